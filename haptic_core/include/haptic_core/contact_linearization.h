@@ -1,0 +1,82 @@
+#pragma once
+// Per-contact linearization of the texture penetration depth (DESIGN.md §4–§5): δ0, its 6-DoF
+// gradient J by central differences, and the penalty wrench Φ = −k δ ∇δ.
+
+#include <cstdint>
+#include <vector>
+
+#include "haptic_core/haptic_model.h"
+#include "haptic_core/penetration_depth.h"
+#include "haptic_core/spatial.h"
+
+namespace ht {
+
+/// Gradient ∇δ of a penetration depth with respect to the tool's pose q = (x, θ): x the position
+/// of the tool's centre of mass and θ a rotation vector about it, both along world axes [L].
+struct PenetrationGradient {
+  glm::dvec3 d_translation_W{0.0};  ///< ∂δ/∂x (dimensionless, m/m).
+  glm::dvec3 d_rotation_W{0.0};     ///< ∂δ/∂θ (m/rad).
+
+  /// J·Δq for a pose change Δq (Δq.linear in m, Δq.angular in rad, world axes). Returns metres.
+  double Dot(const Twist& dq) const noexcept {
+    return glm::dot(d_translation_W, dq.linear) + glm::dot(d_rotation_W, dq.angular);
+  }
+};
+
+/// The linearized contact that the remote node sends and the operator loop evaluates:
+/// δ_i(q) ≈ depth_m + J·(q ⊖ q0) with stiffness k (DESIGN.md §5).
+struct ContactLinearization {
+  double depth_m = 0.0;  ///< δ0 at q0 (m), signed: negative = separated along n.
+  PenetrationGradient gradient;  ///< J = ∇δ at q0.
+  double stiffness_n_per_m = 0.0;  ///< Penalty stiffness k (N/m).
+  glm::dvec3 point_W{0.0};   ///< Deepest cell's centre on the window plane (m), for display.
+  glm::dvec3 normal_W{0.0, 0.0, 1.0};  ///< Contact direction n (unit, from environment to tool).
+};
+
+/// Penalty wrench on the tool at its centre of mass, expressed in W, for depth δ and gradient J:
+/// Φ = −k·max(δ, 0)·J (force N, torque N·m) [L]. Zero when δ ≤ 0 or δ is not finite.
+Wrench PenaltyWrench(double depth_m, const PenetrationGradient& gradient,
+                     double stiffness_n_per_m) noexcept;
+
+/// Counters of numerical faults met while linearizing (MuJoCo-style: counted, never thrown).
+struct LinearizationFaults {
+  std::int64_t missing_overlap = 0;  ///< A perturbed evaluation had no overlapping cell.
+};
+
+/// Evaluates δ and its gradient for one contact, reusing preallocated height buffers: one
+/// environment render and 11 tool renders (base and ±h along u, v and about u, v, n); the
+/// derivative along n is −1 exactly [L]. Step sizes: h_x = W/N, h_θ = (W/N)/(W/2) [R].
+class TexturePenetrationSolver {
+ public:
+  /// Preallocates buffers for windows of up to `max_resolution`² cells and models of up to
+  /// `max_triangles` triangles (larger ones still work but allocate on first use).
+  explicit TexturePenetrationSolver(int max_resolution = 128, int max_triangles = 4096);
+
+  /// Linearizes the contact of `tool` posed at X_WT (frame T at the tool's centre of mass) against
+  /// `environment` posed at X_WE over `window`, with penalty stiffness k (N/m).
+  /// Returns depth_m = −∞ and a zero gradient when the patches do not overlap on the window.
+  ContactLinearization Linearize(const HapticModel& tool, const RigidTransform& X_WT,
+                                 const HapticModel& environment, const RigidTransform& X_WE,
+                                 const ContactWindow& window, double stiffness_n_per_m) noexcept;
+
+  /// δ only (m), at one tool pose; same conventions as Linearize.
+  DepthSample Depth(const HapticModel& tool, const RigidTransform& X_WT,
+                    const HapticModel& environment, const RigidTransform& X_WE,
+                    const ContactWindow& window) noexcept;
+
+  const LinearizationFaults& faults() const noexcept { return faults_; }
+
+ private:
+  void RenderEnvironment(const HapticModel& environment, const RigidTransform& X_WE,
+                         const ContactWindow& window) noexcept;
+  DepthSample EvaluateTool(const HapticModel& tool, const RigidTransform& X_WT,
+                           const ContactWindow& window) noexcept;
+
+  std::vector<float> env_heights_;
+  std::vector<float> tool_heights_;
+  std::vector<int> env_triangles_;
+  std::vector<int> tool_triangles_;
+  LinearizationFaults faults_;
+};
+
+}  // namespace ht

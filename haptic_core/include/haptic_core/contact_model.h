@@ -1,0 +1,55 @@
+#pragma once
+// The intermediate representation between the remote node and the operator loop (DESIGN.md §5):
+// a set of linearized contacts at tool pose q0, evaluated every tick at the current tool pose.
+
+#include <array>
+#include <cstdint>
+
+#include <Eigen/Core>
+
+#include "haptic_core/contact_linearization.h"
+#include "haptic_core/spatial.h"
+
+namespace ht {
+
+/// Largest number of contacts one contact model carries (seed: up to 7 after clustering).
+inline constexpr int kMaxContacts = 16;
+
+/// Generalized stiffness ∂Φ/∂q (6×6, rows/cols: translation x,y,z then rotation x,y,z, world
+/// axes; units N/m, N/rad, N·m/m, N·m/rad).
+using Stiffness6 = Eigen::Matrix<double, 6, 6>;
+
+/// A contact model: the linearizations of all contacts at the tool pose X_WT0 (q0).
+/// Fixed capacity so that it can be copied between threads and evaluated without allocation.
+struct ContactModel {
+  /// Tool pose q0 (frame T at the tool's centre of mass) the linearizations were taken at.
+  RigidTransform X_WT0;
+  /// Sequence number of the tool state the remote node used for q0 (0 = none yet).
+  std::uint64_t tool_state_seq = 0;
+  /// Number of valid entries in `contacts` (0..kMaxContacts).
+  int num_contacts = 0;
+  std::array<ContactLinearization, kMaxContacts> contacts{};
+  /// Total penalty wrench on the tool at q0, at its centre of mass, in W (N, N·m).
+  Wrench F_T_W_at_q0;
+};
+
+/// Result of evaluating a contact model at a tool pose.
+struct ContactModelEvaluation {
+  /// Φ = Σ −k_i max(δ_i(q), 0) J_i: wrench on the tool at its centre of mass, in W.
+  Wrench F_T_W;
+  /// K = Σ_{δ_i>0} −k_i J_i J_iᵀ (negative semi-definite).
+  Stiffness6 K = Stiffness6::Zero();
+  /// Contacts with δ_i(q) > 0.
+  int active_contacts = 0;
+  /// Largest δ_i(q) (m), or 0 with no contact.
+  double max_depth_m = 0.0;
+};
+
+/// Evaluates `model` at tool pose X_WT: δ_i(q) = δ0_i + J_i·(q ⊖ q0), per-contact switching by
+/// max(δ_i, 0) (DESIGN.md §5). Contacts whose δ0 or stiffness is not finite are skipped.
+/// `stiffness_scale` ∈ [0, 1] multiplies every k_i (used to blend a new model in). noexcept and
+/// allocation-free: callable from the 1 kHz loop.
+ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const RigidTransform& X_WT,
+                                            double stiffness_scale = 1.0) noexcept;
+
+}  // namespace ht

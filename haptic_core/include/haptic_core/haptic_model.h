@@ -1,0 +1,65 @@
+#pragma once
+// The haptic representation of one touchable object (DESIGN.md §2): a coarse triangle mesh plus a
+// haptic texture (height field) that holds the detail the coarse mesh dropped, and the convex
+// hull(s) used by the coarse contact query.
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <glm/vec2.hpp>
+#include <glm/vec3.hpp>
+
+#include "haptic_core/height_field.h"
+
+namespace ht {
+
+/// A textured coarse model in its own object frame O (metres). Built once at start-up and then
+/// only read (MuJoCo-style constant model).
+///
+/// The full-resolution surface it stands for is p(u,v) = p_coarse(u,v) + h(u,v)·N(u,v), with N
+/// the interpolated unit outward normal of the coarse surface and h the height field [S][L].
+struct HapticModel {
+  std::string name;
+  /// Coarse vertices p_OV, #V.
+  std::vector<glm::dvec3> vertices_O;
+  /// Coarse triangles, #F, counter-clockwise seen from outside (outward face normals).
+  std::vector<glm::ivec3> triangles;
+  /// Interpolated unit outward normals per triangle corner, #F*3 (corner c of triangle f at 3f+c).
+  std::vector<glm::dvec3> corner_normals_O;
+  /// Texture coordinates per triangle corner, #F*3, into `texture`.
+  std::vector<glm::vec2> corner_uvs;
+  /// Per triangle: 1 when the texture applies, 0 when the face is smooth (h = 0), #F.
+  std::vector<std::uint8_t> textured;
+  /// Per triangle: metres on the surface covered by one level-0 texel, #F (for mip selection).
+  std::vector<double> texel_size_m;
+  /// The haptic texture shared by all textured triangles.
+  HeightField texture;
+  /// Vertices whose convex hull bounds the coarse surface (used by the convex coarse contact
+  /// query, which widens its tolerance by TextureReach() of both sides), #H.
+  std::vector<glm::dvec3> hull_vertices_O;
+  /// Centre of mass, p_OOcm (m).
+  glm::dvec3 center_of_mass_O{0.0};
+  /// Mass (kg), and principal moments of inertia about the centre of mass along O's axes (kg·m²).
+  double mass_kg = 0.0;
+  glm::dvec3 inertia_diagonal_O{0.0};
+  /// Triangle count of the full-resolution surface this model stands for (for reports).
+  std::int64_t full_resolution_triangles = 0;
+
+  /// Largest |h| of the texture (m): how far the true surface may lie outside the coarse one.
+  double TextureReach() const noexcept;
+
+  /// Checks sizes, finiteness and normal lengths; throws std::invalid_argument naming the model
+  /// and the first inconsistency found.
+  void Validate() const;
+};
+
+/// A full-resolution triangle mesh (for display, baking and reports), frame O, metres.
+struct TriangleMesh {
+  /// Vertices, #V.
+  std::vector<glm::dvec3> vertices;
+  /// Triangles, #F, counter-clockwise seen from outside.
+  std::vector<glm::ivec3> triangles;
+};
+
+}  // namespace ht

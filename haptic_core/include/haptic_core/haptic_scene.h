@@ -1,0 +1,76 @@
+#pragma once
+// A scene as the remote node sees it: the tool's haptic model, the touchable objects with their
+// poses and stiffness, and the per-step pipeline that turns a tool pose into a contact model.
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "haptic_core/contact_linearization.h"
+#include "haptic_core/contact_model.h"
+#include "haptic_core/haptic_model.h"
+
+namespace ht {
+
+/// One touchable object O of the scene: its haptic model, pose X_WO and penalty stiffness.
+struct TouchableObject {
+  std::shared_ptr<const HapticModel> model;
+  RigidTransform X_WO;
+  double stiffness_n_per_m = 8000.0;
+};
+
+/// The haptic part of a scene: the tool (frame T at its centre of mass) and the touchables.
+struct HapticScene {
+  std::string name;
+  std::shared_ptr<const HapticModel> tool;
+  std::vector<TouchableObject> touchables;
+  /// Where the tool starts (and where the operator's workspace is centred), X_WT.
+  RigidTransform X_WT_home;
+};
+
+/// The seed's Fig. 72-b scene: the ridged block (tool) resting on the fixed ridged gear, the gear
+/// axis along world x through the origin, so that both sets of ridges run along x. The home pose
+/// puts the block's mean bottom face 0.5 mm above the gear's mean top line.
+HapticScene MakeBlockOnGearScene();
+
+/// Options of the per-step pipeline.
+struct PipelineOptions {
+  int grid_resolution = 50;        ///< N of the penetration-depth grid (seed: 50).
+  double window_extent_m = 0.02;   ///< W of each contact window (m).
+  double proximity_margin_m = 0.5e-3;  ///< Extra coarse tolerance beyond both texture reaches (m).
+
+  /// Throws std::invalid_argument naming a value out of range.
+  void Validate() const;
+};
+
+/// Per-step timings and counts (µs), for traces and summaries (seed Fig. 77 splits these).
+struct StepTimings {
+  double collision_us = 0.0;
+  double texture_us = 0.0;
+  double total_us = 0.0;
+  int convex_pairs = 0;
+};
+
+/// The remote node's per-step pipeline (DESIGN.md §1): coarse contact query, contacts, texture
+/// penetration depth with gradient, linearization. Holds preallocated scratch; not thread-safe.
+class HapticTexturePipeline {
+ public:
+  /// Keeps a reference to `scene`, which must outlive the pipeline. Throws std::invalid_argument
+  /// for bad options, a scene without a tool, or a tool whose centre of mass is not T's origin.
+  HapticTexturePipeline(const HapticScene& scene, const PipelineOptions& options);
+
+  /// Builds the contact model at tool pose X_WT (q0), tagging it with `tool_state_seq`.
+  /// A non-finite pose gives an empty model. Fills `timings`.
+  ContactModel Step(const RigidTransform& X_WT, std::uint64_t tool_state_seq,
+                    StepTimings& timings);
+
+  const LinearizationFaults& faults() const noexcept { return solver_.faults(); }
+
+ private:
+  const HapticScene& scene_;
+  PipelineOptions options_;
+  TexturePenetrationSolver solver_;
+};
+
+}  // namespace ht

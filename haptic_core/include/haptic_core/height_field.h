@@ -1,0 +1,60 @@
+#pragma once
+// Haptic texture storage: a scalar height field with a mip chain (DESIGN.md §2, seed §19.6.2).
+
+#include <cstdint>
+#include <vector>
+
+namespace ht {
+
+/// One mip level of a height field: `width` × `height` texels, row-major (`texels[y*width + x]`),
+/// heights in metres along the coarse surface's outward normal.
+struct HeightFieldLevel {
+  int width = 0;
+  int height = 0;
+  std::vector<float> texels;
+};
+
+/// A haptic texture: the height h(u,v) (m) of the full-resolution surface above the coarse surface
+/// along its interpolated outward normal, p_full = p_coarse + h·N [S][L]. Texture coordinates
+/// (u,v) ∈ [0,1]² map texel centres at ((x+0.5)/width, (y+0.5)/height). Level 0 is the full
+/// resolution (seed: 1024×1024 floats); each further level halves both sizes with a 2×2 box filter
+/// so that samples taken at the level whose texel matches the penetration-depth grid cell do not
+/// alias.
+class HeightField {
+ public:
+  HeightField() = default;
+
+  /// Builds a height field from `texels` (#width*height, row-major, metres) and its mip chain.
+  /// `wrap_u`/`wrap_v` select periodic addressing (else clamp to edge) along each axis.
+  /// Throws std::invalid_argument if a size is not positive, the texel count does not match,
+  /// or any texel is not finite.
+  HeightField(int width, int height, std::vector<float> texels, bool wrap_u, bool wrap_v);
+
+  /// Number of mip levels (1 + floor(log2(max(width,height)))); 0 for an empty field.
+  int num_levels() const noexcept { return static_cast<int>(levels_.size()); }
+  /// Level `i` (0 = full resolution). Precondition: 0 <= i < num_levels().
+  const HeightFieldLevel& level(int i) const noexcept { return levels_[i]; }
+  bool empty() const noexcept { return levels_.empty(); }
+  bool wrap_u() const noexcept { return wrap_u_; }
+  bool wrap_v() const noexcept { return wrap_v_; }
+  /// Smallest and largest level-0 height (m).
+  float min_height() const noexcept { return min_height_; }
+  float max_height() const noexcept { return max_height_; }
+
+  /// Bilinear sample (m) of level `level` (clamped to the chain) at texture coordinates (u,v).
+  /// Returns 0 for an empty field. Never allocates; non-finite u or v gives 0.
+  float Sample(int level, float u, float v) const noexcept;
+
+  /// Mip level whose texel size best matches `cell_size_m` for a surface whose level-0 texel
+  /// measures `texel_size_m` on the coarse surface: floor(log2(cell/texel)), clamped to the chain.
+  int LevelForFootprint(double texel_size_m, double cell_size_m) const noexcept;
+
+ private:
+  std::vector<HeightFieldLevel> levels_;
+  bool wrap_u_ = false;
+  bool wrap_v_ = false;
+  float min_height_ = 0.0f;
+  float max_height_ = 0.0f;
+};
+
+}  // namespace ht

@@ -1,0 +1,76 @@
+#pragma once
+// Directional penetration depth of two textured patches on an N×N grid (DESIGN.md §4).
+// This CPU path is the reference that the GPU backend must match.
+
+#include <span>
+#include <vector>
+
+#include <glm/vec3.hpp>
+
+#include "haptic_core/haptic_model.h"
+#include "haptic_core/spatial.h"
+
+namespace ht {
+
+/// The orthographic sampling window of one contact: a W×W square on the plane through `center_W`
+/// perpendicular to `normal_W`, sampled at N×N cell centres. Cell (i, j) (i along u, j along v)
+/// is stored at index j*N + i and centred at center_W + ((i+0.5)/N − 0.5)·W·u + ((j+0.5)/N − 0.5)·W·v.
+struct ContactWindow {
+  glm::dvec3 center_W{0.0};  ///< Window centre in world (m).
+  glm::dvec3 normal_W{0.0, 0.0, 1.0};  ///< n: unit, from environment B towards tool A.
+  glm::dvec3 axis_u_W{1.0, 0.0, 0.0};  ///< Unit, ⟂ n.
+  glm::dvec3 axis_v_W{0.0, 1.0, 0.0};  ///< Unit, u × v = n.
+  double extent_m = 0.02;  ///< W: side length (m).
+  int resolution = 50;     ///< N: cells per side (seed: 50).
+
+  /// Builds a window with u the projection of world x on the plane ⟂ n (world y when n is within
+  /// 25° of x), v = n × u. Throws std::invalid_argument for a non-finite or zero normal, a
+  /// non-positive extent, or a resolution outside [2, 1024].
+  static ContactWindow Make(const glm::dvec3& center_W, const glm::dvec3& normal_W,
+                            double extent_m, int resolution);
+
+  /// Cell side W/N (m).
+  double cell_size_m() const noexcept { return extent_m / resolution; }
+  /// World position (m) of cell `index`'s centre on the window plane.
+  glm::dvec3 CellCenter(int index) const noexcept;
+};
+
+/// Which envelope of a patch a height buffer keeps.
+enum class PatchSide {
+  kEnvironment,  ///< B: keeps the largest height along n per cell (surface facing +n).
+  kTool,         ///< A: keeps the smallest height along n per cell (surface facing −n).
+};
+
+/// Appends to `triangles_out` the triangles of `model` (posed at X_WO) that may contribute to
+/// `window`: facing the other side (face normal·n > 0.05 for B, < −0.05 for A), overlapping the
+/// window grown by `margin_m` on the plane, and within ±(W + margin) of the plane along n.
+/// `triangles_out` is cleared first; it does not allocate once its capacity reaches the model's
+/// triangle count.
+void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
+                          const ContactWindow& window, PatchSide side, double margin_m,
+                          std::vector<int>& triangles_out) noexcept;
+
+/// Renders the heights along n (m, relative to the window centre) of the textured surface of
+/// `model` posed at X_WO into `heights` (#N*N). Per covered cell: coarse height d + h(uv)·(N·n),
+/// with N the interpolated normal and h sampled at the mip level whose texel matches the cell
+/// (the GPU path does the same per fragment) [L][R]. `heights` must be initialised by the caller
+/// (−∞ for kEnvironment, +∞ for kTool); cells no triangle covers keep that value. Never allocates.
+void RenderPatchHeights(const HapticModel& model, const RigidTransform& X_WO,
+                        std::span<const int> triangles, const ContactWindow& window,
+                        PatchSide side, std::span<float> heights) noexcept;
+
+/// Result of one directional penetration-depth evaluation.
+struct DepthSample {
+  /// δ = max over cells covered by both patches of (b − a) (m). Signed: negative means the
+  /// patches are separated along n by −δ. −∞ when no cell is covered by both.
+  double depth_m;
+  /// Index j*N + i of the deepest cell, or −1 when no cell is covered by both.
+  int cell;
+};
+
+/// δ of heights `b` (environment, −∞ where empty) and `a` (tool, +∞ where empty), both #N*N.
+/// Ties keep the lowest index. Never allocates.
+DepthSample DirectionalPenetrationDepth(std::span<const float> b,
+                                        std::span<const float> a) noexcept;
+
+}  // namespace ht

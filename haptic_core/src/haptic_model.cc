@@ -1,0 +1,52 @@
+#include "haptic_core/haptic_model.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include <glm/geometric.hpp>
+
+namespace ht {
+
+double HapticModel::TextureReach() const noexcept {
+  if (texture.empty()) return 0.0;
+  return std::max(std::abs(static_cast<double>(texture.min_height())),
+                  std::abs(static_cast<double>(texture.max_height())));
+}
+
+void HapticModel::Validate() const {
+  const auto fail = [&](const std::string& what) {
+    throw std::invalid_argument("haptic model '" + name + "': " + what);
+  };
+  const size_t nf = triangles.size();
+  if (vertices_O.empty() || nf == 0) fail("no coarse geometry");
+  if (corner_normals_O.size() != 3 * nf) fail("corner_normals_O must have 3 entries per triangle");
+  if (corner_uvs.size() != 3 * nf) fail("corner_uvs must have 3 entries per triangle");
+  if (textured.size() != nf) fail("textured must have one entry per triangle");
+  if (texel_size_m.size() != nf) fail("texel_size_m must have one entry per triangle");
+  if (hull_vertices_O.size() < 4) fail("hull needs at least 4 vertices");
+  for (size_t f = 0; f < nf; ++f) {
+    for (int c = 0; c < 3; ++c) {
+      const int vi = triangles[f][c];
+      if (vi < 0 || static_cast<size_t>(vi) >= vertices_O.size()) {
+        fail("triangle " + std::to_string(f) + " indexes vertex " + std::to_string(vi) +
+             " out of range");
+      }
+      const double len = glm::length(corner_normals_O[3 * f + c]);
+      if (!(std::abs(len - 1.0) < 1e-6)) fail("corner normal of triangle " + std::to_string(f) +
+                                              " is not unit length");
+    }
+  }
+  for (const auto& v : vertices_O) {
+    if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z)) {
+      fail("non-finite vertex");
+    }
+  }
+  if (!(mass_kg > 0.0)) fail("mass must be positive");
+  if (!(inertia_diagonal_O.x > 0.0 && inertia_diagonal_O.y > 0.0 && inertia_diagonal_O.z > 0.0)) {
+    fail("inertia must be positive");
+  }
+}
+
+}  // namespace ht

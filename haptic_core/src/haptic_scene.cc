@@ -1,0 +1,106 @@
+#include "haptic_core/haptic_scene.h"
+
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "haptic_core/convex_contact.h"
+#include "haptic_core/procedural_models.h"
+
+namespace ht {
+
+HapticScene MakeBlockOnGearScene() {
+  HapticScene scene;
+  scene.name = "block_on_gear";
+  const RidgedBlockParams block_params;
+  const RidgedGearParams gear_params;
+  scene.tool = std::make_shared<const HapticModel>(MakeRidgedBlock(block_params));
+  TouchableObject gear;
+  gear.model = std::make_shared<const HapticModel>(MakeRidgedGear(gear_params));
+  gear.X_WO = RigidTransform::Identity();
+  gear.stiffness_n_per_m = 8000.0;
+  scene.touchables.push_back(gear);
+  scene.X_WT_home.translation = {0.0, 0.0,
+                                 gear_params.radius_m + block_params.half_extents_m.z + 0.5e-3};
+  return scene;
+}
+
+void PipelineOptions::Validate() const {
+  if (grid_resolution < 2 || grid_resolution > 1024) {
+    throw std::invalid_argument("grid resolution must be in [2, 1024], got " +
+                                std::to_string(grid_resolution));
+  }
+  if (!(window_extent_m > 0.0) || !std::isfinite(window_extent_m)) {
+    throw std::invalid_argument("window extent must be positive, got " +
+                                std::to_string(window_extent_m));
+  }
+  if (!(proximity_margin_m >= 0.0) || !std::isfinite(proximity_margin_m)) {
+    throw std::invalid_argument("proximity margin must be >= 0, got " +
+                                std::to_string(proximity_margin_m));
+  }
+}
+
+HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
+                                             const PipelineOptions& options)
+    : scene_(scene), options_(options), solver_(options.grid_resolution) {
+  options_.Validate();
+  if (!scene.tool) throw std::invalid_argument("scene '" + scene.name + "' has no tool");
+  if (glm::length(scene.tool->center_of_mass_O) > 1e-9) {
+    throw std::invalid_argument("tool model '" + scene.tool->name +
+                                "' must have its centre of mass at its frame origin");
+  }
+  for (const auto& t : scene.touchables) {
+    if (!t.model) throw std::invalid_argument("scene '" + scene.name + "' has an empty touchable");
+  }
+}
+
+ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64_t seq,
+                                         StepTimings& timings) {
+  using Clock = std::chrono::steady_clock;
+  const auto us = [](Clock::duration d) {
+    return std::chrono::duration<double, std::micro>(d).count();
+  };
+  const auto t0 = Clock::now();
+  ContactModel model;
+  model.X_WT0 = X_WT;
+  model.tool_state_seq = seq;
+  timings = {};
+  if (!IsFiniteRigidTransform(X_WT)) return model;
+
+  const HapticModel& tool = *scene_.tool;
+  struct Candidate {
+    const TouchableObject* object;
+    ConvexContact contact;
+  };
+  std::array<Candidate, kMaxContacts> candidates{};
+  int num_candidates = 0;
+  for (const TouchableObject& object : scene_.touchables) {
+    const double tolerance =
+        tool.TextureReach() + object.model->TextureReach() + options_.proximity_margin_m;
+    const auto contact = QueryConvexContact(tool.hull_vertices_O, X_WT,
+                                            object.model->hull_vertices_O, object.X_WO, tolerance);
+    ++timings.convex_pairs;
+    if (contact && num_candidates < kMaxContacts) candidates[num_candidates++] = {&object, *contact};
+  }
+  const auto t1 = Clock::now();
+
+  for (int i = 0; i < num_candidates; ++i) {
+    const Candidate& c = candidates[i];
+    const ContactWindow window = ContactWindow::Make(
+        c.contact.point_W, c.contact.normal_W, options_.window_extent_m, options_.grid_resolution);
+    const ContactLinearization lin = solver_.Linearize(tool, X_WT, *c.object->model,
+                                                       c.object->X_WO, window,
+                                                       c.object->stiffness_n_per_m);
+    if (!std::isfinite(lin.depth_m)) continue;  // no overlap of the patches on the window
+    model.contacts[model.num_contacts++] = lin;
+    model.F_T_W_at_q0 += PenaltyWrench(lin.depth_m, lin.gradient, lin.stiffness_n_per_m);
+  }
+  const auto t2 = Clock::now();
+  timings.collision_us = us(t1 - t0);
+  timings.texture_us = us(t2 - t1);
+  timings.total_us = us(t2 - t0);
+  return model;
+}
+
+}  // namespace ht

@@ -1,0 +1,153 @@
+#include "haptic_core/penetration_depth.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+#include <glm/geometric.hpp>
+
+namespace ht {
+
+ContactWindow ContactWindow::Make(const glm::dvec3& center_W, const glm::dvec3& normal_W,
+                                  double extent_m, int resolution) {
+  const double len = glm::length(normal_W);
+  if (!std::isfinite(len) || !(len > 1e-12)) {
+    throw std::invalid_argument("ContactWindow: normal must be finite and non-zero");
+  }
+  if (!std::isfinite(center_W.x) || !std::isfinite(center_W.y) || !std::isfinite(center_W.z)) {
+    throw std::invalid_argument("ContactWindow: centre must be finite");
+  }
+  if (!(extent_m > 0.0) || !std::isfinite(extent_m)) {
+    throw std::invalid_argument("ContactWindow: extent must be positive, got " +
+                                std::to_string(extent_m));
+  }
+  if (resolution < 2 || resolution > 1024) {
+    throw std::invalid_argument("ContactWindow: resolution must be in [2, 1024], got " +
+                                std::to_string(resolution));
+  }
+  ContactWindow w;
+  w.center_W = center_W;
+  w.normal_W = normal_W / len;
+  const glm::dvec3 ref = std::abs(w.normal_W.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0);
+  w.axis_u_W = glm::normalize(ref - glm::dot(ref, w.normal_W) * w.normal_W);
+  w.axis_v_W = glm::cross(w.normal_W, w.axis_u_W);
+  w.extent_m = extent_m;
+  w.resolution = resolution;
+  return w;
+}
+
+glm::dvec3 ContactWindow::CellCenter(int index) const noexcept {
+  const int i = index % resolution, j = index / resolution;
+  const double s = ((i + 0.5) / resolution - 0.5) * extent_m;
+  const double t = ((j + 0.5) / resolution - 0.5) * extent_m;
+  return center_W + s * axis_u_W + t * axis_v_W;
+}
+
+void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
+                          const ContactWindow& w, PatchSide side, double margin_m,
+                          std::vector<int>& out) noexcept {
+  out.clear();
+  const double half = 0.5 * w.extent_m + margin_m;
+  const double depth_limit = w.extent_m + margin_m;
+  const int nf = static_cast<int>(model.triangles.size());
+  for (int f = 0; f < nf; ++f) {
+    const glm::ivec3 t = model.triangles[f];
+    const glm::dvec3 p0 = X_WO * model.vertices_O[t[0]] - w.center_W;
+    const glm::dvec3 p1 = X_WO * model.vertices_O[t[1]] - w.center_W;
+    const glm::dvec3 p2 = X_WO * model.vertices_O[t[2]] - w.center_W;
+    const glm::dvec3 cr = glm::cross(p1 - p0, p2 - p0);
+    const double area2 = glm::length(cr);
+    if (!(area2 > 0.0)) continue;
+    const double facing = glm::dot(cr, w.normal_W) / area2;
+    if (side == PatchSide::kEnvironment ? facing <= 0.05 : facing >= -0.05) continue;
+    const double s[3] = {glm::dot(p0, w.axis_u_W), glm::dot(p1, w.axis_u_W),
+                         glm::dot(p2, w.axis_u_W)};
+    const double t2[3] = {glm::dot(p0, w.axis_v_W), glm::dot(p1, w.axis_v_W),
+                          glm::dot(p2, w.axis_v_W)};
+    const double d[3] = {glm::dot(p0, w.normal_W), glm::dot(p1, w.normal_W),
+                         glm::dot(p2, w.normal_W)};
+    if (std::max({s[0], s[1], s[2]}) < -half || std::min({s[0], s[1], s[2]}) > half) continue;
+    if (std::max({t2[0], t2[1], t2[2]}) < -half || std::min({t2[0], t2[1], t2[2]}) > half) continue;
+    if (std::max({d[0], d[1], d[2]}) < -depth_limit || std::min({d[0], d[1], d[2]}) > depth_limit) {
+      continue;
+    }
+    out.push_back(f);
+  }
+}
+
+void RenderPatchHeights(const HapticModel& model, const RigidTransform& X_WO,
+                        std::span<const int> triangles, const ContactWindow& w, PatchSide side,
+                        std::span<float> heights) noexcept {
+  const int n = w.resolution;
+  if (heights.size() < static_cast<size_t>(n) * n) return;
+  const double inv_cell = 1.0 / w.cell_size_m();
+  const double half_cells = 0.5 * n;
+  const bool keep_max = side == PatchSide::kEnvironment;
+  for (const int f : triangles) {
+    const glm::ivec3 tri = model.triangles[f];
+    double x[3], y[3], d[3], nn[3];
+    for (int c = 0; c < 3; ++c) {
+      const glm::dvec3 p = X_WO * model.vertices_O[tri[c]] - w.center_W;
+      x[c] = glm::dot(p, w.axis_u_W) * inv_cell + half_cells;  // pixel i spans [i, i+1)
+      y[c] = glm::dot(p, w.axis_v_W) * inv_cell + half_cells;
+      d[c] = glm::dot(p, w.normal_W);
+      nn[c] = glm::dot(X_WO.rotation * model.corner_normals_O[3 * f + c], w.normal_W);
+    }
+    const double area = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]);
+    if (!(std::abs(area) > 1e-12)) continue;  // edge-on or degenerate in projection
+    const double inv_area = 1.0 / area;
+    const int i0 = std::max(0, static_cast<int>(std::ceil(std::min({x[0], x[1], x[2]}) - 0.5)));
+    const int i1 = std::min(n - 1, static_cast<int>(std::floor(std::max({x[0], x[1], x[2]}) - 0.5)));
+    const int j0 = std::max(0, static_cast<int>(std::ceil(std::min({y[0], y[1], y[2]}) - 0.5)));
+    const int j1 = std::min(n - 1, static_cast<int>(std::floor(std::max({y[0], y[1], y[2]}) - 0.5)));
+    if (i0 > i1 || j0 > j1) continue;
+    const bool textured = model.textured[f] != 0 && !model.texture.empty();
+    const int level = textured ? model.texture.LevelForFootprint(model.texel_size_m[f], w.cell_size_m()) : 0;
+    const glm::vec2 uv0 = model.corner_uvs[3 * f], uv1 = model.corner_uvs[3 * f + 1],
+                    uv2 = model.corner_uvs[3 * f + 2];
+    // Inclusive edge test with a small tolerance: cells on shared edges may be covered twice,
+    // which the max/min envelope makes harmless, and no crack opens between triangles.
+    constexpr double kEdgeTolerance = -1e-9;
+    for (int j = j0; j <= j1; ++j) {
+      const double py = j + 0.5;
+      for (int i = i0; i <= i1; ++i) {
+        const double px = i + 0.5;
+        const double b0 = ((x[1] - px) * (y[2] - py) - (x[2] - px) * (y[1] - py)) * inv_area;
+        const double b1 = ((x[2] - px) * (y[0] - py) - (x[0] - px) * (y[2] - py)) * inv_area;
+        const double b2 = 1.0 - b0 - b1;
+        if (b0 < kEdgeTolerance || b1 < kEdgeTolerance || b2 < kEdgeTolerance) continue;
+        double value = b0 * d[0] + b1 * d[1] + b2 * d[2];
+        if (textured) {
+          const float u = static_cast<float>(b0 * uv0.x + b1 * uv1.x + b2 * uv2.x);
+          const float v = static_cast<float>(b0 * uv0.y + b1 * uv1.y + b2 * uv2.y);
+          const double ndotn = b0 * nn[0] + b1 * nn[1] + b2 * nn[2];
+          value += static_cast<double>(model.texture.Sample(level, u, v)) * ndotn;
+        }
+        float& cell = heights[static_cast<size_t>(j) * n + i];
+        const auto fv = static_cast<float>(value);
+        if (keep_max ? fv > cell : fv < cell) cell = fv;
+      }
+    }
+  }
+}
+
+DepthSample DirectionalPenetrationDepth(std::span<const float> b,
+                                        std::span<const float> a) noexcept {
+  DepthSample best{-std::numeric_limits<double>::infinity(), -1};
+  const size_t count = std::min(a.size(), b.size());
+  float best_value = -std::numeric_limits<float>::infinity();
+  for (size_t k = 0; k < count; ++k) {
+    const float bk = b[k], ak = a[k];
+    if (!(std::isfinite(bk) && std::isfinite(ak))) continue;
+    const float diff = bk - ak;
+    if (diff > best_value) {
+      best_value = diff;
+      best.cell = static_cast<int>(k);
+    }
+  }
+  if (best.cell >= 0) best.depth_m = static_cast<double>(best_value);
+  return best;
+}
+
+}  // namespace ht

@@ -1,0 +1,123 @@
+#include "haptic_core/tool_simulation.h"
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include <Eigen/Cholesky>
+#include <glm/mat3x3.hpp>
+#include <glm/gtc/quaternion.hpp>
+
+namespace ht {
+namespace {
+
+using Vector6 = Eigen::Matrix<double, 6, 1>;
+
+void RequireNonNegative(double v, const char* name) {
+  if (!(v >= 0.0) || !std::isfinite(v)) {
+    throw std::invalid_argument(std::string("virtual coupling: ") + name +
+                                " must be finite and >= 0, got " + std::to_string(v));
+  }
+}
+
+Vector6 ToVector(const Wrench& F) {
+  Vector6 v;
+  v << F.force.x, F.force.y, F.force.z, F.torque.x, F.torque.y, F.torque.z;
+  return v;
+}
+Vector6 ToVector(const Twist& V) {
+  Vector6 v;
+  v << V.linear.x, V.linear.y, V.linear.z, V.angular.x, V.angular.y, V.angular.z;
+  return v;
+}
+
+}  // namespace
+
+void VirtualCoupling::Validate() const {
+  RequireNonNegative(k_translation_n_per_m, "k_translation_n_per_m");
+  RequireNonNegative(b_translation_ns_per_m, "b_translation_ns_per_m");
+  RequireNonNegative(k_rotation_nm_per_rad, "k_rotation_nm_per_rad");
+  RequireNonNegative(b_rotation_nms_per_rad, "b_rotation_nms_per_rad");
+}
+
+ToolSimulator::ToolSimulator(const ToolInertia& inertia, const VirtualCoupling& coupling)
+    : inertia_(inertia), coupling_(coupling) {
+  if (!(inertia.mass_kg > 0.0)) throw std::invalid_argument("tool mass must be positive");
+  if (!(inertia.inertia_diagonal_T.x > 0.0 && inertia.inertia_diagonal_T.y > 0.0 &&
+        inertia.inertia_diagonal_T.z > 0.0)) {
+    throw std::invalid_argument("tool inertia must be positive");
+  }
+  coupling.Validate();
+}
+
+Wrench ToolSimulator::CouplingWrench(const ToolState& s, const RigidTransform& X_WH,
+                                     const Twist& V_WH_W) const noexcept {
+  const VirtualCoupling& c = coupling_;
+  const Twist d = PoseDifference(X_WH, s.X_WT);
+  return {c.k_translation_n_per_m * d.linear +
+              c.b_translation_ns_per_m * (V_WH_W.linear - s.V_WT_W.linear),
+          c.k_rotation_nm_per_rad * d.angular +
+              c.b_rotation_nms_per_rad * (V_WH_W.angular - s.V_WT_W.angular)};
+}
+
+ToolStepResult ToolSimulator::Step(ToolState& s, const RigidTransform& X_WH, const Twist& V_WH_W,
+                                   const ContactModel& model, double stiffness_scale,
+                                   double h) const noexcept {
+  ToolStepResult result;
+  if (!IsFiniteRigidTransform(X_WH) || !IsFinite(V_WH_W) || !(h > 0.0) || !std::isfinite(h)) {
+    result.ok = false;  // hold the tool where it is, at rest
+    s.V_WT_W = {};
+    return result;
+  }
+  if (!IsFiniteRigidTransform(s.X_WT) || !IsFinite(s.V_WT_W)) {
+    s = {X_WH, V_WH_W};
+    result.ok = false;
+  }
+  const ContactModelEvaluation contact = EvaluateContactModel(model, s.X_WT, stiffness_scale);
+  result.F_contact_T_W = contact.F_T_W;
+  result.active_contacts = contact.active_contacts;
+  result.max_depth_m = contact.max_depth_m;
+
+  const VirtualCoupling& c = coupling_;
+  const Wrench F_total = contact.F_T_W + CouplingWrench(s, X_WH, V_WH_W);
+
+  // Mass matrix in W: diag(m I, R I_T Rᵀ).
+  const glm::dmat3 R = glm::mat3_cast(s.X_WT.rotation);
+  Eigen::Matrix3d R_e;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) R_e(i, j) = R[j][i];  // glm is column-major: R[col][row]
+  const Eigen::Vector3d I_T(inertia_.inertia_diagonal_T.x, inertia_.inertia_diagonal_T.y,
+                            inertia_.inertia_diagonal_T.z);
+  Stiffness6 A = Stiffness6::Zero();
+  A.topLeftCorner<3, 3>().diagonal().setConstant(inertia_.mass_kg);
+  A.bottomRightCorner<3, 3>() = R_e * I_T.asDiagonal() * R_e.transpose();
+
+  Stiffness6 K = contact.K;
+  K.topLeftCorner<3, 3>().diagonal().array() -= c.k_translation_n_per_m;
+  K.bottomRightCorner<3, 3>().diagonal().array() -= c.k_rotation_nm_per_rad;
+  // D = −diag(b_t, b_r): A = M − h D − h² K.
+  A.topLeftCorner<3, 3>().diagonal().array() += h * c.b_translation_ns_per_m;
+  A.bottomRightCorner<3, 3>().diagonal().array() += h * c.b_rotation_nms_per_rad;
+  A.noalias() -= (h * h) * K;
+
+  const Vector6 V = ToVector(s.V_WT_W);
+  const Vector6 rhs = h * (ToVector(F_total) + h * (K * V));
+  const Eigen::LDLT<Stiffness6> ldlt(A);
+  const Vector6 dV = ldlt.solve(rhs);
+  const Vector6 V_next = V + dV;
+
+  ToolState next;
+  next.V_WT_W.linear = {V_next(0), V_next(1), V_next(2)};
+  next.V_WT_W.angular = {V_next(3), V_next(4), V_next(5)};
+  next.X_WT = Displace(s.X_WT, {h * next.V_WT_W.linear, h * next.V_WT_W.angular});
+  if (ldlt.info() != Eigen::Success || !IsFiniteRigidTransform(next.X_WT) ||
+      !IsFinite(next.V_WT_W)) {
+    next = {X_WH, V_WH_W};
+    result.ok = false;
+  }
+  s = next;
+  result.F_coupling_T_W = CouplingWrench(s, X_WH, V_WH_W);
+  return result;
+}
+
+}  // namespace ht
