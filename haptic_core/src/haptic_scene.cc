@@ -21,9 +21,15 @@ HapticScene MakeBlockOnGearScene() {
   gear.X_WO = RigidTransform::Identity();
   gear.stiffness_n_per_m = 8000.0;
   scene.touchables.push_back(gear);
-  scene.X_WT_home.translation = {0.0, 0.0,
-                                 gear_params.radius_m + block_params.half_extents_m.z + 0.5e-3};
+  scene.X_WT_home = BlockOnGearHomePose();
   return scene;
+}
+
+RigidTransform BlockOnGearHomePose() {
+  RigidTransform X_WT;
+  X_WT.translation = {0.0, 0.0,
+                      RidgedGearParams{}.radius_m + RidgedBlockParams{}.half_extents_m.z + 0.5e-3};
+  return X_WT;
 }
 
 void PipelineOptions::Validate() const {

@@ -47,34 +47,6 @@ HeightField::HeightField(int width, int height, std::vector<float> texels, bool 
   }
 }
 
-namespace {
-inline int Address(int i, int n, bool wrap) noexcept {
-  if (wrap) {
-    i %= n;
-    return i < 0 ? i + n : i;
-  }
-  return std::clamp(i, 0, n - 1);
-}
-}  // namespace
-
-float HeightField::Sample(int level, float u, float v) const noexcept {
-  if (levels_.empty() || !std::isfinite(u) || !std::isfinite(v)) return 0.0f;
-  const HeightFieldLevel& L = levels_[std::clamp(level, 0, num_levels() - 1)];
-  // Keep coordinates in a range where float→int conversion is defined.
-  const float fx = std::clamp(u * static_cast<float>(L.width) - 0.5f, -1e6f, 1e6f);
-  const float fy = std::clamp(v * static_cast<float>(L.height) - 0.5f, -1e6f, 1e6f);
-  const float x0f = std::floor(fx), y0f = std::floor(fy);
-  const float tx = fx - x0f, ty = fy - y0f;
-  const int x0 = static_cast<int>(x0f), y0 = static_cast<int>(y0f);
-  const int xa = Address(x0, L.width, wrap_u_), xb = Address(x0 + 1, L.width, wrap_u_);
-  const int ya = Address(y0, L.height, wrap_v_), yb = Address(y0 + 1, L.height, wrap_v_);
-  const float* row_a = &L.texels[static_cast<size_t>(ya) * L.width];
-  const float* row_b = &L.texels[static_cast<size_t>(yb) * L.width];
-  const float top = row_a[xa] + tx * (row_a[xb] - row_a[xa]);
-  const float bottom = row_b[xa] + tx * (row_b[xb] - row_b[xa]);
-  return top + ty * (bottom - top);
-}
-
 int HeightField::LevelForFootprint(double texel_size_m, double cell_size_m) const noexcept {
   if (levels_.empty() || !(texel_size_m > 0.0) || !(cell_size_m > texel_size_m)) return 0;
   const int level = static_cast<int>(std::floor(std::log2(cell_size_m / texel_size_m)));

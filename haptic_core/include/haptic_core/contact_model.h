@@ -12,8 +12,9 @@
 
 namespace ht {
 
-/// Largest number of contacts one contact model carries (seed: up to 7 after clustering).
-inline constexpr int kMaxContacts = 16;
+/// Largest number of contacts one contact model carries (seed: up to 7 after clustering); sized so
+/// that a whole model fits in one UDP datagram (transport/protocol.h).
+inline constexpr int kMaxContacts = 14;
 
 /// Generalized stiffness ∂Φ/∂q (6×6, rows/cols: translation x,y,z then rotation x,y,z, world
 /// axes; units N/m, N/rad, N·m/m, N·m/rad).

@@ -34,6 +34,9 @@ struct HapticScene {
 /// puts the block's mean bottom face 0.5 mm above the gear's mean top line.
 HapticScene MakeBlockOnGearScene();
 
+/// Home pose X_WT of the tool in MakeBlockOnGearScene(), without building the scene.
+RigidTransform BlockOnGearHomePose();
+
 /// Options of the per-step pipeline.
 struct PipelineOptions {
   int grid_resolution = 50;        ///< N of the penetration-depth grid (seed: 50).

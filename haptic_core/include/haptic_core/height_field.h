@@ -1,6 +1,8 @@
 #pragma once
 // Haptic texture storage: a scalar height field with a mip chain (DESIGN.md §2, seed §19.6.2).
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -43,7 +45,7 @@ class HeightField {
 
   /// Bilinear sample (m) of level `level` (clamped to the chain) at texture coordinates (u,v).
   /// Returns 0 for an empty field. Never allocates; non-finite u or v gives 0.
-  float Sample(int level, float u, float v) const noexcept;
+  inline float Sample(int level, float u, float v) const noexcept;
 
   /// Mip level whose texel size best matches `cell_size_m` for a surface whose level-0 texel
   /// measures `texel_size_m` on the coarse surface: floor(log2(cell/texel)), clamped to the chain.
@@ -56,5 +58,30 @@ class HeightField {
   float min_height_ = 0.0f;
   float max_height_ = 0.0f;
 };
+
+inline float HeightField::Sample(int level, float u, float v) const noexcept {
+  if (levels_.empty() || !std::isfinite(u) || !std::isfinite(v)) return 0.0f;
+  const HeightFieldLevel& L = levels_[std::clamp(level, 0, num_levels() - 1)];
+  // Keep coordinates in a range where float→int conversion is defined.
+  const float fx = std::clamp(u * static_cast<float>(L.width) - 0.5f, -1e6f, 1e6f);
+  const float fy = std::clamp(v * static_cast<float>(L.height) - 0.5f, -1e6f, 1e6f);
+  const float x0f = std::floor(fx), y0f = std::floor(fy);
+  const float tx = fx - x0f, ty = fy - y0f;
+  const int x0 = static_cast<int>(x0f), y0 = static_cast<int>(y0f);
+  const auto address = [](int i, int n, bool wrap) {
+    if (wrap) {
+      i %= n;
+      return i < 0 ? i + n : i;
+    }
+    return std::clamp(i, 0, n - 1);
+  };
+  const int xa = address(x0, L.width, wrap_u_), xb = address(x0 + 1, L.width, wrap_u_);
+  const int ya = address(y0, L.height, wrap_v_), yb = address(y0 + 1, L.height, wrap_v_);
+  const float* row_a = &L.texels[static_cast<size_t>(ya) * L.width];
+  const float* row_b = &L.texels[static_cast<size_t>(yb) * L.width];
+  const float top = row_a[xa] + tx * (row_a[xb] - row_a[xa]);
+  const float bottom = row_b[xa] + tx * (row_b[xb] - row_b[xa]);
+  return top + ty * (bottom - top);
+}
 
 }  // namespace ht

@@ -1,0 +1,519 @@
+#include "master_station/operator_station.h"
+
+#include <pthread.h>
+#include <sched.h>
+#include <time.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <stdexcept>
+#include <thread>
+#include <vector>
+
+#include "master_station/lock_free.h"
+#include "transport/messages.h"
+
+namespace ht {
+namespace {
+
+std::int64_t NowNs() noexcept {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+void SleepUntilNs(std::int64_t t_ns) noexcept {
+  timespec ts{static_cast<time_t>(t_ns / 1000000000), static_cast<long>(t_ns % 1000000000)};
+  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+  }
+}
+
+double Percentile(std::vector<double> v, double q) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const auto i = static_cast<size_t>(std::clamp(q, 0.0, 1.0) * (v.size() - 1) + 0.5);
+  return v[std::min(i, v.size() - 1)];
+}
+
+struct OutgoingToolState {
+  wire::ToolStateMessage message;
+  std::int64_t time_ns = 0;
+  std::uint64_t sequence = 0;
+};
+
+struct IncomingModel {
+  wire::ContactModelMessage message;
+  std::uint64_t sequence = 0;
+};
+
+/// One row of trace.csv (one per tick), filled by the loop and written by the recorder thread.
+struct TraceRow {
+  double t_s = 0.0;
+  int phase = 0;
+  RigidTransform X_WT;
+  Wrench F_contact_T_W;
+  int contacts = 0;
+  double model_age_ms = -1.0;
+  glm::dvec3 p_WH{0.0};
+  Wrench F_device_W;
+  double depth_m = 0.0;
+  float tick_compute_us = 0.0f;
+  float remote_collision_us = 0.0f;
+  float remote_texture_us = 0.0f;
+  float remote_step_us = 0.0f;
+};
+
+struct Counters {
+  std::atomic<std::uint64_t> tool_state_sent{0}, tool_state_send_failed{0}, tool_state_bytes{0};
+  std::atomic<std::uint64_t> model_received{0}, model_accepted{0}, model_stale{0},
+      model_lost{0}, model_bytes{0}, model_wrong_session{0};
+  std::array<std::atomic<std::uint64_t>, 16> rejected_by_reason{};
+  std::atomic<std::uint64_t> rejected_total{0};
+};
+
+/// Exchanges datagrams with the remote node; runs on its own thread.
+class NetworkWorker {
+ public:
+  NetworkWorker(const StationConfig& config, TripleBuffer<OutgoingToolState>& outgoing,
+                TripleBuffer<IncomingModel>& incoming, Counters& counters)
+      : config_(config),
+        socket_(config.local_address),
+        outgoing_(outgoing),
+        incoming_(incoming),
+        counters_(counters) {
+    rtt_ms_.reserve(1 << 20);
+    remote_step_us_.reserve(1 << 20);
+  }
+
+  void Run(const std::atomic<bool>& stop) {
+    std::array<std::uint8_t, wire::kMaxDatagramBytes + 1> buffer{};
+    OutgoingToolState last{};
+    bool have_last = false;
+    std::int64_t last_send_ns = 0;
+    std::uint64_t last_model_seq = 0;
+    while (!stop.load(std::memory_order_acquire)) {
+      socket_.WaitReadable(0);
+      timespec pause{0, 200000};  // 0.2 ms between polls: bounded latency, little CPU
+      nanosleep(&pause, nullptr);
+      SocketAddress from;
+      while (auto n = socket_.ReceiveFrom(buffer, from)) {
+        const std::int64_t now = NowNs();
+        counters_.model_received.fetch_add(1, std::memory_order_relaxed);
+        counters_.model_bytes.fetch_add(*n, std::memory_order_relaxed);
+        wire::Header header;
+        IncomingModel model;
+        const auto size = std::min(*n, buffer.size());
+        wire::DecodeStatus status =
+            *n > wire::kMaxDatagramBytes
+                ? wire::DecodeStatus::kTooLong
+                : wire::DecodeContactModel({buffer.data(), size}, header, model.message);
+        if (status != wire::DecodeStatus::kOk) {
+          counters_.rejected_total.fetch_add(1, std::memory_order_relaxed);
+          counters_.rejected_by_reason[static_cast<int>(status)].fetch_add(
+              1, std::memory_order_relaxed);
+          continue;
+        }
+        if (header.session_id != config_.session_id) {
+          counters_.model_wrong_session.fetch_add(1, std::memory_order_relaxed);
+          continue;
+        }
+        if (header.sequence <= last_model_seq) {  // newest wins: older or duplicate
+          counters_.model_stale.fetch_add(1, std::memory_order_relaxed);
+          continue;
+        }
+        if (last_model_seq != 0) {
+          counters_.model_lost.fetch_add(header.sequence - last_model_seq - 1,
+                                         std::memory_order_relaxed);
+        }
+        last_model_seq = header.sequence;
+        model.sequence = header.sequence;
+        counters_.model_accepted.fetch_add(1, std::memory_order_relaxed);
+        if (model.message.model.tool_state_seq != 0) {
+          rtt_ms_.push_back((now - model.message.tool_state_send_time_ns - model.message.hold_ns) *
+                            1e-6);
+        }
+        remote_step_us_.push_back(model.message.step_us);
+        collision_us_.push_back(model.message.collision_us);
+        texture_us_.push_back(model.message.texture_us);
+        if (first_remote_ns_ == 0) {
+          first_remote_ns_ = now;
+          first_remote_steps_ = model.message.remote_step_count;
+        }
+        last_remote_ns_ = now;
+        last_remote_steps_ = model.message.remote_step_count;
+        incoming_.Write(model);
+      }
+      OutgoingToolState state;
+      const std::int64_t now = NowNs();
+      if (outgoing_.Read(state)) {
+        last = state;
+        have_last = true;
+        Send(state);
+        last_send_ns = now;
+      } else if (have_last && now - last_send_ns > 20000000) {
+        Send(last);  // keep-alive while the loop is not running yet, or after a loss
+        last_send_ns = now;
+      }
+    }
+    wire::Header bye;
+    bye.session_id = config_.session_id;
+    bye.send_time_ns = NowNs();
+    const wire::Datagram d = wire::EncodeGoodbye(bye);
+    for (int i = 0; i < 3; ++i) socket_.SendTo(d.view(), config_.remote_address);
+  }
+
+  const std::vector<double>& rtt_ms() const { return rtt_ms_; }
+  const std::vector<double>& remote_step_us() const { return remote_step_us_; }
+  const std::vector<double>& collision_us() const { return collision_us_; }
+  const std::vector<double>& texture_us() const { return texture_us_; }
+  double RemoteRateHz() const {
+    if (last_remote_ns_ <= first_remote_ns_) return 0.0;
+    return static_cast<double>(last_remote_steps_ - first_remote_steps_) /
+           ((last_remote_ns_ - first_remote_ns_) * 1e-9);
+  }
+  SocketAddress local_address() const { return socket_.local_address(); }
+
+ private:
+  void Send(const OutgoingToolState& s) {
+    wire::Header h;
+    h.session_id = config_.session_id;
+    h.sequence = s.sequence;
+    h.send_time_ns = s.time_ns;
+    const wire::Datagram d = wire::EncodeToolState(h, s.message);
+    if (socket_.SendTo(d.view(), config_.remote_address)) {
+      counters_.tool_state_sent.fetch_add(1, std::memory_order_relaxed);
+      counters_.tool_state_bytes.fetch_add(d.size, std::memory_order_relaxed);
+    } else {
+      counters_.tool_state_send_failed.fetch_add(1, std::memory_order_relaxed);
+    }
+  }
+
+  const StationConfig& config_;
+  UdpSocket socket_;
+  TripleBuffer<OutgoingToolState>& outgoing_;
+  TripleBuffer<IncomingModel>& incoming_;
+  Counters& counters_;
+  std::vector<double> rtt_ms_, remote_step_us_, collision_us_, texture_us_;
+  std::int64_t first_remote_ns_ = 0, last_remote_ns_ = 0;
+  std::uint64_t first_remote_steps_ = 0, last_remote_steps_ = 0;
+};
+
+void WriteTraceHeader(std::FILE* f) {
+  std::fputs(
+      "t_s,phase,tool_x,tool_y,tool_z,tool_rx,tool_ry,tool_rz,fx,fy,fz,tx,ty,tz,contacts,"
+      "model_age_ms,hand_x,hand_y,hand_z,device_fx,device_fy,device_fz,device_tx,device_ty,"
+      "device_tz,depth_m,tick_compute_us,remote_collision_us,remote_texture_us,remote_step_us\n",
+      f);
+}
+
+void WriteTraceRow(std::FILE* f, const TraceRow& r, const std::vector<std::string>& phases) {
+  const glm::dvec3 rv = RotationVectorFromQuaternion(r.X_WT.rotation);
+  const glm::dvec3& p = r.X_WT.translation;
+  const char* phase = r.phase >= 0 && r.phase < static_cast<int>(phases.size())
+                          ? phases[r.phase].c_str()
+                          : "unknown";
+  std::fprintf(f,
+               "%.6f,%s,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%.4f,"
+               "%.9g,%.9g,%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.2f,%.2f,%.2f,%.2f\n",
+               r.t_s, phase, p.x, p.y, p.z, rv.x, rv.y, rv.z, r.F_contact_T_W.force.x,
+               r.F_contact_T_W.force.y, r.F_contact_T_W.force.z, r.F_contact_T_W.torque.x,
+               r.F_contact_T_W.torque.y, r.F_contact_T_W.torque.z, r.contacts, r.model_age_ms,
+               r.p_WH.x, r.p_WH.y, r.p_WH.z, r.F_device_W.force.x, r.F_device_W.force.y,
+               r.F_device_W.force.z, r.F_device_W.torque.x, r.F_device_W.torque.y,
+               r.F_device_W.torque.z, r.depth_m, static_cast<double>(r.tick_compute_us),
+               static_cast<double>(r.remote_collision_us),
+               static_cast<double>(r.remote_texture_us), static_cast<double>(r.remote_step_us));
+}
+
+/// Scales `v` down to length `limit` when longer, keeping its direction. Returns true if clamped.
+bool ClampLength(glm::dvec3& v, double limit) noexcept {
+  const double len = glm::length(v);
+  if (len <= limit) return false;
+  v *= limit / len;
+  return true;
+}
+
+}  // namespace
+
+void StationConfig::Validate() const {
+  if (!(loop_rate_hz >= 100.0 && loop_rate_hz <= 4000.0)) {
+    throw std::invalid_argument("loop rate must be within 100..4000 Hz, got " +
+                                std::to_string(loop_rate_hz));
+  }
+  if (!IsFiniteRigidTransform(X_WM)) throw std::invalid_argument("X_WM must be finite");
+  if (!(connect_timeout_s > 0.0)) throw std::invalid_argument("connect timeout must be positive");
+  coupling.Validate();
+}
+
+nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& device,
+                                  const Experiment& experiment) {
+  config.Validate();
+  const ToolSimulator simulator(config.tool_inertia, config.coupling);
+  const DeviceCapabilities caps = device.capabilities();
+  const auto ticks = static_cast<std::int64_t>(std::ceil(experiment.duration_s() *
+                                                          config.loop_rate_hz));
+  const std::int64_t period_ns = static_cast<std::int64_t>(std::llround(1e9 / config.loop_rate_hz));
+  const double h = period_ns * 1e-9;
+
+  std::FILE* trace = nullptr;
+  if (!config.out_dir.empty()) {
+    std::filesystem::create_directories(config.out_dir);
+    const std::string path = config.out_dir + "/trace.csv";
+    trace = std::fopen(path.c_str(), "w");
+    if (!trace) throw std::runtime_error("cannot write " + path);
+    WriteTraceHeader(trace);
+  }
+
+  TripleBuffer<OutgoingToolState> outgoing;
+  TripleBuffer<IncomingModel> incoming;
+  SpscRing<TraceRow> rows(16384);
+  Counters counters;
+  NetworkWorker network(config, outgoing, incoming, counters);
+
+  device.Open();
+  // The tool starts where the experiment's first target puts the handle.
+  ToolState tool;
+  tool.X_WT = config.X_WM * experiment.Target(0.0).X_MH;
+  std::uint64_t tool_seq = 1;
+  outgoing.Write({{tool.X_WT, tool.V_WT_W}, NowNs(), tool_seq});
+
+  std::atomic<bool> stop_network{false}, stop_recorder{false};
+  std::thread network_thread([&] { network.Run(stop_network); });
+  std::atomic<std::uint64_t> rows_dropped{0};
+  std::thread recorder_thread([&] {
+    TraceRow row;
+    while (true) {
+      const bool stopping = stop_recorder.load(std::memory_order_acquire);
+      bool any = false;
+      while (rows.Pop(row)) {
+        any = true;
+        if (trace) WriteTraceRow(trace, row, experiment.phase_names());
+      }
+      if (stopping && !any) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+  });
+  const auto stop_threads = [&] {
+    stop_network.store(true, std::memory_order_release);
+    stop_recorder.store(true, std::memory_order_release);
+    network_thread.join();
+    recorder_thread.join();
+    if (trace) std::fclose(trace);
+    trace = nullptr;
+    device.Close();
+  };
+
+  // Wait for the remote node's first contact model (it answers our first tool state).
+  const std::int64_t connect_deadline =
+      NowNs() + static_cast<std::int64_t>(config.connect_timeout_s * 1e9);
+  while (counters.model_accepted.load() == 0 && NowNs() < connect_deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  if (counters.model_accepted.load() == 0) {
+    stop_threads();
+    throw std::runtime_error("no contact model from the remote node at " +
+                             config.remote_address.ToString() + " within " +
+                             std::to_string(config.connect_timeout_s) +
+                             " s: is slave_sim running and listening there? (datagrams rejected: " +
+                             std::to_string(counters.rejected_total.load()) + ")");
+  }
+
+  // The haptic loop, on its own thread with real-time priority when permitted.
+  std::vector<double> compute_us(static_cast<size_t>(ticks), 0.0);
+  std::vector<double> period_us(static_cast<size_t>(ticks), 0.0);
+  std::atomic<std::int64_t> ticks_done{0};
+  std::atomic<int> progress_contacts{0}, progress_phase{0};
+  std::atomic<double> progress_force{0.0}, progress_age_ms{-1.0};
+  std::int64_t nonfinite = 0, device_faults = 0, force_clamped = 0, overruns = 0;
+  int contacts_max = 0;
+  double force_max = 0.0;
+  std::vector<double> model_age_samples(static_cast<size_t>(ticks), -1.0);
+  std::string realtime_note = "SCHED_FIFO priority 80";
+
+  std::thread loop_thread([&] {
+    sched_param sp{};
+    sp.sched_priority = 80;
+    if (pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp) != 0) {
+      realtime_note = "not permitted (run as root or grant CAP_SYS_NICE / rtprio); normal priority";
+    }
+    IncomingModel received{};
+    ContactModel model{};
+    std::int64_t model_tool_time_ns = 0;
+    bool have_model = false;
+    float remote_collision = 0, remote_texture = 0, remote_step = 0;
+    const glm::dquat R_MW = glm::conjugate(config.X_WM.rotation);
+    std::int64_t next = NowNs() + period_ns;
+    std::int64_t previous = next - period_ns;
+    const std::int64_t t0 = next;
+    for (std::int64_t k = 0; k < ticks; ++k) {
+      SleepUntilNs(next);
+      const std::int64_t now = NowNs();
+      period_us[k] = (now - previous) * 1e-3;
+      previous = now;
+      TraceRow row;
+      row.t_s = (now - t0) * 1e-9;
+
+      DeviceState ds;
+      Wrench F_device_W;
+      if (!device.ReadState(now, ds)) {
+        ++device_faults;
+        device.WriteWrench({}, now);
+      } else {
+        const RigidTransform X_WH = config.X_WM * ds.X_MH;
+        const Twist V_WH_W{config.X_WM.rotation * ds.V_MH_M.linear,
+                           config.X_WM.rotation * ds.V_MH_M.angular};
+        if (incoming.Read(received)) {
+          model = received.message.model;
+          model_tool_time_ns = received.message.tool_state_send_time_ns;
+          remote_collision = received.message.collision_us;
+          remote_texture = received.message.texture_us;
+          remote_step = received.message.step_us;
+          have_model = true;
+        }
+        const ToolStepResult step = simulator.Step(tool, X_WH, V_WH_W, model, 1.0, h);
+        if (!step.ok) ++nonfinite;
+        F_device_W = -step.F_coupling_T_W;
+        if (!IsFinite(F_device_W)) {
+          ++nonfinite;
+          F_device_W = {};
+        }
+        bool clamped = ClampLength(F_device_W.force, caps.max_force_n);
+        clamped |= ClampLength(F_device_W.torque, caps.max_torque_nm);
+        if (clamped) ++force_clamped;
+        const Wrench F_H_M{R_MW * F_device_W.force, R_MW * F_device_W.torque};
+        if (!device.WriteWrench(F_H_M, now)) ++device_faults;
+
+        ++tool_seq;
+        outgoing.Write({{tool.X_WT, tool.V_WT_W}, now, tool_seq});
+
+        row.X_WT = tool.X_WT;
+        row.F_contact_T_W = step.F_contact_T_W;
+        row.contacts = step.active_contacts;
+        row.depth_m = step.max_depth_m;
+        row.p_WH = X_WH.translation;
+        row.F_device_W = F_device_W;
+        if (have_model) row.model_age_ms = (now - model_tool_time_ns) * 1e-6;
+        row.remote_collision_us = remote_collision;
+        row.remote_texture_us = remote_texture;
+        row.remote_step_us = remote_step;
+        contacts_max = std::max(contacts_max, step.active_contacts);
+        force_max = std::max(force_max, glm::length(step.F_contact_T_W.force));
+        if (!IsFinite(step.F_contact_T_W) || !IsFiniteRigidTransform(tool.X_WT)) ++nonfinite;
+      }
+      // The phase the simulated hand was following, when the device is scripted.
+      row.phase = experiment.Target(row.t_s).phase;
+      model_age_samples[k] = row.model_age_ms;
+      const std::int64_t end = NowNs();
+      row.tick_compute_us = static_cast<float>((end - now) * 1e-3);
+      compute_us[k] = (end - now) * 1e-3;
+      if (!rows.Push(row)) rows_dropped.fetch_add(1, std::memory_order_relaxed);
+      progress_contacts.store(row.contacts, std::memory_order_relaxed);
+      progress_phase.store(row.phase, std::memory_order_relaxed);
+      progress_force.store(glm::length(row.F_contact_T_W.force), std::memory_order_relaxed);
+      progress_age_ms.store(row.model_age_ms, std::memory_order_relaxed);
+      ticks_done.store(k + 1, std::memory_order_release);
+      next += period_ns;
+      if (end > next + period_ns) {  // fell more than a period behind: do not burst to catch up
+        ++overruns;
+        next = end + period_ns;
+      }
+    }
+    device.WriteWrench({}, NowNs());
+  });
+
+  // Progress while the loop runs.
+  const std::int64_t started = NowNs();
+  std::int64_t last_print = started;
+  std::int64_t last_ticks = 0;
+  std::uint64_t last_models = counters.model_accepted.load();
+  while (ticks_done.load(std::memory_order_acquire) < ticks) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    const std::int64_t now = NowNs();
+    if (config.progress_period_s > 0.0 && (now - last_print) * 1e-9 >= config.progress_period_s) {
+      const std::int64_t done = ticks_done.load();
+      const std::uint64_t models = counters.model_accepted.load();
+      const double dt = (now - last_print) * 1e-9;
+      const int phase = progress_phase.load();
+      std::printf(
+          "[master] t=%5.2f/%.2f s  phase=%-8s  loop %6.0f Hz  models %6.0f Hz  contacts %d  "
+          "|F|=%6.3f N  model age %5.2f ms\n",
+          done / config.loop_rate_hz, experiment.duration_s(),
+          phase < static_cast<int>(experiment.phase_names().size())
+              ? experiment.phase_names()[phase].c_str()
+              : "?",
+          (done - last_ticks) / dt, (models - last_models) / dt, progress_contacts.load(),
+          progress_force.load(), progress_age_ms.load());
+      std::fflush(stdout);
+      last_print = now;
+      last_ticks = done;
+      last_models = models;
+    }
+  }
+  loop_thread.join();
+  const double elapsed_s = (NowNs() - started) * 1e-9;
+  stop_threads();
+
+  std::vector<double> ages;
+  for (double a : model_age_samples)
+    if (a >= 0.0) ages.push_back(a);
+  nlohmann::json rejected = nlohmann::json::object();
+  for (int i = 1; i < 16; ++i) {
+    const auto n = counters.rejected_by_reason[i].load();
+    if (n) rejected[wire::ToString(static_cast<wire::DecodeStatus>(i))] = n;
+  }
+  nlohmann::json s;
+  s["experiment"] = experiment.name();
+  s["device"] = caps.name;
+  s["duration_s"] = experiment.duration_s();
+  s["ticks"] = ticks;
+  s["master_rate_hz"] = ticks / std::max(elapsed_s, 1e-9);
+  s["master_period_p50_us"] = Percentile(period_us, 0.5);
+  s["master_period_p99_us"] = Percentile(period_us, 0.99);
+  s["master_tick_p50_us"] = Percentile(compute_us, 0.5);
+  s["master_tick_p99_us"] = Percentile(compute_us, 0.99);
+  s["master_tick_max_us"] = Percentile(compute_us, 1.0);
+  s["master_overruns"] = overruns;
+  s["realtime_priority"] = realtime_note;
+  s["slave_rate_hz"] = network.RemoteRateHz();
+  s["slave_step_p50_us"] = Percentile(network.remote_step_us(), 0.5);
+  s["slave_step_p99_us"] = Percentile(network.remote_step_us(), 0.99);
+  s["slave_collision_p50_us"] = Percentile(network.collision_us(), 0.5);
+  s["slave_texture_p50_us"] = Percentile(network.texture_us(), 0.5);
+  s["rtt_ms_p50"] = Percentile(network.rtt_ms(), 0.5);
+  s["rtt_ms_p99"] = Percentile(network.rtt_ms(), 0.99);
+  s["model_age_ms_p50"] = Percentile(ages, 0.5);
+  s["model_age_ms_p99"] = Percentile(ages, 0.99);
+  s["contacts_max"] = contacts_max;
+  s["contact_force_max_n"] = force_max;
+  s["device_max_force_n"] = caps.max_force_n;
+  s["device_max_torque_nm"] = caps.max_torque_nm;
+  s["force_clamped_ticks"] = force_clamped;
+  s["nonfinite_count"] = nonfinite;
+  s["device_faults"] = device_faults;
+  s["trace_rows_dropped"] = rows_dropped.load();
+  s["datagrams"]["tool_state"] = {{"sent", counters.tool_state_sent.load()},
+                                  {"send_failed", counters.tool_state_send_failed.load()},
+                                  {"bytes_sent", counters.tool_state_bytes.load()}};
+  s["datagrams"]["contact_model"] = {{"received", counters.model_received.load()},
+                                     {"accepted", counters.model_accepted.load()},
+                                     {"dropped_stale", counters.model_stale.load()},
+                                     {"dropped_wrong_session", counters.model_wrong_session.load()},
+                                     {"dropped_malformed", counters.rejected_total.load()},
+                                     {"dropped_malformed_by_reason", rejected},
+                                     {"lost", counters.model_lost.load()},
+                                     {"bytes_received", counters.model_bytes.load()}};
+  if (!config.out_dir.empty()) {
+    const std::string path = config.out_dir + "/summary.json";
+    std::ofstream out(path);
+    out << s.dump(2) << "\n";
+    if (!out) throw std::runtime_error("cannot write " + path);
+  }
+  return s;
+}
+
+}  // namespace ht

@@ -1,0 +1,89 @@
+#include "master_station/simulated_operator.h"
+
+#include <algorithm>
+#include <stdexcept>
+
+namespace ht {
+
+SimulatedOperatorDevice::SimulatedOperatorDevice(const Experiment& experiment,
+                                                 const OperatorHandParams& hand)
+    : experiment_(experiment), hand_(hand) {
+  if (!(hand.mass_kg > 0.0) || !(hand.inertia_kg_m2 > 0.0) || hand.substeps < 1) {
+    throw std::invalid_argument("simulated operator: mass, inertia and substeps must be positive");
+  }
+}
+
+DeviceCapabilities SimulatedOperatorDevice::capabilities() const {
+  DeviceCapabilities c;
+  c.name = "simulated operator (" + experiment_.name() + ")";
+  c.max_force_n = 10.0;
+  c.max_torque_nm = 1.0;
+  c.max_stiffness_n_per_m = 3000.0;
+  c.max_rotational_stiffness_nm_per_rad = 5.0;
+  c.max_damping_ns_per_m = 40.0;
+  c.rated_loop_rate_hz = 1000.0;
+  c.workspace_half_extents_m = {0.1, 0.1, 0.1};
+  c.dof_in = 6;
+  c.dof_out = 6;
+  return c;
+}
+
+void SimulatedOperatorDevice::Open() {
+  open_ = true;
+  started_ = false;
+  F_H_M_ = {};
+  const HandTarget start = experiment_.Target(0.0);
+  state_.X_MH = start.X_MH;
+  state_.V_MH_M = {};
+}
+
+void SimulatedOperatorDevice::Close() noexcept {
+  F_H_M_ = {};
+  open_ = false;
+}
+
+bool SimulatedOperatorDevice::ReadState(std::int64_t now_ns, DeviceState& out) noexcept {
+  if (!open_) return false;
+  if (!started_) {
+    started_ = true;
+    t0_ns_ = now_ns;
+    last_ns_ = now_ns;
+  }
+  // Integrate the hand from the last reading to now (at most 50 ms at once after a stall).
+  const double dt_total = std::clamp((now_ns - last_ns_) * 1e-9, 0.0, 0.05);
+  const double dt = dt_total / hand_.substeps;
+  const HandTarget target = experiment_.Target((now_ns - t0_ns_) * 1e-9);
+  phase_ = target.phase;
+  for (int i = 0; i < hand_.substeps && dt > 0.0; ++i) {
+    Twist& V = state_.V_MH_M;
+    RigidTransform& X = state_.X_MH;
+    const Twist err = PoseDifference(target.X_MH, X);
+    const glm::dvec3 force = hand_.stiffness_n_per_m * err.linear +
+                             hand_.damping_ns_per_m * (target.V_MH_M.linear - V.linear) +
+                             F_H_M_.force;
+    const glm::dvec3 torque = hand_.rotational_stiffness_nm_per_rad * err.angular +
+                              hand_.rotational_damping_nms_per_rad *
+                                  (target.V_MH_M.angular - V.angular) +
+                              F_H_M_.torque;
+    V.linear += dt * force / hand_.mass_kg;
+    V.angular += dt * torque / hand_.inertia_kg_m2;
+    X = Displace(X, {dt * V.linear, dt * V.angular});
+    energy_to_operator_j_ +=
+        dt * (glm::dot(F_H_M_.force, V.linear) + glm::dot(F_H_M_.torque, V.angular));
+  }
+  last_ns_ = now_ns;
+  state_.timestamp_ns = now_ns;
+  out = state_;
+  return IsFiniteRigidTransform(out.X_MH) && IsFinite(out.V_MH_M);
+}
+
+bool SimulatedOperatorDevice::WriteWrench(const Wrench& F_H_M, std::int64_t) noexcept {
+  if (!open_ || !IsFinite(F_H_M)) {
+    F_H_M_ = {};
+    return false;
+  }
+  F_H_M_ = F_H_M;
+  return true;
+}
+
+}  // namespace ht
