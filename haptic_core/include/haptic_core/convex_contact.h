@@ -17,7 +17,8 @@ struct ConvexContact {
   double signed_distance_m = 0.0;
   /// Unit direction from B towards A (A must move along it to separate), world frame.
   glm::dvec3 normal_W{0.0, 0.0, 1.0};
-  /// A point between the two hulls where they touch or overlap most (m), world frame.
+  /// A point of the region where the hulls touch or overlap (m), world frame; laterally within
+  /// the contact region, its position along the normal only approximate (libccd EPA).
   glm::dvec3 point_W{0.0};
 };
 

@@ -1,0 +1,142 @@
+// Checks the trace of the loopback fig75 run (tests/CMakeLists.txt runs deploy/run-loopback
+// first): the seed's qualitative results of Fig. 75 and the safety properties.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace {
+
+struct Trace {
+  std::vector<std::string> columns;
+  std::vector<std::string> phase;
+  std::map<std::string, std::vector<double>> values;
+  std::vector<double> Select(const std::string& column, const std::string& which) const {
+    std::vector<double> out;
+    const auto& v = values.at(column);
+    for (size_t i = 0; i < v.size(); ++i)
+      if (phase[i] == which) out.push_back(v[i]);
+    return out;
+  }
+};
+
+std::string OutDir() {
+  const char* d = std::getenv("HT_LOOPBACK_OUT");
+  return d ? d : "loopback_fig75";
+}
+
+Trace LoadTrace() {
+  Trace t;
+  std::ifstream in(OutDir() + "/trace.csv");
+  EXPECT_TRUE(in.good()) << "no trace at " << OutDir() << "/trace.csv";
+  std::string line;
+  std::getline(in, line);
+  std::stringstream header(line);
+  for (std::string c; std::getline(header, c, ',');) t.columns.push_back(c);
+  while (std::getline(in, line)) {
+    std::stringstream row(line);
+    std::string cell;
+    for (size_t i = 0; std::getline(row, cell, ','); ++i) {
+      if (t.columns[i] == "phase") {
+        t.phase.push_back(cell);
+      } else {
+        t.values[t.columns[i]].push_back(std::strtod(cell.c_str(), nullptr));
+      }
+    }
+  }
+  return t;
+}
+
+double Rms(const std::vector<double>& v) {
+  double s = 0;
+  for (double x : v) s += x * x;
+  return v.empty() ? 0.0 : std::sqrt(s / v.size());
+}
+
+TEST(LoopbackFig75, TraceHasTheRequiredColumnsAndFiniteValues) {
+  const Trace t = LoadTrace();
+  for (const char* c : {"t_s", "phase", "tool_x", "tool_y", "tool_z", "tool_rx", "tool_ry",
+                        "tool_rz", "fx", "fy", "fz", "tx", "ty", "tz", "contacts", "model_age_ms"}) {
+    EXPECT_NE(std::find(t.columns.begin(), t.columns.end(), c), t.columns.end()) << c;
+  }
+  ASSERT_GE(t.phase.size(), 1500u) << "fig75 needs at least 1,500 frames";
+  for (const auto& [name, v] : t.values) {
+    for (double x : v) ASSERT_TRUE(std::isfinite(x)) << "non-finite value in column " << name;
+  }
+}
+
+TEST(LoopbackFig75, ForceAlongTheRidgesStaysSmall) {
+  const Trace t = LoadTrace();
+  const auto fx = t.Select("fx", "x"), fy = t.Select("fy", "x"), fz = t.Select("fz", "x");
+  std::vector<double> mag;
+  for (size_t i = 0; i < fx.size(); ++i) mag.push_back(std::hypot(fx[i], fy[i], fz[i]));
+  ASSERT_GT(Rms(mag), 0.2) << "the block must press on the gear during the x phase";
+  EXPECT_LT(Rms(fx), 0.05 * Rms(mag));
+}
+
+TEST(LoopbackFig75, CrossingTheRidgesGivesAStaircaseInZ) {
+  const Trace t = LoadTrace();
+  const auto y = t.Select("tool_y", "y"), z = t.Select("tool_z", "y");
+  ASSERT_FALSE(z.empty());
+  // Count rises of at least 0.15 mm (crests climbed): the block rests on a ridge, then drops.
+  int rises = 0;
+  double low = z[0], high = z[0];
+  bool climbing = false;
+  for (double v : z) {
+    low = std::min(low, v);
+    if (!climbing && v - low > 0.15e-3) {
+      climbing = true;
+      high = v;
+    }
+    if (climbing) {
+      high = std::max(high, v);
+      if (high - v > 0.15e-3) {
+        ++rises;
+        climbing = false;
+        low = v;
+      }
+    }
+  }
+  const double travel = *std::max_element(y.begin(), y.end()) - *std::min_element(y.begin(), y.end());
+  EXPECT_GT(travel, 6e-3) << "the block must cross several 3 mm ridges";
+  EXPECT_GE(rises, 4);
+  // Along x the ridges do not change: z stays much flatter there than while crossing.
+  const auto zx = t.Select("tool_z", "x");
+  auto range = [](const std::vector<double>& v) {
+    return *std::max_element(v.begin(), v.end()) - *std::min_element(v.begin(), v.end());
+  };
+  EXPECT_LT(range(std::vector<double>(zx.begin() + zx.size() / 3, zx.end())), range(z));
+}
+
+TEST(LoopbackFig75, ForcesStayWithinTheDeviceLimits) {
+  const Trace t = LoadTrace();
+  std::ifstream in(OutDir() + "/summary.json");
+  ASSERT_TRUE(in.good());
+  const nlohmann::json s = nlohmann::json::parse(in);
+  const double max_force = s["device_max_force_n"].get<double>();
+  const double max_torque = s["device_max_torque_nm"].get<double>();
+  const auto& fx = t.values.at("device_fx");
+  for (size_t i = 0; i < fx.size(); ++i) {
+    const double f = std::hypot(fx[i], t.values.at("device_fy")[i], t.values.at("device_fz")[i]);
+    const double tq = std::hypot(t.values.at("device_tx")[i], t.values.at("device_ty")[i],
+                                 t.values.at("device_tz")[i]);
+    ASSERT_LE(f, max_force * (1 + 1e-9));
+    ASSERT_LE(tq, max_torque * (1 + 1e-9));
+  }
+  EXPECT_EQ(s["nonfinite_count"].get<int>(), 0);
+  EXPECT_GE(s["contacts_max"].get<int>(), 1);
+  for (const char* k : {"master_rate_hz", "master_tick_p99_us", "slave_rate_hz", "slave_step_p50_us",
+                        "rtt_ms_p50"}) {
+    EXPECT_TRUE(s.contains(k)) << k;
+  }
+  EXPECT_GT(s["datagrams"]["contact_model"]["accepted"].get<int>(), 0);
+}
+
+}  // namespace

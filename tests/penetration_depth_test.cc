@@ -1,0 +1,153 @@
+#include "haptic_core/penetration_depth.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+
+#include "haptic_core/contact_linearization.h"
+#include "test_scenes.h"
+
+namespace ht {
+namespace {
+
+using testing::EnvironmentBox;
+using testing::EnvironmentPose;
+using testing::ToolBox;
+using testing::ToolPose;
+
+const auto kFlat = [](double, double) { return 0.0; };
+
+TEST(PenetrationDepth, FlatPatchesGiveTheirOverlap) {
+  const HapticModel a = ToolBox(kFlat), b = EnvironmentBox(kFlat);
+  TexturePenetrationSolver solver;
+  const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 50);
+  for (double overlap : {0.0, 1e-4, 1e-3, 4e-3}) {
+    const DepthSample d = solver.Depth(a, ToolPose(0.001, -0.002, -overlap), b, EnvironmentPose(), w);
+    EXPECT_NEAR(d.depth_m, overlap, 1e-7) << "overlap " << overlap;
+  }
+}
+
+TEST(PenetrationDepth, ConstantTexturesAddToTheOverlap) {
+  // Texture heights displace along the outward normals: both protrusions add to the overlap.
+  const HapticModel a = ToolBox([](double, double) { return 3e-4; });
+  const HapticModel b = EnvironmentBox([](double, double) { return 2e-4; });
+  TexturePenetrationSolver solver;
+  const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 50);
+  EXPECT_NEAR(solver.Depth(a, ToolPose(0, 0, 0.0), b, EnvironmentPose(), w).depth_m, 5e-4, 1e-7);
+}
+
+TEST(PenetrationDepth, SeparatedPatchesGiveNegativeDepthAndNoForce) {
+  const HapticModel a = ToolBox(kFlat), b = EnvironmentBox(kFlat);
+  TexturePenetrationSolver solver;
+  const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 50);
+  const ContactLinearization lin = solver.Linearize(a, ToolPose(0, 0, 2e-3), b, EnvironmentPose(), w, 1000.0);
+  EXPECT_NEAR(lin.depth_m, -2e-3, 1e-7);
+  const Wrench F = PenaltyWrench(lin.depth_m, lin.gradient, lin.stiffness_n_per_m);
+  EXPECT_EQ(glm::length(F.force), 0.0);
+  EXPECT_EQ(glm::length(F.torque), 0.0);
+}
+
+TEST(PenetrationDepth, NoOverlapOnTheWindowIsReported) {
+  const HapticModel a = ToolBox(kFlat), b = EnvironmentBox(kFlat);
+  TexturePenetrationSolver solver;
+  // Tool far to the side: its patch does not cover the window.
+  const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.01, 20);
+  const DepthSample d = solver.Depth(a, ToolPose(0.2, 0, 0), b, EnvironmentPose(), w);
+  EXPECT_EQ(d.cell, -1);
+  EXPECT_TRUE(std::isinf(d.depth_m));
+}
+
+// Sinusoidal environment b(y) = A sin(ωy) under a tool with a smooth paraboloid bump
+// h_A = c − κ|p − p_A|². The deepest point y* solves A ω cos(ω y*) = 2κ (y* − y_A); there the
+// force is one force with tangential/normal ratio equal to the sinusoid's slope (DESIGN.md §4).
+struct SmoothCase {
+  double amp = 3e-4, omega = 2 * std::numbers::pi / 6e-3, kappa = 500.0, c = 1e-4;
+  double y_tool = 0.8e-3, z_bottom = 1e-4;
+  double DeepestY() const {
+    double lo = y_tool - 5e-3, hi = y_tool + 5e-3;  // f(y) = Aω cos(ωy) − 2κ(y − y_A) decreases
+    for (int i = 0; i < 200; ++i) {
+      const double mid = 0.5 * (lo + hi);
+      (amp * omega * std::cos(omega * mid) - 2 * kappa * (mid - y_tool) > 0 ? lo : hi) = mid;
+    }
+    return 0.5 * (lo + hi);
+  }
+  double Slope(double y) const { return amp * omega * std::cos(omega * y); }
+};
+
+TEST(PenetrationDepth, SinusoidForceRatioEqualsSlopeAtDeepestPoint) {
+  const SmoothCase s;
+  const HapticModel a = ToolBox([&](double x, double y) { return s.c - s.kappa * (x * x + y * y); }, 1024);
+  const HapticModel b = EnvironmentBox([&](double, double y) { return s.amp * std::sin(s.omega * y); }, 1024);
+  TexturePenetrationSolver solver(200);
+  const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 200);
+  const ContactLinearization lin = solver.Linearize(a, ToolPose(0, s.y_tool, s.z_bottom), b, EnvironmentPose(), w, 1000.0);
+  ASSERT_GT(lin.depth_m, 0.0);
+  const Wrench F = PenaltyWrench(lin.depth_m, lin.gradient, 1000.0);
+  const double y_star = s.DeepestY();
+  const double slope = s.Slope(y_star);
+  ASSERT_GT(std::abs(slope), 0.1) << "the case must put the deepest point on a flank";
+  EXPECT_NEAR(-F.force.y / F.force.z, slope, 0.05 * std::abs(slope));
+  EXPECT_NEAR(F.force.x / F.force.z, 0.0, 0.01);
+  EXPECT_NEAR(lin.point_W.y, y_star, 2 * w.cell_size_m());
+}
+
+TEST(PenetrationDepth, FiniteDifferenceGradientMatchesAnalyticGradient) {
+  // Envelope theorem: ∇δ = (g − n, r × (g − n)) with g the tool surface slope at the deepest
+  // point p* and r = p* − centre of mass. Two independent routes to the same six numbers.
+  const SmoothCase s;
+  const HapticModel a = ToolBox([&](double x, double y) { return s.c - s.kappa * (x * x + y * y); }, 1024);
+  const HapticModel b = EnvironmentBox([&](double, double y) { return s.amp * std::sin(s.omega * y); }, 1024);
+  TexturePenetrationSolver solver(200);
+  const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 200);
+  const RigidTransform X_WT = ToolPose(0, s.y_tool, s.z_bottom);
+  const ContactLinearization lin = solver.Linearize(a, X_WT, b, EnvironmentPose(), w, 1000.0);
+
+  const double y_star = s.DeepestY();
+  const double slope = s.Slope(y_star);  // = ∂a/∂y at p*, since ∇a = ∇b there
+  const double a_star = s.z_bottom - (s.c - s.kappa * (y_star - s.y_tool) * (y_star - s.y_tool));
+  const glm::dvec3 n(0, 0, 1), g(0, slope, 0);
+  const glm::dvec3 r = glm::dvec3(0, y_star, a_star) - X_WT.translation;
+  const glm::dvec3 J_x = g - n, J_theta = glm::cross(r, g - n);
+  const double tol_x = 0.05 * glm::length(J_x), tol_theta = 0.05 * glm::length(J_theta);
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(lin.gradient.d_translation_W[i], J_x[i], tol_x) << "translation axis " << i;
+    EXPECT_NEAR(lin.gradient.d_rotation_W[i], J_theta[i], tol_theta) << "rotation axis " << i;
+  }
+}
+
+TEST(PenetrationDepth, ActionEqualsMinusReaction) {
+  // Swap the roles: the environment becomes the tool, n flips. The two wrenches, taken about the
+  // world origin, must cancel.
+  const SmoothCase s;
+  const HapticModel a = ToolBox([&](double x, double y) { return s.c - s.kappa * (x * x + y * y); }, 1024);
+  const HapticModel b = EnvironmentBox([&](double, double y) { return s.amp * std::sin(s.omega * y); }, 1024);
+  TexturePenetrationSolver solver(100);
+  const RigidTransform X_WA = ToolPose(1e-3, s.y_tool, s.z_bottom), X_WB = EnvironmentPose();
+  const double k = 1000.0;
+  const ContactLinearization on_a =
+      solver.Linearize(a, X_WA, b, X_WB, ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 100), k);
+  const ContactLinearization on_b =
+      solver.Linearize(b, X_WB, a, X_WA, ContactWindow::Make({0, 0, 0}, {0, 0, -1}, 0.02, 100), k);
+  EXPECT_NEAR(on_a.depth_m, on_b.depth_m, 1e-7);
+  const Wrench F_a = PenaltyWrench(on_a.depth_m, on_a.gradient, k);
+  const Wrench F_b = PenaltyWrench(on_b.depth_m, on_b.gradient, k);
+  const double scale = glm::length(F_a.force);
+  ASSERT_GT(scale, 0.0);
+  EXPECT_LT(glm::length(F_a.force + F_b.force), 0.03 * scale);
+  const glm::dvec3 torque_o = F_a.torque + glm::cross(X_WA.translation, F_a.force) + F_b.torque +
+                              glm::cross(X_WB.translation, F_b.force);
+  EXPECT_LT(glm::length(torque_o), 0.03 * scale * 0.01);
+}
+
+TEST(PenetrationDepth, WindowRejectsBadArguments) {
+  EXPECT_THROW(ContactWindow::Make({0, 0, 0}, {0, 0, 0}, 0.02, 50), std::invalid_argument);
+  EXPECT_THROW(ContactWindow::Make({0, 0, 0}, {NAN, 0, 1}, 0.02, 50), std::invalid_argument);
+  EXPECT_THROW(ContactWindow::Make({0, 0, 0}, {0, 0, 1}, -1.0, 50), std::invalid_argument);
+  EXPECT_THROW(ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 1), std::invalid_argument);
+  const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0.3, -0.2, 0.9}, 0.02, 50);
+  EXPECT_NEAR(glm::dot(glm::cross(w.axis_u_W, w.axis_v_W), w.normal_W), 1.0, 1e-12);
+}
+
+}  // namespace
+}  // namespace ht

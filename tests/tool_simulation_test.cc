@@ -1,0 +1,62 @@
+#include "haptic_core/tool_simulation.h"
+
+#include <gtest/gtest.h>
+
+namespace ht {
+namespace {
+
+TEST(ToolSimulation, ToolSettlesOnTheHandleInFreeSpace) {
+  const ToolSimulator sim(BlockOnGearToolInertia(), VirtualCoupling{});
+  ToolState s;
+  RigidTransform X_WH;
+  X_WH.translation = {0.01, -0.02, 0.005};
+  X_WH.rotation = QuaternionFromRotationVector({0.1, -0.2, 0.05});
+  const ContactModel none;
+  for (int i = 0; i < 5000; ++i) ASSERT_TRUE(sim.Step(s, X_WH, {}, none, 1.0, 1e-3).ok);
+  const Twist d = PoseDifference(X_WH, s.X_WT);
+  EXPECT_LT(glm::length(d.linear), 1e-6);
+  EXPECT_LT(glm::length(d.angular), 1e-5);
+}
+
+TEST(ToolSimulation, StiffContactBalancesTheCouplingAtRest) {
+  // A wall below the tool (δ = −z, k = 1e5 N/m, far stiffer than the coupling): pushing the
+  // handle 5 mm into it, the tool rests where the coupling force equals the contact force.
+  const ToolSimulator sim(BlockOnGearToolInertia(), VirtualCoupling{});
+  ContactModel wall;
+  wall.num_contacts = 1;
+  wall.contacts[0].depth_m = 0.0;
+  wall.contacts[0].gradient = {{0, 0, -1}, {0, 0, 0}};
+  wall.contacts[0].stiffness_n_per_m = 1e5;
+  RigidTransform X_WH;
+  X_WH.translation = {0, 0, -5e-3};
+  ToolState s;
+  ToolStepResult r;
+  for (int i = 0; i < 3000; ++i) r = sim.Step(s, X_WH, {}, wall, 1.0, 1e-3);
+  const double k_c = VirtualCoupling{}.k_translation_n_per_m;
+  const double z_expected = -k_c * 5e-3 / (k_c + 1e5);  // series springs
+  EXPECT_NEAR(s.X_WT.translation.z, z_expected, 1e-7);
+  EXPECT_NEAR(r.F_coupling_T_W.force.z + r.F_contact_T_W.force.z, 0.0, 1e-3);
+}
+
+TEST(ToolSimulation, NonFiniteHandleHoldsTheTool) {
+  const ToolSimulator sim(BlockOnGearToolInertia(), VirtualCoupling{});
+  ToolState s;
+  s.V_WT_W.linear = {0.1, 0, 0};
+  RigidTransform bad;
+  bad.translation.y = NAN;
+  const ToolStepResult r = sim.Step(s, bad, {}, ContactModel{}, 1.0, 1e-3);
+  EXPECT_FALSE(r.ok);
+  EXPECT_TRUE(IsFiniteRigidTransform(s.X_WT));
+  EXPECT_EQ(glm::length(s.V_WT_W.linear), 0.0);
+  EXPECT_TRUE(IsFinite(r.F_coupling_T_W));
+}
+
+TEST(ToolSimulation, RejectsBadParameters) {
+  VirtualCoupling c;
+  c.k_translation_n_per_m = -1;
+  EXPECT_THROW(ToolSimulator(BlockOnGearToolInertia(), c), std::invalid_argument);
+  EXPECT_THROW(ToolSimulator(ToolInertia{0.0, {1, 1, 1}}, VirtualCoupling{}), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace ht
