@@ -1,5 +1,13 @@
 #include "codecs/draco_mesh_codec.h"
 
+#include <draco/attributes/geometry_attribute.h>
+#include <draco/attributes/point_attribute.h>
+#include <draco/compression/decode.h>
+#include <draco/compression/encode.h>
+#include <draco/core/decoder_buffer.h>
+#include <draco/core/encoder_buffer.h>
+#include <draco/mesh/mesh.h>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -11,18 +19,10 @@
 #include <string>
 #include <utility>
 
-#include <draco/attributes/geometry_attribute.h>
-#include <draco/attributes/point_attribute.h>
-#include <draco/compression/decode.h>
-#include <draco/compression/encode.h>
-#include <draco/core/decoder_buffer.h>
-#include <draco/core/encoder_buffer.h>
-#include <draco/mesh/mesh.h>
-
 namespace ht {
 namespace {
 
-constexpr int kMinQuantizationBits = 1;   // Draco's AttributeQuantizationTransform limits.
+constexpr int kMinQuantizationBits = 1;  // Draco's AttributeQuantizationTransform limits.
 constexpr int kMaxQuantizationBits = 30;
 constexpr int kMinSpeed = 0;
 constexpr int kMaxSpeed = 10;
@@ -40,9 +40,9 @@ std::array<float, 3> ToFloat3(const glm::dvec3& v, std::size_t i) {
   const std::array<float, 3> f = {static_cast<float>(v.x), static_cast<float>(v.y),
                                   static_cast<float>(v.z)};
   if (!(std::isfinite(f[0]) && std::isfinite(f[1]) && std::isfinite(f[2]))) {
-    throw std::invalid_argument("Draco: vertex " + std::to_string(i) + " (" +
-                                std::to_string(v.x) + ", " + std::to_string(v.y) + ", " +
-                                std::to_string(v.z) + ") is not finite as a float32");
+    throw std::invalid_argument("Draco: vertex " + std::to_string(i) + " (" + std::to_string(v.x) +
+                                ", " + std::to_string(v.y) + ", " + std::to_string(v.z) +
+                                ") is not finite as a float32");
   }
   return f;
 }

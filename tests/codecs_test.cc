@@ -1,0 +1,404 @@
+// Tests of codecs/draco_mesh_codec: round trip of a procedural mesh against the quantization bound
+// and the surface area, rejection of bad input on both sides, and decoding of Draco's own test
+// files (../shared/data/draco, located through HT_SHARED_DATA).
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <glm/common.hpp>
+#include <glm/ext/vector_int3_sized.hpp>
+#include <glm/geometric.hpp>
+#include <iterator>
+#include <limits>
+#include <optional>
+#include <random>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "codecs/draco_mesh_codec.h"
+#include "haptic_core/haptic_model.h"
+#include "haptic_core/procedural_models.h"
+
+namespace ht {
+namespace {
+
+double SurfaceArea(const TriangleMesh& mesh) {
+  double area = 0.0;
+  for (const glm::ivec3& t : mesh.triangles) {
+    const glm::dvec3& a = mesh.vertices[t.x];
+    const glm::dvec3& b = mesh.vertices[t.y];
+    const glm::dvec3& c = mesh.vertices[t.z];
+    area += 0.5 * glm::length(glm::cross(b - a, c - a));
+  }
+  return area;
+}
+
+// Uniform hash grid over a point set: answers "distance to the nearest point, if it is within
+// `radius`" by scanning the 27 cells around the query (cell size = radius).
+class PointGrid {
+ public:
+  PointGrid(const std::vector<glm::dvec3>& points, double radius) : points_(points), cell_(radius) {
+    for (std::size_t i = 0; i < points_.size(); ++i) cells_[Key(Cell(points_[i]))].push_back(i);
+  }
+
+  // Distance from `q` to the nearest point, or nullopt when none lies within `radius`.
+  std::optional<double> NearestWithinRadius(const glm::dvec3& q) const {
+    const glm::i64vec3 c = Cell(q);
+    double best = std::numeric_limits<double>::infinity();
+    for (std::int64_t dx = -1; dx <= 1; ++dx) {
+      for (std::int64_t dy = -1; dy <= 1; ++dy) {
+        for (std::int64_t dz = -1; dz <= 1; ++dz) {
+          const auto it = cells_.find(Key(c + glm::i64vec3(dx, dy, dz)));
+          if (it == cells_.end()) continue;
+          for (std::size_t i : it->second) best = std::min(best, glm::distance(q, points_[i]));
+        }
+      }
+    }
+    if (!(best <= cell_)) return std::nullopt;
+    return best;
+  }
+
+ private:
+  glm::i64vec3 Cell(const glm::dvec3& p) const {
+    return glm::i64vec3(std::floor(p.x / cell_), std::floor(p.y / cell_), std::floor(p.z / cell_));
+  }
+  static std::uint64_t Key(const glm::i64vec3& c) {
+    // 21 bits per axis is ample for a 6 cm object on a µm grid.
+    const auto k = [](std::int64_t v) { return static_cast<std::uint64_t>(v) & 0x1fffffu; };
+    return k(c.x) | (k(c.y) << 21) | (k(c.z) << 42);
+  }
+
+  const std::vector<glm::dvec3>& points_;
+  double cell_;
+  std::unordered_map<std::uint64_t, std::vector<std::size_t>> cells_;
+};
+
+// Largest distance from a point of `from` to its nearest point of `to`; +inf when some point of
+// `from` has no point of `to` within `radius`.
+double MaxNearestDistance(const std::vector<glm::dvec3>& from, const std::vector<glm::dvec3>& to,
+                          double radius) {
+  const PointGrid grid(to, radius);
+  double worst = 0.0;
+  for (const glm::dvec3& p : from) {
+    const std::optional<double> d = grid.NearestWithinRadius(p);
+    if (!d) return std::numeric_limits<double>::infinity();
+    worst = std::max(worst, *d);
+  }
+  return worst;
+}
+
+void ExpectIndicesInRange(const TriangleMesh& mesh) {
+  const auto n = static_cast<int>(mesh.vertices.size());
+  for (const glm::ivec3& t : mesh.triangles) {
+    for (int c = 0; c < 3; ++c) {
+      ASSERT_GE(t[c], 0);
+      ASSERT_LT(t[c], n);
+    }
+  }
+}
+
+// Decoding must either throw std::runtime_error or give a usable mesh; anything else (another
+// exception, a crash) fails the test.
+void ExpectRuntimeErrorOrValidMesh(const std::vector<std::uint8_t>& bytes) {
+  try {
+    const TriangleMesh mesh = DecodeMeshDraco(bytes);
+    EXPECT_FALSE(mesh.triangles.empty());
+    ExpectIndicesInRange(mesh);
+  } catch (const std::runtime_error&) {
+  }
+}
+
+TriangleMesh OneTriangle() {
+  TriangleMesh mesh;
+  mesh.vertices = {{0.0, 0.0, 0.0}, {0.02, 0.0, 0.0}, {0.0, 0.01, 0.005}};
+  mesh.triangles = {{0, 1, 2}};
+  return mesh;
+}
+
+class DracoGearTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    gear_ = new TriangleMesh(MakeRidgedGearFullResolution());
+    encoded_ = new std::vector<std::uint8_t>(EncodeMeshDraco(*gear_));
+  }
+  static void TearDownTestSuite() {
+    delete gear_;
+    delete encoded_;
+  }
+  static const TriangleMesh* gear_;
+  static const std::vector<std::uint8_t>* encoded_;
+};
+const TriangleMesh* DracoGearTest::gear_ = nullptr;
+const std::vector<std::uint8_t>* DracoGearTest::encoded_ = nullptr;
+
+TEST_F(DracoGearTest, RoundTripKeepsTrianglesVerticesWithinOneStepAndArea) {
+  const TriangleMesh decoded = DecodeMeshDraco(*encoded_);
+  ASSERT_EQ(decoded.triangles.size(), gear_->triangles.size());
+  ExpectIndicesInRange(decoded);
+
+  const double step =
+      DracoQuantizationStep(*gear_, DracoEncodeOptions{}.position_quantization_bits);
+  // Every decoded vertex is near an original one, and every original near a decoded one (no
+  // vertex moved further than a step, none lost).
+  EXPECT_LE(MaxNearestDistance(decoded.vertices, gear_->vertices, step), step);
+  EXPECT_LE(MaxNearestDistance(gear_->vertices, decoded.vertices, step), step);
+
+  const double area = SurfaceArea(*gear_);
+  EXPECT_NEAR(SurfaceArea(decoded), area, 1e-3 * area);
+}
+
+TEST_F(DracoGearTest, QuantizationStepIsTheGearLengthOverTheGridSize) {
+  // Independent route: the gear's largest extent is its length along x (it is 6 cm long and
+  // about 5.1 cm across), and Draco divides the extent into 2^bits - 1 steps.
+  const RidgedGearParams params;
+  ASSERT_GT(params.length_m, 2.0 * (params.radius_m + params.amplitude_m));
+  for (int bits : {1, 8, 14, 30}) {
+    const double expected = params.length_m / (std::ldexp(1.0, bits) - 1.0);
+    EXPECT_NEAR(DracoQuantizationStep(*gear_, bits), expected, 1e-6 * expected) << bits;
+  }
+}
+
+TEST_F(DracoGearTest, MoreBitsGiveSmallerErrorAndLargerStream) {
+  double previous_error = std::numeric_limits<double>::infinity();
+  std::size_t previous_size = 0;
+  for (int bits : {8, 12, 16, 20}) {
+    const std::vector<std::uint8_t> bytes = EncodeMeshDraco(*gear_, {bits, 5});
+    const TriangleMesh decoded = DecodeMeshDraco(bytes);
+    const double step = DracoQuantizationStep(*gear_, bits);
+    const double error = MaxNearestDistance(decoded.vertices, gear_->vertices, step);
+    EXPECT_LE(error, step) << bits;
+    EXPECT_LT(error, previous_error) << bits;
+    EXPECT_GT(bytes.size(), previous_size) << bits;
+    previous_error = error;
+    previous_size = bytes.size();
+  }
+}
+
+TEST_F(DracoGearTest, EverySpeedRoundTrips) {
+  const double area = SurfaceArea(*gear_);
+  for (int speed = 0; speed <= 10; ++speed) {
+    const TriangleMesh decoded = DecodeMeshDraco(EncodeMeshDraco(*gear_, {14, speed}));
+    EXPECT_EQ(decoded.triangles.size(), gear_->triangles.size()) << speed;
+    EXPECT_NEAR(SurfaceArea(decoded), area, 1e-3 * area) << speed;
+  }
+}
+
+TEST_F(DracoGearTest, TruncatedStreamThrowsRuntimeError) {
+  const std::size_t n = encoded_->size();
+  for (std::size_t length : {std::size_t{0}, std::size_t{1}, std::size_t{4}, std::size_t{5},
+                             std::size_t{8}, std::size_t{11}, std::size_t{16}, std::size_t{64},
+                             n / 4, n / 2, 3 * n / 4, n - 16, n - 1}) {
+    const std::vector<std::uint8_t> truncated(encoded_->begin(),
+                                              encoded_->begin() + static_cast<long>(length));
+    EXPECT_THROW(DecodeMeshDraco(truncated), std::runtime_error) << length << " of " << n;
+  }
+}
+
+TEST_F(DracoGearTest, CorruptedStreamThrowsRuntimeErrorOrDecodes) {
+  std::mt19937 rng(12345);
+  for (int trial = 0; trial < 60; ++trial) {
+    std::vector<std::uint8_t> bytes = *encoded_;
+    // Corrupt 1-3 bytes, half the time within the header and the first attribute data.
+    const std::size_t span =
+        trial % 2 == 0 ? std::min<std::size_t>(64, bytes.size()) : bytes.size();
+    const int flips = 1 + static_cast<int>(rng() % 3);
+    for (int k = 0; k < flips; ++k) bytes[rng() % span] = static_cast<std::uint8_t>(rng());
+    ExpectRuntimeErrorOrValidMesh(bytes);
+  }
+}
+
+TEST(DracoDecodeTest, RandomBytesThrowRuntimeError) {
+  std::mt19937 rng(2024);
+  for (int trial = 0; trial < 200; ++trial) {
+    std::vector<std::uint8_t> bytes(rng() % 4096);
+    for (std::uint8_t& b : bytes) b = static_cast<std::uint8_t>(rng());
+    EXPECT_THROW(DecodeMeshDraco(bytes), std::runtime_error) << trial;
+  }
+}
+
+TEST(DracoDecodeTest, ValidHeaderFollowedByRandomBytesNeverCrashes) {
+  const std::vector<std::uint8_t> valid = EncodeMeshDraco(OneTriangle());
+  std::mt19937 rng(77);
+  for (int trial = 0; trial < 200; ++trial) {
+    // Keep the 11-byte header (magic, version, mesh, method, flags) and a few more bytes.
+    std::vector<std::uint8_t> bytes(valid.begin(), valid.begin() + 11 + trial % 8);
+    const std::size_t extra = rng() % 256;
+    for (std::size_t k = 0; k < extra; ++k) bytes.push_back(static_cast<std::uint8_t>(rng()));
+    ExpectRuntimeErrorOrValidMesh(bytes);
+  }
+}
+
+TEST(DracoEncodeTest, BadOptionsThrowInvalidArgument) {
+  const TriangleMesh mesh = OneTriangle();
+  for (int bits : {-1, 0, 31, 64}) {
+    EXPECT_THROW(EncodeMeshDraco(mesh, {bits, 5}), std::invalid_argument) << bits;
+    EXPECT_THROW(DracoQuantizationStep(mesh, bits), std::invalid_argument) << bits;
+  }
+  for (int speed : {-1, 11, 100}) {
+    EXPECT_THROW(EncodeMeshDraco(mesh, {14, speed}), std::invalid_argument) << speed;
+  }
+  EXPECT_NO_THROW(EncodeMeshDraco(mesh, {1, 0}));
+  EXPECT_NO_THROW(EncodeMeshDraco(mesh, {30, 10}));
+}
+
+TEST(DracoEncodeTest, BadMeshesThrowInvalidArgument) {
+  EXPECT_THROW(EncodeMeshDraco(TriangleMesh{}), std::invalid_argument);
+  EXPECT_THROW(DracoQuantizationStep(TriangleMesh{}, 14), std::invalid_argument);
+
+  TriangleMesh no_triangles = OneTriangle();
+  no_triangles.triangles.clear();
+  EXPECT_THROW(EncodeMeshDraco(no_triangles), std::invalid_argument);
+
+  for (const glm::ivec3& bad : {glm::ivec3(0, 1, 3), glm::ivec3(-1, 1, 2)}) {
+    TriangleMesh mesh = OneTriangle();
+    mesh.triangles.push_back(bad);
+    EXPECT_THROW(EncodeMeshDraco(mesh), std::invalid_argument);
+  }
+  for (double bad : {std::numeric_limits<double>::quiet_NaN(),
+                     std::numeric_limits<double>::infinity(), 1e39 /* overflows float */}) {
+    TriangleMesh mesh = OneTriangle();
+    mesh.vertices[1].y = bad;
+    EXPECT_THROW(EncodeMeshDraco(mesh), std::invalid_argument) << bad;
+    EXPECT_THROW(DracoQuantizationStep(mesh, 14), std::invalid_argument) << bad;
+  }
+}
+
+TEST(DracoEncodeTest, SingleTriangleRoundTripsWithinHalfAStepPerAxis) {
+  const TriangleMesh mesh = OneTriangle();
+  const int bits = 10;
+  const double step = DracoQuantizationStep(mesh, bits);
+  EXPECT_NEAR(step, 0.02 / 1023.0, 1e-6 * step);  // x extent 2 cm is the largest
+  const TriangleMesh decoded = DecodeMeshDraco(EncodeMeshDraco(mesh, {bits, 5}));
+  ASSERT_EQ(decoded.triangles.size(), 1u);
+  ASSERT_EQ(decoded.vertices.size(), 3u);
+  for (const glm::dvec3& p : decoded.vertices) {
+    double best = std::numeric_limits<double>::infinity();
+    for (const glm::dvec3& q : mesh.vertices) {
+      const glm::dvec3 d = glm::abs(p - q);
+      best = std::min(best, std::max({d.x, d.y, d.z}));
+    }
+    EXPECT_LE(best, 0.5 * step + 1e-9);
+  }
+}
+
+// Draco's test files (../shared/data/draco). HT_SHARED_DATA overrides the location; otherwise
+// ../shared/data relative to the working directory, then /work/shared/data.
+std::optional<std::filesystem::path> DracoDataDir() {
+  std::vector<std::filesystem::path> candidates;
+  if (const char* env = std::getenv("HT_SHARED_DATA"); env != nullptr && *env != '\0') {
+    candidates.emplace_back(env);
+  } else {
+    candidates.emplace_back("../shared/data");
+    candidates.emplace_back("/work/shared/data");
+  }
+  for (const std::filesystem::path& base : candidates) {
+    std::error_code ec;
+    if (std::filesystem::is_directory(base / "draco", ec)) return base / "draco";
+  }
+  return std::nullopt;
+}
+
+std::vector<std::uint8_t> ReadFile(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::runtime_error("cannot open " + path.string());
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// Triangle count and surface area of an OBJ made of triangles ("v x y z", "f a b c" with optional
+// /vt/vn suffixes, 1-based indices): the independent route to the numbers in the .drc twins.
+struct ObjFacts {
+  std::size_t triangles = 0;
+  double area = 0.0;
+};
+ObjFacts ReadTriangleObj(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error("cannot open " + path.string());
+  std::vector<glm::dvec3> vertices;
+  std::vector<glm::ivec3> faces;
+  std::string line;
+  while (std::getline(in, line)) {
+    std::istringstream ls(line);
+    std::string tag;
+    ls >> tag;
+    if (tag == "v") {
+      glm::dvec3 v;
+      ls >> v.x >> v.y >> v.z;
+      vertices.push_back(v);
+    } else if (tag == "f") {
+      std::vector<int> corners;
+      std::string corner;
+      while (ls >> corner) corners.push_back(std::stoi(corner.substr(0, corner.find('/'))) - 1);
+      if (corners.size() != 3) throw std::runtime_error("non-triangle face in " + path.string());
+      faces.emplace_back(corners[0], corners[1], corners[2]);
+    }
+  }
+  TriangleMesh mesh{vertices, faces};
+  return {faces.size(), SurfaceArea(mesh)};
+}
+
+class DracoFilesTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const std::optional<std::filesystem::path> dir = DracoDataDir();
+    if (!dir) {
+      GTEST_SKIP() << "Draco test data not found: set HT_SHARED_DATA to the shared data directory "
+                      "(the one holding draco/), or run where ../shared/data exists";
+    }
+    dir_ = *dir;
+  }
+  std::filesystem::path dir_;
+};
+
+TEST_F(DracoFilesTest, DecodesTestNmEdgebreakerFile) {
+  const TriangleMesh mesh =
+      DecodeMeshDraco(ReadFile(dir_ / "test_nm.obj.edgebreaker.cl10.2.2.drc"));
+  EXPECT_GT(mesh.triangles.size(), 0u);
+  ExpectIndicesInRange(mesh);
+}
+
+TEST_F(DracoFilesTest, EveryTestNmVersionMatchesTheObj) {
+  const ObjFacts obj = ReadTriangleObj(dir_ / "test_nm.obj");
+  ASSERT_GT(obj.triangles, 0u);
+  int files = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(dir_)) {
+    const std::string name = entry.path().filename().string();
+    if (name.rfind("test_nm", 0) != 0 || entry.path().extension() != ".drc") continue;
+    ++files;
+    const TriangleMesh mesh = DecodeMeshDraco(ReadFile(entry.path()));
+    EXPECT_EQ(mesh.triangles.size(), obj.triangles) << name;
+    ExpectIndicesInRange(mesh);
+    // The files were quantized at 11 bits or more with an unknown extent: 1 % is loose but still
+    // catches a wrong vertex mapping.
+    EXPECT_NEAR(SurfaceArea(mesh), obj.area, 1e-2 * obj.area) << name;
+  }
+  EXPECT_GE(files, 10);
+}
+
+TEST_F(DracoFilesTest, PointCloudFilesThrowAClearError) {
+  for (const char* name :
+       {"cube_pc.drc", "pc_color.drc", "pc_kd_color.drc", "point_cloud_no_qp.drc"}) {
+    const std::filesystem::path path = dir_ / name;
+    if (!std::filesystem::exists(path)) continue;
+    try {
+      DecodeMeshDraco(ReadFile(path));
+      ADD_FAILURE() << name << " decoded as a mesh";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find("point cloud"), std::string::npos) << e.what();
+    }
+  }
+}
+
+TEST_F(DracoFilesTest, NonDracoFileThrowsRuntimeError) {
+  EXPECT_THROW(DecodeMeshDraco(ReadFile(dir_ / "test_nm.obj")), std::runtime_error);
+}
+
+}  // namespace
+}  // namespace ht
