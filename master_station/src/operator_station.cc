@@ -88,6 +88,7 @@ class NetworkWorker {
         counters_(counters) {
     rtt_ms_.reserve(1 << 20);
     remote_step_us_.reserve(1 << 20);
+    contact_step_us_.reserve(1 << 20);
   }
 
   void Run(const std::atomic<bool>& stop) {
@@ -138,6 +139,7 @@ class NetworkWorker {
                             1e-6);
         }
         remote_step_us_.push_back(model.message.step_us);
+        if (model.message.model.num_contacts > 0) contact_step_us_.push_back(model.message.step_us);
         collision_us_.push_back(model.message.collision_us);
         texture_us_.push_back(model.message.texture_us);
         if (first_remote_ns_ == 0) {
@@ -169,6 +171,7 @@ class NetworkWorker {
 
   const std::vector<double>& rtt_ms() const { return rtt_ms_; }
   const std::vector<double>& remote_step_us() const { return remote_step_us_; }
+  const std::vector<double>& contact_step_us() const { return contact_step_us_; }
   const std::vector<double>& collision_us() const { return collision_us_; }
   const std::vector<double>& texture_us() const { return texture_us_; }
   double RemoteRateHz() const {
@@ -198,7 +201,7 @@ class NetworkWorker {
   TripleBuffer<OutgoingToolState>& outgoing_;
   TripleBuffer<IncomingModel>& incoming_;
   Counters& counters_;
-  std::vector<double> rtt_ms_, remote_step_us_, collision_us_, texture_us_;
+  std::vector<double> rtt_ms_, remote_step_us_, contact_step_us_, collision_us_, texture_us_;
   std::int64_t first_remote_ns_ = 0, last_remote_ns_ = 0;
   std::uint64_t first_remote_steps_ = 0, last_remote_steps_ = 0;
 };
@@ -482,6 +485,8 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   s["slave_rate_hz"] = network.RemoteRateHz();
   s["slave_step_p50_us"] = Percentile(network.remote_step_us(), 0.5);
   s["slave_step_p99_us"] = Percentile(network.remote_step_us(), 0.99);
+  s["slave_step_in_contact_p50_us"] = Percentile(network.contact_step_us(), 0.5);
+  s["slave_step_in_contact_p99_us"] = Percentile(network.contact_step_us(), 0.99);
   s["slave_collision_p50_us"] = Percentile(network.collision_us(), 0.5);
   s["slave_texture_p50_us"] = Percentile(network.texture_us(), 0.5);
   s["rtt_ms_p50"] = Percentile(network.rtt_ms(), 0.5);

@@ -54,7 +54,8 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
                 sessions = 0, bytes_received = 0;
   std::array<std::uint64_t, 16> malformed_by_reason{};
   std::uint64_t models_sent = 0, send_failed = 0, bytes_sent = 0;
-  std::vector<double> step_us, collision_us, texture_us;
+  std::vector<double> step_us, collision_us, texture_us, contact_step_us;
+  contact_step_us.reserve(1 << 20);
   step_us.reserve(1 << 20);
   collision_us.reserve(1 << 20);
   texture_us.reserve(1 << 20);
@@ -140,6 +141,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     last_step_ns = NowNs();
     contacts_max = std::max(contacts_max, out.model.num_contacts);
     step_us.push_back(timings.total_us);
+    if (out.model.num_contacts > 0) contact_step_us.push_back(timings.total_us);
     collision_us.push_back(timings.collision_us);
     texture_us.push_back(timings.texture_us);
     out.tool_state_send_time_ns = latest_send_time_ns;
@@ -194,6 +196,9 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   s["step_p50_us"] = Percentile(step_us, 0.5);
   s["step_p99_us"] = Percentile(step_us, 0.99);
   s["step_max_us"] = Percentile(step_us, 1.0);
+  s["steps_in_contact"] = contact_step_us.size();
+  s["step_in_contact_p50_us"] = Percentile(contact_step_us, 0.5);
+  s["step_in_contact_p99_us"] = Percentile(contact_step_us, 0.99);
   s["collision_max_us"] = Percentile(collision_us, 1.0);
   s["texture_max_us"] = Percentile(texture_us, 1.0);
   s["slow_steps_over_5ms"] = std::count_if(step_us.begin(), step_us.end(), [](double v) { return v > 5000.0; });
