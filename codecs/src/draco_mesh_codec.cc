@@ -23,7 +23,7 @@ namespace ht {
 namespace {
 
 constexpr int kMinQuantizationBits = 1;  // Draco's AttributeQuantizationTransform limits.
-constexpr int kMaxQuantizationBits = 30;
+constexpr int kMaxQuantizationBits = 24;  // 2^bits-entry histogram in the encoder: 67 MB at 24
 constexpr int kMinSpeed = 0;
 constexpr int kMaxSpeed = 10;
 constexpr std::size_t kMaxVertices = static_cast<std::size_t>(std::numeric_limits<int>::max());
@@ -31,7 +31,7 @@ constexpr std::size_t kMaxVertices = static_cast<std::size_t>(std::numeric_limit
 void CheckQuantizationBits(int bits) {
   if (bits < kMinQuantizationBits || bits > kMaxQuantizationBits) {
     throw std::invalid_argument("Draco: position_quantization_bits = " + std::to_string(bits) +
-                                " is outside [1, 30]");
+                                " is outside [1, 24]");
   }
 }
 

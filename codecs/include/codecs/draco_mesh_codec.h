@@ -13,9 +13,11 @@ namespace ht {
 
 /// Options of EncodeMeshDraco().
 struct DracoEncodeOptions {
-  /// Bits per position coordinate, in [1, 30]. Positions are quantized on a uniform grid whose
+  /// Bits per position coordinate, in [1, 24]. Positions are quantized on a uniform grid whose
   /// step is DracoQuantizationStep(mesh, position_quantization_bits) in every axis; 14 bits on a
-  /// 6 cm object gives a step of 3.7 µm.
+  /// 6 cm object gives a step of 3.7 µm. Cost: libdraco 1.5.5's encoder builds a histogram of
+  /// 2^bits entries (draco/core/shannon_entropy.cc), so whatever the mesh, encoding takes about
+  /// 4·2^bits bytes and time to match: 4 MB at 20 bits, 67 MB / 0.05 s at 24 (hence the cap; 4.3 GB / 3 s at 30).
   int position_quantization_bits = 14;
   /// Draco speed, in [0, 10], used for both encoding and decoding: 0 gives the smallest stream and
   /// the slowest codec, 10 the fastest and largest (10 switches Edgebreaker connectivity coding
@@ -28,11 +30,12 @@ struct DracoEncodeOptions {
 /// reads back. Only positions are stored; they are converted to float32 and quantized (see
 /// DracoEncodeOptions).
 ///
-/// What does not survive the round trip: vertex and triangle order; vertices used by no triangle;
-/// degenerate triangles (two corners with the same position after float32 conversion), which carry
-/// no area; and the identity of distinct vertices at the same position, which Draco merges (it may
-/// split non-manifold vertices instead). Each decoded coordinate lies within half a quantization
-/// step (plus float32 rounding, about 6e-8 of the coordinate's magnitude) of the original.
+/// What may not survive the round trip: vertex and triangle order; with speed < 10 (Edgebreaker),
+/// vertices used by no triangle and triangles that repeat an index (they carry no area) are
+/// dropped, and a vertex where the surface is non-manifold comes back as several copies (speed 10
+/// keeps all of these). Vertices at the same position are not merged. Each decoded coordinate
+/// lies within half a quantization step (plus float32 rounding, about 6e-8 of the coordinate's
+/// magnitude) of the original; the step counts dropped vertices too.
 ///
 /// Throws std::invalid_argument when the mesh has no vertex or no triangle, a triangle index is
 /// outside [0, #V), a vertex coordinate is not finite or does not fit in a float, more than 2^31-1
@@ -58,7 +61,7 @@ TriangleMesh DecodeMeshDraco(std::span<const std::uint8_t> bytes);
 /// does this function. The bounding box covers all vertices, used by a triangle or not.
 ///
 /// Throws std::invalid_argument when the mesh has no vertex, a vertex is not finite, or `bits` is
-/// outside [1, 30].
+/// outside [1, 24].
 double DracoQuantizationStep(const TriangleMesh& mesh, int bits);
 
 }  // namespace ht
