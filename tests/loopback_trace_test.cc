@@ -6,11 +6,10 @@
 #include <cstdlib>
 #include <fstream>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 namespace {
 
@@ -62,8 +61,9 @@ double Rms(const std::vector<double>& v) {
 
 TEST(LoopbackFig75, TraceHasTheRequiredColumnsAndFiniteValues) {
   const Trace t = LoadTrace();
-  for (const char* c : {"t_s", "phase", "tool_x", "tool_y", "tool_z", "tool_rx", "tool_ry",
-                        "tool_rz", "fx", "fy", "fz", "tx", "ty", "tz", "contacts", "model_age_ms"}) {
+  for (const char* c :
+       {"t_s", "phase", "tool_x", "tool_y", "tool_z", "tool_rx", "tool_ry", "tool_rz", "fx", "fy",
+        "fz", "tx", "ty", "tz", "contacts", "model_age_ms"}) {
     EXPECT_NE(std::find(t.columns.begin(), t.columns.end(), c), t.columns.end()) << c;
   }
   ASSERT_GE(t.phase.size(), 1500u) << "fig75 needs at least 1,500 frames";
@@ -104,7 +104,8 @@ TEST(LoopbackFig75, CrossingTheRidgesGivesAStaircaseInZ) {
       }
     }
   }
-  const double travel = *std::max_element(y.begin(), y.end()) - *std::min_element(y.begin(), y.end());
+  const double travel =
+      *std::max_element(y.begin(), y.end()) - *std::min_element(y.begin(), y.end());
   EXPECT_GT(travel, 6e-3) << "the block must cross several 3 mm ridges";
   EXPECT_GE(rises, 4);
   // Along x the ridges do not change: z stays much flatter there than while crossing.
@@ -132,8 +133,8 @@ TEST(LoopbackFig75, ForcesStayWithinTheDeviceLimits) {
   }
   EXPECT_EQ(s["nonfinite_count"].get<int>(), 0);
   EXPECT_GE(s["contacts_max"].get<int>(), 1);
-  for (const char* k : {"master_rate_hz", "master_tick_p99_us", "slave_rate_hz", "slave_step_p50_us",
-                        "rtt_ms_p50"}) {
+  for (const char* k : {"master_rate_hz", "master_tick_p99_us", "slave_rate_hz",
+                        "slave_step_p50_us", "rtt_ms_p50"}) {
     EXPECT_TRUE(s.contains(k)) << k;
   }
   EXPECT_GT(s["datagrams"]["contact_model"]["accepted"].get<int>(), 0);

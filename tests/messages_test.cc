@@ -61,7 +61,8 @@ TEST(Messages, ContactModelRoundTripsWithEveryCount) {
     EXPECT_EQ(out.hold_ns, 1500);
     for (int i = 0; i < n; ++i) {
       EXPECT_EQ(out.model.contacts[i].depth_m, m.model.contacts[i].depth_m);
-      EXPECT_EQ(out.model.contacts[i].gradient.d_rotation_W, m.model.contacts[i].gradient.d_rotation_W);
+      EXPECT_EQ(out.model.contacts[i].gradient.d_rotation_W,
+                m.model.contacts[i].gradient.d_rotation_W);
     }
   }
 }
@@ -105,10 +106,12 @@ TEST(Messages, NonFiniteAndImpossibleValuesAreRejected) {
   ContactModelMessage cm = SampleModel(2);
   cm.model.contacts[1].gradient.d_translation_W.y = INFINITY;
   ContactModelMessage cout;
-  EXPECT_EQ(DecodeContactModel(EncodeContactModel({}, cm).view(), h, cout), DecodeStatus::kNonFinite);
+  EXPECT_EQ(DecodeContactModel(EncodeContactModel({}, cm).view(), h, cout),
+            DecodeStatus::kNonFinite);
   cm = SampleModel(2);
   cm.model.contacts[0].stiffness_n_per_m = -1;
-  EXPECT_EQ(DecodeContactModel(EncodeContactModel({}, cm).view(), h, cout), DecodeStatus::kBadValue);
+  EXPECT_EQ(DecodeContactModel(EncodeContactModel({}, cm).view(), h, cout),
+            DecodeStatus::kBadValue);
   Datagram d = EncodeContactModel({}, SampleModel(0));
   d.bytes[kHeaderBytes + kContactModelFixedBytes - 1] = kMaxWireContacts + 1;  // count byte
   EXPECT_EQ(DecodeContactModel(d.view(), h, cout), DecodeStatus::kBadCount);

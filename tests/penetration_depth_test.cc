@@ -23,7 +23,8 @@ TEST(PenetrationDepth, FlatPatchesGiveTheirOverlap) {
   TexturePenetrationSolver solver;
   const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 50);
   for (double overlap : {0.0, 1e-4, 1e-3, 4e-3}) {
-    const DepthSample d = solver.Depth(a, ToolPose(0.001, -0.002, -overlap), b, EnvironmentPose(), w);
+    const DepthSample d =
+        solver.Depth(a, ToolPose(0.001, -0.002, -overlap), b, EnvironmentPose(), w);
     EXPECT_NEAR(d.depth_m, overlap, 1e-7) << "overlap " << overlap;
   }
 }
@@ -41,7 +42,8 @@ TEST(PenetrationDepth, SeparatedPatchesGiveNegativeDepthAndNoForce) {
   const HapticModel a = ToolBox(kFlat), b = EnvironmentBox(kFlat);
   TexturePenetrationSolver solver;
   const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 50);
-  const ContactLinearization lin = solver.Linearize(a, ToolPose(0, 0, 2e-3), b, EnvironmentPose(), w, 1000.0);
+  const ContactLinearization lin =
+      solver.Linearize(a, ToolPose(0, 0, 2e-3), b, EnvironmentPose(), w, 1000.0);
   EXPECT_NEAR(lin.depth_m, -2e-3, 1e-7);
   const Wrench F = PenaltyWrench(lin.depth_m, lin.gradient, lin.stiffness_n_per_m);
   EXPECT_EQ(glm::length(F.force), 0.0);
@@ -77,11 +79,14 @@ struct SmoothCase {
 
 TEST(PenetrationDepth, SinusoidForceRatioEqualsSlopeAtDeepestPoint) {
   const SmoothCase s;
-  const HapticModel a = ToolBox([&](double x, double y) { return s.c - s.kappa * (x * x + y * y); }, 1024);
-  const HapticModel b = EnvironmentBox([&](double, double y) { return s.amp * std::sin(s.omega * y); }, 1024);
+  const HapticModel a =
+      ToolBox([&](double x, double y) { return s.c - s.kappa * (x * x + y * y); }, 1024);
+  const HapticModel b =
+      EnvironmentBox([&](double, double y) { return s.amp * std::sin(s.omega * y); }, 1024);
   TexturePenetrationSolver solver(200);
   const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 200);
-  const ContactLinearization lin = solver.Linearize(a, ToolPose(0, s.y_tool, s.z_bottom), b, EnvironmentPose(), w, 1000.0);
+  const ContactLinearization lin =
+      solver.Linearize(a, ToolPose(0, s.y_tool, s.z_bottom), b, EnvironmentPose(), w, 1000.0);
   ASSERT_GT(lin.depth_m, 0.0);
   const Wrench F = PenaltyWrench(lin.depth_m, lin.gradient, 1000.0);
   const double y_star = s.DeepestY();
@@ -96,8 +101,10 @@ TEST(PenetrationDepth, FiniteDifferenceGradientMatchesAnalyticGradient) {
   // Envelope theorem: ∇δ = (g − n, r × (g − n)) with g the tool surface slope at the deepest
   // point p* and r = p* − centre of mass. Two independent routes to the same six numbers.
   const SmoothCase s;
-  const HapticModel a = ToolBox([&](double x, double y) { return s.c - s.kappa * (x * x + y * y); }, 1024);
-  const HapticModel b = EnvironmentBox([&](double, double y) { return s.amp * std::sin(s.omega * y); }, 1024);
+  const HapticModel a =
+      ToolBox([&](double x, double y) { return s.c - s.kappa * (x * x + y * y); }, 1024);
+  const HapticModel b =
+      EnvironmentBox([&](double, double y) { return s.amp * std::sin(s.omega * y); }, 1024);
   TexturePenetrationSolver solver(200);
   const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 200);
   const RigidTransform X_WT = ToolPose(0, s.y_tool, s.z_bottom);
@@ -120,8 +127,10 @@ TEST(PenetrationDepth, ActionEqualsMinusReaction) {
   // Swap the roles: the environment becomes the tool, n flips. The two wrenches, taken about the
   // world origin, must cancel.
   const SmoothCase s;
-  const HapticModel a = ToolBox([&](double x, double y) { return s.c - s.kappa * (x * x + y * y); }, 1024);
-  const HapticModel b = EnvironmentBox([&](double, double y) { return s.amp * std::sin(s.omega * y); }, 1024);
+  const HapticModel a =
+      ToolBox([&](double x, double y) { return s.c - s.kappa * (x * x + y * y); }, 1024);
+  const HapticModel b =
+      EnvironmentBox([&](double, double y) { return s.amp * std::sin(s.omega * y); }, 1024);
   TexturePenetrationSolver solver(100);
   const RigidTransform X_WA = ToolPose(1e-3, s.y_tool, s.z_bottom), X_WB = EnvironmentPose();
   const double k = 1000.0;

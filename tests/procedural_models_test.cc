@@ -19,7 +19,8 @@ void ExpectClosedAndOriented(const std::vector<glm::ivec3>& triangles) {
     for (int c = 0; c < 3; ++c) ++directed[{t[c], t[(c + 1) % 3]}];
   }
   for (const auto& [edge, count] : directed) {
-    ASSERT_EQ(count, 1) << "edge " << edge.first << "-" << edge.second << " used twice the same way";
+    ASSERT_EQ(count, 1) << "edge " << edge.first << "-" << edge.second
+                        << " used twice the same way";
     ASSERT_EQ(directed.count({edge.second, edge.first}), 1u)
         << "edge " << edge.first << "-" << edge.second << " is on a boundary";
   }
@@ -79,7 +80,8 @@ TEST(ProceduralModels, BadParametersThrow) {
   RidgedGearParams g;
   g.coarse_segments = 2;
   EXPECT_THROW(MakeRidgedGear(g), std::invalid_argument);
-  EXPECT_THROW(MakeTexturedBox({0.01, 0.01, 0.01}, [](double, double) { return NAN; }, 8, 1.0, "nan"),
+  EXPECT_THROW(MakeTexturedBox(
+                   {0.01, 0.01, 0.01}, [](double, double) { return NAN; }, 8, 1.0, "nan"),
                std::invalid_argument);
 }
 

@@ -38,8 +38,8 @@ TEST(RemoteNode, AnswersToolStatesAndCountsGarbage) {
   const SocketAddress remote = SocketAddress::Parse("127.0.0.1:" + std::to_string(port));
   UdpSocket socket(SocketAddress::Parse("127.0.0.1:0"));
 
-  const std::uint8_t garbage[] = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18,
-                                  19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30};
+  const std::uint8_t garbage[] = {1,  2,  3,  4,  5,  6,  7,  8,  9,  10, 11, 12, 13, 14, 15,
+                                  16, 17, 18, 19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30};
   for (int i = 0; i < 5; ++i) socket.SendTo(garbage, remote);
   wire::ToolStateMessage state;
   state.X_WT = scene.X_WT_home;

@@ -8,7 +8,7 @@
 
 namespace ht::testing {
 
-inline constexpr double kHalf = 0.02;       // box half size in x and y (m)
+inline constexpr double kHalf = 0.02;        // box half size in x and y (m)
 inline constexpr double kHalfHeight = 0.01;  // box half height (m)
 
 /// Tool box A with bottom texture h_A(x_A, y_A) (A's own coordinates).
@@ -21,9 +21,9 @@ inline HapticModel ToolBox(const std::function<double(double, double)>& h, int t
 inline HapticModel EnvironmentBox(const std::function<double(double, double)>& h_world,
                                   int texture = 512) {
   // Turned by π about x: local (x, y) maps to world (x, −y).
-  return MakeTexturedBox({kHalf, kHalf, kHalfHeight},
-                         [h_world](double x, double y) { return h_world(x, -y); }, texture, 1.0,
-                         "test_environment");
+  return MakeTexturedBox(
+      {kHalf, kHalf, kHalfHeight}, [h_world](double x, double y) { return h_world(x, -y); },
+      texture, 1.0, "test_environment");
 }
 
 /// Pose of B with its textured face up and at world z = 0 (mean surface).

@@ -55,7 +55,8 @@ TEST(ToolSimulation, RejectsBadParameters) {
   VirtualCoupling c;
   c.k_translation_n_per_m = -1;
   EXPECT_THROW(ToolSimulator(BlockOnGearToolInertia(), c), std::invalid_argument);
-  EXPECT_THROW(ToolSimulator(ToolInertia{0.0, {1, 1, 1}}, VirtualCoupling{}), std::invalid_argument);
+  EXPECT_THROW(ToolSimulator(ToolInertia{0.0, {1, 1, 1}}, VirtualCoupling{}),
+               std::invalid_argument);
 }
 
 }  // namespace

@@ -22,7 +22,7 @@
 namespace ht {
 namespace {
 
-constexpr int kMinQuantizationBits = 1;  // Draco's AttributeQuantizationTransform limits.
+constexpr int kMinQuantizationBits = 1;   // Draco's AttributeQuantizationTransform limits.
 constexpr int kMaxQuantizationBits = 24;  // 2^bits-entry histogram in the encoder: 67 MB at 24
 constexpr int kMinSpeed = 0;
 constexpr int kMaxSpeed = 10;

@@ -3,9 +3,8 @@
 #include <ccd/ccd.h>
 
 #include <cmath>
-#include <limits>
-
 #include <glm/geometric.hpp>
+#include <limits>
 
 namespace ht {
 namespace {
@@ -87,8 +86,8 @@ std::optional<ConvexContact> QueryConvexContact(std::span<const glm::dvec3> hull
   c.signed_distance_m = tolerance_m - depth;
   // EPA's point lies mid-way inside the grown overlap; shift by half the growth so it sits
   // between the true hulls.
-  c.point_W = glm::dvec3(ccdVec3X(&pos), ccdVec3Y(&pos), ccdVec3Z(&pos)) +
-              0.5 * tolerance_m * c.normal_W;
+  c.point_W =
+      glm::dvec3(ccdVec3X(&pos), ccdVec3Y(&pos), ccdVec3Z(&pos)) + 0.5 * tolerance_m * c.normal_W;
   return c;
 }
 

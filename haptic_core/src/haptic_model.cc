@@ -2,10 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <glm/geometric.hpp>
 #include <stdexcept>
 #include <string>
-
-#include <glm/geometric.hpp>
 
 namespace ht {
 
@@ -34,8 +33,8 @@ void HapticModel::Validate() const {
              " out of range");
       }
       const double len = glm::length(corner_normals_O[3 * f + c]);
-      if (!(std::abs(len - 1.0) < 1e-6)) fail("corner normal of triangle " + std::to_string(f) +
-                                              " is not unit length");
+      if (!(std::abs(len - 1.0) < 1e-6))
+        fail("corner normal of triangle " + std::to_string(f) + " is not unit length");
     }
   }
   for (const auto& v : vertices_O) {

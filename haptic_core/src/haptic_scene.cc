@@ -87,7 +87,8 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
     const auto contact = QueryConvexContact(tool.hull_vertices_O, X_WT,
                                             object.model->hull_vertices_O, object.X_WO, tolerance);
     ++timings.convex_pairs;
-    if (contact && num_candidates < kMaxContacts) candidates[num_candidates++] = {&object, *contact};
+    if (contact && num_candidates < kMaxContacts)
+      candidates[num_candidates++] = {&object, *contact};
   }
   const auto t1 = Clock::now();
 
@@ -95,9 +96,8 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
     const Candidate& c = candidates[i];
     const ContactWindow window = ContactWindow::Make(
         c.contact.point_W, c.contact.normal_W, options_.window_extent_m, options_.grid_resolution);
-    const ContactLinearization lin = solver_.Linearize(tool, X_WT, *c.object->model,
-                                                       c.object->X_WO, window,
-                                                       c.object->stiffness_n_per_m);
+    const ContactLinearization lin = solver_.Linearize(tool, X_WT, *c.object->model, c.object->X_WO,
+                                                       window, c.object->stiffness_n_per_m);
     if (!std::isfinite(lin.depth_m)) continue;  // no overlap of the patches on the window
     model.contacts[model.num_contacts++] = lin;
     model.F_T_W_at_q0 += PenaltyWrench(lin.depth_m, lin.gradient, lin.stiffness_n_per_m);

@@ -7,12 +7,11 @@
 
 namespace ht {
 
-HeightField::HeightField(int width, int height, std::vector<float> texels, bool wrap_u,
-                         bool wrap_v)
+HeightField::HeightField(int width, int height, std::vector<float> texels, bool wrap_u, bool wrap_v)
     : wrap_u_(wrap_u), wrap_v_(wrap_v) {
   if (!(width > 0) || !(height > 0)) {
-    throw std::invalid_argument("HeightField: size must be positive, got " +
-                                std::to_string(width) + "x" + std::to_string(height));
+    throw std::invalid_argument("HeightField: size must be positive, got " + std::to_string(width) +
+                                "x" + std::to_string(height));
   }
   if (texels.size() != static_cast<size_t>(width) * static_cast<size_t>(height)) {
     throw std::invalid_argument("HeightField: expected " + std::to_string(width * height) +

@@ -2,10 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <glm/geometric.hpp>
 #include <limits>
 #include <stdexcept>
-
-#include <glm/geometric.hpp>
 
 namespace ht {
 
@@ -98,12 +97,15 @@ void RenderPatchHeights(const HapticModel& model, const RigidTransform& X_WO,
     if (!(std::abs(area) > 1e-12)) continue;  // edge-on or degenerate in projection
     const double inv_area = 1.0 / area;
     const int i0 = std::max(0, static_cast<int>(std::ceil(std::min({x[0], x[1], x[2]}) - 0.5)));
-    const int i1 = std::min(n - 1, static_cast<int>(std::floor(std::max({x[0], x[1], x[2]}) - 0.5)));
+    const int i1 =
+        std::min(n - 1, static_cast<int>(std::floor(std::max({x[0], x[1], x[2]}) - 0.5)));
     const int j0 = std::max(0, static_cast<int>(std::ceil(std::min({y[0], y[1], y[2]}) - 0.5)));
-    const int j1 = std::min(n - 1, static_cast<int>(std::floor(std::max({y[0], y[1], y[2]}) - 0.5)));
+    const int j1 =
+        std::min(n - 1, static_cast<int>(std::floor(std::max({y[0], y[1], y[2]}) - 0.5)));
     if (i0 > i1 || j0 > j1) continue;
     const bool textured = model.textured[f] != 0 && !model.texture.empty();
-    const int level = textured ? model.texture.LevelForFootprint(model.texel_size_m[f], w.cell_size_m()) : 0;
+    const int level =
+        textured ? model.texture.LevelForFootprint(model.texel_size_m[f], w.cell_size_m()) : 0;
     const glm::vec2 uv0 = model.corner_uvs[3 * f], uv1 = model.corner_uvs[3 * f + 1],
                     uv2 = model.corner_uvs[3 * f + 2];
     // Inclusive edge test with a small tolerance: cells on shared edges may be covered twice,

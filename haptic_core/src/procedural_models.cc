@@ -1,11 +1,10 @@
 #include "haptic_core/procedural_models.h"
 
 #include <cmath>
+#include <glm/geometric.hpp>
 #include <numbers>
 #include <stdexcept>
 #include <string>
-
-#include <glm/geometric.hpp>
 
 namespace ht {
 namespace {
@@ -204,7 +203,8 @@ HapticModel MakeRidgedGear(const RidgedGearParams& p) {
   for (int j = 0; j < S; ++j) {
     const int b = (j + 1) % S;
     const double phi_a = kTwoPi * j / S, phi_b = kTwoPi * (j + 1) / S;
-    const glm::dvec3 na(0, std::cos(phi_a), std::sin(phi_a)), nb(0, std::cos(phi_b), std::sin(phi_b));
+    const glm::dvec3 na(0, std::cos(phi_a), std::sin(phi_a)),
+        nb(0, std::cos(phi_b), std::sin(phi_b));
     const auto va = static_cast<float>(static_cast<double>(j) / S);
     const auto vb = static_cast<float>(static_cast<double>(j + 1) / S);  // 1.0 at the seam
     {
@@ -235,8 +235,7 @@ HapticModel MakeRidgedGear(const RidgedGearParams& p) {
   const double ixx = 0.5 * p.mass_kg * R * R;
   const double iyy = p.mass_kg / 12.0 * (3 * R * R + L * L);
   m.inertia_diagonal_O = {ixx, iyy, iyy};
-  m.full_resolution_triangles =
-      2LL * p.full_resolution_segments * (p.full_resolution_rows + 1);
+  m.full_resolution_triangles = 2LL * p.full_resolution_segments * (p.full_resolution_rows + 1);
   m.Validate();
   return m;
 }

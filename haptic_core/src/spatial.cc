@@ -14,8 +14,8 @@ glm::dquat QuaternionFromRotationVector(const glm::dvec3& theta) noexcept {
   if (angle < 1e-8) {
     // sin(a/2)/a ≈ 1/2 - a²/48.
     const double s = 0.5 - angle * angle / 48.0;
-    return glm::normalize(glm::dquat(1.0 - angle * angle / 8.0, s * theta.x, s * theta.y,
-                                     s * theta.z));
+    return glm::normalize(
+        glm::dquat(1.0 - angle * angle / 8.0, s * theta.x, s * theta.y, s * theta.z));
   }
   const double s = std::sin(0.5 * angle) / angle;
   return glm::dquat(std::cos(0.5 * angle), s * theta.x, s * theta.y, s * theta.z);

@@ -1,14 +1,13 @@
 #include "haptic_core/tool_simulation.h"
 
-#include "haptic_core/procedural_models.h"
-
+#include <Eigen/Cholesky>
 #include <cmath>
+#include <glm/gtc/quaternion.hpp>
+#include <glm/mat3x3.hpp>
 #include <stdexcept>
 #include <string>
 
-#include <Eigen/Cholesky>
-#include <glm/mat3x3.hpp>
-#include <glm/gtc/quaternion.hpp>
+#include "haptic_core/procedural_models.h"
 
 namespace ht {
 namespace {
@@ -39,8 +38,9 @@ ToolInertia BlockOnGearToolInertia() {
   const RidgedBlockParams p;
   const glm::dvec3 s = 2.0 * p.half_extents_m;
   const double m = p.mass_kg;
-  return {m, {m / 12 * (s.y * s.y + s.z * s.z), m / 12 * (s.x * s.x + s.z * s.z),
-              m / 12 * (s.x * s.x + s.y * s.y)}};
+  return {m,
+          {m / 12 * (s.y * s.y + s.z * s.z), m / 12 * (s.x * s.x + s.z * s.z),
+           m / 12 * (s.x * s.x + s.y * s.y)}};
 }
 
 void VirtualCoupling::Validate() const {

@@ -2,14 +2,12 @@
 // the contact models streamed by slave_sim, and writes trace.csv and summary.json.
 
 #include <CLI/CLI.hpp>
-
 #include <cstdio>
 #include <exception>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <random>
 #include <sstream>
-
-#include <nlohmann/json.hpp>
 
 #include "haptic_core/haptic_scene.h"
 #include "master_station/experiment.h"

@@ -70,8 +70,8 @@ struct TraceRow {
 
 struct Counters {
   std::atomic<std::uint64_t> tool_state_sent{0}, tool_state_send_failed{0}, tool_state_bytes{0};
-  std::atomic<std::uint64_t> model_received{0}, model_accepted{0}, model_stale{0},
-      model_lost{0}, model_bytes{0}, model_wrong_session{0};
+  std::atomic<std::uint64_t> model_received{0}, model_accepted{0}, model_stale{0}, model_lost{0},
+      model_bytes{0}, model_wrong_session{0};
   std::array<std::atomic<std::uint64_t>, 16> rejected_by_reason{};
   std::atomic<std::uint64_t> rejected_total{0};
 };
@@ -229,8 +229,8 @@ void WriteTraceRow(std::FILE* f, const TraceRow& r, const std::vector<std::strin
                r.p_WH.x, r.p_WH.y, r.p_WH.z, r.F_device_W.force.x, r.F_device_W.force.y,
                r.F_device_W.force.z, r.F_device_W.torque.x, r.F_device_W.torque.y,
                r.F_device_W.torque.z, r.depth_m, static_cast<double>(r.tick_compute_us),
-               static_cast<double>(r.remote_collision_us),
-               static_cast<double>(r.remote_texture_us), static_cast<double>(r.remote_step_us));
+               static_cast<double>(r.remote_collision_us), static_cast<double>(r.remote_texture_us),
+               static_cast<double>(r.remote_step_us));
 }
 
 /// Scales `v` down to length `limit` when longer, keeping its direction. Returns true if clamped.
@@ -258,8 +258,8 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   config.Validate();
   const ToolSimulator simulator(config.tool_inertia, config.coupling);
   const DeviceCapabilities caps = device.capabilities();
-  const auto ticks = static_cast<std::int64_t>(std::ceil(experiment.duration_s() *
-                                                          config.loop_rate_hz));
+  const auto ticks =
+      static_cast<std::int64_t>(std::ceil(experiment.duration_s() * config.loop_rate_hz));
   const std::int64_t period_ns = static_cast<std::int64_t>(std::llround(1e9 / config.loop_rate_hz));
   const double h = period_ns * 1e-9;
 

@@ -61,10 +61,9 @@ bool SimulatedOperatorDevice::ReadState(std::int64_t now_ns, DeviceState& out) n
     const glm::dvec3 force = hand_.stiffness_n_per_m * err.linear +
                              hand_.damping_ns_per_m * (target.V_MH_M.linear - V.linear) +
                              F_H_M_.force;
-    const glm::dvec3 torque = hand_.rotational_stiffness_nm_per_rad * err.angular +
-                              hand_.rotational_damping_nms_per_rad *
-                                  (target.V_MH_M.angular - V.angular) +
-                              F_H_M_.torque;
+    const glm::dvec3 torque =
+        hand_.rotational_stiffness_nm_per_rad * err.angular +
+        hand_.rotational_damping_nms_per_rad * (target.V_MH_M.angular - V.angular) + F_H_M_.torque;
     V.linear += dt * force / hand_.mass_kg;
     V.angular += dt * torque / hand_.inertia_kg_m2;
     X = Displace(X, {dt * V.linear, dt * V.angular});

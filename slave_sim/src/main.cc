@@ -2,7 +2,6 @@
 // models computed with 6-DoF haptic texture rendering on the scene.
 
 #include <CLI/CLI.hpp>
-
 #include <csignal>
 #include <cstdio>
 #include <exception>
@@ -33,8 +32,7 @@ int main(int argc, char** argv) {
                  "penetration-depth grid N (N x N cells per contact)")
       ->check(CLI::Range(2, 1024))
       ->capture_default_str();
-  app.add_option("--window", config.pipeline.window_extent_m,
-                 "contact window side W in metres")
+  app.add_option("--window", config.pipeline.window_extent_m, "contact window side W in metres")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   app.add_option("--max-rate", config.max_rate_hz, "cap on the step rate in Hz (0 = none)")

@@ -165,11 +165,11 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     if (config.progress_period_s > 0.0 &&
         (now - last_progress_ns) * 1e-9 >= config.progress_period_s) {
       const double dt = (now - last_progress_ns) * 1e-9;
-      std::printf("[slave] %6.0f steps/s  step %6.0f us (collision %4.0f, texture %6.0f)  "
-                  "contacts %d  tool states %llu\n",
-                  (step_count - last_progress_steps) / dt, timings.total_us,
-                  timings.collision_us, timings.texture_us, out.model.num_contacts,
-                  static_cast<unsigned long long>(accepted));
+      std::printf(
+          "[slave] %6.0f steps/s  step %6.0f us (collision %4.0f, texture %6.0f)  "
+          "contacts %d  tool states %llu\n",
+          (step_count - last_progress_steps) / dt, timings.total_us, timings.collision_us,
+          timings.texture_us, out.model.num_contacts, static_cast<unsigned long long>(accepted));
       std::fflush(stdout);
       last_progress_ns = now;
       last_progress_steps = step_count;
@@ -201,7 +201,8 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   s["step_in_contact_p99_us"] = Percentile(contact_step_us, 0.99);
   s["collision_max_us"] = Percentile(collision_us, 1.0);
   s["texture_max_us"] = Percentile(texture_us, 1.0);
-  s["slow_steps_over_5ms"] = std::count_if(step_us.begin(), step_us.end(), [](double v) { return v > 5000.0; });
+  s["slow_steps_over_5ms"] =
+      std::count_if(step_us.begin(), step_us.end(), [](double v) { return v > 5000.0; });
   s["tool_state_gap_max_ms"] = max_gap_ns * 1e-6;
   s["collision_p50_us"] = Percentile(collision_us, 0.5);
   s["texture_p50_us"] = Percentile(texture_us, 0.5);
@@ -211,11 +212,11 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   s["window_extent_m"] = config.pipeline.window_extent_m;
   s["linearization_missing_overlap"] = pipeline.faults().missing_overlap;
   s["sessions"] = sessions;
-  s["datagrams"]["tool_state"] = {{"received", received},   {"accepted", accepted},
-                                  {"dropped_stale", stale}, {"lost", lost},
-                                  {"dropped_malformed", malformed},
-                                  {"dropped_malformed_by_reason", reasons},
-                                  {"goodbyes", goodbyes},   {"bytes_received", bytes_received}};
+  s["datagrams"]["tool_state"] = {
+      {"received", received},           {"accepted", accepted},
+      {"dropped_stale", stale},         {"lost", lost},
+      {"dropped_malformed", malformed}, {"dropped_malformed_by_reason", reasons},
+      {"goodbyes", goodbyes},           {"bytes_received", bytes_received}};
   s["datagrams"]["contact_model"] = {
       {"sent", models_sent}, {"send_failed", send_failed}, {"bytes_sent", bytes_sent}};
   return s;

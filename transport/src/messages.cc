@@ -14,8 +14,8 @@ class Writer {
   void Put(T value) {
     static_assert(std::is_integral_v<T>);
     for (std::size_t i = 0; i < sizeof(T); ++i) {
-      d_.bytes[d_.size++] = static_cast<std::uint8_t>(
-          static_cast<std::make_unsigned_t<T>>(value) >> (8 * i));
+      d_.bytes[d_.size++] =
+          static_cast<std::uint8_t>(static_cast<std::make_unsigned_t<T>>(value) >> (8 * i));
     }
   }
   void F64(double v) { Put(std::bit_cast<std::uint64_t>(v)); }
@@ -113,16 +113,26 @@ DecodeStatus CheckPose(const RigidTransform& X) {
 
 const char* ToString(DecodeStatus s) noexcept {
   switch (s) {
-    case DecodeStatus::kOk: return "ok";
-    case DecodeStatus::kTooShort: return "too_short";
-    case DecodeStatus::kTooLong: return "too_long";
-    case DecodeStatus::kBadMagic: return "bad_magic";
-    case DecodeStatus::kBadVersion: return "bad_version";
-    case DecodeStatus::kBadFlags: return "bad_flags";
-    case DecodeStatus::kUnknownType: return "unknown_type";
-    case DecodeStatus::kBadCount: return "bad_count";
-    case DecodeStatus::kNonFinite: return "non_finite";
-    case DecodeStatus::kBadValue: return "bad_value";
+    case DecodeStatus::kOk:
+      return "ok";
+    case DecodeStatus::kTooShort:
+      return "too_short";
+    case DecodeStatus::kTooLong:
+      return "too_long";
+    case DecodeStatus::kBadMagic:
+      return "bad_magic";
+    case DecodeStatus::kBadVersion:
+      return "bad_version";
+    case DecodeStatus::kBadFlags:
+      return "bad_flags";
+    case DecodeStatus::kUnknownType:
+      return "unknown_type";
+    case DecodeStatus::kBadCount:
+      return "bad_count";
+    case DecodeStatus::kNonFinite:
+      return "non_finite";
+    case DecodeStatus::kBadValue:
+      return "bad_value";
   }
   return "unknown";
 }
@@ -155,7 +165,7 @@ Datagram EncodeContactModel(const Header& header, const ContactModelMessage& m) 
   w.Pose(m.model.X_WT0);
   w.Vec(m.model.F_T_W_at_q0.force);
   w.Vec(m.model.F_T_W_at_q0.torque);
-  const int n = m.model.num_contacts < 0 ? 0
+  const int n = m.model.num_contacts < 0                  ? 0
                 : m.model.num_contacts > kMaxWireContacts ? kMaxWireContacts
                                                           : m.model.num_contacts;
   w.Put(static_cast<std::uint8_t>(n));

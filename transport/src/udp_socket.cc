@@ -102,7 +102,7 @@ bool UdpSocket::SendTo(std::span<const std::uint8_t> bytes, const SocketAddress&
 }
 
 std::optional<std::size_t> UdpSocket::ReceiveFrom(std::span<std::uint8_t> buffer,
-                                                   SocketAddress& from) noexcept {
+                                                  SocketAddress& from) noexcept {
   from.length = sizeof(from.storage);
   const ssize_t n = ::recvfrom(fd_, buffer.data(), buffer.size(), MSG_DONTWAIT | MSG_TRUNC,
                                reinterpret_cast<sockaddr*>(&from.storage), &from.length);

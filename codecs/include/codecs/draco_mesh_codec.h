@@ -17,7 +17,8 @@ struct DracoEncodeOptions {
   /// step is DracoQuantizationStep(mesh, position_quantization_bits) in every axis; 14 bits on a
   /// 6 cm object gives a step of 3.7 µm. Cost: libdraco 1.5.5's encoder builds a histogram of
   /// 2^bits entries (draco/core/shannon_entropy.cc), so whatever the mesh, encoding takes about
-  /// 4·2^bits bytes and time to match: 4 MB at 20 bits, 67 MB / 0.05 s at 24 (hence the cap; 4.3 GB / 3 s at 30).
+  /// 4·2^bits bytes and time to match: 4 MB at 20 bits, 67 MB / 0.05 s at 24 (hence the cap; 4.3 GB
+  /// / 3 s at 30).
   int position_quantization_bits = 14;
   /// Draco speed, in [0, 10], used for both encoding and decoding: 0 gives the smallest stream and
   /// the slowest codec, 10 the fastest and largest (10 switches Edgebreaker connectivity coding

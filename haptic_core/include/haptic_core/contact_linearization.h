@@ -26,10 +26,10 @@ struct PenetrationGradient {
 /// The linearized contact that the remote node sends and the operator loop evaluates:
 /// δ_i(q) ≈ depth_m + J·(q ⊖ q0) with stiffness k (DESIGN.md §5).
 struct ContactLinearization {
-  double depth_m = 0.0;  ///< δ0 at q0 (m), signed: negative = separated along n.
-  PenetrationGradient gradient;  ///< J = ∇δ at q0.
+  double depth_m = 0.0;            ///< δ0 at q0 (m), signed: negative = separated along n.
+  PenetrationGradient gradient;    ///< J = ∇δ at q0.
   double stiffness_n_per_m = 0.0;  ///< Penalty stiffness k (N/m).
-  glm::dvec3 point_W{0.0};   ///< Deepest cell's centre on the window plane (m), for display.
+  glm::dvec3 point_W{0.0};         ///< Deepest cell's centre on the window plane (m), for display.
   glm::dvec3 normal_W{0.0, 0.0, 1.0};  ///< Contact direction n (unit, from environment to tool).
 };
 

@@ -2,10 +2,9 @@
 // The intermediate representation between the remote node and the operator loop (DESIGN.md §5):
 // a set of linearized contacts at tool pose q0, evaluated every tick at the current tool pose.
 
+#include <Eigen/Core>
 #include <array>
 #include <cstdint>
-
-#include <Eigen/Core>
 
 #include "haptic_core/contact_linearization.h"
 #include "haptic_core/spatial.h"

@@ -1,10 +1,9 @@
 #pragma once
 // Coarse contact query between two convex vertex sets through libccd (GJK + EPA, MPR fallback).
 
+#include <glm/vec3.hpp>
 #include <optional>
 #include <span>
-
-#include <glm/vec3.hpp>
 
 #include "haptic_core/spatial.h"
 

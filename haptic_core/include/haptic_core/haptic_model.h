@@ -4,11 +4,10 @@
 // hull(s) used by the coarse contact query.
 
 #include <cstdint>
-#include <string>
-#include <vector>
-
 #include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
+#include <string>
+#include <vector>
 
 #include "haptic_core/height_field.h"
 

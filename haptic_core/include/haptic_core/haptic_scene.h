@@ -39,8 +39,8 @@ RigidTransform BlockOnGearHomePose();
 
 /// Options of the per-step pipeline.
 struct PipelineOptions {
-  int grid_resolution = 50;        ///< N of the penetration-depth grid (seed: 50).
-  double window_extent_m = 0.02;   ///< W of each contact window (m).
+  int grid_resolution = 50;            ///< N of the penetration-depth grid (seed: 50).
+  double window_extent_m = 0.02;       ///< W of each contact window (m).
   double proximity_margin_m = 0.5e-3;  ///< Extra coarse tolerance beyond both texture reaches (m).
 
   /// Throws std::invalid_argument naming a value out of range.
@@ -65,8 +65,7 @@ class HapticTexturePipeline {
 
   /// Builds the contact model at tool pose X_WT (q0), tagging it with `tool_state_seq`.
   /// A non-finite pose gives an empty model. Fills `timings`.
-  ContactModel Step(const RigidTransform& X_WT, std::uint64_t tool_state_seq,
-                    StepTimings& timings);
+  ContactModel Step(const RigidTransform& X_WT, std::uint64_t tool_state_seq, StepTimings& timings);
 
   const LinearizationFaults& faults() const noexcept { return solver_.faults(); }
 

@@ -2,10 +2,9 @@
 // Directional penetration depth of two textured patches on an N×N grid (DESIGN.md §4).
 // This CPU path is the reference that the GPU backend must match.
 
+#include <glm/vec3.hpp>
 #include <span>
 #include <vector>
-
-#include <glm/vec3.hpp>
 
 #include "haptic_core/haptic_model.h"
 #include "haptic_core/spatial.h"
@@ -14,20 +13,21 @@ namespace ht {
 
 /// The orthographic sampling window of one contact: a W×W square on the plane through `center_W`
 /// perpendicular to `normal_W`, sampled at N×N cell centres. Cell (i, j) (i along u, j along v)
-/// is stored at index j*N + i and centred at center_W + ((i+0.5)/N − 0.5)·W·u + ((j+0.5)/N − 0.5)·W·v.
+/// is stored at index j*N + i and centred at center_W + ((i+0.5)/N − 0.5)·W·u + ((j+0.5)/N −
+/// 0.5)·W·v.
 struct ContactWindow {
-  glm::dvec3 center_W{0.0};  ///< Window centre in world (m).
+  glm::dvec3 center_W{0.0};            ///< Window centre in world (m).
   glm::dvec3 normal_W{0.0, 0.0, 1.0};  ///< n: unit, from environment B towards tool A.
   glm::dvec3 axis_u_W{1.0, 0.0, 0.0};  ///< Unit, ⟂ n.
   glm::dvec3 axis_v_W{0.0, 1.0, 0.0};  ///< Unit, u × v = n.
-  double extent_m = 0.02;  ///< W: side length (m).
-  int resolution = 50;     ///< N: cells per side (seed: 50).
+  double extent_m = 0.02;              ///< W: side length (m).
+  int resolution = 50;                 ///< N: cells per side (seed: 50).
 
   /// Builds a window with u the projection of world x on the plane ⟂ n (world y when n is within
   /// 25° of x), v = n × u. Throws std::invalid_argument for a non-finite or zero normal, a
   /// non-positive extent, or a resolution outside [2, 1024].
-  static ContactWindow Make(const glm::dvec3& center_W, const glm::dvec3& normal_W,
-                            double extent_m, int resolution);
+  static ContactWindow Make(const glm::dvec3& center_W, const glm::dvec3& normal_W, double extent_m,
+                            int resolution);
 
   /// Cell side W/N (m).
   double cell_size_m() const noexcept { return extent_m / resolution; }
@@ -56,8 +56,8 @@ void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
 /// (the GPU path does the same per fragment) [L][R]. `heights` must be initialised by the caller
 /// (−∞ for kEnvironment, +∞ for kTool); cells no triangle covers keep that value. Never allocates.
 void RenderPatchHeights(const HapticModel& model, const RigidTransform& X_WO,
-                        std::span<const int> triangles, const ContactWindow& window,
-                        PatchSide side, std::span<float> heights) noexcept;
+                        std::span<const int> triangles, const ContactWindow& window, PatchSide side,
+                        std::span<float> heights) noexcept;
 
 /// Result of one directional penetration-depth evaluation.
 struct DepthSample {

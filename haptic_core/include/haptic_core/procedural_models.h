@@ -57,8 +57,8 @@ struct RidgedGearParams {
   int teeth = 52;           ///< Ridges around the circumference (arc period 2πR/teeth).
   double amplitude_m = 0.4e-3;
   double sharpness = 1.5;
-  int coarse_segments = 400;      ///< 400 → 1,600 coarse triangles (seed: 1,600).
-  int texture_size = 1024;        ///< Texels per side of the height field.
+  int coarse_segments = 400;            ///< 400 → 1,600 coarse triangles (seed: 1,600).
+  int texture_size = 1024;              ///< Texels per side of the height field.
   int full_resolution_segments = 3200;  ///< with 3 length rows → 25,600 triangles (seed: 25,600).
   int full_resolution_rows = 3;
   double mass_kg = 1.0;

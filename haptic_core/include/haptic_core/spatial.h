@@ -5,8 +5,8 @@
 // tool frame T in world W, `p_WT` the position of T's origin in W, `V_WT_W` the twist of T in W
 // expressed in W, `F_T_W` a wrench on T (at T's origin) expressed in W. SI units throughout.
 
-#include <glm/gtc/quaternion.hpp>
 #include <glm/geometric.hpp>
+#include <glm/gtc/quaternion.hpp>
 #include <glm/vec3.hpp>
 
 namespace ht {

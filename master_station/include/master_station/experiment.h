@@ -38,7 +38,7 @@ struct Fig75Params {
   double start_height_m = 2e-3;  ///< Hand height above the contact at t = 0 (m).
   double x_amplitude_m = 8e-3;
   double y_amplitude_m = 6e-3;
-  double lift_height_m = 3e-3;   ///< Hand height above the contact at the top of the z phase (m).
+  double lift_height_m = 3e-3;  ///< Hand height above the contact at the top of the z phase (m).
 };
 
 /// Builds the Fig. 75 experiment. Throws std::invalid_argument for a non-positive duration.

@@ -13,8 +13,8 @@ namespace ht {
 /// What a device can sense and render. Frames: M is the device base, H its handle.
 struct DeviceCapabilities {
   std::string name;
-  double max_force_n = 0.0;       ///< Largest force magnitude it renders (N); 0 = no force output.
-  double max_torque_nm = 0.0;     ///< Largest torque magnitude it renders (N·m); 0 = none.
+  double max_force_n = 0.0;    ///< Largest force magnitude it renders (N); 0 = no force output.
+  double max_torque_nm = 0.0;  ///< Largest torque magnitude it renders (N·m); 0 = none.
   /// Largest coupling stiffness it renders stably at `rated_loop_rate_hz` (N/m, N·m/rad).
   double max_stiffness_n_per_m = 0.0;
   double max_rotational_stiffness_nm_per_rad = 0.0;

@@ -17,8 +17,9 @@ class TripleBuffer {
   /// Writer side: publishes a copy of `value`.
   void Write(const T& value) noexcept {
     buffers_[write_] = value;
-    write_ = shared_.exchange(static_cast<std::uint8_t>(write_ | kFresh),
-                              std::memory_order_acq_rel) & kIndexMask;
+    write_ =
+        shared_.exchange(static_cast<std::uint8_t>(write_ | kFresh), std::memory_order_acq_rel) &
+        kIndexMask;
   }
   /// Reader side: copies the newest value into `out` if one was published since the last Read.
   bool Read(T& out) noexcept {
@@ -32,9 +33,9 @@ class TripleBuffer {
   static constexpr std::uint8_t kFresh = 0x4;
   static constexpr std::uint8_t kIndexMask = 0x3;
   std::array<T, 3> buffers_{};
-  std::uint8_t write_ = 0;                 // owned by the writer
-  std::uint8_t read_ = 1;                  // owned by the reader
-  std::atomic<std::uint8_t> shared_{2};    // the middle buffer, with the fresh flag
+  std::uint8_t write_ = 0;               // owned by the writer
+  std::uint8_t read_ = 1;                // owned by the reader
+  std::atomic<std::uint8_t> shared_{2};  // the middle buffer, with the fresh flag
 };
 
 /// Bounded single-producer/single-consumer queue.

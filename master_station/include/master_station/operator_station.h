@@ -5,9 +5,8 @@
 // other threads through TripleBuffer / SpscRing.
 
 #include <cstdint>
-#include <string>
-
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "haptic_core/tool_simulation.h"
 #include "master_station/experiment.h"

@@ -4,9 +4,8 @@
 
 #include <atomic>
 #include <cstdint>
-#include <string>
-
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "haptic_core/haptic_scene.h"
 #include "transport/udp_socket.h"

@@ -40,15 +40,15 @@ struct ContactModelMessage {
 /// Why a datagram was rejected.
 enum class DecodeStatus : std::uint8_t {
   kOk = 0,
-  kTooShort,        ///< shorter than the header or than its body needs
-  kTooLong,         ///< longer than kMaxDatagramBytes or than its body allows
+  kTooShort,  ///< shorter than the header or than its body needs
+  kTooLong,   ///< longer than kMaxDatagramBytes or than its body allows
   kBadMagic,
   kBadVersion,
   kBadFlags,
   kUnknownType,
-  kBadCount,        ///< contact count above kMaxWireContacts
-  kNonFinite,       ///< a pose, twist, wrench or contact field is NaN or infinite
-  kBadValue,        ///< a finite but impossible value (non-unit quaternion, negative stiffness)
+  kBadCount,   ///< contact count above kMaxWireContacts
+  kNonFinite,  ///< a pose, twist, wrench or contact field is NaN or infinite
+  kBadValue,   ///< a finite but impossible value (non-unit quaternion, negative stiffness)
 };
 
 /// Human-readable name of a status ("ok", "too_short", ...), for logs and summaries.
