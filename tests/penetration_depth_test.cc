@@ -75,14 +75,17 @@ struct SmoothCase {
     return 0.5 * (lo + hi);
   }
   double Slope(double y) const { return amp * omega * std::cos(omega * y); }
+  HapticModel Tool() const {
+    return ToolBox([this](double x, double y) { return c - kappa * (x * x + y * y); }, 1024);
+  }
+  HapticModel Environment() const {
+    return EnvironmentBox([this](double, double y) { return amp * std::sin(omega * y); }, 1024);
+  }
 };
 
 TEST(PenetrationDepth, SinusoidForceRatioEqualsSlopeAtDeepestPoint) {
   const SmoothCase s;
-  const HapticModel a =
-      ToolBox([&](double x, double y) { return s.c - s.kappa * (x * x + y * y); }, 1024);
-  const HapticModel b =
-      EnvironmentBox([&](double, double y) { return s.amp * std::sin(s.omega * y); }, 1024);
+  const HapticModel a = s.Tool(), b = s.Environment();
   TexturePenetrationSolver solver(200);
   const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 200);
   const ContactLinearization lin =
@@ -101,10 +104,7 @@ TEST(PenetrationDepth, FiniteDifferenceGradientMatchesAnalyticGradient) {
   // Envelope theorem: ∇δ = (g − n, r × (g − n)) with g the tool surface slope at the deepest
   // point p* and r = p* − centre of mass. Two independent routes to the same six numbers.
   const SmoothCase s;
-  const HapticModel a =
-      ToolBox([&](double x, double y) { return s.c - s.kappa * (x * x + y * y); }, 1024);
-  const HapticModel b =
-      EnvironmentBox([&](double, double y) { return s.amp * std::sin(s.omega * y); }, 1024);
+  const HapticModel a = s.Tool(), b = s.Environment();
   TexturePenetrationSolver solver(200);
   const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 200);
   const RigidTransform X_WT = ToolPose(0, s.y_tool, s.z_bottom);
@@ -127,10 +127,7 @@ TEST(PenetrationDepth, ActionEqualsMinusReaction) {
   // Swap the roles: the environment becomes the tool, n flips. The two wrenches, taken about the
   // world origin, must cancel.
   const SmoothCase s;
-  const HapticModel a =
-      ToolBox([&](double x, double y) { return s.c - s.kappa * (x * x + y * y); }, 1024);
-  const HapticModel b =
-      EnvironmentBox([&](double, double y) { return s.amp * std::sin(s.omega * y); }, 1024);
+  const HapticModel a = s.Tool(), b = s.Environment();
   TexturePenetrationSolver solver(100);
   const RigidTransform X_WA = ToolPose(1e-3, s.y_tool, s.z_bottom), X_WB = EnvironmentPose();
   const double k = 1000.0;
