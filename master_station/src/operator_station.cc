@@ -15,6 +15,7 @@
 #include <thread>
 #include <vector>
 
+#include "haptic_core/statistics.h"
 #include "master_station/lock_free.h"
 #include "transport/messages.h"
 
@@ -31,13 +32,6 @@ void SleepUntilNs(std::int64_t t_ns) noexcept {
   timespec ts{static_cast<time_t>(t_ns / 1000000000), static_cast<long>(t_ns % 1000000000)};
   while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
   }
-}
-
-double Percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  const auto i = static_cast<size_t>(std::clamp(q, 0.0, 1.0) * (v.size() - 1) + 0.5);
-  return v[std::min(i, v.size() - 1)];
 }
 
 struct OutgoingToolState {
