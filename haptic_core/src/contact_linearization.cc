@@ -49,47 +49,84 @@ DepthSample TexturePenetrationSolver::Depth(const HapticModel& tool, const Rigid
   return EvaluateTool(tool, X_WT, w);
 }
 
-ContactLinearization TexturePenetrationSolver::Linearize(
-    const HapticModel& tool, const RigidTransform& X_WT, const HapticModel& environment,
-    const RigidTransform& X_WE, const ContactWindow& w, double stiffness_n_per_m) noexcept {
+std::array<RigidTransform, kGradientSamples> GradientSamplePoses(const RigidTransform& X_WT,
+                                                                const ContactWindow& w) noexcept {
+  const GradientSteps h = GradientSteps::For(w);
+  const glm::dvec3 u = w.axis_u_W, v = w.axis_v_W, n = w.normal_W, zero(0.0);
+  const Twist steps[5] = {{h.h_x * u, zero},
+                          {h.h_x * v, zero},
+                          {zero, h.h_theta * u},
+                          {zero, h.h_theta * v},
+                          {zero, h.h_theta * n}};
+  std::array<RigidTransform, kGradientSamples> poses;
+  poses[0] = X_WT;
+  for (int i = 0; i < 5; ++i) {
+    poses[1 + 2 * i] = Displace(X_WT, steps[i]);
+    poses[2 + 2 * i] = Displace(X_WT, {-steps[i].linear, -steps[i].angular});
+  }
+  return poses;
+}
+
+ContactLinearization AssembleLinearization(const ContactWindow& w,
+                                           std::span<const DepthSample> samples,
+                                           double stiffness_n_per_m,
+                                           LinearizationFaults& faults) noexcept {
   ContactLinearization out;
   out.stiffness_n_per_m = stiffness_n_per_m;
   out.normal_W = w.normal_W;
   out.point_W = w.center_W;
-
-  const double h_x = w.cell_size_m();
-  const double h_theta = h_x / (0.5 * w.extent_m);
-  double tool_radius = 0.0;
-  for (const auto& v : tool.vertices_O) tool_radius = std::max(tool_radius, glm::length(v));
-
-  RenderEnvironment(environment, X_WE, w);
-  // Tool triangles are chosen once with a margin that covers every perturbed pose.
-  SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool, 2.0 * h_x + h_theta * tool_radius,
-                       tool_triangles_);
-  const DepthSample base = EvaluateTool(tool, X_WT, w);
+  out.depth_m = -std::numeric_limits<double>::infinity();
+  if (samples.size() < static_cast<size_t>(kGradientSamples)) return out;
+  const DepthSample& base = samples[0];
   out.depth_m = base.depth_m;
   if (base.cell < 0) return out;
   out.point_W = w.CellCenter(base.cell);
 
-  const auto central = [&](const Twist& step, double h) {
-    const DepthSample plus = EvaluateTool(tool, Displace(X_WT, step), w);
-    const DepthSample minus = EvaluateTool(tool, Displace(X_WT, {-step.linear, -step.angular}), w);
-    if (plus.cell >= 0 && minus.cell >= 0) return (plus.depth_m - minus.depth_m) / (2.0 * h);
-    ++faults_.missing_overlap;
-    if (plus.cell >= 0) return (plus.depth_m - base.depth_m) / h;
-    if (minus.cell >= 0) return (base.depth_m - minus.depth_m) / h;
+  const GradientSteps h = GradientSteps::For(w);
+  const auto central = [&](int i, double step) {
+    const DepthSample& plus = samples[1 + 2 * i];
+    const DepthSample& minus = samples[2 + 2 * i];
+    if (plus.cell >= 0 && minus.cell >= 0) return (plus.depth_m - minus.depth_m) / (2.0 * step);
+    ++faults.missing_overlap;
+    if (plus.cell >= 0) return (plus.depth_m - base.depth_m) / step;
+    if (minus.cell >= 0) return (base.depth_m - minus.depth_m) / step;
     return 0.0;
   };
   const glm::dvec3 u = w.axis_u_W, v = w.axis_v_W, n = w.normal_W;
-  const double g_u = central({h_x * u, glm::dvec3(0.0)}, h_x);
-  const double g_v = central({h_x * v, glm::dvec3(0.0)}, h_x);
-  const double r_u = central({glm::dvec3(0.0), h_theta * u}, h_theta);
-  const double r_v = central({glm::dvec3(0.0), h_theta * v}, h_theta);
-  const double r_n = central({glm::dvec3(0.0), h_theta * n}, h_theta);
+  const double g_u = central(0, h.h_x);
+  const double g_v = central(1, h.h_x);
+  const double r_u = central(2, h.h_theta);
+  const double r_v = central(3, h.h_theta);
+  const double r_n = central(4, h.h_theta);
   // Moving the tool along +n lifts every tool height by the same amount: ∂δ/∂x_n = −1 exactly.
   out.gradient.d_translation_W = g_u * u + g_v * v - n;
   out.gradient.d_rotation_W = r_u * u + r_v * v + r_n * n;
   return out;
+}
+
+ContactLinearization TexturePenetrationSolver::Linearize(
+    const HapticModel& tool, const RigidTransform& X_WT, const HapticModel& environment,
+    const RigidTransform& X_WE, const ContactWindow& w, double stiffness_n_per_m,
+    std::span<DepthSample> samples_out) noexcept {
+  const GradientSteps h = GradientSteps::For(w);
+  double tool_radius = 0.0;
+  for (const auto& v : tool.vertices_O) tool_radius = std::max(tool_radius, glm::length(v));
+
+  RenderEnvironment(environment, X_WE, w);
+  // Tool triangles are chosen once, with margins that cover every perturbed pose (the render
+  // re-checks facing at each pose).
+  SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool, 2.0 * h.h_x + h.h_theta * tool_radius,
+                       tool_triangles_, h.h_theta + 1e-9);
+  std::array<DepthSample, kGradientSamples> samples;
+  samples[0] = EvaluateTool(tool, X_WT, w);
+  if (samples[0].cell >= 0) {
+    const auto poses = GradientSamplePoses(X_WT, w);
+    for (int i = 1; i < kGradientSamples; ++i) samples[i] = EvaluateTool(tool, poses[i], w);
+  } else {
+    for (int i = 1; i < kGradientSamples; ++i) samples[i] = samples[0];
+  }
+  if (samples_out.size() >= samples.size()) std::copy(samples.begin(), samples.end(), samples_out.begin());
+  return AssembleLinearization(w, samples, stiffness_n_per_m, faults_);
 }
 
 }  // namespace ht

@@ -48,9 +48,11 @@ void PipelineOptions::Validate() const {
 }
 
 HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
-                                             const PipelineOptions& options)
-    : scene_(scene), options_(options), solver_(options.grid_resolution) {
+                                             const PipelineOptions& options,
+                                             std::unique_ptr<PenetrationDepthBackend> backend)
+    : scene_(scene), options_(options), backend_(std::move(backend)) {
   options_.Validate();
+  if (!backend_) backend_ = std::make_unique<CpuPenetrationDepthBackend>(options_.grid_resolution);
   if (!scene.tool) throw std::invalid_argument("scene '" + scene.name + "' has no tool");
   if (glm::length(scene.tool->center_of_mass_O) > 1e-9) {
     throw std::invalid_argument("tool model '" + scene.tool->name +
@@ -92,12 +94,27 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   }
   const auto t1 = Clock::now();
 
+  std::array<ContactQuery, kMaxContacts> queries;
+  std::array<ContactLinearization, kMaxContacts> results;
   for (int i = 0; i < num_candidates; ++i) {
     const Candidate& c = candidates[i];
-    const ContactWindow window = ContactWindow::Make(
-        c.contact.point_W, c.contact.normal_W, options_.window_extent_m, options_.grid_resolution);
-    const ContactLinearization lin = solver_.Linearize(tool, X_WT, *c.object->model, c.object->X_WO,
-                                                       window, c.object->stiffness_n_per_m);
+    queries[i] = {c.object->model.get(), c.object->X_WO,
+                  ContactWindow::Make(c.contact.point_W, c.contact.normal_W,
+                                      options_.window_extent_m, options_.grid_resolution),
+                  c.object->stiffness_n_per_m};
+  }
+  const std::span<const ContactQuery> batch(queries.data(), num_candidates);
+  const std::span<ContactLinearization> batch_out(results.data(), num_candidates);
+  if (num_candidates > 0 && !backend_->LinearizeBatch(tool, X_WT, batch, batch_out)) {
+    // The GPU failed (context lost, GL error): this step and all later ones on the CPU.
+    if (backend_failures_++ == 0) {
+      fallback_reason_ = std::string(backend_->name()) + ": " + backend_->last_error();
+    }
+    backend_ = std::make_unique<CpuPenetrationDepthBackend>(options_.grid_resolution);
+    backend_->LinearizeBatch(tool, X_WT, batch, batch_out);
+  }
+  for (int i = 0; i < num_candidates; ++i) {
+    const ContactLinearization& lin = results[i];
     if (!std::isfinite(lin.depth_m)) continue;  // no overlap of the patches on the window
     model.contacts[model.num_contacts++] = lin;
     model.F_T_W_at_q0 += PenaltyWrench(lin.depth_m, lin.gradient, lin.stiffness_n_per_m);

@@ -45,10 +45,11 @@ glm::dvec3 ContactWindow::CellCenter(int index) const noexcept {
 
 void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
                           const ContactWindow& w, PatchSide side, double margin_m,
-                          std::vector<int>& out) noexcept {
+                          std::vector<int>& out, double facing_slack) noexcept {
   out.clear();
   const double half = 0.5 * w.extent_m + margin_m;
-  const double depth_limit = w.extent_m + margin_m;
+  const double depth_limit = w.depth_range_m() + margin_m;
+  const double threshold = kPatchFacingThreshold - facing_slack;
   const int nf = static_cast<int>(model.triangles.size());
   for (int f = 0; f < nf; ++f) {
     const glm::ivec3 t = model.triangles[f];
@@ -59,7 +60,7 @@ void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
     const double area2 = glm::length(cr);
     if (!(area2 > 0.0)) continue;
     const double facing = glm::dot(cr, w.normal_W) / area2;
-    if (side == PatchSide::kEnvironment ? facing <= 0.05 : facing >= -0.05) continue;
+    if (side == PatchSide::kEnvironment ? facing <= threshold : facing >= -threshold) continue;
     const double s[3] = {glm::dot(p0, w.axis_u_W), glm::dot(p1, w.axis_u_W),
                          glm::dot(p2, w.axis_u_W)};
     const double t2[3] = {glm::dot(p0, w.axis_v_W), glm::dot(p1, w.axis_v_W),
@@ -83,16 +84,24 @@ void RenderPatchHeights(const HapticModel& model, const RigidTransform& X_WO,
   const double inv_cell = 1.0 / w.cell_size_m();
   const double half_cells = 0.5 * n;
   const bool keep_max = side == PatchSide::kEnvironment;
+  const double range = w.depth_range_m();
   for (const int f : triangles) {
     const glm::ivec3 tri = model.triangles[f];
     double x[3], y[3], d[3], nn[3];
+    glm::dvec3 p[3];
     for (int c = 0; c < 3; ++c) {
-      const glm::dvec3 p = X_WO * model.vertices_O[tri[c]] - w.center_W;
-      x[c] = glm::dot(p, w.axis_u_W) * inv_cell + half_cells;  // pixel i spans [i, i+1)
-      y[c] = glm::dot(p, w.axis_v_W) * inv_cell + half_cells;
-      d[c] = glm::dot(p, w.normal_W);
+      p[c] = X_WO * model.vertices_O[tri[c]] - w.center_W;
+      x[c] = glm::dot(p[c], w.axis_u_W) * inv_cell + half_cells;  // pixel i spans [i, i+1)
+      y[c] = glm::dot(p[c], w.axis_v_W) * inv_cell + half_cells;
+      d[c] = glm::dot(p[c], w.normal_W);
       nn[c] = glm::dot(X_WO.rotation * model.corner_normals_O[3 * f + c], w.normal_W);
     }
+    // Facing test at this pose (the selection may have been made at another one).
+    const glm::dvec3 cr = glm::cross(p[1] - p[0], p[2] - p[0]);
+    const double cr_len = glm::length(cr);
+    if (!(cr_len > 0.0)) continue;
+    const double facing = glm::dot(cr, w.normal_W) / cr_len;
+    if (keep_max ? facing <= kPatchFacingThreshold : facing >= -kPatchFacingThreshold) continue;
     const double area = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]);
     if (!(std::abs(area) > 1e-12)) continue;  // edge-on or degenerate in projection
     const double inv_area = 1.0 / area;
@@ -126,6 +135,7 @@ void RenderPatchHeights(const HapticModel& model, const RigidTransform& X_WO,
           const double ndotn = b0 * nn[0] + b1 * nn[1] + b2 * nn[2];
           value += static_cast<double>(model.texture.Sample(level, u, v)) * ndotn;
         }
+        if (!(std::abs(value) <= range)) continue;  // outside the window's box along n
         float& cell = heights[static_cast<size_t>(j) * n + i];
         const auto fv = static_cast<float>(value);
         if (keep_max ? fv > cell : fv < cell) cell = fv;

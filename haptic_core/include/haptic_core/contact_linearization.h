@@ -2,7 +2,9 @@
 // Per-contact linearization of the texture penetration depth (DESIGN.md §4–§5): δ0, its 6-DoF
 // gradient J by central differences, and the penalty wrench Φ = −k δ ∇δ.
 
+#include <array>
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "haptic_core/haptic_model.h"
@@ -43,6 +45,36 @@ struct LinearizationFaults {
   std::int64_t missing_overlap = 0;  ///< A perturbed evaluation had no overlapping cell.
 };
 
+/// Number of depth evaluations per contact for the gradient: the base pose and ± steps along u, v
+/// (translation) and about u, v, n (rotation) [L][R].
+inline constexpr int kGradientSamples = 11;
+
+/// Step sizes of the central differences for `window`: h_x = W/N (m), h_θ = (W/N)/(W/2) (rad),
+/// one grid-cell footprint at the patch border [R].
+struct GradientSteps {
+  double h_x;
+  double h_theta;
+  static GradientSteps For(const ContactWindow& window) noexcept {
+    const double h_x = window.cell_size_m();
+    return {h_x, h_x / (0.5 * window.extent_m)};
+  }
+};
+
+/// The kGradientSamples tool poses at which δ is evaluated, in this order: X_WT, then ±h_x along
+/// u, ±h_x along v, ±h_θ about u, ±h_θ about v, ±h_θ about n (plus first), each applied with
+/// Displace (world axes, about the tool's centre of mass). Both backends use this table.
+std::array<RigidTransform, kGradientSamples> GradientSamplePoses(
+    const RigidTransform& X_WT, const ContactWindow& window) noexcept;
+
+/// Builds the linearization from the kGradientSamples depths taken at GradientSamplePoses():
+/// central differences, or one-sided ones (counted in `faults`) where a perturbed pose has no
+/// overlapping cell; ∂δ/∂x_n = −1 exactly. Returns depth_m = −∞ when the base sample has no
+/// overlap. `samples` must hold kGradientSamples entries.
+ContactLinearization AssembleLinearization(const ContactWindow& window,
+                                           std::span<const DepthSample> samples,
+                                           double stiffness_n_per_m,
+                                           LinearizationFaults& faults) noexcept;
+
 /// Evaluates δ and its gradient for one contact, reusing preallocated height buffers: one
 /// environment render and 11 tool renders (base and ±h along u, v and about u, v, n); the
 /// derivative along n is −1 exactly [L]. Step sizes: h_x = W/N, h_θ = (W/N)/(W/2) [R].
@@ -55,9 +87,11 @@ class TexturePenetrationSolver {
   /// Linearizes the contact of `tool` posed at X_WT (frame T at the tool's centre of mass) against
   /// `environment` posed at X_WE over `window`, with penalty stiffness k (N/m).
   /// Returns depth_m = −∞ and a zero gradient when the patches do not overlap on the window.
+  /// When `samples_out` holds kGradientSamples entries, the raw depths are copied there.
   ContactLinearization Linearize(const HapticModel& tool, const RigidTransform& X_WT,
                                  const HapticModel& environment, const RigidTransform& X_WE,
-                                 const ContactWindow& window, double stiffness_n_per_m) noexcept;
+                                 const ContactWindow& window, double stiffness_n_per_m,
+                                 std::span<DepthSample> samples_out = {}) noexcept;
 
   /// δ only (m), at one tool pose; same conventions as Linearize.
   DepthSample Depth(const HapticModel& tool, const RigidTransform& X_WT,

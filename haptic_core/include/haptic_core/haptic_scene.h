@@ -10,6 +10,7 @@
 #include "haptic_core/contact_linearization.h"
 #include "haptic_core/contact_model.h"
 #include "haptic_core/haptic_model.h"
+#include "haptic_core/penetration_depth_backend.h"
 
 namespace ht {
 
@@ -56,23 +57,36 @@ struct StepTimings {
 };
 
 /// The remote node's per-step pipeline (DESIGN.md §1): coarse contact query, contacts, texture
-/// penetration depth with gradient, linearization. Holds preallocated scratch; not thread-safe.
+/// penetration depth with gradient (one batch for all contacts), linearization. Holds
+/// preallocated scratch; not thread-safe, and must be stepped on the thread that created its
+/// penetration-depth backend (a GL context is current there).
 class HapticTexturePipeline {
  public:
-  /// Keeps a reference to `scene`, which must outlive the pipeline. Throws std::invalid_argument
-  /// for bad options, a scene without a tool, or a tool whose centre of mass is not T's origin.
-  HapticTexturePipeline(const HapticScene& scene, const PipelineOptions& options);
+  /// Keeps a reference to `scene`, which must outlive the pipeline. `backend` computes the
+  /// penetration depth (null: the CPU reference). Throws std::invalid_argument for bad options, a
+  /// scene without a tool, or a tool whose centre of mass is not T's origin.
+  HapticTexturePipeline(const HapticScene& scene, const PipelineOptions& options,
+                        std::unique_ptr<PenetrationDepthBackend> backend = nullptr);
 
   /// Builds the contact model at tool pose X_WT (q0), tagging it with `tool_state_seq`.
   /// A non-finite pose gives an empty model. Fills `timings`.
   ContactModel Step(const RigidTransform& X_WT, std::uint64_t tool_state_seq, StepTimings& timings);
 
-  const LinearizationFaults& faults() const noexcept { return solver_.faults(); }
+  /// Faults of the backend in use.
+  const LinearizationFaults& faults() const noexcept { return backend_->faults(); }
+  /// The backend in use: the one given, or the CPU reference after that one failed.
+  const PenetrationDepthBackend& backend() const noexcept { return *backend_; }
+  /// Batches the given backend failed (the step is then recomputed on the CPU, which stays in
+  /// use), and the reason of the first failure ("" when none).
+  std::int64_t backend_failures() const noexcept { return backend_failures_; }
+  const std::string& fallback_reason() const noexcept { return fallback_reason_; }
 
  private:
   const HapticScene& scene_;
   PipelineOptions options_;
-  TexturePenetrationSolver solver_;
+  std::unique_ptr<PenetrationDepthBackend> backend_;
+  std::int64_t backend_failures_ = 0;
+  std::string fallback_reason_;
 };
 
 }  // namespace ht

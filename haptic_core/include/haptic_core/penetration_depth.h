@@ -31,6 +31,9 @@ struct ContactWindow {
 
   /// Cell side W/N (m).
   double cell_size_m() const noexcept { return extent_m / resolution; }
+  /// Half-depth R of the window's box along n (m): surface samples whose height along n lies
+  /// outside [−R, R] are ignored by both backends, so δ saturates at 2R. R = W.
+  double depth_range_m() const noexcept { return extent_m; }
   /// World position (m) of cell `index`'s centre on the window plane.
   glm::dvec3 CellCenter(int index) const noexcept;
 };
@@ -41,19 +44,27 @@ enum class PatchSide {
   kTool,         ///< A: keeps the smallest height along n per cell (surface facing −n).
 };
 
+/// A triangle faces the other side when its unit face normal · n exceeds this for B (environment),
+/// or is below its negative for A (tool). Triangles closer to edge-on are not rendered.
+inline constexpr double kPatchFacingThreshold = 0.05;
+
 /// Appends to `triangles_out` the triangles of `model` (posed at X_WO) that may contribute to
-/// `window`: facing the other side (face normal·n > 0.05 for B, < −0.05 for A), overlapping the
-/// window grown by `margin_m` on the plane, and within ±(W + margin) of the plane along n.
+/// `window`: facing the other side (face normal·n > kPatchFacingThreshold − facing_slack for B,
+/// < −(kPatchFacingThreshold − facing_slack) for A), overlapping the window grown by `margin_m` on
+/// the plane, and within ±(R + margin) of the plane along n. A conservative pre-filter: a slack of
+/// sin(θ) keeps every triangle that may face the other side after a rotation by θ.
 /// `triangles_out` is cleared first; it does not allocate once its capacity reaches the model's
 /// triangle count.
 void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
                           const ContactWindow& window, PatchSide side, double margin_m,
-                          std::vector<int>& triangles_out) noexcept;
+                          std::vector<int>& triangles_out, double facing_slack = 0.0) noexcept;
 
 /// Renders the heights along n (m, relative to the window centre) of the textured surface of
-/// `model` posed at X_WO into `heights` (#N*N). Per covered cell: coarse height d + h(uv)·(N·n),
-/// with N the interpolated normal and h sampled at the mip level whose texel matches the cell
-/// (the GPU path does the same per fragment) [L][R]. `heights` must be initialised by the caller
+/// `model` posed at X_WO into `heights` (#N*N). Only triangles of `triangles` that face the other
+/// side at this pose (kPatchFacingThreshold) are drawn. Per covered cell: coarse height
+/// d + h(uv)·(N·n), with N the interpolated normal and h sampled at the mip level whose texel
+/// matches the cell (the GPU path does the same per fragment) [L][R]; samples with
+/// |height| > depth_range_m() are outside the window's box and ignored. `heights` must be initialised by the caller
 /// (−∞ for kEnvironment, +∞ for kTool); cells no triangle covers keep that value. Never allocates.
 void RenderPatchHeights(const HapticModel& model, const RigidTransform& X_WO,
                         std::span<const int> triangles, const ContactWindow& window, PatchSide side,

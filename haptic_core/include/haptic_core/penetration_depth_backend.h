@@ -1,0 +1,74 @@
+#pragma once
+// Where the texture penetration depth of a remote step is computed (DESIGN.md §4): the CPU
+// reference, or the GPU (haptic_core_gpu). Both take the same batch and give the same numbers to
+// within the GPU's depth quantum.
+
+#include <memory>
+#include <span>
+#include <string>
+#include <string_view>
+
+#include "haptic_core/contact_linearization.h"
+#include "haptic_core/haptic_model.h"
+#include "haptic_core/penetration_depth.h"
+#include "haptic_core/spatial.h"
+
+namespace ht {
+
+/// One contact of a batch: the environment object B at X_WE, the window found by the coarse
+/// query, and B's penalty stiffness k (N/m).
+struct ContactQuery {
+  const HapticModel* environment = nullptr;  ///< Must outlive the call; not null.
+  RigidTransform X_WE;
+  ContactWindow window;
+  double stiffness_n_per_m = 0.0;
+};
+
+/// Computes, for all contacts of one remote step, δ and its gradient (kGradientSamples depth
+/// evaluations each). Implementations preallocate at construction; a batch does not allocate.
+class PenetrationDepthBackend {
+ public:
+  virtual ~PenetrationDepthBackend() = default;
+
+  /// "cpu" or "gpu".
+  virtual std::string_view name() const noexcept = 0;
+  /// What runs it, for logs and summaries: "CPU reference rasterizer" or the GL renderer string.
+  virtual std::string description() const = 0;
+
+  /// Linearizes every query for `tool` posed at X_WT (frame T at the tool's centre of mass) into
+  /// `out` (#queries). When `samples_out` holds #queries × kGradientSamples entries, the raw depth
+  /// samples are written there too (query-major, in GradientSamplePoses() order). Returns false
+  /// when the backend failed (lost GPU context, GL error, more queries than it was sized for);
+  /// `last_error()` then says why and `out` is unspecified. Must be called from the thread that
+  /// created the backend.
+  virtual bool LinearizeBatch(const HapticModel& tool, const RigidTransform& X_WT,
+                              std::span<const ContactQuery> queries,
+                              std::span<ContactLinearization> out,
+                              std::span<DepthSample> samples_out = {}) noexcept = 0;
+
+  /// Why the last failed batch failed ("" when none failed).
+  virtual const std::string& last_error() const noexcept = 0;
+  /// Numerical faults met while linearizing (counted, never thrown).
+  virtual const LinearizationFaults& faults() const noexcept = 0;
+};
+
+/// The CPU reference (software rasterizer, DESIGN.md §4), one contact after the other.
+class CpuPenetrationDepthBackend final : public PenetrationDepthBackend {
+ public:
+  /// Preallocates for grids of up to `max_resolution`² cells.
+  explicit CpuPenetrationDepthBackend(int max_resolution = 128) : solver_(max_resolution) {}
+
+  std::string_view name() const noexcept override { return "cpu"; }
+  std::string description() const override { return "CPU reference rasterizer"; }
+  bool LinearizeBatch(const HapticModel& tool, const RigidTransform& X_WT,
+                      std::span<const ContactQuery> queries, std::span<ContactLinearization> out,
+                      std::span<DepthSample> samples_out = {}) noexcept override;
+  const std::string& last_error() const noexcept override { return last_error_; }
+  const LinearizationFaults& faults() const noexcept override { return solver_.faults(); }
+
+ private:
+  TexturePenetrationSolver solver_;
+  std::string last_error_;
+};
+
+}  // namespace ht
