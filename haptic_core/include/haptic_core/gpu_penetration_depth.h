@@ -1,0 +1,132 @@
+#pragma once
+// Texture penetration depth on the GPU (DESIGN.md §4) [S][L]: per remote step one batch for all
+// contacts and all gradient samples. Per contact the environment patch B is rendered once and the
+// tool patch A at its kGradientSamples poses, with orthographic projection along n into depth
+// tiles of an atlas (heights as depth, B keeping the maximum, A the minimum, both displaced by
+// their haptic textures per fragment at the mip level matching the grid cell). A compute shader
+// takes b − a per cell and reduces each tile to its maximum and cell; one small readback per
+// step. Same conventions as the CPU reference (penetration_depth.h), which it matches to within
+// one depth quantum.
+
+#include <array>
+#include <memory>
+#include <span>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "haptic_core/contact_model.h"
+#include "haptic_core/egl_context.h"
+#include "haptic_core/penetration_depth_backend.h"
+
+namespace ht {
+
+/// Options of the GPU backend.
+struct GpuPenetrationDepthOptions {
+  /// Depth buffer precision: 16 (fixed point, like the seed) or 32 (float).
+  int depth_bits = 16;
+  /// Largest number of contacts in one batch (the atlases are sized for it at start).
+  int max_contacts = kMaxContacts;
+  /// Largest grid N (tiles are N×N texels).
+  int max_resolution = 128;
+  /// Time the stages (upload, draw, reduction, readback) with glFinish between them. Costs
+  /// throughput; for benchmarks only.
+  bool profile_stages = false;
+  EglContextOptions egl;
+  /// Testing hook: break the fragment shader's source so that compiling it fails.
+  bool inject_shader_compile_error = false;
+};
+
+/// Wall time of the stages of the last batch (µs), filled when profile_stages is on.
+struct GpuStageTimes {
+  double upload_us = 0.0;    ///< Per-draw uniforms and state; textures are uploaded once.
+  double draw_us = 0.0;      ///< Rasterizing B and A patches into the depth atlases.
+  double reduce_us = 0.0;    ///< Compute shader: b − a and per-tile max.
+  double readback_us = 0.0;  ///< Mapping the result buffer.
+};
+
+/// The GPU penetration-depth backend. Owns its EGL context (current on the creating thread).
+class GpuPenetrationDepthBackend final : public PenetrationDepthBackend {
+ public:
+  /// Starts a headless context, compiles the shaders and allocates the atlases and buffers.
+  /// Throws GpuError with a clear message (no EGL display, no ES 3.1, shader compile or link log,
+  /// incomplete framebuffer) and std::invalid_argument for options out of range.
+  static std::unique_ptr<GpuPenetrationDepthBackend> Create(
+      const GpuPenetrationDepthOptions& options = {});
+  ~GpuPenetrationDepthBackend() override;
+
+  std::string_view name() const noexcept override { return "gpu"; }
+  /// "<GL_RENDERER> (<GL_VERSION>, <platform>, <bits>-bit depth)".
+  std::string description() const override;
+  /// See PenetrationDepthBackend. A model seen for the first time is uploaded (vertex buffer and
+  /// texture with its mip chain, allocated once and kept); later batches only set uniforms.
+  /// Returns false on a GL error or lost context, more queries than max_contacts, a grid larger
+  /// than max_resolution, or mixed grid resolutions or window extents in one batch.
+  bool LinearizeBatch(const HapticModel& tool, const RigidTransform& X_WT,
+                      std::span<const ContactQuery> queries, std::span<ContactLinearization> out,
+                      std::span<DepthSample> samples_out = {}) noexcept override;
+  const std::string& last_error() const noexcept override { return last_error_; }
+  const LinearizationFaults& faults() const noexcept override { return faults_; }
+
+  /// Uploads `model` now rather than at its first batch. Throws GpuError on a GL error.
+  void Upload(const HapticModel& model);
+
+  const GpuInfo& info() const noexcept { return context_->info(); }
+  int depth_bits() const noexcept { return options_.depth_bits; }
+  /// Height resolution of the depth buffer for `window` (m): 2R'/(2^16 − 1) at 16 bits, with R'
+  /// slightly above the window's depth range R; at 32 bits the float spacing near the middle of
+  /// the range, 2R'·2^−24.
+  double DepthQuantum(const ContactWindow& window) const noexcept;
+  const GpuStageTimes& stage_times() const noexcept { return stage_times_; }
+
+  /// Testing hook: deletes the tile program behind the backend's back, so that the next batch
+  /// meets a real GL error (as after a lost context) and must fail cleanly.
+  void BreakProgramForTesting() noexcept;
+
+ private:
+  struct GpuModel;
+  explicit GpuPenetrationDepthBackend(const GpuPenetrationDepthOptions& options);
+  void Initialize();
+  GpuModel* ModelFor(const HapticModel& model);
+  bool Fail(std::string why) noexcept;
+
+  GpuPenetrationDepthOptions options_;
+  std::unique_ptr<EglContext> context_;
+  std::unordered_map<const HapticModel*, std::unique_ptr<GpuModel>> models_;
+  // GL objects (names), all created in Initialize().
+  unsigned render_program_ = 0, reduce_program_ = 0;
+  unsigned env_depth_ = 0, tool_depth_ = 0, env_fbo_ = 0, tool_fbo_ = 0, results_ = 0;
+  int env_columns_ = 1, tool_columns_ = 1;
+  int tile_stride_location_ = -1;
+  struct RenderUniforms {
+    int row_u = -1, row_v = -1, row_n = -1, half_extent = -1, cell_size = -1, facing_sign = -1,
+        num_levels = -1, wrap = -1, depth_range = -1, depth_scale = -1, texture = -1;
+  } ru_;
+  struct ReduceUniforms {
+    int env_depth = -1, tool_depth = -1, resolution = -1, env_columns = -1, tool_columns = -1,
+        samples_per_contact = -1, height_scale = -1;
+  } rd_;
+  std::vector<RigidTransform> sample_poses_;  // scratch, #max_contacts*kGradientSamples
+  std::vector<DepthSample> samples_;          // scratch, same size
+  LinearizationFaults faults_;
+  GpuStageTimes stage_times_;
+  std::string last_error_;
+  bool broken_ = false;
+};
+
+/// Which penetration-depth backend the remote node uses.
+enum class PdBackendChoice { kCpu, kGpu, kAuto };
+
+/// Parses "cpu", "gpu" or "auto"; throws std::invalid_argument naming the bad value.
+PdBackendChoice ParsePdBackendChoice(const std::string& text);
+const char* ToString(PdBackendChoice choice) noexcept;
+
+/// Makes the backend for `choice`. kCpu: the CPU reference. kGpu and kAuto: the GPU backend when a
+/// context starts and its shaders build; otherwise the CPU reference, with the reason in
+/// `message` (kGpu says it was requested and could not start; kAuto says which it chose). Never
+/// throws for a GPU failure.
+std::unique_ptr<PenetrationDepthBackend> MakePenetrationDepthBackend(
+    PdBackendChoice choice, const GpuPenetrationDepthOptions& gpu_options, int grid_resolution,
+    std::string& message);
+
+}  // namespace ht

@@ -1,0 +1,708 @@
+#include "haptic_core/gpu_penetration_depth.h"
+
+#include <GLES3/gl31.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <glm/geometric.hpp>
+#include <glm/gtc/quaternion.hpp>
+#include <stdexcept>
+#include <string>
+
+namespace ht {
+namespace {
+
+// Heights h (m, along n, relative to the window centre) are stored as depth z = 0.5 + h/(2R'),
+// R' = R·(1 + 1/1024) with R the window's depth range, so that every stored sample lies strictly
+// inside (0, 1): the clear values 0 (environment) and 1 (tool) mark empty cells.
+constexpr double kRangeSlack = 1.0 + 1.0 / 1024.0;
+constexpr int kReduceGroupSize = 256;
+constexpr int kFloatsPerCorner = 12;  // position 3, normal 3, face normal 3, uv 2, texel size 1
+
+// Vertex stage: object frame O → window frame (u, v, n) with per-draw rows; triangles that do not
+// face the other side are moved outside the clip volume (all three corners share the face normal).
+constexpr const char* kRenderVertexShader = R"(#version 310 es
+precision highp float;
+precision highp int;
+layout(location = 0) in vec3 a_position_O;
+layout(location = 1) in vec3 a_normal_O;
+layout(location = 2) in vec3 a_face_normal_O;
+layout(location = 3) in vec2 a_uv;
+layout(location = 4) in float a_texel_size;  // < 0: smooth face (no texture)
+uniform vec4 u_row_u;  // xyz: u in O; w: u·(p_WO − c_W)
+uniform vec4 u_row_v;
+uniform vec4 u_row_n;
+uniform float u_half_extent;  // W/2 (m)
+uniform float u_cell_size;    // W/N (m)
+uniform float u_facing_sign;  // +1 environment B, −1 tool A
+uniform int u_num_levels;
+out vec2 v_uv;
+out float v_height;
+out float v_ndotn;
+flat out int v_level;
+void main() {
+  float facing = u_facing_sign * dot(a_face_normal_O, u_row_n.xyz);
+  float s = dot(u_row_u.xyz, a_position_O) + u_row_u.w;
+  float t = dot(u_row_v.xyz, a_position_O) + u_row_v.w;
+  v_height = dot(u_row_n.xyz, a_position_O) + u_row_n.w;
+  v_ndotn = dot(a_normal_O, u_row_n.xyz);
+  v_uv = a_uv;
+  int level = -1;
+  if (a_texel_size >= 0.0) {
+    level = 0;
+    if (a_texel_size > 0.0 && u_cell_size > a_texel_size) {
+      level = clamp(int(floor(log2(u_cell_size / a_texel_size))), 0, u_num_levels - 1);
+    }
+  }
+  v_level = level;
+  gl_Position = facing > 0.05 ? vec4(s / u_half_extent, t / u_half_extent, 0.0, 1.0)
+                              : vec4(2.0, 2.0, 2.0, 1.0);
+}
+)";
+
+// Fragment stage: coarse height plus texture height times N·n, bilinear at the chosen mip level
+// exactly as HeightField::Sample does (texelFetch, so no fixed-point filter weights).
+constexpr const char* kRenderFragmentShader = R"(#version 310 es
+precision highp float;
+precision highp int;
+uniform highp sampler2D u_texture;
+uniform ivec2 u_wrap;
+uniform float u_depth_range;  // R (m)
+uniform float u_depth_scale;  // 1 / (2 R')
+in vec2 v_uv;
+in float v_height;
+in float v_ndotn;
+flat in int v_level;
+int Address(int i, int n, int wrap) {
+  if (wrap != 0) {
+    if (i < 0) i += n * ((-i) / n + 1);
+    return i % n;
+  }
+  return clamp(i, 0, n - 1);
+}
+float SampleHeight(int level, vec2 uv) {
+  ivec2 size = textureSize(u_texture, level);
+  float fx = clamp(uv.x * float(size.x) - 0.5, -1e6, 1e6);
+  float fy = clamp(uv.y * float(size.y) - 0.5, -1e6, 1e6);
+  float x0f = floor(fx), y0f = floor(fy);
+  float tx = fx - x0f, ty = fy - y0f;
+  int x0 = int(x0f), y0 = int(y0f);
+  int xa = Address(x0, size.x, u_wrap.x), xb = Address(x0 + 1, size.x, u_wrap.x);
+  int ya = Address(y0, size.y, u_wrap.y), yb = Address(y0 + 1, size.y, u_wrap.y);
+  float aa = texelFetch(u_texture, ivec2(xa, ya), level).r;
+  float ba = texelFetch(u_texture, ivec2(xb, ya), level).r;
+  float ab = texelFetch(u_texture, ivec2(xa, yb), level).r;
+  float bb = texelFetch(u_texture, ivec2(xb, yb), level).r;
+  float top = aa + tx * (ba - aa);
+  float bottom = ab + tx * (bb - ab);
+  return top + ty * (bottom - top);
+}
+void main() {
+  float h = v_height;
+  if (v_level >= 0) h += SampleHeight(v_level, v_uv) * v_ndotn;
+  if (!(abs(h) <= u_depth_range)) discard;
+  gl_FragDepth = 0.5 + h * u_depth_scale;
+}
+)";
+
+// Reduction: one work group per tool tile; per cell covered by both patches b − a, then the
+// maximum and its lowest cell index (ties as in DirectionalPenetrationDepth).
+constexpr const char* kReduceComputeShader = R"(#version 310 es
+precision highp float;
+precision highp int;
+layout(local_size_x = 256) in;
+uniform highp sampler2D u_env_depth;
+uniform highp sampler2D u_tool_depth;
+uniform int u_resolution;
+uniform int u_tile_stride;
+uniform int u_env_columns;
+uniform int u_tool_columns;
+uniform int u_samples_per_contact;
+uniform float u_height_scale;  // 2 R' (m)
+struct Result { float depth; int cell; };
+layout(std430, binding = 0) writeonly buffer Results { Result results[]; };
+shared float s_depth[256];
+shared int s_cell[256];
+void main() {
+  int tile = int(gl_WorkGroupID.x);
+  int contact = tile / u_samples_per_contact;
+  ivec2 env_origin = u_tile_stride * ivec2(contact % u_env_columns, contact / u_env_columns);
+  ivec2 tool_origin = u_tile_stride * ivec2(tile % u_tool_columns, tile / u_tool_columns);
+  int lid = int(gl_LocalInvocationID.x);
+  float best = 0.0;
+  int cell = -1;
+  int cells = u_resolution * u_resolution;
+  for (int k = lid; k < cells; k += 256) {
+    ivec2 ij = ivec2(k % u_resolution, k / u_resolution);
+    float b = texelFetch(u_env_depth, env_origin + ij, 0).r;
+    float a = texelFetch(u_tool_depth, tool_origin + ij, 0).r;
+    if (b > 0.0 && a < 1.0) {
+      float d = (b - a) * u_height_scale;
+      if (cell < 0 || d > best) { best = d; cell = k; }
+    }
+  }
+  s_depth[lid] = best;
+  s_cell[lid] = cell;
+  barrier();
+  for (int stride = 128; stride > 0; stride >>= 1) {
+    if (lid < stride) {
+      float od = s_depth[lid + stride];
+      int oc = s_cell[lid + stride];
+      int mc = s_cell[lid];
+      if (oc >= 0 && (mc < 0 || od > s_depth[lid] || (od == s_depth[lid] && oc < mc))) {
+        s_depth[lid] = od;
+        s_cell[lid] = oc;
+      }
+    }
+    barrier();
+  }
+  if (lid == 0) results[tile] = Result(s_depth[0], s_cell[0]);
+}
+)";
+
+const char* GlErrorName(GLenum e) {
+  switch (e) {
+    case GL_INVALID_ENUM: return "GL_INVALID_ENUM";
+    case GL_INVALID_VALUE: return "GL_INVALID_VALUE";
+    case GL_INVALID_OPERATION: return "GL_INVALID_OPERATION";
+    case GL_INVALID_FRAMEBUFFER_OPERATION: return "GL_INVALID_FRAMEBUFFER_OPERATION";
+    case GL_OUT_OF_MEMORY: return "GL_OUT_OF_MEMORY";
+    default: return "GL error";
+  }
+}
+
+// Returns "" when no GL error is pending, else the names of the pending errors.
+std::string DrainGlErrors() {
+  std::string errors;
+  for (int i = 0; i < 16; ++i) {
+    const GLenum e = glGetError();
+    if (e == GL_NO_ERROR) break;
+    if (!errors.empty()) errors += ", ";
+    errors += GlErrorName(e);
+  }
+  return errors;
+}
+
+GLuint CompileShader(GLenum stage, const std::string& source, const char* what) {
+  const GLuint shader = glCreateShader(stage);
+  const char* text = source.c_str();
+  glShaderSource(shader, 1, &text, nullptr);
+  glCompileShader(shader);
+  GLint ok = GL_FALSE;
+  glGetShaderiv(shader, GL_COMPILE_STATUS, &ok);
+  if (ok != GL_TRUE) {
+    GLint length = 0;
+    glGetShaderiv(shader, GL_INFO_LOG_LENGTH, &length);
+    std::string log(static_cast<size_t>(std::max(length, 1)), '\0');
+    glGetShaderInfoLog(shader, length, nullptr, log.data());
+    glDeleteShader(shader);
+    throw GpuError(std::string("GPU penetration depth: the ") + what +
+                   " failed to compile: " + log.c_str());
+  }
+  return shader;
+}
+
+GLuint LinkProgram(std::initializer_list<GLuint> shaders, const char* what) {
+  const GLuint program = glCreateProgram();
+  for (GLuint s : shaders) glAttachShader(program, s);
+  glLinkProgram(program);
+  for (GLuint s : shaders) glDeleteShader(s);
+  GLint ok = GL_FALSE;
+  glGetProgramiv(program, GL_LINK_STATUS, &ok);
+  if (ok != GL_TRUE) {
+    GLint length = 0;
+    glGetProgramiv(program, GL_INFO_LOG_LENGTH, &length);
+    std::string log(static_cast<size_t>(std::max(length, 1)), '\0');
+    glGetProgramInfoLog(program, length, nullptr, log.data());
+    glDeleteProgram(program);
+    throw GpuError(std::string("GPU penetration depth: the ") + what +
+                   " failed to link: " + log.c_str());
+  }
+  return program;
+}
+
+// Rows of the map from object frame O to window coordinates (s, t, height) for a body at X_WO.
+struct WindowRows {
+  float u[4], v[4], n[4];
+};
+
+WindowRows RowsFor(const RigidTransform& X_WO, const ContactWindow& w) {
+  const glm::dquat q_inv = glm::conjugate(X_WO.rotation);
+  const glm::dvec3 offset = X_WO.translation - w.center_W;
+  WindowRows r{};
+  const auto fill = [&](float* row, const glm::dvec3& axis_W) {
+    const glm::dvec3 axis_O = q_inv * axis_W;
+    row[0] = static_cast<float>(axis_O.x);
+    row[1] = static_cast<float>(axis_O.y);
+    row[2] = static_cast<float>(axis_O.z);
+    row[3] = static_cast<float>(glm::dot(axis_W, offset));
+  };
+  fill(r.u, w.axis_u_W);
+  fill(r.v, w.axis_v_W);
+  fill(r.n, w.normal_W);
+  return r;
+}
+
+}  // namespace
+
+struct GpuPenetrationDepthBackend::GpuModel {
+  GLuint vao = 0, vbo = 0, texture = 0;
+  GLsizei corners = 0;
+  int num_levels = 1;
+  int wrap_u = 0, wrap_v = 0;
+};
+
+GpuPenetrationDepthBackend::GpuPenetrationDepthBackend(const GpuPenetrationDepthOptions& options)
+    : options_(options) {}
+
+std::unique_ptr<GpuPenetrationDepthBackend> GpuPenetrationDepthBackend::Create(
+    const GpuPenetrationDepthOptions& options) {
+  if (options.depth_bits != 16 && options.depth_bits != 32) {
+    throw std::invalid_argument("depth bits must be 16 or 32, got " +
+                                std::to_string(options.depth_bits));
+  }
+  if (options.max_contacts < 1 || options.max_contacts > 256) {
+    throw std::invalid_argument("max contacts must be in [1, 256], got " +
+                                std::to_string(options.max_contacts));
+  }
+  if (options.max_resolution < 2 || options.max_resolution > 1024) {
+    throw std::invalid_argument("max resolution must be in [2, 1024], got " +
+                                std::to_string(options.max_resolution));
+  }
+  std::unique_ptr<GpuPenetrationDepthBackend> backend(new GpuPenetrationDepthBackend(options));
+  backend->context_ = EglContext::Create(options.egl);
+  backend->Initialize();
+  return backend;
+}
+
+void GpuPenetrationDepthBackend::Initialize() {
+  const GpuInfo& info = context_->info();
+  int major = 0, minor = 0;
+  glGetIntegerv(GL_MAJOR_VERSION, &major);
+  glGetIntegerv(GL_MINOR_VERSION, &minor);
+  if (major < 3 || (major == 3 && minor < 1)) {
+    throw GpuError("GPU penetration depth: OpenGL ES 3.1 needed (compute shaders), got " +
+                   info.version);
+  }
+  std::string fragment = kRenderFragmentShader;
+  if (options_.inject_shader_compile_error) fragment += "\nthis is not GLSL;\n";
+  render_program_ =
+      LinkProgram({CompileShader(GL_VERTEX_SHADER, kRenderVertexShader, "height vertex shader"),
+                   CompileShader(GL_FRAGMENT_SHADER, fragment, "height fragment shader")},
+                  "height program");
+  reduce_program_ = LinkProgram(
+      {CompileShader(GL_COMPUTE_SHADER, kReduceComputeShader, "reduction compute shader")},
+      "reduction program");
+
+  const auto loc = [](GLuint p, const char* name) { return glGetUniformLocation(p, name); };
+  ru_ = {loc(render_program_, "u_row_u"),       loc(render_program_, "u_row_v"),
+         loc(render_program_, "u_row_n"),       loc(render_program_, "u_half_extent"),
+         loc(render_program_, "u_cell_size"),   loc(render_program_, "u_facing_sign"),
+         loc(render_program_, "u_num_levels"),  loc(render_program_, "u_wrap"),
+         loc(render_program_, "u_depth_range"), loc(render_program_, "u_depth_scale"),
+         loc(render_program_, "u_texture")};
+  rd_ = {loc(reduce_program_, "u_env_depth"),    loc(reduce_program_, "u_tool_depth"),
+         loc(reduce_program_, "u_resolution"),   loc(reduce_program_, "u_env_columns"),
+         loc(reduce_program_, "u_tool_columns"), loc(reduce_program_, "u_samples_per_contact"),
+         loc(reduce_program_, "u_height_scale")};
+  tile_stride_location_ = loc(reduce_program_, "u_tile_stride");
+
+  // Depth atlases: one N_max × N_max tile per environment render and per tool render.
+  const int stride = options_.max_resolution;
+  const auto layout = [&](int tiles, int& columns) {
+    columns = std::max(1, static_cast<int>(std::ceil(std::sqrt(static_cast<double>(tiles)))));
+    const int rows = (tiles + columns - 1) / columns;
+    if (columns * stride > info.max_texture_size || rows * stride > info.max_texture_size) {
+      throw GpuError("GPU penetration depth: an atlas of " + std::to_string(tiles) + " tiles of " +
+                     std::to_string(stride) + "² exceeds GL_MAX_TEXTURE_SIZE " +
+                     std::to_string(info.max_texture_size) + "; lower max contacts or grid");
+    }
+    return std::pair{columns * stride, rows * stride};
+  };
+  const GLenum depth_format =
+      options_.depth_bits == 16 ? GL_DEPTH_COMPONENT16 : GL_DEPTH_COMPONENT32F;
+  const auto make_atlas = [&](int tiles, int& columns, GLuint& texture, GLuint& fbo) {
+    const auto [width, height] = layout(tiles, columns);
+    glGenTextures(1, &texture);
+    glBindTexture(GL_TEXTURE_2D, texture);
+    glTexStorage2D(GL_TEXTURE_2D, 1, depth_format, width, height);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_COMPARE_MODE, GL_NONE);
+    glGenFramebuffers(1, &fbo);
+    glBindFramebuffer(GL_FRAMEBUFFER, fbo);
+    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_TEXTURE_2D, texture, 0);
+    const GLenum none = GL_NONE;
+    glDrawBuffers(1, &none);
+    glReadBuffer(GL_NONE);
+    const GLenum status = glCheckFramebufferStatus(GL_FRAMEBUFFER);
+    if (status != GL_FRAMEBUFFER_COMPLETE) {
+      char hex[16];
+      std::snprintf(hex, sizeof hex, "0x%04x", status);
+      throw GpuError(std::string("GPU penetration depth: depth atlas framebuffer incomplete (") +
+                     hex + ") for " + std::to_string(options_.depth_bits) + "-bit depth");
+    }
+  };
+  make_atlas(options_.max_contacts, env_columns_, env_depth_, env_fbo_);
+  make_atlas(options_.max_contacts * kGradientSamples, tool_columns_, tool_depth_, tool_fbo_);
+  glBindFramebuffer(GL_FRAMEBUFFER, 0);
+
+  glGenBuffers(1, &results_);
+  glBindBuffer(GL_SHADER_STORAGE_BUFFER, results_);
+  glBufferData(GL_SHADER_STORAGE_BUFFER,
+               static_cast<GLsizeiptr>(options_.max_contacts) * kGradientSamples * 8, nullptr,
+               GL_DYNAMIC_READ);
+  glBindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+
+  sample_poses_.resize(static_cast<size_t>(options_.max_contacts) * kGradientSamples);
+  samples_.resize(sample_poses_.size());
+  if (const std::string e = DrainGlErrors(); !e.empty()) {
+    throw GpuError("GPU penetration depth: GL error while setting up: " + e);
+  }
+}
+
+GpuPenetrationDepthBackend::~GpuPenetrationDepthBackend() {
+  if (!context_ || !context_->MakeCurrent()) return;
+  for (auto& [key, m] : models_) {
+    glDeleteVertexArrays(1, &m->vao);
+    glDeleteBuffers(1, &m->vbo);
+    glDeleteTextures(1, &m->texture);
+  }
+  glDeleteBuffers(1, &results_);
+  glDeleteFramebuffers(1, &env_fbo_);
+  glDeleteFramebuffers(1, &tool_fbo_);
+  glDeleteTextures(1, &env_depth_);
+  glDeleteTextures(1, &tool_depth_);
+  if (!broken_) glDeleteProgram(render_program_);
+  glDeleteProgram(reduce_program_);
+}
+
+std::string GpuPenetrationDepthBackend::description() const {
+  const GpuInfo& i = context_->info();
+  return i.renderer + " (" + i.version + ", " + i.platform + " platform, " +
+         std::to_string(options_.depth_bits) + "-bit depth)";
+}
+
+double GpuPenetrationDepthBackend::DepthQuantum(const ContactWindow& w) const noexcept {
+  const double span = 2.0 * w.depth_range_m() * kRangeSlack;
+  return options_.depth_bits == 16 ? span / 65535.0 : span * std::ldexp(1.0, -24);
+}
+
+void GpuPenetrationDepthBackend::BreakProgramForTesting() noexcept {
+  glDeleteProgram(render_program_);
+  broken_ = true;
+}
+
+void GpuPenetrationDepthBackend::Upload(const HapticModel& model) {
+  if (ModelFor(model) == nullptr) {
+    throw GpuError("GPU penetration depth: upload of model '" + model.name + "' failed: " +
+                   last_error_);
+  }
+}
+
+GpuPenetrationDepthBackend::GpuModel* GpuPenetrationDepthBackend::ModelFor(
+    const HapticModel& model) {
+  if (auto it = models_.find(&model); it != models_.end()) return it->second.get();
+  auto m = std::make_unique<GpuModel>();
+  const size_t nf = model.triangles.size();
+  std::vector<float> corners(nf * 3 * kFloatsPerCorner);
+  const bool has_texture = !model.texture.empty();
+  for (size_t f = 0; f < nf; ++f) {
+    const glm::ivec3 t = model.triangles[f];
+    const glm::dvec3 p0 = model.vertices_O[t[0]], p1 = model.vertices_O[t[1]],
+                     p2 = model.vertices_O[t[2]];
+    const glm::dvec3 cr = glm::cross(p1 - p0, p2 - p0);
+    const double len = glm::length(cr);
+    const glm::dvec3 face = len > 0.0 ? cr / len : glm::dvec3(0.0);
+    const bool textured = has_texture && model.textured[f] != 0;
+    for (int c = 0; c < 3; ++c) {
+      float* o = &corners[(3 * f + c) * kFloatsPerCorner];
+      const glm::dvec3 p = model.vertices_O[t[c]];
+      const glm::dvec3 nrm = model.corner_normals_O[3 * f + c];
+      const glm::vec2 uv = model.corner_uvs[3 * f + c];
+      const float values[kFloatsPerCorner] = {
+          static_cast<float>(p.x),    static_cast<float>(p.y),    static_cast<float>(p.z),
+          static_cast<float>(nrm.x),  static_cast<float>(nrm.y),  static_cast<float>(nrm.z),
+          static_cast<float>(face.x), static_cast<float>(face.y), static_cast<float>(face.z),
+          uv.x,                       uv.y,
+          textured ? static_cast<float>(model.texel_size_m[f]) : -1.0f};
+      std::memcpy(o, values, sizeof values);
+    }
+  }
+  m->corners = static_cast<GLsizei>(nf * 3);
+  glGenVertexArrays(1, &m->vao);
+  glBindVertexArray(m->vao);
+  glGenBuffers(1, &m->vbo);
+  glBindBuffer(GL_ARRAY_BUFFER, m->vbo);
+  glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(corners.size() * sizeof(float)),
+               corners.data(), GL_STATIC_DRAW);
+  const GLsizei stride = kFloatsPerCorner * sizeof(float);
+  const int sizes[5] = {3, 3, 3, 2, 1};
+  size_t offset = 0;
+  for (GLuint a = 0; a < 5; ++a) {
+    glEnableVertexAttribArray(a);
+    glVertexAttribPointer(a, sizes[a], GL_FLOAT, GL_FALSE, stride,
+                          reinterpret_cast<const void*>(offset * sizeof(float)));
+    offset += static_cast<size_t>(sizes[a]);
+  }
+  glBindVertexArray(0);
+
+  glGenTextures(1, &m->texture);
+  glBindTexture(GL_TEXTURE_2D, m->texture);
+  if (has_texture) {
+    const HeightField& hf = model.texture;
+    m->num_levels = hf.num_levels();
+    glTexStorage2D(GL_TEXTURE_2D, m->num_levels, GL_R32F, hf.level(0).width, hf.level(0).height);
+    glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+    for (int l = 0; l < m->num_levels; ++l) {
+      const HeightFieldLevel& L = hf.level(l);
+      glTexSubImage2D(GL_TEXTURE_2D, l, 0, 0, L.width, L.height, GL_RED, GL_FLOAT,
+                      L.texels.data());
+    }
+    m->wrap_u = hf.wrap_u() ? 1 : 0;
+    m->wrap_v = hf.wrap_v() ? 1 : 0;
+  } else {
+    const float zero = 0.0f;
+    glTexStorage2D(GL_TEXTURE_2D, 1, GL_R32F, 1, 1);
+    glTexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, 1, 1, GL_RED, GL_FLOAT, &zero);
+  }
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST_MIPMAP_NEAREST);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAX_LEVEL, m->num_levels - 1);
+  if (const std::string e = DrainGlErrors(); !e.empty()) {
+    last_error_ = "GL error while uploading model '" + model.name + "': " + e;
+    glDeleteVertexArrays(1, &m->vao);
+    glDeleteBuffers(1, &m->vbo);
+    glDeleteTextures(1, &m->texture);
+    return nullptr;
+  }
+  GpuModel* raw = m.get();
+  models_.emplace(&model, std::move(m));
+  return raw;
+}
+
+bool GpuPenetrationDepthBackend::Fail(std::string why) noexcept {
+  last_error_ = std::move(why);
+  return false;
+}
+
+bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool,
+                                                const RigidTransform& X_WT,
+                                                std::span<const ContactQuery> queries,
+                                                std::span<ContactLinearization> out,
+                                                std::span<DepthSample> samples_out) noexcept {
+  using Clock = std::chrono::steady_clock;
+  const auto us = [](Clock::duration d) {
+    return std::chrono::duration<double, std::micro>(d).count();
+  };
+  const int count = static_cast<int>(queries.size());
+  if (count == 0) return true;
+  if (out.size() < queries.size()) return Fail("output span shorter than the batch");
+  if (count > options_.max_contacts) {
+    return Fail(std::to_string(count) + " contacts in one batch, sized for " +
+                std::to_string(options_.max_contacts));
+  }
+  const int n = queries[0].window.resolution;
+  for (const ContactQuery& q : queries) {
+    if (q.environment == nullptr) return Fail("a query without an environment model");
+    if (q.window.resolution != n) return Fail("mixed grid resolutions in one batch");
+  }
+  // One depth encoding per batch (the reduction decodes all tiles alike): one window extent W.
+  const double range = queries[0].window.depth_range_m();
+  for (const ContactQuery& q : queries) {
+    if (q.window.depth_range_m() != range) return Fail("mixed window extents in one batch");
+  }
+  if (n > options_.max_resolution) {
+    return Fail("grid " + std::to_string(n) + " larger than the backend's maximum " +
+                std::to_string(options_.max_resolution));
+  }
+  const auto t0 = Clock::now();
+  GpuModel* tool_model;
+  std::array<GpuModel*, 256> env_models{};
+  try {
+    tool_model = ModelFor(tool);
+    for (int c = 0; c < count; ++c) env_models[c] = ModelFor(*queries[c].environment);
+  } catch (const std::exception& e) {  // allocation failure on a first upload
+    return Fail(std::string("model upload: ") + e.what());
+  }
+  if (tool_model == nullptr) return false;
+  for (int c = 0; c < count; ++c) {
+    if (env_models[c] == nullptr) return false;
+  }
+
+  const int stride = options_.max_resolution;
+  const auto set_window_uniforms = [&](const RigidTransform& X, const ContactWindow& w,
+                                       float facing_sign) {
+    const WindowRows r = RowsFor(X, w);
+    glUniform4fv(ru_.row_u, 1, r.u);
+    glUniform4fv(ru_.row_v, 1, r.v);
+    glUniform4fv(ru_.row_n, 1, r.n);
+    glUniform1f(ru_.half_extent, static_cast<float>(0.5 * w.extent_m));
+    glUniform1f(ru_.cell_size, static_cast<float>(w.cell_size_m()));
+    glUniform1f(ru_.facing_sign, facing_sign);
+    glUniform1f(ru_.depth_range, static_cast<float>(w.depth_range_m()));
+    glUniform1f(ru_.depth_scale, static_cast<float>(1.0 / (2.0 * w.depth_range_m() * kRangeSlack)));
+  };
+  const auto bind_model = [&](const GpuModel& m) {
+    glBindVertexArray(m.vao);
+    glActiveTexture(GL_TEXTURE0);
+    glBindTexture(GL_TEXTURE_2D, m.texture);
+    glUniform1i(ru_.num_levels, m.num_levels);
+    glUniform2i(ru_.wrap, m.wrap_u, m.wrap_v);
+  };
+  const auto tile = [&](int index, int columns) {
+    const int x = (index % columns) * stride, y = (index / columns) * stride;
+    glViewport(x, y, n, n);
+    glScissor(x, y, n, n);
+    glClear(GL_DEPTH_BUFFER_BIT);
+  };
+
+  for (int c = 0; c < count; ++c) {
+    const auto poses = GradientSamplePoses(X_WT, queries[c].window);
+    std::copy(poses.begin(), poses.end(), sample_poses_.begin() + c * kGradientSamples);
+  }
+  const auto t1 = Clock::now();
+
+  glUseProgram(render_program_);
+  glUniform1i(ru_.texture, 0);
+  glEnable(GL_DEPTH_TEST);
+  glEnable(GL_SCISSOR_TEST);
+  glDisable(GL_CULL_FACE);
+  glDisable(GL_BLEND);
+  glDepthMask(GL_TRUE);
+  // Environment patches B: keep the largest height per cell.
+  glBindFramebuffer(GL_FRAMEBUFFER, env_fbo_);
+  glDepthFunc(GL_GREATER);
+  glClearDepthf(0.0f);
+  for (int c = 0; c < count; ++c) {
+    const ContactQuery& q = queries[c];
+    tile(c, env_columns_);
+    bind_model(*env_models[c]);
+    set_window_uniforms(q.X_WE, q.window, 1.0f);
+    glDrawArrays(GL_TRIANGLES, 0, env_models[c]->corners);
+  }
+  // Tool patches A at every gradient sample pose: keep the smallest height per cell.
+  glBindFramebuffer(GL_FRAMEBUFFER, tool_fbo_);
+  glDepthFunc(GL_LESS);
+  glClearDepthf(1.0f);
+  bind_model(*tool_model);
+  for (int c = 0; c < count; ++c) {
+    for (int s = 0; s < kGradientSamples; ++s) {
+      const int index = c * kGradientSamples + s;
+      tile(index, tool_columns_);
+      set_window_uniforms(sample_poses_[index], queries[c].window, -1.0f);
+      glDrawArrays(GL_TRIANGLES, 0, tool_model->corners);
+    }
+  }
+  glBindFramebuffer(GL_FRAMEBUFFER, 0);
+  glBindVertexArray(0);
+  glDisable(GL_SCISSOR_TEST);
+  if (options_.profile_stages) glFinish();
+  const auto t2 = Clock::now();
+
+  // Reduction: one work group per tool tile.
+  glUseProgram(reduce_program_);
+  glActiveTexture(GL_TEXTURE1);
+  glBindTexture(GL_TEXTURE_2D, env_depth_);
+  glActiveTexture(GL_TEXTURE2);
+  glBindTexture(GL_TEXTURE_2D, tool_depth_);
+  glActiveTexture(GL_TEXTURE0);
+  glUniform1i(rd_.env_depth, 1);
+  glUniform1i(rd_.tool_depth, 2);
+  glUniform1i(rd_.resolution, n);
+  glUniform1i(tile_stride_location_, stride);
+  glUniform1i(rd_.env_columns, env_columns_);
+  glUniform1i(rd_.tool_columns, tool_columns_);
+  glUniform1i(rd_.samples_per_contact, kGradientSamples);
+  glUniform1f(rd_.height_scale, static_cast<float>(2.0 * range * kRangeSlack));
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, results_);
+  glDispatchCompute(static_cast<GLuint>(count * kGradientSamples), 1, 1);
+  glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+  if (options_.profile_stages) glFinish();
+  const auto t3 = Clock::now();
+  if (const std::string e = DrainGlErrors(); !e.empty()) {
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, 0);
+    return Fail("GL error during the batch: " + e);
+  }
+
+  // One small readback: kGradientSamples (depth, cell) pairs per contact.
+  const GLsizeiptr bytes = static_cast<GLsizeiptr>(count) * kGradientSamples * 8;
+  glBindBuffer(GL_SHADER_STORAGE_BUFFER, results_);
+  const void* mapped = glMapBufferRange(GL_SHADER_STORAGE_BUFFER, 0, bytes, GL_MAP_READ_BIT);
+  if (mapped == nullptr) {
+    const std::string e = DrainGlErrors();
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, 0);
+    return Fail("cannot map the result buffer (" + (e.empty() ? std::string("no GL error") : e) +
+                ")");
+  }
+  const auto* bytes_in = static_cast<const unsigned char*>(mapped);
+  for (int i = 0; i < count * kGradientSamples; ++i) {
+    float depth;
+    std::int32_t cell;
+    std::memcpy(&depth, bytes_in + 8 * i, 4);
+    std::memcpy(&cell, bytes_in + 8 * i + 4, 4);
+    samples_[i] = cell >= 0 ? DepthSample{static_cast<double>(depth), cell}
+                            : DepthSample{-std::numeric_limits<double>::infinity(), -1};
+  }
+  const GLboolean unmapped = glUnmapBuffer(GL_SHADER_STORAGE_BUFFER);
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, 0);
+  if (unmapped != GL_TRUE) return Fail("result buffer contents lost while mapped");
+  const auto t4 = Clock::now();
+
+  const bool want_samples = samples_out.size() >= queries.size() * kGradientSamples;
+  for (int c = 0; c < count; ++c) {
+    const std::span<const DepthSample> s(samples_.data() + c * kGradientSamples,
+                                         kGradientSamples);
+    out[c] = AssembleLinearization(queries[c].window, s, queries[c].stiffness_n_per_m, faults_);
+    if (want_samples) std::copy(s.begin(), s.end(), samples_out.begin() + c * kGradientSamples);
+  }
+  stage_times_ = {us(t1 - t0), us(t2 - t1), us(t3 - t2), us(t4 - t3)};
+  return true;
+}
+
+PdBackendChoice ParsePdBackendChoice(const std::string& text) {
+  if (text == "cpu") return PdBackendChoice::kCpu;
+  if (text == "gpu") return PdBackendChoice::kGpu;
+  if (text == "auto") return PdBackendChoice::kAuto;
+  throw std::invalid_argument("penetration-depth backend must be cpu, gpu or auto, got '" + text +
+                              "'");
+}
+
+const char* ToString(PdBackendChoice choice) noexcept {
+  switch (choice) {
+    case PdBackendChoice::kCpu: return "cpu";
+    case PdBackendChoice::kGpu: return "gpu";
+    case PdBackendChoice::kAuto: return "auto";
+  }
+  return "?";
+}
+
+std::unique_ptr<PenetrationDepthBackend> MakePenetrationDepthBackend(
+    PdBackendChoice choice, const GpuPenetrationDepthOptions& gpu_options, int grid_resolution,
+    std::string& message) {
+  const int cpu_resolution = std::max(grid_resolution, 2);
+  if (choice == PdBackendChoice::kCpu) {
+    message = "penetration depth on the CPU (requested)";
+    return std::make_unique<CpuPenetrationDepthBackend>(cpu_resolution);
+  }
+  try {
+    GpuPenetrationDepthOptions options = gpu_options;
+    options.max_resolution = std::max(options.max_resolution, grid_resolution);
+    auto gpu = GpuPenetrationDepthBackend::Create(options);
+    message = std::string("penetration depth on the GPU (") + ToString(choice) +
+              "): " + gpu->description() + ", vendor " + gpu->info().vendor;
+    return gpu;
+  } catch (const std::exception& e) {
+    message = choice == PdBackendChoice::kGpu
+                  ? std::string("GPU penetration depth was requested but cannot start: ") +
+                        e.what() + "; falling back to the CPU reference"
+                  : std::string("no usable GPU (") + e.what() +
+                        "); penetration depth on the CPU reference";
+    return std::make_unique<CpuPenetrationDepthBackend>(cpu_resolution);
+  }
+}
+
+}  // namespace ht

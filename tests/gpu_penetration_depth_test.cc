@@ -1,0 +1,314 @@
+// The GPU penetration depth (headless EGL; llvmpipe on CI machines) against the CPU reference:
+// same depth samples within one depth quantum, same gradients within the bound that follows,
+// same wrenches through the pipeline, and the failure paths (shader compile error, GL error in a
+// batch) giving a clear error and the CPU path.
+#include "haptic_core/gpu_penetration_depth.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <random>
+
+#include "haptic_core/haptic_scene.h"
+#include "haptic_core/procedural_models.h"
+
+namespace ht {
+namespace {
+
+class GpuTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() { setenv("MESA_SHADER_CACHE_DISABLE", "true", 0); }
+};
+
+std::unique_ptr<GpuPenetrationDepthBackend> MakeGpu(int depth_bits, int max_contacts = kMaxContacts,
+                                                    int max_resolution = 128) {
+  GpuPenetrationDepthOptions o;
+  o.depth_bits = depth_bits;
+  o.max_contacts = max_contacts;
+  o.max_resolution = max_resolution;
+  return GpuPenetrationDepthBackend::Create(o);
+}
+
+// A random contact of the ridged block (tool) on the ridged gear (environment): block over the
+// gear's top within ±8 mm along x and ±4 mm along y, pressed −0.3…+0.8 mm, tilted up to ±4°, and
+// a window whose normal leans up to 10° from the gear's radial direction.
+struct RandomContact {
+  RigidTransform X_WT;
+  ContactWindow window;
+};
+
+RandomContact MakeRandomContact(std::mt19937& rng, int grid) {
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  RandomContact c;
+  c.X_WT = BlockOnGearHomePose();
+  c.X_WT.translation += glm::dvec3(8e-3 * U(rng), 4e-3 * U(rng), -0.25e-3 - 0.55e-3 * U(rng));
+  c.X_WT.rotation =
+      QuaternionFromRotationVector(glm::dvec3(U(rng), U(rng), U(rng)) * (4.0 * M_PI / 180.0));
+  const double y = c.X_WT.translation.y;
+  const double r = RidgedGearParams{}.radius_m;
+  const double angle = std::asin(std::clamp(y / r, -1.0, 1.0));
+  glm::dvec3 n(0.0, std::sin(angle), std::cos(angle));
+  n = glm::normalize(n + 0.18 * glm::dvec3(U(rng), U(rng), 0.0));
+  const glm::dvec3 p(c.X_WT.translation.x, r * std::sin(angle), r * std::cos(angle));
+  c.window = ContactWindow::Make(p, n, 0.02, grid);
+  return c;
+}
+
+// The float geometry of the GPU path (vertex transforms, interpolation) adds an error of a few
+// float epsilons times the size of the posed models; measured 12 nm on the block/gear scene.
+double GeometryTolerance(const HapticModel& a, const HapticModel& b) {
+  double r = 0.0;
+  for (const auto* m : {&a, &b}) {
+    double rm = 0.0;
+    for (const auto& v : m->vertices_O) rm = std::max(rm, glm::length(v));
+    r += rm;
+  }
+  return 4.0 * 1.1920929e-7 * r;
+}
+
+struct ParityStats {
+  int evaluations = 0, compared = 0, coverage_mismatch = 0;
+  double max_depth_error = 0.0, max_depth_error_in_quanta = 0.0;
+  double max_translation_gradient_error = 0.0, max_rotation_gradient_error = 0.0;
+  double max_error_over_tolerance = 0.0, max_gradient_error_over_bound = 0.0;
+};
+
+void Print(const char* label, const ParityStats& st) {
+  std::printf("%s: %d evaluations, %d compared, %d coverage mismatches, max |dδ| %.3g m "
+              "(%.2f quanta, %.2f of the tolerance), max |dJx| %.3g, max |dJθ| %.3g m/rad "
+              "(%.2f of the bound)\n",
+              label, st.evaluations, st.compared, st.coverage_mismatch, st.max_depth_error,
+              st.max_depth_error_in_quanta, st.max_error_over_tolerance,
+              st.max_translation_gradient_error, st.max_rotation_gradient_error,
+              st.max_gradient_error_over_bound);
+}
+
+ParityStats CompareOnRandomContacts(GpuPenetrationDepthBackend& gpu, int grid, int trials,
+                                    unsigned seed) {
+  const HapticModel block = MakeRidgedBlock(RidgedBlockParams{});
+  const HapticModel gear = MakeRidgedGear(RidgedGearParams{});
+  CpuPenetrationDepthBackend cpu(grid);
+  std::mt19937 rng(seed);
+  ParityStats st;
+  const double geometry = GeometryTolerance(block, gear);
+  for (int t = 0; t < trials; ++t) {
+    const RandomContact c = MakeRandomContact(rng, grid);
+    const ContactQuery q{&gear, RigidTransform::Identity(), c.window, 8000.0};
+    std::array<ContactLinearization, 1> lc, lg;
+    std::array<DepthSample, kGradientSamples> sc, sg;
+    EXPECT_TRUE(cpu.LinearizeBatch(block, c.X_WT, {&q, 1}, lc, sc));
+    EXPECT_TRUE(gpu.LinearizeBatch(block, c.X_WT, {&q, 1}, lg, sg)) << gpu.last_error();
+    if (sc[0].cell < 0) continue;  // CPU copies the empty base sample; nothing to compare
+    const double tolerance = gpu.DepthQuantum(c.window) + geometry;
+    bool all_covered = true;
+    for (int i = 0; i < kGradientSamples; ++i) {
+      ++st.evaluations;
+      if ((sc[i].cell >= 0) != (sg[i].cell >= 0)) {
+        ++st.coverage_mismatch;
+        all_covered = false;
+        continue;
+      }
+      if (sc[i].cell < 0) continue;
+      ++st.compared;
+      const double e = std::abs(sg[i].depth_m - sc[i].depth_m);
+      st.max_depth_error = std::max(st.max_depth_error, e);
+      st.max_depth_error_in_quanta =
+          std::max(st.max_depth_error_in_quanta, e / gpu.DepthQuantum(c.window));
+      st.max_error_over_tolerance = std::max(st.max_error_over_tolerance, e / tolerance);
+    }
+    if (all_covered) {
+      // Central differences of samples each within `tolerance`: every component within
+      // tolerance/h, so |ΔJ_x| ≤ √2·tol/h_x (u, v) and |ΔJ_θ| ≤ √3·tol/h_θ.
+      const GradientSteps h = GradientSteps::For(c.window);
+      const double ex =
+          glm::length(lg[0].gradient.d_translation_W - lc[0].gradient.d_translation_W);
+      const double er = glm::length(lg[0].gradient.d_rotation_W - lc[0].gradient.d_rotation_W);
+      st.max_translation_gradient_error = std::max(st.max_translation_gradient_error, ex);
+      st.max_rotation_gradient_error = std::max(st.max_rotation_gradient_error, er);
+      st.max_gradient_error_over_bound =
+          std::max({st.max_gradient_error_over_bound, ex / (std::sqrt(2.0) * tolerance / h.h_x),
+                    er / (std::sqrt(3.0) * tolerance / h.h_theta)});
+    }
+  }
+  return st;
+}
+
+TEST_F(GpuTest, ContextReportsItsRenderer) {
+  auto gpu = MakeGpu(16);
+  EXPECT_FALSE(gpu->info().renderer.empty());
+  EXPECT_NE(gpu->info().version.find("OpenGL ES 3."), std::string::npos) << gpu->info().version;
+  EXPECT_EQ(gpu->name(), "gpu");
+  std::printf("GL: %s\n", gpu->description().c_str());
+}
+
+TEST_F(GpuTest, DepthSamplesMatchTheCpuWithinOneQuantum16Bit) {
+  auto gpu = MakeGpu(16);
+  const ParityStats st = CompareOnRandomContacts(*gpu, 50, 150, 7);
+  Print("16-bit", st);
+  EXPECT_GT(st.compared, 1000);
+  // Rasterization rules may differ on patch borders; on these contacts they never did.
+  EXPECT_LE(st.coverage_mismatch, st.evaluations / 200);
+  EXPECT_LE(st.max_error_over_tolerance, 1.0);
+  EXPECT_LE(st.max_gradient_error_over_bound, 1.0);
+}
+
+TEST_F(GpuTest, DepthSamplesMatchTheCpuWithinOneQuantum32Bit) {
+  auto gpu = MakeGpu(32);
+  const ParityStats st = CompareOnRandomContacts(*gpu, 50, 150, 8);
+  Print("32-bit", st);
+  EXPECT_GT(st.compared, 1000);
+  EXPECT_LE(st.coverage_mismatch, st.evaluations / 200);
+  // At 32 bits the quantum (2.4 nm) is below the float geometry error: the tolerance is their sum.
+  EXPECT_LE(st.max_error_over_tolerance, 1.0);
+  EXPECT_LE(st.max_gradient_error_over_bound, 1.0);
+}
+
+TEST_F(GpuTest, CoarseAndFineGridsMatchToo) {
+  auto gpu = MakeGpu(16);
+  for (int grid : {25, 100}) {
+    const ParityStats st = CompareOnRandomContacts(*gpu, grid, 40, 11 + grid);
+    Print(grid == 25 ? "16-bit 25x25" : "16-bit 100x100", st);
+    EXPECT_GT(st.compared, 200);
+    EXPECT_LE(st.max_error_over_tolerance, 1.0);
+    EXPECT_LE(st.coverage_mismatch, st.evaluations / 100);
+  }
+}
+
+TEST_F(GpuTest, OneBatchOfManyContactsEqualsContactsOneByOne) {
+  // 14 windows on the block/gear contact with one tool pose: checks the atlas tiling and that
+  // every contact's tool tiles are reduced against its own environment tile.
+  auto gpu = MakeGpu(32);
+  const HapticModel block = MakeRidgedBlock(RidgedBlockParams{});
+  const HapticModel gear = MakeRidgedGear(RidgedGearParams{});
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  RigidTransform X_WT = BlockOnGearHomePose();
+  X_WT.translation.z -= 0.6e-3;
+  std::vector<ContactQuery> queries;
+  const double r = RidgedGearParams{}.radius_m;
+  for (int i = 0; i < kMaxContacts; ++i) {
+    const glm::dvec3 n = glm::normalize(glm::dvec3(0.1 * U(rng), 0.1 * U(rng), 1.0));
+    const glm::dvec3 p(0.012 * U(rng), 0.004 * U(rng), r);
+    queries.push_back({&gear, RigidTransform::Identity(), ContactWindow::Make(p, n, 0.02, 50),
+                       8000.0 + 100.0 * i});
+  }
+  std::vector<ContactLinearization> batch(queries.size());
+  std::vector<DepthSample> batch_samples(queries.size() * kGradientSamples);
+  ASSERT_TRUE(gpu->LinearizeBatch(block, X_WT, queries, batch, batch_samples)) << gpu->last_error();
+  const double tolerance = gpu->DepthQuantum(queries[0].window) + GeometryTolerance(block, gear);
+  CpuPenetrationDepthBackend cpu(50);
+  for (size_t i = 0; i < queries.size(); ++i) {
+    std::array<ContactLinearization, 1> one;
+    std::array<DepthSample, kGradientSamples> samples;
+    ASSERT_TRUE(cpu.LinearizeBatch(block, X_WT, {&queries[i], 1}, one, samples));
+    ASSERT_GE(samples[0].cell, 0) << "contact " << i;
+    EXPECT_EQ(batch[i].stiffness_n_per_m, queries[i].stiffness_n_per_m);
+    for (int s = 0; s < kGradientSamples; ++s) {
+      const DepthSample& g = batch_samples[i * kGradientSamples + s];
+      ASSERT_EQ(g.cell >= 0, samples[s].cell >= 0) << "contact " << i << " sample " << s;
+      EXPECT_NEAR(g.depth_m, samples[s].depth_m, tolerance) << "contact " << i << " sample " << s;
+    }
+  }
+}
+
+TEST_F(GpuTest, SeparatedAndNonOverlappingContactsAgreeWithTheCpu) {
+  auto gpu = MakeGpu(16);
+  const HapticModel block = MakeRidgedBlock(RidgedBlockParams{});
+  const HapticModel gear = MakeRidgedGear(RidgedGearParams{});
+  const double r = RidgedGearParams{}.radius_m;
+  RigidTransform lifted = BlockOnGearHomePose();
+  lifted.translation.z += 2e-3;  // separated along n: δ < 0
+  RigidTransform aside = BlockOnGearHomePose();
+  aside.translation.x += 0.1;  // far beyond the window: no overlap at all
+  const ContactQuery q{&gear, RigidTransform::Identity(),
+                       ContactWindow::Make({0, 0, r}, {0, 0, 1}, 0.02, 50), 8000.0};
+  CpuPenetrationDepthBackend cpu(50);
+  for (const RigidTransform& X : {lifted, aside}) {
+    std::array<ContactLinearization, 1> lg, lc;
+    ASSERT_TRUE(gpu->LinearizeBatch(block, X, {&q, 1}, lg)) << gpu->last_error();
+    ASSERT_TRUE(cpu.LinearizeBatch(block, X, {&q, 1}, lc));
+    if (std::isfinite(lc[0].depth_m)) {
+      EXPECT_LT(lc[0].depth_m, 0.0);
+      EXPECT_NEAR(lg[0].depth_m, lc[0].depth_m, gpu->DepthQuantum(q.window) + 3e-8);
+    } else {
+      EXPECT_FALSE(std::isfinite(lg[0].depth_m));
+    }
+  }
+}
+
+TEST_F(GpuTest, ShaderCompileErrorIsAClearErrorAndTheFactoryFallsBackToTheCpu) {
+  GpuPenetrationDepthOptions o;
+  o.inject_shader_compile_error = true;
+  try {
+    GpuPenetrationDepthBackend::Create(o);
+    FAIL() << "a broken shader must not give a backend";
+  } catch (const GpuError& e) {
+    EXPECT_NE(std::string(e.what()).find("fragment shader failed to compile"), std::string::npos)
+        << e.what();
+  }
+  for (PdBackendChoice choice : {PdBackendChoice::kGpu, PdBackendChoice::kAuto}) {
+    std::string message;
+    auto backend = MakePenetrationDepthBackend(choice, o, 50, message);
+    EXPECT_EQ(backend->name(), "cpu");
+    EXPECT_NE(message.find("failed to compile"), std::string::npos) << message;
+    EXPECT_NE(message.find("CPU"), std::string::npos) << message;
+  }
+  std::string message;
+  EXPECT_EQ(MakePenetrationDepthBackend(PdBackendChoice::kAuto, {}, 50, message)->name(), "gpu")
+      << message;
+  EXPECT_EQ(MakePenetrationDepthBackend(PdBackendChoice::kCpu, {}, 50, message)->name(), "cpu");
+  EXPECT_THROW(ParsePdBackendChoice("cuda"), std::invalid_argument);
+  EXPECT_EQ(ParsePdBackendChoice("auto"), PdBackendChoice::kAuto);
+}
+
+TEST_F(GpuTest, BadOptionsAndOversizedBatchesAreRefused) {
+  GpuPenetrationDepthOptions o;
+  o.depth_bits = 24;
+  EXPECT_THROW(GpuPenetrationDepthBackend::Create(o), std::invalid_argument);
+  auto gpu = MakeGpu(16, 2, 64);
+  const HapticModel block = MakeRidgedBlock(RidgedBlockParams{});
+  const HapticModel gear = MakeRidgedGear(RidgedGearParams{});
+  const ContactQuery q{&gear, RigidTransform::Identity(),
+                       ContactWindow::Make({0, 0, 0.025}, {0, 0, 1}, 0.02, 50), 8000.0};
+  std::vector<ContactQuery> three(3, q);
+  std::vector<ContactLinearization> out(3);
+  EXPECT_FALSE(gpu->LinearizeBatch(block, BlockOnGearHomePose(), three, out));
+  EXPECT_NE(gpu->last_error().find("sized for 2"), std::string::npos) << gpu->last_error();
+  ContactQuery big = q;
+  big.window = ContactWindow::Make({0, 0, 0.025}, {0, 0, 1}, 0.02, 100);
+  EXPECT_FALSE(gpu->LinearizeBatch(block, BlockOnGearHomePose(), {&big, 1}, out));
+  EXPECT_NE(gpu->last_error().find("larger than"), std::string::npos) << gpu->last_error();
+  // Still usable after refusing.
+  EXPECT_TRUE(gpu->LinearizeBatch(block, BlockOnGearHomePose(), {&q, 1}, out)) << gpu->last_error();
+}
+
+TEST_F(GpuTest, GlErrorInABatchSwitchesThePipelineToTheCpu) {
+  const HapticScene scene = MakeBlockOnGearScene();
+  PipelineOptions options;
+  auto gpu = MakeGpu(16);
+  GpuPenetrationDepthBackend* raw = gpu.get();
+  HapticTexturePipeline pipeline(scene, options, std::move(gpu));
+  HapticTexturePipeline reference(scene, options);
+  RigidTransform X = scene.X_WT_home;
+  X.translation.z -= 0.6e-3;
+  StepTimings t;
+  const ContactModel before = pipeline.Step(X, 1, t);
+  ASSERT_EQ(before.num_contacts, 1);
+  EXPECT_EQ(pipeline.backend().name(), "gpu");
+  raw->BreakProgramForTesting();  // the next batch meets GL_INVALID_VALUE
+  const ContactModel after = pipeline.Step(X, 2, t);
+  EXPECT_EQ(pipeline.backend().name(), "cpu");
+  EXPECT_EQ(pipeline.backend_failures(), 1);
+  EXPECT_NE(pipeline.fallback_reason().find("GL error"), std::string::npos)
+      << pipeline.fallback_reason();
+  // The failed step was recomputed on the CPU: exactly the reference's contact model.
+  const ContactModel expected = reference.Step(X, 2, t);
+  ASSERT_EQ(after.num_contacts, expected.num_contacts);
+  EXPECT_EQ(after.contacts[0].depth_m, expected.contacts[0].depth_m);
+  EXPECT_EQ(after.F_T_W_at_q0.force, expected.F_T_W_at_q0.force);
+  EXPECT_EQ(after.F_T_W_at_q0.torque, expected.F_T_W_at_q0.torque);
+}
+
+}  // namespace
+}  // namespace ht
