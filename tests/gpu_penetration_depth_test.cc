@@ -247,16 +247,28 @@ TEST_F(GpuTest, ShaderCompileErrorIsAClearErrorAndTheFactoryFallsBackToTheCpu) {
     EXPECT_NE(std::string(e.what()).find("fragment shader failed to compile"), std::string::npos)
         << e.what();
   }
-  for (PdBackendChoice choice : {PdBackendChoice::kGpu, PdBackendChoice::kAuto}) {
-    std::string message;
-    auto backend = MakePenetrationDepthBackend(choice, o, 50, message);
-    EXPECT_EQ(backend->name(), "cpu");
-    EXPECT_NE(message.find("failed to compile"), std::string::npos) << message;
-    EXPECT_NE(message.find("CPU"), std::string::npos) << message;
-  }
   std::string message;
-  EXPECT_EQ(MakePenetrationDepthBackend(PdBackendChoice::kAuto, {}, 50, message)->name(), "gpu")
+  auto backend = MakePenetrationDepthBackend(PdBackendChoice::kGpu, o, 50, message);
+  EXPECT_EQ(backend->name(), "cpu");
+  EXPECT_NE(message.find("failed to compile"), std::string::npos) << message;
+  EXPECT_NE(message.find("CPU"), std::string::npos) << message;
+  backend = MakePenetrationDepthBackend(PdBackendChoice::kAuto, o, 50, message);
+  EXPECT_EQ(backend->name(), "cpu");
+  EXPECT_NE(message.find("CPU"), std::string::npos) << message;
+
+  // Without the fault: gpu takes any context (llvmpipe here); auto takes a hardware one only.
+  EXPECT_EQ(MakePenetrationDepthBackend(PdBackendChoice::kGpu, {}, 50, message)->name(), "gpu")
       << message;
+  bool hardware = true;
+  try {
+    EglContext::Create({.allow_software = false});
+  } catch (const GpuError&) {
+    hardware = false;
+  }
+  EXPECT_EQ(MakePenetrationDepthBackend(PdBackendChoice::kAuto, {}, 50, message)->name(),
+            hardware ? "gpu" : "cpu")
+      << message;
+  EXPECT_NE(message.find(hardware ? "GPU" : "no hardware GPU"), std::string::npos) << message;
   EXPECT_EQ(MakePenetrationDepthBackend(PdBackendChoice::kCpu, {}, 50, message)->name(), "cpu");
   EXPECT_THROW(ParsePdBackendChoice("cuda"), std::invalid_argument);
   EXPECT_EQ(ParsePdBackendChoice("auto"), PdBackendChoice::kAuto);
@@ -308,6 +320,64 @@ TEST_F(GpuTest, GlErrorInABatchSwitchesThePipelineToTheCpu) {
   EXPECT_EQ(after.contacts[0].depth_m, expected.contacts[0].depth_m);
   EXPECT_EQ(after.F_T_W_at_q0.force, expected.F_T_W_at_q0.force);
   EXPECT_EQ(after.F_T_W_at_q0.torque, expected.F_T_W_at_q0.torque);
+}
+
+}  // namespace
+}  // namespace ht
+
+namespace ht {
+namespace {
+
+TEST_F(GpuTest, Fig75PathGivesTheSameWrenchesWithEitherBackend) {
+  // The tool poses of a Fig. 75 style path (slide along x, then y, then press and lift along z)
+  // run open loop through the whole pipeline with each backend: per frame the wrenches agree
+  // within what the depth tolerance allows, k·(tol·|J| + δ·|ΔJ|max).
+  const HapticScene scene = MakeBlockOnGearScene();
+  PipelineOptions options;
+  HapticTexturePipeline cpu(scene, options);
+  HapticTexturePipeline gpu(scene, options, MakeGpu(16));
+  const double tol = dynamic_cast<const GpuPenetrationDepthBackend&>(gpu.backend())
+                         .DepthQuantum(ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 50)) +
+                     GeometryTolerance(*scene.tool, *scene.touchables[0].model);
+  const GradientSteps h = GradientSteps::For(ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 50));
+  const int frames = 300;
+  double sum_f2 = 0.0, sum_df2 = 0.0;
+  int in_contact = 0;
+  for (int i = 0; i < frames; ++i) {
+    const double s = static_cast<double>(i % 100) / 100.0;
+    RigidTransform X = scene.X_WT_home;
+    if (i < 100) {
+      X.translation += glm::dvec3(-8e-3 + 16e-3 * s, 0.0, -0.9e-3);
+    } else if (i < 200) {
+      X.translation += glm::dvec3(0.0, -6e-3 + 12e-3 * s, -0.9e-3);
+    } else {
+      X.translation.z += 0.5e-3 - 1.6e-3 * std::sin(M_PI * s);
+    }
+    StepTimings t;
+    const ContactModel a = cpu.Step(X, i, t);
+    const ContactModel b = gpu.Step(X, i, t);
+    ASSERT_EQ(a.num_contacts, b.num_contacts) << "frame " << i;
+    double force_bound = 0.0, torque_bound = 0.0;
+    for (int c = 0; c < a.num_contacts; ++c) {
+      const ContactLinearization& l = a.contacts[c];
+      const double k = l.stiffness_n_per_m, depth = std::max(l.depth_m, 0.0) + tol;
+      force_bound += k * (tol * glm::length(l.gradient.d_translation_W) +
+                          depth * std::sqrt(2.0) * tol / h.h_x);
+      torque_bound += k * (tol * glm::length(l.gradient.d_rotation_W) +
+                           depth * std::sqrt(3.0) * tol / h.h_theta);
+    }
+    const double df = glm::length(a.F_T_W_at_q0.force - b.F_T_W_at_q0.force);
+    const double dt = glm::length(a.F_T_W_at_q0.torque - b.F_T_W_at_q0.torque);
+    EXPECT_LE(df, force_bound) << "frame " << i;
+    EXPECT_LE(dt, torque_bound) << "frame " << i;
+    sum_f2 += glm::dot(a.F_T_W_at_q0.force, a.F_T_W_at_q0.force);
+    sum_df2 += df * df;
+    in_contact += a.num_contacts > 0 && a.contacts[0].depth_m > 0.0;
+  }
+  EXPECT_GT(in_contact, frames / 2);
+  EXPECT_EQ(gpu.backend().name(), "gpu");
+  std::printf("Fig. 75 path: %d frames, %d pressing; RMS |F| %.4f N, RMS |F_gpu − F_cpu| %.2g N\n",
+              frames, in_contact, std::sqrt(sum_f2 / frames), std::sqrt(sum_df2 / frames));
 }
 
 }  // namespace

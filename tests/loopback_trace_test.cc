@@ -141,3 +141,20 @@ TEST(LoopbackFig75, ForcesStayWithinTheDeviceLimits) {
 }
 
 }  // namespace
+
+namespace {
+
+TEST(LoopbackFig75, SummaryNamesThePenetrationDepthBackend) {
+  std::ifstream in(OutDir() + "/summary.json");
+  ASSERT_TRUE(in.good());
+  const nlohmann::json s = nlohmann::json::parse(in);
+  ASSERT_TRUE(s.contains("pd_backend")) << "merge-summary did not add the remote backend";
+  const std::string used = s["pd_backend"].get<std::string>();
+  EXPECT_TRUE(used == "cpu" || used == "gpu") << used;
+  if (const char* expected = std::getenv("HT_EXPECT_PD_BACKEND")) EXPECT_EQ(used, expected);
+  // A GPU run records its renderer; a CPU run has none.
+  EXPECT_EQ(used == "gpu", !s["gl_renderer"].get<std::string>().empty());
+  EXPECT_EQ(s["remote"]["pd_backend"]["failures"].get<int>(), 0);
+}
+
+}  // namespace

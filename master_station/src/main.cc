@@ -32,6 +32,10 @@ int MergeSummary(const std::string& summary_path, const std::string& remote_path
   if (!rin) throw std::runtime_error("cannot read " + remote_path);
   nlohmann::json s = nlohmann::json::parse(in), r = nlohmann::json::parse(rin);
   s["remote"] = r;
+  if (r.contains("pd_backend")) {  // which penetration-depth backend ran, and on what renderer
+    s["pd_backend"] = r["pd_backend"]["used"];
+    s["gl_renderer"] = r["pd_backend"]["gl_renderer"];
+  }
   if (r.contains("datagrams") && r["datagrams"].contains("tool_state")) {
     s["datagrams"]["tool_state"]["remote"] = r["datagrams"]["tool_state"];
   }

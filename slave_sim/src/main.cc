@@ -25,6 +25,7 @@ int main(int argc, char** argv) {
   std::string listen = "127.0.0.1:47000", out_dir, port_file, scene = "block-on-gear";
   ht::RemoteNodeConfig config;
   bool quiet = false, stay = false;
+  std::string pd_backend = "auto";
   app.add_option("--listen", listen, "UDP address HOST:PORT to listen on (port 0 = any free)")
       ->capture_default_str();
   app.add_option("--scene", scene, "scene: block-on-gear (built in)")->capture_default_str();
@@ -34,6 +35,17 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--window", config.pipeline.window_extent_m, "contact window side W in metres")
       ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--pd-backend", pd_backend,
+                 "where the texture penetration depth runs: cpu (reference rasterizer), gpu\n"
+                 "(headless EGL, OpenGL ES 3.1; Mesa llvmpipe when there is no GPU), or auto (a\n"
+                 "hardware GPU when one starts, else cpu). A GPU that cannot start or fails\n"
+                 "mid-run falls back to cpu with a message")
+      ->check(CLI::IsMember({"cpu", "gpu", "auto"}))
+      ->capture_default_str();
+  app.add_option("--depth-bits", config.gpu.depth_bits,
+                 "GPU depth buffer precision: 16 (fixed point, as the seed) or 32 (float)")
+      ->check(CLI::IsMember({16, 32}))
       ->capture_default_str();
   app.add_option("--max-rate", config.max_rate_hz, "cap on the step rate in Hz (0 = none)")
       ->check(CLI::NonNegativeNumber)
@@ -51,6 +63,7 @@ int main(int argc, char** argv) {
       throw std::invalid_argument("unknown scene '" + scene + "' (built in: block-on-gear)");
     }
     config.listen_address = ht::SocketAddress::Parse(listen);
+    config.pd_backend = ht::ParsePdBackendChoice(pd_backend);
     config.port_file = port_file;
     config.exit_on_goodbye = !stay;
     config.progress_period_s = quiet ? 0.0 : 1.0;

@@ -26,7 +26,21 @@ std::int64_t NowNs() {
 nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& scene,
                              const std::atomic<bool>& stop) {
   config.pipeline.Validate();
-  HapticTexturePipeline pipeline(scene, config.pipeline);
+  std::string backend_message;
+  std::unique_ptr<PenetrationDepthBackend> backend = MakePenetrationDepthBackend(
+      config.pd_backend, config.gpu, config.pipeline.grid_resolution, backend_message);
+  std::string gl_renderer, gl_version, gl_vendor;
+  if (auto* gpu = dynamic_cast<GpuPenetrationDepthBackend*>(backend.get())) {
+    gl_renderer = gpu->info().renderer;
+    gl_version = gpu->info().version;
+    gl_vendor = gpu->info().vendor;
+    gpu->Upload(*scene.tool);  // textures once per model, before the first step
+    for (const TouchableObject& t : scene.touchables) gpu->Upload(*t.model);
+  }
+  std::printf("[slave] %s\n", backend_message.c_str());
+  std::fflush(stdout);
+  HapticTexturePipeline pipeline(scene, config.pipeline, std::move(backend));
+  const std::string backend_at_start(pipeline.backend().name());
   UdpSocket socket(config.listen_address);
   const SocketAddress bound = socket.local_address();
   if (!config.port_file.empty()) {
@@ -70,6 +84,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   std::uint64_t last_progress_steps = 0;
   bool running = true;
   std::int64_t max_gap_ns = 0;
+  bool reported_fallback = false;
 
   while (running && !stop.load(std::memory_order_relaxed)) {
     SocketAddress from;
@@ -130,6 +145,12 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     StepTimings timings;
     wire::ContactModelMessage out;
     out.model = pipeline.Step(latest.X_WT, last_seq, timings);
+    if (pipeline.backend_failures() == 1 && !reported_fallback) {
+      reported_fallback = true;
+      std::printf("[slave] GPU penetration depth failed (%s); continuing on the CPU reference\n",
+                  pipeline.fallback_reason().c_str());
+      std::fflush(stdout);
+    }
     ++step_count;
     if (first_step_ns == 0) first_step_ns = t_step;
     last_step_ns = NowNs();
@@ -205,6 +226,16 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   s["grid_resolution"] = config.pipeline.grid_resolution;
   s["window_extent_m"] = config.pipeline.window_extent_m;
   s["linearization_missing_overlap"] = pipeline.faults().missing_overlap;
+  s["pd_backend"] = {{"requested", ToString(config.pd_backend)},
+                     {"used", backend_at_start},
+                     {"used_at_end", std::string(pipeline.backend().name())},
+                     {"message", backend_message},
+                     {"gl_renderer", gl_renderer},
+                     {"gl_version", gl_version},
+                     {"gl_vendor", gl_vendor},
+                     {"depth_bits", gl_renderer.empty() ? 0 : config.gpu.depth_bits},
+                     {"failures", pipeline.backend_failures()},
+                     {"fallback_reason", pipeline.fallback_reason()}};
   s["sessions"] = sessions;
   s["datagrams"]["tool_state"] = {
       {"received", received},           {"accepted", accepted},

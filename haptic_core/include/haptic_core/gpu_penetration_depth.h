@@ -121,10 +121,11 @@ enum class PdBackendChoice { kCpu, kGpu, kAuto };
 PdBackendChoice ParsePdBackendChoice(const std::string& text);
 const char* ToString(PdBackendChoice choice) noexcept;
 
-/// Makes the backend for `choice`. kCpu: the CPU reference. kGpu and kAuto: the GPU backend when a
-/// context starts and its shaders build; otherwise the CPU reference, with the reason in
-/// `message` (kGpu says it was requested and could not start; kAuto says which it chose). Never
-/// throws for a GPU failure.
+/// Makes the backend for `choice`. kCpu: the CPU reference. kGpu: the GPU backend on any context
+/// that starts (a real GPU first, else llvmpipe). kAuto: the GPU backend on a hardware GPU only,
+/// since a software rasterizer is slower than the CPU reference for this stage. When the GPU
+/// cannot start or its shaders do not build: the CPU reference, with the reason in `message`
+/// (which always says what was chosen and why). Never throws for a GPU failure.
 std::unique_ptr<PenetrationDepthBackend> MakePenetrationDepthBackend(
     PdBackendChoice choice, const GpuPenetrationDepthOptions& gpu_options, int grid_resolution,
     std::string& message);

@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "haptic_core/gpu_penetration_depth.h"
 #include "haptic_core/haptic_scene.h"
 #include "transport/udp_socket.h"
 
@@ -16,6 +17,12 @@ namespace ht {
 struct RemoteNodeConfig {
   SocketAddress listen_address = SocketAddress::Parse("127.0.0.1:47000");
   PipelineOptions pipeline;
+  /// Where the texture penetration depth runs: cpu, gpu (headless EGL), or auto (a hardware GPU
+  /// when one starts, else the CPU reference). A GPU that cannot start means the CPU, with a
+  /// message; so does a GPU that fails mid-run.
+  PdBackendChoice pd_backend = PdBackendChoice::kAuto;
+  /// GPU options (depth precision, batch size).
+  GpuPenetrationDepthOptions gpu;
   /// Upper bound on the step rate (Hz); 0 = as fast as the pipeline runs.
   double max_rate_hz = 0.0;
   /// Stop when the operator side says goodbye.
