@@ -67,9 +67,9 @@ void Run(benchmark::State& state, ht::PenetrationDepthBackend& backend) {
     benchmark::DoNotOptimize(out.data());
   }
   // Wall time: the GPU (or llvmpipe's threads) works outside this thread's CPU time.
-  state.counters["us_per_contact"] = benchmark::Counter(
-      static_cast<double>(state.iterations()) * contacts,
-      benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+  state.counters["us_per_contact"] =
+      benchmark::Counter(static_cast<double>(state.iterations()) * contacts,
+                         benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
 }
 
 void BM_PenetrationDepthCpu(benchmark::State& state) {

@@ -75,13 +75,13 @@ struct ParityStats {
 };
 
 void Print(const char* label, const ParityStats& st) {
-  std::printf("%s: %d evaluations, %d compared, %d coverage mismatches, max |dδ| %.3g m "
-              "(%.2f quanta, %.2f of the tolerance), max |dJx| %.3g, max |dJθ| %.3g m/rad "
-              "(%.2f of the bound)\n",
-              label, st.evaluations, st.compared, st.coverage_mismatch, st.max_depth_error,
-              st.max_depth_error_in_quanta, st.max_error_over_tolerance,
-              st.max_translation_gradient_error, st.max_rotation_gradient_error,
-              st.max_gradient_error_over_bound);
+  std::printf(
+      "%s: %d evaluations, %d compared, %d coverage mismatches, max |dδ| %.3g m "
+      "(%.2f quanta, %.2f of the tolerance), max |dJx| %.3g, max |dJθ| %.3g m/rad "
+      "(%.2f of the bound)\n",
+      label, st.evaluations, st.compared, st.coverage_mismatch, st.max_depth_error,
+      st.max_depth_error_in_quanta, st.max_error_over_tolerance, st.max_translation_gradient_error,
+      st.max_rotation_gradient_error, st.max_gradient_error_over_bound);
 }
 
 ParityStats CompareOnRandomContacts(GpuPenetrationDepthBackend& gpu, int grid, int trials,

@@ -50,7 +50,7 @@ DepthSample TexturePenetrationSolver::Depth(const HapticModel& tool, const Rigid
 }
 
 std::array<RigidTransform, kGradientSamples> GradientSamplePoses(const RigidTransform& X_WT,
-                                                                const ContactWindow& w) noexcept {
+                                                                 const ContactWindow& w) noexcept {
   const GradientSteps h = GradientSteps::For(w);
   const glm::dvec3 u = w.axis_u_W, v = w.axis_v_W, n = w.normal_W, zero(0.0);
   const Twist steps[5] = {{h.h_x * u, zero},
@@ -125,7 +125,8 @@ ContactLinearization TexturePenetrationSolver::Linearize(
   } else {
     for (int i = 1; i < kGradientSamples; ++i) samples[i] = samples[0];
   }
-  if (samples_out.size() >= samples.size()) std::copy(samples.begin(), samples.end(), samples_out.begin());
+  if (samples_out.size() >= samples.size())
+    std::copy(samples.begin(), samples.end(), samples_out.begin());
   return AssembleLinearization(w, samples, stiffness_n_per_m, faults_);
 }
 

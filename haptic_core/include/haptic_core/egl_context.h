@@ -23,10 +23,10 @@ struct EglContextOptions {
 
 /// What the context runs on, as reported by EGL and GL at start.
 struct GpuInfo {
-  std::string platform;  ///< "device" or "surfaceless".
-  std::string vendor;    ///< GL_VENDOR.
-  std::string renderer;  ///< GL_RENDERER (e.g. "llvmpipe (LLVM 15.0.6, 256 bits)").
-  std::string version;   ///< GL_VERSION (e.g. "OpenGL ES 3.2 Mesa 22.3.6").
+  std::string platform;   ///< "device" or "surfaceless".
+  std::string vendor;     ///< GL_VENDOR.
+  std::string renderer;   ///< GL_RENDERER (e.g. "llvmpipe (LLVM 15.0.6, 256 bits)").
+  std::string version;    ///< GL_VERSION (e.g. "OpenGL ES 3.2 Mesa 22.3.6").
   bool software = false;  ///< True for a software rasterizer (EGL_MESA_device_software, llvmpipe).
   int max_texture_size = 0;  ///< GL_MAX_TEXTURE_SIZE (texels).
 };

@@ -64,8 +64,9 @@ void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
 /// side at this pose (kPatchFacingThreshold) are drawn. Per covered cell: coarse height
 /// d + h(uv)·(N·n), with N the interpolated normal and h sampled at the mip level whose texel
 /// matches the cell (the GPU path does the same per fragment) [L][R]; samples with
-/// |height| > depth_range_m() are outside the window's box and ignored. `heights` must be initialised by the caller
-/// (−∞ for kEnvironment, +∞ for kTool); cells no triangle covers keep that value. Never allocates.
+/// |height| > depth_range_m() are outside the window's box and ignored. `heights` must be
+/// initialised by the caller (−∞ for kEnvironment, +∞ for kTool); cells no triangle covers keep
+/// that value. Never allocates.
 void RenderPatchHeights(const HapticModel& model, const RigidTransform& X_WO,
                         std::span<const int> triangles, const ContactWindow& window, PatchSide side,
                         std::span<float> heights) noexcept;

@@ -29,21 +29,32 @@ bool HasExtension(const char* list, const char* name) {
 
 std::string EglErrorName(EGLint e) {
   switch (e) {
-    case EGL_SUCCESS: return "EGL_SUCCESS";
-    case EGL_NOT_INITIALIZED: return "EGL_NOT_INITIALIZED";
-    case EGL_BAD_ACCESS: return "EGL_BAD_ACCESS";
-    case EGL_BAD_ALLOC: return "EGL_BAD_ALLOC";
-    case EGL_BAD_ATTRIBUTE: return "EGL_BAD_ATTRIBUTE";
-    case EGL_BAD_CONFIG: return "EGL_BAD_CONFIG";
-    case EGL_BAD_CONTEXT: return "EGL_BAD_CONTEXT";
-    case EGL_BAD_DISPLAY: return "EGL_BAD_DISPLAY";
-    case EGL_BAD_MATCH: return "EGL_BAD_MATCH";
-    case EGL_BAD_PARAMETER: return "EGL_BAD_PARAMETER";
-    default: return "EGL error 0x" + [&] {
-      char b[16];
-      std::snprintf(b, sizeof b, "%04x", static_cast<unsigned>(e));
-      return std::string(b);
-    }();
+    case EGL_SUCCESS:
+      return "EGL_SUCCESS";
+    case EGL_NOT_INITIALIZED:
+      return "EGL_NOT_INITIALIZED";
+    case EGL_BAD_ACCESS:
+      return "EGL_BAD_ACCESS";
+    case EGL_BAD_ALLOC:
+      return "EGL_BAD_ALLOC";
+    case EGL_BAD_ATTRIBUTE:
+      return "EGL_BAD_ATTRIBUTE";
+    case EGL_BAD_CONFIG:
+      return "EGL_BAD_CONFIG";
+    case EGL_BAD_CONTEXT:
+      return "EGL_BAD_CONTEXT";
+    case EGL_BAD_DISPLAY:
+      return "EGL_BAD_DISPLAY";
+    case EGL_BAD_MATCH:
+      return "EGL_BAD_MATCH";
+    case EGL_BAD_PARAMETER:
+      return "EGL_BAD_PARAMETER";
+    default:
+      return "EGL error 0x" + [&] {
+        char b[16];
+        std::snprintf(b, sizeof b, "%04x", static_cast<unsigned>(e));
+        return std::string(b);
+      }();
   }
 }
 
@@ -64,8 +75,9 @@ struct Candidate {
 std::unique_ptr<EglContext> EglContext::Create(const EglContextOptions& options) {
   const char* client = eglQueryString(EGL_NO_DISPLAY, EGL_EXTENSIONS);
   if (client == nullptr) {
-    throw GpuError("EGL: no client extensions (EGL 1.5 / EGL_EXT_client_extensions needed; is "
-                   "libegl1 with a vendor library such as libegl-mesa0 installed?)");
+    throw GpuError(
+        "EGL: no client extensions (EGL 1.5 / EGL_EXT_client_extensions needed; is "
+        "libegl1 with a vendor library such as libegl-mesa0 installed?)");
   }
   auto get_platform_display = reinterpret_cast<PFNEGLGETPLATFORMDISPLAYEXTPROC>(
       eglGetProcAddress("eglGetPlatformDisplayEXT"));
@@ -84,11 +96,11 @@ std::unique_ptr<EglContext> EglContext::Create(const EglContextOptions& options)
         eglGetProcAddress("eglQueryDeviceStringEXT"));
     std::array<EGLDeviceEXT, 16> devices{};
     EGLint count = 0;
-    if (query_devices && query_devices(static_cast<EGLint>(devices.size()), devices.data(),
-                                       &count)) {
+    if (query_devices &&
+        query_devices(static_cast<EGLint>(devices.size()), devices.data(), &count)) {
       for (EGLint i = 0; i < count; ++i) {
-        const char* ext = query_device_string ? query_device_string(devices[i], EGL_EXTENSIONS)
-                                              : nullptr;
+        const char* ext =
+            query_device_string ? query_device_string(devices[i], EGL_EXTENSIONS) : nullptr;
         const bool is_software = HasExtension(ext, "EGL_MESA_device_software");
         Candidate c{"EGL device " + std::to_string(i) + (is_software ? " (software)" : ""),
                     EGL_PLATFORM_DEVICE_EXT, devices[i], is_software};
@@ -101,8 +113,8 @@ std::unique_ptr<EglContext> EglContext::Create(const EglContextOptions& options)
     tried += "no EGL_EXT_platform_device; ";
   }
   if (HasExtension(client, "EGL_MESA_platform_surfaceless")) {
-    surfaceless.push_back({"Mesa surfaceless platform", EGL_PLATFORM_SURFACELESS_MESA,
-                           EGL_DEFAULT_DISPLAY, true});
+    surfaceless.push_back(
+        {"Mesa surfaceless platform", EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, true});
   }
   std::vector<Candidate> order = hardware;
   if (options.allow_software) {

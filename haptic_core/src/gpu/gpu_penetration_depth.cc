@@ -6,9 +6,9 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
-#include <limits>
 #include <glm/geometric.hpp>
 #include <glm/gtc/quaternion.hpp>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -19,7 +19,6 @@ namespace {
 // R' = R·(1 + 1/1024) with R the window's depth range, so that every stored sample lies strictly
 // inside (0, 1): the clear values 0 (environment) and 1 (tool) mark empty cells.
 constexpr double kRangeSlack = 1.0 + 1.0 / 1024.0;
-constexpr int kReduceGroupSize = 256;
 constexpr int kFloatsPerCorner = 12;  // position 3, normal 3, face normal 3, uv 2, texel size 1
 
 // Vertex stage: object frame O → window frame (u, v, n) with per-draw rows; triangles that do not
@@ -165,12 +164,18 @@ void main() {
 
 const char* GlErrorName(GLenum e) {
   switch (e) {
-    case GL_INVALID_ENUM: return "GL_INVALID_ENUM";
-    case GL_INVALID_VALUE: return "GL_INVALID_VALUE";
-    case GL_INVALID_OPERATION: return "GL_INVALID_OPERATION";
-    case GL_INVALID_FRAMEBUFFER_OPERATION: return "GL_INVALID_FRAMEBUFFER_OPERATION";
-    case GL_OUT_OF_MEMORY: return "GL_OUT_OF_MEMORY";
-    default: return "GL error";
+    case GL_INVALID_ENUM:
+      return "GL_INVALID_ENUM";
+    case GL_INVALID_VALUE:
+      return "GL_INVALID_VALUE";
+    case GL_INVALID_OPERATION:
+      return "GL_INVALID_OPERATION";
+    case GL_INVALID_FRAMEBUFFER_OPERATION:
+      return "GL_INVALID_FRAMEBUFFER_OPERATION";
+    case GL_OUT_OF_MEMORY:
+      return "GL_OUT_OF_MEMORY";
+    default:
+      return "GL error";
   }
 }
 
@@ -398,8 +403,8 @@ void GpuPenetrationDepthBackend::BreakProgramForTesting() noexcept {
 
 void GpuPenetrationDepthBackend::Upload(const HapticModel& model) {
   if (ModelFor(model) == nullptr) {
-    throw GpuError("GPU penetration depth: upload of model '" + model.name + "' failed: " +
-                   last_error_);
+    throw GpuError("GPU penetration depth: upload of model '" + model.name +
+                   "' failed: " + last_error_);
   }
 }
 
@@ -424,10 +429,17 @@ GpuPenetrationDepthBackend::GpuModel* GpuPenetrationDepthBackend::ModelFor(
       const glm::dvec3 nrm = model.corner_normals_O[3 * f + c];
       const glm::vec2 uv = model.corner_uvs[3 * f + c];
       const float values[kFloatsPerCorner] = {
-          static_cast<float>(p.x),    static_cast<float>(p.y),    static_cast<float>(p.z),
-          static_cast<float>(nrm.x),  static_cast<float>(nrm.y),  static_cast<float>(nrm.z),
-          static_cast<float>(face.x), static_cast<float>(face.y), static_cast<float>(face.z),
-          uv.x,                       uv.y,
+          static_cast<float>(p.x),
+          static_cast<float>(p.y),
+          static_cast<float>(p.z),
+          static_cast<float>(nrm.x),
+          static_cast<float>(nrm.y),
+          static_cast<float>(nrm.z),
+          static_cast<float>(face.x),
+          static_cast<float>(face.y),
+          static_cast<float>(face.z),
+          uv.x,
+          uv.y,
           textured ? static_cast<float>(model.texel_size_m[f]) : -1.0f};
       std::memcpy(o, values, sizeof values);
     }
@@ -459,8 +471,7 @@ GpuPenetrationDepthBackend::GpuModel* GpuPenetrationDepthBackend::ModelFor(
     glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
     for (int l = 0; l < m->num_levels; ++l) {
       const HeightFieldLevel& L = hf.level(l);
-      glTexSubImage2D(GL_TEXTURE_2D, l, 0, 0, L.width, L.height, GL_RED, GL_FLOAT,
-                      L.texels.data());
+      glTexSubImage2D(GL_TEXTURE_2D, l, 0, 0, L.width, L.height, GL_RED, GL_FLOAT, L.texels.data());
     }
     m->wrap_u = hf.wrap_u() ? 1 : 0;
     m->wrap_v = hf.wrap_v() ? 1 : 0;
@@ -489,8 +500,7 @@ bool GpuPenetrationDepthBackend::Fail(std::string why) noexcept {
   return false;
 }
 
-bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool,
-                                                const RigidTransform& X_WT,
+bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const RigidTransform& X_WT,
                                                 std::span<const ContactQuery> queries,
                                                 std::span<ContactLinearization> out,
                                                 std::span<DepthSample> samples_out) noexcept {
@@ -654,8 +664,7 @@ bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool,
 
   const bool want_samples = samples_out.size() >= queries.size() * kGradientSamples;
   for (int c = 0; c < count; ++c) {
-    const std::span<const DepthSample> s(samples_.data() + c * kGradientSamples,
-                                         kGradientSamples);
+    const std::span<const DepthSample> s(samples_.data() + c * kGradientSamples, kGradientSamples);
     out[c] = AssembleLinearization(queries[c].window, s, queries[c].stiffness_n_per_m, faults_);
     if (want_samples) std::copy(s.begin(), s.end(), samples_out.begin() + c * kGradientSamples);
   }
@@ -673,9 +682,12 @@ PdBackendChoice ParsePdBackendChoice(const std::string& text) {
 
 const char* ToString(PdBackendChoice choice) noexcept {
   switch (choice) {
-    case PdBackendChoice::kCpu: return "cpu";
-    case PdBackendChoice::kGpu: return "gpu";
-    case PdBackendChoice::kAuto: return "auto";
+    case PdBackendChoice::kCpu:
+      return "cpu";
+    case PdBackendChoice::kGpu:
+      return "gpu";
+    case PdBackendChoice::kAuto:
+      return "auto";
   }
   return "?";
 }
