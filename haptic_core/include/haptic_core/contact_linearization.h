@@ -52,8 +52,8 @@ inline constexpr int kGradientSamples = 11;
 /// Step sizes of the central differences for `window`: h_x = W/N (m), h_θ = (W/N)/(W/2) (rad),
 /// one grid-cell footprint at the patch border [R].
 struct GradientSteps {
-  double h_x;
-  double h_theta;
+  double h_x;      ///< Translation step along u and v (m).
+  double h_theta;  ///< Rotation step about u, v and n (rad), about the tool's centre of mass.
   static GradientSteps For(const ContactWindow& window) noexcept {
     const double h_x = window.cell_size_m();
     return {h_x, h_x / (0.5 * window.extent_m)};
