@@ -39,7 +39,9 @@ struct GpuPenetrationDepthOptions {
 
 /// Wall time of the stages of the last batch (µs), filled when profile_stages is on.
 struct GpuStageTimes {
-  double upload_us = 0.0;    ///< Per-draw uniforms and state; textures are uploaded once.
+  /// CPU-side preparation: model lookup (a first-seen model is uploaded here, once) and the
+  /// gradient sample poses. Per-draw uniforms are set inside the draw stage.
+  double upload_us = 0.0;
   double draw_us = 0.0;      ///< Rasterizing B and A patches into the depth atlases.
   double reduce_us = 0.0;    ///< Compute shader: b − a and per-tile max.
   double readback_us = 0.0;  ///< Mapping the result buffer.
