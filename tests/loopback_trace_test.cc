@@ -137,7 +137,7 @@ TEST(LoopbackFig75, ForcesStayWithinTheDeviceLimits) {
                         "slave_step_p50_us", "rtt_ms_p50"}) {
     EXPECT_TRUE(s.contains(k)) << k;
   }
-  EXPECT_GT(s["datagrams"]["contact_model"]["accepted"].get<int>(), 0);
+  EXPECT_GT(s["transport"]["streams"]["contact_model"]["received"].get<int>(), 0);
 }
 
 }  // namespace

@@ -1,11 +1,20 @@
+// The wire format: every message round-trips, every malformed case is rejected with its reason,
+// and no single bit flip of an authenticated datagram gets through.
 #include "transport/messages.h"
 
 #include <gtest/gtest.h>
 
 #include <random>
+#include <vector>
 
 namespace ht::wire {
 namespace {
+
+MacKey TestKey(std::uint8_t seed = 7) {
+  MacKey k;
+  for (std::size_t i = 0; i < k.bytes.size(); ++i) k.bytes[i] = static_cast<std::uint8_t>(seed + 13 * i);
+  return k;
+}
 
 ContactModelMessage SampleModel(int contacts) {
   ContactModelMessage m;
@@ -28,107 +37,304 @@ ContactModelMessage SampleModel(int contacts) {
   return m;
 }
 
-TEST(Messages, ToolStateRoundTrips) {
+/// Opens with `key` and decodes the body as the header's type says; kOk only if both pass.
+DecodeStatus OpenAndDecode(std::span<const std::uint8_t> bytes, const MacKey& key) {
+  Header h;
+  std::span<const std::uint8_t> body;
+  if (const DecodeStatus s = OpenDatagram(bytes, key, h, body); s != DecodeStatus::kOk) return s;
+  switch (h.type) {
+    case MessageType::kToolState: { ToolStateMessage m; return DecodeToolState(body, m); }
+    case MessageType::kContactModel: { ContactModelMessage m; return DecodeContactModel(body, m); }
+    case MessageType::kGoodbye:
+    case MessageType::kPing: return DecodeEmpty(body);
+    case MessageType::kHello: { HelloMessage m; return DecodeHello(body, m); }
+    case MessageType::kWelcome: { WelcomeMessage m; return DecodeWelcome(body, m); }
+    case MessageType::kReject: { RejectMessage m; return DecodeReject(body, m); }
+    case MessageType::kPong: { PongMessage m; return DecodePong(body, m); }
+    case MessageType::kSceneFragment: { SceneFragmentMessage m; return DecodeSceneFragment(body, m); }
+    case MessageType::kSceneManifest: { SceneManifestMessage m; return DecodeSceneManifest(body, m); }
+    case MessageType::kSceneNack: { SceneNackMessage m; return DecodeSceneNack(body, m); }
+  }
+  return DecodeStatus::kUnknownType;
+}
+
+WelcomeMessage SampleWelcome() {
+  WelcomeMessage w;
+  w.client_nonce = 0x1122334455667788ull;
+  w.grid = 50;
+  w.window_m = 0.02f;
+  w.codecs = kCodecDracoMesh;
+  w.scene_objects = 2;
+  const std::string name = "block_on_gear";
+  std::copy(name.begin(), name.end(), w.scene_name.begin());
+  w.scene_name_length = static_cast<std::uint8_t>(name.size());
+  return w;
+}
+
+/// One valid datagram of every message type.
+std::vector<Datagram> OneOfEach(const MacKey& key) {
+  static const std::vector<std::uint8_t> object(3000, 0x5a);
+  std::vector<Datagram> out;
   Header h{MessageType::kToolState, 0xabcdef01u, 99, -5};
+  ToolStateMessage ts;
+  ts.X_WT.rotation = QuaternionFromRotationVector({0.1, 0.2, 0.3});
+  out.push_back(EncodeToolState(h, ts, key));
+  out.push_back(EncodeContactModel(h, SampleModel(kMaxWireContacts), key));
+  out.push_back(EncodeGoodbye(h, key));
+  HelloMessage hello;
+  hello.client_nonce = 5;
+  out.push_back(EncodeHello({MessageType::kHello, 0, 1, 3}, hello, key));
+  out.push_back(EncodeWelcome(h, SampleWelcome(), key));
+  RejectMessage r;
+  r.reason = RejectReason::kCapabilities;
+  r.text_length = 5;
+  std::copy_n("grid!", 5, r.text.begin());
+  out.push_back(EncodeReject(h, r, key));
+  out.push_back(EncodePing(h, key));
+  out.push_back(EncodePong(h, {9, 100, 200}, key));
+  SceneFragmentMessage f{7, 2, 3000, 1, 3, std::span<const std::uint8_t>(object).subspan(1396, 1396)};
+  out.push_back(EncodeSceneFragment(h, f, key));
+  SceneManifestMessage m;
+  m.total_objects = 2;
+  m.count = 2;
+  m.entries[0] = {1, 1, 100, 1, SceneObjectKind::kDracoMesh, {}};
+  m.entries[1] = {2, 4, 5000, 4, SceneObjectKind::kDracoMesh, {1, 2, 3}};
+  out.push_back(EncodeSceneManifest(h, m, key));
+  SceneNackMessage n;
+  n.object_id = 7;
+  n.version = 2;
+  n.count = 3;
+  n.missing[0] = 0;
+  n.missing[1] = 5;
+  n.missing[2] = 9;
+  out.push_back(EncodeSceneNack(h, n, key));
+  return out;
+}
+
+TEST(Messages, EveryTypeRoundTripsThroughOpen) {
+  const MacKey key = TestKey();
+  const auto all = OneOfEach(key);
+  ASSERT_EQ(all.size(), static_cast<std::size_t>(kMaxMessageType));
+  for (const Datagram& d : all) {
+    EXPECT_LE(d.size, kMaxDatagramBytes);
+    EXPECT_EQ(OpenAndDecode(d.view(), key), DecodeStatus::kOk) << int(d.bytes[6]);
+  }
+}
+
+TEST(Messages, FieldsSurviveTheRoundTrip) {
+  const MacKey key = TestKey();
+  Header h;
+  std::span<const std::uint8_t> body;
   ToolStateMessage m;
   m.X_WT.translation = {1, 2, 3};
   m.X_WT.rotation = QuaternionFromRotationVector({0.1, 0.2, 0.3});
   m.V_WT_W = {{0.4, 0.5, 0.6}, {-0.7, 0.8, -0.9}};
-  const Datagram d = EncodeToolState(h, m);
-  ASSERT_EQ(d.size, kHeaderBytes + kToolStateBodyBytes);
-  Header h2;
+  const Datagram d = EncodeToolState({MessageType::kToolState, 0xabcdef01u, 99, -5}, m, key);
+  ASSERT_EQ(d.size, kHeaderBytes + kToolStateBodyBytes + kMacBytes);
+  ASSERT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kOk);
+  EXPECT_EQ(h.session_id, 0xabcdef01u);
+  EXPECT_EQ(h.sequence, 99u);
+  EXPECT_EQ(h.send_time_ns, -5);
   ToolStateMessage m2;
-  ASSERT_EQ(DecodeToolState(d.view(), h2, m2), DecodeStatus::kOk);
-  EXPECT_EQ(h2.session_id, h.session_id);
-  EXPECT_EQ(h2.sequence, 99u);
-  EXPECT_EQ(h2.send_time_ns, -5);
+  ASSERT_EQ(DecodeToolState(body, m2), DecodeStatus::kOk);
   EXPECT_EQ(m2.X_WT.translation, m.X_WT.translation);
   EXPECT_EQ(m2.X_WT.rotation, m.X_WT.rotation);
   EXPECT_EQ(m2.V_WT_W.angular, m.V_WT_W.angular);
-}
 
-TEST(Messages, ContactModelRoundTripsWithEveryCount) {
   for (int n : {0, 1, 7, kMaxWireContacts}) {
-    const ContactModelMessage m = SampleModel(n);
-    const Datagram d = EncodeContactModel({MessageType::kContactModel, 7, 3, 11}, m);
-    ASSERT_EQ(d.size, kHeaderBytes + kContactModelFixedBytes + n * kContactBytes);
-    ASSERT_LE(d.size, kMaxDatagramBytes);
-    Header h;
+    const ContactModelMessage cm = SampleModel(n);
+    const Datagram dc = EncodeContactModel({MessageType::kContactModel, 7, 3, 11}, cm, key);
+    ASSERT_EQ(dc.size, kHeaderBytes + kContactModelFixedBytes + n * kContactBytes + kMacBytes);
+    ASSERT_EQ(OpenDatagram(dc.view(), key, h, body), DecodeStatus::kOk);
     ContactModelMessage out;
-    ASSERT_EQ(DecodeContactModel(d.view(), h, out), DecodeStatus::kOk) << n;
+    ASSERT_EQ(DecodeContactModel(body, out), DecodeStatus::kOk) << n;
     EXPECT_EQ(out.model.num_contacts, n);
     EXPECT_EQ(out.model.tool_state_seq, 42u);
     EXPECT_EQ(out.hold_ns, 1500);
     for (int i = 0; i < n; ++i) {
-      EXPECT_EQ(out.model.contacts[i].depth_m, m.model.contacts[i].depth_m);
-      EXPECT_EQ(out.model.contacts[i].gradient.d_rotation_W,
-                m.model.contacts[i].gradient.d_rotation_W);
+      EXPECT_EQ(out.model.contacts[i].depth_m, cm.model.contacts[i].depth_m);
+      EXPECT_EQ(out.model.contacts[i].gradient.d_rotation_W, cm.model.contacts[i].gradient.d_rotation_W);
+    }
+  }
+
+  const Datagram dw = EncodeWelcome({MessageType::kWelcome, 5, 1, 0}, SampleWelcome(), key);
+  ASSERT_EQ(OpenDatagram(dw.view(), key, h, body), DecodeStatus::kOk);
+  WelcomeMessage w;
+  ASSERT_EQ(DecodeWelcome(body, w), DecodeStatus::kOk);
+  EXPECT_EQ(w.name(), "block_on_gear");
+  EXPECT_EQ(w.client_nonce, 0x1122334455667788ull);
+  EXPECT_EQ(w.scene_objects, 2);
+
+  const auto all = OneOfEach(key);
+  ASSERT_EQ(OpenDatagram(all[8].view(), key, h, body), DecodeStatus::kOk);
+  SceneFragmentMessage f;
+  ASSERT_EQ(DecodeSceneFragment(body, f), DecodeStatus::kOk);
+  EXPECT_EQ(f.object_id, 7u);
+  EXPECT_EQ(f.fragment_index, 1);
+  EXPECT_EQ(f.payload.size(), 1396u);
+  ASSERT_EQ(OpenDatagram(all[10].view(), key, h, body), DecodeStatus::kOk);
+  SceneNackMessage n;
+  ASSERT_EQ(DecodeSceneNack(body, n), DecodeStatus::kOk);
+  EXPECT_EQ(n.count, 3);
+  EXPECT_EQ(n.missing[2], 9);
+}
+
+TEST(Messages, EveryTruncationAndExtensionIsRejected) {
+  const MacKey key = TestKey();
+  for (const Datagram& d : OneOfEach(key)) {
+    for (std::size_t len = 0; len < d.size; ++len) {
+      EXPECT_NE(OpenAndDecode({d.bytes.data(), len}, key), DecodeStatus::kOk) << len;
+    }
+    std::array<std::uint8_t, kMaxDatagramBytes + 1> longer{};
+    std::copy(d.bytes.begin(), d.bytes.begin() + d.size, longer.begin());
+    EXPECT_NE(OpenAndDecode({longer.data(), d.size + 1}, key), DecodeStatus::kOk);
+    EXPECT_EQ(OpenAndDecode({longer.data(), kMaxDatagramBytes + 1}, key), DecodeStatus::kTooLong);
+  }
+}
+
+TEST(Messages, TruncatedBodiesThatStillCarryAValidMacAreRejected) {
+  // The MAC is recomputed over the cut datagram: only the body decoders' length checks remain.
+  const MacKey key = TestKey();
+  for (const Datagram& d : OneOfEach(key)) {
+    const std::size_t body = d.size - kHeaderBytes - kMacBytes;
+    const int type = d.bytes[6];
+    for (std::size_t cut = 1; cut <= body; ++cut) {
+      if (type == int(MessageType::kReject) || type == int(MessageType::kSceneFragment)) {
+        if (cut < body && type == int(MessageType::kSceneFragment)) continue;  // shorter payload
+      }
+      Datagram t;
+      std::copy(d.bytes.begin(), d.bytes.begin() + static_cast<long>(d.size - kMacBytes - cut),
+                t.bytes.begin());
+      t.size = d.size - kMacBytes - cut;
+      ComputeMac(t.view(), key, std::span<std::uint8_t, kMacBytes>(t.bytes.data() + t.size, kMacBytes));
+      t.size += kMacBytes;
+      const DecodeStatus s = OpenAndDecode(t.view(), key);
+      EXPECT_NE(s, DecodeStatus::kOk) << "type " << type << " cut " << cut;
     }
   }
 }
 
-TEST(Messages, EveryTruncationAndExtensionIsRejected) {
-  const Datagram d = EncodeContactModel({MessageType::kContactModel, 7, 3, 11}, SampleModel(3));
-  Header h;
-  ContactModelMessage out;
-  for (std::size_t len = 0; len < d.size; ++len) {
-    EXPECT_NE(DecodeContactModel({d.bytes.data(), len}, h, out), DecodeStatus::kOk) << len;
+TEST(Messages, AnySingleBitFlipIsRejected) {
+  const MacKey key = TestKey();
+  std::size_t flips = 0;
+  for (const Datagram& d : OneOfEach(key)) {
+    for (std::size_t bit = 0; bit < d.size * 8; ++bit) {
+      Datagram f = d;
+      f.bytes[bit / 8] ^= static_cast<std::uint8_t>(1u << (bit % 8));
+      ASSERT_NE(OpenAndDecode(f.view(), key), DecodeStatus::kOk) << "type " << int(d.bytes[6])
+                                                                 << " bit " << bit;
+      ++flips;
+    }
   }
-  std::array<std::uint8_t, kMaxDatagramBytes> longer{};
-  std::copy(d.bytes.begin(), d.bytes.begin() + d.size, longer.begin());
-  EXPECT_EQ(DecodeContactModel({longer.data(), d.size + 1}, h, out), DecodeStatus::kTooLong);
+  EXPECT_GT(flips, 30000u);  // every bit of one datagram of each of the 11 types
 }
 
-TEST(Messages, HeaderFieldsAreChecked) {
-  const Datagram good = EncodeToolState({MessageType::kToolState, 1, 1, 0}, ToolStateMessage{});
-  Header h;
-  ToolStateMessage out;
+TEST(Messages, AnotherKeyIsRejectedAsBadMac) {
+  const MacKey key = TestKey(1), other = TestKey(2);
+  for (const Datagram& d : OneOfEach(key)) {
+    EXPECT_EQ(OpenAndDecode(d.view(), other), DecodeStatus::kBadMac);
+  }
+}
+
+TEST(Messages, HeaderFieldsAreCheckedBeforeTheMac) {
+  const MacKey key = TestKey();
+  const Datagram good = EncodeToolState({MessageType::kToolState, 1, 1, 0}, ToolStateMessage{}, key);
   auto mutate = [&](std::size_t offset, std::uint8_t value) {
     Datagram d = good;
     d.bytes[offset] = value;
-    return DecodeToolState(d.view(), h, out);
+    return OpenAndDecode(d.view(), key);
   };
   EXPECT_EQ(mutate(0, 0x00), DecodeStatus::kBadMagic);
-  EXPECT_EQ(mutate(4, 0x09), DecodeStatus::kBadVersion);
+  EXPECT_EQ(mutate(4, 0x01), DecodeStatus::kBadVersion);  // version 1 is no longer accepted
   EXPECT_EQ(mutate(6, 0x7f), DecodeStatus::kUnknownType);
+  EXPECT_EQ(mutate(6, 0x00), DecodeStatus::kUnknownType);
   EXPECT_EQ(mutate(7, 0x01), DecodeStatus::kBadFlags);
+  EXPECT_EQ(mutate(9, 0x01), DecodeStatus::kBadMac);  // session id changed
+  EXPECT_EQ(mutate(good.size - 1, good.bytes[good.size - 1] ^ 1), DecodeStatus::kBadMac);
 }
 
-TEST(Messages, NonFiniteAndImpossibleValuesAreRejected) {
+/// Encodes with a valid MAC, so that the body checks are what rejects.
+template <typename Encode>
+DecodeStatus Sealed(Encode&& encode) {
+  const MacKey key = TestKey();
+  return OpenAndDecode(encode(key).view(), key);
+}
+
+TEST(Messages, NonFiniteAndImpossibleValuesAreRejectedEvenWithAValidMac) {
   ToolStateMessage m;
   m.X_WT.translation.x = NAN;
-  Header h;
-  ToolStateMessage out;
-  EXPECT_EQ(DecodeToolState(EncodeToolState({}, m).view(), h, out), DecodeStatus::kNonFinite);
+  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeToolState({}, m, k); }), DecodeStatus::kNonFinite);
   m = {};
   m.X_WT.rotation = glm::dquat(3.0, 0, 0, 0);
-  EXPECT_EQ(DecodeToolState(EncodeToolState({}, m).view(), h, out), DecodeStatus::kBadValue);
+  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeToolState({}, m, k); }), DecodeStatus::kBadValue);
   ContactModelMessage cm = SampleModel(2);
   cm.model.contacts[1].gradient.d_translation_W.y = INFINITY;
-  ContactModelMessage cout;
-  EXPECT_EQ(DecodeContactModel(EncodeContactModel({}, cm).view(), h, cout),
+  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeContactModel({}, cm, k); }),
             DecodeStatus::kNonFinite);
   cm = SampleModel(2);
   cm.model.contacts[0].stiffness_n_per_m = -1;
-  EXPECT_EQ(DecodeContactModel(EncodeContactModel({}, cm).view(), h, cout),
+  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeContactModel({}, cm, k); }),
             DecodeStatus::kBadValue);
-  Datagram d = EncodeContactModel({}, SampleModel(0));
-  d.bytes[kHeaderBytes + kContactModelFixedBytes - 1] = kMaxWireContacts + 1;  // count byte
-  EXPECT_EQ(DecodeContactModel(d.view(), h, cout), DecodeStatus::kBadCount);
+  EXPECT_EQ(Sealed([&](const MacKey& k) {
+              Datagram d = EncodeContactModel({}, SampleModel(0), k);
+              d.size -= kMacBytes;
+              d.bytes[kHeaderBytes + kContactModelFixedBytes - 1] = kMaxWireContacts + 1;
+              ComputeMac(d.view(), k, std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size, kMacBytes));
+              d.size += kMacBytes;
+              return d;
+            }),
+            DecodeStatus::kBadCount);
+  HelloMessage hello;
+  hello.mtu = 100;  // below the smallest MTU
+  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeHello({}, hello, k); }), DecodeStatus::kBadValue);
+  hello = {};
+  hello.min_version = 5;
+  hello.max_version = 3;
+  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeHello({}, hello, k); }), DecodeStatus::kBadValue);
+  hello = {};
+  hello.tool_state_rate_hz = NAN;
+  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeHello({}, hello, k); }), DecodeStatus::kNonFinite);
+  WelcomeMessage w = SampleWelcome();
+  w.scene_name_length = 40;
+  EXPECT_EQ(Sealed([&](const MacKey& k) {
+              Datagram d = EncodeWelcome({}, SampleWelcome(), k);
+              d.size -= kMacBytes;
+              d.bytes[kHeaderBytes + 36] = 40;  // name length beyond its field
+              ComputeMac(d.view(), k, std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size, kMacBytes));
+              d.size += kMacBytes;
+              return d;
+            }),
+            DecodeStatus::kBadValue);
+  static const std::vector<std::uint8_t> bytes(10, 1);
+  SceneFragmentMessage f{1, 1, 10, 3, 3, bytes};  // index >= count
+  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeSceneFragment({}, f, k); }), DecodeStatus::kBadValue);
+  f = {1, 1, 5, 0, 1, bytes};  // payload longer than the object
+  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeSceneFragment({}, f, k); }), DecodeStatus::kBadValue);
+  f = {1, 1, kMaxSceneObjectBytes + 1, 0, 60000, bytes};
+  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeSceneFragment({}, f, k); }), DecodeStatus::kBadValue);
+  SceneManifestMessage man;
+  man.total_objects = 1;
+  man.first_index = 1;
+  man.count = 1;
+  man.entries[0] = {1, 1, 10, 1, SceneObjectKind::kDracoMesh, {}};
+  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeSceneManifest({}, man, k); }), DecodeStatus::kBadValue);
+  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodePong({}, {0, 1, 2}, k); }), DecodeStatus::kBadValue);
 }
 
-TEST(Messages, RandomBytesNeverDecodeOrCrash) {
+TEST(Messages, RandomBytesNeverOpenOrCrash) {
+  const MacKey key = TestKey();
   std::mt19937 rng(1);
-  std::array<std::uint8_t, kMaxDatagramBytes> buf{};
-  Header h;
-  ContactModelMessage cm;
-  ToolStateMessage ts;
+  std::array<std::uint8_t, kMaxDatagramBytes + 1> buf{};
   int accepted = 0;
   for (int i = 0; i < 20000; ++i) {
     const std::size_t len = rng() % buf.size();
     for (std::size_t k = 0; k < len; ++k) buf[k] = static_cast<std::uint8_t>(rng());
-    accepted += DecodeContactModel({buf.data(), len}, h, cm) == DecodeStatus::kOk;
-    accepted += DecodeToolState({buf.data(), len}, h, ts) == DecodeStatus::kOk;
+    if (len >= 8 && i % 2 == 0) {  // a valid-looking header, so that the MAC is what refuses it
+      buf[0] = 'H'; buf[1] = 'T'; buf[2] = 'L'; buf[3] = 'P';
+      buf[4] = kProtocolVersion; buf[5] = 0;
+      buf[6] = static_cast<std::uint8_t>(1 + rng() % kMaxMessageType); buf[7] = 0;
+    }
+    accepted += OpenAndDecode({buf.data(), len}, key) == DecodeStatus::kOk;
   }
   EXPECT_EQ(accepted, 0);
 }

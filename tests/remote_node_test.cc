@@ -1,5 +1,6 @@
-// The remote node on a real UDP socket: it answers tool states with contact models and drops
-// malformed datagrams, counting them.
+// The remote node on a real UDP socket: a session opens with Hello/Welcome, tool states are
+// answered with contact models, and garbage, forged, replayed and out-of-session datagrams are
+// dropped and counted by reason.
 #include "slave_sim/remote_node.h"
 
 #include <gtest/gtest.h>
@@ -13,11 +14,38 @@
 namespace ht {
 namespace {
 
-TEST(RemoteNode, AnswersToolStatesAndCountsGarbage) {
+MacKey TestKey(std::uint8_t seed) {
+  MacKey k;
+  for (std::size_t i = 0; i < k.bytes.size(); ++i) k.bytes[i] = static_cast<std::uint8_t>(seed + 3 * i);
+  return k;
+}
+
+/// Waits for a datagram of `type` that opens under `key`; returns its body bytes' decode target.
+template <typename Decode>
+bool Await(UdpSocket& socket, const MacKey& key, wire::MessageType type, wire::Header& h,
+           Decode&& decode) {
+  std::array<std::uint8_t, wire::kMaxDatagramBytes> buf{};
+  for (int i = 0; i < 300; ++i) {
+    socket.WaitReadable(10);
+    SocketAddress from;
+    while (auto n = socket.ReceiveFrom(buf, from)) {
+      std::span<const std::uint8_t> body;
+      if (wire::OpenDatagram({buf.data(), *n}, key, h, body) == wire::DecodeStatus::kOk &&
+          h.type == type && decode(body)) {
+        return true;
+      }
+    }
+  }
+  return false;
+}
+
+TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
   const HapticScene scene = MakeBlockOnGearScene();
   RemoteNodeConfig config;
   config.listen_address = SocketAddress::Parse("127.0.0.1:0");
   config.progress_period_s = 0.0;
+  config.key = TestKey(11);
+  config.scene_objects.emplace_back(5, std::vector<std::uint8_t>(3000, 0x42));
   const std::string port_file = ::testing::TempDir() + "/remote_node_test.port";
   std::remove(port_file.c_str());
   config.port_file = port_file;
@@ -44,38 +72,65 @@ TEST(RemoteNode, AnswersToolStatesAndCountsGarbage) {
   wire::ToolStateMessage state;
   state.X_WT = scene.X_WT_home;
   state.X_WT.translation.z -= 0.5e-3;  // pressed onto the ridges
-  const wire::Datagram d = wire::EncodeToolState({wire::MessageType::kToolState, 5, 1, 0}, state);
-  ASSERT_TRUE(socket.SendTo(d.view(), remote));
+  // Before any session, even an authenticated tool state is refused.
+  socket.SendTo(wire::EncodeToolState({wire::MessageType::kToolState, 77, 1, 0}, state, config.key).view(),
+                remote);
+  // A Hello under another key is refused as bad_mac.
+  wire::HelloMessage hello;
+  hello.client_nonce = 1234;
+  socket.SendTo(wire::EncodeHello({wire::MessageType::kHello, 0, 1, 0}, hello, TestKey(99)).view(), remote);
+  const wire::Datagram hello_datagram =
+      wire::EncodeHello({wire::MessageType::kHello, 0, 2, 0}, hello, config.key);
+  ASSERT_TRUE(socket.SendTo(hello_datagram.view(), remote));
+  wire::Header h;
+  wire::WelcomeMessage welcome;
+  ASSERT_TRUE(Await(socket, config.key, wire::MessageType::kWelcome, h, [&](auto body) {
+    return wire::DecodeWelcome(body, welcome) == wire::DecodeStatus::kOk;
+  }));
+  const std::uint32_t session = h.session_id;
+  EXPECT_NE(session, 0u);
+  EXPECT_EQ(welcome.client_nonce, 1234u);
+  EXPECT_EQ(welcome.scene_objects, 1);
+  EXPECT_EQ(welcome.grid, config.pipeline.grid_resolution);
 
-  std::array<std::uint8_t, wire::kMaxDatagramBytes> buf{};
+  const wire::Datagram d =
+      wire::EncodeToolState({wire::MessageType::kToolState, session, 1, 0}, state, config.key);
+  ASSERT_TRUE(socket.SendTo(d.view(), remote));
   wire::ContactModelMessage model;
-  bool got = false;
-  for (int i = 0; i < 500 && !got; ++i) {
-    socket.WaitReadable(10);
-    SocketAddress from;
-    while (auto n = socket.ReceiveFrom(buf, from)) {
-      wire::Header h;
-      if (wire::DecodeContactModel({buf.data(), *n}, h, model) == wire::DecodeStatus::kOk) {
-        EXPECT_EQ(h.session_id, 5u);
-        got = true;
-      }
-    }
-  }
-  ASSERT_TRUE(got);
+  ASSERT_TRUE(Await(socket, config.key, wire::MessageType::kContactModel, h, [&](auto body) {
+    return wire::DecodeContactModel(body, model) == wire::DecodeStatus::kOk;
+  }));
+  EXPECT_EQ(h.session_id, session);
   EXPECT_EQ(model.model.tool_state_seq, 1u);
   ASSERT_EQ(model.model.num_contacts, 1);
   EXPECT_GT(model.model.contacts[0].depth_m, 0.0);
   EXPECT_GT(model.model.F_T_W_at_q0.force.z, 0.0);  // pushes the block up, away from the gear
 
-  const wire::Datagram bye = wire::EncodeGoodbye({wire::MessageType::kGoodbye, 5, 2, 0});
+  socket.SendTo(d.view(), remote);               // replayed
+  socket.SendTo(hello_datagram.view(), remote);  // a replayed Hello must not open a session
+  wire::Datagram forged =
+      wire::EncodeToolState({wire::MessageType::kToolState, session, 2, 0}, state, config.key);
+  forged.bytes[40] ^= 0x10;
+  socket.SendTo(forged.view(), remote);  // forged
+  const wire::Datagram bye =
+      wire::EncodeGoodbye({wire::MessageType::kGoodbye, session, 1, 0}, config.key);
   socket.SendTo(bye.view(), remote);
   for (int i = 0; i < 200 && !summary.is_object(); ++i) {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   stop = true;
   node.join();
-  EXPECT_EQ(summary["datagrams"]["tool_state"]["dropped_malformed"].get<int>(), 5);
-  EXPECT_EQ(summary["datagrams"]["tool_state"]["accepted"].get<int>(), 1);
+  const nlohmann::json& t = summary["transport"];
+  EXPECT_EQ(t["rejected_by_reason"]["bad_magic"].get<int>(), 5);
+  EXPECT_EQ(t["rejected_by_reason"]["bad_mac"].get<int>(), 2);
+  EXPECT_EQ(t["rejected_by_reason"]["wrong_session"].get<int>(), 1);
+  EXPECT_EQ(t["rejected_by_reason"]["replayed"].get<int>(), 2);
+  EXPECT_EQ(t["hello_replayed"].get<int>(), 1);
+  EXPECT_EQ(t["sessions"].get<int>(), 1);
+  EXPECT_EQ(t["goodbyes"].get<int>(), 1);
+  EXPECT_EQ(t["streams"]["tool_state"]["received"].get<int>(), 1);
+  EXPECT_EQ(t["streams"]["tool_state"]["duplicate"].get<int>(), 1);
+  EXPECT_GE(t["streams"]["scene_fragment"]["sent"].get<int>(), 3);  // 3000 B in 1396 B pieces
   EXPECT_GE(summary["steps"].get<int>(), 1);
 }
 

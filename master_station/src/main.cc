@@ -26,7 +26,8 @@ glm::dvec3 ParseVector(const std::string& text) {
   return v;
 }
 
-int MergeSummary(const std::string& summary_path, const std::string& remote_path) {
+int MergeSummary(const std::string& summary_path, const std::string& remote_path,
+                 const std::string& relay_path) {
   std::ifstream in(summary_path), rin(remote_path);
   if (!in) throw std::runtime_error("cannot read " + summary_path);
   if (!rin) throw std::runtime_error("cannot read " + remote_path);
@@ -36,11 +37,18 @@ int MergeSummary(const std::string& summary_path, const std::string& remote_path
     s["pd_backend"] = r["pd_backend"]["used"];
     s["gl_renderer"] = r["pd_backend"]["gl_renderer"];
   }
-  if (r.contains("datagrams") && r["datagrams"].contains("tool_state")) {
-    s["datagrams"]["tool_state"]["remote"] = r["datagrams"]["tool_state"];
+  // Per stream, what the other side counted, next to what this side counted.
+  if (r.contains("transport") && s.contains("transport")) {
+    for (auto& [name, stream] : r["transport"]["streams"].items()) {
+      s["transport"]["streams"][name]["remote"] = stream;
+    }
+    s["transport"]["remote_rejected_total"] = r["transport"]["rejected_total"];
+    s["transport"]["remote_rejected_by_reason"] = r["transport"]["rejected_by_reason"];
   }
-  if (r.contains("datagrams") && r["datagrams"].contains("contact_model")) {
-    s["datagrams"]["contact_model"]["remote"] = r["datagrams"]["contact_model"];
+  if (!relay_path.empty()) {  // what the impairment relay did, for comparison with the streams
+    std::ifstream lin(relay_path);
+    if (!lin) throw std::runtime_error("cannot read " + relay_path);
+    s["relay"] = nlohmann::json::parse(lin);
   }
   std::ofstream out(summary_path);
   out << s.dump(2) << "\n";
@@ -54,7 +62,11 @@ int main(int argc, char** argv) {
       "master_station: operator side of the networked 6-DoF haptic texture rendering system.\n"
       "Runs the haptic loop (virtual coupling + implicit Euler on the local contact model) with a\n"
       "simulated operator hand that follows an experiment script, exchanging tool states and\n"
-      "contact models with slave_sim over UDP."};
+      "contact models with slave_sim over UDP. Every datagram is authenticated with the\n"
+      "pre-shared key (--key) that slave_sim uses."};
+  app.set_config("--config", "",
+                 "read options from a TOML file (key = value, long option names without dashes);\n"
+                 "command-line options override it");
   std::string remote = "127.0.0.1:47000", bind = "127.0.0.1:0", experiment_name = "fig75";
   std::string out_dir, origin_text;
   double duration_s = 5.0, rate_hz = 1000.0, connect_timeout_s = 10.0;
@@ -79,26 +91,72 @@ int main(int argc, char** argv) {
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   app.add_flag("--quiet", quiet, "no progress lines");
+  std::string key_file;
+  ht::StationConfig defaults;
+  int mtu = defaults.mtu, peer_timeout_ms = defaults.peer_timeout_ms, max_grid = 0;
+  app.add_option("--key", key_file, "pre-shared key file (64 hex characters, mode 0600); required")
+      ->check(CLI::ExistingFile);
+  app.add_option("--mtu", mtu, "largest UDP datagram for scene-update fragments, bytes")
+      ->check(CLI::Range(548, 1472))
+      ->capture_default_str();
+  app.add_option("--peer-timeout", peer_timeout_ms,
+                 "declare the remote node lost after this long without an authenticated datagram, "
+                 "ms (it is then asked for a new session every 250 ms)")
+      ->check(CLI::Range(150, 60000))
+      ->capture_default_str();
+  double max_model_rate = 0.0;
+  app.add_option("--max-model-rate", max_model_rate,
+                 "most contact models per second asked of the remote node (0 = the loop rate)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  app.add_option("--max-grid", max_grid,
+                 "refuse a remote node whose penetration-depth grid is larger (0 = any)")
+      ->check(CLI::Range(0, 65535))
+      ->capture_default_str();
+  std::string keygen_path;
+  bool keygen_force = false;
+  CLI::App* keygen = app.add_subcommand(
+      "keygen", "write a new random pre-shared key (mode 0600) to PATH and exit; copy the same\n"
+                "file to the other machine");
+  keygen->add_option("path", keygen_path, "where to write the key")->required();
+  keygen->add_flag("--force", keygen_force, "overwrite an existing file");
   std::string merge_summary, merge_remote;
   CLI::App* merge = app.add_subcommand(
       "merge-summary", "add the remote node's remote_summary.json into summary.json and exit");
   merge->add_option("summary", merge_summary, "summary.json to update")->required();
   merge->add_option("remote", merge_remote, "remote_summary.json from slave_sim")->required();
+  std::string merge_relay;
+  merge->add_option("--relay", merge_relay, "relay_stats.json from ht_relay, kept under \"relay\"");
   CLI11_PARSE(app, argc, argv);
 
   try {
-    if (*merge) return MergeSummary(merge_summary, merge_remote);
+    if (*merge) return MergeSummary(merge_summary, merge_remote, merge_relay);
+    if (*keygen) {
+      ht::WriteKeyFile(keygen_path, ht::MacKey::Generate(), keygen_force);
+      std::printf("master_station: wrote a new key to %s (mode 0600); copy it to the other side\n",
+                  keygen_path.c_str());
+      return 0;
+    }
+    if (key_file.empty()) {
+      throw std::invalid_argument(
+          "--key FILE is required: every datagram is authenticated (create a key with: "
+          "master_station keygen FILE, and give slave_sim the same file)");
+    }
     ht::StationConfig config;
     config.remote_address = ht::SocketAddress::Parse(remote);
     config.local_address = ht::SocketAddress::Parse(bind);
     config.loop_rate_hz = rate_hz;
     config.connect_timeout_s = connect_timeout_s;
+    config.key = ht::LoadKeyFile(key_file);
+    config.mtu = mtu;
+    config.peer_timeout_ms = peer_timeout_ms;
+    config.max_grid = max_grid;
+    config.max_model_rate_hz = max_model_rate;
     config.out_dir = out_dir;
     config.progress_period_s = quiet ? 0.0 : 0.5;
     config.X_WM = ht::BlockOnGearHomePose();
     if (!origin_text.empty()) config.X_WM.translation = ParseVector(origin_text);
     config.tool_inertia = ht::BlockOnGearToolInertia();
-    config.session_id = std::random_device{}() | 1u;
 
     const auto experiment = ht::MakeExperiment(experiment_name, duration_s);
     ht::SimulatedOperatorDevice device(*experiment);

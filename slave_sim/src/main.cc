@@ -21,7 +21,12 @@ int main(int argc, char** argv) {
       "slave_sim: remote simulation node of the networked 6-DoF haptic texture rendering system.\n"
       "Per step it takes the latest tool pose received, runs the coarse contact query and the\n"
       "texture penetration depth with its gradient, and sends the linearized contact model back.\n"
-      "Stops on SIGINT/SIGTERM or when the operator side says goodbye."};
+      "Every datagram is authenticated with a pre-shared key (--key; make one with 'slave_sim\n"
+      "keygen FILE' and copy it to the operator machine). Stops on SIGINT/SIGTERM or when the\n"
+      "operator side says goodbye (unless --stay)."};
+  app.set_config("--config", "",
+                 "read options from a TOML file (key = value, long option names without dashes);\n"
+                 "command-line options override it");
   std::string listen = "127.0.0.1:47000", out_dir, port_file, scene = "block-on-gear";
   ht::RemoteNodeConfig config;
   bool quiet = false, stay = false;
@@ -52,13 +57,49 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--out", out_dir, "directory for remote_summary.json");
   app.add_option("--port-file", port_file, "write the bound UDP port to this file");
+  std::string key_file;
+  int mtu = 1472;
+  app.add_option("--key", key_file,
+                 "pre-shared key file (64 hex characters, mode 0600); required")
+      ->check(CLI::ExistingFile);
+  app.add_option("--mtu", mtu, "largest UDP datagram for scene-update fragments, bytes")
+      ->check(CLI::Range(548, 1472))
+      ->capture_default_str();
+  app.add_option("--peer-timeout", config.peer_timeout_ms,
+                 "declare the operator lost after this long without an authenticated datagram, ms")
+      ->check(CLI::Range(50, 60000))
+      ->capture_default_str();
+  app.add_option("--scene-rate", config.scene_rate_bytes_per_s,
+                 "pace of scene-update fragments, bytes per second")
+      ->check(CLI::Range(1e4, 1e9))
+      ->capture_default_str();
   app.add_flag("--stay", stay, "keep running after the operator says goodbye");
+  std::string keygen_path;
+  bool keygen_force = false;
+  CLI::App* keygen = app.add_subcommand(
+      "keygen", "write a new random pre-shared key (mode 0600) to PATH and exit; copy the same\n"
+                "file to the other machine");
+  keygen->add_option("path", keygen_path, "where to write the key")->required();
+  keygen->add_flag("--force", keygen_force, "overwrite an existing file");
   app.add_flag("--quiet", quiet, "no progress lines");
   CLI11_PARSE(app, argc, argv);
 
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);
   try {
+    if (*keygen) {
+      ht::WriteKeyFile(keygen_path, ht::MacKey::Generate(), keygen_force);
+      std::printf("slave_sim: wrote a new key to %s (mode 0600); copy it to the other side\n",
+                  keygen_path.c_str());
+      return 0;
+    }
+    if (key_file.empty()) {
+      throw std::invalid_argument(
+          "--key FILE is required: every datagram is authenticated (create a key with: slave_sim "
+          "keygen FILE)");
+    }
+    config.key = ht::LoadKeyFile(key_file);
+    config.mtu = static_cast<std::size_t>(mtu);
     if (scene != "block-on-gear") {
       throw std::invalid_argument("unknown scene '" + scene + "' (built in: block-on-gear)");
     }
@@ -68,6 +109,7 @@ int main(int argc, char** argv) {
     config.exit_on_goodbye = !stay;
     config.progress_period_s = quiet ? 0.0 : 1.0;
     const ht::HapticScene haptic_scene = ht::MakeBlockOnGearScene();
+    config.scene_objects = ht::BlockOnGearSceneObjects();
     const nlohmann::json summary = ht::RunRemoteNode(config, haptic_scene, g_stop);
     std::printf("[slave] done: %llu steps, %.1f steps/s, step p50 %.0f us\n",
                 static_cast<unsigned long long>(summary["steps"].get<std::uint64_t>()),

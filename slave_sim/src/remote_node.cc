@@ -10,7 +10,12 @@
 #include <vector>
 
 #include "haptic_core/statistics.h"
+#include "codecs/draco_mesh_codec.h"
+#include "haptic_core/procedural_models.h"
+#include "transport/link.h"
 #include "transport/messages.h"
+#include "transport/scene_stream.h"
+#include "transport/session.h"
 
 namespace ht {
 namespace {
@@ -22,6 +27,13 @@ std::int64_t NowNs() {
 }
 
 }  // namespace
+
+std::vector<std::pair<std::uint32_t, std::vector<std::uint8_t>>> BlockOnGearSceneObjects() {
+  std::vector<std::pair<std::uint32_t, std::vector<std::uint8_t>>> objects;
+  objects.emplace_back(1, EncodeMeshDraco(MakeRidgedBlockFullResolution()));
+  objects.emplace_back(2, EncodeMeshDraco(MakeRidgedGearFullResolution()));
+  return objects;
+}
 
 nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& scene,
                              const std::atomic<bool>& stop) {
@@ -52,29 +64,46 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     }
     std::rename(tmp.c_str(), config.port_file.c_str());
   }
-  std::printf("[slave] scene '%s': tool '%s', %zu touchable(s); listening on %s\n",
-              scene.name.c_str(), scene.tool->name.c_str(), scene.touchables.size(),
-              bound.ToString().c_str());
+  SecureLink link(socket, config.key, LinkRole::kRemote);
+  SceneSender scene_sender(config.mtu);
+  std::size_t scene_bytes = 0;
+  for (const auto& [id, bytes] : config.scene_objects) {
+    scene_sender.Update(id, bytes);
+    scene_bytes += bytes.size();
+  }
+  RemoteCapabilities caps;
+  caps.grid = static_cast<std::uint16_t>(config.pipeline.grid_resolution);
+  caps.window_m = static_cast<float>(config.pipeline.window_extent_m);
+  caps.mtu = static_cast<std::uint16_t>(config.mtu);
+  caps.max_model_rate_hz = static_cast<float>(config.max_rate_hz);
+  caps.peer_timeout_ms = static_cast<std::uint16_t>(config.peer_timeout_ms);
+  caps.scene_objects = static_cast<std::uint16_t>(config.scene_objects.size());
+  caps.scene_name = scene.name;
+  NonceHistory nonces;
+  std::printf(
+      "[slave] scene '%s': tool '%s', %zu touchable(s), %zu scene object(s) (%zu bytes); "
+      "listening on %s (authenticated)\n",
+      scene.name.c_str(), scene.tool->name.c_str(), scene.touchables.size(),
+      config.scene_objects.size(), scene_bytes, bound.ToString().c_str());
   std::fflush(stdout);
 
   std::array<std::uint8_t, wire::kMaxDatagramBytes + 1> buffer{};
-  std::uint64_t received = 0, accepted = 0, stale = 0, lost = 0, malformed = 0, goodbyes = 0,
-                sessions = 0, bytes_received = 0;
-  std::array<std::uint64_t, 16> malformed_by_reason{};
-  std::uint64_t models_sent = 0, send_failed = 0, bytes_sent = 0;
+  std::uint64_t sessions = 0, goodbyes = 0, peers_lost = 0, hello_replayed = 0, rejects_sent = 0;
+  std::uint64_t nacks_accepted = 0, nacks_ignored = 0;
   std::vector<double> step_us, collision_us, texture_us, contact_step_us;
   contact_step_us.reserve(1 << 20);
   step_us.reserve(1 << 20);
   collision_us.reserve(1 << 20);
   texture_us.reserve(1 << 20);
 
-  bool have_peer = false;
-  SocketAddress peer;
   std::uint32_t session = 0;
-  std::uint64_t last_seq = 0;
+  SocketAddress peer;
+  std::int64_t peer_timeout_ns = 0, model_period_ns = 0, last_model_sent_ns = 0;
+  bool have_state = false;
+  std::uint64_t state_seq = 0;
   wire::ToolStateMessage latest;
   std::int64_t latest_send_time_ns = 0, latest_recv_ns = 0;
-  std::uint64_t step_count = 0, model_seq = 0;
+  std::uint64_t step_count = 0;
   int contacts_max = 0;
   const std::int64_t min_period_ns =
       config.max_rate_hz > 0.0 ? static_cast<std::int64_t>(1e9 / config.max_rate_hz) : 0;
@@ -85,66 +114,171 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   bool running = true;
   std::int64_t max_gap_ns = 0;
   bool reported_fallback = false;
+  double scene_tokens = 0.0;
+  std::int64_t last_token_ns = start_ns, last_manifest_ns = 0;
+  const double token_cap = std::max(16.0 * wire::kMaxDatagramBytes, config.scene_rate_bytes_per_s * 0.01);
+
+  const auto send_manifest = [&] {
+    for (const wire::SceneManifestMessage& m : scene_sender.Manifest()) {
+      link.Send(wire::EncodeSceneManifest(link.NextHeader(wire::MessageType::kSceneManifest, session),
+                                          m, config.key),
+                peer);
+    }
+    last_manifest_ns = NowNs();
+  };
+  const auto close_session = [&](const char* why) {
+    std::printf("[slave] session %08x closed: %s\n", session, why);
+    std::fflush(stdout);
+    session = 0;
+    have_state = false;
+  };
 
   while (running && !stop.load(std::memory_order_relaxed)) {
     SocketAddress from;
     while (auto n = socket.ReceiveFrom(buffer, from)) {
-      ++received;
-      bytes_received += *n;
       const std::int64_t now = NowNs();
       wire::Header header;
-      wire::DecodeStatus status = *n > wire::kMaxDatagramBytes
-                                      ? wire::DecodeStatus::kTooLong
-                                      : wire::DecodeHeader({buffer.data(), *n}, header);
-      wire::ToolStateMessage message;
-      if (status == wire::DecodeStatus::kOk && header.type == wire::MessageType::kToolState) {
-        status = wire::DecodeToolState({buffer.data(), *n}, header, message);
-      } else if (status == wire::DecodeStatus::kOk &&
-                 header.type == wire::MessageType::kContactModel) {
-        status = wire::DecodeStatus::kUnknownType;  // not a message this side accepts
-      }
-      if (status != wire::DecodeStatus::kOk) {
-        ++malformed;
-        ++malformed_by_reason[static_cast<int>(status)];
-        continue;
-      }
-      if (header.type == wire::MessageType::kGoodbye) {
-        if (have_peer && header.session_id == session && from == peer) {
-          ++goodbyes;
-          if (config.exit_on_goodbye) running = false;
+      std::span<const std::uint8_t> body;
+      bool late = false;
+      const std::span<const std::uint8_t> datagram(buffer.data(), std::min(*n, buffer.size()));
+      if (link.Open(datagram, session, header, body, late) != wire::DecodeStatus::kOk) continue;
+      switch (header.type) {
+        case wire::MessageType::kHello: {
+          wire::HelloMessage hello;
+          if (const auto st = wire::DecodeHello(body, hello); st != wire::DecodeStatus::kOk) {
+            link.CountBodyRejected(header.type, st);
+            break;
+          }
+          if (!nonces.Insert(hello.client_nonce)) {  // a recorded Hello played again
+            ++hello_replayed;
+            link.CountBodyRejected(header.type, wire::DecodeStatus::kReplayed);
+            break;
+          }
+          wire::WelcomeMessage welcome;
+          wire::RejectMessage reject;
+          if (!NegotiateSession(hello, caps, welcome, reject)) {
+            ++rejects_sent;
+            link.Send(wire::EncodeReject(link.NextHeader(wire::MessageType::kReject, 0), reject,
+                                         config.key),
+                      from);
+            std::printf("[slave] refused operator at %s: %.*s\n", from.ToString().c_str(),
+                        static_cast<int>(reject.text_length), reject.text.data());
+            std::fflush(stdout);
+            break;
+          }
+          if (session != 0) close_session("replaced by a new session");
+          std::uint32_t id = RandomSessionId();
+          while (id == session) id = RandomSessionId();
+          link.ResetSession();
+          session = id;
+          peer = from;
+          ++sessions;
+          peer_timeout_ns = std::int64_t{welcome.peer_timeout_ms} * 1000000;
+          model_period_ns = welcome.model_rate_hz > 0.0f
+                                ? static_cast<std::int64_t>(1e9 / welcome.model_rate_hz)
+                                : 0;
+          scene_sender.SetMtu(welcome.mtu);
+          scene_sender.QueueAll();
+          scene_tokens = 0.0;
+          link.Send(wire::EncodeWelcome(link.NextHeader(wire::MessageType::kWelcome, session),
+                                        welcome, config.key),
+                    peer);
+          send_manifest();
+          std::printf(
+              "[slave] session %08x opened for operator at %s (protocol v%u, mtu %u, grid %u, "
+              "peer timeout %u ms)\n",
+              session, from.ToString().c_str(), welcome.version, welcome.mtu, welcome.grid,
+              welcome.peer_timeout_ms);
+          std::fflush(stdout);
+          break;
         }
-        continue;
+        case wire::MessageType::kToolState: {
+          wire::ToolStateMessage message;
+          if (const auto st = wire::DecodeToolState(body, message); st != wire::DecodeStatus::kOk) {
+            link.CountBodyRejected(header.type, st);
+            break;
+          }
+          if (late) break;  // newest wins: a newer tool state is already in hand
+          peer = from;      // authenticated: follow the operator if its address changed
+          latest = message;
+          state_seq = header.sequence;
+          latest_send_time_ns = header.send_time_ns;
+          if (latest_recv_ns != 0 && have_state) max_gap_ns = std::max(max_gap_ns, now - latest_recv_ns);
+          latest_recv_ns = now;
+          have_state = true;
+          break;
+        }
+        case wire::MessageType::kPing: {
+          if (const auto st = wire::DecodeEmpty(body); st != wire::DecodeStatus::kOk) {
+            link.CountBodyRejected(header.type, st);
+            break;
+          }
+          wire::PongMessage pong{header.sequence, header.send_time_ns, now};
+          link.Send(wire::EncodePong(link.NextHeader(wire::MessageType::kPong, session), pong,
+                                     config.key),
+                    peer);
+          break;
+        }
+        case wire::MessageType::kSceneNack: {
+          wire::SceneNackMessage nack;
+          if (const auto st = wire::DecodeSceneNack(body, nack); st != wire::DecodeStatus::kOk) {
+            link.CountBodyRejected(header.type, st);
+            break;
+          }
+          if (scene_sender.OnNack(nack)) {
+            ++nacks_accepted;
+          } else {
+            ++nacks_ignored;
+          }
+          break;
+        }
+        case wire::MessageType::kGoodbye: {
+          if (wire::DecodeEmpty(body) != wire::DecodeStatus::kOk) {
+            link.CountBodyRejected(header.type, wire::DecodeStatus::kTooLong);
+            break;
+          }
+          ++goodbyes;
+          close_session("the operator said goodbye");
+          if (config.exit_on_goodbye) running = false;
+          break;
+        }
+        default:
+          break;  // Open() refuses every other type on this side
       }
-      if (!have_peer || header.session_id != session) {  // a new operator session
-        have_peer = true;
-        peer = from;
-        session = header.session_id;
-        last_seq = 0;
-        ++sessions;
-        std::printf("[slave] operator session %08x from %s\n", session, from.ToString().c_str());
-        std::fflush(stdout);
-      }
-      if (header.sequence <= last_seq) {
-        ++stale;
-        continue;
-      }
-      if (last_seq != 0) lost += header.sequence - last_seq - 1;
-      last_seq = header.sequence;
-      ++accepted;
-      latest = message;
-      latest_send_time_ns = header.send_time_ns;
-      if (latest_recv_ns != 0) max_gap_ns = std::max(max_gap_ns, now - latest_recv_ns);
-      latest_recv_ns = now;
     }
     if (!running) break;
-    if (!have_peer) {
+    const std::int64_t now_loop = NowNs();
+    if (session != 0 && now_loop - link.last_authenticated_ns() > peer_timeout_ns) {
+      ++peers_lost;
+      char why[96];
+      std::snprintf(why, sizeof(why), "operator lost (nothing authenticated for %.0f ms)",
+                    (now_loop - link.last_authenticated_ns()) * 1e-6);
+      close_session(why);
+    }
+    if (session == 0) {
       socket.WaitReadable(50);
+      continue;
+    }
+    // Scene fragments, paced, and the manifest every 250 ms.
+    scene_tokens = std::min(token_cap, scene_tokens + config.scene_rate_bytes_per_s *
+                                                          (now_loop - last_token_ns) * 1e-9);
+    last_token_ns = now_loop;
+    wire::SceneFragmentMessage fragment;
+    while (scene_tokens > 0.0 && scene_sender.Next(fragment)) {
+      const wire::Datagram d = wire::EncodeSceneFragment(
+          link.NextHeader(wire::MessageType::kSceneFragment, session), fragment, config.key);
+      link.Send(d, peer);
+      scene_tokens -= static_cast<double>(d.size);
+    }
+    if (now_loop - last_manifest_ns > 250000000) send_manifest();
+    if (!have_state) {
+      socket.WaitReadable(1);
       continue;
     }
     const std::int64_t t_step = NowNs();
     StepTimings timings;
     wire::ContactModelMessage out;
-    out.model = pipeline.Step(latest.X_WT, last_seq, timings);
+    out.model = pipeline.Step(latest.X_WT, state_seq, timings);
     if (pipeline.backend_failures() == 1 && !reported_fallback) {
       reported_fallback = true;
       std::printf("[slave] GPU penetration depth failed (%s); continuing on the CPU reference\n",
@@ -159,22 +293,16 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     if (out.model.num_contacts > 0) contact_step_us.push_back(timings.total_us);
     collision_us.push_back(timings.collision_us);
     texture_us.push_back(timings.texture_us);
-    out.tool_state_send_time_ns = latest_send_time_ns;
-    out.remote_step_count = step_count;
-    out.collision_us = static_cast<float>(timings.collision_us);
-    out.texture_us = static_cast<float>(timings.texture_us);
-    out.step_us = static_cast<float>(timings.total_us);
-    wire::Header header;
-    header.session_id = session;
-    header.sequence = ++model_seq;
-    header.send_time_ns = NowNs();
-    out.hold_ns = header.send_time_ns - latest_recv_ns;
-    const wire::Datagram d = wire::EncodeContactModel(header, out);
-    if (socket.SendTo(d.view(), peer)) {
-      ++models_sent;
-      bytes_sent += d.size;
-    } else {
-      ++send_failed;
+    if (model_period_ns == 0 || last_step_ns - last_model_sent_ns >= model_period_ns) {
+      out.tool_state_send_time_ns = latest_send_time_ns;
+      out.remote_step_count = step_count;
+      out.collision_us = static_cast<float>(timings.collision_us);
+      out.texture_us = static_cast<float>(timings.texture_us);
+      out.step_us = static_cast<float>(timings.total_us);
+      wire::Header header = link.NextHeader(wire::MessageType::kContactModel, session);
+      out.hold_ns = header.send_time_ns - latest_recv_ns;
+      link.Send(wire::EncodeContactModel(header, out, config.key), peer);
+      last_model_sent_ns = last_step_ns;
     }
     const std::int64_t now = NowNs();
     if (config.progress_period_s > 0.0 &&
@@ -182,9 +310,11 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
       const double dt = (now - last_progress_ns) * 1e-9;
       std::printf(
           "[slave] %6.0f steps/s  step %6.0f us (collision %4.0f, texture %6.0f)  "
-          "contacts %d  tool states %llu\n",
+          "contacts %d  tool states %llu  rejected %llu\n",
           (step_count - last_progress_steps) / dt, timings.total_us, timings.collision_us,
-          timings.texture_us, out.model.num_contacts, static_cast<unsigned long long>(accepted));
+          timings.texture_us, out.model.num_contacts,
+          static_cast<unsigned long long>(link.stats(wire::MessageType::kToolState).received),
+          static_cast<unsigned long long>(link.rejected_total()));
       std::fflush(stdout);
       last_progress_ns = now;
       last_progress_steps = step_count;
@@ -192,13 +322,6 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     if (min_period_ns > 0) {
       const std::int64_t wait = t_step + min_period_ns - NowNs();
       if (wait > 0) std::this_thread::sleep_for(std::chrono::nanoseconds(wait));
-    }
-  }
-
-  nlohmann::json reasons = nlohmann::json::object();
-  for (int i = 1; i < 16; ++i) {
-    if (malformed_by_reason[i]) {
-      reasons[wire::ToString(static_cast<wire::DecodeStatus>(i))] = malformed_by_reason[i];
     }
   }
   nlohmann::json s;
@@ -236,14 +359,20 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
                      {"depth_bits", gl_renderer.empty() ? 0 : config.gpu.depth_bits},
                      {"failures", pipeline.backend_failures()},
                      {"fallback_reason", pipeline.fallback_reason()}};
-  s["sessions"] = sessions;
-  s["datagrams"]["tool_state"] = {
-      {"received", received},           {"accepted", accepted},
-      {"dropped_stale", stale},         {"lost", lost},
-      {"dropped_malformed", malformed}, {"dropped_malformed_by_reason", reasons},
-      {"goodbyes", goodbyes},           {"bytes_received", bytes_received}};
-  s["datagrams"]["contact_model"] = {
-      {"sent", models_sent}, {"send_failed", send_failed}, {"bytes_sent", bytes_sent}};
+  nlohmann::json transport = link.StatsJson();
+  transport["sessions"] = sessions;
+  transport["goodbyes"] = goodbyes;
+  transport["peers_lost"] = peers_lost;
+  transport["hello_replayed"] = hello_replayed;
+  transport["rejects_sent"] = rejects_sent;
+  transport["mtu"] = config.mtu;
+  transport["scene"] = {{"objects", config.scene_objects.size()},
+                        {"bytes", scene_bytes},
+                        {"fragment_payload_bytes", scene_sender.payload_bytes()},
+                        {"nacks_accepted", nacks_accepted},
+                        {"nacks_ignored", nacks_ignored},
+                        {"fragments_queued_at_end", scene_sender.queued()}};
+  s["transport"] = transport;
   return s;
 }
 

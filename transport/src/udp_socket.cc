@@ -82,6 +82,11 @@ UdpSocket::UdpSocket(const SocketAddress& local) {
     fd_ = -1;
     throw std::runtime_error("cannot bind UDP " + local.ToString() + ": " + why);
   }
+  // Room for bursts while a thread is descheduled (best effort: the kernel caps it at
+  // net.core.rmem_max / wmem_max).
+  const int receive_bytes = 4 << 20, send_bytes = 1 << 20;
+  ::setsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &receive_bytes, sizeof(receive_bytes));
+  ::setsockopt(fd_, SOL_SOCKET, SO_SNDBUF, &send_bytes, sizeof(send_bytes));
 }
 
 UdpSocket::~UdpSocket() {

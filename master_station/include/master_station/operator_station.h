@@ -11,6 +11,7 @@
 #include "haptic_core/tool_simulation.h"
 #include "master_station/experiment.h"
 #include "master_station/haptic_device.h"
+#include "transport/auth.h"
 #include "transport/udp_socket.h"
 
 namespace ht {
@@ -31,15 +32,34 @@ struct StationConfig {
   std::string out_dir;
   /// Print progress lines to stdout every `progress_period_s` (0 = never).
   double progress_period_s = 0.5;
-  std::uint32_t session_id = 1;
+  /// Pre-shared key: every datagram is authenticated with it (see transport/protocol.h).
+  MacKey key;
+  /// Largest datagram for scene fragments (bytes); the session uses the smaller of both sides'.
+  int mtu = 1472;
+  /// Ping period (ms): heartbeat, round-trip time and clock offset.
+  int heartbeat_ms = 100;
+  /// The remote node is declared lost after this long without an authenticated datagram (ms).
+  int peer_timeout_ms = 500;
+  /// While no session is open, a new Hello every this many milliseconds.
+  int reconnect_period_ms = 250;
+  /// Most contact models per second asked of the remote node (0 = as fast as it steps); the
+  /// default, 0 here, is replaced by the loop rate: more models than ticks are never used.
+  double max_model_rate_hz = 0.0;
+  /// Largest penetration-depth grid accepted from the remote node (0 = any).
+  int max_grid = 0;
 
-  /// Throws std::invalid_argument naming the first bad value (rate outside 100..4000 Hz, ...).
+  /// Throws std::invalid_argument naming the first bad value (rate outside 100..4000 Hz, MTU
+  /// outside 548..1472, peer timeout not above the heartbeat, ...).
   void Validate() const;
 };
 
-/// Runs `experiment` with `device` against the remote node. Returns the summary (the same object
-/// written to summary.json). Throws std::runtime_error when the remote node never answers within
-/// connect_timeout_s or a socket cannot be opened; the message says what to check.
+/// Runs `experiment` with `device` against the remote node: opens an authenticated session
+/// (Hello/Welcome), runs the loop, keeps the session alive (Ping/Pong; reconnects when the remote
+/// node is lost, while the loop goes on with the last contact model), receives the scene, and
+/// says goodbye at the end. Returns the summary (the same object written to summary.json), with
+/// per-stream statistics under "transport". Throws std::runtime_error when the remote node never
+/// answers within connect_timeout_s, refuses the session (with its reason), or a socket cannot be
+/// opened; the message says what to check.
 nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& device,
                                   const Experiment& experiment);
 

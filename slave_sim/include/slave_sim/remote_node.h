@@ -6,9 +6,12 @@
 #include <cstdint>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "haptic_core/gpu_penetration_depth.h"
 #include "haptic_core/haptic_scene.h"
+#include "transport/auth.h"
 #include "transport/udp_socket.h"
 
 namespace ht {
@@ -31,11 +34,31 @@ struct RemoteNodeConfig {
   std::string port_file;
   /// Print a progress line every this many seconds (0 = never).
   double progress_period_s = 1.0;
+  /// Pre-shared key: every datagram is authenticated with it (see transport/protocol.h).
+  MacKey key;
+  /// Largest datagram for scene fragments (bytes, kMinMtuBytes..kMaxDatagramBytes); a session uses
+  /// the smaller of this and the operator's.
+  std::size_t mtu = 1472;
+  /// An operator that has sent nothing authenticated for this long is declared lost (ms); the
+  /// session uses the larger of this and the operator's.
+  int peer_timeout_ms = 500;
+  /// Pace of scene fragments (bytes per second), so that they never crowd out contact models.
+  double scene_rate_bytes_per_s = 4e6;
+  /// Scene objects streamed to the operator at join (Draco bitstreams), by object id.
+  std::vector<std::pair<std::uint32_t, std::vector<std::uint8_t>>> scene_objects;
 };
 
+/// The built-in scene's full-resolution meshes (ridged block = object 1, ridged gear = 2),
+/// Draco-compressed for streaming (14-bit positions, speed 5).
+std::vector<std::pair<std::uint32_t, std::vector<std::uint8_t>>> BlockOnGearSceneObjects();
+
 /// Runs the node on `scene` until `stop` becomes true (or a goodbye arrives when
-/// exit_on_goodbye). Returns the run's summary (rates, step-time percentiles, datagram counters).
-/// Throws std::runtime_error if the socket cannot be bound or the port file cannot be written.
+/// exit_on_goodbye). Sessions: a Hello (authenticated, fresh nonce) opens one, replacing any
+/// other; the node steps only while a session is open, and closes it on Goodbye or when the
+/// operator is silent for the peer timeout, then waits for the next Hello. Returns the run's
+/// summary (rates, step-time percentiles, per-stream statistics, sessions). Throws
+/// std::runtime_error if the socket cannot be bound or the port file cannot be written, and
+/// std::invalid_argument for a bad MTU.
 nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& scene,
                              const std::atomic<bool>& stop);
 

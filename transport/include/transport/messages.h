@@ -1,13 +1,16 @@
 #pragma once
 // Encoding and decoding of the messages defined in transport/protocol.h. Field by field,
-// little-endian, every length checked before it is read; no allocation.
+// little-endian, every length checked before it is read; no allocation. Encoders append the MAC;
+// OpenDatagram checks the header and the MAC before any body decoder runs.
 
 #include <array>
 #include <cstdint>
 #include <span>
+#include <string_view>
 
 #include "haptic_core/contact_model.h"
 #include "haptic_core/spatial.h"
+#include "transport/auth.h"
 #include "transport/protocol.h"
 
 namespace ht::wire {
@@ -37,22 +40,114 @@ struct ContactModelMessage {
   float step_us = 0.0f;
 };
 
-/// Why a datagram was rejected.
+/// Operator → remote: opens (or reopens) a session and states what the operator can do.
+struct HelloMessage {
+  std::uint16_t min_version = kMinProtocolVersion;
+  std::uint16_t max_version = kProtocolVersion;
+  std::uint64_t client_nonce = 0;     ///< random per attempt; Welcome/Reject echo it
+  float tool_state_rate_hz = 1000.0f;  ///< the operator's loop rate
+  float max_model_rate_hz = 0.0f;      ///< most contact models per second wanted (0 = any)
+  std::uint16_t max_grid = 0;          ///< largest penetration-depth grid accepted (0 = any)
+  std::uint16_t mtu = kMaxDatagramBytes;
+  std::uint32_t codecs = kCodecDracoMesh;
+  std::uint16_t heartbeat_ms = 100;
+  std::uint16_t peer_timeout_ms = 500;
+};
+
+/// Remote → operator: the session's parameters, as negotiated.
+struct WelcomeMessage {
+  std::uint64_t client_nonce = 0;
+  std::uint16_t version = kProtocolVersion;
+  float tool_state_rate_hz = 1000.0f;
+  float model_rate_hz = 0.0f;  ///< 0 = as fast as the remote node steps
+  std::uint16_t grid = 0;
+  float window_m = 0.0f;
+  std::uint16_t mtu = kMaxDatagramBytes;
+  std::uint32_t codecs = 0;
+  std::uint16_t heartbeat_ms = 100;
+  std::uint16_t peer_timeout_ms = 500;
+  std::uint16_t scene_objects = 0;
+  std::array<char, kSceneNameBytes> scene_name{};  ///< zero padded, not terminated when full
+  std::uint8_t scene_name_length = 0;
+  std::string_view name() const noexcept { return {scene_name.data(), scene_name_length}; }
+};
+
+/// Remote → operator: a Hello refused, and why.
+struct RejectMessage {
+  std::uint64_t client_nonce = 0;
+  RejectReason reason = RejectReason::kVersion;
+  std::array<char, kMaxRejectText> text{};
+  std::uint8_t text_length = 0;
+  std::string_view message() const noexcept { return {text.data(), text_length}; }
+};
+
+/// Remote → operator: answer to a Ping (NTP-style timestamps; t3 is the header's send time).
+struct PongMessage {
+  std::uint64_t ping_sequence = 0;
+  std::int64_t t1_ns = 0;  ///< the ping's send time, operator clock
+  std::int64_t t2_ns = 0;  ///< the ping's receive time, remote clock
+};
+
+/// Remote → operator: one fragment of a scene object. `payload` points into the datagram.
+struct SceneFragmentMessage {
+  std::uint32_t object_id = 0;
+  std::uint32_t version = 0;
+  std::uint32_t object_bytes = 0;
+  std::uint16_t fragment_index = 0;
+  std::uint16_t fragment_count = 0;
+  std::span<const std::uint8_t> payload;
+};
+
+/// One scene object as announced by the remote node.
+struct ManifestEntry {
+  std::uint32_t object_id = 0;
+  std::uint32_t version = 0;
+  std::uint32_t object_bytes = 0;
+  std::uint16_t fragment_count = 0;
+  SceneObjectKind kind = SceneObjectKind::kDracoMesh;
+  std::array<std::uint8_t, kSceneDigestBytes> digest{};
+};
+
+/// Remote → operator: part of the list of current scene objects (periodic, so that an object
+/// whose fragments were all lost is still known).
+struct SceneManifestMessage {
+  std::uint16_t total_objects = 0;
+  std::uint16_t first_index = 0;
+  std::uint8_t count = 0;
+  std::array<ManifestEntry, kMaxManifestEntries> entries{};
+};
+
+/// Operator → remote: fragments of one object version that did not arrive.
+struct SceneNackMessage {
+  std::uint32_t object_id = 0;
+  std::uint32_t version = 0;
+  std::uint16_t count = 0;  ///< 0 = resend every fragment
+  std::array<std::uint16_t, kMaxNackIndices> missing{};
+};
+
+/// Why a datagram was dropped. Counted per reason in the summaries.
 enum class DecodeStatus : std::uint8_t {
   kOk = 0,
-  kTooShort,  ///< shorter than the header or than its body needs
+  kTooShort,  ///< shorter than header + MAC or than its body needs
   kTooLong,   ///< longer than kMaxDatagramBytes or than its body allows
   kBadMagic,
   kBadVersion,
   kBadFlags,
   kUnknownType,
-  kBadCount,   ///< contact count above kMaxWireContacts
+  kBadCount,   ///< a count above its limit (contacts, manifest entries, NACK indices)
   kNonFinite,  ///< a pose, twist, wrench or contact field is NaN or infinite
-  kBadValue,   ///< a finite but impossible value (non-unit quaternion, negative stiffness)
+  kBadValue,   ///< a finite but impossible value (non-unit quaternion, index ≥ count, ...)
+  kBadMac,     ///< the MAC does not verify under the pre-shared key
+  kReplayed,   ///< a sequence number already seen, 0, or too old for the replay window
+  kWrongSession,  ///< authenticated, but for another session than the current one
+  kUnexpected,    ///< authenticated, but a type this side does not accept (or not now)
 };
+inline constexpr int kDecodeStatusCount = 14;
 
-/// Human-readable name of a status ("ok", "too_short", ...), for logs and summaries.
+/// Human-readable name of a status ("ok", "too_short", "bad_mac", ...), for logs and summaries.
 const char* ToString(DecodeStatus status) noexcept;
+/// Name of a message type ("tool_state", ...; "unknown" outside the enum).
+const char* ToString(MessageType type) noexcept;
 
 /// Fixed-capacity buffer for one outgoing datagram.
 struct Datagram {
@@ -61,23 +156,44 @@ struct Datagram {
   std::span<const std::uint8_t> view() const noexcept { return {bytes.data(), size}; }
 };
 
-/// Encodes a tool state. Returns the datagram (size kHeaderBytes + kToolStateBodyBytes).
-Datagram EncodeToolState(const Header& header, const ToolStateMessage& message) noexcept;
-/// Encodes a contact model; contacts beyond kMaxWireContacts are not sent (the caller keeps at
-/// most kMaxContacts, which equals it).
-Datagram EncodeContactModel(const Header& header, const ContactModelMessage& message) noexcept;
-/// Encodes a goodbye.
-Datagram EncodeGoodbye(const Header& header) noexcept;
+// Encoders: header (its type is set by the encoder) + body + MAC under `key`.
+Datagram EncodeToolState(const Header& header, const ToolStateMessage& message, const MacKey& key) noexcept;
+/// Contacts beyond kMaxWireContacts are not sent (the caller keeps at most kMaxContacts).
+Datagram EncodeContactModel(const Header& header, const ContactModelMessage& message,
+                            const MacKey& key) noexcept;
+Datagram EncodeGoodbye(const Header& header, const MacKey& key) noexcept;
+Datagram EncodeHello(const Header& header, const HelloMessage& message, const MacKey& key) noexcept;
+Datagram EncodeWelcome(const Header& header, const WelcomeMessage& message, const MacKey& key) noexcept;
+Datagram EncodeReject(const Header& header, const RejectMessage& message, const MacKey& key) noexcept;
+Datagram EncodePing(const Header& header, const MacKey& key) noexcept;
+Datagram EncodePong(const Header& header, const PongMessage& message, const MacKey& key) noexcept;
+/// The payload is cut to what fits in kMaxDatagramBytes.
+Datagram EncodeSceneFragment(const Header& header, const SceneFragmentMessage& message,
+                             const MacKey& key) noexcept;
+Datagram EncodeSceneManifest(const Header& header, const SceneManifestMessage& message,
+                             const MacKey& key) noexcept;
+Datagram EncodeSceneNack(const Header& header, const SceneNackMessage& message, const MacKey& key) noexcept;
 
-/// Reads and checks the header of `bytes` (magic, version, flags, type, size limits).
-DecodeStatus DecodeHeader(std::span<const std::uint8_t> bytes, Header& header) noexcept;
-/// Decodes a whole tool-state datagram (header included); checks exact length and finiteness.
-DecodeStatus DecodeToolState(std::span<const std::uint8_t> bytes, Header& header,
-                             ToolStateMessage& message) noexcept;
-/// Decodes a whole contact-model datagram (header included); checks exact length for the count,
-/// the count, finiteness, unit quaternion and stiffness ≥ 0.
-DecodeStatus DecodeContactModel(std::span<const std::uint8_t> bytes, Header& header,
-                                ContactModelMessage& message) noexcept;
+/// Checks a received datagram's size limits, header (magic, version, flags, known type) and MAC,
+/// in that order, and on kOk gives the header and the body (between header and MAC).
+DecodeStatus OpenDatagram(std::span<const std::uint8_t> datagram, const MacKey& key, Header& header,
+                          std::span<const std::uint8_t>& body) noexcept;
+/// Reads only the header fields (no MAC check); for relays and counters. kOk or the first problem.
+DecodeStatus PeekHeader(std::span<const std::uint8_t> datagram, Header& header) noexcept;
+
+// Body decoders: `body` is what OpenDatagram gave; exact length, counts, finiteness and values are
+// checked; `message` is written only on kOk.
+DecodeStatus DecodeToolState(std::span<const std::uint8_t> body, ToolStateMessage& message) noexcept;
+DecodeStatus DecodeContactModel(std::span<const std::uint8_t> body, ContactModelMessage& message) noexcept;
+DecodeStatus DecodeHello(std::span<const std::uint8_t> body, HelloMessage& message) noexcept;
+DecodeStatus DecodeWelcome(std::span<const std::uint8_t> body, WelcomeMessage& message) noexcept;
+DecodeStatus DecodeReject(std::span<const std::uint8_t> body, RejectMessage& message) noexcept;
+DecodeStatus DecodePong(std::span<const std::uint8_t> body, PongMessage& message) noexcept;
+DecodeStatus DecodeSceneFragment(std::span<const std::uint8_t> body, SceneFragmentMessage& message) noexcept;
+DecodeStatus DecodeSceneManifest(std::span<const std::uint8_t> body, SceneManifestMessage& message) noexcept;
+DecodeStatus DecodeSceneNack(std::span<const std::uint8_t> body, SceneNackMessage& message) noexcept;
+/// Bodies that must be empty (Goodbye, Ping).
+DecodeStatus DecodeEmpty(std::span<const std::uint8_t> body) noexcept;
 
 static_assert(kMaxWireContacts == kMaxContacts, "wire and model contact limits must agree");
 

@@ -1,40 +1,56 @@
 #pragma once
 // The wire format, in one place (ENet-style single source of truth). Every datagram is
 //
-//   header (kHeaderBytes) | body (per message type, fixed or counted size)
+//   header (kHeaderBytes) | body (per message type, fixed or counted size) | MAC (kMacBytes)
 //
 // All integers and IEEE-754 floats are little-endian, written and read field by field (never by
 // casting a struct over bytes). Wire order of 6-vectors: force then torque, linear then angular.
 // Quaternions: w, x, y, z. Units are SI (m, rad, N, N·m, s), times in nanoseconds of the sender's
-// steady clock.
+// steady clock (the clocks of the two sides are unrelated; see Ping/Pong).
 //
 // Header layout (28 bytes):
 //   offset 0  u32 magic            kMagic ("HTLP" read as little-endian u32)
 //   offset 4  u16 version          kProtocolVersion
 //   offset 6  u8  type             MessageType
 //   offset 7  u8  flags            0 (reserved; non-zero is rejected)
-//   offset 8  u32 session_id       chosen by the operator side, echoed by the remote side
-//   offset 12 u64 sequence         per sender and stream, starting at 1, strictly increasing
+//   offset 8  u32 session_id       0 in Hello; otherwise the id the remote node gave in Welcome
+//   offset 12 u64 sequence         per sender, session and message type, starting at 1
 //   offset 20 i64 send_time_ns     sender's steady clock at send
 //
-// ToolState body (operator → remote, kToolStateBodyBytes = 104):
-//   X_WT: p_WT (3×f64, m), R_WT (4×f64 quaternion w,x,y,z); V_WT_W: linear (3×f64, m/s),
-//   angular (3×f64, rad/s). T is the tool frame at its centre of mass, W the remote world.
+// MAC (32 bytes, last in the datagram): libsodium crypto_auth (HMAC-SHA-512-256) under the
+// pre-shared key, over every byte before it (header and body). A datagram whose MAC does not verify
+// is dropped before any body field is read.
 //
-// ContactModel body (remote → operator, kContactModelFixedBytes + n·kContactBytes):
-//   u64 tool_state_seq      sequence of the tool state used as q0 (0 = none received yet)
-//   i64 tool_state_send_time_ns   that tool state's send_time_ns, echoed (for round-trip time)
-//   i64 hold_ns             remote time between receiving that tool state and sending this
-//   u64 remote_step_count   steps the remote node has completed since start
-//   f32 collision_us, f32 texture_us, f32 step_us   timings of the step that built this model
-//   X_WT0: 3×f64 + 4×f64    q0
-//   F_T_W at q0: 3×f64 force (N), 3×f64 torque (N·m)
-//   u8  num_contacts        0..kMaxWireContacts
-//   per contact (kContactBytes = 88):
-//     f64 depth_m, 3×f64 ∂δ/∂x (m/m), 3×f64 ∂δ/∂θ (m/rad), f64 stiffness (N/m),
-//     3×f32 point_W (m), 3×f32 normal_W (unit)
-//
-// Goodbye body: empty. Sent by either side on a clean shutdown.
+// Bodies (operator = O, remote node = R):
+//   ToolState O→R (104): X_WT: p_WT 3×f64 (m), R_WT 4×f64 quaternion; V_WT_W: linear 3×f64 (m/s),
+//     angular 3×f64 (rad/s). T is the tool frame at its centre of mass, W the remote world.
+//   ContactModel R→O (kContactModelFixedBytes + n·kContactBytes):
+//     u64 tool_state_seq  i64 tool_state_send_time_ns (echoed)  i64 hold_ns (remote time between
+//     receiving that tool state and sending this)  u64 remote_step_count
+//     f32 collision_us, f32 texture_us, f32 step_us
+//     X_WT0: 3×f64 + 4×f64   F_T_W at q0: 3×f64 force (N), 3×f64 torque (N·m)
+//     u8 num_contacts (0..kMaxWireContacts), then per contact (88): f64 depth_m, 3×f64 ∂δ/∂x,
+//     3×f64 ∂δ/∂θ (m/rad), f64 stiffness (N/m), 3×f32 point_W (m), 3×f32 normal_W (unit)
+//   Goodbye O↔R (0): clean close of the session.
+//   Hello O→R (32): u16 min_version, u16 max_version, u64 client_nonce, f32 tool_state_rate_hz,
+//     f32 max_model_rate_hz (0 = any), u16 max_grid (0 = any), u16 mtu, u32 codecs (kCodec*),
+//     u16 heartbeat_ms, u16 peer_timeout_ms
+//   Welcome R→O (69): u64 client_nonce (echoed), u16 version, f32 tool_state_rate_hz,
+//     f32 model_rate_hz (0 = as fast as the remote steps), u16 grid, f32 window_m, u16 mtu,
+//     u32 codecs, u16 heartbeat_ms, u16 peer_timeout_ms, u16 scene_objects,
+//     u8 name_length, 32 bytes scene name (zero padded). The header carries the new session id.
+//   Reject R→O (10 + n): u64 client_nonce, u8 RejectReason, u8 n, n bytes of UTF-8 text (n ≤ 200)
+//   Ping O→R (0): its header's send_time_ns is t1.
+//   Pong R→O (24): u64 ping_sequence, i64 t1 (echoed), i64 t2 (remote receive time); the header's
+//     send_time_ns is t3 (NTP's four timestamps with the operator's receive time t4).
+//   SceneFragment R→O (16 + payload, payload ≥ 1): u32 object_id, u32 version, u32 object_bytes,
+//     u16 fragment_index, u16 fragment_count, then bytes [index·P, min((index+1)·P, object_bytes))
+//     of the object where P = FragmentPayloadBytes(mtu).
+//   SceneManifest R→O (5 + n·31): u16 total_objects, u16 first_index, u8 n (≤ kMaxManifestEntries),
+//     per entry: u32 object_id, u32 version, u32 object_bytes, u16 fragment_count, u8 SceneObjectKind,
+//     16 bytes BLAKE2b-128 digest of the object's bytes.
+//   SceneNack O→R (10 + 2n): u32 object_id, u32 version, u16 n (≤ kMaxNackIndices; 0 = resend all),
+//     n × u16 missing fragment indices.
 
 #include <cstddef>
 #include <cstdint>
@@ -42,26 +58,85 @@
 namespace ht::wire {
 
 inline constexpr std::uint32_t kMagic = 0x504C5448u;  // bytes 'H' 'T' 'L' 'P'
-inline constexpr std::uint16_t kProtocolVersion = 1;
+/// Version 2 added authentication, sessions, clock sync and scene streaming; version 1 (the
+/// loopback slice) is not accepted.
+inline constexpr std::uint16_t kProtocolVersion = 2;
+inline constexpr std::uint16_t kMinProtocolVersion = 2;
 
 /// Message types; values are part of the protocol and never reused.
 enum class MessageType : std::uint8_t {
   kToolState = 1,
   kContactModel = 2,
   kGoodbye = 3,
+  kHello = 4,
+  kWelcome = 5,
+  kReject = 6,
+  kPing = 7,
+  kPong = 8,
+  kSceneFragment = 9,
+  kSceneNack = 10,
+  kSceneManifest = 11,
+};
+inline constexpr int kMaxMessageType = 11;
+
+/// Why a remote node refused a Hello.
+enum class RejectReason : std::uint8_t {
+  kVersion = 1,       ///< no protocol version in common
+  kCapabilities = 2,  ///< grid, codecs or rates the remote node cannot meet
+  kBusy = 3,          ///< reserved: another operator holds the node
+};
+
+/// Codec bits of Hello/Welcome `codecs`.
+inline constexpr std::uint32_t kCodecDracoMesh = 1u << 0;
+
+/// What a scene object's bytes are.
+enum class SceneObjectKind : std::uint8_t {
+  kDracoMesh = 1,  ///< a Draco bitstream of a triangle mesh, positions in the object's frame (m)
 };
 
 inline constexpr std::size_t kHeaderBytes = 28;
+inline constexpr std::size_t kMacBytes = 32;  // crypto_auth_BYTES
+inline constexpr std::size_t kMacKeyBytes = 32;  // crypto_auth_KEYBYTES
 inline constexpr std::size_t kToolStateBodyBytes = 13 * 8;
 inline constexpr std::size_t kContactModelFixedBytes = 8 * 4 + 4 * 3 + 7 * 8 + 6 * 8 + 1;
 inline constexpr std::size_t kContactBytes = 8 + 6 * 8 + 8 + 3 * 4 + 3 * 4;
+inline constexpr std::size_t kHelloBodyBytes = 32;
+inline constexpr std::size_t kSceneNameBytes = 32;
+inline constexpr std::size_t kWelcomeBodyBytes = 37 + kSceneNameBytes;
+inline constexpr std::size_t kRejectFixedBytes = 10;
+inline constexpr std::size_t kMaxRejectText = 200;
+inline constexpr std::size_t kPongBodyBytes = 24;
+inline constexpr std::size_t kSceneFragmentFixedBytes = 16;
+inline constexpr std::size_t kSceneManifestFixedBytes = 5;
+inline constexpr std::size_t kManifestEntryBytes = 31;
+inline constexpr std::size_t kSceneDigestBytes = 16;
+inline constexpr int kMaxManifestEntries = 15;
+inline constexpr std::size_t kSceneNackFixedBytes = 10;
+inline constexpr int kMaxNackIndices = 200;
+
 /// Largest datagram either side sends or accepts: an Ethernet MTU (1500) less IPv4 and UDP headers.
 inline constexpr std::size_t kMaxDatagramBytes = 1472;
+/// Smallest configurable MTU (largest datagram for scene fragments): IPv4's 576 less headers.
+inline constexpr std::size_t kMinMtuBytes = 548;
 /// Contacts that fit in one contact-model datagram.
 inline constexpr int kMaxWireContacts = 14;
+/// Largest scene object (bytes) a sender fragments or a receiver reassembles.
+inline constexpr std::uint32_t kMaxSceneObjectBytes = 64u << 20;
 
-static_assert(kHeaderBytes + kContactModelFixedBytes + kMaxWireContacts * kContactBytes <=
-                  kMaxDatagramBytes,
+/// Bytes of one object carried per SceneFragment when datagrams are at most `mtu` bytes.
+constexpr std::size_t FragmentPayloadBytes(std::size_t mtu) noexcept {
+  return mtu - kHeaderBytes - kSceneFragmentFixedBytes - kMacBytes;
+}
+
+static_assert(kHeaderBytes + kContactModelFixedBytes + kMaxWireContacts * kContactBytes +
+                      kMacBytes <= kMaxDatagramBytes,
               "a full contact model must fit in one datagram");
+static_assert(kHeaderBytes + kSceneManifestFixedBytes + kMaxManifestEntries * kManifestEntryBytes +
+                      kMacBytes <= kMinMtuBytes,
+              "a full manifest must fit in the smallest MTU");
+static_assert(kHeaderBytes + kSceneNackFixedBytes + 2 * kMaxNackIndices + kMacBytes <= kMinMtuBytes,
+              "a full NACK must fit in the smallest MTU");
+static_assert(kHeaderBytes + kWelcomeBodyBytes + kMacBytes <= kMinMtuBytes);
+static_assert(kHeaderBytes + kRejectFixedBytes + kMaxRejectText + kMacBytes <= kMinMtuBytes);
 
 }  // namespace ht::wire

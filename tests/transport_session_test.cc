@@ -1,0 +1,373 @@
+// Keys, the replay window, session negotiation, the clock filter, scene fragmentation with NACK
+// repair through a lossy in-process channel, and a SecureLink under a flood of bad datagrams.
+#include <gtest/gtest.h>
+#include <sys/stat.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <fstream>
+#include <random>
+
+#include "transport/auth.h"
+#include "transport/link.h"
+#include "transport/scene_stream.h"
+#include "transport/session.h"
+
+namespace ht {
+namespace {
+
+std::string TempPath(const std::string& name) {
+  const std::string p = ::testing::TempDir() + "/" + name;
+  std::remove(p.c_str());
+  return p;
+}
+
+TEST(KeyFile, GeneratesWritesAndReadsBack) {
+  const std::string path = TempPath("key_roundtrip.key");
+  const MacKey k = MacKey::Generate();
+  WriteKeyFile(path, k, false);
+  struct stat st{};
+  ASSERT_EQ(::stat(path.c_str(), &st), 0);
+  EXPECT_EQ(st.st_mode & 0777, 0600u);
+  EXPECT_EQ(LoadKeyFile(path).bytes, k.bytes);
+  EXPECT_NE(MacKey::Generate().bytes, k.bytes);
+  EXPECT_THROW(WriteKeyFile(path, k, false), std::runtime_error);  // no silent overwrite
+  const MacKey k2 = MacKey::Generate();
+  WriteKeyFile(path, k2, true);
+  EXPECT_EQ(LoadKeyFile(path).bytes, k2.bytes);
+}
+
+TEST(KeyFile, RefusesLoosePermissionsAndBadContent) {
+  const std::string path = TempPath("key_loose.key");
+  WriteKeyFile(path, MacKey::Generate(), false);
+  ::chmod(path.c_str(), 0644);
+  try {
+    LoadKeyFile(path);
+    FAIL() << "a group/other-readable key was accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("chmod 600"), std::string::npos) << e.what();
+  }
+  ::chmod(path.c_str(), 0600);
+  { std::ofstream(path) << "not a key\n"; }
+  EXPECT_THROW(LoadKeyFile(path), std::runtime_error);
+  { std::ofstream(path) << std::string(63, 'a') << "\n"; }
+  EXPECT_THROW(LoadKeyFile(path), std::runtime_error);
+  { std::ofstream(path) << std::string(63, 'a') << "g\n"; }
+  EXPECT_THROW(LoadKeyFile(path), std::runtime_error);
+  EXPECT_THROW(LoadKeyFile(TempPath("missing.key")), std::runtime_error);
+  const MacKey k = MacKey::Generate();
+  EXPECT_EQ(MacKey::FromHex("  " + k.ToHex() + "\n").bytes, k.bytes);
+}
+
+TEST(ReplayWindow, ClassifiesNewestLateDuplicateAndTooOld) {
+  ReplayWindow w;
+  EXPECT_EQ(w.Accept(0), ReplayWindow::Verdict::kZero);
+  EXPECT_EQ(w.Accept(5), ReplayWindow::Verdict::kNewest);
+  EXPECT_EQ(w.Accept(3), ReplayWindow::Verdict::kLate);
+  EXPECT_EQ(w.Accept(3), ReplayWindow::Verdict::kDuplicate);
+  EXPECT_EQ(w.Accept(5), ReplayWindow::Verdict::kDuplicate);
+  EXPECT_EQ(w.Accept(4), ReplayWindow::Verdict::kLate);
+  EXPECT_EQ(w.Accept(5 + ReplayWindow::kBits), ReplayWindow::Verdict::kNewest);
+  EXPECT_EQ(w.Check(5), ReplayWindow::Verdict::kTooOld);
+  EXPECT_EQ(w.Check(6), ReplayWindow::Verdict::kLate);  // inside the window, never seen
+  w.Reset();
+  EXPECT_EQ(w.Accept(1), ReplayWindow::Verdict::kNewest);
+}
+
+TEST(ReplayWindow, MatchesASetOverARandomOrderWithDuplicates) {
+  // Two routes to one answer: the bitmap against an exact set, on a shuffled stream with repeats.
+  std::mt19937_64 rng(3);
+  std::vector<std::uint64_t> seq;
+  for (std::uint64_t s = 1; s <= 20000; ++s) {
+    seq.push_back(s);
+    if (rng() % 10 == 0) seq.push_back(s);
+  }
+  for (std::size_t i = 0; i + 1 < seq.size(); ++i) {  // local reordering up to 40 places
+    const std::size_t j = std::min(seq.size() - 1, i + rng() % 40);
+    std::swap(seq[i], seq[j]);
+  }
+  ReplayWindow w;
+  std::set<std::uint64_t> seen;
+  std::uint64_t highest = 0;
+  for (std::uint64_t s : seq) {
+    const auto v = w.Accept(s);
+    if (highest >= ReplayWindow::kBits && s <= highest - ReplayWindow::kBits) {
+      EXPECT_EQ(v, ReplayWindow::Verdict::kTooOld);
+      continue;
+    }
+    const bool fresh = seen.insert(s).second;
+    EXPECT_EQ(v == ReplayWindow::Verdict::kDuplicate, !fresh) << s;
+    EXPECT_EQ(v == ReplayWindow::Verdict::kNewest, fresh && s > highest) << s;
+    highest = std::max(highest, s);
+  }
+}
+
+TEST(Session, NegotiatesTheCommonGround) {
+  RemoteCapabilities caps;
+  caps.grid = 50;
+  caps.mtu = 1200;
+  caps.max_model_rate_hz = 2000;
+  caps.scene_objects = 2;
+  caps.scene_name = "block_on_gear";
+  wire::HelloMessage hello;
+  hello.max_model_rate_hz = 1000;
+  hello.mtu = 1472;
+  hello.peer_timeout_ms = 300;
+  caps.peer_timeout_ms = 800;
+  wire::WelcomeMessage w;
+  wire::RejectMessage r;
+  ASSERT_TRUE(NegotiateSession(hello, caps, w, r));
+  EXPECT_EQ(w.version, wire::kProtocolVersion);
+  EXPECT_EQ(w.mtu, 1200);
+  EXPECT_EQ(w.model_rate_hz, 1000.0f);
+  EXPECT_EQ(w.peer_timeout_ms, 800);
+  EXPECT_EQ(w.scene_objects, 2);
+  EXPECT_EQ(w.name(), "block_on_gear");
+  hello.codecs = 0;  // no Draco: no scene
+  ASSERT_TRUE(NegotiateSession(hello, caps, w, r));
+  EXPECT_EQ(w.scene_objects, 0);
+  hello = {};
+  hello.max_grid = 32;
+  EXPECT_FALSE(NegotiateSession(hello, caps, w, r));
+  EXPECT_EQ(r.reason, wire::RejectReason::kCapabilities);
+  EXPECT_NE(r.message().find("50"), std::string_view::npos);
+  hello = {};
+  hello.min_version = hello.max_version = 7;
+  EXPECT_FALSE(NegotiateSession(hello, caps, w, r));
+  EXPECT_EQ(r.reason, wire::RejectReason::kVersion);
+}
+
+TEST(Session, NonceHistoryRefusesRepeats) {
+  NonceHistory h;
+  EXPECT_TRUE(h.Insert(1));
+  EXPECT_FALSE(h.Insert(1));
+  for (std::uint64_t n = 2; n < 2 + NonceHistory::kSize; ++n) EXPECT_TRUE(h.Insert(n));
+  EXPECT_TRUE(h.Insert(1));  // forgotten after kSize others (documented limit)
+}
+
+TEST(ClockSync, RecoversAKnownOffsetFromAsymmetricNoise) {
+  ClockSync c;
+  std::mt19937 rng(5);
+  const std::int64_t offset = 123456789, base_delay = 200000;
+  for (int i = 0; i < 50; ++i) {
+    const std::int64_t t1 = 1000000000LL + i * 100000000LL;
+    const std::int64_t up = base_delay + static_cast<std::int64_t>(rng() % 3000000);
+    const std::int64_t down = base_delay + static_cast<std::int64_t>(rng() % 3000000);
+    const std::int64_t t2 = t1 + up + offset, t3 = t2 + 50000, t4 = t3 - offset + down;
+    ASSERT_TRUE(c.AddSample(t1, t2, t3, t4));
+  }
+  ASSERT_TRUE(c.valid());
+  // The error of the min-delay sample is at most half its round trip.
+  EXPECT_LE(std::llabs(c.offset_ns() - offset), c.rtt_ns() / 2);
+  EXPECT_GE(c.rtt_ns(), 2 * base_delay);
+  EXPECT_FALSE(c.AddSample(10, 5, 6, 9));  // t4 < t1
+}
+
+std::vector<std::uint8_t> RandomBytes(std::size_t n, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::vector<std::uint8_t> v(n);
+  for (auto& b : v) b = static_cast<std::uint8_t>(rng());
+  return v;
+}
+
+/// Runs a sender and a reassembler over a channel that loses, duplicates and reorders fragments
+/// (and manifests and NACKs), with simulated time; returns the rounds until the scene is complete.
+int RunLossyScene(double loss, std::uint32_t seed, SceneSender& sender, SceneReassembler& rx) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::int64_t now = 0;
+  const std::int64_t quiet = 30000000;
+  std::vector<std::vector<std::uint8_t>> in_flight;  // copies: payload spans must stay valid
+  std::vector<wire::SceneFragmentMessage> held;
+  for (int round = 0; round < 2000; ++round) {
+    now += 10000000;  // 10 ms per round
+    if (round % 25 == 0) {
+      for (const auto& m : sender.Manifest()) {
+        if (u(rng) >= loss) rx.OnManifest(m, now);
+      }
+    }
+    std::vector<std::pair<wire::SceneFragmentMessage, std::vector<std::uint8_t>>> batch;
+    wire::SceneFragmentMessage f;
+    for (int i = 0; i < 20 && sender.Next(f); ++i) {
+      if (u(rng) < loss) continue;
+      const int copies = u(rng) < 0.05 ? 2 : 1;
+      for (int c = 0; c < copies; ++c) batch.emplace_back(f, std::vector<std::uint8_t>(f.payload.begin(), f.payload.end()));
+    }
+    std::shuffle(batch.begin(), batch.end(), rng);
+    for (auto& [frag, bytes] : batch) {
+      frag.payload = bytes;
+      rx.Add(frag, now);
+    }
+    if (rx.SceneComplete()) return round;
+    rx.CollectNacks(now, quiet, [&](const wire::SceneNackMessage& n) {
+      if (u(rng) >= loss) sender.OnNack(n);
+    });
+  }
+  return -1;
+}
+
+TEST(SceneStream, ArrivesWholeThroughLossDuplicationAndReordering) {
+  for (double loss : {0.0, 0.05, 0.2, 0.5}) {
+    SceneSender sender(600);
+    const auto a = RandomBytes(70000, 1), b = RandomBytes(35, 2), c = RandomBytes(472 * 3, 3);
+    sender.Update(1, a);
+    sender.Update(2, b);
+    sender.Update(3, c);  // an exact multiple of the payload
+    SceneReassembler rx(600);
+    const int rounds = RunLossyScene(loss, 11, sender, rx);
+    ASSERT_GE(rounds, 0) << "loss " << loss;
+    EXPECT_EQ(rx.verified_objects(), 3u);
+    const auto got = rx.CompletedBytes(1);
+    EXPECT_TRUE(std::equal(got.begin(), got.end(), a.begin(), a.end()));
+    EXPECT_EQ(rx.stats().digest_mismatches, 0u);
+    if (loss > 0) EXPECT_GT(rx.stats().nacks_sent, 0u) << loss;
+  }
+}
+
+TEST(SceneStream, ANewerVersionSupersedesAnUnfinishedOlderOne) {
+  SceneSender sender(1472);
+  sender.Update(9, RandomBytes(10000, 4));
+  SceneReassembler rx(1472);
+  wire::SceneFragmentMessage f;
+  std::vector<std::uint8_t> keep;
+  ASSERT_TRUE(sender.Next(f));  // one fragment of version 1 only
+  EXPECT_EQ(rx.Add(f, 1), SceneReassembler::Outcome::kAccepted);
+  const auto v2 = RandomBytes(5000, 5);
+  EXPECT_EQ(sender.Update(9, v2), 2u);
+  int sent = 0;
+  while (sender.Next(f)) {
+    EXPECT_EQ(f.version, 2u);  // queued fragments of version 1 are skipped
+    rx.Add(f, 2);
+    ++sent;
+  }
+  EXPECT_EQ(sent, 4);
+  EXPECT_EQ(rx.stats().objects_superseded, 1u);
+  EXPECT_EQ(rx.bytes_held(), v2.size());  // the old buffer is gone
+  for (const auto& m : sender.Manifest()) rx.OnManifest(m, 3);
+  EXPECT_TRUE(rx.SceneComplete());
+  // A late fragment of version 1 is stale.
+  std::vector<std::uint8_t> old(1396, 0);
+  EXPECT_EQ(rx.Add({9, 1, 10000, 3, 8, old}, 4), SceneReassembler::Outcome::kStale);
+}
+
+TEST(SceneStream, ReassemblyMemoryIsBounded) {
+  ReassemblyLimits limits;
+  limits.max_object_bytes = 100000;
+  limits.max_total_bytes = 150000;
+  limits.max_objects = 4;
+  SceneReassembler rx(1472, limits);
+  std::vector<std::uint8_t> piece(1396, 1);
+  EXPECT_EQ(rx.Add({1, 1, 200000, 0, 144, piece}, 0), SceneReassembler::Outcome::kOverLimit);
+  EXPECT_EQ(rx.Add({1, 1, 90000, 0, 65, piece}, 0), SceneReassembler::Outcome::kAccepted);
+  EXPECT_EQ(rx.Add({2, 1, 90000, 0, 65, piece}, 0), SceneReassembler::Outcome::kOverLimit);
+  EXPECT_EQ(rx.bytes_held(), 90000u);
+  for (std::uint32_t id = 3; id < 10; ++id) rx.Add({id, 1, 2000, 0, 2, piece}, 0);
+  EXPECT_LE(rx.bytes_held(), limits.max_total_bytes);
+  EXPECT_GT(rx.stats().fragments_over_limit, 2u);
+  // Fragments that disagree with their object are refused, not copied out of bounds.
+  std::vector<std::uint8_t> small(10, 1);
+  EXPECT_EQ(rx.Add({1, 1, 90000, 1, 65, small}, 0), SceneReassembler::Outcome::kInconsistent);
+  EXPECT_EQ(rx.Add({1, 1, 90000, 1, 66, piece}, 0), SceneReassembler::Outcome::kInconsistent);
+  EXPECT_EQ(rx.Add({1, 1, 90001, 1, 65, piece}, 0), SceneReassembler::Outcome::kInconsistent);
+}
+
+TEST(SceneStream, ADigestMismatchIsDetectedAndRepaired) {
+  SceneSender sender(1472);
+  const auto bytes = RandomBytes(3000, 6);
+  sender.Update(4, bytes);
+  SceneReassembler rx(1472);
+  for (const auto& m : sender.Manifest()) rx.OnManifest(m, 0);
+  wire::SceneFragmentMessage f;
+  std::vector<std::uint8_t> corrupted;
+  ASSERT_TRUE(sender.Next(f));
+  corrupted.assign(f.payload.begin(), f.payload.end());
+  corrupted[7] ^= 1;
+  f.payload = corrupted;
+  rx.Add(f, 1);
+  while (sender.Next(f)) rx.Add(f, 1);
+  EXPECT_EQ(rx.stats().digest_mismatches, 1u);
+  EXPECT_FALSE(rx.SceneComplete());
+  rx.CollectNacks(1000000000, 30000000, [&](const wire::SceneNackMessage& n) { sender.OnNack(n); });
+  while (sender.Next(f)) rx.Add(f, 2000000000);
+  EXPECT_TRUE(rx.SceneComplete());
+}
+
+TEST(SceneStream, SenderRefusesBadNacksAndObjects) {
+  SceneSender sender(1472);
+  sender.Update(1, RandomBytes(5000, 7));
+  wire::SceneNackMessage n;
+  n.object_id = 1;
+  n.version = 1;
+  n.count = 1;
+  n.missing[0] = 4;  // 4 fragments: 0..3
+  EXPECT_FALSE(sender.OnNack(n));
+  n.version = 2;
+  n.missing[0] = 0;
+  EXPECT_FALSE(sender.OnNack(n));
+  n.object_id = 2;
+  EXPECT_FALSE(sender.OnNack(n));
+  EXPECT_THROW(sender.Update(3, {}), std::invalid_argument);
+  EXPECT_THROW(SceneSender(100), std::invalid_argument);
+}
+
+TEST(SecureLink, AFloodOfBadDatagramsIsCountedAndNeverAccepted) {
+  UdpSocket rx_socket(SocketAddress::Parse("127.0.0.1:0"));
+  UdpSocket tx_socket(SocketAddress::Parse("127.0.0.1:0"));
+  const MacKey key = MacKey::Generate(), wrong = MacKey::Generate();
+  SecureLink rx(rx_socket, key, LinkRole::kRemote);
+  SecureLink tx(tx_socket, key, LinkRole::kOperator);
+  SecureLink attacker(tx_socket, wrong, LinkRole::kOperator);
+  const std::uint32_t session = 77;
+  wire::ToolStateMessage state;
+  const SocketAddress to = rx_socket.local_address();
+  std::mt19937 rng(9);
+  int good_sent = 0;
+  std::array<std::uint8_t, wire::kMaxDatagramBytes + 1> buf{};
+  std::uint64_t accepted = 0;
+  for (int i = 0; i < 20000; ++i) {
+    switch (i % 5) {
+      case 0: tx.Send(wire::EncodeToolState(tx.NextHeader(wire::MessageType::kToolState, session), state, key), to); ++good_sent; break;
+      case 1: {  // forged: sequence numbers ahead of the real ones, so only the MAC can refuse them
+        wire::Header h = attacker.NextHeader(wire::MessageType::kToolState, session);
+        h.sequence += 1000000;
+        attacker.Send(wire::EncodeToolState(h, state, wrong), to);
+        break;
+      }
+      case 2: { std::array<std::uint8_t, 64> g{}; for (auto& b : g) b = static_cast<std::uint8_t>(rng()); tx_socket.SendTo(g, to); break; }
+      case 3: tx.Send(wire::EncodeContactModel(tx.NextHeader(wire::MessageType::kContactModel, session), {}, key), to); break;  // wrong direction
+      case 4: { std::vector<std::uint8_t> big(2000, 0x48); tx_socket.SendTo(big, to); break; }
+    }
+    SocketAddress from;
+    while (auto n = rx_socket.ReceiveFrom(buf, from)) {
+      wire::Header h;
+      std::span<const std::uint8_t> body;
+      bool late = false;
+      if (rx.Open({buf.data(), std::min(*n, buf.size())}, session, h, body, late) == wire::DecodeStatus::kOk) ++accepted;
+    }
+  }
+  for (int i = 0; i < 50; ++i) {
+    if (!rx_socket.WaitReadable(10)) break;
+    SocketAddress from;
+    while (auto n = rx_socket.ReceiveFrom(buf, from)) {
+      wire::Header h;
+      std::span<const std::uint8_t> body;
+      bool late = false;
+      if (rx.Open({buf.data(), std::min(*n, buf.size())}, session, h, body, late) == wire::DecodeStatus::kOk) ++accepted;
+    }
+  }
+  const std::uint64_t good_received = rx.stats(wire::MessageType::kToolState).received;
+  EXPECT_EQ(accepted, good_received);
+  EXPECT_LE(good_received, static_cast<std::uint64_t>(good_sent));
+  EXPECT_GT(good_received, 0u);
+  EXPECT_EQ(rx.rejected(wire::DecodeStatus::kBadMac), rx.stats(wire::MessageType::kToolState).rejected);
+  EXPECT_GT(rx.rejected(wire::DecodeStatus::kBadMac), 0u);
+  EXPECT_GT(rx.rejected(wire::DecodeStatus::kUnexpected), 0u);
+  EXPECT_GT(rx.rejected(wire::DecodeStatus::kTooLong), 0u);
+  // Everything that arrived is either accepted or counted as rejected.
+  std::uint64_t arrived_bad = 0;
+  for (int r = 1; r < wire::kDecodeStatusCount; ++r) arrived_bad += rx.rejected(static_cast<wire::DecodeStatus>(r));
+  EXPECT_EQ(arrived_bad, rx.rejected_total());
+}
+
+}  // namespace
+}  // namespace ht
