@@ -1,0 +1,107 @@
+// libFuzzer target for the datagram decoder (transport/messages.h) and the scene reassembler.
+// Each input is tried three ways:
+//   1. as a received datagram, through OpenDatagram and the body decoder of its type, under a fixed
+//      key (the MAC refuses almost everything: this covers the header and size checks);
+//   2. sealed with that key first (the input is taken as header + body and the MAC appended), so
+//      that every body decoder sees arbitrary bytes behind a valid MAC;
+//   3. every decoded scene fragment / manifest / NACK is fed to a SceneReassembler / SceneSender,
+//      whose memory must stay within its limits.
+// Build and run: tests/fuzz/run-fuzz (CI runs it for a bounded time).
+#include <cstddef>
+#include <cstdint>
+#include <cstdlib>
+
+#include "transport/messages.h"
+#include "transport/scene_stream.h"
+
+namespace {
+
+const ht::MacKey& Key() {
+  static const ht::MacKey key = [] {
+    ht::MacKey k;
+    for (std::size_t i = 0; i < k.bytes.size(); ++i) k.bytes[i] = static_cast<std::uint8_t>(i * 7 + 1);
+    return k;
+  }();
+  return key;
+}
+
+void Check(bool ok) {
+  if (!ok) std::abort();
+}
+
+void DecodeBody(const ht::wire::Header& h, std::span<const std::uint8_t> body) {
+  using namespace ht::wire;
+  static ht::SceneReassembler reassembler(kMinMtuBytes, [] {
+    ht::ReassemblyLimits l;
+    l.max_object_bytes = 1 << 20;
+    l.max_total_bytes = 2 << 20;
+    l.max_objects = 16;
+    return l;
+  }());
+  static ht::SceneSender sender = [] {
+    ht::SceneSender s(kMinMtuBytes);
+    s.Update(1, std::vector<std::uint8_t>(5000, 1));
+    return s;
+  }();
+  static std::int64_t now = 0;
+  now += 1000000;
+  switch (h.type) {
+    case MessageType::kToolState: { ToolStateMessage m; if (DecodeToolState(body, m) == DecodeStatus::kOk) Check(ht::IsFiniteRigidTransform(m.X_WT)); break; }
+    case MessageType::kContactModel: { ContactModelMessage m; if (DecodeContactModel(body, m) == DecodeStatus::kOk) Check(m.model.num_contacts <= kMaxWireContacts); break; }
+    case MessageType::kGoodbye:
+    case MessageType::kPing: (void)DecodeEmpty(body); break;
+    case MessageType::kHello: { HelloMessage m; if (DecodeHello(body, m) == DecodeStatus::kOk) Check(m.mtu >= kMinMtuBytes); break; }
+    case MessageType::kWelcome: { WelcomeMessage m; if (DecodeWelcome(body, m) == DecodeStatus::kOk) Check(m.name().size() <= kSceneNameBytes); break; }
+    case MessageType::kReject: { RejectMessage m; if (DecodeReject(body, m) == DecodeStatus::kOk) Check(m.message().size() <= kMaxRejectText); break; }
+    case MessageType::kPong: { PongMessage m; (void)DecodePong(body, m); break; }
+    case MessageType::kSceneFragment: {
+      SceneFragmentMessage m;
+      if (DecodeSceneFragment(body, m) == DecodeStatus::kOk) {
+        reassembler.Add(m, now);
+        Check(reassembler.bytes_held() <= (2u << 20));
+      }
+      break;
+    }
+    case MessageType::kSceneManifest: {
+      SceneManifestMessage m;
+      if (DecodeSceneManifest(body, m) == DecodeStatus::kOk) {
+        reassembler.OnManifest(m, now);
+        Check(reassembler.manifest_objects() <= 16);
+        reassembler.CollectNacks(now, 0, [](const SceneNackMessage& n) { Check(n.count <= kMaxNackIndices); });
+      }
+      break;
+    }
+    case MessageType::kSceneNack: {
+      SceneNackMessage m;
+      if (DecodeSceneNack(body, m) == DecodeStatus::kOk) {
+        sender.OnNack(m);
+        SceneFragmentMessage f;
+        for (int i = 0; i < 20 && sender.Next(f); ++i) Check(f.payload.size() <= f.object_bytes);
+      }
+      break;
+    }
+  }
+}
+
+}  // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  using namespace ht::wire;
+  const std::span<const std::uint8_t> input(data, size);
+  Header h;
+  std::span<const std::uint8_t> body;
+  if (OpenDatagram(input, Key(), h, body) == DecodeStatus::kOk) DecodeBody(h, body);
+  // Sealed: the same bytes behind a valid MAC.
+  if (size >= kHeaderBytes && size + kMacBytes <= kMaxDatagramBytes) {
+    Datagram d;
+    std::copy(data, data + size, d.bytes.begin());
+    d.size = size;
+    ht::ComputeMac(d.view(), Key(), std::span<std::uint8_t, kMacBytes>(d.bytes.data() + size, kMacBytes));
+    d.size += kMacBytes;
+    if (OpenDatagram(d.view(), Key(), h, body) == DecodeStatus::kOk) {
+      Check(body.size() == size - kHeaderBytes);
+      DecodeBody(h, body);
+    }
+  }
+  return 0;
+}
