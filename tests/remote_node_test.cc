@@ -106,14 +106,28 @@ TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
   EXPECT_GT(model.model.contacts[0].depth_m, 0.0);
   EXPECT_GT(model.model.F_T_W_at_q0.force.z, 0.0);  // pushes the block up, away from the gear
 
-  socket.SendTo(d.view(), remote);               // replayed
-  socket.SendTo(hello_datagram.view(), remote);  // a replayed Hello must not open a session
+  socket.SendTo(d.view(), remote);  // replayed
   wire::Datagram forged =
       wire::EncodeToolState({wire::MessageType::kToolState, session, 2, 0}, state, config.key);
   forged.bytes[40] ^= 0x10;
   socket.SendTo(forged.view(), remote);  // forged
+  // The same Hello again (a retransmission) is welcomed into the same session.
+  socket.SendTo(hello_datagram.view(), remote);
+  ASSERT_TRUE(Await(socket, config.key, wire::MessageType::kWelcome, h, [&](auto body) {
+    return wire::DecodeWelcome(body, welcome) == wire::DecodeStatus::kOk;
+  }));
+  EXPECT_EQ(h.session_id, session);
+  // A new Hello opens a new session; after that, the first Hello played again opens nothing.
+  hello.client_nonce = 999;
+  socket.SendTo(wire::EncodeHello({wire::MessageType::kHello, 0, 3, 0}, hello, config.key).view(), remote);
+  ASSERT_TRUE(Await(socket, config.key, wire::MessageType::kWelcome, h, [&](auto body) {
+    return wire::DecodeWelcome(body, welcome) == wire::DecodeStatus::kOk && welcome.client_nonce == 999;
+  }));
+  const std::uint32_t session2 = h.session_id;
+  EXPECT_NE(session2, session);
+  socket.SendTo(hello_datagram.view(), remote);
   const wire::Datagram bye =
-      wire::EncodeGoodbye({wire::MessageType::kGoodbye, session, 1, 0}, config.key);
+      wire::EncodeGoodbye({wire::MessageType::kGoodbye, session2, 1, 0}, config.key);
   socket.SendTo(bye.view(), remote);
   for (int i = 0; i < 200 && !summary.is_object(); ++i) {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
@@ -126,10 +140,12 @@ TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
   EXPECT_EQ(t["rejected_by_reason"]["wrong_session"].get<int>(), 1);
   EXPECT_EQ(t["rejected_by_reason"]["replayed"].get<int>(), 2);
   EXPECT_EQ(t["hello_replayed"].get<int>(), 1);
-  EXPECT_EQ(t["sessions"].get<int>(), 1);
+  EXPECT_EQ(t["hello_retransmits"].get<int>(), 1);
+  EXPECT_EQ(t["sessions"].get<int>(), 2);
   EXPECT_EQ(t["goodbyes"].get<int>(), 1);
   EXPECT_EQ(t["streams"]["tool_state"]["received"].get<int>(), 1);
   EXPECT_EQ(t["streams"]["tool_state"]["duplicate"].get<int>(), 1);
+  EXPECT_EQ(t["streams"]["hello"]["received"].get<int>(), 3);  // first, retransmitted, second
   EXPECT_GE(t["streams"]["scene_fragment"]["sent"].get<int>(), 3);  // 3000 B in 1396 B pieces
   EXPECT_GE(summary["steps"].get<int>(), 1);
 }

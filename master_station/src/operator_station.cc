@@ -223,9 +223,14 @@ class NetworkWorker {
   }
 
  private:
+  /// Sends (or resends) the Hello of the current connection attempt. One attempt keeps its nonce
+  /// over retransmissions, so that a round trip longer than the reconnect period still completes:
+  /// the remote node answers a repeated nonce with the same session.
   void SendHello() {
-    if (session_ == 0 && hello_nonce_ != 0) link_.ResetSession();
-    hello_nonce_ = RandomNonce();
+    if (hello_nonce_ == 0) {  // a new attempt
+      link_.ResetSession();
+      hello_nonce_ = RandomNonce();
+    }
     wire::HelloMessage hello;
     hello.client_nonce = hello_nonce_;
     hello.tool_state_rate_hz = static_cast<float>(config_.loop_rate_hz);
@@ -266,7 +271,7 @@ class NetworkWorker {
         link_.ResetSession();
         session_ = header.session_id;
         ++sessions_;
-        hello_nonce_ = 0;
+        hello_nonce_ = 0;  // the next attempt (after a loss) gets a new nonce
         mtu_ = w.mtu;
         heartbeat_ns_ = std::int64_t{w.heartbeat_ms} * 1000000;
         peer_timeout_ns_ = std::int64_t{w.peer_timeout_ms} * 1000000;

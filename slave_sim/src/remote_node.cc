@@ -97,6 +97,8 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   texture_us.reserve(1 << 20);
 
   std::uint32_t session = 0;
+  std::uint64_t session_nonce = 0, hello_retransmits = 0;
+  wire::WelcomeMessage session_welcome;
   SocketAddress peer;
   std::int64_t peer_timeout_ns = 0, model_period_ns = 0, last_model_sent_ns = 0;
   bool have_state = false;
@@ -149,6 +151,15 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
             link.CountBodyRejected(header.type, st);
             break;
           }
+          if (session != 0 && hello.client_nonce == session_nonce) {
+            // The operator retransmitted its Hello before our Welcome reached it (round trip
+            // longer than its retry period): the same session, welcomed again.
+            ++hello_retransmits;
+            link.Send(wire::EncodeWelcome(link.NextHeader(wire::MessageType::kWelcome, session),
+                                          session_welcome, config.key),
+                      from);
+            break;
+          }
           if (!nonces.Insert(hello.client_nonce)) {  // a recorded Hello played again
             ++hello_replayed;
             link.CountBodyRejected(header.type, wire::DecodeStatus::kReplayed);
@@ -171,6 +182,8 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
           while (id == session) id = RandomSessionId();
           link.ResetSession();
           session = id;
+          session_nonce = hello.client_nonce;
+          session_welcome = welcome;
           peer = from;
           ++sessions;
           peer_timeout_ns = std::int64_t{welcome.peer_timeout_ms} * 1000000;
@@ -364,6 +377,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   transport["goodbyes"] = goodbyes;
   transport["peers_lost"] = peers_lost;
   transport["hello_replayed"] = hello_replayed;
+  transport["hello_retransmits"] = hello_retransmits;
   transport["rejects_sent"] = rejects_sent;
   transport["mtu"] = config.mtu;
   transport["scene"] = {{"objects", config.scene_objects.size()},

@@ -241,6 +241,10 @@ void SceneReassembler::OnManifest(const wire::SceneManifestMessage& m, std::int6
   manifest_total_ = m.total_objects;
   for (int i = 0; i < m.count; ++i) {
     const wire::ManifestEntry& e = m.entries[static_cast<std::size_t>(i)];
+    if (manifest_.size() >= limits_.max_objects && !manifest_.contains(e.object_id)) {
+      ++stats_.fragments_over_limit;  // a hostile manifest cannot grow memory
+      continue;
+    }
     auto [it, inserted] = manifest_.try_emplace(e.object_id);
     if (inserted || it->second.entry.version != e.version) {
       it->second.entry = e;
@@ -253,9 +257,6 @@ void SceneReassembler::OnManifest(const wire::SceneManifestMessage& m, std::int6
       ++stats_.digest_mismatches;
       Release(o->second);
     }
-  }
-  if (manifest_.size() > limits_.max_objects) {  // a hostile manifest cannot grow memory
-    manifest_.erase(std::prev(manifest_.end()));
   }
 }
 

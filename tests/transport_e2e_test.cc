@@ -1,0 +1,114 @@
+// Checks a finished run-loopback (or netns-split-test) run made through the impairment relay:
+// the session held, nothing crashed, the scene arrived whole, and each side's per-stream counts
+// agree with what the relay says it did. The run's directory comes from HT_LOOPBACK_OUT.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+
+namespace {
+
+nlohmann::json LoadSummary(bool& missing) {
+  const char* dir = std::getenv("HT_LOOPBACK_OUT");
+  missing = true;
+  if (!dir) return {};
+  std::ifstream in(std::string(dir) + "/summary.json");
+  if (!in) return {};
+  missing = false;
+  return nlohmann::json::parse(in);
+}
+
+std::uint64_t Get(const nlohmann::json& j, const char* key) {
+  return j.contains(key) ? j[key].get<std::uint64_t>() : 0;
+}
+
+class ImpairedRun : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    bool missing = true;
+    s_ = LoadSummary(missing);
+    if (missing && std::getenv("HT_E2E_OPTIONAL")) {
+      GTEST_SKIP() << "no summary.json in HT_LOOPBACK_OUT: the run was skipped";
+    }
+    ASSERT_FALSE(missing) << "no summary.json in HT_LOOPBACK_OUT (did the run fail?)";
+    ASSERT_TRUE(s_.contains("relay")) << "the run was not made through ht_relay";
+    ASSERT_TRUE(s_.contains("remote"));
+  }
+  nlohmann::json s_;
+};
+
+TEST_F(ImpairedRun, TheSessionHeldAndNothingWentNonFinite) {
+  const auto& t = s_["transport"];
+  EXPECT_EQ(s_["nonfinite_count"].get<int>(), 0);
+  EXPECT_EQ(t["sessions"].get<int>(), 1);
+  EXPECT_EQ(t["peers_lost"].get<int>(), 0);
+  EXPECT_EQ(s_["remote"]["transport"]["peers_lost"].get<int>(), 0);
+  EXPECT_GT(t["streams"]["contact_model"]["received"].get<int>(), 0);
+  EXPECT_EQ(t["rejected_by_reason"].value("bad_mac", 0), 0);
+  EXPECT_EQ(s_["remote"]["transport"]["rejected_by_reason"].value("bad_mac", 0), 0);
+}
+
+TEST_F(ImpairedRun, TheSceneArrivedWholeAndDecodes) {
+  const auto& scene = s_["transport"]["scene"];
+  ASSERT_TRUE(scene["complete"].get<bool>());
+  EXPECT_EQ(scene["verified_objects"].get<int>(), scene["announced_objects"].get<int>());
+  EXPECT_EQ(scene["digest_mismatches"].get<int>(), 0);
+  for (const auto& o : scene["decoded"]) {
+    EXPECT_FALSE(o.contains("error")) << o.dump();
+    EXPECT_GT(o["triangles"].get<int>(), 0);
+  }
+}
+
+/// Receiver vs relay for one stream in one direction. A datagram the relay forwarded reaches the
+/// receiver as received (unique) or duplicate, except those still travelling when the receiver
+/// stopped (the tail): so received + duplicate <= forwarded, short by at most the tail. The
+/// receiver's "lost" (holes below its highest sequence number) are the relay's drops, except drops
+/// in the tail. The tail is bounded by the stream's rate times the one-way delay plus the
+/// shutdown time; `tail` states it. Reordering (jitter) can leave a few holes just below the
+/// highest number when the receiver stops, which were not drops: `kReorderSlack` of them.
+constexpr double kReorderSlack = 25.0;  // 1 kHz x (2 x 5 ms jitter + shutdown), rounded up
+
+void ExpectMatches(const nlohmann::json& rx, const nlohmann::json& relay, double tail,
+                   const char* what) {
+  SCOPED_TRACE(what);
+  const double forwarded = static_cast<double>(Get(relay, "forwarded"));
+  const double dropped = static_cast<double>(Get(relay, "dropped_loss") + Get(relay, "dropped_queue"));
+  const double duplicated = static_cast<double>(Get(relay, "duplicated"));
+  const double received = static_cast<double>(Get(rx, "received") + Get(rx, "rejected"));
+  const double dup = static_cast<double>(Get(rx, "duplicate"));
+  const double lost = static_cast<double>(Get(rx, "lost"));
+  // Every datagram of the stream the receiver saw came through the relay.
+  EXPECT_LE(received, forwarded + 0.5);
+  EXPECT_GE(received, forwarded - tail);
+  // Duplicates: the relay's copies, each seen once as a duplicate (minus copies in the tail).
+  EXPECT_LE(dup, duplicated + 0.5);
+  EXPECT_GE(dup, duplicated - tail);
+  // Losses.
+  EXPECT_LE(lost, dropped + kReorderSlack);
+  EXPECT_GE(lost, dropped - tail);
+}
+
+TEST_F(ImpairedRun, ToolStateCountsMatchTheRelay) {
+  const auto& relay = s_["relay"]["up"]["tool_state"];
+  const auto& sent = s_["transport"]["streams"]["tool_state"];
+  const auto& rx = s_["remote"]["transport"]["streams"]["tool_state"];
+  // Everything the operator sent reached the relay (loopback/veth lose nothing by themselves).
+  EXPECT_EQ(Get(sent, "sent"), Get(relay, "received"));
+  const double delay_s = s_["relay"].value("up_delay_s", 0.2);
+  ExpectMatches(rx, relay, 1000.0 * (delay_s + 0.05) * 0.25 + 5, "tool_state up");
+}
+
+TEST_F(ImpairedRun, ContactModelCountsMatchTheRelay) {
+  const auto& relay = s_["relay"]["down"]["contact_model"];
+  const auto& sent = s_["remote"]["transport"]["streams"]["contact_model"];
+  const auto& rx = s_["transport"]["streams"]["contact_model"];
+  EXPECT_EQ(Get(sent, "sent"), Get(relay, "received"));
+  // The remote node keeps sending models until the goodbye reaches it: one round trip of them
+  // (up to 1000/s) can be in flight when the operator stops listening.
+  ExpectMatches(rx, relay, 1000.0 * 0.4 + 10, "contact_model down");
+}
+
+}  // namespace
