@@ -113,6 +113,7 @@ class NetworkWorker {
       const std::int64_t now = SteadyNowNs();
       if (session_ != 0 && now - link_.last_authenticated_ns() > peer_timeout_ns_) {
         ++peers_lost_;
+        loss_detected_after_ms_.push_back((now - link_.last_authenticated_ns()) * 1e-6);
         std::printf("[master] remote node lost (nothing authenticated for %.0f ms); reconnecting\n",
                     (now - link_.last_authenticated_ns()) * 1e-6);
         std::fflush(stdout);
@@ -186,6 +187,7 @@ class NetworkWorker {
     nlohmann::json t = link_.StatsJson();
     t["sessions"] = sessions_;
     t["peers_lost"] = peers_lost_;
+    t["peer_lost_detected_after_ms"] = loss_detected_after_ms_;
     t["remote_goodbyes"] = remote_goodbyes_;
     t["hellos_sent"] = hellos_sent_;
     t["mtu"] = mtu_;
@@ -422,6 +424,7 @@ class NetworkWorker {
   bool scene_complete_ = false;
   double scene_complete_ms_ = -1.0;
   std::vector<nlohmann::json> scene_objects_;
+  std::vector<double> loss_detected_after_ms_;
   std::vector<double> rtt_ms_, one_way_ms_, remote_step_us_, contact_step_us_, collision_us_,
       texture_us_;
   std::int64_t first_remote_ns_ = 0, last_remote_ns_ = 0;
