@@ -68,7 +68,8 @@ void OpenLoop(benchmark::State& state, LinkRole role, wire::MessageType type, En
   UdpSocket socket(SocketAddress::Parse("127.0.0.1:0"));
   SecureLink link(socket, Key(), role);
   std::vector<wire::Datagram> datagrams(4096);
-  for (std::size_t i = 0; i < datagrams.size(); ++i) datagrams[i] = encode(wire::Header{type, 7, i + 1, 0});
+  for (std::size_t i = 0; i < datagrams.size(); ++i)
+    datagrams[i] = encode(wire::Header{type, 7, i + 1, 0});
   std::size_t i = 0;
   for (auto _ : state) {
     if (i == datagrams.size()) {  // a new session, so that the same sequence numbers are fresh
@@ -143,7 +144,8 @@ void RoundTrip(benchmark::State& state, bool sealed) {
       wire::ToolStateMessage m;
       if (lb.Open({buf.data(), *n}, 7, h, body, late) == wire::DecodeStatus::kOk &&
           wire::DecodeToolState(body, m) == wire::DecodeStatus::kOk) {
-        lb.Send(wire::EncodeContactModel(lb.NextHeader(wire::MessageType::kContactModel, 7), model, Key()),
+        lb.Send(wire::EncodeContactModel(lb.NextHeader(wire::MessageType::kContactModel, 7), model,
+                                         Key()),
                 to_a);
       }
     }
@@ -152,7 +154,8 @@ void RoundTrip(benchmark::State& state, bool sealed) {
   const wire::Datagram raw_request = wire::EncodeToolState({}, {}, Key());
   for (auto _ : state) {
     if (sealed) {
-      la.Send(wire::EncodeToolState(la.NextHeader(wire::MessageType::kToolState, 7), {}, Key()), to_b);
+      la.Send(wire::EncodeToolState(la.NextHeader(wire::MessageType::kToolState, 7), {}, Key()),
+              to_b);
     } else {
       a.SendTo(raw_request.view(), to_b);
     }

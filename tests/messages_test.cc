@@ -12,7 +12,8 @@ namespace {
 
 MacKey TestKey(std::uint8_t seed = 7) {
   MacKey k;
-  for (std::size_t i = 0; i < k.bytes.size(); ++i) k.bytes[i] = static_cast<std::uint8_t>(seed + 13 * i);
+  for (std::size_t i = 0; i < k.bytes.size(); ++i)
+    k.bytes[i] = static_cast<std::uint8_t>(seed + 13 * i);
   return k;
 }
 
@@ -43,17 +44,45 @@ DecodeStatus OpenAndDecode(std::span<const std::uint8_t> bytes, const MacKey& ke
   std::span<const std::uint8_t> body;
   if (const DecodeStatus s = OpenDatagram(bytes, key, h, body); s != DecodeStatus::kOk) return s;
   switch (h.type) {
-    case MessageType::kToolState: { ToolStateMessage m; return DecodeToolState(body, m); }
-    case MessageType::kContactModel: { ContactModelMessage m; return DecodeContactModel(body, m); }
+    case MessageType::kToolState: {
+      ToolStateMessage m;
+      return DecodeToolState(body, m);
+    }
+    case MessageType::kContactModel: {
+      ContactModelMessage m;
+      return DecodeContactModel(body, m);
+    }
     case MessageType::kGoodbye:
-    case MessageType::kPing: return DecodeEmpty(body);
-    case MessageType::kHello: { HelloMessage m; return DecodeHello(body, m); }
-    case MessageType::kWelcome: { WelcomeMessage m; return DecodeWelcome(body, m); }
-    case MessageType::kReject: { RejectMessage m; return DecodeReject(body, m); }
-    case MessageType::kPong: { PongMessage m; return DecodePong(body, m); }
-    case MessageType::kSceneFragment: { SceneFragmentMessage m; return DecodeSceneFragment(body, m); }
-    case MessageType::kSceneManifest: { SceneManifestMessage m; return DecodeSceneManifest(body, m); }
-    case MessageType::kSceneNack: { SceneNackMessage m; return DecodeSceneNack(body, m); }
+    case MessageType::kPing:
+      return DecodeEmpty(body);
+    case MessageType::kHello: {
+      HelloMessage m;
+      return DecodeHello(body, m);
+    }
+    case MessageType::kWelcome: {
+      WelcomeMessage m;
+      return DecodeWelcome(body, m);
+    }
+    case MessageType::kReject: {
+      RejectMessage m;
+      return DecodeReject(body, m);
+    }
+    case MessageType::kPong: {
+      PongMessage m;
+      return DecodePong(body, m);
+    }
+    case MessageType::kSceneFragment: {
+      SceneFragmentMessage m;
+      return DecodeSceneFragment(body, m);
+    }
+    case MessageType::kSceneManifest: {
+      SceneManifestMessage m;
+      return DecodeSceneManifest(body, m);
+    }
+    case MessageType::kSceneNack: {
+      SceneNackMessage m;
+      return DecodeSceneNack(body, m);
+    }
   }
   return DecodeStatus::kUnknownType;
 }
@@ -92,7 +121,8 @@ std::vector<Datagram> OneOfEach(const MacKey& key) {
   out.push_back(EncodeReject(h, r, key));
   out.push_back(EncodePing(h, key));
   out.push_back(EncodePong(h, {9, 100, 200}, key));
-  SceneFragmentMessage f{7, 2, 3000, 1, 3, std::span<const std::uint8_t>(object).subspan(1396, 1396)};
+  SceneFragmentMessage f{7, 2, 3000,
+                         1, 3, std::span<const std::uint8_t>(object).subspan(1396, 1396)};
   out.push_back(EncodeSceneFragment(h, f, key));
   SceneManifestMessage m;
   m.total_objects = 2;
@@ -153,7 +183,8 @@ TEST(Messages, FieldsSurviveTheRoundTrip) {
     EXPECT_EQ(out.hold_ns, 1500);
     for (int i = 0; i < n; ++i) {
       EXPECT_EQ(out.model.contacts[i].depth_m, cm.model.contacts[i].depth_m);
-      EXPECT_EQ(out.model.contacts[i].gradient.d_rotation_W, cm.model.contacts[i].gradient.d_rotation_W);
+      EXPECT_EQ(out.model.contacts[i].gradient.d_rotation_W,
+                cm.model.contacts[i].gradient.d_rotation_W);
     }
   }
 
@@ -206,7 +237,8 @@ TEST(Messages, TruncatedBodiesThatStillCarryAValidMacAreRejected) {
       std::copy(d.bytes.begin(), d.bytes.begin() + static_cast<long>(d.size - kMacBytes - cut),
                 t.bytes.begin());
       t.size = d.size - kMacBytes - cut;
-      ComputeMac(t.view(), key, std::span<std::uint8_t, kMacBytes>(t.bytes.data() + t.size, kMacBytes));
+      ComputeMac(t.view(), key,
+                 std::span<std::uint8_t, kMacBytes>(t.bytes.data() + t.size, kMacBytes));
       t.size += kMacBytes;
       const DecodeStatus s = OpenAndDecode(t.view(), key);
       EXPECT_NE(s, DecodeStatus::kOk) << "type " << type << " cut " << cut;
@@ -221,8 +253,8 @@ TEST(Messages, AnySingleBitFlipIsRejected) {
     for (std::size_t bit = 0; bit < d.size * 8; ++bit) {
       Datagram f = d;
       f.bytes[bit / 8] ^= static_cast<std::uint8_t>(1u << (bit % 8));
-      ASSERT_NE(OpenAndDecode(f.view(), key), DecodeStatus::kOk) << "type " << int(d.bytes[6])
-                                                                 << " bit " << bit;
+      ASSERT_NE(OpenAndDecode(f.view(), key), DecodeStatus::kOk)
+          << "type " << int(d.bytes[6]) << " bit " << bit;
       ++flips;
     }
   }
@@ -238,7 +270,8 @@ TEST(Messages, AnotherKeyIsRejectedAsBadMac) {
 
 TEST(Messages, HeaderFieldsAreCheckedBeforeTheMac) {
   const MacKey key = TestKey();
-  const Datagram good = EncodeToolState({MessageType::kToolState, 1, 1, 0}, ToolStateMessage{}, key);
+  const Datagram good =
+      EncodeToolState({MessageType::kToolState, 1, 1, 0}, ToolStateMessage{}, key);
   auto mutate = [&](std::size_t offset, std::uint8_t value) {
     Datagram d = good;
     d.bytes[offset] = value;
@@ -263,10 +296,12 @@ DecodeStatus Sealed(Encode&& encode) {
 TEST(Messages, NonFiniteAndImpossibleValuesAreRejectedEvenWithAValidMac) {
   ToolStateMessage m;
   m.X_WT.translation.x = NAN;
-  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeToolState({}, m, k); }), DecodeStatus::kNonFinite);
+  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeToolState({}, m, k); }),
+            DecodeStatus::kNonFinite);
   m = {};
   m.X_WT.rotation = glm::dquat(3.0, 0, 0, 0);
-  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeToolState({}, m, k); }), DecodeStatus::kBadValue);
+  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeToolState({}, m, k); }),
+            DecodeStatus::kBadValue);
   ContactModelMessage cm = SampleModel(2);
   cm.model.contacts[1].gradient.d_translation_W.y = INFINITY;
   EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeContactModel({}, cm, k); }),
@@ -279,46 +314,58 @@ TEST(Messages, NonFiniteAndImpossibleValuesAreRejectedEvenWithAValidMac) {
               Datagram d = EncodeContactModel({}, SampleModel(0), k);
               d.size -= kMacBytes;
               d.bytes[kHeaderBytes + kContactModelFixedBytes - 1] = kMaxWireContacts + 1;
-              ComputeMac(d.view(), k, std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size, kMacBytes));
+              ComputeMac(d.view(), k,
+                         std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size, kMacBytes));
               d.size += kMacBytes;
               return d;
             }),
             DecodeStatus::kBadCount);
   HelloMessage hello;
   hello.mtu = 100;  // below the smallest MTU
-  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeHello({}, hello, k); }), DecodeStatus::kBadValue);
+  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeHello({}, hello, k); }),
+            DecodeStatus::kBadValue);
   hello = {};
   hello.min_version = 5;
   hello.max_version = 3;
-  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeHello({}, hello, k); }), DecodeStatus::kBadValue);
+  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeHello({}, hello, k); }),
+            DecodeStatus::kBadValue);
   hello = {};
   hello.tool_state_rate_hz = NAN;
-  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeHello({}, hello, k); }), DecodeStatus::kNonFinite);
+  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeHello({}, hello, k); }),
+            DecodeStatus::kNonFinite);
   WelcomeMessage w = SampleWelcome();
   w.scene_name_length = 40;
   EXPECT_EQ(Sealed([&](const MacKey& k) {
               Datagram d = EncodeWelcome({}, SampleWelcome(), k);
               d.size -= kMacBytes;
               d.bytes[kHeaderBytes + 36] = 40;  // name length beyond its field
-              ComputeMac(d.view(), k, std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size, kMacBytes));
+              ComputeMac(d.view(), k,
+                         std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size, kMacBytes));
               d.size += kMacBytes;
               return d;
             }),
             DecodeStatus::kBadValue);
   static const std::vector<std::uint8_t> bytes(10, 1);
   SceneFragmentMessage f{1, 1, 10, 3, 3, bytes};  // index >= count
-  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeSceneFragment({}, f, k); }), DecodeStatus::kBadValue);
+  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeSceneFragment({}, f, k); }),
+            DecodeStatus::kBadValue);
   f = {1, 1, 5, 0, 1, bytes};  // payload longer than the object
-  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeSceneFragment({}, f, k); }), DecodeStatus::kBadValue);
+  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeSceneFragment({}, f, k); }),
+            DecodeStatus::kBadValue);
   f = {1, 1, kMaxSceneObjectBytes + 1, 0, 60000, bytes};
-  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeSceneFragment({}, f, k); }), DecodeStatus::kBadValue);
+  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeSceneFragment({}, f, k); }),
+            DecodeStatus::kBadValue);
   SceneManifestMessage man;
   man.total_objects = 1;
   man.first_index = 1;
   man.count = 1;
   man.entries[0] = {1, 1, 10, 1, SceneObjectKind::kDracoMesh, {}};
-  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeSceneManifest({}, man, k); }), DecodeStatus::kBadValue);
-  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodePong({}, {0, 1, 2}, k); }), DecodeStatus::kBadValue);
+  EXPECT_EQ(Sealed([&](const MacKey& k) { return EncodeSceneManifest({}, man, k); }),
+            DecodeStatus::kBadValue);
+  EXPECT_EQ(Sealed([&](const MacKey& k) {
+              return EncodePong({}, {0, 1, 2}, k);
+            }),
+            DecodeStatus::kBadValue);
 }
 
 TEST(Messages, RandomBytesNeverOpenOrCrash) {
@@ -330,9 +377,14 @@ TEST(Messages, RandomBytesNeverOpenOrCrash) {
     const std::size_t len = rng() % buf.size();
     for (std::size_t k = 0; k < len; ++k) buf[k] = static_cast<std::uint8_t>(rng());
     if (len >= 8 && i % 2 == 0) {  // a valid-looking header, so that the MAC is what refuses it
-      buf[0] = 'H'; buf[1] = 'T'; buf[2] = 'L'; buf[3] = 'P';
-      buf[4] = kProtocolVersion; buf[5] = 0;
-      buf[6] = static_cast<std::uint8_t>(1 + rng() % kMaxMessageType); buf[7] = 0;
+      buf[0] = 'H';
+      buf[1] = 'T';
+      buf[2] = 'L';
+      buf[3] = 'P';
+      buf[4] = kProtocolVersion;
+      buf[5] = 0;
+      buf[6] = static_cast<std::uint8_t>(1 + rng() % kMaxMessageType);
+      buf[7] = 0;
     }
     accepted += OpenAndDecode({buf.data(), len}, key) == DecodeStatus::kOk;
   }

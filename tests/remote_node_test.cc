@@ -16,7 +16,8 @@ namespace {
 
 MacKey TestKey(std::uint8_t seed) {
   MacKey k;
-  for (std::size_t i = 0; i < k.bytes.size(); ++i) k.bytes[i] = static_cast<std::uint8_t>(seed + 3 * i);
+  for (std::size_t i = 0; i < k.bytes.size(); ++i)
+    k.bytes[i] = static_cast<std::uint8_t>(seed + 3 * i);
   return k;
 }
 
@@ -73,12 +74,14 @@ TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
   state.X_WT = scene.X_WT_home;
   state.X_WT.translation.z -= 0.5e-3;  // pressed onto the ridges
   // Before any session, even an authenticated tool state is refused.
-  socket.SendTo(wire::EncodeToolState({wire::MessageType::kToolState, 77, 1, 0}, state, config.key).view(),
-                remote);
+  socket.SendTo(
+      wire::EncodeToolState({wire::MessageType::kToolState, 77, 1, 0}, state, config.key).view(),
+      remote);
   // A Hello under another key is refused as bad_mac.
   wire::HelloMessage hello;
   hello.client_nonce = 1234;
-  socket.SendTo(wire::EncodeHello({wire::MessageType::kHello, 0, 1, 0}, hello, TestKey(99)).view(), remote);
+  socket.SendTo(wire::EncodeHello({wire::MessageType::kHello, 0, 1, 0}, hello, TestKey(99)).view(),
+                remote);
   const wire::Datagram hello_datagram =
       wire::EncodeHello({wire::MessageType::kHello, 0, 2, 0}, hello, config.key);
   ASSERT_TRUE(socket.SendTo(hello_datagram.view(), remote));
@@ -119,9 +122,11 @@ TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
   EXPECT_EQ(h.session_id, session);
   // A new Hello opens a new session; after that, the first Hello played again opens nothing.
   hello.client_nonce = 999;
-  socket.SendTo(wire::EncodeHello({wire::MessageType::kHello, 0, 3, 0}, hello, config.key).view(), remote);
+  socket.SendTo(wire::EncodeHello({wire::MessageType::kHello, 0, 3, 0}, hello, config.key).view(),
+                remote);
   ASSERT_TRUE(Await(socket, config.key, wire::MessageType::kWelcome, h, [&](auto body) {
-    return wire::DecodeWelcome(body, welcome) == wire::DecodeStatus::kOk && welcome.client_nonce == 999;
+    return wire::DecodeWelcome(body, welcome) == wire::DecodeStatus::kOk &&
+           welcome.client_nonce == 999;
   }));
   const std::uint32_t session2 = h.session_id;
   EXPECT_NE(session2, session);
@@ -145,7 +150,7 @@ TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
   EXPECT_EQ(t["goodbyes"].get<int>(), 1);
   EXPECT_EQ(t["streams"]["tool_state"]["received"].get<int>(), 1);
   EXPECT_EQ(t["streams"]["tool_state"]["duplicate"].get<int>(), 1);
-  EXPECT_EQ(t["streams"]["hello"]["received"].get<int>(), 3);  // first, retransmitted, second
+  EXPECT_EQ(t["streams"]["hello"]["received"].get<int>(), 3);       // first, retransmitted, second
   EXPECT_GE(t["streams"]["scene_fragment"]["sent"].get<int>(), 3);  // 3000 B in 1396 B pieces
   EXPECT_GE(summary["steps"].get<int>(), 1);
 }

@@ -39,7 +39,8 @@ RemoteNodeConfig RemoteConfig(const MacKey& key, std::uint16_t port) {
   return c;
 }
 
-StationConfig OperatorConfig(const MacKey& key, std::uint16_t remote_port, std::uint16_t local_port) {
+StationConfig OperatorConfig(const MacKey& key, std::uint16_t remote_port,
+                             std::uint16_t local_port) {
   StationConfig c;
   c.remote_address = Loopback(remote_port);
   c.local_address = Loopback(local_port);
@@ -56,9 +57,8 @@ TEST(SessionEndToEnd, AFloodOfBadDatagramsIsDroppedAndCountedWhileTheSessionHold
   const std::uint16_t remote_port = FreePort(), operator_port = FreePort();
   std::atomic<bool> stop_remote{false}, stop_flood{false};
   nlohmann::json remote_summary;
-  std::thread remote([&] {
-    remote_summary = RunRemoteNode(RemoteConfig(key, remote_port), scene, stop_remote);
-  });
+  std::thread remote(
+      [&] { remote_summary = RunRemoteNode(RemoteConfig(key, remote_port), scene, stop_remote); });
   std::atomic<std::uint64_t> flood_sent{0};
   std::thread flood([&] {
     UdpSocket s(SocketAddress::Parse("127.0.0.1:0"));
@@ -75,10 +75,10 @@ TEST(SessionEndToEnd, AFloodOfBadDatagramsIsDroppedAndCountedWhileTheSessionHold
         for (auto& b : junk) b = static_cast<std::uint8_t>(rng());
         const SocketAddress to = Loopback(burst % 2 ? remote_port : operator_port);
         s.SendTo({junk.data(), 16 + rng() % 200}, to);  // garbage
-        s.SendTo(junk, to);                              // oversized
+        s.SendTo(junk, to);                             // oversized
         wire::Header h = forger.NextHeader(wire::MessageType::kToolState, rng());
         s.SendTo(wire::EncodeToolState(h, state, wrong).view(), to);  // forged (wrong key)
-        s.SendTo(wire::EncodeHello(h, {}, wrong).view(), to);  // forged Hello
+        s.SendTo(wire::EncodeHello(h, {}, wrong).view(), to);         // forged Hello
         s.SendTo(wire::EncodeContactModel(h, {}, wrong).view(), to);  // forged model
         s.SendTo(wire::EncodeWelcome(h, {}, wrong).view(), to);       // forged Welcome
         flood_sent += 6;
@@ -128,7 +128,8 @@ TEST(SessionEndToEnd, TheOperatorReconnectsToARestartedRemoteNode) {
   const std::uint16_t remote_port = FreePort(), operator_port = FreePort();
   std::atomic<bool> stop_first{false}, stop_second{false};
   nlohmann::json first_summary, second_summary;
-  std::thread first([&] { first_summary = RunRemoteNode(RemoteConfig(key, remote_port), scene, stop_first); });
+  std::thread first(
+      [&] { first_summary = RunRemoteNode(RemoteConfig(key, remote_port), scene, stop_first); });
   std::thread supervisor([&] {
     std::this_thread::sleep_for(std::chrono::milliseconds(1200));
     stop_first = true;  // dies without a goodbye

@@ -75,7 +75,8 @@ void ExpectMatches(const nlohmann::json& rx, const nlohmann::json& relay, double
                    const char* what) {
   SCOPED_TRACE(what);
   const double forwarded = static_cast<double>(Get(relay, "forwarded"));
-  const double dropped = static_cast<double>(Get(relay, "dropped_loss") + Get(relay, "dropped_queue"));
+  const double dropped =
+      static_cast<double>(Get(relay, "dropped_loss") + Get(relay, "dropped_queue"));
   const double duplicated = static_cast<double>(Get(relay, "duplicated"));
   const double received = static_cast<double>(Get(rx, "received") + Get(rx, "rejected"));
   const double dup = static_cast<double>(Get(rx, "duplicate"));

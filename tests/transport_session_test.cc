@@ -26,7 +26,7 @@ TEST(KeyFile, GeneratesWritesAndReadsBack) {
   const std::string path = TempPath("key_roundtrip.key");
   const MacKey k = MacKey::Generate();
   WriteKeyFile(path, k, false);
-  struct stat st{};
+  struct stat st {};
   ASSERT_EQ(::stat(path.c_str(), &st), 0);
   EXPECT_EQ(st.st_mode & 0777, 0600u);
   EXPECT_EQ(LoadKeyFile(path).bytes, k.bytes);
@@ -191,7 +191,8 @@ int RunLossyScene(double loss, std::uint32_t seed, SceneSender& sender, SceneRea
     for (int i = 0; i < 20 && sender.Next(f); ++i) {
       if (u(rng) < loss) continue;
       const int copies = u(rng) < 0.05 ? 2 : 1;
-      for (int c = 0; c < copies; ++c) batch.emplace_back(f, std::vector<std::uint8_t>(f.payload.begin(), f.payload.end()));
+      for (int c = 0; c < copies; ++c)
+        batch.emplace_back(f, std::vector<std::uint8_t>(f.payload.begin(), f.payload.end()));
     }
     std::shuffle(batch.begin(), batch.end(), rng);
     for (auto& [frag, bytes] : batch) {
@@ -326,23 +327,43 @@ TEST(SecureLink, AFloodOfBadDatagramsIsCountedAndNeverAccepted) {
   std::uint64_t accepted = 0;
   for (int i = 0; i < 20000; ++i) {
     switch (i % 5) {
-      case 0: tx.Send(wire::EncodeToolState(tx.NextHeader(wire::MessageType::kToolState, session), state, key), to); ++good_sent; break;
+      case 0:
+        tx.Send(wire::EncodeToolState(tx.NextHeader(wire::MessageType::kToolState, session), state,
+                                      key),
+                to);
+        ++good_sent;
+        break;
       case 1: {  // forged: sequence numbers ahead of the real ones, so only the MAC can refuse them
         wire::Header h = attacker.NextHeader(wire::MessageType::kToolState, session);
         h.sequence += 1000000;
         attacker.Send(wire::EncodeToolState(h, state, wrong), to);
         break;
       }
-      case 2: { std::array<std::uint8_t, 64> g{}; for (auto& b : g) b = static_cast<std::uint8_t>(rng()); tx_socket.SendTo(g, to); break; }
-      case 3: tx.Send(wire::EncodeContactModel(tx.NextHeader(wire::MessageType::kContactModel, session), {}, key), to); break;  // wrong direction
-      case 4: { std::vector<std::uint8_t> big(2000, 0x48); tx_socket.SendTo(big, to); break; }
+      case 2: {
+        std::array<std::uint8_t, 64> g{};
+        for (auto& b : g) b = static_cast<std::uint8_t>(rng());
+        tx_socket.SendTo(g, to);
+        break;
+      }
+      case 3:
+        tx.Send(wire::EncodeContactModel(tx.NextHeader(wire::MessageType::kContactModel, session),
+                                         {}, key),
+                to);
+        break;  // wrong direction
+      case 4: {
+        std::vector<std::uint8_t> big(2000, 0x48);
+        tx_socket.SendTo(big, to);
+        break;
+      }
     }
     SocketAddress from;
     while (auto n = rx_socket.ReceiveFrom(buf, from)) {
       wire::Header h;
       std::span<const std::uint8_t> body;
       bool late = false;
-      if (rx.Open({buf.data(), std::min(*n, buf.size())}, session, h, body, late) == wire::DecodeStatus::kOk) ++accepted;
+      if (rx.Open({buf.data(), std::min(*n, buf.size())}, session, h, body, late) ==
+          wire::DecodeStatus::kOk)
+        ++accepted;
     }
   }
   for (int i = 0; i < 50; ++i) {
@@ -352,20 +373,24 @@ TEST(SecureLink, AFloodOfBadDatagramsIsCountedAndNeverAccepted) {
       wire::Header h;
       std::span<const std::uint8_t> body;
       bool late = false;
-      if (rx.Open({buf.data(), std::min(*n, buf.size())}, session, h, body, late) == wire::DecodeStatus::kOk) ++accepted;
+      if (rx.Open({buf.data(), std::min(*n, buf.size())}, session, h, body, late) ==
+          wire::DecodeStatus::kOk)
+        ++accepted;
     }
   }
   const std::uint64_t good_received = rx.stats(wire::MessageType::kToolState).received;
   EXPECT_EQ(accepted, good_received);
   EXPECT_LE(good_received, static_cast<std::uint64_t>(good_sent));
   EXPECT_GT(good_received, 0u);
-  EXPECT_EQ(rx.rejected(wire::DecodeStatus::kBadMac), rx.stats(wire::MessageType::kToolState).rejected);
+  EXPECT_EQ(rx.rejected(wire::DecodeStatus::kBadMac),
+            rx.stats(wire::MessageType::kToolState).rejected);
   EXPECT_GT(rx.rejected(wire::DecodeStatus::kBadMac), 0u);
   EXPECT_GT(rx.rejected(wire::DecodeStatus::kUnexpected), 0u);
   EXPECT_GT(rx.rejected(wire::DecodeStatus::kTooLong), 0u);
   // Everything that arrived is either accepted or counted as rejected.
   std::uint64_t arrived_bad = 0;
-  for (int r = 1; r < wire::kDecodeStatusCount; ++r) arrived_bad += rx.rejected(static_cast<wire::DecodeStatus>(r));
+  for (int r = 1; r < wire::kDecodeStatusCount; ++r)
+    arrived_bad += rx.rejected(static_cast<wire::DecodeStatus>(r));
   EXPECT_EQ(arrived_bad, rx.rejected_total());
 }
 

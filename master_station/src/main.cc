@@ -116,8 +116,9 @@ int main(int argc, char** argv) {
   std::string keygen_path;
   bool keygen_force = false;
   CLI::App* keygen = app.add_subcommand(
-      "keygen", "write a new random pre-shared key (mode 0600) to PATH and exit; copy the same\n"
-                "file to the other machine");
+      "keygen",
+      "write a new random pre-shared key (mode 0600) to PATH and exit; copy the same\n"
+      "file to the other machine");
   keygen->add_option("path", keygen_path, "where to write the key")->required();
   keygen->add_flag("--force", keygen_force, "overwrite an existing file");
   std::string merge_summary, merge_remote;

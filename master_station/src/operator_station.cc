@@ -15,9 +15,9 @@
 #include <thread>
 #include <vector>
 
+#include "codecs/draco_mesh_codec.h"
 #include "haptic_core/statistics.h"
 #include "master_station/lock_free.h"
-#include "codecs/draco_mesh_codec.h"
 #include "transport/link.h"
 #include "transport/messages.h"
 #include "transport/scene_stream.h"
@@ -143,8 +143,9 @@ class NetworkWorker {
         last_send_ns = now;
       }
       if (now - last_ping_ns >= heartbeat_ns_) {
-        link_.Send(wire::EncodePing(link_.NextHeader(wire::MessageType::kPing, session_), config_.key),
-                   config_.remote_address);
+        link_.Send(
+            wire::EncodePing(link_.NextHeader(wire::MessageType::kPing, session_), config_.key),
+            config_.remote_address);
         last_ping_ns = now;
       }
       const std::int64_t quiet = std::max<std::int64_t>(30000000, 2 * clock_.rtt_ns());
@@ -155,8 +156,8 @@ class NetworkWorker {
       });
     }
     if (session_ != 0) {
-      const wire::Datagram d = wire::EncodeGoodbye(
-          link_.NextHeader(wire::MessageType::kGoodbye, session_), config_.key);
+      const wire::Datagram d =
+          wire::EncodeGoodbye(link_.NextHeader(wire::MessageType::kGoodbye, session_), config_.key);
       link_.Send(d, config_.remote_address);
       // Retries carry new sequence numbers (a copy of the same datagram would be a replay).
       for (int i = 0; i < 2; ++i) {
@@ -242,8 +243,9 @@ class NetworkWorker {
     hello.mtu = static_cast<std::uint16_t>(config_.mtu);
     hello.heartbeat_ms = static_cast<std::uint16_t>(config_.heartbeat_ms);
     hello.peer_timeout_ms = static_cast<std::uint16_t>(config_.peer_timeout_ms);
-    link_.Send(wire::EncodeHello(link_.NextHeader(wire::MessageType::kHello, 0), hello, config_.key),
-               config_.remote_address);
+    link_.Send(
+        wire::EncodeHello(link_.NextHeader(wire::MessageType::kHello, 0), hello, config_.key),
+        config_.remote_address);
     ++hellos_sent_;
   }
 
@@ -382,8 +384,8 @@ class NetworkWorker {
     if (scene_complete_ || !reassembler_.SceneComplete()) return;
     scene_complete_ = true;
     scene_complete_ms_ = (now - session_start_ns_) * 1e-6;
-    for (std::uint32_t id = 0; id < 65536 && scene_objects_.size() < reassembler_.manifest_objects();
-         ++id) {
+    for (std::uint32_t id = 0;
+         id < 65536 && scene_objects_.size() < reassembler_.manifest_objects(); ++id) {
       const auto bytes = reassembler_.CompletedBytes(id);
       if (bytes.empty()) continue;
       nlohmann::json o = {{"object_id", id}, {"bytes", bytes.size()}};
@@ -396,8 +398,8 @@ class NetworkWorker {
       }
       scene_objects_.push_back(o);
     }
-    std::printf("[master] scene complete after %.0f ms: %zu object(s) verified\n", scene_complete_ms_,
-                reassembler_.verified_objects());
+    std::printf("[master] scene complete after %.0f ms: %zu object(s) verified\n",
+                scene_complete_ms_, reassembler_.verified_objects());
     std::fflush(stdout);
   }
 
@@ -475,7 +477,8 @@ void StationConfig::Validate() const {
   }
   if (!IsFiniteRigidTransform(X_WM)) throw std::invalid_argument("X_WM must be finite");
   if (!(connect_timeout_s > 0.0)) throw std::invalid_argument("connect timeout must be positive");
-  if (mtu < static_cast<int>(wire::kMinMtuBytes) || mtu > static_cast<int>(wire::kMaxDatagramBytes)) {
+  if (mtu < static_cast<int>(wire::kMinMtuBytes) ||
+      mtu > static_cast<int>(wire::kMaxDatagramBytes)) {
     throw std::invalid_argument("MTU must be within 548..1472 bytes, got " + std::to_string(mtu));
   }
   if (heartbeat_ms < 10 || heartbeat_ms > 10000) {

@@ -59,8 +59,7 @@ int main(int argc, char** argv) {
   app.add_option("--port-file", port_file, "write the bound UDP port to this file");
   std::string key_file;
   int mtu = 1472;
-  app.add_option("--key", key_file,
-                 "pre-shared key file (64 hex characters, mode 0600); required")
+  app.add_option("--key", key_file, "pre-shared key file (64 hex characters, mode 0600); required")
       ->check(CLI::ExistingFile);
   app.add_option("--mtu", mtu, "largest UDP datagram for scene-update fragments, bytes")
       ->check(CLI::Range(548, 1472))
@@ -77,8 +76,9 @@ int main(int argc, char** argv) {
   std::string keygen_path;
   bool keygen_force = false;
   CLI::App* keygen = app.add_subcommand(
-      "keygen", "write a new random pre-shared key (mode 0600) to PATH and exit; copy the same\n"
-                "file to the other machine");
+      "keygen",
+      "write a new random pre-shared key (mode 0600) to PATH and exit; copy the same\n"
+      "file to the other machine");
   keygen->add_option("path", keygen_path, "where to write the key")->required();
   keygen->add_flag("--force", keygen_force, "overwrite an existing file");
   app.add_flag("--quiet", quiet, "no progress lines");

@@ -9,9 +9,9 @@
 #include <thread>
 #include <vector>
 
-#include "haptic_core/statistics.h"
 #include "codecs/draco_mesh_codec.h"
 #include "haptic_core/procedural_models.h"
+#include "haptic_core/statistics.h"
 #include "transport/link.h"
 #include "transport/messages.h"
 #include "transport/scene_stream.h"
@@ -118,12 +118,13 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   bool reported_fallback = false;
   double scene_tokens = 0.0;
   std::int64_t last_token_ns = start_ns, last_manifest_ns = 0;
-  const double token_cap = std::max(16.0 * wire::kMaxDatagramBytes, config.scene_rate_bytes_per_s * 0.01);
+  const double token_cap =
+      std::max(16.0 * wire::kMaxDatagramBytes, config.scene_rate_bytes_per_s * 0.01);
 
   const auto send_manifest = [&] {
     for (const wire::SceneManifestMessage& m : scene_sender.Manifest()) {
-      link.Send(wire::EncodeSceneManifest(link.NextHeader(wire::MessageType::kSceneManifest, session),
-                                          m, config.key),
+      link.Send(wire::EncodeSceneManifest(
+                    link.NextHeader(wire::MessageType::kSceneManifest, session), m, config.key),
                 peer);
     }
     last_manifest_ns = NowNs();
@@ -216,7 +217,8 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
           latest = message;
           state_seq = header.sequence;
           latest_send_time_ns = header.send_time_ns;
-          if (latest_recv_ns != 0 && have_state) max_gap_ns = std::max(max_gap_ns, now - latest_recv_ns);
+          if (latest_recv_ns != 0 && have_state)
+            max_gap_ns = std::max(max_gap_ns, now - latest_recv_ns);
           latest_recv_ns = now;
           have_state = true;
           break;

@@ -19,7 +19,8 @@ namespace {
 const ht::MacKey& Key() {
   static const ht::MacKey key = [] {
     ht::MacKey k;
-    for (std::size_t i = 0; i < k.bytes.size(); ++i) k.bytes[i] = static_cast<std::uint8_t>(i * 7 + 1);
+    for (std::size_t i = 0; i < k.bytes.size(); ++i)
+      k.bytes[i] = static_cast<std::uint8_t>(i * 7 + 1);
     return k;
   }();
   return key;
@@ -46,14 +47,41 @@ void DecodeBody(const ht::wire::Header& h, std::span<const std::uint8_t> body) {
   static std::int64_t now = 0;
   now += 1000000;
   switch (h.type) {
-    case MessageType::kToolState: { ToolStateMessage m; if (DecodeToolState(body, m) == DecodeStatus::kOk) Check(ht::IsFiniteRigidTransform(m.X_WT)); break; }
-    case MessageType::kContactModel: { ContactModelMessage m; if (DecodeContactModel(body, m) == DecodeStatus::kOk) Check(m.model.num_contacts <= kMaxWireContacts); break; }
+    case MessageType::kToolState: {
+      ToolStateMessage m;
+      if (DecodeToolState(body, m) == DecodeStatus::kOk) Check(ht::IsFiniteRigidTransform(m.X_WT));
+      break;
+    }
+    case MessageType::kContactModel: {
+      ContactModelMessage m;
+      if (DecodeContactModel(body, m) == DecodeStatus::kOk)
+        Check(m.model.num_contacts <= kMaxWireContacts);
+      break;
+    }
     case MessageType::kGoodbye:
-    case MessageType::kPing: (void)DecodeEmpty(body); break;
-    case MessageType::kHello: { HelloMessage m; if (DecodeHello(body, m) == DecodeStatus::kOk) Check(m.mtu >= kMinMtuBytes); break; }
-    case MessageType::kWelcome: { WelcomeMessage m; if (DecodeWelcome(body, m) == DecodeStatus::kOk) Check(m.name().size() <= kSceneNameBytes); break; }
-    case MessageType::kReject: { RejectMessage m; if (DecodeReject(body, m) == DecodeStatus::kOk) Check(m.message().size() <= kMaxRejectText); break; }
-    case MessageType::kPong: { PongMessage m; (void)DecodePong(body, m); break; }
+    case MessageType::kPing:
+      (void)DecodeEmpty(body);
+      break;
+    case MessageType::kHello: {
+      HelloMessage m;
+      if (DecodeHello(body, m) == DecodeStatus::kOk) Check(m.mtu >= kMinMtuBytes);
+      break;
+    }
+    case MessageType::kWelcome: {
+      WelcomeMessage m;
+      if (DecodeWelcome(body, m) == DecodeStatus::kOk) Check(m.name().size() <= kSceneNameBytes);
+      break;
+    }
+    case MessageType::kReject: {
+      RejectMessage m;
+      if (DecodeReject(body, m) == DecodeStatus::kOk) Check(m.message().size() <= kMaxRejectText);
+      break;
+    }
+    case MessageType::kPong: {
+      PongMessage m;
+      (void)DecodePong(body, m);
+      break;
+    }
     case MessageType::kSceneFragment: {
       SceneFragmentMessage m;
       if (DecodeSceneFragment(body, m) == DecodeStatus::kOk) {
@@ -67,7 +95,8 @@ void DecodeBody(const ht::wire::Header& h, std::span<const std::uint8_t> body) {
       if (DecodeSceneManifest(body, m) == DecodeStatus::kOk) {
         reassembler.OnManifest(m, now);
         Check(reassembler.manifest_objects() <= 16);
-        reassembler.CollectNacks(now, 0, [](const SceneNackMessage& n) { Check(n.count <= kMaxNackIndices); });
+        reassembler.CollectNacks(
+            now, 0, [](const SceneNackMessage& n) { Check(n.count <= kMaxNackIndices); });
       }
       break;
     }
@@ -96,7 +125,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     Datagram d;
     std::copy(data, data + size, d.bytes.begin());
     d.size = size;
-    ht::ComputeMac(d.view(), Key(), std::span<std::uint8_t, kMacBytes>(d.bytes.data() + size, kMacBytes));
+    ht::ComputeMac(d.view(), Key(),
+                   std::span<std::uint8_t, kMacBytes>(d.bytes.data() + size, kMacBytes));
     d.size += kMacBytes;
     if (OpenDatagram(d.view(), Key(), h, body) == DecodeStatus::kOk) {
       Check(body.size() == size - kHeaderBytes);

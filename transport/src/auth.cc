@@ -71,7 +71,7 @@ std::string MacKey::ToHex() const {
 }
 
 MacKey LoadKeyFile(const std::string& path) {
-  struct stat st{};
+  struct stat st {};
   if (::stat(path.c_str(), &st) != 0) {
     throw std::runtime_error("cannot read key file " + path + ": " + std::strerror(errno) +
                              " (create one with: slave_sim keygen " + path + ")");

@@ -27,15 +27,17 @@ bool ClockSync::AddSample(std::int64_t t1, std::int64_t t2, std::int64_t t3,
 
 std::int64_t ClockSync::offset_ns() const noexcept {
   if (count_ == 0) return 0;
-  const auto best = std::min_element(samples_.begin(), samples_.begin() + count_,
-                                     [](const Sample& a, const Sample& b) { return a.rtt_ns < b.rtt_ns; });
+  const auto best =
+      std::min_element(samples_.begin(), samples_.begin() + count_,
+                       [](const Sample& a, const Sample& b) { return a.rtt_ns < b.rtt_ns; });
   return best->offset_ns;
 }
 
 std::int64_t ClockSync::rtt_ns() const noexcept {
   if (count_ == 0) return 0;
-  const auto best = std::min_element(samples_.begin(), samples_.begin() + count_,
-                                     [](const Sample& a, const Sample& b) { return a.rtt_ns < b.rtt_ns; });
+  const auto best =
+      std::min_element(samples_.begin(), samples_.begin() + count_,
+                       [](const Sample& a, const Sample& b) { return a.rtt_ns < b.rtt_ns; });
   return best->rtt_ns;
 }
 
@@ -169,10 +171,14 @@ nlohmann::json SecureLink::StatsJson() const {
     if (highest > unique_in_session_[t]) s.lost += highest - unique_in_session_[t];
     if (s.sent + s.send_failed + s.received + s.rejected + s.duplicate == 0) continue;
     streams[wire::ToString(static_cast<wire::MessageType>(t))] = {
-        {"sent", s.sent},         {"send_failed", s.send_failed},
-        {"bytes_sent", s.bytes_sent}, {"received", s.received},
-        {"bytes_received", s.bytes_received}, {"lost", s.lost},
-        {"late", s.late},         {"duplicate", s.duplicate},
+        {"sent", s.sent},
+        {"send_failed", s.send_failed},
+        {"bytes_sent", s.bytes_sent},
+        {"received", s.received},
+        {"bytes_received", s.bytes_received},
+        {"lost", s.lost},
+        {"late", s.late},
+        {"duplicate", s.duplicate},
         {"rejected", s.rejected}};
   }
   nlohmann::json reasons = nlohmann::json::object();
@@ -181,7 +187,8 @@ nlohmann::json SecureLink::StatsJson() const {
       reasons[wire::ToString(static_cast<wire::DecodeStatus>(i))] = rejected_by_reason_[i];
     }
   }
-  return {{"streams", streams}, {"rejected_total", rejected_total_}, {"rejected_by_reason", reasons}};
+  return {
+      {"streams", streams}, {"rejected_total", rejected_total_}, {"rejected_by_reason", reasons}};
 }
 
 }  // namespace ht

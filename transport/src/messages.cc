@@ -150,42 +150,68 @@ void PutText(Writer& w, const std::array<char, N>& text, std::uint8_t length, bo
 
 const char* ToString(DecodeStatus s) noexcept {
   switch (s) {
-    case DecodeStatus::kOk: return "ok";
-    case DecodeStatus::kTooShort: return "too_short";
-    case DecodeStatus::kTooLong: return "too_long";
-    case DecodeStatus::kBadMagic: return "bad_magic";
-    case DecodeStatus::kBadVersion: return "bad_version";
-    case DecodeStatus::kBadFlags: return "bad_flags";
-    case DecodeStatus::kUnknownType: return "unknown_type";
-    case DecodeStatus::kBadCount: return "bad_count";
-    case DecodeStatus::kNonFinite: return "non_finite";
-    case DecodeStatus::kBadValue: return "bad_value";
-    case DecodeStatus::kBadMac: return "bad_mac";
-    case DecodeStatus::kReplayed: return "replayed";
-    case DecodeStatus::kWrongSession: return "wrong_session";
-    case DecodeStatus::kUnexpected: return "unexpected";
+    case DecodeStatus::kOk:
+      return "ok";
+    case DecodeStatus::kTooShort:
+      return "too_short";
+    case DecodeStatus::kTooLong:
+      return "too_long";
+    case DecodeStatus::kBadMagic:
+      return "bad_magic";
+    case DecodeStatus::kBadVersion:
+      return "bad_version";
+    case DecodeStatus::kBadFlags:
+      return "bad_flags";
+    case DecodeStatus::kUnknownType:
+      return "unknown_type";
+    case DecodeStatus::kBadCount:
+      return "bad_count";
+    case DecodeStatus::kNonFinite:
+      return "non_finite";
+    case DecodeStatus::kBadValue:
+      return "bad_value";
+    case DecodeStatus::kBadMac:
+      return "bad_mac";
+    case DecodeStatus::kReplayed:
+      return "replayed";
+    case DecodeStatus::kWrongSession:
+      return "wrong_session";
+    case DecodeStatus::kUnexpected:
+      return "unexpected";
   }
   return "unknown";
 }
 
 const char* ToString(MessageType t) noexcept {
   switch (t) {
-    case MessageType::kToolState: return "tool_state";
-    case MessageType::kContactModel: return "contact_model";
-    case MessageType::kGoodbye: return "goodbye";
-    case MessageType::kHello: return "hello";
-    case MessageType::kWelcome: return "welcome";
-    case MessageType::kReject: return "reject";
-    case MessageType::kPing: return "ping";
-    case MessageType::kPong: return "pong";
-    case MessageType::kSceneFragment: return "scene_fragment";
-    case MessageType::kSceneNack: return "scene_nack";
-    case MessageType::kSceneManifest: return "scene_manifest";
+    case MessageType::kToolState:
+      return "tool_state";
+    case MessageType::kContactModel:
+      return "contact_model";
+    case MessageType::kGoodbye:
+      return "goodbye";
+    case MessageType::kHello:
+      return "hello";
+    case MessageType::kWelcome:
+      return "welcome";
+    case MessageType::kReject:
+      return "reject";
+    case MessageType::kPing:
+      return "ping";
+    case MessageType::kPong:
+      return "pong";
+    case MessageType::kSceneFragment:
+      return "scene_fragment";
+    case MessageType::kSceneNack:
+      return "scene_nack";
+    case MessageType::kSceneManifest:
+      return "scene_manifest";
   }
   return "unknown";
 }
 
-Datagram EncodeToolState(const Header& header, const ToolStateMessage& m, const MacKey& key) noexcept {
+Datagram EncodeToolState(const Header& header, const ToolStateMessage& m,
+                         const MacKey& key) noexcept {
   Datagram d;
   Writer w(d);
   PutHeader(w, header, MessageType::kToolState);
@@ -275,7 +301,8 @@ Datagram EncodeWelcome(const Header& header, const WelcomeMessage& m, const MacK
   w.Put(m.heartbeat_ms);
   w.Put(m.peer_timeout_ms);
   w.Put(m.scene_objects);
-  const auto n = static_cast<std::uint8_t>(std::min<std::size_t>(m.scene_name_length, kSceneNameBytes));
+  const auto n =
+      static_cast<std::uint8_t>(std::min<std::size_t>(m.scene_name_length, kSceneNameBytes));
   w.Put(n);
   PutText(w, m.scene_name, n, true);
   w.Seal(key);
@@ -343,7 +370,8 @@ Datagram EncodeSceneManifest(const Header& header, const SceneManifestMessage& m
   return d;
 }
 
-Datagram EncodeSceneNack(const Header& header, const SceneNackMessage& m, const MacKey& key) noexcept {
+Datagram EncodeSceneNack(const Header& header, const SceneNackMessage& m,
+                         const MacKey& key) noexcept {
   Datagram d;
   Writer w(d);
   PutHeader(w, header, MessageType::kSceneNack);
@@ -389,7 +417,8 @@ DecodeStatus DecodeEmpty(std::span<const std::uint8_t> body) noexcept {
 }
 
 DecodeStatus DecodeToolState(std::span<const std::uint8_t> body, ToolStateMessage& m) noexcept {
-  if (const DecodeStatus s = ExactLength(body, kToolStateBodyBytes); s != DecodeStatus::kOk) return s;
+  if (const DecodeStatus s = ExactLength(body, kToolStateBodyBytes); s != DecodeStatus::kOk)
+    return s;
   Reader r(body);
   ToolStateMessage out;
   out.X_WT = r.Pose();
@@ -401,7 +430,8 @@ DecodeStatus DecodeToolState(std::span<const std::uint8_t> body, ToolStateMessag
   return DecodeStatus::kOk;
 }
 
-DecodeStatus DecodeContactModel(std::span<const std::uint8_t> body, ContactModelMessage& m) noexcept {
+DecodeStatus DecodeContactModel(std::span<const std::uint8_t> body,
+                                ContactModelMessage& m) noexcept {
   if (body.size() < kContactModelFixedBytes) return DecodeStatus::kTooShort;
   Reader r(body);
   ContactModelMessage out;
@@ -536,7 +566,8 @@ DecodeStatus DecodePong(std::span<const std::uint8_t> body, PongMessage& m) noex
   return DecodeStatus::kOk;
 }
 
-DecodeStatus DecodeSceneFragment(std::span<const std::uint8_t> body, SceneFragmentMessage& m) noexcept {
+DecodeStatus DecodeSceneFragment(std::span<const std::uint8_t> body,
+                                 SceneFragmentMessage& m) noexcept {
   if (body.size() <= kSceneFragmentFixedBytes) return DecodeStatus::kTooShort;
   Reader r(body);
   SceneFragmentMessage out;
@@ -546,16 +577,16 @@ DecodeStatus DecodeSceneFragment(std::span<const std::uint8_t> body, SceneFragme
   out.fragment_index = r.Get<std::uint16_t>();
   out.fragment_count = r.Get<std::uint16_t>();
   out.payload = r.Take(r.remaining());
-  if (out.object_bytes == 0 || out.object_bytes > kMaxSceneObjectBytes ||
-      out.fragment_count == 0 || out.fragment_index >= out.fragment_count ||
-      out.payload.size() > out.object_bytes) {
+  if (out.object_bytes == 0 || out.object_bytes > kMaxSceneObjectBytes || out.fragment_count == 0 ||
+      out.fragment_index >= out.fragment_count || out.payload.size() > out.object_bytes) {
     return DecodeStatus::kBadValue;
   }
   m = out;
   return DecodeStatus::kOk;
 }
 
-DecodeStatus DecodeSceneManifest(std::span<const std::uint8_t> body, SceneManifestMessage& m) noexcept {
+DecodeStatus DecodeSceneManifest(std::span<const std::uint8_t> body,
+                                 SceneManifestMessage& m) noexcept {
   if (body.size() < kSceneManifestFixedBytes) return DecodeStatus::kTooShort;
   Reader r(body);
   const auto total = r.Get<std::uint16_t>();
@@ -600,7 +631,8 @@ DecodeStatus DecodeSceneNack(std::span<const std::uint8_t> body, SceneNackMessag
   const std::size_t expected = 2u * out.count;
   if (r.remaining() < expected) return DecodeStatus::kTooShort;
   if (r.remaining() > expected) return DecodeStatus::kTooLong;
-  for (int i = 0; i < out.count; ++i) out.missing[static_cast<std::size_t>(i)] = r.Get<std::uint16_t>();
+  for (int i = 0; i < out.count; ++i)
+    out.missing[static_cast<std::size_t>(i)] = r.Get<std::uint16_t>();
   m = out;
   return DecodeStatus::kOk;
 }

@@ -26,7 +26,8 @@ SceneSender::SceneSender(std::size_t mtu) : payload_(CheckedPayload(mtu)) {}
 
 std::uint32_t SceneSender::Update(std::uint32_t object_id, std::vector<std::uint8_t> bytes,
                                   wire::SceneObjectKind kind) {
-  if (bytes.empty()) throw std::invalid_argument("scene object " + std::to_string(object_id) + " is empty");
+  if (bytes.empty())
+    throw std::invalid_argument("scene object " + std::to_string(object_id) + " is empty");
   if (bytes.size() > wire::kMaxSceneObjectBytes) {
     throw std::invalid_argument("scene object " + std::to_string(object_id) + " has " +
                                 std::to_string(bytes.size()) + " bytes; the limit is " +
@@ -53,7 +54,8 @@ std::uint32_t SceneSender::Update(std::uint32_t object_id, std::vector<std::uint
   const auto index = static_cast<std::size_t>(it - objects_.begin());
   queued_[index].assign(count, false);
   for (std::size_t f = 0; f < count; ++f) {
-    queue_.push_back({static_cast<std::uint32_t>(index), it->version, static_cast<std::uint16_t>(f)});
+    queue_.push_back(
+        {static_cast<std::uint32_t>(index), it->version, static_cast<std::uint16_t>(f)});
     queued_[index][f] = true;
   }
   return it->version;
@@ -87,9 +89,8 @@ void SceneSender::QueueAll() {
 }
 
 bool SceneSender::OnNack(const wire::SceneNackMessage& nack) {
-  const auto it = std::find_if(objects_.begin(), objects_.end(), [&](const SceneObject& o) {
-    return o.object_id == nack.object_id;
-  });
+  const auto it = std::find_if(objects_.begin(), objects_.end(),
+                               [&](const SceneObject& o) { return o.object_id == nack.object_id; });
   if (it == objects_.end() || it->version != nack.version) return false;
   const auto index = static_cast<std::size_t>(it - objects_.begin());
   for (int i = 0; i < nack.count; ++i) {
@@ -139,8 +140,8 @@ std::vector<wire::SceneManifestMessage> SceneSender::Manifest() const {
     m.count = static_cast<std::uint8_t>(n);
     for (std::size_t i = 0; i < n; ++i) {
       const SceneObject& o = objects_[first + i];
-      m.entries[i] = {o.object_id, o.version, static_cast<std::uint32_t>(o.bytes.size()),
-                      o.fragment_count, o.kind, o.digest};
+      m.entries[i] = {o.object_id,      o.version, static_cast<std::uint32_t>(o.bytes.size()),
+                      o.fragment_count, o.kind,    o.digest};
     }
     out.push_back(m);
   }
@@ -219,7 +220,8 @@ SceneReassembler::Outcome SceneReassembler::Add(const wire::SceneFragmentMessage
     ++stats_.fragments_duplicate;
     return Outcome::kDuplicate;
   }
-  std::copy(f.payload.begin(), f.payload.end(), o.bytes.begin() + static_cast<std::ptrdiff_t>(begin));
+  std::copy(f.payload.begin(), f.payload.end(),
+            o.bytes.begin() + static_cast<std::ptrdiff_t>(begin));
   o.have[f.fragment_index] = true;
   ++o.have_count;
   o.last_fragment_ns = now_ns;
@@ -314,7 +316,8 @@ std::size_t SceneReassembler::verified_objects() const noexcept {
   return n;
 }
 
-std::span<const std::uint8_t> SceneReassembler::CompletedBytes(std::uint32_t object_id) const noexcept {
+std::span<const std::uint8_t> SceneReassembler::CompletedBytes(
+    std::uint32_t object_id) const noexcept {
   const auto o = objects_.find(object_id);
   if (o == objects_.end() || !o->second.complete) return {};
   return o->second.bytes;

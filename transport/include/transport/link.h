@@ -21,7 +21,7 @@ struct StreamStats {
   std::uint64_t bytes_sent = 0;
   std::uint64_t received = 0;  ///< authenticated, in session, not a duplicate (late ones included)
   std::uint64_t bytes_received = 0;  ///< of those
-  std::uint64_t late = 0;       ///< arrived after a higher sequence number (reordered)
+  std::uint64_t late = 0;            ///< arrived after a higher sequence number (reordered)
   std::uint64_t duplicate = 0;  ///< a sequence number already received (network copy or replay)
   std::uint64_t lost = 0;       ///< sequence numbers never received below the highest one
   std::uint64_t rejected = 0;   ///< claimed this type but failed MAC, session, replay or decode
@@ -42,11 +42,16 @@ class ClockSync {
   /// Round trip of the sample used for offset_ns() (ns).
   std::int64_t rtt_ns() const noexcept;
   /// A remote steady-clock time expressed on the local clock (ns).
-  std::int64_t RemoteToLocal(std::int64_t remote_ns) const noexcept { return remote_ns - offset_ns(); }
+  std::int64_t RemoteToLocal(std::int64_t remote_ns) const noexcept {
+    return remote_ns - offset_ns();
+  }
   /// Every round trip measured (ns), for percentiles; capped at `capacity` given to Reserve.
   const std::vector<double>& rtt_ms_samples() const noexcept { return rtt_ms_; }
   void Reserve(std::size_t capacity) { rtt_ms_.reserve(capacity); }
-  void Reset() noexcept { count_ = 0; next_ = 0; }
+  void Reset() noexcept {
+    count_ = 0;
+    next_ = 0;
+  }
 
  private:
   struct Sample {
@@ -76,8 +81,8 @@ class SecureLink {
 
   /// Opens one received datagram: size, header, accepted type, then (except Hello, Welcome and
   /// Reject) the session (`session_id` 0 = none open: every such datagram is refused) and the
-  /// replay window of its stream, then the MAC. On kOk gives header, body and whether it arrived late; on failure counts it by reason
-  /// (and under its claimed type when the header parsed).
+  /// replay window of its stream, then the MAC. On kOk gives header, body and whether it arrived
+  /// late; on failure counts it by reason (and under its claimed type when the header parsed).
   wire::DecodeStatus Open(std::span<const std::uint8_t> datagram, std::uint32_t session_id,
                           wire::Header& header, std::span<const std::uint8_t>& body,
                           bool& late) noexcept;

@@ -44,7 +44,7 @@ struct ContactModelMessage {
 struct HelloMessage {
   std::uint16_t min_version = kMinProtocolVersion;
   std::uint16_t max_version = kProtocolVersion;
-  std::uint64_t client_nonce = 0;     ///< random per attempt; Welcome/Reject echo it
+  std::uint64_t client_nonce = 0;      ///< random per attempt; Welcome/Reject echo it
   float tool_state_rate_hz = 1000.0f;  ///< the operator's loop rate
   float max_model_rate_hz = 0.0f;      ///< most contact models per second wanted (0 = any)
   std::uint16_t max_grid = 0;          ///< largest penetration-depth grid accepted (0 = any)
@@ -134,11 +134,11 @@ enum class DecodeStatus : std::uint8_t {
   kBadVersion,
   kBadFlags,
   kUnknownType,
-  kBadCount,   ///< a count above its limit (contacts, manifest entries, NACK indices)
-  kNonFinite,  ///< a pose, twist, wrench or contact field is NaN or infinite
-  kBadValue,   ///< a finite but impossible value (non-unit quaternion, index ≥ count, ...)
-  kBadMac,     ///< the MAC does not verify under the pre-shared key
-  kReplayed,   ///< a sequence number already seen, 0, or too old for the replay window
+  kBadCount,      ///< a count above its limit (contacts, manifest entries, NACK indices)
+  kNonFinite,     ///< a pose, twist, wrench or contact field is NaN or infinite
+  kBadValue,      ///< a finite but impossible value (non-unit quaternion, index ≥ count, ...)
+  kBadMac,        ///< the MAC does not verify under the pre-shared key
+  kReplayed,      ///< a sequence number already seen, 0, or too old for the replay window
   kWrongSession,  ///< authenticated, but for another session than the current one
   kUnexpected,    ///< authenticated, but a type this side does not accept (or not now)
 };
@@ -157,14 +157,17 @@ struct Datagram {
 };
 
 // Encoders: header (its type is set by the encoder) + body + MAC under `key`.
-Datagram EncodeToolState(const Header& header, const ToolStateMessage& message, const MacKey& key) noexcept;
+Datagram EncodeToolState(const Header& header, const ToolStateMessage& message,
+                         const MacKey& key) noexcept;
 /// Contacts beyond kMaxWireContacts are not sent (the caller keeps at most kMaxContacts).
 Datagram EncodeContactModel(const Header& header, const ContactModelMessage& message,
                             const MacKey& key) noexcept;
 Datagram EncodeGoodbye(const Header& header, const MacKey& key) noexcept;
 Datagram EncodeHello(const Header& header, const HelloMessage& message, const MacKey& key) noexcept;
-Datagram EncodeWelcome(const Header& header, const WelcomeMessage& message, const MacKey& key) noexcept;
-Datagram EncodeReject(const Header& header, const RejectMessage& message, const MacKey& key) noexcept;
+Datagram EncodeWelcome(const Header& header, const WelcomeMessage& message,
+                       const MacKey& key) noexcept;
+Datagram EncodeReject(const Header& header, const RejectMessage& message,
+                      const MacKey& key) noexcept;
 Datagram EncodePing(const Header& header, const MacKey& key) noexcept;
 Datagram EncodePong(const Header& header, const PongMessage& message, const MacKey& key) noexcept;
 /// The payload is cut to what fits in kMaxDatagramBytes.
@@ -172,7 +175,8 @@ Datagram EncodeSceneFragment(const Header& header, const SceneFragmentMessage& m
                              const MacKey& key) noexcept;
 Datagram EncodeSceneManifest(const Header& header, const SceneManifestMessage& message,
                              const MacKey& key) noexcept;
-Datagram EncodeSceneNack(const Header& header, const SceneNackMessage& message, const MacKey& key) noexcept;
+Datagram EncodeSceneNack(const Header& header, const SceneNackMessage& message,
+                         const MacKey& key) noexcept;
 
 /// Checks a received datagram's size limits, header (magic, version, flags, known type) and MAC,
 /// in that order, and on kOk gives the header and the body (between header and MAC).
@@ -183,15 +187,20 @@ DecodeStatus PeekHeader(std::span<const std::uint8_t> datagram, Header& header) 
 
 // Body decoders: `body` is what OpenDatagram gave; exact length, counts, finiteness and values are
 // checked; `message` is written only on kOk.
-DecodeStatus DecodeToolState(std::span<const std::uint8_t> body, ToolStateMessage& message) noexcept;
-DecodeStatus DecodeContactModel(std::span<const std::uint8_t> body, ContactModelMessage& message) noexcept;
+DecodeStatus DecodeToolState(std::span<const std::uint8_t> body,
+                             ToolStateMessage& message) noexcept;
+DecodeStatus DecodeContactModel(std::span<const std::uint8_t> body,
+                                ContactModelMessage& message) noexcept;
 DecodeStatus DecodeHello(std::span<const std::uint8_t> body, HelloMessage& message) noexcept;
 DecodeStatus DecodeWelcome(std::span<const std::uint8_t> body, WelcomeMessage& message) noexcept;
 DecodeStatus DecodeReject(std::span<const std::uint8_t> body, RejectMessage& message) noexcept;
 DecodeStatus DecodePong(std::span<const std::uint8_t> body, PongMessage& message) noexcept;
-DecodeStatus DecodeSceneFragment(std::span<const std::uint8_t> body, SceneFragmentMessage& message) noexcept;
-DecodeStatus DecodeSceneManifest(std::span<const std::uint8_t> body, SceneManifestMessage& message) noexcept;
-DecodeStatus DecodeSceneNack(std::span<const std::uint8_t> body, SceneNackMessage& message) noexcept;
+DecodeStatus DecodeSceneFragment(std::span<const std::uint8_t> body,
+                                 SceneFragmentMessage& message) noexcept;
+DecodeStatus DecodeSceneManifest(std::span<const std::uint8_t> body,
+                                 SceneManifestMessage& message) noexcept;
+DecodeStatus DecodeSceneNack(std::span<const std::uint8_t> body,
+                             SceneNackMessage& message) noexcept;
 /// Bodies that must be empty (Goodbye, Ping).
 DecodeStatus DecodeEmpty(std::span<const std::uint8_t> body) noexcept;
 

@@ -47,8 +47,8 @@
 //     u16 fragment_index, u16 fragment_count, then bytes [index·P, min((index+1)·P, object_bytes))
 //     of the object where P = FragmentPayloadBytes(mtu).
 //   SceneManifest R→O (5 + n·31): u16 total_objects, u16 first_index, u8 n (≤ kMaxManifestEntries),
-//     per entry: u32 object_id, u32 version, u32 object_bytes, u16 fragment_count, u8 SceneObjectKind,
-//     16 bytes BLAKE2b-128 digest of the object's bytes.
+//     per entry: u32 object_id, u32 version, u32 object_bytes, u16 fragment_count, u8
+//     SceneObjectKind, 16 bytes BLAKE2b-128 digest of the object's bytes.
 //   SceneNack O→R (10 + 2n): u32 object_id, u32 version, u16 n (≤ kMaxNackIndices; 0 = resend all),
 //     n × u16 missing fragment indices.
 
@@ -95,7 +95,7 @@ enum class SceneObjectKind : std::uint8_t {
 };
 
 inline constexpr std::size_t kHeaderBytes = 28;
-inline constexpr std::size_t kMacBytes = 32;  // crypto_auth_BYTES
+inline constexpr std::size_t kMacBytes = 32;     // crypto_auth_BYTES
 inline constexpr std::size_t kMacKeyBytes = 32;  // crypto_auth_KEYBYTES
 inline constexpr std::size_t kToolStateBodyBytes = 13 * 8;
 inline constexpr std::size_t kContactModelFixedBytes = 8 * 4 + 4 * 3 + 7 * 8 + 6 * 8 + 1;
@@ -129,10 +129,12 @@ constexpr std::size_t FragmentPayloadBytes(std::size_t mtu) noexcept {
 }
 
 static_assert(kHeaderBytes + kContactModelFixedBytes + kMaxWireContacts * kContactBytes +
-                      kMacBytes <= kMaxDatagramBytes,
+                      kMacBytes <=
+                  kMaxDatagramBytes,
               "a full contact model must fit in one datagram");
 static_assert(kHeaderBytes + kSceneManifestFixedBytes + kMaxManifestEntries * kManifestEntryBytes +
-                      kMacBytes <= kMinMtuBytes,
+                      kMacBytes <=
+                  kMinMtuBytes,
               "a full manifest must fit in the smallest MTU");
 static_assert(kHeaderBytes + kSceneNackFixedBytes + 2 * kMaxNackIndices + kMacBytes <= kMinMtuBytes,
               "a full NACK must fit in the smallest MTU");

@@ -96,7 +96,12 @@ class SceneReassembler {
 
   /// What happened to one fragment.
   enum class Outcome : std::uint8_t {
-    kAccepted, kCompleted, kDuplicate, kStale, kInconsistent, kOverLimit
+    kAccepted,
+    kCompleted,
+    kDuplicate,
+    kStale,
+    kInconsistent,
+    kOverLimit
   };
   /// Adds a fragment received at `now_ns` (operator clock).
   Outcome Add(const wire::SceneFragmentMessage& fragment, std::int64_t now_ns);
@@ -123,7 +128,7 @@ class SceneReassembler {
 
  private:
   struct Object {
-    std::uint32_t version = 0;           ///< newest version seen (in progress or complete)
+    std::uint32_t version = 0;  ///< newest version seen (in progress or complete)
     std::uint32_t object_bytes = 0;
     std::uint16_t fragment_count = 0;
     std::vector<std::uint8_t> bytes;

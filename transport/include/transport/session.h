@@ -12,11 +12,11 @@ namespace ht {
 
 /// What the remote node offers (its configuration, fixed for its lifetime).
 struct RemoteCapabilities {
-  std::uint16_t grid = 50;          ///< penetration-depth grid N (N×N per contact)
-  float window_m = 0.02f;           ///< contact window side W (m)
+  std::uint16_t grid = 50;  ///< penetration-depth grid N (N×N per contact)
+  float window_m = 0.02f;   ///< contact window side W (m)
   std::uint16_t mtu = wire::kMaxDatagramBytes;
   std::uint32_t codecs = wire::kCodecDracoMesh;
-  float max_model_rate_hz = 0.0f;   ///< cap on contact models per second (0 = none)
+  float max_model_rate_hz = 0.0f;  ///< cap on contact models per second (0 = none)
   std::uint16_t heartbeat_ms = 100;
   std::uint16_t peer_timeout_ms = 500;
   std::uint16_t scene_objects = 0;

@@ -29,8 +29,9 @@ struct SocketAddress {
 /// Non-blocking UDP socket. Send and receive never block; Wait blocks up to a timeout.
 class UdpSocket {
  public:
-  /// Opens a socket bound to `local` (port 0 picks a free port), asking for a 4 MiB receive buffer. Throws std::runtime_error with
-  /// the system's reason (e.g. "Address already in use") and the address on failure.
+  /// Opens a socket bound to `local` (port 0 picks a free port), asking for a 4 MiB receive buffer.
+  /// Throws std::runtime_error with the system's reason (e.g. "Address already in use") and the
+  /// address on failure.
   explicit UdpSocket(const SocketAddress& local);
   ~UdpSocket();
   UdpSocket(const UdpSocket&) = delete;
