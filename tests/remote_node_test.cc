@@ -47,6 +47,7 @@ TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
   config.progress_period_s = 0.0;
   config.key = TestKey(11);
   config.scene_objects.emplace_back(5, std::vector<std::uint8_t>(3000, 0x42));
+  config.exit_on_goodbye = false;
   const std::string port_file = ::testing::TempDir() + "/remote_node_test.port";
   std::remove(port_file.c_str());
   config.port_file = port_file;
@@ -120,9 +121,16 @@ TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
     return wire::DecodeWelcome(body, welcome) == wire::DecodeStatus::kOk;
   }));
   EXPECT_EQ(h.session_id, session);
-  // A new Hello opens a new session; after that, the first Hello played again opens nothing.
+  // A new Hello while this session is live is deferred (a replayed Hello cannot take a live
+  // session over); once the session ends, the retransmitted Hello opens a new one; after that
+  // the first Hello played again opens nothing.
   hello.client_nonce = 999;
   socket.SendTo(wire::EncodeHello({wire::MessageType::kHello, 0, 3, 0}, hello, config.key).view(),
+                remote);
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  socket.SendTo(
+      wire::EncodeGoodbye({wire::MessageType::kGoodbye, session, 1, 0}, config.key).view(), remote);
+  socket.SendTo(wire::EncodeHello({wire::MessageType::kHello, 0, 4, 0}, hello, config.key).view(),
                 remote);
   ASSERT_TRUE(Await(socket, config.key, wire::MessageType::kWelcome, h, [&](auto body) {
     return wire::DecodeWelcome(body, welcome) == wire::DecodeStatus::kOk &&
@@ -131,9 +139,8 @@ TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
   const std::uint32_t session2 = h.session_id;
   EXPECT_NE(session2, session);
   socket.SendTo(hello_datagram.view(), remote);
-  const wire::Datagram bye =
-      wire::EncodeGoodbye({wire::MessageType::kGoodbye, session2, 1, 0}, config.key);
-  socket.SendTo(bye.view(), remote);
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  stop = true;
   for (int i = 0; i < 200 && !summary.is_object(); ++i) {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
@@ -146,11 +153,13 @@ TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
   EXPECT_EQ(t["rejected_by_reason"]["replayed"].get<int>(), 2);
   EXPECT_EQ(t["hello_replayed"].get<int>(), 1);
   EXPECT_EQ(t["hello_retransmits"].get<int>(), 1);
+  EXPECT_EQ(t["hello_deferred"].get<int>(), 1);
   EXPECT_EQ(t["sessions"].get<int>(), 2);
   EXPECT_EQ(t["goodbyes"].get<int>(), 1);
   EXPECT_EQ(t["streams"]["tool_state"]["received"].get<int>(), 1);
   EXPECT_EQ(t["streams"]["tool_state"]["duplicate"].get<int>(), 1);
-  EXPECT_EQ(t["streams"]["hello"]["received"].get<int>(), 3);       // first, retransmitted, second
+  EXPECT_EQ(t["streams"]["hello"]["received"].get<int>(),
+            4);  // A, A again, 999 twice (A replayed is rejected)
   EXPECT_GE(t["streams"]["scene_fragment"]["sent"].get<int>(), 3);  // 3000 B in 1396 B pieces
   EXPECT_GE(summary["steps"].get<int>(), 1);
 }

@@ -128,8 +128,9 @@ TEST(SessionEndToEnd, TheOperatorReconnectsToARestartedRemoteNode) {
   const std::uint16_t remote_port = FreePort(), operator_port = FreePort();
   std::atomic<bool> stop_first{false}, stop_second{false};
   nlohmann::json first_summary, second_summary;
-  std::thread first(
-      [&] { first_summary = RunRemoteNode(RemoteConfig(key, remote_port), scene, stop_first); });
+  RemoteNodeConfig crashing = RemoteConfig(key, remote_port);
+  crashing.goodbye_on_stop = false;  // it dies without a word
+  std::thread first([&] { first_summary = RunRemoteNode(crashing, scene, stop_first); });
   std::thread supervisor([&] {
     std::this_thread::sleep_for(std::chrono::milliseconds(1200));
     stop_first = true;  // dies without a goodbye

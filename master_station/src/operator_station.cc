@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <stdexcept>
 #include <thread>
 #include <vector>
@@ -107,20 +108,30 @@ class NetworkWorker {
       timespec pause{0, 200000};  // 0.2 ms between polls: bounded latency, little CPU
       nanosleep(&pause, nullptr);
       SocketAddress from;
-      while (auto n = socket_.ReceiveFrom(buffer, from)) {
+      // At most kDrainPerPass datagrams per pass: a flood delays this thread's other duties
+      // (tool states, pings), never stops them.
+      constexpr int kDrainPerPass = 256;
+      int drained = 0;
+      std::optional<std::size_t> n;
+      while (drained++ < kDrainPerPass && (n = socket_.ReceiveFrom(buffer, from))) {
         Handle({buffer.data(), std::min(*n, buffer.size())}, from);
       }
       const std::int64_t now = SteadyNowNs();
-      if (session_ != 0 && now - link_.last_authenticated_ns() > peer_timeout_ns_) {
+      const std::int64_t last_heard = std::max(link_.last_authenticated_ns(), session_start_ns_);
+      if (session_ != 0 && now - last_heard > peer_timeout_ns_) {
         ++peers_lost_;
-        loss_detected_after_ms_.push_back((now - link_.last_authenticated_ns()) * 1e-6);
+        loss_detected_after_ms_.push_back((now - last_heard) * 1e-6);
         std::printf("[master] remote node lost (nothing authenticated for %.0f ms); reconnecting\n",
-                    (now - link_.last_authenticated_ns()) * 1e-6);
+                    (now - last_heard) * 1e-6);
         std::fflush(stdout);
         EndSession();
       }
       if (session_ == 0) {
         if (counters_.rejected.load()) break;
+        if (hello_nonce_ != 0 &&
+            now - attempt_start_ns_ > 2LL * config_.peer_timeout_ms * 1000000LL) {
+          hello_nonce_ = 0;  // no Welcome for two peer timeouts: a new attempt, with a new nonce
+        }
         if (now - last_hello_ns >= config_.reconnect_period_ms * 1000000LL) {
           SendHello();
           last_hello_ns = now;
@@ -233,6 +244,7 @@ class NetworkWorker {
     if (hello_nonce_ == 0) {  // a new attempt
       link_.ResetSession();
       hello_nonce_ = RandomNonce();
+      attempt_start_ns_ = SteadyNowNs();
     }
     wire::HelloMessage hello;
     hello.client_nonce = hello_nonce_;
@@ -320,15 +332,22 @@ class NetworkWorker {
         model.sequence = header.sequence;
         model.built_local_ns = clock_.valid() ? clock_.RemoteToLocal(header.send_time_ns) : now;
         counters_.model_accepted.fetch_add(1, std::memory_order_relaxed);
-        if (model.message.model.tool_state_seq != 0) {
+        // Samples for percentiles: the first 2^20 of each (reserved), then no more growth.
+        if (model.message.model.tool_state_seq != 0 && rtt_ms_.size() < rtt_ms_.capacity()) {
           rtt_ms_.push_back((now - model.message.tool_state_send_time_ns - model.message.hold_ns) *
                             1e-6);
         }
-        if (clock_.valid()) one_way_ms_.push_back((now - model.built_local_ns) * 1e-6);
-        remote_step_us_.push_back(model.message.step_us);
-        if (model.message.model.num_contacts > 0) contact_step_us_.push_back(model.message.step_us);
-        collision_us_.push_back(model.message.collision_us);
-        texture_us_.push_back(model.message.texture_us);
+        if (clock_.valid() && one_way_ms_.size() < one_way_ms_.capacity())
+          one_way_ms_.push_back((now - model.built_local_ns) * 1e-6);
+        if (remote_step_us_.size() < remote_step_us_.capacity()) {
+          remote_step_us_.push_back(model.message.step_us);
+          collision_us_.push_back(model.message.collision_us);
+          texture_us_.push_back(model.message.texture_us);
+        }
+        if (model.message.model.num_contacts > 0 &&
+            contact_step_us_.size() < contact_step_us_.capacity()) {
+          contact_step_us_.push_back(model.message.step_us);
+        }
         if (first_remote_ns_ == 0) {
           first_remote_ns_ = now;
           first_remote_steps_ = model.message.remote_step_count;
@@ -419,6 +438,7 @@ class NetworkWorker {
   Counters& counters_;
   std::uint32_t session_ = 0;
   std::uint64_t hello_nonce_ = 0;
+  std::int64_t attempt_start_ns_ = 0;
   std::int64_t heartbeat_ns_ = 100000000, peer_timeout_ns_ = 500000000, session_start_ns_ = 0;
   std::uint64_t sessions_ = 0, peers_lost_ = 0, remote_goodbyes_ = 0, hellos_sent_ = 0;
   std::size_t mtu_ = 0, expected_objects_ = 0;

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cstdio>
 #include <fstream>
+#include <optional>
 #include <stdexcept>
 #include <thread>
 #include <vector>
@@ -97,7 +98,9 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   texture_us.reserve(1 << 20);
 
   std::uint32_t session = 0;
-  std::uint64_t session_nonce = 0, hello_retransmits = 0;
+  std::uint64_t session_nonce = 0, hello_retransmits = 0, pending_nonce = 0, hello_deferred = 0;
+  std::int64_t session_start_ns = 0;
+  bool scene_enabled = false;
   wire::WelcomeMessage session_welcome;
   SocketAddress peer;
   std::int64_t peer_timeout_ns = 0, model_period_ns = 0, last_model_sent_ns = 0;
@@ -122,6 +125,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
       std::max(16.0 * wire::kMaxDatagramBytes, config.scene_rate_bytes_per_s * 0.01);
 
   const auto send_manifest = [&] {
+    if (!scene_enabled) return;
     for (const wire::SceneManifestMessage& m : scene_sender.Manifest()) {
       link.Send(wire::EncodeSceneManifest(
                     link.NextHeader(wire::MessageType::kSceneManifest, session), m, config.key),
@@ -138,7 +142,11 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
 
   while (running && !stop.load(std::memory_order_relaxed)) {
     SocketAddress from;
-    while (auto n = socket.ReceiveFrom(buffer, from)) {
+    // At most kDrainPerPass datagrams between steps: a flood delays steps, never stops them.
+    constexpr int kDrainPerPass = 256;
+    int drained = 0;
+    std::optional<std::size_t> n;
+    while (drained++ < kDrainPerPass && (n = socket.ReceiveFrom(buffer, from))) {
       const std::int64_t now = NowNs();
       wire::Header header;
       std::span<const std::uint8_t> body;
@@ -152,20 +160,40 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
             link.CountBodyRejected(header.type, st);
             break;
           }
+          const bool live =
+              session != 0 &&
+              now - std::max(link.last_authenticated_ns(), session_start_ns) < peer_timeout_ns;
           if (session != 0 && hello.client_nonce == session_nonce) {
             // The operator retransmitted its Hello before our Welcome reached it (round trip
-            // longer than its retry period): the same session, welcomed again.
+            // longer than its retry period): the same session, welcomed again (to the session's
+            // address only).
             ++hello_retransmits;
             link.Send(wire::EncodeWelcome(link.NextHeader(wire::MessageType::kWelcome, session),
                                           session_welcome, config.key),
-                      from);
+                      peer);
             break;
           }
-          if (!nonces.Insert(hello.client_nonce)) {  // a recorded Hello played again
-            ++hello_replayed;
-            link.CountBodyRejected(header.type, wire::DecodeStatus::kReplayed);
-            break;
+          if (pending_nonce != 0 && hello.client_nonce == pending_nonce) {
+            if (live) {  // still deferred: the current operator is active
+              ++hello_deferred;
+              break;
+            }
+          } else {
+            if (!nonces.Insert(hello.client_nonce)) {  // a recorded Hello played again
+              ++hello_replayed;
+              link.CountBodyRejected(header.type, wire::DecodeStatus::kReplayed);
+              break;
+            }
+            if (live) {
+              // Another operator (or a recorded Hello this node never saw) while the current one
+              // is active: deferred until the current session ends or goes silent, so that a
+              // replayed Hello cannot take a live session over. The operator keeps retrying.
+              pending_nonce = hello.client_nonce;
+              ++hello_deferred;
+              break;
+            }
           }
+          pending_nonce = 0;
           wire::WelcomeMessage welcome;
           wire::RejectMessage reject;
           if (!NegotiateSession(hello, caps, welcome, reject)) {
@@ -184,16 +212,23 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
           link.ResetSession();
           session = id;
           session_nonce = hello.client_nonce;
-          session_welcome = welcome;
           peer = from;
           ++sessions;
           peer_timeout_ns = std::int64_t{welcome.peer_timeout_ms} * 1000000;
           model_period_ns = welcome.model_rate_hz > 0.0f
                                 ? static_cast<std::int64_t>(1e9 / welcome.model_rate_hz)
                                 : 0;
-          scene_sender.SetMtu(welcome.mtu);
-          scene_sender.QueueAll();
+          try {
+            scene_sender.SetMtu(welcome.mtu);
+          } catch (const std::invalid_argument& e) {
+            std::printf("[slave] scene not streamed at MTU %u: %s\n", welcome.mtu, e.what());
+            welcome.scene_objects = 0;
+          }
+          scene_enabled = welcome.scene_objects > 0;
+          if (scene_enabled) scene_sender.QueueAll();
           scene_tokens = 0.0;
+          session_start_ns = now;
+          session_welcome = welcome;
           link.Send(wire::EncodeWelcome(link.NextHeader(wire::MessageType::kWelcome, session),
                                         welcome, config.key),
                     peer);
@@ -263,11 +298,12 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     }
     if (!running) break;
     const std::int64_t now_loop = NowNs();
-    if (session != 0 && now_loop - link.last_authenticated_ns() > peer_timeout_ns) {
+    const std::int64_t last_heard = std::max(link.last_authenticated_ns(), session_start_ns);
+    if (session != 0 && now_loop - last_heard > peer_timeout_ns) {
       ++peers_lost;
       char why[96];
       std::snprintf(why, sizeof(why), "operator lost (nothing authenticated for %.0f ms)",
-                    (now_loop - link.last_authenticated_ns()) * 1e-6);
+                    (now_loop - last_heard) * 1e-6);
       close_session(why);
     }
     if (session == 0) {
@@ -304,10 +340,12 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     if (first_step_ns == 0) first_step_ns = t_step;
     last_step_ns = NowNs();
     contacts_max = std::max(contacts_max, out.model.num_contacts);
-    step_us.push_back(timings.total_us);
-    if (out.model.num_contacts > 0) contact_step_us.push_back(timings.total_us);
-    collision_us.push_back(timings.collision_us);
-    texture_us.push_back(timings.texture_us);
+    if (step_us.size() < step_us.capacity()) step_us.push_back(timings.total_us);
+    if (out.model.num_contacts > 0 && contact_step_us.size() < contact_step_us.capacity()) {
+      contact_step_us.push_back(timings.total_us);  // percentiles over the first 2^20 samples
+    }
+    if (collision_us.size() < collision_us.capacity()) collision_us.push_back(timings.collision_us);
+    if (texture_us.size() < texture_us.capacity()) texture_us.push_back(timings.texture_us);
     if (model_period_ns == 0 || last_step_ns - last_model_sent_ns >= model_period_ns) {
       out.tool_state_send_time_ns = latest_send_time_ns;
       out.remote_step_count = step_count;
@@ -337,6 +375,14 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     if (min_period_ns > 0) {
       const std::int64_t wait = t_step + min_period_ns - NowNs();
       if (wait > 0) std::this_thread::sleep_for(std::chrono::nanoseconds(wait));
+    }
+  }
+  if (session != 0 &&
+      config.goodbye_on_stop) {  // stopped: tell the operator, which reconnects at once
+    for (int i = 0; i < 3; ++i) {
+      link.Send(
+          wire::EncodeGoodbye(link.NextHeader(wire::MessageType::kGoodbye, session), config.key),
+          peer);
     }
   }
   nlohmann::json s;
@@ -380,6 +426,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   transport["peers_lost"] = peers_lost;
   transport["hello_replayed"] = hello_replayed;
   transport["hello_retransmits"] = hello_retransmits;
+  transport["hello_deferred"] = hello_deferred;
   transport["rejects_sent"] = rejects_sent;
   transport["mtu"] = config.mtu;
   transport["scene"] = {{"objects", config.scene_objects.size()},

@@ -87,8 +87,10 @@ void SecureLink::CountBodyRejected(wire::MessageType type, wire::DecodeStatus st
   ++rejected_by_reason_[static_cast<int>(status)];
   StreamStats& s = stats_[static_cast<int>(type)];
   ++s.rejected;
-  // It was counted as received when it opened; it is not.
+  // It was counted as received when it opened; it is not (its sequence number stays consumed, so
+  // it is neither received nor lost: it is rejected).
   if (s.received > 0) --s.received;
+  s.bytes_received -= std::min(s.bytes_received, last_open_bytes_);
 }
 
 wire::DecodeStatus SecureLink::Open(std::span<const std::uint8_t> datagram,
@@ -109,43 +111,38 @@ wire::DecodeStatus SecureLink::Open(std::span<const std::uint8_t> datagram,
     CountRejected(&h, DecodeStatus::kUnexpected);
     return DecodeStatus::kUnexpected;
   }
-  // A cheap replay check before the MAC: a flood of replays costs no HMAC.
   const bool handshake = h.type == wire::MessageType::kHello ||
                          h.type == wire::MessageType::kWelcome ||
                          h.type == wire::MessageType::kReject;
   const int t = static_cast<int>(h.type);
-  if (!handshake && h.session_id != session_id) {
-    // Still authenticate, so that forged datagrams count as bad_mac, not as another session.
-    if (!VerifyMac(datagram, key_)) {
-      CountRejected(&h, DecodeStatus::kBadMac);
-      return DecodeStatus::kBadMac;
-    }
+  // The MAC first: only authenticated datagrams are classified further, so that a forgery always
+  // counts as bad_mac (never as a duplicate or another session) and never touches a window.
+  s = wire::OpenDatagram(datagram, key_, header, body);
+  if (s != DecodeStatus::kOk) {
+    CountRejected(&h, s);
+    return s;
+  }
+  if (!handshake && (session_id == 0 || header.session_id != session_id)) {
     CountRejected(&h, DecodeStatus::kWrongSession);
     return DecodeStatus::kWrongSession;
   }
   if (!handshake) {
-    const auto v = windows_[t].Check(h.sequence);
+    const auto v = windows_[t].Accept(header.sequence);
     if (v == ReplayWindow::Verdict::kDuplicate || v == ReplayWindow::Verdict::kTooOld ||
         v == ReplayWindow::Verdict::kZero) {
       ++stats_[t].duplicate;
       CountRejected(&h, DecodeStatus::kReplayed);
       return DecodeStatus::kReplayed;
     }
-  }
-  s = wire::OpenDatagram(datagram, key_, header, body);
-  if (s != DecodeStatus::kOk) {
-    CountRejected(&h, s);
-    return s;
-  }
-  if (!handshake) {
-    const auto v = windows_[t].Accept(header.sequence);
     late = v == ReplayWindow::Verdict::kLate;
     if (late) ++stats_[t].late;
     ++unique_in_session_[t];
+    // Only in-session traffic proves the peer alive: a replayed handshake datagram must not.
+    last_authenticated_ns_ = SteadyNowNs();
   }
   ++stats_[t].received;
   stats_[t].bytes_received += datagram.size();
-  last_authenticated_ns_ = SteadyNowNs();
+  last_open_bytes_ = datagram.size();
   return DecodeStatus::kOk;
 }
 

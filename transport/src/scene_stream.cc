@@ -287,6 +287,11 @@ void SceneReassembler::BuildNacks(std::int64_t now_ns, std::int64_t quiet_ns,
     const bool started = o != objects_.end() && o->second.version == a.entry.version &&
                          (o->second.complete || !o->second.bytes.empty());
     if (started) continue;
+    // Never ask for what would be refused anyway (it would be re-sent for ever).
+    if (a.entry.object_bytes > limits_.max_object_bytes ||
+        bytes_held_ + a.entry.object_bytes > limits_.max_total_bytes) {
+      continue;
+    }
     if (now_ns - a.first_seen_ns < quiet_ns || now_ns - a.last_nack_ns < quiet_ns) continue;
     wire::SceneNackMessage n;
     n.object_id = id;

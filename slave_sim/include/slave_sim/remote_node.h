@@ -34,6 +34,8 @@ struct RemoteNodeConfig {
   std::string port_file;
   /// Print a progress line every this many seconds (0 = never).
   double progress_period_s = 1.0;
+  /// Say goodbye to the operator when stopped (false simulates a crash, for tests).
+  bool goodbye_on_stop = true;
   /// Pre-shared key: every datagram is authenticated with it (see transport/protocol.h).
   MacKey key;
   /// Largest datagram for scene fragments (bytes, kMinMtuBytes..kMaxDatagramBytes); a session uses

@@ -19,10 +19,12 @@ struct StreamStats {
   std::uint64_t sent = 0;         ///< datagrams handed to the socket
   std::uint64_t send_failed = 0;  ///< refused by the socket (buffer full, no route)
   std::uint64_t bytes_sent = 0;
-  std::uint64_t received = 0;  ///< authenticated, in session, not a duplicate (late ones included)
+  std::uint64_t received = 0;  ///< authenticated, in session, not a duplicate (late ones included;
+                               ///< Hello/Welcome/Reject: authenticated)
   std::uint64_t bytes_received = 0;  ///< of those
   std::uint64_t late = 0;            ///< arrived after a higher sequence number (reordered)
-  std::uint64_t duplicate = 0;  ///< a sequence number already received (network copy or replay)
+  std::uint64_t duplicate = 0;  ///< authenticated, but a sequence number already received, 0, or
+                                ///< below the replay window (a network copy or a replay)
   std::uint64_t lost = 0;       ///< sequence numbers never received below the highest one
   std::uint64_t rejected = 0;   ///< claimed this type but failed MAC, session, replay or decode
 };
@@ -45,7 +47,7 @@ class ClockSync {
   std::int64_t RemoteToLocal(std::int64_t remote_ns) const noexcept {
     return remote_ns - offset_ns();
   }
-  /// Every round trip measured (ns), for percentiles; capped at `capacity` given to Reserve.
+  /// Every round trip measured (ms), for percentiles; capped at the capacity given to Reserve.
   const std::vector<double>& rtt_ms_samples() const noexcept { return rtt_ms_; }
   void Reserve(std::size_t capacity) { rtt_ms_.reserve(capacity); }
   void Reset() noexcept {
@@ -79,9 +81,9 @@ class SecureLink {
   /// Sends a sealed datagram to `to` and counts it under its type. False if the socket refused.
   bool Send(const wire::Datagram& datagram, const SocketAddress& to) noexcept;
 
-  /// Opens one received datagram: size, header, accepted type, then (except Hello, Welcome and
-  /// Reject) the session (`session_id` 0 = none open: every such datagram is refused) and the
-  /// replay window of its stream, then the MAC. On kOk gives header, body and whether it arrived
+  /// Opens one received datagram: size, header and accepted type, then the MAC, then (except for
+  /// Hello, Welcome and Reject) the session (`session_id` 0 = none open: every such datagram is
+  /// refused) and the replay window of its stream. On kOk gives header, body and whether it arrived
   /// late; on failure counts it by reason (and under its claimed type when the header parsed).
   wire::DecodeStatus Open(std::span<const std::uint8_t> datagram, std::uint32_t session_id,
                           wire::Header& header, std::span<const std::uint8_t>& body,
@@ -100,7 +102,8 @@ class SecureLink {
   std::uint64_t rejected(wire::DecodeStatus reason) const noexcept {
     return rejected_by_reason_[static_cast<int>(reason)];
   }
-  /// Local time (ns) of the last datagram that opened (0 = none).
+  /// Local time (ns) of the last in-session datagram that opened (0 = none); handshake datagrams
+  /// do not count, so that a replayed one cannot keep a dead peer "alive".
   std::int64_t last_authenticated_ns() const noexcept { return last_authenticated_ns_; }
   UdpSocket& socket() noexcept { return socket_; }
   const MacKey& key() const noexcept { return key_; }
@@ -119,6 +122,7 @@ class SecureLink {
   std::array<std::uint64_t, wire::kDecodeStatusCount> rejected_by_reason_{};
   std::uint64_t rejected_total_ = 0;
   std::int64_t last_authenticated_ns_ = 0;
+  std::uint64_t last_open_bytes_ = 0;
 };
 
 /// The steady clock in nanoseconds (the clock every send_time_ns is on).

@@ -31,7 +31,8 @@
 //     X_WT0: 3×f64 + 4×f64   F_T_W at q0: 3×f64 force (N), 3×f64 torque (N·m)
 //     u8 num_contacts (0..kMaxWireContacts), then per contact (88): f64 depth_m, 3×f64 ∂δ/∂x,
 //     3×f64 ∂δ/∂θ (m/rad), f64 stiffness (N/m), 3×f32 point_W (m), 3×f32 normal_W (unit)
-//   Goodbye O↔R (0): clean close of the session.
+//   Goodbye O↔R (0): clean close of the session (the operator at the end of a run, the remote
+//     node when stopped); sent three times with new sequence numbers.
 //   Hello O→R (32): u16 min_version, u16 max_version, u64 client_nonce, f32 tool_state_rate_hz,
 //     f32 max_model_rate_hz (0 = any), u16 max_grid (0 = any), u16 mtu, u32 codecs (kCodec*),
 //     u16 heartbeat_ms, u16 peer_timeout_ms

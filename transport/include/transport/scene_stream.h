@@ -1,8 +1,9 @@
 #pragma once
 // Scene updates over UDP: objects (Draco bitstreams) cut into MTU-sized fragments, reassembled
 // on the operator side, repaired by negative acknowledgement (NACK), with a newer version of an
-// object superseding an unfinished older one. Both ends are plain state machines (no sockets):
-// the remote node and the operator station drive them from their network loops.
+// object superseding an older one (an unfinished one is dropped at once; a finished one is
+// replaced when the first fragment of the newer arrives). Both ends are plain state machines (no
+// sockets): the remote node and the operator station drive them from their network loops.
 
 #include <cstdint>
 #include <deque>
@@ -73,13 +74,13 @@ struct ReassemblyLimits {
   std::size_t max_objects = 256;             ///< distinct object ids kept
 };
 
-/// Counters of the reassembler (all since construction or Reset).
+/// Counters of the reassembler (since construction; Reset keeps them).
 struct ReassemblyStats {
   std::uint64_t fragments_accepted = 0;
   std::uint64_t fragments_duplicate = 0;
   std::uint64_t fragments_stale = 0;         ///< for a version older than one already seen
   std::uint64_t fragments_inconsistent = 0;  ///< size/count disagreeing with the object's others
-  std::uint64_t fragments_over_limit = 0;    ///< refused by ReassemblyLimits
+  std::uint64_t fragments_over_limit = 0;    ///< fragments or manifest entries refused by limits
   std::uint64_t objects_completed = 0;
   std::uint64_t objects_superseded = 0;  ///< unfinished versions dropped for a newer one
   std::uint64_t digest_mismatches = 0;   ///< completed, but not the manifest's content

@@ -35,8 +35,10 @@ bool NegotiateSession(const wire::HelloMessage& hello, const RemoteCapabilities&
                       wire::WelcomeMessage& welcome, wire::RejectMessage& reject) noexcept;
 
 /// The last kSize Hello nonces seen, so that a replayed Hello is refused (a new Hello carries a
-/// fresh random nonce). A Hello older than the last kSize is not caught: it would need that many
-/// reconnections recorded in between.
+/// fresh random nonce). Not caught: a Hello older than the last kSize, and, after the remote node
+/// restarts (the history is in memory), a recorded Hello it never saw. Such a Hello can open a
+/// session only when no live session exists (the remote node defers new Hellos while its current
+/// operator is active), and the session it opens carries no traffic: it times out.
 class NonceHistory {
  public:
   static constexpr std::size_t kSize = 1024;
