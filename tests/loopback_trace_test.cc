@@ -138,6 +138,16 @@ TEST(LoopbackFig75, ForcesStayWithinTheDeviceLimits) {
     EXPECT_TRUE(s.contains(k)) << k;
   }
   EXPECT_GT(s["transport"]["streams"]["contact_model"]["received"].get<int>(), 0);
+  // Two routes to one number: both processes read the same steady clock here, so the true offset
+  // is 0; the NTP-style estimate must find it within its stated uncertainty (half the best RTT).
+  const auto& clock = s["transport"]["clock"];
+  ASSERT_GT(clock["samples"].get<int>(), 10);
+  EXPECT_LE(std::abs(clock["offset_ms"].get<double>()),
+            clock["offset_uncertainty_ms"].get<double>() + 1e-3);
+  // The scene arrived whole and decoded on the operator side.
+  EXPECT_TRUE(s["transport"]["scene"]["complete"].get<bool>());
+  EXPECT_EQ(s["transport"]["scene"]["verified_objects"].get<int>(), 2);
+  EXPECT_EQ(s["transport"]["rejected_total"].get<int>(), 0);
 }
 
 }  // namespace
