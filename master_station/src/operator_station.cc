@@ -150,7 +150,10 @@ class NetworkWorker {
         Send(state);
         last_send_ns = now;
       } else if (have_last && now - last_send_ns > 20000000) {
-        Send(last);  // keep-alive while the loop is not running yet
+        // Keep-alive while the loop is not running (before the first tick, after the last): the
+        // same pose, stamped now, so that round trips measured on it are not inflated.
+        last.time_ns = now;
+        Send(last);
         last_send_ns = now;
       }
       if (now - last_ping_ns >= heartbeat_ns_) {
