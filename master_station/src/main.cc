@@ -113,6 +113,14 @@ int main(int argc, char** argv) {
                  "refuse a remote node whose penetration-depth grid is larger (0 = any)")
       ->check(CLI::Range(0, 65535))
       ->capture_default_str();
+  bool no_passivity = false;
+  double model_timeout_s = defaults.safety.model_timeout_s;
+  app.add_flag("--no-passivity", no_passivity,
+               "turn off the time-domain passivity controller (for comparison only)");
+  app.add_option("--model-timeout", model_timeout_s,
+                 "fade the force to zero when the contact model is older than this, s")
+      ->check(CLI::Range(0.01, 60.0))
+      ->capture_default_str();
   std::string keygen_path;
   bool keygen_force = false;
   CLI::App* keygen = app.add_subcommand(
@@ -153,6 +161,8 @@ int main(int argc, char** argv) {
     config.peer_timeout_ms = peer_timeout_ms;
     config.max_grid = max_grid;
     config.max_model_rate_hz = max_model_rate;
+    config.passivity = !no_passivity;
+    config.safety.model_timeout_s = model_timeout_s;
     config.out_dir = out_dir;
     config.progress_period_s = quiet ? 0.0 : 0.5;
     config.X_WM = ht::BlockOnGearHomePose();

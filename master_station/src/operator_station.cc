@@ -17,7 +17,9 @@
 #include <vector>
 
 #include "codecs/draco_mesh_codec.h"
+#include "haptic_core/passivity.h"
 #include "haptic_core/statistics.h"
+#include "haptic_core/wrench_safety.h"
 #include "master_station/lock_free.h"
 #include "transport/link.h"
 #include "transport/messages.h"
@@ -483,14 +485,6 @@ void WriteTraceRow(std::FILE* f, const TraceRow& r, const std::vector<std::strin
                static_cast<double>(r.remote_step_us));
 }
 
-/// Scales `v` down to length `limit` when longer, keeping its direction. Returns true if clamped.
-bool ClampLength(glm::dvec3& v, double limit) noexcept {
-  const double len = glm::length(v);
-  if (len <= limit) return false;
-  v *= limit / len;
-  return true;
-}
-
 }  // namespace
 
 void StationConfig::Validate() const {
@@ -515,6 +509,7 @@ void StationConfig::Validate() const {
   if (reconnect_period_ms < 10) throw std::invalid_argument("reconnect period must be >= 10 ms");
   if (max_grid < 0 || max_grid > 65535) throw std::invalid_argument("max grid must be 0..65535");
   coupling.Validate();
+  safety.Validate();
 }
 
 nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& device,
@@ -606,7 +601,18 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   std::atomic<std::int64_t> ticks_done{0};
   std::atomic<int> progress_contacts{0}, progress_phase{0};
   std::atomic<double> progress_force{0.0}, progress_age_ms{-1.0};
-  std::int64_t nonfinite = 0, device_faults = 0, force_clamped = 0, overruns = 0;
+  std::int64_t nonfinite = 0, device_faults = 0, overruns = 0;
+  // The added damping is capped (4 x the device's rated damping: the controller acts for single
+  // ticks, well inside what a 1 kHz device renders); energy it cannot dissipate in one tick stays
+  // in the observer (E < 0) and is dissipated on the next ones.
+  PassivityController passivity(1e-4, 4.0 * caps.max_damping_ns_per_m);
+  SafetyLimits safety_limits = config.safety;
+  // The device's own limits bound the configured ones (a device without force output gets a
+  // vanishing limit: it renders nothing).
+  safety_limits.max_force_n = std::max(1e-9, std::min(safety_limits.max_force_n, caps.max_force_n));
+  safety_limits.max_torque_nm =
+      std::max(1e-9, std::min(safety_limits.max_torque_nm, caps.max_torque_nm));
+  WrenchSafetyFilter safety(safety_limits);
   int contacts_max = 0;
   double force_max = 0.0;
   std::vector<double> model_age_samples(static_cast<size_t>(ticks), -1.0);
@@ -619,6 +625,7 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
       realtime_note = "not permitted (run as root or grant CAP_SYS_NICE / rtprio); normal priority";
     }
     IncomingModel received{};
+    std::int64_t model_built_ns = 0;
     ContactModel model{};
     std::int64_t model_tool_time_ns = 0;
     bool have_model = false;
@@ -647,6 +654,7 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
         if (incoming.Read(received)) {
           model = received.message.model;
           model_tool_time_ns = received.message.tool_state_send_time_ns;
+          model_built_ns = received.built_local_ns;
           remote_collision = received.message.collision_us;
           remote_texture = received.message.texture_us;
           remote_step = received.message.step_us;
@@ -659,9 +667,14 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
           ++nonfinite;
           F_device_W = {};
         }
-        bool clamped = ClampLength(F_device_W.force, caps.max_force_n);
-        clamped |= ClampLength(F_device_W.torque, caps.max_torque_nm);
-        if (clamped) ++force_clamped;
+        // Passivity (energy the delayed model created is dissipated), then the safety stage, then
+        // the observer records what the device really gets.
+        if (config.passivity) F_device_W = passivity.Apply(F_device_W, V_WH_W, h);
+        const double model_age_s = have_model ? (now - model_built_ns) * 1e-9 : -1.0;
+        std::uint32_t actions = 0;
+        F_device_W = safety.Filter(F_device_W, V_WH_W, model_age_s,
+                                   counters.connected.load(std::memory_order_relaxed), h, actions);
+        passivity.Commit(F_device_W, V_WH_W, h);
         const Wrench F_H_M{R_MW * F_device_W.force, R_MW * F_device_W.torque};
         if (!device.WriteWrench(F_H_M, now)) ++device_faults;
 
@@ -766,7 +779,23 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   s["contact_force_max_n"] = force_max;
   s["device_max_force_n"] = caps.max_force_n;
   s["device_max_torque_nm"] = caps.max_torque_nm;
-  s["force_clamped_ticks"] = force_clamped;
+  const SafetyCounters& sc = safety.counters();
+  s["force_clamped_ticks"] = sc.clamped;
+  s["operator_energy_in_J"] = passivity.energy_in_j();
+  s["operator_energy_out_J"] = passivity.energy_out_j();
+  s["passivity"] = {{"enabled", config.passivity},
+                    {"observed_energy_J", passivity.observed_energy_j()},
+                    {"dissipated_J", passivity.dissipated_j()},
+                    {"active_ticks", passivity.active_ticks()},
+                    {"max_damping_ns_per_m", passivity.max_alpha()}};
+  s["safety"] = {{"nonfinite_ticks", sc.nonfinite},
+                 {"fading_ticks", sc.fading},
+                 {"braking_ticks", sc.braking},
+                 {"clamped_ticks", sc.clamped},
+                 {"rate_limited_ticks", sc.rate_limited},
+                 {"max_force_n", safety_limits.max_force_n},
+                 {"max_torque_nm", safety_limits.max_torque_nm},
+                 {"model_timeout_s", safety_limits.model_timeout_s}};
   s["nonfinite_count"] = nonfinite;
   s["device_faults"] = device_faults;
   s["trace_rows_dropped"] = rows_dropped.load();

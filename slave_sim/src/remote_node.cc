@@ -168,6 +168,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
             // longer than its retry period): the same session, welcomed again (to the session's
             // address only).
             ++hello_retransmits;
+            session_start_ns = now;  // an authenticated sign of life of this session's operator
             link.Send(wire::EncodeWelcome(link.NextHeader(wire::MessageType::kWelcome, session),
                                           session_welcome, config.key),
                       peer);

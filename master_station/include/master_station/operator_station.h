@@ -9,6 +9,7 @@
 #include <string>
 
 #include "haptic_core/tool_simulation.h"
+#include "haptic_core/wrench_safety.h"
 #include "master_station/experiment.h"
 #include "master_station/haptic_device.h"
 #include "transport/auth.h"
@@ -45,6 +46,11 @@ struct StationConfig {
   /// Most contact models per second asked of the remote node (0 = as fast as it steps); the
   /// default, 0 here, is replaced by the loop rate: more models than ticks are never used.
   double max_model_rate_hz = 0.0;
+  /// Time-domain passivity controller on the hand–device port (Ryu, Kwon & Hannaford 2004).
+  bool passivity = true;
+  /// The safety stage before the device (force/torque caps are further bounded by the device's
+  /// capabilities; the contact model's age is measured on the local clock from its send time).
+  SafetyLimits safety{.max_force_n = 1e9, .max_torque_nm = 1e9, .model_timeout_s = 0.5};
   /// Largest penetration-depth grid accepted from the remote node (0 = any).
   int max_grid = 0;
 

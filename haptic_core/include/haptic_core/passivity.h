@@ -1,0 +1,62 @@
+#pragma once
+// Time-domain passivity on the port between the operator's hand and the haptic device (Ryu,
+// Kwon & Hannaford, "Stable teleoperation with time-domain passivity control", IEEE TRA 20(2),
+// 2004; Hannaford & Ryu, "Time-domain passivity control of haptic interfaces", IEEE TRA 18(1),
+// 2002). The observer integrates the energy the operator puts into the rest of the system (the
+// device, the virtual coupling, the tool and the network-delayed contact model); the controller
+// adds exactly the damping needed to keep that energy non-negative, and nothing otherwise.
+
+#include <cstdint>
+
+#include "haptic_core/spatial.h"
+
+namespace ht {
+
+/// Passivity observer and controller for one impedance-type port (velocity in, wrench out).
+/// Sign convention: F_device_W is the wrench the device applies to the hand (N, N·m, in W, at the
+/// handle), V_hand_W the hand's twist (m/s, rad/s, in W). The device does work on the hand at the
+/// rate F·V; the hand does work on the system at −F·V. The observed energy
+///   E_k = Σ_{i≤k} −(F_i · V_i) h   (J)
+/// is what the operator has put in minus what the system has given back; the port is passive
+/// while E_k ≥ 0 [L: RKH04, eq. 5].
+class PassivityController {
+ public:
+  /// `min_speed`: below this hand speed (m/s, with rad/s weighted by `angular_weight_m`), no
+  /// damping is added (it would be unbounded); `max_damping`: cap on the added damping (N·s/m;
+  /// N·m·s/rad = max_damping·angular_weight_m²), 0 = none. Throws std::invalid_argument for
+  /// negative or non-finite values.
+  PassivityController(double min_speed = 1e-4, double max_damping_ns_per_m = 0.0,
+                      double angular_weight_m = 0.05);
+
+  /// Given the wrench about to be commanded and the hand's twist over the tick of length `h_s`,
+  /// returns the wrench with passivity damping added when the step would make E negative:
+  /// F' = F − α·Ṽ with α ≥ 0 chosen so that E_k = 0 exactly (Ṽ weights rotation by
+  /// angular_weight_m). Does not update E (call Commit with what was really sent).
+  Wrench Apply(const Wrench& F_device_W, const Twist& V_hand_W, double h_s) noexcept;
+  /// Records the wrench actually commanded (after any later safety stage) over the tick.
+  void Commit(const Wrench& F_commanded_W, const Twist& V_hand_W, double h_s) noexcept;
+
+  /// E_k (J): operator's input minus output so far (≥ 0 while passive).
+  double observed_energy_j() const noexcept { return energy_j_; }
+  /// Energy the operator put into the system, Σ max(−F·V, 0) h (J).
+  double energy_in_j() const noexcept { return energy_in_j_; }
+  /// Energy the system gave to the operator, Σ max(F·V, 0) h (J).
+  double energy_out_j() const noexcept { return energy_out_j_; }
+  /// Energy the controller dissipated (J), and ticks where it acted.
+  double dissipated_j() const noexcept { return dissipated_j_; }
+  std::int64_t active_ticks() const noexcept { return active_ticks_; }
+  /// Largest damping coefficient it applied (N·s/m).
+  double max_alpha() const noexcept { return max_alpha_; }
+  void Reset() noexcept;
+
+ private:
+  double min_speed_, max_damping_, angular_weight_m_;
+  double energy_j_ = 0.0, energy_in_j_ = 0.0, energy_out_j_ = 0.0, dissipated_j_ = 0.0;
+  double max_alpha_ = 0.0;
+  std::int64_t active_ticks_ = 0;
+};
+
+/// Power the device delivers to the hand, F·V = f·v + τ·ω (W).
+double DevicePower(const Wrench& F_device_W, const Twist& V_hand_W) noexcept;
+
+}  // namespace ht

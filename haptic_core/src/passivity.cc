@@ -1,0 +1,61 @@
+#include "haptic_core/passivity.h"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace ht {
+
+double DevicePower(const Wrench& F, const Twist& V) noexcept {
+  return glm::dot(F.force, V.linear) + glm::dot(F.torque, V.angular);
+}
+
+PassivityController::PassivityController(double min_speed, double max_damping_ns_per_m,
+                                         double angular_weight_m)
+    : min_speed_(min_speed),
+      max_damping_(max_damping_ns_per_m),
+      angular_weight_m_(angular_weight_m) {
+  if (!(min_speed >= 0.0) || !std::isfinite(min_speed) || !(max_damping_ns_per_m >= 0.0) ||
+      !std::isfinite(max_damping_ns_per_m) || !(angular_weight_m > 0.0) ||
+      !std::isfinite(angular_weight_m)) {
+    throw std::invalid_argument(
+        "passivity controller: min speed and max damping must be finite and >= 0, angular weight "
+        "finite and > 0");
+  }
+}
+
+Wrench PassivityController::Apply(const Wrench& F, const Twist& V, double h) noexcept {
+  const double predicted = energy_j_ - DevicePower(F, V) * h;
+  if (predicted >= 0.0) return F;
+  // Weighted twist: rotation counts as motion of a point angular_weight_m from the axis.
+  const double L2 = angular_weight_m_ * angular_weight_m_;
+  const double speed2 = glm::dot(V.linear, V.linear) + L2 * glm::dot(V.angular, V.angular);
+  if (speed2 <= min_speed_ * min_speed_ || !(h > 0.0)) return F;
+  // F' = F − α (v, L² ω): F'·V = F·V − α·speed2, and E_k = predicted + α·speed2·h = 0.
+  double alpha = -predicted / (speed2 * h);
+  if (max_damping_ > 0.0 && alpha > max_damping_) alpha = max_damping_;
+  Wrench out = F;
+  out.force -= alpha * V.linear;
+  out.torque -= alpha * L2 * V.angular;
+  ++active_ticks_;
+  dissipated_j_ += alpha * speed2 * h;
+  if (alpha > max_alpha_) max_alpha_ = alpha;
+  return out;
+}
+
+void PassivityController::Commit(const Wrench& F, const Twist& V, double h) noexcept {
+  const double p = DevicePower(F, V);
+  if (!std::isfinite(p) || !(h > 0.0)) return;
+  energy_j_ -= p * h;
+  if (p > 0.0) {
+    energy_out_j_ += p * h;
+  } else {
+    energy_in_j_ -= p * h;
+  }
+}
+
+void PassivityController::Reset() noexcept {
+  energy_j_ = energy_in_j_ = energy_out_j_ = dissipated_j_ = max_alpha_ = 0.0;
+  active_ticks_ = 0;
+}
+
+}  // namespace ht

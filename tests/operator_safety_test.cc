@@ -1,0 +1,145 @@
+// The operator side's last stages before the device: the time-domain passivity controller and
+// the wrench safety filter. Each protection is shown to trigger and what the device then gets.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <deque>
+
+#include "haptic_core/passivity.h"
+#include "haptic_core/wrench_safety.h"
+
+namespace ht {
+namespace {
+
+constexpr double kH = 1e-3;
+
+TEST(WrenchSafety, NonFiniteBecomesZero) {
+  WrenchSafetyFilter f({});
+  std::uint32_t a = 0;
+  const Wrench out = f.Filter({{NAN, 0, 0}, {0, 0, 0}}, {}, 0.0, true, kH, a);
+  EXPECT_TRUE(a & kSafetyNonFinite);
+  EXPECT_EQ(out.force, glm::dvec3(0.0));
+  EXPECT_EQ(f.counters().nonfinite, 1);
+}
+
+TEST(WrenchSafety, ClampsKeepingDirectionAndLimitsTheRate) {
+  SafetyLimits l;
+  l.max_force_n = 4.0;
+  l.max_force_rate_n_per_s = 1000.0;  // 1 N per 1 ms tick
+  WrenchSafetyFilter f(l);
+  std::uint32_t a = 0;
+  const glm::dvec3 desired{30.0, 40.0, 0.0};  // 50 N along (0.6, 0.8, 0)
+  glm::dvec3 previous{0.0};
+  for (int k = 0; k < 10; ++k) {
+    const Wrench out = f.Filter({desired, {}}, {}, 0.0, true, kH, a);
+    EXPECT_LE(glm::length(out.force - previous), 1.0 + 1e-12);  // impulse limit
+    EXPECT_LE(glm::length(out.force), 4.0 + 1e-12);
+    EXPECT_NEAR(glm::dot(glm::normalize(out.force), glm::dvec3(0.6, 0.8, 0.0)), 1.0, 1e-12);
+    previous = out.force;
+  }
+  EXPECT_NEAR(glm::length(previous), 4.0, 1e-12);  // reached the clamp after 4 ticks
+  EXPECT_TRUE(a & kSafetyClamped);
+  EXPECT_GT(f.counters().rate_limited, 0);
+}
+
+TEST(WrenchSafety, BrakesWithDampingOnlyAboveTheSpeedLimit) {
+  SafetyLimits l;
+  l.max_force_rate_n_per_s = 1e6;
+  WrenchSafetyFilter f(l);
+  std::uint32_t a = 0;
+  const Twist fast{{2.0, 0.0, 0.0}, {0, 0, 0}};
+  const Wrench out = f.Filter({{5.0, 1.0, 0.0}, {}}, fast, 0.0, true, kH, a);  // pushing along v
+  EXPECT_TRUE(a & kSafetyBraking);
+  EXPECT_LT(glm::dot(out.force, fast.linear), 0.0);  // dissipates
+  EXPECT_NEAR(out.force.x, -l.brake_damping_ns_per_m * 2.0, 1e-12);
+  const Wrench slow = f.Filter({{5.0, 1.0, 0.0}, {}}, {{0.1, 0, 0}, {0, 0, 0}}, 0.0, true, kH, a);
+  EXPECT_FALSE(a & kSafetyBraking);
+  EXPECT_NEAR(slow.force.x, 5.0, 1e-12);
+}
+
+TEST(WrenchSafety, FadesToZeroWhenStaleOrLinkLostAndResumesSmoothly) {
+  SafetyLimits l;
+  l.model_timeout_s = 0.25;
+  l.fade_out_s = 0.1;
+  l.fade_in_s = 0.2;
+  WrenchSafetyFilter f(l);
+  std::uint32_t a = 0;
+  const Wrench F{{0.0, 0.0, 3.0}, {}};
+  for (int k = 0; k < 50; ++k) f.Filter(F, {}, 0.01, true, kH, a);
+  EXPECT_DOUBLE_EQ(f.gain(), 1.0);
+  // Stale model: the force ramps to zero within fade_out_s, never increasing.
+  double last = 3.0;
+  int ticks_to_zero = -1;
+  for (int k = 0; k < 200; ++k) {
+    const Wrench out = f.Filter(F, {}, 0.3, true, kH, a);
+    EXPECT_LE(out.force.z, last + 1e-12);
+    last = out.force.z;
+    if (ticks_to_zero < 0 && out.force.z == 0.0) ticks_to_zero = k + 1;
+  }
+  EXPECT_EQ(ticks_to_zero, 100);  // fade_out_s / h
+  EXPECT_TRUE(a & kSafetyFading);
+  // Link lost counts the same, whatever the model age.
+  EXPECT_EQ(f.Filter(F, {}, 0.0, false, kH, a).force.z, 0.0);
+  // Fresh again: back to full over fade_in_s, by at most 3 N × h / fade_in_s per tick.
+  last = 0.0;
+  for (int k = 0; k < 250; ++k) {
+    const Wrench out = f.Filter(F, {}, 0.01, true, kH, a);
+    EXPECT_GE(out.force.z, last - 1e-12);
+    EXPECT_LE(out.force.z - last, 3.0 * kH / l.fade_in_s + 1e-9);
+    last = out.force.z;
+  }
+  EXPECT_NEAR(last, 3.0, 1e-12);
+  EXPECT_THROW(WrenchSafetyFilter(SafetyLimits{.max_force_n = -1.0}), std::invalid_argument);
+}
+
+/// A 1-DoF hand oscillating against a stiff virtual wall whose force reaches the device
+/// `delay_ticks` late (a network-delayed model): the classic energy-creating case.
+struct WallRun {
+  double energy_in = 0, energy_out = 0, min_energy = 0, dissipated = 0;
+};
+
+WallRun RunDelayedWall(int delay_ticks, bool passivity, double k = 5000.0) {
+  PassivityController pc;
+  std::deque<double> delayed(static_cast<std::size_t>(delay_ticks), 0.0);
+  // The hand oscillates at the frequency where the delay is a quarter period: the delayed wall
+  // force then pushes along the motion on the way out (the worst case).
+  const double hz = delay_ticks > 0 ? 1.0 / (4.0 * delay_ticks * kH) : 2.0;
+  WallRun r;
+  for (int i = 0; i < 8000; ++i) {
+    const double t = i * kH;
+    const double x = 0.004 * std::sin(2 * M_PI * hz * t) - 0.001;  // into the wall when x > 0
+    const double v = 0.004 * 2 * M_PI * hz * std::cos(2 * M_PI * hz * t);
+    delayed.push_back(x > 0.0 ? -k * x : 0.0);  // wall force on the hand
+    const double f_delayed = delayed.front();
+    delayed.pop_front();
+    const Twist V{{v, 0, 0}, {0, 0, 0}};
+    Wrench F{{f_delayed, 0, 0}, {0, 0, 0}};
+    if (passivity) F = pc.Apply(F, V, kH);
+    pc.Commit(F, V, kH);
+    r.min_energy = std::min(r.min_energy, pc.observed_energy_j());
+  }
+  r.energy_in = pc.energy_in_j();
+  r.energy_out = pc.energy_out_j();
+  r.dissipated = pc.dissipated_j();
+  return r;
+}
+
+TEST(Passivity, ADelayedStiffWallCreatesEnergyWithoutTheController) {
+  for (int delay : {100, 300}) {  // 100 and 300 ms round trip
+    const WallRun r = RunDelayedWall(delay, false);
+    EXPECT_GT(r.energy_out, r.energy_in * 1.05) << delay;  // the wall gave back more than it got
+    EXPECT_LT(r.min_energy, 0.0);
+  }
+}
+
+TEST(Passivity, TheControllerKeepsTheOperatorsOutputBelowTheInput) {
+  for (int delay : {0, 100, 300}) {
+    const WallRun r = RunDelayedWall(delay, true);
+    EXPECT_LE(r.energy_out, r.energy_in + 1e-9) << delay;
+    EXPECT_GE(r.min_energy, -1e-9) << delay;
+    if (delay > 0) EXPECT_GT(r.dissipated, 0.0) << delay;
+  }
+}
+
+}  // namespace
+}  // namespace ht
