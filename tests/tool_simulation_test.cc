@@ -59,5 +59,37 @@ TEST(ToolSimulation, RejectsBadParameters) {
                std::invalid_argument);
 }
 
+TEST(ToolSimulation, ANewModelBlendsInWithBoundedForceSteps) {
+  // Two contact models that disagree (a 1 mm deeper contact): switching at once jumps the contact
+  // force by k·1 mm; blending over N ticks moves it by about a N-th of that per tick.
+  const ToolSimulator sim(BlockOnGearToolInertia(), VirtualCoupling{});
+  ContactModel a;
+  a.num_contacts = 1;
+  a.contacts[0].depth_m = 0.5e-3;
+  a.contacts[0].gradient.d_translation_W = {0, 0, -1};
+  a.contacts[0].stiffness_n_per_m = 4000;
+  a.contacts[0].normal_W = {0, 0, 1};
+  ContactModel b = a;
+  b.contacts[0].depth_m = 1.5e-3;
+  const int N = 4;
+  ToolState s;
+  const RigidTransform X_WH;
+  double last = EvaluateContactModel(a, s.X_WT).F_T_W.force.z;
+  double largest_step = 0.0;
+  for (int k = 1; k <= N; ++k) {
+    ToolState probe = s;  // the same tool pose each tick: only the blend changes
+    const ToolStepResult r = sim.StepBlended(probe, X_WH, {}, b, a, double(k) / N, 1e-3);
+    largest_step = std::max(largest_step, std::abs(r.F_contact_T_W.force.z - last));
+    last = r.F_contact_T_W.force.z;
+  }
+  const double jump = 4000 * 1e-3;
+  EXPECT_NEAR(last, EvaluateContactModel(b, s.X_WT).F_T_W.force.z, 1e-9);
+  EXPECT_NEAR(largest_step, jump / N, 1e-9);
+  // Blend 1 is the plain step with the current model, blend 0 the previous one.
+  ToolState p1 = s, p2 = s;
+  EXPECT_EQ(sim.StepBlended(p1, X_WH, {}, b, a, 1.0, 1e-3).F_contact_T_W.force,
+            sim.Step(p2, X_WH, {}, b, 1.0, 1e-3).F_contact_T_W.force);
+}
+
 }  // namespace
 }  // namespace ht

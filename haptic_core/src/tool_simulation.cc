@@ -1,6 +1,7 @@
 #include "haptic_core/tool_simulation.h"
 
 #include <Eigen/Cholesky>
+#include <algorithm>
 #include <cmath>
 #include <glm/gtc/quaternion.hpp>
 #include <glm/mat3x3.hpp>
@@ -83,7 +84,38 @@ ToolStepResult ToolSimulator::Step(ToolState& s, const RigidTransform& X_WH, con
     s = {X_WH, V_WH_W};
     result.ok = false;
   }
-  const ContactModelEvaluation contact = EvaluateContactModel(model, s.X_WT, stiffness_scale);
+  return Integrate(s, X_WH, V_WH_W, EvaluateContactModel(model, s.X_WT, stiffness_scale), h,
+                   result);
+}
+
+ToolStepResult ToolSimulator::StepBlended(ToolState& s, const RigidTransform& X_WH,
+                                          const Twist& V_WH_W, const ContactModel& current,
+                                          const ContactModel& previous, double blend,
+                                          double h) const noexcept {
+  ToolStepResult result;
+  if (!IsFiniteRigidTransform(X_WH) || !IsFinite(V_WH_W) || !(h > 0.0) || !std::isfinite(h)) {
+    result.ok = false;
+    s.V_WT_W = {};
+    return result;
+  }
+  if (!IsFiniteRigidTransform(s.X_WT) || !IsFinite(s.V_WT_W)) {
+    s = {X_WH, V_WH_W};
+    result.ok = false;
+  }
+  const double beta = std::isfinite(blend) ? std::clamp(blend, 0.0, 1.0) : 1.0;
+  ContactModelEvaluation a = EvaluateContactModel(current, s.X_WT, beta);
+  const ContactModelEvaluation b = EvaluateContactModel(previous, s.X_WT, 1.0 - beta);
+  a.F_T_W.force += b.F_T_W.force;
+  a.F_T_W.torque += b.F_T_W.torque;
+  a.K += b.K;
+  a.active_contacts = beta >= 0.5 ? a.active_contacts : b.active_contacts;
+  a.max_depth_m = std::max(a.max_depth_m, b.max_depth_m);
+  return Integrate(s, X_WH, V_WH_W, a, h, result);
+}
+
+ToolStepResult ToolSimulator::Integrate(ToolState& s, const RigidTransform& X_WH,
+                                        const Twist& V_WH_W, const ContactModelEvaluation& contact,
+                                        double h, ToolStepResult result) const noexcept {
   result.F_contact_T_W = contact.F_T_W;
   result.active_contacts = contact.active_contacts;
   result.max_depth_m = contact.max_depth_m;

@@ -12,6 +12,7 @@
 #include "haptic_core/haptic_scene.h"
 #include "master_station/experiment.h"
 #include "master_station/operator_station.h"
+#include "master_station/replay_device.h"
 #include "master_station/simulated_operator.h"
 
 namespace {
@@ -113,6 +114,17 @@ int main(int argc, char** argv) {
                  "refuse a remote node whose penetration-depth grid is larger (0 = any)")
       ->check(CLI::Range(0, 65535))
       ->capture_default_str();
+  std::string device_name = "simulated", replay_file;
+  app.add_option("--device", device_name,
+                 "operator device: simulated (a scripted hand following --experiment) or replay\n"
+                 "(a recorded handle trajectory, --replay FILE)")
+      ->check(CLI::IsMember({"simulated", "replay"}))
+      ->capture_default_str();
+  app.add_option(
+         "--replay", replay_file,
+         "CSV for --device replay: header with t_s and x,y,z (m, device base) and optional\n"
+         "rx,ry,rz (rad); or a trace.csv of this station (hand_x,hand_y,hand_z)")
+      ->check(CLI::ExistingFile);
   bool no_passivity = false;
   double model_timeout_s = defaults.safety.model_timeout_s;
   app.add_flag("--no-passivity", no_passivity,
@@ -169,13 +181,25 @@ int main(int argc, char** argv) {
     if (!origin_text.empty()) config.X_WM.translation = ParseVector(origin_text);
     config.tool_inertia = ht::BlockOnGearToolInertia();
 
-    const auto experiment = ht::MakeExperiment(experiment_name, duration_s);
-    ht::SimulatedOperatorDevice device(*experiment);
+    std::unique_ptr<ht::HapticDevice> device;
+    std::unique_ptr<ht::Experiment> experiment;
+    if (device_name == "replay") {
+      if (replay_file.empty()) throw std::invalid_argument("--device replay needs --replay FILE");
+      auto replay = std::make_unique<ht::ReplayDevice>(
+          ht::LoadReplayTrace(replay_file, config.X_WM.translation), replay_file);
+      // The run lasts as long as the recording unless --duration says otherwise.
+      if (app.count("--duration") == 0) duration_s = std::max(0.1, replay->duration_s());
+      experiment = ht::MakeExperiment(experiment_name, duration_s);
+      device = std::move(replay);
+    } else {
+      experiment = ht::MakeExperiment(experiment_name, duration_s);
+      device = std::make_unique<ht::SimulatedOperatorDevice>(*experiment);
+    }
     std::printf("[master] device: %s; loop %.0f Hz; remote %s; experiment %s (%.2f s)\n",
-                device.capabilities().name.c_str(), rate_hz, remote.c_str(),
+                device->capabilities().name.c_str(), rate_hz, remote.c_str(),
                 experiment_name.c_str(), duration_s);
     std::fflush(stdout);
-    const nlohmann::json summary = ht::RunOperatorStation(config, device, *experiment);
+    const nlohmann::json summary = ht::RunOperatorStation(config, *device, *experiment);
     std::printf(
         "[master] done: loop %.1f Hz (tick p99 %.1f us), remote %.1f Hz (step p50 %.0f us), "
         "rtt p50 %.3f ms, contacts max %d, non-finite %lld\n",

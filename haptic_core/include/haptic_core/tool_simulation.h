@@ -64,6 +64,13 @@ class ToolSimulator {
   ToolStepResult Step(ToolState& state, const RigidTransform& X_WH, const Twist& V_WH_W,
                       const ContactModel& model, double stiffness_scale, double h_s) const noexcept;
 
+  /// Like Step, with a newly received contact model blended in: contact wrench and stiffness are
+  /// blend·(current) + (1 − blend)·(previous), blend ∈ [0, 1] (clamped; NaN counts as 1). Ramping
+  /// blend over a few ticks after each arrival replaces a jump of the force by steps of at most
+  /// |ΔΦ|/ticks (DESIGN.md §5).
+  ToolStepResult StepBlended(ToolState& state, const RigidTransform& X_WH, const Twist& V_WH_W,
+                             const ContactModel& current, const ContactModel& previous,
+                             double blend, double h_s) const noexcept;
   /// Coupling wrench on the tool at its centre of mass, in W: k (p_H − p_T) + b (v_H − v_T) and
   /// k_r·rotvec(R_H R_Tᵀ) + b_r (ω_H − ω_T).
   Wrench CouplingWrench(const ToolState& state, const RigidTransform& X_WH,
@@ -73,6 +80,9 @@ class ToolSimulator {
   const ToolInertia& inertia() const noexcept { return inertia_; }
 
  private:
+  ToolStepResult Integrate(ToolState& state, const RigidTransform& X_WH, const Twist& V_WH_W,
+                           const ContactModelEvaluation& contact, double h,
+                           ToolStepResult result) const noexcept;
   ToolInertia inertia_;
   VirtualCoupling coupling_;
 };

@@ -46,6 +46,8 @@ struct StationConfig {
   /// Most contact models per second asked of the remote node (0 = as fast as it steps); the
   /// default, 0 here, is replaced by the loop rate: more models than ticks are never used.
   double max_model_rate_hz = 0.0;
+  /// A newly received contact model is blended in over this many ticks (1 = switched at once).
+  int model_blend_ticks = 4;
   /// Time-domain passivity controller on the hand–device port (Ryu, Kwon & Hannaford 2004).
   bool passivity = true;
   /// The safety stage before the device (force/torque caps are further bounded by the device's
