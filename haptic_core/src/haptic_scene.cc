@@ -25,6 +25,24 @@ HapticScene MakeBlockOnGearScene() {
   return scene;
 }
 
+HapticScene MakeStiffWallScene() {
+  HapticScene scene;
+  scene.name = "stiff_wall";
+  scene.tool = std::make_shared<const HapticModel>(MakeRidgedBlock(RidgedBlockParams{}));
+  const glm::dvec3 half{0.06, 0.06, 0.01};
+  TouchableObject wall;
+  // MakeTexturedBox puts its (here flat) texture on the bottom face; turned over, that face is
+  // the top, at z = the gear's radius.
+  wall.model = std::make_shared<const HapticModel>(
+      MakeTexturedBox(half, [](double, double) { return 0.0; }, 16, 2.0, "stiff_wall"));
+  wall.X_WO.translation = {0.0, 0.0, RidgedGearParams{}.radius_m - half.z};
+  wall.X_WO.rotation = glm::angleAxis(M_PI, glm::dvec3(1.0, 0.0, 0.0));
+  wall.stiffness_n_per_m = 40000.0;
+  scene.touchables.push_back(wall);
+  scene.X_WT_home = BlockOnGearHomePose();
+  return scene;
+}
+
 RigidTransform BlockOnGearHomePose() {
   RigidTransform X_WT;
   X_WT.translation = {0.0, 0.0,

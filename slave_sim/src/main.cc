@@ -33,7 +33,11 @@ int main(int argc, char** argv) {
   std::string pd_backend = "auto";
   app.add_option("--listen", listen, "UDP address HOST:PORT to listen on (port 0 = any free)")
       ->capture_default_str();
-  app.add_option("--scene", scene, "scene: block-on-gear (built in)")->capture_default_str();
+  app.add_option("--scene", scene,
+                 "built-in scene: block-on-gear (seed Fig. 75) or stiff-wall (the same block on a\n"
+                 "flat wall five times stiffer, a stability hard case)")
+      ->check(CLI::IsMember({"block-on-gear", "stiff-wall"}))
+      ->capture_default_str();
   app.add_option("--grid", config.pipeline.grid_resolution,
                  "penetration-depth grid N (N x N cells per contact)")
       ->check(CLI::Range(2, 1024))
@@ -100,15 +104,13 @@ int main(int argc, char** argv) {
     }
     config.key = ht::LoadKeyFile(key_file);
     config.mtu = static_cast<std::size_t>(mtu);
-    if (scene != "block-on-gear") {
-      throw std::invalid_argument("unknown scene '" + scene + "' (built in: block-on-gear)");
-    }
     config.listen_address = ht::SocketAddress::Parse(listen);
     config.pd_backend = ht::ParsePdBackendChoice(pd_backend);
     config.port_file = port_file;
     config.exit_on_goodbye = !stay;
     config.progress_period_s = quiet ? 0.0 : 1.0;
-    const ht::HapticScene haptic_scene = ht::MakeBlockOnGearScene();
+    const ht::HapticScene haptic_scene =
+        scene == "stiff-wall" ? ht::MakeStiffWallScene() : ht::MakeBlockOnGearScene();
     config.scene_objects = ht::BlockOnGearSceneObjects();
     const nlohmann::json summary = ht::RunRemoteNode(config, haptic_scene, g_stop);
     std::printf("[slave] done: %llu steps, %.1f steps/s, step p50 %.0f us\n",

@@ -35,6 +35,11 @@ struct HapticScene {
 /// puts the block's mean bottom face 0.5 mm above the gear's mean top line.
 HapticScene MakeBlockOnGearScene();
 
+/// A stiff, smooth wall under the same ridged block (a hard case for stability: k = 40,000 N/m,
+/// five times the gear's): a 12 × 12 × 2 cm box whose top face lies where the gear's top is, so
+/// the home pose and the experiments are those of MakeBlockOnGearScene().
+HapticScene MakeStiffWallScene();
+
 /// Home pose X_WT of the tool in MakeBlockOnGearScene(), without building the scene.
 RigidTransform BlockOnGearHomePose();
 
