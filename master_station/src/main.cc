@@ -11,9 +11,11 @@
 
 #include "haptic_core/haptic_scene.h"
 #include "master_station/experiment.h"
+#include "master_station/falcon.h"
 #include "master_station/operator_station.h"
 #include "master_station/replay_device.h"
 #include "master_station/simulated_operator.h"
+#include "master_station/spacemouse.h"
 
 namespace {
 
@@ -115,16 +117,24 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, 65535))
       ->capture_default_str();
   std::string device_name = "simulated", replay_file;
-  app.add_option("--device", device_name,
-                 "operator device: simulated (a scripted hand following --experiment) or replay\n"
-                 "(a recorded handle trajectory, --replay FILE)")
-      ->check(CLI::IsMember({"simulated", "replay"}))
+  app.add_option(
+         "--device", device_name,
+         "operator device: simulated (a scripted hand following --experiment) or replay\n"
+         "(a recorded handle trajectory, --replay FILE), spacemouse (3Dconnexion 6-DoF mouse\n"
+         "through hidapi, rate control, no force) or falcon (Novint Falcon through libusb, 3-DoF\n"
+         "position and force; needs --falcon-firmware)")
+      ->check(CLI::IsMember({"simulated", "replay", "spacemouse", "falcon"}))
       ->capture_default_str();
   app.add_option(
          "--replay", replay_file,
          "CSV for --device replay: header with t_s and x,y,z (m, device base) and optional\n"
          "rx,ry,rz (rad); or a trace.csv of this station (hand_x,hand_y,hand_z)")
       ->check(CLI::ExistingFile);
+  std::string spacemouse_path, falcon_firmware;
+  app.add_option("--spacemouse-path", spacemouse_path,
+                 "hidraw path of the SpaceMouse (default: the first 6-DoF 3Dconnexion device)");
+  app.add_option("--falcon-firmware", falcon_firmware,
+                 "Falcon firmware image (not shipped; e.g. from libnifalcon's or Novint's files)");
   bool no_passivity = false;
   double model_timeout_s = defaults.safety.model_timeout_s;
   app.add_flag("--no-passivity", no_passivity,
@@ -193,7 +203,17 @@ int main(int argc, char** argv) {
       device = std::move(replay);
     } else {
       experiment = ht::MakeExperiment(experiment_name, duration_s);
-      device = std::make_unique<ht::SimulatedOperatorDevice>(*experiment);
+      if (device_name == "spacemouse") {
+        ht::SpaceMouseConfig sm;
+        sm.path = spacemouse_path;
+        device = std::make_unique<ht::SpaceMouseDevice>(sm);
+      } else if (device_name == "falcon") {
+        ht::falcon::FalconConfig fc;
+        fc.firmware_path = falcon_firmware;
+        device = std::make_unique<ht::falcon::FalconDevice>(fc);
+      } else {
+        device = std::make_unique<ht::SimulatedOperatorDevice>(*experiment);
+      }
     }
     std::printf("[master] device: %s; loop %.0f Hz; remote %s; experiment %s (%.2f s)\n",
                 device->capabilities().name.c_str(), rate_hz, remote.c_str(),
