@@ -8,12 +8,15 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <glm/gtc/quaternion.hpp>
 #include <iostream>
 #include <limits>
 #include <map>
@@ -464,6 +467,201 @@ TEST(GltfSceneData, TruncatedAndCorruptedGlbNeverCrash) {
 }
 
 // ----------------------------------------------------------------------------------------------
+// Animations in the real files.
+
+// The FLOAT elements (`components` numbers each) of accessor `a` of a .gltf whose buffers are
+// external files, read straight from the JSON and the .bin (no tinygltf, no loader code): the
+// second route to the keys.
+std::vector<float> ReadFloatAccessor(const nlohmann::json& doc, const fs::path& dir, int a,
+                                     int components) {
+  const nlohmann::json& acc = doc["accessors"][static_cast<std::size_t>(a)];
+  EXPECT_EQ(acc["componentType"], 5126);
+  const nlohmann::json& view = doc["bufferViews"][acc["bufferView"].get<std::size_t>()];
+  EXPECT_FALSE(view.contains("byteStride")) << "this reader wants tightly packed elements";
+  const nlohmann::json& buffer = doc["buffers"][view["buffer"].get<std::size_t>()];
+  std::ifstream in(dir / buffer["uri"].get<std::string>(), std::ios::binary);
+  const std::vector<char> bytes{std::istreambuf_iterator<char>(in), {}};
+  const std::size_t offset =
+      view.value("byteOffset", std::size_t{0}) + acc.value("byteOffset", std::size_t{0});
+  std::vector<float> out(acc["count"].get<std::size_t>() * static_cast<std::size_t>(components));
+  EXPECT_LE(offset + out.size() * 4, bytes.size());
+  if (offset + out.size() * 4 <= bytes.size())
+    std::memcpy(out.data(), bytes.data() + offset, out.size() * 4);
+  return out;
+}
+
+double MaxAbsDifference(const glm::dmat4& a, const glm::dmat4& b) {
+  double worst = 0.0;
+  for (int c = 0; c < 4; ++c) {
+    for (int r = 0; r < 4; ++r) worst = std::max(worst, std::abs(a[c][r] - b[c][r]));
+  }
+  return worst;
+}
+
+std::size_t InstanceOfNode(const GltfScene& s, int node_index) {
+  for (std::size_t i = 0; i < s.instances.size(); ++i) {
+    if (s.instances[i].node_index == node_index) return i;
+  }
+  ADD_FAILURE() << "no instance of node " << node_index;
+  return 0;
+}
+
+TEST(GltfSceneData, OnlyTheTruckAndTheSkeletonHaveTransformAnimations) {
+  REQUIRE_GLTF_DATA(dir);
+  // Found by grepping every .gltf and every .glb JSON chunk for "animations": the milk truck
+  // (wheel rotations), unassigned-skeleton.gltf (a bone's rotation and scale) and the sparse
+  // morph cube (one `weights` channel, ignored).
+  for (const std::string& rel : ListGltfFiles(*dir)) {
+    if (kValidFiles.count(rel) == 0) continue;
+    const GltfScene s = LoadGltfScene((*dir / rel).string());
+    std::size_t channels = 0;
+    for (const GltfAnimation& a : s.animations) channels += a.channels.size();
+    if (!s.animations.empty()) {
+      std::cout << rel << ": " << s.animations.size() << " animation(s), " << channels
+                << " channel(s), first lasts " << s.animations[0].duration_s << " s\n";
+    }
+    const bool expect_channels =
+        rel == "draco_testdata_gltf/CesiumMilkTruck/glTF/CesiumMilkTruck.gltf" ||
+        rel == "tinygltf_tests/models/regression/unassigned-skeleton.gltf";
+    EXPECT_EQ(channels > 0, expect_channels) << rel;
+  }
+  const GltfScene morph = LoadGltfScene(
+      (*dir / "tinygltf_tests/models/SparseMorphTargets-issue280/singleBlendshapeCube_sparse.glb")
+          .string());
+  ASSERT_EQ(morph.animations.size(), 1u);
+  EXPECT_EQ(morph.animations[0].name, "Take 001");
+  EXPECT_TRUE(morph.animations[0].channels.empty());
+  EXPECT_TRUE(HasNoteContaining(morph, "weights")) << ::testing::PrintToString(morph.notes);
+
+  // The skeleton: bone_2 (node 2, under bone_1 at (0, 1, 0)) turns and scales; its keys are
+  // interleaved with a 32-byte stride. It shows no mesh, so the instances stay at rest.
+  const GltfScene bones =
+      LoadGltfScene((*dir / "tinygltf_tests/models/regression/unassigned-skeleton.gltf").string());
+  ASSERT_EQ(bones.animations.size(), 1u);
+  ASSERT_EQ(bones.animations[0].channels.size(), 2u);
+  EXPECT_NEAR(bones.animations[0].duration_s, 5.466667175292969, 1e-9);
+  for (const GltfAnimationChannel& c : bones.animations[0].channels) {
+    EXPECT_EQ(c.node, 2);
+    EXPECT_EQ(c.times_s.size(), 165u);
+    EXPECT_EQ(bones.nodes[static_cast<std::size_t>(c.scene_node)].node_index, 2);
+  }
+  EXPECT_EQ(bones.animations[0].channels[0].path, GltfAnimationChannel::Path::kRotation);
+  EXPECT_EQ(bones.animations[0].channels[1].path, GltfAnimationChannel::Path::kScale);
+  const std::vector<glm::dmat4> X = PoseInstancesAt(bones, 0, 2.0);
+  ASSERT_EQ(X.size(), bones.instances.size());
+  for (std::size_t i = 0; i < X.size(); ++i)
+    EXPECT_EQ(MaxAbsDifference(X[i], bones.instances[i].X_WN), 0.0);
+}
+
+TEST(GltfSceneData, MilkTruckWheelsTurnAboutTheirAxlesThroughTheKeys) {
+  REQUIRE_GLTF_DATA(dir);
+  const fs::path path = *dir / "draco_testdata_gltf/CesiumMilkTruck/glTF/CesiumMilkTruck.gltf";
+  const GltfScene s = LoadGltfScene(path.string());
+  std::ifstream in(path);
+  const nlohmann::json doc = nlohmann::json::parse(in);
+
+  // One animation, two LINEAR rotation channels (wheels: nodes 2 and 4), 31 keys over 1.25 s.
+  ASSERT_EQ(s.animations.size(), 1u);
+  const GltfAnimation& anim = s.animations[0];
+  ASSERT_EQ(anim.channels.size(), 2u);
+  const nlohmann::json& samplers = doc["animations"][0]["samplers"];
+  const double max_time = doc["accessors"][samplers[0]["input"].get<int>()]["max"][0];
+  EXPECT_EQ(anim.duration_s, max_time);
+  EXPECT_NEAR(anim.duration_s, 1.25, 1e-12);
+  const nlohmann::json summary = SceneSummaryJson(s);
+  ASSERT_EQ(summary["animations"].size(), 1u);
+  EXPECT_EQ(summary["animations"][0]["channels"], 2);
+  EXPECT_EQ(summary["animations"][0]["duration_s"].get<double>(), anim.duration_s);
+
+  // The rest pose is the loader's X_WN, exactly.
+  const std::vector<glm::dmat4> rest = PoseInstancesAt(s, -1, 0.0);
+  ASSERT_EQ(rest.size(), s.instances.size());
+  for (std::size_t i = 0; i < rest.size(); ++i)
+    EXPECT_EQ(MaxAbsDifference(rest[i], s.instances[i].X_WN), 0.0);
+
+  const std::size_t body = InstanceOfNode(s, 0);
+  for (std::size_t c = 0; c < 2; ++c) {
+    const nlohmann::json& channel = doc["animations"][0]["channels"][c];
+    const int node = channel["target"]["node"];
+    SCOPED_TRACE("wheel node " + std::to_string(node));
+    ASSERT_EQ(channel["target"]["path"], "rotation");
+    const nlohmann::json& sampler = samplers[channel["sampler"].get<std::size_t>()];
+    const std::vector<float> times =
+        ReadFloatAccessor(doc, path.parent_path(), sampler["input"], 1);
+    const std::vector<float> quats =
+        ReadFloatAccessor(doc, path.parent_path(), sampler["output"], 4);
+    ASSERT_EQ(times.size(), 31u);
+    ASSERT_EQ(quats.size(), 4 * times.size());
+    // The wheel's parent: the node whose children hold it, a translation-only matrix under the
+    // untransformed root.
+    glm::dmat4 X_WP(1.0);
+    for (const nlohmann::json& n : doc["nodes"]) {
+      const std::vector<int> children = n.value("children", std::vector<int>{});
+      if (n.contains("matrix") && std::count(children.begin(), children.end(), node) == 1) {
+        for (int k = 0; k < 16; ++k) X_WP[k / 4][k % 4] = n["matrix"][k].get<double>();
+      }
+    }
+    ASSERT_NE(X_WP[3].x, 0.0);
+    auto key = [&](std::size_t k) {
+      return glm::normalize(
+          glm::dquat(quats[4 * k + 3], quats[4 * k], quats[4 * k + 1], quats[4 * k + 2]));
+    };
+    const std::size_t wheel = InstanceOfNode(s, node);
+
+    // At every key time the pose is the key value (no loop, so the last key is not wrapped).
+    for (std::size_t k = 0; k < times.size(); ++k) {
+      const std::vector<glm::dmat4> X = PoseInstancesAt(s, 0, times[k], /*loop=*/false);
+      EXPECT_LT(MaxAbsDifference(X[wheel], X_WP * glm::mat4_cast(key(k))), 1e-12) << "key " << k;
+      EXPECT_LT(MaxAbsDifference(X[body], s.instances[body].X_WN), 1e-15);
+    }
+    // Halfway between two keys: slerp of the two (glm::slerp, shorter arc).
+    for (std::size_t k = 0; k + 1 < times.size(); k += 7) {
+      const double t = 0.5 * (double{times[k]} + double{times[k + 1]});
+      const std::vector<glm::dmat4> X = PoseInstancesAt(s, 0, t, false);
+      EXPECT_LT(
+          MaxAbsDifference(X[wheel], X_WP * glm::mat4_cast(glm::slerp(key(k), key(k + 1), 0.5))),
+          1e-9)
+          << "between keys " << k << " and " << k + 1;
+    }
+    // At half the duration the wheel has turned about its axle (z of its parent frame): its
+    // origin and axle stay where they were at rest, its spokes do not.
+    const std::vector<glm::dmat4> half = PoseInstancesAt(s, 0, 0.5 * anim.duration_s);
+    const glm::dmat4& X_rest = s.instances[wheel].X_WN;
+    const glm::dmat4& X_half = half[wheel];
+    EXPECT_LT(glm::length(glm::dvec3(X_half[3]) - glm::dvec3(X_rest[3])), 1e-12);
+    EXPECT_LT(glm::length(glm::dvec3(X_half[2]) - glm::dvec3(X_rest[2])), 1e-9);
+    const double turned =
+        std::acos(std::clamp(glm::dot(glm::dvec3(X_half[0]), glm::dvec3(X_rest[0])), -1.0, 1.0));
+    std::cout << "wheel node " << node << " at " << 0.5 * anim.duration_s << " s: turned by "
+              << turned << " rad from rest\n";
+    EXPECT_GT(turned, 0.1);
+
+    // Looping wraps by the duration (either way); without loop, later times hold the last key.
+    const double t = 0.4;
+    const glm::dmat4 X_t = PoseInstancesAt(s, 0, t, false)[wheel];
+    EXPECT_LT(MaxAbsDifference(PoseInstancesAt(s, 0, t + 3 * anim.duration_s, true)[wheel], X_t),
+              1e-9);
+    EXPECT_LT(MaxAbsDifference(PoseInstancesAt(s, 0, t - anim.duration_s, true)[wheel], X_t), 1e-9);
+    EXPECT_LT(MaxAbsDifference(PoseInstancesAt(s, 0, 100.0, false)[wheel],
+                               X_WP * glm::mat4_cast(key(times.size() - 1))),
+              1e-12);
+    // Odd times never throw: NaN is the rest pose, infinities hold the end keys.
+    EXPECT_EQ(MaxAbsDifference(
+                  PoseInstancesAt(s, 0, std::numeric_limits<double>::quiet_NaN())[wheel], X_rest),
+              0.0);
+    EXPECT_LT(
+        MaxAbsDifference(PoseInstancesAt(s, 0, -std::numeric_limits<double>::infinity())[wheel],
+                         X_WP * glm::mat4_cast(key(0))),
+        1e-12);
+    EXPECT_LT(
+        MaxAbsDifference(PoseInstancesAt(s, 0, std::numeric_limits<double>::infinity())[wheel],
+                         X_WP * glm::mat4_cast(key(times.size() - 1))),
+        1e-12);
+    EXPECT_TRUE(std::isfinite(PoseInstancesAt(s, 0, 1e300)[wheel][0][0]));
+  }
+}
+
+// ----------------------------------------------------------------------------------------------
 // Files made here.
 
 class GltfSceneMadeFiles : public ::testing::Test {
@@ -535,6 +733,67 @@ class GltfSceneMadeFiles : public ::testing::Test {
       p.emplace_back(std::cos(a), std::sin(a), 0.0f);
     }
     return p;
+  }
+
+  // Adds to animation 0 of `doc` (made if absent) a channel moving `node`'s `path` with its own
+  // sampler, whose key times (FLOAT SCALAR) and values (FLOAT `value_type`, VEC3 or VEC4) lie in
+  // a new base64-embedded buffer. Returns the index of the values' accessor (the times' is the
+  // one before).
+  static int AddChannel(nlohmann::json& doc, int node, const std::string& path,
+                        const std::string& interpolation, const std::vector<float>& times,
+                        const std::vector<float>& values, const std::string& value_type) {
+    std::vector<std::uint8_t> bytes((times.size() + values.size()) * 4);
+    std::memcpy(bytes.data(), times.data(), times.size() * 4);
+    std::memcpy(bytes.data() + times.size() * 4, values.data(), values.size() * 4);
+    const std::size_t buffer = doc["buffers"].size();
+    doc["buffers"].push_back({{"uri", "data:application/octet-stream;base64," + Base64(bytes)},
+                              {"byteLength", bytes.size()}});
+    const std::size_t view = doc["bufferViews"].size();
+    doc["bufferViews"].push_back(
+        {{"buffer", buffer}, {"byteOffset", 0}, {"byteLength", times.size() * 4}});
+    doc["bufferViews"].push_back(
+        {{"buffer", buffer}, {"byteOffset", times.size() * 4}, {"byteLength", values.size() * 4}});
+    const std::size_t accessor = doc["accessors"].size();
+    doc["accessors"].push_back({{"bufferView", view},
+                                {"componentType", 5126},
+                                {"type", "SCALAR"},
+                                {"count", times.size()}});
+    const std::size_t components = value_type == "VEC4" ? 4 : 3;
+    doc["accessors"].push_back({{"bufferView", view + 1},
+                                {"componentType", 5126},
+                                {"type", value_type},
+                                {"count", values.size() / components}});
+    if (!doc.contains("animations")) {
+      nlohmann::json anim = nlohmann::json::object();
+      anim["name"] = "anim";
+      anim["channels"] = nlohmann::json::array();
+      anim["samplers"] = nlohmann::json::array();
+      doc["animations"] = nlohmann::json::array({anim});
+    }
+    nlohmann::json& anim = doc["animations"][0];
+    const std::size_t sampler = anim["samplers"].size();
+    anim["samplers"].push_back(
+        {{"input", accessor}, {"output", accessor + 1}, {"interpolation", interpolation}});
+    anim["channels"].push_back(
+        {{"sampler", sampler}, {"target", {{"node", node}, {"path", path}}}});
+    return static_cast<int>(accessor + 1);
+  }
+
+  static std::string Base64(const std::vector<std::uint8_t>& bytes) {
+    static const char* kAlphabet =
+        "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    std::string out;
+    for (std::size_t i = 0; i < bytes.size(); i += 3) {
+      const std::uint32_t b0 = bytes[i];
+      const std::uint32_t b1 = i + 1 < bytes.size() ? bytes[i + 1] : 0;
+      const std::uint32_t b2 = i + 2 < bytes.size() ? bytes[i + 2] : 0;
+      const std::uint32_t v = (b0 << 16) | (b1 << 8) | b2;
+      out.push_back(kAlphabet[(v >> 18) & 63]);
+      out.push_back(kAlphabet[(v >> 12) & 63]);
+      out.push_back(i + 1 < bytes.size() ? kAlphabet[(v >> 6) & 63] : '=');
+      out.push_back(i + 2 < bytes.size() ? kAlphabet[v & 63] : '=');
+    }
+    return out;
   }
 
   fs::path dir_;
@@ -686,6 +945,282 @@ TEST_F(GltfSceneMadeFiles, AbsurdCountIsRefusedWithoutAllocating) {
 }
 
 TEST_F(GltfSceneMadeFiles, MissingFileIsRefused) { ExpectLoadError(dir_ / "absent.gltf"); }
+
+// ---- Animations in files made here.
+
+// Origin of an instance's frame N in W.
+glm::dvec3 Origin(const glm::dmat4& X_WN) { return glm::dvec3(X_WN[3]); }
+
+TEST_F(GltfSceneMadeFiles, LinearTranslationIsInterpolatedClampedAndLooped) {
+  // Node 0 moves from (0,0,0) at t = 0 s to (1,0,0) at t = 2 s.
+  nlohmann::json doc = Doc(Zigzag(), {}, 4);
+  AddChannel(doc, 0, "translation", "LINEAR", {0, 2}, {0, 0, 0, 1, 0, 0}, "VEC3");
+  const GltfScene s = LoadGltfScene(Write(doc).string());
+  ASSERT_EQ(s.animations.size(), 1u);
+  EXPECT_EQ(s.animations[0].name, "anim");
+  EXPECT_EQ(s.animations[0].duration_s, 2.0);
+  ASSERT_EQ(s.animations[0].channels.size(), 1u);
+  EXPECT_EQ(s.animations[0].channels[0].interpolation, GltfInterpolation::kLinear);
+  EXPECT_NEAR(PoseInstancesAt(s, 0, 0.5)[0][3].x, 0.25, 1e-15);
+  EXPECT_NEAR(PoseInstancesAt(s, 0, 1.5)[0][3].x, 0.75, 1e-15);
+  EXPECT_EQ(PoseInstancesAt(s, 0, 0.0)[0][3].x, 0.0);
+  EXPECT_EQ(PoseInstancesAt(s, 0, -1.0, false)[0][3].x, 0.0);  // before the first key
+  EXPECT_EQ(PoseInstancesAt(s, 0, 2.0, false)[0][3].x, 1.0);
+  EXPECT_EQ(PoseInstancesAt(s, 0, 7.0, false)[0][3].x, 1.0);  // after the last key
+  EXPECT_NEAR(PoseInstancesAt(s, 0, 2.5, true)[0][3].x, 0.25, 1e-15);
+  EXPECT_NEAR(PoseInstancesAt(s, 0, -1.5, true)[0][3].x, 0.25, 1e-15);
+  // The mesh's points move with the node: p_W = X_WN p_N.
+  const glm::dvec3 p_W = glm::dvec3(PoseInstancesAt(s, 0, 1.0)[0] * glm::dvec4(0, 1, 0, 1));
+  EXPECT_NEAR(glm::length(p_W - glm::dvec3(0.5, 1, 0)), 0.0, 1e-15);
+  const nlohmann::json j = SceneSummaryJson(s);
+  EXPECT_EQ(j["animations"][0]["name"], "anim");
+  EXPECT_EQ(j["animations"][0]["channels"], 1);
+  EXPECT_EQ(j["animations"][0]["duration_s"], 2.0);
+}
+
+TEST_F(GltfSceneMadeFiles, StepHoldsThePreviousKey) {
+  nlohmann::json doc = Doc(Zigzag(), {}, 4);
+  AddChannel(doc, 0, "translation", "STEP", {0, 1, 2}, {0, 0, 0, 5, 0, 0, 7, 0, 0}, "VEC3");
+  const GltfScene s = LoadGltfScene(Write(doc).string());
+  ASSERT_EQ(s.animations[0].channels.size(), 1u);
+  EXPECT_EQ(s.animations[0].channels[0].interpolation, GltfInterpolation::kStep);
+  for (const auto& [t, x] : std::vector<std::pair<double, double>>{
+           {0.0, 0.0}, {0.99, 0.0}, {1.0, 5.0}, {1.5, 5.0}, {1.999, 5.0}, {2.0, 7.0}, {9.0, 7.0}}) {
+    EXPECT_EQ(PoseInstancesAt(s, 0, t, false)[0][3].x, x) << "t = " << t;
+  }
+}
+
+TEST_F(GltfSceneMadeFiles, RotationSlerpsAndChildrenFollowTheirAnimatedParent) {
+  // Parent (node 0) turns 0 -> 90° about z over 1 s; child (node 1) sits at (1,0,0) in it.
+  nlohmann::json doc = Doc(Zigzag(), {}, 4);
+  doc["nodes"] = {{{"name", "parent"}, {"mesh", 0}, {"children", {1}}},
+                  {{"name", "child"}, {"mesh", 0}, {"translation", {1, 0, 0}}}};
+  const float h = static_cast<float>(std::sqrt(0.5));
+  AddChannel(doc, 0, "rotation", "LINEAR", {0, 1}, {0, 0, 0, 1, 0, 0, h, h}, "VEC4");
+  const GltfScene s = LoadGltfScene(Write(doc).string());
+  ASSERT_EQ(s.instances.size(), 2u);
+  ASSERT_EQ(s.nodes.size(), 2u);
+  EXPECT_EQ(s.nodes[1].parent, 0);
+  EXPECT_EQ(s.instances[1].scene_node, 1);
+  const double pi = std::acos(-1.0);
+  // Slerp turns at a constant rate: 45° at 0.5 s, 22.5° at 0.25 s (normalized linear
+  // interpolation would give 21.6° there). The float key limits the accuracy to ~1e-7.
+  for (const double t : {0.0, 0.25, 0.5, 0.75, 1.0}) {
+    const double angle = 0.5 * pi * t;
+    const std::vector<glm::dmat4> X = PoseInstancesAt(s, 0, t, /*loop=*/false);  // t = 1: end
+    const glm::dvec3 child_W = Origin(X[1]);
+    EXPECT_NEAR(glm::length(child_W - glm::dvec3(std::cos(angle), std::sin(angle), 0)), 0.0, 1e-7)
+        << "t = " << t;
+    // The parent turns in place; the child's axes turn with it.
+    EXPECT_NEAR(glm::length(Origin(X[0])), 0.0, 1e-15);
+    EXPECT_NEAR(glm::length(glm::dvec3(X[1][0]) - glm::dvec3(std::cos(angle), std::sin(angle), 0)),
+                0.0, 1e-7);
+  }
+  // The same rotation as the negated quaternion (-q is q): slerp takes the shorter arc, 45°.
+  doc = Doc(Zigzag(), {}, 4);
+  doc["nodes"] = {{{"mesh", 0}, {"children", {1}}}, {{"mesh", 0}, {"translation", {1, 0, 0}}}};
+  AddChannel(doc, 0, "rotation", "LINEAR", {0, 1}, {0, 0, 0, 1, 0, 0, -h, -h}, "VEC4");
+  const GltfScene neg = LoadGltfScene(Write(doc).string());
+  EXPECT_NEAR(glm::length(Origin(PoseInstancesAt(neg, 0, 0.5)[1]) -
+                          glm::dvec3(std::sqrt(0.5), std::sqrt(0.5), 0)),
+              0.0, 1e-7);
+}
+
+TEST_F(GltfSceneMadeFiles, ScaleIsAnimatedAndTheOtherPropertiesKeepTheirRestValues) {
+  // Rest translation (5,0,0) and rotation 90° about z stay; scale goes 1 -> 3 over 1 s.
+  nlohmann::json doc = Doc(Zigzag(), {}, 4);
+  const double h = std::sqrt(0.5);
+  doc["nodes"][0]["translation"] = {5, 0, 0};
+  doc["nodes"][0]["rotation"] = {0, 0, h, h};
+  AddChannel(doc, 0, "scale", "LINEAR", {0, 1}, {1, 1, 1, 3, 3, 3}, "VEC3");
+  const GltfScene s = LoadGltfScene(Write(doc).string());
+  const glm::dmat4 X = PoseInstancesAt(s, 0, 0.5)[0];
+  // (1,0,0) in N -> scaled by 2 -> turned to (0,2,0) -> moved to (5,2,0).
+  EXPECT_NEAR(glm::length(glm::dvec3(X * glm::dvec4(1, 0, 0, 1)) - glm::dvec3(5, 2, 0)), 0.0,
+              1e-12);
+  // At t = 0 (scale 1) the pose equals the rest pose.
+  EXPECT_LT(MaxAbsDifference(PoseInstancesAt(s, 0, 0.0)[0], s.instances[0].X_WN), 1e-15);
+}
+
+TEST_F(GltfSceneMadeFiles, CubicSplineFollowsTheHermiteSplineOfValuesAndTangents) {
+  // x from 0 to 1 over 2 s, out-tangent of key 0 = 0.5 /s, in-tangent of key 1 = 0:
+  // p(u) = (3u² - 2u³)·1 + (u³ - 2u² + u)·dt·0.5 with dt = 2.
+  nlohmann::json doc = Doc(Zigzag(), {}, 4);
+  AddChannel(doc, 0, "translation", "CUBICSPLINE", {0, 2},
+             {0, 0, 0, /*v0*/ 0, 0, 0, /*b0*/ 0.5f, 0, 0,  // key 0: in, value, out
+              /*a1*/ 0, 0, 0, /*v1*/ 1, 0, 0, 0, 0, 0},    // key 1: in, value, out
+             "VEC3");
+  // Rotation with zero tangents from identity to 90° about z: symmetric, so 45° at the middle.
+  const float h = static_cast<float>(std::sqrt(0.5));
+  AddChannel(doc, 0, "rotation", "CUBICSPLINE", {0, 2},
+             {0, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, h, h, 0, 0, 0, 0}, "VEC4");
+  const GltfScene s = LoadGltfScene(Write(doc).string());
+  ASSERT_EQ(s.animations[0].channels.size(), 2u);
+  EXPECT_EQ(s.animations[0].channels[0].values.size(), 6u);
+  for (const double t : {0.0, 0.3, 1.0, 1.7, 2.0}) {
+    const double u = t / 2.0;
+    const double x = (3 * u * u - 2 * u * u * u) + (u * u * u - 2 * u * u + u) * 2.0 * 0.5;
+    EXPECT_NEAR(PoseInstancesAt(s, 0, t, false)[0][3].x, x, 1e-12) << "t = " << t;
+  }
+  const glm::dmat4 X = PoseInstancesAt(s, 0, 1.0)[0];
+  const double pi = std::acos(-1.0);
+  EXPECT_NEAR(glm::length(glm::dvec3(X[0]) - glm::dvec3(std::cos(pi / 4), std::sin(pi / 4), 0)),
+              0.0, 1e-7);
+  EXPECT_NEAR(glm::length(glm::dvec3(X[0])), 1.0, 1e-12);  // normalized: no scale creeps in
+}
+
+TEST_F(GltfSceneMadeFiles, AnimatedNodeUnderTwoParentsMovesOnEveryPath) {
+  nlohmann::json doc = Doc(Zigzag(), {}, 4);
+  doc["scenes"][0]["nodes"] = {0, 1};
+  doc["nodes"] = {{{"children", {2}}, {"translation", {10, 0, 0}}},
+                  {{"children", {2}}, {"translation", {20, 0, 0}}},
+                  {{"mesh", 0}}};
+  AddChannel(doc, 2, "translation", "LINEAR", {0, 1}, {0, 0, 0, 0, 4, 0}, "VEC3");
+  const GltfScene s = LoadGltfScene(Write(doc).string());
+  ASSERT_EQ(s.instances.size(), 2u);
+  const std::vector<glm::dmat4> X = PoseInstancesAt(s, 0, 0.5);
+  EXPECT_EQ(Origin(X[0]), glm::dvec3(10, 2, 0));
+  EXPECT_EQ(Origin(X[1]), glm::dvec3(20, 2, 0));
+}
+
+TEST_F(GltfSceneMadeFiles, RestPoseForNoAnimationAndTheReusedVectorIsNotReallocated) {
+  nlohmann::json doc = Doc(Zigzag(), {}, 4);
+  doc["nodes"][0]["translation"] = {1, 2, 3};
+  const GltfScene plain = LoadGltfScene(Write(doc).string());
+  EXPECT_TRUE(plain.animations.empty());
+  EXPECT_EQ(SceneSummaryJson(plain)["animations"], nlohmann::json::array());
+  for (const int a : {-1, 0, 3}) {
+    const std::vector<glm::dmat4> X = PoseInstancesAt(plain, a, 1.0);
+    ASSERT_EQ(X.size(), 1u);
+    EXPECT_EQ(MaxAbsDifference(X[0], plain.instances[0].X_WN), 0.0);
+  }
+  AddChannel(doc, 0, "translation", "LINEAR", {0, 1}, {0, 0, 0, 1, 0, 0}, "VEC3");
+  const GltfScene s = LoadGltfScene(Write(doc).string());
+  std::vector<glm::dmat4> X;
+  PoseInstancesAt(s, 0, 0.5, true, &X);
+  const glm::dmat4* data = X.data();
+  for (const double t : {0.1, 0.7, std::numeric_limits<double>::quiet_NaN(), -1e308, 1e308,
+                         std::numeric_limits<double>::infinity()}) {
+    PoseInstancesAt(s, 0, t, true, &X);
+    EXPECT_EQ(X.data(), data) << "t = " << t;
+    ASSERT_EQ(X.size(), 1u);
+    EXPECT_TRUE(std::isfinite(X[0][3].x)) << "t = " << t;
+  }
+  PoseInstancesAt(s, 0, std::numeric_limits<double>::quiet_NaN(), true, &X);
+  EXPECT_EQ(MaxAbsDifference(X[0], s.instances[0].X_WN), 0.0);
+  PoseInstancesAt(s, 1, 0.5, true, &X);  // no animation 1: rest
+  EXPECT_EQ(MaxAbsDifference(X[0], s.instances[0].X_WN), 0.0);
+}
+
+TEST_F(GltfSceneMadeFiles, WeightsUnreachedAndMatrixChannelsAreIgnoredWithANote) {
+  nlohmann::json doc = Doc(Zigzag(), {}, 4);
+  doc["nodes"] = {{{"mesh", 0}},
+                  {{"mesh", 0}},  // not in the scene
+                  {{"matrix", {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}}}};
+  doc["scenes"][0]["nodes"] = {0, 2};
+  AddChannel(doc, 0, "weights", "LINEAR", {0, 1}, {0, 0, 0, 1, 1, 1}, "VEC3");
+  AddChannel(doc, 1, "translation", "LINEAR", {0, 1}, {0, 0, 0, 1, 1, 1}, "VEC3");
+  AddChannel(doc, 2, "translation", "LINEAR", {0, 1}, {0, 0, 0, 1, 1, 1}, "VEC3");
+  const GltfScene s = LoadGltfScene(Write(doc).string());
+  ASSERT_EQ(s.animations.size(), 1u);
+  EXPECT_TRUE(s.animations[0].channels.empty());
+  EXPECT_EQ(s.animations[0].duration_s, 0.0);
+  EXPECT_TRUE(HasNoteContaining(s, "weights")) << ::testing::PrintToString(s.notes);
+  EXPECT_TRUE(HasNoteContaining(s, "not reached from the scene"));
+  EXPECT_TRUE(HasNoteContaining(s, "gives a matrix"));
+  EXPECT_EQ(MaxAbsDifference(PoseInstancesAt(s, 0, 0.5)[0], s.instances[0].X_WN), 0.0);
+}
+
+TEST_F(GltfSceneMadeFiles, MalformedAnimationsAreRefusedNamingTheFileAndChannel) {
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  struct Case {
+    const char* what;
+    std::function<void(nlohmann::json&)> make;
+    const char* expected;
+  };
+  const std::vector<Case> cases = {
+      {"decreasing times",
+       [](nlohmann::json& d) {
+         AddChannel(d, 0, "translation", "LINEAR", {0, 2, 1}, std::vector<float>(9, 0.0f), "VEC3");
+       },
+       "non-decreasing"},
+      {"negative time",
+       [](nlohmann::json& d) {
+         AddChannel(d, 0, "translation", "LINEAR", {-1, 1}, std::vector<float>(6, 0.0f), "VEC3");
+       },
+       "negative"},
+      {"NaN time",
+       [nan](nlohmann::json& d) {
+         AddChannel(d, 0, "translation", "LINEAR", {0, nan}, std::vector<float>(6, 0.0f), "VEC3");
+       },
+       "not finite"},
+      {"output count",
+       [](nlohmann::json& d) {
+         AddChannel(d, 0, "translation", "LINEAR", {0, 1, 2}, std::vector<float>(6, 0.0f), "VEC3");
+       },
+       "expected 3"},
+      {"cubic output count",
+       [](nlohmann::json& d) {
+         AddChannel(d, 0, "translation", "CUBICSPLINE", {0, 1}, std::vector<float>(6, 0.0f),
+                    "VEC3");
+       },
+       "3 per key"},
+      {"target out of range",
+       [](nlohmann::json& d) {
+         AddChannel(d, 7, "translation", "LINEAR", {0, 1}, std::vector<float>(6, 0.0f), "VEC3");
+       },
+       "target node 7 out of range"},
+      {"NaN value",
+       [nan](nlohmann::json& d) {
+         AddChannel(d, 0, "translation", "LINEAR", {0, 1}, {0, 0, 0, 1, nan, 0}, "VEC3");
+       },
+       "not finite"},
+      {"rotation as VEC3",
+       [](nlohmann::json& d) {
+         AddChannel(d, 0, "rotation", "LINEAR", {0, 1}, std::vector<float>(6, 0.0f), "VEC3");
+       },
+       "FLOAT VEC4 is required"},
+      {"zero rotation",
+       [](nlohmann::json& d) {
+         AddChannel(d, 0, "rotation", "LINEAR", {0, 1}, {0, 0, 0, 1, 0, 0, 0, 0}, "VEC4");
+       },
+       "zero length"},
+      {"integer times",
+       [](nlohmann::json& d) {
+         const int out =
+             AddChannel(d, 0, "translation", "LINEAR", {0, 1}, std::vector<float>(6, 0.0f), "VEC3");
+         d["accessors"][out - 1]["componentType"] = 5125;  // UNSIGNED_INT
+       },
+       "FLOAT SCALAR is required"},
+      {"unknown interpolation",
+       [](nlohmann::json& d) {
+         AddChannel(d, 0, "translation", "BEZIER", {0, 1}, std::vector<float>(6, 0.0f), "VEC3");
+       },
+       "BEZIER"},
+      {"sampler out of range",
+       [](nlohmann::json& d) {
+         AddChannel(d, 0, "translation", "LINEAR", {0, 1}, std::vector<float>(6, 0.0f), "VEC3");
+         d["animations"][0]["channels"][0]["sampler"] = 4;
+       },
+       "sampler 4 out of range"},
+      {"same target twice",
+       [](nlohmann::json& d) {
+         AddChannel(d, 0, "scale", "LINEAR", {0, 1}, std::vector<float>(6, 1.0f), "VEC3");
+         AddChannel(d, 0, "scale", "STEP", {0, 1}, std::vector<float>(6, 1.0f), "VEC3");
+       },
+       "already animated by channel 0"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.what);
+    nlohmann::json doc = Doc(Zigzag(), {}, 4);
+    c.make(doc);
+    const std::string message = ExpectLoadError(Write(doc));
+    EXPECT_NE(message.find("animation 0"), std::string::npos) << message;
+    EXPECT_NE(message.find(c.expected), std::string::npos)
+        << message << "\n  expected: " << c.expected;
+    std::cout << "[ refused] " << c.what << ": " << message << "\n";
+  }
+}
 
 }  // namespace
 }  // namespace ht

@@ -530,7 +530,15 @@ PrimitiveData DecodeDracoPrimitive(const tinygltf::Model& model, const DracoPrim
   return out;
 }
 
-glm::dmat4 LocalTransform(const tinygltf::Node& node, int index) {
+// T·R·S as a matrix (glTF 2.0 §3.5.3), the same operations for rest and animated poses.
+glm::dmat4 ComposeTrs(const glm::dvec3& t, const glm::dquat& r, const glm::dvec3& s) noexcept {
+  glm::dmat4 X = glm::translate(glm::dmat4(1.0), t);
+  X = X * glm::mat4_cast(r);
+  return glm::scale(X, s);
+}
+
+// The rest transform of file node `index` (checked), without its place in the tree.
+GltfNode RestNode(const tinygltf::Node& node, int index) {
   const std::string what = "node " + std::to_string(index);
   auto check = [&](const std::vector<double>& v, std::size_t n, const char* field) {
     if (!v.empty() && v.size() != n) {
@@ -545,30 +553,31 @@ glm::dmat4 LocalTransform(const tinygltf::Node& node, int index) {
   check(node.translation, 3, "translation");
   check(node.rotation, 4, "rotation");
   check(node.scale, 3, "scale");
-  glm::dmat4 X(1.0);
+  GltfNode out;
+  out.node_index = index;
   if (!node.matrix.empty()) {
+    out.has_matrix = true;
+    glm::dmat4& X = out.X_PN;
     for (int c = 0; c < 4; ++c) {
       for (int r = 0; r < 4; ++r) X[c][r] = node.matrix[static_cast<std::size_t>(4 * c + r)];
     }
     if (X[0][3] != 0.0 || X[1][3] != 0.0 || X[2][3] != 0.0 || X[3][3] != 1.0) {
       throw LoadError(what + ": matrix's bottom row is not (0, 0, 0, 1)");
     }
-    return X;
+    return out;
   }
-  if (!node.translation.empty()) {
-    X = glm::translate(X,
-                       glm::dvec3(node.translation[0], node.translation[1], node.translation[2]));
-  }
+  if (!node.translation.empty())
+    out.translation = glm::dvec3(node.translation[0], node.translation[1], node.translation[2]);
   if (!node.rotation.empty()) {
     // glTF quaternions are (x, y, z, w); glm::dquat's constructor takes (w, x, y, z).
     glm::dquat q(node.rotation[3], node.rotation[0], node.rotation[1], node.rotation[2]);
     const double norm = glm::length(q);
     if (!(norm > 1e-12)) throw LoadError(what + ": rotation quaternion has zero length");
-    X = X * glm::mat4_cast(q / norm);
+    out.rotation = q / norm;
   }
-  if (!node.scale.empty())
-    X = glm::scale(X, glm::dvec3(node.scale[0], node.scale[1], node.scale[2]));
-  return X;
+  if (!node.scale.empty()) out.scale = glm::dvec3(node.scale[0], node.scale[1], node.scale[2]);
+  out.X_PN = ComposeTrs(out.translation, out.rotation, out.scale);
+  return out;
 }
 
 // Reads all triangle primitives of mesh `m` into one GltfMesh.
@@ -680,6 +689,209 @@ GltfMesh BuildMesh(const tinygltf::Model& model, int m,
   return out;
 }
 
+// Reads `count`-checked FLOAT elements of `components` numbers (1, 3 or 4) from an accessor into
+// dvec4s (unused components 0), refusing NaN and infinities.
+void ReadFloatElements(const tinygltf::Model& model, int accessor_index, int components,
+                       const std::string& what, std::vector<glm::dvec4>* out) {
+  const AccessorView v =
+      ViewAccessor(model, accessor_index, static_cast<std::size_t>(components) * 4, what);
+  out->assign(v.count, glm::dvec4(0.0));
+  if (v.data == nullptr) return;
+  for (std::size_t i = 0; i < v.count; ++i) {
+    float xyzw[4] = {0.0f, 0.0f, 0.0f, 0.0f};
+    std::memcpy(xyzw, v.data + i * v.stride, sizeof(float) * static_cast<std::size_t>(components));
+    for (int k = 0; k < components; ++k) {
+      if (!std::isfinite(xyzw[k])) {
+        throw LoadError(what + ": element " + std::to_string(i) +
+                        " is not finite (NaN or infinite)");
+      }
+    }
+    (*out)[i] = glm::dvec4(xyzw[0], xyzw[1], xyzw[2], xyzw[3]);
+  }
+}
+
+const char* PathName(GltfAnimationChannel::Path path) {
+  switch (path) {
+    case GltfAnimationChannel::Path::kTranslation:
+      return "translation";
+    case GltfAnimationChannel::Path::kRotation:
+      return "rotation";
+    case GltfAnimationChannel::Path::kScale:
+      return "scale";
+  }
+  return "?";
+}
+
+// Reads and checks the translation/rotation/scale channels of every animation. `first_entry`
+// maps a file node to its first entry in `nodes` (-1 when the scene does not reach it).
+std::vector<GltfAnimation> ReadAnimations(const tinygltf::Model& model,
+                                          const std::vector<int>& first_entry,
+                                          const std::vector<GltfNode>& nodes,
+                                          std::vector<std::string>* notes) {
+  std::vector<GltfAnimation> out;
+  std::int64_t keys = 0;  // output elements kept so far, against kGltfMaxAnimationKeys
+  std::size_t weights = 0, unreached = 0, matrix = 0, kept = 0;
+  for (std::size_t a = 0; a < model.animations.size(); ++a) {
+    const tinygltf::Animation& src = model.animations[a];
+    GltfAnimation anim;
+    anim.name = src.name;
+    // (node, path) -> channel index, to refuse a target animated twice.
+    std::map<std::pair<int, int>, std::size_t> targets;
+    for (std::size_t c = 0; c < src.channels.size(); ++c) {
+      const tinygltf::AnimationChannel& ch = src.channels[c];
+      const std::string what =
+          "animation " + std::to_string(a) + " (\"" + src.name + "\") channel " + std::to_string(c);
+      if (ch.sampler < 0 || static_cast<std::size_t>(ch.sampler) >= src.samplers.size()) {
+        throw LoadError(what + ": sampler " + std::to_string(ch.sampler) + " out of range [0, " +
+                        std::to_string(src.samplers.size()) + ")");
+      }
+      if (ch.target_node < 0 || static_cast<std::size_t>(ch.target_node) >= model.nodes.size()) {
+        throw LoadError(what + ": target node " + std::to_string(ch.target_node) +
+                        " out of range [0, " + std::to_string(model.nodes.size()) + ")");
+      }
+      GltfAnimationChannel out_ch;
+      out_ch.node = ch.target_node;
+      if (ch.target_path == "translation") {
+        out_ch.path = GltfAnimationChannel::Path::kTranslation;
+      } else if (ch.target_path == "rotation") {
+        out_ch.path = GltfAnimationChannel::Path::kRotation;
+      } else if (ch.target_path == "scale") {
+        out_ch.path = GltfAnimationChannel::Path::kScale;
+      } else if (ch.target_path == "weights") {
+        ++weights;
+        continue;
+      } else {
+        notes->push_back(what + ": target path \"" + ch.target_path + "\" not supported, ignored");
+        continue;
+      }
+      const int entry = first_entry[static_cast<std::size_t>(ch.target_node)];
+      if (entry < 0) {
+        ++unreached;
+        continue;
+      }
+      if (nodes[static_cast<std::size_t>(entry)].has_matrix) {
+        ++matrix;
+        continue;
+      }
+      out_ch.scene_node = entry;
+      const auto [it, inserted] =
+          targets.emplace(std::make_pair(ch.target_node, static_cast<int>(out_ch.path)), c);
+      if (!inserted) {
+        throw LoadError(what + ": node " + std::to_string(ch.target_node) + " " +
+                        PathName(out_ch.path) + " is already animated by channel " +
+                        std::to_string(it->second) + " (a target may appear once)");
+      }
+
+      const tinygltf::AnimationSampler& sampler =
+          src.samplers[static_cast<std::size_t>(ch.sampler)];
+      const std::string sw = what + " sampler " + std::to_string(ch.sampler);
+      if (sampler.interpolation == "LINEAR") {
+        out_ch.interpolation = GltfInterpolation::kLinear;
+      } else if (sampler.interpolation == "STEP") {
+        out_ch.interpolation = GltfInterpolation::kStep;
+      } else if (sampler.interpolation == "CUBICSPLINE") {
+        out_ch.interpolation = GltfInterpolation::kCubicSpline;
+      } else {
+        throw LoadError(sw + ": interpolation \"" + sampler.interpolation +
+                        "\" is not LINEAR, STEP or CUBICSPLINE");
+      }
+      const bool cubic = out_ch.interpolation == GltfInterpolation::kCubicSpline;
+
+      // Input: key times.
+      if (sampler.input < 0 || static_cast<std::size_t>(sampler.input) >= model.accessors.size()) {
+        throw LoadError(sw + ": input accessor " + std::to_string(sampler.input) + " out of range");
+      }
+      const tinygltf::Accessor& in = model.accessors[static_cast<std::size_t>(sampler.input)];
+      if (in.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT || in.type != TINYGLTF_TYPE_SCALAR) {
+        throw LoadError(sw + ": input accessor " + std::to_string(sampler.input) + " has " +
+                        ComponentName(in.componentType) + " components of type code " +
+                        std::to_string(in.type) + "; FLOAT SCALAR is required");
+      }
+      if (in.count == 0) throw LoadError(sw + ": input accessor has no keys");
+      // Output: values (3 per key for a cubic spline).
+      if (sampler.output < 0 ||
+          static_cast<std::size_t>(sampler.output) >= model.accessors.size()) {
+        throw LoadError(sw + ": output accessor " + std::to_string(sampler.output) +
+                        " out of range");
+      }
+      const tinygltf::Accessor& outa = model.accessors[static_cast<std::size_t>(sampler.output)];
+      const bool rotation = out_ch.path == GltfAnimationChannel::Path::kRotation;
+      const int want_type = rotation ? TINYGLTF_TYPE_VEC4 : TINYGLTF_TYPE_VEC3;
+      if (outa.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT || outa.type != want_type) {
+        throw LoadError(sw + ": output accessor " + std::to_string(sampler.output) + " has " +
+                        ComponentName(outa.componentType) + " components of type code " +
+                        std::to_string(outa.type) + "; FLOAT " + (rotation ? "VEC4" : "VEC3") +
+                        " is required for " + PathName(out_ch.path) +
+                        " (normalized integers of KHR_mesh_quantization are not supported)");
+      }
+      const std::uint64_t want_count = std::uint64_t{in.count} * (cubic ? 3 : 1);
+      if (outa.count != want_count) {
+        throw LoadError(sw + ": output accessor has " + std::to_string(outa.count) +
+                        " elements for " + std::to_string(in.count) + " key times, expected " +
+                        std::to_string(want_count) + (cubic ? " (3 per key for CUBICSPLINE)" : ""));
+      }
+      keys += static_cast<std::int64_t>(want_count);
+      if (keys > kGltfMaxAnimationKeys) {
+        throw LoadError(sw + ": animations hold more than " +
+                        std::to_string(kGltfMaxAnimationKeys) + " key values");
+      }
+
+      std::vector<glm::dvec4> times;
+      ReadFloatElements(model, sampler.input, 1, sw + " input", &times);
+      out_ch.times_s.resize(times.size());
+      for (std::size_t k = 0; k < times.size(); ++k) {
+        const double t = times[k].x;
+        if (t < 0.0) {
+          throw LoadError(sw + ": key time " + std::to_string(k) + " is negative (" +
+                          std::to_string(t) + " s)");
+        }
+        if (k > 0 && t < out_ch.times_s[k - 1]) {
+          throw LoadError(sw + ": key time " + std::to_string(k) + " (" + std::to_string(t) +
+                          " s) is smaller than the one before (" +
+                          std::to_string(out_ch.times_s[k - 1]) +
+                          " s): times must be non-decreasing");
+        }
+        out_ch.times_s[k] = t;
+      }
+      ReadFloatElements(model, sampler.output, rotation ? 4 : 3, sw + " output", &out_ch.values);
+      if (rotation) {
+        for (std::size_t k = 0; k < in.count; ++k) {
+          const glm::dvec4& q = out_ch.values[cubic ? 3 * k + 1 : k];
+          if (!(glm::length(q) > 1e-12)) {
+            throw LoadError(sw + ": rotation of key " + std::to_string(k) + " has zero length");
+          }
+        }
+      }
+      anim.duration_s = std::max(anim.duration_s, out_ch.times_s.back());
+      anim.channels.push_back(std::move(out_ch));
+      ++kept;
+    }
+    std::stable_sort(anim.channels.begin(), anim.channels.end(),
+                     [](const GltfAnimationChannel& x, const GltfAnimationChannel& y) {
+                       return x.node != y.node ? x.node < y.node : x.path < y.path;
+                     });
+    out.push_back(std::move(anim));
+  }
+  if (!out.empty()) {
+    notes->push_back(std::to_string(out.size()) + " animation(s), " + std::to_string(kept) +
+                     " translation/rotation/scale channel(s) kept");
+  }
+  if (weights > 0) {
+    notes->push_back(std::to_string(weights) +
+                     " animation channel(s) of weights (morph targets) ignored");
+  }
+  if (unreached > 0) {
+    notes->push_back(std::to_string(unreached) +
+                     " animation channel(s) ignored: their node is not reached from the scene");
+  }
+  if (matrix > 0) {
+    notes->push_back(std::to_string(matrix) +
+                     " animation channel(s) ignored: their node gives a matrix (glTF 2.0 allows "
+                     "only translation/rotation/scale on animated nodes)");
+  }
+  return out;
+}
+
 GltfScene BuildScene(const std::string& path) {
   GltfScene scene;
   scene.path = path;
@@ -701,8 +913,6 @@ GltfScene BuildScene(const std::string& path) {
     scene.notes.push_back(std::to_string(model.skins.size()) + " skin(s) ignored (bind pose used)");
   if (!model.materials.empty())
     scene.notes.push_back(std::to_string(model.materials.size()) + " material(s) ignored");
-  if (!model.animations.empty())
-    scene.notes.push_back(std::to_string(model.animations.size()) + " animation(s) ignored");
 
   // The node graph must be acyclic, with children in range. glTF 2.0 asks for disjoint trees,
   // but some files (Draco's CubeScaledInstances) instance a node under several parents: such a
@@ -795,17 +1005,38 @@ GltfScene BuildScene(const std::string& path) {
   std::vector<int> mesh_slot(model.meshes.size(), -1);
   std::int64_t total_triangles = 0;
   std::int64_t total_vertices = 0;
-  std::vector<std::pair<int, glm::dmat4>> stack;
-  for (auto it = roots.rbegin(); it != roots.rend(); ++it) stack.emplace_back(*it, glm::dmat4(1.0));
+  // Entries of scene.nodes per file node: the first, and the last (to chain next_same_node).
+  std::vector<int> first_entry(node_count, -1);
+  std::vector<int> last_entry(node_count, -1);
+  struct Pending {
+    int node;
+    int parent_entry;
+    glm::dmat4 X_WP;
+  };
+  std::vector<Pending> stack;
+  for (auto it = roots.rbegin(); it != roots.rend(); ++it)
+    stack.push_back({*it, -1, glm::dmat4(1.0)});
   while (!stack.empty()) {
-    const auto [n, X_WP] = stack.back();
+    const Pending top = stack.back();
+    const int n = top.node;
     stack.pop_back();
     if (++visits > kMaxNodeVisits) {
       throw LoadError("more than " + std::to_string(kMaxNodeVisits) +
                       " node visits (shared children multiply the paths)");
     }
     const tinygltf::Node& node = model.nodes[static_cast<std::size_t>(n)];
-    const glm::dmat4 X_WN = X_WP * LocalTransform(node, n);
+    GltfNode entry = RestNode(node, n);
+    entry.parent = top.parent_entry;
+    const int e = static_cast<int>(scene.nodes.size());
+    const std::size_t un = static_cast<std::size_t>(n);
+    if (first_entry[un] < 0) {
+      first_entry[un] = e;
+    } else {
+      scene.nodes[static_cast<std::size_t>(last_entry[un])].next_same_node = e;
+    }
+    last_entry[un] = e;
+    const glm::dmat4 X_WN = top.X_WP * entry.X_PN;
+    scene.nodes.push_back(entry);
     if (node.mesh >= 0) {
       if (static_cast<std::size_t>(node.mesh) >= model.meshes.size()) {
         throw LoadError("node " + std::to_string(n) + " refers to mesh " +
@@ -824,11 +1055,12 @@ GltfScene BuildScene(const std::string& path) {
         slot = static_cast<int>(scene.meshes.size());
         scene.meshes.push_back(std::move(mesh));
       }
-      scene.instances.push_back({node.name, n, slot, X_WN});
+      scene.instances.push_back({node.name, n, slot, X_WN, e});
     }
     for (auto c = node.children.rbegin(); c != node.children.rend(); ++c)
-      stack.emplace_back(*c, X_WN);
+      stack.push_back({*c, e, X_WN});
   }
+  scene.animations = ReadAnimations(model, first_entry, scene.nodes, &scene.notes);
   const std::size_t unused =
       static_cast<std::size_t>(std::count(mesh_slot.begin(), mesh_slot.end(), -1));
   if (unused > 0)
@@ -837,6 +1069,76 @@ GltfScene BuildScene(const std::string& path) {
 }
 
 nlohmann::json Vec3Json(const glm::dvec3& v) { return nlohmann::json::array({v.x, v.y, v.z}); }
+
+// ---- Sampling (glTF 2.0 Appendix C). Nothing here allocates or throws.
+
+// `q` / |q|, or `fallback` when q has no usable length.
+glm::dvec4 NormalizedOr(const glm::dvec4& q, const glm::dvec4& fallback) noexcept {
+  const double n = glm::length(q);
+  return (n > 1e-300 && std::isfinite(n)) ? q / n : fallback;
+}
+
+// Spherical linear interpolation of unit quaternions (x, y, z, w) along the shorter arc.
+glm::dvec4 Slerp(const glm::dvec4& a, glm::dvec4 b, double u) noexcept {
+  double d = glm::dot(a, b);
+  if (d < 0.0) {
+    b = -b;
+    d = -d;
+  }
+  if (d > 0.9995) return NormalizedOr(a + u * (b - a), a);  // nearly parallel: lerp is exact
+  const double theta = std::acos(std::min(d, 1.0));
+  const double s = std::sin(theta);
+  return NormalizedOr((std::sin((1.0 - u) * theta) / s) * a + (std::sin(u * theta) / s) * b, a);
+}
+
+// True when the channel's arrays are consistent (always so for a loaded scene).
+bool Usable(const GltfAnimationChannel& c) noexcept {
+  const std::size_t n = c.times_s.size();
+  const std::size_t per_key = c.interpolation == GltfInterpolation::kCubicSpline ? 3 : 1;
+  return n > 0 && c.values.size() >= per_key * n;
+}
+
+// The channel's value at time t (not NaN; clamped to the keys); rotations normalized.
+glm::dvec4 Sample(const GltfAnimationChannel& c, double t) noexcept {
+  const std::vector<double>& k = c.times_s;
+  const std::size_t n = k.size();
+  const bool cubic = c.interpolation == GltfInterpolation::kCubicSpline;
+  const bool rotation = c.path == GltfAnimationChannel::Path::kRotation;
+  auto key = [&](std::size_t i) { return cubic ? c.values[3 * i + 1] : c.values[i]; };
+  auto finish = [&](const glm::dvec4& v, std::size_t i) {
+    if (!rotation) return v;
+    return NormalizedOr(v, NormalizedOr(key(i), glm::dvec4(0.0, 0.0, 0.0, 1.0)));
+  };
+  if (!(t > k[0])) return finish(key(0), 0);
+  if (t >= k[n - 1]) return finish(key(n - 1), n - 1);
+  // k[0] < t < k[n - 1]: k[i] <= t < k[i + 1], so k[i + 1] > k[i].
+  const std::size_t i =
+      static_cast<std::size_t>(std::upper_bound(k.begin(), k.end(), t) - k.begin()) - 1;
+  const double dt = k[i + 1] - k[i];
+  const double u = (t - k[i]) / dt;
+  switch (c.interpolation) {
+    case GltfInterpolation::kStep:
+      return finish(key(i), i);
+    case GltfInterpolation::kLinear:
+      if (rotation) {
+        const glm::dvec4 fallback(0.0, 0.0, 0.0, 1.0);
+        return Slerp(NormalizedOr(key(i), fallback), NormalizedOr(key(i + 1), fallback), u);
+      }
+      return key(i) + u * (key(i + 1) - key(i));
+    case GltfInterpolation::kCubicSpline: {
+      // Hermite: p(u) = h00 v_i + h10 dt b_i + h01 v_{i+1} + h11 dt a_{i+1}, with a the
+      // in-tangent and b the out-tangent of a key.
+      const double u2 = u * u;
+      const double u3 = u2 * u;
+      const glm::dvec4 v = (2.0 * u3 - 3.0 * u2 + 1.0) * c.values[3 * i + 1] +
+                           ((u3 - 2.0 * u2 + u) * dt) * c.values[3 * i + 2] +
+                           (-2.0 * u3 + 3.0 * u2) * c.values[3 * (i + 1) + 1] +
+                           ((u3 - u2) * dt) * c.values[3 * (i + 1)];
+      return finish(v, i);
+    }
+  }
+  return finish(key(i), i);
+}
 
 }  // namespace
 
@@ -850,6 +1152,98 @@ GltfScene LoadGltfScene(const std::string& path) {
   } catch (const std::exception& e) {
     throw std::runtime_error(path + ": " + e.what());
   }
+}
+
+void PoseInstancesAt(const GltfScene& scene, int animation, double time_s, bool loop,
+                     std::vector<glm::dmat4>* X_WN) {
+  std::vector<glm::dmat4>& X = *X_WN;
+  const std::size_t n_inst = scene.instances.size();
+  const std::size_t n_nodes = scene.nodes.size();
+  const GltfAnimation* anim = nullptr;
+  if (animation >= 0 && static_cast<std::size_t>(animation) < scene.animations.size() &&
+      !std::isnan(time_s)) {
+    anim = &scene.animations[static_cast<std::size_t>(animation)];
+  }
+  if (anim == nullptr || anim->channels.empty()) {
+    X.resize(n_inst);
+    for (std::size_t i = 0; i < n_inst; ++i) X[i] = scene.instances[i].X_WN;
+    return;
+  }
+  // X first holds every entry's local pose X_PN, then its world pose X_WN (parents come first),
+  // then the instances' poses are moved to the front.
+  X.resize(std::max(n_nodes, n_inst));
+  for (std::size_t v = 0; v < n_nodes; ++v) X[v] = scene.nodes[v].X_PN;
+
+  double t = time_s;
+  const double duration = anim->duration_s;
+  if (loop && std::isfinite(t) && duration > 0.0 && std::isfinite(duration)) {
+    t = std::fmod(t, duration);
+    if (t < 0.0) t += duration;
+  }
+  const std::vector<GltfAnimationChannel>& channels = anim->channels;
+  for (std::size_t c = 0; c < channels.size();) {
+    std::size_t end = c + 1;
+    while (end < channels.size() && channels[end].node == channels[c].node) ++end;
+    const int first = channels[c].scene_node;
+    if (first < 0 || static_cast<std::size_t>(first) >= n_nodes ||
+        scene.nodes[static_cast<std::size_t>(first)].has_matrix) {
+      c = end;
+      continue;
+    }
+    const GltfNode& rest = scene.nodes[static_cast<std::size_t>(first)];
+    glm::dvec3 translation = rest.translation;
+    glm::dquat rotation = rest.rotation;
+    glm::dvec3 scale = rest.scale;
+    for (; c < end; ++c) {
+      const GltfAnimationChannel& ch = channels[c];
+      if (!Usable(ch)) continue;
+      const glm::dvec4 v = Sample(ch, t);
+      switch (ch.path) {
+        case GltfAnimationChannel::Path::kTranslation:
+          translation = glm::dvec3(v);
+          break;
+        case GltfAnimationChannel::Path::kRotation:
+          rotation = glm::dquat(v.w, v.x, v.y, v.z);
+          break;
+        case GltfAnimationChannel::Path::kScale:
+          scale = glm::dvec3(v);
+          break;
+      }
+    }
+    const glm::dmat4 X_PN = ComposeTrs(translation, rotation, scale);
+    // Every path to the node; next_same_node only grows, so this ends.
+    for (int v = first;;) {
+      X[static_cast<std::size_t>(v)] = X_PN;
+      const int next = scene.nodes[static_cast<std::size_t>(v)].next_same_node;
+      if (next <= v || static_cast<std::size_t>(next) >= n_nodes) break;
+      v = next;
+    }
+  }
+  for (std::size_t v = 0; v < n_nodes; ++v) {
+    const int p = scene.nodes[v].parent;
+    if (p >= 0 && static_cast<std::size_t>(p) < v) X[v] = X[static_cast<std::size_t>(p)] * X[v];
+  }
+  // In a loaded scene the instances' entries grow strictly with the instance index, so entry >= i
+  // and X[entry] is not yet overwritten (only X[0..i) is); anything else keeps the rest pose.
+  int previous = -1;
+  for (std::size_t i = 0; i < n_inst; ++i) {
+    const int e = scene.instances[i].scene_node;
+    if (e > previous && static_cast<std::size_t>(e) >= i && static_cast<std::size_t>(e) < n_nodes) {
+      X[i] = X[static_cast<std::size_t>(e)];
+      previous = e;
+    } else {
+      X[i] = scene.instances[i].X_WN;
+    }
+  }
+  X.resize(n_inst);
+}
+
+std::vector<glm::dmat4> PoseInstancesAt(const GltfScene& scene, int animation, double time_s,
+                                        bool loop) {
+  std::vector<glm::dmat4> X_WN;
+  X_WN.reserve(std::max(scene.nodes.size(), scene.instances.size()));
+  PoseInstancesAt(scene, animation, time_s, loop, &X_WN);
+  return X_WN;
 }
 
 nlohmann::json SceneSummaryJson(const GltfScene& scene) {
@@ -910,6 +1304,11 @@ nlohmann::json SceneSummaryJson(const GltfScene& scene) {
     totals["bbox_max_W"] = Vec3Json(hi_all);
   }
   j["totals"] = std::move(totals);
+  j["animations"] = nlohmann::json::array();
+  for (const GltfAnimation& a : scene.animations) {
+    j["animations"].push_back(
+        {{"name", a.name}, {"channels", a.channels.size()}, {"duration_s", a.duration_s}});
+  }
   return j;
 }
 

@@ -115,6 +115,10 @@ void RenderPatchHeights(const HapticModel& model, const RigidTransform& X_WO,
     const bool textured = model.textured[f] != 0 && !model.texture.empty();
     const int level =
         textured ? model.texture.LevelForFootprint(model.texel_size_m[f], w.cell_size_m()) : 0;
+    const glm::dvec3& n0 = model.corner_normals_O[3 * f];
+    const glm::dvec3& n1 = model.corner_normals_O[3 * f + 1];
+    const glm::dvec3& n2 = model.corner_normals_O[3 * f + 2];
+    const double cos01 = glm::dot(n0, n1), cos02 = glm::dot(n0, n2), cos12 = glm::dot(n1, n2);
     const glm::vec2 uv0 = model.corner_uvs[3 * f], uv1 = model.corner_uvs[3 * f + 1],
                     uv2 = model.corner_uvs[3 * f + 2];
     // Inclusive edge test with a small tolerance: cells on shared edges may be covered twice,
@@ -132,7 +136,12 @@ void RenderPatchHeights(const HapticModel& model, const RigidTransform& X_WO,
         if (textured) {
           const float u = static_cast<float>(b0 * uv0.x + b1 * uv1.x + b2 * uv2.x);
           const float v = static_cast<float>(b0 * uv0.y + b1 * uv1.y + b2 * uv2.y);
-          const double ndotn = b0 * nn[0] + b1 * nn[1] + b2 * nn[2];
+          // h is along the unit interpolated normal N = Ñ/|Ñ|, Ñ = Σ b_i n_i (unit n_i):
+          // |Ñ|² = Σ b_i² + 2 Σ_{i<j} b_i b_j (n_i·n_j), from the per-triangle corner cosines.
+          const double len2 = b0 * b0 + b1 * b1 + b2 * b2 +
+                              2.0 * (b0 * b1 * cos01 + b0 * b2 * cos02 + b1 * b2 * cos12);
+          const double ndotn =
+              len2 > 1e-12 ? (b0 * nn[0] + b1 * nn[1] + b2 * nn[2]) / std::sqrt(len2) : 0.0;
           value += static_cast<double>(model.texture.Sample(level, u, v)) * ndotn;
         }
         if (!(std::abs(value) <= range)) continue;  // outside the window's box along n

@@ -1,15 +1,22 @@
 // slave_sim: the remote simulation node. Listens for tool states over UDP and streams contact
 // models computed with 6-DoF haptic texture rendering on the scene.
 
+#include <sys/resource.h>
+
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <csignal>
 #include <cstdio>
 #include <exception>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 
+#include "codecs/glb_writer.h"
 #include "haptic_core/haptic_scene.h"
+#include "haptic_core/seed_models.h"
 #include "slave_sim/remote_node.h"
+#include "slave_sim/scene_build.h"
 
 namespace {
 std::atomic<bool> g_stop{false};
@@ -85,8 +92,97 @@ int main(int argc, char** argv) {
       "file to the other machine");
   keygen->add_option("path", keygen_path, "where to write the key")->required();
   keygen->add_flag("--force", keygen_force, "overwrite an existing file");
+  std::string inspect_path, inspect_tool, cache_dir = ht::HapticModelCache::DefaultDir();
+  bool no_cache = false;
+  CLI::App* inspect = app.add_subcommand(
+      "inspect",
+      "load a scene (a glTF 2.0 .gltf/.glb file, or a scene description .json naming one),\n"
+      "build the haptic model of every tool and touchable node (coarse mesh, haptic texture,\n"
+      "convex-hull hierarchy) or load it from the cache, and print one JSON object: per object\n"
+      "its name, role, full and coarse triangle counts, hull count, texture size, bake error and\n"
+      "time per stage. Progress goes to stderr. A bad file gives a one-line error and exit 2");
+  inspect->add_option("file", inspect_path, "scene file (.gltf, .glb or .json)")->required();
+  inspect->add_option("--tool", inspect_tool,
+                      "node (name or #index) that is the tool; default: the description's, else\n"
+                      "the built-in probe (a small ridged block)");
+  inspect
+      ->add_option("--cache-dir", cache_dir,
+                   "folder of built models, keyed by content and build parameters\n"
+                   "(default: $HT_CACHE_DIR, else $XDG_CACHE_HOME/haptic_teleop, else\n"
+                   "~/.cache/haptic_teleop)")
+      ->capture_default_str();
+  inspect->add_flag("--no-cache", no_cache, "build every model, read and write no cache");
+  std::string seed_out;
+  std::vector<std::string> seed_names;
+  CLI::App* seed_models = app.add_subcommand(
+      "seed-models",
+      "generate the seed's six benchmark models (block, gear, hammer, cad_part, file, torus;\n"
+      "seed Table 6) procedurally at the seed's full-resolution triangle counts and write each as\n"
+      "DIR/NAME.glb with a scene description DIR/NAME.json (coarse target = the seed's coarse\n"
+      "count, 1024x1024 texture); then 'slave_sim inspect DIR/NAME.json' builds it");
+  seed_models->add_option("--out", seed_out, "folder to write into (created)")->required();
+  seed_models->add_option("--model", seed_names, "only these models (repeatable)");
   app.add_flag("--quiet", quiet, "no progress lines");
   CLI11_PARSE(app, argc, argv);
+
+  if (*seed_models) {
+    try {
+      for (const std::string& n : seed_names) ht::ParseSeedModelName(n);  // a typo is an error
+      std::filesystem::create_directories(seed_out);
+      for (const ht::SeedModelSpec& spec : ht::SeedModelSpecs()) {
+        if (!seed_names.empty() &&
+            std::find(seed_names.begin(), seed_names.end(), spec.name) == seed_names.end()) {
+          continue;
+        }
+        ht::TriangleMesh mesh = ht::MakeSeedModelFullResolution(spec.model);
+        const std::string glb = seed_out + "/" + spec.name + ".glb";
+        const std::size_t triangles = mesh.triangles.size();
+        ht::WriteGlb(glb, {{spec.name, std::move(mesh), glm::dmat4(1.0), ""}});
+        nlohmann::json desc = {{"scene", std::string(spec.name) + ".glb"},
+                               {"defaults",
+                                {{"role", "touchable"},
+                                 {"coarse_triangles", spec.seed_coarse_triangles},
+                                 {"texture_size", 1024}}}};
+        std::ofstream(seed_out + "/" + spec.name + ".json") << desc.dump(2) << "\n";
+        if (!quiet) {
+          std::printf("seed-models: %s: %zu triangles (seed %lld) -> %s\n", spec.name, triangles,
+                      static_cast<long long>(spec.seed_full_triangles), glb.c_str());
+        }
+      }
+      return 0;
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "slave_sim seed-models: error: %s\n", e.what());
+      return 2;
+    }
+  }
+
+  if (*inspect) {
+    try {
+      const ht::SceneDescription description = ht::LoadSceneInput(inspect_path, inspect_tool);
+      const ht::HapticModelCache cache(no_cache ? std::string() : cache_dir);
+      const ht::BuiltScene built =
+          ht::BuildScene(description, cache, [&](const std::string& node, int index, int count) {
+            if (!quiet) {
+              std::fprintf(stderr, "[inspect] model %d/%d: node '%s'\n", index, count,
+                           node.c_str());
+            }
+          });
+      nlohmann::json out = ht::InspectJson(built);
+      struct rusage usage {};
+      getrusage(RUSAGE_SELF, &usage);
+      out["peak_rss_mb"] = static_cast<double>(usage.ru_maxrss) / 1024.0;  // ru_maxrss is KiB
+      out["cache_dir"] = cache.dir();
+      std::printf("%s\n", out.dump(2).c_str());
+      return 0;
+    } catch (const std::exception& e) {
+      std::string line = e.what();
+      for (char& c : line) {
+        if (c == '\n' || c == '\r') c = ' ';
+      }
+      std::fprintf(stderr, "slave_sim inspect: error: %s\n", line.c_str());
+      return 2;
+    }
+  }
 
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);

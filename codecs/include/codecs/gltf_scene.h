@@ -1,13 +1,18 @@
 #pragma once
 // Loading the triangle geometry of a glTF 2.0 scene (https://registry.khronos.org/glTF/specs/2.0/)
 // for display and haptic baking: every mesh of the scene once, in its node frame, plus one
-// instance per node that shows it. Materials, textures, cameras, skins, morph targets and
-// animations are ignored (a note says so). The parser is tinygltf 2.7 (compiled into this
-// library under the name proj_tinygltf, see ../shared/design/DEPENDENCIES.md trap 1); Draco
-// primitives (KHR_draco_mesh_compression) are decoded with libdraco.
+// instance per node that shows it, and the node tree with its translation/rotation/scale
+// animations so that moving parts can be replayed (PoseInstancesAt) without a physics engine.
+// Materials, textures, cameras, skins and morph targets (with their `weights` animations) are
+// ignored (a note says so). The parser is tinygltf 2.7 (compiled into this library under the name
+// proj_tinygltf, see ../shared/design/DEPENDENCIES.md trap 1); Draco primitives
+// (KHR_draco_mesh_compression) are decoded with libdraco.
 
 #include <cstdint>
+#include <glm/gtc/quaternion.hpp>
 #include <glm/mat4x4.hpp>
+#include <glm/vec3.hpp>
+#include <glm/vec4.hpp>
 #include <nlohmann/json_fwd.hpp>
 #include <string>
 #include <vector>
@@ -24,6 +29,10 @@ inline constexpr std::int64_t kGltfMaxVertices = 50'000'000;
 /// Largest file (bytes) that LoadGltfScene() reads; external buffers are bounded by the same
 /// figure each.
 inline constexpr std::int64_t kGltfMaxFileBytes = std::int64_t{1} << 31;
+/// Most animation output elements (summed over the kept channels of all animations, a cubic
+/// spline key counting 3) that LoadGltfScene() accepts: an accessor shared by many samplers could
+/// otherwise multiply the memory taken past the file's size.
+inline constexpr std::int64_t kGltfMaxAnimationKeys = 10'000'000;
 
 /// One glTF mesh (all its triangle primitives merged), stored once however many nodes show it.
 struct GltfMesh {
@@ -57,6 +66,69 @@ struct GltfMeshInstance {
   /// (and, when a file gives one, shear); the bottom row is (0, 0, 0, 1). Column-major like glTF:
   /// p_W = X_WN * (p_N, 1).
   glm::dmat4 X_WN{1.0};
+  /// Index into GltfScene::nodes of the entry (the path from a root) this instance is shown at.
+  int scene_node = -1;
+};
+
+/// One entry of the scene's node tree: a node reached from the scene's roots, once per path
+/// (a node that several parents share, which glTF 2.0 forbids but some files do, has one entry
+/// per path; in a conforming file every reachable node has exactly one entry).
+struct GltfNode {
+  /// Index of the node in the file's `nodes` array.
+  int node_index = -1;
+  /// Index into GltfScene::nodes of the parent entry (always smaller than this entry's index:
+  /// entries are in depth-first pre-order), -1 for a root of the scene.
+  int parent = -1;
+  /// The next entry of the same file node (another path to it), -1 for none.
+  int next_same_node = -1;
+  /// True when the node gives a `matrix` (then translation/rotation/scale keep their defaults and
+  /// the node is never animated); false when it gives translation/rotation/scale (or nothing).
+  bool has_matrix = false;
+  /// Rest translation of N in its parent P (metres), rest rotation R_PN (unit quaternion; the
+  /// file's (x, y, z, w) normalized; glm::dquat's constructor takes (w, x, y, z)) and rest scale
+  /// (per N axis, unitless). Defaults when the file omits them: (0,0,0), identity, (1,1,1).
+  glm::dvec3 translation{0.0};
+  glm::dquat rotation{1.0, 0.0, 0.0, 0.0};
+  glm::dvec3 scale{1.0};
+  /// Rest pose of N in its parent P (the scene frame W for a root): the `matrix`, or T·R·S.
+  /// Column-major like glTF: p_P = X_PN * (p_N, 1).
+  glm::dmat4 X_PN{1.0};
+};
+
+/// How an animation sampler interpolates between keys (glTF 2.0 §3.11, Appendix C).
+enum class GltfInterpolation { kLinear, kStep, kCubicSpline };
+
+/// One animated property of one node: an animation channel with its sampler's keys.
+struct GltfAnimationChannel {
+  /// The target's index in the file's `nodes` array.
+  int node = -1;
+  /// The first entry of GltfScene::nodes for that node (further paths to it: follow
+  /// GltfNode::next_same_node).
+  int scene_node = -1;
+  /// The animated property: translation (metres, in the parent frame), rotation (R_PN as a
+  /// quaternion) or scale (unitless); it replaces the node's rest value while the other two keep
+  /// theirs.
+  enum class Path { kTranslation, kRotation, kScale } path = Path::kTranslation;
+  GltfInterpolation interpolation = GltfInterpolation::kLinear;
+  /// Key times #K (seconds from the animation's start), finite, >= 0 and non-decreasing; K >= 1.
+  std::vector<double> times_s;
+  /// Key values as read from the file (FLOAT, finite): #K, or #3K for kCubicSpline, which keeps
+  /// (in-tangent, value, out-tangent) triplets per key. (x, y, z, unused 0) for translation and
+  /// scale; the quaternion (x, y, z, w) for rotation (values of non-zero length, normalized
+  /// when sampled; tangents are not unit).
+  std::vector<glm::dvec4> values;
+};
+
+/// One glTF animation: the channels that move translation/rotation/scale of nodes in the scene.
+struct GltfAnimation {
+  /// The animation's `name` in the file ("" when absent).
+  std::string name;
+  /// Kept channels, ordered by target node then path (translation, rotation, scale); a node and
+  /// path appear at most once. Channels of `weights`, of nodes not reached from the scene and of
+  /// nodes that give a `matrix` are left out (a note says so).
+  std::vector<GltfAnimationChannel> channels;
+  /// Latest key time over the kept channels (seconds); 0 when none is kept.
+  double duration_s = 0.0;
 };
 
 /// The triangle geometry of one glTF scene.
@@ -67,8 +139,13 @@ struct GltfScene {
   std::vector<GltfMesh> meshes;
   /// One entry per node (reached from the scene's roots) that has a mesh, in depth-first order.
   std::vector<GltfMeshInstance> instances;
+  /// The node tree reached from the scene's roots, in depth-first pre-order (parents first), one
+  /// entry per path: what PoseInstancesAt() recomposes.
+  std::vector<GltfNode> nodes;
+  /// The file's animations, in the file's order (index = the file's animation index).
+  std::vector<GltfAnimation> animations;
   /// What was ignored or assumed: which scene was taken, skipped primitives, ignored cameras,
-  /// skins, materials, tinygltf's warnings.
+  /// skins, materials, animation channels, tinygltf's warnings.
   std::vector<std::string> notes;
 };
 
@@ -78,9 +155,10 @@ struct GltfScene {
 ///
 /// Scene: the file's `scene`, else scene 0, else (no `scenes`) every root node (a node that is
 /// nobody's child); the choice is written in `notes`. Node transforms (`matrix` or
-/// `translation`/`rotation`/`scale`) are composed from the root down into X_WN. Primitives of
-/// mode TRIANGLES, TRIANGLE_STRIP and TRIANGLE_FAN are read, indexed or not, and merged per mesh;
-/// POINTS and LINES primitives, and primitives without POSITION, are skipped with a note.
+/// `translation`/`rotation`/`scale`) are composed from the root down into X_WN; the node tree and
+/// the animations' translation/rotation/scale channels are kept for PoseInstancesAt(). Primitives
+/// of mode TRIANGLES, TRIANGLE_STRIP and TRIANGLE_FAN are read, indexed or not, and merged per
+/// mesh; POINTS and LINES primitives, and primitives without POSITION, are skipped with a note.
 /// KHR_draco_mesh_compression primitives are decoded from their Draco buffer view.
 ///
 /// Throws std::runtime_error, whose message starts with `path` and says what is wrong, when: the
@@ -95,7 +173,41 @@ struct GltfScene {
 /// or transform is NaN or infinite; the node graph has a cycle, or shared children
 /// multiply the paths past 1,000,000 node visits; a sparse accessor is used (not supported yet); a
 /// Draco stream does not decode; the scene exceeds kGltfMaxTriangles or kGltfMaxVertices.
+/// Animation channels (the message names the animation and channel) are refused when: the
+/// sampler or target node index is out of range; two channels of one animation target the same
+/// node and path; the interpolation is not LINEAR, STEP or CUBICSPLINE; the input is not FLOAT
+/// SCALAR, is empty, or holds a time that is not finite, negative, or smaller than the one before;
+/// the output is not FLOAT (KHR_mesh_quantization's normalized integers are not supported), not
+/// VEC3 (translation, scale) or VEC4 (rotation), or its count is not the input's (3 times it for
+/// CUBICSPLINE); a value is NaN or infinite, or a rotation value has zero length; the kept keys
+/// exceed kGltfMaxAnimationKeys. Channels of `weights` (morph targets), of nodes not reached from
+/// the scene and of nodes that give a `matrix` are ignored with a note.
 GltfScene LoadGltfScene(const std::string& path);
+
+/// Pose X_WN of every instance of `scene` (same order and frames as scene.instances: N the node
+/// frame, W the scene frame, metres, column-major) at time `time_s` (seconds from the start) of
+/// scene.animations[animation]: each animated node's channels replace its rest
+/// translation/rotation/scale, and the node tree is recomposed from the roots down.
+///
+/// Sampling (glTF 2.0 Appendix C): LINEAR interpolates translation and scale linearly and rotation
+/// by slerp along the shorter arc; STEP holds the previous key; CUBICSPLINE evaluates the Hermite
+/// spline of the keys' values and tangents (scaled by the key interval). Rotations are normalized
+/// after sampling. Before the first key a channel holds its first value, after the last key its
+/// last value; with `loop`, time is first wrapped into [0, duration_s) (when duration_s > 0).
+///
+/// Never throws for any time and never reads out of range: animation -1 (or out of range, or a
+/// scene without animations) and a NaN time give the rest pose, equal to scene.instances[i].X_WN;
+/// +/-infinity holds the last/first key (also with `loop`). An instance whose scene_node is out
+/// of range keeps its rest X_WN. Allocates only the returned vector (of scene.nodes.size()
+/// capacity, used as scratch: see the overload below to reuse one).
+std::vector<glm::dmat4> PoseInstancesAt(const GltfScene& scene, int animation, double time_s,
+                                        bool loop = true);
+
+/// The same into `X_WN` (resized to #instances); allocates only when X_WN's capacity is below
+/// max(scene.nodes.size(), scene.instances.size()), so a caller that keeps the vector allocates
+/// once. Throws only std::bad_alloc, and only from that growth.
+void PoseInstancesAt(const GltfScene& scene, int animation, double time_s, bool loop,
+                     std::vector<glm::dmat4>* X_WN);
 
 /// A JSON report of `scene`:
 /// {"path", "notes": [...], "meshes": [{"name", "gltf_mesh_index", "triangles", "vertices",
@@ -103,7 +215,8 @@ GltfScene LoadGltfScene(const std::string& path);
 ///  "instances": [{"node", "node_index", "mesh", "mesh_name", "triangles", "vertices",
 ///  "bbox_min_W": [x,y,z], "bbox_max_W": [x,y,z]}],
 ///  "totals": {"instances", "meshes", "triangles" (summed over instances), "mesh_triangles"
-///  (each mesh once), "vertices" (each mesh once), "bbox_min_W", "bbox_max_W"}}.
+///  (each mesh once), "vertices" (each mesh once), "bbox_min_W", "bbox_max_W"}},
+///  "animations": [{"name", "channels" (kept channels), "duration_s"}]}.
 /// Bounding boxes are axis-aligned in W (metres) over all vertices of the instance; they are
 /// omitted for an instance whose mesh has no vertex, and totals' box is omitted when no instance
 /// has one.

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "haptic_core/height_field.h"
+#include "haptic_core/hull_hierarchy.h"
 
 namespace ht {
 
@@ -37,6 +38,10 @@ struct HapticModel {
   /// Vertices whose convex hull bounds the coarse surface (used by the convex coarse contact
   /// query, which widens its tolerance by TextureReach() of both sides), #H.
   std::vector<glm::dvec3> hull_vertices_O;
+  /// Bounding volume hierarchy of convex hulls over the coarse mesh (DESIGN.md §2); empty for
+  /// the built-in procedural models, whose coarse meshes are convex (hull_vertices_O is their
+  /// single hull). Built by BuildConvexHullHierarchy() for models loaded from files.
+  ConvexHullHierarchy hull_hierarchy;
   /// Centre of mass, p_OOcm (m).
   glm::dvec3 center_of_mass_O{0.0};
   /// Mass (kg), and principal moments of inertia about the centre of mass along O's axes (kg·m²).

@@ -40,14 +40,14 @@ uniform float u_facing_sign;  // +1 environment B, −1 tool A
 uniform int u_num_levels;
 out vec2 v_uv;
 out float v_height;
-out float v_ndotn;
+out vec3 v_normal_O;  // interpolated corner normal (renormalized per fragment)
 flat out int v_level;
 void main() {
   float facing = u_facing_sign * dot(a_face_normal_O, u_row_n.xyz);
   float s = dot(u_row_u.xyz, a_position_O) + u_row_u.w;
   float t = dot(u_row_v.xyz, a_position_O) + u_row_v.w;
   v_height = dot(u_row_n.xyz, a_position_O) + u_row_n.w;
-  v_ndotn = dot(a_normal_O, u_row_n.xyz);
+  v_normal_O = a_normal_O;
   v_uv = a_uv;
   int level = -1;
   if (a_texel_size >= 0.0) {
@@ -73,7 +73,8 @@ uniform float u_depth_range;  // R (m)
 uniform float u_depth_scale;  // 1 / (2 R')
 in vec2 v_uv;
 in float v_height;
-in float v_ndotn;
+in vec3 v_normal_O;
+uniform vec4 u_row_n;
 flat in int v_level;
 int Address(int i, int n, int wrap) {
   if (wrap != 0) {
@@ -101,7 +102,12 @@ float SampleHeight(int level, vec2 uv) {
 }
 void main() {
   float h = v_height;
-  if (v_level >= 0) h += SampleHeight(v_level, v_uv) * v_ndotn;
+  if (v_level >= 0) {
+    // Height along the unit interpolated normal N (HapticModel: p = p_coarse + h·N), projected on n.
+    float len = length(v_normal_O);
+    float ndotn = len > 1e-6 ? dot(v_normal_O, u_row_n.xyz) / len : 0.0;
+    h += SampleHeight(v_level, v_uv) * ndotn;
+  }
   if (!(abs(h) <= u_depth_range)) discard;
   gl_FragDepth = 0.5 + h * u_depth_scale;
 }

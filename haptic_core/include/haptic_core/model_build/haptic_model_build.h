@@ -1,0 +1,112 @@
+#pragma once
+// The haptic model build (DESIGN.md §2, seed §19.4): full-resolution mesh → coarse mesh (quadric
+// decimation) → haptic texture (height field baked by ray casting) → bounding volume hierarchy of
+// convex hulls, plus mass properties; cached on disk by content.
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "haptic_core/haptic_model.h"
+#include "haptic_core/model_build/hull_hierarchy_build.h"
+#include "haptic_core/model_build/mesh_decimation.h"
+#include "haptic_core/model_build/texture_bake.h"
+
+namespace ht {
+
+/// What to build for one object. Every field enters the cache key.
+struct HapticModelBuildParams {
+  /// Coarse triangle target (seed: a few hundred to a few thousand).
+  int coarse_triangles = 500;
+  /// Haptic texture bake (texture_size is the atlas side in texels).
+  TextureBakeParams texture;
+  /// Convex-hull hierarchy.
+  HullHierarchyParams hulls;
+  /// Density (kg/m³) for the mass properties of a closed coarse mesh.
+  double density_kg_per_m3 = 1000.0;
+};
+
+/// Figures of one build, for `slave_sim inspect` and the notes.
+struct HapticModelBuildReport {
+  std::string name;
+  std::int64_t full_triangles = 0;
+  std::int64_t coarse_triangles = 0;
+  /// Decimation details (welded vertices, dropped non-manifold triangles, boundary edges).
+  std::int64_t welded_vertices = 0;
+  std::int64_t dropped_non_manifold_triangles = 0;
+  std::int64_t input_boundary_edges = 0;
+  std::int64_t coarse_boundary_edges = 0;
+  /// Hierarchy size: all nodes, and leaves (convex surface patches).
+  int hull_nodes = 0;
+  int hull_leaves = 0;
+  int hull_depth = 0;
+  int texture_size = 0;
+  TextureBakeReport bake;
+  /// Wall time per stage (s); zeros for stages skipped because the cache had the model.
+  double decimate_s = 0.0;
+  double bake_s = 0.0;
+  double hulls_s = 0.0;
+  double cache_load_s = 0.0;
+  double total_s = 0.0;
+  /// True when the model came from the cache instead of being built.
+  bool from_cache = false;
+  /// Hex digest naming the cache entry ("" when no cache was used).
+  std::string cache_key;
+  /// Why a cache entry present on disk was not used ("" when none or used).
+  std::string cache_note;
+};
+
+/// A built model and its report.
+struct HapticModelBuild {
+  std::shared_ptr<const HapticModel> model;
+  HapticModelBuildReport report;
+};
+
+/// Builds the haptic model of the closed (or open) surface `full_O` (#V vertices, #F triangles,
+/// counter-clockwise seen from outside, frame O, metres): DecimateQuadric() to
+/// params.coarse_triangles, BakeHapticTexture() of the detail, BuildConvexHullHierarchy() over
+/// the coarse mesh (its root hull's vertices become HapticModel::hull_vertices_O), and mass,
+/// centre of mass and inertia of the coarse solid at params.density (from its bounding box when the
+/// coarse mesh is open or has no positive volume). Throws what the stages throw
+/// (std::invalid_argument for bad meshes or parameters, naming `name`).
+HapticModelBuild BuildHapticModel(const std::string& name, const TriangleMesh& full_O,
+                                  const HapticModelBuildParams& params);
+
+/// Hex BLAKE2b-256 of everything a build depends on: the build format version, `full_O`'s
+/// vertices and triangles (bit exact), and every field of `params`. Equal keys mean equal builds.
+std::string HapticModelCacheKey(const TriangleMesh& full_O, const HapticModelBuildParams& params);
+
+/// The on-disk cache of built models: one file per key, `<dir>/<key>.htmodel`, written to a
+/// temporary name and renamed (a crash never leaves a half file under the final name).
+class HapticModelCache {
+ public:
+  /// `dir` is created on first Store(). An empty `dir` disables the cache.
+  explicit HapticModelCache(std::string dir) : dir_(std::move(dir)) {}
+
+  /// The default folder: $HT_CACHE_DIR, else $XDG_CACHE_HOME/haptic_teleop, else
+  /// $HOME/.cache/haptic_teleop, else "" (no cache).
+  static std::string DefaultDir();
+
+  const std::string& dir() const noexcept { return dir_; }
+
+  /// Reads the entry `key`. Returns nullopt when there is none; when the file is unreadable,
+  /// truncated, of another format version, for another key, or holds invalid numbers, returns
+  /// nullopt and puts the reason in `*why` (the caller rebuilds and overwrites it).
+  std::optional<HapticModelBuild> Load(const std::string& key, std::string* why) const;
+
+  /// Writes `build` under `key`. Throws std::runtime_error naming the path when it cannot.
+  void Store(const std::string& key, const HapticModelBuild& build) const;
+
+ private:
+  std::string dir_;
+};
+
+/// BuildHapticModel() through `cache`: a hit returns the stored model (report.from_cache, with the
+/// stored stage times kept and cache_load_s set); a miss builds, stores (a failed store is noted in
+/// report.cache_note, not thrown) and returns.
+HapticModelBuild BuildHapticModelCached(const std::string& name, const TriangleMesh& full_O,
+                                        const HapticModelBuildParams& params,
+                                        const HapticModelCache& cache);
+
+}  // namespace ht

@@ -1,0 +1,360 @@
+#include "slave_sim/scene_build.h"
+
+#include <Eigen/Dense>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <glm/glm.hpp>
+#include <glm/gtc/quaternion.hpp>
+#include <limits>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+
+#include "haptic_core/procedural_models.h"
+
+namespace ht {
+namespace {
+
+double Seconds(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+NodeRole ParseRole(const std::string& where, const std::string& role) {
+  if (role == "tool") return NodeRole::kTool;
+  if (role == "touchable") return NodeRole::kTouchable;
+  if (role == "display") return NodeRole::kDisplay;
+  throw std::runtime_error(where + ": role '" + role + "' is not one of tool, touchable, display");
+}
+
+// Reads the keys of `j` (an object) into `spec`, over what it already holds.
+void ReadSpec(const std::string& where, const nlohmann::json& j, NodeSpec& spec) {
+  if (!j.is_object()) throw std::runtime_error(where + ": must be a JSON object");
+  for (const auto& [key, value] : j.items()) {
+    const std::string at = where + "." + key;
+    if (key == "role") {
+      if (!value.is_string()) throw std::runtime_error(at + ": must be a string");
+      spec.role = ParseRole(at, value.get<std::string>());
+    } else if (key == "stiffness_n_per_m") {
+      if (!value.is_number()) throw std::runtime_error(at + ": must be a number");
+      spec.stiffness_n_per_m = value.get<double>();
+      if (!(spec.stiffness_n_per_m > 0.0) || !std::isfinite(spec.stiffness_n_per_m)) {
+        throw std::runtime_error(at + ": must be a positive stiffness in N/m");
+      }
+    } else if (key == "coarse_triangles") {
+      if (!value.is_number_integer() || value.get<std::int64_t>() < 4 ||
+          value.get<std::int64_t>() > 1'000'000) {
+        throw std::runtime_error(at + ": must be an integer in [4, 1000000]");
+      }
+      spec.coarse_triangles = value.get<int>();
+    } else if (key == "texture_size") {
+      if (!value.is_number_integer()) throw std::runtime_error(at + ": must be an integer");
+      const auto n = value.get<std::int64_t>();
+      if (n < 16 || n > 8192 || (n & (n - 1)) != 0) {
+        throw std::runtime_error(at + ": must be a power of two in [16, 8192], got " +
+                                 std::to_string(n));
+      }
+      spec.texture_size = static_cast<int>(n);
+    } else {
+      throw std::runtime_error(at +
+                               ": unknown key (known: role, stiffness_n_per_m, "
+                               "coarse_triangles, texture_size)");
+    }
+  }
+}
+
+// Polar decomposition of the linear part of X_WN: L = R·S with R a rotation; S (returned in
+// `residual`) keeps scale, shear and any mirror.
+glm::dquat RotationOf(const glm::dmat4& X_WN, glm::dmat3& residual) {
+  Eigen::Matrix3d m;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) m(r, c) = X_WN[c][r];
+  }
+  Eigen::JacobiSVD<Eigen::Matrix3d> svd(m, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d u = svd.matrixU();
+  if ((u * svd.matrixV().transpose()).determinant() < 0.0) u.col(2) *= -1.0;
+  const Eigen::Matrix3d rotation = u * svd.matrixV().transpose();
+  const Eigen::Matrix3d s = rotation.transpose() * m;
+  glm::dmat3 R{1.0};
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) {
+      R[c][r] = rotation(r, c);
+      residual[c][r] = s(r, c);
+    }
+  }
+  return glm::normalize(glm::quat_cast(R));
+}
+
+// True when the node key ("name" or "#index") names this instance.
+bool KeyMatches(const std::string& key, const GltfMeshInstance& inst) {
+  if (!key.empty() && key[0] == '#') return key.substr(1) == std::to_string(inst.node_index);
+  return key == inst.node_name;
+}
+
+}  // namespace
+
+const char* NodeRoleName(NodeRole role) noexcept {
+  switch (role) {
+    case NodeRole::kTool:
+      return "tool";
+    case NodeRole::kTouchable:
+      return "touchable";
+    case NodeRole::kDisplay:
+      return "display";
+  }
+  return "?";
+}
+
+SceneDescription SceneDescription::ForGltf(const std::string& gltf_path) {
+  SceneDescription d;
+  d.gltf_path = gltf_path;
+  return d;
+}
+
+SceneDescription SceneDescription::LoadFile(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error(path + ": cannot open the scene description");
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(in);
+  } catch (const nlohmann::json::exception& e) {
+    throw std::runtime_error(path + ": not valid JSON: " + e.what());
+  }
+  if (!j.is_object()) throw std::runtime_error(path + ": must be a JSON object");
+  SceneDescription d;
+  bool have_scene = false;
+  for (const auto& [key, value] : j.items()) {
+    if (key == "scene") {
+      if (!value.is_string()) throw std::runtime_error(path + ": scene must be a path string");
+      std::filesystem::path p = value.get<std::string>();
+      if (p.is_relative()) p = std::filesystem::path(path).parent_path() / p;
+      d.gltf_path = p.lexically_normal().string();
+      have_scene = true;
+    } else if (key == "defaults") {
+      ReadSpec(path + ": defaults", value, d.defaults);
+      if (d.defaults.role == NodeRole::kTool) {
+        throw std::runtime_error(path + ": defaults.role cannot be tool (name one node)");
+      }
+    } else if (key == "nodes") {
+      if (!value.is_object()) throw std::runtime_error(path + ": nodes must be an object");
+    } else if (key == "tool") {
+      if (!value.is_string()) throw std::runtime_error(path + ": tool must be a node name");
+      d.tool_node = value.get<std::string>();
+    } else {
+      throw std::runtime_error(path + ": unknown key '" + key +
+                               "' (known: scene, defaults, nodes, tool)");
+    }
+  }
+  if (!have_scene) throw std::runtime_error(path + ": no \"scene\" (the glTF file) given");
+  if (j.contains("nodes")) {
+    // Node settings start from the defaults, whatever the key order in the file.
+    for (const auto& [key, value] : j["nodes"].items()) {
+      NodeSpec spec = d.defaults;
+      ReadSpec(path + ": nodes." + key, value, spec);
+      if (spec.role == NodeRole::kTool) {
+        if (!d.tool_node.empty() && d.tool_node != key) {
+          throw std::runtime_error(path + ": two tools: '" + d.tool_node + "' and '" + key + "'");
+        }
+        d.tool_node = key;
+      }
+      d.nodes.emplace_back(key, spec);
+    }
+  }
+  return d;
+}
+
+SceneDescription LoadSceneInput(const std::string& path, const std::string& tool_node) {
+  const std::string ext = std::filesystem::path(path).extension().string();
+  SceneDescription d =
+      ext == ".json" ? SceneDescription::LoadFile(path) : SceneDescription::ForGltf(path);
+  if (!tool_node.empty()) d.tool_node = tool_node;
+  return d;
+}
+
+BuiltScene BuildScene(const SceneDescription& description, const HapticModelCache& cache,
+                      const SceneBuildProgress& progress) {
+  const auto start = std::chrono::steady_clock::now();
+  BuiltScene scene;
+  scene.description = description;
+  scene.gltf = LoadGltfScene(description.gltf_path);
+  scene.load_s = Seconds(start);
+  const std::string& file = description.gltf_path;
+
+  // Every description key must name a node of the scene.
+  const auto names_a_node = [&](const std::string& key) {
+    for (const auto& inst : scene.gltf.instances) {
+      if (KeyMatches(key, inst)) return true;
+    }
+    return false;
+  };
+  for (const auto& [key, spec] : description.nodes) {
+    if (!names_a_node(key)) {
+      throw std::runtime_error(file + ": the scene description names node '" + key +
+                               "', which is not a mesh node of the scene");
+    }
+  }
+  if (!description.tool_node.empty() && !names_a_node(description.tool_node)) {
+    throw std::runtime_error(file + ": the tool node '" + description.tool_node +
+                             "' is not a mesh node of the scene");
+  }
+
+  for (const GltfMeshInstance& inst : scene.gltf.instances) {
+    SceneObject obj;
+    obj.node_name = inst.node_name;
+    obj.node_index = inst.node_index;
+    obj.mesh = inst.mesh;
+    obj.spec = description.defaults;
+    for (const auto& [key, spec] : description.nodes) {
+      if (KeyMatches(key, inst)) obj.spec = spec;
+    }
+    if (!description.tool_node.empty() && KeyMatches(description.tool_node, inst)) {
+      obj.spec.role = NodeRole::kTool;
+    } else if (obj.spec.role == NodeRole::kTool) {
+      obj.spec.role = NodeRole::kTouchable;  // tool named elsewhere (override)
+    }
+    obj.full_triangles =
+        static_cast<std::int64_t>(scene.gltf.meshes[inst.mesh].mesh_N.triangles.size());
+    scene.objects.push_back(std::move(obj));
+  }
+  int tools = 0;
+  for (const SceneObject& obj : scene.objects) tools += obj.spec.role == NodeRole::kTool;
+  if (tools > 1) {
+    throw std::runtime_error(file + ": the tool '" + description.tool_node + "' names " +
+                             std::to_string(tools) + " nodes; name one node (\"#index\")");
+  }
+
+  int to_build = 0;
+  for (const SceneObject& obj : scene.objects) to_build += obj.spec.role != NodeRole::kDisplay;
+  int built = 0;
+  std::map<std::string, std::size_t> first_with_key;  // instances share a build
+  glm::dvec3 lo{std::numeric_limits<double>::max()}, hi{-std::numeric_limits<double>::max()};
+  for (std::size_t i = 0; i < scene.objects.size(); ++i) {
+    SceneObject& obj = scene.objects[i];
+    const GltfMeshInstance& inst = scene.gltf.instances[i];
+    glm::dmat3 residual{1.0};
+    obj.X_WO.rotation = RotationOf(inst.X_WN, residual);
+    obj.X_WO.translation = glm::dvec3(inst.X_WN[3]);
+    if (obj.spec.role == NodeRole::kDisplay) continue;
+    if (progress) progress(obj.node_name, ++built, to_build);
+
+    // The model's frame O is the node frame without its scale: vertices carry the residual.
+    TriangleMesh mesh_O = scene.gltf.meshes[inst.mesh].mesh_N;
+    for (glm::dvec3& p : mesh_O.vertices) p = residual * p;
+    if (glm::determinant(residual) < 0.0) {
+      for (glm::ivec3& t : mesh_O.triangles) std::swap(t.y, t.z);  // a mirror flips winding
+    }
+    if (obj.spec.role == NodeRole::kTool) {
+      // The tool frame T sits at the centre of its bounds (near its centre of mass).
+      glm::dvec3 tlo{std::numeric_limits<double>::max()}, thi{-std::numeric_limits<double>::max()};
+      for (const glm::dvec3& p : mesh_O.vertices) {
+        tlo = glm::min(tlo, p);
+        thi = glm::max(thi, p);
+      }
+      const glm::dvec3 centre = 0.5 * (tlo + thi);
+      for (glm::dvec3& p : mesh_O.vertices) p -= centre;
+      obj.X_WO.translation += obj.X_WO.rotation * centre;
+    }
+    HapticModelBuildParams params;
+    params.coarse_triangles = obj.spec.coarse_triangles;
+    params.texture.texture_size = obj.spec.texture_size;
+    const std::string name =
+        obj.node_name.empty() ? "node#" + std::to_string(obj.node_index) : obj.node_name;
+    const std::string key = HapticModelCacheKey(mesh_O, params);
+    if (auto it = first_with_key.find(key); it != first_with_key.end()) {
+      obj.model = scene.objects[it->second].model;
+      obj.report = scene.objects[it->second].report;
+      obj.report.name = name;
+      obj.report.from_cache = true;
+      obj.report.cache_note =
+          "shares the model of node '" + scene.objects[it->second].node_name + "'";
+      obj.report.decimate_s = obj.report.bake_s = obj.report.hulls_s = 0.0;
+      obj.report.cache_load_s = obj.report.total_s = 0.0;
+    } else {
+      try {
+        HapticModelBuild b = BuildHapticModelCached(name, mesh_O, params, cache);
+        obj.model = std::move(b.model);
+        obj.report = std::move(b.report);
+      } catch (const std::exception& e) {
+        throw std::runtime_error(file + ": node '" + name + "': " + e.what());
+      }
+      first_with_key.emplace(key, i);
+    }
+    if (obj.spec.role == NodeRole::kTool) {
+      scene.haptic.tool = obj.model;
+      scene.builtin_probe = false;
+    } else {
+      scene.haptic.touchables.push_back({obj.model, obj.X_WO, obj.spec.stiffness_n_per_m});
+      for (const glm::dvec3& p : obj.model->vertices_O) {
+        const glm::dvec3 p_W = obj.X_WO * p;
+        lo = glm::min(lo, p_W);
+        hi = glm::max(hi, p_W);
+      }
+    }
+  }
+
+  scene.haptic.name = std::filesystem::path(file).stem().string();
+  RigidTransform home;
+  if (!scene.haptic.tool) {
+    scene.haptic.tool = std::make_shared<const HapticModel>(MakeRidgedBlock());
+    // The probe's textured face (−z in T) faces the scene's down direction (−Y in W).
+    home.rotation = glm::angleAxis(-0.5 * 3.14159265358979323846, glm::dvec3(1, 0, 0));
+  }
+  if (scene.haptic.touchables.empty()) {
+    home.translation = glm::dvec3(0.0);
+  } else {
+    double below = 0.0;  // tool's extent below its frame along −Y of W
+    for (const glm::dvec3& p : scene.haptic.tool->vertices_O) {
+      below = std::max(below, -(home.rotation * p).y);
+    }
+    home.translation = glm::dvec3(0.5 * (lo.x + hi.x), hi.y + 0.01 + below, 0.5 * (lo.z + hi.z));
+  }
+  scene.haptic.X_WT_home = home;
+  scene.total_s = Seconds(start);
+  return scene;
+}
+
+nlohmann::json InspectJson(const BuiltScene& scene) {
+  using nlohmann::json;
+  json out;
+  out["file"] = scene.description.gltf_path;
+  out["load_s"] = scene.load_s;
+  out["total_s"] = scene.total_s;
+  out["tool"] = scene.builtin_probe ? json("built-in probe: " + scene.haptic.tool->name)
+                                    : json(scene.description.tool_node);
+  json objects = json::array();
+  for (const SceneObject& obj : scene.objects) {
+    json o;
+    o["name"] = obj.node_name;
+    o["node_index"] = obj.node_index;
+    o["role"] = NodeRoleName(obj.spec.role);
+    o["full_triangles"] = obj.full_triangles;
+    if (obj.model) {
+      const HapticModelBuildReport& r = obj.report;
+      o["coarse_triangles"] = r.coarse_triangles;
+      o["coarse_closed"] = r.coarse_boundary_edges == 0;
+      o["hull_count"] = r.hull_nodes;
+      o["hull_leaves"] = r.hull_leaves;
+      o["texture_size"] = r.texture_size;
+      o["bake_max_error_m"] = r.bake.max_bake_error_m;
+      o["bake_rms_error_m"] = r.bake.rms_bake_error_m;
+      o["bake_max_abs_height_m"] = r.bake.max_abs_height_m;
+      o["bake_misses"] = r.bake.misses;
+      o["bake_clamped"] = r.bake.clamped;
+      o["stiffness_n_per_m"] = obj.spec.stiffness_n_per_m;
+      o["from_cache"] = r.from_cache;
+      if (!r.cache_note.empty()) o["cache_note"] = r.cache_note;
+      o["seconds"] = {{"decimate", r.decimate_s},
+                      {"bake", r.bake_s},
+                      {"hulls", r.hulls_s},
+                      {"cache_load", r.cache_load_s},
+                      {"total", r.total_s}};
+    }
+    objects.push_back(std::move(o));
+  }
+  out["objects"] = std::move(objects);
+  out["notes"] = scene.gltf.notes;
+  return out;
+}
+
+}  // namespace ht

@@ -1,0 +1,339 @@
+// The haptic model build: quadric decimation, the whole pipeline, mass properties and the cache.
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <glm/glm.hpp>
+#include <limits>
+#include <map>
+#include <numbers>
+#include <set>
+#include <utility>
+
+#include "haptic_core/model_build/haptic_model_build.h"
+#include "haptic_core/model_build/mesh_decimation.h"
+
+namespace ht {
+namespace {
+
+// A UV sphere of radius r: closed, 2·n_lon·(n_lat−1) triangles, outward winding.
+TriangleMesh UvSphere(double r, int n_lat, int n_lon) {
+  TriangleMesh m;
+  m.vertices.emplace_back(0, 0, r);
+  for (int i = 1; i < n_lat; ++i) {
+    const double th = std::numbers::pi * i / n_lat;
+    for (int j = 0; j < n_lon; ++j) {
+      const double ph = 2 * std::numbers::pi * j / n_lon;
+      m.vertices.emplace_back(r * std::sin(th) * std::cos(ph), r * std::sin(th) * std::sin(ph),
+                              r * std::cos(th));
+    }
+  }
+  m.vertices.emplace_back(0, 0, -r);
+  const int south = static_cast<int>(m.vertices.size()) - 1;
+  const auto ring = [&](int i, int j) { return 1 + (i - 1) * n_lon + (j % n_lon); };
+  for (int j = 0; j < n_lon; ++j) m.triangles.emplace_back(0, ring(1, j), ring(1, j + 1));
+  for (int i = 1; i < n_lat - 1; ++i) {
+    for (int j = 0; j < n_lon; ++j) {
+      m.triangles.emplace_back(ring(i, j), ring(i + 1, j), ring(i + 1, j + 1));
+      m.triangles.emplace_back(ring(i, j), ring(i + 1, j + 1), ring(i, j + 1));
+    }
+  }
+  for (int j = 0; j < n_lon; ++j) {
+    m.triangles.emplace_back(south, ring(n_lat - 1, j + 1), ring(n_lat - 1, j));
+  }
+  return m;
+}
+
+// Counts one-sided edges and edges used in the same direction twice (orientation faults).
+std::pair<int, int> BoundaryAndFlippedEdges(const TriangleMesh& m) {
+  std::map<std::pair<int, int>, int> directed;
+  for (const auto& t : m.triangles) {
+    for (int c = 0; c < 3; ++c) ++directed[{t[c], t[(c + 1) % 3]}];
+  }
+  int boundary = 0, flipped = 0;
+  for (const auto& [e, n] : directed) {
+    if (n > 1) ++flipped;
+    if (directed.find({e.second, e.first}) == directed.end()) ++boundary;
+  }
+  return {boundary, flipped};
+}
+
+double SignedVolume(const TriangleMesh& m) {
+  double v = 0;
+  for (const auto& t : m.triangles) {
+    v += glm::dot(m.vertices[t.x], glm::cross(m.vertices[t.y], m.vertices[t.z])) / 6.0;
+  }
+  return v;
+}
+
+TEST(MeshDecimation, ClosedSphereStaysClosedOrientedAndNearTheTarget) {
+  const TriangleMesh full = UvSphere(0.05, 60, 120);
+  ASSERT_EQ(BoundaryAndFlippedEdges(full), std::make_pair(0, 0));
+  const DecimationResult r = DecimateQuadric(full, 500);
+  EXPECT_EQ(r.input_triangles, static_cast<std::int64_t>(full.triangles.size()));
+  EXPECT_LE(r.mesh.triangles.size(), 500u);
+  EXPECT_GE(r.mesh.triangles.size(), 490u);
+  EXPECT_EQ(r.input_boundary_edges, 0);
+  EXPECT_EQ(r.output_boundary_edges, 0);
+  EXPECT_EQ(BoundaryAndFlippedEdges(r.mesh), std::make_pair(0, 0));
+  // Euler characteristic of a sphere: V − E + F = 2 with E = 3F/2.
+  EXPECT_EQ(static_cast<int>(r.mesh.vertices.size()) -
+                static_cast<int>(3 * r.mesh.triangles.size() / 2) +
+                static_cast<int>(r.mesh.triangles.size()),
+            2);
+  // Quadric collapses keep vertices near the surface: the volume stays near 4/3 π r³.
+  const double exact = 4.0 / 3.0 * std::numbers::pi * std::pow(0.05, 3);
+  EXPECT_NEAR(SignedVolume(r.mesh), exact, 0.03 * exact);
+  for (const auto& p : r.mesh.vertices) EXPECT_NEAR(glm::length(p), 0.05, 0.002);
+}
+
+TEST(MeshDecimation, SplitVerticesAreWeldedSoACubeWithSeamsIsOneClosedSurface) {
+  // A cube whose 6 faces each have their own 4 vertices (as glTF files store flat-shaded boxes).
+  TriangleMesh cube;
+  const glm::dvec3 n[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  for (const auto& normal : n) {
+    const glm::dvec3 u = std::abs(normal.x) > 0.5 ? glm::dvec3(0, 1, 0) : glm::dvec3(1, 0, 0);
+    const glm::dvec3 v = glm::cross(normal, u);
+    const int base = static_cast<int>(cube.vertices.size());
+    for (const auto& [a, b] : {std::pair{-1, -1}, {1, -1}, {1, 1}, {-1, 1}}) {
+      cube.vertices.push_back(0.01 * (normal + double(a) * u + double(b) * v));
+    }
+    cube.triangles.emplace_back(base, base + 1, base + 2);
+    cube.triangles.emplace_back(base, base + 2, base + 3);
+  }
+  const DecimationResult r = DecimateQuadric(cube, 100);
+  EXPECT_EQ(r.input_vertices, 24);
+  EXPECT_EQ(r.welded_vertices, 8);
+  EXPECT_EQ(r.dropped_non_manifold_triangles, 0);
+  EXPECT_EQ(r.input_boundary_edges, 0);
+  EXPECT_EQ(r.mesh.triangles.size(), 12u);
+  EXPECT_EQ(BoundaryAndFlippedEdges(r.mesh), std::make_pair(0, 0));
+  EXPECT_NEAR(SignedVolume(r.mesh), 8e-6, 1e-12);
+}
+
+TEST(MeshDecimation, NonManifoldTrianglesAreCountedAndLeftOut) {
+  TriangleMesh m;
+  m.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0.5, 0.5, 1}};
+  // Three triangles on edge (0,1): the third makes it non-manifold.
+  m.triangles = {{0, 1, 2}, {1, 0, 3}, {0, 1, 4}};
+  const DecimationResult r = DecimateQuadric(m, 100);
+  EXPECT_EQ(r.dropped_non_manifold_triangles, 1);
+  EXPECT_EQ(r.mesh.triangles.size(), 2u);
+  EXPECT_EQ(r.output_boundary_edges, 4);
+  EXPECT_EQ(r.mesh.vertices.size(), 4u);  // the isolated vertex is gone
+}
+
+TEST(MeshDecimation, BadInputThrows) {
+  TriangleMesh m = UvSphere(1.0, 4, 6);
+  EXPECT_THROW(DecimateQuadric(m, 3), std::invalid_argument);
+  TriangleMesh out_of_range = m;
+  out_of_range.triangles[2].y = 1000;
+  EXPECT_THROW(DecimateQuadric(out_of_range, 10), std::invalid_argument);
+  TriangleMesh nan = m;
+  nan.vertices[3].x = std::nan("");
+  EXPECT_THROW(DecimateQuadric(nan, 10), std::invalid_argument);
+  EXPECT_THROW(DecimateQuadric(TriangleMesh{}, 10), std::runtime_error);
+}
+
+// A sphere of radius r whose surface carries bumps of amplitude a: r(θ,φ) = r +
+// a·sin(10θ)·sin(12φ).
+TriangleMesh BumpySphere(double r, double a, int n_lat, int n_lon) {
+  TriangleMesh m = UvSphere(1.0, n_lat, n_lon);
+  for (glm::dvec3& p : m.vertices) {
+    const double th = std::acos(std::clamp(p.z, -1.0, 1.0)), ph = std::atan2(p.y, p.x);
+    p *= r + a * std::sin(10 * th) * std::sin(12 * ph);
+  }
+  return m;
+}
+
+HapticModelBuildParams SmallParams() {
+  HapticModelBuildParams p;
+  p.coarse_triangles = 300;
+  p.texture.texture_size = 256;
+  p.texture.validation_samples = 4000;
+  return p;
+}
+
+TEST(HapticModelBuild, BumpySphereGivesAClosedCoarseMeshATextureThatHoldsTheBumpsAndHulls) {
+  const double r = 0.05, a = 0.5e-3;
+  const TriangleMesh full = BumpySphere(r, a, 100, 200);
+  const HapticModelBuild b = BuildHapticModel("bumpy", full, SmallParams());
+  const HapticModel& m = *b.model;
+  EXPECT_NO_THROW(m.Validate());
+  EXPECT_EQ(b.report.full_triangles, static_cast<std::int64_t>(full.triangles.size()));
+  EXPECT_EQ(m.full_resolution_triangles, b.report.full_triangles);
+  EXPECT_LE(b.report.coarse_triangles, 300);
+  EXPECT_GE(b.report.coarse_triangles, 290);
+  EXPECT_EQ(b.report.coarse_boundary_edges, 0);
+  // The texture holds what the coarse mesh dropped: heights of the order of the bumps (plus the
+  // coarse mesh's chordal gap), and the bake reproduces its own rays to a small fraction of them.
+  EXPECT_GT(b.report.bake.max_abs_height_m, 0.5 * a);
+  EXPECT_LT(b.report.bake.max_abs_height_m, 10 * a);
+  EXPECT_LT(b.report.bake.rms_bake_error_m, 0.2 * a);
+  EXPECT_EQ(b.report.bake.misses, 0);
+  EXPECT_EQ(b.report.texture_size, 256);
+  // Hulls: a valid hierarchy whose root bounds every coarse vertex.
+  ASSERT_GE(b.report.hull_nodes, 1);
+  EXPECT_NO_THROW(m.hull_hierarchy.Validate(m.vertices_O, m.triangles, 1e-6));
+  EXPECT_EQ(m.hull_vertices_O.size(), m.hull_hierarchy.nodes.front().hull.vertices_O.size());
+  // Mass properties of a solid sphere at 1000 kg/m³: m = ρ·4/3·π·r³, I = 2/5·m·r².
+  const double mass = 1000.0 * 4.0 / 3.0 * std::numbers::pi * r * r * r;
+  EXPECT_NEAR(m.mass_kg, mass, 0.05 * mass);
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(m.inertia_diagonal_O[i], 0.4 * mass * r * r, 0.08 * 0.4 * mass * r * r);
+    EXPECT_NEAR(m.center_of_mass_O[i], 0.0, 1e-3 * r);
+  }
+}
+
+TEST(HapticModelBuild, BoxMassPropertiesMatchTheClosedForm) {
+  // An off-centre 4 × 2 × 1 cm box: m = ρabc, I_xx = m(b²+c²)/12, centre of mass at its centre.
+  TriangleMesh box;
+  const glm::dvec3 c{0.1, -0.2, 0.3}, h{0.02, 0.01, 0.005};
+  for (int i = 0; i < 8; ++i) {
+    box.vertices.push_back(c +
+                           glm::dvec3(i & 1 ? h.x : -h.x, i & 2 ? h.y : -h.y, i & 4 ? h.z : -h.z));
+  }
+  box.triangles = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
+                   {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
+  ASSERT_EQ(BoundaryAndFlippedEdges(box), std::make_pair(0, 0));
+  ASSERT_GT(SignedVolume(box), 0.0);
+  HapticModelBuildParams p = SmallParams();
+  p.texture.texture_size = 64;
+  p.density_kg_per_m3 = 2700.0;
+  const HapticModelBuild b = BuildHapticModel("box", box, p);
+  const double a = 2 * h.x, bb = 2 * h.y, cc = 2 * h.z, mass = 2700.0 * a * bb * cc;
+  EXPECT_NEAR(b.model->mass_kg, mass, 1e-9 * mass);
+  EXPECT_NEAR(b.model->center_of_mass_O.x, c.x, 1e-12);
+  EXPECT_NEAR(b.model->center_of_mass_O.y, c.y, 1e-12);
+  EXPECT_NEAR(b.model->center_of_mass_O.z, c.z, 1e-12);
+  EXPECT_NEAR(b.model->inertia_diagonal_O.x, mass * (bb * bb + cc * cc) / 12, 1e-9 * mass * a * a);
+  EXPECT_NEAR(b.model->inertia_diagonal_O.y, mass * (a * a + cc * cc) / 12, 1e-9 * mass * a * a);
+  EXPECT_NEAR(b.model->inertia_diagonal_O.z, mass * (a * a + bb * bb) / 12, 1e-9 * mass * a * a);
+  // A box is convex: one hull.
+  EXPECT_EQ(b.report.hull_nodes, 1);
+  EXPECT_EQ(b.report.coarse_triangles, 12);
+}
+
+class HapticModelCacheTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = std::filesystem::temp_directory_path() /
+           ("ht_model_cache_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()) +
+            "_" + ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    std::filesystem::remove_all(dir_);
+  }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+  std::filesystem::path dir_;
+};
+
+void ExpectSameModel(const HapticModel& a, const HapticModel& b) {
+  ASSERT_EQ(a.vertices_O.size(), b.vertices_O.size());
+  for (std::size_t i = 0; i < a.vertices_O.size(); ++i) EXPECT_EQ(a.vertices_O[i], b.vertices_O[i]);
+  ASSERT_EQ(a.triangles.size(), b.triangles.size());
+  for (std::size_t i = 0; i < a.triangles.size(); ++i) EXPECT_EQ(a.triangles[i], b.triangles[i]);
+  EXPECT_EQ(a.corner_uvs, b.corner_uvs);
+  EXPECT_EQ(a.textured, b.textured);
+  EXPECT_EQ(a.texel_size_m, b.texel_size_m);
+  ASSERT_EQ(a.texture.num_levels(), b.texture.num_levels());
+  for (int l = 0; l < a.texture.num_levels(); ++l) {
+    EXPECT_EQ(a.texture.level(l).texels, b.texture.level(l).texels) << "level " << l;
+  }
+  ASSERT_EQ(a.hull_hierarchy.nodes.size(), b.hull_hierarchy.nodes.size());
+  for (std::size_t i = 0; i < a.hull_hierarchy.nodes.size(); ++i) {
+    EXPECT_EQ(a.hull_hierarchy.nodes[i].triangles, b.hull_hierarchy.nodes[i].triangles);
+    EXPECT_EQ(a.hull_hierarchy.nodes[i].hull.vertices_O.size(),
+              b.hull_hierarchy.nodes[i].hull.vertices_O.size());
+  }
+  EXPECT_EQ(a.mass_kg, b.mass_kg);
+  EXPECT_EQ(a.inertia_diagonal_O, b.inertia_diagonal_O);
+}
+
+TEST_F(HapticModelCacheTest, SecondBuildComesFromTheCacheAndEqualsTheFirst) {
+  const TriangleMesh full = BumpySphere(0.05, 0.5e-3, 40, 80);
+  const HapticModelCache cache(dir_.string());
+  const HapticModelBuild first = BuildHapticModelCached("s", full, SmallParams(), cache);
+  EXPECT_FALSE(first.report.from_cache);
+  EXPECT_EQ(first.report.cache_note, "");
+  EXPECT_TRUE(std::filesystem::exists(dir_ / (first.report.cache_key + ".htmodel")));
+  const HapticModelBuild second = BuildHapticModelCached("s", full, SmallParams(), cache);
+  EXPECT_TRUE(second.report.from_cache);
+  EXPECT_EQ(second.report.cache_key, first.report.cache_key);
+  EXPECT_EQ(second.report.hull_nodes, first.report.hull_nodes);
+  EXPECT_EQ(second.report.bake.max_bake_error_m, first.report.bake.max_bake_error_m);
+  ExpectSameModel(*first.model, *second.model);
+}
+
+TEST_F(HapticModelCacheTest, AChangedMeshOrParameterRebuilds) {
+  TriangleMesh full = BumpySphere(0.05, 0.5e-3, 30, 60);
+  const HapticModelCache cache(dir_.string());
+  const std::string key = HapticModelCacheKey(full, SmallParams());
+  EXPECT_EQ(key.size(), 64u);
+  EXPECT_EQ(key, HapticModelCacheKey(full, SmallParams()));
+  BuildHapticModelCached("s", full, SmallParams(), cache);
+  HapticModelBuildParams other = SmallParams();
+  other.texture.texture_size = 512;
+  EXPECT_NE(HapticModelCacheKey(full, other), key);
+  EXPECT_FALSE(BuildHapticModelCached("s", full, other, cache).report.from_cache);
+  other = SmallParams();
+  other.coarse_triangles = 200;
+  EXPECT_NE(HapticModelCacheKey(full, other), key);
+  full.vertices[7].x = std::nextafter(full.vertices[7].x, 1.0);  // one ulp
+  EXPECT_NE(HapticModelCacheKey(full, SmallParams()), key);
+  EXPECT_FALSE(BuildHapticModelCached("s", full, SmallParams(), cache).report.from_cache);
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir_),
+                          std::filesystem::directory_iterator()),
+            3);
+}
+
+TEST_F(HapticModelCacheTest, DamagedEntriesAreRebuiltAndOverwritten) {
+  const TriangleMesh full = BumpySphere(0.05, 0.5e-3, 30, 60);
+  const HapticModelCache cache(dir_.string());
+  const HapticModelBuild first = BuildHapticModelCached("s", full, SmallParams(), cache);
+  const auto path = dir_ / (first.report.cache_key + ".htmodel");
+  const auto size = std::filesystem::file_size(path);
+  // Truncated.
+  std::filesystem::resize_file(path, size / 2);
+  HapticModelBuild again = BuildHapticModelCached("s", full, SmallParams(), cache);
+  EXPECT_FALSE(again.report.from_cache);
+  EXPECT_TRUE(again.report.cache_note.find("truncated") != std::string::npos ||
+              again.report.cache_note.find("exceeds the file") != std::string::npos)
+      << again.report.cache_note;
+  EXPECT_EQ(std::filesystem::file_size(path), size);  // rewritten whole
+  // A NaN written over a vertex coordinate (bytes just past the name).
+  {
+    std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(8 + 4 + 8 + 64 + 8 + 1 + 8);
+    const double nan = std::nan("");
+    f.write(reinterpret_cast<const char*>(&nan), 8);
+  }
+  again = BuildHapticModelCached("s", full, SmallParams(), cache);
+  EXPECT_FALSE(again.report.from_cache);
+  EXPECT_NE(again.report.cache_note.find("non-finite"), std::string::npos)
+      << again.report.cache_note;
+  // Garbage.
+  { std::ofstream(path, std::ios::binary | std::ios::trunc) << "not a model at all"; }
+  again = BuildHapticModelCached("s", full, SmallParams(), cache);
+  EXPECT_FALSE(again.report.from_cache);
+  EXPECT_FALSE(again.report.cache_note.empty());
+  EXPECT_TRUE(BuildHapticModelCached("s", full, SmallParams(), cache).report.from_cache);
+}
+
+TEST(HapticModelBuild, BadInputNamesTheModel) {
+  TriangleMesh full = UvSphere(0.05, 10, 20);
+  full.vertices[3].y = std::numeric_limits<double>::infinity();
+  try {
+    BuildHapticModel("wing", full, SmallParams());
+    FAIL() << "expected a throw";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("wing"), std::string::npos) << e.what();
+  }
+  HapticModelBuildParams p = SmallParams();
+  p.coarse_triangles = 2;
+  EXPECT_THROW(BuildHapticModel("wing", UvSphere(0.05, 10, 20), p), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace ht

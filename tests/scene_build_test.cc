@@ -1,0 +1,286 @@
+// Scenes from files: WriteGlb round trip, scene descriptions, roles, scaled instances, shared
+// builds, the cache through BuildScene, the real files of ../shared/data/gltf, and the CLI's JSON.
+
+#include "slave_sim/scene_build.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <glm/glm.hpp>
+#include <glm/gtc/matrix_transform.hpp>
+#include <nlohmann/json.hpp>
+#include <optional>
+
+#include "codecs/glb_writer.h"
+#include "codecs/gltf_scene.h"
+
+namespace ht {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::optional<fs::path> GltfDataDir() {
+  fs::path base = "../shared/data";
+  if (const char* env = std::getenv("HT_SHARED_DATA"); env != nullptr && *env != '\0') base = env;
+  std::error_code ec;
+  if (fs::is_directory(base / "gltf", ec)) return base / "gltf";
+  return std::nullopt;
+}
+
+#define REQUIRE_GLTF_DATA(dir)                                                                \
+  const std::optional<fs::path> dir = GltfDataDir();                                          \
+  if (!dir) {                                                                                 \
+    GTEST_SKIP() << "glTF test data not found: set HT_SHARED_DATA to the shared data folder " \
+                    "(the one holding gltf/), or run from the repository root with "          \
+                    "../shared/data/gltf present";                                            \
+  }
+
+// A closed box with a ridged top (ridges along x), centred on the origin: 2·n² + 8 triangles.
+TriangleMesh RidgedSlab(double half_x, double half_y, double half_z, int n) {
+  TriangleMesh m;
+  for (int j = 0; j <= n; ++j) {
+    for (int i = 0; i <= n; ++i) {
+      const double x = -half_x + 2 * half_x * i / n, y = -half_y + 2 * half_y * j / n;
+      const bool edge = i == 0 || j == 0 || i == n || j == n;
+      const double z = half_z + (edge ? 0.0 : 0.3e-3 * std::sin(2 * 3.14159265358979 * y / 3e-3));
+      m.vertices.emplace_back(x, y, z);
+    }
+  }
+  for (int j = 0; j < n; ++j) {
+    for (int i = 0; i < n; ++i) {
+      const int a = j * (n + 1) + i, b = a + 1, c = a + n + 1, d = c + 1;
+      m.triangles.emplace_back(a, b, d);
+      m.triangles.emplace_back(a, d, c);
+    }
+  }
+  // Bottom corners and the four sides down to them.
+  const int base = static_cast<int>(m.vertices.size());
+  m.vertices.emplace_back(-half_x, -half_y, -half_z);
+  m.vertices.emplace_back(half_x, -half_y, -half_z);
+  m.vertices.emplace_back(half_x, half_y, -half_z);
+  m.vertices.emplace_back(-half_x, half_y, -half_z);
+  m.triangles.emplace_back(base, base + 2, base + 1);
+  m.triangles.emplace_back(base, base + 3, base + 2);
+  // Side walls as fans from the bottom corners (each side: top edge vertices + 2 bottom corners).
+  const auto top = [&](int i, int j) { return j * (n + 1) + i; };
+  for (int i = 0; i < n; ++i) {
+    m.triangles.emplace_back(top(i, 0), base, top(i + 1, 0));      // y = −h side
+    m.triangles.emplace_back(top(i + 1, n), base + 2, top(i, n));  // y = +h side
+    m.triangles.emplace_back(top(0, i + 1), base + 3, top(0, i));  // x = −h side
+    m.triangles.emplace_back(top(n, i), base + 1, top(n, i + 1));  // x = +h side
+  }
+  m.triangles.emplace_back(top(n, 0), base, base + 1);
+  m.triangles.emplace_back(top(n, n), base + 1, base + 2);
+  m.triangles.emplace_back(top(0, n), base + 2, base + 3);
+  m.triangles.emplace_back(top(0, 0), base + 3, base);
+  return m;
+}
+
+class SceneBuildTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("ht_scene_build_" +
+            std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string Write(const std::string& name, const std::string& text) {
+    const fs::path p = dir_ / name;
+    std::ofstream(p) << text;
+    return p.string();
+  }
+  fs::path dir_;
+};
+
+TEST_F(SceneBuildTest, WrittenGlbLoadsBackWithTheSameTrianglesAndPoses) {
+  const TriangleMesh slab = RidgedSlab(0.03, 0.03, 0.005, 20);
+  GlbNode a{"slab", slab, glm::dmat4(1.0), ""};
+  GlbNode b{"moved", slab, glm::translate(glm::dmat4(1.0), glm::dvec3(0.1, 0.2, 0.3)), ""};
+  const std::string path = (dir_ / "two.glb").string();
+  WriteGlb(path, {a, b});
+  const GltfScene scene = LoadGltfScene(path);
+  ASSERT_EQ(scene.instances.size(), 2u);
+  ASSERT_EQ(scene.meshes.size(), 2u);
+  const TriangleMesh& back = scene.meshes[0].mesh_N;
+  ASSERT_EQ(back.triangles.size(), slab.triangles.size());
+  ASSERT_EQ(back.vertices.size(), slab.vertices.size());
+  for (std::size_t i = 0; i < slab.vertices.size(); ++i) {
+    EXPECT_LT(glm::length(back.vertices[i] - slab.vertices[i]), 1e-8);  // float32 rounding
+  }
+  for (std::size_t i = 0; i < slab.triangles.size(); ++i) {
+    EXPECT_EQ(back.triangles[i], slab.triangles[i]);
+  }
+  EXPECT_EQ(scene.instances[1].node_name, "moved");
+  EXPECT_NEAR(scene.instances[1].X_WN[3].y, 0.2, 1e-12);
+  TriangleMesh bad = slab;
+  bad.triangles[0].x = 100000;
+  EXPECT_THROW(WriteGlb(path, {{"bad", bad, glm::dmat4(1.0), ""}}), std::invalid_argument);
+}
+
+TEST_F(SceneBuildTest, DescriptionRolesScaleAndSharedInstances) {
+  const TriangleMesh slab = RidgedSlab(0.03, 0.03, 0.005, 30);
+  const glm::dmat4 scaled =
+      glm::scale(glm::translate(glm::dmat4(1.0), glm::dvec3(0.2, 0, 0)), glm::dvec3(2.0, 2.0, 2.0));
+  WriteGlb((dir_ / "scene.glb").string(),
+           {{"floor", slab, glm::dmat4(1.0), ""},
+            {"floor_copy", slab, glm::translate(glm::dmat4(1.0), glm::dvec3(0, 0.1, 0)), ""},
+            {"big", slab, scaled, ""},
+            {"decor", slab, glm::translate(glm::dmat4(1.0), glm::dvec3(0, 0, 1)), ""}});
+  const std::string desc = Write("scene.json", R"({
+    "scene": "scene.glb",
+    "defaults": {"coarse_triangles": 60, "texture_size": 128, "stiffness_n_per_m": 5000},
+    "nodes": {"decor": {"role": "display"}, "big": {"stiffness_n_per_m": 12000}}
+  })");
+  const SceneDescription d = LoadSceneInput(desc);
+  EXPECT_EQ(fs::path(d.gltf_path), (dir_ / "scene.glb").lexically_normal());
+  const BuiltScene s = BuildScene(d, HapticModelCache(""));
+  ASSERT_EQ(s.objects.size(), 4u);
+  EXPECT_TRUE(s.builtin_probe);
+  ASSERT_EQ(s.haptic.touchables.size(), 3u);
+  EXPECT_EQ(s.objects[3].spec.role, NodeRole::kDisplay);
+  EXPECT_EQ(s.objects[3].model, nullptr);
+  // Two unscaled instances of one mesh share one model; the scaled one has its own, twice as big.
+  EXPECT_EQ(s.objects[0].model, s.objects[1].model);
+  EXPECT_NE(s.objects[0].model, s.objects[2].model);
+  EXPECT_EQ(s.haptic.touchables[2].stiffness_n_per_m, 12000.0);
+  EXPECT_EQ(s.haptic.touchables[0].stiffness_n_per_m, 5000.0);
+  const auto extent_x = [](const HapticModel& m) {
+    double lo = 1e9, hi = -1e9;
+    for (const auto& p : m.vertices_O) {
+      lo = std::min(lo, p.x);
+      hi = std::max(hi, p.x);
+    }
+    return hi - lo;
+  };
+  EXPECT_NEAR(extent_x(*s.objects[2].model), 2 * extent_x(*s.objects[0].model), 1e-6);
+  EXPECT_NEAR(s.objects[2].X_WO.translation.x, 0.2, 1e-12);
+  EXPECT_NEAR(std::abs(s.objects[2].X_WO.rotation.w), 1.0, 1e-12);  // no rotation left in scale
+  EXPECT_LE(s.objects[0].report.coarse_triangles, 60);
+  // The probe starts above every touchable (+Y is up in glTF).
+  double top = -1e9;
+  for (const auto& t : s.haptic.touchables) {
+    for (const auto& p : t.model->vertices_O) top = std::max(top, (t.X_WO * p).y);
+  }
+  for (const auto& p : s.haptic.tool->vertices_O) {
+    EXPECT_GT((s.haptic.X_WT_home * p).y, top);
+  }
+  const nlohmann::json j = InspectJson(s);
+  ASSERT_EQ(j["objects"].size(), 4u);
+  EXPECT_EQ(j["objects"][3]["role"], "display");
+  EXPECT_FALSE(j["objects"][3].contains("coarse_triangles"));
+  EXPECT_EQ(j["objects"][2]["role"], "touchable");
+  for (const char* key :
+       {"coarse_triangles", "hull_count", "texture_size", "bake_max_error_m", "seconds"}) {
+    EXPECT_TRUE(j["objects"][0].contains(key)) << key;
+  }
+}
+
+TEST_F(SceneBuildTest, ANodeCanBeTheTool) {
+  const TriangleMesh slab = RidgedSlab(0.01, 0.01, 0.005, 10);
+  WriteGlb((dir_ / "t.glb").string(),
+           {{"floor", RidgedSlab(0.05, 0.05, 0.005, 20), glm::dmat4(1.0), ""},
+            {"probe", slab, glm::translate(glm::dmat4(1.0), glm::dvec3(0.3, 0.5, 0.7)), ""}});
+  const BuiltScene s =
+      BuildScene(LoadSceneInput((dir_ / "t.glb").string(), "probe"), HapticModelCache(""));
+  EXPECT_FALSE(s.builtin_probe);
+  EXPECT_EQ(s.objects[1].spec.role, NodeRole::kTool);
+  EXPECT_EQ(s.haptic.touchables.size(), 1u);
+  EXPECT_EQ(s.haptic.tool, s.objects[1].model);
+  EXPECT_THROW(
+      BuildScene(LoadSceneInput((dir_ / "t.glb").string(), "nobody"), HapticModelCache("")),
+      std::runtime_error);
+}
+
+TEST_F(SceneBuildTest, BadDescriptionsAreRefusedNamingTheFileAndTheKey) {
+  WriteGlb((dir_ / "s.glb").string(),
+           {{"floor", RidgedSlab(0.05, 0.05, 0.005, 4), glm::dmat4(1.0), ""}});
+  const struct {
+    const char* text;
+    const char* expect;
+  } cases[] = {
+      {R"({"scene": "s.glb", "nodes": {"floor": {"role": "wall"}}})", "role 'wall'"},
+      {R"({"scene": "s.glb", "defaults": {"texture_size": 100}})", "power of two"},
+      {R"({"scene": "s.glb", "defaults": {"stiffness_n_per_m": -1}})", "positive stiffness"},
+      {R"({"scene": "s.glb", "defaults": {"coarse_triangles": 2}})", "coarse_triangles"},
+      {R"({"scene": "s.glb", "defaults": {"stifness_n_per_m": 10}})", "unknown key"},
+      {R"({"scene": "s.glb", "colour": 1})", "unknown key 'colour'"},
+      {R"({"nodes": {}})", "no \"scene\""},
+      {R"({"scene": "s.glb",)", "not valid JSON"},
+  };
+  for (const auto& c : cases) {
+    const std::string path = Write("bad.json", c.text);
+    try {
+      LoadSceneInput(path);
+      ADD_FAILURE() << "accepted: " << c.text;
+    } catch (const std::runtime_error& e) {
+      const std::string what = e.what();
+      EXPECT_EQ(what.rfind(path, 0), 0u) << what;
+      EXPECT_NE(what.find(c.expect), std::string::npos) << what;
+    }
+  }
+  const std::string unknown_node =
+      Write("n.json", R"({"scene": "s.glb", "nodes": {"ceiling": {"role": "display"}}})");
+  try {
+    BuildScene(LoadSceneInput(unknown_node), HapticModelCache(""));
+    ADD_FAILURE() << "accepted a description naming no node";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("'ceiling'"), std::string::npos) << e.what();
+  }
+}
+
+TEST_F(SceneBuildTest, CacheMakesTheSecondBuildOfASceneComeFromDisk) {
+  WriteGlb((dir_ / "c.glb").string(),
+           {{"floor", RidgedSlab(0.05, 0.05, 0.005, 40), glm::dmat4(1.0), ""}});
+  const HapticModelCache cache((dir_ / "cache").string());
+  SceneDescription d = SceneDescription::ForGltf((dir_ / "c.glb").string());
+  d.defaults.texture_size = 256;
+  const BuiltScene first = BuildScene(d, cache);
+  const BuiltScene second = BuildScene(d, cache);
+  EXPECT_FALSE(first.objects[0].report.from_cache);
+  EXPECT_TRUE(second.objects[0].report.from_cache);
+  EXPECT_EQ(first.objects[0].model->vertices_O, second.objects[0].model->vertices_O);
+  d.defaults.coarse_triangles = 100;
+  EXPECT_FALSE(BuildScene(d, cache).objects[0].report.from_cache);
+}
+
+TEST(SceneBuildData, DuckBuildsAClosedTexturedModel) {
+  REQUIRE_GLTF_DATA(dir);
+  const BuiltScene s = BuildScene(
+      SceneDescription::ForGltf((*dir / "draco_testdata_gltf/glTF_Binary/Duck.glb").string()),
+      HapticModelCache(""));
+  ASSERT_EQ(s.haptic.touchables.size(), 1u);
+  const HapticModelBuildReport& r = s.objects[0].report;
+  EXPECT_EQ(r.full_triangles, 4212);
+  EXPECT_LE(r.coarse_triangles, 500);
+  EXPECT_GE(r.coarse_triangles, 480);
+  // The duck's coarse surface lies within the ray range of its full surface almost everywhere;
+  // the few texels whose rays miss (thin bill and tail) are filled from their neighbours.
+  EXPECT_LT(r.bake.misses, r.bake.texels_baked / 100) << r.bake.misses << " misses";
+  EXPECT_LT(r.bake.rms_bake_error_m, 0.01 * 2.0);  // the duck is ~2 units across
+  EXPECT_GE(r.hull_nodes, 1);
+  EXPECT_NO_THROW(s.objects[0].model->Validate());
+}
+
+TEST(SceneBuildData, DracoBoxAndItsTwinBuildTheSameModel) {
+  REQUIRE_GLTF_DATA(dir);
+  const auto build = [&](const char* rel) {
+    return BuildScene(SceneDescription::ForGltf((*dir / rel).string()), HapticModelCache(""));
+  };
+  const BuiltScene draco = build("draco_testdata_gltf/glTF_Binary/Box_Draco.glb");
+  const BuiltScene plain = build("draco_testdata_gltf/glTF_Binary/Box.glb");
+  ASSERT_EQ(draco.objects.size(), plain.objects.size());
+  for (std::size_t i = 0; i < draco.objects.size(); ++i) {
+    EXPECT_EQ(draco.objects[i].report.coarse_triangles, plain.objects[i].report.coarse_triangles);
+    EXPECT_EQ(draco.objects[i].report.hull_nodes, plain.objects[i].report.hull_nodes);
+    EXPECT_NEAR(draco.objects[i].model->mass_kg, plain.objects[i].model->mass_kg,
+                1e-3 * plain.objects[i].model->mass_kg);
+  }
+}
+
+}  // namespace
+}  // namespace ht
