@@ -282,5 +282,43 @@ TEST(SceneBuildData, DracoBoxAndItsTwinBuildTheSameModel) {
   }
 }
 
+TEST(SceneBuildData, MilkTruckWheelsTurnWhenTheAnimationPlays) {
+  REQUIRE_GLTF_DATA(dir);
+  SceneDescription d = SceneDescription::ForGltf(
+      (*dir / "draco_testdata_gltf/CesiumMilkTruck/glTF/CesiumMilkTruck.gltf").string());
+  d.defaults.coarse_triangles = 100;
+  d.defaults.texture_size = 256;
+  BuiltScene s = BuildScene(d, HapticModelCache(""));
+  ASSERT_EQ(s.gltf.animations.size(), 1u);
+  ASSERT_EQ(s.touchable_objects.size(), s.haptic.touchables.size());
+  std::vector<RigidTransform> rest;
+  for (const auto& t : s.haptic.touchables) rest.push_back(t.X_WO);
+  std::vector<glm::dmat4> scratch;
+  const double half = 0.5 * s.gltf.animations[0].duration_s;
+  AnimateScene(s, 0, half, &scratch);
+  int turned = 0;
+  for (std::size_t k = 0; k < rest.size(); ++k) {
+    const RigidTransform& now = s.haptic.touchables[k].X_WO;
+    // Wheels turn about their axle: the origin stays, the rotation changes; the rest stays put.
+    EXPECT_LT(glm::length(now.translation - rest[k].translation), 1e-9);
+    const double angle =
+        2.0 * std::acos(std::min(1.0, std::abs(glm::dot(now.rotation, rest[k].rotation))));
+    if (angle > 0.5) ++turned;
+    EXPECT_EQ(s.objects[s.touchable_objects[k]].X_WO.rotation, now.rotation);
+  }
+  EXPECT_GE(turned, 2);  // the two wheel nodes (each possibly several instances)
+  // Back at the start of the loop (and for a NaN time) every object is at rest again.
+  AnimateScene(s, 0, std::nan(""), &scratch);
+  for (std::size_t k = 0; k < rest.size(); ++k) {
+    EXPECT_LT(std::abs(glm::dot(s.haptic.touchables[k].X_WO.rotation, rest[k].rotation)) - 1.0,
+              1e-9);
+    EXPECT_GT(std::abs(glm::dot(s.haptic.touchables[k].X_WO.rotation, rest[k].rotation)),
+              1.0 - 1e-9);
+  }
+  const nlohmann::json j = InspectJson(s);
+  ASSERT_EQ(j["animations"].size(), 1u);
+  EXPECT_EQ(j["animations"][0]["channels"], 2);
+}
+
 }  // namespace
 }  // namespace ht

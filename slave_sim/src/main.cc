@@ -112,6 +112,7 @@ int main(int argc, char** argv) {
                    "~/.cache/haptic_teleop)")
       ->capture_default_str();
   inspect->add_flag("--no-cache", no_cache, "build every model, read and write no cache");
+  inspect->add_flag("--quiet", quiet, "no progress lines on stderr");
   std::string seed_out;
   std::vector<std::string> seed_names;
   CLI::App* seed_models = app.add_subcommand(
@@ -122,6 +123,7 @@ int main(int argc, char** argv) {
       "count, 1024x1024 texture); then 'slave_sim inspect DIR/NAME.json' builds it");
   seed_models->add_option("--out", seed_out, "folder to write into (created)")->required();
   seed_models->add_option("--model", seed_names, "only these models (repeatable)");
+  seed_models->add_flag("--quiet", quiet, "no progress lines");
   app.add_flag("--quiet", quiet, "no progress lines");
   CLI11_PARSE(app, argc, argv);
 

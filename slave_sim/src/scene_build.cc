@@ -285,6 +285,7 @@ BuiltScene BuildScene(const SceneDescription& description, const HapticModelCach
       scene.builtin_probe = false;
     } else {
       scene.haptic.touchables.push_back({obj.model, obj.X_WO, obj.spec.stiffness_n_per_m});
+      scene.touchable_objects.push_back(static_cast<int>(i));
       for (const glm::dvec3& p : obj.model->vertices_O) {
         const glm::dvec3 p_W = obj.X_WO * p;
         lo = glm::min(lo, p_W);
@@ -312,6 +313,21 @@ BuiltScene BuildScene(const SceneDescription& description, const HapticModelCach
   scene.haptic.X_WT_home = home;
   scene.total_s = Seconds(start);
   return scene;
+}
+
+void AnimateScene(BuiltScene& scene, int animation, double time_s,
+                  std::vector<glm::dmat4>* scratch) {
+  PoseInstancesAt(scene.gltf, animation, time_s, /*loop=*/true, scratch);
+  for (std::size_t k = 0; k < scene.haptic.touchables.size(); ++k) {
+    const auto i = static_cast<std::size_t>(scene.touchable_objects[k]);
+    if (i >= scratch->size()) continue;
+    glm::dmat3 residual{1.0};
+    RigidTransform X_WO;
+    X_WO.rotation = RotationOf((*scratch)[i], residual);
+    X_WO.translation = glm::dvec3((*scratch)[i][3]);
+    scene.objects[i].X_WO = X_WO;
+    scene.haptic.touchables[k].X_WO = X_WO;
+  }
 }
 
 nlohmann::json InspectJson(const BuiltScene& scene) {
@@ -353,6 +369,12 @@ nlohmann::json InspectJson(const BuiltScene& scene) {
     objects.push_back(std::move(o));
   }
   out["objects"] = std::move(objects);
+  json animations = json::array();
+  for (const GltfAnimation& a : scene.gltf.animations) {
+    animations.push_back(
+        {{"name", a.name}, {"channels", a.channels.size()}, {"duration_s", a.duration_s}});
+  }
+  out["animations"] = std::move(animations);
   out["notes"] = scene.gltf.notes;
   return out;
 }

@@ -97,6 +97,8 @@ struct BuiltScene {
   /// The haptic scene: tool (a node, or the built-in probe) and the touchable objects with their
   /// stiffness; X_WT_home puts the tool 1 cm above the top (+Y) of the touchables' bounds.
   HapticScene haptic;
+  /// For each entry of haptic.touchables, the index of its object in `objects`.
+  std::vector<int> touchable_objects;
   /// True when the tool is the built-in probe.
   bool builtin_probe = true;
   /// Time to load the glTF file (s) and for the whole build (s).
@@ -114,6 +116,16 @@ using SceneBuildProgress = std::function<void(const std::string& node, int index
 /// loaded, a description key names no node, two nodes are the tool, or a build fails.
 BuiltScene BuildScene(const SceneDescription& description, const HapticModelCache& cache,
                       const SceneBuildProgress& progress = {});
+
+/// Plays the glTF node animations (DESIGN.md: moving parts without a physics engine): moves every
+/// touchable object to its pose at `time_s` (s) of animation `animation` (an index into
+/// gltf.animations; looping), writing objects[i].X_WO and haptic.touchables[k].X_WO. Only the
+/// rigid part of an animated node transform moves the model (its scale stays the one it was
+/// built with). An out-of-range `animation` or a non-finite time gives the rest poses. `scratch`
+/// is reused between calls so that, once grown, a call allocates nothing. Never throws except
+/// std::bad_alloc when `scratch` grows.
+void AnimateScene(BuiltScene& scene, int animation, double time_s,
+                  std::vector<glm::dmat4>* scratch);
 
 /// The JSON object `slave_sim inspect` prints: {"file", "load_s", "total_s", "tool",
 /// "objects": [{"name", "node_index", "role", "full_triangles", "coarse_triangles",
