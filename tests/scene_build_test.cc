@@ -196,6 +196,23 @@ TEST_F(SceneBuildTest, ANodeCanBeTheTool) {
       std::runtime_error);
 }
 
+TEST_F(SceneBuildTest, AZeroScaledNodeIsShownOnlyWithANote) {
+  WriteGlb((dir_ / "z.glb").string(),
+           {{"floor", RidgedSlab(0.05, 0.05, 0.005, 10), glm::dmat4(1.0), ""},
+            {"hidden", RidgedSlab(0.05, 0.05, 0.005, 10),
+             glm::scale(glm::dmat4(1.0), glm::dvec3(0.0)), ""}});
+  SceneDescription d = SceneDescription::ForGltf((dir_ / "z.glb").string());
+  d.defaults.texture_size = 128;
+  d.defaults.coarse_triangles = 50;
+  const BuiltScene s = BuildScene(d, HapticModelCache(""));
+  ASSERT_EQ(s.objects.size(), 2u);
+  EXPECT_EQ(s.objects[1].spec.role, NodeRole::kDisplay);
+  EXPECT_EQ(s.objects[1].model, nullptr);
+  EXPECT_EQ(s.haptic.touchables.size(), 1u);
+  ASSERT_EQ(s.notes.size(), 1u);
+  EXPECT_NE(s.notes[0].find("'hidden'"), std::string::npos) << s.notes[0];
+}
+
 TEST_F(SceneBuildTest, BadDescriptionsAreRefusedNamingTheFileAndTheKey) {
   WriteGlb((dir_ / "s.glb").string(),
            {{"floor", RidgedSlab(0.05, 0.05, 0.005, 4), glm::dmat4(1.0), ""}});

@@ -237,6 +237,19 @@ BuiltScene BuildScene(const SceneDescription& description, const HapticModelCach
     obj.X_WO.translation = glm::dvec3(inst.X_WN[3]);
     if (obj.spec.role == NodeRole::kDisplay) continue;
     if (progress) progress(obj.node_name, ++built, to_build);
+    const std::string label =
+        obj.node_name.empty() ? "#" + std::to_string(obj.node_index) : obj.node_name;
+    if (scene.gltf.meshes[inst.mesh].mesh_N.triangles.empty()) {
+      scene.notes.push_back("node '" + label + "' has no triangles: shown only (display)");
+      obj.spec.role = NodeRole::kDisplay;
+      continue;
+    }
+    if (!(std::abs(glm::determinant(residual)) > 1e-12)) {
+      scene.notes.push_back("node '" + label +
+                            "' has a zero (singular) scale: shown only (display)");
+      obj.spec.role = NodeRole::kDisplay;
+      continue;
+    }
 
     // The model's frame O is the node frame without its scale: vertices carry the residual.
     TriangleMesh mesh_O = scene.gltf.meshes[inst.mesh].mesh_N;
@@ -375,7 +388,9 @@ nlohmann::json InspectJson(const BuiltScene& scene) {
         {{"name", a.name}, {"channels", a.channels.size()}, {"duration_s", a.duration_s}});
   }
   out["animations"] = std::move(animations);
-  out["notes"] = scene.gltf.notes;
+  json notes = scene.gltf.notes;
+  for (const std::string& n : scene.notes) notes.push_back(n);
+  out["notes"] = std::move(notes);
   return out;
 }
 

@@ -101,6 +101,9 @@ struct BuiltScene {
   std::vector<int> touchable_objects;
   /// True when the tool is the built-in probe.
   bool builtin_probe = true;
+  /// What the build decided on its own: nodes shown only because they have no triangles or a
+  /// zero (singular) scale.
+  std::vector<std::string> notes;
   /// Time to load the glTF file (s) and for the whole build (s).
   double load_s = 0.0;
   double total_s = 0.0;

@@ -28,9 +28,10 @@ struct DecimationResult {
   /// collapses never open a closed surface (OpenMesh refuses collapses that change topology).
   std::int64_t input_boundary_edges = 0;
   std::int64_t output_boundary_edges = 0;
-  /// Vertices of valence above 64 that were kept out of the collapses (fan centres): OpenMesh
-  /// re-scores every edge around such a vertex after each neighbouring collapse, which costs the
-  /// square of the valence; they stay in the coarse mesh.
+  /// Vertices still of valence above 64 at the end (fan centres), which were kept out of the
+  /// collapses: OpenMesh re-scores every edge around such a vertex after each neighbouring
+  /// collapse, at a cost of the square of the valence. Fans are thinned in a first pass to 4× the
+  /// target, after which most centres have a low valence and are collapsed like any vertex.
   std::int64_t locked_high_valence_vertices = 0;
   /// Wall time (s).
   double seconds = 0.0;
