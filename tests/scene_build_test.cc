@@ -191,6 +191,15 @@ TEST_F(SceneBuildTest, ANodeCanBeTheTool) {
   EXPECT_EQ(s.objects[1].spec.role, NodeRole::kTool);
   EXPECT_EQ(s.haptic.touchables.size(), 1u);
   EXPECT_EQ(s.haptic.tool, s.objects[1].model);
+  // T is at the tool's centre of mass, and the pose moved with it: the tool's surface in W is
+  // where the node put it (the slab's top is at z = 0.7 + 0.005 in W).
+  EXPECT_LT(glm::length(s.haptic.tool->center_of_mass_O), 1e-12);
+  double top = -1e9;
+  for (const auto& p : s.haptic.tool->vertices_O) top = std::max(top, (s.objects[1].X_WO * p).z);
+  EXPECT_NEAR(top, 0.7 + 0.005 + 0.3e-3, 0.35e-3);
+  EXPECT_NO_THROW(s.haptic.tool->hull_hierarchy.Validate(s.haptic.tool->vertices_O,
+                                                         s.haptic.tool->triangles, 1e-9));
+  EXPECT_NO_THROW(HapticTexturePipeline(s.haptic, PipelineOptions{}));
   EXPECT_THROW(
       BuildScene(LoadSceneInput((dir_ / "t.glb").string(), "nobody"), HapticModelCache("")),
       std::runtime_error);

@@ -9,6 +9,7 @@
 #include <fstream>
 #include <limits>
 #include <nlohmann/json.hpp>
+#include <random>
 #include <stdexcept>
 
 namespace ht {
@@ -30,6 +31,7 @@ void PadTo4(std::vector<std::uint8_t>& out, std::uint8_t fill) {
 
 void WriteGlb(const std::string& path, const std::vector<GlbNode>& nodes) {
   using nlohmann::json;
+  if (nodes.empty()) throw std::invalid_argument("WriteGlb: no node to write to " + path);
   json doc;
   doc["asset"] = {{"version", "2.0"}, {"generator", "haptic_teleop WriteGlb"}};
   doc["scene"] = 0;
@@ -123,6 +125,10 @@ void WriteGlb(const std::string& path, const std::vector<GlbNode>& nodes) {
   std::vector<std::uint8_t> json_chunk(text.begin(), text.end());
   PadTo4(json_chunk, ' ');
   PadTo4(bin, 0);
+  const std::uint64_t total = 12 + 8 + json_chunk.size() + 8 + bin.size();
+  if (total > std::numeric_limits<std::uint32_t>::max()) {
+    throw std::invalid_argument("WriteGlb: " + path + " would exceed the 4 GiB a .glb can hold");
+  }
   std::vector<std::uint8_t> out;
   out.reserve(28 + json_chunk.size() + bin.size());
   PutU32(out, 0x46546C67);  // "glTF"
@@ -135,7 +141,8 @@ void WriteGlb(const std::string& path, const std::vector<GlbNode>& nodes) {
   PutU32(out, 0x004E4942);  // "BIN\0"
   out.insert(out.end(), bin.begin(), bin.end());
 
-  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
+  const std::string tmp =
+      path + ".tmp." + std::to_string(::getpid()) + "." + std::to_string(std::random_device{}());
   {
     std::ofstream file(tmp, std::ios::binary | std::ios::trunc);
     file.write(reinterpret_cast<const char*>(out.data()), static_cast<std::streamsize>(out.size()));

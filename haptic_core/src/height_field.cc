@@ -14,7 +14,8 @@ HeightField::HeightField(int width, int height, std::vector<float> texels, bool 
                                 "x" + std::to_string(height));
   }
   if (texels.size() != static_cast<size_t>(width) * static_cast<size_t>(height)) {
-    throw std::invalid_argument("HeightField: expected " + std::to_string(width * height) +
+    throw std::invalid_argument("HeightField: expected " +
+                                std::to_string(static_cast<std::int64_t>(width) * height) +
                                 " texels, got " + std::to_string(texels.size()));
   }
   min_height_ = texels.empty() ? 0.0f : texels[0];

@@ -145,7 +145,10 @@ int main(int argc, char** argv) {
                                 {{"role", "touchable"},
                                  {"coarse_triangles", spec.seed_coarse_triangles},
                                  {"texture_size", 1024}}}};
-        std::ofstream(seed_out + "/" + spec.name + ".json") << desc.dump(2) << "\n";
+        const std::string json_path = seed_out + "/" + spec.name + ".json";
+        std::ofstream json_file(json_path);
+        json_file << desc.dump(2) << "\n";
+        if (!json_file.flush()) throw std::runtime_error("cannot write " + json_path);
         if (!quiet) {
           std::printf("seed-models: %s: %zu triangles (seed %lld) -> %s\n", spec.name, triangles,
                       static_cast<long long>(spec.seed_full_triangles), glb.c_str());

@@ -29,7 +29,7 @@ NodeRole ParseRole(const std::string& where, const std::string& role) {
 }
 
 // Reads the keys of `j` (an object) into `spec`, over what it already holds.
-void ReadSpec(const std::string& where, const nlohmann::json& j, NodeSpec& spec) {
+void ReadSpec(const std::string& where, const nlohmann::ordered_json& j, NodeSpec& spec) {
   if (!j.is_object()) throw std::runtime_error(where + ": must be a JSON object");
   for (const auto& [key, value] : j.items()) {
     const std::string at = where + "." + key;
@@ -66,12 +66,17 @@ void ReadSpec(const std::string& where, const nlohmann::json& j, NodeSpec& spec)
 
 // Polar decomposition of the linear part of X_WN: L = R·S with R a rotation; S (returned in
 // `residual`) keeps scale, shear and any mirror.
-glm::dquat RotationOf(const glm::dmat4& X_WN, glm::dmat3& residual) {
+glm::dquat RotationOf(const glm::dmat4& X_WN, glm::dmat3& residual,
+                      double* conditioning = nullptr) {
   Eigen::Matrix3d m;
   for (int r = 0; r < 3; ++r) {
     for (int c = 0; c < 3; ++c) m(r, c) = X_WN[c][r];
   }
   Eigen::JacobiSVD<Eigen::Matrix3d> svd(m, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  if (conditioning != nullptr) {
+    const Eigen::Vector3d sv = svd.singularValues();  // decreasing
+    *conditioning = sv(0) > 0.0 ? sv(2) / sv(0) : 0.0;
+  }
   Eigen::Matrix3d u = svd.matrixU();
   if ((u * svd.matrixV().transpose()).determinant() < 0.0) u.col(2) *= -1.0;
   const Eigen::Matrix3d rotation = u * svd.matrixV().transpose();
@@ -87,6 +92,18 @@ glm::dquat RotationOf(const glm::dmat4& X_WN, glm::dmat3& residual) {
 }
 
 // True when the node key ("name" or "#index") names this instance.
+// Moves a model's frame origin to p_OC (expressed in O): every position p becomes p − p_OC.
+void ShiftModelFrame(HapticModel& m, const glm::dvec3& p_OC) {
+  for (glm::dvec3& p : m.vertices_O) p -= p_OC;
+  for (glm::dvec3& p : m.hull_vertices_O) p -= p_OC;
+  for (HullNode& node : m.hull_hierarchy.nodes) {
+    for (glm::dvec3& p : node.hull.vertices_O) p -= p_OC;
+    for (glm::dvec4& plane : node.hull.planes_O) plane.w -= glm::dot(glm::dvec3(plane), p_OC);
+    node.hull.center_O -= p_OC;
+  }
+  m.center_of_mass_O -= p_OC;
+}
+
 bool KeyMatches(const std::string& key, const GltfMeshInstance& inst) {
   if (!key.empty() && key[0] == '#') return key.substr(1) == std::to_string(inst.node_index);
   return key == inst.node_name;
@@ -115,9 +132,9 @@ SceneDescription SceneDescription::ForGltf(const std::string& gltf_path) {
 SceneDescription SceneDescription::LoadFile(const std::string& path) {
   std::ifstream in(path);
   if (!in) throw std::runtime_error(path + ": cannot open the scene description");
-  nlohmann::json j;
+  nlohmann::ordered_json j;  // keeps the file's key order
   try {
-    j = nlohmann::json::parse(in);
+    j = nlohmann::ordered_json::parse(in);
   } catch (const nlohmann::json::exception& e) {
     throw std::runtime_error(path + ": not valid JSON: " + e.what());
   }
@@ -233,8 +250,10 @@ BuiltScene BuildScene(const SceneDescription& description, const HapticModelCach
     SceneObject& obj = scene.objects[i];
     const GltfMeshInstance& inst = scene.gltf.instances[i];
     glm::dmat3 residual{1.0};
-    obj.X_WO.rotation = RotationOf(inst.X_WN, residual);
+    double conditioning = 0.0;
+    obj.X_WO.rotation = RotationOf(inst.X_WN, residual, &conditioning);
     obj.X_WO.translation = glm::dvec3(inst.X_WN[3]);
+    obj.rest_residual = residual;
     if (obj.spec.role == NodeRole::kDisplay) continue;
     if (progress) progress(obj.node_name, ++built, to_build);
     const std::string label =
@@ -244,7 +263,7 @@ BuiltScene BuildScene(const SceneDescription& description, const HapticModelCach
       obj.spec.role = NodeRole::kDisplay;
       continue;
     }
-    if (!(std::abs(glm::determinant(residual)) > 1e-12)) {
+    if (!(conditioning > 1e-9)) {
       scene.notes.push_back("node '" + label +
                             "' has a zero (singular) scale: shown only (display)");
       obj.spec.role = NodeRole::kDisplay;
@@ -256,17 +275,6 @@ BuiltScene BuildScene(const SceneDescription& description, const HapticModelCach
     for (glm::dvec3& p : mesh_O.vertices) p = residual * p;
     if (glm::determinant(residual) < 0.0) {
       for (glm::ivec3& t : mesh_O.triangles) std::swap(t.y, t.z);  // a mirror flips winding
-    }
-    if (obj.spec.role == NodeRole::kTool) {
-      // The tool frame T sits at the centre of its bounds (near its centre of mass).
-      glm::dvec3 tlo{std::numeric_limits<double>::max()}, thi{-std::numeric_limits<double>::max()};
-      for (const glm::dvec3& p : mesh_O.vertices) {
-        tlo = glm::min(tlo, p);
-        thi = glm::max(thi, p);
-      }
-      const glm::dvec3 centre = 0.5 * (tlo + thi);
-      for (glm::dvec3& p : mesh_O.vertices) p -= centre;
-      obj.X_WO.translation += obj.X_WO.rotation * centre;
     }
     HapticModelBuildParams params;
     params.coarse_triangles = obj.spec.coarse_triangles;
@@ -289,11 +297,26 @@ BuiltScene BuildScene(const SceneDescription& description, const HapticModelCach
         obj.model = std::move(b.model);
         obj.report = std::move(b.report);
       } catch (const std::exception& e) {
+        if (std::string(e.what()).find("forms a manifold surface") != std::string::npos) {
+          // Every triangle degenerate once equal positions are welded: nothing to touch.
+          scene.notes.push_back("node '" + label + "' has no surface (" + e.what() +
+                                "): shown only (display)");
+          obj.spec.role = NodeRole::kDisplay;
+          continue;
+        }
         throw std::runtime_error(file + ": node '" + name + "': " + e.what());
       }
       first_with_key.emplace(key, i);
     }
     if (obj.spec.role == NodeRole::kTool) {
+      // The tool frame T sits at the tool's centre of mass (HapticTexturePipeline requires it).
+      const glm::dvec3 com = obj.model->center_of_mass_O;
+      if (glm::length(com) > 0.0) {
+        auto centred = std::make_shared<HapticModel>(*obj.model);
+        ShiftModelFrame(*centred, com);
+        obj.model = std::move(centred);
+        obj.X_WO.translation += obj.X_WO.rotation * com;
+      }
       scene.haptic.tool = obj.model;
       scene.builtin_probe = false;
     } else {
@@ -334,10 +357,14 @@ void AnimateScene(BuiltScene& scene, int animation, double time_s,
   for (std::size_t k = 0; k < scene.haptic.touchables.size(); ++k) {
     const auto i = static_cast<std::size_t>(scene.touchable_objects[k]);
     if (i >= scratch->size()) continue;
+    // The model carries the rest scale S_rest (M = R·S): the rotation now is the polar rotation of
+    // M(t)·S_rest⁻¹, which stays unique when S_rest mirrors with equal scales.
+    const glm::dmat4& M = (*scratch)[i];
+    const glm::dmat3 L = glm::dmat3(M) * glm::inverse(scene.objects[i].rest_residual);
     glm::dmat3 residual{1.0};
     RigidTransform X_WO;
-    X_WO.rotation = RotationOf((*scratch)[i], residual);
-    X_WO.translation = glm::dvec3((*scratch)[i][3]);
+    X_WO.rotation = RotationOf(glm::dmat4(L), residual);
+    X_WO.translation = glm::dvec3(M[3]);
     scene.objects[i].X_WO = X_WO;
     scene.haptic.touchables[k].X_WO = X_WO;
   }

@@ -11,13 +11,14 @@
 #include <fstream>
 #include <glm/glm.hpp>
 #include <limits>
+#include <random>
 #include <stdexcept>
 
 namespace ht {
 namespace {
 
 // Bump when the build's output or the file layout changes: old entries then miss.
-constexpr std::uint32_t kBuildFormatVersion = 1;
+constexpr std::uint32_t kBuildFormatVersion = 3;  // 3: two-pass decimation
 constexpr char kCacheMagic[8] = {'H', 'T', 'M', 'O', 'D', 'E', 'L', '1'};
 // Bounds on what a cache file may claim (the loader never allocates beyond them).
 constexpr std::uint64_t kMaxCacheCount = 64ULL << 20;
@@ -112,7 +113,7 @@ class ByteReader {
   }
   std::string Str() {
     const std::uint64_t n = Count(1);
-    std::string s(reinterpret_cast<const char*>(&bytes_[pos_]), n);
+    std::string s(reinterpret_cast<const char*>(bytes_.data() + pos_), n);
     pos_ += n;
     return s;
   }
@@ -162,7 +163,8 @@ std::string Hex(const unsigned char* data, std::size_t n) {
 
 // Mass properties of a closed triangle mesh by signed tetrahedra from the origin (Mirtich 1996 in
 // its simplest, exact-for-polyhedra form: second moments of each tetrahedron).
-void SetMassProperties(const TriangleMesh& coarse, double density, HapticModel& model) {
+void SetMassProperties(const TriangleMesh& coarse, bool closed, double density,
+                       HapticModel& model) {
   double volume = 0.0;
   glm::dvec3 first{0.0};
   glm::dmat3 second{0.0};  // ∫ x_i x_j dV
@@ -186,7 +188,7 @@ void SetMassProperties(const TriangleMesh& coarse, double density, HapticModel& 
   }
   const glm::dvec3 size = hi - lo;
   const double box_volume = size.x * size.y * size.z;
-  if (volume > 1e-6 * box_volume && volume > 0.0) {
+  if (closed && volume > 1e-6 * box_volume && volume > 0.0) {
     model.mass_kg = density * volume;
     model.center_of_mass_O = first / volume;
     const glm::dvec3 c = model.center_of_mass_O;
@@ -351,7 +353,8 @@ HapticModelBuild ReadBuild(ByteReader& r, const std::string& key) {
   }
   m.hull_vertices_O.resize(r.Count(24));
   for (auto& p : m.hull_vertices_O) p = r.Vec3();
-  m.hull_hierarchy.nodes.resize(r.Count(24 + 8 + 8));
+  // A node takes at least 8+8+24 (hull counts, centre) + 8 (children) + 8 (triangle count) bytes.
+  m.hull_hierarchy.nodes.resize(r.Count(56));
   for (HullNode& node : m.hull_hierarchy.nodes) {
     node.hull = ReadHull(r);
     node.children[0] = r.I32();
@@ -469,7 +472,8 @@ HapticModelBuild BuildHapticModel(const std::string& name, const TriangleMesh& f
   rep.hull_leaves = model->hull_hierarchy.LeafCount();
   rep.hull_depth = model->hull_hierarchy.Depth();
 
-  SetMassProperties(coarse.mesh, params.density_kg_per_m3, *model);
+  SetMassProperties(coarse.mesh, coarse.output_boundary_edges == 0, params.density_kg_per_m3,
+                    *model);
   model->Validate();
   rep.total_s = Seconds(start);
   build.model = std::move(model);
@@ -541,7 +545,7 @@ std::optional<HapticModelBuild> HapticModelCache::Load(const std::string& key,
     HapticModelBuild build = ReadBuild(reader, key);
     build.report.cache_key = key;
     return build;
-  } catch (const CacheFormatError& e) {
+  } catch (const std::exception& e) {  // CacheFormatError, or what a damaged file provokes
     if (why) *why = path + ": " + e.what();
     return std::nullopt;
   }
@@ -555,7 +559,8 @@ void HapticModelCache::Store(const std::string& key, const HapticModelBuild& bui
   ByteWriter w;
   WriteBuild(w, key, build);
   const std::string path = dir_ + "/" + key + ".htmodel";
-  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
+  const std::string tmp =
+      path + ".tmp." + std::to_string(::getpid()) + "." + std::to_string(std::random_device{}());
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
     out.write(reinterpret_cast<const char*>(w.bytes().data()),

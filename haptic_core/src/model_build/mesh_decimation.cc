@@ -147,12 +147,12 @@ DecimationResult DecimateQuadric(const TriangleMesh& full, int target_triangles)
   };
   const auto target = static_cast<std::size_t>(target_triangles);
   if (mesh.n_faces() > target) {
-    if (lock_high_valence() > 0 && mesh.n_faces() > 4 * target) {
+    // Below 4× the target the cost of a fan is bounded: no locks, one pass.
+    if (mesh.n_faces() > 4 * target && lock_high_valence() > 0) {
       run_pass(4 * target);
-      lock_high_valence();
+      result.locked_high_valence_vertices = lock_high_valence();
     }
     run_pass(target);
-    result.locked_high_valence_vertices = lock_high_valence();
   }
   result.output_boundary_edges = CountBoundaryEdges(mesh);
 

@@ -79,8 +79,12 @@ struct SceneObject {
   int mesh = -1;
   NodeSpec spec;
   /// Rigid part of the node's pose, X_WO (the glTF scene frame W: +Y up, metres). The node's
-  /// scale and shear are applied to the vertices of its model instead.
+  /// scale and shear are applied to the vertices of its model instead. For the tool, O is moved
+  /// to the model's centre of mass (the tool frame T).
   RigidTransform X_WO;
+  /// The scale and shear of the node's rest pose, baked into the model's vertices
+  /// (X_WN = [R_WO·rest_residual | p_WO]).
+  glm::dmat3 rest_residual{1.0};
   /// Triangles of the node's mesh.
   std::int64_t full_triangles = 0;
   /// The haptic model (tool and touchable roles; null for display nodes) and how it was built.
