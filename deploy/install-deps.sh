@@ -13,6 +13,8 @@ PACKAGES=(
   libccd-dev libeigen3-dev nlohmann-json3-dev libcli11-dev libsodium-dev
   # haptic model build: convex hulls (qhull) and the texture bake's ray casting (Embree 3)
   libqhull-dev libembree-dev
+  # FCL: the reference the coarse contact query is checked and benchmarked against
+  libfcl-dev
   # tests and benchmarks; clang's libFuzzer for the datagram fuzz target; iproute2 for the
   # network-namespace split test
   libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev iproute2
