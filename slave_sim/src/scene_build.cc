@@ -217,7 +217,7 @@ BuiltScene BuildScene(const SceneDescription& description, const HapticModelCach
   }
 
   for (const GltfMeshInstance& inst : scene.gltf.instances) {
-    SceneObject obj;
+    SceneNode obj;
     obj.node_name = inst.node_name;
     obj.node_index = inst.node_index;
     obj.mesh = inst.mesh;
@@ -235,19 +235,19 @@ BuiltScene BuildScene(const SceneDescription& description, const HapticModelCach
     scene.objects.push_back(std::move(obj));
   }
   int tools = 0;
-  for (const SceneObject& obj : scene.objects) tools += obj.spec.role == NodeRole::kTool;
+  for (const SceneNode& obj : scene.objects) tools += obj.spec.role == NodeRole::kTool;
   if (tools > 1) {
     throw std::runtime_error(file + ": the tool '" + description.tool_node + "' names " +
                              std::to_string(tools) + " nodes; name one node (\"#index\")");
   }
 
   int to_build = 0;
-  for (const SceneObject& obj : scene.objects) to_build += obj.spec.role != NodeRole::kDisplay;
+  for (const SceneNode& obj : scene.objects) to_build += obj.spec.role != NodeRole::kDisplay;
   int built = 0;
   std::map<std::string, std::size_t> first_with_key;  // instances share a build
   glm::dvec3 lo{std::numeric_limits<double>::max()}, hi{-std::numeric_limits<double>::max()};
   for (std::size_t i = 0; i < scene.objects.size(); ++i) {
-    SceneObject& obj = scene.objects[i];
+    SceneNode& obj = scene.objects[i];
     const GltfMeshInstance& inst = scene.gltf.instances[i];
     glm::dmat3 residual{1.0};
     double conditioning = 0.0;
@@ -379,7 +379,7 @@ nlohmann::json InspectJson(const BuiltScene& scene) {
   out["tool"] = scene.builtin_probe ? json("built-in probe: " + scene.haptic.tool->name)
                                     : json(scene.description.tool_node);
   json objects = json::array();
-  for (const SceneObject& obj : scene.objects) {
+  for (const SceneNode& obj : scene.objects) {
     json o;
     o["name"] = obj.node_name;
     o["node_index"] = obj.node_index;

@@ -72,7 +72,7 @@ struct SceneDescription {
 SceneDescription LoadSceneInput(const std::string& path, const std::string& tool_node = "");
 
 /// One node of a built scene.
-struct SceneObject {
+struct SceneNode {
   std::string node_name;
   int node_index = -1;
   /// Index into GltfScene::meshes.
@@ -97,7 +97,7 @@ struct BuiltScene {
   SceneDescription description;
   GltfScene gltf;
   /// Every mesh node of the glTF scene, in the loader's order.
-  std::vector<SceneObject> objects;
+  std::vector<SceneNode> objects;
   /// The haptic scene: tool (a node, or the built-in probe) and the touchable objects with their
   /// stiffness; X_WT_home puts the tool 1 cm above the top (+Y) of the touchables' bounds.
   HapticScene haptic;
