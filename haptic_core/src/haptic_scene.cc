@@ -33,8 +33,8 @@ HapticScene MakeStiffWallScene() {
   TouchableObject wall;
   // MakeTexturedBox puts its (here flat) texture on the bottom face; turned over, that face is
   // the top, at z = the gear's radius.
-  wall.model = std::make_shared<const HapticModel>(
-      MakeTexturedBox(half, [](double, double) { return 0.0; }, 16, 2.0, "stiff_wall"));
+  wall.model = std::make_shared<const HapticModel>(MakeTexturedBox(
+      half, [](double, double) { return 0.0; }, 16, 2.0, "stiff_wall"));
   wall.X_WO.translation = {0.0, 0.0, RidgedGearParams{}.radius_m - half.z};
   wall.X_WO.rotation = glm::angleAxis(M_PI, glm::dvec3(1.0, 0.0, 0.0));
   wall.stiffness_n_per_m = 40000.0;
@@ -70,6 +70,8 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
                                              std::unique_ptr<PenetrationDepthBackend> backend)
     : scene_(scene), options_(options), backend_(std::move(backend)) {
   options_.Validate();
+  queries_.reserve(scene.touchables.size());
+  for (std::size_t i = 0; i < scene.touchables.size(); ++i) queries_.emplace_back();
   if (!backend_) backend_ = std::make_unique<CpuPenetrationDepthBackend>(options_.grid_resolution);
   if (!scene.tool) throw std::invalid_argument("scene '" + scene.name + "' has no tool");
   if (glm::length(scene.tool->center_of_mass_O) > 1e-9) {
@@ -97,18 +99,40 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   const HapticModel& tool = *scene_.tool;
   struct Candidate {
     const TouchableObject* object;
-    ConvexContact contact;
+    glm::dvec3 point_W;
+    glm::dvec3 normal_W;
   };
   std::array<Candidate, kMaxContacts> candidates{};
   int num_candidates = 0;
-  for (const TouchableObject& object : scene_.touchables) {
-    const double tolerance =
-        tool.TextureReach() + object.model->TextureReach() + options_.proximity_margin_m;
-    const auto contact = QueryConvexContact(tool.hull_vertices_O, X_WT,
-                                            object.model->hull_vertices_O, object.X_WO, tolerance);
+  for (std::size_t k = 0; k < scene_.touchables.size(); ++k) {
+    const TouchableObject& object = scene_.touchables[k];
+    const double reach = tool.TextureReach() + object.model->TextureReach();
+    ProximityQueryOptions query;
+    query.tolerance_m = reach + options_.proximity_margin_m;
+    query.time_budget_us = options_.collision_budget_us;
+    ProximityQueryStats stats;
+    const std::span<const HullPairContact> pairs =
+        queries_[k].Query(tool, X_WT, *object.model, object.X_WO, query, &stats);
     ++timings.convex_pairs;
-    if (contact && num_candidates < kMaxContacts)
-      candidates[num_candidates++] = {&object, *contact};
+    timings.leaf_pairs += static_cast<int>(pairs.size());
+    timings.collision_budget_exhausted |= stats.budget_exhausted;
+    if (pairs.empty()) continue;
+    // One window per cluster, all of the pipeline's window size: clusters whose windows would
+    // overlap merge, so no texture region is rendered in two windows.
+    ClusteringOptions clustering;
+    clustering.merge_distance_m = options_.clustering_distance_m;
+    clustering.max_normal_angle_deg = options_.clustering_angle_deg;
+    clustering.texture_margin_m = reach;
+    clustering.min_extent_m = clustering.max_extent_m = options_.window_extent_m;
+    clustering.max_contacts = kMaxContacts;
+    const std::span<const ContactCluster> clusters =
+        clusterer_.Cluster(pairs, tool.hull_hierarchy, object.model->hull_hierarchy, clustering);
+    timings.clusters += static_cast<int>(clusters.size());
+    for (const ContactCluster& c : clusters) {
+      if (num_candidates < kMaxContacts) {
+        candidates[num_candidates++] = {&object, c.point_W, c.normal_W};
+      }
+    }
   }
   const auto t1 = Clock::now();
 
@@ -117,8 +141,8 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   for (int i = 0; i < num_candidates; ++i) {
     const Candidate& c = candidates[i];
     queries[i] = {c.object->model.get(), c.object->X_WO,
-                  ContactWindow::Make(c.contact.point_W, c.contact.normal_W,
-                                      options_.window_extent_m, options_.grid_resolution),
+                  ContactWindow::Make(c.point_W, c.normal_W, options_.window_extent_m,
+                                      options_.grid_resolution),
                   c.object->stiffness_n_per_m};
   }
   const std::span<const ContactQuery> batch(queries.data(), num_candidates);

@@ -7,9 +7,11 @@
 #include <string>
 #include <vector>
 
+#include "haptic_core/contact_clustering.h"
 #include "haptic_core/contact_linearization.h"
 #include "haptic_core/contact_model.h"
 #include "haptic_core/haptic_model.h"
+#include "haptic_core/hull_proximity.h"
 #include "haptic_core/penetration_depth_backend.h"
 
 namespace ht {
@@ -48,6 +50,13 @@ struct PipelineOptions {
   int grid_resolution = 50;            ///< N of the penetration-depth grid (seed: 50).
   double window_extent_m = 0.02;       ///< W of each contact window (m).
   double proximity_margin_m = 0.5e-3;  ///< Extra coarse tolerance beyond both texture reaches (m).
+  /// Time budget of the coarse query per tool–object pair (µs; 0 = none): most important node
+  /// pairs first, the step reports when it stopped early.
+  double collision_budget_us = 0.0;
+  /// Contact clustering (DESIGN.md §3): leaf pairs whose points are closer than this (m) and whose
+  /// normals differ by less than clustering_angle_deg merge into one contact.
+  double clustering_distance_m = 5e-3;
+  double clustering_angle_deg = 30.0;
 
   /// Throws std::invalid_argument naming a value out of range.
   void Validate() const;
@@ -58,11 +67,20 @@ struct StepTimings {
   double collision_us = 0.0;
   double texture_us = 0.0;
   double total_us = 0.0;
+  /// Tool–object pairs queried (one per touchable object).
   int convex_pairs = 0;
+  /// Leaf hull pairs found within tolerance, and contacts after clustering (before the cap of
+  /// kMaxContacts per step).
+  int leaf_pairs = 0;
+  int clusters = 0;
+  /// True when a coarse query stopped at options.collision_budget_us.
+  bool collision_budget_exhausted = false;
 };
 
-/// The remote node's per-step pipeline (DESIGN.md §1): coarse contact query, contacts, texture
-/// penetration depth with gradient (one batch for all contacts), linearization. Holds
+/// The remote node's per-step pipeline (DESIGN.md §1): coarse contact query between the tool's and
+/// each object's convex-hull hierarchies (HullProximityQuery; a model without a hierarchy is one
+/// hull), contact clustering (ContactClusterer), texture penetration depth with gradient (one
+/// batch for all contacts), linearization. Holds
 /// preallocated scratch; not thread-safe, and must be stepped on the thread that created its
 /// penetration-depth backend (a GL context is current there).
 class HapticTexturePipeline {
@@ -90,6 +108,9 @@ class HapticTexturePipeline {
   const HapticScene& scene_;
   PipelineOptions options_;
   std::unique_ptr<PenetrationDepthBackend> backend_;
+  /// One proximity query per touchable object (each keeps its own last-frame pairs).
+  std::vector<HullProximityQuery> queries_;
+  ContactClusterer clusterer_;
   std::int64_t backend_failures_ = 0;
   std::string fallback_reason_;
 };
