@@ -14,6 +14,12 @@ double HapticModel::TextureReach() const noexcept {
                   std::abs(static_cast<double>(texture.max_height())));
 }
 
+double HapticModel::OutwardReach() const noexcept {
+  if (outward_reach_m >= 0.0) return outward_reach_m;
+  if (texture.empty()) return 0.0;
+  return std::max(0.0, static_cast<double>(texture.max_height()));
+}
+
 void HapticModel::Validate() const {
   const auto fail = [&](const std::string& what) {
     throw std::invalid_argument("haptic model '" + name + "': " + what);

@@ -106,7 +106,7 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   int num_candidates = 0;
   for (std::size_t k = 0; k < scene_.touchables.size(); ++k) {
     const TouchableObject& object = scene_.touchables[k];
-    const double reach = tool.TextureReach() + object.model->TextureReach();
+    const double reach = tool.OutwardReach() + object.model->OutwardReach();
     ProximityQueryOptions query;
     query.tolerance_m = reach + options_.proximity_margin_m;
     query.time_budget_us = options_.collision_budget_us;

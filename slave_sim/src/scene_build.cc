@@ -395,6 +395,7 @@ nlohmann::json InspectJson(const BuiltScene& scene) {
       o["bake_max_error_m"] = r.bake.max_bake_error_m;
       o["bake_rms_error_m"] = r.bake.rms_bake_error_m;
       o["bake_max_abs_height_m"] = r.bake.max_abs_height_m;
+      o["outward_reach_m"] = r.outward_reach_m;
       o["bake_misses"] = r.bake.misses;
       o["bake_clamped"] = r.bake.clamped;
       o["stiffness_n_per_m"] = obj.spec.stiffness_n_per_m;

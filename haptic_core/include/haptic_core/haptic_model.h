@@ -42,6 +42,11 @@ struct HapticModel {
   /// the built-in procedural models, whose coarse meshes are convex (hull_vertices_O is their
   /// single hull). Built by BuildConvexHullHierarchy() for models loaded from files.
   ConvexHullHierarchy hull_hierarchy;
+  /// Outward reach used by OutwardReach() (m); < 0 means "the texture's largest height". The model
+  /// build sets it to the 99.9th percentile of the positive heights, so that a few texels whose
+  /// rays hit another part of the object (the file's handle seen from its blade) do not widen
+  /// every coarse query of the object by centimetres.
+  double outward_reach_m = -1.0;
   /// Centre of mass, p_OOcm (m).
   glm::dvec3 center_of_mass_O{0.0};
   /// Mass (kg), and principal moments of inertia about the centre of mass along O's axes (kg·m²).
@@ -52,6 +57,12 @@ struct HapticModel {
 
   /// Largest |h| of the texture (m): how far the true surface may lie outside the coarse one.
   double TextureReach() const noexcept;
+  /// How far the true surface lies OUTSIDE the coarse one (m): outward_reach_m when set (≥ 0),
+  /// else the texture's largest positive h (0 when there is none). Two objects' true surfaces can
+  /// only touch where their coarse surfaces are within the sum of their outward reaches, so this
+  /// (not TextureReach(), which also counts the inward deviations of concave regions the coarse
+  /// mesh cuts across) widens the coarse query.
+  double OutwardReach() const noexcept;
 
   /// Checks sizes, finiteness and normal lengths; throws std::invalid_argument naming the model
   /// and the first inconsistency found.

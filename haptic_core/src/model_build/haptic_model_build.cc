@@ -3,6 +3,7 @@
 #include <sodium.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -18,7 +19,7 @@ namespace ht {
 namespace {
 
 // Bump when the build's output or the file layout changes: old entries then miss.
-constexpr std::uint32_t kBuildFormatVersion = 3;  // 3: two-pass decimation
+constexpr std::uint32_t kBuildFormatVersion = 4;  // 4: outward reach percentile
 constexpr char kCacheMagic[8] = {'H', 'T', 'M', 'O', 'D', 'E', 'L', '1'};
 // Bounds on what a cache file may claim (the loader never allocates beyond them).
 constexpr std::uint64_t kMaxCacheCount = 64ULL << 20;
@@ -283,6 +284,7 @@ void WriteBuild(ByteWriter& w, const std::string& key, const HapticModelBuild& b
     w.U64(node.triangles.size());
     for (const int t : node.triangles) w.I32(t);
   }
+  w.F64(m.outward_reach_m < 0.0 ? -1.0 : m.outward_reach_m);
   w.Vec3(m.center_of_mass_O);
   w.F64(m.mass_kg);
   w.Vec3(m.inertia_diagonal_O);
@@ -362,6 +364,7 @@ HapticModelBuild ReadBuild(ByteReader& r, const std::string& key) {
     node.triangles.resize(r.Count(4));
     for (int& t : node.triangles) t = r.I32();
   }
+  m.outward_reach_m = r.F64();
   m.center_of_mass_O = r.Vec3();
   m.mass_kg = r.F64();
   m.inertia_diagonal_O = r.Vec3();
@@ -408,6 +411,7 @@ HapticModelBuild ReadBuild(ByteReader& r, const std::string& key) {
   rep.hull_leaves = m.hull_hierarchy.LeafCount();
   rep.hull_depth = m.hull_hierarchy.Depth();
   rep.texture_size = m.texture.empty() ? 0 : m.texture.level(0).width;
+  rep.outward_reach_m = m.OutwardReach();
   build.model = std::move(model);
   return build;
 }
@@ -458,6 +462,22 @@ HapticModelBuild BuildHapticModel(const std::string& name, const TriangleMesh& f
   rep.bake_s = Seconds(stage);
   ApplyBakedTexture(std::move(baked), *model);
   rep.texture_size = model->texture.empty() ? 0 : model->texture.level(0).width;
+  if (!model->texture.empty()) {
+    // 99.9th percentile of the positive heights (see HapticModel::outward_reach_m).
+    std::vector<float> positive;
+    for (const float h : model->texture.level(0).texels) {
+      if (h > 0.0f) positive.push_back(h);
+    }
+    double reach = 0.0;
+    if (!positive.empty()) {
+      const auto k = static_cast<std::size_t>(0.999 * static_cast<double>(positive.size() - 1));
+      std::nth_element(positive.begin(), positive.begin() + static_cast<std::ptrdiff_t>(k),
+                       positive.end());
+      reach = positive[k];
+    }
+    model->outward_reach_m = reach;
+  }
+  rep.outward_reach_m = model->OutwardReach();
 
   stage = std::chrono::steady_clock::now();
   try {

@@ -42,6 +42,8 @@ struct HapticModelBuildReport {
   int hull_leaves = 0;
   int hull_depth = 0;
   int texture_size = 0;
+  /// HapticModel::OutwardReach() of the built model (m).
+  double outward_reach_m = 0.0;
   TextureBakeReport bake;
   /// Wall time per stage (s); zeros for stages skipped because the cache had the model.
   double decimate_s = 0.0;
