@@ -8,7 +8,7 @@
 // deepest coarse pair penetrates 0.3 mm (resting on the highest features). Models: the seed
 // models at the seed's coarse counts with 1024² textures, through the on-disk cache.
 //
-// Usage: fig77_scrape [--frames N] [--csv FILE] [--cache-dir DIR]
+// Usage: fig77_scrape [--frames N] [--csv FILE] [--cache-dir DIR] [--tolerance-mm E]
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -62,6 +62,11 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--csv", csv_path, "per-frame output")->capture_default_str();
   app.add_option("--cache-dir", cache_dir, "model cache folder")->capture_default_str();
+  double tolerance_mm = 0.0;
+  app.add_option("--tolerance-mm", tolerance_mm,
+                 "coarse query tolerance in mm (default 0: the remote step's, both models'\n"
+                 "outward reaches + 0.5 mm)")
+      ->check(CLI::NonNegativeNumber);
   CLI11_PARSE(app, argc, argv);
 
   const auto file = Build(ht::SeedModel::kFile, cache_dir);
@@ -70,6 +75,7 @@ int main(int argc, char** argv) {
   const double reach = file->OutwardReach() + part->OutwardReach();
   ht::ProximityQueryOptions options;
   options.tolerance_m = reach + 0.5e-3;  // as the remote step: outward reaches + margin
+  if (tolerance_mm > 0.0) options.tolerance_m = tolerance_mm * 1e-3;
   ht::ClusteringOptions clustering;
   clustering.texture_margin_m = reach;
   clustering.min_extent_m = clustering.max_extent_m = 0.02;  // the pipeline's window W
@@ -90,7 +96,7 @@ int main(int argc, char** argv) {
     ht::RigidTransform X_WA;
     X_WA.rotation = glm::angleAxis(yaw, glm::dvec3(0, 0, 1));
     // Bisection on height: the deepest pair at −0.3 mm (not timed).
-    double lo = -0.05, hi = 0.08;
+    double lo = -0.006, hi = 0.08;  // lo: the blade deep in the plate; hi: clear above
     ht::ProximityQueryOptions probe = options;
     probe.tolerance_m = 0.0;
     for (int it = 0; it < 40; ++it) {
