@@ -31,3 +31,11 @@ add_test(NAME cli_inspect_truncated_file
   COMMAND slave_sim inspect ${PROJECT_SOURCE_DIR}/tests/data/truncated.glb --no-cache)
 set_tests_properties(cli_inspect_truncated_file PROPERTIES
   PASS_REGULAR_EXPRESSION "slave_sim inspect: error: [^\n]*truncated.glb")
+
+# Both processes on a real glTF scene with animations (skips when ../shared/data is absent).
+add_test(NAME scene_file_loopback_milk_truck
+  COMMAND ${CMAKE_CURRENT_SOURCE_DIR}/scene_file_loopback.sh ${CMAKE_BINARY_DIR}
+          ${PROJECT_SOURCE_DIR}/../shared/data/gltf/draco_testdata_gltf/CesiumMilkTruck/glTF/CesiumMilkTruck.gltf
+          ${CMAKE_BINARY_DIR}/scene_file_loopback)
+set_tests_properties(scene_file_loopback_milk_truck PROPERTIES SKIP_RETURN_CODE 77 RUN_SERIAL TRUE
+  TIMEOUT 180 PASS_REGULAR_EXPRESSION "scene file loopback: ok|skipped")

@@ -12,6 +12,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "codecs/draco_mesh_codec.h"
 #include "codecs/glb_writer.h"
 #include "haptic_core/haptic_scene.h"
 #include "haptic_core/seed_models.h"
@@ -42,8 +43,15 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--scene", scene,
                  "built-in scene: block-on-gear (seed Fig. 75) or stiff-wall (the same block on a\n"
-                 "flat wall five times stiffer, a stability hard case)")
-      ->check(CLI::IsMember({"block-on-gear", "stiff-wall"}))
+                 "flat wall five times stiffer, a stability hard case); or a scene file (.gltf,\n"
+                 ".glb, or a scene description .json), built through the model cache (see\n"
+                 "'slave_sim inspect'); its glTF animation 0, if any, plays in a loop")
+      ->capture_default_str();
+  std::string scene_tool, scene_cache_dir = ht::HapticModelCache::DefaultDir();
+  app.add_option("--tool", scene_tool,
+                 "with a scene file: the node (name or #index) that is the tool; default the\n"
+                 "description's, else the built-in probe");
+  app.add_option("--cache-dir", scene_cache_dir, "with a scene file: the model cache folder")
       ->capture_default_str();
   app.add_option("--grid", config.pipeline.grid_resolution,
                  "penetration-depth grid N (N x N cells per contact)")
@@ -210,9 +218,51 @@ int main(int argc, char** argv) {
     config.port_file = port_file;
     config.exit_on_goodbye = !stay;
     config.progress_period_s = quiet ? 0.0 : 1.0;
-    const ht::HapticScene haptic_scene =
-        scene == "stiff-wall" ? ht::MakeStiffWallScene() : ht::MakeBlockOnGearScene();
-    config.scene_objects = ht::BlockOnGearSceneObjects();
+    ht::HapticScene builtin_scene;
+    std::unique_ptr<ht::BuiltScene> file_scene;
+    std::vector<glm::dmat4> animation_scratch;
+    if (scene == "block-on-gear" || scene == "stiff-wall") {
+      builtin_scene = scene == "stiff-wall" ? ht::MakeStiffWallScene() : ht::MakeBlockOnGearScene();
+      config.scene_objects = ht::BlockOnGearSceneObjects();
+    } else {
+      if (!std::filesystem::exists(scene)) {
+        throw std::invalid_argument("--scene " + scene +
+                                    ": neither a built-in scene (block-on-gear, stiff-wall) nor "
+                                    "an existing file");
+      }
+      file_scene = std::make_unique<ht::BuiltScene>(ht::BuildScene(
+          ht::LoadSceneInput(scene, scene_tool), ht::HapticModelCache(scene_cache_dir),
+          [&](const std::string& node, int index, int count) {
+            if (!quiet) {
+              std::printf("[slave] model %d/%d: node '%s'\n", index, count,
+                          node.empty() ? "(unnamed)" : node.c_str());
+            }
+          }));
+      // Every mesh node is streamed to the operator for display, in W.
+      for (std::size_t i = 0; i < file_scene->gltf.instances.size(); ++i) {
+        const ht::GltfMeshInstance& inst = file_scene->gltf.instances[i];
+        ht::TriangleMesh mesh_W = file_scene->gltf.meshes[inst.mesh].mesh_N;
+        if (mesh_W.triangles.empty()) continue;
+        for (glm::dvec3& p : mesh_W.vertices) p = glm::dvec3(inst.X_WN * glm::dvec4(p, 1.0));
+        config.scene_objects.emplace_back(static_cast<std::uint32_t>(i + 1),
+                                          ht::EncodeMeshDraco(mesh_W));
+        if (config.scene_objects.size() >= 60000) break;
+      }
+      const ht::RigidTransform& home = file_scene->haptic.X_WT_home;
+      std::printf(
+          "[slave] scene file %s: %zu touchable(s), tool %s; tool home position in W %.4f,%.4f,"
+          "%.4f (give it to the operator: --workspace-origin %.4f,%.4f,%.4f)\n",
+          scene.c_str(), file_scene->haptic.touchables.size(),
+          file_scene->builtin_probe ? "built-in probe" : scene_tool.c_str(), home.translation.x,
+          home.translation.y, home.translation.z, home.translation.x, home.translation.y,
+          home.translation.z);
+      if (!file_scene->gltf.animations.empty()) {
+        config.animate = [&](double t_s) {
+          ht::AnimateScene(*file_scene, 0, t_s, &animation_scratch);
+        };
+      }
+    }
+    const ht::HapticScene& haptic_scene = file_scene ? file_scene->haptic : builtin_scene;
     const nlohmann::json summary = ht::RunRemoteNode(config, haptic_scene, g_stop);
     std::printf("[slave] done: %llu steps, %.1f steps/s, step p50 %.0f us\n",
                 static_cast<unsigned long long>(summary["steps"].get<std::uint64_t>()),

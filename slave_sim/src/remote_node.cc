@@ -328,6 +328,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
       continue;
     }
     const std::int64_t t_step = NowNs();
+    if (config.animate) config.animate(static_cast<double>(t_step - start_ns) * 1e-9);
     StepTimings timings;
     wire::ContactModelMessage out;
     out.model = pipeline.Step(latest.X_WT, state_seq, timings);

@@ -4,6 +4,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <utility>
@@ -48,6 +49,10 @@ struct RemoteNodeConfig {
   double scene_rate_bytes_per_s = 4e6;
   /// Scene objects streamed to the operator at join (Draco bitstreams), by object id.
   std::vector<std::pair<std::uint32_t, std::vector<std::uint8_t>>> scene_objects;
+  /// Called before each step with the seconds since the node started, to move animated objects
+  /// of the scene (e.g. AnimateScene() on a scene from a file); empty = a static scene. It runs on
+  /// the stepping thread and must not throw.
+  std::function<void(double elapsed_s)> animate;
 };
 
 /// The built-in scene's full-resolution meshes (ridged block = object 1, ridged gear = 2),
