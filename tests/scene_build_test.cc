@@ -205,6 +205,38 @@ TEST_F(SceneBuildTest, ANodeCanBeTheTool) {
       std::runtime_error);
 }
 
+TEST_F(SceneBuildTest, PipelineOnAFileSceneCullsFarObjectsAndFindsContactOnTheNearOne) {
+  WriteGlb((dir_ / "p.glb").string(),
+           {{"floor", RidgedSlab(0.05, 0.05, 0.005, 30), glm::dmat4(1.0), ""},
+            {"far", RidgedSlab(0.05, 0.05, 0.005, 30),
+             glm::translate(glm::dmat4(1.0), glm::dvec3(1.0, 0.0, 0.0)), ""}});
+  SceneDescription d = SceneDescription::ForGltf((dir_ / "p.glb").string());
+  d.defaults.texture_size = 128;
+  d.defaults.coarse_triangles = 100;
+  const BuiltScene s = BuildScene(d, HapticModelCache(""));
+  HapticTexturePipeline pipeline(s.haptic, PipelineOptions{});
+  StepTimings timings;
+  // Home is above the middle of both slabs' bounds (x = 0.5 m), far from each: both culled.
+  pipeline.Step(s.haptic.X_WT_home, 1, timings);
+  EXPECT_EQ(timings.broad_phase_culled, 2);
+  EXPECT_EQ(timings.convex_pairs, 0);
+  // Pressed 0.2 mm into the floor's ridged top (the slab's +z face): the probe's textured face
+  // (−z in T) down onto it. Contacts come from the hierarchy query, clustering and the texture.
+  RigidTransform X_WT;
+  double top = -1e9;
+  for (const auto& p : s.haptic.touchables[0].model->vertices_O) top = std::max(top, p.z);
+  double below = 0.0;
+  for (const auto& p : s.haptic.tool->vertices_O) below = std::max(below, -p.z);
+  X_WT.translation = glm::dvec3(0.0, 0.0, top + below - 0.2e-3);
+  const ContactModel m = pipeline.Step(X_WT, 2, timings);
+  EXPECT_EQ(timings.broad_phase_culled, 1);
+  EXPECT_EQ(timings.convex_pairs, 1);
+  EXPECT_GE(timings.leaf_pairs, 1);
+  EXPECT_GE(timings.clusters, 1);
+  EXPECT_GE(m.num_contacts, 1);
+  EXPECT_GT(m.F_T_W_at_q0.force.z, 0.0);  // pushed up, out of the floor
+}
+
 TEST_F(SceneBuildTest, AZeroScaledNodeIsShownOnlyWithANote) {
   WriteGlb((dir_ / "z.glb").string(),
            {{"floor", RidgedSlab(0.05, 0.05, 0.005, 10), glm::dmat4(1.0), ""},

@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -72,6 +73,30 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
   options_.Validate();
   queries_.reserve(scene.touchables.size());
   for (std::size_t i = 0; i < scene.touchables.size(); ++i) queries_.emplace_back();
+  // Bounding spheres about each model's vertex-box centre.
+  const auto sphere = [](const HapticModel& m, glm::dvec3& center, double& radius) {
+    glm::dvec3 lo{std::numeric_limits<double>::max()}, hi{-std::numeric_limits<double>::max()};
+    for (const glm::dvec3& p : m.vertices_O) {
+      lo = glm::min(lo, p);
+      hi = glm::max(hi, p);
+    }
+    for (const glm::dvec3& p : m.hull_vertices_O) {
+      lo = glm::min(lo, p);
+      hi = glm::max(hi, p);
+    }
+    center = m.vertices_O.empty() && m.hull_vertices_O.empty() ? glm::dvec3(0.0) : 0.5 * (lo + hi);
+    radius = 0.0;
+    for (const glm::dvec3& p : m.vertices_O) radius = std::max(radius, glm::length(p - center));
+    for (const glm::dvec3& p : m.hull_vertices_O) {
+      radius = std::max(radius, glm::length(p - center));
+    }
+  };
+  sphere(*scene.tool, tool_sphere_center_O_, tool_sphere_radius_m_);
+  object_sphere_centers_O_.resize(scene.touchables.size());
+  object_sphere_radii_m_.resize(scene.touchables.size());
+  for (std::size_t i = 0; i < scene.touchables.size(); ++i) {
+    sphere(*scene.touchables[i].model, object_sphere_centers_O_[i], object_sphere_radii_m_[i]);
+  }
   if (!backend_) backend_ = std::make_unique<CpuPenetrationDepthBackend>(options_.grid_resolution);
   if (!scene.tool) throw std::invalid_argument("scene '" + scene.name + "' has no tool");
   if (glm::length(scene.tool->center_of_mass_O) > 1e-9) {
@@ -109,6 +134,14 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
     const double reach = tool.OutwardReach() + object.model->OutwardReach();
     ProximityQueryOptions query;
     query.tolerance_m = reach + options_.proximity_margin_m;
+    // Broad phase: bounding spheres in W (the objects may move between steps).
+    const double gap =
+        glm::length(X_WT * tool_sphere_center_O_ - object.X_WO * object_sphere_centers_O_[k]) -
+        tool_sphere_radius_m_ - object_sphere_radii_m_[k];
+    if (gap > query.tolerance_m) {
+      ++timings.broad_phase_culled;
+      continue;
+    }
     query.time_budget_us = options_.collision_budget_us;
     ProximityQueryStats stats;
     const std::span<const HullPairContact> pairs =

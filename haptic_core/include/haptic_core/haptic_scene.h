@@ -67,8 +67,10 @@ struct StepTimings {
   double collision_us = 0.0;
   double texture_us = 0.0;
   double total_us = 0.0;
-  /// Tool–object pairs queried (one per touchable object).
+  /// Tool–object pairs queried by the hierarchy query (those the broad phase let through).
   int convex_pairs = 0;
+  /// Tool–object pairs the broad phase (bounding spheres) ruled out.
+  int broad_phase_culled = 0;
   /// Leaf hull pairs found within tolerance, and contacts after clustering (before the cap of
   /// kMaxContacts per step).
   int leaf_pairs = 0;
@@ -110,6 +112,12 @@ class HapticTexturePipeline {
   std::unique_ptr<PenetrationDepthBackend> backend_;
   /// One proximity query per touchable object (each keeps its own last-frame pairs).
   std::vector<HullProximityQuery> queries_;
+  /// Broad phase: a bounding sphere (centre in the model's frame, radius in m) of the tool and of
+  /// every touchable, so that objects far from the tool cost one distance test per step.
+  glm::dvec3 tool_sphere_center_O_{0.0};
+  double tool_sphere_radius_m_ = 0.0;
+  std::vector<glm::dvec3> object_sphere_centers_O_;
+  std::vector<double> object_sphere_radii_m_;
   ContactClusterer clusterer_;
   std::int64_t backend_failures_ = 0;
   std::string fallback_reason_;
