@@ -28,26 +28,12 @@
 #include <unordered_map>
 #include <vector>
 
+#include "gltf_test_data.h"
+
 namespace ht {
 namespace {
 
 namespace fs = std::filesystem;
-
-std::optional<fs::path> GltfDataDir() {
-  fs::path base = "../shared/data";
-  if (const char* env = std::getenv("HT_SHARED_DATA"); env != nullptr && *env != '\0') base = env;
-  std::error_code ec;
-  if (fs::is_directory(base / "gltf", ec)) return base / "gltf";
-  return std::nullopt;
-}
-
-#define REQUIRE_GLTF_DATA(dir)                                                            \
-  const std::optional<fs::path> dir = GltfDataDir();                                      \
-  if (!dir) {                                                                             \
-    GTEST_SKIP() << "glTF test data not found: set HT_SHARED_DATA to the shared data "    \
-                    "directory (the one holding gltf/), or run from the repository root " \
-                    "with ../shared/data/gltf present";                                   \
-  }
 
 // Expects LoadGltfScene(path) to throw std::runtime_error whose message starts with the path;
 // returns the message.

@@ -16,27 +16,12 @@
 
 #include "codecs/glb_writer.h"
 #include "codecs/gltf_scene.h"
+#include "gltf_test_data.h"
 
 namespace ht {
 namespace {
 
 namespace fs = std::filesystem;
-
-std::optional<fs::path> GltfDataDir() {
-  fs::path base = "../shared/data";
-  if (const char* env = std::getenv("HT_SHARED_DATA"); env != nullptr && *env != '\0') base = env;
-  std::error_code ec;
-  if (fs::is_directory(base / "gltf", ec)) return base / "gltf";
-  return std::nullopt;
-}
-
-#define REQUIRE_GLTF_DATA(dir)                                                                \
-  const std::optional<fs::path> dir = GltfDataDir();                                          \
-  if (!dir) {                                                                                 \
-    GTEST_SKIP() << "glTF test data not found: set HT_SHARED_DATA to the shared data folder " \
-                    "(the one holding gltf/), or run from the repository root with "          \
-                    "../shared/data/gltf present";                                            \
-  }
 
 // A closed box with a ridged top (ridges along x), centred on the origin: 2·n² + 8 triangles.
 TriangleMesh RidgedSlab(double half_x, double half_y, double half_z, int n) {

@@ -99,8 +99,8 @@ void ContactClusterer::Refresh(WorkCluster& c, const ClusteringOptions& options)
       half = std::max({half, std::abs(glm::dot(d, u)), std::abs(glm::dot(d, v))});
     }
   }
-  c.raw_extent_m = 2.0 * (half + options.texture_margin_m);
-  c.extent_m = std::clamp(c.raw_extent_m, options.min_extent_m, options.max_extent_m);
+  c.extent_m = std::clamp(2.0 * (half + options.texture_margin_m), options.min_extent_m,
+                          options.max_extent_m);
 }
 
 double ContactClusterer::MergedRawExtent(const WorkCluster& a, const WorkCluster& b,

@@ -2,11 +2,9 @@
 
 #include <chrono>
 #include <cmath>
-#include <limits>
 #include <stdexcept>
 #include <string>
 
-#include "haptic_core/convex_contact.h"
 #include "haptic_core/procedural_models.h"
 
 namespace ht {
@@ -73,30 +71,6 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
   options_.Validate();
   queries_.reserve(scene.touchables.size());
   for (std::size_t i = 0; i < scene.touchables.size(); ++i) queries_.emplace_back();
-  // Bounding spheres about each model's vertex-box centre.
-  const auto sphere = [](const HapticModel& m, glm::dvec3& center, double& radius) {
-    glm::dvec3 lo{std::numeric_limits<double>::max()}, hi{-std::numeric_limits<double>::max()};
-    for (const glm::dvec3& p : m.vertices_O) {
-      lo = glm::min(lo, p);
-      hi = glm::max(hi, p);
-    }
-    for (const glm::dvec3& p : m.hull_vertices_O) {
-      lo = glm::min(lo, p);
-      hi = glm::max(hi, p);
-    }
-    center = m.vertices_O.empty() && m.hull_vertices_O.empty() ? glm::dvec3(0.0) : 0.5 * (lo + hi);
-    radius = 0.0;
-    for (const glm::dvec3& p : m.vertices_O) radius = std::max(radius, glm::length(p - center));
-    for (const glm::dvec3& p : m.hull_vertices_O) {
-      radius = std::max(radius, glm::length(p - center));
-    }
-  };
-  sphere(*scene.tool, tool_sphere_center_O_, tool_sphere_radius_m_);
-  object_sphere_centers_O_.resize(scene.touchables.size());
-  object_sphere_radii_m_.resize(scene.touchables.size());
-  for (std::size_t i = 0; i < scene.touchables.size(); ++i) {
-    sphere(*scene.touchables[i].model, object_sphere_centers_O_[i], object_sphere_radii_m_[i]);
-  }
   if (!backend_) backend_ = std::make_unique<CpuPenetrationDepthBackend>(options_.grid_resolution);
   if (!scene.tool) throw std::invalid_argument("scene '" + scene.name + "' has no tool");
   if (glm::length(scene.tool->center_of_mass_O) > 1e-9) {
@@ -105,6 +79,14 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
   }
   for (const auto& t : scene.touchables) {
     if (!t.model) throw std::invalid_argument("scene '" + scene.name + "' has an empty touchable");
+  }
+  // Broad-phase spheres: the root bounding spheres the proximity queries use anyway. Asking each
+  // query for both of its models here also fills its cache, so the first step does not.
+  object_spheres_O_.reserve(scene.touchables.size());
+  tool_sphere_O_ = HullProximityQuery().BoundingSphere(*scene.tool, 0);
+  for (std::size_t i = 0; i < scene.touchables.size(); ++i) {
+    object_spheres_O_.push_back(queries_[i].BoundingSphere(*scene.touchables[i].model, 0));
+    queries_[i].BoundingSphere(*scene.tool, 0);
   }
 }
 
@@ -135,9 +117,10 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
     ProximityQueryOptions query;
     query.tolerance_m = reach + options_.proximity_margin_m;
     // Broad phase: bounding spheres in W (the objects may move between steps).
+    const glm::dvec4& object_sphere_O = object_spheres_O_[k];
     const double gap =
-        glm::length(X_WT * tool_sphere_center_O_ - object.X_WO * object_sphere_centers_O_[k]) -
-        tool_sphere_radius_m_ - object_sphere_radii_m_[k];
+        glm::length(X_WT * glm::dvec3(tool_sphere_O_) - object.X_WO * glm::dvec3(object_sphere_O)) -
+        tool_sphere_O_.w - object_sphere_O.w;
     if (gap > query.tolerance_m) {
       ++timings.broad_phase_culled;
       continue;

@@ -89,7 +89,7 @@ int ConvexHullHierarchy::LeafCount() const noexcept {
   return count;
 }
 
-int ConvexHullHierarchy::Depth() const noexcept {
+int ConvexHullHierarchy::Depth() const {
   if (nodes.empty()) return 0;
   // Iterative level-by-level walk with a fixed level budget (no recursion, no unbounded loop on a
   // cyclic tree). Allocates: not meant for the haptic loop.

@@ -469,11 +469,9 @@ const HullProximityQuery::ModelEntry& HullProximityQuery::Entry(const HapticMode
   for (ModelEntry& e : cache_) {
     if (e.last_use < slot->last_use) slot = &e;
   }
-  slot->model = &model;
-  slot->nodes_data = nodes.data();
-  slot->node_count = nodes.size();
-  slot->hull_vertex_count = model.hull_vertices_O.size();
-  slot->last_use = use_counter_;
+  // The slot is named for `model` only once its spheres are complete: if their allocation throws,
+  // the slot stays empty rather than claiming a model it holds no spheres for.
+  slot->model = nullptr;
   auto sphere = [](const std::vector<glm::dvec3>& vertices, const glm::dvec3* center) {
     glm::dvec3 c(0.0);
     if (center != nullptr) {
@@ -495,6 +493,11 @@ const HullProximityQuery::ModelEntry& HullProximityQuery::Entry(const HapticMode
       slot->spheres_O.push_back(sphere(node.hull.vertices_O, &node.hull.center_O));
     }
   }
+  slot->model = &model;
+  slot->nodes_data = nodes.data();
+  slot->node_count = nodes.size();
+  slot->hull_vertex_count = model.hull_vertices_O.size();
+  slot->last_use = use_counter_;
   return *slot;
 }
 

@@ -185,7 +185,6 @@ class ContactClusterer {
     bool alive;
     glm::dvec3 point_W, normal_W;  // derived from the sums
     double extent_m;               // derived (clamped window side)
-    double raw_extent_m;           // unclamped 2·(half spread + margin)
   };
   // One (leaf, pair) incidence for the triangle assignment.
   struct LeafEntry {

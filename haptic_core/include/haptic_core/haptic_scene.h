@@ -112,12 +112,11 @@ class HapticTexturePipeline {
   std::unique_ptr<PenetrationDepthBackend> backend_;
   /// One proximity query per touchable object (each keeps its own last-frame pairs).
   std::vector<HullProximityQuery> queries_;
-  /// Broad phase: a bounding sphere (centre in the model's frame, radius in m) of the tool and of
-  /// every touchable, so that objects far from the tool cost one distance test per step.
-  glm::dvec3 tool_sphere_center_O_{0.0};
-  double tool_sphere_radius_m_ = 0.0;
-  std::vector<glm::dvec3> object_sphere_centers_O_;
-  std::vector<double> object_sphere_radii_m_;
+  /// Broad phase: root bounding spheres of the tool (frame T) and of every touchable (its frame
+  /// O), centre in xyz and radius in w (m), so that objects far from the tool cost one distance
+  /// test per step.
+  glm::dvec4 tool_sphere_O_{0.0};
+  std::vector<glm::dvec4> object_spheres_O_;
   ContactClusterer clusterer_;
   std::int64_t backend_failures_ = 0;
   std::string fallback_reason_;

@@ -66,7 +66,8 @@ struct ConvexHullHierarchy {
   int LeafCount() const noexcept;
   /// Number of levels: 0 for an empty hierarchy, 1 for a single node. Follows child links only
   /// to valid indices and stops at nodes.size() levels, so it terminates on a corrupt tree too.
-  int Depth() const noexcept;
+  /// Allocates a scratch list (throws only std::bad_alloc): not for the step.
+  int Depth() const;
 
   /// Checks the hierarchy against the coarse mesh it was built from: `vertices_O` (#V, m) and
   /// `triangles` (#F, indices into vertices_O). Throws std::invalid_argument naming the first

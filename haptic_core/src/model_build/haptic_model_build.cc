@@ -152,14 +152,18 @@ void WriteParams(ByteWriter& w, const HapticModelBuildParams& p) {
   w.F64(p.density_kg_per_m3);
 }
 
-std::string Hex(const unsigned char* data, std::size_t n) {
-  static const char* kDigits = "0123456789abcdef";
-  std::string s;
-  for (std::size_t i = 0; i < n; ++i) {
-    s += kDigits[data[i] >> 4];
-    s += kDigits[data[i] & 15];
+// Axis-aligned bounds of a point set (lo > hi in every axis when it is empty).
+struct Bounds {
+  glm::dvec3 lo{std::numeric_limits<double>::max()};
+  glm::dvec3 hi{-std::numeric_limits<double>::max()};
+};
+Bounds BoundsOf(const std::vector<glm::dvec3>& points) {
+  Bounds b;
+  for (const glm::dvec3& p : points) {
+    b.lo = glm::min(b.lo, p);
+    b.hi = glm::max(b.hi, p);
   }
-  return s;
+  return b;
 }
 
 // Mass properties of a closed triangle mesh by signed tetrahedra from the origin (Mirtich 1996 in
@@ -182,11 +186,7 @@ void SetMassProperties(const TriangleMesh& coarse, bool closed, double density,
       }
     }
   }
-  glm::dvec3 lo{std::numeric_limits<double>::max()}, hi{-std::numeric_limits<double>::max()};
-  for (const glm::dvec3& p : coarse.vertices) {
-    lo = glm::min(lo, p);
-    hi = glm::max(hi, p);
-  }
+  const auto [lo, hi] = BoundsOf(coarse.vertices);
   const glm::dvec3 size = hi - lo;
   const double box_volume = size.x * size.y * size.z;
   if (closed && volume > 1e-6 * box_volume && volume > 0.0) {
@@ -395,13 +395,10 @@ HapticModelBuild ReadBuild(ByteReader& r, const std::string& key) {
     m.Validate();
     // The builder's hulls contain their vertices to ~1e-9 of the diagonal; the file holds the
     // same doubles, so a loose bound only catches damage.
-    glm::dvec3 lo{std::numeric_limits<double>::max()}, hi{-std::numeric_limits<double>::max()};
-    for (const auto& p : m.vertices_O) {
-      lo = glm::min(lo, p);
-      hi = glm::max(hi, p);
-    }
+    const Bounds bounds = BoundsOf(m.vertices_O);
     if (!m.hull_hierarchy.nodes.empty()) {
-      m.hull_hierarchy.Validate(m.vertices_O, m.triangles, 1e-6 * glm::length(hi - lo) + 1e-12);
+      m.hull_hierarchy.Validate(m.vertices_O, m.triangles,
+                                1e-6 * glm::length(bounds.hi - bounds.lo) + 1e-12);
     }
   } catch (const std::invalid_argument& e) {
     throw CacheFormatError(std::string("invalid model: ") + e.what());
@@ -529,7 +526,9 @@ std::string HapticModelCacheKey(const TriangleMesh& full_O, const HapticModelBui
   flush();
   unsigned char digest[32];
   crypto_generichash_final(&state, digest, sizeof digest);
-  return Hex(digest, sizeof digest);
+  char hex[2 * sizeof digest + 1];
+  sodium_bin2hex(hex, sizeof hex, digest, sizeof digest);
+  return hex;
 }
 
 std::string HapticModelCache::DefaultDir() {
