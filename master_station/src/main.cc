@@ -77,7 +77,11 @@ int main(int argc, char** argv) {
   app.add_option("--remote", remote, "slave_sim address HOST:PORT")->capture_default_str();
   app.add_option("--bind", bind, "local UDP address HOST:PORT (port 0 = any)")
       ->capture_default_str();
-  app.add_option("--experiment", experiment_name, "scripted operator motion: fig75")
+  app.add_option("--experiment", experiment_name,
+                 "scripted operator motion: fig75 (the seed's Fig. 75 on the built-in scene:\n"
+                 "press, slide along x, along y, lift and press) or explore (any scene: visit\n"
+                 "the touchable objects the remote node lists, press on each under force control,\n"
+                 "slide, release, move on)")
       ->capture_default_str();
   app.add_option("--duration", duration_s, "experiment duration in seconds")
       ->check(CLI::Range(0.1, 3600.0))
@@ -87,8 +91,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--out", out_dir, "directory for trace.csv and summary.json");
   app.add_option("--workspace-origin", origin_text,
-                 "X,Y,Z (m): where the device workspace centre lands in the remote world "
-                 "(default: the block-on-gear tool home pose)");
+                 "X,Y,Z (m): where the device workspace centre lands in the remote world\n"
+                 "(default: the tool's home position the remote node gives when the session opens)");
   app.add_option("--connect-timeout", connect_timeout_s,
                  "seconds to wait for the first contact model")
       ->check(CLI::PositiveNumber)
@@ -187,9 +191,14 @@ int main(int argc, char** argv) {
     config.safety.model_timeout_s = model_timeout_s;
     config.out_dir = out_dir;
     config.progress_period_s = quiet ? 0.0 : 0.5;
+    // The remote node's Welcome gives the workspace pose (the tool's home) and the tool's
+    // inertia; these are used only by a remote node that gives none.
     config.X_WM = ht::BlockOnGearHomePose();
-    if (!origin_text.empty()) config.X_WM.translation = ParseVector(origin_text);
     config.tool_inertia = ht::BlockOnGearToolInertia();
+    if (!origin_text.empty()) {
+      config.workspace_origin_W = ParseVector(origin_text);
+      config.X_WM.translation = *config.workspace_origin_W;
+    }
 
     std::unique_ptr<ht::HapticDevice> device;
     std::unique_ptr<ht::Experiment> experiment;

@@ -11,6 +11,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
+#include <mutex>
 #include <optional>
 #include <stdexcept>
 #include <thread>
@@ -197,6 +199,11 @@ class NetworkWorker {
   }
   SocketAddress local_address() const { return socket_.local_address(); }
   const std::string& reject_text() const { return reject_text_; }
+  /// The scene layout of the last Welcome (read once the session is connected).
+  wire::SceneLayout layout() const {
+    std::lock_guard<std::mutex> lock(layout_mutex_);
+    return layout_;
+  }
   std::uint64_t rejected_total() const { return link_.rejected_total(); }
 
   /// The transport's part of summary.json (call after the thread has stopped).
@@ -298,6 +305,10 @@ class NetworkWorker {
         peer_timeout_ns_ = std::int64_t{w.peer_timeout_ms} * 1000000;
         expected_objects_ = w.scene_objects;
         scene_name_ = std::string(w.name());
+        {
+          std::lock_guard<std::mutex> lock(layout_mutex_);
+          layout_ = w.layout;
+        }
         reassembler_.Reset(w.mtu);
         scene_complete_ = false;
         scene_objects_.clear();
@@ -448,6 +459,8 @@ class NetworkWorker {
   std::uint64_t sessions_ = 0, peers_lost_ = 0, remote_goodbyes_ = 0, hellos_sent_ = 0;
   std::size_t mtu_ = 0, expected_objects_ = 0;
   std::string scene_name_, reject_text_;
+  mutable std::mutex layout_mutex_;
+  wire::SceneLayout layout_;
   bool scene_complete_ = false;
   double scene_complete_ms_ = -1.0;
   std::vector<nlohmann::json> scene_objects_;
@@ -516,9 +529,8 @@ void StationConfig::Validate() const {
 }
 
 nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& device,
-                                  const Experiment& experiment) {
+                                  Experiment& experiment) {
   config.Validate();
-  const ToolSimulator simulator(config.tool_inertia, config.coupling);
   const DeviceCapabilities caps = device.capabilities();
   const auto ticks =
       static_cast<std::int64_t>(std::ceil(experiment.duration_s() * config.loop_rate_hz));
@@ -540,13 +552,6 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   Counters counters;
   NetworkWorker network(config, outgoing, incoming, counters);
 
-  device.Open();
-  // The tool starts where the experiment's first target puts the handle.
-  ToolState tool;
-  tool.X_WT = config.X_WM * experiment.Target(0.0).X_MH;
-  std::uint64_t tool_seq = 1;
-  outgoing.Write({{tool.X_WT, tool.V_WT_W}, NowNs(), tool_seq});
-
   std::atomic<bool> stop_network{false}, stop_recorder{false};
   std::thread network_thread([&] { network.Run(stop_network); });
   std::atomic<std::uint64_t> rows_dropped{0};
@@ -563,6 +568,7 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
       std::this_thread::sleep_for(std::chrono::milliseconds(5));
     }
   });
+  bool device_open = false;
   const auto stop_threads = [&] {
     stop_network.store(true, std::memory_order_release);
     stop_recorder.store(true, std::memory_order_release);
@@ -570,12 +576,61 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
     recorder_thread.join();
     if (trace) std::fclose(trace);
     trace = nullptr;
-    device.Close();
+    if (device_open) device.Close();
   };
 
-  // Wait for the remote node's first contact model (it answers our first tool state).
+  // The session first: its Welcome says where the workspace goes (the tool's home pose), the
+  // tool's inertia and where the touchable objects are.
   const std::int64_t connect_deadline =
       NowNs() + static_cast<std::int64_t>(config.connect_timeout_s * 1e9);
+  while (!counters.connected.load() && !counters.rejected.load() && NowNs() < connect_deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  RigidTransform X_WM = config.X_WM;
+  ToolInertia tool_inertia = config.tool_inertia;
+  ExperimentScene scene_M;
+  std::vector<ExperimentTarget>& targets_M = scene_M.targets;
+  if (counters.connected.load()) {
+    const wire::SceneLayout layout = network.layout();
+    if (config.workspace_from_remote) {
+      X_WM = layout.X_WT_home;
+      if (config.workspace_origin_W) X_WM.translation = *config.workspace_origin_W;
+    }
+    scene_M.tool_extent_down_m = layout.tool_extent_down_m;
+    if (layout.tool_mass_kg > 0.0) {
+      tool_inertia = {layout.tool_mass_kg, layout.tool_inertia_diagonal_T};
+    }
+    const RigidTransform X_MW = X_WM.Inverse();
+    for (int i = 0; i < layout.num_targets; ++i) {
+      const wire::WelcomeTarget& t = layout.targets[static_cast<std::size_t>(i)];
+      ExperimentTarget e;
+      e.box_min_M = glm::dvec3(std::numeric_limits<double>::infinity());
+      e.box_max_M = -e.box_min_M;
+      for (int c = 0; c < 8; ++c) {  // the box's corners in M, and their bounds
+        const glm::dvec3 corner_W{(c & 1) ? t.box_max_W.x : t.box_min_W.x,
+                                  (c & 2) ? t.box_max_W.y : t.box_min_W.y,
+                                  (c & 4) ? t.box_max_W.z : t.box_min_W.z};
+        const glm::dvec3 corner_M = X_MW * corner_W;
+        e.box_min_M = glm::min(e.box_min_M, corner_M);
+        e.box_max_M = glm::max(e.box_max_M, corner_M);
+      }
+      e.top_M = X_MW * t.top_W;
+      e.approach_z_M = e.top_M.z + t.approach_m;
+      targets_M.push_back(e);
+    }
+  }
+  const ToolSimulator simulator(tool_inertia, config.coupling);
+  const RigidTransform X_WM_start = X_WM;
+  experiment.SetScene(scene_M);
+  device.Open();
+  device_open = true;
+  // The tool starts where the experiment's first target puts the handle.
+  ToolState tool;
+  tool.X_WT = X_WM * experiment.Target(0.0).X_MH;
+  std::uint64_t tool_seq = 1;
+  outgoing.Write({{tool.X_WT, tool.V_WT_W}, NowNs(), tool_seq});
+
+  // Then the remote node's first contact model (it answers our first tool state).
   while (counters.model_accepted.load() == 0 && !counters.rejected.load() &&
          NowNs() < connect_deadline) {
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
@@ -621,6 +676,8 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   std::vector<double> model_age_samples(static_cast<size_t>(ticks), -1.0);
   std::string realtime_note = "SCHED_FIFO priority 80";
 
+  glm::dvec3 workspace_shift_M{0.0};
+  std::int64_t workspace_jumps = 0, models_from_before_jump = 0;
   std::thread loop_thread([&] {
     sched_param sp{};
     sp.sched_priority = 80;
@@ -635,7 +692,9 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
     std::int64_t model_tool_time_ns = 0;
     bool have_model = false;
     float remote_collision = 0, remote_texture = 0, remote_step = 0;
-    const glm::dquat R_MW = glm::conjugate(config.X_WM.rotation);
+    const glm::dquat R_MW = glm::conjugate(X_WM.rotation);
+    std::int64_t experiment_t0 = -1;
+    std::uint64_t first_seq_after_jump = 0;
     std::int64_t next = NowNs() + period_ns;
     std::int64_t previous = next - period_ns;
     const std::int64_t t0 = next;
@@ -653,10 +712,30 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
         ++device_faults;
         device.WriteWrench({}, now);
       } else {
-        const RigidTransform X_WH = config.X_WM * ds.X_MH;
-        const Twist V_WH_W{config.X_WM.rotation * ds.V_MH_M.linear,
-                           config.X_WM.rotation * ds.V_MH_M.angular};
-        if (incoming.Read(received)) {
+        if (caps.scripted) {
+          // A scripted "go to" (HandTarget::workspace_shift_M), on the device's own clock (time 0
+          // at its first reading, this tick's `now`): the workspace and the tool jump together,
+          // in free space, and the contact models of the old place are dropped.
+          if (experiment_t0 < 0) experiment_t0 = now;
+          const glm::dvec3 shift = experiment.Target((now - experiment_t0) * 1e-9).workspace_shift_M;
+          if (shift != workspace_shift_M) {
+            const glm::dvec3 jump_W = X_WM.rotation * (shift - workspace_shift_M);
+            X_WM.translation += jump_W;
+            tool.X_WT.translation += jump_W;
+            workspace_shift_M = shift;
+            model = ContactModel{};
+            previous_model = ContactModel{};
+            blend_tick = config.model_blend_ticks;
+            first_seq_after_jump = tool_seq + 1;  // the first tool state sent from the new place
+            ++workspace_jumps;
+          }
+        }
+        const RigidTransform X_WH = X_WM * ds.X_MH;
+        const Twist V_WH_W{X_WM.rotation * ds.V_MH_M.linear, X_WM.rotation * ds.V_MH_M.angular};
+        const bool new_model = incoming.Read(received);
+        if (new_model && received.message.model.tool_state_seq < first_seq_after_jump) {
+          ++models_from_before_jump;  // linearized at the old place: meaningless here
+        } else if (new_model) {
           previous_model = model;  // blended out over the next model_blend_ticks ticks
           blend_tick = 0;
           model = received.message.model;
@@ -768,6 +847,27 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
     if (a >= 0.0) ages.push_back(a);
   nlohmann::json s;
   s["experiment"] = experiment.name();
+  s["workspace"] = {
+      {"origin_W_at_start",
+       {X_WM_start.translation.x, X_WM_start.translation.y, X_WM_start.translation.z}},
+      {"rotation_WM_wxyz",
+       {X_WM_start.rotation.w, X_WM_start.rotation.x, X_WM_start.rotation.y,
+        X_WM_start.rotation.z}},
+      {"from_remote", config.workspace_from_remote},
+      {"targets", targets_M.size()},
+      {"jumps", workspace_jumps},
+      {"models_dropped_from_before_a_jump", models_from_before_jump},
+      {"targets_M", [&] {
+         nlohmann::json list = nlohmann::json::array();
+         for (const ExperimentTarget& t : targets_M) {
+           list.push_back({{"box_min", {t.box_min_M.x, t.box_min_M.y, t.box_min_M.z}},
+                           {"box_max", {t.box_max_M.x, t.box_max_M.y, t.box_max_M.z}},
+                           {"top", {t.top_M.x, t.top_M.y, t.top_M.z}}});
+         }
+         return list;
+       }()},
+      {"shift_M", {workspace_shift_M.x, workspace_shift_M.y, workspace_shift_M.z}}};
+  s["tool_mass_kg"] = tool_inertia.mass_kg;
   s["device"] = caps.name;
   s["duration_s"] = experiment.duration_s();
   s["ticks"] = ticks;

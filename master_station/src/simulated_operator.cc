@@ -1,6 +1,7 @@
 #include "master_station/simulated_operator.h"
 
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 
 namespace ht {
@@ -25,7 +26,63 @@ DeviceCapabilities SimulatedOperatorDevice::capabilities() const {
   c.workspace_half_extents_m = {0.1, 0.1, 0.1};
   c.dof_in = 6;
   c.dof_out = 6;
+  c.scripted = true;
   return c;
+}
+
+HandTarget SimulatedOperatorDevice::ControlZ(const HandTarget& script, double dt) noexcept {
+  HandTarget target = script;
+  target.X_MH.translation -= script.workspace_shift_M;  // into the (moved) workspace
+  target.floor_z_m -= script.workspace_shift_M.z;
+  target.slow_below_z_m -= script.workspace_shift_M.z;
+  const double script_z = target.X_MH.translation.z;
+  if (script.z_control != z_mode_) {  // entering a mode: start from where the hand is
+    if (script.z_control != HandZControl::kPosition) {
+      const double here = state_.X_MH.translation.z;
+      z_hand_ = z_free_ ? std::min(here, script_z) : z_hand_;
+      lift_start_z_ = std::min(here, z_hand_);
+      z_free_ = false;
+    }
+    z_mode_ = script.z_control;
+  }
+  double rate = 0.0;
+  switch (script.z_control) {
+    case HandZControl::kPress: {
+      const double felt_up_n = F_H_M_.force.z;
+      const double fast = z_hand_ > target.slow_below_z_m ? hand_.press_fast_speed_m_per_s
+                                                          : hand_.press_slow_speed_m_per_s;
+      // Nothing felt yet: come down at the approach speed; then regulate the force.
+      rate = felt_up_n < 0.25 * script.press_force_n
+                 ? -fast
+                 : std::clamp(hand_.press_gain_m_per_s_per_n * (felt_up_n - script.press_force_n),
+                              -fast, hand_.press_slow_speed_m_per_s);
+      z_hand_ = std::clamp(z_hand_ + rate * dt, std::min(target.floor_z_m, script_z), script_z);
+      break;
+    }
+    case HandZControl::kLift: {
+      const double top = std::min(lift_start_z_ + script.lift_m, script_z);
+      rate = z_hand_ < top ? hand_.press_slow_speed_m_per_s : 0.0;
+      z_hand_ = std::min(z_hand_ + rate * dt, std::max(top, z_hand_));
+      break;
+    }
+    case HandZControl::kPosition:
+      if (!z_free_) {  // back to the script's z, at no more than the fast speed
+        const double step = hand_.press_fast_speed_m_per_s * dt;
+        if (std::abs(script_z - z_hand_) <= step) {
+          z_free_ = true;
+        } else {
+          rate = script_z > z_hand_ ? hand_.press_fast_speed_m_per_s
+                                    : -hand_.press_fast_speed_m_per_s;
+          z_hand_ += rate * dt;
+        }
+      }
+      break;
+  }
+  if (!z_free_) {
+    target.X_MH.translation.z = z_hand_;
+    target.V_MH_M.linear.z = rate;
+  }
+  return target;
 }
 
 void SimulatedOperatorDevice::Open() {
@@ -34,7 +91,11 @@ void SimulatedOperatorDevice::Open() {
   F_H_M_ = {};
   const HandTarget start = experiment_.Target(0.0);
   state_.X_MH = start.X_MH;
+  state_.X_MH.translation -= start.workspace_shift_M;
   state_.V_MH_M = {};
+  z_free_ = true;
+  z_mode_ = HandZControl::kPosition;
+  z_hand_ = state_.X_MH.translation.z;
 }
 
 void SimulatedOperatorDevice::Close() noexcept {
@@ -52,11 +113,12 @@ bool SimulatedOperatorDevice::ReadState(std::int64_t now_ns, DeviceState& out) n
   // Integrate the hand from the last reading to now (at most 50 ms at once after a stall).
   const double dt_total = std::clamp((now_ns - last_ns_) * 1e-9, 0.0, 0.05);
   const double dt = dt_total / hand_.substeps;
-  const HandTarget target = experiment_.Target((now_ns - t0_ns_) * 1e-9);
-  phase_ = target.phase;
+  const HandTarget script = experiment_.Target((now_ns - t0_ns_) * 1e-9);
+  phase_ = script.phase;
   for (int i = 0; i < hand_.substeps && dt > 0.0; ++i) {
     Twist& V = state_.V_MH_M;
     RigidTransform& X = state_.X_MH;
+    const HandTarget target = ControlZ(script, dt);
     const Twist err = PoseDifference(target.X_MH, X);
     const glm::dvec3 force = hand_.stiffness_n_per_m * err.linear +
                              hand_.damping_ns_per_m * (target.V_MH_M.linear - V.linear) +

@@ -322,10 +322,11 @@ BuiltScene BuildScene(const SceneDescription& description, const HapticModelCach
     } else {
       scene.haptic.touchables.push_back({obj.model, obj.X_WO, obj.spec.stiffness_n_per_m});
       scene.touchable_objects.push_back(static_cast<int>(i));
+      const double reach = obj.model->OutwardReach();  // the textured surface's, beyond coarse
       for (const glm::dvec3& p : obj.model->vertices_O) {
         const glm::dvec3 p_W = obj.X_WO * p;
-        lo = glm::min(lo, p_W);
-        hi = glm::max(hi, p_W);
+        lo = glm::min(lo, p_W - glm::dvec3(reach));
+        hi = glm::max(hi, p_W + glm::dvec3(reach));
       }
     }
   }

@@ -305,6 +305,19 @@ Datagram EncodeWelcome(const Header& header, const WelcomeMessage& m, const MacK
       static_cast<std::uint8_t>(std::min<std::size_t>(m.scene_name_length, kSceneNameBytes));
   w.Put(n);
   PutText(w, m.scene_name, n, true);
+  const SceneLayout& l = m.layout;
+  w.Pose(l.X_WT_home);
+  w.F32(static_cast<float>(l.tool_mass_kg));
+  w.Vec32(l.tool_inertia_diagonal_T);
+  w.F32(static_cast<float>(l.tool_extent_down_m));
+  const auto targets = static_cast<std::uint8_t>(std::min<int>(l.num_targets, kMaxWelcomeTargets));
+  w.Put(targets);
+  for (int i = 0; i < targets; ++i) {
+    w.Vec32(l.targets[i].box_min_W);
+    w.Vec32(l.targets[i].box_max_W);
+    w.Vec32(l.targets[i].top_W);
+    w.F32(static_cast<float>(l.targets[i].approach_m));
+  }
   w.Seal(key);
   return d;
 }
@@ -504,7 +517,7 @@ DecodeStatus DecodeHello(std::span<const std::uint8_t> body, HelloMessage& m) no
 }
 
 DecodeStatus DecodeWelcome(std::span<const std::uint8_t> body, WelcomeMessage& m) noexcept {
-  if (const DecodeStatus s = ExactLength(body, kWelcomeBodyBytes); s != DecodeStatus::kOk) return s;
+  if (body.size() < kWelcomeFixedBytes) return DecodeStatus::kTooShort;
   Reader r(body);
   WelcomeMessage out;
   out.client_nonce = r.Get<std::uint64_t>();
@@ -520,6 +533,43 @@ DecodeStatus DecodeWelcome(std::span<const std::uint8_t> body, WelcomeMessage& m
   out.scene_objects = r.Get<std::uint16_t>();
   out.scene_name_length = r.Get<std::uint8_t>();
   const auto name = r.Take(kSceneNameBytes);
+  SceneLayout& l = out.layout;
+  l.X_WT_home = r.Pose();
+  l.tool_mass_kg = r.F32();
+  l.tool_inertia_diagonal_T = r.Vec32();
+  l.tool_extent_down_m = r.F32();
+  l.num_targets = r.Get<std::uint8_t>();
+  if (l.num_targets > kMaxWelcomeTargets) return DecodeStatus::kBadCount;
+  if (body.size() != kWelcomeFixedBytes + l.num_targets * kWelcomeTargetBytes) {
+    return body.size() < kWelcomeFixedBytes + l.num_targets * kWelcomeTargetBytes
+               ? DecodeStatus::kTooShort
+               : DecodeStatus::kTooLong;
+  }
+  for (int i = 0; i < l.num_targets; ++i) {
+    WelcomeTarget& t = l.targets[i];
+    t.box_min_W = r.Vec32();
+    t.box_max_W = r.Vec32();
+    t.top_W = r.Vec32();
+    t.approach_m = r.F32();
+    if (!Finite3(t.box_min_W) || !Finite3(t.box_max_W) || !Finite3(t.top_W) ||
+        !std::isfinite(t.approach_m)) {
+      return DecodeStatus::kNonFinite;
+    }
+    if (t.box_min_W.x > t.box_max_W.x || t.box_min_W.y > t.box_max_W.y ||
+        t.box_min_W.z > t.box_max_W.z || t.approach_m < 0.0) {
+      return DecodeStatus::kBadValue;
+    }
+  }
+  if (const DecodeStatus s = CheckPose(l.X_WT_home); s != DecodeStatus::kOk) return s;
+  if (!std::isfinite(l.tool_mass_kg) || !Finite3(l.tool_inertia_diagonal_T) ||
+      !std::isfinite(l.tool_extent_down_m)) {
+    return DecodeStatus::kNonFinite;
+  }
+  if (l.tool_mass_kg < 0.0 || l.tool_extent_down_m < 0.0 || (l.tool_mass_kg > 0.0 && !(l.tool_inertia_diagonal_T.x > 0.0 &&
+                                                          l.tool_inertia_diagonal_T.y > 0.0 &&
+                                                          l.tool_inertia_diagonal_T.z > 0.0))) {
+    return DecodeStatus::kBadValue;
+  }
   if (!std::isfinite(out.tool_state_rate_hz) || !std::isfinite(out.model_rate_hz) ||
       !std::isfinite(out.window_m)) {
     return DecodeStatus::kNonFinite;

@@ -56,6 +56,7 @@ bool NegotiateSession(const wire::HelloMessage& hello, const RemoteCapabilities&
   welcome.peer_timeout_ms = std::max(hello.peer_timeout_ms, remote.peer_timeout_ms);
   welcome.scene_objects = (welcome.codecs & wire::kCodecDracoMesh) ? remote.scene_objects : 0;
   welcome.scene_name_length = CopyText(welcome.scene_name, remote.scene_name.c_str());
+  welcome.layout = remote.layout;
   return true;
 }
 

@@ -24,6 +24,9 @@ struct DeviceCapabilities {
   glm::dvec3 workspace_half_extents_m{0.0};
   int dof_in = 6;   ///< Sensed degrees of freedom.
   int dof_out = 6;  ///< Actuated degrees of freedom.
+  /// The handle is moved by the experiment's script (a simulated operator): the station then
+  /// applies the script's workspace jumps (HandTarget::workspace_shift_M) too.
+  bool scripted = false;
 };
 
 /// Handle state read from a device: pose X_MH, twist V_MH_M, buttons, device timestamp.

@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 
 #include "haptic_core/tool_simulation.h"
@@ -23,8 +24,13 @@ struct StationConfig {
   SocketAddress local_address = SocketAddress::Parse("127.0.0.1:0");
   double loop_rate_hz = 1000.0;
   /// Maps the device base M into the remote world W (X_WM): the workspace centre lands on the
-  /// tool's home pose.
+  /// tool's home pose, and M's +z is the scene's up. With `workspace_from_remote` (the default)
+  /// it is the home pose the remote node's Welcome gives, its translation replaced by
+  /// `workspace_origin_W` when that is set; otherwise this value as given.
   RigidTransform X_WM;
+  bool workspace_from_remote = true;
+  std::optional<glm::dvec3> workspace_origin_W;
+  /// The tool's mass properties when the remote node's Welcome gives none.
   ToolInertia tool_inertia;
   VirtualCoupling coupling;
   /// How long to wait for the first contact model before giving up (s).
@@ -62,13 +68,14 @@ struct StationConfig {
 };
 
 /// Runs `experiment` with `device` against the remote node: opens an authenticated session
-/// (Hello/Welcome), runs the loop, keeps the session alive (Ping/Pong; reconnects when the remote
+/// (Hello/Welcome; the Welcome's scene layout places the workspace and is given to the experiment
+/// through Experiment::SetScene before the device is opened), runs the loop, keeps the session alive (Ping/Pong; reconnects when the remote
 /// node is lost, while the loop goes on with the last contact model), receives the scene, and
 /// says goodbye at the end. Returns the summary (the same object written to summary.json), with
 /// per-stream statistics under "transport". Throws std::runtime_error when the remote node never
 /// answers within connect_timeout_s, refuses the session (with its reason), or a socket cannot be
 /// opened; the message says what to check.
 nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& device,
-                                  const Experiment& experiment);
+                                  Experiment& experiment);
 
 }  // namespace ht

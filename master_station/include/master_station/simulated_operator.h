@@ -19,6 +19,13 @@ struct OperatorHandParams {
   double rotational_stiffness_nm_per_rad = 2.0;
   double rotational_damping_nms_per_rad = 0.04;
   int substeps = 10;  ///< Semi-implicit Euler substeps per ReadState interval.
+  /// Force control along z (HandZControl::kPress): while the felt upward force is below a quarter
+  /// of the wanted one, the hand's z target comes down at the fast speed (above the target's
+  /// slow_below_z_m) or the slow speed (below it); then it moves at gain·(felt − wanted), within
+  /// the same bound downwards and the slow speed upwards. kLift rises at the slow speed.
+  double press_gain_m_per_s_per_n = 0.02;
+  double press_fast_speed_m_per_s = 0.25;
+  double press_slow_speed_m_per_s = 0.05;
 };
 
 /// Simulated 6-DoF impedance device with a scripted hand. Capabilities are those of a
@@ -40,6 +47,10 @@ class SimulatedOperatorDevice final : public HapticDevice {
   double energy_to_operator_j() const noexcept { return energy_to_operator_j_; }
 
  private:
+  /// The script's target with z replaced by the hand's own z control (HandZControl), advanced
+  /// by dt (s).
+  HandTarget ControlZ(const HandTarget& script, double dt) noexcept;
+
   const Experiment& experiment_;
   OperatorHandParams hand_;
   bool open_ = false;
@@ -50,6 +61,12 @@ class SimulatedOperatorDevice final : public HapticDevice {
   Wrench F_H_M_;
   int phase_ = 0;
   double energy_to_operator_j_ = 0.0;
+  // The hand's own z target when it departs from the script's (press, lift, and the return to the
+  // script's z afterwards); z_free_ = true when it is the script's.
+  double z_hand_ = 0.0;
+  bool z_free_ = true;
+  HandZControl z_mode_ = HandZControl::kPosition;
+  double lift_start_z_ = 0.0;
 };
 
 }  // namespace ht

@@ -12,6 +12,7 @@
 
 #include "haptic_core/gpu_penetration_depth.h"
 #include "haptic_core/haptic_scene.h"
+#include "transport/messages.h"
 #include "transport/auth.h"
 #include "transport/udp_socket.h"
 
@@ -58,6 +59,15 @@ struct RemoteNodeConfig {
 /// The built-in scene's full-resolution meshes (ridged block = object 1, ridged gear = 2),
 /// Draco-compressed for streaming (14-bit positions, speed 5).
 std::vector<std::pair<std::uint32_t, std::vector<std::uint8_t>>> BlockOnGearSceneObjects();
+
+/// The scene's layout that every Welcome carries (wire::SceneLayout): the tool's home pose (whose
+/// +z is the scene's up), the tool's mass and principal moments, and, for the touchable objects
+/// (the kMaxWelcomeTargets largest by bounding-box diagonal, largest first), their bounds in W at
+/// their current poses, widened by the texture's outward reach (HapticModel::OutwardReach()),
+/// their highest coarse vertex along up, and the hand height above it where the tool touches
+/// nothing (checked with HullProximityQuery against every touchable). Never throws except
+/// std::bad_alloc.
+wire::SceneLayout MakeSceneLayout(const HapticScene& scene);
 
 /// Runs the node on `scene` until `stop` becomes true (or a goodbye arrives when
 /// exit_on_goodbye). Sessions: a Hello (authenticated, fresh nonce) opens one, replacing any

@@ -99,7 +99,8 @@ struct BuiltScene {
   /// Every mesh node of the glTF scene, in the loader's order.
   std::vector<SceneNode> objects;
   /// The haptic scene: tool (a node, or the built-in probe) and the touchable objects with their
-  /// stiffness; X_WT_home puts the tool 1 cm above the top (+Y) of the touchables' bounds.
+  /// stiffness; X_WT_home puts the tool 1 cm above the top (+Y) of the touchables' bounds (their
+  /// coarse meshes widened by the texture's outward reach).
   HapticScene haptic;
   /// For each entry of haptic.touchables, the index of its object in `objects`.
   std::vector<int> touchable_objects;

@@ -54,6 +54,35 @@ struct HelloMessage {
   std::uint16_t peer_timeout_ms = 500;
 };
 
+/// Where one touchable object of the scene is, so that an operator (or a scripted one) can find it:
+/// its bounds in W at rest and its highest point along the scene's up direction.
+struct WelcomeTarget {
+  glm::dvec3 box_min_W{0.0};  ///< Axis-aligned bounds in W (m), min ≤ max per axis, widened by
+                              ///< the object's texture outward reach.
+  glm::dvec3 box_max_W{0.0};
+  glm::dvec3 top_W{0.0};  ///< The object's highest coarse vertex along up_W (m), inside the box.
+  /// Height (m, along up_W, ≥ 0) above top_W where the hand can bring the tool (at the home
+  /// orientation) without it touching any object: the remote node checked it.
+  double approach_m = 0.0;
+};
+
+/// What the remote node tells the operator about its scene when a session opens.
+struct SceneLayout {
+  /// The tool's home pose X_WT_home: the operator's workspace centre lands here, and its +z axis
+  /// is the scene's up direction (up_W = R_WT_home·ẑ).
+  RigidTransform X_WT_home;
+  /// Mass (kg) and principal moments along T (kg·m²) of the tool; mass 0 = not given (the
+  /// operator keeps its own).
+  double tool_mass_kg = 0.0;
+  glm::dvec3 tool_inertia_diagonal_T{0.0};
+  /// How far the tool reaches below T along −z of T (m): at the home pose, the hand is this high
+  /// above the point of the tool that touches first.
+  double tool_extent_down_m = 0.0;
+  /// The touchable objects (at most kMaxWelcomeTargets: the largest ones), num_targets used.
+  std::array<WelcomeTarget, kMaxWelcomeTargets> targets{};
+  std::uint8_t num_targets = 0;
+};
+
 /// Remote → operator: the session's parameters, as negotiated.
 struct WelcomeMessage {
   std::uint64_t client_nonce = 0;
@@ -69,6 +98,7 @@ struct WelcomeMessage {
   std::uint16_t scene_objects = 0;
   std::array<char, kSceneNameBytes> scene_name{};  ///< zero padded, not terminated when full
   std::uint8_t scene_name_length = 0;
+  SceneLayout layout;
   std::string_view name() const noexcept { return {scene_name.data(), scene_name_length}; }
 };
 

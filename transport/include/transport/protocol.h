@@ -36,10 +36,17 @@
 //   Hello O→R (32): u16 min_version, u16 max_version, u64 client_nonce, f32 tool_state_rate_hz,
 //     f32 max_model_rate_hz (0 = any), u16 max_grid (0 = any), u16 mtu, u32 codecs (kCodec*),
 //     u16 heartbeat_ms, u16 peer_timeout_ms
-//   Welcome R→O (69): u64 client_nonce (echoed), u16 version, f32 tool_state_rate_hz,
-//     f32 model_rate_hz (0 = as fast as the remote steps), u16 grid, f32 window_m, u16 mtu,
-//     u32 codecs, u16 heartbeat_ms, u16 peer_timeout_ms, u16 scene_objects,
-//     u8 name_length, 32 bytes scene name (zero padded). The header carries the new session id.
+//   Welcome R→O (kWelcomeFixedBytes + n·kWelcomeTargetBytes): u64 client_nonce (echoed),
+//     u16 version, f32 tool_state_rate_hz, f32 model_rate_hz (0 = as fast as the remote steps),
+//     u16 grid, f32 window_m, u16 mtu, u32 codecs, u16 heartbeat_ms, u16 peer_timeout_ms,
+//     u16 scene_objects, u8 name_length, 32 bytes scene name (zero padded); then the scene's
+//     layout: X_WT_home 3×f64 + 4×f64 (the tool's home pose: where the operator's workspace centre
+//     lands; its +z is the scene's up), f32 tool_mass_kg (0 = not given), 3×f32 tool principal
+//     moments along T (kg·m²), f32 tool_extent_down_m (how far the tool reaches below T along
+//     −z, m), u8 n (≤ kMaxWelcomeTargets), per target (40): 3×f32 box_min_W,
+//     3×f32 box_max_W (m, the object's bounds in W at rest, widened by its texture's outward reach),
+//     3×f32 top_W (its highest coarse vertex along the scene's up), f32 approach_m (the hand
+//     height above top_W at which the tool is clear of every touchable). The header carries the new session id.
 //   Reject R→O (10 + n): u64 client_nonce, u8 RejectReason, u8 n, n bytes of UTF-8 text (n ≤ 200)
 //   Ping O→R (0): its header's send_time_ns is t1.
 //   Pong R→O (24): u64 ping_sequence, i64 t1 (echoed), i64 t2 (remote receive time); the header's
@@ -59,10 +66,11 @@
 namespace ht::wire {
 
 inline constexpr std::uint32_t kMagic = 0x504C5448u;  // bytes 'H' 'T' 'L' 'P'
-/// Version 2 added authentication, sessions, clock sync and scene streaming; version 1 (the
-/// loopback slice) is not accepted.
-inline constexpr std::uint16_t kProtocolVersion = 2;
-inline constexpr std::uint16_t kMinProtocolVersion = 2;
+/// Version 2 added authentication, sessions, clock sync and scene streaming; version 3 the scene
+/// layout in Welcome (home pose, tool inertia, where the touchable objects are). Versions 1 and 2
+/// are not accepted.
+inline constexpr std::uint16_t kProtocolVersion = 3;
+inline constexpr std::uint16_t kMinProtocolVersion = 3;
 
 /// Message types; values are part of the protocol and never reused.
 enum class MessageType : std::uint8_t {
@@ -103,7 +111,10 @@ inline constexpr std::size_t kContactModelFixedBytes = 8 * 4 + 4 * 3 + 7 * 8 + 6
 inline constexpr std::size_t kContactBytes = 8 + 6 * 8 + 8 + 3 * 4 + 3 * 4;
 inline constexpr std::size_t kHelloBodyBytes = 32;
 inline constexpr std::size_t kSceneNameBytes = 32;
-inline constexpr std::size_t kWelcomeBodyBytes = 37 + kSceneNameBytes;
+inline constexpr std::size_t kWelcomeFixedBytes = 37 + kSceneNameBytes + 7 * 8 + 5 * 4 + 1;
+inline constexpr std::size_t kWelcomeTargetBytes = 10 * 4;
+/// Touchable objects described in a Welcome (the largest ones when a scene has more).
+inline constexpr int kMaxWelcomeTargets = 8;
 inline constexpr std::size_t kRejectFixedBytes = 10;
 inline constexpr std::size_t kMaxRejectText = 200;
 inline constexpr std::size_t kPongBodyBytes = 24;
@@ -139,7 +150,10 @@ static_assert(kHeaderBytes + kSceneManifestFixedBytes + kMaxManifestEntries * kM
               "a full manifest must fit in the smallest MTU");
 static_assert(kHeaderBytes + kSceneNackFixedBytes + 2 * kMaxNackIndices + kMacBytes <= kMinMtuBytes,
               "a full NACK must fit in the smallest MTU");
-static_assert(kHeaderBytes + kWelcomeBodyBytes + kMacBytes <= kMinMtuBytes);
+static_assert(kHeaderBytes + kWelcomeFixedBytes + kMaxWelcomeTargets * kWelcomeTargetBytes +
+                      kMacBytes <=
+                  kMinMtuBytes,
+              "a full Welcome must fit in the smallest MTU");
 static_assert(kHeaderBytes + kRejectFixedBytes + kMaxRejectText + kMacBytes <= kMinMtuBytes);
 
 }  // namespace ht::wire

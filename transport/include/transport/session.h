@@ -21,6 +21,8 @@ struct RemoteCapabilities {
   std::uint16_t peer_timeout_ms = 500;
   std::uint16_t scene_objects = 0;
   std::string scene_name;
+  /// Sent as is in every Welcome: home pose, tool inertia, where the touchables are.
+  wire::SceneLayout layout;
 };
 
 /// Negotiates a session from an operator's Hello:
@@ -28,7 +30,7 @@ struct RemoteCapabilities {
 /// - grid: the remote node's, refused (Reject kCapabilities) when above the operator's max_grid;
 /// - model rate: the smaller non-zero of the operator's wish and the node's cap;
 /// - MTU: the smaller; codecs: the intersection (no Draco ⇒ no scene objects are announced);
-/// - heartbeat: the operator's; peer timeout: the larger of the two.
+/// - heartbeat: the operator's; peer timeout: the larger of the two; the scene layout: the node's.
 /// Returns true and fills `welcome` (without its session id, which goes in the header), or false
 /// and fills `reject` with a reason and a sentence saying what differs.
 bool NegotiateSession(const wire::HelloMessage& hello, const RemoteCapabilities& remote,
