@@ -7,51 +7,20 @@
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
+
+#include "trace_csv.h"
 #include <sstream>
 #include <string>
 #include <vector>
 
 namespace {
 
-struct Trace {
-  std::vector<std::string> columns;
-  std::vector<std::string> phase;
-  std::map<std::string, std::vector<double>> values;
-  std::vector<double> Select(const std::string& column, const std::string& which) const {
-    std::vector<double> out;
-    const auto& v = values.at(column);
-    for (size_t i = 0; i < v.size(); ++i)
-      if (phase[i] == which) out.push_back(v[i]);
-    return out;
-  }
-};
-
 std::string OutDir() {
   const char* d = std::getenv("HT_LOOPBACK_OUT");
   return d ? d : "loopback_fig75";
 }
 
-Trace LoadTrace() {
-  Trace t;
-  std::ifstream in(OutDir() + "/trace.csv");
-  EXPECT_TRUE(in.good()) << "no trace at " << OutDir() << "/trace.csv";
-  std::string line;
-  std::getline(in, line);
-  std::stringstream header(line);
-  for (std::string c; std::getline(header, c, ',');) t.columns.push_back(c);
-  while (std::getline(in, line)) {
-    std::stringstream row(line);
-    std::string cell;
-    for (size_t i = 0; std::getline(row, cell, ','); ++i) {
-      if (t.columns[i] == "phase") {
-        t.phase.push_back(cell);
-      } else {
-        t.values[t.columns[i]].push_back(std::strtod(cell.c_str(), nullptr));
-      }
-    }
-  }
-  return t;
-}
+Trace LoadTrace() { return LoadTrace(OutDir()); }
 
 double Rms(const std::vector<double>& v) {
   double s = 0;

@@ -97,6 +97,20 @@ WelcomeMessage SampleWelcome() {
   const std::string name = "block_on_gear";
   std::copy(name.begin(), name.end(), w.scene_name.begin());
   w.scene_name_length = static_cast<std::uint8_t>(name.size());
+  SceneLayout& l = w.layout;
+  l.X_WT_home.translation = {0.01, -0.02, 0.0215};
+  l.X_WT_home.rotation = QuaternionFromRotationVector({-1.5707963267948966, 0.0, 0.0});
+  l.tool_mass_kg = 0.25;
+  l.tool_inertia_diagonal_T = {1e-5, 2e-5, 3e-5};
+  l.tool_extent_down_m = 0.0075;
+  l.num_targets = kMaxWelcomeTargets;  // a full Welcome must fit the smallest MTU
+  for (int i = 0; i < kMaxWelcomeTargets; ++i) {
+    WelcomeTarget& t = l.targets[static_cast<std::size_t>(i)];
+    t.box_min_W = {-0.06 - i, -0.05, -0.02};
+    t.box_max_W = {0.06, 0.05 + i, 0.01};
+    t.top_W = {0.001 * i, 0.0, 0.01};
+    t.approach_m = 0.0125 + i;
+  }
   return w;
 }
 
@@ -195,6 +209,23 @@ TEST(Messages, FieldsSurviveTheRoundTrip) {
   EXPECT_EQ(w.name(), "block_on_gear");
   EXPECT_EQ(w.client_nonce, 0x1122334455667788ull);
   EXPECT_EQ(w.scene_objects, 2);
+  // The layout: the pose in f64 exactly, the rest in f32.
+  const SceneLayout& sent = SampleWelcome().layout;
+  EXPECT_EQ(w.layout.X_WT_home.translation, sent.X_WT_home.translation);
+  EXPECT_EQ(w.layout.X_WT_home.rotation, sent.X_WT_home.rotation);
+  EXPECT_FLOAT_EQ(static_cast<float>(w.layout.tool_mass_kg), 0.25f);
+  EXPECT_FLOAT_EQ(static_cast<float>(w.layout.tool_inertia_diagonal_T.z), 3e-5f);
+  EXPECT_FLOAT_EQ(static_cast<float>(w.layout.tool_extent_down_m), 0.0075f);
+  ASSERT_EQ(w.layout.num_targets, kMaxWelcomeTargets);
+  for (int i = 0; i < kMaxWelcomeTargets; ++i) {
+    const WelcomeTarget& a = w.layout.targets[static_cast<std::size_t>(i)];
+    const WelcomeTarget& b = sent.targets[static_cast<std::size_t>(i)];
+    EXPECT_FLOAT_EQ(static_cast<float>(a.box_min_W.x), static_cast<float>(b.box_min_W.x));
+    EXPECT_FLOAT_EQ(static_cast<float>(a.box_max_W.y), static_cast<float>(b.box_max_W.y));
+    EXPECT_FLOAT_EQ(static_cast<float>(a.top_W.x), static_cast<float>(b.top_W.x));
+    EXPECT_FLOAT_EQ(static_cast<float>(a.approach_m), static_cast<float>(b.approach_m));
+  }
+  EXPECT_LE(dw.size, kMinMtuBytes);
 
   const auto all = OneOfEach(key);
   ASSERT_EQ(OpenDatagram(all[8].view(), key, h, body), DecodeStatus::kOk);
@@ -366,6 +397,57 @@ TEST(Messages, NonFiniteAndImpossibleValuesAreRejectedEvenWithAValidMac) {
               return EncodePong({}, {0, 1, 2}, k);
             }),
             DecodeStatus::kBadValue);
+}
+
+TEST(Messages, ImpossibleSceneLayoutsAreRejected) {
+  const auto status = [](const WelcomeMessage& w) {
+    return Sealed([&](const MacKey& k) { return EncodeWelcome({}, w, k); });
+  };
+  ASSERT_EQ(status(SampleWelcome()), DecodeStatus::kOk);
+  WelcomeMessage w = SampleWelcome();
+  w.layout.X_WT_home.translation.y = NAN;
+  EXPECT_EQ(status(w), DecodeStatus::kNonFinite);
+  w = SampleWelcome();
+  w.layout.X_WT_home.rotation = glm::dquat(2.0, 0.0, 0.0, 0.0);
+  EXPECT_EQ(status(w), DecodeStatus::kBadValue);
+  w = SampleWelcome();
+  w.layout.tool_mass_kg = -1.0;
+  EXPECT_EQ(status(w), DecodeStatus::kBadValue);
+  w = SampleWelcome();
+  w.layout.tool_inertia_diagonal_T.y = 0.0;  // a mass without an inertia
+  EXPECT_EQ(status(w), DecodeStatus::kBadValue);
+  w = SampleWelcome();
+  w.layout.tool_extent_down_m = INFINITY;
+  EXPECT_EQ(status(w), DecodeStatus::kNonFinite);
+  w = SampleWelcome();
+  w.layout.targets[3].box_min_W.z = 1.0;  // min above max
+  EXPECT_EQ(status(w), DecodeStatus::kBadValue);
+  w = SampleWelcome();
+  w.layout.targets[7].top_W.x = NAN;
+  EXPECT_EQ(status(w), DecodeStatus::kNonFinite);
+  w = SampleWelcome();
+  w.layout.targets[0].approach_m = -0.01;
+  EXPECT_EQ(status(w), DecodeStatus::kBadValue);
+  // A count beyond the limit, and a count that does not match the bytes.
+  const MacKey key = TestKey();
+  const auto reseal = [&](Datagram d, std::size_t offset, std::uint8_t value) {
+    d.size -= kMacBytes;
+    d.bytes[offset] = value;
+    ComputeMac(d.view(), key, std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size, kMacBytes));
+    d.size += kMacBytes;
+    return OpenAndDecode(d.view(), key);
+  };
+  const std::size_t count_at = kHeaderBytes + kWelcomeFixedBytes - 1;
+  w = SampleWelcome();
+  w.layout.num_targets = 2;
+  const Datagram two = EncodeWelcome({}, w, key);
+  EXPECT_EQ(OpenAndDecode(two.view(), key), DecodeStatus::kOk);
+  EXPECT_EQ(reseal(two, count_at, 9), DecodeStatus::kBadCount);
+  EXPECT_EQ(reseal(two, count_at, 3), DecodeStatus::kTooShort);
+  EXPECT_EQ(reseal(two, count_at, 1), DecodeStatus::kTooLong);
+  // A Welcome without targets is valid (a scene with nothing touchable).
+  w.layout.num_targets = 0;
+  EXPECT_EQ(status(w), DecodeStatus::kOk);
 }
 
 TEST(Messages, RandomBytesNeverOpenOrCrash) {

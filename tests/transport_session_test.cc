@@ -109,6 +109,9 @@ TEST(Session, NegotiatesTheCommonGround) {
   caps.max_model_rate_hz = 2000;
   caps.scene_objects = 2;
   caps.scene_name = "block_on_gear";
+  caps.layout.tool_mass_kg = 0.2;
+  caps.layout.num_targets = 1;
+  caps.layout.targets[0].approach_m = 0.03;
   wire::HelloMessage hello;
   hello.max_model_rate_hz = 1000;
   hello.mtu = 1472;
@@ -123,6 +126,9 @@ TEST(Session, NegotiatesTheCommonGround) {
   EXPECT_EQ(w.peer_timeout_ms, 800);
   EXPECT_EQ(w.scene_objects, 2);
   EXPECT_EQ(w.name(), "block_on_gear");
+  EXPECT_EQ(w.layout.tool_mass_kg, 0.2);  // the node's scene layout, as is
+  EXPECT_EQ(w.layout.num_targets, 1);
+  EXPECT_EQ(w.layout.targets[0].approach_m, 0.03);
   hello.codecs = 0;  // no Draco: no scene
   ASSERT_TRUE(NegotiateSession(hello, caps, w, r));
   EXPECT_EQ(w.scene_objects, 0);

@@ -56,7 +56,9 @@ HandTarget SimulatedOperatorDevice::ControlZ(const HandTarget& script, double dt
                  ? -fast
                  : std::clamp(hand_.press_gain_m_per_s_per_n * (felt_up_n - script.press_force_n),
                               -fast, hand_.press_slow_speed_m_per_s);
-      z_hand_ = std::clamp(z_hand_ + rate * dt, std::min(target.floor_z_m, script_z), script_z);
+      const double z = std::clamp(z_hand_ + rate * dt, std::min(target.floor_z_m, script_z), script_z);
+      rate = (z - z_hand_) / dt;  // 0 once at the floor or the ceiling
+      z_hand_ = z;
       break;
     }
     case HandZControl::kLift: {

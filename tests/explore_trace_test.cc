@@ -1,0 +1,86 @@
+// Checks an `explore` run on a real scene (tests/explore_loopback.sh runs deploy/run-loopback
+// first and then this, with HT_LOOPBACK_OUT set): the simulated operator reached the objects the
+// remote node listed, pressed and slid on them, and the contact force the remote node computed
+// matches the force the hand pressed with (two routes to one number); nothing non-finite, the
+// device never above its limit.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "master_station/experiment.h"
+#include "trace_csv.h"
+
+namespace {
+
+std::string OutDir() {
+  const char* d = std::getenv("HT_LOOPBACK_OUT");
+  return d ? d : "explore";
+}
+
+nlohmann::json Summary() {
+  std::ifstream in(OutDir() + "/summary.json");
+  EXPECT_TRUE(in.good()) << "no summary at " << OutDir();
+  return nlohmann::json::parse(in);
+}
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  std::nth_element(v.begin(), v.begin() + static_cast<long>(v.size() / 2), v.end());
+  return v[v.size() / 2];
+}
+
+TEST(Explore, TheOperatorFoundTheObjectsAndPressedOnThem) {
+  const nlohmann::json s = Summary();
+  EXPECT_EQ(s["experiment"], "explore");
+  EXPECT_EQ(s["nonfinite_count"], 0);
+  EXPECT_TRUE(s["workspace"]["from_remote"].get<bool>());
+  const int targets = s["workspace"]["targets"].get<int>();
+  EXPECT_GE(targets, 1);
+  const Trace t = LoadTrace(OutDir());
+  ASSERT_GT(t.phase.size(), 1000u);
+  EXPECT_EQ(t.phase.front(), "transfer@1");
+  for (const auto& [name, v] : t.values) {
+    for (double x : v) ASSERT_TRUE(std::isfinite(x)) << "non-finite value in column " << name;
+  }
+  const auto& contacts = t.values.at("contacts");
+  std::vector<double> contact_force, device_force;
+  std::size_t slide_rows = 0, slide_in_contact = 0;
+  std::set<std::string> touched;
+  const double device_max = s["device_max_force_n"].get<double>();
+  for (std::size_t i = 0; i < t.phase.size(); ++i) {
+    const double fd = std::hypot(t.values.at("device_fx")[i], t.values.at("device_fy")[i],
+                                 t.values.at("device_fz")[i]);
+    ASSERT_LE(fd, device_max * (1.0 + 1e-5)) << "device force above its limit at row " << i;
+    if (t.phase[i].rfind("slide", 0) != 0) continue;
+    ++slide_rows;
+    if (contacts[i] <= 0) continue;
+    ++slide_in_contact;
+    touched.insert(t.phase[i].substr(t.phase[i].find('@')));
+    contact_force.push_back(
+        std::hypot(t.values.at("fx")[i], t.values.at("fy")[i], t.values.at("fz")[i]));
+    device_force.push_back(fd);
+  }
+  ASSERT_GT(slide_rows, 0u) << "no slide at all";
+  EXPECT_GT(static_cast<double>(slide_in_contact) / slide_rows, 0.3)
+      << "the tool must be on a surface for most of its slides";
+  EXPECT_GE(touched.size(), 1u);
+  // The hand presses with ExploreParams::press_force_n; the remote node's contact force and the
+  // device's force, while sliding in contact, are that force (quasi-static), within ±50 %.
+  const double wanted = ht::ExploreParams{}.press_force_n;
+  EXPECT_NEAR(Median(contact_force), wanted, 0.5 * wanted);
+  EXPECT_NEAR(Median(device_force), wanted, 0.5 * wanted);
+  std::printf("explore: %zu slide rows, %.0f %% in contact, %zu object(s) touched, median contact "
+              "force %.2f N, device %.2f N, workspace jumps %d\n",
+              slide_rows, 100.0 * slide_in_contact / slide_rows, touched.size(),
+              Median(contact_force), Median(device_force),
+              s["workspace"]["jumps"].get<int>());
+}
+
+}  // namespace
