@@ -552,6 +552,9 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   Counters counters;
   NetworkWorker network(config, outgoing, incoming, counters);
 
+  // The device first, so that a missing one is said at once (a simulated hand takes its start
+  // from the experiment at its first reading, after the scene is known).
+  device.Open();
   std::atomic<bool> stop_network{false}, stop_recorder{false};
   std::thread network_thread([&] { network.Run(stop_network); });
   std::atomic<std::uint64_t> rows_dropped{0};
@@ -568,7 +571,6 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
       std::this_thread::sleep_for(std::chrono::milliseconds(5));
     }
   });
-  bool device_open = false;
   const auto stop_threads = [&] {
     stop_network.store(true, std::memory_order_release);
     stop_recorder.store(true, std::memory_order_release);
@@ -576,7 +578,7 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
     recorder_thread.join();
     if (trace) std::fclose(trace);
     trace = nullptr;
-    if (device_open) device.Close();
+    device.Close();
   };
 
   // The session first: its Welcome says where the workspace goes (the tool's home pose), the
@@ -622,8 +624,6 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   const ToolSimulator simulator(tool_inertia, config.coupling);
   const RigidTransform X_WM_start = X_WM;
   experiment.SetScene(scene_M);
-  device.Open();
-  device_open = true;
   // The tool starts where the experiment's first target puts the handle.
   ToolState tool;
   tool.X_WT = X_WM * experiment.Target(0.0).X_MH;

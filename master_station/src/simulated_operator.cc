@@ -91,13 +91,6 @@ void SimulatedOperatorDevice::Open() {
   open_ = true;
   started_ = false;
   F_H_M_ = {};
-  const HandTarget start = experiment_.Target(0.0);
-  state_.X_MH = start.X_MH;
-  state_.X_MH.translation -= start.workspace_shift_M;
-  state_.V_MH_M = {};
-  z_free_ = true;
-  z_mode_ = HandZControl::kPosition;
-  z_hand_ = state_.X_MH.translation.z;
 }
 
 void SimulatedOperatorDevice::Close() noexcept {
@@ -107,10 +100,17 @@ void SimulatedOperatorDevice::Close() noexcept {
 
 bool SimulatedOperatorDevice::ReadState(std::int64_t now_ns, DeviceState& out) noexcept {
   if (!open_) return false;
-  if (!started_) {
+  if (!started_) {  // the hand starts at the experiment's first target
     started_ = true;
     t0_ns_ = now_ns;
     last_ns_ = now_ns;
+    const HandTarget start = experiment_.Target(0.0);
+    state_.X_MH = start.X_MH;
+    state_.X_MH.translation -= start.workspace_shift_M;
+    state_.V_MH_M = {};
+    z_free_ = true;
+    z_mode_ = HandZControl::kPosition;
+    z_hand_ = state_.X_MH.translation.z;
   }
   // Integrate the hand from the last reading to now (at most 50 ms at once after a stall).
   const double dt_total = std::clamp((now_ns - last_ns_) * 1e-9, 0.0, 0.05);

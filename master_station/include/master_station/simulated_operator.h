@@ -32,7 +32,9 @@ struct OperatorHandParams {
 /// desktop 6-DoF device (10 N, 1 N·m, 3,000 N/m at 1 kHz, ±0.1 m workspace).
 class SimulatedOperatorDevice final : public HapticDevice {
  public:
-  /// `experiment` must outlive the device. Time zero of the experiment is the first ReadState.
+  /// `experiment` must outlive the device. Time zero of the experiment is the first ReadState,
+  /// where the hand starts at the experiment's first target (so an experiment told the scene
+  /// after Open() starts where it should).
   SimulatedOperatorDevice(const Experiment& experiment, const OperatorHandParams& hand = {});
 
   DeviceCapabilities capabilities() const override;
