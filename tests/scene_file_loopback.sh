@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Both processes on a scene FILE (a real glTF with animations): the remote node builds it through
-# the model cache and plays its animation, the operator runs 3 s at the home position the node
-# prints. Checks: a session, the scene streamed and verified, no non-finite value.
+# the model cache and plays its animation, the operator runs 3 s. Checks: a session, the operator's
+# workspace centred on the home position the node prints (received in the Welcome), the scene
+# streamed and verified, no non-finite value.
 # Usage: scene_file_loopback.sh BUILD_DIR SCENE_FILE OUT_DIR   (exit 77 = skipped: no data)
 set -euo pipefail
 build=$1 scene=$2 out=$3
@@ -17,10 +18,12 @@ slave=$!
 trap 'kill $slave 2>/dev/null || true' EXIT
 for _ in $(seq 1 240); do [ -s "$out/port" ] && break; sleep 0.5; done
 [ -s "$out/port" ] || { echo "remote node did not start"; cat "$out/slave.log"; exit 1; }
-origin=$(grep -o 'workspace-origin [-0-9.,]*' "$out/slave.log" | head -1 | cut -d' ' -f2)
+origin=$(grep -o 'tool home position in W [-0-9.,]*' "$out/slave.log" | head -1 | cut -d' ' -f6)
 [ -n "$origin" ] || { echo "no home position printed"; cat "$out/slave.log"; exit 1; }
 "$build/master_station/master_station" --key "$out/k.key" --remote "127.0.0.1:$(cat "$out/port")" \
-  --workspace-origin "$origin" --duration 3 --out "$out/m" --quiet
+  --duration 3 --out "$out/m" --quiet | tee "$out/master.log"
+grep -q "workspace centre in W $origin (the remote node's home pose)" "$out/master.log" || {
+  echo "the operator's workspace is not at the node's home position $origin"; exit 1; }
 wait $slave
 grep -q '"nonfinite_count": 0' "$out/m/summary.json" || { echo "non-finite values"; exit 1; }
 grep -q '"complete": true' "$out/m/summary.json" || { echo "scene not complete"; exit 1; }

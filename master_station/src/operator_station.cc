@@ -624,6 +624,13 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   const ToolSimulator simulator(tool_inertia, config.coupling);
   const RigidTransform X_WM_start = X_WM;
   experiment.SetScene(scene_M);
+  std::printf("[master] workspace centre in W %.4f,%.4f,%.4f (%s); %zu object(s) described\n",
+              X_WM.translation.x, X_WM.translation.y, X_WM.translation.z,
+              !config.workspace_from_remote ? "as configured"
+              : config.workspace_origin_W   ? "--workspace-origin"
+                                            : "the remote node's home pose",
+              targets_M.size());
+  std::fflush(stdout);
   // The tool starts where the experiment's first target puts the handle.
   ToolState tool;
   tool.X_WT = X_WM * experiment.Target(0.0).X_MH;

@@ -251,11 +251,10 @@ int main(int argc, char** argv) {
       const ht::RigidTransform& home = file_scene->haptic.X_WT_home;
       std::printf(
           "[slave] scene file %s: %zu touchable(s), tool %s; tool home position in W %.4f,%.4f,"
-          "%.4f (give it to the operator: --workspace-origin %.4f,%.4f,%.4f)\n",
+          "%.4f (the operator's workspace centre: sent in the Welcome)\n",
           scene.c_str(), file_scene->haptic.touchables.size(),
           file_scene->builtin_probe ? "built-in probe" : scene_tool.c_str(), home.translation.x,
-          home.translation.y, home.translation.z, home.translation.x, home.translation.y,
-          home.translation.z);
+          home.translation.y, home.translation.z);
       if (!file_scene->gltf.animations.empty()) {
         config.animate = [&](double t_s) {
           ht::AnimateScene(*file_scene, 0, t_s, &animation_scratch);

@@ -69,7 +69,10 @@ void DecodeBody(const ht::wire::Header& h, std::span<const std::uint8_t> body) {
     }
     case MessageType::kWelcome: {
       WelcomeMessage m;
-      if (DecodeWelcome(body, m) == DecodeStatus::kOk) Check(m.name().size() <= kSceneNameBytes);
+      if (DecodeWelcome(body, m) == DecodeStatus::kOk) {
+        Check(m.name().size() <= kSceneNameBytes);
+        Check(m.layout.num_targets <= kMaxWelcomeTargets && m.layout.tool_mass_kg >= 0.0);
+      }
       break;
     }
     case MessageType::kReject: {
