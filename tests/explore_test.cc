@@ -32,11 +32,11 @@ ExperimentTarget Target(glm::dvec3 lo, glm::dvec3 hi, glm::dvec3 top, double app
 ExperimentScene ThreeObjects() {
   ExperimentScene scene;
   scene.tool_extent_down_m = 0.01;
-  scene.targets.push_back(Target({-0.05, -0.05, -0.1}, {0.05, 0.05, -0.02}, {0.001, 0.0, -0.021},
-                                 -0.0));
+  scene.targets.push_back(
+      Target({-0.05, -0.05, -0.1}, {0.05, 0.05, -0.02}, {0.001, 0.0, -0.021}, -0.0));
   scene.targets.push_back(Target({1.9, -0.1, -0.5}, {2.1, 0.1, -0.3}, {2.0, 0.02, -0.31}, -0.28));
-  scene.targets.push_back(Target({-3.1, 0.9, -0.2}, {-2.9, 1.1, -0.05}, {-3.0, 1.0, -0.06},
-                                 -0.035));
+  scene.targets.push_back(
+      Target({-3.1, 0.9, -0.2}, {-2.9, 1.1, -0.05}, {-3.0, 1.0, -0.06}, -0.035));
   return scene;
 }
 
@@ -220,8 +220,8 @@ TEST(SceneLayout, AnObjectUnderAnotherIsApproachedAboveTheOneOnTop) {
   // the 2 cm tall tool).
   auto small = std::make_shared<const HapticModel>(
       MakeTexturedBox({0.02, 0.02, 0.02}, flat, 16, 0.1, "small"));
-  auto slab = std::make_shared<const HapticModel>(
-      MakeTexturedBox({0.2, 0.2, 0.01}, flat, 16, 1.0, "slab"));
+  auto slab =
+      std::make_shared<const HapticModel>(MakeTexturedBox({0.2, 0.2, 0.01}, flat, 16, 1.0, "slab"));
   TouchableObject a{small, {}, 8000.0};
   a.X_WO.translation = {0.0, 0.0, 0.02};
   TouchableObject b{slab, {}, 8000.0};

@@ -79,11 +79,11 @@ TEST(Explore, TheOperatorFoundTheObjectsAndPressedOnThem) {
   EXPECT_NEAR(Median(device_force), wanted, 0.5 * wanted);
   EXPECT_GT(Median(contact_force), 0.5 * wanted);
   EXPECT_LT(Median(contact_force), 2.0 * wanted);
-  std::printf("explore: %zu slide rows, %.0f %% in contact, %zu object(s) touched, median contact "
-              "force %.2f N, device %.2f N, workspace jumps %d\n",
-              slide_rows, 100.0 * slide_in_contact / slide_rows, touched.size(),
-              Median(contact_force), Median(device_force),
-              s["workspace"]["jumps"].get<int>());
+  std::printf(
+      "explore: %zu slide rows, %.0f %% in contact, %zu object(s) touched, median contact "
+      "force %.2f N, device %.2f N, workspace jumps %d\n",
+      slide_rows, 100.0 * slide_in_contact / slide_rows, touched.size(), Median(contact_force),
+      Median(device_force), s["workspace"]["jumps"].get<int>());
 }
 
 }  // namespace

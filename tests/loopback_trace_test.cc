@@ -7,11 +7,11 @@
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
-
-#include "trace_csv.h"
 #include <sstream>
 #include <string>
 #include <vector>
+
+#include "trace_csv.h"
 
 namespace {
 

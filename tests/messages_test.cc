@@ -433,7 +433,8 @@ TEST(Messages, ImpossibleSceneLayoutsAreRejected) {
   const auto reseal = [&](Datagram d, std::size_t offset, std::uint8_t value) {
     d.size -= kMacBytes;
     d.bytes[offset] = value;
-    ComputeMac(d.view(), key, std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size, kMacBytes));
+    ComputeMac(d.view(), key,
+               std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size, kMacBytes));
     d.size += kMacBytes;
     return OpenAndDecode(d.view(), key);
   };

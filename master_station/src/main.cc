@@ -90,9 +90,10 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(100.0, 4000.0))
       ->capture_default_str();
   app.add_option("--out", out_dir, "directory for trace.csv and summary.json");
-  app.add_option("--workspace-origin", origin_text,
-                 "X,Y,Z (m): where the device workspace centre lands in the remote world\n"
-                 "(default: the tool's home position the remote node gives when the session opens)");
+  app.add_option(
+      "--workspace-origin", origin_text,
+      "X,Y,Z (m): where the device workspace centre lands in the remote world\n"
+      "(default: the tool's home position the remote node gives when the session opens)");
   app.add_option("--connect-timeout", connect_timeout_s,
                  "seconds to wait for the first contact model")
       ->check(CLI::PositiveNumber)

@@ -724,7 +724,8 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
           // at its first reading, this tick's `now`): the workspace and the tool jump together,
           // in free space, and the contact models of the old place are dropped.
           if (experiment_t0 < 0) experiment_t0 = now;
-          const glm::dvec3 shift = experiment.Target((now - experiment_t0) * 1e-9).workspace_shift_M;
+          const glm::dvec3 shift =
+              experiment.Target((now - experiment_t0) * 1e-9).workspace_shift_M;
           if (shift != workspace_shift_M) {
             const glm::dvec3 jump_W = X_WM.rotation * (shift - workspace_shift_M);
             X_WM.translation += jump_W;
@@ -864,7 +865,8 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
       {"targets", targets_M.size()},
       {"jumps", workspace_jumps},
       {"models_dropped_from_before_a_jump", models_from_before_jump},
-      {"targets_M", [&] {
+      {"targets_M",
+       [&] {
          nlohmann::json list = nlohmann::json::array();
          for (const ExperimentTarget& t : targets_M) {
            list.push_back({{"box_min", {t.box_min_M.x, t.box_min_M.y, t.box_min_M.z}},

@@ -56,7 +56,8 @@ HandTarget SimulatedOperatorDevice::ControlZ(const HandTarget& script, double dt
                  ? -fast
                  : std::clamp(hand_.press_gain_m_per_s_per_n * (felt_up_n - script.press_force_n),
                               -fast, hand_.press_slow_speed_m_per_s);
-      const double z = std::clamp(z_hand_ + rate * dt, std::min(target.floor_z_m, script_z), script_z);
+      const double z =
+          std::clamp(z_hand_ + rate * dt, std::min(target.floor_z_m, script_z), script_z);
       rate = (z - z_hand_) / dt;  // 0 once at the floor or the ceiling
       z_hand_ = z;
       break;
@@ -73,8 +74,8 @@ HandTarget SimulatedOperatorDevice::ControlZ(const HandTarget& script, double dt
         if (std::abs(script_z - z_hand_) <= step) {
           z_free_ = true;
         } else {
-          rate = script_z > z_hand_ ? hand_.press_fast_speed_m_per_s
-                                    : -hand_.press_fast_speed_m_per_s;
+          rate =
+              script_z > z_hand_ ? hand_.press_fast_speed_m_per_s : -hand_.press_fast_speed_m_per_s;
           z_hand_ += rate * dt;
         }
       }

@@ -565,9 +565,10 @@ DecodeStatus DecodeWelcome(std::span<const std::uint8_t> body, WelcomeMessage& m
       !std::isfinite(l.tool_extent_down_m)) {
     return DecodeStatus::kNonFinite;
   }
-  if (l.tool_mass_kg < 0.0 || l.tool_extent_down_m < 0.0 || (l.tool_mass_kg > 0.0 && !(l.tool_inertia_diagonal_T.x > 0.0 &&
-                                                          l.tool_inertia_diagonal_T.y > 0.0 &&
-                                                          l.tool_inertia_diagonal_T.z > 0.0))) {
+  if (l.tool_mass_kg < 0.0 || l.tool_extent_down_m < 0.0 ||
+      (l.tool_mass_kg > 0.0 &&
+       !(l.tool_inertia_diagonal_T.x > 0.0 && l.tool_inertia_diagonal_T.y > 0.0 &&
+         l.tool_inertia_diagonal_T.z > 0.0))) {
     return DecodeStatus::kBadValue;
   }
   if (!std::isfinite(out.tool_state_rate_hz) || !std::isfinite(out.model_rate_hz) ||

@@ -104,15 +104,15 @@ std::unique_ptr<Experiment> MakeFig75Experiment(const Fig75Params& params = {});
 /// space: large scenes need no hand motion beyond the device's workspace.
 struct ExploreParams {
   double duration_s = 20.0;
-  double press_force_n = 1.5;         ///< Force the hand presses with (N).
-  double travel_height_m = 5e-3;      ///< Height above the home pose for moves between spots (m).
-  double transfer_speed_m_s = 0.25;   ///< Mean speed of moves between spots (m/s).
-  double stroke_m = 15e-3;            ///< Slide amplitude, at most 40 % of the object's half width.
-  double press_s = 0.5;               ///< Time to come down and settle on a spot (s).
-  double slide_s = 0.8;               ///< Duration of each slide (along x, along y) (s).
-  double release_s = 0.4;             ///< Time lifted off between the two presses of a visit (s).
-  double release_lift_m = 5e-3;       ///< Hand lift when releasing (m).
-  double jump_beyond_m = 0.05;        ///< Spots farther than this are reached by a jump (m).
+  double press_force_n = 1.5;        ///< Force the hand presses with (N).
+  double travel_height_m = 5e-3;     ///< Height above the home pose for moves between spots (m).
+  double transfer_speed_m_s = 0.25;  ///< Mean speed of moves between spots (m/s).
+  double stroke_m = 15e-3;           ///< Slide amplitude, at most 40 % of the object's half width.
+  double press_s = 0.5;              ///< Time to come down and settle on a spot (s).
+  double slide_s = 0.8;              ///< Duration of each slide (along x, along y) (s).
+  double release_s = 0.4;            ///< Time lifted off between the two presses of a visit (s).
+  double release_lift_m = 5e-3;      ///< Hand lift when releasing (m).
+  double jump_beyond_m = 0.05;       ///< Spots farther than this are reached by a jump (m).
 };
 
 /// Builds the explore experiment. Throws std::invalid_argument for a non-positive duration,

@@ -69,12 +69,12 @@ struct StationConfig {
 
 /// Runs `experiment` with `device` against the remote node: opens an authenticated session
 /// (Hello/Welcome; the Welcome's scene layout places the workspace and is given to the experiment
-/// through Experiment::SetScene before the device is opened), runs the loop, keeps the session alive (Ping/Pong; reconnects when the remote
-/// node is lost, while the loop goes on with the last contact model), receives the scene, and
-/// says goodbye at the end. Returns the summary (the same object written to summary.json), with
-/// per-stream statistics under "transport". Throws std::runtime_error when the remote node never
-/// answers within connect_timeout_s, refuses the session (with its reason), or a socket cannot be
-/// opened; the message says what to check.
+/// through Experiment::SetScene before the device is opened), runs the loop, keeps the session
+/// alive (Ping/Pong; reconnects when the remote node is lost, while the loop goes on with the last
+/// contact model), receives the scene, and says goodbye at the end. Returns the summary (the same
+/// object written to summary.json), with per-stream statistics under "transport". Throws
+/// std::runtime_error when the remote node never answers within connect_timeout_s, refuses the
+/// session (with its reason), or a socket cannot be opened; the message says what to check.
 nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& device,
                                   Experiment& experiment);
 

@@ -12,8 +12,8 @@
 
 #include "haptic_core/gpu_penetration_depth.h"
 #include "haptic_core/haptic_scene.h"
-#include "transport/messages.h"
 #include "transport/auth.h"
+#include "transport/messages.h"
 #include "transport/udp_socket.h"
 
 namespace ht {
