@@ -701,7 +701,8 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
     float remote_collision = 0, remote_texture = 0, remote_step = 0;
     const glm::dquat R_MW = glm::conjugate(X_WM.rotation);
     std::int64_t experiment_t0 = -1;
-    std::uint64_t first_seq_after_jump = 0;
+    glm::dvec3 jumped_from_W{0.0};  // the tool's position before the last jump
+    bool after_jump = false;         // no model from the new place yet
     std::int64_t next = NowNs() + period_ns;
     std::int64_t previous = next - period_ns;
     const std::int64_t t0 = next;
@@ -728,22 +729,32 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
               experiment.Target((now - experiment_t0) * 1e-9).workspace_shift_M;
           if (shift != workspace_shift_M) {
             const glm::dvec3 jump_W = X_WM.rotation * (shift - workspace_shift_M);
+            jumped_from_W = tool.X_WT.translation;
+            after_jump = true;
             X_WM.translation += jump_W;
             tool.X_WT.translation += jump_W;
             workspace_shift_M = shift;
             model = ContactModel{};
             previous_model = ContactModel{};
             blend_tick = config.model_blend_ticks;
-            first_seq_after_jump = tool_seq + 1;  // the first tool state sent from the new place
             ++workspace_jumps;
           }
         }
         const RigidTransform X_WH = X_WM * ds.X_MH;
         const Twist V_WH_W{X_WM.rotation * ds.V_MH_M.linear, X_WM.rotation * ds.V_MH_M.angular};
-        const bool new_model = incoming.Read(received);
-        if (new_model && received.message.model.tool_state_seq < first_seq_after_jump) {
-          ++models_from_before_jump;  // linearized at the old place: meaningless here
-        } else if (new_model) {
+        bool new_model = incoming.Read(received);
+        if (new_model && after_jump) {
+          // Models in flight were linearized at the old place (nearer to it than to the tool
+          // now): meaningless here. The first from the new place ends the wait.
+          const glm::dvec3& p0_W = received.message.model.X_WT0.translation;
+          if (glm::length(p0_W - jumped_from_W) < glm::length(p0_W - tool.X_WT.translation)) {
+            ++models_from_before_jump;
+            new_model = false;
+          } else {
+            after_jump = false;
+          }
+        }
+        if (new_model) {
           previous_model = model;  // blended out over the next model_blend_ticks ticks
           blend_tick = 0;
           model = received.message.model;
