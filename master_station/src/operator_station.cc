@@ -702,7 +702,7 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
     const glm::dquat R_MW = glm::conjugate(X_WM.rotation);
     std::int64_t experiment_t0 = -1;
     glm::dvec3 jumped_from_W{0.0};  // the tool's position before the last jump
-    bool after_jump = false;         // no model from the new place yet
+    bool after_jump = false;        // no model from the new place yet
     std::int64_t next = NowNs() + period_ns;
     std::int64_t previous = next - period_ns;
     const std::int64_t t0 = next;
