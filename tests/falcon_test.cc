@@ -863,12 +863,15 @@ TEST(FalconDevice, VelocityFollowsAHandleMovingAtConstantSpeed) {
   const auto start = std::chrono::steady_clock::now();
   glm::dvec3 v_sum(0.0);
   int samples = 0;
+  double max_gap_s = 0.0, last_t = 0.0;
   for (;;) {
     const double t =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     // 0.1 s of samples after settling, longer (up to 0.4 s, 8 cm of travel) when a loaded
     // machine stretches the 200 µs sleeps: the count, not the wall time, is what the estimate needs.
     if ((t > 0.15 && samples > 50) || t > 0.4) break;
+    max_gap_s = std::max(max_gap_s, t - last_t);
+    last_t = t;
     rig.fake->SetHandle(p0 + t * v_true);
     std::this_thread::sleep_for(200us);
     DeviceState state;
@@ -876,6 +879,12 @@ TEST(FalconDevice, VelocityFollowsAHandleMovingAtConstantSpeed) {
       v_sum += state.V_MH_M.linear;
       ++samples;
     }
+  }
+  if (max_gap_s > 5e-3) {
+    // The handle did not move smoothly (this thread slept for max_gap_s at once): the premise of
+    // a constant-speed handle sampled at about 1 kHz did not hold on this machine at this time.
+    GTEST_SKIP() << "the machine stalled this test for " << max_gap_s * 1e3
+                 << " ms at once; velocity estimate not checked";
   }
   ASSERT_GT(samples, 20);
   const glm::dvec3 v_mean = v_sum / static_cast<double>(samples);
