@@ -143,13 +143,18 @@ double PressOnWall(SimulatedOperatorDevice& device, double wall_z, double k, dou
   return force;
 }
 
-TEST(SimulatedOperator, PressFindsASurfaceOfUnknownHeightAndHoldsTheForce) {
+/// A force-controlled press target at the workspace centre.
+HandTarget Press(double force_n, double floor_z_m, double slow_below_z_m) {
   HandTarget press;
   press.z_control = HandZControl::kPress;
-  press.press_force_n = 2.0;
-  press.floor_z_m = -0.2;
-  press.slow_below_z_m = -0.03;
-  FixedTarget script(press);
+  press.press_force_n = force_n;
+  press.floor_z_m = floor_z_m;
+  press.slow_below_z_m = slow_below_z_m;
+  return press;
+}
+
+TEST(SimulatedOperator, PressFindsASurfaceOfUnknownHeightAndHoldsTheForce) {
+  FixedTarget script(Press(2.0, -0.2, -0.03));
   SimulatedOperatorDevice device(script);
   device.Open();
   std::int64_t now = 1000000000;
@@ -168,12 +173,7 @@ TEST(SimulatedOperator, PressFindsASurfaceOfUnknownHeightAndHoldsTheForce) {
 }
 
 TEST(SimulatedOperator, PressWithNothingBelowStopsAtTheFloor) {
-  HandTarget press;
-  press.z_control = HandZControl::kPress;
-  press.press_force_n = 1.5;
-  press.floor_z_m = -0.05;
-  press.slow_below_z_m = -0.01;
-  FixedTarget script(press);
+  FixedTarget script(Press(1.5, -0.05, -0.01));
   SimulatedOperatorDevice device(script);
   device.Open();
   std::int64_t now = 1000000000;

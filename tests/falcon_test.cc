@@ -868,7 +868,8 @@ TEST(FalconDevice, VelocityFollowsAHandleMovingAtConstantSpeed) {
     const double t =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     // 0.1 s of samples after settling, longer (up to 0.4 s, 8 cm of travel) when a loaded
-    // machine stretches the 200 µs sleeps: the count, not the wall time, is what the estimate needs.
+    // machine stretches the 200 µs sleeps: the count, not the wall time, is what the estimate
+    // needs.
     if ((t > 0.15 && samples > 50) || t > 0.4) break;
     max_gap_s = std::max(max_gap_s, t - last_t);
     last_t = t;

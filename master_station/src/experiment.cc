@@ -6,6 +6,8 @@
 #include <numbers>
 #include <stdexcept>
 
+#include "master_station/simulated_operator.h"
+
 namespace ht {
 namespace {
 
@@ -108,10 +110,12 @@ class ExploreExperiment final : public Experiment {
     double travel_z = 0.0;
     for (const ExperimentTarget& t : targets) travel_z = std::max(travel_z, t.box_max_M.z + below);
     travel_z += p_.travel_height_m;
-    const double fast = 0.25;  // the hand's fast press speed (OperatorHandParams default)
-    glm::dvec3 here(0.0);      // the workspace centre: the home pose
-    glm::dvec3 shift(0.0);     // the workspace's jumps so far
-    double ceiling = 0.0;      // where the last press started
+    // The simulated hand's approach speeds (its defaults), for how long phases last.
+    const OperatorHandParams hand;
+    const double fast = hand.press_fast_speed_m_per_s, slow = hand.press_slow_speed_m_per_s;
+    glm::dvec3 here(0.0);   // the workspace centre: the home pose
+    glm::dvec3 shift(0.0);  // the workspace's jumps so far
+    double ceiling = 0.0;   // where the last press started
     double t = 0.0;
     const auto add = [&](Segment s, double duration) {
       s.t0 = t;
@@ -173,7 +177,7 @@ class ExploreExperiment final : public Experiment {
       press.shift = shift;
       press.floor_z = floor_z;
       press.slow_below_z = hover_z + 0.01;
-      add(press, p_.press_s + std::max(0.0, press.to.z - press.slow_below_z) / fast + 0.01 / 0.05);
+      add(press, p_.press_s + std::max(0.0, press.to.z - press.slow_below_z) / fast + 0.01 / slow);
       const double stroke_x = std::min(p_.stroke_m, 0.4 * half.x);
       const double stroke_y = std::min(p_.stroke_m, 0.4 * half.y);
       Segment slide = press;
