@@ -18,6 +18,8 @@ PACKAGES=(
   # tests and benchmarks; clang's libFuzzer for the datagram fuzz target; iproute2 for the
   # network-namespace split test
   libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev iproute2
+  # plots of the speed-vs-error frontier (deploy/plot-frontier runs /usr/bin/python3)
+  python3-matplotlib
 )
 
 missing=()

@@ -54,4 +54,15 @@ void HapticModel::Validate() const {
   }
 }
 
+void ShiftModelFrame(HapticModel& m, const glm::dvec3& p_OC) {
+  for (glm::dvec3& p : m.vertices_O) p -= p_OC;
+  for (glm::dvec3& p : m.hull_vertices_O) p -= p_OC;
+  for (HullNode& node : m.hull_hierarchy.nodes) {
+    for (glm::dvec3& p : node.hull.vertices_O) p -= p_OC;
+    for (glm::dvec4& plane : node.hull.planes_O) plane.w -= glm::dot(glm::dvec3(plane), p_OC);
+    node.hull.center_O -= p_OC;
+  }
+  m.center_of_mass_O -= p_OC;
+}
+
 }  // namespace ht

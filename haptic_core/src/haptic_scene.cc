@@ -101,6 +101,7 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   model.X_WT0 = X_WT;
   model.tool_state_seq = seq;
   timings = {};
+  last_num_queries_ = 0;
   if (!IsFiniteRigidTransform(X_WT)) return model;
 
   const HapticModel& tool = *scene_.tool;
@@ -152,8 +153,9 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   }
   const auto t1 = Clock::now();
 
-  std::array<ContactQuery, kMaxContacts> queries;
-  std::array<ContactLinearization, kMaxContacts> results;
+  std::array<ContactQuery, kMaxContacts>& queries = last_queries_;
+  std::array<ContactLinearization, kMaxContacts>& results = last_results_;
+  last_num_queries_ = num_candidates;
   for (int i = 0; i < num_candidates; ++i) {
     const Candidate& c = candidates[i];
     queries[i] = {c.object->model.get(), c.object->X_WO,

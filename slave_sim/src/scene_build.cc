@@ -92,18 +92,6 @@ glm::dquat RotationOf(const glm::dmat4& X_WN, glm::dmat3& residual,
 }
 
 // True when the node key ("name" or "#index") names this instance.
-// Moves a model's frame origin to p_OC (expressed in O): every position p becomes p − p_OC.
-void ShiftModelFrame(HapticModel& m, const glm::dvec3& p_OC) {
-  for (glm::dvec3& p : m.vertices_O) p -= p_OC;
-  for (glm::dvec3& p : m.hull_vertices_O) p -= p_OC;
-  for (HullNode& node : m.hull_hierarchy.nodes) {
-    for (glm::dvec3& p : node.hull.vertices_O) p -= p_OC;
-    for (glm::dvec4& plane : node.hull.planes_O) plane.w -= glm::dot(glm::dvec3(plane), p_OC);
-    node.hull.center_O -= p_OC;
-  }
-  m.center_of_mass_O -= p_OC;
-}
-
 bool KeyMatches(const std::string& key, const GltfMeshInstance& inst) {
   if (!key.empty() && key[0] == '#') return key.substr(1) == std::to_string(inst.node_index);
   return key == inst.node_name;

@@ -69,6 +69,12 @@ struct HapticModel {
   void Validate() const;
 };
 
+/// Moves a model's frame origin to p_OC (m, expressed in O; e.g. its centre of mass, as the tool
+/// frame T requires): every position of the model (coarse vertices, hull vertices and planes,
+/// hierarchy nodes, centre of mass) becomes p − p_OC. Orientation, texture and normals are
+/// unchanged.
+void ShiftModelFrame(HapticModel& model, const glm::dvec3& p_OC);
+
 /// A full-resolution triangle mesh (for display, baking and reports), frame O, metres.
 struct TriangleMesh {
   /// Vertices, #V.

@@ -2,8 +2,10 @@
 // A scene as the remote node sees it: the tool's haptic model, the touchable objects with their
 // poses and stiffness, and the per-step pipeline that turns a tool pose into a contact model.
 
+#include <array>
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -106,6 +108,19 @@ class HapticTexturePipeline {
   std::int64_t backend_failures() const noexcept { return backend_failures_; }
   const std::string& fallback_reason() const noexcept { return fallback_reason_; }
 
+  /// The contacts of the last Step() before the texture stage dropped any: one query per cluster
+  /// (object, its pose X_WO, window, stiffness), in the order they were linearized. Valid until
+  /// the next Step(). For accuracy studies (the speed-vs-error frontier recomputes each window's
+  /// ground truth); the step itself does not need them.
+  std::span<const ContactQuery> last_contact_queries() const noexcept {
+    return {last_queries_.data(), static_cast<std::size_t>(last_num_queries_)};
+  }
+  /// The linearization of each of last_contact_queries() (depth_m = −∞ where the patches did not
+  /// overlap on the window, so that the step left that contact out of its model).
+  std::span<const ContactLinearization> last_linearizations() const noexcept {
+    return {last_results_.data(), static_cast<std::size_t>(last_num_queries_)};
+  }
+
  private:
   const HapticScene& scene_;
   PipelineOptions options_;
@@ -118,6 +133,9 @@ class HapticTexturePipeline {
   glm::dvec4 tool_sphere_O_{0.0};
   std::vector<glm::dvec4> object_spheres_O_;
   ContactClusterer clusterer_;
+  std::array<ContactQuery, kMaxContacts> last_queries_{};
+  std::array<ContactLinearization, kMaxContacts> last_results_{};
+  int last_num_queries_ = 0;
   std::int64_t backend_failures_ = 0;
   std::string fallback_reason_;
 };

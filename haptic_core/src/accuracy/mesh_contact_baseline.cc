@@ -1,0 +1,99 @@
+#include "haptic_core/accuracy/mesh_contact_baseline.h"
+
+#include <chrono>
+#include <fcl/fcl.h>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace ht {
+namespace {
+
+std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>> MakeBvh(const TriangleMesh& mesh, const char* what) {
+  if (mesh.vertices.empty() || mesh.triangles.empty()) {
+    throw std::invalid_argument(std::string("MeshContactBaseline: empty ") + what + " mesh");
+  }
+  const int nv = static_cast<int>(mesh.vertices.size());
+  std::vector<fcl::Vector3d> v;
+  v.reserve(mesh.vertices.size());
+  for (const glm::dvec3& p : mesh.vertices) v.emplace_back(p.x, p.y, p.z);
+  std::vector<fcl::Triangle> t;
+  t.reserve(mesh.triangles.size());
+  for (const glm::ivec3& f : mesh.triangles) {
+    if (f.x < 0 || f.y < 0 || f.z < 0 || f.x >= nv || f.y >= nv || f.z >= nv) {
+      throw std::invalid_argument(std::string("MeshContactBaseline: ") + what +
+                                  " mesh has a vertex index out of range");
+    }
+    t.emplace_back(f.x, f.y, f.z);
+  }
+  auto bvh = std::make_shared<fcl::BVHModel<fcl::OBBRSSd>>();
+  bvh->beginModel(static_cast<int>(t.size()), nv);
+  bvh->addSubModel(v, t);
+  bvh->endModel();
+  return bvh;
+}
+
+fcl::Transform3d ToFcl(const RigidTransform& X) {
+  fcl::Transform3d T = fcl::Transform3d::Identity();
+  T.linear() =
+      fcl::Quaterniond(X.rotation.w, X.rotation.x, X.rotation.y, X.rotation.z).toRotationMatrix();
+  T.translation() = fcl::Vector3d(X.translation.x, X.translation.y, X.translation.z);
+  return T;
+}
+
+}  // namespace
+
+struct MeshContactBaseline::Impl {
+  std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>> tool, environment;
+};
+
+MeshContactBaseline::MeshContactBaseline(const TriangleMesh& tool_Ft,
+                                         const TriangleMesh& environment_Fe)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->tool = MakeBvh(tool_Ft, "tool");
+  impl_->environment = MakeBvh(environment_Fe, "environment");
+}
+
+MeshContactBaseline::~MeshContactBaseline() = default;
+
+MeshContactResult MeshContactBaseline::Query(const RigidTransform& X_WFt,
+                                             const RigidTransform& X_WFe, double k,
+                                             const glm::dvec3& p_WTcm, int max_contacts) const {
+  MeshContactResult out;
+  fcl::CollisionObjectd tool(impl_->tool, ToFcl(X_WFt));
+  fcl::CollisionObjectd env(impl_->environment, ToFcl(X_WFe));
+  fcl::CollisionRequestd request(static_cast<std::size_t>(std::max(max_contacts, 1)), true);
+  fcl::CollisionResultd result;
+  const auto t0 = std::chrono::steady_clock::now();
+  fcl::collide(&tool, &env, request, result);
+  const auto t1 = std::chrono::steady_clock::now();
+  out.query_us = std::chrono::duration<double, std::micro>(t1 - t0).count();
+  out.in_contact = result.isCollision();
+  out.contacts = static_cast<int>(result.numContacts());
+  for (std::size_t i = 0; i < result.numContacts(); ++i) {
+    const fcl::Contactd& c = result.getContact(i);
+    // FCL's normal points from o1 (the tool) to o2 (the environment): the penalty pushes the
+    // tool the other way.
+    const glm::dvec3 n(c.normal.x(), c.normal.y(), c.normal.z());
+    const glm::dvec3 p(c.pos.x(), c.pos.y(), c.pos.z());
+    const double d = c.penetration_depth;
+    if (!std::isfinite(d) || !std::isfinite(n.x + n.y + n.z + p.x + p.y + p.z)) continue;
+    const glm::dvec3 f = -k * d * n;
+    out.F_T_W.force += f;
+    out.F_T_W.torque += glm::cross(p - p_WTcm, f);
+    out.max_depth_m = std::max(out.max_depth_m, d);
+  }
+  return out;
+}
+
+bool MeshContactBaseline::Intersects(const RigidTransform& X_WFt,
+                                     const RigidTransform& X_WFe) const {
+  fcl::CollisionObjectd tool(impl_->tool, ToFcl(X_WFt));
+  fcl::CollisionObjectd env(impl_->environment, ToFcl(X_WFe));
+  fcl::CollisionRequestd request(1, false);
+  fcl::CollisionResultd result;
+  fcl::collide(&tool, &env, request, result);
+  return result.isCollision();
+}
+
+}  // namespace ht

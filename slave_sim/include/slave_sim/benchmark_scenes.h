@@ -1,0 +1,75 @@
+#pragma once
+// The seed's benchmark scenes (DESIGN.md §7) as the speed-vs-error study needs them (issue 14):
+// each with its haptic models built at a chosen texture size and coarse triangle count, the
+// full-resolution meshes the ground truth is computed on, and in-contact tool poses.
+//
+//   fig75         ridged block (tool) on the ridged gear (seed Figs. 72-b, 75)
+//   fig76         two identical striped blocks, interlocked; the upper one is the tool (Fig. 72-a, 76)
+//   fig77         the file (tool) scraping the rough CAD part (Figs. 74, 77)
+//   hammer_torus  the textured hammer (tool) touching the wrinkled helicoidal torus (Fig. 73)
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "haptic_core/haptic_scene.h"
+#include "haptic_core/model_build/haptic_model_build.h"
+
+namespace ht {
+
+/// What the models of a benchmark scene are built with.
+struct BenchmarkModelSettings {
+  /// Haptic texture side (texels; seed: 1024).
+  int texture_size = 1024;
+  /// Coarse triangle target as a multiple of the seed's count (Table 6). The ridged blocks keep
+  /// their 16 triangles (a box); the gear's prism has 400·scale sides.
+  double coarse_scale = 1.0;
+  /// False: the coarse meshes alone, textures dropped (a baseline).
+  bool textured = true;
+};
+
+/// One benchmark scene with one environment object, ready for the remote step and for the ground
+/// truth.
+struct BenchmarkScene {
+  /// "fig75", "fig76", "fig77" or "hammer_torus".
+  std::string name;
+  /// The haptic scene: tool (frame T at its centre of mass) and one touchable object.
+  HapticScene haptic;
+  /// Full-resolution meshes (frames Ft and Fe of the files written for them, metres) and names.
+  std::shared_ptr<const TriangleMesh> tool_mesh_Ft, object_mesh_Fe;
+  std::string tool_name, object_name;
+  /// Pose of the tool mesh's frame in T (T sits at the coarse model's centre of mass). The object
+  /// mesh's frame is the object's model frame: X_WFe = haptic.touchables[0].X_WO.
+  RigidTransform X_TFt;
+  /// Coarse triangles actually built (tool, object), and a note when a setting does not apply.
+  std::int64_t tool_coarse_triangles = 0, object_coarse_triangles = 0;
+  std::string note;
+};
+
+/// The scene names, in the order above.
+const std::vector<std::string>& BenchmarkSceneNames();
+
+/// Builds scene `name` with `settings`; models from files go through `cache` (the seed models are
+/// generated procedurally, then decimated, baked and cached; about a minute each when cold).
+/// Throws std::invalid_argument for an unknown name (listing the known ones) or bad settings, and
+/// what the model build throws.
+BenchmarkScene MakeBenchmarkScene(const std::string& name, const BenchmarkModelSettings& settings,
+                                  const HapticModelCache& cache);
+
+/// `count` in-contact poses X_WFt of the tool MESH's frame for a scene, from a scripted motion
+/// of the seed's kind (fig75: sliding along and across the ridges; fig76: small oscillating
+/// rotations about n, interlocked; fig77: scraping along the part with sway and yaw; hammer:
+/// along the torus's tube with wobble). At each, the tool is first lowered along W's −z (the
+/// scene's up is +z) until its full-resolution mesh touches the object's (bisection on FCL's
+/// intersection test, to 10 nm), then pushed down a further depth that cycles through 0.05–0.4
+/// mm (0.02–0.2 mm for the interlocked blocks): true penetrations of the size the 1.5 N presses of
+/// the runs give. Poses where no touching height is found are skipped, so fewer may come back.
+std::vector<RigidTransform> ScriptedContactPoses(const BenchmarkScene& scene, int count);
+
+/// Poses X_WFt from a run's trace.csv (master_station: tool_x..tool_rz is X_WT), keeping rows
+/// with at least one contact, `count` of them evenly spread. Throws std::runtime_error naming the
+/// file when it cannot be read or lacks the columns.
+std::vector<RigidTransform> PosesFromTrace(const std::string& trace_csv, const BenchmarkScene& scene,
+                                           int count);
+
+}  // namespace ht

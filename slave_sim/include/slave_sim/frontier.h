@@ -1,0 +1,78 @@
+#pragma once
+// The speed-vs-error frontier (issue 14): every setting of the remote step (grid N, texture size,
+// coarse triangle count, CPU or GPU backend, GPU depth bits) and two baselines a user might pick
+// instead (coarse meshes without textures; full-resolution meshes through FCL), run on in-contact
+// poses of the seed's benchmark scenes and measured, in one run on one machine, for time per step
+// and for error against the full-resolution ground truth (haptic_core/accuracy).
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include "haptic_core/accuracy/ground_truth_depth.h"
+
+namespace ht {
+
+/// How a setting computes the contact wrench.
+enum class FrontierMethod {
+  kTexture,            ///< The method: coarse query, clustering, texture penetration depth.
+  kCoarseOnly,         ///< The same pipeline on the coarse meshes with the textures dropped.
+  kFullResolutionFcl,  ///< FCL contacts between the full-resolution meshes, Σ k·d·n.
+};
+
+/// "texture", "coarse_only", "fcl_full_resolution".
+const char* FrontierMethodName(FrontierMethod method) noexcept;
+
+/// One point of the sweep.
+struct FrontierSetting {
+  std::string name;
+  FrontierMethod method = FrontierMethod::kTexture;
+  int grid = 50;             ///< N of the penetration-depth grid.
+  int texture_size = 1024;   ///< Haptic texture side (texels).
+  double coarse_scale = 1.0; ///< Coarse triangle target × the seed's count.
+  std::string backend = "cpu";  ///< "cpu" or "gpu".
+  int depth_bits = 32;       ///< GPU depth precision (16 or 32); the CPU works in float.
+};
+
+/// The sweep: the default setting (grid 50, 1024² textures, the seed's coarse counts, CPU) first,
+/// then grid N ∈ {16, 25, 100}, texture size ∈ {256, 512, 2048}, coarse ×½ and ×2, the GPU at
+/// 16 and 32 depth bits (when `with_gpu`), and the two baselines. `quick` keeps grids 16, 25 and
+/// 100, texture 256, coarse ×2, the GPU at 16 bits and both baselines.
+std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu);
+
+/// Options of a run.
+struct FrontierOptions {
+  /// Output folder (created). Written there: frontier.csv, contacts.csv, meshes/*.glb,
+  /// summary.md and (when matplotlib is there) frontier.png.
+  std::string out_dir;
+  /// Fewer poses and settings, and only the procedural scenes (fig75, fig76): minutes, for ctest.
+  bool quick = false;
+  /// Scenes to run (BenchmarkSceneNames() when empty).
+  std::vector<std::string> scenes;
+  /// In-contact poses per scene (0 = 200, or 12 with quick).
+  int poses = 0;
+  /// Scene name → a run's trace.csv to take the poses from (else ScriptedContactPoses).
+  std::map<std::string, std::string> traces;
+  /// Model cache folder ("" = none).
+  std::string cache_dir;
+  /// Include the GPU settings (through EGL; llvmpipe without a GPU).
+  bool gpu = true;
+  /// Threads for the ground truth (the timed steps always run on one).
+  int threads = 2;
+  /// The ground truth's resolution and convergence.
+  GroundTruthOptions ground_truth;
+  /// The plotting script (python3 + matplotlib), "" = no plot.
+  std::string plot_script;
+  /// The command line, for summary.md.
+  std::string command_line;
+  /// Progress lines on stderr.
+  bool progress = true;
+};
+
+/// Runs the study and writes its files. Each file is written under a temporary name and renamed
+/// when complete, summary.md last, so a run that fails leaves nothing that looks finished.
+/// Throws std::invalid_argument for bad options or an unknown scene, std::runtime_error when a
+/// scene cannot be built or a file cannot be written.
+void RunSpeedErrorFrontier(const FrontierOptions& options);
+
+}  // namespace ht

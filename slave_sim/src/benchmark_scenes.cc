@@ -1,0 +1,276 @@
+#include "slave_sim/benchmark_scenes.h"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <glm/gtc/quaternion.hpp>
+#include <limits>
+#include <map>
+#include <mutex>
+#include <numbers>
+#include <sstream>
+#include <stdexcept>
+
+#include "haptic_core/accuracy/mesh_contact_baseline.h"
+#include "haptic_core/procedural_models.h"
+#include "haptic_core/seed_models.h"
+
+namespace ht {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+constexpr double kStiffness = 8000.0;  // N/m, the gear's (MakeBlockOnGearScene)
+
+// The seed models' full-resolution meshes take up to 0.3 s each to generate: made once.
+std::shared_ptr<const TriangleMesh> SeedMesh(SeedModel model) {
+  static std::mutex mutex;
+  static std::map<SeedModel, std::shared_ptr<const TriangleMesh>> meshes;
+  const std::lock_guard<std::mutex> lock(mutex);
+  auto& slot = meshes[model];
+  if (!slot) slot = std::make_shared<const TriangleMesh>(MakeSeedModelFullResolution(model));
+  return slot;
+}
+
+// A copy of `model` without its texture: every face smooth, nothing reaching out of the coarse
+// surface.
+std::shared_ptr<const HapticModel> Untextured(const HapticModel& model) {
+  auto m = std::make_shared<HapticModel>(model);
+  std::fill(m->textured.begin(), m->textured.end(), std::uint8_t{0});
+  m->outward_reach_m = 0.0;
+  m->name += "_untextured";
+  return m;
+}
+
+std::shared_ptr<const HapticModel> Finish(HapticModel model, bool textured) {
+  if (!textured) return Untextured(model);
+  return std::make_shared<const HapticModel>(std::move(model));
+}
+
+// A seed model through the build cache, its frame moved to its centre of mass when `centred`
+// (the tool frame T); `com_out` gets where that centre was in the mesh's frame.
+std::shared_ptr<const HapticModel> SeedHapticModel(SeedModel model,
+                                                   const BenchmarkModelSettings& settings,
+                                                   const HapticModelCache& cache, bool centred,
+                                                   glm::dvec3* com_out) {
+  HapticModelBuildParams params;
+  params.coarse_triangles = std::max(
+      4, static_cast<int>(std::lround(settings.coarse_scale *
+                                      static_cast<double>(SeedModelSpecOf(model).seed_coarse_triangles))));
+  params.texture.texture_size = settings.texture_size;
+  const HapticModelBuild build =
+      BuildHapticModelCached(SeedModelName(model), *SeedMesh(model), params, cache);
+  HapticModel m = *build.model;
+  if (com_out != nullptr) *com_out = m.center_of_mass_O;
+  if (centred) ShiftModelFrame(m, m.center_of_mass_O);
+  return Finish(std::move(m), settings.textured);
+}
+
+}  // namespace
+
+const std::vector<std::string>& BenchmarkSceneNames() {
+  static const std::vector<std::string> names = {"fig75", "fig76", "fig77", "hammer_torus"};
+  return names;
+}
+
+BenchmarkScene MakeBenchmarkScene(const std::string& name, const BenchmarkModelSettings& settings,
+                                  const HapticModelCache& cache) {
+  if (settings.texture_size < 16 || settings.texture_size > 8192 ||
+      (settings.texture_size & (settings.texture_size - 1)) != 0) {
+    throw std::invalid_argument("texture size must be a power of two in [16, 8192], got " +
+                                std::to_string(settings.texture_size));
+  }
+  if (!(settings.coarse_scale > 0.0) || settings.coarse_scale > 16.0) {
+    throw std::invalid_argument("coarse scale must be in (0, 16], got " +
+                                std::to_string(settings.coarse_scale));
+  }
+  BenchmarkScene scene;
+  scene.name = name;
+  scene.haptic.name = name;
+  TouchableObject object;
+  object.stiffness_n_per_m = kStiffness;
+  if (name == "fig75" || name == "fig76") {
+    RidgedBlockParams block;
+    block.texture_size = settings.texture_size;
+    scene.haptic.tool = Finish(MakeRidgedBlock(block), settings.textured);
+    scene.tool_mesh_Ft = std::make_shared<const TriangleMesh>(MakeRidgedBlockFullResolution());
+    scene.tool_name = "ridged_block";
+    scene.X_TFt = RigidTransform::Identity();  // the block's frame is its centre of mass
+    if (name == "fig75") {
+      RidgedGearParams gear;
+      gear.texture_size = settings.texture_size;
+      gear.coarse_segments = std::max(8, static_cast<int>(std::lround(400 * settings.coarse_scale)));
+      object.model = Finish(MakeRidgedGear(gear), settings.textured);
+      scene.object_mesh_Fe = std::make_shared<const TriangleMesh>(MakeRidgedGearFullResolution());
+      scene.object_name = "ridged_gear";
+      scene.haptic.X_WT_home = BlockOnGearHomePose();
+      scene.note = "block: 16 coarse triangles at every coarse scale (a box)";
+    } else {
+      // The lower striped block: the same block turned over about x, its striped face up at z = 0.
+      // A model object of its own: per-model caches (the proximity query's) must not see the
+      // tool and the object as one model.
+      object.model = std::make_shared<const HapticModel>(*scene.haptic.tool);
+      scene.object_mesh_Fe = scene.tool_mesh_Ft;
+      scene.object_name = "ridged_block";
+      object.X_WO.rotation = glm::angleAxis(kPi, glm::dvec3(1.0, 0.0, 0.0));
+      object.X_WO.translation = {0.0, 0.0, -block.half_extents_m.z};
+      // Interlocked: the upper block's crests over the lower one's valleys (half a period in y).
+      scene.haptic.X_WT_home.translation = {0.0, 0.5 * block.ridges.period_m,
+                                            block.half_extents_m.z};
+      scene.note = "both blocks: 16 coarse triangles at every coarse scale (boxes)";
+    }
+  } else if (name == "fig77" || name == "hammer_torus") {
+    const bool file = name == "fig77";
+    const SeedModel tool = file ? SeedModel::kFile : SeedModel::kHammer;
+    const SeedModel env = file ? SeedModel::kCadPart : SeedModel::kTorus;
+    glm::dvec3 com(0.0);
+    scene.haptic.tool = SeedHapticModel(tool, settings, cache, true, &com);
+    scene.X_TFt.translation = -com;
+    scene.tool_mesh_Ft = SeedMesh(tool);
+    scene.tool_name = SeedModelName(tool);
+    object.model = SeedHapticModel(env, settings, cache, false, nullptr);
+    scene.object_mesh_Fe = SeedMesh(env);
+    scene.object_name = SeedModelName(env);
+    scene.haptic.X_WT_home.translation = {0.0, 0.0, 0.05};
+  } else {
+    std::string known;
+    for (const std::string& n : BenchmarkSceneNames()) known += (known.empty() ? "" : ", ") + n;
+    throw std::invalid_argument("unknown benchmark scene '" + name + "' (known: " + known + ")");
+  }
+  scene.haptic.touchables.push_back(object);
+  scene.tool_coarse_triangles = static_cast<std::int64_t>(scene.haptic.tool->triangles.size());
+  scene.object_coarse_triangles = static_cast<std::int64_t>(object.model->triangles.size());
+  return scene;
+}
+
+namespace {
+
+// Lowest z of `mesh` posed with rotation R (translation zero), and highest z of the object mesh
+// at its pose.
+double LowestZ(const TriangleMesh& mesh, const glm::dquat& R) {
+  double z = std::numeric_limits<double>::infinity();
+  for (const glm::dvec3& p : mesh.vertices) z = std::min(z, (R * p).z);
+  return z;
+}
+double HighestZ(const TriangleMesh& mesh, const RigidTransform& X) {
+  double z = -std::numeric_limits<double>::infinity();
+  for (const glm::dvec3& p : mesh.vertices) z = std::max(z, (X * p).z);
+  return z;
+}
+
+// One scripted pose before lowering: orientation, xy, and the extra depth once touching (m).
+struct PoseScript {
+  glm::dquat rotation{1.0, 0.0, 0.0, 0.0};
+  glm::dvec2 xy{0.0};
+  double depth_m = 0.0;
+};
+
+PoseScript ScriptAt(const std::string& scene, double s) {
+  PoseScript p;
+  const double wave = 0.5 + 0.5 * std::sin(2 * kPi * 5 * s + 0.7);  // 0..1
+  const auto deg = [](double d) { return d * kPi / 180.0; };
+  const auto rot = [](double angle, glm::dvec3 axis) { return glm::angleAxis(angle, axis); };
+  const glm::dvec3 X(1, 0, 0), Y(0, 1, 0), Z(0, 0, 1);
+  if (scene == "fig75") {  // along the ridges (x), across them (y), with a little tilt
+    p.xy = {8e-3 * std::sin(2 * kPi * 2 * s), 6e-3 * std::sin(2 * kPi * 3 * s + 0.3)};
+    p.rotation = rot(deg(3.0) * std::sin(2 * kPi * 4 * s), Z) *
+                 rot(deg(1.5) * std::sin(2 * kPi * 7 * s), X) *
+                 rot(deg(1.5) * std::sin(2 * kPi * 5 * s + 1.0), Y);
+    p.depth_m = 0.05e-3 + 0.35e-3 * wave;
+  } else if (scene == "fig76") {  // small oscillating rotations about n, interlocked
+    p.xy = {4e-3 * std::sin(2 * kPi * s), 1.5e-3 + 0.2e-3 * std::sin(2 * kPi * 3 * s)};
+    p.rotation = rot(deg(3.0) * std::sin(2 * kPi * 6 * s), Z);
+    p.depth_m = 0.02e-3 + 0.18e-3 * wave;
+  } else if (scene == "fig77") {  // scraping along the part, with sway and yaw (as fig77_scrape)
+    p.xy = {-0.03 + 0.06 * s, 0.01 * std::sin(2 * kPi * 2 * s)};
+    p.rotation = rot(deg(5.0) * std::sin(2 * kPi * 3 * s), Z);
+    p.depth_m = 0.05e-3 + 0.35e-3 * wave;
+  } else {  // hammer_torus: the head (turned down) along the tube, with wobble
+    const double phi = deg(-25.0 + 50.0 * s);
+    const double R = WrinkledTorusParams{}.major_radius_m;
+    p.xy = {R * std::cos(phi), R * std::sin(phi)};
+    p.rotation = rot(phi + 0.5 * kPi + deg(8.0) * std::sin(2 * kPi * 4 * s), Z) *
+                 rot(deg(3.0) * std::sin(2 * kPi * 3 * s), X) * rot(kPi, X);
+    p.depth_m = 0.05e-3 + 0.35e-3 * wave;
+  }
+  return p;
+}
+
+}  // namespace
+
+std::vector<RigidTransform> ScriptedContactPoses(const BenchmarkScene& scene, int count) {
+  std::vector<RigidTransform> poses;
+  if (count <= 0) return poses;
+  const RigidTransform X_WFe = scene.haptic.touchables.at(0).X_WO;
+  const MeshContactBaseline meshes(*scene.tool_mesh_Ft, *scene.object_mesh_Fe);
+  const double top = HighestZ(*scene.object_mesh_Fe, X_WFe);
+  for (int i = 0; i < count; ++i) {
+    const double s = (i + 0.5) / count;
+    const PoseScript script = ScriptAt(scene.name, s);
+    RigidTransform X_WFt;
+    X_WFt.rotation = script.rotation;
+    // Clear above the object's top, and deep enough that a touch is sure.
+    double hi = top - LowestZ(*scene.tool_mesh_Ft, script.rotation) + 1e-3;
+    double lo = hi - 0.03;
+    X_WFt.translation = {script.xy.x, script.xy.y, lo};
+    if (!meshes.Intersects(X_WFt, X_WFe)) continue;  // nothing under the tool here
+    while (hi - lo > 1e-8) {
+      const double mid = 0.5 * (lo + hi);
+      X_WFt.translation.z = mid;
+      (meshes.Intersects(X_WFt, X_WFe) ? lo : hi) = mid;
+    }
+    X_WFt.translation.z = hi - script.depth_m;
+    poses.push_back(X_WFt);
+  }
+  return poses;
+}
+
+std::vector<RigidTransform> PosesFromTrace(const std::string& path, const BenchmarkScene& scene,
+                                           int count) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error(path + ": cannot read the trace");
+  std::string line;
+  if (!std::getline(in, line)) throw std::runtime_error(path + ": empty trace");
+  std::vector<std::string> columns;
+  {
+    std::stringstream header(line);
+    for (std::string c; std::getline(header, c, ',');) columns.push_back(c);
+  }
+  const char* wanted[] = {"tool_x", "tool_y", "tool_z", "tool_rx", "tool_ry", "tool_rz", "contacts"};
+  int index[7];
+  for (int k = 0; k < 7; ++k) {
+    const auto it = std::find(columns.begin(), columns.end(), wanted[k]);
+    if (it == columns.end()) {
+      throw std::runtime_error(path + ": no column '" + wanted[k] +
+                               "' (not a master_station trace.csv?)");
+    }
+    index[k] = static_cast<int>(it - columns.begin());
+  }
+  std::vector<RigidTransform> in_contact;
+  while (std::getline(in, line)) {
+    std::vector<std::string> cells;
+    std::stringstream row(line);
+    for (std::string c; std::getline(row, c, ',');) cells.push_back(c);
+    if (cells.size() != columns.size()) continue;  // a truncated last row
+    double v[7];
+    bool ok = true;
+    for (int k = 0; k < 7; ++k) {
+      char* end = nullptr;
+      v[k] = std::strtod(cells[index[k]].c_str(), &end);
+      ok = ok && end != cells[index[k]].c_str() && std::isfinite(v[k]);
+    }
+    if (!ok || v[6] < 1.0) continue;
+    RigidTransform X_WT;
+    X_WT.translation = {v[0], v[1], v[2]};
+    X_WT.rotation = QuaternionFromRotationVector({v[3], v[4], v[5]});
+    in_contact.push_back(X_WT * scene.X_TFt);
+  }
+  if (in_contact.empty()) throw std::runtime_error(path + ": no row in contact");
+  std::vector<RigidTransform> out;
+  const int n = std::min<int>(count, static_cast<int>(in_contact.size()));
+  for (int i = 0; i < n; ++i) {
+    out.push_back(in_contact[static_cast<std::size_t>((i + 0.5) * in_contact.size() / n)]);
+  }
+  return out;
+}
+
+}  // namespace ht

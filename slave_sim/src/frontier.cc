@@ -1,0 +1,779 @@
+#include "slave_sim/frontier.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <memory>
+#include <numbers>
+#include <sstream>
+#include <stdexcept>
+#include <thread>
+
+#include "codecs/glb_writer.h"
+#include "haptic_core/accuracy/mesh_contact_baseline.h"
+#include "haptic_core/gpu_penetration_depth.h"
+#include "haptic_core/haptic_scene.h"
+#include "slave_sim/benchmark_scenes.h"
+
+namespace ht {
+
+const char* FrontierMethodName(FrontierMethod method) noexcept {
+  switch (method) {
+    case FrontierMethod::kTexture:
+      return "texture";
+    case FrontierMethod::kCoarseOnly:
+      return "coarse_only";
+    case FrontierMethod::kFullResolutionFcl:
+      return "fcl_full_resolution";
+  }
+  return "?";
+}
+
+std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
+  std::vector<FrontierSetting> s;
+  const FrontierSetting base{"default"};
+  s.push_back(base);
+  const auto grid = [&](int n) {
+    FrontierSetting x = base;
+    x.name = "grid" + std::to_string(n);
+    x.grid = n;
+    s.push_back(x);
+  };
+  const auto texture = [&](int n) {
+    FrontierSetting x = base;
+    x.name = "texture" + std::to_string(n);
+    x.texture_size = n;
+    s.push_back(x);
+  };
+  const auto coarse = [&](double k, const char* name) {
+    FrontierSetting x = base;
+    x.name = name;
+    x.coarse_scale = k;
+    s.push_back(x);
+  };
+  const auto gpu = [&](int bits) {
+    FrontierSetting x = base;
+    x.name = "gpu" + std::to_string(bits);
+    x.backend = "gpu";
+    x.depth_bits = bits;
+    s.push_back(x);
+  };
+  for (int n : {16, 25, 100}) grid(n);
+  if (quick) {
+    texture(256);
+    coarse(2.0, "coarse2x");
+  } else {
+    for (int n : {256, 512, 2048}) texture(n);
+    coarse(0.5, "coarse0.5x");
+    coarse(2.0, "coarse2x");
+  }
+  if (with_gpu) {
+    gpu(16);
+    if (!quick) gpu(32);
+  }
+  FrontierSetting c = base;
+  c.name = "coarse_only";
+  c.method = FrontierMethod::kCoarseOnly;
+  s.push_back(c);
+  FrontierSetting f = base;
+  f.name = "fcl_full_resolution";
+  f.method = FrontierMethod::kFullResolutionFcl;
+  s.push_back(f);
+  return s;
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double Seconds(Clock::time_point since) {
+  return std::chrono::duration<double>(Clock::now() - since).count();
+}
+
+double Percentile(std::vector<double> v, double q) {
+  if (v.empty()) return std::numeric_limits<double>::quiet_NaN();
+  std::sort(v.begin(), v.end());
+  const double pos = q * static_cast<double>(v.size() - 1);
+  const auto i = static_cast<std::size_t>(pos);
+  const double f = pos - static_cast<double>(i);
+  return i + 1 < v.size() ? v[i] * (1.0 - f) + v[i + 1] * f : v[i];
+}
+
+// One ground-truth window: inputs and result.
+struct GtJob {
+  RigidTransform X_WT, X_TFt, X_WFe;
+  ContactWindow window;
+  double stiffness = 0.0;
+  GroundTruthContact result;
+  bool done = false;
+};
+
+// One contact (window) of a setting at a pose.
+struct ContactRecord {
+  int pose = 0;
+  int index = 0;
+  ContactQuery query;
+  ContactLinearization lin;
+  int gt = -1;  // into the scene's GtJob list
+};
+
+struct PoseRecord {
+  StepTimings timings;
+  Wrench F;          // the method's wrench on the tool at its centre of mass, in W
+  int contacts = 0;  // contacts with δ > 0
+};
+
+struct Metrics {
+  double collision_p50 = 0, collision_p95 = 0, texture_p50 = 0, texture_p95 = 0, total_p50 = 0,
+         total_p95 = 0;
+  double contacts_mean = 0, leaf_pairs_mean = 0;
+  double force_rel_rms = 0, torque_rel_rms = 0;
+  double force_rel_p50 = 0;  // median over poses of |F − F_gt| / |F_gt|
+  double dir_p50_deg = 0, dir_p95_deg = 0;
+  int dir_poses = 0;
+  double delta_p50_um = 0, delta_p95_um = 0;
+  int windows = 0, missed = 0, invented = 0, poses_missed = 0, poses_invented = 0;
+  bool pareto = false;
+};
+
+struct SettingRun {
+  FrontierSetting setting;
+  std::string renderer;
+  std::string skipped;  // why the setting did not run ("" when it did)
+  std::string note;
+  RigidTransform X_TFt;
+  std::int64_t tool_coarse_triangles = 0, object_coarse_triangles = 0;
+  std::vector<PoseRecord> poses;
+  std::vector<ContactRecord> contacts;
+  Metrics m;
+};
+
+// Key of a ground-truth window: the pose, the tool's frame, and the window's geometry, bit for
+// bit (windows of settings that differ only in grid or backend are one job).
+std::string GtKey(int pose, const RigidTransform& X_TFt, const ContactWindow& w, double k) {
+  std::ostringstream s;
+  s.precision(17);
+  s << pose << '|' << X_TFt.translation.x << ',' << X_TFt.translation.y << ','
+    << X_TFt.translation.z << '|' << w.center_W.x << ',' << w.center_W.y << ',' << w.center_W.z
+    << '|' << w.normal_W.x << ',' << w.normal_W.y << ',' << w.normal_W.z << '|' << w.axis_u_W.x
+    << ',' << w.axis_u_W.y << ',' << w.axis_u_W.z << '|' << w.extent_m << '|' << k;
+  return s.str();
+}
+
+class PartialFile {
+ public:
+  explicit PartialFile(std::string path) : path_(std::move(path)), tmp_(path_ + ".partial") {
+    out_.open(tmp_);
+    if (!out_) throw std::runtime_error("cannot write " + tmp_);
+  }
+  std::ofstream& out() { return out_; }
+  void Commit() {
+    out_.flush();
+    if (!out_) throw std::runtime_error("cannot write " + tmp_);
+    out_.close();
+    std::filesystem::rename(tmp_, path_);
+  }
+  ~PartialFile() {
+    if (out_.is_open()) {
+      out_.close();
+      std::error_code ec;
+      std::filesystem::remove(tmp_, ec);
+    }
+  }
+
+ private:
+  std::string path_, tmp_;
+  std::ofstream out_;
+};
+
+double AngleDeg(const glm::dvec3& a, const glm::dvec3& b) {
+  const double c = glm::dot(a, b) / (glm::length(a) * glm::length(b));
+  return std::acos(std::clamp(c, -1.0, 1.0)) * 180.0 / std::numbers::pi;
+}
+
+std::string Fmt(double v, int precision = 4) {
+  if (!std::isfinite(v)) return "nan";
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*g", precision, v);
+  return buf;
+}
+
+std::string MachineLine() {
+  std::string cpu = "unknown CPU";
+  std::ifstream info("/proc/cpuinfo");
+  for (std::string line; std::getline(info, line);) {
+    if (line.rfind("model name", 0) == 0) {
+      cpu = line.substr(line.find(':') + 2);
+      break;
+    }
+  }
+  return cpu + ", " + std::to_string(std::thread::hardware_concurrency()) + " hardware threads";
+}
+
+// Runs the timed steps of one setting on one scene (single thread).
+void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& poses_WFt,
+                const MeshContactBaseline& fcl, SettingRun& run) {
+  const FrontierSetting& st = run.setting;
+  run.X_TFt = scene.X_TFt;
+  run.tool_coarse_triangles = scene.tool_coarse_triangles;
+  run.object_coarse_triangles = scene.object_coarse_triangles;
+  const RigidTransform X_FtT = scene.X_TFt.Inverse();
+  const TouchableObject& object = scene.haptic.touchables.at(0);
+  if (st.method == FrontierMethod::kFullResolutionFcl) {
+    run.renderer = "FCL 0.7 (BVH OBBRSS), full-resolution meshes";
+    for (const RigidTransform& X_WFt : poses_WFt) {
+      const RigidTransform X_WT = X_WFt * X_FtT;
+      const MeshContactResult r =
+          fcl.Query(X_WFt, object.X_WO, object.stiffness_n_per_m, X_WT.translation);
+      PoseRecord p;
+      p.timings.collision_us = p.timings.total_us = r.query_us;
+      p.timings.leaf_pairs = r.contacts;
+      p.F = r.F_T_W;
+      p.contacts = r.contacts;
+      run.poses.push_back(p);
+    }
+    return;
+  }
+  std::unique_ptr<PenetrationDepthBackend> backend;
+  if (st.backend == "gpu") {
+    GpuPenetrationDepthOptions gpu;
+    gpu.depth_bits = st.depth_bits;
+    gpu.max_resolution = std::max(128, st.grid);
+    try {
+      auto g = GpuPenetrationDepthBackend::Create(gpu);
+      backend = std::move(g);
+    } catch (const std::exception& e) {
+      run.skipped = std::string("GPU did not start: ") + e.what();
+      return;
+    }
+  } else {
+    backend = std::make_unique<CpuPenetrationDepthBackend>(std::max(128, st.grid));
+  }
+  run.renderer = backend->description();
+  PipelineOptions options;
+  options.grid_resolution = st.grid;
+  HapticTexturePipeline pipeline(scene.haptic, options, std::move(backend));
+  StepTimings timings;
+  for (int i = 0; i < 3 && !poses_WFt.empty(); ++i) {  // warm-up: caches, GPU uploads
+    pipeline.Step(poses_WFt.front() * X_FtT, 0, timings);
+  }
+  for (std::size_t k = 0; k < poses_WFt.size(); ++k) {
+    const ContactModel model = pipeline.Step(poses_WFt[k] * X_FtT, k, timings);
+    PoseRecord p;
+    p.timings = timings;
+    p.F = model.F_T_W_at_q0;
+    for (int c = 0; c < model.num_contacts; ++c) p.contacts += model.contacts[c].depth_m > 0.0;
+    run.poses.push_back(p);
+    const auto queries = pipeline.last_contact_queries();
+    const auto lins = pipeline.last_linearizations();
+    for (std::size_t c = 0; c < queries.size(); ++c) {
+      ContactRecord r;
+      r.pose = static_cast<int>(k);
+      r.index = static_cast<int>(c);
+      r.query = queries[c];
+      r.lin = lins[c];
+      run.contacts.push_back(r);
+    }
+  }
+  if (pipeline.backend_failures() > 0) {
+    run.note = "backend failed, CPU used: " + pipeline.fallback_reason();
+    run.renderer = pipeline.backend().description();
+  }
+}
+
+// Computes every job's ground truth on `threads` threads, with progress.
+void RunGroundTruth(const BenchmarkScene& scene, std::vector<GtJob>& jobs,
+                    const FrontierOptions& options) {
+  const RayCastSurface tool(*scene.tool_mesh_Ft);
+  const RayCastSurface object(*scene.object_mesh_Fe);
+  std::atomic<std::size_t> next{0}, finished{0};
+  const auto t0 = Clock::now();
+  const auto worker = [&](bool reporter) {
+    GroundTruthDepthSolver solver(tool, object, options.ground_truth);
+    double last_report = 0.0;
+    for (std::size_t i; (i = next.fetch_add(1)) < jobs.size();) {
+      GtJob& j = jobs[i];
+      j.result = solver.Linearize(j.X_WT, j.X_TFt, j.X_WFe, j.window, j.stiffness);
+      j.done = true;
+      const std::size_t f = ++finished;
+      if (reporter && options.progress && Seconds(t0) - last_report > 5.0) {
+        last_report = Seconds(t0);
+        const double left = last_report / static_cast<double>(f) *
+                            static_cast<double>(jobs.size() - f);
+        std::fprintf(stderr, "[frontier] %s: ground truth %zu/%zu windows, about %.0f s left\n",
+                     scene.name.c_str(), f, jobs.size(), left);
+      }
+    }
+  };
+  const int n = std::max(1, options.threads);
+  std::vector<std::thread> pool;
+  for (int t = 1; t < n; ++t) pool.emplace_back(worker, false);
+  worker(true);
+  for (std::thread& t : pool) t.join();
+}
+
+void ComputeMetrics(SettingRun& run, const std::vector<GtJob>& jobs,
+                    const std::vector<Wrench>& reference_gt, const std::vector<bool>& touching) {
+  Metrics& m = run.m;
+  std::vector<double> coll, tex, tot, dir, derr, rel;
+  double contacts = 0, leaf = 0;
+  for (const PoseRecord& p : run.poses) {
+    coll.push_back(p.timings.collision_us);
+    tex.push_back(p.timings.texture_us);
+    tot.push_back(p.timings.total_us);
+    contacts += p.contacts;
+    leaf += p.timings.leaf_pairs;
+  }
+  const double n = std::max<double>(1.0, static_cast<double>(run.poses.size()));
+  m.collision_p50 = Percentile(coll, 0.5);
+  m.collision_p95 = Percentile(coll, 0.95);
+  m.texture_p50 = Percentile(tex, 0.5);
+  m.texture_p95 = Percentile(tex, 0.95);
+  m.total_p50 = Percentile(tot, 0.5);
+  m.total_p95 = Percentile(tot, 0.95);
+  m.contacts_mean = contacts / n;
+  m.leaf_pairs_mean = leaf / n;
+  // The truth per pose: the ground truth on this setting's own windows (the baselines, which
+  // have none, against the default setting's).
+  std::vector<Wrench> gt(run.poses.size());
+  const bool own = run.setting.method == FrontierMethod::kTexture;
+  if (own) {
+    for (const ContactRecord& c : run.contacts) gt[c.pose] += jobs[c.gt].result.F_T_W;
+  } else {
+    gt = reference_gt;
+  }
+  double fe = 0, fg = 0, te = 0, tg = 0;
+  for (std::size_t k = 0; k < run.poses.size(); ++k) {
+    const Wrench& F = run.poses[k].F;
+    const Wrench& G = gt[k];
+    fe += glm::dot(F.force - G.force, F.force - G.force);
+    fg += glm::dot(G.force, G.force);
+    te += glm::dot(F.torque - G.torque, F.torque - G.torque);
+    tg += glm::dot(G.torque, G.torque);
+    if (glm::length(G.force) > 1e-9 && glm::length(F.force) > 1e-9) {
+      dir.push_back(AngleDeg(F.force, G.force));
+    }
+    if (glm::length(G.force) > 1e-9) {
+      rel.push_back(glm::length(F.force - G.force) / glm::length(G.force));
+    }
+    const bool method_contact = run.poses[k].contacts > 0;
+    if (k < touching.size()) {
+      m.poses_missed += touching[k] && !method_contact;
+      m.poses_invented += !touching[k] && method_contact;
+    }
+  }
+  m.force_rel_rms = fg > 0 ? std::sqrt(fe / fg) : std::numeric_limits<double>::quiet_NaN();
+  m.torque_rel_rms = tg > 0 ? std::sqrt(te / tg) : std::numeric_limits<double>::quiet_NaN();
+  m.force_rel_p50 = Percentile(rel, 0.5);
+  m.dir_p50_deg = Percentile(dir, 0.5);
+  m.dir_p95_deg = Percentile(dir, 0.95);
+  m.dir_poses = static_cast<int>(dir.size());
+  for (const ContactRecord& c : run.contacts) {
+    const double d = c.lin.depth_m, g = jobs[c.gt].result.linearization.depth_m;
+    ++m.windows;
+    const bool dc = std::isfinite(d) && d > 0.0, gc = std::isfinite(g) && g > 0.0;
+    m.missed += gc && !dc;
+    m.invented += dc && !gc;
+    if ((dc || gc) && std::isfinite(d) && std::isfinite(g)) derr.push_back(std::abs(d - g) * 1e6);
+  }
+  m.delta_p50_um = Percentile(derr, 0.5);
+  m.delta_p95_um = Percentile(derr, 0.95);
+}
+
+void MarkPareto(std::vector<SettingRun>& runs) {
+  for (SettingRun& a : runs) {
+    if (!a.skipped.empty() || !std::isfinite(a.m.force_rel_rms)) continue;
+    a.m.pareto = true;
+    for (const SettingRun& b : runs) {
+      if (&a == &b || !b.skipped.empty() || !std::isfinite(b.m.force_rel_rms)) continue;
+      const bool no_worse = b.m.total_p50 <= a.m.total_p50 && b.m.force_rel_rms <= a.m.force_rel_rms;
+      const bool better = b.m.total_p50 < a.m.total_p50 || b.m.force_rel_rms < a.m.force_rel_rms;
+      if (no_worse && better) a.m.pareto = false;
+    }
+  }
+}
+
+void WriteQuat(std::ostream& o, const RigidTransform& X) {
+  o << X.translation.x << ',' << X.translation.y << ',' << X.translation.z << ',' << X.rotation.w
+    << ',' << X.rotation.x << ',' << X.rotation.y << ',' << X.rotation.z;
+}
+
+void WriteWrench(std::ostream& o, const Wrench& F) {
+  o << F.force.x << ',' << F.force.y << ',' << F.force.z << ',' << F.torque.x << ','
+    << F.torque.y << ',' << F.torque.z;
+}
+
+struct SceneReport {
+  std::string name, tool_file, object_file, mesh_note, pose_source;
+  std::int64_t tool_full = 0, object_full = 0;
+  int poses = 0, touching = 0;
+  std::vector<SettingRun> runs;
+  // Ground truth figures.
+  std::size_t gt_windows = 0, gt_converged = 0;
+  double gt_change_max_m = 0, gt_seconds = 0;
+  long long gt_rays = 0;
+  std::vector<int> gt_m;
+};
+
+}  // namespace
+
+void RunSpeedErrorFrontier(const FrontierOptions& options) {
+  if (options.out_dir.empty()) throw std::invalid_argument("--out DIR is required");
+  options.ground_truth.Validate();
+  std::vector<std::string> scenes = options.scenes;
+  if (scenes.empty()) {
+    scenes = options.quick ? std::vector<std::string>{"fig75", "fig76"} : BenchmarkSceneNames();
+  }
+  for (const std::string& s : scenes) {
+    const auto& known = BenchmarkSceneNames();
+    if (std::find(known.begin(), known.end(), s) == known.end()) {
+      std::string list;
+      for (const std::string& k : known) list += (list.empty() ? "" : ", ") + k;
+      throw std::invalid_argument("unknown scene '" + s + "' (known: " + list + ")");
+    }
+  }
+  for (const auto& [scene, path] : options.traces) {
+    if (std::find(scenes.begin(), scenes.end(), scene) == scenes.end()) {
+      throw std::invalid_argument("--trace names scene '" + scene + "', which is not run");
+    }
+    if (!std::filesystem::exists(path)) {
+      throw std::invalid_argument("--trace " + scene + "=" + path + ": no such file");
+    }
+  }
+  const int pose_count = options.poses > 0 ? options.poses : (options.quick ? 12 : 200);
+  const std::vector<FrontierSetting> settings = FrontierSettings(options.quick, options.gpu);
+  std::filesystem::create_directories(options.out_dir + "/meshes");
+  // Nothing of an earlier run may be taken for this one's.
+  for (const char* f : {"summary.md", "frontier.csv", "contacts.csv", "frontier.png"}) {
+    std::filesystem::remove(options.out_dir + "/" + f);
+  }
+  const HapticModelCache cache(options.cache_dir);
+  const auto t_start = Clock::now();
+  const auto say = [&](const char* fmt, auto... args) {
+    if (!options.progress) return;
+    std::fprintf(stderr, "[frontier] ");
+    std::fprintf(stderr, fmt, args...);
+    std::fprintf(stderr, "\n");
+  };
+
+  PartialFile contacts_csv(options.out_dir + "/contacts.csv");
+  std::ostream& cc = contacts_csv.out();
+  cc.precision(10);
+  cc << "scene,setting,pose_id,contact,tool,object,tool_px,tool_py,tool_pz,tool_qw,tool_qx,"
+        "tool_qy,tool_qz,obj_px,obj_py,obj_pz,obj_qw,obj_qx,obj_qy,obj_qz,window_cx,window_cy,"
+        "window_cz,window_nx,window_ny,window_nz,window_ux,window_uy,window_uz,window_extent_m,"
+        "grid,stiffness_n_per_m,delta_m,delta_gt_m,fx,fy,fz,tx,ty,tz,fx_gt,fy_gt,fz_gt,tx_gt,"
+        "ty_gt,tz_gt,tool_com_x,tool_com_y,tool_com_z,gt_samples_per_side,gt_converged\n";
+
+  std::vector<SceneReport> reports;
+  const int total_units = static_cast<int>(scenes.size() * settings.size());
+  int units_done = 0;
+  for (const std::string& name : scenes) {
+    SceneReport rep;
+    rep.name = name;
+    say("%s: building the models (cache: %s)", name.c_str(),
+        options.cache_dir.empty() ? "none" : options.cache_dir.c_str());
+    std::map<std::tuple<int, double, bool>, std::unique_ptr<BenchmarkScene>> built;
+    const auto scene_for = [&](const BenchmarkModelSettings& b) -> const BenchmarkScene& {
+      auto& slot = built[{b.texture_size, b.coarse_scale, b.textured}];
+      if (!slot) {
+        try {
+          slot = std::make_unique<BenchmarkScene>(MakeBenchmarkScene(name, b, cache));
+        } catch (const std::exception& e) {
+          throw std::runtime_error("scene " + name + " (texture " +
+                                   std::to_string(b.texture_size) + ", coarse x" +
+                                   Fmt(b.coarse_scale) + "): " + e.what());
+        }
+      }
+      return *slot;
+    };
+    const BenchmarkScene& ref = scene_for({});
+    rep.tool_file = ref.tool_name + ".glb";
+    rep.object_file = ref.object_name + ".glb";
+    rep.tool_full = static_cast<std::int64_t>(ref.tool_mesh_Ft->triangles.size());
+    rep.object_full = static_cast<std::int64_t>(ref.object_mesh_Fe->triangles.size());
+    for (const auto& [file, mesh] : {std::pair{rep.tool_file, ref.tool_mesh_Ft},
+                                     std::pair{rep.object_file, ref.object_mesh_Fe}}) {
+      const std::string path = options.out_dir + "/meshes/" + file;
+      if (!std::filesystem::exists(path)) {
+        WriteGlb(path + ".partial", {{file.substr(0, file.size() - 4), *mesh, glm::dmat4(1.0), ""}});
+        std::filesystem::rename(path + ".partial", path);
+      }
+    }
+    rep.mesh_note = (name == "fig75" || name == "fig76")
+                        ? "procedural (haptic_core/procedural_models.h), the same code that makes "
+                          "the haptic models; also written by `slave_sim seed-models`"
+                        : "procedural seed analogues (haptic_core/seed_models.h), as written by "
+                          "`slave_sim seed-models`; the haptic models are decimated and baked "
+                          "from them through the model cache";
+    std::vector<RigidTransform> poses;
+    const auto trace = options.traces.find(name);
+    if (trace != options.traces.end()) {
+      poses = PosesFromTrace(trace->second, ref, pose_count);
+      rep.pose_source = "rows in contact of the run trace " + trace->second;
+    } else {
+      say("%s: finding %d in-contact poses on the full-resolution meshes", name.c_str(),
+          pose_count);
+      poses = ScriptedContactPoses(ref, pose_count);
+      rep.pose_source =
+          "scripted motion (ScriptedContactPoses): lowered until the full-resolution meshes touch, "
+          "then pressed 0.02-0.4 mm further";
+    }
+    if (poses.empty()) throw std::runtime_error("scene " + name + ": no in-contact pose found");
+    rep.poses = static_cast<int>(poses.size());
+    const RigidTransform X_WFe = ref.haptic.touchables.at(0).X_WO;
+    const MeshContactBaseline fcl(*ref.tool_mesh_Ft, *ref.object_mesh_Fe);
+    std::vector<bool> touching;
+    for (const RigidTransform& X : poses) touching.push_back(fcl.Intersects(X, X_WFe));
+    rep.touching = static_cast<int>(std::count(touching.begin(), touching.end(), true));
+
+    // Timed steps, one setting after the other, on this thread alone.
+    std::vector<GtJob> jobs;
+    std::map<std::string, int> job_index;
+    for (const FrontierSetting& st : settings) {
+      SettingRun run;
+      run.setting = st;
+      ++units_done;
+      if (st.coarse_scale != 1.0 && name == "fig76") {
+        run.skipped = "the striped blocks are boxes of 16 coarse triangles at every scale";
+      } else {
+        BenchmarkModelSettings b;
+        b.texture_size = st.texture_size;
+        b.coarse_scale = st.coarse_scale;
+        b.textured = st.method != FrontierMethod::kCoarseOnly;
+        const BenchmarkScene& scene = scene_for(b);
+        const auto t0 = Clock::now();
+        RunSetting(scene, poses, fcl, run);
+        for (ContactRecord& c : run.contacts) {
+          const std::string key = GtKey(c.pose, run.X_TFt, c.query.window, c.query.stiffness_n_per_m);
+          auto [it, fresh] = job_index.try_emplace(key, static_cast<int>(jobs.size()));
+          if (fresh) {
+            GtJob j;
+            j.X_WT = poses[c.pose] * run.X_TFt.Inverse();
+            j.X_TFt = run.X_TFt;
+            j.X_WFe = c.query.X_WE;
+            j.window = c.query.window;
+            j.stiffness = c.query.stiffness_n_per_m;
+            jobs.push_back(j);
+          }
+          c.gt = it->second;
+        }
+        say("%s: setting %d/%d done (%s, %.1f s)%s%s", name.c_str(), units_done, total_units,
+            st.name.c_str(), Seconds(t0), run.skipped.empty() ? "" : ": skipped: ",
+            run.skipped.c_str());
+      }
+      rep.runs.push_back(std::move(run));
+    }
+    // The ground truth of every distinct window, on all threads.
+    say("%s: ground truth of %zu windows on %d thread(s)", name.c_str(), jobs.size(),
+        options.threads);
+    const auto t_gt = Clock::now();
+    RunGroundTruth(ref, jobs, options);
+    rep.gt_seconds = Seconds(t_gt);
+    rep.gt_windows = jobs.size();
+    for (const GtJob& j : jobs) {
+      rep.gt_converged += j.result.base.converged;
+      if (std::isfinite(j.result.base.change_m)) {
+        rep.gt_change_max_m = std::max(rep.gt_change_max_m, j.result.base.change_m);
+      }
+      rep.gt_rays += j.result.rays;
+      rep.gt_m.push_back(j.result.base.samples_per_side);
+    }
+    // The default setting's ground truth per pose: the truth for the baselines.
+    std::vector<Wrench> reference_gt(poses.size());
+    for (const ContactRecord& c : rep.runs.front().contacts) {
+      reference_gt[c.pose] += jobs[c.gt].result.F_T_W;
+    }
+    for (SettingRun& run : rep.runs) {
+      if (!run.skipped.empty()) continue;
+      ComputeMetrics(run, jobs, reference_gt, touching);
+      const glm::dvec3 com_shift = run.X_TFt.Inverse().translation;
+      for (const ContactRecord& c : run.contacts) {
+        const GtJob& j = jobs[c.gt];
+        const ContactWindow& w = c.query.window;
+        cc << name << ',' << run.setting.name << ',' << c.pose << ',' << c.index << ','
+           << rep.tool_file << ',' << rep.object_file << ',';
+        WriteQuat(cc, poses[c.pose]);
+        cc << ',';
+        WriteQuat(cc, c.query.X_WE);
+        cc << ',' << w.center_W.x << ',' << w.center_W.y << ',' << w.center_W.z << ','
+           << w.normal_W.x << ',' << w.normal_W.y << ',' << w.normal_W.z << ',' << w.axis_u_W.x
+           << ',' << w.axis_u_W.y << ',' << w.axis_u_W.z << ',' << w.extent_m << ','
+           << w.resolution << ',' << c.query.stiffness_n_per_m << ',' << c.lin.depth_m << ','
+           << j.result.linearization.depth_m << ',';
+        WriteWrench(cc, PenaltyWrench(c.lin.depth_m, c.lin.gradient, c.lin.stiffness_n_per_m));
+        cc << ',';
+        WriteWrench(cc, j.result.F_T_W);
+        const glm::dvec3 com_W = poses[c.pose] * com_shift;
+        cc << ',' << com_W.x << ',' << com_W.y << ',' << com_W.z << ','
+           << j.result.base.samples_per_side << ',' << (j.result.base.converged ? 1 : 0) << '\n';
+      }
+    }
+    MarkPareto(rep.runs);
+    say("%s: done (%.0f s so far)", name.c_str(), Seconds(t_start));
+    reports.push_back(std::move(rep));
+  }
+  contacts_csv.Commit();
+
+  // frontier.csv
+  {
+    PartialFile f(options.out_dir + "/frontier.csv");
+    std::ostream& o = f.out();
+    o << "scene,setting,method,backend,renderer,grid,texture_size,coarse_scale,depth_bits,"
+         "tool_coarse_triangles,object_coarse_triangles,poses,contacts_mean,leaf_pairs_mean,"
+         "collision_p50_us,collision_p95_us,texture_p50_us,texture_p95_us,total_p50_us,"
+         "total_p95_us,force_rel_rms,force_rel_p50,torque_rel_rms,force_dir_p50_deg,force_dir_p95_deg,"
+         "delta_err_p50_um,delta_err_p95_um,windows,contacts_missed,contacts_invented,"
+         "poses_missed,poses_invented,pareto,skipped\n";
+    for (const SceneReport& rep : reports) {
+      for (const SettingRun& r : rep.runs) {
+        const FrontierSetting& s = r.setting;
+        const auto clean = [](std::string t) {
+          std::replace(t.begin(), t.end(), ',', ';');
+          std::replace(t.begin(), t.end(), '\n', ' ');
+          return t;
+        };
+        const Metrics& m = r.m;
+        std::vector<std::string> cells = {
+            rep.name, s.name, FrontierMethodName(s.method),
+            s.method == FrontierMethod::kFullResolutionFcl ? "cpu" : s.backend,
+            clean(r.renderer), std::to_string(s.grid), std::to_string(s.texture_size),
+            Fmt(s.coarse_scale), std::to_string(s.backend == "gpu" ? s.depth_bits : 32),
+            std::to_string(r.tool_coarse_triangles), std::to_string(r.object_coarse_triangles)};
+        if (r.skipped.empty()) {
+          for (const std::string& c :
+               {std::to_string(r.poses.size()), Fmt(m.contacts_mean), Fmt(m.leaf_pairs_mean),
+                Fmt(m.collision_p50), Fmt(m.collision_p95), Fmt(m.texture_p50),
+                Fmt(m.texture_p95), Fmt(m.total_p50), Fmt(m.total_p95), Fmt(m.force_rel_rms), Fmt(m.force_rel_p50),
+                Fmt(m.torque_rel_rms), Fmt(m.dir_p50_deg), Fmt(m.dir_p95_deg),
+                Fmt(m.delta_p50_um), Fmt(m.delta_p95_um), std::to_string(m.windows),
+                std::to_string(m.missed), std::to_string(m.invented),
+                std::to_string(m.poses_missed), std::to_string(m.poses_invented),
+                std::string(m.pareto ? "1" : "0"), std::string()}) {
+            cells.push_back(c);
+          }
+        } else {
+          cells.resize(cells.size() + 22);
+          cells.push_back(clean(r.skipped));
+        }
+        for (std::size_t i = 0; i < cells.size(); ++i) o << (i ? "," : "") << cells[i];
+        o << '\n';
+      }
+    }
+    f.Commit();
+  }
+
+  // frontier.png
+  std::string plot_note;
+  if (!options.plot_script.empty()) {
+    const std::string cmd = "/usr/bin/python3 '" + options.plot_script + "' '" + options.out_dir +
+                            "/frontier.csv' '" + options.out_dir + "/frontier.png'";
+    const int rc = std::system(cmd.c_str());
+    if (rc != 0) {
+      plot_note = "frontier.png was not written (`" + cmd + "` exited with " + std::to_string(rc) +
+                  "; it needs /usr/bin/python3 with matplotlib: apt-get install python3-matplotlib)";
+      say("%s", plot_note.c_str());
+    }
+  } else {
+    plot_note = "frontier.png was not written (no plot script given)";
+  }
+
+  // summary.md, last.
+  PartialFile sm(options.out_dir + "/summary.md");
+  std::ostream& s = sm.out();
+  s << "# Speed against error: the frontier\n\n";
+  s << "Command: `" << options.command_line << "`  \n";
+  s << "Machine: " << MachineLine() << "; total " << Fmt(Seconds(t_start), 3) << " s.  \n";
+  s << "Timed steps run one at a time on one thread; the ground truth afterwards on "
+    << options.threads << ".\n\n";
+  s << "Error is against the ground truth: the directional penetration depth of each window on the "
+       "**full-resolution** meshes (Embree ray casting with the method's facing and box rules), "
+       "its gradient by central differences at the method's sample poses (the 50×50 grid's step "
+       "table), Φ_gt = −k δ_gt ∇δ_gt summed over a pose's windows. Texture settings are compared "
+       "on their own windows (so the figures isolate what the texture and the grid lose); the two "
+       "baselines, which have no windows, against the default setting's. Force error is the "
+       "relative RMS √(Σ|F − F_gt|²/Σ|F_gt|²) over the poses; torque likewise; direction error "
+       "over poses where both forces are non-zero; δ error over windows where either δ is "
+       "positive. Missed / invented: windows where only the truth / only the method has δ > 0; "
+       "poses missed / invented: against FCL's intersection test on the full-resolution "
+       "meshes.\n\n";
+  if (!plot_note.empty()) s << plot_note << "\n\n";
+  for (const SceneReport& rep : reports) {
+    s << "## " << rep.name << "\n\n";
+    s << "- Meshes: `meshes/" << rep.tool_file << "` (tool, " << rep.tool_full
+      << " triangles) and `meshes/" << rep.object_file << "` (object, " << rep.object_full
+      << " triangles): " << rep.mesh_note << ".\n";
+    s << "- Poses: " << rep.poses << ", from " << rep.pose_source << "; " << rep.touching
+      << " of them intersect at full resolution (FCL).\n";
+    const int m50 = static_cast<int>(Percentile(std::vector<double>(rep.gt_m.begin(), rep.gt_m.end()), 0.5));
+    const int mmax = rep.gt_m.empty() ? 0 : *std::max_element(rep.gt_m.begin(), rep.gt_m.end());
+    s << "- Ground truth: " << rep.gt_windows << " distinct windows, " << rep.gt_converged
+      << " converged (δ changed by < " << Fmt(options.ground_truth.tolerance_m * 1e6, 3)
+      << " µm when M doubled); M×M samples with M from " << options.ground_truth.initial_samples
+      << " (p50 " << m50 << ", max " << mmax << ", cap " << options.ground_truth.max_samples
+      << "), each grid refined locally from its " << options.ground_truth.refine_seeds
+      << " best cells down to " << Fmt(options.ground_truth.refine_step_m * 1e9, 3)
+      << " nm; largest last change " << Fmt(rep.gt_change_max_m * 1e6, 3) << " µm; "
+      << rep.gt_rays << " rays in " << Fmt(rep.gt_seconds, 3) << " s.\n\n";
+    s << "| setting | method | backend | N | texture | coarse | contacts | step p50 / p95 (ms) | "
+         "collision p50 | texture p50 | force err (RMS; pose p50) | torque err | dir err p50 / p95 (°) | δ err "
+         "p50 / p95 (µm) | missed / invented | Pareto |\n";
+    s << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+    const SettingRun* fastest = nullptr;
+    const SettingRun* def = nullptr;
+    for (const SettingRun& r : rep.runs) {
+      const FrontierSetting& st = r.setting;
+      if (st.name == "default") def = &r;
+      s << "| " << st.name << " | " << FrontierMethodName(st.method) << " | "
+        << (st.backend == "gpu" ? "gpu " + std::to_string(st.depth_bits) + "-bit" : "cpu")
+        << " | " << st.grid << " | " << st.texture_size << " | ×" << Fmt(st.coarse_scale) << " | ";
+      if (!r.skipped.empty()) {
+        s << "skipped: " << r.skipped << " |||||||||\n";
+        continue;
+      }
+      const Metrics& m = r.m;
+      s << Fmt(m.contacts_mean, 3) << " | " << Fmt(m.total_p50 / 1e3, 3) << " / "
+        << Fmt(m.total_p95 / 1e3, 3) << " | " << Fmt(m.collision_p50 / 1e3, 3) << " | "
+        << Fmt(m.texture_p50 / 1e3, 3) << " | " << Fmt(100 * m.force_rel_rms, 3) << " %; "
+        << Fmt(100 * m.force_rel_p50, 3) << " % | "
+        << Fmt(100 * m.torque_rel_rms, 3) << " % | " << Fmt(m.dir_p50_deg, 3) << " / "
+        << Fmt(m.dir_p95_deg, 3) << " | " << Fmt(m.delta_p50_um, 3) << " / "
+        << Fmt(m.delta_p95_um, 3) << " | " << m.missed << " / " << m.invented << " (poses "
+        << m.poses_missed << " / " << m.poses_invented << ") | " << (m.pareto ? "yes" : "") << " |\n";
+      if (m.force_rel_rms <= 0.05 && (!fastest || m.total_p50 < fastest->m.total_p50)) fastest = &r;
+    }
+    s << "\n";
+    if (fastest) {
+      s << "Fastest setting with force error ≤ 5 %: **" << fastest->setting.name << "**, "
+        << Fmt(fastest->m.total_p50 / 1e3, 3) << " ms per step (p50), "
+        << Fmt(fastest->m.contacts_mean, 3) << " contacts per step, "
+        << Fmt(fastest->m.contacts_mean > 0 ? fastest->m.texture_p50 / 1e3 / fastest->m.contacts_mean
+                                            : 0.0,
+               3)
+        << " ms of texture stage per contact; seed (2004 GPU): about 2 ms per contact, "
+        << (rep.name == "fig77" ? "5-10 ms per frame (100-200 Hz) on this scene"
+                                : "about 2 ms per step (about 500 Hz) with one contact")
+        << ".\n";
+    } else {
+      s << "No setting reached a force error of 5 % or less on this scene.\n";
+    }
+    if (def && def->skipped.empty()) {
+      s << "The default setting (N = 50, 1024² textures, the seed's coarse counts, CPU) is "
+        << (def->m.pareto ? "on" : "not on") << " the Pareto frontier here: "
+        << Fmt(def->m.total_p50 / 1e3, 3) << " ms per step at " << Fmt(100 * def->m.force_rel_rms, 3)
+        << " % force error.\n";
+    }
+    s << "\n";
+  }
+  sm.Commit();
+  say("wrote %s/{frontier.csv,contacts.csv,summary.md%s,meshes/} in %.0f s",
+      options.out_dir.c_str(), plot_note.empty() ? ",frontier.png" : "", Seconds(t_start));
+}
+
+}  // namespace ht

@@ -1,0 +1,85 @@
+// speed_error_frontier: the remote step's speed against its error, measured against the
+// full-resolution ground truth on the seed's benchmark scenes (issue 14). See --help and the
+// README section "Speed against error".
+
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+
+#include "haptic_core/model_build/haptic_model_build.h"
+#include "slave_sim/benchmark_scenes.h"
+#include "slave_sim/frontier.h"
+
+#ifndef HT_PLOT_FRONTIER_SCRIPT
+#define HT_PLOT_FRONTIER_SCRIPT ""
+#endif
+
+int main(int argc, char** argv) {
+  CLI::App app{
+      "Speed against error of the remote step: every setting (grid N, texture size, coarse\n"
+      "triangle count, CPU or GPU, GPU depth bits) and two baselines (coarse meshes without\n"
+      "textures; full-resolution meshes through FCL) on in-contact poses of the seed's scenes,\n"
+      "timed, and compared with the ground truth computed on the full-resolution meshes.\n"
+      "Writes OUT/frontier.csv, OUT/contacts.csv, OUT/meshes/*.glb, OUT/frontier.png and\n"
+      "OUT/summary.md (last)."};
+  ht::FrontierOptions options;
+  std::vector<std::string> traces;
+  options.cache_dir = ht::HapticModelCache::DefaultDir();
+  bool no_gpu = false, quiet = false;
+  app.add_option("--out", options.out_dir, "output folder (created)")->required();
+  app.add_flag("--quick", options.quick,
+               "fig75 and fig76 only, 12 poses, 10 settings: a few minutes (what ctest runs)");
+  std::string scene_list;
+  for (const std::string& n : ht::BenchmarkSceneNames()) scene_list += " " + n;
+  app.add_option("--scene", options.scenes, "scenes to run (repeatable):" + scene_list);
+  app.add_option("--poses", options.poses, "in-contact poses per scene (default 200; 12 with --quick)")
+      ->check(CLI::Range(1, 100000));
+  app.add_option("--trace", traces,
+                 "SCENE=FILE: take that scene's poses from a run's trace.csv (rows in contact),\n"
+                 "e.g. fig75=out/fig75/trace.csv from deploy/run-loopback (repeatable)");
+  app.add_option("--cache-dir", options.cache_dir, "model cache folder")->capture_default_str();
+  app.add_flag("--no-gpu", no_gpu, "leave out the GPU settings");
+  app.add_option("--threads", options.threads, "threads for the ground truth")
+      ->check(CLI::Range(1, 256))
+      ->capture_default_str();
+  app.add_option("--gt-initial-samples", options.ground_truth.initial_samples,
+                 "ground truth: M of the first grid")
+      ->capture_default_str();
+  app.add_option("--gt-max-samples", options.ground_truth.max_samples,
+                 "ground truth: largest M tried")
+      ->capture_default_str();
+  app.add_option("--gt-tolerance-um", options.ground_truth.tolerance_m,
+                 "ground truth: converged when doubling M changes delta by less than this (µm)")
+      ->transform([](std::string v) { return std::to_string(std::stod(v) * 1e-6); });
+  app.add_flag("--quiet", quiet, "no progress lines");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int rc = app.exit(e);
+    return rc == 0 ? 0 : 2;
+  }
+  std::string command = "speed_error_frontier";
+  for (int i = 1; i < argc; ++i) command += std::string(" ") + argv[i];
+  try {
+    for (const std::string& t : traces) {
+      const auto eq = t.find('=');
+      if (eq == std::string::npos || eq == 0 || eq + 1 == t.size()) {
+        throw std::invalid_argument("--trace " + t + ": expected SCENE=FILE");
+      }
+      options.traces[t.substr(0, eq)] = t.substr(eq + 1);
+    }
+    options.gpu = !no_gpu;
+    options.progress = !quiet;
+    options.command_line = command;
+    options.plot_script = HT_PLOT_FRONTIER_SCRIPT;
+    if (!options.plot_script.empty() && !std::filesystem::exists(options.plot_script)) {
+      options.plot_script.clear();
+    }
+    ht::RunSpeedErrorFrontier(options);
+    return 0;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "speed_error_frontier: error: %s\n", e.what());
+    return 2;
+  }
+}
