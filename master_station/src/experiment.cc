@@ -1,6 +1,7 @@
 #include "master_station/experiment.h"
 
 #include <algorithm>
+#include <glm/gtc/quaternion.hpp>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -263,6 +264,109 @@ class ExploreExperiment final : public Experiment {
   std::vector<std::string> phases_;
 };
 
+// Seed Fig. 76: press the upper striped block into the lower one, then rotate it back and forth
+// about n (the device's z, the scene's up) while the hand keeps pressing.
+class Fig76Experiment final : public Experiment {
+ public:
+  explicit Fig76Experiment(const Fig76Params& p) : p_(p) {
+    if (!(p.duration_s > 0.0) || !std::isfinite(p.duration_s) || !(p.period_s > 0.0) ||
+        !(p.amplitude_rad > 0.0)) {
+      throw std::invalid_argument("fig76: duration, period and amplitude must be positive");
+    }
+    t_approach_ = std::min(1.0, 0.1 * p.duration_s);
+  }
+  const std::string& name() const noexcept override { return name_; }
+  double duration_s() const noexcept override { return p_.duration_s; }
+  const std::vector<std::string>& phase_names() const noexcept override { return phases_; }
+
+  HandTarget Target(double t) const noexcept override {
+    HandTarget out;
+    t = std::clamp(t, 0.0, p_.duration_s);
+    glm::dvec3& p = out.X_MH.translation;
+    if (t < t_approach_) {  // ease down from the start height to the pressing depth
+      const double s = t / t_approach_;
+      const double span = -p_.press_depth_m - p_.start_height_m;
+      p.z = p_.start_height_m + span * 0.5 * (1.0 - std::cos(std::numbers::pi * s));
+      out.V_MH_M.linear.z =
+          span * 0.5 * std::numbers::pi * std::sin(std::numbers::pi * s) / t_approach_;
+      out.phase = 0;
+      return out;
+    }
+    p.z = -p_.press_depth_m;
+    const double w = kTwoPi / p_.period_s;
+    const double theta = p_.amplitude_rad * std::sin(w * (t - t_approach_));
+    out.X_MH.rotation = glm::angleAxis(theta, glm::dvec3(0.0, 0.0, 1.0));
+    out.V_MH_M.angular.z = p_.amplitude_rad * w * std::cos(w * (t - t_approach_));
+    out.phase = 1;
+    return out;
+  }
+
+ private:
+  Fig76Params p_;
+  double t_approach_ = 0.0;
+  std::string name_ = "fig76";
+  std::vector<std::string> phases_ = {"approach", "rotate"};
+};
+
+// Seed Fig. 77: press the tool onto the part, then scrape along +x with a sway in y and a yaw.
+class Fig77Experiment final : public Experiment {
+ public:
+  explicit Fig77Experiment(const Fig77Params& p) : p_(p) {
+    if (!(p.duration_s > 0.0) || !std::isfinite(p.duration_s) || !(p.stroke_m > 0.0)) {
+      throw std::invalid_argument("fig77: duration and stroke must be positive");
+    }
+    t_approach_ = std::min(1.0, 0.1 * p.duration_s);
+  }
+  const std::string& name() const noexcept override { return name_; }
+  double duration_s() const noexcept override { return p_.duration_s; }
+  const std::vector<std::string>& phase_names() const noexcept override { return phases_; }
+
+  HandTarget Target(double t) const noexcept override {
+    HandTarget out;
+    t = std::clamp(t, 0.0, p_.duration_s);
+    glm::dvec3& p = out.X_MH.translation;
+    glm::dvec3& v = out.V_MH_M.linear;
+    if (t < t_approach_) {
+      const double s = t / t_approach_;
+      const double span = -p_.press_depth_m - p_.start_height_m;
+      p.z = p_.start_height_m + span * 0.5 * (1.0 - std::cos(std::numbers::pi * s));
+      v.z = span * 0.5 * std::numbers::pi * std::sin(std::numbers::pi * s) / t_approach_;
+      out.phase = 0;
+      return out;
+    }
+    const double T = p_.duration_s - t_approach_;
+    const double tau = (t - t_approach_) / T;  // 0 → 1 over the scrape
+    p.z = -p_.press_depth_m;
+    // x: eased from 0 to the stroke; y: two sways; yaw: three swings.
+    p.x = p_.stroke_m * 0.5 * (1.0 - std::cos(std::numbers::pi * tau));
+    v.x = p_.stroke_m * 0.5 * std::numbers::pi * std::sin(std::numbers::pi * tau) / T;
+    p.y = p_.sway_m * std::sin(kTwoPi * 2.0 * tau);
+    v.y = p_.sway_m * kTwoPi * 2.0 / T * std::cos(kTwoPi * 2.0 * tau);
+    const double yaw = p_.yaw_rad * std::sin(kTwoPi * 3.0 * tau);
+    out.X_MH.rotation = glm::angleAxis(yaw, glm::dvec3(0.0, 0.0, 1.0));
+    out.V_MH_M.angular.z = p_.yaw_rad * kTwoPi * 3.0 / T * std::cos(kTwoPi * 3.0 * tau);
+    out.phase = 1;
+    return out;
+  }
+
+ private:
+  Fig77Params p_;
+  double t_approach_ = 0.0;
+  std::string name_ = "fig77";
+  std::vector<std::string> phases_ = {"approach", "scrape"};
+};
+
+}  // namespace
+
+std::unique_ptr<Experiment> MakeFig76Experiment(const Fig76Params& params) {
+  return std::make_unique<Fig76Experiment>(params);
+}
+
+std::unique_ptr<Experiment> MakeFig77Experiment(const Fig77Params& params) {
+  return std::make_unique<Fig77Experiment>(params);
+}
+
+namespace {
 }  // namespace
 
 std::unique_ptr<Experiment> MakeExploreExperiment(const ExploreParams& params) {
@@ -284,7 +388,18 @@ std::unique_ptr<Experiment> MakeExperiment(const std::string& name, double durat
     p.duration_s = duration_s;
     return MakeExploreExperiment(p);
   }
-  throw std::invalid_argument("unknown experiment '" + name + "' (known: fig75, explore)");
+  if (name == "fig76") {
+    Fig76Params p;
+    p.duration_s = duration_s;
+    return MakeFig76Experiment(p);
+  }
+  if (name == "fig77") {
+    Fig77Params p;
+    p.duration_s = duration_s;
+    return MakeFig77Experiment(p);
+  }
+  throw std::invalid_argument("unknown experiment '" + name +
+                              "' (known: fig75, fig76, fig77, explore)");
 }
 
 }  // namespace ht

@@ -79,7 +79,10 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--experiment", experiment_name,
                  "scripted operator motion: fig75 (the seed's Fig. 75 on the built-in scene:\n"
-                 "press, slide along x, along y, lift and press) or explore (any scene: visit\n"
+                 "press, slide along x, along y, lift and press), fig76 (striped-blocks: press,\n"
+                 "then rotate back and forth about the scene's up; run it for 12 s), fig77\n"
+                 "(file-on-cad-part or hammer-on-torus: press, then scrape 6 cm along x with sway\n"
+                 "and yaw; 10 s), or explore (any scene: visit\n"
                  "the touchable objects the remote node lists, press on each under force control,\n"
                  "slide, release, move on)")
       ->capture_default_str();

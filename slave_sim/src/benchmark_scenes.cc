@@ -31,6 +31,21 @@ std::shared_ptr<const TriangleMesh> SeedMesh(SeedModel model) {
   return slot;
 }
 
+// The hammer turned head down (a half turn about x: (x, y, z) → (x, −y, −z)), so that its striking
+// face looks down at the identity pose: the operator's workspace is aligned with the tool's home
+// orientation, whose +z must be the scene's up.
+std::shared_ptr<const TriangleMesh> HammerHeadDown() {
+  static std::mutex mutex;
+  static std::shared_ptr<const TriangleMesh> mesh;
+  const std::lock_guard<std::mutex> lock(mutex);
+  if (!mesh) {
+    TriangleMesh m = *SeedMesh(SeedModel::kHammer);
+    for (glm::dvec3& p : m.vertices) p = {p.x, -p.y, -p.z};
+    mesh = std::make_shared<const TriangleMesh>(std::move(m));
+  }
+  return mesh;
+}
+
 // A copy of `model` without its texture: every face smooth, nothing reaching out of the coarse
 // surface.
 std::shared_ptr<const HapticModel> Untextured(const HapticModel& model) {
@@ -51,18 +66,57 @@ std::shared_ptr<const HapticModel> Finish(HapticModel model, bool textured) {
 std::shared_ptr<const HapticModel> SeedHapticModel(SeedModel model,
                                                    const BenchmarkModelSettings& settings,
                                                    const HapticModelCache& cache, bool centred,
-                                                   glm::dvec3* com_out) {
+                                                   glm::dvec3* com_out,
+                                                   std::shared_ptr<const TriangleMesh> mesh,
+                                                   const std::string& name) {
   HapticModelBuildParams params;
   params.coarse_triangles = std::max(
       4, static_cast<int>(std::lround(settings.coarse_scale *
                                       static_cast<double>(SeedModelSpecOf(model).seed_coarse_triangles))));
   params.texture.texture_size = settings.texture_size;
-  const HapticModelBuild build =
-      BuildHapticModelCached(SeedModelName(model), *SeedMesh(model), params, cache);
+  const HapticModelBuild build = BuildHapticModelCached(name, *mesh, params, cache);
   HapticModel m = *build.model;
   if (com_out != nullptr) *com_out = m.center_of_mass_O;
   if (centred) ShiftModelFrame(m, m.center_of_mass_O);
   return Finish(std::move(m), settings.textured);
+}
+
+}  // namespace
+
+namespace {
+
+// Lowest z of `mesh` posed with rotation R (translation zero), and highest z of the object mesh
+// at its pose.
+double LowestZ(const TriangleMesh& mesh, const glm::dquat& R) {
+  double z = std::numeric_limits<double>::infinity();
+  for (const glm::dvec3& p : mesh.vertices) z = std::min(z, (R * p).z);
+  return z;
+}
+double HighestZ(const TriangleMesh& mesh, const RigidTransform& X) {
+  double z = -std::numeric_limits<double>::infinity();
+  for (const glm::dvec3& p : mesh.vertices) z = std::max(z, (X * p).z);
+  return z;
+}
+
+// Height z of the tool mesh's frame (orientation R, position xy) at which its full-resolution
+// mesh first touches the object's when lowered along −z: bisection on FCL's intersection test to
+// 10 nm. NaN when nothing is under the tool within 3 cm below the object's top.
+double TouchHeight(const MeshContactBaseline& meshes, const BenchmarkScene& scene,
+                   const glm::dquat& R, const glm::dvec2& xy) {
+  const RigidTransform X_WFe = scene.haptic.touchables.at(0).X_WO;
+  const double top = HighestZ(*scene.object_mesh_Fe, X_WFe);
+  double hi = top - LowestZ(*scene.tool_mesh_Ft, R) + 1e-3;  // clear above the object
+  double lo = hi - 0.03;
+  RigidTransform X_WFt;
+  X_WFt.rotation = R;
+  X_WFt.translation = {xy.x, xy.y, lo};
+  if (!meshes.Intersects(X_WFt, X_WFe)) return std::numeric_limits<double>::quiet_NaN();
+  while (hi - lo > 1e-8) {
+    const double mid = 0.5 * (lo + hi);
+    X_WFt.translation.z = mid;
+    (meshes.Intersects(X_WFt, X_WFe) ? lo : hi) = mid;
+  }
+  return hi;
 }
 
 }  // namespace
@@ -114,8 +168,9 @@ BenchmarkScene MakeBenchmarkScene(const std::string& name, const BenchmarkModelS
       object.X_WO.rotation = glm::angleAxis(kPi, glm::dvec3(1.0, 0.0, 0.0));
       object.X_WO.translation = {0.0, 0.0, -block.half_extents_m.z};
       // Interlocked: the upper block's crests over the lower one's valleys (half a period in y).
+      // Home 0.5 mm above touching, as the block on the gear.
       scene.haptic.X_WT_home.translation = {0.0, 0.5 * block.ridges.period_m,
-                                            block.half_extents_m.z};
+                                            block.half_extents_m.z + 0.5e-3};
       scene.note = "both blocks: 16 coarse triangles at every coarse scale (boxes)";
     }
   } else if (name == "fig77" || name == "hammer_torus") {
@@ -123,39 +178,45 @@ BenchmarkScene MakeBenchmarkScene(const std::string& name, const BenchmarkModelS
     const SeedModel tool = file ? SeedModel::kFile : SeedModel::kHammer;
     const SeedModel env = file ? SeedModel::kCadPart : SeedModel::kTorus;
     glm::dvec3 com(0.0);
-    scene.haptic.tool = SeedHapticModel(tool, settings, cache, true, &com);
+    scene.tool_mesh_Ft = file ? SeedMesh(tool) : HammerHeadDown();
+    scene.tool_name = file ? SeedModelName(tool) : "hammer_head_down";
+    scene.haptic.tool =
+        SeedHapticModel(tool, settings, cache, true, &com, scene.tool_mesh_Ft, scene.tool_name);
     scene.X_TFt.translation = -com;
-    scene.tool_mesh_Ft = SeedMesh(tool);
-    scene.tool_name = SeedModelName(tool);
-    object.model = SeedHapticModel(env, settings, cache, false, nullptr);
+    object.model = SeedHapticModel(env, settings, cache, false, nullptr, SeedMesh(env),
+                                   SeedModelName(env));
     scene.object_mesh_Fe = SeedMesh(env);
     scene.object_name = SeedModelName(env);
-    scene.haptic.X_WT_home.translation = {0.0, 0.0, 0.05};
   } else {
     std::string known;
     for (const std::string& n : BenchmarkSceneNames()) known += (known.empty() ? "" : ", ") + n;
     throw std::invalid_argument("unknown benchmark scene '" + name + "' (known: " + known + ")");
   }
   scene.haptic.touchables.push_back(object);
+  if (name == "fig77" || name == "hammer_torus") {
+    // Home: where the scraping experiment starts, 1 mm above the first full-resolution touch.
+    // The file lies flat (teeth down) at x = −3 cm over the part; the hammer (its mesh head
+    // down), head along x, over the torus's tube at (−3 cm, R), where the tube runs along x. The
+    // home orientation is the identity: the operator's workspace is aligned with it.
+    const MeshContactBaseline meshes(*scene.tool_mesh_Ft, *scene.object_mesh_Fe);
+    RigidTransform X_WFt;
+    if (name == "hammer_torus") {
+      X_WFt.translation = {-0.03, WrinkledTorusParams{}.major_radius_m, 0.0};
+    } else {
+      X_WFt.translation = {-0.03, 0.0, 0.0};
+    }
+    const double touch = TouchHeight(meshes, scene, X_WFt.rotation,
+                                     {X_WFt.translation.x, X_WFt.translation.y});
+    if (std::isnan(touch)) throw std::logic_error(name + ": nothing under the tool's home");
+    X_WFt.translation.z = touch + 1e-3;
+    scene.haptic.X_WT_home = X_WFt * scene.X_TFt.Inverse();
+  }
   scene.tool_coarse_triangles = static_cast<std::int64_t>(scene.haptic.tool->triangles.size());
   scene.object_coarse_triangles = static_cast<std::int64_t>(object.model->triangles.size());
   return scene;
 }
 
 namespace {
-
-// Lowest z of `mesh` posed with rotation R (translation zero), and highest z of the object mesh
-// at its pose.
-double LowestZ(const TriangleMesh& mesh, const glm::dquat& R) {
-  double z = std::numeric_limits<double>::infinity();
-  for (const glm::dvec3& p : mesh.vertices) z = std::min(z, (R * p).z);
-  return z;
-}
-double HighestZ(const TriangleMesh& mesh, const RigidTransform& X) {
-  double z = -std::numeric_limits<double>::infinity();
-  for (const glm::dvec3& p : mesh.vertices) z = std::max(z, (X * p).z);
-  return z;
-}
 
 // One scripted pose before lowering: orientation, xy, and the extra depth once touching (m).
 struct PoseScript {
@@ -189,7 +250,7 @@ PoseScript ScriptAt(const std::string& scene, double s) {
     const double R = WrinkledTorusParams{}.major_radius_m;
     p.xy = {R * std::cos(phi), R * std::sin(phi)};
     p.rotation = rot(phi + 0.5 * kPi + deg(8.0) * std::sin(2 * kPi * 4 * s), Z) *
-                 rot(deg(3.0) * std::sin(2 * kPi * 3 * s), X) * rot(kPi, X);
+                 rot(deg(3.0) * std::sin(2 * kPi * 3 * s), X);  // the mesh is head down
     p.depth_m = 0.05e-3 + 0.35e-3 * wave;
   }
   return p;
@@ -200,25 +261,15 @@ PoseScript ScriptAt(const std::string& scene, double s) {
 std::vector<RigidTransform> ScriptedContactPoses(const BenchmarkScene& scene, int count) {
   std::vector<RigidTransform> poses;
   if (count <= 0) return poses;
-  const RigidTransform X_WFe = scene.haptic.touchables.at(0).X_WO;
   const MeshContactBaseline meshes(*scene.tool_mesh_Ft, *scene.object_mesh_Fe);
-  const double top = HighestZ(*scene.object_mesh_Fe, X_WFe);
   for (int i = 0; i < count; ++i) {
     const double s = (i + 0.5) / count;
     const PoseScript script = ScriptAt(scene.name, s);
+    const double touch = TouchHeight(meshes, scene, script.rotation, script.xy);
+    if (std::isnan(touch)) continue;  // nothing under the tool here
     RigidTransform X_WFt;
     X_WFt.rotation = script.rotation;
-    // Clear above the object's top, and deep enough that a touch is sure.
-    double hi = top - LowestZ(*scene.tool_mesh_Ft, script.rotation) + 1e-3;
-    double lo = hi - 0.03;
-    X_WFt.translation = {script.xy.x, script.xy.y, lo};
-    if (!meshes.Intersects(X_WFt, X_WFe)) continue;  // nothing under the tool here
-    while (hi - lo > 1e-8) {
-      const double mid = 0.5 * (lo + hi);
-      X_WFt.translation.z = mid;
-      (meshes.Intersects(X_WFt, X_WFe) ? lo : hi) = mid;
-    }
-    X_WFt.translation.z = hi - script.depth_m;
+    X_WFt.translation = {script.xy.x, script.xy.y, touch - script.depth_m};
     poses.push_back(X_WFt);
   }
   return poses;

@@ -10,12 +10,14 @@
 #include <exception>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 
 #include "codecs/draco_mesh_codec.h"
 #include "codecs/glb_writer.h"
 #include "haptic_core/haptic_scene.h"
 #include "haptic_core/seed_models.h"
+#include "slave_sim/benchmark_scenes.h"
 #include "slave_sim/remote_node.h"
 #include "slave_sim/scene_build.h"
 
@@ -42,8 +44,11 @@ int main(int argc, char** argv) {
   app.add_option("--listen", listen, "UDP address HOST:PORT to listen on (port 0 = any free)")
       ->capture_default_str();
   app.add_option("--scene", scene,
-                 "built-in scene: block-on-gear (seed Fig. 75) or stiff-wall (the same block on a\n"
-                 "flat wall five times stiffer, a stability hard case); or a scene file (.gltf,\n"
+                 "built-in scene: block-on-gear (seed Fig. 75), stiff-wall (the same block on a\n"
+                 "flat wall five times stiffer, a stability hard case), striped-blocks (two\n"
+                 "interlocked striped blocks, seed Fig. 76), file-on-cad-part (seed Fig. 77) or\n"
+                 "hammer-on-torus (seed Fig. 73; these two build the seed models through the\n"
+                 "cache, about a minute each when cold); or a scene file (.gltf,\n"
                  ".glb, or a scene description .json), built through the model cache (see\n"
                  "'slave_sim inspect'); its glTF animation 0, if any, plays in a loop")
       ->capture_default_str();
@@ -51,7 +56,8 @@ int main(int argc, char** argv) {
   app.add_option("--tool", scene_tool,
                  "with a scene file: the node (name or #index) that is the tool; default the\n"
                  "description's, else the built-in probe");
-  app.add_option("--cache-dir", scene_cache_dir, "with a scene file: the model cache folder")
+  app.add_option("--cache-dir", scene_cache_dir,
+                 "with a scene file or a seed-model scene: the model cache folder")
       ->capture_default_str();
   app.add_option("--grid", config.pipeline.grid_resolution,
                  "penetration-depth grid N (N x N cells per contact)")
@@ -74,7 +80,8 @@ int main(int argc, char** argv) {
   app.add_option("--max-rate", config.max_rate_hz, "cap on the step rate in Hz (0 = none)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
-  app.add_option("--out", out_dir, "directory for remote_summary.json");
+  app.add_option("--out", out_dir,
+                 "directory for remote_summary.json and remote_steps.csv (one row per step)");
   app.add_option("--port-file", port_file, "write the bound UDP port to this file");
   std::string key_file;
   int mtu = 1472;
@@ -221,14 +228,42 @@ int main(int argc, char** argv) {
     ht::HapticScene builtin_scene;
     std::unique_ptr<ht::BuiltScene> file_scene;
     std::vector<glm::dmat4> animation_scratch;
+    if (!out_dir.empty()) {
+      std::filesystem::create_directories(out_dir);
+      config.step_trace_path = out_dir + "/remote_steps.csv";
+    }
+    const std::map<std::string, std::string> benchmark_scenes = {
+        {"striped-blocks", "fig76"}, {"file-on-cad-part", "fig77"}, {"hammer-on-torus", "hammer_torus"}};
     if (scene == "block-on-gear" || scene == "stiff-wall") {
       builtin_scene = scene == "stiff-wall" ? ht::MakeStiffWallScene() : ht::MakeBlockOnGearScene();
       config.scene_objects = ht::BlockOnGearSceneObjects();
+    } else if (benchmark_scenes.count(scene) != 0) {
+      if (!quiet) std::printf("[slave] building scene %s (model cache: %s)\n", scene.c_str(),
+                              scene_cache_dir.empty() ? "none" : scene_cache_dir.c_str());
+      const ht::BenchmarkScene bench = ht::MakeBenchmarkScene(
+          benchmark_scenes.at(scene), {}, ht::HapticModelCache(scene_cache_dir));
+      builtin_scene = bench.haptic;
+      builtin_scene.name = scene;
+      // The full-resolution meshes, posed in W, streamed for display: tool 1, object 2.
+      const auto posed = [](const ht::TriangleMesh& mesh, const ht::RigidTransform& X_WF) {
+        ht::TriangleMesh m = mesh;
+        for (glm::dvec3& p : m.vertices) p = X_WF * p;
+        return ht::EncodeMeshDraco(m);
+      };
+      config.scene_objects.emplace_back(1, posed(*bench.tool_mesh_Ft,
+                                                 bench.haptic.X_WT_home * bench.X_TFt));
+      config.scene_objects.emplace_back(2, posed(*bench.object_mesh_Fe,
+                                                 bench.haptic.touchables.at(0).X_WO));
+      const ht::RigidTransform& home = bench.haptic.X_WT_home;
+      std::printf("[slave] scene %s: tool %s on %s; tool home position in W %.4f,%.4f,%.4f\n",
+                  scene.c_str(), bench.tool_name.c_str(), bench.object_name.c_str(),
+                  home.translation.x, home.translation.y, home.translation.z);
     } else {
       if (!std::filesystem::exists(scene)) {
         throw std::invalid_argument("--scene " + scene +
-                                    ": neither a built-in scene (block-on-gear, stiff-wall) nor "
-                                    "an existing file");
+                                    ": neither a built-in scene (block-on-gear, stiff-wall, "
+                                    "striped-blocks, file-on-cad-part, hammer-on-torus) nor an "
+                                    "existing file");
       }
       file_scene = std::make_unique<ht::BuiltScene>(ht::BuildScene(
           ht::LoadSceneInput(scene, scene_tool), ht::HapticModelCache(scene_cache_dir),

@@ -165,6 +165,13 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   std::uint64_t sessions = 0, goodbyes = 0, peers_lost = 0, hello_replayed = 0, rejects_sent = 0;
   std::uint64_t nacks_accepted = 0, nacks_ignored = 0;
   std::vector<double> step_us, collision_us, texture_us, contact_step_us;
+  struct StepRecord {
+    double t_s;
+    StepTimings timings;
+    int contacts;
+  };
+  std::vector<StepRecord> step_records;
+  if (!config.step_trace_path.empty()) step_records.reserve(1 << 20);
   contact_step_us.reserve(1 << 20);
   step_us.reserve(1 << 20);
   collision_us.reserve(1 << 20);
@@ -421,6 +428,10 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     }
     if (collision_us.size() < collision_us.capacity()) collision_us.push_back(timings.collision_us);
     if (texture_us.size() < texture_us.capacity()) texture_us.push_back(timings.texture_us);
+    if (step_records.size() < step_records.capacity()) {
+      step_records.push_back({static_cast<double>(t_step - start_ns) * 1e-9, timings,
+                              out.model.num_contacts});
+    }
     if (model_period_ns == 0 || last_step_ns - last_model_sent_ns >= model_period_ns) {
       out.tool_state_send_time_ns = latest_send_time_ns;
       out.remote_step_count = step_count;
@@ -459,6 +470,21 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
           wire::EncodeGoodbye(link.NextHeader(wire::MessageType::kGoodbye, session), config.key),
           peer);
     }
+  }
+  if (!config.step_trace_path.empty()) {
+    std::FILE* f = std::fopen(config.step_trace_path.c_str(), "w");
+    if (f == nullptr) throw std::runtime_error("cannot write " + config.step_trace_path);
+    std::fputs("step,t_s,leaf_pairs,clusters,contacts,broad_phase_culled,collision_us,texture_us,"
+               "total_us,budget_exhausted\n",
+               f);
+    for (std::size_t i = 0; i < step_records.size(); ++i) {
+      const StepRecord& r = step_records[i];
+      std::fprintf(f, "%zu,%.6f,%d,%d,%d,%d,%.2f,%.2f,%.2f,%d\n", i + 1, r.t_s,
+                   r.timings.leaf_pairs, r.timings.clusters, r.contacts,
+                   r.timings.broad_phase_culled, r.timings.collision_us, r.timings.texture_us,
+                   r.timings.total_us, r.timings.collision_budget_exhausted ? 1 : 0);
+    }
+    if (std::fclose(f) != 0) throw std::runtime_error("cannot write " + config.step_trace_path);
   }
   nlohmann::json s;
   s["scene"] = scene.name;

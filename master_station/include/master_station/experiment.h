@@ -93,6 +93,39 @@ struct Fig75Params {
 /// Builds the Fig. 75 experiment. Throws std::invalid_argument for a non-positive duration.
 std::unique_ptr<Experiment> MakeFig75Experiment(const Fig75Params& params = {});
 
+/// Seed Fig. 76 (roughness under rotation), for the striped-blocks scene: the upper block is
+/// pressed into the lower one (phase approach, the first 10 % or 1 s at most), then rotated back
+/// and forth about n (the device's z, the scene's up) while the hand keeps pressing: θ(t) =
+/// amplitude·sin(2π t/period) (phase rotate). Seed: 6,000 frames, about 12 s.
+struct Fig76Params {
+  double duration_s = 12.0;
+  double press_depth_m = 2e-3;   ///< Hand target below the contact (m).
+  double start_height_m = 2e-3;  ///< Hand height above the contact at t = 0 (m).
+  double amplitude_rad = 0.05;   ///< Rotation amplitude about n (rad, about 2.9°).
+  double period_s = 2.0;         ///< Period of the oscillation (s).
+};
+
+/// Builds the Fig. 76 experiment. Throws std::invalid_argument for a non-positive duration,
+/// period or amplitude.
+std::unique_ptr<Experiment> MakeFig76Experiment(const Fig76Params& params = {});
+
+/// Seed Fig. 77 (performance with complex contact), for the file-on-cad-part and hammer-on-torus
+/// scenes: the tool is pressed onto the object (phase approach, the first 10 % or 1 s at most),
+/// then scraped `stroke_m` along +x (eased), swaying ±`sway_m` in y twice and yawing
+/// ±`yaw_rad` three times (phase scrape), as benchmarks/fig77_scrape does offline.
+struct Fig77Params {
+  double duration_s = 10.0;
+  double press_depth_m = 2e-3;
+  double start_height_m = 1e-3;
+  double stroke_m = 0.06;
+  double sway_m = 0.01;
+  double yaw_rad = 0.0873;  ///< 5°
+};
+
+/// Builds the Fig. 77 experiment. Throws std::invalid_argument for a non-positive duration or
+/// stroke.
+std::unique_ptr<Experiment> MakeFig77Experiment(const Fig77Params& params = {});
+
 /// `explore`: lets any scene be felt without a script. The simulated operator visits the remote
 /// scene's touchable objects in turn (largest first, then round again at other spots of each):
 /// it lifts the tool above the scene, moves over the object, lowers it and presses with
@@ -119,7 +152,7 @@ struct ExploreParams {
 /// force, speed or phase time.
 std::unique_ptr<Experiment> MakeExploreExperiment(const ExploreParams& params = {});
 
-/// Builds an experiment by name ("fig75", "explore"). Throws std::invalid_argument listing the
+/// Builds an experiment by name ("fig75", "fig76", "fig77", "explore"). Throws std::invalid_argument listing the
 /// known names.
 std::unique_ptr<Experiment> MakeExperiment(const std::string& name, double duration_s);
 

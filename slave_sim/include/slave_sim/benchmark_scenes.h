@@ -6,7 +6,9 @@
 //   fig75         ridged block (tool) on the ridged gear (seed Figs. 72-b, 75)
 //   fig76         two identical striped blocks, interlocked; the upper one is the tool (Fig. 72-a, 76)
 //   fig77         the file (tool) scraping the rough CAD part (Figs. 74, 77)
-//   hammer_torus  the textured hammer (tool) touching the wrinkled helicoidal torus (Fig. 73)
+//   hammer_torus  the textured hammer (tool) touching the wrinkled helicoidal torus (Fig. 73); the
+//                 hammer mesh is turned head down (a half turn about x) so that the tool's home
+//                 orientation, which the operator's workspace is aligned with, is the identity
 
 #include <memory>
 #include <string>
@@ -33,7 +35,10 @@ struct BenchmarkModelSettings {
 struct BenchmarkScene {
   /// "fig75", "fig76", "fig77" or "hammer_torus".
   std::string name;
-  /// The haptic scene: tool (frame T at its centre of mass) and one touchable object.
+  /// The haptic scene: tool (frame T at its centre of mass) and one touchable object. Its
+  /// X_WT_home is where the seed's experiment starts: fig75 and fig76 0.5 mm above touching (the
+  /// fig76 blocks interlocked), fig77 and hammer_torus 1 mm above the first full-resolution touch
+  /// at x = −3 cm, identity orientation (the scene's up is +z).
   HapticScene haptic;
   /// Full-resolution meshes (frames Ft and Fe of the files written for them, metres) and names.
   std::shared_ptr<const TriangleMesh> tool_mesh_Ft, object_mesh_Fe;

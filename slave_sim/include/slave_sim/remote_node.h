@@ -54,6 +54,11 @@ struct RemoteNodeConfig {
   /// of the scene (e.g. AnimateScene() on a scene from a file); empty = a static scene. It runs on
   /// the stepping thread and must not throw.
   std::function<void(double elapsed_s)> animate;
+  /// Where to write one CSV row per remote step once the node stops ("" = don't): `step, t_s,
+  /// leaf_pairs, clusters, contacts, broad_phase_culled, collision_us, texture_us, total_us,
+  /// budget_exhausted` (the split of seed Fig. 77). The first 2^20 steps are kept, in memory
+  /// reserved at start, so the step loop never writes a file.
+  std::string step_trace_path;
 };
 
 /// The built-in scene's full-resolution meshes (ridged block = object 1, ridged gear = 2),
