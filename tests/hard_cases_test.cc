@@ -1,0 +1,399 @@
+// The hard cases of DESIGN.md §8 / docs/hard-cases.md, each a named test through the parts of the
+// product it touches (the remote step, the penetration depth, the contact model, the tool step,
+// the safety stage): every one gives finite, bounded forces and no crash, and the property each
+// case is about. Each prints one "[hard case]" line with what it gave (the docs table quotes them).
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <glm/gtc/quaternion.hpp>
+#include <limits>
+#include <memory>
+
+#include "haptic_core/contact_model.h"
+#include "haptic_core/haptic_scene.h"
+#include "haptic_core/penetration_depth.h"
+#include "haptic_core/procedural_models.h"
+#include "haptic_core/stability_map.h"
+#include "haptic_core/tool_simulation.h"
+#include "haptic_core/wrench_safety.h"
+
+namespace ht {
+namespace {
+
+constexpr double kK = 8000.0;  // N/m
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+bool Finite(const Wrench& F) {
+  return std::isfinite(F.force.x + F.force.y + F.force.z + F.torque.x + F.torque.y + F.torque.z);
+}
+
+// The largest force one contact can give on a window: k·δ·|J| with δ ≤ 2R = 2W (the box) and each
+// finite-difference slope ≤ 2W / h_x = 2N.
+double ForceBound(const ContactWindow& w, int contacts = 1) {
+  return contacts * kK * 2.0 * w.extent_m * std::sqrt(1.0 + 2.0 * std::pow(2.0 * w.resolution, 2));
+}
+
+std::shared_ptr<const HapticModel> FlatBox(glm::dvec3 half, double mass = 0.1) {
+  return std::make_shared<const HapticModel>(
+      MakeTexturedBox(half, [](double, double) { return 0.0; }, 16, mass, "flat_box"));
+}
+
+// A tool box (bottom face textured, frame at its centre) over a big flat object whose top is z = 0.
+HapticScene BoxOnSlab(std::shared_ptr<const HapticModel> tool) {
+  HapticScene s;
+  s.name = "box_on_slab";
+  s.tool = std::move(tool);
+  TouchableObject slab;
+  // MakeTexturedBox's textured face is its bottom: turned over, it is the top, at z = 0.
+  slab.model = FlatBox({0.06, 0.06, 0.01}, 2.0);
+  slab.X_WO.rotation = glm::angleAxis(M_PI, glm::dvec3(1, 0, 0));
+  slab.X_WO.translation = {0, 0, -0.01};
+  slab.stiffness_n_per_m = kK;
+  s.touchables.push_back(slab);
+  return s;
+}
+
+RigidTransform At(glm::dvec3 p, glm::dquat R = glm::dquat(1, 0, 0, 0)) {
+  RigidTransform X;
+  X.translation = p;
+  X.rotation = R;
+  return X;
+}
+
+ContactModel StepAt(const HapticScene& scene, const RigidTransform& X_WT,
+                    StepTimings* timings = nullptr) {
+  HapticTexturePipeline pipeline(scene, PipelineOptions{});
+  StepTimings t;
+  ContactModel m = pipeline.Step(X_WT, 1, t);
+  if (timings) *timings = t;
+  return m;
+}
+
+void Report(const char* name, const std::string& what) {
+  std::printf("[hard case] %s: %s\n", name, what.c_str());
+}
+
+std::string Fmt(const char* fmt, double a, double b = 0, double c = 0, double d = 0) {
+  char buf[256];
+  std::snprintf(buf, sizeof buf, fmt, a, b, c, d);
+  return buf;
+}
+
+TEST(HardCases, CoplanarRestingContact) {
+  // Every cell of the window has the same δ: many equal maxima.
+  const HapticScene scene = BoxOnSlab(FlatBox({0.02, 0.02, 0.01}));
+  const ContactModel m = StepAt(scene, At({0, 0, 0.01 - 0.1e-3}));
+  ASSERT_GE(m.num_contacts, 1);
+  const Wrench& F = m.F_T_W_at_q0;
+  ASSERT_TRUE(Finite(F));
+  EXPECT_NEAR(F.force.z, kK * 0.1e-3 * m.num_contacts, 1e-6);
+  EXPECT_NEAR(std::hypot(F.force.x, F.force.y), 0.0, 1e-9);
+  Report("coplanar resting contact",
+         Fmt("%.0f contact(s), F = (%.2g, %.2g, %.4f) N for δ = 0.1 mm: k·δ along n, no "
+             "tangential force",
+             static_cast<double>(m.num_contacts), F.force.x, F.force.y, F.force.z));
+}
+
+TEST(HardCases, GrazingContactDirection) {
+  // n 85° away from the faces' normal: the faces barely face the window (cos 85° = 0.087 > the
+  // 0.05 facing threshold) and heights along n vary by tan 85° per metre across the window.
+  const auto tool = FlatBox({0.02, 0.02, 0.01});
+  const auto object = FlatBox({0.06, 0.06, 0.01}, 2.0);
+  const RigidTransform X_WO = At({0, 0, -0.01}, glm::angleAxis(M_PI, glm::dvec3(1, 0, 0)));
+  TexturePenetrationSolver solver;
+  double worst = 0.0;
+  for (double deg : {80.0, 85.0, 87.0, 89.0}) {
+    const double a = deg * M_PI / 180.0;
+    const ContactWindow w =
+        ContactWindow::Make({0, 0, 0}, {std::sin(a), 0.0, std::cos(a)}, 0.02, 50);
+    const ContactLinearization lin =
+        solver.Linearize(*tool, At({0, 0, 0.01 - 0.2e-3}), *object, X_WO, w, kK);
+    const Wrench F = PenaltyWrench(lin.depth_m, lin.gradient, kK);
+    ASSERT_TRUE(Finite(F)) << deg;
+    EXPECT_LE(glm::length(F.force), ForceBound(w)) << deg;
+    worst = std::max(worst, glm::length(F.force));
+  }
+  Report("grazing contact direction",
+         Fmt("n at 80-89° from the face normal: finite; largest |F| %.3g N (bound k·2W·|J|max = "
+             "%.3g N): δ along a grazing n is large, the seed's 'not a height field' limit",
+             worst, ForceBound(ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 50))));
+}
+
+TEST(HardCases, ZeroAndNearZeroPenetration) {
+  const HapticScene scene = BoxOnSlab(FlatBox({0.02, 0.02, 0.01}));
+  const ContactModel touching = StepAt(scene, At({0, 0, 0.01}));
+  EXPECT_TRUE(Finite(touching.F_T_W_at_q0));
+  EXPECT_EQ(glm::length(touching.F_T_W_at_q0.force), 0.0);
+  const ContactModel barely = StepAt(scene, At({0, 0, 0.01 - 1e-9}));
+  EXPECT_TRUE(Finite(barely.F_T_W_at_q0));
+  EXPECT_LE(glm::length(barely.F_T_W_at_q0.force), kK * 2e-9 * std::max(1, barely.num_contacts));
+  // And the contact model switches the contact on and off continuously around δ = 0.
+  const ContactModelEvaluation out = EvaluateContactModel(barely, At({0, 0, 0.01 + 1e-6}));
+  EXPECT_EQ(out.active_contacts, 0);
+  Report("zero and near-zero penetration",
+         Fmt("δ = 0: F = 0 exactly; δ = 1 nm: |F| = %.2g N; 1 µm out: contact off", 
+             glm::length(barely.F_T_W_at_q0.force)));
+}
+
+TEST(HardCases, PenetrationDeeperThanTheTextureAmplitude) {
+  const HapticScene scene = MakeBlockOnGearScene();
+  const double amplitude = RidgedBlockParams{}.ridges.amplitude_m;  // 0.4 mm
+  double last_fz = 0.0;
+  std::string what;
+  for (double depth : {1e-3, 5e-3, 15e-3}) {
+    RigidTransform X = BlockOnGearHomePose();
+    X.translation.z -= 0.5e-3 + depth;
+    const ContactModel m = StepAt(scene, X);
+    ASSERT_GE(m.num_contacts, 1) << depth;
+    const Wrench& F = m.F_T_W_at_q0;
+    ASSERT_TRUE(Finite(F)) << depth;
+    EXPECT_GT(F.force.z, 0.0) << "pushes the tool out at " << depth;
+    EXPECT_LE(m.contacts[0].depth_m, 2.0 * 0.02 + 1e-9) << "δ saturates at 2R";
+    EXPECT_GE(F.force.z, last_fz) << "deeper never pushes less";
+    last_fz = F.force.z;
+    what += Fmt("%.0f mm (%.0f× A): δ %.2f mm, Fz %.1f N; ", depth * 1e3, depth / amplitude,
+                m.contacts[0].depth_m * 1e3, F.force.z);
+  }
+  Report("penetration deeper than the texture amplitude", what + "monotonic, finite");
+}
+
+TEST(HardCases, DeepestPointOnTheWindowBorder) {
+  // A tilted tool face: δ is largest on the window's edge.
+  const auto tool = FlatBox({0.03, 0.03, 0.005});
+  const auto object = FlatBox({0.06, 0.06, 0.01}, 2.0);
+  const RigidTransform X_WO = At({0, 0, -0.01}, glm::angleAxis(M_PI, glm::dvec3(1, 0, 0)));
+  const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 50);
+  TexturePenetrationSolver solver;
+  const double theta = 0.05;
+  const auto X_WT = At({0, 0, 0.005 + 0.1e-3}, glm::angleAxis(theta, glm::dvec3(0, 1, 0)));
+  const ContactLinearization lin = solver.Linearize(*tool, X_WT, *object, X_WO, w, kK);
+  const Wrench F = PenaltyWrench(lin.depth_m, lin.gradient, kK);
+  ASSERT_TRUE(Finite(F));
+  EXPECT_GT(lin.depth_m, 0.0);
+  // The deepest cell is in the border column; the slope along u is the face's tilt.
+  EXPECT_NEAR(std::abs(lin.point_W.x), 0.5 * w.extent_m - 0.5 * w.cell_size_m(), 1e-9);
+  EXPECT_NEAR(std::abs(lin.gradient.d_translation_W.x), std::tan(theta), 2e-3);
+  Report("deepest point on the window border",
+         Fmt("deepest cell at x = %.4f m (border column), ∂δ/∂x = %.4f (tan θ = %.4f), |F| = %.3f "
+             "N; the truth at the border itself is half a cell deeper",
+             lin.point_W.x, lin.gradient.d_translation_W.x, std::tan(theta),
+             glm::length(F.force)));
+}
+
+TEST(HardCases, InterlockingRidges) {
+  // Two ridged blocks interlocked (seed Fig. 76), the upper one turned about n: the torque about
+  // n opposes the turn.
+  HapticScene scene;
+  scene.tool = std::make_shared<const HapticModel>(MakeRidgedBlock());
+  TouchableObject lower;
+  lower.model = std::make_shared<const HapticModel>(MakeRidgedBlock());
+  lower.X_WO = At({0, 0, -0.01}, glm::angleAxis(M_PI, glm::dvec3(1, 0, 0)));
+  lower.stiffness_n_per_m = kK;
+  scene.touchables.push_back(lower);
+  std::string what;
+  for (double deg : {-2.0, 2.0}) {
+    const double a = deg * M_PI / 180.0;
+    const ContactModel m =
+        StepAt(scene, At({0, 1.5e-3, 0.01 + 0.1e-3}, glm::angleAxis(a, glm::dvec3(0, 0, 1))));
+    ASSERT_GE(m.num_contacts, 1);
+    ASSERT_TRUE(Finite(m.F_T_W_at_q0));
+    EXPECT_LT(m.F_T_W_at_q0.torque.z * a, 0.0) << deg << "°: the torque about n opposes the turn";
+    EXPECT_GT(m.F_T_W_at_q0.force.z, 0.0);
+    what += Fmt("%+.0f°: τz %+.2e N·m, Fz %.2f N; ", deg, m.F_T_W_at_q0.torque.z,
+                m.F_T_W_at_q0.force.z);
+  }
+  Report("interlocking ridges", what + "torque opposes the rotation");
+}
+
+// Largest tangential/normal force ratio over 8 shifts across a period of interlocked saw teeth
+// of slope `slope` and period `period` on both faces, each pressed until δ = 0.1 mm.
+double SawToothRatio(double slope, double period) {
+  const double amplitude = slope * period / 2.0;
+  const auto saw = [=](double, double y) {
+    const double s = std::fmod(std::fmod(y, period) + period, period) / period;  // 0..1
+    return amplitude * (s < 0.5 ? 2.0 * s : 2.0 - 2.0 * s) - 0.5 * amplitude;
+  };
+  const HapticModel tool = MakeTexturedBox({0.02, 0.02, 0.01}, saw, 1024, 0.1, "saw");
+  const HapticModel object = MakeTexturedBox({0.03, 0.03, 0.01}, saw, 1024, 1.0, "saw_slab");
+  const RigidTransform X_WO = At({0, 0, -0.01}, glm::angleAxis(M_PI, glm::dvec3(1, 0, 0)));
+  const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 50);
+  TexturePenetrationSolver solver;
+  double worst = 0.0;
+  for (int i = 0; i < 8; ++i) {
+    const double y = (i + 0.5) * period / 8.0;
+    double lo = 0.01 - 2.0 * amplitude, hi = 0.01 + 2.0 * amplitude;  // z of the tool's centre
+    for (int it = 0; it < 40; ++it) {
+      const double mid = 0.5 * (lo + hi);
+      (solver.Depth(tool, At({0, y, mid}), object, X_WO, w).depth_m > 0.1e-3 ? lo : hi) = mid;
+    }
+    const ContactLinearization lin = solver.Linearize(tool, At({0, y, hi}), object, X_WO, w, kK);
+    const Wrench F = PenaltyWrench(lin.depth_m, lin.gradient, kK);
+    EXPECT_TRUE(Finite(F)) << y;
+    EXPECT_GT(F.force.z, 0.0) << y;
+    if (F.force.z > 0.0) worst = std::max(worst, std::hypot(F.force.x, F.force.y) / F.force.z);
+  }
+  return worst;
+}
+
+TEST(HardCases, TextureSlopesAbove60Degrees) {
+  // Teeth of slope tan 70° = 2.75, interlocked: where the grid resolves them (4 mm period, ten
+  // cells) the flanks push the tool sideways with a tangential/normal ratio up to the slope and no
+  // more; where it does not (0.8 mm, two cells) the mip level the grid's cell selects has
+  // averaged them away (seed §19.6.2): a bounded, smaller force, not aliasing.
+  const double slope = std::tan(70.0 * M_PI / 180.0);
+  const double resolved = SawToothRatio(slope, 4e-3);
+  const double filtered = SawToothRatio(slope, 0.8e-3);
+  EXPECT_LE(resolved, 1.2 * slope);
+  EXPECT_GT(resolved, 0.3 * slope) << "the flanks should push sideways";
+  EXPECT_LE(filtered, resolved);
+  Report("texture slopes above 60°",
+         Fmt("interlocked teeth of slope %.2f (70°) at δ = 0.1 mm: tangential/normal up to %.2f "
+             "with a 4 mm period; %.2f with 0.8 mm (two cells: the mip level averages the teeth "
+             "away); finite",
+             slope, resolved, filtered));
+}
+
+TEST(HardCases, DegenerateAndSliverCoarseTriangles) {
+  HapticModel m = MakeTexturedBox({0.02, 0.02, 0.01}, [](double, double) { return 0.0; }, 16, 0.1,
+                                  "box_with_slivers");
+  // A zero-area triangle (three collinear points on the bottom) and a 1e-9 m sliver, both facing
+  // down like the bottom face, with the bottom's corner normals and uvs.
+  const int base = static_cast<int>(m.vertices_O.size());
+  m.vertices_O.push_back({-0.01, 0.0, -0.01});
+  m.vertices_O.push_back({0.0, 0.0, -0.01});
+  m.vertices_O.push_back({0.01, 0.0, -0.01});
+  m.vertices_O.push_back({0.0, 1e-9, -0.01});
+  for (glm::ivec3 t : {glm::ivec3(base, base + 2, base + 1), glm::ivec3(base, base + 3, base + 2)}) {
+    m.triangles.push_back(t);
+    for (int c = 0; c < 3; ++c) {
+      m.corner_normals_O.push_back({0, 0, -1});
+      m.corner_uvs.push_back({0.5f, 0.5f});
+    }
+    m.textured.push_back(0);
+    m.texel_size_m.push_back(1e-4);
+  }
+  const auto tool = std::make_shared<const HapticModel>(m);
+  const HapticScene with = BoxOnSlab(tool);
+  const HapticScene without = BoxOnSlab(FlatBox({0.02, 0.02, 0.01}));
+  const RigidTransform X = At({0, 0, 0.01 - 0.1e-3});
+  const ContactModel a = StepAt(with, X), b = StepAt(without, X);
+  ASSERT_TRUE(Finite(a.F_T_W_at_q0));
+  EXPECT_NEAR(a.F_T_W_at_q0.force.z, b.F_T_W_at_q0.force.z, 1e-9);
+  Report("degenerate and sliver coarse triangles",
+         Fmt("a zero-area and a 1 nm sliver triangle on the pressed face: Fz %.4f N, the same as "
+             "without them (%.4f N)",
+             a.F_T_W_at_q0.force.z, b.F_T_W_at_q0.force.z));
+}
+
+TEST(HardCases, ContactDirectionFlippingBetweenFrames) {
+  // Models whose n flips every tick (a thin wall seen from both sides): the tool step and the
+  // safety stage keep the force finite, within the device's limits and its rate limit.
+  ContactModel up, down;
+  up.num_contacts = down.num_contacts = 1;
+  up.contacts[0].depth_m = down.contacts[0].depth_m = 1e-3;
+  up.contacts[0].stiffness_n_per_m = down.contacts[0].stiffness_n_per_m = kK;
+  up.contacts[0].gradient.d_translation_W = {0, 0, -1};
+  down.contacts[0].gradient.d_translation_W = {0, 0, 1};
+  const ToolSimulator sim(BlockOnGearToolInertia(), VirtualCoupling{});
+  const SafetyLimits limits;
+  WrenchSafetyFilter safety(limits);
+  ToolState s;
+  const double h = 1e-3;
+  double max_f = 0.0, max_step = 0.0;
+  glm::dvec3 last(0.0);
+  for (int i = 0; i < 2000; ++i) {
+    const bool odd = i % 2;
+    const ToolStepResult r =
+        sim.StepBlended(s, RigidTransform{}, Twist{}, odd ? up : down, odd ? down : up, 0.25, h);
+    ASSERT_TRUE(r.ok);
+    std::uint32_t flags = 0;
+    const Wrench out = safety.Filter(-r.F_coupling_T_W, Twist{}, 0.001, true, h, flags);
+    ASSERT_TRUE(Finite(out));
+    max_f = std::max(max_f, glm::length(out.force));
+    if (i > 0) max_step = std::max(max_step, glm::length(out.force - last));
+    last = out.force;
+  }
+  EXPECT_LE(max_f, limits.max_force_n + 1e-9);
+  EXPECT_LE(max_step, limits.max_force_rate_n_per_s * h + 1e-9);
+  Report("contact direction flipping between frames",
+         Fmt("n flipping every tick for 2 s: device |F| ≤ %.3f N, step ≤ %.3f N per tick (limits "
+             "%.0f N, %.0f N/s)",
+             max_f, max_step, limits.max_force_n, limits.max_force_rate_n_per_s));
+}
+
+TEST(HardCases, VeryStiffContactOnALightTool) {
+  StabilityProbe p;
+  p.stiffness_n_per_m = 1e6;
+  p.mass_kg = 0.01;
+  p.rate_hz = 1000.0;
+  const StabilityResult imp = ProbeStability(p, ToolIntegrator::kImplicitEuler);
+  const StabilityResult exp = ProbeStability(p, ToolIntegrator::kExplicitEuler);
+  EXPECT_TRUE(imp.stable);
+  EXPECT_FALSE(exp.stable);
+  Report("very stiff contact on a light tool",
+         Fmt("k = 1e6 N/m, m = 10 g, 1 kHz (h·ω = %.1f): implicit stable (late amplitude %.2g m), "
+             "explicit diverges; the whole map: build/benchmarks/stability_map",
+             imp.h_omega, imp.late_amplitude_m));
+}
+
+TEST(HardCases, StaleModelAfterADelaySpike) {
+  // A model linearized 5 cm from where the tool now is (a 500 ms delay spike): the linear model
+  // extrapolates a huge δ; the safety stage clamps it and fades it out once the model is stale.
+  ContactModel m;
+  m.num_contacts = 1;
+  m.contacts[0].depth_m = 0.2e-3;
+  m.contacts[0].stiffness_n_per_m = kK;
+  m.contacts[0].gradient.d_translation_W = {0, 0, -1};
+  const ContactModelEvaluation e = EvaluateContactModel(m, At({0, 0, -0.05}));
+  ASSERT_TRUE(Finite(e.F_T_W));
+  const SafetyLimits limits;
+  WrenchSafetyFilter safety(limits);
+  std::uint32_t flags = 0;
+  Wrench out;
+  double first = -1.0;
+  for (int i = 0; i < 400; ++i) {
+    out = safety.Filter(e.F_T_W, Twist{}, 0.5, true, 1e-3, flags);
+    ASSERT_TRUE(Finite(out));
+    EXPECT_LE(glm::length(out.force), limits.max_force_n + 1e-9);
+    if (i == 0) first = glm::length(out.force);
+  }
+  EXPECT_EQ(glm::length(out.force), 0.0);
+  Report("stale model after a delay spike",
+         Fmt("model 5 cm off: Φ = %.0f N extrapolated; device gets %.3f N on the first tick "
+             "(rate limit), never above %.0f N, and 0 once older than the model timeout",
+             glm::length(e.F_T_W.force), first, limits.max_force_n));
+}
+
+TEST(HardCases, NonFinitePosesFromTheNetwork) {
+  const HapticScene scene = MakeBlockOnGearScene();
+  RigidTransform bad = BlockOnGearHomePose();
+  bad.translation.x = kNaN;
+  const ContactModel m = StepAt(scene, bad);
+  EXPECT_EQ(m.num_contacts, 0);
+  RigidTransform inf = BlockOnGearHomePose();
+  inf.rotation.w = std::numeric_limits<double>::infinity();
+  EXPECT_EQ(StepAt(scene, inf).num_contacts, 0);
+  ContactModel one;
+  one.num_contacts = 1;
+  one.contacts[0].depth_m = 1e-3;
+  one.contacts[0].stiffness_n_per_m = kK;
+  one.contacts[0].gradient.d_translation_W = {0, 0, -1};
+  EXPECT_TRUE(Finite(EvaluateContactModel(one, bad).F_T_W));
+  const ToolSimulator sim(BlockOnGearToolInertia(), VirtualCoupling{});
+  ToolState s;
+  const ToolStepResult r = sim.Step(s, bad, Twist{}, one, 1.0, 1e-3);
+  EXPECT_FALSE(r.ok);
+  EXPECT_TRUE(IsFiniteRigidTransform(s.X_WT));
+  WrenchSafetyFilter safety{SafetyLimits{}};
+  std::uint32_t flags = 0;
+  const Wrench out = safety.Filter(Wrench{{kNaN, 0, 0}, {}}, Twist{}, 0.001, true, 1e-3, flags);
+  EXPECT_TRUE(Finite(out));
+  Report("NaN or infinite poses from the network",
+         "remote step: empty model; contact model: finite (zero) wrench; tool step: holds the "
+         "tool, ok = false; safety: non-finite wrench becomes zero");
+}
+
+}  // namespace
+}  // namespace ht
