@@ -14,6 +14,20 @@ namespace {
 
 constexpr double kTwoPi = 2.0 * std::numbers::pi;
 
+// The approach of the press experiments (fig75, fig76, fig77): the hand eases down along M's z
+// from `start_height_m` above the contact to `press_depth_m` below it over [0, t_approach_s),
+// with zero speed at both ends. Phase 0.
+HandTarget ApproachTarget(double t, double t_approach_s, double start_height_m,
+                          double press_depth_m) noexcept {
+  HandTarget out;
+  const double s = t / t_approach_s;
+  const double span = -press_depth_m - start_height_m;
+  out.X_MH.translation.z = start_height_m + span * 0.5 * (1.0 - std::cos(std::numbers::pi * s));
+  out.V_MH_M.linear.z = span * 0.5 * std::numbers::pi * std::sin(std::numbers::pi * s) / t_approach_s;
+  out.phase = 0;
+  return out;
+}
+
 class Fig75Experiment final : public Experiment {
  public:
   explicit Fig75Experiment(const Fig75Params& p) : p_(p) {
@@ -32,13 +46,8 @@ class Fig75Experiment final : public Experiment {
     t = std::clamp(t, 0.0, p_.duration_s);
     glm::dvec3& p = out.X_MH.translation;
     glm::dvec3& v = out.V_MH_M.linear;
-    if (t < t_approach_) {  // ease down from start height to the pressing depth
-      const double s = t / t_approach_;
-      const double span = -p_.press_depth_m - p_.start_height_m;
-      p.z = p_.start_height_m + span * 0.5 * (1.0 - std::cos(std::numbers::pi * s));
-      v.z = span * 0.5 * std::numbers::pi * std::sin(std::numbers::pi * s) / t_approach_;
-      out.phase = 0;
-      return out;
+    if (t < t_approach_) {
+      return ApproachTarget(t, t_approach_, p_.start_height_m, p_.press_depth_m);
     }
     p.z = -p_.press_depth_m;
     double tau = (t - t_approach_) / t_phase_;
@@ -283,14 +292,8 @@ class Fig76Experiment final : public Experiment {
     HandTarget out;
     t = std::clamp(t, 0.0, p_.duration_s);
     glm::dvec3& p = out.X_MH.translation;
-    if (t < t_approach_) {  // ease down from the start height to the pressing depth
-      const double s = t / t_approach_;
-      const double span = -p_.press_depth_m - p_.start_height_m;
-      p.z = p_.start_height_m + span * 0.5 * (1.0 - std::cos(std::numbers::pi * s));
-      out.V_MH_M.linear.z =
-          span * 0.5 * std::numbers::pi * std::sin(std::numbers::pi * s) / t_approach_;
-      out.phase = 0;
-      return out;
+    if (t < t_approach_) {
+      return ApproachTarget(t, t_approach_, p_.start_height_m, p_.press_depth_m);
     }
     p.z = -p_.press_depth_m;
     const double w = kTwoPi / p_.period_s;
@@ -327,12 +330,7 @@ class Fig77Experiment final : public Experiment {
     glm::dvec3& p = out.X_MH.translation;
     glm::dvec3& v = out.V_MH_M.linear;
     if (t < t_approach_) {
-      const double s = t / t_approach_;
-      const double span = -p_.press_depth_m - p_.start_height_m;
-      p.z = p_.start_height_m + span * 0.5 * (1.0 - std::cos(std::numbers::pi * s));
-      v.z = span * 0.5 * std::numbers::pi * std::sin(std::numbers::pi * s) / t_approach_;
-      out.phase = 0;
-      return out;
+      return ApproachTarget(t, t_approach_, p_.start_height_m, p_.press_depth_m);
     }
     const double T = p_.duration_s - t_approach_;
     const double tau = (t - t_approach_) / T;  // 0 → 1 over the scrape
