@@ -4,6 +4,7 @@
 // dir.
 
 #include "codecs/gltf_scene.h"
+#include "codecs/json_nesting.h"
 
 #include <gtest/gtest.h>
 
@@ -931,6 +932,44 @@ TEST_F(GltfSceneMadeFiles, AbsurdCountIsRefusedWithoutAllocating) {
 }
 
 TEST_F(GltfSceneMadeFiles, MissingFileIsRefused) { ExpectLoadError(dir_ / "absent.gltf"); }
+
+// A few hundred kilobytes of nested arrays used to overflow the stack of the JSON parsers (issue
+// 16): refused by depth before any parser runs, in .gltf and in a .glb's JSON chunk.
+TEST_F(GltfSceneMadeFiles, DeeplyNestedJsonIsRefusedNotACrash) {
+  const std::string nest = std::string(150000, '[') + std::string(150000, ']');
+  const std::string text = R"({"asset": {"version": "2.0"}, "extras": )" + nest + "}";
+  const fs::path gltf = dir_ / "deep.gltf";
+  std::ofstream(gltf, std::ios::binary) << text;
+  try {
+    LoadGltfScene(gltf.string());
+    ADD_FAILURE() << "accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("nests 150001 levels deep"), std::string::npos)
+        << e.what();
+    EXPECT_EQ(std::string(e.what()).rfind(gltf.string(), 0), 0u) << e.what();
+  }
+  // The same JSON as the JSON chunk of a GLB.
+  std::string chunk = text;
+  while (chunk.size() % 4 != 0) chunk.push_back(' ');
+  std::vector<std::uint8_t> glb;
+  const auto u32 = [&](std::uint32_t v) {
+    for (int i = 0; i < 4; ++i) glb.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
+  };
+  u32(0x46546C67);  // "glTF"
+  u32(2);
+  u32(static_cast<std::uint32_t>(12 + 8 + chunk.size()));
+  u32(static_cast<std::uint32_t>(chunk.size()));
+  u32(0x4E4F534A);  // "JSON"
+  glb.insert(glb.end(), chunk.begin(), chunk.end());
+  const fs::path glb_path = dir_ / "deep.glb";
+  std::ofstream(glb_path, std::ios::binary)
+      .write(reinterpret_cast<const char*>(glb.data()), static_cast<std::streamsize>(glb.size()));
+  ExpectLoadError(glb_path);
+  // Shallow nesting inside strings does not count; escapes are honoured.
+  EXPECT_EQ(JsonNestingDepth(R"({"a": "[[[[\"[[[", "b": [{}]})"), 3u);
+  EXPECT_EQ(JsonNestingDepth("]]]][[}{"), 2u);
+  EXPECT_EQ(JsonNestingDepth(""), 0u);
+}
 
 // ---- Animations in files made here.
 

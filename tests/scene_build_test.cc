@@ -255,6 +255,17 @@ TEST_F(SceneBuildTest, BadDescriptionsAreRefusedNamingTheFileAndTheKey) {
       {R"({"nodes": {}})", "no \"scene\""},
       {R"({"scene": "s.glb",)", "not valid JSON"},
   };
+  // Deeply nested JSON: refused before the (recursive) parser sees it, not a stack overflow.
+  const std::string deep_text = R"({"scene": "s.glb", "x": )" + std::string(200000, '[') +
+                                std::string(200000, ']') + "}";
+  const std::string deep = Write("deep.json", deep_text);
+  try {
+    LoadSceneInput(deep);
+    ADD_FAILURE() << "accepted a 200,000-deep description";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("nests 200001 levels deep"), std::string::npos)
+        << e.what();
+  }
   for (const auto& c : cases) {
     const std::string path = Write("bad.json", c.text);
     try {

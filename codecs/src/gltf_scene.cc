@@ -34,6 +34,7 @@
 #include <vector>
 
 #include "codecs/gltf_scene.h"
+#include "codecs/json_nesting.h"
 
 namespace ht {
 namespace {
@@ -216,6 +217,11 @@ tinygltf::Model ParseWithTinyGltf(const std::string& path,
     json_text.assign(reinterpret_cast<const char*>(bytes.data()), bytes.size());
   }
 
+  // Both parsers recurse per nesting level: a deep file must not reach them (stack overflow).
+  if (const std::size_t depth = JsonNestingDepth(json_text); depth > kMaxJsonNesting) {
+    throw LoadError("the JSON nests " + std::to_string(depth) + " levels deep (at most " +
+                    std::to_string(kMaxJsonNesting) + " are accepted)");
+  }
   nlohmann::json doc = nlohmann::json::parse(json_text, nullptr, /*allow_exceptions=*/false);
   if (doc.is_discarded()) throw LoadError("the JSON does not parse");
   *draco = ExtractDraco(doc);

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <glm/glm.hpp>
 #include <glm/gtc/quaternion.hpp>
 #include <limits>
@@ -12,6 +13,7 @@
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 
+#include "codecs/json_nesting.h"
 #include "haptic_core/procedural_models.h"
 
 namespace ht {
@@ -118,11 +120,23 @@ SceneDescription SceneDescription::ForGltf(const std::string& gltf_path) {
 }
 
 SceneDescription SceneDescription::LoadFile(const std::string& path) {
-  std::ifstream in(path);
+  std::ifstream in(path, std::ios::binary);
   if (!in) throw std::runtime_error(path + ": cannot open the scene description");
+  constexpr std::uintmax_t kMaxDescriptionBytes = 16u << 20;  // a description is a few hundred bytes
+  std::error_code size_error;
+  if (std::filesystem::file_size(path, size_error) > kMaxDescriptionBytes && !size_error) {
+    throw std::runtime_error(path + ": a scene description larger than 16 MiB is refused");
+  }
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  // The parser recurses per nesting level: a deep file must not reach it (stack overflow).
+  if (const std::size_t depth = JsonNestingDepth(text); depth > kMaxJsonNesting) {
+    throw std::runtime_error(path + ": the JSON nests " + std::to_string(depth) +
+                             " levels deep (at most " + std::to_string(kMaxJsonNesting) +
+                             " are accepted)");
+  }
   nlohmann::ordered_json j;  // keeps the file's key order
   try {
-    j = nlohmann::ordered_json::parse(in);
+    j = nlohmann::ordered_json::parse(text);
   } catch (const nlohmann::json::exception& e) {
     throw std::runtime_error(path + ": not valid JSON: " + e.what());
   }
