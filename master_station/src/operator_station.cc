@@ -22,6 +22,7 @@
 #include "haptic_core/passivity.h"
 #include "haptic_core/statistics.h"
 #include "haptic_core/wrench_safety.h"
+#include "master_station/operator_tick.h"
 #include "master_station/lock_free.h"
 #include "transport/link.h"
 #include "transport/messages.h"
@@ -666,25 +667,32 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   std::atomic<std::int64_t> ticks_done{0};
   std::atomic<int> progress_contacts{0}, progress_phase{0};
   std::atomic<double> progress_force{0.0}, progress_age_ms{-1.0};
-  std::int64_t nonfinite = 0, device_faults = 0, overruns = 0;
-  // The added damping is capped (4 x the device's rated damping: the controller acts for single
-  // ticks, well inside what a 1 kHz device renders); energy it cannot dissipate in one tick stays
-  // in the observer (E < 0) and is dissipated on the next ones.
-  PassivityController passivity(1e-4, 4.0 * caps.max_damping_ns_per_m);
+  std::int64_t overruns = 0, device_write_faults = 0;
   SafetyLimits safety_limits = config.safety;
   // The device's own limits bound the configured ones (a device without force output gets a
   // vanishing limit: it renders nothing).
   safety_limits.max_force_n = std::max(1e-9, std::min(safety_limits.max_force_n, caps.max_force_n));
   safety_limits.max_torque_nm =
       std::max(1e-9, std::min(safety_limits.max_torque_nm, caps.max_torque_nm));
-  WrenchSafetyFilter safety(safety_limits);
+  OperatorTickConfig tick_config;
+  tick_config.inertia = tool_inertia;
+  tick_config.coupling = config.coupling;
+  tick_config.safety = safety_limits;
+  tick_config.model_blend_ticks = config.model_blend_ticks;
+  tick_config.passivity = config.passivity;
+  // The added damping is capped (4 x the device's rated damping: the controller acts for single
+  // ticks, well inside what a 1 kHz device renders); energy it cannot dissipate in one tick stays
+  // in the observer (E < 0) and is dissipated on the next ones.
+  tick_config.passivity_max_damping_ns_per_m = 4.0 * caps.max_damping_ns_per_m;
+  tick_config.h_s = h;
+  OperatorTick tick(tick_config, X_WM, tool);
+  const PassivityController& passivity = tick.passivity();
+  const WrenchSafetyFilter& safety = tick.safety();
   int contacts_max = 0;
   double force_max = 0.0;
   std::vector<double> model_age_samples(static_cast<size_t>(ticks), -1.0);
   std::string realtime_note = "SCHED_FIFO priority 80";
 
-  glm::dvec3 workspace_shift_M{0.0};
-  std::int64_t workspace_jumps = 0, models_from_before_jump = 0;
   std::thread loop_thread([&] {
     sched_param sp{};
     sp.sched_priority = 80;
@@ -692,17 +700,8 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
       realtime_note = "not permitted (run as root or grant CAP_SYS_NICE / rtprio); normal priority";
     }
     IncomingModel received{};
-    std::int64_t model_built_ns = 0;
-    ContactModel previous_model{};
-    int blend_tick = config.model_blend_ticks;
-    ContactModel model{};
-    std::int64_t model_tool_time_ns = 0;
-    bool have_model = false;
-    float remote_collision = 0, remote_texture = 0, remote_step = 0;
-    const glm::dquat R_MW = glm::conjugate(X_WM.rotation);
+    ArrivedModel arrived{};
     std::int64_t experiment_t0 = -1;
-    glm::dvec3 jumped_from_W{0.0};  // the tool's position before the last jump
-    bool after_jump = false;        // no model from the new place yet
     std::int64_t next = NowNs() + period_ns;
     std::int64_t previous = next - period_ns;
     const std::int64_t t0 = next;
@@ -714,99 +713,43 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
       TraceRow row;
       row.t_s = (now - t0) * 1e-9;
 
-      DeviceState ds;
-      Wrench F_device_W;
-      if (!device.ReadState(now, ds)) {
-        ++device_faults;
-        device.WriteWrench({}, now);
-      } else {
-        if (caps.scripted) {
-          // A scripted "go to" (HandTarget::workspace_shift_M), on the device's own clock (time 0
-          // at its first reading, this tick's `now`): the workspace and the tool jump together,
-          // in free space, and the contact models of the old place are dropped.
-          if (experiment_t0 < 0) experiment_t0 = now;
-          const glm::dvec3 shift =
-              experiment.Target((now - experiment_t0) * 1e-9).workspace_shift_M;
-          if (shift != workspace_shift_M) {
-            const glm::dvec3 jump_W = X_WM.rotation * (shift - workspace_shift_M);
-            jumped_from_W = tool.X_WT.translation;
-            after_jump = true;
-            X_WM.translation += jump_W;
-            tool.X_WT.translation += jump_W;
-            workspace_shift_M = shift;
-            model = ContactModel{};
-            previous_model = ContactModel{};
-            blend_tick = config.model_blend_ticks;
-            ++workspace_jumps;
-          }
-        }
-        const RigidTransform X_WH = X_WM * ds.X_MH;
-        const Twist V_WH_W{X_WM.rotation * ds.V_MH_M.linear, X_WM.rotation * ds.V_MH_M.angular};
-        bool new_model = incoming.Read(received);
-        if (new_model && after_jump) {
-          // Models in flight were linearized at the old place (nearer to it than to the tool
-          // now): meaningless here. The first from the new place ends the wait.
-          const glm::dvec3& p0_W = received.message.model.X_WT0.translation;
-          if (glm::length(p0_W - jumped_from_W) < glm::length(p0_W - tool.X_WT.translation)) {
-            ++models_from_before_jump;
-            new_model = false;
-          } else {
-            after_jump = false;
-          }
-        }
-        if (new_model) {
-          previous_model = model;  // blended out over the next model_blend_ticks ticks
-          blend_tick = 0;
-          model = received.message.model;
-          model_tool_time_ns = received.message.tool_state_send_time_ns;
-          model_built_ns = received.built_local_ns;
-          remote_collision = received.message.collision_us;
-          remote_texture = received.message.texture_us;
-          remote_step = received.message.step_us;
-          have_model = true;
-        }
-        ToolStepResult step;
-        if (blend_tick < config.model_blend_ticks) {
-          ++blend_tick;
-          step =
-              simulator.StepBlended(tool, X_WH, V_WH_W, model, previous_model,
-                                    static_cast<double>(blend_tick) / config.model_blend_ticks, h);
-        } else {
-          step = simulator.Step(tool, X_WH, V_WH_W, model, 1.0, h);
-        }
-        if (!step.ok) ++nonfinite;
-        F_device_W = -step.F_coupling_T_W;
-        if (!IsFinite(F_device_W)) {
-          ++nonfinite;
-          F_device_W = {};
-        }
-        // Passivity (energy the delayed model created is dissipated), then the safety stage, then
-        // the observer records what the device really gets.
-        if (config.passivity) F_device_W = passivity.Apply(F_device_W, V_WH_W, h);
-        const double model_age_s = have_model ? (now - model_built_ns) * 1e-9 : -1.0;
-        std::uint32_t actions = 0;
-        F_device_W = safety.Filter(F_device_W, V_WH_W, model_age_s,
-                                   counters.connected.load(std::memory_order_relaxed), h, actions);
-        passivity.Commit(F_device_W, V_WH_W, h);
-        const Wrench F_H_M{R_MW * F_device_W.force, R_MW * F_device_W.torque};
-        if (!device.WriteWrench(F_H_M, now)) ++device_faults;
-
+      OperatorTickInput in;
+      in.now_ns = now;
+      in.device_ok = device.ReadState(now, in.device);
+      in.link_connected = counters.connected.load(std::memory_order_relaxed);
+      if (in.device_ok && caps.scripted) {
+        // A scripted "go to" (HandTarget::workspace_shift_M), on the device's own clock (time 0
+        // at its first reading, this tick's `now`).
+        if (experiment_t0 < 0) experiment_t0 = now;
+        in.workspace_shift_M = experiment.Target((now - experiment_t0) * 1e-9).workspace_shift_M;
+      }
+      if (incoming.Read(received)) {
+        arrived.model = received.message.model;
+        arrived.tool_state_sent_ns = received.message.tool_state_send_time_ns;
+        arrived.built_local_ns = received.built_local_ns;
+        arrived.collision_us = received.message.collision_us;
+        arrived.texture_us = received.message.texture_us;
+        arrived.step_us = received.message.step_us;
+        in.arrived = &arrived;
+      }
+      const OperatorTickOutput out = tick.Step(in);
+      if (!device.WriteWrench(out.F_H_M, now)) ++device_write_faults;
+      if (in.device_ok) {
         ++tool_seq;
-        outgoing.Write({{tool.X_WT, tool.V_WT_W}, now, tool_seq});
-
-        row.X_WT = tool.X_WT;
+        outgoing.Write({{tick.tool().X_WT, tick.tool().V_WT_W}, now, tool_seq});
+        const ToolStepResult& step = out.step;
+        row.X_WT = tick.tool().X_WT;
         row.F_contact_T_W = step.F_contact_T_W;
         row.contacts = step.active_contacts;
         row.depth_m = step.max_depth_m;
-        row.p_WH = X_WH.translation;
-        row.F_device_W = F_device_W;
-        if (have_model) row.model_age_ms = (now - model_tool_time_ns) * 1e-6;
-        row.remote_collision_us = remote_collision;
-        row.remote_texture_us = remote_texture;
-        row.remote_step_us = remote_step;
+        row.p_WH = out.X_WH.translation;
+        row.F_device_W = out.F_device_W;
+        row.model_age_ms = out.model_age_ms;
+        row.remote_collision_us = tick.last_arrived().collision_us;
+        row.remote_texture_us = tick.last_arrived().texture_us;
+        row.remote_step_us = tick.last_arrived().step_us;
         contacts_max = std::max(contacts_max, step.active_contacts);
         force_max = std::max(force_max, glm::length(step.F_contact_T_W.force));
-        if (!IsFinite(step.F_contact_T_W) || !IsFiniteRigidTransform(tool.X_WT)) ++nonfinite;
       }
       // The phase the simulated hand was following, when the device is scripted.
       row.phase = experiment.Target(row.t_s).phase;
@@ -874,8 +817,8 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
         X_WM_start.rotation.z}},
       {"from_remote", config.workspace_from_remote},
       {"targets", targets_M.size()},
-      {"jumps", workspace_jumps},
-      {"models_dropped_from_before_a_jump", models_from_before_jump},
+      {"jumps", tick.counters().workspace_jumps},
+      {"models_dropped_from_before_a_jump", tick.counters().models_from_before_jump},
       {"targets_M",
        [&] {
          nlohmann::json list = nlohmann::json::array();
@@ -886,7 +829,8 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
          }
          return list;
        }()},
-      {"shift_M", {workspace_shift_M.x, workspace_shift_M.y, workspace_shift_M.z}}};
+      {"shift_M",
+       {tick.workspace_shift_M().x, tick.workspace_shift_M().y, tick.workspace_shift_M().z}}};
   s["tool_mass_kg"] = tool_inertia.mass_kg;
   s["device"] = caps.name;
   s["duration_s"] = experiment.duration_s();
@@ -932,8 +876,10 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
                  {"max_force_n", safety_limits.max_force_n},
                  {"max_torque_nm", safety_limits.max_torque_nm},
                  {"model_timeout_s", safety_limits.model_timeout_s}};
-  s["nonfinite_count"] = nonfinite;
-  s["device_faults"] = device_faults;
+  s["nonfinite_count"] = tick.counters().nonfinite;
+  s["device_faults"] = tick.counters().device_faults + device_write_faults;
+  s["device_read_faults"] = tick.counters().device_faults;
+  s["device_write_faults"] = device_write_faults;
   s["trace_rows_dropped"] = rows_dropped.load();
   s["transport"] = network.Summary();
   s["clock_offset_ms"] = s["transport"]["clock"]["offset_ms"];

@@ -1,0 +1,122 @@
+#pragma once
+// The operator's haptic tick as one unit (issue 16): the device state in, the device wrench out,
+// with no thread, socket or clock of its own, so that tests run it tick by tick. Stages, in
+// order (DESIGN.md §5):
+//   1. the contact model in use: a newly arrived one is blended in over a few ticks; after a
+//      scripted workspace jump, models linearized nearer the old place than the tool are dropped;
+//   2. virtual coupling and the implicit (linearized backward-Euler) tool step against it;
+//   3. passivity: the time-domain passivity controller (Ryu, Kwon & Hannaford 2004);
+//   4. safety: non-finite → zero, fade when stale or the link is lost, brake, clamp, rate limit.
+// Every tick's wrench passes the safety stage, a failed device read included: the device then
+// gets the safety stage's ramp to zero, and a later recovery ramps back up instead of jumping.
+
+#include <cstdint>
+
+#include "haptic_core/contact_model.h"
+#include "haptic_core/passivity.h"
+#include "haptic_core/tool_simulation.h"
+#include "haptic_core/wrench_safety.h"
+#include "master_station/haptic_device.h"
+
+namespace ht {
+
+/// What the tick is built with (validated by the station before).
+struct OperatorTickConfig {
+  ToolInertia inertia;
+  VirtualCoupling coupling;
+  /// The device's and the configuration's limits, already combined.
+  SafetyLimits safety;
+  /// Ticks over which a newly arrived contact model is blended in (≥ 1).
+  int model_blend_ticks = 4;
+  /// Run the passivity controller (else the observer only watches).
+  bool passivity = true;
+  /// Cap on the damping the passivity controller adds (N·s/m; 0 = none).
+  double passivity_max_damping_ns_per_m = 0.0;
+  /// Tick length h (s).
+  double h_s = 1e-3;
+};
+
+/// A contact model the network delivered since the last tick.
+struct ArrivedModel {
+  ContactModel model;
+  /// Local steady-clock times (ns): when the tool state it answers was sent, and when the remote
+  /// node sent the model (mapped onto the local clock).
+  std::int64_t tool_state_sent_ns = 0;
+  std::int64_t built_local_ns = 0;
+  /// The remote step's split (µs), for the trace.
+  float collision_us = 0.0f, texture_us = 0.0f, step_us = 0.0f;
+};
+
+/// One tick's inputs.
+struct OperatorTickInput {
+  std::int64_t now_ns = 0;  ///< steady clock (ns)
+  /// False when the device read failed: the tool is held and the device gets the safety stage's
+  /// ramp to zero.
+  bool device_ok = true;
+  DeviceState device;                   ///< X_MH, V_MH_M when device_ok
+  const ArrivedModel* arrived = nullptr;  ///< a new model, or null
+  bool link_connected = true;
+  /// A scripted "go to" (HandTarget::workspace_shift_M, m in M): when it differs from the
+  /// last one the workspace and the tool jump together by the difference.
+  glm::dvec3 workspace_shift_M{0.0};
+};
+
+/// One tick's outputs.
+struct OperatorTickOutput {
+  Wrench F_H_M;       ///< To command to the device: on the handle, in M (N, N·m).
+  Wrench F_device_W;  ///< The same in W.
+  ToolStepResult step;  ///< The tool step (default when the device read failed).
+  RigidTransform X_WH;  ///< Handle pose in W this tick (the last good one after a fault).
+  double model_age_ms = -1.0;  ///< Age of the tool pose the model in use answers; −1 = none.
+  std::uint32_t safety_actions = 0;
+};
+
+/// Counters of the tick's faults and events.
+struct OperatorTickCounters {
+  std::int64_t device_faults = 0;       ///< failed device reads
+  std::int64_t nonfinite = 0;           ///< non-finite steps, wrenches or tool poses
+  std::int64_t workspace_jumps = 0;
+  std::int64_t models_from_before_jump = 0;
+  std::int64_t models_used = 0;
+};
+
+/// The operator's tick. Construction may allocate; Step never allocates, locks, blocks or throws.
+class OperatorTick {
+ public:
+  /// The workspace starts at X_WM and the tool at `tool_start`. Throws std::invalid_argument for
+  /// bad inertia, coupling or safety limits, or model_blend_ticks < 1.
+  OperatorTick(const OperatorTickConfig& config, const RigidTransform& X_WM,
+               const ToolState& tool_start);
+
+  /// Runs the stages above once.
+  OperatorTickOutput Step(const OperatorTickInput& in) noexcept;
+
+  const ToolState& tool() const noexcept { return tool_; }
+  const RigidTransform& X_WM() const noexcept { return X_WM_; }
+  /// The scripted workspace shift in effect (m, in M at the start).
+  const glm::dvec3& workspace_shift_M() const noexcept { return workspace_shift_M_; }
+  const OperatorTickCounters& counters() const noexcept { return counters_; }
+  const PassivityController& passivity() const noexcept { return passivity_; }
+  const WrenchSafetyFilter& safety() const noexcept { return safety_; }
+  /// The remote step split of the model in use (µs).
+  const ArrivedModel& last_arrived() const noexcept { return last_arrived_; }
+
+ private:
+  OperatorTickConfig config_;
+  ToolSimulator simulator_;
+  PassivityController passivity_;
+  WrenchSafetyFilter safety_;
+  RigidTransform X_WM_;
+  ToolState tool_;
+  RigidTransform X_WH_last_;
+  ContactModel model_{}, previous_model_{};
+  int blend_tick_;
+  bool have_model_ = false;
+  ArrivedModel last_arrived_{};
+  glm::dvec3 workspace_shift_M_{0.0};
+  glm::dvec3 jumped_from_W_{0.0};
+  bool after_jump_ = false;
+  OperatorTickCounters counters_;
+};
+
+}  // namespace ht

@@ -1,0 +1,114 @@
+#include "master_station/operator_tick.h"
+
+#include <stdexcept>
+#include <string>
+
+namespace ht {
+
+OperatorTick::OperatorTick(const OperatorTickConfig& config, const RigidTransform& X_WM,
+                           const ToolState& tool_start)
+    : config_(config),
+      simulator_(config.inertia, config.coupling),
+      passivity_(1e-4, config.passivity_max_damping_ns_per_m),
+      safety_(config.safety),
+      X_WM_(X_WM),
+      tool_(tool_start),
+      X_WH_last_(tool_start.X_WT),
+      blend_tick_(config.model_blend_ticks) {
+  if (config.model_blend_ticks < 1) {
+    throw std::invalid_argument("model blend ticks must be >= 1, got " +
+                                std::to_string(config.model_blend_ticks));
+  }
+  if (!(config.h_s > 0.0)) throw std::invalid_argument("tick length must be positive");
+}
+
+OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
+  OperatorTickOutput out;
+  const double h = config_.h_s;
+
+  // Stage 1: the contact model in use. A model that arrives is taken even while the device read
+  // fails (newest wins), unless it comes from before a workspace jump.
+  if (in.arrived != nullptr) {
+    bool take = true;
+    if (after_jump_) {
+      // Models in flight were linearized at the old place (nearer to it than to the tool now):
+      // meaningless here. The first from the new place ends the wait.
+      const glm::dvec3& p0_W = in.arrived->model.X_WT0.translation;
+      if (glm::length(p0_W - jumped_from_W_) < glm::length(p0_W - tool_.X_WT.translation)) {
+        ++counters_.models_from_before_jump;
+        take = false;
+      } else {
+        after_jump_ = false;
+      }
+    }
+    if (take) {
+      previous_model_ = model_;  // blended out over the next model_blend_ticks ticks
+      blend_tick_ = 0;
+      model_ = in.arrived->model;
+      last_arrived_ = *in.arrived;
+      have_model_ = true;
+      ++counters_.models_used;
+    }
+  }
+  if (have_model_) out.model_age_ms = (in.now_ns - last_arrived_.tool_state_sent_ns) * 1e-6;
+  const double model_age_s = have_model_ ? (in.now_ns - last_arrived_.built_local_ns) * 1e-9 : -1.0;
+
+  Wrench F_device_W;
+  Twist V_WH_W;
+  if (!in.device_ok) {
+    // The device read failed: hold the tool, observe no motion, and let the safety stage ramp
+    // the last force down (and back up once the device answers again).
+    ++counters_.device_faults;
+    out.X_WH = X_WH_last_;
+  } else {
+    // A scripted "go to": the workspace and the tool jump together, in free space, and the
+    // contact models of the old place are dropped.
+    if (in.workspace_shift_M != workspace_shift_M_) {
+      const glm::dvec3 jump_W = X_WM_.rotation * (in.workspace_shift_M - workspace_shift_M_);
+      jumped_from_W_ = tool_.X_WT.translation;
+      after_jump_ = true;
+      X_WM_.translation += jump_W;
+      tool_.X_WT.translation += jump_W;
+      workspace_shift_M_ = in.workspace_shift_M;
+      model_ = ContactModel{};
+      previous_model_ = ContactModel{};
+      blend_tick_ = config_.model_blend_ticks;
+      ++counters_.workspace_jumps;
+    }
+    out.X_WH = X_WM_ * in.device.X_MH;
+    X_WH_last_ = out.X_WH;
+    V_WH_W = {X_WM_.rotation * in.device.V_MH_M.linear, X_WM_.rotation * in.device.V_MH_M.angular};
+
+    // Stage 2: coupling and the implicit step against the (blended) model.
+    if (blend_tick_ < config_.model_blend_ticks) {
+      ++blend_tick_;
+      out.step = simulator_.StepBlended(tool_, out.X_WH, V_WH_W, model_, previous_model_,
+                                        static_cast<double>(blend_tick_) /
+                                            config_.model_blend_ticks,
+                                        h);
+    } else {
+      out.step = simulator_.Step(tool_, out.X_WH, V_WH_W, model_, 1.0, h);
+    }
+    if (!out.step.ok) ++counters_.nonfinite;
+    F_device_W = -out.step.F_coupling_T_W;
+    if (!IsFinite(F_device_W)) {
+      ++counters_.nonfinite;
+      F_device_W = {};
+    }
+    if (!IsFinite(out.step.F_contact_T_W) || !IsFiniteRigidTransform(tool_.X_WT)) {
+      ++counters_.nonfinite;
+    }
+    // Stage 3: passivity (energy a delayed model created is dissipated).
+    if (config_.passivity) F_device_W = passivity_.Apply(F_device_W, V_WH_W, h);
+  }
+  // Stage 4: safety, on every tick. Then the observer records what the device really gets.
+  F_device_W = safety_.Filter(F_device_W, V_WH_W, model_age_s, in.link_connected, h,
+                              out.safety_actions);
+  passivity_.Commit(F_device_W, V_WH_W, h);
+  out.F_device_W = F_device_W;
+  const glm::dquat R_MW = glm::conjugate(X_WM_.rotation);
+  out.F_H_M = {R_MW * F_device_W.force, R_MW * F_device_W.torque};
+  return out;
+}
+
+}  // namespace ht

@@ -1,0 +1,193 @@
+// The operator's tick as a unit (master_station/operator_tick.h), run tick by tick without
+// threads or sockets: a failed device read ramps the force down through the safety stage and the
+// recovery ramps it back up (it used to jump); a new model blends in; a scripted jump drops the
+// models of the old place; non-finite device readings give zero; and a tick never allocates.
+
+#include "master_station/operator_tick.h"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cstdlib>
+#include <new>
+
+// Counts every allocation of this test program (the tick must make none).
+static std::atomic<long> g_allocations{0};
+void* operator new(std::size_t n) {
+  g_allocations.fetch_add(1, std::memory_order_relaxed);
+  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+
+namespace ht {
+namespace {
+
+constexpr double kH = 1e-3;
+
+OperatorTickConfig Config() {
+  OperatorTickConfig c;
+  c.inertia = BlockOnGearToolInertia();
+  c.h_s = kH;
+  c.passivity_max_damping_ns_per_m = 4.0 * 5.0;
+  return c;
+}
+
+// A wall under the tool along +z: δ = 2 mm at the origin, so the coupling (1,000 N/m) pressing
+// the handle 2 mm into it gives a few newtons.
+ArrivedModel Wall(std::int64_t now_ns) {
+  ArrivedModel a;
+  a.model.num_contacts = 1;
+  a.model.contacts[0].depth_m = 2e-3;
+  a.model.contacts[0].stiffness_n_per_m = 8000.0;
+  a.model.contacts[0].gradient.d_translation_W = {0, 0, -1};
+  a.model.F_T_W_at_q0 = PenaltyWrench(2e-3, a.model.contacts[0].gradient, 8000.0);
+  a.tool_state_sent_ns = now_ns;
+  a.built_local_ns = now_ns;
+  return a;
+}
+
+OperatorTickInput Pressing(std::int64_t now_ns) {
+  OperatorTickInput in;
+  in.now_ns = now_ns;
+  in.device.X_MH.translation = {0, 0, -10e-3};  // the handle 10 mm below the surface
+  return in;
+}
+
+TEST(OperatorTick, AFailedDeviceReadRampsDownAndTheRecoveryRampsUp) {
+  OperatorTick tick(Config(), RigidTransform{}, ToolState{});
+  const SafetyLimits limits = Config().safety;
+  const double max_step = limits.max_force_rate_n_per_s * kH + 1e-9;
+  std::int64_t now = 0;
+  ArrivedModel wall = Wall(now);
+  OperatorTickInput in = Pressing(now);
+  in.arrived = &wall;
+  double last = 0.0, pressing = 0.0;
+  for (int k = 0; k < 500; ++k) {  // settle while pressing
+    in.now_ns = now += 1000000;
+    wall.tool_state_sent_ns = wall.built_local_ns = now;
+    last = glm::length(tick.Step(in).F_device_W.force);
+    in.arrived = k % 2 ? &wall : nullptr;
+  }
+  pressing = last;
+  ASSERT_GT(pressing, 1.0) << "the press should give a few newtons";
+  // 20 failed reads: every tick through the safety stage, the force ramps to zero.
+  OperatorTickInput fault;
+  fault.device_ok = false;
+  int ticks_to_zero = -1;
+  for (int k = 0; k < 20; ++k) {
+    fault.now_ns = now += 1000000;
+    const double f = glm::length(tick.Step(fault).F_device_W.force);
+    EXPECT_LE(std::abs(f - last), max_step) << "fault tick " << k;
+    EXPECT_LE(f, last + 1e-12);
+    if (ticks_to_zero < 0 && f == 0.0) ticks_to_zero = k + 1;
+    last = f;
+  }
+  EXPECT_EQ(last, 0.0);
+  EXPECT_GT(ticks_to_zero, 0);
+  EXPECT_EQ(tick.counters().device_faults, 20);
+  // The device answers again: the force comes back by at most the rate limit per tick.
+  int ticks_to_full = -1;
+  for (int k = 0; k < 50; ++k) {
+    in = Pressing(now += 1000000);
+    wall.tool_state_sent_ns = wall.built_local_ns = now;
+    in.arrived = &wall;
+    const double f = glm::length(tick.Step(in).F_device_W.force);
+    EXPECT_LE(std::abs(f - last), max_step) << "recovery tick " << k;
+    if (ticks_to_full < 0 && f > 0.99 * pressing) ticks_to_full = k + 1;
+    last = f;
+  }
+  EXPECT_GT(ticks_to_full, 1) << "the force must ramp back, not jump";
+  std::printf("fault: %.3f N to 0 in %d ticks; recovery to 99 %% in %d ticks (limit %.1f N/tick)\n",
+              pressing, ticks_to_zero, ticks_to_full, max_step);
+}
+
+TEST(OperatorTick, FreeSpaceGivesNoForceAndTheToolFollowsTheHandle) {
+  OperatorTick tick(Config(), RigidTransform{}, ToolState{});
+  OperatorTickInput in;
+  in.device.X_MH.translation = {0.01, 0, 0};
+  OperatorTickOutput out;
+  for (int k = 0; k < 2000; ++k) {
+    in.now_ns = (k + 1) * 1000000LL;
+    out = tick.Step(in);
+  }
+  EXPECT_NEAR(tick.tool().X_WT.translation.x, 0.01, 1e-6);
+  EXPECT_NEAR(glm::length(out.F_device_W.force), 0.0, 1e-6);
+  EXPECT_EQ(out.model_age_ms, -1.0);
+}
+
+TEST(OperatorTick, ANewModelBlendsInWithBoundedSteps) {
+  OperatorTickConfig c = Config();
+  c.model_blend_ticks = 8;
+  c.safety.max_force_rate_n_per_s = 1e9;  // see the blend, not the rate limit
+  OperatorTick tick(c, RigidTransform{}, ToolState{});
+  OperatorTickInput in = Pressing(1000000);
+  for (int k = 0; k < 300; ++k) tick.Step(in);  // pressing into nothing: the tool sits at −10 mm
+  ArrivedModel wall = Wall(in.now_ns);
+  in.arrived = &wall;
+  double last = glm::length(tick.Step(in).step.F_contact_T_W.force);
+  in.arrived = nullptr;
+  double biggest = 0.0;
+  for (int k = 0; k < 8; ++k) {
+    const double f = glm::length(tick.Step(in).step.F_contact_T_W.force);
+    biggest = std::max(biggest, f - last);
+    last = f;
+  }
+  EXPECT_GT(last, 10.0);
+  EXPECT_LT(biggest, 0.6 * last) << "blended in over the ticks, not at once";
+  EXPECT_EQ(tick.counters().models_used, 1);
+}
+
+TEST(OperatorTick, AWorkspaceJumpDropsModelsOfTheOldPlace) {
+  OperatorTick tick(Config(), RigidTransform{}, ToolState{});
+  OperatorTickInput in;
+  in.now_ns = 1000000;
+  tick.Step(in);
+  in.workspace_shift_M = {0.5, 0, 0};  // go 50 cm along x
+  tick.Step(in);
+  EXPECT_EQ(tick.counters().workspace_jumps, 1);
+  EXPECT_NEAR(tick.X_WM().translation.x, 0.5, 1e-12);
+  ArrivedModel old_place = Wall(in.now_ns);  // linearized at the origin
+  in.arrived = &old_place;
+  tick.Step(in);
+  EXPECT_EQ(tick.counters().models_from_before_jump, 1);
+  EXPECT_EQ(tick.counters().models_used, 0);
+  ArrivedModel new_place = Wall(in.now_ns);
+  new_place.model.X_WT0.translation = {0.5, 0, 0};
+  in.arrived = &new_place;
+  tick.Step(in);
+  EXPECT_EQ(tick.counters().models_used, 1);
+}
+
+TEST(OperatorTick, NonFiniteDeviceReadingsGiveZeroWrench) {
+  OperatorTick tick(Config(), RigidTransform{}, ToolState{});
+  OperatorTickInput in;
+  in.now_ns = 1000000;
+  in.device.X_MH.translation = {std::nan(""), 0, 0};
+  const OperatorTickOutput out = tick.Step(in);
+  EXPECT_TRUE(IsFinite(out.F_device_W));
+  EXPECT_EQ(glm::length(out.F_device_W.force), 0.0);
+  EXPECT_GE(tick.counters().nonfinite, 1);
+  EXPECT_TRUE(IsFiniteRigidTransform(tick.tool().X_WT));
+}
+
+TEST(OperatorTick, ATickNeverAllocates) {
+  OperatorTick tick(Config(), RigidTransform{}, ToolState{});
+  ArrivedModel wall = Wall(0);
+  OperatorTickInput in = Pressing(0);
+  OperatorTickInput fault;
+  fault.device_ok = false;
+  tick.Step(in);  // warm-up
+  const long before = g_allocations.load();
+  for (int k = 0; k < 5000; ++k) {
+    in.now_ns = fault.now_ns = (k + 1) * 1000000LL;
+    in.arrived = k % 3 == 0 ? &wall : nullptr;
+    in.workspace_shift_M = k == 2500 ? glm::dvec3(0.01, 0, 0) : in.workspace_shift_M;
+    tick.Step(k % 97 == 0 ? fault : in);
+  }
+  EXPECT_EQ(g_allocations.load() - before, 0);
+}
+
+}  // namespace
+}  // namespace ht
