@@ -2,6 +2,8 @@
 // the contact models streamed by slave_sim, and writes trace.csv and summary.json.
 
 #include <CLI/CLI.hpp>
+#include <atomic>
+#include <csignal>
 #include <cstdio>
 #include <exception>
 #include <fstream>
@@ -16,6 +18,14 @@
 #include "master_station/replay_device.h"
 #include "master_station/simulated_operator.h"
 #include "master_station/spacemouse.h"
+
+namespace {
+
+// Set by SIGINT / SIGTERM: the loop ramps the force to zero and the run ends normally.
+std::atomic<bool> g_stop{false};
+extern "C" void OnStopSignal(int) { g_stop.store(true); }
+
+}  // namespace
 
 namespace {
 
@@ -86,8 +96,15 @@ int main(int argc, char** argv) {
                  "the touchable objects the remote node lists, press on each under force control,\n"
                  "slide, release, move on)")
       ->capture_default_str();
-  app.add_option("--duration", duration_s, "experiment duration in seconds")
-      ->check(CLI::Range(0.1, 3600.0))
+  app.add_option("--duration", duration_s,
+                 "experiment duration in seconds (default 5; with --device spacemouse or falcon\n"
+                 "the session lasts until Ctrl-C or SIGTERM unless this is given)")
+      ->check(CLI::Range(0.1, 1e6))
+      ->capture_default_str();
+  double trace_max_mb = 0.0;
+  app.add_option("--trace-max-mb", trace_max_mb,
+                 "largest trace.csv in MiB (0 = no cap); rows past it are counted, not written")
+      ->check(CLI::Range(0.0, 1e6))
       ->capture_default_str();
   app.add_option("--rate", rate_hz, "haptic loop rate in Hz (100..4000)")
       ->check(CLI::Range(100.0, 4000.0))
@@ -215,6 +232,9 @@ int main(int argc, char** argv) {
       experiment = ht::MakeExperiment(experiment_name, duration_s);
       device = std::move(replay);
     } else {
+      // A person at a real device: the session lasts until they stop it, unless --duration.
+      const bool real_device = device_name == "spacemouse" || device_name == "falcon";
+      config.run_until_stopped = real_device && app.count("--duration") == 0;
       experiment = ht::MakeExperiment(experiment_name, duration_s);
       if (device_name == "spacemouse") {
         ht::SpaceMouseConfig sm;
@@ -232,7 +252,21 @@ int main(int argc, char** argv) {
                 device->capabilities().name.c_str(), rate_hz, remote.c_str(),
                 experiment_name.c_str(), duration_s);
     std::fflush(stdout);
+    // Ctrl-C and SIGTERM: the force is ramped to zero, the device commanded zero and closed,
+    // the summary written, exit 0.
+    std::signal(SIGINT, OnStopSignal);
+    std::signal(SIGTERM, OnStopSignal);
+    config.stop_requested = &g_stop;
+    config.trace_max_bytes = static_cast<std::uint64_t>(trace_max_mb * 1024.0 * 1024.0);
+    if (config.run_until_stopped) {
+      std::printf("[master] running until Ctrl-C or SIGTERM (the force is ramped to zero first)\n");
+      std::fflush(stdout);
+    }
     const nlohmann::json summary = ht::RunOperatorStation(config, *device, *experiment);
+    if (summary["stopped_by_request"].get<bool>()) {
+      std::printf("[master] stopped on request after %.1f s: force ramped to zero, device closed\n",
+                  summary["duration_s"].get<double>());
+    }
     std::printf(
         "[master] done: loop %.1f Hz (tick p99 %.1f us), remote %.1f Hz (step p50 %.0f us), "
         "rtt p50 %.3f ms, contacts max %d, non-finite %lld\n",

@@ -534,7 +534,9 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   config.Validate();
   const DeviceCapabilities caps = device.capabilities();
   const auto ticks =
-      static_cast<std::int64_t>(std::ceil(experiment.duration_s() * config.loop_rate_hz));
+      config.run_until_stopped
+          ? std::numeric_limits<std::int64_t>::max()
+          : static_cast<std::int64_t>(std::ceil(experiment.duration_s() * config.loop_rate_hz));
   const std::int64_t period_ns = static_cast<std::int64_t>(std::llround(1e9 / config.loop_rate_hz));
   const double h = period_ns * 1e-9;
 
@@ -559,14 +561,25 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   std::atomic<bool> stop_network{false}, stop_recorder{false};
   std::thread network_thread([&] { network.Run(stop_network); });
   std::atomic<std::uint64_t> rows_dropped{0};
+  std::uint64_t rows_over_cap = 0;
   std::thread recorder_thread([&] {
     TraceRow row;
+    std::int64_t written = 0;
     while (true) {
       const bool stopping = stop_recorder.load(std::memory_order_acquire);
       bool any = false;
       while (rows.Pop(row)) {
         any = true;
-        if (trace) WriteTraceRow(trace, row, experiment.phase_names());
+        if (!trace) continue;
+        // The trace is written as the run goes; past the size cap rows are counted only.
+        if (config.trace_max_bytes > 0 &&
+            static_cast<std::uint64_t>(written) >= config.trace_max_bytes) {
+          ++rows_over_cap;
+          continue;
+        }
+        const long before = std::ftell(trace);
+        WriteTraceRow(trace, row, experiment.phase_names());
+        written += std::ftell(trace) - before;
       }
       if (stopping && !any) break;
       std::this_thread::sleep_for(std::chrono::milliseconds(5));
@@ -662,9 +675,13 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   }
 
   // The haptic loop, on its own thread with real-time priority when permitted.
-  std::vector<double> compute_us(static_cast<size_t>(ticks), 0.0);
-  std::vector<double> period_us(static_cast<size_t>(ticks), 0.0);
+  // Bounded statistics however long the run: a uniform sample of at most 2^20 ticks.
+  const auto sample_capacity = static_cast<std::size_t>(std::min<std::int64_t>(ticks, 1 << 20));
+  ReservoirSamples compute_us(sample_capacity), period_us(sample_capacity);
+  ReservoirSamples model_age_samples(sample_capacity);
   std::atomic<std::int64_t> ticks_done{0};
+  std::atomic<bool> loop_done{false};
+  bool stopped_by_request = false;
   std::atomic<int> progress_contacts{0}, progress_phase{0};
   std::atomic<double> progress_force{0.0}, progress_age_ms{-1.0};
   std::int64_t overruns = 0, device_write_faults = 0;
@@ -690,7 +707,6 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   const WrenchSafetyFilter& safety = tick.safety();
   int contacts_max = 0;
   double force_max = 0.0;
-  std::vector<double> model_age_samples(static_cast<size_t>(ticks), -1.0);
   std::string realtime_note = "SCHED_FIFO priority 80";
 
   std::thread loop_thread([&] {
@@ -702,13 +718,15 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
     IncomingModel received{};
     ArrivedModel arrived{};
     std::int64_t experiment_t0 = -1;
+    std::int64_t stop_ramp_start = -1;
+    const double stop_ramp_ticks = std::max(1.0, config.stop_ramp_s * config.loop_rate_hz);
     std::int64_t next = NowNs() + period_ns;
     std::int64_t previous = next - period_ns;
     const std::int64_t t0 = next;
     for (std::int64_t k = 0; k < ticks; ++k) {
       SleepUntilNs(next);
       const std::int64_t now = NowNs();
-      period_us[k] = (now - previous) * 1e-3;
+      period_us.Add((now - previous) * 1e-3);
       previous = now;
       TraceRow row;
       row.t_s = (now - t0) * 1e-9;
@@ -732,7 +750,18 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
         arrived.step_us = received.message.step_us;
         in.arrived = &arrived;
       }
-      const OperatorTickOutput out = tick.Step(in);
+      OperatorTickOutput out = tick.Step(in);
+      // Asked to stop (Ctrl-C, SIGTERM): ramp the device's wrench to zero, then end the run.
+      if (stop_ramp_start < 0 && config.stop_requested != nullptr &&
+          config.stop_requested->load(std::memory_order_relaxed)) {
+        stop_ramp_start = k;
+      }
+      if (stop_ramp_start >= 0) {
+        const double gain =
+            std::max(0.0, 1.0 - static_cast<double>(k - stop_ramp_start + 1) / stop_ramp_ticks);
+        out.F_H_M = {gain * out.F_H_M.force, gain * out.F_H_M.torque};
+        out.F_device_W = {gain * out.F_device_W.force, gain * out.F_device_W.torque};
+      }
       if (!device.WriteWrench(out.F_H_M, now)) ++device_write_faults;
       if (in.device_ok) {
         ++tool_seq;
@@ -753,16 +782,20 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
       }
       // The phase the simulated hand was following, when the device is scripted.
       row.phase = experiment.Target(row.t_s).phase;
-      model_age_samples[k] = row.model_age_ms;
+      if (row.model_age_ms >= 0.0) model_age_samples.Add(row.model_age_ms);
       const std::int64_t end = NowNs();
       row.tick_compute_us = static_cast<float>((end - now) * 1e-3);
-      compute_us[k] = (end - now) * 1e-3;
+      compute_us.Add((end - now) * 1e-3);
       if (!rows.Push(row)) rows_dropped.fetch_add(1, std::memory_order_relaxed);
       progress_contacts.store(row.contacts, std::memory_order_relaxed);
       progress_phase.store(row.phase, std::memory_order_relaxed);
       progress_force.store(glm::length(row.F_contact_T_W.force), std::memory_order_relaxed);
       progress_age_ms.store(row.model_age_ms, std::memory_order_relaxed);
       ticks_done.store(k + 1, std::memory_order_release);
+      if (stop_ramp_start >= 0 && k - stop_ramp_start + 1 >= stop_ramp_ticks) {
+        stopped_by_request = true;
+        break;
+      }
       next += period_ns;
       if (end > next + period_ns) {  // fell more than a period behind: do not burst to catch up
         ++overruns;
@@ -770,6 +803,7 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
       }
     }
     device.WriteWrench({}, NowNs());
+    loop_done.store(true, std::memory_order_release);
   });
 
   // Progress while the loop runs.
@@ -777,7 +811,7 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   std::int64_t last_print = started;
   std::int64_t last_ticks = 0;
   std::uint64_t last_models = counters.model_accepted.load();
-  while (ticks_done.load(std::memory_order_acquire) < ticks) {
+  while (!loop_done.load(std::memory_order_acquire)) {
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
     const std::int64_t now = NowNs();
     if (config.progress_period_s > 0.0 && (now - last_print) * 1e-9 >= config.progress_period_s) {
@@ -804,9 +838,8 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   const double elapsed_s = (NowNs() - started) * 1e-9;
   stop_threads();
 
-  std::vector<double> ages;
-  for (double a : model_age_samples)
-    if (a >= 0.0) ages.push_back(a);
+  const std::vector<double>& ages = model_age_samples.values();
+  const std::int64_t ticks_run = ticks_done.load();
   nlohmann::json s;
   s["experiment"] = experiment.name();
   s["workspace"] = {
@@ -833,15 +866,20 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
        {tick.workspace_shift_M().x, tick.workspace_shift_M().y, tick.workspace_shift_M().z}}};
   s["tool_mass_kg"] = tool_inertia.mass_kg;
   s["device"] = caps.name;
-  s["duration_s"] = experiment.duration_s();
-  s["ticks"] = ticks;
-  s["master_rate_hz"] = ticks / std::max(elapsed_s, 1e-9);
-  s["master_period_p50_us"] = Percentile(period_us, 0.5);
-  s["master_period_p99_us"] = Percentile(period_us, 0.99);
-  s["master_period_max_us"] = Percentile(period_us, 1.0);
-  s["master_tick_p50_us"] = Percentile(compute_us, 0.5);
-  s["master_tick_p99_us"] = Percentile(compute_us, 0.99);
-  s["master_tick_max_us"] = Percentile(compute_us, 1.0);
+  s["duration_s"] =
+      config.run_until_stopped || stopped_by_request ? elapsed_s : experiment.duration_s();
+  s["run_until_stopped"] = config.run_until_stopped;
+  s["stopped_by_request"] = stopped_by_request;
+  s["ticks"] = ticks_run;
+  s["master_rate_hz"] = ticks_run / std::max(elapsed_s, 1e-9);
+  // Percentiles over a uniform sample of at most 2^20 ticks (all of them in runs up to 17 min).
+  s["tick_statistics_sampled"] = compute_us.count() > compute_us.values().size();
+  s["master_period_p50_us"] = Percentile(period_us.values(), 0.5);
+  s["master_period_p99_us"] = Percentile(period_us.values(), 0.99);
+  s["master_period_max_us"] = Percentile(period_us.values(), 1.0);
+  s["master_tick_p50_us"] = Percentile(compute_us.values(), 0.5);
+  s["master_tick_p99_us"] = Percentile(compute_us.values(), 0.99);
+  s["master_tick_max_us"] = Percentile(compute_us.values(), 1.0);
   s["master_overruns"] = overruns;
   s["realtime_priority"] = realtime_note;
   s["slave_rate_hz"] = network.RemoteRateHz();
@@ -881,6 +919,7 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   s["device_read_faults"] = tick.counters().device_faults;
   s["device_write_faults"] = device_write_faults;
   s["trace_rows_dropped"] = rows_dropped.load();
+  s["trace_rows_over_cap"] = rows_over_cap;
   s["transport"] = network.Summary();
   s["clock_offset_ms"] = s["transport"]["clock"]["offset_ms"];
   s["model_one_way_ms_p50"] = Percentile(network.one_way_ms(), 0.5);

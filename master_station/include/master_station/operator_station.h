@@ -4,6 +4,7 @@
 // writes the trace. The loop never allocates, locks, blocks or does I/O; it hands data to the
 // other threads through TripleBuffer / SpscRing.
 
+#include <atomic>
 #include <cstdint>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -20,6 +21,15 @@ namespace ht {
 
 /// Configuration of one run of the station.
 struct StationConfig {
+  /// When this becomes true (a signal handler sets it), the loop ramps the device's wrench to
+  /// zero over `stop_ramp_s`, commands zero, closes the device and the run ends normally (the
+  /// summary is written). Null: only the experiment's duration ends the run.
+  const std::atomic<bool>* stop_requested = nullptr;
+  double stop_ramp_s = 0.2;
+  /// Run until `stop_requested` (a person at a real device), not for the experiment's duration.
+  bool run_until_stopped = false;
+  /// Largest trace.csv (bytes; 0 = no cap): rows beyond it are counted, not written.
+  std::uint64_t trace_max_bytes = 0;
   SocketAddress remote_address = SocketAddress::Parse("127.0.0.1:47000");
   SocketAddress local_address = SocketAddress::Parse("127.0.0.1:0");
   double loop_rate_hz = 1000.0;
