@@ -96,10 +96,13 @@ TEST(WrenchSafety, FadesToZeroWhenStaleOrLinkLostAndResumesSmoothly) {
 /// `delay_ticks` late (a network-delayed model): the classic energy-creating case.
 struct WallRun {
   double energy_in = 0, energy_out = 0, min_energy = 0, dissipated = 0;
+  std::int64_t scaled_ticks = 0;
+  double scaled_away_ns = 0;
 };
 
-WallRun RunDelayedWall(int delay_ticks, bool passivity, double k = 5000.0) {
-  PassivityController pc;
+WallRun RunDelayedWall(int delay_ticks, bool passivity, double k = 5000.0,
+                       double max_damping = 0.0) {
+  PassivityController pc(1e-4, max_damping);
   std::deque<double> delayed(static_cast<std::size_t>(delay_ticks), 0.0);
   // The hand oscillates at the frequency where the delay is a quarter period: the delayed wall
   // force then pushes along the motion on the way out (the worst case).
@@ -121,6 +124,8 @@ WallRun RunDelayedWall(int delay_ticks, bool passivity, double k = 5000.0) {
   r.energy_in = pc.energy_in_j();
   r.energy_out = pc.energy_out_j();
   r.dissipated = pc.dissipated_j();
+  r.scaled_ticks = pc.scaled_ticks();
+  r.scaled_away_ns = pc.force_scaled_away_ns();
   return r;
 }
 
@@ -139,6 +144,28 @@ TEST(Passivity, TheControllerKeepsTheOperatorsOutputBelowTheInput) {
     EXPECT_GE(r.min_energy, -1e-9) << delay;
     if (delay > 0) EXPECT_GT(r.dissipated, 0.0) << delay;
   }
+}
+
+// With the damping capped (4 × a device's rated 5 N·s/m, as the station does) the damping alone
+// cannot dissipate what the delayed wall creates: the wrench itself is scaled down, and the
+// energy observed never goes negative (it used to, by up to 0.1 mJ through the relay).
+TEST(Passivity, WhenTheDampingCapBindsTheForceIsScaledAndEnergyStaysNonNegative) {
+  for (int delay : {25, 75, 150}) {
+    const WallRun uncapped_off = RunDelayedWall(delay, false);
+    const WallRun r = RunDelayedWall(delay, true, 5000.0, 20.0);
+    EXPECT_LE(r.energy_out, r.energy_in + 1e-12) << delay;
+    EXPECT_GE(r.min_energy, -1e-12) << delay;
+    EXPECT_GT(r.scaled_ticks, 0) << delay << ": the cap should bind on a 5 kN/m delayed wall";
+    EXPECT_GT(r.scaled_away_ns, 0.0);
+    EXPECT_LT(uncapped_off.min_energy, 0.0);
+  }
+  // The guard alone: a wrench doing work on the hand with no energy stored is zeroed.
+  PassivityController pc(1e-4, 1.0);
+  const Twist V{{0.1, 0, 0}, {}};
+  const Wrench out = pc.Guard(Wrench{{2.0, 0, 0}, {}}, V, 1e-3);
+  EXPECT_EQ(out.force.x, 0.0);
+  // And leaves alone a wrench the hand does work against.
+  EXPECT_EQ(pc.Guard(Wrench{{-2.0, 0, 0}, {}}, V, 1e-3).force.x, -2.0);
 }
 
 }  // namespace

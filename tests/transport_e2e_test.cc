@@ -3,6 +3,8 @@
 // agree with what the relay says it did. The run's directory comes from HT_LOOPBACK_OUT.
 #include <gtest/gtest.h>
 
+#include <cstdio>
+
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
@@ -113,13 +115,17 @@ TEST_F(ImpairedRun, ContactModelCountsMatchTheRelay) {
 }
 
 TEST_F(ImpairedRun, TheOperatorNeverGetsMoreEnergyThanItPutIn) {
-  // Time-domain passivity: the observer's E = in − out stays >= 0 except for what the capped
-  // damping (4 x the device's rated damping) could not dissipate yet; that residue is carried to
-  // the next ticks. Stated tolerance: 1 mJ (seen: at most 0.18 mJ of 3 mJ exchanged).
+  // Time-domain passivity: the observer's E = in − out never goes negative. Where the capped
+  // damping (4 x the device's rated damping) is not enough, the wrench itself is scaled down
+  // (passivity.scaled_ticks, force_scaled_away_Ns say how much that cost).
   const double in = s_["operator_energy_in_J"].get<double>();
   const double out = s_["operator_energy_out_J"].get<double>();
-  EXPECT_LE(out, in + 1e-3) << "in " << in << " J, out " << out << " J";
+  EXPECT_LE(out, in + 1e-9) << "in " << in << " J, out " << out << " J";
+  EXPECT_GE(s_["passivity"]["observed_energy_J"].get<double>(), -1e-9);
   EXPECT_GT(in, 0.0);
+  std::printf("passivity: in %.5f J, out %.5f J, scaled on %lld ticks, %.4f N·s of force taken\n",
+              in, out, static_cast<long long>(s_["passivity"]["scaled_ticks"].get<std::int64_t>()),
+              s_["passivity"]["force_scaled_away_Ns"].get<double>());
 }
 
 }  // namespace

@@ -1,5 +1,6 @@
 #include "haptic_core/passivity.h"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -39,6 +40,19 @@ Wrench PassivityController::Apply(const Wrench& F, const Twist& V, double h) noe
   ++active_ticks_;
   dissipated_j_ += alpha * speed2 * h;
   if (alpha > max_alpha_) max_alpha_ = alpha;
+  // The capped damping was not enough: scale the wrench itself down to what keeps E_k ≥ 0.
+  return Guard(out, V, h);
+}
+
+Wrench PassivityController::Guard(const Wrench& F, const Twist& V, double h) noexcept {
+  const double p = DevicePower(F, V);
+  if (!(p > 0.0) || !(h > 0.0) || !std::isfinite(p)) return F;  // no work done on the hand
+  if (energy_j_ - p * h >= 0.0) return F;
+  // s·p·h = E (or 0 when E is already spent): the most of F that keeps the port passive.
+  const double s = energy_j_ > 0.0 ? std::clamp(energy_j_ / (p * h), 0.0, 1.0) : 0.0;
+  Wrench out{s * F.force, s * F.torque};
+  ++scaled_ticks_;
+  force_scaled_away_ns_ += (1.0 - s) * glm::length(F.force) * h;
   return out;
 }
 
@@ -55,7 +69,8 @@ void PassivityController::Commit(const Wrench& F, const Twist& V, double h) noex
 
 void PassivityController::Reset() noexcept {
   energy_j_ = energy_in_j_ = energy_out_j_ = dissipated_j_ = max_alpha_ = 0.0;
-  active_ticks_ = 0;
+  force_scaled_away_ns_ = 0.0;
+  active_ticks_ = scaled_ticks_ = 0;
 }
 
 }  // namespace ht

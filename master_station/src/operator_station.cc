@@ -905,7 +905,9 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
                     {"observed_energy_J", passivity.observed_energy_j()},
                     {"dissipated_J", passivity.dissipated_j()},
                     {"active_ticks", passivity.active_ticks()},
-                    {"max_damping_ns_per_m", passivity.max_alpha()}};
+                    {"max_damping_ns_per_m", passivity.max_alpha()},
+                    {"scaled_ticks", passivity.scaled_ticks()},
+                    {"force_scaled_away_Ns", passivity.force_scaled_away_ns()}};
   s["safety"] = {{"nonfinite_ticks", sc.nonfinite},
                  {"fading_ticks", sc.fading},
                  {"braking_ticks", sc.braking},

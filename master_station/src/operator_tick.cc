@@ -104,6 +104,9 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
   // Stage 4: safety, on every tick. Then the observer records what the device really gets.
   F_device_W = safety_.Filter(F_device_W, V_WH_W, model_age_s, in.link_connected, h,
                               out.safety_actions);
+  // The safety stage's rate limit can hold back a drop passivity asked for: the guard scales
+  // what is left so that the observed energy never goes negative.
+  if (config_.passivity) F_device_W = passivity_.Guard(F_device_W, V_WH_W, h);
   passivity_.Commit(F_device_W, V_WH_W, h);
   out.F_device_W = F_device_W;
   const glm::dquat R_MW = glm::conjugate(X_WM_.rotation);

@@ -6,7 +6,8 @@
 //      scripted workspace jump, models linearized nearer the old place than the tool are dropped;
 //   2. virtual coupling and the implicit (linearized backward-Euler) tool step against it;
 //   3. passivity: the time-domain passivity controller (Ryu, Kwon & Hannaford 2004);
-//   4. safety: non-finite → zero, fade when stale or the link is lost, brake, clamp, rate limit.
+//   4. safety: non-finite → zero, fade when stale or the link is lost, brake, clamp, rate limit;
+//      then the passivity guard scales what is left if the energy observed would go negative.
 // Every tick's wrench passes the safety stage, a failed device read included: the device then
 // gets the safety stage's ramp to zero, and a later recovery ramps back up instead of jumping.
 
