@@ -1,6 +1,6 @@
 // The only translation unit that compiles tiny_gltf.h's implementation. It is built with
 // tinygltf=proj_tinygltf (set on the codecs target) so that its symbols do not clash with the
-// older tinygltf copy that libdraco.so exports (../shared/design/DEPENDENCIES.md trap 1).
+// older tinygltf copy that libdraco.so exports (docs/DEPENDENCIES.md trap 1).
 //
 // TINYGLTF_ENABLE_DRACO is deliberately NOT defined: tinygltf 2.7's Draco path
 // (ParseDracoExtension) indexes bufferViews, buffers and accessors without bounds checks and

@@ -1,6 +1,7 @@
 #include "haptic_core/haptic_scene.h"
 
 #include <chrono>
+#include <optional>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -156,13 +157,22 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   std::array<ContactQuery, kMaxContacts>& queries = last_queries_;
   std::array<ContactLinearization, kMaxContacts>& results = last_results_;
   last_num_queries_ = num_candidates;
+  int num_queries = 0;
   for (int i = 0; i < num_candidates; ++i) {
     const Candidate& c = candidates[i];
-    queries[i] = {c.object->model.get(), c.object->X_WO,
-                  ContactWindow::Make(c.point_W, c.normal_W, options_.window_extent_m,
-                                      options_.grid_resolution),
-                  c.object->stiffness_n_per_m};
+    // A cluster with a non-finite point or a degenerate normal is a fault of the coarse stage:
+    // counted and skipped; the step goes on (nothing in the step throws).
+    const std::optional<ContactWindow> window = ContactWindow::TryMake(
+        c.point_W, c.normal_W, options_.window_extent_m, options_.grid_resolution);
+    if (!window) {
+      ++step_faults_.bad_windows;
+      continue;
+    }
+    queries[num_queries++] = {c.object->model.get(), c.object->X_WO, *window,
+                              c.object->stiffness_n_per_m};
   }
+  num_candidates = num_queries;
+  last_num_queries_ = num_queries;
   const std::span<const ContactQuery> batch(queries.data(), num_candidates);
   const std::span<ContactLinearization> batch_out(results.data(), num_candidates);
   if (num_candidates > 0 && !backend_->LinearizeBatch(tool, X_WT, batch, batch_out)) {

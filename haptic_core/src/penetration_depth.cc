@@ -1,5 +1,7 @@
 #include "haptic_core/penetration_depth.h"
 
+#include <optional>
+
 #include <algorithm>
 #include <cmath>
 #include <glm/geometric.hpp>
@@ -8,8 +10,32 @@
 
 namespace ht {
 
+std::optional<ContactWindow> ContactWindow::TryMake(const glm::dvec3& center_W,
+                                                    const glm::dvec3& normal_W, double extent_m,
+                                                    int resolution) noexcept {
+  const double len = glm::length(normal_W);
+  if (!std::isfinite(len) || !(len > 1e-12)) return std::nullopt;
+  if (!std::isfinite(center_W.x) || !std::isfinite(center_W.y) || !std::isfinite(center_W.z)) {
+    return std::nullopt;
+  }
+  if (!(extent_m > 0.0) || !std::isfinite(extent_m)) return std::nullopt;
+  if (resolution < 2 || resolution > 1024) return std::nullopt;
+  ContactWindow w;
+  w.center_W = center_W;
+  w.normal_W = normal_W / len;
+  const glm::dvec3 ref = std::abs(w.normal_W.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0);
+  w.axis_u_W = glm::normalize(ref - glm::dot(ref, w.normal_W) * w.normal_W);
+  w.axis_v_W = glm::cross(w.normal_W, w.axis_u_W);
+  w.extent_m = extent_m;
+  w.resolution = resolution;
+  return w;
+}
+
 ContactWindow ContactWindow::Make(const glm::dvec3& center_W, const glm::dvec3& normal_W,
                                   double extent_m, int resolution) {
+  if (const std::optional<ContactWindow> w = TryMake(center_W, normal_W, extent_m, resolution)) {
+    return *w;
+  }
   const double len = glm::length(normal_W);
   if (!std::isfinite(len) || !(len > 1e-12)) {
     throw std::invalid_argument("ContactWindow: normal must be finite and non-zero");
@@ -21,19 +47,8 @@ ContactWindow ContactWindow::Make(const glm::dvec3& center_W, const glm::dvec3& 
     throw std::invalid_argument("ContactWindow: extent must be positive, got " +
                                 std::to_string(extent_m));
   }
-  if (resolution < 2 || resolution > 1024) {
-    throw std::invalid_argument("ContactWindow: resolution must be in [2, 1024], got " +
-                                std::to_string(resolution));
-  }
-  ContactWindow w;
-  w.center_W = center_W;
-  w.normal_W = normal_W / len;
-  const glm::dvec3 ref = std::abs(w.normal_W.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0);
-  w.axis_u_W = glm::normalize(ref - glm::dot(ref, w.normal_W) * w.normal_W);
-  w.axis_v_W = glm::cross(w.normal_W, w.axis_u_W);
-  w.extent_m = extent_m;
-  w.resolution = resolution;
-  return w;
+  throw std::invalid_argument("ContactWindow: resolution must be in [2, 1024], got " +
+                              std::to_string(resolution));
 }
 
 glm::dvec3 ContactWindow::CellCenter(int index) const noexcept {

@@ -5,7 +5,7 @@
 // animations so that moving parts can be replayed (PoseInstancesAt) without a physics engine.
 // Materials, textures, cameras, skins and morph targets (with their `weights` animations) are
 // ignored (a note says so). The parser is tinygltf 2.7 (compiled into this library under the name
-// proj_tinygltf, see ../shared/design/DEPENDENCIES.md trap 1); Draco primitives
+// proj_tinygltf, see docs/DEPENDENCIES.md trap 1); Draco primitives
 // (KHR_draco_mesh_compression) are decoded with libdraco.
 
 #include <cstdint>

@@ -29,7 +29,7 @@ struct ClusteringOptions {
   /// never cancel, so n and −n never average to zero.
   double max_normal_angle_deg = 30.0;
   /// Added on each side of the members' spread to make the window's side (m); set it to at least
-  /// TextureReach() of both models so that the texture around the outermost pairs is inside.
+  /// OutwardReach() of both models so that the texture around the outermost pairs is inside.
   double texture_margin_m = 1e-3;
   /// Bounds of the window side extent_m (m), 0 < min_extent_m ≤ max_extent_m. min_extent_m is the
   /// side a single pair gets when 2·texture_margin_m is smaller: set it to the size of a leaf patch

@@ -36,7 +36,7 @@ struct HapticModel {
   /// The haptic texture shared by all textured triangles.
   HeightField texture;
   /// Vertices whose convex hull bounds the coarse surface (used by the convex coarse contact
-  /// query, which widens its tolerance by TextureReach() of both sides), #H.
+  /// query, which widens its tolerance by OutwardReach() of both sides), #H.
   std::vector<glm::dvec3> hull_vertices_O;
   /// Bounding volume hierarchy of convex hulls over the coarse mesh (DESIGN.md §2); empty for
   /// the built-in procedural models, whose coarse meshes are convex (hull_vertices_O is their

@@ -101,6 +101,12 @@ class HapticTexturePipeline {
 
   /// Faults of the backend in use.
   const LinearizationFaults& faults() const noexcept { return backend_->faults(); }
+  /// Faults of the step's own stages (counted, never thrown).
+  struct StepFaults {
+    /// Clusters whose window could not be set up (non-finite point, zero normal): skipped.
+    std::int64_t bad_windows = 0;
+  };
+  const StepFaults& step_faults() const noexcept { return step_faults_; }
   /// The backend in use: the one given, or the CPU reference after that one failed.
   const PenetrationDepthBackend& backend() const noexcept { return *backend_; }
   /// Batches the given backend failed (the step is then recomputed on the CPU, which stays in
@@ -136,6 +142,7 @@ class HapticTexturePipeline {
   std::array<ContactQuery, kMaxContacts> last_queries_{};
   std::array<ContactLinearization, kMaxContacts> last_results_{};
   int last_num_queries_ = 0;
+  StepFaults step_faults_;
   std::int64_t backend_failures_ = 0;
   std::string fallback_reason_;
 };

@@ -25,7 +25,7 @@ namespace ht {
 /// Options of HullProximityQuery::Query().
 struct ProximityQueryOptions {
   /// ε (m, ≥ 0): leaf pairs whose hulls are closer than this, touch or penetrate are reported.
-  /// A caller rendering textures passes at least A.TextureReach() + B.TextureReach().
+  /// A caller rendering textures passes at least A.OutwardReach() + B.OutwardReach().
   double tolerance_m = 0.0;
   /// Time budget (µs): 0 = unlimited. Otherwise the traversal stops refining once this much wall
   /// time is spent (checked before each node pair, so it overruns by at most one node-pair test)

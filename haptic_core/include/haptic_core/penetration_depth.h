@@ -3,6 +3,7 @@
 // This CPU path is the reference that the GPU backend must match.
 
 #include <glm/vec3.hpp>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -28,6 +29,11 @@ struct ContactWindow {
   /// non-positive extent, or a resolution outside [2, 1024].
   static ContactWindow Make(const glm::dvec3& center_W, const glm::dvec3& normal_W, double extent_m,
                             int resolution);
+  /// The same rule without throwing (for the remote step, which counts faults instead): nullopt
+  /// where Make() would throw.
+  static std::optional<ContactWindow> TryMake(const glm::dvec3& center_W,
+                                              const glm::dvec3& normal_W, double extent_m,
+                                              int resolution) noexcept;
 
   /// Cell side W/N (m).
   double cell_size_m() const noexcept { return extent_m / resolution; }

@@ -1,7 +1,7 @@
 #pragma once
 // Spatial algebra on GLM: rigid transforms, twists, wrenches, rotation vectors.
 //
-// Frames follow Drake's monogram notation (see ../shared/design/STYLE.md): `X_WT` is the pose of
+// Frames follow Drake's monogram notation (see docs/STYLE.md): `X_WT` is the pose of
 // tool frame T in world W, `p_WT` the position of T's origin in W, `V_WT_W` the twist of T in W
 // expressed in W, `F_T_W` a wrench on T (at T's origin) expressed in W. SI units throughout.
 
