@@ -1,4 +1,5 @@
 #include "master_station/falcon.h"
+#include "haptic_core/steady_clock.h"
 
 #include <libusb.h>
 
@@ -17,10 +18,7 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-std::int64_t NowNs() noexcept {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch())
-      .count();
-}
+std::int64_t NowNs() noexcept { return SteadyNowNs(); }
 
 int MsUntil(Clock::time_point deadline) noexcept {
   const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now());

@@ -28,15 +28,12 @@
 #include "transport/messages.h"
 #include "transport/scene_stream.h"
 #include "transport/session.h"
+#include "haptic_core/steady_clock.h"
 
 namespace ht {
 namespace {
 
-std::int64_t NowNs() noexcept {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
+std::int64_t NowNs() noexcept { return SteadyNowNs(); }
 
 void SleepUntilNs(std::int64_t t_ns) noexcept {
   timespec ts{static_cast<time_t>(t_ns / 1000000000), static_cast<long>(t_ns % 1000000000)};

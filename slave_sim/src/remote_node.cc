@@ -19,15 +19,12 @@
 #include "transport/messages.h"
 #include "transport/scene_stream.h"
 #include "transport/session.h"
+#include "haptic_core/steady_clock.h"
 
 namespace ht {
 namespace {
 
-std::int64_t NowNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
+std::int64_t NowNs() noexcept { return SteadyNowNs(); }
 
 }  // namespace
 

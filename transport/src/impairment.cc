@@ -20,6 +20,7 @@
 #include <string_view>
 
 #include "transport/protocol.h"
+#include "haptic_core/steady_clock.h"
 
 namespace ht {
 namespace {
@@ -208,11 +209,7 @@ std::string FormatRate(double bps) {
   return Shortest(bps) + "bit";
 }
 
-std::int64_t NowNs() noexcept {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
+std::int64_t NowNs() noexcept { return SteadyNowNs(); }
 
 void WriteFileAtomically(const std::string& path, const std::string& text) {
   const std::string tmp = path + ".tmp";

@@ -5,11 +5,6 @@
 
 namespace ht {
 
-std::int64_t SteadyNowNs() noexcept {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
 
 bool ClockSync::AddSample(std::int64_t t1, std::int64_t t2, std::int64_t t3,
                           std::int64_t t4) noexcept {

@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <vector>
 
+#include "haptic_core/steady_clock.h"  // SteadyNowNs: the clock every send_time_ns is on
 #include "transport/messages.h"
 #include "transport/udp_socket.h"
 
@@ -124,8 +125,5 @@ class SecureLink {
   std::int64_t last_authenticated_ns_ = 0;
   std::uint64_t last_open_bytes_ = 0;
 };
-
-/// The steady clock in nanoseconds (the clock every send_time_ns is on).
-std::int64_t SteadyNowNs() noexcept;
 
 }  // namespace ht
