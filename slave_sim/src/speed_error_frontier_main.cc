@@ -72,9 +72,14 @@ int main(int argc, char** argv) {
     options.gpu = !no_gpu;
     options.progress = !quiet;
     options.command_line = command;
+    // The plot script: in the source tree (a build), else beside an installed binary.
     options.plot_script = HT_PLOT_FRONTIER_SCRIPT;
-    if (!options.plot_script.empty() && !std::filesystem::exists(options.plot_script)) {
-      options.plot_script.clear();
+    if (options.plot_script.empty() || !std::filesystem::exists(options.plot_script)) {
+      std::error_code ec;
+      const auto exe = std::filesystem::read_symlink("/proc/self/exe", ec);
+      const auto installed = exe.parent_path() / "../share/haptic_teleop/plot-frontier";
+      options.plot_script =
+          !ec && std::filesystem::exists(installed) ? installed.lexically_normal().string() : "";
     }
     ht::RunSpeedErrorFrontier(options);
     return 0;

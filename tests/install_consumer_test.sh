@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Installed as users expect (issue 16): `cmake --install` into a fresh prefix, then a project
+# outside the tree finds the haptic core with find_package and runs a remote step with it; and
+# `cpack -G DEB` makes a Debian package holding the binaries, units and rules.
+# Usage: tests/install_consumer_test.sh SOURCE_DIR BUILD_DIR OUT_DIR
+set -euo pipefail
+src="${1:?source dir}"; build="${2:?build dir}"; out="${3:?out dir}"
+rm -rf "$out"; mkdir -p "$out"
+cmake --install "$build" --prefix "$out/prefix" > "$out/install.log"
+for f in bin/slave_sim bin/master_station bin/ht_relay bin/speed_error_frontier \
+         lib/libhaptic_core.a include/haptic_core/haptic_scene.h \
+         lib/cmake/haptic_teleop/haptic_teleopConfig.cmake \
+         lib/systemd/system/haptic-slave-sim.service lib/udev/rules.d/70-haptic-falcon.rules \
+         share/haptic_teleop/config/remote.toml; do
+  [ -e "$out/prefix/$f" ] || { echo "install: $f missing"; exit 1; }
+done
+"$out/prefix/bin/slave_sim" --help > /dev/null
+cmake -S "$src/examples/find_package_consumer" -B "$out/consumer" \
+  -DCMAKE_PREFIX_PATH="$out/prefix" > "$out/consumer.log"
+cmake --build "$out/consumer" -j2 >> "$out/consumer.log"
+"$out/consumer/haptic_core_consumer"
+( cd "$build" && cpack -G DEB -B "$out/deb" > "$out/cpack.log" 2>&1 ) || { tail "$out/cpack.log"; exit 1; }
+deb="$(ls "$out"/deb/haptic-teleop_*.deb)"
+contents="$(dpkg-deb -c "$deb")"
+for f in ./usr/bin/slave_sim ./usr/bin/master_station ./usr/lib/systemd/system/haptic-slave-sim.service \
+         ./usr/lib/udev/rules.d/70-haptic-spacemouse.rules; do
+  grep -qF "$f" <<< "$contents" || { echo "deb: $f missing"; exit 1; }
+done
+echo "install_consumer_test: installed, consumed through find_package, packaged as $(basename "$deb")"
