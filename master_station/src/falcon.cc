@@ -856,11 +856,13 @@ void FalconDevice::IoLoop() noexcept {
   std::int64_t t_position_ns = 0;
   bool homed = false;
   auto next = Clock::now();
+  // The clock is passed in (FalconConfig::clock_ns): readings and freshness use it.
+  const auto clock_ns = [this]() noexcept { return config_.clock_ns ? config_.clock_ns() : NowNs(); };
 
   while (!stop_.load(std::memory_order_relaxed)) {
     ForceCommand newest;
     if (commands_.Read(newest)) force = newest;
-    const std::int64_t now_ns = NowNs();
+    const std::int64_t now_ns = clock_ns();
 
     FalconRequest request;
     request.homing_mode = !homed;
@@ -883,7 +885,7 @@ void FalconDevice::IoLoop() noexcept {
         protocol_->Exchange(request, response, config_.exchange_timeout_ms);
     malformed_.store(protocol_->malformed_frames(), std::memory_order_relaxed);
     if (result == ExchangeResult::kOk) {
-      const std::int64_t t_ns = NowNs();
+      const std::int64_t t_ns = clock_ns();
       exchanges_.fetch_add(1, std::memory_order_relaxed);
       homed_mask_.store(response.homed_mask, std::memory_order_relaxed);
       homed = (response.homed_mask & kAllAxesHomed) == kAllAxesHomed;

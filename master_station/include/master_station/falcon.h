@@ -358,6 +358,10 @@ struct FalconConfig {
   double stale_after_s = 0.02;
   double velocity_cutoff_hz = 100.0;  ///< First-order low-pass on the differentiated position.
   int start_timeout_ms = 1000;  ///< Open waits this long for the first response after the load.
+  /// The clock the I/O thread stamps readings and checks wrench freshness with (ns, steady);
+  /// null = std::chrono::steady_clock (SteadyNowNs). Tests pass a simulated clock so that what
+  /// the velocity filter sees does not depend on how the machine schedules threads.
+  std::int64_t (*clock_ns)() noexcept = nullptr;
 };
 
 /// What the I/O thread has seen (counters since Open).
