@@ -4,13 +4,13 @@
 //
 // Usage: stability_map --out DIR
 
+#include "haptic_core/stability_map.h"
+
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
-
-#include "haptic_core/stability_map.h"
 
 #ifndef HT_PLOT_STABILITY_SCRIPT
 #define HT_PLOT_STABILITY_SCRIPT ""

@@ -5,11 +5,10 @@
 #include "master_station/falcon.h"
 
 #include <gtest/gtest.h>
-
-#include <atomic>
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <deque>

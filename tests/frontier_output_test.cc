@@ -7,7 +7,6 @@
 
 #include <algorithm>
 #include <array>
-
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -39,7 +38,8 @@ Table ReadCsv(const std::string& path) {
     if (!line.empty() && line.back() == ',') cells.emplace_back();
     EXPECT_EQ(cells.size(), t.columns.size()) << path << ": " << line;
     std::map<std::string, std::string> r;
-    for (std::size_t i = 0; i < cells.size() && i < t.columns.size(); ++i) r[t.columns[i]] = cells[i];
+    for (std::size_t i = 0; i < cells.size() && i < t.columns.size(); ++i)
+      r[t.columns[i]] = cells[i];
     t.rows.push_back(r);
   }
   return t;
@@ -57,7 +57,7 @@ class FrontierOutput : public ::testing::Test {
     dir_ = dir;
   }
   const std::map<std::string, std::string>* Row(const Table& t, const std::string& scene,
-                                                 const std::string& setting) const {
+                                                const std::string& setting) const {
     for (const auto& r : t.rows) {
       if (r.at("scene") == scene && r.at("setting") == setting) return &r;
     }
@@ -86,13 +86,29 @@ TEST_F(FrontierOutput, EveryFileIsThereAndNothingHalfWritten) {
 
 TEST_F(FrontierOutput, ContactsCsvHasTheColumnsToRecomputeAGroundTruth) {
   const Table c = ReadCsv(dir_ + "/contacts.csv");
-  const std::vector<std::string> need = {
-      "scene", "setting", "pose_id", "contact", "tool", "object", "tool_px", "tool_py", "tool_pz",
-      "tool_qw", "tool_qx", "tool_qy", "tool_qz", "obj_px", "obj_py", "obj_pz", "obj_qw",
-      "obj_qx", "obj_qy", "obj_qz", "window_cx", "window_cy", "window_cz", "window_nx",
-      "window_ny", "window_nz", "window_ux", "window_uy", "window_uz", "window_extent_m", "grid",
-      "stiffness_n_per_m", "delta_m", "delta_gt_m", "fx", "fy", "fz", "tx", "ty", "tz", "fx_gt",
-      "fy_gt", "fz_gt", "tx_gt", "ty_gt", "tz_gt"};
+  const std::vector<std::string> need = {"scene",     "setting",
+                                         "pose_id",   "contact",
+                                         "tool",      "object",
+                                         "tool_px",   "tool_py",
+                                         "tool_pz",   "tool_qw",
+                                         "tool_qx",   "tool_qy",
+                                         "tool_qz",   "obj_px",
+                                         "obj_py",    "obj_pz",
+                                         "obj_qw",    "obj_qx",
+                                         "obj_qy",    "obj_qz",
+                                         "window_cx", "window_cy",
+                                         "window_cz", "window_nx",
+                                         "window_ny", "window_nz",
+                                         "window_ux", "window_uy",
+                                         "window_uz", "window_extent_m",
+                                         "grid",      "stiffness_n_per_m",
+                                         "delta_m",   "delta_gt_m",
+                                         "fx",        "fy",
+                                         "fz",        "tx",
+                                         "ty",        "tz",
+                                         "fx_gt",     "fy_gt",
+                                         "fz_gt",     "tx_gt",
+                                         "ty_gt",     "tz_gt"};
   for (const std::string& n : need) {
     EXPECT_NE(std::find(c.columns.begin(), c.columns.end(), n), c.columns.end()) << n;
   }

@@ -4,7 +4,6 @@
 // dir.
 
 #include "codecs/gltf_scene.h"
-#include "codecs/json_nesting.h"
 
 #include <gtest/gtest.h>
 
@@ -29,6 +28,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "codecs/json_nesting.h"
 #include "gltf_test_data.h"
 
 namespace ht {

@@ -3,13 +3,14 @@
 // CPU method against the ground truth on models whose coarse mesh is exact (two routes to one
 // number), and the FCL full-resolution baseline's sign and intersection test.
 
+#include "haptic_core/accuracy/ground_truth_depth.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <glm/gtc/quaternion.hpp>
 #include <limits>
 
-#include "haptic_core/accuracy/ground_truth_depth.h"
 #include "haptic_core/accuracy/mesh_contact_baseline.h"
 #include "haptic_core/contact_linearization.h"
 #include "haptic_core/procedural_models.h"

@@ -36,8 +36,8 @@ double ForceBound(const ContactWindow& w, int contacts = 1) {
 }
 
 std::shared_ptr<const HapticModel> FlatBox(glm::dvec3 half, double mass = 0.1) {
-  return std::make_shared<const HapticModel>(
-      MakeTexturedBox(half, [](double, double) { return 0.0; }, 16, mass, "flat_box"));
+  return std::make_shared<const HapticModel>(MakeTexturedBox(
+      half, [](double, double) { return 0.0; }, 16, mass, "flat_box"));
 }
 
 // A tool box (bottom face textured, frame at its centre) over a big flat object whose top is z = 0.
@@ -133,7 +133,7 @@ TEST(HardCases, ZeroAndNearZeroPenetration) {
   const ContactModelEvaluation out = EvaluateContactModel(barely, At({0, 0, 0.01 + 1e-6}));
   EXPECT_EQ(out.active_contacts, 0);
   Report("zero and near-zero penetration",
-         Fmt("δ = 0: F = 0 exactly; δ = 1 nm: |F| = %.2g N; 1 µm out: contact off", 
+         Fmt("δ = 0: F = 0 exactly; δ = 1 nm: |F| = %.2g N; 1 µm out: contact off",
              glm::length(barely.F_T_W_at_q0.force)));
 }
 
@@ -178,8 +178,7 @@ TEST(HardCases, DeepestPointOnTheWindowBorder) {
   Report("deepest point on the window border",
          Fmt("deepest cell at x = %.4f m (border column), ∂δ/∂x = %.4f (tan θ = %.4f), |F| = %.3f "
              "N; the truth at the border itself is half a cell deeper",
-             lin.point_W.x, lin.gradient.d_translation_W.x, std::tan(theta),
-             glm::length(F.force)));
+             lin.point_W.x, lin.gradient.d_translation_W.x, std::tan(theta), glm::length(F.force)));
 }
 
 TEST(HardCases, InterlockingRidges) {
@@ -256,8 +255,8 @@ TEST(HardCases, TextureSlopesAbove60Degrees) {
 }
 
 TEST(HardCases, DegenerateAndSliverCoarseTriangles) {
-  HapticModel m = MakeTexturedBox({0.02, 0.02, 0.01}, [](double, double) { return 0.0; }, 16, 0.1,
-                                  "box_with_slivers");
+  HapticModel m = MakeTexturedBox(
+      {0.02, 0.02, 0.01}, [](double, double) { return 0.0; }, 16, 0.1, "box_with_slivers");
   // A zero-area triangle (three collinear points on the bottom) and a 1e-9 m sliver, both facing
   // down like the bottom face, with the bottom's corner normals and uvs.
   const int base = static_cast<int>(m.vertices_O.size());
@@ -265,7 +264,8 @@ TEST(HardCases, DegenerateAndSliverCoarseTriangles) {
   m.vertices_O.push_back({0.0, 0.0, -0.01});
   m.vertices_O.push_back({0.01, 0.0, -0.01});
   m.vertices_O.push_back({0.0, 1e-9, -0.01});
-  for (glm::ivec3 t : {glm::ivec3(base, base + 2, base + 1), glm::ivec3(base, base + 3, base + 2)}) {
+  for (glm::ivec3 t :
+       {glm::ivec3(base, base + 2, base + 1), glm::ivec3(base, base + 3, base + 2)}) {
     m.triangles.push_back(t);
     for (int c = 0; c < 3; ++c) {
       m.corner_normals_O.push_back({0, 0, -1});

@@ -256,8 +256,8 @@ TEST_F(SceneBuildTest, BadDescriptionsAreRefusedNamingTheFileAndTheKey) {
       {R"({"scene": "s.glb",)", "not valid JSON"},
   };
   // Deeply nested JSON: refused before the (recursive) parser sees it, not a stack overflow.
-  const std::string deep_text = R"({"scene": "s.glb", "x": )" + std::string(200000, '[') +
-                                std::string(200000, ']') + "}";
+  const std::string deep_text =
+      R"({"scene": "s.glb", "x": )" + std::string(200000, '[') + std::string(200000, ']') + "}";
   const std::string deep = Write("deep.json", deep_text);
   try {
     LoadSceneInput(deep);

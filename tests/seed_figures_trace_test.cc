@@ -85,9 +85,10 @@ TEST(Fig76Trace, TheBlockRisesWhenRotatedAndTheTorqueOpposesTheRotation) {
   ASSERT_GT(rotated, 500);
   EXPECT_GT(opposing, static_cast<int>(0.8 * rotated))
       << opposing << " of " << rotated << " rotated in-contact ticks have the torque opposing";
-  std::printf("fig76: %zu rotate ticks, |theta| max %.4f rad, corr(z, |theta|) %.3f, torque opposes "
-              "in %d of %d rotated in-contact ticks\n",
-              rz.size(), theta_max, rise, opposing, rotated);
+  std::printf(
+      "fig76: %zu rotate ticks, |theta| max %.4f rad, corr(z, |theta|) %.3f, torque opposes "
+      "in %d of %d rotated in-contact ticks\n",
+      rz.size(), theta_max, rise, opposing, rotated);
 }
 
 // Seed Fig. 77: at least 500 remote frames in contact, each with leaf pairs, contacts and the
@@ -122,10 +123,10 @@ TEST(Fig77Trace, RemoteStepsSplitCollisionAndTextureTime) {
   int touching = 0;
   for (double v : c) touching += v >= 1;
   EXPECT_GT(touching, static_cast<int>(0.5 * c.size()));
-  std::printf("fig77: %zu remote steps in contact: leaf pairs mean %.1f, contacts mean %.2f, "
-              "texture us mean %.0f, total us mean %.0f; in contact %d of %zu scrape ticks\n",
-              contacts.size(), Mean(pairs), Mean(contacts), Mean(texture), Mean(total), touching,
-              c.size());
+  std::printf(
+      "fig77: %zu remote steps in contact: leaf pairs mean %.1f, contacts mean %.2f, "
+      "texture us mean %.0f, total us mean %.0f; in contact %d of %zu scrape ticks\n",
+      contacts.size(), Mean(pairs), Mean(contacts), Mean(texture), Mean(total), touching, c.size());
 }
 
 }  // namespace

@@ -20,8 +20,8 @@ TEST(StabilityMap, ImplicitIsStableEverywhereAndExplicitOnlyBelowTheLimit) {
         p.rate_hz = rate;
         const StabilityResult imp = ProbeStability(p, ToolIntegrator::kImplicitEuler);
         const StabilityResult exp = ProbeStability(p, ToolIntegrator::kExplicitEuler);
-        SCOPED_TRACE(testing::Message() << "k " << k << " m " << m << " rate " << rate
-                                        << " h·ω " << imp.h_omega);
+        SCOPED_TRACE(testing::Message()
+                     << "k " << k << " m " << m << " rate " << rate << " h·ω " << imp.h_omega);
         EXPECT_TRUE(imp.stable);
         EXPECT_LT(imp.late_amplitude_m, 1e-3);
         if (exp.h_omega >= 2.2) {  // beyond the explicit step's limit, with a margin for damping

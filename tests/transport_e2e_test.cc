@@ -3,9 +3,8 @@
 // agree with what the relay says it did. The run's directory comes from HT_LOOPBACK_OUT.
 #include <gtest/gtest.h>
 
-#include <cstdio>
-
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <nlohmann/json.hpp>

@@ -1,8 +1,8 @@
 #include "haptic_core/haptic_scene.h"
 
 #include <chrono>
-#include <optional>
 #include <cmath>
+#include <optional>
 #include <stdexcept>
 #include <string>
 

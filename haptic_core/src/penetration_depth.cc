@@ -1,11 +1,10 @@
 #include "haptic_core/penetration_depth.h"
 
-#include <optional>
-
 #include <algorithm>
 #include <cmath>
 #include <glm/geometric.hpp>
 #include <limits>
+#include <optional>
 #include <stdexcept>
 
 namespace ht {

@@ -76,8 +76,8 @@ StabilityResult ProbeStability(const StabilityProbe& p, ToolIntegrator integrato
   // Stable: bounded, and either settled or still decaying (a growing swing or a limit cycle of
   // bounces in and out of contact is not).
   const double first_swing = first_hi - first_lo, late_swing = late_hi - late_lo;
-  out.stable = late_amp <= 2.0 * offset0 &&
-               (late_amp < 1e-3 * offset0 || late_swing <= 0.9 * first_swing);
+  out.stable =
+      late_amp <= 2.0 * offset0 && (late_amp < 1e-3 * offset0 || late_swing <= 0.9 * first_swing);
   return out;
 }
 

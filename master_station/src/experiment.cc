@@ -1,8 +1,8 @@
 #include "master_station/experiment.h"
 
 #include <algorithm>
-#include <glm/gtc/quaternion.hpp>
 #include <cmath>
+#include <glm/gtc/quaternion.hpp>
 #include <limits>
 #include <numbers>
 #include <stdexcept>
@@ -23,7 +23,8 @@ HandTarget ApproachTarget(double t, double t_approach_s, double start_height_m,
   const double s = t / t_approach_s;
   const double span = -press_depth_m - start_height_m;
   out.X_MH.translation.z = start_height_m + span * 0.5 * (1.0 - std::cos(std::numbers::pi * s));
-  out.V_MH_M.linear.z = span * 0.5 * std::numbers::pi * std::sin(std::numbers::pi * s) / t_approach_s;
+  out.V_MH_M.linear.z =
+      span * 0.5 * std::numbers::pi * std::sin(std::numbers::pi * s) / t_approach_s;
   out.phase = 0;
   return out;
 }
@@ -364,8 +365,7 @@ std::unique_ptr<Experiment> MakeFig77Experiment(const Fig77Params& params) {
   return std::make_unique<Fig77Experiment>(params);
 }
 
-namespace {
-}  // namespace
+namespace {}  // namespace
 
 std::unique_ptr<Experiment> MakeExploreExperiment(const ExploreParams& params) {
   return std::make_unique<ExploreExperiment>(params);

@@ -1,5 +1,4 @@
 #include "master_station/falcon.h"
-#include "haptic_core/steady_clock.h"
 
 #include <libusb.h>
 
@@ -12,6 +11,8 @@
 #include <fstream>
 #include <numbers>
 #include <stdexcept>
+
+#include "haptic_core/steady_clock.h"
 
 namespace ht::falcon {
 namespace {
@@ -857,7 +858,9 @@ void FalconDevice::IoLoop() noexcept {
   bool homed = false;
   auto next = Clock::now();
   // The clock is passed in (FalconConfig::clock_ns): readings and freshness use it.
-  const auto clock_ns = [this]() noexcept { return config_.clock_ns ? config_.clock_ns() : NowNs(); };
+  const auto clock_ns = [this]() noexcept {
+    return config_.clock_ns ? config_.clock_ns() : NowNs();
+  };
 
   while (!stop_.load(std::memory_order_relaxed)) {
     ForceCommand newest;

@@ -21,16 +21,16 @@
 #include "codecs/draco_mesh_codec.h"
 #include "haptic_core/passivity.h"
 #include "haptic_core/statistics.h"
+#include "haptic_core/steady_clock.h"
 #include "haptic_core/wrench_safety.h"
-#include "master_station/operator_tick.h"
 #include "master_station/lock_free.h"
+#include "master_station/operator_tick.h"
+#include "network_worker.h"
+#include "trace_recorder.h"
 #include "transport/link.h"
 #include "transport/messages.h"
 #include "transport/scene_stream.h"
 #include "transport/session.h"
-#include "haptic_core/steady_clock.h"
-#include "network_worker.h"
-#include "trace_recorder.h"
 
 namespace ht {
 namespace {

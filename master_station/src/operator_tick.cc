@@ -82,10 +82,9 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
     // Stage 2: coupling and the implicit step against the (blended) model.
     if (blend_tick_ < config_.model_blend_ticks) {
       ++blend_tick_;
-      out.step = simulator_.StepBlended(tool_, out.X_WH, V_WH_W, model_, previous_model_,
-                                        static_cast<double>(blend_tick_) /
-                                            config_.model_blend_ticks,
-                                        h);
+      out.step =
+          simulator_.StepBlended(tool_, out.X_WH, V_WH_W, model_, previous_model_,
+                                 static_cast<double>(blend_tick_) / config_.model_blend_ticks, h);
     } else {
       out.step = simulator_.Step(tool_, out.X_WH, V_WH_W, model_, 1.0, h);
     }
@@ -102,8 +101,8 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
     if (config_.passivity) F_device_W = passivity_.Apply(F_device_W, V_WH_W, h);
   }
   // Stage 4: safety, on every tick. Then the observer records what the device really gets.
-  F_device_W = safety_.Filter(F_device_W, V_WH_W, model_age_s, in.link_connected, h,
-                              out.safety_actions);
+  F_device_W =
+      safety_.Filter(F_device_W, V_WH_W, model_age_s, in.link_connected, h, out.safety_actions);
   // The safety stage's rate limit can hold back a drop passivity asked for: the guard scales
   // what is left so that the observed energy never goes negative.
   if (config_.passivity) F_device_W = passivity_.Guard(F_device_W, V_WH_W, h);

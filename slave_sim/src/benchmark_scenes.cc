@@ -71,8 +71,9 @@ std::shared_ptr<const HapticModel> SeedHapticModel(SeedModel model,
                                                    const std::string& name) {
   HapticModelBuildParams params;
   params.coarse_triangles = std::max(
-      4, static_cast<int>(std::lround(settings.coarse_scale *
-                                      static_cast<double>(SeedModelSpecOf(model).seed_coarse_triangles))));
+      4, static_cast<int>(
+             std::lround(settings.coarse_scale *
+                         static_cast<double>(SeedModelSpecOf(model).seed_coarse_triangles))));
   params.texture.texture_size = settings.texture_size;
   const HapticModelBuild build = BuildHapticModelCached(name, *mesh, params, cache);
   HapticModel m = *build.model;
@@ -152,7 +153,8 @@ BenchmarkScene MakeBenchmarkScene(const std::string& name, const BenchmarkModelS
     if (name == "fig75") {
       RidgedGearParams gear;
       gear.texture_size = settings.texture_size;
-      gear.coarse_segments = std::max(8, static_cast<int>(std::lround(400 * settings.coarse_scale)));
+      gear.coarse_segments =
+          std::max(8, static_cast<int>(std::lround(400 * settings.coarse_scale)));
       object.model = Finish(MakeRidgedGear(gear), settings.textured);
       scene.object_mesh_Fe = std::make_shared<const TriangleMesh>(MakeRidgedGearFullResolution());
       scene.object_name = "ridged_gear";
@@ -183,8 +185,8 @@ BenchmarkScene MakeBenchmarkScene(const std::string& name, const BenchmarkModelS
     scene.haptic.tool =
         SeedHapticModel(tool, settings, cache, true, &com, scene.tool_mesh_Ft, scene.tool_name);
     scene.X_TFt.translation = -com;
-    object.model = SeedHapticModel(env, settings, cache, false, nullptr, SeedMesh(env),
-                                   SeedModelName(env));
+    object.model =
+        SeedHapticModel(env, settings, cache, false, nullptr, SeedMesh(env), SeedModelName(env));
     scene.object_mesh_Fe = SeedMesh(env);
     scene.object_name = SeedModelName(env);
   } else {
@@ -205,8 +207,8 @@ BenchmarkScene MakeBenchmarkScene(const std::string& name, const BenchmarkModelS
     } else {
       X_WFt.translation = {-0.03, 0.0, 0.0};
     }
-    const double touch = TouchHeight(meshes, scene, X_WFt.rotation,
-                                     {X_WFt.translation.x, X_WFt.translation.y});
+    const double touch =
+        TouchHeight(meshes, scene, X_WFt.rotation, {X_WFt.translation.x, X_WFt.translation.y});
     if (std::isnan(touch)) throw std::logic_error(name + ": nothing under the tool's home");
     X_WFt.translation.z = touch + 1e-3;
     scene.haptic.X_WT_home = X_WFt * scene.X_TFt.Inverse();
@@ -286,7 +288,8 @@ std::vector<RigidTransform> PosesFromTrace(const std::string& path, const Benchm
     std::stringstream header(line);
     for (std::string c; std::getline(header, c, ',');) columns.push_back(c);
   }
-  const char* wanted[] = {"tool_x", "tool_y", "tool_z", "tool_rx", "tool_ry", "tool_rz", "contacts"};
+  const char* wanted[] = {"tool_x",  "tool_y",  "tool_z",  "tool_rx",
+                          "tool_ry", "tool_rz", "contacts"};
   int index[7];
   for (int k = 0; k < 7; ++k) {
     const auto it = std::find(columns.begin(), columns.end(), wanted[k]);

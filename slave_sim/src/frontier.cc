@@ -304,8 +304,8 @@ void RunGroundTruth(const BenchmarkScene& scene, std::vector<GtJob>& jobs,
       const std::size_t f = ++finished;
       if (reporter && options.progress && Seconds(t0) - last_report > 5.0) {
         last_report = Seconds(t0);
-        const double left = last_report / static_cast<double>(f) *
-                            static_cast<double>(jobs.size() - f);
+        const double left =
+            last_report / static_cast<double>(f) * static_cast<double>(jobs.size() - f);
         std::fprintf(stderr, "[frontier] %s: ground truth %zu/%zu windows, about %.0f s left\n",
                      scene.name.c_str(), f, jobs.size(), left);
       }
@@ -392,7 +392,8 @@ void MarkPareto(std::vector<SettingRun>& runs) {
     a.m.pareto = true;
     for (const SettingRun& b : runs) {
       if (&a == &b || !b.skipped.empty() || !std::isfinite(b.m.force_rel_rms)) continue;
-      const bool no_worse = b.m.total_p50 <= a.m.total_p50 && b.m.force_rel_rms <= a.m.force_rel_rms;
+      const bool no_worse =
+          b.m.total_p50 <= a.m.total_p50 && b.m.force_rel_rms <= a.m.force_rel_rms;
       const bool better = b.m.total_p50 < a.m.total_p50 || b.m.force_rel_rms < a.m.force_rel_rms;
       if (no_worse && better) a.m.pareto = false;
     }
@@ -405,8 +406,8 @@ void WriteQuat(std::ostream& o, const RigidTransform& X) {
 }
 
 void WriteWrench(std::ostream& o, const Wrench& F) {
-  o << F.force.x << ',' << F.force.y << ',' << F.force.z << ',' << F.torque.x << ','
-    << F.torque.y << ',' << F.torque.z;
+  o << F.force.x << ',' << F.force.y << ',' << F.force.z << ',' << F.torque.x << ',' << F.torque.y
+    << ',' << F.torque.z;
 }
 
 // The seed's timing figures for a scene (seed §19.5.2), for summary.md.
@@ -499,9 +500,8 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
         try {
           slot = std::make_unique<BenchmarkScene>(MakeBenchmarkScene(name, b, cache));
         } catch (const std::exception& e) {
-          throw std::runtime_error("scene " + name + " (texture " +
-                                   std::to_string(b.texture_size) + ", coarse x" +
-                                   Fmt(b.coarse_scale) + "): " + e.what());
+          throw std::runtime_error("scene " + name + " (texture " + std::to_string(b.texture_size) +
+                                   ", coarse x" + Fmt(b.coarse_scale) + "): " + e.what());
         }
       }
       return *slot;
@@ -515,7 +515,8 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
                                      std::pair{rep.object_file, ref.object_mesh_Fe}}) {
       const std::string path = options.out_dir + "/meshes/" + file;
       if (!std::filesystem::exists(path)) {
-        WriteGlb(path + ".partial", {{file.substr(0, file.size() - 4), *mesh, glm::dmat4(1.0), ""}});
+        WriteGlb(path + ".partial",
+                 {{file.substr(0, file.size() - 4), *mesh, glm::dmat4(1.0), ""}});
         std::filesystem::rename(path + ".partial", path);
       }
     }
@@ -564,7 +565,8 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
         const auto t0 = Clock::now();
         RunSetting(scene, poses, fcl, run);
         for (ContactRecord& c : run.contacts) {
-          const std::string key = GtKey(c.pose, run.X_TFt, c.query.window, c.query.stiffness_n_per_m);
+          const std::string key =
+              GtKey(c.pose, run.X_TFt, c.query.window, c.query.stiffness_n_per_m);
           auto [it, fresh] = job_index.try_emplace(key, static_cast<int>(jobs.size()));
           if (fresh) {
             GtJob j;
@@ -578,8 +580,8 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
           c.gt = it->second;
         }
         say("%s: setting %d/%d done (%s, %.1f s)%s%s", name.c_str(), units_done, total_units,
-            st.name.c_str(), Seconds(t0), run.skipped.empty() ? "" : ": skipped: ",
-            run.skipped.c_str());
+            st.name.c_str(), Seconds(t0),
+            run.skipped.empty() ? "" : ": skipped: ", run.skipped.c_str());
       }
       rep.runs.push_back(std::move(run));
     }
@@ -617,8 +619,8 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
         WriteQuat(cc, c.query.X_WE);
         cc << ',' << w.center_W.x << ',' << w.center_W.y << ',' << w.center_W.z << ','
            << w.normal_W.x << ',' << w.normal_W.y << ',' << w.normal_W.z << ',' << w.axis_u_W.x
-           << ',' << w.axis_u_W.y << ',' << w.axis_u_W.z << ',' << w.extent_m << ','
-           << w.resolution << ',' << c.query.stiffness_n_per_m << ',' << c.lin.depth_m << ','
+           << ',' << w.axis_u_W.y << ',' << w.axis_u_W.z << ',' << w.extent_m << ',' << w.resolution
+           << ',' << c.query.stiffness_n_per_m << ',' << c.lin.depth_m << ','
            << j.result.linearization.depth_m << ',';
         WriteWrench(cc, PenaltyWrench(c.lin.depth_m, c.lin.gradient, c.lin.stiffness_n_per_m));
         cc << ',';
@@ -641,7 +643,8 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
     o << "scene,setting,method,backend,renderer,grid,texture_size,coarse_scale,depth_bits,"
          "tool_coarse_triangles,object_coarse_triangles,poses,contacts_mean,leaf_pairs_mean,"
          "collision_p50_us,collision_p95_us,texture_p50_us,texture_p95_us,total_p50_us,"
-         "total_p95_us,force_rel_rms,force_rel_p50,torque_rel_rms,force_dir_p50_deg,force_dir_p95_deg,"
+         "total_p95_us,force_rel_rms,force_rel_p50,torque_rel_rms,force_dir_p50_deg,force_dir_p95_"
+         "deg,"
          "delta_err_p50_um,delta_err_p95_um,windows,contacts_missed,contacts_invented,"
          "poses_missed,poses_invented,pareto,skipped\n";
     for (const SceneReport& rep : reports) {
@@ -654,21 +657,41 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
         };
         const Metrics& m = r.m;
         std::vector<std::string> cells = {
-            rep.name, s.name, FrontierMethodName(s.method),
+            rep.name,
+            s.name,
+            FrontierMethodName(s.method),
             s.method == FrontierMethod::kFullResolutionFcl ? "cpu" : s.backend,
-            clean(r.renderer), std::to_string(s.grid), std::to_string(s.texture_size),
-            Fmt(s.coarse_scale), std::to_string(s.backend == "gpu" ? s.depth_bits : 32),
-            std::to_string(r.tool_coarse_triangles), std::to_string(r.object_coarse_triangles)};
+            clean(r.renderer),
+            std::to_string(s.grid),
+            std::to_string(s.texture_size),
+            Fmt(s.coarse_scale),
+            std::to_string(s.backend == "gpu" ? s.depth_bits : 32),
+            std::to_string(r.tool_coarse_triangles),
+            std::to_string(r.object_coarse_triangles)};
         if (r.skipped.empty()) {
-          for (const std::string& c :
-               {std::to_string(r.poses.size()), Fmt(m.contacts_mean), Fmt(m.leaf_pairs_mean),
-                Fmt(m.collision_p50), Fmt(m.collision_p95), Fmt(m.texture_p50),
-                Fmt(m.texture_p95), Fmt(m.total_p50), Fmt(m.total_p95), Fmt(m.force_rel_rms), Fmt(m.force_rel_p50),
-                Fmt(m.torque_rel_rms), Fmt(m.dir_p50_deg), Fmt(m.dir_p95_deg),
-                Fmt(m.delta_p50_um), Fmt(m.delta_p95_um), std::to_string(m.windows),
-                std::to_string(m.missed), std::to_string(m.invented),
-                std::to_string(m.poses_missed), std::to_string(m.poses_invented),
-                std::string(m.pareto ? "1" : "0"), std::string()}) {
+          for (const std::string& c : {std::to_string(r.poses.size()),
+                                       Fmt(m.contacts_mean),
+                                       Fmt(m.leaf_pairs_mean),
+                                       Fmt(m.collision_p50),
+                                       Fmt(m.collision_p95),
+                                       Fmt(m.texture_p50),
+                                       Fmt(m.texture_p95),
+                                       Fmt(m.total_p50),
+                                       Fmt(m.total_p95),
+                                       Fmt(m.force_rel_rms),
+                                       Fmt(m.force_rel_p50),
+                                       Fmt(m.torque_rel_rms),
+                                       Fmt(m.dir_p50_deg),
+                                       Fmt(m.dir_p95_deg),
+                                       Fmt(m.delta_p50_um),
+                                       Fmt(m.delta_p95_um),
+                                       std::to_string(m.windows),
+                                       std::to_string(m.missed),
+                                       std::to_string(m.invented),
+                                       std::to_string(m.poses_missed),
+                                       std::to_string(m.poses_invented),
+                                       std::string(m.pareto ? "1" : "0"),
+                                       std::string()}) {
             cells.push_back(c);
           }
         } else {
@@ -689,8 +712,9 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
                             "/frontier.csv' '" + options.out_dir + "/frontier.png'";
     const int rc = std::system(cmd.c_str());
     if (rc != 0) {
-      plot_note = "frontier.png was not written (`" + cmd + "` exited with " + std::to_string(rc) +
-                  "; it needs /usr/bin/python3 with matplotlib: apt-get install python3-matplotlib)";
+      plot_note =
+          "frontier.png was not written (`" + cmd + "` exited with " + std::to_string(rc) +
+          "; it needs /usr/bin/python3 with matplotlib: apt-get install python3-matplotlib)";
       say("%s", plot_note.c_str());
     }
   } else {
@@ -724,7 +748,8 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
       << " triangles): " << rep.mesh_note << ".\n";
     s << "- Poses: " << rep.poses << ", from " << rep.pose_source << "; " << rep.touching
       << " of them intersect at full resolution (FCL).\n";
-    const int m50 = static_cast<int>(Percentile(std::vector<double>(rep.gt_m.begin(), rep.gt_m.end()), 0.5));
+    const int m50 =
+        static_cast<int>(Percentile(std::vector<double>(rep.gt_m.begin(), rep.gt_m.end()), 0.5));
     const int mmax = rep.gt_m.empty() ? 0 : *std::max_element(rep.gt_m.begin(), rep.gt_m.end());
     s << "- Ground truth: " << rep.gt_windows << " distinct windows, " << rep.gt_converged
       << " converged (δ changed by < " << Fmt(options.ground_truth.tolerance_m * 1e6, 3)
@@ -732,10 +757,12 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
       << " (p50 " << m50 << ", max " << mmax << ", cap " << options.ground_truth.max_samples
       << "), each grid refined locally from its " << options.ground_truth.refine_seeds
       << " best cells down to " << Fmt(options.ground_truth.refine_step_m * 1e9, 3)
-      << " nm; largest last change " << Fmt(rep.gt_change_max_m * 1e6, 3) << " µm; "
-      << rep.gt_rays << " rays in " << Fmt(rep.gt_seconds, 3) << " s.\n\n";
-    s << "| setting | method | backend | N | texture | coarse | leaf pairs / contacts | step p50 / p95 (ms) | "
-         "collision p50 | texture p50 | force err (RMS; pose p50) | torque err | dir err p50 / p95 (°) | δ err "
+      << " nm; largest last change " << Fmt(rep.gt_change_max_m * 1e6, 3) << " µm; " << rep.gt_rays
+      << " rays in " << Fmt(rep.gt_seconds, 3) << " s.\n\n";
+    s << "| setting | method | backend | N | texture | coarse | leaf pairs / contacts | step p50 / "
+         "p95 (ms) | "
+         "collision p50 | texture p50 | force err (RMS; pose p50) | torque err | dir err p50 / p95 "
+         "(°) | δ err "
          "p50 / p95 (µm) | missed / invented | Pareto |\n";
     s << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
     const SettingRun* fastest = nullptr;
@@ -744,22 +771,22 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
       const FrontierSetting& st = r.setting;
       if (st.name == "default") def = &r;
       s << "| " << st.name << " | " << FrontierMethodName(st.method) << " | "
-        << (st.backend == "gpu" ? "gpu " + std::to_string(st.depth_bits) + "-bit" : "cpu")
-        << " | " << st.grid << " | " << st.texture_size << " | ×" << Fmt(st.coarse_scale) << " | ";
+        << (st.backend == "gpu" ? "gpu " + std::to_string(st.depth_bits) + "-bit" : "cpu") << " | "
+        << st.grid << " | " << st.texture_size << " | ×" << Fmt(st.coarse_scale) << " | ";
       if (!r.skipped.empty()) {
         s << "skipped: " << r.skipped << " |||||||||\n";
         continue;
       }
       const Metrics& m = r.m;
       s << Fmt(m.leaf_pairs_mean, 3) << " / " << Fmt(m.contacts_mean, 3) << " | "
-        << Fmt(m.total_p50 / 1e3, 3) << " / "
-        << Fmt(m.total_p95 / 1e3, 3) << " | " << Fmt(m.collision_p50 / 1e3, 3) << " | "
-        << Fmt(m.texture_p50 / 1e3, 3) << " | " << Fmt(100 * m.force_rel_rms, 3) << " %; "
-        << Fmt(100 * m.force_rel_p50, 3) << " % | "
+        << Fmt(m.total_p50 / 1e3, 3) << " / " << Fmt(m.total_p95 / 1e3, 3) << " | "
+        << Fmt(m.collision_p50 / 1e3, 3) << " | " << Fmt(m.texture_p50 / 1e3, 3) << " | "
+        << Fmt(100 * m.force_rel_rms, 3) << " %; " << Fmt(100 * m.force_rel_p50, 3) << " % | "
         << Fmt(100 * m.torque_rel_rms, 3) << " % | " << Fmt(m.dir_p50_deg, 3) << " / "
         << Fmt(m.dir_p95_deg, 3) << " | " << Fmt(m.delta_p50_um, 3) << " / "
         << Fmt(m.delta_p95_um, 3) << " | " << m.missed << " / " << m.invented << " (poses "
-        << m.poses_missed << " / " << m.poses_invented << ") | " << (m.pareto ? "yes" : "") << " |\n";
+        << m.poses_missed << " / " << m.poses_invented << ") | " << (m.pareto ? "yes" : "")
+        << " |\n";
       if (m.force_rel_rms <= 0.05 && (!fastest || m.total_p50 < fastest->m.total_p50)) fastest = &r;
     }
     s << "\n";
@@ -767,8 +794,9 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
       s << "Fastest setting with force error ≤ 5 %: **" << fastest->setting.name << "**, "
         << Fmt(fastest->m.total_p50 / 1e3, 3) << " ms per step (p50), "
         << Fmt(fastest->m.contacts_mean, 3) << " contacts per step, "
-        << Fmt(fastest->m.contacts_mean > 0 ? fastest->m.texture_p50 / 1e3 / fastest->m.contacts_mean
-                                            : 0.0,
+        << Fmt(fastest->m.contacts_mean > 0
+                   ? fastest->m.texture_p50 / 1e3 / fastest->m.contacts_mean
+                   : 0.0,
                3)
         << " ms of texture stage per contact; seed (2004 GPU): about 2 ms per contact, "
         << SeedFigures(rep.name) << ".\n";
@@ -790,9 +818,9 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
     }
     if (def && def->skipped.empty()) {
       s << "The default setting (N = 50, 1024² textures, the seed's coarse counts, CPU) is "
-        << (def->m.pareto ? "on" : "not on") << " the Pareto frontier here: "
-        << Fmt(def->m.total_p50 / 1e3, 3) << " ms per step at " << Fmt(100 * def->m.force_rel_rms, 3)
-        << " % force error.\n";
+        << (def->m.pareto ? "on" : "not on")
+        << " the Pareto frontier here: " << Fmt(def->m.total_p50 / 1e3, 3) << " ms per step at "
+        << Fmt(100 * def->m.force_rel_rms, 3) << " % force error.\n";
     }
     s << "\n";
   }

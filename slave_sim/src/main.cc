@@ -233,13 +233,16 @@ int main(int argc, char** argv) {
       config.step_trace_path = out_dir + "/remote_steps.csv";
     }
     const std::map<std::string, std::string> benchmark_scenes = {
-        {"striped-blocks", "fig76"}, {"file-on-cad-part", "fig77"}, {"hammer-on-torus", "hammer_torus"}};
+        {"striped-blocks", "fig76"},
+        {"file-on-cad-part", "fig77"},
+        {"hammer-on-torus", "hammer_torus"}};
     if (scene == "block-on-gear" || scene == "stiff-wall") {
       builtin_scene = scene == "stiff-wall" ? ht::MakeStiffWallScene() : ht::MakeBlockOnGearScene();
       config.scene_objects = ht::BlockOnGearSceneObjects();
     } else if (benchmark_scenes.count(scene) != 0) {
-      if (!quiet) std::printf("[slave] building scene %s (model cache: %s)\n", scene.c_str(),
-                              scene_cache_dir.empty() ? "none" : scene_cache_dir.c_str());
+      if (!quiet)
+        std::printf("[slave] building scene %s (model cache: %s)\n", scene.c_str(),
+                    scene_cache_dir.empty() ? "none" : scene_cache_dir.c_str());
       const ht::BenchmarkScene bench = ht::MakeBenchmarkScene(
           benchmark_scenes.at(scene), {}, ht::HapticModelCache(scene_cache_dir));
       builtin_scene = bench.haptic;
@@ -250,10 +253,10 @@ int main(int argc, char** argv) {
         for (glm::dvec3& p : m.vertices) p = X_WF * p;
         return ht::EncodeMeshDraco(m);
       };
-      config.scene_objects.emplace_back(1, posed(*bench.tool_mesh_Ft,
-                                                 bench.haptic.X_WT_home * bench.X_TFt));
-      config.scene_objects.emplace_back(2, posed(*bench.object_mesh_Fe,
-                                                 bench.haptic.touchables.at(0).X_WO));
+      config.scene_objects.emplace_back(
+          1, posed(*bench.tool_mesh_Ft, bench.haptic.X_WT_home * bench.X_TFt));
+      config.scene_objects.emplace_back(
+          2, posed(*bench.object_mesh_Fe, bench.haptic.touchables.at(0).X_WO));
       const ht::RigidTransform& home = bench.haptic.X_WT_home;
       std::printf("[slave] scene %s: tool %s on %s; tool home position in W %.4f,%.4f,%.4f\n",
                   scene.c_str(), bench.tool_name.c_str(), bench.object_name.c_str(),

@@ -15,11 +15,11 @@
 #include "haptic_core/hull_proximity.h"
 #include "haptic_core/procedural_models.h"
 #include "haptic_core/statistics.h"
+#include "haptic_core/steady_clock.h"
 #include "transport/link.h"
 #include "transport/messages.h"
 #include "transport/scene_stream.h"
 #include "transport/session.h"
-#include "haptic_core/steady_clock.h"
 
 namespace ht {
 namespace {
@@ -426,8 +426,8 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     if (collision_us.size() < collision_us.capacity()) collision_us.push_back(timings.collision_us);
     if (texture_us.size() < texture_us.capacity()) texture_us.push_back(timings.texture_us);
     if (step_records.size() < step_records.capacity()) {
-      step_records.push_back({static_cast<double>(t_step - start_ns) * 1e-9, timings,
-                              out.model.num_contacts});
+      step_records.push_back(
+          {static_cast<double>(t_step - start_ns) * 1e-9, timings, out.model.num_contacts});
     }
     if (model_period_ns == 0 || last_step_ns - last_model_sent_ns >= model_period_ns) {
       out.tool_state_send_time_ns = latest_send_time_ns;
@@ -471,9 +471,10 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   if (!config.step_trace_path.empty()) {
     std::FILE* f = std::fopen(config.step_trace_path.c_str(), "w");
     if (f == nullptr) throw std::runtime_error("cannot write " + config.step_trace_path);
-    std::fputs("step,t_s,leaf_pairs,clusters,contacts,broad_phase_culled,collision_us,texture_us,"
-               "total_us,budget_exhausted\n",
-               f);
+    std::fputs(
+        "step,t_s,leaf_pairs,clusters,contacts,broad_phase_culled,collision_us,texture_us,"
+        "total_us,budget_exhausted\n",
+        f);
     for (std::size_t i = 0; i < step_records.size(); ++i) {
       const StepRecord& r = step_records[i];
       std::fprintf(f, "%zu,%.6f,%d,%d,%d,%d,%.2f,%.2f,%.2f,%d\n", i + 1, r.t_s,

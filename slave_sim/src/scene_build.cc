@@ -5,9 +5,9 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
-#include <iterator>
 #include <glm/glm.hpp>
 #include <glm/gtc/quaternion.hpp>
+#include <iterator>
 #include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -122,7 +122,8 @@ SceneDescription SceneDescription::ForGltf(const std::string& gltf_path) {
 SceneDescription SceneDescription::LoadFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw std::runtime_error(path + ": cannot open the scene description");
-  constexpr std::uintmax_t kMaxDescriptionBytes = 16u << 20;  // a description is a few hundred bytes
+  constexpr std::uintmax_t kMaxDescriptionBytes = 16u
+                                                  << 20;  // a description is a few hundred bytes
   std::error_code size_error;
   if (std::filesystem::file_size(path, size_error) > kMaxDescriptionBytes && !size_error) {
     throw std::runtime_error(path + ": a scene description larger than 16 MiB is refused");

@@ -33,7 +33,8 @@ int main(int argc, char** argv) {
   std::string scene_list;
   for (const std::string& n : ht::BenchmarkSceneNames()) scene_list += " " + n;
   app.add_option("--scene", options.scenes, "scenes to run (repeatable):" + scene_list);
-  app.add_option("--poses", options.poses, "in-contact poses per scene (default 200; 12 with --quick)")
+  app.add_option("--poses", options.poses,
+                 "in-contact poses per scene (default 200; 12 with --quick)")
       ->check(CLI::Range(1, 100000));
   app.add_option("--trace", traces,
                  "SCENE=FILE: take that scene's poses from a run's trace.csv (rows in contact),\n"

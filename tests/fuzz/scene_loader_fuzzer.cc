@@ -18,8 +18,7 @@
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   static const std::string path = [] {
     const char* dir = std::getenv("TMPDIR");
-    return std::string(dir ? dir : "/tmp") + "/ht_scene_fuzz_" + std::to_string(getpid()) +
-           ".gltf";
+    return std::string(dir ? dir : "/tmp") + "/ht_scene_fuzz_" + std::to_string(getpid()) + ".gltf";
   }();
   std::FILE* f = std::fopen(path.c_str(), "wb");
   if (f == nullptr) return 0;

@@ -19,8 +19,8 @@
 #include <stdexcept>
 #include <string_view>
 
-#include "transport/protocol.h"
 #include "haptic_core/steady_clock.h"
+#include "transport/protocol.h"
 
 namespace ht {
 namespace {

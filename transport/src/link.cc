@@ -5,7 +5,6 @@
 
 namespace ht {
 
-
 bool ClockSync::AddSample(std::int64_t t1, std::int64_t t2, std::int64_t t3,
                           std::int64_t t4) noexcept {
   if (t4 < t1 || t3 < t2) return false;

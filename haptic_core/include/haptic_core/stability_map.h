@@ -16,7 +16,8 @@ namespace ht {
 /// How the tool's state is advanced.
 enum class ToolIntegrator {
   kImplicitEuler,  ///< ToolSimulator::Step (linearized backward Euler, the product's).
-  kExplicitEuler,  ///< v ← v + h·F(x, v)/m; x ← x + h·v (semi-implicit Euler, the usual explicit choice).
+  kExplicitEuler,  ///< v ← v + h·F(x, v)/m; x ← x + h·v (semi-implicit Euler, the usual explicit
+                   ///< choice).
 };
 
 /// "implicit" or "explicit".

@@ -86,9 +86,8 @@ RayCastSurface::RayCastSurface(const TriangleMesh& mesh) : impl_(std::make_uniqu
   rtcSetSceneFlags(impl_->scene, RTC_SCENE_FLAG_ROBUST);
   rtcSetSceneBuildQuality(impl_->scene, RTC_BUILD_QUALITY_HIGH);
   RTCGeometry geom = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_TRIANGLE);
-  auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0,
-                                                         RTC_FORMAT_FLOAT3, 3 * sizeof(float),
-                                                         mesh.vertices.size()));
+  auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(
+      geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), mesh.vertices.size()));
   auto* ib = static_cast<unsigned*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0,
                                                             RTC_FORMAT_UINT3, 3 * sizeof(unsigned),
                                                             mesh.triangles.size()));
@@ -150,8 +149,9 @@ void GroundTruthOptions::Validate() const {
                                 std::to_string(initial_samples));
   }
   if (max_samples < initial_samples || max_samples > 8192) {
-    throw std::invalid_argument("ground truth: max_samples must be in [initial_samples, 8192], got " +
-                                std::to_string(max_samples));
+    throw std::invalid_argument(
+        "ground truth: max_samples must be in [initial_samples, 8192], got " +
+        std::to_string(max_samples));
   }
   if (!(tolerance_m > 0.0) || !(refine_step_m > 0.0) || refine_seeds < 0) {
     throw std::invalid_argument(
@@ -348,8 +348,8 @@ GroundTruthContact GroundTruthDepthSolver::Linearize(const RigidTransform& X_WT,
   out.linearization = AssembleLinearization(w, samples, stiffness_n_per_m, faults);
   out.linearization.point_W =
       w.center_W + out.base.at_uv_m.x * w.axis_u_W + out.base.at_uv_m.y * w.axis_v_W;
-  out.F_T_W = PenaltyWrench(out.linearization.depth_m, out.linearization.gradient,
-                            stiffness_n_per_m);
+  out.F_T_W =
+      PenaltyWrench(out.linearization.depth_m, out.linearization.gradient, stiffness_n_per_m);
   out.rays = rays;
   return out;
 }

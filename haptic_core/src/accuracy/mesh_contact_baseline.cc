@@ -1,7 +1,8 @@
 #include "haptic_core/accuracy/mesh_contact_baseline.h"
 
-#include <chrono>
 #include <fcl/fcl.h>
+
+#include <chrono>
 #include <stdexcept>
 #include <string>
 #include <vector>

@@ -152,8 +152,8 @@ struct ExploreParams {
 /// force, speed or phase time.
 std::unique_ptr<Experiment> MakeExploreExperiment(const ExploreParams& params = {});
 
-/// Builds an experiment by name ("fig75", "fig76", "fig77", "explore"). Throws std::invalid_argument listing the
-/// known names.
+/// Builds an experiment by name ("fig75", "fig76", "fig77", "explore"). Throws
+/// std::invalid_argument listing the known names.
 std::unique_ptr<Experiment> MakeExperiment(const std::string& name, double duration_s);
 
 }  // namespace ht

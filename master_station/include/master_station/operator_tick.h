@@ -54,7 +54,7 @@ struct OperatorTickInput {
   /// False when the device read failed: the tool is held and the device gets the safety stage's
   /// ramp to zero.
   bool device_ok = true;
-  DeviceState device;                   ///< X_MH, V_MH_M when device_ok
+  DeviceState device;                     ///< X_MH, V_MH_M when device_ok
   const ArrivedModel* arrived = nullptr;  ///< a new model, or null
   bool link_connected = true;
   /// A scripted "go to" (HandTarget::workspace_shift_M, m in M): when it differs from the
@@ -64,18 +64,18 @@ struct OperatorTickInput {
 
 /// One tick's outputs.
 struct OperatorTickOutput {
-  Wrench F_H_M;       ///< To command to the device: on the handle, in M (N, N·m).
-  Wrench F_device_W;  ///< The same in W.
-  ToolStepResult step;  ///< The tool step (default when the device read failed).
-  RigidTransform X_WH;  ///< Handle pose in W this tick (the last good one after a fault).
+  Wrench F_H_M;                ///< To command to the device: on the handle, in M (N, N·m).
+  Wrench F_device_W;           ///< The same in W.
+  ToolStepResult step;         ///< The tool step (default when the device read failed).
+  RigidTransform X_WH;         ///< Handle pose in W this tick (the last good one after a fault).
   double model_age_ms = -1.0;  ///< Age of the tool pose the model in use answers; −1 = none.
   std::uint32_t safety_actions = 0;
 };
 
 /// Counters of the tick's faults and events.
 struct OperatorTickCounters {
-  std::int64_t device_faults = 0;       ///< failed device reads
-  std::int64_t nonfinite = 0;           ///< non-finite steps, wrenches or tool poses
+  std::int64_t device_faults = 0;  ///< failed device reads
+  std::int64_t nonfinite = 0;      ///< non-finite steps, wrenches or tool poses
   std::int64_t workspace_jumps = 0;
   std::int64_t models_from_before_jump = 0;
   std::int64_t models_used = 0;

@@ -4,9 +4,9 @@
 // full-resolution meshes the ground truth is computed on, and in-contact tool poses.
 //
 //   fig75         ridged block (tool) on the ridged gear (seed Figs. 72-b, 75)
-//   fig76         two identical striped blocks, interlocked; the upper one is the tool (Fig. 72-a, 76)
-//   fig77         the file (tool) scraping the rough CAD part (Figs. 74, 77)
-//   hammer_torus  the textured hammer (tool) touching the wrinkled helicoidal torus (Fig. 73); the
+//   fig76         two identical striped blocks, interlocked; the upper one is the tool (Fig. 72-a,
+//   76) fig77         the file (tool) scraping the rough CAD part (Figs. 74, 77) hammer_torus  the
+//   textured hammer (tool) touching the wrinkled helicoidal torus (Fig. 73); the
 //                 hammer mesh is turned head down (a half turn about x) so that the tool's home
 //                 orientation, which the operator's workspace is aligned with, is the identity
 
@@ -74,7 +74,7 @@ std::vector<RigidTransform> ScriptedContactPoses(const BenchmarkScene& scene, in
 /// Poses X_WFt from a run's trace.csv (master_station: tool_x..tool_rz is X_WT), keeping rows
 /// with at least one contact, `count` of them evenly spread. Throws std::runtime_error naming the
 /// file when it cannot be read or lacks the columns.
-std::vector<RigidTransform> PosesFromTrace(const std::string& trace_csv, const BenchmarkScene& scene,
-                                           int count);
+std::vector<RigidTransform> PosesFromTrace(const std::string& trace_csv,
+                                           const BenchmarkScene& scene, int count);
 
 }  // namespace ht

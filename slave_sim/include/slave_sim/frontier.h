@@ -27,11 +27,11 @@ const char* FrontierMethodName(FrontierMethod method) noexcept;
 struct FrontierSetting {
   std::string name;
   FrontierMethod method = FrontierMethod::kTexture;
-  int grid = 50;             ///< N of the penetration-depth grid.
-  int texture_size = 1024;   ///< Haptic texture side (texels).
-  double coarse_scale = 1.0; ///< Coarse triangle target × the seed's count.
+  int grid = 50;                ///< N of the penetration-depth grid.
+  int texture_size = 1024;      ///< Haptic texture side (texels).
+  double coarse_scale = 1.0;    ///< Coarse triangle target × the seed's count.
   std::string backend = "cpu";  ///< "cpu" or "gpu".
-  int depth_bits = 32;       ///< GPU depth precision (16 or 32); the CPU works in float.
+  int depth_bits = 32;          ///< GPU depth precision (16 or 32); the CPU works in float.
 };
 
 /// The sweep: the default setting (grid 50, 1024² textures, the seed's coarse counts, CPU) first,
