@@ -7,19 +7,9 @@
 
 #include <gtest/gtest.h>
 
-#include <atomic>
-#include <cstdlib>
-#include <new>
+#include "allocation_counter.h"  // the tick / step must make no allocation
 
-// Counts every allocation of this test program (the tick must make none).
-static std::atomic<long> g_allocations{0};
-void* operator new(std::size_t n) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
-  throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+using ht::testing_support::Allocations;
 
 namespace ht {
 namespace {
@@ -179,14 +169,14 @@ TEST(OperatorTick, ATickNeverAllocates) {
   OperatorTickInput fault;
   fault.device_ok = false;
   tick.Step(in);  // warm-up
-  const long before = g_allocations.load();
+  const long before = Allocations();
   for (int k = 0; k < 5000; ++k) {
     in.now_ns = fault.now_ns = (k + 1) * 1000000LL;
     in.arrived = k % 3 == 0 ? &wall : nullptr;
     in.workspace_shift_M = k == 2500 ? glm::dvec3(0.01, 0, 0) : in.workspace_shift_M;
     tick.Step(k % 97 == 0 ? fault : in);
   }
-  EXPECT_EQ(g_allocations.load() - before, 0);
+  EXPECT_EQ(Allocations() - before, 0);
 }
 
 }  // namespace

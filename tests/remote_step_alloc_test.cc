@@ -4,22 +4,13 @@
 
 #include <gtest/gtest.h>
 
-#include <atomic>
-#include <cstdlib>
 #include <glm/gtc/quaternion.hpp>
-#include <new>
 
+#include "allocation_counter.h"  // the tick / step must make no allocation
 #include "haptic_core/haptic_scene.h"
 #include "haptic_core/procedural_models.h"
 
-static std::atomic<long> g_allocations{0};
-void* operator new(std::size_t n) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
-  throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+using ht::testing_support::Allocations;
 
 namespace ht {
 namespace {
@@ -40,9 +31,9 @@ TEST(RemoteStep, AllocatesNothingAfterWarmUp) {
   StepTimings t;
   int in_contact = 0;
   for (int k = 0; k < 200; ++k) pipeline.Step(PoseAt(k), k, t);  // warm-up: the scratch grows
-  const long before = g_allocations.load();
+  const long before = Allocations();
   for (int k = 200; k < 1200; ++k) in_contact += pipeline.Step(PoseAt(k), k, t).num_contacts > 0;
-  EXPECT_EQ(g_allocations.load() - before, 0);
+  EXPECT_EQ(Allocations() - before, 0);
   EXPECT_GT(in_contact, 100);
   EXPECT_LT(in_contact, 1000);  // and out of contact too
 }

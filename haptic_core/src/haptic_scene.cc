@@ -154,9 +154,9 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   }
   const auto t1 = Clock::now();
 
+  // The batch lives in members, so that last_contact_queries() can show it after the step.
   std::array<ContactQuery, kMaxContacts>& queries = last_queries_;
   std::array<ContactLinearization, kMaxContacts>& results = last_results_;
-  last_num_queries_ = num_candidates;
   int num_queries = 0;
   for (int i = 0; i < num_candidates; ++i) {
     const Candidate& c = candidates[i];
@@ -171,11 +171,10 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
     queries[num_queries++] = {c.object->model.get(), c.object->X_WO, *window,
                               c.object->stiffness_n_per_m};
   }
-  num_candidates = num_queries;
   last_num_queries_ = num_queries;
-  const std::span<const ContactQuery> batch(queries.data(), num_candidates);
-  const std::span<ContactLinearization> batch_out(results.data(), num_candidates);
-  if (num_candidates > 0 && !backend_->LinearizeBatch(tool, X_WT, batch, batch_out)) {
+  const std::span<const ContactQuery> batch(queries.data(), num_queries);
+  const std::span<ContactLinearization> batch_out(results.data(), num_queries);
+  if (num_queries > 0 && !backend_->LinearizeBatch(tool, X_WT, batch, batch_out)) {
     // The GPU failed (context lost, GL error): this step and all later ones on the CPU.
     if (backend_failures_++ == 0) {
       fallback_reason_ = std::string(backend_->name()) + ": " + backend_->last_error();
@@ -183,7 +182,7 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
     backend_ = std::make_unique<CpuPenetrationDepthBackend>(options_.grid_resolution);
     backend_->LinearizeBatch(tool, X_WT, batch, batch_out);
   }
-  for (int i = 0; i < num_candidates; ++i) {
+  for (int i = 0; i < num_queries; ++i) {
     const ContactLinearization& lin = results[i];
     if (!std::isfinite(lin.depth_m)) continue;  // no overlap of the patches on the window
     model.contacts[model.num_contacts++] = lin;

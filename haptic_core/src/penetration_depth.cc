@@ -6,22 +6,35 @@
 #include <limits>
 #include <optional>
 #include <stdexcept>
+#include <string>
 
 namespace ht {
+
+namespace {
+
+// What is wrong with a window's arguments (nullptr when nothing): the one rule TryMake and Make
+// share.
+const char* WindowProblem(const glm::dvec3& center_W, const glm::dvec3& normal_W, double extent_m,
+                          int resolution) noexcept {
+  const double len = glm::length(normal_W);
+  if (!std::isfinite(len) || !(len > 1e-12)) return "normal must be finite and non-zero";
+  if (!std::isfinite(center_W.x) || !std::isfinite(center_W.y) || !std::isfinite(center_W.z)) {
+    return "centre must be finite";
+  }
+  if (!(extent_m > 0.0) || !std::isfinite(extent_m)) return "extent must be positive";
+  if (resolution < 2 || resolution > 1024) return "resolution must be in [2, 1024]";
+  return nullptr;
+}
+
+}  // namespace
 
 std::optional<ContactWindow> ContactWindow::TryMake(const glm::dvec3& center_W,
                                                     const glm::dvec3& normal_W, double extent_m,
                                                     int resolution) noexcept {
-  const double len = glm::length(normal_W);
-  if (!std::isfinite(len) || !(len > 1e-12)) return std::nullopt;
-  if (!std::isfinite(center_W.x) || !std::isfinite(center_W.y) || !std::isfinite(center_W.z)) {
-    return std::nullopt;
-  }
-  if (!(extent_m > 0.0) || !std::isfinite(extent_m)) return std::nullopt;
-  if (resolution < 2 || resolution > 1024) return std::nullopt;
+  if (WindowProblem(center_W, normal_W, extent_m, resolution) != nullptr) return std::nullopt;
   ContactWindow w;
   w.center_W = center_W;
-  w.normal_W = normal_W / len;
+  w.normal_W = normal_W / glm::length(normal_W);
   const glm::dvec3 ref = std::abs(w.normal_W.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0);
   w.axis_u_W = glm::normalize(ref - glm::dot(ref, w.normal_W) * w.normal_W);
   w.axis_v_W = glm::cross(w.normal_W, w.axis_u_W);
@@ -32,22 +45,12 @@ std::optional<ContactWindow> ContactWindow::TryMake(const glm::dvec3& center_W,
 
 ContactWindow ContactWindow::Make(const glm::dvec3& center_W, const glm::dvec3& normal_W,
                                   double extent_m, int resolution) {
-  if (const std::optional<ContactWindow> w = TryMake(center_W, normal_W, extent_m, resolution)) {
-    return *w;
+  if (const char* problem = WindowProblem(center_W, normal_W, extent_m, resolution)) {
+    throw std::invalid_argument(std::string("ContactWindow: ") + problem + " (extent " +
+                                std::to_string(extent_m) + ", resolution " +
+                                std::to_string(resolution) + ")");
   }
-  const double len = glm::length(normal_W);
-  if (!std::isfinite(len) || !(len > 1e-12)) {
-    throw std::invalid_argument("ContactWindow: normal must be finite and non-zero");
-  }
-  if (!std::isfinite(center_W.x) || !std::isfinite(center_W.y) || !std::isfinite(center_W.z)) {
-    throw std::invalid_argument("ContactWindow: centre must be finite");
-  }
-  if (!(extent_m > 0.0) || !std::isfinite(extent_m)) {
-    throw std::invalid_argument("ContactWindow: extent must be positive, got " +
-                                std::to_string(extent_m));
-  }
-  throw std::invalid_argument("ContactWindow: resolution must be in [2, 1024], got " +
-                              std::to_string(resolution));
+  return *TryMake(center_W, normal_W, extent_m, resolution);
 }
 
 glm::dvec3 ContactWindow::CellCenter(int index) const noexcept {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 
 #include "haptic_core/contact_model.h"
 
@@ -39,8 +40,13 @@ StabilityResult ProbeStability(const StabilityProbe& p, ToolIntegrator integrato
   inertia.mass_kg = p.mass_kg;
   const double side = 0.04;
   inertia.inertia_diagonal_T = glm::dvec3(p.mass_kg * side * side / 6.0);
-  const VirtualCoupling& coupling = p.coupling;
-  ToolSimulator sim(inertia, coupling);
+  // Bad coupling gains make the simulator refuse: an unstable answer, not an exception.
+  try {
+    p.coupling.Validate();
+  } catch (const std::invalid_argument&) {
+    return out;
+  }
+  const ToolSimulator sim(inertia, p.coupling);
   // Released at rest, 10 % of δ0 above the rest position (still in contact).
   const double offset0 = std::max(0.1 * c.depth_m, 1e-9);
   ToolState s;

@@ -6,6 +6,7 @@
 #include <limits>
 #include <numbers>
 #include <stdexcept>
+#include <utility>
 
 #include "master_station/simulated_operator.h"
 
@@ -29,18 +30,31 @@ HandTarget ApproachTarget(double t, double t_approach_s, double start_height_m,
   return out;
 }
 
-class Fig75Experiment final : public Experiment {
+// What every fixed script (fig75, fig76, fig77) shares: its name, duration and phase names.
+class FixedScript : public Experiment {
  public:
-  explicit Fig75Experiment(const Fig75Params& p) : p_(p) {
+  FixedScript(std::string name, double duration_s, std::vector<std::string> phases)
+      : name_(std::move(name)), duration_s_(duration_s), phases_(std::move(phases)) {}
+  const std::string& name() const noexcept override { return name_; }
+  double duration_s() const noexcept override { return duration_s_; }
+  const std::vector<std::string>& phase_names() const noexcept override { return phases_; }
+
+ private:
+  std::string name_;
+  double duration_s_;
+  std::vector<std::string> phases_;
+};
+
+class Fig75Experiment final : public FixedScript {
+ public:
+  explicit Fig75Experiment(const Fig75Params& p)
+      : FixedScript("fig75", p.duration_s, {"approach", "x", "y", "z"}), p_(p) {
     if (!(p.duration_s > 0.0) || !std::isfinite(p.duration_s)) {
       throw std::invalid_argument("fig75: duration must be positive");
     }
     t_approach_ = 0.1 * p.duration_s;
     t_phase_ = 0.3 * p.duration_s;
   }
-  const std::string& name() const noexcept override { return name_; }
-  double duration_s() const noexcept override { return p_.duration_s; }
-  const std::vector<std::string>& phase_names() const noexcept override { return phases_; }
 
   HandTarget Target(double t) const noexcept override {
     HandTarget out;
@@ -77,8 +91,6 @@ class Fig75Experiment final : public Experiment {
   Fig75Params p_;
   double t_approach_ = 0.0;
   double t_phase_ = 0.0;
-  std::string name_ = "fig75";
-  std::vector<std::string> phases_ = {"approach", "x", "y", "z"};
 };
 
 // The explore script: a list of segments, each a time interval with a hand behaviour.
@@ -276,18 +288,16 @@ class ExploreExperiment final : public Experiment {
 
 // Seed Fig. 76: press the upper striped block into the lower one, then rotate it back and forth
 // about n (the device's z, the scene's up) while the hand keeps pressing.
-class Fig76Experiment final : public Experiment {
+class Fig76Experiment final : public FixedScript {
  public:
-  explicit Fig76Experiment(const Fig76Params& p) : p_(p) {
+  explicit Fig76Experiment(const Fig76Params& p)
+      : FixedScript("fig76", p.duration_s, {"approach", "rotate"}), p_(p) {
     if (!(p.duration_s > 0.0) || !std::isfinite(p.duration_s) || !(p.period_s > 0.0) ||
         !(p.amplitude_rad > 0.0)) {
       throw std::invalid_argument("fig76: duration, period and amplitude must be positive");
     }
     t_approach_ = std::min(1.0, 0.1 * p.duration_s);
   }
-  const std::string& name() const noexcept override { return name_; }
-  double duration_s() const noexcept override { return p_.duration_s; }
-  const std::vector<std::string>& phase_names() const noexcept override { return phases_; }
 
   HandTarget Target(double t) const noexcept override {
     HandTarget out;
@@ -308,22 +318,18 @@ class Fig76Experiment final : public Experiment {
  private:
   Fig76Params p_;
   double t_approach_ = 0.0;
-  std::string name_ = "fig76";
-  std::vector<std::string> phases_ = {"approach", "rotate"};
 };
 
 // Seed Fig. 77: press the tool onto the part, then scrape along +x with a sway in y and a yaw.
-class Fig77Experiment final : public Experiment {
+class Fig77Experiment final : public FixedScript {
  public:
-  explicit Fig77Experiment(const Fig77Params& p) : p_(p) {
+  explicit Fig77Experiment(const Fig77Params& p)
+      : FixedScript("fig77", p.duration_s, {"approach", "scrape"}), p_(p) {
     if (!(p.duration_s > 0.0) || !std::isfinite(p.duration_s) || !(p.stroke_m > 0.0)) {
       throw std::invalid_argument("fig77: duration and stroke must be positive");
     }
     t_approach_ = std::min(1.0, 0.1 * p.duration_s);
   }
-  const std::string& name() const noexcept override { return name_; }
-  double duration_s() const noexcept override { return p_.duration_s; }
-  const std::vector<std::string>& phase_names() const noexcept override { return phases_; }
 
   HandTarget Target(double t) const noexcept override {
     HandTarget out;
@@ -351,8 +357,6 @@ class Fig77Experiment final : public Experiment {
  private:
   Fig77Params p_;
   double t_approach_ = 0.0;
-  std::string name_ = "fig77";
-  std::vector<std::string> phases_ = {"approach", "scrape"};
 };
 
 }  // namespace

@@ -326,9 +326,9 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
         row.p_WH = out.X_WH.translation;
         row.F_device_W = out.F_device_W;
         row.model_age_ms = out.model_age_ms;
-        row.remote_collision_us = tick.last_arrived().collision_us;
-        row.remote_texture_us = tick.last_arrived().texture_us;
-        row.remote_step_us = tick.last_arrived().step_us;
+        row.remote_collision_us = tick.model_stamp().collision_us;
+        row.remote_texture_us = tick.model_stamp().texture_us;
+        row.remote_step_us = tick.model_stamp().step_us;
         contacts_max = std::max(contacts_max, step.active_contacts);
         force_max = std::max(force_max, glm::length(step.F_contact_T_W.force));
       }

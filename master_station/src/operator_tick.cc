@@ -45,13 +45,13 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
       previous_model_ = model_;  // blended out over the next model_blend_ticks ticks
       blend_tick_ = 0;
       model_ = in.arrived->model;
-      last_arrived_ = *in.arrived;
+      model_stamp_ = *in.arrived;  // the stamp only: the model itself is in model_
       have_model_ = true;
       ++counters_.models_used;
     }
   }
-  if (have_model_) out.model_age_ms = (in.now_ns - last_arrived_.tool_state_sent_ns) * 1e-6;
-  const double model_age_s = have_model_ ? (in.now_ns - last_arrived_.built_local_ns) * 1e-9 : -1.0;
+  if (have_model_) out.model_age_ms = (in.now_ns - model_stamp_.tool_state_sent_ns) * 1e-6;
+  const double model_age_s = have_model_ ? (in.now_ns - model_stamp_.built_local_ns) * 1e-9 : -1.0;
 
   Wrench F_device_W;
   Twist V_WH_W;

@@ -111,7 +111,6 @@ struct GtJob {
   ContactWindow window;
   double stiffness = 0.0;
   GroundTruthContact result;
-  bool done = false;
 };
 
 // One contact (window) of a setting at a pose.
@@ -136,7 +135,6 @@ struct Metrics {
   double force_rel_rms = 0, torque_rel_rms = 0;
   double force_rel_p50 = 0;  // median over poses of |F − F_gt| / |F_gt|
   double dir_p50_deg = 0, dir_p95_deg = 0;
-  int dir_poses = 0;
   double delta_p50_um = 0, delta_p95_um = 0;
   int windows = 0, missed = 0, invented = 0, poses_missed = 0, poses_invented = 0;
   bool pareto = false;
@@ -300,7 +298,6 @@ void RunGroundTruth(const BenchmarkScene& scene, std::vector<GtJob>& jobs,
     for (std::size_t i; (i = next.fetch_add(1)) < jobs.size();) {
       GtJob& j = jobs[i];
       j.result = solver.Linearize(j.X_WT, j.X_TFt, j.X_WFe, j.window, j.stiffness);
-      j.done = true;
       const std::size_t f = ++finished;
       if (reporter && options.progress && Seconds(t0) - last_report > 5.0) {
         last_report = Seconds(t0);
@@ -373,7 +370,6 @@ void ComputeMetrics(SettingRun& run, const std::vector<GtJob>& jobs,
   m.force_rel_p50 = Percentile(rel, 0.5);
   m.dir_p50_deg = Percentile(dir, 0.5);
   m.dir_p95_deg = Percentile(dir, 0.95);
-  m.dir_poses = static_cast<int>(dir.size());
   for (const ContactRecord& c : run.contacts) {
     const double d = c.lin.depth_m, g = jobs[c.gt].result.linearization.depth_m;
     ++m.windows;
@@ -790,6 +786,9 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
       if (m.force_rel_rms <= 0.05 && (!fastest || m.total_p50 < fastest->m.total_p50)) fastest = &r;
     }
     s << "\n";
+    for (const SettingRun& r : rep.runs) {  // e.g. a GPU that failed mid-run
+      if (!r.note.empty()) s << "Note on " << r.setting.name << ": " << r.note << ".\n";
+    }
     if (fastest) {
       s << "Fastest setting with force error ≤ 5 %: **" << fastest->setting.name << "**, "
         << Fmt(fastest->m.total_p50 / 1e3, 3) << " ms per step (p50), "

@@ -48,8 +48,8 @@ struct StabilityResult {
 /// Simulates the tool pressed by the coupling (handle 10 mm below, 10 N) onto one contact of
 /// stiffness k along +z (J = −ẑ; at rest the tool is in contact at δ0 = 10 N / k), released at
 /// rest 0.1·δ0 above its rest position, with `integrator`; linear while the tool stays in
-/// contact. noexcept apart from std::bad_alloc; never throws for bad numbers (a non-positive
-/// mass or rate gives stable = false).
+/// contact. Never throws: a non-positive mass, rate or duration, a negative stiffness or bad
+/// coupling gains give stable = false.
 StabilityResult ProbeStability(const StabilityProbe& probe, ToolIntegrator integrator) noexcept;
 
 }  // namespace ht

@@ -37,15 +37,19 @@ struct OperatorTickConfig {
   double h_s = 1e-3;
 };
 
-/// A contact model the network delivered since the last tick.
-struct ArrivedModel {
-  ContactModel model;
+/// When a contact model was made and what its remote step cost.
+struct ModelStamp {
   /// Local steady-clock times (ns): when the tool state it answers was sent, and when the remote
   /// node sent the model (mapped onto the local clock).
   std::int64_t tool_state_sent_ns = 0;
   std::int64_t built_local_ns = 0;
   /// The remote step's split (µs), for the trace.
   float collision_us = 0.0f, texture_us = 0.0f, step_us = 0.0f;
+};
+
+/// A contact model the network delivered since the last tick, with its stamp.
+struct ArrivedModel : ModelStamp {
+  ContactModel model;
 };
 
 /// One tick's inputs.
@@ -99,8 +103,8 @@ class OperatorTick {
   const OperatorTickCounters& counters() const noexcept { return counters_; }
   const PassivityController& passivity() const noexcept { return passivity_; }
   const WrenchSafetyFilter& safety() const noexcept { return safety_; }
-  /// The remote step split of the model in use (µs).
-  const ArrivedModel& last_arrived() const noexcept { return last_arrived_; }
+  /// The stamp of the model in use (its times and its remote step's split).
+  const ModelStamp& model_stamp() const noexcept { return model_stamp_; }
 
  private:
   OperatorTickConfig config_;
@@ -113,7 +117,7 @@ class OperatorTick {
   ContactModel model_{}, previous_model_{};
   int blend_tick_;
   bool have_model_ = false;
-  ArrivedModel last_arrived_{};
+  ModelStamp model_stamp_{};
   glm::dvec3 workspace_shift_M_{0.0};
   glm::dvec3 jumped_from_W_{0.0};
   bool after_jump_ = false;

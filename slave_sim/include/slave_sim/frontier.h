@@ -25,10 +25,10 @@ const char* FrontierMethodName(FrontierMethod method) noexcept;
 
 /// One point of the sweep.
 struct FrontierSetting {
-  std::string name;
-  FrontierMethod method = FrontierMethod::kTexture;
-  int grid = 50;                ///< N of the penetration-depth grid.
-  int texture_size = 1024;      ///< Haptic texture side (texels).
+  std::string name;  ///< Row name in the outputs: "default", "grid16", "texture256", "gpu16", …
+  FrontierMethod method = FrontierMethod::kTexture;  ///< What computes the wrench.
+  int grid = 50;                                     ///< N of the penetration-depth grid.
+  int texture_size = 1024;                           ///< Haptic texture side (texels).
   double coarse_scale = 1.0;    ///< Coarse triangle target × the seed's count.
   std::string backend = "cpu";  ///< "cpu" or "gpu".
   int depth_bits = 32;          ///< GPU depth precision (16 or 32); the CPU works in float.
