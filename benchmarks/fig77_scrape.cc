@@ -21,9 +21,9 @@
 #include <vector>
 
 #include "haptic_core/contact_clustering.h"
+#include "haptic_core/demo/seed_models.h"
 #include "haptic_core/hull_proximity.h"
 #include "haptic_core/model_build/haptic_model_build.h"
-#include "haptic_core/seed_models.h"
 
 namespace {
 

@@ -12,9 +12,10 @@
 #include <random>
 #include <vector>
 
+#include "haptic_core/demo/demo_scenes.h"
+#include "haptic_core/demo/procedural_models.h"
 #include "haptic_core/gpu_penetration_depth.h"
 #include "haptic_core/haptic_scene.h"
-#include "haptic_core/procedural_models.h"
 
 namespace {
 

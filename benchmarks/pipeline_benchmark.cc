@@ -2,7 +2,9 @@
 // penetration depth with its 11 evaluations) and the operator loop's per-tick work.
 #include <benchmark/benchmark.h>
 
+#include "haptic_core/demo/demo_scenes.h"
 #include "haptic_core/haptic_scene.h"
+#include "haptic_core/remote_step.h"
 #include "haptic_core/tool_simulation.h"
 
 namespace {

@@ -2,7 +2,8 @@
 #   bin/                      slave_sim, master_station, ht_relay, speed_error_frontier
 #   lib/, include/haptic_core the haptic core (static library) and its public headers, with an
 #                             exported CMake package: find_package(haptic_teleop CONFIG) gives
-#                             haptic_teleop::haptic_core (examples/find_package_consumer uses it)
+#                             haptic_teleop::haptic_core, and the demo models and scenes as
+#                             haptic_teleop::haptic_demo_models (examples/find_package_consumer)
 #   lib/systemd/system/       the two services;  lib/udev/rules.d/  the device rules
 #   share/haptic_teleop/      example configs, the plot scripts, the docs
 # and `cpack -G DEB` (in the build folder) makes a Debian package of the same.
@@ -15,7 +16,7 @@ if(TARGET ht_relay)
   install(TARGETS ht_relay RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
 endif()
 
-install(TARGETS haptic_core EXPORT haptic_teleop_targets
+install(TARGETS haptic_core haptic_demo_models EXPORT haptic_teleop_targets
         ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
         INCLUDES DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
 install(DIRECTORY ${PROJECT_SOURCE_DIR}/haptic_core/include/haptic_core

@@ -24,8 +24,8 @@
 #include <vector>
 
 #include "codecs/draco_mesh_codec.h"
+#include "haptic_core/demo/procedural_models.h"
 #include "haptic_core/haptic_model.h"
-#include "haptic_core/procedural_models.h"
 
 namespace ht {
 namespace {

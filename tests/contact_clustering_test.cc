@@ -9,6 +9,7 @@
 #include <glm/geometric.hpp>
 #include <limits>
 #include <new>
+#include <numbers>
 #include <random>
 #include <set>
 #include <vector>
@@ -156,7 +157,7 @@ TEST(ContactClustering, SeedCase104PairsOnSevenSeparatedSpotsGiveSevenWeightedCl
       offset = {uni(rng), uni(rng), uni(rng)};
     } while (glm::length(offset) > 1.0);
     const glm::dvec3 p = centers[s] + 1.5e-3 * offset;
-    const glm::dvec3 n = RandomUnitNear(normals[s], 5.0 * 3.14159265 / 180.0, rng);
+    const glm::dvec3 n = RandomUnitNear(normals[s], 5.0 * std::numbers::pi / 180.0, rng);
     const double d = -1e-3 + 1.2e-3 * 0.5 * (uni(rng) + 1.0);  // [−1, 0.2] mm
     pairs.push_back(MakePair(p, n, d, i, 200 + i));
     spots[s].push_back(pairs.back());

@@ -9,9 +9,10 @@
 #include <set>
 #include <string>
 
+#include "haptic_core/demo/demo_scenes.h"
+#include "haptic_core/demo/procedural_models.h"
 #include "haptic_core/haptic_scene.h"
 #include "haptic_core/hull_proximity.h"
-#include "haptic_core/procedural_models.h"
 #include "master_station/experiment.h"
 #include "master_station/simulated_operator.h"
 #include "slave_sim/remote_node.h"

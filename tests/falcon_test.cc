@@ -523,10 +523,10 @@ TEST(FtdiBaud, DivisorsMatchTheLiteralsLibnifalconSends) {
 // ---------------------------------------------------------------------------------------------
 
 TEST(FalconKinematics, EncoderScaleIsTheCapstanRatioOfAQuadratureWheel) {
-  constexpr double kPi = std::numbers::pi;
-  EXPECT_NEAR(EncoderToMotorAngle(0), 35.0 * kPi / 180.0, 1e-15);
+  EXPECT_NEAR(EncoderToMotorAngle(0), 35.0 * std::numbers::pi / 180.0, 1e-15);
   // One motor turn (320 slots x 4) turns the arm by the shaft/arm diameter ratio.
-  EXPECT_NEAR(EncoderToMotorAngle(1280) - EncoderToMotorAngle(0), 2.0 * kPi * 14.25 / 110.0, 1e-12);
+  EXPECT_NEAR(EncoderToMotorAngle(1280) - EncoderToMotorAngle(0),
+              2.0 * std::numbers::pi * 14.25 / 110.0, 1e-12);
   for (double counts : {-3000.0, -1.0, 0.0, 17.0, 2500.0}) {
     EXPECT_NEAR(MotorAngleToEncoder(EncoderToMotorAngle(counts)), counts, 1e-9);
   }

@@ -8,10 +8,13 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <numbers>
 #include <random>
 
+#include "haptic_core/demo/demo_scenes.h"
+#include "haptic_core/demo/procedural_models.h"
 #include "haptic_core/haptic_scene.h"
-#include "haptic_core/procedural_models.h"
+#include "haptic_core/remote_step.h"
 
 namespace ht {
 namespace {
@@ -43,8 +46,8 @@ RandomContact MakeRandomContact(std::mt19937& rng, int grid) {
   RandomContact c;
   c.X_WT = BlockOnGearHomePose();
   c.X_WT.translation += glm::dvec3(8e-3 * U(rng), 4e-3 * U(rng), -0.25e-3 - 0.55e-3 * U(rng));
-  c.X_WT.rotation =
-      QuaternionFromRotationVector(glm::dvec3(U(rng), U(rng), U(rng)) * (4.0 * M_PI / 180.0));
+  c.X_WT.rotation = QuaternionFromRotationVector(glm::dvec3(U(rng), U(rng), U(rng)) *
+                                                 (4.0 * std::numbers::pi / 180.0));
   const double y = c.X_WT.translation.y;
   const double r = RidgedGearParams{}.radius_m;
   const double angle = std::asin(std::clamp(y / r, -1.0, 1.0));
@@ -345,7 +348,7 @@ TEST_F(GpuTest, Fig75PathGivesTheSameWrenchesWithEitherBackend) {
     } else if (i < 200) {
       X.translation += glm::dvec3(0.0, -6e-3 + 12e-3 * s, -0.9e-3);
     } else {
-      X.translation.z += 0.5e-3 - 1.6e-3 * std::sin(M_PI * s);
+      X.translation.z += 0.5e-3 - 1.6e-3 * std::sin(std::numbers::pi * s);
     }
     StepTimings t;
     const ContactModel a = cpu.Step(X, i, t);

@@ -13,7 +13,7 @@
 
 #include "haptic_core/accuracy/mesh_contact_baseline.h"
 #include "haptic_core/contact_linearization.h"
-#include "haptic_core/procedural_models.h"
+#include "haptic_core/demo/procedural_models.h"
 
 namespace ht {
 namespace {

@@ -10,11 +10,14 @@
 #include <glm/gtc/quaternion.hpp>
 #include <limits>
 #include <memory>
+#include <numbers>
 
 #include "haptic_core/contact_model.h"
+#include "haptic_core/demo/demo_scenes.h"
+#include "haptic_core/demo/procedural_models.h"
 #include "haptic_core/haptic_scene.h"
 #include "haptic_core/penetration_depth.h"
-#include "haptic_core/procedural_models.h"
+#include "haptic_core/remote_step.h"
 #include "haptic_core/stability_map.h"
 #include "haptic_core/tool_simulation.h"
 #include "haptic_core/wrench_safety.h"
@@ -48,7 +51,7 @@ HapticScene BoxOnSlab(std::shared_ptr<const HapticModel> tool) {
   TouchableObject slab;
   // MakeTexturedBox's textured face is its bottom: turned over, it is the top, at z = 0.
   slab.model = FlatBox({0.06, 0.06, 0.01}, 2.0);
-  slab.X_WO.rotation = glm::angleAxis(M_PI, glm::dvec3(1, 0, 0));
+  slab.X_WO.rotation = glm::angleAxis(std::numbers::pi, glm::dvec3(1, 0, 0));
   slab.X_WO.translation = {0, 0, -0.01};
   slab.stiffness_n_per_m = kK;
   s.touchables.push_back(slab);
@@ -101,11 +104,12 @@ TEST(HardCases, GrazingContactDirection) {
   // 0.05 facing threshold) and heights along n vary by tan 85° per metre across the window.
   const auto tool = FlatBox({0.02, 0.02, 0.01});
   const auto object = FlatBox({0.06, 0.06, 0.01}, 2.0);
-  const RigidTransform X_WO = At({0, 0, -0.01}, glm::angleAxis(M_PI, glm::dvec3(1, 0, 0)));
+  const RigidTransform X_WO =
+      At({0, 0, -0.01}, glm::angleAxis(std::numbers::pi, glm::dvec3(1, 0, 0)));
   TexturePenetrationSolver solver;
   double worst = 0.0;
   for (double deg : {80.0, 85.0, 87.0, 89.0}) {
-    const double a = deg * M_PI / 180.0;
+    const double a = deg * std::numbers::pi / 180.0;
     const ContactWindow w =
         ContactWindow::Make({0, 0, 0}, {std::sin(a), 0.0, std::cos(a)}, 0.02, 50);
     const ContactLinearization lin =
@@ -163,7 +167,8 @@ TEST(HardCases, DeepestPointOnTheWindowBorder) {
   // A tilted tool face: δ is largest on the window's edge.
   const auto tool = FlatBox({0.03, 0.03, 0.005});
   const auto object = FlatBox({0.06, 0.06, 0.01}, 2.0);
-  const RigidTransform X_WO = At({0, 0, -0.01}, glm::angleAxis(M_PI, glm::dvec3(1, 0, 0)));
+  const RigidTransform X_WO =
+      At({0, 0, -0.01}, glm::angleAxis(std::numbers::pi, glm::dvec3(1, 0, 0)));
   const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 50);
   TexturePenetrationSolver solver;
   const double theta = 0.05;
@@ -188,12 +193,12 @@ TEST(HardCases, InterlockingRidges) {
   scene.tool = std::make_shared<const HapticModel>(MakeRidgedBlock());
   TouchableObject lower;
   lower.model = std::make_shared<const HapticModel>(MakeRidgedBlock());
-  lower.X_WO = At({0, 0, -0.01}, glm::angleAxis(M_PI, glm::dvec3(1, 0, 0)));
+  lower.X_WO = At({0, 0, -0.01}, glm::angleAxis(std::numbers::pi, glm::dvec3(1, 0, 0)));
   lower.stiffness_n_per_m = kK;
   scene.touchables.push_back(lower);
   std::string what;
   for (double deg : {-2.0, 2.0}) {
-    const double a = deg * M_PI / 180.0;
+    const double a = deg * std::numbers::pi / 180.0;
     const ContactModel m =
         StepAt(scene, At({0, 1.5e-3, 0.01 + 0.1e-3}, glm::angleAxis(a, glm::dvec3(0, 0, 1))));
     ASSERT_GE(m.num_contacts, 1);
@@ -216,7 +221,8 @@ double SawToothRatio(double slope, double period) {
   };
   const HapticModel tool = MakeTexturedBox({0.02, 0.02, 0.01}, saw, 1024, 0.1, "saw");
   const HapticModel object = MakeTexturedBox({0.03, 0.03, 0.01}, saw, 1024, 1.0, "saw_slab");
-  const RigidTransform X_WO = At({0, 0, -0.01}, glm::angleAxis(M_PI, glm::dvec3(1, 0, 0)));
+  const RigidTransform X_WO =
+      At({0, 0, -0.01}, glm::angleAxis(std::numbers::pi, glm::dvec3(1, 0, 0)));
   const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 50);
   TexturePenetrationSolver solver;
   double worst = 0.0;
@@ -241,7 +247,7 @@ TEST(HardCases, TextureSlopesAbove60Degrees) {
   // cells) the flanks push the tool sideways with a tangential/normal ratio up to the slope and no
   // more; where it does not (0.8 mm, two cells) the mip level the grid's cell selects has
   // averaged them away (seed §19.6.2): a bounded, smaller force, not aliasing.
-  const double slope = std::tan(70.0 * M_PI / 180.0);
+  const double slope = std::tan(70.0 * std::numbers::pi / 180.0);
   const double resolved = SawToothRatio(slope, 4e-3);
   const double filtered = SawToothRatio(slope, 0.8e-3);
   EXPECT_LE(resolved, 1.2 * slope);

@@ -18,6 +18,7 @@
 #include <iostream>
 #include <limits>
 #include <map>
+#include <numbers>
 #include <random>
 #include <set>
 #include <stdexcept>
@@ -26,13 +27,11 @@
 #include <utility>
 #include <vector>
 
+#include "haptic_core/demo/procedural_models.h"
 #include "haptic_core/model_build/hull_hierarchy_build.h"
-#include "haptic_core/procedural_models.h"
 
 namespace ht {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 struct Mesh {
   std::vector<glm::dvec3> vertices;
@@ -60,7 +59,7 @@ Mesh MakeCube(double h, glm::dvec3 c = glm::dvec3(0.0)) {
 Mesh MakePrism(int n, double r, double len) {
   Mesh m;
   for (int i = 0; i < n; ++i) {
-    const double a = 2.0 * kPi * i / n;
+    const double a = 2.0 * std::numbers::pi * i / n;
     m.vertices.emplace_back(r * std::cos(a), r * std::sin(a), -0.5 * len);
     m.vertices.emplace_back(r * std::cos(a), r * std::sin(a), 0.5 * len);
   }
@@ -116,8 +115,8 @@ Mesh MakeTorus(int nu, int nv, double R, double r,
   Mesh m;
   for (int i = 0; i < nu; ++i) {
     for (int j = 0; j < nv; ++j) {
-      const double u = 2.0 * kPi * i / nu;
-      const double v = 2.0 * kPi * j / nv;
+      const double u = 2.0 * std::numbers::pi * i / nu;
+      const double v = 2.0 * std::numbers::pi * j / nv;
       const double rr = r * (wrinkle ? wrinkle(u, v) : 1.0);
       m.vertices.emplace_back((R + rr * std::cos(v)) * std::cos(u),
                               (R + rr * std::cos(v)) * std::sin(u), rr * std::sin(v));
@@ -138,7 +137,7 @@ Mesh MakeTorus(int nu, int nv, double R, double r,
 Mesh MakeWasher(int n, double ri, double ro, double hz) {
   Mesh m;
   for (int i = 0; i < n; ++i) {
-    const double a = 2.0 * kPi * i / n;
+    const double a = 2.0 * std::numbers::pi * i / n;
     const glm::dvec3 d(std::cos(a), std::sin(a), 0.0);
     m.vertices.push_back(ro * d);                         // 4i: outer bottom
     m.vertices.push_back(ro * d + glm::dvec3(0, 0, hz));  // 4i+1: outer top

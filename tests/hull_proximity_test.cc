@@ -17,18 +17,17 @@
 #include <iostream>
 #include <limits>
 #include <memory>
+#include <numbers>
 #include <random>
 #include <set>
 #include <utility>
 #include <vector>
 
+#include "haptic_core/demo/procedural_models.h"
 #include "haptic_core/model_build/hull_hierarchy_build.h"
-#include "haptic_core/procedural_models.h"
 
 namespace ht {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 struct Mesh {
   std::vector<glm::dvec3> vertices;
@@ -77,7 +76,7 @@ Mesh MakeTorus(int nu, int nv, double R, double r) {
   Mesh m;
   for (int i = 0; i < nu; ++i) {
     for (int j = 0; j < nv; ++j) {
-      const double u = 2.0 * kPi * i / nu, v = 2.0 * kPi * j / nv;
+      const double u = 2.0 * std::numbers::pi * i / nu, v = 2.0 * std::numbers::pi * j / nv;
       m.vertices.emplace_back((R + r * std::cos(v)) * std::cos(u),
                               (R + r * std::cos(v)) * std::sin(u), r * std::sin(v));
     }
@@ -243,7 +242,7 @@ class TorusLBlock : public ::testing::Test {
   }
   // A random pose of the L-block near the torus tube.
   static RigidTransform RandomPose(std::mt19937_64& rng) {
-    std::uniform_real_distribution<double> angle(0.0, 2.0 * kPi), radial(0.02, 0.09),
+    std::uniform_real_distribution<double> angle(0.0, 2.0 * std::numbers::pi), radial(0.02, 0.09),
         height(-0.035, 0.035);
     const double a = angle(rng), r = radial(rng);
     return Pose({r * std::cos(a), r * std::sin(a), height(rng)}, RandomRotation(rng));
@@ -519,12 +518,13 @@ TEST(HullProximityHardCases, FaceFaceRestingContact) {
 TEST(HullProximityHardCases, EdgeEdgeCrossing) {
   const HapticModel box = MakeModel(MakeBox({0.01, 0.01, 0.01}));
   const double h = 0.01 * std::sqrt(2.0);
-  const RigidTransform X_WB = Pose({0, 0, 0}, AxisAngle({0, 1, 0}, kPi / 4));
+  const RigidTransform X_WB = Pose({0, 0, 0}, AxisAngle({0, 1, 0}, std::numbers::pi / 4));
   HullProximityQuery q;
   ProximityQueryOptions opt;
   opt.tolerance_m = 2e-3;
   for (double gap : {1e-3, 0.0, -1e-3}) {
-    const RigidTransform X_WA = Pose({0, 0, 2 * h + gap}, AxisAngle({1, 0, 0}, kPi / 4));
+    const RigidTransform X_WA =
+        Pose({0, 0, 2 * h + gap}, AxisAngle({1, 0, 0}, std::numbers::pi / 4));
     const auto pairs = q.Query(box, X_WA, box, X_WB, opt);
     const auto c = Only(pairs);
     CheckPairs(pairs, box, X_WA, box, X_WB, opt.tolerance_m);

@@ -8,7 +8,8 @@ src="${1:?source dir}"; build="${2:?build dir}"; out="${3:?out dir}"
 rm -rf "$out"; mkdir -p "$out"
 cmake --install "$build" --prefix "$out/prefix" > "$out/install.log"
 for f in bin/slave_sim bin/master_station bin/ht_relay bin/speed_error_frontier \
-         lib/libhaptic_core.a include/haptic_core/haptic_scene.h \
+         lib/libhaptic_core.a lib/libhaptic_demo_models.a include/haptic_core/remote_step.h \
+         include/haptic_core/demo/demo_scenes.h \
          lib/cmake/haptic_teleop/haptic_teleopConfig.cmake \
          lib/systemd/system/haptic-slave-sim.service lib/udev/rules.d/70-haptic-falcon.rules \
          share/haptic_teleop/config/remote.toml; do

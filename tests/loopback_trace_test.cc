@@ -102,8 +102,8 @@ TEST(LoopbackFig75, ForcesStayWithinTheDeviceLimits) {
   }
   EXPECT_EQ(s["nonfinite_count"].get<int>(), 0);
   EXPECT_GE(s["contacts_max"].get<int>(), 1);
-  for (const char* k : {"master_rate_hz", "master_tick_p99_us", "slave_rate_hz",
-                        "slave_step_p50_us", "rtt_ms_p50"}) {
+  for (const char* k : {"operator_rate_hz", "operator_tick_p99_us", "remote_rate_hz",
+                        "remote_step_p50_us", "rtt_ms_p50"}) {
     EXPECT_TRUE(s.contains(k)) << k;
   }
   EXPECT_GT(s["transport"]["streams"]["contact_model"]["received"].get<int>(), 0);

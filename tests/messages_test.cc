@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <numbers>
 #include <random>
 #include <vector>
 
@@ -99,7 +100,7 @@ WelcomeMessage SampleWelcome() {
   w.scene_name_length = static_cast<std::uint8_t>(name.size());
   SceneLayout& l = w.layout;
   l.X_WT_home.translation = {0.01, -0.02, 0.0215};
-  l.X_WT_home.rotation = QuaternionFromRotationVector({-1.5707963267948966, 0.0, 0.0});
+  l.X_WT_home.rotation = QuaternionFromRotationVector({-std::numbers::pi / 2, 0.0, 0.0});
   l.tool_mass_kg = 0.25;
   l.tool_inertia_diagonal_T = {1e-5, 2e-5, 3e-5};
   l.tool_extent_down_m = 0.0075;

@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <deque>
+#include <numbers>
 
 #include "haptic_core/passivity.h"
 #include "haptic_core/wrench_safety.h"
@@ -110,8 +111,9 @@ WallRun RunDelayedWall(int delay_ticks, bool passivity, double k = 5000.0,
   WallRun r;
   for (int i = 0; i < 8000; ++i) {
     const double t = i * kH;
-    const double x = 0.004 * std::sin(2 * M_PI * hz * t) - 0.001;  // into the wall when x > 0
-    const double v = 0.004 * 2 * M_PI * hz * std::cos(2 * M_PI * hz * t);
+    const double x =
+        0.004 * std::sin(2 * std::numbers::pi * hz * t) - 0.001;  // into the wall when x > 0
+    const double v = 0.004 * 2 * std::numbers::pi * hz * std::cos(2 * std::numbers::pi * hz * t);
     delayed.push_back(x > 0.0 ? -k * x : 0.0);  // wall force on the hand
     const double f_delayed = delayed.front();
     delayed.pop_front();

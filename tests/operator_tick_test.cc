@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include "allocation_counter.h"  // the tick / step must make no allocation
+#include "haptic_core/demo/demo_scenes.h"
 
 using ht::testing_support::Allocations;
 

@@ -1,4 +1,4 @@
-#include "haptic_core/procedural_models.h"
+#include "haptic_core/demo/procedural_models.h"
 
 #include <gtest/gtest.h>
 
@@ -6,6 +6,7 @@
 #include <map>
 #include <utility>
 
+#include "haptic_core/demo/demo_scenes.h"
 #include "haptic_core/haptic_scene.h"
 
 namespace ht {

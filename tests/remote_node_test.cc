@@ -9,6 +9,7 @@
 #include <chrono>
 #include <thread>
 
+#include "haptic_core/demo/demo_scenes.h"
 #include "transport/messages.h"
 
 namespace ht {

@@ -7,8 +7,10 @@
 #include <glm/gtc/quaternion.hpp>
 
 #include "allocation_counter.h"  // the tick / step must make no allocation
+#include "haptic_core/demo/demo_scenes.h"
+#include "haptic_core/demo/procedural_models.h"
 #include "haptic_core/haptic_scene.h"
-#include "haptic_core/procedural_models.h"
+#include "haptic_core/remote_step.h"
 
 using ht::testing_support::Allocations;
 

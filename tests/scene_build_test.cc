@@ -12,11 +12,13 @@
 #include <glm/glm.hpp>
 #include <glm/gtc/matrix_transform.hpp>
 #include <nlohmann/json.hpp>
+#include <numbers>
 #include <optional>
 
 #include "codecs/glb_writer.h"
 #include "codecs/gltf_scene.h"
 #include "gltf_test_data.h"
+#include "haptic_core/remote_step.h"
 
 namespace ht {
 namespace {
@@ -30,7 +32,7 @@ TriangleMesh RidgedSlab(double half_x, double half_y, double half_z, int n) {
     for (int i = 0; i <= n; ++i) {
       const double x = -half_x + 2 * half_x * i / n, y = -half_y + 2 * half_y * j / n;
       const bool edge = i == 0 || j == 0 || i == n || j == n;
-      const double z = half_z + (edge ? 0.0 : 0.3e-3 * std::sin(2 * 3.14159265358979 * y / 3e-3));
+      const double z = half_z + (edge ? 0.0 : 0.3e-3 * std::sin(2 * std::numbers::pi * y / 3e-3));
       m.vertices.emplace_back(x, y, z);
     }
   }

@@ -1,4 +1,4 @@
-#include "haptic_core/seed_models.h"
+#include "haptic_core/demo/seed_models.h"
 
 #include <gtest/gtest.h>
 
@@ -13,12 +13,10 @@
 #include <string>
 #include <vector>
 
-#include "haptic_core/procedural_models.h"
+#include "haptic_core/demo/procedural_models.h"
 
 namespace ht {
 namespace {
-
-constexpr double kPi = std::numbers::pi;
 
 // Generated once per test binary: the large models take a few tenths of a second each.
 const TriangleMesh& Model(SeedModel m) {
@@ -100,7 +98,7 @@ double WindingNumber(const TriangleMesh& m, const glm::dvec3& p) {
         la * lb * lc + glm::dot(a, b) * lc + glm::dot(a, c) * lb + glm::dot(b, c) * la;
     sum += 2.0 * std::atan2(det, den);
   }
-  return sum / (4.0 * kPi);
+  return sum / (4.0 * std::numbers::pi);
 }
 
 // Largest angle (deg) between the normals of two triangles sharing an edge.
@@ -113,7 +111,8 @@ double MaxDihedralDeg(const TriangleMesh& m, const std::vector<DirectedEdge>& ed
       const int o = OppositeTriangle(edges, f[c], f[(c + 1) % 3]);
       if (o < static_cast<int>(t)) continue;
       const glm::dvec3 no = glm::normalize(FaceNormal(m, o));
-      worst = std::max(worst, std::acos(std::clamp(glm::dot(n, no), -1.0, 1.0)) * 180.0 / kPi);
+      worst = std::max(
+          worst, std::acos(std::clamp(glm::dot(n, no), -1.0, 1.0)) * 180.0 / std::numbers::pi);
     }
   }
   return worst;
@@ -239,7 +238,7 @@ TEST(SeedModels, BlockAndGearVolumesMatchTheirDimensions) {
   EXPECT_NEAR(SignedVolume(Model(SeedModel::kBlock)), 8.0 * h.x * h.y * h.z,
               0.01 * 8.0 * h.x * h.y * h.z);
   const RidgedGearParams gear;
-  const double cylinder = kPi * gear.radius_m * gear.radius_m * gear.length_m;
+  const double cylinder = std::numbers::pi * gear.radius_m * gear.radius_m * gear.length_m;
   EXPECT_NEAR(SignedVolume(Model(SeedModel::kGear)), cylinder, 0.02 * cylinder);
 }
 
@@ -248,10 +247,11 @@ TEST(SeedModels, TorusVolumeAndWrinkles) {
   const double R = p.major_radius_m, r = p.minor_radius_m, A = p.wrinkle_amplitude_m;
   WrinkledTorusParams smooth = p;
   smooth.detail_scale = 0.0;
-  EXPECT_NEAR(SignedVolume(MakeWrinkledTorusFullResolution(smooth)), 2 * kPi * kPi * R * r * r,
-              0.002 * 2 * kPi * kPi * R * r * r);
+  EXPECT_NEAR(SignedVolume(MakeWrinkledTorusFullResolution(smooth)),
+              2 * std::numbers::pi * std::numbers::pi * R * r * r,
+              0.002 * 2 * std::numbers::pi * std::numbers::pi * R * r * r);
   // ∫∫∫ over the tube of radius r + A sin(…): the sine averages out, A² adds 2π²R·A²/2.
-  const double wrinkled = 2 * kPi * kPi * R * (r * r + 0.5 * A * A);
+  const double wrinkled = 2 * std::numbers::pi * std::numbers::pi * R * (r * r + 0.5 * A * A);
   EXPECT_NEAR(SignedVolume(Model(SeedModel::kTorus)), wrinkled, 0.005 * wrinkled);
   // Distance from the tube's centre circle spans r ± A.
   double lo = 1.0, hi = 0.0;
@@ -273,7 +273,8 @@ TEST(SeedModels, HammerVolumeSmoothBaseAndKnurl) {
   const TriangleMesh base = MakeTexturedHammerFullResolution(smooth);
   const glm::dvec3 hh = p.head_half_extents_m;
   const double R = p.handle_radius_m;
-  const double sharp = 8.0 * hh.x * hh.y * hh.z + kPi * R * R * (p.length_m - 2.0 * hh.z);
+  const double sharp =
+      8.0 * hh.x * hh.y * hh.z + std::numbers::pi * R * R * (p.length_m - 2.0 * hh.z);
   EXPECT_NEAR(SignedVolume(base), sharp, 0.03 * sharp);
   EXPECT_LT(MaxDihedralDeg(base, SortedDirectedEdges(base)), 25.0) << "base shape not smooth";
   const double reach = MaxDisplacement(base, Model(SeedModel::kHammer));
@@ -301,10 +302,10 @@ TEST(SeedModels, CadPartVolumeSmoothBaseAndMillMarks) {
   const double step =
       (hx - p.step_start_x_m) * 2.0 * hy * (p.step_top_z_m - p.plate_top_z_m) -
       (hx - p.slot_start_x_m) * 2.0 * p.slot_half_width_m * (p.step_top_z_m - p.slot_floor_z_m);
-  const double bosses =
-      2.0 * kPi * p.boss_radius_m * p.boss_radius_m * (p.boss_top_z_m - p.plate_top_z_m);
+  const double bosses = 2.0 * std::numbers::pi * p.boss_radius_m * p.boss_radius_m *
+                        (p.boss_top_z_m - p.plate_top_z_m);
   const double pins =
-      2.0 * kPi * p.pin_radius_m * p.pin_radius_m * (p.pin_top_z_m - p.step_top_z_m);
+      2.0 * std::numbers::pi * p.pin_radius_m * p.pin_radius_m * (p.pin_top_z_m - p.step_top_z_m);
   const double sharp = plate + step + bosses + pins;
   EXPECT_NEAR(SignedVolume(base), sharp, 0.03 * sharp);
   EXPECT_LT(MaxDihedralDeg(base, SortedDirectedEdges(base)), 25.0) << "base shape not smooth";
@@ -340,7 +341,7 @@ TEST(SeedModels, FileVolumeSmoothBaseAndTeeth) {
   }
   const double blade_section = 4.0 * p.blade_half_width_m * p.blade_half_thickness_m;
   const double sharp =
-      kPi * p.handle_radius_m * p.handle_radius_m * p.handle_length_m +
+      std::numbers::pi * p.handle_radius_m * p.handle_radius_m * p.handle_length_m +
       4.0 * p.neck_half_width_m * p.neck_half_thickness_m * p.neck_length_m +
       blade_section * (p.blade_length_m - p.taper_length_m + p.taper_length_m * taper);
   EXPECT_NEAR(SignedVolume(base), sharp, 0.03 * sharp);

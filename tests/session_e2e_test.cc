@@ -9,6 +9,7 @@
 #include <random>
 #include <thread>
 
+#include "haptic_core/demo/demo_scenes.h"
 #include "master_station/experiment.h"
 #include "master_station/operator_station.h"
 #include "master_station/simulated_operator.h"
@@ -118,8 +119,8 @@ TEST(SessionEndToEnd, AFloodOfBadDatagramsIsDroppedAndCountedWhileTheSessionHold
                 t["rejected_total"].get<std::uint64_t>(),
             flood_sent.load());
   std::printf("[flood] %llu bad datagrams sent; operator loop %.1f Hz, tick p99 %.1f us\n",
-              static_cast<unsigned long long>(flood_sent.load()), s["master_rate_hz"].get<double>(),
-              s["master_tick_p99_us"].get<double>());
+              static_cast<unsigned long long>(flood_sent.load()),
+              s["operator_rate_hz"].get<double>(), s["operator_tick_p99_us"].get<double>());
 }
 
 TEST(SessionEndToEnd, TheOperatorReconnectsToARestartedRemoteNode) {

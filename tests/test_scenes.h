@@ -4,7 +4,7 @@
 
 #include <functional>
 
-#include "haptic_core/procedural_models.h"
+#include "haptic_core/demo/procedural_models.h"
 
 namespace ht::testing {
 

@@ -23,8 +23,6 @@
 namespace ht {
 namespace {
 
-constexpr double kPi = std::numbers::pi;
-
 // Grid of nx×ny quads over [x0,x1]×[y0,y1] at height z(x, y), counter-clockwise seen from +z.
 TriangleMesh MakeGrid(double x0, double x1, double y0, double y1, int nx, int ny,
                       const std::function<double(double, double)>& z) {
@@ -152,7 +150,7 @@ std::pair<double, double> RandomBarycentric(std::mt19937_64& rng) {
 
 TEST(TextureBake, FlatSquareOverSinusoidReproducesTheSinusoid) {
   const double amplitude = 0.5e-3, period = 5e-3, side = 20e-3;
-  const double k = 2 * kPi / period;
+  const double k = 2 * std::numbers::pi / period;
   // The full surface extends 1 mm beyond the coarse square, as a closed object's surface would
   // continue past a face: the gutters' extended charts then find it too. 220 quads over 22 mm.
   const double margin = 1e-3, spacing = 0.1e-3;

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include "haptic_core/demo/demo_scenes.h"
+
 namespace ht {
 namespace {
 

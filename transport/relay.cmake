@@ -1,7 +1,11 @@
 # The impairment relay (included from transport/CMakeLists.txt): the library (spec, seeded model,
 # per-direction statistics, relay loop) and the ht_relay executable, which lands in
 # ${CMAKE_BINARY_DIR}/transport/ht_relay like every target defined in transport/.
-add_library(impairment ${CMAKE_CURRENT_SOURCE_DIR}/src/impairment.cc)
+add_library(impairment
+  ${CMAKE_CURRENT_SOURCE_DIR}/src/impairment_model.cc
+  ${CMAKE_CURRENT_SOURCE_DIR}/src/impairment_relay.cc
+  ${CMAKE_CURRENT_SOURCE_DIR}/src/impairment_spec.cc
+)
 target_include_directories(impairment PUBLIC ${CMAKE_CURRENT_SOURCE_DIR}/include)
 target_link_libraries(impairment PUBLIC transport nlohmann_json::nlohmann_json)
 

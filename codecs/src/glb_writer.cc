@@ -4,7 +4,6 @@
 
 #include <cmath>
 #include <cstdint>
-#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -12,17 +11,11 @@
 #include <random>
 #include <stdexcept>
 
+#include "haptic_core/byte_order.h"
+
 namespace ht {
 namespace {
 
-void PutU32(std::vector<std::uint8_t>& out, std::uint32_t v) {
-  for (int i = 0; i < 4; ++i) out.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
-}
-void PutF32(std::vector<std::uint8_t>& out, float v) {
-  std::uint32_t u;
-  std::memcpy(&u, &v, 4);
-  PutU32(out, u);
-}
 void PadTo4(std::vector<std::uint8_t>& out, std::uint8_t fill) {
   while (out.size() % 4 != 0) out.push_back(fill);
 }
@@ -57,7 +50,7 @@ void WriteGlb(const std::string& path, const std::vector<GlbNode>& nodes) {
       }
       for (int c = 0; c < 3; ++c) {
         const float f = static_cast<float>(p[c]);
-        PutF32(bin, f);
+        AppendLe(bin, f);
         lo[c] = std::min(lo[c], static_cast<double>(f));
         hi[c] = std::max(hi[c], static_cast<double>(f));
       }
@@ -73,7 +66,7 @@ void WriteGlb(const std::string& path, const std::vector<GlbNode>& nodes) {
                                       std::to_string(f) + " indexes vertex " + std::to_string(i) +
                                       " of " + std::to_string(nv));
         }
-        PutU32(bin, static_cast<std::uint32_t>(i));
+        AppendLe(bin, static_cast<std::uint32_t>(i));
       }
     }
     const std::size_t index_bytes = bin.size() - index_offset;
@@ -131,14 +124,14 @@ void WriteGlb(const std::string& path, const std::vector<GlbNode>& nodes) {
   }
   std::vector<std::uint8_t> out;
   out.reserve(28 + json_chunk.size() + bin.size());
-  PutU32(out, 0x46546C67);  // "glTF"
-  PutU32(out, 2);
-  PutU32(out, static_cast<std::uint32_t>(12 + 8 + json_chunk.size() + 8 + bin.size()));
-  PutU32(out, static_cast<std::uint32_t>(json_chunk.size()));
-  PutU32(out, 0x4E4F534A);  // "JSON"
+  AppendLe(out, std::uint32_t{0x46546C67});  // "glTF"
+  AppendLe(out, std::uint32_t{2});
+  AppendLe(out, static_cast<std::uint32_t>(12 + 8 + json_chunk.size() + 8 + bin.size()));
+  AppendLe(out, static_cast<std::uint32_t>(json_chunk.size()));
+  AppendLe(out, std::uint32_t{0x4E4F534A});  // "JSON"
   out.insert(out.end(), json_chunk.begin(), json_chunk.end());
-  PutU32(out, static_cast<std::uint32_t>(bin.size()));
-  PutU32(out, 0x004E4942);  // "BIN\0"
+  AppendLe(out, static_cast<std::uint32_t>(bin.size()));
+  AppendLe(out, std::uint32_t{0x004E4942});  // "BIN\0"
   out.insert(out.end(), bin.begin(), bin.end());
 
   const std::string tmp =

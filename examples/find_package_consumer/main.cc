@@ -3,7 +3,9 @@
 // contact wrench it gives. Exits 0 when the block is pushed out (Fz > 0), 1 otherwise.
 #include <cstdio>
 
+#include "haptic_core/demo/demo_scenes.h"
 #include "haptic_core/haptic_scene.h"
+#include "haptic_core/remote_step.h"
 
 int main() {
   const ht::HapticScene scene = ht::MakeBlockOnGearScene();

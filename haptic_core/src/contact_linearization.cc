@@ -22,13 +22,13 @@ TexturePenetrationSolver::TexturePenetrationSolver(int max_resolution, int max_t
 }
 
 void TexturePenetrationSolver::RenderEnvironment(const HapticModel& environment,
-                                                 const RigidTransform& X_WE,
+                                                 const RigidTransform& X_WO,
                                                  const ContactWindow& w) noexcept {
   const size_t cells = static_cast<size_t>(w.resolution) * w.resolution;
   env_heights_.assign(cells, -std::numeric_limits<float>::infinity());
-  SelectPatchTriangles(environment, X_WE, w, PatchSide::kEnvironment, w.cell_size_m(),
+  SelectPatchTriangles(environment, X_WO, w, PatchSide::kEnvironment, w.cell_size_m(),
                        env_triangles_);
-  RenderPatchHeights(environment, X_WE, env_triangles_, w, PatchSide::kEnvironment, env_heights_);
+  RenderPatchHeights(environment, X_WO, env_triangles_, w, PatchSide::kEnvironment, env_heights_);
 }
 
 DepthSample TexturePenetrationSolver::EvaluateTool(const HapticModel& tool,
@@ -42,9 +42,9 @@ DepthSample TexturePenetrationSolver::EvaluateTool(const HapticModel& tool,
 
 DepthSample TexturePenetrationSolver::Depth(const HapticModel& tool, const RigidTransform& X_WT,
                                             const HapticModel& environment,
-                                            const RigidTransform& X_WE,
+                                            const RigidTransform& X_WO,
                                             const ContactWindow& w) noexcept {
-  RenderEnvironment(environment, X_WE, w);
+  RenderEnvironment(environment, X_WO, w);
   SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool, w.cell_size_m(), tool_triangles_);
   return EvaluateTool(tool, X_WT, w);
 }
@@ -106,13 +106,13 @@ ContactLinearization AssembleLinearization(const ContactWindow& w,
 
 ContactLinearization TexturePenetrationSolver::Linearize(
     const HapticModel& tool, const RigidTransform& X_WT, const HapticModel& environment,
-    const RigidTransform& X_WE, const ContactWindow& w, double stiffness_n_per_m,
+    const RigidTransform& X_WO, const ContactWindow& w, double stiffness_n_per_m,
     std::span<DepthSample> samples_out) noexcept {
   const GradientSteps h = GradientSteps::For(w);
   double tool_radius = 0.0;
   for (const auto& v : tool.vertices_O) tool_radius = std::max(tool_radius, glm::length(v));
 
-  RenderEnvironment(environment, X_WE, w);
+  RenderEnvironment(environment, X_WO, w);
   // Tool triangles are chosen once, with margins that cover every perturbed pose (the render
   // re-checks facing at each pose).
   SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool, 2.0 * h.h_x + h.h_theta * tool_radius,

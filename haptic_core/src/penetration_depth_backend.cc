@@ -11,7 +11,7 @@ bool CpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
   for (size_t i = 0; i < queries.size(); ++i) {
     const ContactQuery& q = queries[i];
     out[i] =
-        solver_.Linearize(tool, X_WT, *q.environment, q.X_WE, q.window, q.stiffness_n_per_m,
+        solver_.Linearize(tool, X_WT, *q.environment, q.X_WO, q.window, q.stiffness_n_per_m,
                           want_samples ? samples_out.subspan(i * kGradientSamples, kGradientSamples)
                                        : std::span<DepthSample>{});
   }

@@ -8,8 +8,6 @@
 #include <stdexcept>
 #include <string>
 
-#include "haptic_core/procedural_models.h"
-
 namespace ht {
 namespace {
 
@@ -34,15 +32,6 @@ Vector6 ToVector(const Twist& V) {
 }
 
 }  // namespace
-
-ToolInertia BlockOnGearToolInertia() {
-  const RidgedBlockParams p;
-  const glm::dvec3 s = 2.0 * p.half_extents_m;
-  const double m = p.mass_kg;
-  return {m,
-          {m / 12 * (s.y * s.y + s.z * s.z), m / 12 * (s.x * s.x + s.z * s.z),
-           m / 12 * (s.x * s.x + s.y * s.y)}};
-}
 
 void VirtualCoupling::Validate() const {
   RequireNonNegative(k_translation_n_per_m, "k_translation_n_per_m");

@@ -51,18 +51,20 @@ WrenchSafetyFilter::WrenchSafetyFilter(const SafetyLimits& limits) : limits_(lim
   limits_.Validate();
 }
 
-Wrench WrenchSafetyFilter::Filter(const Wrench& F_desired, const Twist& V, double model_age_s,
-                                  bool link_up, double h, std::uint32_t& actions) noexcept {
+Wrench WrenchSafetyFilter::Filter(const Wrench& F_desired_W, const Twist& V_hand_W,
+                                  double model_staleness_s, bool link_up, double h,
+                                  std::uint32_t& actions) noexcept {
   actions = kSafetyNone;
   if (!(h > 0.0) || !std::isfinite(h)) h = 1e-3;
-  Wrench F = F_desired;
+  Wrench F = F_desired_W;  // in W throughout
   if (!IsFinite(F)) {
     F = {};
     actions |= kSafetyNonFinite;
     ++counters_.nonfinite;
   }
   // Fade: to zero over fade_out_s when stale or the link is lost; back over fade_in_s.
-  const bool stale = !link_up || (model_age_s >= 0.0 && model_age_s > limits_.model_timeout_s);
+  const bool stale =
+      !link_up || (model_staleness_s >= 0.0 && model_staleness_s > limits_.model_timeout_s);
   gain_ = stale ? std::max(0.0, gain_ - h / limits_.fade_out_s)
                 : std::min(1.0, gain_ + h / limits_.fade_in_s);
   if (gain_ < 1.0) {
@@ -72,10 +74,11 @@ Wrench WrenchSafetyFilter::Filter(const Wrench& F_desired, const Twist& V, doubl
     ++counters_.fading;
   }
   // Brake: above the speed limit the device only dissipates.
-  if (IsFinite(V) && (glm::length(V.linear) > limits_.brake_speed_m_per_s ||
-                      glm::length(V.angular) > limits_.brake_angular_speed_rad_per_s)) {
-    F.force = -limits_.brake_damping_ns_per_m * V.linear;
-    F.torque = -limits_.brake_damping_nms_per_rad * V.angular;
+  if (IsFinite(V_hand_W) &&
+      (glm::length(V_hand_W.linear) > limits_.brake_speed_m_per_s ||
+       glm::length(V_hand_W.angular) > limits_.brake_angular_speed_rad_per_s)) {
+    F.force = -limits_.brake_damping_ns_per_m * V_hand_W.linear;
+    F.torque = -limits_.brake_damping_nms_per_rad * V_hand_W.angular;
     actions |= kSafetyBraking;
     ++counters_.braking;
   }

@@ -11,6 +11,7 @@
 #include <random>
 #include <sstream>
 
+#include "haptic_core/demo/demo_scenes.h"
 #include "haptic_core/haptic_scene.h"
 #include "master_station/experiment.h"
 #include "master_station/falcon.h"
@@ -270,8 +271,8 @@ int main(int argc, char** argv) {
     std::printf(
         "[master] done: loop %.1f Hz (tick p99 %.1f us), remote %.1f Hz (step p50 %.0f us), "
         "rtt p50 %.3f ms, contacts max %d, non-finite %lld\n",
-        summary["master_rate_hz"].get<double>(), summary["master_tick_p99_us"].get<double>(),
-        summary["slave_rate_hz"].get<double>(), summary["slave_step_p50_us"].get<double>(),
+        summary["operator_rate_hz"].get<double>(), summary["operator_tick_p99_us"].get<double>(),
+        summary["remote_rate_hz"].get<double>(), summary["remote_step_p50_us"].get<double>(),
         summary["rtt_ms_p50"].get<double>(), summary["contacts_max"].get<int>(),
         static_cast<long long>(summary["nonfinite_count"].get<std::int64_t>()));
     if (!out_dir.empty()) {

@@ -51,7 +51,8 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
     }
   }
   if (have_model_) out.model_age_ms = (in.now_ns - model_stamp_.tool_state_sent_ns) * 1e-6;
-  const double model_age_s = have_model_ ? (in.now_ns - model_stamp_.built_local_ns) * 1e-9 : -1.0;
+  const double model_staleness_s =
+      have_model_ ? (in.now_ns - model_stamp_.built_local_ns) * 1e-9 : -1.0;
 
   Wrench F_device_W;
   Twist V_WH_W;
@@ -101,8 +102,8 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
     if (config_.passivity) F_device_W = passivity_.Apply(F_device_W, V_WH_W, h);
   }
   // Stage 4: safety, on every tick. Then the observer records what the device really gets.
-  F_device_W =
-      safety_.Filter(F_device_W, V_WH_W, model_age_s, in.link_connected, h, out.safety_actions);
+  F_device_W = safety_.Filter(F_device_W, V_WH_W, model_staleness_s, in.link_connected, h,
+                              out.safety_actions);
   // The safety stage's rate limit can hold back a drop passivity asked for: the guard scales
   // what is left so that the observed energy never goes negative.
   if (config_.passivity) F_device_W = passivity_.Guard(F_device_W, V_WH_W, h);

@@ -12,13 +12,12 @@
 #include <stdexcept>
 
 #include "haptic_core/accuracy/mesh_contact_baseline.h"
-#include "haptic_core/procedural_models.h"
-#include "haptic_core/seed_models.h"
+#include "haptic_core/demo/demo_scenes.h"
+#include "haptic_core/demo/procedural_models.h"
+#include "haptic_core/demo/seed_models.h"
 
 namespace ht {
 namespace {
-
-constexpr double kPi = std::numbers::pi;
 constexpr double kStiffness = 8000.0;  // N/m, the gear's (MakeBlockOnGearScene)
 
 // The seed models' full-resolution meshes take up to 0.3 s each to generate: made once.
@@ -167,7 +166,7 @@ BenchmarkScene MakeBenchmarkScene(const std::string& name, const BenchmarkModelS
       object.model = std::make_shared<const HapticModel>(*scene.haptic.tool);
       scene.object_mesh_Fe = scene.tool_mesh_Ft;
       scene.object_name = "ridged_block";
-      object.X_WO.rotation = glm::angleAxis(kPi, glm::dvec3(1.0, 0.0, 0.0));
+      object.X_WO.rotation = glm::angleAxis(std::numbers::pi, glm::dvec3(1.0, 0.0, 0.0));
       object.X_WO.translation = {0.0, 0.0, -block.half_extents_m.z};
       // Interlocked: the upper block's crests over the lower one's valleys (half a period in y).
       // Home 0.5 mm above touching, as the block on the gear.
@@ -229,30 +228,33 @@ struct PoseScript {
 
 PoseScript ScriptAt(const std::string& scene, double s) {
   PoseScript p;
-  const double wave = 0.5 + 0.5 * std::sin(2 * kPi * 5 * s + 0.7);  // 0..1
-  const auto deg = [](double d) { return d * kPi / 180.0; };
+  const double wave = 0.5 + 0.5 * std::sin(2 * std::numbers::pi * 5 * s + 0.7);  // 0..1
+  const auto deg = [](double d) { return d * std::numbers::pi / 180.0; };
   const auto rot = [](double angle, glm::dvec3 axis) { return glm::angleAxis(angle, axis); };
   const glm::dvec3 X(1, 0, 0), Y(0, 1, 0), Z(0, 0, 1);
   if (scene == "fig75") {  // along the ridges (x), across them (y), with a little tilt
-    p.xy = {8e-3 * std::sin(2 * kPi * 2 * s), 6e-3 * std::sin(2 * kPi * 3 * s + 0.3)};
-    p.rotation = rot(deg(3.0) * std::sin(2 * kPi * 4 * s), Z) *
-                 rot(deg(1.5) * std::sin(2 * kPi * 7 * s), X) *
-                 rot(deg(1.5) * std::sin(2 * kPi * 5 * s + 1.0), Y);
+    p.xy = {8e-3 * std::sin(2 * std::numbers::pi * 2 * s),
+            6e-3 * std::sin(2 * std::numbers::pi * 3 * s + 0.3)};
+    p.rotation = rot(deg(3.0) * std::sin(2 * std::numbers::pi * 4 * s), Z) *
+                 rot(deg(1.5) * std::sin(2 * std::numbers::pi * 7 * s), X) *
+                 rot(deg(1.5) * std::sin(2 * std::numbers::pi * 5 * s + 1.0), Y);
     p.depth_m = 0.05e-3 + 0.35e-3 * wave;
   } else if (scene == "fig76") {  // small oscillating rotations about n, interlocked
-    p.xy = {4e-3 * std::sin(2 * kPi * s), 1.5e-3 + 0.2e-3 * std::sin(2 * kPi * 3 * s)};
-    p.rotation = rot(deg(3.0) * std::sin(2 * kPi * 6 * s), Z);
+    p.xy = {4e-3 * std::sin(2 * std::numbers::pi * s),
+            1.5e-3 + 0.2e-3 * std::sin(2 * std::numbers::pi * 3 * s)};
+    p.rotation = rot(deg(3.0) * std::sin(2 * std::numbers::pi * 6 * s), Z);
     p.depth_m = 0.02e-3 + 0.18e-3 * wave;
   } else if (scene == "fig77") {  // scraping along the part, with sway and yaw (as fig77_scrape)
-    p.xy = {-0.03 + 0.06 * s, 0.01 * std::sin(2 * kPi * 2 * s)};
-    p.rotation = rot(deg(5.0) * std::sin(2 * kPi * 3 * s), Z);
+    p.xy = {-0.03 + 0.06 * s, 0.01 * std::sin(2 * std::numbers::pi * 2 * s)};
+    p.rotation = rot(deg(5.0) * std::sin(2 * std::numbers::pi * 3 * s), Z);
     p.depth_m = 0.05e-3 + 0.35e-3 * wave;
   } else {  // hammer_torus: the head (turned down) along the tube, with wobble
     const double phi = deg(-25.0 + 50.0 * s);
     const double R = WrinkledTorusParams{}.major_radius_m;
     p.xy = {R * std::cos(phi), R * std::sin(phi)};
-    p.rotation = rot(phi + 0.5 * kPi + deg(8.0) * std::sin(2 * kPi * 4 * s), Z) *
-                 rot(deg(3.0) * std::sin(2 * kPi * 3 * s), X);  // the mesh is head down
+    p.rotation =
+        rot(phi + 0.5 * std::numbers::pi + deg(8.0) * std::sin(2 * std::numbers::pi * 4 * s), Z) *
+        rot(deg(3.0) * std::sin(2 * std::numbers::pi * 3 * s), X);  // the mesh is head down
     p.depth_m = 0.05e-3 + 0.35e-3 * wave;
   }
   return p;

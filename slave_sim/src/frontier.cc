@@ -19,6 +19,7 @@
 #include "haptic_core/accuracy/mesh_contact_baseline.h"
 #include "haptic_core/gpu_penetration_depth.h"
 #include "haptic_core/haptic_scene.h"
+#include "haptic_core/remote_step.h"
 #include "slave_sim/benchmark_scenes.h"
 
 namespace ht {
@@ -516,12 +517,13 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
         std::filesystem::rename(path + ".partial", path);
       }
     }
-    rep.mesh_note = (name == "fig75" || name == "fig76")
-                        ? "procedural (haptic_core/procedural_models.h), the same code that makes "
-                          "the haptic models; also written by `slave_sim seed-models`"
-                        : "procedural seed analogues (haptic_core/seed_models.h), as written by "
-                          "`slave_sim seed-models`; the haptic models are decimated and baked "
-                          "from them through the model cache";
+    rep.mesh_note =
+        (name == "fig75" || name == "fig76")
+            ? "procedural (haptic_core/demo/procedural_models.h), the same code that makes "
+              "the haptic models; also written by `slave_sim seed-models`"
+            : "procedural seed analogues (haptic_core/demo/seed_models.h), as written by "
+              "`slave_sim seed-models`; the haptic models are decimated and baked "
+              "from them through the model cache";
     std::vector<RigidTransform> poses;
     const auto trace = options.traces.find(name);
     if (trace != options.traces.end()) {
@@ -568,7 +570,7 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
             GtJob j;
             j.X_WT = poses[c.pose] * run.X_TFt.Inverse();
             j.X_TFt = run.X_TFt;
-            j.X_WFe = c.query.X_WE;
+            j.X_WFe = c.query.X_WO;
             j.window = c.query.window;
             j.stiffness = c.query.stiffness_n_per_m;
             jobs.push_back(j);
@@ -612,7 +614,7 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
            << rep.tool_file << ',' << rep.object_file << ',';
         WriteQuat(cc, poses[c.pose]);
         cc << ',';
-        WriteQuat(cc, c.query.X_WE);
+        WriteQuat(cc, c.query.X_WO);
         cc << ',' << w.center_W.x << ',' << w.center_W.y << ',' << w.center_W.z << ','
            << w.normal_W.x << ',' << w.normal_W.y << ',' << w.normal_W.z << ',' << w.axis_u_W.x
            << ',' << w.axis_u_W.y << ',' << w.axis_u_W.z << ',' << w.extent_m << ',' << w.resolution

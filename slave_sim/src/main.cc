@@ -15,8 +15,9 @@
 
 #include "codecs/draco_mesh_codec.h"
 #include "codecs/glb_writer.h"
+#include "haptic_core/demo/demo_scenes.h"
+#include "haptic_core/demo/seed_models.h"
 #include "haptic_core/haptic_scene.h"
-#include "haptic_core/seed_models.h"
 #include "slave_sim/benchmark_scenes.h"
 #include "slave_sim/remote_node.h"
 #include "slave_sim/scene_build.h"

@@ -11,10 +11,12 @@
 #include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <numbers>
 #include <stdexcept>
 
 #include "codecs/json_nesting.h"
-#include "haptic_core/procedural_models.h"
+#include "haptic_core/demo/procedural_models.h"
+#include "haptic_core/remote_step.h"
 
 namespace ht {
 namespace {
@@ -339,7 +341,7 @@ BuiltScene BuildScene(const SceneDescription& description, const HapticModelCach
   if (!scene.haptic.tool) {
     scene.haptic.tool = std::make_shared<const HapticModel>(MakeRidgedBlock());
     // The probe's textured face (−z in T) faces the scene's down direction (−Y in W).
-    home.rotation = glm::angleAxis(-0.5 * 3.14159265358979323846, glm::dvec3(1, 0, 0));
+    home.rotation = glm::angleAxis(-0.5 * std::numbers::pi, glm::dvec3(1, 0, 0));
   }
   if (scene.haptic.touchables.empty()) {
     home.translation = glm::dvec3(0.0);

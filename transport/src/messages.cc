@@ -3,35 +3,75 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <concepts>
 #include <cstring>
+#include <type_traits>
+
+#include "haptic_core/byte_order.h"
 
 namespace ht::wire {
 namespace {
 
+// Every body's wire layout is written once, as a Fields(archive, message) function that the
+// Writer (encoding) and the Reader (decoding) both walk. The Reader checks structure as it goes
+// (the body's length, and every count against its capacity and the bytes left before any element
+// is read); what the values must satisfy is each message's Check(), run only on decode.
+
+/// What an archive carries as itself: integers, enums (their underlying integer) and IEEE-754
+/// floats, all little-endian.
+template <class T>
+concept Scalar =
+    (std::integral<T> && !std::same_as<T, bool>) || std::is_enum_v<T> || std::floating_point<T>;
+
+/// The unsigned integer whose bytes a scalar of N bytes is sent as.
+template <std::size_t N>
+using Bits = std::conditional_t<
+    N == 1, std::uint8_t,
+    std::conditional_t<N == 2, std::uint16_t,
+                       std::conditional_t<N == 4, std::uint32_t, std::uint64_t>>>;
+
+/// `M` is `T` or `const T`: Fields() get the message const from the Writer, mutable from the
+/// Reader.
+template <class M, class T>
+concept Of = std::same_as<std::remove_const_t<M>, T>;
+
+/// Encodes into a Datagram. Space is not checked per field: protocol.h's static_asserts bound every
+/// body; only byte payloads are cut to what fits before the MAC.
 class Writer {
  public:
   explicit Writer(Datagram& d) : d_(d) { d_.size = 0; }
-  template <typename T>
-  void Put(T value) {
-    static_assert(std::is_integral_v<T>);
-    for (std::size_t i = 0; i < sizeof(T); ++i) {
-      d_.bytes[d_.size++] =
-          static_cast<std::uint8_t>(static_cast<std::make_unsigned_t<T>>(value) >> (8 * i));
-    }
+  template <Scalar T>
+  void operator()(T value) {
+    StoreLe(std::bit_cast<Bits<sizeof(T)>>(value), d_.bytes.data() + d_.size);
+    d_.size += sizeof(T);
   }
-  void F64(double v) { Put(std::bit_cast<std::uint64_t>(v)); }
-  void F32(float v) { Put(std::bit_cast<std::uint32_t>(v)); }
-  void Vec(const glm::dvec3& v) {
-    F64(v.x);
-    F64(v.y);
-    F64(v.z);
+  /// A double sent as an f32.
+  void F32(double v) { (*this)(static_cast<float>(v)); }
+  /// The count of the elements that follow, as a `Wire` integer: `n` clamped to [0, capacity].
+  /// Returns how many elements follow.
+  template <std::unsigned_integral Wire, class N>
+  std::size_t Count(const N& n, std::size_t capacity, std::size_t /*element_bytes*/) {
+    const auto count = static_cast<std::size_t>(
+        std::clamp<std::int64_t>(n, 0, static_cast<std::int64_t>(capacity)));
+    (*this)(static_cast<Wire>(count));
+    return count;
   }
-  void Vec32(const glm::dvec3& v) {
-    F32(static_cast<float>(v.x));
-    F32(static_cast<float>(v.y));
-    F32(static_cast<float>(v.z));
+  /// The first `n` bytes of `bytes`.
+  template <class T, std::size_t N>
+  void Bytes(const std::array<T, N>& bytes, std::size_t n) {
+    static_assert(sizeof(T) == 1);
+    Payload({reinterpret_cast<const std::uint8_t*>(bytes.data()), std::min(n, N)});
   }
-  void Bytes(std::span<const std::uint8_t> b) {
+  /// u8 length, then the text's first `length` bytes zero padded to N bytes.
+  template <std::size_t N>
+  void Text(std::uint8_t length, const std::array<char, N>& text) {
+    const std::size_t n = std::min<std::size_t>(length, N);
+    (*this)(static_cast<std::uint8_t>(n));
+    Bytes(text, n);
+    for (std::size_t i = n; i < N; ++i) (*this)(std::uint8_t{0});
+  }
+  /// The bytes, cut to what fits before the MAC.
+  void Payload(std::span<const std::uint8_t> b) {
     const std::size_t n = std::min(b.size(), d_.bytes.size() - kMacBytes - d_.size);
     std::memcpy(d_.bytes.data() + d_.size, b.data(), n);
     d_.size += n;
@@ -41,80 +81,309 @@ class Writer {
                std::span<std::uint8_t, kMacBytes>(d_.bytes.data() + d_.size, kMacBytes));
     d_.size += kMacBytes;
   }
-  void Pose(const RigidTransform& X) {
-    Vec(X.translation);
-    F64(X.rotation.w);
-    F64(X.rotation.x);
-    F64(X.rotation.y);
-    F64(X.rotation.z);
-  }
 
  private:
   Datagram& d_;
 };
 
+/// Decodes a body. The first problem met is kept (kTooShort past the end, kBadCount, kTooLong)
+/// and every later field is skipped.
 class Reader {
  public:
   explicit Reader(std::span<const std::uint8_t> b) : b_(b) {}
-  template <typename T>
-  T Get() {
-    static_assert(std::is_integral_v<T>);
-    std::make_unsigned_t<T> v = 0;
-    if (pos_ + sizeof(T) > b_.size()) {
-      ok_ = false;
-      return 0;
-    }
-    for (std::size_t i = 0; i < sizeof(T); ++i) {
-      v |= static_cast<std::make_unsigned_t<T>>(static_cast<std::make_unsigned_t<T>>(b_[pos_ + i])
-                                                << (8 * i));
-    }
+  template <Scalar T>
+  void operator()(T& value) {
+    if (!Need(sizeof(T))) return;
+    value = std::bit_cast<T>(LoadLe<Bits<sizeof(T)>>(b_.data() + pos_));
     pos_ += sizeof(T);
-    return static_cast<T>(v);
   }
-  double F64() { return std::bit_cast<double>(Get<std::uint64_t>()); }
-  float F32() { return std::bit_cast<float>(Get<std::uint32_t>()); }
-  glm::dvec3 Vec() {
-    const double x = F64(), y = F64(), z = F64();
-    return {x, y, z};
+  void F32(double& v) {
+    float f = 0.0f;
+    (*this)(f);
+    v = f;
   }
-  glm::dvec3 Vec32() {
-    const double x = F32(), y = F32(), z = F32();
-    return {x, y, z};
+  /// Reads the count, then, before any element: kBadCount above `capacity`, kTooShort or kTooLong
+  /// unless exactly count · element_bytes bytes are left. Returns the count (0 on a problem).
+  template <std::unsigned_integral Wire, class N>
+  std::size_t Count(N& n, std::size_t capacity, std::size_t element_bytes) {
+    Wire count = 0;
+    (*this)(count);
+    if (status_ != DecodeStatus::kOk) return 0;
+    if (count > capacity) return Fail(DecodeStatus::kBadCount);
+    const std::size_t expected = element_bytes * count;
+    if (remaining() < expected) return Fail(DecodeStatus::kTooShort);
+    if (remaining() > expected) return Fail(DecodeStatus::kTooLong);
+    n = static_cast<N>(count);
+    return count;
   }
-  RigidTransform Pose() {
-    RigidTransform X;
-    X.translation = Vec();
-    const double w = F64(), x = F64(), y = F64(), z = F64();
-    X.rotation = glm::dquat(w, x, y, z);
-    return X;
-  }
-  std::span<const std::uint8_t> Take(std::size_t n) {
-    if (pos_ + n > b_.size()) {
-      ok_ = false;
-      return {};
-    }
-    const auto r = b_.subspan(pos_, n);
+  template <class T, std::size_t N>
+  void Bytes(std::array<T, N>& bytes, std::size_t n) {
+    static_assert(sizeof(T) == 1);
+    if (n > N) Fail(DecodeStatus::kBadCount);
+    if (!Need(n)) return;
+    std::memcpy(bytes.data(), b_.data() + pos_, n);
     pos_ += n;
-    return r;
   }
-  bool ok() const { return ok_; }
-  std::size_t remaining() const { return b_.size() - pos_; }
+  /// The length as sent (checked by the message's Check()), then all N bytes.
+  template <std::size_t N>
+  void Text(std::uint8_t& length, std::array<char, N>& text) {
+    (*this)(length);
+    Bytes(text, N);
+  }
+  /// The rest of the body, at least one byte; points into the body.
+  void Payload(std::span<const std::uint8_t>& b) {
+    if (!Need(std::max<std::size_t>(remaining(), 1))) return;
+    b = b_.subspan(pos_);
+    pos_ = b_.size();
+  }
+  /// kOk when every field was read and no byte is left over.
+  DecodeStatus Finish() {
+    if (status_ == DecodeStatus::kOk && remaining() > 0) status_ = DecodeStatus::kTooLong;
+    return status_;
+  }
 
  private:
+  std::size_t remaining() const { return b_.size() - pos_; }
+  bool Need(std::size_t n) {
+    if (status_ == DecodeStatus::kOk && remaining() < n) status_ = DecodeStatus::kTooShort;
+    return status_ == DecodeStatus::kOk;
+  }
+  std::size_t Fail(DecodeStatus s) {
+    if (status_ == DecodeStatus::kOk) status_ = s;
+    return 0;
+  }
   std::span<const std::uint8_t> b_;
   std::size_t pos_ = 0;
-  bool ok_ = true;
+  DecodeStatus status_ = DecodeStatus::kOk;
 };
 
-void PutHeader(Writer& w, const Header& h, MessageType type) {
-  w.Put(kMagic);
-  w.Put(kProtocolVersion);
-  w.Put(static_cast<std::uint8_t>(type));
-  w.Put(std::uint8_t{0});
-  w.Put(h.session_id);
-  w.Put(h.sequence);
-  w.Put(h.send_time_ns);
+/// Counts the bytes of a field list at compile time, each count followed by one element, so that
+/// static_asserts below tie every Fields() to the sizes in protocol.h.
+class Sizer {
+ public:
+  template <Scalar T>
+  constexpr void operator()(const T&) {
+    bytes += sizeof(T);
+  }
+  constexpr void F32(double) { bytes += 4; }
+  template <std::unsigned_integral Wire, class N>
+  constexpr std::size_t Count(const N&, std::size_t, std::size_t element_bytes) {
+    bytes += sizeof(Wire);
+    counted_bytes += element_bytes;
+    return 1;
+  }
+  template <class T, std::size_t N>
+  constexpr void Bytes(const std::array<T, N>&, std::size_t n) {
+    bytes += n;
+  }
+  template <std::size_t N>
+  constexpr void Text(std::uint8_t, const std::array<char, N>&) {
+    bytes += 1 + N;
+  }
+  constexpr void Payload(std::span<const std::uint8_t>) {}
+  std::size_t bytes = 0;          ///< fixed part and one element per count
+  std::size_t counted_bytes = 0;  ///< element sizes the counts declare
+};
+
+/// Wire layout of a count: the count as `Wire`, then that many elements of element_bytes each.
+/// Returns the number of elements the caller's Fields() then walks.
+template <std::unsigned_integral Wire>
+constexpr std::size_t Count(auto& a, auto& n, std::size_t capacity, std::size_t element_bytes) {
+  return a.template Count<Wire>(n, capacity, element_bytes);
 }
+
+// 3×f64.
+constexpr void Vec(auto& a, Of<glm::dvec3> auto& v) {
+  a(v.x);
+  a(v.y);
+  a(v.z);
+}
+
+// 3×f32 (a dvec3 rounded to float).
+constexpr void Vec32(auto& a, Of<glm::dvec3> auto& v) {
+  a.F32(v.x);
+  a.F32(v.y);
+  a.F32(v.z);
+}
+
+// Translation 3×f64, then the quaternion w, x, y, z as f64.
+constexpr void Pose(auto& a, Of<RigidTransform> auto& X) {
+  Vec(a, X.translation);
+  a(X.rotation.w);
+  a(X.rotation.x);
+  a(X.rotation.y);
+  a(X.rotation.z);
+}
+
+/// The header as it is on the wire (protocol.h).
+struct WireHeader {
+  std::uint32_t magic = kMagic;
+  std::uint16_t version = kProtocolVersion;
+  std::uint8_t type = 0;
+  std::uint8_t flags = 0;
+  std::uint32_t session_id = 0;
+  std::uint64_t sequence = 0;
+  std::int64_t send_time_ns = 0;
+};
+
+/// The body of Goodbye and Ping.
+struct EmptyBody {};
+
+constexpr void Fields(auto& a, Of<WireHeader> auto& h) {
+  a(h.magic);
+  a(h.version);
+  a(h.type);
+  a(h.flags);
+  a(h.session_id);
+  a(h.sequence);
+  a(h.send_time_ns);
+}
+
+constexpr void Fields(auto&, Of<EmptyBody> auto&) {}
+
+constexpr void Fields(auto& a, Of<ToolStateMessage> auto& m) {
+  Pose(a, m.X_WT);
+  Vec(a, m.V_WT_W.linear);
+  Vec(a, m.V_WT_W.angular);
+}
+
+constexpr void Fields(auto& a, Of<ContactLinearization> auto& c) {
+  a(c.depth_m);
+  Vec(a, c.gradient.d_translation_W);
+  Vec(a, c.gradient.d_rotation_W);
+  a(c.stiffness_n_per_m);
+  Vec32(a, c.point_W);
+  Vec32(a, c.normal_W);
+}
+
+constexpr void Fields(auto& a, Of<ContactModelMessage> auto& m) {
+  a(m.model.tool_state_seq);
+  a(m.tool_state_send_time_ns);
+  a(m.hold_ns);
+  a(m.remote_step_count);
+  a(m.collision_us);
+  a(m.texture_us);
+  a(m.step_us);
+  Pose(a, m.model.X_WT0);
+  Vec(a, m.model.F_T_W_at_q0.force);
+  Vec(a, m.model.F_T_W_at_q0.torque);
+  const std::size_t n =
+      Count<std::uint8_t>(a, m.model.num_contacts, kMaxWireContacts, kContactBytes);
+  for (std::size_t i = 0; i < n; ++i) Fields(a, m.model.contacts[i]);
+}
+
+constexpr void Fields(auto& a, Of<HelloMessage> auto& m) {
+  a(m.min_version);
+  a(m.max_version);
+  a(m.client_nonce);
+  a(m.tool_state_rate_hz);
+  a(m.max_model_rate_hz);
+  a(m.max_grid);
+  a(m.mtu);
+  a(m.codecs);
+  a(m.heartbeat_ms);
+  a(m.peer_timeout_ms);
+}
+
+constexpr void Fields(auto& a, Of<WelcomeTarget> auto& t) {
+  Vec32(a, t.box_min_W);
+  Vec32(a, t.box_max_W);
+  Vec32(a, t.top_W);
+  a.F32(t.approach_m);
+}
+
+constexpr void Fields(auto& a, Of<WelcomeMessage> auto& m) {
+  a(m.client_nonce);
+  a(m.version);
+  a(m.tool_state_rate_hz);
+  a(m.model_rate_hz);
+  a(m.grid);
+  a(m.window_m);
+  a(m.mtu);
+  a(m.codecs);
+  a(m.heartbeat_ms);
+  a(m.peer_timeout_ms);
+  a(m.scene_objects);
+  a.Text(m.scene_name_length, m.scene_name);
+  auto& l = m.layout;
+  Pose(a, l.X_WT_home);
+  a.F32(l.tool_mass_kg);
+  Vec32(a, l.tool_inertia_diagonal_T);
+  a.F32(l.tool_extent_down_m);
+  const std::size_t n =
+      Count<std::uint8_t>(a, l.num_targets, kMaxWelcomeTargets, kWelcomeTargetBytes);
+  for (std::size_t i = 0; i < n; ++i) Fields(a, l.targets[i]);
+}
+
+constexpr void Fields(auto& a, Of<RejectMessage> auto& m) {
+  a(m.client_nonce);
+  a(m.reason);
+  const std::size_t n = Count<std::uint8_t>(a, m.text_length, kMaxRejectText, 1);
+  a.Bytes(m.text, n);
+}
+
+constexpr void Fields(auto& a, Of<PongMessage> auto& m) {
+  a(m.ping_sequence);
+  a(m.t1_ns);
+  a(m.t2_ns);
+}
+
+constexpr void Fields(auto& a, Of<SceneFragmentMessage> auto& m) {
+  a(m.object_id);
+  a(m.version);
+  a(m.object_bytes);
+  a(m.fragment_index);
+  a(m.fragment_count);
+  a.Payload(m.payload);
+}
+
+constexpr void Fields(auto& a, Of<ManifestEntry> auto& e) {
+  a(e.object_id);
+  a(e.version);
+  a(e.object_bytes);
+  a(e.fragment_count);
+  a(e.kind);
+  a.Bytes(e.digest, kSceneDigestBytes);
+}
+
+constexpr void Fields(auto& a, Of<SceneManifestMessage> auto& m) {
+  a(m.total_objects);
+  a(m.first_index);
+  const std::size_t n = Count<std::uint8_t>(a, m.count, kMaxManifestEntries, kManifestEntryBytes);
+  for (std::size_t i = 0; i < n; ++i) Fields(a, m.entries[i]);
+}
+
+constexpr void Fields(auto& a, Of<SceneNackMessage> auto& m) {
+  a(m.object_id);
+  a(m.version);
+  const std::size_t n = Count<std::uint16_t>(a, m.count, kMaxNackIndices, 2);
+  for (std::size_t i = 0; i < n; ++i) a(m.missing[i]);
+}
+
+/// Msg's field list measured: bytes with one element per count, and the bytes the counts declare
+/// their elements take.
+template <class Msg>
+constexpr Sizer SizeOf() {
+  Sizer s;
+  Msg m;
+  Fields(s, m);
+  return s;
+}
+
+static_assert(SizeOf<WireHeader>().bytes == kHeaderBytes);
+static_assert(SizeOf<ToolStateMessage>().bytes == kToolStateBodyBytes);
+static_assert(SizeOf<ContactModelMessage>().bytes == kContactModelFixedBytes + kContactBytes);
+static_assert(SizeOf<ContactModelMessage>().counted_bytes == kContactBytes);
+static_assert(SizeOf<HelloMessage>().bytes == kHelloBodyBytes);
+static_assert(SizeOf<WelcomeMessage>().bytes == kWelcomeFixedBytes + kWelcomeTargetBytes);
+static_assert(SizeOf<WelcomeMessage>().counted_bytes == kWelcomeTargetBytes);
+static_assert(SizeOf<RejectMessage>().bytes == kRejectFixedBytes + 1);
+static_assert(SizeOf<PongMessage>().bytes == kPongBodyBytes);
+static_assert(SizeOf<SceneFragmentMessage>().bytes == kSceneFragmentFixedBytes);
+static_assert(SizeOf<SceneManifestMessage>().bytes ==
+              kSceneManifestFixedBytes + kManifestEntryBytes);
+static_assert(SizeOf<SceneManifestMessage>().counted_bytes == kManifestEntryBytes);
+static_assert(SizeOf<SceneNackMessage>().bytes == kSceneNackFixedBytes + 2);
 
 bool Finite3(const glm::dvec3& v) {
   return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
@@ -129,21 +398,145 @@ DecodeStatus CheckPose(const RigidTransform& X) {
   return IsFiniteRigidTransform(X) ? DecodeStatus::kOk : DecodeStatus::kBadValue;
 }
 
-DecodeStatus ExactLength(std::span<const std::uint8_t> body, std::size_t n) {
-  if (body.size() < n) return DecodeStatus::kTooShort;
-  if (body.size() > n) return DecodeStatus::kTooLong;
+bool FinitePositive(float v) { return std::isfinite(v) && v >= 0.0f; }
+
+// Checks of the values, in the order they apply, run once a body's fields were read.
+
+DecodeStatus Check(const EmptyBody&) { return DecodeStatus::kOk; }
+
+DecodeStatus Check(const ToolStateMessage& m) {
+  if (const DecodeStatus s = CheckPose(m.X_WT); s != DecodeStatus::kOk) return s;
+  if (!IsFinite(m.V_WT_W)) return DecodeStatus::kNonFinite;
   return DecodeStatus::kOk;
 }
 
-bool FinitePositive(float v) { return std::isfinite(v) && v >= 0.0f; }
-
-template <std::size_t N>
-void PutText(Writer& w, const std::array<char, N>& text, std::uint8_t length, bool padded) {
-  const std::size_t n = std::min<std::size_t>(length, N);
-  w.Bytes({reinterpret_cast<const std::uint8_t*>(text.data()), n});
-  if (padded) {
-    for (std::size_t i = n; i < N; ++i) w.Put(std::uint8_t{0});
+DecodeStatus Check(const ContactModelMessage& m) {
+  for (int i = 0; i < m.model.num_contacts; ++i) {
+    const ContactLinearization& c = m.model.contacts[i];
+    if (!std::isfinite(c.depth_m) || !Finite3(c.gradient.d_translation_W) ||
+        !Finite3(c.gradient.d_rotation_W) || !std::isfinite(c.stiffness_n_per_m) ||
+        !Finite3(c.point_W) || !Finite3(c.normal_W)) {
+      return DecodeStatus::kNonFinite;
+    }
+    if (c.stiffness_n_per_m < 0.0) return DecodeStatus::kBadValue;
   }
+  if (const DecodeStatus s = CheckPose(m.model.X_WT0); s != DecodeStatus::kOk) return s;
+  if (!IsFinite(m.model.F_T_W_at_q0) || !std::isfinite(m.collision_us) ||
+      !std::isfinite(m.texture_us) || !std::isfinite(m.step_us)) {
+    return DecodeStatus::kNonFinite;
+  }
+  return DecodeStatus::kOk;
+}
+
+DecodeStatus Check(const HelloMessage& m) {
+  if (!std::isfinite(m.tool_state_rate_hz) || !std::isfinite(m.max_model_rate_hz)) {
+    return DecodeStatus::kNonFinite;
+  }
+  if (m.min_version > m.max_version || !(m.tool_state_rate_hz > 0.0f) ||
+      !FinitePositive(m.max_model_rate_hz) || m.mtu < kMinMtuBytes || m.mtu > kMaxDatagramBytes ||
+      m.heartbeat_ms == 0 || m.peer_timeout_ms <= m.heartbeat_ms) {
+    return DecodeStatus::kBadValue;
+  }
+  return DecodeStatus::kOk;
+}
+
+DecodeStatus Check(const WelcomeMessage& m) {
+  const SceneLayout& l = m.layout;
+  for (int i = 0; i < l.num_targets; ++i) {
+    const WelcomeTarget& t = l.targets[i];
+    if (!Finite3(t.box_min_W) || !Finite3(t.box_max_W) || !Finite3(t.top_W) ||
+        !std::isfinite(t.approach_m)) {
+      return DecodeStatus::kNonFinite;
+    }
+    if (t.box_min_W.x > t.box_max_W.x || t.box_min_W.y > t.box_max_W.y ||
+        t.box_min_W.z > t.box_max_W.z || t.approach_m < 0.0) {
+      return DecodeStatus::kBadValue;
+    }
+  }
+  if (const DecodeStatus s = CheckPose(l.X_WT_home); s != DecodeStatus::kOk) return s;
+  if (!std::isfinite(l.tool_mass_kg) || !Finite3(l.tool_inertia_diagonal_T) ||
+      !std::isfinite(l.tool_extent_down_m)) {
+    return DecodeStatus::kNonFinite;
+  }
+  if (l.tool_mass_kg < 0.0 || l.tool_extent_down_m < 0.0 ||
+      (l.tool_mass_kg > 0.0 &&
+       !(l.tool_inertia_diagonal_T.x > 0.0 && l.tool_inertia_diagonal_T.y > 0.0 &&
+         l.tool_inertia_diagonal_T.z > 0.0))) {
+    return DecodeStatus::kBadValue;
+  }
+  if (!std::isfinite(m.tool_state_rate_hz) || !std::isfinite(m.model_rate_hz) ||
+      !std::isfinite(m.window_m)) {
+    return DecodeStatus::kNonFinite;
+  }
+  if (m.scene_name_length > kSceneNameBytes || !(m.tool_state_rate_hz > 0.0f) ||
+      !FinitePositive(m.model_rate_hz) || !(m.window_m > 0.0f) || m.grid < 2 ||
+      m.mtu < kMinMtuBytes || m.mtu > kMaxDatagramBytes || m.heartbeat_ms == 0 ||
+      m.peer_timeout_ms <= m.heartbeat_ms) {
+    return DecodeStatus::kBadValue;
+  }
+  return DecodeStatus::kOk;
+}
+
+DecodeStatus Check(const RejectMessage& m) {
+  const auto reason = static_cast<std::uint8_t>(m.reason);
+  return reason < 1 || reason > 3 ? DecodeStatus::kBadValue : DecodeStatus::kOk;
+}
+
+DecodeStatus Check(const PongMessage& m) {
+  return m.ping_sequence == 0 ? DecodeStatus::kBadValue : DecodeStatus::kOk;
+}
+
+DecodeStatus Check(const SceneFragmentMessage& m) {
+  if (m.object_bytes == 0 || m.object_bytes > kMaxSceneObjectBytes || m.fragment_count == 0 ||
+      m.fragment_index >= m.fragment_count || m.payload.size() > m.object_bytes) {
+    return DecodeStatus::kBadValue;
+  }
+  return DecodeStatus::kOk;
+}
+
+DecodeStatus Check(const SceneManifestMessage& m) {
+  if (static_cast<std::size_t>(m.first_index) + m.count > m.total_objects) {
+    return DecodeStatus::kBadValue;
+  }
+  for (int i = 0; i < m.count; ++i) {
+    const ManifestEntry& e = m.entries[static_cast<std::size_t>(i)];
+    if (e.kind != SceneObjectKind::kDracoMesh || e.object_bytes == 0 ||
+        e.object_bytes > kMaxSceneObjectBytes || e.fragment_count == 0) {
+      return DecodeStatus::kBadValue;
+    }
+  }
+  return DecodeStatus::kOk;
+}
+
+DecodeStatus Check(const SceneNackMessage&) { return DecodeStatus::kOk; }
+
+/// Header, body and MAC: the one encoder of every message type.
+template <class Body>
+Datagram Encode(const Header& header, MessageType type, const Body& body,
+                const MacKey& key) noexcept {
+  Datagram d;
+  Writer w(d);
+  const WireHeader h{.type = static_cast<std::uint8_t>(type),
+                     .session_id = header.session_id,
+                     .sequence = header.sequence,
+                     .send_time_ns = header.send_time_ns};
+  Fields(w, h);
+  Fields(w, body);
+  w.Seal(key);
+  return d;
+}
+
+/// Reads `body` into a new Msg (structure checked as it is read), then Check(); `m` is written
+/// only on kOk.
+template <class Msg>
+DecodeStatus Decode(std::span<const std::uint8_t> body, Msg& m) noexcept {
+  Reader r(body);
+  Msg out;
+  Fields(r, out);
+  if (const DecodeStatus s = r.Finish(); s != DecodeStatus::kOk) return s;
+  if (const DecodeStatus s = Check(out); s != DecodeStatus::kOk) return s;
+  m = out;
+  return DecodeStatus::kOk;
 }
 
 }  // namespace
@@ -212,204 +605,67 @@ const char* ToString(MessageType t) noexcept {
 
 Datagram EncodeToolState(const Header& header, const ToolStateMessage& m,
                          const MacKey& key) noexcept {
-  Datagram d;
-  Writer w(d);
-  PutHeader(w, header, MessageType::kToolState);
-  w.Pose(m.X_WT);
-  w.Vec(m.V_WT_W.linear);
-  w.Vec(m.V_WT_W.angular);
-  w.Seal(key);
-  return d;
+  return Encode(header, MessageType::kToolState, m, key);
 }
 
 Datagram EncodeContactModel(const Header& header, const ContactModelMessage& m,
                             const MacKey& key) noexcept {
-  Datagram d;
-  Writer w(d);
-  PutHeader(w, header, MessageType::kContactModel);
-  w.Put(m.model.tool_state_seq);
-  w.Put(m.tool_state_send_time_ns);
-  w.Put(m.hold_ns);
-  w.Put(m.remote_step_count);
-  w.F32(m.collision_us);
-  w.F32(m.texture_us);
-  w.F32(m.step_us);
-  w.Pose(m.model.X_WT0);
-  w.Vec(m.model.F_T_W_at_q0.force);
-  w.Vec(m.model.F_T_W_at_q0.torque);
-  const int n = std::clamp(m.model.num_contacts, 0, kMaxWireContacts);
-  w.Put(static_cast<std::uint8_t>(n));
-  for (int i = 0; i < n; ++i) {
-    const ContactLinearization& c = m.model.contacts[i];
-    w.F64(c.depth_m);
-    w.Vec(c.gradient.d_translation_W);
-    w.Vec(c.gradient.d_rotation_W);
-    w.F64(c.stiffness_n_per_m);
-    w.Vec32(c.point_W);
-    w.Vec32(c.normal_W);
-  }
-  w.Seal(key);
-  return d;
+  return Encode(header, MessageType::kContactModel, m, key);
 }
 
 Datagram EncodeGoodbye(const Header& header, const MacKey& key) noexcept {
-  Datagram d;
-  Writer w(d);
-  PutHeader(w, header, MessageType::kGoodbye);
-  w.Seal(key);
-  return d;
+  return Encode(header, MessageType::kGoodbye, EmptyBody{}, key);
 }
 
 Datagram EncodePing(const Header& header, const MacKey& key) noexcept {
-  Datagram d;
-  Writer w(d);
-  PutHeader(w, header, MessageType::kPing);
-  w.Seal(key);
-  return d;
+  return Encode(header, MessageType::kPing, EmptyBody{}, key);
 }
 
 Datagram EncodeHello(const Header& header, const HelloMessage& m, const MacKey& key) noexcept {
-  Datagram d;
-  Writer w(d);
-  PutHeader(w, header, MessageType::kHello);
-  w.Put(m.min_version);
-  w.Put(m.max_version);
-  w.Put(m.client_nonce);
-  w.F32(m.tool_state_rate_hz);
-  w.F32(m.max_model_rate_hz);
-  w.Put(m.max_grid);
-  w.Put(m.mtu);
-  w.Put(m.codecs);
-  w.Put(m.heartbeat_ms);
-  w.Put(m.peer_timeout_ms);
-  w.Seal(key);
-  return d;
+  return Encode(header, MessageType::kHello, m, key);
 }
 
 Datagram EncodeWelcome(const Header& header, const WelcomeMessage& m, const MacKey& key) noexcept {
-  Datagram d;
-  Writer w(d);
-  PutHeader(w, header, MessageType::kWelcome);
-  w.Put(m.client_nonce);
-  w.Put(m.version);
-  w.F32(m.tool_state_rate_hz);
-  w.F32(m.model_rate_hz);
-  w.Put(m.grid);
-  w.F32(m.window_m);
-  w.Put(m.mtu);
-  w.Put(m.codecs);
-  w.Put(m.heartbeat_ms);
-  w.Put(m.peer_timeout_ms);
-  w.Put(m.scene_objects);
-  const auto n =
-      static_cast<std::uint8_t>(std::min<std::size_t>(m.scene_name_length, kSceneNameBytes));
-  w.Put(n);
-  PutText(w, m.scene_name, n, true);
-  const SceneLayout& l = m.layout;
-  w.Pose(l.X_WT_home);
-  w.F32(static_cast<float>(l.tool_mass_kg));
-  w.Vec32(l.tool_inertia_diagonal_T);
-  w.F32(static_cast<float>(l.tool_extent_down_m));
-  const auto targets = static_cast<std::uint8_t>(std::min<int>(l.num_targets, kMaxWelcomeTargets));
-  w.Put(targets);
-  for (int i = 0; i < targets; ++i) {
-    w.Vec32(l.targets[i].box_min_W);
-    w.Vec32(l.targets[i].box_max_W);
-    w.Vec32(l.targets[i].top_W);
-    w.F32(static_cast<float>(l.targets[i].approach_m));
-  }
-  w.Seal(key);
-  return d;
+  return Encode(header, MessageType::kWelcome, m, key);
 }
 
 Datagram EncodeReject(const Header& header, const RejectMessage& m, const MacKey& key) noexcept {
-  Datagram d;
-  Writer w(d);
-  PutHeader(w, header, MessageType::kReject);
-  w.Put(m.client_nonce);
-  w.Put(static_cast<std::uint8_t>(m.reason));
-  const auto n = static_cast<std::uint8_t>(std::min<std::size_t>(m.text_length, kMaxRejectText));
-  w.Put(n);
-  PutText(w, m.text, n, false);
-  w.Seal(key);
-  return d;
+  return Encode(header, MessageType::kReject, m, key);
 }
 
 Datagram EncodePong(const Header& header, const PongMessage& m, const MacKey& key) noexcept {
-  Datagram d;
-  Writer w(d);
-  PutHeader(w, header, MessageType::kPong);
-  w.Put(m.ping_sequence);
-  w.Put(m.t1_ns);
-  w.Put(m.t2_ns);
-  w.Seal(key);
-  return d;
+  return Encode(header, MessageType::kPong, m, key);
 }
 
 Datagram EncodeSceneFragment(const Header& header, const SceneFragmentMessage& m,
                              const MacKey& key) noexcept {
-  Datagram d;
-  Writer w(d);
-  PutHeader(w, header, MessageType::kSceneFragment);
-  w.Put(m.object_id);
-  w.Put(m.version);
-  w.Put(m.object_bytes);
-  w.Put(m.fragment_index);
-  w.Put(m.fragment_count);
-  w.Bytes(m.payload);
-  w.Seal(key);
-  return d;
+  return Encode(header, MessageType::kSceneFragment, m, key);
 }
 
 Datagram EncodeSceneManifest(const Header& header, const SceneManifestMessage& m,
                              const MacKey& key) noexcept {
-  Datagram d;
-  Writer w(d);
-  PutHeader(w, header, MessageType::kSceneManifest);
-  const int n = std::clamp<int>(m.count, 0, kMaxManifestEntries);
-  w.Put(m.total_objects);
-  w.Put(m.first_index);
-  w.Put(static_cast<std::uint8_t>(n));
-  for (int i = 0; i < n; ++i) {
-    const ManifestEntry& e = m.entries[static_cast<std::size_t>(i)];
-    w.Put(e.object_id);
-    w.Put(e.version);
-    w.Put(e.object_bytes);
-    w.Put(e.fragment_count);
-    w.Put(static_cast<std::uint8_t>(e.kind));
-    w.Bytes(e.digest);
-  }
-  w.Seal(key);
-  return d;
+  return Encode(header, MessageType::kSceneManifest, m, key);
 }
 
 Datagram EncodeSceneNack(const Header& header, const SceneNackMessage& m,
                          const MacKey& key) noexcept {
-  Datagram d;
-  Writer w(d);
-  PutHeader(w, header, MessageType::kSceneNack);
-  const int n = std::clamp<int>(m.count, 0, kMaxNackIndices);
-  w.Put(m.object_id);
-  w.Put(m.version);
-  w.Put(static_cast<std::uint16_t>(n));
-  for (int i = 0; i < n; ++i) w.Put(m.missing[static_cast<std::size_t>(i)]);
-  w.Seal(key);
-  return d;
+  return Encode(header, MessageType::kSceneNack, m, key);
 }
 
 DecodeStatus PeekHeader(std::span<const std::uint8_t> bytes, Header& h) noexcept {
   if (bytes.size() < kHeaderBytes) return DecodeStatus::kTooShort;
   if (bytes.size() > kMaxDatagramBytes) return DecodeStatus::kTooLong;
-  Reader r(bytes);
-  if (r.Get<std::uint32_t>() != kMagic) return DecodeStatus::kBadMagic;
-  if (r.Get<std::uint16_t>() != kProtocolVersion) return DecodeStatus::kBadVersion;
-  const auto type = r.Get<std::uint8_t>();
-  if (r.Get<std::uint8_t>() != 0) return DecodeStatus::kBadFlags;
-  if (type < 1 || type > kMaxMessageType) return DecodeStatus::kUnknownType;
-  h.type = static_cast<MessageType>(type);
-  h.session_id = r.Get<std::uint32_t>();
-  h.sequence = r.Get<std::uint64_t>();
-  h.send_time_ns = r.Get<std::int64_t>();
+  Reader r(bytes.first(kHeaderBytes));
+  WireHeader w;
+  Fields(r, w);
+  if (w.magic != kMagic) return DecodeStatus::kBadMagic;
+  if (w.version != kProtocolVersion) return DecodeStatus::kBadVersion;
+  if (w.flags != 0) return DecodeStatus::kBadFlags;
+  if (w.type < 1 || w.type > kMaxMessageType) return DecodeStatus::kUnknownType;
+  h.type = static_cast<MessageType>(w.type);
+  h.session_id = w.session_id;
+  h.sequence = w.sequence;
+  h.send_time_ns = w.send_time_ns;
   return DecodeStatus::kOk;
 }
 
@@ -426,266 +682,47 @@ DecodeStatus OpenDatagram(std::span<const std::uint8_t> bytes, const MacKey& key
 }
 
 DecodeStatus DecodeEmpty(std::span<const std::uint8_t> body) noexcept {
-  return body.empty() ? DecodeStatus::kOk : DecodeStatus::kTooLong;
+  EmptyBody m;
+  return Decode(body, m);
 }
 
 DecodeStatus DecodeToolState(std::span<const std::uint8_t> body, ToolStateMessage& m) noexcept {
-  if (const DecodeStatus s = ExactLength(body, kToolStateBodyBytes); s != DecodeStatus::kOk)
-    return s;
-  Reader r(body);
-  ToolStateMessage out;
-  out.X_WT = r.Pose();
-  out.V_WT_W.linear = r.Vec();
-  out.V_WT_W.angular = r.Vec();
-  if (const DecodeStatus s = CheckPose(out.X_WT); s != DecodeStatus::kOk) return s;
-  if (!IsFinite(out.V_WT_W)) return DecodeStatus::kNonFinite;
-  m = out;
-  return DecodeStatus::kOk;
+  return Decode(body, m);
 }
 
 DecodeStatus DecodeContactModel(std::span<const std::uint8_t> body,
                                 ContactModelMessage& m) noexcept {
-  if (body.size() < kContactModelFixedBytes) return DecodeStatus::kTooShort;
-  Reader r(body);
-  ContactModelMessage out;
-  out.model.tool_state_seq = r.Get<std::uint64_t>();
-  out.tool_state_send_time_ns = r.Get<std::int64_t>();
-  out.hold_ns = r.Get<std::int64_t>();
-  out.remote_step_count = r.Get<std::uint64_t>();
-  out.collision_us = r.F32();
-  out.texture_us = r.F32();
-  out.step_us = r.F32();
-  out.model.X_WT0 = r.Pose();
-  out.model.F_T_W_at_q0.force = r.Vec();
-  out.model.F_T_W_at_q0.torque = r.Vec();
-  const int n = r.Get<std::uint8_t>();
-  if (n > kMaxWireContacts) return DecodeStatus::kBadCount;
-  const std::size_t expected = kContactBytes * static_cast<std::size_t>(n);
-  if (r.remaining() < expected) return DecodeStatus::kTooShort;
-  if (r.remaining() > expected) return DecodeStatus::kTooLong;
-  out.model.num_contacts = n;
-  for (int i = 0; i < n; ++i) {
-    ContactLinearization& c = out.model.contacts[i];
-    c.depth_m = r.F64();
-    c.gradient.d_translation_W = r.Vec();
-    c.gradient.d_rotation_W = r.Vec();
-    c.stiffness_n_per_m = r.F64();
-    c.point_W = r.Vec32();
-    c.normal_W = r.Vec32();
-    if (!std::isfinite(c.depth_m) || !Finite3(c.gradient.d_translation_W) ||
-        !Finite3(c.gradient.d_rotation_W) || !std::isfinite(c.stiffness_n_per_m) ||
-        !Finite3(c.point_W) || !Finite3(c.normal_W)) {
-      return DecodeStatus::kNonFinite;
-    }
-    if (c.stiffness_n_per_m < 0.0) return DecodeStatus::kBadValue;
-  }
-  if (!r.ok()) return DecodeStatus::kTooShort;
-  if (const DecodeStatus s = CheckPose(out.model.X_WT0); s != DecodeStatus::kOk) return s;
-  if (!IsFinite(out.model.F_T_W_at_q0) || !std::isfinite(out.collision_us) ||
-      !std::isfinite(out.texture_us) || !std::isfinite(out.step_us)) {
-    return DecodeStatus::kNonFinite;
-  }
-  m = out;
-  return DecodeStatus::kOk;
+  return Decode(body, m);
 }
 
 DecodeStatus DecodeHello(std::span<const std::uint8_t> body, HelloMessage& m) noexcept {
-  if (const DecodeStatus s = ExactLength(body, kHelloBodyBytes); s != DecodeStatus::kOk) return s;
-  Reader r(body);
-  HelloMessage out;
-  out.min_version = r.Get<std::uint16_t>();
-  out.max_version = r.Get<std::uint16_t>();
-  out.client_nonce = r.Get<std::uint64_t>();
-  out.tool_state_rate_hz = r.F32();
-  out.max_model_rate_hz = r.F32();
-  out.max_grid = r.Get<std::uint16_t>();
-  out.mtu = r.Get<std::uint16_t>();
-  out.codecs = r.Get<std::uint32_t>();
-  out.heartbeat_ms = r.Get<std::uint16_t>();
-  out.peer_timeout_ms = r.Get<std::uint16_t>();
-  if (!std::isfinite(out.tool_state_rate_hz) || !std::isfinite(out.max_model_rate_hz)) {
-    return DecodeStatus::kNonFinite;
-  }
-  if (out.min_version > out.max_version || !(out.tool_state_rate_hz > 0.0f) ||
-      !FinitePositive(out.max_model_rate_hz) || out.mtu < kMinMtuBytes ||
-      out.mtu > kMaxDatagramBytes || out.heartbeat_ms == 0 ||
-      out.peer_timeout_ms <= out.heartbeat_ms) {
-    return DecodeStatus::kBadValue;
-  }
-  m = out;
-  return DecodeStatus::kOk;
+  return Decode(body, m);
 }
 
 DecodeStatus DecodeWelcome(std::span<const std::uint8_t> body, WelcomeMessage& m) noexcept {
-  if (body.size() < kWelcomeFixedBytes) return DecodeStatus::kTooShort;
-  Reader r(body);
-  WelcomeMessage out;
-  out.client_nonce = r.Get<std::uint64_t>();
-  out.version = r.Get<std::uint16_t>();
-  out.tool_state_rate_hz = r.F32();
-  out.model_rate_hz = r.F32();
-  out.grid = r.Get<std::uint16_t>();
-  out.window_m = r.F32();
-  out.mtu = r.Get<std::uint16_t>();
-  out.codecs = r.Get<std::uint32_t>();
-  out.heartbeat_ms = r.Get<std::uint16_t>();
-  out.peer_timeout_ms = r.Get<std::uint16_t>();
-  out.scene_objects = r.Get<std::uint16_t>();
-  out.scene_name_length = r.Get<std::uint8_t>();
-  const auto name = r.Take(kSceneNameBytes);
-  SceneLayout& l = out.layout;
-  l.X_WT_home = r.Pose();
-  l.tool_mass_kg = r.F32();
-  l.tool_inertia_diagonal_T = r.Vec32();
-  l.tool_extent_down_m = r.F32();
-  l.num_targets = r.Get<std::uint8_t>();
-  if (l.num_targets > kMaxWelcomeTargets) return DecodeStatus::kBadCount;
-  if (body.size() != kWelcomeFixedBytes + l.num_targets * kWelcomeTargetBytes) {
-    return body.size() < kWelcomeFixedBytes + l.num_targets * kWelcomeTargetBytes
-               ? DecodeStatus::kTooShort
-               : DecodeStatus::kTooLong;
-  }
-  for (int i = 0; i < l.num_targets; ++i) {
-    WelcomeTarget& t = l.targets[i];
-    t.box_min_W = r.Vec32();
-    t.box_max_W = r.Vec32();
-    t.top_W = r.Vec32();
-    t.approach_m = r.F32();
-    if (!Finite3(t.box_min_W) || !Finite3(t.box_max_W) || !Finite3(t.top_W) ||
-        !std::isfinite(t.approach_m)) {
-      return DecodeStatus::kNonFinite;
-    }
-    if (t.box_min_W.x > t.box_max_W.x || t.box_min_W.y > t.box_max_W.y ||
-        t.box_min_W.z > t.box_max_W.z || t.approach_m < 0.0) {
-      return DecodeStatus::kBadValue;
-    }
-  }
-  if (const DecodeStatus s = CheckPose(l.X_WT_home); s != DecodeStatus::kOk) return s;
-  if (!std::isfinite(l.tool_mass_kg) || !Finite3(l.tool_inertia_diagonal_T) ||
-      !std::isfinite(l.tool_extent_down_m)) {
-    return DecodeStatus::kNonFinite;
-  }
-  if (l.tool_mass_kg < 0.0 || l.tool_extent_down_m < 0.0 ||
-      (l.tool_mass_kg > 0.0 &&
-       !(l.tool_inertia_diagonal_T.x > 0.0 && l.tool_inertia_diagonal_T.y > 0.0 &&
-         l.tool_inertia_diagonal_T.z > 0.0))) {
-    return DecodeStatus::kBadValue;
-  }
-  if (!std::isfinite(out.tool_state_rate_hz) || !std::isfinite(out.model_rate_hz) ||
-      !std::isfinite(out.window_m)) {
-    return DecodeStatus::kNonFinite;
-  }
-  if (out.scene_name_length > kSceneNameBytes || !(out.tool_state_rate_hz > 0.0f) ||
-      !FinitePositive(out.model_rate_hz) || !(out.window_m > 0.0f) || out.grid < 2 ||
-      out.mtu < kMinMtuBytes || out.mtu > kMaxDatagramBytes || out.heartbeat_ms == 0 ||
-      out.peer_timeout_ms <= out.heartbeat_ms) {
-    return DecodeStatus::kBadValue;
-  }
-  std::memcpy(out.scene_name.data(), name.data(), kSceneNameBytes);
-  m = out;
-  return DecodeStatus::kOk;
+  return Decode(body, m);
 }
 
 DecodeStatus DecodeReject(std::span<const std::uint8_t> body, RejectMessage& m) noexcept {
-  if (body.size() < kRejectFixedBytes) return DecodeStatus::kTooShort;
-  Reader r(body);
-  RejectMessage out;
-  out.client_nonce = r.Get<std::uint64_t>();
-  const auto reason = r.Get<std::uint8_t>();
-  const auto n = r.Get<std::uint8_t>();
-  if (n > kMaxRejectText) return DecodeStatus::kBadCount;
-  if (r.remaining() < n) return DecodeStatus::kTooShort;
-  if (r.remaining() > n) return DecodeStatus::kTooLong;
-  if (reason < 1 || reason > 3) return DecodeStatus::kBadValue;
-  out.reason = static_cast<RejectReason>(reason);
-  const auto text = r.Take(n);
-  std::memcpy(out.text.data(), text.data(), n);
-  out.text_length = n;
-  m = out;
-  return DecodeStatus::kOk;
+  return Decode(body, m);
 }
 
 DecodeStatus DecodePong(std::span<const std::uint8_t> body, PongMessage& m) noexcept {
-  if (const DecodeStatus s = ExactLength(body, kPongBodyBytes); s != DecodeStatus::kOk) return s;
-  Reader r(body);
-  PongMessage out;
-  out.ping_sequence = r.Get<std::uint64_t>();
-  out.t1_ns = r.Get<std::int64_t>();
-  out.t2_ns = r.Get<std::int64_t>();
-  if (out.ping_sequence == 0) return DecodeStatus::kBadValue;
-  m = out;
-  return DecodeStatus::kOk;
+  return Decode(body, m);
 }
 
 DecodeStatus DecodeSceneFragment(std::span<const std::uint8_t> body,
                                  SceneFragmentMessage& m) noexcept {
-  if (body.size() <= kSceneFragmentFixedBytes) return DecodeStatus::kTooShort;
-  Reader r(body);
-  SceneFragmentMessage out;
-  out.object_id = r.Get<std::uint32_t>();
-  out.version = r.Get<std::uint32_t>();
-  out.object_bytes = r.Get<std::uint32_t>();
-  out.fragment_index = r.Get<std::uint16_t>();
-  out.fragment_count = r.Get<std::uint16_t>();
-  out.payload = r.Take(r.remaining());
-  if (out.object_bytes == 0 || out.object_bytes > kMaxSceneObjectBytes || out.fragment_count == 0 ||
-      out.fragment_index >= out.fragment_count || out.payload.size() > out.object_bytes) {
-    return DecodeStatus::kBadValue;
-  }
-  m = out;
-  return DecodeStatus::kOk;
+  return Decode(body, m);
 }
 
 DecodeStatus DecodeSceneManifest(std::span<const std::uint8_t> body,
                                  SceneManifestMessage& m) noexcept {
-  if (body.size() < kSceneManifestFixedBytes) return DecodeStatus::kTooShort;
-  Reader r(body);
-  const auto total = r.Get<std::uint16_t>();
-  const auto first = r.Get<std::uint16_t>();
-  const auto n = r.Get<std::uint8_t>();
-  if (n > kMaxManifestEntries) return DecodeStatus::kBadCount;
-  const std::size_t expected = kManifestEntryBytes * n;
-  if (r.remaining() < expected) return DecodeStatus::kTooShort;
-  if (r.remaining() > expected) return DecodeStatus::kTooLong;
-  if (static_cast<std::size_t>(first) + n > total) return DecodeStatus::kBadValue;
-  SceneManifestMessage out;
-  out.total_objects = total;
-  out.first_index = first;
-  out.count = n;
-  for (int i = 0; i < n; ++i) {
-    ManifestEntry& e = out.entries[static_cast<std::size_t>(i)];
-    e.object_id = r.Get<std::uint32_t>();
-    e.version = r.Get<std::uint32_t>();
-    e.object_bytes = r.Get<std::uint32_t>();
-    e.fragment_count = r.Get<std::uint16_t>();
-    const auto kind = r.Get<std::uint8_t>();
-    const auto digest = r.Take(kSceneDigestBytes);
-    if (kind != static_cast<std::uint8_t>(SceneObjectKind::kDracoMesh) || e.object_bytes == 0 ||
-        e.object_bytes > kMaxSceneObjectBytes || e.fragment_count == 0) {
-      return DecodeStatus::kBadValue;
-    }
-    e.kind = static_cast<SceneObjectKind>(kind);
-    std::memcpy(e.digest.data(), digest.data(), kSceneDigestBytes);
-  }
-  m = out;
-  return DecodeStatus::kOk;
+  return Decode(body, m);
 }
 
 DecodeStatus DecodeSceneNack(std::span<const std::uint8_t> body, SceneNackMessage& m) noexcept {
-  if (body.size() < kSceneNackFixedBytes) return DecodeStatus::kTooShort;
-  Reader r(body);
-  SceneNackMessage out;
-  out.object_id = r.Get<std::uint32_t>();
-  out.version = r.Get<std::uint32_t>();
-  out.count = r.Get<std::uint16_t>();
-  if (out.count > kMaxNackIndices) return DecodeStatus::kBadCount;
-  const std::size_t expected = 2u * out.count;
-  if (r.remaining() < expected) return DecodeStatus::kTooShort;
-  if (r.remaining() > expected) return DecodeStatus::kTooLong;
-  for (int i = 0; i < out.count; ++i)
-    out.missing[static_cast<std::size_t>(i)] = r.Get<std::uint16_t>();
-  m = out;
-  return DecodeStatus::kOk;
+  return Decode(body, m);
 }
 
 }  // namespace ht::wire

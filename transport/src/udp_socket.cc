@@ -73,7 +73,7 @@ bool SocketAddress::operator==(const SocketAddress& o) const noexcept {
   return length == o.length && std::memcmp(&storage, &o.storage, length) == 0;
 }
 
-UdpSocket::UdpSocket(const SocketAddress& local) {
+UdpSocket::UdpSocket(const SocketAddress& local, int send_buffer_bytes) {
   fd_ = ::socket(local.storage.ss_family, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
   if (fd_ < 0) throw std::runtime_error(std::string("socket(): ") + std::strerror(errno));
   if (::bind(fd_, reinterpret_cast<const sockaddr*>(&local.storage), local.length) != 0) {
@@ -84,9 +84,9 @@ UdpSocket::UdpSocket(const SocketAddress& local) {
   }
   // Room for bursts while a thread is descheduled (best effort: the kernel caps it at
   // net.core.rmem_max / wmem_max).
-  const int receive_bytes = 4 << 20, send_bytes = 1 << 20;
+  const int receive_bytes = 4 << 20;
   ::setsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &receive_bytes, sizeof(receive_bytes));
-  ::setsockopt(fd_, SOL_SOCKET, SO_SNDBUF, &send_bytes, sizeof(send_bytes));
+  ::setsockopt(fd_, SOL_SOCKET, SO_SNDBUF, &send_buffer_bytes, sizeof(send_buffer_bytes));
 }
 
 UdpSocket::~UdpSocket() {

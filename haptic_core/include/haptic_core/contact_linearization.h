@@ -85,23 +85,23 @@ class TexturePenetrationSolver {
   explicit TexturePenetrationSolver(int max_resolution = 128, int max_triangles = 4096);
 
   /// Linearizes the contact of `tool` posed at X_WT (frame T at the tool's centre of mass) against
-  /// `environment` posed at X_WE over `window`, with penalty stiffness k (N/m).
+  /// `environment` posed at X_WO over `window`, with penalty stiffness k (N/m).
   /// Returns depth_m = −∞ and a zero gradient when the patches do not overlap on the window.
   /// When `samples_out` holds kGradientSamples entries, the raw depths are copied there.
   ContactLinearization Linearize(const HapticModel& tool, const RigidTransform& X_WT,
-                                 const HapticModel& environment, const RigidTransform& X_WE,
+                                 const HapticModel& environment, const RigidTransform& X_WO,
                                  const ContactWindow& window, double stiffness_n_per_m,
                                  std::span<DepthSample> samples_out = {}) noexcept;
 
   /// δ only (m), at one tool pose; same conventions as Linearize.
   DepthSample Depth(const HapticModel& tool, const RigidTransform& X_WT,
-                    const HapticModel& environment, const RigidTransform& X_WE,
+                    const HapticModel& environment, const RigidTransform& X_WO,
                     const ContactWindow& window) noexcept;
 
   const LinearizationFaults& faults() const noexcept { return faults_; }
 
  private:
-  void RenderEnvironment(const HapticModel& environment, const RigidTransform& X_WE,
+  void RenderEnvironment(const HapticModel& environment, const RigidTransform& X_WO,
                          const ContactWindow& window) noexcept;
   DepthSample EvaluateTool(const HapticModel& tool, const RigidTransform& X_WT,
                            const ContactWindow& window) noexcept;

@@ -1,20 +1,14 @@
 #pragma once
-// A scene as the remote node sees it: the tool's haptic model, the touchable objects with their
-// poses and stiffness, and the per-step pipeline that turns a tool pose into a contact model.
+// A scene as the remote node sees it: the tool's haptic model and the touchable objects with their
+// poses and stiffness. The remote step that turns a tool pose into a contact model over such a
+// scene is in remote_step.h; the demo scenes (block on gear, stiff wall) in demo/demo_scenes.h.
 
-#include <array>
-#include <cstdint>
 #include <memory>
-#include <span>
 #include <string>
 #include <vector>
 
-#include "haptic_core/contact_clustering.h"
-#include "haptic_core/contact_linearization.h"
-#include "haptic_core/contact_model.h"
 #include "haptic_core/haptic_model.h"
-#include "haptic_core/hull_proximity.h"
-#include "haptic_core/penetration_depth_backend.h"
+#include "haptic_core/spatial.h"
 
 namespace ht {
 
@@ -32,119 +26,6 @@ struct HapticScene {
   std::vector<TouchableObject> touchables;
   /// Where the tool starts (and where the operator's workspace is centred), X_WT.
   RigidTransform X_WT_home;
-};
-
-/// The seed's Fig. 72-b scene: the ridged block (tool) resting on the fixed ridged gear, the gear
-/// axis along world x through the origin, so that both sets of ridges run along x. The home pose
-/// puts the block's mean bottom face 0.5 mm above the gear's mean top line.
-HapticScene MakeBlockOnGearScene();
-
-/// A stiff, smooth wall under the same ridged block (a hard case for stability: k = 40,000 N/m,
-/// five times the gear's): a 12 × 12 × 2 cm box whose top face lies where the gear's top is, so
-/// the home pose and the experiments are those of MakeBlockOnGearScene().
-HapticScene MakeStiffWallScene();
-
-/// Home pose X_WT of the tool in MakeBlockOnGearScene(), without building the scene.
-RigidTransform BlockOnGearHomePose();
-
-/// Options of the per-step pipeline.
-struct PipelineOptions {
-  int grid_resolution = 50;            ///< N of the penetration-depth grid (seed: 50).
-  double window_extent_m = 0.02;       ///< W of each contact window (m).
-  double proximity_margin_m = 0.5e-3;  ///< Extra coarse tolerance beyond both texture reaches (m).
-  /// Time budget of the coarse query per tool–object pair (µs; 0 = none): most important node
-  /// pairs first, the step reports when it stopped early.
-  double collision_budget_us = 0.0;
-  /// Contact clustering (DESIGN.md §3): leaf pairs whose points are closer than this (m) and whose
-  /// normals differ by less than clustering_angle_deg merge into one contact.
-  double clustering_distance_m = 5e-3;
-  double clustering_angle_deg = 30.0;
-
-  /// Throws std::invalid_argument naming a value out of range.
-  void Validate() const;
-};
-
-/// Per-step timings and counts (µs), for traces and summaries (seed Fig. 77 splits these).
-struct StepTimings {
-  double collision_us = 0.0;
-  double texture_us = 0.0;
-  double total_us = 0.0;
-  /// Tool–object pairs queried by the hierarchy query (those the broad phase let through).
-  int convex_pairs = 0;
-  /// Tool–object pairs the broad phase (bounding spheres) ruled out.
-  int broad_phase_culled = 0;
-  /// Leaf hull pairs found within tolerance, and contacts after clustering (before the cap of
-  /// kMaxContacts per step).
-  int leaf_pairs = 0;
-  int clusters = 0;
-  /// True when a coarse query stopped at options.collision_budget_us.
-  bool collision_budget_exhausted = false;
-};
-
-/// The remote node's per-step pipeline (DESIGN.md §1): coarse contact query between the tool's and
-/// each object's convex-hull hierarchies (HullProximityQuery; a model without a hierarchy is one
-/// hull), contact clustering (ContactClusterer), texture penetration depth with gradient (one
-/// batch for all contacts), linearization. Holds
-/// preallocated scratch; not thread-safe, and must be stepped on the thread that created its
-/// penetration-depth backend (a GL context is current there).
-class HapticTexturePipeline {
- public:
-  /// Keeps a reference to `scene`, which must outlive the pipeline. `backend` computes the
-  /// penetration depth (null: the CPU reference). Throws std::invalid_argument for bad options, a
-  /// scene without a tool, or a tool whose centre of mass is not T's origin.
-  HapticTexturePipeline(const HapticScene& scene, const PipelineOptions& options,
-                        std::unique_ptr<PenetrationDepthBackend> backend = nullptr);
-
-  /// Builds the contact model at tool pose X_WT (q0), tagging it with `tool_state_seq`.
-  /// A non-finite pose gives an empty model. Fills `timings`.
-  ContactModel Step(const RigidTransform& X_WT, std::uint64_t tool_state_seq, StepTimings& timings);
-
-  /// Faults of the backend in use.
-  const LinearizationFaults& faults() const noexcept { return backend_->faults(); }
-  /// Faults of the step's own stages (counted, never thrown).
-  struct StepFaults {
-    /// Clusters whose window could not be set up (non-finite point, zero normal): skipped.
-    std::int64_t bad_windows = 0;
-  };
-  const StepFaults& step_faults() const noexcept { return step_faults_; }
-  /// The backend in use: the one given, or the CPU reference after that one failed.
-  const PenetrationDepthBackend& backend() const noexcept { return *backend_; }
-  /// Batches the given backend failed (the step is then recomputed on the CPU, which stays in
-  /// use), and the reason of the first failure ("" when none).
-  std::int64_t backend_failures() const noexcept { return backend_failures_; }
-  const std::string& fallback_reason() const noexcept { return fallback_reason_; }
-
-  /// The contacts of the last Step() before the texture stage dropped any: one query per cluster
-  /// (object, its pose X_WO, window, stiffness), in the order they were linearized. Valid until
-  /// the next Step(). For accuracy studies (the speed-vs-error frontier recomputes each window's
-  /// ground truth); the step itself does not need them.
-  std::span<const ContactQuery> last_contact_queries() const noexcept {
-    return {last_queries_.data(), static_cast<std::size_t>(last_num_queries_)};
-  }
-  /// The linearization of each of last_contact_queries() (depth_m = −∞ where the patches did not
-  /// overlap on the window, so that the step left that contact out of its model).
-  std::span<const ContactLinearization> last_linearizations() const noexcept {
-    return {last_results_.data(), static_cast<std::size_t>(last_num_queries_)};
-  }
-
- private:
-  const HapticScene& scene_;
-  PipelineOptions options_;
-  std::unique_ptr<PenetrationDepthBackend> backend_;
-  /// One proximity query per touchable object (each keeps its own last-frame pairs).
-  std::vector<HullProximityQuery> queries_;
-  /// Broad phase: root bounding spheres of the tool (frame T) and of every touchable (its frame
-  /// O), centre in xyz and radius in w (m), so that objects far from the tool cost one distance
-  /// test per step.
-  glm::dvec4 tool_sphere_O_{0.0};
-  std::vector<glm::dvec4> object_spheres_O_;
-  ContactClusterer clusterer_;
-  std::array<ContactQuery, kMaxContacts> last_queries_{};
-  std::array<ContactLinearization, kMaxContacts> last_results_{};
-  int last_num_queries_ = 0;
-  StepFaults step_faults_;
-  std::int64_t backend_failures_ = 0;
-  std::string fallback_reason_;
 };
 
 }  // namespace ht

@@ -15,11 +15,11 @@
 
 namespace ht {
 
-/// One contact of a batch: the environment object B at X_WE, the window found by the coarse
-/// query, and B's penalty stiffness k (N/m).
+/// One contact of a batch: the environment object O at X_WO, the window found by the coarse
+/// query, and O's penalty stiffness k (N/m).
 struct ContactQuery {
   const HapticModel* environment = nullptr;  ///< Must outlive the call; not null.
-  RigidTransform X_WE;
+  RigidTransform X_WO;
   ContactWindow window;
   double stiffness_n_per_m = 0.0;
 };

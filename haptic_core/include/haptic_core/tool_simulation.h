@@ -28,9 +28,6 @@ struct ToolInertia {
   glm::dvec3 inertia_diagonal_T{1e-5, 1e-5, 1e-5};  ///< Principal moments along T's axes (kg·m²).
 };
 
-/// Mass properties of the ridged block of MakeBlockOnGearScene() (the default tool).
-ToolInertia BlockOnGearToolInertia();
-
 /// State of the simulated tool: pose of T (at the centre of mass) in W and its twist in W.
 struct ToolState {
   RigidTransform X_WT;

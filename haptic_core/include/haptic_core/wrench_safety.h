@@ -20,7 +20,7 @@ struct SafetyLimits {
   double brake_angular_speed_rad_per_s = 10.0;
   double brake_damping_ns_per_m = 5.0;      ///< the brake's damping (N·s/m)
   double brake_damping_nms_per_rad = 0.02;  ///< (N·m·s/rad)
-  double model_timeout_s = 0.25;            ///< a contact model older than this counts as stale
+  double model_timeout_s = 0.25;            ///< a model with a longer staleness counts as stale
   double fade_out_s = 0.1;  ///< ramp from full to zero wrench when stale or link lost
   double fade_in_s = 0.2;   ///< ramp back once fresh
   /// Throws std::invalid_argument naming the first value that is negative, zero where it must be
@@ -49,12 +49,15 @@ class WrenchSafetyFilter {
   /// Throws std::invalid_argument when `limits` is invalid.
   explicit WrenchSafetyFilter(const SafetyLimits& limits);
 
-  /// Filters the desired device wrench for a tick of `h_s` seconds. `V_hand` is the hand's twist;
-  /// `model_age_s` the age of the contact model in use (negative = none yet, which counts as
-  /// fresh: free motion has no model); `link_up` false when the remote node is lost. Returns the
-  /// wrench to command; `actions` gets the SafetyAction bits of this tick.
-  Wrench Filter(const Wrench& F_desired, const Twist& V_hand, double model_age_s, bool link_up,
-                double h_s, std::uint32_t& actions) noexcept;
+  /// Filters the desired device wrench F_desired_W (on the hand, in W: N, N·m) for a tick of `h_s`
+  /// seconds. `V_hand_W` is the hand's twist in W (m/s, rad/s);
+  /// `model_staleness_s` the seconds since the remote node sent the contact model in use (its
+  /// send time on the local clock; negative = no model yet, which counts as fresh: free motion
+  /// has no model). Not the "model age" of traces and summaries, which is the age of the tool
+  /// pose the model answers (one round trip more); `link_up` false when the remote node is lost.
+  /// Returns the wrench to command, in W; `actions` gets the SafetyAction bits of this tick.
+  Wrench Filter(const Wrench& F_desired_W, const Twist& V_hand_W, double model_staleness_s,
+                bool link_up, double h_s, std::uint32_t& actions) noexcept;
 
   /// Current fade gain in [0, 1].
   double gain() const noexcept { return gain_; }

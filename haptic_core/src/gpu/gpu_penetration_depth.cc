@@ -597,7 +597,7 @@ bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
     const ContactQuery& q = queries[c];
     tile(c, env_columns_);
     bind_model(*env_models[c]);
-    set_window_uniforms(q.X_WE, q.window, 1.0f);
+    set_window_uniforms(q.X_WO, q.window, 1.0f);
     glDrawArrays(GL_TRIANGLES, 0, env_models[c]->corners);
   }
   // Tool patches A at every gradient sample pose: keep the smallest height per cell.

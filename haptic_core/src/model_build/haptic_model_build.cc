@@ -4,8 +4,10 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <bit>
 #include <chrono>
 #include <cmath>
+#include <concepts>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -14,6 +16,8 @@
 #include <limits>
 #include <random>
 #include <stdexcept>
+
+#include "haptic_core/byte_order.h"
 
 namespace ht {
 namespace {
@@ -31,25 +35,13 @@ double Seconds(std::chrono::steady_clock::time_point since) {
 // Field-by-field little-endian serialization (STYLE.md 7).
 class ByteWriter {
  public:
-  void U8(std::uint8_t v) { bytes_.push_back(v); }
-  void U32(std::uint32_t v) {
-    for (int i = 0; i < 4; ++i) bytes_.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
-  }
-  void U64(std::uint64_t v) {
-    for (int i = 0; i < 8; ++i) bytes_.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
-  }
+  void U8(std::uint8_t v) { AppendLe(bytes_, v); }
+  void U32(std::uint32_t v) { AppendLe(bytes_, v); }
+  void U64(std::uint64_t v) { AppendLe(bytes_, v); }
   void I64(std::int64_t v) { U64(static_cast<std::uint64_t>(v)); }
   void I32(std::int32_t v) { U32(static_cast<std::uint32_t>(v)); }
-  void F64(double v) {
-    std::uint64_t u;
-    std::memcpy(&u, &v, 8);
-    U64(u);
-  }
-  void F32(float v) {
-    std::uint32_t u;
-    std::memcpy(&u, &v, 4);
-    U32(u);
-  }
+  void F64(double v) { AppendLe(bytes_, v); }
+  void F32(float v) { AppendLe(bytes_, v); }
   void Vec3(const glm::dvec3& v) {
     F64(v.x);
     F64(v.y);
@@ -76,35 +68,18 @@ struct CacheFormatError : std::runtime_error {
 class ByteReader {
  public:
   explicit ByteReader(const std::vector<std::uint8_t>& bytes) : bytes_(bytes) {}
-  std::uint8_t U8() {
-    Need(1);
-    return bytes_[pos_++];
-  }
-  std::uint32_t U32() {
-    Need(4);
-    std::uint32_t v = 0;
-    for (int i = 0; i < 4; ++i) v |= static_cast<std::uint32_t>(bytes_[pos_++]) << (8 * i);
-    return v;
-  }
-  std::uint64_t U64() {
-    Need(8);
-    std::uint64_t v = 0;
-    for (int i = 0; i < 8; ++i) v |= static_cast<std::uint64_t>(bytes_[pos_++]) << (8 * i);
-    return v;
-  }
+  std::uint8_t U8() { return Load<std::uint8_t>(); }
+  std::uint32_t U32() { return Load<std::uint32_t>(); }
+  std::uint64_t U64() { return Load<std::uint64_t>(); }
   std::int64_t I64() { return static_cast<std::int64_t>(U64()); }
   std::int32_t I32() { return static_cast<std::int32_t>(U32()); }
   double F64() {
-    const std::uint64_t u = U64();
-    double v;
-    std::memcpy(&v, &u, 8);
+    const auto v = std::bit_cast<double>(U64());
     if (!std::isfinite(v)) throw CacheFormatError("non-finite number");
     return v;
   }
   float F32() {
-    const std::uint32_t u = U32();
-    float v;
-    std::memcpy(&v, &u, 4);
+    const auto v = std::bit_cast<float>(U32());
     if (!std::isfinite(v)) throw CacheFormatError("non-finite number");
     return v;
   }
@@ -129,8 +104,12 @@ class ByteReader {
   bool AtEnd() const noexcept { return pos_ == bytes_.size(); }
 
  private:
-  void Need(std::size_t n) {
-    if (bytes_.size() - pos_ < n) throw CacheFormatError("truncated");
+  template <std::unsigned_integral T>
+  T Load() {
+    if (bytes_.size() - pos_ < sizeof(T)) throw CacheFormatError("truncated");
+    const T v = LoadLe<T>(bytes_.data() + pos_);
+    pos_ += sizeof(T);
+    return v;
   }
   const std::vector<std::uint8_t>& bytes_;
   std::size_t pos_ = 0;

@@ -22,8 +22,6 @@
 
 namespace ht {
 namespace {
-
-constexpr double kPi = std::numbers::pi;
 // Smallest chart leg the atlas accepts (texels).
 constexpr int kMinChartTexels = 4;
 // Gutter heights are extrapolated this far from the triangle (texels) and held constant beyond:
@@ -126,7 +124,7 @@ std::vector<glm::dvec3> CornerNormals(const TriangleMesh& m, double crease_angle
       incident[canon[t[c]]].push_back({f, c});
     }
   }
-  const double cos_crease = std::cos(crease_angle_deg * kPi / 180.0);
+  const double cos_crease = std::cos(crease_angle_deg * std::numbers::pi / 180.0);
   std::vector<glm::dvec3> out(3 * static_cast<size_t>(nf), glm::dvec3(0.0));
   std::vector<int> parent;
   for (int v = 0; v < nv; ++v) {

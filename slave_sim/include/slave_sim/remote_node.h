@@ -12,6 +12,7 @@
 
 #include "haptic_core/gpu_penetration_depth.h"
 #include "haptic_core/haptic_scene.h"
+#include "haptic_core/remote_step.h"
 #include "transport/auth.h"
 #include "transport/messages.h"
 #include "transport/udp_socket.h"

@@ -29,10 +29,11 @@ struct SocketAddress {
 /// Non-blocking UDP socket. Send and receive never block; Wait blocks up to a timeout.
 class UdpSocket {
  public:
-  /// Opens a socket bound to `local` (port 0 picks a free port), asking for a 4 MiB receive buffer.
-  /// Throws std::runtime_error with the system's reason (e.g. "Address already in use") and the
-  /// address on failure.
-  explicit UdpSocket(const SocketAddress& local);
+  /// Opens a socket bound to `local` (port 0 picks a free port), asking for a 4 MiB receive buffer
+  /// and a send buffer of `send_buffer_bytes` (best effort: the kernel caps them at
+  /// net.core.rmem_max / wmem_max). Throws std::runtime_error with the system's reason (e.g.
+  /// "Address already in use") and the address on failure.
+  explicit UdpSocket(const SocketAddress& local, int send_buffer_bytes = 1 << 20);
   ~UdpSocket();
   UdpSocket(const UdpSocket&) = delete;
   UdpSocket& operator=(const UdpSocket&) = delete;
@@ -52,6 +53,11 @@ class UdpSocket {
 
   /// Waits until a datagram is readable or `timeout_ms` passes. Returns true when readable.
   bool WaitReadable(int timeout_ms) noexcept;
+
+  /// The socket's file descriptor, to wait on it together with other descriptors (poll, ppoll).
+  /// The socket keeps owning it: the caller must not close it, and it is invalid once the socket
+  /// is destroyed.
+  int native_handle() const noexcept { return fd_; }
 
  private:
   int fd_ = -1;

@@ -1,0 +1,149 @@
+// The remote step (remote_step.h) as its list of stages; each stage's work is in the file named
+// after it (broad_phase, hull_proximity, contact_clustering, contact_windows,
+// penetration_depth_backend and contact_linearization, contact_assembly).
+
+#include "haptic_core/remote_step.h"
+
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "haptic_core/broad_phase.h"
+#include "haptic_core/contact_assembly.h"
+
+namespace ht {
+
+void PipelineOptions::Validate() const {
+  if (grid_resolution < 2 || grid_resolution > 1024) {
+    throw std::invalid_argument("grid resolution must be in [2, 1024], got " +
+                                std::to_string(grid_resolution));
+  }
+  if (!(window_extent_m > 0.0) || !std::isfinite(window_extent_m)) {
+    throw std::invalid_argument("window extent must be positive, got " +
+                                std::to_string(window_extent_m));
+  }
+  if (!(proximity_margin_m >= 0.0) || !std::isfinite(proximity_margin_m)) {
+    throw std::invalid_argument("proximity margin must be >= 0, got " +
+                                std::to_string(proximity_margin_m));
+  }
+}
+
+HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
+                                             const PipelineOptions& options,
+                                             std::unique_ptr<PenetrationDepthBackend> backend)
+    : scene_(scene), options_(options), backend_(std::move(backend)) {
+  options_.Validate();
+  queries_.reserve(scene.touchables.size());
+  for (std::size_t i = 0; i < scene.touchables.size(); ++i) queries_.emplace_back();
+  if (!backend_) backend_ = std::make_unique<CpuPenetrationDepthBackend>(options_.grid_resolution);
+  if (!scene.tool) throw std::invalid_argument("scene '" + scene.name + "' has no tool");
+  if (glm::length(scene.tool->center_of_mass_O) > 1e-9) {
+    throw std::invalid_argument("tool model '" + scene.tool->name +
+                                "' must have its centre of mass at its frame origin");
+  }
+  for (const auto& t : scene.touchables) {
+    if (!t.model) throw std::invalid_argument("scene '" + scene.name + "' has an empty touchable");
+  }
+  // Broad-phase spheres: the root bounding spheres the proximity queries use anyway. Asking each
+  // query for both of its models here also fills its cache, so the first step does not.
+  object_spheres_O_.reserve(scene.touchables.size());
+  tool_sphere_O_ = HullProximityQuery().BoundingSphere(*scene.tool, 0);
+  for (std::size_t i = 0; i < scene.touchables.size(); ++i) {
+    object_spheres_O_.push_back(queries_[i].BoundingSphere(*scene.touchables[i].model, 0));
+    queries_[i].BoundingSphere(*scene.tool, 0);
+  }
+}
+
+ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64_t seq,
+                                         StepTimings& timings) {
+  using Clock = std::chrono::steady_clock;
+  const auto us = [](Clock::duration d) {
+    return std::chrono::duration<double, std::micro>(d).count();
+  };
+  const auto t0 = Clock::now();
+  ContactModel model;
+  model.X_WT0 = X_WT;
+  model.tool_state_seq = seq;
+  timings = {};
+  last_num_queries_ = 0;
+  if (!IsFiniteRigidTransform(X_WT)) return model;
+
+  // Stages 1–3: broad phase, hull proximity, contact clustering.
+  FindContactCandidates(X_WT, timings);
+  const auto t1 = Clock::now();
+  // Stage 4: one window per cluster. The batch lives in members, so that last_contact_queries()
+  // can show it after the step.
+  last_num_queries_ = MakeContactQueries(
+      {candidates_.data(), static_cast<std::size_t>(num_candidates_)}, options_.window_extent_m,
+      options_.grid_resolution, last_queries_, step_faults_.bad_windows);
+  // Stage 5: texture penetration depth and its gradient, linearized, for the whole batch.
+  LinearizeContacts(X_WT, last_num_queries_);
+  // Stage 6: the contact model.
+  AssembleContactModel(last_linearizations(), model);
+  const auto t2 = Clock::now();
+  timings.collision_us = us(t1 - t0);
+  timings.texture_us = us(t2 - t1);
+  timings.total_us = us(t2 - t0);
+  return model;
+}
+
+void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
+                                                  StepTimings& timings) {
+  num_candidates_ = 0;
+  const HapticModel& tool = *scene_.tool;
+  for (std::size_t k = 0; k < scene_.touchables.size(); ++k) {
+    const TouchableObject& object = scene_.touchables[k];
+    const double reach = tool.OutwardReach() + object.model->OutwardReach();
+    ProximityQueryOptions query;
+    query.tolerance_m = reach + options_.proximity_margin_m;
+    // 1. Broad phase: bounding spheres in W (the objects may move between steps).
+    if (BoundingSphereGap(tool_sphere_O_, X_WT, object_spheres_O_[k], object.X_WO) >
+        query.tolerance_m) {
+      ++timings.broad_phase_culled;
+      continue;
+    }
+    // 2. Hull proximity: leaf hull pairs within the tolerance.
+    query.time_budget_us = options_.collision_budget_us;
+    ProximityQueryStats stats;
+    const std::span<const HullPairContact> pairs =
+        queries_[k].Query(tool, X_WT, *object.model, object.X_WO, query, &stats);
+    ++timings.convex_pairs;
+    timings.leaf_pairs += static_cast<int>(pairs.size());
+    timings.collision_budget_exhausted |= stats.budget_exhausted;
+    if (pairs.empty()) continue;
+    // 3. Contact clustering: one window per cluster, all of the pipeline's window size; clusters
+    // whose windows would overlap merge, so no texture region is rendered in two windows.
+    ClusteringOptions clustering;
+    clustering.merge_distance_m = options_.clustering_distance_m;
+    clustering.max_normal_angle_deg = options_.clustering_angle_deg;
+    clustering.texture_margin_m = reach;
+    clustering.min_extent_m = clustering.max_extent_m = options_.window_extent_m;
+    clustering.max_contacts = kMaxContacts;
+    const std::span<const ContactCluster> clusters =
+        clusterer_.Cluster(pairs, tool.hull_hierarchy, object.model->hull_hierarchy, clustering);
+    timings.clusters += static_cast<int>(clusters.size());
+    for (const ContactCluster& c : clusters) {
+      if (num_candidates_ < kMaxContacts) {
+        candidates_[num_candidates_++] = {&object, c.point_W, c.normal_W};
+      }
+    }
+  }
+}
+
+void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n) {
+  if (n == 0) return;
+  const HapticModel& tool = *scene_.tool;
+  const std::span<const ContactQuery> batch(last_queries_.data(), static_cast<std::size_t>(n));
+  const std::span<ContactLinearization> batch_out(last_results_.data(),
+                                                  static_cast<std::size_t>(n));
+  if (backend_->LinearizeBatch(tool, X_WT, batch, batch_out)) return;
+  // The GPU failed (context lost, GL error): this step and all later ones on the CPU.
+  if (backend_failures_++ == 0) {
+    fallback_reason_ = std::string(backend_->name()) + ": " + backend_->last_error();
+  }
+  backend_ = std::make_unique<CpuPenetrationDepthBackend>(options_.grid_resolution);
+  backend_->LinearizeBatch(tool, X_WT, batch, batch_out);
+}
+
+}  // namespace ht

@@ -1,0 +1,363 @@
+// The operator station's network worker: the member functions of NetworkWorker
+// (network_worker.h), which runs the session, the tool-state and contact-model streams and the
+// scene stream's reassembly on its own thread. Internal to master_station.
+
+#include "network_worker.h"
+
+#include <algorithm>
+#include <array>
+#include <cstdio>
+#include <ctime>
+#include <exception>
+#include <optional>
+
+#include "codecs/draco_mesh_codec.h"
+#include "haptic_core/statistics.h"
+
+namespace ht::station {
+
+NetworkWorker::NetworkWorker(const StationConfig& config, TripleBuffer<OutgoingToolState>& outgoing,
+                             TripleBuffer<IncomingModel>& incoming, Counters& counters)
+    : config_(config),
+      socket_(config.local_address),
+      link_(socket_, config.key, LinkRole::kOperator),
+      reassembler_(config.mtu),
+      outgoing_(outgoing),
+      incoming_(incoming),
+      counters_(counters) {
+  rtt_ms_.reserve(1 << 20);
+  one_way_ms_.reserve(1 << 20);
+  remote_step_us_.reserve(1 << 20);
+  contact_step_us_.reserve(1 << 20);
+  collision_us_.reserve(1 << 20);
+  texture_us_.reserve(1 << 20);
+  clock_.Reserve(1 << 16);
+}
+
+void NetworkWorker::Run(const std::atomic<bool>& stop) {
+  std::array<std::uint8_t, wire::kMaxDatagramBytes + 1> buffer{};
+  OutgoingToolState last{};
+  bool have_last = false;
+  std::int64_t last_send_ns = 0, last_hello_ns = 0, last_ping_ns = 0;
+  while (!stop.load(std::memory_order_acquire)) {
+    socket_.WaitReadable(0);
+    timespec pause{0, 200000};  // 0.2 ms between polls: bounded latency, little CPU
+    nanosleep(&pause, nullptr);
+    SocketAddress from;
+    // At most kDrainPerPass datagrams per pass: a flood delays this thread's other duties
+    // (tool states, pings), never stops them.
+    constexpr int kDrainPerPass = 256;
+    int drained = 0;
+    std::optional<std::size_t> n;
+    while (drained++ < kDrainPerPass && (n = socket_.ReceiveFrom(buffer, from))) {
+      Handle({buffer.data(), std::min(*n, buffer.size())}, from);
+    }
+    const std::int64_t now = SteadyNowNs();
+    const std::int64_t last_heard = std::max(link_.last_authenticated_ns(), session_start_ns_);
+    if (session_ != 0 && now - last_heard > peer_timeout_ns_) {
+      ++peers_lost_;
+      loss_detected_after_ms_.push_back((now - last_heard) * 1e-6);
+      std::printf("[master] remote node lost (nothing authenticated for %.0f ms); reconnecting\n",
+                  (now - last_heard) * 1e-6);
+      std::fflush(stdout);
+      EndSession();
+    }
+    if (session_ == 0) {
+      if (counters_.rejected.load()) break;
+      if (hello_nonce_ != 0 &&
+          now - attempt_start_ns_ > 2LL * config_.peer_timeout_ms * 1000000LL) {
+        hello_nonce_ = 0;  // no Welcome for two peer timeouts: a new attempt, with a new nonce
+      }
+      if (now - last_hello_ns >= config_.reconnect_period_ms * 1000000LL) {
+        SendHello();
+        last_hello_ns = now;
+      }
+      OutgoingToolState state;
+      if (outgoing_.Read(state)) {
+        last = state;
+        have_last = true;
+      }
+      continue;
+    }
+    OutgoingToolState state;
+    if (outgoing_.Read(state)) {
+      last = state;
+      have_last = true;
+      Send(state);
+      last_send_ns = now;
+    } else if (have_last && now - last_send_ns > 20000000) {
+      // Keep-alive while the loop is not running (before the first tick, after the last): the
+      // same pose, stamped now, so that round trips measured on it are not inflated.
+      last.time_ns = now;
+      Send(last);
+      last_send_ns = now;
+    }
+    if (now - last_ping_ns >= heartbeat_ns_) {
+      link_.Send(
+          wire::EncodePing(link_.NextHeader(wire::MessageType::kPing, session_), config_.key),
+          config_.remote_address);
+      last_ping_ns = now;
+    }
+    const std::int64_t quiet = std::max<std::int64_t>(30000000, 2 * clock_.rtt_ns());
+    reassembler_.CollectNacks(now, quiet, [&](const wire::SceneNackMessage& nack) {
+      link_.Send(wire::EncodeSceneNack(link_.NextHeader(wire::MessageType::kSceneNack, session_),
+                                       nack, config_.key),
+                 config_.remote_address);
+    });
+  }
+  if (session_ != 0) {
+    const wire::Datagram d =
+        wire::EncodeGoodbye(link_.NextHeader(wire::MessageType::kGoodbye, session_), config_.key);
+    link_.Send(d, config_.remote_address);
+    // Retries carry new sequence numbers (a copy of the same datagram would be a replay).
+    for (int i = 0; i < 2; ++i) {
+      link_.Send(
+          wire::EncodeGoodbye(link_.NextHeader(wire::MessageType::kGoodbye, session_), config_.key),
+          config_.remote_address);
+    }
+  }
+}
+
+double NetworkWorker::RemoteRateHz() const {
+  if (last_remote_ns_ <= first_remote_ns_) return 0.0;
+  return static_cast<double>(last_remote_steps_ - first_remote_steps_) /
+         ((last_remote_ns_ - first_remote_ns_) * 1e-9);
+}
+
+wire::SceneLayout NetworkWorker::layout() const {
+  std::lock_guard<std::mutex> lock(layout_mutex_);
+  return layout_;
+}
+
+nlohmann::json NetworkWorker::Summary() const {
+  nlohmann::json t = link_.StatsJson();
+  t["sessions"] = sessions_;
+  t["peers_lost"] = peers_lost_;
+  t["peer_lost_detected_after_ms"] = loss_detected_after_ms_;
+  t["remote_goodbyes"] = remote_goodbyes_;
+  t["hellos_sent"] = hellos_sent_;
+  t["mtu"] = mtu_;
+  t["scene_name"] = scene_name_;
+  t["clock"] = {{"samples", clock_.rtt_ms_samples().size()},
+                {"offset_ms", clock_.offset_ns() * 1e-6},
+                {"offset_uncertainty_ms", clock_.rtt_ns() * 0.5e-6},
+                {"rtt_ms_p50", Percentile(clock_.rtt_ms_samples(), 0.5)},
+                {"rtt_ms_p99", Percentile(clock_.rtt_ms_samples(), 0.99)}};
+  t["streams"]["contact_model"]["rtt_ms_p50"] = Percentile(rtt_ms_, 0.5);
+  t["streams"]["contact_model"]["rtt_ms_p99"] = Percentile(rtt_ms_, 0.99);
+  t["streams"]["contact_model"]["one_way_ms_p50"] = Percentile(one_way_ms_, 0.5);
+  t["streams"]["contact_model"]["one_way_ms_p99"] = Percentile(one_way_ms_, 0.99);
+  const ReassemblyStats& r = reassembler_.stats();
+  nlohmann::json objects = nlohmann::json::array();
+  for (const auto& o : scene_objects_) objects.push_back(o);
+  t["scene"] = {{"announced_objects", expected_objects_},
+                {"manifest_objects", reassembler_.manifest_objects()},
+                {"verified_objects", reassembler_.verified_objects()},
+                {"complete", scene_complete_},
+                {"complete_after_ms", scene_complete_ms_},
+                {"bytes_held", reassembler_.bytes_held()},
+                {"fragments_accepted", r.fragments_accepted},
+                {"fragments_duplicate", r.fragments_duplicate},
+                {"fragments_stale", r.fragments_stale},
+                {"fragments_inconsistent", r.fragments_inconsistent},
+                {"fragments_over_limit", r.fragments_over_limit},
+                {"objects_completed", r.objects_completed},
+                {"objects_superseded", r.objects_superseded},
+                {"digest_mismatches", r.digest_mismatches},
+                {"nacks_sent", r.nacks_sent},
+                {"fragments_nacked", r.fragments_nacked},
+                {"decoded", objects}};
+  return t;
+}
+
+void NetworkWorker::SendHello() {
+  if (hello_nonce_ == 0) {  // a new attempt
+    link_.ResetSession();
+    hello_nonce_ = RandomNonce();
+    attempt_start_ns_ = SteadyNowNs();
+  }
+  wire::HelloMessage hello;
+  hello.client_nonce = hello_nonce_;
+  hello.tool_state_rate_hz = static_cast<float>(config_.loop_rate_hz);
+  hello.max_grid = static_cast<std::uint16_t>(config_.max_grid);
+  hello.max_model_rate_hz = static_cast<float>(
+      config_.max_model_rate_hz > 0.0 ? config_.max_model_rate_hz : config_.loop_rate_hz);
+  hello.mtu = static_cast<std::uint16_t>(config_.mtu);
+  hello.heartbeat_ms = static_cast<std::uint16_t>(config_.heartbeat_ms);
+  hello.peer_timeout_ms = static_cast<std::uint16_t>(config_.peer_timeout_ms);
+  link_.Send(wire::EncodeHello(link_.NextHeader(wire::MessageType::kHello, 0), hello, config_.key),
+             config_.remote_address);
+  ++hellos_sent_;
+}
+
+void NetworkWorker::EndSession() {
+  session_ = 0;
+  counters_.connected.store(false);
+}
+
+void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketAddress& from) {
+  const std::int64_t now = SteadyNowNs();
+  wire::Header header;
+  std::span<const std::uint8_t> body;
+  bool late = false;
+  if (link_.Open(datagram, session_, header, body, late) != wire::DecodeStatus::kOk) return;
+  (void)from;
+  switch (header.type) {
+    case wire::MessageType::kWelcome: {
+      wire::WelcomeMessage w;
+      if (const auto st = wire::DecodeWelcome(body, w); st != wire::DecodeStatus::kOk) {
+        link_.CountBodyRejected(header.type, st);
+        return;
+      }
+      if (session_ != 0 || w.client_nonce != hello_nonce_ || header.session_id == 0) {
+        link_.CountBodyRejected(header.type, wire::DecodeStatus::kUnexpected);
+        return;  // an answer to an older Hello, or a replay
+      }
+      link_.ResetSession();
+      session_ = header.session_id;
+      ++sessions_;
+      hello_nonce_ = 0;  // the next attempt (after a loss) gets a new nonce
+      mtu_ = w.mtu;
+      heartbeat_ns_ = std::int64_t{w.heartbeat_ms} * 1000000;
+      peer_timeout_ns_ = std::int64_t{w.peer_timeout_ms} * 1000000;
+      expected_objects_ = w.scene_objects;
+      scene_name_ = std::string(w.name());
+      {
+        std::lock_guard<std::mutex> lock(layout_mutex_);
+        layout_ = w.layout;
+      }
+      reassembler_.Reset(w.mtu);
+      scene_complete_ = false;
+      scene_objects_.clear();
+      session_start_ns_ = now;
+      clock_.Reset();
+      counters_.connected.store(true);
+      std::printf(
+          "[master] session %08x with remote node %s: scene '%s' (%u objects), grid %u, "
+          "window %.3f m, mtu %u, protocol v%u\n",
+          session_, config_.remote_address.ToString().c_str(), scene_name_.c_str(), w.scene_objects,
+          w.grid, static_cast<double>(w.window_m), w.mtu, w.version);
+      std::fflush(stdout);
+      return;
+    }
+    case wire::MessageType::kReject: {
+      wire::RejectMessage r;
+      if (const auto st = wire::DecodeReject(body, r); st != wire::DecodeStatus::kOk) {
+        link_.CountBodyRejected(header.type, st);
+        return;
+      }
+      if (session_ != 0 || r.client_nonce != hello_nonce_) {
+        link_.CountBodyRejected(header.type, wire::DecodeStatus::kUnexpected);
+        return;
+      }
+      reject_text_ = std::string(r.message());
+      counters_.rejected.store(true);
+      return;
+    }
+    case wire::MessageType::kContactModel: {
+      IncomingModel model;
+      if (const auto st = wire::DecodeContactModel(body, model.message);
+          st != wire::DecodeStatus::kOk) {
+        link_.CountBodyRejected(header.type, st);
+        return;
+      }
+      if (late) return;  // newest wins: a newer model is already in use
+      model.sequence = header.sequence;
+      model.built_local_ns = clock_.valid() ? clock_.RemoteToLocal(header.send_time_ns) : now;
+      counters_.model_accepted.fetch_add(1, std::memory_order_relaxed);
+      // Samples for percentiles: the first 2^20 of each (reserved), then no more growth.
+      if (model.message.model.tool_state_seq != 0 && rtt_ms_.size() < rtt_ms_.capacity()) {
+        rtt_ms_.push_back((now - model.message.tool_state_send_time_ns - model.message.hold_ns) *
+                          1e-6);
+      }
+      if (clock_.valid() && one_way_ms_.size() < one_way_ms_.capacity())
+        one_way_ms_.push_back((now - model.built_local_ns) * 1e-6);
+      if (remote_step_us_.size() < remote_step_us_.capacity()) {
+        remote_step_us_.push_back(model.message.step_us);
+        collision_us_.push_back(model.message.collision_us);
+        texture_us_.push_back(model.message.texture_us);
+      }
+      if (model.message.model.num_contacts > 0 &&
+          contact_step_us_.size() < contact_step_us_.capacity()) {
+        contact_step_us_.push_back(model.message.step_us);
+      }
+      if (first_remote_ns_ == 0) {
+        first_remote_ns_ = now;
+        first_remote_steps_ = model.message.remote_step_count;
+      }
+      last_remote_ns_ = now;
+      last_remote_steps_ = model.message.remote_step_count;
+      incoming_.Write(model);
+      return;
+    }
+    case wire::MessageType::kPong: {
+      wire::PongMessage p;
+      if (const auto st = wire::DecodePong(body, p); st != wire::DecodeStatus::kOk) {
+        link_.CountBodyRejected(header.type, st);
+        return;
+      }
+      clock_.AddSample(p.t1_ns, p.t2_ns, header.send_time_ns, now);
+      return;
+    }
+    case wire::MessageType::kSceneManifest: {
+      wire::SceneManifestMessage m;
+      if (const auto st = wire::DecodeSceneManifest(body, m); st != wire::DecodeStatus::kOk) {
+        link_.CountBodyRejected(header.type, st);
+        return;
+      }
+      reassembler_.OnManifest(m, now);
+      CheckScene(now);
+      return;
+    }
+    case wire::MessageType::kSceneFragment: {
+      wire::SceneFragmentMessage f;
+      if (const auto st = wire::DecodeSceneFragment(body, f); st != wire::DecodeStatus::kOk) {
+        link_.CountBodyRejected(header.type, st);
+        return;
+      }
+      if (reassembler_.Add(f, now) == SceneReassembler::Outcome::kCompleted) CheckScene(now);
+      return;
+    }
+    case wire::MessageType::kGoodbye: {
+      if (wire::DecodeEmpty(body) != wire::DecodeStatus::kOk) return;
+      ++remote_goodbyes_;
+      std::printf("[master] the remote node closed the session; reconnecting\n");
+      std::fflush(stdout);
+      EndSession();
+      return;
+    }
+    default:
+      return;
+  }
+}
+
+void NetworkWorker::CheckScene(std::int64_t now) {
+  if (scene_complete_ || !reassembler_.SceneComplete()) return;
+  scene_complete_ = true;
+  scene_complete_ms_ = (now - session_start_ns_) * 1e-6;
+  for (std::uint32_t id = 0; id < 65536 && scene_objects_.size() < reassembler_.manifest_objects();
+       ++id) {
+    const auto bytes = reassembler_.CompletedBytes(id);
+    if (bytes.empty()) continue;
+    nlohmann::json o = {{"object_id", id}, {"bytes", bytes.size()}};
+    try {
+      const TriangleMesh mesh = DecodeMeshDraco(bytes);
+      o["vertices"] = mesh.vertices.size();
+      o["triangles"] = mesh.triangles.size();
+    } catch (const std::exception& e) {
+      o["error"] = e.what();
+    }
+    scene_objects_.push_back(o);
+  }
+  std::printf("[master] scene complete after %.0f ms: %zu object(s) verified\n", scene_complete_ms_,
+              reassembler_.verified_objects());
+  std::fflush(stdout);
+}
+
+void NetworkWorker::Send(const OutgoingToolState& s) {
+  wire::Header h = link_.NextHeader(wire::MessageType::kToolState, session_);
+  h.send_time_ns = s.time_ns;
+  link_.Send(wire::EncodeToolState(h, s.message, config_.key), config_.remote_address);
+}
+
+}  // namespace ht::station

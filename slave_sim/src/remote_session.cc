@@ -1,0 +1,263 @@
+#include "remote_session.h"
+
+#include <algorithm>
+#include <cstdio>
+#include <stdexcept>
+
+#include "haptic_core/steady_clock.h"
+
+namespace ht {
+
+RemoteSession::RemoteSession(const RemoteNodeConfig& config, SecureLink& link,
+                             SceneSender& scene_sender, const RemoteCapabilities& caps)
+    : config_(config),
+      link_(link),
+      scene_sender_(scene_sender),
+      caps_(caps),
+      last_token_ns_(SteadyNowNs()),
+      token_cap_(std::max(16.0 * wire::kMaxDatagramBytes, config.scene_rate_bytes_per_s * 0.01)) {}
+
+bool RemoteSession::OnDatagram(std::span<const std::uint8_t> datagram, const SocketAddress& from,
+                               std::int64_t now) {
+  wire::Header header;
+  std::span<const std::uint8_t> body;
+  bool late = false;
+  if (link_.Open(datagram, session_, header, body, late) != wire::DecodeStatus::kOk) return true;
+  switch (header.type) {
+    case wire::MessageType::kHello:
+      OnHello(header, body, from, now);
+      break;
+    case wire::MessageType::kToolState: {
+      wire::ToolStateMessage message;
+      if (const auto st = wire::DecodeToolState(body, message); st != wire::DecodeStatus::kOk) {
+        link_.CountBodyRejected(header.type, st);
+        break;
+      }
+      if (late) break;  // newest wins: a newer tool state is already in hand
+      peer_ = from;     // authenticated: follow the operator if its address changed
+      latest_ = message;
+      state_seq_ = header.sequence;
+      latest_send_time_ns_ = header.send_time_ns;
+      if (latest_recv_ns_ != 0 && have_state_) {
+        max_gap_ns_ = std::max(max_gap_ns_, now - latest_recv_ns_);
+      }
+      latest_recv_ns_ = now;
+      have_state_ = true;
+      break;
+    }
+    case wire::MessageType::kPing: {
+      if (const auto st = wire::DecodeEmpty(body); st != wire::DecodeStatus::kOk) {
+        link_.CountBodyRejected(header.type, st);
+        break;
+      }
+      wire::PongMessage pong{header.sequence, header.send_time_ns, now};
+      link_.Send(
+          wire::EncodePong(link_.NextHeader(wire::MessageType::kPong, session_), pong, config_.key),
+          peer_);
+      break;
+    }
+    case wire::MessageType::kSceneNack: {
+      wire::SceneNackMessage nack;
+      if (const auto st = wire::DecodeSceneNack(body, nack); st != wire::DecodeStatus::kOk) {
+        link_.CountBodyRejected(header.type, st);
+        break;
+      }
+      if (scene_sender_.OnNack(nack)) {
+        ++nacks_accepted_;
+      } else {
+        ++nacks_ignored_;
+      }
+      break;
+    }
+    case wire::MessageType::kGoodbye: {
+      if (wire::DecodeEmpty(body) != wire::DecodeStatus::kOk) {
+        link_.CountBodyRejected(header.type, wire::DecodeStatus::kTooLong);
+        break;
+      }
+      ++goodbyes_;
+      Close("the operator said goodbye");
+      if (config_.exit_on_goodbye) return false;
+      break;
+    }
+    default:
+      break;  // Open() refuses every other type on this side
+  }
+  return true;
+}
+
+void RemoteSession::OnHello(const wire::Header& header, std::span<const std::uint8_t> body,
+                            const SocketAddress& from, std::int64_t now) {
+  wire::HelloMessage hello;
+  if (const auto st = wire::DecodeHello(body, hello); st != wire::DecodeStatus::kOk) {
+    link_.CountBodyRejected(header.type, st);
+    return;
+  }
+  const bool live =
+      session_ != 0 &&
+      now - std::max(link_.last_authenticated_ns(), session_start_ns_) < peer_timeout_ns_;
+  if (session_ != 0 && hello.client_nonce == session_nonce_) {
+    // The operator retransmitted its Hello before our Welcome reached it (round trip longer than
+    // its retry period): the same session, welcomed again (to the session's address only).
+    ++hello_retransmits_;
+    session_start_ns_ = now;  // an authenticated sign of life of this session's operator
+    link_.Send(wire::EncodeWelcome(link_.NextHeader(wire::MessageType::kWelcome, session_),
+                                   session_welcome_, config_.key),
+               peer_);
+    return;
+  }
+  if (pending_nonce_ != 0 && hello.client_nonce == pending_nonce_) {
+    if (live) {  // still deferred: the current operator is active
+      ++hello_deferred_;
+      return;
+    }
+  } else {
+    if (!nonces_.Insert(hello.client_nonce)) {  // a recorded Hello played again
+      ++hello_replayed_;
+      link_.CountBodyRejected(header.type, wire::DecodeStatus::kReplayed);
+      return;
+    }
+    if (live) {
+      // Another operator (or a recorded Hello this node never saw) while the current one is
+      // active: deferred until the current session ends or goes silent, so that a replayed Hello
+      // cannot take a live session over. The operator keeps retrying.
+      pending_nonce_ = hello.client_nonce;
+      ++hello_deferred_;
+      return;
+    }
+  }
+  pending_nonce_ = 0;
+  wire::WelcomeMessage welcome;
+  wire::RejectMessage reject;
+  if (!NegotiateSession(hello, caps_, welcome, reject)) {
+    ++rejects_sent_;
+    link_.Send(
+        wire::EncodeReject(link_.NextHeader(wire::MessageType::kReject, 0), reject, config_.key),
+        from);
+    std::printf("[slave] refused operator at %s: %.*s\n", from.ToString().c_str(),
+                static_cast<int>(reject.text_length), reject.text.data());
+    std::fflush(stdout);
+    return;
+  }
+  if (session_ != 0) Close("replaced by a new session");
+  std::uint32_t id = RandomSessionId();
+  while (id == session_) id = RandomSessionId();
+  link_.ResetSession();
+  session_ = id;
+  session_nonce_ = hello.client_nonce;
+  peer_ = from;
+  ++sessions_;
+  peer_timeout_ns_ = std::int64_t{welcome.peer_timeout_ms} * 1000000;
+  model_period_ns_ =
+      welcome.model_rate_hz > 0.0f ? static_cast<std::int64_t>(1e9 / welcome.model_rate_hz) : 0;
+  try {
+    scene_sender_.SetMtu(welcome.mtu);
+  } catch (const std::invalid_argument& e) {
+    std::printf("[slave] scene not streamed at MTU %u: %s\n", welcome.mtu, e.what());
+    welcome.scene_objects = 0;
+  }
+  scene_enabled_ = welcome.scene_objects > 0;
+  if (scene_enabled_) scene_sender_.QueueAll();
+  scene_tokens_ = 0.0;
+  session_start_ns_ = now;
+  session_welcome_ = welcome;
+  link_.Send(wire::EncodeWelcome(link_.NextHeader(wire::MessageType::kWelcome, session_), welcome,
+                                 config_.key),
+             peer_);
+  SendManifest();
+  std::printf(
+      "[slave] session %08x opened for operator at %s (protocol v%u, mtu %u, grid %u, "
+      "peer timeout %u ms)\n",
+      session_, from.ToString().c_str(), welcome.version, welcome.mtu, welcome.grid,
+      welcome.peer_timeout_ms);
+  std::fflush(stdout);
+}
+
+void RemoteSession::CheckPeerTimeout(std::int64_t now) {
+  const std::int64_t last_heard = std::max(link_.last_authenticated_ns(), session_start_ns_);
+  if (session_ != 0 && now - last_heard > peer_timeout_ns_) {
+    ++peers_lost_;
+    char why[96];
+    std::snprintf(why, sizeof(why), "operator lost (nothing authenticated for %.0f ms)",
+                  (now - last_heard) * 1e-6);
+    Close(why);
+  }
+}
+
+void RemoteSession::StreamScene(std::int64_t now) {
+  if (session_ == 0) return;
+  scene_tokens_ = std::min(
+      token_cap_, scene_tokens_ + config_.scene_rate_bytes_per_s * (now - last_token_ns_) * 1e-9);
+  last_token_ns_ = now;
+  wire::SceneFragmentMessage fragment;
+  while (scene_tokens_ > 0.0 && scene_sender_.Next(fragment)) {
+    const wire::Datagram d = wire::EncodeSceneFragment(
+        link_.NextHeader(wire::MessageType::kSceneFragment, session_), fragment, config_.key);
+    link_.Send(d, peer_);
+    scene_tokens_ -= static_cast<double>(d.size);
+  }
+  if (now - last_manifest_ns_ > 250000000) SendManifest();
+}
+
+bool RemoteSession::MaybeSendContactModel(wire::ContactModelMessage& out,
+                                          const StepTimings& timings, std::uint64_t step_count,
+                                          std::int64_t now) {
+  if (session_ == 0) return false;
+  if (model_period_ns_ != 0 && now - last_model_sent_ns_ < model_period_ns_) return false;
+  out.tool_state_send_time_ns = latest_send_time_ns_;
+  out.remote_step_count = step_count;
+  out.collision_us = static_cast<float>(timings.collision_us);
+  out.texture_us = static_cast<float>(timings.texture_us);
+  out.step_us = static_cast<float>(timings.total_us);
+  wire::Header header = link_.NextHeader(wire::MessageType::kContactModel, session_);
+  out.hold_ns = header.send_time_ns - latest_recv_ns_;
+  link_.Send(wire::EncodeContactModel(header, out, config_.key), peer_);
+  last_model_sent_ns_ = now;
+  return true;
+}
+
+void RemoteSession::SayGoodbye() {
+  if (session_ == 0) return;
+  for (int i = 0; i < 3; ++i) {
+    link_.Send(
+        wire::EncodeGoodbye(link_.NextHeader(wire::MessageType::kGoodbye, session_), config_.key),
+        peer_);
+  }
+}
+
+void RemoteSession::SendManifest() {
+  if (!scene_enabled_) return;
+  for (const wire::SceneManifestMessage& m : scene_sender_.Manifest()) {
+    link_.Send(wire::EncodeSceneManifest(
+                   link_.NextHeader(wire::MessageType::kSceneManifest, session_), m, config_.key),
+               peer_);
+  }
+  last_manifest_ns_ = SteadyNowNs();
+}
+
+void RemoteSession::Close(const char* why) {
+  std::printf("[slave] session %08x closed: %s\n", session_, why);
+  std::fflush(stdout);
+  session_ = 0;
+  have_state_ = false;
+}
+
+nlohmann::json RemoteSession::StatsJson(std::size_t scene_objects, std::size_t scene_bytes) const {
+  nlohmann::json transport = link_.StatsJson();
+  transport["sessions"] = sessions_;
+  transport["goodbyes"] = goodbyes_;
+  transport["peers_lost"] = peers_lost_;
+  transport["hello_replayed"] = hello_replayed_;
+  transport["hello_retransmits"] = hello_retransmits_;
+  transport["hello_deferred"] = hello_deferred_;
+  transport["rejects_sent"] = rejects_sent_;
+  transport["mtu"] = config_.mtu;
+  transport["scene"] = {{"objects", scene_objects},
+                        {"bytes", scene_bytes},
+                        {"fragment_payload_bytes", scene_sender_.payload_bytes()},
+                        {"nacks_accepted", nacks_accepted_},
+                        {"nacks_ignored", nacks_ignored_},
+                        {"fragments_queued_at_end", scene_sender_.queued()}};
+  return transport;
+}
+
+}  // namespace ht

@@ -1,0 +1,97 @@
+#pragma once
+// The remote node's side of the session protocol (docs/DESIGN.md §6, transport/protocol.h): one
+// operator session at a time, opened by an authenticated Hello with a fresh nonce, welcomed or
+// refused after negotiation (transport/session.h), closed on Goodbye or when the operator is
+// silent for the peer timeout; the newest tool state kept for the next remote step; pings
+// answered; scene fragments paced and NACKs served; contact models sent at the negotiated rate.
+// Private to slave_sim: RunRemoteNode (remote_node.cc) drives it.
+
+#include <cstdint>
+#include <nlohmann/json.hpp>
+#include <span>
+
+#include "slave_sim/remote_node.h"
+#include "transport/link.h"
+#include "transport/messages.h"
+#include "transport/scene_stream.h"
+#include "transport/session.h"
+
+namespace ht {
+
+/// Session state and counters of the remote node. Not thread-safe: one thread (the node's loop)
+/// calls everything. Sends through `link` to the session's operator; never throws after
+/// construction except std::bad_alloc from the scene sender's queue.
+class RemoteSession {
+ public:
+  /// Keeps references to `config`, `link` and `scene_sender`, which must outlive the session.
+  /// `caps` is what this node offers in negotiation.
+  RemoteSession(const RemoteNodeConfig& config, SecureLink& link, SceneSender& scene_sender,
+                const RemoteCapabilities& caps);
+
+  /// Handles one received datagram from `from` at local time `now_ns` (ns, SteadyNowNs()).
+  /// Datagrams that fail to open or decode are counted by the link and dropped. Returns false
+  /// when the node should stop (a Goodbye with config.exit_on_goodbye).
+  bool OnDatagram(std::span<const std::uint8_t> datagram, const SocketAddress& from,
+                  std::int64_t now_ns);
+  /// Closes the session when nothing authenticated has come from the operator for the peer
+  /// timeout (counted in peers_lost).
+  void CheckPeerTimeout(std::int64_t now_ns);
+  /// Sends scene fragments as the pacing budget (config.scene_rate_bytes_per_s) allows, and the
+  /// manifest every 250 ms. Only while a session is open.
+  void StreamScene(std::int64_t now_ns);
+  /// Sends `out` (its model filled by the step that began at the newest tool state) unless the
+  /// negotiated model period since the last one sent has not passed at `now_ns`; fills its
+  /// timing fields from `timings`, its step count and its hold time. Returns true when sent.
+  bool MaybeSendContactModel(wire::ContactModelMessage& out, const StepTimings& timings,
+                             std::uint64_t step_count, std::int64_t now_ns);
+  /// Tells the operator the node is stopping (three Goodbyes), when a session is open.
+  void SayGoodbye();
+
+  /// A session is open.
+  bool open() const noexcept { return session_ != 0; }
+  /// A tool state has arrived in the open session (the node steps only then).
+  bool have_tool_state() const noexcept { return have_state_; }
+  /// The newest tool state of the session and its sequence number (the contact model's q0 tag).
+  const wire::ToolStateMessage& latest_tool_state() const noexcept { return latest_; }
+  std::uint64_t latest_tool_state_seq() const noexcept { return state_seq_; }
+  /// Longest gap between two tool states of one session (ns).
+  std::int64_t tool_state_gap_max_ns() const noexcept { return max_gap_ns_; }
+
+  /// The link's statistics with the session counters (sessions, goodbyes, peers lost, Hello
+  /// replays, retransmits, deferrals, rejects) and the scene stream's, for the run summary.
+  nlohmann::json StatsJson(std::size_t scene_objects, std::size_t scene_bytes) const;
+
+ private:
+  void OnHello(const wire::Header& header, std::span<const std::uint8_t> body,
+               const SocketAddress& from, std::int64_t now_ns);
+  void SendManifest();
+  void Close(const char* why);
+
+  const RemoteNodeConfig& config_;
+  SecureLink& link_;
+  SceneSender& scene_sender_;
+  RemoteCapabilities caps_;
+  NonceHistory nonces_;
+
+  std::uint32_t session_ = 0;
+  std::uint64_t session_nonce_ = 0, pending_nonce_ = 0;
+  std::int64_t session_start_ns_ = 0;
+  wire::WelcomeMessage session_welcome_;
+  SocketAddress peer_;
+  std::int64_t peer_timeout_ns_ = 0, model_period_ns_ = 0, last_model_sent_ns_ = 0;
+  bool scene_enabled_ = false;
+  double scene_tokens_ = 0.0;
+  std::int64_t last_token_ns_ = 0, last_manifest_ns_ = 0;
+  double token_cap_ = 0.0;
+
+  bool have_state_ = false;
+  std::uint64_t state_seq_ = 0;
+  wire::ToolStateMessage latest_;
+  std::int64_t latest_send_time_ns_ = 0, latest_recv_ns_ = 0, max_gap_ns_ = 0;
+
+  std::uint64_t sessions_ = 0, goodbyes_ = 0, peers_lost_ = 0, hello_replayed_ = 0;
+  std::uint64_t hello_retransmits_ = 0, hello_deferred_ = 0, rejects_sent_ = 0;
+  std::uint64_t nacks_accepted_ = 0, nacks_ignored_ = 0;
+};
+
+}  // namespace ht

@@ -1,0 +1,91 @@
+// The scene as the remote node offers it at join: the block-on-gear demo's meshes for streaming,
+// and the layout every Welcome carries (targets, their bounds and clear approach heights).
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "codecs/draco_mesh_codec.h"
+#include "haptic_core/demo/procedural_models.h"
+#include "haptic_core/hull_proximity.h"
+#include "slave_sim/remote_node.h"
+
+namespace ht {
+
+std::vector<std::pair<std::uint32_t, std::vector<std::uint8_t>>> BlockOnGearSceneObjects() {
+  std::vector<std::pair<std::uint32_t, std::vector<std::uint8_t>>> objects;
+  objects.emplace_back(1, EncodeMeshDraco(MakeRidgedBlockFullResolution()));
+  objects.emplace_back(2, EncodeMeshDraco(MakeRidgedGearFullResolution()));
+  return objects;
+}
+
+wire::SceneLayout MakeSceneLayout(const HapticScene& scene) {
+  wire::SceneLayout layout;
+  layout.X_WT_home = scene.X_WT_home;
+  if (scene.tool) {
+    layout.tool_mass_kg = scene.tool->mass_kg;
+    layout.tool_inertia_diagonal_T = scene.tool->inertia_diagonal_O;
+    for (const glm::dvec3& p_T : scene.tool->vertices_O) {
+      layout.tool_extent_down_m = std::max(layout.tool_extent_down_m, -p_T.z);
+    }
+  }
+  const glm::dvec3 up_W = scene.X_WT_home.rotation * glm::dvec3(0.0, 0.0, 1.0);
+  std::vector<std::pair<double, wire::WelcomeTarget>> all;
+  for (const TouchableObject& object : scene.touchables) {
+    if (!object.model || object.model->vertices_O.empty()) continue;
+    wire::WelcomeTarget t;
+    t.box_min_W = glm::dvec3(std::numeric_limits<double>::infinity());
+    t.box_max_W = -t.box_min_W;
+    double top = -std::numeric_limits<double>::infinity();
+    for (const glm::dvec3& p_O : object.model->vertices_O) {
+      const glm::dvec3 p_W = object.X_WO * p_O;
+      t.box_min_W = glm::min(t.box_min_W, p_W);
+      t.box_max_W = glm::max(t.box_max_W, p_W);
+      if (glm::dot(p_W, up_W) > top) {
+        top = glm::dot(p_W, up_W);
+        t.top_W = p_W;
+      }
+    }
+    // The textured surface reaches beyond the coarse mesh by up to the texture's outward reach.
+    const double reach = object.model->OutwardReach();
+    t.box_min_W -= glm::dvec3(reach);
+    t.box_max_W += glm::dvec3(reach);
+    all.emplace_back(glm::length(t.box_max_W - t.box_min_W), t);
+  }
+  std::stable_sort(all.begin(), all.end(),
+                   [](const auto& a, const auto& b) { return a.first > b.first; });
+  // Where the tool, centred over a target's top at the home orientation, touches nothing: from
+  // just above the top (by the texture's reach, at most 2 cm, plus 1 cm) up in doubling steps,
+  // checked with the coarse proximity query against every touchable at tolerance
+  // min(reach, 2 cm) + 1 mm; the home height (clear of everything) at worst.
+  HullProximityQuery query(16);
+  const auto clear = [&](const RigidTransform& X_WT) {
+    for (const TouchableObject& o : scene.touchables) {
+      if (!o.model) continue;
+      ProximityQueryOptions options;
+      options.tolerance_m = std::min(o.model->OutwardReach(), 0.02) + 1e-3;
+      options.max_pairs = 1;
+      options.temporal_coherence = false;
+      if (!query.Query(*scene.tool, X_WT, *o.model, o.X_WO, options).empty()) return false;
+    }
+    return true;
+  };
+  const double home_height = glm::dot(scene.X_WT_home.translation, up_W);
+  for (const auto& [size, target] : all) {
+    if (layout.num_targets >= wire::kMaxWelcomeTargets) break;
+    wire::WelcomeTarget t = target;
+    const double top = glm::dot(t.top_W, up_W);
+    const double reach = glm::dot(t.box_max_W - t.top_W, up_W);  // ≈ the texture's reach
+    double height = layout.tool_extent_down_m + std::clamp(reach, 0.0, 0.02) + 0.01;
+    for (double step = 0.01; scene.tool && top + height < home_height; step *= 2.0) {
+      RigidTransform X_WT = scene.X_WT_home;
+      X_WT.translation = t.top_W + height * up_W;
+      if (clear(X_WT)) break;
+      height = std::min(height + step, home_height - top);
+    }
+    t.approach_m = std::max(0.0, height);
+    layout.targets[layout.num_targets++] = t;
+  }
+  return layout;
+}
+
+}  // namespace ht
