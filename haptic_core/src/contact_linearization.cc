@@ -13,10 +13,13 @@ Wrench PenaltyWrench(double depth_m, const PenetrationGradient& J,
   return {s * J.d_translation_W, s * J.d_rotation_W};
 }
 
-TexturePenetrationSolver::TexturePenetrationSolver(int max_resolution, int max_triangles) {
+TexturePenetrationSolver::TexturePenetrationSolver(int max_resolution, int max_triangles,
+                                                   TextureStagePath path)
+    : path_(path) {
   const size_t cells = static_cast<size_t>(max_resolution) * max_resolution;
   env_heights_.reserve(cells);
   tool_heights_.reserve(cells);
+  tool_ext_heights_.reserve(static_cast<size_t>(max_resolution + 2) * (max_resolution + 2));
   env_triangles_.reserve(static_cast<size_t>(max_triangles));
   tool_triangles_.reserve(static_cast<size_t>(max_triangles));
 }
@@ -28,7 +31,12 @@ void TexturePenetrationSolver::RenderEnvironment(const HapticModel& environment,
   env_heights_.assign(cells, -std::numeric_limits<float>::infinity());
   SelectPatchTriangles(environment, X_WO, w, PatchSide::kEnvironment, w.cell_size_m(),
                        env_triangles_);
-  RenderPatchHeights(environment, X_WO, env_triangles_, w, PatchSide::kEnvironment, env_heights_);
+  if (path_ == TextureStagePath::kFast) {
+    RenderPatchHeightsFast(environment, X_WO, env_triangles_, w, PatchSide::kEnvironment, 0,
+                           env_heights_);
+  } else {
+    RenderPatchHeights(environment, X_WO, env_triangles_, w, PatchSide::kEnvironment, env_heights_);
+  }
 }
 
 DepthSample TexturePenetrationSolver::EvaluateTool(const HapticModel& tool,
@@ -36,8 +44,27 @@ DepthSample TexturePenetrationSolver::EvaluateTool(const HapticModel& tool,
                                                    const ContactWindow& w) noexcept {
   const size_t cells = static_cast<size_t>(w.resolution) * w.resolution;
   tool_heights_.assign(cells, std::numeric_limits<float>::infinity());
-  RenderPatchHeights(tool, X_WT, tool_triangles_, w, PatchSide::kTool, tool_heights_);
+  if (path_ == TextureStagePath::kFast) {
+    RenderPatchHeightsFast(tool, X_WT, tool_triangles_, w, PatchSide::kTool, 0, tool_heights_);
+  } else {
+    RenderPatchHeights(tool, X_WT, tool_triangles_, w, PatchSide::kTool, tool_heights_);
+  }
   return DirectionalPenetrationDepth(env_heights_, tool_heights_);
+}
+
+double TexturePenetrationSolver::ToolRadius(const HapticModel& tool) noexcept {
+  // Keyed by the model's address and its vertex storage, so a model freed and another built at
+  // the same address is measured again.
+  if (&tool != radius_model_ || tool.vertices_O.data() != radius_vertices_ ||
+      tool.vertices_O.size() != radius_vertex_count_) {
+    double r = 0.0;
+    for (const auto& v : tool.vertices_O) r = std::max(r, glm::length(v));
+    radius_model_ = &tool;
+    radius_vertices_ = tool.vertices_O.data();
+    radius_vertex_count_ = tool.vertices_O.size();
+    radius_m_ = r;
+  }
+  return radius_m_;
 }
 
 DepthSample TexturePenetrationSolver::Depth(const HapticModel& tool, const RigidTransform& X_WT,
@@ -109,8 +136,7 @@ ContactLinearization TexturePenetrationSolver::Linearize(
     const RigidTransform& X_WO, const ContactWindow& w, double stiffness_n_per_m,
     std::span<DepthSample> samples_out) noexcept {
   const GradientSteps h = GradientSteps::For(w);
-  double tool_radius = 0.0;
-  for (const auto& v : tool.vertices_O) tool_radius = std::max(tool_radius, glm::length(v));
+  const double tool_radius = ToolRadius(tool);
 
   RenderEnvironment(environment, X_WO, w);
   // Tool triangles are chosen once, with margins that cover every perturbed pose (the render
@@ -118,11 +144,30 @@ ContactLinearization TexturePenetrationSolver::Linearize(
   SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool, 2.0 * h.h_x + h.h_theta * tool_radius,
                        tool_triangles_, h.h_theta + 1e-9);
   std::array<DepthSample, kGradientSamples> samples;
-  samples[0] = EvaluateTool(tool, X_WT, w);
-  if (samples[0].cell >= 0) {
-    const auto poses = GradientSamplePoses(X_WT, w);
-    for (int i = 1; i < kGradientSamples; ++i) samples[i] = EvaluateTool(tool, poses[i], w);
+  if (path_ == TextureStagePath::kFast) {
+    // The base pose on the window grown by one cell: the translations by ±h_x = ±one cell along
+    // u and v are that render read one cell over (the tool moved +u is, at window cell i, what
+    // the unmoved tool has at cell i − 1).
+    const int n = w.resolution, nt = n + 2;
+    tool_ext_heights_.assign(static_cast<size_t>(nt) * nt, std::numeric_limits<float>::infinity());
+    RenderPatchHeightsFast(tool, X_WT, tool_triangles_, w, PatchSide::kTool, 1, tool_ext_heights_);
+    samples[0] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, 0);
+    if (samples[0].cell >= 0) {
+      samples[1] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, -1, 0);
+      samples[2] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 1, 0);
+      samples[3] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, -1);
+      samples[4] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, 1);
+      const auto poses = GradientSamplePoses(X_WT, w);
+      for (int i = 5; i < kGradientSamples; ++i) samples[i] = EvaluateTool(tool, poses[i], w);
+    }
   } else {
+    samples[0] = EvaluateTool(tool, X_WT, w);
+    if (samples[0].cell >= 0) {
+      const auto poses = GradientSamplePoses(X_WT, w);
+      for (int i = 1; i < kGradientSamples; ++i) samples[i] = EvaluateTool(tool, poses[i], w);
+    }
+  }
+  if (samples[0].cell < 0) {
     for (int i = 1; i < kGradientSamples; ++i) samples[i] = samples[0];
   }
   if (samples_out.size() >= samples.size())

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <glm/geometric.hpp>
+#include <glm/gtc/quaternion.hpp>
 #include <limits>
 #include <optional>
 #include <stdexcept>
@@ -95,13 +96,13 @@ void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
 
 void RenderPatchHeights(const HapticModel& model, const RigidTransform& X_WO,
                         std::span<const int> triangles, const ContactWindow& w, PatchSide side,
-                        std::span<float> heights) noexcept {
+                        std::span<float> heights, double depth_range_m) noexcept {
   const int n = w.resolution;
   if (heights.size() < static_cast<size_t>(n) * n) return;
   const double inv_cell = 1.0 / w.cell_size_m();
   const double half_cells = 0.5 * n;
   const bool keep_max = side == PatchSide::kEnvironment;
-  const double range = w.depth_range_m();
+  const double range = depth_range_m > 0.0 ? depth_range_m : w.depth_range_m();
   for (const int f : triangles) {
     const glm::ivec3 tri = model.triangles[f];
     double x[3], y[3], d[3], nn[3];
@@ -182,6 +183,151 @@ DepthSample DirectionalPenetrationDepth(std::span<const float> b,
     if (diff > best_value) {
       best_value = diff;
       best.cell = static_cast<int>(k);
+    }
+  }
+  if (best.cell >= 0) best.depth_m = static_cast<double>(best_value);
+  return best;
+}
+
+}  // namespace ht
+
+namespace ht {
+
+void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO,
+                            std::span<const int> triangles, const ContactWindow& w, PatchSide side,
+                            int margin_cells, std::span<float> heights) noexcept {
+  const int n = w.resolution;
+  const int m = std::max(margin_cells, 0);
+  const int nt = n + 2 * m;
+  if (heights.size() < static_cast<size_t>(nt) * nt) return;
+  const double inv_cell = 1.0 / w.cell_size_m();
+  const double half_cells = 0.5 * n + m;  // extended pixel i spans [i, i+1)
+  const bool keep_max = side == PatchSide::kEnvironment;
+  const double range = w.depth_range_m();
+  // The window's frame in O: p_W·a − c·a = p_O·(R⁻¹a) + (t − c)·a for each axis a.
+  const glm::dquat q_inv = glm::conjugate(X_WO.rotation);
+  const glm::dvec3 u_O = q_inv * w.axis_u_W, v_O = q_inv * w.axis_v_W, n_O = q_inv * w.normal_W;
+  const glm::dvec3 offset = X_WO.translation - w.center_W;
+  const double ou = glm::dot(offset, w.axis_u_W), ov = glm::dot(offset, w.axis_v_W),
+               on = glm::dot(offset, w.normal_W);
+  const bool have_texture = !model.texture.empty();
+  constexpr double kEdgeTolerance = -1e-9;  // as RenderPatchHeights
+  for (const int f : triangles) {
+    const glm::ivec3 tri = model.triangles[f];
+    const glm::dvec3& a0 = model.vertices_O[tri[0]];
+    const glm::dvec3& a1 = model.vertices_O[tri[1]];
+    const glm::dvec3& a2 = model.vertices_O[tri[2]];
+    // Facing test at this pose (the selection may have been made at another one).
+    const glm::dvec3 cr = glm::cross(a1 - a0, a2 - a0);
+    const double cr_len = glm::length(cr);
+    if (!(cr_len > 0.0)) continue;
+    const double facing = glm::dot(cr, n_O) / cr_len;
+    if (keep_max ? facing <= kPatchFacingThreshold : facing >= -kPatchFacingThreshold) continue;
+    double x[3], y[3], d[3], nn[3];
+    const glm::dvec3* corners[3] = {&a0, &a1, &a2};
+    for (int c = 0; c < 3; ++c) {
+      const glm::dvec3& p = *corners[c];
+      x[c] = (glm::dot(p, u_O) + ou) * inv_cell + half_cells;
+      y[c] = (glm::dot(p, v_O) + ov) * inv_cell + half_cells;
+      d[c] = glm::dot(p, n_O) + on;
+      nn[c] = glm::dot(model.corner_normals_O[3 * f + c], n_O);
+    }
+    const double area = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]);
+    if (!(std::abs(area) > 1e-12)) continue;  // edge-on or degenerate in projection
+    const double inv_area = 1.0 / area;
+    const int i0 = std::max(0, static_cast<int>(std::ceil(std::min({x[0], x[1], x[2]}) - 0.5)));
+    const int i1 =
+        std::min(nt - 1, static_cast<int>(std::floor(std::max({x[0], x[1], x[2]}) - 0.5)));
+    const int j0 = std::max(0, static_cast<int>(std::ceil(std::min({y[0], y[1], y[2]}) - 0.5)));
+    const int j1 =
+        std::min(nt - 1, static_cast<int>(std::floor(std::max({y[0], y[1], y[2]}) - 0.5)));
+    if (i0 > i1 || j0 > j1) continue;
+    const bool textured = have_texture && model.textured[f] != 0;
+    const int level =
+        textured ? model.texture.LevelForFootprint(model.texel_size_m[f], w.cell_size_m()) : 0;
+    const HeightFieldLevel* tex_level = textured ? &model.texture.level(level) : nullptr;
+    const glm::dvec3& n0 = model.corner_normals_O[3 * f];
+    const glm::dvec3& n1 = model.corner_normals_O[3 * f + 1];
+    const glm::dvec3& n2 = model.corner_normals_O[3 * f + 2];
+    const double cos01 = glm::dot(n0, n1), cos02 = glm::dot(n0, n2), cos12 = glm::dot(n1, n2);
+    const glm::vec2 uv0 = model.corner_uvs[3 * f], uv1 = model.corner_uvs[3 * f + 1],
+                    uv2 = model.corner_uvs[3 * f + 2];
+    // Barycentrics, affine in the cell centre (px, py): b0 = k0 + gx0·px + gy0·py, likewise b1,
+    // and b2 = 1 − b0 − b1.
+    const double k0 = (x[1] * y[2] - x[2] * y[1]) * inv_area;
+    const double gx0 = (y[1] - y[2]) * inv_area, gy0 = (x[2] - x[1]) * inv_area;
+    const double k1 = (x[2] * y[0] - x[0] * y[2]) * inv_area;
+    const double gx1 = (y[2] - y[0]) * inv_area, gy1 = (x[0] - x[2]) * inv_area;
+    for (int j = j0; j <= j1; ++j) {
+      const double py = j + 0.5;
+      const double r0 = k0 + gy0 * py, r1 = k1 + gy1 * py, r2 = 1.0 - r0 - r1;
+      const double g2 = -gx0 - gx1;
+      // The span of px where each b ≥ the tolerance, widened by a cell for rounding (the exact
+      // per-cell test below decides).
+      double lo = static_cast<double>(i0), hi = static_cast<double>(i1) + 1.0;
+      bool empty = false;
+      const auto clip = [&](double r, double g) {
+        if (g > 0.0) {
+          lo = std::max(lo, (kEdgeTolerance - r) / g);
+        } else if (g < 0.0) {
+          hi = std::min(hi, (kEdgeTolerance - r) / g);
+        } else if (r < kEdgeTolerance) {
+          empty = true;
+        }
+      };
+      clip(r0, gx0);
+      clip(r1, gx1);
+      clip(r2, g2);
+      if (empty || !(lo <= hi + 2.0)) continue;
+      const int ia = std::max(i0, static_cast<int>(std::floor(lo - 0.5)) - 1);
+      const int ib = std::min(i1, static_cast<int>(std::ceil(hi - 0.5)) + 1);
+      float* row = &heights[static_cast<size_t>(j) * nt];
+      for (int i = ia; i <= ib; ++i) {
+        const double px = i + 0.5;
+        const double b0 = r0 + gx0 * px;
+        const double b1 = r1 + gx1 * px;
+        const double b2 = 1.0 - b0 - b1;
+        if (b0 < kEdgeTolerance || b1 < kEdgeTolerance || b2 < kEdgeTolerance) continue;
+        double value = b0 * d[0] + b1 * d[1] + b2 * d[2];
+        if (tex_level != nullptr) {
+          const float u = static_cast<float>(b0 * uv0.x + b1 * uv1.x + b2 * uv2.x);
+          const float v = static_cast<float>(b0 * uv0.y + b1 * uv1.y + b2 * uv2.y);
+          const double len2 = b0 * b0 + b1 * b1 + b2 * b2 +
+                              2.0 * (b0 * b1 * cos01 + b0 * b2 * cos02 + b1 * b2 * cos12);
+          const double ndotn =
+              len2 > 1e-12 ? (b0 * nn[0] + b1 * nn[1] + b2 * nn[2]) / std::sqrt(len2) : 0.0;
+          value += static_cast<double>(model.texture.SampleAt(level, *tex_level, u, v)) * ndotn;
+        }
+        if (!(std::abs(value) <= range)) continue;  // outside the window's box along n
+        float& cell = row[i];
+        const auto fv = static_cast<float>(value);
+        if (keep_max ? fv > cell : fv < cell) cell = fv;
+      }
+    }
+  }
+}
+
+DepthSample DirectionalPenetrationDepthShifted(std::span<const float> b, int resolution,
+                                               std::span<const float> a_ext, int margin_cells,
+                                               int di, int dj) noexcept {
+  DepthSample best{-std::numeric_limits<double>::infinity(), -1};
+  const int n = resolution, m = margin_cells, nt = n + 2 * m;
+  if (n <= 0 || m < 0 || std::abs(di) > m || std::abs(dj) > m ||
+      b.size() < static_cast<size_t>(n) * n || a_ext.size() < static_cast<size_t>(nt) * nt) {
+    return best;
+  }
+  float best_value = -std::numeric_limits<float>::infinity();
+  for (int j = 0; j < n; ++j) {
+    const float* brow = &b[static_cast<size_t>(j) * n];
+    const float* arow = &a_ext[static_cast<size_t>(j + m + dj) * nt + (m + di)];
+    for (int i = 0; i < n; ++i) {
+      const float bk = brow[i], ak = arow[i];
+      if (!(std::isfinite(bk) && std::isfinite(ak))) continue;
+      const float diff = bk - ak;
+      if (diff > best_value) {
+        best_value = diff;
+        best.cell = j * n + i;
+      }
     }
   }
   if (best.cell >= 0) best.depth_m = static_cast<double>(best_value);

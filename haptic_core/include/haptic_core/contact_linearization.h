@@ -75,14 +75,30 @@ ContactLinearization AssembleLinearization(const ContactWindow& window,
                                            double stiffness_n_per_m,
                                            LinearizationFaults& faults) noexcept;
 
+/// How the CPU texture stage renders (issue 15). Both give the same δ and gradient within float
+/// rounding (tests/texture_stage_parity_test.cc checks it on random contacts of all six seed
+/// models).
+enum class TextureStagePath {
+  /// The reference: RenderPatchHeights, 11 tool renders per contact.
+  kReference,
+  /// RenderPatchHeightsFast; the four in-plane translation samples read one tool render on the
+  /// window grown by a cell (the translation step is one cell, so they are exact shifts): 7 tool
+  /// renders per contact.
+  kFast,
+};
+
 /// Evaluates δ and its gradient for one contact, reusing preallocated height buffers: one
-/// environment render and 11 tool renders (base and ±h along u, v and about u, v, n); the
-/// derivative along n is −1 exactly [L]. Step sizes: h_x = W/N, h_θ = (W/N)/(W/2) [R].
+/// environment render and the tool at the 11 poses of GradientSamplePoses (base and ±h along u, v
+/// and about u, v, n; see TextureStagePath for how many renders that takes); the derivative along
+/// n is −1 exactly [L]. Step sizes: h_x = W/N, h_θ = (W/N)/(W/2) [R].
 class TexturePenetrationSolver {
  public:
   /// Preallocates buffers for windows of up to `max_resolution`² cells and models of up to
   /// `max_triangles` triangles (larger ones still work but allocate on first use).
-  explicit TexturePenetrationSolver(int max_resolution = 128, int max_triangles = 4096);
+  explicit TexturePenetrationSolver(int max_resolution = 128, int max_triangles = 4096,
+                                    TextureStagePath path = TextureStagePath::kFast);
+
+  TextureStagePath path() const noexcept { return path_; }
 
   /// Linearizes the contact of `tool` posed at X_WT (frame T at the tool's centre of mass) against
   /// `environment` posed at X_WO over `window`, with penalty stiffness k (N/m).
@@ -105,9 +121,17 @@ class TexturePenetrationSolver {
                          const ContactWindow& window) noexcept;
   DepthSample EvaluateTool(const HapticModel& tool, const RigidTransform& X_WT,
                            const ContactWindow& window) noexcept;
+  /// Largest |p_O| of the tool's vertices (m), computed once per model.
+  double ToolRadius(const HapticModel& tool) noexcept;
 
+  TextureStagePath path_;
   std::vector<float> env_heights_;
   std::vector<float> tool_heights_;
+  std::vector<float> tool_ext_heights_;  ///< kFast: the base pose on the window grown by a cell
+  const HapticModel* radius_model_ = nullptr;
+  const glm::dvec3* radius_vertices_ = nullptr;
+  std::size_t radius_vertex_count_ = 0;
+  double radius_m_ = 0.0;
   std::vector<int> env_triangles_;
   std::vector<int> tool_triangles_;
   LinearizationFaults faults_;

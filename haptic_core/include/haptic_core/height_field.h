@@ -46,6 +46,10 @@ class HeightField {
   /// Bilinear sample (m) of level `level` (clamped to the chain) at texture coordinates (u,v).
   /// Returns 0 for an empty field. Never allocates; non-finite u or v gives 0.
   inline float Sample(int level, float u, float v) const noexcept;
+  /// The same value as Sample(level, u, v), bit for bit, with the address arithmetic (wrap or
+  /// clamp) skipped when the 2×2 footprint lies inside the level: the texture stage's fast path
+  /// (issue 15). `L` must be level(level) of this field, 0 <= level < num_levels().
+  inline float SampleAt(int level, const HeightFieldLevel& L, float u, float v) const noexcept;
 
   /// Mip level whose texel size best matches `cell_size_m` for a surface whose level-0 texel
   /// measures `texel_size_m` on the coarse surface: floor(log2(cell/texel)), clamped to the chain.
@@ -81,6 +85,23 @@ inline float HeightField::Sample(int level, float u, float v) const noexcept {
   const float* row_b = &L.texels[static_cast<size_t>(yb) * L.width];
   const float top = row_a[xa] + tx * (row_a[xb] - row_a[xa]);
   const float bottom = row_b[xa] + tx * (row_b[xb] - row_b[xa]);
+  return top + ty * (bottom - top);
+}
+
+inline float HeightField::SampleAt(int level, const HeightFieldLevel& L, float u,
+                                   float v) const noexcept {
+  if (!std::isfinite(u) || !std::isfinite(v)) return 0.0f;
+  // The same arithmetic as Sample() up to the texel addresses (so the same value).
+  const float fx = std::clamp(u * static_cast<float>(L.width) - 0.5f, -1e6f, 1e6f);
+  const float fy = std::clamp(v * static_cast<float>(L.height) - 0.5f, -1e6f, 1e6f);
+  const float x0f = std::floor(fx), y0f = std::floor(fy);
+  const int x0 = static_cast<int>(x0f), y0 = static_cast<int>(y0f);
+  if (x0 < 0 || y0 < 0 || x0 + 1 >= L.width || y0 + 1 >= L.height) return Sample(level, u, v);
+  const float tx = fx - x0f, ty = fy - y0f;
+  const float* row_a = &L.texels[static_cast<size_t>(y0) * L.width];
+  const float* row_b = row_a + L.width;
+  const float top = row_a[x0] + tx * (row_a[x0 + 1] - row_a[x0]);
+  const float bottom = row_b[x0] + tx * (row_b[x0 + 1] - row_b[x0]);
   return top + ty * (bottom - top);
 }
 

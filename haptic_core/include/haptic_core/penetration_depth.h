@@ -72,10 +72,24 @@ void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
 /// matches the cell (the GPU path does the same per fragment) [L][R]; samples with
 /// |height| > depth_range_m() are outside the window's box and ignored. `heights` must be
 /// initialised by the caller (−∞ for kEnvironment, +∞ for kTool); cells no triangle covers keep
-/// that value. Never allocates.
+/// that value. `depth_range_m` > 0 replaces the box's half-depth R (tests compare a grid grown
+/// around a window with that window's box). Never allocates.
 void RenderPatchHeights(const HapticModel& model, const RigidTransform& X_WO,
                         std::span<const int> triangles, const ContactWindow& window, PatchSide side,
-                        std::span<float> heights) noexcept;
+                        std::span<float> heights, double depth_range_m = 0.0) noexcept;
+
+/// The fast path of RenderPatchHeights (issue 15), on the window's grid extended by
+/// `margin_cells` (m ≥ 0) cells on every side: `heights` holds (N+2m)² cells, window cell (i, j)
+/// (i, j ∈ [−m, N+m)) at index (j+m)·(N+2m) + (i+m), so that m = 0 is the window itself. Within
+/// float rounding it writes what RenderPatchHeights writes on a window of (N+2m)² cells of the
+/// same cell size and centre; it is faster: the window's axes are brought into the model's frame
+/// once, barycentrics are affine in the cell centre per triangle, each row is clipped to the
+/// triangle's span before the per-cell test, and texture samples inside a mip level skip the
+/// address arithmetic. Same preconditions; never allocates. m = 1 lets one render serve the four
+/// in-plane translation samples of the gradient (exact shifts by one cell).
+void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO,
+                            std::span<const int> triangles, const ContactWindow& window,
+                            PatchSide side, int margin_cells, std::span<float> heights) noexcept;
 
 /// Result of one directional penetration-depth evaluation.
 struct DepthSample {
@@ -90,5 +104,14 @@ struct DepthSample {
 /// Ties keep the lowest index. Never allocates.
 DepthSample DirectionalPenetrationDepth(std::span<const float> b,
                                         std::span<const float> a) noexcept;
+
+/// δ of `b` (environment, N×N, −∞ where empty) against the tool heights of an extended buffer
+/// `a_ext` ((N+2m)², as RenderPatchHeightsFast with margin m) read with an offset: window cell
+/// (i, j) pairs with a_ext at window cell (i + di, j + dj), |di|, |dj| ≤ m. This is the tool
+/// moved by (−di, −dj) cells along (u, v) without another render. Cells index b (j·N + i); ties
+/// keep the lowest index, as DirectionalPenetrationDepth. Never allocates.
+DepthSample DirectionalPenetrationDepthShifted(std::span<const float> b, int resolution,
+                                               std::span<const float> a_ext, int margin_cells,
+                                               int di, int dj) noexcept;
 
 }  // namespace ht

@@ -32,7 +32,8 @@ class PenetrationDepthBackend {
 
   /// "cpu" or "gpu".
   virtual std::string_view name() const noexcept = 0;
-  /// What runs it, for logs and summaries: "CPU reference rasterizer" or the GL renderer string.
+  /// What runs it, for logs and summaries: "CPU rasterizer (fast path)", "CPU reference
+  /// rasterizer" or the GL renderer string.
   virtual std::string description() const = 0;
 
   /// Linearizes every query for `tool` posed at X_WT (frame T at the tool's centre of mass) into
@@ -55,11 +56,17 @@ class PenetrationDepthBackend {
 /// The CPU reference (software rasterizer, DESIGN.md §4), one contact after the other.
 class CpuPenetrationDepthBackend final : public PenetrationDepthBackend {
  public:
-  /// Preallocates for grids of up to `max_resolution`² cells.
-  explicit CpuPenetrationDepthBackend(int max_resolution = 128) : solver_(max_resolution) {}
+  /// Preallocates for grids of up to `max_resolution`² cells; `path` picks the fast texture stage
+  /// (the default) or the reference one (same results within float rounding; issue 15).
+  explicit CpuPenetrationDepthBackend(int max_resolution = 128,
+                                      TextureStagePath path = TextureStagePath::kFast)
+      : solver_(max_resolution, 4096, path) {}
 
   std::string_view name() const noexcept override { return "cpu"; }
-  std::string description() const override { return "CPU reference rasterizer"; }
+  std::string description() const override {
+    return solver_.path() == TextureStagePath::kFast ? "CPU rasterizer (fast path)"
+                                                     : "CPU reference rasterizer";
+  }
   bool LinearizeBatch(const HapticModel& tool, const RigidTransform& X_WT,
                       std::span<const ContactQuery> queries, std::span<ContactLinearization> out,
                       std::span<DepthSample> samples_out = {}) noexcept override;

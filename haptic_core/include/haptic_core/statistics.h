@@ -12,7 +12,8 @@ namespace ht {
 inline double Percentile(std::vector<double> samples, double q) {
   if (samples.empty()) return 0.0;
   std::sort(samples.begin(), samples.end());
-  const auto i = static_cast<size_t>(std::clamp(q, 0.0, 1.0) * (samples.size() - 1) + 0.5);
+  const auto i =
+      static_cast<size_t>(std::clamp(q, 0.0, 1.0) * static_cast<double>(samples.size() - 1) + 0.5);
   return samples[std::min(i, samples.size() - 1)];
 }
 

@@ -1,0 +1,132 @@
+// The full remote step (haptic_core/remote_step.h) on the seed's benchmark scenes (issue 15):
+// per scene, the step's p50 time and its split (coarse stages, texture stage, per contact), leaf
+// pairs and contacts, over in-contact poses of the scene's scripted motion. A program, not a
+// Google Benchmark: each pose is stepped --repeats times and the percentiles are over all steps.
+// Speed is reported here, never asserted; accuracy is the speed-vs-error frontier's job
+// (slave_sim/frontier.h), and parity of fast paths with the reference is tested
+// (tests/texture_stage_parity_test.cc).
+//
+// Usage: remote_step_benchmark [--scenes fig75,fig76,fig77,hammer_torus] [--poses N]
+//                              [--repeats R] [--grid N] [--csv FILE] [--cache-dir D]
+
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "haptic_core/model_build/haptic_model_build.h"
+#include "haptic_core/remote_step.h"
+#include "haptic_core/statistics.h"
+#include "slave_sim/benchmark_scenes.h"
+
+namespace {
+
+std::vector<std::string> SplitCommas(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream in(s);
+  for (std::string item; std::getline(in, item, ',');) {
+    if (!item.empty()) out.push_back(item);
+  }
+  return out;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{
+      "The full remote step on the seed's benchmark scenes: p50 time, its split, pairs and "
+      "contacts"};
+  std::string scenes_arg = "fig75,fig76,fig77,hammer_torus";
+  int poses = 40, repeats = 5, grid = 50;
+  std::string csv_path, cache_dir = ht::HapticModelCache::DefaultDir();
+  app.add_option("--scenes", scenes_arg, "comma-separated scene names")->capture_default_str();
+  app.add_option("--poses", poses, "in-contact poses per scene (scripted motion)")
+      ->check(CLI::Range(1, 10000))
+      ->capture_default_str();
+  app.add_option("--repeats", repeats, "steps per pose")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
+  app.add_option("--grid", grid, "penetration-depth grid N")
+      ->check(CLI::Range(2, 1024))
+      ->capture_default_str();
+  app.add_option("--csv", csv_path, "write one row per scene here");
+  app.add_option("--cache-dir", cache_dir, "model cache folder")->capture_default_str();
+  CLI11_PARSE(app, argc, argv);
+
+  const ht::HapticModelCache cache(cache_dir);
+  std::ofstream csv;
+  if (!csv_path.empty()) {
+    csv.open(csv_path);
+    if (!csv) {
+      std::fprintf(stderr, "remote_step_benchmark: cannot write %s\n", csv_path.c_str());
+      return 1;
+    }
+    csv << "scene,poses,steps,step_p50_us,step_p90_us,coarse_p50_us,texture_p50_us,"
+           "texture_per_contact_us,leaf_pairs_mean,contacts_mean,contacts_max\n";
+  }
+  std::printf("%-13s %5s %9s %9s %9s %9s %12s %8s %9s %4s\n", "scene", "poses", "step p50",
+              "step p90", "coarse", "texture", "per contact", "pairs", "contacts", "max");
+  for (const std::string& name : SplitCommas(scenes_arg)) {
+    ht::BenchmarkScene scene;
+    std::vector<ht::RigidTransform> poses_WFt;
+    try {
+      std::fprintf(stderr, "remote_step_benchmark: %s: building (cache %s)...\n", name.c_str(),
+                   cache_dir.c_str());
+      scene = ht::MakeBenchmarkScene(name, ht::BenchmarkModelSettings{}, cache);
+      std::fprintf(stderr, "remote_step_benchmark: %s: finding %d in-contact poses...\n",
+                   name.c_str(), poses);
+      poses_WFt = ht::ScriptedContactPoses(scene, poses);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "remote_step_benchmark: %s: %s\n", name.c_str(), e.what());
+      return 1;
+    }
+    ht::PipelineOptions options;
+    options.grid_resolution = grid;
+    ht::HapticTexturePipeline pipeline(scene.haptic, options);
+    const ht::RigidTransform X_FtT = scene.X_TFt.Inverse();
+    std::vector<double> step_us, coarse_us, texture_us, per_contact_us;
+    double pairs_sum = 0.0, contacts_sum = 0.0;
+    int contacts_max = 0;
+    ht::StepTimings timings;
+    pipeline.Step(poses_WFt.empty() ? scene.haptic.X_WT_home : poses_WFt[0] * X_FtT, 0,
+                  timings);  // warm-up
+    std::uint64_t seq = 1;
+    for (const ht::RigidTransform& X_WFt : poses_WFt) {
+      const ht::RigidTransform X_WT = X_WFt * X_FtT;
+      for (int r = 0; r < repeats; ++r) {
+        const ht::ContactModel model = pipeline.Step(X_WT, seq++, timings);
+        step_us.push_back(timings.total_us);
+        coarse_us.push_back(timings.collision_us);
+        texture_us.push_back(timings.texture_us);
+        const int queried = static_cast<int>(pipeline.last_contact_queries().size());
+        if (queried > 0) per_contact_us.push_back(timings.texture_us / queried);
+        if (r == 0) {
+          pairs_sum += timings.leaf_pairs;
+          contacts_sum += queried;
+          contacts_max = std::max(contacts_max, queried);
+        }
+        (void)model;
+      }
+    }
+    const double n = std::max<double>(1.0, static_cast<double>(poses_WFt.size()));
+    std::printf("%-13s %5zu %9.1f %9.1f %9.1f %9.1f %12.1f %8.1f %9.2f %4d\n", name.c_str(),
+                poses_WFt.size(), ht::Percentile(step_us, 0.5), ht::Percentile(step_us, 0.9),
+                ht::Percentile(coarse_us, 0.5), ht::Percentile(texture_us, 0.5),
+                ht::Percentile(per_contact_us, 0.5), pairs_sum / n, contacts_sum / n, contacts_max);
+    std::fflush(stdout);
+    if (csv) {
+      csv << name << ',' << poses_WFt.size() << ',' << step_us.size() << ','
+          << ht::Percentile(step_us, 0.5) << ',' << ht::Percentile(step_us, 0.9) << ','
+          << ht::Percentile(coarse_us, 0.5) << ',' << ht::Percentile(texture_us, 0.5) << ','
+          << ht::Percentile(per_contact_us, 0.5) << ',' << pairs_sum / n << ',' << contacts_sum / n
+          << ',' << contacts_max << '\n';
+    }
+  }
+  std::printf("(times in us; contacts = windows linearized per step; %s)\n",
+              "CPU reference backend, one thread");
+  return 0;
+}

@@ -1,0 +1,226 @@
+// The texture stage's fast path (issue 15) against the reference it replaces, on random contacts
+// of all six seed models (procedural full-resolution meshes, decimated and baked through the
+// model cache at 512² textures to keep the test short):
+//  - RenderPatchHeightsFast vs RenderPatchHeights, cell by cell, on the window and on the window
+//    grown by a cell: the same cells covered, heights within a few float ulps;
+//  - TexturePenetrationSolver kFast vs kReference: the 11 depth samples, δ0 and the gradient
+//    within float rounding (the fast path reads the four in-plane translations as shifts of one
+//    render);
+//  - DirectionalPenetrationDepthShifted vs DirectionalPenetrationDepth on an explicitly shifted
+//    buffer: the same sample.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <glm/gtc/quaternion.hpp>
+#include <limits>
+#include <map>
+#include <memory>
+#include <numbers>
+#include <random>
+#include <vector>
+
+#include "haptic_core/contact_linearization.h"
+#include "haptic_core/demo/seed_models.h"
+#include "haptic_core/model_build/haptic_model_build.h"
+#include "haptic_core/penetration_depth.h"
+
+namespace ht {
+namespace {
+
+const HapticModel& Seed(SeedModel which) {
+  static std::map<SeedModel, std::shared_ptr<const HapticModel>> models;
+  auto& slot = models[which];
+  if (!slot) {
+    HapticModelBuildParams params;
+    params.coarse_triangles = static_cast<int>(SeedModelSpecOf(which).seed_coarse_triangles);
+    params.texture.texture_size = 512;
+    slot = BuildHapticModelCached(SeedModelName(which), MakeSeedModelFullResolution(which), params,
+                                  HapticModelCache(HT_TEST_MODEL_CACHE))
+               .model;
+  }
+  return *slot;
+}
+
+constexpr SeedModel kAll[] = {SeedModel::kBlock,   SeedModel::kGear, SeedModel::kHammer,
+                              SeedModel::kCadPart, SeedModel::kFile, SeedModel::kTorus};
+
+// A point on triangle `f` of `m` (frame O) and its unit face normal.
+void PointOn(const HapticModel& m, int f, std::mt19937& rng, glm::dvec3& p, glm::dvec3& n) {
+  std::uniform_real_distribution<double> U(0.0, 1.0);
+  double a = U(rng), b = U(rng);
+  if (a + b > 1.0) {
+    a = 1.0 - a;
+    b = 1.0 - b;
+  }
+  const glm::ivec3 t = m.triangles[f];
+  const glm::dvec3 p0 = m.vertices_O[t[0]], p1 = m.vertices_O[t[1]], p2 = m.vertices_O[t[2]];
+  p = p0 + a * (p1 - p0) + b * (p2 - p0);
+  n = glm::normalize(glm::cross(p1 - p0, p2 - p0));
+}
+
+// A random contact: the environment at the identity, a window on one of its triangles, the tool
+// turned so that one of its triangles faces that one, pressed in by up to 0.4 mm, tilted by up to
+// 3° about a random axis.
+struct Contact {
+  RigidTransform X_WT, X_WO;
+  ContactWindow window;
+};
+
+Contact RandomContact(const HapticModel& tool, const HapticModel& env, std::mt19937& rng,
+                      int resolution) {
+  std::uniform_int_distribution<int> tf(0, static_cast<int>(tool.triangles.size()) - 1);
+  std::uniform_int_distribution<int> ef(0, static_cast<int>(env.triangles.size()) - 1);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  glm::dvec3 pe, ne, pt, nt;
+  PointOn(env, ef(rng), rng, pe, ne);
+  PointOn(tool, tf(rng), rng, pt, nt);
+  Contact c;
+  c.X_WO = RigidTransform::Identity();
+  // Rotate the tool so that its triangle's normal points along −ne, then tilt.
+  const glm::dvec3 to = -ne;
+  const double c_ang = glm::dot(nt, to);
+  const glm::dvec3 perp = std::abs(nt.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0);
+  const glm::dquat align =
+      c_ang < -1.0 + 1e-12 ? glm::angleAxis(std::numbers::pi, glm::normalize(glm::cross(nt, perp)))
+                           : glm::normalize(glm::dquat(1.0 + c_ang, glm::cross(nt, to)));
+  const glm::dvec3 axis = glm::normalize(glm::dvec3(U(rng), U(rng), U(rng)) + glm::dvec3(1e-9));
+  const glm::dquat tilt = glm::angleAxis(3.0 * std::numbers::pi / 180.0 * U(rng), axis);
+  c.X_WT.rotation = glm::normalize(tilt * align);
+  const double press = 0.2e-3 * (1.0 + U(rng));
+  c.X_WT.translation = pe - c.X_WT.rotation * pt - press * ne;
+  c.window = ContactWindow::Make(pe, ne, 0.02, resolution);
+  return c;
+}
+
+double Ulp(float x) {
+  return std::nextafter(std::abs(x), std::numeric_limits<float>::infinity()) - std::abs(x);
+}
+
+// Cell by cell: the same coverage, heights within 4 ulps. Returns the cells compared.
+int ExpectSameHeights(const std::vector<float>& ref, const std::vector<float>& fast,
+                      const char* what) {
+  EXPECT_EQ(ref.size(), fast.size());
+  int covered = 0, coverage_mismatch = 0, height_mismatch = 0;
+  for (std::size_t k = 0; k < std::min(ref.size(), fast.size()); ++k) {
+    const bool a = std::isfinite(ref[k]), b = std::isfinite(fast[k]);
+    if (a != b) {
+      ++coverage_mismatch;
+      continue;
+    }
+    if (!a) continue;
+    ++covered;
+    if (std::abs(ref[k] - fast[k]) > 4.0 * Ulp(ref[k]) + 1e-12) ++height_mismatch;
+  }
+  EXPECT_EQ(coverage_mismatch, 0) << what;
+  EXPECT_EQ(height_mismatch, 0) << what;
+  return covered;
+}
+
+TEST(TextureStageParity, FastRenderDrawsTheReferenceHeightsOnAllSixSeedModels) {
+  std::mt19937 rng(15);
+  int covered = 0;
+  std::vector<int> triangles;
+  for (const SeedModel which : kAll) {
+    const HapticModel& env = Seed(which);
+    const HapticModel& tool = Seed(kAll[(static_cast<int>(which) + 1) % 6]);
+    for (int trial = 0; trial < 8; ++trial) {
+      const int n = trial % 2 == 0 ? 50 : 37;
+      const Contact c = RandomContact(tool, env, rng, n);
+      for (const PatchSide side : {PatchSide::kEnvironment, PatchSide::kTool}) {
+        const HapticModel& m = side == PatchSide::kEnvironment ? env : tool;
+        const RigidTransform& X = side == PatchSide::kEnvironment ? c.X_WO : c.X_WT;
+        const float empty = side == PatchSide::kEnvironment
+                                ? -std::numeric_limits<float>::infinity()
+                                : std::numeric_limits<float>::infinity();
+        // On the window.
+        SelectPatchTriangles(m, X, c.window, side, 2.0 * c.window.cell_size_m(), triangles);
+        std::vector<float> ref(static_cast<std::size_t>(n) * n, empty), fast = ref;
+        RenderPatchHeights(m, X, triangles, c.window, side, ref);
+        RenderPatchHeightsFast(m, X, triangles, c.window, side, 0, fast);
+        covered += ExpectSameHeights(ref, fast, SeedModelName(which));
+        // On the window grown by one cell: the reference on a window of (N+2)² cells, with the
+        // window's own box depth R (the grown window's would be deeper; the fast path keeps R).
+        const ContactWindow grown = ContactWindow::Make(c.window.center_W, c.window.normal_W,
+                                                        c.window.extent_m * (n + 2) / n, n + 2);
+        std::vector<float> ref_grown(static_cast<std::size_t>(n + 2) * (n + 2), empty),
+            fast_grown = ref_grown;
+        RenderPatchHeights(m, X, triangles, grown, side, ref_grown, c.window.depth_range_m());
+        RenderPatchHeightsFast(m, X, triangles, c.window, side, 1, fast_grown);
+        covered += ExpectSameHeights(ref_grown, fast_grown, SeedModelName(which));
+      }
+    }
+  }
+  EXPECT_GT(covered, 20000);  // the contacts really draw something
+}
+
+TEST(TextureStageParity, FastSolverGivesTheReferenceDepthsAndGradients) {
+  std::mt19937 rng(1515);
+  TexturePenetrationSolver reference(128, 4096, TextureStagePath::kReference);
+  TexturePenetrationSolver fast(128, 4096, TextureStagePath::kFast);
+  int in_contact = 0;
+  double worst_depth = 0.0, worst_dx = 0.0, worst_dr = 0.0;
+  for (const SeedModel which : kAll) {
+    const HapticModel& env = Seed(which);
+    for (const SeedModel tool_which : {SeedModel::kFile, SeedModel::kBlock, which}) {
+      const HapticModel& tool = Seed(tool_which);
+      for (int trial = 0; trial < 6; ++trial) {
+        const Contact c = RandomContact(tool, env, rng, 50);
+        std::array<DepthSample, kGradientSamples> sr{}, sf{};
+        const ContactLinearization r =
+            reference.Linearize(tool, c.X_WT, env, c.X_WO, c.window, 8000.0, sr);
+        const ContactLinearization f =
+            fast.Linearize(tool, c.X_WT, env, c.X_WO, c.window, 8000.0, sf);
+        ASSERT_EQ(std::isfinite(r.depth_m), std::isfinite(f.depth_m)) << SeedModelName(which);
+        if (!std::isfinite(r.depth_m)) continue;
+        ++in_contact;
+        for (int i = 0; i < kGradientSamples; ++i) {
+          ASSERT_EQ(sr[i].cell >= 0, sf[i].cell >= 0) << "sample " << i;
+          if (sr[i].cell < 0) continue;
+          // Heights are floats of at most R = 2 cm: a few ulps there is ~1e-8 m.
+          EXPECT_NEAR(sr[i].depth_m, sf[i].depth_m, 1e-8) << "sample " << i;
+          worst_depth = std::max(worst_depth, std::abs(sr[i].depth_m - sf[i].depth_m));
+        }
+        // The gradient: central differences of those depths over h_x = 0.4 mm, h_θ = 0.04 rad.
+        const glm::dvec3 dx = r.gradient.d_translation_W - f.gradient.d_translation_W;
+        const glm::dvec3 dr = r.gradient.d_rotation_W - f.gradient.d_rotation_W;
+        EXPECT_LT(glm::length(dx), 5e-5);
+        EXPECT_LT(glm::length(dr), 5e-7);
+        worst_dx = std::max(worst_dx, glm::length(dx));
+        worst_dr = std::max(worst_dr, glm::length(dr));
+      }
+    }
+  }
+  EXPECT_GT(in_contact, 40);
+  std::printf(
+      "[ parity ] %d contacts in contact; worst |dδ| %.3g m, |dJ_x| %.3g, |dJ_θ| %.3g m/rad\n",
+      in_contact, worst_depth, worst_dx, worst_dr);
+}
+
+TEST(TextureStageParity, ShiftedDepthEqualsTheDepthOfAnExplicitlyShiftedBuffer) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> U(-1e-3f, 1e-3f);
+  const int n = 20, nt = n + 2;
+  std::vector<float> b(n * n), a_ext(nt * nt);
+  for (float& v : b) v = U(rng);
+  for (float& v : a_ext) v = U(rng);
+  b[17] = -std::numeric_limits<float>::infinity();
+  a_ext[40] = std::numeric_limits<float>::infinity();
+  for (int dj = -1; dj <= 1; ++dj) {
+    for (int di = -1; di <= 1; ++di) {
+      std::vector<float> a(n * n);
+      for (int j = 0; j < n; ++j) {
+        for (int i = 0; i < n; ++i) a[j * n + i] = a_ext[(j + 1 + dj) * nt + (i + 1 + di)];
+      }
+      const DepthSample want = DirectionalPenetrationDepth(b, a);
+      const DepthSample got = DirectionalPenetrationDepthShifted(b, n, a_ext, 1, di, dj);
+      EXPECT_EQ(want.cell, got.cell);
+      EXPECT_EQ(want.depth_m, got.depth_m);
+    }
+  }
+  // Out-of-range offsets give no overlap rather than reading outside the buffer.
+  EXPECT_EQ(DirectionalPenetrationDepthShifted(b, n, a_ext, 1, 2, 0).cell, -1);
+}
+
+}  // namespace
+}  // namespace ht
