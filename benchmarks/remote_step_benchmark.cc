@@ -7,7 +7,9 @@
 // (tests/texture_stage_parity_test.cc).
 //
 // Usage: remote_step_benchmark [--scenes fig75,fig76,fig77,hammer_torus] [--poses N]
-//                              [--repeats R] [--grid N] [--csv FILE] [--cache-dir D]
+//                              [--repeats R] [--grid N] [--threads T] [--path fast|reference]
+//                              [--csv FILE]
+//                              [--cache-dir D]
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -41,7 +43,7 @@ int main(int argc, char** argv) {
       "The full remote step on the seed's benchmark scenes: p50 time, its split, pairs and "
       "contacts"};
   std::string scenes_arg = "fig75,fig76,fig77,hammer_torus";
-  int poses = 40, repeats = 5, grid = 50;
+  int poses = 40, repeats = 5, grid = 50, threads = 1;
   std::string csv_path, cache_dir = ht::HapticModelCache::DefaultDir();
   app.add_option("--scenes", scenes_arg, "comma-separated scene names")->capture_default_str();
   app.add_option("--poses", poses, "in-contact poses per scene (scripted motion)")
@@ -52,6 +54,15 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--grid", grid, "penetration-depth grid N")
       ->check(CLI::Range(2, 1024))
+      ->capture_default_str();
+  app.add_option("--threads", threads, "threads of the CPU texture stage")
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str();
+  std::string path = "fast";
+  app.add_option("--path", path,
+                 "texture stage: fast (the product's) or reference (the path it replaced; the\n"
+                 "same results within float rounding)")
+      ->check(CLI::IsMember({"fast", "reference"}))
       ->capture_default_str();
   app.add_option("--csv", csv_path, "write one row per scene here");
   app.add_option("--cache-dir", cache_dir, "model cache folder")->capture_default_str();
@@ -86,7 +97,13 @@ int main(int argc, char** argv) {
     }
     ht::PipelineOptions options;
     options.grid_resolution = grid;
-    ht::HapticTexturePipeline pipeline(scene.haptic, options);
+    options.texture_threads = threads;
+    ht::HapticTexturePipeline pipeline(
+        scene.haptic, options,
+        std::make_unique<ht::CpuPenetrationDepthBackend>(
+            std::max(128, grid),
+            path == "fast" ? ht::TextureStagePath::kFast : ht::TextureStagePath::kReference,
+            threads));
     const ht::RigidTransform X_FtT = scene.X_TFt.Inverse();
     std::vector<double> step_us, coarse_us, texture_us, per_contact_us;
     double pairs_sum = 0.0, contacts_sum = 0.0;
@@ -126,7 +143,9 @@ int main(int argc, char** argv) {
           << ',' << contacts_max << '\n';
     }
   }
-  std::printf("(times in us; contacts = windows linearized per step; %s)\n",
-              "CPU reference backend, one thread");
+  std::printf(
+      "(times in us; contacts = windows linearized per step; CPU %s path, %d texture "
+      "thread(s))\n",
+      path.c_str(), threads);
   return 0;
 }

@@ -11,6 +11,8 @@ PACKAGES=(
   libgl1-mesa-dri libdraco-dev libtinygltf-dev
   # libraries the build uses
   libccd-dev libeigen3-dev nlohmann-json3-dev libcli11-dev libsodium-dev
+  # the CPU texture stage's thread pool
+  libtbb-dev
   # haptic model build: convex hulls (qhull) and the texture bake's ray casting (Embree 3)
   libqhull-dev libembree-dev
   # FCL: the reference the coarse contact query is checked and benchmarked against

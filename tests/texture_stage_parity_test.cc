@@ -24,6 +24,7 @@
 #include "haptic_core/demo/seed_models.h"
 #include "haptic_core/model_build/haptic_model_build.h"
 #include "haptic_core/penetration_depth.h"
+#include "haptic_core/penetration_depth_backend.h"
 
 namespace ht {
 namespace {
@@ -195,6 +196,39 @@ TEST(TextureStageParity, FastSolverGivesTheReferenceDepthsAndGradients) {
   std::printf(
       "[ parity ] %d contacts in contact; worst |dδ| %.3g m, |dJ_x| %.3g, |dJ_θ| %.3g m/rad\n",
       in_contact, worst_depth, worst_dx, worst_dr);
+}
+
+TEST(TextureStageParity, ABatchOnTwoThreadsEqualsTheBatchOnOne) {
+  // Contacts of one tool against two seed models, as one batch: the same linearizations, bit for
+  // bit, whichever thread of the pool takes a contact.
+  std::mt19937 rng(99);
+  const HapticModel& tool = Seed(SeedModel::kFile);
+  std::vector<ContactQuery> queries;
+  RigidTransform X_WT;
+  for (int i = 0; i < 14; ++i) {
+    const HapticModel& env = Seed(i % 2 == 0 ? SeedModel::kCadPart : SeedModel::kGear);
+    const Contact c = RandomContact(tool, env, rng, 50);
+    if (i == 0) X_WT = c.X_WT;
+    // One tool pose for the batch (as in a remote step): windows where the first contact put it.
+    queries.push_back({&env, c.X_WO, c.window, 8000.0});
+  }
+  CpuPenetrationDepthBackend one(128, TextureStagePath::kFast, 1);
+  CpuPenetrationDepthBackend two(128, TextureStagePath::kFast, 2);
+  EXPECT_EQ(two.threads(), 2);
+  std::vector<ContactLinearization> a(queries.size()), b(queries.size());
+  std::vector<DepthSample> sa(queries.size() * kGradientSamples),
+      sb(queries.size() * kGradientSamples);
+  for (int repeat = 0; repeat < 3; ++repeat) {
+    ASSERT_TRUE(one.LinearizeBatch(tool, X_WT, queries, a, sa));
+    ASSERT_TRUE(two.LinearizeBatch(tool, X_WT, queries, b, sb));
+    for (std::size_t i = 0; i < queries.size(); ++i) {
+      EXPECT_EQ(a[i].depth_m, b[i].depth_m) << i;
+      EXPECT_EQ(a[i].gradient.d_translation_W, b[i].gradient.d_translation_W) << i;
+      EXPECT_EQ(a[i].gradient.d_rotation_W, b[i].gradient.d_rotation_W) << i;
+    }
+    for (std::size_t k = 0; k < sa.size(); ++k) EXPECT_EQ(sa[k].cell, sb[k].cell) << k;
+  }
+  EXPECT_EQ(one.faults().missing_overlap, two.faults().missing_overlap);
 }
 
 TEST(TextureStageParity, ShiftedDepthEqualsTheDepthOfAnExplicitlyShiftedBuffer) {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <glm/geometric.hpp>
 #include <glm/gtc/quaternion.hpp>
 #include <limits>
@@ -193,6 +194,73 @@ DepthSample DirectionalPenetrationDepth(std::span<const float> b,
 
 namespace ht {
 
+namespace {
+
+constexpr double kFastEdgeTolerance = -1e-9;  // as RenderPatchHeights
+constexpr int kRowChunk = 128;
+
+// What the cells of one triangle interpolate: heights along n (m), n·(corner normal), the
+// corner normals' cosines (01, 02, 12), texture coordinates.
+struct TriangleGeometry {
+  double d[3], nn[3], cos[3], u[3], v[3];
+};
+
+// One chunk of a row's cells, filled by RowGeometry.
+struct RowChunk {
+  alignas(32) double value[kRowChunk];  // b·d
+  alignas(32) double ndotn[kRowChunk];  // N·n with N the unit interpolated normal
+  alignas(32) float u[kRowChunk];
+  alignas(32) float v[kRowChunk];
+  alignas(32) std::uint8_t inside[kRowChunk];
+};
+
+// The geometry of `count` cells of a row, cell k centred at px0 + k, with the row's barycentric
+// offsets r0, r1 and slopes gx0, gx1 (b2 = 1 − b0 − b1): the same arithmetic per cell as
+// RenderPatchHeights, written without branches so that it vectorizes (an AVX2 clone where the
+// machine has it; IEEE operations lane by lane, so the same values as the scalar code).
+[[gnu::target_clones("avx2", "default")]] void RowGeometry(int count, double px0, double r0,
+                                                           double gx0, double r1, double gx1,
+                                                           const TriangleGeometry& t, bool textured,
+                                                           RowChunk& out) {
+  double* __restrict value = out.value;
+  double* __restrict ndotn = out.ndotn;
+  float* __restrict tu = out.u;
+  float* __restrict tv = out.v;
+  std::uint8_t* __restrict inside = out.inside;
+  const double d0 = t.d[0], d1 = t.d[1], d2 = t.d[2];
+  for (int k = 0; k < count; ++k) {
+    const double px = px0 + k;
+    const double b0 = r0 + gx0 * px;
+    const double b1 = r1 + gx1 * px;
+    const double b2 = 1.0 - b0 - b1;
+    inside[k] = static_cast<std::uint8_t>((b0 >= kFastEdgeTolerance) & (b1 >= kFastEdgeTolerance) &
+                                          (b2 >= kFastEdgeTolerance));
+    value[k] = b0 * d0 + b1 * d1 + b2 * d2;
+  }
+  if (!textured) return;
+  const double n0 = t.nn[0], n1 = t.nn[1], n2 = t.nn[2];
+  const double c01 = t.cos[0], c02 = t.cos[1], c12 = t.cos[2];
+  const double u0 = t.u[0], u1 = t.u[1], u2 = t.u[2];
+  const double v0 = t.v[0], v1 = t.v[1], v2 = t.v[2];
+  for (int k = 0; k < count; ++k) {
+    const double px = px0 + k;
+    const double b0 = r0 + gx0 * px;
+    const double b1 = r1 + gx1 * px;
+    const double b2 = 1.0 - b0 - b1;
+    tu[k] = static_cast<float>(b0 * u0 + b1 * u1 + b2 * u2);
+    tv[k] = static_cast<float>(b0 * v0 + b1 * v1 + b2 * v2);
+    // h is along the unit interpolated normal N = Ñ/|Ñ|, Ñ = Σ b_i n_i (unit n_i):
+    // |Ñ|² = Σ b_i² + 2 Σ_{i<j} b_i b_j (n_i·n_j), from the per-triangle corner cosines.
+    const double len2 =
+        b0 * b0 + b1 * b1 + b2 * b2 + 2.0 * (b0 * b1 * c01 + b0 * b2 * c02 + b1 * b2 * c12);
+    const double num = b0 * n0 + b1 * n1 + b2 * n2;
+    const double q = num / std::sqrt(std::max(len2, 1e-12));
+    ndotn[k] = len2 > 1e-12 ? q : 0.0;
+  }
+}
+
+}  // namespace
+
 void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO,
                             std::span<const int> triangles, const ContactWindow& w, PatchSide side,
                             int margin_cells, std::span<float> heights) noexcept {
@@ -211,7 +279,8 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
   const double ou = glm::dot(offset, w.axis_u_W), ov = glm::dot(offset, w.axis_v_W),
                on = glm::dot(offset, w.normal_W);
   const bool have_texture = !model.texture.empty();
-  constexpr double kEdgeTolerance = -1e-9;  // as RenderPatchHeights
+  constexpr double kEdgeTolerance = kFastEdgeTolerance;
+  RowChunk geom;
   for (const int f : triangles) {
     const glm::ivec3 tri = model.triangles[f];
     const glm::dvec3& a0 = model.vertices_O[tri[0]];
@@ -252,6 +321,11 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
     const double cos01 = glm::dot(n0, n1), cos02 = glm::dot(n0, n2), cos12 = glm::dot(n1, n2);
     const glm::vec2 uv0 = model.corner_uvs[3 * f], uv1 = model.corner_uvs[3 * f + 1],
                     uv2 = model.corner_uvs[3 * f + 2];
+    const TriangleGeometry tri_geom{{d[0], d[1], d[2]},
+                                    {nn[0], nn[1], nn[2]},
+                                    {cos01, cos02, cos12},
+                                    {uv0.x, uv1.x, uv2.x},
+                                    {uv0.y, uv1.y, uv2.y}};
     // Barycentrics, affine in the cell centre (px, py): b0 = k0 + gx0·px + gy0·py, likewise b1,
     // and b2 = 1 − b0 − b1.
     const double k0 = (x[1] * y[2] - x[2] * y[1]) * inv_area;
@@ -282,26 +356,24 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
       const int ia = std::max(i0, static_cast<int>(std::floor(lo - 0.5)) - 1);
       const int ib = std::min(i1, static_cast<int>(std::ceil(hi - 0.5)) + 1);
       float* row = &heights[static_cast<size_t>(j) * nt];
-      for (int i = ia; i <= ib; ++i) {
-        const double px = i + 0.5;
-        const double b0 = r0 + gx0 * px;
-        const double b1 = r1 + gx1 * px;
-        const double b2 = 1.0 - b0 - b1;
-        if (b0 < kEdgeTolerance || b1 < kEdgeTolerance || b2 < kEdgeTolerance) continue;
-        double value = b0 * d[0] + b1 * d[1] + b2 * d[2];
-        if (tex_level != nullptr) {
-          const float u = static_cast<float>(b0 * uv0.x + b1 * uv1.x + b2 * uv2.x);
-          const float v = static_cast<float>(b0 * uv0.y + b1 * uv1.y + b2 * uv2.y);
-          const double len2 = b0 * b0 + b1 * b1 + b2 * b2 +
-                              2.0 * (b0 * b1 * cos01 + b0 * b2 * cos02 + b1 * b2 * cos12);
-          const double ndotn =
-              len2 > 1e-12 ? (b0 * nn[0] + b1 * nn[1] + b2 * nn[2]) / std::sqrt(len2) : 0.0;
-          value += static_cast<double>(model.texture.SampleAt(level, *tex_level, u, v)) * ndotn;
+      // Per chunk of the row: the geometry of every cell at once (a loop without branches that
+      // the compiler vectorizes), then the texture samples and the envelope cell by cell.
+      for (int c0 = ia; c0 <= ib; c0 += kRowChunk) {
+        const int count = std::min(kRowChunk, ib - c0 + 1);
+        RowGeometry(count, c0 + 0.5, r0, gx0, r1, gx1, tri_geom, tex_level != nullptr, geom);
+        for (int k = 0; k < count; ++k) {
+          if (geom.inside[k] == 0) continue;
+          double value = geom.value[k];
+          if (tex_level != nullptr) {
+            value += static_cast<double>(
+                         model.texture.SampleAt(level, *tex_level, geom.u[k], geom.v[k])) *
+                     geom.ndotn[k];
+          }
+          if (!(std::abs(value) <= range)) continue;  // outside the window's box along n
+          float& cell = row[c0 + k];
+          const auto fv = static_cast<float>(value);
+          if (keep_max ? fv > cell : fv < cell) cell = fv;
         }
-        if (!(std::abs(value) <= range)) continue;  // outside the window's box along n
-        float& cell = row[i];
-        const auto fv = static_cast<float>(value);
-        if (keep_max ? fv > cell : fv < cell) cell = fv;
       }
     }
   }

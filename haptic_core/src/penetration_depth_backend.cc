@@ -1,6 +1,34 @@
 #include "haptic_core/penetration_depth_backend.h"
 
+#include <oneapi/tbb/blocked_range.h>
+#include <oneapi/tbb/parallel_for.h>
+#include <oneapi/tbb/task_arena.h>
+
+#include <algorithm>
+
 namespace ht {
+
+struct CpuPenetrationDepthBackend::Arena {
+  explicit Arena(int threads) : arena(threads) {}
+  oneapi::tbb::task_arena arena;
+};
+
+CpuPenetrationDepthBackend::CpuPenetrationDepthBackend(int max_resolution, TextureStagePath path,
+                                                       int threads) {
+  const int n = std::max(threads, 1);
+  solvers_.reserve(static_cast<std::size_t>(n));
+  for (int i = 0; i < n; ++i) solvers_.emplace_back(max_resolution, 4096, path);
+  if (n > 1) arena_ = std::make_unique<Arena>(n);
+}
+
+CpuPenetrationDepthBackend::~CpuPenetrationDepthBackend() = default;
+
+std::string CpuPenetrationDepthBackend::description() const {
+  std::string d = solvers_.front().path() == TextureStagePath::kFast ? "CPU rasterizer (fast path)"
+                                                                     : "CPU reference rasterizer";
+  if (threads() > 1) d += ", " + std::to_string(threads()) + " threads (oneTBB)";
+  return d;
+}
 
 bool CpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const RigidTransform& X_WT,
                                                 std::span<const ContactQuery> queries,
@@ -8,12 +36,38 @@ bool CpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
                                                 std::span<DepthSample> samples_out) noexcept {
   if (out.size() < queries.size()) return false;
   const bool want_samples = samples_out.size() >= queries.size() * kGradientSamples;
-  for (size_t i = 0; i < queries.size(); ++i) {
+  const auto one = [&](TexturePenetrationSolver& solver, std::size_t i) {
     const ContactQuery& q = queries[i];
     out[i] =
-        solver_.Linearize(tool, X_WT, *q.environment, q.X_WO, q.window, q.stiffness_n_per_m,
-                          want_samples ? samples_out.subspan(i * kGradientSamples, kGradientSamples)
-                                       : std::span<DepthSample>{});
+        solver.Linearize(tool, X_WT, *q.environment, q.X_WO, q.window, q.stiffness_n_per_m,
+                         want_samples ? samples_out.subspan(i * kGradientSamples, kGradientSamples)
+                                      : std::span<DepthSample>{});
+  };
+  bool done = false;
+  if (arena_ && queries.size() > 1) {
+    try {
+      arena_->arena.execute([&] {
+        oneapi::tbb::parallel_for(
+            oneapi::tbb::blocked_range<std::size_t>(0, queries.size(), 1),
+            [&](const oneapi::tbb::blocked_range<std::size_t>& r) {
+              // One solver per thread of the arena: a slot is never used by two at once.
+              const int slot = oneapi::tbb::this_task_arena::current_thread_index();
+              TexturePenetrationSolver& solver =
+                  solvers_[static_cast<std::size_t>(std::clamp(slot, 0, threads() - 1))];
+              for (std::size_t i = r.begin(); i != r.end(); ++i) one(solver, i);
+            });
+      });
+      done = true;
+    } catch (...) {
+      done = false;  // the pool could not run the batch (out of memory): the calling thread does
+    }
+  }
+  if (!done) {
+    for (std::size_t i = 0; i < queries.size(); ++i) one(solvers_.front(), i);
+  }
+  faults_ = {};
+  for (const TexturePenetrationSolver& s : solvers_) {
+    faults_.missing_overlap += s.faults().missing_overlap;
   }
   return true;
 }

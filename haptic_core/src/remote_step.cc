@@ -4,10 +4,12 @@
 
 #include "haptic_core/remote_step.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
 #include <string>
+#include <thread>
 
 #include "haptic_core/broad_phase.h"
 #include "haptic_core/contact_assembly.h"
@@ -27,6 +29,15 @@ void PipelineOptions::Validate() const {
     throw std::invalid_argument("proximity margin must be >= 0, got " +
                                 std::to_string(proximity_margin_m));
   }
+  if (texture_threads < 1 || texture_threads > 256) {
+    throw std::invalid_argument("texture threads must be in [1, 256], got " +
+                                std::to_string(texture_threads));
+  }
+}
+
+int DefaultTextureThreads() noexcept {
+  const unsigned hw = std::thread::hardware_concurrency();
+  return std::clamp(static_cast<int>(hw) - 1, 1, 16);
 }
 
 HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
@@ -36,7 +47,10 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
   options_.Validate();
   queries_.reserve(scene.touchables.size());
   for (std::size_t i = 0; i < scene.touchables.size(); ++i) queries_.emplace_back();
-  if (!backend_) backend_ = std::make_unique<CpuPenetrationDepthBackend>(options_.grid_resolution);
+  if (!backend_) {
+    backend_ = std::make_unique<CpuPenetrationDepthBackend>(
+        options_.grid_resolution, TextureStagePath::kFast, options_.texture_threads);
+  }
   if (!scene.tool) throw std::invalid_argument("scene '" + scene.name + "' has no tool");
   if (glm::length(scene.tool->center_of_mass_O) > 1e-9) {
     throw std::invalid_argument("tool model '" + scene.tool->name +
@@ -142,7 +156,8 @@ void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n)
   if (backend_failures_++ == 0) {
     fallback_reason_ = std::string(backend_->name()) + ": " + backend_->last_error();
   }
-  backend_ = std::make_unique<CpuPenetrationDepthBackend>(options_.grid_resolution);
+  backend_ = std::make_unique<CpuPenetrationDepthBackend>(
+      options_.grid_resolution, TextureStagePath::kFast, options_.texture_threads);
   backend_->LinearizeBatch(tool, X_WT, batch, batch_out);
 }
 

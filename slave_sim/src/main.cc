@@ -67,8 +67,14 @@ int main(int argc, char** argv) {
   app.add_option("--window", config.pipeline.window_extent_m, "contact window side W in metres")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  config.pipeline.texture_threads = ht::DefaultTextureThreads();
+  app.add_option("--texture-threads", config.pipeline.texture_threads,
+                 "threads of the CPU texture stage (a step's contacts spread over them); the\n"
+                 "default leaves one core to the operator on a loopback machine")
+      ->check(CLI::Range(1, 256))
+      ->capture_default_str();
   app.add_option("--pd-backend", pd_backend,
-                 "where the texture penetration depth runs: cpu (reference rasterizer), gpu\n"
+                 "where the texture penetration depth runs: cpu (software rasterizer), gpu\n"
                  "(headless EGL, OpenGL ES 3.1; Mesa llvmpipe when there is no GPU), or auto (a\n"
                  "hardware GPU when one starts, else cpu). A GPU that cannot start or fails\n"
                  "mid-run falls back to cpu with a message")

@@ -28,8 +28,9 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
                              const std::atomic<bool>& stop) {
   config.pipeline.Validate();
   std::string backend_message;
-  std::unique_ptr<PenetrationDepthBackend> backend = MakePenetrationDepthBackend(
-      config.pd_backend, config.gpu, config.pipeline.grid_resolution, backend_message);
+  std::unique_ptr<PenetrationDepthBackend> backend =
+      MakePenetrationDepthBackend(config.pd_backend, config.gpu, config.pipeline.grid_resolution,
+                                  backend_message, config.pipeline.texture_threads);
   std::string gl_renderer, gl_version, gl_vendor;
   if (auto* gpu = dynamic_cast<GpuPenetrationDepthBackend*>(backend.get())) {
     gl_renderer = gpu->info().renderer;
@@ -160,6 +161,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   s["tool_state_gap_max_ms"] = session.tool_state_gap_max_ns() * 1e-6;
   s["grid_resolution"] = config.pipeline.grid_resolution;
   s["window_extent_m"] = config.pipeline.window_extent_m;
+  s["texture_threads"] = config.pipeline.texture_threads;
   s["linearization_missing_overlap"] = pipeline.faults().missing_overlap;
   s["pd_backend"] = {{"requested", ToString(config.pd_backend)},
                      {"used", backend_at_start},

@@ -127,9 +127,10 @@ const char* ToString(PdBackendChoice choice) noexcept;
 /// that starts (a real GPU first, else llvmpipe). kAuto: the GPU backend on a hardware GPU only,
 /// since a software rasterizer is slower than the CPU reference for this stage. When the GPU
 /// cannot start or its shaders do not build: the CPU reference, with the reason in `message`
-/// (which always says what was chosen and why). Never throws for a GPU failure.
+/// (which always says what was chosen and why), on `cpu_threads` threads. Never throws for a GPU
+/// failure.
 std::unique_ptr<PenetrationDepthBackend> MakePenetrationDepthBackend(
     PdBackendChoice choice, const GpuPenetrationDepthOptions& gpu_options, int grid_resolution,
-    std::string& message);
+    std::string& message, int cpu_threads = 1);
 
 }  // namespace ht

@@ -91,11 +91,15 @@ inline float HeightField::Sample(int level, float u, float v) const noexcept {
 inline float HeightField::SampleAt(int level, const HeightFieldLevel& L, float u,
                                    float v) const noexcept {
   if (!std::isfinite(u) || !std::isfinite(v)) return 0.0f;
-  // The same arithmetic as Sample() up to the texel addresses (so the same value).
+  // The same arithmetic as Sample() up to the texel addresses (so the same value). floor() by
+  // truncation and a correction: the same integer for the clamped, finite fx and fy, without a
+  // libm call on targets without SSE4.1's round instruction.
   const float fx = std::clamp(u * static_cast<float>(L.width) - 0.5f, -1e6f, 1e6f);
   const float fy = std::clamp(v * static_cast<float>(L.height) - 0.5f, -1e6f, 1e6f);
-  const float x0f = std::floor(fx), y0f = std::floor(fy);
-  const int x0 = static_cast<int>(x0f), y0 = static_cast<int>(y0f);
+  int x0 = static_cast<int>(fx), y0 = static_cast<int>(fy);
+  x0 -= static_cast<int>(fx < static_cast<float>(x0));
+  y0 -= static_cast<int>(fy < static_cast<float>(y0));
+  const float x0f = static_cast<float>(x0), y0f = static_cast<float>(y0);
   if (x0 < 0 || y0 < 0 || x0 + 1 >= L.width || y0 + 1 >= L.height) return Sample(level, u, v);
   const float tx = fx - x0f, ty = fy - y0f;
   const float* row_a = &L.texels[static_cast<size_t>(y0) * L.width];

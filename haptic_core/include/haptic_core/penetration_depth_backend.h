@@ -7,6 +7,7 @@
 #include <span>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "haptic_core/contact_linearization.h"
 #include "haptic_core/haptic_model.h"
@@ -53,28 +54,35 @@ class PenetrationDepthBackend {
   virtual const LinearizationFaults& faults() const noexcept = 0;
 };
 
-/// The CPU reference (software rasterizer, DESIGN.md §4), one contact after the other.
+/// The CPU penetration depth (software rasterizer, DESIGN.md §4): the contacts of a batch one
+/// after the other, or spread over `threads` worker threads (oneTBB, one solver per thread, so
+/// that each contact's result is the same whichever thread computes it).
 class CpuPenetrationDepthBackend final : public PenetrationDepthBackend {
  public:
   /// Preallocates for grids of up to `max_resolution`² cells; `path` picks the fast texture stage
-  /// (the default) or the reference one (same results within float rounding; issue 15).
+  /// (the default) or the reference one (same results within float rounding; issue 15);
+  /// `threads` ≥ 1 (values below 1 count as 1): with more than one, batches of two or more
+  /// contacts run in a oneTBB task arena of that many threads (the calling thread among them).
   explicit CpuPenetrationDepthBackend(int max_resolution = 128,
-                                      TextureStagePath path = TextureStagePath::kFast)
-      : solver_(max_resolution, 4096, path) {}
+                                      TextureStagePath path = TextureStagePath::kFast,
+                                      int threads = 1);
+  ~CpuPenetrationDepthBackend() override;
 
   std::string_view name() const noexcept override { return "cpu"; }
-  std::string description() const override {
-    return solver_.path() == TextureStagePath::kFast ? "CPU rasterizer (fast path)"
-                                                     : "CPU reference rasterizer";
-  }
+  std::string description() const override;
   bool LinearizeBatch(const HapticModel& tool, const RigidTransform& X_WT,
                       std::span<const ContactQuery> queries, std::span<ContactLinearization> out,
                       std::span<DepthSample> samples_out = {}) noexcept override;
   const std::string& last_error() const noexcept override { return last_error_; }
-  const LinearizationFaults& faults() const noexcept override { return solver_.faults(); }
+  const LinearizationFaults& faults() const noexcept override { return faults_; }
+  /// Worker threads of a batch (1 = the calling thread alone).
+  int threads() const noexcept { return static_cast<int>(solvers_.size()); }
 
  private:
-  TexturePenetrationSolver solver_;
+  struct Arena;  // the oneTBB task arena, kept out of this header
+  std::vector<TexturePenetrationSolver> solvers_;
+  std::unique_ptr<Arena> arena_;
+  LinearizationFaults faults_;
   std::string last_error_;
 };
 

@@ -31,10 +31,17 @@ struct PipelineOptions {
   /// normals differ by less than clustering_angle_deg merge into one contact.
   double clustering_distance_m = 5e-3;
   double clustering_angle_deg = 30.0;
+  /// Threads of the CPU texture stage (the contacts of a step spread over them, oneTBB); ≥ 1.
+  /// The remote node's default leaves one core to the operator on a loopback machine
+  /// (DefaultTextureThreads()).
+  int texture_threads = 1;
 
   /// Throws std::invalid_argument naming a value out of range.
   void Validate() const;
 };
+
+/// Texture threads that leave one core free: hardware threads − 1, at least 1, at most 16.
+int DefaultTextureThreads() noexcept;
 
 /// Per-step timings and counts (µs), for traces and summaries (seed Fig. 77 splits these).
 struct StepTimings {

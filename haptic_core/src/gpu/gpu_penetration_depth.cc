@@ -700,11 +700,13 @@ const char* ToString(PdBackendChoice choice) noexcept {
 
 std::unique_ptr<PenetrationDepthBackend> MakePenetrationDepthBackend(
     PdBackendChoice choice, const GpuPenetrationDepthOptions& gpu_options, int grid_resolution,
-    std::string& message) {
+    std::string& message, int cpu_threads) {
   const int cpu_resolution = std::max(grid_resolution, 2);
   if (choice == PdBackendChoice::kCpu) {
-    message = "penetration depth on the CPU (requested)";
-    return std::make_unique<CpuPenetrationDepthBackend>(cpu_resolution);
+    auto cpu = std::make_unique<CpuPenetrationDepthBackend>(cpu_resolution, TextureStagePath::kFast,
+                                                            cpu_threads);
+    message = "penetration depth on the CPU (requested): " + cpu->description();
+    return cpu;
   }
   try {
     GpuPenetrationDepthOptions options = gpu_options;
@@ -723,7 +725,8 @@ std::unique_ptr<PenetrationDepthBackend> MakePenetrationDepthBackend(
                   : std::string("no hardware GPU (") + e.what() +
                         "); penetration depth on the CPU reference (--pd-backend gpu forces a "
                         "software renderer such as llvmpipe)";
-    return std::make_unique<CpuPenetrationDepthBackend>(cpu_resolution);
+    return std::make_unique<CpuPenetrationDepthBackend>(cpu_resolution, TextureStagePath::kFast,
+                                                        cpu_threads);
   }
 }
 
