@@ -175,4 +175,18 @@ TEST_F(FrontierOutput, FinerGridsAreCloserToTheTruthAndTexturesMatter) {
   }
 }
 
+// Two routes to one error (issue 15): the fast texture path and the reference it replaced are
+// the same method within float rounding, so the frontier measures the same error for both.
+TEST_F(FrontierOutput, TheReferenceTexturePathHasTheDefaultsError) {
+  const Table f = ReadCsv(dir_ + "/frontier.csv");
+  const auto* def = Row(f, "fig75", "default");
+  const auto* ref = Row(f, "fig75", "reference");
+  ASSERT_TRUE(def && ref);
+  EXPECT_NE(def->at("renderer"), ref->at("renderer"));
+  EXPECT_NEAR(Num(*ref, "force_rel_rms"), Num(*def, "force_rel_rms"),
+              1e-3 * Num(*def, "force_rel_rms") + 1e-6);
+  EXPECT_NEAR(Num(*ref, "delta_err_p50_um"), Num(*def, "delta_err_p50_um"), 0.01);
+  EXPECT_EQ(Num(*ref, "contacts_mean"), Num(*def, "contacts_mean"));
+}
+
 }  // namespace

@@ -29,6 +29,10 @@ void PipelineOptions::Validate() const {
     throw std::invalid_argument("proximity margin must be >= 0, got " +
                                 std::to_string(proximity_margin_m));
   }
+  if (max_contacts < 1 || max_contacts > kMaxContacts) {
+    throw std::invalid_argument("max contacts must be in [1, " + std::to_string(kMaxContacts) +
+                                "], got " + std::to_string(max_contacts));
+  }
   if (texture_threads < 1 || texture_threads > 256) {
     throw std::invalid_argument("texture threads must be in [1, 256], got " +
                                 std::to_string(texture_threads));
@@ -133,12 +137,12 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
     clustering.max_normal_angle_deg = options_.clustering_angle_deg;
     clustering.texture_margin_m = reach;
     clustering.min_extent_m = clustering.max_extent_m = options_.window_extent_m;
-    clustering.max_contacts = kMaxContacts;
+    clustering.max_contacts = options_.max_contacts;
     const std::span<const ContactCluster> clusters =
         clusterer_.Cluster(pairs, tool.hull_hierarchy, object.model->hull_hierarchy, clustering);
     timings.clusters += static_cast<int>(clusters.size());
     for (const ContactCluster& c : clusters) {
-      if (num_candidates_ < kMaxContacts) {
+      if (num_candidates_ < options_.max_contacts) {
         candidates_[num_candidates_++] = {&object, c.point_W, c.normal_W};
       }
     }

@@ -74,6 +74,20 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     coarse(0.5, "coarse0.5x");
     coarse(2.0, "coarse2x");
   }
+  FrontierSetting ref = base;
+  ref.name = "reference";
+  ref.texture_path = TextureStagePath::kReference;
+  s.push_back(ref);
+  if (!quick) {
+    FrontierSetting two = base;
+    two.name = "threads2";
+    two.texture_threads = 2;
+    s.push_back(two);
+    FrontierSetting seven = base;
+    seven.name = "contacts7";
+    seven.max_contacts = 7;
+    s.push_back(seven);
+  }
   if (with_gpu) {
     gpu(16);
     if (!quick) gpu(32);
@@ -252,11 +266,13 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
       return;
     }
   } else {
-    backend = std::make_unique<CpuPenetrationDepthBackend>(std::max(128, st.grid));
+    backend = std::make_unique<CpuPenetrationDepthBackend>(std::max(128, st.grid), st.texture_path,
+                                                           st.texture_threads);
   }
   run.renderer = backend->description();
   PipelineOptions options;
   options.grid_resolution = st.grid;
+  options.max_contacts = st.max_contacts;
   HapticTexturePipeline pipeline(scene.haptic, options, std::move(backend));
   StepTimings timings;
   for (int i = 0; i < 3 && !poses_WFt.empty(); ++i) {  // warm-up: caches, GPU uploads

@@ -31,6 +31,10 @@ struct PipelineOptions {
   /// normals differ by less than clustering_angle_deg merge into one contact.
   double clustering_distance_m = 5e-3;
   double clustering_angle_deg = 30.0;
+  /// Most contacts per step (1..kMaxContacts): clustering merges the shallowest clusters beyond
+  /// it into the nearest kept ones (ClusteringOptions::max_contacts). The seed reports up to 7 on
+  /// its Fig. 77 scene; fewer contacts is an approximation, placed on the speed-vs-error frontier.
+  int max_contacts = kMaxContacts;
   /// Threads of the CPU texture stage (the contacts of a step spread over them, oneTBB); ≥ 1.
   /// The remote node's default leaves one core to the operator on a loopback machine
   /// (DefaultTextureThreads()).

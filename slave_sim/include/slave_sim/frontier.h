@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "haptic_core/accuracy/ground_truth_depth.h"
+#include "haptic_core/contact_linearization.h"
 
 namespace ht {
 
@@ -32,12 +33,21 @@ struct FrontierSetting {
   double coarse_scale = 1.0;    ///< Coarse triangle target × the seed's count.
   std::string backend = "cpu";  ///< "cpu" or "gpu".
   int depth_bits = 32;          ///< GPU depth precision (16 or 32); the CPU works in float.
+  /// CPU texture stage: the fast path (the product's) or the reference it replaced (issue 15),
+  /// and its threads (timings are single-thread unless a setting says otherwise).
+  TextureStagePath texture_path = TextureStagePath::kFast;
+  int texture_threads = 1;
+  /// Most contacts per step (PipelineOptions::max_contacts).
+  int max_contacts = 14;
 };
 
 /// The sweep: the default setting (grid 50, 1024² textures, the seed's coarse counts, CPU) first,
 /// then grid N ∈ {16, 25, 100}, texture size ∈ {256, 512, 2048}, coarse ×½ and ×2, the GPU at
-/// 16 and 32 depth bits (when `with_gpu`), and the two baselines. `quick` keeps grids 16, 25 and
-/// 100, texture 256, coarse ×2, the GPU at 16 bits and both baselines.
+/// 16 and 32 depth bits (when `with_gpu`), the reference texture path ("reference", the path the
+/// fast one replaced: the same error, its time), the fast path on two threads ("threads2"), at
+/// most 7 contacts per step ("contacts7", the seed's count on Fig. 77), and the two baselines.
+/// `quick` keeps grids 16, 25 and 100, texture 256, coarse ×2, reference, the GPU at 16 bits and
+/// both baselines.
 std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu);
 
 /// Options of a run.
