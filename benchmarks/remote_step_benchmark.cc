@@ -64,6 +64,12 @@ int main(int argc, char** argv) {
                  "same results within float rounding)")
       ->check(CLI::IsMember({"fast", "reference"}))
       ->capture_default_str();
+  bool local_reach = false;
+  int max_contacts = ht::kMaxContacts;
+  app.add_flag("--local-reach", local_reach, "coarse query with each node pair's own reach");
+  app.add_option("--max-contacts", max_contacts, "most contacts per step")
+      ->check(CLI::Range(1, ht::kMaxContacts))
+      ->capture_default_str();
   app.add_option("--csv", csv_path, "write one row per scene here");
   app.add_option("--cache-dir", cache_dir, "model cache folder")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
@@ -98,6 +104,8 @@ int main(int argc, char** argv) {
     ht::PipelineOptions options;
     options.grid_resolution = grid;
     options.texture_threads = threads;
+    options.local_reach = local_reach;
+    options.max_contacts = max_contacts;
     ht::HapticTexturePipeline pipeline(
         scene.haptic, options,
         std::make_unique<ht::CpuPenetrationDepthBackend>(

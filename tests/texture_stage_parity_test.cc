@@ -7,7 +7,9 @@
 //    within float rounding (the fast path reads the four in-plane translations as shifts of one
 //    render);
 //  - DirectionalPenetrationDepthShifted vs DirectionalPenetrationDepth on an explicitly shifted
-//    buffer: the same sample.
+//    buffer: the same sample;
+//  - the coarse query with local reach vs the global query filtered by each pair's own
+//    tolerance: the same pairs.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -18,10 +20,13 @@
 #include <memory>
 #include <numbers>
 #include <random>
+#include <set>
+#include <utility>
 #include <vector>
 
 #include "haptic_core/contact_linearization.h"
 #include "haptic_core/demo/seed_models.h"
+#include "haptic_core/hull_proximity.h"
 #include "haptic_core/model_build/haptic_model_build.h"
 #include "haptic_core/penetration_depth.h"
 #include "haptic_core/penetration_depth_backend.h"
@@ -229,6 +234,71 @@ TEST(TextureStageParity, ABatchOnTwoThreadsEqualsTheBatchOnOne) {
     for (std::size_t k = 0; k < sa.size(); ++k) EXPECT_EQ(sa[k].cell, sb[k].cell) << k;
   }
   EXPECT_EQ(one.faults().missing_overlap, two.faults().missing_overlap);
+}
+
+// The coarse query's local reach (issue 15): two routes to one set of pairs. With local reach on,
+// the query must report exactly those pairs of the global-tolerance query whose signed distance
+// is within the pair's own tolerance (the two leaves' reaches plus the margin).
+TEST(LocalReach, ReportsTheGlobalPairsWithinEachPairsOwnTolerance) {
+  const HapticModel& file = Seed(SeedModel::kFile);
+  const HapticModel& part = Seed(SeedModel::kCadPart);
+  HullProximityQuery global_query(1 << 14), local_query(1 << 14);
+  // Node reaches: within [0, OutwardReach()], a parent at least its children.
+  for (const HapticModel* m : {&file, &part}) {
+    const auto& nodes = m->hull_hierarchy.nodes;
+    ASSERT_FALSE(nodes.empty());
+    for (std::size_t k = 0; k < nodes.size(); ++k) {
+      const double r = global_query.NodeReach(*m, static_cast<int>(k));
+      EXPECT_GE(r, 0.0);
+      EXPECT_LE(r, m->OutwardReach());
+      for (const int c : nodes[k].children) {
+        if (c >= 0) EXPECT_GE(r, global_query.NodeReach(*m, c));
+      }
+    }
+  }
+  const double margin = 0.5e-3;
+  std::mt19937 rng(77);
+  int compared = 0, dropped = 0;
+  for (int trial = 0; trial < 12; ++trial) {
+    const Contact c = RandomContact(file, part, rng, 50);
+    ProximityQueryOptions global;
+    global.tolerance_m = file.OutwardReach() + part.OutwardReach() + margin;
+    global.max_pairs = 1 << 14;
+    global.temporal_coherence = false;
+    ProximityQueryOptions local = global;
+    local.local_reach_margin_m = margin;
+    const auto g = global_query.Query(file, c.X_WT, part, c.X_WO, global);
+    std::set<std::pair<int, int>> want;
+    for (const HullPairContact& p : g) {
+      const double own =
+          std::min(global.tolerance_m, global_query.NodeReach(file, p.node_A) +
+                                           global_query.NodeReach(part, p.node_B) + margin);
+      if (p.signed_distance_m <= own) {
+        want.insert({p.node_A, p.node_B});
+      } else {
+        ++dropped;
+      }
+    }
+    std::set<std::pair<int, int>> got;
+    for (const HullPairContact& p : local_query.Query(file, c.X_WT, part, c.X_WO, local)) {
+      got.insert({p.node_A, p.node_B});
+    }
+    // Pairs within 1e-9 m of their tolerance may go either way (GJK's early exit): compare the
+    // rest exactly.
+    for (const HullPairContact& p : g) {
+      const double own =
+          std::min(global.tolerance_m, global_query.NodeReach(file, p.node_A) +
+                                           global_query.NodeReach(part, p.node_B) + margin);
+      if (std::abs(p.signed_distance_m - own) < 1e-9) {
+        want.erase({p.node_A, p.node_B});
+        got.erase({p.node_A, p.node_B});
+      }
+    }
+    EXPECT_EQ(want, got) << "trial " << trial;
+    compared += static_cast<int>(g.size());
+  }
+  EXPECT_GT(compared, 100);
+  EXPECT_GT(dropped, 0);  // local reach really drops far pairs on these models
 }
 
 TEST(TextureStageParity, ShiftedDepthEqualsTheDepthOfAnExplicitlyShiftedBuffer) {

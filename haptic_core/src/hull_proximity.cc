@@ -455,6 +455,80 @@ void HullProximityQuery::ClearCache() noexcept {
   previous_A_ = previous_B_ = nullptr;
 }
 
+namespace {
+
+// Per node of `model`'s hierarchy (or one value for a model without one): the largest positive
+// level-0 texture height over the node's triangles, each triangle's texel box grown by a texel
+// (bilinear samples reach that far), capped at the model's OutwardReach(). A triangle whose box
+// touches a wrapped border counts the cap. Allocates `out` (warm-up only).
+void ComputeNodeReach(const HapticModel& model, std::vector<double>& out) {
+  const double cap = model.OutwardReach();
+  const auto& nodes = model.hull_hierarchy.nodes;
+  out.assign(std::max<std::size_t>(nodes.size(), 1), cap);
+  if (nodes.empty()) return;
+  const bool have_texture = !model.texture.empty();
+  const std::size_t nf = model.triangles.size();
+  std::vector<double> tri(nf, 0.0);
+  if (have_texture && model.corner_uvs.size() >= 3 * nf && model.textured.size() >= nf) {
+    const HeightFieldLevel& L = model.texture.level(0);
+    for (std::size_t f = 0; f < nf; ++f) {
+      if (model.textured[f] == 0) continue;
+      float umin = 1e30f, umax = -1e30f, vmin = 1e30f, vmax = -1e30f;
+      for (int c = 0; c < 3; ++c) {
+        const glm::vec2 uv = model.corner_uvs[3 * f + c];
+        umin = std::min(umin, uv.x);
+        umax = std::max(umax, uv.x);
+        vmin = std::min(vmin, uv.y);
+        vmax = std::max(vmax, uv.y);
+      }
+      if (!(std::isfinite(umin) && std::isfinite(umax) && std::isfinite(vmin) &&
+            std::isfinite(vmax))) {
+        tri[f] = cap;
+        continue;
+      }
+      const int x0 = static_cast<int>(std::floor(umin * static_cast<float>(L.width) - 0.5f)) - 1;
+      const int x1 = static_cast<int>(std::ceil(umax * static_cast<float>(L.width) - 0.5f)) + 1;
+      const int y0 = static_cast<int>(std::floor(vmin * static_cast<float>(L.height) - 0.5f)) - 1;
+      const int y1 = static_cast<int>(std::ceil(vmax * static_cast<float>(L.height) - 0.5f)) + 1;
+      if ((model.texture.wrap_u() && (x0 < 0 || x1 >= L.width)) ||
+          (model.texture.wrap_v() && (y0 < 0 || y1 >= L.height))) {
+        tri[f] = cap;
+        continue;
+      }
+      double h = 0.0;
+      for (int y = std::max(y0, 0); y <= std::min(y1, L.height - 1); ++y) {
+        const float* row = &L.texels[static_cast<std::size_t>(y) * L.width];
+        for (int x = std::max(x0, 0); x <= std::min(x1, L.width - 1); ++x) {
+          h = std::max(h, static_cast<double>(row[x]));
+        }
+      }
+      tri[f] = std::min(h, cap);
+    }
+  }
+  // Leaves from their triangles; internal nodes from their children (pre-order: children come
+  // after their parent, so a reverse sweep sees them first).
+  for (std::size_t k = nodes.size(); k-- > 0;) {
+    const HullNode& node = nodes[k];
+    double r = 0.0;
+    if (node.is_leaf()) {
+      for (const int f : node.triangles) {
+        if (f >= 0 && static_cast<std::size_t>(f) < nf) r = std::max(r, tri[f]);
+      }
+    } else {
+      for (const int child : node.children) {
+        if (child > static_cast<int>(k) && static_cast<std::size_t>(child) < nodes.size()) {
+          r = std::max(r, out[static_cast<std::size_t>(child)]);
+        } else {
+          r = cap;  // not pre-order: stay conservative
+        }
+      }
+    }
+    out[k] = std::min(r, cap);
+  }
+}
+
+}  // namespace
+
 const HullProximityQuery::ModelEntry& HullProximityQuery::Entry(const HapticModel& model) {
   ++use_counter_;
   const auto& nodes = model.hull_hierarchy.nodes;
@@ -493,12 +567,18 @@ const HullProximityQuery::ModelEntry& HullProximityQuery::Entry(const HapticMode
       slot->spheres_O.push_back(sphere(node.hull.vertices_O, &node.hull.center_O));
     }
   }
+  ComputeNodeReach(model, slot->reach_m);
   slot->model = &model;
   slot->nodes_data = nodes.data();
   slot->node_count = nodes.size();
   slot->hull_vertex_count = model.hull_vertices_O.size();
   slot->last_use = use_counter_;
   return *slot;
+}
+
+double HullProximityQuery::NodeReach(const HapticModel& model, int node) {
+  const ModelEntry& e = Entry(model);
+  return e.reach_m.at(node < 0 ? 0 : static_cast<std::size_t>(node));
 }
 
 glm::dvec4 HullProximityQuery::BoundingSphere(const HapticModel& model, int node) {
@@ -584,6 +664,14 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     const glm::dvec4& sb = entry_B->spheres_O[node_B < 0 ? 0 : static_cast<std::size_t>(node_B)];
     return glm::length(X_WA * glm::dvec3(sa) - X_WB * glm::dvec3(sb)) - sa.w - sb.w;
   };
+  const bool local_reach = options.local_reach_margin_m >= 0.0;
+  // The tolerance of a node pair: ε, or with local reach the pair's own (never larger).
+  auto pair_eps = [&](int node_A, int node_B) {
+    if (!local_reach) return eps;
+    const double ra = entry_A->reach_m[node_A < 0 ? 0 : static_cast<std::size_t>(node_A)];
+    const double rb = entry_B->reach_m[node_B < 0 ? 0 : static_cast<std::size_t>(node_B)];
+    return std::min(eps, ra + rb + options.local_reach_margin_m);
+  };
   auto push = [&](double key, int node_A, int node_B) {
     queue_.push_back({key, node_A, node_B});  // grows only during warm-up
     std::push_heap(queue_.begin(), queue_.end(), HeapAfter);
@@ -607,7 +695,7 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
   const int root_B = b_single ? -1 : 0;
   {
     const double lb = sphere_bound(root_A, root_B);
-    if (lb > eps) {
+    if (lb > pair_eps(root_A, root_B)) {
       ++st.sphere_culls;
     } else {
       push(lb, root_A, root_B);
@@ -633,6 +721,7 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     const bool leaf_A = is_leaf(A, e.node_A);
     const bool leaf_B = is_leaf(B, e.node_B);
     ++st.node_pairs_tested;
+    const double eps_e = pair_eps(e.node_A, e.node_B);
 
     if (leaf_A && leaf_B) {
       ++st.leaf_pairs_tested;
@@ -645,11 +734,11 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
         }
       }
       const GjkResult g =
-          GjkDistance(hA, hB, prev != nullptr ? prev->direction_W : glm::dvec3(0.0), eps);
+          GjkDistance(hA, hB, prev != nullptr ? prev->direction_W : glm::dvec3(0.0), eps_e);
       if (g.status == GjkStatus::kFar) continue;
       HullPairContact c;
       if (g.status == GjkStatus::kSeparated) {
-        if (g.distance_m > eps) continue;
+        if (g.distance_m > eps_e) continue;
         c.signed_distance_m = g.distance_m;
         c.normal_W = g.v / g.distance_m;
         c.point_A_W = g.p_A;
@@ -658,7 +747,7 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
         c = PenetrationContact(hA, hB, prev != nullptr ? &prev->direction_W : nullptr);
         // Touching within GJK's tolerance counts as within ε even when the support intervals
         // leave a gap of a few 1e-13 m.
-        if (c.signed_distance_m > eps + kTouch_m) continue;
+        if (c.signed_distance_m > eps_e + kTouch_m) continue;
       }
       c.node_A = e.node_A;
       c.node_B = e.node_B;
@@ -680,10 +769,10 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     GjkResult g;
     g.status = GjkStatus::kTouching;
     if (hA.vertex_count + hB.vertex_count <= static_cast<std::size_t>(kInternalGjkMaxVertices)) {
-      g = GjkDistance(hA, hB, glm::dvec3(0.0), eps);
+      g = GjkDistance(hA, hB, glm::dvec3(0.0), eps_e);
     }
     if (g.status == GjkStatus::kFar) continue;
-    if (g.status == GjkStatus::kSeparated && g.distance_m > eps) continue;
+    if (g.status == GjkStatus::kSeparated && g.distance_m > eps_e) continue;
     double key = e.key_m;
     if (g.status == GjkStatus::kSeparated) {
       key = std::max(key, g.distance_m);
@@ -706,7 +795,8 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
       const int node_A = split_A ? child : e.node_A;
       const int node_B = split_A ? e.node_B : child;
       const double lb = sphere_bound(node_A, node_B);
-      if (lb > eps) {
+      const double eps_child = pair_eps(node_A, node_B);
+      if (lb > eps_child) {
         ++st.sphere_culls;
         continue;
       }
@@ -718,7 +808,7 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
       const glm::dvec3 d = cA.center_W - cB.center_W;
       const double d_len = glm::length(d);
       if (d_len > 0.0) axis_bound = std::max(lb, -Overlap(cA, cB, d / d_len));
-      if (axis_bound > eps) {
+      if (axis_bound > eps_child) {
         ++st.sphere_culls;
         continue;
       }

@@ -115,6 +115,7 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
     const double reach = tool.OutwardReach() + object.model->OutwardReach();
     ProximityQueryOptions query;
     query.tolerance_m = reach + options_.proximity_margin_m;
+    if (options_.local_reach) query.local_reach_margin_m = options_.proximity_margin_m;
     // 1. Broad phase: bounding spheres in W (the objects may move between steps).
     if (BoundingSphereGap(tool_sphere_O_, X_WT, object_spheres_O_[k], object.X_WO) >
         query.tolerance_m) {

@@ -87,6 +87,10 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     seven.name = "contacts7";
     seven.max_contacts = 7;
     s.push_back(seven);
+    FrontierSetting local = base;
+    local.name = "local_reach";
+    local.local_reach = true;
+    s.push_back(local);
   }
   if (with_gpu) {
     gpu(16);
@@ -273,6 +277,7 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   PipelineOptions options;
   options.grid_resolution = st.grid;
   options.max_contacts = st.max_contacts;
+  options.local_reach = st.local_reach;
   HapticTexturePipeline pipeline(scene.haptic, options, std::move(backend));
   StepTimings timings;
   for (int i = 0; i < 3 && !poses_WFt.empty(); ++i) {  // warm-up: caches, GPU uploads

@@ -47,6 +47,13 @@ struct ProximityQueryOptions {
   /// per frame): 0–10 % faster, within the noise of the shared 2-core machine; kept because it
   /// costs nothing measurable and holds penetrating normals steady from frame to frame.
   bool temporal_coherence = true;
+  /// Local reach (issue 15; an approximation, placed on the speed-vs-error frontier): when ≥ 0,
+  /// a node pair's tolerance is min(tolerance_m, reach_A(node) + reach_B(node) +
+  /// local_reach_margin_m), with a node's reach the largest positive texture height over its
+  /// triangles (level 0, the triangle's texel box grown by a texel; capped at the model's
+  /// OutwardReach()). Far leaves whose own textures are flat then stop counting. Negative: off
+  /// (tolerance_m everywhere).
+  double local_reach_margin_m = -1.0;
 };
 
 /// What one Query() did.
@@ -122,6 +129,9 @@ class HullProximityQuery {
   /// model without hierarchy): centre in O (m) in xyz, radius (m) in w. For tests. Caches the
   /// model (may allocate on first sight).
   glm::dvec4 BoundingSphere(const HapticModel& model, int node);
+  /// The outward texture reach (m) of `node` of `model` (node < 0 or a model without a hierarchy:
+  /// the model's OutwardReach()), as the local-reach option uses it. Cached like the spheres.
+  double NodeReach(const HapticModel& model, int node);
 
   // The implementation's private types are declared here so that the object can hold them by
   // value (no pimpl allocation); they are not part of the API.
@@ -133,6 +143,9 @@ class HullProximityQuery {
     /// Per node (one for a single-hull model): bounding sphere centre (xyz, the hull's vertex
     /// centroid) and radius (w, the largest vertex distance from it), m, frame O.
     std::vector<glm::dvec4> spheres_O;
+    /// Per node (one for a single-hull model): the node's outward texture reach (m), see
+    /// ProximityQueryOptions::local_reach_margin_m.
+    std::vector<double> reach_m;
     /// Use stamp for least-recently-used replacement.
     std::uint64_t last_use = 0;
   };

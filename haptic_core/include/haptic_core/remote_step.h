@@ -31,6 +31,11 @@ struct PipelineOptions {
   /// normals differ by less than clustering_angle_deg merge into one contact.
   double clustering_distance_m = 5e-3;
   double clustering_angle_deg = 30.0;
+  /// Local reach in the coarse query (ProximityQueryOptions::local_reach_margin_m, with
+  /// proximity_margin_m as the margin): each hull-node pair's tolerance from the two nodes' own
+  /// texture heights instead of both models' largest. An approximation, placed on the
+  /// speed-vs-error frontier ("local_reach").
+  bool local_reach = false;
   /// Most contacts per step (1..kMaxContacts): clustering merges the shallowest clusters beyond
   /// it into the nearest kept ones (ClusteringOptions::max_contacts). The seed reports up to 7 on
   /// its Fig. 77 scene; fewer contacts is an approximation, placed on the speed-vs-error frontier.

@@ -39,13 +39,16 @@ struct FrontierSetting {
   int texture_threads = 1;
   /// Most contacts per step (PipelineOptions::max_contacts).
   int max_contacts = 14;
+  /// PipelineOptions::local_reach.
+  bool local_reach = false;
 };
 
 /// The sweep: the default setting (grid 50, 1024² textures, the seed's coarse counts, CPU) first,
 /// then grid N ∈ {16, 25, 100}, texture size ∈ {256, 512, 2048}, coarse ×½ and ×2, the GPU at
 /// 16 and 32 depth bits (when `with_gpu`), the reference texture path ("reference", the path the
 /// fast one replaced: the same error, its time), the fast path on two threads ("threads2"), at
-/// most 7 contacts per step ("contacts7", the seed's count on Fig. 77), and the two baselines.
+/// most 7 contacts per step ("contacts7", the seed's count on Fig. 77), the coarse query's local
+/// reach ("local_reach"), and the two baselines.
 /// `quick` keeps grids 16, 25 and 100, texture 256, coarse ×2, reference, the GPU at 16 bits and
 /// both baselines.
 std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu);
