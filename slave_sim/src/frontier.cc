@@ -746,7 +746,8 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
   s << "# Speed against error: the frontier\n\n";
   s << "Command: `" << options.command_line << "`  \n";
   s << "Machine: " << MachineLine() << "; total " << Fmt(Seconds(t_start), 3) << " s.  \n";
-  s << "Timed steps run one at a time on one thread; the ground truth afterwards on "
+  s << "Timed steps run one at a time on one thread (the threads2 setting's texture stage on two); "
+       "the ground truth afterwards on "
     << options.threads << ".\n\n";
   s << "Error is against the ground truth: the directional penetration depth of each window on the "
        "**full-resolution** meshes (Embree ray casting with the method's facing and box rules), "
