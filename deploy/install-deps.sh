@@ -17,6 +17,8 @@ PACKAGES=(
   libqhull-dev libembree-dev
   # FCL: the reference the coarse contact query is checked and benchmarked against
   libfcl-dev
+  # meshoptimizer and zlib: what the scene stream's Draco is compared with
+  libmeshoptimizer-dev zlib1g-dev
   # tests and benchmarks; clang's libFuzzer for the datagram fuzz target; iproute2 for the
   # network-namespace split test
   libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev iproute2
