@@ -55,6 +55,7 @@ install(FILES ${PROJECT_SOURCE_DIR}/deploy/config/operator.toml
         DESTINATION ${CMAKE_INSTALL_DATADIR}/haptic_teleop/config)
 install(PROGRAMS ${PROJECT_SOURCE_DIR}/deploy/plot-frontier
                  ${PROJECT_SOURCE_DIR}/deploy/plot-stability-map
+                 ${PROJECT_SOURCE_DIR}/deploy/report
         DESTINATION ${CMAKE_INSTALL_DATADIR}/haptic_teleop)
 install(DIRECTORY ${PROJECT_SOURCE_DIR}/docs/ DESTINATION ${CMAKE_INSTALL_DATADIR}/haptic_teleop/docs)
 install(FILES ${PROJECT_SOURCE_DIR}/README.md ${PROJECT_SOURCE_DIR}/deploy/TWO-MACHINES.md

@@ -1,0 +1,125 @@
+#!/usr/bin/python3
+"""deploy/report on a recorded run (the loopback fig75 run of ctest, HT_LOOPBACK_OUT), and on
+broken copies of it (issue 17):
+  - every plot exists, is a PNG of the stated size (IHDR) and is not blank (pixel spread);
+  - index.html references only files that exist, and shows the summary's key figures;
+  - a truncated trace.csv, a foreign one and a missing one each give one error line naming the
+    file and what is wrong, exit status 1, and the plots that can still be drawn.
+Usage: tests/report_test.py SOURCE_DIR   (HT_LOOPBACK_OUT names the run folder)
+"""
+import os
+import re
+import shutil
+import struct
+import subprocess
+import sys
+import tempfile
+
+failures = []
+
+
+def check(cond, what):
+    if not cond:
+        failures.append(what)
+        print("FAIL:", what)
+
+
+def png_size(path):
+    with open(path, "rb") as f:
+        head = f.read(24)
+    if head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        return None
+    return struct.unpack(">II", head[16:24])
+
+
+def not_blank(path):
+    import matplotlib.image as mpimg
+    img = mpimg.imread(path)
+    return float(img[..., :3].std()) > 0.02
+
+
+def run_report(source, run_dir, out, extra=()):
+    r = subprocess.run([os.path.join(source, "deploy", "report"), run_dir, "--out", out,
+                        "--width", "900", "--height", "600", *extra],
+                       capture_output=True, text=True, timeout=120)
+    return r.returncode, r.stdout, r.stderr
+
+
+def main():
+    source = sys.argv[1]
+    run = os.environ.get("HT_LOOPBACK_OUT")
+    if not run or not os.path.exists(os.path.join(run, "trace.csv")):
+        print("report_test: no loopback run (HT_LOOPBACK_OUT)", file=sys.stderr)
+        return 1
+    tmp = tempfile.mkdtemp(prefix="report_test_")
+    try:
+        # The whole run.
+        out = os.path.join(tmp, "full")
+        rc, so, se = run_report(source, run, out)
+        check(rc == 0, f"report on a good run exits 0 (got {rc}: {se.strip()})")
+        expected = ["position_force.png", "rotation.png", "loop_period.png", "model_age.png",
+                    "remote_steps.png", "network.png"]
+        for name in expected:
+            path = os.path.join(out, name)
+            check(os.path.exists(path), f"{name} written")
+            if os.path.exists(path):
+                check(png_size(path) == (900, 600), f"{name} is a 900x600 PNG (got "
+                      f"{png_size(path)})")
+                check(not_blank(path), f"{name} is not blank")
+        page = open(os.path.join(out, "index.html")).read()
+        refs = re.findall(r'src="([^"]+)"', page)
+        check(sorted(refs) == sorted(expected), f"index.html shows the plots (got {refs})")
+        for ref in refs:
+            check(os.path.exists(os.path.join(out, ref)), f"index.html's {ref} exists")
+        check("operator_rate_hz" in page and "remote_step_p50_us" in page,
+              "index.html has the summary's key figures")
+
+        # A truncated trace: the rows that parse are plotted, one error names the file.
+        broken = os.path.join(tmp, "truncated")
+        shutil.copytree(run, broken, ignore=shutil.ignore_patterns("*.png", "index.html"))
+        with open(os.path.join(broken, "trace.csv"), "r+") as f:
+            text = f.read()
+            f.seek(0)
+            f.write(text[: len(text) // 2 + 7])
+            f.truncate()
+        rc, so, se = run_report(source, broken, os.path.join(tmp, "truncated_out"))
+        check(rc == 1, f"a truncated trace exits 1 (got {rc})")
+        check("trace.csv" in se and "truncated" in se, f"the error names the file ({se!r})")
+        check(os.path.exists(os.path.join(tmp, "truncated_out", "position_force.png")),
+              "a truncated trace is still plotted")
+
+        # A foreign trace (another program's CSV): no trace plots, the others still written.
+        foreign = os.path.join(tmp, "foreign")
+        shutil.copytree(run, foreign, ignore=shutil.ignore_patterns("*.png", "index.html"))
+        with open(os.path.join(foreign, "trace.csv"), "w") as f:
+            f.write("time,voltage\n0,1\n1,2\n")
+        rc, so, se = run_report(source, foreign, os.path.join(tmp, "foreign_out"))
+        check(rc == 1, f"a foreign trace exits 1 (got {rc})")
+        check("trace.csv" in se and "not a trace" in se, f"the error says so ({se!r})")
+        check(not os.path.exists(os.path.join(tmp, "foreign_out", "position_force.png")),
+              "a foreign trace draws no trace plot")
+        check(os.path.exists(os.path.join(tmp, "foreign_out", "network.png")),
+              "the summary's plot is still drawn")
+        page = open(os.path.join(tmp, "foreign_out", "index.html")).read()
+        for ref in re.findall(r'src="([^"]+)"', page):
+            check(os.path.exists(os.path.join(tmp, "foreign_out", ref)),
+                  f"foreign: index.html's {ref} exists")
+
+        # A missing trace.
+        missing = os.path.join(tmp, "missing")
+        shutil.copytree(run, missing, ignore=shutil.ignore_patterns("*.png", "index.html",
+                                                                     "trace.csv"))
+        rc, so, se = run_report(source, missing, os.path.join(tmp, "missing_out"))
+        check(rc == 1 and "trace.csv: missing" in se, f"a missing trace is named ({rc}, {se!r})")
+
+        # Not a folder.
+        rc, so, se = run_report(source, os.path.join(tmp, "nowhere"), os.path.join(tmp, "x"))
+        check(rc == 2 and "not a folder" in se, f"a bad run folder exits 2 ({rc}, {se!r})")
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    print(f"report_test: {len(failures)} failure(s)")
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
