@@ -233,6 +233,16 @@ TEST(TextureStageParity, ABatchOnTwoThreadsEqualsTheBatchOnOne) {
     }
     for (std::size_t k = 0; k < sa.size(); ++k) EXPECT_EQ(sa[k].cell, sb[k].cell) << k;
   }
+  // One contact: its seven tool renders become tasks of the two threads; the same result.
+  for (std::size_t i = 0; i < queries.size(); ++i) {
+    const std::span<const ContactQuery> single(&queries[i], 1);
+    ContactLinearization la, lb;
+    ASSERT_TRUE(one.LinearizeBatch(tool, X_WT, single, std::span<ContactLinearization>(&la, 1)));
+    ASSERT_TRUE(two.LinearizeBatch(tool, X_WT, single, std::span<ContactLinearization>(&lb, 1)));
+    EXPECT_EQ(la.depth_m, lb.depth_m) << i;
+    EXPECT_EQ(la.gradient.d_translation_W, lb.gradient.d_translation_W) << i;
+    EXPECT_EQ(la.gradient.d_rotation_W, lb.gradient.d_rotation_W) << i;
+  }
   EXPECT_EQ(one.faults().missing_overlap, two.faults().missing_overlap);
 }
 

@@ -1,5 +1,8 @@
 #include "haptic_core/contact_linearization.h"
 
+#include <oneapi/tbb/parallel_for.h>
+#include <oneapi/tbb/task_arena.h>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -20,6 +23,7 @@ TexturePenetrationSolver::TexturePenetrationSolver(int max_resolution, int max_t
   env_heights_.reserve(cells);
   tool_heights_.reserve(cells);
   tool_ext_heights_.reserve(static_cast<size_t>(max_resolution + 2) * (max_resolution + 2));
+  for (std::vector<float>& b : rotation_heights_) b.reserve(cells);
   env_triangles_.reserve(static_cast<size_t>(max_triangles));
   tool_triangles_.reserve(static_cast<size_t>(max_triangles));
 }
@@ -149,16 +153,50 @@ ContactLinearization TexturePenetrationSolver::Linearize(
     // u and v are that render read one cell over (the tool moved +u is, at window cell i, what
     // the unmoved tool has at cell i − 1).
     const int n = w.resolution, nt = n + 2;
-    tool_ext_heights_.assign(static_cast<size_t>(nt) * nt, std::numeric_limits<float>::infinity());
-    RenderPatchHeightsFast(tool, X_WT, tool_triangles_, w, PatchSide::kTool, 1, tool_ext_heights_);
-    samples[0] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, 0);
-    if (samples[0].cell >= 0) {
+    const auto grown_base = [&] {
+      tool_ext_heights_.assign(static_cast<size_t>(nt) * nt,
+                               std::numeric_limits<float>::infinity());
+      RenderPatchHeightsFast(tool, X_WT, tool_triangles_, w, PatchSide::kTool, 1,
+                             tool_ext_heights_);
+      samples[0] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, 0);
       samples[1] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, -1, 0);
       samples[2] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 1, 0);
       samples[3] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, -1);
       samples[4] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, 1);
-      const auto poses = GradientSamplePoses(X_WT, w);
-      for (int i = 5; i < kGradientSamples; ++i) samples[i] = EvaluateTool(tool, poses[i], w);
+    };
+    const auto poses = GradientSamplePoses(X_WT, w);
+    bool done = false;
+    if (parallel_renders_) {
+      // The seven renders at once, each into its own buffer (the rotations are computed even when
+      // the base has no overlap, and then discarded below, as the serial path never makes them).
+      const size_t cells = static_cast<size_t>(n) * n;
+      try {
+        // Isolated: while this thread waits for the seven, it must not pick up another contact
+        // of the batch, which would run on this same solver (one solver per thread).
+        oneapi::tbb::this_task_arena::isolate([&] {
+          oneapi::tbb::parallel_for(0, 7, [&](int task) {
+            if (task == 0) {
+              grown_base();
+              return;
+            }
+            std::vector<float>& heights = rotation_heights_[static_cast<size_t>(task - 1)];
+            heights.assign(cells, std::numeric_limits<float>::infinity());
+            RenderPatchHeightsFast(tool, poses[static_cast<size_t>(task + 4)], tool_triangles_, w,
+                                   PatchSide::kTool, 0, heights);
+            samples[static_cast<size_t>(task + 4)] =
+                DirectionalPenetrationDepth(env_heights_, heights);
+          });
+        });
+        done = true;
+      } catch (...) {
+        done = false;  // could not spawn the tasks: the serial path below
+      }
+    }
+    if (!done) {
+      grown_base();
+      if (samples[0].cell >= 0) {
+        for (int i = 5; i < kGradientSamples; ++i) samples[i] = EvaluateTool(tool, poses[i], w);
+      }
     }
   } else {
     samples[0] = EvaluateTool(tool, X_WT, w);

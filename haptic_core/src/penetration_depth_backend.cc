@@ -18,7 +18,12 @@ CpuPenetrationDepthBackend::CpuPenetrationDepthBackend(int max_resolution, Textu
   const int n = std::max(threads, 1);
   solvers_.reserve(static_cast<std::size_t>(n));
   for (int i = 0; i < n; ++i) solvers_.emplace_back(max_resolution, 4096, path);
-  if (n > 1) arena_ = std::make_unique<Arena>(n);
+  if (n > 1) {
+    arena_ = std::make_unique<Arena>(n);
+    // Renders of one contact as tasks too, so that a step with fewer contacts than threads uses
+    // them all (each render has its own buffer: the same results).
+    for (TexturePenetrationSolver& s : solvers_) s.set_parallel_renders(true);
+  }
 }
 
 CpuPenetrationDepthBackend::~CpuPenetrationDepthBackend() = default;
@@ -44,7 +49,7 @@ bool CpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
                                       : std::span<DepthSample>{});
   };
   bool done = false;
-  if (arena_ && queries.size() > 1) {
+  if (arena_ && !queries.empty()) {
     try {
       arena_->arena.execute([&] {
         oneapi::tbb::parallel_for(

@@ -100,6 +100,13 @@ class TexturePenetrationSolver {
 
   TextureStagePath path() const noexcept { return path_; }
 
+  /// kFast only: run a contact's tool renders (the grown base render and the six rotations) as
+  /// parallel tasks of the oneTBB arena the caller is in (CpuPenetrationDepthBackend turns it on
+  /// when it has more than one thread, so that a step with fewer contacts than threads still
+  /// uses them all). Each render has its own buffer, so the results are the same either way.
+  /// Must only be turned on for calls made inside a task arena sized as the caller wants.
+  void set_parallel_renders(bool on) noexcept { parallel_renders_ = on; }
+
   /// Linearizes the contact of `tool` posed at X_WT (frame T at the tool's centre of mass) against
   /// `environment` posed at X_WO over `window`, with penalty stiffness k (N/m).
   /// Returns depth_m = −∞ and a zero gradient when the patches do not overlap on the window.
@@ -128,6 +135,9 @@ class TexturePenetrationSolver {
   std::vector<float> env_heights_;
   std::vector<float> tool_heights_;
   std::vector<float> tool_ext_heights_;  ///< kFast: the base pose on the window grown by a cell
+  bool parallel_renders_ = false;
+  /// kFast with parallel renders: one buffer per rotated pose (samples 5..10).
+  std::array<std::vector<float>, 6> rotation_heights_;
   const HapticModel* radius_model_ = nullptr;
   const glm::dvec3* radius_vertices_ = nullptr;
   std::size_t radius_vertex_count_ = 0;
