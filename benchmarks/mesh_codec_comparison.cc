@@ -19,10 +19,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <filesystem>
 #include <fstream>
-#include <sstream>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -31,16 +29,11 @@
 #include "codecs/gltf_scene.h"
 #include "haptic_core/demo/procedural_models.h"
 #include "haptic_core/demo/seed_models.h"
+#include "haptic_core/statistics.h"
 
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
-}
 
 template <class F>
 double MedianMs(int repeats, F&& f) {
@@ -50,7 +43,7 @@ double MedianMs(int repeats, F&& f) {
     f();
     t.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
   }
-  return Median(t);
+  return ht::Percentile(std::move(t), 0.5);
 }
 
 struct Box {
@@ -110,18 +103,21 @@ struct Row {
   double encode_ms = 0.0, decode_ms = 0.0, error_rel = 0.0;
 };
 
-// meshoptimizer at `bits`: positions quantized on Draco's grid into uint16 x, y, z (+ padding to
-// the codec's 4-byte vertex multiple), reordered for the vertex cache and fetch, then encoded.
+// A quantized position as meshoptimizer's vertex codec takes it: uint16 x, y, z on Draco's grid,
+// padded to the codec's 4-byte vertex multiple.
+struct QuantizedVertex {
+  std::uint16_t x, y, z, pad;
+};
+
+// meshoptimizer at `bits`: positions quantized, reordered for the vertex cache and fetch, then
+// encoded.
 struct Meshopt {
   std::vector<unsigned char> vertex_bytes, index_bytes;
   std::size_t vertex_count = 0, index_count = 0;
 };
 
 Meshopt EncodeMeshopt(const ht::TriangleMesh& mesh, const Box& box, double step) {
-  struct Q {
-    std::uint16_t x, y, z, pad;
-  };
-  std::vector<Q> q(mesh.vertices.size());
+  std::vector<QuantizedVertex> q(mesh.vertices.size());
   for (std::size_t i = 0; i < q.size(); ++i) {
     const glm::dvec3 t = (mesh.vertices[i] - box.lo) / step + 0.5;
     q[i] = {static_cast<std::uint16_t>(t.x), static_cast<std::uint16_t>(t.y),
@@ -133,16 +129,17 @@ Meshopt EncodeMeshopt(const ht::TriangleMesh& mesh, const Box& box, double step)
     for (int c = 0; c < 3; ++c) indices.push_back(static_cast<unsigned int>(t[c]));
   }
   meshopt_optimizeVertexCache(indices.data(), indices.data(), indices.size(), q.size());
-  std::vector<Q> fetched(q.size());
+  std::vector<QuantizedVertex> fetched(q.size());
   const std::size_t used = meshopt_optimizeVertexFetch(
-      fetched.data(), indices.data(), indices.size(), q.data(), q.size(), sizeof(Q));
+      fetched.data(), indices.data(), indices.size(), q.data(), q.size(), sizeof(QuantizedVertex));
   fetched.resize(used);
   Meshopt out;
   out.vertex_count = used;
   out.index_count = indices.size();
-  out.vertex_bytes.resize(meshopt_encodeVertexBufferBound(used, sizeof(Q)));
-  out.vertex_bytes.resize(meshopt_encodeVertexBuffer(
-      out.vertex_bytes.data(), out.vertex_bytes.size(), fetched.data(), used, sizeof(Q)));
+  out.vertex_bytes.resize(meshopt_encodeVertexBufferBound(used, sizeof(QuantizedVertex)));
+  out.vertex_bytes.resize(meshopt_encodeVertexBuffer(out.vertex_bytes.data(),
+                                                     out.vertex_bytes.size(), fetched.data(), used,
+                                                     sizeof(QuantizedVertex)));
   out.index_bytes.resize(meshopt_encodeIndexBufferBound(indices.size(), used));
   out.index_bytes.resize(meshopt_encodeIndexBuffer(out.index_bytes.data(), out.index_bytes.size(),
                                                    indices.data(), indices.size()));
@@ -150,12 +147,9 @@ Meshopt EncodeMeshopt(const ht::TriangleMesh& mesh, const Box& box, double step)
 }
 
 ht::TriangleMesh DecodeMeshopt(const Meshopt& m, const Box& box, double step) {
-  struct Q {
-    std::uint16_t x, y, z, pad;
-  };
-  std::vector<Q> q(m.vertex_count);
+  std::vector<QuantizedVertex> q(m.vertex_count);
   std::vector<unsigned int> indices(m.index_count);
-  if (meshopt_decodeVertexBuffer(q.data(), q.size(), sizeof(Q), m.vertex_bytes.data(),
+  if (meshopt_decodeVertexBuffer(q.data(), q.size(), sizeof(QuantizedVertex), m.vertex_bytes.data(),
                                  m.vertex_bytes.size()) != 0 ||
       meshopt_decodeIndexBuffer(indices.data(), indices.size(), sizeof(unsigned int),
                                 m.index_bytes.data(), m.index_bytes.size()) != 0) {
@@ -163,7 +157,8 @@ ht::TriangleMesh DecodeMeshopt(const Meshopt& m, const Box& box, double step) {
   }
   ht::TriangleMesh mesh;
   mesh.vertices.reserve(q.size());
-  for (const Q& v : q) mesh.vertices.push_back(box.lo + glm::dvec3(v.x, v.y, v.z) * step);
+  for (const QuantizedVertex& v : q)
+    mesh.vertices.push_back(box.lo + glm::dvec3(v.x, v.y, v.z) * step);
   for (std::size_t i = 0; i + 2 < indices.size(); i += 3) {
     mesh.triangles.emplace_back(indices[i], indices[i + 1], indices[i + 2]);
   }
@@ -236,9 +231,12 @@ std::vector<Row> Compare(const std::string& name, const ht::TriangleMesh& mesh, 
 
 int main(int argc, char** argv) {
   CLI::App app{"Draco beside meshoptimizer on the seed models and real glTF models"};
-  std::string bits_arg = "11,14", csv_path, shared = "../shared/data";
+  std::vector<int> bits = {11, 14};
+  std::string csv_path, shared = "../shared/data";
   int repeats = 5;
-  app.add_option("--bits", bits_arg, "position quantization bits (comma-separated)")
+  app.add_option("--bits", bits, "position quantization bits (comma-separated, 4 to 16)")
+      ->delimiter(',')
+      ->check(CLI::Range(4, 16))
       ->capture_default_str();
   app.add_option("--repeats", repeats, "timed repeats per codec (median)")
       ->check(CLI::Range(1, 100))
@@ -247,18 +245,6 @@ int main(int argc, char** argv) {
   app.add_option("--shared-data", shared, "the team's data folder (glTF models)")
       ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
-  std::vector<int> bits;
-  {
-    std::stringstream in(bits_arg);
-    for (std::string b; std::getline(in, b, ',');) {
-      const int n = std::atoi(b.c_str());
-      if (n < 4 || n > 16) {
-        std::fprintf(stderr, "mesh_codec_comparison: --bits: %s is not in [4, 16]\n", b.c_str());
-        return 2;
-      }
-      bits.push_back(n);
-    }
-  }
   std::vector<std::pair<std::string, ht::TriangleMesh>> meshes;
   meshes.emplace_back("ridged_block", ht::MakeRidgedBlockFullResolution());
   meshes.emplace_back("ridged_gear", ht::MakeRidgedGearFullResolution());

@@ -13,10 +13,8 @@
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <fstream>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -25,27 +23,16 @@
 #include "haptic_core/statistics.h"
 #include "slave_sim/benchmark_scenes.h"
 
-namespace {
-
-std::vector<std::string> SplitCommas(const std::string& s) {
-  std::vector<std::string> out;
-  std::stringstream in(s);
-  for (std::string item; std::getline(in, item, ',');) {
-    if (!item.empty()) out.push_back(item);
-  }
-  return out;
-}
-
-}  // namespace
-
 int main(int argc, char** argv) {
   CLI::App app{
       "The full remote step on the seed's benchmark scenes: p50 time, its split, pairs and "
       "contacts"};
-  std::string scenes_arg = "fig75,fig76,fig77,hammer_torus";
+  std::vector<std::string> scenes = {"fig75", "fig76", "fig77", "hammer_torus"};
   int poses = 40, repeats = 5, grid = 50, threads = 1;
   std::string csv_path, cache_dir = ht::HapticModelCache::DefaultDir();
-  app.add_option("--scenes", scenes_arg, "comma-separated scene names")->capture_default_str();
+  app.add_option("--scenes", scenes, "comma-separated scene names")
+      ->delimiter(',')
+      ->capture_default_str();
   app.add_option("--poses", poses, "in-contact poses per scene (scripted motion)")
       ->check(CLI::Range(1, 10000))
       ->capture_default_str();
@@ -87,7 +74,7 @@ int main(int argc, char** argv) {
   }
   std::printf("%-13s %5s %9s %9s %9s %9s %12s %8s %9s %4s\n", "scene", "poses", "step p50",
               "step p90", "coarse", "texture", "per contact", "pairs", "contacts", "max");
-  for (const std::string& name : SplitCommas(scenes_arg)) {
+  for (const std::string& name : scenes) {
     ht::BenchmarkScene scene;
     std::vector<ht::RigidTransform> poses_WFt;
     try {
@@ -123,7 +110,7 @@ int main(int argc, char** argv) {
     for (const ht::RigidTransform& X_WFt : poses_WFt) {
       const ht::RigidTransform X_WT = X_WFt * X_FtT;
       for (int r = 0; r < repeats; ++r) {
-        const ht::ContactModel model = pipeline.Step(X_WT, seq++, timings);
+        pipeline.Step(X_WT, seq++, timings);
         step_us.push_back(timings.total_us);
         coarse_us.push_back(timings.collision_us);
         texture_us.push_back(timings.texture_us);
@@ -134,7 +121,6 @@ int main(int argc, char** argv) {
           contacts_sum += queried;
           contacts_max = std::max(contacts_max, queried);
         }
-        (void)model;
       }
     }
     const double n = std::max<double>(1.0, static_cast<double>(poses_WFt.size()));

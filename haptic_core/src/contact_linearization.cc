@@ -23,7 +23,7 @@ TexturePenetrationSolver::TexturePenetrationSolver(int max_resolution, int max_t
   env_heights_.reserve(cells);
   tool_heights_.reserve(cells);
   tool_ext_heights_.reserve(static_cast<size_t>(max_resolution + 2) * (max_resolution + 2));
-  for (std::vector<float>& b : rotation_heights_) b.reserve(cells);
+  max_resolution_ = max_resolution;
   env_triangles_.reserve(static_cast<size_t>(max_triangles));
   tool_triangles_.reserve(static_cast<size_t>(max_triangles));
 }
@@ -167,8 +167,10 @@ ContactLinearization TexturePenetrationSolver::Linearize(
     const auto poses = GradientSamplePoses(X_WT, w);
     bool done = false;
     if (parallel_renders_) {
-      // The seven renders at once, each into its own buffer (the rotations are computed even when
-      // the base has no overlap, and then discarded below, as the serial path never makes them).
+      // The seven renders at once, each into its own buffer. The rotations start with the base
+      // (measured faster on two threads than the base first: 211 against 259 µs on fig75), so
+      // when the base finds no overlap they are computed and discarded below, renders the
+      // serial path never makes.
       const size_t cells = static_cast<size_t>(n) * n;
       try {
         // Isolated: while this thread waits for the seven, it must not pick up another contact

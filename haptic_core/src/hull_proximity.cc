@@ -10,6 +10,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "haptic_core/broad_phase.h"
+
 namespace ht {
 namespace {
 
@@ -660,9 +662,9 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     return node < 0 || m.hull_hierarchy.nodes[static_cast<std::size_t>(node)].is_leaf();
   };
   auto sphere_bound = [&](int node_A, int node_B) {
-    const glm::dvec4& sa = entry_A->spheres_O[node_A < 0 ? 0 : static_cast<std::size_t>(node_A)];
-    const glm::dvec4& sb = entry_B->spheres_O[node_B < 0 ? 0 : static_cast<std::size_t>(node_B)];
-    return glm::length(X_WA * glm::dvec3(sa) - X_WB * glm::dvec3(sb)) - sa.w - sb.w;
+    return BoundingSphereGap(
+        entry_A->spheres_O[node_A < 0 ? 0 : static_cast<std::size_t>(node_A)], X_WA,
+        entry_B->spheres_O[node_B < 0 ? 0 : static_cast<std::size_t>(node_B)], X_WB);
   };
   const bool local_reach = options.local_reach_margin_m >= 0.0;
   // The tolerance of a node pair: ε, or with local reach the pair's own (never larger).

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdint>
 #include <glm/geometric.hpp>
 #include <glm/gtc/quaternion.hpp>
 #include <limits>
@@ -26,6 +25,30 @@ const char* WindowProblem(const glm::dvec3& center_W, const glm::dvec3& normal_W
   if (!(extent_m > 0.0) || !std::isfinite(extent_m)) return "extent must be positive";
   if (resolution < 2 || resolution > 1024) return "resolution must be in [2, 1024]";
   return nullptr;
+}
+
+// Inclusive edge test of the renders, with a small tolerance on the barycentrics: cells on shared
+// edges may be covered twice, which the max/min envelope makes harmless, and no crack opens
+// between triangles.
+constexpr double kEdgeTolerance = -1e-9;
+
+// A triangle projected on a render grid of `cells` × `cells` (corner pixel coordinates x, y;
+// pixel i spans [i, i+1)): 1 / its signed area, and the range of cell centres its bounding box
+// covers, clipped to the grid. False when it is edge-on or degenerate in projection, or covers
+// no cell centre.
+struct ProjectedCells {
+  double inv_area;
+  int i0, i1, j0, j1;
+};
+bool ProjectCells(const double x[3], const double y[3], int cells, ProjectedCells& out) noexcept {
+  const double area = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]);
+  if (!(std::abs(area) > 1e-12)) return false;
+  out.inv_area = 1.0 / area;
+  out.i0 = std::max(0, static_cast<int>(std::ceil(std::min({x[0], x[1], x[2]}) - 0.5)));
+  out.i1 = std::min(cells - 1, static_cast<int>(std::floor(std::max({x[0], x[1], x[2]}) - 0.5)));
+  out.j0 = std::max(0, static_cast<int>(std::ceil(std::min({y[0], y[1], y[2]}) - 0.5)));
+  out.j1 = std::min(cells - 1, static_cast<int>(std::floor(std::max({y[0], y[1], y[2]}) - 0.5)));
+  return out.i0 <= out.i1 && out.j0 <= out.j1;
 }
 
 }  // namespace
@@ -121,16 +144,9 @@ void RenderPatchHeights(const HapticModel& model, const RigidTransform& X_WO,
     if (!(cr_len > 0.0)) continue;
     const double facing = glm::dot(cr, w.normal_W) / cr_len;
     if (keep_max ? facing <= kPatchFacingThreshold : facing >= -kPatchFacingThreshold) continue;
-    const double area = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]);
-    if (!(std::abs(area) > 1e-12)) continue;  // edge-on or degenerate in projection
-    const double inv_area = 1.0 / area;
-    const int i0 = std::max(0, static_cast<int>(std::ceil(std::min({x[0], x[1], x[2]}) - 0.5)));
-    const int i1 =
-        std::min(n - 1, static_cast<int>(std::floor(std::max({x[0], x[1], x[2]}) - 0.5)));
-    const int j0 = std::max(0, static_cast<int>(std::ceil(std::min({y[0], y[1], y[2]}) - 0.5)));
-    const int j1 =
-        std::min(n - 1, static_cast<int>(std::floor(std::max({y[0], y[1], y[2]}) - 0.5)));
-    if (i0 > i1 || j0 > j1) continue;
+    ProjectedCells pc;
+    if (!ProjectCells(x, y, n, pc)) continue;
+    const double inv_area = pc.inv_area;
     const bool textured = model.textured[f] != 0 && !model.texture.empty();
     const int level =
         textured ? model.texture.LevelForFootprint(model.texel_size_m[f], w.cell_size_m()) : 0;
@@ -140,12 +156,9 @@ void RenderPatchHeights(const HapticModel& model, const RigidTransform& X_WO,
     const double cos01 = glm::dot(n0, n1), cos02 = glm::dot(n0, n2), cos12 = glm::dot(n1, n2);
     const glm::vec2 uv0 = model.corner_uvs[3 * f], uv1 = model.corner_uvs[3 * f + 1],
                     uv2 = model.corner_uvs[3 * f + 2];
-    // Inclusive edge test with a small tolerance: cells on shared edges may be covered twice,
-    // which the max/min envelope makes harmless, and no crack opens between triangles.
-    constexpr double kEdgeTolerance = -1e-9;
-    for (int j = j0; j <= j1; ++j) {
+    for (int j = pc.j0; j <= pc.j1; ++j) {
       const double py = j + 0.5;
-      for (int i = i0; i <= i1; ++i) {
+      for (int i = pc.i0; i <= pc.i1; ++i) {
         const double px = i + 0.5;
         const double b0 = ((x[1] - px) * (y[2] - py) - (x[2] - px) * (y[1] - py)) * inv_area;
         const double b1 = ((x[2] - px) * (y[0] - py) - (x[0] - px) * (y[2] - py)) * inv_area;
@@ -190,77 +203,6 @@ DepthSample DirectionalPenetrationDepth(std::span<const float> b,
   return best;
 }
 
-}  // namespace ht
-
-namespace ht {
-
-namespace {
-
-constexpr double kFastEdgeTolerance = -1e-9;  // as RenderPatchHeights
-constexpr int kRowChunk = 128;
-
-// What the cells of one triangle interpolate: heights along n (m), n·(corner normal), the
-// corner normals' cosines (01, 02, 12), texture coordinates.
-struct TriangleGeometry {
-  double d[3], nn[3], cos[3], u[3], v[3];
-};
-
-// One chunk of a row's cells, filled by RowGeometry.
-struct RowChunk {
-  alignas(32) double value[kRowChunk];  // b·d
-  alignas(32) double ndotn[kRowChunk];  // N·n with N the unit interpolated normal
-  alignas(32) float u[kRowChunk];
-  alignas(32) float v[kRowChunk];
-  alignas(32) std::uint8_t inside[kRowChunk];
-};
-
-// The geometry of `count` cells of a row, cell k centred at px0 + k, with the row's barycentric
-// offsets r0, r1 and slopes gx0, gx1 (b2 = 1 − b0 − b1): the same arithmetic per cell as
-// RenderPatchHeights, written without branches so that it vectorizes (an AVX2 clone where the
-// machine has it; IEEE operations lane by lane, so the same values as the scalar code).
-[[gnu::target_clones("avx2", "default")]] void RowGeometry(int count, double px0, double r0,
-                                                           double gx0, double r1, double gx1,
-                                                           const TriangleGeometry& t, bool textured,
-                                                           RowChunk& out) {
-  double* __restrict value = out.value;
-  double* __restrict ndotn = out.ndotn;
-  float* __restrict tu = out.u;
-  float* __restrict tv = out.v;
-  std::uint8_t* __restrict inside = out.inside;
-  const double d0 = t.d[0], d1 = t.d[1], d2 = t.d[2];
-  for (int k = 0; k < count; ++k) {
-    const double px = px0 + k;
-    const double b0 = r0 + gx0 * px;
-    const double b1 = r1 + gx1 * px;
-    const double b2 = 1.0 - b0 - b1;
-    inside[k] = static_cast<std::uint8_t>((b0 >= kFastEdgeTolerance) & (b1 >= kFastEdgeTolerance) &
-                                          (b2 >= kFastEdgeTolerance));
-    value[k] = b0 * d0 + b1 * d1 + b2 * d2;
-  }
-  if (!textured) return;
-  const double n0 = t.nn[0], n1 = t.nn[1], n2 = t.nn[2];
-  const double c01 = t.cos[0], c02 = t.cos[1], c12 = t.cos[2];
-  const double u0 = t.u[0], u1 = t.u[1], u2 = t.u[2];
-  const double v0 = t.v[0], v1 = t.v[1], v2 = t.v[2];
-  for (int k = 0; k < count; ++k) {
-    const double px = px0 + k;
-    const double b0 = r0 + gx0 * px;
-    const double b1 = r1 + gx1 * px;
-    const double b2 = 1.0 - b0 - b1;
-    tu[k] = static_cast<float>(b0 * u0 + b1 * u1 + b2 * u2);
-    tv[k] = static_cast<float>(b0 * v0 + b1 * v1 + b2 * v2);
-    // h is along the unit interpolated normal N = Ñ/|Ñ|, Ñ = Σ b_i n_i (unit n_i):
-    // |Ñ|² = Σ b_i² + 2 Σ_{i<j} b_i b_j (n_i·n_j), from the per-triangle corner cosines.
-    const double len2 =
-        b0 * b0 + b1 * b1 + b2 * b2 + 2.0 * (b0 * b1 * c01 + b0 * b2 * c02 + b1 * b2 * c12);
-    const double num = b0 * n0 + b1 * n1 + b2 * n2;
-    const double q = num / std::sqrt(std::max(len2, 1e-12));
-    ndotn[k] = len2 > 1e-12 ? q : 0.0;
-  }
-}
-
-}  // namespace
-
 void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO,
                             std::span<const int> triangles, const ContactWindow& w, PatchSide side,
                             int margin_cells, std::span<float> heights) noexcept {
@@ -279,8 +221,6 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
   const double ou = glm::dot(offset, w.axis_u_W), ov = glm::dot(offset, w.axis_v_W),
                on = glm::dot(offset, w.normal_W);
   const bool have_texture = !model.texture.empty();
-  constexpr double kEdgeTolerance = kFastEdgeTolerance;
-  RowChunk geom;
   for (const int f : triangles) {
     const glm::ivec3 tri = model.triangles[f];
     const glm::dvec3& a0 = model.vertices_O[tri[0]];
@@ -301,16 +241,10 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
       d[c] = glm::dot(p, n_O) + on;
       nn[c] = glm::dot(model.corner_normals_O[3 * f + c], n_O);
     }
-    const double area = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]);
-    if (!(std::abs(area) > 1e-12)) continue;  // edge-on or degenerate in projection
-    const double inv_area = 1.0 / area;
-    const int i0 = std::max(0, static_cast<int>(std::ceil(std::min({x[0], x[1], x[2]}) - 0.5)));
-    const int i1 =
-        std::min(nt - 1, static_cast<int>(std::floor(std::max({x[0], x[1], x[2]}) - 0.5)));
-    const int j0 = std::max(0, static_cast<int>(std::ceil(std::min({y[0], y[1], y[2]}) - 0.5)));
-    const int j1 =
-        std::min(nt - 1, static_cast<int>(std::floor(std::max({y[0], y[1], y[2]}) - 0.5)));
-    if (i0 > i1 || j0 > j1) continue;
+    ProjectedCells pc;
+    if (!ProjectCells(x, y, nt, pc)) continue;
+    const double inv_area = pc.inv_area;
+    const int i0 = pc.i0, i1 = pc.i1;
     const bool textured = have_texture && model.textured[f] != 0;
     const int level =
         textured ? model.texture.LevelForFootprint(model.texel_size_m[f], w.cell_size_m()) : 0;
@@ -321,18 +255,13 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
     const double cos01 = glm::dot(n0, n1), cos02 = glm::dot(n0, n2), cos12 = glm::dot(n1, n2);
     const glm::vec2 uv0 = model.corner_uvs[3 * f], uv1 = model.corner_uvs[3 * f + 1],
                     uv2 = model.corner_uvs[3 * f + 2];
-    const TriangleGeometry tri_geom{{d[0], d[1], d[2]},
-                                    {nn[0], nn[1], nn[2]},
-                                    {cos01, cos02, cos12},
-                                    {uv0.x, uv1.x, uv2.x},
-                                    {uv0.y, uv1.y, uv2.y}};
     // Barycentrics, affine in the cell centre (px, py): b0 = k0 + gx0·px + gy0·py, likewise b1,
     // and b2 = 1 − b0 − b1.
     const double k0 = (x[1] * y[2] - x[2] * y[1]) * inv_area;
     const double gx0 = (y[1] - y[2]) * inv_area, gy0 = (x[2] - x[1]) * inv_area;
     const double k1 = (x[2] * y[0] - x[0] * y[2]) * inv_area;
     const double gx1 = (y[2] - y[0]) * inv_area, gy1 = (x[0] - x[2]) * inv_area;
-    for (int j = j0; j <= j1; ++j) {
+    for (int j = pc.j0; j <= pc.j1; ++j) {
       const double py = j + 0.5;
       const double r0 = k0 + gy0 * py, r1 = k1 + gy1 * py, r2 = 1.0 - r0 - r1;
       const double g2 = -gx0 - gx1;
@@ -356,24 +285,27 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
       const int ia = std::max(i0, static_cast<int>(std::floor(lo - 0.5)) - 1);
       const int ib = std::min(i1, static_cast<int>(std::ceil(hi - 0.5)) + 1);
       float* row = &heights[static_cast<size_t>(j) * nt];
-      // Per chunk of the row: the geometry of every cell at once (a loop without branches that
-      // the compiler vectorizes), then the texture samples and the envelope cell by cell.
-      for (int c0 = ia; c0 <= ib; c0 += kRowChunk) {
-        const int count = std::min(kRowChunk, ib - c0 + 1);
-        RowGeometry(count, c0 + 0.5, r0, gx0, r1, gx1, tri_geom, tex_level != nullptr, geom);
-        for (int k = 0; k < count; ++k) {
-          if (geom.inside[k] == 0) continue;
-          double value = geom.value[k];
-          if (tex_level != nullptr) {
-            value += static_cast<double>(
-                         model.texture.SampleAt(level, *tex_level, geom.u[k], geom.v[k])) *
-                     geom.ndotn[k];
-          }
-          if (!(std::abs(value) <= range)) continue;  // outside the window's box along n
-          float& cell = row[c0 + k];
-          const auto fv = static_cast<float>(value);
-          if (keep_max ? fv > cell : fv < cell) cell = fv;
+      for (int i = ia; i <= ib; ++i) {
+        const double px = i + 0.5;
+        const double b0 = r0 + gx0 * px;
+        const double b1 = r1 + gx1 * px;
+        const double b2 = 1.0 - b0 - b1;
+        if (b0 < kEdgeTolerance || b1 < kEdgeTolerance || b2 < kEdgeTolerance) continue;
+        double value = b0 * d[0] + b1 * d[1] + b2 * d[2];
+        if (tex_level != nullptr) {
+          const float u = static_cast<float>(b0 * uv0.x + b1 * uv1.x + b2 * uv2.x);
+          const float v = static_cast<float>(b0 * uv0.y + b1 * uv1.y + b2 * uv2.y);
+          // As RenderPatchHeights: h along the unit interpolated normal.
+          const double len2 = b0 * b0 + b1 * b1 + b2 * b2 +
+                              2.0 * (b0 * b1 * cos01 + b0 * b2 * cos02 + b1 * b2 * cos12);
+          const double ndotn =
+              len2 > 1e-12 ? (b0 * nn[0] + b1 * nn[1] + b2 * nn[2]) / std::sqrt(len2) : 0.0;
+          value += static_cast<double>(model.texture.SampleAt(level, *tex_level, u, v)) * ndotn;
         }
+        if (!(std::abs(value) <= range)) continue;  // outside the window's box along n
+        float& cell = row[i];
+        const auto fv = static_cast<float>(value);
+        if (keep_max ? fv > cell : fv < cell) cell = fv;
       }
     }
   }

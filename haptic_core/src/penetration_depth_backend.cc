@@ -68,7 +68,11 @@ bool CpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
     }
   }
   if (!done) {
-    for (std::size_t i = 0; i < queries.size(); ++i) one(solvers_.front(), i);
+    // The calling thread alone, so its renders must not become tasks of the global arena.
+    TexturePenetrationSolver& solver = solvers_.front();
+    solver.set_parallel_renders(false);
+    for (std::size_t i = 0; i < queries.size(); ++i) one(solver, i);
+    solver.set_parallel_renders(threads() > 1);
   }
   faults_ = {};
   for (const TexturePenetrationSolver& s : solvers_) {

@@ -51,10 +51,7 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
   options_.Validate();
   queries_.reserve(scene.touchables.size());
   for (std::size_t i = 0; i < scene.touchables.size(); ++i) queries_.emplace_back();
-  if (!backend_) {
-    backend_ = std::make_unique<CpuPenetrationDepthBackend>(
-        options_.grid_resolution, TextureStagePath::kFast, options_.texture_threads);
-  }
+  if (!backend_) backend_ = MakeCpuBackend();
   if (!scene.tool) throw std::invalid_argument("scene '" + scene.name + "' has no tool");
   if (glm::length(scene.tool->center_of_mass_O) > 1e-9) {
     throw std::invalid_argument("tool model '" + scene.tool->name +
@@ -150,6 +147,11 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
   }
 }
 
+std::unique_ptr<PenetrationDepthBackend> HapticTexturePipeline::MakeCpuBackend() const {
+  return std::make_unique<CpuPenetrationDepthBackend>(
+      options_.grid_resolution, TextureStagePath::kFast, options_.texture_threads);
+}
+
 void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n) {
   if (n == 0) return;
   const HapticModel& tool = *scene_.tool;
@@ -161,8 +163,7 @@ void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n)
   if (backend_failures_++ == 0) {
     fallback_reason_ = std::string(backend_->name()) + ": " + backend_->last_error();
   }
-  backend_ = std::make_unique<CpuPenetrationDepthBackend>(
-      options_.grid_resolution, TextureStagePath::kFast, options_.texture_threads);
+  backend_ = MakeCpuBackend();
   backend_->LinearizeBatch(tool, X_WT, batch, batch_out);
 }
 

@@ -13,6 +13,8 @@
 namespace ht {
 namespace {
 
+constexpr double kTwoPi = 2.0 * std::numbers::pi;
+
 // The approach of the press experiments (fig75, fig76, fig77): the hand eases down along M's z
 // from `start_height_m` above the contact to `press_depth_m` below it over [0, t_approach_s),
 // with zero speed at both ends. Phase 0.
@@ -65,25 +67,22 @@ class Fig75Experiment final : public FixedScript {
     p.z = -p_.press_depth_m;
     double tau = (t - t_approach_) / t_phase_;
     if (tau < 1.0) {  // along x, parallel to the ridges
-      p.x = p_.x_amplitude_m * std::sin((2.0 * std::numbers::pi) * tau);
-      v.x = p_.x_amplitude_m * (2.0 * std::numbers::pi) / t_phase_ *
-            std::cos((2.0 * std::numbers::pi) * tau);
+      p.x = p_.x_amplitude_m * std::sin(kTwoPi * tau);
+      v.x = p_.x_amplitude_m * kTwoPi / t_phase_ * std::cos(kTwoPi * tau);
       out.phase = 1;
       return out;
     }
     tau -= 1.0;
     if (tau < 1.0) {  // along y, across the ridges
-      p.y = p_.y_amplitude_m * std::sin((2.0 * std::numbers::pi) * tau);
-      v.y = p_.y_amplitude_m * (2.0 * std::numbers::pi) / t_phase_ *
-            std::cos((2.0 * std::numbers::pi) * tau);
+      p.y = p_.y_amplitude_m * std::sin(kTwoPi * tau);
+      v.y = p_.y_amplitude_m * kTwoPi / t_phase_ * std::cos(kTwoPi * tau);
       out.phase = 2;
       return out;
     }
     tau = std::min(tau - 1.0, 1.0);  // along z: lift off and press again, twice
     const double span = p_.press_depth_m + p_.lift_height_m;
-    p.z = -p_.press_depth_m + span * 0.5 * (1.0 - std::cos(2.0 * (2.0 * std::numbers::pi) * tau));
-    v.z = span * 0.5 * 2.0 * (2.0 * std::numbers::pi) / t_phase_ *
-          std::sin(2.0 * (2.0 * std::numbers::pi) * tau);
+    p.z = -p_.press_depth_m + span * 0.5 * (1.0 - std::cos(2.0 * kTwoPi * tau));
+    v.z = span * 0.5 * 2.0 * kTwoPi / t_phase_ * std::sin(2.0 * kTwoPi * tau);
     out.phase = 3;
     return out;
   }
@@ -252,9 +251,8 @@ class ExploreExperiment final : public Experiment {
       case Segment::kLift: {
         p = s.to;
         if (s.amplitude > 0.0 && span > 0.0) {  // one period of a sine along x or y
-          p[s.axis] += s.amplitude * std::sin((2.0 * std::numbers::pi) * u);
-          v[s.axis] = s.amplitude * (2.0 * std::numbers::pi) / span *
-                      std::cos((2.0 * std::numbers::pi) * u);
+          p[s.axis] += s.amplitude * std::sin(kTwoPi * u);
+          v[s.axis] = s.amplitude * kTwoPi / span * std::cos(kTwoPi * u);
         }
         if (s.kind == Segment::kPress) {
           out.z_control = HandZControl::kPress;
@@ -309,7 +307,7 @@ class Fig76Experiment final : public FixedScript {
       return ApproachTarget(t, t_approach_, p_.start_height_m, p_.press_depth_m);
     }
     p.z = -p_.press_depth_m;
-    const double w = (2.0 * std::numbers::pi) / p_.period_s;
+    const double w = kTwoPi / p_.period_s;
     const double theta = p_.amplitude_rad * std::sin(w * (t - t_approach_));
     out.X_MH.rotation = glm::angleAxis(theta, glm::dvec3(0.0, 0.0, 1.0));
     out.V_MH_M.angular.z = p_.amplitude_rad * w * std::cos(w * (t - t_approach_));
@@ -347,13 +345,11 @@ class Fig77Experiment final : public FixedScript {
     // x: eased from 0 to the stroke; y: two sways; yaw: three swings.
     p.x = p_.stroke_m * 0.5 * (1.0 - std::cos(std::numbers::pi * tau));
     v.x = p_.stroke_m * 0.5 * std::numbers::pi * std::sin(std::numbers::pi * tau) / T;
-    p.y = p_.sway_m * std::sin((2.0 * std::numbers::pi) * 2.0 * tau);
-    v.y = p_.sway_m * (2.0 * std::numbers::pi) * 2.0 / T *
-          std::cos((2.0 * std::numbers::pi) * 2.0 * tau);
-    const double yaw = p_.yaw_rad * std::sin((2.0 * std::numbers::pi) * 3.0 * tau);
+    p.y = p_.sway_m * std::sin(kTwoPi * 2.0 * tau);
+    v.y = p_.sway_m * kTwoPi * 2.0 / T * std::cos(kTwoPi * 2.0 * tau);
+    const double yaw = p_.yaw_rad * std::sin(kTwoPi * 3.0 * tau);
     out.X_MH.rotation = glm::angleAxis(yaw, glm::dvec3(0.0, 0.0, 1.0));
-    out.V_MH_M.angular.z = p_.yaw_rad * (2.0 * std::numbers::pi) * 3.0 / T *
-                           std::cos((2.0 * std::numbers::pi) * 3.0 * tau);
+    out.V_MH_M.angular.z = p_.yaw_rad * kTwoPi * 3.0 / T * std::cos(kTwoPi * 3.0 * tau);
     out.phase = 1;
     return out;
   }
@@ -372,8 +368,6 @@ std::unique_ptr<Experiment> MakeFig76Experiment(const Fig76Params& params) {
 std::unique_ptr<Experiment> MakeFig77Experiment(const Fig77Params& params) {
   return std::make_unique<Fig77Experiment>(params);
 }
-
-namespace {}  // namespace
 
 std::unique_ptr<Experiment> MakeExploreExperiment(const ExploreParams& params) {
   return std::make_unique<ExploreExperiment>(params);

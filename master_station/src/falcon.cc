@@ -19,8 +19,6 @@ namespace {
 
 using detail::Clock;
 
-std::int64_t NowNs() noexcept { return SteadyNowNs(); }
-
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
@@ -138,7 +136,7 @@ void FalconDevice::IoLoop() noexcept {
   auto next = Clock::now();
   // The clock is passed in (FalconConfig::clock_ns): readings and freshness use it.
   const auto clock_ns = [this]() noexcept {
-    return config_.clock_ns ? config_.clock_ns() : NowNs();
+    return config_.clock_ns ? config_.clock_ns() : SteadyNowNs();
   };
 
   while (!stop_.load(std::memory_order_relaxed)) {

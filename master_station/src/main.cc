@@ -12,7 +12,6 @@
 #include <sstream>
 
 #include "haptic_core/demo/demo_scenes.h"
-#include "haptic_core/haptic_scene.h"
 #include "master_station/experiment.h"
 #include "master_station/falcon.h"
 #include "master_station/operator_station.h"
@@ -25,10 +24,6 @@ namespace {
 // Set by SIGINT / SIGTERM: the loop ramps the force to zero and the run ends normally.
 std::atomic<bool> g_stop{false};
 extern "C" void OnStopSignal(int) { g_stop.store(true); }
-
-}  // namespace
-
-namespace {
 
 glm::dvec3 ParseVector(const std::string& text) {
   std::stringstream ss(text);

@@ -23,8 +23,6 @@
 
 namespace ht::station {
 
-inline std::int64_t NowNs() noexcept { return SteadyNowNs(); }
-
 struct OutgoingToolState {
   wire::ToolStateMessage message;
   std::int64_t time_ns = 0;

@@ -12,13 +12,11 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
-#include <mutex>
 #include <optional>
 #include <stdexcept>
 #include <thread>
 #include <vector>
 
-#include "codecs/draco_mesh_codec.h"
 #include "haptic_core/passivity.h"
 #include "haptic_core/statistics.h"
 #include "haptic_core/steady_clock.h"
@@ -27,15 +25,10 @@
 #include "master_station/operator_tick.h"
 #include "network_worker.h"
 #include "trace_recorder.h"
-#include "transport/link.h"
 #include "transport/messages.h"
-#include "transport/scene_stream.h"
-#include "transport/session.h"
 
 namespace ht {
 namespace {
-
-using station::NowNs;
 
 void SleepUntilNs(std::int64_t t_ns) noexcept {
   timespec ts{static_cast<time_t>(t_ns / 1000000000), static_cast<long>(t_ns % 1000000000)};
@@ -150,8 +143,9 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   // The session first: its Welcome says where the workspace goes (the tool's home pose), the
   // tool's inertia and where the touchable objects are.
   const std::int64_t connect_deadline =
-      NowNs() + static_cast<std::int64_t>(config.connect_timeout_s * 1e9);
-  while (!counters.connected.load() && !counters.rejected.load() && NowNs() < connect_deadline) {
+      SteadyNowNs() + static_cast<std::int64_t>(config.connect_timeout_s * 1e9);
+  while (!counters.connected.load() && !counters.rejected.load() &&
+         SteadyNowNs() < connect_deadline) {
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
   RigidTransform X_WM = config.X_WM;
@@ -201,11 +195,11 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   ToolState tool;
   tool.X_WT = X_WM * experiment.Target(0.0).X_MH;
   std::uint64_t tool_seq = 1;
-  outgoing.Write({{tool.X_WT, tool.V_WT_W}, NowNs(), tool_seq});
+  outgoing.Write({{tool.X_WT, tool.V_WT_W}, SteadyNowNs(), tool_seq});
 
   // Then the remote node's first contact model (it answers our first tool state).
   while (counters.model_accepted.load() == 0 && !counters.rejected.load() &&
-         NowNs() < connect_deadline) {
+         SteadyNowNs() < connect_deadline) {
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
   if (counters.model_accepted.load() == 0) {
@@ -272,12 +266,12 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
     std::int64_t experiment_t0 = -1;
     std::int64_t stop_ramp_start = -1;
     const double stop_ramp_ticks = std::max(1.0, config.stop_ramp_s * config.loop_rate_hz);
-    std::int64_t next = NowNs() + period_ns;
+    std::int64_t next = SteadyNowNs() + period_ns;
     std::int64_t previous = next - period_ns;
     const std::int64_t t0 = next;
     for (std::int64_t k = 0; k < ticks; ++k) {
       SleepUntilNs(next);
-      const std::int64_t now = NowNs();
+      const std::int64_t now = SteadyNowNs();
       period_us.Add((now - previous) * 1e-3);
       previous = now;
       TraceRow row;
@@ -335,7 +329,7 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
       // The phase the simulated hand was following, when the device is scripted.
       row.phase = experiment.Target(row.t_s).phase;
       if (row.model_age_ms >= 0.0) model_age_samples.Add(row.model_age_ms);
-      const std::int64_t end = NowNs();
+      const std::int64_t end = SteadyNowNs();
       row.tick_compute_us = static_cast<float>((end - now) * 1e-3);
       compute_us.Add((end - now) * 1e-3);
       if (!rows.Push(row)) rows_dropped.fetch_add(1, std::memory_order_relaxed);
@@ -354,18 +348,18 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
         next = end + period_ns;
       }
     }
-    device.WriteWrench({}, NowNs());
+    device.WriteWrench({}, SteadyNowNs());
     loop_done.store(true, std::memory_order_release);
   });
 
   // Progress while the loop runs.
-  const std::int64_t started = NowNs();
+  const std::int64_t started = SteadyNowNs();
   std::int64_t last_print = started;
   std::int64_t last_ticks = 0;
   std::uint64_t last_models = counters.model_accepted.load();
   while (!loop_done.load(std::memory_order_acquire)) {
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    const std::int64_t now = NowNs();
+    const std::int64_t now = SteadyNowNs();
     if (config.progress_period_s > 0.0 && (now - last_print) * 1e-9 >= config.progress_period_s) {
       const std::int64_t done = ticks_done.load();
       const std::uint64_t models = counters.model_accepted.load();
@@ -387,7 +381,7 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
     }
   }
   loop_thread.join();
-  const double elapsed_s = (NowNs() - started) * 1e-9;
+  const double elapsed_s = (SteadyNowNs() - started) * 1e-9;
   stop_threads();
 
   const std::vector<double>& ages = model_age_samples.values();

@@ -77,12 +77,12 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
       config.scene_objects.size(), scene_bytes, bound.ToString().c_str());
   std::fflush(stdout);
 
-  RemoteSession session(config, link, scene_sender, caps);
+  const std::int64_t start_ns = SteadyNowNs();
+  RemoteSession session(config, link, scene_sender, caps, start_ns);
   RemoteStepStatistics statistics(!config.step_trace_path.empty());
   std::array<std::uint8_t, wire::kMaxDatagramBytes + 1> buffer{};
   const std::int64_t min_period_ns =
       config.max_rate_hz > 0.0 ? static_cast<std::int64_t>(1e9 / config.max_rate_hz) : 0;
-  const std::int64_t start_ns = SteadyNowNs();
   std::int64_t last_progress_ns = start_ns;
   std::uint64_t last_progress_steps = 0;
   bool running = true;
@@ -121,7 +121,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
         pipeline.Step(session.latest_tool_state().X_WT, session.latest_tool_state_seq(), timings);
     if (pipeline.backend_failures() == 1 && !reported_fallback) {
       reported_fallback = true;
-      std::printf("[slave] GPU penetration depth failed (%s); continuing on the CPU reference\n",
+      std::printf("[slave] GPU penetration depth failed (%s); continuing on the CPU backend\n",
                   pipeline.fallback_reason().c_str());
       std::fflush(stdout);
     }

@@ -4,17 +4,16 @@
 #include <cstdio>
 #include <stdexcept>
 
-#include "haptic_core/steady_clock.h"
-
 namespace ht {
 
 RemoteSession::RemoteSession(const RemoteNodeConfig& config, SecureLink& link,
-                             SceneSender& scene_sender, const RemoteCapabilities& caps)
+                             SceneSender& scene_sender, const RemoteCapabilities& caps,
+                             std::int64_t start_ns)
     : config_(config),
       link_(link),
       scene_sender_(scene_sender),
       caps_(caps),
-      last_token_ns_(SteadyNowNs()),
+      last_token_ns_(start_ns),
       token_cap_(std::max(16.0 * wire::kMaxDatagramBytes, config.scene_rate_bytes_per_s * 0.01)) {}
 
 bool RemoteSession::OnDatagram(std::span<const std::uint8_t> datagram, const SocketAddress& from,
@@ -163,7 +162,7 @@ void RemoteSession::OnHello(const wire::Header& header, std::span<const std::uin
   link_.Send(wire::EncodeWelcome(link_.NextHeader(wire::MessageType::kWelcome, session_), welcome,
                                  config_.key),
              peer_);
-  SendManifest();
+  SendManifest(now);
   std::printf(
       "[slave] session %08x opened for operator at %s (protocol v%u, mtu %u, grid %u, "
       "peer timeout %u ms)\n",
@@ -195,7 +194,7 @@ void RemoteSession::StreamScene(std::int64_t now) {
     link_.Send(d, peer_);
     scene_tokens_ -= static_cast<double>(d.size);
   }
-  if (now - last_manifest_ns_ > 250000000) SendManifest();
+  if (now - last_manifest_ns_ > 250000000) SendManifest(now);
 }
 
 bool RemoteSession::MaybeSendContactModel(wire::ContactModelMessage& out,
@@ -224,14 +223,14 @@ void RemoteSession::SayGoodbye() {
   }
 }
 
-void RemoteSession::SendManifest() {
+void RemoteSession::SendManifest(std::int64_t now) {
   if (!scene_enabled_) return;
   for (const wire::SceneManifestMessage& m : scene_sender_.Manifest()) {
     link_.Send(wire::EncodeSceneManifest(
                    link_.NextHeader(wire::MessageType::kSceneManifest, session_), m, config_.key),
                peer_);
   }
-  last_manifest_ns_ = SteadyNowNs();
+  last_manifest_ns_ = now;
 }
 
 void RemoteSession::Close(const char* why) {

@@ -24,9 +24,10 @@ namespace ht {
 class RemoteSession {
  public:
   /// Keeps references to `config`, `link` and `scene_sender`, which must outlive the session.
-  /// `caps` is what this node offers in negotiation.
+  /// `caps` is what this node offers in negotiation; `start_ns` the node's start (local clock,
+  /// SteadyNowNs()), from which the scene stream's pacing budget accrues.
   RemoteSession(const RemoteNodeConfig& config, SecureLink& link, SceneSender& scene_sender,
-                const RemoteCapabilities& caps);
+                const RemoteCapabilities& caps, std::int64_t start_ns);
 
   /// Handles one received datagram from `from` at local time `now_ns` (ns, SteadyNowNs()).
   /// Datagrams that fail to open or decode are counted by the link and dropped. Returns false
@@ -64,7 +65,7 @@ class RemoteSession {
  private:
   void OnHello(const wire::Header& header, std::span<const std::uint8_t> body,
                const SocketAddress& from, std::int64_t now_ns);
-  void SendManifest();
+  void SendManifest(std::int64_t now_ns);
   void Close(const char* why);
 
   const RemoteNodeConfig& config_;

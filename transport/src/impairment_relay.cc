@@ -100,8 +100,6 @@ namespace {
 using impairment_internal::kNsPerMs;
 using impairment_internal::kNsPerS;
 
-std::int64_t NowNs() noexcept { return SteadyNowNs(); }
-
 void WriteFileAtomically(const std::string& path, const std::string& text) {
   const std::string tmp = path + ".tmp";
   {
@@ -248,7 +246,7 @@ bool ImpairmentRelay::State::ReceiveOne(UdpSocket& socket, bool from_client) noe
                  : std::span<std::uint8_t>(scratch);
   SocketAddress from;
   const std::optional<std::size_t> received = socket.ReceiveFrom(buffer, from);
-  const std::int64_t arrival_ns = NowNs();
+  const std::int64_t arrival_ns = SteadyNowNs();
   auto release = [&] {
     if (index >= 0) dir.queue.Release(static_cast<std::size_t>(index));
   };
@@ -370,7 +368,7 @@ void ImpairmentRelay::Run(const std::atomic<bool>& stop) {
   const auto period_ns = [](double seconds) {
     return static_cast<std::int64_t>(std::llround(seconds * 1e9));
   };
-  const std::int64_t start_ns = NowNs();
+  const std::int64_t start_ns = SteadyNowNs();
   const std::int64_t end_ns = s.config.duration_s > 0.0 ? start_ns + period_ns(s.config.duration_s)
                                                         : std::numeric_limits<std::int64_t>::max();
   const std::int64_t stats_period_ns = period_ns(s.config.stats_period_s);
@@ -396,7 +394,7 @@ void ImpairmentRelay::Run(const std::atomic<bool>& stop) {
       if (taken == kReceiveBatch) more_waiting = true;
     }
     // 2. Send what is due.
-    std::int64_t now_ns = NowNs();
+    std::int64_t now_ns = SteadyNowNs();
     s.SendDue(s.up, /*to_server=*/true, now_ns);
     s.SendDue(s.down, /*to_server=*/false, now_ns);
     s.elapsed_s = static_cast<double>(now_ns - start_ns) * 1e-9;
@@ -428,13 +426,13 @@ void ImpairmentRelay::Run(const std::atomic<bool>& stop) {
     std::int64_t wake_ns = std::min({end_ns, next_stats_ns, next_progress_ns, now_ns + kMaxWaitNs});
     if (!s.up.queue.empty()) wake_ns = std::min(wake_ns, s.up.queue.top().deliver_ns);
     if (!s.down.queue.empty()) wake_ns = std::min(wake_ns, s.down.queue.top().deliver_ns);
-    now_ns = NowNs();
+    now_ns = SteadyNowNs();
     const std::int64_t wait_ns = more_waiting ? 0 : std::max<std::int64_t>(0, wake_ns - now_ns);
     const timespec timeout{static_cast<time_t>(wait_ns / kNsPerS),
                            static_cast<long>(wait_ns % kNsPerS)};
     ::ppoll(fds, 2, &timeout, nullptr);  // EINTR (a signal) just loops back to the stop check
   }
-  s.elapsed_s = static_cast<double>(NowNs() - start_ns) * 1e-9;
+  s.elapsed_s = static_cast<double>(SteadyNowNs() - start_ns) * 1e-9;
   s.final_stats = true;
   if (!s.config.stats_file.empty()) {
     WriteFileAtomically(s.config.stats_file, StatsJson().dump(2) + "\n");

@@ -1,7 +1,6 @@
 #include "transport/link.h"
 
 #include <algorithm>
-#include <chrono>
 
 namespace ht {
 

@@ -101,11 +101,18 @@ class TexturePenetrationSolver {
   TextureStagePath path() const noexcept { return path_; }
 
   /// kFast only: run a contact's tool renders (the grown base render and the six rotations) as
-  /// parallel tasks of the oneTBB arena the caller is in (CpuPenetrationDepthBackend turns it on
-  /// when it has more than one thread, so that a step with fewer contacts than threads still
-  /// uses them all). Each render has its own buffer, so the results are the same either way.
+  /// parallel tasks of the oneTBB arena the caller is in (CpuPenetrationDepthBackend
+  /// turns it on when it has more than one thread, so that a step with fewer contacts than threads
+  /// still uses them all). Each render has its own buffer, so the results are the same either way.
   /// Must only be turned on for calls made inside a task arena sized as the caller wants.
-  void set_parallel_renders(bool on) noexcept { parallel_renders_ = on; }
+  /// Turning it on reserves the six rotation buffers (allocates; call it at set-up).
+  void set_parallel_renders(bool on) {
+    parallel_renders_ = on;
+    const auto cells = static_cast<std::size_t>(max_resolution_) * max_resolution_;
+    if (on) {
+      for (std::vector<float>& b : rotation_heights_) b.reserve(cells);
+    }
+  }
 
   /// Linearizes the contact of `tool` posed at X_WT (frame T at the tool's centre of mass) against
   /// `environment` posed at X_WO over `window`, with penalty stiffness k (N/m).
@@ -135,6 +142,7 @@ class TexturePenetrationSolver {
   std::vector<float> env_heights_;
   std::vector<float> tool_heights_;
   std::vector<float> tool_ext_heights_;  ///< kFast: the base pose on the window grown by a cell
+  int max_resolution_ = 0;
   bool parallel_renders_ = false;
   /// kFast with parallel renders: one buffer per rotated pose (samples 5..10).
   std::array<std::vector<float>, 6> rotation_heights_;

@@ -123,10 +123,10 @@ enum class PdBackendChoice { kCpu, kGpu, kAuto };
 PdBackendChoice ParsePdBackendChoice(const std::string& text);
 const char* ToString(PdBackendChoice choice) noexcept;
 
-/// Makes the backend for `choice`. kCpu: the CPU reference. kGpu: the GPU backend on any context
-/// that starts (a real GPU first, else llvmpipe). kAuto: the GPU backend on a hardware GPU only,
-/// since a software rasterizer is slower than the CPU reference for this stage. When the GPU
-/// cannot start or its shaders do not build: the CPU reference, with the reason in `message`
+/// Makes the backend for `choice`. kCpu: the CPU backend (fast path). kGpu: the GPU backend on any
+/// context that starts (a real GPU first, else llvmpipe). kAuto: the GPU backend on a hardware GPU
+/// only, since a software rasterizer is slower than the CPU backend for this stage. When the GPU
+/// cannot start or its shaders do not build: the CPU backend, with the reason in `message`
 /// (which always says what was chosen and why), on `cpu_threads` threads. Never throws for a GPU
 /// failure.
 std::unique_ptr<PenetrationDepthBackend> MakePenetrationDepthBackend(

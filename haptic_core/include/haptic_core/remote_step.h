@@ -62,7 +62,7 @@ struct StepTimings {
   /// Tool–object pairs the broad phase (bounding spheres) ruled out.
   int broad_phase_culled = 0;
   /// Leaf hull pairs found within tolerance, and contacts after clustering (before the cap of
-  /// kMaxContacts per step).
+  /// PipelineOptions::max_contacts per step).
   int leaf_pairs = 0;
   int clusters = 0;
   /// True when a coarse query stopped at options.collision_budget_us.
@@ -78,7 +78,7 @@ struct StepTimings {
 ///     clusters, each a point and a normal;
 ///  4. contact windows (contact_windows.h): one ContactQuery per cluster;
 ///  5. texture penetration depth and linearization (penetration_depth_backend.h, one batch for
-///     all contacts; the GPU backend falls back to the CPU reference if it fails);
+///     all contacts; the GPU backend falls back to the CPU backend if it fails);
 ///  6. assembly (contact_assembly.h): the contact model and its wrench at q0.
 /// Nothing in it throws after construction (faults are counted), and after warm-up it does not
 /// allocate. Holds preallocated scratch; not thread-safe, and must be stepped on the thread that
@@ -86,8 +86,9 @@ struct StepTimings {
 class HapticTexturePipeline {
  public:
   /// Keeps a reference to `scene`, which must outlive the pipeline. `backend` computes the
-  /// penetration depth (null: the CPU reference). Throws std::invalid_argument for bad options, a
-  /// scene without a tool, or a tool whose centre of mass is not T's origin.
+  /// penetration depth (null: the CPU backend, fast path, texture_threads threads). Throws
+  /// std::invalid_argument for bad options, a scene without a tool, or a tool whose centre of mass
+  /// is not T's origin.
   HapticTexturePipeline(const HapticScene& scene, const PipelineOptions& options,
                         std::unique_ptr<PenetrationDepthBackend> backend = nullptr);
 
@@ -103,7 +104,7 @@ class HapticTexturePipeline {
     std::int64_t bad_windows = 0;
   };
   const StepFaults& step_faults() const noexcept { return step_faults_; }
-  /// The backend in use: the one given, or the CPU reference after that one failed.
+  /// The backend in use: the one given, or the CPU backend after that one failed.
   const PenetrationDepthBackend& backend() const noexcept { return *backend_; }
   /// Batches the given backend failed (the step is then recomputed on the CPU, which stays in
   /// use), and the reason of the first failure ("" when none).
@@ -128,8 +129,10 @@ class HapticTexturePipeline {
   /// coarse counts and flags of `timings`.
   void FindContactCandidates(const RigidTransform& X_WT, StepTimings& timings);
   /// Stage 5: linearizes last_queries_[0, n) into last_results_ with the backend in use; when that
-  /// backend fails, switches to the CPU reference for good and recomputes the batch.
+  /// backend fails, switches to the CPU backend for good and recomputes the batch.
   void LinearizeContacts(const RigidTransform& X_WT, int n);
+  /// The CPU backend of these options (fast path, texture_threads threads).
+  std::unique_ptr<PenetrationDepthBackend> MakeCpuBackend() const;
 
   const HapticScene& scene_;
   PipelineOptions options_;

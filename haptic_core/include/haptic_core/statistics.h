@@ -1,5 +1,6 @@
 #pragma once
-// Summary statistics for run reports (not for the 1 kHz loop: it copies and sorts).
+// Summary statistics for run reports: Percentile() copies and sorts (not for the 1 kHz loop);
+// ReservoirSamples::Add() neither allocates nor locks (fit for it).
 
 #include <algorithm>
 #include <cstdint>

@@ -9,6 +9,8 @@
 namespace ht {
 namespace {
 
+constexpr double kTwoPi = 2.0 * std::numbers::pi;
+
 void AddTriangle(HapticModel& m, glm::ivec3 t, const glm::dvec3 normals[3], const glm::vec2 uvs[3],
                  bool is_textured, double texel_size) {
   m.triangles.push_back(t);
@@ -39,13 +41,13 @@ void RequirePositive(double v, const char* what) {
 }  // namespace
 
 double RidgeProfile::Height(double s_m) const noexcept {
-  const double c = std::cos((2.0 * std::numbers::pi) * s_m / period_m);
+  const double c = std::cos(kTwoPi * s_m / period_m);
   if (sharpness < 1e-6) return amplitude_m * c;
   return amplitude_m * std::tanh(sharpness * c) / std::tanh(sharpness);
 }
 
 double RidgeProfile::MaxSlope() const noexcept {
-  const double k = (2.0 * std::numbers::pi) / period_m;
+  const double k = kTwoPi / period_m;
   if (sharpness < 1e-6) return amplitude_m * k;
   // d/ds tanh(β cos(ks)) = −β k sin(ks) sech²(β cos(ks)); largest near cos(ks) = 0.
   double best = 0.0;
@@ -58,7 +60,7 @@ double RidgeProfile::MaxSlope() const noexcept {
 }
 
 RidgeProfile RidgedGearParams::Profile() const noexcept {
-  return {amplitude_m, (2.0 * std::numbers::pi) * radius_m / teeth, sharpness};
+  return {amplitude_m, kTwoPi * radius_m / teeth, sharpness};
 }
 
 HapticModel MakeTexturedBox(const glm::dvec3& h,
@@ -187,7 +189,7 @@ HapticModel MakeRidgedGear(const RidgedGearParams& p) {
   for (int ring = 0; ring < 2; ++ring) {
     const double x = ring == 0 ? -0.5 * L : 0.5 * L;
     for (int j = 0; j < S; ++j) {
-      const double phi = (2.0 * std::numbers::pi) * j / S;
+      const double phi = kTwoPi * j / S;
       m.vertices_O.push_back({x, R * std::cos(phi), R * std::sin(phi)});
     }
   }
@@ -196,12 +198,11 @@ HapticModel MakeRidgedGear(const RidgedGearParams& p) {
   m.vertices_O.push_back({0.5 * L, 0, 0});
 
   // The ridges vary along the circumference only: texel size is the arc per texel.
-  const double texel = std::max((2.0 * std::numbers::pi) * R, L) / p.texture_size;
+  const double texel = std::max(kTwoPi * R, L) / p.texture_size;
   const glm::vec2 zero_uv[3] = {};
   for (int j = 0; j < S; ++j) {
     const int b = (j + 1) % S;
-    const double phi_a = (2.0 * std::numbers::pi) * j / S,
-                 phi_b = (2.0 * std::numbers::pi) * (j + 1) / S;
+    const double phi_a = kTwoPi * j / S, phi_b = kTwoPi * (j + 1) / S;
     const glm::dvec3 na(0, std::cos(phi_a), std::sin(phi_a)),
         nb(0, std::cos(phi_b), std::sin(phi_b));
     const auto va = static_cast<float>(static_cast<double>(j) / S);
@@ -225,7 +226,7 @@ HapticModel MakeRidgedGear(const RidgedGearParams& p) {
   std::vector<float> texels(static_cast<size_t>(n) * n);
   for (int y = 0; y < n; ++y) {
     const double v = (y + 0.5) / n;
-    const auto height = static_cast<float>(profile.Height((2.0 * std::numbers::pi) * R * v));
+    const auto height = static_cast<float>(profile.Height(kTwoPi * R * v));
     for (int x = 0; x < n; ++x) texels[static_cast<size_t>(y) * n + x] = height;
   }
   m.texture = HeightField(n, n, std::move(texels), false, true);
@@ -247,7 +248,7 @@ TriangleMesh MakeRidgedGearFullResolution(const RidgedGearParams& p) {
   for (int r = 0; r <= rows; ++r) {
     const double x = -0.5 * p.length_m + p.length_m * r / rows;
     for (int j = 0; j < S; ++j) {
-      const double phi = (2.0 * std::numbers::pi) * j / S;
+      const double phi = kTwoPi * j / S;
       const double rad = p.radius_m + profile.Height(p.radius_m * phi);
       mesh.vertices.push_back({x, rad * std::cos(phi), rad * std::sin(phi)});
     }

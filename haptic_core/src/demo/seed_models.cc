@@ -13,6 +13,8 @@
 namespace ht {
 namespace {
 
+constexpr double kTwoPi = 2.0 * std::numbers::pi;
+
 void RequirePositive(double v, const char* what) {
   if (!(v > 0.0)) {
     throw std::invalid_argument(std::string(what) + " must be positive, got " + std::to_string(v));
@@ -397,11 +399,10 @@ class PlaneWaveNoise {
       const double v = Fract((i + 0.5) * 0.7548776662466927 + seed * 0.5698);
       const double w = Fract((i + 0.5) * 0.5698402909980532 + seed * 0.1234);
       const double z = 2.0 * u - 1.0, s = std::sqrt(std::max(0.0, 1.0 - z * z));
-      const double phi = (2.0 * std::numbers::pi) * v;
+      const double phi = kTwoPi * v;
       const double period = min_period * std::pow(max_period / min_period, w);
-      waves_.push_back({glm::dvec3(s * std::cos(phi), s * std::sin(phi), z) *
-                            ((2.0 * std::numbers::pi) / period),
-                        (2.0 * std::numbers::pi) * Fract(i * 0.3819660112501051 + seed * 0.77)});
+      waves_.push_back({glm::dvec3(s * std::cos(phi), s * std::sin(phi), z) * (kTwoPi / period),
+                        kTwoPi * Fract(i * 0.3819660112501051 + seed * 0.77)});
     }
     scale_ = std::sqrt(2.0 / count);
   }
@@ -466,8 +467,7 @@ TriangleMesh MakeTexturedHammerFullResolution(const TexturedHammerParams& p) {
   solid.AddBox({-hh.x, -hh.y, z_head}, {hh.x, hh.y, z_top});
   solid.AddCylinder({2, {0.0, 0.0}, R, z_bottom, z_head, 0.0, outer_blend});
 
-  const int starts =
-      std::max(1, static_cast<int>(std::lround((2.0 * std::numbers::pi) * R / p.knurl_period_m)));
+  const int starts = std::max(1, static_cast<int>(std::lround(kTwoPi * R / p.knurl_period_m)));
   const double grip0 = z_bottom + p.grip_start_m, grip1 = grip0 + p.grip_length_m;
   const double fade = 3.0e-3;
   const PlaneWaveNoise peen(8, p.peen_min_period_m, p.peen_max_period_m, 1.0);
@@ -480,7 +480,7 @@ TriangleMesh MakeTexturedHammerFullResolution(const TexturedHammerParams& p) {
     if (w_knurl > 0.0) {
       const double theta = std::atan2(q.y, q.x);
       h += w_knurl * p.knurl_amplitude_m * std::cos(starts * theta) *
-           std::cos((2.0 * std::numbers::pi) * q.z / p.knurl_period_m);
+           std::cos(kTwoPi * q.z / p.knurl_period_m);
     }
     const double w_head = Smoothstep(z_head - 4.0e-3, z_head, q.z);
     if (w_head > 0.0) h += w_head * p.peen_amplitude_m * std::tanh(0.5 * peen(q));
@@ -559,10 +559,8 @@ TriangleMesh MakeRoughCadPartFullResolution(const RoughCadPartParams& p) {
     const double w_flat = Smoothstep(0.5, 0.9, std::abs(n.z));
     const double mill =
         p.mill_amplitude_m *
-        std::cos((2.0 * std::numbers::pi) * glm::length(glm::dvec2(q.x, q.y) - cutter_centre) /
-                 p.mill_period_m);
-    const double wall =
-        p.wall_amplitude_m * std::cos((2.0 * std::numbers::pi) * q.z / p.wall_period_m);
+        std::cos(kTwoPi * glm::length(glm::dvec2(q.x, q.y) - cutter_centre) / p.mill_period_m);
+    const double wall = p.wall_amplitude_m * std::cos(kTwoPi * q.z / p.wall_period_m);
     return w_flat * mill + (1.0 - w_flat) * wall + p.rough_amplitude_m * std::tanh(0.5 * rough(q));
   };
   return ShapeFromPolycube(
@@ -653,7 +651,7 @@ TriangleMesh MakeToothedFileFullResolution(const ToothedFileParams& p) {
     const double w_grip = Smoothstep(x_handle + 5.0e-3, x_handle + 5.0e-3 + fade, q.x) *
                           (1.0 - Smoothstep(x_neck - 5.0e-3 - fade, x_neck - 5.0e-3, q.x)) *
                           Smoothstep(0.85, 0.97, std::sqrt(n.y * n.y + n.z * n.z));
-    h += w_grip * p.grip_amplitude_m * std::cos((2.0 * std::numbers::pi) * q.x / p.grip_period_m);
+    h += w_grip * p.grip_amplitude_m * std::cos(kTwoPi * q.x / p.grip_period_m);
     return h;
   };
   return ShapeFromPolycube(solid, p.cell_size_m, p.detail_scale, taper, detail);
@@ -676,9 +674,9 @@ TriangleMesh MakeWrinkledTorusFullResolution(const WrinkledTorusParams& p) {
   TriangleMesh mesh;
   mesh.vertices.reserve(static_cast<size_t>(nu) * nv);
   for (int i = 0; i < nu; ++i) {
-    const double theta = (2.0 * std::numbers::pi) * i / nu;
+    const double theta = kTwoPi * i / nu;
     for (int j = 0; j < nv; ++j) {
-      const double phi = (2.0 * std::numbers::pi) * j / nv;
+      const double phi = kTwoPi * j / nv;
       const glm::dvec3 n(std::cos(phi) * std::cos(theta), std::cos(phi) * std::sin(theta),
                          std::sin(phi));
       const double rho = r + A * std::sin(p.major_waves * theta + p.tube_waves * phi);

@@ -711,7 +711,7 @@ std::unique_ptr<PenetrationDepthBackend> MakePenetrationDepthBackend(
   try {
     GpuPenetrationDepthOptions options = gpu_options;
     options.max_resolution = std::max(options.max_resolution, grid_resolution);
-    // A software rasterizer (llvmpipe) is slower than the CPU reference on this stage (see the
+    // A software rasterizer (llvmpipe) is slower than the CPU backend on this stage (see the
     // benchmark): auto takes hardware only; gpu takes whatever starts.
     if (choice == PdBackendChoice::kAuto) options.egl.allow_software = false;
     auto gpu = GpuPenetrationDepthBackend::Create(options);
@@ -721,9 +721,9 @@ std::unique_ptr<PenetrationDepthBackend> MakePenetrationDepthBackend(
   } catch (const std::exception& e) {
     message = choice == PdBackendChoice::kGpu
                   ? std::string("GPU penetration depth was requested but cannot start: ") +
-                        e.what() + "; falling back to the CPU reference"
+                        e.what() + "; falling back to the CPU backend"
                   : std::string("no hardware GPU (") + e.what() +
-                        "); penetration depth on the CPU reference (--pd-backend gpu forces a "
+                        "); penetration depth on the CPU backend (--pd-backend gpu forces a "
                         "software renderer such as llvmpipe)";
     return std::make_unique<CpuPenetrationDepthBackend>(cpu_resolution, TextureStagePath::kFast,
                                                         cpu_threads);

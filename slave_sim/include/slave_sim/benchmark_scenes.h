@@ -3,12 +3,16 @@
 // each with its haptic models built at a chosen texture size and coarse triangle count, the
 // full-resolution meshes the ground truth is computed on, and in-contact tool poses.
 //
+// clang-format off
 //   fig75         ridged block (tool) on the ridged gear (seed Figs. 72-b, 75)
-//   fig76         two identical striped blocks, interlocked; the upper one is the tool (Fig. 72-a,
-//   76) fig77         the file (tool) scraping the rough CAD part (Figs. 74, 77) hammer_torus  the
-//   textured hammer (tool) touching the wrinkled helicoidal torus (Fig. 73); the
-//                 hammer mesh is turned head down (a half turn about x) so that the tool's home
-//                 orientation, which the operator's workspace is aligned with, is the identity
+//   fig76         two identical striped blocks, interlocked; the upper one is the tool
+//                 (Fig. 72-a, 76)
+//   fig77         the file (tool) scraping the rough CAD part (Figs. 74, 77)
+//   hammer_torus  the textured hammer (tool) touching the wrinkled helicoidal torus (Fig. 73);
+//                 the hammer mesh is turned head down (a half turn about x) so that the tool's
+//                 home orientation, which the operator's workspace is aligned with, is the
+//                 identity
+// clang-format on
 
 #include <memory>
 #include <string>

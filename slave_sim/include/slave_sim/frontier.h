@@ -11,6 +11,7 @@
 
 #include "haptic_core/accuracy/ground_truth_depth.h"
 #include "haptic_core/contact_linearization.h"
+#include "haptic_core/contact_model.h"
 
 namespace ht {
 
@@ -38,7 +39,7 @@ struct FrontierSetting {
   TextureStagePath texture_path = TextureStagePath::kFast;
   int texture_threads = 1;
   /// Most contacts per step (PipelineOptions::max_contacts).
-  int max_contacts = 14;
+  int max_contacts = kMaxContacts;
   /// PipelineOptions::local_reach.
   bool local_reach = false;
 };

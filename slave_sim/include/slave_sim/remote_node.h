@@ -24,7 +24,7 @@ struct RemoteNodeConfig {
   SocketAddress listen_address = SocketAddress::Parse("127.0.0.1:47000");
   PipelineOptions pipeline;
   /// Where the texture penetration depth runs: cpu, gpu (headless EGL), or auto (a hardware GPU
-  /// when one starts, else the CPU reference). A GPU that cannot start means the CPU, with a
+  /// when one starts, else the CPU backend). A GPU that cannot start means the CPU, with a
   /// message; so does a GPU that fails mid-run.
   PdBackendChoice pd_backend = PdBackendChoice::kAuto;
   /// GPU options (depth precision, batch size).
