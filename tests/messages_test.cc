@@ -53,6 +53,10 @@ DecodeStatus OpenAndDecode(std::span<const std::uint8_t> bytes, const MacKey& ke
       ContactModelMessage m;
       return DecodeContactModel(body, m);
     }
+    case MessageType::kCompactContactModel: {
+      ContactModelMessage m;
+      return DecodeCompactContactModel(body, m);
+    }
     case MessageType::kGoodbye:
     case MessageType::kPing:
       return DecodeEmpty(body);
@@ -153,6 +157,7 @@ std::vector<Datagram> OneOfEach(const MacKey& key) {
   n.missing[1] = 5;
   n.missing[2] = 9;
   out.push_back(EncodeSceneNack(h, n, key));
+  out.push_back(EncodeCompactContactModel(h, SampleModel(kMaxWireContacts), key));
   return out;
 }
 
@@ -370,7 +375,7 @@ TEST(Messages, NonFiniteAndImpossibleValuesAreRejectedEvenWithAValidMac) {
   EXPECT_EQ(Sealed([&](const MacKey& k) {
               Datagram d = EncodeWelcome({}, SampleWelcome(), k);
               d.size -= kMacBytes;
-              d.bytes[kHeaderBytes + 36] = 40;  // name length beyond its field
+              d.bytes[kHeaderBytes + 36 + kDeadbandTermsBytes] = 40;  // name length beyond its field
               ComputeMac(d.view(), k,
                          std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size, kMacBytes));
               d.size += kMacBytes;

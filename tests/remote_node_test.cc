@@ -10,6 +10,7 @@
 #include <thread>
 
 #include "haptic_core/demo/demo_scenes.h"
+#include "transport/auth.h"
 #include "transport/messages.h"
 
 namespace ht {
@@ -163,6 +164,126 @@ TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
             4);  // A, A again, 999 twice (A replayed is rejected)
   EXPECT_GE(t["streams"]["scene_fragment"]["sent"].get<int>(), 3);  // 3000 B in 1396 B pieces
   EXPECT_GE(summary["steps"].get<int>(), 1);
+}
+
+TEST(RemoteNode, RefusesAnOperatorOfAnotherVersionAndHoldsBackModelsThatSayNothingNew) {
+  const HapticScene scene = MakeBlockOnGearScene();
+  RemoteNodeConfig config;
+  config.listen_address = SocketAddress::Parse("127.0.0.1:0");
+  config.progress_period_s = 0.0;
+  config.key = TestKey(21);
+  config.exit_on_goodbye = false;
+  const std::string port_file = ::testing::TempDir() + "/remote_node_deadband_test.port";
+  std::remove(port_file.c_str());
+  config.port_file = port_file;
+  std::atomic<bool> stop{false};
+  nlohmann::json summary;
+  std::thread node([&] { summary = RunRemoteNode(config, scene, stop); });
+  std::uint16_t port = 0;
+  for (int i = 0; i < 400 && port == 0; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    if (FILE* f = std::fopen(port_file.c_str(), "r")) {
+      unsigned p = 0;
+      if (std::fscanf(f, "%u", &p) == 1) port = static_cast<std::uint16_t>(p);
+      std::fclose(f);
+    }
+  }
+  ASSERT_NE(port, 0);
+  const SocketAddress remote = SocketAddress::Parse("127.0.0.1:" + std::to_string(port));
+  UdpSocket socket(SocketAddress::Parse("127.0.0.1:0"));
+
+  // 1. A version-3 operator's Hello (header version 3, the 32-byte v3 body) gets a Reject in
+  // version 3 that it can read.
+  wire::HelloMessage hello;
+  hello.client_nonce = 4242;
+  hello.min_version = hello.max_version = 3;
+  wire::Datagram old = wire::EncodeHello({wire::MessageType::kHello, 0, 1, 0}, hello, config.key);
+  old.bytes[4] = 3;
+  old.size = wire::kHeaderBytes + 32;
+  ComputeMac(old.view(), config.key,
+             std::span<std::uint8_t, wire::kMacBytes>(old.bytes.data() + old.size, wire::kMacBytes));
+  old.size += wire::kMacBytes;
+  ASSERT_TRUE(socket.SendTo(old.view(), remote));
+  bool refused = false;
+  std::array<std::uint8_t, wire::kMaxDatagramBytes> buf{};
+  for (int i = 0; i < 300 && !refused; ++i) {
+    socket.WaitReadable(10);
+    SocketAddress from;
+    while (auto n = socket.ReceiveFrom(buf, from)) {
+      const std::span<const std::uint8_t> d(buf.data(), *n);
+      if (*n < wire::kHeaderBytes + wire::kRejectFixedBytes + wire::kMacBytes || buf[4] != 3 ||
+          buf[6] != static_cast<std::uint8_t>(wire::MessageType::kReject)) {
+        continue;
+      }
+      ASSERT_TRUE(VerifyMac(d, config.key));
+      // The v3 Reject body: u64 nonce, u8 reason, u8 n, text.
+      std::uint64_t nonce = 0;
+      for (int b = 7; b >= 0; --b) nonce = (nonce << 8) | buf[wire::kHeaderBytes + b];
+      EXPECT_EQ(nonce, 4242u);
+      EXPECT_EQ(buf[wire::kHeaderBytes + 8], static_cast<std::uint8_t>(wire::RejectReason::kVersion));
+      const std::string text(reinterpret_cast<const char*>(buf.data() + wire::kHeaderBytes + 10),
+                             buf[wire::kHeaderBytes + 9]);
+      EXPECT_NE(text.find("operator speaks 3..3"), std::string::npos) << text;
+      refused = true;
+    }
+  }
+  ASSERT_TRUE(refused);
+
+  // 2. A version-4 operator asks for a 10 % deadband on both streams and compact models.
+  hello = {};
+  hello.client_nonce = 4343;
+  hello.codecs = wire::kCodecDracoMesh | wire::kCodecCompactContactModel;
+  hello.deadband = {0.1f, 0.1f, 100, 100};
+  socket.SendTo(wire::EncodeHello({wire::MessageType::kHello, 0, 2, 0}, hello, config.key).view(),
+                remote);
+  wire::Header h;
+  wire::WelcomeMessage welcome;
+  ASSERT_TRUE(Await(socket, config.key, wire::MessageType::kWelcome, h, [&](auto body) {
+    return wire::DecodeWelcome(body, welcome) == wire::DecodeStatus::kOk;
+  }));
+  EXPECT_EQ(welcome.deadband.model_deadband, 0.1f);
+  EXPECT_NE(welcome.codecs & wire::kCodecCompactContactModel, 0u);
+  const std::uint32_t session = h.session_id;
+  // One tool state, at rest and pressed on the ridges, then nothing: the node has nothing new to
+  // compute, skips its steps and keeps the operator's model alive every 100 ms.
+  wire::ToolStateMessage state;
+  state.X_WT = scene.X_WT_home;
+  state.X_WT.translation.z -= 0.5e-3;
+  socket.SendTo(
+      wire::EncodeToolState({wire::MessageType::kToolState, session, 1, 0}, state, config.key)
+          .view(),
+      remote);
+  wire::ContactModelMessage first;
+  ASSERT_TRUE(Await(socket, config.key, wire::MessageType::kCompactContactModel, h, [&](auto b) {
+    return wire::DecodeCompactContactModel(b, first) == wire::DecodeStatus::kOk;
+  }));
+  ASSERT_EQ(first.model.num_contacts, 1);
+  int models = 0;
+  const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(550);
+  while (std::chrono::steady_clock::now() < until) {
+    socket.WaitReadable(10);
+    SocketAddress from;
+    while (auto n = socket.ReceiveFrom(buf, from)) {
+      std::span<const std::uint8_t> body;
+      wire::ContactModelMessage m;
+      if (wire::OpenDatagram({buf.data(), *n}, config.key, h, body) == wire::DecodeStatus::kOk &&
+          h.type == wire::MessageType::kCompactContactModel &&
+          wire::DecodeCompactContactModel(body, m) == wire::DecodeStatus::kOk) {
+        ++models;
+        EXPECT_EQ(m.model.contacts[0].depth_m, first.model.contacts[0].depth_m);  // the same model
+      }
+    }
+  }
+  // About five keep-alives in 550 ms (without the deadband: a model per step, hundreds).
+  EXPECT_GE(models, 3);
+  EXPECT_LE(models, 8);
+  stop = true;
+  node.join();
+  const nlohmann::json& t = summary["transport"];
+  EXPECT_EQ(t["foreign_version_hellos"].get<int>(), 1);
+  EXPECT_EQ(t["rejects_sent"].get<int>(), 1);
+  EXPECT_GT(t["deadband"]["steps_skipped"].get<int>(), 100);
+  EXPECT_GE(t["deadband"]["keepalives_sent"].get<int>(), 3);
 }
 
 }  // namespace

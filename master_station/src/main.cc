@@ -8,6 +8,7 @@
 #include <exception>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <random>
 #include <sstream>
 
@@ -20,6 +21,10 @@
 #include "master_station/spacemouse.h"
 
 namespace {
+
+// The default perceptual deadband on both streams (percent): the largest of the measured table
+// (docs/deadband.md) whose RMS force error stays within 5 %.
+constexpr double kDefaultDeadbandPercent = 0.0;
 
 // Set by SIGINT / SIGTERM: the loop ramps the force to zero and the run ends normally.
 std::atomic<bool> g_stop{false};
@@ -164,6 +169,39 @@ int main(int argc, char** argv) {
                  "fade the force to zero when the contact model is older than this, s")
       ->check(CLI::Range(0.01, 60.0))
       ->capture_default_str();
+  // Perceptual deadband (transport/deadband.h): the measured table is in docs/deadband.md.
+  double deadband_pct = kDefaultDeadbandPercent;
+  std::optional<double> tool_state_deadband_pct, model_deadband_pct;
+  double deadband_keepalive_ms = 100.0;
+  bool deadband_velocity_adaptive = false, float_models = false;
+  app.add_option("--deadband", deadband_pct,
+                 "perceptual deadband on both streams, percent (a Weber fraction: a tool state or "
+                 "contact model is sent only when it differs from what the other side predicts "
+                 "by more than this; 0 = off, every sample sent)")
+      ->check(CLI::Range(0.0, 99.0))
+      ->capture_default_str();
+  app.add_option("--tool-state-deadband", tool_state_deadband_pct,
+                 "deadband on the tool states this station sends, percent (default: --deadband)")
+      ->check(CLI::Range(0.0, 99.0));
+  app.add_option("--model-deadband", model_deadband_pct,
+                 "deadband asked of the remote node for its contact models, percent (default: "
+                 "--deadband)")
+      ->check(CLI::Range(0.0, 99.0));
+  app.add_option("--deadband-keepalive", deadband_keepalive_ms,
+                 "longest gap either stream leaves while its deadband holds samples back, ms "
+                 "(below --model-timeout)")
+      ->check(CLI::Range(1.0, 60000.0))
+      ->capture_default_str();
+  bool deadband_velocity = false;
+  app.add_flag("--deadband-velocity", deadband_velocity,
+               "also send a tool state when its twist changed beyond the deadband (by default "
+               "only the pose's departure from the remote node's extrapolation counts)");
+  app.add_flag("--deadband-velocity-adaptive", deadband_velocity_adaptive,
+               "widen the tool-state position and rotation floors while the tool moves fast "
+               "(1 + speed / 0.05 m/s)");
+  app.add_flag("--float-models", float_models,
+               "ask for contact models in the float encoding rather than the compact quantized "
+               "one (transport/protocol.h states its error bounds)");
   std::string keygen_path;
   bool keygen_force = false;
   CLI::App* keygen = app.add_subcommand(
@@ -206,6 +244,14 @@ int main(int argc, char** argv) {
     config.max_model_rate_hz = max_model_rate;
     config.passivity = !no_passivity;
     config.safety.model_timeout_s = model_timeout_s;
+    config.tool_state_deadband.weber_fraction =
+        tool_state_deadband_pct.value_or(deadband_pct) / 100.0;
+    config.tool_state_deadband.keepalive_s = deadband_keepalive_ms * 1e-3;
+    config.tool_state_deadband.velocity_adaptive = deadband_velocity_adaptive;
+    config.tool_state_deadband.velocity_criterion = deadband_velocity;
+    config.model_deadband = model_deadband_pct.value_or(deadband_pct) / 100.0;
+    config.model_keepalive_s = deadband_keepalive_ms * 1e-3;
+    config.compact_models = !float_models;
     config.out_dir = out_dir;
     config.progress_period_s = quiet ? 0.0 : 0.5;
     // The remote node's Welcome gives the workspace pose (the tool's home) and the tool's

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <array>
 #include <cstdio>
+#include <cmath>
 #include <ctime>
 #include <exception>
 #include <optional>
@@ -83,8 +84,15 @@ void NetworkWorker::Run(const std::atomic<bool>& stop) {
     if (outgoing_.Read(state)) {
       last = state;
       have_last = true;
-      Send(state);
-      last_send_ns = now;
+      ++tool_states_offered_;
+      if (tool_deadband_.Decide(state.message.X_WT, state.message.V_WT_W, state.time_ns) !=
+          DeadbandReason::kNotSent) {
+        Send(state);
+        last_send_ns = now;
+      } else {
+        ++tool_states_held_back_;
+        last_send_ns = now;  // the deadband's own keep-alive bounds the gap
+      }
     } else if (have_last && now - last_send_ns > 20000000) {
       // Keep-alive while the loop is not running (before the first tick, after the last): the
       // same pose, stamped now, so that round trips measured on it are not inflated.
@@ -138,6 +146,23 @@ nlohmann::json NetworkWorker::Summary() const {
   t["hellos_sent"] = hellos_sent_;
   t["mtu"] = mtu_;
   t["scene_name"] = scene_name_;
+  {
+    nlohmann::json reasons = nlohmann::json::object();
+    for (int i = 0; i < kDeadbandReasonCount; ++i) {
+      if (tool_deadband_.counts()[i] != 0) {
+        reasons[ToString(static_cast<DeadbandReason>(i))] = tool_deadband_.counts()[i];
+      }
+    }
+    t["deadband"] = {{"tool_state_deadband", deadband_agreed_.tool_state_deadband},
+                     {"model_deadband", deadband_agreed_.model_deadband},
+                     {"tool_state_keepalive_ms", deadband_agreed_.tool_state_keepalive_ms},
+                     {"model_keepalive_ms", deadband_agreed_.model_keepalive_ms},
+                     {"velocity_adaptive", config_.tool_state_deadband.velocity_adaptive},
+                     {"compact_models", compact_models_},
+                     {"tool_states_offered", tool_states_offered_},
+                     {"tool_states_held_back", tool_states_held_back_},
+                     {"tool_state_decisions", reasons}};
+  }
   t["clock"] = {{"samples", clock_.rtt_ms_samples().size()},
                 {"offset_ms", clock_.offset_ns() * 1e-6},
                 {"offset_uncertainty_ms", clock_.rtt_ns() * 0.5e-6},
@@ -185,6 +210,15 @@ void NetworkWorker::SendHello() {
   hello.mtu = static_cast<std::uint16_t>(config_.mtu);
   hello.heartbeat_ms = static_cast<std::uint16_t>(config_.heartbeat_ms);
   hello.peer_timeout_ms = static_cast<std::uint16_t>(config_.peer_timeout_ms);
+  hello.codecs = wire::kCodecDracoMesh |
+                 (config_.compact_models ? wire::kCodecCompactContactModel : 0u);
+  hello.deadband.tool_state_deadband =
+      static_cast<float>(config_.tool_state_deadband.weber_fraction);
+  hello.deadband.model_deadband = static_cast<float>(config_.model_deadband);
+  hello.deadband.tool_state_keepalive_ms = static_cast<std::uint16_t>(
+      std::lround(config_.tool_state_deadband.keepalive_s * 1e3));
+  hello.deadband.model_keepalive_ms =
+      static_cast<std::uint16_t>(std::lround(config_.model_keepalive_s * 1e3));
   link_.Send(wire::EncodeHello(link_.NextHeader(wire::MessageType::kHello, 0), hello, config_.key),
              config_.remote_address);
   ++hellos_sent_;
@@ -221,6 +255,14 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
       heartbeat_ns_ = std::int64_t{w.heartbeat_ms} * 1000000;
       peer_timeout_ns_ = std::int64_t{w.peer_timeout_ms} * 1000000;
       expected_objects_ = w.scene_objects;
+      {
+        ToolStateDeadbandConfig deadband = config_.tool_state_deadband;
+        deadband.weber_fraction = w.deadband.tool_state_deadband;
+        deadband.keepalive_s = w.deadband.tool_state_keepalive_ms * 1e-3;
+        tool_deadband_ = ToolStateDeadband(deadband);
+      }
+      deadband_agreed_ = w.deadband;
+      compact_models_ = (w.codecs & wire::kCodecCompactContactModel) != 0;
       scene_name_ = std::string(w.name());
       {
         std::lock_guard<std::mutex> lock(layout_mutex_);
@@ -254,9 +296,12 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
       counters_.rejected.store(true);
       return;
     }
-    case wire::MessageType::kContactModel: {
+    case wire::MessageType::kContactModel:
+    case wire::MessageType::kCompactContactModel: {
       IncomingModel model;
-      if (const auto st = wire::DecodeContactModel(body, model.message);
+      if (const auto st = header.type == wire::MessageType::kContactModel
+                              ? wire::DecodeContactModel(body, model.message)
+                              : wire::DecodeCompactContactModel(body, model.message);
           st != wire::DecodeStatus::kOk) {
         link_.CountBodyRejected(header.type, st);
         return;

@@ -16,6 +16,7 @@
 #include "haptic_core/steady_clock.h"
 #include "master_station/lock_free.h"
 #include "master_station/operator_station.h"
+#include "transport/deadband.h"
 #include "transport/link.h"
 #include "transport/messages.h"
 #include "transport/scene_stream.h"
@@ -92,6 +93,11 @@ class NetworkWorker {
   TripleBuffer<IncomingModel>& incoming_;
   Counters& counters_;
   std::uint32_t session_ = 0;
+  /// The tool-state stream's perceptual deadband, as agreed in the Welcome.
+  ToolStateDeadband tool_deadband_{{}};
+  wire::DeadbandTerms deadband_agreed_;
+  bool compact_models_ = false;
+  std::uint64_t tool_states_offered_ = 0, tool_states_held_back_ = 0;
   std::uint64_t hello_nonce_ = 0;
   std::int64_t attempt_start_ns_ = 0;
   std::int64_t heartbeat_ns_ = 100000000, peer_timeout_ns_ = 500000000, session_start_ns_ = 0;

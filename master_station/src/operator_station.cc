@@ -72,6 +72,20 @@ void StationConfig::Validate() const {
   if (max_grid < 0 || max_grid > 65535) throw std::invalid_argument("max grid must be 0..65535");
   coupling.Validate();
   safety.Validate();
+  tool_state_deadband.Validate();
+  if (!(tool_state_deadband.keepalive_s >= 1e-3 && tool_state_deadband.keepalive_s <= 60.0)) {
+    throw std::invalid_argument("tool-state keep-alive must be within 1 ms..60 s");
+  }
+  if (!(model_deadband >= 0.0 && model_deadband < 1.0)) {
+    throw std::invalid_argument("contact-model deadband must be in [0, 1), got " +
+                                std::to_string(model_deadband));
+  }
+  if (!(model_keepalive_s >= 1e-3 && model_keepalive_s < safety.model_timeout_s)) {
+    throw std::invalid_argument(
+        "contact-model keep-alive must be at least 1 ms and below the model timeout (" +
+        std::to_string(safety.model_timeout_s) + " s), or the force would fade between models; "
+        "got " + std::to_string(model_keepalive_s) + " s");
+  }
 }
 
 nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& device,
@@ -215,8 +229,10 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
         std::string("no contact model from the remote node at ") +
         config.remote_address.ToString() + " within " + timeout + " s: " +
         (connected ? "the session opened but no model came back"
-                   : "no session (is slave_sim running and listening there, and do both sides "
-                     "use the same --key file?)") +
+                   : "no session (is slave_sim running and listening there, do both sides "
+                     "use the same --key file, and is it a release that speaks protocol v" +
+                         std::to_string(wire::kProtocolVersion) +
+                         "? an older remote node drops this station's Hello unanswered)") +
         "; datagrams rejected here: " + std::to_string(network.rejected_total()));
   }
 
@@ -469,6 +485,15 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   s["trace_rows_dropped"] = rows_dropped.load();
   s["trace_rows_over_cap"] = rows_over_cap;
   s["transport"] = network.Summary();
+  // Packet and bit rates per stream over the loop's run time (payload bytes: header, body and
+  // MAC; UDP and IP headers not counted). Sent for operator → remote streams, received for the
+  // others; the remote node's own counts are merged under each stream's "remote".
+  for (auto& [type, stream] : s["transport"]["streams"].items()) {
+    const double packets = stream.value("sent", 0.0) + stream.value("received", 0.0);
+    const double bytes = stream.value("bytes_sent", 0.0) + stream.value("bytes_received", 0.0);
+    stream["packets_per_s"] = packets / std::max(elapsed_s, 1e-9);
+    stream["kbit_per_s"] = bytes * 8e-3 / std::max(elapsed_s, 1e-9);
+  }
   s["clock_offset_ms"] = s["transport"]["clock"]["offset_ms"];
   s["model_one_way_ms_p50"] = Percentile(network.one_way_ms(), 0.5);
   s["model_one_way_ms_p99"] = Percentile(network.one_way_ms(), 0.99);

@@ -87,6 +87,12 @@ int main(int argc, char** argv) {
   app.add_option("--max-rate", config.max_rate_hz, "cap on the step rate in Hz (0 = none)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  double max_deadband_pct = 50.0;
+  app.add_option("--max-deadband", max_deadband_pct,
+                 "largest perceptual deadband an operator may ask on either stream, percent (a "
+                 "Weber fraction); a Hello asking more is refused with a Reject that says so")
+      ->check(CLI::Range(0.0, 99.0))
+      ->capture_default_str();
   app.add_option("--out", out_dir,
                  "directory for remote_summary.json and remote_steps.csv (one row per step)");
   app.add_option("--port-file", port_file, "write the bound UDP port to this file");
@@ -148,6 +154,7 @@ int main(int argc, char** argv) {
   seed_models->add_flag("--quiet", quiet, "no progress lines");
   app.add_flag("--quiet", quiet, "no progress lines");
   CLI11_PARSE(app, argc, argv);
+  config.max_deadband = max_deadband_pct / 100.0;
 
   if (*seed_models) {
     try {

@@ -67,6 +67,8 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   caps.mtu = static_cast<std::uint16_t>(config.mtu);
   caps.max_model_rate_hz = static_cast<float>(config.max_rate_hz);
   caps.peer_timeout_ms = static_cast<std::uint16_t>(config.peer_timeout_ms);
+  caps.max_deadband = static_cast<float>(config.max_deadband);
+  caps.codecs = wire::kCodecDracoMesh | wire::kCodecCompactContactModel;
   caps.scene_objects = static_cast<std::uint16_t>(config.scene_objects.size());
   caps.scene_name = scene.name;
   caps.layout = MakeSceneLayout(scene);
@@ -112,13 +114,22 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
       socket.WaitReadable(1);
       continue;
     }
-    // 3. The remote step at the newest tool state, and its contact model to the operator.
+    // 3. The remote step at the newest tool state (extrapolated under a tool-state deadband),
+    // and its contact model to the operator. A step that would see nothing new is skipped: the
+    // operator keeps the model it holds, refreshed at the keep-alive.
     const std::int64_t t_step = SteadyNowNs();
+    const RigidTransform X_WT = session.ToolPoseForStep(t_step);
+    if (!config.animate && session.StepWouldRepeat(X_WT)) {
+      session.CountSkippedStep();
+      session.MaybeSendKeepAlive(t_step);
+      socket.WaitReadable(1);
+      continue;
+    }
     if (config.animate) config.animate(static_cast<double>(t_step - start_ns) * 1e-9);
     StepTimings timings;
     wire::ContactModelMessage out;
-    out.model =
-        pipeline.Step(session.latest_tool_state().X_WT, session.latest_tool_state_seq(), timings);
+    out.model = pipeline.Step(X_WT, session.latest_tool_state_seq(), timings);
+    session.SteppedAt(X_WT);
     if (pipeline.backend_failures() == 1 && !reported_fallback) {
       reported_fallback = true;
       std::printf("[slave] GPU penetration depth failed (%s); continuing on the CPU backend\n",

@@ -21,7 +21,12 @@ bool RemoteSession::OnDatagram(std::span<const std::uint8_t> datagram, const Soc
   wire::Header header;
   std::span<const std::uint8_t> body;
   bool late = false;
-  if (link_.Open(datagram, session_, header, body, late) != wire::DecodeStatus::kOk) return true;
+  const wire::DecodeStatus status = link_.Open(datagram, session_, header, body, late);
+  if (status == wire::DecodeStatus::kBadVersion) {
+    RefuseForeignHello(datagram, from);
+    return true;
+  }
+  if (status != wire::DecodeStatus::kOk) return true;
   switch (header.type) {
     case wire::MessageType::kHello:
       OnHello(header, body, from, now);
@@ -42,6 +47,7 @@ bool RemoteSession::OnDatagram(std::span<const std::uint8_t> datagram, const Soc
       }
       latest_recv_ns_ = now;
       have_state_ = true;
+      fresh_state_ = true;
       break;
     }
     case wire::MessageType::kPing: {
@@ -159,15 +165,25 @@ void RemoteSession::OnHello(const wire::Header& header, std::span<const std::uin
   scene_tokens_ = 0.0;
   session_start_ns_ = now;
   session_welcome_ = welcome;
+  ContactModelDeadbandConfig deadband = config_.model_deadband;
+  deadband.weber_fraction = welcome.deadband.model_deadband;
+  deadband.keepalive_s = welcome.deadband.model_keepalive_ms * 1e-3;
+  model_deadband_ = ContactModelDeadband(deadband);
+  tool_state_deadband_ = welcome.deadband.tool_state_deadband > 0.0f;
+  tool_state_keepalive_ns_ = std::int64_t{welcome.deadband.tool_state_keepalive_ms} * 1000000;
+  model_keepalive_ns_ = std::int64_t{welcome.deadband.model_keepalive_ms} * 1000000;
+  compact_models_ = (welcome.codecs & wire::kCodecCompactContactModel) != 0;
+  have_step_pose_ = have_sent_model_ = false;
   link_.Send(wire::EncodeWelcome(link_.NextHeader(wire::MessageType::kWelcome, session_), welcome,
                                  config_.key),
              peer_);
   SendManifest(now);
   std::printf(
       "[slave] session %08x opened for operator at %s (protocol v%u, mtu %u, grid %u, "
-      "peer timeout %u ms)\n",
+      "peer timeout %u ms, deadband tool states %.0f %% / contact models %.0f %%, %s models)\n",
       session_, from.ToString().c_str(), welcome.version, welcome.mtu, welcome.grid,
-      welcome.peer_timeout_ms);
+      welcome.peer_timeout_ms, 100.0 * welcome.deadband.tool_state_deadband,
+      100.0 * welcome.deadband.model_deadband, compact_models_ ? "compact" : "float");
   std::fflush(stdout);
 }
 
@@ -197,21 +213,90 @@ void RemoteSession::StreamScene(std::int64_t now) {
   if (now - last_manifest_ns_ > 250000000) SendManifest(now);
 }
 
+RigidTransform RemoteSession::ToolPoseForStep(std::int64_t now) noexcept {
+  fresh_state_ = false;
+  if (!tool_state_deadband_) {
+    step_extrapolation_ns_ = 0;
+    return latest_.X_WT;
+  }
+  step_extrapolation_ns_ = std::clamp<std::int64_t>(now - latest_recv_ns_, 0,
+                                                    tool_state_keepalive_ns_);
+  return ExtrapolatePose(latest_.X_WT, latest_.V_WT_W, step_extrapolation_ns_ * 1e-9);
+}
+
+bool RemoteSession::StepWouldRepeat(const RigidTransform& X_WT) const noexcept {
+  return tool_state_deadband_ && !fresh_state_ && have_step_pose_ &&
+         X_WT.translation == last_step_pose_.translation &&
+         X_WT.rotation == last_step_pose_.rotation;
+}
+
 bool RemoteSession::MaybeSendContactModel(wire::ContactModelMessage& out,
                                           const StepTimings& timings, std::uint64_t step_count,
                                           std::int64_t now) {
   if (session_ == 0) return false;
   if (model_period_ns_ != 0 && now - last_model_sent_ns_ < model_period_ns_) return false;
-  out.tool_state_send_time_ns = latest_send_time_ns_;
+  if (model_deadband_.Decide(out.model, now) == DeadbandReason::kNotSent) {
+    ++models_held_back_;
+    return false;
+  }
+  // The pose the model answers is the tool state's extrapolated by step_extrapolation_ns_: its
+  // operator time is the state's send time plus that, and it "arrived" as much later here, so
+  // that the operator's round trip (now − echo − hold) stays the network's.
+  out.tool_state_send_time_ns = latest_send_time_ns_ + step_extrapolation_ns_;
   out.remote_step_count = step_count;
   out.collision_us = static_cast<float>(timings.collision_us);
   out.texture_us = static_cast<float>(timings.texture_us);
   out.step_us = static_cast<float>(timings.total_us);
-  wire::Header header = link_.NextHeader(wire::MessageType::kContactModel, session_);
-  out.hold_ns = header.send_time_ns - latest_recv_ns_;
-  link_.Send(wire::EncodeContactModel(header, out, config_.key), peer_);
-  last_model_sent_ns_ = now;
+  last_sent_answer_recv_ns_ = latest_recv_ns_ + step_extrapolation_ns_;
+  SendModel(out, now);
   return true;
+}
+
+bool RemoteSession::MaybeSendKeepAlive(std::int64_t now) {
+  if (session_ == 0 || !have_sent_model_ || now - last_model_sent_ns_ < model_keepalive_ns_) {
+    return false;
+  }
+  ++keepalives_sent_;
+  wire::ContactModelMessage again = last_sent_;
+  SendModel(again, now);
+  return true;
+}
+
+void RemoteSession::SendModel(wire::ContactModelMessage& out, std::int64_t now) {
+  const wire::MessageType type =
+      compact_models_ ? wire::MessageType::kCompactContactModel : wire::MessageType::kContactModel;
+  wire::Header header = link_.NextHeader(type, session_);
+  out.hold_ns = header.send_time_ns - last_sent_answer_recv_ns_;
+  link_.Send(compact_models_ ? wire::EncodeCompactContactModel(header, out, config_.key)
+                             : wire::EncodeContactModel(header, out, config_.key),
+             peer_);
+  last_model_sent_ns_ = now;
+  last_sent_ = out;
+  have_sent_model_ = true;
+}
+
+void RemoteSession::RefuseForeignHello(std::span<const std::uint8_t> datagram,
+                                       const SocketAddress& from) {
+  wire::ForeignHello hello;
+  if (wire::OpenForeignHello(datagram, config_.key, hello) != wire::DecodeStatus::kOk) return;
+  ++foreign_hellos_;
+  wire::RejectMessage reject;
+  reject.client_nonce = hello.client_nonce;
+  reject.reason = wire::RejectReason::kVersion;
+  const int n = std::snprintf(
+      reject.text.data(), reject.text.size(),
+      "no protocol version in common: operator speaks %u..%u, remote node %u..%u (update both "
+      "sides to the same release)",
+      hello.min_version, hello.max_version, wire::kMinProtocolVersion, wire::kProtocolVersion);
+  reject.text_length = static_cast<std::uint8_t>(
+      std::clamp<int>(n, 0, static_cast<int>(reject.text.size()) - 1));
+  ++rejects_sent_;
+  link_.Send(wire::EncodeReject(link_.NextHeader(wire::MessageType::kReject, 0), reject,
+                                config_.key, hello.header_version),
+             from);
+  std::printf("[slave] refused an operator of protocol v%u at %s\n", hello.header_version,
+              from.ToString().c_str());
+  std::fflush(stdout);
 }
 
 void RemoteSession::SayGoodbye() {
@@ -249,6 +334,23 @@ nlohmann::json RemoteSession::StatsJson(std::size_t scene_objects, std::size_t s
   transport["hello_retransmits"] = hello_retransmits_;
   transport["hello_deferred"] = hello_deferred_;
   transport["rejects_sent"] = rejects_sent_;
+  transport["foreign_version_hellos"] = foreign_hellos_;
+  nlohmann::json reasons = nlohmann::json::object();
+  for (int i = 0; i < kDeadbandReasonCount; ++i) {
+    if (model_deadband_.counts()[i] != 0) {
+      reasons[ToString(static_cast<DeadbandReason>(i))] = model_deadband_.counts()[i];
+    }
+  }
+  transport["deadband"] = {
+      {"tool_state_deadband", session_welcome_.deadband.tool_state_deadband},
+      {"model_deadband", session_welcome_.deadband.model_deadband},
+      {"tool_state_keepalive_ms", session_welcome_.deadband.tool_state_keepalive_ms},
+      {"model_keepalive_ms", session_welcome_.deadband.model_keepalive_ms},
+      {"compact_models", compact_models_},
+      {"models_held_back", models_held_back_},
+      {"steps_skipped", steps_skipped_},
+      {"keepalives_sent", keepalives_sent_},
+      {"model_decisions", reasons}};
   transport["mtu"] = config_.mtu;
   transport["scene"] = {{"objects", scene_objects},
                         {"bytes", scene_bytes},

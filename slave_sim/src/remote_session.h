@@ -40,11 +40,34 @@ class RemoteSession {
   /// Sends scene fragments as the pacing budget (config.scene_rate_bytes_per_s) allows, and the
   /// manifest every 250 ms. Only while a session is open.
   void StreamScene(std::int64_t now_ns);
-  /// Sends `out` (its model filled by the step that began at the newest tool state) unless the
-  /// negotiated model period since the last one sent has not passed at `now_ns`; fills its
-  /// timing fields from `timings`, its step count and its hold time. Returns true when sent.
+  /// The tool pose the next remote step uses at `now_ns` (ns, SteadyNowNs()): with the
+  /// session's tool-state deadband on, the newest tool state extrapolated at its own twist for
+  /// the time since it arrived (ExtrapolatePose, the prediction the operator's deadband makes;
+  /// at most the tool-state keep-alive ahead, then held); without it, the newest state as is.
+  /// Call once per step: it marks the newest state as used.
+  RigidTransform ToolPoseForStep(std::int64_t now_ns) noexcept;
+  /// True when a step at X_WT (from ToolPoseForStep) would see nothing that the last step did
+  /// not: the tool-state deadband is on, no tool state arrived since the last step, and X_WT is
+  /// the last step's pose. (A moving scene is the caller's to check.)
+  bool StepWouldRepeat(const RigidTransform& X_WT) const noexcept;
+  /// Counts a step skipped because it would repeat the last one.
+  void CountSkippedStep() noexcept { ++steps_skipped_; }
+  /// Records that a step ran at X_WT.
+  void SteppedAt(const RigidTransform& X_WT) noexcept {
+    last_step_pose_ = X_WT;
+    have_step_pose_ = true;
+  }
+  /// Sends `out` (its model filled by the step at the pose ToolPoseForStep gave) unless the
+  /// negotiated model period since the last one sent has not passed at `now_ns` or the session's
+  /// contact-model deadband holds it back; fills its timing fields from `timings`, its step
+  /// count, its echo of the tool state (send time plus the extrapolation, so that the operator's
+  /// model age is the age of the pose answered) and its hold time. Sends in the compact encoding
+  /// when both sides have it. Returns true when sent.
   bool MaybeSendContactModel(wire::ContactModelMessage& out, const StepTimings& timings,
                              std::uint64_t step_count, std::int64_t now_ns);
+  /// While steps are skipped (StepWouldRepeat): sends the last model again (new header, same
+  /// content) when the contact-model keep-alive has passed. Returns true when sent.
+  bool MaybeSendKeepAlive(std::int64_t now_ns);
   /// Tells the operator the node is stopping (three Goodbyes), when a session is open.
   void SayGoodbye();
 
@@ -65,6 +88,8 @@ class RemoteSession {
  private:
   void OnHello(const wire::Header& header, std::span<const std::uint8_t> body,
                const SocketAddress& from, std::int64_t now_ns);
+  void RefuseForeignHello(std::span<const std::uint8_t> datagram, const SocketAddress& from);
+  void SendModel(wire::ContactModelMessage& out, std::int64_t now_ns);
   void SendManifest(std::int64_t now_ns);
   void Close(const char* why);
 
@@ -84,6 +109,18 @@ class RemoteSession {
   double scene_tokens_ = 0.0;
   std::int64_t last_token_ns_ = 0, last_manifest_ns_ = 0;
   double token_cap_ = 0.0;
+
+  // Perceptual deadband (transport/deadband.h) of this session.
+  ContactModelDeadband model_deadband_{{}};
+  bool tool_state_deadband_ = false, compact_models_ = false, fresh_state_ = false;
+  bool have_step_pose_ = false, have_sent_model_ = false;
+  std::int64_t tool_state_keepalive_ns_ = 0, model_keepalive_ns_ = 0;
+  std::int64_t step_extrapolation_ns_ = 0;  ///< of the pose the newest step used
+  RigidTransform last_step_pose_;
+  wire::ContactModelMessage last_sent_;
+  std::int64_t last_sent_answer_recv_ns_ = 0;  ///< receive time + extrapolation of its pose
+  std::uint64_t steps_skipped_ = 0, models_held_back_ = 0, keepalives_sent_ = 0;
+  std::uint64_t foreign_hellos_ = 0;
 
   bool have_state_ = false;
   std::uint64_t state_seq_ = 0;

@@ -58,6 +58,12 @@ void DecodeBody(const ht::wire::Header& h, std::span<const std::uint8_t> body) {
         Check(m.model.num_contacts <= kMaxWireContacts);
       break;
     }
+    case MessageType::kCompactContactModel: {
+      ContactModelMessage m;
+      if (DecodeCompactContactModel(body, m) == DecodeStatus::kOk)
+        Check(m.model.num_contacts <= kMaxWireContacts && ht::IsFiniteRigidTransform(m.model.X_WT0));
+      break;
+    }
     case MessageType::kGoodbye:
     case MessageType::kPing:
       (void)DecodeEmpty(body);

@@ -40,9 +40,9 @@ bool Accepts(LinkRole role, wire::MessageType type) noexcept {
     return type == T::kToolState || type == T::kHello || type == T::kPing ||
            type == T::kSceneNack || type == T::kGoodbye;
   }
-  return type == T::kContactModel || type == T::kWelcome || type == T::kReject ||
-         type == T::kPong || type == T::kSceneFragment || type == T::kSceneManifest ||
-         type == T::kGoodbye;
+  return type == T::kContactModel || type == T::kCompactContactModel || type == T::kWelcome ||
+         type == T::kReject || type == T::kPong || type == T::kSceneFragment ||
+         type == T::kSceneManifest || type == T::kGoodbye;
 }
 
 SecureLink::SecureLink(UdpSocket& socket, const MacKey& key, LinkRole role)

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <concepts>
 #include <cstring>
+#include <limits>
 #include <type_traits>
 
 #include "haptic_core/byte_order.h"
@@ -272,6 +273,74 @@ constexpr void Fields(auto& a, Of<ContactModelMessage> auto& m) {
   for (std::size_t i = 0; i < n; ++i) Fields(a, m.model.contacts[i]);
 }
 
+/// One contact of a CompactContactModel as it is on the wire (protocol.h).
+struct CompactContact {
+  float depth_m = 0.0f;
+  std::array<std::int16_t, 3> d_translation{};  ///< ∂δ/∂x in units of s_x
+  std::array<std::int16_t, 3> d_rotation{};     ///< ∂δ/∂θ in units of s_θ
+  float stiffness_n_per_m = 0.0f;
+  std::array<std::int16_t, 3> point_offset{};  ///< point_W − p_WT0 in units of kCompactPointStepM
+  std::array<std::int16_t, 2> normal_oct{};    ///< octahedral (u, v)·kCompactI16Max
+};
+
+/// A CompactContactModel body as it is on the wire: what QuantizeContactModel() makes of a
+/// ContactModelMessage and DequantizeContactModel() turns back into one.
+struct CompactContactModelBody {
+  std::uint64_t tool_state_seq = 0;
+  std::int64_t tool_state_send_time_ns = 0;
+  std::int64_t hold_ns = 0;
+  std::uint64_t remote_step_count = 0;
+  std::uint16_t collision_us = 0;
+  std::uint16_t texture_us = 0;
+  std::uint16_t step_us = 0;
+  glm::dvec3 p_WT0{0.0};
+  std::array<float, 4> q_WT0{1.0f, 0.0f, 0.0f, 0.0f};  ///< w, x, y, z
+  std::array<float, 6> F_T_W_at_q0{};                  ///< force (N) then torque (N·m)
+  float s_x = 0.0f;                                    ///< step of ∂δ/∂x
+  float s_theta = 0.0f;                                ///< step of ∂δ/∂θ (m/rad)
+  int num_contacts = 0;
+  std::array<CompactContact, kMaxWireContacts> contacts{};
+};
+
+// Every element of an array of scalars, in order.
+constexpr void Each(auto& a, auto& values) {
+  for (auto& v : values) a(v);
+}
+
+constexpr void Fields(auto& a, Of<CompactContact> auto& c) {
+  a(c.depth_m);
+  Each(a, c.d_translation);
+  Each(a, c.d_rotation);
+  a(c.stiffness_n_per_m);
+  Each(a, c.point_offset);
+  Each(a, c.normal_oct);
+}
+
+constexpr void Fields(auto& a, Of<CompactContactModelBody> auto& m) {
+  a(m.tool_state_seq);
+  a(m.tool_state_send_time_ns);
+  a(m.hold_ns);
+  a(m.remote_step_count);
+  a(m.collision_us);
+  a(m.texture_us);
+  a(m.step_us);
+  Vec(a, m.p_WT0);
+  Each(a, m.q_WT0);
+  Each(a, m.F_T_W_at_q0);
+  a(m.s_x);
+  a(m.s_theta);
+  const std::size_t n =
+      Count<std::uint8_t>(a, m.num_contacts, kMaxWireContacts, kCompactContactBytes);
+  for (std::size_t i = 0; i < n; ++i) Fields(a, m.contacts[i]);
+}
+
+constexpr void Fields(auto& a, Of<DeadbandTerms> auto& d) {
+  a(d.tool_state_deadband);
+  a(d.model_deadband);
+  a(d.tool_state_keepalive_ms);
+  a(d.model_keepalive_ms);
+}
+
 constexpr void Fields(auto& a, Of<HelloMessage> auto& m) {
   a(m.min_version);
   a(m.max_version);
@@ -283,6 +352,7 @@ constexpr void Fields(auto& a, Of<HelloMessage> auto& m) {
   a(m.codecs);
   a(m.heartbeat_ms);
   a(m.peer_timeout_ms);
+  Fields(a, m.deadband);
 }
 
 constexpr void Fields(auto& a, Of<WelcomeTarget> auto& t) {
@@ -303,6 +373,7 @@ constexpr void Fields(auto& a, Of<WelcomeMessage> auto& m) {
   a(m.codecs);
   a(m.heartbeat_ms);
   a(m.peer_timeout_ms);
+  Fields(a, m.deadband);
   a(m.scene_objects);
   a.Text(m.scene_name_length, m.scene_name);
   auto& l = m.layout;
@@ -374,6 +445,9 @@ static_assert(SizeOf<WireHeader>().bytes == kHeaderBytes);
 static_assert(SizeOf<ToolStateMessage>().bytes == kToolStateBodyBytes);
 static_assert(SizeOf<ContactModelMessage>().bytes == kContactModelFixedBytes + kContactBytes);
 static_assert(SizeOf<ContactModelMessage>().counted_bytes == kContactBytes);
+static_assert(SizeOf<CompactContactModelBody>().bytes ==
+              kCompactContactModelFixedBytes + kCompactContactBytes);
+static_assert(SizeOf<CompactContactModelBody>().counted_bytes == kCompactContactBytes);
 static_assert(SizeOf<HelloMessage>().bytes == kHelloBodyBytes);
 static_assert(SizeOf<WelcomeMessage>().bytes == kWelcomeFixedBytes + kWelcomeTargetBytes);
 static_assert(SizeOf<WelcomeMessage>().counted_bytes == kWelcomeTargetBytes);
@@ -428,10 +502,200 @@ DecodeStatus Check(const ContactModelMessage& m) {
   return DecodeStatus::kOk;
 }
 
+// CompactContactModel (protocol.h): the sender's quantization and the receiver's way back. No NaN,
+// infinite or out-of-range double is ever converted to an integer.
+
+float F32(double v) noexcept { return static_cast<float>(v); }
+
+/// round(steps) within ±kCompactI16Max (±∞ go to the ends); kCompactNotFinite for NaN.
+std::int16_t RoundToI16(double steps) noexcept {
+  if (std::isnan(steps)) return kCompactNotFinite;
+  const double limit = kCompactI16Max;
+  return static_cast<std::int16_t>(std::clamp(std::round(steps), -limit, limit));
+}
+
+/// `value` in units of `step`: kCompactNotFinite for a value that is not finite; 0 for a step that
+/// is 0 (every finite value it steps is then 0) or infinite (the receiver rejects it).
+std::int16_t QuantizeI16(double value, double step) noexcept {
+  if (!std::isfinite(value)) return kCompactNotFinite;
+  if (!(step > 0.0) || !std::isfinite(step)) return 0;
+  return RoundToI16(value / step);
+}
+
+/// The smallest f32 ≥ max_abs / kCompactI16Max, so that no component of magnitude ≤ max_abs needs
+/// more than kCompactI16Max steps; infinite beyond f32's range.
+float GradientStep(double max_abs) noexcept {
+  const double target = max_abs / kCompactI16Max;
+  float s = static_cast<float>(target);
+  if (static_cast<double>(s) < target) {
+    s = std::nextafter(s, std::numeric_limits<float>::infinity());
+  }
+  return s;
+}
+
+/// A time (µs) rounded within [0, kCompactMaxTimeUs]; kCompactTimeNotFinite when not finite.
+std::uint16_t QuantizeTimeUs(float us) noexcept {
+  if (!std::isfinite(us)) return kCompactTimeNotFinite;
+  return static_cast<std::uint16_t>(
+      std::round(std::clamp(static_cast<double>(us), 0.0, kCompactMaxTimeUs)));
+}
+
+double SignNotZero(double v) noexcept { return v < 0.0 ? -1.0 : 1.0; }
+
+/// Octahedral (u, v)·kCompactI16Max of the direction of `n` (protocol.h); kCompactNotFinite twice
+/// for a direction that is not finite or zero.
+std::array<std::int16_t, 2> EncodeOctahedral(const glm::dvec3& n) noexcept {
+  if (!Finite3(n)) return {kCompactNotFinite, kCompactNotFinite};
+  const double largest = std::max({std::abs(n.x), std::abs(n.y), std::abs(n.z)});
+  if (!(largest > 0.0)) return {kCompactNotFinite, kCompactNotFinite};
+  const glm::dvec3 m = n / largest;  // so that the 1-norm neither overflows nor underflows
+  const glm::dvec3 p = m / (std::abs(m.x) + std::abs(m.y) + std::abs(m.z));
+  const bool upper = p.z >= 0.0;
+  const double u = upper ? p.x : (1.0 - std::abs(p.y)) * SignNotZero(p.x);
+  const double v = upper ? p.y : (1.0 - std::abs(p.x)) * SignNotZero(p.y);
+  return {RoundToI16(u * kCompactI16Max), RoundToI16(v * kCompactI16Max)};
+}
+
+/// The unit direction of octahedral (u, v)·kCompactI16Max, each within ±kCompactI16Max.
+glm::dvec3 DecodeOctahedral(const std::array<std::int16_t, 2>& uv) noexcept {
+  const double u = uv[0] / static_cast<double>(kCompactI16Max);
+  const double v = uv[1] / static_cast<double>(kCompactI16Max);
+  glm::dvec3 p{u, v, 1.0 - std::abs(u) - std::abs(v)};
+  if (p.z < 0.0) {
+    p.x = (1.0 - std::abs(v)) * SignNotZero(u);
+    p.y = (1.0 - std::abs(u)) * SignNotZero(v);
+  }
+  return glm::normalize(p);  // ‖p‖₁ = 1, so ‖p‖ ≥ 1/√3
+}
+
+CompactContactModelBody QuantizeContactModel(const ContactModelMessage& m) noexcept {
+  const ContactModel& model = m.model;
+  CompactContactModelBody b;
+  b.tool_state_seq = model.tool_state_seq;
+  b.tool_state_send_time_ns = m.tool_state_send_time_ns;
+  b.hold_ns = m.hold_ns;
+  b.remote_step_count = m.remote_step_count;
+  b.collision_us = QuantizeTimeUs(m.collision_us);
+  b.texture_us = QuantizeTimeUs(m.texture_us);
+  b.step_us = QuantizeTimeUs(m.step_us);
+  const glm::dvec3& p_WT0 = model.X_WT0.translation;
+  const glm::dquat& q = model.X_WT0.rotation;
+  b.p_WT0 = p_WT0;
+  b.q_WT0 = {F32(q.w), F32(q.x), F32(q.y), F32(q.z)};
+  const Wrench& F = model.F_T_W_at_q0;
+  b.F_T_W_at_q0 = {F32(F.force.x),  F32(F.force.y),  F32(F.force.z),
+                   F32(F.torque.x), F32(F.torque.y), F32(F.torque.z)};
+  const int n = std::clamp(model.num_contacts, 0, kMaxWireContacts);
+  b.num_contacts = n;
+  double max_x = 0.0, max_theta = 0.0;  // over the finite components (the others are marked)
+  for (int i = 0; i < n; ++i) {
+    const PenetrationGradient& g = model.contacts[i].gradient;
+    for (int k = 0; k < 3; ++k) {
+      if (std::isfinite(g.d_translation_W[k])) {
+        max_x = std::max(max_x, std::abs(g.d_translation_W[k]));
+      }
+      if (std::isfinite(g.d_rotation_W[k])) {
+        max_theta = std::max(max_theta, std::abs(g.d_rotation_W[k]));
+      }
+    }
+  }
+  b.s_x = GradientStep(max_x);
+  b.s_theta = GradientStep(max_theta);
+  for (int i = 0; i < n; ++i) {
+    const ContactLinearization& c = model.contacts[i];
+    CompactContact& w = b.contacts[i];
+    w.depth_m = F32(c.depth_m);
+    w.stiffness_n_per_m = F32(c.stiffness_n_per_m);
+    for (int k = 0; k < 3; ++k) {
+      w.d_translation[k] = QuantizeI16(c.gradient.d_translation_W[k], b.s_x);
+      w.d_rotation[k] = QuantizeI16(c.gradient.d_rotation_W[k], b.s_theta);
+      w.point_offset[k] = QuantizeI16(c.point_W[k] - p_WT0[k], kCompactPointStepM);
+    }
+    w.normal_oct = EncodeOctahedral(c.normal_W);
+  }
+  return b;
+}
+
+bool HasMarker(const auto& values) {
+  return std::ranges::any_of(values, [](std::int16_t v) { return v == kCompactNotFinite; });
+}
+
+bool AllFinite(const auto& values) {
+  return std::ranges::all_of(values, [](float v) { return std::isfinite(v); });
+}
+
+DecodeStatus Check(const CompactContactModelBody& m) {
+  for (int i = 0; i < m.num_contacts; ++i) {
+    const CompactContact& c = m.contacts[i];
+    if (!std::isfinite(c.depth_m) || !std::isfinite(c.stiffness_n_per_m) ||
+        HasMarker(c.d_translation) || HasMarker(c.d_rotation) || HasMarker(c.point_offset) ||
+        HasMarker(c.normal_oct)) {
+      return DecodeStatus::kNonFinite;
+    }
+    if (c.stiffness_n_per_m < 0.0f) return DecodeStatus::kBadValue;
+  }
+  if (!Finite3(m.p_WT0) || !AllFinite(m.q_WT0)) return DecodeStatus::kNonFinite;
+  double norm2 = 0.0;
+  for (const float v : m.q_WT0) norm2 += static_cast<double>(v) * v;
+  if (!(std::abs(std::sqrt(norm2) - 1.0) < 1e-3)) return DecodeStatus::kBadValue;
+  if (!AllFinite(m.F_T_W_at_q0) || !std::isfinite(m.s_x) || !std::isfinite(m.s_theta) ||
+      m.collision_us == kCompactTimeNotFinite || m.texture_us == kCompactTimeNotFinite ||
+      m.step_us == kCompactTimeNotFinite) {
+    return DecodeStatus::kNonFinite;
+  }
+  if (m.s_x < 0.0f || m.s_theta < 0.0f) return DecodeStatus::kBadValue;
+  return DecodeStatus::kOk;
+}
+
+/// The model a CompactContactModel body stands for; `b` passed Check().
+ContactModelMessage DequantizeContactModel(const CompactContactModelBody& b) noexcept {
+  ContactModelMessage m;
+  ContactModel& model = m.model;
+  model.tool_state_seq = b.tool_state_seq;
+  m.tool_state_send_time_ns = b.tool_state_send_time_ns;
+  m.hold_ns = b.hold_ns;
+  m.remote_step_count = b.remote_step_count;
+  m.collision_us = static_cast<float>(b.collision_us);
+  m.texture_us = static_cast<float>(b.texture_us);
+  m.step_us = static_cast<float>(b.step_us);
+  model.X_WT0.translation = b.p_WT0;
+  model.X_WT0.rotation = glm::normalize(glm::dquat(b.q_WT0[0], b.q_WT0[1], b.q_WT0[2], b.q_WT0[3]));
+  const std::array<float, 6>& F = b.F_T_W_at_q0;
+  model.F_T_W_at_q0 = {glm::dvec3(F[0], F[1], F[2]), glm::dvec3(F[3], F[4], F[5])};
+  model.num_contacts = b.num_contacts;
+  const double s_x = b.s_x, s_theta = b.s_theta;
+  for (int i = 0; i < b.num_contacts; ++i) {
+    const CompactContact& w = b.contacts[i];
+    ContactLinearization& c = model.contacts[i];
+    c.depth_m = w.depth_m;
+    c.stiffness_n_per_m = w.stiffness_n_per_m;
+    for (int k = 0; k < 3; ++k) {
+      c.gradient.d_translation_W[k] = w.d_translation[k] * s_x;
+      c.gradient.d_rotation_W[k] = w.d_rotation[k] * s_theta;
+      c.point_W[k] = b.p_WT0[k] + w.point_offset[k] * kCompactPointStepM;
+    }
+    c.normal_W = DecodeOctahedral(w.normal_oct);
+  }
+  return m;
+}
+
+DecodeStatus Check(const DeadbandTerms& d) {
+  if (!std::isfinite(d.tool_state_deadband) || !std::isfinite(d.model_deadband)) {
+    return DecodeStatus::kNonFinite;
+  }
+  if (!(d.tool_state_deadband >= 0.0f && d.tool_state_deadband < 1.0f) ||
+      !(d.model_deadband >= 0.0f && d.model_deadband < 1.0f) || d.tool_state_keepalive_ms == 0 ||
+      d.model_keepalive_ms == 0) {
+    return DecodeStatus::kBadValue;
+  }
+  return DecodeStatus::kOk;
+}
+
 DecodeStatus Check(const HelloMessage& m) {
   if (!std::isfinite(m.tool_state_rate_hz) || !std::isfinite(m.max_model_rate_hz)) {
     return DecodeStatus::kNonFinite;
   }
+  if (const DecodeStatus s = Check(m.deadband); s != DecodeStatus::kOk) return s;
   if (m.min_version > m.max_version || !(m.tool_state_rate_hz > 0.0f) ||
       !FinitePositive(m.max_model_rate_hz) || m.mtu < kMinMtuBytes || m.mtu > kMaxDatagramBytes ||
       m.heartbeat_ms == 0 || m.peer_timeout_ms <= m.heartbeat_ms) {
@@ -441,6 +705,7 @@ DecodeStatus Check(const HelloMessage& m) {
 }
 
 DecodeStatus Check(const WelcomeMessage& m) {
+  if (const DecodeStatus s = Check(m.deadband); s != DecodeStatus::kOk) return s;
   const SceneLayout& l = m.layout;
   for (int i = 0; i < l.num_targets; ++i) {
     const WelcomeTarget& t = l.targets[i];
@@ -512,11 +777,12 @@ DecodeStatus Check(const SceneNackMessage&) { return DecodeStatus::kOk; }
 
 /// Header, body and MAC: the one encoder of every message type.
 template <class Body>
-Datagram Encode(const Header& header, MessageType type, const Body& body,
-                const MacKey& key) noexcept {
+Datagram Encode(const Header& header, MessageType type, const Body& body, const MacKey& key,
+                std::uint16_t version = kProtocolVersion) noexcept {
   Datagram d;
   Writer w(d);
-  const WireHeader h{.type = static_cast<std::uint8_t>(type),
+  const WireHeader h{.version = version,
+                     .type = static_cast<std::uint8_t>(type),
                      .session_id = header.session_id,
                      .sequence = header.sequence,
                      .send_time_ns = header.send_time_ns};
@@ -599,6 +865,8 @@ const char* ToString(MessageType t) noexcept {
       return "scene_nack";
     case MessageType::kSceneManifest:
       return "scene_manifest";
+    case MessageType::kCompactContactModel:
+      return "compact_contact_model";
   }
   return "unknown";
 }
@@ -611,6 +879,11 @@ Datagram EncodeToolState(const Header& header, const ToolStateMessage& m,
 Datagram EncodeContactModel(const Header& header, const ContactModelMessage& m,
                             const MacKey& key) noexcept {
   return Encode(header, MessageType::kContactModel, m, key);
+}
+
+Datagram EncodeCompactContactModel(const Header& header, const ContactModelMessage& m,
+                                   const MacKey& key) noexcept {
+  return Encode(header, MessageType::kCompactContactModel, QuantizeContactModel(m), key);
 }
 
 Datagram EncodeGoodbye(const Header& header, const MacKey& key) noexcept {
@@ -631,6 +904,35 @@ Datagram EncodeWelcome(const Header& header, const WelcomeMessage& m, const MacK
 
 Datagram EncodeReject(const Header& header, const RejectMessage& m, const MacKey& key) noexcept {
   return Encode(header, MessageType::kReject, m, key);
+}
+
+Datagram EncodeReject(const Header& header, const RejectMessage& m, const MacKey& key,
+                      std::uint16_t version) noexcept {
+  return Encode(header, MessageType::kReject, m, key, version);
+}
+
+DecodeStatus OpenForeignHello(std::span<const std::uint8_t> bytes, const MacKey& key,
+                              ForeignHello& hello) noexcept {
+  if (bytes.size() > kMaxDatagramBytes) return DecodeStatus::kTooLong;
+  if (bytes.size() < kHeaderBytes + 12 + kMacBytes) return DecodeStatus::kTooShort;
+  Reader r(bytes.first(kHeaderBytes + 12));
+  WireHeader w;
+  Fields(r, w);
+  std::uint16_t min_version = 0, max_version = 0;
+  std::uint64_t nonce = 0;
+  r(min_version);
+  r(max_version);
+  r(nonce);
+  if (w.magic != kMagic) return DecodeStatus::kBadMagic;
+  if (w.version == kProtocolVersion) return DecodeStatus::kBadVersion;  // not foreign
+  if (w.flags != 0) return DecodeStatus::kBadFlags;
+  if (w.type != static_cast<std::uint8_t>(MessageType::kHello)) return DecodeStatus::kUnexpected;
+  if (!VerifyMac(bytes, key)) return DecodeStatus::kBadMac;
+  hello = {.header_version = w.version,
+           .min_version = min_version,
+           .max_version = max_version,
+           .client_nonce = nonce};
+  return DecodeStatus::kOk;
 }
 
 Datagram EncodePong(const Header& header, const PongMessage& m, const MacKey& key) noexcept {
@@ -693,6 +995,17 @@ DecodeStatus DecodeToolState(std::span<const std::uint8_t> body, ToolStateMessag
 DecodeStatus DecodeContactModel(std::span<const std::uint8_t> body,
                                 ContactModelMessage& m) noexcept {
   return Decode(body, m);
+}
+
+DecodeStatus DecodeCompactContactModel(std::span<const std::uint8_t> body,
+                                       ContactModelMessage& m) noexcept {
+  CompactContactModelBody wire;
+  if (const DecodeStatus s = Decode(body, wire); s != DecodeStatus::kOk) return s;
+  const ContactModelMessage out = DequantizeContactModel(wire);
+  // What the float decoder would accept (finite by construction once `wire` passed its checks).
+  if (const DecodeStatus s = Check(out); s != DecodeStatus::kOk) return s;
+  m = out;
+  return DecodeStatus::kOk;
 }
 
 DecodeStatus DecodeHello(std::span<const std::uint8_t> body, HelloMessage& m) noexcept {

@@ -42,7 +42,32 @@ bool NegotiateSession(const wire::HelloMessage& hello, const RemoteCapabilities&
     reject.text_length = CopyText(reject.text, text);
     return false;
   }
+  const wire::DeadbandTerms& d = hello.deadband;
+  const float over = std::max(d.tool_state_deadband, d.model_deadband);
+  if (over > remote.max_deadband) {
+    std::snprintf(text, sizeof(text),
+                  "the operator asks a %s deadband of %.1f %%; this remote node accepts at most "
+                  "%.1f %% (lower master_station --deadband or raise slave_sim --max-deadband)",
+                  d.tool_state_deadband >= d.model_deadband ? "tool-state" : "contact-model",
+                  100.0 * over, 100.0 * remote.max_deadband);
+    reject.reason = wire::RejectReason::kCapabilities;
+    reject.text_length = CopyText(reject.text, text);
+    return false;
+  }
+  if (d.model_deadband > 0.0f && remote.max_model_rate_hz > 0.0f &&
+      1000.0f / remote.max_model_rate_hz > static_cast<float>(d.model_keepalive_ms)) {
+    std::snprintf(text, sizeof(text),
+                  "the operator asks a contact-model keep-alive of %u ms; this remote node sends "
+                  "at most %.0f models/s (one per %.0f ms) (raise --deadband-keepalive or slave_sim "
+                  "--max-rate)",
+                  d.model_keepalive_ms, static_cast<double>(remote.max_model_rate_hz),
+                  1000.0 / remote.max_model_rate_hz);
+    reject.reason = wire::RejectReason::kCapabilities;
+    reject.text_length = CopyText(reject.text, text);
+    return false;
+  }
   welcome = {};
+  welcome.deadband = d;
   welcome.client_nonce = hello.client_nonce;
   welcome.version = high;
   welcome.tool_state_rate_hz = hello.tool_state_rate_hz;

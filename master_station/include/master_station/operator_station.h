@@ -15,6 +15,7 @@
 #include "master_station/experiment.h"
 #include "master_station/haptic_device.h"
 #include "transport/auth.h"
+#include "transport/deadband.h"
 #include "transport/udp_socket.h"
 
 namespace ht {
@@ -71,6 +72,17 @@ struct StationConfig {
   SafetyLimits safety{.max_force_n = 1e9, .max_torque_nm = 1e9, .model_timeout_s = 0.5};
   /// Largest penetration-depth grid accepted from the remote node (0 = any).
   int max_grid = 0;
+  /// Perceptual deadband of the tool states this station sends (transport/deadband.h): its
+  /// Weber fraction (0 = every tick), floors, keep-alive and velocity-adaptive option.
+  ToolStateDeadbandConfig tool_state_deadband;
+  /// Weber fraction asked of the remote node for its contact models (0 = every model), and the
+  /// keep-alive of that stream (s; must be below safety.model_timeout_s, or the safety stage
+  /// would fade the force between two models the deadband held back).
+  double model_deadband = 0.0;
+  double model_keepalive_s = 0.1;
+  /// Ask for contact models in the compact quantized encoding (transport/protocol.h) when the
+  /// remote node has it; false keeps the float encoding.
+  bool compact_models = true;
 
   /// Throws std::invalid_argument naming the first bad value (rate outside 100..4000 Hz, MTU
   /// outside 548..1472, peer timeout not above the heartbeat, ...).

@@ -14,6 +14,7 @@
 #include "haptic_core/haptic_scene.h"
 #include "haptic_core/remote_step.h"
 #include "transport/auth.h"
+#include "transport/deadband.h"
 #include "transport/messages.h"
 #include "transport/udp_socket.h"
 
@@ -47,6 +48,12 @@ struct RemoteNodeConfig {
   /// An operator that has sent nothing authenticated for this long is declared lost (ms); the
   /// session uses the larger of this and the operator's.
   int peer_timeout_ms = 500;
+  /// Largest perceptual deadband (Weber fraction, [0, 1)) accepted from an operator on either
+  /// stream; a Hello asking more is refused with a Reject that says so.
+  double max_deadband = 0.5;
+  /// Floors and keep-alive of the contact-model deadband; its Weber fraction and keep-alive come
+  /// from the session (the operator asks them in its Hello).
+  ContactModelDeadbandConfig model_deadband;
   /// Pace of scene fragments (bytes per second), so that they never crowd out contact models.
   double scene_rate_bytes_per_s = 4e6;
   /// Scene objects streamed to the operator at join (Draco bitstreams), by object id.

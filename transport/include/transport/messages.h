@@ -40,6 +40,17 @@ struct ContactModelMessage {
   float step_us = 0.0f;
 };
 
+/// The perceptual deadband of a session's two streams (transport/deadband.h): asked in Hello,
+/// agreed in Welcome. A Weber fraction of 0 turns a stream's deadband off (every sample sent).
+struct DeadbandTerms {
+  float tool_state_deadband = 0.0f;  ///< k the operator applies to its tool states, [0, 1)
+  float model_deadband = 0.0f;       ///< k the remote node applies to its contact models, [0, 1)
+  /// Longest time between two tool states / two contact models while the deadband holds them
+  /// back (ms, > 0).
+  std::uint16_t tool_state_keepalive_ms = 100;
+  std::uint16_t model_keepalive_ms = 100;
+};
+
 /// Operator → remote: opens (or reopens) a session and states what the operator can do.
 struct HelloMessage {
   std::uint16_t min_version = kMinProtocolVersion;
@@ -52,6 +63,7 @@ struct HelloMessage {
   std::uint32_t codecs = kCodecDracoMesh;
   std::uint16_t heartbeat_ms = 100;
   std::uint16_t peer_timeout_ms = 500;
+  DeadbandTerms deadband;  ///< what the operator asks
 };
 
 /// Where one touchable object of the scene is, so that an operator (or a scripted one) can find it:
@@ -95,6 +107,7 @@ struct WelcomeMessage {
   std::uint32_t codecs = 0;
   std::uint16_t heartbeat_ms = 100;
   std::uint16_t peer_timeout_ms = 500;
+  DeadbandTerms deadband;  ///< what both sides apply in this session
   std::uint16_t scene_objects = 0;
   std::array<char, kSceneNameBytes> scene_name{};  ///< zero padded, not terminated when full
   std::uint8_t scene_name_length = 0;
@@ -192,6 +205,14 @@ Datagram EncodeToolState(const Header& header, const ToolStateMessage& message,
 /// Contacts beyond kMaxWireContacts are not sent (the caller keeps at most kMaxContacts).
 Datagram EncodeContactModel(const Header& header, const ContactModelMessage& message,
                             const MacKey& key) noexcept;
+/// The same model quantized as CompactContactModel (protocol.h states the layout and each field's
+/// largest error). Contacts beyond kMaxWireContacts are not sent. Never undefined for any input: a
+/// NaN or infinite field, or a zero normal, is sent marked so that the receiver rejects the
+/// datagram (kNonFinite), as it would the float encoding of it; a point farther than
+/// kCompactPointRangeM from X_WT0 along an axis is clamped to that range; times are clamped to
+/// [0, kCompactMaxTimeUs].
+Datagram EncodeCompactContactModel(const Header& header, const ContactModelMessage& message,
+                                   const MacKey& key) noexcept;
 Datagram EncodeGoodbye(const Header& header, const MacKey& key) noexcept;
 Datagram EncodeHello(const Header& header, const HelloMessage& message, const MacKey& key) noexcept;
 Datagram EncodeWelcome(const Header& header, const WelcomeMessage& message,
@@ -208,6 +229,22 @@ Datagram EncodeSceneManifest(const Header& header, const SceneManifestMessage& m
 Datagram EncodeSceneNack(const Header& header, const SceneNackMessage& message,
                          const MacKey& key) noexcept;
 
+/// A Hello in another protocol version than this one, read only as far as versions 2 to 4 agree.
+struct ForeignHello {
+  std::uint16_t header_version = 0;  ///< the version in its header (the sender's own)
+  std::uint16_t min_version = 0, max_version = 0;
+  std::uint64_t client_nonce = 0;
+};
+/// Opens a Hello whose header version is not kProtocolVersion, so that the remote node can refuse
+/// an operator of another version with a Reject it understands. kOk when the magic, flags and type
+/// match, the MAC verifies under `key` and the body has at least its first 12 bytes; kBadVersion
+/// when the datagram is of this version (open it with OpenDatagram instead).
+DecodeStatus OpenForeignHello(std::span<const std::uint8_t> datagram, const MacKey& key,
+                              ForeignHello& hello) noexcept;
+/// A Reject with `version` in its header (the body is laid out alike in versions 2 to 4).
+Datagram EncodeReject(const Header& header, const RejectMessage& message, const MacKey& key,
+                      std::uint16_t version) noexcept;
+
 /// Checks a received datagram's size limits, header (magic, version, flags, known type) and MAC,
 /// in that order, and on kOk gives the header and the body (between header and MAC).
 DecodeStatus OpenDatagram(std::span<const std::uint8_t> datagram, const MacKey& key, Header& header,
@@ -221,6 +258,12 @@ DecodeStatus DecodeToolState(std::span<const std::uint8_t> body,
                              ToolStateMessage& message) noexcept;
 DecodeStatus DecodeContactModel(std::span<const std::uint8_t> body,
                                 ContactModelMessage& message) noexcept;
+/// CompactContactModel into the message the float encoding decodes to: X_WT0's quaternion
+/// normalized, normals unit. kBadCount for more than kMaxWireContacts contacts, kTooShort/kTooLong
+/// unless the length is exact, kNonFinite for a non-finite field or scale or a marked one,
+/// kBadValue for a negative stiffness or scale or a quaternion whose norm is not within 1e-3 of 1.
+DecodeStatus DecodeCompactContactModel(std::span<const std::uint8_t> body,
+                                       ContactModelMessage& message) noexcept;
 DecodeStatus DecodeHello(std::span<const std::uint8_t> body, HelloMessage& message) noexcept;
 DecodeStatus DecodeWelcome(std::span<const std::uint8_t> body, WelcomeMessage& message) noexcept;
 DecodeStatus DecodeReject(std::span<const std::uint8_t> body, RejectMessage& message) noexcept;

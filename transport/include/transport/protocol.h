@@ -31,16 +31,37 @@
 //     X_WT0: 3×f64 + 4×f64   F_T_W at q0: 3×f64 force (N), 3×f64 torque (N·m)
 //     u8 num_contacts (0..kMaxWireContacts), then per contact (88): f64 depth_m, 3×f64 ∂δ/∂x,
 //     3×f64 ∂δ/∂θ (m/rad), f64 stiffness (N/m), 3×f32 point_W (m), 3×f32 normal_W (unit)
+//   CompactContactModel R→O (kCompactContactModelFixedBytes + n·kCompactContactBytes): the same
+//     model quantized, sent instead of ContactModel when both sides set kCodecCompactContactModel
+//     and decoded into the same message (the float encoding stays available). u64 tool_state_seq,
+//     i64 tool_state_send_time_ns, i64 hold_ns, u64 remote_step_count (as in ContactModel);
+//     u16 collision_us, u16 texture_us, u16 step_us (rounded to µs, clamped to [0, 65534];
+//     65535 = not finite)   X_WT0: p_WT0 3×f64, quaternion 4×f32 (renormalized on receipt)
+//     F_T_W at q0: 6×f32   f32 s_x, f32 s_θ: the gradients' steps, s_x the smallest f32 ≥
+//     max |component of ∂δ/∂x| / 32767 over the message's contacts (s_θ likewise for ∂δ/∂θ)
+//     u8 num_contacts (0..kMaxWireContacts), then per contact (30): f32 depth_m, 3×i16 ∂δ/∂x
+//     (units of s_x), 3×i16 ∂δ/∂θ (units of s_θ), f32 stiffness (N/m), 3×i16 point_W − p_WT0
+//     (units of kCompactPointStepM, each axis clamped to ±32767: the point is for display),
+//     2×i16 normal_W octahedral (u, v)·32767: p = n/‖n‖₁, (u, v) = (p_x, p_y) where p_z ≥ 0, else
+//     ((1 − |p_y|)·sgn p_x, (1 − |p_x|)·sgn p_y), sgn 0 = +1; the receiver unfolds and normalizes
+//     (Meyer et al. 2010; Cigolle et al. 2014). Every i16 is rounded to nearest within ±32767;
+//     −32768 (kCompactNotFinite) marks a value, or normal, that was not finite (or a zero normal)
+//     at the sender, and the receiver rejects the datagram (kNonFinite) as it would ContactModel
+//     with a NaN. The largest error of each field is a kCompact*Error* constant below.
 //   Goodbye O↔R (0): clean close of the session (the operator at the end of a run, the remote
 //     node when stopped); sent three times with new sequence numbers.
-//   Hello O→R (32): u16 min_version, u16 max_version, u64 client_nonce, f32 tool_state_rate_hz,
+//   Hello O→R (44): u16 min_version, u16 max_version, u64 client_nonce, f32 tool_state_rate_hz,
 //     f32 max_model_rate_hz (0 = any), u16 max_grid (0 = any), u16 mtu, u32 codecs (kCodec*),
-//     u16 heartbeat_ms, u16 peer_timeout_ms
+//     u16 heartbeat_ms, u16 peer_timeout_ms, then the deadband terms asked (12): f32
+//     tool_state_deadband (the Weber fraction k ∈ [0, 1) the operator applies to its tool states;
+//     0 = every tick), f32 model_deadband (k asked of the remote node for contact models),
+//     u16 tool_state_keepalive_ms, u16 model_keepalive_ms (> 0; the longest gap either stream
+//     leaves while its deadband holds samples back). transport/deadband.h has the rules.
 //   Welcome R→O (kWelcomeFixedBytes + n·kWelcomeTargetBytes): u64 client_nonce (echoed),
 //     u16 version, f32 tool_state_rate_hz, f32 model_rate_hz (0 = as fast as the remote steps),
 //     u16 grid, f32 window_m, u16 mtu, u32 codecs, u16 heartbeat_ms, u16 peer_timeout_ms,
-//     u16 scene_objects, u8 name_length, 32 bytes scene name (zero padded); then the scene's
-//     layout: X_WT_home 3×f64 + 4×f64 (the tool's home pose: where the operator's workspace centre
+//     the deadband terms agreed (12, as in Hello), u16 scene_objects, u8 name_length, 32 bytes
+//     scene name (zero padded); then the scene's layout: X_WT_home 3×f64 + 4×f64 (the tool's home pose: where the operator's workspace centre
 //     lands; its +z is the scene's up), f32 tool_mass_kg (0 = not given), 3×f32 tool principal
 //     moments along T (kg·m²), f32 tool_extent_down_m (how far the tool reaches below T along
 //     −z, m), u8 n (≤ kMaxWelcomeTargets), per target (40): 3×f32 box_min_W,
@@ -68,10 +89,13 @@ namespace ht::wire {
 
 inline constexpr std::uint32_t kMagic = 0x504C5448u;  // bytes 'H' 'T' 'L' 'P'
 /// Version 2 added authentication, sessions, clock sync and scene streaming; version 3 the scene
-/// layout in Welcome (home pose, tool inertia, where the touchable objects are). Versions 1 and 2
-/// are not accepted.
-inline constexpr std::uint16_t kProtocolVersion = 3;
-inline constexpr std::uint16_t kMinProtocolVersion = 3;
+/// layout in Welcome (home pose, tool inertia, where the touchable objects are); version 4 the
+/// perceptual deadband terms in Hello and Welcome and the compact contact model. Versions 1 to 3
+/// are not accepted; a remote node answers a Hello of another version whose MAC verifies with a
+/// Reject (kVersion) in that Hello's header version (the Hello's first 12 body bytes and the
+/// Reject body are laid out alike in versions 2 to 4), so that an older operator is told why.
+inline constexpr std::uint16_t kProtocolVersion = 4;
+inline constexpr std::uint16_t kMinProtocolVersion = 4;
 
 /// Message types; values are part of the protocol and never reused.
 enum class MessageType : std::uint8_t {
@@ -86,8 +110,9 @@ enum class MessageType : std::uint8_t {
   kSceneFragment = 9,
   kSceneNack = 10,
   kSceneManifest = 11,
+  kCompactContactModel = 12,
 };
-inline constexpr int kMaxMessageType = 11;
+inline constexpr int kMaxMessageType = 12;
 
 /// Why a remote node refused a Hello.
 enum class RejectReason : std::uint8_t {
@@ -98,6 +123,9 @@ enum class RejectReason : std::uint8_t {
 
 /// Codec bits of Hello/Welcome `codecs`.
 inline constexpr std::uint32_t kCodecDracoMesh = 1u << 0;
+/// Contact models go as CompactContactModel (quantized) instead of ContactModel when both sides
+/// set it.
+inline constexpr std::uint32_t kCodecCompactContactModel = 1u << 1;
 
 /// What a scene object's bytes are.
 enum class SceneObjectKind : std::uint8_t {
@@ -110,9 +138,14 @@ inline constexpr std::size_t kMacKeyBytes = 32;  // crypto_auth_KEYBYTES
 inline constexpr std::size_t kToolStateBodyBytes = 13 * 8;
 inline constexpr std::size_t kContactModelFixedBytes = 8 * 4 + 4 * 3 + 7 * 8 + 6 * 8 + 1;
 inline constexpr std::size_t kContactBytes = 8 + 6 * 8 + 8 + 3 * 4 + 3 * 4;
-inline constexpr std::size_t kHelloBodyBytes = 32;
+inline constexpr std::size_t kCompactContactModelFixedBytes =
+    4 * 8 + 3 * 2 + 3 * 8 + 10 * 4 + 2 * 4 + 1;
+inline constexpr std::size_t kCompactContactBytes = 4 + 6 * 2 + 4 + 3 * 2 + 2 * 2;
+inline constexpr std::size_t kDeadbandTermsBytes = 12;
+inline constexpr std::size_t kHelloBodyBytes = 32 + kDeadbandTermsBytes;
 inline constexpr std::size_t kSceneNameBytes = 32;
-inline constexpr std::size_t kWelcomeFixedBytes = 37 + kSceneNameBytes + 7 * 8 + 5 * 4 + 1;
+inline constexpr std::size_t kWelcomeFixedBytes =
+    37 + kDeadbandTermsBytes + kSceneNameBytes + 7 * 8 + 5 * 4 + 1;
 inline constexpr std::size_t kWelcomeTargetBytes = 10 * 4;
 /// Touchable objects described in a Welcome (the largest ones when a scene has more).
 inline constexpr int kMaxWelcomeTargets = 8;
@@ -136,6 +169,45 @@ inline constexpr int kMaxWireContacts = 14;
 /// Largest scene object (bytes) a sender fragments or a receiver reassembles.
 inline constexpr std::uint32_t kMaxSceneObjectBytes = 64u << 20;
 
+// CompactContactModel: its steps and markers, and the largest difference between each field as
+// decoded and as the sender had it (tests/compact_contact_model_test.cc checks each on random
+// models, and the wrench and stiffness they give).
+/// Largest magnitude of a quantized i16 field.
+inline constexpr int kCompactI16Max = 32767;
+/// An i16 field that was not finite at the sender (the receiver rejects the datagram).
+inline constexpr std::int16_t kCompactNotFinite = -32768;
+/// Largest time (µs) a u16 time field carries; larger times are sent as this.
+inline constexpr double kCompactMaxTimeUs = 65534.0;
+/// A u16 time field that was not finite at the sender (the receiver rejects the datagram).
+inline constexpr std::uint16_t kCompactTimeNotFinite = 65535;
+/// Step (m) of a contact point's offset from p_WT0, and the offset's reach per axis (±0.655 m).
+inline constexpr double kCompactPointStepM = 20e-6;
+inline constexpr double kCompactPointRangeM = kCompactI16Max * kCompactPointStepM;
+/// f32 fields (depth_m, stiffness, F_T_W at q0): |error| ≤ 2⁻²⁴·|value| + 2⁻¹⁵⁰ (round to
+/// nearest; the 2⁻¹⁵⁰ is for f32 subnormals). Beyond f32's range a value becomes infinite and the
+/// receiver rejects the datagram.
+inline constexpr double kCompactF32RelativeError = 0x1p-24;
+/// Gradients: per component |error| ≤ s/2 ≤ kCompactGradientErrorPerMax·m + 2⁻¹⁵⁰, m the largest
+/// |component| of that gradient (∂δ/∂x or ∂δ/∂θ) over the message's contacts: s ≤
+/// (1 + 2⁻²³)·m/32767 for a normal f32 s (the factor 1 + 2⁻²⁰ covers it and the double rounding),
+/// within 2⁻¹⁴⁹ of m/32767 for a subnormal one. m beyond 32767× f32's largest value makes s
+/// infinite and the datagram rejected.
+inline constexpr double kCompactGradientErrorPerMax = (0.5 / kCompactI16Max) * (1.0 + 0x1p-20);
+/// Contact point: per axis |error| ≤ kCompactPointStepM/2 (plus the double rounding of p_WT0 +
+/// offset) where |point_W − p_WT0| ≤ kCompactPointRangeM − kCompactPointErrorM on that axis;
+/// beyond, the axis is clamped to ±kCompactPointRangeM from p_WT0.
+inline constexpr double kCompactPointErrorM = 0.5 * kCompactPointStepM;
+/// Normal: angle ≤ √18/65534 = 6.474e-5 rad. Rounding moves (u, v) by ≤ √2/65534; unfolding (u, v)
+/// onto the octahedron ‖p‖₁ = 1 is √3-Lipschitz; the octahedron is ≥ 1/√3 from the origin.
+/// (The bound is nearly reached: 4·10⁶ random directions gave 6.45e-5 rad.)
+inline constexpr double kCompactNormalErrorRad = 6.5e-5;
+/// X_WT0's rotation: angle ≤ 2⁻²² rad. Rounding each component to f32 (≤ 2⁻²⁴ relative) moves the
+/// unit quaternion by ≤ 2⁻²⁴, the rotation by twice that: 2⁻²³, stated with a factor 2 of margin.
+inline constexpr double kCompactRotationErrorRad = 0x1p-22;
+/// Times: |error| ≤ 0.5 µs within [0, kCompactMaxTimeUs]; below 0 they are sent as 0, above as
+/// kCompactMaxTimeUs.
+inline constexpr double kCompactTimeErrorUs = 0.5;
+
 /// Bytes of one object carried per SceneFragment when datagrams are at most `mtu` bytes.
 constexpr std::size_t FragmentPayloadBytes(std::size_t mtu) noexcept {
   return mtu - kHeaderBytes - kSceneFragmentFixedBytes - kMacBytes;
@@ -145,6 +217,10 @@ static_assert(kHeaderBytes + kContactModelFixedBytes + kMaxWireContacts * kConta
                       kMacBytes <=
                   kMaxDatagramBytes,
               "a full contact model must fit in one datagram");
+static_assert(kHeaderBytes + kCompactContactModelFixedBytes +
+                      kMaxWireContacts * kCompactContactBytes + kMacBytes <=
+                  kMaxDatagramBytes,
+              "a full compact contact model must fit in one datagram");
 static_assert(kHeaderBytes + kSceneManifestFixedBytes + kMaxManifestEntries * kManifestEntryBytes +
                       kMacBytes <=
                   kMinMtuBytes,

@@ -19,6 +19,9 @@ struct RemoteCapabilities {
   float max_model_rate_hz = 0.0f;  ///< cap on contact models per second (0 = none)
   std::uint16_t heartbeat_ms = 100;
   std::uint16_t peer_timeout_ms = 500;
+  /// Largest perceptual deadband (Weber fraction) this node accepts on either stream; a Hello
+  /// asking more is refused (kCapabilities).
+  float max_deadband = 0.5f;
   std::uint16_t scene_objects = 0;
   std::string scene_name;
   /// Sent as is in every Welcome: home pose, tool inertia, where the touchables are.
@@ -30,7 +33,10 @@ struct RemoteCapabilities {
 /// - grid: the remote node's, refused (Reject kCapabilities) when above the operator's max_grid;
 /// - model rate: the smaller non-zero of the operator's wish and the node's cap;
 /// - MTU: the smaller; codecs: the intersection (no Draco ⇒ no scene objects are announced);
-/// - heartbeat: the operator's; peer timeout: the larger of the two; the scene layout: the node's.
+/// - heartbeat: the operator's; peer timeout: the larger of the two; the scene layout: the node's;
+/// - deadband: the operator's terms, refused (kCapabilities) when either Weber fraction is above
+///   the node's max_deadband, or when a model deadband's keep-alive is shorter than the node's
+///   model period (1/max_model_rate_hz).
 /// Returns true and fills `welcome` (without its session id, which goes in the header), or false
 /// and fills `reject` with a reason and a sentence saying what differs.
 bool NegotiateSession(const wire::HelloMessage& hello, const RemoteCapabilities& remote,

@@ -1,0 +1,340 @@
+// The perceptual deadband (transport/deadband.h), its negotiation (transport/session.h) and the
+// Reject an operator of another protocol version gets (issue 18).
+#include "transport/deadband.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+#include <random>
+
+#include "transport/messages.h"
+#include "transport/session.h"
+
+namespace ht {
+namespace {
+
+constexpr std::int64_t kMs = 1000000;
+
+TEST(Deadband, ExtrapolatePoseMovesAtTheTwist) {
+  RigidTransform X;
+  X.translation = {0.1, 0.2, 0.3};
+  const Twist V{{0.01, 0.0, -0.02}, {0.0, 0.0, 0.5}};
+  const RigidTransform Y = ExtrapolatePose(X, V, 0.2);
+  EXPECT_NEAR(Y.translation.x, 0.102, 1e-12);
+  EXPECT_NEAR(Y.translation.z, 0.296, 1e-12);
+  // 0.1 rad about +z, about T's own origin.
+  const glm::dvec3 theta = RotationVectorFromQuaternion(Y.rotation);
+  EXPECT_NEAR(theta.z, 0.1, 1e-12);
+  EXPECT_NEAR(glm::length(glm::dvec2(theta.x, theta.y)), 0.0, 1e-12);
+  const RigidTransform Z = ExtrapolatePose(X, V, -1.0);
+  EXPECT_EQ(Z.translation, X.translation);
+}
+
+TEST(Deadband, OffSendsEveryToolState) {
+  ToolStateDeadband d({});
+  RigidTransform X;
+  for (int i = 0; i < 50; ++i) {
+    EXPECT_EQ(d.Decide(X, {}, i * kMs), DeadbandReason::kOff);
+  }
+}
+
+TEST(Deadband, ConstantVelocityIsPredictedSoOnlyKeepAlivesGo) {
+  ToolStateDeadbandConfig c;
+  c.weber_fraction = 0.05;
+  c.keepalive_s = 0.1;
+  ToolStateDeadband d(c);
+  const Twist V{{0.03, -0.01, 0.0}, {0.0, 0.2, 0.0}};
+  RigidTransform X0;
+  int sent = 0, keepalive = 0;
+  for (int i = 0; i <= 1000; ++i) {  // one second at 1 kHz
+    const RigidTransform X = ExtrapolatePose(X0, V, i * 1e-3);
+    const DeadbandReason r = d.Decide(X, V, i * kMs);
+    if (r != DeadbandReason::kNotSent) ++sent;
+    if (r == DeadbandReason::kKeepAlive) ++keepalive;
+  }
+  EXPECT_EQ(keepalive, 10);
+  EXPECT_EQ(sent, 11);  // the first, then one per keep-alive
+}
+
+TEST(Deadband, ToolStateThresholdsAreWeberFractionsWithFloors) {
+  ToolStateDeadbandConfig c;
+  c.weber_fraction = 0.1;
+  c.keepalive_s = 10.0;
+  c.velocity_criterion = true;
+  {
+    ToolStateDeadband d(c);
+    RigidTransform X;
+    ASSERT_EQ(d.Decide(X, {}, 0), DeadbandReason::kFirst);
+    // At rest the position floor is k·2 mm = 0.2 mm.
+    X.translation.x = 0.15e-3;
+    EXPECT_EQ(d.Decide(X, {}, kMs), DeadbandReason::kNotSent);
+    X.translation.x = 0.25e-3;
+    EXPECT_EQ(d.Decide(X, {}, 2 * kMs), DeadbandReason::kPosition);
+  }
+  {
+    ToolStateDeadband d(c);
+    RigidTransform X;
+    const Twist V{{0.1, 0.0, 0.0}, {}};
+    ASSERT_EQ(d.Decide(X, V, 0), DeadbandReason::kFirst);
+    // Velocity: threshold max(k·|v_s|, k·0.02 m/s) = 0.01 m/s.
+    EXPECT_EQ(d.Decide(ExtrapolatePose(X, V, 1e-3), {{0.108, 0.0, 0.0}, {}}, kMs),
+              DeadbandReason::kNotSent);
+    EXPECT_EQ(d.Decide(ExtrapolatePose(X, V, 2e-3), {{0.112, 0.0, 0.0}, {}}, 2 * kMs),
+              DeadbandReason::kVelocity);
+    // Without the velocity criterion the changed twist is not sent by itself; the pose error
+    // it causes is, once it passes the floor (0.2 mm): 12 mm/s more for 20 ms = 0.24 mm.
+    ToolStateDeadbandConfig pose_only = c;
+    pose_only.velocity_criterion = false;
+    ToolStateDeadband e(pose_only);
+    ASSERT_EQ(e.Decide(X, V, 0), DeadbandReason::kFirst);
+    const Twist faster{{0.112, 0.0, 0.0}, {}};
+    EXPECT_EQ(e.Decide(ExtrapolatePose(X, faster, 2e-3), faster, 2 * kMs),
+              DeadbandReason::kNotSent);
+    EXPECT_EQ(e.Decide(ExtrapolatePose(X, faster, 21e-3), faster, 21 * kMs),
+              DeadbandReason::kPosition);
+  }
+  {
+    ToolStateDeadband d(c);
+    RigidTransform X;
+    ASSERT_EQ(d.Decide(X, {}, 0), DeadbandReason::kFirst);
+    // Rotation floor k·0.02 rad = 2 mrad.
+    X.rotation = QuaternionFromRotationVector({0.0, 0.0, 1.5e-3});
+    EXPECT_EQ(d.Decide(X, {}, kMs), DeadbandReason::kNotSent);
+    X.rotation = QuaternionFromRotationVector({0.0, 0.0, 2.5e-3});
+    EXPECT_EQ(d.Decide(X, {}, 2 * kMs), DeadbandReason::kRotation);
+  }
+  {
+    // A larger deadband lets more through unsent: the same wobble, fewer packets.
+    auto count = [&](double k) {
+      ToolStateDeadbandConfig ck = c;
+      ck.weber_fraction = k;
+      ToolStateDeadband d(ck);
+      int sent = 0;
+      for (int i = 0; i < 2000; ++i) {
+        const double t = i * 1e-3;
+        RigidTransform X;
+        X.translation = {0.02 * std::sin(2.0 * std::numbers::pi * 1.3 * t), 0.0,
+                         0.005 * std::sin(2.0 * std::numbers::pi * 0.7 * t)};
+        const Twist V{{0.02 * 2.0 * std::numbers::pi * 1.3 * std::cos(2.0 * std::numbers::pi *
+                                                                        1.3 * t),
+                       0.0,
+                       0.005 * 2.0 * std::numbers::pi * 0.7 *
+                           std::cos(2.0 * std::numbers::pi * 0.7 * t)},
+                      {}};
+        if (d.Decide(X, V, i * kMs) != DeadbandReason::kNotSent) ++sent;
+      }
+      return sent;
+    };
+    const int s5 = count(0.05), s10 = count(0.10), s20 = count(0.20);
+    EXPECT_LT(s5, 2000 / 2);
+    EXPECT_LE(s10, s5);
+    EXPECT_LE(s20, s10);
+    EXPECT_LT(s20, s5);
+  }
+}
+
+TEST(Deadband, VelocityAdaptiveWidensThePositionFloorWhileMovingFast) {
+  ToolStateDeadbandConfig c;
+  c.weber_fraction = 0.1;
+  c.keepalive_s = 10.0;
+  const Twist V{{0.1, 0.0, 0.0}, {}};  // 0.1 m/s: floors × (1 + 0.1/0.05) = ×3
+  RigidTransform X;
+  RigidTransform off = ExtrapolatePose(X, V, 1e-3);
+  off.translation.y += 0.4e-3;  // 0.4 mm off the prediction: above 0.2 mm, below 0.6 mm
+  ToolStateDeadband plain(c);
+  ASSERT_EQ(plain.Decide(X, V, 0), DeadbandReason::kFirst);
+  EXPECT_EQ(plain.Decide(off, V, kMs), DeadbandReason::kPosition);
+  c.velocity_adaptive = true;
+  ToolStateDeadband adaptive(c);
+  ASSERT_EQ(adaptive.Decide(X, V, 0), DeadbandReason::kFirst);
+  EXPECT_EQ(adaptive.Decide(off, V, kMs), DeadbandReason::kNotSent);
+}
+
+ContactModel OneContact(double depth_m, double stiffness, const glm::dvec3& p0) {
+  ContactModel m;
+  m.X_WT0.translation = p0;
+  m.num_contacts = 1;
+  ContactLinearization& c = m.contacts[0];
+  c.depth_m = depth_m;
+  c.gradient.d_translation_W = {0.0, 0.0, -1.0};  // moving up separates
+  c.gradient.d_rotation_W = {0.01, 0.0, 0.0};
+  c.stiffness_n_per_m = stiffness;
+  c.normal_W = {0.0, 0.0, 1.0};
+  m.F_T_W_at_q0 = PenaltyWrench(depth_m, c.gradient, stiffness);
+  return m;
+}
+
+TEST(Deadband, ContactModelSentWhenTheHeldOneRendersDifferently) {
+  ContactModelDeadbandConfig c;
+  c.weber_fraction = 0.1;
+  c.keepalive_s = 0.1;
+  ContactModelDeadband d(c);
+  const ContactModel m0 = OneContact(1e-3, 2000.0, {0, 0, 0});  // 2 N
+  ASSERT_EQ(d.Decide(m0, 0), DeadbandReason::kFirst);
+  // The tool moved down 0.1 mm and the model says the depth grew as its gradient predicts: the
+  // held model already renders that; nothing to send.
+  ContactModel m1 = OneContact(1.1e-3, 2000.0, {0, 0, -1e-4});
+  EXPECT_EQ(d.Decide(m1, kMs), DeadbandReason::kNotSent);
+  // A bump of the texture the held model cannot know: 0.05 mm deeper than predicted is 0.1 N of
+  // 2.3 N (4 %), inside 10 %; 0.3 mm deeper (0.6 N, 26 %) is sent.
+  ContactModel m2 = OneContact(1.15e-3, 2000.0, {0, 0, -1e-4});
+  EXPECT_EQ(d.Decide(m2, 2 * kMs), DeadbandReason::kNotSent);
+  ContactModel m3 = OneContact(1.4e-3, 2000.0, {0, 0, -1e-4});
+  EXPECT_EQ(d.Decide(m3, 3 * kMs), DeadbandReason::kForce);
+  EXPECT_EQ(d.held().contacts[0].depth_m, 1.4e-3);
+  // Stiffness doubled at the same force: the slope the operator feels changed.
+  ContactModel m4 = OneContact(0.7e-3, 4000.0, {0, 0, -1e-4});
+  EXPECT_EQ(d.Decide(m4, 4 * kMs), DeadbandReason::kStiffness);
+  // A second contact appears (separated, so it renders nothing yet): sent.
+  ContactModel m5 = m4;
+  m5.num_contacts = 2;
+  m5.contacts[1] = m5.contacts[0];
+  m5.contacts[1].depth_m = -2e-3;
+  EXPECT_EQ(d.Decide(m5, 5 * kMs), DeadbandReason::kContactCount);
+  // Nothing changes: held until the keep-alive.
+  EXPECT_EQ(d.Decide(m5, 50 * kMs), DeadbandReason::kNotSent);
+  EXPECT_EQ(d.Decide(m5, 105 * kMs), DeadbandReason::kKeepAlive);
+  EXPECT_EQ(d.counts()[static_cast<int>(DeadbandReason::kNotSent)], 3u);
+}
+
+TEST(Deadband, AModelHeldBackRendersWithinTheDeadbandOfTheNewOne) {
+  // Property over a random walk of contact models: whenever a model is held back, the held
+  // model evaluated where the operator is (the new q0) is within the Weber fraction (or the
+  // floor) of the new model's own wrench, checked by evaluating both directly.
+  std::mt19937 rng(11);
+  std::normal_distribution<double> step(0.0, 2e-5);
+  for (const double k : {0.05, 0.1, 0.2}) {
+    ContactModelDeadbandConfig c;
+    c.weber_fraction = k;
+    c.keepalive_s = 1.0;
+    ContactModelDeadband d(c);
+    glm::dvec3 p{0.0};
+    double bump = 0.0;
+    int held = 0;
+    for (int i = 0; i < 3000; ++i) {
+      p += glm::dvec3(step(rng), step(rng), step(rng));
+      bump += step(rng) * 0.5;
+      const ContactModel m = OneContact(1e-3 - p.z + bump, 3000.0, p);
+      if (d.Decide(m, i * kMs) != DeadbandReason::kNotSent) continue;
+      ++held;
+      const Wrench held_at_q0 = EvaluateContactModel(d.held(), m.X_WT0).F_T_W;
+      const Wrench own = EvaluateContactModel(m, m.X_WT0).F_T_W;
+      EXPECT_LE(glm::length(held_at_q0.force - own.force),
+                std::max(k * glm::length(own.force), k * c.force_floor_scale_n) + 1e-12);
+    }
+    EXPECT_GT(held, 1000) << "k = " << k;
+  }
+}
+
+TEST(Deadband, ConfigsRefuseNonsense) {
+  ToolStateDeadbandConfig t;
+  t.weber_fraction = 1.5;
+  EXPECT_THROW(t.Validate(), std::invalid_argument);
+  t.weber_fraction = 0.1;
+  t.keepalive_s = 0.0;
+  EXPECT_THROW(t.Validate(), std::invalid_argument);
+  ContactModelDeadbandConfig m;
+  m.weber_fraction = std::nan("");
+  EXPECT_THROW(m.Validate(), std::invalid_argument);
+}
+
+TEST(DeadbandNegotiation, TermsAgreedOrRefusedSayingWhich) {
+  RemoteCapabilities caps;
+  caps.max_deadband = 0.2f;
+  caps.max_model_rate_hz = 500.0f;
+  wire::HelloMessage hello;
+  hello.deadband = {0.1f, 0.15f, 100, 50};
+  wire::WelcomeMessage w;
+  wire::RejectMessage r;
+  ASSERT_TRUE(NegotiateSession(hello, caps, w, r));
+  EXPECT_EQ(w.deadband.tool_state_deadband, 0.1f);
+  EXPECT_EQ(w.deadband.model_deadband, 0.15f);
+  EXPECT_EQ(w.deadband.model_keepalive_ms, 50);
+  hello.deadband.model_deadband = 0.3f;
+  EXPECT_FALSE(NegotiateSession(hello, caps, w, r));
+  EXPECT_EQ(r.reason, wire::RejectReason::kCapabilities);
+  EXPECT_NE(r.message().find("contact-model deadband of 30.0 %"), std::string_view::npos)
+      << r.message();
+  EXPECT_NE(r.message().find("20.0 %"), std::string_view::npos);
+  hello.deadband = {0.25f, 0.0f, 100, 100};
+  EXPECT_FALSE(NegotiateSession(hello, caps, w, r));
+  EXPECT_NE(r.message().find("tool-state"), std::string_view::npos) << r.message();
+  // A 1 ms keep-alive from a node that sends at most 500 models/s (one per 2 ms).
+  hello.deadband = {0.1f, 0.1f, 100, 1};
+  EXPECT_FALSE(NegotiateSession(hello, caps, w, r));
+  EXPECT_NE(r.message().find("keep-alive of 1 ms"), std::string_view::npos) << r.message();
+}
+
+TEST(DeadbandNegotiation, HelloAndWelcomeCarryTheTermsAndRefuseBadOnes) {
+  const MacKey key = MacKey::Generate();
+  wire::HelloMessage hello;
+  hello.client_nonce = 9;
+  hello.deadband = {0.05f, 0.1f, 80, 90};
+  wire::Header h;
+  h.sequence = 1;
+  const wire::Datagram d = wire::EncodeHello(h, hello, key);
+  wire::Header got;
+  std::span<const std::uint8_t> body;
+  ASSERT_EQ(wire::OpenDatagram(d.view(), key, got, body), wire::DecodeStatus::kOk);
+  wire::HelloMessage back;
+  ASSERT_EQ(wire::DecodeHello(body, back), wire::DecodeStatus::kOk);
+  EXPECT_EQ(back.deadband.tool_state_deadband, 0.05f);
+  EXPECT_EQ(back.deadband.model_deadband, 0.1f);
+  EXPECT_EQ(back.deadband.tool_state_keepalive_ms, 80);
+  EXPECT_EQ(back.deadband.model_keepalive_ms, 90);
+  for (const wire::DeadbandTerms bad : {wire::DeadbandTerms{1.0f, 0.0f, 100, 100},
+                                        wire::DeadbandTerms{0.0f, -0.1f, 100, 100},
+                                        wire::DeadbandTerms{0.1f, 0.1f, 0, 100},
+                                        wire::DeadbandTerms{std::nanf(""), 0.1f, 100, 100}}) {
+    hello.deadband = bad;
+    const wire::Datagram b = wire::EncodeHello(h, hello, key);
+    ASSERT_EQ(wire::OpenDatagram(b.view(), key, got, body), wire::DecodeStatus::kOk);
+    const wire::DecodeStatus s = wire::DecodeHello(body, back);
+    EXPECT_TRUE(s == wire::DecodeStatus::kBadValue || s == wire::DecodeStatus::kNonFinite)
+        << wire::ToString(s);
+  }
+}
+
+TEST(DeadbandNegotiation, AHelloOfAnotherVersionIsOpenedForARejectInItsVersion) {
+  const MacKey key = MacKey::Generate();
+  wire::HelloMessage hello;
+  hello.client_nonce = 0x1122334455667788ull;
+  hello.min_version = hello.max_version = 3;
+  wire::Header h;
+  h.sequence = 1;
+  wire::Datagram d = wire::EncodeHello(h, hello, key);
+  // Rewrite it as a version-3 operator would send it: header version 3, the v3 body (32 bytes:
+  // no deadband terms), a new MAC.
+  d.bytes[4] = 3;
+  d.bytes[5] = 0;
+  d.size = wire::kHeaderBytes + 32;
+  ComputeMac(std::span<const std::uint8_t>(d.bytes.data(), d.size), key,
+             std::span<std::uint8_t, wire::kMacBytes>(d.bytes.data() + d.size, wire::kMacBytes));
+  d.size += wire::kMacBytes;
+  wire::Header got;
+  std::span<const std::uint8_t> body;
+  EXPECT_EQ(wire::OpenDatagram(d.view(), key, got, body), wire::DecodeStatus::kBadVersion);
+  wire::ForeignHello foreign;
+  ASSERT_EQ(wire::OpenForeignHello(d.view(), key, foreign), wire::DecodeStatus::kOk);
+  EXPECT_EQ(foreign.header_version, 3);
+  EXPECT_EQ(foreign.min_version, 3);
+  EXPECT_EQ(foreign.client_nonce, 0x1122334455667788ull);
+  // Under another key it is not opened (no Reject for forgeries).
+  EXPECT_EQ(wire::OpenForeignHello(d.view(), MacKey::Generate(), foreign),
+            wire::DecodeStatus::kBadMac);
+  // This version's own Hello is not foreign.
+  EXPECT_EQ(wire::OpenForeignHello(wire::EncodeHello(h, {}, key).view(), key, foreign),
+            wire::DecodeStatus::kBadVersion);
+  // The Reject goes out in version 3: its header says 3 and its body is the v3 Reject.
+  wire::RejectMessage reject;
+  reject.client_nonce = foreign.client_nonce;
+  reject.reason = wire::RejectReason::kVersion;
+  const wire::Datagram r = wire::EncodeReject(h, reject, key, 3);
+  EXPECT_EQ(r.bytes[4], 3);
+  EXPECT_EQ(r.bytes[5], 0);
+  EXPECT_EQ(r.size, wire::kHeaderBytes + wire::kRejectFixedBytes + wire::kMacBytes);
+}
+
+}  // namespace
+}  // namespace ht

@@ -1,0 +1,174 @@
+#include "transport/deadband.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace ht {
+namespace {
+
+void CheckFraction(double k, const char* name) {
+  if (!(k >= 0.0 && k < 1.0)) {
+    throw std::invalid_argument(std::string(name) + " must be in [0, 1) (a Weber fraction), got " +
+                                std::to_string(k));
+  }
+}
+
+void CheckPositive(double v, const char* name) {
+  if (!(v > 0.0) || !std::isfinite(v)) {
+    throw std::invalid_argument(std::string(name) + " must be positive and finite, got " +
+                                std::to_string(v));
+  }
+}
+
+double Frobenius3(const Stiffness6& K, int row, int col) noexcept {
+  return K.block<3, 3>(row, col).norm();
+}
+
+}  // namespace
+
+RigidTransform ExtrapolatePose(const RigidTransform& X_WT, const Twist& V_WT_W,
+                               double dt_s) noexcept {
+  if (!(dt_s > 0.0)) return X_WT;
+  return Displace(X_WT, {V_WT_W.linear * dt_s, V_WT_W.angular * dt_s});
+}
+
+const char* ToString(DeadbandReason reason) noexcept {
+  switch (reason) {
+    case DeadbandReason::kNotSent:
+      return "not_sent";
+    case DeadbandReason::kOff:
+      return "off";
+    case DeadbandReason::kFirst:
+      return "first";
+    case DeadbandReason::kKeepAlive:
+      return "keep_alive";
+    case DeadbandReason::kPosition:
+      return "position";
+    case DeadbandReason::kRotation:
+      return "rotation";
+    case DeadbandReason::kVelocity:
+      return "velocity";
+    case DeadbandReason::kAngularVelocity:
+      return "angular_velocity";
+    case DeadbandReason::kContactCount:
+      return "contact_count";
+    case DeadbandReason::kForce:
+      return "force";
+    case DeadbandReason::kTorque:
+      return "torque";
+    case DeadbandReason::kStiffness:
+      return "stiffness";
+  }
+  return "unknown";
+}
+
+void ToolStateDeadbandConfig::Validate() const {
+  CheckFraction(weber_fraction, "tool-state deadband");
+  CheckPositive(position_floor_scale_m, "tool-state deadband position floor scale");
+  CheckPositive(rotation_floor_scale_rad, "tool-state deadband rotation floor scale");
+  CheckPositive(linear_velocity_floor_scale_m_per_s, "tool-state deadband velocity floor scale");
+  CheckPositive(angular_velocity_floor_scale_rad_per_s,
+                "tool-state deadband angular velocity floor scale");
+  CheckPositive(keepalive_s, "tool-state keep-alive");
+  CheckPositive(adaptive_speed_ref_m_per_s, "tool-state deadband adaptive speed reference");
+}
+
+void ContactModelDeadbandConfig::Validate() const {
+  CheckFraction(weber_fraction, "contact-model deadband");
+  CheckPositive(force_floor_scale_n, "contact-model deadband force floor scale");
+  CheckPositive(torque_floor_scale_nm, "contact-model deadband torque floor scale");
+  CheckPositive(stiffness_floor_scale_n_per_m, "contact-model deadband stiffness floor scale");
+  CheckPositive(rotational_stiffness_floor_scale_nm_per_rad,
+                "contact-model deadband rotational stiffness floor scale");
+  CheckPositive(keepalive_s, "contact-model keep-alive");
+}
+
+DeadbandReason ToolStateDeadband::Decide(const RigidTransform& X_WT, const Twist& V_WT_W,
+                                         std::int64_t t_ns) noexcept {
+  const ToolStateDeadbandConfig& c = config_;
+  const double k = c.weber_fraction;
+  DeadbandReason reason = DeadbandReason::kNotSent;
+  const double dt = static_cast<double>(t_ns - t_sent_ns_) * 1e-9;
+  if (k <= 0.0) {
+    reason = DeadbandReason::kOff;
+  } else if (!have_sent_) {
+    reason = DeadbandReason::kFirst;
+  } else if (dt >= c.keepalive_s) {
+    reason = DeadbandReason::kKeepAlive;
+  } else {
+    const double a =
+        c.velocity_adaptive ? 1.0 + glm::length(V_WT_W.linear) / c.adaptive_speed_ref_m_per_s
+                            : 1.0;
+    const RigidTransform predicted = ExtrapolatePose(X_sent_, V_sent_, dt);
+    const Twist error = PoseDifference(X_WT, predicted);
+    const Twist moved = PoseDifference(X_WT, X_sent_);
+    if (glm::length(error.linear) >
+        std::max(k * glm::length(moved.linear), k * c.position_floor_scale_m * a)) {
+      reason = DeadbandReason::kPosition;
+    } else if (glm::length(error.angular) >
+               std::max(k * glm::length(moved.angular), k * c.rotation_floor_scale_rad * a)) {
+      reason = DeadbandReason::kRotation;
+    } else if (!c.velocity_criterion) {
+      // Pose only: the twist is sent with every pose, for the receiver's extrapolation.
+    } else if (glm::length(V_WT_W.linear - V_sent_.linear) >
+               std::max(k * glm::length(V_sent_.linear),
+                        k * c.linear_velocity_floor_scale_m_per_s)) {
+      reason = DeadbandReason::kVelocity;
+    } else if (glm::length(V_WT_W.angular - V_sent_.angular) >
+               std::max(k * glm::length(V_sent_.angular),
+                        k * c.angular_velocity_floor_scale_rad_per_s)) {
+      reason = DeadbandReason::kAngularVelocity;
+    }
+  }
+  ++counts_[static_cast<int>(reason)];
+  if (reason != DeadbandReason::kNotSent) {
+    have_sent_ = true;
+    X_sent_ = X_WT;
+    V_sent_ = V_WT_W;
+    t_sent_ns_ = t_ns;
+  }
+  return reason;
+}
+
+DeadbandReason ContactModelDeadband::Decide(const ContactModel& model, std::int64_t t_ns) noexcept {
+  const ContactModelDeadbandConfig& c = config_;
+  const double k = c.weber_fraction;
+  DeadbandReason reason = DeadbandReason::kNotSent;
+  if (k <= 0.0) {
+    reason = DeadbandReason::kOff;
+  } else if (!have_sent_) {
+    reason = DeadbandReason::kFirst;
+  } else if (static_cast<double>(t_ns - t_sent_ns_) * 1e-9 >= c.keepalive_s) {
+    reason = DeadbandReason::kKeepAlive;
+  } else if (model.num_contacts != held_.num_contacts) {
+    reason = DeadbandReason::kContactCount;
+  } else {
+    const ContactModelEvaluation held = EvaluateContactModel(held_, model.X_WT0);
+    const ContactModelEvaluation now = EvaluateContactModel(model, model.X_WT0);
+    const double stiffness_t = Frobenius3(now.K, 0, 0);
+    const double stiffness_r = Frobenius3(now.K, 3, 3);
+    if (glm::length(held.F_T_W.force - now.F_T_W.force) >
+        std::max(k * glm::length(now.F_T_W.force), k * c.force_floor_scale_n)) {
+      reason = DeadbandReason::kForce;
+    } else if (glm::length(held.F_T_W.torque - now.F_T_W.torque) >
+               std::max(k * glm::length(now.F_T_W.torque), k * c.torque_floor_scale_nm)) {
+      reason = DeadbandReason::kTorque;
+    } else if ((held.K.block<3, 3>(0, 0) - now.K.block<3, 3>(0, 0)).norm() >
+                   std::max(k * stiffness_t, k * c.stiffness_floor_scale_n_per_m) ||
+               (held.K.block<3, 3>(3, 3) - now.K.block<3, 3>(3, 3)).norm() >
+                   std::max(k * stiffness_r, k * c.rotational_stiffness_floor_scale_nm_per_rad)) {
+      reason = DeadbandReason::kStiffness;
+    }
+  }
+  ++counts_[static_cast<int>(reason)];
+  if (reason != DeadbandReason::kNotSent) {
+    have_sent_ = true;
+    held_ = model;
+    t_sent_ns_ = t_ns;
+  }
+  return reason;
+}
+
+}  // namespace ht
