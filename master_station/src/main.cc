@@ -24,7 +24,7 @@ namespace {
 
 // The default perceptual deadband on both streams (percent): the largest of the measured table
 // (docs/deadband.md) whose RMS force error stays within 5 %.
-constexpr double kDefaultDeadbandPercent = 0.0;
+constexpr double kDefaultDeadbandPercent = 10.0;
 
 // Set by SIGINT / SIGTERM: the loop ramps the force to zero and the run ends normally.
 std::atomic<bool> g_stop{false};

@@ -276,8 +276,8 @@ constexpr void Fields(auto& a, Of<ContactModelMessage> auto& m) {
 /// One contact of a CompactContactModel as it is on the wire (protocol.h).
 struct CompactContact {
   float depth_m = 0.0f;
-  std::array<std::int16_t, 3> d_translation{};  ///< ∂δ/∂x in units of s_x
-  std::array<std::int16_t, 3> d_rotation{};     ///< ∂δ/∂θ in units of s_θ
+  std::array<float, 3> d_translation{};  ///< ∂δ/∂x
+  std::array<float, 3> d_rotation{};     ///< ∂δ/∂θ (m/rad)
   float stiffness_n_per_m = 0.0f;
   std::array<std::int16_t, 3> point_offset{};  ///< point_W − p_WT0 in units of kCompactPointStepM
   std::array<std::int16_t, 2> normal_oct{};    ///< octahedral (u, v)·kCompactI16Max
@@ -296,8 +296,6 @@ struct CompactContactModelBody {
   glm::dvec3 p_WT0{0.0};
   std::array<float, 4> q_WT0{1.0f, 0.0f, 0.0f, 0.0f};  ///< w, x, y, z
   std::array<float, 6> F_T_W_at_q0{};                  ///< force (N) then torque (N·m)
-  float s_x = 0.0f;                                    ///< step of ∂δ/∂x
-  float s_theta = 0.0f;                                ///< step of ∂δ/∂θ (m/rad)
   int num_contacts = 0;
   std::array<CompactContact, kMaxWireContacts> contacts{};
 };
@@ -327,8 +325,6 @@ constexpr void Fields(auto& a, Of<CompactContactModelBody> auto& m) {
   Vec(a, m.p_WT0);
   Each(a, m.q_WT0);
   Each(a, m.F_T_W_at_q0);
-  a(m.s_x);
-  a(m.s_theta);
   const std::size_t n =
       Count<std::uint8_t>(a, m.num_contacts, kMaxWireContacts, kCompactContactBytes);
   for (std::size_t i = 0; i < n; ++i) Fields(a, m.contacts[i]);
@@ -522,17 +518,6 @@ std::int16_t QuantizeI16(double value, double step) noexcept {
   return RoundToI16(value / step);
 }
 
-/// The smallest f32 ≥ max_abs / kCompactI16Max, so that no component of magnitude ≤ max_abs needs
-/// more than kCompactI16Max steps; infinite beyond f32's range.
-float GradientStep(double max_abs) noexcept {
-  const double target = max_abs / kCompactI16Max;
-  float s = static_cast<float>(target);
-  if (static_cast<double>(s) < target) {
-    s = std::nextafter(s, std::numeric_limits<float>::infinity());
-  }
-  return s;
-}
-
 /// A time (µs) rounded within [0, kCompactMaxTimeUs]; kCompactTimeNotFinite when not finite.
 std::uint16_t QuantizeTimeUs(float us) noexcept {
   if (!std::isfinite(us)) return kCompactTimeNotFinite;
@@ -587,28 +572,14 @@ CompactContactModelBody QuantizeContactModel(const ContactModelMessage& m) noexc
                    F32(F.torque.x), F32(F.torque.y), F32(F.torque.z)};
   const int n = std::clamp(model.num_contacts, 0, kMaxWireContacts);
   b.num_contacts = n;
-  double max_x = 0.0, max_theta = 0.0;  // over the finite components (the others are marked)
-  for (int i = 0; i < n; ++i) {
-    const PenetrationGradient& g = model.contacts[i].gradient;
-    for (int k = 0; k < 3; ++k) {
-      if (std::isfinite(g.d_translation_W[k])) {
-        max_x = std::max(max_x, std::abs(g.d_translation_W[k]));
-      }
-      if (std::isfinite(g.d_rotation_W[k])) {
-        max_theta = std::max(max_theta, std::abs(g.d_rotation_W[k]));
-      }
-    }
-  }
-  b.s_x = GradientStep(max_x);
-  b.s_theta = GradientStep(max_theta);
   for (int i = 0; i < n; ++i) {
     const ContactLinearization& c = model.contacts[i];
     CompactContact& w = b.contacts[i];
     w.depth_m = F32(c.depth_m);
     w.stiffness_n_per_m = F32(c.stiffness_n_per_m);
     for (int k = 0; k < 3; ++k) {
-      w.d_translation[k] = QuantizeI16(c.gradient.d_translation_W[k], b.s_x);
-      w.d_rotation[k] = QuantizeI16(c.gradient.d_rotation_W[k], b.s_theta);
+      w.d_translation[k] = F32(c.gradient.d_translation_W[k]);
+      w.d_rotation[k] = F32(c.gradient.d_rotation_W[k]);
       w.point_offset[k] = QuantizeI16(c.point_W[k] - p_WT0[k], kCompactPointStepM);
     }
     w.normal_oct = EncodeOctahedral(c.normal_W);
@@ -628,7 +599,7 @@ DecodeStatus Check(const CompactContactModelBody& m) {
   for (int i = 0; i < m.num_contacts; ++i) {
     const CompactContact& c = m.contacts[i];
     if (!std::isfinite(c.depth_m) || !std::isfinite(c.stiffness_n_per_m) ||
-        HasMarker(c.d_translation) || HasMarker(c.d_rotation) || HasMarker(c.point_offset) ||
+        !AllFinite(c.d_translation) || !AllFinite(c.d_rotation) || HasMarker(c.point_offset) ||
         HasMarker(c.normal_oct)) {
       return DecodeStatus::kNonFinite;
     }
@@ -638,12 +609,10 @@ DecodeStatus Check(const CompactContactModelBody& m) {
   double norm2 = 0.0;
   for (const float v : m.q_WT0) norm2 += static_cast<double>(v) * v;
   if (!(std::abs(std::sqrt(norm2) - 1.0) < 1e-3)) return DecodeStatus::kBadValue;
-  if (!AllFinite(m.F_T_W_at_q0) || !std::isfinite(m.s_x) || !std::isfinite(m.s_theta) ||
-      m.collision_us == kCompactTimeNotFinite || m.texture_us == kCompactTimeNotFinite ||
+  if (!AllFinite(m.F_T_W_at_q0) || m.collision_us == kCompactTimeNotFinite || m.texture_us == kCompactTimeNotFinite ||
       m.step_us == kCompactTimeNotFinite) {
     return DecodeStatus::kNonFinite;
   }
-  if (m.s_x < 0.0f || m.s_theta < 0.0f) return DecodeStatus::kBadValue;
   return DecodeStatus::kOk;
 }
 
@@ -663,15 +632,14 @@ ContactModelMessage DequantizeContactModel(const CompactContactModelBody& b) noe
   const std::array<float, 6>& F = b.F_T_W_at_q0;
   model.F_T_W_at_q0 = {glm::dvec3(F[0], F[1], F[2]), glm::dvec3(F[3], F[4], F[5])};
   model.num_contacts = b.num_contacts;
-  const double s_x = b.s_x, s_theta = b.s_theta;
   for (int i = 0; i < b.num_contacts; ++i) {
     const CompactContact& w = b.contacts[i];
     ContactLinearization& c = model.contacts[i];
     c.depth_m = w.depth_m;
     c.stiffness_n_per_m = w.stiffness_n_per_m;
     for (int k = 0; k < 3; ++k) {
-      c.gradient.d_translation_W[k] = w.d_translation[k] * s_x;
-      c.gradient.d_rotation_W[k] = w.d_rotation[k] * s_theta;
+      c.gradient.d_translation_W[k] = w.d_translation[k];
+      c.gradient.d_rotation_W[k] = w.d_rotation[k];
       c.point_W[k] = b.p_WT0[k] + w.point_offset[k] * kCompactPointStepM;
     }
     c.normal_W = DecodeOctahedral(w.normal_oct);
