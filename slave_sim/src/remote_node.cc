@@ -115,11 +115,11 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
       continue;
     }
     // 3. The remote step at the newest tool state (extrapolated under a tool-state deadband),
-    // and its contact model to the operator. A step that would see nothing new is skipped: the
-    // operator keeps the model it holds, refreshed at the keep-alive.
+    // and its contact model to the operator. Under the deadband, a step that would see nothing
+    // new waits: the operator keeps the model it holds, refreshed at the keep-alive.
     const std::int64_t t_step = SteadyNowNs();
     const RigidTransform X_WT = session.ToolPoseForStep(t_step);
-    if (!config.animate && session.StepWouldRepeat(X_WT)) {
+    if (session.StepCanWait(X_WT, static_cast<bool>(config.animate))) {
       session.CountSkippedStep();
       session.MaybeSendKeepAlive(t_step);
       socket.WaitReadable(1);

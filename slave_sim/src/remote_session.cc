@@ -214,7 +214,6 @@ void RemoteSession::StreamScene(std::int64_t now) {
 }
 
 RigidTransform RemoteSession::ToolPoseForStep(std::int64_t now) noexcept {
-  fresh_state_ = false;
   if (!tool_state_deadband_) {
     step_extrapolation_ns_ = 0;
     return latest_.X_WT;
@@ -224,9 +223,12 @@ RigidTransform RemoteSession::ToolPoseForStep(std::int64_t now) noexcept {
   return ExtrapolatePose(latest_.X_WT, latest_.V_WT_W, step_extrapolation_ns_ * 1e-9);
 }
 
-bool RemoteSession::StepWouldRepeat(const RigidTransform& X_WT) const noexcept {
-  return tool_state_deadband_ && !fresh_state_ && have_step_pose_ &&
-         X_WT.translation == last_step_pose_.translation &&
+bool RemoteSession::StepCanWait(const RigidTransform& X_WT, bool scene_moves) const noexcept {
+  // Pacing extrapolated steps to the model period was measured and left out: it cut the steps
+  // from 22 kHz to 0.8 kHz on fig75 but raised the device-force error at 10 % from 3.7 % to
+  // 5.0 % (the model that answers a change waits up to a period longer).
+  if (!tool_state_deadband_ || fresh_state_ || !have_step_pose_) return false;
+  return !scene_moves && X_WT.translation == last_step_pose_.translation &&
          X_WT.rotation == last_step_pose_.rotation;
 }
 

@@ -44,16 +44,16 @@ class RemoteSession {
   /// session's tool-state deadband on, the newest tool state extrapolated at its own twist for
   /// the time since it arrived (ExtrapolatePose, the prediction the operator's deadband makes;
   /// at most the tool-state keep-alive ahead, then held); without it, the newest state as is.
-  /// Call once per step: it marks the newest state as used.
   RigidTransform ToolPoseForStep(std::int64_t now_ns) noexcept;
-  /// True when a step at X_WT (from ToolPoseForStep) would see nothing that the last step did
-  /// not: the tool-state deadband is on, no tool state arrived since the last step, and X_WT is
-  /// the last step's pose. (A moving scene is the caller's to check.)
-  bool StepWouldRepeat(const RigidTransform& X_WT) const noexcept;
-  /// Counts a step skipped because it would repeat the last one.
+  /// True when, with the session's tool-state deadband on and no tool state arrived since the
+  /// last step, a step at X_WT (from ToolPoseForStep) would see nothing new: X_WT is
+  /// the last step's pose and the scene does not move. A fresh tool state is always stepped.
+  bool StepCanWait(const RigidTransform& X_WT, bool scene_moves) const noexcept;
+  /// Counts a loop pass that did not step (StepCanWait).
   void CountSkippedStep() noexcept { ++steps_skipped_; }
-  /// Records that a step ran at X_WT.
+  /// Records that a step ran at X_WT (the newest tool state is then used).
   void SteppedAt(const RigidTransform& X_WT) noexcept {
+    fresh_state_ = false;
     last_step_pose_ = X_WT;
     have_step_pose_ = true;
   }
@@ -65,7 +65,7 @@ class RemoteSession {
   /// when both sides have it. Returns true when sent.
   bool MaybeSendContactModel(wire::ContactModelMessage& out, const StepTimings& timings,
                              std::uint64_t step_count, std::int64_t now_ns);
-  /// While steps are skipped (StepWouldRepeat): sends the last model again (new header, same
+  /// While steps wait (StepCanWait): sends the last model again (new header, same
   /// content) when the contact-model keep-alive has passed. Returns true when sent.
   bool MaybeSendKeepAlive(std::int64_t now_ns);
   /// Tells the operator the node is stopping (three Goodbyes), when a session is open.

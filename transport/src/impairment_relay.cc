@@ -24,6 +24,7 @@
 #include "haptic_core/steady_clock.h"
 #include "impairment_internal.h"
 #include "transport/impairment.h"
+#include "transport/messages.h"
 #include "transport/protocol.h"
 
 namespace ht {
@@ -39,10 +40,8 @@ std::uint8_t ClassifyDatagram(std::span<const std::uint8_t> bytes) noexcept {
 }
 
 std::string MessageTypeName(std::uint8_t type) {
-  static constexpr const char* kNames[] = {
-      "other",  "tool_state", "contact_model", "goodbye",        "hello",      "welcome",
-      "reject", "ping",       "pong",          "scene_fragment", "scene_nack", "scene_manifest"};
-  if (type < std::size(kNames)) return kNames[type];
+  if (type == 0) return "other";
+  if (type <= wire::kMaxMessageType) return wire::ToString(static_cast<wire::MessageType>(type));
   return "type_" + std::to_string(type);
 }
 
