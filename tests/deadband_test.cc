@@ -264,6 +264,20 @@ TEST(DeadbandNegotiation, TermsAgreedOrRefusedSayingWhich) {
   hello.deadband = {0.1f, 0.1f, 100, 1};
   EXPECT_FALSE(NegotiateSession(hello, caps, w, r));
   EXPECT_NE(r.message().find("keep-alive of 1 ms"), std::string_view::npos) << r.message();
+  // The session's model rate is the smaller of both sides': an operator asking 5 models/s (one
+  // per 200 ms) cannot have a 100 ms keep-alive either.
+  hello.deadband = {0.1f, 0.1f, 100, 100};
+  hello.max_model_rate_hz = 5.0f;
+  EXPECT_FALSE(NegotiateSession(hello, caps, w, r));
+  EXPECT_NE(r.message().find("one per 200 ms"), std::string_view::npos) << r.message();
+  hello.max_model_rate_hz = 0.0f;
+  // The node extrapolates a tool state for at most its keep-alive: that must stay below the
+  // peer timeout (here 500 ms).
+  hello.deadband = {0.1f, 0.1f, 500, 100};
+  EXPECT_FALSE(NegotiateSession(hello, caps, w, r));
+  EXPECT_NE(r.message().find("peer timeout, 500 ms"), std::string_view::npos) << r.message();
+  hello.deadband = {0.0f, 0.1f, 500, 100};  // no tool-state deadband: its keep-alive is unused
+  EXPECT_TRUE(NegotiateSession(hello, caps, w, r)) << r.message();
 }
 
 TEST(DeadbandNegotiation, HelloAndWelcomeCarryTheTermsAndRefuseBadOnes) {
@@ -323,9 +337,17 @@ TEST(DeadbandNegotiation, AHelloOfAnotherVersionIsOpenedForARejectInItsVersion) 
   // Under another key it is not opened (no Reject for forgeries).
   EXPECT_EQ(wire::OpenForeignHello(d.view(), MacKey::Generate(), foreign),
             wire::DecodeStatus::kBadMac);
-  // This version's own Hello is not foreign.
+  // This version's own Hello is not foreign, and neither is a newer one (its layout is unknown).
   EXPECT_EQ(wire::OpenForeignHello(wire::EncodeHello(h, {}, key).view(), key, foreign),
             wire::DecodeStatus::kBadVersion);
+  wire::Datagram newer = d;
+  newer.bytes[4] = static_cast<std::uint8_t>(wire::kProtocolVersion + 1);
+  newer.size -= wire::kMacBytes;
+  ComputeMac(std::span<const std::uint8_t>(newer.bytes.data(), newer.size), key,
+             std::span<std::uint8_t, wire::kMacBytes>(newer.bytes.data() + newer.size,
+                                                      wire::kMacBytes));
+  newer.size += wire::kMacBytes;
+  EXPECT_EQ(wire::OpenForeignHello(newer.view(), key, foreign), wire::DecodeStatus::kBadVersion);
   // The Reject goes out in version 3: its header says 3 and its body is the v3 Reject.
   wire::RejectMessage reject;
   reject.client_nonce = foreign.client_nonce;

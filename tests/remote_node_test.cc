@@ -8,6 +8,7 @@
 #include <atomic>
 #include <chrono>
 #include <thread>
+#include <vector>
 
 #include "haptic_core/demo/demo_scenes.h"
 #include "transport/auth.h"
@@ -42,6 +43,20 @@ bool Await(UdpSocket& socket, const MacKey& key, wire::MessageType type, wire::H
   return false;
 }
 
+/// The UDP port the node wrote to `port_file` once bound (0 when none came within 4 s).
+std::uint16_t AwaitPort(const std::string& port_file) {
+  for (int i = 0; i < 400; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    if (FILE* f = std::fopen(port_file.c_str(), "r")) {
+      unsigned p = 0;
+      const bool read = std::fscanf(f, "%u", &p) == 1;
+      std::fclose(f);
+      if (read && p != 0) return static_cast<std::uint16_t>(p);
+    }
+  }
+  return 0;
+}
+
 TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
   const HapticScene scene = MakeBlockOnGearScene();
   RemoteNodeConfig config;
@@ -57,15 +72,7 @@ TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
   nlohmann::json summary;
   std::thread node([&] { summary = RunRemoteNode(config, scene, stop); });
 
-  std::uint16_t port = 0;
-  for (int i = 0; i < 400 && port == 0; ++i) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    if (FILE* f = std::fopen(port_file.c_str(), "r")) {
-      unsigned p = 0;
-      if (std::fscanf(f, "%u", &p) == 1) port = static_cast<std::uint16_t>(p);
-      std::fclose(f);
-    }
-  }
+  const std::uint16_t port = AwaitPort(port_file);
   ASSERT_NE(port, 0);
   const SocketAddress remote = SocketAddress::Parse("127.0.0.1:" + std::to_string(port));
   UdpSocket socket(SocketAddress::Parse("127.0.0.1:0"));
@@ -179,15 +186,7 @@ TEST(RemoteNode, RefusesAnOperatorOfAnotherVersionAndHoldsBackModelsThatSayNothi
   std::atomic<bool> stop{false};
   nlohmann::json summary;
   std::thread node([&] { summary = RunRemoteNode(config, scene, stop); });
-  std::uint16_t port = 0;
-  for (int i = 0; i < 400 && port == 0; ++i) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    if (FILE* f = std::fopen(port_file.c_str(), "r")) {
-      unsigned p = 0;
-      if (std::fscanf(f, "%u", &p) == 1) port = static_cast<std::uint16_t>(p);
-      std::fclose(f);
-    }
-  }
+  const std::uint16_t port = AwaitPort(port_file);
   ASSERT_NE(port, 0);
   const SocketAddress remote = SocketAddress::Parse("127.0.0.1:" + std::to_string(port));
   UdpSocket socket(SocketAddress::Parse("127.0.0.1:0"));
@@ -258,9 +257,24 @@ TEST(RemoteNode, RefusesAnOperatorOfAnotherVersionAndHoldsBackModelsThatSayNothi
     return wire::DecodeCompactContactModel(b, first) == wire::DecodeStatus::kOk;
   }));
   ASSERT_EQ(first.model.num_contacts, 1);
-  int models = 0;
-  const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(550);
-  while (std::chrono::steady_clock::now() < until) {
+  // The same v3 Hello played again gets no second Reject.
+  ASSERT_TRUE(socket.SendTo(old.view(), remote));
+  // 450 ms with pings (the node's peer timeout is 500 ms): only keep-alives of that model come,
+  // at most one per keep-alive period (not one per step), each with the same echo and a hold
+  // that grows with its send time.
+  std::vector<std::chrono::steady_clock::time_point> arrivals;
+  std::vector<wire::ContactModelMessage> copies;
+  const auto start = std::chrono::steady_clock::now();
+  std::uint64_t ping_sequence = 1;
+  auto next_ping = start;
+  while (std::chrono::steady_clock::now() < start + std::chrono::milliseconds(450)) {
+    if (std::chrono::steady_clock::now() >= next_ping) {
+      socket.SendTo(
+          wire::EncodePing({wire::MessageType::kPing, session, ping_sequence++, 0}, config.key)
+              .view(),
+          remote);
+      next_ping += std::chrono::milliseconds(100);
+    }
     socket.WaitReadable(10);
     SocketAddress from;
     while (auto n = socket.ReceiveFrom(buf, from)) {
@@ -269,21 +283,29 @@ TEST(RemoteNode, RefusesAnOperatorOfAnotherVersionAndHoldsBackModelsThatSayNothi
       if (wire::OpenDatagram({buf.data(), *n}, config.key, h, body) == wire::DecodeStatus::kOk &&
           h.type == wire::MessageType::kCompactContactModel &&
           wire::DecodeCompactContactModel(body, m) == wire::DecodeStatus::kOk) {
-        ++models;
-        EXPECT_EQ(m.model.contacts[0].depth_m, first.model.contacts[0].depth_m);  // the same model
+        arrivals.push_back(std::chrono::steady_clock::now());
+        copies.push_back(m);
       }
     }
   }
-  // About five keep-alives in 550 ms (without the deadband: a model per step, hundreds).
-  EXPECT_GE(models, 3);
-  EXPECT_LE(models, 8);
+  ASSERT_GE(copies.size(), 2u);  // 100 ms keep-alives in 450 ms: about four
+  for (std::size_t i = 0; i < copies.size(); ++i) {
+    EXPECT_EQ(copies[i].model.contacts[0].depth_m, first.model.contacts[0].depth_m);
+    EXPECT_EQ(copies[i].tool_state_send_time_ns, first.tool_state_send_time_ns);
+    EXPECT_EQ(copies[i].model.tool_state_seq, first.model.tool_state_seq);
+    const std::int64_t previous_hold = i == 0 ? first.hold_ns : copies[i - 1].hold_ns;
+    EXPECT_GE(copies[i].hold_ns - previous_hold, 50'000'000) << i;  // ≥ 50 ms apart at the node
+    if (i > 0) EXPECT_GE(arrivals[i] - arrivals[i - 1], std::chrono::milliseconds(20)) << i;
+  }
   stop = true;
   node.join();
   const nlohmann::json& t = summary["transport"];
   EXPECT_EQ(t["foreign_version_hellos"].get<int>(), 1);
+  EXPECT_EQ(t["hello_replayed"].get<int>(), 1);
   EXPECT_EQ(t["rejects_sent"].get<int>(), 1);
+  EXPECT_EQ(t["peers_lost"].get<int>(), 0);
   EXPECT_GT(t["deadband"]["steps_skipped"].get<int>(), 100);
-  EXPECT_GE(t["deadband"]["keepalives_sent"].get<int>(), 3);
+  EXPECT_EQ(t["deadband"]["keepalives_sent"].get<std::size_t>(), copies.size());
 }
 
 }  // namespace

@@ -95,9 +95,13 @@ void NetworkWorker::Run(const std::atomic<bool>& stop) {
       }
     } else if (have_last && now - last_send_ns > 20000000) {
       // Keep-alive while the loop is not running (before the first tick, after the last): the
-      // same pose, stamped now, so that round trips measured on it are not inflated.
+      // same pose at rest, stamped now, so that round trips measured on it are not inflated and
+      // the remote node does not extrapolate a tool that no longer moves.
       last.time_ns = now;
+      last.message.V_WT_W = {};
       Send(last);
+      tool_deadband_.NoteSent(last.message.X_WT, last.message.V_WT_W, now);
+      ++idle_keepalives_;
       last_send_ns = now;
     }
     if (now - last_ping_ns >= heartbeat_ns_) {
@@ -147,12 +151,6 @@ nlohmann::json NetworkWorker::Summary() const {
   t["mtu"] = mtu_;
   t["scene_name"] = scene_name_;
   {
-    nlohmann::json reasons = nlohmann::json::object();
-    for (int i = 0; i < kDeadbandReasonCount; ++i) {
-      if (tool_deadband_.counts()[i] != 0) {
-        reasons[ToString(static_cast<DeadbandReason>(i))] = tool_deadband_.counts()[i];
-      }
-    }
     t["deadband"] = {{"tool_state_deadband", deadband_agreed_.tool_state_deadband},
                      {"model_deadband", deadband_agreed_.model_deadband},
                      {"tool_state_keepalive_ms", deadband_agreed_.tool_state_keepalive_ms},
@@ -161,7 +159,8 @@ nlohmann::json NetworkWorker::Summary() const {
                      {"compact_models", compact_models_},
                      {"tool_states_offered", tool_states_offered_},
                      {"tool_states_held_back", tool_states_held_back_},
-                     {"tool_state_decisions", reasons}};
+                     {"tool_states_idle_keepalives", idle_keepalives_},
+                     {"tool_state_decisions", ToJson(tool_deadband_.counts())}};
   }
   t["clock"] = {{"samples", clock_.rtt_ms_samples().size()},
                 {"offset_ms", clock_.offset_ns() * 1e-6},
@@ -259,7 +258,7 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
         ToolStateDeadbandConfig deadband = config_.tool_state_deadband;
         deadband.weber_fraction = w.deadband.tool_state_deadband;
         deadband.keepalive_s = w.deadband.tool_state_keepalive_ms * 1e-3;
-        tool_deadband_ = ToolStateDeadband(deadband);
+        tool_deadband_.Configure(deadband);
       }
       deadband_agreed_ = w.deadband;
       compact_models_ = (w.codecs & wire::kCodecCompactContactModel) != 0;

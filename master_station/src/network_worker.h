@@ -97,7 +97,7 @@ class NetworkWorker {
   ToolStateDeadband tool_deadband_{{}};
   wire::DeadbandTerms deadband_agreed_;
   bool compact_models_ = false;
-  std::uint64_t tool_states_offered_ = 0, tool_states_held_back_ = 0;
+  std::uint64_t tool_states_offered_ = 0, tool_states_held_back_ = 0, idle_keepalives_ = 0;
   std::uint64_t hello_nonce_ = 0;
   std::int64_t attempt_start_ns_ = 0;
   std::int64_t heartbeat_ns_ = 100000000, peer_timeout_ns_ = 500000000, session_start_ns_ = 0;

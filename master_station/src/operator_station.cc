@@ -485,9 +485,10 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   s["trace_rows_dropped"] = rows_dropped.load();
   s["trace_rows_over_cap"] = rows_over_cap;
   s["transport"] = network.Summary();
-  // Packet and bit rates per stream over the loop's run time (payload bytes: header, body and
-  // MAC; UDP and IP headers not counted). Sent for operator → remote streams, received for the
-  // others; the remote node's own counts are merged under each stream's "remote".
+  // Packet and bit rates per stream: this side's datagrams (sent plus received) of the whole
+  // session, handshake and scene included, over the loop's run time (payload bytes: header,
+  // body and MAC; UDP and IP headers not counted). The remote node's own counts are merged under
+  // each stream's "remote". (deploy/deadband-table divides the same counts by duration_s.)
   for (auto& [type, stream] : s["transport"]["streams"].items()) {
     const double packets = stream.value("sent", 0.0) + stream.value("received", 0.0);
     const double bytes = stream.value("bytes_sent", 0.0) + stream.value("bytes_received", 0.0);

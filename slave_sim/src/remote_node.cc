@@ -11,6 +11,7 @@
 #include <fstream>
 #include <optional>
 #include <stdexcept>
+#include <string>
 #include <thread>
 
 #include "haptic_core/remote_step.h"
@@ -27,6 +28,11 @@ namespace ht {
 nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& scene,
                              const std::atomic<bool>& stop) {
   config.pipeline.Validate();
+  if (!(config.max_deadband >= 0.0 && config.max_deadband < 1.0)) {
+    throw std::invalid_argument("max deadband must be in [0, 1) (a Weber fraction), got " +
+                                std::to_string(config.max_deadband));
+  }
+  config.model_deadband.Validate();
   std::string backend_message;
   std::unique_ptr<PenetrationDepthBackend> backend =
       MakePenetrationDepthBackend(config.pd_backend, config.gpu, config.pipeline.grid_resolution,

@@ -168,12 +168,12 @@ void RemoteSession::OnHello(const wire::Header& header, std::span<const std::uin
   ContactModelDeadbandConfig deadband = config_.model_deadband;
   deadband.weber_fraction = welcome.deadband.model_deadband;
   deadband.keepalive_s = welcome.deadband.model_keepalive_ms * 1e-3;
-  model_deadband_ = ContactModelDeadband(deadband);
+  model_deadband_.Configure(deadband);
   tool_state_deadband_ = welcome.deadband.tool_state_deadband > 0.0f;
   tool_state_keepalive_ns_ = std::int64_t{welcome.deadband.tool_state_keepalive_ms} * 1000000;
   model_keepalive_ns_ = std::int64_t{welcome.deadband.model_keepalive_ms} * 1000000;
   compact_models_ = (welcome.codecs & wire::kCodecCompactContactModel) != 0;
-  have_step_pose_ = have_sent_model_ = false;
+  have_step_pose_ = have_sent_model_ = model_pending_ = false;
   link_.Send(wire::EncodeWelcome(link_.NextHeader(wire::MessageType::kWelcome, session_), welcome,
                                  config_.key),
              peer_);
@@ -227,7 +227,7 @@ bool RemoteSession::StepCanWait(const RigidTransform& X_WT, bool scene_moves) co
   // Pacing extrapolated steps to the model period was measured and left out: it cut the steps
   // from 22 kHz to 0.8 kHz on fig75 but raised the device-force error at 10 % from 3.7 % to
   // 5.0 % (the model that answers a change waits up to a period longer).
-  if (!tool_state_deadband_ || fresh_state_ || !have_step_pose_) return false;
+  if (!tool_state_deadband_ || fresh_state_ || model_pending_ || !have_step_pose_) return false;
   return !scene_moves && X_WT.translation == last_step_pose_.translation &&
          X_WT.rotation == last_step_pose_.rotation;
 }
@@ -236,7 +236,13 @@ bool RemoteSession::MaybeSendContactModel(wire::ContactModelMessage& out,
                                           const StepTimings& timings, std::uint64_t step_count,
                                           std::int64_t now) {
   if (session_ == 0) return false;
-  if (model_period_ns_ != 0 && now - last_model_sent_ns_ < model_period_ns_) return false;
+  if (model_period_ns_ != 0 && now - last_model_sent_ns_ < model_period_ns_) {
+    // Too soon after the last model: this one is not sent, and the next pass must step again
+    // even if the pose has not changed, or it would never go out.
+    model_pending_ = true;
+    return false;
+  }
+  model_pending_ = false;
   if (model_deadband_.Decide(out.model, now) == DeadbandReason::kNotSent) {
     ++models_held_back_;
     return false;
@@ -261,6 +267,7 @@ bool RemoteSession::MaybeSendKeepAlive(std::int64_t now) {
   ++keepalives_sent_;
   wire::ContactModelMessage again = last_sent_;
   SendModel(again, now);
+  model_deadband_.NoteResent(now);
   return true;
 }
 
@@ -281,17 +288,13 @@ void RemoteSession::RefuseForeignHello(std::span<const std::uint8_t> datagram,
                                        const SocketAddress& from) {
   wire::ForeignHello hello;
   if (wire::OpenForeignHello(datagram, config_.key, hello) != wire::DecodeStatus::kOk) return;
+  if (!nonces_.Insert(hello.client_nonce)) {  // a recorded Hello played again: no answer
+    ++hello_replayed_;
+    return;
+  }
   ++foreign_hellos_;
-  wire::RejectMessage reject;
-  reject.client_nonce = hello.client_nonce;
-  reject.reason = wire::RejectReason::kVersion;
-  const int n = std::snprintf(
-      reject.text.data(), reject.text.size(),
-      "no protocol version in common: operator speaks %u..%u, remote node %u..%u (update both "
-      "sides to the same release)",
-      hello.min_version, hello.max_version, wire::kMinProtocolVersion, wire::kProtocolVersion);
-  reject.text_length = static_cast<std::uint8_t>(
-      std::clamp<int>(n, 0, static_cast<int>(reject.text.size()) - 1));
+  const wire::RejectMessage reject =
+      MakeVersionReject(hello.client_nonce, hello.min_version, hello.max_version);
   ++rejects_sent_;
   link_.Send(wire::EncodeReject(link_.NextHeader(wire::MessageType::kReject, 0), reject,
                                 config_.key, hello.header_version),
@@ -337,12 +340,6 @@ nlohmann::json RemoteSession::StatsJson(std::size_t scene_objects, std::size_t s
   transport["hello_deferred"] = hello_deferred_;
   transport["rejects_sent"] = rejects_sent_;
   transport["foreign_version_hellos"] = foreign_hellos_;
-  nlohmann::json reasons = nlohmann::json::object();
-  for (int i = 0; i < kDeadbandReasonCount; ++i) {
-    if (model_deadband_.counts()[i] != 0) {
-      reasons[ToString(static_cast<DeadbandReason>(i))] = model_deadband_.counts()[i];
-    }
-  }
   transport["deadband"] = {
       {"tool_state_deadband", session_welcome_.deadband.tool_state_deadband},
       {"model_deadband", session_welcome_.deadband.model_deadband},
@@ -352,7 +349,7 @@ nlohmann::json RemoteSession::StatsJson(std::size_t scene_objects, std::size_t s
       {"models_held_back", models_held_back_},
       {"steps_skipped", steps_skipped_},
       {"keepalives_sent", keepalives_sent_},
-      {"model_decisions", reasons}};
+      {"model_decisions", ToJson(model_deadband_.counts())}};
   transport["mtu"] = config_.mtu;
   transport["scene"] = {{"objects", scene_objects},
                         {"bytes", scene_bytes},

@@ -47,7 +47,8 @@ class RemoteSession {
   RigidTransform ToolPoseForStep(std::int64_t now_ns) noexcept;
   /// True when, with the session's tool-state deadband on and no tool state arrived since the
   /// last step, a step at X_WT (from ToolPoseForStep) would see nothing new: X_WT is
-  /// the last step's pose and the scene does not move. A fresh tool state is always stepped.
+  /// the last step's pose, the scene does not move, and the last step's model was not held back
+  /// by the model period (it must still go out). A fresh tool state is always stepped.
   bool StepCanWait(const RigidTransform& X_WT, bool scene_moves) const noexcept;
   /// Counts a loop pass that did not step (StepCanWait).
   void CountSkippedStep() noexcept { ++steps_skipped_; }
@@ -114,6 +115,7 @@ class RemoteSession {
   ContactModelDeadband model_deadband_{{}};
   bool tool_state_deadband_ = false, compact_models_ = false, fresh_state_ = false;
   bool have_step_pose_ = false, have_sent_model_ = false;
+  bool model_pending_ = false;  ///< the last step's model was held by the model period
   std::int64_t tool_state_keepalive_ns_ = 0, model_keepalive_ns_ = 0;
   std::int64_t step_extrapolation_ns_ = 0;  ///< of the pose the newest step used
   RigidTransform last_step_pose_;

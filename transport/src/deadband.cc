@@ -64,6 +64,22 @@ const char* ToString(DeadbandReason reason) noexcept {
   return "unknown";
 }
 
+nlohmann::json ToJson(const DeadbandCounts& counts) {
+  nlohmann::json out = nlohmann::json::object();
+  for (int i = 0; i < kDeadbandReasonCount; ++i) {
+    if (counts[i] != 0) out[ToString(static_cast<DeadbandReason>(i))] = counts[i];
+  }
+  return out;
+}
+
+void ToolStateDeadband::NoteSent(const RigidTransform& X_WT, const Twist& V_WT_W,
+                                 std::int64_t t_ns) noexcept {
+  have_sent_ = true;
+  X_sent_ = X_WT;
+  V_sent_ = V_WT_W;
+  t_sent_ns_ = t_ns;
+}
+
 void ToolStateDeadbandConfig::Validate() const {
   CheckFraction(weber_fraction, "tool-state deadband");
   CheckPositive(position_floor_scale_m, "tool-state deadband position floor scale");

@@ -892,7 +892,9 @@ DecodeStatus OpenForeignHello(std::span<const std::uint8_t> bytes, const MacKey&
   r(max_version);
   r(nonce);
   if (w.magic != kMagic) return DecodeStatus::kBadMagic;
-  if (w.version == kProtocolVersion) return DecodeStatus::kBadVersion;  // not foreign
+  // Only the older versions whose Hello and Reject are laid out like this one's (2..4): a newer
+  // operator is dropped (its layout is unknown here; it falls back to this version itself).
+  if (w.version < 2 || w.version >= kProtocolVersion) return DecodeStatus::kBadVersion;
   if (w.flags != 0) return DecodeStatus::kBadFlags;
   if (w.type != static_cast<std::uint8_t>(MessageType::kHello)) return DecodeStatus::kUnexpected;
   if (!VerifyMac(bytes, key)) return DecodeStatus::kBadMac;

@@ -25,12 +25,7 @@ bool NegotiateSession(const wire::HelloMessage& hello, const RemoteCapabilities&
   const std::uint16_t high = std::min(hello.max_version, wire::kProtocolVersion);
   char text[wire::kMaxRejectText + 1] = {};
   if (low > high) {
-    std::snprintf(text, sizeof(text),
-                  "no protocol version in common: operator speaks %u..%u, remote node %u..%u",
-                  hello.min_version, hello.max_version, wire::kMinProtocolVersion,
-                  wire::kProtocolVersion);
-    reject.reason = wire::RejectReason::kVersion;
-    reject.text_length = CopyText(reject.text, text);
+    reject = MakeVersionReject(hello.client_nonce, hello.min_version, hello.max_version);
     return false;
   }
   if (hello.max_grid != 0 && remote.grid > hello.max_grid) {
@@ -54,14 +49,30 @@ bool NegotiateSession(const wire::HelloMessage& hello, const RemoteCapabilities&
     reject.text_length = CopyText(reject.text, text);
     return false;
   }
-  if (d.model_deadband > 0.0f && remote.max_model_rate_hz > 0.0f &&
-      1000.0f / remote.max_model_rate_hz > static_cast<float>(d.model_keepalive_ms)) {
+  const bool deadband_on = d.tool_state_deadband > 0.0f || d.model_deadband > 0.0f;
+  const float a = hello.max_model_rate_hz, b = remote.max_model_rate_hz;
+  const float model_rate_hz = a > 0 && b > 0 ? std::min(a, b) : std::max(a, b);
+  if (deadband_on && model_rate_hz > 0.0f &&
+      1000.0f / model_rate_hz > static_cast<float>(d.model_keepalive_ms)) {
     std::snprintf(text, sizeof(text),
-                  "the operator asks a contact-model keep-alive of %u ms; this remote node sends "
-                  "at most %.0f models/s (one per %.0f ms) (raise --deadband-keepalive or slave_sim "
-                  "--max-rate)",
-                  d.model_keepalive_ms, static_cast<double>(remote.max_model_rate_hz),
-                  1000.0 / remote.max_model_rate_hz);
+                  "the operator asks a contact-model keep-alive of %u ms, but the session's model "
+                  "rate is %.0f models/s (one per %.0f ms) (raise --deadband-keepalive, "
+                  "--max-model-rate or slave_sim --max-rate)",
+                  d.model_keepalive_ms, static_cast<double>(model_rate_hz),
+                  1000.0 / model_rate_hz);
+    reject.reason = wire::RejectReason::kCapabilities;
+    reject.text_length = CopyText(reject.text, text);
+    return false;
+  }
+  const std::uint16_t peer_timeout_ms = std::max(hello.peer_timeout_ms, remote.peer_timeout_ms);
+  if (d.tool_state_deadband > 0.0f && d.tool_state_keepalive_ms >= peer_timeout_ms) {
+    // The node extrapolates the last tool state for at most the keep-alive: never past the time
+    // after which it would declare the operator lost.
+    std::snprintf(text, sizeof(text),
+                  "the operator asks a tool-state keep-alive of %u ms; it must be shorter than "
+                  "the session's peer timeout, %u ms (lower --deadband-keepalive or raise "
+                  "--peer-timeout)",
+                  d.tool_state_keepalive_ms, peer_timeout_ms);
     reject.reason = wire::RejectReason::kCapabilities;
     reject.text_length = CopyText(reject.text, text);
     return false;
@@ -71,18 +82,31 @@ bool NegotiateSession(const wire::HelloMessage& hello, const RemoteCapabilities&
   welcome.client_nonce = hello.client_nonce;
   welcome.version = high;
   welcome.tool_state_rate_hz = hello.tool_state_rate_hz;
-  const float a = hello.max_model_rate_hz, b = remote.max_model_rate_hz;
-  welcome.model_rate_hz = a > 0 && b > 0 ? std::min(a, b) : std::max(a, b);
+  welcome.model_rate_hz = model_rate_hz;
   welcome.grid = remote.grid;
   welcome.window_m = remote.window_m;
   welcome.mtu = std::min(hello.mtu, remote.mtu);
   welcome.codecs = hello.codecs & remote.codecs;
   welcome.heartbeat_ms = hello.heartbeat_ms;
-  welcome.peer_timeout_ms = std::max(hello.peer_timeout_ms, remote.peer_timeout_ms);
+  welcome.peer_timeout_ms = peer_timeout_ms;
   welcome.scene_objects = (welcome.codecs & wire::kCodecDracoMesh) ? remote.scene_objects : 0;
   welcome.scene_name_length = CopyText(welcome.scene_name, remote.scene_name.c_str());
   welcome.layout = remote.layout;
   return true;
+}
+
+wire::RejectMessage MakeVersionReject(std::uint64_t client_nonce, std::uint16_t min_version,
+                                      std::uint16_t max_version) noexcept {
+  wire::RejectMessage reject;
+  reject.client_nonce = client_nonce;
+  reject.reason = wire::RejectReason::kVersion;
+  char text[wire::kMaxRejectText + 1] = {};
+  std::snprintf(text, sizeof(text),
+                "no protocol version in common: operator speaks %u..%u, remote node %u..%u "
+                "(run the same release on both sides)",
+                min_version, max_version, wire::kMinProtocolVersion, wire::kProtocolVersion);
+  reject.text_length = CopyText(reject.text, text);
+  return reject;
 }
 
 bool NonceHistory::Insert(std::uint64_t nonce) noexcept {

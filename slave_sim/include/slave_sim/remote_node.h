@@ -88,7 +88,7 @@ wire::SceneLayout MakeSceneLayout(const HapticScene& scene);
 /// operator is silent for the peer timeout, then waits for the next Hello. Returns the run's
 /// summary (rates, step-time percentiles, per-stream statistics, sessions). Throws
 /// std::runtime_error if the socket cannot be bound or the port file cannot be written, and
-/// std::invalid_argument for a bad MTU.
+/// std::invalid_argument for a bad MTU, pipeline option or deadband setting.
 nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& scene,
                              const std::atomic<bool>& stop);
 

@@ -21,6 +21,7 @@
 
 #include <array>
 #include <cstdint>
+#include <nlohmann/json.hpp>
 
 #include "haptic_core/contact_model.h"
 #include "haptic_core/spatial.h"
@@ -41,14 +42,18 @@ enum class DeadbandReason : std::uint8_t {
   kKeepAlive,     ///< nothing sent for the keep-alive period
   kPosition,      ///< tool position left the prediction
   kRotation,      ///< tool rotation left the prediction
-  kVelocity,      ///< tool linear velocity changed
-  kAngularVelocity,
-  kContactCount,  ///< the number of contacts changed
-  kForce,         ///< the rendered force changed
-  kTorque,
-  kStiffness,     ///< the rendered stiffness (translational or rotational block) changed
+  kVelocity,        ///< tool linear velocity changed (with the velocity criterion)
+  kAngularVelocity,  ///< tool angular velocity changed (with the velocity criterion)
+  kContactCount,     ///< the number of contacts changed
+  kForce,            ///< the rendered force changed
+  kTorque,           ///< the rendered torque changed
+  kStiffness,        ///< the rendered stiffness (translational or rotational block) changed
 };
-inline constexpr int kDeadbandReasonCount = 12;
+inline constexpr int kDeadbandReasonCount = static_cast<int>(DeadbandReason::kStiffness) + 1;
+/// Decisions per reason, indexed by DeadbandReason.
+using DeadbandCounts = std::array<std::uint64_t, kDeadbandReasonCount>;
+/// {"reason": count} for the reasons with a non-zero count, for summaries.
+nlohmann::json ToJson(const DeadbandCounts& counts);
 /// "not_sent", "off", "first", "keep_alive", "position", ... for summaries.
 const char* ToString(DeadbandReason reason) noexcept;
 
@@ -66,13 +71,13 @@ struct ToolStateDeadbandConfig {
   /// Also send when the twist itself changed beyond the deadband (Weber fraction of the last
   /// twist sent). Off by default: a changed twist already shows as pose error against the
   /// receiver's extrapolation within a few ticks, and on the fig75 and kinesthetic runs the
-  /// twist criterion sent 3.7× more tool states for no measurable gain in force error
-  /// (docs/deadband.md).
+  /// twist criterion sent 3–4× more tool states for no gain in force error (docs/deadband.md).
+
   bool velocity_criterion = false;
   /// Velocity-adaptive deadband: the position and rotation floors widen by (1 + |v|/v_ref) while
   /// the tool moves fast (humans notice position errors less during fast motion).
   bool velocity_adaptive = false;
-  double adaptive_speed_ref_m_per_s = 0.05;
+  double adaptive_speed_ref_m_per_s = 0.05;  ///< v_ref of the velocity-adaptive floors (m/s)
   /// Throws std::invalid_argument naming the field when a value is out of range or not finite.
   void Validate() const;
 };
@@ -86,17 +91,23 @@ struct ToolStateDeadbandConfig {
 class ToolStateDeadband {
  public:
   explicit ToolStateDeadband(const ToolStateDeadbandConfig& config) : config_(config) {}
-  /// The decision for the tool state (X_WT, V_WT_W) at time t_ns (ns, the sender's clock). When
-  /// it returns anything but kNotSent, the state counts as sent (the caller sends it).
+  /// The decision for the tool state (X_WT, V_WT_W) at time t_ns (ns, the sender's steady
+  /// clock). When it returns anything but kNotSent, the state counts as sent (the caller sends
+  /// it).
   DeadbandReason Decide(const RigidTransform& X_WT, const Twist& V_WT_W,
                         std::int64_t t_ns) noexcept;
-  /// Forgets the last state sent (a new session): the next state is sent.
-  void Reset() noexcept { have_sent_ = false; }
-  const ToolStateDeadbandConfig& config() const noexcept { return config_; }
-  /// Decisions so far, per reason (index = DeadbandReason).
-  const std::array<std::uint64_t, kDeadbandReasonCount>& counts() const noexcept {
-    return counts_;
+  /// Records a state the caller sent without asking (e.g. a keep-alive while the loop is idle),
+  /// so that the next decision predicts from it.
+  void NoteSent(const RigidTransform& X_WT, const Twist& V_WT_W, std::int64_t t_ns) noexcept;
+  /// A new session's terms: the new configuration, and the last state sent forgotten (the next
+  /// one is sent). The counts go on across sessions.
+  void Configure(const ToolStateDeadbandConfig& config) noexcept {
+    config_ = config;
+    have_sent_ = false;
   }
+  const ToolStateDeadbandConfig& config() const noexcept { return config_; }
+  /// Decisions so far, over every session.
+  const DeadbandCounts& counts() const noexcept { return counts_; }
 
  private:
   ToolStateDeadbandConfig config_;
@@ -104,14 +115,14 @@ class ToolStateDeadband {
   RigidTransform X_sent_;
   Twist V_sent_;
   std::int64_t t_sent_ns_ = 0;
-  std::array<std::uint64_t, kDeadbandReasonCount> counts_{};
+  DeadbandCounts counts_{};
 };
 
 /// Contact-model deadband. Thresholds are max(k·|value|, k·floor scale).
 struct ContactModelDeadbandConfig {
   double weber_fraction = 0.0;  ///< k ∈ [0, 1); 0 = off (every model is sent)
-  double force_floor_scale_n = 1.0;
-  double torque_floor_scale_nm = 0.05;
+  double force_floor_scale_n = 1.0;     ///< floor of the force threshold, ÷ k (N)
+  double torque_floor_scale_nm = 0.05;  ///< floor of the torque threshold, ÷ k (N·m)
   double stiffness_floor_scale_n_per_m = 200.0;         ///< translational block of K (N/m)
   double rotational_stiffness_floor_scale_nm_per_rad = 0.2;  ///< rotational block (N·m/rad)
   double keepalive_s = 0.1;  ///< longest time between two models sent (s, > 0)
@@ -130,24 +141,30 @@ struct ContactModelDeadbandConfig {
 class ContactModelDeadband {
  public:
   explicit ContactModelDeadband(const ContactModelDeadbandConfig& config) : config_(config) {}
-  /// The decision for `model` at time t_ns. When it returns anything but kNotSent, `model`
-  /// becomes the held model (the caller sends it).
+  /// The decision for `model` at time t_ns (ns, the remote node's steady clock). When it returns
+  /// anything but kNotSent, `model` becomes the held model (the caller sends it).
   DeadbandReason Decide(const ContactModel& model, std::int64_t t_ns) noexcept;
-  /// Forgets the held model (a new session).
-  void Reset() noexcept { have_sent_ = false; }
+  /// Records that the held model was sent again at t_ns (a keep-alive): the keep-alive period
+  /// starts over.
+  void NoteResent(std::int64_t t_ns) noexcept { t_sent_ns_ = t_ns; }
+  /// A new session's terms: the new configuration, and the held model forgotten. The counts go
+  /// on across sessions.
+  void Configure(const ContactModelDeadbandConfig& config) noexcept {
+    config_ = config;
+    have_sent_ = false;
+  }
   const ContactModelDeadbandConfig& config() const noexcept { return config_; }
   /// The last model sent (valid after the first Decide that sent).
   const ContactModel& held() const noexcept { return held_; }
-  const std::array<std::uint64_t, kDeadbandReasonCount>& counts() const noexcept {
-    return counts_;
-  }
+  /// Decisions so far, over every session.
+  const DeadbandCounts& counts() const noexcept { return counts_; }
 
  private:
   ContactModelDeadbandConfig config_;
   bool have_sent_ = false;
   ContactModel held_;
   std::int64_t t_sent_ns_ = 0;
-  std::array<std::uint64_t, kDeadbandReasonCount> counts_{};
+  DeadbandCounts counts_{};
 };
 
 }  // namespace ht

@@ -235,10 +235,11 @@ struct ForeignHello {
   std::uint16_t min_version = 0, max_version = 0;
   std::uint64_t client_nonce = 0;
 };
-/// Opens a Hello whose header version is not kProtocolVersion, so that the remote node can refuse
-/// an operator of another version with a Reject it understands. kOk when the magic, flags and type
-/// match, the MAC verifies under `key` and the body has at least its first 12 bytes; kBadVersion
-/// when the datagram is of this version (open it with OpenDatagram instead).
+/// Opens a Hello of an older protocol version (2 ≤ version < kProtocolVersion), so that the
+/// remote node can refuse that operator with a Reject it understands. kOk when the magic, flags
+/// and type match, the MAC verifies under `key` and the body has at least its first 12 bytes;
+/// kBadVersion for this version (open it with OpenDatagram instead) or a version outside that
+/// range.
 DecodeStatus OpenForeignHello(std::span<const std::uint8_t> datagram, const MacKey& key,
                               ForeignHello& hello) noexcept;
 /// A Reject with `version` in its header (the body is laid out alike in versions 2 to 4).
@@ -260,8 +261,8 @@ DecodeStatus DecodeContactModel(std::span<const std::uint8_t> body,
                                 ContactModelMessage& message) noexcept;
 /// CompactContactModel into the message the float encoding decodes to: X_WT0's quaternion
 /// normalized, normals unit. kBadCount for more than kMaxWireContacts contacts, kTooShort/kTooLong
-/// unless the length is exact, kNonFinite for a non-finite field or scale or a marked one,
-/// kBadValue for a negative stiffness or scale or a quaternion whose norm is not within 1e-3 of 1.
+/// unless the length is exact, kNonFinite for a non-finite field or a marked one, kBadValue for a
+/// negative stiffness or a quaternion whose norm is not within 1e-3 of 1.
 DecodeStatus DecodeCompactContactModel(std::span<const std::uint8_t> body,
                                        ContactModelMessage& message) noexcept;
 DecodeStatus DecodeHello(std::span<const std::uint8_t> body, HelloMessage& message) noexcept;

@@ -26,7 +26,11 @@
 //     angular 3×f64 (rad/s). T is the tool frame at its centre of mass, W the remote world.
 //   ContactModel R→O (kContactModelFixedBytes + n·kContactBytes):
 //     u64 tool_state_seq  i64 tool_state_send_time_ns (echoed)  i64 hold_ns (remote time between
-//     receiving that tool state and sending this)  u64 remote_step_count
+//     receiving that tool state and sending this)  u64 remote_step_count. Under a tool-state
+//     deadband the model answers the tool state extrapolated by Δ (remote time since it arrived,
+//     at most its keep-alive): the echo is then send time + Δ and hold_ns counts from arrival +
+//     Δ, so that now − echo is the age of the pose answered and now − echo − hold_ns stays the
+//     round trip; a keep-alive copy of a held model repeats its echo with a new hold_ns.
 //     f32 collision_us, f32 texture_us, f32 step_us
 //     X_WT0: 3×f64 + 4×f64   F_T_W at q0: 3×f64 force (N), 3×f64 torque (N·m)
 //     u8 num_contacts (0..kMaxWireContacts), then per contact (88): f64 depth_m, 3×f64 ∂δ/∂x,

@@ -35,12 +35,18 @@ struct RemoteCapabilities {
 /// - MTU: the smaller; codecs: the intersection (no Draco ⇒ no scene objects are announced);
 /// - heartbeat: the operator's; peer timeout: the larger of the two; the scene layout: the node's;
 /// - deadband: the operator's terms, refused (kCapabilities) when either Weber fraction is above
-///   the node's max_deadband, or when a model deadband's keep-alive is shorter than the node's
-///   model period (1/max_model_rate_hz).
+///   the node's max_deadband, when (with either deadband on) the model keep-alive is shorter
+///   than the session's model period, or when a tool-state deadband's keep-alive is not shorter
+///   than the session's peer timeout (the node extrapolates a tool state for at most that long).
 /// Returns true and fills `welcome` (without its session id, which goes in the header), or false
 /// and fills `reject` with a reason and a sentence saying what differs.
 bool NegotiateSession(const wire::HelloMessage& hello, const RemoteCapabilities& remote,
                       wire::WelcomeMessage& welcome, wire::RejectMessage& reject) noexcept;
+
+/// The Reject (kVersion) for an operator that speaks versions min_version..max_version, none of
+/// them this node's: says both ranges, in at most kMaxRejectText bytes.
+wire::RejectMessage MakeVersionReject(std::uint64_t client_nonce, std::uint16_t min_version,
+                                      std::uint16_t max_version) noexcept;
 
 /// The last kSize Hello nonces seen, so that a replayed Hello is refused (a new Hello carries a
 /// fresh random nonce). Not caught: a Hello older than the last kSize, and, after the remote node
