@@ -151,6 +151,30 @@ TEST(OperatorTick, AWorkspaceJumpDropsModelsOfTheOldPlace) {
   EXPECT_EQ(tick.counters().models_used, 1);
 }
 
+TEST(OperatorTick, AModelArrivingOnTheJumpsOwnTickIsJudgedAgainstTheNewPlace) {
+  // It used to be taken before the jump was applied, counted as used, then dropped by the jump.
+  OperatorTick tick(Config(), RigidTransform{}, ToolState{});
+  OperatorTickInput in;
+  in.now_ns = 1000000;
+  tick.Step(in);
+  ArrivedModel old_place = Wall(in.now_ns);  // linearized at the origin
+  in.workspace_shift_M = {0.5, 0, 0};
+  in.arrived = &old_place;
+  tick.Step(in);
+  EXPECT_EQ(tick.counters().workspace_jumps, 1);
+  EXPECT_EQ(tick.counters().models_from_before_jump, 1);
+  EXPECT_EQ(tick.counters().models_used, 0);
+  // A model of the new place arriving on a later jump's tick is taken.
+  ArrivedModel new_place = Wall(in.now_ns);
+  new_place.model.X_WT0.translation = {0.6, 0, 0};
+  in.workspace_shift_M = {0.6, 0, 0};
+  in.arrived = &new_place;
+  const OperatorTickOutput out = tick.Step(in);
+  EXPECT_EQ(tick.counters().workspace_jumps, 2);
+  EXPECT_EQ(tick.counters().models_used, 1);
+  EXPECT_GE(out.model_age_ms, 0.0);
+}
+
 TEST(OperatorTick, NonFiniteDeviceReadingsGiveZeroWrench) {
   OperatorTick tick(Config(), RigidTransform{}, ToolState{});
   OperatorTickInput in;

@@ -170,3 +170,44 @@ TEST(SessionEndToEnd, TheOperatorReconnectsToARestartedRemoteNode) {
 
 }  // namespace
 }  // namespace ht
+
+namespace ht {
+namespace {
+
+TEST(SessionEndToEnd, AStopRequestWhileWaitingForTheRemoteNodeEndsTheWait) {
+  // Nobody listens at the remote port: without the stop the station would wait the whole
+  // 30 s connect timeout and then report that no remote node answered.
+  StationConfig config = OperatorConfig(MacKey::Generate(), FreePort(), FreePort());
+  config.connect_timeout_s = 30.0;
+  std::atomic<bool> stop{false};
+  config.stop_requested = &stop;
+  const auto experiment = MakeExperiment("fig75", 1.0);
+  SimulatedOperatorDevice device(*experiment);
+  std::thread signal([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    stop = true;
+  });
+  std::string error;
+  try {
+    RunOperatorStation(config, device, *experiment);
+  } catch (const std::runtime_error& e) {
+    error = e.what();
+  }
+  signal.join();
+  EXPECT_NE(error.find("stopped on request while waiting for the session"), std::string::npos)
+      << error;
+}
+
+TEST(SessionEndToEnd, StopSettingsAreValidated) {
+  StationConfig config = OperatorConfig(MacKey::Generate(), 47000, 0);
+  config.run_until_stopped = true;  // and no stop_requested: it would never end
+  EXPECT_THROW(config.Validate(), std::invalid_argument);
+  std::atomic<bool> stop{false};
+  config.stop_requested = &stop;
+  EXPECT_NO_THROW(config.Validate());
+  config.stop_ramp_s = -1.0;
+  EXPECT_THROW(config.Validate(), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace ht

@@ -72,6 +72,15 @@ void StationConfig::Validate() const {
   if (max_grid < 0 || max_grid > 65535) throw std::invalid_argument("max grid must be 0..65535");
   coupling.Validate();
   safety.Validate();
+  if (!(stop_ramp_s >= 0.0 && stop_ramp_s <= 10.0)) {
+    throw std::invalid_argument("stop ramp must be within 0..10 s, got " +
+                                std::to_string(stop_ramp_s));
+  }
+  if (run_until_stopped && stop_requested == nullptr) {
+    throw std::invalid_argument(
+        "run_until_stopped needs stop_requested (a flag a signal handler sets), or the run "
+        "would never end");
+  }
   tool_state_deadband.Validate();
   if (!(tool_state_deadband.keepalive_s >= 1e-3 && tool_state_deadband.keepalive_s <= 60.0)) {
     throw std::invalid_argument("tool-state keep-alive must be within 1 ms..60 s");
@@ -154,14 +163,28 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
     device.Close();
   };
 
+  // Ctrl-C or SIGTERM while waiting for the remote node ends the wait at once (nothing has been
+  // rendered yet, so there is no force to ramp down).
+  const auto stop_requested = [&] {
+    return config.stop_requested != nullptr &&
+           config.stop_requested->load(std::memory_order_relaxed);
+  };
+  const auto throw_if_stopped = [&](const char* waiting_for) {
+    if (!stop_requested()) return;
+    stop_threads();
+    throw std::runtime_error(std::string("stopped on request while waiting for ") + waiting_for +
+                             " from the remote node at " + config.remote_address.ToString());
+  };
+
   // The session first: its Welcome says where the workspace goes (the tool's home pose), the
   // tool's inertia and where the touchable objects are.
   const std::int64_t connect_deadline =
       SteadyNowNs() + static_cast<std::int64_t>(config.connect_timeout_s * 1e9);
-  while (!counters.connected.load() && !counters.rejected.load() &&
+  while (!counters.connected.load() && !counters.rejected.load() && !stop_requested() &&
          SteadyNowNs() < connect_deadline) {
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
+  throw_if_stopped("the session");
   RigidTransform X_WM = config.X_WM;
   ToolInertia tool_inertia = config.tool_inertia;
   ExperimentScene scene_M;
@@ -213,9 +236,10 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
 
   // Then the remote node's first contact model (it answers our first tool state).
   while (counters.model_accepted.load() == 0 && !counters.rejected.load() &&
-         SteadyNowNs() < connect_deadline) {
+         !stop_requested() && SteadyNowNs() < connect_deadline) {
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
+  if (counters.model_accepted.load() == 0) throw_if_stopped("the first contact model");
   if (counters.model_accepted.load() == 0) {
     const bool connected = counters.connected.load();
     stop_threads();

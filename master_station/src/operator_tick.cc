@@ -26,6 +26,22 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
   OperatorTickOutput out;
   const double h = config_.h_s;
 
+  // A scripted "go to" (with a working device): the workspace and the tool jump together, in
+  // free space, and the contact models of the old place are dropped. Before stage 1, so that a
+  // model arriving on the jump's own tick is judged against the new place like any later one.
+  if (in.device_ok && in.workspace_shift_M != workspace_shift_M_) {
+    const glm::dvec3 jump_W = X_WM_.rotation * (in.workspace_shift_M - workspace_shift_M_);
+    jumped_from_W_ = tool_.X_WT.translation;
+    after_jump_ = true;
+    X_WM_.translation += jump_W;
+    tool_.X_WT.translation += jump_W;
+    workspace_shift_M_ = in.workspace_shift_M;
+    model_ = ContactModel{};
+    previous_model_ = ContactModel{};
+    blend_tick_ = config_.model_blend_ticks;
+    ++counters_.workspace_jumps;
+  }
+
   // Stage 1: the contact model in use. A model that arrives is taken even while the device read
   // fails (newest wins), unless it comes from before a workspace jump.
   if (in.arrived != nullptr) {
@@ -62,20 +78,6 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
     ++counters_.device_faults;
     out.X_WH = X_WH_last_;
   } else {
-    // A scripted "go to": the workspace and the tool jump together, in free space, and the
-    // contact models of the old place are dropped.
-    if (in.workspace_shift_M != workspace_shift_M_) {
-      const glm::dvec3 jump_W = X_WM_.rotation * (in.workspace_shift_M - workspace_shift_M_);
-      jumped_from_W_ = tool_.X_WT.translation;
-      after_jump_ = true;
-      X_WM_.translation += jump_W;
-      tool_.X_WT.translation += jump_W;
-      workspace_shift_M_ = in.workspace_shift_M;
-      model_ = ContactModel{};
-      previous_model_ = ContactModel{};
-      blend_tick_ = config_.model_blend_ticks;
-      ++counters_.workspace_jumps;
-    }
     out.X_WH = X_WM_ * in.device.X_MH;
     X_WH_last_ = out.X_WH;
     V_WH_W = {X_WM_.rotation * in.device.V_MH_M.linear, X_WM_.rotation * in.device.V_MH_M.angular};

@@ -85,7 +85,8 @@ struct StationConfig {
   bool compact_models = true;
 
   /// Throws std::invalid_argument naming the first bad value (rate outside 100..4000 Hz, MTU
-  /// outside 548..1472, peer timeout not above the heartbeat, ...).
+  /// outside 548..1472, peer timeout not above the heartbeat, stop ramp outside 0..10 s,
+  /// run_until_stopped without stop_requested, a deadband outside [0, 1), ...).
   void Validate() const;
 };
 
@@ -96,7 +97,8 @@ struct StationConfig {
 /// contact model), receives the scene, and says goodbye at the end. Returns the summary (the same
 /// object written to summary.json), with per-stream statistics under "transport". Throws
 /// std::runtime_error when the remote node never answers within connect_timeout_s, refuses the
-/// session (with its reason), or a socket cannot be opened; the message says what to check.
+/// session (with its reason), a stop is requested while waiting for it, or a socket cannot be
+/// opened; the message says what to check.
 nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& device,
                                   Experiment& experiment);
 
