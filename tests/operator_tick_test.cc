@@ -7,6 +7,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include "allocation_counter.h"  // the tick / step must make no allocation
 #include "haptic_core/demo/demo_scenes.h"
 
@@ -173,6 +175,40 @@ TEST(OperatorTick, AModelArrivingOnTheJumpsOwnTickIsJudgedAgainstTheNewPlace) {
   EXPECT_EQ(tick.counters().workspace_jumps, 2);
   EXPECT_EQ(tick.counters().models_used, 1);
   EXPECT_GE(out.model_age_ms, 0.0);
+}
+
+TEST(OperatorTick, TheStopRampScalesTheWrenchBeforeThePassivityObserverRecordsIt) {
+  // Two ticks in lockstep pressing the handle into a wall while it moves; on the last tick one
+  // gets half gain. Its device wrench is half, and the observer's energy step is half too: it
+  // recorded the wrench the device got (the ramp used to scale after the observer).
+  OperatorTick a(Config(), RigidTransform{}, ToolState{}), b(Config(), RigidTransform{}, ToolState{});
+  std::int64_t now = 1000000;
+  ArrivedModel wall = Wall(now);
+  OperatorTickOutput out_a, out_b;
+  double before_a = 0.0, before_b = 0.0;
+  for (int k = 0; k < 300; ++k, now += 1000000) {
+    OperatorTickInput in = Pressing(now);
+    in.device.X_MH.translation.z += 2e-3 * std::sin(0.05 * k);  // pressing harder and softer
+    in.device.V_MH_M.linear.z = 2e-3 * 0.05 * 1000.0 * std::cos(0.05 * k);
+    in.arrived = k == 0 ? &wall : nullptr;
+    before_a = a.passivity().observed_energy_j();
+    before_b = b.passivity().observed_energy_j();
+    out_a = a.Step(in);
+    if (k == 299) in.output_gain = 0.5;
+    out_b = b.Step(in);
+  }
+  ASSERT_GT(glm::length(out_a.F_device_W.force), 0.1);
+  EXPECT_NEAR(out_b.F_device_W.force.z, 0.5 * out_a.F_device_W.force.z, 1e-12);
+  EXPECT_NEAR(out_b.F_H_M.force.z, 0.5 * out_a.F_H_M.force.z, 1e-12);
+  EXPECT_EQ(before_a, before_b);
+  const double step_a = a.passivity().observed_energy_j() - before_a;
+  const double step_b = b.passivity().observed_energy_j() - before_b;
+  ASSERT_NE(step_a, 0.0);
+  EXPECT_NEAR(step_b, 0.5 * step_a, 1e-12 + 1e-9 * std::abs(step_a));
+  // Gain 0 (and NaN, treated as 0): nothing reaches the device.
+  OperatorTickInput in = Pressing(now);
+  in.output_gain = std::nan("");
+  EXPECT_EQ(b.Step(in).F_device_W.force, glm::dvec3(0.0));
 }
 
 TEST(OperatorTick, NonFiniteDeviceReadingsGiveZeroWrench) {

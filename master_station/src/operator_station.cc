@@ -336,18 +336,17 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
         arrived.step_us = received.message.step_us;
         in.arrived = &arrived;
       }
-      OperatorTickOutput out = tick.Step(in);
-      // Asked to stop (Ctrl-C, SIGTERM): ramp the device's wrench to zero, then end the run.
+      // Asked to stop (Ctrl-C, SIGTERM): ramp the device's wrench to zero (in the tick, before
+      // the passivity observer records it), then end the run.
       if (stop_ramp_start < 0 && config.stop_requested != nullptr &&
           config.stop_requested->load(std::memory_order_relaxed)) {
         stop_ramp_start = k;
       }
       if (stop_ramp_start >= 0) {
-        const double gain =
+        in.output_gain =
             std::max(0.0, 1.0 - static_cast<double>(k - stop_ramp_start + 1) / stop_ramp_ticks);
-        out.F_H_M = {gain * out.F_H_M.force, gain * out.F_H_M.torque};
-        out.F_device_W = {gain * out.F_device_W.force, gain * out.F_device_W.torque};
       }
+      OperatorTickOutput out = tick.Step(in);
       if (!device.WriteWrench(out.F_H_M, now)) ++device_write_faults;
       if (in.device_ok) {
         ++tool_seq;

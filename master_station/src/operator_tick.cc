@@ -1,5 +1,8 @@
 #include "master_station/operator_tick.h"
 
+#include <algorithm>
+#include <cmath>
+
 #include <stdexcept>
 #include <string>
 
@@ -106,6 +109,8 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
   // Stage 4: safety, on every tick. Then the observer records what the device really gets.
   F_device_W = safety_.Filter(F_device_W, V_WH_W, model_staleness_s, in.link_connected, h,
                               out.safety_actions);
+  const double gain = std::isnan(in.output_gain) ? 0.0 : std::clamp(in.output_gain, 0.0, 1.0);
+  if (gain < 1.0) F_device_W = {gain * F_device_W.force, gain * F_device_W.torque};
   // The safety stage's rate limit can hold back a drop passivity asked for: the guard scales
   // what is left so that the observed energy never goes negative.
   if (config_.passivity) F_device_W = passivity_.Guard(F_device_W, V_WH_W, h);

@@ -64,6 +64,10 @@ struct OperatorTickInput {
   /// A scripted "go to" (HandTarget::workspace_shift_M, m in M): when it differs from the
   /// last one the workspace and the tool jump together by the difference.
   glm::dvec3 workspace_shift_M{0.0};
+  /// Scales the device's wrench after the safety stage and before the passivity observer
+  /// records it, clamped to [0, 1] (NaN = 0): the ramp to zero when a stop is requested. The
+  /// observer then accounts the wrench the device really gets.
+  double output_gain = 1.0;
 };
 
 /// One tick's outputs.
