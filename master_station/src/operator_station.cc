@@ -145,9 +145,7 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
           ++rows_over_cap;
           continue;
         }
-        const long before = std::ftell(trace);
-        WriteTraceRow(trace, row, experiment.phase_names());
-        written += std::ftell(trace) - before;
+        written += WriteTraceRow(trace, row, experiment.phase_names());
       }
       if (stopping && !any) break;
       std::this_thread::sleep_for(std::chrono::milliseconds(5));

@@ -10,13 +10,13 @@ void WriteTraceHeader(std::FILE* f) {
       f);
 }
 
-void WriteTraceRow(std::FILE* f, const TraceRow& r, const std::vector<std::string>& phases) {
+long WriteTraceRow(std::FILE* f, const TraceRow& r, const std::vector<std::string>& phases) {
   const glm::dvec3 rv = RotationVectorFromQuaternion(r.X_WT.rotation);
   const glm::dvec3& p = r.X_WT.translation;
   const char* phase = r.phase >= 0 && r.phase < static_cast<int>(phases.size())
                           ? phases[r.phase].c_str()
                           : "unknown";
-  std::fprintf(f,
+  const int n = std::fprintf(f,
                "%.6f,%s,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%.4f,"
                "%.9g,%.9g,%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.2f,%.2f,%.2f,%.2f\n",
                r.t_s, phase, p.x, p.y, p.z, rv.x, rv.y, rv.z, r.F_contact_T_W.force.x,
@@ -27,6 +27,7 @@ void WriteTraceRow(std::FILE* f, const TraceRow& r, const std::vector<std::strin
                r.F_device_W.torque.z, r.depth_m, static_cast<double>(r.tick_compute_us),
                static_cast<double>(r.remote_collision_us), static_cast<double>(r.remote_texture_us),
                static_cast<double>(r.remote_step_us));
+  return n < 0 ? 0 : n;
 }
 
 }  // namespace ht::station

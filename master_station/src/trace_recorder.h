@@ -29,7 +29,8 @@ struct TraceRow {
 
 /// Writes the header line of trace.csv.
 void WriteTraceHeader(std::FILE* f);
-/// Writes one row; `phases` names the experiment's phases.
-void WriteTraceRow(std::FILE* f, const TraceRow& r, const std::vector<std::string>& phases);
+/// Writes one row; `phases` names the experiment's phases. Returns the bytes written (0 when the
+/// write failed), so that the trace's size cap needs no ftell per row.
+long WriteTraceRow(std::FILE* f, const TraceRow& r, const std::vector<std::string>& phases);
 
 }  // namespace ht::station
