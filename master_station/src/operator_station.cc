@@ -216,7 +216,6 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
       targets_M.push_back(e);
     }
   }
-  const ToolSimulator simulator(tool_inertia, config.coupling);
   const RigidTransform X_WM_start = X_WM;
   experiment.SetScene(scene_M);
   std::printf("[master] workspace centre in W %.4f,%.4f,%.4f (%s); %zu object(s) described\n",
