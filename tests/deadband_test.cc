@@ -116,12 +116,10 @@ TEST(Deadband, ToolStateThresholdsAreWeberFractionsWithFloors) {
         RigidTransform X;
         X.translation = {0.02 * std::sin(2.0 * std::numbers::pi * 1.3 * t), 0.0,
                          0.005 * std::sin(2.0 * std::numbers::pi * 0.7 * t)};
-        const Twist V{{0.02 * 2.0 * std::numbers::pi * 1.3 * std::cos(2.0 * std::numbers::pi *
-                                                                        1.3 * t),
-                       0.0,
-                       0.005 * 2.0 * std::numbers::pi * 0.7 *
-                           std::cos(2.0 * std::numbers::pi * 0.7 * t)},
-                      {}};
+        const Twist V{
+            {0.02 * 2.0 * std::numbers::pi * 1.3 * std::cos(2.0 * std::numbers::pi * 1.3 * t), 0.0,
+             0.005 * 2.0 * std::numbers::pi * 0.7 * std::cos(2.0 * std::numbers::pi * 0.7 * t)},
+            {}};
         if (d.Decide(X, V, i * kMs) != DeadbandReason::kNotSent) ++sent;
       }
       return sent;
@@ -297,10 +295,10 @@ TEST(DeadbandNegotiation, HelloAndWelcomeCarryTheTermsAndRefuseBadOnes) {
   EXPECT_EQ(back.deadband.model_deadband, 0.1f);
   EXPECT_EQ(back.deadband.tool_state_keepalive_ms, 80);
   EXPECT_EQ(back.deadband.model_keepalive_ms, 90);
-  for (const wire::DeadbandTerms bad : {wire::DeadbandTerms{1.0f, 0.0f, 100, 100},
-                                        wire::DeadbandTerms{0.0f, -0.1f, 100, 100},
-                                        wire::DeadbandTerms{0.1f, 0.1f, 0, 100},
-                                        wire::DeadbandTerms{std::nanf(""), 0.1f, 100, 100}}) {
+  for (const wire::DeadbandTerms bad :
+       {wire::DeadbandTerms{1.0f, 0.0f, 100, 100}, wire::DeadbandTerms{0.0f, -0.1f, 100, 100},
+        wire::DeadbandTerms{0.1f, 0.1f, 0, 100},
+        wire::DeadbandTerms{std::nanf(""), 0.1f, 100, 100}}) {
     hello.deadband = bad;
     const wire::Datagram b = wire::EncodeHello(h, hello, key);
     ASSERT_EQ(wire::OpenDatagram(b.view(), key, got, body), wire::DecodeStatus::kOk);
@@ -343,9 +341,9 @@ TEST(DeadbandNegotiation, AHelloOfAnotherVersionIsOpenedForARejectInItsVersion) 
   wire::Datagram newer = d;
   newer.bytes[4] = static_cast<std::uint8_t>(wire::kProtocolVersion + 1);
   newer.size -= wire::kMacBytes;
-  ComputeMac(std::span<const std::uint8_t>(newer.bytes.data(), newer.size), key,
-             std::span<std::uint8_t, wire::kMacBytes>(newer.bytes.data() + newer.size,
-                                                      wire::kMacBytes));
+  ComputeMac(
+      std::span<const std::uint8_t>(newer.bytes.data(), newer.size), key,
+      std::span<std::uint8_t, wire::kMacBytes>(newer.bytes.data() + newer.size, wire::kMacBytes));
   newer.size += wire::kMacBytes;
   EXPECT_EQ(wire::OpenForeignHello(newer.view(), key, foreign), wire::DecodeStatus::kBadVersion);
   // The Reject goes out in version 3: its header says 3 and its body is the v3 Reject.

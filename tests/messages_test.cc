@@ -375,7 +375,8 @@ TEST(Messages, NonFiniteAndImpossibleValuesAreRejectedEvenWithAValidMac) {
   EXPECT_EQ(Sealed([&](const MacKey& k) {
               Datagram d = EncodeWelcome({}, SampleWelcome(), k);
               d.size -= kMacBytes;
-              d.bytes[kHeaderBytes + 36 + kDeadbandTermsBytes] = 40;  // name length beyond its field
+              d.bytes[kHeaderBytes + 36 + kDeadbandTermsBytes] =
+                  40;  // name length beyond its field
               ComputeMac(d.view(), k,
                          std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size, kMacBytes));
               d.size += kMacBytes;

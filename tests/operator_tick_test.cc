@@ -181,7 +181,8 @@ TEST(OperatorTick, TheStopRampScalesTheWrenchBeforeThePassivityObserverRecordsIt
   // Two ticks in lockstep pressing the handle into a wall while it moves; on the last tick one
   // gets half gain. Its device wrench is half, and the observer's energy step is half too: it
   // recorded the wrench the device got (the ramp used to scale after the observer).
-  OperatorTick a(Config(), RigidTransform{}, ToolState{}), b(Config(), RigidTransform{}, ToolState{});
+  OperatorTick a(Config(), RigidTransform{}, ToolState{}),
+      b(Config(), RigidTransform{}, ToolState{});
   std::int64_t now = 1000000;
   ArrivedModel wall = Wall(now);
   OperatorTickOutput out_a, out_b;

@@ -57,22 +57,28 @@ std::uint16_t AwaitPort(const std::string& port_file) {
   return 0;
 }
 
-TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
-  const HapticScene scene = MakeBlockOnGearScene();
+/// A node on 127.0.0.1 (any port, written to TempDir()/port_file_name, stale file removed),
+/// quiet, staying up after a goodbye, authenticating with `key`.
+RemoteNodeConfig LocalNodeConfig(const MacKey& key, const std::string& port_file_name) {
   RemoteNodeConfig config;
   config.listen_address = SocketAddress::Parse("127.0.0.1:0");
   config.progress_period_s = 0.0;
-  config.key = TestKey(11);
-  config.scene_objects.emplace_back(5, std::vector<std::uint8_t>(3000, 0x42));
+  config.key = key;
   config.exit_on_goodbye = false;
-  const std::string port_file = ::testing::TempDir() + "/remote_node_test.port";
-  std::remove(port_file.c_str());
-  config.port_file = port_file;
+  config.port_file = ::testing::TempDir() + "/" + port_file_name;
+  std::remove(config.port_file.c_str());
+  return config;
+}
+
+TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
+  const HapticScene scene = MakeBlockOnGearScene();
+  RemoteNodeConfig config = LocalNodeConfig(TestKey(11), "remote_node_test.port");
+  config.scene_objects.emplace_back(5, std::vector<std::uint8_t>(3000, 0x42));
   std::atomic<bool> stop{false};
   nlohmann::json summary;
   std::thread node([&] { summary = RunRemoteNode(config, scene, stop); });
 
-  const std::uint16_t port = AwaitPort(port_file);
+  const std::uint16_t port = AwaitPort(config.port_file);
   ASSERT_NE(port, 0);
   const SocketAddress remote = SocketAddress::Parse("127.0.0.1:" + std::to_string(port));
   UdpSocket socket(SocketAddress::Parse("127.0.0.1:0"));
@@ -175,18 +181,11 @@ TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
 
 TEST(RemoteNode, RefusesAnOperatorOfAnotherVersionAndHoldsBackModelsThatSayNothingNew) {
   const HapticScene scene = MakeBlockOnGearScene();
-  RemoteNodeConfig config;
-  config.listen_address = SocketAddress::Parse("127.0.0.1:0");
-  config.progress_period_s = 0.0;
-  config.key = TestKey(21);
-  config.exit_on_goodbye = false;
-  const std::string port_file = ::testing::TempDir() + "/remote_node_deadband_test.port";
-  std::remove(port_file.c_str());
-  config.port_file = port_file;
+  const RemoteNodeConfig config = LocalNodeConfig(TestKey(21), "remote_node_deadband_test.port");
   std::atomic<bool> stop{false};
   nlohmann::json summary;
   std::thread node([&] { summary = RunRemoteNode(config, scene, stop); });
-  const std::uint16_t port = AwaitPort(port_file);
+  const std::uint16_t port = AwaitPort(config.port_file);
   ASSERT_NE(port, 0);
   const SocketAddress remote = SocketAddress::Parse("127.0.0.1:" + std::to_string(port));
   UdpSocket socket(SocketAddress::Parse("127.0.0.1:0"));
@@ -199,8 +198,9 @@ TEST(RemoteNode, RefusesAnOperatorOfAnotherVersionAndHoldsBackModelsThatSayNothi
   wire::Datagram old = wire::EncodeHello({wire::MessageType::kHello, 0, 1, 0}, hello, config.key);
   old.bytes[4] = 3;
   old.size = wire::kHeaderBytes + 32;
-  ComputeMac(old.view(), config.key,
-             std::span<std::uint8_t, wire::kMacBytes>(old.bytes.data() + old.size, wire::kMacBytes));
+  ComputeMac(
+      old.view(), config.key,
+      std::span<std::uint8_t, wire::kMacBytes>(old.bytes.data() + old.size, wire::kMacBytes));
   old.size += wire::kMacBytes;
   ASSERT_TRUE(socket.SendTo(old.view(), remote));
   bool refused = false;
@@ -219,7 +219,8 @@ TEST(RemoteNode, RefusesAnOperatorOfAnotherVersionAndHoldsBackModelsThatSayNothi
       std::uint64_t nonce = 0;
       for (int b = 7; b >= 0; --b) nonce = (nonce << 8) | buf[wire::kHeaderBytes + b];
       EXPECT_EQ(nonce, 4242u);
-      EXPECT_EQ(buf[wire::kHeaderBytes + 8], static_cast<std::uint8_t>(wire::RejectReason::kVersion));
+      EXPECT_EQ(buf[wire::kHeaderBytes + 8],
+                static_cast<std::uint8_t>(wire::RejectReason::kVersion));
       const std::string text(reinterpret_cast<const char*>(buf.data() + wire::kHeaderBytes + 10),
                              buf[wire::kHeaderBytes + 9]);
       EXPECT_NE(text.find("operator speaks 3..3"), std::string::npos) << text;

@@ -106,10 +106,10 @@ TEST(SessionEndToEnd, AFloodOfBadDatagramsIsDroppedAndCountedWhileTheSessionHold
   EXPECT_EQ(t["peers_lost"].get<int>(), 0);
   EXPECT_TRUE(t["scene"]["complete"].get<bool>());
   // Contact models come as compact_contact_model (the default encoding) or contact_model.
-  EXPECT_GT(t["streams"].value("compact_contact_model", nlohmann::json::object()).value("received",
-                                                                                         0) +
-                t["streams"].value("contact_model", nlohmann::json::object()).value("received", 0),
-            100);
+  EXPECT_GT(
+      t["streams"].value("compact_contact_model", nlohmann::json::object()).value("received", 0) +
+          t["streams"].value("contact_model", nlohmann::json::object()).value("received", 0),
+      100);
   // Both ends counted the flood by reason and accepted none of it.
   const nlohmann::json& remote_transport = remote_summary["transport"];
   for (const nlohmann::json* side : {&t, &remote_transport}) {

@@ -6,8 +6,8 @@
 
 #include <algorithm>
 #include <array>
-#include <cstdio>
 #include <cmath>
+#include <cstdio>
 #include <ctime>
 #include <exception>
 #include <optional>
@@ -209,13 +209,13 @@ void NetworkWorker::SendHello() {
   hello.mtu = static_cast<std::uint16_t>(config_.mtu);
   hello.heartbeat_ms = static_cast<std::uint16_t>(config_.heartbeat_ms);
   hello.peer_timeout_ms = static_cast<std::uint16_t>(config_.peer_timeout_ms);
-  hello.codecs = wire::kCodecDracoMesh |
-                 (config_.compact_models ? wire::kCodecCompactContactModel : 0u);
+  hello.codecs =
+      wire::kCodecDracoMesh | (config_.compact_models ? wire::kCodecCompactContactModel : 0u);
   hello.deadband.tool_state_deadband =
       static_cast<float>(config_.tool_state_deadband.weber_fraction);
   hello.deadband.model_deadband = static_cast<float>(config_.model_deadband);
-  hello.deadband.tool_state_keepalive_ms = static_cast<std::uint16_t>(
-      std::lround(config_.tool_state_deadband.keepalive_s * 1e3));
+  hello.deadband.tool_state_keepalive_ms =
+      static_cast<std::uint16_t>(std::lround(config_.tool_state_deadband.keepalive_s * 1e3));
   hello.deadband.model_keepalive_ms =
       static_cast<std::uint16_t>(std::lround(config_.model_keepalive_s * 1e3));
   link_.Send(wire::EncodeHello(link_.NextHeader(wire::MessageType::kHello, 0), hello, config_.key),

@@ -92,8 +92,10 @@ void StationConfig::Validate() const {
   if (!(model_keepalive_s >= 1e-3 && model_keepalive_s < safety.model_timeout_s)) {
     throw std::invalid_argument(
         "contact-model keep-alive must be at least 1 ms and below the model timeout (" +
-        std::to_string(safety.model_timeout_s) + " s), or the force would fade between models; "
-        "got " + std::to_string(model_keepalive_s) + " s");
+        std::to_string(safety.model_timeout_s) +
+        " s), or the force would fade between models; "
+        "got " +
+        std::to_string(model_keepalive_s) + " s");
   }
 }
 
@@ -232,8 +234,8 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   outgoing.Write({{tool.X_WT, tool.V_WT_W}, SteadyNowNs(), tool_seq});
 
   // Then the remote node's first contact model (it answers our first tool state).
-  while (counters.model_accepted.load() == 0 && !counters.rejected.load() &&
-         !stop_requested() && SteadyNowNs() < connect_deadline) {
+  while (counters.model_accepted.load() == 0 && !counters.rejected.load() && !stop_requested() &&
+         SteadyNowNs() < connect_deadline) {
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
   if (counters.model_accepted.load() == 0) throw_if_stopped("the first contact model");

@@ -16,17 +16,17 @@ long WriteTraceRow(std::FILE* f, const TraceRow& r, const std::vector<std::strin
   const char* phase = r.phase >= 0 && r.phase < static_cast<int>(phases.size())
                           ? phases[r.phase].c_str()
                           : "unknown";
-  const int n = std::fprintf(f,
-               "%.6f,%s,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%.4f,"
-               "%.9g,%.9g,%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.2f,%.2f,%.2f,%.2f\n",
-               r.t_s, phase, p.x, p.y, p.z, rv.x, rv.y, rv.z, r.F_contact_T_W.force.x,
-               r.F_contact_T_W.force.y, r.F_contact_T_W.force.z, r.F_contact_T_W.torque.x,
-               r.F_contact_T_W.torque.y, r.F_contact_T_W.torque.z, r.contacts, r.model_age_ms,
-               r.p_WH.x, r.p_WH.y, r.p_WH.z, r.F_device_W.force.x, r.F_device_W.force.y,
-               r.F_device_W.force.z, r.F_device_W.torque.x, r.F_device_W.torque.y,
-               r.F_device_W.torque.z, r.depth_m, static_cast<double>(r.tick_compute_us),
-               static_cast<double>(r.remote_collision_us), static_cast<double>(r.remote_texture_us),
-               static_cast<double>(r.remote_step_us));
+  const int n = std::fprintf(
+      f,
+      "%.6f,%s,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%.4f,"
+      "%.9g,%.9g,%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.2f,%.2f,%.2f,%.2f\n",
+      r.t_s, phase, p.x, p.y, p.z, rv.x, rv.y, rv.z, r.F_contact_T_W.force.x,
+      r.F_contact_T_W.force.y, r.F_contact_T_W.force.z, r.F_contact_T_W.torque.x,
+      r.F_contact_T_W.torque.y, r.F_contact_T_W.torque.z, r.contacts, r.model_age_ms, r.p_WH.x,
+      r.p_WH.y, r.p_WH.z, r.F_device_W.force.x, r.F_device_W.force.y, r.F_device_W.force.z,
+      r.F_device_W.torque.x, r.F_device_W.torque.y, r.F_device_W.torque.z, r.depth_m,
+      static_cast<double>(r.tick_compute_us), static_cast<double>(r.remote_collision_us),
+      static_cast<double>(r.remote_texture_us), static_cast<double>(r.remote_step_us));
   return n < 0 ? 0 : n;
 }
 

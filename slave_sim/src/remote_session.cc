@@ -218,8 +218,8 @@ RigidTransform RemoteSession::ToolPoseForStep(std::int64_t now) noexcept {
     step_extrapolation_ns_ = 0;
     return latest_.X_WT;
   }
-  step_extrapolation_ns_ = std::clamp<std::int64_t>(now - latest_recv_ns_, 0,
-                                                    tool_state_keepalive_ns_);
+  step_extrapolation_ns_ =
+      std::clamp<std::int64_t>(now - latest_recv_ns_, 0, tool_state_keepalive_ns_);
   return ExtrapolatePose(latest_.X_WT, latest_.V_WT_W, step_extrapolation_ns_ * 1e-9);
 }
 

@@ -61,7 +61,8 @@ void DecodeBody(const ht::wire::Header& h, std::span<const std::uint8_t> body) {
     case MessageType::kCompactContactModel: {
       ContactModelMessage m;
       if (DecodeCompactContactModel(body, m) == DecodeStatus::kOk)
-        Check(m.model.num_contacts <= kMaxWireContacts && ht::IsFiniteRigidTransform(m.model.X_WT0));
+        Check(m.model.num_contacts <= kMaxWireContacts &&
+              ht::IsFiniteRigidTransform(m.model.X_WT0));
       break;
     }
     case MessageType::kGoodbye:

@@ -115,8 +115,7 @@ DeadbandReason ToolStateDeadband::Decide(const RigidTransform& X_WT, const Twist
     reason = DeadbandReason::kKeepAlive;
   } else {
     const double a =
-        c.velocity_adaptive ? 1.0 + glm::length(V_WT_W.linear) / c.adaptive_speed_ref_m_per_s
-                            : 1.0;
+        c.velocity_adaptive ? 1.0 + glm::length(V_WT_W.linear) / c.adaptive_speed_ref_m_per_s : 1.0;
     const RigidTransform predicted = ExtrapolatePose(X_sent_, V_sent_, dt);
     const Twist error = PoseDifference(X_WT, predicted);
     const Twist moved = PoseDifference(X_WT, X_sent_);

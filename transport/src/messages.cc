@@ -609,8 +609,8 @@ DecodeStatus Check(const CompactContactModelBody& m) {
   double norm2 = 0.0;
   for (const float v : m.q_WT0) norm2 += static_cast<double>(v) * v;
   if (!(std::abs(std::sqrt(norm2) - 1.0) < 1e-3)) return DecodeStatus::kBadValue;
-  if (!AllFinite(m.F_T_W_at_q0) || m.collision_us == kCompactTimeNotFinite || m.texture_us == kCompactTimeNotFinite ||
-      m.step_us == kCompactTimeNotFinite) {
+  if (!AllFinite(m.F_T_W_at_q0) || m.collision_us == kCompactTimeNotFinite ||
+      m.texture_us == kCompactTimeNotFinite || m.step_us == kCompactTimeNotFinite) {
     return DecodeStatus::kNonFinite;
   }
   return DecodeStatus::kOk;

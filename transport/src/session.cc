@@ -58,8 +58,7 @@ bool NegotiateSession(const wire::HelloMessage& hello, const RemoteCapabilities&
                   "the operator asks a contact-model keep-alive of %u ms, but the session's model "
                   "rate is %.0f models/s (one per %.0f ms) (raise --deadband-keepalive, "
                   "--max-model-rate or slave_sim --max-rate)",
-                  d.model_keepalive_ms, static_cast<double>(model_rate_hz),
-                  1000.0 / model_rate_hz);
+                  d.model_keepalive_ms, static_cast<double>(model_rate_hz), 1000.0 / model_rate_hz);
     reject.reason = wire::RejectReason::kCapabilities;
     reject.text_length = CopyText(reject.text, text);
     return false;

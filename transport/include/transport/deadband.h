@@ -36,13 +36,13 @@ RigidTransform ExtrapolatePose(const RigidTransform& X_WT, const Twist& V_WT_W,
 
 /// Why a deadband sent (or did not send) a sample. Counted per reason in the summaries.
 enum class DeadbandReason : std::uint8_t {
-  kNotSent = 0,   ///< inside the deadband: not sent
-  kOff,           ///< the deadband is off (k = 0): every sample is sent
-  kFirst,         ///< nothing sent yet
-  kKeepAlive,     ///< nothing sent for the keep-alive period
-  kPosition,      ///< tool position left the prediction
-  kRotation,      ///< tool rotation left the prediction
-  kVelocity,        ///< tool linear velocity changed (with the velocity criterion)
+  kNotSent = 0,      ///< inside the deadband: not sent
+  kOff,              ///< the deadband is off (k = 0): every sample is sent
+  kFirst,            ///< nothing sent yet
+  kKeepAlive,        ///< nothing sent for the keep-alive period
+  kPosition,         ///< tool position left the prediction
+  kRotation,         ///< tool rotation left the prediction
+  kVelocity,         ///< tool linear velocity changed (with the velocity criterion)
   kAngularVelocity,  ///< tool angular velocity changed (with the velocity criterion)
   kContactCount,     ///< the number of contacts changed
   kForce,            ///< the rendered force changed
@@ -120,10 +120,10 @@ class ToolStateDeadband {
 
 /// Contact-model deadband. Thresholds are max(k·|value|, k·floor scale).
 struct ContactModelDeadbandConfig {
-  double weber_fraction = 0.0;  ///< k ∈ [0, 1); 0 = off (every model is sent)
-  double force_floor_scale_n = 1.0;     ///< floor of the force threshold, ÷ k (N)
-  double torque_floor_scale_nm = 0.05;  ///< floor of the torque threshold, ÷ k (N·m)
-  double stiffness_floor_scale_n_per_m = 200.0;         ///< translational block of K (N/m)
+  double weber_fraction = 0.0;                   ///< k ∈ [0, 1); 0 = off (every model is sent)
+  double force_floor_scale_n = 1.0;              ///< floor of the force threshold, ÷ k (N)
+  double torque_floor_scale_nm = 0.05;           ///< floor of the torque threshold, ÷ k (N·m)
+  double stiffness_floor_scale_n_per_m = 200.0;  ///< translational block of K (N/m)
   double rotational_stiffness_floor_scale_nm_per_rad = 0.2;  ///< rotational block (N·m/rad)
   double keepalive_s = 0.1;  ///< longest time between two models sent (s, > 0)
   /// Throws std::invalid_argument naming the field when a value is out of range or not finite.

@@ -64,14 +64,14 @@
 //     u16 version, f32 tool_state_rate_hz, f32 model_rate_hz (0 = as fast as the remote steps),
 //     u16 grid, f32 window_m, u16 mtu, u32 codecs, u16 heartbeat_ms, u16 peer_timeout_ms,
 //     the deadband terms agreed (12, as in Hello), u16 scene_objects, u8 name_length, 32 bytes
-//     scene name (zero padded); then the scene's layout: X_WT_home 3×f64 + 4×f64 (the tool's home pose: where the operator's workspace centre
-//     lands; its +z is the scene's up), f32 tool_mass_kg (0 = not given), 3×f32 tool principal
-//     moments along T (kg·m²), f32 tool_extent_down_m (how far the tool reaches below T along
-//     −z, m), u8 n (≤ kMaxWelcomeTargets), per target (40): 3×f32 box_min_W,
-//     3×f32 box_max_W (m, the object's bounds in W at rest, widened by its texture's outward
-//     reach), 3×f32 top_W (its highest coarse vertex along the scene's up), f32 approach_m (the
-//     hand height above top_W at which the tool is clear of every touchable). The header carries
-//     the new session id.
+//     scene name (zero padded); then the scene's layout: X_WT_home 3×f64 + 4×f64 (the tool's home
+//     pose: where the operator's workspace centre lands; its +z is the scene's up), f32
+//     tool_mass_kg (0 = not given), 3×f32 tool principal moments along T (kg·m²), f32
+//     tool_extent_down_m (how far the tool reaches below T along −z, m), u8 n (≤
+//     kMaxWelcomeTargets), per target (40): 3×f32 box_min_W, 3×f32 box_max_W (m, the object's
+//     bounds in W at rest, widened by its texture's outward reach), 3×f32 top_W (its highest coarse
+//     vertex along the scene's up), f32 approach_m (the hand height above top_W at which the tool
+//     is clear of every touchable). The header carries the new session id.
 //   Reject R→O (10 + n): u64 client_nonce, u8 RejectReason, u8 n, n bytes of UTF-8 text (n ≤ 200)
 //   Ping O→R (0): its header's send_time_ns is t1.
 //   Pong R→O (24): u64 ping_sequence, i64 t1 (echoed), i64 t2 (remote receive time); the header's
@@ -186,8 +186,8 @@ inline constexpr std::uint16_t kCompactTimeNotFinite = 65535;
 inline constexpr double kCompactPointStepM = 20e-6;
 inline constexpr double kCompactPointRangeM = kCompactI16Max * kCompactPointStepM;
 /// f32 fields (depth_m, gradients, stiffness, F_T_W at q0): |error| ≤ 2⁻²⁴·|value| + 2⁻¹⁵⁰
-/// (round to nearest; the 2⁻¹⁵⁰ is for f32 subnormals). Beyond f32's range a value becomes infinite and the
-/// receiver rejects the datagram.
+/// (round to nearest; the 2⁻¹⁵⁰ is for f32 subnormals). Beyond f32's range a value becomes infinite
+/// and the receiver rejects the datagram.
 inline constexpr double kCompactF32RelativeError = 0x1p-24;
 /// Gradients ∂δ/∂x, ∂δ/∂θ are f32 fields too (each component to 2⁻²⁴ of itself). An i16 with a
 /// per-message step (max |component|/32767) was tried first: it zeroed every component below half
