@@ -9,6 +9,8 @@ PACKAGES=(
   # design-card packages
   libusb-1.0-0-dev libhidapi-dev libglm-dev libopenmesh-dev libegl-dev libgles-dev libegl-mesa0
   libgl1-mesa-dri libdraco-dev libtinygltf-dev
+  # display frames (PNG)
+  libpng-dev
   # libraries the build uses
   libccd-dev libeigen3-dev nlohmann-json3-dev libcli11-dev libsodium-dev
   # the CPU texture stage's thread pool

@@ -16,6 +16,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtc/quaternion.hpp>
 #include <iostream>
 #include <limits>
@@ -338,6 +339,13 @@ TEST(GltfSceneData, SceneChoiceIsWrittenInNotes) {
   EXPECT_TRUE(HasNoteContaining(empty, "has no nodes")) << ::testing::PrintToString(empty.notes);
   const GltfScene cams = LoadGltfScene((*dir / "assimp_gltf2/cameras/Cameras.gltf").string());
   EXPECT_TRUE(HasNoteContaining(cams, "camera")) << ::testing::PrintToString(cams.notes);
+  // The first perspective camera is kept for display (node 1 of the file; the orthographic one on
+  // node 2 is not used), with the file's numbers.
+  ASSERT_GE(cams.camera.scene_node, 0);
+  EXPECT_EQ(cams.nodes[static_cast<std::size_t>(cams.camera.scene_node)].node_index, 1);
+  EXPECT_DOUBLE_EQ(cams.camera.yfov_rad, 0.7);
+  EXPECT_DOUBLE_EQ(cams.camera.znear_m, 0.01);
+  EXPECT_DOUBLE_EQ(cams.camera.zfar_m, 100.0);
 }
 
 TEST(GltfSceneData, TranslationOnlyMatrixMovesTheTriangleByOneInX) {
@@ -1244,6 +1252,82 @@ TEST_F(GltfSceneMadeFiles, MalformedAnimationsAreRefusedNamingTheFileAndChannel)
     EXPECT_NE(message.find(c.expected), std::string::npos)
         << message << "\n  expected: " << c.expected;
     std::cout << "[ refused] " << c.what << ": " << message << "\n";
+  }
+}
+
+std::vector<std::uint8_t> FileBytes(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// The display's materials: the Duck's base-colour texture is kept as the file has it (an external
+// PNG in .gltf, a buffer view in .glb: the same bytes either way), its factor and the mesh's
+// material index.
+TEST(GltfSceneData, DuckKeepsItsBaseColourTextureBytesAsTheFileHasThem) {
+  REQUIRE_GLTF_DATA(dir);
+  const fs::path gltf = *dir / "draco_testdata_gltf/KhronosSampleModels/Duck/glTF/Duck.gltf";
+  const GltfScene s = LoadGltfScene(gltf.string());
+  ASSERT_EQ(s.materials.size(), 1u);
+  ASSERT_EQ(s.images.size(), 1u);
+  ASSERT_EQ(s.meshes.size(), 1u);
+  EXPECT_EQ(s.meshes[0].material, 0);
+  EXPECT_EQ(s.materials[0].base_colour_image, 0);
+  EXPECT_EQ(s.images[0].mime_type, "image/png");
+  const std::vector<std::uint8_t> png = FileBytes(gltf.parent_path() / "DuckCM.png");
+  ASSERT_FALSE(png.empty());
+  EXPECT_EQ(s.images[0].bytes, png);
+  for (int c = 0; c < 4; ++c) {
+    EXPECT_GE(s.materials[0].base_colour_rgba[c], 0.0);
+    EXPECT_LE(s.materials[0].base_colour_rgba[c], 1.0);
+  }
+  const GltfScene glb = LoadGltfScene((*dir / "draco_testdata_gltf/glTF_Binary/Duck.glb").string());
+  ASSERT_EQ(glb.images.size(), 1u);
+  EXPECT_EQ(glb.images[0].mime_type, "image/png");
+  EXPECT_EQ(glb.images[0].bytes, png);  // same image, stored in the GLB's BIN chunk
+}
+
+// AnimatedNodePosesAt gives the local poses that PoseInstancesAt composes: each wheel's parent
+// world pose times its local pose is its instance pose (two routes to one number), and the
+// wheels' rotations change over time while their translations do not.
+TEST(GltfSceneData, AnimatedLocalPosesComposeToTheInstancePoses) {
+  REQUIRE_GLTF_DATA(dir);
+  const GltfScene s = LoadGltfScene(
+      (*dir / "draco_testdata_gltf/CesiumMilkTruck/glTF/CesiumMilkTruck.gltf").string());
+  std::vector<GltfNodePose> poses;
+  AnimatedNodePosesAt(s, 7, 0.3, true, &poses);  // no such animation
+  EXPECT_TRUE(poses.empty());
+  AnimatedNodePosesAt(s, 0, std::nan(""), true, &poses);
+  EXPECT_TRUE(poses.empty());
+  std::vector<glm::dquat> first;
+  for (const double t : {0.1, 0.45, 0.9}) {
+    AnimatedNodePosesAt(s, 0, t, true, &poses);
+    ASSERT_EQ(poses.size(), 2u);
+    const std::vector<glm::dmat4> X = PoseInstancesAt(s, 0, t);
+    const std::vector<glm::dmat4> rest = PoseInstancesAt(s, -1, 0.0);
+    for (std::size_t k = 0; k < poses.size(); ++k) {
+      const GltfNodePose& p = poses[k];
+      ASSERT_GE(p.scene_node, 0);
+      const GltfNode& node = s.nodes[static_cast<std::size_t>(p.scene_node)];
+      ASSERT_GE(node.parent, 0);
+      ASSERT_GE(node.mesh, 0);
+      // The parent is not animated: its world pose is its rest pose, found through any instance
+      // below it (X_WP = X_WN_rest · X_PN_rest⁻¹).
+      std::size_t inst = s.instances.size();
+      for (std::size_t i = 0; i < s.instances.size(); ++i)
+        if (s.instances[i].scene_node == p.scene_node) inst = i;
+      ASSERT_LT(inst, s.instances.size());
+      const glm::dmat4 X_WP = rest[inst] * glm::inverse(node.X_PN);
+      const glm::dmat4 X_PN = glm::translate(glm::dmat4(1.0), p.translation) *
+                              glm::mat4_cast(p.rotation) * glm::scale(glm::dmat4(1.0), p.scale);
+      EXPECT_LT(MaxAbsDifference(X_WP * X_PN, X[inst]), 1e-9) << "t " << t << " node " << k;
+      EXPECT_LT(glm::length(p.translation - node.translation), 1e-12);
+      EXPECT_NEAR(glm::length(p.rotation), 1.0, 1e-12);
+      if (first.size() < poses.size()) {
+        first.push_back(p.rotation);
+      } else {
+        EXPECT_LT(std::abs(glm::dot(first[k], p.rotation)), 1.0 - 1e-6) << "it turned";
+      }
+    }
   }
 }
 

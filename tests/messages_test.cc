@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cstring>
+#include <limits>
 #include <numbers>
 #include <random>
 #include <vector>
@@ -88,6 +90,10 @@ DecodeStatus OpenAndDecode(std::span<const std::uint8_t> bytes, const MacKey& ke
       SceneNackMessage m;
       return DecodeSceneNack(body, m);
     }
+    case MessageType::kNodePoses: {
+      NodePosesMessage m;
+      return DecodeNodePoses(body, m);
+    }
   }
   return DecodeStatus::kUnknownType;
 }
@@ -117,6 +123,24 @@ WelcomeMessage SampleWelcome() {
     t.approach_m = 0.0125 + i;
   }
   return w;
+}
+
+/// NodePoses of `count` entries with distinct, exactly representable values.
+NodePosesMessage SamplePoses(int count) {
+  NodePosesMessage m;
+  m.graph_version = 3;
+  m.scene_time_s = 12.345678901234;
+  m.count = static_cast<std::uint8_t>(count);
+  for (int i = 0; i < count; ++i) {
+    NodePose& p = m.poses[static_cast<std::size_t>(i)];
+    const float f = static_cast<float>(i);
+    p.node = static_cast<std::uint16_t>(1000 + 7 * i);
+    p.translation = {0.25f * f, -0.5f, 0.125f + f};
+    const float c = std::cos(0.1f * f), s = std::sin(0.1f * f);
+    p.rotation = glm::quat(c, 0.0f, 0.0f, s);  // about z by 0.2·i rad
+    p.scale = {1.0f, 2.0f + f, 0.5f};
+  }
+  return m;
 }
 
 /// One valid datagram of every message type.
@@ -158,6 +182,7 @@ std::vector<Datagram> OneOfEach(const MacKey& key) {
   n.missing[2] = 9;
   out.push_back(EncodeSceneNack(h, n, key));
   out.push_back(EncodeCompactContactModel(h, SampleModel(kMaxWireContacts), key));
+  out.push_back(EncodeNodePoses(h, SamplePoses(kMaxNodePosesPerDatagram), key));
   return out;
 }
 
@@ -295,7 +320,7 @@ TEST(Messages, AnySingleBitFlipIsRejected) {
       ++flips;
     }
   }
-  EXPECT_GT(flips, 30000u);  // every bit of one datagram of each of the 11 types
+  EXPECT_GT(flips, 30000u);  // every bit of one datagram of each of the 13 types
 }
 
 TEST(Messages, AnotherKeyIsRejectedAsBadMac) {
@@ -479,6 +504,244 @@ TEST(Messages, RandomBytesNeverOpenOrCrash) {
     accepted += OpenAndDecode({buf.data(), len}, key) == DecodeStatus::kOk;
   }
   EXPECT_EQ(accepted, 0);
+}
+
+/// `d` with its body edited by `edit` (bytes after the header) and a new MAC.
+template <typename Edit>
+Datagram Resealed(Datagram d, const MacKey& key, Edit&& edit) {
+  std::vector<std::uint8_t> body(d.bytes.begin() + kHeaderBytes,
+                                 d.bytes.begin() + static_cast<long>(d.size - kMacBytes));
+  edit(body);
+  std::copy(body.begin(), body.end(), d.bytes.begin() + kHeaderBytes);
+  d.size = kHeaderBytes + body.size();
+  ComputeMac(d.view(), key, std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size, kMacBytes));
+  d.size += kMacBytes;
+  return d;
+}
+
+TEST(NodePoses, AFullDatagramRoundTripsAndFitsTheSmallestMtu) {
+  const MacKey key = TestKey();
+  const NodePosesMessage sent = SamplePoses(kMaxNodePosesPerDatagram);
+  const Datagram d = EncodeNodePoses({MessageType::kToolState, 9, 4, 77}, sent, key);
+  EXPECT_EQ(d.size, kHeaderBytes + kNodePosesFixedBytes +
+                        kMaxNodePosesPerDatagram * kNodePoseBytes + kMacBytes);
+  EXPECT_EQ(kNodePoseBytes, 42u);  // u16 + 10 × f32
+  EXPECT_LE(d.size, kMinMtuBytes);
+  EXPECT_GT(d.size + kNodePoseBytes, kMinMtuBytes);  // one more would not fit
+  Header h;
+  std::span<const std::uint8_t> body;
+  ASSERT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kOk);
+  EXPECT_EQ(h.type, MessageType::kNodePoses);  // the encoder sets the type
+  EXPECT_EQ(h.session_id, 9u);
+  NodePosesMessage got;
+  ASSERT_EQ(DecodeNodePoses(body, got), DecodeStatus::kOk);
+  EXPECT_EQ(got.graph_version, 3u);
+  EXPECT_EQ(got.scene_time_s, sent.scene_time_s);  // f64
+  ASSERT_EQ(got.count, kMaxNodePosesPerDatagram);
+  for (int i = 0; i < kMaxNodePosesPerDatagram; ++i) {
+    const NodePose &a = got.poses[static_cast<std::size_t>(i)],
+                   &b = sent.poses[static_cast<std::size_t>(i)];
+    EXPECT_EQ(a.node, b.node);
+    EXPECT_EQ(a.translation, b.translation);
+    EXPECT_EQ(a.scale, b.scale);
+    // Unit within f32 rounding: the decoder normalizes what it receives.
+    EXPECT_NEAR(a.rotation.w, b.rotation.w, 1e-6f) << i;
+    EXPECT_NEAR(a.rotation.z, b.rotation.z, 1e-6f) << i;
+    EXPECT_NEAR(glm::length(a.rotation), 1.0f, 1e-6f);
+  }
+  // The entry layout: u16 node, then translation, rotation w x y z, scale as f32.
+  const std::size_t first = kHeaderBytes + kNodePosesFixedBytes;
+  EXPECT_EQ(d.bytes[first] | d.bytes[first + 1] << 8, 1000);
+  float w = 0.0f;
+  std::memcpy(&w, &d.bytes[first + 2 + 12], 4);  // the test host is little-endian
+  EXPECT_EQ(w, 1.0f);
+  // Fewer entries, and none, are fine too; a non-unit rotation arrives normalized.
+  NodePosesMessage few = SamplePoses(2);
+  few.poses[1].rotation = glm::quat(0.0f, 0.0f, 3.0f, 4.0f);
+  const Datagram few_datagram = EncodeNodePoses({}, few, key);  // the body points into it
+  ASSERT_EQ(OpenDatagram(few_datagram.view(), key, h, body), DecodeStatus::kOk);
+  ASSERT_EQ(DecodeNodePoses(body, got), DecodeStatus::kOk);
+  EXPECT_EQ(got.count, 2);
+  EXPECT_FLOAT_EQ(got.poses[1].rotation.y, 0.6f);
+  EXPECT_FLOAT_EQ(got.poses[1].rotation.z, 0.8f);
+  const Datagram none = EncodeNodePoses({}, SamplePoses(0), key);
+  EXPECT_EQ(none.size, kHeaderBytes + kNodePosesFixedBytes + kMacBytes);
+  EXPECT_EQ(OpenAndDecode(none.view(), key), DecodeStatus::kOk);
+  EXPECT_STREQ(ToString(MessageType::kNodePoses), "node_poses");
+  EXPECT_EQ(static_cast<int>(MessageType::kNodePoses), kMaxMessageType);
+}
+
+TEST(NodePoses, BadCountsSizesValuesAndMacsAreRejected) {
+  const MacKey key = TestKey();
+  const Datagram good = EncodeNodePoses({}, SamplePoses(3), key);
+  ASSERT_EQ(OpenAndDecode(good.view(), key), DecodeStatus::kOk);
+  const std::size_t count_at = kNodePosesFixedBytes - 1;  // within the body
+  // A count above the limit, with the bytes of that many entries.
+  const Datagram over = Resealed(EncodeNodePoses({}, SamplePoses(kMaxNodePosesPerDatagram), key),
+                                 key, [&](std::vector<std::uint8_t>& b) {
+                                   b[count_at] = kMaxNodePosesPerDatagram + 1;
+                                   b.resize(b.size() + kNodePoseBytes, 0);
+                                 });
+  EXPECT_EQ(OpenAndDecode(over.view(), key), DecodeStatus::kBadCount);
+  // The encoder never sends more than the limit, whatever the count says.
+  NodePosesMessage too_many = SamplePoses(kMaxNodePosesPerDatagram);
+  too_many.count = 200;
+  const Datagram clamped = EncodeNodePoses({}, too_many, key);
+  EXPECT_LE(clamped.size, kMinMtuBytes);
+  EXPECT_EQ(OpenAndDecode(clamped.view(), key), DecodeStatus::kOk);
+  // Sizes other than exactly `count` entries.
+  const auto resized = [&](long delta) {
+    return OpenAndDecode(
+        Resealed(good, key,
+                 [&](std::vector<std::uint8_t>& b) {
+                   b.resize(static_cast<std::size_t>(static_cast<long>(b.size()) + delta));
+                 })
+            .view(),
+        key);
+  };
+  EXPECT_EQ(resized(-1), DecodeStatus::kTooShort);
+  EXPECT_EQ(resized(-static_cast<long>(kNodePoseBytes)), DecodeStatus::kTooShort);
+  EXPECT_EQ(resized(+1), DecodeStatus::kTooLong);
+  EXPECT_EQ(resized(+static_cast<long>(kNodePoseBytes)), DecodeStatus::kTooLong);
+  EXPECT_EQ(resized(-static_cast<long>(good.size - kHeaderBytes - kMacBytes) + 5),
+            DecodeStatus::kTooShort);
+  // Non-finite fields: NaN or ∞ in the time, a translation, a rotation, a scale.
+  const auto status = [&](const NodePosesMessage& m) {
+    return OpenAndDecode(EncodeNodePoses({}, m, key).view(), key);
+  };
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  NodePosesMessage m = SamplePoses(3);
+  m.scene_time_s = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_EQ(status(m), DecodeStatus::kNonFinite);
+  m = SamplePoses(3);
+  m.poses[2].translation.y = nan;
+  EXPECT_EQ(status(m), DecodeStatus::kNonFinite);
+  m = SamplePoses(3);
+  m.poses[0].rotation.x = nan;
+  EXPECT_EQ(status(m), DecodeStatus::kNonFinite);
+  m = SamplePoses(3);
+  m.poses[1].scale.z = std::numeric_limits<float>::infinity();
+  EXPECT_EQ(status(m), DecodeStatus::kNonFinite);
+  // A zero rotation (and one too short to normalize).
+  m = SamplePoses(3);
+  m.poses[1].rotation = glm::quat(0.0f, 0.0f, 0.0f, 0.0f);
+  EXPECT_EQ(status(m), DecodeStatus::kBadValue);
+  m.poses[1].rotation = glm::quat(1e-7f, 0.0f, 0.0f, 0.0f);
+  EXPECT_EQ(status(m), DecodeStatus::kBadValue);
+  m.poses[1].rotation = glm::quat(0.0f, 0.0f, -1e-5f, 0.0f);  // small but not zero: accepted
+  EXPECT_EQ(status(m), DecodeStatus::kOk);
+  // Entries past the count are not read: a NaN there is not seen.
+  m = SamplePoses(3);
+  m.poses[5].translation.x = nan;
+  EXPECT_EQ(status(m), DecodeStatus::kOk);
+  // The MAC: a flipped body byte, a flipped MAC byte, another key.
+  Datagram bad = good;
+  bad.bytes[kHeaderBytes + 20] ^= 0x10;
+  EXPECT_EQ(OpenAndDecode(bad.view(), key), DecodeStatus::kBadMac);
+  bad = good;
+  bad.bytes[good.size - 3] ^= 0x01;
+  EXPECT_EQ(OpenAndDecode(bad.view(), key), DecodeStatus::kBadMac);
+  EXPECT_EQ(OpenAndDecode(good.view(), TestKey(99)), DecodeStatus::kBadMac);
+  // A decoder failure leaves the message as it was.
+  NodePosesMessage kept;
+  kept.graph_version = 42;
+  Header h;
+  std::span<const std::uint8_t> body;
+  m = SamplePoses(3);
+  m.poses[1].rotation = glm::quat(0.0f, 0.0f, 0.0f, 0.0f);
+  const Datagram zero = EncodeNodePoses({}, m, key);
+  ASSERT_EQ(OpenDatagram(zero.view(), key, h, body), DecodeStatus::kOk);
+  EXPECT_EQ(DecodeNodePoses(body, kept), DecodeStatus::kBadValue);
+  EXPECT_EQ(kept.graph_version, 42u);
+}
+
+TEST(Messages, TheManifestCarriesEverySceneObjectKindAndNoOther) {
+  const MacKey key = TestKey();
+  SceneManifestMessage m;
+  m.total_objects = 3;
+  m.count = 3;
+  m.entries[0] = {1, 1, 100, 1, SceneObjectKind::kDracoMesh, {}};
+  m.entries[1] = {2, 1, 100, 1, SceneObjectKind::kSceneGraph, {}};
+  m.entries[2] = {3, 1, 100, 1, SceneObjectKind::kImage, {}};
+  Header h;
+  std::span<const std::uint8_t> body;
+  const Datagram d = EncodeSceneManifest({}, m, key);  // the body points into it
+  ASSERT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kOk);
+  SceneManifestMessage got;
+  ASSERT_EQ(DecodeSceneManifest(body, got), DecodeStatus::kOk);
+  EXPECT_EQ(got.entries[1].kind, SceneObjectKind::kSceneGraph);
+  EXPECT_EQ(got.entries[2].kind, SceneObjectKind::kImage);
+  for (const int kind : {0, kMaxSceneObjectKind + 1, 255}) {
+    m.entries[2].kind = static_cast<SceneObjectKind>(kind);
+    EXPECT_EQ(OpenAndDecode(EncodeSceneManifest({}, m, key).view(), key), DecodeStatus::kBadValue)
+        << kind;
+  }
+}
+
+TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
+  // Version 5 changed neither Hello nor Reject: a version-4 operator's Hello is this version's
+  // bytes with 4 in the header; a version-3 one has the 32-byte body without deadband terms.
+  EXPECT_EQ(kProtocolVersion, 5);
+  EXPECT_EQ(kMinProtocolVersion, 5);
+  const MacKey key = TestKey();
+  for (const std::uint16_t version : {std::uint16_t{4}, std::uint16_t{3}, std::uint16_t{2}}) {
+    HelloMessage hello;
+    hello.client_nonce = 0xfeedu + version;
+    hello.min_version = hello.max_version = version;
+    Datagram d = EncodeHello({MessageType::kHello, 0, 1, 0}, hello, key);
+    d.size -= kMacBytes;
+    d.bytes[4] = static_cast<std::uint8_t>(version);
+    if (version < 4) d.size = kHeaderBytes + 32;
+    ComputeMac(d.view(), key,
+               std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size, kMacBytes));
+    d.size += kMacBytes;
+    Header h;
+    std::span<const std::uint8_t> body;
+    EXPECT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kBadVersion) << version;
+    ForeignHello foreign;
+    ASSERT_EQ(OpenForeignHello(d.view(), key, foreign), DecodeStatus::kOk) << version;
+    EXPECT_EQ(foreign.header_version, version);
+    EXPECT_EQ(foreign.min_version, version);
+    EXPECT_EQ(foreign.max_version, version);
+    EXPECT_EQ(foreign.client_nonce, 0xfeedu + version);
+    EXPECT_EQ(OpenForeignHello(d.view(), TestKey(3), foreign), DecodeStatus::kBadMac);
+    // The Reject in that version: its header says so and its body is the one versions 2..5 share.
+    RejectMessage reject;
+    reject.client_nonce = foreign.client_nonce;
+    reject.reason = RejectReason::kVersion;
+    reject.text_length = 4;
+    std::copy_n("v5!!", 4, reject.text.begin());
+    const Datagram r = EncodeReject({MessageType::kReject, 0, 1, 0}, reject, key, version);
+    EXPECT_EQ(r.bytes[4], version);
+    EXPECT_EQ(r.bytes[5], 0);
+    EXPECT_EQ(r.size, kHeaderBytes + kRejectFixedBytes + 4 + kMacBytes);
+    EXPECT_TRUE(VerifyMac(r.view(), key));
+    // Read back as this version would (header version patched to 5, MAC recomputed).
+    Datagram as_own = r;
+    as_own.size -= kMacBytes;
+    as_own.bytes[4] = static_cast<std::uint8_t>(kProtocolVersion);
+    ComputeMac(as_own.view(), key,
+               std::span<std::uint8_t, kMacBytes>(as_own.bytes.data() + as_own.size, kMacBytes));
+    as_own.size += kMacBytes;
+    ASSERT_EQ(OpenDatagram(as_own.view(), key, h, body), DecodeStatus::kOk);
+    RejectMessage back;
+    ASSERT_EQ(DecodeReject(body, back), DecodeStatus::kOk);
+    EXPECT_EQ(back.client_nonce, 0xfeedu + version);
+    EXPECT_EQ(back.message(), "v5!!");
+  }
+  // Neither this version's own Hello nor a newer or older-than-2 one is foreign.
+  ForeignHello foreign;
+  const Datagram own = EncodeHello({MessageType::kHello, 0, 1, 0}, HelloMessage{}, key);
+  EXPECT_EQ(OpenForeignHello(own.view(), key, foreign), DecodeStatus::kBadVersion);
+  for (const std::uint8_t version : {std::uint8_t{1}, std::uint8_t{6}}) {
+    Datagram d = own;
+    d.size -= kMacBytes;
+    d.bytes[4] = version;
+    ComputeMac(d.view(), key,
+               std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size, kMacBytes));
+    d.size += kMacBytes;
+    EXPECT_EQ(OpenForeignHello(d.view(), key, foreign), DecodeStatus::kBadVersion) << int(version);
+  }
 }
 
 }  // namespace

@@ -73,7 +73,8 @@ RemoteNodeConfig LocalNodeConfig(const MacKey& key, const std::string& port_file
 TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
   const HapticScene scene = MakeBlockOnGearScene();
   RemoteNodeConfig config = LocalNodeConfig(TestKey(11), "remote_node_test.port");
-  config.scene_objects.emplace_back(5, std::vector<std::uint8_t>(3000, 0x42));
+  config.scene_objects.push_back(
+      {5, ht::wire::SceneObjectKind::kDracoMesh, std::vector<std::uint8_t>(3000, 0x42)});
   std::atomic<bool> stop{false};
   nlohmann::json summary;
   std::thread node([&] { summary = RunRemoteNode(config, scene, stop); });

@@ -11,14 +11,17 @@
 #include <fstream>
 #include <glm/glm.hpp>
 #include <glm/gtc/matrix_transform.hpp>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <numbers>
 #include <optional>
 
+#include "codecs/draco_mesh_codec.h"
 #include "codecs/glb_writer.h"
 #include "codecs/gltf_scene.h"
 #include "gltf_test_data.h"
 #include "haptic_core/remote_step.h"
+#include "slave_sim/display_scene.h"
 
 namespace ht {
 namespace {
@@ -374,6 +377,88 @@ TEST(SceneBuildData, MilkTruckWheelsTurnWhenTheAnimationPlays) {
   const nlohmann::json j = InspectJson(s);
   ASSERT_EQ(j["animations"].size(), 1u);
   EXPECT_EQ(j["animations"][0]["channels"], 2);
+}
+
+// The milk truck as the operator's display receives it: the graph decodes from the stream's first
+// object, each mesh is a Draco object in its own frame, the built-in probe is the tool, and the
+// wheels are the moving nodes. Two routes to each touchable's pose: the haptic scene's animated
+// X_WO (AnimateScene) against the display graph composed with the streamed local poses
+// (DisplayNodePosesAt), at several times.
+TEST(SceneBuildData, MilkTruckDisplayStreamPlacesEveryTouchableWhereTheHapticSceneHasIt) {
+  REQUIRE_GLTF_DATA(dir);
+  SceneDescription d = SceneDescription::ForGltf(
+      (*dir / "draco_testdata_gltf/CesiumMilkTruck/glTF/CesiumMilkTruck.gltf").string());
+  d.defaults.coarse_triangles = 100;
+  d.defaults.texture_size = 256;
+  BuiltScene s = BuildScene(d, HapticModelCache(""));
+  const DisplayStream stream = MakeDisplayStream(s);
+  ASSERT_FALSE(stream.objects.empty());
+  ASSERT_EQ(stream.objects[0].kind, wire::SceneObjectKind::kSceneGraph);
+  SceneGraphDescription graph;
+  std::string error;
+  ASSERT_TRUE(DecodeSceneGraph(stream.objects[0].bytes, &graph, &error)) << error;
+  EXPECT_EQ(EncodeSceneGraph(graph), stream.objects[0].bytes);
+  // One Draco object per mesh (plus the probe), decoding to the mesh's triangle count.
+  std::map<std::uint32_t, const StreamObject*> by_id;
+  for (const StreamObject& o : stream.objects) by_id[o.id] = &o;
+  EXPECT_EQ(by_id.size(), stream.objects.size()) << "object ids are distinct";
+  int tools = 0;
+  for (const SceneGraphNode& n : graph.nodes) {
+    tools += (n.flags & kSceneNodeTool) != 0;
+    if (n.mesh_object == 0) continue;
+    ASSERT_EQ(by_id.count(n.mesh_object), 1u) << n.name;
+    EXPECT_EQ(by_id[n.mesh_object]->kind, wire::SceneObjectKind::kDracoMesh);
+    if (n.material >= 0) ASSERT_LT(static_cast<std::size_t>(n.material), graph.materials.size());
+  }
+  EXPECT_EQ(tools, 1);
+  for (std::size_t m = 0; m < s.gltf.meshes.size(); ++m) {
+    const GltfMesh& mesh = s.gltf.meshes[m];
+    for (std::size_t e = 0; e < s.gltf.nodes.size(); ++e) {
+      if (s.gltf.nodes[e].mesh != static_cast<int>(m)) continue;
+      const SceneGraphNode& n =
+          graph.nodes[static_cast<std::size_t>(stream.graph_node_of_entry[e])];
+      EXPECT_EQ(DecodeMeshDraco(by_id[n.mesh_object]->bytes).triangles.size(),
+                mesh.mesh_N.triangles.size());
+    }
+  }
+  // Materials that have a base-colour texture carry it as a kImage object.
+  for (const SceneMaterial& m : graph.materials) {
+    if (m.base_colour_texture_object == 0) continue;
+    ASSERT_EQ(by_id.count(m.base_colour_texture_object), 1u);
+    EXPECT_EQ(by_id[m.base_colour_texture_object]->kind, wire::SceneObjectKind::kImage);
+    EXPECT_EQ(m.texture_mime, "image/png");
+  }
+  ASSERT_EQ(stream.moving_nodes.size(), 2u);  // the two wheel nodes
+
+  std::vector<glm::dmat4> scratch;
+  std::vector<GltfNodePose> pose_scratch;
+  std::vector<wire::NodePose> poses;
+  for (const double t : {0.0, 0.3, 0.77}) {
+    AnimateScene(s, 0, t, &scratch);
+    DisplayNodePosesAt(s, stream, t, &pose_scratch, &poses);
+    ASSERT_EQ(poses.size(), 2u);
+    std::vector<SceneNodeTransform> local = RestTransforms(graph);
+    for (const wire::NodePose& p : poses) {
+      ASSERT_LT(p.node, local.size());
+      EXPECT_TRUE(graph.nodes[p.node].flags & kSceneNodeMoving);
+      local[p.node] = {glm::dvec3(p.translation), glm::dquat(p.rotation), glm::dvec3(p.scale)};
+    }
+    const std::vector<glm::dmat4> X_WN = ComposeWorldPoses(graph, local);
+    for (std::size_t k = 0; k < s.haptic.touchables.size(); ++k) {
+      const int e = s.gltf.instances[static_cast<std::size_t>(s.touchable_objects[k])].scene_node;
+      const glm::dmat4& X =
+          X_WN[static_cast<std::size_t>(stream.graph_node_of_entry[static_cast<std::size_t>(e)])];
+      const RigidTransform& X_WO = s.haptic.touchables[k].X_WO;
+      const glm::dmat3 residual =
+          s.objects[static_cast<std::size_t>(s.touchable_objects[k])].rest_residual;
+      // Display: X_WN = [R·S | p] with f32 poses on the wire; haptics: X_WO = [R | p].
+      EXPECT_LT(glm::length(glm::dvec3(X[3]) - X_WO.translation), 1e-5) << "t " << t;
+      const glm::dmat3 R_display = glm::dmat3(X) * glm::inverse(residual);
+      const glm::dmat3 R_haptic = glm::mat3_cast(X_WO.rotation);
+      for (int c = 0; c < 3; ++c)
+        EXPECT_LT(glm::length(R_display[c] - R_haptic[c]), 1e-5) << "t " << t << " col " << c;
+    }
+  }
 }
 
 }  // namespace

@@ -35,7 +35,8 @@ RemoteNodeConfig RemoteConfig(const MacKey& key, std::uint16_t port) {
   c.progress_period_s = 0.0;
   c.key = key;
   c.exit_on_goodbye = true;
-  c.scene_objects.emplace_back(1, std::vector<std::uint8_t>(20000, 0x11));
+  c.scene_objects.push_back(
+      {1, ht::wire::SceneObjectKind::kDracoMesh, std::vector<std::uint8_t>(20000, 0x11)});
   c.pd_backend = PdBackendChoice::kCpu;
   return c;
 }

@@ -273,35 +273,12 @@ glm::dvec4 Sample(const GltfAnimationChannel& c, double t) noexcept {
   return finish(key(i), i);
 }
 
-}  // namespace
-
-void PoseInstancesAt(const GltfScene& scene, int animation, double time_s, bool loop,
-                     std::vector<glm::dmat4>* X_WN) {
-  std::vector<glm::dmat4>& X = *X_WN;
-  const std::size_t n_inst = scene.instances.size();
+// Calls fn(first entry, translation, rotation, scale) with the sampled local pose of every node
+// that `anim` moves (t already wrapped), skipping nodes out of range or given by a matrix.
+template <typename Fn>
+void ForEachAnimatedNode(const GltfScene& scene, const GltfAnimation& anim, double t, Fn&& fn) {
   const std::size_t n_nodes = scene.nodes.size();
-  const GltfAnimation* anim = nullptr;
-  if (animation >= 0 && static_cast<std::size_t>(animation) < scene.animations.size() &&
-      !std::isnan(time_s)) {
-    anim = &scene.animations[static_cast<std::size_t>(animation)];
-  }
-  if (anim == nullptr || anim->channels.empty()) {
-    X.resize(n_inst);
-    for (std::size_t i = 0; i < n_inst; ++i) X[i] = scene.instances[i].X_WN;
-    return;
-  }
-  // X first holds every entry's local pose X_PN, then its world pose X_WN (parents come first),
-  // then the instances' poses are moved to the front.
-  X.resize(std::max(n_nodes, n_inst));
-  for (std::size_t v = 0; v < n_nodes; ++v) X[v] = scene.nodes[v].X_PN;
-
-  double t = time_s;
-  const double duration = anim->duration_s;
-  if (loop && std::isfinite(t) && duration > 0.0 && std::isfinite(duration)) {
-    t = std::fmod(t, duration);
-    if (t < 0.0) t += duration;
-  }
-  const std::vector<GltfAnimationChannel>& channels = anim->channels;
+  const std::vector<GltfAnimationChannel>& channels = anim.channels;
   for (std::size_t c = 0; c < channels.size();) {
     std::size_t end = c + 1;
     while (end < channels.size() && channels[end].node == channels[c].node) ++end;
@@ -331,15 +308,57 @@ void PoseInstancesAt(const GltfScene& scene, int animation, double time_s, bool 
           break;
       }
     }
-    const glm::dmat4 X_PN = gltf_internal::ComposeTrs(translation, rotation, scale);
-    // Every path to the node; next_same_node only grows, so this ends.
-    for (int v = first;;) {
-      X[static_cast<std::size_t>(v)] = X_PN;
-      const int next = scene.nodes[static_cast<std::size_t>(v)].next_same_node;
-      if (next <= v || static_cast<std::size_t>(next) >= n_nodes) break;
-      v = next;
-    }
+    fn(first, translation, rotation, scale);
   }
+}
+
+// The animation's time: `time_s` wrapped into [0, duration) with `loop`.
+double AnimationTime(const GltfAnimation& anim, double time_s, bool loop) noexcept {
+  double t = time_s;
+  const double duration = anim.duration_s;
+  if (loop && std::isfinite(t) && duration > 0.0 && std::isfinite(duration)) {
+    t = std::fmod(t, duration);
+    if (t < 0.0) t += duration;
+  }
+  return t;
+}
+
+}  // namespace
+
+void PoseInstancesAt(const GltfScene& scene, int animation, double time_s, bool loop,
+                     std::vector<glm::dmat4>* X_WN) {
+  std::vector<glm::dmat4>& X = *X_WN;
+  const std::size_t n_inst = scene.instances.size();
+  const std::size_t n_nodes = scene.nodes.size();
+  const GltfAnimation* anim = nullptr;
+  if (animation >= 0 && static_cast<std::size_t>(animation) < scene.animations.size() &&
+      !std::isnan(time_s)) {
+    anim = &scene.animations[static_cast<std::size_t>(animation)];
+  }
+  if (anim == nullptr || anim->channels.empty()) {
+    X.resize(n_inst);
+    for (std::size_t i = 0; i < n_inst; ++i) X[i] = scene.instances[i].X_WN;
+    return;
+  }
+  // X first holds every entry's local pose X_PN, then its world pose X_WN (parents come first),
+  // then the instances' poses are moved to the front.
+  X.resize(std::max(n_nodes, n_inst));
+  for (std::size_t v = 0; v < n_nodes; ++v) X[v] = scene.nodes[v].X_PN;
+
+  const double t = AnimationTime(*anim, time_s, loop);
+  ForEachAnimatedNode(scene, *anim, t,
+                      [&](int first, const glm::dvec3& translation, const glm::dquat& rotation,
+                          const glm::dvec3& scale) {
+                        const glm::dmat4 X_PN =
+                            gltf_internal::ComposeTrs(translation, rotation, scale);
+                        // Every path to the node; next_same_node only grows, so this ends.
+                        for (int v = first;;) {
+                          X[static_cast<std::size_t>(v)] = X_PN;
+                          const int next = scene.nodes[static_cast<std::size_t>(v)].next_same_node;
+                          if (next <= v || static_cast<std::size_t>(next) >= n_nodes) break;
+                          v = next;
+                        }
+                      });
   for (std::size_t v = 0; v < n_nodes; ++v) {
     const int p = scene.nodes[v].parent;
     if (p >= 0 && static_cast<std::size_t>(p) < v) X[v] = X[static_cast<std::size_t>(p)] * X[v];
@@ -365,6 +384,27 @@ std::vector<glm::dmat4> PoseInstancesAt(const GltfScene& scene, int animation, d
   X_WN.reserve(std::max(scene.nodes.size(), scene.instances.size()));
   PoseInstancesAt(scene, animation, time_s, loop, &X_WN);
   return X_WN;
+}
+
+void AnimatedNodePosesAt(const GltfScene& scene, int animation, double time_s, bool loop,
+                         std::vector<GltfNodePose>* poses) {
+  poses->clear();
+  if (animation < 0 || static_cast<std::size_t>(animation) >= scene.animations.size() ||
+      std::isnan(time_s)) {
+    return;
+  }
+  const GltfAnimation& anim = scene.animations[static_cast<std::size_t>(animation)];
+  const std::size_t n_nodes = scene.nodes.size();
+  ForEachAnimatedNode(scene, anim, AnimationTime(anim, time_s, loop),
+                      [&](int first, const glm::dvec3& translation, const glm::dquat& rotation,
+                          const glm::dvec3& scale) {
+                        for (int v = first;;) {
+                          poses->push_back({v, translation, glm::normalize(rotation), scale});
+                          const int next = scene.nodes[static_cast<std::size_t>(v)].next_same_node;
+                          if (next <= v || static_cast<std::size_t>(next) >= n_nodes) break;
+                          v = next;
+                        }
+                      });
 }
 
 }  // namespace ht

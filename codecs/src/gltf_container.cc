@@ -103,9 +103,12 @@ GlbLayout ParseGlbLayout(const std::vector<unsigned char>& bytes) {
   return layout;
 }
 
-bool IgnoreImage(tinygltf::Image*, const int, std::string*, std::string*, int, int,
-                 const unsigned char*, int, void*) {
-  return true;  // images are not needed for geometry
+// Keeps an image's bytes as the file has them (PNG, JPEG): the display streams them undecoded.
+bool KeepImageBytes(tinygltf::Image* image, const int, std::string*, std::string*, int, int,
+                    const unsigned char* bytes, int size, void*) {
+  if (bytes != nullptr && size > 0) image->image.assign(bytes, bytes + size);
+  image->as_is = true;
+  return true;
 }
 
 std::string Trimmed(std::string s) {
@@ -182,7 +185,7 @@ tinygltf::Model ParseWithTinyGltf(const std::string& path,
   }
 
   tinygltf::TinyGLTF loader;
-  loader.SetImageLoader(&IgnoreImage, nullptr);
+  loader.SetImageLoader(&KeepImageBytes, nullptr);
   tinygltf::Model model;
   std::string err;
   std::string warn;

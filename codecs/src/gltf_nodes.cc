@@ -168,6 +168,10 @@ GltfMesh BuildMesh(const tinygltf::Model& model, int m,
                       " triangles in the mesh");
     }
     ++out.primitive_count;
+    if (out.material < 0 && prim.material >= 0 &&
+        static_cast<std::size_t>(prim.material) < model.materials.size()) {
+      out.material = prim.material;
+    }
   }
   return out;
 }
@@ -297,6 +301,7 @@ NodeTree BuildNodeTree(const tinygltf::Model& model,
     const tinygltf::Node& node = model.nodes[static_cast<std::size_t>(n)];
     GltfNode entry = RestNode(node, n);
     entry.parent = top.parent_entry;
+    entry.name = node.name;
     const int e = static_cast<int>(scene.nodes.size());
     const std::size_t un = static_cast<std::size_t>(n);
     if (first_entry[un] < 0) {
@@ -325,6 +330,7 @@ NodeTree BuildNodeTree(const tinygltf::Model& model,
         slot = static_cast<int>(scene.meshes.size());
         scene.meshes.push_back(std::move(mesh));
       }
+      scene.nodes.back().mesh = slot;
       scene.instances.push_back({node.name, n, slot, X_WN, e});
     }
     for (auto c = node.children.rbegin(); c != node.children.rend(); ++c)

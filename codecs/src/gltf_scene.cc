@@ -5,7 +5,11 @@
 
 #include "codecs/gltf_scene.h"
 
+#include <cctype>
+#include <cmath>
 #include <cstdint>
+#include <filesystem>
+#include <fstream>
 #include <glm/common.hpp>
 #include <limits>
 #include <map>
@@ -22,6 +26,123 @@ namespace {
 
 using gltf_internal::LoadError;
 
+// The signature of PNG and JPEG bytes; "" for anything else.
+std::string SniffImageMime(const std::vector<unsigned char>& b) {
+  if (b.size() >= 8 && b[0] == 0x89 && b[1] == 'P' && b[2] == 'N' && b[3] == 'G')
+    return "image/png";
+  if (b.size() >= 3 && b[0] == 0xFF && b[1] == 0xD8 && b[2] == 0xFF) return "image/jpeg";
+  return "";
+}
+
+// The bytes of an image the file names by a relative URI (tinygltf is built without external
+// images): read from the glTF file's folder. Absolute paths and ".." are refused (a scene file
+// must not make the node stream other files to the operator); a missing file gives a note.
+std::vector<unsigned char> ReadExternalImage(const std::string& gltf_path, const std::string& uri,
+                                             std::vector<std::string>* notes) {
+  std::string decoded;
+  for (std::size_t i = 0; i < uri.size(); ++i) {
+    if (uri[i] == '%' && i + 2 < uri.size() &&
+        std::isxdigit(static_cast<unsigned char>(uri[i + 1])) &&
+        std::isxdigit(static_cast<unsigned char>(uri[i + 2]))) {
+      decoded.push_back(static_cast<char>(std::stoi(uri.substr(i + 1, 2), nullptr, 16)));
+      i += 2;
+    } else {
+      decoded.push_back(uri[i]);
+    }
+  }
+  const std::filesystem::path rel(decoded);
+  bool escapes = rel.is_absolute() || decoded.find(':') != std::string::npos;
+  for (const auto& part : rel) escapes = escapes || part == "..";
+  if (escapes) {
+    notes->push_back("image '" + uri + "' is outside the file's folder: not read");
+    return {};
+  }
+  const std::filesystem::path file = std::filesystem::path(gltf_path).parent_path() / rel;
+  std::error_code ec;
+  const auto size = std::filesystem::file_size(file, ec);
+  if (ec || size > static_cast<std::uintmax_t>(kGltfMaxFileBytes)) {
+    notes->push_back("image '" + uri + "' cannot be read (" +
+                     (ec ? ec.message() : std::string("too large")) + "): colour only");
+    return {};
+  }
+  std::ifstream in(file, std::ios::binary);
+  std::vector<unsigned char> bytes(static_cast<std::size_t>(size));
+  if (!in.read(reinterpret_cast<char*>(bytes.data()), static_cast<std::streamsize>(size))) {
+    notes->push_back("image '" + uri + "' cannot be read: colour only");
+    return {};
+  }
+  return bytes;
+}
+
+// Base colours and base-colour images of every material (indices kept as the file's).
+void ReadMaterials(const tinygltf::Model& model, GltfScene* scene) {
+  for (const tinygltf::Image& src : model.images) {
+    GltfImage image;
+    image.name = src.name;
+    std::vector<unsigned char> external;
+    if (src.image.empty() && !src.uri.empty() && src.uri.rfind("data:", 0) != 0) {
+      external = ReadExternalImage(scene->path, src.uri, &scene->notes);
+    }
+    const std::vector<unsigned char>& bytes = src.image.empty() ? external : src.image;
+    image.mime_type = SniffImageMime(bytes);
+    if (image.mime_type.empty()) image.mime_type = src.mimeType;
+    image.bytes.assign(bytes.begin(), bytes.end());
+    scene->images.push_back(std::move(image));
+  }
+  for (std::size_t i = 0; i < model.materials.size(); ++i) {
+    const tinygltf::Material& src = model.materials[i];
+    GltfMaterial m;
+    m.name = src.name;
+    const std::vector<double>& f = src.pbrMetallicRoughness.baseColorFactor;
+    if (f.size() == 4 && std::isfinite(f[0]) && std::isfinite(f[1]) && std::isfinite(f[2]) &&
+        std::isfinite(f[3])) {
+      m.base_colour_rgba = glm::clamp(glm::dvec4(f[0], f[1], f[2], f[3]), 0.0, 1.0);
+    } else {
+      scene->notes.push_back("material " + std::to_string(i) +
+                             ": baseColorFactor is not 4 finite numbers; white used");
+    }
+    const int texture = src.pbrMetallicRoughness.baseColorTexture.index;
+    if (texture >= 0) {
+      const int source = static_cast<std::size_t>(texture) < model.textures.size()
+                             ? model.textures[static_cast<std::size_t>(texture)].source
+                             : -1;
+      if (source >= 0 && static_cast<std::size_t>(source) < scene->images.size() &&
+          !scene->images[static_cast<std::size_t>(source)].bytes.empty()) {
+        m.base_colour_image = source;
+      } else {
+        scene->notes.push_back("material " + std::to_string(i) +
+                               ": base-colour texture without image bytes; colour only");
+      }
+    }
+    scene->materials.push_back(std::move(m));
+  }
+}
+
+// The first node (depth-first) that shows a perspective camera.
+void FindCamera(const tinygltf::Model& model, GltfScene* scene) {
+  for (std::size_t e = 0; e < scene->nodes.size(); ++e) {
+    const int c = model.nodes[static_cast<std::size_t>(scene->nodes[e].node_index)].camera;
+    if (c < 0 || static_cast<std::size_t>(c) >= model.cameras.size()) continue;
+    const tinygltf::Camera& cam = model.cameras[static_cast<std::size_t>(c)];
+    if (cam.type != "perspective") continue;
+    const tinygltf::PerspectiveCamera& p = cam.perspective;
+    if (!(p.yfov > 0.0 && p.yfov < 3.1) || !(p.znear > 0.0) || !std::isfinite(p.zfar) ||
+        p.zfar < 0.0) {
+      scene->notes.push_back("camera " + std::to_string(c) + ": bad perspective values, ignored");
+      continue;
+    }
+    scene->camera = {static_cast<int>(e), p.yfov, p.znear, p.zfar};
+    scene->notes.push_back("camera " + std::to_string(c) + " (perspective, on node " +
+                           std::to_string(scene->nodes[e].node_index) + ") used for display; " +
+                           std::to_string(model.cameras.size() - 1) + " other camera(s) not used");
+    return;
+  }
+  if (!model.cameras.empty() && scene->camera.scene_node < 0) {
+    scene->notes.push_back(std::to_string(model.cameras.size()) +
+                           " camera(s) not used (none perspective and shown by a scene node)");
+  }
+}
+
 GltfScene BuildScene(const std::string& path) {
   GltfScene scene;
   scene.path = path;
@@ -37,14 +158,12 @@ GltfScene BuildScene(const std::string& path) {
     }
     scene.notes.push_back("required extension " + ext + " ignored (does not change geometry)");
   }
-  if (!model.cameras.empty())
-    scene.notes.push_back(std::to_string(model.cameras.size()) + " camera(s) ignored");
   if (!model.skins.empty())
     scene.notes.push_back(std::to_string(model.skins.size()) + " skin(s) ignored (bind pose used)");
-  if (!model.materials.empty())
-    scene.notes.push_back(std::to_string(model.materials.size()) + " material(s) ignored");
+  ReadMaterials(model, &scene);
 
   const gltf_internal::NodeTree tree = gltf_internal::BuildNodeTree(model, draco, &scene);
+  FindCamera(model, &scene);
   scene.animations =
       gltf_internal::ReadAnimations(model, tree.first_entry, scene.nodes, &scene.notes);
   if (tree.unused_meshes > 0) {

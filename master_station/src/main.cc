@@ -111,6 +111,33 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(100.0, 4000.0))
       ->capture_default_str();
   app.add_option("--out", out_dir, "directory for trace.csv and summary.json");
+  std::string display_mode = "none", frames_dir;
+  double frame_rate_hz = 10.0;
+  int max_frames = 0;
+  std::string frame_size = "640x480";
+  app.add_option("--display", display_mode,
+                 "show the remote scene as received: none, headless (PNG frames through a\n"
+                 "headless EGL context; llvmpipe without a GPU) or window (needs a display server)")
+      ->check(CLI::IsMember({"none", "headless", "window"}))
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeLast)
+      ->capture_default_str();
+  app.add_option("--frames-dir", frames_dir,
+                 "folder for --display headless frames (default: <--out>/frames)");
+  app.add_option("--frame-rate", frame_rate_hz, "display frames per second (0.1..120)")
+      ->check(CLI::Range(0.1, 120.0))
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeLast)
+      ->capture_default_str();
+  app.add_option("--frame-size", frame_size, "display image size, WIDTHxHEIGHT pixels")
+      ->capture_default_str();
+  double camera_distance_m = 0.0;
+  app.add_option("--camera-distance", camera_distance_m,
+                 "distance of the display's camera behind and above the tool, m (0 = five times "
+                 "the tool's radius; a scene file's own camera is used instead when it has one)")
+      ->check(CLI::Range(0.0, 1e4))
+      ->capture_default_str();
+  app.add_option("--max-frames", max_frames, "stop the display after this many frames (0 = none)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   app.add_option(
       "--workspace-origin", origin_text,
       "X,Y,Z (m): where the device workspace centre lands in the remote world\n"
@@ -253,6 +280,18 @@ int main(int argc, char** argv) {
     config.model_keepalive_s = deadband_keepalive_ms * 1e-3;
     config.compact_models = !float_models;
     config.out_dir = out_dir;
+    config.display.mode = display_mode == "headless" ? ht::DisplayConfig::Mode::kHeadless
+                          : display_mode == "window" ? ht::DisplayConfig::Mode::kWindow
+                                                     : ht::DisplayConfig::Mode::kNone;
+    config.display.frames_dir = frames_dir;
+    config.display.frame_rate_hz = frame_rate_hz;
+    config.display.max_frames = max_frames;
+    config.display.camera_distance_m = camera_distance_m;
+    if (std::sscanf(frame_size.c_str(), "%dx%d", &config.display.width, &config.display.height) !=
+        2) {
+      throw std::invalid_argument("--frame-size " + frame_size +
+                                  ": expected WIDTHxHEIGHT, e.g. 640x480");
+    }
     config.progress_period_s = quiet ? 0.0 : 0.5;
     // The remote node's Welcome gives the workspace pose (the tool's home) and the tool's
     // inertia; these are used only by a remote node that gives none.

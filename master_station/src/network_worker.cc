@@ -18,15 +18,18 @@
 namespace ht::station {
 
 NetworkWorker::NetworkWorker(const StationConfig& config, TripleBuffer<OutgoingToolState>& outgoing,
-                             TripleBuffer<IncomingModel>& incoming, Counters& counters)
+                             TripleBuffer<IncomingModel>& incoming, Counters& counters,
+                             ReceivedScene& scene)
     : config_(config),
       socket_(config.local_address),
       link_(socket_, config.key, LinkRole::kOperator),
       reassembler_(config.mtu),
       outgoing_(outgoing),
       incoming_(incoming),
-      counters_(counters) {
+      counters_(counters),
+      scene_(scene) {
   rtt_ms_.reserve(1 << 20);
+  node_pose_latency_ms_.reserve(1 << 18);
   one_way_ms_.reserve(1 << 20);
   remote_step_us_.reserve(1 << 20);
   contact_step_us_.reserve(1 << 20);
@@ -190,7 +193,30 @@ nlohmann::json NetworkWorker::Summary() const {
                 {"digest_mismatches", r.digest_mismatches},
                 {"nacks_sent", r.nacks_sent},
                 {"fragments_nacked", r.fragments_nacked},
-                {"decoded", objects}};
+                {"decoded", objects},
+                {"versions_published", scene_versions_published_}};
+  const ReceivedPoseStats poses = scene_.pose_stats();
+  t["node_poses"] = {{"messages", poses.messages},
+                     {"messages_before_scene", poses.messages_before_scene},
+                     {"entries_applied", poses.entries_applied},
+                     {"entries_dropped", poses.entries_dropped},
+                     {"latency_ms_p50", Percentile(node_pose_latency_ms_, 0.5)},
+                     {"latency_ms_p99", Percentile(node_pose_latency_ms_, 0.99)}};
+  nlohmann::json tracks = nlohmann::json::array();
+  const auto quat = [](const glm::dquat& q) { return nlohmann::json{q.w, q.x, q.y, q.z}; };
+  const auto vec = [](const glm::dvec3& v) { return nlohmann::json{v.x, v.y, v.z}; };
+  for (const ReceivedNodeTrack& k : scene_.node_tracks()) {
+    tracks.push_back({{"node", k.node},
+                      {"name", k.name},
+                      {"updates", k.updates},
+                      {"first_time_s", k.first_time_s},
+                      {"last_time_s", k.last_time_s},
+                      {"first_translation", vec(k.first.translation)},
+                      {"last_translation", vec(k.last.translation)},
+                      {"first_rotation_wxyz", quat(k.first.rotation)},
+                      {"last_rotation_wxyz", quat(k.last.rotation)}});
+  }
+  t["node_poses"]["nodes"] = std::move(tracks);
   return t;
 }
 
@@ -269,6 +295,7 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
       }
       reassembler_.Reset(w.mtu);
       scene_complete_ = false;
+      scene_dirty_ = false;
       scene_objects_.clear();
       session_start_ns_ = now;
       clock_.Reset();
@@ -359,7 +386,23 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
         link_.CountBodyRejected(header.type, st);
         return;
       }
-      if (reassembler_.Add(f, now) == SceneReassembler::Outcome::kCompleted) CheckScene(now);
+      if (reassembler_.Add(f, now) == SceneReassembler::Outcome::kCompleted) {
+        scene_dirty_ = true;
+        CheckScene(now);
+      }
+      return;
+    }
+    case wire::MessageType::kNodePoses: {
+      wire::NodePosesMessage m;
+      if (const auto st = wire::DecodeNodePoses(body, m); st != wire::DecodeStatus::kOk) {
+        link_.CountBodyRejected(header.type, st);
+        return;
+      }
+      // Newest wins per node (by the remote scene's clock), whatever the arrival order.
+      scene_.ApplyPoses(m);
+      if (clock_.valid() && node_pose_latency_ms_.size() < node_pose_latency_ms_.capacity()) {
+        node_pose_latency_ms_.push_back((now - clock_.RemoteToLocal(header.send_time_ns)) * 1e-6);
+      }
       return;
     }
     case wire::MessageType::kGoodbye: {
@@ -376,25 +419,75 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
 }
 
 void NetworkWorker::CheckScene(std::int64_t now) {
-  if (scene_complete_ || !reassembler_.SceneComplete()) return;
+  if (!reassembler_.SceneComplete() || (scene_complete_ && !scene_dirty_)) return;
+  const bool first = !scene_complete_;
   scene_complete_ = true;
-  scene_complete_ms_ = (now - session_start_ns_) * 1e-6;
+  scene_dirty_ = false;
+  if (first) scene_complete_ms_ = (now - session_start_ns_) * 1e-6;
+  auto content = std::make_shared<ReceivedSceneContent>();
+  bool have_graph = false;
+  scene_objects_.clear();
   for (std::uint32_t id = 0; id < 65536 && scene_objects_.size() < reassembler_.manifest_objects();
        ++id) {
     const auto bytes = reassembler_.CompletedBytes(id);
     if (bytes.empty()) continue;
-    nlohmann::json o = {{"object_id", id}, {"bytes", bytes.size()}};
+    const std::optional<wire::SceneObjectKind> kind = reassembler_.ObjectKind(id);
+    const std::uint32_t version = reassembler_.CompletedVersion(id);
+    nlohmann::json o = {{"object_id", id}, {"version", version}, {"bytes", bytes.size()}};
     try {
-      const TriangleMesh mesh = DecodeMeshDraco(bytes);
-      o["vertices"] = mesh.vertices.size();
-      o["triangles"] = mesh.triangles.size();
+      switch (kind.value_or(wire::SceneObjectKind::kDracoMesh)) {
+        case wire::SceneObjectKind::kSceneGraph: {
+          std::string error;
+          if (!DecodeSceneGraph(bytes, &content->graph, &error)) throw std::runtime_error(error);
+          content->graph_version = version;
+          have_graph = true;
+          o["kind"] = "scene_graph";
+          o["nodes"] = content->graph.nodes.size();
+          o["materials"] = content->graph.materials.size();
+          break;
+        }
+        case wire::SceneObjectKind::kImage:
+          content->images.push_back({id, std::vector<std::uint8_t>(bytes.begin(), bytes.end())});
+          o["kind"] = "image";
+          break;
+        case wire::SceneObjectKind::kDracoMesh: {
+          ReceivedSceneContent::Mesh mesh{id, version, DecodeMeshDraco(bytes)};
+          o["kind"] = "draco_mesh";
+          o["vertices"] = mesh.mesh_N.vertices.size();
+          o["triangles"] = mesh.mesh_N.triangles.size();
+          content->meshes.push_back(std::move(mesh));
+          break;
+        }
+      }
     } catch (const std::exception& e) {
       o["error"] = e.what();
+      content->errors.emplace_back(id, e.what());
     }
     scene_objects_.push_back(o);
   }
-  std::printf("[master] scene complete after %.0f ms: %zu object(s) verified\n", scene_complete_ms_,
-              reassembler_.verified_objects());
+  if (!have_graph) {
+    // No scene graph in the stream: each mesh as a root at the identity (posed in W).
+    content->graph.scene_name = scene_name_;
+    for (const ReceivedSceneContent::Mesh& m : content->meshes) {
+      SceneGraphNode n;
+      n.name = "object " + std::to_string(m.object_id);
+      n.mesh_object = m.object_id;
+      content->graph.nodes.push_back(n);
+    }
+  }
+  const std::size_t nodes = content->graph.nodes.size();
+  const std::size_t meshes = content->meshes.size();
+  scene_.Set(std::move(content));
+  ++scene_versions_published_;
+  if (first) {
+    std::printf(
+        "[master] scene complete after %.0f ms: %zu object(s) verified, %zu node(s), %zu "
+        "mesh(es)%s\n",
+        scene_complete_ms_, reassembler_.verified_objects(), nodes, meshes,
+        have_graph ? "" : " (no scene graph: meshes shown as sent)");
+  } else {
+    std::printf("[master] scene updated: a new object version arrived (%zu mesh(es))\n", meshes);
+  }
   std::fflush(stdout);
 }
 

@@ -16,6 +16,7 @@
 #include "haptic_core/steady_clock.h"
 #include "master_station/lock_free.h"
 #include "master_station/operator_station.h"
+#include "master_station/received_scene.h"
 #include "transport/deadband.h"
 #include "transport/link.h"
 #include "transport/messages.h"
@@ -48,8 +49,9 @@ struct Counters {
 /// repairs the scene stream.
 class NetworkWorker {
  public:
+  /// `scene` receives the decoded scene and the moving nodes' poses (for the display).
   NetworkWorker(const StationConfig& config, TripleBuffer<OutgoingToolState>& outgoing,
-                TripleBuffer<IncomingModel>& incoming, Counters& counters);
+                TripleBuffer<IncomingModel>& incoming, Counters& counters, ReceivedScene& scene);
 
   void Run(const std::atomic<bool>& stop);
 
@@ -79,7 +81,9 @@ class NetworkWorker {
 
   void Handle(std::span<const std::uint8_t> datagram, const SocketAddress& from);
 
-  /// When the whole scene has arrived and matches the manifest, decode every object (Draco).
+  /// When the whole scene has arrived and matches the manifest (and again whenever an object's
+  /// new version completes), decode every object (the graph, Draco meshes, images) and publish
+  /// them to the received scene.
   void CheckScene(std::int64_t now);
 
   void Send(const OutgoingToolState& s);
@@ -92,6 +96,10 @@ class NetworkWorker {
   TripleBuffer<OutgoingToolState>& outgoing_;
   TripleBuffer<IncomingModel>& incoming_;
   Counters& counters_;
+  ReceivedScene& scene_;
+  bool scene_dirty_ = false;  ///< an object completed since the scene was last published
+  std::uint64_t scene_versions_published_ = 0;
+  std::vector<double> node_pose_latency_ms_;
   std::uint32_t session_ = 0;
   /// The tool-state stream's perceptual deadband, as agreed in the Welcome.
   ToolStateDeadband tool_deadband_{{}};

@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -17,6 +18,7 @@
 #include <thread>
 #include <vector>
 
+#include "display_worker.h"
 #include "haptic_core/passivity.h"
 #include "haptic_core/statistics.h"
 #include "haptic_core/steady_clock.h"
@@ -39,6 +41,8 @@ void SleepUntilNs(std::int64_t t_ns) noexcept {
 }  // namespace
 
 using station::Counters;
+using station::DisplayToolState;
+using station::DisplayWorker;
 using station::IncomingModel;
 using station::NetworkWorker;
 using station::OutgoingToolState;
@@ -47,6 +51,37 @@ using station::WriteTraceHeader;
 using station::WriteTraceRow;
 
 void StationConfig::Validate() const {
+  if (display.mode != DisplayConfig::Mode::kNone) {
+    if (!(display.frame_rate_hz >= 0.1 && display.frame_rate_hz <= 120.0)) {
+      throw std::invalid_argument("display frame rate must be within 0.1..120 frames/s, got " +
+                                  std::to_string(display.frame_rate_hz));
+    }
+    if (display.width < 16 || display.width > 4096 || display.height < 16 ||
+        display.height > 4096) {
+      throw std::invalid_argument("display size must be within 16..4096 pixels each, got " +
+                                  std::to_string(display.width) + "x" +
+                                  std::to_string(display.height));
+    }
+    if (display.max_frames < 0) throw std::invalid_argument("display max frames must be >= 0");
+    if (!(display.camera_distance_m >= 0.0 && display.camera_distance_m <= 1e4)) {
+      throw std::invalid_argument("camera distance must be within 0..10000 m (0 = automatic)");
+    }
+  }
+  if (display.mode == DisplayConfig::Mode::kHeadless && display.frames_dir.empty() &&
+      out_dir.empty()) {
+    throw std::invalid_argument(
+        "--display headless writes PNG frames: give --frames-dir DIR (or --out DIR, whose "
+        "frames/ folder is then used)");
+  }
+  if (display.mode == DisplayConfig::Mode::kWindow) {
+    const char* x11 = std::getenv("DISPLAY");
+    const char* wayland = std::getenv("WAYLAND_DISPLAY");
+    if ((x11 == nullptr || *x11 == '\0') && (wayland == nullptr || *wayland == '\0')) {
+      throw std::invalid_argument(
+          "--display window needs a display server, but DISPLAY and WAYLAND_DISPLAY are unset "
+          "(on a machine without one, use --display headless --frames-dir DIR)");
+    }
+  }
   if (!(loop_rate_hz >= 100.0 && loop_rate_hz <= 4000.0)) {
     throw std::invalid_argument("loop rate must be within 100..4000 Hz, got " +
                                 std::to_string(loop_rate_hz));
@@ -123,7 +158,17 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   TripleBuffer<IncomingModel> incoming;
   SpscRing<TraceRow> rows(16384);
   Counters counters;
-  NetworkWorker network(config, outgoing, incoming, counters);
+  ReceivedScene received_scene;
+  NetworkWorker network(config, outgoing, incoming, counters, received_scene);
+  // The display (off the loop): the loop hands it the tool, handle and model every few ticks.
+  DisplayConfig display_config = config.display;
+  if (display_config.mode == DisplayConfig::Mode::kHeadless && display_config.frames_dir.empty())
+    display_config.frames_dir = config.out_dir + "/frames";
+  const bool display_on = display_config.mode != DisplayConfig::Mode::kNone;
+  TripleBuffer<DisplayToolState> display_tool;
+  std::optional<DisplayWorker> display;
+  std::atomic<bool> stop_display{false};
+  std::thread display_thread;
 
   // The device first, so that a missing one is said at once (a simulated hand takes its start
   // from the experiment at its first reading, after the scene is known).
@@ -154,6 +199,8 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
     }
   });
   const auto stop_threads = [&] {
+    stop_display.store(true, std::memory_order_release);
+    if (display_thread.joinable()) display_thread.join();
     stop_network.store(true, std::memory_order_release);
     stop_recorder.store(true, std::memory_order_release);
     network_thread.join();
@@ -294,6 +341,12 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   double force_max = 0.0;
   std::string realtime_note = "SCHED_FIFO priority 80";
 
+  if (display_on) {
+    display.emplace(display_config, received_scene, display_tool,
+                    X_WM.rotation * glm::dvec3(0.0, 0.0, 1.0));
+    display_thread = std::thread([&] { display->Run(stop_display); });
+  }
+
   std::thread loop_thread([&] {
     sched_param sp{};
     sp.sched_priority = 80;
@@ -302,6 +355,8 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
     }
     IncomingModel received{};
     ArrivedModel arrived{};
+    DisplayToolState display_state{};
+    constexpr std::int64_t kDisplayEveryTicks = 4;
     std::int64_t experiment_t0 = -1;
     std::int64_t stop_ramp_start = -1;
     const double stop_ramp_ticks = std::max(1.0, config.stop_ramp_s * config.loop_rate_hz);
@@ -334,6 +389,10 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
         arrived.texture_us = received.message.texture_us;
         arrived.step_us = received.message.step_us;
         in.arrived = &arrived;
+        if (display_on) {
+          display_state.model = arrived.model;
+          display_state.have_model = true;
+        }
       }
       // Asked to stop (Ctrl-C, SIGTERM): ramp the device's wrench to zero (in the tick, before
       // the passivity observer records it), then end the run.
@@ -363,6 +422,12 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
         row.remote_step_us = tick.model_stamp().step_us;
         contacts_max = std::max(contacts_max, step.active_contacts);
         force_max = std::max(force_max, glm::length(step.F_contact_T_W.force));
+      }
+      if (display_on && k % kDisplayEveryTicks == 0) {
+        display_state.t_s = row.t_s;
+        display_state.X_WT = tick.tool().X_WT;
+        display_state.X_WH = out.X_WH;
+        display_tool.Write(display_state);
       }
       // The phase the simulated hand was following, when the device is scripted.
       row.phase = experiment.Target(row.t_s).phase;
@@ -448,6 +513,11 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
        }()},
       {"shift_M",
        {tick.workspace_shift_M().x, tick.workspace_shift_M().y, tick.workspace_shift_M().z}}};
+  if (display) {
+    s["display"] = display->Summary();
+  } else {
+    s["display"] = {{"mode", "none"}};
+  }
   s["tool_mass_kg"] = tool_inertia.mass_kg;
   s["device"] = caps.name;
   s["duration_s"] =

@@ -87,6 +87,10 @@ int main(int argc, char** argv) {
   app.add_option("--max-rate", config.max_rate_hz, "cap on the step rate in Hz (0 = none)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  app.add_option("--display-rate", config.display_rate_hz,
+                 "rate of the moving scene nodes' poses streamed for the operator's display (Hz)")
+      ->check(CLI::Range(1.0, 1000.0))
+      ->capture_default_str();
   double max_deadband_pct = 50.0;
   app.add_option("--max-deadband", max_deadband_pct,
                  "largest perceptual deadband an operator may ask on either stream, percent (a "
@@ -242,6 +246,8 @@ int main(int argc, char** argv) {
     ht::HapticScene builtin_scene;
     std::unique_ptr<ht::BuiltScene> file_scene;
     std::vector<glm::dmat4> animation_scratch;
+    ht::DisplayStream display_stream;
+    std::vector<ht::GltfNodePose> display_pose_scratch;
     if (!out_dir.empty()) {
       std::filesystem::create_directories(out_dir);
       config.step_trace_path = out_dir + "/remote_steps.csv";
@@ -252,7 +258,7 @@ int main(int argc, char** argv) {
         {"hammer-on-torus", "hammer_torus"}};
     if (scene == "block-on-gear" || scene == "stiff-wall") {
       builtin_scene = scene == "stiff-wall" ? ht::MakeStiffWallScene() : ht::MakeBlockOnGearScene();
-      config.scene_objects = ht::BlockOnGearSceneObjects();
+      config.scene_objects = ht::BlockOnGearDisplayStream(builtin_scene).objects;
     } else if (benchmark_scenes.count(scene) != 0) {
       if (!quiet)
         std::printf("[slave] building scene %s (model cache: %s)\n", scene.c_str(),
@@ -261,16 +267,10 @@ int main(int argc, char** argv) {
           benchmark_scenes.at(scene), {}, ht::HapticModelCache(scene_cache_dir));
       builtin_scene = bench.haptic;
       builtin_scene.name = scene;
-      // The full-resolution meshes, posed in W, streamed for display: tool 1, object 2.
-      const auto posed = [](const ht::TriangleMesh& mesh, const ht::RigidTransform& X_WF) {
-        ht::TriangleMesh m = mesh;
-        for (glm::dvec3& p : m.vertices) p = X_WF * p;
-        return ht::EncodeMeshDraco(m);
-      };
-      config.scene_objects.emplace_back(
-          1, posed(*bench.tool_mesh_Ft, bench.haptic.X_WT_home * bench.X_TFt));
-      config.scene_objects.emplace_back(
-          2, posed(*bench.object_mesh_Fe, bench.haptic.touchables.at(0).X_WO));
+      // The full-resolution meshes in their own frames, with the scene graph, for display.
+      config.scene_objects = ht::MakeDisplayStream(builtin_scene, *bench.tool_mesh_Ft, bench.X_TFt,
+                                                   {bench.object_mesh_Fe.get()})
+                                 .objects;
       const ht::RigidTransform& home = bench.haptic.X_WT_home;
       std::printf("[slave] scene %s: tool %s on %s; tool home position in W %.4f,%.4f,%.4f\n",
                   scene.c_str(), bench.tool_name.c_str(), bench.object_name.c_str(),
@@ -290,15 +290,19 @@ int main(int argc, char** argv) {
                           node.empty() ? "(unnamed)" : node.c_str());
             }
           }));
-      // Every mesh node is streamed to the operator for display, in W.
-      for (std::size_t i = 0; i < file_scene->gltf.instances.size(); ++i) {
-        const ht::GltfMeshInstance& inst = file_scene->gltf.instances[i];
-        ht::TriangleMesh mesh_W = file_scene->gltf.meshes[inst.mesh].mesh_N;
-        if (mesh_W.triangles.empty()) continue;
-        for (glm::dvec3& p : mesh_W.vertices) p = glm::dvec3(inst.X_WN * glm::dvec4(p, 1.0));
-        config.scene_objects.emplace_back(static_cast<std::uint32_t>(i + 1),
-                                          ht::EncodeMeshDraco(mesh_W));
-        if (config.scene_objects.size() >= 60000) break;
+      // The scene as a scene for display: its graph, each mesh once in its own frame, the
+      // base-colour images; the moving nodes' poses follow at the display rate.
+      display_stream = ht::MakeDisplayStream(*file_scene);
+      config.scene_objects = display_stream.objects;
+      if (config.scene_objects.size() > 65535) {
+        throw std::invalid_argument("--scene " + scene + ": " +
+                                    std::to_string(config.scene_objects.size()) +
+                                    " display objects (meshes and images); at most 65535 stream");
+      }
+      if (!display_stream.moving_nodes.empty()) {
+        config.display_poses = [&](double t_s, std::vector<ht::wire::NodePose>* poses) {
+          ht::DisplayNodePosesAt(*file_scene, display_stream, t_s, &display_pose_scratch, poses);
+        };
       }
       const ht::RigidTransform& home = file_scene->haptic.X_WT_home;
       std::printf(

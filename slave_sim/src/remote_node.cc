@@ -33,6 +33,10 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
                                 std::to_string(config.max_deadband));
   }
   config.model_deadband.Validate();
+  if (!(config.display_rate_hz >= 1.0 && config.display_rate_hz <= 1000.0)) {
+    throw std::invalid_argument("display rate must be 1..1000 Hz, got " +
+                                std::to_string(config.display_rate_hz));
+  }
   std::string backend_message;
   std::unique_ptr<PenetrationDepthBackend> backend =
       MakePenetrationDepthBackend(config.pd_backend, config.gpu, config.pipeline.grid_resolution,
@@ -63,9 +67,9 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   SecureLink link(socket, config.key, LinkRole::kRemote);
   SceneSender scene_sender(config.mtu);
   std::size_t scene_bytes = 0;
-  for (const auto& [id, bytes] : config.scene_objects) {
-    scene_sender.Update(id, bytes);
-    scene_bytes += bytes.size();
+  for (const StreamObject& o : config.scene_objects) {
+    scene_sender.Update(o.id, o.bytes, o.kind);
+    scene_bytes += o.bytes.size();
   }
   RemoteCapabilities caps;
   caps.grid = static_cast<std::uint16_t>(config.pipeline.grid_resolution);
@@ -116,6 +120,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
       continue;
     }
     session.StreamScene(now_loop);
+    session.MaybeSendNodePoses(now_loop);
     if (!session.have_tool_state()) {
       socket.WaitReadable(1);
       continue;

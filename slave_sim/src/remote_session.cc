@@ -14,7 +14,13 @@ RemoteSession::RemoteSession(const RemoteNodeConfig& config, SecureLink& link,
       scene_sender_(scene_sender),
       caps_(caps),
       last_token_ns_(start_ns),
-      token_cap_(std::max(16.0 * wire::kMaxDatagramBytes, config.scene_rate_bytes_per_s * 0.01)) {}
+      token_cap_(std::max(16.0 * wire::kMaxDatagramBytes, config.scene_rate_bytes_per_s * 0.01)),
+      start_ns_(start_ns),
+      node_poses_period_ns_(static_cast<std::int64_t>(1e9 / config.display_rate_hz)) {
+  for (const SceneObject& o : scene_sender.objects()) {
+    if (o.kind == wire::SceneObjectKind::kSceneGraph) graph_version_ = o.version;
+  }
+}
 
 bool RemoteSession::OnDatagram(std::span<const std::uint8_t> datagram, const SocketAddress& from,
                                std::int64_t now) {
@@ -198,6 +204,29 @@ void RemoteSession::CheckPeerTimeout(std::int64_t now) {
   }
 }
 
+void RemoteSession::MaybeSendNodePoses(std::int64_t now) {
+  if (session_ == 0 || !scene_enabled_ || !config_.display_poses || graph_version_ == 0) return;
+  if (now - last_node_poses_ns_ < node_poses_period_ns_) return;
+  last_node_poses_ns_ = now;
+  const double scene_time_s = static_cast<double>(now - start_ns_) * 1e-9;
+  config_.display_poses(scene_time_s, &node_poses_);
+  if (node_poses_.empty()) return;
+  wire::NodePosesMessage m;
+  m.graph_version = graph_version_;
+  m.scene_time_s = scene_time_s;
+  for (std::size_t first = 0; first < node_poses_.size(); first += wire::kMaxNodePosesPerDatagram) {
+    const std::size_t n =
+        std::min<std::size_t>(wire::kMaxNodePosesPerDatagram, node_poses_.size() - first);
+    m.count = static_cast<std::uint8_t>(n);
+    std::copy_n(node_poses_.begin() + static_cast<std::ptrdiff_t>(first), n, m.poses.begin());
+    link_.Send(wire::EncodeNodePoses(link_.NextHeader(wire::MessageType::kNodePoses, session_), m,
+                                     config_.key),
+               peer_);
+  }
+  ++node_pose_frames_;
+  node_pose_entries_ += node_poses_.size();
+}
+
 void RemoteSession::StreamScene(std::int64_t now) {
   if (session_ == 0) return;
   scene_tokens_ = std::min(
@@ -351,6 +380,10 @@ nlohmann::json RemoteSession::StatsJson(std::size_t scene_objects, std::size_t s
       {"keepalives_sent", keepalives_sent_},
       {"model_decisions", ToJson(model_deadband_.counts())}};
   transport["mtu"] = config_.mtu;
+  transport["node_poses"] = {{"rate_hz", config_.display_rate_hz},
+                             {"graph_version", graph_version_},
+                             {"frames_sent", node_pose_frames_},
+                             {"entries_sent", node_pose_entries_}};
   transport["scene"] = {{"objects", scene_objects},
                         {"bytes", scene_bytes},
                         {"fragment_payload_bytes", scene_sender_.payload_bytes()},

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <nlohmann/json.hpp>
 #include <span>
+#include <vector>
 
 #include "slave_sim/remote_node.h"
 #include "transport/link.h"
@@ -40,6 +41,10 @@ class RemoteSession {
   /// Sends scene fragments as the pacing budget (config.scene_rate_bytes_per_s) allows, and the
   /// manifest every 250 ms. Only while a session is open.
   void StreamScene(std::int64_t now_ns);
+  /// Sends the moving scene nodes' local poses (config.display_poses at the node's clock) as one
+  /// NodePoses frame (as many datagrams as the nodes need) every 1/config.display_rate_hz, while
+  /// a session that takes the scene is open. Allocates nothing once the pose buffer has grown.
+  void MaybeSendNodePoses(std::int64_t now_ns);
   /// The tool pose the next remote step uses at `now_ns` (ns, SteadyNowNs()): with the
   /// session's tool-state deadband on, the newest tool state extrapolated at its own twist for
   /// the time since it arrived (ExtrapolatePose, the prediction the operator's deadband makes;
@@ -123,6 +128,12 @@ class RemoteSession {
   std::int64_t last_sent_answer_recv_ns_ = 0;  ///< receive time + extrapolation of its pose
   std::uint64_t steps_skipped_ = 0, models_held_back_ = 0, keepalives_sent_ = 0;
   std::uint64_t foreign_hellos_ = 0;
+  // Display poses (NodePoses) of the moving scene nodes.
+  std::int64_t start_ns_ = 0;  ///< the node's start: the scene's clock (animate) counts from it
+  std::uint32_t graph_version_ = 0;  ///< version of the kSceneGraph object (0 = none streamed)
+  std::int64_t node_poses_period_ns_ = 0, last_node_poses_ns_ = 0;
+  std::vector<wire::NodePose> node_poses_;
+  std::uint64_t node_pose_frames_ = 0, node_pose_entries_ = 0;
 
   bool have_state_ = false;
   std::uint64_t state_seq_ = 0;

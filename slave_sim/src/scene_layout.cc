@@ -11,11 +11,17 @@
 
 namespace ht {
 
-std::vector<std::pair<std::uint32_t, std::vector<std::uint8_t>>> BlockOnGearSceneObjects() {
-  std::vector<std::pair<std::uint32_t, std::vector<std::uint8_t>>> objects;
-  objects.emplace_back(1, EncodeMeshDraco(MakeRidgedBlockFullResolution()));
-  objects.emplace_back(2, EncodeMeshDraco(MakeRidgedGearFullResolution()));
-  return objects;
+DisplayStream BlockOnGearDisplayStream(const HapticScene& scene) {
+  const TriangleMesh gear = MakeRidgedGearFullResolution();
+  std::vector<const TriangleMesh*> objects(scene.touchables.size(), nullptr);
+  // The gear's own mesh where the object is the gear (the stiff wall shows its coarse mesh).
+  for (std::size_t k = 0; k < objects.size(); ++k) {
+    if (scene.touchables[k].model && scene.touchables[k].model->name == "ridged_gear") {
+      objects[k] = &gear;
+    }
+  }
+  return MakeDisplayStream(scene, MakeRidgedBlockFullResolution(), RigidTransform::Identity(),
+                           objects);
 }
 
 wire::SceneLayout MakeSceneLayout(const HapticScene& scene) {

@@ -5,13 +5,21 @@
 //   2. sealed with that key first (the input is taken as header + body and the MAC appended), so
 //      that every body decoder sees arbitrary bytes behind a valid MAC;
 //   3. every decoded scene fragment / manifest / NACK is fed to a SceneReassembler / SceneSender,
-//      whose memory must stay within its limits.
+//      whose memory must stay within its limits, and every decoded NodePoses to a SceneNodePoses;
+//   4. as the bytes of a scene-graph object (transport/scene_graph.h): a graph it decodes to must
+//      encode back to the same bytes and compose (every object the reassembler completes is tried
+//      the same way).
 // Build and run: tests/fuzz/run-fuzz (CI runs it for a bounded time).
+#include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
+#include <string>
+#include <vector>
 
 #include "transport/messages.h"
+#include "transport/scene_graph.h"
 #include "transport/scene_stream.h"
 
 namespace {
@@ -30,6 +38,20 @@ void Check(bool ok) {
   if (!ok) std::abort();
 }
 
+/// Decodes `bytes` as a scene-graph object; a graph it accepts must be one the encoder writes as
+/// exactly these bytes, and its poses must compose.
+void DecodeGraph(std::span<const std::uint8_t> bytes) {
+  ht::SceneGraphDescription graph;
+  std::string error;
+  if (!ht::DecodeSceneGraph(bytes, &graph, &error)) {
+    Check(!error.empty());
+    return;
+  }
+  const std::vector<std::uint8_t> again = ht::EncodeSceneGraph(graph);
+  Check(again.size() == bytes.size() && std::equal(again.begin(), again.end(), bytes.begin()));
+  Check(ht::ComposeWorldPoses(graph).size() == graph.nodes.size());
+}
+
 void DecodeBody(const ht::wire::Header& h, std::span<const std::uint8_t> body) {
   using namespace ht::wire;
   static ht::SceneReassembler reassembler(kMinMtuBytes, [] {
@@ -43,6 +65,11 @@ void DecodeBody(const ht::wire::Header& h, std::span<const std::uint8_t> body) {
     ht::SceneSender s(kMinMtuBytes);
     s.Update(1, std::vector<std::uint8_t>(5000, 1));
     return s;
+  }();
+  static ht::SceneNodePoses node_poses = [] {
+    ht::SceneGraphDescription g;
+    g.nodes.resize(40);
+    return ht::SceneNodePoses(g, 1);
   }();
   static std::int64_t now = 0;
   now += 1000000;
@@ -95,7 +122,8 @@ void DecodeBody(const ht::wire::Header& h, std::span<const std::uint8_t> body) {
     case MessageType::kSceneFragment: {
       SceneFragmentMessage m;
       if (DecodeSceneFragment(body, m) == DecodeStatus::kOk) {
-        reassembler.Add(m, now);
+        if (reassembler.Add(m, now) == ht::SceneReassembler::Outcome::kCompleted)
+          DecodeGraph(reassembler.CompletedBytes(m.object_id));
         Check(reassembler.bytes_held() <= (2u << 20));
       }
       break;
@@ -107,6 +135,18 @@ void DecodeBody(const ht::wire::Header& h, std::span<const std::uint8_t> body) {
         Check(reassembler.manifest_objects() <= 16);
         reassembler.CollectNacks(
             now, 0, [](const SceneNackMessage& n) { Check(n.count <= kMaxNackIndices); });
+      }
+      break;
+    }
+    case MessageType::kNodePoses: {
+      NodePosesMessage m;
+      if (DecodeNodePoses(body, m) == DecodeStatus::kOk) {
+        Check(m.count <= kMaxNodePosesPerDatagram && std::isfinite(m.scene_time_s));
+        for (int i = 0; i < m.count; ++i) {
+          const glm::quat& q = m.poses[static_cast<std::size_t>(i)].rotation;
+          Check(std::abs(glm::length(q) - 1.0f) < 1e-5f);
+        }
+        Check(node_poses.Apply(m) <= m.count);
       }
       break;
     }
@@ -130,6 +170,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   Header h;
   std::span<const std::uint8_t> body;
   if (OpenDatagram(input, Key(), h, body) == DecodeStatus::kOk) DecodeBody(h, body);
+  DecodeGraph(input);
   // Sealed: the same bytes behind a valid MAC.
   if (size >= kHeaderBytes && size + kMacBytes <= kMaxDatagramBytes) {
     Datagram d;

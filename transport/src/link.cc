@@ -42,7 +42,7 @@ bool Accepts(LinkRole role, wire::MessageType type) noexcept {
   }
   return type == T::kContactModel || type == T::kCompactContactModel || type == T::kWelcome ||
          type == T::kReject || type == T::kPong || type == T::kSceneFragment ||
-         type == T::kSceneManifest || type == T::kGoodbye;
+         type == T::kSceneManifest || type == T::kNodePoses || type == T::kGoodbye;
 }
 
 SecureLink::SecureLink(UdpSocket& socket, const MacKey& key, LinkRole role)

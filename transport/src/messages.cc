@@ -427,6 +427,27 @@ constexpr void Fields(auto& a, Of<SceneNackMessage> auto& m) {
   for (std::size_t i = 0; i < n; ++i) a(m.missing[i]);
 }
 
+constexpr void Fields(auto& a, Of<NodePose> auto& p) {
+  a(p.node);
+  a(p.translation.x);
+  a(p.translation.y);
+  a(p.translation.z);
+  a(p.rotation.w);
+  a(p.rotation.x);
+  a(p.rotation.y);
+  a(p.rotation.z);
+  a(p.scale.x);
+  a(p.scale.y);
+  a(p.scale.z);
+}
+
+constexpr void Fields(auto& a, Of<NodePosesMessage> auto& m) {
+  a(m.graph_version);
+  a(m.scene_time_s);
+  const std::size_t n = Count<std::uint8_t>(a, m.count, kMaxNodePosesPerDatagram, kNodePoseBytes);
+  for (std::size_t i = 0; i < n; ++i) Fields(a, m.poses[i]);
+}
+
 /// Msg's field list measured: bytes with one element per count, and the bytes the counts declare
 /// their elements take.
 template <class Msg>
@@ -454,6 +475,8 @@ static_assert(SizeOf<SceneManifestMessage>().bytes ==
               kSceneManifestFixedBytes + kManifestEntryBytes);
 static_assert(SizeOf<SceneManifestMessage>().counted_bytes == kManifestEntryBytes);
 static_assert(SizeOf<SceneNackMessage>().bytes == kSceneNackFixedBytes + 2);
+static_assert(SizeOf<NodePosesMessage>().bytes == kNodePosesFixedBytes + kNodePoseBytes);
+static_assert(SizeOf<NodePosesMessage>().counted_bytes == kNodePoseBytes);
 
 bool Finite3(const glm::dvec3& v) {
   return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
@@ -733,7 +756,8 @@ DecodeStatus Check(const SceneManifestMessage& m) {
   }
   for (int i = 0; i < m.count; ++i) {
     const ManifestEntry& e = m.entries[static_cast<std::size_t>(i)];
-    if (e.kind != SceneObjectKind::kDracoMesh || e.object_bytes == 0 ||
+    const auto kind = static_cast<int>(e.kind);
+    if (kind < 1 || kind > kMaxSceneObjectKind || e.object_bytes == 0 ||
         e.object_bytes > kMaxSceneObjectBytes || e.fragment_count == 0) {
       return DecodeStatus::kBadValue;
     }
@@ -742,6 +766,30 @@ DecodeStatus Check(const SceneManifestMessage& m) {
 }
 
 DecodeStatus Check(const SceneNackMessage&) { return DecodeStatus::kOk; }
+
+/// Squared norm of a NodePose rotation, in double (an f32 sum of squares could underflow).
+double Norm2(const glm::quat& q) {
+  return static_cast<double>(q.w) * q.w + static_cast<double>(q.x) * q.x +
+         static_cast<double>(q.y) * q.y + static_cast<double>(q.z) * q.z;
+}
+
+DecodeStatus Check(const NodePosesMessage& m) {
+  if (!std::isfinite(m.scene_time_s)) return DecodeStatus::kNonFinite;
+  for (int i = 0; i < m.count; ++i) {
+    const NodePose& p = m.poses[static_cast<std::size_t>(i)];
+    const glm::quat& q = p.rotation;
+    if (!std::isfinite(p.translation.x) || !std::isfinite(p.translation.y) ||
+        !std::isfinite(p.translation.z) || !std::isfinite(q.w) || !std::isfinite(q.x) ||
+        !std::isfinite(q.y) || !std::isfinite(q.z) || !std::isfinite(p.scale.x) ||
+        !std::isfinite(p.scale.y) || !std::isfinite(p.scale.z)) {
+      return DecodeStatus::kNonFinite;
+    }
+    if (!(Norm2(q) >= kMinNodePoseQuaternionNorm * kMinNodePoseQuaternionNorm)) {
+      return DecodeStatus::kBadValue;
+    }
+  }
+  return DecodeStatus::kOk;
+}
 
 /// Header, body and MAC: the one encoder of every message type.
 template <class Body>
@@ -835,6 +883,8 @@ const char* ToString(MessageType t) noexcept {
       return "scene_manifest";
     case MessageType::kCompactContactModel:
       return "compact_contact_model";
+    case MessageType::kNodePoses:
+      return "node_poses";
   }
   return "unknown";
 }
@@ -892,7 +942,7 @@ DecodeStatus OpenForeignHello(std::span<const std::uint8_t> bytes, const MacKey&
   r(max_version);
   r(nonce);
   if (w.magic != kMagic) return DecodeStatus::kBadMagic;
-  // Only the older versions whose Hello and Reject are laid out like this one's (2..4): a newer
+  // Only the older versions whose Hello and Reject are laid out like this one's (2..5): a newer
   // operator is dropped (its layout is unknown here; it falls back to this version itself).
   if (w.version < 2 || w.version >= kProtocolVersion) return DecodeStatus::kBadVersion;
   if (w.flags != 0) return DecodeStatus::kBadFlags;
@@ -922,6 +972,11 @@ Datagram EncodeSceneManifest(const Header& header, const SceneManifestMessage& m
 Datagram EncodeSceneNack(const Header& header, const SceneNackMessage& m,
                          const MacKey& key) noexcept {
   return Encode(header, MessageType::kSceneNack, m, key);
+}
+
+Datagram EncodeNodePoses(const Header& header, const NodePosesMessage& m,
+                         const MacKey& key) noexcept {
+  return Encode(header, MessageType::kNodePoses, m, key);
 }
 
 DecodeStatus PeekHeader(std::span<const std::uint8_t> bytes, Header& h) noexcept {
@@ -1006,6 +1061,19 @@ DecodeStatus DecodeSceneManifest(std::span<const std::uint8_t> body,
 
 DecodeStatus DecodeSceneNack(std::span<const std::uint8_t> body, SceneNackMessage& m) noexcept {
   return Decode(body, m);
+}
+
+DecodeStatus DecodeNodePoses(std::span<const std::uint8_t> body, NodePosesMessage& m) noexcept {
+  NodePosesMessage out;
+  if (const DecodeStatus s = Decode(body, out); s != DecodeStatus::kOk) return s;
+  for (int i = 0; i < out.count; ++i) {
+    glm::quat& q = out.poses[static_cast<std::size_t>(i)].rotation;
+    const double inverse = 1.0 / std::sqrt(Norm2(q));  // Check(): norm ≥ 1e-6, finite
+    q = glm::quat(static_cast<float>(q.w * inverse), static_cast<float>(q.x * inverse),
+                  static_cast<float>(q.y * inverse), static_cast<float>(q.z * inverse));
+  }
+  m = out;
+  return DecodeStatus::kOk;
 }
 
 }  // namespace ht::wire

@@ -26,6 +26,10 @@ SceneSender::SceneSender(std::size_t mtu) : payload_(CheckedPayload(mtu)) {}
 
 std::uint32_t SceneSender::Update(std::uint32_t object_id, std::vector<std::uint8_t> bytes,
                                   wire::SceneObjectKind kind) {
+  if (const auto k = static_cast<int>(kind); k < 1 || k > wire::kMaxSceneObjectKind) {
+    throw std::invalid_argument("scene object " + std::to_string(object_id) + " has kind " +
+                                std::to_string(k) + ", not a SceneObjectKind");
+  }
   if (bytes.empty())
     throw std::invalid_argument("scene object " + std::to_string(object_id) + " is empty");
   if (bytes.size() > wire::kMaxSceneObjectBytes) {
@@ -326,6 +330,19 @@ std::span<const std::uint8_t> SceneReassembler::CompletedBytes(
   const auto o = objects_.find(object_id);
   if (o == objects_.end() || !o->second.complete) return {};
   return o->second.bytes;
+}
+
+std::optional<wire::SceneObjectKind> SceneReassembler::ObjectKind(
+    std::uint32_t object_id) const noexcept {
+  const auto a = manifest_.find(object_id);
+  if (a == manifest_.end()) return std::nullopt;
+  return a->second.entry.kind;
+}
+
+std::uint32_t SceneReassembler::CompletedVersion(std::uint32_t object_id) const noexcept {
+  const auto o = objects_.find(object_id);
+  if (o == objects_.end() || !o->second.complete) return 0;
+  return o->second.version;
 }
 
 }  // namespace ht

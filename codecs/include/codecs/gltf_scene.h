@@ -3,9 +3,10 @@
 // for display and haptic baking: every mesh of the scene once, in its node frame, plus one
 // instance per node that shows it, and the node tree with its translation/rotation/scale
 // animations so that moving parts can be replayed (PoseInstancesAt) without a physics engine.
-// Materials, textures, cameras, skins and morph targets (with their `weights` animations) are
-// ignored (a note says so). The parser is tinygltf 2.7 (compiled into this library under the name
-// proj_tinygltf, see docs/DEPENDENCIES.md trap 1); Draco primitives
+// For display, each material's base colour (and its base-colour texture's bytes, undecoded) and
+// the first perspective camera are kept; skins and morph targets (with their `weights` animations)
+// are ignored (a note says so). The parser is tinygltf 2.7 (compiled into this library under the
+// name proj_tinygltf, see docs/DEPENDENCIES.md trap 1); Draco primitives
 // (KHR_draco_mesh_compression) are decoded with libdraco.
 
 #include <cstdint>
@@ -52,6 +53,41 @@ struct GltfMesh {
   int draco_primitive_count = 0;
   /// Triangles dropped because they repeat a vertex index.
   std::int64_t dropped_degenerate_triangles = 0;
+  /// Index into GltfScene::materials of the first merged primitive that names a material (the
+  /// display shows the whole mesh in it); -1 when none does.
+  int material = -1;
+};
+
+/// A glTF material as the display needs it: the base colour of pbrMetallicRoughness.
+struct GltfMaterial {
+  /// The material's `name` ("" when absent).
+  std::string name;
+  /// baseColorFactor (linear RGBA, each in [0, 1]; (1, 1, 1, 1) when absent).
+  glm::dvec4 base_colour_rgba{1.0};
+  /// Index into GltfScene::images of the baseColorTexture's source image; -1 when it has none
+  /// (or the texture or image index is out of range, with a note).
+  int base_colour_image = -1;
+};
+
+/// A glTF image's bytes as the file has them (PNG or JPEG, not decoded), from a buffer view, a
+/// data URI or an external file.
+struct GltfImage {
+  /// The image's `name` ("" when absent).
+  std::string name;
+  /// "image/png" or "image/jpeg" from the bytes' signature; the file's mimeType otherwise.
+  std::string mime_type;
+  std::vector<std::uint8_t> bytes;
+};
+
+/// The scene's first perspective camera (the first node in depth-first order that shows one).
+struct GltfCamera {
+  /// Index into GltfScene::nodes of the node that carries it (the camera looks along −Z of that
+  /// node's frame, +Y up, glTF 2.0 §3.10).
+  int scene_node = -1;
+  /// Vertical field of view (rad, > 0), near plane (m, > 0) and far plane (m; 0 = infinite).
+  double yfov_rad = 0.8;
+  double znear_m = 0.01;
+  double zfar_m = 0.0;
 };
 
 /// One node of the scene that shows a mesh.
@@ -93,6 +129,10 @@ struct GltfNode {
   /// Rest pose of N in its parent P (the scene frame W for a root): the `matrix`, or T·R·S.
   /// Column-major like glTF: p_P = X_PN * (p_N, 1).
   glm::dmat4 X_PN{1.0};
+  /// The node's `name` ("" when absent).
+  std::string name;
+  /// Index into GltfScene::meshes of the mesh the node shows; -1 for none.
+  int mesh = -1;
 };
 
 /// How an animation sampler interpolates between keys (glTF 2.0 §3.11, Appendix C).
@@ -144,6 +184,12 @@ struct GltfScene {
   std::vector<GltfNode> nodes;
   /// The file's animations, in the file's order (index = the file's animation index).
   std::vector<GltfAnimation> animations;
+  /// The file's materials (index = the file's material index) and images (index = the file's
+  /// image index).
+  std::vector<GltfMaterial> materials;
+  std::vector<GltfImage> images;
+  /// The first perspective camera, when the scene shows one (scene_node -1 otherwise).
+  GltfCamera camera;
   /// What was ignored or assumed: which scene was taken, skipped primitives, ignored cameras,
   /// skins, materials, animation channels, tinygltf's warnings.
   std::vector<std::string> notes;
@@ -208,6 +254,24 @@ std::vector<glm::dmat4> PoseInstancesAt(const GltfScene& scene, int animation, d
 /// once. Throws only std::bad_alloc, and only from that growth.
 void PoseInstancesAt(const GltfScene& scene, int animation, double time_s, bool loop,
                      std::vector<glm::dmat4>* X_WN);
+
+/// The local pose of one node entry (in its parent frame P) as an animation sets it.
+struct GltfNodePose {
+  /// Index into GltfScene::nodes.
+  int scene_node = -1;
+  /// Translation (m), rotation R_PN (unit quaternion) and scale of N in P.
+  glm::dvec3 translation{0.0};
+  glm::dquat rotation{1.0, 0.0, 0.0, 0.0};
+  glm::dvec3 scale{1.0};
+};
+
+/// The local poses, at time `time_s` of scene.animations[animation], of every node entry the
+/// animation moves (each path to an animated node, in channel order), sampled as PoseInstancesAt()
+/// samples them; nodes given by a `matrix` are not animated and not listed. `poses` is cleared
+/// first; an animation out of range, or a NaN time, leaves it empty. Allocates only when `poses`
+/// grows past its capacity (throws only std::bad_alloc then).
+void AnimatedNodePosesAt(const GltfScene& scene, int animation, double time_s, bool loop,
+                         std::vector<GltfNodePose>* poses);
 
 /// A JSON report of `scene`:
 /// {"path", "notes": [...], "meshes": [{"name", "gltf_mesh_index", "triangles", "vertices",

@@ -20,6 +20,26 @@
 
 namespace ht {
 
+/// The operator's display of the remote scene as received (off the haptic loop, its own thread).
+struct DisplayConfig {
+  /// kNone renders nothing; kHeadless writes PNG frames through a headless EGL context (Mesa
+  /// llvmpipe without a GPU); kWindow shows a window on a display server.
+  enum class Mode { kNone, kHeadless, kWindow };
+  Mode mode = Mode::kNone;
+  /// Where kHeadless writes frame_00000.png, ... ("" = <out_dir>/frames).
+  std::string frames_dir;
+  /// Frames per second (0.1..120).
+  double frame_rate_hz = 10.0;
+  /// Image size (pixels, 16..4096 each).
+  int width = 640;
+  int height = 480;
+  /// Stop rendering after this many frames (0 = none).
+  int max_frames = 0;
+  /// Distance of the camera that follows the tool (m; 0 = five times the tool's radius). Not
+  /// used when the scene file has a camera.
+  double camera_distance_m = 0.0;
+};
+
 /// Configuration of one run of the station.
 struct StationConfig {
   /// When this becomes true (a signal handler sets it), the loop ramps the device's wrench to
@@ -84,9 +104,13 @@ struct StationConfig {
   /// remote node has it; false keeps the float encoding.
   bool compact_models = true;
 
+  /// The display of the remote scene (none by default).
+  DisplayConfig display;
+
   /// Throws std::invalid_argument naming the first bad value (rate outside 100..4000 Hz, MTU
   /// outside 548..1472, peer timeout not above the heartbeat, stop ramp outside 0..10 s,
-  /// run_until_stopped without stop_requested, a deadband outside [0, 1), ...).
+  /// run_until_stopped without stop_requested, a deadband outside [0, 1), a headless display
+  /// without a frames folder or out_dir, a window display without a display server, ...).
   void Validate() const;
 };
 

@@ -13,6 +13,7 @@
 #include "haptic_core/gpu_penetration_depth.h"
 #include "haptic_core/haptic_scene.h"
 #include "haptic_core/remote_step.h"
+#include "slave_sim/display_scene.h"
 #include "transport/auth.h"
 #include "transport/deadband.h"
 #include "transport/messages.h"
@@ -56,8 +57,17 @@ struct RemoteNodeConfig {
   ContactModelDeadbandConfig model_deadband;
   /// Pace of scene fragments (bytes per second), so that they never crowd out contact models.
   double scene_rate_bytes_per_s = 4e6;
-  /// Scene objects streamed to the operator at join (Draco bitstreams), by object id.
-  std::vector<std::pair<std::uint32_t, std::vector<std::uint8_t>>> scene_objects;
+  /// Scene objects streamed to the operator at join (DisplayStream::objects: the scene graph,
+  /// Draco meshes in their own frames, base-colour images), by object id.
+  std::vector<StreamObject> scene_objects;
+  /// Local poses of the scene graph's moving nodes at `elapsed_s` (seconds since the node
+  /// started, the clock `animate` is called with), written into `poses` (cleared first; its
+  /// capacity is kept, so that it allocates only when it grows). Called at display_rate_hz while
+  /// a session with the scene is open, on the node's loop thread; must not throw. Empty = nothing
+  /// moves.
+  std::function<void(double elapsed_s, std::vector<wire::NodePose>* poses)> display_poses;
+  /// Rate of NodePoses frames (Hz, 1..1000).
+  double display_rate_hz = 60.0;
   /// Called before each step with the seconds since the node started, to move animated objects
   /// of the scene (e.g. AnimateScene() on a scene from a file); empty = a static scene. It runs on
   /// the stepping thread and must not throw.
@@ -69,9 +79,10 @@ struct RemoteNodeConfig {
   std::string step_trace_path;
 };
 
-/// The built-in scene's full-resolution meshes (ridged block = object 1, ridged gear = 2),
-/// Draco-compressed for streaming (14-bit positions, speed 5).
-std::vector<std::pair<std::uint32_t, std::vector<std::uint8_t>>> BlockOnGearSceneObjects();
+/// The built-in block-on-gear scene (or the stiff wall, `scene`) as a display stream: the ridged
+/// block's and the ridged gear's full-resolution meshes (the wall's coarse mesh), Draco-compressed
+/// (14-bit positions, speed 5), with their scene graph.
+DisplayStream BlockOnGearDisplayStream(const HapticScene& scene);
 
 /// The scene's layout that every Welcome carries (wire::SceneLayout): the tool's home pose (whose
 /// +z is the scene's up), the tool's mass and principal moments, and, for the touchable objects

@@ -168,6 +168,25 @@ struct SceneNackMessage {
   std::array<std::uint16_t, kMaxNackIndices> missing{};
 };
 
+/// One node's local pose X_PN in its parent frame P (f32 on the wire), replacing the scene graph's
+/// rest translation, rotation and scale of that node.
+struct NodePose {
+  std::uint16_t node = 0;                      ///< index into the scene graph's nodes
+  glm::vec3 translation{0.0f};                 ///< p_PN (m)
+  glm::quat rotation{1.0f, 0.0f, 0.0f, 0.0f};  ///< R_PN; w, x, y, z on the wire; unit once decoded
+  glm::vec3 scale{1.0f};
+};
+
+/// Remote → operator: local poses of moving scene-graph nodes at one instant of the remote scene.
+/// One frame may take several datagrams (same scene_time_s); the receiver keeps per node the entry
+/// of the newest scene_time_s (transport/scene_graph.h: SceneNodePoses).
+struct NodePosesMessage {
+  std::uint32_t graph_version = 0;  ///< version of the scene-graph object the node indices are of
+  double scene_time_s = 0.0;        ///< the remote scene's clock at this frame (s)
+  std::uint8_t count = 0;           ///< entries used, ≤ kMaxNodePosesPerDatagram
+  std::array<NodePose, kMaxNodePosesPerDatagram> poses{};
+};
+
 /// Why a datagram was dropped. Counted per reason in the summaries.
 enum class DecodeStatus : std::uint8_t {
   kOk = 0,
@@ -228,8 +247,12 @@ Datagram EncodeSceneManifest(const Header& header, const SceneManifestMessage& m
                              const MacKey& key) noexcept;
 Datagram EncodeSceneNack(const Header& header, const SceneNackMessage& message,
                          const MacKey& key) noexcept;
+/// Entries beyond kMaxNodePosesPerDatagram are not sent. Fields are sent as given (f32); a
+/// non-finite field or a zero rotation makes the receiver reject the datagram.
+Datagram EncodeNodePoses(const Header& header, const NodePosesMessage& message,
+                         const MacKey& key) noexcept;
 
-/// A Hello in another protocol version than this one, read only as far as versions 2 to 4 agree.
+/// A Hello in another protocol version than this one, read only as far as versions 2 to 5 agree.
 struct ForeignHello {
   std::uint16_t header_version = 0;  ///< the version in its header (the sender's own)
   std::uint16_t min_version = 0, max_version = 0;
@@ -242,7 +265,7 @@ struct ForeignHello {
 /// range.
 DecodeStatus OpenForeignHello(std::span<const std::uint8_t> datagram, const MacKey& key,
                               ForeignHello& hello) noexcept;
-/// A Reject with `version` in its header (the body is laid out alike in versions 2 to 4).
+/// A Reject with `version` in its header (the body is laid out alike in versions 2 to 5).
 Datagram EncodeReject(const Header& header, const RejectMessage& message, const MacKey& key,
                       std::uint16_t version) noexcept;
 
@@ -275,6 +298,13 @@ DecodeStatus DecodeSceneManifest(std::span<const std::uint8_t> body,
                                  SceneManifestMessage& message) noexcept;
 DecodeStatus DecodeSceneNack(std::span<const std::uint8_t> body,
                              SceneNackMessage& message) noexcept;
+/// NodePoses: kBadCount for more than kMaxNodePosesPerDatagram entries, kTooShort/kTooLong unless
+/// the length is exactly that of its entries, kNonFinite for a non-finite scene_time_s,
+/// translation, rotation or scale, kBadValue for a rotation of norm below
+/// kMinNodePoseQuaternionNorm. On kOk every rotation is normalized. The node indices are not
+/// checked here (the receiver checks them against its scene graph).
+DecodeStatus DecodeNodePoses(std::span<const std::uint8_t> body,
+                             NodePosesMessage& message) noexcept;
 /// Bodies that must be empty (Goodbye, Ping).
 DecodeStatus DecodeEmpty(std::span<const std::uint8_t> body) noexcept;
 

@@ -84,6 +84,41 @@
 //     SceneObjectKind, 16 bytes BLAKE2b-128 digest of the object's bytes.
 //   SceneNack O→R (10 + 2n): u32 object_id, u32 version, u16 n (≤ kMaxNackIndices; 0 = resend all),
 //     n × u16 missing fragment indices.
+//   NodePoses R→O (kNodePosesFixedBytes + n·kNodePoseBytes): u32 graph_version (the version of
+//     the scene-graph object whose node indices these are), f64 scene_time_s (the remote scene's
+//     clock at this frame, s), u8 n (≤ kMaxNodePosesPerDatagram), per entry (42): u16 node (index
+//     into the graph's nodes), 3×f32 translation (m), 4×f32 rotation w, x, y, z, 3×f32 scale: the
+//     node's local pose X_PN in its parent P, replacing the graph's rest translation, rotation and
+//     scale for that node. Sent at a display rate (60 Hz) for the nodes flagged kSceneNodeMoving; a
+//     frame with more entries goes in several datagrams with the same scene_time_s. The receiver
+//     keeps per node the entry of the newest scene_time_s (newest wins; a lost datagram is not
+//     repaired). Rejected: n above the limit (kBadCount), a length other than exactly n entries,
+//     a non-finite field (kNonFinite), a rotation of norm below kMinNodePoseQuaternionNorm
+//     (kBadValue); the decoder hands on the rotation normalized.
+//
+// Scene objects (reassembled from SceneFragments; the manifest gives each one's SceneObjectKind).
+// A scene is sent as a scene: one kDracoMesh object per distinct mesh, its positions in its own
+// frame; one kImage object per base-colour texture (the source file's PNG or JPEG bytes); one
+// kSceneGraph object that places them. The scene-graph object's bytes (all little-endian, written
+// and read field by field by transport/scene_graph.h, which checks every count against the bytes
+// left before allocating):
+//   u32 magic kSceneGraphMagic ("HTSG")   u16 format_version kSceneGraphFormatVersion
+//   u8 n, n bytes scene name (UTF-8)   u16 node_count (≤ 65535)   u16 material_count (≤ 4096)
+//   node_count nodes, parents first (≥ 94 bytes each):
+//     u8 n, n bytes name   i32 parent (−1 = root, whose parent frame is W; else < this index)
+//     3×f64 translation p_PN (m)   4×f64 rotation R_PN w, x, y, z (not zero; normalized on use)
+//     3×f64 scale   u32 mesh_object (kDracoMesh object id, positions in N; 0 = none)
+//     i32 material (−1 = default, else < material_count)   u8 flags (kSceneNode*: 1 tool,
+//     2 touchable, 4 moving; other bits rejected)
+//   material_count materials (≥ 22 bytes each):
+//     u8 n, n bytes name   4×f32 base_colour_rgba (linear, glTF baseColorFactor)
+//     u32 base_colour_texture_object (kImage object id; 0 = none)   u8 n, n bytes MIME type
+//     ("image/png", "image/jpeg"; empty when there is no texture)
+//   u8 has_camera (0 or 1); when 1 (28): i32 node (−1 = W itself, else < node_count; the camera
+//     looks along −z of that node's frame, +y up, as in glTF), f64 yfov_rad (0, π),
+//     f64 znear_m > 0, f64 zfar_m (0 = infinite, else > znear_m)
+// and nothing after it. Every f64 and f32 is finite. A node's pose in W is X_WN = X_WP·X_PN with
+// X_PN = T(translation)·R(rotation)·S(scale) (glTF's order).
 
 #include <cstddef>
 #include <cstdint>
@@ -93,12 +128,14 @@ namespace ht::wire {
 inline constexpr std::uint32_t kMagic = 0x504C5448u;  // bytes 'H' 'T' 'L' 'P'
 /// Version 2 added authentication, sessions, clock sync and scene streaming; version 3 the scene
 /// layout in Welcome (home pose, tool inertia, where the touchable objects are); version 4 the
-/// perceptual deadband terms in Hello and Welcome and the compact contact model. Versions 1 to 3
-/// are not accepted; a remote node answers a Hello of another version whose MAC verifies with a
-/// Reject (kVersion) in that Hello's header version (the Hello's first 12 body bytes and the
-/// Reject body are laid out alike in versions 2 to 4), so that an older operator is told why.
-inline constexpr std::uint16_t kProtocolVersion = 4;
-inline constexpr std::uint16_t kMinProtocolVersion = 4;
+/// perceptual deadband terms in Hello and Welcome and the compact contact model; version 5 the
+/// scene as a scene: meshes in their own frames, the scene-graph and image objects
+/// (SceneObjectKind kSceneGraph, kImage) and NodePoses. Versions 1 to 4 are not accepted; a remote
+/// node answers a Hello of another version whose MAC verifies with a Reject (kVersion) in that
+/// Hello's header version (the Hello's first 12 body bytes and the Reject body are laid out alike
+/// in versions 2 to 5), so that an older operator is told why.
+inline constexpr std::uint16_t kProtocolVersion = 5;
+inline constexpr std::uint16_t kMinProtocolVersion = 5;
 
 /// Message types; values are part of the protocol and never reused.
 enum class MessageType : std::uint8_t {
@@ -114,8 +151,9 @@ enum class MessageType : std::uint8_t {
   kSceneNack = 10,
   kSceneManifest = 11,
   kCompactContactModel = 12,
+  kNodePoses = 13,
 };
-inline constexpr int kMaxMessageType = 12;
+inline constexpr int kMaxMessageType = 13;
 
 /// Why a remote node refused a Hello.
 enum class RejectReason : std::uint8_t {
@@ -132,8 +170,21 @@ inline constexpr std::uint32_t kCodecCompactContactModel = 1u << 1;
 
 /// What a scene object's bytes are.
 enum class SceneObjectKind : std::uint8_t {
-  kDracoMesh = 1,  ///< a Draco bitstream of a triangle mesh, positions in the object's frame (m)
+  kDracoMesh = 1,   ///< a Draco bitstream of a triangle mesh, positions in the object's frame (m)
+  kSceneGraph = 2,  ///< an encoded SceneGraphDescription (layout above; transport/scene_graph.h)
+  kImage = 3,       ///< a base-colour texture, the source file's bytes as they are (PNG or JPEG;
+                    ///< the scene graph's material gives its MIME type)
 };
+/// Largest SceneObjectKind value.
+inline constexpr int kMaxSceneObjectKind = 3;
+
+/// The scene-graph object's magic ("HTSG" read as little-endian u32) and format version.
+inline constexpr std::uint32_t kSceneGraphMagic = 0x47535448u;  // bytes 'H' 'T' 'S' 'G'
+inline constexpr std::uint16_t kSceneGraphFormatVersion = 1;
+/// Smallest encoded node (empty name), material (empty name and MIME type) and camera.
+inline constexpr std::size_t kSceneGraphNodeMinBytes = 1 + 4 + 10 * 8 + 4 + 4 + 1;
+inline constexpr std::size_t kSceneMaterialMinBytes = 1 + 4 * 4 + 4 + 1;
+inline constexpr std::size_t kSceneGraphCameraBytes = 4 + 3 * 8;
 
 inline constexpr std::size_t kHeaderBytes = 28;
 inline constexpr std::size_t kMacBytes = 32;     // crypto_auth_BYTES
@@ -161,6 +212,12 @@ inline constexpr std::size_t kSceneDigestBytes = 16;
 inline constexpr int kMaxManifestEntries = 15;
 inline constexpr std::size_t kSceneNackFixedBytes = 10;
 inline constexpr int kMaxNackIndices = 200;
+inline constexpr std::size_t kNodePosesFixedBytes = 4 + 8 + 1;
+inline constexpr std::size_t kNodePoseBytes = 2 + 10 * 4;
+/// Node poses per NodePoses datagram: as many as fit the smallest MTU.
+inline constexpr int kMaxNodePosesPerDatagram = 11;
+/// A NodePoses rotation of smaller norm is refused (it has no direction to normalize to).
+inline constexpr double kMinNodePoseQuaternionNorm = 1e-6;
 
 /// Largest datagram either side sends or accepts: an Ethernet MTU (1500) less IPv4 and UDP headers.
 inline constexpr std::size_t kMaxDatagramBytes = 1472;
@@ -234,5 +291,13 @@ static_assert(kHeaderBytes + kWelcomeFixedBytes + kMaxWelcomeTargets * kWelcomeT
                   kMinMtuBytes,
               "a full Welcome must fit in the smallest MTU");
 static_assert(kHeaderBytes + kRejectFixedBytes + kMaxRejectText + kMacBytes <= kMinMtuBytes);
+static_assert(kHeaderBytes + kNodePosesFixedBytes + kMaxNodePosesPerDatagram * kNodePoseBytes +
+                      kMacBytes <=
+                  kMinMtuBytes,
+              "a full NodePoses must fit in the smallest MTU");
+static_assert(kHeaderBytes + kNodePosesFixedBytes +
+                      (kMaxNodePosesPerDatagram + 1) * kNodePoseBytes + kMacBytes >
+                  kMinMtuBytes,
+              "kMaxNodePosesPerDatagram is as many as fit");
 
 }  // namespace ht::wire

@@ -1,13 +1,15 @@
 #pragma once
-// Scene updates over UDP: objects (Draco bitstreams) cut into MTU-sized fragments, reassembled
-// on the operator side, repaired by negative acknowledgement (NACK), with a newer version of an
-// object superseding an older one (an unfinished one is dropped at once; a finished one is
-// replaced when the first fragment of the newer arrives). Both ends are plain state machines (no
-// sockets): the remote node and the operator station drive them from their network loops.
+// Scene updates over UDP: objects (Draco meshes, the scene graph, texture images: SceneObjectKind
+// in protocol.h) cut into MTU-sized fragments, reassembled on the operator side, repaired by
+// negative acknowledgement (NACK), with a newer version of an object superseding an older one (an
+// unfinished one is dropped at once; a finished one is replaced when the first fragment of the
+// newer arrives). Both ends are plain state machines (no sockets): the remote node and the
+// operator station drive them from their network loops.
 
 #include <cstdint>
 #include <deque>
 #include <map>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -35,7 +37,8 @@ class SceneSender {
 
   /// Adds an object, or replaces its bytes with a new version (queued fragments of the old one are
   /// skipped). Throws std::invalid_argument when the bytes are empty, exceed kMaxSceneObjectBytes
-  /// or need more than 65535 fragments at this MTU. Returns the object's version.
+  /// or need more than 65535 fragments at this MTU, or `kind` is not a SceneObjectKind. Returns the
+  /// object's version.
   std::uint32_t Update(std::uint32_t object_id, std::vector<std::uint8_t> bytes,
                        wire::SceneObjectKind kind = wire::SceneObjectKind::kDracoMesh);
   /// Changes the MTU (a new session negotiated another); every object is re-cut.
@@ -121,6 +124,12 @@ class SceneReassembler {
   std::size_t verified_objects() const noexcept;
   /// The complete bytes of an object (empty when it is not complete).
   std::span<const std::uint8_t> CompletedBytes(std::uint32_t object_id) const noexcept;
+  /// What the manifest says the object is; nullopt for an object no manifest has announced.
+  std::optional<wire::SceneObjectKind> ObjectKind(std::uint32_t object_id) const noexcept;
+  /// Version of the object's complete bytes (those CompletedBytes gives); 0 when it is not
+  /// complete (nothing yet, a newer version under way, or dropped on a digest mismatch). Watch it
+  /// to see a new version of a mesh, the scene graph or an image arrive.
+  std::uint32_t CompletedVersion(std::uint32_t object_id) const noexcept;
   /// Bytes held (unfinished and finished).
   std::size_t bytes_held() const noexcept { return bytes_held_; }
   const ReassemblyStats& stats() const noexcept { return stats_; }

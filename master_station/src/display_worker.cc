@@ -1,0 +1,226 @@
+// The operator's display thread (display_worker.h).
+#include "display_worker.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <limits>
+#include <map>
+#include <thread>
+
+#include "haptic_core/contact_linearization.h"
+#include "haptic_core/statistics.h"
+#include "haptic_core/steady_clock.h"
+#include "master_station/png_image.h"
+#include "master_station/scene_renderer.h"
+
+namespace ht::station {
+namespace {
+
+constexpr glm::vec4 kDefaultColour{0.70f, 0.70f, 0.72f, 1.0f};
+constexpr glm::vec4 kHandleGhostColour{0.55f, 0.85f, 1.0f, 1.0f};
+
+glm::dmat4 Matrix(const RigidTransform& X) {
+  glm::dmat4 M = glm::mat4_cast(X.rotation);
+  M[3] = glm::dvec4(X.translation, 1.0);
+  return M;
+}
+
+RenderMesh ToRenderMesh(const TriangleMesh& m) {
+  RenderMesh r;
+  r.positions_N.reserve(m.vertices.size());
+  for (const glm::dvec3& p : m.vertices) r.positions_N.emplace_back(p);
+  r.triangles.reserve(m.triangles.size());
+  for (const glm::ivec3& t : m.triangles) r.triangles.emplace_back(t);
+  return r;
+}
+
+// Nodes that move with the tool: the tool node and its descendants (parents come first).
+std::vector<bool> UnderTool(const SceneGraphDescription& g) {
+  std::vector<bool> under(g.nodes.size(), false);
+  for (std::size_t i = 0; i < g.nodes.size(); ++i) {
+    const SceneGraphNode& n = g.nodes[i];
+    under[i] = (n.flags & kSceneNodeTool) != 0 ||
+               (n.parent >= 0 && static_cast<std::size_t>(n.parent) < i &&
+                under[static_cast<std::size_t>(n.parent)]);
+  }
+  return under;
+}
+
+}  // namespace
+
+DisplayWorker::DisplayWorker(const DisplayConfig& config, const ReceivedScene& scene,
+                             TripleBuffer<DisplayToolState>& tool, const glm::dvec3& up_W)
+    : config_(config), scene_(scene), tool_(tool), up_W_(up_W) {}
+
+void DisplayWorker::Run(const std::atomic<bool>& stop) {
+  std::unique_ptr<SceneRenderer> renderer;
+  try {
+    std::filesystem::create_directories(config_.frames_dir);
+    renderer = SceneRenderer::Create(config_.width, config_.height);
+    renderer_ = renderer->gpu().renderer;
+  } catch (const std::exception& e) {
+    error_ = std::string("the display could not start: ") + e.what();
+    std::fprintf(stderr, "[master] %s; the run goes on without it\n", error_.c_str());
+    return;
+  }
+  std::printf("[master] display: headless, %dx%d at %.1f frames/s into %s (%s)\n", config_.width,
+              config_.height, config_.frame_rate_hz, config_.frames_dir.c_str(), renderer_.c_str());
+  std::fflush(stdout);
+
+  std::uint64_t generation = 0;
+  std::shared_ptr<const ReceivedSceneContent> content;
+  std::map<std::uint32_t, int> mesh_index;  // object id → renderer mesh
+  std::map<std::uint32_t, double> mesh_radius;
+  std::vector<bool> under_tool;
+  double tool_radius_m = 0.02;
+  std::vector<SceneNodeTransform> local;
+  DisplayToolState tool{};
+  bool have_tool = false;
+  RenderFrame frame;
+  std::vector<std::uint8_t> rgba;
+  const std::int64_t period_ns = static_cast<std::int64_t>(1e9 / config_.frame_rate_hz);
+  std::int64_t next = SteadyNowNs();
+  while (!stop.load(std::memory_order_acquire)) {
+    const std::int64_t now = SteadyNowNs();
+    if (now < next) {
+      std::this_thread::sleep_for(std::chrono::nanoseconds(std::min<std::int64_t>(
+          next - now, 20'000'000)));  // wakes at least every 20 ms to see a stop
+      continue;
+    }
+    next += period_ns;
+    if (next < now) next = now + period_ns;  // fell behind: no burst of frames
+    if (tool_.Read(tool)) have_tool = true;
+    std::uint64_t g = 0;
+    std::shared_ptr<const ReceivedSceneContent> c = scene_.Content(&g);
+    if (!c || !have_tool) {
+      ++frames_without_scene_;
+      continue;
+    }
+    try {
+      if (g != generation) {
+        // A new scene version: upload new or changed meshes.
+        content = std::move(c);
+        generation = g;
+        ++scene_generations_;
+        for (const ReceivedSceneContent::Mesh& m : content->meshes) {
+          if (m.mesh_N.triangles.empty()) continue;
+          const RenderMesh r = ToRenderMesh(m.mesh_N);
+          if (auto it = mesh_index.find(m.object_id); it != mesh_index.end()) {
+            renderer->ReplaceMesh(it->second, r);
+          } else {
+            mesh_index[m.object_id] = renderer->AddMesh(r);
+          }
+          double radius = 0.0;
+          for (const glm::dvec3& p : m.mesh_N.vertices) radius = std::max(radius, glm::length(p));
+          mesh_radius[m.object_id] = radius;
+        }
+        under_tool = UnderTool(content->graph);
+        tool_radius_m = 0.0;
+        for (std::size_t i = 0; i < content->graph.nodes.size(); ++i) {
+          const SceneGraphNode& n = content->graph.nodes[i];
+          if ((n.flags & kSceneNodeTool) == 0 || mesh_radius.count(n.mesh_object) == 0) continue;
+          const double s =
+              std::max({std::abs(n.scale.x), std::abs(n.scale.y), std::abs(n.scale.z)});
+          tool_radius_m =
+              std::max(tool_radius_m, glm::length(n.translation) + s * mesh_radius[n.mesh_object]);
+        }
+        if (!(tool_radius_m > 1e-4)) tool_radius_m = 0.02;
+        // Arrows: half the tool's radius per newton, so that a 2 N contact spans the tool.
+        arrow_m_per_n_ = 0.5 * tool_radius_m;
+      }
+      const SceneGraphDescription& graph = content->graph;
+      scene_.CopyPoses(&local);
+      const std::vector<glm::dmat4> X_WN = local.size() == graph.nodes.size()
+                                               ? ComposeWorldPoses(graph, local)
+                                               : ComposeWorldPoses(graph);
+      const glm::dmat4 X_WT = Matrix(tool.X_WT);
+      const glm::dmat4 X_WH = Matrix(tool.X_WH);
+      frame.items.clear();
+      frame.arrows.clear();
+      for (std::size_t i = 0; i < graph.nodes.size(); ++i) {
+        const SceneGraphNode& n = graph.nodes[i];
+        const auto m = mesh_index.find(n.mesh_object);
+        if (n.mesh_object == 0 || m == mesh_index.end()) continue;
+        glm::vec4 colour = kDefaultColour;
+        if (n.material >= 0 && static_cast<std::size_t>(n.material) < graph.materials.size()) {
+          colour = graph.materials[static_cast<std::size_t>(n.material)].base_colour_rgba;
+        }
+        if (under_tool[i]) {
+          // Tool nodes are posed in T: at the simulated tool, and as a ghost at the handle.
+          frame.items.push_back({m->second, X_WT * X_WN[i], colour, false});
+          frame.items.push_back({m->second, X_WH * X_WN[i], kHandleGhostColour, true});
+        } else {
+          frame.items.push_back({m->second, X_WN[i], colour, false});
+        }
+      }
+      if (tool.have_model) {
+        for (int k = 0; k < tool.model.num_contacts; ++k) {
+          const ContactLinearization& cl = tool.model.contacts[static_cast<std::size_t>(k)];
+          const Wrench F = PenaltyWrench(cl.depth_m, cl.gradient, cl.stiffness_n_per_m);
+          frame.arrows.push_back({cl.point_W, F.force});
+        }
+      }
+      frame.arrow_m_per_n = arrow_m_per_n_;
+      if (graph.camera && graph.camera->node >= 0 &&
+          static_cast<std::size_t>(graph.camera->node) < X_WN.size()) {
+        // The scene file's camera: looks along −z of its node, +y up.
+        const glm::dmat4& X_WC = X_WN[static_cast<std::size_t>(graph.camera->node)];
+        frame.camera.eye_W = glm::dvec3(X_WC[3]);
+        frame.camera.target_W = frame.camera.eye_W - glm::normalize(glm::dvec3(X_WC[2]));
+        frame.camera.up_W = glm::dvec3(X_WC[1]);
+        frame.camera.yfov_rad = graph.camera->yfov_rad;
+        frame.camera.near_m = graph.camera->znear_m;
+        frame.camera.far_m = graph.camera->zfar_m > 0.0 ? graph.camera->zfar_m : 1000.0;
+      } else {
+        // Follows the tool, from above and behind, far enough to see it and what it touches.
+        frame.camera = FollowCamera(
+            tool.X_WT.translation, up_W_,
+            config_.camera_distance_m > 0.0 ? config_.camera_distance_m : 5.0 * tool_radius_m);
+      }
+      const std::int64_t t0 = SteadyNowNs();
+      renderer->Render(frame, &rgba);
+      const std::int64_t t1 = SteadyNowNs();
+      char name[32];
+      std::snprintf(name, sizeof(name), "frame_%05llu.png",
+                    static_cast<unsigned long long>(frames_));
+      const std::string path = config_.frames_dir + "/" + name;
+      WritePng(path, renderer->width(), renderer->height(), rgba);
+      const std::int64_t t2 = SteadyNowNs();
+      render_ms_.push_back(static_cast<double>(t1 - t0) * 1e-6);
+      write_ms_.push_back(static_cast<double>(t2 - t1) * 1e-6);
+      ++frames_;
+      if (frame_files_.size() < 100000) frame_files_.push_back(name);
+      if (config_.max_frames > 0 && frames_ >= static_cast<std::uint64_t>(config_.max_frames)) {
+        break;
+      }
+    } catch (const std::exception& e) {
+      error_ = std::string("the display stopped: ") + e.what();
+      std::fprintf(stderr, "[master] %s; the run goes on without it\n", error_.c_str());
+      return;
+    }
+  }
+}
+
+nlohmann::json DisplayWorker::Summary() const {
+  nlohmann::json j;
+  j["mode"] = "headless";
+  j["frames_dir"] = config_.frames_dir;
+  j["size"] = {config_.width, config_.height};
+  j["frame_rate_hz"] = config_.frame_rate_hz;
+  j["renderer"] = renderer_;
+  j["frames"] = frames_;
+  j["frames_without_scene"] = frames_without_scene_;
+  j["scene_versions_shown"] = scene_generations_;
+  j["render_ms_p50"] = Percentile(render_ms_, 0.5);
+  j["render_ms_p99"] = Percentile(render_ms_, 0.99);
+  j["png_write_ms_p50"] = Percentile(write_ms_, 0.5);
+  j["arrow_m_per_n"] = arrow_m_per_n_;
+  j["error"] = error_;
+  j["first_frame"] = frame_files_.empty() ? "" : frame_files_.front();
+  j["last_frame"] = frame_files_.empty() ? "" : frame_files_.back();
+  return j;
+}
+
+}  // namespace ht::station

@@ -1,0 +1,58 @@
+#pragma once
+// The operator's display (issue 17): renders the scene as the operator station received it, off
+// the haptic loop, on its own thread: the decoded meshes with their materials' base colours at
+// their received poses, the tool at its simulated pose, the device's handle as a ghost of the
+// tool, and the contact points of the contact model in use with force arrows (m per N in the
+// summary). Headless: PNG frames through EGL (Mesa llvmpipe without a GPU). Internal to
+// master_station.
+
+#include <atomic>
+#include <cstdint>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "haptic_core/contact_model.h"
+#include "haptic_core/spatial.h"
+#include "master_station/lock_free.h"
+#include "master_station/operator_station.h"
+#include "master_station/received_scene.h"
+
+namespace ht::station {
+
+/// What the haptic loop hands the display (newest wins, TripleBuffer): W is the remote world.
+struct DisplayToolState {
+  double t_s = 0.0;         ///< run time of the tick (s)
+  RigidTransform X_WT;      ///< the simulated tool's pose (frame T at its centre of mass)
+  RigidTransform X_WH;      ///< the device handle's pose mapped into W
+  bool have_model = false;  ///< a contact model has arrived
+  ContactModel model;       ///< the newest contact model (contacts at its q0)
+};
+
+/// Renders frames at config.display.frame_rate_hz until stopped. Never throws from Run: a display
+/// that cannot start (no EGL context, an unwritable folder) is said once on stderr, recorded in
+/// Summary() and the run goes on without it.
+class DisplayWorker {
+ public:
+  /// `up_W`: the scene's up direction (the Welcome's home pose +z); `scene` and `tool` must
+  /// outlive the worker.
+  DisplayWorker(const DisplayConfig& config, const ReceivedScene& scene,
+                TripleBuffer<DisplayToolState>& tool, const glm::dvec3& up_W);
+  void Run(const std::atomic<bool>& stop);
+  /// The display's part of summary.json: mode, renderer, frames written, render and write times,
+  /// the arrow scale, what went wrong.
+  nlohmann::json Summary() const;
+
+ private:
+  const DisplayConfig& config_;
+  const ReceivedScene& scene_;
+  TripleBuffer<DisplayToolState>& tool_;
+  glm::dvec3 up_W_;
+  std::string renderer_, error_;
+  std::uint64_t frames_ = 0, frames_without_scene_ = 0, scene_generations_ = 0;
+  std::vector<double> render_ms_, write_ms_;
+  double arrow_m_per_n_ = 0.0;
+  std::vector<std::string> frame_files_;
+};
+
+}  // namespace ht::station

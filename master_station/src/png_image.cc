@@ -1,0 +1,84 @@
+#include "master_station/png_image.h"
+
+#include <png.h>
+
+#include <cstring>
+#include <stdexcept>
+
+namespace ht {
+namespace {
+
+constexpr int kMaxPngSide = 16384;
+
+// libpng's simplified API keeps its reason in image.message (never longer than 64 bytes).
+std::string Reason(const png_image& image) {
+  return std::string(image.message, strnlen(image.message, sizeof(image.message)));
+}
+
+}  // namespace
+
+void WritePng(const std::string& path, int width, int height,
+              std::span<const std::uint8_t> rgba_top_down) {
+  if (width < 1 || height < 1 || width > kMaxPngSide || height > kMaxPngSide) {
+    throw std::invalid_argument("WritePng: image size must be in [1, " +
+                                std::to_string(kMaxPngSide) + "] each, got " +
+                                std::to_string(width) + " x " + std::to_string(height));
+  }
+  const std::size_t expected =
+      static_cast<std::size_t>(width) * static_cast<std::size_t>(height) * 4;
+  if (rgba_top_down.size() != expected) {
+    throw std::invalid_argument("WritePng: a " + std::to_string(width) + " x " +
+                                std::to_string(height) + " RGBA8 image needs " +
+                                std::to_string(expected) + " bytes, got " +
+                                std::to_string(rgba_top_down.size()));
+  }
+  png_image image;
+  std::memset(&image, 0, sizeof(image));
+  image.version = PNG_IMAGE_VERSION;
+  image.width = static_cast<png_uint_32>(width);
+  image.height = static_cast<png_uint_32>(height);
+  image.format = PNG_FORMAT_RGBA;
+  // Row stride in components (positive: row 0 is the top).
+  const png_int_32 stride = static_cast<png_int_32>(PNG_IMAGE_ROW_STRIDE(image));
+  if (png_image_write_to_file(&image, path.c_str(), /*convert_to_8bit=*/0, rgba_top_down.data(),
+                              stride, /*colormap=*/nullptr) == 0) {
+    const std::string reason = Reason(image);
+    png_image_free(&image);
+    throw std::runtime_error("WritePng: cannot write " + path + ": " + reason);
+  }
+}
+
+std::vector<std::uint8_t> ReadPng(const std::string& path, int* width, int* height) {
+  if (width == nullptr || height == nullptr) {
+    throw std::invalid_argument("ReadPng: width and height must not be null");
+  }
+  png_image image;
+  std::memset(&image, 0, sizeof(image));
+  image.version = PNG_IMAGE_VERSION;
+  if (png_image_begin_read_from_file(&image, path.c_str()) == 0) {
+    const std::string reason = Reason(image);
+    png_image_free(&image);
+    throw std::runtime_error("ReadPng: cannot read " + path + ": " + reason);
+  }
+  if (image.width < 1 || image.height < 1 || image.width > kMaxPngSide ||
+      image.height > kMaxPngSide) {
+    const std::string size = std::to_string(image.width) + " x " + std::to_string(image.height);
+    png_image_free(&image);
+    throw std::runtime_error("ReadPng: " + path + " is " + size + " pixels; at most " +
+                             std::to_string(kMaxPngSide) + " a side is read");
+  }
+  image.format = PNG_FORMAT_RGBA;
+  std::vector<std::uint8_t> rgba(PNG_IMAGE_SIZE(image));
+  if (png_image_finish_read(&image, /*background=*/nullptr, rgba.data(),
+                            static_cast<png_int_32>(PNG_IMAGE_ROW_STRIDE(image)),
+                            /*colormap=*/nullptr) == 0) {
+    const std::string reason = Reason(image);
+    png_image_free(&image);
+    throw std::runtime_error("ReadPng: cannot read " + path + ": " + reason);
+  }
+  *width = static_cast<int>(image.width);
+  *height = static_cast<int>(image.height);
+  return rgba;
+}
+
+}  // namespace ht

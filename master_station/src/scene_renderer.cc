@@ -1,0 +1,658 @@
+#include "master_station/scene_renderer.h"
+
+#include <GLES3/gl31.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <glm/ext/matrix_clip_space.hpp>
+#include <glm/ext/matrix_transform.hpp>
+#include <glm/geometric.hpp>
+#include <glm/gtc/type_ptr.hpp>
+#include <glm/mat3x3.hpp>
+#include <numbers>
+#include <stdexcept>
+#include <string>
+
+namespace ht {
+namespace {
+
+constexpr int kMaxSide = 4096;
+constexpr std::size_t kMaxTriangles = std::size_t{1} << 24;
+constexpr int kFloatsPerVertex = 6;  // position_N 3, face normal_N 3
+
+// Shading terms: items are lit fully, arrows and markers lightly so that their colour stays
+// recognisable (shade in [0.7, 1]).
+constexpr float kItemAmbient = 0.3f, kItemDiffuse = 0.7f;
+constexpr float kArrowAmbient = 0.7f, kArrowDiffuse = 0.3f;
+constexpr float kGhostAlpha = 0.3f;
+
+// Arrow proportions (fractions of its length L) and screen-size floors (pixels at the arrow's
+// point) so that short arrows and contact markers stay visible.
+constexpr double kShaftRadius = 0.03, kHeadRadius = 0.08, kHeadLength = 0.25;
+constexpr double kMinShaftRadiusPx = 1.5, kHeadOverShaft = 2.5, kMarkerRadiusPx = 3.0;
+constexpr int kRoundSegments = 16;
+
+// Vertex stage: node frame N → camera frame C (X_CN computed in double on the CPU), face normal
+// by the cofactor of X_CN's linear part (the inverse transpose up to a positive scale when
+// det > 0; the sign does not matter, lighting is two-sided).
+constexpr const char* kVertexShader = R"(#version 300 es
+precision highp float;
+layout(location = 0) in vec3 a_position_N;
+layout(location = 1) in vec3 a_normal_N;
+uniform mat4 u_X_CN;
+uniform mat3 u_normal_CN;
+uniform mat4 u_projection;
+out vec3 v_position_C;
+flat out vec3 v_normal_C;
+invariant gl_Position;  // the same depth in a translucent item's depth and colour passes
+void main() {
+  vec4 p_C = u_X_CN * vec4(a_position_N, 1.0);
+  v_position_C = p_C.xyz;
+  v_normal_C = u_normal_CN * a_normal_N;
+  gl_Position = u_projection * p_C;
+}
+)";
+
+// Fragment stage: headlight at the eye plus ambient, two-sided Lambert on the flat normal.
+constexpr const char* kFragmentShader = R"(#version 300 es
+precision highp float;
+uniform vec4 u_colour;
+uniform float u_ambient;
+uniform float u_diffuse;
+in vec3 v_position_C;
+flat in vec3 v_normal_C;
+out vec4 o_colour;
+void main() {
+  float len = length(v_normal_C);
+  float lambert = 1.0;
+  if (len > 0.0) lambert = abs(dot(v_normal_C / len, normalize(-v_position_C)));
+  float shade = u_ambient + u_diffuse * lambert;
+  o_colour = vec4(clamp(u_colour.rgb * shade, 0.0, 1.0), u_colour.a);
+}
+)";
+
+std::string GlErrorNames() {
+  std::string errors;
+  for (int i = 0; i < 16; ++i) {
+    const GLenum e = glGetError();
+    if (e == GL_NO_ERROR) break;
+    if (!errors.empty()) errors += ", ";
+    switch (e) {
+      case GL_INVALID_ENUM:
+        errors += "GL_INVALID_ENUM";
+        break;
+      case GL_INVALID_VALUE:
+        errors += "GL_INVALID_VALUE";
+        break;
+      case GL_INVALID_OPERATION:
+        errors += "GL_INVALID_OPERATION";
+        break;
+      case GL_INVALID_FRAMEBUFFER_OPERATION:
+        errors += "GL_INVALID_FRAMEBUFFER_OPERATION";
+        break;
+      case GL_OUT_OF_MEMORY:
+        errors += "GL_OUT_OF_MEMORY";
+        break;
+      default:
+        errors += "GL error " + std::to_string(e);
+    }
+  }
+  return errors;
+}
+
+void ThrowOnGlError(const char* where) {
+  if (const std::string e = GlErrorNames(); !e.empty()) {
+    throw GpuError(std::string("scene renderer: ") + where + ": " + e);
+  }
+}
+
+GLuint Compile(GLenum stage, const char* source, const char* what) {
+  const GLuint shader = glCreateShader(stage);
+  glShaderSource(shader, 1, &source, nullptr);
+  glCompileShader(shader);
+  GLint ok = GL_FALSE;
+  glGetShaderiv(shader, GL_COMPILE_STATUS, &ok);
+  if (ok == GL_TRUE) return shader;
+  GLint length = 0;
+  glGetShaderiv(shader, GL_INFO_LOG_LENGTH, &length);
+  std::string log(static_cast<std::size_t>(std::max(length, 1)), '\0');
+  glGetShaderInfoLog(shader, static_cast<GLsizei>(log.size()), nullptr, log.data());
+  glDeleteShader(shader);
+  throw GpuError(std::string("scene renderer: the ") + what + " failed to compile: " + log.c_str());
+}
+
+GLuint BuildProgram() {
+  const GLuint vs = Compile(GL_VERTEX_SHADER, kVertexShader, "vertex shader");
+  GLuint fs = 0;
+  try {
+    fs = Compile(GL_FRAGMENT_SHADER, kFragmentShader, "fragment shader");
+  } catch (...) {
+    glDeleteShader(vs);
+    throw;
+  }
+  const GLuint program = glCreateProgram();
+  glAttachShader(program, vs);
+  glAttachShader(program, fs);
+  glLinkProgram(program);
+  glDeleteShader(vs);
+  glDeleteShader(fs);
+  GLint ok = GL_FALSE;
+  glGetProgramiv(program, GL_LINK_STATUS, &ok);
+  if (ok == GL_TRUE) return program;
+  GLint length = 0;
+  glGetProgramiv(program, GL_INFO_LOG_LENGTH, &length);
+  std::string log(static_cast<std::size_t>(std::max(length, 1)), '\0');
+  glGetProgramInfoLog(program, static_cast<GLsizei>(log.size()), nullptr, log.data());
+  glDeleteProgram(program);
+  throw GpuError(std::string("scene renderer: the shader program failed to link: ") + log.c_str());
+}
+
+bool Finite(const glm::dvec3& v) {
+  return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+}
+bool Finite(const glm::vec4& v) {
+  return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z) && std::isfinite(v.w);
+}
+bool Finite(const glm::dmat4& m) {
+  for (int c = 0; c < 4; ++c) {
+    for (int r = 0; r < 4; ++r) {
+      if (!std::isfinite(m[c][r])) return false;
+    }
+  }
+  return true;
+}
+
+std::string Str(const glm::dvec3& v) {
+  return "(" + std::to_string(v.x) + ", " + std::to_string(v.y) + ", " + std::to_string(v.z) + ")";
+}
+
+void CheckCamera(const RenderCamera& c) {
+  if (!Finite(c.eye_W) || !Finite(c.target_W) || !Finite(c.up_W)) {
+    throw std::invalid_argument("render camera: eye " + Str(c.eye_W) + ", target " +
+                                Str(c.target_W) + " and up " + Str(c.up_W) + " must be finite");
+  }
+  const glm::dvec3 forward = c.target_W - c.eye_W;
+  const double f = glm::length(forward), u = glm::length(c.up_W);
+  if (!(f > 0.0)) {
+    throw std::invalid_argument("render camera: eye and target are the same point " + Str(c.eye_W));
+  }
+  if (!(glm::length(glm::cross(forward, c.up_W)) > 1e-9 * f * u)) {
+    throw std::invalid_argument("render camera: up " + Str(c.up_W) +
+                                " is zero or parallel to the view direction " + Str(forward));
+  }
+  if (!(c.yfov_rad > 0.0 && c.yfov_rad < std::numbers::pi)) {
+    throw std::invalid_argument("render camera: yfov_rad must be in (0, pi), got " +
+                                std::to_string(c.yfov_rad));
+  }
+  if (!(c.near_m > 0.0 && c.far_m > c.near_m && std::isfinite(c.far_m))) {
+    throw std::invalid_argument("render camera: need 0 < near_m < far_m < inf, got near " +
+                                std::to_string(c.near_m) + ", far " + std::to_string(c.far_m));
+  }
+}
+
+// X_CW: W → C (camera looks along −z_C, y_C up).
+glm::dmat4 CameraFromWorld(const RenderCamera& c) {
+  return glm::lookAtRH(c.eye_W, c.target_W, c.up_W);
+}
+
+// C → clip coordinates (OpenGL, depth −1…1).
+glm::dmat4 Projection(const RenderCamera& c, int width, int height) {
+  return glm::perspectiveRH_NO(c.yfov_rad, static_cast<double>(width) / height, c.near_m, c.far_m);
+}
+
+// The unit shapes arrows and markers are made of.
+RenderMesh UnitCylinder() {  // radius 1, z ∈ [0, 1], closed
+  RenderMesh m;
+  m.positions_N = {{0, 0, 0}, {0, 0, 1}};
+  for (int i = 0; i < kRoundSegments; ++i) {
+    const double a = 2.0 * std::numbers::pi * i / kRoundSegments;
+    const float x = static_cast<float>(std::cos(a)), y = static_cast<float>(std::sin(a));
+    m.positions_N.push_back({x, y, 0.f});
+    m.positions_N.push_back({x, y, 1.f});
+  }
+  for (unsigned i = 0; i < kRoundSegments; ++i) {
+    const unsigned j = (i + 1) % kRoundSegments;
+    const unsigned b0 = 2 + 2 * i, t0 = b0 + 1, b1 = 2 + 2 * j, t1 = b1 + 1;
+    m.triangles.push_back({b0, b1, t1});
+    m.triangles.push_back({b0, t1, t0});
+    m.triangles.push_back({0, b1, b0});
+    m.triangles.push_back({1, t0, t1});
+  }
+  return m;
+}
+
+RenderMesh UnitCone() {  // base radius 1 at z = 0, apex at z = 1, closed
+  RenderMesh m;
+  m.positions_N = {{0, 0, 0}, {0, 0, 1}};
+  for (int i = 0; i < kRoundSegments; ++i) {
+    const double a = 2.0 * std::numbers::pi * i / kRoundSegments;
+    m.positions_N.push_back(
+        {static_cast<float>(std::cos(a)), static_cast<float>(std::sin(a)), 0.f});
+  }
+  for (unsigned i = 0; i < kRoundSegments; ++i) {
+    const unsigned b0 = 2 + i, b1 = 2 + (i + 1) % kRoundSegments;
+    m.triangles.push_back({b0, b1, 1});
+    m.triangles.push_back({0, b1, b0});
+  }
+  return m;
+}
+
+RenderMesh UnitOctahedron() {  // vertices at ±1 on each axis
+  RenderMesh m;
+  m.positions_N = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  m.triangles = {{0, 2, 4}, {2, 1, 4}, {1, 3, 4}, {3, 0, 4},
+                 {2, 0, 5}, {1, 2, 5}, {3, 1, 5}, {0, 3, 5}};
+  return m;
+}
+
+// An affine map that takes the unit z axis to `axis_W` (any length), x and y to `radius`·(two
+// unit vectors perpendicular to it), and the origin to `origin_W`.
+glm::dmat4 AlongAxis(const glm::dvec3& origin_W, const glm::dvec3& unit_axis_W, double length,
+                     double radius) {
+  const glm::dvec3 helper =
+      std::abs(unit_axis_W.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0);
+  const glm::dvec3 e1 = glm::normalize(glm::cross(helper, unit_axis_W));
+  const glm::dvec3 e2 = glm::cross(unit_axis_W, e1);
+  glm::dmat4 X(1.0);
+  X[0] = glm::dvec4(e1 * radius, 0.0);
+  X[1] = glm::dvec4(e2 * radius, 0.0);
+  X[2] = glm::dvec4(unit_axis_W * length, 0.0);
+  X[3] = glm::dvec4(origin_W, 1.0);
+  return X;
+}
+
+}  // namespace
+
+struct SceneRenderer::Impl {
+  struct GpuMesh {
+    GLuint vao = 0;
+    GLuint vbo = 0;
+    GLsizei vertices = 0;
+    glm::dvec3 centre_N{0.0};  // bounding-box centre, for back-to-front order
+  };
+  struct Translucent {
+    const RenderItem* item;
+    float alpha;
+    double depth_C;  // z of the mesh centre in C (more negative: farther)
+  };
+
+  // Declared first: destroyed last, after ~Impl has deleted the GL objects.
+  std::unique_ptr<EglContext> context;
+  GLuint program = 0;
+  GLuint fbo = 0;
+  GLuint colour_rb = 0;
+  GLuint depth_rb = 0;
+  GLint u_X_CN = -1, u_normal_CN = -1, u_projection = -1, u_colour = -1, u_ambient = -1,
+        u_diffuse = -1;
+  std::vector<GpuMesh> meshes;  // user meshes, by AddMesh index
+  GpuMesh cylinder, cone, octahedron;
+  std::vector<std::uint8_t> bottom_up;  // glReadPixels' rows, bottom first
+  std::vector<Translucent> translucent;
+  std::vector<float> upload;
+
+  ~Impl() {
+    if (!context || !context->MakeCurrent()) return;  // eglDestroyContext frees them then
+    for (GpuMesh* m : {&cylinder, &cone, &octahedron}) Free(*m);
+    for (GpuMesh& m : meshes) Free(m);
+    glDeleteFramebuffers(1, &fbo);
+    glDeleteRenderbuffers(1, &colour_rb);
+    glDeleteRenderbuffers(1, &depth_rb);
+    glDeleteProgram(program);
+  }
+
+  static void Free(GpuMesh& m) {
+    glDeleteVertexArrays(1, &m.vao);
+    glDeleteBuffers(1, &m.vbo);
+    m = {};
+  }
+
+  void MakeCurrent() {
+    if (!context->MakeCurrent()) {
+      throw GpuError(
+          "scene renderer: its EGL context cannot be made current on this thread (is it current "
+          "on another thread? use the renderer on the thread that created it)");
+    }
+  }
+
+  // Validates `mesh`, un-indexes it with face normals into `upload`, and uploads it into `gpu`
+  // (creating its buffers on first use). `gpu` is unchanged when validation fails.
+  void Upload(const RenderMesh& mesh, GpuMesh& gpu) {
+    const std::size_t nv = mesh.positions_N.size();
+    if (mesh.triangles.size() > kMaxTriangles) {
+      throw std::invalid_argument("render mesh: " + std::to_string(mesh.triangles.size()) +
+                                  " triangles, at most " + std::to_string(kMaxTriangles));
+    }
+    glm::dvec3 lo(0.0), hi(0.0);
+    for (std::size_t i = 0; i < nv; ++i) {
+      const glm::dvec3 p(mesh.positions_N[i]);
+      if (!Finite(p)) {
+        throw std::invalid_argument("render mesh: position " + std::to_string(i) + " is " + Str(p) +
+                                    ", not finite");
+      }
+      lo = i == 0 ? p : glm::min(lo, p);
+      hi = i == 0 ? p : glm::max(hi, p);
+    }
+    upload.clear();
+    upload.reserve(mesh.triangles.size() * 3 * kFloatsPerVertex);
+    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+      const glm::uvec3& tri = mesh.triangles[t];
+      for (int k = 0; k < 3; ++k) {
+        if (tri[k] >= nv) {
+          throw std::invalid_argument("render mesh: triangle " + std::to_string(t) +
+                                      " names vertex " + std::to_string(tri[k]) + " of " +
+                                      std::to_string(nv));
+        }
+      }
+      const glm::dvec3 a(mesh.positions_N[tri[0]]), b(mesh.positions_N[tri[1]]),
+          c(mesh.positions_N[tri[2]]);
+      const glm::dvec3 n = glm::cross(b - a, c - a);
+      const double len = glm::length(n);
+      if (!(len > 0.0)) continue;  // zero area: draws nothing
+      const glm::vec3 n_N(n / len);
+      for (int k = 0; k < 3; ++k) {
+        const glm::vec3& p = mesh.positions_N[tri[k]];
+        upload.insert(upload.end(), {p.x, p.y, p.z, n_N.x, n_N.y, n_N.z});
+      }
+    }
+    if (gpu.vao == 0) {
+      glGenVertexArrays(1, &gpu.vao);
+      glGenBuffers(1, &gpu.vbo);
+      glBindVertexArray(gpu.vao);
+      glBindBuffer(GL_ARRAY_BUFFER, gpu.vbo);
+      const GLsizei stride = kFloatsPerVertex * sizeof(float);
+      glEnableVertexAttribArray(0);
+      glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, stride, nullptr);
+      glEnableVertexAttribArray(1);
+      glVertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, stride,
+                            reinterpret_cast<const void*>(3 * sizeof(float)));
+      glBindVertexArray(0);
+    }
+    glBindBuffer(GL_ARRAY_BUFFER, gpu.vbo);
+    glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(upload.size() * sizeof(float)),
+                 upload.empty() ? nullptr : upload.data(), GL_STATIC_DRAW);
+    glBindBuffer(GL_ARRAY_BUFFER, 0);
+    ThrowOnGlError("mesh upload");
+    gpu.vertices = static_cast<GLsizei>(upload.size() / kFloatsPerVertex);
+    gpu.centre_N = 0.5 * (lo + hi);
+  }
+
+  void Draw(const GpuMesh& m, const glm::dmat4& X_CN, const glm::vec4& colour, float ambient,
+            float diffuse) {
+    if (m.vertices == 0) return;
+    const glm::dvec3 a(X_CN[0]), b(X_CN[1]), c(X_CN[2]);
+    const glm::mat3 normal_CN(glm::dmat3(glm::cross(b, c), glm::cross(c, a), glm::cross(a, b)));
+    const glm::mat4 X(X_CN);
+    glUniformMatrix4fv(u_X_CN, 1, GL_FALSE, glm::value_ptr(X));
+    glUniformMatrix3fv(u_normal_CN, 1, GL_FALSE, glm::value_ptr(normal_CN));
+    glUniform4fv(u_colour, 1, glm::value_ptr(colour));
+    glUniform1f(u_ambient, ambient);
+    glUniform1f(u_diffuse, diffuse);
+    glBindVertexArray(m.vao);
+    glDrawArrays(GL_TRIANGLES, 0, m.vertices);
+  }
+};
+
+SceneRenderer::SceneRenderer(int width, int height) : width_(width), height_(height) {}
+
+SceneRenderer::~SceneRenderer() = default;
+
+const GpuInfo& SceneRenderer::gpu() const noexcept { return impl_->context->info(); }
+
+std::unique_ptr<SceneRenderer> SceneRenderer::Create(int width, int height) {
+  if (width < 1 || width > kMaxSide || height < 1 || height > kMaxSide) {
+    throw std::invalid_argument("scene renderer: image size must be in [1, " +
+                                std::to_string(kMaxSide) + "] each, got " + std::to_string(width) +
+                                " x " + std::to_string(height));
+  }
+  std::unique_ptr<SceneRenderer> r(new SceneRenderer(width, height));
+  r->impl_ = std::make_unique<Impl>();
+  Impl& g = *r->impl_;
+  g.context = EglContext::Create();
+  GLint max_rb = 0;
+  glGetIntegerv(GL_MAX_RENDERBUFFER_SIZE, &max_rb);
+  if (width > max_rb || height > max_rb) {
+    throw GpuError("scene renderer: " + std::to_string(width) + " x " + std::to_string(height) +
+                   " exceeds GL_MAX_RENDERBUFFER_SIZE " + std::to_string(max_rb) + " of " +
+                   g.context->info().renderer);
+  }
+  glGenRenderbuffers(1, &g.colour_rb);
+  glBindRenderbuffer(GL_RENDERBUFFER, g.colour_rb);
+  glRenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, width, height);
+  glGenRenderbuffers(1, &g.depth_rb);
+  glBindRenderbuffer(GL_RENDERBUFFER, g.depth_rb);
+  glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT24, width, height);
+  glBindRenderbuffer(GL_RENDERBUFFER, 0);
+  glGenFramebuffers(1, &g.fbo);
+  glBindFramebuffer(GL_FRAMEBUFFER, g.fbo);
+  glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, g.colour_rb);
+  glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, g.depth_rb);
+  if (const GLenum status = glCheckFramebufferStatus(GL_FRAMEBUFFER);
+      status != GL_FRAMEBUFFER_COMPLETE) {
+    throw GpuError("scene renderer: RGBA8 + depth24 framebuffer incomplete (status " +
+                   std::to_string(status) + ") on " + g.context->info().renderer);
+  }
+  g.program = BuildProgram();
+  g.u_X_CN = glGetUniformLocation(g.program, "u_X_CN");
+  g.u_normal_CN = glGetUniformLocation(g.program, "u_normal_CN");
+  g.u_projection = glGetUniformLocation(g.program, "u_projection");
+  g.u_colour = glGetUniformLocation(g.program, "u_colour");
+  g.u_ambient = glGetUniformLocation(g.program, "u_ambient");
+  g.u_diffuse = glGetUniformLocation(g.program, "u_diffuse");
+  g.Upload(UnitCylinder(), g.cylinder);
+  g.Upload(UnitCone(), g.cone);
+  g.Upload(UnitOctahedron(), g.octahedron);
+  g.bottom_up.resize(static_cast<std::size_t>(width) * height * 4);
+  ThrowOnGlError("set-up");
+  return r;
+}
+
+int SceneRenderer::AddMesh(const RenderMesh& mesh) {
+  Impl& g = *impl_;
+  g.MakeCurrent();
+  Impl::GpuMesh gpu;
+  try {
+    g.Upload(mesh, gpu);
+  } catch (...) {
+    Impl::Free(gpu);
+    throw;
+  }
+  g.meshes.push_back(gpu);
+  return static_cast<int>(g.meshes.size()) - 1;
+}
+
+void SceneRenderer::ReplaceMesh(int index, const RenderMesh& mesh) {
+  Impl& g = *impl_;
+  if (index < 0 || index >= static_cast<int>(g.meshes.size())) {
+    throw std::invalid_argument("scene renderer: ReplaceMesh of mesh " + std::to_string(index) +
+                                ", but " + std::to_string(g.meshes.size()) + " were added");
+  }
+  g.MakeCurrent();
+  g.Upload(mesh, g.meshes[static_cast<std::size_t>(index)]);
+}
+
+void SceneRenderer::Render(const RenderFrame& frame, std::vector<std::uint8_t>* rgba_top_down) {
+  Impl& g = *impl_;
+  // Validate everything before touching GL, so that a bad frame draws nothing.
+  if (rgba_top_down == nullptr) throw std::invalid_argument("scene renderer: null output image");
+  CheckCamera(frame.camera);
+  if (!(frame.arrow_m_per_n >= 0.0 && std::isfinite(frame.arrow_m_per_n))) {
+    throw std::invalid_argument("scene renderer: arrow_m_per_n must be finite and >= 0, got " +
+                                std::to_string(frame.arrow_m_per_n));
+  }
+  if (!Finite(frame.background_rgba)) {
+    throw std::invalid_argument("scene renderer: background colour is not finite");
+  }
+  for (std::size_t i = 0; i < frame.items.size(); ++i) {
+    const RenderItem& item = frame.items[i];
+    if (item.mesh < 0 || item.mesh >= static_cast<int>(g.meshes.size())) {
+      throw std::invalid_argument("scene renderer: item " + std::to_string(i) + " names mesh " +
+                                  std::to_string(item.mesh) + ", but " +
+                                  std::to_string(g.meshes.size()) + " were added");
+    }
+    if (!Finite(item.X_WN) || !Finite(item.colour_rgba)) {
+      throw std::invalid_argument("scene renderer: item " + std::to_string(i) +
+                                  " has a non-finite pose or colour");
+    }
+  }
+  for (std::size_t i = 0; i < frame.arrows.size(); ++i) {
+    if (!Finite(frame.arrows[i].point_W) || !Finite(frame.arrows[i].force_W)) {
+      throw std::invalid_argument("scene renderer: arrow " + std::to_string(i) + " at " +
+                                  Str(frame.arrows[i].point_W) + " with force " +
+                                  Str(frame.arrows[i].force_W) + " is not finite");
+    }
+  }
+
+  g.MakeCurrent();
+  const RenderCamera& cam = frame.camera;
+  const glm::dmat4 X_CW = CameraFromWorld(cam);
+  const glm::mat4 projection(Projection(cam, width_, height_));
+  // Size of one pixel (m) at distance `depth` in front of the eye.
+  const double pixel_per_depth = 2.0 * std::tan(0.5 * cam.yfov_rad) / height_;
+
+  glBindFramebuffer(GL_FRAMEBUFFER, g.fbo);
+  glViewport(0, 0, width_, height_);
+  const glm::vec4 bg = glm::clamp(frame.background_rgba, 0.0f, 1.0f);
+  glClearColor(bg.r, bg.g, bg.b, bg.a);
+  glClearDepthf(1.0f);
+  glDepthMask(GL_TRUE);
+  glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+  glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_LESS);
+  glDisable(GL_CULL_FACE);
+  glDisable(GL_BLEND);
+  glUseProgram(g.program);
+  glUniformMatrix4fv(g.u_projection, 1, GL_FALSE, glm::value_ptr(projection));
+
+  // 1. Opaque items; translucent ones are kept for the last pass.
+  g.translucent.clear();
+  for (const RenderItem& item : frame.items) {
+    const Impl::GpuMesh& mesh = g.meshes[static_cast<std::size_t>(item.mesh)];
+    const glm::dmat4 X_CN = X_CW * item.X_WN;
+    glm::vec4 colour = glm::clamp(item.colour_rgba, 0.0f, 1.0f);
+    if (item.ghost) colour.a *= kGhostAlpha;
+    if (colour.a >= 1.0f) {
+      g.Draw(mesh, X_CN, colour, kItemAmbient, kItemDiffuse);
+    } else if (colour.a > 0.0f) {
+      g.translucent.push_back({&item, colour.a, (X_CN * glm::dvec4(mesh.centre_N, 1.0)).z});
+    }
+  }
+
+  // 2. Translucent items, farthest first, depth-tested against everything opaque. Each writes
+  // depth in a depth-only pass before its colour pass (one blended layer per pixel); that depth
+  // hides only translucent items drawn after it, which are nearer (sorted), except where
+  // translucent items interpenetrate.
+  if (!g.translucent.empty()) {
+    std::stable_sort(g.translucent.begin(), g.translucent.end(),
+                     [](const Impl::Translucent& a, const Impl::Translucent& b) {
+                       return a.depth_C < b.depth_C;
+                     });
+    glBlendFuncSeparate(GL_SRC_ALPHA, GL_ONE_MINUS_SRC_ALPHA, GL_ONE, GL_ONE_MINUS_SRC_ALPHA);
+    glDepthFunc(GL_LEQUAL);
+    for (const Impl::Translucent& t : g.translucent) {
+      const Impl::GpuMesh& mesh = g.meshes[static_cast<std::size_t>(t.item->mesh)];
+      const glm::dmat4 X_CN = X_CW * t.item->X_WN;
+      glm::vec4 colour = glm::clamp(t.item->colour_rgba, 0.0f, 1.0f);
+      colour.a = t.alpha;
+      // Depth only first, so that the colour pass blends each pixel once, with the item's nearest
+      // surface (else a closed mesh blends its back and front layers, twice as opaque).
+      glDisable(GL_BLEND);
+      glColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
+      glDepthMask(GL_TRUE);
+      g.Draw(mesh, X_CN, colour, kItemAmbient, kItemDiffuse);
+      glEnable(GL_BLEND);
+      glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+      glDepthMask(GL_FALSE);
+      g.Draw(mesh, X_CN, colour, kItemAmbient, kItemDiffuse);
+    }
+    glDepthMask(GL_TRUE);
+    glDisable(GL_BLEND);
+    glDepthFunc(GL_LESS);
+  }
+  // 3. Arrows (shaft + cone) and a contact marker at each point of application, over everything
+  // drawn so far (the depth buffer is cleared first, so that an arrow inside the tool or under a
+  // ghost still shows; arrows still hide one another by depth).
+  glClear(GL_DEPTH_BUFFER_BIT);
+  for (const RenderArrow& arrow : frame.arrows) {
+    const double depth = std::max(-(X_CW * glm::dvec4(arrow.point_W, 1.0)).z, cam.near_m);
+    const double pixel_m = depth * pixel_per_depth;
+    const double marker = kMarkerRadiusPx * pixel_m;
+    g.Draw(g.octahedron, X_CW * AlongAxis(arrow.point_W, {0, 0, 1}, marker, marker),
+           kForceArrowColour, kArrowAmbient, kArrowDiffuse);
+    const double force = glm::length(arrow.force_W);
+    const double length = force * frame.arrow_m_per_n;
+    if (!(length > 0.0) || !std::isfinite(length)) continue;
+    const glm::dvec3 axis_W = arrow.force_W / force;
+    const double shaft_radius = std::max(kShaftRadius * length, kMinShaftRadiusPx * pixel_m);
+    const double head_radius = std::max(kHeadRadius * length, kHeadOverShaft * shaft_radius);
+    const double head_length = kHeadLength * length;
+    const double shaft_length = length - head_length;
+    g.Draw(g.cylinder, X_CW * AlongAxis(arrow.point_W, axis_W, shaft_length, shaft_radius),
+           kForceArrowColour, kArrowAmbient, kArrowDiffuse);
+    g.Draw(
+        g.cone,
+        X_CW * AlongAxis(arrow.point_W + shaft_length * axis_W, axis_W, head_length, head_radius),
+        kForceArrowColour, kArrowAmbient, kArrowDiffuse);
+  }
+
+  glBindVertexArray(0);
+
+  // 4. Read back (GL's row 0 is the bottom) and flip to top-down.
+  glPixelStorei(GL_PACK_ALIGNMENT, 1);
+  glReadPixels(0, 0, width_, height_, GL_RGBA, GL_UNSIGNED_BYTE, g.bottom_up.data());
+  glBindFramebuffer(GL_FRAMEBUFFER, 0);
+  ThrowOnGlError("render");
+  const std::size_t row = static_cast<std::size_t>(width_) * 4;
+  rgba_top_down->resize(row * static_cast<std::size_t>(height_));
+  for (int j = 0; j < height_; ++j) {
+    std::memcpy(rgba_top_down->data() + row * static_cast<std::size_t>(j),
+                g.bottom_up.data() + row * static_cast<std::size_t>(height_ - 1 - j), row);
+  }
+}
+
+RenderCamera FollowCamera(const glm::dvec3& target_W, const glm::dvec3& up_W, double distance_m) {
+  if (!Finite(target_W)) {
+    throw std::invalid_argument("FollowCamera: target " + Str(target_W) + " is not finite");
+  }
+  if (!Finite(up_W) || !(glm::length(up_W) > 0.0)) {
+    throw std::invalid_argument("FollowCamera: up " + Str(up_W) + " must be finite and non-zero");
+  }
+  if (!(distance_m > 0.0 && std::isfinite(distance_m))) {
+    throw std::invalid_argument("FollowCamera: distance_m must be finite and > 0, got " +
+                                std::to_string(distance_m));
+  }
+  const glm::dvec3 u = glm::normalize(up_W);
+  // "Behind": W's +z made perpendicular to up (glTF's viewer side), or −y where up is near ±z.
+  glm::dvec3 back = glm::dvec3(0, 0, 1) - u.z * u;
+  if (glm::length(back) < 0.15) back = glm::dvec3(0, -1, 0) + u.y * u;
+  back = glm::normalize(back);
+  constexpr double kElevation = 35.0 * std::numbers::pi / 180.0;
+  RenderCamera c;
+  c.target_W = target_W;
+  c.eye_W = target_W + distance_m * (std::cos(kElevation) * back + std::sin(kElevation) * u);
+  c.up_W = u;
+  c.yfov_rad = 0.8;
+  c.near_m = 0.01 * distance_m;
+  c.far_m = 100.0 * distance_m;
+  return c;
+}
+
+bool ProjectToPixel(const RenderCamera& c, int width, int height, const glm::dvec3& p_W,
+                    glm::dvec2* pixel) {
+  CheckCamera(c);
+  if (width < 1 || height < 1) {
+    throw std::invalid_argument("ProjectToPixel: image size must be >= 1, got " +
+                                std::to_string(width) + " x " + std::to_string(height));
+  }
+  const glm::dvec4 p_C = CameraFromWorld(c) * glm::dvec4(p_W, 1.0);
+  if (!(p_C.z < 0.0)) return false;  // at or behind the eye's plane
+  const glm::dvec4 clip = Projection(c, width, height) * p_C;
+  const double x_ndc = clip.x / clip.w, y_ndc = clip.y / clip.w;
+  if (pixel != nullptr) {
+    *pixel = glm::dvec2(0.5 * (x_ndc + 1.0) * width, 0.5 * (1.0 - y_ndc) * height);
+  }
+  return true;
+}
+
+}  // namespace ht
