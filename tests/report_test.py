@@ -2,7 +2,8 @@
 """deploy/report on a recorded run (the loopback fig75 run of ctest, HT_LOOPBACK_OUT), and on
 broken copies of it (issue 17):
   - every plot exists, is a PNG of the stated size (IHDR) and is not blank (pixel spread);
-  - index.html references only files that exist, and shows the summary's key figures;
+  - index.html references only files that exist, shows the summary's key figures and up to six
+    of the display's frames;
   - a truncated trace.csv, a foreign one and a missing one each give one error line naming the
     file and what is wrong, exit status 1, and the plots that can still be drawn.
 Usage: tests/report_test.py SOURCE_DIR   (HT_LOOPBACK_OUT names the run folder)
@@ -68,7 +69,13 @@ def main():
                 check(not_blank(path), f"{name} is not blank")
         page = open(os.path.join(out, "index.html")).read()
         refs = re.findall(r'src="([^"]+)"', page)
-        check(sorted(refs) == sorted(expected), f"index.html shows the plots (got {refs})")
+        plots = [r for r in refs if "frames/frame_" not in r]
+        frames = [r for r in refs if "frames/frame_" in r]
+        check(sorted(plots) == sorted(expected), f"index.html shows the plots (got {plots})")
+        n_frames = len([f for f in os.listdir(os.path.join(run, "frames"))
+                        if f.endswith(".png")]) if os.path.isdir(os.path.join(run, "frames")) else 0
+        check(len(frames) == min(6, n_frames),
+              f"index.html shows min(6, {n_frames}) of the display's frames (got {len(frames)})")
         for ref in refs:
             check(os.path.exists(os.path.join(out, ref)), f"index.html's {ref} exists")
         check("operator_rate_hz" in page and "remote_step_p50_us" in page,

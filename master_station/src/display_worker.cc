@@ -156,10 +156,16 @@ void DisplayWorker::Run(const std::atomic<bool>& stop) {
         }
       }
       if (tool.have_model) {
+        // Each contact's force on the tool at the tool's pose now, as the loop renders it:
+        // −k·max(δ0 + J·(q ⊖ q0), 0)·J (DESIGN.md §5), drawn at the contact point moved with the
+        // tool since q0.
+        const Twist dq = PoseDifference(tool.X_WT, tool.model.X_WT0);
+        const RigidTransform X_moved = tool.X_WT * tool.model.X_WT0.Inverse();
         for (int k = 0; k < tool.model.num_contacts; ++k) {
           const ContactLinearization& cl = tool.model.contacts[static_cast<std::size_t>(k)];
-          const Wrench F = PenaltyWrench(cl.depth_m, cl.gradient, cl.stiffness_n_per_m);
-          frame.arrows.push_back({cl.point_W, F.force});
+          const double depth = cl.depth_m + cl.gradient.Dot(dq);
+          const Wrench F = PenaltyWrench(depth, cl.gradient, cl.stiffness_n_per_m);
+          frame.arrows.push_back({X_moved * cl.point_W, F.force});
         }
       }
       frame.arrow_m_per_n = arrow_m_per_n_;
