@@ -11,6 +11,8 @@ PACKAGES=(
   libgl1-mesa-dri libdraco-dev libtinygltf-dev
   # display frames (PNG)
   libpng-dev
+  # the display's window (GLFW) and its test under Xvfb
+  libglfw3-dev xvfb xauth
   # libraries the build uses
   libccd-dev libeigen3-dev nlohmann-json3-dev libcli11-dev libsodium-dev
   # the CPU texture stage's thread pool

@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -15,6 +16,7 @@
 #include <nlohmann/json.hpp>
 #include <numbers>
 #include <optional>
+#include <thread>
 
 #include "codecs/draco_mesh_codec.h"
 #include "codecs/glb_writer.h"
@@ -22,6 +24,7 @@
 #include "gltf_test_data.h"
 #include "haptic_core/remote_step.h"
 #include "slave_sim/display_scene.h"
+#include "slave_sim/watched_scene.h"
 
 namespace ht {
 namespace {
@@ -110,6 +113,59 @@ TEST_F(SceneBuildTest, WrittenGlbLoadsBackWithTheSameTrianglesAndPoses) {
   TriangleMesh bad = slab;
   bad.triangles[0].x = 100000;
   EXPECT_THROW(WriteGlb(path, {{"bad", bad, glm::dmat4(1.0), ""}}), std::invalid_argument);
+}
+
+// The remote node's file watching (issue 17): a scene file rewritten on disk is rebuilt on the
+// watcher thread and adopted by TakeReload; the new version's model and display mesh are the new
+// file's; a broken file is counted and the current version stays; the description's glTF is
+// watched too.
+TEST_F(SceneBuildTest, AWatchedSceneIsRebuiltWhenItsFileChangesAndKeptWhenTheNewFileIsBroken) {
+  const std::string glb = (dir_ / "watched.glb").string();
+  WriteGlb(glb, {{"slab", RidgedSlab(0.03, 0.03, 0.005, 10), glm::dmat4(1.0), ""}});
+  const std::string desc = Write("watched.json", R"({"scene": "watched.glb",
+    "defaults": {"coarse_triangles": 40, "texture_size": 64}})");
+  WatchedScene w(desc, "", HapticModelCache(""));
+  ASSERT_EQ(w.watched_files().size(), 2u);  // the description and its glTF
+  ASSERT_EQ(w.haptic().touchables.size(), 1u);
+  const auto extent_x = [](const HapticScene& s) {
+    double hi = 0.0;
+    for (const glm::dvec3& p : s.touchables[0].model->vertices_O) hi = std::max(hi, p.x);
+    return hi;
+  };
+  EXPECT_NEAR(extent_x(w.haptic()), 0.03, 1e-6);
+  const std::vector<std::uint8_t> mesh_before = w.stream().objects.at(1).bytes;
+  const HapticScene* before = &w.haptic();
+  EXPECT_FALSE(w.TakeReload());
+  w.StartWatching(0.05);
+  const auto wait_reload = [&] {
+    for (int i = 0; i < 400; ++i) {
+      if (w.TakeReload()) return true;
+      std::this_thread::sleep_for(std::chrono::milliseconds(25));
+    }
+    return false;
+  };
+  // A wider slab: the rebuilt model and the streamed mesh follow the file.
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));  // a new modification time
+  WriteGlb(glb, {{"slab", RidgedSlab(0.05, 0.03, 0.005, 10), glm::dmat4(1.0), ""}});
+  ASSERT_TRUE(wait_reload()) << w.StatsJson().dump();
+  EXPECT_NE(&w.haptic(), before);
+  EXPECT_NEAR(extent_x(w.haptic()), 0.05, 1e-6);
+  EXPECT_NE(w.stream().objects.at(1).bytes, mesh_before);
+  double min_x = 0.0;
+  for (const glm::dvec3& p : DecodeMeshDraco(w.stream().objects.at(1).bytes).vertices)
+    min_x = std::min(min_x, p.x);
+  EXPECT_NEAR(min_x, -0.05, 1e-4);  // Draco's 14-bit positions
+  EXPECT_EQ(w.StatsJson()["reloads"], 1);
+  // A broken file: counted with its message, and the current version stays.
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  { std::ofstream(glb, std::ios::binary | std::ios::trunc) << "glTF but not really"; }
+  for (int i = 0; i < 400 && w.StatsJson()["builds_failed"] == 0; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(25));
+  EXPECT_EQ(w.StatsJson()["builds_failed"], 1);
+  EXPECT_NE(w.StatsJson()["last_error"].get<std::string>().find("watched.glb"), std::string::npos)
+      << w.StatsJson().dump();
+  EXPECT_FALSE(w.TakeReload());
+  EXPECT_NEAR(extent_x(w.haptic()), 0.05, 1e-6);
 }
 
 TEST_F(SceneBuildTest, DescriptionRolesScaleAndSharedInstances) {

@@ -21,6 +21,7 @@
 #include "slave_sim/benchmark_scenes.h"
 #include "slave_sim/remote_node.h"
 #include "slave_sim/scene_build.h"
+#include "slave_sim/watched_scene.h"
 
 namespace {
 std::atomic<bool> g_stop{false};
@@ -57,6 +58,11 @@ int main(int argc, char** argv) {
   app.add_option("--tool", scene_tool,
                  "with a scene file: the node (name or #index) that is the tool; default the\n"
                  "description's, else the built-in probe");
+  bool no_watch = false;
+  app.add_flag("--no-watch", no_watch,
+               "with a scene file: do not watch it (by default a change of the file on disk\n"
+               "rebuilds the scene through the cache, switches the pipeline to it between two\n"
+               "steps and streams the changed meshes to the operator)");
   app.add_option("--cache-dir", scene_cache_dir,
                  "with a scene file or a seed-model scene: the model cache folder")
       ->capture_default_str();
@@ -244,10 +250,8 @@ int main(int argc, char** argv) {
     config.exit_on_goodbye = !stay;
     config.progress_period_s = quiet ? 0.0 : 1.0;
     ht::HapticScene builtin_scene;
-    std::unique_ptr<ht::BuiltScene> file_scene;
-    std::vector<glm::dmat4> animation_scratch;
-    ht::DisplayStream display_stream;
-    std::vector<ht::GltfNodePose> display_pose_scratch;
+    std::unique_ptr<ht::WatchedScene> file_scene;
+    const bool watch = !no_watch;
     if (!out_dir.empty()) {
       std::filesystem::create_directories(out_dir);
       config.step_trace_path = out_dir + "/remote_steps.csv";
@@ -282,43 +286,47 @@ int main(int argc, char** argv) {
                                     "striped-blocks, file-on-cad-part, hammer-on-torus) nor an "
                                     "existing file");
       }
-      file_scene = std::make_unique<ht::BuiltScene>(ht::BuildScene(
-          ht::LoadSceneInput(scene, scene_tool), ht::HapticModelCache(scene_cache_dir),
+      file_scene = std::make_unique<ht::WatchedScene>(
+          scene, scene_tool, ht::HapticModelCache(scene_cache_dir),
           [&](const std::string& node, int index, int count) {
             if (!quiet) {
               std::printf("[slave] model %d/%d: node '%s'\n", index, count,
                           node.empty() ? "(unnamed)" : node.c_str());
             }
-          }));
+          });
       // The scene as a scene for display: its graph, each mesh once in its own frame, the
       // base-colour images; the moving nodes' poses follow at the display rate.
-      display_stream = ht::MakeDisplayStream(*file_scene);
-      config.scene_objects = display_stream.objects;
+      config.scene_objects = file_scene->stream().objects;
       if (config.scene_objects.size() > 65535) {
         throw std::invalid_argument("--scene " + scene + ": " +
                                     std::to_string(config.scene_objects.size()) +
                                     " display objects (meshes and images); at most 65535 stream");
       }
-      if (!display_stream.moving_nodes.empty()) {
-        config.display_poses = [&](double t_s, std::vector<ht::wire::NodePose>* poses) {
-          ht::DisplayNodePosesAt(*file_scene, display_stream, t_s, &display_pose_scratch, poses);
+      config.display_poses = [&](double t_s, std::vector<ht::wire::NodePose>* poses) {
+        file_scene->DisplayPoses(t_s, poses);
+      };
+      config.animate = [&](double t_s) { file_scene->Animate(t_s); };
+      if (watch) {
+        // A change of the file on disk rebuilds the scene (through the cache) and switches to it.
+        file_scene->StartWatching(0.5);
+        config.take_reload = [&](std::vector<ht::StreamObject>* objects) -> const ht::HapticScene* {
+          if (!file_scene->TakeReload()) return nullptr;
+          *objects = file_scene->stream().objects;
+          return &file_scene->haptic();
         };
       }
-      const ht::RigidTransform& home = file_scene->haptic.X_WT_home;
+      const ht::BuiltScene& built = file_scene->built();
+      const ht::RigidTransform& home = built.haptic.X_WT_home;
       std::printf(
           "[slave] scene file %s: %zu touchable(s), tool %s; tool home position in W %.4f,%.4f,"
-          "%.4f (the operator's workspace centre: sent in the Welcome)\n",
-          scene.c_str(), file_scene->haptic.touchables.size(),
-          file_scene->builtin_probe ? "built-in probe" : scene_tool.c_str(), home.translation.x,
-          home.translation.y, home.translation.z);
-      if (!file_scene->gltf.animations.empty()) {
-        config.animate = [&](double t_s) {
-          ht::AnimateScene(*file_scene, 0, t_s, &animation_scratch);
-        };
-      }
+          "%.4f (the operator's workspace centre: sent in the Welcome)%s\n",
+          scene.c_str(), built.haptic.touchables.size(),
+          built.builtin_probe ? "built-in probe" : scene_tool.c_str(), home.translation.x,
+          home.translation.y, home.translation.z, watch ? "; watching the file for changes" : "");
     }
-    const ht::HapticScene& haptic_scene = file_scene ? file_scene->haptic : builtin_scene;
-    const nlohmann::json summary = ht::RunRemoteNode(config, haptic_scene, g_stop);
+    const ht::HapticScene& haptic_scene = file_scene ? file_scene->haptic() : builtin_scene;
+    nlohmann::json summary = ht::RunRemoteNode(config, haptic_scene, g_stop);
+    if (file_scene) summary["scene_file"] = file_scene->StatsJson();
     std::printf("[slave] done: %llu steps, %.1f steps/s, step p50 %.0f us\n",
                 static_cast<unsigned long long>(summary["steps"].get<std::uint64_t>()),
                 summary["rate_hz"].get<double>(), summary["step_p50_us"].get<double>());

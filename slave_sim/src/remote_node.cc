@@ -51,8 +51,9 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   }
   std::printf("[slave] %s\n", backend_message.c_str());
   std::fflush(stdout);
-  HapticTexturePipeline pipeline(scene, config.pipeline, std::move(backend));
-  const std::string backend_at_start(pipeline.backend().name());
+  auto pipeline =
+      std::make_unique<HapticTexturePipeline>(scene, config.pipeline, std::move(backend));
+  const std::string backend_at_start(pipeline->backend().name());
   UdpSocket socket(config.listen_address);
   const SocketAddress bound = socket.local_address();
   if (!config.port_file.empty()) {
@@ -99,6 +100,9 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   std::uint64_t last_progress_steps = 0;
   bool running = true;
   bool reported_fallback = false;
+  std::vector<StreamObject> reload_objects;
+  std::uint64_t scene_reloads = 0;
+  std::size_t reload_bytes = 0;
 
   while (running && !stop.load(std::memory_order_relaxed)) {
     // 1. Receive: at most kDrainPerPass datagrams between steps, so that a flood delays steps,
@@ -118,6 +122,39 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     if (!session.open()) {
       socket.WaitReadable(50);
       continue;
+    }
+    // A rebuilt scene (its file changed): switch the pipeline between two steps, and stream the
+    // objects whose bytes changed as new versions.
+    if (config.take_reload) {
+      reload_objects.clear();
+      if (const HapticScene* next = config.take_reload(&reload_objects)) {
+        const auto t0 = SteadyNowNs();
+        std::unique_ptr<PenetrationDepthBackend> kept = pipeline->ReleaseBackend();
+        if (auto* gpu = dynamic_cast<GpuPenetrationDepthBackend*>(kept.get())) {
+          gpu->Upload(*next->tool);
+          for (const TouchableObject& t : next->touchables) gpu->Upload(*t.model);
+        }
+        pipeline = std::make_unique<HapticTexturePipeline>(*next, config.pipeline, std::move(kept));
+        std::size_t changed = 0, changed_bytes = 0;
+        for (const StreamObject& o : reload_objects) {
+          const auto& held = scene_sender.objects();
+          const auto it = std::find_if(held.begin(), held.end(),
+                                       [&](const SceneObject& h) { return h.object_id == o.id; });
+          if (it != held.end() && it->kind == o.kind && it->bytes == o.bytes) continue;
+          const std::uint32_t version = scene_sender.Update(o.id, o.bytes, o.kind);
+          if (o.kind == wire::SceneObjectKind::kSceneGraph) session.SetGraphVersion(version);
+          ++changed;
+          changed_bytes += o.bytes.size();
+        }
+        session.SceneChanged(MakeSceneLayout(*next));
+        ++scene_reloads;
+        reload_bytes += changed_bytes;
+        std::printf(
+            "[slave] switched to the rebuilt scene in %.1f ms: %zu object(s) changed, "
+            "%zu bytes queued for the operator\n",
+            (SteadyNowNs() - t0) * 1e-6, changed, changed_bytes);
+        std::fflush(stdout);
+      }
     }
     session.StreamScene(now_loop);
     session.MaybeSendNodePoses(now_loop);
@@ -139,12 +176,12 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     if (config.animate) config.animate(static_cast<double>(t_step - start_ns) * 1e-9);
     StepTimings timings;
     wire::ContactModelMessage out;
-    out.model = pipeline.Step(X_WT, session.latest_tool_state_seq(), timings);
+    out.model = pipeline->Step(X_WT, session.latest_tool_state_seq(), timings);
     session.SteppedAt(X_WT);
-    if (pipeline.backend_failures() == 1 && !reported_fallback) {
+    if (pipeline->backend_failures() == 1 && !reported_fallback) {
       reported_fallback = true;
       std::printf("[slave] GPU penetration depth failed (%s); continuing on the CPU backend\n",
-                  pipeline.fallback_reason().c_str());
+                  pipeline->fallback_reason().c_str());
       std::fflush(stdout);
     }
     const std::int64_t step_end_ns = SteadyNowNs();
@@ -184,18 +221,20 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   s["grid_resolution"] = config.pipeline.grid_resolution;
   s["window_extent_m"] = config.pipeline.window_extent_m;
   s["texture_threads"] = config.pipeline.texture_threads;
-  s["linearization_missing_overlap"] = pipeline.faults().missing_overlap;
+  s["linearization_missing_overlap"] = pipeline->faults().missing_overlap;
   s["pd_backend"] = {{"requested", ToString(config.pd_backend)},
                      {"used", backend_at_start},
-                     {"used_at_end", std::string(pipeline.backend().name())},
+                     {"used_at_end", std::string(pipeline->backend().name())},
                      {"message", backend_message},
                      {"gl_renderer", gl_renderer},
                      {"gl_version", gl_version},
                      {"gl_vendor", gl_vendor},
                      {"depth_bits", gl_renderer.empty() ? 0 : config.gpu.depth_bits},
-                     {"failures", pipeline.backend_failures()},
-                     {"fallback_reason", pipeline.fallback_reason()}};
+                     {"failures", pipeline->backend_failures()},
+                     {"fallback_reason", pipeline->fallback_reason()}};
   s["transport"] = session.StatsJson(config.scene_objects.size(), scene_bytes);
+  s["transport"]["scene"]["reloads_switched"] = scene_reloads;
+  s["transport"]["scene"]["reload_bytes_queued"] = reload_bytes;
   return s;
 }
 

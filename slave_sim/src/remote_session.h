@@ -45,6 +45,15 @@ class RemoteSession {
   /// NodePoses frame (as many datagrams as the nodes need) every 1/config.display_rate_hz, while
   /// a session that takes the scene is open. Allocates nothing once the pose buffer has grown.
   void MaybeSendNodePoses(std::int64_t now_ns);
+  /// The scene graph object's version that NodePoses name (after a new version was queued).
+  void SetGraphVersion(std::uint32_t version) noexcept { graph_version_ = version; }
+  /// The scene changed (a rebuilt file): the next Welcome offers `layout`, the next pass steps
+  /// (even at an unchanged pose) and the manifest goes out at once.
+  void SceneChanged(const wire::SceneLayout& layout) noexcept {
+    caps_.layout = layout;
+    have_step_pose_ = false;
+    last_manifest_ns_ = 0;
+  }
   /// The tool pose the next remote step uses at `now_ns` (ns, SteadyNowNs()): with the
   /// session's tool-state deadband on, the newest tool state extrapolated at its own twist for
   /// the time since it arrived (ExtrapolatePose, the prediction the operator's deadband makes;

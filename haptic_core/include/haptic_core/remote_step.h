@@ -106,6 +106,10 @@ class HapticTexturePipeline {
   const StepFaults& step_faults() const noexcept { return step_faults_; }
   /// The backend in use: the one given, or the CPU backend after that one failed.
   const PenetrationDepthBackend& backend() const noexcept { return *backend_; }
+  /// Gives up the backend in use (for a pipeline built on a new scene, e.g. after the scene file
+  /// changed: the GPU backend keeps its context and its uploaded textures). The pipeline must not
+  /// be stepped afterwards.
+  std::unique_ptr<PenetrationDepthBackend> ReleaseBackend() noexcept { return std::move(backend_); }
   /// Batches the given backend failed (the step is then recomputed on the CPU, which stays in
   /// use), and the reason of the first failure ("" when none).
   std::int64_t backend_failures() const noexcept { return backend_failures_; }

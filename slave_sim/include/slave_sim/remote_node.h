@@ -68,6 +68,13 @@ struct RemoteNodeConfig {
   std::function<void(double elapsed_s, std::vector<wire::NodePose>* poses)> display_poses;
   /// Rate of NodePoses frames (Hz, 1..1000).
   double display_rate_hz = 60.0;
+  /// Called on the node's loop thread before each pass: returns a new version of the scene when
+  /// one is ready (its scene file changed and was rebuilt, e.g. WatchedScene::TakeReload), with
+  /// its display stream's objects in `objects`; null otherwise. The node then switches its
+  /// pipeline to the returned scene (which must outlive the node or the next switch) between two
+  /// steps and streams the objects whose bytes changed as new versions. Must not block. Empty =
+  /// the scene never changes.
+  std::function<const HapticScene*(std::vector<StreamObject>* objects)> take_reload;
   /// Called before each step with the seconds since the node started, to move animated objects
   /// of the scene (e.g. AnimateScene() on a scene from a file); empty = a static scene. It runs on
   /// the stepping thread and must not throw.
