@@ -8,7 +8,6 @@
 #include <algorithm>
 #include <cstdlib>
 #include <cstring>
-#include <cstdio>
 #include <mutex>
 #include <string>
 #include <utility>
@@ -62,7 +61,6 @@ std::string TakeGlfwError() {
 // libglvnd lets only one window-system API (EGL or GLX) have a context current on a thread, and
 // the renderer's headless EGL context usually is: release it before the window's is made current.
 void ReleaseCurrentEglContext() {
-  if (std::getenv("HT_EXP_NORELEASE")) return;
   if (eglGetCurrentContext() != EGL_NO_CONTEXT) {
     eglMakeCurrent(eglGetCurrentDisplay(), EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
   }
@@ -212,7 +210,6 @@ std::unique_ptr<DisplayWindow> DisplayWindow::Open(int width, int height,
   const std::pair<int, const char*> apis[] = {{GLFW_EGL_CONTEXT_API, "EGL"},
                                               {GLFW_NATIVE_CONTEXT_API, "GLX"}};
   for (const auto& [api, name] : apis) {
-    if (std::getenv("HT_EXP_API") && std::string(std::getenv("HT_EXP_API")) != name) continue;
     glfwDefaultWindowHints();
     glfwWindowHint(GLFW_CLIENT_API, GLFW_OPENGL_ES_API);
     glfwWindowHint(GLFW_CONTEXT_CREATION_API, api);
@@ -233,7 +230,6 @@ std::unique_ptr<DisplayWindow> DisplayWindow::Open(int width, int height,
   }
   // From here on, ~DisplayWindow releases the window and GLFW.
   g.Enter();
-  std::fprintf(stderr, "EXP api=%s GL_VERSION=%s GL_RENDERER=%s\n", tried.empty() ? "first" : tried.c_str(), (const char*)glGetString(GL_VERSION), (const char*)glGetString(GL_RENDERER));
   glfwSwapInterval(0);
   std::string log;
   const GLuint vs = Compile(GL_VERTEX_SHADER, kVertexShader, &log);

@@ -194,7 +194,12 @@ nlohmann::json NetworkWorker::Summary() const {
                 {"nacks_sent", r.nacks_sent},
                 {"fragments_nacked", r.fragments_nacked},
                 {"decoded", objects},
-                {"versions_published", scene_versions_published_}};
+                {"versions_published", scene_versions_published_},
+                {"object_transfer_ms_p50", Percentile(transfer_ms_, 0.5)},
+                {"object_transfer_ms_max", Percentile(transfer_ms_, 1.0)},
+                {"updates_received", update_transfer_ms_.size()},
+                {"update_transfer_ms_p50", Percentile(update_transfer_ms_, 0.5)},
+                {"update_transfer_ms_max", Percentile(update_transfer_ms_, 1.0)}};
   const ReceivedPoseStats poses = scene_.pose_stats();
   t["node_poses"] = {{"messages", poses.messages},
                      {"messages_before_scene", poses.messages_before_scene},
@@ -296,6 +301,7 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
       reassembler_.Reset(w.mtu);
       scene_complete_ = false;
       scene_dirty_ = false;
+      object_first_fragment_.clear();
       scene_objects_.clear();
       session_start_ns_ = now;
       clock_.Reset();
@@ -386,7 +392,19 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
         link_.CountBodyRejected(header.type, st);
         return;
       }
-      if (reassembler_.Add(f, now) == SceneReassembler::Outcome::kCompleted) {
+      const SceneReassembler::Outcome outcome = reassembler_.Add(f, now);
+      if (outcome == SceneReassembler::Outcome::kAccepted ||
+          outcome == SceneReassembler::Outcome::kCompleted) {
+        // Transfer time of each object version: its first fragment here to its completion.
+        auto [it, fresh] = object_first_fragment_.try_emplace(f.object_id, f.version, now);
+        if (!fresh && it->second.first != f.version) it->second = {f.version, now};
+      }
+      if (outcome == SceneReassembler::Outcome::kCompleted) {
+        if (const auto it = object_first_fragment_.find(f.object_id);
+            it != object_first_fragment_.end() && it->second.first == f.version) {
+          (f.version > 1 ? update_transfer_ms_ : transfer_ms_)
+              .push_back((now - it->second.second) * 1e-6);
+        }
         scene_dirty_ = true;
         CheckScene(now);
       }

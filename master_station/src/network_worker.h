@@ -7,6 +7,7 @@
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <map>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <span>
@@ -100,6 +101,10 @@ class NetworkWorker {
   bool scene_dirty_ = false;  ///< an object completed since the scene was last published
   std::uint64_t scene_versions_published_ = 0;
   std::vector<double> node_pose_latency_ms_;
+  /// Per object id: the version in transfer and when its first fragment arrived (local ns).
+  std::map<std::uint32_t, std::pair<std::uint32_t, std::int64_t>> object_first_fragment_;
+  /// Transfer times (first fragment to complete, ms) of first versions and of later ones.
+  std::vector<double> transfer_ms_, update_transfer_ms_;
   std::uint32_t session_ = 0;
   /// The tool-state stream's perceptual deadband, as agreed in the Welcome.
   ToolStateDeadband tool_deadband_{{}};
