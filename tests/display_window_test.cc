@@ -63,8 +63,7 @@ class ScopedEnv {
 };
 
 std::string OpenError(const std::string& display) {
-  ScopedEnv d("DISPLAY",
-              display == "<unset>" ? std::nullopt : std::optional<std::string>(display));
+  ScopedEnv d("DISPLAY", display == "<unset>" ? std::nullopt : std::optional<std::string>(display));
   ScopedEnv w("WAYLAND_DISPLAY", std::nullopt);
   try {
     DisplayWindow::Open(64, 48, "no display");
@@ -316,7 +315,7 @@ TEST_F(DisplayWindowOnServer, ClosingTheWindowMakesShowReturnFalse) {
   }
   EXPECT_FALSE(shown);
   EXPECT_TRUE(window->closed());
-  EXPECT_FALSE(window->Show(img, 64, 48));  // stays closed, shows nothing
+  EXPECT_FALSE(window->Show(img, 64, 48));                         // stays closed, shows nothing
   EXPECT_THROW(window->Show(img, 64, 47), std::invalid_argument);  // sizes still checked
   int w = -1, h = -1;
   EXPECT_TRUE(window->ReadBack(&w, &h).empty());
@@ -337,8 +336,8 @@ TEST_F(DisplayWindowOnServer, ShowTimeFor640x480) {
     img[static_cast<std::size_t>(i)] ^= 0xff;  // a new frame each time
     const auto t0 = std::chrono::steady_clock::now();
     ASSERT_TRUE(window->Show(img, kW, kH));
-    ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
-                     .count());
+    ms.push_back(
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
   }
   std::sort(ms.begin(), ms.end());
   const double median_ms = 0.5 * (ms[kRuns / 2 - 1] + ms[kRuns / 2]);
