@@ -12,7 +12,7 @@ PACKAGES=(
   # display frames (PNG)
   libpng-dev
   # the display's window (GLFW) and its test under Xvfb
-  libglfw3-dev xvfb xauth
+  libglfw3-dev xvfb xauth libx11-dev
   # libraries the build uses
   libccd-dev libeigen3-dev nlohmann-json3-dev libcli11-dev libsodium-dev
   # the CPU texture stage's thread pool

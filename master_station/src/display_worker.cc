@@ -12,6 +12,7 @@
 #include "haptic_core/contact_linearization.h"
 #include "haptic_core/statistics.h"
 #include "haptic_core/steady_clock.h"
+#include "master_station/display_window.h"
 #include "master_station/png_image.h"
 #include "master_station/scene_renderer.h"
 
@@ -20,6 +21,8 @@ namespace {
 
 constexpr glm::vec4 kDefaultColour{0.70f, 0.70f, 0.72f, 1.0f};
 constexpr glm::vec4 kHandleGhostColour{0.55f, 0.85f, 1.0f, 1.0f};
+// Longest arrow drawn, in tool radii (longer ones are saturated).
+constexpr double kArrowMaxRadii = 1.5;
 
 glm::dmat4 Matrix(const RigidTransform& X) {
   glm::dmat4 M = glm::mat4_cast(X.rotation);
@@ -56,17 +59,23 @@ DisplayWorker::DisplayWorker(const DisplayConfig& config, const ReceivedScene& s
 
 void DisplayWorker::Run(const std::atomic<bool>& stop) {
   std::unique_ptr<SceneRenderer> renderer;
+  std::unique_ptr<DisplayWindow> window;
+  const bool write_frames = !config_.frames_dir.empty();
   try {
-    std::filesystem::create_directories(config_.frames_dir);
+    if (write_frames) std::filesystem::create_directories(config_.frames_dir);
     renderer = SceneRenderer::Create(config_.width, config_.height);
     renderer_ = renderer->gpu().renderer;
+    if (config_.mode == DisplayConfig::Mode::kWindow) {
+      window = DisplayWindow::Open(config_.width, config_.height, "master_station: remote scene");
+    }
   } catch (const std::exception& e) {
     error_ = std::string("the display could not start: ") + e.what();
     std::fprintf(stderr, "[master] %s; the run goes on without it\n", error_.c_str());
     return;
   }
-  std::printf("[master] display: headless, %dx%d at %.1f frames/s into %s (%s)\n", config_.width,
-              config_.height, config_.frame_rate_hz, config_.frames_dir.c_str(), renderer_.c_str());
+  std::printf("[master] display: %s, %dx%d at %.1f frames/s%s%s (%s)\n",
+              window ? "window" : "headless", config_.width, config_.height, config_.frame_rate_hz,
+              write_frames ? " into " : "", config_.frames_dir.c_str(), renderer_.c_str());
   std::fflush(stdout);
 
   std::uint64_t generation = 0;
@@ -129,6 +138,7 @@ void DisplayWorker::Run(const std::atomic<bool>& stop) {
         if (!(tool_radius_m > 1e-4)) tool_radius_m = 0.02;
         // Arrows: half the tool's radius per newton, so that a 2 N contact spans the tool.
         arrow_m_per_n_ = 0.5 * tool_radius_m;
+        arrow_max_m_ = kArrowMaxRadii * tool_radius_m;
       }
       const SceneGraphDescription& graph = content->graph;
       scene_.CopyPoses(&local);
@@ -164,8 +174,16 @@ void DisplayWorker::Run(const std::atomic<bool>& stop) {
         for (int k = 0; k < tool.model.num_contacts; ++k) {
           const ContactLinearization& cl = tool.model.contacts[static_cast<std::size_t>(k)];
           const double depth = cl.depth_m + cl.gradient.Dot(dq);
-          const Wrench F = PenaltyWrench(depth, cl.gradient, cl.stiffness_n_per_m);
-          frame.arrows.push_back({X_moved * cl.point_W, F.force});
+          glm::dvec3 force = PenaltyWrench(depth, cl.gradient, cl.stiffness_n_per_m).force;
+          // An arrow longer than kArrowMaxRadii tool radii is drawn at that length (saturated:
+          // counted), so that a grazing contact's large force does not hide the scene.
+          const double length = glm::length(force) * arrow_m_per_n_;
+          if (length > kArrowMaxRadii * tool_radius_m) {
+            force *= kArrowMaxRadii * tool_radius_m / length;
+            ++arrows_saturated_;
+          }
+          ++arrows_;
+          frame.arrows.push_back({X_moved * cl.point_W, force});
         }
       }
       frame.arrow_m_per_n = arrow_m_per_n_;
@@ -188,16 +206,23 @@ void DisplayWorker::Run(const std::atomic<bool>& stop) {
       const std::int64_t t0 = SteadyNowNs();
       renderer->Render(frame, &rgba);
       const std::int64_t t1 = SteadyNowNs();
-      char name[32];
-      std::snprintf(name, sizeof(name), "frame_%05llu.png",
-                    static_cast<unsigned long long>(frames_));
-      const std::string path = config_.frames_dir + "/" + name;
-      WritePng(path, renderer->width(), renderer->height(), rgba);
+      if (write_frames) {
+        char name[32];
+        std::snprintf(name, sizeof(name), "frame_%05llu.png",
+                      static_cast<unsigned long long>(frames_));
+        WritePng(config_.frames_dir + "/" + name, renderer->width(), renderer->height(), rgba);
+        if (frame_files_.size() < 100000) frame_files_.push_back(name);
+      }
+      if (window && !window->Show(rgba, renderer->width(), renderer->height())) {
+        window_closed_ = true;
+        std::printf("[master] display: the window was closed; the run goes on\n");
+        std::fflush(stdout);
+        return;
+      }
       const std::int64_t t2 = SteadyNowNs();
       render_ms_.push_back(static_cast<double>(t1 - t0) * 1e-6);
       write_ms_.push_back(static_cast<double>(t2 - t1) * 1e-6);
       ++frames_;
-      if (frame_files_.size() < 100000) frame_files_.push_back(name);
       if (config_.max_frames > 0 && frames_ >= static_cast<std::uint64_t>(config_.max_frames)) {
         break;
       }
@@ -211,7 +236,11 @@ void DisplayWorker::Run(const std::atomic<bool>& stop) {
 
 nlohmann::json DisplayWorker::Summary() const {
   nlohmann::json j;
-  j["mode"] = "headless";
+  j["mode"] = config_.mode == DisplayConfig::Mode::kWindow ? "window" : "headless";
+  j["window_closed"] = window_closed_;
+  j["arrows"] = arrows_;
+  j["arrows_saturated"] = arrows_saturated_;
+  j["arrow_max_m"] = arrow_max_m_;
   j["frames_dir"] = config_.frames_dir;
   j["size"] = {config_.width, config_.height};
   j["frame_rate_hz"] = config_.frame_rate_hz;
@@ -221,7 +250,7 @@ nlohmann::json DisplayWorker::Summary() const {
   j["scene_versions_shown"] = scene_generations_;
   j["render_ms_p50"] = Percentile(render_ms_, 0.5);
   j["render_ms_p99"] = Percentile(render_ms_, 0.99);
-  j["png_write_ms_p50"] = Percentile(write_ms_, 0.5);
+  j["present_ms_p50"] = Percentile(write_ms_, 0.5);  // PNG write and/or window
   j["arrow_m_per_n"] = arrow_m_per_n_;
   j["error"] = error_;
   j["first_frame"] = frame_files_.empty() ? "" : frame_files_.front();

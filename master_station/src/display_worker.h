@@ -3,8 +3,8 @@
 // the haptic loop, on its own thread: the decoded meshes with their materials' base colours at
 // their received poses, the tool at its simulated pose, the device's handle as a ghost of the
 // tool, and the contact points of the contact model in use with force arrows (m per N in the
-// summary). Headless: PNG frames through EGL (Mesa llvmpipe without a GPU). Internal to
-// master_station.
+// summary, saturated at 1.5 tool radii). Headless: PNG frames through EGL (Mesa llvmpipe without
+// a GPU); window: the same frames shown through GLFW. Internal to master_station.
 
 #include <atomic>
 #include <cstdint>
@@ -29,9 +29,10 @@ struct DisplayToolState {
   ContactModel model;       ///< the newest contact model (contacts at its q0)
 };
 
-/// Renders frames at config.display.frame_rate_hz until stopped. Never throws from Run: a display
-/// that cannot start (no EGL context, an unwritable folder) is said once on stderr, recorded in
-/// Summary() and the run goes on without it.
+/// Renders frames at config.display.frame_rate_hz until stopped; kHeadless writes them as PNG
+/// files, kWindow shows them in a window (and writes them too when frames_dir is given). Never
+/// throws from Run: a display that cannot start (no EGL context, an unwritable folder) is said once
+/// on stderr, recorded in Summary() and the run goes on without it.
 class DisplayWorker {
  public:
   /// `up_W`: the scene's up direction (the Welcome's home pose +z); `scene` and `tool` must
@@ -51,7 +52,9 @@ class DisplayWorker {
   std::string renderer_, error_;
   std::uint64_t frames_ = 0, frames_without_scene_ = 0, scene_generations_ = 0;
   std::vector<double> render_ms_, write_ms_;
-  double arrow_m_per_n_ = 0.0;
+  double arrow_m_per_n_ = 0.0, arrow_max_m_ = 0.0;
+  std::uint64_t arrows_ = 0, arrows_saturated_ = 0;
+  bool window_closed_ = false;
   std::vector<std::string> frame_files_;
 };
 
