@@ -18,6 +18,7 @@
 #include <cstdint>
 #include <glm/gtc/quaternion.hpp>
 #include <glm/mat4x4.hpp>
+#include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -43,9 +44,11 @@ struct DracoPrimitive {
 };
 using DracoKey = std::pair<int, int>;  // mesh index, primitive index
 
-// Vertex positions and the corner list (before strip/fan conversion) of one primitive.
+// Vertex positions, texture coordinates and the corner list (before strip/fan conversion) of one
+// primitive.
 struct PrimitiveData {
   std::vector<glm::dvec3> positions;
+  std::vector<glm::dvec2> uv;          // TEXCOORD_0, one per position; empty when absent
   std::vector<std::uint32_t> corners;  // indices, or 0..#V-1 for a non-indexed primitive
 };
 
@@ -74,9 +77,11 @@ tinygltf::Model ParseWithTinyGltf(const std::string& path,
 std::map<DracoKey, DracoPrimitive> ExtractDraco(nlohmann::json& doc);
 
 // Decodes the Draco stream of one primitive: its POSITION attribute (3 components read as
-// float, finite) and its faces as a triangle list. `what` names the primitive in error
-// messages. Throws LoadError on an index or range out of bounds, a stream that does not decode,
-// or a mesh over the limits.
+// float, finite), its TEXCOORD_0 attribute when `d.attributes` names one (2 components read as
+// float, normalized integers divided by their maximum, finite), one of each per Draco point, and
+// its faces as a triangle list. `what` names the primitive in error messages. Throws LoadError
+// on an index or range out of bounds, a stream that does not decode, an attribute id the stream
+// lacks, a wrong component count, a non-finite value, or a mesh over the limits.
 PrimitiveData DecodeDracoPrimitive(const tinygltf::Model& model, const DracoPrimitive& d,
                                    const std::string& what);
 
@@ -98,6 +103,13 @@ void ReadPositions(const tinygltf::Model& model, int accessor_index, const std::
 // Reads an UNSIGNED_BYTE/SHORT/INT SCALAR indices accessor into `*out`.
 void ReadIndices(const tinygltf::Model& model, int accessor_index, const std::string& what,
                  std::vector<std::uint32_t>* out);
+
+// Reads a TEXCOORD accessor into `*out` as the file has it ((0, 0) the image's top-left, u
+// right, v down): FLOAT VEC2, or normalized UNSIGNED_BYTE / UNSIGNED_SHORT VEC2 (divided by 255
+// or 65535), glTF 2.0 §3.7.2.1. Throws LoadError naming `what` for any other type, an integer
+// accessor that is not normalized, a non-finite value, or more than kGltfMaxVertices elements.
+void ReadTexCoords(const tinygltf::Model& model, int accessor_index, const std::string& what,
+                   std::vector<glm::dvec2>* out);
 
 // Reads `count`-checked FLOAT elements of `components` numbers (1, 3 or 4) from an accessor into
 // dvec4s (unused components 0), refusing NaN and infinities.

@@ -302,6 +302,7 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
       scene_complete_ = false;
       scene_dirty_ = false;
       object_first_fragment_.clear();
+      decoded_meshes_.clear();
       scene_objects_.clear();
       session_start_ns_ = now;
       clock_.Reset();
@@ -469,11 +470,19 @@ void NetworkWorker::CheckScene(std::int64_t now) {
           o["kind"] = "image";
           break;
         case wire::SceneObjectKind::kDracoMesh: {
-          ReceivedSceneContent::Mesh mesh{id, version, DecodeMeshDraco(bytes)};
+          // Decoded once per version: an update re-decodes only the objects that changed.
+          auto cached = decoded_meshes_.find(id);
+          if (cached == decoded_meshes_.end() || cached->second.version != version) {
+            cached = decoded_meshes_
+                         .insert_or_assign(
+                             id, ReceivedSceneContent::Mesh{id, version, DecodeMeshDraco(bytes)})
+                         .first;
+          }
+          const ReceivedSceneContent::Mesh& mesh = cached->second;
           o["kind"] = "draco_mesh";
           o["vertices"] = mesh.mesh_N.vertices.size();
           o["triangles"] = mesh.mesh_N.triangles.size();
-          content->meshes.push_back(std::move(mesh));
+          content->meshes.push_back(mesh);
           break;
         }
       }

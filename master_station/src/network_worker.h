@@ -105,6 +105,8 @@ class NetworkWorker {
   std::map<std::uint32_t, std::pair<std::uint32_t, std::int64_t>> object_first_fragment_;
   /// Transfer times (first fragment to complete, ms) of first versions and of later ones.
   std::vector<double> transfer_ms_, update_transfer_ms_;
+  /// Decoded meshes by object id (with their version), so that an update decodes only what changed.
+  std::map<std::uint32_t, ReceivedSceneContent::Mesh> decoded_meshes_;
   std::uint32_t session_ = 0;
   /// The tool-state stream's perceptual deadband, as agreed in the Welcome.
   ToolStateDeadband tool_deadband_{{}};
