@@ -9,8 +9,8 @@ PACKAGES=(
   # design-card packages
   libusb-1.0-0-dev libhidapi-dev libglm-dev libopenmesh-dev libegl-dev libgles-dev libegl-mesa0
   libgl1-mesa-dri libdraco-dev libtinygltf-dev
-  # display frames (PNG)
-  libpng-dev
+  # display frames (PNG) and the scene's base-colour textures (PNG, JPEG)
+  libpng-dev libjpeg-dev
   # the display's window (GLFW) and its test under Xvfb
   libglfw3-dev xvfb xauth libx11-dev
   # libraries the build uses

@@ -1,10 +1,12 @@
 // Tests of codecs/draco_mesh_codec: round trip of a procedural mesh against the quantization bound
-// and the surface area, rejection of bad input on both sides, and decoding of Draco's own test
-// files (../shared/data/draco, located through HT_SHARED_DATA).
+// and the surface area, texture coordinates that stay attached to their vertices, rejection of bad
+// input on both sides, and decoding of Draco's own test files (../shared/data/draco, located
+// through HT_SHARED_DATA).
 
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -14,6 +16,8 @@
 #include <glm/common.hpp>
 #include <glm/ext/vector_int3_sized.hpp>
 #include <glm/geometric.hpp>
+#include <glm/vec2.hpp>
+#include <iostream>
 #include <iterator>
 #include <limits>
 #include <optional>
@@ -23,6 +27,7 @@
 #include <stdexcept>
 #include <string>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include "codecs/draco_mesh_codec.h"
@@ -309,6 +314,181 @@ TEST(DracoEncodeTest, EdgebreakerDropsRepeatedIndexTrianglesAndUnusedVerticesSpe
   EXPECT_NEAR(SurfaceArea(sequential), 1.0, 1e-3);
 }
 
+// ---- Texture coordinates (EncodeMeshDracoWithUv / DecodeMeshDracoWithUv).
+
+// A smooth, non-linear map from position to (u, v) over the gear's bounding box, so that a
+// coordinate that stayed attached to its vertex is f(its decoded position) and one that moved
+// to another vertex is not. A change of dp moves u and v each by at most kUvLipschitz·max|dp_k|
+// / (the smallest extent).
+struct UvOfPosition {
+  glm::dvec3 lo, extent;
+  glm::dvec2 operator()(const glm::dvec3& p) const {
+    const glm::dvec3 s = (p - lo) / extent;  // each in [0, 1]
+    return {0.8 * s.x + 0.2 * s.y * s.y, 0.6 * s.z + 0.4 * s.x * s.y};
+  }
+};
+// Sum over the axes of |d(u or v)/ds_k|, at most: u 0.8 + 0.4, v 0.6 + 0.4 + 0.4.
+constexpr double kUvLipschitz = 1.4;
+
+UvOfPosition UvMapOf(const TriangleMesh& mesh) {
+  glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
+  for (const glm::dvec3& p : mesh.vertices) {
+    lo = glm::min(lo, p);
+    hi = glm::max(hi, p);
+  }
+  return {lo, glm::max(hi - lo, glm::dvec3(1e-12))};
+}
+
+TEST_F(DracoGearTest, TextureCoordinatesStayAttachedToTheirVerticesAtEverySpeed) {
+  const UvOfPosition f = UvMapOf(*gear_);
+  std::vector<glm::dvec2> uv;
+  for (const glm::dvec3& p : gear_->vertices) uv.push_back(f(p));
+  const double min_extent = std::min({f.extent.x, f.extent.y, f.extent.z});
+  for (const int speed : {0, 5, 10}) {
+    DracoEncodeOptions options;
+    options.speed = speed;
+    const DracoMesh decoded = DecodeMeshDracoWithUv(EncodeMeshDracoWithUv(*gear_, uv, options));
+    ASSERT_EQ(decoded.uv.size(), decoded.mesh.vertices.size()) << speed;
+    EXPECT_EQ(decoded.mesh.triangles.size(), gear_->triangles.size()) << speed;
+    ExpectIndicesInRange(decoded.mesh);
+    // Bound: half a uv step (range <= 1 here, 12 bits) plus f's change over the position error
+    // (half a position step per axis), plus float32 rounding.
+    const double uv_step = 1.0 / ((1 << options.uv_quantization_bits) - 1);
+    const double position_step = DracoQuantizationStep(*gear_, options.position_quantization_bits);
+    const double bound = 0.5 * uv_step + kUvLipschitz * 0.5 * position_step / min_extent + 1e-6;
+    double worst = 0.0;
+    for (std::size_t i = 0; i < decoded.uv.size(); ++i) {
+      const glm::dvec2 d = glm::abs(decoded.uv[i] - f(decoded.mesh.vertices[i]));
+      worst = std::max({worst, d.x, d.y});
+    }
+    EXPECT_LE(worst, bound) << "speed " << speed;
+    std::cout << "speed " << speed << ": worst |uv - f(p)| " << worst << " (bound " << bound
+              << ")\n";
+  }
+}
+
+TEST_F(DracoGearTest, WithoutCoordinatesTheStreamIsTheSameAndDecodesWithEmptyUv) {
+  EXPECT_EQ(EncodeMeshDracoWithUv(*gear_, {}), *encoded_);
+  const DracoMesh decoded = DecodeMeshDracoWithUv(*encoded_);
+  EXPECT_TRUE(decoded.uv.empty());
+  const TriangleMesh plain = DecodeMeshDraco(*encoded_);
+  EXPECT_EQ(decoded.mesh.vertices, plain.vertices);
+  EXPECT_EQ(decoded.mesh.triangles, plain.triangles);
+}
+
+TEST_F(DracoGearTest, TruncatedStreamWithCoordinatesThrowsRuntimeError) {
+  const UvOfPosition f = UvMapOf(*gear_);
+  std::vector<glm::dvec2> uv;
+  for (const glm::dvec3& p : gear_->vertices) uv.push_back(f(p));
+  const std::vector<std::uint8_t> bytes = EncodeMeshDracoWithUv(*gear_, uv);
+  EXPECT_GT(bytes.size(), encoded_->size());  // the coordinates take room
+  for (const std::size_t length :
+       {std::size_t{0}, std::size_t{10}, bytes.size() / 3, bytes.size() / 2, bytes.size() - 1}) {
+    const std::vector<std::uint8_t> truncated(bytes.begin(),
+                                              bytes.begin() + static_cast<std::ptrdiff_t>(length));
+    EXPECT_THROW(DecodeMeshDracoWithUv(truncated), std::runtime_error) << length;
+  }
+}
+
+// A unit cube with a seam at every edge: 24 vertices, 4 per face, each face mapped onto the whole
+// [0, 1]² (the same positions with different coordinates). Every decoded corner's (position, uv)
+// pair must be one of the 24 given pairs: a coordinate is not a function of position here.
+TEST(DracoUvTest, SeamVerticesKeepTheirOwnCoordinates) {
+  TriangleMesh cube;
+  std::vector<glm::dvec2> uv;
+  for (int axis = 0; axis < 3; ++axis) {
+    for (const double side : {0.0, 1.0}) {
+      const auto base = static_cast<int>(cube.vertices.size());
+      for (int k = 0; k < 4; ++k) {
+        const double a = (k & 1) ? 1.0 : 0.0, b = (k & 2) ? 1.0 : 0.0;
+        glm::dvec3 p;
+        p[axis] = side;
+        p[(axis + 1) % 3] = a;
+        p[(axis + 2) % 3] = b;
+        cube.vertices.push_back(p * 0.05);
+        uv.emplace_back(0.1 + 0.8 * a, 0.9 - 0.8 * b);
+      }
+      if (side == 0.0) {
+        cube.triangles.emplace_back(base, base + 2, base + 1);
+        cube.triangles.emplace_back(base + 1, base + 2, base + 3);
+      } else {
+        cube.triangles.emplace_back(base, base + 1, base + 2);
+        cube.triangles.emplace_back(base + 1, base + 3, base + 2);
+      }
+    }
+  }
+  for (const int speed : {0, 5, 10}) {
+    DracoEncodeOptions options;
+    options.speed = speed;
+    const DracoMesh d = DecodeMeshDracoWithUv(EncodeMeshDracoWithUv(cube, uv, options));
+    ASSERT_EQ(d.uv.size(), d.mesh.vertices.size());
+    ASSERT_EQ(d.mesh.triangles.size(), 12u) << speed;
+    for (const glm::ivec3& t : d.mesh.triangles) {
+      // The triangle's three (position, uv) pairs are the corners of one given triangle.
+      bool found = false;
+      for (const glm::ivec3& g : cube.triangles) {
+        int matched = 0;
+        for (int c = 0; c < 3; ++c) {
+          for (int e = 0; e < 3; ++e) {
+            const auto i = static_cast<std::size_t>(t[c]), j = static_cast<std::size_t>(g[e]);
+            if (glm::length(d.mesh.vertices[i] - cube.vertices[j]) < 1e-4 &&
+                glm::length(d.uv[i] - uv[j]) < 1e-3) {
+              ++matched;
+              break;
+            }
+          }
+        }
+        found = found || matched == 3;
+      }
+      EXPECT_TRUE(found) << "speed " << speed << ": a decoded triangle matches no given one";
+    }
+  }
+}
+
+TEST(DracoUvTest, BadCoordinatesAndOptionsThrowInvalidArgument) {
+  const TriangleMesh mesh = OneTriangle();
+  const std::vector<glm::dvec2> uv = {{0, 0}, {1, 0}, {0, 1}};
+  EXPECT_NO_THROW(EncodeMeshDracoWithUv(mesh, uv));
+  EXPECT_THROW(EncodeMeshDracoWithUv(mesh, std::vector<glm::dvec2>(2)), std::invalid_argument);
+  EXPECT_THROW(EncodeMeshDracoWithUv(mesh, std::vector<glm::dvec2>(4)), std::invalid_argument);
+  for (const double bad :
+       {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity(), 1e39}) {
+    std::vector<glm::dvec2> b = uv;
+    b[1].y = bad;
+    EXPECT_THROW(EncodeMeshDracoWithUv(mesh, b), std::invalid_argument) << bad;
+  }
+  for (const int bits : {0, 25}) {
+    DracoEncodeOptions options;
+    options.uv_quantization_bits = bits;
+    EXPECT_THROW(EncodeMeshDracoWithUv(mesh, uv, options), std::invalid_argument) << bits;
+    EXPECT_NO_THROW(EncodeMeshDraco(mesh, options)) << "unused without coordinates";
+  }
+}
+
+// 12 bits give a step of 1/4095 on [0, 1]: a coordinate comes back within half of it; 20 bits
+// much closer (two routes: the chosen bits show in the error).
+TEST(DracoUvTest, CoordinatesComeBackWithinHalfAQuantizationStep) {
+  const TriangleMesh mesh = OneTriangle();
+  const std::vector<glm::dvec2> uv = {{0.0, 1.0}, {0.123456, 0.654321}, {1.0, 0.0}};
+  for (const int bits : {8, 12, 20}) {
+    DracoEncodeOptions options;
+    options.uv_quantization_bits = bits;
+    const DracoMesh d = DecodeMeshDracoWithUv(EncodeMeshDracoWithUv(mesh, uv, options));
+    ASSERT_EQ(d.uv.size(), 3u);
+    const double half_step = 0.5 / ((1 << bits) - 1);
+    for (std::size_t i = 0; i < 3; ++i) {
+      std::size_t j = 0;  // the given vertex nearest the decoded one
+      for (std::size_t k = 1; k < 3; ++k) {
+        if (glm::length(mesh.vertices[k] - d.mesh.vertices[i]) <
+            glm::length(mesh.vertices[j] - d.mesh.vertices[i]))
+          j = k;
+      }
+      EXPECT_LE(std::abs(d.uv[i].x - uv[j].x), half_step + 1e-7) << bits;
+      EXPECT_LE(std::abs(d.uv[i].y - uv[j].y), half_step + 1e-7) << bits;
+    }
+  }
+}
+
 // Draco's test files (../shared/data/draco). HT_SHARED_DATA overrides the location; otherwise
 // ../shared/data relative to the working directory, then /work/shared/data.
 std::optional<std::filesystem::path> DracoDataDir() {
@@ -539,6 +719,67 @@ TEST_F(DracoFilesTest, TruncatedAndCorruptedPayloadsNeverCrash) {
 
 TEST_F(DracoFilesTest, NonDracoFileThrowsRuntimeError) {
   EXPECT_THROW(DecodeMeshDraco(ReadFile(dir_ / "test_nm.obj")), std::runtime_error);
+}
+
+// Draco's own cube with texture coordinates: every decoded triangle's (position, uv) corners are
+// those of one face of the OBJ it was made from ("f v/vt/vn"), read independently of libdraco.
+TEST_F(DracoFilesTest, CubeTextureCoordinatesMatchTheObjCorners) {
+  std::ifstream in(dir_ / "cube_att.obj");
+  ASSERT_TRUE(in);
+  std::vector<glm::dvec3> v;
+  std::vector<glm::dvec2> vt;
+  std::vector<std::array<std::pair<glm::dvec3, glm::dvec2>, 3>> faces;
+  std::string line;
+  while (std::getline(in, line)) {
+    std::istringstream ls(line);
+    std::string tag;
+    ls >> tag;
+    if (tag == "v") {
+      glm::dvec3 p;
+      ls >> p.x >> p.y >> p.z;
+      v.push_back(p);
+    } else if (tag == "vt") {
+      glm::dvec2 t;
+      ls >> t.x >> t.y;
+      vt.push_back(t);
+    } else if (tag == "f") {
+      std::array<std::pair<glm::dvec3, glm::dvec2>, 3> f;
+      for (auto& corner : f) {
+        std::string c;
+        ls >> c;
+        const std::size_t slash = c.find('/');
+        const int iv = std::stoi(c.substr(0, slash)) - 1;
+        const int it = std::stoi(c.substr(slash + 1)) - 1;
+        corner = {v.at(static_cast<std::size_t>(iv)), vt.at(static_cast<std::size_t>(it))};
+      }
+      faces.push_back(f);
+    }
+  }
+  ASSERT_EQ(faces.size(), 12u);
+  for (const char* name :
+       {"cube_att.obj.sequential.cl3.2.2.drc", "cube_att.obj.edgebreaker.cl4.2.2.drc",
+        "cube_att.obj.edgebreaker.cl10.2.2.drc"}) {
+    const DracoMesh d = DecodeMeshDracoWithUv(ReadFile(dir_ / name));
+    ASSERT_EQ(d.uv.size(), d.mesh.vertices.size()) << name;
+    ASSERT_EQ(d.mesh.triangles.size(), 12u) << name;
+    for (const glm::ivec3& t : d.mesh.triangles) {
+      bool found = false;
+      for (const auto& f : faces) {
+        int matched = 0;
+        for (int c = 0; c < 3; ++c) {
+          const auto i = static_cast<std::size_t>(t[c]);
+          for (const auto& [p, uv] : f) {
+            if (glm::length(d.mesh.vertices[i] - p) < 1e-3 && glm::length(d.uv[i] - uv) < 1e-3) {
+              ++matched;
+              break;
+            }
+          }
+        }
+        found = found || matched == 3;
+      }
+      EXPECT_TRUE(found) << name << ": a decoded triangle matches no face of the OBJ";
+    }
+  }
 }
 
 }  // namespace

@@ -29,6 +29,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "codecs/draco_mesh_codec.h"
 #include "codecs/json_nesting.h"
 #include "gltf_test_data.h"
 
@@ -656,6 +657,210 @@ TEST(GltfSceneData, MilkTruckWheelsTurnAboutTheirAxlesThroughTheKeys) {
   }
 }
 
+// ---- Texture coordinates and per-triangle materials in the real files.
+
+// Every coordinate in [0, 1] and one per vertex, the material of every triangle the mesh's.
+void ExpectDuckTextureCoordinates(const GltfScene& s, const std::string& what) {
+  ASSERT_EQ(s.meshes.size(), 1u) << what;
+  const GltfMesh& m = s.meshes[0];
+  ASSERT_EQ(m.uv_N.size(), m.mesh_N.vertices.size()) << what;
+  ASSERT_FALSE(m.uv_N.empty()) << what;
+  for (const glm::dvec2& uv : m.uv_N) {
+    ASSERT_TRUE(uv.x >= 0.0 && uv.x <= 1.0 && uv.y >= 0.0 && uv.y <= 1.0)
+        << what << ": (" << uv.x << ", " << uv.y << ")";
+  }
+  ASSERT_EQ(m.triangle_material.size(), m.mesh_N.triangles.size()) << what;
+  EXPECT_TRUE(std::all_of(m.triangle_material.begin(), m.triangle_material.end(), [&](int k) {
+    return k == m.material;
+  })) << what;
+  EXPECT_EQ(m.material, 0) << what;
+}
+
+TEST(GltfSceneData, DuckHasTextureCoordinatesInTheUnitSquareForEveryVertex) {
+  REQUIRE_GLTF_DATA(dir);
+  const fs::path gltf = *dir / "draco_testdata_gltf/KhronosSampleModels/Duck/glTF/Duck.gltf";
+  const GltfScene a = LoadGltfScene(gltf.string());
+  ExpectDuckTextureCoordinates(a, "Duck.gltf");
+  // Second route: the accessor's min/max in the file's JSON bound the coordinates read.
+  std::ifstream in(gltf);
+  const nlohmann::json doc = nlohmann::json::parse(in);
+  const int accessor = doc["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_0"];
+  const nlohmann::json& acc = doc["accessors"][static_cast<std::size_t>(accessor)];
+  glm::dvec2 lo(1e9), hi(-1e9);
+  for (const glm::dvec2& uv : a.meshes[0].uv_N) {
+    lo = glm::min(lo, uv);
+    hi = glm::max(hi, uv);
+  }
+  for (int k = 0; k < 2; ++k) {
+    EXPECT_NEAR(lo[k], acc["min"][static_cast<std::size_t>(k)].get<double>(), 1e-6);
+    EXPECT_NEAR(hi[k], acc["max"][static_cast<std::size_t>(k)].get<double>(), 1e-6);
+  }
+  const GltfScene b = LoadGltfScene((*dir / "draco_testdata_gltf/glTF_Binary/Duck.glb").string());
+  ExpectDuckTextureCoordinates(b, "Duck.glb");
+  EXPECT_EQ(a.meshes[0].uv_N, b.meshes[0].uv_N);
+}
+
+// The shared data holds no Draco Duck: one is made here from the plain Duck with this project's
+// Draco encoder (14-bit positions, 12-bit coordinates) and written as a .gltf with
+// KHR_draco_mesh_compression. Loaded, every vertex (position, uv) lies within half a
+// quantization step of a vertex of the plain Duck, and every plain vertex has such a twin.
+TEST(GltfSceneData, DracoDuckAgreesWithThePlainDuckWithinTheQuantizationSteps) {
+  REQUIRE_GLTF_DATA(dir);
+  const GltfScene plain = LoadGltfScene(
+      (*dir / "draco_testdata_gltf/KhronosSampleModels/Duck/glTF/Duck.gltf").string());
+  ASSERT_EQ(plain.meshes.size(), 1u);
+  const GltfMesh& p = plain.meshes[0];
+  const DracoEncodeOptions options;  // 14 and 12 bits
+  const std::vector<std::uint8_t> draco = EncodeMeshDracoWithUv(p.mesh_N, p.uv_N, options);
+  const std::size_t points = DecodeMeshDracoWithUv(draco).mesh.vertices.size();
+
+  const fs::path out = fs::temp_directory_path() / "gltf_scene_test_draco_duck";
+  fs::create_directories(out);
+  std::ofstream(out / "duck.bin", std::ios::binary | std::ios::trunc)
+      .write(reinterpret_cast<const char*>(draco.data()),
+             static_cast<std::streamsize>(draco.size()));
+  const nlohmann::json doc = {
+      {"asset", {{"version", "2.0"}}},
+      {"extensionsUsed", {"KHR_draco_mesh_compression"}},
+      {"extensionsRequired", {"KHR_draco_mesh_compression"}},
+      {"scene", 0},
+      {"scenes", {{{"nodes", {0}}}}},
+      {"nodes", {{{"mesh", 0}}}},
+      {"meshes",
+       {{{"name", "duck"},
+         {"primitives",
+          {{{"attributes", {{"POSITION", 0}, {"TEXCOORD_0", 1}}},
+            {"mode", 4},
+            {"extensions",
+             {{"KHR_draco_mesh_compression",
+               {{"bufferView", 0}, {"attributes", {{"POSITION", 0}, {"TEXCOORD_0", 1}}}}}}}}}}}}},
+      {"accessors",
+       {{{"componentType", 5126}, {"type", "VEC3"}, {"count", points}},
+        {{"componentType", 5126}, {"type", "VEC2"}, {"count", points}}}},
+      {"bufferViews", {{{"buffer", 0}, {"byteOffset", 0}, {"byteLength", draco.size()}}}},
+      {"buffers", {{{"uri", "duck.bin"}, {"byteLength", draco.size()}}}},
+  };
+  std::ofstream(out / "duck.gltf", std::ios::trunc) << doc.dump(1);
+  const GltfScene d = LoadGltfScene((out / "duck.gltf").string());
+  fs::remove_all(out);
+  ASSERT_EQ(d.meshes.size(), 1u);
+  const GltfMesh& m = d.meshes[0];
+  EXPECT_EQ(m.draco_primitive_count, 1);
+  ASSERT_EQ(m.uv_N.size(), m.mesh_N.vertices.size());
+  EXPECT_EQ(m.mesh_N.triangles.size(), p.mesh_N.triangles.size());
+
+  // Half a step, plus float32 rounding (about 6e-8 of the coordinates' magnitude, 160 here).
+  double magnitude = 0.0;
+  for (const glm::dvec3& v : p.mesh_N.vertices)
+    magnitude = std::max({magnitude, std::abs(v.x), std::abs(v.y), std::abs(v.z)});
+  const double position_half_step =
+      0.5 * DracoQuantizationStep(p.mesh_N, options.position_quantization_bits) +
+      1.2e-7 * magnitude;
+  glm::dvec2 lo(1e9), hi(-1e9);
+  for (const glm::dvec2& uv : p.uv_N) {
+    lo = glm::min(lo, uv);
+    hi = glm::max(hi, uv);
+  }
+  const double uv_half_step =
+      0.5 * std::max(hi.x - lo.x, hi.y - lo.y) / ((1 << options.uv_quantization_bits) - 1) + 1e-6;
+  auto twin = [&](const glm::dvec3& q, const glm::dvec2& t, const GltfMesh& in) {
+    for (std::size_t j = 0; j < in.mesh_N.vertices.size(); ++j) {
+      const glm::dvec3 dp = glm::abs(q - in.mesh_N.vertices[j]);
+      const glm::dvec2 dt = glm::abs(t - in.uv_N[j]);
+      if (std::max({dp.x, dp.y, dp.z}) <= position_half_step &&
+          std::max(dt.x, dt.y) <= uv_half_step)
+        return true;
+    }
+    return false;
+  };
+  std::size_t lonely = 0;
+  for (std::size_t i = 0; i < m.mesh_N.vertices.size(); ++i)
+    lonely += twin(m.mesh_N.vertices[i], m.uv_N[i], p) ? 0 : 1;
+  EXPECT_EQ(lonely, 0u) << "Draco vertices without a plain twin";
+  std::vector<char> used(p.mesh_N.vertices.size(), 0);
+  for (const glm::ivec3& t : p.mesh_N.triangles)
+    for (int c = 0; c < 3; ++c) used[static_cast<std::size_t>(t[c])] = 1;
+  lonely = 0;
+  for (std::size_t j = 0; j < p.mesh_N.vertices.size(); ++j)
+    lonely += !used[j] || twin(p.mesh_N.vertices[j], p.uv_N[j], m) ? 0 : 1;
+  EXPECT_EQ(lonely, 0u) << "plain vertices without a Draco twin";
+}
+
+// A Draco file from another encoder (Cesium's BoxMetaDraco, 36 points): TEXCOORD_0 is read from
+// the Draco attribute the extension names, one per vertex, finite.
+TEST(GltfSceneData, DracoBoxMetaHasTextureCoordinatesFromItsDracoStream) {
+  REQUIRE_GLTF_DATA(dir);
+  const GltfScene s =
+      LoadGltfScene((*dir / "draco_testdata_gltf/BoxMetaDraco/glTF/BoxMetaDraco.gltf").string());
+  ASSERT_EQ(s.meshes.size(), 1u);
+  const GltfMesh& m = s.meshes[0];
+  EXPECT_EQ(m.draco_primitive_count, 1);
+  ASSERT_EQ(m.uv_N.size(), m.mesh_N.vertices.size());
+  EXPECT_EQ(m.mesh_N.vertices.size(), 36u);
+  for (const glm::dvec2& uv : m.uv_N) {
+    EXPECT_TRUE(std::isfinite(uv.x) && std::isfinite(uv.y));
+    EXPECT_TRUE(uv.x >= -1e-6 && uv.x <= 1.0 + 1e-6 && uv.y >= -1e-6 && uv.y <= 1.0 + 1e-6)
+        << uv.x << ", " << uv.y;
+  }
+  EXPECT_EQ(m.triangle_material, std::vector<int>(m.mesh_N.triangles.size(), 0));
+}
+
+// CesiumMilkTruck's body mesh merges three primitives (truck, glass, window_trim): each triangle
+// names its primitive's material, in the file's primitive order, and each material's triangle
+// count is its primitive's index count / 3 (read from the JSON: the second route). Only the body
+// primitive has TEXCOORD_0; glass and trim have no texture, so the body keeps its coordinates
+// and theirs are (0, 0), with a note.
+TEST(GltfSceneData, MilkTruckBodyHasOneMaterialPerPrimitiveInTriangleMaterial) {
+  REQUIRE_GLTF_DATA(dir);
+  const fs::path path = *dir / "draco_testdata_gltf/CesiumMilkTruck/glTF/CesiumMilkTruck.gltf";
+  const GltfScene s = LoadGltfScene(path.string());
+  std::ifstream in(path);
+  const nlohmann::json doc = nlohmann::json::parse(in);
+  const GltfMesh* truck = nullptr;
+  for (const GltfMesh& m : s.meshes) {
+    if (m.name == "Cesium_Milk_Truck") truck = &m;
+  }
+  ASSERT_NE(truck, nullptr);
+  ASSERT_EQ(truck->triangle_material.size(), truck->mesh_N.triangles.size());
+  EXPECT_EQ(truck->dropped_degenerate_triangles, 0);
+  std::map<int, std::size_t> count;
+  for (int k : truck->triangle_material) ++count[k];
+  EXPECT_GT(count.size(), 1u);
+  std::map<int, std::size_t> expected;
+  for (const nlohmann::json& prim : doc["meshes"][truck->gltf_mesh_index]["primitives"]) {
+    const int indices = prim["indices"];
+    expected[prim["material"].get<int>()] +=
+        doc["accessors"][static_cast<std::size_t>(indices)]["count"].get<std::size_t>() / 3;
+  }
+  EXPECT_EQ(count, expected);
+  EXPECT_TRUE(std::is_sorted(truck->triangle_material.begin(), truck->triangle_material.end()))
+      << "primitives 0, 1, 2 merged in order";
+  EXPECT_EQ(truck->material, truck->triangle_material.front());
+  // Coordinates: complete; the textured body's span the texture, the others' are (0, 0).
+  ASSERT_EQ(truck->uv_N.size(), truck->mesh_N.vertices.size());
+  for (std::size_t f = 0; f < truck->mesh_N.triangles.size(); ++f) {
+    if (truck->triangle_material[f] == 0) continue;
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_EQ(truck->uv_N[static_cast<std::size_t>(truck->mesh_N.triangles[f][c])],
+                glm::dvec2(0.0));
+    }
+  }
+  EXPECT_TRUE(HasNoteContaining(s, "no TEXCOORD_0 and no base-colour texture"))
+      << ::testing::PrintToString(s.notes);
+}
+
+TEST(GltfSceneData, BoxWithoutTexCoordHasNoCoordinatesAndNoNote) {
+  REQUIRE_GLTF_DATA(dir);
+  for (const char* rel :
+       {"draco_testdata_gltf/Box/glTF/Box.gltf", "draco_testdata_gltf/glTF_Binary/Box_Draco.glb"}) {
+    const GltfScene s = LoadGltfScene((*dir / rel).string());
+    ASSERT_EQ(s.meshes.size(), 1u) << rel;
+    EXPECT_TRUE(s.meshes[0].uv_N.empty()) << rel;
+    EXPECT_EQ(s.meshes[0].triangle_material.size(), s.meshes[0].mesh_N.triangles.size()) << rel;
+    EXPECT_FALSE(HasNoteContaining(s, "TEXCOORD")) << rel;
+  }
+}
+
 // ----------------------------------------------------------------------------------------------
 // Files made here.
 
@@ -715,6 +920,33 @@ class GltfSceneMadeFiles : public ::testing::Test {
     const fs::path path = dir_ / "scene.gltf";
     std::ofstream(path, std::ios::trunc) << doc.dump(1);
     return path;
+  }
+
+  // Appends `bytes` (TEXCOORD_0 data of `count` elements) to the bin, with a buffer view and an
+  // accessor of `component_type` and `type`, and names it TEXCOORD_0 of primitive `prim` of
+  // mesh 0.
+  void AddTexCoords(nlohmann::json& doc, const std::vector<std::uint8_t>& bytes, std::size_t count,
+                    int component_type, const std::string& type, bool normalized, int prim = 0) {
+    const std::size_t offset = bin_.size();
+    bin_.insert(bin_.end(), bytes.begin(), bytes.end());
+    while (bin_.size() % 4 != 0) bin_.push_back(0);
+    doc["buffers"][0]["byteLength"] = bin_.size();
+    const std::size_t view = doc["bufferViews"].size();
+    doc["bufferViews"].push_back(
+        {{"buffer", 0}, {"byteOffset", offset}, {"byteLength", bytes.size()}});
+    const std::size_t accessor = doc["accessors"].size();
+    nlohmann::json a = {
+        {"bufferView", view}, {"componentType", component_type}, {"type", type}, {"count", count}};
+    if (normalized) a["normalized"] = true;
+    doc["accessors"].push_back(a);
+    doc["meshes"][0]["primitives"][prim]["attributes"]["TEXCOORD_0"] = accessor;
+  }
+
+  template <typename T>
+  static std::vector<std::uint8_t> Bytes(const std::vector<T>& values) {
+    std::vector<std::uint8_t> out(values.size() * sizeof(T));
+    std::memcpy(out.data(), values.data(), out.size());
+    return out;
   }
 
   // Six vertices on a zigzag in the z = 0 plane (for strips) or around a centre (for fans).
@@ -977,6 +1209,100 @@ TEST_F(GltfSceneMadeFiles, DeeplyNestedJsonIsRefusedNotACrash) {
   EXPECT_EQ(JsonNestingDepth(R"({"a": "[[[[\"[[[", "b": [{}]})"), 3u);
   EXPECT_EQ(JsonNestingDepth("]]]][[}{"), 2u);
   EXPECT_EQ(JsonNestingDepth(""), 0u);
+}
+
+// ---- Texture coordinates and per-triangle materials in files made here.
+
+TEST_F(GltfSceneMadeFiles, FloatTexCoordsAreReadAsTheFileHasThem) {
+  nlohmann::json doc = Doc(Zigzag(), {}, 5);
+  const std::vector<float> uv = {0.f, 1.f, 0.f, 0.f, 0.5f, 1.f, 0.5f, 0.f, 1.f, 1.f, 2.5f, -0.5f};
+  AddTexCoords(doc, Bytes(uv), 6, 5126, "VEC2", false);
+  const GltfScene s = LoadGltfScene(Write(doc).string());
+  ASSERT_EQ(s.meshes[0].uv_N.size(), 6u);
+  for (std::size_t i = 0; i < 6; ++i) {
+    EXPECT_EQ(s.meshes[0].uv_N[i], glm::dvec2(uv[2 * i], uv[2 * i + 1])) << i;  // no flip
+  }
+}
+
+TEST_F(GltfSceneMadeFiles, NormalizedIntegerTexCoordsAreDividedByTheirMaximum) {
+  nlohmann::json doc = Doc(Zigzag(), {}, 5);
+  const std::vector<std::uint8_t> u8 = {0, 255, 51, 102, 255, 0, 1, 2, 3, 4, 128, 127};
+  AddTexCoords(doc, u8, 6, 5121, "VEC2", true);
+  GltfScene s = LoadGltfScene(Write(doc).string());
+  ASSERT_EQ(s.meshes[0].uv_N.size(), 6u);
+  for (std::size_t i = 0; i < 6; ++i) {
+    EXPECT_DOUBLE_EQ(s.meshes[0].uv_N[i].x, u8[2 * i] / 255.0);
+    EXPECT_DOUBLE_EQ(s.meshes[0].uv_N[i].y, u8[2 * i + 1] / 255.0);
+  }
+  doc = Doc(Zigzag(), {}, 5);
+  const std::vector<std::uint16_t> u16 = {0, 65535, 13107, 32768, 65535, 0, 1, 2, 3, 4, 5, 6};
+  AddTexCoords(doc, Bytes(u16), 6, 5123, "VEC2", true);
+  s = LoadGltfScene(Write(doc).string());
+  ASSERT_EQ(s.meshes[0].uv_N.size(), 6u);
+  for (std::size_t i = 0; i < 6; ++i) {
+    EXPECT_DOUBLE_EQ(s.meshes[0].uv_N[i].x, u16[2 * i] / 65535.0);
+    EXPECT_DOUBLE_EQ(s.meshes[0].uv_N[i].y, u16[2 * i + 1] / 65535.0);
+  }
+}
+
+TEST_F(GltfSceneMadeFiles, OtherTexCoordTypesAndNonFiniteValuesAreRefused) {
+  const std::vector<float> f12(12, 0.5f), f18(18, 0.5f);
+  nlohmann::json doc = Doc(Zigzag(), {}, 5);
+  AddTexCoords(doc, std::vector<std::uint8_t>(12, 7), 6, 5121, "VEC2", false);  // not normalized
+  EXPECT_NE(ExpectLoadError(Write(doc)).find("wrong component type"), std::string::npos);
+  doc = Doc(Zigzag(), {}, 5);
+  AddTexCoords(doc, std::vector<std::uint8_t>(24, 7), 6, 5122, "VEC2", true);  // SHORT
+  EXPECT_NE(ExpectLoadError(Write(doc)).find("wrong component type"), std::string::npos);
+  doc = Doc(Zigzag(), {}, 5);
+  AddTexCoords(doc, Bytes(f18), 6, 5126, "VEC3", false);
+  EXPECT_NE(ExpectLoadError(Write(doc)).find("wrong type"), std::string::npos);
+  for (const float bad :
+       {std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity()}) {
+    std::vector<float> uv = f12;
+    uv[7] = bad;
+    doc = Doc(Zigzag(), {}, 5);
+    AddTexCoords(doc, Bytes(uv), 6, 5126, "VEC2", false);
+    EXPECT_NE(ExpectLoadError(Write(doc)).find("not finite"), std::string::npos) << bad;
+  }
+  doc = Doc(Zigzag(), {}, 5);
+  AddTexCoords(doc, Bytes(f12), 6, 5126, "VEC2", false);
+  doc["accessors"][1]["count"] = 7;  // past its view, and longer than POSITION
+  ExpectLoadError(Write(doc));
+}
+
+// Three primitives over the same points: material 1 with coordinates, none without, material 0
+// (textured) without. Each triangle names its primitive's material, degenerate ones dropped with
+// theirs; the coordinates are complete while only an untextured primitive lacks them, and
+// dropped (with a note) once a textured one does.
+TEST_F(GltfSceneMadeFiles, TriangleMaterialFollowsThePrimitivesAndCoordinatesStayComplete) {
+  nlohmann::json doc = Doc(Zigzag(), {0, 1, 2, 2, 2, 3, 2, 3, 4}, 4);
+  AddTexCoords(doc, Bytes(std::vector<float>(12, 0.25f)), 6, 5126, "VEC2", false);
+  doc["materials"] = {
+      {{"name", "textured"}, {"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}},
+      {{"name", "plain"}}};
+  nlohmann::json& prims = doc["meshes"][0]["primitives"];
+  prims[0]["material"] = 1;
+  nlohmann::json second = {{"attributes", {{"POSITION", 0}}}, {"indices", 1}, {"mode", 4}};
+  prims.push_back(second);  // no material, no coordinates
+  GltfScene s = LoadGltfScene(Write(doc).string());
+  const GltfMesh& m = s.meshes[0];
+  // Per primitive: (0,1,2) kept, (2,2,3) dropped, (2,3,4) kept.
+  EXPECT_EQ(m.dropped_degenerate_triangles, 2);
+  EXPECT_EQ(m.triangle_material, (std::vector<int>{1, 1, -1, -1}));
+  EXPECT_EQ(m.material, 1);
+  ASSERT_EQ(m.uv_N.size(), 12u);
+  EXPECT_EQ(m.uv_N[0], glm::dvec2(0.25));
+  EXPECT_EQ(m.uv_N[6], glm::dvec2(0.0));
+  EXPECT_TRUE(HasNoteContaining(s, "primitive(s) 1 have no TEXCOORD_0"))
+      << ::testing::PrintToString(s.notes);
+
+  prims.push_back(second);
+  prims[2]["material"] = 0;  // textured, without coordinates
+  s = LoadGltfScene(Write(doc).string());
+  EXPECT_TRUE(s.meshes[0].uv_N.empty());
+  EXPECT_EQ(s.meshes[0].triangle_material, (std::vector<int>{1, 1, -1, -1, 0, 0}));
+  EXPECT_TRUE(HasNoteContaining(s, "primitive 2 has no TEXCOORD_0 but its material has"))
+      << ::testing::PrintToString(s.notes);
 }
 
 // ---- Animations in files made here.

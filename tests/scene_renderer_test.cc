@@ -1,7 +1,8 @@
 // The operator's scene renderer on a real headless EGL context (Mesa llvmpipe on machines without
 // a GPU; skipped where no context can be made at all): pixels of a known scene checked against
 // projections computed by hand for an axis-aligned camera and with ProjectToPixel for others,
-// ghosts, force arrows, poses and mesh replacement, PNG files, and bad arguments.
+// ghosts, force arrows, poses and mesh replacement, textures (a checker quad, sRGB decoding, the
+// Duck), PNG files, images decoded from memory (PNG, JPEG, garbage), and bad arguments.
 #include "master_station/scene_renderer.h"
 
 #include <gtest/gtest.h>
@@ -18,7 +19,16 @@
 #include <limits>
 #include <numbers>
 #include <random>
+#include <set>
+#include <utility>
 
+// clang-format off
+#include <cstdio>  // jpeglib.h needs FILE and size_t first
+#include <jpeglib.h>
+// clang-format on
+
+#include "codecs/gltf_scene.h"
+#include "gltf_test_data.h"
 #include "master_station/png_image.h"
 
 namespace ht {
@@ -466,6 +476,447 @@ TEST_F(SceneRendererTest, FollowCameraLooksAtItsTargetFromAboveAndBehind) {
     glm::dvec2 above;
     ASSERT_TRUE(ProjectToPixel(c, kWidth, kHeight, target + 0.02 * glm::normalize(up), &above));
     EXPECT_LT(above.y, px.y - 5);
+  }
+}
+
+// ---- Textures.
+
+// sRGB decoding (IEC 61966-2-1) of an 8-bit value, and encoding of a linear value to 8 bits.
+double SrgbToLinear(std::uint8_t byte) {
+  const double c = byte / 255.0;
+  return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4);
+}
+double LinearToSrgbByte(double linear) {
+  const double c = linear <= 0.0031308 ? 12.92 * linear : 1.055 * std::pow(linear, 1 / 2.4) - 0.055;
+  return 255.0 * c;
+}
+
+// A 2 x 2 checker of four distinct colours, row 0 the top: texel (column, row).
+constexpr std::array<Rgba, 4> kChecker = {
+    Rgba{200, 40, 40, 255}, Rgba{40, 180, 60, 255},    // top-left, top-right
+    Rgba{50, 70, 220, 255}, Rgba{230, 210, 90, 255}};  // bottom-left, bottom-right
+
+std::vector<std::uint8_t> CheckerBytes() {
+  std::vector<std::uint8_t> bytes;
+  for (const Rgba& t : kChecker) bytes.insert(bytes.end(), t.begin(), t.end());
+  return bytes;
+}
+
+// A camera 1 m in front of the z = 0 plane looking down −z with a narrow field of view (0.05 rad:
+// the view direction of every pixel is within 1.3° of the normal, shade > 0.9998), and the quad
+// of that plane that exactly fills a width x height image, with glTF texture coordinates: its
+// top-left corner (as seen) at (0, 0), bottom-right at (1, 1).
+RenderCamera QuadCamera() {
+  RenderCamera c = AxisCamera(1.0);
+  c.yfov_rad = 0.05;
+  return c;
+}
+RenderMesh ScreenQuad(int width, int height) {
+  const double half_h = std::tan(0.5 * QuadCamera().yfov_rad);  // at distance 1
+  const auto y = static_cast<float>(half_h);
+  const auto x = static_cast<float>(half_h * width / height);
+  RenderMesh m;
+  m.positions_N = {{-x, y, 0}, {x, y, 0}, {-x, -y, 0}, {x, -y, 0}};
+  m.uv = {{0, 0}, {1, 0}, {0, 1}, {1, 1}};
+  m.triangles = {{0, 2, 1}, {1, 2, 3}};
+  return m;
+}
+
+// The checker quad seen face-on, in both encodings: each quadrant's centre pixel is its texel.
+// The image is 162 x 122 so that those pixels' centres fall on texel centres (uv 0.25 or 0.75:
+// (40 + 0.5) / 162 = 0.25): bilinear filtering then takes the texel alone.
+// kSrgb: the texel's own bytes (decoded to linear, times white and shade 1, encoded again);
+// kLinear: 255 × the texel's linear value, from the sRGB formula written out here. A
+// colour_rgba other than white scales the linear value.
+TEST(SceneRendererTextureTest, CheckerQuadShowsEachTexelInItsQuadrant) {
+  setenv("MESA_SHADER_CACHE_DISABLE", "true", 0);
+  for (const ColourEncoding encoding : {ColourEncoding::kSrgb, ColourEncoding::kLinear}) {
+    constexpr int kW = 162, kH = 122;
+    std::unique_ptr<SceneRenderer> r;
+    try {
+      r = SceneRenderer::Create(kW, kH, encoding);
+    } catch (const GpuError& e) {
+      GTEST_SKIP() << "no EGL context: " << e.what();
+    }
+    const int quad = r->AddMesh(ScreenQuad(kW, kH));
+    const std::vector<std::uint8_t> checker = CheckerBytes();
+    const int texture = r->AddTexture(checker, 2, 2);
+    EXPECT_EQ(texture, 0);
+    for (const glm::vec4 colour : {glm::vec4(1.f), glm::vec4(0.5f, 1.f, 0.25f, 1.f)}) {
+      RenderFrame f;
+      f.camera = QuadCamera();
+      f.background_rgba = kBackground;
+      f.items.push_back({.mesh = quad, .colour_rgba = colour, .texture = texture});
+      std::vector<std::uint8_t> img;
+      r->Render(f, &img);
+      const std::string what = std::string(encoding == ColourEncoding::kSrgb ? "sRGB" : "linear") +
+                               " output, colour (" + std::to_string(colour.r) + ", " +
+                               std::to_string(colour.g) + ", " + std::to_string(colour.b) + ")";
+      for (int row = 0; row < 2; ++row) {
+        for (int column = 0; column < 2; ++column) {
+          const Rgba& texel = kChecker[static_cast<std::size_t>(2 * row + column)];
+          const Rgba got = At(img, kW, kW / 4 + column * kW / 2, kH / 4 + row * kH / 2);
+          for (int c = 0; c < 3; ++c) {
+            const double linear = colour[c] * SrgbToLinear(texel[static_cast<std::size_t>(c)]);
+            const double expected =
+                encoding == ColourEncoding::kSrgb ? LinearToSrgbByte(linear) : 255.0 * linear;
+            EXPECT_NEAR(got[static_cast<std::size_t>(c)], expected, 1.5)
+                << what << ", texel (" << column << ", " << row << ") channel " << c << ": got "
+                << Show(got);
+          }
+          EXPECT_EQ(got[3], 255);
+        }
+      }
+    }
+  }
+}
+
+// The same quad without a texture, or with one but no uv, is its flat colour; with uv it is
+// not; a texture given to an item whose mesh has no uv changes nothing.
+TEST_F(SceneRendererTest, TextureNeedsUvAndUvWithoutTextureIsFlat) {
+  RenderMesh with_uv = ScreenQuad(kWidth, kHeight);
+  RenderMesh without_uv = with_uv;
+  without_uv.uv.clear();
+  const int a = renderer_->AddMesh(with_uv);
+  const int b = renderer_->AddMesh(without_uv);
+  const int texture = renderer_->AddTexture(CheckerBytes(), 2, 2);
+  const glm::vec4 grey{0.6f, 0.6f, 0.6f, 1.f};
+  auto draw = [&](int mesh, int tex) {
+    RenderFrame f;
+    f.camera = QuadCamera();
+    f.background_rgba = kBackground;
+    f.items.push_back({.mesh = mesh, .colour_rgba = grey, .texture = tex});
+    return Draw(f);
+  };
+  const auto flat = draw(a, -1);
+  EXPECT_EQ(draw(b, texture), flat);
+  EXPECT_EQ(draw(b, -1), flat);
+  EXPECT_NE(draw(a, texture), flat);
+  EXPECT_NEAR(At(flat, kWidth, 10, 10)[0], 0.6 * 255, 1.0);
+}
+
+// A translucent (ghost) item is textured too: its pixel is between the background and the
+// opaque textured pixel.
+TEST_F(SceneRendererTest, GhostItemsAreTexturedToo) {
+  const int quad = renderer_->AddMesh(ScreenQuad(kWidth, kHeight));
+  const int texture = renderer_->AddTexture(CheckerBytes(), 2, 2);
+  RenderFrame f;
+  f.camera = QuadCamera();
+  f.background_rgba = kBackground;
+  f.items.push_back({.mesh = quad, .colour_rgba = glm::vec4(1.f), .texture = texture});
+  const Rgba opaque = At(Draw(f), kWidth, kWidth / 4, kHeight / 4);
+  f.items[0].ghost = true;
+  const Rgba ghost = At(Draw(f), kWidth, kWidth / 4, kHeight / 4);
+  for (int c = 0; c < 3; ++c) {
+    const double expected = 0.3 * opaque[c] + 0.7 * kBackgroundBytes[c];
+    EXPECT_NEAR(ghost[c], expected, 2.0) << c;
+  }
+}
+
+TEST_F(SceneRendererTest, BadTexturesAndTextureIndicesAreRefused) {
+  const std::vector<std::uint8_t> checker = CheckerBytes();
+  EXPECT_THROW(renderer_->AddTexture(checker, 2, 3), std::invalid_argument);
+  EXPECT_THROW(renderer_->AddTexture(checker, 0, 2), std::invalid_argument);
+  EXPECT_THROW(renderer_->AddTexture({}, 0, 0), std::invalid_argument);
+  EXPECT_THROW(renderer_->AddTexture(std::vector<std::uint8_t>(8193 * 4), 8193, 1),
+               std::invalid_argument);
+  RenderMesh quad = ScreenQuad(kWidth, kHeight);
+  quad.uv.pop_back();
+  EXPECT_THROW(renderer_->AddMesh(quad), std::invalid_argument);
+  quad = ScreenQuad(kWidth, kHeight);
+  quad.uv[2].y = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_THROW(renderer_->AddMesh(quad), std::invalid_argument);
+  EXPECT_THROW(renderer_->ReplaceMesh(cube_, quad), std::invalid_argument);
+
+  std::vector<std::uint8_t> img;
+  RenderFrame f = CubeFrame(glm::dmat4(1.0), {0.5f, 0.5f, 0.5f, 1.f});
+  for (const int bad : {0, 1, -2}) {  // no texture added yet
+    f.items[0].texture = bad;
+    EXPECT_THROW(renderer_->Render(f, &img), std::invalid_argument) << bad;
+  }
+  EXPECT_TRUE(img.empty());
+  EXPECT_EQ(renderer_->AddTexture(checker, 2, 2), 0);
+  EXPECT_EQ(renderer_->AddTexture(checker, 1, 4), 1);  // 1 x 4: any shape
+  f.items[0].texture = 1;
+  EXPECT_NO_THROW(renderer_->Render(f, &img));
+  f.items[0].texture = 2;
+  EXPECT_THROW(renderer_->Render(f, &img), std::invalid_argument);
+}
+
+// sRGB output encodes flat colours too: linear 0.5 → 188, and the background likewise.
+TEST(SceneRendererTextureTest, SrgbOutputEncodesFlatColoursAndTheBackground) {
+  setenv("MESA_SHADER_CACHE_DISABLE", "true", 0);
+  std::unique_ptr<SceneRenderer> r;
+  try {
+    r = SceneRenderer::Create(kWidth, kHeight, ColourEncoding::kSrgb);
+  } catch (const GpuError& e) {
+    GTEST_SKIP() << "no EGL context: " << e.what();
+  }
+  const int quad = r->AddMesh(ScreenQuad(kWidth, kHeight));
+  RenderFrame f;
+  f.camera = QuadCamera();
+  f.background_rgba = {0.2f, 0.2f, 0.2f, 1.f};
+  f.items.push_back({.mesh = quad,
+                     .X_WN = glm::scale(glm::dmat4(1.0), glm::dvec3(0.5)),
+                     .colour_rgba = {0.5f, 0.25f, 0.f, 1.f}});
+  std::vector<std::uint8_t> img;
+  r->Render(f, &img);
+  const Rgba centre = At(img, kWidth, kWidth / 2, kHeight / 2);
+  EXPECT_NEAR(centre[0], LinearToSrgbByte(0.5), 1.5);   // 188
+  EXPECT_NEAR(centre[1], LinearToSrgbByte(0.25), 1.5);  // 137
+  EXPECT_EQ(centre[2], 0);
+  const Rgba corner = At(img, kWidth, 2, 2);           // outside the half-size quad
+  EXPECT_NEAR(corner[0], LinearToSrgbByte(0.2), 1.5);  // 124
+}
+
+// ---- Images decoded from memory.
+
+std::vector<std::uint8_t> FileBytes(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// Encodes an RGB image (`components` 3) or a grey one (1) as a baseline JPEG with libjpeg.
+std::vector<std::uint8_t> EncodeJpeg(const std::vector<std::uint8_t>& pixels, int width, int height,
+                                     int components, int quality) {
+  jpeg_compress_struct cinfo;
+  jpeg_error_mgr err;
+  cinfo.err = jpeg_std_error(&err);  // the default handler exits: only for known-good input
+  jpeg_create_compress(&cinfo);
+  unsigned char* out = nullptr;
+  unsigned long size = 0;
+  jpeg_mem_dest(&cinfo, &out, &size);
+  cinfo.image_width = static_cast<JDIMENSION>(width);
+  cinfo.image_height = static_cast<JDIMENSION>(height);
+  cinfo.input_components = components;
+  cinfo.in_color_space = components == 1 ? JCS_GRAYSCALE : JCS_RGB;
+  jpeg_set_defaults(&cinfo);
+  jpeg_set_quality(&cinfo, quality, TRUE);
+  jpeg_start_compress(&cinfo, TRUE);
+  const std::size_t row = static_cast<std::size_t>(width) * components;
+  while (cinfo.next_scanline < cinfo.image_height) {
+    JSAMPROW r = const_cast<std::uint8_t*>(pixels.data()) + row * cinfo.next_scanline;
+    jpeg_write_scanlines(&cinfo, &r, 1);
+  }
+  jpeg_finish_compress(&cinfo);
+  jpeg_destroy_compress(&cinfo);
+  std::vector<std::uint8_t> bytes(out, out + size);
+  std::free(out);
+  return bytes;
+}
+
+// A smooth colour image (JPEG's easy case), `components` 3 (RGB) or 1 (grey).
+std::vector<std::uint8_t> Gradient(int width, int height, int components) {
+  std::vector<std::uint8_t> p;
+  for (int y = 0; y < height; ++y) {
+    for (int x = 0; x < width; ++x) {
+      const int r = 255 * x / (width - 1), g = 255 * y / (height - 1), b = (r + g) / 3 + 40;
+      if (components == 1) {
+        p.push_back(static_cast<std::uint8_t>((r + g) / 2));
+      } else {
+        p.insert(p.end(), {static_cast<std::uint8_t>(r), static_cast<std::uint8_t>(g),
+                           static_cast<std::uint8_t>(b)});
+      }
+    }
+  }
+  return p;
+}
+
+TEST(DecodeImageTest, DuckTexturePngHasTheSizeInItsHeaderAndReadPngsPixels) {
+  REQUIRE_GLTF_DATA(dir);
+  const std::filesystem::path png =
+      *dir / "draco_testdata_gltf/KhronosSampleModels/Duck/glTF/DuckCM.png";
+  const std::vector<std::uint8_t> bytes = FileBytes(png);
+  ASSERT_GT(bytes.size(), 24u);
+  // IHDR is the first chunk: width and height big-endian at bytes 16 and 20.
+  auto be32 = [&](std::size_t at) {
+    return (bytes[at] << 24) | (bytes[at + 1] << 16) | (bytes[at + 2] << 8) | bytes[at + 3];
+  };
+  int w = 0, h = 0;
+  const std::vector<std::uint8_t> rgba = DecodeImage(bytes, &w, &h);
+  EXPECT_EQ(w, be32(16));
+  EXPECT_EQ(h, be32(20));
+  EXPECT_EQ(rgba.size(), static_cast<std::size_t>(w) * h * 4);
+  int rw = 0, rh = 0;
+  EXPECT_EQ(rgba, ReadPng(png.string(), &rw, &rh)) << "from memory = from the file";
+}
+
+TEST(DecodeImageTest, JpegRoundTripIsWithinJpegTolerance) {
+  for (const int components : {3, 1}) {
+    const int w = 48, h = 32;
+    const std::vector<std::uint8_t> pixels = Gradient(w, h, components);
+    const std::vector<std::uint8_t> jpeg = EncodeJpeg(pixels, w, h, components, 95);
+    int dw = 0, dh = 0;
+    const std::vector<std::uint8_t> rgba = DecodeImage(jpeg, &dw, &dh);
+    ASSERT_EQ(dw, w);
+    ASSERT_EQ(dh, h);
+    ASSERT_EQ(rgba.size(), static_cast<std::size_t>(w) * h * 4);
+    double sum = 0.0, worst = 0.0;
+    for (std::size_t i = 0; i < static_cast<std::size_t>(w) * h; ++i) {
+      for (int c = 0; c < 3; ++c) {
+        const int given = pixels[i * components + (components == 1 ? 0 : c)];
+        const double d = std::abs(rgba[4 * i + c] - given);
+        sum += d;
+        worst = std::max(worst, d);
+      }
+      ASSERT_EQ(rgba[4 * i + 3], 255);
+    }
+    const double mean = sum / (3.0 * w * h);
+    std::cout << components << "-component JPEG (quality 95): mean |error| " << mean << ", max "
+              << worst << "\n";
+    EXPECT_LT(mean, 2.0) << components;
+    EXPECT_LT(worst, 12.0) << components;
+  }
+}
+
+TEST(DecodeImageTest, GarbageTruncatedAndOversizedImagesThrowSayingWhy) {
+  const auto expect_error = [](const std::vector<std::uint8_t>& bytes, const std::string& word,
+                               const std::string& what) {
+    int w = -1, h = -1;
+    try {
+      DecodeImage(bytes, &w, &h);
+      ADD_FAILURE() << what << ": decoded";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find(word), std::string::npos) << what << ": " << e.what();
+    } catch (...) {
+      ADD_FAILURE() << what << ": threw something other than std::runtime_error";
+    }
+    EXPECT_EQ(w, -1) << what << ": width set on failure";
+  };
+  expect_error({}, "neither PNG nor JPEG", "no bytes");
+  const std::string text = "GIF89a, or any other format";
+  expect_error({text.begin(), text.end()}, "neither PNG nor JPEG", "GIF");
+  std::mt19937 rng(11);
+  for (int trial = 0; trial < 50; ++trial) {
+    std::vector<std::uint8_t> bytes(1 + rng() % 2000);
+    for (std::uint8_t& b : bytes) b = static_cast<std::uint8_t>(rng());
+    expect_error(bytes, "DecodeImage", "random bytes");
+    // The same after a valid signature, so that the decoders themselves see garbage.
+    std::vector<std::uint8_t> png = {0x89, 'P', 'N', 'G', 0x0D, 0x0A, 0x1A, 0x0A};
+    png.insert(png.end(), bytes.begin(), bytes.end());
+    expect_error(png, "PNG", "PNG signature + random bytes");
+    std::vector<std::uint8_t> jpeg = {0xFF, 0xD8, 0xFF};
+    jpeg.insert(jpeg.end(), bytes.begin(), bytes.end());
+    expect_error(jpeg, "JPEG", "JPEG signature + random bytes");
+  }
+
+  // Truncations of a valid PNG and a valid JPEG at many lengths.
+  const std::vector<std::uint8_t> rgb = Gradient(40, 30, 3);
+  std::vector<std::uint8_t> rgba;
+  for (std::size_t i = 0; i < rgb.size(); i += 3)
+    rgba.insert(rgba.end(), {rgb[i], rgb[i + 1], rgb[i + 2], 255});
+  const std::string png_path = ::testing::TempDir() + "scene_renderer_test_decode.png";
+  WritePng(png_path, 40, 30, rgba);
+  const std::vector<std::uint8_t> png = FileBytes(png_path);
+  std::filesystem::remove(png_path);
+  const std::vector<std::uint8_t> jpeg = EncodeJpeg(rgb, 40, 30, 3, 90);
+  int w = 0, h = 0;
+  EXPECT_EQ(DecodeImage(png, &w, &h), rgba);  // the whole files decode
+  EXPECT_EQ(DecodeImage(jpeg, &w, &h).size(), rgba.size());
+  for (const auto& [bytes, format] : {std::pair{png, std::string("PNG")}, {jpeg, "JPEG"}}) {
+    for (std::size_t length = 1; length < bytes.size(); length += 1 + length / 8) {
+      expect_error({bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(length)}, "",
+                   format + " truncated to " + std::to_string(length) + " of " +
+                       std::to_string(bytes.size()) + " bytes");
+    }
+  }
+
+  // Larger than 8192 a side: refused from the header.
+  const std::string wide_path = ::testing::TempDir() + "scene_renderer_test_wide.png";
+  WritePng(wide_path, 8193, 1, std::vector<std::uint8_t>(8193 * 4, 9));
+  expect_error(FileBytes(wide_path), "at most 8192", "8193 x 1 PNG");
+  std::filesystem::remove(wide_path);
+  expect_error(EncodeJpeg(std::vector<std::uint8_t>(8193, 9), 1, 8193, 1, 90), "at most 8192",
+               "1 x 8193 JPEG");
+  EXPECT_THROW(DecodeImage(png, nullptr, &h), std::invalid_argument);
+}
+
+// ---- The Duck, textured.
+
+// The Duck (mesh 0 with its uv, its material's PNG decoded and added as a texture), drawn by a
+// camera looking at its bounding box: the textured frame covers exactly the untextured frame's
+// pixels, shows many more colours, and is yellow (the texture's main colour: red and green well
+// above blue). Written to the test temp dir as duck_textured.png (sRGB output, as a viewer
+// expects) and duck_textured_linear.png for a person to look at.
+TEST(SceneRendererDuckTest, DuckIsDrawnWithItsBaseColourTexture) {
+  setenv("MESA_SHADER_CACHE_DISABLE", "true", 0);
+  REQUIRE_GLTF_DATA(dir);
+  const GltfScene scene = LoadGltfScene(
+      (*dir / "draco_testdata_gltf/KhronosSampleModels/Duck/glTF/Duck.gltf").string());
+  ASSERT_FALSE(scene.meshes.empty());
+  ASSERT_FALSE(scene.instances.empty());
+  const GltfMesh& duck = scene.meshes[0];
+  ASSERT_EQ(duck.uv_N.size(), duck.mesh_N.vertices.size());
+  ASSERT_GE(duck.material, 0);
+  const GltfMaterial& material = scene.materials[static_cast<std::size_t>(duck.material)];
+  ASSERT_GE(material.base_colour_image, 0);
+  int tw = 0, th = 0;
+  const std::vector<std::uint8_t> texels = DecodeImage(
+      scene.images[static_cast<std::size_t>(material.base_colour_image)].bytes, &tw, &th);
+
+  RenderMesh mesh;
+  for (const glm::dvec3& p : duck.mesh_N.vertices) mesh.positions_N.emplace_back(p);
+  for (const glm::dvec2& uv : duck.uv_N) mesh.uv.emplace_back(uv);
+  for (const glm::ivec3& t : duck.mesh_N.triangles) mesh.triangles.emplace_back(t);
+  const glm::dmat4& X_WN = scene.instances[0].X_WN;
+  glm::dvec3 lo(1e300), hi(-1e300);
+  for (const glm::dvec3& p_N : duck.mesh_N.vertices) {
+    const glm::dvec3 p_W(X_WN * glm::dvec4(p_N, 1.0));
+    lo = glm::min(lo, p_W);
+    hi = glm::max(hi, p_W);
+  }
+  const int w = 480, h = 360;
+  RenderFrame f;
+  f.camera = FollowCamera(0.5 * (lo + hi), {0, 1, 0}, 1.6 * glm::length(hi - lo));
+  f.background_rgba = kBackground;
+  f.items.push_back({.mesh = 0,
+                     .X_WN = X_WN,
+                     .colour_rgba = glm::vec4(glm::dvec4(material.base_colour_rgba)),
+                     .texture = 0});
+  for (const ColourEncoding encoding : {ColourEncoding::kSrgb, ColourEncoding::kLinear}) {
+    std::unique_ptr<SceneRenderer> r;
+    try {
+      r = SceneRenderer::Create(w, h, encoding);
+    } catch (const GpuError& e) {
+      GTEST_SKIP() << "no EGL context: " << e.what();
+    }
+    ASSERT_EQ(r->AddMesh(mesh), 0);
+    ASSERT_EQ(r->AddTexture(texels, tw, th), 0);
+    std::vector<std::uint8_t> textured, flat;
+    r->Render(f, &textured);
+    RenderFrame untextured = f;
+    untextured.items[0].texture = -1;
+    r->Render(untextured, &flat);
+    const Rgba bg = At(flat, w, 0, 0);
+    std::set<std::array<std::uint8_t, 4>> colours_textured, colours_flat;
+    std::size_t covered = 0, differ = 0;
+    double r_sum = 0, g_sum = 0, b_sum = 0;
+    for (int j = 0; j < h; ++j) {
+      for (int i = 0; i < w; ++i) {
+        const Rgba t = At(textured, w, i, j), u = At(flat, w, i, j);
+        differ += (t == bg) != (u == bg);
+        if (u == bg) continue;
+        ++covered;
+        colours_textured.insert(t);
+        colours_flat.insert(u);
+        r_sum += t[0];
+        g_sum += t[1];
+        b_sum += t[2];
+      }
+    }
+    const std::string name =
+        encoding == ColourEncoding::kSrgb ? "duck_textured.png" : "duck_textured_linear.png";
+    const std::string path = ::testing::TempDir() + name;
+    WritePng(path, w, h, textured);
+    const auto n = static_cast<double>(covered);
+    std::cout << path << ": " << covered << " duck pixels, " << colours_textured.size()
+              << " colours textured vs " << colours_flat.size() << " flat; mean RGB (" << r_sum / n
+              << ", " << g_sum / n << ", " << b_sum / n << ")\n";
+    EXPECT_GT(covered, static_cast<std::size_t>(w * h / 10));
+    EXPECT_LE(differ, covered / 1000) << "the texture changes no coverage";
+    EXPECT_GT(colours_textured.size(), 4 * colours_flat.size());
+    EXPECT_GT(r_sum, 1.5 * b_sum);
+    EXPECT_GT(g_sum, 1.2 * b_sum);
   }
 }
 

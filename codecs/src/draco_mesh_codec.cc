@@ -28,9 +28,9 @@ constexpr int kMinSpeed = 0;
 constexpr int kMaxSpeed = 10;
 constexpr std::size_t kMaxVertices = static_cast<std::size_t>(std::numeric_limits<int>::max());
 
-void CheckQuantizationBits(int bits) {
+void CheckQuantizationBits(int bits, const char* name = "position_quantization_bits") {
   if (bits < kMinQuantizationBits || bits > kMaxQuantizationBits) {
-    throw std::invalid_argument("Draco: position_quantization_bits = " + std::to_string(bits) +
+    throw std::invalid_argument(std::string("Draco: ") + name + " = " + std::to_string(bits) +
                                 " is outside [1, 24]");
   }
 }
@@ -71,8 +71,90 @@ void ValidateMesh(const TriangleMesh& mesh) {
   for (std::size_t i = 0; i < mesh.vertices.size(); ++i) ToFloat3(mesh.vertices[i], i);
 }
 
+void ValidateUv(std::span<const glm::dvec2> uv, std::size_t num_vertices) {
+  if (uv.size() != num_vertices) {
+    throw std::invalid_argument("Draco: " + std::to_string(uv.size()) +
+                                " texture coordinates for " + std::to_string(num_vertices) +
+                                " vertices (need one per vertex, or none)");
+  }
+  for (std::size_t i = 0; i < uv.size(); ++i) {
+    const float u = static_cast<float>(uv[i].x), v = static_cast<float>(uv[i].y);
+    if (!(std::isfinite(u) && std::isfinite(v))) {
+      throw std::invalid_argument("Draco: texture coordinate " + std::to_string(i) + " (" +
+                                  std::to_string(uv[i].x) + ", " + std::to_string(uv[i].y) +
+                                  ") is not finite as a float32");
+    }
+  }
+}
+
 [[noreturn]] void ThrowDecodeError(const std::string& what) {
   throw std::runtime_error("Draco decode: " + what);
+}
+
+// The decoded mesh with one vertex per Draco point: its position and its value of `tex` (2
+// components).
+DracoMesh ToPointMesh(const draco::Mesh& dmesh, const draco::PointAttribute& tex) {
+  const draco::PointAttribute* const position =
+      dmesh.GetNamedAttribute(draco::GeometryAttribute::POSITION);
+  if (position == nullptr) ThrowDecodeError("the mesh has no position attribute");
+  if (position->num_components() != 3) {
+    ThrowDecodeError("the position attribute has " +
+                     std::to_string(static_cast<int>(position->num_components())) +
+                     " components, expected 3");
+  }
+  if (tex.num_components() != 2) {
+    ThrowDecodeError("the texture coordinate attribute has " +
+                     std::to_string(static_cast<int>(tex.num_components())) +
+                     " components, expected 2");
+  }
+  if (dmesh.num_faces() == 0) ThrowDecodeError("the mesh has no triangles");
+  const std::size_t num_points = dmesh.num_points();
+  if (num_points == 0) ThrowDecodeError("the mesh has no points");
+  if (num_points > kMaxVertices) {
+    ThrowDecodeError(std::to_string(num_points) + " points exceed 2^31-1");
+  }
+  for (const draco::PointAttribute* a : {position, &tex}) {
+    if (!a->is_mapping_identity() && a->indices_map_size() < num_points) {
+      ThrowDecodeError(std::string("the ") + (a == position ? "position" : "texture coordinate") +
+                       " attribute maps fewer points than the mesh has");
+    }
+  }
+  DracoMesh out;
+  out.mesh.vertices.resize(num_points);
+  out.uv.resize(num_points);
+  for (std::size_t i = 0; i < num_points; ++i) {
+    const draco::PointIndex point(static_cast<std::uint32_t>(i));
+    std::array<double, 3> p{};
+    std::array<double, 2> st{};
+    // ConvertValue checks the value index against the attribute's buffer.
+    if (!position->ConvertValue<double>(position->mapped_index(point), 3, p.data())) {
+      ThrowDecodeError("the position of point " + std::to_string(i) + " cannot be read");
+    }
+    if (!tex.ConvertValue<double>(tex.mapped_index(point), 2, st.data())) {
+      ThrowDecodeError("the texture coordinate of point " + std::to_string(i) + " cannot be read");
+    }
+    if (!(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]))) {
+      ThrowDecodeError("the position of point " + std::to_string(i) + " is not finite");
+    }
+    if (!(std::isfinite(st[0]) && std::isfinite(st[1]))) {
+      ThrowDecodeError("the texture coordinate of point " + std::to_string(i) + " is not finite");
+    }
+    out.mesh.vertices[i] = glm::dvec3(p[0], p[1], p[2]);
+    out.uv[i] = glm::dvec2(st[0], st[1]);
+  }
+  out.mesh.triangles.resize(dmesh.num_faces());
+  for (draco::FaceIndex f(0); f < dmesh.num_faces(); ++f) {
+    const draco::Mesh::Face& face = dmesh.face(f);
+    glm::ivec3& t = out.mesh.triangles[f.value()];
+    for (int c = 0; c < 3; ++c) {
+      if (face[c].value() >= num_points) {
+        ThrowDecodeError("triangle " + std::to_string(f.value()) + " refers to point " +
+                         std::to_string(face[c].value()) + " of " + std::to_string(num_points));
+      }
+      t[c] = static_cast<int>(face[c].value());
+    }
+  }
+  return out;
 }
 
 TriangleMesh ToTriangleMesh(const draco::Mesh& dmesh) {
@@ -133,14 +215,24 @@ TriangleMesh ToTriangleMesh(const draco::Mesh& dmesh) {
 
 std::vector<std::uint8_t> EncodeMeshDraco(const TriangleMesh& mesh,
                                           const DracoEncodeOptions& options) {
+  return EncodeMeshDracoWithUv(mesh, {}, options);
+}
+
+std::vector<std::uint8_t> EncodeMeshDracoWithUv(const TriangleMesh& mesh,
+                                                std::span<const glm::dvec2> uv,
+                                                const DracoEncodeOptions& options) {
   CheckQuantizationBits(options.position_quantization_bits);
+  if (!uv.empty()) CheckQuantizationBits(options.uv_quantization_bits, "uv_quantization_bits");
   if (options.speed < kMinSpeed || options.speed > kMaxSpeed) {
     throw std::invalid_argument("Draco: speed = " + std::to_string(options.speed) +
                                 " is outside [0, 10]");
   }
   ValidateMesh(mesh);
+  if (!uv.empty()) ValidateUv(uv, mesh.vertices.size());
 
-  // One Draco point per vertex, one position value per point (identity mapping).
+  // One Draco point per vertex, one position value (and one texture coordinate value) per point
+  // (identity mapping): a point carries its position and its (u, v) together through Draco's
+  // reordering.
   const auto num_vertices = static_cast<std::uint32_t>(mesh.vertices.size());
   draco::Mesh dmesh;
   dmesh.set_num_points(num_vertices);
@@ -154,6 +246,17 @@ std::vector<std::uint8_t> EncodeMeshDraco(const TriangleMesh& mesh,
     const std::array<float, 3> p = ToFloat3(mesh.vertices[i], i);
     position->SetAttributeValue(draco::AttributeValueIndex(i), p.data());
   }
+  if (!uv.empty()) {
+    draco::GeometryAttribute tex_attribute;
+    tex_attribute.Init(draco::GeometryAttribute::TEX_COORD, nullptr, 2, draco::DT_FLOAT32,
+                       /*normalized=*/false, sizeof(float) * 2, 0);
+    const int tex_id = dmesh.AddAttribute(tex_attribute, /*identity_mapping=*/true, num_vertices);
+    draco::PointAttribute* const tex = dmesh.attribute(tex_id);
+    for (std::uint32_t i = 0; i < num_vertices; ++i) {
+      const std::array<float, 2> st = {static_cast<float>(uv[i].x), static_cast<float>(uv[i].y)};
+      tex->SetAttributeValue(draco::AttributeValueIndex(i), st.data());
+    }
+  }
   dmesh.SetNumFaces(mesh.triangles.size());
   for (std::size_t f = 0; f < mesh.triangles.size(); ++f) {
     const glm::ivec3& t = mesh.triangles[f];
@@ -166,6 +269,10 @@ std::vector<std::uint8_t> EncodeMeshDraco(const TriangleMesh& mesh,
   draco::Encoder encoder;
   encoder.SetAttributeQuantization(draco::GeometryAttribute::POSITION,
                                    options.position_quantization_bits);
+  if (!uv.empty()) {
+    encoder.SetAttributeQuantization(draco::GeometryAttribute::TEX_COORD,
+                                     options.uv_quantization_bits);
+  }
   encoder.SetSpeedOptions(options.speed, options.speed);
   draco::EncoderBuffer buffer;
   const draco::Status status = encoder.EncodeMeshToBuffer(dmesh, &buffer);
@@ -176,7 +283,11 @@ std::vector<std::uint8_t> EncodeMeshDraco(const TriangleMesh& mesh,
   return std::vector<std::uint8_t>(data, data + buffer.size());
 }
 
-TriangleMesh DecodeMeshDraco(std::span<const std::uint8_t> bytes) {
+namespace {
+
+// Decodes `bytes` into positions and triangles, and with `with_uv` the first texture coordinate
+// attribute too (one vertex per point then).
+DracoMesh Decode(std::span<const std::uint8_t> bytes, bool with_uv) {
   // Draco sizes its allocations from counts in the stream: a corrupt count can ask for more
   // memory than there is, which surfaces as std::bad_alloc / std::length_error.
   try {
@@ -207,12 +318,25 @@ TriangleMesh DecodeMeshDraco(std::span<const std::uint8_t> bytes) {
     }
     const std::unique_ptr<draco::Mesh> dmesh = std::move(decoded).value();
     if (dmesh == nullptr) ThrowDecodeError("Draco returned no mesh");
-    return ToTriangleMesh(*dmesh);
+    const draco::PointAttribute* const tex =
+        with_uv ? dmesh->GetNamedAttribute(draco::GeometryAttribute::TEX_COORD) : nullptr;
+    if (tex != nullptr) return ToPointMesh(*dmesh, *tex);
+    return {ToTriangleMesh(*dmesh), {}};
   } catch (const std::bad_alloc&) {
     ThrowDecodeError("corrupt stream: its sizes ask for more memory than is available");
   } catch (const std::length_error& e) {
     ThrowDecodeError(std::string("corrupt stream: impossible size (") + e.what() + ")");
   }
+}
+
+}  // namespace
+
+TriangleMesh DecodeMeshDraco(std::span<const std::uint8_t> bytes) {
+  return Decode(bytes, /*with_uv=*/false).mesh;
+}
+
+DracoMesh DecodeMeshDracoWithUv(std::span<const std::uint8_t> bytes) {
+  return Decode(bytes, /*with_uv=*/true);
 }
 
 double DracoQuantizationStep(const TriangleMesh& mesh, int bits) {

@@ -1,5 +1,6 @@
 // glTF accessors: typed element data read out of buffer views with every offset, stride and
-// count checked against the buffer (positions, indices, and the float elements of animations).
+// count checked against the buffer (positions, texture coordinates, indices, and the float
+// elements of animations).
 
 #include <cmath>
 #include <cstdint>
@@ -121,6 +122,67 @@ void ReadPositions(const tinygltf::Model& model, int accessor_index, const std::
       }
     }
     (*out)[i] = glm::dvec3(xyz[0], xyz[1], xyz[2]);
+  }
+}
+
+void ReadTexCoords(const tinygltf::Model& model, int accessor_index, const std::string& what,
+                   std::vector<glm::dvec2>* out) {
+  if (accessor_index < 0 || static_cast<std::size_t>(accessor_index) >= model.accessors.size()) {
+    throw LoadError(what + ": TEXCOORD_0 accessor " + std::to_string(accessor_index) +
+                    " out of range");
+  }
+  const tinygltf::Accessor& a = model.accessors[static_cast<std::size_t>(accessor_index)];
+  const std::string name = what + ": TEXCOORD_0 accessor " + std::to_string(accessor_index);
+  if (a.type != TINYGLTF_TYPE_VEC2) {
+    throw LoadError(name + " has type code " + std::to_string(a.type) +
+                    "; VEC2 is required (wrong type)");
+  }
+  std::size_t component_size = 0;
+  switch (a.componentType) {
+    case TINYGLTF_COMPONENT_TYPE_FLOAT:
+      component_size = 4;
+      break;
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+      component_size = 1;
+      break;
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT:
+      component_size = 2;
+      break;
+    default:
+      throw LoadError(name + " has " + ComponentName(a.componentType) +
+                      " components; FLOAT or normalized UNSIGNED_BYTE/SHORT is required (wrong "
+                      "component type)");
+  }
+  if (component_size != 4 && !a.normalized) {
+    throw LoadError(name + " has " + ComponentName(a.componentType) +
+                    " components that are not normalized (KHR_mesh_quantization's texture "
+                    "coordinates are not supported; wrong component type)");
+  }
+  const AccessorView v =
+      ViewAccessor(model, accessor_index, 2 * component_size, what + " TEXCOORD_0");
+  if (static_cast<std::int64_t>(v.count) > kGltfMaxVertices) {
+    throw LoadError(name + ": " + std::to_string(v.count) + " elements exceed the limit of " +
+                    std::to_string(kGltfMaxVertices));
+  }
+  out->assign(v.count, glm::dvec2(0.0));
+  if (v.data == nullptr) return;
+  for (std::size_t i = 0; i < v.count; ++i) {
+    const unsigned char* p = v.data + i * v.stride;
+    if (component_size == 4) {
+      float uv[2];
+      std::memcpy(uv, p, sizeof uv);
+      if (!std::isfinite(uv[0]) || !std::isfinite(uv[1])) {
+        throw LoadError(name + ": TEXCOORD_0 of vertex " + std::to_string(i) +
+                        " is not finite (NaN or infinite)");
+      }
+      (*out)[i] = glm::dvec2(uv[0], uv[1]);
+    } else if (component_size == 2) {
+      std::uint16_t uv[2];
+      std::memcpy(uv, p, sizeof uv);
+      (*out)[i] = glm::dvec2(uv[0], uv[1]) / 65535.0;
+    } else {
+      (*out)[i] = glm::dvec2(p[0], p[1]) / 255.0;
+    }
   }
 }
 

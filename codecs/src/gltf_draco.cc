@@ -1,6 +1,6 @@
 // KHR_draco_mesh_compression primitives of a glTF scene: taking the extension objects out of the
 // JSON before tinygltf sees it (see gltf_container.cc for why), and decoding each primitive's
-// Draco stream with libdraco, every index and range checked.
+// Draco stream (positions, TEXCOORD_0, faces) with libdraco, every index and range checked.
 
 #include <draco/compression/decode.h>
 #include <draco/core/decoder_buffer.h>
@@ -137,6 +137,33 @@ PrimitiveData DecodeDracoPrimitive(const tinygltf::Model& model, const DracoPrim
       }
     }
     out.positions[i.value()] = glm::dvec3(xyz[0], xyz[1], xyz[2]);
+  }
+  auto tex = d.attributes.find("TEXCOORD_0");
+  if (tex != d.attributes.end()) {
+    const draco::PointAttribute* uv =
+        mesh->GetAttributeByUniqueId(static_cast<std::uint32_t>(tex->second));
+    if (uv == nullptr) {
+      throw LoadError(what + ": Draco stream has no attribute with id " +
+                      std::to_string(tex->second) + " (TEXCOORD_0)");
+    }
+    if (uv->num_components() != 2) {
+      throw LoadError(what + ": Draco TEXCOORD_0 has " + std::to_string(uv->num_components()) +
+                      " components, expected 2");
+    }
+    // Dequantized by the decoder; normalized integer values are divided by their maximum.
+    out.uv.resize(mesh->num_points());
+    for (draco::PointIndex i(0); i < mesh->num_points(); ++i) {
+      float st[2] = {0.0f, 0.0f};
+      if (!uv->ConvertValue<float>(uv->mapped_index(i), 2, st)) {
+        throw LoadError(what + ": Draco TEXCOORD_0 of point " + std::to_string(i.value()) +
+                        " cannot be read");
+      }
+      if (!std::isfinite(st[0]) || !std::isfinite(st[1])) {
+        throw LoadError(what + ": Draco TEXCOORD_0 of point " + std::to_string(i.value()) +
+                        " is not finite (NaN or infinite)");
+      }
+      out.uv[i.value()] = glm::dvec2(st[0], st[1]);
+    }
   }
   out.corners.reserve(static_cast<std::size_t>(mesh->num_faces()) * 3);
   for (draco::FaceIndex f(0); f < mesh->num_faces(); ++f) {

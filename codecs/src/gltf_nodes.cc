@@ -1,6 +1,7 @@
 // The glTF node tree: checks of the node graph, the roots of the scene, each node's rest
 // transform, and the depth-first walk that turns nodes showing meshes into scene instances
-// (each mesh read once, its triangle primitives merged).
+// (each mesh read once, its triangle primitives merged, with their texture coordinates and the
+// material of each triangle).
 
 #include <algorithm>
 #include <cmath>
@@ -8,6 +9,7 @@
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtc/quaternion.hpp>
 #include <map>
+#include <set>
 #include <string>
 #include <utility>
 #include <vector>
@@ -71,6 +73,13 @@ GltfMesh BuildMesh(const tinygltf::Model& model, int m,
   GltfMesh out;
   out.name = src.name;
   out.gltf_mesh_index = m;
+  // Texture coordinates are kept when every merged primitive that needs them has them: a
+  // primitive without TEXCOORD_0 whose material has no base-colour texture gets (0, 0) (never
+  // sampled); one whose material has such a texture drops the mesh's coordinates.
+  bool any_uv = false;
+  int first_missing_needed = -1;    // first primitive without coordinates that needs them
+  std::vector<std::string> filled;  // primitives given (0, 0)
+  std::set<int> materials_seen;
   for (std::size_t p = 0; p < src.primitives.size(); ++p) {
     const tinygltf::Primitive& prim = src.primitives[p];
     const std::string what =
@@ -111,6 +120,9 @@ GltfMesh BuildMesh(const tinygltf::Model& model, int m,
                           " (vertex arrays of different lengths)");
         }
       }
+      if (auto tex = prim.attributes.find("TEXCOORD_0"); tex != prim.attributes.end()) {
+        ReadTexCoords(model, tex->second, what, &data.uv);
+      }
       if (prim.indices >= 0) {
         ReadIndices(model, prim.indices, what, &data.corners);
       } else {
@@ -134,6 +146,38 @@ GltfMesh BuildMesh(const tinygltf::Model& model, int m,
     }
     out.mesh_N.vertices.insert(out.mesh_N.vertices.end(), data.positions.begin(),
                                data.positions.end());
+    // The primitive's material, -1 for none or an index out of range.
+    int material = -1;
+    if (prim.material >= 0 && static_cast<std::size_t>(prim.material) < model.materials.size()) {
+      material = prim.material;
+    } else if (prim.material >= 0) {
+      notes->push_back(what + ": material " + std::to_string(prim.material) +
+                       " out of range; drawn without one");
+    }
+    if (data.uv.size() == nv) {
+      any_uv = true;
+      out.uv_N.resize(base, glm::dvec2(0.0));  // (0, 0) for earlier primitives without
+      out.uv_N.insert(out.uv_N.end(), data.uv.begin(), data.uv.end());
+    } else {
+      const bool textured =
+          material >= 0 && model.materials[static_cast<std::size_t>(material)]
+                                   .pbrMetallicRoughness.baseColorTexture.index >= 0;
+      if (textured && first_missing_needed < 0) first_missing_needed = static_cast<int>(p);
+      if (!textured) filled.push_back(std::to_string(p));
+    }
+    if (material >= 0 && materials_seen.insert(material).second) {
+      const tinygltf::TextureInfo& t =
+          model.materials[static_cast<std::size_t>(material)].pbrMetallicRoughness.baseColorTexture;
+      if (t.index >= 0 && t.texCoord != 0) {
+        notes->push_back(what + ": material " + std::to_string(material) +
+                         "'s base-colour texture uses TEXCOORD_" + std::to_string(t.texCoord) +
+                         "; only TEXCOORD_0 is read");
+      }
+      if (t.index >= 0 && t.extensions.count("KHR_texture_transform") != 0) {
+        notes->push_back(what + ": material " + std::to_string(material) +
+                         "'s base-colour texture has KHR_texture_transform, ignored");
+      }
+    }
     auto add = [&](std::uint32_t a, std::uint32_t b, std::uint32_t c) {
       if (a == b || b == c || c == a) {
         ++out.dropped_degenerate_triangles;
@@ -141,6 +185,7 @@ GltfMesh BuildMesh(const tinygltf::Model& model, int m,
       }
       out.mesh_N.triangles.emplace_back(static_cast<int>(base + a), static_cast<int>(base + b),
                                         static_cast<int>(base + c));
+      out.triangle_material.push_back(material);
     };
     const std::vector<std::uint32_t>& k = data.corners;
     const std::size_t n = k.size();
@@ -168,10 +213,22 @@ GltfMesh BuildMesh(const tinygltf::Model& model, int m,
                       " triangles in the mesh");
     }
     ++out.primitive_count;
-    if (out.material < 0 && prim.material >= 0 &&
-        static_cast<std::size_t>(prim.material) < model.materials.size()) {
-      out.material = prim.material;
-    }
+    if (out.material < 0) out.material = material;
+  }
+  const std::string mesh_what = "mesh " + std::to_string(m) + " (\"" + src.name + "\")";
+  if (!any_uv) {
+    // Nothing was stored.
+  } else if (first_missing_needed >= 0) {
+    notes->push_back(mesh_what + " primitive " + std::to_string(first_missing_needed) +
+                     " has no TEXCOORD_0 but its material has a base-colour texture: the mesh is "
+                     "loaded without texture coordinates");
+    std::vector<glm::dvec2>().swap(out.uv_N);  // frees them
+  } else if (!filled.empty()) {
+    out.uv_N.resize(out.mesh_N.vertices.size(), glm::dvec2(0.0));  // later primitives without
+    std::string list;
+    for (const std::string& f : filled) list += (list.empty() ? "" : ", ") + f;
+    notes->push_back(mesh_what + " primitive(s) " + list +
+                     " have no TEXCOORD_0 and no base-colour texture: their vertices get (0, 0)");
   }
   return out;
 }

@@ -5,6 +5,8 @@
 #include <cstring>
 #include <stdexcept>
 
+#include "jpeg_image.h"
+
 namespace ht {
 namespace {
 
@@ -75,6 +77,54 @@ std::vector<std::uint8_t> ReadPng(const std::string& path, int* width, int* heig
     const std::string reason = Reason(image);
     png_image_free(&image);
     throw std::runtime_error("ReadPng: cannot read " + path + ": " + reason);
+  }
+  *width = static_cast<int>(image.width);
+  *height = static_cast<int>(image.height);
+  return rgba;
+}
+
+std::vector<std::uint8_t> DecodeImage(std::span<const std::uint8_t> bytes, int* width,
+                                      int* height) {
+  if (width == nullptr || height == nullptr) {
+    throw std::invalid_argument("DecodeImage: width and height must not be null");
+  }
+  const std::string size = std::to_string(bytes.size()) + " bytes";
+  if (bytes.size() >= 3 && bytes[0] == 0xFF && bytes[1] == 0xD8 && bytes[2] == 0xFF) {
+    return image_internal::DecodeJpeg(bytes, kMaxDecodedImageSide, width, height);
+  }
+  if (bytes.size() < 8 || png_sig_cmp(bytes.data(), 0, 8) != 0) {
+    throw std::runtime_error("DecodeImage: " + size +
+                             " are neither PNG nor JPEG (no PNG or JPEG signature)");
+  }
+  png_image image;
+  std::memset(&image, 0, sizeof(image));
+  image.version = PNG_IMAGE_VERSION;
+  if (png_image_begin_read_from_memory(&image, bytes.data(), bytes.size()) == 0) {
+    const std::string reason = Reason(image);
+    png_image_free(&image);
+    throw std::runtime_error("DecodeImage: PNG of " + size + ": " + reason);
+  }
+  if (image.width < 1 || image.height < 1 || image.width > kMaxDecodedImageSide ||
+      image.height > kMaxDecodedImageSide) {
+    const std::string dims = std::to_string(image.width) + " x " + std::to_string(image.height);
+    png_image_free(&image);
+    throw std::runtime_error("DecodeImage: PNG of " + size + " is " + dims + " pixels; at most " +
+                             std::to_string(kMaxDecodedImageSide) + " a side is decoded");
+  }
+  image.format = PNG_FORMAT_RGBA;  // 8-bit sRGB, alpha 255 where the file has none
+  std::vector<std::uint8_t> rgba;
+  try {
+    rgba.resize(PNG_IMAGE_SIZE(image));
+  } catch (...) {
+    png_image_free(&image);
+    throw;
+  }
+  if (png_image_finish_read(&image, /*background=*/nullptr, rgba.data(),
+                            static_cast<png_int_32>(PNG_IMAGE_ROW_STRIDE(image)),
+                            /*colormap=*/nullptr) == 0) {
+    const std::string reason = Reason(image);
+    png_image_free(&image);
+    throw std::runtime_error("DecodeImage: PNG of " + size + ": " + reason);
   }
   *width = static_cast<int>(image.width);
   *height = static_cast<int>(image.height);

@@ -11,15 +11,19 @@
 #include <glm/gtc/type_ptr.hpp>
 #include <glm/mat3x3.hpp>
 #include <numbers>
+#include <span>
 #include <stdexcept>
 #include <string>
+
+#include "master_station/png_image.h"
 
 namespace ht {
 namespace {
 
 constexpr int kMaxSide = 4096;
 constexpr std::size_t kMaxTriangles = std::size_t{1} << 24;
-constexpr int kFloatsPerVertex = 6;  // position_N 3, face normal_N 3
+constexpr int kFloatsPerVertex = 8;                    // position_N 3, face normal_N 3, uv 2
+constexpr int kMaxTextureSide = kMaxDecodedImageSide;  // what DecodeImage() gives at most
 
 // Shading terms: items are lit fully, arrows and markers lightly so that their colour stays
 // recognisable (shade in [0.7, 1]).
@@ -40,35 +44,45 @@ constexpr const char* kVertexShader = R"(#version 300 es
 precision highp float;
 layout(location = 0) in vec3 a_position_N;
 layout(location = 1) in vec3 a_normal_N;
+layout(location = 2) in vec2 a_uv;
 uniform mat4 u_X_CN;
 uniform mat3 u_normal_CN;
 uniform mat4 u_projection;
 out vec3 v_position_C;
 flat out vec3 v_normal_C;
+out vec2 v_uv;
 invariant gl_Position;  // the same depth in a translucent item's depth and colour passes
 void main() {
   vec4 p_C = u_X_CN * vec4(a_position_N, 1.0);
   v_position_C = p_C.xyz;
   v_normal_C = u_normal_CN * a_normal_N;
+  v_uv = a_uv;
   gl_Position = u_projection * p_C;
 }
 )";
 
-// Fragment stage: headlight at the eye plus ambient, two-sided Lambert on the flat normal.
+// Fragment stage: headlight at the eye plus ambient, two-sided Lambert on the flat normal, times
+// the base colour: u_colour, times the texel when textured (an sRGB texture: the sampled value
+// is linear). The texel's alpha is ignored (glTF alphaMode OPAQUE).
 constexpr const char* kFragmentShader = R"(#version 300 es
 precision highp float;
 uniform vec4 u_colour;
 uniform float u_ambient;
 uniform float u_diffuse;
+uniform bool u_textured;
+uniform sampler2D u_texture;
 in vec3 v_position_C;
 flat in vec3 v_normal_C;
+in vec2 v_uv;
 out vec4 o_colour;
 void main() {
   float len = length(v_normal_C);
   float lambert = 1.0;
   if (len > 0.0) lambert = abs(dot(v_normal_C / len, normalize(-v_position_C)));
   float shade = u_ambient + u_diffuse * lambert;
-  o_colour = vec4(clamp(u_colour.rgb * shade, 0.0, 1.0), u_colour.a);
+  vec3 base = u_colour.rgb;
+  if (u_textured) base *= texture(u_texture, v_uv).rgb;
+  o_colour = vec4(clamp(base * shade, 0.0, 1.0), u_colour.a);
 }
 )";
 
@@ -270,6 +284,7 @@ struct SceneRenderer::Impl {
     GLuint vbo = 0;
     GLsizei vertices = 0;
     glm::dvec3 centre_N{0.0};  // bounding-box centre, for back-to-front order
+    bool has_uv = false;
   };
   struct Translucent {
     const RenderItem* item;
@@ -284,8 +299,9 @@ struct SceneRenderer::Impl {
   GLuint colour_rb = 0;
   GLuint depth_rb = 0;
   GLint u_X_CN = -1, u_normal_CN = -1, u_projection = -1, u_colour = -1, u_ambient = -1,
-        u_diffuse = -1;
-  std::vector<GpuMesh> meshes;  // user meshes, by AddMesh index
+        u_diffuse = -1, u_textured = -1, u_texture = -1;
+  std::vector<GpuMesh> meshes;   // user meshes, by AddMesh index
+  std::vector<GLuint> textures;  // by AddTexture index
   GpuMesh cylinder, cone, octahedron;
   std::vector<std::uint8_t> bottom_up;  // glReadPixels' rows, bottom first
   std::vector<Translucent> translucent;
@@ -295,6 +311,7 @@ struct SceneRenderer::Impl {
     if (!context || !context->MakeCurrent()) return;  // eglDestroyContext frees them then
     for (GpuMesh* m : {&cylinder, &cone, &octahedron}) Free(*m);
     for (GpuMesh& m : meshes) Free(m);
+    if (!textures.empty()) glDeleteTextures(static_cast<GLsizei>(textures.size()), textures.data());
     glDeleteFramebuffers(1, &fbo);
     glDeleteRenderbuffers(1, &colour_rb);
     glDeleteRenderbuffers(1, &depth_rb);
@@ -319,6 +336,18 @@ struct SceneRenderer::Impl {
   // (creating its buffers on first use). `gpu` is unchanged when validation fails.
   void Upload(const RenderMesh& mesh, GpuMesh& gpu) {
     const std::size_t nv = mesh.positions_N.size();
+    const bool has_uv = !mesh.uv.empty();
+    if (has_uv && mesh.uv.size() != nv) {
+      throw std::invalid_argument("render mesh: " + std::to_string(mesh.uv.size()) +
+                                  " texture coordinates for " + std::to_string(nv) +
+                                  " positions (need one per position, or none)");
+    }
+    for (std::size_t i = 0; i < mesh.uv.size(); ++i) {
+      if (!std::isfinite(mesh.uv[i].x) || !std::isfinite(mesh.uv[i].y)) {
+        throw std::invalid_argument("render mesh: texture coordinate " + std::to_string(i) +
+                                    " is not finite");
+      }
+    }
     if (mesh.triangles.size() > kMaxTriangles) {
       throw std::invalid_argument("render mesh: " + std::to_string(mesh.triangles.size()) +
                                   " triangles, at most " + std::to_string(kMaxTriangles));
@@ -352,7 +381,8 @@ struct SceneRenderer::Impl {
       const glm::vec3 n_N(n / len);
       for (int k = 0; k < 3; ++k) {
         const glm::vec3& p = mesh.positions_N[tri[k]];
-        upload.insert(upload.end(), {p.x, p.y, p.z, n_N.x, n_N.y, n_N.z});
+        const glm::vec2 uv = has_uv ? mesh.uv[tri[k]] : glm::vec2(0.0f);
+        upload.insert(upload.end(), {p.x, p.y, p.z, n_N.x, n_N.y, n_N.z, uv.x, uv.y});
       }
     }
     if (gpu.vao == 0) {
@@ -366,6 +396,9 @@ struct SceneRenderer::Impl {
       glEnableVertexAttribArray(1);
       glVertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, stride,
                             reinterpret_cast<const void*>(3 * sizeof(float)));
+      glEnableVertexAttribArray(2);
+      glVertexAttribPointer(2, 2, GL_FLOAT, GL_FALSE, stride,
+                            reinterpret_cast<const void*>(6 * sizeof(float)));
       glBindVertexArray(0);
     }
     glBindBuffer(GL_ARRAY_BUFFER, gpu.vbo);
@@ -375,11 +408,19 @@ struct SceneRenderer::Impl {
     ThrowOnGlError("mesh upload");
     gpu.vertices = static_cast<GLsizei>(upload.size() / kFloatsPerVertex);
     gpu.centre_N = 0.5 * (lo + hi);
+    gpu.has_uv = has_uv;
+  }
+
+  // The GL texture item `item` is drawn with on `mesh`: 0 for none (no texture, or no uv).
+  GLuint TextureOf(const RenderItem& item, const GpuMesh& mesh) const {
+    return item.texture >= 0 && mesh.has_uv ? textures[static_cast<std::size_t>(item.texture)] : 0;
   }
 
   void Draw(const GpuMesh& m, const glm::dmat4& X_CN, const glm::vec4& colour, float ambient,
-            float diffuse) {
+            float diffuse, GLuint texture = 0) {
     if (m.vertices == 0) return;
+    glUniform1i(u_textured, texture != 0 ? 1 : 0);
+    if (texture != 0) glBindTexture(GL_TEXTURE_2D, texture);
     const glm::dvec3 a(X_CN[0]), b(X_CN[1]), c(X_CN[2]);
     const glm::mat3 normal_CN(glm::dmat3(glm::cross(b, c), glm::cross(c, a), glm::cross(a, b)));
     const glm::mat4 X(X_CN);
@@ -399,7 +440,8 @@ SceneRenderer::~SceneRenderer() = default;
 
 const GpuInfo& SceneRenderer::gpu() const noexcept { return impl_->context->info(); }
 
-std::unique_ptr<SceneRenderer> SceneRenderer::Create(int width, int height) {
+std::unique_ptr<SceneRenderer> SceneRenderer::Create(int width, int height,
+                                                     ColourEncoding encoding) {
   if (width < 1 || width > kMaxSide || height < 1 || height > kMaxSide) {
     throw std::invalid_argument("scene renderer: image size must be in [1, " +
                                 std::to_string(kMaxSide) + "] each, got " + std::to_string(width) +
@@ -418,7 +460,11 @@ std::unique_ptr<SceneRenderer> SceneRenderer::Create(int width, int height) {
   }
   glGenRenderbuffers(1, &g.colour_rb);
   glBindRenderbuffer(GL_RENDERBUFFER, g.colour_rb);
-  glRenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, width, height);
+  // An sRGB colour buffer encodes on write and blends in linear (OpenGL ES 3.0 §4.1.8);
+  // glReadPixels returns its stored (encoded) bytes.
+  glRenderbufferStorage(GL_RENDERBUFFER,
+                        encoding == ColourEncoding::kSrgb ? GL_SRGB8_ALPHA8 : GL_RGBA8, width,
+                        height);
   glGenRenderbuffers(1, &g.depth_rb);
   glBindRenderbuffer(GL_RENDERBUFFER, g.depth_rb);
   glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT24, width, height);
@@ -429,8 +475,10 @@ std::unique_ptr<SceneRenderer> SceneRenderer::Create(int width, int height) {
   glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, g.depth_rb);
   if (const GLenum status = glCheckFramebufferStatus(GL_FRAMEBUFFER);
       status != GL_FRAMEBUFFER_COMPLETE) {
-    throw GpuError("scene renderer: RGBA8 + depth24 framebuffer incomplete (status " +
-                   std::to_string(status) + ") on " + g.context->info().renderer);
+    throw GpuError(std::string("scene renderer: ") +
+                   (encoding == ColourEncoding::kSrgb ? "SRGB8_ALPHA8" : "RGBA8") +
+                   " + depth24 framebuffer incomplete (status " + std::to_string(status) + ") on " +
+                   g.context->info().renderer);
   }
   g.program = BuildProgram();
   g.u_X_CN = glGetUniformLocation(g.program, "u_X_CN");
@@ -439,6 +487,11 @@ std::unique_ptr<SceneRenderer> SceneRenderer::Create(int width, int height) {
   g.u_colour = glGetUniformLocation(g.program, "u_colour");
   g.u_ambient = glGetUniformLocation(g.program, "u_ambient");
   g.u_diffuse = glGetUniformLocation(g.program, "u_diffuse");
+  g.u_textured = glGetUniformLocation(g.program, "u_textured");
+  g.u_texture = glGetUniformLocation(g.program, "u_texture");
+  glUseProgram(g.program);
+  glUniform1i(g.u_texture, 0);  // texture unit 0, the only one used
+  glUseProgram(0);
   g.Upload(UnitCylinder(), g.cylinder);
   g.Upload(UnitCone(), g.cone);
   g.Upload(UnitOctahedron(), g.octahedron);
@@ -459,6 +512,53 @@ int SceneRenderer::AddMesh(const RenderMesh& mesh) {
   }
   g.meshes.push_back(gpu);
   return static_cast<int>(g.meshes.size()) - 1;
+}
+
+int SceneRenderer::AddTexture(std::span<const std::uint8_t> rgba_top_down, int width, int height) {
+  Impl& g = *impl_;
+  if (width < 1 || height < 1 || width > kMaxTextureSide || height > kMaxTextureSide) {
+    throw std::invalid_argument("scene renderer: texture size must be in [1, " +
+                                std::to_string(kMaxTextureSide) + "] each, got " +
+                                std::to_string(width) + " x " + std::to_string(height));
+  }
+  const std::size_t expected =
+      static_cast<std::size_t>(width) * static_cast<std::size_t>(height) * 4;
+  if (rgba_top_down.size() != expected) {
+    throw std::invalid_argument("scene renderer: a " + std::to_string(width) + " x " +
+                                std::to_string(height) + " RGBA8 texture needs " +
+                                std::to_string(expected) + " bytes, got " +
+                                std::to_string(rgba_top_down.size()));
+  }
+  g.MakeCurrent();
+  GLint max_size = 0;
+  glGetIntegerv(GL_MAX_TEXTURE_SIZE, &max_size);
+  if (width > max_size || height > max_size) {
+    throw GpuError("scene renderer: a " + std::to_string(width) + " x " + std::to_string(height) +
+                   " texture exceeds GL_MAX_TEXTURE_SIZE " + std::to_string(max_size) + " of " +
+                   g.context->info().renderer);
+  }
+  int levels = 1;
+  while ((std::max(width, height) >> levels) > 0) ++levels;
+  GLuint texture = 0;
+  glGenTextures(1, &texture);
+  glBindTexture(GL_TEXTURE_2D, texture);
+  // Row 0 of the image (its top) is GL's t = 0, which is glTF's v = 0: no flip.
+  glTexStorage2D(GL_TEXTURE_2D, levels, GL_SRGB8_ALPHA8, width, height);
+  glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+  glTexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, width, height, GL_RGBA, GL_UNSIGNED_BYTE,
+                  rgba_top_down.data());
+  glGenerateMipmap(GL_TEXTURE_2D);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_LINEAR_MIPMAP_LINEAR);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, GL_REPEAT);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_REPEAT);
+  glBindTexture(GL_TEXTURE_2D, 0);
+  if (const std::string e = GlErrorNames(); !e.empty()) {
+    glDeleteTextures(1, &texture);
+    throw GpuError("scene renderer: texture upload: " + e);
+  }
+  g.textures.push_back(texture);
+  return static_cast<int>(g.textures.size()) - 1;
 }
 
 void SceneRenderer::ReplaceMesh(int index, const RenderMesh& mesh) {
@@ -489,6 +589,11 @@ void SceneRenderer::Render(const RenderFrame& frame, std::vector<std::uint8_t>* 
       throw std::invalid_argument("scene renderer: item " + std::to_string(i) + " names mesh " +
                                   std::to_string(item.mesh) + ", but " +
                                   std::to_string(g.meshes.size()) + " were added");
+    }
+    if (item.texture < -1 || item.texture >= static_cast<int>(g.textures.size())) {
+      throw std::invalid_argument("scene renderer: item " + std::to_string(i) + " names texture " +
+                                  std::to_string(item.texture) + ", but " +
+                                  std::to_string(g.textures.size()) + " were added (-1: none)");
     }
     if (!Finite(item.X_WN) || !Finite(item.colour_rgba)) {
       throw std::invalid_argument("scene renderer: item " + std::to_string(i) +
@@ -524,6 +629,7 @@ void SceneRenderer::Render(const RenderFrame& frame, std::vector<std::uint8_t>* 
   glDisable(GL_BLEND);
   glUseProgram(g.program);
   glUniformMatrix4fv(g.u_projection, 1, GL_FALSE, glm::value_ptr(projection));
+  glActiveTexture(GL_TEXTURE0);
 
   // 1. Opaque items; translucent ones are kept for the last pass.
   g.translucent.clear();
@@ -533,7 +639,7 @@ void SceneRenderer::Render(const RenderFrame& frame, std::vector<std::uint8_t>* 
     glm::vec4 colour = glm::clamp(item.colour_rgba, 0.0f, 1.0f);
     if (item.ghost) colour.a *= kGhostAlpha;
     if (colour.a >= 1.0f) {
-      g.Draw(mesh, X_CN, colour, kItemAmbient, kItemDiffuse);
+      g.Draw(mesh, X_CN, colour, kItemAmbient, kItemDiffuse, g.TextureOf(item, mesh));
     } else if (colour.a > 0.0f) {
       g.translucent.push_back({&item, colour.a, (X_CN * glm::dvec4(mesh.centre_N, 1.0)).z});
     }
@@ -564,7 +670,7 @@ void SceneRenderer::Render(const RenderFrame& frame, std::vector<std::uint8_t>* 
       glEnable(GL_BLEND);
       glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
       glDepthMask(GL_FALSE);
-      g.Draw(mesh, X_CN, colour, kItemAmbient, kItemDiffuse);
+      g.Draw(mesh, X_CN, colour, kItemAmbient, kItemDiffuse, g.TextureOf(*t.item, mesh));
     }
     glDepthMask(GL_TRUE);
     glDisable(GL_BLEND);
@@ -597,6 +703,7 @@ void SceneRenderer::Render(const RenderFrame& frame, std::vector<std::uint8_t>* 
   }
 
   glBindVertexArray(0);
+  glBindTexture(GL_TEXTURE_2D, 0);
 
   // 4. Read back (GL's row 0 is the bottom) and flip to top-down.
   glPixelStorei(GL_PACK_ALIGNMENT, 1);

@@ -4,6 +4,7 @@
 // decoded mesh). Uses Draco's public mesh API (https://google.github.io/draco/).
 
 #include <cstdint>
+#include <glm/vec2.hpp>
 #include <span>
 #include <vector>
 
@@ -24,6 +25,13 @@ struct DracoEncodeOptions {
   /// the slowest codec, 10 the fastest and largest (10 switches Edgebreaker connectivity coding
   /// off in favour of sequential coding).
   int speed = 5;
+  /// Bits per texture coordinate, in [1, 24], for EncodeMeshDracoWithUv() (unused without
+  /// coordinates; declared last so that {bits, speed} initializers keep their meaning). Draco
+  /// quantizes (u, v) on a uniform grid whose step is the larger extent of their bounding box
+  /// divided by 2^bits - 1: 12 bits on [0, 1] gives a step of 2.4e-4, a quarter texel of a
+  /// 1024-pixel texture. 12 is glTF-Transform's default for Draco texture coordinates (libdraco
+  /// itself quantizes nothing unless asked; its draco_encoder tool defaults to 10).
+  int uv_quantization_bits = 12;
 };
 
 /// Compresses `mesh` (frame O, metres) into a self-contained Draco byte stream (format of the
@@ -45,6 +53,29 @@ struct DracoEncodeOptions {
 std::vector<std::uint8_t> EncodeMeshDraco(const TriangleMesh& mesh,
                                           const DracoEncodeOptions& options = {});
 
+/// EncodeMeshDraco() with texture coordinates: `uv` holds one (u, v) per vertex of `mesh` (#V
+/// entries, uv[i] belonging to mesh.vertices[i], any convention: they are stored as given,
+/// float32, quantized with options.uv_quantization_bits), stored as a TEX_COORD attribute of
+/// the same Draco points as the positions; empty `uv` stores none (the same stream as
+/// EncodeMeshDraco()). DecodeMeshDracoWithUv() returns them attached to their vertices whatever
+/// order Draco gives the vertices. Each decoded coordinate lies within half a uv quantization step
+/// (plus float32 rounding) of the original.
+///
+/// Throws what EncodeMeshDraco() throws, and std::invalid_argument when `uv` is neither empty nor
+/// #V long, a coordinate is not finite as a float32, or uv_quantization_bits is outside [1, 24].
+std::vector<std::uint8_t> EncodeMeshDracoWithUv(const TriangleMesh& mesh,
+                                                std::span<const glm::dvec2> uv,
+                                                const DracoEncodeOptions& options = {});
+
+/// A decoded Draco mesh with its texture coordinates.
+struct DracoMesh {
+  /// Positions (the stream's units: metres for EncodeMeshDraco streams) and triangles.
+  TriangleMesh mesh;
+  /// (u, v) of each vertex of `mesh` (#V entries, uv[i] belonging to mesh.vertices[i]), as they
+  /// were encoded (no flip); empty when the stream has no texture coordinate attribute.
+  std::vector<glm::dvec2> uv;
+};
+
 /// Decodes a Draco mesh stream (any version libdraco reads) into a triangle mesh whose positions
 /// are the stream's position attribute, in the stream's units (metres for EncodeMeshDraco()
 /// streams). Triangles keep the stream's corner order. Other attributes (normals, texture
@@ -55,6 +86,16 @@ std::vector<std::uint8_t> EncodeMeshDraco(const TriangleMesh& mesh,
 /// Draco's status message), no 3-component position attribute, no triangles, or a non-finite
 /// decoded coordinate.
 TriangleMesh DecodeMeshDraco(std::span<const std::uint8_t> bytes);
+
+/// Decodes a Draco mesh stream with its first texture coordinate attribute (TEX_COORD). With one,
+/// the vertices are the stream's points: each point's position and (u, v) (2 components read as
+/// float, normalized integers divided by their maximum), so that a vertex where the coordinates
+/// have a seam comes back once per side; triangles keep the stream's corner order. Without one,
+/// the result is DecodeMeshDraco()'s with an empty uv.
+///
+/// Throws what DecodeMeshDraco() throws, and std::runtime_error when the texture coordinate
+/// attribute has other than 2 components or a non-finite value.
+DracoMesh DecodeMeshDracoWithUv(std::span<const std::uint8_t> bytes);
 
 /// Position quantization step (m) that EncodeMeshDraco() uses for `mesh` at `bits` bits: the
 /// largest extent of the axis-aligned bounding box of the vertices (computed in float32, as Draco

@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <glm/gtc/quaternion.hpp>
 #include <glm/mat4x4.hpp>
+#include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
 #include <glm/vec4.hpp>
 #include <nlohmann/json_fwd.hpp>
@@ -47,6 +48,23 @@ struct GltfMesh {
   /// index carry no surface and are dropped (see dropped_degenerate_triangles); vertices are not
   /// merged or removed.
   TriangleMesh mesh_N;
+  /// Texture coordinates TEXCOORD_0 of mesh_N's vertices, #V entries (uv_N[i] belongs to
+  /// mesh_N.vertices[i]), as the file has them: glTF's convention, (0, 0) the image's top-left
+  /// corner, u to the right and v down, (1, 1) the bottom-right, values outside [0, 1] repeating
+  /// per the sampler. Normalized UNSIGNED_BYTE/SHORT coordinates are divided by 255 / 65535;
+  /// Draco ones come dequantized. Either complete or empty: empty when no merged primitive has
+  /// TEXCOORD_0, or when one without it has a material with a base-colour texture (a note says
+  /// so). A primitive without TEXCOORD_0 whose material has no base-colour texture (or that has
+  /// no material) gets (0, 0) at its vertices, with a note: its triangles sample no texture, and
+  /// the mesh's other primitives keep theirs (CesiumMilkTruck's body beside its untextured glass
+  /// and trim). Only TEXCOORD_0 is read: a material whose base-colour texture names another set,
+  /// or has KHR_texture_transform, gets a note.
+  std::vector<glm::dvec2> uv_N;
+  /// The glTF material index (= index into GltfScene::materials) of the primitive each triangle
+  /// came from, #F entries in the order of mesh_N.triangles (triangle_material[f] belongs to
+  /// mesh_N.triangles[f]); -1 where the primitive names no material (or one out of range, with a
+  /// note). Primitives are merged in the file's order, so each material's triangles form runs.
+  std::vector<int> triangle_material;
   /// Number of triangle primitives merged into mesh_N (POINTS/LINES primitives excluded).
   int primitive_count = 0;
   /// How many of those primitives were KHR_draco_mesh_compression primitives.
@@ -205,7 +223,8 @@ struct GltfScene {
 /// the animations' translation/rotation/scale channels are kept for PoseInstancesAt(). Primitives
 /// of mode TRIANGLES, TRIANGLE_STRIP and TRIANGLE_FAN are read, indexed or not, and merged per
 /// mesh; POINTS and LINES primitives, and primitives without POSITION, are skipped with a note.
-/// KHR_draco_mesh_compression primitives are decoded from their Draco buffer view.
+/// KHR_draco_mesh_compression primitives are decoded from their Draco buffer view (POSITION, and
+/// TEXCOORD_0 when the extension's `attributes` names it).
 ///
 /// Throws std::runtime_error, whose message starts with `path` and says what is wrong, when: the
 /// file cannot be read or is larger than kGltfMaxFileBytes; a .glb header or chunk is truncated
@@ -214,9 +233,10 @@ struct GltfScene {
 /// KHR_mesh_quantization, EXT_mesh_gpu_instancing); an index (scene, node, mesh, accessor, buffer
 /// view, buffer) is out of range; an accessor reaches past its buffer view or buffer; POSITION is
 /// not FLOAT VEC3 or indices are not UNSIGNED_BYTE/SHORT/INT SCALAR; a vertex index is out of
-/// range; the attributes of a primitive differ in count; a TRIANGLES primitive has a
-/// corner count that is not a multiple of 3; `primitives` is not an array; a position
-/// or transform is NaN or infinite; the node graph has a cycle, or shared children
+/// range; TEXCOORD_0 is not FLOAT VEC2 or normalized UNSIGNED_BYTE/SHORT VEC2, or a texture
+/// coordinate is NaN or infinite; the attributes of a primitive differ in count; a TRIANGLES
+/// primitive has a corner count that is not a multiple of 3; `primitives` is not an array; a
+/// position or transform is NaN or infinite; the node graph has a cycle, or shared children
 /// multiply the paths past 1,000,000 node visits; a sparse accessor is used (not supported yet); a
 /// Draco stream does not decode; the scene exceeds kGltfMaxTriangles or kGltfMaxVertices.
 /// Animation channels (the message names the animation and channel) are refused when: the

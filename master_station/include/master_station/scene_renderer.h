@@ -12,6 +12,7 @@
 #include <glm/vec3.hpp>
 #include <glm/vec4.hpp>
 #include <memory>
+#include <span>
 #include <vector>
 
 #include "haptic_core/egl_context.h"
@@ -25,6 +26,11 @@ struct RenderMesh {
   /// Triangles as three indices into positions_N, #T entries, counter-clockwise seen from the
   /// outside by convention (lighting is two-sided: winding changes nothing drawn).
   std::vector<glm::uvec3> triangles;
+  /// Texture coordinates, empty or #V entries (uv[i] belongs to positions_N[i]), finite, in
+  /// glTF's convention: (0, 0) the texture image's top-left corner, u to the right, v down
+  /// (GltfMesh::uv_N as loaded, no flip). Values outside [0, 1] repeat. Without them the mesh is
+  /// drawn in its items' flat colour whatever their texture.
+  std::vector<glm::vec2> uv;
 };
 
 /// One mesh drawn at one pose.
@@ -34,11 +40,17 @@ struct RenderItem {
   /// Pose of the node frame N in W (m); any invertible affine map (scale allowed).
   glm::dmat4 X_WN{1.0};
   /// Linear RGBA in [0, 1] (values outside are clamped). Alpha below 1 draws translucently.
+  /// With a texture, the base colour's RGB is colour_rgba.rgb × the texel's linear RGB (glTF's
+  /// baseColorFactor × baseColorTexture); alpha stays colour_rgba.a.
   glm::vec4 colour_rgba{0.7f, 0.7f, 0.7f, 1.f};
   /// Drawn translucent (alpha 0.3 × colour_rgba.a) after the opaque items and arrows: e.g. the
   /// tool where the operator's hand is, beside the tool where the remote side holds it. Only its
   /// nearest surface is blended (one layer per pixel), and it hides nothing drawn before it.
   bool ghost = false;
+  /// Index returned by SceneRenderer::AddTexture, or -1 for none. Used only when the item's mesh
+  /// has uv; the texture's alpha is ignored (glTF's default alphaMode OPAQUE). Declared last, so
+  /// that {mesh, X_WN, colour_rgba, ghost} initializers keep their meaning.
+  int texture = -1;
 };
 
 /// A force shown as an arrow from its point of application.
@@ -75,10 +87,27 @@ struct RenderFrame {
 /// this colour scaled by a shade in [0.7, 1] (alpha 1).
 inline constexpr glm::vec4 kForceArrowColour{1.0f, 0.35f, 0.05f, 1.0f};
 
+/// How the bytes SceneRenderer::Render() returns encode the linear colours it computes.
+enum class ColourEncoding {
+  /// byte = round(255 · linear value), no transfer function (what the renderer always did: an
+  /// item of colour_rgba c, fully lit, reads back as 255·c). Shown on a screen, which takes
+  /// bytes as sRGB, colours look darker than their linear values; a texture's texels (decoded
+  /// from sRGB to linear) come back as 255·linear, darker than the image file's bytes.
+  kLinear,
+  /// byte = sRGB encoding (IEC 61966-2-1) of the linear value, through a GL_SRGB8_ALPHA8
+  /// framebuffer, with blending done in linear: what a screen or PNG viewer expects. A fully lit
+  /// texel comes back as the image file's byte (within rounding); a flat colour c as
+  /// sRGB(c) (0.5 → 188).
+  kSrgb,
+};
+
 /// Draws RenderFrames into an off-screen RGBA8 + 24-bit depth framebuffer and reads them back.
 ///
 /// Shading: flat per-face normals (meshes are un-indexed on upload), a headlight at the eye and
-/// an ambient term (shade = 0.3 + 0.7·|n·l|, two-sided), times the item's colour. Draw order:
+/// an ambient term (shade = 0.3 + 0.7·|n·l|, two-sided), times the item's base colour:
+/// colour_rgba, times the texel at the fragment's uv for an item with a texture on a mesh with
+/// uv (textures are GL_SRGB8_ALPHA8: sampling decodes sRGB to linear before filtering, so the
+/// product is linear; mipmapped, trilinear filtering, REPEAT wrap). Draw order:
 /// opaque items; then translucent items (ghosts, alpha < 1) from back to front by their
 /// bounding-box centres, each with a depth-only pass then a blended colour pass (so each item
 /// blends once per pixel, with its nearest surface; its depth hides only translucent items drawn
@@ -93,18 +122,31 @@ inline constexpr glm::vec4 kForceArrowColour{1.0f, 0.35f, 0.05f, 1.0f};
 class SceneRenderer {
  public:
   /// Creates a headless EglContext, current on the calling thread, and a width x height
-  /// framebuffer. Throws std::invalid_argument when width or height is outside [1, 4096], and
-  /// GpuError when no context can be made or the framebuffer is refused (message says why).
-  static std::unique_ptr<SceneRenderer> Create(int width, int height);
+  /// framebuffer whose bytes are `encoding` (see ColourEncoding; kLinear by default, as before).
+  /// Throws std::invalid_argument when width or height is outside [1, 4096], and GpuError when
+  /// no context can be made or the framebuffer is refused (message says why).
+  static std::unique_ptr<SceneRenderer> Create(int width, int height,
+                                               ColourEncoding encoding = ColourEncoding::kLinear);
   ~SceneRenderer();
   SceneRenderer(const SceneRenderer&) = delete;
   SceneRenderer& operator=(const SceneRenderer&) = delete;
 
-  /// Uploads `mesh` (un-indexed, with face normals; zero-area triangles are dropped) and returns
-  /// its index for RenderItem::mesh (0, 1, 2, ... in call order). Throws std::invalid_argument
-  /// naming the bad value for a triangle index >= #V, a non-finite position, or more than 2^24
-  /// triangles; GpuError when GL refuses the upload.
+  /// Uploads `mesh` (un-indexed, with face normals and its uv; zero-area triangles are dropped)
+  /// and returns its index for RenderItem::mesh (0, 1, 2, ... in call order). Throws
+  /// std::invalid_argument naming the bad value for a triangle index >= #V, a non-finite
+  /// position or uv, a uv count other than 0 or #V, or more than 2^24 triangles; GpuError when
+  /// GL refuses the upload.
   int AddMesh(const RenderMesh& mesh);
+
+  /// Uploads a width x height RGBA8 image (rgba_top_down: width·height·4 bytes, row 0 the top,
+  /// sRGB-encoded colour as image files hold it, e.g. DecodeImage()'s output) as a texture and
+  /// returns its index for RenderItem::texture (0, 1, 2, ... in call order). Stored as
+  /// GL_SRGB8_ALPHA8 with a full mipmap chain; sampled with trilinear filtering
+  /// (LINEAR_MIPMAP_LINEAR / LINEAR) and REPEAT wrap in u and v; row 0 is v = 0. Textures live
+  /// as long as the renderer. Throws std::invalid_argument for width or height outside
+  /// [1, kMaxDecodedImageSide = 8192] or a buffer of another size; GpuError when GL refuses it
+  /// (e.g. larger than GL_MAX_TEXTURE_SIZE, out of memory).
+  int AddTexture(std::span<const std::uint8_t> rgba_top_down, int width, int height);
 
   /// Replaces mesh `index` with a new version (e.g. a newer version of a scene object); items
   /// that name `index` draw the new one from the next Render on. Throws std::invalid_argument for
@@ -115,7 +157,8 @@ class SceneRenderer {
   /// top of the image, pixel (i, j) covering x ∈ [i, i+1), y ∈ [j, j+1) of ProjectToPixel's
   /// coordinates. The vector is resized (no allocation once it has the size). Throws
   /// std::invalid_argument, before drawing anything, for a null output, an item whose mesh index
-  /// was not returned by AddMesh, a non-finite pose, colour, arrow or background, a negative or
+  /// was not returned by AddMesh or whose texture is neither -1 nor an index returned by
+  /// AddTexture, a non-finite pose, colour, arrow or background, a negative or
   /// non-finite arrow_m_per_n, or a degenerate camera (see RenderCamera); GpuError on a GL error.
   void Render(const RenderFrame& frame, std::vector<std::uint8_t>* rgba_top_down);
 
