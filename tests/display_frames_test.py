@@ -56,7 +56,10 @@ def main():
         check(float(img[..., :3].std()) > 0.02, f"{name} is not blank")
         # The gear (bronze 0.72, 0.50, 0.26 times a shade in 0.3..1) and the tool (steel blue
         # 0.45, 0.55, 0.70 times a shade): both in view, the camera follows the tool.
-        rgb = img[..., :3]
+        # The frames are sRGB images of linear colours: compare in linear terms.
+        srgb = img[..., :3].astype(float)
+        rgb = ((srgb + 0.055) / 1.055) ** 2.4
+        rgb[srgb <= 0.04045] = srgb[srgb <= 0.04045] / 12.92
         bronze = int(((rgb[..., 0] > rgb[..., 1] + 0.05) & (rgb[..., 1] > rgb[..., 2] + 0.05) &
                       (rgb[..., 0] - rgb[..., 2] > 0.15) & (rgb[..., 0] < 0.85)).sum())
         blue = int(((rgb[..., 2] > rgb[..., 0] + 0.08) & (rgb[..., 2] > 0.2)).sum())

@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 #include <numbers>
 #include <optional>
+#include <set>
 #include <thread>
 
 #include "codecs/draco_mesh_codec.h"
@@ -467,14 +468,27 @@ TEST(SceneBuildData, MilkTruckDisplayStreamPlacesEveryTouchableWhereTheHapticSce
     if (n.material >= 0) ASSERT_LT(static_cast<std::size_t>(n.material), graph.materials.size());
   }
   EXPECT_EQ(tools, 1);
-  for (std::size_t m = 0; m < s.gltf.meshes.size(); ++m) {
-    const GltfMesh& mesh = s.gltf.meshes[m];
-    for (std::size_t e = 0; e < s.gltf.nodes.size(); ++e) {
-      if (s.gltf.nodes[e].mesh != static_cast<int>(m)) continue;
-      const SceneGraphNode& n =
-          graph.nodes[static_cast<std::size_t>(stream.graph_node_of_entry[e])];
-      EXPECT_EQ(DecodeMeshDraco(by_id[n.mesh_object]->bytes).triangles.size(),
-                mesh.mesh_N.triangles.size());
+  // Each node's mesh arrives whole: its part on the node plus the further material parts on
+  // child nodes (part_of), their triangles adding up to the glTF mesh's.
+  ASSERT_EQ(stream.part_of.size(), graph.nodes.size());
+  for (std::size_t e = 0; e < s.gltf.nodes.size(); ++e) {
+    const int m = s.gltf.nodes[e].mesh;
+    if (m < 0) continue;
+    const int node = stream.graph_node_of_entry[e];
+    std::size_t triangles = 0;
+    std::set<int> materials;
+    for (std::size_t v = 0; v < graph.nodes.size(); ++v) {
+      if (static_cast<int>(v) != node && stream.part_of[v] != node) continue;
+      const DracoMesh part = DecodeMeshDracoWithUv(by_id[graph.nodes[v].mesh_object]->bytes);
+      triangles += part.mesh.triangles.size();
+      materials.insert(graph.nodes[v].material);
+      EXPECT_EQ(part.uv.size(), s.gltf.meshes[static_cast<std::size_t>(m)].uv_N.empty()
+                                    ? 0u
+                                    : part.mesh.vertices.size());
+    }
+    EXPECT_EQ(triangles, s.gltf.meshes[static_cast<std::size_t>(m)].mesh_N.triangles.size());
+    if (s.gltf.meshes[static_cast<std::size_t>(m)].name == "Cesium_Milk_Truck") {
+      EXPECT_EQ(materials.size(), 3u);  // the body's three materials, each its own part
     }
   }
   // Materials that have a base-colour texture carry it as a kImage object.

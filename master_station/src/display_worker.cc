@@ -21,6 +21,8 @@ namespace {
 
 constexpr glm::vec4 kDefaultColour{0.70f, 0.70f, 0.72f, 1.0f};
 constexpr glm::vec4 kHandleGhostColour{0.55f, 0.85f, 1.0f, 1.0f};
+// A dark blue-grey (linear; about 0.1 once sRGB-encoded).
+constexpr glm::vec4 kBackground{0.010f, 0.010f, 0.013f, 1.0f};
 // Longest arrow drawn, in tool radii (longer ones are saturated).
 constexpr double kArrowMaxRadii = 1.5;
 
@@ -30,12 +32,16 @@ glm::dmat4 Matrix(const RigidTransform& X) {
   return M;
 }
 
-RenderMesh ToRenderMesh(const TriangleMesh& m) {
+RenderMesh ToRenderMesh(const ReceivedSceneContent::Mesh& m) {
   RenderMesh r;
-  r.positions_N.reserve(m.vertices.size());
-  for (const glm::dvec3& p : m.vertices) r.positions_N.emplace_back(p);
-  r.triangles.reserve(m.triangles.size());
-  for (const glm::ivec3& t : m.triangles) r.triangles.emplace_back(t);
+  r.positions_N.reserve(m.mesh_N.vertices.size());
+  for (const glm::dvec3& p : m.mesh_N.vertices) r.positions_N.emplace_back(p);
+  r.triangles.reserve(m.mesh_N.triangles.size());
+  for (const glm::ivec3& t : m.mesh_N.triangles) r.triangles.emplace_back(t);
+  if (m.uv_N.size() == m.mesh_N.vertices.size()) {
+    r.uv.reserve(m.uv_N.size());
+    for (const glm::dvec2& uv : m.uv_N) r.uv.emplace_back(uv);
+  }
   return r;
 }
 
@@ -63,7 +69,8 @@ void DisplayWorker::Run(const std::atomic<bool>& stop) {
   const bool write_frames = !config_.frames_dir.empty();
   try {
     if (write_frames) std::filesystem::create_directories(config_.frames_dir);
-    renderer = SceneRenderer::Create(config_.width, config_.height);
+    // Base colours are linear (glTF); the frames are sRGB images, like the textures.
+    renderer = SceneRenderer::Create(config_.width, config_.height, ColourEncoding::kSrgb);
     renderer_ = renderer->gpu().renderer;
     if (config_.mode == DisplayConfig::Mode::kWindow) {
       window = DisplayWindow::Open(config_.width, config_.height, "master_station: remote scene");
@@ -82,6 +89,8 @@ void DisplayWorker::Run(const std::atomic<bool>& stop) {
   std::shared_ptr<const ReceivedSceneContent> content;
   std::map<std::uint32_t, int> mesh_index;  // object id → renderer mesh
   std::map<std::uint32_t, double> mesh_radius;
+  std::map<std::uint32_t, bool> mesh_has_uv;
+  std::map<std::uint32_t, int> texture_index;  // image object id → renderer texture (−1 failed)
   std::vector<bool> under_tool;
   double tool_radius_m = 0.02;
   std::vector<SceneNodeTransform> local;
@@ -115,15 +124,30 @@ void DisplayWorker::Run(const std::atomic<bool>& stop) {
         ++scene_generations_;
         for (const ReceivedSceneContent::Mesh& m : content->meshes) {
           if (m.mesh_N.triangles.empty()) continue;
-          const RenderMesh r = ToRenderMesh(m.mesh_N);
+          const RenderMesh r = ToRenderMesh(m);
           if (auto it = mesh_index.find(m.object_id); it != mesh_index.end()) {
             renderer->ReplaceMesh(it->second, r);
           } else {
             mesh_index[m.object_id] = renderer->AddMesh(r);
           }
+          mesh_has_uv[m.object_id] = m.uv_N.size() == m.mesh_N.vertices.size();
           double radius = 0.0;
           for (const glm::dvec3& p : m.mesh_N.vertices) radius = std::max(radius, glm::length(p));
           mesh_radius[m.object_id] = radius;
+        }
+        // Base-colour textures, decoded once per object (PNG or JPEG as the file had them).
+        for (const ReceivedSceneContent::Image& image : content->images) {
+          if (texture_index.count(image.object_id) != 0) continue;
+          int w = 0, h = 0;
+          try {
+            const std::vector<std::uint8_t> rgba = DecodeImage(image.bytes, &w, &h);
+            texture_index[image.object_id] = renderer->AddTexture(rgba, w, h);
+            ++textures_;
+          } catch (const std::exception& e) {
+            texture_index[image.object_id] = -1;  // drawn in its base colour
+            ++textures_failed_;
+            texture_error_ = e.what();
+          }
         }
         under_tool = UnderTool(content->graph);
         tool_radius_m = 0.0;
@@ -154,15 +178,19 @@ void DisplayWorker::Run(const std::atomic<bool>& stop) {
         const auto m = mesh_index.find(n.mesh_object);
         if (n.mesh_object == 0 || m == mesh_index.end()) continue;
         glm::vec4 colour = kDefaultColour;
+        int texture = -1;
         if (n.material >= 0 && static_cast<std::size_t>(n.material) < graph.materials.size()) {
-          colour = graph.materials[static_cast<std::size_t>(n.material)].base_colour_rgba;
+          const SceneMaterial& material = graph.materials[static_cast<std::size_t>(n.material)];
+          colour = material.base_colour_rgba;
+          const auto t = texture_index.find(material.base_colour_texture_object);
+          if (t != texture_index.end() && mesh_has_uv[n.mesh_object]) texture = t->second;
         }
         if (under_tool[i]) {
           // Tool nodes are posed in T: at the simulated tool, and as a ghost at the handle.
-          frame.items.push_back({m->second, X_WT * X_WN[i], colour, false});
+          frame.items.push_back({m->second, X_WT * X_WN[i], colour, false, texture});
           frame.items.push_back({m->second, X_WH * X_WN[i], kHandleGhostColour, true});
         } else {
-          frame.items.push_back({m->second, X_WN[i], colour, false});
+          frame.items.push_back({m->second, X_WN[i], colour, false, texture});
         }
       }
       if (tool.have_model) {
@@ -187,6 +215,7 @@ void DisplayWorker::Run(const std::atomic<bool>& stop) {
         }
       }
       frame.arrow_m_per_n = arrow_m_per_n_;
+      frame.background_rgba = kBackground;
       if (graph.camera && graph.camera->node >= 0 &&
           static_cast<std::size_t>(graph.camera->node) < X_WN.size()) {
         // The scene file's camera: looks along −z of its node, +y up.
@@ -238,6 +267,9 @@ nlohmann::json DisplayWorker::Summary() const {
   nlohmann::json j;
   j["mode"] = config_.mode == DisplayConfig::Mode::kWindow ? "window" : "headless";
   j["window_closed"] = window_closed_;
+  j["textures"] = textures_;
+  j["textures_failed"] = textures_failed_;
+  j["texture_error"] = texture_error_;
   j["arrows"] = arrows_;
   j["arrows_saturated"] = arrows_saturated_;
   j["arrow_max_m"] = arrow_max_m_;

@@ -55,6 +55,8 @@ class DisplayWorker {
   double arrow_m_per_n_ = 0.0, arrow_max_m_ = 0.0;
   std::uint64_t arrows_ = 0, arrows_saturated_ = 0;
   bool window_closed_ = false;
+  std::uint64_t textures_ = 0, textures_failed_ = 0;
+  std::string texture_error_;
   std::vector<std::string> frame_files_;
 };
 

@@ -473,15 +473,18 @@ void NetworkWorker::CheckScene(std::int64_t now) {
           // Decoded once per version: an update re-decodes only the objects that changed.
           auto cached = decoded_meshes_.find(id);
           if (cached == decoded_meshes_.end() || cached->second.version != version) {
+            DracoMesh decoded = DecodeMeshDracoWithUv(bytes);
             cached = decoded_meshes_
                          .insert_or_assign(
-                             id, ReceivedSceneContent::Mesh{id, version, DecodeMeshDraco(bytes)})
+                             id, ReceivedSceneContent::Mesh{id, version, std::move(decoded.mesh),
+                                                            std::move(decoded.uv)})
                          .first;
           }
           const ReceivedSceneContent::Mesh& mesh = cached->second;
           o["kind"] = "draco_mesh";
           o["vertices"] = mesh.mesh_N.vertices.size();
           o["triangles"] = mesh.mesh_N.triangles.size();
+          o["texture_coordinates"] = !mesh.uv_N.empty();
           content->meshes.push_back(mesh);
           break;
         }

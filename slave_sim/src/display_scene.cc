@@ -11,9 +11,10 @@
 namespace ht {
 namespace {
 
-// Base colours per role (linear RGBA): a steel-blue tool, a bronze object, grey scenery.
-constexpr glm::vec4 kToolColour{0.45f, 0.55f, 0.70f, 1.0f};
-constexpr glm::vec4 kObjectColour{0.72f, 0.50f, 0.26f, 1.0f};
+// Base colours per role, linear RGBA like glTF's baseColorFactor (the display writes sRGB
+// images): a steel-blue tool and a bronze object.
+constexpr glm::vec4 kToolColour{0.17f, 0.26f, 0.45f, 1.0f};
+constexpr glm::vec4 kObjectColour{0.48f, 0.21f, 0.055f, 1.0f};
 
 TriangleMesh CoarseMesh(const HapticModel& model) {
   TriangleMesh m;
@@ -32,6 +33,43 @@ SceneGraphNode NodeAt(const std::string& name, const RigidTransform& X, std::uin
   n.material = material;
   n.flags = flags;
   return n;
+}
+
+// One material's triangles of a glTF mesh, with only the vertices they use (and their UVs).
+struct MeshPart {
+  int material = -1;
+  TriangleMesh mesh;
+  std::vector<glm::dvec2> uv;
+  std::uint32_t object = 0;
+};
+
+std::vector<MeshPart> SplitByMaterial(const GltfMesh& m) {
+  const std::size_t nf = m.mesh_N.triangles.size();
+  const bool per_triangle = m.triangle_material.size() == nf;
+  const bool with_uv = m.uv_N.size() == m.mesh_N.vertices.size();
+  std::vector<MeshPart> parts;
+  std::vector<int> remap(m.mesh_N.vertices.size(), -1);
+  for (std::size_t f = 0; f < nf;) {
+    const int material = per_triangle ? m.triangle_material[f] : m.material;
+    MeshPart part;
+    part.material = material;
+    std::fill(remap.begin(), remap.end(), -1);
+    for (; f < nf && (per_triangle ? m.triangle_material[f] : m.material) == material; ++f) {
+      glm::ivec3 t = m.mesh_N.triangles[f];
+      for (int c = 0; c < 3; ++c) {
+        int& r = remap[static_cast<std::size_t>(t[c])];
+        if (r < 0) {
+          r = static_cast<int>(part.mesh.vertices.size());
+          part.mesh.vertices.push_back(m.mesh_N.vertices[static_cast<std::size_t>(t[c])]);
+          if (with_uv) part.uv.push_back(m.uv_N[static_cast<std::size_t>(t[c])]);
+        }
+        t[c] = r;
+      }
+      part.mesh.triangles.push_back(t);
+    }
+    parts.push_back(std::move(part));
+  }
+  return parts;
 }
 
 void EncodeGraph(DisplayStream* s) {
@@ -78,13 +116,18 @@ DisplayStream MakeDisplayStream(const BuiltScene& scene) {
   const GltfScene& g = scene.gltf;
   s.graph.scene_name = scene.haptic.name;
   std::uint32_t id = kSceneGraphObjectId + 1;
-  // Meshes, each once, in N.
-  std::vector<std::uint32_t> mesh_object(g.meshes.size(), 0);
+  // Meshes, each once, in N: one Draco object per (mesh, material) part, with its texture
+  // coordinates when the mesh has them.
+  std::vector<std::vector<MeshPart>> parts(g.meshes.size());
   for (std::size_t m = 0; m < g.meshes.size(); ++m) {
-    if (g.meshes[m].mesh_N.triangles.empty()) continue;
-    mesh_object[m] = id;
-    s.objects.push_back(
-        {id++, wire::SceneObjectKind::kDracoMesh, EncodeMeshDraco(g.meshes[m].mesh_N)});
+    for (MeshPart& part : SplitByMaterial(g.meshes[m])) {
+      if (part.mesh.triangles.empty()) continue;
+      part.object = id;
+      s.objects.push_back({id++, wire::SceneObjectKind::kDracoMesh,
+                           part.uv.empty() ? EncodeMeshDraco(part.mesh)
+                                           : EncodeMeshDracoWithUv(part.mesh, part.uv)});
+      parts[m].push_back(std::move(part));
+    }
   }
   // Materials and the images they use.
   std::vector<std::uint32_t> image_object(g.images.size(), 0);
@@ -148,10 +191,10 @@ DisplayStream MakeDisplayStream(const BuiltScene& scene) {
       out.rotation = n.rotation;
       out.scale = n.scale;
     }
-    if (n.mesh >= 0) {
-      const auto m = static_cast<std::size_t>(n.mesh);
-      out.mesh_object = mesh_object[m];
-      out.material = g.meshes[m].material;
+    if (n.mesh >= 0 && !parts[static_cast<std::size_t>(n.mesh)].empty()) {
+      const MeshPart& first = parts[static_cast<std::size_t>(n.mesh)].front();
+      out.mesh_object = first.object;
+      out.material = first.material;
     }
     if (role[e] == NodeRole::kTouchable) out.flags |= kSceneNodeTouchable;
     if (moving[e]) out.flags |= kSceneNodeMoving;
@@ -172,6 +215,26 @@ DisplayStream MakeDisplayStream(const BuiltScene& scene) {
     s.graph_node_of_entry[e] = static_cast<int>(s.graph.nodes.size());
     s.graph.nodes.push_back(std::move(out));
   }
+  // A mesh's further material parts: child nodes of each node that shows it, at the identity.
+  // Appended after every entry, so that parents still come first.
+  s.part_of.assign(s.graph.nodes.size(), -1);
+  for (std::size_t e = 0; e < g.nodes.size(); ++e) {
+    const int mesh = g.nodes[e].mesh;
+    if (mesh < 0) continue;
+    const std::vector<MeshPart>& p = parts[static_cast<std::size_t>(mesh)];
+    const int node = s.graph_node_of_entry[e];
+    for (std::size_t k = 1; k < p.size(); ++k) {
+      SceneGraphNode child;
+      child.name = s.graph.nodes[static_cast<std::size_t>(node)].name;
+      child.parent = node;
+      child.mesh_object = p[k].object;
+      child.material = p[k].material;
+      child.flags = s.graph.nodes[static_cast<std::size_t>(node)].flags &
+                    static_cast<std::uint8_t>(kSceneNodeTouchable);
+      s.graph.nodes.push_back(std::move(child));
+      s.part_of.push_back(node);
+    }
+  }
   if (tool_entry < 0 && scene.haptic.tool) {
     // The built-in probe: its coarse mesh, in T.
     const std::uint32_t probe = id++;
@@ -181,6 +244,7 @@ DisplayStream MakeDisplayStream(const BuiltScene& scene) {
     s.graph.nodes.push_back(NodeAt("probe", RigidTransform::Identity(), probe,
                                    static_cast<int>(s.graph.materials.size()) - 1,
                                    kSceneNodeTool | kSceneNodeMoving));
+    s.part_of.push_back(-1);
   }
   for (std::size_t v = 0; v < s.graph.nodes.size(); ++v) {
     const SceneGraphNode& n = s.graph.nodes[v];

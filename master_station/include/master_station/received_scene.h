@@ -5,6 +5,7 @@
 // guards it; the loop never touches it.
 
 #include <cstdint>
+#include <glm/vec2.hpp>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -30,6 +31,8 @@ struct ReceivedSceneContent {
     std::uint32_t object_id = 0;
     std::uint32_t version = 0;
     TriangleMesh mesh_N;
+    /// TEXCOORD_0 per vertex (glTF's convention: (0, 0) the image's top-left), or empty.
+    std::vector<glm::dvec2> uv_N;
   };
   /// Every mesh object that decoded, by object id ascending.
   std::vector<Mesh> meshes;

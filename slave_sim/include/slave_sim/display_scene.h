@@ -32,8 +32,9 @@ inline constexpr std::uint32_t kSceneGraphObjectId = 1;
 
 /// What the remote node streams for display.
 struct DisplayStream {
-  /// The scene graph first (kSceneGraphObjectId), then one kDracoMesh per distinct mesh (positions
-  /// in the mesh's node frame N, metres), then one kImage per base-colour image a material uses.
+  /// The scene graph first (kSceneGraphObjectId), then one kDracoMesh per distinct mesh and
+  /// material (positions in the mesh's node frame N, metres; with TEXCOORD_0 as a Draco TEX_COORD
+  /// attribute when the mesh has it), then one kImage per base-colour image a material uses.
   std::vector<StreamObject> objects;
   /// The decoded form of objects[0].
   SceneGraphDescription graph;
@@ -42,6 +43,11 @@ struct DisplayStream {
   std::vector<int> graph_node_of_entry;
   /// Nodes of `graph` whose local pose the stream updates (kSceneNodeMoving, not the tool).
   std::vector<std::uint16_t> moving_nodes;
+  /// For a scene from a glTF file: per node of `graph`, the node whose glTF mesh it shows a
+  /// further material part of (a child at the identity), −1 for the nodes of the file. A mesh
+  /// whose primitives have several materials is sent as one Draco object per material (the
+  /// first on the node itself), so that each part can be drawn in its material and texture.
+  std::vector<int> part_of;
 };
 
 /// The stream of a built-in scene: the tool's full-resolution mesh in its frame Ft (placed at
