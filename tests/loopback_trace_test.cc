@@ -118,9 +118,18 @@ TEST(LoopbackFig75, ForcesStayWithinTheDeviceLimits) {
   ASSERT_GT(clock["samples"].get<int>(), 10);
   EXPECT_LE(std::abs(clock["offset_ms"].get<double>()),
             clock["offset_uncertainty_ms"].get<double>() + 1e-3);
-  // The scene arrived whole and decoded on the operator side.
+  // The scene arrived whole, as a scene (its graph and the block's and gear's meshes), and
+  // decoded on the operator side.
   EXPECT_TRUE(s["transport"]["scene"]["complete"].get<bool>());
-  EXPECT_EQ(s["transport"]["scene"]["verified_objects"].get<int>(), 2);
+  EXPECT_EQ(s["transport"]["scene"]["verified_objects"].get<int>(), 3);
+  int graphs = 0, meshes = 0;
+  for (const auto& o : s["transport"]["scene"]["decoded"]) {
+    EXPECT_FALSE(o.contains("error")) << o.dump();
+    graphs += o.value("kind", "") == "scene_graph";
+    meshes += o.value("kind", "") == "draco_mesh";
+  }
+  EXPECT_EQ(graphs, 1);
+  EXPECT_EQ(meshes, 2);
   EXPECT_EQ(s["transport"]["rejected_total"].get<int>(), 0);
 }
 
