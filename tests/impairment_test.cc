@@ -505,7 +505,8 @@ TEST(MessageTypeName, NamesKnownTypesAndNumbersTheRest) {
   // The names are the protocol's own (wire::ToString), so a new type is named without a change
   // here.
   EXPECT_EQ(MessageTypeName(12), "compact_contact_model");
-  EXPECT_EQ(MessageTypeName(13), "type_13");
+  EXPECT_EQ(MessageTypeName(13), "node_poses");
+  EXPECT_EQ(MessageTypeName(14), "type_14");
   EXPECT_EQ(MessageTypeName(255), "type_255");
 }
 

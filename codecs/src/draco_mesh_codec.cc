@@ -91,9 +91,8 @@ void ValidateUv(std::span<const glm::dvec2> uv, std::size_t num_vertices) {
   throw std::runtime_error("Draco decode: " + what);
 }
 
-// The decoded mesh with one vertex per Draco point: its position and its value of `tex` (2
-// components).
-DracoMesh ToPointMesh(const draco::Mesh& dmesh, const draco::PointAttribute& tex) {
+// The mesh's position attribute, checked to exist with 3 components.
+const draco::PointAttribute* PositionAttribute(const draco::Mesh& dmesh) {
   const draco::PointAttribute* const position =
       dmesh.GetNamedAttribute(draco::GeometryAttribute::POSITION);
   if (position == nullptr) ThrowDecodeError("the mesh has no position attribute");
@@ -102,6 +101,13 @@ DracoMesh ToPointMesh(const draco::Mesh& dmesh, const draco::PointAttribute& tex
                      std::to_string(static_cast<int>(position->num_components())) +
                      " components, expected 3");
   }
+  return position;
+}
+
+// The decoded mesh with one vertex per Draco point: its position and its value of `tex` (2
+// components).
+DracoMesh ToPointMesh(const draco::Mesh& dmesh, const draco::PointAttribute& tex) {
+  const draco::PointAttribute* const position = PositionAttribute(dmesh);
   if (tex.num_components() != 2) {
     ThrowDecodeError("the texture coordinate attribute has " +
                      std::to_string(static_cast<int>(tex.num_components())) +
@@ -158,14 +164,7 @@ DracoMesh ToPointMesh(const draco::Mesh& dmesh, const draco::PointAttribute& tex
 }
 
 TriangleMesh ToTriangleMesh(const draco::Mesh& dmesh) {
-  const draco::PointAttribute* const position =
-      dmesh.GetNamedAttribute(draco::GeometryAttribute::POSITION);
-  if (position == nullptr) ThrowDecodeError("the mesh has no position attribute");
-  if (position->num_components() != 3) {
-    ThrowDecodeError("the position attribute has " +
-                     std::to_string(static_cast<int>(position->num_components())) +
-                     " components, expected 3");
-  }
+  const draco::PointAttribute* const position = PositionAttribute(dmesh);
   if (dmesh.num_faces() == 0) ThrowDecodeError("the mesh has no triangles");
   const std::size_t num_values = position->size();
   if (num_values == 0) ThrowDecodeError("the position attribute is empty");
