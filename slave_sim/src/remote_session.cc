@@ -33,6 +33,13 @@ bool RemoteSession::OnDatagram(std::span<const std::uint8_t> datagram, const Soc
     return true;
   }
   if (status != wire::DecodeStatus::kOk) return true;
+  // Any datagram of the open session other than a Hello shows that the operator holds our
+  // Welcome: only then does the scene stream start (before that, its fragments would reach an
+  // operator without the session id and be dropped as out of session: with the Welcome lost, the
+  // whole first burst was wasted and only NACK repair, a round trip at a time, could recover it).
+  if (session_ != 0 && header.session_id == session_ && header.type != wire::MessageType::kHello) {
+    operator_confirmed_ = true;
+  }
   switch (header.type) {
     case wire::MessageType::kHello:
       OnHello(header, body, from, now);
@@ -167,6 +174,7 @@ void RemoteSession::OnHello(const wire::Header& header, std::span<const std::uin
     welcome.scene_objects = 0;
   }
   scene_enabled_ = welcome.scene_objects > 0;
+  operator_confirmed_ = false;
   if (scene_enabled_) scene_sender_.QueueAll();
   scene_tokens_ = 0.0;
   session_start_ns_ = now;
@@ -205,7 +213,10 @@ void RemoteSession::CheckPeerTimeout(std::int64_t now) {
 }
 
 void RemoteSession::MaybeSendNodePoses(std::int64_t now) {
-  if (session_ == 0 || !scene_enabled_ || !config_.display_poses || graph_version_ == 0) return;
+  if (session_ == 0 || !operator_confirmed_ || !scene_enabled_ || !config_.display_poses ||
+      graph_version_ == 0) {
+    return;
+  }
   if (now - last_node_poses_ns_ < node_poses_period_ns_) return;
   last_node_poses_ns_ = now;
   const double scene_time_s = static_cast<double>(now - start_ns_) * 1e-9;
@@ -228,7 +239,7 @@ void RemoteSession::MaybeSendNodePoses(std::int64_t now) {
 }
 
 void RemoteSession::StreamScene(std::int64_t now) {
-  if (session_ == 0) return;
+  if (session_ == 0 || !operator_confirmed_) return;
   scene_tokens_ = std::min(
       token_cap_, scene_tokens_ + config_.scene_rate_bytes_per_s * (now - last_token_ns_) * 1e-9);
   last_token_ns_ = now;

@@ -39,7 +39,8 @@ class RemoteSession {
   /// timeout (counted in peers_lost).
   void CheckPeerTimeout(std::int64_t now_ns);
   /// Sends scene fragments as the pacing budget (config.scene_rate_bytes_per_s) allows, and the
-  /// manifest every 250 ms. Only while a session is open.
+  /// manifest every 250 ms. Only while a session is open and the operator has shown that it holds
+  /// the Welcome (a datagram of the session other than a Hello has come from it).
   void StreamScene(std::int64_t now_ns);
   /// Sends the moving scene nodes' local poses (config.display_poses at the node's clock) as one
   /// NodePoses frame (as many datagrams as the nodes need) every 1/config.display_rate_hz, while
@@ -121,6 +122,8 @@ class RemoteSession {
   SocketAddress peer_;
   std::int64_t peer_timeout_ns_ = 0, model_period_ns_ = 0, last_model_sent_ns_ = 0;
   bool scene_enabled_ = false;
+  /// A datagram of this session (not a Hello) came from the operator: it holds the Welcome.
+  bool operator_confirmed_ = false;
   double scene_tokens_ = 0.0;
   std::int64_t last_token_ns_ = 0, last_manifest_ns_ = 0;
   double token_cap_ = 0.0;
