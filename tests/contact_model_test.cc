@@ -57,6 +57,44 @@ TEST(ContactModel, ContactsSwitchOffWhenTheToolLeaves) {
   EXPECT_EQ(e.K.norm(), 0.0);
 }
 
+// DESIGN.md §5's bound on the delivered stiffness: a contact whose force exceeds the bound pushes
+// with exactly the bound, along its own direction, and adds no stiffness; one below the bound is
+// untouched (the same numbers as without a bound); the bound is continuous at its edge.
+TEST(ContactModel, TheForceBoundSaturatesOnlyTheContactsBeyondIt) {
+  ContactModel m = TwoContactModel();
+  m.contacts[0].depth_m = 0.03;  // a grazing contact's 30 mm: 5000 · 0.03 · |J_x| ≈ 157 N
+  const ContactModelEvaluation free = EvaluateContactModel(m, m.X_WT0);
+  const double bound = 20.0;
+  const ContactModelEvaluation e = EvaluateContactModel(m, m.X_WT0, 1.0, bound);
+  EXPECT_EQ(e.active_contacts, 2);
+  EXPECT_EQ(e.saturated_contacts, 1);
+  EXPECT_EQ(free.saturated_contacts, 0);
+  const Wrench small = PenaltyWrench(1e-4, m.contacts[1].gradient, 3000);
+  const Wrench big = (e.F_T_W + Wrench{-small.force, -small.torque});
+  EXPECT_NEAR(glm::length(big.force), bound, 1e-9);
+  const Wrench big_free = PenaltyWrench(0.03, m.contacts[0].gradient, 5000);
+  EXPECT_NEAR(glm::length(glm::normalize(big.force) - glm::normalize(big_free.force)), 0.0, 1e-12);
+  // Torque scales with the force (the same saturated depth).
+  EXPECT_NEAR(glm::length(big.torque) / glm::length(big_free.torque),
+              bound / glm::length(big_free.force), 1e-12);
+  // Only the unsaturated contact stiffens: K is that contact's alone.
+  ContactModel only_small = m;
+  only_small.contacts[0].depth_m = -1.0;
+  const ContactModelEvaluation s = EvaluateContactModel(only_small, m.X_WT0);
+  EXPECT_NEAR((e.K - s.K).norm(), 0.0, 1e-12);
+  // Below the bound nothing changes, bit for bit.
+  const ContactModelEvaluation low = EvaluateContactModel(TwoContactModel(), m.X_WT0, 1.0, bound);
+  const ContactModelEvaluation low_free = EvaluateContactModel(TwoContactModel(), m.X_WT0);
+  EXPECT_EQ(low.F_T_W.force, low_free.F_T_W.force);
+  EXPECT_EQ(low.K, low_free.K);
+  EXPECT_EQ(low.saturated_contacts, 0);
+  // Continuous at the edge: just beyond the bound the force is the bound.
+  const double edge = bound / (5000 * glm::length(m.contacts[0].gradient.d_translation_W));
+  m.contacts[0].depth_m = edge * (1 + 1e-9);
+  EXPECT_NEAR(glm::length(EvaluateContactModel(m, m.X_WT0, 1.0, bound).F_T_W.force - small.force),
+              bound, 1e-6);
+}
+
 TEST(ContactModel, NonFiniteInputsGiveZeroWrench) {
   ContactModel m = TwoContactModel();
   RigidTransform X = m.X_WT0;

@@ -60,6 +60,14 @@ Wrench ToolSimulator::CouplingWrench(const ToolState& s, const RigidTransform& X
               c.b_rotation_nms_per_rad * (V_WH_W.angular - s.V_WT_W.angular)};
 }
 
+void ToolSimulator::set_max_contact_force(double max_contact_force_n) {
+  if (!(max_contact_force_n > 0.0)) {
+    throw std::invalid_argument("the bound on a contact's force must be > 0 N (+inf = none), got " +
+                                std::to_string(max_contact_force_n));
+  }
+  max_contact_force_n_ = max_contact_force_n;
+}
+
 ToolStepResult ToolSimulator::Step(ToolState& s, const RigidTransform& X_WH, const Twist& V_WH_W,
                                    const ContactModel& model, double stiffness_scale,
                                    double h) const noexcept {
@@ -73,7 +81,8 @@ ToolStepResult ToolSimulator::Step(ToolState& s, const RigidTransform& X_WH, con
     s = {X_WH, V_WH_W};
     result.ok = false;
   }
-  return Integrate(s, X_WH, V_WH_W, EvaluateContactModel(model, s.X_WT, stiffness_scale), h,
+  return Integrate(s, X_WH, V_WH_W,
+                   EvaluateContactModel(model, s.X_WT, stiffness_scale, max_contact_force_n_), h,
                    result);
 }
 
@@ -92,12 +101,14 @@ ToolStepResult ToolSimulator::StepBlended(ToolState& s, const RigidTransform& X_
     result.ok = false;
   }
   const double beta = std::isfinite(blend) ? std::clamp(blend, 0.0, 1.0) : 1.0;
-  ContactModelEvaluation a = EvaluateContactModel(current, s.X_WT, beta);
-  const ContactModelEvaluation b = EvaluateContactModel(previous, s.X_WT, 1.0 - beta);
+  ContactModelEvaluation a = EvaluateContactModel(current, s.X_WT, beta, max_contact_force_n_);
+  const ContactModelEvaluation b =
+      EvaluateContactModel(previous, s.X_WT, 1.0 - beta, max_contact_force_n_);
   a.F_T_W.force += b.F_T_W.force;
   a.F_T_W.torque += b.F_T_W.torque;
   a.K += b.K;
   a.active_contacts = beta >= 0.5 ? a.active_contacts : b.active_contacts;
+  a.saturated_contacts = beta >= 0.5 ? a.saturated_contacts : b.saturated_contacts;
   a.max_depth_m = std::max(a.max_depth_m, b.max_depth_m);
   return Integrate(s, X_WH, V_WH_W, a, h, result);
 }
@@ -108,6 +119,7 @@ ToolStepResult ToolSimulator::Integrate(ToolState& s, const RigidTransform& X_WH
   result.F_contact_T_W = contact.F_T_W;
   result.active_contacts = contact.active_contacts;
   result.max_depth_m = contact.max_depth_m;
+  result.saturated_contacts = contact.saturated_contacts;
 
   const VirtualCoupling& c = coupling_;
   const Wrench F_total = contact.F_T_W + CouplingWrench(s, X_WH, V_WH_W);

@@ -60,8 +60,14 @@ std::vector<bool> UnderTool(const SceneGraphDescription& g) {
 }  // namespace
 
 DisplayWorker::DisplayWorker(const DisplayConfig& config, const ReceivedScene& scene,
-                             TripleBuffer<DisplayToolState>& tool, const glm::dvec3& up_W)
-    : config_(config), scene_(scene), tool_(tool), up_W_(up_W) {}
+                             TripleBuffer<DisplayToolState>& tool, const glm::dvec3& up_W,
+                             double max_contact_force_n)
+    : config_(config),
+      scene_(scene),
+      tool_(tool),
+      up_W_(up_W),
+      max_contact_force_n_(max_contact_force_n > 0.0 ? max_contact_force_n
+                                                     : std::numeric_limits<double>::infinity()) {}
 
 void DisplayWorker::Run(const std::atomic<bool>& stop) {
   std::unique_ptr<SceneRenderer> renderer;
@@ -203,6 +209,10 @@ void DisplayWorker::Run(const std::atomic<bool>& stop) {
           const ContactLinearization& cl = tool.model.contacts[static_cast<std::size_t>(k)];
           const double depth = cl.depth_m + cl.gradient.Dot(dq);
           glm::dvec3 force = PenaltyWrench(depth, cl.gradient, cl.stiffness_n_per_m).force;
+          // As the loop renders it: held at the bound on a contact's force (EvaluateContactModel).
+          if (const double f = glm::length(force); f > max_contact_force_n_) {
+            force *= max_contact_force_n_ / f;
+          }
           // An arrow longer than kArrowMaxRadii tool radii is drawn at that length (saturated:
           // counted), so that a grazing contact's large force does not hide the scene.
           const double length = glm::length(force) * arrow_m_per_n_;

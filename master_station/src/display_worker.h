@@ -35,10 +35,12 @@ struct DisplayToolState {
 /// on stderr, recorded in Summary() and the run goes on without it.
 class DisplayWorker {
  public:
-  /// `up_W`: the scene's up direction (the Welcome's home pose +z); `scene` and `tool` must
-  /// outlive the worker.
+  /// `up_W`: the scene's up direction (the Welcome's home pose +z); `max_contact_force_n`: the
+  /// loop's bound on a contact's force (N; 0 = none), applied to the arrows as the loop applies it;
+  /// `scene` and `tool` must outlive the worker.
   DisplayWorker(const DisplayConfig& config, const ReceivedScene& scene,
-                TripleBuffer<DisplayToolState>& tool, const glm::dvec3& up_W);
+                TripleBuffer<DisplayToolState>& tool, const glm::dvec3& up_W,
+                double max_contact_force_n);
   void Run(const std::atomic<bool>& stop);
   /// The display's part of summary.json: mode, renderer, frames written, render and write times,
   /// the arrow scale, what went wrong.
@@ -49,6 +51,7 @@ class DisplayWorker {
   const ReceivedScene& scene_;
   TripleBuffer<DisplayToolState>& tool_;
   glm::dvec3 up_W_;
+  double max_contact_force_n_;
   std::string renderer_, error_;
   std::uint64_t frames_ = 0, frames_without_scene_ = 0, scene_generations_ = 0;
   std::vector<double> render_ms_, write_ms_;

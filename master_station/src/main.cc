@@ -190,6 +190,13 @@ int main(int argc, char** argv) {
                  "Falcon firmware image (not shipped; e.g. from libnifalcon's or Novint's files)");
   bool no_passivity = false;
   double model_timeout_s = defaults.safety.model_timeout_s;
+  double max_contact_force_n = defaults.max_contact_force_n;
+  app.add_option("--max-contact-force", max_contact_force_n,
+                 "bound on each contact's force on the simulated tool, N (0 = none): a contact\n"
+                 "beyond it pushes with the bound and adds no stiffness (DESIGN.md 5; grazing\n"
+                 "contacts, docs/hard-cases.md)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   app.add_flag("--no-passivity", no_passivity,
                "turn off the time-domain passivity controller (for comparison only)");
   app.add_option("--model-timeout", model_timeout_s,
@@ -270,6 +277,7 @@ int main(int argc, char** argv) {
     config.max_grid = max_grid;
     config.max_model_rate_hz = max_model_rate;
     config.passivity = !no_passivity;
+    config.max_contact_force_n = max_contact_force_n;
     config.safety.model_timeout_s = model_timeout_s;
     config.tool_state_deadband.weber_fraction =
         tool_state_deadband_pct.value_or(deadband_pct) / 100.0;

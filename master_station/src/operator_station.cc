@@ -51,6 +51,9 @@ using station::WriteTraceHeader;
 using station::WriteTraceRow;
 
 void StationConfig::Validate() const {
+  if (!(max_contact_force_n >= 0.0)) {
+    throw std::invalid_argument("the bound on a contact's force must be >= 0 N (0 = none)");
+  }
   if (display.mode != DisplayConfig::Mode::kNone) {
     if (!(display.frame_rate_hz >= 0.1 && display.frame_rate_hz <= 120.0)) {
       throw std::invalid_argument("display frame rate must be within 0.1..120 frames/s, got " +
@@ -334,6 +337,9 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   // in the observer (E < 0) and is dissipated on the next ones.
   tick_config.passivity_max_damping_ns_per_m = 4.0 * caps.max_damping_ns_per_m;
   tick_config.h_s = h;
+  tick_config.max_contact_force_n = config.max_contact_force_n > 0.0
+                                        ? config.max_contact_force_n
+                                        : std::numeric_limits<double>::infinity();
   OperatorTick tick(tick_config, X_WM, tool);
   const PassivityController& passivity = tick.passivity();
   const WrenchSafetyFilter& safety = tick.safety();
@@ -343,7 +349,7 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
 
   if (display_on) {
     display.emplace(display_config, received_scene, display_tool,
-                    X_WM.rotation * glm::dvec3(0.0, 0.0, 1.0));
+                    X_WM.rotation * glm::dvec3(0.0, 0.0, 1.0), config.max_contact_force_n);
     display_thread = std::thread([&] { display->Run(stop_display); });
   }
 
@@ -518,6 +524,8 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   } else {
     s["display"] = {{"mode", "none"}};
   }
+  s["contact_force_bound_n"] = config.max_contact_force_n;
+  s["saturated_contact_ticks"] = tick.counters().saturated_contact_ticks;
   s["tool_mass_kg"] = tool_inertia.mass_kg;
   s["device"] = caps.name;
   s["duration_s"] =

@@ -22,6 +22,7 @@ OperatorTick::OperatorTick(const OperatorTickConfig& config, const RigidTransfor
                                 std::to_string(config.model_blend_ticks));
   }
   if (!(config.h_s > 0.0)) throw std::invalid_argument("tick length must be positive");
+  simulator_.set_max_contact_force(config.max_contact_force_n);
 }
 
 OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
@@ -94,6 +95,7 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
       out.step = simulator_.Step(tool_, out.X_WH, V_WH_W, model_, 1.0, h);
     }
     if (!out.step.ok) ++counters_.nonfinite;
+    if (out.step.saturated_contacts > 0) ++counters_.saturated_contact_ticks;
     F_device_W = -out.step.F_coupling_T_W;
     if (!IsFinite(F_device_W)) {
       ++counters_.nonfinite;

@@ -5,6 +5,7 @@
 #include <Eigen/Core>
 #include <array>
 #include <cstdint>
+#include <limits>
 
 #include "haptic_core/contact_linearization.h"
 #include "haptic_core/spatial.h"
@@ -43,13 +44,22 @@ struct ContactModelEvaluation {
   int active_contacts = 0;
   /// Largest δ_i(q) (m), or 0 with no contact.
   double max_depth_m = 0.0;
+  /// Active contacts whose force was saturated at the bound (see EvaluateContactModel).
+  int saturated_contacts = 0;
 };
 
 /// Evaluates `model` at tool pose X_WT: δ_i(q) = δ0_i + J_i·(q ⊖ q0), per-contact switching by
 /// max(δ_i, 0) (DESIGN.md §5). Contacts whose δ0 or stiffness is not finite are skipped.
-/// `stiffness_scale` ∈ [0, 1] multiplies every k_i (used to blend a new model in). noexcept and
-/// allocation-free: callable from the 1 kHz loop.
-ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const RigidTransform& X_WT,
-                                            double stiffness_scale = 1.0) noexcept;
+/// `stiffness_scale` ∈ [0, 1] multiplies every k_i (used to blend a new model in).
+///
+/// `max_contact_force_n` (N, > 0; +∞ = none) bounds each contact's force, DESIGN.md §5's bounded
+/// delivered stiffness: where k_i·δ_i·|∂δ_i/∂x| exceeds it, δ_i is held at the depth that gives
+/// the bound (the contact's force and torque saturate along J_i) and the contact adds no stiffness
+/// to K (its force no longer grows with δ). A grazing contact whose δ is the sideways overlap of
+/// patches that are not height fields (docs/hard-cases.md) then pushes with the bound, not with
+/// thousands of newtons. noexcept and allocation-free: callable from the 1 kHz loop.
+ContactModelEvaluation EvaluateContactModel(
+    const ContactModel& model, const RigidTransform& X_WT, double stiffness_scale = 1.0,
+    double max_contact_force_n = std::numeric_limits<double>::infinity()) noexcept;
 
 }  // namespace ht

@@ -1,4 +1,6 @@
 #pragma once
+
+#include <limits>
 // Simulated tool driven by the haptic device through a virtual coupling, integrated with one
 // linearized backward-Euler step per tick against the local contact model (DESIGN.md §5;
 // Otaduy & Lin 2005, "Stable and responsive six-degree-of-freedom haptic manipulation using
@@ -43,6 +45,8 @@ struct ToolStepResult {
   Wrench F_contact_T_W;
   int active_contacts = 0;
   double max_depth_m = 0.0;
+  /// Active contacts whose force was held at the simulator's bound this step.
+  int saturated_contacts = 0;
   /// False when the step produced a non-finite state; the tool was then reset onto the handle.
   bool ok = true;
 };
@@ -75,6 +79,10 @@ class ToolSimulator {
 
   const VirtualCoupling& coupling() const noexcept { return coupling_; }
   const ToolInertia& inertia() const noexcept { return inertia_; }
+  /// The bound on each contact's force (N; +∞ = none, the default), passed to
+  /// EvaluateContactModel by Step and StepBlended. Throws std::invalid_argument unless > 0.
+  void set_max_contact_force(double max_contact_force_n);
+  double max_contact_force_n() const noexcept { return max_contact_force_n_; }
 
  private:
   ToolStepResult Integrate(ToolState& state, const RigidTransform& X_WH, const Twist& V_WH_W,
@@ -82,6 +90,7 @@ class ToolSimulator {
                            ToolStepResult result) const noexcept;
   ToolInertia inertia_;
   VirtualCoupling coupling_;
+  double max_contact_force_n_ = std::numeric_limits<double>::infinity();
 };
 
 }  // namespace ht

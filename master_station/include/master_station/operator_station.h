@@ -87,6 +87,10 @@ struct StationConfig {
   int model_blend_ticks = 4;
   /// Time-domain passivity controller on the hand–device port (Ryu, Kwon & Hannaford 2004).
   bool passivity = true;
+  /// Bound on each contact's force on the simulated tool (N; 0 = none): DESIGN.md §5's bounded
+  /// delivered stiffness. A contact beyond it pushes with the bound and adds no stiffness
+  /// (EvaluateContactModel); docs/hard-cases.md has the grazing contacts it is for.
+  double max_contact_force_n = 5.0;
   /// The safety stage before the device (force/torque caps are further bounded by the device's
   /// capabilities; the contact model's age is measured on the local clock from its send time).
   SafetyLimits safety{.max_force_n = 1e9, .max_torque_nm = 1e9, .model_timeout_s = 0.5};

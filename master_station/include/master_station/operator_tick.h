@@ -12,6 +12,7 @@
 // gets the safety stage's ramp to zero, and a later recovery ramps back up instead of jumping.
 
 #include <cstdint>
+#include <limits>
 
 #include "haptic_core/contact_model.h"
 #include "haptic_core/passivity.h"
@@ -35,6 +36,9 @@ struct OperatorTickConfig {
   double passivity_max_damping_ns_per_m = 0.0;
   /// Tick length h (s).
   double h_s = 1e-3;
+  /// Bound on each contact's force on the simulated tool (N; +∞ = none): DESIGN.md §5's bounded
+  /// delivered stiffness (ToolSimulator::set_max_contact_force).
+  double max_contact_force_n = std::numeric_limits<double>::infinity();
 };
 
 /// When a contact model was made and what its remote step cost.
@@ -87,6 +91,7 @@ struct OperatorTickCounters {
   std::int64_t workspace_jumps = 0;
   std::int64_t models_from_before_jump = 0;
   std::int64_t models_used = 0;
+  std::int64_t saturated_contact_ticks = 0;  ///< ticks with a contact force held at the bound
 };
 
 /// The operator's tick. Construction may allocate; Step never allocates, locks, blocks or throws.
