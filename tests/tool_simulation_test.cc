@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include "haptic_core/demo/demo_scenes.h"
 
 namespace ht {
@@ -38,6 +40,31 @@ TEST(ToolSimulation, StiffContactBalancesTheCouplingAtRest) {
   const double z_expected = -k_c * 5e-3 / (k_c + 1e5);  // series springs
   EXPECT_NEAR(s.X_WT.translation.z, z_expected, 1e-7);
   EXPECT_NEAR(r.F_coupling_T_W.force.z + r.F_contact_T_W.force.z, 0.0, 1e-3);
+}
+
+// With a bound on a contact's force, a wall whose penalty force would exceed it holds the tool
+// with the bound: pushed 5 mm in by the handle, the tool sinks until the coupling's force equals
+// the bound (the wall adds no stiffness beyond it), and the step says the contact saturated.
+TEST(ToolSimulation, ABoundedContactHoldsTheToolWithTheBound) {
+  ToolSimulator sim(BlockOnGearToolInertia(), VirtualCoupling{});
+  EXPECT_THROW(sim.set_max_contact_force(0.0), std::invalid_argument);
+  EXPECT_THROW(sim.set_max_contact_force(std::nan("")), std::invalid_argument);
+  const double bound = 2.0;
+  sim.set_max_contact_force(bound);
+  ContactModel wall;
+  wall.num_contacts = 1;
+  wall.contacts[0].depth_m = 0.0;
+  wall.contacts[0].gradient = {{0, 0, -1}, {0, 0, 0}};
+  wall.contacts[0].stiffness_n_per_m = 1e5;
+  RigidTransform X_WH;
+  X_WH.translation = {0, 0, -5e-3};  // unbounded, the wall would push back with 4.95 N
+  ToolState s;
+  ToolStepResult r;
+  for (int i = 0; i < 3000; ++i) r = sim.Step(s, X_WH, {}, wall, 1.0, 1e-3);
+  EXPECT_EQ(r.saturated_contacts, 1);
+  EXPECT_NEAR(r.F_contact_T_W.force.z, bound, 1e-9);
+  const double k_c = VirtualCoupling{}.k_translation_n_per_m;
+  EXPECT_NEAR(s.X_WT.translation.z, -5e-3 + bound / k_c, 1e-7);  // coupling force = the bound
 }
 
 TEST(ToolSimulation, NonFiniteHandleHoldsTheTool) {
