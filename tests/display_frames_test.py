@@ -10,26 +10,11 @@ Usage: tests/display_frames_test.py   (HT_LOOPBACK_OUT names the run folder)
 """
 import json
 import os
-import struct
 import sys
 
 import matplotlib.image as mpimg
 
-failures = []
-
-
-def check(cond, what):
-    if not cond:
-        failures.append(what)
-        print("FAIL:", what)
-
-
-def png_size(path):
-    with open(path, "rb") as f:
-        head = f.read(24)
-    if head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
-        return None
-    return struct.unpack(">II", head[16:24])
+from png_checks import check, failures, png_size
 
 
 def main():

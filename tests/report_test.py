@@ -11,26 +11,11 @@ Usage: tests/report_test.py SOURCE_DIR   (HT_LOOPBACK_OUT names the run folder)
 import os
 import re
 import shutil
-import struct
 import subprocess
 import sys
 import tempfile
 
-failures = []
-
-
-def check(cond, what):
-    if not cond:
-        failures.append(what)
-        print("FAIL:", what)
-
-
-def png_size(path):
-    with open(path, "rb") as f:
-        head = f.read(24)
-    if head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
-        return None
-    return struct.unpack(">II", head[16:24])
+from png_checks import check, failures, png_size
 
 
 def not_blank(path):

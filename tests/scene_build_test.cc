@@ -398,13 +398,18 @@ TEST(SceneBuildData, DracoBoxAndItsTwinBuildTheSameModel) {
   }
 }
 
-TEST(SceneBuildData, MilkTruckWheelsTurnWhenTheAnimationPlays) {
-  REQUIRE_GLTF_DATA(dir);
+// The CesiumMilkTruck built small (100 coarse triangles, 256² textures), no cache.
+BuiltScene BuildSmallMilkTruck(const fs::path& data) {
   SceneDescription d = SceneDescription::ForGltf(
-      (*dir / "draco_testdata_gltf/CesiumMilkTruck/glTF/CesiumMilkTruck.gltf").string());
+      (data / "draco_testdata_gltf/CesiumMilkTruck/glTF/CesiumMilkTruck.gltf").string());
   d.defaults.coarse_triangles = 100;
   d.defaults.texture_size = 256;
-  BuiltScene s = BuildScene(d, HapticModelCache(""));
+  return BuildScene(d, HapticModelCache(""));
+}
+
+TEST(SceneBuildData, MilkTruckWheelsTurnWhenTheAnimationPlays) {
+  REQUIRE_GLTF_DATA(dir);
+  BuiltScene s = BuildSmallMilkTruck(*dir);
   ASSERT_EQ(s.gltf.animations.size(), 1u);
   ASSERT_EQ(s.touchable_objects.size(), s.haptic.touchables.size());
   std::vector<RigidTransform> rest;
@@ -443,11 +448,7 @@ TEST(SceneBuildData, MilkTruckWheelsTurnWhenTheAnimationPlays) {
 // (DisplayNodePosesAt), at several times.
 TEST(SceneBuildData, MilkTruckDisplayStreamPlacesEveryTouchableWhereTheHapticSceneHasIt) {
   REQUIRE_GLTF_DATA(dir);
-  SceneDescription d = SceneDescription::ForGltf(
-      (*dir / "draco_testdata_gltf/CesiumMilkTruck/glTF/CesiumMilkTruck.gltf").string());
-  d.defaults.coarse_triangles = 100;
-  d.defaults.texture_size = 256;
-  BuiltScene s = BuildScene(d, HapticModelCache(""));
+  BuiltScene s = BuildSmallMilkTruck(*dir);
   const DisplayStream stream = MakeDisplayStream(s);
   ASSERT_FALSE(stream.objects.empty());
   ASSERT_EQ(stream.objects[0].kind, wire::SceneObjectKind::kSceneGraph);
