@@ -88,6 +88,13 @@ TEST(ContactModel, TheForceBoundSaturatesOnlyTheContactsBeyondIt) {
   EXPECT_EQ(low.F_T_W.force, low_free.F_T_W.force);
   EXPECT_EQ(low.K, low_free.K);
   EXPECT_EQ(low.saturated_contacts, 0);
+  // Two blended evaluations of one model (scales β and 1 − β, as StepBlended does) add up to the
+  // bound at most, not twice it.
+  ContactModel deep = m;
+  deep.contacts[1].depth_m = -1.0;
+  const Wrench blended = EvaluateContactModel(deep, m.X_WT0, 0.25, bound).F_T_W +
+                         EvaluateContactModel(deep, m.X_WT0, 0.75, bound).F_T_W;
+  EXPECT_NEAR(glm::length(blended.force), bound, 1e-9);
   // Continuous at the edge: just beyond the bound the force is the bound.
   const double edge = bound / (5000 * glm::length(m.contacts[0].gradient.d_translation_W));
   m.contacts[0].depth_m = edge * (1 + 1e-9);

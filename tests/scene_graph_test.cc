@@ -598,3 +598,31 @@ TEST(SceneGraph, ASceneSentAsASceneArrivesThroughTheSceneStream) {
 
 }  // namespace
 }  // namespace ht
+
+namespace ht {
+namespace {
+
+// Names from files have no limit: SceneGraphName keeps what a graph can carry, cut between two
+// characters, and the encoder takes it.
+TEST(SceneGraph, NamesFromFilesAreCutToWhatTheGraphCarries) {
+  const std::string e_acute = "\xC3\xA9";  // é, two bytes
+  std::string long_name;
+  for (int i = 0; i < 200; ++i) long_name += e_acute;  // 400 bytes
+  const std::string cut = SceneGraphName(long_name);
+  EXPECT_LE(cut.size(), kMaxSceneGraphNameBytes);
+  EXPECT_EQ(cut.size(), 254u);  // 127 characters: the 128th would end at byte 256
+  EXPECT_EQ(SceneGraphName("wheel"), "wheel");
+  EXPECT_EQ(SceneGraphName(std::string("bad \xC0\x80 name")), "");  // overlong: not UTF-8
+  SceneGraphDescription g;
+  g.nodes.resize(1);
+  g.nodes[0].name = cut;
+  g.scene_name = SceneGraphName(std::string(300, 'x'));
+  EXPECT_EQ(g.scene_name.size(), kMaxSceneGraphNameBytes);
+  SceneGraphDescription back;
+  std::string error;
+  ASSERT_TRUE(DecodeSceneGraph(EncodeSceneGraph(g), &back, &error)) << error;
+  EXPECT_EQ(back.nodes[0].name, cut);
+}
+
+}  // namespace
+}  // namespace ht

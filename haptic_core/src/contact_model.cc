@@ -21,8 +21,10 @@ ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const Rig
     if (!(depth > 0.0)) continue;
     ++out.active_contacts;
     out.max_depth_m = std::max(out.max_depth_m, depth);
-    // The bound on the contact's force: saturate δ along J (no stiffness beyond it).
-    const double force_per_m = k * glm::length(c.gradient.d_translation_W);
+    // The bound on the contact's force: saturate δ along J (no stiffness beyond it). The depth
+    // is held where the unscaled stiffness reaches the bound, so that blended models (scales β
+    // and 1 − β of one contact) add up to the bound at most.
+    const double force_per_m = c.stiffness_n_per_m * glm::length(c.gradient.d_translation_W);
     if (force_per_m * depth > max_contact_force_n) {
       out.F_T_W += PenaltyWrench(max_contact_force_n / force_per_m, c.gradient, k);
       ++out.saturated_contacts;

@@ -97,6 +97,7 @@ void DisplayWorker::Run(const std::atomic<bool>& stop) {
   std::map<std::uint32_t, double> mesh_radius;
   std::map<std::uint32_t, bool> mesh_has_uv;
   std::map<std::uint32_t, int> texture_index;  // image object id → renderer texture (−1 failed)
+  std::map<std::uint32_t, std::uint32_t> texture_version;  // image object id → version uploaded
   std::vector<bool> under_tool;
   double tool_radius_m = 0.02;
   std::vector<SceneNodeTransform> local;
@@ -142,8 +143,14 @@ void DisplayWorker::Run(const std::atomic<bool>& stop) {
           mesh_radius[m.object_id] = radius;
         }
         // Base-colour textures, decoded once per object (PNG or JPEG as the file had them).
+        // A new version of an image is uploaded as a new texture (the old one stays allocated:
+        // the renderer has no release; edits of a texture are rare).
         for (const ReceivedSceneContent::Image& image : content->images) {
-          if (texture_index.count(image.object_id) != 0) continue;
+          if (const auto v = texture_version.find(image.object_id);
+              v != texture_version.end() && v->second == image.version) {
+            continue;
+          }
+          texture_version[image.object_id] = image.version;
           int w = 0, h = 0;
           try {
             const std::vector<std::uint8_t> rgba = DecodeImage(image.bytes, &w, &h);

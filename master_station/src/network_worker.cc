@@ -466,7 +466,8 @@ void NetworkWorker::CheckScene(std::int64_t now) {
           break;
         }
         case wire::SceneObjectKind::kImage:
-          content->images.push_back({id, std::vector<std::uint8_t>(bytes.begin(), bytes.end())});
+          content->images.push_back(
+              {id, version, std::vector<std::uint8_t>(bytes.begin(), bytes.end())});
           o["kind"] = "image";
           break;
         case wire::SceneObjectKind::kDracoMesh: {

@@ -7,8 +7,12 @@ namespace ht {
 
 void ReceivedScene::Set(std::shared_ptr<const ReceivedSceneContent> content) {
   std::lock_guard<std::mutex> lock(mutex_);
+  const bool same_graph = content_ && content && content_->graph_version != 0 &&
+                          content->graph_version == content_->graph_version &&
+                          content->graph.nodes.size() == content_->graph.nodes.size();
   content_ = std::move(content);
   ++generation_;
+  if (same_graph) return;  // only a mesh or an image changed: the poses received still hold
   poses_.reset();
   tracks_.clear();
   if (content_) poses_.emplace(content_->graph, content_->graph_version);

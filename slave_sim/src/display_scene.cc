@@ -72,6 +72,21 @@ std::vector<MeshPart> SplitByMaterial(const GltfMesh& m) {
   return parts;
 }
 
+// Translation, rotation and per-axis scale of an affine X (its columns' lengths; a mirror goes
+// into the scale of z). Shear is not carried.
+void SetFromMatrix(const glm::dmat4& X, SceneGraphNode* out) {
+  const glm::dmat3 M(X);
+  out->scale = glm::dvec3(glm::length(M[0]), glm::length(M[1]), glm::length(M[2]));
+  glm::dmat3 R = M;
+  for (int c = 0; c < 3; ++c) R[c] = out->scale[c] > 0.0 ? M[c] / out->scale[c] : R[c];
+  if (glm::determinant(R) < 0.0) {
+    R[2] = -R[2];
+    out->scale.z = -out->scale.z;
+  }
+  out->rotation = glm::normalize(glm::quat_cast(R));
+  out->translation = glm::dvec3(X[3]);
+}
+
 void EncodeGraph(DisplayStream* s) {
   s->objects.insert(s->objects.begin(),
                     StreamObject{kSceneGraphObjectId, wire::SceneObjectKind::kSceneGraph,
@@ -114,7 +129,7 @@ DisplayStream MakeDisplayStream(const HapticScene& scene, const TriangleMesh& to
 DisplayStream MakeDisplayStream(const BuiltScene& scene) {
   DisplayStream s;
   const GltfScene& g = scene.gltf;
-  s.graph.scene_name = scene.haptic.name;
+  s.graph.scene_name = SceneGraphName(scene.haptic.name);
   std::uint32_t id = kSceneGraphObjectId + 1;
   // Meshes, each once, in N: one Draco object per (mesh, material) part, with its texture
   // coordinates when the mesh has them.
@@ -133,7 +148,7 @@ DisplayStream MakeDisplayStream(const BuiltScene& scene) {
   std::vector<std::uint32_t> image_object(g.images.size(), 0);
   for (const GltfMaterial& m : g.materials) {
     SceneMaterial out;
-    out.name = m.name;
+    out.name = SceneGraphName(m.name);
     out.base_colour_rgba = glm::vec4(m.base_colour_rgba);
     if (m.base_colour_image >= 0) {
       const auto i = static_cast<std::size_t>(m.base_colour_image);
@@ -142,7 +157,7 @@ DisplayStream MakeDisplayStream(const BuiltScene& scene) {
         s.objects.push_back({id++, wire::SceneObjectKind::kImage, g.images[i].bytes});
       }
       out.base_colour_texture_object = image_object[i];
-      out.texture_mime = g.images[i].mime_type;
+      out.texture_mime = SceneGraphName(g.images[i].mime_type);
     }
     s.graph.materials.push_back(std::move(out));
   }
@@ -172,20 +187,10 @@ DisplayStream MakeDisplayStream(const BuiltScene& scene) {
   for (std::size_t e = 0; e < g.nodes.size(); ++e) {
     const GltfNode& n = g.nodes[e];
     SceneGraphNode out;
-    out.name = n.name;
+    out.name = SceneGraphName(n.name);
     out.parent = n.parent >= 0 ? s.graph_node_of_entry[static_cast<std::size_t>(n.parent)] : -1;
     if (n.has_matrix) {
-      // A `matrix` node: its rigid part and the scale of its columns (shear is not carried).
-      const glm::dmat3 M(n.X_PN);
-      out.scale = glm::dvec3(glm::length(M[0]), glm::length(M[1]), glm::length(M[2]));
-      glm::dmat3 R = M;
-      for (int c = 0; c < 3; ++c) R[c] = out.scale[c] > 0.0 ? M[c] / out.scale[c] : R[c];
-      if (glm::determinant(R) < 0.0) {
-        R[2] = -R[2];
-        out.scale.z = -out.scale.z;
-      }
-      out.rotation = glm::normalize(glm::quat_cast(R));
-      out.translation = glm::dvec3(n.X_PN[3]);
+      SetFromMatrix(n.X_PN, &out);
     } else {
       out.translation = n.translation;
       out.rotation = n.rotation;
@@ -199,16 +204,15 @@ DisplayStream MakeDisplayStream(const BuiltScene& scene) {
     if (role[e] == NodeRole::kTouchable) out.flags |= kSceneNodeTouchable;
     if (moving[e]) out.flags |= kSceneNodeMoving;
     if (role[e] == NodeRole::kTool && object_of_entry[e] >= 0) {
-      // Pose of N in the tool frame T: X_TN = X_WT⁻¹·X_WN = [rest residual | −centre of mass].
+      // Pose of N in the tool frame T: X_TN = X_WT⁻¹·X_WN (rest poses; T is the node's rigid
+      // part moved to the model's centre of mass).
       const SceneNode& obj = scene.objects[static_cast<std::size_t>(object_of_entry[e])];
-      const glm::dmat3& residual = obj.rest_residual;
+      glm::dmat4 X_WT = glm::mat4_cast(obj.X_WO.rotation);
+      X_WT[3] = glm::dvec4(obj.X_WO.translation, 1.0);
+      SetFromMatrix(
+          glm::inverse(X_WT) * g.instances[static_cast<std::size_t>(object_of_entry[e])].X_WN,
+          &out);
       out.parent = -1;
-      out.rotation = glm::dquat(1.0, 0.0, 0.0, 0.0);
-      out.scale = glm::dvec3(residual[0][0], residual[1][1], residual[2][2]);
-      out.translation =
-          -(glm::inverse(obj.X_WO.rotation) *
-            (obj.X_WO.translation -
-             glm::dvec3(g.instances[static_cast<std::size_t>(object_of_entry[e])].X_WN[3])));
       out.flags = kSceneNodeTool | kSceneNodeMoving;
       tool_entry = static_cast<int>(e);
     }

@@ -101,6 +101,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   bool running = true;
   bool reported_fallback = false;
   std::vector<StreamObject> reload_objects;
+  const HapticScene* current_scene = &scene;  // the scene the pipeline steps (a reload moves it)
   std::uint64_t scene_reloads = 0;
   std::size_t reload_bytes = 0;
 
@@ -119,10 +120,6 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     // 2. The session: lost operator, scene stream.
     const std::int64_t now_loop = SteadyNowNs();
     session.CheckPeerTimeout(now_loop);
-    if (!session.open()) {
-      socket.WaitReadable(50);
-      continue;
-    }
     // A rebuilt scene (its file changed): switch the pipeline between two steps, and stream the
     // objects whose bytes changed as new versions.
     if (config.take_reload) {
@@ -130,11 +127,23 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
       if (const HapticScene* next = config.take_reload(&reload_objects)) {
         const auto t0 = SteadyNowNs();
         std::unique_ptr<PenetrationDepthBackend> kept = pipeline->ReleaseBackend();
-        if (auto* gpu = dynamic_cast<GpuPenetrationDepthBackend*>(kept.get())) {
-          gpu->Upload(*next->tool);
-          for (const TouchableObject& t : next->touchables) gpu->Upload(*t.model);
+        try {
+          if (auto* gpu = dynamic_cast<GpuPenetrationDepthBackend*>(kept.get())) {
+            // Uploads are keyed by the model's address: the old models' go (a new model may
+            // reuse a freed address), the new ones are uploaded before the first step.
+            gpu->ForgetModels();
+            gpu->Upload(*next->tool);
+            for (const TouchableObject& t : next->touchables) gpu->Upload(*t.model);
+          }
+          pipeline =
+              std::make_unique<HapticTexturePipeline>(*next, config.pipeline, std::move(kept));
+        } catch (const std::exception& e) {
+          // The GPU refused the new models: the CPU backend, as after a failed batch.
+          std::printf("[slave] the %s backend failed on the rebuilt scene (%s); CPU backend\n",
+                      backend_at_start.c_str(), e.what());
+          pipeline = std::make_unique<HapticTexturePipeline>(*next, config.pipeline, nullptr);
         }
-        pipeline = std::make_unique<HapticTexturePipeline>(*next, config.pipeline, std::move(kept));
+        current_scene = next;
         std::size_t changed = 0, changed_bytes = 0;
         for (const StreamObject& o : reload_objects) {
           const auto& held = scene_sender.objects();
@@ -155,6 +164,10 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
             (SteadyNowNs() - t0) * 1e-6, changed, changed_bytes);
         std::fflush(stdout);
       }
+    }
+    if (!session.open()) {
+      socket.WaitReadable(50);
+      continue;
     }
     session.StreamScene(now_loop);
     session.MaybeSendNodePoses(now_loop);
@@ -214,7 +227,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   if (!config.step_trace_path.empty()) statistics.WriteTrace(config.step_trace_path);
 
   nlohmann::json s;
-  s["scene"] = scene.name;
+  s["scene"] = current_scene->name;
   s["listen"] = bound.ToString();
   statistics.AddTo(s);
   s["tool_state_gap_max_ms"] = session.tool_state_gap_max_ns() * 1e-6;

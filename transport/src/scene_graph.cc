@@ -248,6 +248,16 @@ glm::dmat4 LocalMatrix(const SceneNodeTransform& t) {
 
 }  // namespace
 
+std::string SceneGraphName(std::string_view name) {
+  if (!IsUtf8(name)) return "";
+  std::size_t end = std::min(name.size(), kMaxSceneGraphNameBytes);
+  // Back off continuation bytes (10xxxxxx) so that the cut falls between two characters.
+  while (end < name.size() && end > 0 && (static_cast<unsigned char>(name[end]) & 0xC0u) == 0x80u) {
+    --end;
+  }
+  return std::string(name.substr(0, end));
+}
+
 std::vector<std::uint8_t> EncodeSceneGraph(const SceneGraphDescription& g) {
   if (std::string problem = CheckGraph(g); !problem.empty()) throw std::invalid_argument(problem);
   std::vector<std::uint8_t> out;

@@ -53,11 +53,13 @@ struct ContactModelEvaluation {
 /// `stiffness_scale` ∈ [0, 1] multiplies every k_i (used to blend a new model in).
 ///
 /// `max_contact_force_n` (N, > 0; +∞ = none) bounds each contact's force, DESIGN.md §5's bounded
-/// delivered stiffness: where k_i·δ_i·|∂δ_i/∂x| exceeds it, δ_i is held at the depth that gives
-/// the bound (the contact's force and torque saturate along J_i) and the contact adds no stiffness
-/// to K (its force no longer grows with δ). A grazing contact whose δ is the sideways overlap of
-/// patches that are not height fields (docs/hard-cases.md) then pushes with the bound, not with
-/// thousands of newtons. noexcept and allocation-free: callable from the 1 kHz loop.
+/// delivered stiffness: where k_i·δ_i·|∂δ_i/∂x| exceeds it (k_i unscaled), δ_i is held at the
+/// depth that gives the bound (the contact's force and torque saturate along J_i; times
+/// `stiffness_scale`, so that two blended evaluations add up to the bound at most) and the
+/// contact adds no stiffness to K (its force no longer grows with δ). A grazing contact whose δ is
+/// the sideways overlap of patches that are not height fields (docs/hard-cases.md) then pushes with
+/// the bound, not with thousands of newtons. noexcept and allocation-free: callable from the 1 kHz
+/// loop.
 ContactModelEvaluation EvaluateContactModel(
     const ContactModel& model, const RigidTransform& X_WT, double stiffness_scale = 1.0,
     double max_contact_force_n = std::numeric_limits<double>::infinity()) noexcept;

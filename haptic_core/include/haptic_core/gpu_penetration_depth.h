@@ -72,6 +72,9 @@ class GpuPenetrationDepthBackend final : public PenetrationDepthBackend {
 
   /// Uploads `model` now rather than at its first batch. Throws GpuError on a GL error.
   void Upload(const HapticModel& model);
+  /// Frees every uploaded model (a new scene replaces them: uploads are keyed by the model's
+  /// address, which a freed model's successor may reuse). The next batch or Upload uploads again.
+  void ForgetModels() noexcept;
 
   const GpuInfo& info() const noexcept { return context_->info(); }
   int depth_bits() const noexcept { return options_.depth_bits; }

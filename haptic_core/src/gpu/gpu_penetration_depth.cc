@@ -391,6 +391,17 @@ GpuPenetrationDepthBackend::~GpuPenetrationDepthBackend() {
   glDeleteProgram(reduce_program_);
 }
 
+void GpuPenetrationDepthBackend::ForgetModels() noexcept {
+  if (context_ && context_->MakeCurrent()) {
+    for (auto& [key, m] : models_) {
+      glDeleteVertexArrays(1, &m->vao);
+      glDeleteBuffers(1, &m->vbo);
+      glDeleteTextures(1, &m->texture);
+    }
+  }
+  models_.clear();
+}
+
 std::string GpuPenetrationDepthBackend::description() const {
   const GpuInfo& i = context_->info();
   return i.renderer + " (" + i.version + ", " + i.platform + " platform, " +

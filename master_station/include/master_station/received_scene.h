@@ -39,6 +39,7 @@ struct ReceivedSceneContent {
   /// A kImage object: a base-colour texture's bytes as the file had them.
   struct Image {
     std::uint32_t object_id = 0;
+    std::uint32_t version = 0;
     std::vector<std::uint8_t> bytes;
   };
   std::vector<Image> images;
@@ -66,8 +67,9 @@ struct ReceivedNodeTrack {
 /// Thread-safe holder of the received scene (see the file comment).
 class ReceivedScene {
  public:
-  /// Publishes a new content (a completed scene stream) and restarts the moving nodes at its
-  /// graph's rest poses. Bumps generation().
+  /// Publishes a new content (a completed scene stream). The moving nodes restart at the new
+  /// graph's rest poses, unless the graph is the same version as before (another object changed):
+  /// then they keep the poses received. Bumps generation().
   void Set(std::shared_ptr<const ReceivedSceneContent> content);
   /// Applies a NodePoses message (newest wins per node, transport/scene_graph.h SceneNodePoses).
   /// Returns the entries applied; a message before any content is counted and dropped.

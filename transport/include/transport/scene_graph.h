@@ -15,6 +15,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "transport/messages.h"
@@ -72,6 +73,12 @@ inline constexpr std::size_t kMaxSceneGraphNodes = 65535;
 inline constexpr std::size_t kMaxSceneMaterials = 4096;
 /// Longest name, scene name or MIME type (bytes).
 inline constexpr std::size_t kMaxSceneGraphNameBytes = 255;
+
+/// `name` as a scene graph can carry it: "" when it is not well-formed UTF-8, else its longest
+/// prefix of at most kMaxSceneGraphNameBytes bytes that ends on a character boundary. For names
+/// taken from files (glTF node, mesh and material names have no length limit). Never throws
+/// except std::bad_alloc.
+std::string SceneGraphName(std::string_view name);
 
 /// The bytes of a kSceneGraph object (layout in protocol.h). Throws std::invalid_argument, with a
 /// message naming the node, material or field, on: a parent not in [−1, index), a non-finite
