@@ -15,6 +15,7 @@
 #include <map>
 #include <new>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -39,25 +40,12 @@ std::string SniffImageMime(const std::vector<unsigned char>& b) {
 // must not make the node stream other files to the operator); a missing file gives a note.
 std::vector<unsigned char> ReadExternalImage(const std::string& gltf_path, const std::string& uri,
                                              std::vector<std::string>* notes) {
-  std::string decoded;
-  for (std::size_t i = 0; i < uri.size(); ++i) {
-    if (uri[i] == '%' && i + 2 < uri.size() &&
-        std::isxdigit(static_cast<unsigned char>(uri[i + 1])) &&
-        std::isxdigit(static_cast<unsigned char>(uri[i + 2]))) {
-      decoded.push_back(static_cast<char>(std::stoi(uri.substr(i + 1, 2), nullptr, 16)));
-      i += 2;
-    } else {
-      decoded.push_back(uri[i]);
-    }
-  }
-  const std::filesystem::path rel(decoded);
-  bool escapes = rel.is_absolute() || decoded.find(':') != std::string::npos;
-  for (const auto& part : rel) escapes = escapes || part == "..";
-  if (escapes) {
+  const std::optional<std::filesystem::path> local = GltfLocalFile(gltf_path, uri);
+  if (!local) {
     notes->push_back("image '" + uri + "' is outside the file's folder: not read");
     return {};
   }
-  const std::filesystem::path file = std::filesystem::path(gltf_path).parent_path() / rel;
+  const std::filesystem::path& file = *local;
   std::error_code ec;
   const auto size = std::filesystem::file_size(file, ec);
   if (ec || size > static_cast<std::uintmax_t>(kGltfMaxFileBytes)) {
@@ -176,6 +164,29 @@ GltfScene BuildScene(const std::string& path) {
 nlohmann::json Vec3Json(const glm::dvec3& v) { return nlohmann::json::array({v.x, v.y, v.z}); }
 
 }  // namespace
+
+std::optional<std::filesystem::path> GltfLocalFile(const std::string& gltf_path,
+                                                   const std::string& uri) {
+  std::string decoded;
+  for (std::size_t i = 0; i < uri.size(); ++i) {
+    if (uri[i] == '%' && i + 2 < uri.size() &&
+        std::isxdigit(static_cast<unsigned char>(uri[i + 1])) &&
+        std::isxdigit(static_cast<unsigned char>(uri[i + 2]))) {
+      decoded.push_back(static_cast<char>(std::stoi(uri.substr(i + 1, 2), nullptr, 16)));
+      i += 2;
+    } else {
+      decoded.push_back(uri[i]);
+    }
+  }
+  const std::filesystem::path rel(decoded);
+  if (decoded.empty() || rel.is_absolute() || decoded.find(':') != std::string::npos) {
+    return std::nullopt;
+  }
+  for (const auto& part : rel) {
+    if (part == "..") return std::nullopt;
+  }
+  return std::filesystem::path(gltf_path).parent_path() / rel;
+}
 
 GltfScene LoadGltfScene(const std::string& path) {
   try {

@@ -1,8 +1,6 @@
 // The remote scene as the operator station has received it (master_station/received_scene.h).
 #include "master_station/received_scene.h"
 
-#include <limits>
-
 namespace ht {
 
 void ReceivedScene::Set(std::shared_ptr<const ReceivedSceneContent> content) {
@@ -58,19 +56,13 @@ std::shared_ptr<const ReceivedSceneContent> ReceivedScene::Content(
   return content_;
 }
 
-double ReceivedScene::CopyPoses(std::vector<SceneNodeTransform>* local) const {
+void ReceivedScene::CopyPoses(std::vector<SceneNodeTransform>* local) const {
   std::lock_guard<std::mutex> lock(mutex_);
   if (!poses_) {
     local->clear();
-    return -std::numeric_limits<double>::infinity();
+    return;
   }
   local->assign(poses_->local().begin(), poses_->local().end());
-  return poses_->newest_time_s();
-}
-
-std::uint64_t ReceivedScene::generation() const {
-  std::lock_guard<std::mutex> lock(mutex_);
-  return generation_;
 }
 
 std::vector<ReceivedNodeTrack> ReceivedScene::node_tracks() const {

@@ -13,19 +13,6 @@ double SecondsSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-// A relative URI of a file beside the glTF (no scheme, no data URI, not absolute, no "..").
-bool IsLocalRelativeUri(const std::string& uri) {
-  if (uri.empty() || uri.rfind("data:", 0) == 0 || uri.find(':') != std::string::npos) {
-    return false;
-  }
-  const std::filesystem::path p(uri);
-  if (p.is_absolute()) return false;
-  for (const auto& part : p) {
-    if (part == "..") return false;
-  }
-  return true;
-}
-
 }  // namespace
 
 std::vector<std::filesystem::path> SceneInputFiles(const std::string& path) {
@@ -44,9 +31,8 @@ std::vector<std::filesystem::path> SceneInputFiles(const std::string& path) {
           if (!doc.contains(key) || !doc[key].is_array()) continue;
           for (const nlohmann::json& e : doc[key]) {
             if (!e.is_object() || !e.contains("uri") || !e["uri"].is_string()) continue;
-            const std::string uri = e["uri"].get<std::string>();
-            if (IsLocalRelativeUri(uri)) {
-              files.push_back(std::filesystem::path(gltf).parent_path() / uri);
+            if (auto file = GltfLocalFile(gltf, e["uri"].get<std::string>())) {
+              files.push_back(std::move(*file));
             }
           }
         }

@@ -10,12 +10,14 @@
 // (KHR_draco_mesh_compression) are decoded with libdraco.
 
 #include <cstdint>
+#include <filesystem>
 #include <glm/gtc/quaternion.hpp>
 #include <glm/mat4x4.hpp>
 #include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
 #include <glm/vec4.hpp>
 #include <nlohmann/json_fwd.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -249,6 +251,14 @@ struct GltfScene {
 /// exceed kGltfMaxAnimationKeys. Channels of `weights` (morph targets), of nodes not reached from
 /// the scene and of nodes that give a `matrix` are ignored with a note.
 GltfScene LoadGltfScene(const std::string& path);
+
+/// The file a glTF `uri` (a buffer's or an image's) names beside the glTF at `gltf_path`: the
+/// URI percent-decoded and resolved against the glTF's folder. nullopt for a data URI, a URI
+/// with a scheme or a drive (any ':'), an absolute path, an empty one, or one with a ".."
+/// component (a scene file must not make the node read, or stream, files outside its folder).
+/// Does not touch the file system; never throws except std::bad_alloc.
+std::optional<std::filesystem::path> GltfLocalFile(const std::string& gltf_path,
+                                                   const std::string& uri);
 
 /// Pose X_WN of every instance of `scene` (same order and frames as scene.instances: N the node
 /// frame, W the scene frame, metres, column-major) at time `time_s` (seconds from the start) of

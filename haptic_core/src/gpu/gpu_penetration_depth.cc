@@ -377,11 +377,7 @@ void GpuPenetrationDepthBackend::Initialize() {
 
 GpuPenetrationDepthBackend::~GpuPenetrationDepthBackend() {
   if (!context_ || !context_->MakeCurrent()) return;
-  for (auto& [key, m] : models_) {
-    glDeleteVertexArrays(1, &m->vao);
-    glDeleteBuffers(1, &m->vbo);
-    glDeleteTextures(1, &m->texture);
-  }
+  ForgetModels();
   glDeleteBuffers(1, &results_);
   glDeleteFramebuffers(1, &env_fbo_);
   glDeleteFramebuffers(1, &tool_fbo_);

@@ -57,10 +57,12 @@ struct ReceivedPoseStats {
 
 /// The first and the newest local pose a moving node received (for the run summary).
 struct ReceivedNodeTrack {
-  std::uint16_t node = 0;
-  std::string name;  ///< the node's name in the graph
-  std::uint64_t updates = 0;
+  std::uint16_t node = 0;                        ///< index into the graph's nodes
+  std::string name;                              ///< the node's name in the graph
+  std::uint64_t updates = 0;                     ///< NodePoses entries applied to it
   double first_time_s = 0.0, last_time_s = 0.0;  ///< the remote scene's clock (s)
+  /// The node's local pose X_PN in its parent frame P (m, unit quaternion R_PN, scale) at
+  /// first_time_s and at last_time_s.
   SceneNodeTransform first, last;
 };
 
@@ -76,12 +78,9 @@ class ReceivedScene {
   std::size_t ApplyPoses(const wire::NodePosesMessage& message);
   /// The current content (null before the first Set) and its generation (0 before).
   std::shared_ptr<const ReceivedSceneContent> Content(std::uint64_t* generation) const;
-  /// Copies the current local transform of every node of the current content's graph into
-  /// `local` (#nodes; resized, so it allocates only when it grows) and returns the newest
-  /// scene_time_s applied (−∞ when none).
-  double CopyPoses(std::vector<SceneNodeTransform>* local) const;
-  /// How many generations have been published.
-  std::uint64_t generation() const;
+  /// Copies the current local transform X_PN of every node of the current content's graph into
+  /// `local` (#nodes; empty before the first Set; resized, so it allocates only when it grows).
+  void CopyPoses(std::vector<SceneNodeTransform>* local) const;
   ReceivedPoseStats pose_stats() const;
   /// Per moving node of the current graph (ascending node index, at most kMaxTrackedNodes): the
   /// first and newest pose applied.
