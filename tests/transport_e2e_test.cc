@@ -55,7 +55,13 @@ TEST_F(ImpairedRun, TheSessionHeldAndNothingWentNonFinite) {
   EXPECT_EQ(s_["nonfinite_count"].get<int>(), 0);
   EXPECT_EQ(t["sessions"].get<int>(), 1);
   EXPECT_EQ(t["peers_lost"].get<int>(), 0);
-  EXPECT_EQ(s_["remote"]["transport"]["peers_lost"].get<int>(), 0);
+  // The operator says goodbye three times at the end; when the relay dropped all three (0.8 % of
+  // runs at 20 % loss), the remote node rightly declares the operator lost after its timeout.
+  const nlohmann::json& goodbyes = s_["relay"]["up"].value("goodbye", nlohmann::json::object());
+  const bool all_goodbyes_dropped =
+      Get(goodbyes, "received") > 0 && Get(goodbyes, "forwarded") == 0;
+  EXPECT_EQ(s_["remote"]["transport"]["peers_lost"].get<int>(), all_goodbyes_dropped ? 1 : 0)
+      << "relay, goodbyes operator to remote: " << goodbyes.dump();
   EXPECT_GT(t["streams"][ModelStream(t["streams"])]["received"].get<int>(), 0);
   EXPECT_EQ(t["rejected_by_reason"].value("bad_mac", 0), 0);
   EXPECT_EQ(s_["remote"]["transport"]["rejected_by_reason"].value("bad_mac", 0), 0);
