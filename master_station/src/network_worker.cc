@@ -113,11 +113,14 @@ void NetworkWorker::Run(const std::atomic<bool>& stop) {
           config_.remote_address);
       last_ping_ns = now;
     }
-    const std::int64_t quiet = std::max<std::int64_t>(30000000, 2 * clock_.rtt_ns());
-    reassembler_.CollectNacks(now, quiet, [&](const wire::SceneNackMessage& nack) {
-      link_.Send(wire::EncodeSceneNack(link_.NextHeader(wire::MessageType::kSceneNack, session_),
-                                       nack, config_.key),
-                 config_.remote_address);
+    SceneReassembler::RepairTiming repair;
+    repair.rtt_ns = clock_.valid() ? clock_.rtt_ns() : handshake_rtt_ns_;
+    reassembler_.CollectNacks(now, repair, [&](const wire::SceneNackMessage& nack) {
+      for (int copy = 0; copy < kSceneNackCopies; ++copy) {
+        link_.Send(wire::EncodeSceneNack(link_.NextHeader(wire::MessageType::kSceneNack, session_),
+                                         nack, config_.key),
+                   config_.remote_address);
+      }
     });
   }
   if (session_ != 0) {
@@ -281,6 +284,7 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
       session_ = header.session_id;
       ++sessions_;
       hello_nonce_ = 0;  // the next attempt (after a loss) gets a new nonce
+      handshake_rtt_ns_ = now - attempt_start_ns_;
       mtu_ = w.mtu;
       heartbeat_ns_ = std::int64_t{w.heartbeat_ms} * 1000000;
       peer_timeout_ns_ = std::int64_t{w.peer_timeout_ms} * 1000000;

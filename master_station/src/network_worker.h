@@ -115,6 +115,9 @@ class NetworkWorker {
   std::uint64_t tool_states_offered_ = 0, tool_states_held_back_ = 0, idle_keepalives_ = 0;
   std::uint64_t hello_nonce_ = 0;
   std::int64_t attempt_start_ns_ = 0;
+  /// First Hello of the attempt to its Welcome (ns): the round trip until Ping/Pong measure it
+  /// (an over-estimate when a Hello was retransmitted, which only delays the first repairs).
+  std::int64_t handshake_rtt_ns_ = 0;
   std::int64_t heartbeat_ns_ = 100000000, peer_timeout_ns_ = 500000000, session_start_ns_ = 0;
   std::uint64_t sessions_ = 0, peers_lost_ = 0, remote_goodbyes_ = 0, hellos_sent_ = 0;
   std::size_t mtu_ = 0, expected_objects_ = 0;

@@ -134,7 +134,8 @@ void DecodeBody(const ht::wire::Header& h, std::span<const std::uint8_t> body) {
         reassembler.OnManifest(m, now);
         Check(reassembler.manifest_objects() <= 16);
         reassembler.CollectNacks(
-            now, 0, [](const SceneNackMessage& n) { Check(n.count <= kMaxNackIndices); });
+            now, ht::SceneReassembler::RepairTiming{0, 0},
+            [](const SceneNackMessage& n) { Check(n.count <= kMaxNackIndices); });
       }
       break;
     }

@@ -161,6 +161,7 @@ void SceneReassembler::Reset(std::size_t mtu) {
   manifest_.clear();
   manifest_total_ = 0;
   bytes_held_ = 0;
+  last_any_fragment_ns_ = 0;
 }
 
 void SceneReassembler::Release(Object& o) {
@@ -173,6 +174,7 @@ void SceneReassembler::Release(Object& o) {
 
 SceneReassembler::Outcome SceneReassembler::Add(const wire::SceneFragmentMessage& f,
                                                 std::int64_t now_ns) {
+  last_any_fragment_ns_ = now_ns;
   if (f.object_bytes > limits_.max_object_bytes) {
     ++stats_.fragments_over_limit;
     return Outcome::kOverLimit;
@@ -266,12 +268,14 @@ void SceneReassembler::OnManifest(const wire::SceneManifestMessage& m, std::int6
   }
 }
 
-void SceneReassembler::BuildNacks(std::int64_t now_ns, std::int64_t quiet_ns,
+void SceneReassembler::BuildNacks(std::int64_t now_ns, const RepairTiming& timing,
                                   std::vector<wire::SceneNackMessage>& out) {
+  const std::int64_t gap = std::max<std::int64_t>(timing.gap_ns, 0);
+  const std::int64_t repeat = std::max<std::int64_t>(timing.rtt_ns, 0) + gap;
   // Objects with fragments missing and nothing arriving.
   for (auto& [id, o] : objects_) {
     if (o.complete || o.bytes.empty()) continue;
-    if (now_ns - o.last_fragment_ns < quiet_ns || now_ns - o.last_nack_ns < quiet_ns) continue;
+    if (now_ns - o.last_fragment_ns < gap || now_ns - o.last_nack_ns < repeat) continue;
     const auto m = manifest_.find(id);
     if (m != manifest_.end() && m->second.entry.version > o.version) continue;  // superseded
     wire::SceneNackMessage n;
@@ -296,7 +300,13 @@ void SceneReassembler::BuildNacks(std::int64_t now_ns, std::int64_t quiet_ns,
         bytes_held_ + a.entry.object_bytes > limits_.max_total_bytes) {
       continue;
     }
-    if (now_ns - a.first_seen_ns < quiet_ns || now_ns - a.last_nack_ns < quiet_ns) continue;
+    // The sender streams its queue in order: while fragments still arrive, this object may be
+    // behind them. The manifest travels ahead of the stream (with the Welcome), so its age must
+    // cover a round trip before "nothing yet" means lost.
+    if (now_ns - last_any_fragment_ns_ < gap || now_ns - a.first_seen_ns < repeat ||
+        now_ns - a.last_nack_ns < repeat) {
+      continue;
+    }
     wire::SceneNackMessage n;
     n.object_id = id;
     n.version = a.entry.version;
