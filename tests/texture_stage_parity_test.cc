@@ -14,6 +14,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <glm/gtc/quaternion.hpp>
 #include <limits>
 #include <map>
@@ -145,6 +146,12 @@ TEST(TextureStageParity, FastRenderDrawsTheReferenceHeightsOnAllSixSeedModels) {
         RenderPatchHeights(m, X, triangles, c.window, side, ref);
         RenderPatchHeightsFast(m, X, triangles, c.window, side, 0, fast);
         covered += ExpectSameHeights(ref, fast, SeedModelName(which));
+        // The batched texture samples (SIMD here) against one SampleAt at a time: the same bits.
+        std::vector<float> fast_scalar(ref.size(), empty);
+        RenderPatchHeightsFast(m, X, triangles, c.window, side, 0, fast_scalar,
+                               SampleKernel::kScalar);
+        EXPECT_EQ(0, std::memcmp(fast.data(), fast_scalar.data(), fast.size() * sizeof(float)))
+            << SeedModelName(which) << " " << SampleKernelName();
         // On the window grown by one cell: the reference on a window of (N+2)² cells, with the
         // window's own box depth R (the grown window's would be deeper; the fast path keeps R).
         const ContactWindow grown = ContactWindow::Make(c.window.center_W, c.window.normal_W,
@@ -262,7 +269,9 @@ TEST(LocalReach, ReportsTheGlobalPairsWithinEachPairsOwnTolerance) {
       EXPECT_GE(r, 0.0);
       EXPECT_LE(r, m->OutwardReach());
       for (const int c : nodes[k].children) {
-        if (c >= 0) EXPECT_GE(r, global_query.NodeReach(*m, c));
+        if (c >= 0) {
+          EXPECT_GE(r, global_query.NodeReach(*m, c));
+        }
       }
     }
   }

@@ -92,28 +92,38 @@ void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
   const double half = 0.5 * w.extent_m + margin_m;
   const double depth_limit = w.depth_range_m() + margin_m;
   const double threshold = kPatchFacingThreshold - facing_slack;
+  // The window's axes in O, once (as RenderPatchHeightsFast): a vertex's window coordinates are
+  // p_O·a_O + (t − c)·a. The tests run cheapest and most selective first (the extent along u, then
+  // v, then n), so that the many triangles far from the window cost nine multiply-adds each; the
+  // facing test (a square root) only runs for those near it. A pre-filter: a rounding difference
+  // from the world-frame arithmetic can only move triangles at the margin's edge, which draw
+  // nothing inside the window.
+  const glm::dquat q_inv = glm::conjugate(X_WO.rotation);
+  const glm::dvec3 u_O = q_inv * w.axis_u_W, v_O = q_inv * w.axis_v_W, n_O = q_inv * w.normal_W;
+  const glm::dvec3 offset = X_WO.translation - w.center_W;
+  const double ou = glm::dot(offset, w.axis_u_W), ov = glm::dot(offset, w.axis_v_W),
+               on = glm::dot(offset, w.normal_W);
   const int nf = static_cast<int>(model.triangles.size());
+  const glm::dvec3* vertices = model.vertices_O.data();
   for (int f = 0; f < nf; ++f) {
     const glm::ivec3 t = model.triangles[f];
-    const glm::dvec3 p0 = X_WO * model.vertices_O[t[0]] - w.center_W;
-    const glm::dvec3 p1 = X_WO * model.vertices_O[t[1]] - w.center_W;
-    const glm::dvec3 p2 = X_WO * model.vertices_O[t[2]] - w.center_W;
+    const glm::dvec3& p0 = vertices[t[0]];
+    const glm::dvec3& p1 = vertices[t[1]];
+    const glm::dvec3& p2 = vertices[t[2]];
+    const double s0 = glm::dot(p0, u_O) + ou, s1 = glm::dot(p1, u_O) + ou,
+                 s2 = glm::dot(p2, u_O) + ou;
+    if (std::max({s0, s1, s2}) < -half || std::min({s0, s1, s2}) > half) continue;
+    const double t0 = glm::dot(p0, v_O) + ov, t1 = glm::dot(p1, v_O) + ov,
+                 t2 = glm::dot(p2, v_O) + ov;
+    if (std::max({t0, t1, t2}) < -half || std::min({t0, t1, t2}) > half) continue;
+    const double d0 = glm::dot(p0, n_O) + on, d1 = glm::dot(p1, n_O) + on,
+                 d2 = glm::dot(p2, n_O) + on;
+    if (std::max({d0, d1, d2}) < -depth_limit || std::min({d0, d1, d2}) > depth_limit) continue;
     const glm::dvec3 cr = glm::cross(p1 - p0, p2 - p0);
     const double area2 = glm::length(cr);
     if (!(area2 > 0.0)) continue;
-    const double facing = glm::dot(cr, w.normal_W) / area2;
+    const double facing = glm::dot(cr, n_O) / area2;
     if (side == PatchSide::kEnvironment ? facing <= threshold : facing >= -threshold) continue;
-    const double s[3] = {glm::dot(p0, w.axis_u_W), glm::dot(p1, w.axis_u_W),
-                         glm::dot(p2, w.axis_u_W)};
-    const double t2[3] = {glm::dot(p0, w.axis_v_W), glm::dot(p1, w.axis_v_W),
-                          glm::dot(p2, w.axis_v_W)};
-    const double d[3] = {glm::dot(p0, w.normal_W), glm::dot(p1, w.normal_W),
-                         glm::dot(p2, w.normal_W)};
-    if (std::max({s[0], s[1], s[2]}) < -half || std::min({s[0], s[1], s[2]}) > half) continue;
-    if (std::max({t2[0], t2[1], t2[2]}) < -half || std::min({t2[0], t2[1], t2[2]}) > half) continue;
-    if (std::max({d[0], d[1], d[2]}) < -depth_limit || std::min({d[0], d[1], d[2]}) > depth_limit) {
-      continue;
-    }
     out.push_back(f);
   }
 }
@@ -205,7 +215,8 @@ DepthSample DirectionalPenetrationDepth(std::span<const float> b,
 
 void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO,
                             std::span<const int> triangles, const ContactWindow& w, PatchSide side,
-                            int margin_cells, std::span<float> heights) noexcept {
+                            int margin_cells, std::span<float> heights,
+                            SampleKernel kernel) noexcept {
   const int n = w.resolution;
   const int m = std::max(margin_cells, 0);
   const int nt = n + 2 * m;
@@ -221,7 +232,31 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
   const double ou = glm::dot(offset, w.axis_u_W), ov = glm::dot(offset, w.axis_v_W),
                on = glm::dot(offset, w.normal_W);
   const bool have_texture = !model.texture.empty();
+  // A textured triangle's covered cells wait here for their texture samples, taken together
+  // (SampleLevelBatch), then finish as the reference does: value + h·(N·n), the box test, the
+  // envelope. Flushed when full and at the end of each triangle (one mip level per triangle).
+  constexpr int kBatch = 256;
+  alignas(32) float batch_u[kBatch], batch_v[kBatch], batch_h[kBatch];
+  double batch_value[kBatch], batch_ndotn[kBatch];
+  float* batch_cell[kBatch];
+  int batch_count = 0, batch_level = 0;
+  const auto flush = [&] {
+    if (batch_count == 0) return;
+    const auto count = static_cast<std::size_t>(batch_count);
+    SampleLevelBatch(model.texture, batch_level, std::span<const float>(batch_u, count),
+                     std::span<const float>(batch_v, count), std::span<float>(batch_h, count),
+                     kernel);
+    for (std::size_t k = 0; k < count; ++k) {
+      const double value = batch_value[k] + static_cast<double>(batch_h[k]) * batch_ndotn[k];
+      if (!(std::abs(value) <= range)) continue;  // outside the window's box along n
+      float& cell = *batch_cell[k];
+      const auto fv = static_cast<float>(value);
+      if (keep_max ? fv > cell : fv < cell) cell = fv;
+    }
+    batch_count = 0;
+  };
   for (const int f : triangles) {
+    flush();
     const glm::ivec3 tri = model.triangles[f];
     const glm::dvec3& a0 = model.vertices_O[tri[0]];
     const glm::dvec3& a1 = model.vertices_O[tri[1]];
@@ -248,11 +283,15 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
     const bool textured = have_texture && model.textured[f] != 0;
     const int level =
         textured ? model.texture.LevelForFootprint(model.texel_size_m[f], w.cell_size_m()) : 0;
-    const HeightFieldLevel* tex_level = textured ? &model.texture.level(level) : nullptr;
+    batch_level = level;
     const glm::dvec3& n0 = model.corner_normals_O[3 * f];
     const glm::dvec3& n1 = model.corner_normals_O[3 * f + 1];
     const glm::dvec3& n2 = model.corner_normals_O[3 * f + 2];
     const double cos01 = glm::dot(n0, n1), cos02 = glm::dot(n0, n2), cos12 = glm::dot(n1, n2);
+    // A flat-shaded triangle (the three corner normals equal): the interpolated normal is the
+    // corner normal, (b·nn)/|Σ b_k n_k| = nn0 up to rounding (1e-16 relative), without the
+    // per-cell square root and division.
+    const bool flat = n0 == n1 && n0 == n2;
     const glm::vec2 uv0 = model.corner_uvs[3 * f], uv1 = model.corner_uvs[3 * f + 1],
                     uv2 = model.corner_uvs[3 * f + 2];
     // Barycentrics, affine in the cell centre (px, py): b0 = k0 + gx0·px + gy0·py, likewise b1,
@@ -291,16 +330,23 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
         const double b1 = r1 + gx1 * px;
         const double b2 = 1.0 - b0 - b1;
         if (b0 < kEdgeTolerance || b1 < kEdgeTolerance || b2 < kEdgeTolerance) continue;
-        double value = b0 * d[0] + b1 * d[1] + b2 * d[2];
-        if (tex_level != nullptr) {
-          const float u = static_cast<float>(b0 * uv0.x + b1 * uv1.x + b2 * uv2.x);
-          const float v = static_cast<float>(b0 * uv0.y + b1 * uv1.y + b2 * uv2.y);
+        const double value = b0 * d[0] + b1 * d[1] + b2 * d[2];
+        if (textured) {
           // As RenderPatchHeights: h along the unit interpolated normal.
-          const double len2 = b0 * b0 + b1 * b1 + b2 * b2 +
-                              2.0 * (b0 * b1 * cos01 + b0 * b2 * cos02 + b1 * b2 * cos12);
-          const double ndotn =
-              len2 > 1e-12 ? (b0 * nn[0] + b1 * nn[1] + b2 * nn[2]) / std::sqrt(len2) : 0.0;
-          value += static_cast<double>(model.texture.SampleAt(level, *tex_level, u, v)) * ndotn;
+          double ndotn = nn[0];
+          if (!flat) {
+            const double len2 = b0 * b0 + b1 * b1 + b2 * b2 +
+                                2.0 * (b0 * b1 * cos01 + b0 * b2 * cos02 + b1 * b2 * cos12);
+            ndotn =
+                len2 > 1e-12 ? (b0 * nn[0] + b1 * nn[1] + b2 * nn[2]) / std::sqrt(len2) : 0.0;
+          }
+          batch_u[batch_count] = static_cast<float>(b0 * uv0.x + b1 * uv1.x + b2 * uv2.x);
+          batch_v[batch_count] = static_cast<float>(b0 * uv0.y + b1 * uv1.y + b2 * uv2.y);
+          batch_value[batch_count] = value;
+          batch_ndotn[batch_count] = ndotn;
+          batch_cell[batch_count] = &row[i];
+          if (++batch_count == kBatch) flush();
+          continue;
         }
         if (!(std::abs(value) <= range)) continue;  // outside the window's box along n
         float& cell = row[i];
@@ -309,6 +355,7 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
       }
     }
   }
+  flush();
 }
 
 DepthSample DirectionalPenetrationDepthShifted(std::span<const float> b, int resolution,

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "haptic_core/haptic_model.h"
+#include "haptic_core/height_field_batch.h"
 #include "haptic_core/spatial.h"
 
 namespace ht {
@@ -86,10 +87,15 @@ void RenderPatchHeights(const HapticModel& model, const RigidTransform& X_WO,
 /// once, barycentrics are affine in the cell centre per triangle, each row is clipped to the
 /// triangle's span before the per-cell test, and texture samples inside a mip level skip the
 /// address arithmetic. Same preconditions; never allocates. m = 1 lets one render serve the four
-/// in-plane translation samples of the gradient (exact shifts by one cell).
+/// in-plane translation samples of the gradient (exact shifts by one cell). A textured
+/// triangle's covered cells are gathered and their texture samples taken together
+/// (SampleLevelBatch with `kernel`: the same bits with SIMD, three to five times faster per
+/// sample here); flat-shaded triangles (equal corner normals) skip the normal's per-cell length
+/// (a 1e-16 relative difference from the reference).
 void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO,
                             std::span<const int> triangles, const ContactWindow& window,
-                            PatchSide side, int margin_cells, std::span<float> heights) noexcept;
+                            PatchSide side, int margin_cells, std::span<float> heights,
+                            SampleKernel kernel = SampleKernel::kBest) noexcept;
 
 /// Result of one directional penetration-depth evaluation.
 struct DepthSample {
