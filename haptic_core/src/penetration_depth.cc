@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <glm/geometric.hpp>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 #include <glm/gtc/quaternion.hpp>
 #include <limits>
 #include <optional>
@@ -49,6 +52,67 @@ bool ProjectCells(const double x[3], const double y[3], int cells, ProjectedCell
   out.j0 = std::max(0, static_cast<int>(std::ceil(std::min({y[0], y[1], y[2]}) - 0.5)));
   out.j1 = std::min(cells - 1, static_cast<int>(std::floor(std::max({y[0], y[1], y[2]}) - 0.5)));
   return out.i0 <= out.i1 && out.j0 <= out.j1;
+}
+
+// What the fast render's textured cells need besides their barycentrics: one triangle's corner
+// texture coordinates (the floats, exactly, as doubles), its corner normals' components along n
+// and their cosines, and whether it is flat-shaded.
+struct TriangleShading {
+  double uv0x, uv1x, uv2x, uv0y, uv1y, uv2y;
+  double nn0, nn1, nn2, cos01, cos02, cos12;
+  bool flat;
+};
+
+// Per cell k < n with barycentrics (b0, b1, b2)[k]: the texture coordinates, and the unit
+// interpolated normal's component along n, (b·nn)/|Σ b_k n_k| (0 where that length vanishes;
+// nn0 for a flat triangle). The arithmetic of RenderPatchHeights in its order, so that the SSE2
+// lanes (two cells a step: the square roots and divisions, the slowest part of a smooth
+// triangle's cell, no longer wait one after the other) write the bits of the scalar code.
+void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, const double* b2,
+                float* u, float* v, double* ndotn, int n) noexcept {
+  int k = 0;
+#if defined(__SSE2__)
+  const __m128d uv0x = _mm_set1_pd(t.uv0x), uv1x = _mm_set1_pd(t.uv1x), uv2x = _mm_set1_pd(t.uv2x);
+  const __m128d uv0y = _mm_set1_pd(t.uv0y), uv1y = _mm_set1_pd(t.uv1y), uv2y = _mm_set1_pd(t.uv2y);
+  const __m128d nn0 = _mm_set1_pd(t.nn0), nn1 = _mm_set1_pd(t.nn1), nn2 = _mm_set1_pd(t.nn2);
+  const __m128d c01 = _mm_set1_pd(t.cos01), c02 = _mm_set1_pd(t.cos02), c12 = _mm_set1_pd(t.cos12);
+  const __m128d two = _mm_set1_pd(2.0), tiny = _mm_set1_pd(1e-12);
+  for (; k + 2 <= n; k += 2) {
+    const __m128d a = _mm_loadu_pd(b0 + k), b = _mm_loadu_pd(b1 + k), c = _mm_loadu_pd(b2 + k);
+    const __m128d uu =
+        _mm_add_pd(_mm_add_pd(_mm_mul_pd(a, uv0x), _mm_mul_pd(b, uv1x)), _mm_mul_pd(c, uv2x));
+    const __m128d vv =
+        _mm_add_pd(_mm_add_pd(_mm_mul_pd(a, uv0y), _mm_mul_pd(b, uv1y)), _mm_mul_pd(c, uv2y));
+    _mm_storel_pi(reinterpret_cast<__m64*>(u + k), _mm_cvtpd_ps(uu));
+    _mm_storel_pi(reinterpret_cast<__m64*>(v + k), _mm_cvtpd_ps(vv));
+    if (t.flat) {
+      _mm_storeu_pd(ndotn + k, nn0);
+      continue;
+    }
+    const __m128d squares =
+        _mm_add_pd(_mm_add_pd(_mm_mul_pd(a, a), _mm_mul_pd(b, b)), _mm_mul_pd(c, c));
+    const __m128d cross = _mm_add_pd(
+        _mm_add_pd(_mm_mul_pd(_mm_mul_pd(a, b), c01), _mm_mul_pd(_mm_mul_pd(a, c), c02)),
+        _mm_mul_pd(_mm_mul_pd(b, c), c12));
+    const __m128d len2 = _mm_add_pd(squares, _mm_mul_pd(two, cross));
+    const __m128d dot =
+        _mm_add_pd(_mm_add_pd(_mm_mul_pd(a, nn0), _mm_mul_pd(b, nn1)), _mm_mul_pd(c, nn2));
+    const __m128d quotient = _mm_div_pd(dot, _mm_sqrt_pd(len2));
+    _mm_storeu_pd(ndotn + k, _mm_and_pd(quotient, _mm_cmpgt_pd(len2, tiny)));
+  }
+#endif
+  for (; k < n; ++k) {
+    const double a = b0[k], b = b1[k], c = b2[k];
+    u[k] = static_cast<float>(a * t.uv0x + b * t.uv1x + c * t.uv2x);
+    v[k] = static_cast<float>(a * t.uv0y + b * t.uv1y + c * t.uv2y);
+    if (t.flat) {
+      ndotn[k] = t.nn0;
+      continue;
+    }
+    const double len2 =
+        a * a + b * b + c * c + 2.0 * (a * b * t.cos01 + a * c * t.cos02 + b * c * t.cos12);
+    ndotn[k] = len2 > 1e-12 ? (a * t.nn0 + b * t.nn1 + c * t.nn2) / std::sqrt(len2) : 0.0;
+  }
 }
 
 }  // namespace
@@ -232,17 +296,22 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
   const double ou = glm::dot(offset, w.axis_u_W), ov = glm::dot(offset, w.axis_v_W),
                on = glm::dot(offset, w.normal_W);
   const bool have_texture = !model.texture.empty();
-  // A textured triangle's covered cells wait here for their texture samples, taken together
-  // (SampleLevelBatch), then finish as the reference does: value + h·(N·n), the box test, the
-  // envelope. Flushed when full and at the end of each triangle (one mip level per triangle).
+  // A textured triangle's covered cells wait here with their barycentrics; then, together, their
+  // texture coordinates and normal factors (ShadeCells) and their texture samples
+  // (SampleLevelBatch), and they finish as the reference does: value + h·(N·n), the box test,
+  // the envelope. Flushed when full and at the end of each triangle (one mip level and one
+  // shading per triangle).
   constexpr int kBatch = 256;
   alignas(32) float batch_u[kBatch], batch_v[kBatch], batch_h[kBatch];
+  alignas(32) double batch_b0[kBatch], batch_b1[kBatch], batch_b2[kBatch];
   double batch_value[kBatch], batch_ndotn[kBatch];
   float* batch_cell[kBatch];
   int batch_count = 0, batch_level = 0;
+  TriangleShading shading{};
   const auto flush = [&] {
     if (batch_count == 0) return;
     const auto count = static_cast<std::size_t>(batch_count);
+    ShadeCells(shading, batch_b0, batch_b1, batch_b2, batch_u, batch_v, batch_ndotn, batch_count);
     SampleLevelBatch(model.texture, batch_level, std::span<const float>(batch_u, count),
                      std::span<const float>(batch_v, count), std::span<float>(batch_h, count),
                      kernel);
@@ -287,13 +356,26 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
     const glm::dvec3& n0 = model.corner_normals_O[3 * f];
     const glm::dvec3& n1 = model.corner_normals_O[3 * f + 1];
     const glm::dvec3& n2 = model.corner_normals_O[3 * f + 2];
-    const double cos01 = glm::dot(n0, n1), cos02 = glm::dot(n0, n2), cos12 = glm::dot(n1, n2);
-    // A flat-shaded triangle (the three corner normals equal): the interpolated normal is the
-    // corner normal, (b·nn)/|Σ b_k n_k| = nn0 up to rounding (1e-16 relative), without the
-    // per-cell square root and division.
-    const bool flat = n0 == n1 && n0 == n2;
-    const glm::vec2 uv0 = model.corner_uvs[3 * f], uv1 = model.corner_uvs[3 * f + 1],
-                    uv2 = model.corner_uvs[3 * f + 2];
+    if (textured) {
+      const glm::vec2 uv0 = model.corner_uvs[3 * f], uv1 = model.corner_uvs[3 * f + 1],
+                      uv2 = model.corner_uvs[3 * f + 2];
+      // A flat-shaded triangle (the three corner normals equal): the interpolated normal is the
+      // corner normal, (b·nn)/|Σ b_k n_k| = nn0 up to rounding (1e-16 relative), without the
+      // per-cell square root and division.
+      shading = {uv0.x,
+                 uv1.x,
+                 uv2.x,
+                 uv0.y,
+                 uv1.y,
+                 uv2.y,
+                 nn[0],
+                 nn[1],
+                 nn[2],
+                 glm::dot(n0, n1),
+                 glm::dot(n0, n2),
+                 glm::dot(n1, n2),
+                 n0 == n1 && n0 == n2};
+    }
     // Barycentrics, affine in the cell centre (px, py): b0 = k0 + gx0·px + gy0·py, likewise b1,
     // and b2 = 1 − b0 − b1.
     const double k0 = (x[1] * y[2] - x[2] * y[1]) * inv_area;
@@ -331,19 +413,11 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
         const double b2 = 1.0 - b0 - b1;
         if (b0 < kEdgeTolerance || b1 < kEdgeTolerance || b2 < kEdgeTolerance) continue;
         const double value = b0 * d[0] + b1 * d[1] + b2 * d[2];
-        if (textured) {
-          // As RenderPatchHeights: h along the unit interpolated normal.
-          double ndotn = nn[0];
-          if (!flat) {
-            const double len2 = b0 * b0 + b1 * b1 + b2 * b2 +
-                                2.0 * (b0 * b1 * cos01 + b0 * b2 * cos02 + b1 * b2 * cos12);
-            ndotn =
-                len2 > 1e-12 ? (b0 * nn[0] + b1 * nn[1] + b2 * nn[2]) / std::sqrt(len2) : 0.0;
-          }
-          batch_u[batch_count] = static_cast<float>(b0 * uv0.x + b1 * uv1.x + b2 * uv2.x);
-          batch_v[batch_count] = static_cast<float>(b0 * uv0.y + b1 * uv1.y + b2 * uv2.y);
+        if (textured) {  // h along the unit interpolated normal, in flush()
+          batch_b0[batch_count] = b0;
+          batch_b1[batch_count] = b1;
+          batch_b2[batch_count] = b2;
           batch_value[batch_count] = value;
-          batch_ndotn[batch_count] = ndotn;
           batch_cell[batch_count] = &row[i];
           if (++batch_count == kBatch) flush();
           continue;
