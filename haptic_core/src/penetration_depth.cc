@@ -382,29 +382,38 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
     const double gx0 = (y[1] - y[2]) * inv_area, gy0 = (x[2] - x[1]) * inv_area;
     const double k1 = (x[2] * y[0] - x[0] * y[2]) * inv_area;
     const double gx1 = (y[2] - y[0]) * inv_area, gy1 = (x[0] - x[2]) * inv_area;
+    // Each row's span: where each b ≥ the tolerance, b = r + g·px with r the row's part. By
+    // reciprocals (a row costs three multiplies, not three divisions) and floors by truncation
+    // (lo stays in [i0, i1 + 3] and hi in [i0 − 2, i1 + 1] wherever the span is used, so the
+    // conversions are exact): the span is widened by a cell on each side for rounding, and the
+    // exact per-cell test below decides, so the cells drawn are those of the divisions.
+    const double g2 = -gx0 - gx1;
+    const double inv_gx0 = gx0 != 0.0 ? 1.0 / gx0 : 0.0, inv_gx1 = gx1 != 0.0 ? 1.0 / gx1 : 0.0,
+                 inv_g2 = g2 != 0.0 ? 1.0 / g2 : 0.0;
     for (int j = pc.j0; j <= pc.j1; ++j) {
       const double py = j + 0.5;
       const double r0 = k0 + gy0 * py, r1 = k1 + gy1 * py, r2 = 1.0 - r0 - r1;
-      const double g2 = -gx0 - gx1;
-      // The span of px where each b ≥ the tolerance, widened by a cell for rounding (the exact
-      // per-cell test below decides).
       double lo = static_cast<double>(i0), hi = static_cast<double>(i1) + 1.0;
       bool empty = false;
-      const auto clip = [&](double r, double g) {
+      const auto clip = [&](double r, double g, double inv_g) {
         if (g > 0.0) {
-          lo = std::max(lo, (kEdgeTolerance - r) / g);
+          lo = std::max(lo, (kEdgeTolerance - r) * inv_g);
         } else if (g < 0.0) {
-          hi = std::min(hi, (kEdgeTolerance - r) / g);
+          hi = std::min(hi, (kEdgeTolerance - r) * inv_g);
         } else if (r < kEdgeTolerance) {
           empty = true;
         }
       };
-      clip(r0, gx0);
-      clip(r1, gx1);
-      clip(r2, g2);
+      clip(r0, gx0, inv_gx0);
+      clip(r1, gx1, inv_gx1);
+      clip(r2, g2, inv_g2);
       if (empty || !(lo <= hi + 2.0)) continue;
-      const int ia = std::max(i0, static_cast<int>(std::floor(lo - 0.5)) - 1);
-      const int ib = std::min(i1, static_cast<int>(std::ceil(hi - 0.5)) + 1);
+      const double lo_c = lo - 0.5, hi_c = hi - 0.5;
+      const int lo_t = static_cast<int>(lo_c), hi_t = static_cast<int>(hi_c);
+      const int lo_floor = lo_t - static_cast<int>(lo_c < lo_t);
+      const int hi_ceil = hi_t + static_cast<int>(hi_c > hi_t);
+      const int ia = std::max(i0, lo_floor - 1);
+      const int ib = std::min(i1, hi_ceil + 1);
       float* row = &heights[static_cast<size_t>(j) * nt];
       for (int i = ia; i <= ib; ++i) {
         const double px = i + 0.5;
