@@ -3,7 +3,11 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <algorithm>
+#include <limits>
 #include <numbers>
+#include <random>
+#include <vector>
 
 #include "haptic_core/contact_linearization.h"
 #include "test_scenes.h"
@@ -153,6 +157,73 @@ TEST(PenetrationDepth, WindowRejectsBadArguments) {
   EXPECT_THROW(ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 1), std::invalid_argument);
   const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0.3, -0.2, 0.9}, 0.02, 50);
   EXPECT_NEAR(glm::dot(glm::cross(w.axis_u_W, w.axis_v_W), w.normal_W), 1.0, 1e-12);
+}
+
+}  // namespace
+}  // namespace ht
+
+namespace ht {
+namespace {
+
+// One pass keeping the first strictly larger difference of finite pairs: the definition the
+// SIMD two-pass DirectionalPenetrationDepth(Shifted) must reproduce bit for bit.
+DepthSample OnePassDepth(const std::vector<float>& b, const std::vector<float>& a) {
+  DepthSample best{-std::numeric_limits<double>::infinity(), -1};
+  float best_value = -std::numeric_limits<float>::infinity();
+  for (std::size_t k = 0; k < std::min(a.size(), b.size()); ++k) {
+    if (!(std::isfinite(b[k]) && std::isfinite(a[k]))) continue;
+    if (b[k] - a[k] > best_value) {
+      best_value = b[k] - a[k];
+      best.cell = static_cast<int>(k);
+    }
+  }
+  if (best.cell >= 0) best.depth_m = best_value;
+  return best;
+}
+
+TEST(PenetrationDepth, TwoPassDepthIsTheOnePassDefinitionWithTiesInfinitiesAndSignedZeros) {
+  std::mt19937 rng(77);
+  std::uniform_real_distribution<float> h(-1e-3f, 1e-3f);
+  const float inf = std::numeric_limits<float>::infinity();
+  int found = 0;
+  for (int trial = 0; trial < 400; ++trial) {
+    const int n = 2 + trial % 13, m = 1;
+    const int nt = n + 2 * m;
+    std::vector<float> b(static_cast<std::size_t>(n) * n), a_ext(static_cast<std::size_t>(nt) * nt);
+    // Few distinct values (ties), ±0, empty cells, a NaN now and then, one overflow.
+    const auto draw = [&](float empty) {
+      const int pick = static_cast<int>(rng() % 10);
+      if (pick < 3) return empty;
+      if (pick == 3) return 0.0f;
+      if (pick == 4) return -0.0f;
+      if (pick == 5 && trial % 7 == 0) return std::numeric_limits<float>::quiet_NaN();
+      if (pick == 6 && trial % 11 == 0) return empty > 0 ? -3e38f : 3e38f;
+      return trial % 3 == 0 ? static_cast<float>(rng() % 4) * 1e-4f : h(rng);
+    };
+    for (float& x : b) x = draw(-inf);
+    for (float& x : a_ext) x = draw(inf);
+    for (int dj = -m; dj <= m; ++dj) {
+      for (int di = -m; di <= m; ++di) {
+        std::vector<float> a(b.size());
+        for (int j = 0; j < n; ++j) {
+          for (int i = 0; i < n; ++i) {
+            a[static_cast<std::size_t>(j * n + i)] =
+                a_ext[static_cast<std::size_t>((j + m + dj) * nt + (i + m + di))];
+          }
+        }
+        const DepthSample want = OnePassDepth(b, a);
+        const DepthSample plain = DirectionalPenetrationDepth(b, a);
+        const DepthSample shifted = DirectionalPenetrationDepthShifted(b, n, a_ext, m, di, dj);
+        for (const DepthSample& got : {plain, shifted}) {
+          ASSERT_EQ(got.cell, want.cell) << "trial " << trial;
+          ASSERT_EQ(std::signbit(got.depth_m), std::signbit(want.depth_m)) << "trial " << trial;
+          ASSERT_EQ(got.depth_m, want.depth_m) << "trial " << trial;
+        }
+        found += want.cell >= 0;
+      }
+    }
+  }
+  EXPECT_GT(found, 1000);
 }
 
 }  // namespace

@@ -11,6 +11,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 namespace ht {
 
@@ -113,6 +114,47 @@ void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, co
         a * a + b * b + c * c + 2.0 * (a * b * t.cos01 + a * c * t.cos02 + b * c * t.cos12);
     ndotn[k] = len2 > 1e-12 ? (a * t.nn0 + b * t.nn1 + c * t.nn2) / std::sqrt(len2) : 0.0;
   }
+}
+
+// The largest b[k] − a[k] over k < n where both are finite (−∞ when there is none): the first
+// pass of the directional penetration depth, four cells a step where SSE2 is there (a
+// maximum does not depend on the order, so the lanes find the scalar loop's value).
+float MaxFiniteDifference(const float* b, const float* a, std::size_t n) noexcept {
+  constexpr float kNone = -std::numeric_limits<float>::infinity();
+  float best = kNone;
+  std::size_t k = 0;
+#if defined(__SSE2__)
+  const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+  const __m128 big = _mm_set1_ps(std::numeric_limits<float>::max()), none = _mm_set1_ps(kNone);
+  __m128 lanes = none;
+  for (; k + 4 <= n; k += 4) {
+    const __m128 bv = _mm_loadu_ps(b + k), av = _mm_loadu_ps(a + k);
+    const __m128 finite = _mm_and_ps(_mm_cmple_ps(_mm_and_ps(bv, abs_mask), big),
+                                     _mm_cmple_ps(_mm_and_ps(av, abs_mask), big));
+    const __m128 diff = _mm_sub_ps(bv, av);
+    lanes = _mm_max_ps(lanes, _mm_or_ps(_mm_and_ps(finite, diff), _mm_andnot_ps(finite, none)));
+  }
+  alignas(16) float lane[4];
+  _mm_store_ps(lane, lanes);
+  for (const float x : lane) best = std::max(best, x);
+#endif
+  for (; k < n; ++k) {
+    if (std::isfinite(b[k]) && std::isfinite(a[k])) best = std::max(best, b[k] - a[k]);
+  }
+  return best;
+}
+
+// The first k < n where both are finite and b[k] − a[k] == value (−1 when none): the second
+// pass, which gives the scalar loop's cell (ties keep the lowest index) and its difference
+// (a −0 that ties with a +0 stays what the first cell had).
+long FirstFiniteDifferenceEqual(const float* b, const float* a, std::size_t n,
+                                float value) noexcept {
+  for (std::size_t k = 0; k < n; ++k) {
+    if (std::isfinite(b[k]) && std::isfinite(a[k]) && b[k] - a[k] == value) {
+      return static_cast<long>(k);
+    }
+  }
+  return -1;
 }
 
 }  // namespace
@@ -263,17 +305,14 @@ DepthSample DirectionalPenetrationDepth(std::span<const float> b,
                                         std::span<const float> a) noexcept {
   DepthSample best{-std::numeric_limits<double>::infinity(), -1};
   const size_t count = std::min(a.size(), b.size());
-  float best_value = -std::numeric_limits<float>::infinity();
-  for (size_t k = 0; k < count; ++k) {
-    const float bk = b[k], ak = a[k];
-    if (!(std::isfinite(bk) && std::isfinite(ak))) continue;
-    const float diff = bk - ak;
-    if (diff > best_value) {
-      best_value = diff;
-      best.cell = static_cast<int>(k);
-    }
-  }
-  if (best.cell >= 0) best.depth_m = static_cast<double>(best_value);
+  // Two passes: the largest difference, then its first cell (what one pass keeping the first
+  // strictly larger difference finds).
+  const float largest = MaxFiniteDifference(b.data(), a.data(), count);
+  if (!(largest > -std::numeric_limits<float>::infinity())) return best;
+  const long k = FirstFiniteDifferenceEqual(b.data(), a.data(), count, largest);
+  if (k < 0) return best;
+  best.cell = static_cast<int>(k);
+  best.depth_m = static_cast<double>(b[static_cast<size_t>(k)] - a[static_cast<size_t>(k)]);
   return best;
 }
 
@@ -450,21 +489,26 @@ DepthSample DirectionalPenetrationDepthShifted(std::span<const float> b, int res
       b.size() < static_cast<size_t>(n) * n || a_ext.size() < static_cast<size_t>(nt) * nt) {
     return best;
   }
-  float best_value = -std::numeric_limits<float>::infinity();
+  // Two passes, as DirectionalPenetrationDepth, row by row (the tool's rows are offset).
+  const auto rows = [&](int j) {
+    return std::pair<const float*, const float*>(
+        &b[static_cast<size_t>(j) * n], &a_ext[static_cast<size_t>(j + m + dj) * nt + (m + di)]);
+  };
+  float largest = -std::numeric_limits<float>::infinity();
   for (int j = 0; j < n; ++j) {
-    const float* brow = &b[static_cast<size_t>(j) * n];
-    const float* arow = &a_ext[static_cast<size_t>(j + m + dj) * nt + (m + di)];
-    for (int i = 0; i < n; ++i) {
-      const float bk = brow[i], ak = arow[i];
-      if (!(std::isfinite(bk) && std::isfinite(ak))) continue;
-      const float diff = bk - ak;
-      if (diff > best_value) {
-        best_value = diff;
-        best.cell = j * n + i;
-      }
+    const auto [brow, arow] = rows(j);
+    largest = std::max(largest, MaxFiniteDifference(brow, arow, static_cast<size_t>(n)));
+  }
+  if (!(largest > -std::numeric_limits<float>::infinity())) return best;
+  for (int j = 0; j < n; ++j) {
+    const auto [brow, arow] = rows(j);
+    const long i = FirstFiniteDifferenceEqual(brow, arow, static_cast<size_t>(n), largest);
+    if (i >= 0) {
+      best.cell = j * n + static_cast<int>(i);
+      best.depth_m = static_cast<double>(brow[i] - arow[i]);
+      return best;
     }
   }
-  if (best.cell >= 0) best.depth_m = static_cast<double>(best_value);
   return best;
 }
 
