@@ -1,6 +1,8 @@
 // SampleLevelBatch (issue 15): every kernel writes HeightField::Sample's bits, on clamped and
 // periodic textures (power-of-two and other sizes), at coordinates inside, on the edges of and
 // far outside [0, 1]², and at non-finite ones; batch lengths that leave SIMD tails.
+#include "haptic_core/height_field_batch.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -8,8 +10,6 @@
 #include <limits>
 #include <random>
 #include <vector>
-
-#include "haptic_core/height_field_batch.h"
 
 namespace ht {
 namespace {
@@ -42,14 +42,14 @@ TEST(SampleLevelBatch, EveryKernelWritesTheBitsOfSample) {
     int width, height;
     bool wrap_u, wrap_v;
   };
-  const Case cases[] = {{64, 64, false, false}, {64, 32, true, true}, {128, 64, true, false},
+  const Case cases[] = {{64, 64, false, false}, {64, 32, true, true},  {128, 64, true, false},
                         {48, 40, true, true},   {33, 17, false, true}, {1, 1, false, false}};
   int compared = 0;
   for (const Case& c : cases) {
     const HeightField field = RandomField(c.width, c.height, c.wrap_u, c.wrap_v, 7);
     for (int level = 0; level < field.num_levels(); ++level) {
-      for (const std::size_t n : {std::size_t{1}, std::size_t{7}, std::size_t{8},
-                                  std::size_t{13}, std::size_t{256}}) {
+      for (const std::size_t n :
+           {std::size_t{1}, std::size_t{7}, std::size_t{8}, std::size_t{13}, std::size_t{256}}) {
         std::vector<float> u(n), v(n), best(n, -1.0f), scalar(n, -2.0f);
         for (std::size_t k = 0; k < n; ++k) {
           const int pick = static_cast<int>(rng() % 8);

@@ -167,6 +167,73 @@ TEST(TextureStageParity, FastRenderDrawsTheReferenceHeightsOnAllSixSeedModels) {
   EXPECT_GT(covered, 20000);  // the contacts really draw something
 }
 
+// Slivers, needles and triangles with an edge almost along a row: the fast render's row spans
+// are computed bounds widened by a tiny slack, so cells exactly on or a rounding away from an
+// edge are where a too-tight span would lose a cell the reference draws. Random triangles of all
+// shapes over the window, untextured (the span alone decides), both sides, margin 0 and 1.
+TEST(TextureStageParity, FastRenderCoversTheReferenceCellsOnSliversAndNeedles) {
+  std::mt19937 rng(1507);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 50);
+  const double cell = w.cell_size_m();
+  int covered = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    HapticModel m;
+    for (int t = 0; t < 20; ++t) {
+      // Corners on cell centres or edges (exact ties), or anywhere; the third one nearly on the
+      // line of the first two now and then (a sliver), or far along it (a needle).
+      const auto corner = [&] {
+        const int mode = static_cast<int>(rng() % 3);
+        const double x = U(rng) * 0.012, y = U(rng) * 0.012;
+        if (mode == 0)
+          return glm::dvec3(std::round(x / cell) * cell, std::round(y / cell) * cell, 0);
+        if (mode == 1) {
+          return glm::dvec3((std::round(x / cell) + 0.5) * cell,
+                            (std::round(y / cell) + 0.5) * cell, 0);
+        }
+        return glm::dvec3(x, y, 0);
+      };
+      glm::dvec3 a = corner(), b = corner(), c = corner();
+      if (trial % 3 == 1)
+        c = a + (b - a) * (0.5 + U(rng)) + glm::dvec3(-(b - a).y, (b - a).x, 0) * 1e-7 * U(rng);
+      if (trial % 3 == 2) c = a + glm::dvec3(1.0, 1e-9 * U(rng), 0) * 0.02 * U(rng);
+      a.z = 1e-3 * U(rng);
+      b.z = 1e-3 * U(rng);
+      c.z = 1e-3 * U(rng);
+      // Facing +z for the environment's test, −z for the tool's: one of each orientation.
+      const bool up = glm::cross(b - a, c - a).z > 0.0;
+      const int base = static_cast<int>(m.vertices_O.size());
+      m.vertices_O.insert(m.vertices_O.end(), {a, b, c});
+      m.triangles.push_back(up == (t % 2 == 0) ? glm::ivec3(base, base + 1, base + 2)
+                                               : glm::ivec3(base, base + 2, base + 1));
+      for (int k = 0; k < 3; ++k) {
+        m.corner_normals_O.push_back({0, 0, up == (t % 2 == 0) ? 1.0 : -1.0});
+        m.corner_uvs.push_back({0.0f, 0.0f});
+      }
+      m.textured.push_back(0);
+      m.texel_size_m.push_back(1e-4);
+    }
+    std::vector<int> all(m.triangles.size());
+    for (std::size_t k = 0; k < all.size(); ++k) all[k] = static_cast<int>(k);
+    for (const PatchSide side : {PatchSide::kEnvironment, PatchSide::kTool}) {
+      const float empty = side == PatchSide::kEnvironment ? -std::numeric_limits<float>::infinity()
+                                                          : std::numeric_limits<float>::infinity();
+      std::vector<float> ref(2500, empty), fast = ref;
+      RenderPatchHeights(m, RigidTransform::Identity(), all, w, side, ref);
+      RenderPatchHeightsFast(m, RigidTransform::Identity(), all, w, side, 0, fast);
+      covered += ExpectSameHeights(ref, fast, "slivers");
+      const ContactWindow grown =
+          ContactWindow::Make(w.center_W, w.normal_W, w.extent_m * 52 / 50, 52);
+      std::vector<float> ref_grown(52 * 52, empty), fast_grown = ref_grown;
+      RenderPatchHeights(m, RigidTransform::Identity(), all, grown, side, ref_grown,
+                         w.depth_range_m());
+      RenderPatchHeightsFast(m, RigidTransform::Identity(), all, w, side, 1, fast_grown);
+      covered += ExpectSameHeights(ref_grown, fast_grown, "slivers, grown");
+    }
+  }
+  EXPECT_GT(covered, 10000);
+}
+
 TEST(TextureStageParity, FastSolverGivesTheReferenceDepthsAndGradients) {
   std::mt19937 rng(1515);
   TexturePenetrationSolver reference(128, 4096, TextureStagePath::kReference);

@@ -95,9 +95,9 @@ std::size_t SampleSse2(const HeightFieldLevel& L, bool wrap_u, bool wrap_v, cons
   return _mm256_min_epi32(_mm256_max_epi32(i, _mm256_setzero_si256()), size_minus_1);
 }
 
-[[gnu::target("avx2")]] std::size_t SampleAvx2(const HeightFieldLevel& L, bool wrap_u,
-                                               bool wrap_v, const float* u, const float* v,
-                                               float* h, std::size_t n) noexcept {
+[[gnu::target("avx2")]] std::size_t SampleAvx2(const HeightFieldLevel& L, bool wrap_u, bool wrap_v,
+                                               const float* u, const float* v, float* h,
+                                               std::size_t n) noexcept {
   const __m256 tw = _mm256_set1_ps(static_cast<float>(L.width));
   const __m256 th = _mm256_set1_ps(static_cast<float>(L.height));
   const __m256 half = _mm256_set1_ps(0.5f), lo = _mm256_set1_ps(-1e6f), hi = _mm256_set1_ps(1e6f);
@@ -123,8 +123,8 @@ std::size_t SampleSse2(const HeightFieldLevel& L, bool wrap_u, bool wrap_v, cons
     const __m256i xa = AddressAvx2(x0, wm1, wrap_u);
     const __m256i xb = AddressAvx2(_mm256_add_epi32(x0, one), wm1, wrap_u);
     const __m256i ya = _mm256_mullo_epi32(AddressAvx2(y0, hm1, wrap_v), width);
-    const __m256i yb = _mm256_mullo_epi32(AddressAvx2(_mm256_add_epi32(y0, one), hm1, wrap_v),
-                                          width);
+    const __m256i yb =
+        _mm256_mullo_epi32(AddressAvx2(_mm256_add_epi32(y0, one), hm1, wrap_v), width);
     const __m256 a0 = _mm256_i32gather_ps(texels, _mm256_add_epi32(ya, xa), 4);
     const __m256 a1 = _mm256_i32gather_ps(texels, _mm256_add_epi32(ya, xb), 4);
     const __m256 b0 = _mm256_i32gather_ps(texels, _mm256_add_epi32(yb, xa), 4);

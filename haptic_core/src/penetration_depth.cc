@@ -92,9 +92,9 @@ void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, co
     }
     const __m128d squares =
         _mm_add_pd(_mm_add_pd(_mm_mul_pd(a, a), _mm_mul_pd(b, b)), _mm_mul_pd(c, c));
-    const __m128d cross = _mm_add_pd(
-        _mm_add_pd(_mm_mul_pd(_mm_mul_pd(a, b), c01), _mm_mul_pd(_mm_mul_pd(a, c), c02)),
-        _mm_mul_pd(_mm_mul_pd(b, c), c12));
+    const __m128d cross =
+        _mm_add_pd(_mm_add_pd(_mm_mul_pd(_mm_mul_pd(a, b), c01), _mm_mul_pd(_mm_mul_pd(a, c), c02)),
+                   _mm_mul_pd(_mm_mul_pd(b, c), c12));
     const __m128d len2 = _mm_add_pd(squares, _mm_mul_pd(two, cross));
     const __m128d dot =
         _mm_add_pd(_mm_add_pd(_mm_mul_pd(a, nn0), _mm_mul_pd(b, nn1)), _mm_mul_pd(c, nn2));
@@ -421,11 +421,14 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
     const double gx0 = (y[1] - y[2]) * inv_area, gy0 = (x[2] - x[1]) * inv_area;
     const double k1 = (x[2] * y[0] - x[0] * y[2]) * inv_area;
     const double gx1 = (y[2] - y[0]) * inv_area, gy1 = (x[0] - x[2]) * inv_area;
-    // Each row's span: where each b ≥ the tolerance, b = r + g·px with r the row's part. By
-    // reciprocals (a row costs three multiplies, not three divisions) and floors by truncation
-    // (lo stays in [i0, i1 + 3] and hi in [i0 − 2, i1 + 1] wherever the span is used, so the
-    // conversions are exact): the span is widened by a cell on each side for rounding, and the
-    // exact per-cell test below decides, so the cells drawn are those of the divisions.
+    // Each row's span: the cell centres px where each b = r + g·px ≥ the tolerance (r the row's
+    // part, the same double the per-cell test uses), by reciprocals. A computed bound differs from
+    // the exact one by a few ulps of px plus a few of r/g; each is widened by 1e-7 cell plus
+    // 1e-12·|r/g|, far more than that, so every cell the exact per-cell test below accepts lies in
+    // the span (the cells drawn are those of the test alone) while the span no longer carries the
+    // whole extra cell at each end that it did (a third of the cells tested on the CAD part).
+    // lo stays in [i0, i1 + 3] and hi in [i0 − 2, i1 + 1] wherever the span is used, so the
+    // floors and ceilings by truncation are exact.
     const double g2 = -gx0 - gx1;
     const double inv_gx0 = gx0 != 0.0 ? 1.0 / gx0 : 0.0, inv_gx1 = gx1 != 0.0 ? 1.0 / gx1 : 0.0,
                  inv_g2 = g2 != 0.0 ? 1.0 / g2 : 0.0;
@@ -435,24 +438,27 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
       double lo = static_cast<double>(i0), hi = static_cast<double>(i1) + 1.0;
       bool empty = false;
       const auto clip = [&](double r, double g, double inv_g) {
+        if (g == 0.0) {
+          empty = empty || r < kEdgeTolerance;
+          return;
+        }
+        const double bound = (kEdgeTolerance - r) * inv_g;
+        const double slack = 1e-7 + 1e-12 * std::abs(r * inv_g);
         if (g > 0.0) {
-          lo = std::max(lo, (kEdgeTolerance - r) * inv_g);
-        } else if (g < 0.0) {
-          hi = std::min(hi, (kEdgeTolerance - r) * inv_g);
-        } else if (r < kEdgeTolerance) {
-          empty = true;
+          lo = std::max(lo, bound - slack);
+        } else {
+          hi = std::min(hi, bound + slack);
         }
       };
       clip(r0, gx0, inv_gx0);
       clip(r1, gx1, inv_gx1);
       clip(r2, g2, inv_g2);
       if (empty || !(lo <= hi + 2.0)) continue;
+      // Cell i (centre i + 0.5) with lo ≤ i + 0.5 ≤ hi.
       const double lo_c = lo - 0.5, hi_c = hi - 0.5;
       const int lo_t = static_cast<int>(lo_c), hi_t = static_cast<int>(hi_c);
-      const int lo_floor = lo_t - static_cast<int>(lo_c < lo_t);
-      const int hi_ceil = hi_t + static_cast<int>(hi_c > hi_t);
-      const int ia = std::max(i0, lo_floor - 1);
-      const int ib = std::min(i1, hi_ceil + 1);
+      const int ia = std::max(i0, lo_t + static_cast<int>(lo_c > lo_t));
+      const int ib = std::min(i1, hi_t - static_cast<int>(hi_c < hi_t));
       float* row = &heights[static_cast<size_t>(j) * nt];
       for (int i = ia; i <= ib; ++i) {
         const double px = i + 0.5;
