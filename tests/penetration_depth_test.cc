@@ -166,7 +166,7 @@ namespace ht {
 namespace {
 
 // One pass keeping the first strictly larger difference of finite pairs: the definition the
-// SIMD two-pass DirectionalPenetrationDepth(Shifted) must reproduce bit for bit.
+// SIMD lane scan of DirectionalPenetrationDepth(Shifted) must reproduce bit for bit.
 DepthSample OnePassDepth(const std::vector<float>& b, const std::vector<float>& a) {
   DepthSample best{-std::numeric_limits<double>::infinity(), -1};
   float best_value = -std::numeric_limits<float>::infinity();
@@ -181,7 +181,7 @@ DepthSample OnePassDepth(const std::vector<float>& b, const std::vector<float>& 
   return best;
 }
 
-TEST(PenetrationDepth, TwoPassDepthIsTheOnePassDefinitionWithTiesInfinitiesAndSignedZeros) {
+TEST(PenetrationDepth, LaneScanDepthIsTheOnePassDefinitionWithTiesInfinitiesAndSignedZeros) {
   std::mt19937 rng(77);
   std::uniform_real_distribution<float> h(-1e-3f, 1e-3f);
   const float inf = std::numeric_limits<float>::infinity();

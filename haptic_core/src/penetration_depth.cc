@@ -116,46 +116,72 @@ void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, co
   }
 }
 
-// The largest b[k] − a[k] over k < n where both are finite (−∞ when there is none): the first
-// pass of the directional penetration depth, four cells a step where SSE2 is there (a
-// maximum does not depend on the order, so the lanes find the scalar loop's value).
-float MaxFiniteDifference(const float* b, const float* a, std::size_t n) noexcept {
-  constexpr float kNone = -std::numeric_limits<float>::infinity();
-  float best = kNone;
-  std::size_t k = 0;
+// The first cell of the largest b − a over cells where both are finite: one strictly-greater
+// scan, four cells a step where SSE2 is there. Each lane (and the scalar tail) keeps the first
+// cell of its own largest difference; Result() takes the largest of them and, among equal ones
+// (a −0 equals a +0), the lowest cell, which is the one scan's cell, with its difference's bits.
+// Rows may be added in any number (Add), in increasing cell order.
+class FirstLargestDifference {
+ public:
+  void Add(const float* b, const float* a, std::size_t n, int first_cell) noexcept {
+    std::size_t k = 0;
 #if defined(__SSE2__)
-  const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
-  const __m128 big = _mm_set1_ps(std::numeric_limits<float>::max()), none = _mm_set1_ps(kNone);
-  __m128 lanes = none;
-  for (; k + 4 <= n; k += 4) {
-    const __m128 bv = _mm_loadu_ps(b + k), av = _mm_loadu_ps(a + k);
-    const __m128 finite = _mm_and_ps(_mm_cmple_ps(_mm_and_ps(bv, abs_mask), big),
-                                     _mm_cmple_ps(_mm_and_ps(av, abs_mask), big));
-    const __m128 diff = _mm_sub_ps(bv, av);
-    lanes = _mm_max_ps(lanes, _mm_or_ps(_mm_and_ps(finite, diff), _mm_andnot_ps(finite, none)));
-  }
-  alignas(16) float lane[4];
-  _mm_store_ps(lane, lanes);
-  for (const float x : lane) best = std::max(best, x);
+    const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+    const __m128 big = _mm_set1_ps(std::numeric_limits<float>::max());
+    __m128i cell = _mm_add_epi32(_mm_set1_epi32(first_cell), _mm_set_epi32(3, 2, 1, 0));
+    const __m128i four = _mm_set1_epi32(4);
+    for (; k + 4 <= n; k += 4) {
+      const __m128 bv = _mm_loadu_ps(b + k), av = _mm_loadu_ps(a + k);
+      const __m128 finite = _mm_and_ps(_mm_cmple_ps(_mm_and_ps(bv, abs_mask), big),
+                                       _mm_cmple_ps(_mm_and_ps(av, abs_mask), big));
+      const __m128 diff = _mm_sub_ps(bv, av);
+      const __m128 take = _mm_and_ps(finite, _mm_cmpgt_ps(diff, lanes_));
+      lanes_ = _mm_or_ps(_mm_and_ps(take, diff), _mm_andnot_ps(take, lanes_));
+      const __m128i take_i = _mm_castps_si128(take);
+      lane_cells_ =
+          _mm_or_si128(_mm_and_si128(take_i, cell), _mm_andnot_si128(take_i, lane_cells_));
+      cell = _mm_add_epi32(cell, four);
+    }
 #endif
-  for (; k < n; ++k) {
-    if (std::isfinite(b[k]) && std::isfinite(a[k])) best = std::max(best, b[k] - a[k]);
-  }
-  return best;
-}
-
-// The first k < n where both are finite and b[k] − a[k] == value (−1 when none): the second
-// pass, which gives the scalar loop's cell (ties keep the lowest index) and its difference
-// (a −0 that ties with a +0 stays what the first cell had).
-long FirstFiniteDifferenceEqual(const float* b, const float* a, std::size_t n,
-                                float value) noexcept {
-  for (std::size_t k = 0; k < n; ++k) {
-    if (std::isfinite(b[k]) && std::isfinite(a[k]) && b[k] - a[k] == value) {
-      return static_cast<long>(k);
+    for (; k < n; ++k) {
+      if (!(std::isfinite(b[k]) && std::isfinite(a[k]))) continue;
+      const float diff = b[k] - a[k];
+      if (diff > tail_value_) {
+        tail_value_ = diff;
+        tail_cell_ = first_cell + static_cast<int>(k);
+      }
     }
   }
-  return -1;
-}
+
+  DepthSample Result() const noexcept {
+    float value = tail_value_;
+    int cell = tail_cell_;
+    const auto consider = [&](float v, int c) {
+      if (c < 0) return;
+      if (cell < 0 || v > value || (v == value && c < cell)) {
+        value = v;
+        cell = c;
+      }
+    };
+#if defined(__SSE2__)
+    alignas(16) float v[4];
+    alignas(16) int c[4];
+    _mm_store_ps(v, lanes_);
+    _mm_store_si128(reinterpret_cast<__m128i*>(c), lane_cells_);
+    for (int l = 0; l < 4; ++l) consider(v[l], c[l]);
+#endif
+    if (cell < 0) return {-std::numeric_limits<double>::infinity(), -1};
+    return {static_cast<double>(value), cell};
+  }
+
+ private:
+#if defined(__SSE2__)
+  __m128 lanes_ = _mm_set1_ps(-std::numeric_limits<float>::infinity());
+  __m128i lane_cells_ = _mm_set1_epi32(-1);
+#endif
+  float tail_value_ = -std::numeric_limits<float>::infinity();
+  int tail_cell_ = -1;
+};
 
 }  // namespace
 
@@ -303,17 +329,10 @@ void RenderPatchHeights(const HapticModel& model, const RigidTransform& X_WO,
 
 DepthSample DirectionalPenetrationDepth(std::span<const float> b,
                                         std::span<const float> a) noexcept {
-  DepthSample best{-std::numeric_limits<double>::infinity(), -1};
   const size_t count = std::min(a.size(), b.size());
-  // Two passes: the largest difference, then its first cell (what one pass keeping the first
-  // strictly larger difference finds).
-  const float largest = MaxFiniteDifference(b.data(), a.data(), count);
-  if (!(largest > -std::numeric_limits<float>::infinity())) return best;
-  const long k = FirstFiniteDifferenceEqual(b.data(), a.data(), count, largest);
-  if (k < 0) return best;
-  best.cell = static_cast<int>(k);
-  best.depth_m = static_cast<double>(b[static_cast<size_t>(k)] - a[static_cast<size_t>(k)]);
-  return best;
+  FirstLargestDifference scan;
+  scan.Add(b.data(), a.data(), count, 0);
+  return scan.Result();
 }
 
 void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO,
@@ -495,27 +514,13 @@ DepthSample DirectionalPenetrationDepthShifted(std::span<const float> b, int res
       b.size() < static_cast<size_t>(n) * n || a_ext.size() < static_cast<size_t>(nt) * nt) {
     return best;
   }
-  // Two passes, as DirectionalPenetrationDepth, row by row (the tool's rows are offset).
-  const auto rows = [&](int j) {
-    return std::pair<const float*, const float*>(
-        &b[static_cast<size_t>(j) * n], &a_ext[static_cast<size_t>(j + m + dj) * nt + (m + di)]);
-  };
-  float largest = -std::numeric_limits<float>::infinity();
+  FirstLargestDifference scan;  // row by row: the tool's rows are offset
   for (int j = 0; j < n; ++j) {
-    const auto [brow, arow] = rows(j);
-    largest = std::max(largest, MaxFiniteDifference(brow, arow, static_cast<size_t>(n)));
+    scan.Add(&b[static_cast<size_t>(j) * n],
+             &a_ext[static_cast<size_t>(j + m + dj) * nt + (m + di)], static_cast<size_t>(n),
+             j * n);
   }
-  if (!(largest > -std::numeric_limits<float>::infinity())) return best;
-  for (int j = 0; j < n; ++j) {
-    const auto [brow, arow] = rows(j);
-    const long i = FirstFiniteDifferenceEqual(brow, arow, static_cast<size_t>(n), largest);
-    if (i >= 0) {
-      best.cell = j * n + static_cast<int>(i);
-      best.depth_m = static_cast<double>(brow[i] - arow[i]);
-      return best;
-    }
-  }
-  return best;
+  return scan.Result();
 }
 
 }  // namespace ht
