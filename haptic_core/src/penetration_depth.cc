@@ -62,14 +62,16 @@ struct TriangleShading {
   double uv0x, uv1x, uv2x, uv0y, uv1y, uv2y;
   double nn0, nn1, nn2, cos01, cos02, cos12;
   bool flat;
+  double d0, d1, d2;  // corner heights along n (m)
 };
 
-// Per cell k < n with barycentrics (b0, b1, b2)[k]: the texture coordinates, and the unit
+// Per cell k < n with barycentrics (b0, b1)[k] (b2 = 1 − b0 − b1): the coarse height along n
+// (value = b·d), the texture coordinates, and the unit
 // interpolated normal's component along n, (b·nn)/|Σ b_k n_k| (0 where that length vanishes;
 // nn0 for a flat triangle). The arithmetic of RenderPatchHeights in its order, so that the SSE2
 // lanes (two cells a step: the square roots and divisions, the slowest part of a smooth
 // triangle's cell, no longer wait one after the other) write the bits of the scalar code.
-void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, const double* b2,
+void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, double* value,
                 float* u, float* v, double* ndotn, int n) noexcept {
   int k = 0;
 #if defined(__SSE2__)
@@ -77,9 +79,13 @@ void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, co
   const __m128d uv0y = _mm_set1_pd(t.uv0y), uv1y = _mm_set1_pd(t.uv1y), uv2y = _mm_set1_pd(t.uv2y);
   const __m128d nn0 = _mm_set1_pd(t.nn0), nn1 = _mm_set1_pd(t.nn1), nn2 = _mm_set1_pd(t.nn2);
   const __m128d c01 = _mm_set1_pd(t.cos01), c02 = _mm_set1_pd(t.cos02), c12 = _mm_set1_pd(t.cos12);
-  const __m128d two = _mm_set1_pd(2.0), tiny = _mm_set1_pd(1e-12);
+  const __m128d d0 = _mm_set1_pd(t.d0), d1 = _mm_set1_pd(t.d1), d2 = _mm_set1_pd(t.d2);
+  const __m128d one = _mm_set1_pd(1.0), two = _mm_set1_pd(2.0), tiny = _mm_set1_pd(1e-12);
   for (; k + 2 <= n; k += 2) {
-    const __m128d a = _mm_loadu_pd(b0 + k), b = _mm_loadu_pd(b1 + k), c = _mm_loadu_pd(b2 + k);
+    const __m128d a = _mm_loadu_pd(b0 + k), b = _mm_loadu_pd(b1 + k);
+    const __m128d c = _mm_sub_pd(_mm_sub_pd(one, a), b);
+    _mm_storeu_pd(value + k,
+                  _mm_add_pd(_mm_add_pd(_mm_mul_pd(a, d0), _mm_mul_pd(b, d1)), _mm_mul_pd(c, d2)));
     const __m128d uu =
         _mm_add_pd(_mm_add_pd(_mm_mul_pd(a, uv0x), _mm_mul_pd(b, uv1x)), _mm_mul_pd(c, uv2x));
     const __m128d vv =
@@ -103,7 +109,8 @@ void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, co
   }
 #endif
   for (; k < n; ++k) {
-    const double a = b0[k], b = b1[k], c = b2[k];
+    const double a = b0[k], b = b1[k], c = 1.0 - a - b;
+    value[k] = a * t.d0 + b * t.d1 + c * t.d2;
     u[k] = static_cast<float>(a * t.uv0x + b * t.uv1x + c * t.uv2x);
     v[k] = static_cast<float>(a * t.uv0y + b * t.uv1y + c * t.uv2y);
     if (t.flat) {
@@ -361,7 +368,7 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
   // shading per triangle).
   constexpr int kBatch = 256;
   alignas(32) float batch_u[kBatch], batch_v[kBatch], batch_h[kBatch];
-  alignas(32) double batch_b0[kBatch], batch_b1[kBatch], batch_b2[kBatch];
+  alignas(32) double batch_b0[kBatch], batch_b1[kBatch];
   double batch_value[kBatch], batch_ndotn[kBatch];
   float* batch_cell[kBatch];
   int batch_count = 0, batch_level = 0;
@@ -369,7 +376,8 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
   const auto flush = [&] {
     if (batch_count == 0) return;
     const auto count = static_cast<std::size_t>(batch_count);
-    ShadeCells(shading, batch_b0, batch_b1, batch_b2, batch_u, batch_v, batch_ndotn, batch_count);
+    ShadeCells(shading, batch_b0, batch_b1, batch_value, batch_u, batch_v, batch_ndotn,
+               batch_count);
     SampleLevelBatch(model.texture, batch_level, std::span<const float>(batch_u, count),
                      std::span<const float>(batch_v, count), std::span<float>(batch_h, count),
                      kernel);
@@ -432,7 +440,10 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
                  glm::dot(n0, n1),
                  glm::dot(n0, n2),
                  glm::dot(n1, n2),
-                 n0 == n1 && n0 == n2};
+                 n0 == n1 && n0 == n2,
+                 d[0],
+                 d[1],
+                 d[2]};
     }
     // Barycentrics, affine in the cell centre (px, py): b0 = k0 + gx0·px + gy0·py, likewise b1,
     // and b2 = 1 − b0 − b1.
@@ -485,16 +496,14 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
         const double b1 = r1 + gx1 * px;
         const double b2 = 1.0 - b0 - b1;
         if (b0 < kEdgeTolerance || b1 < kEdgeTolerance || b2 < kEdgeTolerance) continue;
-        const double value = b0 * d[0] + b1 * d[1] + b2 * d[2];
-        if (textured) {  // h along the unit interpolated normal, in flush()
+        if (textured) {  // b·d and h along the unit interpolated normal, in flush()
           batch_b0[batch_count] = b0;
           batch_b1[batch_count] = b1;
-          batch_b2[batch_count] = b2;
-          batch_value[batch_count] = value;
           batch_cell[batch_count] = &row[i];
           if (++batch_count == kBatch) flush();
           continue;
         }
+        const double value = b0 * d[0] + b1 * d[1] + b2 * d[2];
         if (!(std::abs(value) <= range)) continue;  // outside the window's box along n
         float& cell = row[i];
         const auto fv = static_cast<float>(value);
