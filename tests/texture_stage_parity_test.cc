@@ -9,7 +9,9 @@
 //  - DirectionalPenetrationDepthShifted vs DirectionalPenetrationDepth on an explicitly shifted
 //    buffer: the same sample;
 //  - the coarse query with local reach vs the global query filtered by each pair's own
-//    tolerance: the same pairs.
+//    tolerance: the same pairs;
+//  - the coarse query with internal GJK stopping within the tolerance vs run to the exact
+//    distance: the same pairs, contacts and order.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -410,6 +412,53 @@ TEST(TextureStageParity, ShiftedDepthEqualsTheDepthOfAnExplicitlyShiftedBuffer) 
   }
   // Out-of-range offsets give no overlap rather than reading outside the buffer.
   EXPECT_EQ(DirectionalPenetrationDepthShifted(b, n, a_ext, 1, 2, 0).cell, -1);
+}
+
+// Internal node pairs' GJK stopping once the hulls are within the tolerance (the default without
+// a budget) against running it to the exact distance: the same leaf pairs, contacts and order,
+// bit for bit, over a sequence of nearby poses with temporal coherence on (so the coherent
+// directions carried from call to call are compared too), at the product's tolerance (both
+// outward reaches plus the pipeline's margin) on the file and CAD part and on hammer and torus.
+TEST(CoarseQueryParity, StoppingInternalGjkWithinTheToleranceReportsTheSamePairs) {
+  std::mt19937 rng(1501);
+  int compared = 0;
+  const std::pair<SeedModel, SeedModel> scenes[] = {{SeedModel::kFile, SeedModel::kCadPart},
+                                                    {SeedModel::kHammer, SeedModel::kTorus}};
+  for (const auto& [tool_model, env_model] : scenes) {
+    const HapticModel& tool = Seed(tool_model);
+    const HapticModel& env = Seed(env_model);
+    HullProximityQuery exact_query(1 << 14), near_query(1 << 14);
+    ProximityQueryOptions exact;
+    exact.tolerance_m = tool.OutwardReach() + env.OutwardReach() + 0.5e-3;
+    exact.max_pairs = 1 << 14;
+    exact.exact_internal_distances = true;
+    ProximityQueryOptions near = exact;
+    near.exact_internal_distances = false;
+    std::uniform_real_distribution<double> U(-1.0, 1.0);
+    for (int trial = 0; trial < 6; ++trial) {
+      Contact c = RandomContact(tool, env, rng, 50);
+      for (int frame = 0; frame < 5; ++frame) {
+        // Slide by up to 0.2 mm per frame.
+        c.X_WT.translation += 0.2e-3 * glm::dvec3(U(rng), U(rng), U(rng));
+        const auto a = exact_query.Query(tool, c.X_WT, env, c.X_WO, exact);
+        const std::vector<HullPairContact> want(a.begin(), a.end());
+        const auto got = near_query.Query(tool, c.X_WT, env, c.X_WO, near);
+        ASSERT_EQ(want.size(), got.size()) << SeedModelName(tool_model) << " trial " << trial;
+        for (std::size_t k = 0; k < want.size(); ++k) {
+          const HullPairContact& x = want[k];
+          const HullPairContact& y = got[k];
+          ASSERT_EQ(x.node_A, y.node_A) << k;
+          ASSERT_EQ(x.node_B, y.node_B) << k;
+          EXPECT_EQ(x.signed_distance_m, y.signed_distance_m) << k;
+          EXPECT_EQ(x.normal_W, y.normal_W) << k;
+          EXPECT_EQ(x.point_A_W, y.point_A_W) << k;
+          EXPECT_EQ(x.point_B_W, y.point_B_W) << k;
+        }
+        compared += static_cast<int>(want.size());
+      }
+    }
+  }
+  EXPECT_GT(compared, 500);
 }
 
 }  // namespace

@@ -243,21 +243,24 @@ glm::dvec3 ClosestOnSimplex(Simplex& s, bool* contains_origin) noexcept {
   }
 }
 
-enum class GjkStatus { kFar, kSeparated, kTouching };
+enum class GjkStatus { kFar, kNear, kSeparated, kTouching };
 
 struct GjkResult {
   GjkStatus status = GjkStatus::kFar;
-  /// Distance (m) for kSeparated; a lower bound for kFar; 0 for kTouching.
+  /// Distance (m) for kSeparated; a lower bound for kFar and kNear; 0 for kTouching.
   double distance_m = 0.0;
   glm::dvec3 v{0.0};  // p_A − p_B (W)
   glm::dvec3 p_A{0.0};
   glm::dvec3 p_B{0.0};
 };
 
-// Distance between two posed hulls, stopping early (kFar) once a lower bound exceeds far_m.
-// `guess` is an initial estimate of p_A − p_B (any length; zero → centre difference).
-GjkResult GjkDistance(const PosedHull& A, const PosedHull& B, glm::dvec3 guess,
-                      double far_m) noexcept {
+// Distance between two posed hulls, stopping early (kFar) once a lower bound exceeds far_m, or
+// (kNear, with near_m ≥ 0) once an upper bound, |v| (the distance between two points of the
+// hulls), is at most near_m: the distance is then known to be within near_m and r.distance_m is
+// the lower bound v·w/|v| (≥ 0) reached so far. `guess` is an initial estimate of p_A − p_B (any
+// length; zero → centre difference).
+GjkResult GjkDistance(const PosedHull& A, const PosedHull& B, glm::dvec3 guess, double far_m,
+                      double near_m = -1.0) noexcept {
   GjkResult r;
   if (!(glm::dot(guess, guess) > 0.0)) guess = A.center_W - B.center_W;
   if (!(glm::dot(guess, guess) > 0.0)) guess = glm::dvec3(1.0, 0.0, 0.0);
@@ -286,6 +289,11 @@ GjkResult GjkDistance(const PosedHull& A, const PosedHull& B, glm::dvec3 guess,
     if (vw > far_m * v_len) {
       r.status = GjkStatus::kFar;
       r.distance_m = vw / v_len;
+      return r;
+    }
+    if (v_len <= near_m) {
+      r.status = GjkStatus::kNear;
+      r.distance_m = std::max(0.0, vw / v_len);
       return r;
     }
     r.status = GjkStatus::kSeparated;
@@ -704,6 +712,8 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     }
   }
 
+  const bool near_exit =
+      !options.exact_internal_distances && !(budget_us < kInf) && options.max_node_pair_tests <= 0;
   while (!queue_.empty()) {
     if (options.max_node_pair_tests > 0 && st.node_pairs_tested >= options.max_node_pair_tests) {
       st.budget_exhausted = true;
@@ -771,12 +781,16 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     GjkResult g;
     g.status = GjkStatus::kTouching;
     if (hA.vertex_count + hB.vertex_count <= static_cast<std::size_t>(kInternalGjkMaxVertices)) {
-      g = GjkDistance(hA, hB, glm::dvec3(0.0), eps_e);
+      // Without a budget GJK is here only to cull: it stops as soon as the hulls are certainly
+      // within ε (kNear), since then the pair descends whatever their exact distance (on the
+      // file and CAD part at the product's ε = 8.2 mm, 79 % of internal GJK calls culled
+      // nothing). With a budget the exact distance keeps the best-first order sharp.
+      g = GjkDistance(hA, hB, glm::dvec3(0.0), eps_e, near_exit ? eps_e : -1.0);
     }
     if (g.status == GjkStatus::kFar) continue;
     if (g.status == GjkStatus::kSeparated && g.distance_m > eps_e) continue;
     double key = e.key_m;
-    if (g.status == GjkStatus::kSeparated) {
+    if (g.status == GjkStatus::kSeparated || g.status == GjkStatus::kNear) {
       key = std::max(key, g.distance_m);
     } else {
       // Overlapping: any direction's overlap bounds the penetration depth of every descendant
@@ -818,9 +832,13 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     }
   }
 
+  // Ties broken by the nodes, so that the order does not depend on the traversal's.
   std::sort(results_.begin(), results_.end(),
             [](const HullPairContact& x, const HullPairContact& y) {
-              return x.signed_distance_m < y.signed_distance_m;
+              if (x.signed_distance_m != y.signed_distance_m) {
+                return x.signed_distance_m < y.signed_distance_m;
+              }
+              return x.node_A != y.node_A ? x.node_A < y.node_A : x.node_B < y.node_B;
             });
   std::sort(current_.begin(), current_.end(), PairLess);
   previous_.swap(current_);

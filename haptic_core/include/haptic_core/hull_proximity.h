@@ -54,6 +54,14 @@ struct ProximityQueryOptions {
   /// OutwardReach()). Far leaves whose own textures are flat then stop counting. Negative: off
   /// (tolerance_m everywhere).
   double local_reach_margin_m = -1.0;
+  /// Internal node pairs' GJK runs to the exact hull distance (the behaviour before issue 15's
+  /// coarse-query work). Otherwise, when no budget is set, it stops once the two hulls are known
+  /// to be within the pair's tolerance (then the pair descends whatever the distance), which
+  /// makes the query 20–30 % faster on the seed scenes at the product's tolerance. Either way the
+  /// same leaf pairs are reported with the same contacts in the same order; only the traversal's
+  /// keys differ. With a budget the exact distances are kept: there the best-first order decides
+  /// which pairs are found. For tests and before/after measurements.
+  bool exact_internal_distances = false;
 };
 
 /// What one Query() did.
