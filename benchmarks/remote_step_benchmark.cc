@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "haptic_core/height_field_batch.h"
 #include "haptic_core/model_build/haptic_model_build.h"
 #include "haptic_core/remote_step.h"
 #include "haptic_core/statistics.h"
@@ -139,7 +140,7 @@ int main(int argc, char** argv) {
   }
   std::printf(
       "(times in us; contacts = windows linearized per step; CPU %s path, %d texture "
-      "thread(s))\n",
-      path.c_str(), threads);
+      "thread(s), texture samples %s)\n",
+      path.c_str(), threads, ht::SampleKernelName());
   return 0;
 }
