@@ -11,7 +11,7 @@
 //  - the coarse query with local reach vs the global query filtered by each pair's own
 //    tolerance: the same pairs;
 //  - the coarse query with internal GJK stopping within the tolerance vs run to the exact
-//    distance: the same pairs, contacts and order.
+//    distance, and on two threads vs one: the same pairs, contacts and order.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -459,6 +459,59 @@ TEST(CoarseQueryParity, StoppingInternalGjkWithinTheToleranceReportsTheSamePairs
     }
   }
   EXPECT_GT(compared, 500);
+}
+
+// The coarse query's traversal on two threads against one: the same pairs, contacts, order and
+// counts, over a sequence of nearby poses with coherence (each side carries its own directions),
+// at the product's tolerance, with and without local reach.
+TEST(CoarseQueryParity, TwoThreadsReportWhatOneReports) {
+  std::mt19937 rng(1502);
+  int compared = 0;
+  const std::pair<SeedModel, SeedModel> scenes[] = {{SeedModel::kFile, SeedModel::kCadPart},
+                                                    {SeedModel::kHammer, SeedModel::kTorus}};
+  for (const auto& [tool_model, env_model] : scenes) {
+    const HapticModel& tool = Seed(tool_model);
+    const HapticModel& env = Seed(env_model);
+    for (const bool local : {false, true}) {
+      HullProximityQuery one(1 << 14), two(1 << 14);
+      two.SetThreads(2);
+      ASSERT_EQ(two.threads(), 2);
+      ProximityQueryOptions options;
+      options.tolerance_m = tool.OutwardReach() + env.OutwardReach() + 0.5e-3;
+      options.max_pairs = 1 << 14;
+      if (local) options.local_reach_margin_m = 0.5e-3;
+      std::uniform_real_distribution<double> U(-1.0, 1.0);
+      for (int trial = 0; trial < 4; ++trial) {
+        Contact c = RandomContact(tool, env, rng, 50);
+        for (int frame = 0; frame < 5; ++frame) {
+          c.X_WT.translation += 0.2e-3 * glm::dvec3(U(rng), U(rng), U(rng));
+          ProximityQueryStats s1, s2;
+          const auto a = one.Query(tool, c.X_WT, env, c.X_WO, options, &s1);
+          const std::vector<HullPairContact> want(a.begin(), a.end());
+          const auto got = two.Query(tool, c.X_WT, env, c.X_WO, options, &s2);
+          ASSERT_EQ(want.size(), got.size()) << SeedModelName(tool_model) << " trial " << trial;
+          for (std::size_t k = 0; k < want.size(); ++k) {
+            ASSERT_EQ(want[k].node_A, got[k].node_A) << k;
+            ASSERT_EQ(want[k].node_B, got[k].node_B) << k;
+            EXPECT_EQ(want[k].signed_distance_m, got[k].signed_distance_m) << k;
+            EXPECT_EQ(want[k].normal_W, got[k].normal_W) << k;
+            EXPECT_EQ(want[k].point_A_W, got[k].point_A_W) << k;
+            EXPECT_EQ(want[k].point_B_W, got[k].point_B_W) << k;
+          }
+          EXPECT_EQ(s1.node_pairs_tested, s2.node_pairs_tested);
+          EXPECT_EQ(s1.leaf_pairs_tested, s2.leaf_pairs_tested);
+          EXPECT_EQ(s1.sphere_culls, s2.sphere_culls);
+          EXPECT_EQ(s1.coherent_hits, s2.coherent_hits);
+          EXPECT_EQ(s1.pairs_dropped, s2.pairs_dropped);
+          compared += static_cast<int>(want.size());
+        }
+      }
+    }
+  }
+  EXPECT_GT(compared, 500);
+  HullProximityQuery q;
+  EXPECT_THROW(q.SetThreads(0), std::invalid_argument);
+  EXPECT_THROW(q.SetThreads(257), std::invalid_argument);
 }
 
 }  // namespace

@@ -1,6 +1,9 @@
 #include "haptic_core/hull_proximity.h"
 
 #include <ccd/ccd.h>
+#include <oneapi/tbb/blocked_range.h>
+#include <oneapi/tbb/parallel_for.h>
+#include <oneapi/tbb/task_arena.h>
 
 #include <algorithm>
 #include <chrono>
@@ -453,6 +456,31 @@ HullProximityQuery::HullProximityQuery(int max_pairs) : capacity_(max_pairs) {
   queue_.reserve(4096);
 }
 
+struct HullProximityQuery::Arena {
+  explicit Arena(int threads) : arena(threads) {}
+  oneapi::tbb::task_arena arena;
+};
+
+void HullProximityQuery::SetThreads(int threads) {
+  if (threads < 1 || threads > 256) {
+    throw std::invalid_argument("HullProximityQuery: threads must be in [1, 256], got " +
+                                std::to_string(threads));
+  }
+  if (threads == 1) {
+    arena_.reset();
+    workers_.clear();
+    return;
+  }
+  std::vector<Worker> workers(static_cast<std::size_t>(threads));
+  for (Worker& w : workers) {
+    w.queue.reserve(4096);
+    w.results.reserve(static_cast<std::size_t>(capacity_));
+    w.current.reserve(static_cast<std::size_t>(capacity_));
+  }
+  arena_ = std::make_shared<Arena>(threads);
+  workers_ = std::move(workers);
+}
+
 void HullProximityQuery::ClearCache() noexcept {
   for (ModelEntry& e : cache_) {
     e.model = nullptr;
@@ -682,19 +710,28 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     const double rb = entry_B->reach_m[node_B < 0 ? 0 : static_cast<std::size_t>(node_B)];
     return std::min(eps, ra + rb + options.local_reach_margin_m);
   };
-  auto push = [&](double key, int node_A, int node_B) {
-    queue_.push_back({key, node_A, node_B});  // grows only during warm-up
-    std::push_heap(queue_.begin(), queue_.end(), HeapAfter);
+  // Where a traversal keeps its queue, its pairs, its coherent directions and its counts: the
+  // object's own, or one worker's (SetThreads).
+  struct Traversal {
+    std::vector<QueueEntry>& queue;
+    std::vector<HullPairContact>& results;
+    std::vector<CoherentPair>& current;
+    ProximityQueryStats& st;
   };
-  auto emit = [&](const HullPairContact& c) {
-    if (results_.size() < max_pairs) {
-      results_.push_back(c);
+  Traversal main_traversal{queue_, results_, current_, st};
+  auto push = [](Traversal& t, double key, int node_A, int node_B) {
+    t.queue.push_back({key, node_A, node_B});  // grows only during warm-up
+    std::push_heap(t.queue.begin(), t.queue.end(), HeapAfter);
+  };
+  auto emit = [&](Traversal& t, const HullPairContact& c) {
+    if (t.results.size() < max_pairs) {
+      t.results.push_back(c);
       return;
     }
-    ++st.pairs_dropped;
-    if (results_.empty()) return;
+    ++t.st.pairs_dropped;
+    if (t.results.empty()) return;
     // Full: keep the deeper of the new pair and the shallowest kept one.
-    auto worst = std::max_element(results_.begin(), results_.end(),
+    auto worst = std::max_element(t.results.begin(), t.results.end(),
                                   [](const HullPairContact& x, const HullPairContact& y) {
                                     return x.signed_distance_m < y.signed_distance_m;
                                   });
@@ -708,35 +745,30 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     if (lb > pair_eps(root_A, root_B)) {
       ++st.sphere_culls;
     } else {
-      push(lb, root_A, root_B);
+      push(main_traversal, lb, root_A, root_B);
     }
   }
 
-  const bool near_exit =
-      !options.exact_internal_distances && !(budget_us < kInf) && options.max_node_pair_tests <= 0;
-  while (!queue_.empty()) {
-    if (options.max_node_pair_tests > 0 && st.node_pairs_tested >= options.max_node_pair_tests) {
-      st.budget_exhausted = true;
-      break;
-    }
-    if (budget_us < kInf &&
-        std::chrono::duration<double, std::micro>(Clock::now() - t0).count() >= budget_us) {
-      st.budget_exhausted = true;
-      break;
-    }
-    std::pop_heap(queue_.begin(), queue_.end(), HeapAfter);
-    const QueueEntry e = queue_.back();
-    queue_.pop_back();
-
+  const bool unlimited = !(budget_us < kInf) && options.max_node_pair_tests <= 0;
+  const bool near_exit = !options.exact_internal_distances && unlimited;
+  // With workers (SetThreads) and no budget, the traversal moves to them once this many node
+  // pairs are queued (a budget needs the one best-first order).
+  const std::size_t split_at =
+      arena_ != nullptr && unlimited && !a_single && !b_single ? 16 * workers_.size() : 0;
+  // One node pair of a traversal: leaf pairs are tested and emitted, internal pairs split into
+  // their children (queued unless culled). Reads only what the call's set-up fixed (models,
+  // poses, cache entries, the previous call's coherent directions), so that workers may run it
+  // at once on their own traversals.
+  auto process = [&](Traversal& t, const QueueEntry& e) {
     const PosedHull hA = posed(A, *entry_A, X_WA, R_AW, e.node_A);
     const PosedHull hB = posed(B, *entry_B, X_WB, R_BW, e.node_B);
     const bool leaf_A = is_leaf(A, e.node_A);
     const bool leaf_B = is_leaf(B, e.node_B);
-    ++st.node_pairs_tested;
+    ++t.st.node_pairs_tested;
     const double eps_e = pair_eps(e.node_A, e.node_B);
 
     if (leaf_A && leaf_B) {
-      ++st.leaf_pairs_tested;
+      ++t.st.leaf_pairs_tested;
       const CoherentPair* prev = nullptr;
       if (coherent) {
         const CoherentPair probe{e.node_A, e.node_B, glm::dvec3(0.0)};
@@ -747,10 +779,10 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
       }
       const GjkResult g =
           GjkDistance(hA, hB, prev != nullptr ? prev->direction_W : glm::dvec3(0.0), eps_e);
-      if (g.status == GjkStatus::kFar) continue;
+      if (g.status == GjkStatus::kFar) return;
       HullPairContact c;
       if (g.status == GjkStatus::kSeparated) {
-        if (g.distance_m > eps_e) continue;
+        if (g.distance_m > eps_e) return;
         c.signed_distance_m = g.distance_m;
         c.normal_W = g.v / g.distance_m;
         c.point_A_W = g.p_A;
@@ -759,20 +791,20 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
         c = PenetrationContact(hA, hB, prev != nullptr ? &prev->direction_W : nullptr);
         // Touching within GJK's tolerance counts as within ε even when the support intervals
         // leave a gap of a few 1e-13 m.
-        if (c.signed_distance_m > eps_e + kTouch_m) continue;
+        if (c.signed_distance_m > eps_e + kTouch_m) return;
       }
       c.node_A = e.node_A;
       c.node_B = e.node_B;
       if (!IsFiniteContact(c)) {
-        ++st.numerical_faults;
-        continue;
+        ++t.st.numerical_faults;
+        return;
       }
-      if (prev != nullptr) ++st.coherent_hits;
-      emit(c);
-      if (current_.size() < current_.capacity()) {
-        current_.push_back({c.node_A, c.node_B, c.normal_W});
+      if (prev != nullptr) ++t.st.coherent_hits;
+      emit(t, c);
+      if (t.current.size() < t.current.capacity()) {
+        t.current.push_back({c.node_A, c.node_B, c.normal_W});
       }
-      continue;
+      return;
     }
 
     // Internal pair: GJK, stopping as soon as the hulls are known to be farther than ε; skipped
@@ -787,8 +819,8 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
       // nothing). With a budget the exact distance keeps the best-first order sharp.
       g = GjkDistance(hA, hB, glm::dvec3(0.0), eps_e, near_exit ? eps_e : -1.0);
     }
-    if (g.status == GjkStatus::kFar) continue;
-    if (g.status == GjkStatus::kSeparated && g.distance_m > eps_e) continue;
+    if (g.status == GjkStatus::kFar) return;
+    if (g.status == GjkStatus::kSeparated && g.distance_m > eps_e) return;
     double key = e.key_m;
     if (g.status == GjkStatus::kSeparated || g.status == GjkStatus::kNear) {
       key = std::max(key, g.distance_m);
@@ -813,7 +845,7 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
       const double lb = sphere_bound(node_A, node_B);
       const double eps_child = pair_eps(node_A, node_B);
       if (lb > eps_child) {
-        ++st.sphere_culls;
+        ++t.st.sphere_culls;
         continue;
       }
       // A tighter key, and a separating-axis cull: the support intervals' overlap along the
@@ -825,13 +857,86 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
       const double d_len = glm::length(d);
       if (d_len > 0.0) axis_bound = std::max(lb, -Overlap(cA, cB, d / d_len));
       if (axis_bound > eps_child) {
-        ++st.sphere_culls;
+        ++t.st.sphere_culls;
         continue;
       }
-      push(std::max(key, axis_bound), node_A, node_B);
+      push(t, std::max(key, axis_bound), node_A, node_B);
+    }
+  };
+
+  while (!queue_.empty()) {
+    if (options.max_node_pair_tests > 0 && st.node_pairs_tested >= options.max_node_pair_tests) {
+      st.budget_exhausted = true;
+      break;
+    }
+    if (budget_us < kInf &&
+        std::chrono::duration<double, std::micro>(Clock::now() - t0).count() >= budget_us) {
+      st.budget_exhausted = true;
+      break;
+    }
+    std::pop_heap(queue_.begin(), queue_.end(), HeapAfter);
+    const QueueEntry e = queue_.back();
+    queue_.pop_back();
+    process(main_traversal, e);
+    if (split_at > 0 && queue_.size() >= split_at) break;
+  }
+  if (split_at > 0 && !queue_.empty()) {
+    // The rest of the traversal on the workers: each queued node pair's subtree is one task
+    // (oneTBB balances them), descended on the queue of the thread that runs it. Without a budget
+    // every pair that is not culled is tested whatever the order, so the pairs found are the
+    // serial traversal's; sorted below.
+    for (Worker& w : workers_) {
+      w.queue.clear();
+      w.results.clear();
+      w.current.clear();
+      w.st = ProximityQueryStats{};
+    }
+    const auto drain = [&](Worker& w) {
+      Traversal t{w.queue, w.results, w.current, w.st};
+      while (!w.queue.empty()) {
+        std::pop_heap(w.queue.begin(), w.queue.end(), HeapAfter);
+        const QueueEntry e = w.queue.back();
+        w.queue.pop_back();
+        process(t, e);
+      }
+    };
+    constexpr int kDone = -2;  // a subtree's entry once a task has descended it
+    const auto descend = [&](Worker& w, QueueEntry& entry) {
+      w.queue.push_back(entry);
+      entry.node_A = kDone;
+      drain(w);
+    };
+    try {
+      arena_->arena.execute([&] {
+        oneapi::tbb::parallel_for(oneapi::tbb::blocked_range<std::size_t>(0, queue_.size(), 1),
+                                  [&](const oneapi::tbb::blocked_range<std::size_t>& r) {
+                                    const int slot =
+                                        oneapi::tbb::this_task_arena::current_thread_index();
+                                    Worker& w = workers_[static_cast<std::size_t>(slot)];
+                                    for (std::size_t k = r.begin(); k != r.end(); ++k)
+                                      descend(w, queue_[k]);
+                                  });
+      });
+    } catch (...) {
+      // Tasks could not be spawned: the subtrees not yet descended, on this thread.
+    }
+    for (QueueEntry& entry : queue_) {
+      if (entry.node_A != kDone) descend(workers_[0], entry);
+    }
+    queue_.clear();
+    for (Worker& w : workers_) {
+      for (const HullPairContact& c : w.results) emit(main_traversal, c);
+      for (const CoherentPair& c : w.current) {
+        if (current_.size() < current_.capacity()) current_.push_back(c);
+      }
+      st.node_pairs_tested += w.st.node_pairs_tested;
+      st.leaf_pairs_tested += w.st.leaf_pairs_tested;
+      st.sphere_culls += w.st.sphere_culls;
+      st.pairs_dropped += w.st.pairs_dropped;
+      st.coherent_hits += w.st.coherent_hits;
+      st.numerical_faults += w.st.numerical_faults;
     }
   }
-
   // Ties broken by the nodes, so that the order does not depend on the traversal's.
   std::sort(results_.begin(), results_.end(),
             [](const HullPairContact& x, const HullPairContact& y) {

@@ -50,7 +50,11 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
     : scene_(scene), options_(options), backend_(std::move(backend)) {
   options_.Validate();
   queries_.reserve(scene.touchables.size());
-  for (std::size_t i = 0; i < scene.touchables.size(); ++i) queries_.emplace_back();
+  for (std::size_t i = 0; i < scene.touchables.size(); ++i) {
+    queries_.emplace_back();
+    // The coarse query's traversal on the texture stage's threads too (the same pairs).
+    queries_.back().SetThreads(options_.texture_threads);
+  }
   if (!backend_) backend_ = MakeCpuBackend();
   if (!scene.tool) throw std::invalid_argument("scene '" + scene.name + "' has no tool");
   if (glm::length(scene.tool->center_of_mass_O) > 1e-9) {

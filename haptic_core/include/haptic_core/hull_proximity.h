@@ -13,6 +13,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <vector>
 
@@ -130,6 +131,15 @@ class HullProximityQuery {
                                          const ProximityQueryOptions& options,
                                          ProximityQueryStats* stats = nullptr) noexcept;
 
+  /// Lets Query() run its traversal on `threads` threads (a oneTBB task arena of that many, the
+  /// calling thread among them) when no budget is set and both models have hierarchies: once a
+  /// few node pairs are queued, they are dealt out to the threads, each descending its own. The
+  /// pairs, contacts, their order and the statistics (but query_us) are those of one thread
+  /// (tested). 1 (the default) runs on the calling thread alone. Preallocates each thread's
+  /// queue and results; throws std::invalid_argument outside [1, 256].
+  void SetThreads(int threads);
+  int threads() const noexcept { return workers_.empty() ? 1 : static_cast<int>(workers_.size()); }
+
   /// Forgets the cached per-model data and the previous call's pairs (allocation-free).
   void ClearCache() noexcept;
 
@@ -167,6 +177,13 @@ class HullProximityQuery {
     int node_B;
     glm::dvec3 direction_W;  ///< Previous closest-point direction v = p_A − p_B, or normal.
   };
+  /// One thread's share of a traversal (SetThreads).
+  struct Worker {
+    std::vector<QueueEntry> queue;
+    std::vector<HullPairContact> results;
+    std::vector<CoherentPair> current;
+    ProximityQueryStats st;
+  };
 
  private:
   const ModelEntry& Entry(const HapticModel& model);
@@ -181,6 +198,9 @@ class HullProximityQuery {
   static constexpr int kCacheSlots = 8;
   ModelEntry cache_[kCacheSlots];
   std::uint64_t use_counter_ = 0;
+  struct Arena;  // the oneTBB task arena, kept out of this header
+  std::shared_ptr<Arena> arena_;
+  std::vector<Worker> workers_;
 };
 
 }  // namespace ht

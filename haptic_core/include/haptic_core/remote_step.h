@@ -40,7 +40,8 @@ struct PipelineOptions {
   /// it into the nearest kept ones (ClusteringOptions::max_contacts). The seed reports up to 7 on
   /// its Fig. 77 scene; fewer contacts is an approximation, placed on the speed-vs-error frontier.
   int max_contacts = kMaxContacts;
-  /// Threads of the CPU texture stage (the contacts of a step spread over them, oneTBB); ≥ 1.
+  /// Threads of the CPU texture stage (the contacts of a step spread over them, oneTBB), and of
+  /// the coarse query's traversal (HullProximityQuery::SetThreads: the same pairs); ≥ 1.
   /// The remote node's default leaves one core to the operator on a loopback machine
   /// (DefaultTextureThreads()).
   int texture_threads = 1;
