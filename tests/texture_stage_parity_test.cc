@@ -24,6 +24,7 @@
 #include <numbers>
 #include <random>
 #include <set>
+#include <span>
 #include <utility>
 #include <vector>
 
@@ -414,6 +415,24 @@ TEST(TextureStageParity, ShiftedDepthEqualsTheDepthOfAnExplicitlyShiftedBuffer) 
   EXPECT_EQ(DirectionalPenetrationDepthShifted(b, n, a_ext, 1, 2, 0).cell, -1);
 }
 
+// The coarse-query parity tests' scenes (tool, object): the seed's Fig. 77 and Fig. 73.
+constexpr std::pair<SeedModel, SeedModel> kCoarseScenes[] = {
+    {SeedModel::kFile, SeedModel::kCadPart}, {SeedModel::kHammer, SeedModel::kTorus}};
+
+// Pair by pair: the same leaf nodes, and the same signed distance, normal and witness bits.
+void ExpectSamePairs(const std::vector<HullPairContact>& want, std::span<const HullPairContact> got,
+                     const char* what) {
+  ASSERT_EQ(want.size(), got.size()) << what;
+  for (std::size_t k = 0; k < want.size(); ++k) {
+    ASSERT_EQ(want[k].node_A, got[k].node_A) << what << " pair " << k;
+    ASSERT_EQ(want[k].node_B, got[k].node_B) << what << " pair " << k;
+    EXPECT_EQ(want[k].signed_distance_m, got[k].signed_distance_m) << what << " pair " << k;
+    EXPECT_EQ(want[k].normal_W, got[k].normal_W) << what << " pair " << k;
+    EXPECT_EQ(want[k].point_A_W, got[k].point_A_W) << what << " pair " << k;
+    EXPECT_EQ(want[k].point_B_W, got[k].point_B_W) << what << " pair " << k;
+  }
+}
+
 // Internal node pairs' GJK stopping once the hulls are within the tolerance (the default without
 // a budget) against running it to the exact distance: the same leaf pairs, contacts and order,
 // bit for bit, over a sequence of nearby poses with temporal coherence on (so the coherent
@@ -422,9 +441,7 @@ TEST(TextureStageParity, ShiftedDepthEqualsTheDepthOfAnExplicitlyShiftedBuffer) 
 TEST(CoarseQueryParity, StoppingInternalGjkWithinTheToleranceReportsTheSamePairs) {
   std::mt19937 rng(1501);
   int compared = 0;
-  const std::pair<SeedModel, SeedModel> scenes[] = {{SeedModel::kFile, SeedModel::kCadPart},
-                                                    {SeedModel::kHammer, SeedModel::kTorus}};
-  for (const auto& [tool_model, env_model] : scenes) {
+  for (const auto& [tool_model, env_model] : kCoarseScenes) {
     const HapticModel& tool = Seed(tool_model);
     const HapticModel& env = Seed(env_model);
     HullProximityQuery exact_query(1 << 14), near_query(1 << 14);
@@ -442,18 +459,8 @@ TEST(CoarseQueryParity, StoppingInternalGjkWithinTheToleranceReportsTheSamePairs
         c.X_WT.translation += 0.2e-3 * glm::dvec3(U(rng), U(rng), U(rng));
         const auto a = exact_query.Query(tool, c.X_WT, env, c.X_WO, exact);
         const std::vector<HullPairContact> want(a.begin(), a.end());
-        const auto got = near_query.Query(tool, c.X_WT, env, c.X_WO, near);
-        ASSERT_EQ(want.size(), got.size()) << SeedModelName(tool_model) << " trial " << trial;
-        for (std::size_t k = 0; k < want.size(); ++k) {
-          const HullPairContact& x = want[k];
-          const HullPairContact& y = got[k];
-          ASSERT_EQ(x.node_A, y.node_A) << k;
-          ASSERT_EQ(x.node_B, y.node_B) << k;
-          EXPECT_EQ(x.signed_distance_m, y.signed_distance_m) << k;
-          EXPECT_EQ(x.normal_W, y.normal_W) << k;
-          EXPECT_EQ(x.point_A_W, y.point_A_W) << k;
-          EXPECT_EQ(x.point_B_W, y.point_B_W) << k;
-        }
+        ExpectSamePairs(want, near_query.Query(tool, c.X_WT, env, c.X_WO, near),
+                        SeedModelName(tool_model));
         compared += static_cast<int>(want.size());
       }
     }
@@ -467,9 +474,7 @@ TEST(CoarseQueryParity, StoppingInternalGjkWithinTheToleranceReportsTheSamePairs
 TEST(CoarseQueryParity, TwoThreadsReportWhatOneReports) {
   std::mt19937 rng(1502);
   int compared = 0;
-  const std::pair<SeedModel, SeedModel> scenes[] = {{SeedModel::kFile, SeedModel::kCadPart},
-                                                    {SeedModel::kHammer, SeedModel::kTorus}};
-  for (const auto& [tool_model, env_model] : scenes) {
+  for (const auto& [tool_model, env_model] : kCoarseScenes) {
     const HapticModel& tool = Seed(tool_model);
     const HapticModel& env = Seed(env_model);
     for (const bool local : {false, true}) {
@@ -489,15 +494,7 @@ TEST(CoarseQueryParity, TwoThreadsReportWhatOneReports) {
           const auto a = one.Query(tool, c.X_WT, env, c.X_WO, options, &s1);
           const std::vector<HullPairContact> want(a.begin(), a.end());
           const auto got = two.Query(tool, c.X_WT, env, c.X_WO, options, &s2);
-          ASSERT_EQ(want.size(), got.size()) << SeedModelName(tool_model) << " trial " << trial;
-          for (std::size_t k = 0; k < want.size(); ++k) {
-            ASSERT_EQ(want[k].node_A, got[k].node_A) << k;
-            ASSERT_EQ(want[k].node_B, got[k].node_B) << k;
-            EXPECT_EQ(want[k].signed_distance_m, got[k].signed_distance_m) << k;
-            EXPECT_EQ(want[k].normal_W, got[k].normal_W) << k;
-            EXPECT_EQ(want[k].point_A_W, got[k].point_A_W) << k;
-            EXPECT_EQ(want[k].point_B_W, got[k].point_B_W) << k;
-          }
+          ExpectSamePairs(want, got, SeedModelName(tool_model));
           EXPECT_EQ(s1.node_pairs_tested, s2.node_pairs_tested);
           EXPECT_EQ(s1.leaf_pairs_tested, s2.leaf_pairs_tested);
           EXPECT_EQ(s1.sphere_culls, s2.sphere_culls);

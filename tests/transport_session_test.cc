@@ -251,31 +251,26 @@ DelayedTransfer RunDelayedScene(double loss, std::int64_t one_way_ns, std::uint3
       if (u(rng) < loss) continue;
       down.push_back({now + one_way_ns + jitter(rng), f, {f.payload.begin(), f.payload.end()}});
     }
-    for (auto it = manifests.begin(); it != manifests.end();) {
-      if (it->first > now) {
-        ++it;
-        continue;
+    // Everything due by now arrives, in the order it was sent.
+    const auto deliver_due = [now](auto& in_flight, auto&& arrival, auto&& deliver) {
+      for (auto it = in_flight.begin(); it != in_flight.end();) {
+        if (arrival(*it) > now) {
+          ++it;
+          continue;
+        }
+        deliver(*it);
+        it = in_flight.erase(it);
       }
-      rx.OnManifest(it->second, now);
-      it = manifests.erase(it);
-    }
-    for (auto it = down.begin(); it != down.end();) {
-      if (it->arrive > now) {
-        ++it;
-        continue;
-      }
-      it->message.payload = it->bytes;
-      rx.Add(it->message, now);
-      it = down.erase(it);
-    }
-    for (auto it = up.begin(); it != up.end();) {
-      if (it->first > now) {
-        ++it;
-        continue;
-      }
-      sender.OnNack(it->second);
-      it = up.erase(it);
-    }
+    };
+    const auto first = [](const auto& p) { return p.first; };
+    deliver_due(manifests, first, [&](const auto& m) { rx.OnManifest(m.second, now); });
+    deliver_due(
+        down, [](const Fragment& f) { return f.arrive; },
+        [&](Fragment& in) {
+          in.message.payload = in.bytes;
+          rx.Add(in.message, now);
+        });
+    deliver_due(up, first, [&](const auto& n) { sender.OnNack(n.second); });
     if (rx.SceneComplete()) {
       out.complete_s = static_cast<double>(now) * 1e-9;
       return out;
