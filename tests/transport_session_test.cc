@@ -265,7 +265,7 @@ DelayedTransfer RunDelayedScene(double loss, std::int64_t one_way_ns, std::uint3
     const auto first = [](const auto& p) { return p.first; };
     deliver_due(manifests, first, [&](const auto& m) { rx.OnManifest(m.second, now); });
     deliver_due(
-        down, [](const Fragment& f) { return f.arrive; },
+        down, [](const Fragment& in) { return in.arrive; },
         [&](Fragment& in) {
           in.message.payload = in.bytes;
           rx.Add(in.message, now);
