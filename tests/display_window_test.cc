@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "master_station/scene_renderer.h"
+#include "render_test_meshes.h"
 
 #ifdef HT_TEST_HAVE_XLIB
 #include <X11/Xatom.h>
@@ -98,15 +99,7 @@ class DisplayWindowOnServer : public ::testing::Test {
   }
 };
 
-RenderMesh Cube(float h) {
-  RenderMesh m;
-  for (int i = 0; i < 8; ++i) {
-    m.positions_N.push_back({(i & 1) ? h : -h, (i & 2) ? h : -h, (i & 4) ? h : -h});
-  }
-  m.triangles = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
-                 {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
-  return m;
-}
+using testing_support::Cube;
 
 // A frame of a cube at `x_m` along W's x, seen obliquely, with a force arrow: several colours.
 RenderFrame CubeFrame(double x_m) {

@@ -466,7 +466,9 @@ TEST(SceneBuildData, MilkTruckDisplayStreamPlacesEveryTouchableWhereTheHapticSce
     if (n.mesh_object == 0) continue;
     ASSERT_EQ(by_id.count(n.mesh_object), 1u) << n.name;
     EXPECT_EQ(by_id[n.mesh_object]->kind, wire::SceneObjectKind::kDracoMesh);
-    if (n.material >= 0) ASSERT_LT(static_cast<std::size_t>(n.material), graph.materials.size());
+    if (n.material >= 0) {
+      ASSERT_LT(static_cast<std::size_t>(n.material), graph.materials.size());
+    }
   }
   EXPECT_EQ(tools, 1);
   // Each node's mesh arrives whole: its part on the node plus the further material parts on

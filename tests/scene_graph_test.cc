@@ -21,25 +21,9 @@
 #include "haptic_core/byte_order.h"
 #include "transport/scene_stream.h"
 
-// Largest single allocation while `g_track_allocations` is set: shows that a decoder refuses a
-// count the bytes cannot hold before it allocates for it.
-namespace {
-std::atomic<bool> g_track_allocations{false};
-std::atomic<std::size_t> g_largest_allocation{0};
-}  // namespace
-
-void* operator new(std::size_t size) {
-  if (g_track_allocations.load(std::memory_order_relaxed)) {
-    std::size_t seen = g_largest_allocation.load(std::memory_order_relaxed);
-    while (size > seen && !g_largest_allocation.compare_exchange_weak(seen, size)) {
-    }
-  }
-  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
-  throw std::bad_alloc();
-}
-// Not inlined: GCC would otherwise see free() on what it takes for a new-expression's pointer.
-[[gnu::noinline]] void operator delete(void* p) noexcept { std::free(p); }
-[[gnu::noinline]] void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+// Largest single allocation while asked: shows that a decoder refuses a count the bytes cannot
+// hold before it allocates for it.
+#include "allocation_counter.h"
 
 namespace ht {
 namespace {
@@ -383,14 +367,13 @@ TEST(SceneGraph, CountsBeyondTheBytesOrTheLimitsAreRefusedBeforeAllocating) {
     SceneGraphDescription out;
     std::string error;
     error.reserve(512);
-    g_largest_allocation = 0;
-    g_track_allocations = true;
+    testing_support::StartLargestAllocation();
     const bool ok = DecodeSceneGraph(bytes, &out, &error);
-    g_track_allocations = false;
+    const std::size_t largest = testing_support::StopLargestAllocation();
     EXPECT_FALSE(ok);
     EXPECT_TRUE(Contains(error, c.says)) << error;
     // Only small strings (the message) were allocated: nothing sized by the counts.
-    EXPECT_LT(g_largest_allocation.load(), 1024u) << c.nodes << " " << c.materials;
+    EXPECT_LT(largest, 1024u) << c.nodes << " " << c.materials;
   }
   // The counter does see a decoder's allocations: a real graph of 3000 nodes needs a vector of
   // them.
@@ -398,12 +381,11 @@ TEST(SceneGraph, CountsBeyondTheBytesOrTheLimitsAreRefusedBeforeAllocating) {
   big.nodes.resize(3000);
   const std::vector<std::uint8_t> bytes = EncodeSceneGraph(big);
   SceneGraphDescription out;
-  g_largest_allocation = 0;
-  g_track_allocations = true;
+  testing_support::StartLargestAllocation();
   const bool ok = DecodeSceneGraph(bytes, &out, nullptr);
-  g_track_allocations = false;
+  const std::size_t largest = testing_support::StopLargestAllocation();
   EXPECT_TRUE(ok);
-  EXPECT_GE(g_largest_allocation.load(), 3000 * sizeof(SceneGraphNode));
+  EXPECT_GE(largest, 3000 * sizeof(SceneGraphNode));
 }
 
 TEST(SceneGraph, BadMagicVersionAndCameraFlagAreRefused) {

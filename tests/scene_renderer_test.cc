@@ -30,6 +30,7 @@
 #include "codecs/gltf_scene.h"
 #include "gltf_test_data.h"
 #include "master_station/png_image.h"
+#include "render_test_meshes.h"
 
 namespace ht {
 namespace {
@@ -43,17 +44,7 @@ constexpr std::array<std::uint8_t, 4> kBackgroundBytes{26, 26, 31, 255};
 
 using Rgba = std::array<std::uint8_t, 4>;
 
-RenderMesh Cube(double half) {
-  const float h = static_cast<float>(half);
-  RenderMesh m;
-  for (int i = 0; i < 8; ++i) {
-    m.positions_N.push_back({(i & 1) ? h : -h, (i & 2) ? h : -h, (i & 4) ? h : -h});
-  }
-  // Counter-clockwise from outside.
-  m.triangles = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
-                 {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
-  return m;
-}
+using testing_support::Cube;
 
 RenderMesh Sphere(double radius, int rings, int segments) {
   RenderMesh m;

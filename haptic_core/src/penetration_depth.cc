@@ -67,9 +67,10 @@ struct TriangleShading {
 
 // Per cell k < n with barycentrics (b0, b1)[k] (b2 = 1 − b0 − b1): the coarse height along n
 // (value = b·d), the texture coordinates, and the unit interpolated normal's component along n,
-// (b·nn)/|Σ b_k n_k| (0 where that length vanishes; nn0 for a flat triangle). The arithmetic of RenderPatchHeights in its order, so that the SSE2
-// lanes (two cells a step: the square roots and divisions, the slowest part of a smooth
-// triangle's cell, no longer wait one after the other) write the bits of the scalar code.
+// (b·nn)/|Σ b_k n_k| (0 where that length vanishes; nn0 for a flat triangle). The arithmetic of
+// RenderPatchHeights in its order, so that the SSE2 lanes (two cells a step: the square roots and
+// divisions, the slowest part of a smooth triangle's cell, no longer wait one after the other)
+// write the bits of the scalar code.
 void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, double* value,
                 float* u, float* v, double* ndotn, int n) noexcept {
   int k = 0;

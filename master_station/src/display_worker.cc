@@ -26,12 +26,6 @@ constexpr glm::vec4 kBackground{0.010f, 0.010f, 0.013f, 1.0f};
 // Longest arrow drawn, in tool radii (longer ones are saturated).
 constexpr double kArrowMaxRadii = 1.5;
 
-glm::dmat4 Matrix(const RigidTransform& X) {
-  glm::dmat4 M = glm::mat4_cast(X.rotation);
-  M[3] = glm::dvec4(X.translation, 1.0);
-  return M;
-}
-
 RenderMesh ToRenderMesh(const ReceivedSceneContent::Mesh& m) {
   RenderMesh r;
   r.positions_N.reserve(m.mesh_N.vertices.size());
@@ -153,8 +147,8 @@ void DisplayWorker::Run(const std::atomic<bool>& stop) {
           texture_version[image.object_id] = image.version;
           int w = 0, h = 0;
           try {
-            const std::vector<std::uint8_t> rgba = DecodeImage(image.bytes, &w, &h);
-            texture_index[image.object_id] = renderer->AddTexture(rgba, w, h);
+            const std::vector<std::uint8_t> pixels = DecodeImage(image.bytes, &w, &h);
+            texture_index[image.object_id] = renderer->AddTexture(pixels, w, h);
             ++textures_;
           } catch (const std::exception& e) {
             texture_index[image.object_id] = -1;  // drawn in its base colour
@@ -182,8 +176,8 @@ void DisplayWorker::Run(const std::atomic<bool>& stop) {
       const std::vector<glm::dmat4> X_WN = local.size() == graph.nodes.size()
                                                ? ComposeWorldPoses(graph, local)
                                                : ComposeWorldPoses(graph);
-      const glm::dmat4 X_WT = Matrix(tool.X_WT);
-      const glm::dmat4 X_WH = Matrix(tool.X_WH);
+      const glm::dmat4 X_WT = tool.X_WT.Matrix();
+      const glm::dmat4 X_WH = tool.X_WH.Matrix();
       frame.items.clear();
       frame.arrows.clear();
       for (std::size_t i = 0; i < graph.nodes.size(); ++i) {

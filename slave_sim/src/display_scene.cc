@@ -207,11 +207,9 @@ DisplayStream MakeDisplayStream(const BuiltScene& scene) {
       // Pose of N in the tool frame T: X_TN = X_WT⁻¹·X_WN (rest poses; T is the node's rigid
       // part moved to the model's centre of mass).
       const SceneNode& obj = scene.objects[static_cast<std::size_t>(object_of_entry[e])];
-      glm::dmat4 X_WT = glm::mat4_cast(obj.X_WO.rotation);
-      X_WT[3] = glm::dvec4(obj.X_WO.translation, 1.0);
-      SetFromMatrix(
-          glm::inverse(X_WT) * g.instances[static_cast<std::size_t>(object_of_entry[e])].X_WN,
-          &out);
+      SetFromMatrix(glm::inverse(obj.X_WO.Matrix()) *
+                        g.instances[static_cast<std::size_t>(object_of_entry[e])].X_WN,
+                    &out);
       out.parent = -1;
       out.flags = kSceneNodeTool | kSceneNodeMoving;
       tool_entry = static_cast<int>(e);

@@ -138,6 +138,7 @@ class HullProximityQuery {
   /// (tested). 1 (the default) runs on the calling thread alone. Preallocates each thread's
   /// queue and results; throws std::invalid_argument outside [1, 256].
   void SetThreads(int threads);
+  /// Threads the traversal may use (SetThreads; 1 by default).
   int threads() const noexcept { return workers_.empty() ? 1 : static_cast<int>(workers_.size()); }
 
   /// Forgets the cached per-model data and the previous call's pairs (allocation-free).

@@ -7,6 +7,7 @@
 
 #include <glm/geometric.hpp>
 #include <glm/gtc/quaternion.hpp>
+#include <glm/mat4x4.hpp>
 #include <glm/vec3.hpp>
 
 namespace ht {
@@ -32,6 +33,13 @@ struct RigidTransform {
   RigidTransform Inverse() const noexcept {
     const glm::dquat R_BA = glm::conjugate(rotation);
     return {-(R_BA * translation), R_BA};
+  }
+  /// X_AB as a 4×4 homogeneous matrix (glm, column-major; metres): (p_AQ, 1) = M·(p_BQ, 1). For
+  /// composing with scene-graph matrices that carry scale.
+  glm::dmat4 Matrix() const noexcept {
+    glm::dmat4 M = glm::mat4_cast(rotation);
+    M[3] = glm::dvec4(translation, 1.0);
+    return M;
   }
 };
 
