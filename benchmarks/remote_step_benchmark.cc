@@ -58,6 +58,12 @@ int main(int argc, char** argv) {
   app.add_option("--max-contacts", max_contacts, "most contacts per step")
       ->check(CLI::Range(1, ht::kMaxContacts))
       ->capture_default_str();
+  std::string rotation = "rendered";
+  app.add_option("--rotation-gradient", rotation,
+                 "rotation part of the gradient: rendered (six rotated tool renders, the\n"
+                 "product's) or lever (the deepest cell's r x dδ/dx; an approximation)")
+      ->check(CLI::IsMember({"rendered", "lever"}))
+      ->capture_default_str();
   app.add_option("--csv", csv_path, "write one row per scene here");
   app.add_option("--cache-dir", cache_dir, "model cache folder")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
@@ -94,12 +100,14 @@ int main(int argc, char** argv) {
     options.texture_threads = threads;
     options.local_reach = local_reach;
     options.max_contacts = max_contacts;
+    options.rotation_gradient = rotation == "lever" ? ht::RotationGradient::kContactLever
+                                                    : ht::RotationGradient::kRenderedSamples;
     ht::HapticTexturePipeline pipeline(
         scene.haptic, options,
         std::make_unique<ht::CpuPenetrationDepthBackend>(
             std::max(128, grid),
             path == "fast" ? ht::TextureStagePath::kFast : ht::TextureStagePath::kReference,
-            threads));
+            threads, options.rotation_gradient));
     const ht::RigidTransform X_FtT = scene.X_TFt.Inverse();
     std::vector<double> step_us, coarse_us, texture_us, per_contact_us;
     double pairs_sum = 0.0, contacts_sum = 0.0;

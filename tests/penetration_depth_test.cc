@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -125,6 +126,62 @@ TEST(PenetrationDepth, FiniteDifferenceGradientMatchesAnalyticGradient) {
     EXPECT_NEAR(lin.gradient.d_translation_W[i], J_x[i], tol_x) << "translation axis " << i;
     EXPECT_NEAR(lin.gradient.d_rotation_W[i], J_theta[i], tol_theta) << "rotation axis " << i;
   }
+}
+
+// The lever rotation gradient (issue 15): r × ∂δ/∂x at the deepest cell, without the six rotated
+// renders. On the smooth case it must give the analytic gradient as the rendered samples do; its
+// depth, point and translation gradient are the rendered mode's, bit for bit (the same five
+// samples), and its rotation gradient is a lever: ⟂ to ∂δ/∂x.
+TEST(PenetrationDepth, LeverRotationGradientMatchesAnalyticAndRenderedGradients) {
+  const SmoothCase s;
+  const HapticModel a = s.Tool(), b = s.Environment();
+  const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 200);
+  const RigidTransform X_WT = ToolPose(0, s.y_tool, s.z_bottom);
+  for (const TextureStagePath path : {TextureStagePath::kFast, TextureStagePath::kReference}) {
+    TexturePenetrationSolver rendered(200, 4096, path), lever(200, 4096, path);
+    lever.set_rotation_gradient(RotationGradient::kContactLever);
+    std::array<DepthSample, kGradientSamples> samples;
+    const ContactLinearization lr = rendered.Linearize(a, X_WT, b, EnvironmentPose(), w, 1000.0);
+    const ContactLinearization ll =
+        lever.Linearize(a, X_WT, b, EnvironmentPose(), w, 1000.0, samples);
+    ASSERT_GT(ll.depth_m, 0.0);
+    EXPECT_EQ(ll.depth_m, lr.depth_m);
+    EXPECT_EQ(ll.point_W, lr.point_W);
+    EXPECT_EQ(ll.gradient.d_translation_W, lr.gradient.d_translation_W);
+    for (int i = 5; i < kGradientSamples; ++i) EXPECT_EQ(samples[i].cell, -1) << "not rendered";
+
+    const double y_star = s.DeepestY();
+    const double slope = s.Slope(y_star);
+    const double a_star =
+        s.z_bottom - (s.c - s.kappa * (y_star - s.y_tool) * (y_star - s.y_tool));
+    const glm::dvec3 r = glm::dvec3(0, y_star, a_star) - X_WT.translation;
+    const glm::dvec3 J_theta = glm::cross(r, glm::dvec3(0, slope, 0) - glm::dvec3(0, 0, 1));
+    const double tol = 0.05 * glm::length(J_theta);
+    for (int i = 0; i < 3; ++i) {
+      EXPECT_NEAR(ll.gradient.d_rotation_W[i], J_theta[i], tol) << "axis " << i;
+      EXPECT_NEAR(ll.gradient.d_rotation_W[i], lr.gradient.d_rotation_W[i], tol) << "axis " << i;
+    }
+    EXPECT_NEAR(glm::dot(ll.gradient.d_rotation_W, ll.gradient.d_translation_W), 0.0,
+                1e-12 * glm::length(ll.gradient.d_rotation_W));
+  }
+}
+
+TEST(PenetrationDepth, LeverRotationGradientOfSeparatedPatchesIsZero) {
+  const HapticModel a = ToolBox(kFlat), b = EnvironmentBox(kFlat);
+  TexturePenetrationSolver solver;
+  solver.set_rotation_gradient(RotationGradient::kContactLever);
+  const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 50);
+  const ContactLinearization lin =
+      solver.Linearize(a, ToolPose(0, 0, 2e-3), b, EnvironmentPose(), w, 1000.0);
+  EXPECT_NEAR(lin.depth_m, -2e-3, 1e-7);
+  const Wrench F = PenaltyWrench(lin.depth_m, lin.gradient, lin.stiffness_n_per_m);
+  EXPECT_EQ(glm::length(F.force), 0.0);
+  EXPECT_EQ(glm::length(F.torque), 0.0);
+  // Off the window: no overlap, −∞, and nothing computed from a missing cell.
+  const ContactLinearization off =
+      solver.Linearize(a, ToolPose(0.2, 0, 0), b, EnvironmentPose(), w, 1000.0);
+  EXPECT_TRUE(std::isinf(off.depth_m) && off.depth_m < 0.0);
+  EXPECT_EQ(off.gradient.d_rotation_W, glm::dvec3(0.0));
 }
 
 TEST(PenetrationDepth, ActionEqualsMinusReaction) {

@@ -6,6 +6,8 @@
 
 #include <glm/gtc/quaternion.hpp>
 
+#include <string>
+
 #include "allocation_counter.h"  // the tick / step must make no allocation
 #include "haptic_core/demo/demo_scenes.h"
 #include "haptic_core/demo/procedural_models.h"
@@ -27,9 +29,20 @@ RigidTransform PoseAt(int k) {
   return X;
 }
 
-TEST(RemoteStep, AllocatesNothingAfterWarmUp) {
+// On one thread and on two (the contacts, the coarse query's subtrees and a contact's renders as
+// oneTBB tasks), with either rotation gradient.
+struct AllocCase {
+  int threads;
+  RotationGradient rotation;
+};
+class RemoteStepAlloc : public ::testing::TestWithParam<AllocCase> {};
+
+TEST_P(RemoteStepAlloc, AllocatesNothingAfterWarmUp) {
   const HapticScene scene = MakeBlockOnGearScene();
-  HapticTexturePipeline pipeline(scene, PipelineOptions{});
+  PipelineOptions options;
+  options.texture_threads = GetParam().threads;
+  options.rotation_gradient = GetParam().rotation;
+  HapticTexturePipeline pipeline(scene, options);
   StepTimings t;
   int in_contact = 0;
   for (int k = 0; k < 200; ++k) pipeline.Step(PoseAt(k), k, t);  // warm-up: the scratch grows
@@ -39,6 +52,17 @@ TEST(RemoteStep, AllocatesNothingAfterWarmUp) {
   EXPECT_GT(in_contact, 100);
   EXPECT_LT(in_contact, 1000);  // and out of contact too
 }
+
+INSTANTIATE_TEST_SUITE_P(
+    ThreadsAndRotationGradients, RemoteStepAlloc,
+    ::testing::Values(AllocCase{1, RotationGradient::kRenderedSamples},
+                      AllocCase{2, RotationGradient::kRenderedSamples},
+                      AllocCase{1, RotationGradient::kContactLever},
+                      AllocCase{2, RotationGradient::kContactLever}),
+    [](const ::testing::TestParamInfo<AllocCase>& info) {
+      return std::to_string(info.param.threads) + "Threads" +
+             (info.param.rotation == RotationGradient::kContactLever ? "Lever" : "Rendered");
+    });
 
 TEST(RemoteStep, NonFinitePosesAndFaultsAreCountedNotThrown) {
   const HapticScene scene = MakeBlockOnGearScene();

@@ -98,23 +98,17 @@ std::array<RigidTransform, kGradientSamples> GradientSamplePoses(const RigidTran
   return poses;
 }
 
-ContactLinearization AssembleLinearization(const ContactWindow& w,
-                                           std::span<const DepthSample> samples,
-                                           double stiffness_n_per_m,
-                                           LinearizationFaults& faults) noexcept {
-  ContactLinearization out;
-  out.stiffness_n_per_m = stiffness_n_per_m;
-  out.normal_W = w.normal_W;
-  out.point_W = w.center_W;
-  out.depth_m = -std::numeric_limits<double>::infinity();
-  if (samples.size() < static_cast<size_t>(kGradientSamples)) return out;
-  const DepthSample& base = samples[0];
-  out.depth_m = base.depth_m;
-  if (base.cell < 0) return out;
-  out.point_W = w.CellCenter(base.cell);
+namespace {
 
-  const GradientSteps h = GradientSteps::For(w);
-  const auto central = [&](int i, double step) {
+// The part of AssembleLinearization both rotation gradients share: δ0, the point, the normal,
+// and the central difference of samples 1 + 2i and 2 + 2i (one-sided, and counted, where one of
+// them has no overlap). False when the base sample has no overlap (depth_m = −∞ then).
+struct Differences {
+  const ContactWindow& w;
+  std::span<const DepthSample> samples;
+  LinearizationFaults& faults;
+  double Central(int i, double step) const noexcept {
+    const DepthSample& base = samples[0];
     const DepthSample& plus = samples[1 + 2 * i];
     const DepthSample& minus = samples[2 + 2 * i];
     if (plus.cell >= 0 && minus.cell >= 0) return (plus.depth_m - minus.depth_m) / (2.0 * step);
@@ -122,16 +116,56 @@ ContactLinearization AssembleLinearization(const ContactWindow& w,
     if (plus.cell >= 0) return (plus.depth_m - base.depth_m) / step;
     if (minus.cell >= 0) return (base.depth_m - minus.depth_m) / step;
     return 0.0;
-  };
-  const glm::dvec3 u = w.axis_u_W, v = w.axis_v_W, n = w.normal_W;
-  const double g_u = central(0, h.h_x);
-  const double g_v = central(1, h.h_x);
-  const double r_u = central(2, h.h_theta);
-  const double r_v = central(3, h.h_theta);
-  const double r_n = central(4, h.h_theta);
-  // Moving the tool along +n lifts every tool height by the same amount: ∂δ/∂x_n = −1 exactly.
-  out.gradient.d_translation_W = g_u * u + g_v * v - n;
-  out.gradient.d_rotation_W = r_u * u + r_v * v + r_n * n;
+  }
+  // ∂δ/∂x: central differences along u and v; moving the tool along +n lifts every tool height
+  // by the same amount, so ∂δ/∂x_n = −1 exactly.
+  glm::dvec3 Translation() const noexcept {
+    const double h_x = GradientSteps::For(w).h_x;
+    return Central(0, h_x) * w.axis_u_W + Central(1, h_x) * w.axis_v_W - w.normal_W;
+  }
+};
+
+bool StartLinearization(const ContactWindow& w, std::span<const DepthSample> samples,
+                        std::size_t needed, double stiffness_n_per_m,
+                        ContactLinearization& out) noexcept {
+  out.stiffness_n_per_m = stiffness_n_per_m;
+  out.normal_W = w.normal_W;
+  out.point_W = w.center_W;
+  out.depth_m = -std::numeric_limits<double>::infinity();
+  if (samples.size() < needed) return false;
+  out.depth_m = samples[0].depth_m;
+  if (samples[0].cell < 0) return false;
+  out.point_W = w.CellCenter(samples[0].cell);
+  return true;
+}
+
+}  // namespace
+
+ContactLinearization AssembleLinearization(const ContactWindow& w,
+                                           std::span<const DepthSample> samples,
+                                           double stiffness_n_per_m,
+                                           LinearizationFaults& faults) noexcept {
+  ContactLinearization out;
+  if (!StartLinearization(w, samples, kGradientSamples, stiffness_n_per_m, out)) return out;
+  const Differences d{w, samples, faults};
+  const double h_theta = GradientSteps::For(w).h_theta;
+  out.gradient.d_translation_W = d.Translation();
+  out.gradient.d_rotation_W = d.Central(2, h_theta) * w.axis_u_W +
+                              d.Central(3, h_theta) * w.axis_v_W +
+                              d.Central(4, h_theta) * w.normal_W;
+  return out;
+}
+
+ContactLinearization AssembleLeverLinearization(const ContactWindow& w,
+                                                std::span<const DepthSample> samples,
+                                                const glm::dvec3& r_W, double stiffness_n_per_m,
+                                                LinearizationFaults& faults) noexcept {
+  ContactLinearization out;
+  if (!StartLinearization(w, samples, 5, stiffness_n_per_m, out)) return out;
+  const Differences d{w, samples, faults};
+  out.gradient.d_translation_W = d.Translation();
+  // The tool point p moves by Δx + Δθ × r: δ changes by ∂δ/∂x·(Δθ × r) = (r × ∂δ/∂x)·Δθ.
+  out.gradient.d_rotation_W = glm::cross(r_W, out.gradient.d_translation_W);
   return out;
 }
 
@@ -142,12 +176,53 @@ ContactLinearization TexturePenetrationSolver::Linearize(
   const GradientSteps h = GradientSteps::For(w);
   const double tool_radius = ToolRadius(tool);
 
+  const bool lever = rotation_gradient_ == RotationGradient::kContactLever;
   RenderEnvironment(environment, X_WO, w);
   // Tool triangles are chosen once, with margins that cover every perturbed pose (the render
-  // re-checks facing at each pose).
-  SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool, 2.0 * h.h_x + h.h_theta * tool_radius,
-                       tool_triangles_, h.h_theta + 1e-9);
+  // re-checks facing at each pose); with the lever only the translated ones are drawn.
+  SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool,
+                       lever ? 2.0 * h.h_x : 2.0 * h.h_x + h.h_theta * tool_radius,
+                       tool_triangles_, lever ? 1e-9 : h.h_theta + 1e-9);
   std::array<DepthSample, kGradientSamples> samples;
+  for (DepthSample& s : samples) s = {-std::numeric_limits<double>::infinity(), -1};
+  // The lever: the deepest cell's tool point less the centre of mass, from the tool's height
+  // there (along n from the window plane) in the base render.
+  glm::dvec3 lever_W(0.0);
+  const auto set_lever = [&](float tool_height_m) {
+    lever_W = w.CellCenter(samples[0].cell) + static_cast<double>(tool_height_m) * w.normal_W -
+              X_WT.translation;
+  };
+  if (lever) {
+    if (path_ == TextureStagePath::kFast) {
+      const int n = w.resolution, nt = n + 2;
+      tool_ext_heights_.assign(static_cast<size_t>(nt) * nt,
+                               std::numeric_limits<float>::infinity());
+      RenderPatchHeightsFast(tool, X_WT, tool_triangles_, w, PatchSide::kTool, 1,
+                             tool_ext_heights_);
+      samples[0] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, 0);
+      if (samples[0].cell >= 0) {
+        const int i = samples[0].cell % n, j = samples[0].cell / n;
+        set_lever(tool_ext_heights_[static_cast<size_t>(j + 1) * nt + (i + 1)]);
+        samples[1] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, -1, 0);
+        samples[2] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 1, 0);
+        samples[3] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, -1);
+        samples[4] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, 1);
+      }
+    } else {
+      samples[0] = EvaluateTool(tool, X_WT, w);
+      if (samples[0].cell >= 0) {
+        set_lever(tool_heights_[static_cast<size_t>(samples[0].cell)]);
+        const auto poses = GradientSamplePoses(X_WT, w);
+        for (int i = 1; i < 5; ++i) samples[i] = EvaluateTool(tool, poses[i], w);
+      }
+    }
+    if (samples[0].cell < 0) {
+      for (int i = 1; i < 5; ++i) samples[i] = samples[0];
+    }
+    if (samples_out.size() >= samples.size())
+      std::copy(samples.begin(), samples.end(), samples_out.begin());
+    return AssembleLeverLinearization(w, samples, lever_W, stiffness_n_per_m, faults_);
+  }
   if (path_ == TextureStagePath::kFast) {
     // The base pose on the window grown by one cell: the translations by ±h_x = ±one cell along
     // u and v are that render read one cell over (the tool moved +u is, at window cell i, what

@@ -153,7 +153,8 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
 
 std::unique_ptr<PenetrationDepthBackend> HapticTexturePipeline::MakeCpuBackend() const {
   return std::make_unique<CpuPenetrationDepthBackend>(
-      options_.grid_resolution, TextureStagePath::kFast, options_.texture_threads);
+      options_.grid_resolution, TextureStagePath::kFast, options_.texture_threads,
+      options_.rotation_gradient);
 }
 
 void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n) {

@@ -91,6 +91,15 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     local.name = "local_reach";
     local.local_reach = true;
     s.push_back(local);
+    FrontierSetting lever = base;
+    lever.name = "rotation_lever";
+    lever.rotation_gradient = RotationGradient::kContactLever;
+    s.push_back(lever);
+    FrontierSetting fast = lever;
+    fast.name = "lever_contacts7_threads2";
+    fast.max_contacts = 7;
+    fast.texture_threads = 2;
+    s.push_back(fast);
   }
   if (with_gpu) {
     gpu(16);
@@ -271,13 +280,14 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
     }
   } else {
     backend = std::make_unique<CpuPenetrationDepthBackend>(std::max(128, st.grid), st.texture_path,
-                                                           st.texture_threads);
+                                                           st.texture_threads, st.rotation_gradient);
   }
   run.renderer = backend->description();
   PipelineOptions options;
   options.grid_resolution = st.grid;
   options.max_contacts = st.max_contacts;
   options.local_reach = st.local_reach;
+  options.rotation_gradient = st.rotation_gradient;
   HapticTexturePipeline pipeline(scene.haptic, options, std::move(backend));
   StepTimings timings;
   for (int i = 0; i < 3 && !poses_WFt.empty(); ++i) {  // warm-up: caches, GPU uploads

@@ -79,6 +79,13 @@ int main(int argc, char** argv) {
                  "default leaves one core to the operator on a loopback machine")
       ->check(CLI::Range(1, 256))
       ->capture_default_str();
+  std::string rotation_gradient = "rendered";
+  app.add_option("--rotation-gradient", rotation_gradient,
+                 "rotation part of each contact's gradient (CPU texture stage): rendered (six\n"
+                 "rotated tool renders) or lever (the deepest cell's r x dδ/dx: one tool render\n"
+                 "per contact instead of seven; an approximation, see docs/frontier/issue15)")
+      ->check(CLI::IsMember({"rendered", "lever"}))
+      ->capture_default_str();
   app.add_option("--pd-backend", pd_backend,
                  "where the texture penetration depth runs: cpu (software rasterizer), gpu\n"
                  "(headless EGL, OpenGL ES 3.1; Mesa llvmpipe when there is no GPU), or auto (a\n"
@@ -246,6 +253,18 @@ int main(int argc, char** argv) {
     config.mtu = static_cast<std::size_t>(mtu);
     config.listen_address = ht::SocketAddress::Parse(listen);
     config.pd_backend = ht::ParsePdBackendChoice(pd_backend);
+    if (rotation_gradient == "lever") {
+      config.pipeline.rotation_gradient = ht::RotationGradient::kContactLever;
+      if (config.pd_backend == ht::PdBackendChoice::kGpu) {
+        throw std::invalid_argument(
+            "--rotation-gradient lever is an option of the CPU texture stage; the GPU backend "
+            "renders the rotated samples (use --pd-backend cpu, or drop the option)");
+      }
+      if (config.pd_backend == ht::PdBackendChoice::kAuto) {
+        std::fprintf(stderr, "slave_sim: --rotation-gradient lever: using the CPU texture stage\n");
+        config.pd_backend = ht::PdBackendChoice::kCpu;
+      }
+    }
     config.port_file = port_file;
     config.exit_on_goodbye = !stay;
     config.progress_period_s = quiet ? 0.0 : 1.0;

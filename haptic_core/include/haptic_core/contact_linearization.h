@@ -75,6 +75,32 @@ ContactLinearization AssembleLinearization(const ContactWindow& window,
                                            double stiffness_n_per_m,
                                            LinearizationFaults& faults) noexcept;
 
+/// How the rotation part of ∇δ is found (issue 15).
+enum class RotationGradient {
+  /// Central differences of δ at the six rotated poses of GradientSamplePoses (±h_θ about u, v
+  /// and n): six tool renders per contact [L]. The product's default.
+  kRenderedSamples,
+  /// The lever of the deepest cell (an approximation, placed on the speed-vs-error frontier as
+  /// "rotation_lever"): ∂δ/∂θ = r × ∂δ/∂x, r the tool's surface point at the deepest cell less
+  /// the tool's centre of mass. A rigid motion moves that point by Δx + Δθ × r, and to first order
+  /// δ changes as the point's own translation would change it (the envelope of the max over cells
+  /// at its arg-max), so the rotation samples are not rendered: one tool render per contact
+  /// instead of seven. Exact to first order where the deepest cell is unique and the surface
+  /// smooth there; unlike the rendered samples, it does not see a rotation bring another cell
+  /// deeper.
+  kContactLever,
+};
+
+/// Builds the linearization from the first five depths of GradientSamplePoses() (the base, ±h_x
+/// along u and v) with RotationGradient::kContactLever: ∂δ/∂x as AssembleLinearization, and
+/// ∂δ/∂θ = r_W × ∂δ/∂x with r_W the deepest cell's tool point less the tool's centre of mass
+/// (world axes, m). Returns depth_m = −∞ when the base sample has no overlap. `samples` must hold
+/// at least 5 entries.
+ContactLinearization AssembleLeverLinearization(const ContactWindow& window,
+                                                std::span<const DepthSample> samples,
+                                                const glm::dvec3& r_W, double stiffness_n_per_m,
+                                                LinearizationFaults& faults) noexcept;
+
 /// How the CPU texture stage renders (issue 15). Both give the same δ and gradient within float
 /// rounding (tests/texture_stage_parity_test.cc checks it on random contacts of all six seed
 /// models).
@@ -100,6 +126,10 @@ class TexturePenetrationSolver {
 
   TextureStagePath path() const noexcept { return path_; }
 
+  /// How Linearize finds ∂δ/∂θ (default: the rendered samples).
+  void set_rotation_gradient(RotationGradient r) noexcept { rotation_gradient_ = r; }
+  RotationGradient rotation_gradient() const noexcept { return rotation_gradient_; }
+
   /// kFast only: run a contact's tool renders (the grown base render and the six rotations) as
   /// parallel tasks of the oneTBB arena the caller is in (CpuPenetrationDepthBackend
   /// turns it on when it has more than one thread, so that a step with fewer contacts than threads
@@ -117,7 +147,8 @@ class TexturePenetrationSolver {
   /// Linearizes the contact of `tool` posed at X_WT (frame T at the tool's centre of mass) against
   /// `environment` posed at X_WO over `window`, with penalty stiffness k (N/m).
   /// Returns depth_m = −∞ and a zero gradient when the patches do not overlap on the window.
-  /// When `samples_out` holds kGradientSamples entries, the raw depths are copied there.
+  /// When `samples_out` holds kGradientSamples entries, the raw depths are copied there (with
+  /// RotationGradient::kContactLever the six rotated ones are not taken: depth −∞, cell −1).
   ContactLinearization Linearize(const HapticModel& tool, const RigidTransform& X_WT,
                                  const HapticModel& environment, const RigidTransform& X_WO,
                                  const ContactWindow& window, double stiffness_n_per_m,
@@ -139,6 +170,7 @@ class TexturePenetrationSolver {
   double ToolRadius(const HapticModel& tool) noexcept;
 
   TextureStagePath path_;
+  RotationGradient rotation_gradient_ = RotationGradient::kRenderedSamples;
   std::vector<float> env_heights_;
   std::vector<float> tool_heights_;
   std::vector<float> tool_ext_heights_;  ///< kFast: the base pose on the window grown by a cell

@@ -45,6 +45,10 @@ struct PipelineOptions {
   /// The remote node's default leaves one core to the operator on a loopback machine
   /// (DefaultTextureThreads()).
   int texture_threads = 1;
+  /// How the CPU texture stage finds ∂δ/∂θ: the six rendered rotation samples (the default), or
+  /// the deepest cell's lever r × ∂δ/∂x (one tool render per contact instead of seven). An
+  /// approximation, placed on the speed-vs-error frontier ("rotation_lever").
+  RotationGradient rotation_gradient = RotationGradient::kRenderedSamples;
 
   /// Throws std::invalid_argument naming a value out of range.
   void Validate() const;

@@ -42,6 +42,8 @@ struct FrontierSetting {
   int max_contacts = kMaxContacts;
   /// PipelineOptions::local_reach.
   bool local_reach = false;
+  /// PipelineOptions::rotation_gradient (CPU only).
+  RotationGradient rotation_gradient = RotationGradient::kRenderedSamples;
 };
 
 /// The sweep: the default setting (grid 50, 1024² textures, the seed's coarse counts, CPU) first,
@@ -49,7 +51,9 @@ struct FrontierSetting {
 /// 16 and 32 depth bits (when `with_gpu`), the reference texture path ("reference", the path the
 /// fast one replaced: the same error, its time), the fast path on two threads ("threads2"), at
 /// most 7 contacts per step ("contacts7", the seed's count on Fig. 77), the coarse query's local
-/// reach ("local_reach"), and the two baselines.
+/// reach ("local_reach"), the rotation gradient from the deepest cell's lever ("rotation_lever",
+/// and with at most 7 contacts and two threads, "lever_contacts7_threads2"), and the two
+/// baselines.
 /// `quick` keeps grids 16, 25 and 100, texture 256, coarse ×2, reference, the GPU at 16 bits and
 /// both baselines.
 std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu);
