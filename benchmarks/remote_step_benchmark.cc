@@ -61,8 +61,9 @@ int main(int argc, char** argv) {
   std::string rotation = "rendered";
   app.add_option("--rotation-gradient", rotation,
                  "rotation part of the gradient: rendered (six rotated tool renders, the\n"
-                 "product's) or lever (the deepest cell's r x dδ/dx; an approximation)")
-      ->check(CLI::IsMember({"rendered", "lever"}))
+                 "product's), warp (rotation samples from the base render) or lever (the deepest\n"
+                 "cell's r x dδ/dx); warp and lever are approximations")
+      ->check(CLI::IsMember({"rendered", "warp", "lever"}))
       ->capture_default_str();
   app.add_option("--csv", csv_path, "write one row per scene here");
   app.add_option("--cache-dir", cache_dir, "model cache folder")->capture_default_str();
@@ -100,8 +101,7 @@ int main(int argc, char** argv) {
     options.texture_threads = threads;
     options.local_reach = local_reach;
     options.max_contacts = max_contacts;
-    options.rotation_gradient = rotation == "lever" ? ht::RotationGradient::kContactLever
-                                                    : ht::RotationGradient::kRenderedSamples;
+    options.rotation_gradient = ht::ParseRotationGradient(rotation);
     ht::HapticTexturePipeline pipeline(
         scene.haptic, options,
         std::make_unique<ht::CpuPenetrationDepthBackend>(

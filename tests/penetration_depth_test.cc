@@ -166,6 +166,78 @@ TEST(PenetrationDepth, LeverRotationGradientMatchesAnalyticAndRenderedGradients)
   }
 }
 
+TEST(PenetrationDepth, WarpedRotationSamplesMatchAnalyticAndRenderedGradients) {
+  // RotationGradient::kWarpedBaseRender on the smooth case: the six rotated samples from the
+  // base render, the analytic gradient as the rendered samples give it; depth and translation
+  // bit for bit the rendered mode's.
+  const SmoothCase s;
+  const HapticModel a = s.Tool(), b = s.Environment();
+  const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 200);
+  const RigidTransform X_WT = ToolPose(0, s.y_tool, s.z_bottom);
+  for (const TextureStagePath path : {TextureStagePath::kFast, TextureStagePath::kReference}) {
+    TexturePenetrationSolver rendered(200, 4096, path), warp(200, 4096, path);
+    warp.set_rotation_gradient(RotationGradient::kWarpedBaseRender);
+    std::array<DepthSample, kGradientSamples> sr, sw;
+    const ContactLinearization lr =
+        rendered.Linearize(a, X_WT, b, EnvironmentPose(), w, 1000.0, sr);
+    const ContactLinearization lw = warp.Linearize(a, X_WT, b, EnvironmentPose(), w, 1000.0, sw);
+    ASSERT_GT(lw.depth_m, 0.0);
+    EXPECT_EQ(lw.depth_m, lr.depth_m);
+    EXPECT_EQ(lw.gradient.d_translation_W, lr.gradient.d_translation_W);
+    const double y_star = s.DeepestY();
+    const double a_star =
+        s.z_bottom - (s.c - s.kappa * (y_star - s.y_tool) * (y_star - s.y_tool));
+    const glm::dvec3 r = glm::dvec3(0, y_star, a_star) - X_WT.translation;
+    const glm::dvec3 J_theta =
+        glm::cross(r, glm::dvec3(0, s.Slope(y_star), 0) - glm::dvec3(0, 0, 1));
+    const double tol = 0.05 * glm::length(J_theta);
+    for (int i = 0; i < 3; ++i) {
+      EXPECT_NEAR(lw.gradient.d_rotation_W[i], J_theta[i], tol) << "axis " << i;
+      EXPECT_NEAR(lw.gradient.d_rotation_W[i], lr.gradient.d_rotation_W[i], tol) << "axis " << i;
+    }
+    // The warped samples are first order: they differ from the rendered ones by the curvature's
+    // O(h_θ²) part, the same for +h_θ and −h_θ, which the central difference cancels.
+    for (int i = 5; i < kGradientSamples; i += 2) {
+      ASSERT_GE(sw[i].cell, 0) << i;
+      ASSERT_GE(sw[i + 1].cell, 0) << i + 1;
+      const double rendered_odd = sr[i].depth_m - sr[i + 1].depth_m;
+      const double warped_odd = sw[i].depth_m - sw[i + 1].depth_m;
+      EXPECT_NEAR(warped_odd, rendered_odd, 0.05 * std::abs(rendered_odd) + 2e-7) << "sample " << i;
+    }
+  }
+}
+
+TEST(PenetrationDepth, WarpedRotationSamplesSeeTiesThatTheLeverMisses) {
+  // A flat face pressed flat on a flat face, the centre of mass off the window's centre: every
+  // cell is equally deep. A rotation about u lowers the cells on one side, so δ(±h_θ) comes from
+  // the two far edges and the central difference is the midrange of their levers; the rendered
+  // samples and the warped ones both see that, while the lever of one (the first) tied cell does
+  // not.
+  const HapticModel a = ToolBox(kFlat), b = EnvironmentBox(kFlat);
+  const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 50);
+  const RigidTransform X_WT = ToolPose(0.003, -0.002, -5e-4);
+  TexturePenetrationSolver rendered, warp, lever;
+  warp.set_rotation_gradient(RotationGradient::kWarpedBaseRender);
+  lever.set_rotation_gradient(RotationGradient::kContactLever);
+  const ContactLinearization lr = rendered.Linearize(a, X_WT, b, EnvironmentPose(), w, 1000.0);
+  const ContactLinearization lw = warp.Linearize(a, X_WT, b, EnvironmentPose(), w, 1000.0);
+  const ContactLinearization ll = lever.Linearize(a, X_WT, b, EnvironmentPose(), w, 1000.0);
+  ASSERT_NEAR(lr.depth_m, 5e-4, 1e-7);
+  const double scale = glm::length(lr.gradient.d_rotation_W);
+  ASSERT_GT(scale, 1e-4) << "the off-centre mass must give a rotation gradient";
+  EXPECT_LT(glm::length(lw.gradient.d_rotation_W - lr.gradient.d_rotation_W), 0.02 * scale);
+  EXPECT_GT(glm::length(ll.gradient.d_rotation_W - lr.gradient.d_rotation_W), 0.2 * scale);
+}
+
+TEST(PenetrationDepth, RotationGradientNamesRoundTrip) {
+  for (const RotationGradient r : {RotationGradient::kRenderedSamples,
+                                   RotationGradient::kContactLever,
+                                   RotationGradient::kWarpedBaseRender}) {
+    EXPECT_EQ(ParseRotationGradient(ToString(r)), r);
+  }
+  EXPECT_THROW(ParseRotationGradient("analytic"), std::invalid_argument);
+}
+
 TEST(PenetrationDepth, LeverRotationGradientOfSeparatedPatchesIsZero) {
   const HapticModel a = ToolBox(kFlat), b = EnvironmentBox(kFlat);
   TexturePenetrationSolver solver;

@@ -6,6 +6,7 @@
 
 #include <glm/gtc/quaternion.hpp>
 
+#include <cctype>
 #include <string>
 
 #include "allocation_counter.h"  // the tick / step must make no allocation
@@ -58,10 +59,13 @@ INSTANTIATE_TEST_SUITE_P(
     ::testing::Values(AllocCase{1, RotationGradient::kRenderedSamples},
                       AllocCase{2, RotationGradient::kRenderedSamples},
                       AllocCase{1, RotationGradient::kContactLever},
-                      AllocCase{2, RotationGradient::kContactLever}),
-    [](const ::testing::TestParamInfo<AllocCase>& info) {
-      return std::to_string(info.param.threads) + "Threads" +
-             (info.param.rotation == RotationGradient::kContactLever ? "Lever" : "Rendered");
+                      AllocCase{2, RotationGradient::kContactLever},
+                      AllocCase{1, RotationGradient::kWarpedBaseRender},
+                      AllocCase{2, RotationGradient::kWarpedBaseRender}),
+    [](const ::testing::TestParamInfo<AllocCase>& param_info) {
+      std::string name = ToString(param_info.param.rotation);
+      name[0] = static_cast<char>(std::toupper(static_cast<unsigned char>(name[0])));
+      return std::to_string(param_info.param.threads) + "Threads" + name;
     });
 
 TEST(RemoteStep, NonFinitePosesAndFaultsAreCountedNotThrown) {

@@ -15,6 +15,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstdint>
 #include <cmath>
 #include <cstring>
 #include <glm/gtc/quaternion.hpp>
@@ -323,19 +324,15 @@ TEST(TextureStageParity, ABatchOnTwoThreadsEqualsTheBatchOnOne) {
   EXPECT_EQ(one.faults().missing_overlap, two.faults().missing_overlap);
 }
 
-TEST(TextureStageParity, LeverRotationGradientKeepsDepthAndTranslationOnSeedModels) {
-  // RotationGradient::kContactLever on random contacts of the seed models: the depth, point and
-  // translation gradient of the rendered mode, bit for bit; a rotation gradient ⟂ to the
-  // translation one (a lever r × ∂δ/∂x); the same on two threads as on one; and the fast path's
-  // lever within float rounding of the reference path's.
-  std::mt19937 rng(2026);
+void CheckBaseRenderRotationGradient(RotationGradient mode, std::uint32_t seed) {
+  std::mt19937 rng(seed);
   CpuPenetrationDepthBackend rendered(128, TextureStagePath::kFast, 1);
   CpuPenetrationDepthBackend lever1(128, TextureStagePath::kFast, 1,
-                                    RotationGradient::kContactLever);
+                                    mode);
   CpuPenetrationDepthBackend lever2(128, TextureStagePath::kFast, 2,
-                                    RotationGradient::kContactLever);
+                                    mode);
   CpuPenetrationDepthBackend lever_ref(128, TextureStagePath::kReference, 1,
-                                       RotationGradient::kContactLever);
+                                       mode);
   int in_contact = 0, rotation_differs = 0;
   for (const SeedModel which : kAll) {
     const HapticModel& env = Seed(which);
@@ -363,10 +360,13 @@ TEST(TextureStageParity, LeverRotationGradientKeepsDepthAndTranslationOnSeedMode
         if (!std::isfinite(l1.depth_m)) continue;  // −∞: no overlap on this window
         ++in_contact;
         const glm::dvec3 jx = l1.gradient.d_translation_W, jt = l1.gradient.d_rotation_W;
-        EXPECT_LE(std::abs(glm::dot(jx, jt)), 1e-12 * glm::length(jx) * glm::length(jt) + 1e-300);
+        if (mode == RotationGradient::kContactLever) {  // a lever: ⟂ to ∂δ/∂x
+          EXPECT_LE(std::abs(glm::dot(jx, jt)),
+                    1e-12 * glm::length(jx) * glm::length(jt) + 1e-300);
+        }
         rotation_differs += jt != r.gradient.d_rotation_W;
         // As FastSolverGivesTheReferenceDepthsAndGradients; the lever multiplies ∂δ/∂x's
-        // rounding by |r| ≤ 0.2 m.
+        // rounding by |r| ≤ 0.2 m, the warp works from heights within float rounding.
         EXPECT_NEAR(lr.depth_m, l1.depth_m, 1e-8);
         EXPECT_LT(glm::length(lr.gradient.d_translation_W - jx), 5e-5);
         EXPECT_LT(glm::length(lr.gradient.d_rotation_W - jt), 1e-5);
@@ -375,6 +375,18 @@ TEST(TextureStageParity, LeverRotationGradientKeepsDepthAndTranslationOnSeedMode
   }
   EXPECT_GT(in_contact, 12);
   EXPECT_GT(rotation_differs, 0);  // the lever is an approximation, not the rendered samples
+}
+
+// The rotation gradient from the base render alone (RotationGradient::kContactLever and
+// kWarpedBaseRender) on random contacts of the seed models: the depth, point and translation
+// gradient of the rendered mode, bit for bit (the same five samples); the same on two threads as
+// on one; the fast path within float rounding of the reference path; the lever ⟂ to ∂δ/∂x; and a
+// rotation gradient that is not the rendered one (they are approximations).
+TEST(TextureStageParity, LeverRotationGradientKeepsDepthAndTranslationOnSeedModels) {
+  CheckBaseRenderRotationGradient(RotationGradient::kContactLever, 2026);
+}
+TEST(TextureStageParity, WarpedRotationSamplesKeepDepthAndTranslationOnSeedModels) {
+  CheckBaseRenderRotationGradient(RotationGradient::kWarpedBaseRender, 2027);
 }
 
 // The coarse query's local reach (issue 15): two routes to one set of pairs. With local reach on,

@@ -24,8 +24,8 @@ CpuPenetrationDepthBackend::CpuPenetrationDepthBackend(int max_resolution, Textu
   if (n > 1) {
     arena_ = std::make_unique<Arena>(n);
     // Renders of one contact as tasks too, so that a step with fewer contacts than threads uses
-    // them all (each render has its own buffer: the same results). With the lever a contact has
-    // one tool render, so only the contacts are spread.
+    // them all (each render has its own buffer: the same results). Without rendered rotations a
+    // contact has one tool render, so only the contacts are spread.
     for (TexturePenetrationSolver& s : solvers_) s.set_parallel_renders(ParallelRenders());
   }
 }
@@ -36,8 +36,15 @@ std::string CpuPenetrationDepthBackend::description() const {
   std::string d = solvers_.front().path() == TextureStagePath::kFast ? "CPU rasterizer (fast path)"
                                                                      : "CPU reference rasterizer";
   if (threads() > 1) d += ", " + std::to_string(threads()) + " threads (oneTBB)";
-  if (solvers_.front().rotation_gradient() == RotationGradient::kContactLever) {
-    d += ", rotation gradient by the contact lever";
+  switch (solvers_.front().rotation_gradient()) {
+    case RotationGradient::kRenderedSamples:
+      break;
+    case RotationGradient::kContactLever:
+      d += ", rotation gradient by the contact lever";
+      break;
+    case RotationGradient::kWarpedBaseRender:
+      d += ", rotation samples warped from the base render";
+      break;
   }
   return d;
 }

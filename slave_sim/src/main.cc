@@ -82,9 +82,10 @@ int main(int argc, char** argv) {
   std::string rotation_gradient = "rendered";
   app.add_option("--rotation-gradient", rotation_gradient,
                  "rotation part of each contact's gradient (CPU texture stage): rendered (six\n"
-                 "rotated tool renders) or lever (the deepest cell's r x dδ/dx: one tool render\n"
-                 "per contact instead of seven; an approximation, see docs/frontier/issue15)")
-      ->check(CLI::IsMember({"rendered", "lever"}))
+                 "rotated tool renders), warp (rotation samples from the base render) or lever\n"
+                 "(the deepest cell's r x dδ/dx); warp and lever render the tool once per contact\n"
+                 "instead of seven times and are approximations: see docs/frontier/issue15")
+      ->check(CLI::IsMember({"rendered", "warp", "lever"}))
       ->capture_default_str();
   app.add_option("--pd-backend", pd_backend,
                  "where the texture penetration depth runs: cpu (software rasterizer), gpu\n"
@@ -253,15 +254,17 @@ int main(int argc, char** argv) {
     config.mtu = static_cast<std::size_t>(mtu);
     config.listen_address = ht::SocketAddress::Parse(listen);
     config.pd_backend = ht::ParsePdBackendChoice(pd_backend);
-    if (rotation_gradient == "lever") {
-      config.pipeline.rotation_gradient = ht::RotationGradient::kContactLever;
+    config.pipeline.rotation_gradient = ht::ParseRotationGradient(rotation_gradient);
+    if (config.pipeline.rotation_gradient != ht::RotationGradient::kRenderedSamples) {
       if (config.pd_backend == ht::PdBackendChoice::kGpu) {
-        throw std::invalid_argument(
-            "--rotation-gradient lever is an option of the CPU texture stage; the GPU backend "
-            "renders the rotated samples (use --pd-backend cpu, or drop the option)");
+        throw std::invalid_argument("--rotation-gradient " + rotation_gradient +
+                                    " is an option of the CPU texture stage; the GPU backend "
+                                    "renders the rotated samples (use --pd-backend cpu, or drop "
+                                    "the option)");
       }
       if (config.pd_backend == ht::PdBackendChoice::kAuto) {
-        std::fprintf(stderr, "slave_sim: --rotation-gradient lever: using the CPU texture stage\n");
+        std::fprintf(stderr, "slave_sim: --rotation-gradient %s: using the CPU texture stage\n",
+                     rotation_gradient.c_str());
         config.pd_backend = ht::PdBackendChoice::kCpu;
       }
     }

@@ -235,6 +235,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   s["grid_resolution"] = config.pipeline.grid_resolution;
   s["window_extent_m"] = config.pipeline.window_extent_m;
   s["texture_threads"] = config.pipeline.texture_threads;
+  s["rotation_gradient"] = ToString(config.pipeline.rotation_gradient);
   s["linearization_missing_overlap"] = pipeline->faults().missing_overlap;
   s["pd_backend"] = {{"requested", ToString(config.pd_backend)},
                      {"used", backend_at_start},

@@ -5,6 +5,7 @@
 #include <array>
 #include <cstdint>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "haptic_core/haptic_model.h"
@@ -89,7 +90,31 @@ enum class RotationGradient {
   /// smooth there; unlike the rendered samples, it does not see a rotation bring another cell
   /// deeper.
   kContactLever,
+  /// Rotation samples from the base render (an approximation, placed on the speed-vs-error
+  /// frontier as "rotation_warp"): each cell's depth δ_c = b_c − a_c moves, under a rotation θ
+  /// about axis e through the centre of mass, by −θ·e·(r_c × (n − ∇a_c)) to first order (r_c the
+  /// tool's point at the cell less the centre of mass, ∇a_c the tool's height slope there from
+  /// its neighbours), and δ(±h_θ) is the largest moved δ_c (WarpedRotationSamples). Central
+  /// differences of those, as the rendered samples: one tool render per contact instead of
+  /// seven, and, unlike the lever, every cell (a rotation may bring another cell deeper: ties
+  /// and flat contacts).
+  kWarpedBaseRender,
 };
+
+/// "rendered", "lever" or "warp" (the command-line and summary names).
+const char* ToString(RotationGradient r) noexcept;
+/// Parses ToString's names; throws std::invalid_argument naming the bad value and the choices.
+RotationGradient ParseRotationGradient(const std::string& text);
+
+/// The six rotated samples of GradientSamplePoses (5..10: ±h_θ about u, v, n) estimated from the
+/// base pose's heights (RotationGradient::kWarpedBaseRender): `env` the environment's N×N
+/// heights, `tool_ext` the tool's at the base pose on the window grown by one cell ((N+2)² cells,
+/// window cell (i, j) at (i+1, j+1)), `p_WTcm` the tool's centre of mass in W (m). Each sample is
+/// max_c (δ_c ∓ h_θ·e·(r_c × (n − ∇a_c))) over the cells where both heights are finite, with its
+/// first cell (−∞ and −1 where there is none). Writes out[0..6); never allocates.
+void WarpedRotationSamples(std::span<const float> env, std::span<const float> tool_ext,
+                           const ContactWindow& window, const glm::dvec3& p_WTcm,
+                           std::span<DepthSample> out) noexcept;
 
 /// Builds the linearization from the first five depths of GradientSamplePoses() (the base, ±h_x
 /// along u and v) with RotationGradient::kContactLever: ∂δ/∂x as AssembleLinearization, and
@@ -148,7 +173,8 @@ class TexturePenetrationSolver {
   /// `environment` posed at X_WO over `window`, with penalty stiffness k (N/m).
   /// Returns depth_m = −∞ and a zero gradient when the patches do not overlap on the window.
   /// When `samples_out` holds kGradientSamples entries, the raw depths are copied there (with
-  /// RotationGradient::kContactLever the six rotated ones are not taken: depth −∞, cell −1).
+  /// RotationGradient::kContactLever the six rotated ones are not taken: depth −∞, cell −1; with
+  /// kWarpedBaseRender they are the warped estimates).
   ContactLinearization Linearize(const HapticModel& tool, const RigidTransform& X_WT,
                                  const HapticModel& environment, const RigidTransform& X_WO,
                                  const ContactWindow& window, double stiffness_n_per_m,

@@ -64,7 +64,7 @@ class CpuPenetrationDepthBackend final : public PenetrationDepthBackend {
   /// `threads` ≥ 1 (values below 1 count as 1): with more than one, every batch runs in a oneTBB
   /// task arena of that many threads (the calling thread among them): its contacts, and each
   /// contact's tool renders, are tasks. `rotation` picks how ∂δ/∂θ is found (the rendered
-  /// samples, the default, or the deepest cell's lever, an approximation; RotationGradient).
+  /// samples, the default, or from the base render alone, approximations; RotationGradient).
   explicit CpuPenetrationDepthBackend(
       int max_resolution = 128, TextureStagePath path = TextureStagePath::kFast, int threads = 1,
       RotationGradient rotation = RotationGradient::kRenderedSamples);

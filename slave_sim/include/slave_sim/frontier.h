@@ -35,7 +35,8 @@ struct FrontierSetting {
   std::string backend = "cpu";  ///< "cpu" or "gpu".
   int depth_bits = 32;          ///< GPU depth precision (16 or 32); the CPU works in float.
   /// CPU texture stage: the fast path (the product's) or the reference it replaced (issue 15),
-  /// and its threads (timings are single-thread unless a setting says otherwise).
+  /// and its threads, which the coarse query's traversal uses too (timings are single-thread
+  /// unless a setting says otherwise).
   TextureStagePath texture_path = TextureStagePath::kFast;
   int texture_threads = 1;
   /// Most contacts per step (PipelineOptions::max_contacts).
@@ -51,9 +52,9 @@ struct FrontierSetting {
 /// 16 and 32 depth bits (when `with_gpu`), the reference texture path ("reference", the path the
 /// fast one replaced: the same error, its time), the fast path on two threads ("threads2"), at
 /// most 7 contacts per step ("contacts7", the seed's count on Fig. 77), the coarse query's local
-/// reach ("local_reach"), the rotation gradient from the deepest cell's lever ("rotation_lever",
-/// and with at most 7 contacts and two threads, "lever_contacts7_threads2"), and the two
-/// baselines.
+/// reach ("local_reach"), the rotation gradient from the base render alone (the deepest cell's
+/// lever, "rotation_lever", and the warped rotation samples, "rotation_warp"), every speed option
+/// at once ("warp_local_contacts7_threads2"), and the two baselines.
 /// `quick` keeps grids 16, 25 and 100, texture 256, coarse ×2, reference, the GPU at 16 bits and
 /// both baselines.
 std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu);
