@@ -152,8 +152,7 @@ TEST(PenetrationDepth, LeverRotationGradientMatchesAnalyticAndRenderedGradients)
 
     const double y_star = s.DeepestY();
     const double slope = s.Slope(y_star);
-    const double a_star =
-        s.z_bottom - (s.c - s.kappa * (y_star - s.y_tool) * (y_star - s.y_tool));
+    const double a_star = s.z_bottom - (s.c - s.kappa * (y_star - s.y_tool) * (y_star - s.y_tool));
     const glm::dvec3 r = glm::dvec3(0, y_star, a_star) - X_WT.translation;
     const glm::dvec3 J_theta = glm::cross(r, glm::dvec3(0, slope, 0) - glm::dvec3(0, 0, 1));
     const double tol = 0.05 * glm::length(J_theta);
@@ -185,8 +184,7 @@ TEST(PenetrationDepth, WarpedRotationSamplesMatchAnalyticAndRenderedGradients) {
     EXPECT_EQ(lw.depth_m, lr.depth_m);
     EXPECT_EQ(lw.gradient.d_translation_W, lr.gradient.d_translation_W);
     const double y_star = s.DeepestY();
-    const double a_star =
-        s.z_bottom - (s.c - s.kappa * (y_star - s.y_tool) * (y_star - s.y_tool));
+    const double a_star = s.z_bottom - (s.c - s.kappa * (y_star - s.y_tool) * (y_star - s.y_tool));
     const glm::dvec3 r = glm::dvec3(0, y_star, a_star) - X_WT.translation;
     const glm::dvec3 J_theta =
         glm::cross(r, glm::dvec3(0, s.Slope(y_star), 0) - glm::dvec3(0, 0, 1));
@@ -230,9 +228,9 @@ TEST(PenetrationDepth, WarpedRotationSamplesSeeTiesThatTheLeverMisses) {
 }
 
 TEST(PenetrationDepth, RotationGradientNamesRoundTrip) {
-  for (const RotationGradient r : {RotationGradient::kRenderedSamples,
-                                   RotationGradient::kContactLever,
-                                   RotationGradient::kWarpedBaseRender}) {
+  for (const RotationGradient r :
+       {RotationGradient::kRenderedSamples, RotationGradient::kContactLever,
+        RotationGradient::kWarpedBaseRender}) {
     EXPECT_EQ(ParseRotationGradient(ToString(r)), r);
   }
   EXPECT_THROW(ParseRotationGradient("analytic"), std::invalid_argument);

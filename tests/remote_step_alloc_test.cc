@@ -4,9 +4,8 @@
 
 #include <gtest/gtest.h>
 
-#include <glm/gtc/quaternion.hpp>
-
 #include <cctype>
+#include <glm/gtc/quaternion.hpp>
 #include <string>
 
 #include "allocation_counter.h"  // the tick / step must make no allocation
@@ -54,19 +53,19 @@ TEST_P(RemoteStepAlloc, AllocatesNothingAfterWarmUp) {
   EXPECT_LT(in_contact, 1000);  // and out of contact too
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    ThreadsAndRotationGradients, RemoteStepAlloc,
-    ::testing::Values(AllocCase{1, RotationGradient::kRenderedSamples},
-                      AllocCase{2, RotationGradient::kRenderedSamples},
-                      AllocCase{1, RotationGradient::kContactLever},
-                      AllocCase{2, RotationGradient::kContactLever},
-                      AllocCase{1, RotationGradient::kWarpedBaseRender},
-                      AllocCase{2, RotationGradient::kWarpedBaseRender}),
-    [](const ::testing::TestParamInfo<AllocCase>& param_info) {
-      std::string name = ToString(param_info.param.rotation);
-      name[0] = static_cast<char>(std::toupper(static_cast<unsigned char>(name[0])));
-      return std::to_string(param_info.param.threads) + "Threads" + name;
-    });
+INSTANTIATE_TEST_SUITE_P(ThreadsAndRotationGradients, RemoteStepAlloc,
+                         ::testing::Values(AllocCase{1, RotationGradient::kRenderedSamples},
+                                           AllocCase{2, RotationGradient::kRenderedSamples},
+                                           AllocCase{1, RotationGradient::kContactLever},
+                                           AllocCase{2, RotationGradient::kContactLever},
+                                           AllocCase{1, RotationGradient::kWarpedBaseRender},
+                                           AllocCase{2, RotationGradient::kWarpedBaseRender}),
+                         [](const ::testing::TestParamInfo<AllocCase>& param_info) {
+                           std::string name = ToString(param_info.param.rotation);
+                           name[0] =
+                               static_cast<char>(std::toupper(static_cast<unsigned char>(name[0])));
+                           return std::to_string(param_info.param.threads) + "Threads" + name;
+                         });
 
 TEST(RemoteStep, NonFinitePosesAndFaultsAreCountedNotThrown) {
   const HapticScene scene = MakeBlockOnGearScene();

@@ -15,8 +15,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
-#include <cstdint>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <glm/gtc/quaternion.hpp>
 #include <limits>
@@ -327,12 +327,9 @@ TEST(TextureStageParity, ABatchOnTwoThreadsEqualsTheBatchOnOne) {
 void CheckBaseRenderRotationGradient(RotationGradient mode, std::uint32_t seed) {
   std::mt19937 rng(seed);
   CpuPenetrationDepthBackend rendered(128, TextureStagePath::kFast, 1);
-  CpuPenetrationDepthBackend lever1(128, TextureStagePath::kFast, 1,
-                                    mode);
-  CpuPenetrationDepthBackend lever2(128, TextureStagePath::kFast, 2,
-                                    mode);
-  CpuPenetrationDepthBackend lever_ref(128, TextureStagePath::kReference, 1,
-                                       mode);
+  CpuPenetrationDepthBackend lever1(128, TextureStagePath::kFast, 1, mode);
+  CpuPenetrationDepthBackend lever2(128, TextureStagePath::kFast, 2, mode);
+  CpuPenetrationDepthBackend lever_ref(128, TextureStagePath::kReference, 1, mode);
   int in_contact = 0, rotation_differs = 0;
   for (const SeedModel which : kAll) {
     const HapticModel& env = Seed(which);
@@ -361,8 +358,7 @@ void CheckBaseRenderRotationGradient(RotationGradient mode, std::uint32_t seed) 
         ++in_contact;
         const glm::dvec3 jx = l1.gradient.d_translation_W, jt = l1.gradient.d_rotation_W;
         if (mode == RotationGradient::kContactLever) {  // a lever: ⟂ to ∂δ/∂x
-          EXPECT_LE(std::abs(glm::dot(jx, jt)),
-                    1e-12 * glm::length(jx) * glm::length(jt) + 1e-300);
+          EXPECT_LE(std::abs(glm::dot(jx, jt)), 1e-12 * glm::length(jx) * glm::length(jt) + 1e-300);
         }
         rotation_differs += jt != r.gradient.d_rotation_W;
         // As FastSolverGivesTheReferenceDepthsAndGradients; the lever multiplies ∂δ/∂x's

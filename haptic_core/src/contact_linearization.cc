@@ -31,9 +31,9 @@ const char* ToString(RotationGradient r) noexcept {
 }
 
 RotationGradient ParseRotationGradient(const std::string& text) {
-  for (const RotationGradient r : {RotationGradient::kRenderedSamples,
-                                   RotationGradient::kContactLever,
-                                   RotationGradient::kWarpedBaseRender}) {
+  for (const RotationGradient r :
+       {RotationGradient::kRenderedSamples, RotationGradient::kContactLever,
+        RotationGradient::kWarpedBaseRender}) {
     if (text == ToString(r)) return r;
   }
   throw std::invalid_argument("rotation gradient must be rendered, lever or warp, got '" + text +
@@ -285,10 +285,14 @@ ContactLinearization TexturePenetrationSolver::Linearize(
                              tool_ext_heights_);
       samples[0] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, 0);
       if (samples[0].cell >= 0) {
-        samples[1] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, -1, 0);
-        samples[2] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 1, 0);
-        samples[3] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, -1);
-        samples[4] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, 1);
+        samples[1] =
+            DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, -1, 0);
+        samples[2] =
+            DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 1, 0);
+        samples[3] =
+            DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, -1);
+        samples[4] =
+            DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, 1);
       }
     } else {
       // The grown window: the same centre, axes and cell centres, one more cell on each side, and

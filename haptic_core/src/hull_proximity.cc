@@ -38,20 +38,46 @@ bool IsFiniteVec(const glm::dvec3& v) noexcept {
   return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
 }
 
-// One hull posed in W: a view of its vertices and planes in O, and the pose.
+// One hull posed in a query frame (named W below; Query works in the frame of its first model,
+// where that model's hulls need no transform): a view of its vertices and planes in O, and the
+// pose.
 struct PosedHull {
   const glm::dvec3* vertices_O = nullptr;
   std::size_t vertex_count = 0;
   const glm::dvec4* planes_O = nullptr;
   std::size_t plane_count = 0;
-  RigidTransform X_WO;
-  glm::dquat R_OW{1.0, 0.0, 0.0, 0.0};
+  // The pose as rotation matrices (R_OW = R_WOᵀ, made once per query: a matrix–vector product
+  // costs about half a quaternion rotation, and the support functions do two per call), or none
+  // (`identity`: O is the query frame).
+  bool identity = false;
+  const glm::dmat3* R_WO = nullptr;
+  const glm::dmat3* R_OW = nullptr;
+  glm::dvec3 p_WO{0.0};  // the frame's origin in W
   glm::dvec3 center_W{0.0};
   double radius_m = 0.0;
+  // The pose in the world as a quaternion, and the centre in O, for PenetrationContact
+  // (QuaternionPath), which works in the world frame.
+  const RigidTransform* X_WO = nullptr;
+  glm::dvec3 center_O{0.0};
+  bool quaternion = false;
+  glm::dquat q_OW{1.0, 0.0, 0.0, 0.0};
+
+  // The same hull, its support functions and centre computed with the quaternion: MPR's path
+  // (libccd's penetration search) follows the last bits of its supports, so the penetrating
+  // pairs keep the arithmetic they had before the matrices (the same contacts, bit for bit).
+  PosedHull QuaternionPath() const noexcept {
+    PosedHull h = *this;
+    h.identity = false;
+    h.quaternion = true;
+    h.q_OW = glm::conjugate(X_WO->rotation);
+    h.p_WO = X_WO->translation;
+    h.center_W = *X_WO * center_O;
+    return h;
+  }
 
   // Support point p_WV of the hull along d_W (any length): its vertex farthest along d_W.
   glm::dvec3 Support(const glm::dvec3& d_W) const noexcept {
-    const glm::dvec3 d_O = R_OW * d_W;
+    const glm::dvec3 d_O = identity ? d_W : quaternion ? q_OW * d_W : *R_OW * d_W;
     std::size_t best = 0;
     double best_dot = glm::dot(vertices_O[0], d_O);
     for (std::size_t i = 1; i < vertex_count; ++i) {
@@ -61,15 +87,21 @@ struct PosedHull {
         best = i;
       }
     }
-    return X_WO * vertices_O[best];
+    if (identity) return vertices_O[best];
+    return quaternion ? *X_WO * vertices_O[best] : *R_WO * vertices_O[best] + p_WO;
   }
   // Support value h(d_W) = max_v d_W·p_WV.
   double SupportValue(const glm::dvec3& d_W) const noexcept {
-    const glm::dvec3 d_O = R_OW * d_W;
-    double best = -kInf;
-    for (std::size_t i = 0; i < vertex_count; ++i)
+    const glm::dvec3 d_O = identity ? d_W : quaternion ? q_OW * d_W : *R_OW * d_W;
+    double best = -kInf, best_odd = -kInf;  // two chains: each max waits for half as many
+    std::size_t i = 0;
+    for (; i + 1 < vertex_count; i += 2) {
       best = std::max(best, glm::dot(vertices_O[i], d_O));
-    return best + glm::dot(d_W, X_WO.translation);
+      best_odd = std::max(best_odd, glm::dot(vertices_O[i + 1], d_O));
+    }
+    if (i < vertex_count) best = std::max(best, glm::dot(vertices_O[i], d_O));
+    best = std::max(best, best_odd);
+    return identity ? best : best + glm::dot(d_W, p_WO);
   }
 };
 
@@ -361,8 +393,9 @@ double Overlap(const PosedHull& A, const PosedHull& B, const glm::dvec3& n) noex
 }
 
 // Contact of a touching or penetrating pair (see HullProximityQuery::Query for the method).
-HullPairContact PenetrationContact(const PosedHull& A, const PosedHull& B,
+HullPairContact PenetrationContact(const PosedHull& A_in, const PosedHull& B_in,
                                    const glm::dvec3* previous_normal_W) noexcept {
+  const PosedHull A = A_in.QuaternionPath(), B = B_in.QuaternionPath();
   double best_overlap = kInf;
   glm::dvec3 best_n(0.0, 0.0, 1.0);
   auto consider = [&](const glm::dvec3& n, double overlap) {
@@ -394,17 +427,15 @@ HullPairContact PenetrationContact(const PosedHull& A, const PosedHull& B,
     if (IsFiniteVec(p)) q_W = p, have_point = true;
   }
   if (A.plane_count * B.vertex_count + B.plane_count * A.vertex_count <= kMaxFaceCandidateWork) {
-    const glm::dquat& R_WB = B.X_WO.rotation;
     for (std::size_t i = 0; i < B.plane_count; ++i) {
       const glm::dvec4& pl = B.planes_O[i];
-      const glm::dvec3 n = R_WB * glm::dvec3(pl.x, pl.y, pl.z);
-      consider(n, pl.w + glm::dot(n, B.X_WO.translation) + A.SupportValue(-n));
+      const glm::dvec3 n = B.X_WO->rotation * glm::dvec3(pl.x, pl.y, pl.z);
+      consider(n, pl.w + glm::dot(n, B.p_WO) + A.SupportValue(-n));
     }
-    const glm::dquat& R_WA = A.X_WO.rotation;
     for (std::size_t j = 0; j < A.plane_count; ++j) {
       const glm::dvec4& pl = A.planes_O[j];
-      const glm::dvec3 m = R_WA * glm::dvec3(pl.x, pl.y, pl.z);
-      consider(-m, pl.w + glm::dot(m, A.X_WO.translation) + B.SupportValue(-m));
+      const glm::dvec3 m = A.X_WO->rotation * glm::dvec3(pl.x, pl.y, pl.z);
+      consider(-m, pl.w + glm::dot(m, A.p_WO) + B.SupportValue(-m));
     }
   }
   if (previous_normal_W != nullptr) consider(*previous_normal_W, Overlap(A, B, *previous_normal_W));
@@ -672,10 +703,16 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
       static_cast<std::size_t>(std::clamp(options.max_pairs, 0, capacity_));
   const double budget_us = options.time_budget_us > 0.0 ? options.time_budget_us : kInf;
 
-  const glm::dquat R_AW = glm::conjugate(X_WA.rotation);
-  const glm::dquat R_BW = glm::conjugate(X_WB.rotation);
+  // The traversal works in A's frame: A's hulls need no transform there, and B's one matrix
+  // product per support call (R_AB, p_AB) instead of two quaternion rotations. Leaf contacts go
+  // back to W (penetrating ones are found in W, PenetrationContact).
+  const glm::dmat3 R_WA = glm::mat3_cast(X_WA.rotation), R_AW = glm::transpose(R_WA);
+  const glm::dmat3 R_AB = R_AW * glm::mat3_cast(X_WB.rotation), R_BA = glm::transpose(R_AB);
+  const glm::dvec3 p_AB = R_AW * (X_WB.translation - X_WA.translation);
+  const glm::dmat3 identity_matrix(1.0);
   auto posed = [&](const HapticModel& m, const ModelEntry& e, const RigidTransform& X_WO,
-                   const glm::dquat& R_OW, int node) {
+                   const glm::dmat3* R_QO, const glm::dmat3* R_OQ, const glm::dvec3& p_QO,
+                   int node) {
     PosedHull h;
     const glm::dvec4& sph = e.spheres_O[node < 0 ? 0 : static_cast<std::size_t>(node)];
     if (node < 0) {
@@ -688,9 +725,13 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
       h.planes_O = hull.planes_O.data();
       h.plane_count = hull.planes_O.size();
     }
-    h.X_WO = X_WO;
-    h.R_OW = R_OW;
-    h.center_W = X_WO * glm::dvec3(sph);
+    h.identity = R_QO == nullptr;
+    h.R_WO = h.identity ? &identity_matrix : R_QO;
+    h.R_OW = h.identity ? &identity_matrix : R_OQ;
+    h.p_WO = p_QO;
+    h.center_W = h.identity ? glm::dvec3(sph) : *R_QO * glm::dvec3(sph) + p_QO;
+    h.X_WO = &X_WO;
+    h.center_O = glm::dvec3(sph);
     h.radius_m = sph.w;
     return h;
   };
@@ -698,9 +739,10 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     return node < 0 || m.hull_hierarchy.nodes[static_cast<std::size_t>(node)].is_leaf();
   };
   auto sphere_bound = [&](int node_A, int node_B) {
-    return BoundingSphereGap(
-        entry_A->spheres_O[node_A < 0 ? 0 : static_cast<std::size_t>(node_A)], X_WA,
-        entry_B->spheres_O[node_B < 0 ? 0 : static_cast<std::size_t>(node_B)], X_WB);
+    // BoundingSphereGap, in A's frame.
+    const glm::dvec4& a = entry_A->spheres_O[node_A < 0 ? 0 : static_cast<std::size_t>(node_A)];
+    const glm::dvec4& b = entry_B->spheres_O[node_B < 0 ? 0 : static_cast<std::size_t>(node_B)];
+    return glm::length(glm::dvec3(a) - (R_AB * glm::dvec3(b) + p_AB)) - a.w - b.w;
   };
   const bool local_reach = options.local_reach_margin_m >= 0.0;
   // The tolerance of a node pair: ε, or with local reach the pair's own (never larger).
@@ -760,8 +802,8 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
   // poses, cache entries, the previous call's coherent directions), so that workers may run it
   // at once on their own traversals.
   auto process = [&](Traversal& t, const QueueEntry& e) {
-    const PosedHull hA = posed(A, *entry_A, X_WA, R_AW, e.node_A);
-    const PosedHull hB = posed(B, *entry_B, X_WB, R_BW, e.node_B);
+    const PosedHull hA = posed(A, *entry_A, X_WA, nullptr, nullptr, glm::dvec3(0.0), e.node_A);
+    const PosedHull hB = posed(B, *entry_B, X_WB, &R_AB, &R_BA, p_AB, e.node_B);
     const bool leaf_A = is_leaf(A, e.node_A);
     const bool leaf_B = is_leaf(B, e.node_B);
     ++t.st.node_pairs_tested;
@@ -778,15 +820,15 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
         }
       }
       const GjkResult g =
-          GjkDistance(hA, hB, prev != nullptr ? prev->direction_W : glm::dvec3(0.0), eps_e);
+          GjkDistance(hA, hB, prev != nullptr ? R_AW * prev->direction_W : glm::dvec3(0.0), eps_e);
       if (g.status == GjkStatus::kFar) return;
       HullPairContact c;
       if (g.status == GjkStatus::kSeparated) {
         if (g.distance_m > eps_e) return;
         c.signed_distance_m = g.distance_m;
-        c.normal_W = g.v / g.distance_m;
-        c.point_A_W = g.p_A;
-        c.point_B_W = g.p_B;
+        c.normal_W = R_WA * (g.v / g.distance_m);
+        c.point_A_W = R_WA * g.p_A + X_WA.translation;
+        c.point_B_W = R_WA * g.p_B + X_WA.translation;
       } else {
         c = PenetrationContact(hA, hB, prev != nullptr ? &prev->direction_W : nullptr);
         // Touching within GJK's tolerance counts as within ε even when the support intervals
@@ -850,8 +892,9 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
       }
       // A tighter key, and a separating-axis cull: the support intervals' overlap along the
       // centre line (−overlap ≤ every descendant pair's signed distance).
-      const PosedHull cA = split_A ? posed(A, *entry_A, X_WA, R_AW, child) : hA;
-      const PosedHull cB = split_A ? hB : posed(B, *entry_B, X_WB, R_BW, child);
+      const PosedHull cA =
+          split_A ? posed(A, *entry_A, X_WA, nullptr, nullptr, glm::dvec3(0.0), child) : hA;
+      const PosedHull cB = split_A ? hB : posed(B, *entry_B, X_WB, &R_AB, &R_BA, p_AB, child);
       double axis_bound = lb;
       const glm::dvec3 d = cA.center_W - cB.center_W;
       const double d_len = glm::length(d);

@@ -286,8 +286,8 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
       return;
     }
   } else {
-    backend = std::make_unique<CpuPenetrationDepthBackend>(std::max(128, st.grid), st.texture_path,
-                                                           st.texture_threads, st.rotation_gradient);
+    backend = std::make_unique<CpuPenetrationDepthBackend>(
+        std::max(128, st.grid), st.texture_path, st.texture_threads, st.rotation_gradient);
   }
   run.renderer = backend->description();
   PipelineOptions options;
@@ -765,7 +765,8 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
   s << "# Speed against error: the frontier\n\n";
   s << "Command: `" << options.command_line << "`  \n";
   s << "Machine: " << MachineLine() << "; total " << Fmt(Seconds(t_start), 3) << " s.  \n";
-  s << "Timed steps run one at a time on one thread (settings named threads2 on two: the texture stage and the coarse query); "
+  s << "Timed steps run one at a time on one thread (settings named threads2 on two: the texture "
+       "stage and the coarse query); "
        "the ground truth afterwards on "
     << options.threads << ".\n\n";
   s << "Error is against the ground truth: the directional penetration depth of each window on the "

@@ -38,10 +38,9 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
                                 std::to_string(config.display_rate_hz));
   }
   std::string backend_message;
-  std::unique_ptr<PenetrationDepthBackend> backend =
-      MakePenetrationDepthBackend(config.pd_backend, config.gpu, config.pipeline.grid_resolution,
-                                  backend_message, config.pipeline.texture_threads,
-                                  config.pipeline.rotation_gradient);
+  std::unique_ptr<PenetrationDepthBackend> backend = MakePenetrationDepthBackend(
+      config.pd_backend, config.gpu, config.pipeline.grid_resolution, backend_message,
+      config.pipeline.texture_threads, config.pipeline.rotation_gradient);
   std::string gl_renderer, gl_version, gl_vendor;
   if (auto* gpu = dynamic_cast<GpuPenetrationDepthBackend*>(backend.get())) {
     gl_renderer = gpu->info().renderer;
