@@ -172,6 +172,9 @@ class HullProximityQuery {
     double key_m;  ///< Lower bound of the signed distance of every leaf pair below (m).
     int node_A;
     int node_B;
+    /// The parent pair's last GJK direction p_A − p_B in A's frame (0: none), GJK's first guess
+    /// for this pair.
+    glm::dvec3 guess_A{0.0};
   };
   struct CoherentPair {
     int node_A;
