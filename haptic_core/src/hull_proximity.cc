@@ -821,9 +821,11 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
           prev = &*it;
         }
       }
-      // First guess: this pair's direction in the previous query, else its parent pair's.
+      // First guess: this pair's direction in the previous query, else the centre line (not the
+      // parent pair's direction, which depends on how far the parent's GJK ran: a leaf's
+      // contact must not depend on the traversal).
       const GjkResult g =
-          GjkDistance(hA, hB, prev != nullptr ? R_AW * prev->direction_W : e.guess_A, eps_e);
+          GjkDistance(hA, hB, prev != nullptr ? R_AW * prev->direction_W : glm::dvec3(0.0), eps_e);
       if (g.status == GjkStatus::kFar) return;
       HullPairContact c;
       if (g.status == GjkStatus::kSeparated) {

@@ -173,7 +173,7 @@ class HullProximityQuery {
     int node_A;
     int node_B;
     /// The parent pair's last GJK direction p_A − p_B in A's frame (0: none), GJK's first guess
-    /// for this pair.
+    /// for this pair when it is internal.
     glm::dvec3 guess_A{0.0};
   };
   struct CoherentPair {
