@@ -11,6 +11,7 @@
 #include <limits>
 #include <memory>
 #include <numbers>
+#include <string>
 
 #include "haptic_core/contact_model.h"
 #include "haptic_core/demo/demo_scenes.h"
@@ -66,8 +67,11 @@ RigidTransform At(glm::dvec3 p, glm::dquat R = glm::dquat(1, 0, 0, 0)) {
 }
 
 ContactModel StepAt(const HapticScene& scene, const RigidTransform& X_WT,
-                    StepTimings* timings = nullptr) {
-  HapticTexturePipeline pipeline(scene, PipelineOptions{});
+                    StepTimings* timings = nullptr,
+                    RotationGradient rotation = RotationGradient::kRenderedSamples) {
+  PipelineOptions options;
+  options.rotation_gradient = rotation;
+  HapticTexturePipeline pipeline(scene, options);
   StepTimings t;
   ContactModel m = pipeline.Step(X_WT, 1, t);
   if (timings) *timings = t;
@@ -209,6 +213,41 @@ TEST(HardCases, InterlockingRidges) {
                 m.F_T_W_at_q0.force.z);
   }
   Report("interlocking ridges", what + "torque opposes the rotation");
+}
+
+TEST(HardCases, InterlockingRidgesWithTheRotationGradientFromTheBaseRender) {
+  // The same turn with the rotation gradient from the base render alone (issue 15). The warped
+  // samples see the ridges' flanks that the turn presses (many cells tie on the crests), so the
+  // torque about n still opposes the turn; the lever of the one deepest cell is reported.
+  HapticScene scene;
+  scene.tool = std::make_shared<const HapticModel>(MakeRidgedBlock());
+  TouchableObject lower;
+  lower.model = std::make_shared<const HapticModel>(MakeRidgedBlock());
+  lower.X_WO = At({0, 0, -0.01}, glm::angleAxis(std::numbers::pi, glm::dvec3(1, 0, 0)));
+  lower.stiffness_n_per_m = kK;
+  scene.touchables.push_back(lower);
+  std::string what;
+  for (const RotationGradient r :
+       {RotationGradient::kWarpedBaseRender, RotationGradient::kContactLever}) {
+    what += std::string(ToString(r)) + ": ";
+    for (double deg : {-2.0, 2.0}) {
+      const double a = deg * std::numbers::pi / 180.0;
+      const RigidTransform X_WT =
+          At({0, 1.5e-3, 0.01 + 0.1e-3}, glm::angleAxis(a, glm::dvec3(0, 0, 1)));
+      const ContactModel m = StepAt(scene, X_WT, nullptr, r);
+      const ContactModel rendered = StepAt(scene, X_WT);
+      ASSERT_GE(m.num_contacts, 1);
+      ASSERT_TRUE(Finite(m.F_T_W_at_q0));
+      // The force is the rendered mode's: only the rotation part of the gradient differs.
+      EXPECT_EQ(m.F_T_W_at_q0.force, rendered.F_T_W_at_q0.force);
+      if (r == RotationGradient::kWarpedBaseRender) {
+        EXPECT_LT(m.F_T_W_at_q0.torque.z * a, 0.0) << deg << "°: the torque opposes the turn";
+      }
+      what += Fmt("%+.0f°: τz %+.2e N·m (rendered %+.2e); ", deg, m.F_T_W_at_q0.torque.z,
+                  rendered.F_T_W_at_q0.torque.z);
+    }
+  }
+  Report("interlocking ridges, rotation gradient from the base render", what);
 }
 
 // Largest tangential/normal force ratio over 8 shifts across a period of interlocked saw teeth
