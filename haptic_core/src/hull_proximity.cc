@@ -62,9 +62,10 @@ struct PosedHull {
   bool quaternion = false;
   glm::dquat q_OW{1.0, 0.0, 0.0, 0.0};
 
-  // The same hull, its support functions and centre computed with the quaternion: MPR's path
-  // (libccd's penetration search) follows the last bits of its supports, so the penetrating
-  // pairs keep the arithmetic they had before the matrices (the same contacts, bit for bit).
+  // The same hull in W, its support functions and centre computed with the quaternion: leaf
+  // pairs (GJK, and libccd's MPR, whose path follows the last bits of its supports) keep the
+  // arithmetic they had before the traversal moved to A's frame, so the query's contacts are
+  // the same bit for bit.
   PosedHull QuaternionPath() const noexcept {
     PosedHull h = *this;
     h.identity = false;
@@ -395,9 +396,9 @@ double Overlap(const PosedHull& A, const PosedHull& B, const glm::dvec3& n) noex
 }
 
 // Contact of a touching or penetrating pair (see HullProximityQuery::Query for the method).
-HullPairContact PenetrationContact(const PosedHull& A_in, const PosedHull& B_in,
+// A and B must be on the quaternion path (PosedHull::QuaternionPath), in W.
+HullPairContact PenetrationContact(const PosedHull& A, const PosedHull& B,
                                    const glm::dvec3* previous_normal_W) noexcept {
-  const PosedHull A = A_in.QuaternionPath(), B = B_in.QuaternionPath();
   double best_overlap = kInf;
   glm::dvec3 best_n(0.0, 0.0, 1.0);
   auto consider = [&](const glm::dvec3& n, double overlap) {
@@ -821,21 +822,24 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
           prev = &*it;
         }
       }
-      // First guess: this pair's direction in the previous query, else the centre line (not the
-      // parent pair's direction, which depends on how far the parent's GJK ran: a leaf's
-      // contact must not depend on the traversal).
+      // Leaf pairs in W with the quaternion arithmetic (QuaternionPath): their contacts are the
+      // remote step's output, and downstream a window moved by a last bit can flip a cell that
+      // lies exactly on a triangle's edge (the striped blocks of fig76 are axis-aligned), so they
+      // keep the bits they had before the query moved to A's frame. First guess: this pair's
+      // direction in the previous query, else the centre line.
+      const PosedHull wA = hA.QuaternionPath(), wB = hB.QuaternionPath();
       const GjkResult g =
-          GjkDistance(hA, hB, prev != nullptr ? R_AW * prev->direction_W : glm::dvec3(0.0), eps_e);
+          GjkDistance(wA, wB, prev != nullptr ? prev->direction_W : glm::dvec3(0.0), eps_e);
       if (g.status == GjkStatus::kFar) return;
       HullPairContact c;
       if (g.status == GjkStatus::kSeparated) {
         if (g.distance_m > eps_e) return;
         c.signed_distance_m = g.distance_m;
-        c.normal_W = R_WA * (g.v / g.distance_m);
-        c.point_A_W = R_WA * g.p_A + X_WA.translation;
-        c.point_B_W = R_WA * g.p_B + X_WA.translation;
+        c.normal_W = g.v / g.distance_m;
+        c.point_A_W = g.p_A;
+        c.point_B_W = g.p_B;
       } else {
-        c = PenetrationContact(hA, hB, prev != nullptr ? &prev->direction_W : nullptr);
+        c = PenetrationContact(wA, wB, prev != nullptr ? &prev->direction_W : nullptr);
         // Touching within GJK's tolerance counts as within ε even when the support intervals
         // leave a gap of a few 1e-13 m.
         if (c.signed_distance_m > eps_e + kTouch_m) return;
