@@ -190,9 +190,8 @@ TEST(HardCases, DeepestPointOnTheWindowBorder) {
              lin.point_W.x, lin.gradient.d_translation_W.x, std::tan(theta), glm::length(F.force)));
 }
 
-TEST(HardCases, InterlockingRidges) {
-  // Two ridged blocks interlocked (seed Fig. 76), the upper one turned about n: the torque about
-  // n opposes the turn.
+// Two ridged blocks (seed Fig. 76): the lower one upside down under the tool.
+HapticScene InterlockedRidgedBlocks() {
   HapticScene scene;
   scene.tool = std::make_shared<const HapticModel>(MakeRidgedBlock());
   TouchableObject lower;
@@ -200,6 +199,13 @@ TEST(HardCases, InterlockingRidges) {
   lower.X_WO = At({0, 0, -0.01}, glm::angleAxis(std::numbers::pi, glm::dvec3(1, 0, 0)));
   lower.stiffness_n_per_m = kK;
   scene.touchables.push_back(lower);
+  return scene;
+}
+
+TEST(HardCases, InterlockingRidges) {
+  // Two ridged blocks interlocked (seed Fig. 76), the upper one turned about n: the torque about
+  // n opposes the turn.
+  const HapticScene scene = InterlockedRidgedBlocks();
   std::string what;
   for (double deg : {-2.0, 2.0}) {
     const double a = deg * std::numbers::pi / 180.0;
@@ -219,13 +225,7 @@ TEST(HardCases, InterlockingRidgesWithTheRotationGradientFromTheBaseRender) {
   // The same turn with the rotation gradient from the base render alone (issue 15). The warped
   // samples see the ridges' flanks that the turn presses (many cells tie on the crests), so the
   // torque about n still opposes the turn; the lever of the one deepest cell is reported.
-  HapticScene scene;
-  scene.tool = std::make_shared<const HapticModel>(MakeRidgedBlock());
-  TouchableObject lower;
-  lower.model = std::make_shared<const HapticModel>(MakeRidgedBlock());
-  lower.X_WO = At({0, 0, -0.01}, glm::angleAxis(std::numbers::pi, glm::dvec3(1, 0, 0)));
-  lower.stiffness_n_per_m = kK;
-  scene.touchables.push_back(lower);
+  const HapticScene scene = InterlockedRidgedBlocks();
   std::string what;
   for (const RotationGradient r :
        {RotationGradient::kWarpedBaseRender, RotationGradient::kContactLever}) {

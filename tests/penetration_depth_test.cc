@@ -44,15 +44,27 @@ TEST(PenetrationDepth, ConstantTexturesAddToTheOverlap) {
 }
 
 TEST(PenetrationDepth, SeparatedPatchesGiveNegativeDepthAndNoForce) {
+  // With every rotation gradient (issue 15): separated patches give no wrench, and a window the
+  // tool does not cover gives −∞ and a zero gradient (nothing computed from a missing cell).
   const HapticModel a = ToolBox(kFlat), b = EnvironmentBox(kFlat);
-  TexturePenetrationSolver solver;
   const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 50);
-  const ContactLinearization lin =
-      solver.Linearize(a, ToolPose(0, 0, 2e-3), b, EnvironmentPose(), w, 1000.0);
-  EXPECT_NEAR(lin.depth_m, -2e-3, 1e-7);
-  const Wrench F = PenaltyWrench(lin.depth_m, lin.gradient, lin.stiffness_n_per_m);
-  EXPECT_EQ(glm::length(F.force), 0.0);
-  EXPECT_EQ(glm::length(F.torque), 0.0);
+  for (const RotationGradient r :
+       {RotationGradient::kRenderedSamples, RotationGradient::kContactLever,
+        RotationGradient::kWarpedBaseRender}) {
+    TexturePenetrationSolver solver;
+    solver.set_rotation_gradient(r);
+    const ContactLinearization lin =
+        solver.Linearize(a, ToolPose(0, 0, 2e-3), b, EnvironmentPose(), w, 1000.0);
+    EXPECT_NEAR(lin.depth_m, -2e-3, 1e-7) << ToString(r);
+    const Wrench F = PenaltyWrench(lin.depth_m, lin.gradient, lin.stiffness_n_per_m);
+    EXPECT_EQ(glm::length(F.force), 0.0) << ToString(r);
+    EXPECT_EQ(glm::length(F.torque), 0.0) << ToString(r);
+    const ContactLinearization off =
+        solver.Linearize(a, ToolPose(0.2, 0, 0), b, EnvironmentPose(), w, 1000.0);
+    EXPECT_TRUE(std::isinf(off.depth_m) && off.depth_m < 0.0) << ToString(r);
+    EXPECT_EQ(off.gradient.d_translation_W, glm::dvec3(0.0)) << ToString(r);
+    EXPECT_EQ(off.gradient.d_rotation_W, glm::dvec3(0.0)) << ToString(r);
+  }
 }
 
 TEST(PenetrationDepth, NoOverlapOnTheWindowIsReported) {
@@ -86,6 +98,16 @@ struct SmoothCase {
   HapticModel Environment() const {
     return EnvironmentBox([this](double, double y) { return amp * std::sin(omega * y); }, 1024);
   }
+  /// The analytic gradient at tool pose X_WT (envelope theorem): ∇δ = (g − n, r × (g − n)), g the
+  /// tool surface slope at the deepest point p* (= ∂a/∂y there, since ∇a = ∇b at p*) and
+  /// r = p* − centre of mass.
+  PenetrationGradient AnalyticGradient(const RigidTransform& X_WT) const {
+    const double y_star = DeepestY();
+    const double a_star = z_bottom - (c - kappa * (y_star - y_tool) * (y_star - y_tool));
+    const glm::dvec3 g_minus_n(0, Slope(y_star), -1);
+    const glm::dvec3 r = glm::dvec3(0, y_star, a_star) - X_WT.translation;
+    return {g_minus_n, glm::cross(r, g_minus_n)};
+  }
 };
 
 TEST(PenetrationDepth, SinusoidForceRatioEqualsSlopeAtDeepestPoint) {
@@ -115,12 +137,8 @@ TEST(PenetrationDepth, FiniteDifferenceGradientMatchesAnalyticGradient) {
   const RigidTransform X_WT = ToolPose(0, s.y_tool, s.z_bottom);
   const ContactLinearization lin = solver.Linearize(a, X_WT, b, EnvironmentPose(), w, 1000.0);
 
-  const double y_star = s.DeepestY();
-  const double slope = s.Slope(y_star);  // = ∂a/∂y at p*, since ∇a = ∇b there
-  const double a_star = s.z_bottom - (s.c - s.kappa * (y_star - s.y_tool) * (y_star - s.y_tool));
-  const glm::dvec3 n(0, 0, 1), g(0, slope, 0);
-  const glm::dvec3 r = glm::dvec3(0, y_star, a_star) - X_WT.translation;
-  const glm::dvec3 J_x = g - n, J_theta = glm::cross(r, g - n);
+  const PenetrationGradient J = s.AnalyticGradient(X_WT);
+  const glm::dvec3 J_x = J.d_translation_W, J_theta = J.d_rotation_W;
   const double tol_x = 0.05 * glm::length(J_x), tol_theta = 0.05 * glm::length(J_theta);
   for (int i = 0; i < 3; ++i) {
     EXPECT_NEAR(lin.gradient.d_translation_W[i], J_x[i], tol_x) << "translation axis " << i;
@@ -128,73 +146,65 @@ TEST(PenetrationDepth, FiniteDifferenceGradientMatchesAnalyticGradient) {
   }
 }
 
-// The lever rotation gradient (issue 15): r × ∂δ/∂x at the deepest cell, without the six rotated
-// renders. On the smooth case it must give the analytic gradient as the rendered samples do; its
-// depth, point and translation gradient are the rendered mode's, bit for bit (the same five
-// samples), and its rotation gradient is a lever: ⟂ to ∂δ/∂x.
-TEST(PenetrationDepth, LeverRotationGradientMatchesAnalyticAndRenderedGradients) {
+// The smooth case linearized on its 200² window, with the rendered rotation samples and with
+// `mode` (RotationGradient), on `path`. Checks what both base-render modes (issue 15) promise
+// there: δ, the point and ∂δ/∂x of the rendered mode bit for bit (the same five samples), and
+// ∂δ/∂θ within 5 % of both the analytic gradient and the rendered one. Returns the samples.
+struct BaseRenderGradientRun {
+  std::array<DepthSample, kGradientSamples> rendered{}, approximate{};
+  ContactLinearization approximate_lin;
+};
+BaseRenderGradientRun CheckBaseRenderGradientOnTheSmoothCase(TextureStagePath path,
+                                                             RotationGradient mode) {
   const SmoothCase s;
   const HapticModel a = s.Tool(), b = s.Environment();
   const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 200);
   const RigidTransform X_WT = ToolPose(0, s.y_tool, s.z_bottom);
-  for (const TextureStagePath path : {TextureStagePath::kFast, TextureStagePath::kReference}) {
-    TexturePenetrationSolver rendered(200, 4096, path), lever(200, 4096, path);
-    lever.set_rotation_gradient(RotationGradient::kContactLever);
-    std::array<DepthSample, kGradientSamples> samples;
-    const ContactLinearization lr = rendered.Linearize(a, X_WT, b, EnvironmentPose(), w, 1000.0);
-    const ContactLinearization ll =
-        lever.Linearize(a, X_WT, b, EnvironmentPose(), w, 1000.0, samples);
-    ASSERT_GT(ll.depth_m, 0.0);
-    EXPECT_EQ(ll.depth_m, lr.depth_m);
-    EXPECT_EQ(ll.point_W, lr.point_W);
-    EXPECT_EQ(ll.gradient.d_translation_W, lr.gradient.d_translation_W);
-    for (int i = 5; i < kGradientSamples; ++i) EXPECT_EQ(samples[i].cell, -1) << "not rendered";
+  TexturePenetrationSolver rendered(200, 4096, path), approximate(200, 4096, path);
+  approximate.set_rotation_gradient(mode);
+  BaseRenderGradientRun run;
+  const ContactLinearization lr =
+      rendered.Linearize(a, X_WT, b, EnvironmentPose(), w, 1000.0, run.rendered);
+  const ContactLinearization la =
+      approximate.Linearize(a, X_WT, b, EnvironmentPose(), w, 1000.0, run.approximate);
+  run.approximate_lin = la;
+  EXPECT_GT(la.depth_m, 0.0);
+  EXPECT_EQ(la.depth_m, lr.depth_m);
+  EXPECT_EQ(la.point_W, lr.point_W);
+  EXPECT_EQ(la.gradient.d_translation_W, lr.gradient.d_translation_W);
+  const glm::dvec3 J_theta = s.AnalyticGradient(X_WT).d_rotation_W;
+  const double tol = 0.05 * glm::length(J_theta);
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(la.gradient.d_rotation_W[i], J_theta[i], tol) << "axis " << i;
+    EXPECT_NEAR(la.gradient.d_rotation_W[i], lr.gradient.d_rotation_W[i], tol) << "axis " << i;
+  }
+  return run;
+}
 
-    const double y_star = s.DeepestY();
-    const double slope = s.Slope(y_star);
-    const double a_star = s.z_bottom - (s.c - s.kappa * (y_star - s.y_tool) * (y_star - s.y_tool));
-    const glm::dvec3 r = glm::dvec3(0, y_star, a_star) - X_WT.translation;
-    const glm::dvec3 J_theta = glm::cross(r, glm::dvec3(0, slope, 0) - glm::dvec3(0, 0, 1));
-    const double tol = 0.05 * glm::length(J_theta);
-    for (int i = 0; i < 3; ++i) {
-      EXPECT_NEAR(ll.gradient.d_rotation_W[i], J_theta[i], tol) << "axis " << i;
-      EXPECT_NEAR(ll.gradient.d_rotation_W[i], lr.gradient.d_rotation_W[i], tol) << "axis " << i;
+// The lever rotation gradient (issue 15): r × ∂δ/∂x at the deepest cell, without the six rotated
+// renders: the smooth case's gradient, no rotated sample taken, and a lever: ⟂ to ∂δ/∂x.
+TEST(PenetrationDepth, LeverRotationGradientMatchesAnalyticAndRenderedGradients) {
+  for (const TextureStagePath path : {TextureStagePath::kFast, TextureStagePath::kReference}) {
+    const BaseRenderGradientRun run =
+        CheckBaseRenderGradientOnTheSmoothCase(path, RotationGradient::kContactLever);
+    for (int i = 5; i < kGradientSamples; ++i) {
+      EXPECT_EQ(run.approximate[i].cell, -1) << "not rendered";
     }
-    EXPECT_NEAR(glm::dot(ll.gradient.d_rotation_W, ll.gradient.d_translation_W), 0.0,
-                1e-12 * glm::length(ll.gradient.d_rotation_W));
+    const PenetrationGradient& J = run.approximate_lin.gradient;
+    EXPECT_NEAR(glm::dot(J.d_rotation_W, J.d_translation_W), 0.0,
+                1e-12 * glm::length(J.d_rotation_W));
   }
 }
 
+// The rotation samples warped from the base render (issue 15): the smooth case's gradient, and
+// samples that are first order: they differ from the rendered ones by the curvature's O(h_θ²)
+// part, the same for +h_θ and −h_θ, which the central difference cancels.
 TEST(PenetrationDepth, WarpedRotationSamplesMatchAnalyticAndRenderedGradients) {
-  // RotationGradient::kWarpedBaseRender on the smooth case: the six rotated samples from the
-  // base render, the analytic gradient as the rendered samples give it; depth and translation
-  // bit for bit the rendered mode's.
-  const SmoothCase s;
-  const HapticModel a = s.Tool(), b = s.Environment();
-  const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 200);
-  const RigidTransform X_WT = ToolPose(0, s.y_tool, s.z_bottom);
   for (const TextureStagePath path : {TextureStagePath::kFast, TextureStagePath::kReference}) {
-    TexturePenetrationSolver rendered(200, 4096, path), warp(200, 4096, path);
-    warp.set_rotation_gradient(RotationGradient::kWarpedBaseRender);
-    std::array<DepthSample, kGradientSamples> sr, sw;
-    const ContactLinearization lr =
-        rendered.Linearize(a, X_WT, b, EnvironmentPose(), w, 1000.0, sr);
-    const ContactLinearization lw = warp.Linearize(a, X_WT, b, EnvironmentPose(), w, 1000.0, sw);
-    ASSERT_GT(lw.depth_m, 0.0);
-    EXPECT_EQ(lw.depth_m, lr.depth_m);
-    EXPECT_EQ(lw.gradient.d_translation_W, lr.gradient.d_translation_W);
-    const double y_star = s.DeepestY();
-    const double a_star = s.z_bottom - (s.c - s.kappa * (y_star - s.y_tool) * (y_star - s.y_tool));
-    const glm::dvec3 r = glm::dvec3(0, y_star, a_star) - X_WT.translation;
-    const glm::dvec3 J_theta =
-        glm::cross(r, glm::dvec3(0, s.Slope(y_star), 0) - glm::dvec3(0, 0, 1));
-    const double tol = 0.05 * glm::length(J_theta);
-    for (int i = 0; i < 3; ++i) {
-      EXPECT_NEAR(lw.gradient.d_rotation_W[i], J_theta[i], tol) << "axis " << i;
-      EXPECT_NEAR(lw.gradient.d_rotation_W[i], lr.gradient.d_rotation_W[i], tol) << "axis " << i;
-    }
-    // The warped samples are first order: they differ from the rendered ones by the curvature's
-    // O(h_θ²) part, the same for +h_θ and −h_θ, which the central difference cancels.
+    const BaseRenderGradientRun run =
+        CheckBaseRenderGradientOnTheSmoothCase(path, RotationGradient::kWarpedBaseRender);
+    const auto& sr = run.rendered;
+    const auto& sw = run.approximate;
     for (int i = 5; i < kGradientSamples; i += 2) {
       ASSERT_GE(sw[i].cell, 0) << i;
       ASSERT_GE(sw[i + 1].cell, 0) << i + 1;
@@ -234,24 +244,6 @@ TEST(PenetrationDepth, RotationGradientNamesRoundTrip) {
     EXPECT_EQ(ParseRotationGradient(ToString(r)), r);
   }
   EXPECT_THROW(ParseRotationGradient("analytic"), std::invalid_argument);
-}
-
-TEST(PenetrationDepth, LeverRotationGradientOfSeparatedPatchesIsZero) {
-  const HapticModel a = ToolBox(kFlat), b = EnvironmentBox(kFlat);
-  TexturePenetrationSolver solver;
-  solver.set_rotation_gradient(RotationGradient::kContactLever);
-  const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 50);
-  const ContactLinearization lin =
-      solver.Linearize(a, ToolPose(0, 0, 2e-3), b, EnvironmentPose(), w, 1000.0);
-  EXPECT_NEAR(lin.depth_m, -2e-3, 1e-7);
-  const Wrench F = PenaltyWrench(lin.depth_m, lin.gradient, lin.stiffness_n_per_m);
-  EXPECT_EQ(glm::length(F.force), 0.0);
-  EXPECT_EQ(glm::length(F.torque), 0.0);
-  // Off the window: no overlap, −∞, and nothing computed from a missing cell.
-  const ContactLinearization off =
-      solver.Linearize(a, ToolPose(0.2, 0, 0), b, EnvironmentPose(), w, 1000.0);
-  EXPECT_TRUE(std::isinf(off.depth_m) && off.depth_m < 0.0);
-  EXPECT_EQ(off.gradient.d_rotation_W, glm::dvec3(0.0));
 }
 
 TEST(PenetrationDepth, ActionEqualsMinusReaction) {

@@ -706,9 +706,10 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
       static_cast<std::size_t>(std::clamp(options.max_pairs, 0, capacity_));
   const double budget_us = options.time_budget_us > 0.0 ? options.time_budget_us : kInf;
 
-  // The traversal works in A's frame: A's hulls need no transform there, and B's one matrix
-  // product per support call (R_AB, p_AB) instead of two quaternion rotations. Leaf contacts go
-  // back to W (penetrating ones are found in W, PenetrationContact).
+  // The traversal (bounding spheres, centre-line overlaps, internal GJK: culling and keys only)
+  // works in A's frame: A's hulls need no transform there, and B's one matrix product per
+  // support call (R_AB, p_AB) instead of two quaternion rotations. Leaf pairs, whose contacts are
+  // the output, are tested in W as before (PosedHull::QuaternionPath).
   const glm::dmat3 R_WA = glm::mat3_cast(X_WA.rotation), R_AW = glm::transpose(R_WA);
   const glm::dmat3 R_AB = R_AW * glm::mat3_cast(X_WB.rotation), R_BA = glm::transpose(R_AB);
   const glm::dvec3 p_AB = R_AW * (X_WB.translation - X_WA.translation);
