@@ -275,28 +275,17 @@ ContactLinearization TexturePenetrationSolver::Linearize(
                        tool_triangles_, from_base ? 1e-9 : h.h_theta + 1e-9);
   std::array<DepthSample, kGradientSamples> samples;
   for (DepthSample& s : samples) s = {-std::numeric_limits<double>::infinity(), -1};
+  glm::dvec3 lever_W(0.0);  // RotationGradient::kContactLever
   if (from_base) {
-    // The base pose on the window grown by one cell: the four translations are that render read
-    // one cell over (kFast), or rendered at their poses (kReference); the rotations come from it.
+    // The base pose on the window grown by one cell; the rotations come from it.
     const int n = w.resolution, nt = n + 2;
-    tool_ext_heights_.assign(static_cast<size_t>(nt) * nt, std::numeric_limits<float>::infinity());
     if (path_ == TextureStagePath::kFast) {
-      RenderPatchHeightsFast(tool, X_WT, tool_triangles_, w, PatchSide::kTool, 1,
-                             tool_ext_heights_);
-      samples[0] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, 0);
-      if (samples[0].cell >= 0) {
-        samples[1] =
-            DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, -1, 0);
-        samples[2] =
-            DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 1, 0);
-        samples[3] =
-            DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, -1);
-        samples[4] =
-            DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, 1);
-      }
+      RenderGrownBase(tool, X_WT, w, samples);
     } else {
-      // The grown window: the same centre, axes and cell centres, one more cell on each side, and
-      // the window's own box along n.
+      // The reference: the grown window (the same centre, axes and cell centres, one more cell
+      // on each side, and the window's own box along n) and the translations at their poses.
+      tool_ext_heights_.assign(static_cast<size_t>(nt) * nt,
+                               std::numeric_limits<float>::infinity());
       ContactWindow grown = w;
       grown.resolution = nt;
       grown.extent_m = w.extent_m * nt / n;
@@ -308,47 +297,22 @@ ContactLinearization TexturePenetrationSolver::Linearize(
         for (int i = 1; i < 5; ++i) samples[i] = EvaluateTool(tool, poses[i], w);
       }
     }
-    if (samples[0].cell < 0) {
-      for (int i = 1; i < 5; ++i) samples[i] = samples[0];
-      if (samples_out.size() >= samples.size())
-        std::copy(samples.begin(), samples.end(), samples_out.begin());
-      return AssembleLeverLinearization(w, samples, glm::dvec3(0.0), stiffness_n_per_m, faults_);
-    }
-    if (rotation_gradient_ == RotationGradient::kWarpedBaseRender) {
-      WarpedRotationSamples(env_heights_, tool_ext_heights_, w, X_WT.translation,
-                            std::span<DepthSample>(samples).subspan(5));
-      for (int i = 5; i < kGradientSamples; ++i) {
-        if (samples[i].cell < 0) samples[i] = samples[0];  // cannot happen: the base cell counts
+    if (samples[0].cell >= 0) {
+      if (rotation_gradient_ == RotationGradient::kWarpedBaseRender) {
+        WarpedRotationSamples(env_heights_, tool_ext_heights_, w, X_WT.translation,
+                              std::span<DepthSample>(samples).subspan(5));
+      } else {
+        // The deepest cell's tool point (its height along n from the window plane) less the
+        // centre of mass.
+        const int i = samples[0].cell % n, j = samples[0].cell / n;
+        const double t = tool_ext_heights_[static_cast<size_t>(j + 1) * nt + (i + 1)];
+        lever_W = w.CellCenter(samples[0].cell) + t * w.normal_W - X_WT.translation;
       }
-      if (samples_out.size() >= samples.size())
-        std::copy(samples.begin(), samples.end(), samples_out.begin());
-      return AssembleLinearization(w, samples, stiffness_n_per_m, faults_);
     }
-    // The lever: the deepest cell's tool point (its height along n from the window plane) less
-    // the centre of mass.
-    const int i = samples[0].cell % n, j = samples[0].cell / n;
-    const double t = tool_ext_heights_[static_cast<size_t>(j + 1) * nt + (i + 1)];
-    const glm::dvec3 lever_W = w.CellCenter(samples[0].cell) + t * w.normal_W - X_WT.translation;
-    if (samples_out.size() >= samples.size())
-      std::copy(samples.begin(), samples.end(), samples_out.begin());
-    return AssembleLeverLinearization(w, samples, lever_W, stiffness_n_per_m, faults_);
-  }
-  if (path_ == TextureStagePath::kFast) {
-    // The base pose on the window grown by one cell: the translations by ±h_x = ±one cell along
-    // u and v are that render read one cell over (the tool moved +u is, at window cell i, what
-    // the unmoved tool has at cell i − 1).
-    const int n = w.resolution, nt = n + 2;
-    const auto grown_base = [&] {
-      tool_ext_heights_.assign(static_cast<size_t>(nt) * nt,
-                               std::numeric_limits<float>::infinity());
-      RenderPatchHeightsFast(tool, X_WT, tool_triangles_, w, PatchSide::kTool, 1,
-                             tool_ext_heights_);
-      samples[0] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, 0);
-      samples[1] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, -1, 0);
-      samples[2] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 1, 0);
-      samples[3] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, -1);
-      samples[4] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, 1);
-    };
+  } else if (path_ == TextureStagePath::kFast) {
+    // The base pose on the window grown by one cell gives the four translations (RenderGrownBase);
+    // the six rotations are rendered.
+    const size_t cells = static_cast<size_t>(w.resolution) * w.resolution;
     const auto poses = GradientSamplePoses(X_WT, w);
     bool done = false;
     if (parallel_renders_) {
@@ -356,14 +320,13 @@ ContactLinearization TexturePenetrationSolver::Linearize(
       // (measured faster on two threads than the base first: 211 against 259 µs on fig75), so
       // when the base finds no overlap they are computed and discarded below, renders the
       // serial path never makes.
-      const size_t cells = static_cast<size_t>(n) * n;
       try {
         // Isolated: while this thread waits for the seven, it must not pick up another contact
         // of the batch, which would run on this same solver (one solver per thread).
         oneapi::tbb::this_task_arena::isolate([&] {
           oneapi::tbb::parallel_for(0, 7, [&](int task) {
             if (task == 0) {
-              grown_base();
+              RenderGrownBase(tool, X_WT, w, samples);
               return;
             }
             std::vector<float>& heights = rotation_heights_[static_cast<size_t>(task - 1)];
@@ -380,7 +343,7 @@ ContactLinearization TexturePenetrationSolver::Linearize(
       }
     }
     if (!done) {
-      grown_base();
+      RenderGrownBase(tool, X_WT, w, samples);
       if (samples[0].cell >= 0) {
         for (int i = 5; i < kGradientSamples; ++i) samples[i] = EvaluateTool(tool, poses[i], w);
       }
@@ -397,7 +360,25 @@ ContactLinearization TexturePenetrationSolver::Linearize(
   }
   if (samples_out.size() >= samples.size())
     std::copy(samples.begin(), samples.end(), samples_out.begin());
+  if (rotation_gradient_ == RotationGradient::kContactLever) {
+    return AssembleLeverLinearization(w, samples, lever_W, stiffness_n_per_m, faults_);
+  }
   return AssembleLinearization(w, samples, stiffness_n_per_m, faults_);
+}
+
+void TexturePenetrationSolver::RenderGrownBase(const HapticModel& tool, const RigidTransform& X_WT,
+                                               const ContactWindow& w,
+                                               std::span<DepthSample> samples) noexcept {
+  // The translations by ±h_x = ±one cell along u and v are this render read one cell over (the
+  // tool moved +u is, at window cell i, what the unmoved tool has at cell i − 1).
+  const int n = w.resolution, nt = n + 2;
+  tool_ext_heights_.assign(static_cast<size_t>(nt) * nt, std::numeric_limits<float>::infinity());
+  RenderPatchHeightsFast(tool, X_WT, tool_triangles_, w, PatchSide::kTool, 1, tool_ext_heights_);
+  samples[0] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, 0);
+  samples[1] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, -1, 0);
+  samples[2] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 1, 0);
+  samples[3] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, -1);
+  samples[4] = DirectionalPenetrationDepthShifted(env_heights_, n, tool_ext_heights_, 1, 0, 1);
 }
 
 }  // namespace ht

@@ -38,47 +38,57 @@ bool IsFiniteVec(const glm::dvec3& v) noexcept {
   return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
 }
 
-// One hull posed in a query frame (named W below; Query works in the frame of its first model,
-// where that model's hulls need no transform): a view of its vertices and planes in O, and the
-// pose.
+// One hull posed in a query frame, named W in this file: the world for leaf pairs, and the frame
+// of Query's first model for the traversal, where that model's hulls need no transform. A view of
+// its vertices and planes in O, and the pose.
 struct PosedHull {
   const glm::dvec3* vertices_O = nullptr;
   std::size_t vertex_count = 0;
   const glm::dvec4* planes_O = nullptr;
   std::size_t plane_count = 0;
-  // The pose as rotation matrices (R_OW = R_WOᵀ, made once per query: a matrix–vector product
-  // costs about half a quaternion rotation, and the support functions do two per call), or none
-  // (`identity`: O is the query frame).
-  bool identity = false;
-  const glm::dmat3* R_WO = nullptr;
-  const glm::dmat3* R_OW = nullptr;
-  glm::dvec3 p_WO{0.0};  // the frame's origin in W
+  // How O maps to W: not at all (O is W), by rotation matrices made once per query (a
+  // matrix–vector product costs about half a quaternion rotation, and the support functions do
+  // two per call), or by the world pose's quaternion (QuaternionPath).
+  enum class Map : unsigned char { kIdentity, kMatrix, kQuaternion };
+  Map map = Map::kMatrix;
+  const glm::dmat3* R_WO = nullptr;     // kMatrix
+  const glm::dmat3* R_OW = nullptr;     // kMatrix: R_WOᵀ
+  glm::dquat q_OW{1.0, 0.0, 0.0, 0.0};  // kQuaternion
+  glm::dvec3 p_WO{0.0};                 // the frame's origin in W (0 for kIdentity)
   glm::dvec3 center_W{0.0};
   double radius_m = 0.0;
-  // The pose in the world as a quaternion, and the centre in O, for PenetrationContact
-  // (QuaternionPath), which works in the world frame.
+  // The pose in the world and the centre in O, for QuaternionPath.
   const RigidTransform* X_WO = nullptr;
   glm::dvec3 center_O{0.0};
-  bool quaternion = false;
-  glm::dquat q_OW{1.0, 0.0, 0.0, 0.0};
 
-  // The same hull in W, its support functions and centre computed with the quaternion: leaf
-  // pairs (GJK, and libccd's MPR, whose path follows the last bits of its supports) keep the
-  // arithmetic they had before the traversal moved to A's frame, so the query's contacts are
+  // The same hull in the world, its support functions and centre computed with the quaternion:
+  // leaf pairs (GJK, and libccd's MPR, whose path follows the last bits of its supports) keep
+  // the arithmetic they had before the traversal moved to A's frame, so the query's contacts are
   // the same bit for bit.
   PosedHull QuaternionPath() const noexcept {
     PosedHull h = *this;
-    h.identity = false;
-    h.quaternion = true;
+    h.map = Map::kQuaternion;
     h.q_OW = glm::conjugate(X_WO->rotation);
     h.p_WO = X_WO->translation;
     h.center_W = *X_WO * center_O;
     return h;
   }
 
+  glm::dvec3 DirectionInO(const glm::dvec3& d_W) const noexcept {
+    switch (map) {
+      case Map::kIdentity:
+        return d_W;
+      case Map::kMatrix:
+        return *R_OW * d_W;
+      case Map::kQuaternion:
+        break;
+    }
+    return q_OW * d_W;
+  }
+
   // Support point p_WV of the hull along d_W (any length): its vertex farthest along d_W.
   glm::dvec3 Support(const glm::dvec3& d_W) const noexcept {
-    const glm::dvec3 d_O = identity ? d_W : quaternion ? q_OW * d_W : *R_OW * d_W;
+    const glm::dvec3 d_O = DirectionInO(d_W);
     std::size_t best = 0;
     double best_dot = glm::dot(vertices_O[0], d_O);
     for (std::size_t i = 1; i < vertex_count; ++i) {
@@ -88,12 +98,19 @@ struct PosedHull {
         best = i;
       }
     }
-    if (identity) return vertices_O[best];
-    return quaternion ? *X_WO * vertices_O[best] : *R_WO * vertices_O[best] + p_WO;
+    switch (map) {
+      case Map::kIdentity:
+        return vertices_O[best];
+      case Map::kMatrix:
+        return *R_WO * vertices_O[best] + p_WO;
+      case Map::kQuaternion:
+        break;
+    }
+    return *X_WO * vertices_O[best];
   }
   // Support value h(d_W) = max_v d_W·p_WV.
   double SupportValue(const glm::dvec3& d_W) const noexcept {
-    const glm::dvec3 d_O = identity ? d_W : quaternion ? q_OW * d_W : *R_OW * d_W;
+    const glm::dvec3 d_O = DirectionInO(d_W);
     double best = -kInf, best_odd = -kInf;  // two chains: each max waits for half as many
     std::size_t i = 0;
     for (; i + 1 < vertex_count; i += 2) {
@@ -102,7 +119,7 @@ struct PosedHull {
     }
     if (i < vertex_count) best = std::max(best, glm::dot(vertices_O[i], d_O));
     best = std::max(best, best_odd);
-    return identity ? best : best + glm::dot(d_W, p_WO);
+    return map == Map::kIdentity ? best : best + glm::dot(d_W, p_WO);
   }
 };
 
@@ -713,7 +730,6 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
   const glm::dmat3 R_WA = glm::mat3_cast(X_WA.rotation), R_AW = glm::transpose(R_WA);
   const glm::dmat3 R_AB = R_AW * glm::mat3_cast(X_WB.rotation), R_BA = glm::transpose(R_AB);
   const glm::dvec3 p_AB = R_AW * (X_WB.translation - X_WA.translation);
-  const glm::dmat3 identity_matrix(1.0);
   auto posed = [&](const HapticModel& m, const ModelEntry& e, const RigidTransform& X_WO,
                    const glm::dmat3* R_QO, const glm::dmat3* R_OQ, const glm::dvec3& p_QO,
                    int node) {
@@ -729,11 +745,11 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
       h.planes_O = hull.planes_O.data();
       h.plane_count = hull.planes_O.size();
     }
-    h.identity = R_QO == nullptr;
-    h.R_WO = h.identity ? &identity_matrix : R_QO;
-    h.R_OW = h.identity ? &identity_matrix : R_OQ;
+    h.map = R_QO == nullptr ? PosedHull::Map::kIdentity : PosedHull::Map::kMatrix;
+    h.R_WO = R_QO;
+    h.R_OW = R_OQ;
     h.p_WO = p_QO;
-    h.center_W = h.identity ? glm::dvec3(sph) : *R_QO * glm::dvec3(sph) + p_QO;
+    h.center_W = R_QO == nullptr ? glm::dvec3(sph) : *R_QO * glm::dvec3(sph) + p_QO;
     h.X_WO = &X_WO;
     h.center_O = glm::dvec3(sph);
     h.radius_m = sph.w;

@@ -192,6 +192,10 @@ class TexturePenetrationSolver {
                          const ContactWindow& window) noexcept;
   DepthSample EvaluateTool(const HapticModel& tool, const RigidTransform& X_WT,
                            const ContactWindow& window) noexcept;
+  /// kFast: the tool at X_WT on the window grown by one cell (tool_ext_heights_) and samples
+  /// 0..4 (the base, ±h_x along u and v) read from it; `samples` holds ≥ 5 entries.
+  void RenderGrownBase(const HapticModel& tool, const RigidTransform& X_WT,
+                       const ContactWindow& window, std::span<DepthSample> samples) noexcept;
   /// Largest |p_O| of the tool's vertices (m), computed once per model.
   double ToolRadius(const HapticModel& tool) noexcept;
 
@@ -199,7 +203,8 @@ class TexturePenetrationSolver {
   RotationGradient rotation_gradient_ = RotationGradient::kRenderedSamples;
   std::vector<float> env_heights_;
   std::vector<float> tool_heights_;
-  std::vector<float> tool_ext_heights_;  ///< kFast: the base pose on the window grown by a cell
+  /// The base pose on the window grown by a cell (kFast, and the base-render rotation gradients).
+  std::vector<float> tool_ext_heights_;
   int max_resolution_ = 0;
   bool parallel_renders_ = false;
   /// kFast with parallel renders: one buffer per rotated pose (samples 5..10).

@@ -45,9 +45,11 @@ struct PipelineOptions {
   /// The remote node's default leaves one core to the operator on a loopback machine
   /// (DefaultTextureThreads()).
   int texture_threads = 1;
-  /// How the CPU texture stage finds ∂δ/∂θ: the six rendered rotation samples (the default), or
-  /// the deepest cell's lever r × ∂δ/∂x (one tool render per contact instead of seven). An
-  /// approximation, placed on the speed-vs-error frontier ("rotation_lever").
+  /// How the CPU texture stage finds ∂δ/∂θ (RotationGradient): the six rendered rotation samples
+  /// (the default), or from the base render alone, the deepest cell's lever r × ∂δ/∂x or the
+  /// warped rotation samples (one tool render per contact instead of seven; δ and ∂δ/∂x
+  /// unchanged). Both are approximations, placed on the speed-vs-error frontier
+  /// ("rotation_lever", "rotation_warp"). GPU backends ignore it.
   RotationGradient rotation_gradient = RotationGradient::kRenderedSamples;
 
   /// Throws std::invalid_argument naming a value out of range.
