@@ -417,11 +417,14 @@ TEST_F(TorusLBlock, BudgetsReturnValidSubsetsDeepestFirst) {
     EXPECT_FALSE(st.budget_exhausted);
     ASSERT_EQ(all.size(), full.size());
     for (std::size_t i = 0; i < all.size(); ++i) EXPECT_TRUE(same(all[i], full[i]));
-    // Half and three quarters of the work: valid subsets; count how often they hold the
+    // The work of a traversal with a budget that never runs out (a budget keeps the exact
+    // internal distances, so its count differs from the unlimited one's).
+    const int budget_work = st.node_pairs_tested;
+    // Half and three quarters of that work: valid subsets; count how often they hold the
     // deepest pair.
     for (int q = 0; q < 2; ++q) {
       ProximityQueryOptions part_opt = opt;
-      part_opt.max_node_pair_tests = std::max(1, full_st.node_pairs_tested * (2 + q) / 4);
+      part_opt.max_node_pair_tests = std::max(1, budget_work * (2 + q) / 4);
       auto part = query.Query(A, X_WA, B, RigidTransform{}, part_opt, &st);
       EXPECT_TRUE(st.budget_exhausted);
       for (const auto& c : part) {
@@ -709,6 +712,38 @@ TEST(HullProximityHardCases, BoundingSpheresContainHulls) {
       EXPECT_LE(glm::length(v - glm::dvec3(s)), s.w * (1 + 1e-12));
     }
   }
+}
+
+// Oriented boxes contain their hulls' vertices and have orthonormal axes; on a torus, whose
+// patches are tilted every way, the principal axes give a smaller box than the model's own axes on
+// most nodes.
+TEST(HullProximityHardCases, OrientedBoxesContainHulls) {
+  const HapticModel torus = MakeModel(MakeTorus(22, 12, 0.05, 0.015));
+  HullProximityQuery q;
+  int tighter = 0;
+  for (std::size_t i = 0; i < torus.hull_hierarchy.nodes.size(); ++i) {
+    const HullProximityQuery::OrientedBox b = q.BoundingBox(torus, static_cast<int>(i));
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) {
+        EXPECT_NEAR(glm::dot(b.axes_O[r], b.axes_O[c]), r == c ? 1.0 : 0.0, 1e-12);
+      }
+    }
+    glm::dvec3 lo(1e30), hi(-1e30);
+    for (const auto& v : torus.hull_hierarchy.nodes[i].hull.vertices_O) {
+      for (int c = 0; c < 3; ++c) {
+        EXPECT_LE(std::abs(glm::dot(v - b.center_O, b.axes_O[c])), b.half_extents_m[c]);
+      }
+      lo = glm::min(lo, v);
+      hi = glm::max(hi, v);
+    }
+    const glm::dvec3 aabb = hi - lo;
+    const double box_volume = 8.0 * b.half_extents_m.x * b.half_extents_m.y * b.half_extents_m.z;
+    tighter += box_volume < aabb.x * aabb.y * aabb.z;
+  }
+  // Principal axes beat the model's axes on most of a torus's nodes (tilted patches).
+  EXPECT_GT(tighter, static_cast<int>(torus.hull_hierarchy.nodes.size()) / 2);
+  EXPECT_THROW(q.BoundingBox(torus, static_cast<int>(torus.hull_hierarchy.nodes.size())),
+               std::out_of_range);
 }
 
 }  // namespace

@@ -3,11 +3,12 @@
 // remote node's step): every pair of leaf hulls (convex surface patches) of a tool A and an object
 // B that lie within a tolerance ε of each other, or penetrate, with signed distance, normal and
 // witness points. Method: a best-first simultaneous traversal of both hierarchies (node pairs in
-// order of a lower bound of their signed distance), bounding spheres as the cheap first test,
-// then GJK distance on the hulls (Gilbert, Johnson & Keerthi, IEEE J. Robotics & Automation 1988,
-// with Ericson's closest-point-on-simplex routines, "Real-Time Collision Detection" §5.1, §9.5);
-// for penetrating leaf pairs libccd's MPR (Snethen, "XenoCollide", Game Programming Gems 7) plus
-// the hulls' own face normals as candidate separating directions. As in Otaduy & Lin (SIGGRAPH
+// order of a lower bound of their signed distance), bounding spheres and oriented boxes (the
+// separating-axis test of Gottschalk, Lin & Manocha, "OBBTree", SIGGRAPH 1996) as the cheap first
+// tests, then GJK distance on the hulls (Gilbert, Johnson & Keerthi, IEEE J. Robotics & Automation
+// 1988, with Ericson's closest-point-on-simplex routines, "Real-Time Collision Detection" §5.1,
+// §9.5); for penetrating leaf pairs libccd's MPR (Snethen, "XenoCollide", Game Programming Gems 7)
+// plus the hulls' own face normals as candidate separating directions. As in Otaduy & Lin (SIGGRAPH
 // 2003, IEEE T-RO 22(4) 2006), whose contact query traverses the BVH of convex hulls in the same
 // way.
 
@@ -67,11 +68,13 @@ struct ProximityQueryOptions {
 
 /// What one Query() did.
 struct ProximityQueryStats {
-  /// Node pairs tested with GJK (after passing the bounding-sphere test), leaf pairs included.
+  /// Node pairs tested (after passing the bounding-sphere, oriented-box and centre-line tests),
+  /// leaf pairs included.
   int node_pairs_tested = 0;
   /// Leaf pairs tested with GJK.
   int leaf_pairs_tested = 0;
-  /// Node pairs rejected by the bounding-sphere test alone.
+  /// Node pairs rejected before testing: by their bounding spheres, their oriented boxes or the
+  /// overlap of their hulls along the centre line.
   int sphere_culls = 0;
   /// Pairs returned.
   int pairs_found = 0;
@@ -100,6 +103,15 @@ struct ProximityQueryStats {
 /// ClearCache() after changing models.
 class HullProximityQuery {
  public:
+  /// A box holding a hull: centre (m) and unit axes (columns) in the model's frame O, and the
+  /// half-extents (m) along them; the axes are the principal axes of the hull's vertices
+  /// (Gottschalk, Lin & Manocha 1996, "OBBTree"), the extents their vertices' range, padded for
+  /// rounding.
+  struct OrientedBox {
+    glm::dvec3 center_O{0.0};
+    glm::dmat3 axes_O{1.0};
+    glm::dvec3 half_extents_m{0.0};
+  };
   /// Preallocates room for `max_pairs` (≥ 1) results and a traversal queue. Throws
   /// std::invalid_argument when max_pairs < 1.
   explicit HullProximityQuery(int max_pairs = 4096);
@@ -148,6 +160,10 @@ class HullProximityQuery {
   /// model without hierarchy): centre in O (m) in xyz, radius (m) in w. For tests. Caches the
   /// model (may allocate on first sight).
   glm::dvec4 BoundingSphere(const HapticModel& model, int node);
+  /// The oriented box this object uses for node `node` of `model` (−1: the single hull of a model
+  /// without hierarchy), frame O. For tests. Caches the model (may allocate on first sight).
+  /// Throws std::out_of_range for a node the model does not have.
+  OrientedBox BoundingBox(const HapticModel& model, int node);
   /// The outward texture reach (m) of `node` of `model` (node < 0 or a model without a hierarchy:
   /// the model's OutwardReach()), as the local-reach option uses it. Cached like the spheres.
   double NodeReach(const HapticModel& model, int node);
@@ -165,6 +181,8 @@ class HullProximityQuery {
     /// Per node (one for a single-hull model): the node's outward texture reach (m), see
     /// ProximityQueryOptions::local_reach_margin_m.
     std::vector<double> reach_m;
+    /// Per node (one for a single-hull model): an oriented box holding the node's hull, frame O.
+    std::vector<OrientedBox> boxes_O;
     /// Use stamp for least-recently-used replacement.
     std::uint64_t last_use = 0;
   };
@@ -175,6 +193,10 @@ class HullProximityQuery {
     /// The parent pair's last GJK direction p_A − p_B in A's frame (0: none), GJK's first guess
     /// for this pair when it is internal.
     glm::dvec3 guess_A{0.0};
+    /// The largest gap (m) between the pair's oriented boxes along their separating axes: a lower
+    /// bound of its hulls' distance, negative where the boxes overlap along every axis (and
+    /// internal GJK is then skipped without a budget).
+    double box_gap_m = 0.0;
   };
   struct CoherentPair {
     int node_A;
