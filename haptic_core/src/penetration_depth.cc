@@ -6,6 +6,10 @@
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#include <immintrin.h>
+#define HT_RASTER_AVX2 1
+#endif
 #include <glm/gtc/quaternion.hpp>
 #include <limits>
 #include <optional>
@@ -122,6 +126,61 @@ void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, do
     ndotn[k] = len2 > 1e-12 ? (a * t.nn0 + b * t.nn1 + c * t.nn2) / std::sqrt(len2) : 0.0;
   }
 }
+
+#ifdef HT_RASTER_AVX2
+bool HaveAvx2Raster() noexcept {
+  static const bool have = __builtin_cpu_supports("avx2");
+  return have;
+}
+
+// The covered cells of one row of a triangle, four cells a step: for each cell i in [ia, ib]
+// with centre px = i + 0.5, b0 = r0 + gx0·px, b1 = r1 + gx1·px and b2 = 1 − b0 − b1, the cells
+// where no b is below the edge tolerance (a NaN b passes, as the scalar test's `<` lets it) are
+// appended to b0_out, b1_out and i_out, in increasing i; returns how many. AVX2 without FMA: the
+// compiler may not fuse the multiplies and adds, so each b has the scalar code's bits. The outputs
+// need room for ib − ia + 4 cells.
+[[gnu::target("avx2")]] int CoverRowAvx2(double r0, double gx0, double r1, double gx1, int ia,
+                                         int ib, double* b0_out, double* b1_out,
+                                         int* i_out) noexcept {
+  const __m256d vr0 = _mm256_set1_pd(r0), vgx0 = _mm256_set1_pd(gx0);
+  const __m256d vr1 = _mm256_set1_pd(r1), vgx1 = _mm256_set1_pd(gx1);
+  const __m256d one = _mm256_set1_pd(1.0), half = _mm256_set1_pd(0.5);
+  const __m256d tol = _mm256_set1_pd(kEdgeTolerance);
+  const __m128i steps = _mm_set_epi32(3, 2, 1, 0);
+  int count = 0;
+  for (int i = ia; i <= ib; i += 4) {
+    const __m128i lanes = _mm_add_epi32(_mm_set1_epi32(i), steps);
+    const __m256d px = _mm256_add_pd(_mm256_cvtepi32_pd(lanes), half);  // exact
+    const __m256d b0 = _mm256_add_pd(vr0, _mm256_mul_pd(vgx0, px));
+    const __m256d b1 = _mm256_add_pd(vr1, _mm256_mul_pd(vgx1, px));
+    const __m256d b2 = _mm256_sub_pd(_mm256_sub_pd(one, b0), b1);
+    const __m256d keep = _mm256_and_pd(
+        _mm256_and_pd(_mm256_cmp_pd(b0, tol, _CMP_NLT_UQ), _mm256_cmp_pd(b1, tol, _CMP_NLT_UQ)),
+        _mm256_cmp_pd(b2, tol, _CMP_NLT_UQ));
+    int mask = _mm256_movemask_pd(keep);
+    if (ib - i < 3) mask &= (1 << (ib - i + 1)) - 1;  // lanes past ib
+    if (mask == 0xF) {
+      _mm256_storeu_pd(b0_out + count, b0);
+      _mm256_storeu_pd(b1_out + count, b1);
+      _mm_storeu_si128(reinterpret_cast<__m128i*>(i_out + count), lanes);
+      count += 4;
+      continue;
+    }
+    if (mask == 0) continue;
+    alignas(32) double a0[4], a1[4];
+    _mm256_store_pd(a0, b0);
+    _mm256_store_pd(a1, b1);
+    for (int l = 0; l < 4; ++l) {
+      if ((mask >> l & 1) == 0) continue;
+      b0_out[count] = a0[l];
+      b1_out[count] = a1[l];
+      i_out[count] = i + l;
+      ++count;
+    }
+  }
+  return count;
+}
+#endif
 
 // The first cell of the largest b − a over cells where both are finite: one strictly-greater
 // scan, four cells a step where SSE2 is there. Each lane (and the scalar tail) keeps the first
@@ -361,23 +420,36 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
   const double ou = glm::dot(offset, w.axis_u_W), ov = glm::dot(offset, w.axis_v_W),
                on = glm::dot(offset, w.normal_W);
   const bool have_texture = !model.texture.empty();
-  // A textured triangle's covered cells wait here with their barycentrics; then, together, their
-  // texture coordinates and normal factors (ShadeCells) and their texture samples
-  // (SampleLevelBatch), and they finish as the reference does: value + h·(N·n), the box test,
-  // the envelope. Flushed when full and at the end of each triangle (one mip level and one
-  // shading per triangle).
+  // A textured triangle's covered cells wait here with their barycentrics. At the end of the
+  // triangle they get their texture coordinates and normal factors (ShadeCells, with the
+  // triangle's shading); when the batch is full, the mip level changes or an untextured triangle
+  // comes, every waiting cell gets its texture sample (SampleLevelBatch, one call for many
+  // triangles) and finishes as the reference does: value + h·(N·n), the box test, the envelope,
+  // in the order the cells were drawn.
   constexpr int kBatch = 256;
   alignas(32) float batch_u[kBatch], batch_v[kBatch], batch_h[kBatch];
   alignas(32) double batch_b0[kBatch], batch_b1[kBatch];
   double batch_value[kBatch], batch_ndotn[kBatch];
   float* batch_cell[kBatch];
-  int batch_count = 0, batch_level = 0;
+  alignas(16) int batch_i[kBatch];  // a row's cell columns (CoverRowAvx2)
+  int batch_count = 0, batch_shaded = 0, batch_level = 0;
+#ifdef HT_RASTER_AVX2
+  // Rows four cells a step where the CPU has AVX2 (and the caller did not ask for scalar code).
+  const bool avx2_rows = kernel == SampleKernel::kBest && HaveAvx2Raster();
+#endif
   TriangleShading shading{};
+  const auto shade = [&] {  // the current triangle's waiting cells
+    const int s = batch_shaded;
+    if (batch_count > s) {
+      ShadeCells(shading, batch_b0 + s, batch_b1 + s, batch_value + s, batch_u + s, batch_v + s,
+                 batch_ndotn + s, batch_count - s);
+    }
+    batch_shaded = batch_count;
+  };
   const auto flush = [&] {
+    shade();
     if (batch_count == 0) return;
     const auto count = static_cast<std::size_t>(batch_count);
-    ShadeCells(shading, batch_b0, batch_b1, batch_value, batch_u, batch_v, batch_ndotn,
-               batch_count);
     SampleLevelBatch(model.texture, batch_level, std::span<const float>(batch_u, count),
                      std::span<const float>(batch_v, count), std::span<float>(batch_h, count),
                      kernel);
@@ -388,10 +460,10 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
       const auto fv = static_cast<float>(value);
       if (keep_max ? fv > cell : fv < cell) cell = fv;
     }
-    batch_count = 0;
+    batch_count = batch_shaded = 0;
   };
   for (const int f : triangles) {
-    flush();
+    shade();  // the previous triangle's cells, before its shading is replaced
     const glm::ivec3 tri = model.triangles[f];
     const glm::dvec3& a0 = model.vertices_O[tri[0]];
     const glm::dvec3& a1 = model.vertices_O[tri[1]];
@@ -418,6 +490,7 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
     const bool textured = have_texture && model.textured[f] != 0;
     const int level =
         textured ? model.texture.LevelForFootprint(model.texel_size_m[f], w.cell_size_m()) : 0;
+    if (!textured || level != batch_level) flush();
     batch_level = level;
     const glm::dvec3& n0 = model.corner_normals_O[3 * f];
     const glm::dvec3& n1 = model.corner_normals_O[3 * f + 1];
@@ -490,6 +563,24 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
       const int ia = std::max(i0, lo_t + static_cast<int>(lo_c > lo_t));
       const int ib = std::min(i1, hi_t - static_cast<int>(hi_c < hi_t));
       float* row = &heights[static_cast<size_t>(j) * nt];
+#ifdef HT_RASTER_AVX2
+      if (textured && avx2_rows) {
+        // The row's covered cells straight into the batch, a chunk at a time (flushed early when
+        // a chunk might not fit: cells are independent, so where a batch ends changes nothing).
+        constexpr int kChunk = kBatch / 2;
+        for (int start = ia; start <= ib; start += kChunk) {
+          const int end = std::min(ib, start + kChunk - 1);
+          if (batch_count + (end - start + 4) > kBatch) flush();
+          const int added = CoverRowAvx2(r0, gx0, r1, gx1, start, end, batch_b0 + batch_count,
+                                         batch_b1 + batch_count, batch_i + batch_count);
+          for (int k = batch_count; k < batch_count + added; ++k) {
+            batch_cell[k] = &row[batch_i[k]];
+          }
+          batch_count += added;
+        }
+        continue;
+      }
+#endif
       for (int i = ia; i <= ib; ++i) {
         const double px = i + 0.5;
         const double b0 = r0 + gx0 * px;
