@@ -95,8 +95,9 @@ struct ProximityQueryStats {
 
 /// The proximity query between the convex-hull hierarchies of two posed HapticModels, with all
 /// working memory preallocated: after the first calls on a pair of models (warm-up: the per-model
-/// bounding spheres are computed and cached on first sight of a model, and the traversal queue
-/// grows to its working size), a call allocates nothing. Not thread-safe: one object per thread.
+/// bounding spheres and boxes are computed and cached on first sight of a model, and the traversal
+/// queue grows to its working size), a call allocates nothing. Not thread-safe: one object per
+/// thread.
 ///
 /// Models are cached by address (with their node count and node storage address as a check): a
 /// model must not be changed or destroyed and replaced at the same address while cached; call
