@@ -99,6 +99,17 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     warp.name = "rotation_warp";
     warp.rotation_gradient = RotationGradient::kWarpedBaseRender;
     s.push_back(warp);
+    // The seed's contact count on both cores (issue 15's fig77 target allows both), the product's
+    // rendered rotations: without and with local reach.
+    FrontierSetting seven_two = base;
+    seven_two.name = "contacts7_threads2";
+    seven_two.max_contacts = 7;
+    seven_two.texture_threads = 2;
+    s.push_back(seven_two);
+    FrontierSetting local_seven_two = seven_two;
+    local_seven_two.name = "local_contacts7_threads2";
+    local_seven_two.local_reach = true;
+    s.push_back(local_seven_two);
     // Every speed option at once: the warped rotations, local reach, at most 7 contacts, two
     // threads.
     FrontierSetting fast = warp;
