@@ -624,10 +624,13 @@ void ComputeNodeReach(const HapticModel& model, std::vector<double>& out) {
 // The box of `vertices` (frame O) along their principal axes (the eigenvectors of their
 // covariance; Gottschalk, Lin & Manocha 1996), its extents the vertices' range along each axis,
 // padded by 1e-9 of the box's size (and 1e-12 m) so that rounding in the query's box tests can
-// never leave a vertex outside.
+// never leave a vertex outside. No vertices: a box too big to cull anything.
 HullProximityQuery::OrientedBox FitOrientedBox(const std::vector<glm::dvec3>& vertices) {
   HullProximityQuery::OrientedBox box;
-  if (vertices.empty()) return box;
+  if (vertices.empty()) {  // a box that culls nothing
+    box.half_extents_m = glm::dvec3(1e30);
+    return box;
+  }
   glm::dvec3 mean(0.0);
   for (const glm::dvec3& v : vertices) mean += v;
   mean /= static_cast<double>(vertices.size());

@@ -431,9 +431,9 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
   alignas(32) double batch_b0[kBatch], batch_b1[kBatch];
   double batch_value[kBatch], batch_ndotn[kBatch];
   float* batch_cell[kBatch];
-  alignas(16) int batch_i[kBatch];  // a row's cell columns (CoverRowAvx2)
   int batch_count = 0, batch_shaded = 0, batch_level = 0;
 #ifdef HT_RASTER_AVX2
+  alignas(16) int batch_i[kBatch];  // a row's cell columns (CoverRowAvx2)
   // Rows four cells a step where the CPU has AVX2 (and the caller did not ask for scalar code).
   const bool avx2_rows = kernel == SampleKernel::kBest && HaveAvx2Raster();
 #endif
