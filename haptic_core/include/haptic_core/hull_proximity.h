@@ -4,13 +4,13 @@
 // B that lie within a tolerance ε of each other, or penetrate, with signed distance, normal and
 // witness points. Method: a best-first simultaneous traversal of both hierarchies (node pairs in
 // order of a lower bound of their signed distance), bounding spheres and oriented boxes (the
-// separating-axis test of Gottschalk, Lin & Manocha, "OBBTree", SIGGRAPH 1996) as the cheap first
-// tests, then GJK distance on the hulls (Gilbert, Johnson & Keerthi, IEEE J. Robotics & Automation
-// 1988, with Ericson's closest-point-on-simplex routines, "Real-Time Collision Detection" §5.1,
-// §9.5); for penetrating leaf pairs libccd's MPR (Snethen, "XenoCollide", Game Programming Gems 7)
-// plus the hulls' own face normals as candidate separating directions. As in Otaduy & Lin (SIGGRAPH
-// 2003, IEEE T-RO 22(4) 2006), whose contact query traverses the BVH of convex hulls in the same
-// way.
+// face axes of the separating-axis test of Gottschalk, Lin & Manocha, "OBBTree", SIGGRAPH 1996) as
+// the cheap first tests, then GJK distance on the hulls (Gilbert, Johnson & Keerthi, IEEE J.
+// Robotics & Automation 1988, with Ericson's closest-point-on-simplex routines, "Real-Time
+// Collision Detection" §5.1, §9.5); for penetrating leaf pairs libccd's MPR (Snethen,
+// "XenoCollide", Game Programming Gems 7) plus the hulls' own face normals as candidate separating
+// directions. As in Otaduy & Lin (SIGGRAPH 2003, IEEE T-RO 22(4) 2006), whose contact query
+// traverses the BVH of convex hulls in the same way.
 
 #include <chrono>
 #include <cstdint>
@@ -194,8 +194,8 @@ class HullProximityQuery {
     /// The parent pair's last GJK direction p_A − p_B in A's frame (0: none), GJK's first guess
     /// for this pair when it is internal.
     glm::dvec3 guess_A{0.0};
-    /// The largest gap (m) between the pair's oriented boxes along their separating axes: a lower
-    /// bound of its hulls' distance, negative where the boxes overlap along every axis (and
+    /// The largest gap (m) between the pair's oriented boxes along their face normals: a lower
+    /// bound of its hulls' distance, negative where the boxes overlap along all six (and
     /// internal GJK is then skipped without a budget).
     double box_gap_m = 0.0;
   };
