@@ -559,7 +559,7 @@ TEST(CoarseQueryParity, TwoThreadsReportWhatOneReports) {
           ExpectSamePairs(want, got, SeedModelName(tool_model));
           EXPECT_EQ(s1.node_pairs_tested, s2.node_pairs_tested);
           EXPECT_EQ(s1.leaf_pairs_tested, s2.leaf_pairs_tested);
-          EXPECT_EQ(s1.sphere_culls, s2.sphere_culls);
+          EXPECT_EQ(s1.node_pairs_culled, s2.node_pairs_culled);
           EXPECT_EQ(s1.coherent_hits, s2.coherent_hits);
           EXPECT_EQ(s1.pairs_dropped, s2.pairs_dropped);
           compared += static_cast<int>(want.size());

@@ -189,9 +189,9 @@ std::array<RigidTransform, kGradientSamples> GradientSamplePoses(const RigidTran
 
 namespace {
 
-// The part of AssembleLinearization both rotation gradients share: δ0, the point, the normal,
-// and the central difference of samples 1 + 2i and 2 + 2i (one-sided, and counted, where one of
-// them has no overlap). False when the base sample has no overlap (depth_m = −∞ then).
+// The central difference of samples 1 + 2i and 2 + 2i (one-sided, and counted in `faults`, where
+// one of them has no overlap), and ∂δ/∂x from the first two: what the rendered and the lever
+// linearizations share.
 struct Differences {
   const ContactWindow& w;
   std::span<const DepthSample> samples;
@@ -214,6 +214,9 @@ struct Differences {
   }
 };
 
+// δ0, the point and the normal of a linearization from the base sample; false (depth_m = −∞ or
+// the base's depth, no gradient) when `samples` is shorter than `needed` or the base has no
+// overlap.
 bool StartLinearization(const ContactWindow& w, std::span<const DepthSample> samples,
                         std::size_t needed, double stiffness_n_per_m,
                         ContactLinearization& out) noexcept {

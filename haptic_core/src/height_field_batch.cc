@@ -140,13 +140,18 @@ std::size_t SampleSse2(const HeightFieldLevel& L, bool wrap_u, bool wrap_v, cons
   return k;
 }
 
-bool HaveAvx2() noexcept {
-  static const bool have = __builtin_cpu_supports("avx2");
-  return have;
-}
 #endif
 
 }  // namespace
+
+bool CpuHasAvx2() noexcept {
+#ifdef HT_SAMPLE_X86
+  static const bool have = __builtin_cpu_supports("avx2");
+  return have;
+#else
+  return false;
+#endif
+}
 
 void SampleLevelBatch(const HeightField& field, int level, std::span<const float> u,
                       std::span<const float> v, std::span<float> h, SampleKernel kernel) noexcept {
@@ -161,8 +166,8 @@ void SampleLevelBatch(const HeightField& field, int level, std::span<const float
                     static_cast<long long>(L.width) * L.height <= (1LL << 31) - 1 &&
                     (!wrap_u || IsPowerOfTwo(L.width)) && (!wrap_v || IsPowerOfTwo(L.height));
   if (simd) {
-    done = HaveAvx2() ? SampleAvx2(L, wrap_u, wrap_v, u.data(), v.data(), h.data(), n)
-                      : SampleSse2(L, wrap_u, wrap_v, u.data(), v.data(), h.data(), n);
+    done = CpuHasAvx2() ? SampleAvx2(L, wrap_u, wrap_v, u.data(), v.data(), h.data(), n)
+                        : SampleSse2(L, wrap_u, wrap_v, u.data(), v.data(), h.data(), n);
   }
 #else
   (void)kernel;
@@ -172,7 +177,7 @@ void SampleLevelBatch(const HeightField& field, int level, std::span<const float
 
 const char* SampleKernelName(SampleKernel kernel) noexcept {
 #ifdef HT_SAMPLE_X86
-  if (kernel == SampleKernel::kBest) return HaveAvx2() ? "avx2" : "sse2";
+  if (kernel == SampleKernel::kBest) return CpuHasAvx2() ? "avx2" : "sse2";
 #else
   (void)kernel;
 #endif

@@ -894,7 +894,7 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     const double eps_root = pair_eps(root_A, root_B);
     const double gap = lb > eps_root ? kInf : box_gap(root_A, root_B, eps_root + kBoxSlack_m);
     if (gap > eps_root + kBoxSlack_m) {
-      ++st.sphere_culls;
+      ++st.node_pairs_culled;
     } else {
       push(main_traversal, lb, root_A, root_B, glm::dvec3(0.0), gap);
     }
@@ -1020,12 +1020,12 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
         const double lb = sphere_bound(node_A, node_B);
         const double eps_child = pair_eps(node_A, node_B);
         if (lb > eps_child) {
-          ++t.st.sphere_culls;
+          ++t.st.node_pairs_culled;
           continue;
         }
         const double gap = box_gap(node_A, node_B, eps_child + kBoxSlack_m);
         if (gap > eps_child + kBoxSlack_m) {
-          ++t.st.sphere_culls;
+          ++t.st.node_pairs_culled;
           continue;
         }
         const PosedHull cB = !split_B ? hB : posed(B, *entry_B, X_WB, &R_AB, &R_BA, p_AB, node_B);
@@ -1034,7 +1034,7 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
         const double d_len = glm::length(d);
         if (d_len > 0.0) bound = std::max(bound, -Overlap(cA, cB, d / d_len));
         if (bound > eps_child) {
-          ++t.st.sphere_culls;
+          ++t.st.node_pairs_culled;
           continue;
         }
         push(t, std::max(key, bound), node_A, node_B, g.v, gap);
@@ -1109,7 +1109,7 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
       }
       st.node_pairs_tested += w.st.node_pairs_tested;
       st.leaf_pairs_tested += w.st.leaf_pairs_tested;
-      st.sphere_culls += w.st.sphere_culls;
+      st.node_pairs_culled += w.st.node_pairs_culled;
       st.pairs_dropped += w.st.pairs_dropped;
       st.coherent_hits += w.st.coherent_hits;
       st.numerical_faults += w.st.numerical_faults;

@@ -128,11 +128,6 @@ void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, do
 }
 
 #ifdef HT_RASTER_AVX2
-bool HaveAvx2Raster() noexcept {
-  static const bool have = __builtin_cpu_supports("avx2");
-  return have;
-}
-
 // The covered cells of one row of a triangle, four cells a step: for each cell i in [ia, ib]
 // with centre px = i + 0.5, b0 = r0 + gx0·px, b1 = r1 + gx1·px and b2 = 1 − b0 − b1, the cells
 // where no b is below the edge tolerance (a NaN b passes, as the scalar test's `<` lets it) are
@@ -435,7 +430,7 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
 #ifdef HT_RASTER_AVX2
   alignas(16) int batch_i[kBatch];  // a row's cell columns (CoverRowAvx2)
   // Rows four cells a step where the CPU has AVX2 (and the caller did not ask for scalar code).
-  const bool avx2_rows = kernel == SampleKernel::kBest && HaveAvx2Raster();
+  const bool avx2_rows = kernel == SampleKernel::kBest && CpuHasAvx2();
 #endif
   TriangleShading shading{};
   const auto shade = [&] {  // the current triangle's waiting cells

@@ -25,6 +25,10 @@ void SampleLevelBatch(const HeightField& field, int level, std::span<const float
                       std::span<const float> v, std::span<float> h,
                       SampleKernel kernel = SampleKernel::kBest) noexcept;
 
+/// Whether this CPU runs AVX2 (asked once; false off x86-64 or without GCC/Clang): what kBest
+/// picks here, and the texture stage's raster rows (RenderPatchHeightsFast) too.
+bool CpuHasAvx2() noexcept;
+
 /// What `kernel` runs on this CPU: "avx2", "sse2" or "scalar" (for benchmark reports).
 const char* SampleKernelName(SampleKernel kernel = SampleKernel::kBest) noexcept;
 

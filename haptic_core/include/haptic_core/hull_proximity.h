@@ -75,7 +75,7 @@ struct ProximityQueryStats {
   int leaf_pairs_tested = 0;
   /// Node pairs rejected before testing: by their bounding spheres, their oriented boxes or the
   /// overlap of their hulls along the centre line.
-  int sphere_culls = 0;
+  int node_pairs_culled = 0;
   /// Pairs returned.
   int pairs_found = 0;
   /// Pairs within ε that did not fit in max_pairs (the shallowest ones).
