@@ -128,20 +128,67 @@ void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, do
 }
 
 #ifdef HT_RASTER_AVX2
+// ShadeCells four cells a step (AVX2, the same operations in the same order and no FMA, so the
+// bits of the scalar code); the last n mod 4 cells go to ShadeCells.
+[[gnu::target("avx2")]] void ShadeCellsAvx2(const TriangleShading& t, const double* b0,
+                                            const double* b1, double* value, float* u, float* v,
+                                            double* ndotn, int n) noexcept {
+  int k = 0;
+  const __m256d uv0x = _mm256_set1_pd(t.uv0x), uv1x = _mm256_set1_pd(t.uv1x);
+  const __m256d uv2x = _mm256_set1_pd(t.uv2x), uv0y = _mm256_set1_pd(t.uv0y);
+  const __m256d uv1y = _mm256_set1_pd(t.uv1y), uv2y = _mm256_set1_pd(t.uv2y);
+  const __m256d nn0 = _mm256_set1_pd(t.nn0), nn1 = _mm256_set1_pd(t.nn1);
+  const __m256d nn2 = _mm256_set1_pd(t.nn2), c01 = _mm256_set1_pd(t.cos01);
+  const __m256d c02 = _mm256_set1_pd(t.cos02), c12 = _mm256_set1_pd(t.cos12);
+  const __m256d d0 = _mm256_set1_pd(t.d0), d1 = _mm256_set1_pd(t.d1), d2 = _mm256_set1_pd(t.d2);
+  const __m256d one = _mm256_set1_pd(1.0), two = _mm256_set1_pd(2.0);
+  const __m256d tiny = _mm256_set1_pd(1e-12);
+  for (; k + 4 <= n; k += 4) {
+    const __m256d a = _mm256_loadu_pd(b0 + k), b = _mm256_loadu_pd(b1 + k);
+    const __m256d c = _mm256_sub_pd(_mm256_sub_pd(one, a), b);
+    _mm256_storeu_pd(value + k,
+                     _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(a, d0), _mm256_mul_pd(b, d1)),
+                                   _mm256_mul_pd(c, d2)));
+    const __m256d uu = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(a, uv0x), _mm256_mul_pd(b, uv1x)),
+                                     _mm256_mul_pd(c, uv2x));
+    const __m256d vv = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(a, uv0y), _mm256_mul_pd(b, uv1y)),
+                                     _mm256_mul_pd(c, uv2y));
+    _mm_storeu_ps(u + k, _mm256_cvtpd_ps(uu));
+    _mm_storeu_ps(v + k, _mm256_cvtpd_ps(vv));
+    if (t.flat) {
+      _mm256_storeu_pd(ndotn + k, nn0);
+      continue;
+    }
+    const __m256d squares =
+        _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(a, a), _mm256_mul_pd(b, b)), _mm256_mul_pd(c, c));
+    const __m256d cross = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(_mm256_mul_pd(a, b), c01),
+                                                      _mm256_mul_pd(_mm256_mul_pd(a, c), c02)),
+                                        _mm256_mul_pd(_mm256_mul_pd(b, c), c12));
+    const __m256d len2 = _mm256_add_pd(squares, _mm256_mul_pd(two, cross));
+    const __m256d dot = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(a, nn0), _mm256_mul_pd(b, nn1)),
+                                      _mm256_mul_pd(c, nn2));
+    const __m256d quotient = _mm256_div_pd(dot, _mm256_sqrt_pd(len2));
+    _mm256_storeu_pd(ndotn + k, _mm256_and_pd(quotient, _mm256_cmp_pd(len2, tiny, _CMP_GT_OQ)));
+  }
+  if (k < n) ShadeCells(t, b0 + k, b1 + k, value + k, u + k, v + k, ndotn + k, n - k);
+}
+
 // The covered cells of one row of a triangle, four cells a step: for each cell i in [ia, ib]
 // with centre px = i + 0.5, b0 = r0 + gx0·px, b1 = r1 + gx1·px and b2 = 1 − b0 − b1, the cells
 // where no b is below the edge tolerance (a NaN b passes, as the scalar test's `<` lets it) are
-// appended to b0_out, b1_out and i_out, in increasing i; returns how many. AVX2 without FMA: the
-// compiler may not fuse the multiplies and adds, so each b has the scalar code's bits. The outputs
-// need room for ib − ia + 4 cells.
+// appended to b0_out, b1_out and, as row_start + i (the cell's index in the render buffer),
+// cell_out, in increasing i; returns how many. AVX2 without FMA: the compiler may not fuse the
+// multiplies and adds, so each b has the scalar code's bits. The outputs need room for ib − ia + 4
+// cells.
 [[gnu::target("avx2")]] int CoverRowAvx2(double r0, double gx0, double r1, double gx1, int ia,
-                                         int ib, double* b0_out, double* b1_out,
-                                         int* i_out) noexcept {
+                                         int ib, int row_start, double* b0_out, double* b1_out,
+                                         int* cell_out) noexcept {
   const __m256d vr0 = _mm256_set1_pd(r0), vgx0 = _mm256_set1_pd(gx0);
   const __m256d vr1 = _mm256_set1_pd(r1), vgx1 = _mm256_set1_pd(gx1);
   const __m256d one = _mm256_set1_pd(1.0), half = _mm256_set1_pd(0.5);
   const __m256d tol = _mm256_set1_pd(kEdgeTolerance);
   const __m128i steps = _mm_set_epi32(3, 2, 1, 0);
+  const __m128i start = _mm_set1_epi32(row_start);
   int count = 0;
   for (int i = ia; i <= ib; i += 4) {
     const __m128i lanes = _mm_add_epi32(_mm_set1_epi32(i), steps);
@@ -157,7 +204,7 @@ void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, do
     if (mask == 0xF) {
       _mm256_storeu_pd(b0_out + count, b0);
       _mm256_storeu_pd(b1_out + count, b1);
-      _mm_storeu_si128(reinterpret_cast<__m128i*>(i_out + count), lanes);
+      _mm_storeu_si128(reinterpret_cast<__m128i*>(cell_out + count), _mm_add_epi32(lanes, start));
       count += 4;
       continue;
     }
@@ -169,7 +216,7 @@ void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, do
       if ((mask >> l & 1) == 0) continue;
       b0_out[count] = a0[l];
       b1_out[count] = a1[l];
-      i_out[count] = i + l;
+      cell_out[count] = row_start + i + l;
       ++count;
     }
   }
@@ -425,10 +472,9 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
   alignas(32) float batch_u[kBatch], batch_v[kBatch], batch_h[kBatch];
   alignas(32) double batch_b0[kBatch], batch_b1[kBatch];
   double batch_value[kBatch], batch_ndotn[kBatch];
-  float* batch_cell[kBatch];
+  alignas(16) int batch_cell[kBatch];  // index into heights (row · nt + column)
   int batch_count = 0, batch_shaded = 0, batch_level = 0;
 #ifdef HT_RASTER_AVX2
-  alignas(16) int batch_i[kBatch];  // a row's cell columns (CoverRowAvx2)
   // Rows four cells a step where the CPU has AVX2 (and the caller did not ask for scalar code).
   const bool avx2_rows = kernel == SampleKernel::kBest && CpuHasAvx2();
 #endif
@@ -436,6 +482,14 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
   const auto shade = [&] {  // the current triangle's waiting cells
     const int s = batch_shaded;
     if (batch_count > s) {
+#ifdef HT_RASTER_AVX2
+      if (avx2_rows) {
+        ShadeCellsAvx2(shading, batch_b0 + s, batch_b1 + s, batch_value + s, batch_u + s,
+                       batch_v + s, batch_ndotn + s, batch_count - s);
+        batch_shaded = batch_count;
+        return;
+      }
+#endif
       ShadeCells(shading, batch_b0 + s, batch_b1 + s, batch_value + s, batch_u + s, batch_v + s,
                  batch_ndotn + s, batch_count - s);
     }
@@ -451,7 +505,7 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
     for (std::size_t k = 0; k < count; ++k) {
       const double value = batch_value[k] + static_cast<double>(batch_h[k]) * batch_ndotn[k];
       if (!(std::abs(value) <= range)) continue;  // outside the window's box along n
-      float& cell = *batch_cell[k];
+      float& cell = heights[static_cast<std::size_t>(batch_cell[k])];
       const auto fv = static_cast<float>(value);
       if (keep_max ? fv > cell : fv < cell) cell = fv;
     }
@@ -566,12 +620,8 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
         for (int start = ia; start <= ib; start += kChunk) {
           const int end = std::min(ib, start + kChunk - 1);
           if (batch_count + (end - start + 4) > kBatch) flush();
-          const int added = CoverRowAvx2(r0, gx0, r1, gx1, start, end, batch_b0 + batch_count,
-                                         batch_b1 + batch_count, batch_i + batch_count);
-          for (int k = batch_count; k < batch_count + added; ++k) {
-            batch_cell[k] = &row[batch_i[k]];
-          }
-          batch_count += added;
+          batch_count += CoverRowAvx2(r0, gx0, r1, gx1, start, end, j * nt, batch_b0 + batch_count,
+                                      batch_b1 + batch_count, batch_cell + batch_count);
         }
         continue;
       }
@@ -585,7 +635,7 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
         if (textured) {  // b·d and h along the unit interpolated normal, in flush()
           batch_b0[batch_count] = b0;
           batch_b1[batch_count] = b1;
-          batch_cell[batch_count] = &row[i];
+          batch_cell[batch_count] = j * nt + i;
           if (++batch_count == kBatch) flush();
           continue;
         }
