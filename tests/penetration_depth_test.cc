@@ -306,7 +306,7 @@ TEST(PenetrationDepth, LaneScanDepthIsTheOnePassDefinitionWithTiesInfinitiesAndS
   const float inf = std::numeric_limits<float>::infinity();
   int found = 0;
   for (int trial = 0; trial < 400; ++trial) {
-    const int n = 2 + trial % 13, m = 1;
+    const int n = 2 + trial % 29, m = 1;  // rows of 2–30 cells: the 4- and 8-lane steps and tails
     const int nt = n + 2 * m;
     std::vector<float> b(static_cast<std::size_t>(n) * n), a_ext(static_cast<std::size_t>(nt) * nt);
     // Few distinct values (ties), ±0, empty cells, a NaN now and then, one overflow.

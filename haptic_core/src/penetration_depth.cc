@@ -224,33 +224,85 @@ void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, do
 }
 #endif
 
+#ifdef HT_RASTER_AVX2
+// FirstLargestDifference's lanes, eight cells a step (AVX2): lane l keeps the first cell of the
+// largest finite b − a among cells ≡ l (mod 8) of this call; returns how many cells it took (a
+// multiple of 8), the rest being the caller's.
+[[gnu::target("avx2")]] std::size_t LargestDifferenceLanesAvx2(const float* b, const float* a,
+                                                               std::size_t n, int first_cell,
+                                                               float* lane_values,
+                                                               int* lane_cells) noexcept {
+  if (n < 8) return 0;
+  const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
+  const __m256 big = _mm256_set1_ps(std::numeric_limits<float>::max());
+  __m256 values = _mm256_loadu_ps(lane_values);
+  __m256i cells = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(lane_cells));
+  __m256i cell =
+      _mm256_add_epi32(_mm256_set1_epi32(first_cell), _mm256_set_epi32(7, 6, 5, 4, 3, 2, 1, 0));
+  const __m256i eight = _mm256_set1_epi32(8);
+  std::size_t k = 0;
+  for (; k + 8 <= n; k += 8) {
+    const __m256 bv = _mm256_loadu_ps(b + k), av = _mm256_loadu_ps(a + k);
+    const __m256 finite =
+        _mm256_and_ps(_mm256_cmp_ps(_mm256_and_ps(bv, abs_mask), big, _CMP_LE_OQ),
+                      _mm256_cmp_ps(_mm256_and_ps(av, abs_mask), big, _CMP_LE_OQ));
+    const __m256 diff = _mm256_sub_ps(bv, av);
+    const __m256 take = _mm256_and_ps(finite, _mm256_cmp_ps(diff, values, _CMP_GT_OQ));
+    values = _mm256_blendv_ps(values, diff, take);
+    cells = _mm256_castps_si256(
+        _mm256_blendv_ps(_mm256_castsi256_ps(cells), _mm256_castsi256_ps(cell), take));
+    cell = _mm256_add_epi32(cell, eight);
+  }
+  _mm256_storeu_ps(lane_values, values);
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(lane_cells), cells);
+  return k;
+}
+#endif
+
 // The first cell of the largest b − a over cells where both are finite: one strictly-greater
-// scan, four cells a step where SSE2 is there. Each lane (and the scalar tail) keeps the first
-// cell of its own largest difference; Result() takes the largest of them and, among equal ones
-// (a −0 equals a +0), the lowest cell, which is the one scan's cell, with its difference's bits.
-// Rows may be added in any number (Add), in increasing cell order.
+// scan, eight cells a step with AVX2 or four with SSE2. Each lane (and the scalar tail) keeps the
+// first cell of its own largest difference; Result() takes the largest of them and, among equal
+// ones (a −0 equals a +0), the lowest cell, which is the one scan's cell, with its difference's
+// bits. Rows may be added in any number (Add), in increasing cell order.
 class FirstLargestDifference {
  public:
+  FirstLargestDifference() noexcept {
+    for (int l = 0; l < 8; ++l) {
+      lane_values_[l] = -std::numeric_limits<float>::infinity();
+      lane_cells_[l] = -1;
+    }
+  }
+
   void Add(const float* b, const float* a, std::size_t n, int first_cell) noexcept {
     std::size_t k = 0;
-#if defined(__SSE2__)
-    const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
-    const __m128 big = _mm_set1_ps(std::numeric_limits<float>::max());
-    __m128i cell = _mm_add_epi32(_mm_set1_epi32(first_cell), _mm_set_epi32(3, 2, 1, 0));
-    const __m128i four = _mm_set1_epi32(4);
-    for (; k + 4 <= n; k += 4) {
-      const __m128 bv = _mm_loadu_ps(b + k), av = _mm_loadu_ps(a + k);
-      const __m128 finite = _mm_and_ps(_mm_cmple_ps(_mm_and_ps(bv, abs_mask), big),
-                                       _mm_cmple_ps(_mm_and_ps(av, abs_mask), big));
-      const __m128 diff = _mm_sub_ps(bv, av);
-      const __m128 take = _mm_and_ps(finite, _mm_cmpgt_ps(diff, lanes_));
-      lanes_ = _mm_or_ps(_mm_and_ps(take, diff), _mm_andnot_ps(take, lanes_));
-      const __m128i take_i = _mm_castps_si128(take);
-      lane_cells_ =
-          _mm_or_si128(_mm_and_si128(take_i, cell), _mm_andnot_si128(take_i, lane_cells_));
-      cell = _mm_add_epi32(cell, four);
-    }
+#ifdef HT_RASTER_AVX2
+    if (avx2_) {
+      k = LargestDifferenceLanesAvx2(b, a, n, first_cell, lane_values_, lane_cells_);
+    } else
 #endif
+    {
+#if defined(__SSE2__)
+      const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+      const __m128 big = _mm_set1_ps(std::numeric_limits<float>::max());
+      __m128 values = _mm_loadu_ps(lane_values_);
+      __m128i cells = _mm_loadu_si128(reinterpret_cast<const __m128i*>(lane_cells_));
+      __m128i cell = _mm_add_epi32(_mm_set1_epi32(first_cell), _mm_set_epi32(3, 2, 1, 0));
+      const __m128i four = _mm_set1_epi32(4);
+      for (; k + 4 <= n; k += 4) {
+        const __m128 bv = _mm_loadu_ps(b + k), av = _mm_loadu_ps(a + k);
+        const __m128 finite = _mm_and_ps(_mm_cmple_ps(_mm_and_ps(bv, abs_mask), big),
+                                         _mm_cmple_ps(_mm_and_ps(av, abs_mask), big));
+        const __m128 diff = _mm_sub_ps(bv, av);
+        const __m128 take = _mm_and_ps(finite, _mm_cmpgt_ps(diff, values));
+        values = _mm_or_ps(_mm_and_ps(take, diff), _mm_andnot_ps(take, values));
+        const __m128i take_i = _mm_castps_si128(take);
+        cells = _mm_or_si128(_mm_and_si128(take_i, cell), _mm_andnot_si128(take_i, cells));
+        cell = _mm_add_epi32(cell, four);
+      }
+      _mm_storeu_ps(lane_values_, values);
+      _mm_storeu_si128(reinterpret_cast<__m128i*>(lane_cells_), cells);
+#endif
+    }
     for (; k < n; ++k) {
       if (!(std::isfinite(b[k]) && std::isfinite(a[k]))) continue;
       const float diff = b[k] - a[k];
@@ -264,31 +316,28 @@ class FirstLargestDifference {
   DepthSample Result() const noexcept {
     float value = tail_value_;
     int cell = tail_cell_;
-    const auto consider = [&](float v, int c) {
-      if (c < 0) return;
+    for (int l = 0; l < 8; ++l) {
+      const float v = lane_values_[l];
+      const int c = lane_cells_[l];
+      if (c < 0) continue;
       if (cell < 0 || v > value || (v == value && c < cell)) {
         value = v;
         cell = c;
       }
-    };
-#if defined(__SSE2__)
-    alignas(16) float v[4];
-    alignas(16) int c[4];
-    _mm_store_ps(v, lanes_);
-    _mm_store_si128(reinterpret_cast<__m128i*>(c), lane_cells_);
-    for (int l = 0; l < 4; ++l) consider(v[l], c[l]);
-#endif
+    }
     if (cell < 0) return {-std::numeric_limits<double>::infinity(), -1};
     return {static_cast<double>(value), cell};
   }
 
  private:
-#if defined(__SSE2__)
-  __m128 lanes_ = _mm_set1_ps(-std::numeric_limits<float>::infinity());
-  __m128i lane_cells_ = _mm_set1_epi32(-1);
-#endif
+  // Lanes 0–3 for SSE2, 0–7 for AVX2 (a scan uses one of the two).
+  alignas(32) float lane_values_[8];
+  alignas(32) int lane_cells_[8];
   float tail_value_ = -std::numeric_limits<float>::infinity();
   int tail_cell_ = -1;
+#ifdef HT_RASTER_AVX2
+  bool avx2_ = CpuHasAvx2();
+#endif
 };
 
 }  // namespace
