@@ -173,6 +173,36 @@ void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, do
   if (k < n) ShadeCells(t, b0 + k, b1 + k, value + k, u + k, v + k, ndotn + k, n - k);
 }
 
+// What the envelope takes from n textured cells, four a step: fv[k] = float(value[k] + h[k]·
+// ndotn[k]) (double arithmetic without FMA, the scalar code's bits), or the envelope's neutral
+// value (−∞ when keep_max, else +∞) where that height is outside the window's box (|·| > range,
+// or NaN), so that it replaces no cell.
+[[gnu::target("avx2")]] void FinishCellsAvx2(const double* value, const float* h,
+                                             const double* ndotn, double range, bool keep_max,
+                                             float* fv, int n) noexcept {
+  const __m256d abs_mask = _mm256_castsi256_pd(_mm256_set1_epi64x(0x7fffffffffffffff));
+  const __m256d vrange = _mm256_set1_pd(range);
+  const float neutral_value =
+      keep_max ? -std::numeric_limits<float>::infinity() : std::numeric_limits<float>::infinity();
+  const __m128 neutral = _mm_set1_ps(neutral_value);
+  const __m256i narrow = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
+  int k = 0;
+  for (; k + 4 <= n; k += 4) {
+    const __m256d x = _mm256_add_pd(
+        _mm256_loadu_pd(value + k),
+        _mm256_mul_pd(_mm256_cvtps_pd(_mm_loadu_ps(h + k)), _mm256_loadu_pd(ndotn + k)));
+    const __m256d inside = _mm256_cmp_pd(_mm256_and_pd(x, abs_mask), vrange, _CMP_LE_OQ);
+    // The four 64-bit lane masks narrowed to 32-bit ones, in order.
+    const __m128 keep = _mm_castsi128_ps(
+        _mm256_castsi256_si128(_mm256_permutevar8x32_epi32(_mm256_castpd_si256(inside), narrow)));
+    _mm_storeu_ps(fv + k, _mm_blendv_ps(neutral, _mm256_cvtpd_ps(x), keep));
+  }
+  for (; k < n; ++k) {
+    const double x = value[k] + static_cast<double>(h[k]) * ndotn[k];
+    fv[k] = std::abs(x) <= range ? static_cast<float>(x) : neutral_value;
+  }
+}
+
 // The covered cells of one row of a triangle, four cells a step: for each cell i in [ia, ib]
 // with centre px = i + 0.5, b0 = r0 + gx0·px, b1 = r1 + gx1·px and b2 = 1 − b0 − b1, the cells
 // where no b is below the edge tolerance (a NaN b passes, as the scalar test's `<` lets it) are
@@ -522,6 +552,9 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
   alignas(32) double batch_b0[kBatch], batch_b1[kBatch];
   double batch_value[kBatch], batch_ndotn[kBatch];
   alignas(16) int batch_cell[kBatch];  // index into heights (row · nt + column)
+#ifdef HT_RASTER_AVX2
+  alignas(32) float batch_fv[kBatch];  // the cells' heights, as the envelope takes them
+#endif
   int batch_count = 0, batch_shaded = 0, batch_level = 0;
 #ifdef HT_RASTER_AVX2
   // Rows four cells a step where the CPU has AVX2 (and the caller did not ask for scalar code).
@@ -551,6 +584,27 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
     SampleLevelBatch(model.texture, batch_level, std::span<const float>(batch_u, count),
                      std::span<const float>(batch_v, count), std::span<float>(batch_h, count),
                      kernel);
+#ifdef HT_RASTER_AVX2
+    if (avx2_rows) {
+      // The heights four cells a step, a cell outside the box made the envelope's neutral value
+      // (which never replaces a cell); then the envelope, cell by cell in the order drawn.
+      FinishCellsAvx2(batch_value, batch_h, batch_ndotn, range, keep_max, batch_fv, batch_count);
+      float* const cells = heights.data();
+      if (keep_max) {
+        for (std::size_t k = 0; k < count; ++k) {
+          float& cell = cells[batch_cell[k]];
+          if (batch_fv[k] > cell) cell = batch_fv[k];
+        }
+      } else {
+        for (std::size_t k = 0; k < count; ++k) {
+          float& cell = cells[batch_cell[k]];
+          if (batch_fv[k] < cell) cell = batch_fv[k];
+        }
+      }
+      batch_count = batch_shaded = 0;
+      return;
+    }
+#endif
     for (std::size_t k = 0; k < count; ++k) {
       const double value = batch_value[k] + static_cast<double>(batch_h[k]) * batch_ndotn[k];
       if (!(std::abs(value) <= range)) continue;  // outside the window's box along n
