@@ -252,6 +252,76 @@ void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, do
   }
   return count;
 }
+
+// A triangle's row spans, four rows a step: for rows j0 + k (k < count), the parts r0[k] and
+// r1[k] of b0 and b1 and the columns [ia[k], ib[k]] (ib < ia: no cell) that the scalar loop of
+// RenderPatchHeightsFast computes, with its bits: the same operations in the same order, no FMA,
+// and std::max(lo, x) / std::min(hi, x) as max(x, lo) / min(x, hi), which keep lo and hi where x
+// is NaN as they do. (k0, gy0) and (k1, gy1) give r0 and r1 = k + gy·(j + 0.5); gx0, gx1 and
+// g2 = −gx0 − gx1 are the edges' x slopes and inv_* their reciprocals (0 for a zero slope).
+// The outputs need room for count rounded up to a multiple of 4.
+[[gnu::target("avx2")]] void RowSpansAvx2(double k0, double gy0, double k1, double gy1,
+                                          const double g[3], const double inv_g[3], int i0, int i1,
+                                          int j0, int count, double* r0_out, double* r1_out,
+                                          int* ia_out, int* ib_out) noexcept {
+  const __m256d vk0 = _mm256_set1_pd(k0), vgy0 = _mm256_set1_pd(gy0);
+  const __m256d vk1 = _mm256_set1_pd(k1), vgy1 = _mm256_set1_pd(gy1);
+  const __m256d one = _mm256_set1_pd(1.0), half = _mm256_set1_pd(0.5);
+  const __m256d two = _mm256_set1_pd(2.0), tol = _mm256_set1_pd(kEdgeTolerance);
+  const __m256d slack0 = _mm256_set1_pd(1e-7), slack1 = _mm256_set1_pd(1e-12);
+  const __m256d abs_mask = _mm256_castsi256_pd(_mm256_set1_epi64x(0x7fffffffffffffff));
+  const __m256d lo0 = _mm256_set1_pd(static_cast<double>(i0));
+  const __m256d hi0 = _mm256_set1_pd(static_cast<double>(i1) + 1.0);
+  const __m128i vi0 = _mm_set1_epi32(i0), vi1 = _mm_set1_epi32(i1);
+  const __m128i steps = _mm_set_epi32(3, 2, 1, 0);
+  for (int k = 0; k < count; k += 4) {
+    const __m256d py = _mm256_add_pd(
+        _mm256_cvtepi32_pd(_mm_add_epi32(_mm_set1_epi32(j0 + k), steps)), half);  // exact
+    __m256d r[3];
+    r[0] = _mm256_add_pd(vk0, _mm256_mul_pd(vgy0, py));
+    r[1] = _mm256_add_pd(vk1, _mm256_mul_pd(vgy1, py));
+    r[2] = _mm256_sub_pd(_mm256_sub_pd(one, r[0]), r[1]);
+    __m256d lo = lo0, hi = hi0, empty = _mm256_setzero_pd();
+    for (int e = 0; e < 3; ++e) {
+      if (g[e] == 0.0) {
+        empty = _mm256_or_pd(empty, _mm256_cmp_pd(r[e], tol, _CMP_LT_OQ));
+        continue;
+      }
+      const __m256d ig = _mm256_set1_pd(inv_g[e]);
+      const __m256d bound = _mm256_mul_pd(_mm256_sub_pd(tol, r[e]), ig);
+      const __m256d slack = _mm256_add_pd(
+          slack0, _mm256_mul_pd(slack1, _mm256_and_pd(_mm256_mul_pd(r[e], ig), abs_mask)));
+      if (g[e] > 0.0) {
+        lo = _mm256_max_pd(_mm256_sub_pd(bound, slack), lo);
+      } else {
+        hi = _mm256_min_pd(_mm256_add_pd(bound, slack), hi);
+      }
+    }
+    // Rows to skip: empty, or !(lo <= hi + 2).
+    const __m256d skip =
+        _mm256_or_pd(empty, _mm256_cmp_pd(lo, _mm256_add_pd(hi, two), _CMP_NLE_UQ));
+    const __m256d lo_c = _mm256_sub_pd(lo, half), hi_c = _mm256_sub_pd(hi, half);
+    const __m128i lo_t = _mm256_cvttpd_epi32(lo_c), hi_t = _mm256_cvttpd_epi32(hi_c);
+    // + (lo_c > lo_t) and − (hi_c < hi_t): a true compare is −1 as an integer.
+    const __m128i lo_up = _mm256_castsi256_si128(_mm256_permutevar8x32_epi32(
+        _mm256_castpd_si256(_mm256_cmp_pd(lo_c, _mm256_cvtepi32_pd(lo_t), _CMP_GT_OQ)),
+        _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7)));
+    const __m128i hi_down = _mm256_castsi256_si128(_mm256_permutevar8x32_epi32(
+        _mm256_castpd_si256(_mm256_cmp_pd(hi_c, _mm256_cvtepi32_pd(hi_t), _CMP_LT_OQ)),
+        _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7)));
+    __m128i ia = _mm_max_epi32(vi0, _mm_sub_epi32(lo_t, lo_up));
+    __m128i ib = _mm_min_epi32(vi1, _mm_add_epi32(hi_t, hi_down));
+    const __m128i skip_i = _mm256_castsi256_si128(_mm256_permutevar8x32_epi32(
+        _mm256_castpd_si256(skip), _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7)));
+    // A skipped row: ia = 1, ib = 0 (no cell).
+    ia = _mm_blendv_epi8(ia, _mm_set1_epi32(1), skip_i);
+    ib = _mm_blendv_epi8(ib, _mm_setzero_si128(), skip_i);
+    _mm256_storeu_pd(r0_out + k, r[0]);
+    _mm256_storeu_pd(r1_out + k, r[1]);
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(ia_out + k), ia);
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(ib_out + k), ib);
+  }
+}
 #endif
 
 #ifdef HT_RASTER_AVX2
@@ -687,6 +757,34 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
     const double g2 = -gx0 - gx1;
     const double inv_gx0 = gx0 != 0.0 ? 1.0 / gx0 : 0.0, inv_gx1 = gx1 != 0.0 ? 1.0 / gx1 : 0.0,
                  inv_g2 = g2 != 0.0 ? 1.0 / g2 : 0.0;
+#ifdef HT_RASTER_AVX2
+    if (textured && avx2_rows) {
+      // The spans of up to kRows rows at a time (RowSpansAvx2, the bits of the loop below), then
+      // each row's covered cells straight into the batch, a chunk at a time (flushed early when a
+      // chunk might not fit: cells are independent, so where a batch ends changes nothing).
+      constexpr int kRows = 64;
+      alignas(32) double span_r0[kRows], span_r1[kRows];
+      alignas(16) int span_ia[kRows], span_ib[kRows];
+      const double g[3] = {gx0, gx1, g2}, inv_g[3] = {inv_gx0, inv_gx1, inv_g2};
+      for (int jb = pc.j0; jb <= pc.j1; jb += kRows) {
+        const int rows = std::min(kRows, pc.j1 - jb + 1);
+        RowSpansAvx2(k0, gy0, k1, gy1, g, inv_g, i0, i1, jb, rows, span_r0, span_r1, span_ia,
+                     span_ib);
+        for (int k = 0; k < rows; ++k) {
+          const int ia = span_ia[k], ib = span_ib[k], row_start = (jb + k) * nt;
+          constexpr int kChunk = kBatch / 2;
+          for (int start = ia; start <= ib; start += kChunk) {
+            const int end = std::min(ib, start + kChunk - 1);
+            if (batch_count + (end - start + 4) > kBatch) flush();
+            batch_count += CoverRowAvx2(span_r0[k], gx0, span_r1[k], gx1, start, end, row_start,
+                                        batch_b0 + batch_count, batch_b1 + batch_count,
+                                        batch_cell + batch_count);
+          }
+        }
+      }
+      continue;
+    }
+#endif
     for (int j = pc.j0; j <= pc.j1; ++j) {
       const double py = j + 0.5;
       const double r0 = k0 + gy0 * py, r1 = k1 + gy1 * py, r2 = 1.0 - r0 - r1;
@@ -715,20 +813,6 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
       const int ia = std::max(i0, lo_t + static_cast<int>(lo_c > lo_t));
       const int ib = std::min(i1, hi_t - static_cast<int>(hi_c < hi_t));
       float* row = &heights[static_cast<size_t>(j) * nt];
-#ifdef HT_RASTER_AVX2
-      if (textured && avx2_rows) {
-        // The row's covered cells straight into the batch, a chunk at a time (flushed early when
-        // a chunk might not fit: cells are independent, so where a batch ends changes nothing).
-        constexpr int kChunk = kBatch / 2;
-        for (int start = ia; start <= ib; start += kChunk) {
-          const int end = std::min(ib, start + kChunk - 1);
-          if (batch_count + (end - start + 4) > kBatch) flush();
-          batch_count += CoverRowAvx2(r0, gx0, r1, gx1, start, end, j * nt, batch_b0 + batch_count,
-                                      batch_b1 + batch_count, batch_cell + batch_count);
-        }
-        continue;
-      }
-#endif
       for (int i = ia; i <= ib; ++i) {
         const double px = i + 0.5;
         const double b0 = r0 + gx0 * px;
