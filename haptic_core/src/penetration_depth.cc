@@ -128,6 +128,12 @@ void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, do
 }
 
 #ifdef HT_RASTER_AVX2
+// A compare's four 64-bit lane masks as four 32-bit ones, in order.
+[[gnu::target("avx2")]] inline __m128i NarrowMaskAvx2(__m256d mask) noexcept {
+  return _mm256_castsi256_si128(_mm256_permutevar8x32_epi32(
+      _mm256_castpd_si256(mask), _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7)));
+}
+
 // ShadeCells four cells a step (AVX2, the same operations in the same order and no FMA, so the
 // bits of the scalar code); the last n mod 4 cells go to ShadeCells.
 [[gnu::target("avx2")]] void ShadeCellsAvx2(const TriangleShading& t, const double* b0,
@@ -185,16 +191,13 @@ void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, do
   const float neutral_value =
       keep_max ? -std::numeric_limits<float>::infinity() : std::numeric_limits<float>::infinity();
   const __m128 neutral = _mm_set1_ps(neutral_value);
-  const __m256i narrow = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
   int k = 0;
   for (; k + 4 <= n; k += 4) {
     const __m256d x = _mm256_add_pd(
         _mm256_loadu_pd(value + k),
         _mm256_mul_pd(_mm256_cvtps_pd(_mm_loadu_ps(h + k)), _mm256_loadu_pd(ndotn + k)));
     const __m256d inside = _mm256_cmp_pd(_mm256_and_pd(x, abs_mask), vrange, _CMP_LE_OQ);
-    // The four 64-bit lane masks narrowed to 32-bit ones, in order.
-    const __m128 keep = _mm_castsi128_ps(
-        _mm256_castsi256_si128(_mm256_permutevar8x32_epi32(_mm256_castpd_si256(inside), narrow)));
+    const __m128 keep = _mm_castsi128_ps(NarrowMaskAvx2(inside));
     _mm_storeu_ps(fv + k, _mm_blendv_ps(neutral, _mm256_cvtpd_ps(x), keep));
   }
   for (; k < n; ++k) {
@@ -303,16 +306,12 @@ void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, do
     const __m256d lo_c = _mm256_sub_pd(lo, half), hi_c = _mm256_sub_pd(hi, half);
     const __m128i lo_t = _mm256_cvttpd_epi32(lo_c), hi_t = _mm256_cvttpd_epi32(hi_c);
     // + (lo_c > lo_t) and − (hi_c < hi_t): a true compare is −1 as an integer.
-    const __m128i lo_up = _mm256_castsi256_si128(_mm256_permutevar8x32_epi32(
-        _mm256_castpd_si256(_mm256_cmp_pd(lo_c, _mm256_cvtepi32_pd(lo_t), _CMP_GT_OQ)),
-        _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7)));
-    const __m128i hi_down = _mm256_castsi256_si128(_mm256_permutevar8x32_epi32(
-        _mm256_castpd_si256(_mm256_cmp_pd(hi_c, _mm256_cvtepi32_pd(hi_t), _CMP_LT_OQ)),
-        _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7)));
+    const __m128i lo_up = NarrowMaskAvx2(_mm256_cmp_pd(lo_c, _mm256_cvtepi32_pd(lo_t), _CMP_GT_OQ));
+    const __m128i hi_down =
+        NarrowMaskAvx2(_mm256_cmp_pd(hi_c, _mm256_cvtepi32_pd(hi_t), _CMP_LT_OQ));
     __m128i ia = _mm_max_epi32(vi0, _mm_sub_epi32(lo_t, lo_up));
     __m128i ib = _mm_min_epi32(vi1, _mm_add_epi32(hi_t, hi_down));
-    const __m128i skip_i = _mm256_castsi256_si128(_mm256_permutevar8x32_epi32(
-        _mm256_castpd_si256(skip), _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7)));
+    const __m128i skip_i = NarrowMaskAvx2(skip);
     // A skipped row: ia = 1, ib = 0 (no cell).
     ia = _mm_blendv_epi8(ia, _mm_set1_epi32(1), skip_i);
     ib = _mm_blendv_epi8(ib, _mm_setzero_si128(), skip_i);

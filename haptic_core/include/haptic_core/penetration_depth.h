@@ -87,11 +87,13 @@ void RenderPatchHeights(const HapticModel& model, const RigidTransform& X_WO,
 /// - the window's axes are brought into the model's frame once;
 /// - barycentrics are affine in the cell centre per triangle, and each row is clipped to the
 ///   triangle's span (by reciprocals, widened by far more than their rounding) before the exact
-///   per-cell test;
-/// - a textured triangle's covered cells are gathered, then their texture coordinates and normal
-///   factors computed two at a time (SSE2) and their texture samples taken together
-///   (SampleLevelBatch with `kernel`: the same bits; per sample 1.7× faster with SSE2 and 4.8×
-///   with AVX2 than one at a time in a micro-benchmark here);
+///   per-cell test; with `kernel` kBest on a CPU with AVX2, the spans are computed four rows at a
+///   time and a row's cells tested four at a time;
+/// - a textured triangle's covered cells are gathered, then their texture coordinates, normal
+///   factors and heights computed four at a time (AVX2 with kBest, else two with SSE2) and their
+///   texture samples taken together (SampleLevelBatch with `kernel`; per sample 1.7× faster with
+///   SSE2 and 4.8× with AVX2 than one at a time in a micro-benchmark here);
+/// - every SIMD step writes the bits of the scalar code (no FMA), which kScalar runs;
 /// - flat-shaded triangles (equal corner normals) skip the normal's per-cell length (a 1e-16
 ///   relative difference from the reference).
 /// Same preconditions; never allocates. m = 1 lets one render serve the four in-plane
@@ -111,8 +113,9 @@ struct DepthSample {
 };
 
 /// δ of heights `b` (environment, −∞ where empty) and `a` (tool, +∞ where empty), both #N*N.
-/// Ties keep the lowest index. Never allocates. One scan in SSE2 lanes, each keeping the first
-/// cell of its largest difference: the cell and bits of the plain one-cell-at-a-time scan.
+/// Ties keep the lowest index. Never allocates. One scan in SIMD lanes (eight with AVX2, else four
+/// with SSE2), each keeping the first cell of its largest difference: the cell and bits of the
+/// plain one-cell-at-a-time scan.
 DepthSample DirectionalPenetrationDepth(std::span<const float> b,
                                         std::span<const float> a) noexcept;
 
