@@ -130,7 +130,7 @@ void BM_HullProximity(benchmark::State& state) {
   opt.tolerance_m = s.tolerance_m;
   opt.temporal_coherence = state.range(1) != 0;
   ht::ProximityQueryStats st;
-  double pairs = 0, tests = 0, leaf_tests = 0, min_sd = 0;
+  double pairs = 0, tests = 0, leaf_tests = 0, culls = 0, min_sd = 0;
   int i = 0;
   for (auto _ : state) {
     const auto r = q.Query(*s.tool, Frame(s, i++), *s.env, ht::RigidTransform{}, opt, &st);
@@ -138,12 +138,14 @@ void BM_HullProximity(benchmark::State& state) {
     pairs += st.pairs_found;
     tests += st.node_pairs_tested;
     leaf_tests += st.leaf_pairs_tested;
+    culls += st.coherent_culls;
     if (!r.empty()) min_sd = r[0].signed_distance_m;
   }
   const double n = static_cast<double>(state.iterations());
   state.counters["pairs"] = pairs / n;
   state.counters["node_pairs"] = tests / n;
   state.counters["leaf_pairs"] = leaf_tests / n;
+  state.counters["coherent_culls"] = culls / n;
   state.counters["min_sd_mm"] = 1e3 * min_sd;
   state.counters["eps_mm"] = 1e3 * s.tolerance_m;
   state.SetLabel(state.range(0) == 0 ? "file/CAD part" : "hammer/torus");

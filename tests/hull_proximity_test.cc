@@ -442,9 +442,10 @@ TEST_F(TorusLBlock, BudgetsReturnValidSubsetsDeepestFirst) {
 }
 
 // Check 4: temporal coherence (previous pairs warm-start GJK and add their old normal as a
-// candidate direction) reports the same pairs along a smooth trajectory; separated distances agree
-// to 1e-9, and a penetrating pair's depth estimate can only get shallower, i.e. closer to the true
-// depth (one more candidate direction; every candidate's overlap bounds the depth from above).
+// candidate direction; pairs found beyond ε are first tested along their old separating
+// direction) reports the same pairs along a smooth trajectory; separated distances agree to 1e-9,
+// and a penetrating pair's depth estimate can only get shallower, i.e. closer to the true depth
+// (one more candidate direction; every candidate's overlap bounds the depth from above).
 TEST_F(TorusLBlock, TemporalCoherenceGivesTheSamePairs) {
   const HapticModel& A = *block_;
   const HapticModel& B = *torus_;
@@ -453,7 +454,7 @@ TEST_F(TorusLBlock, TemporalCoherenceGivesTheSamePairs) {
   on.tolerance_m = off.tolerance_m = 2e-3;
   on.temporal_coherence = true;
   off.temporal_coherence = false;
-  int hits = 0, pairs_total = 0;
+  int hits = 0, culls = 0, pairs_total = 0;
   for (int k = 0; k < 400; ++k) {
     const double t = k * 0.005;
     const RigidTransform X_WA = Pose({0.05 * std::cos(t), 0.05 * std::sin(t), 0.019 - 0.00001 * k},
@@ -461,7 +462,11 @@ TEST_F(TorusLBlock, TemporalCoherenceGivesTheSamePairs) {
     ProximityQueryStats st;
     auto a = with.Query(A, X_WA, B, RigidTransform{}, on, &st);
     hits += st.coherent_hits;
-    auto b = without.Query(A, X_WA, B, RigidTransform{}, off);
+    culls += st.coherent_culls;
+    ProximityQueryStats st_off;
+    auto b = without.Query(A, X_WA, B, RigidTransform{}, off, &st_off);
+    ASSERT_EQ(st_off.coherent_culls, 0);
+    ASSERT_EQ(st.leaf_pairs_tested, st_off.leaf_pairs_tested);
     ASSERT_EQ(a.size(), b.size()) << "frame " << k;
     pairs_total += static_cast<int>(a.size());
     std::vector<HullPairContact> sa(a.begin(), a.end()), sb(b.begin(), b.end());
@@ -480,9 +485,11 @@ TEST_F(TorusLBlock, TemporalCoherenceGivesTheSamePairs) {
       }
     }
   }
-  std::cout << "400 frames: " << pairs_total << " pairs, " << hits << " coherent hits\n";
+  std::cout << "400 frames: " << pairs_total << " pairs, " << hits << " coherent hits, " << culls
+            << " leaf pairs dropped along their previous separating direction\n";
   EXPECT_GT(pairs_total, 400);
   EXPECT_GT(hits, pairs_total / 2);
+  EXPECT_GT(culls, 0);
 }
 
 // ---------------------------------------------------------------------------------------------

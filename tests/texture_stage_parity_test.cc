@@ -537,7 +537,7 @@ TEST(CoarseQueryParity, StoppingInternalGjkWithinTheToleranceReportsTheSamePairs
 // at the product's tolerance, with and without local reach.
 TEST(CoarseQueryParity, TwoThreadsReportWhatOneReports) {
   std::mt19937 rng(1502);
-  int compared = 0;
+  int compared = 0, culls = 0;
   for (const auto& [tool_model, env_model] : kCoarseScenes) {
     const HapticModel& tool = Seed(tool_model);
     const HapticModel& env = Seed(env_model);
@@ -563,13 +563,16 @@ TEST(CoarseQueryParity, TwoThreadsReportWhatOneReports) {
           EXPECT_EQ(s1.leaf_pairs_tested, s2.leaf_pairs_tested);
           EXPECT_EQ(s1.node_pairs_culled, s2.node_pairs_culled);
           EXPECT_EQ(s1.coherent_hits, s2.coherent_hits);
+          EXPECT_EQ(s1.coherent_culls, s2.coherent_culls);
           EXPECT_EQ(s1.pairs_dropped, s2.pairs_dropped);
           compared += static_cast<int>(want.size());
+          culls += s1.coherent_culls;
         }
       }
     }
   }
   EXPECT_GT(compared, 500);
+  EXPECT_GT(culls, 0);  // the previous call's separating directions were used on both sides
   HullProximityQuery q;
   EXPECT_THROW(q.SetThreads(0), std::invalid_argument);
   EXPECT_THROW(q.SetThreads(257), std::invalid_argument);

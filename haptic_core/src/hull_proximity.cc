@@ -499,6 +499,14 @@ bool PairLess(const HullProximityQuery::CoherentPair& x,
   return x.node_A != y.node_A ? x.node_A < y.node_A : x.node_B < y.node_B;
 }
 
+// The entry of (node_A, node_B) in `pairs` (sorted by PairLess), or null.
+const HullProximityQuery::CoherentPair* FindPair(
+    const std::vector<HullProximityQuery::CoherentPair>& pairs, int node_A, int node_B) noexcept {
+  const HullProximityQuery::CoherentPair probe{node_A, node_B, glm::dvec3(0.0)};
+  auto it = std::lower_bound(pairs.begin(), pairs.end(), probe, PairLess);
+  return it != pairs.end() && it->node_A == node_A && it->node_B == node_B ? &*it : nullptr;
+}
+
 }  // namespace
 
 HullProximityQuery::HullProximityQuery(int max_pairs) : capacity_(max_pairs) {
@@ -509,6 +517,8 @@ HullProximityQuery::HullProximityQuery(int max_pairs) : capacity_(max_pairs) {
   results_.reserve(static_cast<std::size_t>(max_pairs));
   previous_.reserve(static_cast<std::size_t>(max_pairs));
   current_.reserve(static_cast<std::size_t>(max_pairs));
+  previous_far_.reserve(static_cast<std::size_t>(max_pairs));
+  current_far_.reserve(static_cast<std::size_t>(max_pairs));
   queue_.reserve(4096);
 }
 
@@ -532,6 +542,7 @@ void HullProximityQuery::SetThreads(int threads) {
     w.queue.reserve(4096);
     w.results.reserve(static_cast<std::size_t>(capacity_));
     w.current.reserve(static_cast<std::size_t>(capacity_));
+    w.current_far.reserve(static_cast<std::size_t>(capacity_));
   }
   arena_ = std::make_shared<Arena>(threads);
   workers_ = std::move(workers);
@@ -546,6 +557,7 @@ void HullProximityQuery::ClearCache() noexcept {
     e.spheres_O.clear();
   }
   previous_.clear();
+  previous_far_.clear();
   previous_A_ = previous_B_ = nullptr;
 }
 
@@ -744,6 +756,7 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
   results_.clear();
   queue_.clear();
   current_.clear();
+  current_far_.clear();
   const double eps = options.tolerance_m;
 
   auto finish = [&]() {
@@ -757,12 +770,14 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
       !std::isfinite(eps) || !std::isfinite(options.time_budget_us)) {
     st.invalid_input = 1;
     previous_.clear();
+    previous_far_.clear();
     return finish();
   }
   const bool a_single = A.hull_hierarchy.nodes.empty();
   const bool b_single = B.hull_hierarchy.nodes.empty();
   if ((a_single && A.hull_vertices_O.empty()) || (b_single && B.hull_vertices_O.empty())) {
     previous_.clear();
+    previous_far_.clear();
     return finish();
   }
   // Warm-up allocations happen here only (first sight of a model).
@@ -776,6 +791,7 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     return finish();
   }
   const bool coherent = options.temporal_coherence && previous_A_ == &A && previous_B_ == &B;
+  const bool coherent_next = options.temporal_coherence;
   const std::size_t max_pairs =
       static_cast<std::size_t>(std::clamp(options.max_pairs, 0, capacity_));
   const double budget_us = options.time_budget_us > 0.0 ? options.time_budget_us : kInf;
@@ -864,9 +880,10 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     std::vector<QueueEntry>& queue;
     std::vector<HullPairContact>& results;
     std::vector<CoherentPair>& current;
+    std::vector<CoherentPair>& current_far;
     ProximityQueryStats& st;
   };
-  Traversal main_traversal{queue_, results_, current_, st};
+  Traversal main_traversal{queue_, results_, current_, current_far_, st};
   auto push = [](Traversal& t, double key, int node_A, int node_B, const glm::dvec3& guess_A,
                  double box_gap_m) {
     t.queue.push_back({key, node_A, node_B, guess_A, box_gap_m});  // grows only during warm-up
@@ -921,11 +938,27 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     if (leaf_A && leaf_B) {
       ++t.st.leaf_pairs_tested;
       const CoherentPair* prev = nullptr;
+      const CoherentPair* prev_far = nullptr;
       if (coherent) {
-        const CoherentPair probe{e.node_A, e.node_B, glm::dvec3(0.0)};
-        auto it = std::lower_bound(previous_.begin(), previous_.end(), probe, PairLess);
-        if (it != previous_.end() && it->node_A == e.node_A && it->node_B == e.node_B) {
-          prev = &*it;
+        prev = FindPair(previous_, e.node_A, e.node_B);
+        if (prev == nullptr) prev_far = FindPair(previous_far_, e.node_A, e.node_B);
+      }
+      // A pair farther than its tolerance: remembered with the direction (A's frame) that
+      // showed it, for the next call.
+      auto remember_far = [&](const glm::dvec3& v_A) {
+        if (t.current_far.size() < t.current_far.capacity()) {
+          t.current_far.push_back({e.node_A, e.node_B, v_A});
+        }
+      };
+      if (prev_far != nullptr) {
+        // The previous call's separating direction v: the hulls' support intervals along it
+        // are at least −Overlap/|v| apart, a lower bound of their distance. Still beyond the
+        // tolerance: dropped, as GJK would have (it reports only pairs within it).
+        const glm::dvec3& v_A = prev_far->direction_W;
+        if (-Overlap(hA, hB, v_A) > eps_e * glm::length(v_A)) {
+          ++t.st.coherent_culls;
+          remember_far(v_A);
+          return;
         }
       }
       // Leaf pairs in W with the quaternion arithmetic (QuaternionPath): their contacts are the
@@ -936,10 +969,16 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
       const PosedHull wA = hA.QuaternionPath(), wB = hB.QuaternionPath();
       const GjkResult g =
           GjkDistance(wA, wB, prev != nullptr ? prev->direction_W : glm::dvec3(0.0), eps_e);
-      if (g.status == GjkStatus::kFar) return;
+      if (g.status == GjkStatus::kFar) {
+        if (coherent_next) remember_far(R_AW * g.v);
+        return;
+      }
       HullPairContact c;
       if (g.status == GjkStatus::kSeparated) {
-        if (g.distance_m > eps_e) return;
+        if (g.distance_m > eps_e) {
+          if (coherent_next) remember_far(R_AW * g.v);
+          return;
+        }
         c.signed_distance_m = g.distance_m;
         c.normal_W = g.v / g.distance_m;
         c.point_A_W = g.p_A;
@@ -1067,10 +1106,11 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
       w.queue.clear();
       w.results.clear();
       w.current.clear();
+      w.current_far.clear();
       w.st = ProximityQueryStats{};
     }
     const auto drain = [&](Worker& w) {
-      Traversal t{w.queue, w.results, w.current, w.st};
+      Traversal t{w.queue, w.results, w.current, w.current_far, w.st};
       while (!w.queue.empty()) {
         std::pop_heap(w.queue.begin(), w.queue.end(), HeapAfter);
         const QueueEntry e = w.queue.back();
@@ -1107,11 +1147,15 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
       for (const CoherentPair& c : w.current) {
         if (current_.size() < current_.capacity()) current_.push_back(c);
       }
+      for (const CoherentPair& c : w.current_far) {
+        if (current_far_.size() < current_far_.capacity()) current_far_.push_back(c);
+      }
       st.node_pairs_tested += w.st.node_pairs_tested;
       st.leaf_pairs_tested += w.st.leaf_pairs_tested;
       st.node_pairs_culled += w.st.node_pairs_culled;
       st.pairs_dropped += w.st.pairs_dropped;
       st.coherent_hits += w.st.coherent_hits;
+      st.coherent_culls += w.st.coherent_culls;
       st.numerical_faults += w.st.numerical_faults;
     }
   }
@@ -1125,6 +1169,8 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
             });
   std::sort(current_.begin(), current_.end(), PairLess);
   previous_.swap(current_);
+  std::sort(current_far_.begin(), current_far_.end(), PairLess);
+  previous_far_.swap(current_far_);
   previous_A_ = &A;
   previous_B_ = &B;
   return finish();

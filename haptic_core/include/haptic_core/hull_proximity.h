@@ -43,11 +43,16 @@ struct ProximityQueryOptions {
   int max_pairs = 4096;
   /// Temporal coherence: a leaf pair that was reported by the previous call (same two models)
   /// starts GJK from its previous separating direction, and its previous normal is one more
-  /// candidate direction when it penetrates. Never changes which pairs are reported (a
+  /// candidate direction when it penetrates. A leaf pair that the previous call tested and found
+  /// farther apart than its tolerance is first tested along the direction GJK separated it by
+  /// then: where the hulls' support intervals along that axis are still more than the tolerance
+  /// apart (a lower bound of their distance) the pair is dropped without GJK
+  /// (ProximityQueryStats::coherent_culls). Never changes which pairs are reported (a
   /// penetrating pair's depth estimate can only get closer to the true depth). Measured
   /// (benchmarks/hull_proximity_benchmark.cc, BM_HullProximity coherence:0/1, tool sliding 1 µm
-  /// per frame): 0–10 % faster, within the noise of the shared 2-core machine; kept because it
-  /// costs nothing measurable and holds penetrating normals steady from frame to frame.
+  /// per frame, ε = 1 mm): the warm start alone was 0–10 % faster, within the machine's noise;
+  /// with the separating-direction test, hammer on torus 50 → 39 µs (38 of 54 leaf pairs
+  /// dropped without GJK) and file on CAD part 111 → 105 µs.
   bool temporal_coherence = true;
   /// Local reach (issue 15; an approximation, placed on the speed-vs-error frontier): when ≥ 0,
   /// a node pair's tolerance is min(tolerance_m, reach_A(node) + reach_B(node) +
@@ -85,6 +90,10 @@ struct ProximityQueryStats {
   bool budget_exhausted = false;
   /// Leaf pairs found again from the previous call (temporal coherence was used for them).
   int coherent_hits = 0;
+  /// Leaf pairs dropped without GJK because the previous call's separating direction still
+  /// separates them by more than their tolerance (temporal coherence; counted in
+  /// leaf_pairs_tested too).
+  int coherent_culls = 0;
   /// Calls refused because a pose or the tolerance was not finite (0 or 1 per call).
   int invalid_input = 0;
   /// Leaf pairs whose result came out non-finite and was dropped (never expected; counted).
@@ -202,13 +211,16 @@ class HullProximityQuery {
   struct CoherentPair {
     int node_A;
     int node_B;
-    glm::dvec3 direction_W;  ///< Previous closest-point direction v = p_A − p_B, or normal.
+    /// Previous closest-point direction v = p_A − p_B, or normal, in W; for a pair found
+    /// farther than its tolerance (previous_far_), GJK's last v in the frame of Query's A.
+    glm::dvec3 direction_W;
   };
   /// One thread's share of a traversal (SetThreads).
   struct Worker {
     std::vector<QueueEntry> queue;
     std::vector<HullPairContact> results;
     std::vector<CoherentPair> current;
+    std::vector<CoherentPair> current_far;
     ProximityQueryStats st;
   };
 
@@ -220,6 +232,10 @@ class HullProximityQuery {
   std::vector<QueueEntry> queue_;
   std::vector<CoherentPair> previous_;
   std::vector<CoherentPair> current_;
+  // Leaf pairs the previous call tested and found farther than their tolerance, with the
+  // direction that showed it (temporal coherence), and this call's.
+  std::vector<CoherentPair> previous_far_;
+  std::vector<CoherentPair> current_far_;
   const HapticModel* previous_A_ = nullptr;
   const HapticModel* previous_B_ = nullptr;
   static constexpr int kCacheSlots = 8;
