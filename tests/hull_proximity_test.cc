@@ -347,10 +347,20 @@ TEST_F(TorusLBlock, FindsExactlyTheLeafPairsWithinToleranceByBruteForce) {
   opt.tolerance_m = eps;
   std::mt19937_64 rng(11);
   const RigidTransform X_WB = Pose({0.001, -0.002, 0.0}, AxisAngle({1, 2, 3}, 0.3));
-  int total_pairs = 0;
+  RigidTransform previous;
+  int total_pairs = 0, fronts = 0;
   for (int k = 0; k < 300; ++k) {
-    const RigidTransform X_WA = RandomPose(rng);
-    const auto pairs = query.Query(A, X_WA, B, X_WB, opt);
+    // Every other pose a small step from the one before, so that the query also starts from its
+    // previous front (temporal coherence), after jumps as well as small moves.
+    RigidTransform X_WA = RandomPose(rng);
+    if (k % 2 == 1) {
+      X_WA = previous;
+      X_WA.translation += 2e-4 * glm::dvec3(std::cos(k), std::sin(k), 0.5);
+    }
+    previous = X_WA;
+    ProximityQueryStats st;
+    const auto pairs = query.Query(A, X_WA, B, X_WB, opt, &st);
+    fronts += st.front_pairs > 0;
     std::set<std::pair<int, int>> ours;
     for (const auto& c : pairs) ours.emplace(c.node_A, c.node_B);
     ASSERT_EQ(ours.size(), pairs.size()) << "a pair reported twice";
@@ -371,8 +381,10 @@ TEST_F(TorusLBlock, FindsExactlyTheLeafPairsWithinToleranceByBruteForce) {
     }
   }
   std::cout << "300 poses: " << total_pairs
-            << " leaf pairs reported, all confirmed by brute force\n";
+            << " leaf pairs reported, all confirmed by brute force; " << fronts
+            << " queries started from the previous front\n";
   EXPECT_GT(total_pairs, 100);
+  EXPECT_GE(fronts, 150);
 }
 
 // Check 3: time and work budgets. A tiny budget stops early (budget_exhausted) with a subset of the
@@ -454,7 +466,7 @@ TEST_F(TorusLBlock, TemporalCoherenceGivesTheSamePairs) {
   on.tolerance_m = off.tolerance_m = 2e-3;
   on.temporal_coherence = true;
   off.temporal_coherence = false;
-  int hits = 0, culls = 0, pairs_total = 0;
+  int hits = 0, culls = 0, fronts = 0, pairs_total = 0;
   for (int k = 0; k < 400; ++k) {
     const double t = k * 0.005;
     const RigidTransform X_WA = Pose({0.05 * std::cos(t), 0.05 * std::sin(t), 0.019 - 0.00001 * k},
@@ -466,7 +478,8 @@ TEST_F(TorusLBlock, TemporalCoherenceGivesTheSamePairs) {
     ProximityQueryStats st_off;
     auto b = without.Query(A, X_WA, B, RigidTransform{}, off, &st_off);
     ASSERT_EQ(st_off.coherent_culls, 0);
-    ASSERT_EQ(st.leaf_pairs_tested, st_off.leaf_pairs_tested);
+    ASSERT_EQ(st_off.front_pairs, 0);
+    fronts += st.front_pairs > 0;
     ASSERT_EQ(a.size(), b.size()) << "frame " << k;
     pairs_total += static_cast<int>(a.size());
     std::vector<HullPairContact> sa(a.begin(), a.end()), sb(b.begin(), b.end());
@@ -486,10 +499,12 @@ TEST_F(TorusLBlock, TemporalCoherenceGivesTheSamePairs) {
     }
   }
   std::cout << "400 frames: " << pairs_total << " pairs, " << hits << " coherent hits, " << culls
-            << " leaf pairs dropped along their previous separating direction\n";
+            << " leaf pairs dropped along their previous separating direction, " << fronts
+            << " frames started from the previous front\n";
   EXPECT_GT(pairs_total, 400);
   EXPECT_GT(hits, pairs_total / 2);
   EXPECT_GT(culls, 0);
+  EXPECT_GT(fronts, 300);
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -533,11 +533,12 @@ TEST(CoarseQueryParity, StoppingInternalGjkWithinTheToleranceReportsTheSamePairs
 }
 
 // The coarse query's traversal on two threads against one: the same pairs, contacts, order and
-// counts, over a sequence of nearby poses with coherence (each side carries its own directions),
-// at the product's tolerance, with and without local reach.
+// counts, over a sequence of nearby poses with coherence (each side carries its own directions
+// and its own front, which two threads re-test in blocks on their workers), at the product's
+// tolerance, with and without local reach.
 TEST(CoarseQueryParity, TwoThreadsReportWhatOneReports) {
   std::mt19937 rng(1502);
-  int compared = 0, culls = 0;
+  int compared = 0, culls = 0, fronts = 0;
   for (const auto& [tool_model, env_model] : kCoarseScenes) {
     const HapticModel& tool = Seed(tool_model);
     const HapticModel& env = Seed(env_model);
@@ -564,6 +565,8 @@ TEST(CoarseQueryParity, TwoThreadsReportWhatOneReports) {
           EXPECT_EQ(s1.node_pairs_culled, s2.node_pairs_culled);
           EXPECT_EQ(s1.coherent_hits, s2.coherent_hits);
           EXPECT_EQ(s1.coherent_culls, s2.coherent_culls);
+          EXPECT_EQ(s1.front_pairs, s2.front_pairs);
+          fronts += s1.front_pairs > 0;
           EXPECT_EQ(s1.pairs_dropped, s2.pairs_dropped);
           compared += static_cast<int>(want.size());
           culls += s1.coherent_culls;
@@ -573,6 +576,7 @@ TEST(CoarseQueryParity, TwoThreadsReportWhatOneReports) {
   }
   EXPECT_GT(compared, 500);
   EXPECT_GT(culls, 0);  // the previous call's separating directions were used on both sides
+  EXPECT_GT(fronts, 0);  // and their fronts (on the workers with two threads)
   HullProximityQuery q;
   EXPECT_THROW(q.SetThreads(0), std::invalid_argument);
   EXPECT_THROW(q.SetThreads(257), std::invalid_argument);

@@ -7,6 +7,7 @@
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <glm/geometric.hpp>
@@ -38,6 +39,8 @@ constexpr std::size_t kMaxFaceCandidateWork = 65536;
 // tolerance: far above the rounding of the box test (1e-16 of the models' size), so that a culled
 // pair is certainly one the exact test would have dropped.
 constexpr double kBoxSlack_m = 1e-9;
+// Room for a front (node pairs; front tracking stops for a call whose front would not fit).
+constexpr std::size_t kFrontCapacity = 16384;
 
 bool IsFiniteVec(const glm::dvec3& v) noexcept {
   return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
@@ -519,6 +522,8 @@ HullProximityQuery::HullProximityQuery(int max_pairs) : capacity_(max_pairs) {
   current_.reserve(static_cast<std::size_t>(max_pairs));
   previous_far_.reserve(static_cast<std::size_t>(max_pairs));
   current_far_.reserve(static_cast<std::size_t>(max_pairs));
+  front_.reserve(kFrontCapacity);
+  next_front_.reserve(kFrontCapacity);
   queue_.reserve(4096);
 }
 
@@ -543,6 +548,7 @@ void HullProximityQuery::SetThreads(int threads) {
     w.results.reserve(static_cast<std::size_t>(capacity_));
     w.current.reserve(static_cast<std::size_t>(capacity_));
     w.current_far.reserve(static_cast<std::size_t>(capacity_));
+    w.front.reserve(kFrontCapacity);
   }
   arena_ = std::make_shared<Arena>(threads);
   workers_ = std::move(workers);
@@ -558,6 +564,8 @@ void HullProximityQuery::ClearCache() noexcept {
   }
   previous_.clear();
   previous_far_.clear();
+  front_.clear();
+  front_valid_ = false;
   previous_A_ = previous_B_ = nullptr;
 }
 
@@ -757,6 +765,7 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
   queue_.clear();
   current_.clear();
   current_far_.clear();
+  next_front_.clear();
   const double eps = options.tolerance_m;
 
   auto finish = [&]() {
@@ -771,6 +780,7 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     st.invalid_input = 1;
     previous_.clear();
     previous_far_.clear();
+    front_valid_ = false;
     return finish();
   }
   const bool a_single = A.hull_hierarchy.nodes.empty();
@@ -778,6 +788,7 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
   if ((a_single && A.hull_vertices_O.empty()) || (b_single && B.hull_vertices_O.empty())) {
     previous_.clear();
     previous_far_.clear();
+    front_valid_ = false;
     return finish();
   }
   // Warm-up allocations happen here only (first sight of a model).
@@ -788,6 +799,7 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     entry_B = &Entry(B);
   } catch (...) {
     st.numerical_faults = 1;
+    front_valid_ = false;
     return finish();
   }
   const bool coherent = options.temporal_coherence && previous_A_ == &A && previous_B_ == &B;
@@ -881,9 +893,23 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     std::vector<HullPairContact>& results;
     std::vector<CoherentPair>& current;
     std::vector<CoherentPair>& current_far;
+    std::vector<FrontPair>& front;
     ProximityQueryStats& st;
   };
-  Traversal main_traversal{queue_, results_, current_, current_far_, st};
+  Traversal main_traversal{queue_, results_, current_, current_far_, next_front_, st};
+  // A node pair where the traversal stops joins this call's front (when it fits; a front that
+  // does not fit is not used by the next call).
+  std::atomic<bool> front_overflow{false};
+  const bool track_front = coherent_next && !a_single && !b_single &&
+                           !(budget_us < kInf) && options.max_node_pair_tests <= 0;
+  auto stop_at = [&](Traversal& t, int node_A, int node_B, const glm::dvec3& axis_A) {
+    if (!track_front) return;
+    if (t.front.size() < t.front.capacity()) {
+      t.front.push_back({node_A, node_B, axis_A});
+    } else {
+      front_overflow.store(true, std::memory_order_relaxed);
+    }
+  };
   auto push = [](Traversal& t, double key, int node_A, int node_B, const glm::dvec3& guess_A,
                  double box_gap_m) {
     t.queue.push_back({key, node_A, node_B, guess_A, box_gap_m});  // grows only during warm-up
@@ -904,19 +930,6 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     if (c.signed_distance_m < worst->signed_distance_m) *worst = c;
   };
 
-  const int root_A = a_single ? -1 : 0;
-  const int root_B = b_single ? -1 : 0;
-  {
-    const double lb = sphere_bound(root_A, root_B);
-    const double eps_root = pair_eps(root_A, root_B);
-    const double gap = lb > eps_root ? kInf : box_gap(root_A, root_B, eps_root + kBoxSlack_m);
-    if (gap > eps_root + kBoxSlack_m) {
-      ++st.node_pairs_culled;
-    } else {
-      push(main_traversal, lb, root_A, root_B, glm::dvec3(0.0), gap);
-    }
-  }
-
   const bool unlimited = !(budget_us < kInf) && options.max_node_pair_tests <= 0;
   const bool near_exit = !options.exact_internal_distances && unlimited;
   // With workers (SetThreads) and no budget, the traversal moves to them once this many node
@@ -927,6 +940,51 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
   // their children (queued unless culled). Reads only what the call's set-up fixed (models,
   // poses, cache entries, the previous call's coherent directions), so that workers may run it
   // at once on their own traversals.
+  // The cheap tests of a front pair (front tracking), cheapest first: those of a child pair in
+  // `process` below (the bounding spheres, the oriented boxes, the support intervals' overlap
+  // along the centre line, where −overlap ≤ every descendant pair's signed distance) and, for a
+  // pair that internal GJK culled, the overlap along its separating direction then (axis_A,
+  // nonzero). A pair none of them culls is queued (key: this bound; guess_A: GJK's first guess
+  // for it); one that is culled joins the front again. cB: B's posed hull, or null to pose it.
+  // `process` keeps its own copy of the first three tests inline: calling this lambda from its
+  // child loop made the query without coherence 8 % slower (hammer on torus 50.4 → 54.0 µs,
+  // file on CAD part 112 → 121 µs).
+  auto test_pair = [&](Traversal& t, int node_A, int node_B, const PosedHull& cA,
+                       const PosedHull* cB_posed, double key, const glm::dvec3& guess_A,
+                       const glm::dvec3& axis_A) {
+    const double lb = sphere_bound(node_A, node_B);
+    const double eps_pair = pair_eps(node_A, node_B);
+    if (lb > eps_pair) {
+      ++t.st.node_pairs_culled;
+      stop_at(t, node_A, node_B, glm::dvec3(0.0));
+      return;
+    }
+    const double gap = box_gap(node_A, node_B, eps_pair + kBoxSlack_m);
+    if (gap > eps_pair + kBoxSlack_m) {
+      ++t.st.node_pairs_culled;
+      stop_at(t, node_A, node_B, glm::dvec3(0.0));
+      return;
+    }
+    const PosedHull cB =
+        cB_posed != nullptr ? *cB_posed : posed(B, *entry_B, X_WB, &R_AB, &R_BA, p_AB, node_B);
+    double bound = lb;
+    const glm::dvec3 d = cA.center_W - cB.center_W;
+    const double d_len = glm::length(d);
+    if (d_len > 0.0) bound = std::max(bound, -Overlap(cA, cB, d / d_len));
+    if (bound > eps_pair) {
+      ++t.st.node_pairs_culled;
+      stop_at(t, node_A, node_B, glm::dvec3(0.0));
+      return;
+    }
+    if (glm::dot(axis_A, axis_A) > 0.0 &&
+        -Overlap(cA, cB, axis_A) > eps_pair * glm::length(axis_A)) {
+      ++t.st.node_pairs_culled;
+      stop_at(t, node_A, node_B, axis_A);
+      return;
+    }
+    push(t, std::max(key, bound), node_A, node_B, guess_A, gap);
+  };
+
   auto process = [&](Traversal& t, const QueueEntry& e) {
     const PosedHull hA = posed(A, *entry_A, X_WA, nullptr, nullptr, glm::dvec3(0.0), e.node_A);
     const PosedHull hB = posed(B, *entry_B, X_WB, &R_AB, &R_BA, p_AB, e.node_B);
@@ -937,6 +995,7 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
 
     if (leaf_A && leaf_B) {
       ++t.st.leaf_pairs_tested;
+      stop_at(t, e.node_A, e.node_B, glm::dvec3(0.0));
       const CoherentPair* prev = nullptr;
       const CoherentPair* prev_far = nullptr;
       if (coherent) {
@@ -1019,8 +1078,11 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     if (small && !(near_exit && e.box_gap_m < 0.0)) {
       g = GjkDistance(hA, hB, e.guess_A, eps_e, near_exit ? eps_e : -1.0);
     }
-    if (g.status == GjkStatus::kFar) return;
-    if (g.status == GjkStatus::kSeparated && g.distance_m > eps_e) return;
+    if (g.status == GjkStatus::kFar ||
+        (g.status == GjkStatus::kSeparated && g.distance_m > eps_e)) {
+      stop_at(t, e.node_A, e.node_B, g.v);
+      return;
+    }
     double key = e.key_m;
     if (g.status == GjkStatus::kSeparated || g.status == GjkStatus::kNear) {
       key = std::max(key, g.distance_m);
@@ -1056,15 +1118,18 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
         if (split_B && (node_B < 0 || node_B >= count_B)) continue;
         // Cheapest first: the bounding spheres, the oriented boxes, then the support intervals'
         // overlap along the centre line (−overlap ≤ every descendant pair's signed distance).
+        // A culled pair joins the front.
         const double lb = sphere_bound(node_A, node_B);
         const double eps_child = pair_eps(node_A, node_B);
         if (lb > eps_child) {
           ++t.st.node_pairs_culled;
+          stop_at(t, node_A, node_B, glm::dvec3(0.0));
           continue;
         }
         const double gap = box_gap(node_A, node_B, eps_child + kBoxSlack_m);
         if (gap > eps_child + kBoxSlack_m) {
           ++t.st.node_pairs_culled;
+          stop_at(t, node_A, node_B, glm::dvec3(0.0));
           continue;
         }
         const PosedHull cB = !split_B ? hB : posed(B, *entry_B, X_WB, &R_AB, &R_BA, p_AB, node_B);
@@ -1074,12 +1139,41 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
         if (d_len > 0.0) bound = std::max(bound, -Overlap(cA, cB, d / d_len));
         if (bound > eps_child) {
           ++t.st.node_pairs_culled;
+          stop_at(t, node_A, node_B, glm::dvec3(0.0));
           continue;
         }
         push(t, std::max(key, bound), node_A, node_B, g.v, gap);
       }
     }
   };
+
+  // Where the traversal starts: the previous call's front (front tracking), or the two roots.
+  const bool use_front =
+      track_front && coherent && front_valid_ && front_.size() <= 2 * front_base_ + 64;
+  // With workers, each takes its share of the front (below).
+  const bool front_on_workers = use_front && split_at > 0;
+  const auto retest = [&](Traversal& t, const FrontPair& f) {
+    const PosedHull cA = posed(A, *entry_A, X_WA, nullptr, nullptr, glm::dvec3(0.0), f.node_A);
+    test_pair(t, f.node_A, f.node_B, cA, nullptr, -kInf, f.axis_A, f.axis_A);
+  };
+  if (use_front) {
+    st.front_pairs = static_cast<int>(front_.size());
+    if (!front_on_workers) {
+      for (const FrontPair& f : front_) retest(main_traversal, f);
+    }
+  } else {
+    const int root_A = a_single ? -1 : 0;
+    const int root_B = b_single ? -1 : 0;
+    const double lb = sphere_bound(root_A, root_B);
+    const double eps_root = pair_eps(root_A, root_B);
+    const double gap = lb > eps_root ? kInf : box_gap(root_A, root_B, eps_root + kBoxSlack_m);
+    if (gap > eps_root + kBoxSlack_m) {
+      ++st.node_pairs_culled;
+      stop_at(main_traversal, root_A, root_B, glm::dvec3(0.0));
+    } else {
+      push(main_traversal, lb, root_A, root_B, glm::dvec3(0.0), gap);
+    }
+  }
 
   while (!queue_.empty()) {
     if (options.max_node_pair_tests > 0 && st.node_pairs_tested >= options.max_node_pair_tests) {
@@ -1097,20 +1191,22 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     process(main_traversal, e);
     if (split_at > 0 && queue_.size() >= split_at) break;
   }
-  if (split_at > 0 && !queue_.empty()) {
+  if (split_at > 0 && (!queue_.empty() || front_on_workers)) {
     // The rest of the traversal on the workers: each queued node pair's subtree is one task
-    // (oneTBB balances them), descended on the queue of the thread that runs it. Without a budget
-    // every pair that is not culled is tested whatever the order, so the pairs found are the
-    // serial traversal's; sorted below.
+    // (oneTBB balances them), descended on the queue of the thread that runs it; or, starting
+    // from the previous front, blocks of its pairs are the tasks. Without a budget every pair
+    // that is not culled is tested whatever the order, so the pairs found are the serial
+    // traversal's; sorted below.
     for (Worker& w : workers_) {
       w.queue.clear();
       w.results.clear();
       w.current.clear();
       w.current_far.clear();
+      w.front.clear();
       w.st = ProximityQueryStats{};
     }
     const auto drain = [&](Worker& w) {
-      Traversal t{w.queue, w.results, w.current, w.current_far, w.st};
+      Traversal t{w.queue, w.results, w.current, w.current_far, w.front, w.st};
       while (!w.queue.empty()) {
         std::pop_heap(w.queue.begin(), w.queue.end(), HeapAfter);
         const QueueEntry e = w.queue.back();
@@ -1124,22 +1220,39 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
       entry.node_A = kDone;
       drain(w);
     };
+    const auto descend_front = [&](Worker& w, FrontPair& f) {
+      Traversal t{w.queue, w.results, w.current, w.current_far, w.front, w.st};
+      retest(t, f);
+      f.node_A = kDone;
+      drain(w);
+    };
+    const std::size_t tasks = front_on_workers ? front_.size() : queue_.size();
     try {
       arena_->arena.execute([&] {
-        oneapi::tbb::parallel_for(oneapi::tbb::blocked_range<std::size_t>(0, queue_.size(), 1),
-                                  [&](const oneapi::tbb::blocked_range<std::size_t>& r) {
-                                    const int slot =
-                                        oneapi::tbb::this_task_arena::current_thread_index();
-                                    Worker& w = workers_[static_cast<std::size_t>(slot)];
-                                    for (std::size_t k = r.begin(); k != r.end(); ++k)
-                                      descend(w, queue_[k]);
-                                  });
+        oneapi::tbb::parallel_for(
+            oneapi::tbb::blocked_range<std::size_t>(0, tasks, front_on_workers ? 16 : 1),
+            [&](const oneapi::tbb::blocked_range<std::size_t>& r) {
+              const int slot = oneapi::tbb::this_task_arena::current_thread_index();
+              Worker& w = workers_[static_cast<std::size_t>(slot)];
+              for (std::size_t k = r.begin(); k != r.end(); ++k) {
+                if (front_on_workers) {
+                  descend_front(w, front_[k]);
+                } else {
+                  descend(w, queue_[k]);
+                }
+              }
+            });
       });
     } catch (...) {
       // Tasks could not be spawned: the subtrees not yet descended, on this thread.
     }
     for (QueueEntry& entry : queue_) {
       if (entry.node_A != kDone) descend(workers_[0], entry);
+    }
+    if (front_on_workers) {
+      for (FrontPair& f : front_) {
+        if (f.node_A != kDone) descend_front(workers_[0], f);
+      }
     }
     queue_.clear();
     for (Worker& w : workers_) {
@@ -1149,6 +1262,13 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
       }
       for (const CoherentPair& c : w.current_far) {
         if (current_far_.size() < current_far_.capacity()) current_far_.push_back(c);
+      }
+      for (const FrontPair& f : w.front) {
+        if (next_front_.size() < next_front_.capacity()) {
+          next_front_.push_back(f);
+        } else {
+          front_overflow.store(true, std::memory_order_relaxed);
+        }
       }
       st.node_pairs_tested += w.st.node_pairs_tested;
       st.leaf_pairs_tested += w.st.leaf_pairs_tested;
@@ -1171,6 +1291,9 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
   previous_.swap(current_);
   std::sort(current_far_.begin(), current_far_.end(), PairLess);
   previous_far_.swap(current_far_);
+  front_valid_ = track_front && !st.budget_exhausted && !front_overflow.load();
+  if (front_valid_ && !use_front) front_base_ = next_front_.size();
+  front_.swap(next_front_);
   previous_A_ = &A;
   previous_B_ = &B;
   return finish();
