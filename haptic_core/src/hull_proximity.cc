@@ -940,51 +940,6 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
   // their children (queued unless culled). Reads only what the call's set-up fixed (models,
   // poses, cache entries, the previous call's coherent directions), so that workers may run it
   // at once on their own traversals.
-  // The cheap tests of a front pair (front tracking), cheapest first: those of a child pair in
-  // `process` below (the bounding spheres, the oriented boxes, the support intervals' overlap
-  // along the centre line, where −overlap ≤ every descendant pair's signed distance) and, for a
-  // pair that internal GJK culled, the overlap along its separating direction then (axis_A,
-  // nonzero). A pair none of them culls is queued (key: this bound; guess_A: GJK's first guess
-  // for it); one that is culled joins the front again. cB: B's posed hull, or null to pose it.
-  // `process` keeps its own copy of the first three tests inline: calling this lambda from its
-  // child loop made the query without coherence 8 % slower (hammer on torus 50.4 → 54.0 µs,
-  // file on CAD part 112 → 121 µs).
-  auto test_pair = [&](Traversal& t, int node_A, int node_B, const PosedHull& cA,
-                       const PosedHull* cB_posed, double key, const glm::dvec3& guess_A,
-                       const glm::dvec3& axis_A) {
-    const double lb = sphere_bound(node_A, node_B);
-    const double eps_pair = pair_eps(node_A, node_B);
-    if (lb > eps_pair) {
-      ++t.st.node_pairs_culled;
-      stop_at(t, node_A, node_B, glm::dvec3(0.0));
-      return;
-    }
-    const double gap = box_gap(node_A, node_B, eps_pair + kBoxSlack_m);
-    if (gap > eps_pair + kBoxSlack_m) {
-      ++t.st.node_pairs_culled;
-      stop_at(t, node_A, node_B, glm::dvec3(0.0));
-      return;
-    }
-    const PosedHull cB =
-        cB_posed != nullptr ? *cB_posed : posed(B, *entry_B, X_WB, &R_AB, &R_BA, p_AB, node_B);
-    double bound = lb;
-    const glm::dvec3 d = cA.center_W - cB.center_W;
-    const double d_len = glm::length(d);
-    if (d_len > 0.0) bound = std::max(bound, -Overlap(cA, cB, d / d_len));
-    if (bound > eps_pair) {
-      ++t.st.node_pairs_culled;
-      stop_at(t, node_A, node_B, glm::dvec3(0.0));
-      return;
-    }
-    if (glm::dot(axis_A, axis_A) > 0.0 &&
-        -Overlap(cA, cB, axis_A) > eps_pair * glm::length(axis_A)) {
-      ++t.st.node_pairs_culled;
-      stop_at(t, node_A, node_B, axis_A);
-      return;
-    }
-    push(t, std::max(key, bound), node_A, node_B, guess_A, gap);
-  };
-
   auto process = [&](Traversal& t, const QueueEntry& e) {
     const PosedHull hA = posed(A, *entry_A, X_WA, nullptr, nullptr, glm::dvec3(0.0), e.node_A);
     const PosedHull hB = posed(B, *entry_B, X_WB, &R_AB, &R_BA, p_AB, e.node_B);
@@ -1147,15 +1102,53 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     }
   };
 
+  // The cheap tests of a front pair f (front tracking), cheapest first: the bounding spheres,
+  // the oriented boxes, for a pair that internal GJK culled the overlap along its separating
+  // direction then (f.axis_A, nonzero), and the overlap along the centre line, where −overlap ≤
+  // every descendant pair's signed distance (the child tests in `process` above, which keeps
+  // its own copy inline: calling one lambda from its child loop made the query without
+  // coherence 8 % slower, hammer on torus 50.4 → 54.0 µs, file on CAD part 112 → 121 µs). A
+  // pair none of them culls is queued (key: the bound; GJK's first guess: f.axis_A); one that
+  // is culled joins the front again. The hulls are posed only once spheres and boxes pass.
+  auto retest = [&](Traversal& t, const FrontPair& f) {
+    const double lb = sphere_bound(f.node_A, f.node_B);
+    const double eps_pair = pair_eps(f.node_A, f.node_B);
+    if (lb > eps_pair) {
+      ++t.st.node_pairs_culled;
+      stop_at(t, f.node_A, f.node_B, glm::dvec3(0.0));
+      return;
+    }
+    const double gap = box_gap(f.node_A, f.node_B, eps_pair + kBoxSlack_m);
+    if (gap > eps_pair + kBoxSlack_m) {
+      ++t.st.node_pairs_culled;
+      stop_at(t, f.node_A, f.node_B, glm::dvec3(0.0));
+      return;
+    }
+    const PosedHull cA = posed(A, *entry_A, X_WA, nullptr, nullptr, glm::dvec3(0.0), f.node_A);
+    const PosedHull cB = posed(B, *entry_B, X_WB, &R_AB, &R_BA, p_AB, f.node_B);
+    if (glm::dot(f.axis_A, f.axis_A) > 0.0 &&
+        -Overlap(cA, cB, f.axis_A) > eps_pair * glm::length(f.axis_A)) {
+      ++t.st.node_pairs_culled;
+      stop_at(t, f.node_A, f.node_B, f.axis_A);
+      return;
+    }
+    double bound = lb;
+    const glm::dvec3 d = cA.center_W - cB.center_W;
+    const double d_len = glm::length(d);
+    if (d_len > 0.0) bound = std::max(bound, -Overlap(cA, cB, d / d_len));
+    if (bound > eps_pair) {
+      ++t.st.node_pairs_culled;
+      stop_at(t, f.node_A, f.node_B, glm::dvec3(0.0));
+      return;
+    }
+    push(t, bound, f.node_A, f.node_B, f.axis_A, gap);
+  };
+
   // Where the traversal starts: the previous call's front (front tracking), or the two roots.
   const bool use_front =
       track_front && coherent && front_valid_ && front_.size() <= 2 * front_base_ + 64;
   // With workers, each takes its share of the front (below).
   const bool front_on_workers = use_front && split_at > 0;
-  const auto retest = [&](Traversal& t, const FrontPair& f) {
-    const PosedHull cA = posed(A, *entry_A, X_WA, nullptr, nullptr, glm::dvec3(0.0), f.node_A);
-    test_pair(t, f.node_A, f.node_B, cA, nullptr, -kInf, f.axis_A, f.axis_A);
-  };
   if (use_front) {
     st.front_pairs = static_cast<int>(front_.size());
     if (!front_on_workers) {
