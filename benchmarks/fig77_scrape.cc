@@ -86,7 +86,7 @@ int main(int argc, char** argv) {
   ht::ContactClusterer clusterer;
   std::ofstream csv(csv_path);
   csv << "frame,x_m,y_m,yaw_rad,z_m,pairs,contacts,min_signed_distance_m,query_us,"
-         "clustering_us,node_pairs_tested\n";
+         "clustering_us,node_pairs_tested,front_pairs\n";
   std::vector<double> query_us, cluster_us, pairs_v, contacts_v;
   for (int k = 0; k < frames; ++k) {
     const double s = frames > 1 ? static_cast<double>(k) / (frames - 1) : 0.0;
@@ -119,7 +119,7 @@ int main(int argc, char** argv) {
     const double min_sd = pairs.empty() ? 0.0 : pairs.front().signed_distance_m;
     csv << k << ',' << x << ',' << y << ',' << yaw << ',' << hi << ',' << pairs.size() << ','
         << clusters.size() << ',' << min_sd << ',' << q_us << ',' << c_us << ','
-        << stats.node_pairs_tested << '\n';
+        << stats.node_pairs_tested << ',' << stats.front_pairs << '\n';
     query_us.push_back(q_us);
     cluster_us.push_back(c_us);
     pairs_v.push_back(static_cast<double>(pairs.size()));

@@ -89,7 +89,8 @@ struct ProximityQueryStats {
   /// Leaf pairs tested with GJK.
   int leaf_pairs_tested = 0;
   /// Node pairs rejected before testing: by their bounding spheres, their oriented boxes or the
-  /// overlap of their hulls along the centre line.
+  /// overlap of their hulls along the centre line (or, for a pair of the previous call's front
+  /// that internal GJK culled then, along GJK's separating direction).
   int node_pairs_culled = 0;
   /// Pairs returned.
   int pairs_found = 0;
