@@ -507,6 +507,36 @@ TEST_F(TorusLBlock, TemporalCoherenceGivesTheSamePairs) {
   EXPECT_GT(fronts, 300);
 }
 
+// A model replaced at its address between two coherent calls (a coarser torus, with fewer hull
+// nodes than the front's pairs name): the query sees the new hierarchy (its cache entry is
+// rebuilt), starts from the roots instead of the old front, and reports what a fresh query does.
+TEST_F(TorusLBlock, AModelReplacedAtItsAddressStartsFromTheRoots) {
+  const HapticModel& A = *block_;
+  HapticModel B = *torus_;
+  HullProximityQuery coherent_query, fresh_query;
+  ProximityQueryOptions opt;
+  opt.tolerance_m = 3e-3;
+  const RigidTransform X_WA = Pose({0.05, 0.0, 0.017}, AxisAngle({0, 1, 0.2}, 0.4));
+  ProximityQueryStats st;
+  ASSERT_FALSE(coherent_query.Query(A, X_WA, B, RigidTransform{}, opt, &st).empty());
+  coherent_query.Query(A, X_WA, B, RigidTransform{}, opt, &st);
+  ASSERT_GT(st.front_pairs, 0);  // the second call started from the first one's front
+  const std::size_t old_nodes = B.hull_hierarchy.nodes.size();
+  B = MakeModel(MakeTorus(10, 6, 0.05, 0.015));  // the same address, a smaller hierarchy
+  ASSERT_LT(B.hull_hierarchy.nodes.size(), old_nodes);
+  const auto got = coherent_query.Query(A, X_WA, B, RigidTransform{}, opt, &st);
+  EXPECT_EQ(st.front_pairs, 0);
+  const std::vector<HullPairContact> mine(got.begin(), got.end());
+  const auto want = fresh_query.Query(A, X_WA, B, RigidTransform{}, opt);
+  ASSERT_EQ(mine.size(), want.size());
+  ASSERT_FALSE(want.empty());
+  for (std::size_t i = 0; i < want.size(); ++i) {
+    EXPECT_EQ(mine[i].node_A, want[i].node_A);
+    EXPECT_EQ(mine[i].node_B, want[i].node_B);
+    EXPECT_NEAR(mine[i].signed_distance_m, want[i].signed_distance_m, 1e-12);
+  }
+}
+
 // ---------------------------------------------------------------------------------------------
 // Hard cases (DESIGN.md §8). Boxes are convex: one node each.
 

@@ -728,6 +728,7 @@ const HullProximityQuery::ModelEntry& HullProximityQuery::Entry(const HapticMode
     }
   }
   ComputeNodeReach(model, slot->reach_m);
+  ++entry_builds_;
   slot->model = &model;
   slot->nodes_data = nodes.data();
   slot->node_count = nodes.size();
@@ -794,6 +795,7 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
   // Warm-up allocations happen here only (first sight of a model).
   const ModelEntry* entry_A;
   const ModelEntry* entry_B;
+  const std::uint64_t entry_builds = entry_builds_;
   try {
     entry_A = &Entry(A);
     entry_B = &Entry(B);
@@ -1145,8 +1147,10 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
   };
 
   // Where the traversal starts: the previous call's front (front tracking), or the two roots.
-  const bool use_front =
-      track_front && coherent && front_valid_ && front_.size() <= 2 * front_base_ + 64;
+  // Not from a front whose models were cached anew since (a model changed at its address: its
+  // node indices may no longer exist).
+  const bool use_front = track_front && coherent && front_valid_ &&
+                         entry_builds_ == entry_builds && front_.size() <= 2 * front_base_ + 64;
   // With workers, each takes its share of the front (below).
   const bool front_on_workers = use_front && split_at > 0;
   if (use_front) {

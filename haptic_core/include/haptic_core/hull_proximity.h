@@ -266,6 +266,7 @@ class HullProximityQuery {
   std::vector<FrontPair> next_front_;
   bool front_valid_ = false;
   std::size_t front_base_ = 0;
+  std::uint64_t entry_builds_ = 0;  // model entries built (Entry), to tell a cached model anew
   const HapticModel* previous_A_ = nullptr;
   const HapticModel* previous_B_ = nullptr;
   static constexpr int kCacheSlots = 8;
