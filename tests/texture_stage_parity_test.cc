@@ -575,7 +575,7 @@ TEST(CoarseQueryParity, TwoThreadsReportWhatOneReports) {
     }
   }
   EXPECT_GT(compared, 500);
-  EXPECT_GT(culls, 0);  // the previous call's separating directions were used on both sides
+  EXPECT_GT(culls, 0);   // the previous call's separating directions were used on both sides
   EXPECT_GT(fronts, 0);  // and their fronts (on the workers with two threads)
   HullProximityQuery q;
   EXPECT_THROW(q.SetThreads(0), std::invalid_argument);

@@ -902,8 +902,8 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
   // A node pair where the traversal stops joins this call's front (when it fits; a front that
   // does not fit is not used by the next call).
   std::atomic<bool> front_overflow{false};
-  const bool track_front = coherent_next && !a_single && !b_single &&
-                           !(budget_us < kInf) && options.max_node_pair_tests <= 0;
+  const bool track_front = coherent_next && !a_single && !b_single && !(budget_us < kInf) &&
+                           options.max_node_pair_tests <= 0;
   auto stop_at = [&](Traversal& t, int node_A, int node_B, const glm::dvec3& axis_A) {
     if (!track_front) return;
     if (t.front.size() < t.front.capacity()) {
@@ -942,6 +942,13 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
   // their children (queued unless culled). Reads only what the call's set-up fixed (models,
   // poses, cache entries, the previous call's coherent directions), so that workers may run it
   // at once on their own traversals.
+  // A node pair's lower bound from the overlap of its hulls' support intervals along the centre
+  // line (−overlap ≤ every descendant pair's signed distance), or lb where that is larger.
+  const auto centre_line_bound = [](const PosedHull& cA, const PosedHull& cB, double lb) {
+    const glm::dvec3 d = cA.center_W - cB.center_W;
+    const double d_len = glm::length(d);
+    return d_len > 0.0 ? std::max(lb, -Overlap(cA, cB, d / d_len)) : lb;
+  };
   auto process = [&](Traversal& t, const QueueEntry& e) {
     const PosedHull hA = posed(A, *entry_A, X_WA, nullptr, nullptr, glm::dvec3(0.0), e.node_A);
     const PosedHull hB = posed(B, *entry_B, X_WB, &R_AB, &R_BA, p_AB, e.node_B);
@@ -1090,10 +1097,7 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
           continue;
         }
         const PosedHull cB = !split_B ? hB : posed(B, *entry_B, X_WB, &R_AB, &R_BA, p_AB, node_B);
-        double bound = lb;
-        const glm::dvec3 d = cA.center_W - cB.center_W;
-        const double d_len = glm::length(d);
-        if (d_len > 0.0) bound = std::max(bound, -Overlap(cA, cB, d / d_len));
+        const double bound = centre_line_bound(cA, cB, lb);
         if (bound > eps_child) {
           ++t.st.node_pairs_culled;
           stop_at(t, node_A, node_B, glm::dvec3(0.0));
@@ -1106,12 +1110,12 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
 
   // The cheap tests of a front pair f (front tracking), cheapest first: the bounding spheres,
   // the oriented boxes, for a pair that internal GJK culled the overlap along its separating
-  // direction then (f.axis_A, nonzero), and the overlap along the centre line, where −overlap ≤
-  // every descendant pair's signed distance (the child tests in `process` above, which keeps
-  // its own copy inline: calling one lambda from its child loop made the query without
-  // coherence 8 % slower, hammer on torus 50.4 → 54.0 µs, file on CAD part 112 → 121 µs). A
-  // pair none of them culls is queued (key: the bound; GJK's first guess: f.axis_A); one that
-  // is culled joins the front again. The hulls are posed only once spheres and boxes pass.
+  // direction then (f.axis_A, nonzero), and the centre-line bound. These are the child tests of
+  // `process` above, which stay written out there: calling this lambda from its child loop made
+  // the query without coherence 8 % slower (hammer on torus 50.4 → 54.0 µs, file on CAD part
+  // 112 → 121 µs). A pair none of them culls is queued (key: the bound; GJK's first guess:
+  // f.axis_A); one that is culled joins the front again. The hulls are posed only once spheres
+  // and boxes pass.
   auto retest = [&](Traversal& t, const FrontPair& f) {
     const double lb = sphere_bound(f.node_A, f.node_B);
     const double eps_pair = pair_eps(f.node_A, f.node_B);
@@ -1134,10 +1138,7 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
       stop_at(t, f.node_A, f.node_B, f.axis_A);
       return;
     }
-    double bound = lb;
-    const glm::dvec3 d = cA.center_W - cB.center_W;
-    const double d_len = glm::length(d);
-    if (d_len > 0.0) bound = std::max(bound, -Overlap(cA, cB, d / d_len));
+    const double bound = centre_line_bound(cA, cB, lb);
     if (bound > eps_pair) {
       ++t.st.node_pairs_culled;
       stop_at(t, f.node_A, f.node_B, glm::dvec3(0.0));
@@ -1149,8 +1150,8 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
   // Where the traversal starts: the previous call's front (front tracking), or the two roots.
   // Not from a front whose models were cached anew since (a model changed at its address: its
   // node indices may no longer exist).
-  const bool use_front = track_front && coherent && front_valid_ &&
-                         entry_builds_ == entry_builds && front_.size() <= 2 * front_base_ + 64;
+  const bool use_front = track_front && coherent && front_valid_ && entry_builds_ == entry_builds &&
+                         front_.size() <= 2 * front_base_ + 64;
   // With workers, each takes its share of the front (below).
   const bool front_on_workers = use_front && split_at > 0;
   if (use_front) {

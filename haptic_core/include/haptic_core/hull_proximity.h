@@ -62,7 +62,10 @@ struct ProximityQueryOptions {
   /// direction then); a pair no test culls any more is descended as before. The front is a cut
   /// of the traversal tree, so every leaf pair is still decided by the exact tests: the same
   /// pairs are reported. Fronts are not pulled up: when one has grown past twice the size of the
-  /// last front made from the roots (plus 64), the next call starts from the roots again.
+  /// last front made from the roots (plus 64), the next call starts from the roots again, as it
+  /// does after a call with a budget, on other models, or once a model's cache entry was rebuilt.
+  /// Measured with fig77_scrape (500 frames of the file scraping the CAD part, ε = 8.2 mm): query
+  /// p50 953–958 → 636–637 µs, p95 1432–1503 → 943–964 µs.
   bool temporal_coherence = true;
   /// Local reach (issue 15; an approximation, placed on the speed-vs-error frontier): when ≥ 0,
   /// a node pair's tolerance is min(tolerance_m, reach_A(node) + reach_B(node) +
@@ -178,7 +181,8 @@ class HullProximityQuery {
   /// Threads the traversal may use (SetThreads; 1 by default).
   int threads() const noexcept { return workers_.empty() ? 1 : static_cast<int>(workers_.size()); }
 
-  /// Forgets the cached per-model data and the previous call's pairs (allocation-free).
+  /// Forgets the cached per-model data and the previous call's pairs, separating directions and
+  /// front (allocation-free).
   void ClearCache() noexcept;
 
   /// The bounding sphere this object uses for node `node` of `model` (−1: the single hull of a
