@@ -497,16 +497,17 @@ bool HeapAfter(const HullProximityQuery::QueueEntry& x,
   return x.key_m > y.key_m;
 }
 
-bool PairLess(const HullProximityQuery::CoherentPair& x,
-              const HullProximityQuery::CoherentPair& y) noexcept {
+// Order of node pairs (CoherentPair, FrontPair) by node_A, then node_B.
+template <typename Pair>
+bool PairLess(const Pair& x, const Pair& y) noexcept {
   return x.node_A != y.node_A ? x.node_A < y.node_A : x.node_B < y.node_B;
 }
 
 // The entry of (node_A, node_B) in `pairs` (sorted by PairLess), or null.
-const HullProximityQuery::CoherentPair* FindPair(
-    const std::vector<HullProximityQuery::CoherentPair>& pairs, int node_A, int node_B) noexcept {
-  const HullProximityQuery::CoherentPair probe{node_A, node_B, glm::dvec3(0.0)};
-  auto it = std::lower_bound(pairs.begin(), pairs.end(), probe, PairLess);
+template <typename Pair>
+const Pair* FindPair(const std::vector<Pair>& pairs, int node_A, int node_B) noexcept {
+  const Pair probe{node_A, node_B, glm::dvec3(0.0)};
+  auto it = std::lower_bound(pairs.begin(), pairs.end(), probe, PairLess<Pair>);
   return it != pairs.end() && it->node_A == node_A && it->node_B == node_B ? &*it : nullptr;
 }
 
@@ -894,7 +895,7 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     std::vector<QueueEntry>& queue;
     std::vector<HullPairContact>& results;
     std::vector<CoherentPair>& current;
-    std::vector<CoherentPair>& current_far;
+    std::vector<FrontPair>& current_far;
     std::vector<FrontPair>& front;
     ProximityQueryStats& st;
   };
@@ -961,7 +962,7 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
       ++t.st.leaf_pairs_tested;
       stop_at(t, e.node_A, e.node_B, glm::dvec3(0.0));
       const CoherentPair* prev = nullptr;
-      const CoherentPair* prev_far = nullptr;
+      const FrontPair* prev_far = nullptr;
       if (coherent) {
         prev = FindPair(previous_, e.node_A, e.node_B);
         if (prev == nullptr) prev_far = FindPair(previous_far_, e.node_A, e.node_B);
@@ -977,7 +978,7 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
         // The previous call's separating direction v: the hulls' support intervals along it
         // are at least −Overlap/|v| apart, a lower bound of their distance. Still beyond the
         // tolerance: dropped, as GJK would have (it reports only pairs within it).
-        const glm::dvec3& v_A = prev_far->direction_W;
+        const glm::dvec3& v_A = prev_far->axis_A;
         if (-Overlap(hA, hB, v_A) > eps_e * glm::length(v_A)) {
           ++t.st.coherent_culls;
           remember_far(v_A);
@@ -1258,7 +1259,7 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
       for (const CoherentPair& c : w.current) {
         if (current_.size() < current_.capacity()) current_.push_back(c);
       }
-      for (const CoherentPair& c : w.current_far) {
+      for (const FrontPair& c : w.current_far) {
         if (current_far_.size() < current_far_.capacity()) current_far_.push_back(c);
       }
       for (const FrontPair& f : w.front) {
@@ -1285,9 +1286,9 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
               }
               return x.node_A != y.node_A ? x.node_A < y.node_A : x.node_B < y.node_B;
             });
-  std::sort(current_.begin(), current_.end(), PairLess);
+  std::sort(current_.begin(), current_.end(), PairLess<CoherentPair>);
   previous_.swap(current_);
-  std::sort(current_far_.begin(), current_far_.end(), PairLess);
+  std::sort(current_far_.begin(), current_far_.end(), PairLess<FrontPair>);
   previous_far_.swap(current_far_);
   front_valid_ = track_front && !st.budget_exhausted && !front_overflow.load();
   if (front_valid_ && !use_front) front_base_ = next_front_.size();

@@ -321,9 +321,7 @@ void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, do
     _mm_storeu_si128(reinterpret_cast<__m128i*>(ib_out + k), ib);
   }
 }
-#endif
 
-#ifdef HT_RASTER_AVX2
 // FirstLargestDifference's lanes, eight cells a step (AVX2): lane l keeps the first cell of the
 // largest finite b − a among cells ≡ l (mod 8) of this call; returns how many cells it took (a
 // multiple of 8), the rest being the caller's.

@@ -230,16 +230,17 @@ class HullProximityQuery {
   struct CoherentPair {
     int node_A;
     int node_B;
-    /// Previous closest-point direction v = p_A − p_B, or normal, in W; for a pair found
-    /// farther than its tolerance (previous_far_), GJK's last v in the frame of Query's A.
+    /// Previous closest-point direction v = p_A − p_B, or normal, in W.
     glm::dvec3 direction_W;
   };
-  /// A node pair where a traversal stopped (culled, or a leaf pair tested): one entry of a
-  /// front.
+  /// A node pair where a traversal stopped (culled, or a leaf pair tested), with the direction
+  /// that showed it farther apart than its tolerance where GJK gave one: an entry of a front, or
+  /// of the leaf pairs found beyond their tolerance (previous_far_).
   struct FrontPair {
     int node_A;
     int node_B;
-    /// For a pair internal GJK culled: its last direction p_A − p_B in A's frame; else 0.
+    /// GJK's last direction p_A − p_B (any length) in the frame of Query's A, for a pair GJK
+    /// showed beyond its tolerance; else 0.
     glm::dvec3 axis_A;
   };
   /// One thread's share of a traversal (SetThreads).
@@ -248,7 +249,7 @@ class HullProximityQuery {
     std::vector<QueueEntry> queue;
     std::vector<HullPairContact> results;
     std::vector<CoherentPair> current;
-    std::vector<CoherentPair> current_far;
+    std::vector<FrontPair> current_far;
     ProximityQueryStats st;
   };
 
@@ -262,8 +263,8 @@ class HullProximityQuery {
   std::vector<CoherentPair> current_;
   // Leaf pairs the previous call tested and found farther than their tolerance, with the
   // direction that showed it (temporal coherence), and this call's.
-  std::vector<CoherentPair> previous_far_;
-  std::vector<CoherentPair> current_far_;
+  std::vector<FrontPair> previous_far_;
+  std::vector<FrontPair> current_far_;
   // The previous call's front and this call's (front tracking); front_valid_ when the previous
   // call's is complete; front_base_ the size of the last front made from the roots.
   std::vector<FrontPair> front_;
