@@ -49,14 +49,16 @@ TEST(SampleLevelBatch, EveryKernelWritesTheBitsOfSample) {
     const HeightField field = RandomField(c.width, c.height, c.wrap_u, c.wrap_v, 7);
     for (int level = 0; level < field.num_levels(); ++level) {
       for (const std::size_t n :
-           {std::size_t{1}, std::size_t{7}, std::size_t{8}, std::size_t{13}, std::size_t{256}}) {
-        std::vector<float> u(n), v(n), best(n, -1.0f), scalar(n, -2.0f);
+           {std::size_t{1}, std::size_t{7}, std::size_t{8}, std::size_t{13}, std::size_t{16},
+            std::size_t{29}, std::size_t{256}}) {
+        std::vector<float> u(n), v(n), best(n, -1.0f), avx2(n, -3.0f), scalar(n, -2.0f);
         for (std::size_t k = 0; k < n; ++k) {
           const int pick = static_cast<int>(rng() % 8);
           u[k] = pick < 5 ? inside(rng) : pick < 7 ? outside(rng) : specials[rng() % 11];
           v[k] = pick < 4 ? inside(rng) : pick < 7 ? outside(rng) : specials[rng() % 11];
         }
         SampleLevelBatch(field, level, u, v, best, SampleKernel::kBest);
+        SampleLevelBatch(field, level, u, v, avx2, SampleKernel::kAvx2);
         SampleLevelBatch(field, level, u, v, scalar, SampleKernel::kScalar);
         for (std::size_t k = 0; k < n; ++k) {
           const float want = field.Sample(level, u[k], v[k]);
@@ -64,6 +66,7 @@ TEST(SampleLevelBatch, EveryKernelWritesTheBitsOfSample) {
               << SampleKernelName() << " " << c.width << "x" << c.height << " wrap " << c.wrap_u
               << c.wrap_v << " level " << level << " at (" << u[k] << ", " << v[k]
               << "): " << best[k] << " vs " << want;
+          ASSERT_TRUE(SameBits(avx2[k], want)) << SampleKernelName(SampleKernel::kAvx2);
           ASSERT_TRUE(SameBits(scalar[k], want));
           ++compared;
         }

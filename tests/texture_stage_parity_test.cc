@@ -152,12 +152,17 @@ TEST(TextureStageParity, FastRenderDrawsTheReferenceHeightsOnAllSixSeedModels) {
         RenderPatchHeights(m, X, triangles, c.window, side, ref);
         RenderPatchHeightsFast(m, X, triangles, c.window, side, 0, fast);
         covered += ExpectSameHeights(ref, fast, SeedModelName(which));
-        // The batched texture samples (SIMD here) against one SampleAt at a time: the same bits.
-        std::vector<float> fast_scalar(ref.size(), empty);
+        // The SIMD rows and batched texture samples (AVX-512 or AVX2 here, and AVX2 even where
+        // the CPU has AVX-512) against scalar rows and one SampleAt at a time: the same bits.
+        std::vector<float> fast_scalar(ref.size(), empty), fast_avx2(ref.size(), empty);
         RenderPatchHeightsFast(m, X, triangles, c.window, side, 0, fast_scalar,
                                SampleKernel::kScalar);
+        RenderPatchHeightsFast(m, X, triangles, c.window, side, 0, fast_avx2,
+                               SampleKernel::kAvx2);
         EXPECT_EQ(0, std::memcmp(fast.data(), fast_scalar.data(), fast.size() * sizeof(float)))
             << SeedModelName(which) << " " << SampleKernelName();
+        EXPECT_EQ(0, std::memcmp(fast_avx2.data(), fast_scalar.data(), fast.size() * sizeof(float)))
+            << SeedModelName(which) << " " << SampleKernelName(SampleKernel::kAvx2);
         // On the window grown by one cell: the reference on a window of (N+2)² cells, with the
         // window's own box depth R (the grown window's would be deeper; the fast path keeps R).
         const ContactWindow grown = ContactWindow::Make(c.window.center_W, c.window.normal_W,

@@ -333,11 +333,10 @@ ContactLinearization TexturePenetrationSolver::Linearize(
               return;
             }
             std::vector<float>& heights = rotation_heights_[static_cast<size_t>(task - 1)];
-            heights.assign(cells, std::numeric_limits<float>::infinity());
-            RenderPatchHeightsFast(tool, poses[static_cast<size_t>(task + 4)], tool_triangles_, w,
-                                   PatchSide::kTool, 0, heights);
+            heights.resize(cells);
             samples[static_cast<size_t>(task + 4)] =
-                DirectionalPenetrationDepth(env_heights_, heights);
+                RenderToolDepth(tool, poses[static_cast<size_t>(task + 4)], tool_triangles_, w,
+                                env_heights_, -1, heights);
           });
         });
         done = true;
@@ -348,7 +347,13 @@ ContactLinearization TexturePenetrationSolver::Linearize(
     if (!done) {
       RenderGrownBase(tool, X_WT, w, samples);
       if (samples[0].cell >= 0) {
-        for (int i = 5; i < kGradientSamples; ++i) samples[i] = EvaluateTool(tool, poses[i], w);
+        // Each rotation's depth alone, its render culled to the cells that can matter
+        // (RenderToolDepth), from the triangles over the unrotated pose's deepest cell.
+        tool_heights_.resize(cells);
+        for (int i = 5; i < kGradientSamples; ++i) {
+          samples[i] = RenderToolDepth(tool, poses[i], tool_triangles_, w, env_heights_,
+                                       samples[0].cell, tool_heights_);
+        }
       }
     }
   } else {

@@ -140,6 +140,62 @@ std::size_t SampleSse2(const HeightFieldLevel& L, bool wrap_u, bool wrap_v, cons
   return k;
 }
 
+// AVX-512, sixteen samples a step: SampleAvx2's operations, lane for lane (this file is built
+// with -ffp-contract=off, so the multiplies and adds are not fused and the bits are the scalar
+// code's).
+#define HT_AVX512_TARGET gnu::target("avx512f,avx512vl,avx512dq,avx512cd")
+
+[[HT_AVX512_TARGET]] inline __m512i AddressAvx512(__m512i i, __m512i size_minus_1,
+                                                  bool wrap) noexcept {
+  if (wrap) return _mm512_and_si512(i, size_minus_1);
+  return _mm512_min_epi32(_mm512_max_epi32(i, _mm512_setzero_si512()), size_minus_1);
+}
+
+[[HT_AVX512_TARGET]] std::size_t SampleAvx512(const HeightFieldLevel& L, bool wrap_u,
+                                               bool wrap_v, const float* u, const float* v,
+                                               float* h, std::size_t n) noexcept {
+  const __m512 tw = _mm512_set1_ps(static_cast<float>(L.width));
+  const __m512 th = _mm512_set1_ps(static_cast<float>(L.height));
+  const __m512 half = _mm512_set1_ps(0.5f), lo = _mm512_set1_ps(-1e6f), hi = _mm512_set1_ps(1e6f);
+  const __m512i wm1 = _mm512_set1_epi32(L.width - 1), hm1 = _mm512_set1_epi32(L.height - 1);
+  const __m512i one = _mm512_set1_epi32(1), width = _mm512_set1_epi32(L.width);
+  const __m512 big = _mm512_set1_ps(std::numeric_limits<float>::max());
+  const float* texels = L.texels.data();
+  std::size_t k = 0;
+  for (; k + 16 <= n; k += 16) {
+    const __m512 uu = _mm512_loadu_ps(u + k), vv = _mm512_loadu_ps(v + k);
+    const __m512 fx =
+        _mm512_min_ps(_mm512_max_ps(_mm512_sub_ps(_mm512_mul_ps(uu, tw), half), lo), hi);
+    const __m512 fy =
+        _mm512_min_ps(_mm512_max_ps(_mm512_sub_ps(_mm512_mul_ps(vv, th), half), lo), hi);
+    __m512i x0 = _mm512_cvttps_epi32(fx), y0 = _mm512_cvttps_epi32(fy);
+    // floor: truncation, minus one where that rounded up.
+    x0 = _mm512_mask_sub_epi32(x0, _mm512_cmp_ps_mask(fx, _mm512_cvtepi32_ps(x0), _CMP_LT_OQ),
+                               x0, one);
+    y0 = _mm512_mask_sub_epi32(y0, _mm512_cmp_ps_mask(fy, _mm512_cvtepi32_ps(y0), _CMP_LT_OQ),
+                               y0, one);
+    const __m512 tx = _mm512_sub_ps(fx, _mm512_cvtepi32_ps(x0));
+    const __m512 ty = _mm512_sub_ps(fy, _mm512_cvtepi32_ps(y0));
+    const __m512i xa = AddressAvx512(x0, wm1, wrap_u);
+    const __m512i xb = AddressAvx512(_mm512_add_epi32(x0, one), wm1, wrap_u);
+    const __m512i ya = _mm512_mullo_epi32(AddressAvx512(y0, hm1, wrap_v), width);
+    const __m512i yb =
+        _mm512_mullo_epi32(AddressAvx512(_mm512_add_epi32(y0, one), hm1, wrap_v), width);
+    const __m512 a0 = _mm512_i32gather_ps(_mm512_add_epi32(ya, xa), texels, 4);
+    const __m512 a1 = _mm512_i32gather_ps(_mm512_add_epi32(ya, xb), texels, 4);
+    const __m512 b0 = _mm512_i32gather_ps(_mm512_add_epi32(yb, xa), texels, 4);
+    const __m512 b1 = _mm512_i32gather_ps(_mm512_add_epi32(yb, xb), texels, 4);
+    const __m512 top = _mm512_add_ps(a0, _mm512_mul_ps(tx, _mm512_sub_ps(a1, a0)));
+    const __m512 bottom = _mm512_add_ps(b0, _mm512_mul_ps(tx, _mm512_sub_ps(b1, b0)));
+    const __m512 value = _mm512_add_ps(top, _mm512_mul_ps(ty, _mm512_sub_ps(bottom, top)));
+    // Non-finite u or v: +0, as HeightField::Sample (|x| <= FLT_MAX is false for ±inf and NaN).
+    const __mmask16 finite = _mm512_cmp_ps_mask(_mm512_abs_ps(uu), big, _CMP_LE_OQ) &
+                             _mm512_cmp_ps_mask(_mm512_abs_ps(vv), big, _CMP_LE_OQ);
+    _mm512_storeu_ps(h + k, _mm512_maskz_mov_ps(finite, value));
+  }
+  return k;
+}
+
 #endif
 
 }  // namespace
@@ -162,12 +218,17 @@ void SampleLevelBatch(const HeightField& field, int level, std::span<const float
 #ifdef HT_SAMPLE_X86
   const bool wrap_u = field.wrap_u(), wrap_v = field.wrap_v();
   // The texel index y·width + x must fit 32-bit lanes; periodic sizes must be powers of two.
-  const bool simd = kernel == SampleKernel::kBest &&
+  const bool simd = kernel != SampleKernel::kScalar &&
                     static_cast<long long>(L.width) * L.height <= (1LL << 31) - 1 &&
                     (!wrap_u || IsPowerOfTwo(L.width)) && (!wrap_v || IsPowerOfTwo(L.height));
   if (simd) {
-    done = CpuHasAvx2() ? SampleAvx2(L, wrap_u, wrap_v, u.data(), v.data(), h.data(), n)
-                        : SampleSse2(L, wrap_u, wrap_v, u.data(), v.data(), h.data(), n);
+    if (kernel == SampleKernel::kBest && CpuHasAvx512()) {
+      done = SampleAvx512(L, wrap_u, wrap_v, u.data(), v.data(), h.data(), n);
+    }
+    done += CpuHasAvx2() ? SampleAvx2(L, wrap_u, wrap_v, u.data() + done, v.data() + done,
+                                      h.data() + done, n - done)
+                         : SampleSse2(L, wrap_u, wrap_v, u.data() + done, v.data() + done,
+                                      h.data() + done, n - done);
   }
 #else
   (void)kernel;
@@ -175,9 +236,21 @@ void SampleLevelBatch(const HeightField& field, int level, std::span<const float
   SampleScalar(field, level, L, u.data() + done, v.data() + done, h.data() + done, n - done);
 }
 
+bool CpuHasAvx512() noexcept {
+#ifdef HT_SAMPLE_X86
+  static const bool have =
+      __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+      __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512cd");
+  return have;
+#else
+  return false;
+#endif
+}
+
 const char* SampleKernelName(SampleKernel kernel) noexcept {
 #ifdef HT_SAMPLE_X86
-  if (kernel == SampleKernel::kBest) return CpuHasAvx2() ? "avx2" : "sse2";
+  if (kernel == SampleKernel::kBest && CpuHasAvx512()) return "avx512";
+  if (kernel != SampleKernel::kScalar) return CpuHasAvx2() ? "avx2" : "sse2";
 #else
   (void)kernel;
 #endif

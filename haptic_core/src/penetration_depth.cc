@@ -213,9 +213,17 @@ void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, do
 // cell_out, in increasing i; returns how many. AVX2 without FMA: the compiler may not fuse the
 // multiplies and adds, so each b has the scalar code's bits. The outputs need room for ib − ia + 4
 // cells.
+// With `cull` (a RowCull, below), a covered cell is also dropped where its coarse height cannot
+// make it the deepest cell.
+struct RowCull {
+  const float* env;  // the environment's heights, indexed as the render buffer
+  double d0, d1, d2;  // the triangle's corner heights along n
+  double cut;         // keep a cell where env − (b·d) ≥ cut (ordered: NaN drops)
+};
+
 [[gnu::target("avx2")]] int CoverRowAvx2(double r0, double gx0, double r1, double gx1, int ia,
                                          int ib, int row_start, double* b0_out, double* b1_out,
-                                         int* cell_out) noexcept {
+                                         int* cell_out, const RowCull* cull = nullptr) noexcept {
   const __m256d vr0 = _mm256_set1_pd(r0), vgx0 = _mm256_set1_pd(gx0);
   const __m256d vr1 = _mm256_set1_pd(r1), vgx1 = _mm256_set1_pd(gx1);
   const __m256d one = _mm256_set1_pd(1.0), half = _mm256_set1_pd(0.5);
@@ -234,6 +242,16 @@ void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, do
         _mm256_cmp_pd(b2, tol, _CMP_NLT_UQ));
     int mask = _mm256_movemask_pd(keep);
     if (ib - i < 3) mask &= (1 << (ib - i + 1)) - 1;  // lanes past ib
+    if (cull != nullptr && mask != 0) {
+      const __m128i load = _mm_cmpgt_epi32(_mm_set1_epi32(ib - i + 1), steps);  // lanes ≤ ib
+      const __m256d env = _mm256_cvtps_pd(_mm_maskload_ps(cull->env + row_start + i, load));
+      const __m256d value = _mm256_add_pd(
+          _mm256_add_pd(_mm256_mul_pd(b0, _mm256_set1_pd(cull->d0)),
+                        _mm256_mul_pd(b1, _mm256_set1_pd(cull->d1))),
+          _mm256_mul_pd(b2, _mm256_set1_pd(cull->d2)));
+      mask &= _mm256_movemask_pd(
+          _mm256_cmp_pd(_mm256_sub_pd(env, value), _mm256_set1_pd(cull->cut), _CMP_GE_OQ));
+    }
     if (mask == 0xF) {
       _mm256_storeu_pd(b0_out + count, b0);
       _mm256_storeu_pd(b1_out + count, b1);
@@ -319,6 +337,156 @@ void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, do
     _mm256_storeu_pd(r1_out + k, r[1]);
     _mm_storeu_si128(reinterpret_cast<__m128i*>(ia_out + k), ia);
     _mm_storeu_si128(reinterpret_cast<__m128i*>(ib_out + k), ib);
+  }
+}
+
+// The AVX-512 kernels (F, VL, DQ, CD): the AVX2 kernels' operations on eight cells a step,
+// lane for lane, so the same bits (this file is built with -ffp-contract=off: AVX-512 F has
+// FMA instructions, and no multiply-add may be fused).
+#define HT_AVX512_TARGET gnu::target("avx512f,avx512vl,avx512dq,avx512cd")
+
+// CoverRowAvx2 eight cells a step, the covered lanes compressed into the outputs (which need
+// room for ib − ia + 8 cells).
+[[HT_AVX512_TARGET]] int CoverRowAvx512(double r0, double gx0, double r1, double gx1, int ia,
+                                        int ib, int row_start, double* b0_out, double* b1_out,
+                                        int* cell_out, const RowCull* cull = nullptr) noexcept {
+  const __m512d vr0 = _mm512_set1_pd(r0), vgx0 = _mm512_set1_pd(gx0);
+  const __m512d vr1 = _mm512_set1_pd(r1), vgx1 = _mm512_set1_pd(gx1);
+  const __m512d one = _mm512_set1_pd(1.0), half = _mm512_set1_pd(0.5);
+  const __m512d tol = _mm512_set1_pd(kEdgeTolerance);
+  const __m256i steps = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+  const __m256i start = _mm256_set1_epi32(row_start);
+  int count = 0;
+  for (int i = ia; i <= ib; i += 8) {
+    const __m256i lanes = _mm256_add_epi32(_mm256_set1_epi32(i), steps);
+    const __m512d px = _mm512_add_pd(_mm512_cvtepi32_pd(lanes), half);  // exact
+    const __m512d b0 = _mm512_add_pd(vr0, _mm512_mul_pd(vgx0, px));
+    const __m512d b1 = _mm512_add_pd(vr1, _mm512_mul_pd(vgx1, px));
+    const __m512d b2 = _mm512_sub_pd(_mm512_sub_pd(one, b0), b1);
+    unsigned keep = _mm512_cmp_pd_mask(b0, tol, _CMP_NLT_UQ) &
+                    _mm512_cmp_pd_mask(b1, tol, _CMP_NLT_UQ) &
+                    _mm512_cmp_pd_mask(b2, tol, _CMP_NLT_UQ);
+    if (ib - i < 7) keep &= (1u << (ib - i + 1)) - 1;  // lanes past ib
+    if (cull != nullptr && keep != 0) {
+      const __m512d env = _mm512_cvtps_pd(
+          _mm256_maskz_loadu_ps(static_cast<__mmask8>(keep), cull->env + row_start + i));
+      const __m512d value = _mm512_add_pd(
+          _mm512_add_pd(_mm512_mul_pd(b0, _mm512_set1_pd(cull->d0)),
+                        _mm512_mul_pd(b1, _mm512_set1_pd(cull->d1))),
+          _mm512_mul_pd(b2, _mm512_set1_pd(cull->d2)));
+      keep &= _mm512_cmp_pd_mask(_mm512_sub_pd(env, value), _mm512_set1_pd(cull->cut),
+                                 _CMP_GE_OQ);
+    }
+    if (keep == 0) continue;
+    const auto k = static_cast<__mmask8>(keep);
+    _mm512_storeu_pd(b0_out + count, _mm512_maskz_compress_pd(k, b0));
+    _mm512_storeu_pd(b1_out + count, _mm512_maskz_compress_pd(k, b1));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(cell_out + count),
+                        _mm256_maskz_compress_epi32(k, _mm256_add_epi32(lanes, start)));
+    count += __builtin_popcount(keep);
+  }
+  return count;
+}
+
+// ShadeCellsAvx2 eight cells a step; the last n mod 8 in masked lanes.
+[[HT_AVX512_TARGET]] void ShadeCellsAvx512(const TriangleShading& t, const double* b0,
+                                           const double* b1, double* value, float* u, float* v,
+                                           double* ndotn, int n) noexcept {
+  const __m512d uv0x = _mm512_set1_pd(t.uv0x), uv1x = _mm512_set1_pd(t.uv1x);
+  const __m512d uv2x = _mm512_set1_pd(t.uv2x), uv0y = _mm512_set1_pd(t.uv0y);
+  const __m512d uv1y = _mm512_set1_pd(t.uv1y), uv2y = _mm512_set1_pd(t.uv2y);
+  const __m512d nn0 = _mm512_set1_pd(t.nn0), nn1 = _mm512_set1_pd(t.nn1);
+  const __m512d nn2 = _mm512_set1_pd(t.nn2), c01 = _mm512_set1_pd(t.cos01);
+  const __m512d c02 = _mm512_set1_pd(t.cos02), c12 = _mm512_set1_pd(t.cos12);
+  const __m512d d0 = _mm512_set1_pd(t.d0), d1 = _mm512_set1_pd(t.d1), d2 = _mm512_set1_pd(t.d2);
+  const __m512d one = _mm512_set1_pd(1.0), two = _mm512_set1_pd(2.0);
+  const __m512d tiny = _mm512_set1_pd(1e-12);
+  for (int k = 0; k < n; k += 8) {
+    const auto m = static_cast<__mmask8>(n - k >= 8 ? 0xFF : (1u << (n - k)) - 1);
+    const __m512d a = _mm512_maskz_loadu_pd(m, b0 + k), b = _mm512_maskz_loadu_pd(m, b1 + k);
+    const __m512d c = _mm512_sub_pd(_mm512_sub_pd(one, a), b);
+    _mm512_mask_storeu_pd(
+        value + k, m,
+        _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(a, d0), _mm512_mul_pd(b, d1)),
+                      _mm512_mul_pd(c, d2)));
+    const __m512d uu = _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(a, uv0x), _mm512_mul_pd(b, uv1x)),
+                                     _mm512_mul_pd(c, uv2x));
+    const __m512d vv = _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(a, uv0y), _mm512_mul_pd(b, uv1y)),
+                                     _mm512_mul_pd(c, uv2y));
+    _mm256_mask_storeu_ps(u + k, m, _mm512_cvtpd_ps(uu));
+    _mm256_mask_storeu_ps(v + k, m, _mm512_cvtpd_ps(vv));
+    if (t.flat) {
+      _mm512_mask_storeu_pd(ndotn + k, m, nn0);
+      continue;
+    }
+    const __m512d squares =
+        _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(a, a), _mm512_mul_pd(b, b)), _mm512_mul_pd(c, c));
+    const __m512d cross = _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(_mm512_mul_pd(a, b), c01),
+                                                      _mm512_mul_pd(_mm512_mul_pd(a, c), c02)),
+                                        _mm512_mul_pd(_mm512_mul_pd(b, c), c12));
+    const __m512d len2 = _mm512_add_pd(squares, _mm512_mul_pd(two, cross));
+    const __m512d dot = _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(a, nn0), _mm512_mul_pd(b, nn1)),
+                                      _mm512_mul_pd(c, nn2));
+    const __m512d quotient = _mm512_div_pd(dot, _mm512_sqrt_pd(len2));
+    // +0 where len2 ≤ 1e-12 (or NaN), as the scalar code's conditional.
+    _mm512_mask_storeu_pd(
+        ndotn + k, m,
+        _mm512_maskz_mov_pd(_mm512_cmp_pd_mask(len2, tiny, _CMP_GT_OQ), quotient));
+  }
+}
+
+// FinishCellsAvx2 and the envelope, eight cells a step: the heights fv (float(value + h·ndotn),
+// or the neutral value outside the box), then heights[cell] = fv where fv > it (keep_max) or
+// fv < it. Eight cells that are one run of a row (the common case) are loaded and stored as one
+// vector; other distinct cells are gathered and scattered; eight with a repeated cell (a cell on
+// an edge that two triangles share) go one at a time in the order drawn. As the cells are
+// distinct within a step, each cell sees the same comparisons in the same order as the scalar
+// loop.
+[[HT_AVX512_TARGET]] void FinishEnvelopeAvx512(const double* value, const float* h,
+                                               const double* ndotn, const int* cell, double range,
+                                               bool keep_max, float* heights, int n) noexcept {
+  const __m512d abs_mask = _mm512_castsi512_pd(_mm512_set1_epi64(0x7fffffffffffffff));
+  const __m512d vrange = _mm512_set1_pd(range);
+  const float neutral_value =
+      keep_max ? -std::numeric_limits<float>::infinity() : std::numeric_limits<float>::infinity();
+  const __m256 neutral = _mm256_set1_ps(neutral_value);
+  const __m256i steps = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+  for (int k = 0; k < n; k += 8) {
+    const unsigned valid = n - k >= 8 ? 0xFFu : (1u << (n - k)) - 1;
+    const auto m = static_cast<__mmask8>(valid);
+    const __m512d x = _mm512_add_pd(
+        _mm512_maskz_loadu_pd(m, value + k),
+        _mm512_mul_pd(_mm512_cvtps_pd(_mm256_maskz_loadu_ps(m, h + k)),
+                      _mm512_maskz_loadu_pd(m, ndotn + k)));
+    const __mmask8 inside =
+        _mm512_cmp_pd_mask(_mm512_and_pd(x, abs_mask), vrange, _CMP_LE_OQ);
+    const __m256 fv = _mm256_mask_mov_ps(neutral, inside, _mm512_cvtpd_ps(x));
+    const __m256i idx = _mm256_maskz_loadu_epi32(m, cell + k);
+    const int first = cell[k];
+    const __m256i run = _mm256_add_epi32(_mm256_set1_epi32(first), steps);
+    if ((_mm256_cmpeq_epi32_mask(idx, run) & valid) == valid) {
+      const __m256 old = _mm256_maskz_loadu_ps(m, heights + first);
+      const __mmask8 take = m & (keep_max ? _mm256_cmp_ps_mask(fv, old, _CMP_GT_OQ)
+                                          : _mm256_cmp_ps_mask(fv, old, _CMP_LT_OQ));
+      _mm256_mask_storeu_ps(heights + first, take, fv);
+      continue;
+    }
+    // A lane's conflict bits name the earlier lanes with its cell; the lanes past n are after
+    // every valid lane, so they name none of them.
+    if (false && _mm256_mask_test_epi32_mask(m, _mm256_conflict_epi32(idx), _mm256_set1_epi32(-1)) == 0) {
+      const __m256 old = _mm256_mmask_i32gather_ps(neutral, m, idx, heights, 4);
+      const __mmask8 take = m & (keep_max ? _mm256_cmp_ps_mask(fv, old, _CMP_GT_OQ)
+                                          : _mm256_cmp_ps_mask(fv, old, _CMP_LT_OQ));
+      _mm256_mask_i32scatter_ps(heights, take, idx, fv, 4);
+      continue;
+    }
+    alignas(32) float f[8];
+    _mm256_store_ps(f, fv);
+    const int lanes = std::min(8, n - k);
+    for (int l = 0; l < lanes; ++l) {
+      float& c = heights[cell[k + l]];
+      if (keep_max ? f[l] > c : f[l] < c) c = f[l];
+    }
   }
 }
 
@@ -589,10 +757,24 @@ DepthSample DirectionalPenetrationDepth(std::span<const float> b,
   return scan.Result();
 }
 
-void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO,
-                            std::span<const int> triangles, const ContactWindow& w, PatchSide side,
-                            int margin_cells, std::span<float> heights,
-                            SampleKernel kernel) noexcept {
+namespace {
+
+// What RenderToolDepth adds to RenderPatchHeightsFast (margin 0, the tool's side): the
+// environment's heights, the largest |h·(N·n)| a textured cell can add to its coarse height, the
+// cell whose covering triangles are drawn first, and `lower`, the largest b − a of the cells
+// drawn so far (a lower bound of the render's depth: a cell's tool height only falls as more
+// triangles are drawn).
+struct DepthCull {
+  const float* env;
+  double texture_bound_m;
+  int first_i, first_j;
+  float lower;
+};
+
+void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
+                           std::span<const int> triangles, const ContactWindow& w, PatchSide side,
+                           int margin_cells, std::span<float> heights, SampleKernel kernel,
+                           DepthCull* cull) noexcept {
   const int n = w.resolution;
   const int m = std::max(margin_cells, 0);
   const int nt = n + 2 * m;
@@ -624,14 +806,22 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
 #endif
   int batch_count = 0, batch_shaded = 0, batch_level = 0;
 #ifdef HT_RASTER_AVX2
-  // Rows four cells a step where the CPU has AVX2 (and the caller did not ask for scalar code).
-  const bool avx2_rows = kernel == SampleKernel::kBest && CpuHasAvx2();
+  // Rows eight cells a step where the CPU has AVX-512 (and the caller asked for the best
+  // kernel), else four where it has AVX2 (and the caller did not ask for scalar code).
+  const bool avx512_rows = kernel == SampleKernel::kBest && CpuHasAvx512();
+  const bool avx2_rows = kernel != SampleKernel::kScalar && CpuHasAvx2();
 #endif
   TriangleShading shading{};
   const auto shade = [&] {  // the current triangle's waiting cells
     const int s = batch_shaded;
     if (batch_count > s) {
 #ifdef HT_RASTER_AVX2
+      if (avx512_rows) {
+        ShadeCellsAvx512(shading, batch_b0 + s, batch_b1 + s, batch_value + s, batch_u + s,
+                         batch_v + s, batch_ndotn + s, batch_count - s);
+        batch_shaded = batch_count;
+        return;
+      }
       if (avx2_rows) {
         ShadeCellsAvx2(shading, batch_b0 + s, batch_b1 + s, batch_value + s, batch_u + s,
                        batch_v + s, batch_ndotn + s, batch_count - s);
@@ -651,7 +841,30 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
     SampleLevelBatch(model.texture, batch_level, std::span<const float>(batch_u, count),
                      std::span<const float>(batch_v, count), std::span<float>(batch_h, count),
                      kernel);
+    if (cull != nullptr) {
+      // The scalar finish, and each cell's b − a (float, as the depth scan takes it) raises the
+      // lower bound: the cell's final tool height is at most this one.
+      float lower = cull->lower;
+      for (std::size_t k = 0; k < count; ++k) {
+        const double value = batch_value[k] + static_cast<double>(batch_h[k]) * batch_ndotn[k];
+        if (!(std::abs(value) <= range)) continue;  // outside the window's box along n
+        float& cell = heights[static_cast<std::size_t>(batch_cell[k])];
+        const auto fv = static_cast<float>(value);
+        if (fv < cell) cell = fv;
+        const float e = cull->env[batch_cell[k]];
+        if (std::isfinite(e) && e - fv > lower) lower = e - fv;
+      }
+      cull->lower = lower;
+      batch_count = batch_shaded = 0;
+      return;
+    }
 #ifdef HT_RASTER_AVX2
+    if (avx512_rows) {
+      FinishEnvelopeAvx512(batch_value, batch_h, batch_ndotn, batch_cell, range, keep_max,
+                           heights.data(), batch_count);
+      batch_count = batch_shaded = 0;
+      return;
+    }
     if (avx2_rows) {
       // The heights four cells a step, a cell outside the box made the envelope's neutral value
       // (which never replaces a cell); then the envelope, cell by cell in the order drawn.
@@ -681,6 +894,18 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
     }
     batch_count = batch_shaded = 0;
   };
+  // With culling, two passes: the cells within kFirstCellReach of the first cell, then (after a
+  // flush, which sets the lower bound from them) every cell, dropped where its coarse height
+  // cannot reach the lower bound (the first pass's cells are drawn again: the envelope keeps
+  // them). Without, one pass.
+  constexpr int kFirstCellReach = 2;
+  const int passes = cull != nullptr && cull->first_i >= 0 ? 2 : 1;
+  // Culling margin: the float roundings of a cell's height and of b − a (relative 2⁻²⁴ each, of
+  // values within the window's box) and of the double arithmetic, far exceeded.
+  const double cull_margin =
+      cull != nullptr ? 1e-6 * (3.0 * range + cull->texture_bound_m) + 1e-15 : 0.0;
+  for (int pass = 0; pass < passes; ++pass) {
+  if (pass == 1) flush();
   for (const int f : triangles) {
     shade();  // the previous triangle's cells, before its shading is replaced
     const glm::ivec3 tri = model.triangles[f];
@@ -704,9 +929,28 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
     }
     ProjectedCells pc;
     if (!ProjectCells(x, y, nt, pc)) continue;
+    if (pass == 0 && passes == 2) {
+      // The first pass draws the cells around the first cell only.
+      pc.i0 = std::max(pc.i0, cull->first_i - kFirstCellReach);
+      pc.i1 = std::min(pc.i1, cull->first_i + kFirstCellReach);
+      pc.j0 = std::max(pc.j0, cull->first_j - kFirstCellReach);
+      pc.j1 = std::min(pc.j1, cull->first_j + kFirstCellReach);
+      if (pc.i0 > pc.i1 || pc.j0 > pc.j1) continue;
+    }
     const double inv_area = pc.inv_area;
     const int i0 = pc.i0, i1 = pc.i1;
     const bool textured = have_texture && model.textured[f] != 0;
+    // The cull of this triangle's cells: a cell's b − a is at most env − (b·d) + |h·(N·n)|
+    // (|N·n| ≤ 1, |h| ≤ the texture's bound), so cells where that, with the margin, is below the
+    // lower bound cannot be the deepest (nor tie with it).
+    RowCull row_cull{};
+    const RowCull* row_cull_ptr = nullptr;
+    if (cull != nullptr && std::isfinite(cull->lower)) {
+      row_cull = {cull->env, d[0], d[1], d[2],
+                  static_cast<double>(cull->lower) - (textured ? cull->texture_bound_m : 0.0) -
+                      cull_margin};
+      row_cull_ptr = &row_cull;
+    }
     const int level =
         textured ? model.texture.LevelForFootprint(model.texel_size_m[f], w.cell_size_m()) : 0;
     if (!textured || level != batch_level) flush();
@@ -772,10 +1016,15 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
           constexpr int kChunk = kBatch / 2;
           for (int start = ia; start <= ib; start += kChunk) {
             const int end = std::min(ib, start + kChunk - 1);
-            if (batch_count + (end - start + 4) > kBatch) flush();
-            batch_count += CoverRowAvx2(span_r0[k], gx0, span_r1[k], gx1, start, end, row_start,
-                                        batch_b0 + batch_count, batch_b1 + batch_count,
-                                        batch_cell + batch_count);
+            if (batch_count + (end - start + 8) > kBatch) flush();
+            batch_count +=
+                avx512_rows
+                    ? CoverRowAvx512(span_r0[k], gx0, span_r1[k], gx1, start, end, row_start,
+                                     batch_b0 + batch_count, batch_b1 + batch_count,
+                                     batch_cell + batch_count, row_cull_ptr)
+                    : CoverRowAvx2(span_r0[k], gx0, span_r1[k], gx1, start, end, row_start,
+                                   batch_b0 + batch_count, batch_b1 + batch_count,
+                                   batch_cell + batch_count, row_cull_ptr);
           }
         }
       }
@@ -816,6 +1065,11 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
         const double b1 = r1 + gx1 * px;
         const double b2 = 1.0 - b0 - b1;
         if (b0 < kEdgeTolerance || b1 < kEdgeTolerance || b2 < kEdgeTolerance) continue;
+        if (row_cull_ptr != nullptr &&
+            !(static_cast<double>(row_cull.env[j * nt + i]) - (b0 * d[0] + b1 * d[1] + b2 * d[2]) >=
+              row_cull.cut)) {
+          continue;
+        }
         if (textured) {  // b·d and h along the unit interpolated normal, in flush()
           batch_b0[batch_count] = b0;
           batch_b1[batch_count] = b1;
@@ -828,10 +1082,45 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
         float& cell = row[i];
         const auto fv = static_cast<float>(value);
         if (keep_max ? fv > cell : fv < cell) cell = fv;
+        if (cull != nullptr) {
+          const float e = cull->env[j * nt + i];
+          if (std::isfinite(e) && e - fv > cull->lower) cull->lower = e - fv;
+        }
       }
     }
   }
+  }
   flush();
+}
+
+}  // namespace
+
+void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO,
+                            std::span<const int> triangles, const ContactWindow& w, PatchSide side,
+                            int margin_cells, std::span<float> heights,
+                            SampleKernel kernel) noexcept {
+  RenderHeightsFastImpl(model, X_WO, triangles, w, side, margin_cells, heights, kernel, nullptr);
+}
+
+DepthSample RenderToolDepth(const HapticModel& tool, const RigidTransform& X_WT,
+                            std::span<const int> triangles, const ContactWindow& w,
+                            std::span<const float> env_heights, int first_cell,
+                            std::span<float> heights, SampleKernel kernel) noexcept {
+  const int n = w.resolution;
+  const auto cells = static_cast<std::size_t>(n) * n;
+  if (n <= 0 || env_heights.size() < cells || heights.size() < cells) {
+    return {-std::numeric_limits<double>::infinity(), -1};
+  }
+  std::fill_n(heights.begin(), cells, std::numeric_limits<float>::infinity());
+  DepthCull cull{env_heights.data(),
+                 tool.texture.empty() ? 0.0
+                                      : std::max(std::abs(static_cast<double>(tool.texture.min_height())),
+                                                 std::abs(static_cast<double>(tool.texture.max_height()))),
+                 first_cell >= 0 && first_cell < static_cast<int>(cells) ? first_cell % n : -1,
+                 first_cell >= 0 && first_cell < static_cast<int>(cells) ? first_cell / n : -1,
+                 -std::numeric_limits<float>::infinity()};
+  RenderHeightsFastImpl(tool, X_WT, triangles, w, PatchSide::kTool, 0, heights, kernel, &cull);
+  return DirectionalPenetrationDepth(env_heights.first(cells), heights.first(cells));
 }
 
 DepthSample DirectionalPenetrationDepthShifted(std::span<const float> b, int resolution,
