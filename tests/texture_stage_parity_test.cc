@@ -178,6 +178,71 @@ TEST(TextureStageParity, FastRenderDrawsTheReferenceHeightsOnAllSixSeedModels) {
   EXPECT_GT(covered, 20000);  // the contacts really draw something
 }
 
+// RenderToolDepth draws only the cells that can be the deepest: on random contacts of all six
+// seed models, at the base pose and at the rotation samples' poses, the same cell and depth bits
+// as the depth scan of the whole render, with every kernel and whatever first cell it is given
+// (the base's deepest, none, a random one); and it does cull (cells the whole render covers are
+// left undrawn), so the comparison is not between two whole renders.
+TEST(TextureStageParity, CulledToolRenderGivesTheWholeRendersDepth) {
+  std::mt19937 rng(77);
+  std::vector<int> env_triangles, tool_triangles;
+  int compared = 0, in_contact = 0;
+  long long whole_cells = 0, drawn_cells = 0;
+  for (const SeedModel which : kAll) {
+    const HapticModel& env = Seed(which);
+    const HapticModel& tool = Seed(kAll[(static_cast<int>(which) + 2) % 6]);
+    for (int trial = 0; trial < 6; ++trial) {
+      const int n = trial % 3 == 2 ? 37 : 50;
+      const Contact c = RandomContact(tool, env, rng, n);
+      const auto cells = static_cast<std::size_t>(n) * n;
+      std::vector<float> env_h(cells, -std::numeric_limits<float>::infinity());
+      SelectPatchTriangles(env, c.X_WO, c.window, PatchSide::kEnvironment, 0.0, env_triangles);
+      RenderPatchHeightsFast(env, c.X_WO, env_triangles, c.window, PatchSide::kEnvironment, 0,
+                             env_h);
+      const GradientSteps h = GradientSteps::For(c.window);
+      SelectPatchTriangles(tool, c.X_WT, c.window, PatchSide::kTool, 2.0 * h.h_x + 0.05,
+                           tool_triangles, h.h_theta + 1e-9);
+      const auto poses = GradientSamplePoses(c.X_WT, c.window);
+      std::vector<float> whole(cells), partial(cells);
+      int base_cell = -1;
+      for (const int p : {0, 5, 6, 7, 8, 9, 10}) {
+        std::fill(whole.begin(), whole.end(), std::numeric_limits<float>::infinity());
+        RenderPatchHeightsFast(tool, poses[p], tool_triangles, c.window, PatchSide::kTool, 0,
+                               whole);
+        const DepthSample want = DirectionalPenetrationDepth(env_h, whole);
+        if (p == 0) base_cell = want.cell;
+        if (want.cell >= 0) ++in_contact;
+        const int random_cell = static_cast<int>(rng() % cells);
+        for (const SampleKernel kernel :
+             {SampleKernel::kBest, SampleKernel::kAvx2, SampleKernel::kScalar}) {
+          for (const int first : {base_cell, -1, random_cell}) {
+            const DepthSample got =
+                RenderToolDepth(tool, poses[p], tool_triangles, c.window, env_h, first, partial,
+                                kernel);
+            ASSERT_EQ(got.cell, want.cell) << SeedModelName(which) << " pose " << p;
+            ASSERT_EQ(std::memcmp(&got.depth_m, &want.depth_m, sizeof(double)), 0)
+                << SeedModelName(which) << " pose " << p << ": " << got.depth_m << " vs "
+                << want.depth_m;
+            ++compared;
+            if (kernel == SampleKernel::kBest && first == base_cell && want.cell >= 0) {
+              for (std::size_t k = 0; k < cells; ++k) {
+                whole_cells += std::isfinite(whole[k]) && std::isfinite(env_h[k]);
+                drawn_cells += std::isfinite(partial[k]) && std::isfinite(env_h[k]);
+              }
+            }
+          }
+        }
+      }
+    }
+  }
+  EXPECT_GT(in_contact, 100);
+  EXPECT_GT(compared, 2000);
+  // It culls: fewer cells drawn than the whole renders cover (where the environment is too).
+  EXPECT_LT(drawn_cells, whole_cells * 9 / 10) << drawn_cells << " of " << whole_cells;
+  RecordProperty("drawn_cells", std::to_string(drawn_cells));
+  RecordProperty("whole_cells", std::to_string(whole_cells));
+}
+
 // Slivers, needles and triangles with an edge almost along a row: the fast render's row spans
 // are computed bounds widened by a tiny slack, so cells exactly on or a rounding away from an
 // edge are where a too-tight span would lose a cell the reference draws. Random triangles of all
