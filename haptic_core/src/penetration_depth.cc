@@ -769,6 +769,7 @@ struct DepthCull {
   double texture_bound_m;
   int first_i, first_j;
   float lower;
+  int min_cell, max_cell;  // the lowest and highest cell drawn (the rest stay +∞)
 };
 
 void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
@@ -845,6 +846,7 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
       // The scalar finish, and each cell's b − a (float, as the depth scan takes it) raises the
       // lower bound: the cell's final tool height is at most this one.
       float lower = cull->lower;
+      int min_cell = cull->min_cell, max_cell = cull->max_cell;
       for (std::size_t k = 0; k < count; ++k) {
         const double value = batch_value[k] + static_cast<double>(batch_h[k]) * batch_ndotn[k];
         if (!(std::abs(value) <= range)) continue;  // outside the window's box along n
@@ -853,8 +855,12 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
         if (fv < cell) cell = fv;
         const float e = cull->env[batch_cell[k]];
         if (std::isfinite(e) && e - fv > lower) lower = e - fv;
+        min_cell = std::min(min_cell, batch_cell[k]);
+        max_cell = std::max(max_cell, batch_cell[k]);
       }
       cull->lower = lower;
+      cull->min_cell = min_cell;
+      cull->max_cell = max_cell;
       batch_count = batch_shaded = 0;
       return;
     }
@@ -1085,6 +1091,8 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
         if (cull != nullptr) {
           const float e = cull->env[j * nt + i];
           if (std::isfinite(e) && e - fv > cull->lower) cull->lower = e - fv;
+          cull->min_cell = std::min(cull->min_cell, j * nt + i);
+          cull->max_cell = std::max(cull->max_cell, j * nt + i);
         }
       }
     }
@@ -1118,9 +1126,20 @@ DepthSample RenderToolDepth(const HapticModel& tool, const RigidTransform& X_WT,
                                                  std::abs(static_cast<double>(tool.texture.max_height()))),
                  first_cell >= 0 && first_cell < static_cast<int>(cells) ? first_cell % n : -1,
                  first_cell >= 0 && first_cell < static_cast<int>(cells) ? first_cell / n : -1,
-                 -std::numeric_limits<float>::infinity()};
+                 -std::numeric_limits<float>::infinity(),
+                 static_cast<int>(cells),
+                 -1};
   RenderHeightsFastImpl(tool, X_WT, triangles, w, PatchSide::kTool, 0, heights, kernel, &cull);
-  return DirectionalPenetrationDepth(env_heights.first(cells), heights.first(cells));
+  // The scan over the rows drawn (every other cell is +∞, which no scan takes), row by row in
+  // increasing cell order: the whole scan's cell and bits.
+  FirstLargestDifference scan;
+  if (cull.max_cell >= 0) {
+    const int j0 = cull.min_cell / n, j1 = cull.max_cell / n;
+    const auto first = static_cast<std::size_t>(j0) * n;
+    scan.Add(env_heights.data() + first, heights.data() + first,
+             static_cast<std::size_t>(j1 - j0 + 1) * n, j0 * n);
+  }
+  return scan.Result();
 }
 
 DepthSample DirectionalPenetrationDepthShifted(std::span<const float> b, int resolution,
