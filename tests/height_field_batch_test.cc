@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -88,6 +89,40 @@ TEST(SampleLevelBatch, BadArgumentsWriteNothing) {
   for (const float x : h) EXPECT_EQ(x, 42.0f);
   SampleLevelBatch(field, 0, u, v, h);
   for (const float x : h) EXPECT_NE(x, 42.0f);
+}
+
+// LevelForFootprint takes floor(log2(cell/texel)) from the ratio's exponent (issue 15: no log2
+// per triangle and render): the level std::log2 gives, clamped, on random ratios, on exact
+// powers of two and on ratios a few ulps either side of them.
+TEST(HeightFieldLevels, LevelForFootprintIsTheFloorOfLog2) {
+  const HeightField field = RandomField(1024, 512, true, true, 5);  // 11 levels
+  const auto want = [&](double texel, double cell) {
+    if (!(texel > 0.0) || !(cell > texel)) return 0;
+    const double level = std::floor(std::log2(cell / texel));
+    return static_cast<int>(std::clamp(level, 0.0, field.num_levels() - 1.0));
+  };
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> exponent(-2.0, 14.0);
+  int compared = 0;
+  for (int k = 0; k < 20000; ++k) {
+    const double texel = 1e-5 * std::exp2(exponent(rng)), cell = 4e-4;
+    ASSERT_EQ(field.LevelForFootprint(texel, cell), want(texel, cell)) << texel;
+    ++compared;
+  }
+  for (int p = 0; p <= 13; ++p) {
+    const double cell = 4e-4, exact = cell / std::exp2(p);
+    double texel = exact;
+    for (int step = 0; step < 4; ++step) texel = std::nextafter(texel, 0.0);
+    for (int step = 0; step < 8; ++step) {
+      ASSERT_EQ(field.LevelForFootprint(texel, cell), want(texel, cell)) << p << " " << step;
+      texel = std::nextafter(texel, 1.0);
+      ++compared;
+    }
+  }
+  EXPECT_EQ(field.LevelForFootprint(0.0, 4e-4), 0);
+  EXPECT_EQ(field.LevelForFootprint(4e-4, 1e-4), 0);
+  EXPECT_EQ(field.LevelForFootprint(1e-320, 4e-4), field.num_levels() - 1);
+  EXPECT_GT(compared, 20000);
 }
 
 }  // namespace

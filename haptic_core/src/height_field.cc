@@ -49,7 +49,14 @@ HeightField::HeightField(int width, int height, std::vector<float> texels, bool 
 
 int HeightField::LevelForFootprint(double texel_size_m, double cell_size_m) const noexcept {
   if (levels_.empty() || !(texel_size_m > 0.0) || !(cell_size_m > texel_size_m)) return 0;
-  const int level = static_cast<int>(std::floor(std::log2(cell_size_m / texel_size_m)));
+  const double ratio = cell_size_m / texel_size_m;
+  // floor(log2(ratio)) from the exponent (ratio = m·2^e, m in [0.5, 1): e − 1), without a log2
+  // call per triangle and render. Where m is within 1e-13 of 1, a log2 correct to within an ulp
+  // may round up to e, so those take log2 itself: the level is floor(std::log2(ratio)) always.
+  if (!std::isfinite(ratio)) return num_levels() - 1;  // a texel too small to be a number
+  int e = 0;
+  const double m = std::frexp(ratio, &e);
+  const int level = m > 1.0 - 1e-13 ? static_cast<int>(std::floor(std::log2(ratio))) : e - 1;
   return std::clamp(level, 0, num_levels() - 1);
 }
 
