@@ -353,6 +353,52 @@ TEST(TextureStageParity, FastSolverGivesTheReferenceDepthsAndGradients) {
       in_contact, worst_depth, worst_dx, worst_dr);
 }
 
+// The solver's rotation samples rendered culled (always, never, or where the base render says it
+// pays): the same eleven samples, cells and linearizations, bit for bit, on random contacts of
+// the six seed models; and the default both culls and does not over those contacts.
+TEST(TextureStageParity, CulledRotationSamplesEqualTheWholeRenders) {
+  std::mt19937 rng(2711);
+  using C = TexturePenetrationSolver::CullRotations;
+  TexturePenetrationSolver never(128, 4096), always(128, 4096), pays(128, 4096);
+  never.set_cull_rotations(C::kNever);
+  always.set_cull_rotations(C::kAlways);
+  int in_contact = 0;
+  for (const SeedModel which : kAll) {
+    const HapticModel& env = Seed(which);
+    for (const SeedModel tool_which : {SeedModel::kFile, SeedModel::kBlock, which}) {
+      const HapticModel& tool = Seed(tool_which);
+      for (int trial = 0; trial < 4; ++trial) {
+        const Contact c = RandomContact(tool, env, rng, trial == 3 ? 37 : 50);
+        std::array<DepthSample, kGradientSamples> sn{}, sa{}, sp{};
+        const ContactLinearization n =
+            never.Linearize(tool, c.X_WT, env, c.X_WO, c.window, 8000.0, sn);
+        const ContactLinearization a =
+            always.Linearize(tool, c.X_WT, env, c.X_WO, c.window, 8000.0, sa);
+        const ContactLinearization p =
+            pays.Linearize(tool, c.X_WT, env, c.X_WO, c.window, 8000.0, sp);
+        in_contact += std::isfinite(n.depth_m) ? 1 : 0;
+        for (int i = 0; i < kGradientSamples; ++i) {
+          ASSERT_EQ(sa[i].cell, sn[i].cell) << SeedModelName(which) << " sample " << i;
+          ASSERT_EQ(sp[i].cell, sn[i].cell) << SeedModelName(which) << " sample " << i;
+          ASSERT_EQ(0, std::memcmp(&sa[i].depth_m, &sn[i].depth_m, sizeof(double))) << i;
+          ASSERT_EQ(0, std::memcmp(&sp[i].depth_m, &sn[i].depth_m, sizeof(double))) << i;
+        }
+        EXPECT_EQ(a.gradient.d_rotation_W, n.gradient.d_rotation_W);
+        EXPECT_EQ(p.gradient.d_rotation_W, n.gradient.d_rotation_W);
+        EXPECT_EQ(p.gradient.d_translation_W, n.gradient.d_translation_W);
+      }
+    }
+  }
+  EXPECT_GT(in_contact, 30);
+  EXPECT_EQ(never.culled_contacts(), 0u);
+  EXPECT_EQ(always.culled_contacts(), static_cast<std::uint64_t>(in_contact));
+  // The default culls some contacts and renders others whole.
+  EXPECT_GT(pays.culled_contacts(), 0u);
+  EXPECT_LT(pays.culled_contacts(), static_cast<std::uint64_t>(in_contact));
+  std::printf("[ parity ] %d contacts in contact; culled by default: %llu\n", in_contact,
+              static_cast<unsigned long long>(pays.culled_contacts()));
+}
+
 TEST(TextureStageParity, ABatchOnTwoThreadsEqualsTheBatchOnOne) {
   // Contacts of one tool against two seed models, as one batch: the same linearizations, bit for
   // bit, whichever thread of the pool takes a contact.

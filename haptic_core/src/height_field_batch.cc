@@ -5,6 +5,12 @@
 #include <limits>
 
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+// GCC 12 reports its own AVX-512 intrinsics (the _mm*_undefined_* operands of conversions and
+// masked gathers) as (maybe) uninitialized where they are inlined here.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#endif
 #include <immintrin.h>
 #define HT_SAMPLE_X86 1
 #endif

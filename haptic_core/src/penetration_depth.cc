@@ -7,6 +7,12 @@
 #include <emmintrin.h>
 #endif
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+// GCC 12 reports its own AVX-512 intrinsics (the _mm*_undefined_* operands of conversions and
+// masked gathers) as (maybe) uninitialized where they are inlined here.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#endif
 #include <immintrin.h>
 #define HT_RASTER_AVX2 1
 #endif
@@ -435,22 +441,33 @@ struct RowCull {
   }
 }
 
+// What a culled tool render (RenderToolDepth) keeps of its drawn cells: the environment's
+// heights (indexed as the render), the largest b − a (float, as the depth scan takes it) of the
+// cells drawn, and the lowest and highest cell drawn.
+struct DrawnCells {
+  const float* env;
+  float lower;
+  int min_cell, max_cell;
+};
+
 // FinishCellsAvx2 and the envelope, eight cells a step: the heights fv (float(value + h·ndotn),
 // or the neutral value outside the box), then heights[cell] = fv where fv > it (keep_max) or
 // fv < it. Eight cells that are one run of a row (the common case) are loaded and stored as one
-// vector; other distinct cells are gathered and scattered; eight with a repeated cell (a cell on
-// an edge that two triangles share) go one at a time in the order drawn. As the cells are
-// distinct within a step, each cell sees the same comparisons in the same order as the scalar
-// loop.
+// vector; others go one at a time in the order drawn (gathers and scatters of distinct cells
+// measured slower). Each cell sees the same comparisons in the same order as the scalar loop.
+// With `drawn` (the tool's side), the cells also raise its lower bound and widen its cell range.
 [[HT_AVX512_TARGET]] void FinishEnvelopeAvx512(const double* value, const float* h,
                                                const double* ndotn, const int* cell, double range,
-                                               bool keep_max, float* heights, int n) noexcept {
+                                               bool keep_max, float* heights, int n,
+                                               DrawnCells* drawn) noexcept {
   const __m512d abs_mask = _mm512_castsi512_pd(_mm512_set1_epi64(0x7fffffffffffffff));
   const __m512d vrange = _mm512_set1_pd(range);
   const float neutral_value =
       keep_max ? -std::numeric_limits<float>::infinity() : std::numeric_limits<float>::infinity();
   const __m256 neutral = _mm256_set1_ps(neutral_value);
+  const __m256 minus_inf = _mm256_set1_ps(-std::numeric_limits<float>::infinity());
   const __m256i steps = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+  __m256 lower = minus_inf;  // b − a of the runs drawn, lane by lane
   for (int k = 0; k < n; k += 8) {
     const unsigned valid = n - k >= 8 ? 0xFFu : (1u << (n - k)) - 1;
     const auto m = static_cast<__mmask8>(valid);
@@ -464,29 +481,40 @@ struct RowCull {
     const __m256i idx = _mm256_maskz_loadu_epi32(m, cell + k);
     const int first = cell[k];
     const __m256i run = _mm256_add_epi32(_mm256_set1_epi32(first), steps);
+    const int lanes = std::min(8, n - k);
     if ((_mm256_cmpeq_epi32_mask(idx, run) & valid) == valid) {
       const __m256 old = _mm256_maskz_loadu_ps(m, heights + first);
       const __mmask8 take = m & (keep_max ? _mm256_cmp_ps_mask(fv, old, _CMP_GT_OQ)
                                           : _mm256_cmp_ps_mask(fv, old, _CMP_LT_OQ));
       _mm256_mask_storeu_ps(heights + first, take, fv);
-      continue;
-    }
-    // A lane's conflict bits name the earlier lanes with its cell; the lanes past n are after
-    // every valid lane, so they name none of them.
-    if (false && _mm256_mask_test_epi32_mask(m, _mm256_conflict_epi32(idx), _mm256_set1_epi32(-1)) == 0) {
-      const __m256 old = _mm256_mmask_i32gather_ps(neutral, m, idx, heights, 4);
-      const __mmask8 take = m & (keep_max ? _mm256_cmp_ps_mask(fv, old, _CMP_GT_OQ)
-                                          : _mm256_cmp_ps_mask(fv, old, _CMP_LT_OQ));
-      _mm256_mask_i32scatter_ps(heights, take, idx, fv, 4);
+      if (drawn != nullptr) {
+        // env − fv: −∞ where the environment has no cell or the height is outside the box.
+        const __m256 diff = _mm256_sub_ps(_mm256_maskz_loadu_ps(m, drawn->env + first), fv);
+        lower = _mm256_max_ps(lower, _mm256_mask_mov_ps(minus_inf, m & inside, diff));
+        drawn->min_cell = std::min(drawn->min_cell, first);
+        drawn->max_cell = std::max(drawn->max_cell, first + lanes - 1);
+      }
       continue;
     }
     alignas(32) float f[8];
     _mm256_store_ps(f, fv);
-    const int lanes = std::min(8, n - k);
     for (int l = 0; l < lanes; ++l) {
       float& c = heights[cell[k + l]];
       if (keep_max ? f[l] > c : f[l] < c) c = f[l];
+      if (drawn != nullptr) {
+        const float e = drawn->env[cell[k + l]];
+        if (std::isfinite(e) && std::isfinite(f[l]) && e - f[l] > drawn->lower) {
+          drawn->lower = e - f[l];
+        }
+        drawn->min_cell = std::min(drawn->min_cell, cell[k + l]);
+        drawn->max_cell = std::max(drawn->max_cell, cell[k + l]);
+      }
     }
+  }
+  if (drawn != nullptr) {
+    alignas(32) float l[8];
+    _mm256_store_ps(l, lower);
+    for (const float x : l) drawn->lower = x > drawn->lower ? x : drawn->lower;
   }
 }
 
@@ -765,11 +793,9 @@ namespace {
 // drawn so far (a lower bound of the render's depth: a cell's tool height only falls as more
 // triangles are drawn).
 struct DepthCull {
-  const float* env;
   double texture_bound_m;
   int first_i, first_j;
-  float lower;
-  int min_cell, max_cell;  // the lowest and highest cell drawn (the rest stay +∞)
+  DrawnCells drawn;  // the environment, the lower bound, the cells drawn (the rest stay +∞)
 };
 
 void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
@@ -842,35 +868,55 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
     SampleLevelBatch(model.texture, batch_level, std::span<const float>(batch_u, count),
                      std::span<const float>(batch_v, count), std::span<float>(batch_h, count),
                      kernel);
+#ifdef HT_RASTER_AVX2
+    if (avx512_rows) {
+      FinishEnvelopeAvx512(batch_value, batch_h, batch_ndotn, batch_cell, range, keep_max,
+                           heights.data(), batch_count, cull != nullptr ? &cull->drawn : nullptr);
+      batch_count = batch_shaded = 0;
+      return;
+    }
+#endif
     if (cull != nullptr) {
-      // The scalar finish, and each cell's b − a (float, as the depth scan takes it) raises the
-      // lower bound: the cell's final tool height is at most this one.
-      float lower = cull->lower;
-      int min_cell = cull->min_cell, max_cell = cull->max_cell;
+      // The finish, and each cell's b − a (float, as the depth scan takes it) raises the lower
+      // bound: the cell's final tool height is at most this one.
+      DrawnCells& drawn = cull->drawn;
+#ifdef HT_RASTER_AVX2
+      if (avx2_rows) {
+        FinishCellsAvx2(batch_value, batch_h, batch_ndotn, range, false, batch_fv, batch_count);
+        float lower = drawn.lower;
+        int min_cell = drawn.min_cell, max_cell = drawn.max_cell;
+        float* const cells = heights.data();
+        for (std::size_t k = 0; k < count; ++k) {
+          const int c = batch_cell[k];
+          const float fv = batch_fv[k];  // +∞ outside the box: no cell, and e − fv = −∞
+          if (fv < cells[c]) cells[c] = fv;
+          const float diff = drawn.env[c] - fv;  // −∞ where the environment has no cell
+          lower = diff > lower ? diff : lower;
+          min_cell = std::min(min_cell, c);
+          max_cell = std::max(max_cell, c);
+        }
+        drawn.lower = lower;
+        drawn.min_cell = min_cell;
+        drawn.max_cell = max_cell;
+        batch_count = batch_shaded = 0;
+        return;
+      }
+#endif
       for (std::size_t k = 0; k < count; ++k) {
         const double value = batch_value[k] + static_cast<double>(batch_h[k]) * batch_ndotn[k];
         if (!(std::abs(value) <= range)) continue;  // outside the window's box along n
         float& cell = heights[static_cast<std::size_t>(batch_cell[k])];
         const auto fv = static_cast<float>(value);
         if (fv < cell) cell = fv;
-        const float e = cull->env[batch_cell[k]];
-        if (std::isfinite(e) && e - fv > lower) lower = e - fv;
-        min_cell = std::min(min_cell, batch_cell[k]);
-        max_cell = std::max(max_cell, batch_cell[k]);
+        const float e = drawn.env[batch_cell[k]];
+        if (std::isfinite(e) && e - fv > drawn.lower) drawn.lower = e - fv;
+        drawn.min_cell = std::min(drawn.min_cell, batch_cell[k]);
+        drawn.max_cell = std::max(drawn.max_cell, batch_cell[k]);
       }
-      cull->lower = lower;
-      cull->min_cell = min_cell;
-      cull->max_cell = max_cell;
       batch_count = batch_shaded = 0;
       return;
     }
 #ifdef HT_RASTER_AVX2
-    if (avx512_rows) {
-      FinishEnvelopeAvx512(batch_value, batch_h, batch_ndotn, batch_cell, range, keep_max,
-                           heights.data(), batch_count);
-      batch_count = batch_shaded = 0;
-      return;
-    }
     if (avx2_rows) {
       // The heights four cells a step, a cell outside the box made the envelope's neutral value
       // (which never replaces a cell); then the envelope, cell by cell in the order drawn.
@@ -951,9 +997,10 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
     // lower bound cannot be the deepest (nor tie with it).
     RowCull row_cull{};
     const RowCull* row_cull_ptr = nullptr;
-    if (cull != nullptr && std::isfinite(cull->lower)) {
-      row_cull = {cull->env, d[0], d[1], d[2],
-                  static_cast<double>(cull->lower) - (textured ? cull->texture_bound_m : 0.0) -
+    if (cull != nullptr && std::isfinite(cull->drawn.lower)) {
+      row_cull = {cull->drawn.env, d[0], d[1], d[2],
+                  static_cast<double>(cull->drawn.lower) -
+                      (textured ? cull->texture_bound_m : 0.0) -
                       cull_margin};
       row_cull_ptr = &row_cull;
     }
@@ -1089,10 +1136,11 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
         const auto fv = static_cast<float>(value);
         if (keep_max ? fv > cell : fv < cell) cell = fv;
         if (cull != nullptr) {
-          const float e = cull->env[j * nt + i];
-          if (std::isfinite(e) && e - fv > cull->lower) cull->lower = e - fv;
-          cull->min_cell = std::min(cull->min_cell, j * nt + i);
-          cull->max_cell = std::max(cull->max_cell, j * nt + i);
+          DrawnCells& drawn = cull->drawn;
+          const float e = drawn.env[j * nt + i];
+          if (std::isfinite(e) && e - fv > drawn.lower) drawn.lower = e - fv;
+          drawn.min_cell = std::min(drawn.min_cell, j * nt + i);
+          drawn.max_cell = std::max(drawn.max_cell, j * nt + i);
         }
       }
     }
@@ -1120,21 +1168,18 @@ DepthSample RenderToolDepth(const HapticModel& tool, const RigidTransform& X_WT,
     return {-std::numeric_limits<double>::infinity(), -1};
   }
   std::fill_n(heights.begin(), cells, std::numeric_limits<float>::infinity());
-  DepthCull cull{env_heights.data(),
-                 tool.texture.empty() ? 0.0
-                                      : std::max(std::abs(static_cast<double>(tool.texture.min_height())),
-                                                 std::abs(static_cast<double>(tool.texture.max_height()))),
-                 first_cell >= 0 && first_cell < static_cast<int>(cells) ? first_cell % n : -1,
-                 first_cell >= 0 && first_cell < static_cast<int>(cells) ? first_cell / n : -1,
-                 -std::numeric_limits<float>::infinity(),
-                 static_cast<int>(cells),
-                 -1};
+  const bool has_first = first_cell >= 0 && first_cell < static_cast<int>(cells);
+  DepthCull cull{tool.TextureReach(),
+                 has_first ? first_cell % n : -1,
+                 has_first ? first_cell / n : -1,
+                 {env_heights.data(), -std::numeric_limits<float>::infinity(),
+                  static_cast<int>(cells), -1}};
   RenderHeightsFastImpl(tool, X_WT, triangles, w, PatchSide::kTool, 0, heights, kernel, &cull);
   // The scan over the rows drawn (every other cell is +∞, which no scan takes), row by row in
   // increasing cell order: the whole scan's cell and bits.
   FirstLargestDifference scan;
-  if (cull.max_cell >= 0) {
-    const int j0 = cull.min_cell / n, j1 = cull.max_cell / n;
+  if (cull.drawn.max_cell >= 0) {
+    const int j0 = cull.drawn.min_cell / n, j1 = cull.drawn.max_cell / n;
     const auto first = static_cast<std::size_t>(j0) * n;
     scan.Add(env_heights.data() + first, heights.data() + first,
              static_cast<std::size_t>(j1 - j0 + 1) * n, j0 * n);
