@@ -115,6 +115,7 @@ TexturePenetrationSolver::TexturePenetrationSolver(int max_resolution, int max_t
   max_resolution_ = max_resolution;
   env_triangles_.reserve(static_cast<size_t>(max_triangles));
   tool_triangles_.reserve(static_cast<size_t>(max_triangles));
+  vertex_scratch_.reserve(static_cast<size_t>(max_triangles));  // a closed mesh: V ≈ F/2
 }
 
 void TexturePenetrationSolver::RenderEnvironment(const HapticModel& environment,
@@ -123,7 +124,7 @@ void TexturePenetrationSolver::RenderEnvironment(const HapticModel& environment,
   const size_t cells = static_cast<size_t>(w.resolution) * w.resolution;
   env_heights_.assign(cells, -std::numeric_limits<float>::infinity());
   SelectPatchTriangles(environment, X_WO, w, PatchSide::kEnvironment, w.cell_size_m(),
-                       env_triangles_);
+                       env_triangles_, 0.0, &vertex_scratch_);
   if (path_ == TextureStagePath::kFast) {
     RenderPatchHeightsFast(environment, X_WO, env_triangles_, w, PatchSide::kEnvironment, 0,
                            env_heights_);
@@ -165,7 +166,8 @@ DepthSample TexturePenetrationSolver::Depth(const HapticModel& tool, const Rigid
                                             const RigidTransform& X_WO,
                                             const ContactWindow& w) noexcept {
   RenderEnvironment(environment, X_WO, w);
-  SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool, w.cell_size_m(), tool_triangles_);
+  SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool, w.cell_size_m(), tool_triangles_, 0.0,
+                       &vertex_scratch_);
   return EvaluateTool(tool, X_WT, w);
 }
 
@@ -275,7 +277,7 @@ ContactLinearization TexturePenetrationSolver::Linearize(
   // the window grown by a cell.
   SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool,
                        from_base ? 2.0 * h.h_x : 2.0 * h.h_x + h.h_theta * tool_radius,
-                       tool_triangles_, from_base ? 1e-9 : h.h_theta + 1e-9);
+                       tool_triangles_, from_base ? 1e-9 : h.h_theta + 1e-9, &vertex_scratch_);
   std::array<DepthSample, kGradientSamples> samples;
   for (DepthSample& s : samples) s = {-std::numeric_limits<double>::infinity(), -1};
   glm::dvec3 lever_W(0.0);  // RotationGradient::kContactLever

@@ -669,7 +669,8 @@ glm::dvec3 ContactWindow::CellCenter(int index) const noexcept {
 
 void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
                           const ContactWindow& w, PatchSide side, double margin_m,
-                          std::vector<int>& out, double facing_slack) noexcept {
+                          std::vector<int>& out, double facing_slack,
+                          std::vector<double>* vertex_scratch) noexcept {
   out.clear();
   const double half = 0.5 * w.extent_m + margin_m;
   const double depth_limit = w.depth_range_m() + margin_m;
@@ -687,14 +688,31 @@ void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
                on = glm::dot(offset, w.normal_W);
   const int nf = static_cast<int>(model.triangles.size());
   const glm::dvec3* vertices = model.vertices_O.data();
+  // With room in the scratch, each vertex's coordinate along u once (the same double as per
+  // triangle below, so the same triangles): a vertex is shared by about six triangles.
+  const std::size_t nv = model.vertices_O.size();
+  double* along_u = nullptr;
+  if (vertex_scratch != nullptr && vertex_scratch->capacity() >= nv) {
+    vertex_scratch->resize(nv);
+    along_u = vertex_scratch->data();
+    for (std::size_t k = 0; k < nv; ++k) along_u[k] = glm::dot(vertices[k], u_O) + ou;
+  }
   for (int f = 0; f < nf; ++f) {
     const glm::ivec3 t = model.triangles[f];
+    double s0, s1, s2;
+    if (along_u != nullptr) {
+      s0 = along_u[t[0]];
+      s1 = along_u[t[1]];
+      s2 = along_u[t[2]];
+    } else {
+      s0 = glm::dot(vertices[t[0]], u_O) + ou;
+      s1 = glm::dot(vertices[t[1]], u_O) + ou;
+      s2 = glm::dot(vertices[t[2]], u_O) + ou;
+    }
+    if (std::max({s0, s1, s2}) < -half || std::min({s0, s1, s2}) > half) continue;
     const glm::dvec3& p0 = vertices[t[0]];
     const glm::dvec3& p1 = vertices[t[1]];
     const glm::dvec3& p2 = vertices[t[2]];
-    const double s0 = glm::dot(p0, u_O) + ou, s1 = glm::dot(p1, u_O) + ou,
-                 s2 = glm::dot(p2, u_O) + ou;
-    if (std::max({s0, s1, s2}) < -half || std::min({s0, s1, s2}) > half) continue;
     const double t0 = glm::dot(p0, v_O) + ov, t1 = glm::dot(p1, v_O) + ov,
                  t2 = glm::dot(p2, v_O) + ov;
     if (std::max({t0, t1, t2}) < -half || std::min({t0, t1, t2}) > half) continue;

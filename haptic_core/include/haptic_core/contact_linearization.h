@@ -225,6 +225,8 @@ class TexturePenetrationSolver {
   RotationGradient rotation_gradient_ = RotationGradient::kRenderedSamples;
   CullRotations cull_rotations_ = CullRotations::kWhenItPays;
   std::uint64_t culled_contacts_ = 0;
+  /// SelectPatchTriangles' per-vertex coordinates (reserved for max_triangles vertices).
+  std::vector<double> vertex_scratch_;
   std::vector<float> env_heights_;
   std::vector<float> tool_heights_;
   /// The base pose on the window grown by a cell (kFast, and the base-render rotation gradients).
