@@ -125,5 +125,45 @@ TEST(HeightFieldLevels, LevelForFootprintIsTheFloorOfLog2) {
   EXPECT_GT(compared, 20000);
 }
 
+// MaxAbsOver bounds every sample of its box (dense samples of random boxes, all levels, clamped
+// and periodic textures, boxes that cross a periodic edge), and is local: far from a single tall
+// spike it is the low texture's bound, not the spike's.
+TEST(HeightFieldLevels, MaxAbsOverBoundsEverySampleOfItsBoxAndIsLocal) {
+  std::mt19937 rng(21);
+  std::uniform_real_distribution<float> U(-0.2f, 1.2f), size(0.0f, 0.05f);
+  int checked = 0;
+  for (const bool wrap : {false, true}) {
+    std::vector<float> texels(256 * 128);
+    std::uniform_real_distribution<float> h(-1e-4f, 1e-4f);
+    for (float& t : texels) t = h(rng);
+    texels[37 * 256 + 200] = 5e-3f;  // one spike, at texel (200, 37)
+    const HeightField field(256, 128, std::move(texels), wrap, wrap);
+    const float whole = 5e-3f;
+    for (int trial = 0; trial < 400; ++trial) {
+      const int level = static_cast<int>(rng() % static_cast<unsigned>(field.num_levels()));
+      const float u0 = U(rng), v0 = U(rng), u1 = u0 + size(rng), v1 = v0 + size(rng);
+      const float bound = field.MaxAbsOver(level, u0, v0, u1, v1);
+      ASSERT_LE(bound, whole * 1.0001f);
+      for (int a = 0; a <= 16; ++a) {
+        for (int b = 0; b <= 16; ++b) {
+          const float u = u0 + (u1 - u0) * static_cast<float>(a) / 16.0f;
+          const float v = v0 + (v1 - v0) * static_cast<float>(b) / 16.0f;
+          ASSERT_LE(std::abs(field.Sample(level, u, v)), bound)
+              << "level " << level << " at (" << u << ", " << v << ") wrap " << wrap;
+          ++checked;
+        }
+      }
+    }
+    // Far from the spike (u ≈ 0.78, v ≈ 0.29), at level 0 and 2: the low texture's bound.
+    EXPECT_LE(field.MaxAbsOver(0, 0.1f, 0.6f, 0.12f, 0.62f), 1.001e-4f);
+    EXPECT_LE(field.MaxAbsOver(2, 0.1f, 0.6f, 0.15f, 0.65f), 1.001e-4f);
+    // Over the spike: at least the spike's sample there.
+    EXPECT_GE(field.MaxAbsOver(0, 0.78f, 0.28f, 0.79f, 0.30f), 4.9e-3f);
+  }
+  EXPECT_GT(checked, 200000);
+  const HeightField empty;
+  EXPECT_EQ(empty.MaxAbsOver(0, 0.0f, 0.0f, 1.0f, 1.0f), 0.0f);
+}
+
 }  // namespace
 }  // namespace ht

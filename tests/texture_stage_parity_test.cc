@@ -218,7 +218,7 @@ TEST(TextureStageParity, CulledToolRenderGivesTheWholeRendersDepth) {
           for (const int first : {base_cell, -1, random_cell}) {
             const DepthSample got =
                 RenderToolDepth(tool, poses[p], tool_triangles, c.window, env_h, first, partial,
-                                kernel);
+                                nullptr, kernel);
             ASSERT_EQ(got.cell, want.cell) << SeedModelName(which) << " pose " << p;
             ASSERT_EQ(std::memcmp(&got.depth_m, &want.depth_m, sizeof(double)), 0)
                 << SeedModelName(which) << " pose " << p << ": " << got.depth_m << " vs "

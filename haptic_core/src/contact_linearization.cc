@@ -357,17 +357,25 @@ ContactLinearization TexturePenetrationSolver::Linearize(
     if (!done) {
       RenderGrownBase(tool, X_WT, w, samples);
       if (samples[0].cell >= 0) {
-        if (CullPays(tool, w, samples[0].depth_m)) {
-          ++culled_contacts_;
-          // Each rotation's depth alone, its render culled to the cells that can matter
-          // (RenderToolDepth), from the cells around the unrotated pose's deepest cell.
-          tool_heights_.resize(cells);
-          for (int i = 5; i < kGradientSamples; ++i) {
-            samples[i] = RenderToolDepth(tool, poses[i], tool_triangles_, w, env_heights_,
-                                         samples[0].cell, tool_heights_);
+        // Each rotation's depth alone, its render culled to the cells that can matter
+        // (RenderToolDepth), from the cells around the unrotated pose's deepest cell; under
+        // kWhenItPays, only while the first rotation drew few enough cells for it to pay.
+        tool_heights_.resize(cells);
+        bool cull = cull_rotations_ != CullRotations::kNever;
+        if (cull) ++culled_contacts_;
+        for (int i = 5; i < kGradientSamples; ++i) {
+          if (!cull) {
+            samples[i] = EvaluateTool(tool, poses[i], w);
+            continue;
           }
-        } else {
-          for (int i = 5; i < kGradientSamples; ++i) samples[i] = EvaluateTool(tool, poses[i], w);
+          int drawn = 0;
+          samples[i] = RenderToolDepth(tool, poses[i], tool_triangles_, w, env_heights_,
+                                       samples[0].cell, tool_heights_, &drawn);
+          if (i == 5 && cull_rotations_ == CullRotations::kWhenItPays &&
+              drawn > kCullPaysFraction * static_cast<double>(cells)) {
+            cull = false;
+            --culled_contacts_;
+          }
         }
       }
     }
@@ -387,30 +395,6 @@ ContactLinearization TexturePenetrationSolver::Linearize(
     return AssembleLeverLinearization(w, samples, lever_W, stiffness_n_per_m, faults_);
   }
   return AssembleLinearization(w, samples, stiffness_n_per_m, faults_);
-}
-
-bool TexturePenetrationSolver::CullPays(const HapticModel& tool, const ContactWindow& w,
-                                        double depth_m) noexcept {
-  if (cull_rotations_ != CullRotations::kWhenItPays) {
-    return cull_rotations_ == CullRotations::kAlways;
-  }
-  // The base render's cells (tool_ext_heights_, grown by a cell) whose b − a is within one
-  // texture reach of the depth: about those a rotation's culled render keeps (its bound is the
-  // coarse height's, which lies within the reach of the textured one).
-  const int n = w.resolution, nt = n + 2;
-  const auto reach = static_cast<float>(tool.TextureReach());
-  const auto level = static_cast<float>(depth_m) - reach;
-  int both = 0, near = 0;
-  for (int j = 0; j < n; ++j) {
-    const float* env = &env_heights_[static_cast<std::size_t>(j) * n];
-    const float* t = &tool_ext_heights_[static_cast<std::size_t>(j + 1) * nt + 1];
-    for (int i = 0; i < n; ++i) {
-      const float diff = env[i] - t[i];  // NaN (−∞ − +∞ is −∞; +∞ never): −∞ where either is empty
-      both += diff > -std::numeric_limits<float>::infinity() ? 1 : 0;
-      near += diff >= level ? 1 : 0;
-    }
-  }
-  return near < kCullPaysFraction * both;
 }
 
 void TexturePenetrationSolver::RenderGrownBase(const HapticModel& tool, const RigidTransform& X_WT,

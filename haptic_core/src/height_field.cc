@@ -45,6 +45,71 @@ HeightField::HeightField(int width, int height, std::vector<float> texels, bool 
     }
     levels_.push_back(std::move(dst));
   }
+  // The pyramid of largest |h| (MaxAbsOver), over the mip's footprints: with power-of-two sizes,
+  // texel c of a level lies under texel c / 2 of the next.
+  const auto power_of_two = [](int n) { return (n & (n - 1)) == 0; };
+  if (power_of_two(width) && power_of_two(height)) {
+    for (std::size_t k = 1; k < levels_.size(); ++k) {
+      const HeightFieldLevel& src = levels_[k - 1];
+      const HeightFieldLevel& dst = levels_[k];
+      std::vector<float> m(dst.texels.size());
+      for (int y = 0; y < dst.height; ++y) {
+        const int y0 = std::min(2 * y, src.height - 1), y1 = std::min(2 * y + 1, src.height - 1);
+        for (int x = 0; x < dst.width; ++x) {
+          const int x0 = std::min(2 * x, src.width - 1), x1 = std::min(2 * x + 1, src.width - 1);
+          const auto at = [&](int xx, int yy) {
+            const auto i = static_cast<std::size_t>(yy) * src.width + xx;
+            return k == 1 ? std::abs(src.texels[i]) : max_abs_.back()[i];
+          };
+          m[static_cast<std::size_t>(y) * dst.width + x] =
+              std::max({at(x0, y0), at(x1, y0), at(x0, y1), at(x1, y1)});
+        }
+      }
+      max_abs_.push_back(std::move(m));
+    }
+  }
+}
+
+float HeightField::MaxAbsOver(int level, float u0, float v0, float u1, float v1) const noexcept {
+  if (levels_.empty()) return 0.0f;
+  constexpr float kRounding = 1.0f + 1e-6f;
+  const float whole = std::max(std::abs(min_height_), std::abs(max_height_)) * kRounding;
+  if (max_abs_.size() + 1 != levels_.size() || !(std::isfinite(u0) && std::isfinite(u1) &&
+                                                 std::isfinite(v0) && std::isfinite(v1))) {
+    return whole;
+  }
+  level = std::clamp(level, 0, num_levels() - 1);
+  const HeightFieldLevel& L = levels_[static_cast<std::size_t>(level)];
+  // The taps of Sample: floor(u·W − 0.5) and the next texel, widened by a texel each way for
+  // the float arithmetic; clamped axes clamp, periodic ones must stay inside.
+  const auto taps = [](float a, float b, int n, bool wrap, int& lo, int& hi) {
+    const double l = std::floor(std::min(a, b) * static_cast<double>(n) - 0.5) - 1.0;
+    const double h = std::floor(std::max(a, b) * static_cast<double>(n) - 0.5) + 2.0;
+    if (wrap && (l < 0.0 || h > n - 1.0)) return false;
+    lo = static_cast<int>(std::clamp(l, 0.0, n - 1.0));
+    hi = static_cast<int>(std::clamp(h, 0.0, n - 1.0));
+    return true;
+  };
+  int x0, x1, y0, y1;
+  if (std::max(std::abs(u0), std::abs(u1)) > 1e6f || std::max(std::abs(v0), std::abs(v1)) > 1e6f ||
+      !taps(u0, u1, L.width, wrap_u_, x0, x1) || !taps(v0, v1, L.height, wrap_v_, y0, y1)) {
+    return whole;
+  }
+  // The first level up from `level` where the taps lie under at most 2×2 texels.
+  int s = 0;
+  while (((x1 >> s) - (x0 >> s) > 1 || (y1 >> s) - (y0 >> s) > 1) && level + s + 1 < num_levels()) {
+    ++s;
+  }
+  const int k = level + s;
+  const HeightFieldLevel& K = levels_[static_cast<std::size_t>(k)];
+  float m = 0.0f;
+  for (int y = y0 >> s; y <= std::min(y1 >> s, K.height - 1); ++y) {
+    for (int x = x0 >> s; x <= std::min(x1 >> s, K.width - 1); ++x) {
+      const auto i = static_cast<std::size_t>(y) * K.width + x;
+      m = std::max(m, k == 0 ? std::abs(K.texels[i]) : max_abs_[static_cast<std::size_t>(k - 1)][i]);
+    }
+  }
+  return m * kRounding;
 }
 
 int HeightField::LevelForFootprint(double texel_size_m, double cell_size_m) const noexcept {

@@ -448,6 +448,7 @@ struct DrawnCells {
   const float* env;
   float lower;
   int min_cell, max_cell;
+  int count;  // cells drawn (a cell drawn twice counts twice)
 };
 
 // FinishCellsAvx2 and the envelope, eight cells a step: the heights fv (float(value + h·ndotn),
@@ -512,6 +513,7 @@ struct DrawnCells {
     }
   }
   if (drawn != nullptr) {
+    drawn->count += n;
     alignas(32) float l[8];
     _mm256_store_ps(l, lower);
     for (const float x : l) drawn->lower = x > drawn->lower ? x : drawn->lower;
@@ -916,6 +918,7 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
         drawn.lower = lower;
         drawn.min_cell = min_cell;
         drawn.max_cell = max_cell;
+        drawn.count += batch_count;
         batch_count = batch_shaded = 0;
         return;
       }
@@ -931,6 +934,7 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
         drawn.min_cell = std::min(drawn.min_cell, batch_cell[k]);
         drawn.max_cell = std::max(drawn.max_cell, batch_cell[k]);
       }
+      drawn.count += batch_count;
       batch_count = batch_shaded = 0;
       return;
     }
@@ -1010,20 +1014,27 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
     const double inv_area = pc.inv_area;
     const int i0 = pc.i0, i1 = pc.i1;
     const bool textured = have_texture && model.textured[f] != 0;
+    const int level =
+        textured ? model.texture.LevelForFootprint(model.texel_size_m[f], w.cell_size_m()) : 0;
     // The cull of this triangle's cells: a cell's b − a is at most env − (b·d) + |h·(N·n)|
-    // (|N·n| ≤ 1, |h| ≤ the texture's bound), so cells where that, with the margin, is below the
-    // lower bound cannot be the deepest (nor tie with it).
+    // (|N·n| ≤ 1, and |h| at most the largest |h| under the triangle's texture coordinates, whose
+    // box holds every cell's: b ≥ −1e-9 sum to 1), so cells where that, with the margin, is below
+    // the lower bound cannot be the deepest (nor tie with it).
     RowCull row_cull{};
     const RowCull* row_cull_ptr = nullptr;
     if (cull != nullptr && std::isfinite(cull->drawn.lower)) {
+      double texture_bound = 0.0;
+      if (textured) {
+        const glm::vec2 uv0 = model.corner_uvs[3 * f], uv1 = model.corner_uvs[3 * f + 1],
+                        uv2 = model.corner_uvs[3 * f + 2];
+        texture_bound = model.texture.MaxAbsOver(
+            level, std::min({uv0.x, uv1.x, uv2.x}), std::min({uv0.y, uv1.y, uv2.y}),
+            std::max({uv0.x, uv1.x, uv2.x}), std::max({uv0.y, uv1.y, uv2.y}));
+      }
       row_cull = {cull->drawn.env, d[0], d[1], d[2],
-                  static_cast<double>(cull->drawn.lower) -
-                      (textured ? cull->texture_bound_m : 0.0) -
-                      cull_margin};
+                  static_cast<double>(cull->drawn.lower) - texture_bound - cull_margin};
       row_cull_ptr = &row_cull;
     }
-    const int level =
-        textured ? model.texture.LevelForFootprint(model.texel_size_m[f], w.cell_size_m()) : 0;
     if (!textured || level != batch_level) flush();
     batch_level = level;
     const glm::dvec3& n0 = model.corner_normals_O[3 * f];
@@ -1159,6 +1170,7 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
           if (std::isfinite(e) && e - fv > drawn.lower) drawn.lower = e - fv;
           drawn.min_cell = std::min(drawn.min_cell, j * nt + i);
           drawn.max_cell = std::max(drawn.max_cell, j * nt + i);
+          ++drawn.count;
         }
       }
     }
@@ -1179,9 +1191,11 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
 DepthSample RenderToolDepth(const HapticModel& tool, const RigidTransform& X_WT,
                             std::span<const int> triangles, const ContactWindow& w,
                             std::span<const float> env_heights, int first_cell,
-                            std::span<float> heights, SampleKernel kernel) noexcept {
+                            std::span<float> heights, int* cells_drawn,
+                            SampleKernel kernel) noexcept {
   const int n = w.resolution;
   const auto cells = static_cast<std::size_t>(n) * n;
+  if (cells_drawn != nullptr) *cells_drawn = 0;
   if (n <= 0 || env_heights.size() < cells || heights.size() < cells) {
     return {-std::numeric_limits<double>::infinity(), -1};
   }
@@ -1191,8 +1205,9 @@ DepthSample RenderToolDepth(const HapticModel& tool, const RigidTransform& X_WT,
                  has_first ? first_cell % n : -1,
                  has_first ? first_cell / n : -1,
                  {env_heights.data(), -std::numeric_limits<float>::infinity(),
-                  static_cast<int>(cells), -1}};
+                  static_cast<int>(cells), -1, 0}};
   RenderHeightsFastImpl(tool, X_WT, triangles, w, PatchSide::kTool, 0, heights, kernel, &cull);
+  if (cells_drawn != nullptr) *cells_drawn = cull.drawn.count;
   // The scan over the rows drawn (every other cell is +∞, which no scan takes), row by row in
   // increasing cell order: the whole scan's cell and bits.
   FirstLargestDifference scan;

@@ -172,13 +172,14 @@ class TexturePenetrationSolver {
   /// kFast with rendered rotations: when the six rotation samples are rendered culled
   /// (RenderToolDepth: the same depths and cells, fewer cells drawn; issue 15).
   enum class CullRotations {
-    kWhenItPays,  ///< when the base render says few cells can matter (CullPays); with parallel
-                  ///< renders, never (the rotations start with the base); the default
-    kAlways,      ///< every contact (with parallel renders, without a first cell)
+    kWhenItPays,  ///< the first rotation culled, the other five too when it drew few cells
+                  ///< (kCullPaysFraction); with parallel renders, none (the rotations start
+                  ///< with the base); the default
+    kAlways,      ///< every rotation (with parallel renders, without a first cell)
     kNever,       ///< whole renders, as before the cull
   };
   void set_cull_rotations(CullRotations c) noexcept { cull_rotations_ = c; }
-  /// Contacts whose rotation renders were culled (serial renders) since construction.
+  /// Contacts whose six rotation renders were all culled (serial renders) since construction.
   std::uint64_t culled_contacts() const noexcept { return culled_contacts_; }
 
   /// Linearizes the contact of `tool` posed at X_WT (frame T at the tool's centre of mass) against
@@ -208,14 +209,10 @@ class TexturePenetrationSolver {
   /// 0..4 (the base, ±h_x along u and v) read from it; `samples` holds ≥ 5 entries.
   void RenderGrownBase(const HapticModel& tool, const RigidTransform& X_WT,
                        const ContactWindow& window, std::span<DepthSample> samples) noexcept;
-  /// Whether culling the rotation renders pays for this contact: under kWhenItPays, true when
-  /// fewer than kCullPaysFraction of the cells both renders cover have b − a within the tool's
-  /// texture reach of `depth_m` at the base pose (env_heights_ and tool_ext_heights_ as
-  /// RenderGrownBase left them). Culling costs more per cell drawn (two passes, the bound's test,
-  /// flushes that raise the lower bound), so where most cells stay it is slower: hammer on torus
-  /// keeps 94 % of its cells and took 160–170 µs per contact culled against 140–150 plain;
-  /// block on gear keeps 6 % and took 63 against 102 µs (issue 15).
-  bool CullPays(const HapticModel& tool, const ContactWindow& window, double depth_m) noexcept;
+  /// kWhenItPays: the remaining five rotations are rendered whole when the first culled one drew
+  /// more than this fraction of the window's cells. A culled render costs more per cell drawn
+  /// (two passes, the bound's test, flushes that raise the lower bound), so where most cells stay
+  /// it is the slower one (issue 15).
   static constexpr double kCullPaysFraction = 0.3;
 
   /// Largest |p_O| of the tool's vertices (m), computed once per model.

@@ -122,16 +122,18 @@ struct DepthSample {
 /// guess at the deepest cell, such as the unrotated pose's; −1 for none) are drawn first; from
 /// their cells on, the largest b − a drawn so far is a lower bound L of the depth (a cell's tool
 /// height only falls as triangles are drawn), and a covered cell whose bound env − (b·d) +
-/// max|h| (its coarse height b·d, the texture's largest |height|, |N·n| ≤ 1) is below L by more
-/// than a margin for float rounding is not textured or drawn: it cannot be the deepest cell nor
-/// tie with it. `heights` (#N*N, scratch) holds the partial render afterwards: the drawn cells
-/// have their RenderPatchHeightsFast values or above, the others +∞ or above. How much is culled
-/// depends on the texture's amplitude against the depth's spread over the window. Returns
-/// {−∞, −1} when env_heights or heights hold fewer than N*N cells. Never allocates.
+/// max|h| (its coarse height b·d; max|h| the largest |height| under its triangle's texture
+/// coordinates, HeightField::MaxAbsOver at the triangle's mip level; |N·n| ≤ 1) is below L by
+/// more than a margin for float rounding is not textured or drawn: it cannot be the deepest cell
+/// nor tie with it. `heights` (#N*N, scratch) holds the partial render afterwards: the drawn
+/// cells have their RenderPatchHeightsFast values or above, the others +∞ or above. How much is
+/// culled depends on the texture's amplitude against the depth's spread over the window;
+/// `cells_drawn` (when not null) gets how many cells were textured and drawn. Returns {−∞, −1}
+/// when env_heights or heights hold fewer than N*N cells. Never allocates.
 DepthSample RenderToolDepth(const HapticModel& tool, const RigidTransform& X_WT,
                             std::span<const int> triangles, const ContactWindow& window,
                             std::span<const float> env_heights, int first_cell,
-                            std::span<float> heights,
+                            std::span<float> heights, int* cells_drawn = nullptr,
                             SampleKernel kernel = SampleKernel::kBest) noexcept;
 
 /// δ of heights `b` (environment, −∞ where empty) and `a` (tool, +∞ where empty), both #N*N.
