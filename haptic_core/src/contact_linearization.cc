@@ -116,6 +116,7 @@ TexturePenetrationSolver::TexturePenetrationSolver(int max_resolution, int max_t
   env_triangles_.reserve(static_cast<size_t>(max_triangles));
   tool_triangles_.reserve(static_cast<size_t>(max_triangles));
   vertex_scratch_.reserve(static_cast<size_t>(max_triangles));  // a closed mesh: V ≈ F/2
+  first_triangles_.reserve(64);
 }
 
 void TexturePenetrationSolver::RenderEnvironment(const HapticModel& environment,
@@ -339,8 +340,9 @@ ContactLinearization TexturePenetrationSolver::Linearize(
             if (cull_rotations_ == CullRotations::kAlways) {
               // No first cell: the base is rendered at the same time.
               heights.resize(cells);
+              ToolDepthCull hints;
               samples[static_cast<size_t>(task + 4)] =
-                  RenderToolDepth(tool, pose, tool_triangles_, w, env_heights_, -1, heights);
+                  RenderToolDepth(tool, pose, tool_triangles_, w, env_heights_, heights, hints);
               return;
             }
             heights.assign(cells, std::numeric_limits<float>::infinity());
@@ -368,11 +370,19 @@ ContactLinearization TexturePenetrationSolver::Linearize(
             samples[i] = EvaluateTool(tool, poses[i], w);
             continue;
           }
-          int drawn = 0;
+          // The first rotation's first pass finds the triangles around the deepest cell; the
+          // other five start from those.
+          ToolDepthCull hints;
+          hints.first_cell = samples[0].cell;
+          if (i == 5) {
+            hints.first_triangles_out = &first_triangles_;
+          } else {
+            hints.first_triangles = first_triangles_;
+          }
           samples[i] = RenderToolDepth(tool, poses[i], tool_triangles_, w, env_heights_,
-                                       samples[0].cell, tool_heights_, &drawn);
+                                       tool_heights_, hints);
           if (i == 5 && cull_rotations_ == CullRotations::kWhenItPays &&
-              drawn > kCullPaysFraction * static_cast<double>(cells)) {
+              hints.cells_drawn > kCullPaysFraction * static_cast<double>(cells)) {
             cull = false;
             --culled_contacts_;
           }

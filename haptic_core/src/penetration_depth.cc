@@ -816,6 +816,8 @@ struct DepthCull {
   double texture_bound_m;
   int first_i, first_j;
   DrawnCells drawn;  // the environment, the lower bound, the cells drawn (the rest stay +∞)
+  std::span<const int> first_triangles;    // the first pass's triangles (empty: all)
+  std::vector<int>* first_triangles_out;   // gets the triangles the first pass drew, or nullptr
 };
 
 void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
@@ -980,7 +982,10 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
       cull != nullptr ? 1e-6 * (3.0 * range + cull->texture_bound_m) + 1e-15 : 0.0;
   for (int pass = 0; pass < passes; ++pass) {
   if (pass == 1) flush();
-  for (const int f : triangles) {
+  const std::span<const int> list =
+      pass == 0 && passes == 2 && !cull->first_triangles.empty() ? cull->first_triangles
+                                                                 : triangles;
+  for (const int f : list) {
     shade();  // the previous triangle's cells, before its shading is replaced
     const glm::ivec3 tri = model.triangles[f];
     const glm::dvec3& a0 = model.vertices_O[tri[0]];
@@ -1010,6 +1015,8 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
       pc.j0 = std::max(pc.j0, cull->first_j - kFirstCellReach);
       pc.j1 = std::min(pc.j1, cull->first_j + kFirstCellReach);
       if (pc.i0 > pc.i1 || pc.j0 > pc.j1) continue;
+      std::vector<int>* out = cull->first_triangles_out;
+      if (out != nullptr && out->size() < out->capacity()) out->push_back(f);
     }
     const double inv_area = pc.inv_area;
     const int i0 = pc.i0, i1 = pc.i1;
@@ -1190,12 +1197,13 @@ void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO
 
 DepthSample RenderToolDepth(const HapticModel& tool, const RigidTransform& X_WT,
                             std::span<const int> triangles, const ContactWindow& w,
-                            std::span<const float> env_heights, int first_cell,
-                            std::span<float> heights, int* cells_drawn,
-                            SampleKernel kernel) noexcept {
+                            std::span<const float> env_heights, std::span<float> heights,
+                            ToolDepthCull& hints, SampleKernel kernel) noexcept {
   const int n = w.resolution;
   const auto cells = static_cast<std::size_t>(n) * n;
-  if (cells_drawn != nullptr) *cells_drawn = 0;
+  hints.cells_drawn = 0;
+  if (hints.first_triangles_out != nullptr) hints.first_triangles_out->clear();
+  const int first_cell = hints.first_cell;
   if (n <= 0 || env_heights.size() < cells || heights.size() < cells) {
     return {-std::numeric_limits<double>::infinity(), -1};
   }
@@ -1205,9 +1213,11 @@ DepthSample RenderToolDepth(const HapticModel& tool, const RigidTransform& X_WT,
                  has_first ? first_cell % n : -1,
                  has_first ? first_cell / n : -1,
                  {env_heights.data(), -std::numeric_limits<float>::infinity(),
-                  static_cast<int>(cells), -1, 0}};
+                  static_cast<int>(cells), -1, 0},
+                 hints.first_triangles,
+                 hints.first_triangles_out};
   RenderHeightsFastImpl(tool, X_WT, triangles, w, PatchSide::kTool, 0, heights, kernel, &cull);
-  if (cells_drawn != nullptr) *cells_drawn = cull.drawn.count;
+  hints.cells_drawn = cull.drawn.count;
   // The scan over the rows drawn (every other cell is +∞, which no scan takes), row by row in
   // increasing cell order: the whole scan's cell and bits.
   FirstLargestDifference scan;

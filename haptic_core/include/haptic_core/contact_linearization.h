@@ -224,6 +224,9 @@ class TexturePenetrationSolver {
   std::uint64_t culled_contacts_ = 0;
   /// SelectPatchTriangles' per-vertex coordinates (reserved for max_triangles vertices).
   std::vector<double> vertex_scratch_;
+  /// The triangles the first culled rotation drew around the deepest cell (up to 64), which the
+  /// other five draw first.
+  std::vector<int> first_triangles_;
   std::vector<float> env_heights_;
   std::vector<float> tool_heights_;
   /// The base pose on the window grown by a cell (kFast, and the base-render rotation gradients).

@@ -115,25 +115,39 @@ struct DepthSample {
   int cell;
 };
 
+/// RenderToolDepth's hints and what it reports about its cull.
+struct ToolDepthCull {
+  /// Window cell j·N + i whose neighbourhood (±2 cells) the first pass draws: a good guess at the
+  /// deepest cell, such as the unrotated pose's; −1 for none (one pass).
+  int first_cell = -1;
+  /// The first pass's triangles, a subset of the render's (a triangle outside them would be
+  /// drawn where the whole render does not draw it); empty: all of them. The triangles a render
+  /// at a nearby pose drew there (first_triangles_out) spare the first pass the others.
+  std::span<const int> first_triangles;
+  /// When not null, gets the triangles the first pass drew (cleared first; up to its capacity).
+  std::vector<int>* first_triangles_out = nullptr;
+  /// Out: how many cells were textured and drawn.
+  int cells_drawn = 0;
+};
+
 /// DirectionalPenetrationDepth(env_heights, tool render) for the tool render that
 /// RenderPatchHeightsFast(tool, X_WT, triangles, window, kTool, 0, ·, kernel) would make, the
 /// same cell and bits, drawing only the cells that can matter (issue 15: the texture stage's
-/// rendered rotation samples). The triangles whose cell box holds `first_cell` (j·N + i; a good
-/// guess at the deepest cell, such as the unrotated pose's; −1 for none) are drawn first; from
-/// their cells on, the largest b − a drawn so far is a lower bound L of the depth (a cell's tool
-/// height only falls as triangles are drawn), and a covered cell whose bound env − (b·d) +
-/// max|h| (its coarse height b·d; max|h| the largest |height| under its triangle's texture
-/// coordinates, HeightField::MaxAbsOver at the triangle's mip level; |N·n| ≤ 1) is below L by
-/// more than a margin for float rounding is not textured or drawn: it cannot be the deepest cell
-/// nor tie with it. `heights` (#N*N, scratch) holds the partial render afterwards: the drawn
-/// cells have their RenderPatchHeightsFast values or above, the others +∞ or above. How much is
-/// culled depends on the texture's amplitude against the depth's spread over the window;
-/// `cells_drawn` (when not null) gets how many cells were textured and drawn. Returns {−∞, −1}
-/// when env_heights or heights hold fewer than N*N cells. Never allocates.
+/// rendered rotation samples). A first pass draws the cells around hints.first_cell (with
+/// hints.first_triangles); from its cells on, the largest b − a drawn so far is a lower bound L
+/// of the depth (a cell's tool height only falls as triangles are drawn), and a covered cell
+/// whose bound env − (b·d) + max|h| (its coarse height b·d; max|h| the largest |height| under
+/// its triangle's texture coordinates, HeightField::MaxAbsOver at the triangle's mip level;
+/// |N·n| ≤ 1) is below L by more than a margin for float rounding is not textured or drawn: it
+/// cannot be the deepest cell nor tie with it. `heights` (#N*N, scratch) holds the partial render
+/// afterwards: the drawn cells have their RenderPatchHeightsFast values or above, the others +∞
+/// or above. How much is culled depends on the texture's amplitude against the depth's spread
+/// over the window (hints.cells_drawn reports it). Returns {−∞, −1} when env_heights or heights
+/// hold fewer than N*N cells. Never allocates.
 DepthSample RenderToolDepth(const HapticModel& tool, const RigidTransform& X_WT,
                             std::span<const int> triangles, const ContactWindow& window,
-                            std::span<const float> env_heights, int first_cell,
-                            std::span<float> heights, int* cells_drawn = nullptr,
+                            std::span<const float> env_heights, std::span<float> heights,
+                            ToolDepthCull& hints,
                             SampleKernel kernel = SampleKernel::kBest) noexcept;
 
 /// δ of heights `b` (environment, −∞ where empty) and `a` (tool, +∞ where empty), both #N*N.
