@@ -199,6 +199,10 @@ TEST(TextureStageParity, CulledToolRenderGivesTheWholeRendersDepth) {
       SelectPatchTriangles(env, c.X_WO, c.window, PatchSide::kEnvironment, 0.0, env_triangles);
       RenderPatchHeightsFast(env, c.X_WO, env_triangles, c.window, PatchSide::kEnvironment, 0,
                              env_h);
+      EnvironmentMaxPyramid env_max;
+      env_max.Reserve(n);
+      env_max.Build(env_h, n);
+      ASSERT_EQ(env_max.resolution(), n);
       const GradientSteps h = GradientSteps::For(c.window);
       SelectPatchTriangles(tool, c.X_WT, c.window, PatchSide::kTool, 2.0 * h.h_x + 0.05,
                            tool_triangles, h.h_theta + 1e-9);
@@ -218,6 +222,7 @@ TEST(TextureStageParity, CulledToolRenderGivesTheWholeRendersDepth) {
           for (const int first : {base_cell, -1, random_cell}) {
             ToolDepthCull hints;
             hints.first_cell = first;
+            hints.env_max = first == base_cell ? &env_max : nullptr;
             // Now and then a first pass with only some of the triangles (any subset is valid).
             std::vector<int> some;
             if (first == random_cell && p % 2 == 1) {
@@ -360,6 +365,43 @@ TEST(TextureStageParity, FastSolverGivesTheReferenceDepthsAndGradients) {
   std::printf(
       "[ parity ] %d contacts in contact; worst |dδ| %.3g m, |dJ_x| %.3g, |dJ_θ| %.3g m/rad\n",
       in_contact, worst_depth, worst_dx, worst_dr);
+}
+
+// EnvironmentMaxPyramid::MaxOver is at least the largest height of any box (random boxes on
+// random heights with empty cells, odd and even sizes), exactly it for a single cell, and −∞ for
+// an empty box.
+TEST(TextureStageParity, EnvironmentMaxPyramidBoundsEveryBox) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> h(-1e-3f, 1e-3f);
+  for (const int n : {1, 2, 37, 50, 64}) {
+    std::vector<float> env(static_cast<std::size_t>(n) * n);
+    for (float& e : env) e = rng() % 5 == 0 ? -std::numeric_limits<float>::infinity() : h(rng);
+    EnvironmentMaxPyramid pyramid;
+    pyramid.Reserve(64);
+    pyramid.Build(env, n);
+    ASSERT_EQ(pyramid.resolution(), n);
+    for (int trial = 0; trial < 2000; ++trial) {
+      int i0 = static_cast<int>(rng() % n), i1 = static_cast<int>(rng() % n);
+      int j0 = static_cast<int>(rng() % n), j1 = static_cast<int>(rng() % n);
+      if (i0 > i1) std::swap(i0, i1);
+      if (j0 > j1) std::swap(j0, j1);
+      if (trial % 4 == 0) i1 = i0, j1 = j0;
+      float want = -std::numeric_limits<float>::infinity();
+      for (int j = j0; j <= j1; ++j)
+        for (int i = i0; i <= i1; ++i) want = std::max(want, env[j * n + i]);
+      const float got = pyramid.MaxOver(i0, i1, j0, j1);
+      ASSERT_GE(got, want) << n << ": [" << i0 << ", " << i1 << "] x [" << j0 << ", " << j1 << "]";
+      if (i0 == i1 && j0 == j1) {
+        ASSERT_EQ(got, want);
+      }
+    }
+    EXPECT_EQ(pyramid.MaxOver(3, 2, 0, 0), -std::numeric_limits<float>::infinity());
+  }
+  EnvironmentMaxPyramid small;
+  small.Reserve(8);
+  std::vector<float> big(100 * 100, 0.0f);
+  small.Build(big, 100);  // beyond the reserve: builds nothing, allocates nothing
+  EXPECT_EQ(small.resolution(), 0);
 }
 
 // The solver's rotation samples rendered culled (always, never, or where the base render says it

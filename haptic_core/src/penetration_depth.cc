@@ -818,6 +818,7 @@ struct DepthCull {
   DrawnCells drawn;  // the environment, the lower bound, the cells drawn (the rest stay +∞)
   std::span<const int> first_triangles;    // the first pass's triangles (empty: all)
   std::vector<int>* first_triangles_out;   // gets the triangles the first pass drew, or nullptr
+  const EnvironmentMaxPyramid* env_max;    // whole triangles skipped by it, or nullptr
 };
 
 void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
@@ -1041,6 +1042,14 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
       row_cull = {cull->drawn.env, d[0], d[1], d[2],
                   static_cast<double>(cull->drawn.lower) - texture_bound - cull_margin};
       row_cull_ptr = &row_cull;
+      // The whole triangle: its cells' coarse heights are at least its smallest corner's (to
+      // rounding far below the margin), and their environment heights at most the box's largest.
+      if (cull->env_max != nullptr &&
+          static_cast<double>(cull->env_max->MaxOver(pc.i0, pc.i1, pc.j0, pc.j1)) -
+                  std::min({d[0], d[1], d[2]}) <
+              row_cull.cut) {
+        continue;
+      }
     }
     if (!textured || level != batch_level) flush();
     batch_level = level;
@@ -1188,6 +1197,82 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
 
 }  // namespace
 
+void EnvironmentMaxPyramid::Reserve(int max_resolution) {
+  std::size_t total = 0;
+  for (int size = (max_resolution + 1) / 2; size >= 1; size = (size + 1) / 2) {
+    total += static_cast<std::size_t>(size) * size;
+    if (size == 1) break;
+  }
+  storage_.reserve(total);
+  offset_.reserve(32);
+  size_.reserve(32);
+}
+
+void EnvironmentMaxPyramid::Build(std::span<const float> env_heights, int n) noexcept {
+  resolution_ = 0;
+  env_ = nullptr;
+  if (n <= 0 || env_heights.size() < static_cast<std::size_t>(n) * n) return;
+  std::size_t total = 0;
+  int levels = 0;
+  for (int size = (n + 1) / 2;; size = (size + 1) / 2) {
+    total += static_cast<std::size_t>(size) * size;
+    ++levels;
+    if (size == 1) break;
+  }
+  if (storage_.capacity() < total || offset_.capacity() < static_cast<std::size_t>(levels) + 1) {
+    return;  // never allocates
+  }
+  storage_.resize(total);
+  offset_.assign(1, 0);
+  size_.assign(1, n);
+  std::size_t at = 0;
+  const float* src = env_heights.data();
+  int src_size = n;
+  for (int k = 1; k <= levels; ++k) {
+    const int size = (src_size + 1) / 2;
+    float* dst = storage_.data() + at;
+    for (int y = 0; y < size; ++y) {
+      const int y1 = std::min(2 * y + 1, src_size - 1);
+      for (int x = 0; x < size; ++x) {
+        const int x1 = std::min(2 * x + 1, src_size - 1);
+        const float a = src[2 * y * src_size + 2 * x], b = src[2 * y * src_size + x1];
+        const float c = src[y1 * src_size + 2 * x], d = src[y1 * src_size + x1];
+        const float ab = a > b ? a : b, cd = c > d ? c : d;
+        dst[y * size + x] = ab > cd ? ab : cd;
+      }
+    }
+    offset_.push_back(static_cast<int>(at));
+    size_.push_back(size);
+    src = dst;
+    src_size = size;
+    at += static_cast<std::size_t>(size) * size;
+  }
+  env_ = env_heights.data();
+  resolution_ = n;
+}
+
+float EnvironmentMaxPyramid::MaxOver(int i0, int i1, int j0, int j1) const noexcept {
+  i0 = std::max(i0, 0);
+  j0 = std::max(j0, 0);
+  i1 = std::min(i1, resolution_ - 1);
+  j1 = std::min(j1, resolution_ - 1);
+  float m = -std::numeric_limits<float>::infinity();
+  if (i0 > i1 || j0 > j1) return m;
+  // Cell c of level 0 lies in block c >> k of level k.
+  int k = 0;
+  const int top = static_cast<int>(size_.size()) - 1;
+  while (k < top && ((i1 >> k) - (i0 >> k) > 1 || (j1 >> k) - (j0 >> k) > 1)) ++k;
+  const float* level = k == 0 ? env_ : storage_.data() + offset_[static_cast<std::size_t>(k)];
+  const int size = size_[static_cast<std::size_t>(k)];
+  for (int y = j0 >> k; y <= (j1 >> k); ++y) {
+    for (int x = i0 >> k; x <= (i1 >> k); ++x) {
+      const float v = level[y * size + x];
+      m = v > m ? v : m;
+    }
+  }
+  return m;
+}
+
 void RenderPatchHeightsFast(const HapticModel& model, const RigidTransform& X_WO,
                             std::span<const int> triangles, const ContactWindow& w, PatchSide side,
                             int margin_cells, std::span<float> heights,
@@ -1215,7 +1300,9 @@ DepthSample RenderToolDepth(const HapticModel& tool, const RigidTransform& X_WT,
                  {env_heights.data(), -std::numeric_limits<float>::infinity(),
                   static_cast<int>(cells), -1, 0},
                  hints.first_triangles,
-                 hints.first_triangles_out};
+                 hints.first_triangles_out,
+                 hints.env_max != nullptr && hints.env_max->resolution() == n ? hints.env_max
+                                                                              : nullptr};
   RenderHeightsFastImpl(tool, X_WT, triangles, w, PatchSide::kTool, 0, heights, kernel, &cull);
   hints.cells_drawn = cull.drawn.count;
   // The scan over the rows drawn (every other cell is +∞, which no scan takes), row by row in

@@ -214,6 +214,9 @@ class TexturePenetrationSolver {
   /// (two passes, the bound's test, flushes that raise the lower bound), so where most cells stay
   /// it is the slower one (issue 15).
   static constexpr double kCullPaysFraction = 0.3;
+  /// Culled rotations use the environment's max pyramid when the tool brings more triangles than
+  /// this.
+  static constexpr std::size_t kPyramidTriangles = 32;
 
   /// Largest |p_O| of the tool's vertices (m), computed once per model.
   double ToolRadius(const HapticModel& tool) noexcept;
@@ -227,6 +230,8 @@ class TexturePenetrationSolver {
   /// The triangles the first culled rotation drew around the deepest cell (up to 64), which the
   /// other five draw first.
   std::vector<int> first_triangles_;
+  /// The environment render's max pyramid, for the culled rotation renders.
+  EnvironmentMaxPyramid env_max_;
   std::vector<float> env_heights_;
   std::vector<float> tool_heights_;
   /// The base pose on the window grown by a cell (kFast, and the base-render rotation gradients).

@@ -115,6 +115,31 @@ struct DepthSample {
   int cell;
 };
 
+/// The largest environment height over square blocks of an N×N render: level k ≥ 1 holds the
+/// maximum of each 2^k × 2^k block (−∞ where empty), so that the largest height over any cell box
+/// is read from at most 2×2 entries of one level. RenderToolDepth skips a triangle whose cells
+/// all fall short before it tests them. Built once per window, for the rotation renders that
+/// share its environment.
+class EnvironmentMaxPyramid {
+ public:
+  /// Reserves for windows up to `max_resolution` cells a side (Build then never allocates).
+  void Reserve(int max_resolution);
+  /// The pyramid of `env_heights` (N×N, N = resolution); builds nothing (resolution() 0) when
+  /// env_heights is too short or the reserve too small. Never allocates.
+  void Build(std::span<const float> env_heights, int resolution) noexcept;
+  /// N of the last Build (0: none).
+  int resolution() const noexcept { return resolution_; }
+  /// The largest height over cells i ∈ [i0, i1], j ∈ [j0, j1] (clamped to the window), or more
+  /// (the blocks read may reach past the box); −∞ for an empty box. Precondition: resolution() > 0.
+  float MaxOver(int i0, int i1, int j0, int j1) const noexcept;
+
+ private:
+  const float* env_ = nullptr;
+  int resolution_ = 0;
+  std::vector<float> storage_;
+  std::vector<int> offset_, size_;  // level k ≥ 1 at storage_[offset_[k]], size_[k]² entries
+};
+
 /// RenderToolDepth's hints and what it reports about its cull.
 struct ToolDepthCull {
   /// Window cell j·N + i whose neighbourhood (±2 cells) the first pass draws: a good guess at the
@@ -126,6 +151,10 @@ struct ToolDepthCull {
   std::span<const int> first_triangles;
   /// When not null, gets the triangles the first pass drew (cleared first; up to its capacity).
   std::vector<int>* first_triangles_out = nullptr;
+  /// The environment's max pyramid (built from env_heights), or nullptr: with it, a triangle
+  /// whose largest environment height over its cell box, less its smallest corner height, cannot
+  /// reach the lower bound is skipped whole.
+  const EnvironmentMaxPyramid* env_max = nullptr;
   /// Out: how many cells were textured and drawn.
   int cells_drawn = 0;
 };
