@@ -180,9 +180,9 @@ DepthSample RenderToolDepth(const HapticModel& tool, const RigidTransform& X_WT,
                             SampleKernel kernel = SampleKernel::kBest) noexcept;
 
 /// δ of heights `b` (environment, −∞ where empty) and `a` (tool, +∞ where empty), both #N*N.
-/// Ties keep the lowest index. Never allocates. One scan in SIMD lanes (eight with AVX2, else four
-/// with SSE2), each keeping the first cell of its largest difference: the cell and bits of the
-/// plain one-cell-at-a-time scan.
+/// Ties keep the lowest index. Never allocates. One scan in SIMD lanes (sixteen with AVX-512,
+/// eight with AVX2, else four with SSE2), each keeping the first cell of its largest difference:
+/// the cell and bits of the plain one-cell-at-a-time scan.
 DepthSample DirectionalPenetrationDepth(std::span<const float> b,
                                         std::span<const float> a) noexcept;
 
