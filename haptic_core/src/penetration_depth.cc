@@ -384,6 +384,14 @@ struct RowCull {
                                  _CMP_GE_OQ);
     }
     if (keep == 0) continue;
+    if (keep == 0xFF) {  // a full run: no compress
+      _mm512_storeu_pd(b0_out + count, b0);
+      _mm512_storeu_pd(b1_out + count, b1);
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(cell_out + count),
+                          _mm256_add_epi32(lanes, start));
+      count += 8;
+      continue;
+    }
     const auto k = static_cast<__mmask8>(keep);
     _mm512_storeu_pd(b0_out + count, _mm512_maskz_compress_pd(k, b0));
     _mm512_storeu_pd(b1_out + count, _mm512_maskz_compress_pd(k, b1));
@@ -483,17 +491,40 @@ struct DrawnCells {
     const int first = cell[k];
     const __m256i run = _mm256_add_epi32(_mm256_set1_epi32(first), steps);
     const int lanes = std::min(8, n - k);
-    if ((_mm256_cmpeq_epi32_mask(idx, run) & valid) == valid) {
-      const __m256 old = _mm256_maskz_loadu_ps(m, heights + first);
-      const __mmask8 take = m & (keep_max ? _mm256_cmp_ps_mask(fv, old, _CMP_GT_OQ)
-                                          : _mm256_cmp_ps_mask(fv, old, _CMP_LT_OQ));
-      _mm256_mask_storeu_ps(heights + first, take, fv);
-      if (drawn != nullptr) {
-        // env − fv: −∞ where the environment has no cell or the height is outside the box.
-        const __m256 diff = _mm256_sub_ps(_mm256_maskz_loadu_ps(m, drawn->env + first), fv);
-        lower = _mm256_max_ps(lower, _mm256_mask_mov_ps(minus_inf, m & inside, diff));
-        drawn->min_cell = std::min(drawn->min_cell, first);
-        drawn->max_cell = std::max(drawn->max_cell, first + lanes - 1);
+    // The lanes that continue the first lane's run, and (a row's end in the middle of the eight)
+    // those that continue the first other lane's: each run is one masked load and store, in
+    // memory order of its cells (distinct cells, so either run may go first).
+    const unsigned first_run = _mm256_cmpeq_epi32_mask(idx, run) & valid;
+    const unsigned rest = valid & ~first_run;
+    unsigned second_run = 0;
+    int second = 0;
+    if (rest != 0) {
+      const int p = __builtin_ctz(rest);
+      second = cell[k + p] - p;  // the run's cell at lane 0
+      second_run = _mm256_cmpeq_epi32_mask(
+                       idx, _mm256_add_epi32(_mm256_set1_epi32(second), steps)) & rest;
+    }
+    if ((first_run | second_run) == valid) {
+      const int bases[2] = {first, second};
+      const unsigned masks[2] = {first_run, second_run};
+      for (int r = 0; r < 2; ++r) {
+        const int base = bases[r];
+        const unsigned lanes_mask = masks[r];
+        if (lanes_mask == 0) continue;
+        const auto mm = static_cast<__mmask8>(lanes_mask);
+        // Lane l writes cell base + l (a lane outside the mask is neither read nor written).
+        const __m256 old = _mm256_maskz_loadu_ps(mm, heights + base);
+        const __mmask8 take = mm & (keep_max ? _mm256_cmp_ps_mask(fv, old, _CMP_GT_OQ)
+                                             : _mm256_cmp_ps_mask(fv, old, _CMP_LT_OQ));
+        _mm256_mask_storeu_ps(heights + base, take, fv);
+        if (drawn != nullptr) {
+          // env − fv: −∞ where the environment has no cell or the height is outside the box.
+          const __m256 diff = _mm256_sub_ps(_mm256_maskz_loadu_ps(mm, drawn->env + base), fv);
+          lower = _mm256_max_ps(lower, _mm256_mask_mov_ps(minus_inf, mm & inside, diff));
+          const int lo = __builtin_ctz(lanes_mask), hi = 31 - __builtin_clz(lanes_mask);
+          drawn->min_cell = std::min(drawn->min_cell, base + lo);
+          drawn->max_cell = std::max(drawn->max_cell, base + hi);
+        }
       }
       continue;
     }
