@@ -49,9 +49,8 @@ TEST(SampleLevelBatch, EveryKernelWritesTheBitsOfSample) {
   for (const Case& c : cases) {
     const HeightField field = RandomField(c.width, c.height, c.wrap_u, c.wrap_v, 7);
     for (int level = 0; level < field.num_levels(); ++level) {
-      for (const std::size_t n :
-           {std::size_t{1}, std::size_t{7}, std::size_t{8}, std::size_t{13}, std::size_t{16},
-            std::size_t{29}, std::size_t{256}}) {
+      for (const std::size_t n : {std::size_t{1}, std::size_t{7}, std::size_t{8}, std::size_t{13},
+                                  std::size_t{16}, std::size_t{29}, std::size_t{256}}) {
         std::vector<float> u(n), v(n), best(n, -1.0f), avx2(n, -3.0f), scalar(n, -2.0f);
         for (std::size_t k = 0; k < n; ++k) {
           const int pick = static_cast<int>(rng() % 8);

@@ -157,8 +157,7 @@ TEST(TextureStageParity, FastRenderDrawsTheReferenceHeightsOnAllSixSeedModels) {
         std::vector<float> fast_scalar(ref.size(), empty), fast_avx2(ref.size(), empty);
         RenderPatchHeightsFast(m, X, triangles, c.window, side, 0, fast_scalar,
                                SampleKernel::kScalar);
-        RenderPatchHeightsFast(m, X, triangles, c.window, side, 0, fast_avx2,
-                               SampleKernel::kAvx2);
+        RenderPatchHeightsFast(m, X, triangles, c.window, side, 0, fast_avx2, SampleKernel::kAvx2);
         EXPECT_EQ(0, std::memcmp(fast.data(), fast_scalar.data(), fast.size() * sizeof(float)))
             << SeedModelName(which) << " " << SampleKernelName();
         EXPECT_EQ(0, std::memcmp(fast_avx2.data(), fast_scalar.data(), fast.size() * sizeof(float)))
@@ -231,8 +230,8 @@ TEST(TextureStageParity, CulledToolRenderGivesTheWholeRendersDepth) {
               }
               hints.first_triangles = some;
             }
-            const DepthSample got = RenderToolDepth(tool, poses[p], tool_triangles, c.window,
-                                                    env_h, partial, hints, kernel);
+            const DepthSample got = RenderToolDepth(tool, poses[p], tool_triangles, c.window, env_h,
+                                                    partial, hints, kernel);
             ASSERT_EQ(got.cell, want.cell) << SeedModelName(which) << " pose " << p;
             ASSERT_EQ(std::memcmp(&got.depth_m, &want.depth_m, sizeof(double)), 0)
                 << SeedModelName(which) << " pose " << p << ": " << got.depth_m << " vs "

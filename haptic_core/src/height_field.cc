@@ -74,8 +74,8 @@ float HeightField::MaxAbsOver(int level, float u0, float v0, float u1, float v1)
   if (levels_.empty()) return 0.0f;
   constexpr float kRounding = 1.0f + 1e-6f;
   const float whole = std::max(std::abs(min_height_), std::abs(max_height_)) * kRounding;
-  if (max_abs_.size() + 1 != levels_.size() || !(std::isfinite(u0) && std::isfinite(u1) &&
-                                                 std::isfinite(v0) && std::isfinite(v1))) {
+  if (max_abs_.size() + 1 != levels_.size() ||
+      !(std::isfinite(u0) && std::isfinite(u1) && std::isfinite(v0) && std::isfinite(v1))) {
     return whole;
   }
   level = std::clamp(level, 0, num_levels() - 1);
@@ -106,7 +106,8 @@ float HeightField::MaxAbsOver(int level, float u0, float v0, float u1, float v1)
   for (int y = y0 >> s; y <= std::min(y1 >> s, K.height - 1); ++y) {
     for (int x = x0 >> s; x <= std::min(x1 >> s, K.width - 1); ++x) {
       const auto i = static_cast<std::size_t>(y) * K.width + x;
-      m = std::max(m, k == 0 ? std::abs(K.texels[i]) : max_abs_[static_cast<std::size_t>(k - 1)][i]);
+      m = std::max(m,
+                   k == 0 ? std::abs(K.texels[i]) : max_abs_[static_cast<std::size_t>(k - 1)][i]);
     }
   }
   return m * kRounding;

@@ -157,9 +157,9 @@ std::size_t SampleSse2(const HeightFieldLevel& L, bool wrap_u, bool wrap_v, cons
   return _mm512_min_epi32(_mm512_max_epi32(i, _mm512_setzero_si512()), size_minus_1);
 }
 
-[[HT_AVX512_TARGET]] std::size_t SampleAvx512(const HeightFieldLevel& L, bool wrap_u,
-                                               bool wrap_v, const float* u, const float* v,
-                                               float* h, std::size_t n) noexcept {
+[[HT_AVX512_TARGET]] std::size_t SampleAvx512(const HeightFieldLevel& L, bool wrap_u, bool wrap_v,
+                                              const float* u, const float* v, float* h,
+                                              std::size_t n) noexcept {
   const __m512 tw = _mm512_set1_ps(static_cast<float>(L.width));
   const __m512 th = _mm512_set1_ps(static_cast<float>(L.height));
   const __m512 half = _mm512_set1_ps(0.5f), lo = _mm512_set1_ps(-1e6f), hi = _mm512_set1_ps(1e6f);
@@ -176,10 +176,10 @@ std::size_t SampleSse2(const HeightFieldLevel& L, bool wrap_u, bool wrap_v, cons
         _mm512_min_ps(_mm512_max_ps(_mm512_sub_ps(_mm512_mul_ps(vv, th), half), lo), hi);
     __m512i x0 = _mm512_cvttps_epi32(fx), y0 = _mm512_cvttps_epi32(fy);
     // floor: truncation, minus one where that rounded up.
-    x0 = _mm512_mask_sub_epi32(x0, _mm512_cmp_ps_mask(fx, _mm512_cvtepi32_ps(x0), _CMP_LT_OQ),
-                               x0, one);
-    y0 = _mm512_mask_sub_epi32(y0, _mm512_cmp_ps_mask(fy, _mm512_cvtepi32_ps(y0), _CMP_LT_OQ),
-                               y0, one);
+    x0 = _mm512_mask_sub_epi32(x0, _mm512_cmp_ps_mask(fx, _mm512_cvtepi32_ps(x0), _CMP_LT_OQ), x0,
+                               one);
+    y0 = _mm512_mask_sub_epi32(y0, _mm512_cmp_ps_mask(fy, _mm512_cvtepi32_ps(y0), _CMP_LT_OQ), y0,
+                               one);
     const __m512 tx = _mm512_sub_ps(fx, _mm512_cvtepi32_ps(x0));
     const __m512 ty = _mm512_sub_ps(fy, _mm512_cvtepi32_ps(y0));
     const __m512i xa = AddressAvx512(x0, wm1, wrap_u);
@@ -244,9 +244,9 @@ void SampleLevelBatch(const HeightField& field, int level, std::span<const float
 
 bool CpuHasAvx512() noexcept {
 #ifdef HT_SAMPLE_X86
-  static const bool have =
-      __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
-      __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512cd");
+  static const bool have = __builtin_cpu_supports("avx512f") &&
+                           __builtin_cpu_supports("avx512vl") &&
+                           __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512cd");
   return have;
 #else
   return false;

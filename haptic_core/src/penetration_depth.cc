@@ -222,7 +222,7 @@ void ShadeCells(const TriangleShading& t, const double* b0, const double* b1, do
 // With `cull` (a RowCull, below), a covered cell is also dropped where its coarse height cannot
 // make it the deepest cell.
 struct RowCull {
-  const float* env;  // the environment's heights, indexed as the render buffer
+  const float* env;   // the environment's heights, indexed as the render buffer
   double d0, d1, d2;  // the triangle's corner heights along n
   double cut;         // keep a cell where env − (b·d) ≥ cut (ordered: NaN drops)
 };
@@ -251,10 +251,10 @@ struct RowCull {
     if (cull != nullptr && mask != 0) {
       const __m128i load = _mm_cmpgt_epi32(_mm_set1_epi32(ib - i + 1), steps);  // lanes ≤ ib
       const __m256d env = _mm256_cvtps_pd(_mm_maskload_ps(cull->env + row_start + i, load));
-      const __m256d value = _mm256_add_pd(
-          _mm256_add_pd(_mm256_mul_pd(b0, _mm256_set1_pd(cull->d0)),
-                        _mm256_mul_pd(b1, _mm256_set1_pd(cull->d1))),
-          _mm256_mul_pd(b2, _mm256_set1_pd(cull->d2)));
+      const __m256d value =
+          _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(b0, _mm256_set1_pd(cull->d0)),
+                                      _mm256_mul_pd(b1, _mm256_set1_pd(cull->d1))),
+                        _mm256_mul_pd(b2, _mm256_set1_pd(cull->d2)));
       mask &= _mm256_movemask_pd(
           _mm256_cmp_pd(_mm256_sub_pd(env, value), _mm256_set1_pd(cull->cut), _CMP_GE_OQ));
     }
@@ -376,12 +376,11 @@ struct RowCull {
     if (cull != nullptr && keep != 0) {
       const __m512d env = _mm512_cvtps_pd(
           _mm256_maskz_loadu_ps(static_cast<__mmask8>(keep), cull->env + row_start + i));
-      const __m512d value = _mm512_add_pd(
-          _mm512_add_pd(_mm512_mul_pd(b0, _mm512_set1_pd(cull->d0)),
-                        _mm512_mul_pd(b1, _mm512_set1_pd(cull->d1))),
-          _mm512_mul_pd(b2, _mm512_set1_pd(cull->d2)));
-      keep &= _mm512_cmp_pd_mask(_mm512_sub_pd(env, value), _mm512_set1_pd(cull->cut),
-                                 _CMP_GE_OQ);
+      const __m512d value =
+          _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(b0, _mm512_set1_pd(cull->d0)),
+                                      _mm512_mul_pd(b1, _mm512_set1_pd(cull->d1))),
+                        _mm512_mul_pd(b2, _mm512_set1_pd(cull->d2)));
+      keep &= _mm512_cmp_pd_mask(_mm512_sub_pd(env, value), _mm512_set1_pd(cull->cut), _CMP_GE_OQ);
     }
     if (keep == 0) continue;
     if (keep == 0xFF) {  // a full run: no compress
@@ -419,10 +418,9 @@ struct RowCull {
     const auto m = static_cast<__mmask8>(n - k >= 8 ? 0xFF : (1u << (n - k)) - 1);
     const __m512d a = _mm512_maskz_loadu_pd(m, b0 + k), b = _mm512_maskz_loadu_pd(m, b1 + k);
     const __m512d c = _mm512_sub_pd(_mm512_sub_pd(one, a), b);
-    _mm512_mask_storeu_pd(
-        value + k, m,
-        _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(a, d0), _mm512_mul_pd(b, d1)),
-                      _mm512_mul_pd(c, d2)));
+    _mm512_mask_storeu_pd(value + k, m,
+                          _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(a, d0), _mm512_mul_pd(b, d1)),
+                                        _mm512_mul_pd(c, d2)));
     const __m512d uu = _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(a, uv0x), _mm512_mul_pd(b, uv1x)),
                                      _mm512_mul_pd(c, uv2x));
     const __m512d vv = _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(a, uv0y), _mm512_mul_pd(b, uv1y)),
@@ -444,8 +442,7 @@ struct RowCull {
     const __m512d quotient = _mm512_div_pd(dot, _mm512_sqrt_pd(len2));
     // +0 where len2 ≤ 1e-12 (or NaN), as the scalar code's conditional.
     _mm512_mask_storeu_pd(
-        ndotn + k, m,
-        _mm512_maskz_mov_pd(_mm512_cmp_pd_mask(len2, tiny, _CMP_GT_OQ), quotient));
+        ndotn + k, m, _mm512_maskz_mov_pd(_mm512_cmp_pd_mask(len2, tiny, _CMP_GT_OQ), quotient));
   }
 }
 
@@ -480,12 +477,10 @@ struct DrawnCells {
   for (int k = 0; k < n; k += 8) {
     const unsigned valid = n - k >= 8 ? 0xFFu : (1u << (n - k)) - 1;
     const auto m = static_cast<__mmask8>(valid);
-    const __m512d x = _mm512_add_pd(
-        _mm512_maskz_loadu_pd(m, value + k),
-        _mm512_mul_pd(_mm512_cvtps_pd(_mm256_maskz_loadu_ps(m, h + k)),
-                      _mm512_maskz_loadu_pd(m, ndotn + k)));
-    const __mmask8 inside =
-        _mm512_cmp_pd_mask(_mm512_and_pd(x, abs_mask), vrange, _CMP_LE_OQ);
+    const __m512d x = _mm512_add_pd(_mm512_maskz_loadu_pd(m, value + k),
+                                    _mm512_mul_pd(_mm512_cvtps_pd(_mm256_maskz_loadu_ps(m, h + k)),
+                                                  _mm512_maskz_loadu_pd(m, ndotn + k)));
+    const __mmask8 inside = _mm512_cmp_pd_mask(_mm512_and_pd(x, abs_mask), vrange, _CMP_LE_OQ);
     const __m256 fv = _mm256_mask_mov_ps(neutral, inside, _mm512_cvtpd_ps(x));
     const __m256i idx = _mm256_maskz_loadu_epi32(m, cell + k);
     const int first = cell[k];
@@ -501,8 +496,8 @@ struct DrawnCells {
     if (rest != 0) {
       const int p = __builtin_ctz(rest);
       second = cell[k + p] - p;  // the run's cell at lane 0
-      second_run = _mm256_cmpeq_epi32_mask(
-                       idx, _mm256_add_epi32(_mm256_set1_epi32(second), steps)) & rest;
+      second_run =
+          _mm256_cmpeq_epi32_mask(idx, _mm256_add_epi32(_mm256_set1_epi32(second), steps)) & rest;
     }
     if ((first_run | second_run) == valid) {
       const int bases[2] = {first, second};
@@ -593,9 +588,9 @@ struct DrawnCells {
   const __m512 big = _mm512_set1_ps(std::numeric_limits<float>::max());
   __m512 values = _mm512_loadu_ps(lane_values);
   __m512i cells = _mm512_loadu_si512(lane_cells);
-  __m512i cell = _mm512_add_epi32(
-      _mm512_set1_epi32(first_cell),
-      _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15));
+  __m512i cell =
+      _mm512_add_epi32(_mm512_set1_epi32(first_cell),
+                       _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15));
   const __m512i sixteen = _mm512_set1_epi32(16);
   std::size_t k = 0;
   for (; k + 16 <= n; k += 16) {
@@ -885,9 +880,9 @@ struct DepthCull {
   double texture_bound_m;
   int first_i, first_j;
   DrawnCells drawn;  // the environment, the lower bound, the cells drawn (the rest stay +∞)
-  std::span<const int> first_triangles;    // the first pass's triangles (empty: all)
-  std::vector<int>* first_triangles_out;   // gets the triangles the first pass drew, or nullptr
-  const EnvironmentMaxPyramid* env_max;    // whole triangles skipped by it, or nullptr
+  std::span<const int> first_triangles;   // the first pass's triangles (empty: all)
+  std::vector<int>* first_triangles_out;  // gets the triangles the first pass drew, or nullptr
+  const EnvironmentMaxPyramid* env_max;   // whole triangles skipped by it, or nullptr
 };
 
 void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
@@ -1051,215 +1046,215 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
   const double cull_margin =
       cull != nullptr ? 1e-6 * (3.0 * range + cull->texture_bound_m) + 1e-15 : 0.0;
   for (int pass = 0; pass < passes; ++pass) {
-  if (pass == 1) flush();
-  const std::span<const int> list =
-      pass == 0 && passes == 2 && !cull->first_triangles.empty() ? cull->first_triangles
-                                                                 : triangles;
-  for (const int f : list) {
-    shade();  // the previous triangle's cells, before its shading is replaced
-    const glm::ivec3 tri = model.triangles[f];
-    const glm::dvec3& a0 = model.vertices_O[tri[0]];
-    const glm::dvec3& a1 = model.vertices_O[tri[1]];
-    const glm::dvec3& a2 = model.vertices_O[tri[2]];
-    // Facing test at this pose (the selection may have been made at another one).
-    const glm::dvec3 cr = glm::cross(a1 - a0, a2 - a0);
-    const double cr_len = glm::length(cr);
-    if (!(cr_len > 0.0)) continue;
-    const double facing = glm::dot(cr, n_O) / cr_len;
-    if (keep_max ? facing <= kPatchFacingThreshold : facing >= -kPatchFacingThreshold) continue;
-    double x[3], y[3], d[3], nn[3];
-    const glm::dvec3* corners[3] = {&a0, &a1, &a2};
-    for (int c = 0; c < 3; ++c) {
-      const glm::dvec3& p = *corners[c];
-      x[c] = (glm::dot(p, u_O) + ou) * inv_cell + half_cells;
-      y[c] = (glm::dot(p, v_O) + ov) * inv_cell + half_cells;
-      d[c] = glm::dot(p, n_O) + on;
-      nn[c] = glm::dot(model.corner_normals_O[3 * f + c], n_O);
-    }
-    ProjectedCells pc;
-    if (!ProjectCells(x, y, nt, pc)) continue;
-    if (pass == 0 && passes == 2) {
-      // The first pass draws the cells around the first cell only.
-      pc.i0 = std::max(pc.i0, cull->first_i - kFirstCellReach);
-      pc.i1 = std::min(pc.i1, cull->first_i + kFirstCellReach);
-      pc.j0 = std::max(pc.j0, cull->first_j - kFirstCellReach);
-      pc.j1 = std::min(pc.j1, cull->first_j + kFirstCellReach);
-      if (pc.i0 > pc.i1 || pc.j0 > pc.j1) continue;
-      std::vector<int>* out = cull->first_triangles_out;
-      if (out != nullptr && out->size() < out->capacity()) out->push_back(f);
-    }
-    const double inv_area = pc.inv_area;
-    const int i0 = pc.i0, i1 = pc.i1;
-    const bool textured = have_texture && model.textured[f] != 0;
-    const int level =
-        textured ? model.texture.LevelForFootprint(model.texel_size_m[f], w.cell_size_m()) : 0;
-    // The cull of this triangle's cells: a cell's b − a is at most env − (b·d) + |h·(N·n)|
-    // (|N·n| ≤ 1, and |h| at most the largest |h| under the triangle's texture coordinates, whose
-    // box holds every cell's: b ≥ −1e-9 sum to 1), so cells where that, with the margin, is below
-    // the lower bound cannot be the deepest (nor tie with it).
-    RowCull row_cull{};
-    const RowCull* row_cull_ptr = nullptr;
-    if (cull != nullptr && std::isfinite(cull->drawn.lower)) {
-      double texture_bound = 0.0;
+    if (pass == 1) flush();
+    const std::span<const int> list = pass == 0 && passes == 2 && !cull->first_triangles.empty()
+                                          ? cull->first_triangles
+                                          : triangles;
+    for (const int f : list) {
+      shade();  // the previous triangle's cells, before its shading is replaced
+      const glm::ivec3 tri = model.triangles[f];
+      const glm::dvec3& a0 = model.vertices_O[tri[0]];
+      const glm::dvec3& a1 = model.vertices_O[tri[1]];
+      const glm::dvec3& a2 = model.vertices_O[tri[2]];
+      // Facing test at this pose (the selection may have been made at another one).
+      const glm::dvec3 cr = glm::cross(a1 - a0, a2 - a0);
+      const double cr_len = glm::length(cr);
+      if (!(cr_len > 0.0)) continue;
+      const double facing = glm::dot(cr, n_O) / cr_len;
+      if (keep_max ? facing <= kPatchFacingThreshold : facing >= -kPatchFacingThreshold) continue;
+      double x[3], y[3], d[3], nn[3];
+      const glm::dvec3* corners[3] = {&a0, &a1, &a2};
+      for (int c = 0; c < 3; ++c) {
+        const glm::dvec3& p = *corners[c];
+        x[c] = (glm::dot(p, u_O) + ou) * inv_cell + half_cells;
+        y[c] = (glm::dot(p, v_O) + ov) * inv_cell + half_cells;
+        d[c] = glm::dot(p, n_O) + on;
+        nn[c] = glm::dot(model.corner_normals_O[3 * f + c], n_O);
+      }
+      ProjectedCells pc;
+      if (!ProjectCells(x, y, nt, pc)) continue;
+      if (pass == 0 && passes == 2) {
+        // The first pass draws the cells around the first cell only.
+        pc.i0 = std::max(pc.i0, cull->first_i - kFirstCellReach);
+        pc.i1 = std::min(pc.i1, cull->first_i + kFirstCellReach);
+        pc.j0 = std::max(pc.j0, cull->first_j - kFirstCellReach);
+        pc.j1 = std::min(pc.j1, cull->first_j + kFirstCellReach);
+        if (pc.i0 > pc.i1 || pc.j0 > pc.j1) continue;
+        std::vector<int>* out = cull->first_triangles_out;
+        if (out != nullptr && out->size() < out->capacity()) out->push_back(f);
+      }
+      const double inv_area = pc.inv_area;
+      const int i0 = pc.i0, i1 = pc.i1;
+      const bool textured = have_texture && model.textured[f] != 0;
+      const int level =
+          textured ? model.texture.LevelForFootprint(model.texel_size_m[f], w.cell_size_m()) : 0;
+      // The cull of this triangle's cells: a cell's b − a is at most env − (b·d) + |h·(N·n)|
+      // (|N·n| ≤ 1, and |h| at most the largest |h| under the triangle's texture coordinates, whose
+      // box holds every cell's: b ≥ −1e-9 sum to 1), so cells where that, with the margin, is below
+      // the lower bound cannot be the deepest (nor tie with it).
+      RowCull row_cull{};
+      const RowCull* row_cull_ptr = nullptr;
+      if (cull != nullptr && std::isfinite(cull->drawn.lower)) {
+        double texture_bound = 0.0;
+        if (textured) {
+          const glm::vec2 uv0 = model.corner_uvs[3 * f], uv1 = model.corner_uvs[3 * f + 1],
+                          uv2 = model.corner_uvs[3 * f + 2];
+          texture_bound = model.texture.MaxAbsOver(
+              level, std::min({uv0.x, uv1.x, uv2.x}), std::min({uv0.y, uv1.y, uv2.y}),
+              std::max({uv0.x, uv1.x, uv2.x}), std::max({uv0.y, uv1.y, uv2.y}));
+        }
+        row_cull = {cull->drawn.env, d[0], d[1], d[2],
+                    static_cast<double>(cull->drawn.lower) - texture_bound - cull_margin};
+        row_cull_ptr = &row_cull;
+        // The whole triangle: its cells' coarse heights are at least its smallest corner's (to
+        // rounding far below the margin), and their environment heights at most the box's largest.
+        if (cull->env_max != nullptr &&
+            static_cast<double>(cull->env_max->MaxOver(pc.i0, pc.i1, pc.j0, pc.j1)) -
+                    std::min({d[0], d[1], d[2]}) <
+                row_cull.cut) {
+          continue;
+        }
+      }
+      if (!textured || level != batch_level) flush();
+      batch_level = level;
+      const glm::dvec3& n0 = model.corner_normals_O[3 * f];
+      const glm::dvec3& n1 = model.corner_normals_O[3 * f + 1];
+      const glm::dvec3& n2 = model.corner_normals_O[3 * f + 2];
       if (textured) {
         const glm::vec2 uv0 = model.corner_uvs[3 * f], uv1 = model.corner_uvs[3 * f + 1],
                         uv2 = model.corner_uvs[3 * f + 2];
-        texture_bound = model.texture.MaxAbsOver(
-            level, std::min({uv0.x, uv1.x, uv2.x}), std::min({uv0.y, uv1.y, uv2.y}),
-            std::max({uv0.x, uv1.x, uv2.x}), std::max({uv0.y, uv1.y, uv2.y}));
+        // A flat-shaded triangle (the three corner normals equal): the interpolated normal is the
+        // corner normal, (b·nn)/|Σ b_k n_k| = nn0 up to rounding (1e-16 relative), without the
+        // per-cell square root and division.
+        shading = {uv0.x,
+                   uv1.x,
+                   uv2.x,
+                   uv0.y,
+                   uv1.y,
+                   uv2.y,
+                   nn[0],
+                   nn[1],
+                   nn[2],
+                   glm::dot(n0, n1),
+                   glm::dot(n0, n2),
+                   glm::dot(n1, n2),
+                   n0 == n1 && n0 == n2,
+                   d[0],
+                   d[1],
+                   d[2]};
       }
-      row_cull = {cull->drawn.env, d[0], d[1], d[2],
-                  static_cast<double>(cull->drawn.lower) - texture_bound - cull_margin};
-      row_cull_ptr = &row_cull;
-      // The whole triangle: its cells' coarse heights are at least its smallest corner's (to
-      // rounding far below the margin), and their environment heights at most the box's largest.
-      if (cull->env_max != nullptr &&
-          static_cast<double>(cull->env_max->MaxOver(pc.i0, pc.i1, pc.j0, pc.j1)) -
-                  std::min({d[0], d[1], d[2]}) <
-              row_cull.cut) {
+      // Barycentrics, affine in the cell centre (px, py): b0 = k0 + gx0·px + gy0·py, likewise b1,
+      // and b2 = 1 − b0 − b1.
+      const double k0 = (x[1] * y[2] - x[2] * y[1]) * inv_area;
+      const double gx0 = (y[1] - y[2]) * inv_area, gy0 = (x[2] - x[1]) * inv_area;
+      const double k1 = (x[2] * y[0] - x[0] * y[2]) * inv_area;
+      const double gx1 = (y[2] - y[0]) * inv_area, gy1 = (x[0] - x[2]) * inv_area;
+      // Each row's span: the cell centres px where each b = r + g·px ≥ the tolerance (r the row's
+      // part, the same double the per-cell test uses), by reciprocals. A computed bound differs
+      // from the exact one by a few ulps of px plus a few of r/g; each is widened by 1e-7 cell plus
+      // 1e-12·|r/g|, far more than that, so every cell the exact per-cell test below accepts lies
+      // in the span (the cells drawn are those of the test alone) while the span no longer carries
+      // the whole extra cell at each end that it did (a third of the cells tested on the CAD part).
+      // lo stays in [i0, i1 + 3] and hi in [i0 − 2, i1 + 1] wherever the span is used, so the
+      // floors and ceilings by truncation are exact.
+      const double g2 = -gx0 - gx1;
+      const double inv_gx0 = gx0 != 0.0 ? 1.0 / gx0 : 0.0, inv_gx1 = gx1 != 0.0 ? 1.0 / gx1 : 0.0,
+                   inv_g2 = g2 != 0.0 ? 1.0 / g2 : 0.0;
+#ifdef HT_RASTER_AVX2
+      if (textured && avx2_rows) {
+        // The spans of up to kRows rows at a time (RowSpansAvx2, the bits of the loop below), then
+        // each row's covered cells straight into the batch, a chunk at a time (flushed early when a
+        // chunk might not fit: cells are independent, so where a batch ends changes nothing).
+        constexpr int kRows = 64;
+        alignas(32) double span_r0[kRows], span_r1[kRows];
+        alignas(16) int span_ia[kRows], span_ib[kRows];
+        const double g[3] = {gx0, gx1, g2}, inv_g[3] = {inv_gx0, inv_gx1, inv_g2};
+        for (int jb = pc.j0; jb <= pc.j1; jb += kRows) {
+          const int rows = std::min(kRows, pc.j1 - jb + 1);
+          RowSpansAvx2(k0, gy0, k1, gy1, g, inv_g, i0, i1, jb, rows, span_r0, span_r1, span_ia,
+                       span_ib);
+          for (int k = 0; k < rows; ++k) {
+            const int ia = span_ia[k], ib = span_ib[k], row_start = (jb + k) * nt;
+            constexpr int kChunk = kBatch / 2;
+            for (int start = ia; start <= ib; start += kChunk) {
+              const int end = std::min(ib, start + kChunk - 1);
+              if (batch_count + (end - start + 8) > kBatch) flush();
+              batch_count +=
+                  avx512_rows
+                      ? CoverRowAvx512(span_r0[k], gx0, span_r1[k], gx1, start, end, row_start,
+                                       batch_b0 + batch_count, batch_b1 + batch_count,
+                                       batch_cell + batch_count, row_cull_ptr)
+                      : CoverRowAvx2(span_r0[k], gx0, span_r1[k], gx1, start, end, row_start,
+                                     batch_b0 + batch_count, batch_b1 + batch_count,
+                                     batch_cell + batch_count, row_cull_ptr);
+            }
+          }
+        }
         continue;
       }
-    }
-    if (!textured || level != batch_level) flush();
-    batch_level = level;
-    const glm::dvec3& n0 = model.corner_normals_O[3 * f];
-    const glm::dvec3& n1 = model.corner_normals_O[3 * f + 1];
-    const glm::dvec3& n2 = model.corner_normals_O[3 * f + 2];
-    if (textured) {
-      const glm::vec2 uv0 = model.corner_uvs[3 * f], uv1 = model.corner_uvs[3 * f + 1],
-                      uv2 = model.corner_uvs[3 * f + 2];
-      // A flat-shaded triangle (the three corner normals equal): the interpolated normal is the
-      // corner normal, (b·nn)/|Σ b_k n_k| = nn0 up to rounding (1e-16 relative), without the
-      // per-cell square root and division.
-      shading = {uv0.x,
-                 uv1.x,
-                 uv2.x,
-                 uv0.y,
-                 uv1.y,
-                 uv2.y,
-                 nn[0],
-                 nn[1],
-                 nn[2],
-                 glm::dot(n0, n1),
-                 glm::dot(n0, n2),
-                 glm::dot(n1, n2),
-                 n0 == n1 && n0 == n2,
-                 d[0],
-                 d[1],
-                 d[2]};
-    }
-    // Barycentrics, affine in the cell centre (px, py): b0 = k0 + gx0·px + gy0·py, likewise b1,
-    // and b2 = 1 − b0 − b1.
-    const double k0 = (x[1] * y[2] - x[2] * y[1]) * inv_area;
-    const double gx0 = (y[1] - y[2]) * inv_area, gy0 = (x[2] - x[1]) * inv_area;
-    const double k1 = (x[2] * y[0] - x[0] * y[2]) * inv_area;
-    const double gx1 = (y[2] - y[0]) * inv_area, gy1 = (x[0] - x[2]) * inv_area;
-    // Each row's span: the cell centres px where each b = r + g·px ≥ the tolerance (r the row's
-    // part, the same double the per-cell test uses), by reciprocals. A computed bound differs from
-    // the exact one by a few ulps of px plus a few of r/g; each is widened by 1e-7 cell plus
-    // 1e-12·|r/g|, far more than that, so every cell the exact per-cell test below accepts lies in
-    // the span (the cells drawn are those of the test alone) while the span no longer carries the
-    // whole extra cell at each end that it did (a third of the cells tested on the CAD part).
-    // lo stays in [i0, i1 + 3] and hi in [i0 − 2, i1 + 1] wherever the span is used, so the
-    // floors and ceilings by truncation are exact.
-    const double g2 = -gx0 - gx1;
-    const double inv_gx0 = gx0 != 0.0 ? 1.0 / gx0 : 0.0, inv_gx1 = gx1 != 0.0 ? 1.0 / gx1 : 0.0,
-                 inv_g2 = g2 != 0.0 ? 1.0 / g2 : 0.0;
-#ifdef HT_RASTER_AVX2
-    if (textured && avx2_rows) {
-      // The spans of up to kRows rows at a time (RowSpansAvx2, the bits of the loop below), then
-      // each row's covered cells straight into the batch, a chunk at a time (flushed early when a
-      // chunk might not fit: cells are independent, so where a batch ends changes nothing).
-      constexpr int kRows = 64;
-      alignas(32) double span_r0[kRows], span_r1[kRows];
-      alignas(16) int span_ia[kRows], span_ib[kRows];
-      const double g[3] = {gx0, gx1, g2}, inv_g[3] = {inv_gx0, inv_gx1, inv_g2};
-      for (int jb = pc.j0; jb <= pc.j1; jb += kRows) {
-        const int rows = std::min(kRows, pc.j1 - jb + 1);
-        RowSpansAvx2(k0, gy0, k1, gy1, g, inv_g, i0, i1, jb, rows, span_r0, span_r1, span_ia,
-                     span_ib);
-        for (int k = 0; k < rows; ++k) {
-          const int ia = span_ia[k], ib = span_ib[k], row_start = (jb + k) * nt;
-          constexpr int kChunk = kBatch / 2;
-          for (int start = ia; start <= ib; start += kChunk) {
-            const int end = std::min(ib, start + kChunk - 1);
-            if (batch_count + (end - start + 8) > kBatch) flush();
-            batch_count +=
-                avx512_rows
-                    ? CoverRowAvx512(span_r0[k], gx0, span_r1[k], gx1, start, end, row_start,
-                                     batch_b0 + batch_count, batch_b1 + batch_count,
-                                     batch_cell + batch_count, row_cull_ptr)
-                    : CoverRowAvx2(span_r0[k], gx0, span_r1[k], gx1, start, end, row_start,
-                                   batch_b0 + batch_count, batch_b1 + batch_count,
-                                   batch_cell + batch_count, row_cull_ptr);
+#endif
+      for (int j = pc.j0; j <= pc.j1; ++j) {
+        const double py = j + 0.5;
+        const double r0 = k0 + gy0 * py, r1 = k1 + gy1 * py, r2 = 1.0 - r0 - r1;
+        double lo = static_cast<double>(i0), hi = static_cast<double>(i1) + 1.0;
+        bool empty = false;
+        const auto clip = [&](double r, double g, double inv_g) {
+          if (g == 0.0) {
+            empty = empty || r < kEdgeTolerance;
+            return;
+          }
+          const double bound = (kEdgeTolerance - r) * inv_g;
+          const double slack = 1e-7 + 1e-12 * std::abs(r * inv_g);
+          if (g > 0.0) {
+            lo = std::max(lo, bound - slack);
+          } else {
+            hi = std::min(hi, bound + slack);
+          }
+        };
+        clip(r0, gx0, inv_gx0);
+        clip(r1, gx1, inv_gx1);
+        clip(r2, g2, inv_g2);
+        if (empty || !(lo <= hi + 2.0)) continue;
+        // Cell i (centre i + 0.5) with lo ≤ i + 0.5 ≤ hi.
+        const double lo_c = lo - 0.5, hi_c = hi - 0.5;
+        const int lo_t = static_cast<int>(lo_c), hi_t = static_cast<int>(hi_c);
+        const int ia = std::max(i0, lo_t + static_cast<int>(lo_c > lo_t));
+        const int ib = std::min(i1, hi_t - static_cast<int>(hi_c < hi_t));
+        float* row = &heights[static_cast<size_t>(j) * nt];
+        for (int i = ia; i <= ib; ++i) {
+          const double px = i + 0.5;
+          const double b0 = r0 + gx0 * px;
+          const double b1 = r1 + gx1 * px;
+          const double b2 = 1.0 - b0 - b1;
+          if (b0 < kEdgeTolerance || b1 < kEdgeTolerance || b2 < kEdgeTolerance) continue;
+          if (row_cull_ptr != nullptr && !(static_cast<double>(row_cull.env[j * nt + i]) -
+                                               (b0 * d[0] + b1 * d[1] + b2 * d[2]) >=
+                                           row_cull.cut)) {
+            continue;
+          }
+          if (textured) {  // b·d and h along the unit interpolated normal, in flush()
+            batch_b0[batch_count] = b0;
+            batch_b1[batch_count] = b1;
+            batch_cell[batch_count] = j * nt + i;
+            if (++batch_count == kBatch) flush();
+            continue;
+          }
+          const double value = b0 * d[0] + b1 * d[1] + b2 * d[2];
+          if (!(std::abs(value) <= range)) continue;  // outside the window's box along n
+          float& cell = row[i];
+          const auto fv = static_cast<float>(value);
+          if (keep_max ? fv > cell : fv < cell) cell = fv;
+          if (cull != nullptr) {
+            DrawnCells& drawn = cull->drawn;
+            const float e = drawn.env[j * nt + i];
+            if (std::isfinite(e) && e - fv > drawn.lower) drawn.lower = e - fv;
+            drawn.min_cell = std::min(drawn.min_cell, j * nt + i);
+            drawn.max_cell = std::max(drawn.max_cell, j * nt + i);
+            ++drawn.count;
           }
         }
       }
-      continue;
     }
-#endif
-    for (int j = pc.j0; j <= pc.j1; ++j) {
-      const double py = j + 0.5;
-      const double r0 = k0 + gy0 * py, r1 = k1 + gy1 * py, r2 = 1.0 - r0 - r1;
-      double lo = static_cast<double>(i0), hi = static_cast<double>(i1) + 1.0;
-      bool empty = false;
-      const auto clip = [&](double r, double g, double inv_g) {
-        if (g == 0.0) {
-          empty = empty || r < kEdgeTolerance;
-          return;
-        }
-        const double bound = (kEdgeTolerance - r) * inv_g;
-        const double slack = 1e-7 + 1e-12 * std::abs(r * inv_g);
-        if (g > 0.0) {
-          lo = std::max(lo, bound - slack);
-        } else {
-          hi = std::min(hi, bound + slack);
-        }
-      };
-      clip(r0, gx0, inv_gx0);
-      clip(r1, gx1, inv_gx1);
-      clip(r2, g2, inv_g2);
-      if (empty || !(lo <= hi + 2.0)) continue;
-      // Cell i (centre i + 0.5) with lo ≤ i + 0.5 ≤ hi.
-      const double lo_c = lo - 0.5, hi_c = hi - 0.5;
-      const int lo_t = static_cast<int>(lo_c), hi_t = static_cast<int>(hi_c);
-      const int ia = std::max(i0, lo_t + static_cast<int>(lo_c > lo_t));
-      const int ib = std::min(i1, hi_t - static_cast<int>(hi_c < hi_t));
-      float* row = &heights[static_cast<size_t>(j) * nt];
-      for (int i = ia; i <= ib; ++i) {
-        const double px = i + 0.5;
-        const double b0 = r0 + gx0 * px;
-        const double b1 = r1 + gx1 * px;
-        const double b2 = 1.0 - b0 - b1;
-        if (b0 < kEdgeTolerance || b1 < kEdgeTolerance || b2 < kEdgeTolerance) continue;
-        if (row_cull_ptr != nullptr &&
-            !(static_cast<double>(row_cull.env[j * nt + i]) - (b0 * d[0] + b1 * d[1] + b2 * d[2]) >=
-              row_cull.cut)) {
-          continue;
-        }
-        if (textured) {  // b·d and h along the unit interpolated normal, in flush()
-          batch_b0[batch_count] = b0;
-          batch_b1[batch_count] = b1;
-          batch_cell[batch_count] = j * nt + i;
-          if (++batch_count == kBatch) flush();
-          continue;
-        }
-        const double value = b0 * d[0] + b1 * d[1] + b2 * d[2];
-        if (!(std::abs(value) <= range)) continue;  // outside the window's box along n
-        float& cell = row[i];
-        const auto fv = static_cast<float>(value);
-        if (keep_max ? fv > cell : fv < cell) cell = fv;
-        if (cull != nullptr) {
-          DrawnCells& drawn = cull->drawn;
-          const float e = drawn.env[j * nt + i];
-          if (std::isfinite(e) && e - fv > drawn.lower) drawn.lower = e - fv;
-          drawn.min_cell = std::min(drawn.min_cell, j * nt + i);
-          drawn.max_cell = std::max(drawn.max_cell, j * nt + i);
-          ++drawn.count;
-        }
-      }
-    }
-  }
   }
   flush();
 }
@@ -1363,15 +1358,14 @@ DepthSample RenderToolDepth(const HapticModel& tool, const RigidTransform& X_WT,
   }
   std::fill_n(heights.begin(), cells, std::numeric_limits<float>::infinity());
   const bool has_first = first_cell >= 0 && first_cell < static_cast<int>(cells);
-  DepthCull cull{tool.TextureReach(),
-                 has_first ? first_cell % n : -1,
-                 has_first ? first_cell / n : -1,
-                 {env_heights.data(), -std::numeric_limits<float>::infinity(),
-                  static_cast<int>(cells), -1, 0},
-                 hints.first_triangles,
-                 hints.first_triangles_out,
-                 hints.env_max != nullptr && hints.env_max->resolution() == n ? hints.env_max
-                                                                              : nullptr};
+  DepthCull cull{
+      tool.TextureReach(),
+      has_first ? first_cell % n : -1,
+      has_first ? first_cell / n : -1,
+      {env_heights.data(), -std::numeric_limits<float>::infinity(), static_cast<int>(cells), -1, 0},
+      hints.first_triangles,
+      hints.first_triangles_out,
+      hints.env_max != nullptr && hints.env_max->resolution() == n ? hints.env_max : nullptr};
   RenderHeightsFastImpl(tool, X_WT, triangles, w, PatchSide::kTool, 0, heights, kernel, &cull);
   hints.cells_drawn = cull.drawn.count;
   // The scan over the rows drawn (every other cell is +∞, which no scan takes), row by row in
