@@ -63,7 +63,8 @@ inline constexpr double kPatchFacingThreshold = 0.05;
 /// `triangles_out` is cleared first; it does not allocate once its capacity reaches the model's
 /// triangle count. With `vertex_scratch` whose capacity holds one double per vertex, each
 /// vertex's coordinate along the window's u axis is computed once instead of once per triangle
-/// corner (the same triangles; 1.9× faster on the 1,600-triangle gear here); it is not grown.
+/// corner (the same triangles; in penetration_depth_benchmark, whose 1,600-triangle gear makes
+/// this the larger call, its share of the time fell from 13.5 % to 10.3 %); it is not grown.
 void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
                           const ContactWindow& window, PatchSide side, double margin_m,
                           std::vector<int>& triangles_out, double facing_slack = 0.0,
@@ -90,13 +91,14 @@ void RenderPatchHeights(const HapticModel& model, const RigidTransform& X_WO,
 /// - the window's axes are brought into the model's frame once;
 /// - barycentrics are affine in the cell centre per triangle, and each row is clipped to the
 ///   triangle's span (by reciprocals, widened by far more than their rounding) before the exact
-///   per-cell test; with `kernel` kBest on a CPU with AVX2, the spans are computed four rows at a
-///   time and a row's cells tested four at a time;
+///   per-cell test; on a CPU with AVX2 (and `kernel` not kScalar), the spans are computed four
+///   rows at a time and a row's cells tested four at a time, eight with AVX-512 (kernel kBest);
 /// - a textured triangle's covered cells are gathered, then their texture coordinates, normal
-///   factors and heights computed four at a time (AVX2 with kBest, else two with SSE2) and their
-///   texture samples taken together (SampleLevelBatch with `kernel`; per sample 1.7× faster with
-///   SSE2 and 4.8× with AVX2 than one at a time in a micro-benchmark here);
-/// - every SIMD step writes the bits of the scalar code (no FMA), which kScalar runs;
+///   factors and heights computed eight at a time (AVX-512 with kBest; AVX2 four, SSE2 two) and
+///   their texture samples taken together (SampleLevelBatch with `kernel`; per sample 1.7× faster
+///   with SSE2 and 4.8× with AVX2 than one at a time in a micro-benchmark here);
+/// - every SIMD step writes the bits of the scalar code (no FMA), which kScalar runs; kAvx2 runs
+///   the AVX2 steps where the CPU also has AVX-512 (the tests compare both with kScalar);
 /// - flat-shaded triangles (equal corner normals) skip the normal's per-cell length (a 1e-16
 ///   relative difference from the reference).
 /// Same preconditions; never allocates. m = 1 lets one render serve the four in-plane
