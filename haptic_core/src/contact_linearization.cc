@@ -369,7 +369,6 @@ ContactLinearization TexturePenetrationSolver::Linearize(
         // microsecond) pays where the tool brings many (fig77's file: 131-142 against 146-151 µs
         // per contact), not for a few large ones (the block on the gear).
         const bool pyramid = cull && tool_triangles_.size() > kPyramidTriangles;
-        if (cull) ++culled_contacts_;
         if (pyramid) env_max_.Build(env_heights_, w.resolution);
         for (int i = 5; i < kGradientSamples; ++i) {
           if (!cull) {
@@ -391,9 +390,9 @@ ContactLinearization TexturePenetrationSolver::Linearize(
           if (i == 5 && cull_rotations_ == CullRotations::kWhenItPays &&
               hints.cells_drawn > kCullPaysFraction * static_cast<double>(cells)) {
             cull = false;
-            --culled_contacts_;
           }
         }
+        if (cull) ++culled_contacts_;
       }
     }
   } else {

@@ -4,14 +4,8 @@
 #include <cstddef>
 #include <limits>
 
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-// GCC 12 reports its own AVX-512 intrinsics (the _mm*_undefined_* operands of conversions and
-// masked gathers) as (maybe) uninitialized where they are inlined here.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuninitialized"
-#endif
-#include <immintrin.h>
+#include "x86_simd.h"
+#ifdef HT_X86_SIMD
 #define HT_SAMPLE_X86 1
 #endif
 
@@ -146,10 +140,8 @@ std::size_t SampleSse2(const HeightFieldLevel& L, bool wrap_u, bool wrap_v, cons
   return k;
 }
 
-// AVX-512, sixteen samples a step: SampleAvx2's operations, lane for lane (this file is built
-// with -ffp-contract=off, so the multiplies and adds are not fused and the bits are the scalar
-// code's).
-#define HT_AVX512_TARGET gnu::target("avx512f,avx512vl,avx512dq,avx512cd")
+// AVX-512, sixteen samples a step: SampleAvx2's operations, lane for lane (x86_simd.h: the
+// multiplies and adds are not fused, so the bits are the scalar code's).
 
 [[HT_AVX512_TARGET]] inline __m512i AddressAvx512(__m512i i, __m512i size_minus_1,
                                                   bool wrap) noexcept {

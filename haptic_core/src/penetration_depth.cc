@@ -6,14 +6,8 @@
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-// GCC 12 reports its own AVX-512 intrinsics (the _mm*_undefined_* operands of conversions and
-// masked gathers) as (maybe) uninitialized where they are inlined here.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuninitialized"
-#endif
-#include <immintrin.h>
+#include "x86_simd.h"
+#ifdef HT_X86_SIMD
 #define HT_RASTER_AVX2 1
 #endif
 #include <glm/gtc/quaternion.hpp>
@@ -347,9 +341,7 @@ struct RowCull {
 }
 
 // The AVX-512 kernels (F, VL, DQ, CD): the AVX2 kernels' operations on eight cells a step,
-// lane for lane, so the same bits (this file is built with -ffp-contract=off: AVX-512 F has
-// FMA instructions, and no multiply-add may be fused).
-#define HT_AVX512_TARGET gnu::target("avx512f,avx512vl,avx512dq,avx512cd")
+// lane for lane, so the same bits (x86_simd.h: no multiply-add is fused).
 
 // CoverRowAvx2 eight cells a step, the covered lanes compressed into the outputs (which need
 // room for ib − ia + 8 cells).
@@ -454,6 +446,14 @@ struct DrawnCells {
   float lower;
   int min_cell, max_cell;
   int count;  // cells drawn (a cell drawn twice counts twice)
+  // A cell drawn at tool height fv: its env − fv (float, as the depth scan takes it; −∞ where
+  // the environment has no cell or fv is +∞, outside the box) raises the lower bound.
+  void Draw(int cell, float fv) noexcept {
+    const float diff = env[cell] - fv;
+    lower = diff > lower ? diff : lower;
+    min_cell = std::min(min_cell, cell);
+    max_cell = std::max(max_cell, cell);
+  }
 };
 
 // FinishCellsAvx2 and the envelope, eight cells a step: the heights fv (float(value + h·ndotn),
@@ -528,14 +528,7 @@ struct DrawnCells {
     for (int l = 0; l < lanes; ++l) {
       float& c = heights[cell[k + l]];
       if (keep_max ? f[l] > c : f[l] < c) c = f[l];
-      if (drawn != nullptr) {
-        const float e = drawn->env[cell[k + l]];
-        if (std::isfinite(e) && std::isfinite(f[l]) && e - f[l] > drawn->lower) {
-          drawn->lower = e - f[l];
-        }
-        drawn->min_cell = std::min(drawn->min_cell, cell[k + l]);
-        drawn->max_cell = std::max(drawn->max_cell, cell[k + l]);
-      }
+      if (drawn != nullptr) drawn->Draw(cell[k + l], f[l]);
     }
   }
   if (drawn != nullptr) {
@@ -871,11 +864,12 @@ DepthSample DirectionalPenetrationDepth(std::span<const float> b,
 
 namespace {
 
-// What RenderToolDepth adds to RenderPatchHeightsFast (margin 0, the tool's side): the
-// environment's heights, the largest |h·(N·n)| a textured cell can add to its coarse height, the
-// cell whose covering triangles are drawn first, and `lower`, the largest b − a of the cells
-// drawn so far (a lower bound of the render's depth: a cell's tool height only falls as more
-// triangles are drawn).
+// What RenderToolDepth adds to RenderPatchHeightsFast (margin 0, the tool's side): the cell
+// around which the first pass draws, the cells drawn (with the environment's heights and
+// drawn.lower, the largest b − a of the cells drawn so far: a lower bound of the render's depth,
+// as a cell's tool height only falls as more triangles are drawn), and the hints of
+// ToolDepthCull. Each triangle's texture bound is HeightField::MaxAbsOver's; texture_bound_m,
+// the whole texture's (m), only sizes the rounding margin.
 struct DepthCull {
   double texture_bound_m;
   int first_i, first_j;
@@ -970,21 +964,13 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
 #ifdef HT_RASTER_AVX2
       if (avx2_rows) {
         FinishCellsAvx2(batch_value, batch_h, batch_ndotn, range, false, batch_fv, batch_count);
-        float lower = drawn.lower;
-        int min_cell = drawn.min_cell, max_cell = drawn.max_cell;
         float* const cells = heights.data();
         for (std::size_t k = 0; k < count; ++k) {
           const int c = batch_cell[k];
           const float fv = batch_fv[k];  // +∞ outside the box: no cell, and e − fv = −∞
           if (fv < cells[c]) cells[c] = fv;
-          const float diff = drawn.env[c] - fv;  // −∞ where the environment has no cell
-          lower = diff > lower ? diff : lower;
-          min_cell = std::min(min_cell, c);
-          max_cell = std::max(max_cell, c);
+          drawn.Draw(c, fv);
         }
-        drawn.lower = lower;
-        drawn.min_cell = min_cell;
-        drawn.max_cell = max_cell;
         drawn.count += batch_count;
         batch_count = batch_shaded = 0;
         return;
@@ -996,10 +982,7 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
         float& cell = heights[static_cast<std::size_t>(batch_cell[k])];
         const auto fv = static_cast<float>(value);
         if (fv < cell) cell = fv;
-        const float e = drawn.env[batch_cell[k]];
-        if (std::isfinite(e) && e - fv > drawn.lower) drawn.lower = e - fv;
-        drawn.min_cell = std::min(drawn.min_cell, batch_cell[k]);
-        drawn.max_cell = std::max(drawn.max_cell, batch_cell[k]);
+        drawn.Draw(batch_cell[k], fv);
       }
       drawn.count += batch_count;
       batch_count = batch_shaded = 0;
@@ -1245,12 +1228,8 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
           const auto fv = static_cast<float>(value);
           if (keep_max ? fv > cell : fv < cell) cell = fv;
           if (cull != nullptr) {
-            DrawnCells& drawn = cull->drawn;
-            const float e = drawn.env[j * nt + i];
-            if (std::isfinite(e) && e - fv > drawn.lower) drawn.lower = e - fv;
-            drawn.min_cell = std::min(drawn.min_cell, j * nt + i);
-            drawn.max_cell = std::max(drawn.max_cell, j * nt + i);
-            ++drawn.count;
+            cull->drawn.Draw(j * nt + i, fv);
+            ++cull->drawn.count;
           }
         }
       }
