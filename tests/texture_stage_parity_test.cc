@@ -30,6 +30,7 @@
 #include <vector>
 
 #include "haptic_core/contact_linearization.h"
+#include "haptic_core/demo/procedural_models.h"
 #include "haptic_core/demo/seed_models.h"
 #include "haptic_core/hull_proximity.h"
 #include "haptic_core/model_build/haptic_model_build.h"
@@ -181,7 +182,8 @@ TEST(TextureStageParity, FastRenderDrawsTheReferenceHeightsOnAllSixSeedModels) {
 // seed models, at the base pose and at the rotation samples' poses, the same cell and depth bits
 // as the depth scan of the whole render, with every kernel and whatever first cell it is given
 // (the base's deepest, none, a random one); and it does cull (cells the whole render covers are
-// left undrawn), so the comparison is not between two whole renders.
+// left undrawn), so the comparison is not between two whole renders. With and without a
+// TriangleBoundCache shared by a contact's renders.
 TEST(TextureStageParity, CulledToolRenderGivesTheWholeRendersDepth) {
   std::mt19937 rng(77);
   std::vector<int> env_triangles, tool_triangles;
@@ -208,6 +210,11 @@ TEST(TextureStageParity, CulledToolRenderGivesTheWholeRendersDepth) {
       const auto poses = GradientSamplePoses(c.X_WT, c.window);
       std::vector<float> whole(cells), partial(cells);
       int base_cell = -1;
+      // One cache of levels and texture bounds for the contact's renders (as the solver keeps),
+      // filled by whichever render meets a triangle first.
+      TriangleBoundCache bounds;
+      bounds.Reserve(tool.triangles.size());
+      bounds.Reset(tool, c.window.cell_size_m());
       for (const int p : {0, 5, 6, 7, 8, 9, 10}) {
         std::fill(whole.begin(), whole.end(), std::numeric_limits<float>::infinity());
         RenderPatchHeightsFast(tool, poses[p], tool_triangles, c.window, PatchSide::kTool, 0,
@@ -222,6 +229,7 @@ TEST(TextureStageParity, CulledToolRenderGivesTheWholeRendersDepth) {
             ToolDepthCull hints;
             hints.first_cell = first;
             hints.env_max = first == base_cell ? &env_max : nullptr;
+            hints.bounds = first != -1 ? &bounds : nullptr;
             // Now and then a first pass with only some of the triangles (any subset is valid).
             std::vector<int> some;
             if (first == random_cell && p % 2 == 1) {
@@ -369,6 +377,101 @@ TEST(TextureStageParity, FastSolverGivesTheReferenceDepthsAndGradients) {
 // EnvironmentMaxPyramid::MaxOver is at least the largest height of any box (random boxes on
 // random heights with empty cells, odd and even sizes), exactly it for a single cell, and −∞ for
 // an empty box.
+// SelectPatchTriangles through a TriangleBoxTree against the whole scan (and the scan with the
+// vertex scratch): the same triangles in the same order, on random contacts of the six seed
+// models and the procedural gear (a convex model without a hull hierarchy), with windows of
+// several sizes, margins and facing slacks, on both sides, at random poses, and on windows far
+// from any triangle. A tree built from another model, or from this one before it was edited in
+// place, is not used.
+TEST(TextureStageParity, BoxTreeSelectsTheScansTriangles) {
+  std::mt19937 rng(1515);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  const HapticModel gear = MakeRidgedGear();
+  std::vector<const HapticModel*> models;
+  for (const SeedModel which : kAll) models.push_back(&Seed(which));
+  models.push_back(&gear);
+  std::vector<int> scan, scratch_scan, through_tree;
+  std::vector<double> scratch;
+  long selected = 0, compared = 0, empty = 0;
+  for (std::size_t k = 0; k < models.size(); ++k) {
+    const HapticModel& env = *models[k];
+    const HapticModel& tool = *models[(k + 1) % models.size()];
+    TriangleBoxTree env_tree, tool_tree;
+    env_tree.Build(env);
+    tool_tree.Build(tool);
+    ASSERT_TRUE(env_tree.BuiltFrom(env));
+    ASSERT_FALSE(env_tree.BuiltFrom(tool));
+    EXPECT_EQ(env_tree.order().size(), env.triangles.size());
+    std::vector<int> sorted(env_tree.order().begin(), env_tree.order().end());
+    std::sort(sorted.begin(), sorted.end());
+    for (std::size_t f = 0; f < sorted.size(); ++f) ASSERT_EQ(sorted[f], static_cast<int>(f));
+    scratch.reserve(std::max(env.vertices_O.size(), tool.vertices_O.size()));
+    for (int trial = 0; trial < 60; ++trial) {
+      const int n = trial % 3 == 0 ? 25 : 50;
+      Contact c = RandomContact(tool, env, rng, n);
+      if (trial % 4 == 1) {  // another extent: a window many cells wide or one much smaller
+        c.window = ContactWindow::Make(c.window.center_W, c.window.normal_W,
+                                       trial % 8 == 1 ? 0.08 : 0.002, n);
+      }
+      if (trial % 10 == 9) {  // far from both models: no triangle
+        c.window = ContactWindow::Make(c.window.center_W + glm::dvec3(3.0, -2.0, 1.0),
+                                       c.window.normal_W, 0.02, n);
+      }
+      if (trial % 5 == 3) {  // a random pose of the environment too
+        c.X_WO.rotation = glm::normalize(glm::dquat(U(rng), U(rng), U(rng), U(rng)));
+        c.X_WO.translation = c.window.center_W - c.X_WO.rotation * c.window.center_W;
+      }
+      const double h_x = c.window.cell_size_m();
+      for (const PatchSide side : {PatchSide::kEnvironment, PatchSide::kTool}) {
+        const HapticModel& m = side == PatchSide::kEnvironment ? env : tool;
+        const TriangleBoxTree& tree = side == PatchSide::kEnvironment ? env_tree : tool_tree;
+        const TriangleBoxTree& other = side == PatchSide::kEnvironment ? tool_tree : env_tree;
+        const RigidTransform& X = side == PatchSide::kEnvironment ? c.X_WO : c.X_WT;
+        for (const double margin : {0.0, h_x, 2.0 * h_x + 0.05 * 0.1}) {
+          for (const double slack : {0.0, 0.04}) {
+            SelectPatchTriangles(m, X, c.window, side, margin, scan, slack);
+            SelectPatchTriangles(m, X, c.window, side, margin, scratch_scan, slack, &scratch);
+            SelectPatchTriangles(m, X, c.window, side, margin, through_tree, slack, nullptr, &tree);
+            ASSERT_EQ(scan, scratch_scan) << m.name << " trial " << trial;
+            ASSERT_EQ(scan, through_tree) << m.name << " trial " << trial << " margin " << margin;
+            // A tree of another model is ignored: the scan.
+            SelectPatchTriangles(m, X, c.window, side, margin, through_tree, slack, nullptr,
+                                 &other);
+            ASSERT_EQ(scan, through_tree) << m.name << " (another model's tree)";
+            selected += static_cast<long>(scan.size());
+            ++compared;
+            empty += scan.empty() ? 1 : 0;
+          }
+        }
+      }
+    }
+  }
+  // Both outcomes occur: windows with triangles and windows without.
+  EXPECT_GT(selected, 1000);
+  EXPECT_GT(empty, 10);
+  EXPECT_GT(compared - empty, compared / 2);
+
+  // A model edited in place after its tree was built (its frame shifted, as ShiftModelFrame
+  // does): the tree is stale and not used; rebuilt, it is.
+  HapticModel edited = Seed(SeedModel::kCadPart);
+  TriangleBoxTree tree;
+  tree.Build(edited);
+  ASSERT_TRUE(tree.BuiltFrom(edited));
+  ShiftModelFrame(edited, glm::dvec3(0.01, 0.0, 0.0));
+  EXPECT_FALSE(tree.BuiltFrom(edited));
+  const Contact c = RandomContact(Seed(SeedModel::kFile), edited, rng, 50);
+  SelectPatchTriangles(edited, c.X_WO, c.window, PatchSide::kEnvironment, 0.0, scan);
+  SelectPatchTriangles(edited, c.X_WO, c.window, PatchSide::kEnvironment, 0.0, through_tree, 0.0,
+                       nullptr, &tree);
+  EXPECT_EQ(scan, through_tree);
+  EXPECT_FALSE(scan.empty());
+  tree.Build(edited);
+  EXPECT_TRUE(tree.BuiltFrom(edited));
+  SelectPatchTriangles(edited, c.X_WO, c.window, PatchSide::kEnvironment, 0.0, through_tree, 0.0,
+                       nullptr, &tree);
+  EXPECT_EQ(scan, through_tree);
+}
+
 TEST(TextureStageParity, EnvironmentMaxPyramidBoundsEveryBox) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<float> h(-1e-3f, 1e-3f);

@@ -118,6 +118,7 @@ TexturePenetrationSolver::TexturePenetrationSolver(int max_resolution, int max_t
   vertex_scratch_.reserve(static_cast<size_t>(max_triangles));  // a closed mesh: V ≈ F/2
   first_triangles_.reserve(64);
   env_max_.Reserve(max_resolution);
+  tool_bounds_.Reserve(static_cast<size_t>(max_triangles));
 }
 
 void TexturePenetrationSolver::RenderEnvironment(const HapticModel& environment,
@@ -126,7 +127,7 @@ void TexturePenetrationSolver::RenderEnvironment(const HapticModel& environment,
   const size_t cells = static_cast<size_t>(w.resolution) * w.resolution;
   env_heights_.assign(cells, -std::numeric_limits<float>::infinity());
   SelectPatchTriangles(environment, X_WO, w, PatchSide::kEnvironment, w.cell_size_m(),
-                       env_triangles_, 0.0, &vertex_scratch_);
+                       env_triangles_, 0.0, &vertex_scratch_, TreeFor(environment));
   if (path_ == TextureStagePath::kFast) {
     RenderPatchHeightsFast(environment, X_WO, env_triangles_, w, PatchSide::kEnvironment, 0,
                            env_heights_);
@@ -146,6 +147,32 @@ DepthSample TexturePenetrationSolver::EvaluateTool(const HapticModel& tool,
     RenderPatchHeights(tool, X_WT, tool_triangles_, w, PatchSide::kTool, tool_heights_);
   }
   return DirectionalPenetrationDepth(env_heights_, tool_heights_);
+}
+
+const TriangleBoxTree* TexturePenetrationSolver::TreeFor(const HapticModel& model) noexcept {
+  if (model.triangles.size() < kTreeTriangles) return nullptr;
+  ++tree_clock_;
+  TreeSlot* replace = nullptr;
+  for (TreeSlot& slot : trees_) {
+    if (slot.last_use != 0 && slot.tree.BuiltFrom(model)) {
+      slot.last_use = tree_clock_;
+      return &slot.tree;
+    }
+    // A never-built slot first, else the least recently used one if it is stale.
+    if (replace == nullptr || slot.last_use < replace->last_use) replace = &slot;
+  }
+  if (replace->last_use != 0 && tree_clock_ - replace->last_use <= kTreeStaleCalls) {
+    return nullptr;  // every slot in use: the whole scan, without building (or allocating)
+  }
+  try {
+    replace->tree.Build(model);
+  } catch (...) {  // std::bad_alloc
+    replace->tree.Clear();
+    replace->last_use = 0;
+    return nullptr;
+  }
+  replace->last_use = tree_clock_;
+  return &replace->tree;
 }
 
 double TexturePenetrationSolver::ToolRadius(const HapticModel& tool) noexcept {
@@ -169,7 +196,7 @@ DepthSample TexturePenetrationSolver::Depth(const HapticModel& tool, const Rigid
                                             const ContactWindow& w) noexcept {
   RenderEnvironment(environment, X_WO, w);
   SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool, w.cell_size_m(), tool_triangles_, 0.0,
-                       &vertex_scratch_);
+                       &vertex_scratch_, TreeFor(tool));
   return EvaluateTool(tool, X_WT, w);
 }
 
@@ -279,7 +306,8 @@ ContactLinearization TexturePenetrationSolver::Linearize(
   // the window grown by a cell.
   SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool,
                        from_base ? 2.0 * h.h_x : 2.0 * h.h_x + h.h_theta * tool_radius,
-                       tool_triangles_, from_base ? 1e-9 : h.h_theta + 1e-9, &vertex_scratch_);
+                       tool_triangles_, from_base ? 1e-9 : h.h_theta + 1e-9, &vertex_scratch_,
+                       TreeFor(tool));
   std::array<DepthSample, kGradientSamples> samples;
   for (DepthSample& s : samples) s = {-std::numeric_limits<double>::infinity(), -1};
   glm::dvec3 lever_W(0.0);  // RotationGradient::kContactLever
@@ -370,6 +398,7 @@ ContactLinearization TexturePenetrationSolver::Linearize(
         // per contact), not for a few large ones (the block on the gear).
         const bool pyramid = cull && tool_triangles_.size() > kPyramidTriangles;
         if (pyramid) env_max_.Build(env_heights_, w.resolution);
+        tool_bounds_.Reset(tool, w.cell_size_m());
         for (int i = 5; i < kGradientSamples; ++i) {
           if (!cull) {
             samples[i] = EvaluateTool(tool, poses[i], w);
@@ -380,6 +409,7 @@ ContactLinearization TexturePenetrationSolver::Linearize(
           ToolDepthCull hints;
           hints.first_cell = samples[0].cell;
           hints.env_max = pyramid ? &env_max_ : nullptr;
+          hints.bounds = &tool_bounds_;
           if (i == 5) {
             hints.first_triangles_out = &first_triangles_;
           } else {

@@ -726,10 +726,52 @@ glm::dvec3 ContactWindow::CellCenter(int index) const noexcept {
   return center_W + s * axis_u_W + t * axis_v_W;
 }
 
+namespace {
+
+// SelectPatchTriangles' tests of triangle f, cheapest and most selective first: the extent along
+// u (from `along_u`, each vertex's p·u + ou, when given), then v, then n, then the facing test.
+[[gnu::always_inline]] inline bool PatchTriangleTest(const HapticModel& model, int f,
+                                                     const glm::dvec3& u_O, const glm::dvec3& v_O,
+                                                     const glm::dvec3& n_O, double ou, double ov,
+                                                     double on, double half, double depth_limit,
+                                                     PatchSide side, double threshold,
+                                                     const double* along_u) noexcept {
+  const glm::dvec3* vertices = model.vertices_O.data();
+  const glm::ivec3 t = model.triangles[static_cast<std::size_t>(f)];
+  double s0, s1, s2;
+  if (along_u != nullptr) {
+    s0 = along_u[t[0]];
+    s1 = along_u[t[1]];
+    s2 = along_u[t[2]];
+  } else {
+    s0 = glm::dot(vertices[t[0]], u_O) + ou;
+    s1 = glm::dot(vertices[t[1]], u_O) + ou;
+    s2 = glm::dot(vertices[t[2]], u_O) + ou;
+  }
+  if (std::max({s0, s1, s2}) < -half || std::min({s0, s1, s2}) > half) return false;
+  const glm::dvec3& p0 = vertices[t[0]];
+  const glm::dvec3& p1 = vertices[t[1]];
+  const glm::dvec3& p2 = vertices[t[2]];
+  const double t0 = glm::dot(p0, v_O) + ov, t1 = glm::dot(p1, v_O) + ov,
+               t2 = glm::dot(p2, v_O) + ov;
+  if (std::max({t0, t1, t2}) < -half || std::min({t0, t1, t2}) > half) return false;
+  const double d0 = glm::dot(p0, n_O) + on, d1 = glm::dot(p1, n_O) + on,
+               d2 = glm::dot(p2, n_O) + on;
+  if (std::max({d0, d1, d2}) < -depth_limit || std::min({d0, d1, d2}) > depth_limit) return false;
+  const glm::dvec3 cr = glm::cross(p1 - p0, p2 - p0);
+  const double area2 = glm::length(cr);
+  if (!(area2 > 0.0)) return false;
+  const double facing = glm::dot(cr, n_O) / area2;
+  return !(side == PatchSide::kEnvironment ? facing <= threshold : facing >= -threshold);
+}
+
+}  // namespace
+
 void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
                           const ContactWindow& w, PatchSide side, double margin_m,
                           std::vector<int>& out, double facing_slack,
-                          std::vector<double>* vertex_scratch) noexcept {
+                          std::vector<double>* vertex_scratch,
+                          const TriangleBoxTree* tree) noexcept {
   out.clear();
   const double half = 0.5 * w.extent_m + margin_m;
   const double depth_limit = w.depth_range_m() + margin_m;
@@ -747,6 +789,51 @@ void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
                on = glm::dot(offset, w.normal_W);
   const int nf = static_cast<int>(model.triangles.size());
   const glm::dvec3* vertices = model.vertices_O.data();
+  if (tree != nullptr && tree->BuiltFrom(model)) {
+    // The leaves whose boxes reach the window, then the same tests on their triangles, in
+    // increasing order. A box's extent along an axis a is c·a ± |a|·half; the slack (10⁻¹² of
+    // the magnitudes) far exceeds the rounding of that and of a corner's p·a + offset, so a box
+    // is passed over only where each of its triangles fails the same test below.
+    const std::span<const TriangleBoxTree::Node> nodes = tree->nodes();
+    const std::span<const int> order = tree->order();
+    const glm::dvec3 abs_u = glm::abs(u_O), abs_v = glm::abs(v_O), abs_n = glm::abs(n_O);
+    const auto misses = [](const TriangleBoxTree::Node& node, const glm::dvec3& axis,
+                           const glm::dvec3& abs_axis, double plane_offset, double limit) {
+      const double c = glm::dot(node.center_O, axis) + plane_offset;
+      const double r = glm::dot(node.half_O, abs_axis);
+      const glm::dvec3 ac = glm::abs(node.center_O);
+      const double slack = 1e-12 * (ac.x + ac.y + ac.z + node.half_O.x + node.half_O.y +
+                                    node.half_O.z + std::abs(plane_offset) + limit) +
+                           1e-300;
+      return c + r + slack < -limit || c - r - slack > limit;
+    };
+    constexpr int kStack = 64;  // the tree's depth is at most log2(#F / 8) + 2
+    int stack[kStack];
+    int top = 0;
+    if (!nodes.empty()) stack[top++] = 0;
+    while (top > 0) {
+      const int index = stack[--top];
+      const TriangleBoxTree::Node& node = nodes[static_cast<std::size_t>(index)];
+      if (misses(node, u_O, abs_u, ou, half) || misses(node, v_O, abs_v, ov, half) ||
+          misses(node, n_O, abs_n, on, depth_limit)) {
+        continue;
+      }
+      if (node.second < 0) {
+        for (int k = node.begin; k < node.end; ++k) {
+          const int f = order[static_cast<std::size_t>(k)];
+          if (PatchTriangleTest(model, f, u_O, v_O, n_O, ou, ov, on, half, depth_limit, side,
+                                threshold, nullptr)) {
+            out.push_back(f);
+          }
+        }
+      } else if (top + 2 <= kStack) {
+        stack[top++] = node.second;
+        stack[top++] = index + 1;
+      }
+    }
+    std::sort(out.begin(), out.end());
+    return;
+  }
   // With room in the scratch, each vertex's coordinate along u once (the same double as per
   // triangle below, so the same triangles): a vertex is shared by about six triangles.
   const std::size_t nv = model.vertices_O.size();
@@ -757,34 +844,119 @@ void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
     for (std::size_t k = 0; k < nv; ++k) along_u[k] = glm::dot(vertices[k], u_O) + ou;
   }
   for (int f = 0; f < nf; ++f) {
-    const glm::ivec3 t = model.triangles[f];
-    double s0, s1, s2;
-    if (along_u != nullptr) {
-      s0 = along_u[t[0]];
-      s1 = along_u[t[1]];
-      s2 = along_u[t[2]];
-    } else {
-      s0 = glm::dot(vertices[t[0]], u_O) + ou;
-      s1 = glm::dot(vertices[t[1]], u_O) + ou;
-      s2 = glm::dot(vertices[t[2]], u_O) + ou;
+    if (PatchTriangleTest(model, f, u_O, v_O, n_O, ou, ov, on, half, depth_limit, side, threshold,
+                          along_u)) {
+      out.push_back(f);
     }
-    if (std::max({s0, s1, s2}) < -half || std::min({s0, s1, s2}) > half) continue;
-    const glm::dvec3& p0 = vertices[t[0]];
-    const glm::dvec3& p1 = vertices[t[1]];
-    const glm::dvec3& p2 = vertices[t[2]];
-    const double t0 = glm::dot(p0, v_O) + ov, t1 = glm::dot(p1, v_O) + ov,
-                 t2 = glm::dot(p2, v_O) + ov;
-    if (std::max({t0, t1, t2}) < -half || std::min({t0, t1, t2}) > half) continue;
-    const double d0 = glm::dot(p0, n_O) + on, d1 = glm::dot(p1, n_O) + on,
-                 d2 = glm::dot(p2, n_O) + on;
-    if (std::max({d0, d1, d2}) < -depth_limit || std::min({d0, d1, d2}) > depth_limit) continue;
-    const glm::dvec3 cr = glm::cross(p1 - p0, p2 - p0);
-    const double area2 = glm::length(cr);
-    if (!(area2 > 0.0)) continue;
-    const double facing = glm::dot(cr, n_O) / area2;
-    if (side == PatchSide::kEnvironment ? facing <= threshold : facing >= -threshold) continue;
-    out.push_back(f);
   }
+}
+
+namespace {
+
+int TreeDepth(std::span<const TriangleBoxTree::Node> nodes, int index) noexcept {
+  const TriangleBoxTree::Node& node = nodes[static_cast<std::size_t>(index)];
+  if (node.second < 0) return 1;
+  return 1 + std::max(TreeDepth(nodes, index + 1), TreeDepth(nodes, node.second));
+}
+
+}  // namespace
+
+void TriangleBoxTree::Clear() noexcept {
+  nodes_.clear();
+  order_.clear();
+  model_ = nullptr;
+  vertices_ = triangles_ = nullptr;
+  vertex_count_ = triangle_count_ = 0;
+}
+
+void TriangleBoxTree::Build(const HapticModel& model) {
+  Clear();
+  const std::size_t nf = model.triangles.size();
+  order_.resize(nf);
+  std::vector<glm::dvec3> centroids(nf);
+  for (std::size_t f = 0; f < nf; ++f) {
+    order_[f] = static_cast<int>(f);
+    const glm::ivec3 t = model.triangles[f];
+    centroids[f] = (model.vertices_O[static_cast<std::size_t>(t[0])] +
+                    model.vertices_O[static_cast<std::size_t>(t[1])] +
+                    model.vertices_O[static_cast<std::size_t>(t[2])]) /
+                   3.0;
+  }
+  nodes_.reserve(nf / (kLeafTriangles / 2) + 1);
+  if (nf > 0) BuildNode(model, centroids, 0, static_cast<int>(nf));
+  // Median splits keep the depth near log2(#F / 8); SelectPatchTriangles walks with a stack of
+  // 64, which a depth of 60 cannot overflow.
+  if (!nodes_.empty() && TreeDepth(nodes_, 0) > 60) {
+    Clear();
+    return;
+  }
+  model_ = &model;
+  vertices_ = model.vertices_O.data();
+  triangles_ = model.triangles.data();
+  vertex_count_ = model.vertices_O.size();
+  triangle_count_ = nf;
+  if (vertex_count_ > 0) {
+    first_vertex_ = model.vertices_O.front();
+    last_vertex_ = model.vertices_O.back();
+  }
+  if (nf > 0) {
+    first_triangle_ = model.triangles.front();
+    last_triangle_ = model.triangles.back();
+  }
+}
+
+int TriangleBoxTree::BuildNode(const HapticModel& model, std::vector<glm::dvec3>& centroids,
+                               int begin, int end) {
+  glm::dvec3 lo(std::numeric_limits<double>::infinity());
+  glm::dvec3 hi(-std::numeric_limits<double>::infinity());
+  for (int k = begin; k < end; ++k) {
+    const glm::ivec3 t =
+        model.triangles[static_cast<std::size_t>(order_[static_cast<std::size_t>(k)])];
+    for (int c = 0; c < 3; ++c) {
+      const glm::dvec3& p = model.vertices_O[static_cast<std::size_t>(t[c])];
+      lo = glm::min(lo, p);
+      hi = glm::max(hi, p);
+    }
+  }
+  const int index = static_cast<int>(nodes_.size());
+  Node node;
+  node.center_O = 0.5 * (lo + hi);
+  node.half_O = 0.5 * (hi - lo);
+  node.half_O += 1e-12 * (glm::abs(node.center_O) + node.half_O);
+  node.begin = begin;
+  node.end = end;
+  nodes_.push_back(node);
+  if (end - begin <= kLeafTriangles) return index;
+  const glm::dvec3 size = hi - lo;
+  const int axis = size.x >= size.y && size.x >= size.z ? 0 : (size.y >= size.z ? 1 : 2);
+  const int mid = begin + (end - begin) / 2;
+  std::nth_element(order_.begin() + begin, order_.begin() + mid, order_.begin() + end,
+                   [&](int a, int b) {
+                     const double ca = centroids[static_cast<std::size_t>(a)][axis];
+                     const double cb = centroids[static_cast<std::size_t>(b)][axis];
+                     return ca < cb || (ca == cb && a < b);
+                   });
+  BuildNode(model, centroids, begin, mid);
+  const int second = BuildNode(model, centroids, mid, end);
+  nodes_[static_cast<std::size_t>(index)].second = second;
+  return index;
+}
+
+bool TriangleBoxTree::BuiltFrom(const HapticModel& model) const noexcept {
+  if (model_ != &model || vertices_ != model.vertices_O.data() ||
+      triangles_ != model.triangles.data() || vertex_count_ != model.vertices_O.size() ||
+      triangle_count_ != model.triangles.size()) {
+    return false;
+  }
+  if (vertex_count_ > 0 &&
+      (model.vertices_O.front() != first_vertex_ || model.vertices_O.back() != last_vertex_)) {
+    return false;
+  }
+  if (triangle_count_ > 0 &&
+      (model.triangles.front() != first_triangle_ || model.triangles.back() != last_triangle_)) {
+    return false;
+  }
+  return true;
 }
 
 void RenderPatchHeights(const HapticModel& model, const RigidTransform& X_WO,
@@ -877,6 +1049,7 @@ struct DepthCull {
   std::span<const int> first_triangles;   // the first pass's triangles (empty: all)
   std::vector<int>* first_triangles_out;  // gets the triangles the first pass drew, or nullptr
   const EnvironmentMaxPyramid* env_max;   // whole triangles skipped by it, or nullptr
+  TriangleBoundCache* bounds;             // levels and texture bounds, or nullptr
 };
 
 void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
@@ -1028,6 +1201,10 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
   // values within the window's box) and of the double arithmetic, far exceeded.
   const double cull_margin =
       cull != nullptr ? 1e-6 * (3.0 * range + cull->texture_bound_m) + 1e-15 : 0.0;
+  TriangleBoundCache* const bounds =
+      cull != nullptr && cull->bounds != nullptr && cull->bounds->Matches(model, w.cell_size_m())
+          ? cull->bounds
+          : nullptr;
   for (int pass = 0; pass < passes; ++pass) {
     if (pass == 1) flush();
     const std::span<const int> list = pass == 0 && passes == 2 && !cull->first_triangles.empty()
@@ -1069,8 +1246,14 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
       const double inv_area = pc.inv_area;
       const int i0 = pc.i0, i1 = pc.i1;
       const bool textured = have_texture && model.textured[f] != 0;
-      const int level =
-          textured ? model.texture.LevelForFootprint(model.texel_size_m[f], w.cell_size_m()) : 0;
+      // The level and (with culling) the texture bound below, from the window's cache when it
+      // has them: the same values.
+      double texture_bound = 0.0;
+      int level = 0;
+      const bool cached = bounds != nullptr && bounds->Find(f, level, texture_bound);
+      if (!cached && textured) {
+        level = model.texture.LevelForFootprint(model.texel_size_m[f], w.cell_size_m());
+      }
       // The cull of this triangle's cells: a cell's b − a is at most env − (b·d) + |h·(N·n)|
       // (|N·n| ≤ 1, and |h| at most the largest |h| under the triangle's texture coordinates, whose
       // box holds every cell's: b ≥ −1e-9 sum to 1), so cells where that, with the margin, is below
@@ -1078,14 +1261,14 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
       RowCull row_cull{};
       const RowCull* row_cull_ptr = nullptr;
       if (cull != nullptr && std::isfinite(cull->drawn.lower)) {
-        double texture_bound = 0.0;
-        if (textured) {
+        if (!cached && textured) {
           const glm::vec2 uv0 = model.corner_uvs[3 * f], uv1 = model.corner_uvs[3 * f + 1],
                           uv2 = model.corner_uvs[3 * f + 2];
           texture_bound = model.texture.MaxAbsOver(
               level, std::min({uv0.x, uv1.x, uv2.x}), std::min({uv0.y, uv1.y, uv2.y}),
               std::max({uv0.x, uv1.x, uv2.x}), std::max({uv0.y, uv1.y, uv2.y}));
         }
+        if (!cached && bounds != nullptr) bounds->Store(f, level, texture_bound);
         row_cull = {cull->drawn.env, d[0], d[1], d[2],
                     static_cast<double>(cull->drawn.lower) - texture_bound - cull_margin};
         row_cull_ptr = &row_cull;
@@ -1240,6 +1423,20 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
 
 }  // namespace
 
+void TriangleBoundCache::Reserve(std::size_t max_triangles) { entries_.reserve(max_triangles); }
+
+void TriangleBoundCache::Reset(const HapticModel& model, double cell_size_m) noexcept {
+  model_ = &model;
+  cell_size_m_ = cell_size_m;
+  usable_ = model.triangles.size() <= entries_.capacity();
+  if (!usable_) return;
+  if (entries_.size() < model.triangles.size()) entries_.resize(model.triangles.size());
+  if (++stamp_ == 0) {  // the stamp wrapped: no entry may carry the new one by accident
+    for (Entry& e : entries_) e.stamp = 0;
+    stamp_ = 1;
+  }
+}
+
 void EnvironmentMaxPyramid::Reserve(int max_resolution) {
   std::size_t total = 0;
   for (int size = (max_resolution + 1) / 2; size >= 1; size = (size + 1) / 2) {
@@ -1344,7 +1541,8 @@ DepthSample RenderToolDepth(const HapticModel& tool, const RigidTransform& X_WT,
       {env_heights.data(), -std::numeric_limits<float>::infinity(), static_cast<int>(cells), -1, 0},
       hints.first_triangles,
       hints.first_triangles_out,
-      hints.env_max != nullptr && hints.env_max->resolution() == n ? hints.env_max : nullptr};
+      hints.env_max != nullptr && hints.env_max->resolution() == n ? hints.env_max : nullptr,
+      hints.bounds};
   RenderHeightsFastImpl(tool, X_WT, triangles, w, PatchSide::kTool, 0, heights, kernel, &cull);
   hints.cells_drawn = cull.drawn.count;
   // The scan over the rows drawn (every other cell is +∞, which no scan takes), row by row in

@@ -220,6 +220,19 @@ class TexturePenetrationSolver {
 
   /// Largest |p_O| of the tool's vertices (m), computed once per model.
   double ToolRadius(const HapticModel& tool) noexcept;
+  /// The box tree of `model` for SelectPatchTriangles, or nullptr (the whole scan) for a model
+  /// of fewer than kTreeTriangles triangles, or when every slot holds a model used within the
+  /// last kTreeStaleCalls calls. A model seen for the first time is built into a free or stale
+  /// slot (this allocates: once per model, in warm-up, or after a scene change).
+  const TriangleBoxTree* TreeFor(const HapticModel& model) noexcept;
+  static constexpr std::size_t kTreeTriangles = 64;
+  static constexpr std::uint64_t kTreeStaleCalls = 4096;
+  struct TreeSlot {
+    TriangleBoxTree tree;
+    std::uint64_t last_use = 0;  // 0: never built
+  };
+  std::array<TreeSlot, 8> trees_;
+  std::uint64_t tree_clock_ = 0;
 
   TextureStagePath path_;
   RotationGradient rotation_gradient_ = RotationGradient::kRenderedSamples;
@@ -232,6 +245,8 @@ class TexturePenetrationSolver {
   std::vector<int> first_triangles_;
   /// The environment render's max pyramid, for the culled rotation renders.
   EnvironmentMaxPyramid env_max_;
+  /// The tool triangles' levels and texture bounds, shared by a contact's culled rotation renders.
+  TriangleBoundCache tool_bounds_;
   std::vector<float> env_heights_;
   std::vector<float> tool_heights_;
   /// The base pose on the window grown by a cell (kFast, and the base-render rotation gradients).

@@ -2,6 +2,7 @@
 // Directional penetration depth of two textured patches on an N×N grid (DESIGN.md §4).
 // This CPU path is the reference that the GPU backend must match.
 
+#include <cstdint>
 #include <glm/vec3.hpp>
 #include <optional>
 #include <span>
@@ -65,10 +66,67 @@ inline constexpr double kPatchFacingThreshold = 0.05;
 /// vertex's coordinate along the window's u axis is computed once instead of once per triangle
 /// corner (the same triangles; in penetration_depth_benchmark, whose 1,600-triangle gear makes
 /// this the larger call, its share of the time fell from 13.5 % to 10.3 %); it is not grown.
+///
+/// With `tree` built from `model` (TriangleBoxTree::BuiltFrom), only the triangles of the tree's
+/// leaves whose boxes reach the window grown by the margin (and its box along n, grown likewise)
+/// are tested, with the same tests and the same arithmetic: the same triangles in the same
+/// (increasing) order as the whole scan (tested), at a cost that grows with the triangles near the
+/// window rather than with the model. A tree built from another model is ignored (the scan).
+/// The tree path does not use `vertex_scratch`.
+class TriangleBoxTree;
 void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
                           const ContactWindow& window, PatchSide side, double margin_m,
                           std::vector<int>& triangles_out, double facing_slack = 0.0,
-                          std::vector<double>* vertex_scratch = nullptr) noexcept;
+                          std::vector<double>* vertex_scratch = nullptr,
+                          const TriangleBoxTree* tree = nullptr) noexcept;
+
+/// An axis-aligned box tree over a model's coarse triangles, in its frame O (m), for
+/// SelectPatchTriangles: each node's box holds every corner of its triangles (exact minima and
+/// maxima of the corners' coordinates), leaves hold up to kLeafTriangles triangles, and a node
+/// splits its triangles at the median of their centroids along its box's longest axis (so the
+/// depth is at most log2(#F / kLeafTriangles) + 2). Build allocates; queries never do. The
+/// hull hierarchy (HapticModel::hull_hierarchy) is not used: the procedural models have none.
+class TriangleBoxTree {
+ public:
+  static constexpr int kLeafTriangles = 8;
+  /// Builds the tree over `model`'s triangles (replacing any earlier one) and remembers which
+  /// model and storage it was built from. Throws std::bad_alloc only; a model without triangles
+  /// gives an empty tree (which BuiltFrom still matches: SelectPatchTriangles then finds none).
+  /// Triangle corners out of the vertex range are not checked (HapticModel::Validate does).
+  void Build(const HapticModel& model);
+  /// True when the tree was built from `model` (its address) and the model still has the same
+  /// vertex and triangle storage: addresses, counts, and its first and last vertex and triangle.
+  /// A model edited in place between those (ShiftModelFrame moves every vertex, so it is caught)
+  /// needs a new Build.
+  bool BuiltFrom(const HapticModel& model) const noexcept;
+  /// Forgets the model (BuiltFrom false for every model); keeps the storage.
+  void Clear() noexcept;
+  /// Nodes in the tree (0 when empty or cleared).
+  int node_count() const noexcept { return static_cast<int>(nodes_.size()); }
+
+  /// One node: its box (centre and half extents, m, in O, widened by a relative 1e-12 so that
+  /// centre ± half holds the corners despite rounding) and either a leaf's range of order() or
+  /// the index of its second child (the first follows it).
+  struct Node {
+    glm::dvec3 center_O, half_O;
+    int begin = 0, end = 0;  ///< leaf: order()[begin, end)
+    int second = -1;         ///< internal: the second child's index; −1 for a leaf
+  };
+  std::span<const Node> nodes() const noexcept { return nodes_; }
+  /// The triangles in leaf order (each triangle once).
+  std::span<const int> order() const noexcept { return order_; }
+
+ private:
+  int BuildNode(const HapticModel& model, std::vector<glm::dvec3>& centroids, int begin, int end);
+  std::vector<Node> nodes_;
+  std::vector<int> order_;
+  const HapticModel* model_ = nullptr;
+  const void* vertices_ = nullptr;
+  const void* triangles_ = nullptr;
+  std::size_t vertex_count_ = 0, triangle_count_ = 0;
+  glm::dvec3 first_vertex_{0.0}, last_vertex_{0.0};
+  glm::ivec3 first_triangle_{0}, last_triangle_{0};
+};
 
 /// Renders the heights along n (m, relative to the window centre) of the textured surface of
 /// `model` posed at X_WO into `heights` (#N*N). Only triangles of `triangles` that face the other
@@ -142,6 +200,49 @@ class EnvironmentMaxPyramid {
   std::vector<int> offset_, size_;  // level k ≥ 1 at storage_[offset_[k]], size_[k]² entries
 };
 
+/// What RenderToolDepth's cull computes per tool triangle that does not change with the tool's
+/// pose: the triangle's mip level for the window's cell size (HeightField::LevelForFootprint) and
+/// the largest |h| under its texture coordinates at that level (HeightField::MaxAbsOver), kept for
+/// the renders of one window (the six rotated poses share them). Entries fill as the renders meet
+/// the triangles; the values are those the render would compute, so the renders' results are the
+/// same with or without it. Reserve allocates; the rest never does.
+class TriangleBoundCache {
+ public:
+  /// Room for models of up to `max_triangles` triangles (larger ones are not cached).
+  void Reserve(std::size_t max_triangles);
+  /// Starts a window of cell size `cell_size_m` (m) on `model`: forgets every entry, in O(1)
+  /// (entries carry the window's stamp). The cache stays unused (Matches false) when the model
+  /// has more triangles than reserved.
+  void Reset(const HapticModel& model, double cell_size_m) noexcept;
+  /// True when the last Reset was for this model and cell size and the cache has room for it.
+  bool Matches(const HapticModel& model, double cell_size_m) const noexcept {
+    return model_ == &model && cell_size_m_ == cell_size_m && usable_;
+  }
+  /// Triangle f's level and texture bound (m) if cached since the last Reset.
+  bool Find(int f, int& level, double& texture_bound_m) const noexcept {
+    const Entry& e = entries_[static_cast<std::size_t>(f)];
+    if (e.stamp != stamp_) return false;
+    level = e.level;
+    texture_bound_m = e.texture_bound_m;
+    return true;
+  }
+  void Store(int f, int level, double texture_bound_m) noexcept {
+    entries_[static_cast<std::size_t>(f)] = {texture_bound_m, level, stamp_};
+  }
+
+ private:
+  struct Entry {
+    double texture_bound_m = 0.0;
+    int level = 0;
+    std::uint32_t stamp = 0;
+  };
+  std::vector<Entry> entries_;
+  std::uint32_t stamp_ = 0;
+  const HapticModel* model_ = nullptr;
+  double cell_size_m_ = 0.0;
+  bool usable_ = false;
+};
+
 /// RenderToolDepth's hints and what it reports about its cull.
 struct ToolDepthCull {
   /// Window cell j·N + i whose neighbourhood (±2 cells) the first pass draws: a good guess at the
@@ -157,6 +258,9 @@ struct ToolDepthCull {
   /// whose largest environment height over its cell box, less its smallest corner height, cannot
   /// reach the lower bound is skipped whole.
   const EnvironmentMaxPyramid* env_max = nullptr;
+  /// Each triangle's level and texture bound, shared by the renders of one window (Reset for
+  /// this window and the tool), or nullptr: computed per render.
+  TriangleBoundCache* bounds = nullptr;
   /// Out: how many cells were textured and drawn.
   int cells_drawn = 0;
 };
