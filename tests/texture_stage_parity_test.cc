@@ -472,6 +472,56 @@ TEST(TextureStageParity, BoxTreeSelectsTheScansTriangles) {
   EXPECT_EQ(scan, through_tree);
 }
 
+// The tool's triangles with each triangle's own rotation margin (2 h_x + h_θ·r, r its farthest
+// corner from the tool's origin) against the margin of the tool's farthest vertex that the solver
+// used before: a subset, and the same render bits at all eleven sample poses (on the window, and
+// on the window grown by a cell at the base pose), on random contacts of the six seed models.
+TEST(TextureStageParity, PerTriangleRotationMarginKeepsEveryRender) {
+  std::mt19937 rng(2015);
+  std::vector<int> local, global;
+  long local_total = 0, global_total = 0, covered = 0;
+  for (const SeedModel which : kAll) {
+    const HapticModel& env = Seed(which);
+    const HapticModel& tool = Seed(kAll[(static_cast<int>(which) + 3) % 6]);
+    double radius = 0.0;
+    for (const glm::dvec3& p : tool.vertices_O) radius = std::max(radius, glm::length(p));
+    TriangleBoxTree tree;
+    tree.Build(tool);
+    for (int trial = 0; trial < 8; ++trial) {
+      const int n = trial % 2 == 0 ? 50 : 25;
+      const Contact c = RandomContact(tool, env, rng, n);
+      const GradientSteps h = GradientSteps::For(c.window);
+      SelectPatchTriangles(tool, c.X_WT, c.window, PatchSide::kTool,
+                           2.0 * h.h_x + h.h_theta * radius, global, h.h_theta + 1e-9);
+      SelectPatchTriangles(tool, c.X_WT, c.window, PatchSide::kTool, 2.0 * h.h_x, local,
+                           h.h_theta + 1e-9, nullptr, trial % 2 == 0 ? &tree : nullptr, h.h_theta);
+      ASSERT_TRUE(std::includes(global.begin(), global.end(), local.begin(), local.end()));
+      local_total += static_cast<long>(local.size());
+      global_total += static_cast<long>(global.size());
+      const auto poses = GradientSamplePoses(c.X_WT, c.window);
+      const auto cells = static_cast<std::size_t>(n) * n;
+      for (std::size_t p = 0; p < poses.size(); ++p) {
+        for (const int margin : {0, 1}) {
+          if (margin == 1 && p != 0) continue;
+          const auto size = static_cast<std::size_t>(n + 2 * margin) * (n + 2 * margin);
+          std::vector<float> a(size, std::numeric_limits<float>::infinity()), b = a;
+          RenderPatchHeightsFast(tool, poses[p], global, c.window, PatchSide::kTool, margin, a);
+          RenderPatchHeightsFast(tool, poses[p], local, c.window, PatchSide::kTool, margin, b);
+          ASSERT_EQ(0, std::memcmp(a.data(), b.data(), size * sizeof(float)))
+              << SeedModelName(which) << " trial " << trial << " pose " << p;
+          if (margin == 0) {
+            for (std::size_t k = 0; k < cells; ++k) covered += std::isfinite(a[k]) ? 1 : 0;
+          }
+        }
+      }
+    }
+  }
+  EXPECT_GT(covered, 20000);             // the renders draw
+  EXPECT_LT(local_total, global_total);  // and the own margins leave triangles out
+  RecordProperty("local_triangles", std::to_string(local_total));
+  RecordProperty("global_triangles", std::to_string(global_total));
+}
+
 TEST(TextureStageParity, EnvironmentMaxPyramidBoundsEveryBox) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<float> h(-1e-3f, 1e-3f);

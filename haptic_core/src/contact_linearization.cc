@@ -175,21 +175,6 @@ const TriangleBoxTree* TexturePenetrationSolver::TreeFor(const HapticModel& mode
   return &replace->tree;
 }
 
-double TexturePenetrationSolver::ToolRadius(const HapticModel& tool) noexcept {
-  // Keyed by the model's address and its vertex storage, so a model freed and another built at
-  // the same address is measured again.
-  if (&tool != radius_model_ || tool.vertices_O.data() != radius_vertices_ ||
-      tool.vertices_O.size() != radius_vertex_count_) {
-    double r = 0.0;
-    for (const auto& v : tool.vertices_O) r = std::max(r, glm::length(v));
-    radius_model_ = &tool;
-    radius_vertices_ = tool.vertices_O.data();
-    radius_vertex_count_ = tool.vertices_O.size();
-    radius_m_ = r;
-  }
-  return radius_m_;
-}
-
 DepthSample TexturePenetrationSolver::Depth(const HapticModel& tool, const RigidTransform& X_WT,
                                             const HapticModel& environment,
                                             const RigidTransform& X_WO,
@@ -297,17 +282,15 @@ ContactLinearization TexturePenetrationSolver::Linearize(
     const RigidTransform& X_WO, const ContactWindow& w, double stiffness_n_per_m,
     std::span<DepthSample> samples_out) noexcept {
   const GradientSteps h = GradientSteps::For(w);
-  const double tool_radius = ToolRadius(tool);
 
   const bool from_base = rotation_gradient_ != RotationGradient::kRenderedSamples;
   RenderEnvironment(environment, X_WO, w);
   // Tool triangles are chosen once, with margins that cover every perturbed pose (the render
   // re-checks facing at each pose); without rendered rotations only the base pose is drawn, on
   // the window grown by a cell.
-  SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool,
-                       from_base ? 2.0 * h.h_x : 2.0 * h.h_x + h.h_theta * tool_radius,
-                       tool_triangles_, from_base ? 1e-9 : h.h_theta + 1e-9, &vertex_scratch_,
-                       TreeFor(tool));
+  SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool, 2.0 * h.h_x, tool_triangles_,
+                       from_base ? 1e-9 : h.h_theta + 1e-9, &vertex_scratch_, TreeFor(tool),
+                       from_base ? 0.0 : h.h_theta);
   std::array<DepthSample, kGradientSamples> samples;
   for (DepthSample& s : samples) s = {-std::numeric_limits<double>::infinity(), -1};
   glm::dvec3 lever_W(0.0);  // RotationGradient::kContactLever

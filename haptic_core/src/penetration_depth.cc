@@ -730,14 +730,21 @@ namespace {
 
 // SelectPatchTriangles' tests of triangle f, cheapest and most selective first: the extent along
 // u (from `along_u`, each vertex's p·u + ou, when given), then v, then n, then the facing test.
-[[gnu::always_inline]] inline bool PatchTriangleTest(const HapticModel& model, int f,
-                                                     const glm::dvec3& u_O, const glm::dvec3& v_O,
-                                                     const glm::dvec3& n_O, double ou, double ov,
-                                                     double on, double half, double depth_limit,
-                                                     PatchSide side, double threshold,
-                                                     const double* along_u) noexcept {
+[[gnu::always_inline]] inline bool PatchTriangleTest(
+    const HapticModel& model, int f, const glm::dvec3& u_O, const glm::dvec3& v_O,
+    const glm::dvec3& n_O, double ou, double ov, double on, double half, double depth_limit,
+    PatchSide side, double threshold, const double* along_u, double margin_per_radius) noexcept {
   const glm::dvec3* vertices = model.vertices_O.data();
   const glm::ivec3 t = model.triangles[static_cast<std::size_t>(f)];
+  if (margin_per_radius > 0.0) {
+    // The triangle's own margin: its farthest corner from the model's origin (every point of
+    // the triangle is at most that far).
+    const double r = std::sqrt(std::max({glm::dot(vertices[t[0]], vertices[t[0]]),
+                                         glm::dot(vertices[t[1]], vertices[t[1]]),
+                                         glm::dot(vertices[t[2]], vertices[t[2]])}));
+    half += margin_per_radius * r;
+    depth_limit += margin_per_radius * r;
+  }
   double s0, s1, s2;
   if (along_u != nullptr) {
     s0 = along_u[t[0]];
@@ -770,8 +777,8 @@ namespace {
 void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
                           const ContactWindow& w, PatchSide side, double margin_m,
                           std::vector<int>& out, double facing_slack,
-                          std::vector<double>* vertex_scratch,
-                          const TriangleBoxTree* tree) noexcept {
+                          std::vector<double>* vertex_scratch, const TriangleBoxTree* tree,
+                          double margin_per_radius) noexcept {
   out.clear();
   const double half = 0.5 * w.extent_m + margin_m;
   const double depth_limit = w.depth_range_m() + margin_m;
@@ -797,8 +804,13 @@ void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
     const std::span<const TriangleBoxTree::Node> nodes = tree->nodes();
     const std::span<const int> order = tree->order();
     const glm::dvec3 abs_u = glm::abs(u_O), abs_v = glm::abs(v_O), abs_n = glm::abs(n_O);
-    const auto misses = [](const TriangleBoxTree::Node& node, const glm::dvec3& axis,
-                           const glm::dvec3& abs_axis, double plane_offset, double limit) {
+    const auto misses = [margin_per_radius](const TriangleBoxTree::Node& node,
+                                            const glm::dvec3& axis, const glm::dvec3& abs_axis,
+                                            double plane_offset, double limit) {
+      if (margin_per_radius > 0.0) {  // the largest of the node's triangles' own margins
+        limit += margin_per_radius * (glm::length(node.center_O) + glm::length(node.half_O)) *
+                 (1.0 + 1e-12);
+      }
       const double c = glm::dot(node.center_O, axis) + plane_offset;
       const double r = glm::dot(node.half_O, abs_axis);
       const glm::dvec3 ac = glm::abs(node.center_O);
@@ -822,7 +834,7 @@ void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
         for (int k = node.begin; k < node.end; ++k) {
           const int f = order[static_cast<std::size_t>(k)];
           if (PatchTriangleTest(model, f, u_O, v_O, n_O, ou, ov, on, half, depth_limit, side,
-                                threshold, nullptr)) {
+                                threshold, nullptr, margin_per_radius)) {
             out.push_back(f);
           }
         }
@@ -845,7 +857,7 @@ void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
   }
   for (int f = 0; f < nf; ++f) {
     if (PatchTriangleTest(model, f, u_O, v_O, n_O, ou, ov, on, half, depth_limit, side, threshold,
-                          along_u)) {
+                          along_u, margin_per_radius)) {
       out.push_back(f);
     }
   }

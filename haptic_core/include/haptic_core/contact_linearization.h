@@ -218,8 +218,6 @@ class TexturePenetrationSolver {
   /// this.
   static constexpr std::size_t kPyramidTriangles = 32;
 
-  /// Largest |p_O| of the tool's vertices (m), computed once per model.
-  double ToolRadius(const HapticModel& tool) noexcept;
   /// The box tree of `model` for SelectPatchTriangles, or nullptr (the whole scan) for a model
   /// of fewer than kTreeTriangles triangles, or when every slot holds a model used within the
   /// last kTreeStaleCalls calls. A model seen for the first time is built into a free or stale
@@ -255,10 +253,6 @@ class TexturePenetrationSolver {
   bool parallel_renders_ = false;
   /// kFast with parallel renders: one buffer per rotated pose (samples 5..10).
   std::array<std::vector<float>, 6> rotation_heights_;
-  const HapticModel* radius_model_ = nullptr;
-  const glm::dvec3* radius_vertices_ = nullptr;
-  std::size_t radius_vertex_count_ = 0;
-  double radius_m_ = 0.0;
   std::vector<int> env_triangles_;
   std::vector<int> tool_triangles_;
   LinearizationFaults faults_;

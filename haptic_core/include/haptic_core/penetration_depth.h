@@ -73,12 +73,18 @@ inline constexpr double kPatchFacingThreshold = 0.05;
 /// (increasing) order as the whole scan (tested), at a cost that grows with the triangles near the
 /// window rather than with the model. A tree built from another model is ignored (the scan).
 /// The tree path does not use `vertex_scratch`.
+///
+/// With `margin_per_radius` k > 0, each triangle's margin is margin_m + k·r, r the distance of its
+/// farthest corner from the model frame's origin (m): the reach of a rotation by up to k radians
+/// about that origin (chord ≤ k·r), for a caller whose renders turn the model about it. A triangle
+/// near the origin then gets a smaller margin than the model's farthest vertex would give it.
 class TriangleBoxTree;
 void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
                           const ContactWindow& window, PatchSide side, double margin_m,
                           std::vector<int>& triangles_out, double facing_slack = 0.0,
                           std::vector<double>* vertex_scratch = nullptr,
-                          const TriangleBoxTree* tree = nullptr) noexcept;
+                          const TriangleBoxTree* tree = nullptr,
+                          double margin_per_radius = 0.0) noexcept;
 
 /// An axis-aligned box tree over a model's coarse triangles, in its frame O (m), for
 /// SelectPatchTriangles: each node's box holds every corner of its triangles (exact minima and
