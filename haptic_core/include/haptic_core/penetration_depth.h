@@ -121,11 +121,23 @@ class TriangleBoxTree {
   std::span<const Node> nodes() const noexcept { return nodes_; }
   /// The triangles in leaf order (each triangle once).
   std::span<const int> order() const noexcept { return order_; }
+  /// A triangle's corners and the terms of SelectPatchTriangles' tests that do not depend on the
+  /// window, computed with the same expressions as the scan (so the same bits), in leaf order:
+  /// its corners p_O (m), the cross product (p1 − p0) × (p2 − p0) and its length (m²), and the
+  /// distance of its farthest corner from the origin (m).
+  struct Triangle {
+    glm::dvec3 p0_O, p1_O, p2_O;
+    glm::dvec3 cross_O;
+    double cross_length;
+    double radius_m;
+  };
+  std::span<const Triangle> triangles() const noexcept { return triangles_data_; }
 
  private:
   int BuildNode(const HapticModel& model, std::vector<glm::dvec3>& centroids, int begin, int end);
   std::vector<Node> nodes_;
   std::vector<int> order_;
+  std::vector<Triangle> triangles_data_;  // in leaf order, as order_
   const HapticModel* model_ = nullptr;
   const void* vertices_ = nullptr;
   const void* triangles_ = nullptr;
