@@ -472,6 +472,32 @@ TEST(TextureStageParity, BoxTreeSelectsTheScansTriangles) {
   EXPECT_EQ(scan, through_tree);
 }
 
+// The solver's and the GPU backend's cache of box trees: eight models at once, none for a small
+// model, none (and nothing built) while all eight are in use, a stale slot reused, and a model
+// edited in place rebuilt.
+TEST(TextureStageParity, BoxTreeCacheKeepsEightModelsAndReusesStaleSlots) {
+  std::vector<HapticModel> models(TriangleBoxTreeCache::kSlots + 1, Seed(SeedModel::kCadPart));
+  TriangleBoxTreeCache cache;
+  for (int k = 0; k < TriangleBoxTreeCache::kSlots; ++k) {
+    const TriangleBoxTree* tree = cache.For(models[static_cast<std::size_t>(k)]);
+    ASSERT_NE(tree, nullptr);
+    EXPECT_TRUE(tree->BuiltFrom(models[static_cast<std::size_t>(k)]));
+    EXPECT_EQ(cache.For(models[static_cast<std::size_t>(k)]), tree);  // kept, not rebuilt
+  }
+  HapticModel& ninth = models.back();
+  EXPECT_EQ(cache.For(ninth), nullptr);                    // all eight in use
+  EXPECT_EQ(cache.For(Seed(SeedModel::kBlock)), nullptr);  // 16 triangles: the scan
+  for (std::uint64_t k = 0; k <= TriangleBoxTreeCache::kStaleCalls; ++k) cache.For(models[0]);
+  const TriangleBoxTree* ninth_tree = cache.For(ninth);  // the others went stale
+  ASSERT_NE(ninth_tree, nullptr);
+  EXPECT_TRUE(ninth_tree->BuiltFrom(ninth));
+  EXPECT_TRUE(cache.For(models[0])->BuiltFrom(models[0]));
+  ShiftModelFrame(models[0], glm::dvec3(0.0, 0.002, 0.0));
+  const TriangleBoxTree* edited = cache.For(models[0]);
+  ASSERT_NE(edited, nullptr);
+  EXPECT_TRUE(edited->BuiltFrom(models[0]));
+}
+
 // The tool's triangles with each triangle's own rotation margin (2 h_x + h_θ·r, r its farthest
 // corner from the tool's origin) against the margin of the tool's farthest vertex that the solver
 // used before: a subset, and the same render bits at all eleven sample poses (on the window, and

@@ -127,7 +127,7 @@ void TexturePenetrationSolver::RenderEnvironment(const HapticModel& environment,
   const size_t cells = static_cast<size_t>(w.resolution) * w.resolution;
   env_heights_.assign(cells, -std::numeric_limits<float>::infinity());
   SelectPatchTriangles(environment, X_WO, w, PatchSide::kEnvironment, w.cell_size_m(),
-                       env_triangles_, 0.0, &vertex_scratch_, TreeFor(environment));
+                       env_triangles_, 0.0, &vertex_scratch_, trees_.For(environment));
   if (path_ == TextureStagePath::kFast) {
     RenderPatchHeightsFast(environment, X_WO, env_triangles_, w, PatchSide::kEnvironment, 0,
                            env_heights_);
@@ -149,39 +149,13 @@ DepthSample TexturePenetrationSolver::EvaluateTool(const HapticModel& tool,
   return DirectionalPenetrationDepth(env_heights_, tool_heights_);
 }
 
-const TriangleBoxTree* TexturePenetrationSolver::TreeFor(const HapticModel& model) noexcept {
-  if (model.triangles.size() < kTreeTriangles) return nullptr;
-  ++tree_clock_;
-  TreeSlot* replace = nullptr;
-  for (TreeSlot& slot : trees_) {
-    if (slot.last_use != 0 && slot.tree.BuiltFrom(model)) {
-      slot.last_use = tree_clock_;
-      return &slot.tree;
-    }
-    // A never-built slot first, else the least recently used one if it is stale.
-    if (replace == nullptr || slot.last_use < replace->last_use) replace = &slot;
-  }
-  if (replace->last_use != 0 && tree_clock_ - replace->last_use <= kTreeStaleCalls) {
-    return nullptr;  // every slot in use: the whole scan, without building (or allocating)
-  }
-  try {
-    replace->tree.Build(model);
-  } catch (...) {  // std::bad_alloc
-    replace->tree.Clear();
-    replace->last_use = 0;
-    return nullptr;
-  }
-  replace->last_use = tree_clock_;
-  return &replace->tree;
-}
-
 DepthSample TexturePenetrationSolver::Depth(const HapticModel& tool, const RigidTransform& X_WT,
                                             const HapticModel& environment,
                                             const RigidTransform& X_WO,
                                             const ContactWindow& w) noexcept {
   RenderEnvironment(environment, X_WO, w);
   SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool, w.cell_size_m(), tool_triangles_, 0.0,
-                       &vertex_scratch_, TreeFor(tool));
+                       &vertex_scratch_, trees_.For(tool));
   return EvaluateTool(tool, X_WT, w);
 }
 
@@ -289,7 +263,7 @@ ContactLinearization TexturePenetrationSolver::Linearize(
   // re-checks facing at each pose); without rendered rotations only the base pose is drawn, on
   // the window grown by a cell.
   SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool, 2.0 * h.h_x, tool_triangles_,
-                       from_base ? 1e-9 : h.h_theta + 1e-9, &vertex_scratch_, TreeFor(tool),
+                       from_base ? 1e-9 : h.h_theta + 1e-9, &vertex_scratch_, trees_.For(tool),
                        from_base ? 0.0 : h.h_theta);
   std::array<DepthSample, kGradientSamples> samples;
   for (DepthSample& s : samples) s = {-std::numeric_limits<double>::infinity(), -1};

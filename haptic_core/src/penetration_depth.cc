@@ -996,6 +996,32 @@ int TriangleBoxTree::BuildNode(const HapticModel& model, std::vector<glm::dvec3>
   return index;
 }
 
+const TriangleBoxTree* TriangleBoxTreeCache::For(const HapticModel& model) noexcept {
+  if (model.triangles.size() < kMinTriangles) return nullptr;
+  ++clock_;
+  Slot* replace = nullptr;
+  for (Slot& slot : slots_) {
+    if (slot.last_use != 0 && slot.tree.BuiltFrom(model)) {
+      slot.last_use = clock_;
+      return &slot.tree;
+    }
+    // A never-built slot first, else the least recently used one if it is stale.
+    if (replace == nullptr || slot.last_use < replace->last_use) replace = &slot;
+  }
+  if (replace->last_use != 0 && clock_ - replace->last_use <= kStaleCalls) {
+    return nullptr;  // every slot in use: the whole scan, without building (or allocating)
+  }
+  try {
+    replace->tree.Build(model);
+  } catch (...) {  // std::bad_alloc
+    replace->tree.Clear();
+    replace->last_use = 0;
+    return nullptr;
+  }
+  replace->last_use = clock_;
+  return &replace->tree;
+}
+
 bool TriangleBoxTree::BuiltFrom(const HapticModel& model) const noexcept {
   if (model_ != &model || vertices_ != model.vertices_O.data() ||
       triangles_ != model.triangles.data() || vertex_count_ != model.vertices_O.size() ||

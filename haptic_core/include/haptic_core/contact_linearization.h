@@ -218,19 +218,8 @@ class TexturePenetrationSolver {
   /// this.
   static constexpr std::size_t kPyramidTriangles = 32;
 
-  /// The box tree of `model` for SelectPatchTriangles, or nullptr (the whole scan) for a model
-  /// of fewer than kTreeTriangles triangles, or when every slot holds a model used within the
-  /// last kTreeStaleCalls calls. A model seen for the first time is built into a free or stale
-  /// slot (this allocates: once per model, in warm-up, or after a scene change).
-  const TriangleBoxTree* TreeFor(const HapticModel& model) noexcept;
-  static constexpr std::size_t kTreeTriangles = 64;
-  static constexpr std::uint64_t kTreeStaleCalls = 4096;
-  struct TreeSlot {
-    TriangleBoxTree tree;
-    std::uint64_t last_use = 0;  // 0: never built
-  };
-  std::array<TreeSlot, 8> trees_;
-  std::uint64_t tree_clock_ = 0;
+  /// Box trees of the models met, for SelectPatchTriangles.
+  TriangleBoxTreeCache trees_;
 
   TextureStagePath path_;
   RotationGradient rotation_gradient_ = RotationGradient::kRenderedSamples;

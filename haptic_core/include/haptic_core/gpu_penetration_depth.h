@@ -17,6 +17,7 @@
 
 #include "haptic_core/contact_model.h"
 #include "haptic_core/egl_context.h"
+#include "haptic_core/penetration_depth.h"
 #include "haptic_core/penetration_depth_backend.h"
 
 namespace ht {
@@ -111,6 +112,16 @@ class GpuPenetrationDepthBackend final : public PenetrationDepthBackend {
     int env_depth = -1, tool_depth = -1, resolution = -1, env_columns = -1, tool_columns = -1,
         samples_per_contact = -1, height_scale = -1;
   } rd_;
+  // The patch triangles of a batch's contacts (SelectPatchTriangles) as corner index ranges of
+  // patch_ebo_ (first index and count), one per contact and side.
+  struct PatchRange {
+    int first = 0, count = 0;
+  };
+  unsigned patch_ebo_ = 0;
+  std::vector<unsigned> patch_indices_;               // scratch: the element buffer's contents
+  std::vector<int> patch_triangles_;                  // scratch
+  std::vector<PatchRange> env_ranges_, tool_ranges_;  // #max_contacts
+  TriangleBoxTreeCache trees_;
   std::vector<RigidTransform> sample_poses_;  // scratch, #max_contacts*kGradientSamples
   std::vector<DepthSample> samples_;          // scratch, same size
   LinearizationFaults faults_;

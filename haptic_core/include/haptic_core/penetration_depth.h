@@ -2,6 +2,7 @@
 // Directional penetration depth of two textured patches on an N×N grid (DESIGN.md §4).
 // This CPU path is the reference that the GPU backend must match.
 
+#include <array>
 #include <cstdint>
 #include <glm/vec3.hpp>
 #include <optional>
@@ -144,6 +145,31 @@ class TriangleBoxTree {
   std::size_t vertex_count_ = 0, triangle_count_ = 0;
   glm::dvec3 first_vertex_{0.0}, last_vertex_{0.0};
   glm::ivec3 first_triangle_{0}, last_triangle_{0};
+};
+
+/// The box trees of the models a texture stage meets, for SelectPatchTriangles: up to kSlots
+/// models, each built once (on first sight; this allocates) and kept while it is used.
+class TriangleBoxTreeCache {
+ public:
+  static constexpr int kSlots = 8;
+  /// Models of fewer triangles are scanned (nullptr): the scan costs less than the walk.
+  static constexpr std::size_t kMinTriangles = 64;
+  /// A slot is reused for a new model only when unused for this many calls.
+  static constexpr std::uint64_t kStaleCalls = 4096;
+  /// The tree of `model`, or nullptr (the whole scan): for a model of fewer than kMinTriangles
+  /// triangles, when every slot holds a model used within the last kStaleCalls calls (nothing is
+  /// built then, nor allocated), or when building runs out of memory. A model seen for the first
+  /// time, or edited since its tree was built (TriangleBoxTree::BuiltFrom), is built into a free
+  /// or stale slot.
+  const TriangleBoxTree* For(const HapticModel& model) noexcept;
+
+ private:
+  struct Slot {
+    TriangleBoxTree tree;
+    std::uint64_t last_use = 0;  // 0: never built
+  };
+  std::array<Slot, kSlots> slots_;
+  std::uint64_t clock_ = 0;
 };
 
 /// Renders the heights along n (m, relative to the window centre) of the textured surface of

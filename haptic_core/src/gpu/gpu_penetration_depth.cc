@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <glm/geometric.hpp>
 #include <glm/gtc/quaternion.hpp>
@@ -361,6 +362,11 @@ void GpuPenetrationDepthBackend::Initialize() {
   make_atlas(options_.max_contacts * kGradientSamples, tool_columns_, tool_depth_, tool_fbo_);
   glBindFramebuffer(GL_FRAMEBUFFER, 0);
 
+  glGenBuffers(1, &patch_ebo_);
+  patch_indices_.reserve(static_cast<size_t>(options_.max_contacts) * 2 * 3 * 256);
+  patch_triangles_.reserve(4096);
+  env_ranges_.resize(static_cast<size_t>(options_.max_contacts));
+  tool_ranges_.resize(static_cast<size_t>(options_.max_contacts));
   glGenBuffers(1, &results_);
   glBindBuffer(GL_SHADER_STORAGE_BUFFER, results_);
   glBufferData(GL_SHADER_STORAGE_BUFFER,
@@ -379,6 +385,7 @@ GpuPenetrationDepthBackend::~GpuPenetrationDepthBackend() {
   if (!context_ || !context_->MakeCurrent()) return;
   ForgetModels();
   glDeleteBuffers(1, &results_);
+  glDeleteBuffers(1, &patch_ebo_);
   glDeleteFramebuffers(1, &env_fbo_);
   glDeleteFramebuffers(1, &tool_fbo_);
   glDeleteTextures(1, &env_depth_);
@@ -571,6 +578,7 @@ bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
   };
   const auto bind_model = [&](const GpuModel& m) {
     glBindVertexArray(m.vao);
+    glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, patch_ebo_);  // part of the VAO's state
     glActiveTexture(GL_TEXTURE0);
     glBindTexture(GL_TEXTURE_2D, m.texture);
     glUniform1i(ru_.num_levels, m.num_levels);
@@ -587,6 +595,47 @@ bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
     const auto poses = GradientSamplePoses(X_WT, queries[c].window);
     std::copy(poses.begin(), poses.end(), sample_poses_.begin() + c * kGradientSamples);
   }
+  // Each contact's patch triangles, chosen as the CPU path chooses them (SelectPatchTriangles:
+  // the environment's on the window grown by a cell; the tool's with the margins of all eleven
+  // sample poses), as ranges of one element buffer of corner indices: the draws below process
+  // those triangles, not whole models.
+  patch_indices_.clear();
+  const auto append = [&](const std::vector<int>& triangles) {
+    const auto first = static_cast<GLsizei>(patch_indices_.size());
+    for (const int f : triangles) {
+      const auto corner = static_cast<GLuint>(3 * f);
+      patch_indices_.push_back(corner);
+      patch_indices_.push_back(corner + 1);
+      patch_indices_.push_back(corner + 2);
+    }
+    return PatchRange{first, static_cast<GLsizei>(patch_indices_.size()) - first};
+  };
+  try {
+    for (int c = 0; c < count; ++c) {
+      const ContactQuery& q = queries[c];
+      const ContactWindow& w = q.window;
+      const GradientSteps h = GradientSteps::For(w);
+      SelectPatchTriangles(*q.environment, q.X_WO, w, PatchSide::kEnvironment, w.cell_size_m(),
+                           patch_triangles_, 0.0, nullptr, trees_.For(*q.environment));
+      env_ranges_[static_cast<std::size_t>(c)] = append(patch_triangles_);
+      SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool, 2.0 * h.h_x, patch_triangles_,
+                           h.h_theta + 1e-9, nullptr, trees_.For(tool), h.h_theta);
+      tool_ranges_[static_cast<std::size_t>(c)] = append(patch_triangles_);
+    }
+  } catch (const std::exception& e) {  // allocation failure while the lists grow
+    return Fail(std::string("patch triangle lists: ") + e.what());
+  }
+  glBindVertexArray(0);
+  glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, patch_ebo_);
+  glBufferData(GL_ELEMENT_ARRAY_BUFFER,
+               static_cast<GLsizeiptr>(patch_indices_.size() * sizeof(GLuint)),
+               patch_indices_.data(), GL_STREAM_DRAW);
+  const auto draw_range = [](const PatchRange& r) {
+    if (r.count == 0) return;
+    glDrawElements(
+        GL_TRIANGLES, r.count, GL_UNSIGNED_INT,
+        reinterpret_cast<const void*>(static_cast<std::uintptr_t>(r.first) * sizeof(GLuint)));
+  };
   const auto t1 = Clock::now();
 
   glUseProgram(render_program_);
@@ -605,7 +654,7 @@ bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
     tile(c, env_columns_);
     bind_model(*env_models[c]);
     set_window_uniforms(q.X_WO, q.window, 1.0f);
-    glDrawArrays(GL_TRIANGLES, 0, env_models[c]->corners);
+    draw_range(env_ranges_[static_cast<std::size_t>(c)]);
   }
   // Tool patches A at every gradient sample pose: keep the smallest height per cell.
   glBindFramebuffer(GL_FRAMEBUFFER, tool_fbo_);
@@ -617,7 +666,7 @@ bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
       const int index = c * kGradientSamples + s;
       tile(index, tool_columns_);
       set_window_uniforms(sample_poses_[index], queries[c].window, -1.0f);
-      glDrawArrays(GL_TRIANGLES, 0, tool_model->corners);
+      draw_range(tool_ranges_[static_cast<std::size_t>(c)]);
     }
   }
   glBindFramebuffer(GL_FRAMEBUFFER, 0);
