@@ -209,6 +209,72 @@ TEST_F(GpuTest, OneBatchOfManyContactsEqualsContactsOneByOne) {
   }
 }
 
+// The tool's eleven poses in one instanced draw per contact (each instance clipped to its atlas
+// tile) against one draw per pose: the same samples covered, depths within a quantum plus the
+// float geometry's error, in full batches (14 contacts, so instances land in every atlas row) at
+// random tool poses, at 16 and 32 bits.
+TEST_F(GpuTest, InstancedToolDrawsMatchOneDrawPerPose) {
+  const HapticModel block = MakeRidgedBlock(RidgedBlockParams{});
+  const HapticModel gear = MakeRidgedGear(RidgedGearParams{});
+  for (const int bits : {16, 32}) {
+    // The batches, then each backend in turn (a backend's context is current on its thread from
+    // its creation, so the two are not alive at once).
+    std::mt19937 rng(1515 + bits);
+    std::vector<RigidTransform> poses;
+    std::vector<std::vector<ContactQuery>> batches;
+    for (int batch = 0; batch < 6; ++batch) {
+      const RandomContact first = MakeRandomContact(rng, batch % 2 == 0 ? 50 : 37);
+      poses.push_back(first.X_WT);
+      batches.emplace_back();
+      for (int i = 0; i < kMaxContacts; ++i) {
+        const RandomContact c = MakeRandomContact(rng, first.window.resolution);
+        batches.back().push_back({&gear, RigidTransform::Identity(), c.window, 8000.0});
+      }
+    }
+    std::vector<std::vector<DepthSample>> results[2];
+    double tolerance = 0.0;
+    for (const bool instanced : {true, false}) {
+      GpuPenetrationDepthOptions o;
+      o.depth_bits = bits;
+      o.instanced_tool_draws = instanced;
+      auto gpu = GpuPenetrationDepthBackend::Create(o);
+      if (instanced && !gpu->instanced_tool_draws()) {
+        GTEST_SKIP() << "no GL_EXT_clip_cull_distance here: " << gpu->description();
+      }
+      EXPECT_EQ(gpu->instanced_tool_draws(), instanced);
+      // Each route is within a quantum plus the float geometry's error of the CPU's depth
+      // (DepthSamplesMatchTheCpu...), so within twice that of each other.
+      tolerance = 2.0 * (gpu->DepthQuantum(batches[0][0].window) + GeometryTolerance(block, gear));
+      for (std::size_t k = 0; k < batches.size(); ++k) {
+        std::vector<ContactLinearization> out(batches[k].size());
+        std::vector<DepthSample> samples(batches[k].size() * kGradientSamples);
+        ASSERT_TRUE(gpu->LinearizeBatch(block, poses[k], batches[k], out, samples))
+            << gpu->last_error();
+        results[instanced ? 0 : 1].push_back(samples);
+      }
+    }
+    int compared = 0, covered = 0;
+    double largest = 0.0;
+    for (std::size_t k = 0; k < batches.size(); ++k) {
+      const std::vector<DepthSample>& a = results[0][k];
+      const std::vector<DepthSample>& b = results[1][k];
+      for (std::size_t i = 0; i < a.size(); ++i) {
+        ASSERT_EQ(a[i].cell >= 0, b[i].cell >= 0) << bits << "-bit, batch " << k << " sample " << i;
+        ++compared;
+        if (a[i].cell < 0) continue;
+        ++covered;
+        EXPECT_NEAR(a[i].depth_m, b[i].depth_m, tolerance) << bits << "-bit, batch " << k;
+        largest = std::max(largest, std::abs(a[i].depth_m - b[i].depth_m));
+      }
+    }
+    EXPECT_GT(covered, compared / 4) << bits << "-bit";
+    std::printf(
+        "%d-bit: %d samples, %d covered, largest |difference| %.3g m (%.2f of the "
+        "tolerance)\n",
+        bits, compared, covered, largest, largest / tolerance);
+  }
+}
+
 TEST_F(GpuTest, SeparatedAndNonOverlappingContactsAgreeWithTheCpu) {
   auto gpu = MakeGpu(16);
   const HapticModel block = MakeRidgedBlock(RidgedBlockParams{});

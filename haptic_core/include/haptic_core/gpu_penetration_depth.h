@@ -1,7 +1,8 @@
 #pragma once
 // Texture penetration depth on the GPU (DESIGN.md §4) [S][L]: per remote step one batch for all
 // contacts and all gradient samples. Per contact the environment patch B is rendered once and the
-// tool patch A at its kGradientSamples poses, with orthographic projection along n into depth
+// tool patch A at its kGradientSamples poses (one instanced draw where the context allows; only
+// the patch triangles the CPU path would draw), with orthographic projection along n into depth
 // tiles of an atlas (heights as depth, B keeping the maximum, A the minimum, both displaced by
 // their haptic textures per fragment at the mip level matching the grid cell). A compute shader
 // takes b − a per cell and reduces each tile to its maximum and cell; one small readback per
@@ -34,14 +35,21 @@ struct GpuPenetrationDepthOptions {
   /// throughput; for benchmarks only.
   bool profile_stages = false;
   EglContextOptions egl;
+  /// The tool's kGradientSamples poses of a contact in one instanced draw, each instance clipped
+  /// to its own atlas tile by four clip planes, where the context has GL_EXT_clip_cull_distance
+  /// and the viewport can span the tool atlas (instanced_tool_draws() says whether it is used);
+  /// else, or when false, one draw per pose (issue 15). The same cells either way, depths
+  /// within a quantum (tested).
+  bool instanced_tool_draws = true;
   /// Testing hook: break the fragment shader's source so that compiling it fails.
   bool inject_shader_compile_error = false;
 };
 
 /// Wall time of the stages of the last batch (µs), filled when profile_stages is on.
 struct GpuStageTimes {
-  /// CPU-side preparation: model lookup (a first-seen model is uploaded here, once) and the
-  /// gradient sample poses. Per-draw uniforms are set inside the draw stage.
+  /// CPU-side preparation: model lookup (a first-seen model is uploaded here, once), the
+  /// gradient sample poses, and each contact's patch triangles (SelectPatchTriangles, as the CPU
+  /// path chooses them) into the element buffer. Per-draw uniforms are set inside the draw stage.
   double upload_us = 0.0;
   double draw_us = 0.0;      ///< Rasterizing B and A patches into the depth atlases.
   double reduce_us = 0.0;    ///< Compute shader: b − a and per-tile max.
@@ -59,7 +67,7 @@ class GpuPenetrationDepthBackend final : public PenetrationDepthBackend {
   ~GpuPenetrationDepthBackend() override;
 
   std::string_view name() const noexcept override { return "gpu"; }
-  /// "<GL_RENDERER> (<GL_VERSION>, <platform>, <bits>-bit depth)".
+  /// "<GL_RENDERER> (<GL_VERSION>, <platform>, <bits>-bit depth[, instanced tool draws])".
   std::string description() const override;
   /// See PenetrationDepthBackend. A model seen for the first time is uploaded (vertex buffer and
   /// texture with its mip chain, allocated once and kept); later batches only set uniforms.
@@ -79,6 +87,8 @@ class GpuPenetrationDepthBackend final : public PenetrationDepthBackend {
 
   const GpuInfo& info() const noexcept { return context_->info(); }
   int depth_bits() const noexcept { return options_.depth_bits; }
+  /// True when the tool's poses are drawn instanced (GpuPenetrationDepthOptions).
+  bool instanced_tool_draws() const noexcept { return instanced_program_ != 0; }
   /// Height resolution of the depth buffer for `window` (m): 2R'/(2^16 − 1) at 16 bits, with R'
   /// slightly above the window's depth range R; at 32 bits the float spacing near the middle of
   /// the range, 2R'·2^−24.
@@ -108,6 +118,13 @@ class GpuPenetrationDepthBackend final : public PenetrationDepthBackend {
     int row_u = -1, row_v = -1, row_n = -1, half_extent = -1, cell_size = -1, facing_sign = -1,
         num_levels = -1, wrap = -1, depth_range = -1, depth_scale = -1, texture = -1;
   } ru_;
+  unsigned instanced_program_ = 0;  // 0: eleven draws per contact
+  int tool_atlas_width_ = 0, tool_atlas_height_ = 0;
+  struct InstancedUniforms {
+    int rows = -1, half_extent = -1, cell_size = -1, facing_sign = -1, num_levels = -1, wrap = -1,
+        depth_range = -1, depth_scale = -1, texture = -1, first_tile = -1, columns = -1,
+        tile_stride = -1, cells = -1, atlas_size = -1;
+  } iu_;
   struct ReduceUniforms {
     int env_depth = -1, tool_depth = -1, resolution = -1, env_columns = -1, tool_columns = -1,
         samples_per_contact = -1, height_scale = -1;

@@ -43,7 +43,9 @@ out vec2 v_uv;
 out float v_height;
 out vec3 v_normal_O;  // interpolated corner normal (renormalized per fragment)
 flat out int v_level;
+flat out vec3 v_row_n;  // n in O, for the fragment's N·n
 void main() {
+  v_row_n = u_row_n.xyz;
   float facing = u_facing_sign * dot(a_face_normal_O, u_row_n.xyz);
   float s = dot(u_row_u.xyz, a_position_O) + u_row_u.w;
   float t = dot(u_row_v.xyz, a_position_O) + u_row_v.w;
@@ -63,6 +65,68 @@ void main() {
 }
 )";
 
+// Vertex stage of the tool's instanced draw (GL_EXT_clip_cull_distance): instance i is sample
+// pose i of one contact, with its rows from u_rows, drawn into its own tile of the tool atlas
+// (tile u_first_tile + i, the viewport being the whole atlas). The window's edges are clip
+// planes, so a triangle is cut where the per-pose draw's viewport and scissor cut it; the pixel
+// mapping is the viewport transform's, origin + (x + 1)·N/2.
+constexpr const char* kInstancedVertexShader = R"(#version 310 es
+#extension GL_EXT_clip_cull_distance : require
+precision highp float;
+precision highp int;
+layout(location = 0) in vec3 a_position_O;
+layout(location = 1) in vec3 a_normal_O;
+layout(location = 2) in vec3 a_face_normal_O;
+layout(location = 3) in vec2 a_uv;
+layout(location = 4) in float a_texel_size;  // < 0: smooth face (no texture)
+uniform vec4 u_rows[33];      // instance i: u, v, n rows at 3i, 3i + 1, 3i + 2
+uniform float u_half_extent;  // W/2 (m)
+uniform float u_cell_size;    // W/N (m)
+uniform float u_facing_sign;  // −1: the tool A
+uniform int u_num_levels;
+uniform int u_first_tile;     // atlas tile of instance 0
+uniform int u_columns;        // tiles per atlas row
+uniform float u_tile_stride;  // texels between tile origins
+uniform float u_cells;        // N
+uniform vec2 u_atlas_size;    // texels
+out vec2 v_uv;
+out float v_height;
+out vec3 v_normal_O;
+flat out int v_level;
+flat out vec3 v_row_n;
+out float gl_ClipDistance[4];
+void main() {
+  vec4 row_u = u_rows[3 * gl_InstanceID];
+  vec4 row_v = u_rows[3 * gl_InstanceID + 1];
+  vec4 row_n = u_rows[3 * gl_InstanceID + 2];
+  v_row_n = row_n.xyz;
+  float facing = u_facing_sign * dot(a_face_normal_O, row_n.xyz);
+  float s = dot(row_u.xyz, a_position_O) + row_u.w;
+  float t = dot(row_v.xyz, a_position_O) + row_v.w;
+  v_height = dot(row_n.xyz, a_position_O) + row_n.w;
+  v_normal_O = a_normal_O;
+  v_uv = a_uv;
+  int level = -1;
+  if (a_texel_size >= 0.0) {
+    level = 0;
+    if (a_texel_size > 0.0 && u_cell_size > a_texel_size) {
+      level = clamp(int(floor(log2(u_cell_size / a_texel_size))), 0, u_num_levels - 1);
+    }
+  }
+  v_level = level;
+  vec2 xy = vec2(s / u_half_extent, t / u_half_extent);
+  gl_ClipDistance[0] = 1.0 + xy.x;
+  gl_ClipDistance[1] = 1.0 - xy.x;
+  gl_ClipDistance[2] = 1.0 + xy.y;
+  gl_ClipDistance[3] = 1.0 - xy.y;
+  int tile = u_first_tile + gl_InstanceID;
+  vec2 origin = u_tile_stride * vec2(float(tile % u_columns), float(tile / u_columns));
+  vec2 pixel = origin + (xy + 1.0) * (0.5 * u_cells);
+  gl_Position = facing > 0.05 ? vec4(pixel / u_atlas_size * 2.0 - 1.0, 0.0, 1.0)
+                              : vec4(2.0, 2.0, 2.0, 1.0);
+}
+)";
+
 // Fragment stage: coarse height plus texture height times N·n, bilinear at the chosen mip level
 // exactly as HeightField::Sample does (texelFetch, so no fixed-point filter weights).
 constexpr const char* kRenderFragmentShader = R"(#version 310 es
@@ -75,7 +139,7 @@ uniform float u_depth_scale;  // 1 / (2 R')
 in vec2 v_uv;
 in float v_height;
 in vec3 v_normal_O;
-uniform vec4 u_row_n;
+flat in vec3 v_row_n;
 flat in int v_level;
 int Address(int i, int n, int wrap) {
   if (wrap != 0) {
@@ -106,7 +170,7 @@ void main() {
   if (v_level >= 0) {
     // Height along the unit interpolated normal N (HapticModel: p = p_coarse + h·N), projected on n.
     float len = length(v_normal_O);
-    float ndotn = len > 1e-6 ? dot(v_normal_O, u_row_n.xyz) / len : 0.0;
+    float ndotn = len > 1e-6 ? dot(v_normal_O, v_row_n) / len : 0.0;
     h += SampleHeight(v_level, v_uv) * ndotn;
   }
   if (!(abs(h) <= u_depth_range)) discard;
@@ -361,6 +425,47 @@ void GpuPenetrationDepthBackend::Initialize() {
   make_atlas(options_.max_contacts, env_columns_, env_depth_, env_fbo_);
   make_atlas(options_.max_contacts * kGradientSamples, tool_columns_, tool_depth_, tool_fbo_);
   glBindFramebuffer(GL_FRAMEBUFFER, 0);
+  {
+    const auto [width, height] = layout(options_.max_contacts * kGradientSamples, tool_columns_);
+    tool_atlas_width_ = width;
+    tool_atlas_height_ = height;
+  }
+
+  // The tool's eleven poses in one instanced draw per contact where the context can clip each
+  // instance to its tile (GL_EXT_clip_cull_distance, four planes) and the viewport can span the
+  // tool atlas; else eleven draws.
+  if (options_.instanced_tool_draws) {
+    bool clip_distance = false;
+    GLint extensions = 0;
+    glGetIntegerv(GL_NUM_EXTENSIONS, &extensions);
+    for (GLint i = 0; i < extensions; ++i) {
+      const auto* name = reinterpret_cast<const char*>(glGetStringi(GL_EXTENSIONS, i));
+      if (name != nullptr && std::strcmp(name, "GL_EXT_clip_cull_distance") == 0) {
+        clip_distance = true;
+      }
+    }
+    constexpr GLenum kMaxClipDistances = 0x0D32;  // GL_MAX_CLIP_DISTANCES_EXT
+    GLint planes = 0;
+    GLint viewport[2] = {0, 0};
+    if (clip_distance) glGetIntegerv(kMaxClipDistances, &planes);
+    glGetIntegerv(GL_MAX_VIEWPORT_DIMS, viewport);
+    DrainGlErrors();
+    if (clip_distance && planes >= 4 && viewport[0] >= tool_atlas_width_ &&
+        viewport[1] >= tool_atlas_height_) {
+      instanced_program_ = LinkProgram(
+          {CompileShader(GL_VERTEX_SHADER, kInstancedVertexShader, "instanced vertex shader"),
+           CompileShader(GL_FRAGMENT_SHADER, fragment, "height fragment shader")},
+          "instanced height program");
+      const auto iloc = [&](const char* name) {
+        return glGetUniformLocation(instanced_program_, name);
+      };
+      iu_ = {iloc("u_rows"),        iloc("u_half_extent"), iloc("u_cell_size"),
+             iloc("u_facing_sign"), iloc("u_num_levels"),  iloc("u_wrap"),
+             iloc("u_depth_range"), iloc("u_depth_scale"), iloc("u_texture"),
+             iloc("u_first_tile"),  iloc("u_columns"),     iloc("u_tile_stride"),
+             iloc("u_cells"),       iloc("u_atlas_size")};
+    }
+  }
 
   glGenBuffers(1, &patch_ebo_);
   patch_indices_.reserve(static_cast<size_t>(options_.max_contacts) * 2 * 3 * 256);
@@ -391,6 +496,7 @@ GpuPenetrationDepthBackend::~GpuPenetrationDepthBackend() {
   glDeleteTextures(1, &env_depth_);
   glDeleteTextures(1, &tool_depth_);
   if (!broken_) glDeleteProgram(render_program_);
+  glDeleteProgram(instanced_program_);
   glDeleteProgram(reduce_program_);
 }
 
@@ -408,7 +514,8 @@ void GpuPenetrationDepthBackend::ForgetModels() noexcept {
 std::string GpuPenetrationDepthBackend::description() const {
   const GpuInfo& i = context_->info();
   return i.renderer + " (" + i.version + ", " + i.platform + " platform, " +
-         std::to_string(options_.depth_bits) + "-bit depth)";
+         std::to_string(options_.depth_bits) + "-bit depth" +
+         (instanced_program_ != 0 ? ", instanced tool draws)" : ")");
 }
 
 double GpuPenetrationDepthBackend::DepthQuantum(const ContactWindow& w) const noexcept {
@@ -418,6 +525,7 @@ double GpuPenetrationDepthBackend::DepthQuantum(const ContactWindow& w) const no
 
 void GpuPenetrationDepthBackend::BreakProgramForTesting() noexcept {
   glDeleteProgram(render_program_);
+  glDeleteProgram(instanced_program_);
   broken_ = true;
 }
 
@@ -563,7 +671,9 @@ bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
     if (env_models[c] == nullptr) return false;
   }
 
-  const int stride = options_.max_resolution;
+  // Tiles packed at the batch's N (the atlases are sized for N_max tiles, so N×N ones fit), so
+  // that the tiles a batch uses are close together (one clear below covers them).
+  const int stride = n;
   const auto set_window_uniforms = [&](const RigidTransform& X, const ContactWindow& w,
                                        float facing_sign) {
     const WindowRows r = RowsFor(X, w);
@@ -661,12 +771,60 @@ bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
   glDepthFunc(GL_LESS);
   glClearDepthf(1.0f);
   bind_model(*tool_model);
-  for (int c = 0; c < count; ++c) {
-    for (int s = 0; s < kGradientSamples; ++s) {
-      const int index = c * kGradientSamples + s;
-      tile(index, tool_columns_);
-      set_window_uniforms(sample_poses_[index], queries[c].window, -1.0f);
-      draw_range(tool_ranges_[static_cast<std::size_t>(c)]);
+  if (instanced_program_ != 0) {
+    // The batch's tiles cleared at once (whole atlas rows), then one draw per contact with an
+    // instance per sample pose.
+    const int tiles = count * kGradientSamples;
+    const int rows = (tiles + tool_columns_ - 1) / tool_columns_;
+    glScissor(0, 0, std::min(tiles, tool_columns_) * stride, rows * stride);
+    glClear(GL_DEPTH_BUFFER_BIT);
+    glDisable(GL_SCISSOR_TEST);
+    glViewport(0, 0, tool_atlas_width_, tool_atlas_height_);
+    glUseProgram(instanced_program_);
+    glUniform1i(iu_.texture, 0);
+    glUniform1i(iu_.num_levels, tool_model->num_levels);
+    glUniform2i(iu_.wrap, tool_model->wrap_u, tool_model->wrap_v);
+    glUniform1f(iu_.facing_sign, -1.0f);
+    glUniform1i(iu_.columns, tool_columns_);
+    glUniform1f(iu_.tile_stride, static_cast<float>(stride));
+    glUniform1f(iu_.cells, static_cast<float>(n));
+    glUniform2f(iu_.atlas_size, static_cast<float>(tool_atlas_width_),
+                static_cast<float>(tool_atlas_height_));
+    constexpr GLenum kClipDistance0 = 0x3000;  // GL_CLIP_DISTANCE0_EXT
+    for (GLenum plane = 0; plane < 4; ++plane) glEnable(kClipDistance0 + plane);
+    for (int c = 0; c < count; ++c) {
+      const ContactWindow& w = queries[c].window;
+      std::array<float, 4 * 3 * kGradientSamples> rows_data;
+      for (int s = 0; s < kGradientSamples; ++s) {
+        const WindowRows r = RowsFor(sample_poses_[c * kGradientSamples + s], w);
+        std::memcpy(&rows_data[static_cast<std::size_t>(12 * s)], r.u, sizeof r.u);
+        std::memcpy(&rows_data[static_cast<std::size_t>(12 * s + 4)], r.v, sizeof r.v);
+        std::memcpy(&rows_data[static_cast<std::size_t>(12 * s + 8)], r.n, sizeof r.n);
+      }
+      glUniform4fv(iu_.rows, 3 * kGradientSamples, rows_data.data());
+      glUniform1f(iu_.half_extent, static_cast<float>(0.5 * w.extent_m));
+      glUniform1f(iu_.cell_size, static_cast<float>(w.cell_size_m()));
+      glUniform1f(iu_.depth_range, static_cast<float>(w.depth_range_m()));
+      glUniform1f(iu_.depth_scale,
+                  static_cast<float>(1.0 / (2.0 * w.depth_range_m() * kRangeSlack)));
+      glUniform1i(iu_.first_tile, c * kGradientSamples);
+      const PatchRange& r = tool_ranges_[static_cast<std::size_t>(c)];
+      if (r.count > 0) {
+        glDrawElementsInstanced(
+            GL_TRIANGLES, r.count, GL_UNSIGNED_INT,
+            reinterpret_cast<const void*>(static_cast<std::uintptr_t>(r.first) * sizeof(GLuint)),
+            kGradientSamples);
+      }
+    }
+    for (GLenum plane = 0; plane < 4; ++plane) glDisable(kClipDistance0 + plane);
+  } else {
+    for (int c = 0; c < count; ++c) {
+      for (int s = 0; s < kGradientSamples; ++s) {
+        const int index = c * kGradientSamples + s;
+        tile(index, tool_columns_);
+        set_window_uniforms(sample_poses_[index], queries[c].window, -1.0f);
+        draw_range(tool_ranges_[static_cast<std::size_t>(c)]);
+      }
     }
   }
   glBindFramebuffer(GL_FRAMEBUFFER, 0);
