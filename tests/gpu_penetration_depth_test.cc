@@ -209,13 +209,15 @@ TEST_F(GpuTest, OneBatchOfManyContactsEqualsContactsOneByOne) {
   }
 }
 
-// The tool's eleven poses in one instanced draw per contact (each instance clipped to its atlas
-// tile) against one draw per pose: the same samples covered, depths within a quantum plus the
-// float geometry's error, in full batches (14 contacts, so instances land in every atlas row) at
-// random tool poses, at 16 and 32 bits.
-TEST_F(GpuTest, InstancedToolDrawsMatchOneDrawPerPose) {
+// A batch in one instanced draw per side and environment model (each instance clipped to its
+// atlas tile, drawing the union of the batch's patch triangles) against one draw per render: the
+// same samples covered, depths within twice a quantum plus the float geometry's error, in full
+// batches (14 contacts, so instances land in every atlas row; two environment models, so two
+// environment draws) at random tool poses, at 16 and 32 bits.
+TEST_F(GpuTest, InstancedDrawsMatchOneDrawPerRender) {
   const HapticModel block = MakeRidgedBlock(RidgedBlockParams{});
   const HapticModel gear = MakeRidgedGear(RidgedGearParams{});
+  const HapticModel other_gear = gear;  // another model (address) of the same shape
   for (const int bits : {16, 32}) {
     // The batches, then each backend in turn (a backend's context is current on its thread from
     // its creation, so the two are not alive at once).
@@ -228,7 +230,8 @@ TEST_F(GpuTest, InstancedToolDrawsMatchOneDrawPerPose) {
       batches.emplace_back();
       for (int i = 0; i < kMaxContacts; ++i) {
         const RandomContact c = MakeRandomContact(rng, first.window.resolution);
-        batches.back().push_back({&gear, RigidTransform::Identity(), c.window, 8000.0});
+        batches.back().push_back(
+            {i % 3 == 1 ? &other_gear : &gear, RigidTransform::Identity(), c.window, 8000.0});
       }
     }
     std::vector<std::vector<DepthSample>> results[2];
@@ -236,12 +239,12 @@ TEST_F(GpuTest, InstancedToolDrawsMatchOneDrawPerPose) {
     for (const bool instanced : {true, false}) {
       GpuPenetrationDepthOptions o;
       o.depth_bits = bits;
-      o.instanced_tool_draws = instanced;
+      o.instanced_draws = instanced;
       auto gpu = GpuPenetrationDepthBackend::Create(o);
-      if (instanced && !gpu->instanced_tool_draws()) {
+      if (instanced && !gpu->instanced_draws()) {
         GTEST_SKIP() << "no GL_EXT_clip_cull_distance here: " << gpu->description();
       }
-      EXPECT_EQ(gpu->instanced_tool_draws(), instanced);
+      EXPECT_EQ(gpu->instanced_draws(), instanced);
       // Each route is within a quantum plus the float geometry's error of the CPU's depth
       // (DepthSamplesMatchTheCpu...), so within twice that of each other.
       tolerance = 2.0 * (gpu->DepthQuantum(batches[0][0].window) + GeometryTolerance(block, gear));

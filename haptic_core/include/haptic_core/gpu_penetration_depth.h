@@ -10,6 +10,7 @@
 // one depth quantum.
 
 #include <array>
+#include <cstdint>
 #include <memory>
 #include <span>
 #include <string>
@@ -35,12 +36,14 @@ struct GpuPenetrationDepthOptions {
   /// throughput; for benchmarks only.
   bool profile_stages = false;
   EglContextOptions egl;
-  /// The tool's kGradientSamples poses of a contact in one instanced draw, each instance clipped
-  /// to its own atlas tile by four clip planes, where the context has GL_EXT_clip_cull_distance
-  /// and the viewport can span the tool atlas (instanced_tool_draws() says whether it is used);
-  /// else, or when false, one draw per pose (issue 15). The same cells either way, depths
-  /// within a quantum (tested).
-  bool instanced_tool_draws = true;
+  /// One instanced draw per side (per environment model) for the whole batch: an instance per
+  /// render (each contact's environment, each of its tool poses), each clipped to its own atlas
+  /// tile by four clip planes and drawing the union of the batch's patch triangles, where the
+  /// context has GL_EXT_clip_cull_distance, a 16 KiB uniform block and a viewport that can span
+  /// the atlases (instanced_draws() says whether it is used); else, or when false, one draw per
+  /// render, 12 per contact (issue 15). The same cells either way, depths within a quantum
+  /// plus the float geometry's error (tested).
+  bool instanced_draws = true;
   /// Testing hook: break the fragment shader's source so that compiling it fails.
   bool inject_shader_compile_error = false;
 };
@@ -67,7 +70,7 @@ class GpuPenetrationDepthBackend final : public PenetrationDepthBackend {
   ~GpuPenetrationDepthBackend() override;
 
   std::string_view name() const noexcept override { return "gpu"; }
-  /// "<GL_RENDERER> (<GL_VERSION>, <platform>, <bits>-bit depth[, instanced tool draws])".
+  /// "<GL_RENDERER> (<GL_VERSION>, <platform>, <bits>-bit depth[, instanced draws])".
   std::string description() const override;
   /// See PenetrationDepthBackend. A model seen for the first time is uploaded (vertex buffer and
   /// texture with its mip chain, allocated once and kept); later batches only set uniforms.
@@ -87,8 +90,8 @@ class GpuPenetrationDepthBackend final : public PenetrationDepthBackend {
 
   const GpuInfo& info() const noexcept { return context_->info(); }
   int depth_bits() const noexcept { return options_.depth_bits; }
-  /// True when the tool's poses are drawn instanced (GpuPenetrationDepthOptions).
-  bool instanced_tool_draws() const noexcept { return instanced_program_ != 0; }
+  /// True when the batch is drawn instanced (GpuPenetrationDepthOptions::instanced_draws).
+  bool instanced_draws() const noexcept { return instanced_program_ != 0; }
   /// Height resolution of the depth buffer for `window` (m): 2R'/(2^16 − 1) at 16 bits, with R'
   /// slightly above the window's depth range R; at 32 bits the float spacing near the middle of
   /// the range, 2R'·2^−24.
@@ -118,13 +121,16 @@ class GpuPenetrationDepthBackend final : public PenetrationDepthBackend {
     int row_u = -1, row_v = -1, row_n = -1, half_extent = -1, cell_size = -1, facing_sign = -1,
         num_levels = -1, wrap = -1, depth_range = -1, depth_scale = -1, texture = -1;
   } ru_;
-  unsigned instanced_program_ = 0;  // 0: eleven draws per contact
-  int tool_atlas_width_ = 0, tool_atlas_height_ = 0;
+  unsigned instanced_program_ = 0;               // 0: a draw per render
+  unsigned instance_ubo_ = 0;                    // the Instances block: 4 vec4 per instance
+  static constexpr int kInstancesPerDraw = 256;  // 16 KiB, the smallest GL_MAX_UNIFORM_BLOCK_SIZE
+  int tool_atlas_width_ = 0, tool_atlas_height_ = 0, env_atlas_width_ = 0, env_atlas_height_ = 0;
   struct InstancedUniforms {
-    int rows = -1, half_extent = -1, cell_size = -1, facing_sign = -1, num_levels = -1, wrap = -1,
-        depth_range = -1, depth_scale = -1, texture = -1, first_tile = -1, columns = -1,
-        tile_stride = -1, cells = -1, atlas_size = -1;
+    int half_extent = -1, cell_size = -1, facing_sign = -1, num_levels = -1, wrap = -1,
+        depth_range = -1, depth_scale = -1, texture = -1, columns = -1, tile_stride = -1,
+        cells = -1, atlas_size = -1;
   } iu_;
+  std::vector<float> instance_data_;  // scratch: the Instances block of one draw
   struct ReduceUniforms {
     int env_depth = -1, tool_depth = -1, resolution = -1, env_columns = -1, tool_columns = -1,
         samples_per_contact = -1, height_scale = -1;
@@ -137,7 +143,16 @@ class GpuPenetrationDepthBackend final : public PenetrationDepthBackend {
   unsigned patch_ebo_ = 0;
   std::vector<unsigned> patch_indices_;               // scratch: the element buffer's contents
   std::vector<int> patch_triangles_;                  // scratch
-  std::vector<PatchRange> env_ranges_, tool_ranges_;  // #max_contacts
+  std::vector<PatchRange> env_ranges_, tool_ranges_;  // #max_contacts (a draw per render)
+  // Instanced: the union of the batch's patch triangles per environment model and for the tool.
+  struct EnvGroup {
+    int first_contact = 0;
+    PatchRange range;
+  };
+  std::vector<EnvGroup> env_groups_;
+  PatchRange tool_union_;
+  std::vector<std::uint32_t> union_mark_;  // per triangle: the stamp of the union holding it
+  std::uint32_t union_stamp_ = 0;
   TriangleBoxTreeCache trees_;
   std::vector<RigidTransform> sample_poses_;  // scratch, #max_contacts*kGradientSamples
   std::vector<DepthSample> samples_;          // scratch, same size

@@ -65,11 +65,13 @@ void main() {
 }
 )";
 
-// Vertex stage of the tool's instanced draw (GL_EXT_clip_cull_distance): instance i is sample
-// pose i of one contact, with its rows from u_rows, drawn into its own tile of the tool atlas
-// (tile u_first_tile + i, the viewport being the whole atlas). The window's edges are clip
-// planes, so a triangle is cut where the per-pose draw's viewport and scissor cut it; the pixel
-// mapping is the viewport transform's, origin + (x + 1)·N/2.
+// Vertex stage of the instanced draws (GL_EXT_clip_cull_distance): one draw per side (per
+// environment model) for a whole batch, an instance per render (a contact's environment, or one
+// of its tool poses), with its rows and atlas tile from the Instances block; the viewport is the
+// whole atlas. Each instance draws the union of the batch's patch triangles (of that side and
+// model); the window's edges are clip planes, so a triangle is cut where a per-render draw's
+// viewport and scissor cut it, and the pixel mapping is the viewport transform's,
+// origin + (x + 1)·N/2.
 constexpr const char* kInstancedVertexShader = R"(#version 310 es
 #extension GL_EXT_clip_cull_distance : require
 precision highp float;
@@ -79,12 +81,12 @@ layout(location = 1) in vec3 a_normal_O;
 layout(location = 2) in vec3 a_face_normal_O;
 layout(location = 3) in vec2 a_uv;
 layout(location = 4) in float a_texel_size;  // < 0: smooth face (no texture)
-uniform vec4 u_rows[33];      // instance i: u, v, n rows at 3i, 3i + 1, 3i + 2
+// Instance i: its u, v and n rows at 4i, 4i + 1, 4i + 2 and its atlas tile at 4i + 3 (x).
+layout(std140) uniform Instances { vec4 u_instances[4 * 256]; };
 uniform float u_half_extent;  // W/2 (m)
 uniform float u_cell_size;    // W/N (m)
 uniform float u_facing_sign;  // −1: the tool A
 uniform int u_num_levels;
-uniform int u_first_tile;     // atlas tile of instance 0
 uniform int u_columns;        // tiles per atlas row
 uniform float u_tile_stride;  // texels between tile origins
 uniform float u_cells;        // N
@@ -96,9 +98,9 @@ flat out int v_level;
 flat out vec3 v_row_n;
 out float gl_ClipDistance[4];
 void main() {
-  vec4 row_u = u_rows[3 * gl_InstanceID];
-  vec4 row_v = u_rows[3 * gl_InstanceID + 1];
-  vec4 row_n = u_rows[3 * gl_InstanceID + 2];
+  vec4 row_u = u_instances[4 * gl_InstanceID];
+  vec4 row_v = u_instances[4 * gl_InstanceID + 1];
+  vec4 row_n = u_instances[4 * gl_InstanceID + 2];
   v_row_n = row_n.xyz;
   float facing = u_facing_sign * dot(a_face_normal_O, row_n.xyz);
   float s = dot(row_u.xyz, a_position_O) + row_u.w;
@@ -119,7 +121,7 @@ void main() {
   gl_ClipDistance[1] = 1.0 - xy.x;
   gl_ClipDistance[2] = 1.0 + xy.y;
   gl_ClipDistance[3] = 1.0 - xy.y;
-  int tile = u_first_tile + gl_InstanceID;
+  int tile = int(u_instances[4 * gl_InstanceID + 3].x);
   vec2 origin = u_tile_stride * vec2(float(tile % u_columns), float(tile / u_columns));
   vec2 pixel = origin + (xy + 1.0) * (0.5 * u_cells);
   gl_Position = facing > 0.05 ? vec4(pixel / u_atlas_size * 2.0 - 1.0, 0.0, 1.0)
@@ -429,12 +431,15 @@ void GpuPenetrationDepthBackend::Initialize() {
     const auto [width, height] = layout(options_.max_contacts * kGradientSamples, tool_columns_);
     tool_atlas_width_ = width;
     tool_atlas_height_ = height;
+    const auto [env_width, env_height] = layout(options_.max_contacts, env_columns_);
+    env_atlas_width_ = env_width;
+    env_atlas_height_ = env_height;
   }
 
   // The tool's eleven poses in one instanced draw per contact where the context can clip each
   // instance to its tile (GL_EXT_clip_cull_distance, four planes) and the viewport can span the
   // tool atlas; else eleven draws.
-  if (options_.instanced_tool_draws) {
+  if (options_.instanced_draws) {
     bool clip_distance = false;
     GLint extensions = 0;
     glGetIntegerv(GL_NUM_EXTENSIONS, &extensions);
@@ -450,8 +455,12 @@ void GpuPenetrationDepthBackend::Initialize() {
     if (clip_distance) glGetIntegerv(kMaxClipDistances, &planes);
     glGetIntegerv(GL_MAX_VIEWPORT_DIMS, viewport);
     DrainGlErrors();
+    GLint block_size = 0;
+    glGetIntegerv(GL_MAX_UNIFORM_BLOCK_SIZE, &block_size);
     if (clip_distance && planes >= 4 && viewport[0] >= tool_atlas_width_ &&
-        viewport[1] >= tool_atlas_height_) {
+        viewport[1] >= tool_atlas_height_ && viewport[0] >= env_atlas_width_ &&
+        viewport[1] >= env_atlas_height_ &&
+        block_size >= static_cast<GLint>(kInstancesPerDraw * 16 * sizeof(float))) {
       instanced_program_ = LinkProgram(
           {CompileShader(GL_VERTEX_SHADER, kInstancedVertexShader, "instanced vertex shader"),
            CompileShader(GL_FRAGMENT_SHADER, fragment, "height fragment shader")},
@@ -459,11 +468,23 @@ void GpuPenetrationDepthBackend::Initialize() {
       const auto iloc = [&](const char* name) {
         return glGetUniformLocation(instanced_program_, name);
       };
-      iu_ = {iloc("u_rows"),        iloc("u_half_extent"), iloc("u_cell_size"),
-             iloc("u_facing_sign"), iloc("u_num_levels"),  iloc("u_wrap"),
-             iloc("u_depth_range"), iloc("u_depth_scale"), iloc("u_texture"),
-             iloc("u_first_tile"),  iloc("u_columns"),     iloc("u_tile_stride"),
-             iloc("u_cells"),       iloc("u_atlas_size")};
+      iu_ = {iloc("u_half_extent"), iloc("u_cell_size"), iloc("u_facing_sign"),
+             iloc("u_num_levels"),  iloc("u_wrap"),      iloc("u_depth_range"),
+             iloc("u_depth_scale"), iloc("u_texture"),   iloc("u_columns"),
+             iloc("u_tile_stride"), iloc("u_cells"),     iloc("u_atlas_size")};
+      const GLuint block = glGetUniformBlockIndex(instanced_program_, "Instances");
+      glUniformBlockBinding(instanced_program_, block, 0);
+      glGenBuffers(1, &instance_ubo_);
+      glBindBuffer(GL_UNIFORM_BUFFER, instance_ubo_);
+      glBufferData(GL_UNIFORM_BUFFER, kInstancesPerDraw * 16 * sizeof(float), nullptr,
+                   GL_STREAM_DRAW);
+      glBindBuffer(GL_UNIFORM_BUFFER, 0);
+      instance_data_.reserve(static_cast<std::size_t>(kInstancesPerDraw) * 16);
+      if (const std::string e = DrainGlErrors(); !e.empty()) {
+        glDeleteProgram(instanced_program_);
+        glDeleteBuffers(1, &instance_ubo_);
+        instanced_program_ = instance_ubo_ = 0;  // a draw per render, as without the extension
+      }
     }
   }
 
@@ -497,6 +518,7 @@ GpuPenetrationDepthBackend::~GpuPenetrationDepthBackend() {
   glDeleteTextures(1, &tool_depth_);
   if (!broken_) glDeleteProgram(render_program_);
   glDeleteProgram(instanced_program_);
+  glDeleteBuffers(1, &instance_ubo_);
   glDeleteProgram(reduce_program_);
 }
 
@@ -515,7 +537,7 @@ std::string GpuPenetrationDepthBackend::description() const {
   const GpuInfo& i = context_->info();
   return i.renderer + " (" + i.version + ", " + i.platform + " platform, " +
          std::to_string(options_.depth_bits) + "-bit depth" +
-         (instanced_program_ != 0 ? ", instanced tool draws)" : ")");
+         (instanced_program_ != 0 ? ", instanced draws)" : ")");
 }
 
 double GpuPenetrationDepthBackend::DepthQuantum(const ContactWindow& w) const noexcept {
@@ -686,11 +708,16 @@ bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
     glUniform1f(ru_.depth_range, static_cast<float>(w.depth_range_m()));
     glUniform1f(ru_.depth_scale, static_cast<float>(1.0 / (2.0 * w.depth_range_m() * kRangeSlack)));
   };
-  const auto bind_model = [&](const GpuModel& m) {
+  // A model's vertices, the batch's element buffer and the model's texture; with the
+  // per-render program current, its texture uniforms too.
+  const auto bind_geometry = [&](const GpuModel& m) {
     glBindVertexArray(m.vao);
     glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, patch_ebo_);  // part of the VAO's state
     glActiveTexture(GL_TEXTURE0);
     glBindTexture(GL_TEXTURE_2D, m.texture);
+  };
+  const auto bind_model = [&](const GpuModel& m) {
+    bind_geometry(m);
     glUniform1i(ru_.num_levels, m.num_levels);
     glUniform2i(ru_.wrap, m.wrap_u, m.wrap_v);
   };
@@ -720,17 +747,74 @@ bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
     }
     return PatchRange{first, static_cast<GLsizei>(patch_indices_.size()) - first};
   };
+  const bool instanced = instanced_program_ != 0;
+  const auto select_env = [&](int c) {
+    const ContactQuery& q = queries[c];
+    SelectPatchTriangles(*q.environment, q.X_WO, q.window, PatchSide::kEnvironment,
+                         q.window.cell_size_m(), patch_triangles_, 0.0, nullptr,
+                         trees_.For(*q.environment));
+  };
+  const auto select_tool = [&](int c) {
+    const ContactWindow& w = queries[c].window;
+    const GradientSteps h = GradientSteps::For(w);
+    SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool, 2.0 * h.h_x, patch_triangles_,
+                         h.h_theta + 1e-9, nullptr, trees_.For(tool), h.h_theta);
+  };
+  // Instanced: the union of the lists (each triangle once), marked per triangle with a stamp.
+  const auto append_new = [&](std::size_t triangle_count) {
+    if (union_mark_.size() < triangle_count) union_mark_.resize(triangle_count, 0);
+    for (const int f : patch_triangles_) {
+      std::uint32_t& mark = union_mark_[static_cast<std::size_t>(f)];
+      if (mark == union_stamp_) continue;
+      mark = union_stamp_;
+      const auto corner = static_cast<GLuint>(3 * f);
+      patch_indices_.push_back(corner);
+      patch_indices_.push_back(corner + 1);
+      patch_indices_.push_back(corner + 2);
+    }
+  };
+  const auto next_stamp = [&] {
+    if (++union_stamp_ == 0) {  // wrapped: no triangle may carry the new stamp by accident
+      std::fill(union_mark_.begin(), union_mark_.end(), 0u);
+      union_stamp_ = 1;
+    }
+  };
+  env_groups_.clear();
   try {
-    for (int c = 0; c < count; ++c) {
-      const ContactQuery& q = queries[c];
-      const ContactWindow& w = q.window;
-      const GradientSteps h = GradientSteps::For(w);
-      SelectPatchTriangles(*q.environment, q.X_WO, w, PatchSide::kEnvironment, w.cell_size_m(),
-                           patch_triangles_, 0.0, nullptr, trees_.For(*q.environment));
-      env_ranges_[static_cast<std::size_t>(c)] = append(patch_triangles_);
-      SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool, 2.0 * h.h_x, patch_triangles_,
-                           h.h_theta + 1e-9, nullptr, trees_.For(tool), h.h_theta);
-      tool_ranges_[static_cast<std::size_t>(c)] = append(patch_triangles_);
+    if (instanced) {
+      // One group per environment model (in order of its first contact), then the tool.
+      for (int c = 0; c < count; ++c) {
+        bool seen = false;
+        for (const EnvGroup& g : env_groups_) {
+          seen = seen || env_models[g.first_contact] == env_models[c];
+        }
+        if (seen) continue;
+        next_stamp();
+        EnvGroup g;
+        g.first_contact = c;
+        g.range.first = static_cast<int>(patch_indices_.size());
+        for (int k = c; k < count; ++k) {
+          if (env_models[k] != env_models[c]) continue;
+          select_env(k);
+          append_new(queries[k].environment->triangles.size());
+        }
+        g.range.count = static_cast<int>(patch_indices_.size()) - g.range.first;
+        env_groups_.push_back(g);
+      }
+      next_stamp();
+      tool_union_.first = static_cast<int>(patch_indices_.size());
+      for (int c = 0; c < count; ++c) {
+        select_tool(c);
+        append_new(tool.triangles.size());
+      }
+      tool_union_.count = static_cast<int>(patch_indices_.size()) - tool_union_.first;
+    } else {
+      for (int c = 0; c < count; ++c) {
+        select_env(c);
+        env_ranges_[static_cast<std::size_t>(c)] = append(patch_triangles_);
+        select_tool(c);
+        tool_ranges_[static_cast<std::size_t>(c)] = append(patch_triangles_);
+      }
     }
   } catch (const std::exception& e) {  // allocation failure while the lists grow
     return Fail(std::string("patch triangle lists: ") + e.what());
@@ -746,6 +830,55 @@ bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
         GL_TRIANGLES, r.count, GL_UNSIGNED_INT,
         reinterpret_cast<const void*>(static_cast<std::uintptr_t>(r.first) * sizeof(GLuint)));
   };
+  // The instanced draws' helpers: a clear of the first `tiles` tiles of an atlas at once (whole
+  // rows), the per-batch uniforms (one window extent and N per batch), an instance's rows and
+  // tile, and a draw of the instances gathered (then none).
+  const auto clear_tiles = [&](int tiles, int columns) {
+    const int rows = (tiles + columns - 1) / columns;
+    glEnable(GL_SCISSOR_TEST);
+    glScissor(0, 0, std::min(tiles, columns) * stride, rows * stride);
+    glClear(GL_DEPTH_BUFFER_BIT);
+    glDisable(GL_SCISSOR_TEST);
+  };
+  const auto set_instanced_uniforms = [&](const ContactWindow& w, float facing_sign, int columns,
+                                          int width, int height) {
+    glUniform1i(iu_.texture, 0);
+    glUniform1f(iu_.half_extent, static_cast<float>(0.5 * w.extent_m));
+    glUniform1f(iu_.cell_size, static_cast<float>(w.cell_size_m()));
+    glUniform1f(iu_.facing_sign, facing_sign);
+    glUniform1f(iu_.depth_range, static_cast<float>(w.depth_range_m()));
+    glUniform1f(iu_.depth_scale, static_cast<float>(1.0 / (2.0 * w.depth_range_m() * kRangeSlack)));
+    glUniform1i(iu_.columns, columns);
+    glUniform1f(iu_.tile_stride, static_cast<float>(stride));
+    glUniform1f(iu_.cells, static_cast<float>(n));
+    glUniform2f(iu_.atlas_size, static_cast<float>(width), static_cast<float>(height));
+  };
+  const auto add_instance = [&](const RigidTransform& X, const ContactWindow& w, int tile_index) {
+    const WindowRows r = RowsFor(X, w);
+    instance_data_.insert(instance_data_.end(), r.u, r.u + 4);
+    instance_data_.insert(instance_data_.end(), r.v, r.v + 4);
+    instance_data_.insert(instance_data_.end(), r.n, r.n + 4);
+    const float tile_row[4] = {static_cast<float>(tile_index), 0.0f, 0.0f, 0.0f};
+    instance_data_.insert(instance_data_.end(), tile_row, tile_row + 4);
+  };
+  const auto draw_instances = [&](const PatchRange& patch, int instances) {
+    if (instances > 0 && patch.count > 0) {
+      glBindBuffer(GL_UNIFORM_BUFFER, instance_ubo_);
+      // A fresh store (the previous draw may still read the old one), then the instances.
+      glBufferData(GL_UNIFORM_BUFFER, kInstancesPerDraw * 16 * sizeof(float), nullptr,
+                   GL_STREAM_DRAW);
+      glBufferSubData(GL_UNIFORM_BUFFER, 0,
+                      static_cast<GLsizeiptr>(instance_data_.size() * sizeof(float)),
+                      instance_data_.data());
+      glBindBufferBase(GL_UNIFORM_BUFFER, 0, instance_ubo_);
+      glDrawElementsInstanced(
+          GL_TRIANGLES, patch.count, GL_UNSIGNED_INT,
+          reinterpret_cast<const void*>(static_cast<std::uintptr_t>(patch.first) * sizeof(GLuint)),
+          instances);
+    }
+    instance_data_.clear();
+  };
+  constexpr GLenum kClipDistance0 = 0x3000;  // GL_CLIP_DISTANCE0_EXT
   const auto t1 = Clock::now();
 
   glUseProgram(render_program_);
@@ -755,68 +888,71 @@ bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
   glDisable(GL_CULL_FACE);
   glDisable(GL_BLEND);
   glDepthMask(GL_TRUE);
+  if (instanced) {
+    for (GLenum plane = 0; plane < 4; ++plane) glEnable(kClipDistance0 + plane);
+  }
   // Environment patches B: keep the largest height per cell.
   glBindFramebuffer(GL_FRAMEBUFFER, env_fbo_);
   glDepthFunc(GL_GREATER);
   glClearDepthf(0.0f);
-  for (int c = 0; c < count; ++c) {
-    const ContactQuery& q = queries[c];
-    tile(c, env_columns_);
-    bind_model(*env_models[c]);
-    set_window_uniforms(q.X_WO, q.window, 1.0f);
-    draw_range(env_ranges_[static_cast<std::size_t>(c)]);
+  if (instanced) {
+    clear_tiles(count, env_columns_);
+    glViewport(0, 0, env_atlas_width_, env_atlas_height_);
+    glUseProgram(instanced_program_);
+    set_instanced_uniforms(queries[0].window, 1.0f, env_columns_, env_atlas_width_,
+                           env_atlas_height_);
+    for (const EnvGroup& g : env_groups_) {
+      const GpuModel& m = *env_models[g.first_contact];
+      bind_geometry(m);
+      glUniform1i(iu_.num_levels, m.num_levels);
+      glUniform2i(iu_.wrap, m.wrap_u, m.wrap_v);
+      int instances = 0;
+      instance_data_.clear();
+      for (int c = g.first_contact; c < count; ++c) {
+        if (env_models[c] != env_models[g.first_contact]) continue;
+        add_instance(queries[c].X_WO, queries[c].window, c);
+        if (++instances == kInstancesPerDraw) {
+          draw_instances(g.range, instances);
+          instances = 0;
+        }
+      }
+      draw_instances(g.range, instances);
+    }
+    glUseProgram(render_program_);
+  } else {
+    for (int c = 0; c < count; ++c) {
+      const ContactQuery& q = queries[c];
+      tile(c, env_columns_);
+      bind_model(*env_models[c]);
+      set_window_uniforms(q.X_WO, q.window, 1.0f);
+      draw_range(env_ranges_[static_cast<std::size_t>(c)]);
+    }
   }
   // Tool patches A at every gradient sample pose: keep the smallest height per cell.
   glBindFramebuffer(GL_FRAMEBUFFER, tool_fbo_);
   glDepthFunc(GL_LESS);
   glClearDepthf(1.0f);
   bind_model(*tool_model);
-  if (instanced_program_ != 0) {
-    // The batch's tiles cleared at once (whole atlas rows), then one draw per contact with an
-    // instance per sample pose.
-    const int tiles = count * kGradientSamples;
-    const int rows = (tiles + tool_columns_ - 1) / tool_columns_;
-    glScissor(0, 0, std::min(tiles, tool_columns_) * stride, rows * stride);
-    glClear(GL_DEPTH_BUFFER_BIT);
-    glDisable(GL_SCISSOR_TEST);
+  if (instanced) {
+    clear_tiles(count * kGradientSamples, tool_columns_);
     glViewport(0, 0, tool_atlas_width_, tool_atlas_height_);
     glUseProgram(instanced_program_);
-    glUniform1i(iu_.texture, 0);
+    set_instanced_uniforms(queries[0].window, -1.0f, tool_columns_, tool_atlas_width_,
+                           tool_atlas_height_);
     glUniform1i(iu_.num_levels, tool_model->num_levels);
     glUniform2i(iu_.wrap, tool_model->wrap_u, tool_model->wrap_v);
-    glUniform1f(iu_.facing_sign, -1.0f);
-    glUniform1i(iu_.columns, tool_columns_);
-    glUniform1f(iu_.tile_stride, static_cast<float>(stride));
-    glUniform1f(iu_.cells, static_cast<float>(n));
-    glUniform2f(iu_.atlas_size, static_cast<float>(tool_atlas_width_),
-                static_cast<float>(tool_atlas_height_));
-    constexpr GLenum kClipDistance0 = 0x3000;  // GL_CLIP_DISTANCE0_EXT
-    for (GLenum plane = 0; plane < 4; ++plane) glEnable(kClipDistance0 + plane);
-    for (int c = 0; c < count; ++c) {
-      const ContactWindow& w = queries[c].window;
-      std::array<float, 4 * 3 * kGradientSamples> rows_data;
-      for (int s = 0; s < kGradientSamples; ++s) {
-        const WindowRows r = RowsFor(sample_poses_[c * kGradientSamples + s], w);
-        std::memcpy(&rows_data[static_cast<std::size_t>(12 * s)], r.u, sizeof r.u);
-        std::memcpy(&rows_data[static_cast<std::size_t>(12 * s + 4)], r.v, sizeof r.v);
-        std::memcpy(&rows_data[static_cast<std::size_t>(12 * s + 8)], r.n, sizeof r.n);
-      }
-      glUniform4fv(iu_.rows, 3 * kGradientSamples, rows_data.data());
-      glUniform1f(iu_.half_extent, static_cast<float>(0.5 * w.extent_m));
-      glUniform1f(iu_.cell_size, static_cast<float>(w.cell_size_m()));
-      glUniform1f(iu_.depth_range, static_cast<float>(w.depth_range_m()));
-      glUniform1f(iu_.depth_scale,
-                  static_cast<float>(1.0 / (2.0 * w.depth_range_m() * kRangeSlack)));
-      glUniform1i(iu_.first_tile, c * kGradientSamples);
-      const PatchRange& r = tool_ranges_[static_cast<std::size_t>(c)];
-      if (r.count > 0) {
-        glDrawElementsInstanced(
-            GL_TRIANGLES, r.count, GL_UNSIGNED_INT,
-            reinterpret_cast<const void*>(static_cast<std::uintptr_t>(r.first) * sizeof(GLuint)),
-            kGradientSamples);
+    int instances = 0;
+    instance_data_.clear();
+    for (int index = 0; index < count * kGradientSamples; ++index) {
+      add_instance(sample_poses_[static_cast<std::size_t>(index)],
+                   queries[index / kGradientSamples].window, index);
+      if (++instances == kInstancesPerDraw) {
+        draw_instances(tool_union_, instances);
+        instances = 0;
       }
     }
-    for (GLenum plane = 0; plane < 4; ++plane) glDisable(kClipDistance0 + plane);
+    draw_instances(tool_union_, instances);
+    glUseProgram(render_program_);
   } else {
     for (int c = 0; c < count; ++c) {
       for (int s = 0; s < kGradientSamples; ++s) {
@@ -830,6 +966,10 @@ bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
   glBindFramebuffer(GL_FRAMEBUFFER, 0);
   glBindVertexArray(0);
   glDisable(GL_SCISSOR_TEST);
+  if (instanced) {
+    for (GLenum plane = 0; plane < 4; ++plane) glDisable(kClipDistance0 + plane);
+    glBindBufferBase(GL_UNIFORM_BUFFER, 0, 0);
+  }
   if (options_.profile_stages) glFinish();
   const auto t2 = Clock::now();
 
