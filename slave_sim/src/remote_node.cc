@@ -42,7 +42,9 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
       config.pd_backend, config.gpu, config.pipeline.grid_resolution, backend_message,
       config.pipeline.texture_threads, config.pipeline.rotation_gradient);
   std::string gl_renderer, gl_version, gl_vendor;
+  bool gpu_instanced_draws = false;
   if (auto* gpu = dynamic_cast<GpuPenetrationDepthBackend*>(backend.get())) {
+    gpu_instanced_draws = gpu->instanced_draws();
     gl_renderer = gpu->info().renderer;
     gl_version = gpu->info().version;
     gl_vendor = gpu->info().vendor;
@@ -244,6 +246,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
                      {"gl_version", gl_version},
                      {"gl_vendor", gl_vendor},
                      {"depth_bits", gl_renderer.empty() ? 0 : config.gpu.depth_bits},
+                     {"instanced_draws", gpu_instanced_draws},
                      {"failures", pipeline->backend_failures()},
                      {"fallback_reason", pipeline->fallback_reason()}};
   s["transport"] = session.StatsJson(config.scene_objects.size(), scene_bytes);
