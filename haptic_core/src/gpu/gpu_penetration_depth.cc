@@ -22,9 +22,12 @@ namespace {
 constexpr double kRangeSlack = 1.0 + 1.0 / 1024.0;
 constexpr int kFloatsPerCorner = 12;  // position 3, normal 3, face normal 3, uv 2, texel size 1
 
-// Vertex stage: object frame O → window frame (u, v, n) with per-draw rows; triangles that do not
-// face the other side are moved outside the clip volume (all three corners share the face normal).
-constexpr const char* kRenderVertexShader = R"(#version 310 es
+// Vertex stages. Both take a corner from object frame O to the window frame (u, v, n) with
+// rows (xyz: the axis in O; w: axis·(p_WO − c_W)) and pass the fragment stage its height,
+// texture coordinates, mip level, interpolated normal and n; triangles that do not face the other
+// side are moved outside the clip volume (all three corners share the face normal). This part,
+// after "#version 310 es" and any extension line, is shared.
+constexpr const char* kVertexCommon = R"(
 precision highp float;
 precision highp int;
 layout(location = 0) in vec3 a_position_O;
@@ -32,9 +35,6 @@ layout(location = 1) in vec3 a_normal_O;
 layout(location = 2) in vec3 a_face_normal_O;
 layout(location = 3) in vec2 a_uv;
 layout(location = 4) in float a_texel_size;  // < 0: smooth face (no texture)
-uniform vec4 u_row_u;  // xyz: u in O; w: u·(p_WO − c_W)
-uniform vec4 u_row_v;
-uniform vec4 u_row_n;
 uniform float u_half_extent;  // W/2 (m)
 uniform float u_cell_size;    // W/N (m)
 uniform float u_facing_sign;  // +1 environment B, −1 tool A
@@ -44,63 +44,9 @@ out float v_height;
 out vec3 v_normal_O;  // interpolated corner normal (renormalized per fragment)
 flat out int v_level;
 flat out vec3 v_row_n;  // n in O, for the fragment's N·n
-void main() {
-  v_row_n = u_row_n.xyz;
-  float facing = u_facing_sign * dot(a_face_normal_O, u_row_n.xyz);
-  float s = dot(u_row_u.xyz, a_position_O) + u_row_u.w;
-  float t = dot(u_row_v.xyz, a_position_O) + u_row_v.w;
-  v_height = dot(u_row_n.xyz, a_position_O) + u_row_n.w;
-  v_normal_O = a_normal_O;
-  v_uv = a_uv;
-  int level = -1;
-  if (a_texel_size >= 0.0) {
-    level = 0;
-    if (a_texel_size > 0.0 && u_cell_size > a_texel_size) {
-      level = clamp(int(floor(log2(u_cell_size / a_texel_size))), 0, u_num_levels - 1);
-    }
-  }
-  v_level = level;
-  gl_Position = facing > 0.05 ? vec4(s / u_half_extent, t / u_half_extent, 0.0, 1.0)
-                              : vec4(2.0, 2.0, 2.0, 1.0);
-}
-)";
-
-// Vertex stage of the instanced draws (GL_EXT_clip_cull_distance): one draw per side (per
-// environment model) for a whole batch, an instance per render (a contact's environment, or one
-// of its tool poses), with its rows and atlas tile from the Instances block; the viewport is the
-// whole atlas. Each instance draws the union of the batch's patch triangles (of that side and
-// model); the window's edges are clip planes, so a triangle is cut where a per-render draw's
-// viewport and scissor cut it, and the pixel mapping is the viewport transform's,
-// origin + (x + 1)·N/2.
-constexpr const char* kInstancedVertexShader = R"(#version 310 es
-#extension GL_EXT_clip_cull_distance : require
-precision highp float;
-precision highp int;
-layout(location = 0) in vec3 a_position_O;
-layout(location = 1) in vec3 a_normal_O;
-layout(location = 2) in vec3 a_face_normal_O;
-layout(location = 3) in vec2 a_uv;
-layout(location = 4) in float a_texel_size;  // < 0: smooth face (no texture)
-// Instance i: its u, v and n rows at 4i, 4i + 1, 4i + 2 and its atlas tile at 4i + 3 (x).
-layout(std140) uniform Instances { vec4 u_instances[4 * 256]; };
-uniform float u_half_extent;  // W/2 (m)
-uniform float u_cell_size;    // W/N (m)
-uniform float u_facing_sign;  // −1: the tool A
-uniform int u_num_levels;
-uniform int u_columns;        // tiles per atlas row
-uniform float u_tile_stride;  // texels between tile origins
-uniform float u_cells;        // N
-uniform vec2 u_atlas_size;    // texels
-out vec2 v_uv;
-out float v_height;
-out vec3 v_normal_O;
-flat out int v_level;
-flat out vec3 v_row_n;
-out float gl_ClipDistance[4];
-void main() {
-  vec4 row_u = u_instances[4 * gl_InstanceID];
-  vec4 row_v = u_instances[4 * gl_InstanceID + 1];
-  vec4 row_n = u_instances[4 * gl_InstanceID + 2];
+// The corner's window coordinates over W/2 (the window spans [−1, 1]²) in xy; false where its
+// triangle does not face the other side.
+bool ProjectCorner(vec4 row_u, vec4 row_v, vec4 row_n, out vec2 xy) {
   v_row_n = row_n.xyz;
   float facing = u_facing_sign * dot(a_face_normal_O, row_n.xyz);
   float s = dot(row_u.xyz, a_position_O) + row_u.w;
@@ -116,16 +62,50 @@ void main() {
     }
   }
   v_level = level;
-  vec2 xy = vec2(s / u_half_extent, t / u_half_extent);
+  xy = vec2(s / u_half_extent, t / u_half_extent);
+  return facing > 0.05;
+}
+)";
+
+// One draw per render: per-draw rows; the viewport is the render's tile.
+constexpr const char* kRenderVertexMain = R"(
+uniform vec4 u_row_u;
+uniform vec4 u_row_v;
+uniform vec4 u_row_n;
+void main() {
+  vec2 xy;
+  bool faces = ProjectCorner(u_row_u, u_row_v, u_row_n, xy);
+  gl_Position = faces ? vec4(xy, 0.0, 1.0) : vec4(2.0, 2.0, 2.0, 1.0);
+}
+)";
+
+// The instanced draws (GL_EXT_clip_cull_distance): one draw per side (per environment model) for
+// a whole batch, an instance per render (a contact's environment, or one of its tool poses), with
+// its rows and atlas tile from the Instances block; the viewport is the whole atlas. Each
+// instance draws the union of the batch's patch triangles (of that side and model); the window's
+// edges are clip planes, so a triangle is cut where a per-render draw's viewport and scissor cut
+// it, and the pixel mapping is the viewport transform's, origin + (x + 1)·N/2.
+constexpr const char* kInstancedVertexMain = R"(
+// Instance i: its u, v and n rows at 4i, 4i + 1, 4i + 2 and its atlas tile at 4i + 3 (x).
+layout(std140) uniform Instances { vec4 u_instances[4 * 256]; };
+uniform int u_columns;        // tiles per atlas row
+uniform float u_tile_stride;  // texels between tile origins
+uniform float u_cells;        // N
+uniform vec2 u_atlas_size;    // texels
+out float gl_ClipDistance[4];
+void main() {
+  int i = 4 * gl_InstanceID;
+  vec2 xy;
+  bool faces = ProjectCorner(u_instances[i], u_instances[i + 1], u_instances[i + 2], xy);
   gl_ClipDistance[0] = 1.0 + xy.x;
   gl_ClipDistance[1] = 1.0 - xy.x;
   gl_ClipDistance[2] = 1.0 + xy.y;
   gl_ClipDistance[3] = 1.0 - xy.y;
-  int tile = int(u_instances[4 * gl_InstanceID + 3].x);
+  int tile = int(u_instances[i + 3].x);
   vec2 origin = u_tile_stride * vec2(float(tile % u_columns), float(tile / u_columns));
   vec2 pixel = origin + (xy + 1.0) * (0.5 * u_cells);
-  gl_Position = facing > 0.05 ? vec4(pixel / u_atlas_size * 2.0 - 1.0, 0.0, 1.0)
-                              : vec4(2.0, 2.0, 2.0, 1.0);
+  gl_Position = faces ? vec4(pixel / u_atlas_size * 2.0 - 1.0, 0.0, 1.0)
+                      : vec4(2.0, 2.0, 2.0, 1.0);
 }
 )";
 
@@ -367,10 +347,12 @@ void GpuPenetrationDepthBackend::Initialize() {
   }
   std::string fragment = kRenderFragmentShader;
   if (options_.inject_shader_compile_error) fragment += "\nthis is not GLSL;\n";
-  render_program_ =
-      LinkProgram({CompileShader(GL_VERTEX_SHADER, kRenderVertexShader, "height vertex shader"),
-                   CompileShader(GL_FRAGMENT_SHADER, fragment, "height fragment shader")},
-                  "height program");
+  render_program_ = LinkProgram(
+      {CompileShader(GL_VERTEX_SHADER,
+                     std::string("#version 310 es\n") + kVertexCommon + kRenderVertexMain,
+                     "height vertex shader"),
+       CompileShader(GL_FRAGMENT_SHADER, fragment, "height fragment shader")},
+      "height program");
   reduce_program_ = LinkProgram(
       {CompileShader(GL_COMPUTE_SHADER, kReduceComputeShader, "reduction compute shader")},
       "reduction program");
@@ -462,7 +444,11 @@ void GpuPenetrationDepthBackend::Initialize() {
         viewport[1] >= env_atlas_height_ &&
         block_size >= static_cast<GLint>(kInstancesPerDraw * 16 * sizeof(float))) {
       instanced_program_ = LinkProgram(
-          {CompileShader(GL_VERTEX_SHADER, kInstancedVertexShader, "instanced vertex shader"),
+          {CompileShader(GL_VERTEX_SHADER,
+                         std::string("#version 310 es\n#extension GL_EXT_clip_cull_distance : "
+                                     "require\n") +
+                             kVertexCommon + kInstancedVertexMain,
+                         "instanced vertex shader"),
            CompileShader(GL_FRAGMENT_SHADER, fragment, "height fragment shader")},
           "instanced height program");
       const auto iloc = [&](const char* name) {
