@@ -98,6 +98,11 @@ int main(int argc, char** argv) {
                  "GPU depth buffer precision: 16 (fixed point, as the seed) or 32 (float)")
       ->check(CLI::IsMember({16, 32}))
       ->capture_default_str();
+  bool per_render_draws = false;
+  app.add_flag("--gpu-per-render-draws", per_render_draws,
+               "GPU backend: one draw per render (12 per contact), not one instanced draw per\n"
+               "side per batch (the default where the driver has GL_EXT_clip_cull_distance); the\n"
+               "same depths within a quantum, for a driver whose instancing misbehaves");
   app.add_option("--max-rate", config.max_rate_hz, "cap on the step rate in Hz (0 = none)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
@@ -173,6 +178,7 @@ int main(int argc, char** argv) {
   app.add_flag("--quiet", quiet, "no progress lines");
   CLI11_PARSE(app, argc, argv);
   config.max_deadband = max_deadband_pct / 100.0;
+  config.gpu.instanced_draws = !per_render_draws;
 
   if (*seed_models) {
     try {
