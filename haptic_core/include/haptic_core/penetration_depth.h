@@ -262,7 +262,8 @@ class TriangleBoundCache {
   bool Matches(const HapticModel& model, double cell_size_m) const noexcept {
     return model_ == &model && cell_size_m_ == cell_size_m && usable_;
   }
-  /// Triangle f's level and texture bound (m) if cached since the last Reset.
+  /// Triangle f's level and texture bound (m) if cached since the last Reset; false otherwise.
+  /// Precondition: Matches() for the model f belongs to, and 0 ≤ f < its triangle count.
   bool Find(int f, int& level, double& texture_bound_m) const noexcept {
     const Entry& e = entries_[static_cast<std::size_t>(f)];
     if (e.stamp != stamp_) return false;
@@ -270,6 +271,8 @@ class TriangleBoundCache {
     texture_bound_m = e.texture_bound_m;
     return true;
   }
+  /// Caches triangle f's level and texture bound (m) until the next Reset. Precondition (as for
+  /// Find): Matches() for the model f belongs to, and 0 ≤ f < its triangle count.
   void Store(int f, int level, double texture_bound_m) noexcept {
     entries_[static_cast<std::size_t>(f)] = {texture_bound_m, level, stamp_};
   }
