@@ -401,8 +401,9 @@ TEST(TextureStageParity, BoxTreeSelectsTheScansTriangles) {
     tool_tree.Build(tool);
     ASSERT_TRUE(env_tree.BuiltFrom(env));
     ASSERT_FALSE(env_tree.BuiltFrom(tool));
-    EXPECT_EQ(env_tree.order().size(), env.triangles.size());
-    std::vector<int> sorted(env_tree.order().begin(), env_tree.order().end());
+    EXPECT_EQ(env_tree.triangles().size(), env.triangles.size());
+    std::vector<int> sorted;
+    for (const TriangleBoxTree::Triangle& t : env_tree.triangles()) sorted.push_back(t.index);
     std::sort(sorted.begin(), sorted.end());
     for (std::size_t f = 0; f < sorted.size(); ++f) ASSERT_EQ(sorted[f], static_cast<int>(f));
     scratch.reserve(std::max(env.vertices_O.size(), tool.vertices_O.size()));

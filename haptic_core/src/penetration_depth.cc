@@ -728,6 +728,12 @@ glm::dvec3 ContactWindow::CellCenter(int index) const noexcept {
 
 namespace {
 
+// True when the corners' coordinates a, b, c along an axis all lie below −limit or all above
+// +limit: the triangle misses the slab |x| ≤ limit.
+[[gnu::always_inline]] inline bool MissesSlab(double a, double b, double c, double limit) noexcept {
+  return std::max({a, b, c}) < -limit || std::min({a, b, c}) > limit;
+}
+
 // SelectPatchTriangles' tests of triangle f, cheapest and most selective first: the extent along
 // u (from `along_u`, each vertex's p·u + ou, when given), then v, then n, then the facing test.
 [[gnu::always_inline]] inline bool PatchTriangleTest(
@@ -755,16 +761,16 @@ namespace {
     s1 = glm::dot(vertices[t[1]], u_O) + ou;
     s2 = glm::dot(vertices[t[2]], u_O) + ou;
   }
-  if (std::max({s0, s1, s2}) < -half || std::min({s0, s1, s2}) > half) return false;
+  if (MissesSlab(s0, s1, s2, half)) return false;
   const glm::dvec3& p0 = vertices[t[0]];
   const glm::dvec3& p1 = vertices[t[1]];
   const glm::dvec3& p2 = vertices[t[2]];
   const double t0 = glm::dot(p0, v_O) + ov, t1 = glm::dot(p1, v_O) + ov,
                t2 = glm::dot(p2, v_O) + ov;
-  if (std::max({t0, t1, t2}) < -half || std::min({t0, t1, t2}) > half) return false;
+  if (MissesSlab(t0, t1, t2, half)) return false;
   const double d0 = glm::dot(p0, n_O) + on, d1 = glm::dot(p1, n_O) + on,
                d2 = glm::dot(p2, n_O) + on;
-  if (std::max({d0, d1, d2}) < -depth_limit || std::min({d0, d1, d2}) > depth_limit) return false;
+  if (MissesSlab(d0, d1, d2, depth_limit)) return false;
   const glm::dvec3 cr = glm::cross(p1 - p0, p2 - p0);
   const double area2 = glm::length(cr);
   if (!(area2 > 0.0)) return false;
@@ -792,13 +798,13 @@ namespace {
   }
   const double s0 = glm::dot(t.p0_O, u_O) + ou, s1 = glm::dot(t.p1_O, u_O) + ou,
                s2 = glm::dot(t.p2_O, u_O) + ou;
-  if (std::max({s0, s1, s2}) < -half || std::min({s0, s1, s2}) > half) return false;
+  if (MissesSlab(s0, s1, s2, half)) return false;
   const double t0 = glm::dot(t.p0_O, v_O) + ov, t1 = glm::dot(t.p1_O, v_O) + ov,
                t2 = glm::dot(t.p2_O, v_O) + ov;
-  if (std::max({t0, t1, t2}) < -half || std::min({t0, t1, t2}) > half) return false;
+  if (MissesSlab(t0, t1, t2, half)) return false;
   const double d0 = glm::dot(t.p0_O, n_O) + on, d1 = glm::dot(t.p1_O, n_O) + on,
                d2 = glm::dot(t.p2_O, n_O) + on;
-  return !(std::max({d0, d1, d2}) < -depth_limit || std::min({d0, d1, d2}) > depth_limit);
+  return !MissesSlab(d0, d1, d2, depth_limit);
 }
 
 }  // namespace
@@ -831,7 +837,6 @@ void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
     // the magnitudes) far exceeds the rounding of that and of a corner's p·a + offset, so a box
     // is passed over only where each of its triangles fails the same test below.
     const std::span<const TriangleBoxTree::Node> nodes = tree->nodes();
-    const std::span<const int> order = tree->order();
     const std::span<const TriangleBoxTree::Triangle> records = tree->triangles();
     const glm::dvec3 abs_u = glm::abs(u_O), abs_v = glm::abs(v_O), abs_n = glm::abs(n_O);
     const auto misses = [margin_per_radius](const TriangleBoxTree::Node& node,
@@ -862,9 +867,10 @@ void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
       }
       if (node.second < 0) {
         for (int k = node.begin; k < node.end; ++k) {
-          if (PatchRecordTest(records[static_cast<std::size_t>(k)], u_O, v_O, n_O, ou, ov, on, half,
-                              depth_limit, side, threshold, margin_per_radius)) {
-            out.push_back(order[static_cast<std::size_t>(k)]);
+          const TriangleBoxTree::Triangle& record = records[static_cast<std::size_t>(k)];
+          if (PatchRecordTest(record, u_O, v_O, n_O, ou, ov, on, half, depth_limit, side, threshold,
+                              margin_per_radius)) {
+            out.push_back(record.index);
           }
         }
       } else if (top + 2 <= kStack) {
@@ -904,7 +910,6 @@ int TreeDepth(std::span<const TriangleBoxTree::Node> nodes, int index) noexcept 
 
 void TriangleBoxTree::Clear() noexcept {
   nodes_.clear();
-  order_.clear();
   triangles_data_.clear();
   model_ = nullptr;
   vertices_ = triangles_ = nullptr;
@@ -914,10 +919,10 @@ void TriangleBoxTree::Clear() noexcept {
 void TriangleBoxTree::Build(const HapticModel& model) {
   Clear();
   const std::size_t nf = model.triangles.size();
-  order_.resize(nf);
+  std::vector<int> order(nf);  // the triangles, permuted into leaf order by BuildNode
   std::vector<glm::dvec3> centroids(nf);
   for (std::size_t f = 0; f < nf; ++f) {
-    order_[f] = static_cast<int>(f);
+    order[f] = static_cast<int>(f);
     const glm::ivec3 t = model.triangles[f];
     centroids[f] = (model.vertices_O[static_cast<std::size_t>(t[0])] +
                     model.vertices_O[static_cast<std::size_t>(t[1])] +
@@ -925,11 +930,12 @@ void TriangleBoxTree::Build(const HapticModel& model) {
                    3.0;
   }
   nodes_.reserve(nf / (kLeafTriangles / 2) + 1);
-  if (nf > 0) BuildNode(model, centroids, 0, static_cast<int>(nf));
+  if (nf > 0) BuildNode(model, centroids, order, 0, static_cast<int>(nf));
   triangles_data_.resize(nf);
   for (std::size_t k = 0; k < nf; ++k) {
-    const glm::ivec3 t = model.triangles[static_cast<std::size_t>(order_[k])];
+    const glm::ivec3 t = model.triangles[static_cast<std::size_t>(order[k])];
     Triangle& r = triangles_data_[k];
+    r.index = order[k];
     r.p0_O = model.vertices_O[static_cast<std::size_t>(t[0])];
     r.p1_O = model.vertices_O[static_cast<std::size_t>(t[1])];
     r.p2_O = model.vertices_O[static_cast<std::size_t>(t[2])];
@@ -959,13 +965,13 @@ void TriangleBoxTree::Build(const HapticModel& model) {
   }
 }
 
-int TriangleBoxTree::BuildNode(const HapticModel& model, std::vector<glm::dvec3>& centroids,
-                               int begin, int end) {
+int TriangleBoxTree::BuildNode(const HapticModel& model, const std::vector<glm::dvec3>& centroids,
+                               std::vector<int>& order, int begin, int end) {
   glm::dvec3 lo(std::numeric_limits<double>::infinity());
   glm::dvec3 hi(-std::numeric_limits<double>::infinity());
   for (int k = begin; k < end; ++k) {
     const glm::ivec3 t =
-        model.triangles[static_cast<std::size_t>(order_[static_cast<std::size_t>(k)])];
+        model.triangles[static_cast<std::size_t>(order[static_cast<std::size_t>(k)])];
     for (int c = 0; c < 3; ++c) {
       const glm::dvec3& p = model.vertices_O[static_cast<std::size_t>(t[c])];
       lo = glm::min(lo, p);
@@ -984,14 +990,14 @@ int TriangleBoxTree::BuildNode(const HapticModel& model, std::vector<glm::dvec3>
   const glm::dvec3 size = hi - lo;
   const int axis = size.x >= size.y && size.x >= size.z ? 0 : (size.y >= size.z ? 1 : 2);
   const int mid = begin + (end - begin) / 2;
-  std::nth_element(order_.begin() + begin, order_.begin() + mid, order_.begin() + end,
+  std::nth_element(order.begin() + begin, order.begin() + mid, order.begin() + end,
                    [&](int a, int b) {
                      const double ca = centroids[static_cast<std::size_t>(a)][axis];
                      const double cb = centroids[static_cast<std::size_t>(b)][axis];
                      return ca < cb || (ca == cb && a < b);
                    });
-  BuildNode(model, centroids, begin, mid);
-  const int second = BuildNode(model, centroids, mid, end);
+  BuildNode(model, centroids, order, begin, mid);
+  const int second = BuildNode(model, centroids, order, mid, end);
   nodes_[static_cast<std::size_t>(index)].second = second;
   return index;
 }

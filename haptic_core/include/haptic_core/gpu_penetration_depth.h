@@ -136,7 +136,8 @@ class GpuPenetrationDepthBackend final : public PenetrationDepthBackend {
         samples_per_contact = -1, height_scale = -1;
   } rd_;
   // The patch triangles of a batch's contacts (SelectPatchTriangles) as corner index ranges of
-  // patch_ebo_ (first index and count), one per contact and side.
+  // patch_ebo_ (first index and count): one per contact and side, or (instanced) one per
+  // environment model and one for the tool.
   struct PatchRange {
     int first = 0, count = 0;
   };
@@ -151,8 +152,8 @@ class GpuPenetrationDepthBackend final : public PenetrationDepthBackend {
   };
   std::vector<EnvGroup> env_groups_;
   PatchRange tool_union_;
-  std::vector<std::uint32_t> union_mark_;  // per triangle: the stamp of the union holding it
-  std::uint32_t union_stamp_ = 0;
+  std::vector<std::uint32_t> union_mark_;  // per triangle: the stamp of the range holding it
+  std::uint32_t union_stamp_ = 0;          // the range being gathered
   TriangleBoxTreeCache trees_;
   std::vector<RigidTransform> sample_poses_;  // scratch, #max_contacts*kGradientSamples
   std::vector<DepthSample> samples_;          // scratch, same size

@@ -108,37 +108,37 @@ class TriangleBoxTree {
   bool BuiltFrom(const HapticModel& model) const noexcept;
   /// Forgets the model (BuiltFrom false for every model); keeps the storage.
   void Clear() noexcept;
-  /// Nodes in the tree (0 when empty or cleared).
-  int node_count() const noexcept { return static_cast<int>(nodes_.size()); }
 
   /// One node: its box (centre and half extents, m, in O, widened by a relative 1e-12 so that
-  /// centre ± half holds the corners despite rounding) and either a leaf's range of order() or
-  /// the index of its second child (the first follows it).
+  /// centre ± half holds the corners despite rounding) and either a leaf's range of triangles()
+  /// or the index of its second child (the first follows it).
   struct Node {
     glm::dvec3 center_O, half_O;
-    int begin = 0, end = 0;  ///< leaf: order()[begin, end)
+    int begin = 0, end = 0;  ///< leaf: triangles()[begin, end)
     int second = -1;         ///< internal: the second child's index; −1 for a leaf
   };
   std::span<const Node> nodes() const noexcept { return nodes_; }
-  /// The triangles in leaf order (each triangle once).
-  std::span<const int> order() const noexcept { return order_; }
-  /// A triangle's corners and the terms of SelectPatchTriangles' tests that do not depend on the
-  /// window, computed with the same expressions as the scan (so the same bits), in leaf order:
-  /// its corners p_O (m), the cross product (p1 − p0) × (p2 − p0) and its length (m²), and the
-  /// distance of its farthest corner from the origin (m).
+  /// A triangle (its index in the model) with its corners and the terms of SelectPatchTriangles'
+  /// tests that do not depend on the window, computed with the same expressions as the scan (so
+  /// the same bits): its corners p_O (m), the cross product (p1 − p0) × (p2 − p0) and its length
+  /// (m²), and the distance of its farthest corner from the origin (m).
   struct Triangle {
     glm::dvec3 p0_O, p1_O, p2_O;
     glm::dvec3 cross_O;
     double cross_length;
     double radius_m;
+    int index;
   };
+  /// Every triangle of the model once, in leaf order.
   std::span<const Triangle> triangles() const noexcept { return triangles_data_; }
 
  private:
-  int BuildNode(const HapticModel& model, std::vector<glm::dvec3>& centroids, int begin, int end);
+  // Appends the node over order[begin, end) (permuting that range into leaf order) and its
+  // subtree; returns its index.
+  int BuildNode(const HapticModel& model, const std::vector<glm::dvec3>& centroids,
+                std::vector<int>& order, int begin, int end);
   std::vector<Node> nodes_;
-  std::vector<int> order_;
-  std::vector<Triangle> triangles_data_;  // in leaf order, as order_
+  std::vector<Triangle> triangles_data_;  // in leaf order
   const HapticModel* model_ = nullptr;
   const void* vertices_ = nullptr;
   const void* triangles_ = nullptr;

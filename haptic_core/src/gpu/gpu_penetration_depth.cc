@@ -723,16 +723,6 @@ bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
   // sample poses), as ranges of one element buffer of corner indices: the draws below process
   // those triangles, not whole models.
   patch_indices_.clear();
-  const auto append = [&](const std::vector<int>& triangles) {
-    const auto first = static_cast<GLsizei>(patch_indices_.size());
-    for (const int f : triangles) {
-      const auto corner = static_cast<GLuint>(3 * f);
-      patch_indices_.push_back(corner);
-      patch_indices_.push_back(corner + 1);
-      patch_indices_.push_back(corner + 2);
-    }
-    return PatchRange{first, static_cast<GLsizei>(patch_indices_.size()) - first};
-  };
   const bool instanced = instanced_program_ != 0;
   const auto select_env = [&](int c) {
     const ContactQuery& q = queries[c];
@@ -746,8 +736,17 @@ bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
     SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool, 2.0 * h.h_x, patch_triangles_,
                          h.h_theta + 1e-9, nullptr, trees_.For(tool), h.h_theta);
   };
-  // Instanced: the union of the lists (each triangle once), marked per triangle with a stamp.
-  const auto append_new = [&](std::size_t triangle_count) {
+  // A range of the element buffer: begun, then patch_triangles_ appended to it one or more times
+  // (each triangle once: a triangle is marked with the range's stamp when it enters, so that
+  // an instanced range holds the union of its contacts' lists), then ended.
+  const auto begin_range = [&] {
+    if (++union_stamp_ == 0) {  // wrapped: no triangle may carry the new stamp by accident
+      std::fill(union_mark_.begin(), union_mark_.end(), 0u);
+      union_stamp_ = 1;
+    }
+    return static_cast<int>(patch_indices_.size());
+  };
+  const auto append = [&](std::size_t triangle_count) {
     if (union_mark_.size() < triangle_count) union_mark_.resize(triangle_count, 0);
     for (const int f : patch_triangles_) {
       std::uint32_t& mark = union_mark_[static_cast<std::size_t>(f)];
@@ -759,11 +758,8 @@ bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
       patch_indices_.push_back(corner + 2);
     }
   };
-  const auto next_stamp = [&] {
-    if (++union_stamp_ == 0) {  // wrapped: no triangle may carry the new stamp by accident
-      std::fill(union_mark_.begin(), union_mark_.end(), 0u);
-      union_stamp_ = 1;
-    }
+  const auto end_range = [&](int first) {
+    return PatchRange{first, static_cast<int>(patch_indices_.size()) - first};
   };
   env_groups_.clear();
   try {
@@ -775,31 +771,30 @@ bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
           seen = seen || env_models[g.first_contact] == env_models[c];
         }
         if (seen) continue;
-        next_stamp();
-        EnvGroup g;
-        g.first_contact = c;
-        g.range.first = static_cast<int>(patch_indices_.size());
+        const int first = begin_range();
         for (int k = c; k < count; ++k) {
           if (env_models[k] != env_models[c]) continue;
           select_env(k);
-          append_new(queries[k].environment->triangles.size());
+          append(queries[k].environment->triangles.size());
         }
-        g.range.count = static_cast<int>(patch_indices_.size()) - g.range.first;
-        env_groups_.push_back(g);
+        env_groups_.push_back({c, end_range(first)});
       }
-      next_stamp();
-      tool_union_.first = static_cast<int>(patch_indices_.size());
+      const int first = begin_range();
       for (int c = 0; c < count; ++c) {
         select_tool(c);
-        append_new(tool.triangles.size());
+        append(tool.triangles.size());
       }
-      tool_union_.count = static_cast<int>(patch_indices_.size()) - tool_union_.first;
+      tool_union_ = end_range(first);
     } else {
       for (int c = 0; c < count; ++c) {
+        int first = begin_range();
         select_env(c);
-        env_ranges_[static_cast<std::size_t>(c)] = append(patch_triangles_);
+        append(queries[c].environment->triangles.size());
+        env_ranges_[static_cast<std::size_t>(c)] = end_range(first);
+        first = begin_range();
         select_tool(c);
-        tool_ranges_[static_cast<std::size_t>(c)] = append(patch_triangles_);
+        append(tool.triangles.size());
+        tool_ranges_[static_cast<std::size_t>(c)] = end_range(first);
       }
     }
   } catch (const std::exception& e) {  // allocation failure while the lists grow
