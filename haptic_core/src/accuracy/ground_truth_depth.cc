@@ -37,9 +37,17 @@ struct RayCastSurface::Impl {
 
 namespace {
 
+// The intersect context extended with the query's mode (Embree 3 passes the context to the
+// filter, so a query may widen what the filter accepts).
+struct ModeContext {
+  RTCIntersectContext context;
+  bool accept_every_hit = false;
+};
+
 // Embree intersection filter: a hit counts only where its triangle faces the ray, with the
 // method's facing threshold (penetration_depth.h). Rejected hits let traversal go on to the next.
 void FacingFilter(const RTCFilterFunctionNArguments* args) {
+  if (reinterpret_cast<const ModeContext*>(args->context)->accept_every_hit) return;
   const auto* normals = static_cast<const glm::vec3*>(args->geometryUserPtr);
   for (unsigned i = 0; i < args->N; ++i) {
     if (args->valid[i] != -1) continue;
@@ -117,10 +125,9 @@ RayCastSurface::~RayCastSurface() = default;
 
 std::size_t RayCastSurface::triangle_count() const noexcept { return impl_->triangles; }
 
-double RayCastSurface::FirstFacingHit(const glm::dvec3& org, const glm::dvec3& dir,
-                                      double tfar) const noexcept {
-  RTCIntersectContext context;
-  rtcInitIntersectContext(&context);
+namespace {
+
+RTCRayHit MakeRay(const glm::dvec3& org, const glm::dvec3& dir, double tfar) noexcept {
   RTCRayHit rh;
   rh.ray.org_x = static_cast<float>(org.x);
   rh.ray.org_y = static_cast<float>(org.y);
@@ -136,8 +143,29 @@ double RayCastSurface::FirstFacingHit(const glm::dvec3& org, const glm::dvec3& d
   rh.ray.flags = 0;
   rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-  rtcIntersect1(impl_->scene, &context, &rh);
+  return rh;
+}
+
+}  // namespace
+
+double RayCastSurface::FirstFacingHit(const glm::dvec3& org, const glm::dvec3& dir,
+                                      double tfar) const noexcept {
+  ModeContext mode;
+  rtcInitIntersectContext(&mode.context);
+  RTCRayHit rh = MakeRay(org, dir, tfar);
+  rtcIntersect1(impl_->scene, &mode.context, &rh);
   return rh.hit.geomID == RTC_INVALID_GEOMETRY_ID ? -1.0 : static_cast<double>(rh.ray.tfar);
+}
+
+bool RayCastSurface::IsInside(const glm::dvec3& p, const glm::dvec3& dir) const noexcept {
+  ModeContext mode;
+  rtcInitIntersectContext(&mode.context);
+  mode.accept_every_hit = true;
+  RTCRayHit rh = MakeRay(p, dir, std::numeric_limits<float>::infinity());
+  rtcIntersect1(impl_->scene, &mode.context, &rh);
+  if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
+  const glm::vec3& n = impl_->face_normals_F[rh.hit.primID];
+  return n.x * dir.x + n.y * dir.y + n.z * dir.z > 0.0;
 }
 
 // ------------------------------------------------------------------------------------------------
@@ -330,9 +358,11 @@ GroundTruthContact GroundTruthDepthSolver::Linearize(const RigidTransform& X_WT,
                                                      const RigidTransform& X_TFt,
                                                      const RigidTransform& X_WFe,
                                                      const ContactWindow& window,
-                                                     double stiffness_n_per_m) {
+                                                     double stiffness_n_per_m,
+                                                     int step_resolution) {
   ContactWindow w = window;
-  w.resolution = 50;  // the seed's grid fixes the step table for every method compared
+  // The seed's grid fixes the step table for every method compared, unless the caller sets it.
+  w.resolution = step_resolution > 0 ? step_resolution : 50;
   const std::array<RigidTransform, kGradientSamples> poses = GradientSamplePoses(X_WT, w);
   GroundTruthContact out;
   out.base = ConvergedDepth(poses[0] * X_TFt, X_WFe, w);

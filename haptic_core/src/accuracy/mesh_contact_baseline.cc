@@ -1,5 +1,7 @@
 #include "haptic_core/accuracy/mesh_contact_baseline.h"
 
+#include "fcl_mesh.h"
+
 #include <fcl/fcl.h>
 
 #include <chrono>
@@ -8,41 +10,8 @@
 #include <vector>
 
 namespace ht {
-namespace {
-
-std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>> MakeBvh(const TriangleMesh& mesh, const char* what) {
-  if (mesh.vertices.empty() || mesh.triangles.empty()) {
-    throw std::invalid_argument(std::string("MeshContactBaseline: empty ") + what + " mesh");
-  }
-  const int nv = static_cast<int>(mesh.vertices.size());
-  std::vector<fcl::Vector3d> v;
-  v.reserve(mesh.vertices.size());
-  for (const glm::dvec3& p : mesh.vertices) v.emplace_back(p.x, p.y, p.z);
-  std::vector<fcl::Triangle> t;
-  t.reserve(mesh.triangles.size());
-  for (const glm::ivec3& f : mesh.triangles) {
-    if (f.x < 0 || f.y < 0 || f.z < 0 || f.x >= nv || f.y >= nv || f.z >= nv) {
-      throw std::invalid_argument(std::string("MeshContactBaseline: ") + what +
-                                  " mesh has a vertex index out of range");
-    }
-    t.emplace_back(f.x, f.y, f.z);
-  }
-  auto bvh = std::make_shared<fcl::BVHModel<fcl::OBBRSSd>>();
-  bvh->beginModel(static_cast<int>(t.size()), nv);
-  bvh->addSubModel(v, t);
-  bvh->endModel();
-  return bvh;
-}
-
-fcl::Transform3d ToFcl(const RigidTransform& X) {
-  fcl::Transform3d T = fcl::Transform3d::Identity();
-  T.linear() =
-      fcl::Quaterniond(X.rotation.w, X.rotation.x, X.rotation.y, X.rotation.z).toRotationMatrix();
-  T.translation() = fcl::Vector3d(X.translation.x, X.translation.y, X.translation.z);
-  return T;
-}
-
-}  // namespace
+using accuracy_detail::MakeFclMesh;
+using accuracy_detail::ToFcl;
 
 struct MeshContactBaseline::Impl {
   std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>> tool, environment;
@@ -51,8 +20,8 @@ struct MeshContactBaseline::Impl {
 MeshContactBaseline::MeshContactBaseline(const TriangleMesh& tool_Ft,
                                          const TriangleMesh& environment_Fe)
     : impl_(std::make_unique<Impl>()) {
-  impl_->tool = MakeBvh(tool_Ft, "tool");
-  impl_->environment = MakeBvh(environment_Fe, "environment");
+  impl_->tool = MakeFclMesh(tool_Ft, "tool");
+  impl_->environment = MakeFclMesh(environment_Fe, "environment");
 }
 
 MeshContactBaseline::~MeshContactBaseline() = default;

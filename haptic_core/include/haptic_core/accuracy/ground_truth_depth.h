@@ -43,6 +43,13 @@ class RayCastSurface {
   double FirstFacingHit(const glm::dvec3& org_F, const glm::dvec3& dir_F,
                         double tfar_m) const noexcept;
 
+  /// True when `p_F` is inside the closed mesh: the first surface that a ray from `p_F` along the
+  /// unit direction `dir_F` meets, whichever way it faces, faces away from the ray (unit face
+  /// normal · dir_F > 0: the ray leaves the solid there). A point with nothing along the ray is
+  /// outside. Exact for a closed, outward-oriented mesh up to float rounding (~10 nm at 10 cm);
+  /// the direction only matters for rays through edges. Thread-safe.
+  bool IsInside(const glm::dvec3& p_F, const glm::dvec3& dir_F) const noexcept;
+
   /// Triangles of the mesh.
   std::size_t triangle_count() const noexcept;
 
@@ -125,9 +132,11 @@ class GroundTruthDepthSolver {
   /// method built it (its resolution is replaced by the seed's 50 for the step table, so every
   /// method is compared with one truth); penalty stiffness k (N/m). M is chosen at the base pose
   /// (ConvergedDepth) and used for the 10 perturbed poses.
+  /// `step_resolution` N' sets the step table instead (h_x = W/N', h_θ = h_x/(W/2); 0 = the seed's
+  /// 50): the pipeline truth (contact_patch_truth.h) takes its steps at texel scale.
   GroundTruthContact Linearize(const RigidTransform& X_WT, const RigidTransform& X_TFt,
                                const RigidTransform& X_WFe, const ContactWindow& window,
-                               double stiffness_n_per_m);
+                               double stiffness_n_per_m, int step_resolution = 0);
 
  private:
   struct Sample {

@@ -1,0 +1,126 @@
+#pragma once
+// The pipeline truth (issue 31): what the two FULL-RESOLUTION objects would exert at one pose,
+// computed from their meshes alone, so that it owns its contacts instead of borrowing the
+// method's windows (ground_truth_depth.h measures the texture stage on the method's windows).
+//
+// At one pose (DESIGN.md §4 for δ and Φ; the patch geometry is our reconstruction [R]):
+//  1. Intersecting triangle pairs of the two meshes (FCL's BVH collision, every pair).
+//  2. Contact patches: the pairs linked when their points (the midpoint of the two triangles'
+//     centroids) are closer than the method's clustering distance and the environment triangles'
+//     normals agree within its angle (single linkage: connected regions, the granularity of
+//     contact_clustering.h).
+//  3. Per patch, the surfaces inside the other solid: each crossing triangle's inside part
+//     (sub-triangles refined along the intersection curve, tested with RayCastSurface::IsInside) and the triangles
+//     wholly inside, reached by a flood fill over edge neighbours from the crossing ones. Their
+//     area-weighted normals give the gradient of the intersection volume V with respect to the
+//     tool's pose (Reynolds transport: moving the tool by dx changes V by ∫_{∂A∩B} n_A·dx dA):
+//       ∇_x V = ∫_{∂A∩B} n_A dA = −∫_{∂B∩A} n_B dA,
+//       ∇_θ V = ∫_{∂A∩B} (r × n_A) dA = −∫_{∂B∩A} (r × n_B) dA (r from the tool's centre of mass),
+//     the two sides being two routes to one number (their sum is the closed intersection
+//     surface's ∮ n dA = 0). The patch's direction is n = −∇_x V / |∇_x V| (from the environment
+//     towards the tool, the per-cluster penetration direction of Kim, Otaduy, Lin & Manocha 2003
+//     taken over the real surfaces), its centre the inside surfaces' area centroid, and its window
+//     the square on the plane ⟂ n that holds their projection plus a margin.
+//  4. T1, the pipeline truth: δ and ∇δ on that window by ray casting (GroundTruthDepthSolver,
+//     gradient steps at texel scale), Φ_gt = Σ_patches −k δ ∇δ.
+//  5. T2, the volume truth, independent of the force law: −∇_x V's direction and the lever arm
+//     |∇_θ V| / |∇_x V| (what a volume penalty k_V·V would give as |τ|/|F|), so that distributed
+//     and grazing contact are judged by direction and arm, not by stiffness.
+
+#include <memory>
+#include <vector>
+
+#include "haptic_core/accuracy/ground_truth_depth.h"
+#include "haptic_core/haptic_model.h"
+#include "haptic_core/spatial.h"
+
+namespace ht {
+
+/// How the pipeline truth groups and measures its patches.
+struct ContactPatchTruthOptions {
+  /// Patches: pair points closer than this (m) with environment normals within the angle (deg)
+  /// are one region (the method's clustering: PipelineOptions::clustering_distance_m/_angle_deg).
+  double merge_distance_m = 5e-3;
+  double max_normal_angle_deg = 30.0;
+  /// Window: the inside surfaces' projected half extent plus this on each side (m), the side
+  /// clamped to [min_extent_m, max_extent_m].
+  double window_margin_m = 1e-3;
+  double min_extent_m = 2e-3;
+  double max_extent_m = 0.12;
+  /// Translation step of ∇δ's central differences (m): texel scale (the seed's 1024² textures
+  /// over objects of about 10 cm: 0.1 mm). The rotation step is this over half the window.
+  double gradient_step_m = 1e-4;
+  /// Crossing triangles' inside part: split in four until no edge exceeds inside_cell_m (m), then
+  /// only where a sub-triangle's corners and centroid disagree, down to boundary_cell_m (m).
+  double inside_cell_m = 2e-3;
+  double boundary_cell_m = 5e-5;
+  /// Most intersecting pairs gathered per pose (FCL's num_max_contacts).
+  int max_pairs = 1 << 20;
+  /// δ's ray casting on each window.
+  GroundTruthOptions depth;
+
+  /// Throws std::invalid_argument naming a value out of range.
+  void Validate() const;
+};
+
+/// One contact patch of the full-resolution meshes at one pose.
+struct TruthPatch {
+  /// Its window: centre (area centroid of the inside surfaces), n = −∇_x V / |∇_x V| (unit, from
+  /// the environment towards the tool), extent from the inside surfaces' projection; in W, m.
+  ContactWindow window;
+  /// Intersecting triangle pairs in it.
+  int pairs = 0;
+  /// Area (m²) of the tool's surface inside the environment and of the environment's surface
+  /// inside the tool.
+  double tool_inside_area_m2 = 0.0, environment_inside_area_m2 = 0.0;
+  /// ∇V over the tool's pose from the tool's inside surface and from the environment's (m² and
+  /// m³/rad; rotation about the tool's centre of mass, world axes). The truth uses their mean.
+  glm::dvec3 dV_dx_tool_W{0.0}, dV_dtheta_tool_W{0.0};
+  glm::dvec3 dV_dx_environment_W{0.0}, dV_dtheta_environment_W{0.0};
+  /// T1 on the window: δ_gt, ∇δ_gt (steps at texel scale), Φ_gt on the tool at its centre of mass.
+  GroundTruthContact contact;
+};
+
+/// The truth at one pose.
+struct PoseTruth {
+  /// Intersecting triangle pairs found (0: the meshes do not intersect, and the truth is zero).
+  int pairs = 0;
+  /// True when FCL's pair list hit options.max_pairs.
+  bool pairs_truncated = false;
+  std::vector<TruthPatch> patches;
+  /// T1: Σ over patches of Φ_gt (N, N·m), on the tool at its centre of mass, in W.
+  Wrench F_T_W;
+  /// T2: Σ over patches of the mean of both routes' ∇V (m², m³/rad), in W.
+  glm::dvec3 dV_dx_W{0.0}, dV_dtheta_W{0.0};
+  /// Rays cast (inside tests and δ).
+  long long rays = 0;
+};
+
+/// Computes PoseTruth between one tool mesh and one environment mesh. Holds FCL's hierarchies,
+/// each mesh's edge neighbours and a depth solver: one object per thread (FCL's objects are not
+/// shared across threads); the ray-casting surfaces may be shared.
+class ContactPatchTruth {
+ public:
+  /// `tool_Ft`, `environment_Fe`: the full-resolution meshes in their file frames (#V, #F,
+  /// counter-clockwise seen from outside, closed), copied; `tool_rays`, `environment_rays`: the
+  /// same meshes as ray-casting surfaces, which must outlive this object. Throws
+  /// std::invalid_argument for bad options, an empty mesh or an index out of range.
+  ContactPatchTruth(const TriangleMesh& tool_Ft, const TriangleMesh& environment_Fe,
+                    const RayCastSurface& tool_rays, const RayCastSurface& environment_rays,
+                    const ContactPatchTruthOptions& options = {});
+  ~ContactPatchTruth();
+  ContactPatchTruth(const ContactPatchTruth&) = delete;
+  ContactPatchTruth& operator=(const ContactPatchTruth&) = delete;
+
+  /// The truth with the tool's centre of mass frame T at X_WT, the tool mesh's frame at X_TFt in
+  /// T, the environment mesh at X_WFe, penalty stiffness k (N/m). Non-finite poses give an empty
+  /// truth (pairs 0).
+  PoseTruth At(const RigidTransform& X_WT, const RigidTransform& X_TFt,
+               const RigidTransform& X_WFe, double stiffness_n_per_m);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace ht

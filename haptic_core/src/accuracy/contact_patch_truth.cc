@@ -1,0 +1,444 @@
+#include "haptic_core/accuracy/contact_patch_truth.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <numbers>
+#include <stdexcept>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "fcl_mesh.h"
+
+namespace ht {
+
+void ContactPatchTruthOptions::Validate() const {
+  const auto fail = [](const std::string& what, double v) {
+    throw std::invalid_argument("pipeline truth: " + what + ", got " + std::to_string(v));
+  };
+  if (!(merge_distance_m > 0.0) || !std::isfinite(merge_distance_m))
+    fail("merge_distance_m must be > 0", merge_distance_m);
+  if (!(max_normal_angle_deg >= 0.0 && max_normal_angle_deg < 180.0))
+    fail("max_normal_angle_deg must be in [0, 180)", max_normal_angle_deg);
+  if (!(window_margin_m >= 0.0) || !std::isfinite(window_margin_m))
+    fail("window_margin_m must be >= 0", window_margin_m);
+  if (!(min_extent_m > 0.0) || !(max_extent_m >= min_extent_m) || !std::isfinite(max_extent_m))
+    fail("extents must satisfy 0 < min_extent_m <= max_extent_m", min_extent_m);
+  if (!(gradient_step_m > 0.0) || !std::isfinite(gradient_step_m))
+    fail("gradient_step_m must be > 0", gradient_step_m);
+  if (!(inside_cell_m > 0.0) || !std::isfinite(inside_cell_m))
+    fail("inside_cell_m must be > 0", inside_cell_m);
+  if (!(boundary_cell_m > 0.0) || !(boundary_cell_m <= inside_cell_m))
+    fail("boundary_cell_m must be in (0, inside_cell_m]", boundary_cell_m);
+  if (max_pairs < 1) fail("max_pairs must be >= 1", max_pairs);
+  depth.Validate();
+}
+
+namespace {
+
+// A mesh's per-triangle data for the inside surfaces: unit face normals and areas in its frame,
+// and its edge neighbours (−1 where an edge has no single other triangle), over vertices welded
+// by position so that split vertices do not cut the flood fill.
+struct MeshTopology {
+  std::vector<glm::dvec3> normal_F;
+  std::vector<double> area_m2;
+  std::vector<std::array<int, 3>> neighbours;
+
+  explicit MeshTopology(const TriangleMesh& mesh) {
+    const std::size_t nf = mesh.triangles.size();
+    normal_F.resize(nf);
+    area_m2.resize(nf);
+    neighbours.assign(nf, {-1, -1, -1});
+    // Weld by exact position.
+    struct Hash {
+      std::size_t operator()(const glm::dvec3& p) const noexcept {
+        const std::hash<double> h;
+        return h(p.x) ^ (h(p.y) * 0x9e3779b97f4a7c15ull) ^ (h(p.z) * 0xc2b2ae3d27d4eb4full);
+      }
+    };
+    std::unordered_map<glm::dvec3, int, Hash> weld;
+    weld.reserve(mesh.vertices.size());
+    std::vector<int> id(mesh.vertices.size());
+    for (std::size_t v = 0; v < mesh.vertices.size(); ++v) {
+      id[v] = weld.try_emplace(mesh.vertices[v], static_cast<int>(weld.size())).first->second;
+    }
+    std::unordered_map<std::uint64_t, std::array<int, 2>> edges;  // (a < b) → up to two faces
+    edges.reserve(nf * 2);
+    const auto key = [&](int a, int b) {
+      const auto lo = static_cast<std::uint64_t>(std::min(a, b));
+      const auto hi = static_cast<std::uint64_t>(std::max(a, b));
+      return (lo << 32) | hi;
+    };
+    for (std::size_t f = 0; f < nf; ++f) {
+      const glm::ivec3 t = mesh.triangles[f];
+      const glm::dvec3 c = glm::cross(mesh.vertices[t[1]] - mesh.vertices[t[0]],
+                                      mesh.vertices[t[2]] - mesh.vertices[t[0]]);
+      const double len = glm::length(c);
+      normal_F[f] = len > 0.0 ? c / len : glm::dvec3(0.0);
+      area_m2[f] = 0.5 * len;
+      for (int e = 0; e < 3; ++e) {
+        auto [it, fresh] = edges.try_emplace(key(id[t[e]], id[t[(e + 1) % 3]]),
+                                             std::array<int, 2>{static_cast<int>(f), -1});
+        if (!fresh) it->second[1] = it->second[1] == -1 ? static_cast<int>(f) : -2;
+      }
+    }
+    for (std::size_t f = 0; f < nf; ++f) {
+      const glm::ivec3 t = mesh.triangles[f];
+      for (int e = 0; e < 3; ++e) {
+        const auto& pair = edges.at(key(id[t[e]], id[t[(e + 1) % 3]]));
+        if (pair[1] < 0) continue;  // boundary or non-manifold edge
+        neighbours[f][e] = pair[0] == static_cast<int>(f) ? pair[1] : pair[0];
+      }
+    }
+  }
+};
+
+// Where the edges of triangle (a0, a1, a2) pierce triangle (b0, b1, b2): adds each crossing
+// point to `sum` and counts it (Möller–Trumbore on each edge as a segment).
+void EdgePiercings(const glm::dvec3& a0, const glm::dvec3& a1, const glm::dvec3& a2,
+                   const glm::dvec3& b0, const glm::dvec3& b1, const glm::dvec3& b2,
+                   glm::dvec3& sum, int& count) {
+  const glm::dvec3 e1 = b1 - b0, e2 = b2 - b0;
+  const glm::dvec3* corners[3] = {&a0, &a1, &a2};
+  for (int e = 0; e < 3; ++e) {
+    const glm::dvec3& o = *corners[e];
+    const glm::dvec3 d = *corners[(e + 1) % 3] - o;
+    const glm::dvec3 p = glm::cross(d, e2);
+    const double det = glm::dot(e1, p);
+    if (std::abs(det) < 1e-30) continue;
+    const double inv = 1.0 / det;
+    const glm::dvec3 t = o - b0;
+    const double u = glm::dot(t, p) * inv;
+    if (u < 0.0 || u > 1.0) continue;
+    const glm::dvec3 q = glm::cross(t, e1);
+    const double v = glm::dot(d, q) * inv;
+    if (v < 0.0 || u + v > 1.0) continue;
+    const double s = glm::dot(e2, q) * inv;
+    if (s < 0.0 || s > 1.0) continue;
+    sum += o + s * d;
+    ++count;
+  }
+}
+
+// Union-find with path halving.
+int Find(std::vector<int>& parent, int i) {
+  while (parent[i] != i) i = parent[i] = parent[parent[i]];
+  return i;
+}
+
+}  // namespace
+
+struct ContactPatchTruth::Impl {
+  TriangleMesh tool, environment;
+  MeshTopology tool_topology, environment_topology;
+  const RayCastSurface& tool_rays;
+  const RayCastSurface& environment_rays;
+  ContactPatchTruthOptions options;
+  std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>> tool_fcl, environment_fcl;
+  GroundTruthDepthSolver solver;
+  // Per-triangle state of the current pose: 0 unseen, 1 crossing, 2 inside, 3 outside.
+  std::vector<std::uint8_t> tool_state, environment_state;
+
+  Impl(const TriangleMesh& t, const TriangleMesh& e, const RayCastSurface& tr,
+       const RayCastSurface& er, const ContactPatchTruthOptions& o)
+      : tool(t),
+        environment(e),
+        tool_topology(t),
+        environment_topology(e),
+        tool_rays(tr),
+        environment_rays(er),
+        options(o),
+        tool_fcl(accuracy_detail::MakeFclMesh(t, "tool")),
+        environment_fcl(accuracy_detail::MakeFclMesh(e, "environment")),
+        solver(tr, er, o.depth) {}
+
+  // What one side's inside surface adds to a patch.
+  struct SideSums {
+    double area = 0.0;
+    glm::dvec3 sum_an_W{0.0}, sum_a_r_x_n_W{0.0}, sum_ap_W{0.0};
+  };
+
+  // The inside surface of one side of a patch: `mesh` posed at X_WF, its triangles `crossing`
+  // (marked 1 in `state`), tested against the other solid `other` posed at X_WG along ray
+  // direction `dir_W`. Appends inside points (W) to `points`.
+  SideSums InsideSurface(const TriangleMesh& mesh, const MeshTopology& topo,
+                         std::vector<std::uint8_t>& state, const std::vector<int>& crossing,
+                         const RigidTransform& X_WF, const RayCastSurface& other,
+                         const RigidTransform& X_WG, const glm::dvec3& dir_W,
+                         const glm::dvec3& p_WTcm, std::vector<glm::dvec3>& points,
+                         long long& rays) const {
+    SideSums s;
+    const RigidTransform X_GW = X_WG.Inverse();
+    const glm::dvec3 dir_G = X_GW.rotation * dir_W;
+    const auto inside = [&](const glm::dvec3& p_W) {
+      ++rays;
+      return other.IsInside(X_GW * p_W, dir_G);
+    };
+    const auto add = [&](const glm::dvec3& p_W, const glm::dvec3& n_W, double a) {
+      s.area += a;
+      s.sum_an_W += a * n_W;
+      s.sum_a_r_x_n_W += a * glm::cross(p_W - p_WTcm, n_W);
+      s.sum_ap_W += a * p_W;
+    };
+    std::vector<int> queue;
+    const double forced2 = options.inside_cell_m * options.inside_cell_m;
+    const double boundary2 = options.boundary_cell_m * options.boundary_cell_m;
+    // A crossing triangle's inside part: sub-triangles are split in four until their longest edge
+    // is at most inside_cell_m, then further only where their corners and centroid disagree,
+    // down to boundary_cell_m, where the inside share of those four tests is taken.
+    const auto refine = [&](auto&& self, const glm::dvec3& p0, const glm::dvec3& p1,
+                            const glm::dvec3& p2, const glm::dvec3& n_W, double area) -> void {
+      const double e2 = std::max({glm::dot(p1 - p0, p1 - p0), glm::dot(p2 - p1, p2 - p1),
+                                  glm::dot(p0 - p2, p0 - p2)});
+      const auto split = [&] {
+        const glm::dvec3 a = 0.5 * (p0 + p1), b = 0.5 * (p1 + p2), c = 0.5 * (p2 + p0);
+        self(self, p0, a, c, n_W, 0.25 * area);
+        self(self, a, p1, b, n_W, 0.25 * area);
+        self(self, c, b, p2, n_W, 0.25 * area);
+        self(self, a, b, c, n_W, 0.25 * area);
+      };
+      if (e2 > forced2) return split();
+      const glm::dvec3 c = (p0 + p1 + p2) / 3.0;
+      const int in = inside(p0) + inside(p1) + inside(p2) + inside(c);
+      if (in == 0) return;
+      if (in < 4 && e2 > boundary2) return split();
+      add(c, n_W, area * in / 4.0);
+      points.push_back(c);
+    };
+    for (const int f : crossing) {
+      const glm::ivec3 t = mesh.triangles[f];
+      refine(refine, X_WF * mesh.vertices[t[0]], X_WF * mesh.vertices[t[1]],
+             X_WF * mesh.vertices[t[2]], X_WF.rotation * topo.normal_F[f], topo.area_m2[f]);
+      queue.push_back(f);
+    }
+    // Flood fill: a triangle next to a crossing or inside one, crossing nothing, is wholly inside
+    // or wholly outside; its centroid decides.
+    while (!queue.empty()) {
+      const int f = queue.back();
+      queue.pop_back();
+      for (const int g : topo.neighbours[f]) {
+        if (g < 0 || state[g] != 0) continue;
+        const glm::ivec3 t = mesh.triangles[g];
+        const glm::dvec3 p0 = X_WF * mesh.vertices[t[0]], p1 = X_WF * mesh.vertices[t[1]],
+                         p2 = X_WF * mesh.vertices[t[2]];
+        const glm::dvec3 c = (p0 + p1 + p2) / 3.0;
+        if (!inside(c)) {
+          state[g] = 3;
+          continue;
+        }
+        state[g] = 2;
+        add(c, X_WF.rotation * topo.normal_F[g], topo.area_m2[g]);
+        points.push_back(p0);
+        points.push_back(p1);
+        points.push_back(p2);
+        queue.push_back(g);
+      }
+    }
+    return s;
+  }
+};
+
+ContactPatchTruth::ContactPatchTruth(const TriangleMesh& tool_Ft, const TriangleMesh& environment_Fe,
+                                     const RayCastSurface& tool_rays,
+                                     const RayCastSurface& environment_rays,
+                                     const ContactPatchTruthOptions& options) {
+  options.Validate();
+  impl_ = std::make_unique<Impl>(tool_Ft, environment_Fe, tool_rays, environment_rays, options);
+}
+
+ContactPatchTruth::~ContactPatchTruth() = default;
+
+PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform& X_TFt,
+                                const RigidTransform& X_WFe, double k) {
+  PoseTruth out;
+  if (!IsFiniteRigidTransform(X_WT) || !IsFiniteRigidTransform(X_TFt) ||
+      !IsFiniteRigidTransform(X_WFe)) {
+    return out;
+  }
+  Impl& m = *impl_;
+  const ContactPatchTruthOptions& o = m.options;
+  const RigidTransform X_WFt = X_WT * X_TFt;
+
+  // 1. Every intersecting triangle pair (b1: tool triangle, b2: environment triangle).
+  fcl::CollisionObjectd tool(m.tool_fcl, accuracy_detail::ToFcl(X_WFt));
+  fcl::CollisionObjectd env(m.environment_fcl, accuracy_detail::ToFcl(X_WFe));
+  fcl::CollisionRequestd request(static_cast<std::size_t>(o.max_pairs), false);
+  fcl::CollisionResultd result;
+  fcl::collide(&tool, &env, request, result);
+  const int np = static_cast<int>(result.numContacts());
+  out.pairs = np;
+  out.pairs_truncated = np >= o.max_pairs;
+  if (np == 0) return out;
+
+  struct Pair {
+    int tool_tri, env_tri;
+    glm::dvec3 p_W, n_W;  // midpoint of the centroids; environment normal
+  };
+  std::vector<Pair> pairs(static_cast<std::size_t>(np));
+  const auto centroid = [](const TriangleMesh& mesh, int f, const RigidTransform& X) {
+    const glm::ivec3 t = mesh.triangles[f];
+    return X * ((mesh.vertices[t[0]] + mesh.vertices[t[1]] + mesh.vertices[t[2]]) / 3.0);
+  };
+  for (int i = 0; i < np; ++i) {
+    const fcl::Contactd& c = result.getContact(static_cast<std::size_t>(i));
+    const bool swapped = c.o1 != m.tool_fcl.get();
+    Pair& p = pairs[i];
+    p.tool_tri = static_cast<int>(swapped ? c.b2 : c.b1);
+    p.env_tri = static_cast<int>(swapped ? c.b1 : c.b2);
+    // The pair's point: the middle of its intersection segment (where each triangle's edges
+    // pierce the other); the centroids' midpoint when rounding found no piercing.
+    const auto corner = [](const TriangleMesh& mesh, int f, int c, const RigidTransform& X) {
+      return X * mesh.vertices[mesh.triangles[f][c]];
+    };
+    const glm::dvec3 a0 = corner(m.tool, p.tool_tri, 0, X_WFt),
+                     a1 = corner(m.tool, p.tool_tri, 1, X_WFt),
+                     a2 = corner(m.tool, p.tool_tri, 2, X_WFt);
+    const glm::dvec3 b0 = corner(m.environment, p.env_tri, 0, X_WFe),
+                     b1 = corner(m.environment, p.env_tri, 1, X_WFe),
+                     b2 = corner(m.environment, p.env_tri, 2, X_WFe);
+    glm::dvec3 sum(0.0);
+    int count = 0;
+    EdgePiercings(a0, a1, a2, b0, b1, b2, sum, count);
+    EdgePiercings(b0, b1, b2, a0, a1, a2, sum, count);
+    p.p_W = count > 0 ? sum / static_cast<double>(count)
+                      : 0.5 * (centroid(m.tool, p.tool_tri, X_WFt) +
+                               centroid(m.environment, p.env_tri, X_WFe));
+    p.n_W = X_WFe.rotation * m.environment_topology.normal_F[p.env_tri];
+  }
+
+  // 2. Patches: single linkage of pairs that share a triangle (the intersection curve runs from
+  // pair to pair through shared triangles) or whose points are within merge_distance_m (a hash
+  // grid of that cell), in both cases with agreeing environment normals.
+  const double d = o.merge_distance_m, d2 = d * d;
+  const double cos_max = std::cos(o.max_normal_angle_deg * std::numbers::pi / 180.0);
+  const auto cell_of = [&](const glm::dvec3& p) {
+    return glm::i64vec3(std::floor(p.x / d), std::floor(p.y / d), std::floor(p.z / d));
+  };
+  const auto hash = [](const glm::i64vec3& c) {
+    return static_cast<std::uint64_t>(c.x * 73856093LL) ^ static_cast<std::uint64_t>(c.y * 19349663LL) ^
+           static_cast<std::uint64_t>(c.z * 83492791LL);
+  };
+  std::unordered_map<std::uint64_t, std::vector<int>> grid;
+  for (int i = 0; i < np; ++i) grid[hash(cell_of(pairs[i].p_W))].push_back(i);
+  std::vector<int> parent(static_cast<std::size_t>(np));
+  for (int i = 0; i < np; ++i) parent[i] = i;
+  for (int i = 0; i < np; ++i) {
+    const glm::i64vec3 c = cell_of(pairs[i].p_W);
+    for (int dx = -1; dx <= 1; ++dx) {
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dz = -1; dz <= 1; ++dz) {
+          const auto it = grid.find(hash(c + glm::i64vec3(dx, dy, dz)));
+          if (it == grid.end()) continue;
+          for (const int j : it->second) {
+            if (j <= i) continue;
+            const glm::dvec3 dp = pairs[j].p_W - pairs[i].p_W;
+            if (glm::dot(dp, dp) >= d2 || glm::dot(pairs[i].n_W, pairs[j].n_W) < cos_max) continue;
+            const int a = Find(parent, i), b = Find(parent, j);
+            if (a != b) parent[std::max(a, b)] = std::min(a, b);
+          }
+        }
+      }
+    }
+  }
+  const auto link_shared = [&](auto triangle_of) {
+    std::unordered_map<int, int> first;  // triangle → first pair holding it
+    first.reserve(static_cast<std::size_t>(np));
+    for (int i = 0; i < np; ++i) {
+      const auto [it, fresh] = first.try_emplace(triangle_of(pairs[i]), i);
+      if (fresh) continue;
+      const int j = it->second;
+      if (glm::dot(pairs[i].n_W, pairs[j].n_W) < cos_max) continue;
+      const int a = Find(parent, i), b = Find(parent, j);
+      if (a != b) parent[std::max(a, b)] = std::min(a, b);
+    }
+  };
+  link_shared([](const Pair& p) { return p.tool_tri; });
+  link_shared([](const Pair& p) { return p.env_tri; });
+  std::vector<int> patch_of(static_cast<std::size_t>(np), -1);
+  std::vector<int> root_patch(static_cast<std::size_t>(np), -1);
+  int num_patches = 0;
+  for (int i = 0; i < np; ++i) {
+    const int r = Find(parent, i);
+    if (root_patch[r] < 0) root_patch[r] = num_patches++;
+    patch_of[i] = root_patch[r];
+  }
+
+  // 3. Inside surfaces per patch. Crossing triangles are marked for all patches first, so that
+  // no flood fill walks into another patch's crossing triangles.
+  m.tool_state.assign(m.tool.triangles.size(), 0);
+  m.environment_state.assign(m.environment.triangles.size(), 0);
+  std::vector<std::vector<int>> tool_crossing(num_patches), env_crossing(num_patches);
+  std::vector<glm::dvec3> provisional_n(num_patches, glm::dvec3(0.0));
+  std::vector<std::vector<glm::dvec3>> pair_points(num_patches);
+  std::vector<int> patch_pairs(num_patches, 0);
+  for (int i = 0; i < np; ++i) {
+    const int q = patch_of[i];
+    ++patch_pairs[q];
+    provisional_n[q] += pairs[i].n_W;
+    pair_points[q].push_back(pairs[i].p_W);
+    if (m.tool_state[pairs[i].tool_tri] == 0) {
+      m.tool_state[pairs[i].tool_tri] = 1;
+      tool_crossing[q].push_back(pairs[i].tool_tri);
+    }
+    if (m.environment_state[pairs[i].env_tri] == 0) {
+      m.environment_state[pairs[i].env_tri] = 1;
+      env_crossing[q].push_back(pairs[i].env_tri);
+    }
+  }
+  const glm::dvec3 p_WTcm = X_WT.translation;
+  for (int q = 0; q < num_patches; ++q) {
+    const double len = glm::length(provisional_n[q]);
+    const glm::dvec3 n0 = len > 1e-12 ? provisional_n[q] / len : glm::dvec3(0, 0, 1);
+    std::vector<glm::dvec3> points = pair_points[q];
+    // Tool points inside the environment: a ray along +n leaves it through its surface.
+    const Impl::SideSums a =
+        m.InsideSurface(m.tool, m.tool_topology, m.tool_state, tool_crossing[q], X_WFt,
+                        m.environment_rays, X_WFe, n0, p_WTcm, points, out.rays);
+    // Environment points inside the tool: a ray along −n leaves the tool.
+    const Impl::SideSums b = m.InsideSurface(m.environment, m.environment_topology,
+                                             m.environment_state, env_crossing[q], X_WFe,
+                                             m.tool_rays, X_WFt, -n0, p_WTcm, points, out.rays);
+    TruthPatch patch;
+    patch.pairs = patch_pairs[q];
+    patch.tool_inside_area_m2 = a.area;
+    patch.environment_inside_area_m2 = b.area;
+    patch.dV_dx_tool_W = a.sum_an_W;
+    patch.dV_dtheta_tool_W = a.sum_a_r_x_n_W;
+    patch.dV_dx_environment_W = -b.sum_an_W;
+    patch.dV_dtheta_environment_W = -b.sum_a_r_x_n_W;
+    const glm::dvec3 dV_dx = 0.5 * (patch.dV_dx_tool_W + patch.dV_dx_environment_W);
+    const glm::dvec3 dV_dtheta = 0.5 * (patch.dV_dtheta_tool_W + patch.dV_dtheta_environment_W);
+    out.dV_dx_W += dV_dx;
+    out.dV_dtheta_W += dV_dtheta;
+    const double g = glm::length(dV_dx);
+    const glm::dvec3 n = g > 1e-18 ? -dV_dx / g : n0;
+    glm::dvec3 centre(0.0);
+    if (a.area + b.area > 0.0) {
+      centre = (a.sum_ap_W + b.sum_ap_W) / (a.area + b.area);
+    } else {
+      for (const glm::dvec3& p : pair_points[q]) centre += p;
+      centre /= static_cast<double>(pair_points[q].size());
+    }
+    // 4. The window holding the inside surfaces' projection, and T1 on it.
+    const ContactWindow axes = ContactWindow::Make(centre, n, 1.0, 2);
+    double half = 0.0;
+    for (const glm::dvec3& p : points) {
+      const glm::dvec3 dp = p - centre;
+      half = std::max({half, std::abs(glm::dot(dp, axes.axis_u_W)),
+                       std::abs(glm::dot(dp, axes.axis_v_W))});
+    }
+    const double extent = std::clamp(2.0 * (half + o.window_margin_m), o.min_extent_m,
+                                     o.max_extent_m);
+    patch.window = ContactWindow::Make(centre, n, extent, 50);
+    const int step_resolution = std::max(2, static_cast<int>(std::lround(extent / o.gradient_step_m)));
+    patch.contact = m.solver.Linearize(X_WT, X_TFt, X_WFe, patch.window, k, step_resolution);
+    out.rays += patch.contact.rays;
+    out.F_T_W += patch.contact.F_T_W;
+    out.patches.push_back(std::move(patch));
+  }
+  return out;
+}
+
+}  // namespace ht

@@ -1,0 +1,322 @@
+// The pipeline truth (haptic_core/accuracy/contact_patch_truth.h, issue 31): closed forms (flat on
+// flat, a tilted box on its edge, a sphere on a plane), the volume gradient against a finite
+// difference of the intersection volume computed another way (column integration of convex
+// intervals), a pose where a borrowed window sees nothing but the truth's own patch is right, and
+// the property that every pose whose full-resolution meshes intersect gets a non-zero truth.
+
+#include "haptic_core/accuracy/contact_patch_truth.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <glm/gtc/quaternion.hpp>
+#include <numbers>
+#include <random>
+
+#include "haptic_core/accuracy/mesh_contact_baseline.h"
+#include "haptic_core/demo/procedural_models.h"
+
+namespace ht {
+namespace {
+
+constexpr double kK = 8000.0;  // N/m
+
+// Closed box [lo, hi], 12 triangles, counter-clockwise seen from outside.
+TriangleMesh Box(const glm::dvec3& lo, const glm::dvec3& hi) {
+  TriangleMesh m;
+  for (int i = 0; i < 8; ++i) {
+    m.vertices.push_back({(i & 1) ? hi.x : lo.x, (i & 2) ? hi.y : lo.y, (i & 4) ? hi.z : lo.z});
+  }
+  const int faces[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4},
+                           {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+  for (const auto& f : faces) {
+    m.triangles.push_back({f[0], f[1], f[2]});
+    m.triangles.push_back({f[0], f[2], f[3]});
+  }
+  return m;
+}
+
+// UV sphere of radius r about the origin with a pole vertex at −z (the lowest point is exact).
+TriangleMesh Sphere(double r, int rings, int segments) {
+  TriangleMesh m;
+  m.vertices.push_back({0, 0, -r});
+  for (int i = 1; i < rings; ++i) {
+    const double phi = std::numbers::pi * i / rings;  // from −z
+    for (int j = 0; j < segments; ++j) {
+      const double th = 2.0 * std::numbers::pi * j / segments;
+      m.vertices.push_back(
+          {r * std::sin(phi) * std::cos(th), r * std::sin(phi) * std::sin(th), -r * std::cos(phi)});
+    }
+  }
+  m.vertices.push_back({0, 0, r});
+  const int top = static_cast<int>(m.vertices.size()) - 1;
+  const auto ring = [&](int i, int j) { return 1 + (i - 1) * segments + (j % segments); };
+  for (int j = 0; j < segments; ++j) m.triangles.push_back({0, ring(1, j + 1), ring(1, j)});
+  for (int i = 1; i + 1 < rings; ++i) {
+    for (int j = 0; j < segments; ++j) {
+      m.triangles.push_back({ring(i, j), ring(i, j + 1), ring(i + 1, j + 1)});
+      m.triangles.push_back({ring(i, j), ring(i + 1, j + 1), ring(i + 1, j)});
+    }
+  }
+  for (int j = 0; j < segments; ++j) {
+    m.triangles.push_back({top, ring(rings - 1, j), ring(rings - 1, j + 1)});
+  }
+  return m;
+}
+
+RigidTransform At(const glm::dvec3& p, const glm::dquat& R = glm::dquat(1, 0, 0, 0)) {
+  RigidTransform X;
+  X.translation = p;
+  X.rotation = R;
+  return X;
+}
+
+glm::dquat AboutY(double a) { return glm::angleAxis(a, glm::dvec3(0, 1, 0)); }
+
+double AngleDeg(const glm::dvec3& a, const glm::dvec3& b) {
+  const double c = glm::dot(a, b) / (glm::length(a) * glm::length(b));
+  return std::acos(std::clamp(c, -1.0, 1.0)) * 180.0 / std::numbers::pi;
+}
+
+// A slab whose top face is z = 0.
+const TriangleMesh kSlab = Box({-0.06, -0.06, -0.02}, {0.06, 0.06, 0.0});
+
+struct Rig {
+  Rig(const TriangleMesh& tool, const TriangleMesh& env)
+      : tool_rays(tool), env_rays(env), truth(tool, env, tool_rays, env_rays) {}
+  RayCastSurface tool_rays, env_rays;
+  ContactPatchTruth truth;
+};
+
+TEST(RayCastSurface, TellsInsideFromOutsideWhateverTheDirection) {
+  const RayCastSurface box(Box({-1, -1, -1}, {1, 1, 1}));
+  for (const glm::dvec3 d : {glm::dvec3(0, 0, 1), glm::dvec3(0, 0, -1), glm::dvec3(0.6, 0, 0.8)}) {
+    EXPECT_TRUE(box.IsInside({0.2, 0.3, -0.9}, d));
+    EXPECT_FALSE(box.IsInside({0.2, 0.3, 1.5}, d));
+    EXPECT_FALSE(box.IsInside({3, 0, 0}, d));
+  }
+}
+
+// Flat on flat: a 2×2 cm face δ into a slab. One patch along +z, δ_gt = δ, F = k δ ẑ, no torque
+// about the box's centre above the face; ∇_x V = −A ẑ by both routes (V = A·δ).
+TEST(ContactPatchTruth, FlatOnFlatIsKDeltaAlongTheNormal) {
+  const double delta = 0.3e-3;
+  Rig rig(Box({-0.01, -0.01, -0.005}, {0.01, 0.01, 0.005}), kSlab);
+  const RigidTransform X_WT = At({0.002, -0.003, 0.005 - delta});
+  const PoseTruth t = rig.truth.At(X_WT, RigidTransform{}, RigidTransform{}, kK);
+  ASSERT_EQ(t.patches.size(), 1u);
+  const TruthPatch& p = t.patches[0];
+  EXPECT_LT(AngleDeg(p.window.normal_W, {0, 0, 1}), 0.1);
+  EXPECT_NEAR(p.contact.linearization.depth_m, delta, 1e-7);
+  EXPECT_NEAR(t.F_T_W.force.z, kK * delta, 0.01 * kK * delta);
+  EXPECT_NEAR(glm::length(glm::dvec2(t.F_T_W.force)), 0.0, 1e-3 * kK * delta);
+  EXPECT_LT(glm::length(t.F_T_W.torque), 1e-3 * kK * delta * 0.01);
+  // The window sits on the face and holds it.
+  EXPECT_LT(glm::length(glm::dvec2(p.window.center_W) - glm::dvec2(0.002, -0.003)), 1e-4);
+  EXPECT_GE(p.window.extent_m, 0.02);
+  const double area = 4e-4;
+  for (const glm::dvec3& g : {p.dV_dx_tool_W, p.dV_dx_environment_W}) {
+    EXPECT_NEAR(g.z, -area, 0.01 * area);
+    EXPECT_LT(glm::length(glm::dvec2(g)), 0.01 * area);
+  }
+  EXPECT_NEAR(p.tool_inside_area_m2, area + 4 * 0.02 * delta, 0.01 * area);
+  EXPECT_NEAR(p.environment_inside_area_m2, area, 0.01 * area);
+}
+
+// A sphere of radius R pressed h into a plane: δ = h at the pole, F = k h ẑ through the centre;
+// ∇_x V = −π a² ẑ with a² = 2Rh − h² (the cap's base), on a tessellated sphere within 3 %.
+TEST(ContactPatchTruth, SphereOnAPlaneMatchesTheCap) {
+  const double r = 5e-3, h = 0.2e-3;
+  Rig rig(Sphere(r, 96, 192), kSlab);
+  const RigidTransform X_WT = At({0.01, 0.0, r - h});
+  const PoseTruth t = rig.truth.At(X_WT, RigidTransform{}, RigidTransform{}, kK);
+  ASSERT_EQ(t.patches.size(), 1u);
+  EXPECT_NEAR(t.patches[0].contact.linearization.depth_m, h, 1e-7);
+  EXPECT_NEAR(t.F_T_W.force.z, kK * h, 0.01 * kK * h);
+  EXPECT_LT(glm::length(t.F_T_W.torque), 0.01 * kK * h * r);
+  const double cap = std::numbers::pi * (2 * r * h - h * h);
+  EXPECT_NEAR(t.dV_dx_W.z, -cap, 0.03 * cap);
+  EXPECT_LT(glm::length(glm::dvec2(t.dV_dx_W)), 0.01 * cap);
+  EXPECT_LT(glm::length(t.dV_dtheta_W), 0.01 * cap * r);
+}
+
+// Intersection volume of a box (half sizes `half`, posed at X) with the half-space z ≤ 0 by
+// column integration: per column the box's z interval (clipping a vertical line against its six
+// faces) overlapped with z ≤ 0, midpoint rule over a grid covering its footprint.
+double BoxHalfSpaceVolume(const glm::dvec3& half, const RigidTransform& X, int cells) {
+  const glm::dmat3 R = glm::mat3_cast(X.rotation);
+  const double reach = glm::length(half);
+  const double x0 = X.translation.x - reach, y0 = X.translation.y - reach;
+  const double step = 2.0 * reach / cells;
+  double v = 0.0;
+  for (int i = 0; i < cells; ++i) {
+    for (int j = 0; j < cells; ++j) {
+      const glm::dvec3 q(x0 + (i + 0.5) * step, y0 + (j + 0.5) * step, 0.0);
+      double lo = -1e9, hi = 1e9;
+      bool empty = false;
+      for (int a = 0; a < 3 && !empty; ++a) {
+        const glm::dvec3 axis = R[a];  // column a: the box's axis in W
+        // |axis·(q + z ẑ − c)| ≤ half[a]  →  an interval in z (or all / nothing when axis.z = 0).
+        const double base = glm::dot(axis, q - X.translation);
+        if (std::abs(axis.z) < 1e-15) {
+          if (std::abs(base) > half[a]) empty = true;
+          continue;
+        }
+        double z1 = (-half[a] - base) / axis.z, z2 = (half[a] - base) / axis.z;
+        if (z1 > z2) std::swap(z1, z2);
+        lo = std::max(lo, z1);
+        hi = std::min(hi, z2);
+      }
+      if (empty) continue;
+      hi = std::min(hi, 0.0);
+      if (hi > lo) v += (hi - lo) * step * step;
+    }
+  }
+  return v;
+}
+
+// A box tilted 10° about y rests on one edge, δ below the plane. T1: δ_gt = δ, F = k δ ẑ and the
+// torque of that force at the edge. T2: ∇V against central differences of the volume computed by
+// column integration (two routes to one number), along z and about y.
+TEST(ContactPatchTruth, TiltedBoxOnItsEdgeAgreesWithTheVolumeComputedAnotherWay) {
+  const glm::dvec3 half(0.01, 0.01, 0.005);
+  const double alpha = 10.0 * std::numbers::pi / 180.0, delta = 0.5e-3;
+  Rig rig(Box(-half, half), kSlab);
+  // The lowest edge (x = −hx, z = −hz in the box) after the tilt: lift the box so it is at −δ.
+  const glm::dquat R = AboutY(alpha);
+  const glm::dvec3 edge_T = R * glm::dvec3(-half.x, 0, -half.z);
+  const glm::dvec3 edge_T2 = R * glm::dvec3(half.x, 0, -half.z);
+  const glm::dvec3 low = edge_T.z < edge_T2.z ? edge_T : edge_T2;
+  const RigidTransform X_WT = At({0, 0, -delta - low.z}, R);
+  const PoseTruth t = rig.truth.At(X_WT, RigidTransform{}, RigidTransform{}, kK);
+  ASSERT_EQ(t.patches.size(), 1u);
+  EXPECT_NEAR(t.patches[0].contact.linearization.depth_m, delta, 1e-7);
+  EXPECT_LT(AngleDeg(t.patches[0].window.normal_W, {0, 0, 1}), 0.1);
+  const glm::dvec3 F(0, 0, kK * delta);
+  EXPECT_NEAR(t.F_T_W.force.z, F.z, 0.01 * F.z);
+  const glm::dvec3 torque = glm::cross(low, F);  // the force at the edge line's middle
+  EXPECT_NEAR(t.F_T_W.torque.y, torque.y, 0.02 * std::abs(torque.y));
+  EXPECT_NEAR(t.F_T_W.torque.x, 0.0, 0.02 * std::abs(torque.y));
+
+  const int cells = 1600;
+  const double hz = 20e-6, ht = 2e-3;
+  const auto volume = [&](const RigidTransform& X) { return BoxHalfSpaceVolume(half, X, cells); };
+  RigidTransform up = X_WT, down = X_WT;
+  up.translation.z += hz;
+  down.translation.z -= hz;
+  const double dV_dz = (volume(up) - volume(down)) / (2 * hz);
+  RigidTransform plus = X_WT, minus = X_WT;
+  plus.rotation = AboutY(ht) * X_WT.rotation;  // world axes, about the centre of mass
+  minus.rotation = AboutY(-ht) * X_WT.rotation;
+  const double dV_dthy = (volume(plus) - volume(minus)) / (2 * ht);
+  std::printf("[pipeline truth] tilted box: dV/dz %.5g (columns) %.5g / %.5g (tool / environment);"
+              " dV/dθy %.5g (columns) %.5g / %.5g\n",
+              dV_dz, t.patches[0].dV_dx_tool_W.z, t.patches[0].dV_dx_environment_W.z, dV_dthy,
+              t.patches[0].dV_dtheta_tool_W.y, t.patches[0].dV_dtheta_environment_W.y);
+  for (const TruthPatch& p : t.patches) {
+    EXPECT_NEAR(p.dV_dx_tool_W.z, dV_dz, 0.02 * std::abs(dV_dz));
+    EXPECT_NEAR(p.dV_dx_environment_W.z, dV_dz, 0.02 * std::abs(dV_dz));
+    EXPECT_NEAR(p.dV_dtheta_tool_W.y, dV_dthy, 0.03 * std::abs(dV_dthy));
+    EXPECT_NEAR(p.dV_dtheta_environment_W.y, dV_dthy, 0.03 * std::abs(dV_dthy));
+  }
+}
+
+// A long bar tilted 2° touches the plane at one end only. A 2 cm window borrowed from the bar's
+// middle (where a centroid of witness points on its long face may put it) sees no overlap, so a
+// truth on that window is zero; the pipeline truth finds the end and gives k δ ẑ there.
+TEST(ContactPatchTruth, OwnsItsContactWhereABorrowedWindowSeesNothing) {
+  const glm::dvec3 half(0.04, 0.005, 0.005);
+  const double alpha = 2.0 * std::numbers::pi / 180.0, delta = 0.3e-3;
+  const TriangleMesh bar = Box(-half, half);
+  Rig rig(bar, kSlab);
+  const glm::dquat R = AboutY(alpha);
+  const glm::dvec3 low = R * glm::dvec3(half.x, 0, -half.z);  // the +x end goes down
+  ASSERT_LT(low.z, (R * glm::dvec3(-half.x, 0, -half.z)).z);
+  const RigidTransform X_WT = At({0, 0, -delta - low.z}, R);
+  GroundTruthDepthSolver borrowed(rig.tool_rays, rig.env_rays);
+  const ContactWindow middle = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 50);
+  const GroundTruthContact on_middle =
+      borrowed.Linearize(X_WT, RigidTransform{}, RigidTransform{}, middle, kK);
+  EXPECT_EQ(glm::length(on_middle.F_T_W.force), 0.0);
+  const PoseTruth t = rig.truth.At(X_WT, RigidTransform{}, RigidTransform{}, kK);
+  ASSERT_EQ(t.patches.size(), 1u);
+  // The inside surfaces are a strip L = δ / tan α long ending at the low end: the window is
+  // centred on it and holds it.
+  const double strip = delta / std::tan(alpha);
+  EXPECT_NEAR(t.patches[0].window.center_W.x, low.x - 0.5 * strip, 1e-3);
+  EXPECT_GE(t.patches[0].window.extent_m, strip);
+  EXPECT_NEAR(t.patches[0].contact.linearization.depth_m, delta, 1e-7);
+  EXPECT_NEAR(t.F_T_W.force.z, kK * delta, 0.01 * kK * delta);
+}
+
+TEST(ContactPatchTruth, SeparatedMeshesAndNonFinitePosesGiveNoTruth) {
+  Rig rig(Box({-0.01, -0.01, -0.005}, {0.01, 0.01, 0.005}), kSlab);
+  const PoseTruth apart = rig.truth.At(At({0, 0, 0.006}), RigidTransform{}, RigidTransform{}, kK);
+  EXPECT_EQ(apart.pairs, 0);
+  EXPECT_TRUE(apart.patches.empty());
+  EXPECT_EQ(glm::length(apart.F_T_W.force), 0.0);
+  const PoseTruth bad =
+      rig.truth.At(At({std::nan(""), 0, 0}), RigidTransform{}, RigidTransform{}, kK);
+  EXPECT_EQ(bad.pairs, 0);
+}
+
+TEST(ContactPatchTruthOptions, RefusesValuesOutOfRange) {
+  ContactPatchTruthOptions o;
+  o.merge_distance_m = 0.0;
+  EXPECT_THROW(o.Validate(), std::invalid_argument);
+  o = {};
+  o.boundary_cell_m = 1.0;
+  EXPECT_THROW(o.Validate(), std::invalid_argument);
+  o = {};
+  o.gradient_step_m = std::nan("");
+  EXPECT_THROW(o.Validate(), std::invalid_argument);
+}
+
+// The seed's Fig. 75 pair at full resolution (the ridged block on the ridged gear): at random
+// slides and tilts, lowered until the meshes touch and pressed 0.05–0.4 mm further, every pose
+// gets a non-zero truth, every patch a positive δ, and the two routes to ∇V agree.
+TEST(ContactPatchTruth, EveryIntersectingPoseOfTheBlockOnTheGearHasForce) {
+  const TriangleMesh block = MakeRidgedBlockFullResolution();
+  const TriangleMesh gear = MakeRidgedGearFullResolution();
+  Rig rig(block, gear);
+  const MeshContactBaseline fcl(block, gear);
+  std::mt19937 rng(31);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const double top = RidgedGearParams{}.radius_m + RidgedGearParams{}.amplitude_m;
+  for (int k = 0; k < 8; ++k) {
+    const glm::dquat R = glm::angleAxis(0.03 * u(rng), glm::dvec3(1, 0, 0)) *
+                         glm::angleAxis(0.03 * u(rng), glm::dvec3(0, 1, 0)) *
+                         glm::angleAxis(0.3 * u(rng), glm::dvec3(0, 0, 1));
+    const double x = 0.01 * u(rng), y = 0.003 * u(rng);
+    double lo = top - 0.01, hi = top + 0.03;  // lo intersects, hi does not
+    for (int i = 0; i < 40; ++i) {
+      const double mid = 0.5 * (lo + hi);
+      (fcl.Intersects(At({x, y, mid}, R), RigidTransform{}) ? lo : hi) = mid;
+    }
+    const double press = 0.05e-3 + 0.35e-3 * (k / 7.0);
+    const RigidTransform X_WT = At({x, y, hi - press}, R);
+    ASSERT_TRUE(fcl.Intersects(X_WT, RigidTransform{}));
+    const PoseTruth t = rig.truth.At(X_WT, RigidTransform{}, RigidTransform{}, kK);
+    ASSERT_FALSE(t.patches.empty()) << "pose " << k;
+    EXPECT_GT(glm::length(t.F_T_W.force), 0.0) << "pose " << k;
+    // Per patch the two routes agree to 5 % plus the sampling's floor (0.05 mm²: patches of a
+    // fraction of a mm² are sampled by a few sub-triangles); over the pose to 3 % plus that floor.
+    glm::dvec3 tool_route(0.0), environment_route(0.0);
+    for (const TruthPatch& p : t.patches) {
+      EXPECT_GT(p.contact.linearization.depth_m, 0.0) << "pose " << k;
+      EXPECT_LT(glm::length(p.dV_dx_tool_W - p.dV_dx_environment_W),
+                0.05 * glm::length(p.dV_dx_environment_W) + 5e-8)
+          << "pose " << k;
+      tool_route += p.dV_dx_tool_W;
+      environment_route += p.dV_dx_environment_W;
+    }
+    EXPECT_LT(glm::length(tool_route - environment_route),
+              0.03 * glm::length(environment_route) + 5e-8)
+        << "pose " << k;
+    EXPECT_LT(AngleDeg(-t.dV_dx_W, t.F_T_W.force), 10.0) << "pose " << k;
+  }
+}
+
+}  // namespace
+}  // namespace ht
