@@ -67,7 +67,8 @@ class FrontierOutput : public ::testing::Test {
 };
 
 TEST_F(FrontierOutput, EveryFileIsThereAndNothingHalfWritten) {
-  for (const char* f : {"frontier.csv", "contacts.csv", "summary.md", "frontier.png"}) {
+  for (const char* f :
+       {"frontier.csv", "contacts.csv", "patches.csv", "summary.md", "frontier.png"}) {
     EXPECT_TRUE(std::filesystem::exists(dir_ + "/" + f)) << f;
   }
   for (const auto& e : std::filesystem::recursive_directory_iterator(dir_)) {
@@ -149,6 +150,63 @@ TEST_F(FrontierOutput, ForceErrorRecomputesFromTheContacts) {
     SCOPED_TRACE(row.at("scene") + " " + row.at("setting"));
     EXPECT_NEAR(std::sqrt(num / den), Num(row, "force_rel_rms"),
                 2e-3 * Num(row, "force_rel_rms") + 1e-6);
+    ++checked;
+  }
+  EXPECT_GE(checked, 4);
+}
+
+// The pipeline truth (issue 31): patches.csv has the columns to recompute each patch from the
+// meshes, every pose of the quick run (all intersect at full resolution) has a non-zero truth, and
+// frontier.csv's pipeline force error recomputes from patches.csv and contacts.csv (two routes).
+TEST_F(FrontierOutput, PipelineTruthOwnsItsPatchesAndItsErrorRecomputes) {
+  const Table p = ReadCsv(dir_ + "/patches.csv");
+  for (const char* n :
+       {"scene",     "pose_id",   "patch",     "tool",      "object",    "tool_px",
+        "tool_py",   "tool_pz",   "tool_qw",   "tool_qx",   "tool_qy",   "tool_qz",
+        "obj_px",    "obj_py",    "obj_pz",    "obj_qw",    "obj_qx",    "obj_qy",
+        "obj_qz",    "window_cx", "window_cy", "window_cz", "window_nx", "window_ny",
+        "window_nz", "window_ux", "window_uy", "window_uz", "window_extent_m", "delta_gt_m",
+        "fx_gt",     "fy_gt",     "fz_gt",     "tx_gt",     "ty_gt",     "tz_gt"}) {
+    EXPECT_NE(std::find(p.columns.begin(), p.columns.end(), n), p.columns.end()) << n;
+  }
+  ASSERT_FALSE(p.rows.empty());
+  std::map<std::string, std::map<int, std::array<double, 3>>> truth;  // scene → pose → F_gt
+  for (const auto& r : p.rows) {
+    EXPECT_GT(Num(r, "delta_gt_m"), 0.0);
+    auto& f = truth[r.at("scene")][static_cast<int>(Num(r, "pose_id"))];
+    f[0] += Num(r, "fx_gt");
+    f[1] += Num(r, "fy_gt");
+    f[2] += Num(r, "fz_gt");
+  }
+  const Table f = ReadCsv(dir_ + "/frontier.csv");
+  const Table c = ReadCsv(dir_ + "/contacts.csv");
+  int checked = 0;
+  for (const auto& row : f.rows) {
+    if (row.at("method") != "texture" || !row.at("skipped").empty()) continue;
+    const auto& gt = truth[row.at("scene")];
+    EXPECT_EQ(static_cast<double>(gt.size()), Num(row, "poses")) << row.at("scene");
+    std::map<int, std::array<double, 3>> method;
+    for (const auto& r : c.rows) {
+      if (r.at("scene") != row.at("scene") || r.at("setting") != row.at("setting")) continue;
+      auto& a = method[static_cast<int>(Num(r, "pose_id"))];
+      a[0] += Num(r, "fx");
+      a[1] += Num(r, "fy");
+      a[2] += Num(r, "fz");
+    }
+    double num = 0, den = 0;
+    for (const auto& [pose, g] : gt) {
+      const auto it = method.find(pose);
+      const std::array<double, 3> m = it == method.end() ? std::array<double, 3>{} : it->second;
+      for (int i = 0; i < 3; ++i) {
+        num += (m[i] - g[i]) * (m[i] - g[i]);
+        den += g[i] * g[i];
+      }
+    }
+    SCOPED_TRACE(row.at("scene") + " " + row.at("setting"));
+    ASSERT_GT(den, 0.0);
+    EXPECT_NEAR(std::sqrt(num / den), Num(row, "pipeline_force_rel_rms"),
+                2e-3 * Num(row, "pipeline_force_rel_rms") + 1e-6);
+    EXPECT_EQ(Num(row, "poses_force_without_truth"), 0.0);
     ++checked;
   }
   EXPECT_GE(checked, 4);

@@ -21,8 +21,10 @@ int main(int argc, char** argv) {
       "triangle count, CPU or GPU, GPU depth bits) and two baselines (coarse meshes without\n"
       "textures; full-resolution meshes through FCL) on in-contact poses of the seed's scenes,\n"
       "timed, and compared with the ground truth computed on the full-resolution meshes.\n"
-      "Writes OUT/frontier.csv, OUT/contacts.csv, OUT/meshes/*.glb, OUT/frontier.png and\n"
-      "OUT/summary.md (last)."};
+      "Errors against two truths: the pipeline truth (the full-resolution meshes' own contact\n"
+      "patches; OUT/patches.csv) and the texture stage's (the truth on each setting's windows).\n"
+      "Writes OUT/frontier.csv, OUT/contacts.csv, OUT/patches.csv, OUT/meshes/*.glb,\n"
+      "OUT/frontier.png and OUT/summary.md (last)."};
   ht::FrontierOptions options;
   std::vector<std::string> traces;
   options.cache_dir = ht::HapticModelCache::DefaultDir();
@@ -33,6 +35,9 @@ int main(int argc, char** argv) {
   std::string scene_list;
   for (const std::string& n : ht::BenchmarkSceneNames()) scene_list += " " + n;
   app.add_option("--scene", options.scenes, "scenes to run (repeatable):" + scene_list);
+  app.add_option("--setting", options.settings,
+                 "settings to run, by name (repeatable; default all), e.g. --setting default\n"
+                 "--setting grid100");
   app.add_option("--poses", options.poses,
                  "in-contact poses per scene (default 200; 12 with --quick)")
       ->check(CLI::Range(1, 100000));

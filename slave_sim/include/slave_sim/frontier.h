@@ -61,13 +61,16 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu);
 
 /// Options of a run.
 struct FrontierOptions {
-  /// Output folder (created). Written there: frontier.csv, contacts.csv, meshes/*.glb,
-  /// summary.md and (when matplotlib is there) frontier.png.
+  /// Output folder (created). Written there: frontier.csv, contacts.csv, patches.csv (the
+  /// pipeline truth's patches, contact_patch_truth.h), meshes/*.glb, summary.md and (when
+  /// matplotlib is there) frontier.png.
   std::string out_dir;
   /// Fewer poses and settings, and only the procedural scenes (fig75, fig76): minutes, for ctest.
   bool quick = false;
   /// Scenes to run (BenchmarkSceneNames() when empty).
   std::vector<std::string> scenes;
+  /// Settings to run, by name (all of FrontierSettings() when empty); an unknown name throws.
+  std::vector<std::string> settings;
   /// In-contact poses per scene (0 = 200, or 12 with quick).
   int poses = 0;
   /// Scene name → a run's trace.csv to take the poses from (else ScriptedContactPoses).
