@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <glm/gtc/quaternion.hpp>
@@ -14,6 +15,7 @@
 #include <string>
 
 #include "haptic_core/contact_model.h"
+#include "haptic_core/contact_windows.h"
 #include "haptic_core/demo/demo_scenes.h"
 #include "haptic_core/demo/procedural_models.h"
 #include "haptic_core/haptic_scene.h"
@@ -438,6 +440,94 @@ TEST(HardCases, NonFinitePosesFromTheNetwork) {
   Report("NaN or infinite poses from the network",
          "remote step: empty model; contact model: finite (zero) wrench; tool step: holds the "
          "tool, ok = false; safety: non-finite wrench becomes zero");
+}
+
+
+// Issue 31's grazing guard: a δ beyond what the coarse geometry allows is dropped and counted;
+// what it allows is kept (a genuinely deep press is: PenetrationDeeperThanTheTextureAmplitude).
+TEST(HardCases, GrazingGuardDropsDepthsTheCoarseGeometryCannotHold) {
+  std::array<ContactQuery, 3> queries{};
+  std::array<ContactLinearization, 3> results{};
+  queries[0].depth_bound_m = 1.2e-3;  // e.g. 0.4 mm coarse + 0.8 mm reach
+  results[0].depth_m = 18e-3;         // the sideways overlap along a grazing n (fig77: 18-34 mm)
+  queries[1].depth_bound_m = 1.2e-3;
+  results[1].depth_m = 1.1e-3;  // within the bound: kept
+  results[2].depth_m = 30e-3;   // no bound (+∞): kept
+  EXPECT_EQ(DropGrazingContacts(queries, results), 1);
+  EXPECT_TRUE(std::isinf(results[0].depth_m) && results[0].depth_m < 0.0);
+  EXPECT_EQ(results[1].depth_m, 1.1e-3);
+  EXPECT_EQ(results[2].depth_m, 30e-3);
+  // The remote step sets the bound from the cluster: a deep press keeps its contact and counts
+  // no drop; with the guard off the same force.
+  const HapticScene scene = MakeBlockOnGearScene();
+  RigidTransform X = BlockOnGearHomePose();
+  X.translation.z -= 0.5e-3 + 5e-3;
+  PipelineOptions on, off;
+  off.grazing_guard = false;
+  HapticTexturePipeline a(scene, on), b(scene, off);
+  StepTimings t;
+  const ContactModel ma = a.Step(X, 1, t), mb = b.Step(X, 1, t);
+  ASSERT_GE(ma.num_contacts, 1);
+  EXPECT_EQ(a.step_faults().grazing_dropped, 0);
+  EXPECT_EQ(ma.F_T_W_at_q0.force.z, mb.F_T_W_at_q0.force.z);
+  ASSERT_EQ(a.last_contact_queries().size(), 1u);
+  const double bound = a.last_contact_queries()[0].depth_bound_m;
+  EXPECT_TRUE(std::isfinite(bound));
+  EXPECT_GT(bound, ma.contacts[0].depth_m);
+  EXPECT_TRUE(std::isinf(b.last_contact_queries()[0].depth_bound_m));
+}
+
+// Issue 31: separated leaf pairs beyond their leaves' own texture reach start no contact (the
+// coarse query's tolerance adds a margin beyond the reach, so it finds them).
+TEST(HardCases, SeparatedPairsBeyondTheirTextureReachStartNoContact) {
+  const HapticScene scene = MakeBlockOnGearScene();
+  const double reach = scene.tool->OutwardReach() + scene.touchables[0].model->OutwardReach();
+  RigidTransform X = BlockOnGearHomePose();  // 0.5 mm above the gear's mean top line
+  X.translation.z += reach + 0.25e-3 - 0.5e-3;
+  PipelineOptions drop, keep;
+  keep.drop_unreachable_pairs = false;
+  HapticTexturePipeline a(scene, drop), b(scene, keep);
+  StepTimings ta, tb;
+  a.Step(X, 1, ta);
+  b.Step(X, 1, tb);
+  EXPECT_EQ(ta.leaf_pairs, 1);
+  EXPECT_EQ(tb.leaf_pairs, 1);
+  EXPECT_EQ(a.last_contact_queries().size(), 0u);
+  EXPECT_EQ(a.step_faults().unreachable_pairs, 1);
+  ASSERT_EQ(b.last_contact_queries().size(), 1u);
+  EXPECT_LT(b.last_linearizations()[0].depth_m, 0.0);  // it had no overlap anyway
+  // Within the reach the pair is kept.
+  X.translation.z -= 0.5e-3;
+  a.Step(X, 1, ta);
+  EXPECT_EQ(a.last_contact_queries().size(), 1u);
+}
+
+// Issue 31: a window sized from its cluster keeps the cell W/N of the smallest window.
+TEST(HardCases, WindowsSizedFromTheClusterKeepTheCell) {
+  const HapticScene scene = MakeBlockOnGearScene();
+  std::array<ContactCandidate, 3> c{};
+  for (auto& x : c) x.object = &scene.touchables[0];
+  c[0].extent_m = 0.0;    // the smallest window
+  c[1].extent_m = 0.031;  // between
+  c[2].extent_m = 0.09;   // beyond the largest
+  c[1].depth_bound_m = 2e-3;
+  std::array<ContactQuery, 3> out{};
+  std::int64_t bad = 0;
+  ASSERT_EQ(MakeContactQueries(c, 0.02, 0.04, 50, out, bad), 3);
+  EXPECT_EQ(out[0].window.extent_m, 0.02);
+  EXPECT_EQ(out[0].window.resolution, 50);
+  EXPECT_EQ(out[1].window.extent_m, 0.031);
+  EXPECT_EQ(out[1].window.resolution, 78);  // ceil(50 · 0.031 / 0.02)
+  EXPECT_LE(out[1].window.cell_size_m(), 0.02 / 50);
+  EXPECT_EQ(out[2].window.extent_m, 0.04);
+  EXPECT_EQ(out[2].window.resolution, 100);
+  EXPECT_EQ(out[1].depth_bound_m, 2e-3);
+  EXPECT_EQ(bad, 0);
+  PipelineOptions o;
+  o.max_window_extent_m = 0.04;
+  EXPECT_EQ(o.max_window_resolution(), 100);
+  o.max_window_extent_m = 0.01;
+  EXPECT_THROW(o.Validate(), std::invalid_argument);
 }
 
 }  // namespace

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <limits>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -29,6 +30,11 @@ void PipelineOptions::Validate() const {
     throw std::invalid_argument("proximity margin must be >= 0, got " +
                                 std::to_string(proximity_margin_m));
   }
+  if (!(max_window_extent_m >= window_extent_m) || !std::isfinite(max_window_extent_m)) {
+    throw std::invalid_argument("max window extent must be >= the window extent (" +
+                                std::to_string(window_extent_m) + "), got " +
+                                std::to_string(max_window_extent_m));
+  }
   if (max_contacts < 1 || max_contacts > kMaxContacts) {
     throw std::invalid_argument("max contacts must be in [1, " + std::to_string(kMaxContacts) +
                                 "], got " + std::to_string(max_contacts));
@@ -37,6 +43,12 @@ void PipelineOptions::Validate() const {
     throw std::invalid_argument("texture threads must be in [1, 256], got " +
                                 std::to_string(texture_threads));
   }
+}
+
+int PipelineOptions::max_window_resolution() const noexcept {
+  if (!(window_extent_m > 0.0) || !(max_window_extent_m >= window_extent_m)) return grid_resolution;
+  return std::min(1024, static_cast<int>(std::ceil(
+                            grid_resolution * max_window_extent_m / window_extent_m - 1e-9)));
 }
 
 int DefaultTextureThreads() noexcept {
@@ -49,6 +61,7 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
                                              std::unique_ptr<PenetrationDepthBackend> backend)
     : scene_(scene), options_(options), backend_(std::move(backend)) {
   options_.Validate();
+  reachable_pairs_.resize(static_cast<std::size_t>(clusterer_.max_pairs()));
   queries_.reserve(scene.touchables.size());
   for (std::size_t i = 0; i < scene.touchables.size(); ++i) {
     queries_.emplace_back();
@@ -95,9 +108,16 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   // can show it after the step.
   last_num_queries_ = MakeContactQueries(
       {candidates_.data(), static_cast<std::size_t>(num_candidates_)}, options_.window_extent_m,
-      options_.grid_resolution, last_queries_, step_faults_.bad_windows);
+      options_.max_window_extent_m, options_.grid_resolution, last_queries_,
+      step_faults_.bad_windows);
   // Stage 5: texture penetration depth and its gradient, linearized, for the whole batch.
   LinearizeContacts(X_WT, last_num_queries_);
+  // The grazing guard: a δ its coarse geometry cannot hold is the sideways overlap along a
+  // grazing direction, not a penetration; the contact is left out of the model (its linearization
+  // reads −∞, as a contact whose patches do not overlap).
+  step_faults_.grazing_dropped += DropGrazingContacts(
+      {last_queries_.data(), static_cast<std::size_t>(last_num_queries_)},
+      {last_results_.data(), static_cast<std::size_t>(last_num_queries_)});
   // Stage 6: the contact model.
   AssembleContactModel(last_linearizations(), model);
   const auto t2 = Clock::now();
@@ -126,26 +146,48 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
     // 2. Hull proximity: leaf hull pairs within the tolerance.
     query.time_budget_us = options_.collision_budget_us;
     ProximityQueryStats stats;
-    const std::span<const HullPairContact> pairs =
+    std::span<const HullPairContact> pairs =
         queries_[k].Query(tool, X_WT, *object.model, object.X_WO, query, &stats);
     ++timings.convex_pairs;
     timings.leaf_pairs += static_cast<int>(pairs.size());
     timings.collision_budget_exhausted |= stats.budget_exhausted;
+    // Separated pairs beyond their two leaves' own texture reach cannot touch through the
+    // textures: they start no cluster (issue 31; they would only add windows with no overlap).
+    if (options_.drop_unreachable_pairs) {
+      std::size_t kept = 0;
+      for (const HullPairContact& p : pairs) {
+        if (kept == reachable_pairs_.size()) break;
+        if (p.signed_distance_m > 0.0 &&
+            p.signed_distance_m > queries_[k].NodeReach(tool, p.node_A) +
+                                      queries_[k].NodeReach(*object.model, p.node_B)) {
+          ++step_faults_.unreachable_pairs;
+          continue;
+        }
+        reachable_pairs_[kept++] = p;
+      }
+      pairs = {reachable_pairs_.data(), kept};
+    }
     if (pairs.empty()) continue;
-    // 3. Contact clustering: one window per cluster, all of the pipeline's window size; clusters
-    // whose windows would overlap merge, so no texture region is rendered in two windows.
+    // 3. Contact clustering: one window per cluster, sized from its members' spread between the
+    // pipeline's smallest and largest window; clusters whose windows would overlap merge while
+    // the merged window fits, so that a texture region is rarely rendered in two windows.
     ClusteringOptions clustering;
     clustering.merge_distance_m = options_.clustering_distance_m;
     clustering.max_normal_angle_deg = options_.clustering_angle_deg;
     clustering.texture_margin_m = reach;
-    clustering.min_extent_m = clustering.max_extent_m = options_.window_extent_m;
+    clustering.min_extent_m = options_.window_extent_m;
+    clustering.max_extent_m = options_.max_window_extent_m;
     clustering.max_contacts = options_.max_contacts;
     const std::span<const ContactCluster> clusters =
         clusterer_.Cluster(pairs, tool.hull_hierarchy, object.model->hull_hierarchy, clustering);
     timings.clusters += static_cast<int>(clusters.size());
+    const double cell = options_.window_extent_m / options_.grid_resolution;
     for (const ContactCluster& c : clusters) {
       if (num_candidates_ < options_.max_contacts) {
-        candidates_[num_candidates_++] = {&object, c.point_W, c.normal_W};
+        const double bound = options_.grazing_guard
+                                 ? std::max(0.0, -c.min_signed_distance_m) + reach + cell
+                                 : std::numeric_limits<double>::infinity();
+        candidates_[num_candidates_++] = {&object, c.point_W, c.normal_W, c.extent_m, bound};
       }
     }
   }
@@ -153,7 +195,7 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
 
 std::unique_ptr<PenetrationDepthBackend> HapticTexturePipeline::MakeCpuBackend() const {
   return std::make_unique<CpuPenetrationDepthBackend>(
-      options_.grid_resolution, TextureStagePath::kFast, options_.texture_threads,
+      options_.max_window_resolution(), TextureStagePath::kFast, options_.texture_threads,
       options_.rotation_gradient);
 }
 

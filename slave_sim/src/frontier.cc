@@ -113,6 +113,24 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     local_seven_two.name = "local_contacts7_threads2";
     local_seven_two.local_reach = true;
     s.push_back(local_seven_two);
+    // Issue 31's changes one at a time, off: their own effect on the pipeline error.
+    FrontierSetting no_guard = base;
+    no_guard.name = "no_grazing_guard";
+    no_guard.grazing_guard = false;
+    s.push_back(no_guard);
+    FrontierSetting sized = base;
+    sized.name = "windows_from_clusters";
+    sized.max_window_extent_m = 2.0 * PipelineOptions{}.window_extent_m;
+    s.push_back(sized);
+    FrontierSetting keep_pairs = base;
+    keep_pairs.name = "keep_unreachable_pairs";
+    keep_pairs.drop_unreachable_pairs = false;
+    s.push_back(keep_pairs);
+    FrontierSetting before = no_guard;
+    before.name = "issue31_before";
+    before.max_window_extent_m = PipelineOptions{}.window_extent_m;
+    before.drop_unreachable_pairs = false;
+    s.push_back(before);
     // Every speed option at once: the warped rotations, local reach, at most 7 contacts, two
     // threads.
     FrontierSetting fast = warp;
@@ -313,6 +331,9 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.max_contacts = st.max_contacts;
   options.local_reach = st.local_reach;
   options.rotation_gradient = st.rotation_gradient;
+  options.grazing_guard = st.grazing_guard;
+  if (st.max_window_extent_m > 0.0) options.max_window_extent_m = st.max_window_extent_m;
+  options.drop_unreachable_pairs = st.drop_unreachable_pairs;
   // The texture stage's threads are the coarse query's too, as in the product.
   options.texture_threads = st.texture_threads;
   HapticTexturePipeline pipeline(scene.haptic, options, std::move(backend));

@@ -70,7 +70,14 @@ int main(int argc, char** argv) {
                  "penetration-depth grid N (N x N cells per contact)")
       ->check(CLI::Range(2, 1024))
       ->capture_default_str();
-  app.add_option("--window", config.pipeline.window_extent_m, "contact window side W in metres")
+  app.add_option("--window", config.pipeline.window_extent_m,
+                 "smallest contact window side W in metres (with the grid N: the cell W/N)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--max-window", config.pipeline.max_window_extent_m,
+                 "largest contact window side in metres: a cluster spread wider than W gets a\n"
+                 "window sized to it at the same cell (N grows with it); overlapping windows with\n"
+                 "agreeing normals merge while they fit. Equal to --window: every window W x W")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   config.pipeline.texture_threads = ht::DefaultTextureThreads();
@@ -87,6 +94,12 @@ int main(int argc, char** argv) {
                  "instead of seven times and are approximations: see docs/frontier/issue15")
       ->check(CLI::IsMember({"rendered", "warp", "lever"}))
       ->capture_default_str();
+  bool no_grazing_guard = false;
+  app.add_flag("--no-grazing-guard", no_grazing_guard,
+               "keep contacts whose depth exceeds what their coarse geometry allows (the\n"
+               "cluster's hull penetration + both texture reaches + a cell); by default they are\n"
+               "dropped and counted (remote_summary.json grazing_dropped_contacts): along a\n"
+               "grazing direction the depth is a sideways overlap, not a penetration");
   app.add_option("--pd-backend", pd_backend,
                  "where the texture penetration depth runs: cpu (software rasterizer), gpu\n"
                  "(headless EGL, OpenGL ES 3.1; Mesa llvmpipe when there is no GPU), or auto (a\n"
@@ -261,6 +274,7 @@ int main(int argc, char** argv) {
     config.listen_address = ht::SocketAddress::Parse(listen);
     config.pd_backend = ht::ParsePdBackendChoice(pd_backend);
     config.pipeline.rotation_gradient = ht::ParseRotationGradient(rotation_gradient);
+    config.pipeline.grazing_guard = !no_grazing_guard;
     if (config.pipeline.rotation_gradient != ht::RotationGradient::kRenderedSamples) {
       if (config.pd_backend == ht::PdBackendChoice::kGpu) {
         throw std::invalid_argument("--rotation-gradient " + rotation_gradient +

@@ -39,7 +39,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   }
   std::string backend_message;
   std::unique_ptr<PenetrationDepthBackend> backend = MakePenetrationDepthBackend(
-      config.pd_backend, config.gpu, config.pipeline.grid_resolution, backend_message,
+      config.pd_backend, config.gpu, config.pipeline.max_window_resolution(), backend_message,
       config.pipeline.texture_threads, config.pipeline.rotation_gradient);
   std::string gl_renderer, gl_version, gl_vendor;
   bool gpu_instanced_draws = false;
@@ -235,9 +235,13 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   s["tool_state_gap_max_ms"] = session.tool_state_gap_max_ns() * 1e-6;
   s["grid_resolution"] = config.pipeline.grid_resolution;
   s["window_extent_m"] = config.pipeline.window_extent_m;
+  s["max_window_extent_m"] = config.pipeline.max_window_extent_m;
   s["texture_threads"] = config.pipeline.texture_threads;
   s["rotation_gradient"] = ToString(config.pipeline.rotation_gradient);
   s["linearization_missing_overlap"] = pipeline->faults().missing_overlap;
+  s["grazing_guard"] = config.pipeline.grazing_guard;
+  s["grazing_dropped_contacts"] = pipeline->step_faults().grazing_dropped;
+  s["unreachable_pairs_dropped"] = pipeline->step_faults().unreachable_pairs;
   s["pd_backend"] = {{"requested", ToString(config.pd_backend)},
                      {"used", backend_at_start},
                      {"used_at_end", std::string(pipeline->backend().name())},

@@ -7,6 +7,7 @@
 
 #include <cstdint>
 #include <glm/vec3.hpp>
+#include <limits>
 #include <span>
 
 #include "haptic_core/haptic_scene.h"
@@ -20,14 +21,29 @@ struct ContactCandidate {
   const TouchableObject* object = nullptr;
   glm::dvec3 point_W{0.0};
   glm::dvec3 normal_W{0.0, 0.0, 1.0};
+  /// The cluster's window side (m; ContactCluster::extent_m): the members' spread plus the
+  /// texture margin. 0: the minimum side.
+  double extent_m = 0.0;
+  /// The largest δ the coarse geometry allows (m; ContactQuery::depth_bound_m), +∞ for none.
+  double depth_bound_m = std::numeric_limits<double>::infinity();
 };
 
-/// Writes one query per candidate into `out`, in order, with windows of extent W (m) and an N×N
-/// grid (ContactWindow::TryMake). Candidates with a non-finite point, a zero or non-finite normal
+/// Writes one query per candidate into `out`, in order (ContactWindow::TryMake): the window's side
+/// is the candidate's extent_m clamped to [window_extent_m, max_window_extent_m] (m), and its grid
+/// N = ceil(grid_resolution · side / window_extent_m), so that every window keeps the cell
+/// window_extent_m / grid_resolution (issue 31: a window sized from its contact region, at the
+/// texture's cell). Candidates with a non-finite point, a zero or non-finite normal
 /// or a null object are skipped and counted in `bad_windows`. Stops when `out` is full. Returns
 /// the number of queries written. noexcept, allocation-free.
 int MakeContactQueries(std::span<const ContactCandidate> candidates, double window_extent_m,
-                       int grid_resolution, std::span<ContactQuery> out,
+                       double max_window_extent_m, int grid_resolution,
+                       std::span<ContactQuery> out,
                        std::int64_t& bad_windows) noexcept;
+
+/// The grazing guard (issue 31): a contact whose δ0 exceeds its query's depth_bound_m (what its
+/// coarse geometry allows) gets depth_m = −∞, so that the contact model leaves it out. Returns how
+/// many were dropped. noexcept, allocation-free; `queries` and `results` are parallel.
+int DropGrazingContacts(std::span<const ContactQuery> queries,
+                        std::span<ContactLinearization> results) noexcept;
 
 }  // namespace ht

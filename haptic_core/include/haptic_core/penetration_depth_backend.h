@@ -3,6 +3,7 @@
 // reference, or the GPU (haptic_core_gpu). Both take the same batch and give the same numbers to
 // within the GPU's depth quantum.
 
+#include <limits>
 #include <memory>
 #include <span>
 #include <string>
@@ -23,6 +24,10 @@ struct ContactQuery {
   RigidTransform X_WO;
   ContactWindow window;
   double stiffness_n_per_m = 0.0;
+  /// The largest δ the coarse geometry allows this contact (m): the cluster's coarse penetration
+  /// plus both models' outward texture reach plus a cell (issue 31's grazing guard); +∞ for none.
+  /// The backends ignore it; the remote step drops a contact whose δ0 exceeds it.
+  double depth_bound_m = std::numeric_limits<double>::infinity();
 };
 
 /// Computes, for all contacts of one remote step, δ and its gradient (kGradientSamples depth

@@ -22,7 +22,15 @@ namespace ht {
 /// Options of the per-step pipeline.
 struct PipelineOptions {
   int grid_resolution = 50;            ///< N of the penetration-depth grid (seed: 50).
-  double window_extent_m = 0.02;       ///< W of each contact window (m).
+  /// W of each contact window (m): the smallest side, with the grid's N. A cluster whose members
+  /// spread further gets a window sized to them (up to max_window_extent_m) at the same cell W/N.
+  double window_extent_m = 0.02;
+  /// Largest window side (m), ≥ window_extent_m; windows whose normals agree and overlap merge while
+  /// the merged window fits it (contact clustering's pass 2), so that one texture region is not
+  /// rendered in several windows. Equal to window_extent_m (the default): every window W×W. Larger
+  /// is an option placed on the speed-vs-error frontier ("windows_from_clusters": at 4 cm it was
+  /// less accurate and slower on fig77, docs/frontier/issue31).
+  double max_window_extent_m = 0.02;
   double proximity_margin_m = 0.5e-3;  ///< Extra coarse tolerance beyond both texture reaches (m).
   /// Time budget of the coarse query per tool–object pair (µs; 0 = none): most important node
   /// pairs first, the step reports when it stopped early.
@@ -51,9 +59,22 @@ struct PipelineOptions {
   /// unchanged). Both are approximations, placed on the speed-vs-error frontier
   /// ("rotation_lever", "rotation_warp"). GPU backends ignore it.
   RotationGradient rotation_gradient = RotationGradient::kRenderedSamples;
+  /// Grazing guard (issue 31): a contact whose δ0 exceeds what its coarse geometry allows (the
+  /// cluster's deepest hull-pair penetration + both models' outward texture reach + a cell) is
+  /// dropped and counted (StepFaults::grazing_dropped). Along a direction nearly parallel to the
+  /// surfaces the patches are no height fields and δ measures the sideways overlap, bounded only
+  /// by the window's box (DESIGN.md §4, docs/hard-cases.md). Off: every contact is kept.
+  bool grazing_guard = true;
+  /// Separated leaf pairs farther apart than their two leaves' own outward texture reach
+  /// (HullProximityQuery::NodeReach) start no cluster (issue 31): they cannot touch through the
+  /// textures, and would only add windows without overlap. Off: every pair the query found.
+  bool drop_unreachable_pairs = true;
 
   /// Throws std::invalid_argument naming a value out of range.
   void Validate() const;
+  /// The largest grid N a window of these options can have: ceil(N · max_window_extent_m /
+  /// window_extent_m), at most 1024 (size the penetration-depth backend with it).
+  int max_window_resolution() const noexcept;
 };
 
 /// Texture threads that leave one core free: hardware threads − 1, at least 1, at most 16.
@@ -109,6 +130,11 @@ class HapticTexturePipeline {
   struct StepFaults {
     /// Clusters whose window could not be set up (non-finite point, zero normal): skipped.
     std::int64_t bad_windows = 0;
+    /// Contacts dropped by the grazing guard (PipelineOptions::grazing_guard).
+    std::int64_t grazing_dropped = 0;
+    /// Separated leaf pairs beyond their local texture reach, left out of clustering
+    /// (PipelineOptions::drop_unreachable_pairs).
+    std::int64_t unreachable_pairs = 0;
   };
   const StepFaults& step_faults() const noexcept { return step_faults_; }
   /// The backend in use: the one given, or the CPU backend after that one failed.
@@ -156,6 +182,9 @@ class HapticTexturePipeline {
   glm::dvec4 tool_sphere_O_{0.0};
   std::vector<glm::dvec4> object_spheres_O_;
   ContactClusterer clusterer_;
+  /// The leaf pairs within their local texture reach (PipelineOptions::drop_unreachable_pairs),
+  /// as many as the clusterer takes.
+  std::vector<HullPairContact> reachable_pairs_;
   std::array<ContactCandidate, kMaxContacts> candidates_{};
   int num_candidates_ = 0;
   std::array<ContactQuery, kMaxContacts> last_queries_{};

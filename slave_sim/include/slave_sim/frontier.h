@@ -45,6 +45,12 @@ struct FrontierSetting {
   bool local_reach = false;
   /// PipelineOptions::rotation_gradient (CPU only).
   RotationGradient rotation_gradient = RotationGradient::kRenderedSamples;
+  /// PipelineOptions::grazing_guard ("no_grazing_guard" turns it off: issue 31's before).
+  bool grazing_guard = true;
+  /// PipelineOptions::max_window_extent_m (0: the default). "windows_from_clusters": up to 2W.
+  double max_window_extent_m = 0.0;
+  /// PipelineOptions::drop_unreachable_pairs ("keep_unreachable_pairs" turns it off).
+  bool drop_unreachable_pairs = true;
 };
 
 /// The sweep: the default setting (grid 50, 1024² textures, the seed's coarse counts, CPU) first,
