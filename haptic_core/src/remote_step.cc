@@ -184,13 +184,50 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
     const double cell = options_.window_extent_m / options_.grid_resolution;
     for (const ContactCluster& c : clusters) {
       if (num_candidates_ < options_.max_contacts) {
+        const glm::dvec3 normal_W =
+            options_.region_normals ? RegionNormal(c, tool, X_WT, object) : c.normal_W;
         const double bound = options_.grazing_guard
                                  ? std::max(0.0, -c.min_signed_distance_m) + reach + cell
                                  : std::numeric_limits<double>::infinity();
-        candidates_[num_candidates_++] = {&object, c.point_W, c.normal_W, c.extent_m, bound};
+        const double extent = options_.size_windows_from_clusters ? c.extent_m : 0.0;
+        candidates_[num_candidates_++] = {&object, c.point_W, normal_W, extent, bound};
       }
     }
   }
+}
+
+glm::dvec3 HapticTexturePipeline::RegionNormal(const ContactCluster& c, const HapticModel& tool,
+                                               const RigidTransform& X_WT,
+                                               const TouchableObject& object) const noexcept {
+  const glm::dvec3 n0 = c.normal_W;
+  // The footprint: the window's square around the cluster point on the plane ⟂ n0.
+  const double half = 0.5 * std::max(options_.window_extent_m, c.extent_m);
+  const glm::dvec3 ref = std::abs(n0.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0);
+  const glm::dvec3 u = glm::normalize(ref - glm::dot(ref, n0) * n0);
+  const glm::dvec3 v = glm::cross(n0, u);
+  glm::dvec3 sum(0.0);
+  const auto add = [&](const HapticModel& m, const RigidTransform& X, std::span<const int> tris,
+                       double sign) {
+    const int nf = static_cast<int>(m.triangles.size());
+    for (const int f : tris) {
+      if (f < 0 || f >= nf) continue;
+      const glm::ivec3 t = m.triangles[f];
+      const glm::dvec3 p0 = X * m.vertices_O[t[0]], p1 = X * m.vertices_O[t[1]],
+                       p2 = X * m.vertices_O[t[2]];
+      const glm::dvec3 d = (p0 + p1 + p2) / 3.0 - c.point_W;
+      if (std::abs(glm::dot(d, u)) > half || std::abs(glm::dot(d, v)) > half ||
+          std::abs(glm::dot(d, n0)) > 2.0 * half) {
+        continue;
+      }
+      sum += sign * 0.5 * glm::cross(p1 - p0, p2 - p0);  // area × outward normal
+    }
+  };
+  if (!c.object_whole_model) add(*object.model, object.X_WO, c.object_triangles, 1.0);
+  if (!c.tool_whole_model) add(tool, X_WT, c.tool_triangles, -1.0);
+  const double len = glm::length(sum);
+  if (!(len > 0.0) || !std::isfinite(len)) return n0;
+  const glm::dvec3 n = sum / len;
+  return glm::dot(n, n0) > 0.0 ? n : n0;
 }
 
 std::unique_ptr<PenetrationDepthBackend> HapticTexturePipeline::MakeCpuBackend() const {

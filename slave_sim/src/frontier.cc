@@ -122,14 +122,23 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     sized.name = "windows_from_clusters";
     sized.max_window_extent_m = 2.0 * PipelineOptions{}.window_extent_m;
     s.push_back(sized);
+    FrontierSetting merged = sized;
+    merged.name = "merge_clusters_fixed_windows";
+    merged.size_windows_from_clusters = false;
+    s.push_back(merged);
     FrontierSetting keep_pairs = base;
     keep_pairs.name = "keep_unreachable_pairs";
     keep_pairs.drop_unreachable_pairs = false;
     s.push_back(keep_pairs);
+    FrontierSetting region = base;
+    region.name = "region_normals";
+    region.region_normals = true;
+    s.push_back(region);
     FrontierSetting before = no_guard;
     before.name = "issue31_before";
     before.max_window_extent_m = PipelineOptions{}.window_extent_m;
     before.drop_unreachable_pairs = false;
+    before.region_normals = false;
     s.push_back(before);
     // Every speed option at once: the warped rotations, local reach, at most 7 contacts, two
     // threads.
@@ -334,6 +343,8 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.grazing_guard = st.grazing_guard;
   if (st.max_window_extent_m > 0.0) options.max_window_extent_m = st.max_window_extent_m;
   options.drop_unreachable_pairs = st.drop_unreachable_pairs;
+  options.region_normals = st.region_normals;
+  options.size_windows_from_clusters = st.size_windows_from_clusters;
   // The texture stage's threads are the coarse query's too, as in the product.
   options.texture_threads = st.texture_threads;
   HapticTexturePipeline pipeline(scene.haptic, options, std::move(backend));

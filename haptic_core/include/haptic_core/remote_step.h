@@ -31,6 +31,10 @@ struct PipelineOptions {
   /// is an option placed on the speed-vs-error frontier ("windows_from_clusters": at 4 cm it was
   /// less accurate and slower on fig77, docs/frontier/issue31).
   double max_window_extent_m = 0.02;
+  /// True: a window's side is its cluster's extent (between window_extent_m and
+  /// max_window_extent_m, N scaled to keep the cell). False: every window is window_extent_m wide
+  /// around its cluster's point, however far its (merged) members spread.
+  bool size_windows_from_clusters = true;
   double proximity_margin_m = 0.5e-3;  ///< Extra coarse tolerance beyond both texture reaches (m).
   /// Time budget of the coarse query per tool–object pair (µs; 0 = none): most important node
   /// pairs first, the step reports when it stopped early.
@@ -69,6 +73,15 @@ struct PipelineOptions {
   /// (HullProximityQuery::NodeReach) start no cluster (issue 31): they cannot touch through the
   /// textures, and would only add windows without overlap. Off: every pair the query found.
   bool drop_unreachable_pairs = true;
+  /// The contact direction from the contact region (issue 31, after Kim, Otaduy, Lin & Manocha
+  /// 2003's per-cluster penetration direction): n = normalize(Σ a·n over the cluster's own coarse
+  /// triangles of the object − Σ a·n over its tool triangles), each within the window's footprint
+  /// around the cluster point, instead of the mean of its hull pairs' normals (one pair's smallest
+  /// support overlap, which on thin hulls is a side face). Kept when the region has no triangle
+  /// list (a model without hierarchy) or its sum points away from the pairs' normal. Off (the
+  /// default): the pairs' normal. On the frontier ("region_normals", docs/frontier/issue31) it was
+  /// no more accurate: fig77 about the same, the hammer on the torus worse.
+  bool region_normals = false;
 
   /// Throws std::invalid_argument naming a value out of range.
   void Validate() const;
@@ -168,6 +181,10 @@ class HapticTexturePipeline {
   /// Stage 5: linearizes last_queries_[0, n) into last_results_ with the backend in use; when that
   /// backend fails, switches to the CPU backend for good and recomputes the batch.
   void LinearizeContacts(const RigidTransform& X_WT, int n);
+  /// PipelineOptions::region_normals: the direction of cluster `c` from its own coarse triangles
+  /// (the tool at X_WT, `object` at its pose), or c.normal_W when they give none.
+  glm::dvec3 RegionNormal(const ContactCluster& c, const HapticModel& tool,
+                          const RigidTransform& X_WT, const TouchableObject& object) const noexcept;
   /// The CPU backend of these options (fast path, texture_threads threads).
   std::unique_ptr<PenetrationDepthBackend> MakeCpuBackend() const;
 

@@ -51,6 +51,10 @@ struct FrontierSetting {
   double max_window_extent_m = 0.0;
   /// PipelineOptions::drop_unreachable_pairs ("keep_unreachable_pairs" turns it off).
   bool drop_unreachable_pairs = true;
+  /// PipelineOptions::region_normals ("region_normals" turns it on).
+  bool region_normals = false;
+  /// PipelineOptions::size_windows_from_clusters.
+  bool size_windows_from_clusters = true;
 };
 
 /// The sweep: the default setting (grid 50, 1024² textures, the seed's coarse counts, CPU) first,
