@@ -119,7 +119,8 @@ struct StepTimings {
 ///     clusters, each a point and a normal;
 ///  4. contact windows (contact_windows.h): one ContactQuery per cluster;
 ///  5. texture penetration depth and linearization (penetration_depth_backend.h, one batch for
-///     all contacts; the GPU backend falls back to the CPU backend if it fails);
+///     all contacts; the GPU backend falls back to the CPU backend if it fails), then the grazing
+///     guard (contact_windows.h: DropGrazingContacts);
 ///  6. assembly (contact_assembly.h): the contact model and its wrench at q0.
 /// Nothing in it throws after construction (faults are counted), and after warm-up it does not
 /// allocate. Holds preallocated scratch; not thread-safe, and must be stepped on the thread that
