@@ -82,7 +82,8 @@ TEST_F(FrontierOutput, EveryFileIsThereAndNothingHalfWritten) {
   std::stringstream text;
   text << md.rdbuf();
   EXPECT_NE(text.str().find("## fig75"), std::string::npos);
-  EXPECT_NE(text.str().find("Ground truth:"), std::string::npos);
+  EXPECT_NE(text.str().find("Texture-stage ground truth:"), std::string::npos);
+  EXPECT_NE(text.str().find("Pipeline truth:"), std::string::npos);
 }
 
 TEST_F(FrontierOutput, ContactsCsvHasTheColumnsToRecomputeAGroundTruth) {
