@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <glm/geometric.hpp>
+#include <limits>
 #include <numbers>
 #include <stdexcept>
 #include <string>
@@ -149,6 +150,7 @@ void ContactClusterer::Absorb(int into, int from) noexcept {
   a.sum_wn_W += b.sum_wn_W;
   a.sum_w += b.sum_w;
   a.min_signed_distance_m = std::min(a.min_signed_distance_m, b.min_signed_distance_m);
+  a.depth_bound_m = std::max(a.depth_bound_m, b.depth_bound_m);
   a.num_pairs += b.num_pairs;
   b.alive = false;
   b.head = b.tail = -1;
@@ -212,7 +214,14 @@ int ContactClusterer::AssignTriangles(const ConvexHullHierarchy& hulls, bool too
 
 std::span<const ContactCluster> ContactClusterer::Cluster(
     std::span<const HullPairContact> pairs, const ConvexHullHierarchy& tool_hulls,
-    const ConvexHullHierarchy& object_hulls, const ClusteringOptions& options) noexcept {
+    const ConvexHullHierarchy& object_hulls, const ClusteringOptions& options,
+    std::span<const double> pair_depth_bound_m) noexcept {
+  const bool bounds = pair_depth_bound_m.size() == pairs.size();
+  const auto bound_of = [&](int input_index) {
+    if (!bounds) return std::numeric_limits<double>::infinity();
+    const double b = pair_depth_bound_m[static_cast<std::size_t>(input_index)];
+    return std::isnan(b) ? std::numeric_limits<double>::infinity() : b;
+  };
   stats_ = {};
   stats_.input_pairs = static_cast<int>(std::min<std::size_t>(pairs.size(), 1u << 30));
   if (!options.IsValid()) {
@@ -285,6 +294,7 @@ std::span<const ContactCluster> ContactClusterer::Cluster(
       c.sum_wn_W = wn;
       c.sum_w = rec.weight_m;
       c.min_signed_distance_m = rec.signed_distance_m;
+      c.depth_bound_m = bound_of(rec.input_index);
       c.num_pairs = 1;
       c.head = c.tail = r;
       c.alive = true;
@@ -298,6 +308,7 @@ std::span<const ContactCluster> ContactClusterer::Cluster(
     c.sum_wn_W += wn;
     c.sum_w += rec.weight_m;
     c.min_signed_distance_m = std::min(c.min_signed_distance_m, rec.signed_distance_m);
+    c.depth_bound_m = std::max(c.depth_bound_m, bound_of(rec.input_index));
     ++c.num_pairs;
     records_[c.tail].next = r;
     c.tail = r;
@@ -382,6 +393,7 @@ std::span<const ContactCluster> ContactClusterer::Cluster(
     out.normal_W = w.normal_W;
     out.extent_m = w.extent_m;
     out.min_signed_distance_m = w.min_signed_distance_m;
+    out.depth_bound_m = w.depth_bound_m;
     out.total_weight_m = w.sum_w;
     out.num_pairs = w.num_pairs;
   }

@@ -62,6 +62,7 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
     : scene_(scene), options_(options), backend_(std::move(backend)) {
   options_.Validate();
   reachable_pairs_.resize(static_cast<std::size_t>(clusterer_.max_pairs()));
+  pair_bounds_.resize(static_cast<std::size_t>(clusterer_.max_pairs()));
   queries_.reserve(scene.touchables.size());
   for (std::size_t i = 0; i < scene.touchables.size(); ++i) {
     queries_.emplace_back();
@@ -168,6 +169,20 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
       pairs = {reachable_pairs_.data(), kept};
     }
     if (pairs.empty()) continue;
+    // The grazing guard's bound per pair: its hull penetration plus its two leaves' own texture
+    // reach plus a cell (a cluster takes its members' largest).
+    const double cell = options_.window_extent_m / options_.grid_resolution;
+    std::span<const double> pair_bounds;
+    if (options_.grazing_guard && options_.grazing_guard_local_reach &&
+        pairs.size() <= pair_bounds_.size()) {
+      for (std::size_t i = 0; i < pairs.size(); ++i) {
+        const HullPairContact& p = pairs[i];
+        pair_bounds_[i] = std::max(0.0, -p.signed_distance_m) +
+                          queries_[k].NodeReach(tool, p.node_A) +
+                          queries_[k].NodeReach(*object.model, p.node_B) + cell;
+      }
+      pair_bounds = {pair_bounds_.data(), pairs.size()};
+    }
     // 3. Contact clustering: one window per cluster, sized from its members' spread between the
     // pipeline's smallest and largest window; clusters whose windows would overlap merge while
     // the merged window fits, so that a texture region is rarely rendered in two windows.
@@ -179,16 +194,17 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
     clustering.max_extent_m = options_.max_window_extent_m;
     clustering.max_contacts = options_.max_contacts;
     const std::span<const ContactCluster> clusters =
-        clusterer_.Cluster(pairs, tool.hull_hierarchy, object.model->hull_hierarchy, clustering);
+        clusterer_.Cluster(pairs, tool.hull_hierarchy, object.model->hull_hierarchy, clustering,
+                           pair_bounds);
     timings.clusters += static_cast<int>(clusters.size());
-    const double cell = options_.window_extent_m / options_.grid_resolution;
     for (const ContactCluster& c : clusters) {
       if (num_candidates_ < options_.max_contacts) {
         const glm::dvec3 normal_W =
             options_.region_normals ? RegionNormal(c, tool, X_WT, object) : c.normal_W;
-        const double bound = options_.grazing_guard
-                                 ? std::max(0.0, -c.min_signed_distance_m) + reach + cell
-                                 : std::numeric_limits<double>::infinity();
+        const double bound =
+            !options_.grazing_guard        ? std::numeric_limits<double>::infinity()
+            : std::isfinite(c.depth_bound_m) ? c.depth_bound_m
+                                             : std::max(0.0, -c.min_signed_distance_m) + reach + cell;
         const double extent = options_.size_windows_from_clusters ? c.extent_m : 0.0;
         candidates_[num_candidates_++] = {&object, c.point_W, normal_W, extent, bound};
       }

@@ -118,6 +118,10 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     no_guard.name = "no_grazing_guard";
     no_guard.grazing_guard = false;
     s.push_back(no_guard);
+    FrontierSetting model_reach = base;
+    model_reach.name = "guard_model_reach";
+    model_reach.grazing_guard_local_reach = false;
+    s.push_back(model_reach);
     FrontierSetting sized = base;
     sized.name = "windows_from_clusters";
     sized.max_window_extent_m = 2.0 * PipelineOptions{}.window_extent_m;
@@ -341,6 +345,7 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.local_reach = st.local_reach;
   options.rotation_gradient = st.rotation_gradient;
   options.grazing_guard = st.grazing_guard;
+  options.grazing_guard_local_reach = st.grazing_guard_local_reach;
   if (st.max_window_extent_m > 0.0) options.max_window_extent_m = st.max_window_extent_m;
   options.drop_unreachable_pairs = st.drop_unreachable_pairs;
   options.region_normals = st.region_normals;

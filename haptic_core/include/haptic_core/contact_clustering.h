@@ -10,6 +10,7 @@
 // Cluster() never allocates nor throws afterwards.
 
 #include <glm/vec3.hpp>
+#include <limits>
 #include <span>
 #include <vector>
 
@@ -71,6 +72,9 @@ struct ContactCluster {
   double extent_m = 0.0;
   /// Smallest member signed distance (m): the deepest pair (< 0 penetrating).
   double min_signed_distance_m = 0.0;
+  /// The largest of the members' depth bounds given to Cluster() (m), +∞ when none was given: the
+  /// most δ this cluster's coarse geometry allows (the remote step's grazing guard).
+  double depth_bound_m = std::numeric_limits<double>::infinity();
   /// Σ w_i of the members (m).
   double total_weight_m = 0.0;
   /// Number of member pairs (≥ 1).
@@ -147,10 +151,13 @@ class ContactClusterer {
   /// clusters, at most options.max_contacts, deepest first; a view into the clusterer's storage,
   /// valid until the next call. Empty for no valid pairs or invalid options. Never throws, never
   /// allocates; skipped pairs and other faults are counted in stats().
+  /// `pair_depth_bound_m`, when it holds one entry per pair, gives each pair's depth bound (m);
+  /// each cluster reports the largest of its members' (ContactCluster::depth_bound_m).
   std::span<const ContactCluster> Cluster(std::span<const HullPairContact> pairs,
                                           const ConvexHullHierarchy& tool_hulls,
                                           const ConvexHullHierarchy& object_hulls,
-                                          const ClusteringOptions& options) noexcept;
+                                          const ClusteringOptions& options,
+                                          std::span<const double> pair_depth_bound_m = {}) noexcept;
 
   /// Counts of the last call.
   const ClusteringStats& stats() const noexcept { return stats_; }
@@ -180,6 +187,7 @@ class ContactClusterer {
     glm::dvec3 sum_wn_W;
     double sum_w;
     double min_signed_distance_m;
+    double depth_bound_m;
     int num_pairs;
     int head, tail;  // member list through PairRecord::next
     bool alive;

@@ -69,6 +69,11 @@ struct PipelineOptions {
   /// surfaces the patches are no height fields and δ measures the sideways overlap, bounded only
   /// by the window's box (DESIGN.md §4, docs/hard-cases.md). Off: every contact is kept.
   bool grazing_guard = true;
+  /// The guard's texture reach: each pair's two leaves' own (HullProximityQuery::NodeReach; a
+  /// cluster takes its members' largest bound), or both whole models' OutwardReach() (false). The
+  /// models' reach is their largest texture height anywhere (5.4 mm on the seed's CAD part, whose
+  /// pressed contacts are a fraction of a millimetre), so the local one is the tighter bound.
+  bool grazing_guard_local_reach = true;
   /// Separated leaf pairs farther apart than their two leaves' own outward texture reach
   /// (HullProximityQuery::NodeReach) start no cluster (issue 31): they cannot touch through the
   /// textures, and would only add windows without overlap. Off: every pair the query found.
@@ -203,6 +208,8 @@ class HapticTexturePipeline {
   /// The leaf pairs within their local texture reach (PipelineOptions::drop_unreachable_pairs),
   /// as many as the clusterer takes.
   std::vector<HullPairContact> reachable_pairs_;
+  /// The grazing guard's bound of each pair of a query (PipelineOptions::grazing_guard_local_reach).
+  std::vector<double> pair_bounds_;
   std::array<ContactCandidate, kMaxContacts> candidates_{};
   int num_candidates_ = 0;
   std::array<ContactQuery, kMaxContacts> last_queries_{};

@@ -47,6 +47,8 @@ struct FrontierSetting {
   RotationGradient rotation_gradient = RotationGradient::kRenderedSamples;
   /// PipelineOptions::grazing_guard ("no_grazing_guard" turns it off: issue 31's before).
   bool grazing_guard = true;
+  /// PipelineOptions::grazing_guard_local_reach ("guard_model_reach" turns it off).
+  bool grazing_guard_local_reach = true;
   /// PipelineOptions::max_window_extent_m (0: the default). "windows_from_clusters": up to 2W.
   double max_window_extent_m = 0.0;
   /// PipelineOptions::drop_unreachable_pairs ("keep_unreachable_pairs" turns it off).
