@@ -208,6 +208,31 @@ TEST(ContactClustering, CornerSpotsWithinMergeDistanceButNormals90DegApartStaySe
   EXPECT_EQ(clusterer.stats().clusters_pass2, 2);
 }
 
+// Issue 31's grazing guard: each cluster reports the largest of its members' depth bounds, and
+// +∞ when the caller gives none (or a list of the wrong length).
+TEST(ContactClustering, EachClusterCarriesItsMembersLargestDepthBound) {
+  const ClusteringOptions options;
+  std::vector<HullPairContact> pairs;
+  std::vector<double> bounds;
+  for (int i = 0; i < 5; ++i) {
+    pairs.push_back(MakePair({0.0, 0.3e-3 * i, 0.0}, {0, 0, 1}, -2e-4, i, 10 + i));
+    bounds.push_back(1e-3 * (i + 1));  // 1..5 mm on the first spot
+    pairs.push_back(MakePair({2e-3, 0.3e-3 * i, 1e-3}, {1, 0, 0}, -1e-4, 5 + i, 15 + i));
+    bounds.push_back(0.5e-3);  // the second spot's
+  }
+  ContactClusterer clusterer;
+  auto clusters = clusterer.Cluster(pairs, MakeLeaves(10), MakeLeaves(20), options, bounds);
+  ASSERT_EQ(clusters.size(), 2u);
+  EXPECT_EQ(clusters[0].depth_bound_m, 5e-3);
+  EXPECT_EQ(clusters[1].depth_bound_m, 0.5e-3);
+  clusters = clusterer.Cluster(pairs, MakeLeaves(10), MakeLeaves(20), options);
+  ASSERT_EQ(clusters.size(), 2u);
+  EXPECT_TRUE(std::isinf(clusters[0].depth_bound_m));
+  bounds.pop_back();
+  clusters = clusterer.Cluster(pairs, MakeLeaves(10), MakeLeaves(20), options, bounds);
+  EXPECT_TRUE(std::isinf(clusters[1].depth_bound_m));
+}
+
 TEST(ContactClustering, LeafSharedByTwoClustersGoesToTheClusterOfItsDeepestPair) {
   const ClusteringOptions options;
   // Object leaf 0 touches both faces of a corner; its deepest pair is on the +x face.
