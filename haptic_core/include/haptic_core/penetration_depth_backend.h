@@ -25,7 +25,7 @@ struct ContactQuery {
   ContactWindow window;
   double stiffness_n_per_m = 0.0;
   /// The largest δ the coarse geometry allows this contact (m): the cluster's coarse penetration
-  /// plus both models' outward texture reach plus a cell (issue 31's grazing guard); +∞ for none.
+  /// plus the texture reach plus a cell (issue 31's grazing guard, PipelineOptions); +∞ for none.
   /// The backends ignore it; the remote step drops a contact whose δ0 exceeds it.
   double depth_bound_m = std::numeric_limits<double>::infinity();
 };

@@ -64,8 +64,8 @@ struct PipelineOptions {
   /// ("rotation_lever", "rotation_warp"). GPU backends ignore it.
   RotationGradient rotation_gradient = RotationGradient::kRenderedSamples;
   /// Grazing guard (issue 31): a contact whose δ0 exceeds what its coarse geometry allows (the
-  /// cluster's deepest hull-pair penetration + both models' outward texture reach + a cell) is
-  /// dropped and counted (StepFaults::grazing_dropped). Along a direction nearly parallel to the
+  /// largest over the cluster's hull pairs of the pair's penetration + its two leaves' outward
+  /// texture reach + a cell; see grazing_guard_local_reach) is dropped and counted (StepFaults::grazing_dropped). Along a direction nearly parallel to the
   /// surfaces the patches are no height fields and δ measures the sideways overlap, bounded only
   /// by the window's box (DESIGN.md §4, docs/hard-cases.md). Off: every contact is kept.
   bool grazing_guard = true;
