@@ -210,10 +210,11 @@ TEST(ContactPatchTruth, TiltedBoxOnItsEdgeAgreesWithTheVolumeComputedAnotherWay)
   plus.rotation = AboutY(ht) * X_WT.rotation;  // world axes, about the centre of mass
   minus.rotation = AboutY(-ht) * X_WT.rotation;
   const double dV_dthy = (volume(plus) - volume(minus)) / (2 * ht);
-  std::printf("[pipeline truth] tilted box: dV/dz %.5g (columns) %.5g / %.5g (tool / environment);"
-              " dV/dθy %.5g (columns) %.5g / %.5g\n",
-              dV_dz, t.patches[0].dV_dx_tool_W.z, t.patches[0].dV_dx_environment_W.z, dV_dthy,
-              t.patches[0].dV_dtheta_tool_W.y, t.patches[0].dV_dtheta_environment_W.y);
+  std::printf(
+      "[pipeline truth] tilted box: dV/dz %.5g (columns) %.5g / %.5g (tool / environment);"
+      " dV/dθy %.5g (columns) %.5g / %.5g\n",
+      dV_dz, t.patches[0].dV_dx_tool_W.z, t.patches[0].dV_dx_environment_W.z, dV_dthy,
+      t.patches[0].dV_dtheta_tool_W.y, t.patches[0].dV_dtheta_environment_W.y);
   for (const TruthPatch& p : t.patches) {
     EXPECT_NEAR(p.dV_dx_tool_W.z, dV_dz, 0.02 * std::abs(dV_dz));
     EXPECT_NEAR(p.dV_dx_environment_W.z, dV_dz, 0.02 * std::abs(dV_dz));

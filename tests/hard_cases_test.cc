@@ -442,7 +442,6 @@ TEST(HardCases, NonFinitePosesFromTheNetwork) {
          "tool, ok = false; safety: non-finite wrench becomes zero");
 }
 
-
 // Issue 31's grazing guard: a δ beyond what the coarse geometry allows is dropped and counted;
 // what it allows is kept (a genuinely deep press is: PenetrationDeeperThanTheTextureAmplitude).
 TEST(HardCases, GrazingGuardDropsDepthsTheCoarseGeometryCannotHold) {

@@ -8,20 +8,17 @@
 namespace ht {
 
 int MakeContactQueries(std::span<const ContactCandidate> candidates, double window_extent_m,
-                       double max_window_extent_m, int grid_resolution,
-                       std::span<ContactQuery> out,
+                       double max_window_extent_m, int grid_resolution, std::span<ContactQuery> out,
                        std::int64_t& bad_windows) noexcept {
   int num_queries = 0;
   for (const ContactCandidate& c : candidates) {
     if (static_cast<std::size_t>(num_queries) == out.size()) break;
-    const double side =
-        std::clamp(std::isfinite(c.extent_m) ? c.extent_m : 0.0, window_extent_m,
-                   std::max(window_extent_m, max_window_extent_m));
+    const double side = std::clamp(std::isfinite(c.extent_m) ? c.extent_m : 0.0, window_extent_m,
+                                   std::max(window_extent_m, max_window_extent_m));
     const int n = std::min(
         1024, static_cast<int>(std::ceil(grid_resolution * side / window_extent_m - 1e-9)));
     const std::optional<ContactWindow> window =
-        c.object == nullptr ? std::nullopt
-                            : ContactWindow::TryMake(c.point_W, c.normal_W, side, n);
+        c.object == nullptr ? std::nullopt : ContactWindow::TryMake(c.point_W, c.normal_W, side, n);
     if (!window) {
       ++bad_windows;
       continue;

@@ -6,8 +6,8 @@
 
 #include <algorithm>
 #include <chrono>
-#include <limits>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -47,8 +47,9 @@ void PipelineOptions::Validate() const {
 
 int PipelineOptions::max_window_resolution() const noexcept {
   if (!(window_extent_m > 0.0) || !(max_window_extent_m >= window_extent_m)) return grid_resolution;
-  return std::min(1024, static_cast<int>(std::ceil(
-                            grid_resolution * max_window_extent_m / window_extent_m - 1e-9)));
+  return std::min(
+      1024,
+      static_cast<int>(std::ceil(grid_resolution * max_window_extent_m / window_extent_m - 1e-9)));
 }
 
 int DefaultTextureThreads() noexcept {
@@ -107,18 +108,18 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   const auto t1 = Clock::now();
   // Stage 4: one window per cluster. The batch lives in members, so that last_contact_queries()
   // can show it after the step.
-  last_num_queries_ = MakeContactQueries(
-      {candidates_.data(), static_cast<std::size_t>(num_candidates_)}, options_.window_extent_m,
-      options_.max_window_extent_m, options_.grid_resolution, last_queries_,
-      step_faults_.bad_windows);
+  last_num_queries_ =
+      MakeContactQueries({candidates_.data(), static_cast<std::size_t>(num_candidates_)},
+                         options_.window_extent_m, options_.max_window_extent_m,
+                         options_.grid_resolution, last_queries_, step_faults_.bad_windows);
   // Stage 5: texture penetration depth and its gradient, linearized, for the whole batch.
   LinearizeContacts(X_WT, last_num_queries_);
   // The grazing guard: a δ its coarse geometry cannot hold is the sideways overlap along a
   // grazing direction, not a penetration; the contact is left out of the model (its linearization
   // reads −∞, as a contact whose patches do not overlap).
-  step_faults_.grazing_dropped += DropGrazingContacts(
-      {last_queries_.data(), static_cast<std::size_t>(last_num_queries_)},
-      {last_results_.data(), static_cast<std::size_t>(last_num_queries_)});
+  step_faults_.grazing_dropped +=
+      DropGrazingContacts({last_queries_.data(), static_cast<std::size_t>(last_num_queries_)},
+                          {last_results_.data(), static_cast<std::size_t>(last_num_queries_)});
   // Stage 6: the contact model.
   AssembleContactModel(last_linearizations(), model);
   const auto t2 = Clock::now();
@@ -193,18 +194,17 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
     clustering.min_extent_m = options_.window_extent_m;
     clustering.max_extent_m = options_.max_window_extent_m;
     clustering.max_contacts = options_.max_contacts;
-    const std::span<const ContactCluster> clusters =
-        clusterer_.Cluster(pairs, tool.hull_hierarchy, object.model->hull_hierarchy, clustering,
-                           pair_bounds);
+    const std::span<const ContactCluster> clusters = clusterer_.Cluster(
+        pairs, tool.hull_hierarchy, object.model->hull_hierarchy, clustering, pair_bounds);
     timings.clusters += static_cast<int>(clusters.size());
     for (const ContactCluster& c : clusters) {
       if (num_candidates_ < options_.max_contacts) {
         const glm::dvec3 normal_W =
             options_.region_normals ? RegionNormal(c, tool, X_WT, object) : c.normal_W;
-        const double bound =
-            !options_.grazing_guard        ? std::numeric_limits<double>::infinity()
-            : std::isfinite(c.depth_bound_m) ? c.depth_bound_m
-                                             : std::max(0.0, -c.min_signed_distance_m) + reach + cell;
+        const double bound = !options_.grazing_guard ? std::numeric_limits<double>::infinity()
+                             : std::isfinite(c.depth_bound_m)
+                                 ? c.depth_bound_m
+                                 : std::max(0.0, -c.min_signed_distance_m) + reach + cell;
         const double extent = options_.size_windows_from_clusters ? c.extent_m : 0.0;
         candidates_[num_candidates_++] = {&object, c.point_W, normal_W, extent, bound};
       }

@@ -6,10 +6,10 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <exception>
 #include <filesystem>
 #include <fstream>
 #include <limits>
-#include <exception>
 #include <memory>
 #include <mutex>
 #include <numbers>
@@ -432,8 +432,7 @@ void RunPipelineTruth(const BenchmarkScene& scene, const RayCastSurface& tool,
                               truth_options);
       double last_report = 0.0;
       for (std::size_t i; (i = next.fetch_add(1)) < poses_WFt.size();) {
-        out[i] = truth.At(poses_WFt[i] * X_FtT, scene.X_TFt, target.X_WO,
-                          target.stiffness_n_per_m);
+        out[i] = truth.At(poses_WFt[i] * X_FtT, scene.X_TFt, target.X_WO, target.stiffness_n_per_m);
         const std::size_t f = ++finished;
         if (reporter && options.progress && Seconds(t0) - last_report > 5.0) {
           last_report = Seconds(t0);
@@ -561,8 +560,8 @@ void MarkPareto(std::vector<SettingRun>& runs) {
       if (&a == &b || !b.skipped.empty() || !std::isfinite(b.m.pipeline_force_rel_rms)) continue;
       const bool no_worse = b.m.total_p50 <= a.m.total_p50 &&
                             b.m.pipeline_force_rel_rms <= a.m.pipeline_force_rel_rms;
-      const bool better = b.m.total_p50 < a.m.total_p50 ||
-                          b.m.pipeline_force_rel_rms < a.m.pipeline_force_rel_rms;
+      const bool better =
+          b.m.total_p50 < a.m.total_p50 || b.m.pipeline_force_rel_rms < a.m.pipeline_force_rel_rms;
       if (no_worse && better) a.m.pareto = false;
     }
   }
@@ -817,26 +816,24 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
         rep.truth_extents_mm.push_back(patch.window.extent_m * 1e3);
         const ContactWindow& w = patch.window;
         const ContactLinearization& lin = patch.contact.linearization;
-        pc << name << ',' << k << ',' << q << ',' << rep.tool_file << ',' << rep.object_file
-           << ',';
+        pc << name << ',' << k << ',' << q << ',' << rep.tool_file << ',' << rep.object_file << ',';
         WriteQuat(pc, poses[k]);
         pc << ',';
         WriteQuat(pc, ref.haptic.touchables.at(0).X_WO);
         pc << ',' << w.center_W.x << ',' << w.center_W.y << ',' << w.center_W.z << ','
            << w.normal_W.x << ',' << w.normal_W.y << ',' << w.normal_W.z << ',' << w.axis_u_W.x
-           << ',' << w.axis_u_W.y << ',' << w.axis_u_W.z << ',' << w.extent_m << ','
-           << lin.depth_m << ',';
+           << ',' << w.axis_u_W.y << ',' << w.axis_u_W.z << ',' << w.extent_m << ',' << lin.depth_m
+           << ',';
         WriteWrench(pc, patch.contact.F_T_W);
         const glm::dvec3 com_W = poses[k] * ref.X_TFt.Inverse().translation;
         const glm::dvec3 gx = 0.5 * (patch.dV_dx_tool_W + patch.dV_dx_environment_W);
         const glm::dvec3 gt = 0.5 * (patch.dV_dtheta_tool_W + patch.dV_dtheta_environment_W);
         pc << ',' << com_W.x << ',' << com_W.y << ',' << com_W.z << ','
-           << ref.haptic.touchables.at(0).stiffness_n_per_m << ','
-           << truth_options_step(w.extent_m) << ',' << patch.pairs << ','
-           << patch.tool_inside_area_m2 << ',' << patch.environment_inside_area_m2 << ','
-           << gx.x << ',' << gx.y << ',' << gx.z << ',' << gt.x << ',' << gt.y << ',' << gt.z
-           << ',' << patch.contact.base.samples_per_side << ','
-           << (patch.contact.base.converged ? 1 : 0) << '\n';
+           << ref.haptic.touchables.at(0).stiffness_n_per_m << ',' << truth_options_step(w.extent_m)
+           << ',' << patch.pairs << ',' << patch.tool_inside_area_m2 << ','
+           << patch.environment_inside_area_m2 << ',' << gx.x << ',' << gx.y << ',' << gx.z << ','
+           << gt.x << ',' << gt.y << ',' << gt.z << ',' << patch.contact.base.samples_per_side
+           << ',' << (patch.contact.base.converged ? 1 : 0) << '\n';
       }
     }
     rep.gt_windows = jobs.size();
@@ -1033,8 +1030,9 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
       << " nm; largest last change " << Fmt(rep.gt_change_max_m * 1e6, 3) << " µm; " << rep.gt_rays
       << " rays in " << Fmt(rep.gt_seconds, 3) << " s.\n";
     s << "- Pipeline truth: " << rep.truth_poses_intersecting << " of " << rep.poses
-      << " poses intersect at full resolution; " << rep.truth_patches << " patches (window side p50 "
-      << Fmt(Percentile(rep.truth_extents_mm, 0.5), 3) << " mm, max "
+      << " poses intersect at full resolution; " << rep.truth_patches
+      << " patches (window side p50 " << Fmt(Percentile(rep.truth_extents_mm, 0.5), 3)
+      << " mm, max "
       << Fmt(rep.truth_extents_mm.empty()
                  ? 0.0
                  : *std::max_element(rep.truth_extents_mm.begin(), rep.truth_extents_mm.end()),
@@ -1103,8 +1101,8 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
       s << "No setting reached a pipeline force error of 5 % or less on this scene";
       if (best) {
         s << "; the most accurate was **" << best->setting.name << "** ("
-          << Fmt(100 * best->m.pipeline_force_rel_rms, 3) << " %, " << Fmt(best->m.total_p50 / 1e3, 3)
-          << " ms per step)";
+          << Fmt(100 * best->m.pipeline_force_rel_rms, 3) << " %, "
+          << Fmt(best->m.total_p50 / 1e3, 3) << " ms per step)";
       }
       s << ". Seed (2004 GPU): about 2 ms per contact; " << SeedFigures(rep.name) << ".\n";
     }

@@ -36,8 +36,7 @@ struct ContactCandidate {
 /// or a null object are skipped and counted in `bad_windows`. Stops when `out` is full. Returns
 /// the number of queries written. noexcept, allocation-free.
 int MakeContactQueries(std::span<const ContactCandidate> candidates, double window_extent_m,
-                       double max_window_extent_m, int grid_resolution,
-                       std::span<ContactQuery> out,
+                       double max_window_extent_m, int grid_resolution, std::span<ContactQuery> out,
                        std::int64_t& bad_windows) noexcept;
 
 /// The grazing guard (issue 31): a contact whose δ0 exceeds its query's depth_bound_m (what its

@@ -21,15 +21,15 @@ namespace ht {
 
 /// Options of the per-step pipeline.
 struct PipelineOptions {
-  int grid_resolution = 50;            ///< N of the penetration-depth grid (seed: 50).
+  int grid_resolution = 50;  ///< N of the penetration-depth grid (seed: 50).
   /// W of each contact window (m): the smallest side, with the grid's N. A cluster whose members
   /// spread further gets a window sized to them (up to max_window_extent_m) at the same cell W/N.
   double window_extent_m = 0.02;
-  /// Largest window side (m), ≥ window_extent_m; windows whose normals agree and overlap merge while
-  /// the merged window fits it (contact clustering's pass 2), so that one texture region is not
-  /// rendered in several windows. Equal to window_extent_m (the default): every window W×W. Larger
-  /// is an option placed on the speed-vs-error frontier ("windows_from_clusters": at 4 cm it was
-  /// less accurate and slower on fig77, docs/frontier/issue31).
+  /// Largest window side (m), ≥ window_extent_m; windows whose normals agree and overlap merge
+  /// while the merged window fits it (contact clustering's pass 2), so that one texture region is
+  /// not rendered in several windows. Equal to window_extent_m (the default): every window W×W.
+  /// Larger is an option placed on the speed-vs-error frontier ("windows_from_clusters": at 4 cm it
+  /// was less accurate and slower on fig77, docs/frontier/issue31).
   double max_window_extent_m = 0.02;
   /// True: a window's side is its cluster's extent (between window_extent_m and
   /// max_window_extent_m, N scaled to keep the cell). False: every window is window_extent_m wide
@@ -65,9 +65,10 @@ struct PipelineOptions {
   RotationGradient rotation_gradient = RotationGradient::kRenderedSamples;
   /// Grazing guard (issue 31): a contact whose δ0 exceeds what its coarse geometry allows (the
   /// largest over the cluster's hull pairs of the pair's penetration + its two leaves' outward
-  /// texture reach + a cell; see grazing_guard_local_reach) is dropped and counted (StepFaults::grazing_dropped). Along a direction nearly parallel to the
-  /// surfaces the patches are no height fields and δ measures the sideways overlap, bounded only
-  /// by the window's box (DESIGN.md §4, docs/hard-cases.md). Off: every contact is kept.
+  /// texture reach + a cell; see grazing_guard_local_reach) is dropped and counted
+  /// (StepFaults::grazing_dropped). Along a direction nearly parallel to the surfaces the patches
+  /// are no height fields and δ measures the sideways overlap, bounded only by the window's box
+  /// (DESIGN.md §4, docs/hard-cases.md). Off: every contact is kept.
   bool grazing_guard = true;
   /// The guard's texture reach: each pair's two leaves' own (HullProximityQuery::NodeReach; a
   /// cluster takes its members' largest bound), or both whole models' OutwardReach() (false). The
@@ -208,7 +209,8 @@ class HapticTexturePipeline {
   /// The leaf pairs within their local texture reach (PipelineOptions::drop_unreachable_pairs),
   /// as many as the clusterer takes.
   std::vector<HullPairContact> reachable_pairs_;
-  /// The grazing guard's bound of each pair of a query (PipelineOptions::grazing_guard_local_reach).
+  /// The grazing guard's bound of each pair of a query
+  /// (PipelineOptions::grazing_guard_local_reach).
   std::vector<double> pair_bounds_;
   std::array<ContactCandidate, kMaxContacts> candidates_{};
   int num_candidates_ = 0;

@@ -190,8 +190,8 @@ struct ContactPatchTruth::Impl {
     // down to boundary_cell_m, where the inside share of those four tests is taken.
     const auto refine = [&](auto&& self, const glm::dvec3& p0, const glm::dvec3& p1,
                             const glm::dvec3& p2, const glm::dvec3& n_W, double area) -> void {
-      const double e2 = std::max({glm::dot(p1 - p0, p1 - p0), glm::dot(p2 - p1, p2 - p1),
-                                  glm::dot(p0 - p2, p0 - p2)});
+      const double e2 = std::max(
+          {glm::dot(p1 - p0, p1 - p0), glm::dot(p2 - p1, p2 - p1), glm::dot(p0 - p2, p0 - p2)});
       const auto split = [&] {
         const glm::dvec3 a = 0.5 * (p0 + p1), b = 0.5 * (p1 + p2), c = 0.5 * (p2 + p0);
         self(self, p0, a, c, n_W, 0.25 * area);
@@ -240,7 +240,8 @@ struct ContactPatchTruth::Impl {
   }
 };
 
-ContactPatchTruth::ContactPatchTruth(const TriangleMesh& tool_Ft, const TriangleMesh& environment_Fe,
+ContactPatchTruth::ContactPatchTruth(const TriangleMesh& tool_Ft,
+                                     const TriangleMesh& environment_Fe,
                                      const RayCastSurface& tool_rays,
                                      const RayCastSurface& environment_rays,
                                      const ContactPatchTruthOptions& options) {
@@ -317,7 +318,8 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
     return glm::i64vec3(std::floor(p.x / d), std::floor(p.y / d), std::floor(p.z / d));
   };
   const auto hash = [](const glm::i64vec3& c) {
-    return static_cast<std::uint64_t>(c.x * 73856093LL) ^ static_cast<std::uint64_t>(c.y * 19349663LL) ^
+    return static_cast<std::uint64_t>(c.x * 73856093LL) ^
+           static_cast<std::uint64_t>(c.y * 19349663LL) ^
            static_cast<std::uint64_t>(c.z * 83492791LL);
   };
   std::unordered_map<std::uint64_t, std::vector<int>> grid;
@@ -397,9 +399,9 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
         m.InsideSurface(m.tool, m.tool_topology, m.tool_state, tool_crossing[q], X_WFt,
                         m.environment_rays, X_WFe, n0, p_WTcm, points, out.rays);
     // Environment points inside the tool: a ray along −n leaves the tool.
-    const Impl::SideSums b = m.InsideSurface(m.environment, m.environment_topology,
-                                             m.environment_state, env_crossing[q], X_WFe,
-                                             m.tool_rays, X_WFt, -n0, p_WTcm, points, out.rays);
+    const Impl::SideSums b =
+        m.InsideSurface(m.environment, m.environment_topology, m.environment_state, env_crossing[q],
+                        X_WFe, m.tool_rays, X_WFt, -n0, p_WTcm, points, out.rays);
     TruthPatch patch;
     patch.pairs = patch_pairs[q];
     patch.tool_inside_area_m2 = a.area;
@@ -426,13 +428,14 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
     double half = 0.0;
     for (const glm::dvec3& p : points) {
       const glm::dvec3 dp = p - centre;
-      half = std::max({half, std::abs(glm::dot(dp, axes.axis_u_W)),
-                       std::abs(glm::dot(dp, axes.axis_v_W))});
+      half = std::max(
+          {half, std::abs(glm::dot(dp, axes.axis_u_W)), std::abs(glm::dot(dp, axes.axis_v_W))});
     }
-    const double extent = std::clamp(2.0 * (half + o.window_margin_m), o.min_extent_m,
-                                     o.max_extent_m);
+    const double extent =
+        std::clamp(2.0 * (half + o.window_margin_m), o.min_extent_m, o.max_extent_m);
     patch.window = ContactWindow::Make(centre, n, extent, 50);
-    const int step_resolution = std::max(2, static_cast<int>(std::lround(extent / o.gradient_step_m)));
+    const int step_resolution =
+        std::max(2, static_cast<int>(std::lround(extent / o.gradient_step_m)));
     patch.contact = m.solver.Linearize(X_WT, X_TFt, X_WFe, patch.window, k, step_resolution);
     out.rays += patch.contact.rays;
     out.F_T_W += patch.contact.F_T_W;

@@ -6,7 +6,8 @@
 
 namespace ht::accuracy_detail {
 
-std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>> MakeFclMesh(const TriangleMesh& mesh, const char* what) {
+std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>> MakeFclMesh(const TriangleMesh& mesh,
+                                                         const char* what) {
   if (mesh.vertices.empty() || mesh.triangles.empty()) {
     throw std::invalid_argument(std::string("full-resolution ") + what + " mesh is empty");
   }
@@ -37,6 +38,5 @@ fcl::Transform3d ToFcl(const RigidTransform& X) {
   T.translation() = fcl::Vector3d(X.translation.x, X.translation.y, X.translation.z);
   return T;
 }
-
 
 }  // namespace ht::accuracy_detail

@@ -354,12 +354,9 @@ GroundTruthDepth GroundTruthDepthSolver::ConvergedDepth(const RigidTransform& X_
   }
 }
 
-GroundTruthContact GroundTruthDepthSolver::Linearize(const RigidTransform& X_WT,
-                                                     const RigidTransform& X_TFt,
-                                                     const RigidTransform& X_WFe,
-                                                     const ContactWindow& window,
-                                                     double stiffness_n_per_m,
-                                                     int step_resolution) {
+GroundTruthContact GroundTruthDepthSolver::Linearize(
+    const RigidTransform& X_WT, const RigidTransform& X_TFt, const RigidTransform& X_WFe,
+    const ContactWindow& window, double stiffness_n_per_m, int step_resolution) {
   ContactWindow w = window;
   // The seed's grid fixes the step table for every method compared, unless the caller sets it.
   w.resolution = step_resolution > 0 ? step_resolution : 50;

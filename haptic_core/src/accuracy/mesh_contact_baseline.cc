@@ -1,13 +1,13 @@
 #include "haptic_core/accuracy/mesh_contact_baseline.h"
 
-#include "fcl_mesh.h"
-
 #include <fcl/fcl.h>
 
 #include <chrono>
 #include <stdexcept>
 #include <string>
 #include <vector>
+
+#include "fcl_mesh.h"
 
 namespace ht {
 using accuracy_detail::MakeFclMesh;

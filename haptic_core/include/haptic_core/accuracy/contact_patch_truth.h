@@ -10,10 +10,11 @@
 //     normals agree within its angle (single linkage: connected regions, the granularity of
 //     contact_clustering.h).
 //  3. Per patch, the surfaces inside the other solid: each crossing triangle's inside part
-//     (sub-triangles refined along the intersection curve, tested with RayCastSurface::IsInside) and the triangles
-//     wholly inside, reached by a flood fill over edge neighbours from the crossing ones. Their
-//     area-weighted normals give the gradient of the intersection volume V with respect to the
-//     tool's pose (Reynolds transport: moving the tool by dx changes V by ∫_{∂A∩B} n_A·dx dA):
+//     (sub-triangles refined along the intersection curve, tested with RayCastSurface::IsInside)
+//     and the triangles wholly inside, reached by a flood fill over edge neighbours from the
+//     crossing ones. Their area-weighted normals give the gradient of the intersection volume V
+//     with respect to the tool's pose (Reynolds transport: moving the tool by dx changes V by
+//     ∫_{∂A∩B} n_A·dx dA):
 //       ∇_x V = ∫_{∂A∩B} n_A dA = −∫_{∂B∩A} n_B dA,
 //       ∇_θ V = ∫_{∂A∩B} (r × n_A) dA = −∫_{∂B∩A} (r × n_B) dA (r from the tool's centre of mass),
 //     the two sides being two routes to one number (their sum is the closed intersection
@@ -115,8 +116,8 @@ class ContactPatchTruth {
   /// The truth with the tool's centre of mass frame T at X_WT, the tool mesh's frame at X_TFt in
   /// T, the environment mesh at X_WFe, penalty stiffness k (N/m). Non-finite poses give an empty
   /// truth (pairs 0).
-  PoseTruth At(const RigidTransform& X_WT, const RigidTransform& X_TFt,
-               const RigidTransform& X_WFe, double stiffness_n_per_m);
+  PoseTruth At(const RigidTransform& X_WT, const RigidTransform& X_TFt, const RigidTransform& X_WFe,
+               double stiffness_n_per_m);
 
  private:
   struct Impl;
