@@ -11,6 +11,7 @@
 #include <glm/gtc/quaternion.hpp>
 #include <limits>
 
+#include "accuracy_test_meshes.h"
 #include "haptic_core/accuracy/mesh_contact_baseline.h"
 #include "haptic_core/contact_linearization.h"
 #include "haptic_core/demo/procedural_models.h"
@@ -18,30 +19,11 @@
 namespace ht {
 namespace {
 
-// Closed box [lo, hi], 12 triangles, counter-clockwise seen from outside.
-TriangleMesh Box(const glm::dvec3& lo, const glm::dvec3& hi) {
-  TriangleMesh m;
-  for (int i = 0; i < 8; ++i) {
-    m.vertices.push_back({(i & 1) ? hi.x : lo.x, (i & 2) ? hi.y : lo.y, (i & 4) ? hi.z : lo.z});
-  }
-  const int faces[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4},
-                           {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
-  for (const auto& f : faces) {
-    m.triangles.push_back({f[0], f[1], f[2]});
-    m.triangles.push_back({f[0], f[2], f[3]});
-  }
-  return m;
-}
+using test::At;
+using test::Box;
 
 // The coarse mesh of a model as a triangle mesh (exact for untextured boxes).
 TriangleMesh CoarseMesh(const HapticModel& m) { return {m.vertices_O, m.triangles}; }
-
-RigidTransform At(const glm::dvec3& p, const glm::dquat& R = glm::dquat(1, 0, 0, 0)) {
-  RigidTransform X;
-  X.translation = p;
-  X.rotation = R;
-  return X;
-}
 
 const ContactWindow kWindow = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 50);
 

@@ -7,6 +7,11 @@
 
 namespace ht {
 
+int WindowResolution(double side_m, double window_extent_m, int grid_resolution) noexcept {
+  return std::min(1024,
+                  static_cast<int>(std::ceil(grid_resolution * side_m / window_extent_m - 1e-9)));
+}
+
 int MakeContactQueries(std::span<const ContactCandidate> candidates, double window_extent_m,
                        double max_window_extent_m, int grid_resolution, std::span<ContactQuery> out,
                        std::int64_t& bad_windows) noexcept {
@@ -15,8 +20,7 @@ int MakeContactQueries(std::span<const ContactCandidate> candidates, double wind
     if (static_cast<std::size_t>(num_queries) == out.size()) break;
     const double side = std::clamp(std::isfinite(c.extent_m) ? c.extent_m : 0.0, window_extent_m,
                                    std::max(window_extent_m, max_window_extent_m));
-    const int n = std::min(
-        1024, static_cast<int>(std::ceil(grid_resolution * side / window_extent_m - 1e-9)));
+    const int n = WindowResolution(side, window_extent_m, grid_resolution);
     const std::optional<ContactWindow> window =
         c.object == nullptr ? std::nullopt : ContactWindow::TryMake(c.point_W, c.normal_W, side, n);
     if (!window) {

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -47,9 +48,7 @@ void PipelineOptions::Validate() const {
 
 int PipelineOptions::max_window_resolution() const noexcept {
   if (!(window_extent_m > 0.0) || !(max_window_extent_m >= window_extent_m)) return grid_resolution;
-  return std::min(
-      1024,
-      static_cast<int>(std::ceil(grid_resolution * max_window_extent_m / window_extent_m - 1e-9)));
+  return WindowResolution(max_window_extent_m, window_extent_m, grid_resolution);
 }
 
 int DefaultTextureThreads() noexcept {
@@ -153,37 +152,31 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
     ++timings.convex_pairs;
     timings.leaf_pairs += static_cast<int>(pairs.size());
     timings.collision_budget_exhausted |= stats.budget_exhausted;
-    // Separated pairs beyond their two leaves' own texture reach cannot touch through the
-    // textures: they start no cluster (issue 31; they would only add windows with no overlap).
-    if (options_.drop_unreachable_pairs) {
+    // Each pair's two leaves' own texture reach, once, for two uses (issue 31): a separated pair
+    // beyond it cannot touch through the textures and starts no cluster (it would only add a
+    // window with no overlap); and the grazing guard's bound of a pair is its hull penetration
+    // plus that reach plus a cell (a cluster takes its members' largest).
+    const double cell = options_.window_extent_m / options_.grid_resolution;
+    const bool local_bounds = options_.grazing_guard && options_.grazing_guard_local_reach;
+    std::span<const double> pair_bounds;
+    if (options_.drop_unreachable_pairs ||
+        (local_bounds && pairs.size() <= reachable_pairs_.size())) {
       std::size_t kept = 0;
       for (const HullPairContact& p : pairs) {
         if (kept == reachable_pairs_.size()) break;
-        if (p.signed_distance_m > 0.0 &&
-            p.signed_distance_m > queries_[k].NodeReach(tool, p.node_A) +
-                                      queries_[k].NodeReach(*object.model, p.node_B)) {
+        const double pair_reach =
+            queries_[k].NodeReach(tool, p.node_A) + queries_[k].NodeReach(*object.model, p.node_B);
+        if (options_.drop_unreachable_pairs && p.signed_distance_m > pair_reach) {
           ++step_faults_.unreachable_pairs;
           continue;
         }
+        pair_bounds_[kept] = std::max(0.0, -p.signed_distance_m) + pair_reach + cell;
         reachable_pairs_[kept++] = p;
       }
       pairs = {reachable_pairs_.data(), kept};
+      if (local_bounds) pair_bounds = {pair_bounds_.data(), kept};
     }
     if (pairs.empty()) continue;
-    // The grazing guard's bound per pair: its hull penetration plus its two leaves' own texture
-    // reach plus a cell (a cluster takes its members' largest).
-    const double cell = options_.window_extent_m / options_.grid_resolution;
-    std::span<const double> pair_bounds;
-    if (options_.grazing_guard && options_.grazing_guard_local_reach &&
-        pairs.size() <= pair_bounds_.size()) {
-      for (std::size_t i = 0; i < pairs.size(); ++i) {
-        const HullPairContact& p = pairs[i];
-        pair_bounds_[i] = std::max(0.0, -p.signed_distance_m) +
-                          queries_[k].NodeReach(tool, p.node_A) +
-                          queries_[k].NodeReach(*object.model, p.node_B) + cell;
-      }
-      pair_bounds = {pair_bounds_.data(), pairs.size()};
-    }
     // 3. Contact clustering: one window per cluster, sized from its members' spread between the
     // pipeline's smallest and largest window; clusters whose windows would overlap merge while
     // the merged window fits, so that a texture region is rarely rendered in two windows.
@@ -216,11 +209,12 @@ glm::dvec3 HapticTexturePipeline::RegionNormal(const ContactCluster& c, const Ha
                                                const RigidTransform& X_WT,
                                                const TouchableObject& object) const noexcept {
   const glm::dvec3 n0 = c.normal_W;
-  // The footprint: the window's square around the cluster point on the plane ⟂ n0.
+  // The footprint: the window's square around the cluster point on the plane ⟂ n0, with the
+  // window's own axes.
   const double half = 0.5 * std::max(options_.window_extent_m, c.extent_m);
-  const glm::dvec3 ref = std::abs(n0.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0);
-  const glm::dvec3 u = glm::normalize(ref - glm::dot(ref, n0) * n0);
-  const glm::dvec3 v = glm::cross(n0, u);
+  const std::optional<ContactWindow> axes = ContactWindow::TryMake(c.point_W, n0, 2.0 * half, 2);
+  if (!axes) return n0;
+  const glm::dvec3 u = axes->axis_u_W, v = axes->axis_v_W;
   glm::dvec3 sum(0.0);
   const auto add = [&](const HapticModel& m, const RigidTransform& X, std::span<const int> tris,
                        double sign) {

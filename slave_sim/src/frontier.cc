@@ -682,12 +682,6 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
         "fx_gt,fy_gt,fz_gt,tx_gt,ty_gt,tz_gt,tool_com_x,tool_com_y,tool_com_z,stiffness_n_per_m,"
         "gradient_step_m,pairs,tool_inside_area_m2,object_inside_area_m2,dV_dx,dV_dy,dV_dz,"
         "dV_dthx,dV_dthy,dV_dthz,gt_samples_per_side,gt_converged\n";
-  // The translation step of a patch's ∇δ (ContactPatchTruthOptions::gradient_step_m, as
-  // GroundTruthDepthSolver::Linearize rounds it to the window).
-  const auto truth_options_step = [](double extent_m) {
-    const double step = ContactPatchTruthOptions{}.gradient_step_m;
-    return extent_m / std::max(2.0, static_cast<double>(std::lround(extent_m / step)));
-  };
   std::vector<SceneReport> reports;
   const int total_units = static_cast<int>(scenes.size() * settings.size());
   int units_done = 0;
@@ -829,8 +823,8 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
         const glm::dvec3 gx = 0.5 * (patch.dV_dx_tool_W + patch.dV_dx_environment_W);
         const glm::dvec3 gt = 0.5 * (patch.dV_dtheta_tool_W + patch.dV_dtheta_environment_W);
         pc << ',' << com_W.x << ',' << com_W.y << ',' << com_W.z << ','
-           << ref.haptic.touchables.at(0).stiffness_n_per_m << ',' << truth_options_step(w.extent_m)
-           << ',' << patch.pairs << ',' << patch.tool_inside_area_m2 << ','
+           << ref.haptic.touchables.at(0).stiffness_n_per_m << ',' << patch.gradient_step_m << ','
+           << patch.pairs << ',' << patch.tool_inside_area_m2 << ','
            << patch.environment_inside_area_m2 << ',' << gx.x << ',' << gx.y << ',' << gx.z << ','
            << gt.x << ',' << gt.y << ',' << gt.z << ',' << patch.contact.base.samples_per_side
            << ',' << (patch.contact.base.converged ? 1 : 0) << '\n';

@@ -28,6 +28,11 @@ struct ContactCandidate {
   double depth_bound_m = std::numeric_limits<double>::infinity();
 };
 
+/// The grid N of a window of side `side_m` (m) that keeps the cell `window_extent_m` /
+/// `grid_resolution` of the smallest window: ceil(grid_resolution · side_m / window_extent_m),
+/// at most 1024. Expects positive, finite sides.
+int WindowResolution(double side_m, double window_extent_m, int grid_resolution) noexcept;
+
 /// Writes one query per candidate into `out`, in order (ContactWindow::TryMake): the window's side
 /// is the candidate's extent_m clamped to [window_extent_m, max_window_extent_m] (m), and its grid
 /// N = ceil(grid_resolution · side / window_extent_m), so that every window keeps the cell

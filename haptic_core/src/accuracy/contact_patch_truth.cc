@@ -436,6 +436,7 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
     patch.window = ContactWindow::Make(centre, n, extent, 50);
     const int step_resolution =
         std::max(2, static_cast<int>(std::lround(extent / o.gradient_step_m)));
+    patch.gradient_step_m = extent / step_resolution;
     patch.contact = m.solver.Linearize(X_WT, X_TFt, X_WFe, patch.window, k, step_resolution);
     out.rays += patch.contact.rays;
     out.F_T_W += patch.contact.F_T_W;

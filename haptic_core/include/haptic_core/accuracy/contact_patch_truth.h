@@ -78,6 +78,9 @@ struct TruthPatch {
   /// m³/rad; rotation about the tool's centre of mass, world axes). The truth uses their mean.
   glm::dvec3 dV_dx_tool_W{0.0}, dV_dtheta_tool_W{0.0};
   glm::dvec3 dV_dx_environment_W{0.0}, dV_dtheta_environment_W{0.0};
+  /// The translation step of ∇δ_gt's central differences (m): options' gradient_step_m rounded so
+  /// that a whole number of steps spans the window; the rotation step is this over half the window.
+  double gradient_step_m = 0.0;
   /// T1 on the window: δ_gt, ∇δ_gt (steps at texel scale), Φ_gt on the tool at its centre of mass.
   GroundTruthContact contact;
 };
