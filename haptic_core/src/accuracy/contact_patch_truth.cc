@@ -290,8 +290,9 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
     p.env_tri = static_cast<int>(swapped ? c.b1 : c.b2);
     // The pair's point: the middle of its intersection segment (where each triangle's edges
     // pierce the other); the centroids' midpoint when rounding found no piercing.
-    const auto corner = [](const TriangleMesh& mesh, int f, int k, const RigidTransform& X) {
-      return X * mesh.vertices[mesh.triangles[f][k]];
+    const auto corner = [](const TriangleMesh& mesh, int f, int corner_index,
+                           const RigidTransform& X) {
+      return X * mesh.vertices[mesh.triangles[f][corner_index]];
     };
     const glm::dvec3 a0 = corner(m.tool, p.tool_tri, 0, X_WFt),
                      a1 = corner(m.tool, p.tool_tri, 1, X_WFt),
