@@ -123,11 +123,12 @@ TexturePenetrationSolver::TexturePenetrationSolver(int max_resolution, int max_t
 
 void TexturePenetrationSolver::RenderEnvironment(const HapticModel& environment,
                                                  const RigidTransform& X_WO,
-                                                 const ContactWindow& w) noexcept {
+                                                 const ContactWindow& w,
+                                                 TriangleSubset subset) noexcept {
   const size_t cells = static_cast<size_t>(w.resolution) * w.resolution;
   env_heights_.assign(cells, -std::numeric_limits<float>::infinity());
-  SelectPatchTriangles(environment, X_WO, w, PatchSide::kEnvironment, w.cell_size_m(),
-                       env_triangles_, 0.0, &vertex_scratch_, trees_.For(environment));
+  SelectPatchTrianglesIn(subset, environment, X_WO, w, PatchSide::kEnvironment, w.cell_size_m(),
+                         env_triangles_, 0.0, &vertex_scratch_, trees_.For(environment));
   if (path_ == TextureStagePath::kFast) {
     RenderPatchHeightsFast(environment, X_WO, env_triangles_, w, PatchSide::kEnvironment, 0,
                            env_heights_);
@@ -254,17 +255,18 @@ ContactLinearization AssembleLeverLinearization(const ContactWindow& w,
 ContactLinearization TexturePenetrationSolver::Linearize(
     const HapticModel& tool, const RigidTransform& X_WT, const HapticModel& environment,
     const RigidTransform& X_WO, const ContactWindow& w, double stiffness_n_per_m,
-    std::span<DepthSample> samples_out) noexcept {
+    std::span<DepthSample> samples_out, TriangleSubset environment_triangles,
+    TriangleSubset tool_triangles) noexcept {
   const GradientSteps h = GradientSteps::For(w);
 
   const bool from_base = rotation_gradient_ != RotationGradient::kRenderedSamples;
-  RenderEnvironment(environment, X_WO, w);
+  RenderEnvironment(environment, X_WO, w, environment_triangles);
   // Tool triangles are chosen once, with margins that cover every perturbed pose (the render
   // re-checks facing at each pose); without rendered rotations only the base pose is drawn, on
   // the window grown by a cell.
-  SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool, 2.0 * h.h_x, tool_triangles_,
-                       from_base ? 1e-9 : h.h_theta + 1e-9, &vertex_scratch_, trees_.For(tool),
-                       from_base ? 0.0 : h.h_theta);
+  SelectPatchTrianglesIn(tool_triangles, tool, X_WT, w, PatchSide::kTool, 2.0 * h.h_x,
+                         tool_triangles_, from_base ? 1e-9 : h.h_theta + 1e-9, &vertex_scratch_,
+                         trees_.For(tool), from_base ? 0.0 : h.h_theta);
   std::array<DepthSample, kGradientSamples> samples;
   for (DepthSample& s : samples) s = {-std::numeric_limits<double>::infinity(), -1};
   glm::dvec3 lever_W(0.0);  // RotationGradient::kContactLever

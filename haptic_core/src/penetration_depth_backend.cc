@@ -60,7 +60,8 @@ bool CpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
     out[i] =
         solver.Linearize(tool, X_WT, *q.environment, q.X_WO, q.window, q.stiffness_n_per_m,
                          want_samples ? samples_out.subspan(i * kGradientSamples, kGradientSamples)
-                                      : std::span<DepthSample>{});
+                                      : std::span<DepthSample>{},
+                         q.environment_triangles, q.tool_triangles);
   };
   bool done = false;
   if (arena_ && !queries.empty()) {

@@ -15,6 +15,7 @@
 
 #include "haptic_core/broad_phase.h"
 #include "haptic_core/contact_assembly.h"
+#include "haptic_core/contact_region.h"
 
 namespace ht {
 
@@ -63,6 +64,7 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
   options_.Validate();
   reachable_pairs_.resize(static_cast<std::size_t>(clusterer_.max_pairs()));
   pair_bounds_.resize(static_cast<std::size_t>(clusterer_.max_pairs()));
+  candidate_triangles_.resize(static_cast<std::size_t>(2 * clusterer_.max_triangles()));
   queries_.reserve(scene.touchables.size());
   for (std::size_t i = 0; i < scene.touchables.size(); ++i) {
     queries_.emplace_back();
@@ -131,6 +133,20 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
 void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
                                                   StepTimings& timings) {
   num_candidates_ = 0;
+  std::size_t triangles_used = 0;
+  // A copy of a cluster's list into candidate_triangles_, or All() where the side has no list
+  // (no hierarchy) or it does not fit.
+  const auto keep_list = [&](std::span<const int> list, bool whole_model) {
+    if (!options_.cluster_triangles || whole_model) return TriangleSubset::All();
+    if (list.size() > candidate_triangles_.size() - triangles_used) {
+      ++step_faults_.triangle_lists_overflowed;
+      return TriangleSubset::All();
+    }
+    int* first = candidate_triangles_.data() + triangles_used;
+    std::copy(list.begin(), list.end(), first);
+    triangles_used += list.size();
+    return TriangleSubset::Of({first, list.size()});
+  };
   const HapticModel& tool = *scene_.tool;
   for (std::size_t k = 0; k < scene_.touchables.size(); ++k) {
     const TouchableObject& object = scene_.touchables[k];
@@ -159,7 +175,7 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
     const double cell = options_.window_extent_m / options_.grid_resolution;
     const bool local_bounds = options_.grazing_guard && options_.grazing_guard_local_reach;
     std::span<const double> pair_bounds;
-    if (options_.drop_unreachable_pairs ||
+    if (options_.drop_unreachable_pairs || options_.region_normals ||
         (local_bounds && pairs.size() <= reachable_pairs_.size())) {
       std::size_t kept = 0;
       for (const HullPairContact& p : pairs) {
@@ -171,7 +187,16 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
           continue;
         }
         pair_bounds_[kept] = std::max(0.0, -p.signed_distance_m) + pair_reach + cell;
-        reachable_pairs_[kept++] = p;
+        HullPairContact& kept_pair = reachable_pairs_[kept++];
+        kept_pair = p;
+        if (options_.region_normals) {
+          // The pair's direction from its contact region: the coarse triangles of each leaf
+          // within the other leaf's hull widened by the pair's texture reach (contact_region.h).
+          const glm::dvec3 region = LeafPairRegionVector(tool, X_WT, p.node_A, *object.model,
+                                                         object.X_WO, p.node_B, pair_reach);
+          const double len = glm::length(region);
+          if (len > 0.0) kept_pair.normal_W = region / len;
+        }
       }
       pairs = {reachable_pairs_.data(), kept};
       if (local_bounds) pair_bounds = {pair_bounds_.data(), kept};
@@ -192,52 +217,22 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
     timings.clusters += static_cast<int>(clusters.size());
     for (const ContactCluster& c : clusters) {
       if (num_candidates_ < options_.max_contacts) {
-        const glm::dvec3 normal_W =
-            options_.region_normals ? RegionNormal(c, tool, X_WT, object) : c.normal_W;
+        const glm::dvec3 normal_W = c.normal_W;
         const double bound = !options_.grazing_guard ? std::numeric_limits<double>::infinity()
                              : std::isfinite(c.depth_bound_m)
                                  ? c.depth_bound_m
                                  : std::max(0.0, -c.min_signed_distance_m) + reach + cell;
         const double extent = options_.size_windows_from_clusters ? c.extent_m : 0.0;
-        candidates_[num_candidates_++] = {&object, c.point_W, normal_W, extent, bound};
+        candidates_[num_candidates_++] = {&object,
+                                          c.point_W,
+                                          normal_W,
+                                          extent,
+                                          bound,
+                                          keep_list(c.object_triangles, c.object_whole_model),
+                                          keep_list(c.tool_triangles, c.tool_whole_model)};
       }
     }
   }
-}
-
-glm::dvec3 HapticTexturePipeline::RegionNormal(const ContactCluster& c, const HapticModel& tool,
-                                               const RigidTransform& X_WT,
-                                               const TouchableObject& object) const noexcept {
-  const glm::dvec3 n0 = c.normal_W;
-  // The footprint: the window's square around the cluster point on the plane ⟂ n0, with the
-  // window's own axes.
-  const double half = 0.5 * std::max(options_.window_extent_m, c.extent_m);
-  const std::optional<ContactWindow> axes = ContactWindow::TryMake(c.point_W, n0, 2.0 * half, 2);
-  if (!axes) return n0;
-  const glm::dvec3 u = axes->axis_u_W, v = axes->axis_v_W;
-  glm::dvec3 sum(0.0);
-  const auto add = [&](const HapticModel& m, const RigidTransform& X, std::span<const int> tris,
-                       double sign) {
-    const int nf = static_cast<int>(m.triangles.size());
-    for (const int f : tris) {
-      if (f < 0 || f >= nf) continue;
-      const glm::ivec3 t = m.triangles[f];
-      const glm::dvec3 p0 = X * m.vertices_O[t[0]], p1 = X * m.vertices_O[t[1]],
-                       p2 = X * m.vertices_O[t[2]];
-      const glm::dvec3 d = (p0 + p1 + p2) / 3.0 - c.point_W;
-      if (std::abs(glm::dot(d, u)) > half || std::abs(glm::dot(d, v)) > half ||
-          std::abs(glm::dot(d, n0)) > 2.0 * half) {
-        continue;
-      }
-      sum += sign * 0.5 * glm::cross(p1 - p0, p2 - p0);  // area × outward normal
-    }
-  };
-  if (!c.object_whole_model) add(*object.model, object.X_WO, c.object_triangles, 1.0);
-  if (!c.tool_whole_model) add(tool, X_WT, c.tool_triangles, -1.0);
-  const double len = glm::length(sum);
-  if (!(len > 0.0) || !std::isfinite(len)) return n0;
-  const glm::dvec3 n = sum / len;
-  return glm::dot(n, n0) > 0.0 ? n : n0;
 }
 
 std::unique_ptr<PenetrationDepthBackend> HapticTexturePipeline::MakeCpuBackend() const {

@@ -138,11 +138,16 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     region.name = "region_normals";
     region.region_normals = true;
     s.push_back(region);
+    FrontierSetting by_box = base;
+    by_box.name = "windows_pick_by_box";
+    by_box.cluster_triangles = false;
+    s.push_back(by_box);
     FrontierSetting before = no_guard;
     before.name = "issue31_before";
     before.max_window_extent_m = PipelineOptions{}.window_extent_m;
     before.drop_unreachable_pairs = false;
     before.region_normals = false;
+    before.cluster_triangles = false;
     s.push_back(before);
     // Every speed option at once: the warped rotations, local reach, at most 7 contacts, two
     // threads.
@@ -350,6 +355,7 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.drop_unreachable_pairs = st.drop_unreachable_pairs;
   options.region_normals = st.region_normals;
   options.size_windows_from_clusters = st.size_windows_from_clusters;
+  options.cluster_triangles = st.cluster_triangles;
   // The texture stage's threads are the coarse query's too, as in the product.
   options.texture_threads = st.texture_threads;
   HapticTexturePipeline pipeline(scene.haptic, options, std::move(backend));

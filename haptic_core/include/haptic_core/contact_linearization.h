@@ -187,11 +187,15 @@ class TexturePenetrationSolver {
   /// Returns depth_m = −∞ and a zero gradient when the patches do not overlap on the window.
   /// When `samples_out` holds kGradientSamples entries, the raw depths are copied there (with
   /// RotationGradient::kContactLever the six rotated ones are not taken: depth −∞, cell −1; with
-  /// kWarpedBaseRender they are the warped estimates).
+  /// kWarpedBaseRender they are the warped estimates). `environment_triangles` and
+  /// `tool_triangles` restrict which coarse triangles of each side may be rendered (the contact's
+  /// cluster's own, issue 31; default: all, picked by the window alone).
   ContactLinearization Linearize(const HapticModel& tool, const RigidTransform& X_WT,
                                  const HapticModel& environment, const RigidTransform& X_WO,
                                  const ContactWindow& window, double stiffness_n_per_m,
-                                 std::span<DepthSample> samples_out = {}) noexcept;
+                                 std::span<DepthSample> samples_out = {},
+                                 TriangleSubset environment_triangles = TriangleSubset::All(),
+                                 TriangleSubset tool_triangles = TriangleSubset::All()) noexcept;
 
   /// δ only (m), at one tool pose; same conventions as Linearize.
   DepthSample Depth(const HapticModel& tool, const RigidTransform& X_WT,
@@ -202,7 +206,8 @@ class TexturePenetrationSolver {
 
  private:
   void RenderEnvironment(const HapticModel& environment, const RigidTransform& X_WO,
-                         const ContactWindow& window) noexcept;
+                         const ContactWindow& window,
+                         TriangleSubset subset = TriangleSubset::All()) noexcept;
   DepthSample EvaluateTool(const HapticModel& tool, const RigidTransform& X_WT,
                            const ContactWindow& window) noexcept;
   /// kFast: the tool at X_WT on the window grown by one cell (tool_ext_heights_) and samples

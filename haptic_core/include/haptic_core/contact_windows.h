@@ -26,6 +26,10 @@ struct ContactCandidate {
   double extent_m = 0.0;
   /// The largest δ the coarse geometry allows (m; ContactQuery::depth_bound_m), +∞ for none.
   double depth_bound_m = std::numeric_limits<double>::infinity();
+  /// The coarse triangles of the object and of the tool the contact may render
+  /// (ContactQuery::environment_triangles, tool_triangles): its cluster's own leaves, or All().
+  TriangleSubset object_triangles = TriangleSubset::All();
+  TriangleSubset tool_triangles = TriangleSubset::All();
 };
 
 /// The grid N of a window of side `side_m` (m) that keeps the cell `window_extent_m` /
@@ -33,7 +37,8 @@ struct ContactCandidate {
 /// at most 1024. Expects positive, finite sides.
 int WindowResolution(double side_m, double window_extent_m, int grid_resolution) noexcept;
 
-/// Writes one query per candidate into `out`, in order (ContactWindow::TryMake): the window's side
+/// Writes one query per candidate into `out`, in order (ContactWindow::TryMake), with the
+/// candidate's triangle subsets: the window's side
 /// is the candidate's extent_m clamped to [window_extent_m, max_window_extent_m] (m), and its grid
 /// N = ceil(grid_resolution · side / window_extent_m), so that every window keeps the cell
 /// window_extent_m / grid_resolution (issue 31: a window sized from its contact region, at the

@@ -87,6 +87,35 @@ void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
                           const TriangleBoxTree* tree = nullptr,
                           double margin_per_radius = 0.0) noexcept;
 
+/// Which of a model's coarse triangles a contact may render (issue 31, change 4: each texture
+/// once): all of them (`all`, the default: SelectPatchTriangles picks by the window alone), or
+/// only `indices` (into HapticModel::triangles; the leaves contact clustering gave the contact's
+/// cluster, so that no triangle is rendered in two windows of one step). A view: the indices must
+/// outlive the call that reads them.
+struct TriangleSubset {
+  std::span<const int> indices;
+  bool all = true;
+
+  /// Every triangle of the model.
+  static TriangleSubset All() noexcept { return {}; }
+  /// Only `indices` (none when empty).
+  static TriangleSubset Of(std::span<const int> indices) noexcept { return {indices, false}; }
+};
+
+/// SelectPatchTriangles() restricted to `subset`: the same tests on the listed triangles only
+/// (indices out of range are skipped; a triangle listed twice is picked twice), the result sorted
+/// increasing, so that a subset holding
+/// every triangle the scan would pick gives the scan's list. With subset.all, SelectPatchTriangles
+/// itself (`vertex_scratch` and `tree` are only used then). noexcept; `triangles_out` does not
+/// allocate once its capacity reaches the model's triangle count.
+void SelectPatchTrianglesIn(TriangleSubset subset, const HapticModel& model,
+                            const RigidTransform& X_WO, const ContactWindow& window, PatchSide side,
+                            double margin_m, std::vector<int>& triangles_out,
+                            double facing_slack = 0.0,
+                            std::vector<double>* vertex_scratch = nullptr,
+                            const TriangleBoxTree* tree = nullptr,
+                            double margin_per_radius = 0.0) noexcept;
+
 /// An axis-aligned box tree over a model's coarse triangles, in its frame O (m), for
 /// SelectPatchTriangles: each node's box holds every corner of its triangles (exact minima and
 /// maxima of the corners' coordinates), leaves hold up to kLeafTriangles triangles, and a node

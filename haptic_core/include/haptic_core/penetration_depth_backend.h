@@ -28,6 +28,11 @@ struct ContactQuery {
   /// plus the texture reach plus a cell (issue 31's grazing guard, PipelineOptions); +∞ for none.
   /// The backends ignore it; the remote step drops a contact whose δ0 exceeds it.
   double depth_bound_m = std::numeric_limits<double>::infinity();
+  /// The coarse triangles of the environment and of the tool this contact may render (issue 31,
+  /// change 4: the contact's cluster's own leaves, so that no triangle is rendered in two windows
+  /// of one step); All(): picked by the window alone. Views: the lists must outlive the batch.
+  TriangleSubset environment_triangles = TriangleSubset::All();
+  TriangleSubset tool_triangles = TriangleSubset::All();
 };
 
 /// Computes, for all contacts of one remote step, δ and its gradient (kGradientSamples depth

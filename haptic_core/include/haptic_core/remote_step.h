@@ -79,15 +79,21 @@ struct PipelineOptions {
   /// (HullProximityQuery::NodeReach) start no cluster (issue 31): they cannot touch through the
   /// textures, and would only add windows without overlap. Off: every pair the query found.
   bool drop_unreachable_pairs = true;
-  /// The contact direction from the contact region (issue 31, after Kim, Otaduy, Lin & Manocha
-  /// 2003's per-cluster penetration direction): n = normalize(Σ a·n over the cluster's own coarse
-  /// triangles of the object − Σ a·n over its tool triangles), each within the window's footprint
-  /// around the cluster point, instead of the mean of its hull pairs' normals (one pair's smallest
-  /// support overlap, which on thin hulls is a side face). Kept when the region has no triangle
-  /// list (a model without hierarchy) or its sum points away from the pairs' normal. Off (the
-  /// default): the pairs' normal. On the frontier ("region_normals", docs/frontier/issue31) it was
-  /// no more accurate: fig77 about the same, the hammer on the torus worse.
+  /// The contact direction from the contact region (issue 31, change 2, after Kim, Otaduy, Lin &
+  /// Manocha 2003's per-cluster penetration direction): each leaf pair's normal, before
+  /// clustering, is its region vector (LeafPairRegionVector, contact_region.h: the area-weighted
+  /// normals of each leaf's coarse triangles within the other leaf's hull widened by the pair's
+  /// texture reach), instead of the hulls' smallest support overlap, which on thin hulls is a side
+  /// face; the pairs of one region then agree and cluster together. A pair without a region (a
+  /// model without hierarchy, or no triangle within reach) keeps its hull normal.
   bool region_normals = false;
+  /// Each texture once (issue 31, change 4): a contact renders only its cluster's own coarse
+  /// triangles (ContactCluster::tool_triangles, object_triangles: each leaf goes to the cluster of
+  /// its deepest pair), so that no triangle is rendered in two windows of one step and two
+  /// windows on one contact region do not both count its penetration. A side without hierarchy
+  /// (node −1), or a step whose lists overflow the pipeline's storage, picks by window as before.
+  /// Off: every window renders whatever triangles of both models it covers.
+  bool cluster_triangles = true;
 
   /// Throws std::invalid_argument naming a value out of range.
   void Validate() const;
@@ -155,6 +161,9 @@ class HapticTexturePipeline {
     /// Separated leaf pairs beyond their local texture reach, left out of clustering
     /// (PipelineOptions::drop_unreachable_pairs).
     std::int64_t unreachable_pairs = 0;
+    /// Contact sides whose cluster's triangle list did not fit the pipeline's storage and were
+    /// picked by window instead (PipelineOptions::cluster_triangles).
+    std::int64_t triangle_lists_overflowed = 0;
   };
   const StepFaults& step_faults() const noexcept { return step_faults_; }
   /// The backend in use: the one given, or the CPU backend after that one failed.
@@ -188,10 +197,6 @@ class HapticTexturePipeline {
   /// Stage 5: linearizes last_queries_[0, n) into last_results_ with the backend in use; when that
   /// backend fails, switches to the CPU backend for good and recomputes the batch.
   void LinearizeContacts(const RigidTransform& X_WT, int n);
-  /// PipelineOptions::region_normals: the direction of cluster `c` from its own coarse triangles
-  /// (the tool at X_WT, `object` at its pose), or c.normal_W when they give none.
-  glm::dvec3 RegionNormal(const ContactCluster& c, const HapticModel& tool,
-                          const RigidTransform& X_WT, const TouchableObject& object) const noexcept;
   /// The CPU backend of these options (fast path, texture_threads threads).
   std::unique_ptr<PenetrationDepthBackend> MakeCpuBackend() const;
 
@@ -212,6 +217,9 @@ class HapticTexturePipeline {
   /// The grazing guard's bound of each pair of a query
   /// (PipelineOptions::grazing_guard_local_reach).
   std::vector<double> pair_bounds_;
+  /// The candidates' triangle lists (PipelineOptions::cluster_triangles), copied from the
+  /// clusterer, whose lists last only until its next call (one per touchable).
+  std::vector<int> candidate_triangles_;
   std::array<ContactCandidate, kMaxContacts> candidates_{};
   int num_candidates_ = 0;
   std::array<ContactQuery, kMaxContacts> last_queries_{};

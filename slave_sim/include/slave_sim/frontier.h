@@ -57,6 +57,8 @@ struct FrontierSetting {
   bool region_normals = false;
   /// PipelineOptions::size_windows_from_clusters.
   bool size_windows_from_clusters = true;
+  /// PipelineOptions::cluster_triangles ("windows_pick_by_box" turns it off).
+  bool cluster_triangles = true;
 };
 
 /// The sweep: the default setting (grid 50, 1024² textures, the seed's coarse counts, CPU) first,
