@@ -157,8 +157,23 @@ void ContactClusterer::Absorb(int into, int from) noexcept {
   b.num_pairs = 0;
 }
 
+bool ContactClusterer::WindowsOverlap(int a, int b) const noexcept {
+  const ContactCluster& p = out_[static_cast<std::size_t>(a)];
+  const ContactCluster& q = out_[static_cast<std::size_t>(b)];
+  const glm::dvec3 d = q.point_W - p.point_W;
+  const double half_sum = 0.5 * (p.extent_m + q.extent_m);
+  const glm::dvec3 s = p.normal_W + q.normal_W;
+  const double len = glm::length(s);
+  const glm::dvec3 n = len > 1e-12 ? s / len : p.normal_W;
+  glm::dvec3 u, v;
+  WindowAxes(n, u, v);
+  return std::abs(glm::dot(d, u)) < half_sum && std::abs(glm::dot(d, v)) < half_sum &&
+         std::abs(glm::dot(d, n)) < 2.0 * half_sum;
+}
+
 int ContactClusterer::AssignTriangles(const ConvexHullHierarchy& hulls, bool tool_side,
-                                      int num_records, int num_out, int write_at) noexcept {
+                                      int num_records, int num_out, int write_at,
+                                      bool share_disjoint) noexcept {
   const int num_nodes = static_cast<int>(hulls.nodes.size());
   int num_entries = 0;
   for (int r = 0; r < num_records; ++r) {
@@ -186,9 +201,22 @@ int ContactClusterer::AssignTriangles(const ConvexHullHierarchy& hulls, bool too
     return a.input_index < b.input_index;
   });
   int num_leaves = 0;
+  int group = 0;  // the first kept entry of the current leaf
   for (int i = 0; i < num_entries; ++i) {
-    if (num_leaves > 0 && leaf_entries_[num_leaves - 1].leaf == leaf_entries_[i].leaf) continue;
-    leaf_entries_[num_leaves++] = leaf_entries_[i];
+    const LeafEntry entry = leaf_entries_[i];
+    if (num_leaves == 0 || leaf_entries_[num_leaves - 1].leaf != entry.leaf) {
+      group = num_leaves;
+      leaf_entries_[num_leaves++] = entry;
+      continue;
+    }
+    if (!share_disjoint) continue;
+    // A further cluster of this leaf: kept when its window overlaps none of those holding it.
+    bool overlaps = false;
+    for (int k = group; k < num_leaves && !overlaps; ++k) {
+      overlaps = leaf_entries_[k].cluster == entry.cluster ||
+                 WindowsOverlap(leaf_entries_[k].cluster, entry.cluster);
+    }
+    if (!overlaps) leaf_entries_[num_leaves++] = entry;
   }
   std::sort(first, first + num_leaves, [](const LeafEntry& a, const LeafEntry& b) {
     return a.cluster != b.cluster ? a.cluster < b.cluster : a.leaf < b.leaf;
@@ -399,8 +427,9 @@ std::span<const ContactCluster> ContactClusterer::Cluster(
   }
 
   // 4. Triangles: each leaf to the cluster of its deepest kept pair.
-  const int written = AssignTriangles(tool_hulls, /*tool_side=*/true, n, num_out, 0);
-  AssignTriangles(object_hulls, /*tool_side=*/false, n, num_out, written);
+  const bool share = options.share_leaves_between_disjoint_windows;
+  const int written = AssignTriangles(tool_hulls, /*tool_side=*/true, n, num_out, 0, share);
+  AssignTriangles(object_hulls, /*tool_side=*/false, n, num_out, written, share);
   return {out_.data(), static_cast<std::size_t>(num_out)};
 }
 

@@ -212,6 +212,8 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
     clustering.min_extent_m = options_.window_extent_m;
     clustering.max_extent_m = options_.max_window_extent_m;
     clustering.max_contacts = options_.max_contacts;
+    clustering.share_leaves_between_disjoint_windows =
+        options_.cluster_triangles && options_.share_leaves_between_disjoint_windows;
     const std::span<const ContactCluster> clusters = clusterer_.Cluster(
         pairs, tool.hull_hierarchy, object.model->hull_hierarchy, clustering, pair_bounds);
     timings.clusters += static_cast<int>(clusters.size());
@@ -247,7 +249,38 @@ void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n)
   const std::span<const ContactQuery> batch(last_queries_.data(), static_cast<std::size_t>(n));
   const std::span<ContactLinearization> batch_out(last_results_.data(),
                                                   static_cast<std::size_t>(n));
-  if (backend_->LinearizeBatch(tool, X_WT, batch, batch_out)) return;
+  // The GPU backend encodes one window extent and grid per batch: with windows sized from their
+  // clusters, one batch per size (the CPU backend takes them mixed).
+  bool mixed = false;
+  for (int i = 1; i < n; ++i) {
+    mixed = mixed || last_queries_[i].window.resolution != last_queries_[0].window.resolution ||
+            last_queries_[i].window.extent_m != last_queries_[0].window.extent_m;
+  }
+  if (mixed && backend_->name() == "gpu") {
+    bool ok = true;
+    std::array<bool, kMaxContacts> done{};
+    for (int first = 0; first < n && ok; ++first) {
+      if (done[first]) continue;
+      const ContactWindow& w = last_queries_[first].window;
+      int m = 0;
+      for (int i = first; i < n; ++i) {
+        if (done[i] || last_queries_[i].window.resolution != w.resolution ||
+            last_queries_[i].window.extent_m != w.extent_m) {
+          continue;
+        }
+        done[i] = true;
+        size_index_[m] = i;
+        size_queries_[m++] = last_queries_[i];
+      }
+      const auto count = static_cast<std::size_t>(m);
+      ok = backend_->LinearizeBatch(tool, X_WT, {size_queries_.data(), count},
+                                    {size_results_.data(), count});
+      for (int k = 0; ok && k < m; ++k) last_results_[size_index_[k]] = size_results_[k];
+    }
+    if (ok) return;
+  } else if (backend_->LinearizeBatch(tool, X_WT, batch, batch_out)) {
+    return;
+  }
   // The GPU failed (context lost, GL error): this step and all later ones on the CPU.
   if (backend_failures_++ == 0) {
     fallback_reason_ = std::string(backend_->name()) + ": " + backend_->last_error();

@@ -126,6 +126,14 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     sized.name = "windows_from_clusters";
     sized.max_window_extent_m = 2.0 * PipelineOptions{}.window_extent_m;
     s.push_back(sized);
+    FrontierSetting fixed = base;
+    fixed.name = "windows_fixed";
+    fixed.max_window_extent_m = PipelineOptions{}.window_extent_m;
+    s.push_back(fixed);
+    FrontierSetting sized4 = base;
+    sized4.name = "windows_from_clusters_4w";
+    sized4.max_window_extent_m = 4.0 * PipelineOptions{}.window_extent_m;
+    s.push_back(sized4);
     FrontierSetting merged = sized;
     merged.name = "merge_clusters_fixed_windows";
     merged.size_windows_from_clusters = false;
@@ -142,6 +150,10 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     by_box.name = "windows_pick_by_box";
     by_box.cluster_triangles = false;
     s.push_back(by_box);
+    FrontierSetting whole_leaves = base;
+    whole_leaves.name = "leaves_to_deepest_pair";
+    whole_leaves.share_leaves_between_disjoint_windows = false;
+    s.push_back(whole_leaves);
     FrontierSetting before = no_guard;
     before.name = "issue31_before";
     before.max_window_extent_m = PipelineOptions{}.window_extent_m;
@@ -327,11 +339,17 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
     }
     return;
   }
+  // Sized for the largest window of the setting (windows sized from their clusters keep the cell).
+  const int max_resolution =
+      std::max(128, WindowResolution(st.max_window_extent_m > 0.0
+                                         ? st.max_window_extent_m
+                                         : PipelineOptions{}.max_window_extent_m,
+                                     PipelineOptions{}.window_extent_m, st.grid));
   std::unique_ptr<PenetrationDepthBackend> backend;
   if (st.backend == "gpu") {
     GpuPenetrationDepthOptions gpu;
     gpu.depth_bits = st.depth_bits;
-    gpu.max_resolution = std::max(128, st.grid);
+    gpu.max_resolution = max_resolution;
     try {
       auto g = GpuPenetrationDepthBackend::Create(gpu);
       backend = std::move(g);
@@ -341,7 +359,7 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
     }
   } else {
     backend = std::make_unique<CpuPenetrationDepthBackend>(
-        std::max(128, st.grid), st.texture_path, st.texture_threads, st.rotation_gradient);
+        max_resolution, st.texture_path, st.texture_threads, st.rotation_gradient);
   }
   run.renderer = backend->description();
   PipelineOptions options;
@@ -356,6 +374,7 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.region_normals = st.region_normals;
   options.size_windows_from_clusters = st.size_windows_from_clusters;
   options.cluster_triangles = st.cluster_triangles;
+  options.share_leaves_between_disjoint_windows = st.share_leaves_between_disjoint_windows;
   // The texture stage's threads are the coarse query's too, as in the product.
   options.texture_threads = st.texture_threads;
   HapticTexturePipeline pipeline(scene.haptic, options, std::move(backend));

@@ -74,12 +74,14 @@ int main(int argc, char** argv) {
                  "smallest contact window side W in metres (with the grid N: the cell W/N)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  app.add_option("--max-window", config.pipeline.max_window_extent_m,
-                 "largest contact window side in metres: a cluster spread wider than W gets a\n"
-                 "window sized to it at the same cell (N grows with it); overlapping windows with\n"
-                 "agreeing normals merge while they fit. Equal to --window: every window W x W")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
+  CLI::Option* max_window_option =
+      app.add_option("--max-window", config.pipeline.max_window_extent_m,
+                     "largest contact window side in metres: a cluster spread wider than W gets a\n"
+                     "window sized to it at the same cell (N grows with it); overlapping windows\n"
+                     "with agreeing normals merge while they fit. Default 3 x --window; equal to\n"
+                     "--window: every window W x W")
+          ->check(CLI::PositiveNumber)
+          ->capture_default_str();
   config.pipeline.texture_threads = ht::DefaultTextureThreads();
   app.add_option("--texture-threads", config.pipeline.texture_threads,
                  "threads of the CPU texture stage (a step's contacts spread over them); the\n"
@@ -190,6 +192,10 @@ int main(int argc, char** argv) {
   seed_models->add_flag("--quiet", quiet, "no progress lines");
   app.add_flag("--quiet", quiet, "no progress lines");
   CLI11_PARSE(app, argc, argv);
+  if (max_window_option->count() == 0) {
+    config.pipeline.max_window_extent_m =
+        ht::kDefaultMaxWindowPerWindow * config.pipeline.window_extent_m;
+  }
   config.max_deadband = max_deadband_pct / 100.0;
   config.gpu.instanced_draws = !per_render_draws;
 

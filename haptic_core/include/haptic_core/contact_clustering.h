@@ -43,6 +43,12 @@ struct ClusteringOptions {
   /// nearest kept cluster when their normals agree and the merged window fits max_extent_m, and
   /// are dropped otherwise (both counted in ClusteringStats).
   int max_contacts = kMaxContacts;
+  /// Pass 4: a leaf met by the pairs of several kept clusters goes to the cluster of its deepest
+  /// pair (false, the default), and also (true) to each further cluster, deepest pair first,
+  /// whose window is disjoint from the windows of every cluster holding the leaf already (the box
+  /// test of pass 2). One large leaf (a hammer's flat face on a torus) then serves each contact
+  /// region it touches, and no part of it is rendered in two windows, which do not overlap.
+  bool share_leaves_between_disjoint_windows = false;
 
   /// True when every field is finite and in its documented range. Never throws.
   bool IsValid() const noexcept;
@@ -130,9 +136,12 @@ struct ClusteringStats {
 ///      them first, merge into the nearest (centroid distance) of the max_contacts deepest
 ///      clusters among those whose normal agrees and whose merged window fits max_extent_m; with
 ///      none such they are dropped. Kept clusters' depths are unchanged by these merges.
-///   4. Triangles: each leaf met in a kept pair goes to the cluster holding its deepest pair.
+///   4. Triangles: each leaf met in a kept pair goes to the cluster holding its deepest pair
+///      (and, with share_leaves_between_disjoint_windows, to each further cluster whose window
+///      is disjoint from those of the clusters holding it).
 /// Windows that overlap with different normals (a corner, two faces) stay separate. The same
-/// texture is still not counted twice because each coarse triangle is listed in one cluster only.
+/// texture is still not counted twice because each coarse triangle is listed in one cluster only,
+/// or in several whose windows do not overlap.
 /// The texture stage's facing test (face normal·n > kPatchFacingThreshold) alone would not ensure
 /// it: a triangle faces two windows whose normals are α apart whenever cos(α/2) > 0.05, i.e. for
 /// all α < 174.3°; it only separates nearly opposite windows. A leaf's triangles that do not face
@@ -210,7 +219,10 @@ class ContactClusterer {
                 const ClusteringOptions& options) const noexcept;
   void Absorb(int into, int from) noexcept;
   int AssignTriangles(const ConvexHullHierarchy& hulls, bool tool_side, int num_records,
-                      int num_out, int write_at) noexcept;
+                      int num_out, int write_at, bool share_disjoint) noexcept;
+  // Whether output clusters a and b have windows that overlap (pass 2's box test on their
+  // points, normals and extents).
+  bool WindowsOverlap(int a, int b) const noexcept;
 
   int max_pairs_;
   int max_triangles_;

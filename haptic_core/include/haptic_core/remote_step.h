@@ -19,6 +19,10 @@
 
 namespace ht {
 
+/// The default largest window side as a multiple of the window side W
+/// (PipelineOptions::max_window_extent_m; slave_sim applies it to a --window given alone).
+inline constexpr double kDefaultMaxWindowPerWindow = 3.0;
+
 /// Options of the per-step pipeline.
 struct PipelineOptions {
   int grid_resolution = 50;  ///< N of the penetration-depth grid (seed: 50).
@@ -26,11 +30,14 @@ struct PipelineOptions {
   /// spread further gets a window sized to them (up to max_window_extent_m) at the same cell W/N.
   double window_extent_m = 0.02;
   /// Largest window side (m), ≥ window_extent_m; windows whose normals agree and overlap merge
-  /// while the merged window fits it (contact clustering's pass 2), so that one texture region is
-  /// not rendered in several windows. Equal to window_extent_m (the default): every window W×W.
-  /// Larger is an option placed on the speed-vs-error frontier ("windows_from_clusters": at 4 cm it
-  /// was less accurate and slower on fig77, docs/frontier/issue31).
-  double max_window_extent_m = 0.02;
+  /// while the merged window fits it (contact clustering's pass 2), so that one contact region
+  /// (a hammer's face along a torus) gets one window instead of several overlapping ones of which
+  /// only one holds the region's leaves (cluster_triangles). The default is
+  /// kDefaultMaxWindowPerWindow × the default window_extent_m (6 cm; issue 31's second stop: on
+  /// the frontier, against fixed 2 cm windows, the hammer's pipeline force error 52 → 39 %, fig77's
+  /// 58 → 54 %, 0.2–0.4 ms slower per step, docs/frontier/issue31). Equal to window_extent_m:
+  /// every window W×W.
+  double max_window_extent_m = 0.06;
   /// True: a window's side is its cluster's extent (between window_extent_m and
   /// max_window_extent_m, N scaled to keep the cell). False: every window is window_extent_m wide
   /// around its cluster's point, however far its (merged) members spread.
@@ -94,6 +101,11 @@ struct PipelineOptions {
   /// (node −1), or a step whose lists overflow the pipeline's storage, picks by window as before.
   /// Off: every window renders whatever triangles of both models it covers.
   bool cluster_triangles = true;
+  /// With cluster_triangles: a leaf met by several clusters also serves each further cluster
+  /// whose window is disjoint from those holding it
+  /// (ClusteringOptions::share_leaves_between_disjoint_windows), instead of only the cluster of
+  /// its deepest pair, which leaves the other contact regions of one large leaf unrendered.
+  bool share_leaves_between_disjoint_windows = true;
 
   /// Throws std::invalid_argument naming a value out of range.
   void Validate() const;
@@ -194,7 +206,9 @@ class HapticTexturePipeline {
   /// Stages 1–3 for every touchable: appends to candidates_ (up to kMaxContacts) and fills the
   /// coarse counts and flags of `timings`.
   void FindContactCandidates(const RigidTransform& X_WT, StepTimings& timings);
-  /// Stage 5: linearizes last_queries_[0, n) into last_results_ with the backend in use; when that
+  /// Stage 5: linearizes last_queries_[0, n) into last_results_ with the backend in use (the GPU
+  /// backend takes one window size per batch: windows sized from their clusters go to it in one
+  /// batch per size); when that
   /// backend fails, switches to the CPU backend for good and recomputes the batch.
   void LinearizeContacts(const RigidTransform& X_WT, int n);
   /// The CPU backend of these options (fast path, texture_threads threads).
@@ -224,6 +238,10 @@ class HapticTexturePipeline {
   int num_candidates_ = 0;
   std::array<ContactQuery, kMaxContacts> last_queries_{};
   std::array<ContactLinearization, kMaxContacts> last_results_{};
+  /// One window size's queries and results (the GPU backend's batches), and their indices.
+  std::array<ContactQuery, kMaxContacts> size_queries_{};
+  std::array<ContactLinearization, kMaxContacts> size_results_{};
+  std::array<int, kMaxContacts> size_index_{};
   int last_num_queries_ = 0;
   StepFaults step_faults_;
   std::int64_t backend_failures_ = 0;

@@ -49,7 +49,8 @@ struct FrontierSetting {
   bool grazing_guard = true;
   /// PipelineOptions::grazing_guard_local_reach ("guard_model_reach" turns it off).
   bool grazing_guard_local_reach = true;
-  /// PipelineOptions::max_window_extent_m (0: the default). "windows_from_clusters": up to 2W.
+  /// PipelineOptions::max_window_extent_m (0: the default, 3W). "windows_fixed": W (every window
+  /// W×W); "windows_from_clusters": up to 2W; "windows_from_clusters_4w": up to 4W.
   double max_window_extent_m = 0.0;
   /// PipelineOptions::drop_unreachable_pairs ("keep_unreachable_pairs" turns it off).
   bool drop_unreachable_pairs = true;
@@ -59,6 +60,9 @@ struct FrontierSetting {
   bool size_windows_from_clusters = true;
   /// PipelineOptions::cluster_triangles ("windows_pick_by_box" turns it off).
   bool cluster_triangles = true;
+  /// PipelineOptions::share_leaves_between_disjoint_windows ("leaves_to_deepest_pair" turns it
+  /// off).
+  bool share_leaves_between_disjoint_windows = true;
 };
 
 /// The sweep: the default setting (grid 50, 1024² textures, the seed's coarse counts, CPU) first,
