@@ -3,6 +3,8 @@
 // in one window of a step (PipelineOptions::cluster_triangles), and the smooth single-region case
 // with a closed form: a smooth sphere slid across a gently rippled plate.
 
+#include "haptic_core/contact_region.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -16,7 +18,6 @@
 #include <vector>
 
 #include "accuracy_test_meshes.h"
-#include "haptic_core/contact_region.h"
 #include "haptic_core/model_build/haptic_model_build.h"
 #include "haptic_core/penetration_depth.h"
 #include "haptic_core/remote_step.h"
@@ -123,8 +124,8 @@ const SphereOnRipples& Models() {
     pp.coarse_triangles = 24;  // a flat-ish slab: the ripples go to the texture
     pp.texture.texture_size = 1024;
     pp.texture.validation_samples = 1000;
-    s.plate = BuildHapticModel("rippled_plate", RippledPlate(0.03, 0.015, 0.005, 240, 120), pp)
-                  .model;
+    s.plate =
+        BuildHapticModel("rippled_plate", RippledPlate(0.03, 0.015, 0.005, 240, 120), pp).model;
     return s;
   }();
   return models;
@@ -197,9 +198,10 @@ TEST(ContactRegion, LeafPairDirectionIsTheTiltedPlatesNormal) {
   ASSERT_GE(pairs, 2);
   EXPECT_LT(worst, PipelineOptions{}.clustering_angle_deg);
   EXPECT_LT(AngleDeg(sum, n_plate), 3.0);
-  std::printf("[contact region] %d leaf pairs with a region (%.2f mm² in all): their sum %.2f° "
-              "from the plate's normal, the worst pair %.2f°\n",
-              pairs, area * 1e6, AngleDeg(sum, n_plate), worst);
+  std::printf(
+      "[contact region] %d leaf pairs with a region (%.2f mm² in all): their sum %.2f° "
+      "from the plate's normal, the worst pair %.2f°\n",
+      pairs, area * 1e6, AngleDeg(sum, n_plate), worst);
   // Not leaves, or a bad margin: no direction (the caller keeps the pair's normal).
   EXPECT_EQ(LeafPairRegionVector(*m.sphere, X_WT, -1, *m.plate, X_WO, 0, 0.0), glm::dvec3(0.0));
   EXPECT_EQ(LeafPairRegionVector(*m.sphere, X_WT, 0, *m.plate, X_WO, 0,
@@ -303,12 +305,12 @@ TEST(ContactRegion, SmoothSphereSlidingOnGentleRipplesIsOneContactAtTheClosedFor
     PipelineOptions by_box;
     by_box.cluster_triangles = false;
     const SlideFigures off = Slide(by_box, y);
-    std::printf("[smooth sphere] y = %.1f mm: %d ticks; worst direction %.2f°, depth %.1f µm, "
-                "|F|/k %.1f µm from the closed form, %d ticks with >1 contact; windows picking by "
-                "box: %d ticks with >1 contact, %d off, worst |F|/k %.0f µm\n",
-                y * 1e3, on.ticks, on.worst_direction_deg, on.worst_depth_m * 1e6,
-                on.worst_force_m * 1e6, on.multi_contact_ticks, off.multi_contact_ticks,
-                off.off_ticks, off.worst_force_m * 1e6);
+    std::printf(
+        "[smooth sphere] y = %.1f mm: %d ticks; worst direction %.2f°, depth %.1f µm, "
+        "|F|/k %.1f µm from the closed form, %d ticks with >1 contact; windows picking by "
+        "box: %d ticks with >1 contact, %d off, worst |F|/k %.0f µm\n",
+        y * 1e3, on.ticks, on.worst_direction_deg, on.worst_depth_m * 1e6, on.worst_force_m * 1e6,
+        on.multi_contact_ticks, off.multi_contact_ticks, off.off_ticks, off.worst_force_m * 1e6);
   }
 }
 

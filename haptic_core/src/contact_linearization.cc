@@ -122,8 +122,7 @@ TexturePenetrationSolver::TexturePenetrationSolver(int max_resolution, int max_t
 }
 
 void TexturePenetrationSolver::RenderEnvironment(const HapticModel& environment,
-                                                 const RigidTransform& X_WO,
-                                                 const ContactWindow& w,
+                                                 const RigidTransform& X_WO, const ContactWindow& w,
                                                  TriangleSubset subset) noexcept {
   const size_t cells = static_cast<size_t>(w.resolution) * w.resolution;
   env_heights_.assign(cells, -std::numeric_limits<float>::infinity());

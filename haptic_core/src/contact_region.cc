@@ -18,8 +18,9 @@ bool IsLeaf(const HapticModel& m, int node) noexcept {
 // Σ over the triangles of `patch` (leaf `patch_node` of `patch_model`, vertices mapped into the
 // hull's frame by X_HP) of the area vector of each triangle's part inside the planes of `hull`
 // moved out by `margin` (m², the hull's frame).
-glm::dvec3 AreaInsideHull(const HapticModel& patch_model, int patch_node, const RigidTransform& X_HP,
-                          const ConvexHull& hull, double margin) noexcept {
+glm::dvec3 AreaInsideHull(const HapticModel& patch_model, int patch_node,
+                          const RigidTransform& X_HP, const ConvexHull& hull,
+                          double margin) noexcept {
   glm::dvec3 sum(0.0);
   const std::size_t num_planes = hull.planes_O.size();
   if (num_planes == 0 || num_planes + 3 > static_cast<std::size_t>(kMaxPolygon)) return sum;
@@ -99,8 +100,7 @@ glm::dvec3 LeafPairRegionVector(const HapticModel& tool, const RigidTransform& X
   // The object's triangles inside the tool's leaf (in T), the tool's inside the object's (in O).
   const glm::dvec3 object_in_tool_T = AreaInsideHull(object, node_B, X_TO, hull_A, margin_m);
   const glm::dvec3 tool_in_object_O = AreaInsideHull(tool, node_A, X_OT, hull_B, margin_m);
-  const glm::dvec3 v =
-      0.5 * (X_WT.rotation * object_in_tool_T - X_WO.rotation * tool_in_object_O);
+  const glm::dvec3 v = 0.5 * (X_WT.rotation * object_in_tool_T - X_WO.rotation * tool_in_object_O);
   if (!(std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z))) return glm::dvec3(0.0);
   return v;
 }

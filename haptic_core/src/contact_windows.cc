@@ -27,9 +27,9 @@ int MakeContactQueries(std::span<const ContactCandidate> candidates, double wind
       ++bad_windows;
       continue;
     }
-    out[num_queries++] = {c.object->model.get(), c.object->X_WO,      *window,
-                          c.object->stiffness_n_per_m, c.depth_bound_m, c.object_triangles,
-                          c.tool_triangles};
+    out[num_queries++] = {
+        c.object->model.get(), c.object->X_WO,     *window,         c.object->stiffness_n_per_m,
+        c.depth_bound_m,       c.object_triangles, c.tool_triangles};
   }
   return num_queries;
 }

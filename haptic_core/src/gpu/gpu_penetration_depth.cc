@@ -726,11 +726,9 @@ bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
   // The instanced draws render a side's union of the batch's lists into every contact's tile,
   // which would render one cluster's triangles in another's window: a batch whose contacts carry
   // their clusters' own triangles (issue 31, TriangleSubset) is drawn one contact at a time.
-  const bool own_triangles = std::any_of(queries.begin(), queries.begin() + count,
-                                         [](const ContactQuery& q) {
-                                           return !q.environment_triangles.all ||
-                                                  !q.tool_triangles.all;
-                                         });
+  const bool own_triangles = std::any_of(
+      queries.begin(), queries.begin() + count,
+      [](const ContactQuery& q) { return !q.environment_triangles.all || !q.tool_triangles.all; });
   const bool instanced = instanced_program_ != 0 && !own_triangles;
   const auto select_env = [&](int c) {
     const ContactQuery& q = queries[c];
@@ -741,9 +739,9 @@ bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
   const auto select_tool = [&](int c) {
     const ContactWindow& w = queries[c].window;
     const GradientSteps h = GradientSteps::For(w);
-    SelectPatchTrianglesIn(queries[c].tool_triangles, tool, X_WT, w, PatchSide::kTool,
-                           2.0 * h.h_x, patch_triangles_, h.h_theta + 1e-9, nullptr,
-                           trees_.For(tool), h.h_theta);
+    SelectPatchTrianglesIn(queries[c].tool_triangles, tool, X_WT, w, PatchSide::kTool, 2.0 * h.h_x,
+                           patch_triangles_, h.h_theta + 1e-9, nullptr, trees_.For(tool),
+                           h.h_theta);
   };
   // A range of the element buffer: begun, then patch_triangles_ appended to it one or more times
   // (each triangle once: a triangle is marked with the range's stamp when it enters, so that
