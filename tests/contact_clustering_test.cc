@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <cstdlib>
@@ -255,6 +256,39 @@ TEST(ContactClustering, LeafSharedByTwoClustersGoesToTheClusterOfItsDeepestPair)
       (std::vector<int>{0, 1, 2, 6, 7, 8}));
   EXPECT_EQ(clusters[0].tool_triangles.size(), 6u);
   EXPECT_EQ(clusters[1].tool_triangles.size(), 6u);
+}
+
+TEST(ContactClustering, LeafSharedByClustersWithDisjointWindowsServesEachOfThem) {
+  // Object leaf 0 (one large face) is met by three clusters: A (deepest) and B 5 cm apart along
+  // its up normal, whose 2 cm windows are disjoint, and C 5 mm from A along a normal 90° away
+  // (no merge), whose window overlaps A's. Shared, the leaf serves A and B and not C; unshared,
+  // A alone (the cluster of its deepest pair).
+  ClusteringOptions options;
+  options.min_extent_m = options.max_extent_m = 0.02;
+  const std::vector<HullPairContact> pairs = {
+      MakePair({0, 0, 0}, {0, 0, 1}, -3e-4, 0, 0),
+      MakePair({0.05, 0, 0}, {0, 0, 1}, -2e-4, 1, 0),
+      MakePair({0.005, 0, 1e-3}, {1, 0, 0}, -1e-4, 2, 0),
+  };
+  const auto object_list = [](const ContactCluster& c) {
+    return std::vector<int>(c.object_triangles.begin(), c.object_triangles.end());
+  };
+  for (const bool share : {false, true}) {
+    options.share_leaves_between_disjoint_windows = share;
+    ContactClusterer clusterer;
+    const auto clusters = clusterer.Cluster(pairs, MakeLeaves(3), MakeLeaves(1), options);
+    ASSERT_EQ(clusters.size(), 3u);
+    // Well formed; with sharing A and B list the same triangles (their windows are disjoint).
+    if (!share) ExpectWellFormed(clusters, options);
+    EXPECT_EQ(object_list(clusters[0]), (std::vector<int>{0, 1, 2})) << share;
+    EXPECT_EQ(object_list(clusters[1]), share ? (std::vector<int>{0, 1, 2}) : std::vector<int>{})
+        << share;
+    EXPECT_TRUE(object_list(clusters[2]).empty()) << share;
+    // The tool's leaves are one per cluster either way.
+    for (const ContactCluster& c : clusters) EXPECT_EQ(c.tool_triangles.size(), 3u);
+    ExpectNoTriangleTwice(clusters.subspan(1));  // B and C share nothing
+    ExpectNoTriangleTwice(std::array<ContactCluster, 2>{clusters[0], clusters[2]});  // A and C
+  }
 }
 
 TEST(ContactClustering, ChainOfOverlappingWindowsMergesIntoOneContact) {
