@@ -2,7 +2,9 @@
 // Meshes and poses shared by the accuracy tests (ground_truth_depth_test,
 // contact_patch_truth_test).
 
+#include <cmath>
 #include <glm/gtc/quaternion.hpp>
+#include <numbers>
 
 #include "haptic_core/haptic_model.h"
 #include "haptic_core/spatial.h"
@@ -30,6 +32,35 @@ inline RigidTransform At(const glm::dvec3& p, const glm::dquat& R = glm::dquat(1
   X.translation = p;
   X.rotation = R;
   return X;
+}
+
+/// A UV sphere of radius r (m) about the origin: closed, 2·n_lon·(n_lat−1) triangles,
+/// counter-clockwise seen from outside.
+inline TriangleMesh UvSphere(double r, int n_lat, int n_lon) {
+  TriangleMesh m;
+  m.vertices.emplace_back(0, 0, r);
+  for (int i = 1; i < n_lat; ++i) {
+    const double th = std::numbers::pi * i / n_lat;
+    for (int j = 0; j < n_lon; ++j) {
+      const double ph = 2 * std::numbers::pi * j / n_lon;
+      m.vertices.emplace_back(r * std::sin(th) * std::cos(ph), r * std::sin(th) * std::sin(ph),
+                              r * std::cos(th));
+    }
+  }
+  m.vertices.emplace_back(0, 0, -r);
+  const int south = static_cast<int>(m.vertices.size()) - 1;
+  const auto ring = [&](int i, int j) { return 1 + (i - 1) * n_lon + (j % n_lon); };
+  for (int j = 0; j < n_lon; ++j) m.triangles.emplace_back(0, ring(1, j), ring(1, j + 1));
+  for (int i = 1; i < n_lat - 1; ++i) {
+    for (int j = 0; j < n_lon; ++j) {
+      m.triangles.emplace_back(ring(i, j), ring(i + 1, j), ring(i + 1, j + 1));
+      m.triangles.emplace_back(ring(i, j), ring(i + 1, j + 1), ring(i, j + 1));
+    }
+  }
+  for (int j = 0; j < n_lon; ++j) {
+    m.triangles.emplace_back(south, ring(n_lat - 1, j + 1), ring(n_lat - 1, j));
+  }
+  return m;
 }
 
 }  // namespace ht::test

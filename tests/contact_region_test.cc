@@ -26,36 +26,9 @@ namespace ht {
 namespace {
 
 using test::At;
+using test::UvSphere;
 
 constexpr double kPi = std::numbers::pi;
-
-// A UV sphere of radius r about the origin: closed, outward winding.
-TriangleMesh UvSphere(double r, int n_lat, int n_lon) {
-  TriangleMesh m;
-  m.vertices.emplace_back(0, 0, r);
-  for (int i = 1; i < n_lat; ++i) {
-    const double th = kPi * i / n_lat;
-    for (int j = 0; j < n_lon; ++j) {
-      const double ph = 2 * kPi * j / n_lon;
-      m.vertices.emplace_back(r * std::sin(th) * std::cos(ph), r * std::sin(th) * std::sin(ph),
-                              r * std::cos(th));
-    }
-  }
-  m.vertices.emplace_back(0, 0, -r);
-  const int south = static_cast<int>(m.vertices.size()) - 1;
-  const auto ring = [&](int i, int j) { return 1 + (i - 1) * n_lon + (j % n_lon); };
-  for (int j = 0; j < n_lon; ++j) m.triangles.emplace_back(0, ring(1, j), ring(1, j + 1));
-  for (int i = 1; i < n_lat - 1; ++i) {
-    for (int j = 0; j < n_lon; ++j) {
-      m.triangles.emplace_back(ring(i, j), ring(i + 1, j), ring(i + 1, j + 1));
-      m.triangles.emplace_back(ring(i, j), ring(i + 1, j + 1), ring(i, j + 1));
-    }
-  }
-  for (int j = 0; j < n_lon; ++j) {
-    m.triangles.emplace_back(south, ring(n_lat - 1, j + 1), ring(n_lat - 1, j));
-  }
-  return m;
-}
 
 // Gentle ripples along x: h(x) = A sin(2πx/L), slope at most 2πA/L = 0.126 (7.2°), curvature at
 // most A(2π/L)² = 79 m⁻¹, below the sphere's 200 m⁻¹: the sphere touches at one point.

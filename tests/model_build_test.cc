@@ -13,39 +13,14 @@
 #include <set>
 #include <utility>
 
+#include "accuracy_test_meshes.h"
 #include "haptic_core/model_build/haptic_model_build.h"
 #include "haptic_core/model_build/mesh_decimation.h"
 
 namespace ht {
 namespace {
 
-// A UV sphere of radius r: closed, 2·n_lon·(n_lat−1) triangles, outward winding.
-TriangleMesh UvSphere(double r, int n_lat, int n_lon) {
-  TriangleMesh m;
-  m.vertices.emplace_back(0, 0, r);
-  for (int i = 1; i < n_lat; ++i) {
-    const double th = std::numbers::pi * i / n_lat;
-    for (int j = 0; j < n_lon; ++j) {
-      const double ph = 2 * std::numbers::pi * j / n_lon;
-      m.vertices.emplace_back(r * std::sin(th) * std::cos(ph), r * std::sin(th) * std::sin(ph),
-                              r * std::cos(th));
-    }
-  }
-  m.vertices.emplace_back(0, 0, -r);
-  const int south = static_cast<int>(m.vertices.size()) - 1;
-  const auto ring = [&](int i, int j) { return 1 + (i - 1) * n_lon + (j % n_lon); };
-  for (int j = 0; j < n_lon; ++j) m.triangles.emplace_back(0, ring(1, j), ring(1, j + 1));
-  for (int i = 1; i < n_lat - 1; ++i) {
-    for (int j = 0; j < n_lon; ++j) {
-      m.triangles.emplace_back(ring(i, j), ring(i + 1, j), ring(i + 1, j + 1));
-      m.triangles.emplace_back(ring(i, j), ring(i + 1, j + 1), ring(i, j + 1));
-    }
-  }
-  for (int j = 0; j < n_lon; ++j) {
-    m.triangles.emplace_back(south, ring(n_lat - 1, j + 1), ring(n_lat - 1, j));
-  }
-  return m;
-}
+using test::UvSphere;
 
 // Counts one-sided edges and edges used in the same direction twice (orientation faults).
 std::pair<int, int> BoundaryAndFlippedEdges(const TriangleMesh& m) {

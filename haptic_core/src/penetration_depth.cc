@@ -807,13 +807,13 @@ namespace {
   return !MissesSlab(d0, d1, d2, depth_limit);
 }
 
-}  // namespace
-
-void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
-                          const ContactWindow& w, PatchSide side, double margin_m,
-                          std::vector<int>& out, double facing_slack,
-                          std::vector<double>* vertex_scratch, const TriangleBoxTree* tree,
-                          double margin_per_radius) noexcept {
+// SelectPatchTriangles, and with `subset` (not all) the same tests on its listed triangles only
+// (SelectPatchTrianglesIn).
+void SelectPatchTrianglesImpl(const HapticModel& model, const RigidTransform& X_WO,
+                              const ContactWindow& w, PatchSide side, double margin_m,
+                              std::vector<int>& out, double facing_slack,
+                              std::vector<double>* vertex_scratch, const TriangleBoxTree* tree,
+                              double margin_per_radius, TriangleSubset subset) noexcept {
   out.clear();
   const double half = 0.5 * w.extent_m + margin_m;
   const double depth_limit = w.depth_range_m() + margin_m;
@@ -830,6 +830,17 @@ void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
   const double ou = glm::dot(offset, w.axis_u_W), ov = glm::dot(offset, w.axis_v_W),
                on = glm::dot(offset, w.normal_W);
   const int nf = static_cast<int>(model.triangles.size());
+  if (!subset.all) {
+    for (const int f : subset.indices) {
+      if (f >= 0 && f < nf &&
+          PatchTriangleTest(model, f, u_O, v_O, n_O, ou, ov, on, half, depth_limit, side, threshold,
+                            nullptr, margin_per_radius)) {
+        out.push_back(f);
+      }
+    }
+    std::sort(out.begin(), out.end());
+    return;
+  }
   const glm::dvec3* vertices = model.vertices_O.data();
   if (tree != nullptr && tree->BuiltFrom(model)) {
     // The leaves whose boxes reach the window, then the same tests on their triangles, in
@@ -898,36 +909,24 @@ void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
   }
 }
 
+}  // namespace
+
+void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
+                          const ContactWindow& w, PatchSide side, double margin_m,
+                          std::vector<int>& out, double facing_slack,
+                          std::vector<double>* vertex_scratch, const TriangleBoxTree* tree,
+                          double margin_per_radius) noexcept {
+  SelectPatchTrianglesImpl(model, X_WO, w, side, margin_m, out, facing_slack, vertex_scratch, tree,
+                           margin_per_radius, TriangleSubset::All());
+}
+
 void SelectPatchTrianglesIn(TriangleSubset subset, const HapticModel& model,
                             const RigidTransform& X_WO, const ContactWindow& w, PatchSide side,
                             double margin_m, std::vector<int>& out, double facing_slack,
                             std::vector<double>* vertex_scratch, const TriangleBoxTree* tree,
                             double margin_per_radius) noexcept {
-  if (subset.all) {
-    SelectPatchTriangles(model, X_WO, w, side, margin_m, out, facing_slack, vertex_scratch, tree,
-                         margin_per_radius);
-    return;
-  }
-  out.clear();
-  // The same window terms as SelectPatchTriangles, so that a listed triangle passes exactly when
-  // the scan would pass it.
-  const double half = 0.5 * w.extent_m + margin_m;
-  const double depth_limit = w.depth_range_m() + margin_m;
-  const double threshold = kPatchFacingThreshold - facing_slack;
-  const glm::dquat q_inv = glm::conjugate(X_WO.rotation);
-  const glm::dvec3 u_O = q_inv * w.axis_u_W, v_O = q_inv * w.axis_v_W, n_O = q_inv * w.normal_W;
-  const glm::dvec3 offset = X_WO.translation - w.center_W;
-  const double ou = glm::dot(offset, w.axis_u_W), ov = glm::dot(offset, w.axis_v_W),
-               on = glm::dot(offset, w.normal_W);
-  const int nf = static_cast<int>(model.triangles.size());
-  for (const int f : subset.indices) {
-    if (f < 0 || f >= nf) continue;
-    if (PatchTriangleTest(model, f, u_O, v_O, n_O, ou, ov, on, half, depth_limit, side, threshold,
-                          nullptr, margin_per_radius)) {
-      out.push_back(f);
-    }
-  }
-  std::sort(out.begin(), out.end());
+  SelectPatchTrianglesImpl(model, X_WO, w, side, margin_m, out, facing_slack, vertex_scratch, tree,
+                           margin_per_radius, subset);
 }
 
 namespace {
