@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 namespace ht {
 namespace {
 
@@ -111,6 +113,92 @@ TEST(ContactModel, NonFiniteInputsGiveZeroWrench) {
   const ContactModelEvaluation e = EvaluateContactModel(m, m.X_WT0);
   EXPECT_EQ(e.active_contacts, 1);
   EXPECT_TRUE(IsFinite(e.F_T_W));
+}
+
+// A flat face resting on two edges r = 2 cm either side of the tool's centre of mass, as the
+// remote step sends it (AddKinkPlanes): δ(θ) is a V in the tilt θ about y with its vertex at θ_v,
+// δ_v deep there; at q0 (θ = 0) the bearing arm is the contact's own plane (slope +r) and the
+// other arm a kink plane (slope −r).
+constexpr double kR = 0.02, kDepthV = 1e-4, kThetaV = -1e-3;
+ContactModel RestingFace() {
+  ContactModel m;
+  m.X_WT0.translation = {0.0, 0.0, 0.035};
+  m.num_contacts = 1;
+  ContactLinearization& c = m.contacts[0];
+  c.depth_m = kDepthV + kR * (0.0 - kThetaV);
+  c.gradient = {{0.0, 0.0, -1.0}, {0.0, kR, 0.0}};
+  c.stiffness_n_per_m = 8000;
+  c.num_kink_planes = 1;
+  c.kink_planes[0] = {kDepthV - kR * (0.0 - kThetaV), {0.0, -kR, 0.0}};
+  return m;
+}
+
+Twist Tilt(double theta) { return {{0, 0, 0}, {0, theta, 0}}; }
+
+TEST(ContactModel, KinkPlanesGiveTheVAndBlendOnlyAtItsVertex) {
+  const ContactModel m = RestingFace();
+  const ContactLinearization& c = m.contacts[0];
+  const double blend_half_width = kKinkBlendM / (2 * kR);  // rad: the arms' gap reaches ε
+  double largest_step = 0.0, previous = 0.0;
+  const int n = 4000;
+  for (int i = 0; i <= n; ++i) {
+    const double theta = kThetaV - 2e-3 + 4e-3 * i / n;
+    PenetrationGradient J;
+    const double depth = ContactDepthAt(c, Tilt(theta), &J);
+    const double v = kDepthV + kR * std::abs(theta - kThetaV);
+    if (std::abs(theta - kThetaV) > blend_half_width) {
+      // The V exactly, along the bearing arm's gradient.
+      EXPECT_NEAR(depth, v, 1e-15) << theta;
+      EXPECT_NEAR(J.d_rotation_W.y, theta > kThetaV ? kR : -kR, 1e-15) << theta;
+    } else {
+      EXPECT_GE(depth, v - 1e-15) << theta;
+      EXPECT_LE(depth, v + kKinkBlendM / 4 + 1e-15) << theta;
+    }
+    EXPECT_EQ(J.d_translation_W, c.gradient.d_translation_W);
+    if (i > 0) largest_step = std::max(largest_step, std::abs(J.d_rotation_W.y - previous));
+    previous = J.d_rotation_W.y;
+  }
+  // Continuous: the 4000 steps of 1 µrad cross the 0.5 mrad-wide blend in about 500 steps.
+  EXPECT_LT(largest_step, 0.01 * 2 * kR);
+  // At the vertex both edges bear half: no torque.
+  PenetrationGradient J;
+  EXPECT_NEAR(ContactDepthAt(c, Tilt(kThetaV), &J), kDepthV + kKinkBlendM / 4, 1e-15);
+  EXPECT_NEAR(J.d_rotation_W.y, 0.0, 1e-15);
+  // Without kink planes: the contact's own plane, δ0 + J·Δq.
+  ContactLinearization one = c;
+  one.num_kink_planes = 0;
+  const Twist dq{{1e-4, -2e-4, 3e-4}, {2e-3, -4e-3, 1e-3}};
+  EXPECT_EQ(ContactDepthAt(one, dq), one.depth_m + one.gradient.Dot(dq));
+}
+
+TEST(ContactModel, KinkCurvatureAndStiffnessMatchFiniteDifferences) {
+  // Inside the blend (a quarter of its half-width from the vertex), two routes to one number:
+  // the curvature against differences of the gradient, and K against differences of the wrench.
+  const ContactModel m = RestingFace();
+  const double theta0 = kThetaV + 0.25 * kKinkBlendM / (2 * kR);
+  PenetrationGradient J0;
+  Stiffness6 H;
+  ContactDepthAt(m.contacts[0], Tilt(theta0), &J0, &H);
+  const double h = 1e-9;
+  PenetrationGradient J1;
+  ContactDepthAt(m.contacts[0], Tilt(theta0 + h), &J1);
+  EXPECT_NEAR((J1.d_rotation_W.y - J0.d_rotation_W.y) / h, H(4, 4), 1e-4 * H(4, 4));
+  EXPECT_GT(H(4, 4), 0.0);
+  EXPECT_EQ((H.topLeftCorner<3, 3>().norm()), 0.0);
+
+  const RigidTransform X0 = Displace(m.X_WT0, Tilt(theta0));
+  const ContactModelEvaluation e0 = EvaluateContactModel(m, X0);
+  for (int j = 0; j < 6; ++j) {
+    Twist d;
+    (j < 3 ? d.linear[j] : d.angular[j - 3]) = h;
+    const ContactModelEvaluation e = EvaluateContactModel(m, Displace(X0, d));
+    const glm::dvec3 df = (e.F_T_W.force - e0.F_T_W.force) / h;
+    const glm::dvec3 dt = (e.F_T_W.torque - e0.F_T_W.torque) / h;
+    for (int i = 0; i < 3; ++i) {
+      EXPECT_NEAR(df[i], e0.K(i, j), 1e-3 * (1 + std::abs(e0.K(i, j)))) << i << " " << j;
+      EXPECT_NEAR(dt[i], e0.K(3 + i, j), 1e-3 * (1 + std::abs(e0.K(3 + i, j)))) << i << " " << j;
+    }
+  }
 }
 
 }  // namespace

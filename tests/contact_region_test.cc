@@ -1,7 +1,8 @@
-// Contact windows built from the contact regions (issue 31, changes 2 and 4): a leaf pair's
+// Contact windows built from the contact regions (issue 31, changes 1, 2 and 4): a leaf pair's
 // direction from the coarse triangles in contact (contact_region.h), each coarse triangle rendered
-// in one window of a step (PipelineOptions::cluster_triangles), and the smooth single-region case
-// with a closed form: a smooth sphere slid across a gently rippled plate.
+// in one window of a step (PipelineOptions::cluster_triangles), the smooth single-region case
+// with a closed form (a smooth sphere slid across a gently rippled plate), and the window of two
+// whole convex models on their contact region (a flat block resting on the gear's ridges).
 
 #include "haptic_core/contact_region.h"
 
@@ -18,6 +19,8 @@
 #include <vector>
 
 #include "accuracy_test_meshes.h"
+#include "haptic_core/demo/demo_scenes.h"
+#include "haptic_core/demo/procedural_models.h"
 #include "haptic_core/model_build/haptic_model_build.h"
 #include "haptic_core/penetration_depth.h"
 #include "haptic_core/remote_step.h"
@@ -285,6 +288,145 @@ TEST(ContactRegion, SmoothSphereSlidingOnGentleRipplesIsOneContactAtTheClosedFor
         y * 1e3, on.ticks, on.worst_direction_deg, on.worst_depth_m * 1e6, on.worst_force_m * 1e6,
         on.multi_contact_ticks, off.multi_contact_ticks, off.off_ticks, off.worst_force_m * 1e6);
   }
+}
+
+}  // namespace
+}  // namespace ht
+
+namespace ht {
+namespace {
+
+TEST(ContactRegion, ConvexMeshHullHoldsTheBoxAndRefusesADentedOne) {
+  const HapticModel box = MakeTexturedBox(
+      {0.02, 0.015, 0.01}, [](double, double) { return 0.0; }, 16, 0.1, "box");
+  const std::optional<ConvexHull> hull = ConvexMeshHull(box, 1e-9);
+  ASSERT_TRUE(hull.has_value());
+  EXPECT_EQ(hull->planes_O.size(), 6u) << "a box's 16 triangles lie on 6 face planes";
+  for (const glm::dvec3& p : box.vertices_O) EXPECT_LE(hull->SignedDistanceBound(p), 1e-9);
+  EXPECT_GT(hull->SignedDistanceBound({0.0, 0.0, 0.0105}), 0.0);
+  // Push one top corner in towards the centre: the faces meeting there fold inwards.
+  HapticModel dented = box;
+  for (glm::dvec3& p : dented.vertices_O) {
+    if (p.x > 0.0 && p.y > 0.0 && p.z > 0.0) p *= 0.5;
+  }
+  dented.hull_vertices_O = dented.vertices_O;
+  EXPECT_FALSE(ConvexMeshHull(dented, 1e-9).has_value());
+}
+
+// The block of seed Fig. 75 level on the gear, pressed 0.1 mm (its bottom face at the gear's top).
+RigidTransform LevelBlockOnGear(double x_m, double press_m) {
+  RigidTransform X;
+  X.translation = {x_m, 0.0, RidgedGearParams{}.radius_m + RidgedBlockParams{}.half_extents_m.z -
+                                 press_m};
+  return X;
+}
+
+TEST(ContactRegion, RegionOfABlockOnTheGearIsItsFaceAlongTheRidgeLine) {
+  const HapticScene scene = MakeBlockOnGearScene();
+  const HapticModel& block = *scene.tool;
+  const HapticModel& gear = *scene.touchables[0].model;
+  const std::optional<ConvexHull> hull_A = ConvexMeshHull(block, 1e-6);
+  const std::optional<ConvexHull> hull_B = ConvexMeshHull(gear, 1e-6);
+  ASSERT_TRUE(hull_A && hull_B);
+  std::vector<int> all_A(block.triangles.size()), all_B(gear.triangles.size());
+  for (std::size_t i = 0; i < all_A.size(); ++i) all_A[i] = static_cast<int>(i);
+  for (std::size_t i = 0; i < all_B.size(); ++i) all_B[i] = static_cast<int>(i);
+  const double margin = 1e-3;
+  for (const double x : {0.0, 0.012}) {
+    const RigidTransform X_WT = LevelBlockOnGear(x, 0.1e-3);
+    RegionBounds b;
+    // Window axes u = x (along the ridges), v = y, from the block's corner (a witness corner).
+    const glm::dvec3 corner(x + 0.02, 0.0, RidgedGearParams{}.radius_m);
+    ASSERT_TRUE(PairRegionBounds(block, X_WT, *hull_A, all_A, gear, scene.touchables[0].X_WO,
+                                 *hull_B, all_B, margin, corner, {1, 0, 0}, {0, 1, 0}, b));
+    // Along the ridge line the region is the block's face, −2 … +2 cm from its centre, where
+    // the gear is under it (the gear ends at x = 3 cm, the block pushed to 1.2 cm overhangs it).
+    EXPECT_NEAR(b.min_u, -0.04, 1e-6) << "x = " << x;
+    EXPECT_NEAR(b.max_u, std::min(x + 0.02, RidgedGearParams{}.length_m / 2) - corner.x, 1e-6)
+        << "x = " << x;
+    // Across it, the strip where the gear's top is within the margin of the face: |y| ≤ √(2Rm).
+    const double strip = std::sqrt(2.0 * RidgedGearParams{}.radius_m * (margin + 0.1e-3));
+    EXPECT_NEAR(b.max_v, strip, 0.15 * strip);
+    EXPECT_NEAR(b.min_v, -strip, 0.15 * strip);
+  }
+  // Apart by more than the margin: no region.
+  RegionBounds b;
+  EXPECT_FALSE(PairRegionBounds(block, LevelBlockOnGear(0.0, -2e-3), *hull_A, all_A, gear,
+                                scene.touchables[0].X_WO, *hull_B, all_B, margin, {0, 0, 0},
+                                {1, 0, 0}, {0, 1, 0}, b));
+}
+
+// Tilting the resting block about y through level: δ(θ) is a V whose arms are the face's two
+// edges (x = ±2 cm from its centre), so the contact force acts at the bearing edge and the torque
+// about y is the force times that lever, flipping sign once at the vertex (closed form). A window
+// on the face's region sees both edges (a window on the hulls' witness point, a corner of the
+// face, saw one); the deepest cell's slope gives the torque at q0 (the secant of the ±h_θ samples
+// across the vertex gave a tenth of it); and the kink planes let the model taken at one tilt
+// predict the step's wrench at another across the vertex, which is what the operator's 1 kHz loop
+// renders between two models (docs/hard-cases.md: the fig75 block rocked at the model rate).
+TEST(ContactRegion, BlockRestingOnTheGearBearsOnItsEdgesAndItsModelCarriesTheKink) {
+  const HapticScene scene = MakeBlockOnGearScene();
+  const double x0 = 0.0017, half = RidgedBlockParams{}.half_extents_m.x;
+  const auto tilted = [&](double theta) {
+    RigidTransform X = LevelBlockOnGear(x0, 0.1e-3);
+    X.rotation = glm::angleAxis(theta, glm::dvec3(0, 1, 0));
+    return X;
+  };
+  HapticTexturePipeline pipeline(scene, PipelineOptions{});
+  int flips = 0, off_lever = 0;
+  double previous_tau = 0.0;
+  const int steps = 24;
+  for (int i = 0; i <= steps; ++i) {
+    const double theta = -3e-3 + 6e-3 * i / steps;
+    StepTimings t;
+    const ContactModel m = pipeline.Step(tilted(theta), 1, t);
+    ASSERT_EQ(m.num_contacts, 1) << "θ = " << theta;
+    const ContactWindow& w = pipeline.last_contact_queries()[0].window;
+    EXPECT_NEAR(w.center_W.x, x0, 1e-3) << "θ = " << theta;
+    EXPECT_GE(w.extent_m, 2 * half) << "θ = " << theta;
+    const double tau = m.F_T_W_at_q0.torque.y;
+    const double lever = std::abs(tau) / glm::length(m.F_T_W_at_q0.force);
+    // The bearing edge's lever: half the face, within the tilt's and the cell's few per cent;
+    // the level face's V has its vertex at θ = 0, rounded over ±kKinkBlendM / half (both edges
+    // bear there, ContactDepthAt).
+    if (std::abs(theta) > kKinkBlendM / half && std::abs(lever - half) > 0.1 * half) ++off_lever;
+    if (i > 0 && (tau < 0.0) != (previous_tau < 0.0)) ++flips;
+    EXPECT_TRUE(i == 0 || tau <= previous_tau + 1e-6) << "the torque restores: θ = " << theta;
+    previous_tau = tau;
+  }
+  EXPECT_EQ(off_lever, 0) << "|τ_y|/|F| is the bearing edge's lever, " << half << " m";
+  EXPECT_EQ(flips, 1) << "the torque flips once, at the V's vertex";
+
+  // The model taken at one tilt, evaluated 1.5 mrad either way (across the vertex one way), against
+  // the step taken there (whose lever the closed form above checked): force and torque, relative
+  // to the wrench's scale.
+  const auto prediction_error = [&](const PipelineOptions& options) {
+    HapticTexturePipeline p(scene, options);
+    double worst = 0.0;
+    for (const double theta : {-2e-3, -1e-3, 0.0, 1e-3, 2e-3}) {
+      StepTimings t;
+      const ContactModel m = p.Step(tilted(theta), 1, t);
+      for (const double d : {-1.5e-3, 1.5e-3}) {
+        const ContactModel there = pipeline.Step(tilted(theta + d), 1, t);
+        const ContactModelEvaluation e = EvaluateContactModel(m, tilted(theta + d));
+        const double f_scale = glm::length(there.F_T_W_at_q0.force);
+        worst = std::max(worst, glm::length(e.F_T_W.force - there.F_T_W_at_q0.force) / f_scale);
+        worst = std::max(worst, std::abs(e.F_T_W.torque.y - there.F_T_W_at_q0.torque.y) /
+                                    (half * f_scale));
+      }
+    }
+    return worst;
+  };
+  const double with_kinks = prediction_error(PipelineOptions{});
+  PipelineOptions one_plane;
+  one_plane.kink_planes = false;
+  const double without = prediction_error(one_plane);
+  std::printf("[block on gear] the model's wrench 1.5 mrad away against the step there: worst "
+              "%.3g (kink planes) / %.3g (one plane per contact) of F and F·half-width\n",
+              with_kinks, without);
+  EXPECT_LT(with_kinks, 0.05);
+  EXPECT_GT(without, 0.5) << "one plane holds one arm across the vertex: the measure tells them "
+                             "apart";
 }
 
 }  // namespace

@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+
 #include <cstring>
 #include <limits>
 #include <numbers>
@@ -219,7 +221,8 @@ TEST(Messages, FieldsSurviveTheRoundTrip) {
   for (int n : {0, 1, 7, kMaxWireContacts}) {
     const ContactModelMessage cm = SampleModel(n);
     const Datagram dc = EncodeContactModel({MessageType::kContactModel, 7, 3, 11}, cm, key);
-    ASSERT_EQ(dc.size, kHeaderBytes + kContactModelFixedBytes + n * kContactBytes + kMacBytes);
+    ASSERT_EQ(dc.size, kHeaderBytes + kContactModelFixedBytes + n * kContactBytes +
+                           kKinkPlaneCountBytes + kMacBytes);
     ASSERT_EQ(OpenDatagram(dc.view(), key, h, body), DecodeStatus::kOk);
     ContactModelMessage out;
     ASSERT_EQ(DecodeContactModel(body, out), DecodeStatus::kOk) << n;
@@ -679,12 +682,14 @@ TEST(Messages, TheManifestCarriesEverySceneObjectKindAndNoOther) {
 }
 
 TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
-  // Version 5 changed neither Hello nor Reject: a version-4 operator's Hello is this version's
-  // bytes with 4 in the header; a version-3 one has the 32-byte body without deadband terms.
-  EXPECT_EQ(kProtocolVersion, 5);
-  EXPECT_EQ(kMinProtocolVersion, 5);
+  // Versions 5 and 6 changed neither Hello nor Reject: a version-5 or 4 operator's Hello is this
+  // version's bytes with its number in the header; a version-3 one has the 32-byte body without
+  // deadband terms.
+  EXPECT_EQ(kProtocolVersion, 6);
+  EXPECT_EQ(kMinProtocolVersion, 6);
   const MacKey key = TestKey();
-  for (const std::uint16_t version : {std::uint16_t{4}, std::uint16_t{3}, std::uint16_t{2}}) {
+  for (const std::uint16_t version :
+       {std::uint16_t{5}, std::uint16_t{4}, std::uint16_t{3}, std::uint16_t{2}}) {
     HelloMessage hello;
     hello.client_nonce = 0xfeedu + version;
     hello.min_version = hello.max_version = version;
@@ -705,7 +710,7 @@ TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
     EXPECT_EQ(foreign.max_version, version);
     EXPECT_EQ(foreign.client_nonce, 0xfeedu + version);
     EXPECT_EQ(OpenForeignHello(d.view(), TestKey(3), foreign), DecodeStatus::kBadMac);
-    // The Reject in that version: its header says so and its body is the one versions 2..5 share.
+    // The Reject in that version: its header says so and its body is the one versions 2..6 share.
     RejectMessage reject;
     reject.client_nonce = foreign.client_nonce;
     reject.reason = RejectReason::kVersion;
@@ -716,7 +721,7 @@ TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
     EXPECT_EQ(r.bytes[5], 0);
     EXPECT_EQ(r.size, kHeaderBytes + kRejectFixedBytes + 4 + kMacBytes);
     EXPECT_TRUE(VerifyMac(r.view(), key));
-    // Read back as this version would (header version patched to 5, MAC recomputed).
+    // Read back as this version would (header version patched to 6, MAC recomputed).
     Datagram as_own = r;
     as_own.size -= kMacBytes;
     as_own.bytes[4] = static_cast<std::uint8_t>(kProtocolVersion);
@@ -733,7 +738,7 @@ TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
   ForeignHello foreign;
   const Datagram own = EncodeHello({MessageType::kHello, 0, 1, 0}, HelloMessage{}, key);
   EXPECT_EQ(OpenForeignHello(own.view(), key, foreign), DecodeStatus::kBadVersion);
-  for (const std::uint8_t version : {std::uint8_t{1}, std::uint8_t{6}}) {
+  for (const std::uint8_t version : {std::uint8_t{1}, std::uint8_t{7}}) {
     Datagram d = own;
     d.size -= kMacBytes;
     d.bytes[4] = version;
@@ -741,6 +746,93 @@ TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
                std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size, kMacBytes));
     d.size += kMacBytes;
     EXPECT_EQ(OpenForeignHello(d.view(), key, foreign), DecodeStatus::kBadVersion) << int(version);
+  }
+}
+
+// Kink planes (protocol version 6): each contact's planes come back with it, both encodings; a
+// model with more than fit its datagram sends the first ones, contact by contact; a plane naming
+// a contact that is not there, a contact's fifth plane or a non-finite plane is refused.
+TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
+  const MacKey key = TestKey();
+  for (const bool compact : {false, true}) {
+    for (const int n : {1, 7, kMaxWireContacts}) {
+      ContactModelMessage m = SampleModel(n);
+      int planes = 0;
+      for (int i = 0; i < n; ++i) {
+        ContactLinearization& c = m.model.contacts[i];
+        c.num_kink_planes = 1 + i % kMaxKinkPlanes;
+        for (int p = 0; p < c.num_kink_planes; ++p) {
+          c.kink_planes[p] = {c.depth_m - 1e-5 * (p + 1), {0.001 * p, -0.02 + 0.001 * i, 0.003}};
+        }
+        planes += c.num_kink_planes;
+      }
+      const Datagram d = compact ? EncodeCompactContactModel({}, m, key)
+                                 : EncodeContactModel({}, m, key);
+      ASSERT_LE(d.size, kMaxDatagramBytes);
+      const int fit = compact ? KinkPlaneCapacity(kCompactContactModelFixedBytes,
+                                                  kCompactContactBytes, n)
+                              : KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, n);
+      const int sent = std::min(planes, fit);
+      EXPECT_EQ(d.size, kHeaderBytes +
+                            (compact ? kCompactContactModelFixedBytes + n * kCompactContactBytes
+                                     : kContactModelFixedBytes + n * kContactBytes) +
+                            kKinkPlaneCountBytes + sent * kKinkPlaneBytes + kMacBytes);
+      Header h;
+      std::span<const std::uint8_t> body;
+      ASSERT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kOk);
+      ContactModelMessage out;
+      ASSERT_EQ(compact ? DecodeCompactContactModel(body, out) : DecodeContactModel(body, out),
+                DecodeStatus::kOk)
+          << compact << " " << n;
+      int got = 0;
+      for (int i = 0; i < n; ++i) {
+        const ContactLinearization& a = m.model.contacts[i];
+        const ContactLinearization& b = out.model.contacts[i];
+        const int expected = std::clamp(sent - got, 0, a.num_kink_planes);
+        ASSERT_EQ(b.num_kink_planes, expected) << compact << " " << n << " " << i;
+        for (int p = 0; p < expected; ++p) {
+          EXPECT_EQ(b.kink_planes[p].depth_m, static_cast<float>(a.kink_planes[p].depth_m));
+          EXPECT_EQ(b.kink_planes[p].d_rotation_W.y,
+                    static_cast<float>(a.kink_planes[p].d_rotation_W.y));
+        }
+        got += expected;
+      }
+      EXPECT_EQ(got, sent);
+      if (n == 7) EXPECT_EQ(sent, planes) << "the seed's 7 contacts carry all their planes";
+    }
+  }
+  // Refused: the first plane's contact index out of range, a fifth plane of one contact, NaN.
+  for (const bool compact : {false, true}) {
+    ContactModelMessage m = SampleModel(2);
+    m.model.contacts[1].num_kink_planes = kMaxKinkPlanes;
+    const Datagram good = compact ? EncodeCompactContactModel({}, m, key)
+                                  : EncodeContactModel({}, m, key);
+    const std::size_t planes_at = good.size - kMacBytes - kMaxKinkPlanes * kKinkPlaneBytes;
+    const auto patched = [&](auto&& edit) {
+      Datagram d = good;
+      d.size -= kMacBytes;
+      edit(d);
+      ComputeMac(d.view(), key, std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size,
+                                                                    kMacBytes));
+      d.size += kMacBytes;
+      return OpenAndDecode(d.view(), key);
+    };
+    EXPECT_EQ(patched([](Datagram&) {}), DecodeStatus::kOk);
+    EXPECT_EQ(patched([&](Datagram& d) { d.bytes[planes_at] = 2; }), DecodeStatus::kBadValue);
+    // Five planes of contact 1: append one more, counted.
+    EXPECT_EQ(patched([&](Datagram& d) {
+                d.bytes[planes_at - 1] = kMaxKinkPlanes + 1;
+                std::copy_n(d.bytes.begin() + planes_at, kKinkPlaneBytes,
+                            d.bytes.begin() + d.size);
+                d.size += kKinkPlaneBytes;
+              }),
+              DecodeStatus::kBadValue);
+    const float nan = std::nanf("");
+    EXPECT_EQ(patched([&](Datagram& d) { std::memcpy(&d.bytes[planes_at + 1], &nan, 4); }),
+              DecodeStatus::kNonFinite);
+    // A count above what fits: refused before any plane is read.
+    EXPECT_EQ(patched([&](Datagram& d) { d.bytes[planes_at - 1] = 255; }),
+              DecodeStatus::kBadCount);
   }
 }
 

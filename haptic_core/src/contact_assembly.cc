@@ -11,7 +11,10 @@ int AssembleContactModel(std::span<const ContactLinearization> contacts,
     if (!std::isfinite(lin.depth_m)) continue;  // no overlap of the patches on the window
     if (model.num_contacts >= kMaxContacts) break;
     model.contacts[model.num_contacts++] = lin;
-    model.F_T_W_at_q0 += PenaltyWrench(lin.depth_m, lin.gradient, lin.stiffness_n_per_m);
+    // At q0, as the operator's loop evaluates it (a contact's planes may blend there).
+    PenetrationGradient J;
+    const double depth = ContactDepthAt(lin, Twist{}, &J);
+    model.F_T_W_at_q0 += PenaltyWrench(depth, J, lin.stiffness_n_per_m);
     ++appended;
   }
   return appended;

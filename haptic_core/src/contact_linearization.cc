@@ -18,6 +18,62 @@ Wrench PenaltyWrench(double depth_m, const PenetrationGradient& J,
   return {s * J.d_translation_W, s * J.d_rotation_W};
 }
 
+int AddKinkPlanes(const ContactWindow& w, std::span<const DepthSample> samples,
+                  const glm::dvec3& p_WT, ContactLinearization& lin) noexcept {
+  lin.num_kink_planes = 0;
+  if (samples.size() < static_cast<std::size_t>(kGradientSamples) || !std::isfinite(lin.depth_m) ||
+      samples[0].cell < 0) {
+    return 0;
+  }
+  const double h = GradientSteps::For(w).h_theta;
+  const glm::dvec3& J_x = lin.gradient.d_translation_W;
+  // The slope about axis a of the depth of cell c: its lever r_c × ∂δ/∂x along a.
+  const auto slope = [&](int cell, const glm::dvec3& a) {
+    return glm::dot(glm::cross(w.CellCenter(cell) - p_WT, J_x), a);
+  };
+  const glm::dvec3 axes[2] = {w.axis_u_W, w.axis_v_W};
+  bool kinked[2] = {false, false};
+  double arm_slope[2][2] = {{0.0, 0.0}, {0.0, 0.0}};  // [axis][plus, minus]
+  for (int a = 0; a < 2; ++a) {
+    // Samples 5, 6: ±h_θ about u; 7, 8: about v (GradientSamplePoses).
+    const DepthSample& plus = samples[static_cast<std::size_t>(5 + 2 * a)];
+    const DepthSample& minus = samples[static_cast<std::size_t>(6 + 2 * a)];
+    if (plus.cell < 0 || minus.cell < 0 || plus.cell == minus.cell) continue;
+    arm_slope[a][0] = slope(plus.cell, axes[a]);
+    arm_slope[a][1] = slope(minus.cell, axes[a]);
+    // A V: tilted either way, the deepest cell is one that rises with that tilt (a resting face
+    // whose two edges bear in turn). Elsewhere the secant of the samples stays.
+    kinked[a] = arm_slope[a][0] > 0.0 && arm_slope[a][1] < 0.0;
+  }
+  // At q0 the deepest cell's own slope is the gradient along a kinked axis: the secant across the
+  // V's vertex reads the two arms' mean.
+  glm::dvec3 d_rotation = lin.gradient.d_rotation_W;
+  for (int a = 0; a < 2; ++a) {
+    if (!kinked[a]) continue;
+    const double s0 = slope(samples[0].cell, axes[a]);
+    if (std::isfinite(s0)) d_rotation += (s0 - glm::dot(d_rotation, axes[a])) * axes[a];
+  }
+  lin.gradient.d_rotation_W = d_rotation;
+  for (int a = 0; a < 2; ++a) {
+    if (!kinked[a]) continue;
+    for (int side = 0; side < 2; ++side) {
+      const DepthSample& s = samples[static_cast<std::size_t>(5 + 2 * a + side)];
+      if (s.cell == samples[0].cell) continue;  // the contact's own plane already
+      const double sign = side == 0 ? 1.0 : -1.0;
+      KinkPlane p;
+      p.d_rotation_W = d_rotation + (arm_slope[a][side] - glm::dot(d_rotation, axes[a])) * axes[a];
+      // Through the sample: δ_m(q0 ⊕ sign·h_θ·a) = δ_s; never above δ0 at q0.
+      p.depth_m = std::min(s.depth_m - sign * h * arm_slope[a][side], lin.depth_m);
+      if (!std::isfinite(p.depth_m) || !std::isfinite(p.d_rotation_W.x) ||
+          !std::isfinite(p.d_rotation_W.y) || !std::isfinite(p.d_rotation_W.z)) {
+        continue;
+      }
+      lin.kink_planes[static_cast<std::size_t>(lin.num_kink_planes++)] = p;
+    }
+  }
+  return lin.num_kink_planes;
+}
+
 const char* ToString(RotationGradient r) noexcept {
   switch (r) {
     case RotationGradient::kRenderedSamples:

@@ -2,8 +2,60 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace ht {
+
+double ContactDepthAt(const ContactLinearization& c, const Twist& dq,
+                      PenetrationGradient* gradient, Stiffness6* curvature) noexcept {
+  const int n = std::clamp(c.num_kink_planes, 0, kMaxKinkPlanes);
+  const glm::dvec3& J_x = c.gradient.d_translation_W;
+  const double along_x = glm::dot(J_x, dq.linear);
+  // Plane values and rotation gradients: index 0 the contact's own, 1..n its kink planes.
+  std::array<double, kMaxKinkPlanes + 1> d{};
+  std::array<glm::dvec3, kMaxKinkPlanes + 1> r{};
+  d[0] = c.depth_m + c.gradient.Dot(dq);
+  r[0] = c.gradient.d_rotation_W;
+  int top = 0;
+  for (int m = 0; m < n; ++m) {
+    const KinkPlane& p = c.kink_planes[static_cast<std::size_t>(m)];
+    const std::size_t i = static_cast<std::size_t>(m + 1);
+    d[i] = p.depth_m + (along_x + glm::dot(p.d_rotation_W, dq.angular));
+    r[i] = p.d_rotation_W;
+    if (!std::isfinite(d[i]) || !std::isfinite(r[i].x) || !std::isfinite(r[i].y) ||
+        !std::isfinite(r[i].z)) {
+      d[i] = -std::numeric_limits<double>::infinity();
+      continue;
+    }
+    if (d[i] > d[static_cast<std::size_t>(top)]) top = m + 1;
+  }
+  const double eps = kKinkBlendM;
+  const glm::dvec3 r_top = r[static_cast<std::size_t>(top)];
+  double depth = d[static_cast<std::size_t>(top)];
+  glm::dvec3 blend(0.0);
+  double weight = 0.0;
+  if (curvature != nullptr) curvature->setZero();
+  for (int i = 0; i <= n; ++i) {
+    const double gap = depth - d[static_cast<std::size_t>(i)];
+    if (i == top || !(gap < eps)) continue;  // also skips −∞ and NaN
+    const double w = (eps - gap) / (2.0 * eps);
+    const glm::dvec3 diff = r[static_cast<std::size_t>(i)] - r_top;
+    blend += w * diff;
+    weight += w;
+    if (curvature != nullptr) {
+      const Eigen::Vector3d e(diff.x, diff.y, diff.z);
+      curvature->bottomRightCorner<3, 3>().noalias() += (1.0 / (2.0 * eps)) * (e * e.transpose());
+    }
+  }
+  double lift = 0.0;
+  for (int i = 0; i <= n; ++i) {
+    const double gap = depth - d[static_cast<std::size_t>(i)];
+    if (i != top && gap < eps) lift += (eps - gap) * (eps - gap) / (4.0 * eps);
+  }
+  if (weight > 1.0) blend /= weight;  // three or more planes at a tie: a convex combination
+  if (gradient != nullptr) *gradient = {J_x, r_top + blend};
+  return depth + lift;
+}
 
 ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const RigidTransform& X_WT,
                                             double stiffness_scale,
@@ -13,28 +65,31 @@ ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const Rig
   const double scale = std::clamp(std::isfinite(stiffness_scale) ? stiffness_scale : 0.0, 0.0, 1.0);
   const Twist dq = PoseDifference(X_WT, model.X_WT0);
   const int n = std::clamp(model.num_contacts, 0, kMaxContacts);
+  Stiffness6 curvature;
   for (int i = 0; i < n; ++i) {
     const ContactLinearization& c = model.contacts[i];
     const double k = c.stiffness_n_per_m * scale;
     if (!std::isfinite(c.depth_m) || !std::isfinite(k) || !(k > 0.0)) continue;
-    const double depth = c.depth_m + c.gradient.Dot(dq);
+    PenetrationGradient J_active;
+    const double depth = ContactDepthAt(c, dq, &J_active, c.num_kink_planes > 0 ? &curvature : nullptr);
     if (!(depth > 0.0)) continue;
     ++out.active_contacts;
     out.max_depth_m = std::max(out.max_depth_m, depth);
     // The bound on the contact's force: saturate δ along J (no stiffness beyond it). The depth
     // is held where the unscaled stiffness reaches the bound, so that blended models (scales β
     // and 1 − β of one contact) add up to the bound at most.
-    const double force_per_m = c.stiffness_n_per_m * glm::length(c.gradient.d_translation_W);
+    const double force_per_m = c.stiffness_n_per_m * glm::length(J_active.d_translation_W);
     if (force_per_m * depth > max_contact_force_n) {
-      out.F_T_W += PenaltyWrench(max_contact_force_n / force_per_m, c.gradient, k);
+      out.F_T_W += PenaltyWrench(max_contact_force_n / force_per_m, J_active, k);
       ++out.saturated_contacts;
       continue;
     }
-    out.F_T_W += PenaltyWrench(depth, c.gradient, k);
+    out.F_T_W += PenaltyWrench(depth, J_active, k);
     Eigen::Matrix<double, 6, 1> J;
-    J << c.gradient.d_translation_W.x, c.gradient.d_translation_W.y, c.gradient.d_translation_W.z,
-        c.gradient.d_rotation_W.x, c.gradient.d_rotation_W.y, c.gradient.d_rotation_W.z;
+    J << J_active.d_translation_W.x, J_active.d_translation_W.y, J_active.d_translation_W.z,
+        J_active.d_rotation_W.x, J_active.d_rotation_W.y, J_active.d_rotation_W.z;
     out.K.noalias() -= k * (J * J.transpose());
+    if (c.num_kink_planes > 0) out.K.noalias() -= (k * depth) * curvature;
   }
   return out;
 }

@@ -80,6 +80,19 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
   for (const auto& t : scene.touchables) {
     if (!t.model) throw std::invalid_argument("scene '" + scene.name + "' has an empty touchable");
   }
+  // The hulls of models without hierarchy, for windows on their contact region.
+  whole_hulls_.resize(scene.touchables.size() + 1);
+  whole_triangles_.resize(scene.touchables.size() + 1);
+  for (std::size_t i = 0; i <= scene.touchables.size(); ++i) {
+    const HapticModel& m = i == 0 ? *scene.tool : *scene.touchables[i - 1].model;
+    if (!options_.whole_model_region_windows || !m.hull_hierarchy.nodes.empty()) continue;
+    // Convex within a micrometre (the procedural models' caps are fans of coplanar triangles).
+    if (std::optional<ConvexHull> hull = ConvexMeshHull(m, 1e-6)) {
+      whole_hulls_[i] = std::move(*hull);
+      whole_triangles_[i].resize(m.triangles.size());
+      for (std::size_t t = 0; t < m.triangles.size(); ++t) whole_triangles_[i][t] = static_cast<int>(t);
+    }
+  }
   // Broad-phase spheres: the root bounding spheres the proximity queries use anyway. Asking each
   // query for both of its models here also fills its cache, so the first step does not.
   object_spheres_O_.reserve(scene.touchables.size());
@@ -115,6 +128,14 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
                          options_.grid_resolution, last_queries_, step_faults_.bad_windows);
   // Stage 5: texture penetration depth and its gradient, linearized, for the whole batch.
   LinearizeContacts(X_WT, last_num_queries_);
+  if (options_.kink_planes) {
+    for (int i = 0; i < last_num_queries_; ++i) {
+      AddKinkPlanes(last_queries_[i].window,
+                    {last_samples_.data() + static_cast<std::size_t>(i) * kGradientSamples,
+                     static_cast<std::size_t>(kGradientSamples)},
+                    X_WT.translation, last_results_[i]);
+    }
+  }
   // The grazing guard: a δ its coarse geometry cannot hold is the sideways overlap along a
   // grazing direction, not a penetration; the contact is left out of the model (its linearization
   // reads −∞, as a contact whose patches do not overlap).
@@ -224,9 +245,14 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
                              : std::isfinite(c.depth_bound_m)
                                  ? c.depth_bound_m
                                  : std::max(0.0, -c.min_signed_distance_m) + reach + cell;
-        const double extent = options_.size_windows_from_clusters ? c.extent_m : 0.0;
+        double extent = options_.size_windows_from_clusters ? c.extent_m : 0.0;
+        glm::dvec3 point_W = c.point_W;
+        if (c.tool_whole_model && c.object_whole_model && c.num_pairs == 1 &&
+            options_.size_windows_from_clusters) {
+          RegionWindow(X_WT, k, normal_W, reach, point_W, extent);
+        }
         candidates_[num_candidates_++] = {&object,
-                                          c.point_W,
+                                          point_W,
                                           normal_W,
                                           extent,
                                           bound,
@@ -235,6 +261,29 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
       }
     }
   }
+}
+
+void HapticTexturePipeline::RegionWindow(const RigidTransform& X_WT, std::size_t k,
+                                         const glm::dvec3& normal_W, double texture_margin_m,
+                                         glm::dvec3& point_W, double& extent_m) noexcept {
+  const ConvexHull& hull_A = whole_hulls_[0];
+  const ConvexHull& hull_B = whole_hulls_[k + 1];
+  if (hull_A.planes_O.empty() || hull_B.planes_O.empty()) return;
+  const std::optional<ContactWindow> axes =
+      ContactWindow::TryMake(point_W, normal_W, options_.window_extent_m, 2);
+  if (!axes) return;
+  const TouchableObject& object = scene_.touchables[k];
+  const double pair_reach =
+      queries_[k].NodeReach(*scene_.tool, -1) + queries_[k].NodeReach(*object.model, -1);
+  RegionBounds b;
+  if (!PairRegionBounds(*scene_.tool, X_WT, hull_A, whole_triangles_[0], *object.model,
+                        object.X_WO, hull_B, whole_triangles_[k + 1], pair_reach, point_W,
+                        axes->axis_u_W, axes->axis_v_W, b)) {
+    return;
+  }
+  point_W += 0.5 * (b.min_u + b.max_u) * axes->axis_u_W + 0.5 * (b.min_v + b.max_v) * axes->axis_v_W;
+  extent_m = std::max(b.max_u - b.min_u, b.max_v - b.min_v) + 2.0 * texture_margin_m;
+  ++step_faults_.region_windows;
 }
 
 std::unique_ptr<PenetrationDepthBackend> HapticTexturePipeline::MakeCpuBackend() const {
@@ -249,6 +298,8 @@ void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n)
   const std::span<const ContactQuery> batch(last_queries_.data(), static_cast<std::size_t>(n));
   const std::span<ContactLinearization> batch_out(last_results_.data(),
                                                   static_cast<std::size_t>(n));
+  const std::size_t per = kGradientSamples;
+  const std::span<DepthSample> samples_out(last_samples_.data(), static_cast<std::size_t>(n) * per);
   // The GPU backend encodes one window extent and grid per batch: with windows sized from their
   // clusters, one batch per size (the CPU backend takes them mixed).
   bool mixed = false;
@@ -274,11 +325,16 @@ void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n)
       }
       const auto count = static_cast<std::size_t>(m);
       ok = backend_->LinearizeBatch(tool, X_WT, {size_queries_.data(), count},
-                                    {size_results_.data(), count});
-      for (int k = 0; ok && k < m; ++k) last_results_[size_index_[k]] = size_results_[k];
+                                    {size_results_.data(), count},
+                                    {size_samples_.data(), count * per});
+      for (int k = 0; ok && k < m; ++k) {
+        last_results_[size_index_[k]] = size_results_[k];
+        std::copy_n(size_samples_.data() + static_cast<std::size_t>(k) * per, per,
+                    last_samples_.data() + static_cast<std::size_t>(size_index_[k]) * per);
+      }
     }
     if (ok) return;
-  } else if (backend_->LinearizeBatch(tool, X_WT, batch, batch_out)) {
+  } else if (backend_->LinearizeBatch(tool, X_WT, batch, batch_out, samples_out)) {
     return;
   }
   // The GPU failed (context lost, GL error): this step and all later ones on the CPU.
@@ -286,7 +342,7 @@ void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n)
     fallback_reason_ = std::string(backend_->name()) + ": " + backend_->last_error();
   }
   backend_ = MakeCpuBackend();
-  backend_->LinearizeBatch(tool, X_WT, batch, batch_out);
+  backend_->LinearizeBatch(tool, X_WT, batch, batch_out, samples_out);
 }
 
 }  // namespace ht

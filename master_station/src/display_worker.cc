@@ -202,14 +202,15 @@ void DisplayWorker::Run(const std::atomic<bool>& stop) {
       }
       if (tool.have_model) {
         // Each contact's force on the tool at the tool's pose now, as the loop renders it:
-        // −k·max(δ0 + J·(q ⊖ q0), 0)·J (DESIGN.md §5), drawn at the contact point moved with the
-        // tool since q0.
+        // −k·max(δ(q), 0)·J with δ(q) the largest of the contact's planes (ContactDepthAt,
+        // DESIGN.md §5), drawn at the contact point moved with the tool since q0.
         const Twist dq = PoseDifference(tool.X_WT, tool.model.X_WT0);
         const RigidTransform X_moved = tool.X_WT * tool.model.X_WT0.Inverse();
         for (int k = 0; k < tool.model.num_contacts; ++k) {
           const ContactLinearization& cl = tool.model.contacts[static_cast<std::size_t>(k)];
-          const double depth = cl.depth_m + cl.gradient.Dot(dq);
-          glm::dvec3 force = PenaltyWrench(depth, cl.gradient, cl.stiffness_n_per_m).force;
+          PenetrationGradient J;
+          const double depth = ContactDepthAt(cl, dq, &J);
+          glm::dvec3 force = PenaltyWrench(depth, J, cl.stiffness_n_per_m).force;
           // As the loop renders it: held at the bound on a contact's force (EvaluateContactModel).
           if (const double f = glm::length(force); f > max_contact_force_n_) {
             force *= max_contact_force_n_ / f;

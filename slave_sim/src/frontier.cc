@@ -154,12 +154,17 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     whole_leaves.name = "leaves_to_deepest_pair";
     whole_leaves.share_leaves_between_disjoint_windows = false;
     s.push_back(whole_leaves);
+    FrontierSetting at_witness = base;
+    at_witness.name = "windows_at_witness";
+    at_witness.whole_model_region_windows = false;
+    s.push_back(at_witness);
     FrontierSetting before = no_guard;
     before.name = "issue31_before";
     before.max_window_extent_m = PipelineOptions{}.window_extent_m;
     before.drop_unreachable_pairs = false;
     before.region_normals = false;
     before.cluster_triangles = false;
+    before.whole_model_region_windows = false;
     s.push_back(before);
     // Every speed option at once: the warped rotations, local reach, at most 7 contacts, two
     // threads.
@@ -374,6 +379,7 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.size_windows_from_clusters = st.size_windows_from_clusters;
   options.cluster_triangles = st.cluster_triangles;
   options.share_leaves_between_disjoint_windows = st.share_leaves_between_disjoint_windows;
+  options.whole_model_region_windows = st.whole_model_region_windows;
   // The texture stage's threads are the coarse query's too, as in the product.
   options.texture_threads = st.texture_threads;
   HapticTexturePipeline pipeline(scene.haptic, options, std::move(backend));

@@ -102,6 +102,12 @@ int main(int argc, char** argv) {
                "cluster's hull penetration + both texture reaches + a cell); by default they are\n"
                "dropped and counted (remote_summary.json grazing_dropped_contacts): along a\n"
                "grazing direction the depth is a sideways overlap, not a penetration");
+  bool no_kink_planes = false;
+  app.add_flag("--no-kink-planes", no_kink_planes,
+               "send one plane per contact: by default a contact whose depth is a V in the tilt\n"
+               "(a face resting on ridges, its two edges bearing in turn) also carries the V's\n"
+               "arms, so that the operator's loop finds where the torque flips between two models\n"
+               "(docs/hard-cases.md)");
   app.add_option("--pd-backend", pd_backend,
                  "where the texture penetration depth runs: cpu (software rasterizer), gpu\n"
                  "(headless EGL, OpenGL ES 3.1; Mesa llvmpipe when there is no GPU), or auto (a\n"
@@ -281,6 +287,7 @@ int main(int argc, char** argv) {
     config.pd_backend = ht::ParsePdBackendChoice(pd_backend);
     config.pipeline.rotation_gradient = ht::ParseRotationGradient(rotation_gradient);
     config.pipeline.grazing_guard = !no_grazing_guard;
+    config.pipeline.kink_planes = !no_kink_planes;
     if (config.pipeline.rotation_gradient != ht::RotationGradient::kRenderedSamples) {
       if (config.pd_backend == ht::PdBackendChoice::kGpu) {
         throw std::invalid_argument("--rotation-gradient " + rotation_gradient +

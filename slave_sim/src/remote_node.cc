@@ -314,9 +314,11 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
       pipeline->faults().missing_overlap -
       (pipeline->backend_failures() == 0 ? warm_up_missing_overlap : 0);
   s["grazing_guard"] = config.pipeline.grazing_guard;
+  s["kink_planes"] = config.pipeline.kink_planes;
   s["grazing_dropped_contacts"] = pipeline->step_faults().grazing_dropped;
   s["unreachable_pairs_dropped"] = pipeline->step_faults().unreachable_pairs;
   s["triangle_lists_overflowed"] = pipeline->step_faults().triangle_lists_overflowed;
+  s["region_windows"] = pipeline->step_faults().region_windows;
   s["pd_backend"] = {{"requested", ToString(config.pd_backend)},
                      {"used", backend_at_start},
                      {"used_at_end", std::string(pipeline->backend().name())},

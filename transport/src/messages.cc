@@ -57,6 +57,12 @@ class Writer {
     (*this)(static_cast<Wire>(count));
     return count;
   }
+  /// As Count, for a count whose elements are followed by further fields.
+  template <std::unsigned_integral Wire, class N>
+  std::size_t CountBefore(const N& n, std::size_t capacity, std::size_t element_bytes,
+                          std::size_t /*min_bytes_after*/) {
+    return Count<Wire>(n, capacity, element_bytes);
+  }
   /// The first `n` bytes of `bytes`.
   template <class T, std::size_t N>
   void Bytes(const std::array<T, N>& bytes, std::size_t n) {
@@ -117,6 +123,23 @@ class Reader {
     n = static_cast<N>(count);
     return count;
   }
+  /// As Count, for elements followed by further fields: kTooShort unless at least count ·
+  /// element_bytes + min_bytes_after bytes are left (the last count checks the exact length).
+  template <std::unsigned_integral Wire, class N>
+  std::size_t CountBefore(N& n, std::size_t capacity, std::size_t element_bytes,
+                          std::size_t min_bytes_after) {
+    Wire count = 0;
+    (*this)(count);
+    if (status_ != DecodeStatus::kOk) return 0;
+    if (count > capacity) return Fail(DecodeStatus::kBadCount);
+    if (remaining() < element_bytes * count + min_bytes_after) return Fail(DecodeStatus::kTooShort);
+    n = static_cast<N>(count);
+    return count;
+  }
+  /// A value the field list found invalid while reading (e.g. an index out of range): `s` is kept
+  /// unless an earlier problem was.
+  void Reject(DecodeStatus s) { Fail(s); }
+  bool ok() const { return status_ == DecodeStatus::kOk; }
   template <class T, std::size_t N>
   void Bytes(std::array<T, N>& bytes, std::size_t n) {
     static_assert(sizeof(T) == 1);
@@ -173,6 +196,11 @@ class Sizer {
     counted_bytes += element_bytes;
     return 1;
   }
+  template <std::unsigned_integral Wire, class N>
+  constexpr std::size_t CountBefore(const N& n, std::size_t capacity, std::size_t element_bytes,
+                                    std::size_t) {
+    return Count<Wire>(n, capacity, element_bytes);
+  }
   template <class T, std::size_t N>
   constexpr void Bytes(const std::array<T, N>&, std::size_t n) {
     bytes += n;
@@ -191,6 +219,12 @@ class Sizer {
 template <std::unsigned_integral Wire>
 constexpr std::size_t Count(auto& a, auto& n, std::size_t capacity, std::size_t element_bytes) {
   return a.template Count<Wire>(n, capacity, element_bytes);
+}
+/// The same for a count whose elements are followed by at least `min_bytes_after` more bytes.
+template <std::unsigned_integral Wire>
+constexpr std::size_t CountBefore(auto& a, auto& n, std::size_t capacity,
+                                  std::size_t element_bytes, std::size_t min_bytes_after) {
+  return a.template CountBefore<Wire>(n, capacity, element_bytes, min_bytes_after);
 }
 
 // 3×f64.
@@ -257,6 +291,75 @@ constexpr void Fields(auto& a, Of<ContactLinearization> auto& c) {
   Vec32(a, c.normal_W);
 }
 
+static_assert(kMaxKinkPlanesPerContact == kMaxKinkPlanes);
+
+/// One kink plane as it is on the wire (protocol.h).
+struct WireKinkPlane {
+  std::uint8_t contact = 0;
+  float depth_m = 0.0f;
+  std::array<float, 3> d_rotation{};  ///< ∂δ_m/∂θ (m/rad)
+};
+
+constexpr void Fields(auto& a, Of<WireKinkPlane> auto& p) {
+  a(p.contact);
+  a(p.depth_m);
+  for (auto& v : p.d_rotation) a(v);
+}
+
+/// The kink planes of contacts [0, n) of `model` in wire order (contact by contact), at most
+/// `capacity` of them, into `out`; returns how many.
+constexpr std::size_t FlattenKinkPlanes(const ContactModel& model, std::size_t n, int capacity,
+                                        std::span<WireKinkPlane> out) noexcept {
+  std::size_t k = 0;
+  const std::size_t cap = std::min(out.size(), static_cast<std::size_t>(std::max(capacity, 0)));
+  for (std::size_t i = 0; i < n && k < cap; ++i) {
+    const ContactLinearization& c = model.contacts[i];
+    const int planes = std::clamp(c.num_kink_planes, 0, kMaxKinkPlanes);
+    for (int p = 0; p < planes && k < cap; ++p) {
+      const KinkPlane& kp = c.kink_planes[static_cast<std::size_t>(p)];
+      out[k++] = {static_cast<std::uint8_t>(i), static_cast<float>(kp.depth_m),
+                  {static_cast<float>(kp.d_rotation_W.x), static_cast<float>(kp.d_rotation_W.y),
+                   static_cast<float>(kp.d_rotation_W.z)}};
+    }
+  }
+  return k;
+}
+
+/// Gives each wire plane to its contact of `model` (whose first `n` contacts were read); false
+/// when one names a contact ≥ n or a contact's (kMaxKinkPlanes + 1)-th plane.
+bool DistributeKinkPlanes(std::span<const WireKinkPlane> planes, std::size_t n,
+                          ContactModel& model) noexcept {
+  for (std::size_t i = 0; i < n; ++i) model.contacts[i].num_kink_planes = 0;
+  for (const WireKinkPlane& w : planes) {
+    if (w.contact >= n) return false;
+    ContactLinearization& c = model.contacts[w.contact];
+    if (c.num_kink_planes >= kMaxKinkPlanes) return false;
+    c.kink_planes[static_cast<std::size_t>(c.num_kink_planes++)] = {
+        w.depth_m, glm::dvec3(w.d_rotation[0], w.d_rotation[1], w.d_rotation[2])};
+  }
+  return true;
+}
+
+/// The kink-plane section after the contacts (protocol.h): the Writer and the Sizer flatten the
+/// model's planes, the Reader reads them and gives them to their contacts.
+constexpr void KinkPlanes(auto& a, auto& model, std::size_t n, int capacity) {
+  std::array<WireKinkPlane, kMaxWireKinkPlanes> planes{};
+  std::size_t k = 0;
+  if constexpr (!requires { a.Reject(DecodeStatus::kOk); }) {
+    k = FlattenKinkPlanes(model, n, capacity, planes);
+    const std::size_t sent =
+        Count<std::uint8_t>(a, k, static_cast<std::size_t>(capacity), kKinkPlaneBytes);
+    for (std::size_t j = 0; j < std::min(sent, k); ++j) Fields(a, planes[j]);
+  } else {
+    k = Count<std::uint8_t>(a, k, static_cast<std::size_t>(std::max(capacity, 0)),
+                            kKinkPlaneBytes);
+    for (std::size_t j = 0; j < k; ++j) Fields(a, planes[j]);
+    if (a.ok() && !DistributeKinkPlanes({planes.data(), k}, n, model)) {
+      a.Reject(DecodeStatus::kBadValue);
+    }
+  }
+}
+
 constexpr void Fields(auto& a, Of<ContactModelMessage> auto& m) {
   a(m.model.tool_state_seq);
   a(m.tool_state_send_time_ns);
@@ -268,9 +371,10 @@ constexpr void Fields(auto& a, Of<ContactModelMessage> auto& m) {
   Pose(a, m.model.X_WT0);
   Vec(a, m.model.F_T_W_at_q0.force);
   Vec(a, m.model.F_T_W_at_q0.torque);
-  const std::size_t n =
-      Count<std::uint8_t>(a, m.model.num_contacts, kMaxWireContacts, kContactBytes);
+  const std::size_t n = CountBefore<std::uint8_t>(a, m.model.num_contacts, kMaxWireContacts,
+                                                  kContactBytes, kKinkPlaneCountBytes);
   for (std::size_t i = 0; i < n; ++i) Fields(a, m.model.contacts[i]);
+  KinkPlanes(a, m.model, n, KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, static_cast<int>(n)));
 }
 
 /// One contact of a CompactContactModel as it is on the wire (protocol.h).
@@ -298,6 +402,8 @@ struct CompactContactModelBody {
   std::array<float, 6> F_T_W_at_q0{};                  ///< force (N) then torque (N·m)
   int num_contacts = 0;
   std::array<CompactContact, kMaxWireContacts> contacts{};
+  int num_kink_planes = 0;
+  std::array<WireKinkPlane, kMaxWireKinkPlanes> kink_planes{};
 };
 
 // Every element of an array of scalars, in order.
@@ -325,9 +431,14 @@ constexpr void Fields(auto& a, Of<CompactContactModelBody> auto& m) {
   Vec(a, m.p_WT0);
   Each(a, m.q_WT0);
   Each(a, m.F_T_W_at_q0);
-  const std::size_t n =
-      Count<std::uint8_t>(a, m.num_contacts, kMaxWireContacts, kCompactContactBytes);
+  const std::size_t n = CountBefore<std::uint8_t>(a, m.num_contacts, kMaxWireContacts,
+                                                  kCompactContactBytes, kKinkPlaneCountBytes);
   for (std::size_t i = 0; i < n; ++i) Fields(a, m.contacts[i]);
+  const int capacity =
+      KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, static_cast<int>(n));
+  const std::size_t k = Count<std::uint8_t>(a, m.num_kink_planes,
+                                            static_cast<std::size_t>(capacity), kKinkPlaneBytes);
+  for (std::size_t j = 0; j < k; ++j) Fields(a, m.kink_planes[j]);
 }
 
 constexpr void Fields(auto& a, Of<DeadbandTerms> auto& d) {
@@ -460,11 +571,14 @@ constexpr Sizer SizeOf() {
 
 static_assert(SizeOf<WireHeader>().bytes == kHeaderBytes);
 static_assert(SizeOf<ToolStateMessage>().bytes == kToolStateBodyBytes);
-static_assert(SizeOf<ContactModelMessage>().bytes == kContactModelFixedBytes + kContactBytes);
-static_assert(SizeOf<ContactModelMessage>().counted_bytes == kContactBytes);
-static_assert(SizeOf<CompactContactModelBody>().bytes ==
-              kCompactContactModelFixedBytes + kCompactContactBytes);
-static_assert(SizeOf<CompactContactModelBody>().counted_bytes == kCompactContactBytes);
+static_assert(SizeOf<ContactModelMessage>().bytes ==
+              kContactModelFixedBytes + kContactBytes + kKinkPlaneCountBytes);
+static_assert(SizeOf<ContactModelMessage>().counted_bytes == kContactBytes + kKinkPlaneBytes);
+static_assert(SizeOf<CompactContactModelBody>().bytes == kCompactContactModelFixedBytes +
+                                                            kCompactContactBytes +
+                                                            kKinkPlaneCountBytes + kKinkPlaneBytes);
+static_assert(SizeOf<CompactContactModelBody>().counted_bytes ==
+              kCompactContactBytes + kKinkPlaneBytes);
 static_assert(SizeOf<HelloMessage>().bytes == kHelloBodyBytes);
 static_assert(SizeOf<WelcomeMessage>().bytes == kWelcomeFixedBytes + kWelcomeTargetBytes);
 static_assert(SizeOf<WelcomeMessage>().counted_bytes == kWelcomeTargetBytes);
@@ -512,6 +626,10 @@ DecodeStatus Check(const ContactModelMessage& m) {
       return DecodeStatus::kNonFinite;
     }
     if (c.stiffness_n_per_m < 0.0) return DecodeStatus::kBadValue;
+    for (int p = 0; p < std::clamp(c.num_kink_planes, 0, kMaxKinkPlanes); ++p) {
+      const KinkPlane& kp = c.kink_planes[static_cast<std::size_t>(p)];
+      if (!std::isfinite(kp.depth_m) || !Finite3(kp.d_rotation_W)) return DecodeStatus::kNonFinite;
+    }
   }
   if (const DecodeStatus s = CheckPose(m.model.X_WT0); s != DecodeStatus::kOk) return s;
   if (!IsFinite(m.model.F_T_W_at_q0) || !std::isfinite(m.collision_us) ||
@@ -607,6 +725,9 @@ CompactContactModelBody QuantizeContactModel(const ContactModelMessage& m) noexc
     }
     w.normal_oct = EncodeOctahedral(c.normal_W);
   }
+  b.num_kink_planes = static_cast<int>(FlattenKinkPlanes(
+      model, static_cast<std::size_t>(n),
+      KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, n), b.kink_planes));
   return b;
 }
 
@@ -627,6 +748,14 @@ DecodeStatus Check(const CompactContactModelBody& m) {
       return DecodeStatus::kNonFinite;
     }
     if (c.stiffness_n_per_m < 0.0f) return DecodeStatus::kBadValue;
+  }
+  std::array<int, kMaxWireContacts> planes_of{};
+  for (int j = 0; j < m.num_kink_planes; ++j) {
+    const WireKinkPlane& p = m.kink_planes[static_cast<std::size_t>(j)];
+    if (!std::isfinite(p.depth_m) || !AllFinite(p.d_rotation)) return DecodeStatus::kNonFinite;
+    if (p.contact >= m.num_contacts || ++planes_of[p.contact] > kMaxKinkPlanes) {
+      return DecodeStatus::kBadValue;
+    }
   }
   if (!Finite3(m.p_WT0) || !AllFinite(m.q_WT0)) return DecodeStatus::kNonFinite;
   double norm2 = 0.0;
@@ -667,6 +796,9 @@ ContactModelMessage DequantizeContactModel(const CompactContactModelBody& b) noe
     }
     c.normal_W = DecodeOctahedral(w.normal_oct);
   }
+  // Check() found every plane's contact and count valid.
+  DistributeKinkPlanes({b.kink_planes.data(), static_cast<std::size_t>(b.num_kink_planes)},
+                       static_cast<std::size_t>(b.num_contacts), model);
   return m;
 }
 

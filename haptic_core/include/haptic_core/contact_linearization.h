@@ -26,15 +26,51 @@ struct PenetrationGradient {
   }
 };
 
+/// Most kink planes one contact carries (issue 31, change 5): the two arms of δ's V about each of
+/// the window's in-plane rotation axes u and v.
+inline constexpr int kMaxKinkPlanes = 4;
+
+/// A further plane of a contact's depth (issue 31, change 5), sharing the contact's translation
+/// gradient: δ_m(q) = depth_m + ∂δ/∂x·Δx + d_rotation_W·Δθ, Δq = q ⊖ q0 (world axes, rotation
+/// about the tool's centre of mass).
+struct KinkPlane {
+  double depth_m = 0.0;          ///< δ_m at q0 (m), at most the contact's δ0.
+  glm::dvec3 d_rotation_W{0.0};  ///< ∂δ_m/∂θ (m/rad).
+};
+
 /// The linearized contact that the remote node sends and the operator loop evaluates:
-/// δ_i(q) ≈ depth_m + J·(q ⊖ q0) with stiffness k (DESIGN.md §5).
+/// δ_i(q) ≈ depth_m + J·(q ⊖ q0) with stiffness k (DESIGN.md §5), or, with kink planes, the
+/// largest of that plane and theirs, blended over a few micrometres (ContactDepthAt,
+/// contact_model.h): a flat face resting on ridges has a depth
+/// shaped like a V in its tilt, whose arms are its two edges, and one plane holds one arm (or
+/// their secant) until the next model.
 struct ContactLinearization {
   double depth_m = 0.0;            ///< δ0 at q0 (m), signed: negative = separated along n.
   PenetrationGradient gradient;    ///< J = ∇δ at q0.
   double stiffness_n_per_m = 0.0;  ///< Penalty stiffness k (N/m).
   glm::dvec3 point_W{0.0};         ///< Deepest cell's centre on the window plane (m), for display.
   glm::dvec3 normal_W{0.0, 0.0, 1.0};  ///< Contact direction n (unit, from environment to tool).
+  /// Valid entries of kink_planes (0..kMaxKinkPlanes; values outside count as clamped).
+  int num_kink_planes = 0;
+  std::array<KinkPlane, kMaxKinkPlanes> kink_planes{};
 };
+
+/// Adds kink planes to `lin` (issue 31, change 5) from its kGradientSamples depth samples (the
+/// rendered ones, GradientSamplePoses() order, with their cells). About each in-plane rotation
+/// axis a ∈ {u, v}, the ±h_θ samples' deepest cells c± are compared by their lever slopes
+/// s(c) = (r_c × ∂δ/∂x)·a (r_c the cell's centre less the tool's centre of mass p_WT, m, W: how
+/// the cell's own depth moves under a rotation about a). Where s(c+) > 0 > s(c−) the depth is a V
+/// in the tilt (a face resting on ridges: tilted either way, the edge that rises bears), and
+///  - the contact's ∂δ/∂θ along a becomes the slope of its deepest cell (the secant of the samples
+///    across the vertex reads the mean of the two arms: a face pressed on one edge got a third of
+///    that edge's lever), so δ0 is unchanged and the wrench at q0 follows the bearing edge;
+///  - each arm whose cell is not the deepest one is a plane through its sample with its cell's
+///    slope along a (the contact's ∂δ/∂θ along the other axes), lowered to δ0 where it would
+///    exceed δ0 at q0.
+/// Elsewhere nothing changes. Replaces lin's planes; none when δ0 is not finite or the base sample
+/// lacks a cell. Returns the number of planes. noexcept, allocation-free.
+int AddKinkPlanes(const ContactWindow& window, std::span<const DepthSample> samples,
+                  const glm::dvec3& p_WT, ContactLinearization& lin) noexcept;
 
 /// Penalty wrench on the tool at its centre of mass, expressed in W, for depth δ and gradient J:
 /// Φ = −k·max(δ, 0)·J (force N, torque N·m) [L]. Zero when δ ≤ 0 or δ is not finite.

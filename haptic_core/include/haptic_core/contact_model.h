@@ -34,11 +34,34 @@ struct ContactModel {
   Wrench F_T_W_at_q0;
 };
 
+/// Depth width ε (m) over which a contact's planes blend (ContactDepthAt): about a quarter of it is
+/// the most the blend adds to the largest plane, and a tilt of ε/(2r) (r the lever of the arms,
+/// 0.13 mrad for the fig75 block's 2 cm edges) is the width of the V's rounded vertex.
+inline constexpr double kKinkBlendM = 10e-6;
+
+/// δ of contact `c` at the pose change Δq = q ⊖ q0 (Δq.linear in m, Δq.angular in rad, world
+/// axes): the largest of its planes, δ0 + J·Δq and each kink plane's δ_m + J_m·Δq (J_m =
+/// (∂δ/∂x, ∂δ_m/∂θ)), with a quadratic blend where another plane comes within kKinkBlendM of the
+/// largest one (gap g < ε: δ += (ε − g)²/(4ε), J += w·(J_i − J_max) with w = (ε − g)/(2ε); the
+/// weights are normalized when they add up to more than 1). Without planes, δ0 + J·Δq exactly.
+/// The blend makes the gradient continuous through the V's vertex: at a tie the two arms bear
+/// half each, so a face resting on two edges finds its equilibrium instead of chattering between
+/// them tick by tick (each plane alone flips the torque from one edge's to the other's).
+/// `gradient` (optional) receives ∇δ; `curvature` (optional) receives ∇²δ (6×6, world axes,
+/// rows/cols as Stiffness6; only its rotation block is non-zero: the planes share ∂δ/∂x), the
+/// blend's Σ (J_max − J_i)(J_max − J_i)ᵀ/(2ε), which the implicit tool step needs in K to stay
+/// stable there. Non-finite planes are skipped. noexcept, allocation-free (1 kHz loop).
+double ContactDepthAt(const ContactLinearization& c, const Twist& dq,
+                      PenetrationGradient* gradient = nullptr,
+                      Stiffness6* curvature = nullptr) noexcept;
+
 /// Result of evaluating a contact model at a tool pose.
 struct ContactModelEvaluation {
-  /// Φ = Σ −k_i max(δ_i(q), 0) J_i: wrench on the tool at its centre of mass, in W.
+  /// Φ = Σ −k_i max(δ_i(q), 0) J_i: wrench on the tool at its centre of mass, in W (δ_i and
+  /// J_i = ∇δ_i from ContactDepthAt).
   Wrench F_T_W;
-  /// K = Σ_{δ_i>0} −k_i J_i J_iᵀ (negative semi-definite).
+  /// K = Σ_{δ_i>0} −k_i (J_i J_iᵀ + δ_i ∇²δ_i) (negative semi-definite; ∇²δ_i is zero but where
+  /// a contact's planes blend).
   Stiffness6 K = Stiffness6::Zero();
   /// Contacts with δ_i(q) > 0.
   int active_contacts = 0;
@@ -48,8 +71,9 @@ struct ContactModelEvaluation {
   int saturated_contacts = 0;
 };
 
-/// Evaluates `model` at tool pose X_WT: δ_i(q) = δ0_i + J_i·(q ⊖ q0), per-contact switching by
-/// max(δ_i, 0) (DESIGN.md §5). Contacts whose δ0 or stiffness is not finite are skipped.
+/// Evaluates `model` at tool pose X_WT: δ_i(q) = δ0_i + J_i·(q ⊖ q0), or with kink planes the
+/// largest of the contact's planes (ContactDepthAt; force, torque and K along the gradient of the
+/// plane that gives it), per-contact switching by max(δ_i, 0) (DESIGN.md §5). Contacts whose δ0 or stiffness is not finite are skipped.
 /// `stiffness_scale` ∈ [0, 1] multiplies every k_i (used to blend a new model in).
 ///
 /// `max_contact_force_n` (N, > 0; +∞ = none) bounds each contact's force, DESIGN.md §5's bounded

@@ -106,6 +106,21 @@ struct PipelineOptions {
   /// (ClusteringOptions::share_leaves_between_disjoint_windows), instead of only the cluster of
   /// its deepest pair, which leaves the other contact regions of one large leaf unrendered.
   bool share_leaves_between_disjoint_windows = true;
+  /// Windows on the contact region of two models without hierarchy (issue 31, change 1, third
+  /// stop): where a cluster is the single pair of two whole convex models (the procedural scenes:
+  /// a block resting on a gear), its point is the hulls' witness point, which on parallel faces is
+  /// a corner, and its spread is zero, so a 2 cm window sat on one edge of a 4 cm face and saw one
+  /// arm of the face's rocking V (docs/hard-cases.md). On: the window is centred on the pair's
+  /// region (PairRegionBounds, contact_region.h: each model's coarse triangles within the other's
+  /// hull widened by the pair's texture reach) and sized to it plus the texture margin, within
+  /// [window_extent_m, max_window_extent_m]. Off: the witness point and the smallest window.
+  bool whole_model_region_windows = true;
+  /// Kink planes (issue 31, change 5): each contact also carries the arms of its depth's V about
+  /// the window's in-plane rotation axes (AddKinkPlanes, contact_linearization.h, from the
+  /// rendered rotation samples), so that the operator's loop finds the tilt where the torque of a
+  /// face resting on ridges flips between two models (ContactDepthAt). δ and the wrench at q0 are
+  /// unchanged. Off: one plane per contact.
+  bool kink_planes = true;
 
   /// Throws std::invalid_argument naming a value out of range.
   void Validate() const;
@@ -176,6 +191,9 @@ class HapticTexturePipeline {
     /// Contact sides whose cluster's triangle list did not fit the pipeline's storage and were
     /// picked by window instead (PipelineOptions::cluster_triangles).
     std::int64_t triangle_lists_overflowed = 0;
+    /// Windows centred on and sized from the contact region of two whole models
+    /// (PipelineOptions::whole_model_region_windows); not a fault, a count.
+    std::int64_t region_windows = 0;
   };
   const StepFaults& step_faults() const noexcept { return step_faults_; }
   /// The backend in use: the one given, or the CPU backend after that one failed.
@@ -211,6 +229,12 @@ class HapticTexturePipeline {
   /// batch per size); when that
   /// backend fails, switches to the CPU backend for good and recomputes the batch.
   void LinearizeContacts(const RigidTransform& X_WT, int n);
+  /// PipelineOptions::whole_model_region_windows: moves `point_W` to the centre of the contact
+  /// region of the tool and touchable `k`, both whole convex models, on the window axes of
+  /// `normal_W`, and sets `extent_m` to the region's larger side plus 2·texture_margin_m; leaves
+  /// both unchanged when a model has no hull or the region is empty.
+  void RegionWindow(const RigidTransform& X_WT, std::size_t k, const glm::dvec3& normal_W,
+                    double texture_margin_m, glm::dvec3& point_W, double& extent_m) noexcept;
   /// The CPU backend of these options (fast path, texture_threads threads).
   std::unique_ptr<PenetrationDepthBackend> MakeCpuBackend() const;
 
@@ -234,10 +258,18 @@ class HapticTexturePipeline {
   /// The candidates' triangle lists (PipelineOptions::cluster_triangles), copied from the
   /// clusterer, whose lists last only until its next call (one per touchable).
   std::vector<int> candidate_triangles_;
+  /// PipelineOptions::whole_model_region_windows: the hull of each model without hierarchy whose
+  /// coarse mesh is convex (ConvexMeshHull; no planes otherwise), index 0 the tool and k + 1
+  /// touchable k, and the indices of all its coarse triangles.
+  std::vector<ConvexHull> whole_hulls_;
+  std::vector<std::vector<int>> whole_triangles_;
   std::array<ContactCandidate, kMaxContacts> candidates_{};
   int num_candidates_ = 0;
   std::array<ContactQuery, kMaxContacts> last_queries_{};
   std::array<ContactLinearization, kMaxContacts> last_results_{};
+  /// The depth samples of last_queries_ (kGradientSamples each, query-major), for kink planes.
+  std::array<DepthSample, kMaxContacts * kGradientSamples> last_samples_{};
+  std::array<DepthSample, kMaxContacts * kGradientSamples> size_samples_{};
   /// One window size's queries and results (the GPU backend's batches), and their indices.
   std::array<ContactQuery, kMaxContacts> size_queries_{};
   std::array<ContactLinearization, kMaxContacts> size_results_{};

@@ -63,6 +63,8 @@ struct FrontierSetting {
   /// PipelineOptions::share_leaves_between_disjoint_windows ("leaves_to_deepest_pair" turns it
   /// off).
   bool share_leaves_between_disjoint_windows = true;
+  /// PipelineOptions::whole_model_region_windows ("windows_at_witness" turns it off).
+  bool whole_model_region_windows = true;
 };
 
 /// The sweep: the default setting (grid 50, 1024² textures, the seed's coarse counts, CPU) first,

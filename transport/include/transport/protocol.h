@@ -34,7 +34,15 @@
 //     f32 collision_us, f32 texture_us, f32 step_us
 //     X_WT0: 3×f64 + 4×f64   F_T_W at q0: 3×f64 force (N), 3×f64 torque (N·m)
 //     u8 num_contacts (0..kMaxWireContacts), then per contact (88): f64 depth_m, 3×f64 ∂δ/∂x,
-//     3×f64 ∂δ/∂θ (m/rad), f64 stiffness (N/m), 3×f32 point_W (m), 3×f32 normal_W (unit)
+//     3×f64 ∂δ/∂θ (m/rad), f64 stiffness (N/m), 3×f32 point_W (m), 3×f32 normal_W (unit);
+//     then the kink planes (version 6): u8 num_kink_planes (at most KinkPlaneCapacity(): as many
+//     as fit the datagram), per plane (kKinkPlaneBytes, 17): u8 contact (< num_contacts), f32
+//     depth_m (δ_m at q0, m), 3×f32 ∂δ_m/∂θ (m/rad); the plane shares its contact's ∂δ/∂x, and the
+//     contact's depth is the largest of its planes (haptic_core/contact_linearization.h,
+//     ContactDepthAt). Planes go contact by contact, in order; a sender whose model has more than
+//     fit leaves the last ones out (the remote node counts them). Rejected: a plane naming a
+//     contact ≥ num_contacts or a contact's (kMaxKinkPlanesPerContact + 1)-th plane (kBadValue),
+//     a non-finite field (kNonFinite). The compact model carries the same section, alike.
 //   CompactContactModel R→O (kCompactContactModelFixedBytes + n·kCompactContactBytes): the same
 //     model quantized, sent instead of ContactModel when both sides set kCodecCompactContactModel
 //     and decoded into the same message (the float encoding stays available). u64 tool_state_seq,
@@ -50,7 +58,8 @@
 //     (Meyer et al. 2010; Cigolle et al. 2014). Every i16 is rounded to nearest within ±32767;
 //     −32768 (kCompactNotFinite) marks a value, or normal, that was not finite (or a zero normal)
 //     at the sender, and the receiver rejects the datagram (kNonFinite) as it would ContactModel
-//     with a NaN. The largest error of each field is a kCompact*Error* constant below.
+//     with a NaN. The largest error of each field is a kCompact*Error* constant below. Then the
+//     kink planes as in ContactModel (u8 count, 17 bytes each, f32 fields: kCompactF32RelativeError).
 //   Goodbye O↔R (0): clean close of the session (the operator at the end of a run, the remote
 //     node when stopped); sent three times with new sequence numbers.
 //   Hello O→R (44): u16 min_version, u16 max_version, u64 client_nonce, f32 tool_state_rate_hz,
@@ -133,9 +142,11 @@ inline constexpr std::uint32_t kMagic = 0x504C5448u;  // bytes 'H' 'T' 'L' 'P'
 /// (SceneObjectKind kSceneGraph, kImage) and NodePoses. Versions 1 to 4 are not accepted; a remote
 /// node answers a Hello of another version whose MAC verifies with a Reject (kVersion) in that
 /// Hello's header version (the Hello's first 12 body bytes and the Reject body are laid out alike
-/// in versions 2 to 5), so that an older operator is told why.
-inline constexpr std::uint16_t kProtocolVersion = 5;
-inline constexpr std::uint16_t kMinProtocolVersion = 5;
+/// in versions 2 to 6), so that an older operator is told why. Version 6 added the kink planes
+/// after the contacts of ContactModel and CompactContactModel (issue 31); version 5 is no longer
+/// accepted.
+inline constexpr std::uint16_t kProtocolVersion = 6;
+inline constexpr std::uint16_t kMinProtocolVersion = 6;
 
 /// Message types; values are part of the protocol and never reused.
 enum class MessageType : std::uint8_t {
@@ -194,6 +205,12 @@ inline constexpr std::size_t kContactModelFixedBytes = 8 * 4 + 4 * 3 + 7 * 8 + 6
 inline constexpr std::size_t kContactBytes = 8 + 6 * 8 + 8 + 3 * 4 + 3 * 4;
 inline constexpr std::size_t kCompactContactModelFixedBytes = 4 * 8 + 3 * 2 + 3 * 8 + 10 * 4 + 1;
 inline constexpr std::size_t kCompactContactBytes = 4 + 6 * 4 + 4 + 3 * 2 + 2 * 2;
+/// One kink plane on the wire: u8 contact, f32 depth_m, 3×f32 ∂δ_m/∂θ; and the u8 count before
+/// them.
+inline constexpr std::size_t kKinkPlaneBytes = 1 + 4 * 4;
+inline constexpr std::size_t kKinkPlaneCountBytes = 1;
+/// Most kink planes per contact (haptic_core's kMaxKinkPlanes) and per model.
+inline constexpr int kMaxKinkPlanesPerContact = 4;
 inline constexpr std::size_t kDeadbandTermsBytes = 12;
 inline constexpr std::size_t kHelloBodyBytes = 32 + kDeadbandTermsBytes;
 inline constexpr std::size_t kSceneNameBytes = 32;
@@ -225,6 +242,22 @@ inline constexpr std::size_t kMaxDatagramBytes = 1472;
 inline constexpr std::size_t kMinMtuBytes = 548;
 /// Contacts that fit in one contact-model datagram.
 inline constexpr int kMaxWireContacts = 14;
+/// Most kink planes of one contact model on the wire.
+inline constexpr int kMaxWireKinkPlanes = kMaxWireContacts * 4;
+/// Kink planes that fit one datagram after `num_contacts` contacts of `contact_bytes` each and a
+/// fixed part of `fixed_bytes` (kContactModelFixedBytes and kContactBytes, or the compact ones):
+/// at most kMaxWireKinkPlanes. A receiver refuses a larger count (kBadCount).
+constexpr int KinkPlaneCapacity(std::size_t fixed_bytes, std::size_t contact_bytes,
+                                int num_contacts) noexcept {
+  const std::size_t used = kHeaderBytes + fixed_bytes +
+                           static_cast<std::size_t>(num_contacts < 0 ? 0 : num_contacts) *
+                               contact_bytes +
+                           kKinkPlaneCountBytes + kMacBytes;
+  if (used >= kMaxDatagramBytes) return 0;
+  const std::size_t fit = (kMaxDatagramBytes - used) / kKinkPlaneBytes;
+  return fit < static_cast<std::size_t>(kMaxWireKinkPlanes) ? static_cast<int>(fit)
+                                                            : kMaxWireKinkPlanes;
+}
 /// Largest scene object (bytes) a sender fragments or a receiver reassembles.
 inline constexpr std::uint32_t kMaxSceneObjectBytes = 64u << 20;
 
@@ -273,13 +306,18 @@ constexpr std::size_t FragmentPayloadBytes(std::size_t mtu) noexcept {
 }
 
 static_assert(kHeaderBytes + kContactModelFixedBytes + kMaxWireContacts * kContactBytes +
-                      kMacBytes <=
+                      kKinkPlaneCountBytes + kMacBytes <=
                   kMaxDatagramBytes,
               "a full contact model must fit in one datagram");
 static_assert(kHeaderBytes + kCompactContactModelFixedBytes +
-                      kMaxWireContacts * kCompactContactBytes + kMacBytes <=
+                      kMaxWireContacts * kCompactContactBytes + kKinkPlaneCountBytes + kMacBytes <=
                   kMaxDatagramBytes,
               "a full compact contact model must fit in one datagram");
+static_assert(KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, kMaxWireContacts) >= 1,
+              "a full contact model carries at least one kink plane");
+static_assert(KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, 7) >=
+                  7 * kMaxKinkPlanesPerContact,
+              "a compact model of the seed's 7 contacts carries all their kink planes");
 static_assert(kHeaderBytes + kSceneManifestFixedBytes + kMaxManifestEntries * kManifestEntryBytes +
                       kMacBytes <=
                   kMinMtuBytes,
