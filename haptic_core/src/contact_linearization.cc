@@ -19,7 +19,7 @@ Wrench PenaltyWrench(double depth_m, const PenetrationGradient& J,
 }
 
 int AddKinkPlanes(const ContactWindow& w, std::span<const DepthSample> samples,
-                  const glm::dvec3& p_WT, ContactLinearization& lin) noexcept {
+                  const glm::dvec3& p_WT, ContactLinearization& lin, bool own_slope) noexcept {
   lin.num_kink_planes = 0;
   if (samples.size() < static_cast<std::size_t>(kGradientSamples) || !std::isfinite(lin.depth_m) ||
       samples[0].cell < 0) {
@@ -48,9 +48,16 @@ int AddKinkPlanes(const ContactWindow& w, std::span<const DepthSample> samples,
   // At q0 the deepest cell's own slope is the gradient along a kinked axis: the secant across the
   // V's vertex reads the two arms' mean.
   glm::dvec3 d_rotation = lin.gradient.d_rotation_W;
-  for (int a = 0; a < 2; ++a) {
+  for (int a = 0; a < 2 && own_slope; ++a) {
     if (!kinked[a]) continue;
+    // Only where the deepest cell bears like one of the arms (its slope within 10 % of that arm's:
+    // a sharp V, tilted by h_θ the face still bears on the same edge); on a rounded contact the
+    // deepest cell moves with any tilt, and its single cell's slope is the noisier estimate.
     const double s0 = slope(samples[0].cell, axes[a]);
+    if (!(std::abs(s0 - arm_slope[a][0]) <= 0.1 * std::abs(arm_slope[a][0]) ||
+          std::abs(s0 - arm_slope[a][1]) <= 0.1 * std::abs(arm_slope[a][1]))) {
+      continue;
+    }
     if (std::isfinite(s0)) d_rotation += (s0 - glm::dot(d_rotation, axes[a])) * axes[a];
   }
   lin.gradient.d_rotation_W = d_rotation;

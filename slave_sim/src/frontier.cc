@@ -9,6 +9,7 @@
 #include <exception>
 #include <filesystem>
 #include <fstream>
+#include <array>
 #include <limits>
 #include <memory>
 #include <mutex>
@@ -154,10 +155,23 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     whole_leaves.name = "leaves_to_deepest_pair";
     whole_leaves.share_leaves_between_disjoint_windows = false;
     s.push_back(whole_leaves);
+    FrontierSetting one_plane = base;
+    one_plane.name = "no_kink_planes";
+    one_plane.kink_planes = false;
+    s.push_back(one_plane);
+    FrontierSetting keep_secant = base;
+    keep_secant.name = "kink_planes_keep_secant";
+    keep_secant.kink_planes_own_slope = false;
+    s.push_back(keep_secant);
     FrontierSetting at_witness = base;
     at_witness.name = "windows_at_witness";
     at_witness.whole_model_region_windows = false;
     s.push_back(at_witness);
+    // Issue 31's second stop's default: both of the third stop's changes off.
+    FrontierSetting stop2 = at_witness;
+    stop2.name = "witness_windows_one_plane";
+    stop2.kink_planes = false;
+    s.push_back(stop2);
     FrontierSetting before = no_guard;
     before.name = "issue31_before";
     before.max_window_extent_m = PipelineOptions{}.window_extent_m;
@@ -165,6 +179,7 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     before.region_normals = false;
     before.cluster_triangles = false;
     before.whole_model_region_windows = false;
+    before.kink_planes = false;
     s.push_back(before);
     // Every speed option at once: the warped rotations, local reach, at most 7 contacts, two
     // threads.
@@ -243,6 +258,12 @@ struct Metrics {
   double pipeline_force_rel_rms = 0, pipeline_torque_rel_rms = 0;
   double volume_dir_p50_deg = 0, volume_dir_p95_deg = 0, volume_arm_rel_p50 = 0;
   int poses_truth_without_force = 0, poses_force_without_truth = 0;
+  // The contact model's prediction (issue 31, change 5): every PredictionStride()-th pose's model
+  // evaluated at its displaced poses (PredictionDisplacements) against the pipeline truth there
+  // (what the operator's loop renders between two models); relative RMS over those poses and
+  // displacements. NaN for the baselines, which send no model.
+  double prediction_force_rel_rms = std::numeric_limits<double>::quiet_NaN();
+  double prediction_torque_rel_rms = std::numeric_limits<double>::quiet_NaN();
   bool pareto = false;
 };
 
@@ -255,6 +276,8 @@ struct SettingRun {
   std::int64_t tool_coarse_triangles = 0, object_coarse_triangles = 0;
   std::vector<PoseRecord> poses;
   std::vector<ContactRecord> contacts;
+  /// The contact models' wrenches at PredictionPoses() (empty for the baselines).
+  std::vector<Wrench> predicted;
   Metrics m;
 };
 
@@ -321,6 +344,34 @@ std::string MachineLine() {
 }
 
 // Runs the timed steps of one setting on one scene (single thread).
+double SquaredNorm(const glm::dvec3& v) { return glm::dot(v, v); }
+
+// The displacements of the model-prediction measure: ±1 mrad about W's x and y and ±0.1 mm along
+// them, about the tool's centre of mass (a tilt of a resting face either way, a slide).
+std::array<Twist, 8> PredictionDisplacements() {
+  const double a = 1e-3, d = 1e-4;
+  return {Twist{{0, 0, 0}, {a, 0, 0}},  Twist{{0, 0, 0}, {-a, 0, 0}}, Twist{{0, 0, 0}, {0, a, 0}},
+          Twist{{0, 0, 0}, {0, -a, 0}}, Twist{{d, 0, 0}, {0, 0, 0}},  Twist{{-d, 0, 0}, {0, 0, 0}},
+          Twist{{0, d, 0}, {0, 0, 0}},  Twist{{0, -d, 0}, {0, 0, 0}}};
+}
+
+// Every how many poses the prediction measure samples (about 20 poses, 8 displacements each).
+std::size_t PredictionStride(std::size_t poses) { return std::max<std::size_t>(1, poses / 20); }
+
+// The displaced tool-mesh poses X_WFt of the prediction measure: each sampled pose's tool (frame
+// T, X_TFt from the mesh frame) displaced by each of PredictionDisplacements().
+std::vector<RigidTransform> PredictionPoses(const std::vector<RigidTransform>& poses_WFt,
+                                            const RigidTransform& X_TFt) {
+  std::vector<RigidTransform> out;
+  const RigidTransform X_FtT = X_TFt.Inverse();
+  for (std::size_t k = 0; k < poses_WFt.size(); k += PredictionStride(poses_WFt.size())) {
+    for (const Twist& d : PredictionDisplacements()) {
+      out.push_back(Displace(poses_WFt[k] * X_FtT, d) * X_TFt);
+    }
+  }
+  return out;
+}
+
 void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& poses_WFt,
                 const MeshContactBaseline& fcl, SettingRun& run) {
   const FrontierSetting& st = run.setting;
@@ -380,6 +431,8 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.cluster_triangles = st.cluster_triangles;
   options.share_leaves_between_disjoint_windows = st.share_leaves_between_disjoint_windows;
   options.whole_model_region_windows = st.whole_model_region_windows;
+  options.kink_planes = st.kink_planes;
+  options.kink_planes_own_slope = st.kink_planes_own_slope;
   // The texture stage's threads are the coarse query's too, as in the product.
   options.texture_threads = st.texture_threads;
   HapticTexturePipeline pipeline(scene.haptic, options, std::move(backend));
@@ -387,8 +440,11 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   for (int i = 0; i < 3 && !poses_WFt.empty(); ++i) {  // warm-up: caches, GPU uploads
     pipeline.Step(poses_WFt.front() * X_FtT, 0, timings);
   }
+  std::vector<ContactModel> models;
+  models.reserve(poses_WFt.size());
   for (std::size_t k = 0; k < poses_WFt.size(); ++k) {
     const ContactModel model = pipeline.Step(poses_WFt[k] * X_FtT, k, timings);
+    models.push_back(model);
     PoseRecord p;
     p.timings = timings;
     p.F = model.F_T_W_at_q0;
@@ -408,6 +464,15 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   if (pipeline.backend_failures() > 0) {
     run.note = "backend failed, CPU used: " + pipeline.fallback_reason();
     run.renderer = pipeline.backend().description();
+  }
+  // The model's prediction, after the timed steps: each sampled pose's model at its displaced
+  // poses (PredictionPoses' order), compared with the pipeline truth there in ComputeMetrics.
+  const std::size_t stride = PredictionStride(poses_WFt.size());
+  for (std::size_t k = 0; k < poses_WFt.size(); k += stride) {
+    const RigidTransform X_WT = poses_WFt[k] * X_FtT;
+    for (const Twist& d : PredictionDisplacements()) {
+      run.predicted.push_back(EvaluateContactModel(models[k], Displace(X_WT, d)).F_T_W);
+    }
   }
 }
 
@@ -827,6 +892,12 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
     const auto t_truth = Clock::now();
     std::vector<PoseTruth> pipeline;
     RunPipelineTruth(ref, tool_rays, object_rays, poses, options, pipeline);
+    // The truth at the prediction measure's displaced poses.
+    const std::vector<RigidTransform> displaced = PredictionPoses(poses, ref.X_TFt);
+    say("%s: pipeline truth of %zu displaced poses (model prediction)", name.c_str(),
+        displaced.size());
+    std::vector<PoseTruth> displaced_truth;
+    RunPipelineTruth(ref, tool_rays, object_rays, displaced, options, displaced_truth);
     rep.truth_seconds = Seconds(t_truth);
     for (std::size_t k = 0; k < pipeline.size(); ++k) {
       const PoseTruth& t = pipeline[k];
@@ -877,6 +948,20 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
     for (SettingRun& run : rep.runs) {
       if (!run.skipped.empty()) continue;
       ComputeMetrics(run, jobs, reference_gt, touching, pipeline);
+      if (run.predicted.size() == displaced_truth.size() && !run.predicted.empty()) {
+        double fe = 0, fr = 0, te = 0, tr = 0;
+        for (std::size_t i = 0; i < displaced_truth.size(); ++i) {
+          const Wrench& F = run.predicted[i];
+          const Wrench& G = displaced_truth[i].F_T_W;
+          fe += SquaredNorm(F.force - G.force);
+          fr += SquaredNorm(G.force);
+          te += SquaredNorm(F.torque - G.torque);
+          tr += SquaredNorm(G.torque);
+        }
+        const double nan = std::numeric_limits<double>::quiet_NaN();
+        run.m.prediction_force_rel_rms = fr > 0 ? std::sqrt(fe / fr) : nan;
+        run.m.prediction_torque_rel_rms = tr > 0 ? std::sqrt(te / tr) : nan;
+      }
       const glm::dvec3 com_shift = run.X_TFt.Inverse().translation;
       for (const ContactRecord& c : run.contacts) {
         const GtJob& j = jobs[c.gt];
@@ -918,7 +1003,8 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
          "delta_err_p50_um,delta_err_p95_um,windows,contacts_missed,contacts_invented,"
          "poses_missed,poses_invented,pipeline_force_rel_rms,pipeline_torque_rel_rms,"
          "volume_dir_p50_deg,volume_dir_p95_deg,volume_arm_rel_p50,poses_truth_without_force,"
-         "poses_force_without_truth,pareto,skipped\n";
+         "poses_force_without_truth,prediction_force_rel_rms,prediction_torque_rel_rms,pareto,"
+         "skipped\n";
     for (const SceneReport& rep : reports) {
       for (const SettingRun& r : rep.runs) {
         const FrontierSetting& s = r.setting;
@@ -969,6 +1055,8 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
                                        Fmt(m.volume_arm_rel_p50),
                                        std::to_string(m.poses_truth_without_force),
                                        std::to_string(m.poses_force_without_truth),
+                                       Fmt(m.prediction_force_rel_rms),
+                                       Fmt(m.prediction_torque_rel_rms),
                                        std::string(m.pareto ? "1" : "0"),
                                        std::string()}) {
             cells.push_back(c);
@@ -1031,7 +1119,13 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
        "table, so it isolates what the texture and the grid lose inside a window; the two "
        "baselines, which have no windows, against the default setting's. `texture-stage force "
        "err` (RMS; pose p50), torque, direction and δ errors and missed / invented windows use "
-       "it; poses missed / invented are against FCL's intersection test.\n\n"
+       "it; poses missed / invented are against FCL's intersection test.\n"
+       "- **Model prediction** (issue 31, change 5), what the operator's 1 kHz loop renders "
+       "between two models: the contact models of about 20 poses spread evenly, evaluated 1 mrad "
+       "either way about W's x and y and 0.1 mm either way along them, against the **pipeline "
+       "truth** at those displaced poses; `model prediction F / τ err` is the relative RMS over "
+       "them. A face resting on ridges tilted past its V's vertex gets the other edge's torque "
+       "only from a model that carries the kink.\n\n"
        "Pareto and the fastest setting within 5 % use the pipeline truth.\n\n";
   if (!plot_note.empty()) s << plot_note << "\n\n";
   for (const SceneReport& rep : reports) {
@@ -1067,9 +1161,9 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
     s << "| setting | method | backend | N | texture | coarse | leaf pairs / contacts | step p50 / "
          "p95 (ms) | collision p50 | texture p50 | **pipeline force err** | pipeline torque err | "
          "volume dir p50 / p95 (°) | arm err p50 | truth w/o force / force w/o truth | "
-         "texture-stage force err (RMS; pose p50) | texture-stage torque err | texture-stage dir "
+         "model prediction F / τ err | texture-stage force err (RMS; pose p50) | texture-stage torque err | texture-stage dir "
          "p50 / p95 (°) | δ err p50 / p95 (µm) | missed / invented | Pareto |\n";
-    s << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+    s << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
     const SettingRun* fastest = nullptr;
     const SettingRun* def = nullptr;
     for (const SettingRun& r : rep.runs) {
@@ -1079,7 +1173,7 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
         << (st.backend == "gpu" ? "gpu " + std::to_string(st.depth_bits) + "-bit" : "cpu") << " | "
         << st.grid << " | " << st.texture_size << " | ×" << Fmt(st.coarse_scale) << " | ";
       if (!r.skipped.empty()) {
-        s << "skipped: " << r.skipped << " ||||||||||||||\n";
+        s << "skipped: " << r.skipped << " |||||||||||||||\n";
         continue;
       }
       const Metrics& m = r.m;
@@ -1090,7 +1184,11 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
         << Fmt(100 * m.pipeline_torque_rel_rms, 3) << " % | " << Fmt(m.volume_dir_p50_deg, 3)
         << " / " << Fmt(m.volume_dir_p95_deg, 3) << " | " << Fmt(100 * m.volume_arm_rel_p50, 3)
         << " % | " << m.poses_truth_without_force << " / " << m.poses_force_without_truth << " | "
-        << Fmt(100 * m.force_rel_rms, 3) << " %; " << Fmt(100 * m.force_rel_p50, 3) << " % | "
+        << (std::isfinite(m.prediction_force_rel_rms)
+                ? Fmt(100 * m.prediction_force_rel_rms, 3) + " / " +
+                      Fmt(100 * m.prediction_torque_rel_rms, 3) + " %"
+                : std::string("—"))
+        << " | " << Fmt(100 * m.force_rel_rms, 3) << " %; " << Fmt(100 * m.force_rel_p50, 3) << " % | "
         << Fmt(100 * m.torque_rel_rms, 3) << " % | " << Fmt(m.dir_p50_deg, 3) << " / "
         << Fmt(m.dir_p95_deg, 3) << " | " << Fmt(m.delta_p50_um, 3) << " / "
         << Fmt(m.delta_p95_um, 3) << " | " << m.missed << " / " << m.invented << " (poses "

@@ -61,16 +61,23 @@ struct ContactLinearization {
 /// s(c) = (r_c × ∂δ/∂x)·a (r_c the cell's centre less the tool's centre of mass p_WT, m, W: how
 /// the cell's own depth moves under a rotation about a). Where s(c+) > 0 > s(c−) the depth is a V
 /// in the tilt (a face resting on ridges: tilted either way, the edge that rises bears), and
-///  - the contact's ∂δ/∂θ along a becomes the slope of its deepest cell (the secant of the samples
-///    across the vertex reads the mean of the two arms: a face pressed on one edge got a third of
-///    that edge's lever), so δ0 is unchanged and the wrench at q0 follows the bearing edge;
+///  - where the deepest cell bears like one of the arms (its slope within 10 % of that arm's: a
+///    sharp V, the face tilted by h_θ still bears on the same edge), the contact's ∂δ/∂θ along a
+///    becomes that cell's slope (the secant of the samples across the vertex reads the mean of
+///    the two arms: the fig75 block pressed on one edge got a tenth of that edge's lever), so δ0
+///    is unchanged and the wrench at q0 follows the bearing edge; on a rounded contact the secant
+///    stays (the hammer's torque error on the frontier: 66 % with the secant, 70 % with the cell's
+///    slope); `own_slope` false keeps the secant everywhere;
 ///  - each arm whose cell is not the deepest one is a plane through its sample with its cell's
 ///    slope along a (the contact's ∂δ/∂θ along the other axes), lowered to δ0 where it would
 ///    exceed δ0 at q0.
 /// Elsewhere nothing changes. Replaces lin's planes; none when δ0 is not finite or the base sample
 /// lacks a cell. Returns the number of planes. noexcept, allocation-free.
+/// With `own_slope` false the contact's ∂δ/∂θ stays the secant and only arms whose cell is not
+/// the deepest one are added (an approximation placed on the frontier).
 int AddKinkPlanes(const ContactWindow& window, std::span<const DepthSample> samples,
-                  const glm::dvec3& p_WT, ContactLinearization& lin) noexcept;
+                  const glm::dvec3& p_WT, ContactLinearization& lin,
+                  bool own_slope = true) noexcept;
 
 /// Penalty wrench on the tool at its centre of mass, expressed in W, for depth δ and gradient J:
 /// Φ = −k·max(δ, 0)·J (force N, torque N·m) [L]. Zero when δ ≤ 0 or δ is not finite.

@@ -121,6 +121,10 @@ struct PipelineOptions {
   /// face resting on ridges flips between two models (ContactDepthAt). δ and the wrench at q0 are
   /// unchanged. Off: one plane per contact.
   bool kink_planes = true;
+  /// With kink_planes: along a kinked axis the contact's own ∂δ/∂θ becomes its deepest cell's slope
+  /// (AddKinkPlanes). Off: the secant of the ±h_θ samples stays, and only the arm the deepest cell
+  /// is not on is added (placed on the frontier as "kink_planes_keep_secant").
+  bool kink_planes_own_slope = true;
 
   /// Throws std::invalid_argument naming a value out of range.
   void Validate() const;

@@ -65,6 +65,10 @@ struct FrontierSetting {
   bool share_leaves_between_disjoint_windows = true;
   /// PipelineOptions::whole_model_region_windows ("windows_at_witness" turns it off).
   bool whole_model_region_windows = true;
+  /// PipelineOptions::kink_planes ("no_kink_planes" turns it off).
+  bool kink_planes = true;
+  /// PipelineOptions::kink_planes_own_slope ("kink_planes_keep_secant" turns it off).
+  bool kink_planes_own_slope = true;
 };
 
 /// The sweep: the default setting (grid 50, 1024² textures, the seed's coarse counts, CPU) first,
