@@ -47,14 +47,34 @@ double ContactDepthAt(const ContactLinearization& c, const Twist& dq,
       curvature->bottomRightCorner<3, 3>().noalias() += (1.0 / (2.0 * eps)) * (e * e.transpose());
     }
   }
-  double lift = 0.0;
-  for (int i = 0; i <= n; ++i) {
-    const double gap = depth - d[static_cast<std::size_t>(i)];
-    if (i != top && gap < eps) lift += (eps - gap) * (eps - gap) / (4.0 * eps);
-  }
+  // The blend's lift here, less its lift at q0 (planes that tie at q0: a level face on a flat, or
+  // pressed exactly at its V's vertex), so that δ(q0) = δ0 and a touching contact (δ0 = 0) pushes
+  // with nothing.
+  const auto lift_at = [&](const auto& value, int count) {
+    int best = 0;
+    for (int i = 1; i <= count; ++i) {
+      if (value(i) > value(best)) best = i;
+    }
+    double lift = 0.0;
+    for (int i = 0; i <= count; ++i) {
+      const double gap = value(best) - value(i);
+      if (i != best && gap < eps) lift += (eps - gap) * (eps - gap) / (4.0 * eps);
+    }
+    return lift;
+  };
+  const double lift = lift_at([&](int i) { return d[static_cast<std::size_t>(i)]; }, n);
+  const double lift0 = lift_at(
+      [&](int i) {
+        if (i == 0) return c.depth_m;
+        const KinkPlane& p = c.kink_planes[static_cast<std::size_t>(i - 1)];
+        return std::isfinite(d[static_cast<std::size_t>(i)])
+                   ? p.depth_m
+                   : -std::numeric_limits<double>::infinity();
+      },
+      n);
   if (weight > 1.0) blend /= weight;  // three or more planes at a tie: a convex combination
   if (gradient != nullptr) *gradient = {J_x, r_top + blend};
-  return depth + lift;
+  return depth + lift - lift0;
 }
 
 ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const RigidTransform& X_WT,

@@ -976,7 +976,10 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
            << ',' << w.axis_u_W.y << ',' << w.axis_u_W.z << ',' << w.extent_m << ',' << w.resolution
            << ',' << c.query.stiffness_n_per_m << ',' << c.lin.depth_m << ','
            << j.result.linearization.depth_m << ',';
-        WriteWrench(cc, PenaltyWrench(c.lin.depth_m, c.lin.gradient, c.lin.stiffness_n_per_m));
+        // As the model gives it at q0 (its kink planes may blend there: ContactDepthAt).
+        PenetrationGradient J_q0;
+        const double depth_q0 = ContactDepthAt(c.lin, Twist{}, &J_q0);
+        WriteWrench(cc, PenaltyWrench(depth_q0, J_q0, c.lin.stiffness_n_per_m));
         cc << ',';
         WriteWrench(cc, j.result.F_T_W);
         const glm::dvec3 com_W = poses[c.pose] * com_shift;
@@ -1062,7 +1065,7 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
             cells.push_back(c);
           }
         } else {
-          cells.resize(cells.size() + 29);
+          cells.resize(cells.size() + 31);
           cells.push_back(clean(r.skipped));
         }
         for (std::size_t i = 0; i < cells.size(); ++i) o << (i ? "," : "") << cells[i];

@@ -34,16 +34,18 @@ struct ContactModel {
   Wrench F_T_W_at_q0;
 };
 
-/// Depth width ε (m) over which a contact's planes blend (ContactDepthAt): about a quarter of it is
-/// the most the blend adds to the largest plane, and a tilt of ε/(2r) (r the lever of the arms,
-/// 0.13 mrad for the fig75 block's 2 cm edges) is the width of the V's rounded vertex.
+/// Depth width ε (m) over which a contact's planes blend (ContactDepthAt): a tilt of ε/(2r) (r the
+/// lever of the arms, 0.25 mrad for the fig75 block's 2 cm edges) is the width of the V's rounded
+/// vertex.
 inline constexpr double kKinkBlendM = 10e-6;
 
 /// δ of contact `c` at the pose change Δq = q ⊖ q0 (Δq.linear in m, Δq.angular in rad, world
 /// axes): the largest of its planes, δ0 + J·Δq and each kink plane's δ_m + J_m·Δq (J_m =
 /// (∂δ/∂x, ∂δ_m/∂θ)), with a quadratic blend where another plane comes within kKinkBlendM of the
 /// largest one (gap g < ε: δ += (ε − g)²/(4ε), J += w·(J_i − J_max) with w = (ε − g)/(2ε); the
-/// weights are normalized when they add up to more than 1). Without planes, δ0 + J·Δq exactly.
+/// weights are normalized when they add up to more than 1), less that lift at q0, so that
+/// δ(q0) = δ0 always (planes that tie at q0, a level face on a flat, add no depth there; a
+/// touching contact pushes with nothing). Without planes, δ0 + J·Δq exactly.
 /// The blend makes the gradient continuous through the V's vertex: at a tie the two arms bear
 /// half each, so a face resting on two edges finds its equilibrium instead of chattering between
 /// them tick by tick (each plane alone flips the torque from one edge's to the other's).
