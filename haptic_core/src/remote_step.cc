@@ -265,7 +265,7 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
 
 void HapticTexturePipeline::RegionWindow(const RigidTransform& X_WT, std::size_t k,
                                          const glm::dvec3& normal_W, double texture_margin_m,
-                                         glm::dvec3& point_W, double& extent_m) noexcept {
+                                         glm::dvec3& point_W, double& extent_m) {
   const ConvexHull& hull_A = whole_hulls_[0];
   const ConvexHull& hull_B = whole_hulls_[k + 1];
   if (hull_A.planes_O.empty() || hull_B.planes_O.empty()) return;

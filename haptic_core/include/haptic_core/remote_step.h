@@ -238,7 +238,7 @@ class HapticTexturePipeline {
   /// `normal_W`, and sets `extent_m` to the region's larger side plus 2·texture_margin_m; leaves
   /// both unchanged when a model has no hull or the region is empty.
   void RegionWindow(const RigidTransform& X_WT, std::size_t k, const glm::dvec3& normal_W,
-                    double texture_margin_m, glm::dvec3& point_W, double& extent_m) noexcept;
+                    double texture_margin_m, glm::dvec3& point_W, double& extent_m);
   /// The CPU backend of these options (fast path, texture_threads threads).
   std::unique_ptr<PenetrationDepthBackend> MakeCpuBackend() const;
 
