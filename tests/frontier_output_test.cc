@@ -223,7 +223,12 @@ TEST_F(FrontierOutput, FinerGridsAreCloserToTheTruthAndTexturesMatter) {
   // δ error shrinks with the grid's cell (the method samples cell centres; the truth is exact).
   EXPECT_LT(Num(*fine, "delta_err_p50_um"), Num(*def, "delta_err_p50_um"));
   EXPECT_LT(Num(*def, "delta_err_p50_um"), Num(*coarse, "delta_err_p50_um"));
-  EXPECT_LT(Num(*fine, "force_rel_rms"), Num(*def, "force_rel_rms"));
+  // The force error orders the coarse grid behind the default with a wide margin (0.87–0.98
+  // against 0.35–0.38 in two runs). Between the default and grid 100 it does not order them
+  // reliably on the quick run's 12 poses, which come from a live loopback run's trace and differ
+  // run to run: 0.38 / 0.35 in one run, 0.35 / 0.43 in another (issue 31's third stop, fig75's
+  // window 4.2 cm); the δ error above orders them every time (48 / 9 µm).
+  EXPECT_LT(Num(*def, "force_rel_rms"), Num(*coarse, "force_rel_rms"));
   // Without the textures the ridges are gone: worse than with them.
   EXPECT_GT(Num(*untextured, "force_rel_rms"), Num(*def, "force_rel_rms"));
   // Every setting that ran was timed, and the default is one of them.
