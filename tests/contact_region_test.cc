@@ -316,8 +316,8 @@ TEST(ContactRegion, ConvexMeshHullHoldsTheBoxAndRefusesADentedOne) {
 // The block of seed Fig. 75 level on the gear, pressed 0.1 mm (its bottom face at the gear's top).
 RigidTransform LevelBlockOnGear(double x_m, double press_m) {
   RigidTransform X;
-  X.translation = {x_m, 0.0, RidgedGearParams{}.radius_m + RidgedBlockParams{}.half_extents_m.z -
-                                 press_m};
+  X.translation = {x_m, 0.0,
+                   RidgedGearParams{}.radius_m + RidgedBlockParams{}.half_extents_m.z - press_m};
   return X;
 }
 
@@ -411,8 +411,8 @@ TEST(ContactRegion, BlockRestingOnTheGearBearsOnItsEdgesAndItsModelCarriesTheKin
         const ContactModelEvaluation e = EvaluateContactModel(m, tilted(theta + d));
         const double f_scale = glm::length(there.F_T_W_at_q0.force);
         worst = std::max(worst, glm::length(e.F_T_W.force - there.F_T_W_at_q0.force) / f_scale);
-        worst = std::max(worst, std::abs(e.F_T_W.torque.y - there.F_T_W_at_q0.torque.y) /
-                                    (half * f_scale));
+        worst = std::max(
+            worst, std::abs(e.F_T_W.torque.y - there.F_T_W_at_q0.torque.y) / (half * f_scale));
       }
     }
     return worst;
@@ -421,9 +421,10 @@ TEST(ContactRegion, BlockRestingOnTheGearBearsOnItsEdgesAndItsModelCarriesTheKin
   PipelineOptions one_plane;
   one_plane.kink_planes = false;
   const double without = prediction_error(one_plane);
-  std::printf("[block on gear] the model's wrench 1.5 mrad away against the step there: worst "
-              "%.3g (kink planes) / %.3g (one plane per contact) of F and F·half-width\n",
-              with_kinks, without);
+  std::printf(
+      "[block on gear] the model's wrench 1.5 mrad away against the step there: worst "
+      "%.3g (kink planes) / %.3g (one plane per contact) of F and F·half-width\n",
+      with_kinks, without);
   EXPECT_LT(with_kinks, 0.05);
   EXPECT_GT(without, 0.5) << "one plane holds one arm across the vertex: the measure tells them "
                              "apart";

@@ -426,9 +426,9 @@ TEST_F(GpuTest, Fig75PathGivesTheSameWrenchesWithEitherBackend) {
     for (std::size_t q = 0; q < cpu.last_contact_queries().size(); ++q) {
       if (!std::isfinite(cpu.last_linearizations()[q].depth_m)) continue;
       const ContactWindow& w = cpu.last_contact_queries()[q].window;
-      const double tol_c = dynamic_cast<const GpuPenetrationDepthBackend&>(gpu.backend())
-                               .DepthQuantum(w) +
-                           GeometryTolerance(*scene.tool, *scene.touchables[0].model);
+      const double tol_c =
+          dynamic_cast<const GpuPenetrationDepthBackend&>(gpu.backend()).DepthQuantum(w) +
+          GeometryTolerance(*scene.tool, *scene.touchables[0].model);
       const GradientSteps h_c = GradientSteps::For(w);
       const ContactLinearization& l = a.contacts[c++];
       const double k = l.stiffness_n_per_m, depth = std::max(l.depth_m, 0.0) + tol_c;

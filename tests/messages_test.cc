@@ -5,7 +5,6 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
-
 #include <cstring>
 #include <limits>
 #include <numbers>
@@ -766,12 +765,12 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
         }
         planes += c.num_kink_planes;
       }
-      const Datagram d = compact ? EncodeCompactContactModel({}, m, key)
-                                 : EncodeContactModel({}, m, key);
+      const Datagram d =
+          compact ? EncodeCompactContactModel({}, m, key) : EncodeContactModel({}, m, key);
       ASSERT_LE(d.size, kMaxDatagramBytes);
-      const int fit = compact ? KinkPlaneCapacity(kCompactContactModelFixedBytes,
-                                                  kCompactContactBytes, n)
-                              : KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, n);
+      const int fit =
+          compact ? KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, n)
+                  : KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, n);
       const int sent = std::min(planes, fit);
       EXPECT_EQ(d.size, kHeaderBytes +
                             (compact ? kCompactContactModelFixedBytes + n * kCompactContactBytes
@@ -805,15 +804,15 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
   for (const bool compact : {false, true}) {
     ContactModelMessage m = SampleModel(2);
     m.model.contacts[1].num_kink_planes = kMaxKinkPlanes;
-    const Datagram good = compact ? EncodeCompactContactModel({}, m, key)
-                                  : EncodeContactModel({}, m, key);
+    const Datagram good =
+        compact ? EncodeCompactContactModel({}, m, key) : EncodeContactModel({}, m, key);
     const std::size_t planes_at = good.size - kMacBytes - kMaxKinkPlanes * kKinkPlaneBytes;
     const auto patched = [&](auto&& edit) {
       Datagram d = good;
       d.size -= kMacBytes;
       edit(d);
-      ComputeMac(d.view(), key, std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size,
-                                                                    kMacBytes));
+      ComputeMac(d.view(), key,
+                 std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size, kMacBytes));
       d.size += kMacBytes;
       return OpenAndDecode(d.view(), key);
     };
@@ -822,8 +821,7 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
     // Five planes of contact 1: append one more, counted.
     EXPECT_EQ(patched([&](Datagram& d) {
                 d.bytes[planes_at - 1] = kMaxKinkPlanes + 1;
-                std::copy_n(d.bytes.begin() + planes_at, kKinkPlaneBytes,
-                            d.bytes.begin() + d.size);
+                std::copy_n(d.bytes.begin() + planes_at, kKinkPlaneBytes, d.bytes.begin() + d.size);
                 d.size += kKinkPlaneBytes;
               }),
               DecodeStatus::kBadValue);
@@ -831,8 +829,7 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
     EXPECT_EQ(patched([&](Datagram& d) { std::memcpy(&d.bytes[planes_at + 1], &nan, 4); }),
               DecodeStatus::kNonFinite);
     // A count above what fits: refused before any plane is read.
-    EXPECT_EQ(patched([&](Datagram& d) { d.bytes[planes_at - 1] = 255; }),
-              DecodeStatus::kBadCount);
+    EXPECT_EQ(patched([&](Datagram& d) { d.bytes[planes_at - 1] = 255; }), DecodeStatus::kBadCount);
   }
 }
 

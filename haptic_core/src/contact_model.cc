@@ -6,8 +6,8 @@
 
 namespace ht {
 
-double ContactDepthAt(const ContactLinearization& c, const Twist& dq,
-                      PenetrationGradient* gradient, Stiffness6* curvature) noexcept {
+double ContactDepthAt(const ContactLinearization& c, const Twist& dq, PenetrationGradient* gradient,
+                      Stiffness6* curvature) noexcept {
   const int n = std::clamp(c.num_kink_planes, 0, kMaxKinkPlanes);
   const glm::dvec3& J_x = c.gradient.d_translation_W;
   const double along_x = glm::dot(J_x, dq.linear);
@@ -91,7 +91,8 @@ ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const Rig
     const double k = c.stiffness_n_per_m * scale;
     if (!std::isfinite(c.depth_m) || !std::isfinite(k) || !(k > 0.0)) continue;
     PenetrationGradient J_active;
-    const double depth = ContactDepthAt(c, dq, &J_active, c.num_kink_planes > 0 ? &curvature : nullptr);
+    const double depth =
+        ContactDepthAt(c, dq, &J_active, c.num_kink_planes > 0 ? &curvature : nullptr);
     if (!(depth > 0.0)) continue;
     ++out.active_contacts;
     out.max_depth_m = std::max(out.max_depth_m, depth);

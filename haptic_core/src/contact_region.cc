@@ -175,9 +175,10 @@ std::optional<ConvexHull> ConvexMeshHull(const HapticModel& model, double tolera
     if (!(len > 0.0) || !std::isfinite(len)) continue;  // a degenerate triangle has no plane
     const glm::dvec3 unit = n / len;
     const double d = glm::dot(unit, p0);
-    const bool known = std::any_of(hull.planes_O.begin(), hull.planes_O.end(), [&](const glm::dvec4& q) {
-      return glm::length(glm::dvec3(q) - unit) < 1e-9 && std::abs(q.w - d) <= tolerance_m;
-    });
+    const bool known =
+        std::any_of(hull.planes_O.begin(), hull.planes_O.end(), [&](const glm::dvec4& q) {
+          return glm::length(glm::dvec3(q) - unit) < 1e-9 && std::abs(q.w - d) <= tolerance_m;
+        });
     if (!known) hull.planes_O.emplace_back(unit, d);
   }
   // Convex: every vertex of the mesh on the inner side of every face plane.
@@ -193,9 +194,8 @@ std::optional<ConvexHull> ConvexMeshHull(const HapticModel& model, double tolera
 bool PairRegionBounds(const HapticModel& tool, const RigidTransform& X_WT, const ConvexHull& hull_A,
                       std::span<const int> triangles_A, const HapticModel& object,
                       const RigidTransform& X_WO, const ConvexHull& hull_B,
-                      std::span<const int> triangles_B, double margin_m,
-                      const glm::dvec3& origin_W, const glm::dvec3& u_W, const glm::dvec3& v_W,
-                      RegionBounds& out) noexcept {
+                      std::span<const int> triangles_B, double margin_m, const glm::dvec3& origin_W,
+                      const glm::dvec3& u_W, const glm::dvec3& v_W, RegionBounds& out) noexcept {
   out = {};
   if (!(margin_m >= 0.0) || !std::isfinite(margin_m)) return false;
   const RigidTransform X_TO = X_WT.Inverse() * X_WO;
@@ -204,8 +204,7 @@ bool PairRegionBounds(const HapticModel& tool, const RigidTransform& X_WT, const
   // The object's triangles inside the tool's hull (clipped in T), the tool's inside the object's.
   if (!ClippedBox(object, triangles_B, X_TO, X_WT, hull_A, margin_m, origin_W, u_W, v_W,
                   object_part) ||
-      !ClippedBox(tool, triangles_A, X_OT, X_WO, hull_B, margin_m, origin_W, u_W, v_W,
-                  tool_part)) {
+      !ClippedBox(tool, triangles_A, X_OT, X_WO, hull_B, margin_m, origin_W, u_W, v_W, tool_part)) {
     return false;
   }
   // Where both parts are: the overlap of the two boxes (their union if they miss each other).

@@ -90,7 +90,8 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
     if (std::optional<ConvexHull> hull = ConvexMeshHull(m, 1e-6)) {
       whole_hulls_[i] = std::move(*hull);
       whole_triangles_[i].resize(m.triangles.size());
-      for (std::size_t t = 0; t < m.triangles.size(); ++t) whole_triangles_[i][t] = static_cast<int>(t);
+      for (std::size_t t = 0; t < m.triangles.size(); ++t)
+        whole_triangles_[i][t] = static_cast<int>(t);
     }
   }
   // Broad-phase spheres: the root bounding spheres the proximity queries use anyway. Asking each
@@ -276,12 +277,13 @@ void HapticTexturePipeline::RegionWindow(const RigidTransform& X_WT, std::size_t
   const double pair_reach =
       queries_[k].NodeReach(*scene_.tool, -1) + queries_[k].NodeReach(*object.model, -1);
   RegionBounds b;
-  if (!PairRegionBounds(*scene_.tool, X_WT, hull_A, whole_triangles_[0], *object.model,
-                        object.X_WO, hull_B, whole_triangles_[k + 1], pair_reach, point_W,
-                        axes->axis_u_W, axes->axis_v_W, b)) {
+  if (!PairRegionBounds(*scene_.tool, X_WT, hull_A, whole_triangles_[0], *object.model, object.X_WO,
+                        hull_B, whole_triangles_[k + 1], pair_reach, point_W, axes->axis_u_W,
+                        axes->axis_v_W, b)) {
     return;
   }
-  point_W += 0.5 * (b.min_u + b.max_u) * axes->axis_u_W + 0.5 * (b.min_v + b.max_v) * axes->axis_v_W;
+  point_W +=
+      0.5 * (b.min_u + b.max_u) * axes->axis_u_W + 0.5 * (b.min_v + b.max_v) * axes->axis_v_W;
   extent_m = std::max(b.max_u - b.min_u, b.max_v - b.min_v) + 2.0 * texture_margin_m;
   ++step_faults_.region_windows;
 }

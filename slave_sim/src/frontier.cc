@@ -1,6 +1,7 @@
 #include "slave_sim/frontier.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -9,7 +10,6 @@
 #include <exception>
 #include <filesystem>
 #include <fstream>
-#include <array>
 #include <limits>
 #include <memory>
 #include <mutex>
@@ -1164,9 +1164,11 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
     s << "| setting | method | backend | N | texture | coarse | leaf pairs / contacts | step p50 / "
          "p95 (ms) | collision p50 | texture p50 | **pipeline force err** | pipeline torque err | "
          "volume dir p50 / p95 (°) | arm err p50 | truth w/o force / force w/o truth | "
-         "model prediction F / τ err | texture-stage force err (RMS; pose p50) | texture-stage torque err | texture-stage dir "
+         "model prediction F / τ err | texture-stage force err (RMS; pose p50) | texture-stage "
+         "torque err | texture-stage dir "
          "p50 / p95 (°) | δ err p50 / p95 (µm) | missed / invented | Pareto |\n";
-    s << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+    s << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+         "\n";
     const SettingRun* fastest = nullptr;
     const SettingRun* def = nullptr;
     for (const SettingRun& r : rep.runs) {
@@ -1191,8 +1193,8 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
                 ? Fmt(100 * m.prediction_force_rel_rms, 3) + " / " +
                       Fmt(100 * m.prediction_torque_rel_rms, 3) + " %"
                 : std::string("—"))
-        << " | " << Fmt(100 * m.force_rel_rms, 3) << " %; " << Fmt(100 * m.force_rel_p50, 3) << " % | "
-        << Fmt(100 * m.torque_rel_rms, 3) << " % | " << Fmt(m.dir_p50_deg, 3) << " / "
+        << " | " << Fmt(100 * m.force_rel_rms, 3) << " %; " << Fmt(100 * m.force_rel_p50, 3)
+        << " % | " << Fmt(100 * m.torque_rel_rms, 3) << " % | " << Fmt(m.dir_p50_deg, 3) << " / "
         << Fmt(m.dir_p95_deg, 3) << " | " << Fmt(m.delta_p50_um, 3) << " / "
         << Fmt(m.delta_p95_um, 3) << " | " << m.missed << " / " << m.invented << " (poses "
         << m.poses_missed << " / " << m.poses_invented << ") | " << (m.pareto ? "yes" : "")

@@ -320,15 +320,14 @@ void RemoteSession::SendModel(wire::ContactModelMessage& out, std::int64_t now) 
   const int contacts = std::clamp(out.model.num_contacts, 0, wire::kMaxWireContacts);
   std::uint64_t planes = 0;
   for (int i = 0; i < contacts; ++i) {
-    planes += static_cast<std::uint64_t>(
-        std::clamp(out.model.contacts[static_cast<std::size_t>(i)].num_kink_planes, 0,
-                   kMaxKinkPlanes));
+    planes += static_cast<std::uint64_t>(std::clamp(
+        out.model.contacts[static_cast<std::size_t>(i)].num_kink_planes, 0, kMaxKinkPlanes));
   }
   const auto fit = static_cast<std::uint64_t>(
-      compact_models_ ? wire::KinkPlaneCapacity(wire::kCompactContactModelFixedBytes,
-                                                wire::kCompactContactBytes, contacts)
-                      : wire::KinkPlaneCapacity(wire::kContactModelFixedBytes,
-                                                wire::kContactBytes, contacts));
+      compact_models_
+          ? wire::KinkPlaneCapacity(wire::kCompactContactModelFixedBytes,
+                                    wire::kCompactContactBytes, contacts)
+          : wire::KinkPlaneCapacity(wire::kContactModelFixedBytes, wire::kContactBytes, contacts));
   kink_planes_sent_ += std::min(planes, fit);
   kink_planes_left_out_ += planes - std::min(planes, fit);
   link_.Send(compact_models_ ? wire::EncodeCompactContactModel(header, out, config_.key)
@@ -405,8 +404,7 @@ nlohmann::json RemoteSession::StatsJson(std::size_t scene_objects, std::size_t s
       {"steps_skipped", steps_skipped_},
       {"keepalives_sent", keepalives_sent_},
       {"model_decisions", ToJson(model_deadband_.counts())}};
-  transport["kink_planes"] = {{"sent", kink_planes_sent_},
-                              {"left_out", kink_planes_left_out_}};
+  transport["kink_planes"] = {{"sent", kink_planes_sent_}, {"left_out", kink_planes_left_out_}};
   transport["mtu"] = config_.mtu;
   transport["node_poses"] = {{"rate_hz", config_.display_rate_hz},
                              {"graph_version", graph_version_},

@@ -222,8 +222,8 @@ constexpr std::size_t Count(auto& a, auto& n, std::size_t capacity, std::size_t 
 }
 /// The same for a count whose elements are followed by at least `min_bytes_after` more bytes.
 template <std::unsigned_integral Wire>
-constexpr std::size_t CountBefore(auto& a, auto& n, std::size_t capacity,
-                                  std::size_t element_bytes, std::size_t min_bytes_after) {
+constexpr std::size_t CountBefore(auto& a, auto& n, std::size_t capacity, std::size_t element_bytes,
+                                  std::size_t min_bytes_after) {
   return a.template CountBefore<Wire>(n, capacity, element_bytes, min_bytes_after);
 }
 
@@ -317,7 +317,8 @@ constexpr std::size_t FlattenKinkPlanes(const ContactModel& model, std::size_t n
     const int planes = std::clamp(c.num_kink_planes, 0, kMaxKinkPlanes);
     for (int p = 0; p < planes && k < cap; ++p) {
       const KinkPlane& kp = c.kink_planes[static_cast<std::size_t>(p)];
-      out[k++] = {static_cast<std::uint8_t>(i), static_cast<float>(kp.depth_m),
+      out[k++] = {static_cast<std::uint8_t>(i),
+                  static_cast<float>(kp.depth_m),
                   {static_cast<float>(kp.d_rotation_W.x), static_cast<float>(kp.d_rotation_W.y),
                    static_cast<float>(kp.d_rotation_W.z)}};
     }
@@ -351,8 +352,7 @@ constexpr void KinkPlanes(auto& a, auto& model, std::size_t n, int capacity) {
         Count<std::uint8_t>(a, k, static_cast<std::size_t>(capacity), kKinkPlaneBytes);
     for (std::size_t j = 0; j < std::min(sent, k); ++j) Fields(a, planes[j]);
   } else {
-    k = Count<std::uint8_t>(a, k, static_cast<std::size_t>(std::max(capacity, 0)),
-                            kKinkPlaneBytes);
+    k = Count<std::uint8_t>(a, k, static_cast<std::size_t>(std::max(capacity, 0)), kKinkPlaneBytes);
     for (std::size_t j = 0; j < k; ++j) Fields(a, planes[j]);
     if (a.ok() && !DistributeKinkPlanes({planes.data(), k}, n, model)) {
       a.Reject(DecodeStatus::kBadValue);
@@ -374,7 +374,8 @@ constexpr void Fields(auto& a, Of<ContactModelMessage> auto& m) {
   const std::size_t n = CountBefore<std::uint8_t>(a, m.model.num_contacts, kMaxWireContacts,
                                                   kContactBytes, kKinkPlaneCountBytes);
   for (std::size_t i = 0; i < n; ++i) Fields(a, m.model.contacts[i]);
-  KinkPlanes(a, m.model, n, KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, static_cast<int>(n)));
+  KinkPlanes(a, m.model, n,
+             KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, static_cast<int>(n)));
 }
 
 /// One contact of a CompactContactModel as it is on the wire (protocol.h).
@@ -574,9 +575,9 @@ static_assert(SizeOf<ToolStateMessage>().bytes == kToolStateBodyBytes);
 static_assert(SizeOf<ContactModelMessage>().bytes ==
               kContactModelFixedBytes + kContactBytes + kKinkPlaneCountBytes);
 static_assert(SizeOf<ContactModelMessage>().counted_bytes == kContactBytes + kKinkPlaneBytes);
-static_assert(SizeOf<CompactContactModelBody>().bytes == kCompactContactModelFixedBytes +
-                                                            kCompactContactBytes +
-                                                            kKinkPlaneCountBytes + kKinkPlaneBytes);
+static_assert(SizeOf<CompactContactModelBody>().bytes ==
+              kCompactContactModelFixedBytes + kCompactContactBytes + kKinkPlaneCountBytes +
+                  kKinkPlaneBytes);
 static_assert(SizeOf<CompactContactModelBody>().counted_bytes ==
               kCompactContactBytes + kKinkPlaneBytes);
 static_assert(SizeOf<HelloMessage>().bytes == kHelloBodyBytes);

@@ -75,8 +75,9 @@ struct ContactModelEvaluation {
 
 /// Evaluates `model` at tool pose X_WT: δ_i(q) = δ0_i + J_i·(q ⊖ q0), or with kink planes the
 /// largest of the contact's planes (ContactDepthAt; force, torque and K along the gradient of the
-/// plane that gives it), per-contact switching by max(δ_i, 0) (DESIGN.md §5). Contacts whose δ0 or stiffness is not finite are skipped.
-/// `stiffness_scale` ∈ [0, 1] multiplies every k_i (used to blend a new model in).
+/// plane that gives it), per-contact switching by max(δ_i, 0) (DESIGN.md §5). Contacts whose δ0 or
+/// stiffness is not finite are skipped. `stiffness_scale` ∈ [0, 1] multiplies every k_i (used to
+/// blend a new model in).
 ///
 /// `max_contact_force_n` (N, > 0; +∞ = none) bounds each contact's force, DESIGN.md §5's bounded
 /// delivered stiffness: where k_i·δ_i·|∂δ_i/∂x| exceeds it (k_i unscaled), δ_i is held at the

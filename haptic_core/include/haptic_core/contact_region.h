@@ -48,9 +48,9 @@ struct RegionBounds {
 
 /// The hull of a convex coarse mesh (a model without hierarchy, whose coarse mesh is its single
 /// hull: the built-in procedural models): its hull vertices and one outward plane per distinct
-/// face plane of its triangles (frame O, m). nullopt when the mesh is not convex (a vertex more than
-/// `tolerance_m` outside a face plane), has no triangles, or holds a bad index. Allocates: call at
-/// set-up (the remote step builds one per such model at construction).
+/// face plane of its triangles (frame O, m). nullopt when the mesh is not convex (a vertex more
+/// than `tolerance_m` outside a face plane), has no triangles, or holds a bad index. Allocates:
+/// call at set-up (the remote step builds one per such model at construction).
 std::optional<ConvexHull> ConvexMeshHull(const HapticModel& model, double tolerance_m = 1e-9);
 
 /// The extent of one hull pair's contact region on a window's axes (issue 31, change 1: the window
@@ -64,8 +64,7 @@ std::optional<ConvexHull> ConvexMeshHull(const HapticModel& model, double tolera
 bool PairRegionBounds(const HapticModel& tool, const RigidTransform& X_WT, const ConvexHull& hull_A,
                       std::span<const int> triangles_A, const HapticModel& object,
                       const RigidTransform& X_WO, const ConvexHull& hull_B,
-                      std::span<const int> triangles_B, double margin_m,
-                      const glm::dvec3& origin_W, const glm::dvec3& u_W, const glm::dvec3& v_W,
-                      RegionBounds& out) noexcept;
+                      std::span<const int> triangles_B, double margin_m, const glm::dvec3& origin_W,
+                      const glm::dvec3& u_W, const glm::dvec3& v_W, RegionBounds& out) noexcept;
 
 }  // namespace ht

@@ -59,7 +59,8 @@
 //     −32768 (kCompactNotFinite) marks a value, or normal, that was not finite (or a zero normal)
 //     at the sender, and the receiver rejects the datagram (kNonFinite) as it would ContactModel
 //     with a NaN. The largest error of each field is a kCompact*Error* constant below. Then the
-//     kink planes as in ContactModel (u8 count, 17 bytes each, f32 fields: kCompactF32RelativeError).
+//     kink planes as in ContactModel (u8 count, 17 bytes each, f32 fields:
+//     kCompactF32RelativeError).
 //   Goodbye O↔R (0): clean close of the session (the operator at the end of a run, the remote
 //     node when stopped); sent three times with new sequence numbers.
 //   Hello O→R (44): u16 min_version, u16 max_version, u64 client_nonce, f32 tool_state_rate_hz,
@@ -249,10 +250,10 @@ inline constexpr int kMaxWireKinkPlanes = kMaxWireContacts * 4;
 /// at most kMaxWireKinkPlanes. A receiver refuses a larger count (kBadCount).
 constexpr int KinkPlaneCapacity(std::size_t fixed_bytes, std::size_t contact_bytes,
                                 int num_contacts) noexcept {
-  const std::size_t used = kHeaderBytes + fixed_bytes +
-                           static_cast<std::size_t>(num_contacts < 0 ? 0 : num_contacts) *
-                               contact_bytes +
-                           kKinkPlaneCountBytes + kMacBytes;
+  const std::size_t used =
+      kHeaderBytes + fixed_bytes +
+      static_cast<std::size_t>(num_contacts < 0 ? 0 : num_contacts) * contact_bytes +
+      kKinkPlaneCountBytes + kMacBytes;
   if (used >= kMaxDatagramBytes) return 0;
   const std::size_t fit = (kMaxDatagramBytes - used) / kKinkPlaneBytes;
   return fit < static_cast<std::size_t>(kMaxWireKinkPlanes) ? static_cast<int>(fit)
