@@ -20,6 +20,7 @@
 namespace ht {
 
 void PipelineOptions::Validate() const {
+  depth_refinement.Validate();
   if (grid_resolution < 2 || grid_resolution > 1024) {
     throw std::invalid_argument("grid resolution must be in [2, 1024], got " +
                                 std::to_string(grid_resolution));
@@ -60,7 +61,8 @@ int DefaultTextureThreads() noexcept {
 HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
                                              const PipelineOptions& options,
                                              std::unique_ptr<PenetrationDepthBackend> backend)
-    : scene_(scene), options_(options), backend_(std::move(backend)) {
+    : scene_(scene), options_(options), backend_(std::move(backend)),
+      refiner_(options.depth_refinement) {
   options_.Validate();
   reachable_pairs_.resize(static_cast<std::size_t>(clusterer_.max_pairs()));
   pair_bounds_.resize(static_cast<std::size_t>(clusterer_.max_pairs()));
@@ -129,6 +131,15 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
                          options_.grid_resolution, last_queries_, step_faults_.bad_windows);
   // Stage 5: texture penetration depth and its gradient, linearized, for the whole batch.
   LinearizeContacts(X_WT, last_num_queries_);
+  // Stage 5b: δ refined to the finest texture level, its gradient at texel scale (issue 32).
+  if (options_.refine_depth) {
+    for (int i = 0; i < last_num_queries_; ++i) {
+      refiner_.Refine(*scene_.tool, X_WT, last_queries_[i],
+                      {last_samples_.data() + static_cast<std::size_t>(i) * kGradientSamples,
+                       static_cast<std::size_t>(kGradientSamples)},
+                      last_results_[i]);
+    }
+  }
   if (options_.kink_planes) {
     for (int i = 0; i < last_num_queries_; ++i) {
       AddKinkPlanes(last_queries_[i].window,

@@ -163,6 +163,30 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     keep_secant.name = "kink_planes_keep_secant";
     keep_secant.kink_planes_own_slope = false;
     s.push_back(keep_secant);
+    // Issue 32: the grid's δ and secants (the reference), and the refined gradient's step.
+    FrontierSetting grid_depth = base;
+    grid_depth.name = "no_depth_refinement";
+    grid_depth.refine_depth = false;
+    s.push_back(grid_depth);
+    // The refined maximum's gradient at texel-scale steps instead of the refined samples'
+    // one-cell secants: 2 texels (the option's default), and 1, 4 and 8.
+    FrontierSetting texel_gradient = base;
+    texel_gradient.name = "texel_scale_gradient";
+    texel_gradient.texel_scale_gradient = true;
+    s.push_back(texel_gradient);
+    for (const double texels : {1.0, 4.0, 8.0}) {
+      FrontierSetting step = texel_gradient;
+      step.name = "texel_gradient_" + std::to_string(static_cast<int>(texels)) + "_texels";
+      step.gradient_step_texels = texels;
+      s.push_back(step);
+    }
+    for (const int grid : {16, 25}) {
+      FrontierSetting coarse_grid = base;
+      coarse_grid.name = "grid" + std::to_string(grid) + "_no_depth_refinement";
+      coarse_grid.grid = grid;
+      coarse_grid.refine_depth = false;
+      s.push_back(coarse_grid);
+    }
     FrontierSetting at_witness = base;
     at_witness.name = "windows_at_witness";
     at_witness.whole_model_region_windows = false;
@@ -433,6 +457,10 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.whole_model_region_windows = st.whole_model_region_windows;
   options.kink_planes = st.kink_planes;
   options.kink_planes_own_slope = st.kink_planes_own_slope;
+  options.refine_depth = st.refine_depth;
+  options.depth_refinement.texel_scale_gradient = st.texel_scale_gradient;
+  if (st.gradient_step_texels > 0.0)
+    options.depth_refinement.gradient_step_texels = st.gradient_step_texels;
   // The texture stage's threads are the coarse query's too, as in the product.
   options.texture_threads = st.texture_threads;
   HapticTexturePipeline pipeline(scene.haptic, options, std::move(backend));

@@ -315,6 +315,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
       (pipeline->backend_failures() == 0 ? warm_up_missing_overlap : 0);
   s["grazing_guard"] = config.pipeline.grazing_guard;
   s["kink_planes"] = config.pipeline.kink_planes;
+  s["refine_depth"] = config.pipeline.refine_depth;
   s["grazing_dropped_contacts"] = pipeline->step_faults().grazing_dropped;
   s["unreachable_pairs_dropped"] = pipeline->step_faults().unreachable_pairs;
   s["triangle_lists_overflowed"] = pipeline->step_faults().triangle_lists_overflowed;

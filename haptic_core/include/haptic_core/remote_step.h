@@ -13,6 +13,7 @@
 #include "haptic_core/contact_linearization.h"
 #include "haptic_core/contact_model.h"
 #include "haptic_core/contact_windows.h"
+#include "haptic_core/depth_refinement.h"
 #include "haptic_core/haptic_scene.h"
 #include "haptic_core/hull_proximity.h"
 #include "haptic_core/penetration_depth_backend.h"
@@ -125,6 +126,13 @@ struct PipelineOptions {
   /// (AddKinkPlanes). Off: the secant of the ±h_θ samples stays, and only the arm the deepest cell
   /// is not on is added (placed on the frontier as "kink_planes_keep_secant").
   bool kink_planes_own_slope = true;
+  /// Stage 5b (issue 32): δ refined from the grid's cell samples to the finest texture level and
+  /// its gradient taken at texel scale (DepthRefiner, depth_refinement.h), after either backend.
+  /// Off: the grid's δ and its one-cell secants, the reference (`slave_sim --no-depth-refinement`,
+  /// the frontier's "no_depth_refinement").
+  bool refine_depth = true;
+  /// How stage 5b refines (steps, sub-samples, search floor).
+  DepthRefinementOptions depth_refinement;
 
   /// Throws std::invalid_argument naming a value out of range.
   void Validate() const;
@@ -223,6 +231,17 @@ class HapticTexturePipeline {
   std::span<const ContactLinearization> last_linearizations() const noexcept {
     return {last_results_.data(), static_cast<std::size_t>(last_num_queries_)};
   }
+  /// The kGradientSamples depth samples of each of last_contact_queries() (query-major,
+  /// GradientSamplePoses() order), as stage 5b left them (refined where PipelineOptions::
+  /// refine_depth is on). Valid until the next Step().
+  std::span<const DepthSample> last_depth_samples() const noexcept {
+    return {last_samples_.data(),
+            static_cast<std::size_t>(last_num_queries_) * static_cast<std::size_t>(kGradientSamples)};
+  }
+  /// What stage 5b did since construction.
+  const DepthRefinementCounters& depth_refinement_counters() const noexcept {
+    return refiner_.counters();
+  }
 
  private:
   /// Stages 1–3 for every touchable: appends to candidates_ (up to kMaxContacts) and fills the
@@ -245,6 +264,8 @@ class HapticTexturePipeline {
   const HapticScene& scene_;
   PipelineOptions options_;
   std::unique_ptr<PenetrationDepthBackend> backend_;
+  /// Stage 5b (PipelineOptions::refine_depth).
+  DepthRefiner refiner_;
   /// One proximity query per touchable object (each keeps its own last-frame pairs).
   std::vector<HullProximityQuery> queries_;
   /// Broad phase: root bounding spheres of the tool (frame T) and of every touchable (its frame

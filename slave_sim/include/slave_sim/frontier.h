@@ -69,6 +69,14 @@ struct FrontierSetting {
   bool kink_planes = true;
   /// PipelineOptions::kink_planes_own_slope ("kink_planes_keep_secant" turns it off).
   bool kink_planes_own_slope = true;
+  /// PipelineOptions::refine_depth ("no_depth_refinement" turns it off: the grid's δ and
+  /// secants, issue 32's before).
+  bool refine_depth = true;
+  /// PipelineOptions::depth_refinement.gradient_step_texels (0: the default).
+  double gradient_step_texels = 0.0;
+  /// PipelineOptions::depth_refinement.texel_scale_gradient ("texel_scale_gradient" and
+  /// "texel_gradient_K_texels" turn it on).
+  bool texel_scale_gradient = false;
 };
 
 /// The sweep: the default setting (grid 50, 1024² textures, the seed's coarse counts, CPU) first,

@@ -1,0 +1,168 @@
+#pragma once
+// Stage 5b of the remote step (issue 32): the directional penetration depth refined from the
+// N×N grid's cell samples to the finest texture level, and its gradient taken at texel scale.
+//
+// Why. The grid samples each cell centre at the mip level whose texel matches the cell
+// (HeightField::LevelForFootprint), a 2×2 box filter per level: a peak is first averaged (a mean
+// is never above the maximum) and then missed between two centres, so δ reads low by tens of
+// micrometres on the seed models (issue 32: 60–90 µm p50), which at the runs' shallow presses is
+// most of the force; and the gradient is a secant over one cell (0.4 mm at the seed's 2 cm / 50),
+// which reads a 1.2–3 mm ridge's slope about 11 % low.
+//
+// How (our construction [R]; the depth is Otaduy & Lin's max over the window of b − a [L]):
+//  - Seeds: the deepest cells of the kGradientSamples rendered samples (every backend reports
+//    them), each the cell whose filtered value is the largest, so that a level-0 peak the filter
+//    averaged lies within about a cell of it.
+//  - At each seed, b − a is evaluated at level 0 (PatchHeightAt: the same coarse surface, normal
+//    factor and box rule as the render, the texture sampled bilinearly at its full resolution) on
+//    a sub-grid of about two texels over the seed's 1.5-cell square, then a pattern search
+//    (8 directions, step halved down to an eighth of a texel) climbs to the local maximum. The
+//    deepest of the seeds is δ0 and its point the contact point.
+//  - Gradient: central differences of the refined maximum at texel-scale steps
+//    h_x = gradient_step_texels × the finer level-0 texel of the two surfaces at the contact
+//    point (m), h_θ = h_x / (W/2) (rad) (the pipeline truth's steps are 0.1 mm, the seed's 1024²
+//    textures' texel on a 10 cm object), each displaced pose's maximum climbed from the base's
+//    refined seeds that lie within reach of the deepest (a small step cannot bring a far, lower
+//    peak above it). ∂δ/∂x_n = −1 exactly, as the grid's.
+//  - The ten rendered displaced samples (the kink planes read the ±h_θ ones) are refined the same
+//    way from their own deepest cells, so that δ0 and the kink planes' depths share one estimator.
+// The reference (the grid alone) stays: PipelineOptions::refine_depth off.
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "haptic_core/contact_linearization.h"
+#include "haptic_core/haptic_model.h"
+#include "haptic_core/penetration_depth.h"
+#include "haptic_core/penetration_depth_backend.h"
+#include "haptic_core/spatial.h"
+
+namespace ht {
+
+/// The height along the window's n (m, from the window plane through its centre) of the textured
+/// surface of `model` posed at X_WO at the window point (s, t) (m along u and v from the window
+/// centre), over the coarse triangles `triangles` (indices into model.triangles): the largest over
+/// the triangles facing +n for kEnvironment, the smallest over those facing −n for kTool
+/// (kPatchFacingThreshold), each the coarse height + h(uv)·(N·n) with N the interpolated unit
+/// normal, as RenderPatchHeights writes per cell. `level` ≥ 0 samples that mip level (clamped to
+/// the chain); −1 samples the level RenderPatchHeights uses for the window's cell
+/// (LevelForFootprint), so that at a cell centre this is the reference render's value (a test
+/// compares them). Heights with |height| > window.depth_range_m() are outside the window's box
+/// and ignored. Returns −∞ (kEnvironment) or +∞ (kTool) where no triangle covers the point.
+/// Never allocates, never throws.
+double PatchHeightAt(const HapticModel& model, const RigidTransform& X_WO,
+                     std::span<const int> triangles, const ContactWindow& window, PatchSide side,
+                     double s_m, double t_m, int level = 0) noexcept;
+
+/// How the depth is refined (issue 32).
+struct DepthRefinementOptions {
+  /// Translation step of the gradient in level-0 texels of the finer surface at the contact
+  /// point; the rotation step is this over half the window. > 0.
+  double gradient_step_texels = 2.0;
+  /// Most sub-samples per side of a seed's square (its spacing is about two texels, at least one
+  /// sample). In [1, 16].
+  int max_subsamples = 6;
+  /// The pattern search stops when its step falls below this many texels. > 0.
+  double search_floor_texels = 0.25;
+  /// Refine the ten rendered displaced samples as well (the kink planes read them); off: only the
+  /// base and the texel-scale gradient.
+  bool refine_rendered_samples = true;
+  /// The gradient from the refined maximum at texel-scale steps (above); off: the grid's
+  /// one-cell secants (h_x = W/N, h_θ = h_x/(W/2)) of the refined rendered samples.
+  bool texel_scale_gradient = false;
+
+  /// Throws std::invalid_argument naming a value out of range.
+  void Validate() const;
+};
+
+/// What a DepthRefiner did since construction (for reports).
+struct DepthRefinementCounters {
+  std::uint64_t contacts = 0;     ///< Contacts refined.
+  std::uint64_t seeds = 0;        ///< Base seeds searched.
+  std::uint64_t evaluations = 0;  ///< Point evaluations of b − a (each two PatchHeightAt-like).
+  std::uint64_t raised_um = 0;    ///< Σ (refined δ0 − sampled δ0), µm (rounded per contact).
+};
+
+/// Refines the linearizations of a texture stage's batch to the finest texture level (see the
+/// header comment). One per thread; preallocates at construction and never allocates in Refine
+/// (unless a window holds more coarse triangles than reserved).
+class DepthRefiner {
+ public:
+  /// Reserves for windows of up to `max_triangles` coarse triangles per side. Throws
+  /// std::invalid_argument for bad options.
+  explicit DepthRefiner(const DepthRefinementOptions& options = {},
+                        std::size_t max_triangles = 8192);
+
+  /// Refines one contact that a backend linearized: `query` as the backend got it (the
+  /// environment, its pose, the window, the triangle subsets), the tool posed at X_WT (frame T at
+  /// its centre of mass), `samples` its kGradientSamples rendered samples (GradientSamplePoses
+  /// order; their depths are replaced by the refined ones, cells kept except the base's, which
+  /// becomes the cell holding the refined point), and `lin` the backend's linearization: its δ0,
+  /// point and gradient are replaced (stiffness and normal kept). Returns false, changing
+  /// nothing, when the base sample has no overlap or the refinement finds none. noexcept.
+  bool Refine(const HapticModel& tool, const RigidTransform& X_WT, const ContactQuery& query,
+              std::span<DepthSample> samples, ContactLinearization& lin) noexcept;
+
+  const DepthRefinementCounters& counters() const noexcept { return counters_; }
+  const DepthRefinementOptions& options() const noexcept { return options_; }
+
+  /// One coarse triangle projected on a window at one pose (internal; public for the .cc's
+  /// helpers): corners along u, v and n (m), the normal factors N_c·n, texture coordinates, the
+  /// corner normals' cosines, and its bounding box on the window plane.
+  struct Projected {
+    double x[3], y[3], d[3], nn[3];
+    double inv_area;
+    float tu[3], tv[3];
+    double cos01, cos02, cos12;
+    double x0, x1, y0, y1;
+    double texel_m;
+    int face;
+    bool textured;
+  };
+
+ private:
+  struct Seed {
+    double depth_m, s, t;
+  };
+  // A square on the window plane (m along u and v) that a search stays in.
+  struct Box {
+    double s0, s1, t0, t1;
+  };
+  // The triangles of `list` facing the side's way, projected on the window at pose X.
+  void ProjectAll(const HapticModel& model, const RigidTransform& X, PatchSide side,
+                  std::span<const int> list, std::vector<Projected>& out) noexcept;
+  // The environment's projected triangles over a box (env_local_, from env_all_), the tool's
+  // (tool_local_, from `from`), and tool_local_'s faces at another pose (tool_moved_).
+  void GatherEnvironment(double s0, double s1, double t0, double t1) noexcept;
+  void GatherTool(std::span<const Projected> from, double s0, double s1, double t0,
+                  double t1) noexcept;
+  void MoveTool(const RigidTransform& X_WT) noexcept;
+  // b − a at (s, t) at level 0, the tool's heights read at (s − shift_s, t − shift_t); −∞ where
+  // either side is missing.
+  double Difference(std::span<const Projected> tool, double s, double t, double shift_s,
+                    double shift_t) noexcept;
+  // The best of a sub-grid of `subsamples`² points over the square of half side `half_side`
+  // around (s, t) (the point alone for 1), then a pattern search from it with `step` halved down
+  // to `floor_m`, staying in `box`.
+  Seed Search(std::span<const Projected> tool, const Box& box, double s, double t, double half_side,
+              int subsamples, double step, double floor_m, double shift_s, double shift_t) noexcept;
+
+  DepthRefinementOptions options_;
+  DepthRefinementCounters counters_;
+  TriangleBoxTreeCache trees_;
+  std::vector<int> env_list_, tool_list_;
+  std::vector<double> vertex_scratch_;
+  // The window's triangles projected once per contact (the tool at the base pose, and at one
+  // rendered rotation at a time), and those near the point being searched.
+  std::vector<Projected> env_all_, tool_all_, tool_pose_all_;
+  std::vector<Projected> env_local_, tool_local_, tool_moved_;
+  // Set per contact.
+  const HapticModel* env_ = nullptr;
+  const HapticModel* tool_ = nullptr;
+  RigidTransform X_WO_;
+  ContactWindow window_;
+  std::uint64_t evaluations_ = 0;
+};
+
+}  // namespace ht

@@ -1,0 +1,466 @@
+// Stage 5b: the penetration depth refined to the finest texture level (issue 32); see
+// depth_refinement.h for the method.
+
+#include "haptic_core/depth_refinement.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+namespace ht {
+
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+// Barycentric tolerance of a point on a triangle's edge (the render's kEdgeTolerance).
+constexpr double kEdgeTolerance = -1e-9;
+// Spacing of a seed's sub-grid, in level-0 texels (the pattern search refines from its best).
+constexpr double kSubsampleTexels = 4.0;
+// The base's seeds: the deepest cells of the base and of the four in-plane translations (one
+// cell either way: where a peak the filter spread over two cells lies). The rotated samples'
+// cells lie where a rotation by h_θ = 2/N rad brings the depth, mostly at the window's edges.
+constexpr int kBaseSeedSamples = 5;
+
+using Projected = DepthRefiner::Projected;
+
+// Triangle f of `m` posed at X on window w, when it faces the side's way (as the render tests
+// it) and its projection is not edge-on.
+bool ProjectTriangle(const HapticModel& m, const RigidTransform& X, const ContactWindow& w, int f,
+                     PatchSide side, Projected& out) noexcept {
+  const glm::ivec3 tri = m.triangles[static_cast<std::size_t>(f)];
+  glm::dvec3 p[3];
+  for (int c = 0; c < 3; ++c) {
+    p[c] = X * m.vertices_O[static_cast<std::size_t>(tri[c])] - w.center_W;
+    out.x[c] = glm::dot(p[c], w.axis_u_W);
+    out.y[c] = glm::dot(p[c], w.axis_v_W);
+    out.d[c] = glm::dot(p[c], w.normal_W);
+    out.nn[c] =
+        glm::dot(X.rotation * m.corner_normals_O[3 * static_cast<std::size_t>(f) + c], w.normal_W);
+  }
+  const glm::dvec3 cr = glm::cross(p[1] - p[0], p[2] - p[0]);
+  const double cr_len = glm::length(cr);
+  if (!(cr_len > 0.0)) return false;
+  const double facing = glm::dot(cr, w.normal_W) / cr_len;
+  if (side == PatchSide::kEnvironment ? facing <= kPatchFacingThreshold
+                                      : facing >= -kPatchFacingThreshold) {
+    return false;
+  }
+  const double area =
+      (out.x[1] - out.x[0]) * (out.y[2] - out.y[0]) - (out.x[2] - out.x[0]) * (out.y[1] - out.y[0]);
+  if (!(std::abs(area) > 0.0)) return false;
+  out.inv_area = 1.0 / area;
+  const std::size_t k = 3 * static_cast<std::size_t>(f);
+  for (int c = 0; c < 3; ++c) {
+    out.tu[c] = m.corner_uvs[k + c].x;
+    out.tv[c] = m.corner_uvs[k + c].y;
+  }
+  const glm::dvec3& n0 = m.corner_normals_O[k];
+  const glm::dvec3& n1 = m.corner_normals_O[k + 1];
+  const glm::dvec3& n2 = m.corner_normals_O[k + 2];
+  out.cos01 = glm::dot(n0, n1);
+  out.cos02 = glm::dot(n0, n2);
+  out.cos12 = glm::dot(n1, n2);
+  out.x0 = std::min({out.x[0], out.x[1], out.x[2]});
+  out.x1 = std::max({out.x[0], out.x[1], out.x[2]});
+  out.y0 = std::min({out.y[0], out.y[1], out.y[2]});
+  out.y1 = std::max({out.y[0], out.y[1], out.y[2]});
+  out.textured = m.textured[static_cast<std::size_t>(f)] != 0 && !m.texture.empty();
+  out.texel_m = m.texel_size_m[static_cast<std::size_t>(f)];
+  return true;
+}
+
+// The render's value of one projected triangle at (s, t), or NaN where it does not cover it.
+// `level` −1: the footprint level for `cell_m`.
+double ValueAt(const Projected& P, const HeightField& texture, double s, double t, int level,
+               double cell_m) noexcept {
+  if (s < P.x0 - 1e-12 || s > P.x1 + 1e-12 || t < P.y0 - 1e-12 || t > P.y1 + 1e-12) {
+    return std::numeric_limits<double>::quiet_NaN();
+  }
+  const double b0 = ((P.x[1] - s) * (P.y[2] - t) - (P.x[2] - s) * (P.y[1] - t)) * P.inv_area;
+  const double b1 = ((P.x[2] - s) * (P.y[0] - t) - (P.x[0] - s) * (P.y[2] - t)) * P.inv_area;
+  const double b2 = 1.0 - b0 - b1;
+  if (b0 < kEdgeTolerance || b1 < kEdgeTolerance || b2 < kEdgeTolerance) {
+    return std::numeric_limits<double>::quiet_NaN();
+  }
+  double value = b0 * P.d[0] + b1 * P.d[1] + b2 * P.d[2];
+  if (P.textured) {
+    const auto u = static_cast<float>(b0 * P.tu[0] + b1 * P.tu[1] + b2 * P.tu[2]);
+    const auto v = static_cast<float>(b0 * P.tv[0] + b1 * P.tv[1] + b2 * P.tv[2]);
+    const double len2 = b0 * b0 + b1 * b1 + b2 * b2 +
+                        2.0 * (b0 * b1 * P.cos01 + b0 * b2 * P.cos02 + b1 * b2 * P.cos12);
+    const double ndotn =
+        len2 > 1e-12 ? (b0 * P.nn[0] + b1 * P.nn[1] + b2 * P.nn[2]) / std::sqrt(len2) : 0.0;
+    const int lv = level >= 0 ? level : texture.LevelForFootprint(P.texel_m, cell_m);
+    value += static_cast<double>(texture.Sample(lv, u, v)) * ndotn;
+  }
+  return value;
+}
+
+// The envelope of `list` at (s, t): the largest value for the environment, the smallest for the
+// tool, within the box ±range.
+double HeightOver(std::span<const Projected> list, const HeightField& texture, bool keep_max,
+                  double range, double s, double t, int level, double cell_m) noexcept {
+  double best = keep_max ? -kInf : kInf;
+  for (const Projected& P : list) {
+    const double value = ValueAt(P, texture, s, t, level, cell_m);
+    if (!(std::abs(value) <= range)) continue;  // NaN (not covered) or outside the box
+    best = keep_max ? std::max(best, value) : std::min(best, value);
+  }
+  return best;
+}
+
+// Window coordinates (m) of cell `index`'s centre.
+void CellCoordinates(const ContactWindow& w, int index, double& s, double& t) noexcept {
+  const int n = w.resolution;
+  const int i = index % n, j = index / n;
+  s = ((i + 0.5) / n - 0.5) * w.extent_m;
+  t = ((j + 0.5) / n - 0.5) * w.extent_m;
+}
+
+int CellAt(const ContactWindow& w, double s, double t) noexcept {
+  const int n = w.resolution;
+  const int i = std::clamp(static_cast<int>(std::floor((s / w.extent_m + 0.5) * n)), 0, n - 1);
+  const int j = std::clamp(static_cast<int>(std::floor((t / w.extent_m + 0.5) * n)), 0, n - 1);
+  return j * n + i;
+}
+
+}  // namespace
+
+double PatchHeightAt(const HapticModel& model, const RigidTransform& X_WO,
+                     std::span<const int> triangles, const ContactWindow& window, PatchSide side,
+                     double s_m, double t_m, int level) noexcept {
+  const bool keep_max = side == PatchSide::kEnvironment;
+  double best = keep_max ? -kInf : kInf;
+  Projected P;
+  for (const int f : triangles) {
+    if (f < 0 || static_cast<std::size_t>(f) >= model.triangles.size()) continue;
+    if (!ProjectTriangle(model, X_WO, window, f, side, P)) continue;
+    const double value = ValueAt(P, model.texture, s_m, t_m, level, window.cell_size_m());
+    if (!(std::abs(value) <= window.depth_range_m())) continue;
+    best = keep_max ? std::max(best, value) : std::min(best, value);
+  }
+  return best;
+}
+
+void DepthRefinementOptions::Validate() const {
+  if (!(gradient_step_texels > 0.0) || !std::isfinite(gradient_step_texels)) {
+    throw std::invalid_argument("depth refinement: gradient_step_texels must be > 0, got " +
+                                std::to_string(gradient_step_texels));
+  }
+  if (max_subsamples < 1 || max_subsamples > 16) {
+    throw std::invalid_argument("depth refinement: max_subsamples must be in [1, 16], got " +
+                                std::to_string(max_subsamples));
+  }
+  if (!(search_floor_texels > 0.0) || !std::isfinite(search_floor_texels)) {
+    throw std::invalid_argument("depth refinement: search_floor_texels must be > 0, got " +
+                                std::to_string(search_floor_texels));
+  }
+}
+
+DepthRefiner::DepthRefiner(const DepthRefinementOptions& options, std::size_t max_triangles)
+    : options_(options) {
+  options_.Validate();
+  env_list_.reserve(max_triangles);
+  tool_list_.reserve(max_triangles);
+  vertex_scratch_.reserve(max_triangles);
+  env_local_.reserve(max_triangles);
+  tool_local_.reserve(max_triangles);
+  tool_moved_.reserve(max_triangles);
+  env_all_.reserve(max_triangles);
+  tool_all_.reserve(max_triangles);
+  tool_pose_all_.reserve(max_triangles);
+}
+
+void DepthRefiner::ProjectAll(const HapticModel& model, const RigidTransform& X, PatchSide side,
+                              std::span<const int> list, std::vector<Projected>& out) noexcept {
+  out.clear();
+  Projected P;
+  for (const int f : list) {
+    if (!ProjectTriangle(model, X, window_, f, side, P)) continue;
+    P.face = f;
+    out.push_back(P);
+  }
+}
+
+void DepthRefiner::GatherEnvironment(double s0, double s1, double t0, double t1) noexcept {
+  env_local_.clear();
+  for (const Projected& P : env_all_) {
+    if (P.x1 < s0 || P.x0 > s1 || P.y1 < t0 || P.y0 > t1) continue;
+    env_local_.push_back(P);
+  }
+}
+
+void DepthRefiner::GatherTool(std::span<const Projected> from, double s0, double s1, double t0,
+                              double t1) noexcept {
+  tool_local_.clear();
+  for (const Projected& P : from) {
+    if (P.x1 < s0 || P.x0 > s1 || P.y1 < t0 || P.y0 > t1) continue;
+    tool_local_.push_back(P);
+  }
+}
+
+void DepthRefiner::MoveTool(const RigidTransform& X_WT) noexcept {
+  tool_moved_.clear();
+  Projected P;
+  for (const Projected& L : tool_local_) {
+    if (!ProjectTriangle(*tool_, X_WT, window_, L.face, PatchSide::kTool, P)) continue;
+    P.face = L.face;
+    tool_moved_.push_back(P);
+  }
+}
+
+double DepthRefiner::Difference(std::span<const Projected> tool, double s, double t, double shift_s,
+                                double shift_t) noexcept {
+  ++evaluations_;
+  const double range = window_.depth_range_m();
+  const double b = HeightOver(env_local_, env_->texture, true, range, s, t, 0, 0.0);
+  if (!(b > -kInf)) return -kInf;
+  const double a = HeightOver(tool, tool_->texture, false, range, s - shift_s, t - shift_t, 0, 0.0);
+  if (!(a < kInf)) return -kInf;
+  return b - a;
+}
+
+DepthRefiner::Seed DepthRefiner::Search(std::span<const Projected> tool, const Box& box, double s,
+                                        double t, double half_side, int subsamples, double step,
+                                        double floor_m, double shift_s, double shift_t) noexcept {
+  Seed best{-kInf, s, t};
+  const auto inside = [&](double ss, double tt) {
+    return ss >= box.s0 && ss <= box.s1 && tt >= box.t0 && tt <= box.t1;
+  };
+  const auto consider = [&](double ss, double tt) {
+    if (!inside(ss, tt)) return false;
+    const double d = Difference(tool, ss, tt, shift_s, shift_t);
+    if (d > best.depth_m) {
+      best = {d, ss, tt};
+      return true;
+    }
+    return false;
+  };
+  if (subsamples <= 1) {
+    consider(s, t);
+  } else {
+    const double spacing = 2.0 * half_side / subsamples;
+    for (int j = 0; j < subsamples; ++j) {
+      for (int i = 0; i < subsamples; ++i) {
+        consider(s - half_side + (i + 0.5) * spacing, t - half_side + (j + 0.5) * spacing);
+      }
+    }
+  }
+  if (!(best.depth_m > -kInf)) return best;
+  // Pattern search: the best of the four neighbours along u and v at `step`, halved when none
+  // is better.
+  static constexpr std::array<std::array<int, 2>, 4> kDirections{
+      {{1, 0}, {-1, 0}, {0, 1}, {0, -1}}};
+  int moves = 0;
+  while (step >= floor_m && moves < 64) {
+    const Seed from = best;
+    for (const auto& d : kDirections) consider(from.s + d[0] * step, from.t + d[1] * step);
+    if (best.depth_m > from.depth_m) {
+      ++moves;
+    } else {
+      step *= 0.5;
+    }
+  }
+  return best;
+}
+
+bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
+                          const ContactQuery& query, std::span<DepthSample> samples,
+                          ContactLinearization& lin) noexcept {
+  if (samples.size() < static_cast<std::size_t>(kGradientSamples) || samples[0].cell < 0 ||
+      query.environment == nullptr) {
+    return false;
+  }
+  env_ = query.environment;
+  tool_ = &tool;
+  X_WO_ = query.X_WO;
+  window_ = query.window;
+  const ContactWindow& w = window_;
+  const double cell = w.cell_size_m();
+  const GradientSteps big = GradientSteps::For(w);
+  evaluations_ = 0;
+  SelectPatchTrianglesIn(query.environment_triangles, *env_, X_WO_, w, PatchSide::kEnvironment,
+                         cell, env_list_, 0.0, &vertex_scratch_, trees_.For(*env_));
+  SelectPatchTrianglesIn(query.tool_triangles, tool, X_WT, w, PatchSide::kTool, 2.0 * big.h_x,
+                         tool_list_, big.h_theta + 1e-9, &vertex_scratch_, trees_.For(tool),
+                         big.h_theta);
+  ProjectAll(*env_, X_WO_, PatchSide::kEnvironment, env_list_, env_all_);
+  ProjectAll(tool, X_WT, PatchSide::kTool, tool_list_, tool_all_);
+
+  // The finer level-0 texel of the surfaces gathered (the cell's quarter where neither is
+  // textured: a smooth coarse surface is linear inside its triangles).
+  const auto texel_of_gathered = [&](std::span<const Projected> tool_tris) {
+    double texel = kInf;
+    for (const Projected& P : env_local_) {
+      if (P.textured && P.texel_m > 0.0) texel = std::min(texel, P.texel_m);
+    }
+    for (const Projected& P : tool_tris) {
+      if (P.textured && P.texel_m > 0.0) texel = std::min(texel, P.texel_m);
+    }
+    return std::isfinite(texel) ? texel : 0.25 * cell;
+  };
+  // One rendered sample's deepest cell refined at a pose: the tool at X (shifted in-plane by
+  // (shift_s, shift_t) where X is the base pose).
+  const auto refine_cell = [&](int cell_index, std::span<const Projected> tool_at, double shift_s,
+                               double shift_t) -> Seed {
+    double s = 0.0, t = 0.0;
+    CellCoordinates(w, cell_index, s, t);
+    const double half = 0.75 * cell;
+    const Box box{s - half - cell, s + half + cell, t - half - cell, t + half + cell};
+    GatherEnvironment(box.s0, box.s1, box.t0, box.t1);
+    GatherTool(tool_at, box.s0 - shift_s, box.s1 - shift_s, box.t0 - shift_t, box.t1 - shift_t);
+    const double texel = texel_of_gathered(tool_local_);
+    const int g = std::clamp(static_cast<int>(std::ceil(2.0 * half / (kSubsampleTexels * texel))),
+                             1, options_.max_subsamples);
+    const double spacing = 2.0 * half / g;
+    return Search(tool_local_, box, s, t, half, g, 0.5 * spacing,
+                  options_.search_floor_texels * texel, shift_s, shift_t);
+  };
+
+  // The base: every distinct deepest cell of the samples is a seed.
+  std::array<int, kGradientSamples> seed_cells{};
+  int num_seeds = 0;
+  for (int k = 0; k < kBaseSeedSamples; ++k) {
+    const int c = samples[static_cast<std::size_t>(k)].cell;
+    if (c < 0 || c >= w.resolution * w.resolution) continue;
+    if (std::find(seed_cells.begin(), seed_cells.begin() + num_seeds, c) !=
+        seed_cells.begin() + num_seeds) {
+      continue;
+    }
+    seed_cells[static_cast<std::size_t>(num_seeds++)] = c;
+  }
+  std::array<Seed, kGradientSamples> base{};
+  int best = -1;
+  for (int k = 0; k < num_seeds; ++k) {
+    base[static_cast<std::size_t>(k)] = refine_cell(seed_cells[k], tool_all_, 0.0, 0.0);
+    if (best < 0 || base[k].depth_m > base[static_cast<std::size_t>(best)].depth_m) best = k;
+  }
+  if (best < 0 || !(base[static_cast<std::size_t>(best)].depth_m > -kInf)) {
+    counters_.evaluations += evaluations_;
+    return false;
+  }
+  const Seed deepest = base[static_cast<std::size_t>(best)];
+
+  // The gradient at texel scale, from the base seeds within reach of the deepest.
+  GatherEnvironment(deepest.s - cell, deepest.s + cell, deepest.t - cell, deepest.t + cell);
+  GatherTool(tool_all_, deepest.s - cell, deepest.s + cell, deepest.t - cell, deepest.t + cell);
+  const double texel = texel_of_gathered(tool_local_);
+  const double h_x = options_.gradient_step_texels * texel;
+  const double h_theta = h_x / (0.5 * w.extent_m);
+  const glm::dvec3 point_W = w.center_W + deepest.s * w.axis_u_W + deepest.t * w.axis_v_W;
+  const double reach = h_x + h_theta * glm::length(point_W - X_WT.translation);
+  const double floor_m = options_.search_floor_texels * texel;
+  std::array<int, 4> near{};
+  int num_near = 0;
+  {
+    std::array<int, kGradientSamples> order{};
+    for (int k = 0; k < num_seeds; ++k) order[static_cast<std::size_t>(k)] = k;
+    std::sort(order.begin(), order.begin() + num_seeds, [&](int a, int b) {
+      return base[static_cast<std::size_t>(a)].depth_m > base[static_cast<std::size_t>(b)].depth_m;
+    });
+    for (int k = 0; k < num_seeds && num_near < 4; ++k) {
+      const Seed& sd = base[static_cast<std::size_t>(order[static_cast<std::size_t>(k)])];
+      if (sd.depth_m < deepest.depth_m - 4.0 * reach) break;
+      near[static_cast<std::size_t>(num_near++)] = order[static_cast<std::size_t>(k)];
+    }
+  }
+  const glm::dvec3 u = w.axis_u_W, v = w.axis_v_W, n = w.normal_W, zero(0.0);
+  const Twist steps[5] = {{h_x * u, zero},
+                          {h_x * v, zero},
+                          {zero, h_theta * u},
+                          {zero, h_theta * v},
+                          {zero, h_theta * n}};
+  std::array<double, 10> displaced{};
+  displaced.fill(-kInf);
+  for (int m = 0; m < (options_.texel_scale_gradient ? num_near : 0); ++m) {
+    const Seed& sd = base[static_cast<std::size_t>(near[static_cast<std::size_t>(m)])];
+    const double margin = reach + 4.0 * texel;
+    const Box box{sd.s - margin, sd.s + margin, sd.t - margin, sd.t + margin};
+    GatherEnvironment(box.s0, box.s1, box.t0, box.t1);
+    GatherTool(tool_all_, box.s0 - reach, box.s1 + reach, box.t0 - reach, box.t1 + reach);
+    for (int k = 0; k < 10; ++k) {
+      const int axis = k / 2;
+      const double sign = (k % 2 == 0) ? 1.0 : -1.0;
+      double shift_s = 0.0, shift_t = 0.0;
+      std::span<const Projected> tool_tris = tool_local_;
+      // The maximum may stay with the environment's feature (the seed's point) or move with the
+      // tool's (the seed's point carried by the displacement: where a tool edge bounds it, the
+      // seed's own point may have left the tool's support): both starts are climbed.
+      double moved_s = sd.s, moved_t = sd.t;
+      if (axis == 0) {
+        shift_s = sign * h_x;
+        moved_s += shift_s;
+      } else if (axis == 1) {
+        shift_t = sign * h_x;
+        moved_t += shift_t;
+      } else {
+        const RigidTransform X =
+            Displace(X_WT, {sign * steps[axis].linear, sign * steps[axis].angular});
+        MoveTool(X);
+        tool_tris = tool_moved_;
+        const glm::dvec3 p_W = w.center_W + sd.s * u + sd.t * v;
+        const glm::dvec3 moved_W = X * (X_WT.Inverse() * p_W) - w.center_W;
+        moved_s = glm::dot(moved_W, u);
+        moved_t = glm::dot(moved_W, v);
+      }
+      const Seed at_seed =
+          Search(tool_tris, box, sd.s, sd.t, 0.0, 1, texel, floor_m, shift_s, shift_t);
+      const Seed at_moved =
+          Search(tool_tris, box, moved_s, moved_t, 0.0, 1, texel, floor_m, shift_s, shift_t);
+      displaced[static_cast<std::size_t>(k)] =
+          std::max({displaced[static_cast<std::size_t>(k)], at_seed.depth_m, at_moved.depth_m});
+    }
+  }
+  const auto central = [&](int axis, double step) {
+    const double plus = displaced[static_cast<std::size_t>(2 * axis)];
+    const double minus = displaced[static_cast<std::size_t>(2 * axis + 1)];
+    if (plus > -kInf && minus > -kInf) return (plus - minus) / (2.0 * step);
+    if (plus > -kInf) return (plus - deepest.depth_m) / step;
+    if (minus > -kInf) return (deepest.depth_m - minus) / step;
+    return 0.0;
+  };
+
+  // The rendered displaced samples, each from its own deepest cell at its own pose.
+  if (options_.refine_rendered_samples || !options_.texel_scale_gradient) {
+    const auto poses = GradientSamplePoses(X_WT, w);
+    for (int k = 1; k < kGradientSamples; ++k) {
+      DepthSample& sample = samples[static_cast<std::size_t>(k)];
+      if (sample.cell < 0) continue;
+      Seed found;
+      if (k <= 4) {
+        // ±h_x along u (1, 2) and v (3, 4): the base pose shifted.
+        const double sign = (k % 2 == 1) ? 1.0 : -1.0;
+        found = refine_cell(sample.cell, tool_all_, k <= 2 ? sign * big.h_x : 0.0,
+                            k <= 2 ? 0.0 : sign * big.h_x);
+      } else {
+        ProjectAll(tool, poses[static_cast<std::size_t>(k)], PatchSide::kTool, tool_list_,
+                   tool_pose_all_);
+        found = refine_cell(sample.cell, tool_pose_all_, 0.0, 0.0);
+      }
+      if (found.depth_m > -kInf) sample.depth_m = found.depth_m;
+    }
+  }
+
+  counters_.contacts += 1;
+  counters_.seeds += static_cast<std::uint64_t>(num_seeds);
+  counters_.evaluations += evaluations_;
+  const double raised = deepest.depth_m - samples[0].depth_m;
+  if (raised > 0.0) counters_.raised_um += static_cast<std::uint64_t>(std::llround(raised * 1e6));
+  samples[0] = {deepest.depth_m, CellAt(w, deepest.s, deepest.t)};
+  lin.depth_m = deepest.depth_m;
+  lin.point_W = point_W;
+  if (options_.texel_scale_gradient) {
+    lin.gradient.d_translation_W = central(0, h_x) * u + central(1, h_x) * v - n;
+    lin.gradient.d_rotation_W =
+        central(2, h_theta) * u + central(3, h_theta) * v + central(4, h_theta) * n;
+  } else {
+    LinearizationFaults faults;
+    lin.gradient = AssembleLinearization(w, samples, lin.stiffness_n_per_m, faults).gradient;
+  }
+  return true;
+}
+
+}  // namespace ht
