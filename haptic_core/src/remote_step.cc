@@ -61,7 +61,9 @@ int DefaultTextureThreads() noexcept {
 HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
                                              const PipelineOptions& options,
                                              std::unique_ptr<PenetrationDepthBackend> backend)
-    : scene_(scene), options_(options), backend_(std::move(backend)),
+    : scene_(scene),
+      options_(options),
+      backend_(std::move(backend)),
       refiner_(options.depth_refinement) {
   options_.Validate();
   reachable_pairs_.resize(static_cast<std::size_t>(clusterer_.max_pairs()));

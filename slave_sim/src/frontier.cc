@@ -73,6 +73,10 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
   if (quick) {
     texture(256);
     coarse(2.0, "coarse2x");
+    FrontierSetting grid_depth = base;  // issue 32's before: the grid's δ and secants
+    grid_depth.name = "no_depth_refinement";
+    grid_depth.refine_depth = false;
+    s.push_back(grid_depth);
   } else {
     for (int n : {256, 512, 2048}) texture(n);
     coarse(0.5, "coarse0.5x");

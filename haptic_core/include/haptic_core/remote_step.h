@@ -235,8 +235,8 @@ class HapticTexturePipeline {
   /// GradientSamplePoses() order), as stage 5b left them (refined where PipelineOptions::
   /// refine_depth is on). Valid until the next Step().
   std::span<const DepthSample> last_depth_samples() const noexcept {
-    return {last_samples_.data(),
-            static_cast<std::size_t>(last_num_queries_) * static_cast<std::size_t>(kGradientSamples)};
+    return {last_samples_.data(), static_cast<std::size_t>(last_num_queries_) *
+                                      static_cast<std::size_t>(kGradientSamples)};
   }
   /// What stage 5b did since construction.
   const DepthRefinementCounters& depth_refinement_counters() const noexcept {

@@ -1,0 +1,235 @@
+// Stage 5b (issue 32): the penetration depth refined to the finest texture level.
+//  - PatchHeightAt at the window's cell centres, at the render's mip level, is the reference
+//    render's value (two routes to one number);
+//  - closed forms: a sinusoid of known amplitude under a flat tool (δ = A − z0, no in-plane
+//    slope) and under a curved tool (a paraboloid of radius R: δ(x0) = max_x A cos(kx) −
+//    (x − x0)²/2R − z0 and dδ/dx0 = (x* − x0)/R), at several N: the refined δ is the closed
+//    form's within the texture's own interpolation error at every N, where the grid's reads low
+//    by the mip filter's averaging, and its gradient is the closed form's secant (cell secants,
+//    the default) or its derivative (texel-scale steps);
+//  - bad input: a contact without overlap is left unchanged.
+#include "haptic_core/depth_refinement.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <numbers>
+#include <vector>
+
+#include "haptic_core/contact_linearization.h"
+#include "haptic_core/demo/procedural_models.h"
+#include "haptic_core/penetration_depth.h"
+#include "haptic_core/penetration_depth_backend.h"
+#include "test_scenes.h"
+
+namespace ht {
+namespace {
+
+using testing::EnvironmentBox;
+using testing::EnvironmentPose;
+using testing::ToolBox;
+using testing::ToolPose;
+
+constexpr double kA = 40e-6;        // sinusoid amplitude (m)
+constexpr double kLambda = 2e-3;    // its period (m)
+constexpr double kR = 4e-3;         // the curved tool's radius (m)
+constexpr double kToolHalf = 3e-3;  // the curved tool's half side (m)
+const double kK = 2.0 * std::numbers::pi / kLambda;
+
+double Sinusoid(double x, double) { return kA * std::cos(kK * x); }
+
+// The curved tool: a box of 6 mm side whose bottom bulges down as a paraboloid of radius kR
+// through its centre (heights along its outward normal −z: h = −r²/2R).
+HapticModel CurvedTool() {
+  return MakeTexturedBox(
+      {kToolHalf, kToolHalf, 0.01},
+      [](double x, double y) { return -(x * x + y * y) / (2.0 * kR); }, 1024, 0.05,
+      "paraboloid_tool");
+}
+
+RigidTransform CurvedToolPose(double x0, double z0) {
+  RigidTransform X;
+  X.translation = {x0, 0.0, z0 + 0.01};
+  return X;
+}
+
+// max_x A cos(kx) − (x − x0)²/2R by a dense scan and golden-section refinement; x* in `at`.
+double ClosedFormDepth(double x0, double z0, double& at) {
+  const auto f = [&](double x) { return kA * std::cos(kK * x) - (x - x0) * (x - x0) / (2.0 * kR); };
+  double best = -1.0, best_x = 0.0;
+  for (int i = -20000; i <= 20000; ++i) {
+    const double x = x0 + i * 1e-7;
+    if (f(x) > best) {
+      best = f(x);
+      best_x = x;
+    }
+  }
+  double a = best_x - 1e-7, b = best_x + 1e-7;
+  const double g = 0.5 * (std::sqrt(5.0) - 1.0);
+  for (int i = 0; i < 80; ++i) {
+    const double c = b - g * (b - a), d = a + g * (b - a);
+    if (f(c) > f(d)) {
+      b = d;
+    } else {
+      a = c;
+    }
+  }
+  at = 0.5 * (a + b);
+  return f(at) - z0;
+}
+
+struct Refined {
+  ContactLinearization grid, refined;
+  std::vector<DepthSample> samples;
+};
+
+Refined LinearizeAndRefine(const HapticModel& tool, const RigidTransform& X_WT,
+                           const HapticModel& env, int n, DepthRefinementOptions options = {}) {
+  ContactQuery q;
+  q.environment = &env;
+  q.X_WO = EnvironmentPose();
+  q.window = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.02, n);
+  q.stiffness_n_per_m = 1000.0;
+  CpuPenetrationDepthBackend backend(128);
+  Refined r;
+  r.samples.resize(kGradientSamples);
+  std::vector<ContactLinearization> out(1);
+  EXPECT_TRUE(backend.LinearizeBatch(tool, X_WT, {&q, 1}, out, r.samples));
+  r.grid = out[0];
+  r.refined = out[0];
+  DepthRefiner refiner(options);
+  EXPECT_TRUE(refiner.Refine(tool, X_WT, q, r.samples, r.refined));
+  EXPECT_GT(refiner.counters().evaluations, 0u);
+  return r;
+}
+
+TEST(DepthRefinement, PatchHeightAtCellCentresIsTheReferenceRender) {
+  const HapticModel tool = CurvedTool();
+  const HapticModel env = EnvironmentBox(Sinusoid, 1024);
+  const RigidTransform X_WT = CurvedToolPose(0.3e-3, 20e-6);
+  for (const int n : {16, 50}) {
+    const ContactWindow w = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.02, n);
+    for (const bool environment : {true, false}) {
+      const HapticModel& m = environment ? env : tool;
+      const RigidTransform X = environment ? EnvironmentPose() : X_WT;
+      const PatchSide side = environment ? PatchSide::kEnvironment : PatchSide::kTool;
+      std::vector<int> all(m.triangles.size());
+      for (std::size_t f = 0; f < all.size(); ++f) all[f] = static_cast<int>(f);
+      std::vector<float> heights(static_cast<std::size_t>(n) * n,
+                                 environment ? -std::numeric_limits<float>::infinity()
+                                             : std::numeric_limits<float>::infinity());
+      RenderPatchHeights(m, X, all, w, side, heights);
+      int covered = 0;
+      for (int c = 0; c < n * n; ++c) {
+        const glm::dvec3 p = w.CellCenter(c) - w.center_W;
+        const double h =
+            PatchHeightAt(m, X, all, w, side, glm::dot(p, w.axis_u_W), glm::dot(p, w.axis_v_W), -1);
+        const float r = heights[static_cast<std::size_t>(c)];
+        ASSERT_EQ(std::isfinite(h), std::isfinite(r)) << "cell " << c << " n " << n;
+        if (!std::isfinite(r)) continue;
+        ++covered;
+        EXPECT_NEAR(h, r, 1e-6 * std::abs(r) + 1e-12) << "cell " << c << " n " << n;
+      }
+      EXPECT_GT(covered, environment ? n * n - 1 : 4) << n;
+    }
+  }
+}
+
+TEST(DepthRefinement, SinusoidUnderAFlatToolGivesItsAmplitudeAtEveryGrid) {
+  const HapticModel tool = ToolBox([](double, double) { return 0.0; }, 512);
+  const HapticModel env = EnvironmentBox(Sinusoid, 1024);
+  const double z0 = kA - 25e-6;  // δ = A − z0 = 25 µm, on every crest
+  double grid_error_at_16 = 0.0;
+  for (const int n : {16, 25, 50, 100}) {
+    const Refined r = LinearizeAndRefine(tool, ToolPose(0.0, 0.0, z0), env, n);
+    // Bilinear interpolation of the 1024² texture (39 µm texels on 4 cm) reads a crest
+    // A(k·texel)²/8 ≈ 0.08 µm low at most; the search stops within a quarter texel.
+    EXPECT_NEAR(r.refined.depth_m, 25e-6, 0.3e-6) << "N " << n;
+    EXPECT_GE(r.refined.depth_m, r.grid.depth_m - 1e-9) << "N " << n;
+    // Crests run along y: moving a flat tool in its plane changes nothing.
+    EXPECT_NEAR(glm::dot(r.refined.gradient.d_translation_W, glm::dvec3(1, 0, 0)), 0.0, 1e-3);
+    EXPECT_NEAR(glm::dot(r.refined.gradient.d_translation_W, glm::dvec3(0, 1, 0)), 0.0, 1e-3);
+    EXPECT_DOUBLE_EQ(r.refined.gradient.d_translation_W.z, -1.0);
+    if (n == 16) grid_error_at_16 = 25e-6 - r.grid.depth_m;
+  }
+  // What the refinement removes: at N = 16 (1.25 mm cells, mip level 5 of a 2 mm period) the
+  // grid's filtered samples lose most of the crest.
+  EXPECT_GT(grid_error_at_16, 10e-6);
+}
+
+TEST(DepthRefinement, SinusoidUnderACurvedToolGivesTheClosedFormDepthAndSlope) {
+  const HapticModel tool = CurvedTool();
+  const HapticModel env = EnvironmentBox(Sinusoid, 1024);
+  const double z0 = 10e-6;
+  for (const double x0 : {0.15e-3, 0.3e-3, -0.4e-3}) {
+    double x_star = 0.0;
+    const double depth = ClosedFormDepth(x0, z0, x_star);
+    const double slope = (x_star - x0) / kR;  // dδ/dx0 (envelope theorem)
+    ASSERT_GT(depth, 5e-6);
+    for (const int n : {16, 25, 50}) {
+      const double h = 0.02 / n;  // the grid's translation step
+      double unused = 0.0;
+      const double secant =
+          (ClosedFormDepth(x0 + h, z0, unused) - ClosedFormDepth(x0 - h, z0, unused)) / (2.0 * h);
+      const Refined r = LinearizeAndRefine(tool, CurvedToolPose(x0, z0), env, n);
+      EXPECT_NEAR(r.refined.depth_m, depth, 0.3e-6) << "x0 " << x0 << " N " << n;
+      EXPECT_NEAR(r.refined.gradient.d_translation_W.x, secant, 0.02 * std::abs(secant) + 2e-3)
+          << "x0 " << x0 << " N " << n;
+      // The refined point is where the closed form's maximum is.
+      EXPECT_NEAR(r.refined.point_W.x, x_star, 20e-6) << "x0 " << x0 << " N " << n;
+      DepthRefinementOptions texel;
+      texel.texel_scale_gradient = true;
+      const Refined t = LinearizeAndRefine(tool, CurvedToolPose(x0, z0), env, n, texel);
+      EXPECT_NEAR(t.refined.depth_m, depth, 0.3e-6) << "x0 " << x0 << " N " << n;
+      EXPECT_NEAR(t.refined.gradient.d_translation_W.x, slope, 0.03 * std::abs(slope) + 2e-3)
+          << "x0 " << x0 << " N " << n;
+      std::printf(
+          "x0 %+.2f mm N %3d: δ %.2f µm; error refined %+.3f µm, grid %+.2f µm; dδ/dx %+.4f: "
+          "cell secant %+.4f (closed form's %+.4f, grid's %+.4f), texel steps %+.4f\n",
+          x0 * 1e3, n, depth * 1e6, (r.refined.depth_m - depth) * 1e6,
+          (r.grid.depth_m - depth) * 1e6, slope, r.refined.gradient.d_translation_W.x, secant,
+          r.grid.gradient.d_translation_W.x, t.refined.gradient.d_translation_W.x);
+    }
+  }
+}
+
+TEST(DepthRefinement, AContactWithoutOverlapIsLeftUnchanged) {
+  const HapticModel tool = CurvedTool();
+  const HapticModel env = EnvironmentBox(Sinusoid, 256);
+  ContactQuery q;
+  q.environment = &env;
+  q.X_WO = EnvironmentPose();
+  q.window = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.02, 25);
+  std::vector<DepthSample> samples(kGradientSamples,
+                                   {-std::numeric_limits<double>::infinity(), -1});
+  ContactLinearization lin;
+  lin.depth_m = -std::numeric_limits<double>::infinity();
+  DepthRefiner refiner;
+  EXPECT_FALSE(refiner.Refine(tool, CurvedToolPose(0.0, 0.0), q, samples, lin));
+  EXPECT_EQ(lin.depth_m, -std::numeric_limits<double>::infinity());
+  EXPECT_EQ(samples[0].cell, -1);
+  // Too few samples, or no environment: refused.
+  std::vector<DepthSample> few(3, {0.0, 0});
+  EXPECT_FALSE(refiner.Refine(tool, CurvedToolPose(0.0, 0.0), q, few, lin));
+  q.environment = nullptr;
+  std::vector<DepthSample> some(kGradientSamples, {0.0, 0});
+  EXPECT_FALSE(refiner.Refine(tool, CurvedToolPose(0.0, 0.0), q, some, lin));
+  EXPECT_EQ(refiner.counters().contacts, 0u);
+}
+
+TEST(DepthRefinement, OptionsOutOfRangeAreRefused) {
+  DepthRefinementOptions o;
+  o.gradient_step_texels = 0.0;
+  EXPECT_THROW(DepthRefiner{o}, std::invalid_argument);
+  o = {};
+  o.max_subsamples = 0;
+  EXPECT_THROW(DepthRefiner{o}, std::invalid_argument);
+  o = {};
+  o.search_floor_texels = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(DepthRefiner{o}, std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace ht
