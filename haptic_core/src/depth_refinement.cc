@@ -93,8 +93,12 @@ double ValueAt(const Projected& P, const HeightField& texture, double s, double 
                         2.0 * (b0 * b1 * P.cos01 + b0 * b2 * P.cos02 + b1 * b2 * P.cos12);
     const double ndotn =
         len2 > 1e-12 ? (b0 * P.nn[0] + b1 * P.nn[1] + b2 * P.nn[2]) / std::sqrt(len2) : 0.0;
-    const int lv = level >= 0 ? level : texture.LevelForFootprint(P.texel_m, cell_m);
-    value += static_cast<double>(texture.Sample(lv, u, v)) * ndotn;
+    if (level == 0) {
+      value += static_cast<double>(texture.SampleAt(0, texture.level(0), u, v)) * ndotn;
+    } else {
+      const int lv = level > 0 ? level : texture.LevelForFootprint(P.texel_m, cell_m);
+      value += static_cast<double>(texture.Sample(lv, u, v)) * ndotn;
+    }
   }
   return value;
 }
@@ -305,7 +309,7 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
   // One rendered sample's deepest cell refined at a pose: the tool at X (shifted in-plane by
   // (shift_s, shift_t) where X is the base pose).
   const auto refine_cell = [&](int cell_index, std::span<const Projected> tool_at, double shift_s,
-                               double shift_t) -> Seed {
+                               double shift_t, bool subgrid) -> Seed {
     double s = 0.0, t = 0.0;
     CellCoordinates(w, cell_index, s, t);
     const double half = 0.75 * cell;
@@ -316,6 +320,10 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
     const int g = std::clamp(static_cast<int>(std::ceil(2.0 * half / (kSubsampleTexels * texel))),
                              1, options_.max_subsamples);
     const double spacing = 2.0 * half / g;
+    if (!subgrid) {
+      return Search(tool_local_, box, s, t, half, 1, 0.5 * half,
+                    options_.search_floor_texels * texel, shift_s, shift_t);
+    }
     return Search(tool_local_, box, s, t, half, g, 0.5 * spacing,
                   options_.search_floor_texels * texel, shift_s, shift_t);
   };
@@ -326,8 +334,11 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
   for (int k = 0; k < kBaseSeedSamples; ++k) {
     const int c = samples[static_cast<std::size_t>(k)].cell;
     if (c < 0 || c >= w.resolution * w.resolution) continue;
-    if (std::find(seed_cells.begin(), seed_cells.begin() + num_seeds, c) !=
-        seed_cells.begin() + num_seeds) {
+    // A cell next to a seed is mostly within that seed's square (1.5 cells) and its climb.
+    const int n = w.resolution;
+    if (std::any_of(seed_cells.begin(), seed_cells.begin() + num_seeds, [&](int o) {
+          return std::abs(o % n - c % n) <= 1 && std::abs(o / n - c / n) <= 1;
+        })) {
       continue;
     }
     seed_cells[static_cast<std::size_t>(num_seeds++)] = c;
@@ -335,7 +346,7 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
   std::array<Seed, kGradientSamples> base{};
   int best = -1;
   for (int k = 0; k < num_seeds; ++k) {
-    base[static_cast<std::size_t>(k)] = refine_cell(seed_cells[k], tool_all_, 0.0, 0.0);
+    base[static_cast<std::size_t>(k)] = refine_cell(seed_cells[k], tool_all_, 0.0, 0.0, true);
     if (best < 0 || base[k].depth_m > base[static_cast<std::size_t>(best)].depth_m) best = k;
   }
   if (best < 0 || !(base[static_cast<std::size_t>(best)].depth_m > -kInf)) {
@@ -434,11 +445,11 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
         // ±h_x along u (1, 2) and v (3, 4): the base pose shifted.
         const double sign = (k % 2 == 1) ? 1.0 : -1.0;
         found = refine_cell(sample.cell, tool_all_, k <= 2 ? sign * big.h_x : 0.0,
-                            k <= 2 ? 0.0 : sign * big.h_x);
+                            k <= 2 ? 0.0 : sign * big.h_x, true);
       } else {
         ProjectAll(tool, poses[static_cast<std::size_t>(k)], PatchSide::kTool, tool_list_,
                    tool_pose_all_);
-        found = refine_cell(sample.cell, tool_pose_all_, 0.0, 0.0);
+        found = refine_cell(sample.cell, tool_pose_all_, 0.0, 0.0, options_.subgrid_rotations);
       }
       if (found.depth_m > -kInf) sample.depth_m = found.depth_m;
     }

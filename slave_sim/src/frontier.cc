@@ -178,6 +178,10 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     texel_gradient.name = "texel_scale_gradient";
     texel_gradient.texel_scale_gradient = true;
     s.push_back(texel_gradient);
+    FrontierSetting subgrid = base;
+    subgrid.name = "rotations_from_subgrid";
+    subgrid.subgrid_rotations = true;
+    s.push_back(subgrid);
     for (const double texels : {1.0, 4.0, 8.0}) {
       FrontierSetting step = texel_gradient;
       step.name = "texel_gradient_" + std::to_string(static_cast<int>(texels)) + "_texels";
@@ -463,6 +467,7 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.kink_planes_own_slope = st.kink_planes_own_slope;
   options.refine_depth = st.refine_depth;
   options.depth_refinement.texel_scale_gradient = st.texel_scale_gradient;
+  options.depth_refinement.subgrid_rotations = st.subgrid_rotations;
   if (st.gradient_step_texels > 0.0)
     options.depth_refinement.gradient_step_texels = st.gradient_step_texels;
   // The texture stage's threads are the coarse query's too, as in the product.

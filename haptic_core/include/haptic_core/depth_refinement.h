@@ -71,6 +71,11 @@ struct DepthRefinementOptions {
   /// The gradient from the refined maximum at texel-scale steps (above); off: the grid's
   /// one-cell secants (h_x = W/N, h_θ = h_x/(W/2)) of the refined rendered samples.
   bool texel_scale_gradient = false;
+  /// The rendered rotation samples (±h_θ about u, v and n) searched from a sub-grid of their
+  /// deepest cell's square as the base and the translations are; off (the default): a pattern
+  /// search from the cell's centre alone, fewer evaluations at the same error on the frontier
+  /// (fig75 and fig77, 60 poses: every figure equal to 3 digits; "rotations_from_subgrid").
+  bool subgrid_rotations = false;
 
   /// Throws std::invalid_argument naming a value out of range.
   void Validate() const;

@@ -77,6 +77,8 @@ struct FrontierSetting {
   /// PipelineOptions::depth_refinement.texel_scale_gradient ("texel_scale_gradient" and
   /// "texel_gradient_K_texels" turn it on).
   bool texel_scale_gradient = false;
+  /// PipelineOptions::depth_refinement.subgrid_rotations ("rotations_from_subgrid" turns it on).
+  bool subgrid_rotations = false;
 };
 
 /// The sweep: the default setting (grid 50, 1024² textures, the seed's coarse counts, CPU) first,
