@@ -145,6 +145,16 @@ int main(int argc, char** argv) {
                 poses_WFt.size(), ht::Percentile(step_us, 0.5), ht::Percentile(step_us, 0.9),
                 ht::Percentile(coarse_us, 0.5), ht::Percentile(texture_us, 0.5),
                 ht::Percentile(per_contact_us, 0.5), pairs_sum / n, contacts_sum / n, contacts_max);
+    const ht::DepthRefinementCounters& refined = pipeline.depth_refinement_counters();
+    if (refined.contacts > 0) {
+      std::fprintf(stderr,
+                   "remote_step_benchmark: %s: stage 5b refined %llu contacts, %.1f seeds and "
+                   "%.0f evaluations of b - a per contact, δ0 raised %.1f µm on average\n",
+                   name.c_str(), static_cast<unsigned long long>(refined.contacts),
+                   static_cast<double>(refined.seeds) / static_cast<double>(refined.contacts),
+                   static_cast<double>(refined.evaluations) / static_cast<double>(refined.contacts),
+                   static_cast<double>(refined.raised_um) / static_cast<double>(refined.contacts));
+    }
     std::fflush(stdout);
     if (csv) {
       csv << name << ',' << poses_WFt.size() << ',' << step_us.size() << ','

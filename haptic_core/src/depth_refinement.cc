@@ -254,15 +254,24 @@ DepthRefiner::Seed DepthRefiner::Search(std::span<const Projected> tool, const B
     }
   }
   if (!(best.depth_m > -kInf)) return best;
-  // Pattern search: the best of the four neighbours along u and v at `step`, halved when none
-  // is better.
+  // Pattern search over the four neighbours along u and v at `step`, halved when none is
+  // better.
   static constexpr std::array<std::array<int, 2>, 4> kDirections{
       {{1, 0}, {-1, 0}, {0, 1}, {0, -1}}};
-  int moves = 0;
+  // First improvement: the direction that last improved is tried first, and the search moves
+  // as soon as a neighbour is better.
+  int moves = 0, last = 0;
   while (step >= floor_m && moves < 64) {
     const Seed from = best;
-    for (const auto& d : kDirections) consider(from.s + d[0] * step, from.t + d[1] * step);
-    if (best.depth_m > from.depth_m) {
+    bool moved = false;
+    for (int k = 0; k < 4 && !moved; ++k) {
+      const int d = (last + k) % 4;
+      if (consider(from.s + kDirections[d][0] * step, from.t + kDirections[d][1] * step)) {
+        moved = true;
+        last = d;
+      }
+    }
+    if (moved) {
       ++moves;
     } else {
       step *= 0.5;
@@ -445,7 +454,7 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
         // ±h_x along u (1, 2) and v (3, 4): the base pose shifted.
         const double sign = (k % 2 == 1) ? 1.0 : -1.0;
         found = refine_cell(sample.cell, tool_all_, k <= 2 ? sign * big.h_x : 0.0,
-                            k <= 2 ? 0.0 : sign * big.h_x, true);
+                            k <= 2 ? 0.0 : sign * big.h_x, options_.subgrid_translations);
       } else {
         ProjectAll(tool, poses[static_cast<std::size_t>(k)], PatchSide::kTool, tool_list_,
                    tool_pose_all_);

@@ -182,6 +182,10 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     subgrid.name = "rotations_from_subgrid";
     subgrid.subgrid_rotations = true;
     s.push_back(subgrid);
+    FrontierSetting translations_subgrid = base;
+    translations_subgrid.name = "translations_from_subgrid";
+    translations_subgrid.subgrid_translations = true;
+    s.push_back(translations_subgrid);
     for (const double texels : {1.0, 4.0, 8.0}) {
       FrontierSetting step = texel_gradient;
       step.name = "texel_gradient_" + std::to_string(static_cast<int>(texels)) + "_texels";
@@ -468,6 +472,7 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.refine_depth = st.refine_depth;
   options.depth_refinement.texel_scale_gradient = st.texel_scale_gradient;
   options.depth_refinement.subgrid_rotations = st.subgrid_rotations;
+  options.depth_refinement.subgrid_translations = st.subgrid_translations;
   if (st.gradient_step_texels > 0.0)
     options.depth_refinement.gradient_step_texels = st.gradient_step_texels;
   // The texture stage's threads are the coarse query's too, as in the product.

@@ -76,6 +76,10 @@ struct DepthRefinementOptions {
   /// search from the cell's centre alone, fewer evaluations at the same error on the frontier
   /// (fig75 and fig77, 60 poses: every figure equal to 3 digits; "rotations_from_subgrid").
   bool subgrid_rotations = false;
+  /// The same for the rendered translation samples (±h_x along u and v), off by default for the
+  /// same reason (fig75 and fig77, 60 poses: the same errors, 7 % less texture time on fig75;
+  /// "translations_from_subgrid").
+  bool subgrid_translations = false;
 
   /// Throws std::invalid_argument naming a value out of range.
   void Validate() const;

@@ -79,6 +79,9 @@ struct FrontierSetting {
   bool texel_scale_gradient = false;
   /// PipelineOptions::depth_refinement.subgrid_rotations ("rotations_from_subgrid" turns it on).
   bool subgrid_rotations = false;
+  /// PipelineOptions::depth_refinement.subgrid_translations ("translations_from_subgrid" turns
+  /// it on).
+  bool subgrid_translations = false;
 };
 
 /// The sweep: the default setting (grid 50, 1024² textures, the seed's coarse counts, CPU) first,
