@@ -16,6 +16,7 @@
 #include <cstdio>
 #include <limits>
 #include <numbers>
+#include <random>
 #include <vector>
 
 #include "haptic_core/contact_linearization.h"
@@ -229,6 +230,42 @@ TEST(DepthRefinement, OptionsOutOfRangeAreRefused) {
   o = {};
   o.search_floor_texels = std::numeric_limits<double>::quiet_NaN();
   EXPECT_THROW(DepthRefiner{o}, std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace ht
+
+namespace ht {
+namespace {
+
+// HeightField::LossAtLevel (issue 32, `slave_sim inspect`'s texture_detail): a smooth sinusoid
+// of 64 texels' period loses little at half the size and more at each further halving, where
+// texel-scale noise loses most of its amplitude at once; level 0 loses nothing.
+TEST(TextureDetail, LossAtLevelGrowsWithTheDetailTheLevelCannotHold) {
+  const int n = 256;
+  std::vector<float> smooth(static_cast<std::size_t>(n) * n), noise(smooth.size());
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> U(-1e-5f, 1e-5f);
+  for (int y = 0; y < n; ++y) {
+    for (int x = 0; x < n; ++x) {
+      smooth[static_cast<std::size_t>(y) * n + x] =
+          static_cast<float>(1e-4 * std::sin(2.0 * std::numbers::pi * (x + 0.5) / 64.0));
+      noise[static_cast<std::size_t>(y) * n + x] = U(rng);
+    }
+  }
+  const HeightField s(n, n, smooth, true, true), r(n, n, noise, true, true);
+  EXPECT_EQ(s.LossAtLevel(0).max_m, 0.0);
+  double previous = 0.0;
+  for (int level = 1; level <= 3; ++level) {
+    const HeightField::LevelLoss loss = s.LossAtLevel(level);
+    EXPECT_GT(loss.max_m, previous) << level;
+    EXPECT_LE(loss.rms_m, loss.max_m) << level;
+    previous = loss.max_m;
+  }
+  EXPECT_LT(s.LossAtLevel(1).rms_m, 0.02 * 1e-4);                  // 2 % of the amplitude at 128²
+  EXPECT_GT(r.LossAtLevel(1).rms_m, 0.3 * 1e-5 / std::sqrt(3.0));  // noise: most of its RMS
+  EXPECT_EQ(s.LossAtLevel(99).max_m, 0.0);                         // outside the chain
+  EXPECT_EQ(HeightField().LossAtLevel(1).rms_m, 0.0);
 }
 
 }  // namespace

@@ -126,4 +126,24 @@ int HeightField::LevelForFootprint(double texel_size_m, double cell_size_m) cons
   return std::clamp(level, 0, num_levels() - 1);
 }
 
+HeightField::LevelLoss HeightField::LossAtLevel(int level) const noexcept {
+  LevelLoss loss;
+  if (levels_.empty() || level <= 0 || level >= num_levels()) return loss;
+  const HeightFieldLevel& L0 = levels_[0];
+  double sum2 = 0.0;
+  for (int y = 0; y < L0.height; ++y) {
+    const float v = (static_cast<float>(y) + 0.5f) / static_cast<float>(L0.height);
+    for (int x = 0; x < L0.width; ++x) {
+      const float u = (static_cast<float>(x) + 0.5f) / static_cast<float>(L0.width);
+      const double e =
+          std::abs(static_cast<double>(L0.texels[static_cast<std::size_t>(y) * L0.width + x]) -
+                   static_cast<double>(Sample(level, u, v)));
+      loss.max_m = std::max(loss.max_m, e);
+      sum2 += e * e;
+    }
+  }
+  loss.rms_m = std::sqrt(sum2 / (static_cast<double>(L0.width) * L0.height));
+  return loss;
+}
+
 }  // namespace ht

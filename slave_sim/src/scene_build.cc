@@ -1,8 +1,10 @@
 #include "slave_sim/scene_build.h"
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <glm/glm.hpp>
@@ -404,6 +406,42 @@ nlohmann::json InspectJson(const BuiltScene& scene) {
       o["outward_reach_m"] = r.outward_reach_m;
       o["bake_misses"] = r.bake.misses;
       o["bake_clamped"] = r.bake.clamped;
+      // What the texture's size buys (issue 32): the heights a texture of half, a quarter and
+      // an eighth the side would lose (largest and RMS: the largest is dominated by the atlas'
+      // chart seams, which coarser levels blur), and the smallest size whose RMS loss is within
+      // the bake's own RMS error (or 1 µm): it models the surface as well as this one does.
+      const HeightField& tex = obj.model->texture;
+      if (!tex.empty()) {
+        json coarser = json::array();
+        const double budget = std::max(r.bake.rms_bake_error_m, 1e-6);
+        int needed = tex.level(0).width;
+        bool still = true;
+        for (int level = 1; level <= 3 && level < tex.num_levels(); ++level) {
+          const HeightField::LevelLoss loss = tex.LossAtLevel(level);
+          coarser.push_back({{"size", tex.level(level).width},
+                             {"max_loss_m", loss.max_m},
+                             {"rms_loss_m", loss.rms_m}});
+          if (still && loss.rms_m <= budget) {
+            needed = tex.level(level).width;
+          } else {
+            still = false;
+          }
+        }
+        char reason[256];
+        if (needed == tex.level(0).width) {
+          std::snprintf(reason, sizeof reason,
+                        "a %d texture loses more than %.3g um RMS (the bake's own RMS error, or "
+                        "1 um): the surface has detail at %d",
+                        tex.level(0).width / 2, budget * 1e6, tex.level(0).width);
+        } else {
+          std::snprintf(reason, sizeof reason,
+                        "%d reproduces the heights within %.3g um RMS (the bake's own RMS error, "
+                        "or 1 um): a %d texture holds no detail that %d does not",
+                        needed, budget * 1e6, tex.level(0).width, needed);
+        }
+        o["texture_detail"] = {
+            {"coarser", std::move(coarser)}, {"size_needed", needed}, {"reason", reason}};
+      }
       o["stiffness_n_per_m"] = obj.spec.stiffness_n_per_m;
       o["from_cache"] = r.from_cache;
       if (!r.cache_note.empty()) o["cache_note"] = r.cache_note;

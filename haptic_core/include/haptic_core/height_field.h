@@ -62,6 +62,17 @@ class HeightField {
   /// power of two, or the box is not finite. 0 for an empty field. Never allocates.
   float MaxAbsOver(int level, float u0, float v0, float u1, float v1) const noexcept;
 
+  /// What a texture of level `level`'s size would lose (issue 32: "model only what a scene
+  /// needs"): over every level-0 texel centre, |level-0 height − Sample(level, ·)| (m), its
+  /// largest value and its RMS. A surface with nothing finer than level k's texels loses little
+  /// at k. Level 0 gives zeros; an empty field or a level outside the chain gives zeros too.
+  /// O(texels); never allocates.
+  struct LevelLoss {
+    double max_m = 0.0;
+    double rms_m = 0.0;
+  };
+  LevelLoss LossAtLevel(int level) const noexcept;
+
   /// Mip level whose texel size best matches `cell_size_m` for a surface whose level-0 texel
   /// measures `texel_size_m` on the coarse surface: floor(log2(cell/texel)), clamped to the chain.
   int LevelForFootprint(double texel_size_m, double cell_size_m) const noexcept;
