@@ -1,31 +1,36 @@
 #pragma once
 // Stage 5b of the remote step (issue 32): the directional penetration depth refined from the
-// N×N grid's cell samples to the finest texture level, and its gradient taken at texel scale.
+// N×N grid's cell samples to the finest texture level.
 //
 // Why. The grid samples each cell centre at the mip level whose texel matches the cell
 // (HeightField::LevelForFootprint), a 2×2 box filter per level: a peak is first averaged (a mean
 // is never above the maximum) and then missed between two centres, so δ reads low by tens of
 // micrometres on the seed models (issue 32: 60–90 µm p50), which at the runs' shallow presses is
-// most of the force; and the gradient is a secant over one cell (0.4 mm at the seed's 2 cm / 50),
-// which reads a 1.2–3 mm ridge's slope about 11 % low.
+// most of the force.
 //
 // How (our construction [R]; the depth is Otaduy & Lin's max over the window of b − a [L]):
-//  - Seeds: the deepest cells of the kGradientSamples rendered samples (every backend reports
-//    them), each the cell whose filtered value is the largest, so that a level-0 peak the filter
-//    averaged lies within about a cell of it.
+//  - Seeds: the deepest cells of the base sample and of the four in-plane translation samples
+//    (every backend reports them; a cell next to a seed is skipped), each the cell whose filtered
+//    value is the largest, so that a level-0 peak the filter averaged lies within about a cell.
+//    They are not a conservative screen: a level-0 peak under a cell whose filtered value is not
+//    among them is not searched (tests/texture_stage_parity_test.cc: on random contacts of the
+//    six seed models the refined δ0 is never below the grid's and is closer to the truth).
 //  - At each seed, b − a is evaluated at level 0 (PatchHeightAt: the same coarse surface, normal
 //    factor and box rule as the render, the texture sampled bilinearly at its full resolution) on
-//    a sub-grid of about two texels over the seed's 1.5-cell square, then a pattern search
-//    (8 directions, step halved down to an eighth of a texel) climbs to the local maximum. The
-//    deepest of the seeds is δ0 and its point the contact point.
-//  - Gradient: central differences of the refined maximum at texel-scale steps
-//    h_x = gradient_step_texels × the finer level-0 texel of the two surfaces at the contact
-//    point (m), h_θ = h_x / (W/2) (rad) (the pipeline truth's steps are 0.1 mm, the seed's 1024²
-//    textures' texel on a 10 cm object), each displaced pose's maximum climbed from the base's
-//    refined seeds that lie within reach of the deepest (a small step cannot bring a far, lower
-//    peak above it). ∂δ/∂x_n = −1 exactly, as the grid's.
-//  - The ten rendered displaced samples (the kink planes read the ±h_θ ones) are refined the same
-//    way from their own deepest cells, so that δ0 and the kink planes' depths share one estimator.
+//    a sub-grid of about four texels' spacing over the seed's 1.5-cell square, then a pattern
+//    search (u and v, first improvement, step halved down to search_floor_texels) climbs to the
+//    local maximum. The deepest of the seeds is δ0 and its point the contact point.
+//  - The ten rendered displaced samples are refined the same way from their own deepest cells
+//    (from the cell's centre unless subgrid_translations / subgrid_rotations), so that δ0, the
+//    gradient and the kink planes' depths share one estimator.
+//  - Gradient (default): the grid's one-cell central differences of the refined samples
+//    (h_x = W/N, h_θ = h_x/(W/2)), a secant of the refined maximum. With texel_scale_gradient:
+//    central differences of the refined maximum at h_x = gradient_step_texels × the finer
+//    level-0 texel at the contact point (m), h_θ = h_x/(W/2) (rad), each displaced pose climbed
+//    from the base's seeds within reach of the deepest and from the point the displacement
+//    carries it to: the derivative itself (tests/depth_refinement_test.cc: a sinusoid under a
+//    paraboloid, where the cell secant at N = 16 even has the wrong sign), but on the frontier
+//    no closer to the pipeline truth on the seed scenes (docs/frontier/issue32). ∂δ/∂x_n = −1.
 // The reference (the grid alone) stays: PipelineOptions::refine_depth off.
 
 #include <cstdint>
