@@ -8,7 +8,7 @@
 //
 // Usage: remote_step_benchmark [--scenes fig75,fig76,fig77,hammer_torus] [--poses N]
 //                              [--repeats R] [--grid N] [--threads T] [--path fast|reference]
-//                              [--no-depth-refinement] [--texel-gradient] [--csv FILE]
+//                              [--refine-depth] [--texel-gradient] [--csv FILE]
 //                              [--cache-dir D]
 
 #include <CLI/CLI.hpp>
@@ -65,11 +65,12 @@ int main(int argc, char** argv) {
                  "cell's r x dδ/dx); warp and lever are approximations")
       ->check(CLI::IsMember({"rendered", "warp", "lever"}))
       ->capture_default_str();
-  bool no_refinement = false, texel_gradient = false;
-  app.add_flag("--no-depth-refinement", no_refinement,
-               "the grid's depth and secants (stage 5b off: issue 32's before)");
+  bool refinement = false, texel_gradient = false;
+  app.add_flag("--refine-depth", refinement,
+               "stage 5b on: each contact's depth refined to the texture's full resolution");
   app.add_flag("--texel-gradient", texel_gradient,
-               "stage 5b's gradient at texel-scale steps instead of the refined samples' one-cell\n"
+               "with --refine-depth: the gradient at texel-scale steps instead of the refined "
+               "samples' one-cell\n"
                "secants");
   app.add_option("--csv", csv_path, "write one row per scene here");
   app.add_option("--cache-dir", cache_dir, "model cache folder")->capture_default_str();
@@ -108,7 +109,7 @@ int main(int argc, char** argv) {
     options.local_reach = local_reach;
     options.max_contacts = max_contacts;
     options.rotation_gradient = ht::ParseRotationGradient(rotation);
-    options.refine_depth = !no_refinement;
+    options.refine_depth = refinement;
     options.depth_refinement.texel_scale_gradient = texel_gradient;
     ht::HapticTexturePipeline pipeline(
         scene.haptic, options,

@@ -400,10 +400,11 @@ TEST_F(GpuTest, Fig75PathGivesTheSameWrenchesWithEitherBackend) {
   // within what the depth tolerance allows, k·(tol·|J| + δ·|ΔJ|max).
   const HapticScene scene = MakeBlockOnGearScene();
   PipelineOptions options;
-  // The backends' parity is on their own output, the grid's (issue 32: stage 5b refines from the
-  // deepest cells a backend reports, and where cells tie within the GPU's depth quantum, a face
-  // on the gear's flat crests, the two backends report different cells of the plateau, whose
-  // level-0 maxima differ by more than the quantum bounds: 8.8 mN·m of torque on this path).
+  // The backends' parity is on their own output, the grid's, even if stage 5b were on by
+  // default (issue 32: it refines from the deepest cells a backend reports, and where cells tie
+  // within the GPU's depth quantum, a face on the gear's flat crests, the two backends report
+  // different cells of the plateau, whose level-0 maxima differ by more than the quantum
+  // bounds: 8.8 mN·m of torque on this path).
   options.refine_depth = false;
   HapticTexturePipeline cpu(scene, options);
   HapticTexturePipeline gpu(scene, options, MakeGpu(16));

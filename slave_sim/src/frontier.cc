@@ -73,10 +73,14 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
   if (quick) {
     texture(256);
     coarse(2.0, "coarse2x");
-    FrontierSetting grid_depth = base;  // issue 32's before: the grid's δ and secants
-    grid_depth.name = "no_depth_refinement";
-    grid_depth.refine_depth = false;
-    s.push_back(grid_depth);
+    FrontierSetting refined = base;  // issue 32: stage 5b, at N = 50 and 16
+    refined.name = "refined_depth";
+    refined.refine_depth = true;
+    s.push_back(refined);
+    FrontierSetting refined16 = refined;
+    refined16.name = "grid16_refined";
+    refined16.grid = 16;
+    s.push_back(refined16);
   } else {
     for (int n : {256, 512, 2048}) texture(n);
     coarse(0.5, "coarse0.5x");
@@ -167,36 +171,35 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     keep_secant.name = "kink_planes_keep_secant";
     keep_secant.kink_planes_own_slope = false;
     s.push_back(keep_secant);
-    // Issue 32: the grid's δ and secants (the reference), and the refined gradient's step.
-    FrontierSetting grid_depth = base;
-    grid_depth.name = "no_depth_refinement";
-    grid_depth.refine_depth = false;
-    s.push_back(grid_depth);
+    // Issue 32: stage 5b, the refined depth, and its variants.
+    FrontierSetting refined = base;
+    refined.name = "refined_depth";
+    refined.refine_depth = true;
+    s.push_back(refined);
     // The refined maximum's gradient at texel-scale steps instead of the refined samples'
     // one-cell secants: 2 texels (the option's default), and 1, 4 and 8.
-    FrontierSetting texel_gradient = base;
-    texel_gradient.name = "texel_scale_gradient";
+    FrontierSetting texel_gradient = refined;
+    texel_gradient.name = "refined_texel_gradient";
     texel_gradient.texel_scale_gradient = true;
     s.push_back(texel_gradient);
-    FrontierSetting subgrid = base;
-    subgrid.name = "rotations_from_subgrid";
-    subgrid.subgrid_rotations = true;
-    s.push_back(subgrid);
-    FrontierSetting translations_subgrid = base;
-    translations_subgrid.name = "translations_from_subgrid";
-    translations_subgrid.subgrid_translations = true;
-    s.push_back(translations_subgrid);
     for (const double texels : {1.0, 4.0, 8.0}) {
       FrontierSetting step = texel_gradient;
-      step.name = "texel_gradient_" + std::to_string(static_cast<int>(texels)) + "_texels";
+      step.name = "refined_texel_gradient_" + std::to_string(static_cast<int>(texels)) + "_texels";
       step.gradient_step_texels = texels;
       s.push_back(step);
     }
+    FrontierSetting subgrid = refined;
+    subgrid.name = "refined_rotations_from_subgrid";
+    subgrid.subgrid_rotations = true;
+    s.push_back(subgrid);
+    FrontierSetting translations_subgrid = refined;
+    translations_subgrid.name = "refined_translations_from_subgrid";
+    translations_subgrid.subgrid_translations = true;
+    s.push_back(translations_subgrid);
     for (const int grid : {16, 25}) {
-      FrontierSetting coarse_grid = base;
-      coarse_grid.name = "grid" + std::to_string(grid) + "_no_depth_refinement";
+      FrontierSetting coarse_grid = refined;
+      coarse_grid.name = "grid" + std::to_string(grid) + "_refined";
       coarse_grid.grid = grid;
-      coarse_grid.refine_depth = false;
       s.push_back(coarse_grid);
     }
     FrontierSetting at_witness = base;

@@ -108,12 +108,12 @@ int main(int argc, char** argv) {
                "(a face resting on ridges, its two edges bearing in turn) also carries the V's\n"
                "arms, so that the operator's loop finds where the torque flips between two models\n"
                "(docs/hard-cases.md)");
-  bool no_depth_refinement = false;
-  app.add_flag("--no-depth-refinement", no_depth_refinement,
-               "keep the grid's depth (each cell sampled at the mip level of its size) and its\n"
-               "one-cell secants: by default each contact's depth is refined to the texture's\n"
-               "full resolution around the grid's deepest cells and its gradient taken at texel\n"
-               "scale (docs/DESIGN.md, stage 5b)");
+  bool refine_depth = false;
+  app.add_flag("--refine-depth", refine_depth,
+               "refine each contact's depth to the texture's full resolution around the grid's\n"
+               "deepest cells (stage 5b, docs/DESIGN.md §4; the grid reads it low by the mip\n"
+               "filter). Experimental: on the block on the gear it makes the resting block\n"
+               "bounce (docs/frontier/issue32)");
   app.add_option("--pd-backend", pd_backend,
                  "where the texture penetration depth runs: cpu (software rasterizer), gpu\n"
                  "(headless EGL, OpenGL ES 3.1; Mesa llvmpipe when there is no GPU), or auto (a\n"
@@ -294,7 +294,7 @@ int main(int argc, char** argv) {
     config.pipeline.rotation_gradient = ht::ParseRotationGradient(rotation_gradient);
     config.pipeline.grazing_guard = !no_grazing_guard;
     config.pipeline.kink_planes = !no_kink_planes;
-    config.pipeline.refine_depth = !no_depth_refinement;
+    config.pipeline.refine_depth = refine_depth;
     if (config.pipeline.rotation_gradient != ht::RotationGradient::kRenderedSamples) {
       if (config.pd_backend == ht::PdBackendChoice::kGpu) {
         throw std::invalid_argument("--rotation-gradient " + rotation_gradient +

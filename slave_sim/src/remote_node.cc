@@ -316,6 +316,16 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   s["grazing_guard"] = config.pipeline.grazing_guard;
   s["kink_planes"] = config.pipeline.kink_planes;
   s["refine_depth"] = config.pipeline.refine_depth;
+  {
+    // Stage 5b (issue 32), warm-up included: contacts refined, and per contact the seeds, the
+    // evaluations of b − a and how far δ0 rose above the grid's.
+    const DepthRefinementCounters& r = pipeline->depth_refinement_counters();
+    const double n = r.contacts > 0 ? static_cast<double>(r.contacts) : 1.0;
+    s["depth_refinement"] = {{"contacts", r.contacts},
+                             {"seeds_per_contact", static_cast<double>(r.seeds) / n},
+                             {"evaluations_per_contact", static_cast<double>(r.evaluations) / n},
+                             {"depth_raised_um_mean", static_cast<double>(r.raised_um) / n}};
+  }
   s["grazing_dropped_contacts"] = pipeline->step_faults().grazing_dropped;
   s["unreachable_pairs_dropped"] = pipeline->step_faults().unreachable_pairs;
   s["triangle_lists_overflowed"] = pipeline->step_faults().triangle_lists_overflowed;

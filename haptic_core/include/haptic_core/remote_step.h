@@ -126,11 +126,12 @@ struct PipelineOptions {
   /// (AddKinkPlanes). Off: the secant of the ±h_θ samples stays, and only the arm the deepest cell
   /// is not on is added (placed on the frontier as "kink_planes_keep_secant").
   bool kink_planes_own_slope = true;
-  /// Stage 5b (issue 32): δ refined from the grid's cell samples to the finest texture level and
-  /// its gradient taken at texel scale (DepthRefiner, depth_refinement.h), after either backend.
-  /// Off: the grid's δ and its one-cell secants, the reference (`slave_sim --no-depth-refinement`,
-  /// the frontier's "no_depth_refinement").
-  bool refine_depth = true;
+  /// Stage 5b (issue 32): δ refined from the grid's cell samples to the finest texture level
+  /// (DepthRefiner, depth_refinement.h), after either backend. Off by default: on the frontier it
+  /// reads δ within a few micrometres and lowers the force error, but in the closed loop on fig75
+  /// it drives the resting block into a 48 Hz bounce through the kink planes (issue 32's note);
+  /// `slave_sim --refine-depth`, the frontier's "refined_depth".
+  bool refine_depth = false;
   /// How stage 5b refines (steps, sub-samples, search floor).
   DepthRefinementOptions depth_refinement;
 

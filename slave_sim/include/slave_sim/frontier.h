@@ -69,9 +69,8 @@ struct FrontierSetting {
   bool kink_planes = true;
   /// PipelineOptions::kink_planes_own_slope ("kink_planes_keep_secant" turns it off).
   bool kink_planes_own_slope = true;
-  /// PipelineOptions::refine_depth ("no_depth_refinement" turns it off: the grid's δ and
-  /// secants, issue 32's before).
-  bool refine_depth = true;
+  /// PipelineOptions::refine_depth ("refined_depth" and the "*refined*" settings turn it on).
+  bool refine_depth = false;
   /// PipelineOptions::depth_refinement.gradient_step_texels (0: the default).
   double gradient_step_texels = 0.0;
   /// PipelineOptions::depth_refinement.texel_scale_gradient ("texel_scale_gradient" and
