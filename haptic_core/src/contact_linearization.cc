@@ -224,7 +224,12 @@ DepthSample TexturePenetrationSolver::Depth(const HapticModel& tool, const Rigid
 
 std::array<RigidTransform, kGradientSamples> GradientSamplePoses(const RigidTransform& X_WT,
                                                                  const ContactWindow& w) noexcept {
-  const GradientSteps h = GradientSteps::For(w);
+  return GradientSamplePoses(X_WT, w, GradientSteps::For(w));
+}
+
+std::array<RigidTransform, kGradientSamples> GradientSamplePoses(const RigidTransform& X_WT,
+                                                                 const ContactWindow& w,
+                                                                 const GradientSteps& h) noexcept {
   const glm::dvec3 u = w.axis_u_W, v = w.axis_v_W, n = w.normal_W, zero(0.0);
   const Twist steps[5] = {{h.h_x * u, zero},
                           {h.h_x * v, zero},

@@ -280,6 +280,102 @@ DepthRefiner::Seed DepthRefiner::Search(std::span<const Projected> tool, const B
   return best;
 }
 
+PenetrationGradient DepthRefiner::TexelScaleGradient(const RigidTransform& X_WT,
+                                                     std::span<const Seed> base, int num_seeds,
+                                                     const Seed& deepest,
+                                                     const glm::dvec3& point_W) noexcept {
+  const ContactWindow& w = window_;
+  const double cell = w.cell_size_m();
+  const glm::dvec3& u = w.axis_u_W;
+  const glm::dvec3& v = w.axis_v_W;
+  const glm::dvec3& n = w.normal_W;
+  GatherEnvironment(deepest.s - cell, deepest.s + cell, deepest.t - cell, deepest.t + cell);
+  GatherTool(tool_all_, deepest.s - cell, deepest.s + cell, deepest.t - cell, deepest.t + cell);
+  const double texel = TexelOfGathered(tool_local_);
+  const double h_x = options_.gradient_step_texels * texel;
+  const double h_theta = h_x / (0.5 * w.extent_m);
+  const double reach = h_x + h_theta * glm::length(point_W - X_WT.translation);
+  const double floor_m = options_.search_floor_texels * texel;
+  // The base seeds within reach of the deepest (a small step cannot bring a far, lower peak
+  // above it), deepest first, at most four.
+  std::array<int, kBaseSeedSamples> order{};
+  for (int k = 0; k < num_seeds; ++k) order[static_cast<std::size_t>(k)] = k;
+  std::sort(order.begin(), order.begin() + num_seeds, [&](int a, int b) {
+    return base[static_cast<std::size_t>(a)].depth_m > base[static_cast<std::size_t>(b)].depth_m;
+  });
+  int num_near = 0;
+  while (num_near < std::min(num_seeds, 4) &&
+         base[static_cast<std::size_t>(order[static_cast<std::size_t>(num_near)])].depth_m >=
+             deepest.depth_m - 4.0 * reach) {
+    ++num_near;
+  }
+  const auto poses = GradientSamplePoses(X_WT, w, {h_x, h_theta});
+  std::array<double, 10> displaced{};
+  displaced.fill(-kInf);
+  for (int m = 0; m < num_near; ++m) {
+    const Seed& sd = base[static_cast<std::size_t>(order[static_cast<std::size_t>(m)])];
+    const double margin = reach + 4.0 * texel;
+    const Box box{sd.s - margin, sd.s + margin, sd.t - margin, sd.t + margin};
+    GatherEnvironment(box.s0, box.s1, box.t0, box.t1);
+    GatherTool(tool_all_, box.s0 - reach, box.s1 + reach, box.t0 - reach, box.t1 + reach);
+    for (int k = 0; k < 10; ++k) {  // sample k + 1 of the table: ±u, ±v, ±θu, ±θv, ±θn
+      const int axis = k / 2;
+      const double sign = (k % 2 == 0) ? 1.0 : -1.0;
+      double shift_s = 0.0, shift_t = 0.0;
+      std::span<const Projected> tool_tris = tool_local_;
+      // The maximum may stay with the environment's feature (the seed's point) or move with the
+      // tool's (the seed's point carried by the displacement: where a tool edge bounds it, the
+      // seed's own point may have left the tool's support): both starts are climbed.
+      double moved_s = sd.s, moved_t = sd.t;
+      if (axis == 0) {
+        shift_s = sign * h_x;
+        moved_s += shift_s;
+      } else if (axis == 1) {
+        shift_t = sign * h_x;
+        moved_t += shift_t;
+      } else {
+        const RigidTransform& X = poses[static_cast<std::size_t>(k + 1)];
+        MoveTool(X);
+        tool_tris = tool_moved_;
+        const glm::dvec3 p_W = w.center_W + sd.s * u + sd.t * v;
+        const glm::dvec3 moved_W = X * (X_WT.Inverse() * p_W) - w.center_W;
+        moved_s = glm::dot(moved_W, u);
+        moved_t = glm::dot(moved_W, v);
+      }
+      const Seed at_seed =
+          Search(tool_tris, box, sd.s, sd.t, 0.0, 1, texel, floor_m, shift_s, shift_t);
+      const Seed at_moved =
+          Search(tool_tris, box, moved_s, moved_t, 0.0, 1, texel, floor_m, shift_s, shift_t);
+      displaced[static_cast<std::size_t>(k)] =
+          std::max({displaced[static_cast<std::size_t>(k)], at_seed.depth_m, at_moved.depth_m});
+    }
+  }
+  // Central differences, one-sided where a displaced pose found no overlap.
+  const auto central = [&](int axis, double step) {
+    const double plus = displaced[static_cast<std::size_t>(2 * axis)];
+    const double minus = displaced[static_cast<std::size_t>(2 * axis + 1)];
+    if (plus > -kInf && minus > -kInf) return (plus - minus) / (2.0 * step);
+    if (plus > -kInf) return (plus - deepest.depth_m) / step;
+    if (minus > -kInf) return (deepest.depth_m - minus) / step;
+    return 0.0;
+  };
+  PenetrationGradient g;
+  g.d_translation_W = central(0, h_x) * u + central(1, h_x) * v - n;
+  g.d_rotation_W = central(2, h_theta) * u + central(3, h_theta) * v + central(4, h_theta) * n;
+  return g;
+}
+
+double DepthRefiner::TexelOfGathered(std::span<const Projected> tool_tris) const noexcept {
+  double texel = kInf;
+  for (const Projected& P : env_local_) {
+    if (P.textured && P.texel_m > 0.0) texel = std::min(texel, P.texel_m);
+  }
+  for (const Projected& P : tool_tris) {
+    if (P.textured && P.texel_m > 0.0) texel = std::min(texel, P.texel_m);
+  }
+  return std::isfinite(texel) ? texel : 0.25 * window_.cell_size_m();
+}
+
 bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
                           const ContactQuery& query, std::span<DepthSample> samples,
                           ContactLinearization& lin) noexcept {
@@ -303,18 +399,6 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
   ProjectAll(*env_, X_WO_, PatchSide::kEnvironment, env_list_, env_all_);
   ProjectAll(tool, X_WT, PatchSide::kTool, tool_list_, tool_all_);
 
-  // The finer level-0 texel of the surfaces gathered (the cell's quarter where neither is
-  // textured: a smooth coarse surface is linear inside its triangles).
-  const auto texel_of_gathered = [&](std::span<const Projected> tool_tris) {
-    double texel = kInf;
-    for (const Projected& P : env_local_) {
-      if (P.textured && P.texel_m > 0.0) texel = std::min(texel, P.texel_m);
-    }
-    for (const Projected& P : tool_tris) {
-      if (P.textured && P.texel_m > 0.0) texel = std::min(texel, P.texel_m);
-    }
-    return std::isfinite(texel) ? texel : 0.25 * cell;
-  };
   // One rendered sample's deepest cell refined at a pose: the tool at X (shifted in-plane by
   // (shift_s, shift_t) where X is the base pose).
   const auto refine_cell = [&](int cell_index, std::span<const Projected> tool_at, double shift_s,
@@ -325,20 +409,18 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
     const Box box{s - half - cell, s + half + cell, t - half - cell, t + half + cell};
     GatherEnvironment(box.s0, box.s1, box.t0, box.t1);
     GatherTool(tool_at, box.s0 - shift_s, box.s1 - shift_s, box.t0 - shift_t, box.t1 - shift_t);
-    const double texel = texel_of_gathered(tool_local_);
+    const double texel = TexelOfGathered(tool_local_);
+    const double floor_m = options_.search_floor_texels * texel;
+    if (!subgrid)
+      return Search(tool_local_, box, s, t, half, 1, 0.5 * half, floor_m, shift_s, shift_t);
     const int g = std::clamp(static_cast<int>(std::ceil(2.0 * half / (kSubsampleTexels * texel))),
                              1, options_.max_subsamples);
-    const double spacing = 2.0 * half / g;
-    if (!subgrid) {
-      return Search(tool_local_, box, s, t, half, 1, 0.5 * half,
-                    options_.search_floor_texels * texel, shift_s, shift_t);
-    }
-    return Search(tool_local_, box, s, t, half, g, 0.5 * spacing,
-                  options_.search_floor_texels * texel, shift_s, shift_t);
+    return Search(tool_local_, box, s, t, half, g, 0.5 * (2.0 * half / g), floor_m, shift_s,
+                  shift_t);
   };
 
   // The base: every distinct deepest cell of the samples is a seed.
-  std::array<int, kGradientSamples> seed_cells{};
+  std::array<int, kBaseSeedSamples> seed_cells{};
   int num_seeds = 0;
   for (int k = 0; k < kBaseSeedSamples; ++k) {
     const int c = samples[static_cast<std::size_t>(k)].cell;
@@ -352,7 +434,7 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
     }
     seed_cells[static_cast<std::size_t>(num_seeds++)] = c;
   }
-  std::array<Seed, kGradientSamples> base{};
+  std::array<Seed, kBaseSeedSamples> base{};
   int best = -1;
   for (int k = 0; k < num_seeds; ++k) {
     base[static_cast<std::size_t>(k)] = refine_cell(seed_cells[k], tool_all_, 0.0, 0.0, true);
@@ -364,84 +446,10 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
   }
   const Seed deepest = base[static_cast<std::size_t>(best)];
 
-  // The gradient at texel scale, from the base seeds within reach of the deepest.
-  GatherEnvironment(deepest.s - cell, deepest.s + cell, deepest.t - cell, deepest.t + cell);
-  GatherTool(tool_all_, deepest.s - cell, deepest.s + cell, deepest.t - cell, deepest.t + cell);
-  const double texel = texel_of_gathered(tool_local_);
-  const double h_x = options_.gradient_step_texels * texel;
-  const double h_theta = h_x / (0.5 * w.extent_m);
   const glm::dvec3 point_W = w.center_W + deepest.s * w.axis_u_W + deepest.t * w.axis_v_W;
-  const double reach = h_x + h_theta * glm::length(point_W - X_WT.translation);
-  const double floor_m = options_.search_floor_texels * texel;
-  std::array<int, 4> near{};
-  int num_near = 0;
-  {
-    std::array<int, kGradientSamples> order{};
-    for (int k = 0; k < num_seeds; ++k) order[static_cast<std::size_t>(k)] = k;
-    std::sort(order.begin(), order.begin() + num_seeds, [&](int a, int b) {
-      return base[static_cast<std::size_t>(a)].depth_m > base[static_cast<std::size_t>(b)].depth_m;
-    });
-    for (int k = 0; k < num_seeds && num_near < 4; ++k) {
-      const Seed& sd = base[static_cast<std::size_t>(order[static_cast<std::size_t>(k)])];
-      if (sd.depth_m < deepest.depth_m - 4.0 * reach) break;
-      near[static_cast<std::size_t>(num_near++)] = order[static_cast<std::size_t>(k)];
-    }
+  if (options_.texel_scale_gradient) {
+    lin.gradient = TexelScaleGradient(X_WT, base, num_seeds, deepest, point_W);
   }
-  const glm::dvec3 u = w.axis_u_W, v = w.axis_v_W, n = w.normal_W, zero(0.0);
-  const Twist steps[5] = {{h_x * u, zero},
-                          {h_x * v, zero},
-                          {zero, h_theta * u},
-                          {zero, h_theta * v},
-                          {zero, h_theta * n}};
-  std::array<double, 10> displaced{};
-  displaced.fill(-kInf);
-  for (int m = 0; m < (options_.texel_scale_gradient ? num_near : 0); ++m) {
-    const Seed& sd = base[static_cast<std::size_t>(near[static_cast<std::size_t>(m)])];
-    const double margin = reach + 4.0 * texel;
-    const Box box{sd.s - margin, sd.s + margin, sd.t - margin, sd.t + margin};
-    GatherEnvironment(box.s0, box.s1, box.t0, box.t1);
-    GatherTool(tool_all_, box.s0 - reach, box.s1 + reach, box.t0 - reach, box.t1 + reach);
-    for (int k = 0; k < 10; ++k) {
-      const int axis = k / 2;
-      const double sign = (k % 2 == 0) ? 1.0 : -1.0;
-      double shift_s = 0.0, shift_t = 0.0;
-      std::span<const Projected> tool_tris = tool_local_;
-      // The maximum may stay with the environment's feature (the seed's point) or move with the
-      // tool's (the seed's point carried by the displacement: where a tool edge bounds it, the
-      // seed's own point may have left the tool's support): both starts are climbed.
-      double moved_s = sd.s, moved_t = sd.t;
-      if (axis == 0) {
-        shift_s = sign * h_x;
-        moved_s += shift_s;
-      } else if (axis == 1) {
-        shift_t = sign * h_x;
-        moved_t += shift_t;
-      } else {
-        const RigidTransform X =
-            Displace(X_WT, {sign * steps[axis].linear, sign * steps[axis].angular});
-        MoveTool(X);
-        tool_tris = tool_moved_;
-        const glm::dvec3 p_W = w.center_W + sd.s * u + sd.t * v;
-        const glm::dvec3 moved_W = X * (X_WT.Inverse() * p_W) - w.center_W;
-        moved_s = glm::dot(moved_W, u);
-        moved_t = glm::dot(moved_W, v);
-      }
-      const Seed at_seed =
-          Search(tool_tris, box, sd.s, sd.t, 0.0, 1, texel, floor_m, shift_s, shift_t);
-      const Seed at_moved =
-          Search(tool_tris, box, moved_s, moved_t, 0.0, 1, texel, floor_m, shift_s, shift_t);
-      displaced[static_cast<std::size_t>(k)] =
-          std::max({displaced[static_cast<std::size_t>(k)], at_seed.depth_m, at_moved.depth_m});
-    }
-  }
-  const auto central = [&](int axis, double step) {
-    const double plus = displaced[static_cast<std::size_t>(2 * axis)];
-    const double minus = displaced[static_cast<std::size_t>(2 * axis + 1)];
-    if (plus > -kInf && minus > -kInf) return (plus - minus) / (2.0 * step);
-    if (plus > -kInf) return (plus - deepest.depth_m) / step;
-    if (minus > -kInf) return (deepest.depth_m - minus) / step;
-    return 0.0;
-  };
 
   // The rendered displaced samples, each from its own deepest cell at its own pose.
   if (options_.refine_rendered_samples || !options_.texel_scale_gradient) {
@@ -472,11 +480,7 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
   samples[0] = {deepest.depth_m, CellAt(w, deepest.s, deepest.t)};
   lin.depth_m = deepest.depth_m;
   lin.point_W = point_W;
-  if (options_.texel_scale_gradient) {
-    lin.gradient.d_translation_W = central(0, h_x) * u + central(1, h_x) * v - n;
-    lin.gradient.d_rotation_W =
-        central(2, h_theta) * u + central(3, h_theta) * v + central(4, h_theta) * n;
-  } else {
+  if (!options_.texel_scale_gradient) {
     LinearizationFaults faults;
     lin.gradient = AssembleLinearization(w, samples, lin.stiffness_n_per_m, faults).gradient;
   }

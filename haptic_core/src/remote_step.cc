@@ -64,7 +64,8 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
     : scene_(scene),
       options_(options),
       backend_(std::move(backend)),
-      refiner_(options.depth_refinement) {
+      // Stage 5b's buffers (about 10 MB at 8192 triangles) only where it runs.
+      refiner_(options.depth_refinement, options.refine_depth ? 8192 : 0) {
   options_.Validate();
   reachable_pairs_.resize(static_cast<std::size_t>(clusterer_.max_pairs()));
   pair_bounds_.resize(static_cast<std::size_t>(clusterer_.max_pairs()));

@@ -109,6 +109,10 @@ struct GradientSteps {
 /// Displace (world axes, about the tool's centre of mass). Both backends use this table.
 std::array<RigidTransform, kGradientSamples> GradientSamplePoses(
     const RigidTransform& X_WT, const ContactWindow& window) noexcept;
+/// The same table with the steps `steps` (h_x in m along u and v, h_θ in rad about u, v and n)
+/// instead of the window's (stage 5b's texel-scale steps, depth_refinement.h).
+std::array<RigidTransform, kGradientSamples> GradientSamplePoses(
+    const RigidTransform& X_WT, const ContactWindow& window, const GradientSteps& steps) noexcept;
 
 /// Builds the linearization from the kGradientSamples depths taken at GradientSamplePoses():
 /// central differences, or one-sided ones (counted in `faults`) where a perturbed pose has no

@@ -71,8 +71,9 @@ struct DepthRefinementOptions {
   int max_subsamples = 6;
   /// The pattern search stops when its step falls below this many texels. > 0.
   double search_floor_texels = 0.25;
-  /// Refine the ten rendered displaced samples as well (the kink planes read them); off: only the
-  /// base and the texel-scale gradient.
+  /// With texel_scale_gradient: refine the ten rendered displaced samples as well (the kink
+  /// planes read them); off: only the base and the texel-scale gradient. Without
+  /// texel_scale_gradient they are always refined (the gradient is their secant).
   bool refine_rendered_samples = true;
   /// The gradient from the refined maximum at texel-scale steps (above); off: the grid's
   /// one-cell secants (h_x = W/N, h_θ = h_x/(W/2)) of the refined rendered samples.
@@ -144,6 +145,15 @@ class DepthRefiner {
   struct Box {
     double s0, s1, t0, t1;
   };
+  // The finer level-0 texel (m) of env_local_ and `tool_tris` (a quarter cell where neither is
+  // textured: a smooth coarse surface is linear inside its triangles).
+  double TexelOfGathered(std::span<const Projected> tool_tris) const noexcept;
+  // DepthRefinementOptions::texel_scale_gradient: central differences of the refined maximum at
+  // texel-scale steps, climbed from the base seeds `base` [0, num_seeds) within reach of
+  // `deepest` (point_W its point on the window plane, m, W).
+  PenetrationGradient TexelScaleGradient(const RigidTransform& X_WT, std::span<const Seed> base,
+                                         int num_seeds, const Seed& deepest,
+                                         const glm::dvec3& point_W) noexcept;
   // The triangles of `list` facing the side's way, projected on the window at pose X.
   void ProjectAll(const HapticModel& model, const RigidTransform& X, PatchSide side,
                   std::span<const int> list, std::vector<Projected>& out) noexcept;
