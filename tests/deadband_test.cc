@@ -149,6 +149,69 @@ TEST(Deadband, VelocityAdaptiveWidensThePositionFloorWhileMovingFast) {
   EXPECT_EQ(adaptive.Decide(off, V, kMs), DeadbandReason::kNotSent);
 }
 
+TEST(Deadband, NearContactTheFloorsShrinkToTheContactScale) {
+  // A tool resting on a surface that bobs by 0.1 mm and tilts by 1 mrad (the fig75 block's
+  // bounce, issue 32) stays inside the free-space floors (0.2 mm, 2 mrad at k = 0.1): the remote
+  // node would keep modelling it where it is not. Near contact the position floor is 20 µm; the
+  // rotation floor is the free-space one unless asked (here 0.2 mrad).
+  ToolStateDeadbandConfig c;
+  c.weber_fraction = 0.1;
+  c.keepalive_s = 10.0;
+  EXPECT_DOUBLE_EQ(c.contact_rotation_floor_scale_rad, c.rotation_floor_scale_rad);
+  c.contact_rotation_floor_scale_rad = 2e-3;
+  // The largest distance between the tool and the pose the remote node predicts from the states
+  // sent (ExtrapolatePose of the last one), over 0.2 s of a 48 Hz, 0.1 mm bob.
+  auto worst_prediction_error_of_bob = [&](bool near_contact) {
+    ToolStateDeadband d(c);
+    RigidTransform X_sent;
+    Twist V_sent;
+    double t_sent = 0.0, worst = 0.0;
+    for (int i = 0; i < 200; ++i) {
+      const double t = i * 1e-3, w = 2.0 * std::numbers::pi * 48.0;
+      RigidTransform X;
+      X.translation.z = 0.1e-3 * std::sin(w * t);
+      const Twist V{{0.0, 0.0, 0.1e-3 * w * std::cos(w * t)}, {}};
+      if (d.Decide(X, V, i * kMs, near_contact) != DeadbandReason::kNotSent) {
+        X_sent = X;
+        V_sent = V;
+        t_sent = t;
+      }
+      const RigidTransform predicted = ExtrapolatePose(X_sent, V_sent, t - t_sent);
+      worst = std::max(worst, glm::length(X.translation - predicted.translation));
+    }
+    return worst;
+  };
+  EXPECT_GT(worst_prediction_error_of_bob(false), 0.15e-3);
+  EXPECT_LE(worst_prediction_error_of_bob(true), 20e-6);
+  {
+    ToolStateDeadband d(c);
+    RigidTransform X;
+    ASSERT_EQ(d.Decide(X, {}, 0, true), DeadbandReason::kFirst);
+    X.translation.x = 15e-6;
+    EXPECT_EQ(d.Decide(X, {}, kMs, true), DeadbandReason::kNotSent);
+    EXPECT_EQ(d.Decide(X, {}, 2 * kMs, false), DeadbandReason::kNotSent);
+    X.translation.x = 25e-6;
+    EXPECT_EQ(d.Decide(X, {}, 3 * kMs, false), DeadbandReason::kNotSent);
+    EXPECT_EQ(d.Decide(X, {}, 4 * kMs, true), DeadbandReason::kPosition);
+  }
+  {
+    ToolStateDeadband d(c);
+    RigidTransform X;
+    ASSERT_EQ(d.Decide(X, {}, 0, true), DeadbandReason::kFirst);
+    X.rotation = QuaternionFromRotationVector({0.15e-3, 0.0, 0.0});
+    EXPECT_EQ(d.Decide(X, {}, kMs, true), DeadbandReason::kNotSent);
+    X.rotation = QuaternionFromRotationVector({0.25e-3, 0.0, 0.0});
+    EXPECT_EQ(d.Decide(X, {}, 2 * kMs, false), DeadbandReason::kNotSent);
+    EXPECT_EQ(d.Decide(X, {}, 3 * kMs, true), DeadbandReason::kRotation);
+  }
+  ToolStateDeadbandConfig bad = c;
+  bad.contact_position_floor_scale_m = 0.0;
+  EXPECT_THROW(bad.Validate(), std::invalid_argument);
+  bad = c;
+  bad.contact_rotation_floor_scale_rad = std::nan("");
+  EXPECT_THROW(bad.Validate(), std::invalid_argument);
+}
+
 ContactModel OneContact(double depth_m, double stiffness, const glm::dvec3& p0) {
   ContactModel m;
   m.X_WT0.translation = p0;

@@ -233,6 +233,18 @@ int main(int argc, char** argv) {
   app.add_flag("--deadband-velocity-adaptive", deadband_velocity_adaptive,
                "widen the tool-state position and rotation floors while the tool moves fast "
                "(1 + speed / 0.05 m/s)");
+  double contact_floor_mm = 0.2, contact_floor_mrad = 20.0;
+  app.add_option("--deadband-contact-floor-mm", contact_floor_mm,
+                 "near contact, the tool-state deadband's position floor scale, mm: a tool state "
+                 "is sent once the pose leaves the remote node's prediction by the deadband times "
+                 "this (free space: 2 mm)")
+      ->check(CLI::Range(1e-3, 100.0))
+      ->capture_default_str();
+  app.add_option("--deadband-contact-floor-mrad", contact_floor_mrad,
+                 "near contact, the tool-state deadband's rotation floor scale, mrad (the same as "
+                 "in free space by default)")
+      ->check(CLI::Range(1e-3, 1000.0))
+      ->capture_default_str();
   app.add_flag("--float-models", float_models,
                "ask for contact models in the float encoding rather than the compact quantized "
                "one (transport/protocol.h states its error bounds)");
@@ -284,6 +296,8 @@ int main(int argc, char** argv) {
     config.tool_state_deadband.keepalive_s = deadband_keepalive_ms * 1e-3;
     config.tool_state_deadband.velocity_adaptive = deadband_velocity_adaptive;
     config.tool_state_deadband.velocity_criterion = deadband_velocity;
+    config.tool_state_deadband.contact_position_floor_scale_m = contact_floor_mm * 1e-3;
+    config.tool_state_deadband.contact_rotation_floor_scale_rad = contact_floor_mrad * 1e-3;
     config.model_deadband = model_deadband_pct.value_or(deadband_pct) / 100.0;
     config.model_keepalive_s = deadband_keepalive_ms * 1e-3;
     config.compact_models = !float_models;

@@ -88,7 +88,8 @@ void NetworkWorker::Run(const std::atomic<bool>& stop) {
       last = state;
       have_last = true;
       ++tool_states_offered_;
-      if (tool_deadband_.Decide(state.message.X_WT, state.message.V_WT_W, state.time_ns) !=
+      if (tool_deadband_.Decide(state.message.X_WT, state.message.V_WT_W, state.time_ns,
+                                state.near_contact) !=
           DeadbandReason::kNotSent) {
         Send(state);
         last_send_ns = now;
@@ -162,6 +163,10 @@ nlohmann::json NetworkWorker::Summary() const {
                      {"tool_state_keepalive_ms", deadband_agreed_.tool_state_keepalive_ms},
                      {"model_keepalive_ms", deadband_agreed_.model_keepalive_ms},
                      {"velocity_adaptive", config_.tool_state_deadband.velocity_adaptive},
+                     {"contact_position_floor_scale_mm",
+                      config_.tool_state_deadband.contact_position_floor_scale_m * 1e3},
+                     {"contact_rotation_floor_scale_mrad",
+                      config_.tool_state_deadband.contact_rotation_floor_scale_rad * 1e3},
                      {"compact_models", compact_models_},
                      {"tool_states_offered", tool_states_offered_},
                      {"tool_states_held_back", tool_states_held_back_},

@@ -30,6 +30,8 @@ struct OutgoingToolState {
   wire::ToolStateMessage message;
   std::int64_t time_ns = 0;
   std::uint64_t sequence = 0;
+  /// The tick's held contact model has contacts: the tool-state deadband's contact floors apply.
+  bool near_contact = false;
 };
 
 struct IncomingModel {

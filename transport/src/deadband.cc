@@ -84,6 +84,9 @@ void ToolStateDeadbandConfig::Validate() const {
   CheckFraction(weber_fraction, "tool-state deadband");
   CheckPositive(position_floor_scale_m, "tool-state deadband position floor scale");
   CheckPositive(rotation_floor_scale_rad, "tool-state deadband rotation floor scale");
+  CheckPositive(contact_position_floor_scale_m, "tool-state deadband contact position floor scale");
+  CheckPositive(contact_rotation_floor_scale_rad,
+                "tool-state deadband contact rotation floor scale");
   CheckPositive(linear_velocity_floor_scale_m_per_s, "tool-state deadband velocity floor scale");
   CheckPositive(angular_velocity_floor_scale_rad_per_s,
                 "tool-state deadband angular velocity floor scale");
@@ -102,7 +105,7 @@ void ContactModelDeadbandConfig::Validate() const {
 }
 
 DeadbandReason ToolStateDeadband::Decide(const RigidTransform& X_WT, const Twist& V_WT_W,
-                                         std::int64_t t_ns) noexcept {
+                                         std::int64_t t_ns, bool near_contact) noexcept {
   const ToolStateDeadbandConfig& c = config_;
   const double k = c.weber_fraction;
   DeadbandReason reason = DeadbandReason::kNotSent;
@@ -116,14 +119,18 @@ DeadbandReason ToolStateDeadband::Decide(const RigidTransform& X_WT, const Twist
   } else {
     const double a =
         c.velocity_adaptive ? 1.0 + glm::length(V_WT_W.linear) / c.adaptive_speed_ref_m_per_s : 1.0;
+    const double floor_p =
+        near_contact ? c.contact_position_floor_scale_m : c.position_floor_scale_m;
+    const double floor_theta =
+        near_contact ? c.contact_rotation_floor_scale_rad : c.rotation_floor_scale_rad;
     const RigidTransform predicted = ExtrapolatePose(X_sent_, V_sent_, dt);
     const Twist error = PoseDifference(X_WT, predicted);
     const Twist moved = PoseDifference(X_WT, X_sent_);
     if (glm::length(error.linear) >
-        std::max(k * glm::length(moved.linear), k * c.position_floor_scale_m * a)) {
+        std::max(k * glm::length(moved.linear), k * floor_p * a)) {
       reason = DeadbandReason::kPosition;
     } else if (glm::length(error.angular) >
-               std::max(k * glm::length(moved.angular), k * c.rotation_floor_scale_rad * a)) {
+               std::max(k * glm::length(moved.angular), k * floor_theta * a)) {
       reason = DeadbandReason::kRotation;
     } else if (!c.velocity_criterion) {
       // Pose only: the twist is sent with every pose, for the receiver's extrapolation.

@@ -114,6 +114,8 @@ class OperatorTick {
   const WrenchSafetyFilter& safety() const noexcept { return safety_; }
   /// The stamp of the model in use (its times and its remote step's split).
   const ModelStamp& model_stamp() const noexcept { return model_stamp_; }
+  /// The contact model in use (the newest taken; empty before the first).
+  const ContactModel& model() const noexcept { return model_; }
 
  private:
   OperatorTickConfig config_;

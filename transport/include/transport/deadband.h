@@ -67,6 +67,17 @@ struct ToolStateDeadbandConfig {
   double rotation_floor_scale_rad = 0.02;
   double linear_velocity_floor_scale_m_per_s = 0.02;
   double angular_velocity_floor_scale_rad_per_s = 0.2;
+  /// Floor scales while the tool is near contact (the held contact model has contacts: Decide's
+  /// near_contact), in place of position_floor_scale_m and rotation_floor_scale_rad (m, rad).
+  /// In contact the remote node linearizes its model at the pose it predicts, and the contact
+  /// appears and vanishes within the penetration depth (about 0.1 mm on the fig75 block): with
+  /// the free-space position floor (0.2 mm at k = 0.1) a tool bobbing by less than that was
+  /// modelled where it was not, and the models so made kept a resting block bouncing at 45–50 Hz
+  /// (issue 32's note; docs/deadband.md). At k = 0.1 the position floor is 20 µm in contact.
+  /// The rotation floor stays the free-space one by default: shrinking it to 0.2 mrad also kept
+  /// the block calm, at twice the tool states of the position floor alone (docs/deadband.md).
+  double contact_position_floor_scale_m = 2e-4;
+  double contact_rotation_floor_scale_rad = 0.02;
   double keepalive_s = 0.1;  ///< longest time between two tool states sent (s, > 0)
   /// Also send when the twist itself changed beyond the deadband (Weber fraction of the last
   /// twist sent). Off by default: a changed twist already shows as pose error against the
@@ -86,6 +97,7 @@ struct ToolStateDeadbandConfig {
 /// last state sent at t_s and (p̂, R̂) = ExtrapolatePose(last sent, t − t_s):
 ///   position  |p − p̂| > max(k·|p − p_s|, k·floor_p·a)
 ///   rotation  ∠(R R̂ᵀ) > max(k·∠(R R_sᵀ), k·floor_θ·a)
+/// (floor_p, floor_θ the contact floor scales while near contact, else the free-space ones)
 ///   velocity  |v − v_s| > max(k·|v_s|, k·floor_v), the same for ω (with velocity_criterion),
 /// a = 1 + |v|/v_ref with velocity_adaptive, else 1; plus the keep-alive.
 class ToolStateDeadband {
@@ -93,9 +105,10 @@ class ToolStateDeadband {
   explicit ToolStateDeadband(const ToolStateDeadbandConfig& config) : config_(config) {}
   /// The decision for the tool state (X_WT, V_WT_W) at time t_ns (ns, the sender's steady
   /// clock). When it returns anything but kNotSent, the state counts as sent (the caller sends
-  /// it).
-  DeadbandReason Decide(const RigidTransform& X_WT, const Twist& V_WT_W,
-                        std::int64_t t_ns) noexcept;
+  /// it). `near_contact`: the operator's held contact model has contacts (the contact floors
+  /// apply).
+  DeadbandReason Decide(const RigidTransform& X_WT, const Twist& V_WT_W, std::int64_t t_ns,
+                        bool near_contact = false) noexcept;
   /// Records a state the caller sent without asking (e.g. a keep-alive while the loop is idle),
   /// so that the next decision predicts from it.
   void NoteSent(const RigidTransform& X_WT, const Twist& V_WT_W, std::int64_t t_ns) noexcept;
