@@ -416,6 +416,64 @@ TEST(HardCases, StaleModelAfterADelaySpike) {
              glm::length(e.F_T_W.force), first, limits.max_force_n));
 }
 
+TEST(HardCases, ImpactFasterThanTheModelsCome) {
+  // The block over the gear, 0.9 mm above touching, falling at 50 mm/s: a model made now is used
+  // for as long as the next takes to come (10–150 ms over a network, or a slow GPU step), by
+  // which time the block is in the gear. With speculative contacts (PipelineOptions::
+  // speculative_lead_s) the model already holds the gear's surface, separated (δ0 < 0, no force
+  // yet), and the operator's local model puts it where a fresh step finds it; at rest, rising
+  // or sliding sideways the model has no contact, as before.
+  const HapticScene scene = MakeBlockOnGearScene();
+  PipelineOptions options;
+  HapticTexturePipeline pipeline(scene, options);
+  const RigidTransform home = BlockOnGearHomePose();
+  auto above = [&](double dz) { return At(home.translation + glm::dvec3(0, 0, dz), home.rotation); };
+  StepTimings t;
+  // Where the block touches: the highest pose with a contact of δ0 ≥ 0, found by bisection.
+  double lo = -2e-3, hi = 3e-3;
+  for (int i = 0; i < 30; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    const ContactModel m = pipeline.Step(above(mid), 1, t);
+    (m.num_contacts > 0 && m.contacts[0].depth_m >= 0.0 ? lo : hi) = mid;
+  }
+  const double touch_dz = lo;
+  const RigidTransform X0 = above(touch_dz + 0.9e-3);
+  const Twist falling{{0.0, 0.0, -0.05}, {}};
+  EXPECT_EQ(pipeline.Step(X0, 2, t).num_contacts, 0);
+  EXPECT_EQ(pipeline.Step(X0, 3, t, Twist{{0.0, 0.0, 0.05}, {}}).num_contacts, 0);
+  EXPECT_EQ(pipeline.Step(X0, 4, t, Twist{{0.05, 0.0, 0.0}, {}}).num_contacts, 0);
+  EXPECT_EQ(pipeline.Step(X0, 5, t, Twist{{0.0, 0.0, kNaN}, {}}).num_contacts, 0);
+  const std::int64_t speculative_before = pipeline.step_faults().speculative_pairs;
+  const ContactModel m = pipeline.Step(X0, 6, t, falling);
+  ASSERT_GE(m.num_contacts, 1);
+  EXPECT_GT(pipeline.step_faults().speculative_pairs, speculative_before);
+  EXPECT_NEAR(m.contacts[0].depth_m, -0.9e-3, 30e-6);  // the gap, to the grid's accuracy
+  EXPECT_EQ(glm::length(m.F_T_W_at_q0.force), 0.0);
+  // 20 ms later the block is 1 mm lower, 0.1 mm into the gear: its local model against a fresh
+  // step there.
+  const RigidTransform X1 = above(touch_dz - 0.1e-3);
+  const ContactModelEvaluation local = EvaluateContactModel(m, X1);
+  PipelineOptions plain;
+  plain.speculative_lead_s = 0.0;
+  HapticTexturePipeline fresh_pipeline(scene, plain);
+  const ContactModel fresh = fresh_pipeline.Step(X1, 7, t);
+  ASSERT_GE(fresh.num_contacts, 1);
+  const double fresh_fz = fresh.F_T_W_at_q0.force.z;
+  EXPECT_GT(fresh_fz, 0.1);
+  EXPECT_NEAR(local.F_T_W.force.z, fresh_fz, 0.1 * fresh_fz);
+  Report("impact faster than the models come",
+         Fmt("block 0.9 mm above the gear falling at 50 mm/s: model δ0 = %.0f µm (separated); "
+             "0.1 mm into the gear its local model pushes %.2f N, a fresh step %.2f N; at rest, "
+             "rising or sliding: no contact",
+             m.contacts[0].depth_m * 1e6, local.F_T_W.force.z, fresh_fz));
+  PipelineOptions bad;
+  bad.speculative_lead_s = -1.0;
+  EXPECT_THROW(bad.Validate(), std::invalid_argument);
+  bad = PipelineOptions{};
+  bad.max_speculative_margin_m = kNaN;
+  EXPECT_THROW(bad.Validate(), std::invalid_argument);
+}
+
 TEST(HardCases, NonFinitePosesFromTheNetwork) {
   const HapticScene scene = MakeBlockOnGearScene();
   RigidTransform bad = BlockOnGearHomePose();

@@ -38,6 +38,14 @@ void PipelineOptions::Validate() const {
                                 std::to_string(window_extent_m) + "), got " +
                                 std::to_string(max_window_extent_m));
   }
+  if (!(speculative_lead_s >= 0.0 && speculative_lead_s <= 10.0)) {
+    throw std::invalid_argument("speculative lead must be in [0, 10] s, got " +
+                                std::to_string(speculative_lead_s));
+  }
+  if (!(max_speculative_margin_m >= 0.0) || !std::isfinite(max_speculative_margin_m)) {
+    throw std::invalid_argument("max speculative margin must be >= 0, got " +
+                                std::to_string(max_speculative_margin_m));
+  }
   if (max_contacts < 1 || max_contacts > kMaxContacts) {
     throw std::invalid_argument("max contacts must be in [1, " + std::to_string(kMaxContacts) +
                                 "], got " + std::to_string(max_contacts));
@@ -110,7 +118,7 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
 }
 
 ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64_t seq,
-                                         StepTimings& timings) {
+                                         StepTimings& timings, const Twist& V_WT_W) {
   using Clock = std::chrono::steady_clock;
   const auto us = [](Clock::duration d) {
     return std::chrono::duration<double, std::micro>(d).count();
@@ -124,7 +132,7 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   if (!IsFiniteRigidTransform(X_WT)) return model;
 
   // Stages 1–3: broad phase, hull proximity, contact clustering.
-  FindContactCandidates(X_WT, timings);
+  FindContactCandidates(X_WT, V_WT_W, timings);
   const auto t1 = Clock::now();
   // Stage 4: one window per cluster. The batch lives in members, so that last_contact_queries()
   // can show it after the step.
@@ -167,7 +175,7 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
 }
 
 void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
-                                                  StepTimings& timings) {
+                                                  const Twist& V_WT_W, StepTimings& timings) {
   num_candidates_ = 0;
   std::size_t triangles_used = 0;
   // A copy of a cluster's list into candidate_triangles_, or All() where the side has no list
@@ -184,11 +192,33 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
     return TriangleSubset::Of({first, list.size()});
   };
   const HapticModel& tool = *scene_.tool;
+  // Speculative contacts (PipelineOptions::speculative_lead_s): the most any tool point can close
+  // within the lead time widens the coarse query; each separated pair is then judged by its own
+  // closing speed.
+  const bool speculate = options_.speculative_lead_s > 0.0 &&
+                         options_.max_speculative_margin_m > 0.0 && IsFinite(V_WT_W) &&
+                         (V_WT_W.linear != glm::dvec3(0.0) || V_WT_W.angular != glm::dvec3(0.0));
+  const double speculative_bound =
+      !speculate ? 0.0
+                 : std::min(options_.max_speculative_margin_m,
+                            options_.speculative_lead_s *
+                                (glm::length(V_WT_W.linear) +
+                                 glm::length(V_WT_W.angular) *
+                                     (glm::length(glm::dvec3(tool_sphere_O_)) + tool_sphere_O_.w)));
+  const auto speculative_margin = [&](const HullPairContact& p) {
+    if (!speculate) return 0.0;
+    const glm::dvec3 v_A =
+        V_WT_W.linear + glm::cross(V_WT_W.angular, p.point_A_W - X_WT.translation);
+    const double closing = -glm::dot(v_A, p.normal_W);
+    return closing > 0.0 ? std::min(options_.max_speculative_margin_m,
+                                    options_.speculative_lead_s * closing)
+                         : 0.0;
+  };
   for (std::size_t k = 0; k < scene_.touchables.size(); ++k) {
     const TouchableObject& object = scene_.touchables[k];
     const double reach = tool.OutwardReach() + object.model->OutwardReach();
     ProximityQueryOptions query;
-    query.tolerance_m = reach + options_.proximity_margin_m;
+    query.tolerance_m = reach + options_.proximity_margin_m + speculative_bound;
     if (options_.local_reach) query.local_reach_margin_m = options_.proximity_margin_m;
     // 1. Broad phase: bounding spheres in W (the objects may move between steps).
     if (BoundingSphereGap(tool_sphere_O_, X_WT, object_spheres_O_[k], object.X_WO) >
@@ -219,8 +249,11 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
         const double pair_reach =
             queries_[k].NodeReach(tool, p.node_A) + queries_[k].NodeReach(*object.model, p.node_B);
         if (options_.drop_unreachable_pairs && p.signed_distance_m > pair_reach) {
-          ++step_faults_.unreachable_pairs;
-          continue;
+          if (p.signed_distance_m > pair_reach + speculative_margin(p)) {
+            ++step_faults_.unreachable_pairs;
+            continue;
+          }
+          ++step_faults_.speculative_pairs;
         }
         pair_bounds_[kept] = std::max(0.0, -p.signed_distance_m) + pair_reach + cell;
         HullPairContact& kept_pair = reachable_pairs_[kept++];

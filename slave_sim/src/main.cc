@@ -114,6 +114,14 @@ int main(int argc, char** argv) {
                "deepest cells (stage 5b, docs/DESIGN.md §4; the grid reads it low by the mip\n"
                "filter). Experimental: on the block on the gear it makes the resting block\n"
                "bounce (docs/frontier/issue32)");
+  double speculative_lead_ms = 50.0;
+  app.add_option("--speculative-lead-ms", speculative_lead_ms,
+                 "speculative contacts: a separated pair beyond the textures' reach is modelled\n"
+                 "(depth < 0, no force yet) when the tool closes it within this time at its\n"
+                 "twist, so that the operator's local model has the surface before the tool\n"
+                 "reaches it however late the model (0 = off; at most 2 mm ahead)")
+      ->check(CLI::Range(0.0, 10000.0))
+      ->capture_default_str();
   app.add_option("--pd-backend", pd_backend,
                  "where the texture penetration depth runs: cpu (software rasterizer), gpu\n"
                  "(headless EGL, OpenGL ES 3.1; Mesa llvmpipe when there is no GPU), or auto (a\n"
@@ -295,6 +303,7 @@ int main(int argc, char** argv) {
     config.pipeline.grazing_guard = !no_grazing_guard;
     config.pipeline.kink_planes = !no_kink_planes;
     config.pipeline.refine_depth = refine_depth;
+    config.pipeline.speculative_lead_s = speculative_lead_ms * 1e-3;
     if (config.pipeline.rotation_gradient != ht::RotationGradient::kRenderedSamples) {
       if (config.pd_backend == ht::PdBackendChoice::kGpu) {
         throw std::invalid_argument("--rotation-gradient " + rotation_gradient +

@@ -262,7 +262,8 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     if (config.animate) config.animate(static_cast<double>(t_step - start_ns) * 1e-9);
     StepTimings timings;
     wire::ContactModelMessage out;
-    out.model = pipeline->Step(X_WT, session.latest_tool_state_seq(), timings);
+    out.model = pipeline->Step(X_WT, session.latest_tool_state_seq(), timings,
+                               session.latest_tool_state().V_WT_W);
     session.SteppedAt(X_WT);
     if (pipeline->backend_failures() == 1 && !reported_fallback) {
       reported_fallback = true;
@@ -328,6 +329,8 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   }
   s["grazing_dropped_contacts"] = pipeline->step_faults().grazing_dropped;
   s["unreachable_pairs_dropped"] = pipeline->step_faults().unreachable_pairs;
+  s["speculative_pairs"] = pipeline->step_faults().speculative_pairs;
+  s["speculative_lead_ms"] = config.pipeline.speculative_lead_s * 1e3;
   s["triangle_lists_overflowed"] = pipeline->step_faults().triangle_lists_overflowed;
   s["region_windows"] = pipeline->step_faults().region_windows;
   s["pd_backend"] = {{"requested", ToString(config.pd_backend)},

@@ -134,6 +134,21 @@ struct PipelineOptions {
   bool refine_depth = false;
   /// How stage 5b refines (steps, sub-samples, search floor).
   DepthRefinementOptions depth_refinement;
+  /// Speculative contacts (a lead time, s; 0 = off): a separated leaf pair farther apart than
+  /// its local texture reach is kept (not dropped by drop_unreachable_pairs) when the tool's
+  /// twist given to Step closes it within this time, i.e. when
+  ///   signed distance ≤ reach + min(max_speculative_margin_m, lead · closing speed),
+  /// closing speed = −(v + ω × (p_A − p_WT))·n at the pair's tool witness point p_A (m/s, W).
+  /// The contact it starts has δ0 < 0 (separated) and pushes with nothing until the operator's
+  /// tool closes the gap on its local model: the surface is in the model before the tool
+  /// reaches it, however late the model. Without it a model made a few milliseconds before an
+  /// impact had no contact, the tool went into the surface with no force until the next model,
+  /// and that model's spring gave back more energy than the press took (on fig75 with a 10 ms
+  /// remote step, a block bouncing by 1.7 mm; DESIGN.md §5). A tool at rest or sliding along a
+  /// surface (no closing speed) gets the contacts it got before.
+  double speculative_lead_s = 0.05;
+  /// Most speculative margin (m) beyond the texture reach, whatever the speed.
+  double max_speculative_margin_m = 2e-3;
 
   /// Throws std::invalid_argument naming a value out of range.
   void Validate() const;
@@ -187,8 +202,12 @@ class HapticTexturePipeline {
                         std::unique_ptr<PenetrationDepthBackend> backend = nullptr);
 
   /// Builds the contact model at tool pose X_WT (q0), tagging it with `tool_state_seq`.
-  /// A non-finite pose gives an empty model. Fills `timings`.
-  ContactModel Step(const RigidTransform& X_WT, std::uint64_t tool_state_seq, StepTimings& timings);
+  /// A non-finite pose gives an empty model. Fills `timings`. `V_WT_W` is the tool's twist
+  /// (linear velocity of T's origin, m/s, and angular velocity, rad/s, both along W), for the
+  /// speculative contacts (PipelineOptions::speculative_lead_s); zero (a tool at rest) or
+  /// non-finite gives none.
+  ContactModel Step(const RigidTransform& X_WT, std::uint64_t tool_state_seq, StepTimings& timings,
+                    const Twist& V_WT_W = {});
 
   /// Faults of the backend in use.
   const LinearizationFaults& faults() const noexcept { return backend_->faults(); }
@@ -201,6 +220,9 @@ class HapticTexturePipeline {
     /// Separated leaf pairs beyond their local texture reach, left out of clustering
     /// (PipelineOptions::drop_unreachable_pairs).
     std::int64_t unreachable_pairs = 0;
+    /// Separated leaf pairs beyond their local texture reach kept because the tool closes them
+    /// within the lead time (PipelineOptions::speculative_lead_s); not a fault, a count.
+    std::int64_t speculative_pairs = 0;
     /// Contact sides whose cluster's triangle list did not fit the pipeline's storage and were
     /// picked by window instead (PipelineOptions::cluster_triangles).
     std::int64_t triangle_lists_overflowed = 0;
@@ -247,7 +269,8 @@ class HapticTexturePipeline {
  private:
   /// Stages 1–3 for every touchable: appends to candidates_ (up to kMaxContacts) and fills the
   /// coarse counts and flags of `timings`.
-  void FindContactCandidates(const RigidTransform& X_WT, StepTimings& timings);
+  void FindContactCandidates(const RigidTransform& X_WT, const Twist& V_WT_W,
+                             StepTimings& timings);
   /// Stage 5: linearizes last_queries_[0, n) into last_results_ with the backend in use (the GPU
   /// backend takes one window size per batch: windows sized from their clusters go to it in one
   /// batch per size); when that
