@@ -8,7 +8,7 @@
 //
 // Usage: remote_step_benchmark [--scenes fig75,fig76,fig77,hammer_torus] [--poses N]
 //                              [--repeats R] [--grid N] [--threads T] [--path fast|reference]
-//                              [--refine-depth] [--texel-gradient] [--csv FILE]
+//                              [--no-refine-depth] [--texel-gradient] [--csv FILE]
 //                              [--cache-dir D]
 
 #include <CLI/CLI.hpp>
@@ -65,12 +65,12 @@ int main(int argc, char** argv) {
                  "cell's r x dδ/dx); warp and lever are approximations")
       ->check(CLI::IsMember({"rendered", "warp", "lever"}))
       ->capture_default_str();
-  bool refinement = false, texel_gradient = false;
-  app.add_flag("--refine-depth", refinement,
-               "stage 5b on: each contact's depth refined to the texture's full resolution");
+  bool no_refinement = false, texel_gradient = false;
+  app.add_flag("--no-refine-depth", no_refinement,
+               "stage 5b off: the grid's cell samples alone (by default each contact's depth is "
+               "refined to the texture's full resolution)");
   app.add_flag("--texel-gradient", texel_gradient,
-               "with --refine-depth: the gradient at texel-scale steps instead of the refined "
-               "samples' one-cell\n"
+               "stage 5b's gradient at texel-scale steps instead of the refined samples' one-cell\n"
                "secants");
   app.add_option("--csv", csv_path, "write one row per scene here");
   app.add_option("--cache-dir", cache_dir, "model cache folder")->capture_default_str();
@@ -109,7 +109,7 @@ int main(int argc, char** argv) {
     options.local_reach = local_reach;
     options.max_contacts = max_contacts;
     options.rotation_gradient = ht::ParseRotationGradient(rotation);
-    options.refine_depth = refinement;
+    options.refine_depth = !no_refinement;
     options.depth_refinement.texel_scale_gradient = texel_gradient;
     ht::HapticTexturePipeline pipeline(
         scene.haptic, options,

@@ -221,21 +221,21 @@ TEST_F(FrontierOutput, PipelineTruthOwnsItsPatchesAndItsErrorRecomputes) {
 TEST_F(FrontierOutput, FinerGridsAreCloserToTheTruthAndTheRefinedDepthIsNot) {
   const Table f = ReadCsv(dir_ + "/frontier.csv");
   const auto* def = Row(f, "fig75", "default");
+  const auto* grid = Row(f, "fig75", "grid_only");
   const auto* fine = Row(f, "fig75", "grid100");
   const auto* coarse = Row(f, "fig75", "grid16");
   const auto* untextured = Row(f, "fig75", "coarse_only");
-  const auto* refined = Row(f, "fig75", "refined_depth");
   const auto* refined16 = Row(f, "fig75", "grid16_refined");
-  ASSERT_TRUE(def && fine && coarse && untextured && refined && refined16);
+  ASSERT_TRUE(def && grid && fine && coarse && untextured && refined16);
   // The grid's δ error shrinks with its cell (it samples cell centres of a mip level of the
   // cell's size; the truth is exact).
-  EXPECT_LT(Num(*fine, "delta_err_p50_um"), Num(*def, "delta_err_p50_um"));
-  EXPECT_LT(Num(*def, "delta_err_p50_um"), Num(*coarse, "delta_err_p50_um"));
-  // Issue 32's refined δ converges as the texture does, not as the grid does: within a few
-  // micrometres at N = 50 and at N = 16 (1.7 µm at both in one run) where the grid alone is
-  // tens of micrometres low.
-  EXPECT_LT(Num(*refined, "delta_err_p50_um"), 0.5 * Num(*def, "delta_err_p50_um"));
-  EXPECT_LT(Num(*refined, "delta_err_p50_um"), 10.0);
+  EXPECT_LT(Num(*fine, "delta_err_p50_um"), Num(*grid, "delta_err_p50_um"));
+  EXPECT_LT(Num(*grid, "delta_err_p50_um"), Num(*coarse, "delta_err_p50_um"));
+  // Issue 32's refined δ (the default) converges as the texture does, not as the grid does:
+  // within a few micrometres at N = 50 and at N = 16 (1.7 µm at both in one run) where the grid
+  // alone is tens of micrometres low.
+  EXPECT_LT(Num(*def, "delta_err_p50_um"), 0.5 * Num(*grid, "delta_err_p50_um"));
+  EXPECT_LT(Num(*def, "delta_err_p50_um"), 10.0);
   EXPECT_LT(Num(*refined16, "delta_err_p50_um"), 10.0);
   EXPECT_LT(Num(*refined16, "delta_err_p50_um"), Num(*coarse, "delta_err_p50_um"));
   // The force error orders the coarse grid behind the default with a wide margin (0.87–0.98

@@ -483,6 +483,16 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
   if (!options_.texel_scale_gradient) {
     LinearizationFaults faults;
     lin.gradient = AssembleLinearization(w, samples, lin.stiffness_n_per_m, faults).gradient;
+    // Without rotated samples (RotationGradient::kContactLever: only the base pose is drawn) the
+    // rotation part stays the lever's, now at the refined deepest point: (r × ∂δ/∂x).
+    bool rotations_drawn = true;
+    for (int k = 5; k < kGradientSamples; ++k) {
+      rotations_drawn &= samples[static_cast<std::size_t>(k)].cell >= 0;
+    }
+    if (!rotations_drawn) {
+      lin.gradient.d_rotation_W =
+          glm::cross(point_W - X_WT.translation, lin.gradient.d_translation_W);
+    }
   }
   return true;
 }

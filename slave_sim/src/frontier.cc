@@ -44,10 +44,12 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
   std::vector<FrontierSetting> s;
   const FrontierSetting base{"default"};
   s.push_back(base);
+  // The grid alone at N (stage 5b off): how the grid's own error goes with its cell.
   const auto grid = [&](int n) {
     FrontierSetting x = base;
     x.name = "grid" + std::to_string(n);
     x.grid = n;
+    x.refine_depth = false;
     s.push_back(x);
   };
   const auto texture = [&](int n) {
@@ -69,15 +71,17 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     x.depth_bits = bits;
     s.push_back(x);
   };
+  // Issue 32: the default refines δ (stage 5b); "grid_only" is the grid's cell samples at the
+  // default N, the reference it refines.
+  FrontierSetting grid_only = base;
+  grid_only.name = "grid_only";
+  grid_only.refine_depth = false;
+  s.push_back(grid_only);
   for (int n : {16, 25, 100}) grid(n);
   if (quick) {
     texture(256);
     coarse(2.0, "coarse2x");
-    FrontierSetting refined = base;  // issue 32: stage 5b, at N = 50 and 16
-    refined.name = "refined_depth";
-    refined.refine_depth = true;
-    s.push_back(refined);
-    FrontierSetting refined16 = refined;
+    FrontierSetting refined16 = base;  // issue 32: stage 5b at N = 16
     refined16.name = "grid16_refined";
     refined16.grid = 16;
     s.push_back(refined16);
@@ -171,11 +175,8 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     keep_secant.name = "kink_planes_keep_secant";
     keep_secant.kink_planes_own_slope = false;
     s.push_back(keep_secant);
-    // Issue 32: stage 5b, the refined depth, and its variants.
-    FrontierSetting refined = base;
-    refined.name = "refined_depth";
-    refined.refine_depth = true;
-    s.push_back(refined);
+    // Issue 32: stage 5b's variants (the default refines).
+    const FrontierSetting& refined = base;
     // The refined maximum's gradient at texel-scale steps instead of the refined samples'
     // one-cell secants: 2 texels (the option's default), and 1, 4 and 8.
     FrontierSetting texel_gradient = refined;
@@ -210,6 +211,7 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     FrontierSetting stop2 = at_witness;
     stop2.name = "witness_windows_one_plane";
     stop2.kink_planes = false;
+    stop2.refine_depth = false;
     s.push_back(stop2);
     FrontierSetting before = no_guard;
     before.name = "issue31_before";
@@ -219,6 +221,7 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     before.cluster_triangles = false;
     before.whole_model_region_windows = false;
     before.kink_planes = false;
+    before.refine_depth = false;
     s.push_back(before);
     // Every speed option at once: the warped rotations, local reach, at most 7 contacts, two
     // threads.

@@ -31,7 +31,7 @@
 //    carries it to: the derivative itself (tests/depth_refinement_test.cc: a sinusoid under a
 //    paraboloid, where the cell secant at N = 16 even has the wrong sign), but on the frontier
 //    no closer to the pipeline truth on the seed scenes (docs/frontier/issue32). ∂δ/∂x_n = −1.
-// PipelineOptions::refine_depth turns it on; off (the default) is the grid alone, the reference
+// PipelineOptions::refine_depth turns it on (the default); off is the grid alone, the reference
 // (DESIGN.md §4 says why it is not the default yet).
 
 #include <cstdint>

@@ -127,11 +127,12 @@ struct PipelineOptions {
   /// is not on is added (placed on the frontier as "kink_planes_keep_secant").
   bool kink_planes_own_slope = true;
   /// Stage 5b (issue 32): δ refined from the grid's cell samples to the finest texture level
-  /// (DepthRefiner, depth_refinement.h), after either backend. Off by default: on the frontier it
-  /// reads δ within a few micrometres and lowers the force error, but in the closed loop on fig75
-  /// it drives the resting block into a 48 Hz bounce through the kink planes (issue 32's note);
-  /// `slave_sim --refine-depth`, the frontier's "refined_depth".
-  bool refine_depth = false;
+  /// (DepthRefiner, depth_refinement.h), after either backend. On: on the frontier it reads δ
+  /// within a few micrometres where the grid alone is tens low, and lowers the force error. Off
+  /// (`slave_sim --no-refine-depth`, the frontier's "grid_only"): the grid's cell samples, the
+  /// reference for parity. It was off at first because a resting fig75 block bounced with it in
+  /// the closed loop; that came from the tool-state deadband's floor (docs/deadband.md).
+  bool refine_depth = true;
   /// How stage 5b refines (steps, sub-samples, search floor).
   DepthRefinementOptions depth_refinement;
   /// Speculative contacts (a lead time, s; 0 = off): a separated leaf pair farther apart than

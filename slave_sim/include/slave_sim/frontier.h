@@ -69,8 +69,9 @@ struct FrontierSetting {
   bool kink_planes = true;
   /// PipelineOptions::kink_planes_own_slope ("kink_planes_keep_secant" turns it off).
   bool kink_planes_own_slope = true;
-  /// PipelineOptions::refine_depth ("refined_depth" and the "*refined*" settings turn it on).
-  bool refine_depth = false;
+  /// PipelineOptions::refine_depth (on; "grid_only" and the grid-size settings "gridN" turn it
+  /// off, the "gridN_refined" settings keep it).
+  bool refine_depth = true;
   /// PipelineOptions::depth_refinement.gradient_step_texels (0: the default).
   double gradient_step_texels = 0.0;
   /// PipelineOptions::depth_refinement.texel_scale_gradient ("texel_scale_gradient" and
