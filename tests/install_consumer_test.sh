@@ -16,6 +16,19 @@ for f in bin/slave_sim bin/master_station bin/ht_relay bin/speed_error_frontier 
   [ -e "$out/prefix/$f" ] || { echo "install: $f missing"; exit 1; }
 done
 "$out/prefix/bin/slave_sim" --help > /dev/null
+# The installed units (issue 35): ExecStart names the installed binaries (not /usr/local/bin),
+# and systemd-analyze finds nothing to say about them: no unknown key, no missing executable.
+for unit in haptic-slave-sim haptic-master-station; do
+  file="$out/prefix/lib/systemd/system/$unit.service"
+  grep -q "^ExecStart=$out/prefix/bin/" "$file" || {
+    echo "install: $unit.service does not start $out/prefix/bin/..."; grep ExecStart "$file"; exit 1; }
+  if command -v systemd-analyze > /dev/null; then
+    said="$(systemd-analyze verify "$file" 2>&1)" || { echo "$said"; exit 1; }
+    [ -z "$said" ] || { echo "systemd-analyze verify $unit.service: $said"; exit 1; }
+  else
+    echo "install_consumer_test: systemd-analyze not found; unit files not verified"
+  fi
+done
 cmake -S "$src/examples/find_package_consumer" -B "$out/consumer" \
   -DCMAKE_PREFIX_PATH="$out/prefix" > "$out/consumer.log"
 cmake --build "$out/consumer" -j2 >> "$out/consumer.log"

@@ -316,6 +316,11 @@ TEST_F(SceneBuildTest, BadDescriptionsAreRefusedNamingTheFileAndTheKey) {
       {R"({"scene": "s.glb", "colour": 1})", "unknown key 'colour'"},
       {R"({"nodes": {}})", "no \"scene\""},
       {R"({"scene": "s.glb",)", "not valid JSON"},
+      {R"({"scene": "s.glb", "units": "furlong"})", "units must be one of m, cm, mm, in, ft"},
+      {R"({"scene": "s.glb", "scale": 0})", "scale must be a number > 0"},
+      {R"({"scene": "s.glb", "scale": "mm"})", "scale must be a number > 0"},
+      {R"({"scene": "s.glb", "scale": 0.001, "units": "mm"})", "not both"},
+      {R"({"scene": "s.glb", "units": "mm", "scale": 0.001})", "not both"},
   };
   // Deeply nested JSON: refused before the (recursive) parser sees it, not a stack overflow.
   const std::string deep_text =
@@ -347,6 +352,68 @@ TEST_F(SceneBuildTest, BadDescriptionsAreRefusedNamingTheFileAndTheKey) {
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("'ceiling'"), std::string::npos) << e.what();
   }
+}
+
+// Issue 35: a file authored in millimetres (a 60 mm slab written as 60 units, 150 units off the
+// origin) is a 60 m slab until its description says "units": "mm"; then the scene is the one
+// written in metres, node for node, and nothing warns. Unnamed nodes are called by their mesh's
+// name or "#index".
+TEST_F(SceneBuildTest, UnitsScaleAFileInMillimetresToTheSceneInMetres) {
+  const TriangleMesh slab_m = RidgedSlab(0.03, 0.03, 0.005, 10);
+  TriangleMesh slab_mm = slab_m;
+  for (glm::dvec3& p : slab_mm.vertices) p *= 1000.0;
+  WriteGlb((dir_ / "m.glb").string(),
+           {{"slab", slab_m, glm::translate(glm::dmat4(1.0), glm::dvec3(0.15, 0, 0)), ""},
+            {"", slab_m, glm::translate(glm::dmat4(1.0), glm::dvec3(0, 0, 0.15)), ""}});
+  WriteGlb((dir_ / "mm.glb").string(),
+           {{"slab", slab_mm, glm::translate(glm::dmat4(1.0), glm::dvec3(150, 0, 0)), ""},
+            {"", slab_mm, glm::translate(glm::dmat4(1.0), glm::dvec3(0, 0, 150)), ""}});
+  SceneDescription m = SceneDescription::ForGltf((dir_ / "m.glb").string());
+  m.defaults.texture_size = 128;
+  m.defaults.coarse_triangles = 50;
+  const BuiltScene in_m = BuildScene(m, HapticModelCache(""));
+  EXPECT_TRUE(in_m.warnings.empty());
+  SceneDescription raw = SceneDescription::ForGltf((dir_ / "mm.glb").string());
+  raw.defaults = m.defaults;
+  const BuiltScene unscaled = BuildScene(raw, HapticModelCache(""));
+  ASSERT_EQ(unscaled.warnings.size(), 1u);
+  EXPECT_NE(unscaled.warnings[0].find("larger than a desk"), std::string::npos)
+      << unscaled.warnings[0];
+  EXPECT_NE(unscaled.warnings[0].find("\"units\": \"mm\""), std::string::npos);
+  const std::string desc = Write("mm.json", R"({"scene": "mm.glb", "units": "mm",
+    "defaults": {"texture_size": 128, "coarse_triangles": 50}})");
+  const BuiltScene in_mm = BuildScene(LoadSceneInput(desc), HapticModelCache(""));
+  EXPECT_DOUBLE_EQ(in_mm.description.scale, 0.001);
+  EXPECT_TRUE(in_mm.warnings.empty()) << in_mm.warnings[0];
+  ASSERT_EQ(in_mm.haptic.touchables.size(), 2u);
+  for (std::size_t k = 0; k < 2; ++k) {
+    EXPECT_LT(glm::length(in_mm.haptic.touchables[k].X_WO.translation -
+                          in_m.haptic.touchables[k].X_WO.translation),
+              1e-9);
+    // The same model, to float32 rounding of the file (the decimation may break ties apart):
+    // the same bounding box.
+    const auto box = [](const HapticModel& model) {
+      glm::dvec3 lo{1e9}, hi{-1e9};
+      for (const glm::dvec3& p : model.vertices_O) {
+        lo = glm::min(lo, p);
+        hi = glm::max(hi, p);
+      }
+      return std::pair{lo, hi};
+    };
+    const auto [lo_mm, hi_mm] = box(*in_mm.haptic.touchables[k].model);
+    const auto [lo_m, hi_m] = box(*in_m.haptic.touchables[k].model);
+    EXPECT_LT(glm::length(lo_mm - lo_m), 1e-6);
+    EXPECT_LT(glm::length(hi_mm - hi_m), 1e-6);
+  }
+  EXPECT_LT(glm::length(in_mm.haptic.X_WT_home.translation - in_m.haptic.X_WT_home.translation),
+            1e-6);
+  EXPECT_EQ(in_mm.objects[0].label, "slab");
+  EXPECT_EQ(in_mm.objects[1].label, "#1");  // no node name, no mesh name
+  const nlohmann::json j = InspectJson(in_mm);
+  EXPECT_EQ(j["objects"][1]["name"], in_mm.objects[1].label);
+  EXPECT_EQ(j["objects"][1]["node_name"], "");
+  EXPECT_EQ(j["scale"], 0.001);
+  EXPECT_GT(j["objects"][0]["bake_texels"].get<double>(), 0.0);
 }
 
 TEST_F(SceneBuildTest, CacheMakesTheSecondBuildOfASceneComeFromDisk) {

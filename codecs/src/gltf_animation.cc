@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <glm/gtc/quaternion.hpp>
 #include <map>
+#include <stdexcept>
 #include <string>
 #include <utility>
 #include <vector>
@@ -376,6 +377,43 @@ void PoseInstancesAt(const GltfScene& scene, int animation, double time_s, bool 
     }
   }
   X.resize(n_inst);
+}
+
+void ScaleGltfScene(GltfScene& scene, double factor) {
+  if (!(factor > 0.0) || !std::isfinite(factor)) {
+    throw std::invalid_argument("scene scale must be a finite number > 0, got " +
+                                std::to_string(factor));
+  }
+  if (factor == 1.0) return;
+  const glm::dmat4 S = glm::dmat4(glm::dmat3(factor));
+  std::vector<bool> root(scene.nodes.size(), false);
+  for (std::size_t v = 0; v < scene.nodes.size(); ++v) {
+    GltfNode& n = scene.nodes[v];
+    if (n.parent >= 0) continue;
+    root[v] = true;
+    n.X_PN = S * n.X_PN;
+    if (!n.has_matrix) {
+      // S·T·R·Sc = T(f·t)·R·(f·Sc): a uniform scale commutes with the rotation.
+      n.translation *= factor;
+      n.scale *= factor;
+    }
+  }
+  for (GltfMeshInstance& inst : scene.instances) inst.X_WN = S * inst.X_WN;
+  for (GltfAnimation& a : scene.animations) {
+    for (GltfAnimationChannel& c : a.channels) {
+      const bool of_root = c.scene_node >= 0 &&
+                           static_cast<std::size_t>(c.scene_node) < root.size() &&
+                           root[static_cast<std::size_t>(c.scene_node)];
+      if (!of_root || c.path == GltfAnimationChannel::Path::kRotation) continue;
+      for (glm::dvec4& value : c.values) {
+        value.x *= factor;
+        value.y *= factor;
+        value.z *= factor;
+      }
+    }
+  }
+  scene.camera.znear_m *= factor;
+  scene.camera.zfar_m *= factor;
 }
 
 std::vector<glm::dmat4> PoseInstancesAt(const GltfScene& scene, int animation, double time_s,

@@ -19,6 +19,7 @@
 #include "master_station/replay_device.h"
 #include "master_station/simulated_operator.h"
 #include "master_station/spacemouse.h"
+#include "transport/command_line.h"
 
 namespace {
 
@@ -263,7 +264,7 @@ int main(int argc, char** argv) {
   merge->add_option("remote", merge_remote, "remote_summary.json from slave_sim")->required();
   std::string merge_relay;
   merge->add_option("--relay", merge_relay, "relay_stats.json from ht_relay, kept under \"relay\"");
-  CLI11_PARSE(app, argc, argv);
+  if (const auto rc = ht::ParseCommandLine(app, argc, argv, "master_station")) return *rc;
 
   try {
     if (*merge) return MergeSummary(merge_summary, merge_remote, merge_relay);

@@ -22,6 +22,7 @@
 #include "slave_sim/remote_node.h"
 #include "slave_sim/scene_build.h"
 #include "slave_sim/watched_scene.h"
+#include "transport/command_line.h"
 
 namespace {
 std::atomic<bool> g_stop{false};
@@ -211,7 +212,7 @@ int main(int argc, char** argv) {
   seed_models->add_option("--model", seed_names, "only these models (repeatable)");
   seed_models->add_flag("--quiet", quiet, "no progress lines");
   app.add_flag("--quiet", quiet, "no progress lines");
-  CLI11_PARSE(app, argc, argv);
+  if (const auto rc = ht::ParseCommandLine(app, argc, argv, "slave_sim")) return *rc;
   if (max_window_option->count() == 0) {
     config.pipeline.max_window_extent_m =
         ht::kDefaultMaxWindowPerWindow * config.pipeline.window_extent_m;
@@ -264,6 +265,9 @@ int main(int argc, char** argv) {
                            node.c_str());
             }
           });
+      for (const std::string& w : built.warnings) {
+        std::fprintf(stderr, "[inspect] warning: %s\n", w.c_str());
+      }
       nlohmann::json out = ht::InspectJson(built);
       struct rusage usage {};
       getrusage(RUSAGE_SELF, &usage);
@@ -361,8 +365,7 @@ int main(int argc, char** argv) {
           scene, scene_tool, ht::HapticModelCache(scene_cache_dir),
           [&](const std::string& node, int index, int count) {
             if (!quiet) {
-              std::printf("[slave] model %d/%d: node '%s'\n", index, count,
-                          node.empty() ? "(unnamed)" : node.c_str());
+              std::printf("[slave] model %d/%d: node '%s'\n", index, count, node.c_str());
             }
           });
       // The scene as a scene for display: its graph, each mesh once in its own frame, the
@@ -387,6 +390,9 @@ int main(int argc, char** argv) {
         };
       }
       const ht::BuiltScene& built = file_scene->built();
+      for (const std::string& w : built.warnings) {
+        std::fprintf(stderr, "[slave] warning: %s\n", w.c_str());
+      }
       const ht::RigidTransform& home = built.haptic.X_WT_home;
       std::printf(
           "[slave] scene file %s: %zu touchable(s), tool %s; tool home position in W %.4f,%.4f,"

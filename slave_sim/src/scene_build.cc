@@ -165,9 +165,28 @@ SceneDescription SceneDescription::LoadFile(const std::string& path) {
     } else if (key == "tool") {
       if (!value.is_string()) throw std::runtime_error(path + ": tool must be a node name");
       d.tool_node = value.get<std::string>();
+    } else if (key == "scale") {
+      if (j.contains("units")) {
+        throw std::runtime_error(path + ": give \"scale\" or \"units\", not both");
+      }
+      if (!value.is_number() || !(value.get<double>() > 0.0) ||
+          !std::isfinite(value.get<double>())) {
+        throw std::runtime_error(path +
+                                 ": scale must be a number > 0 (metres per unit of the glTF "
+                                 "file: 0.001 for a file in millimetres)");
+      }
+      d.scale = value.get<double>();
+    } else if (key == "units") {
+      static const std::map<std::string, double> kUnits = {
+          {"m", 1.0}, {"cm", 0.01}, {"mm", 0.001}, {"in", 0.0254}, {"ft", 0.3048}};
+      const auto it = value.is_string() ? kUnits.find(value.get<std::string>()) : kUnits.end();
+      if (it == kUnits.end()) {
+        throw std::runtime_error(path + ": units must be one of m, cm, mm, in, ft");
+      }
+      d.scale = it->second;
     } else {
       throw std::runtime_error(path + ": unknown key '" + key +
-                               "' (known: scene, defaults, nodes, tool)");
+                               "' (known: scene, units, scale, defaults, nodes, tool)");
     }
   }
   if (!have_scene) throw std::runtime_error(path + ": no \"scene\" (the glTF file) given");
@@ -202,6 +221,7 @@ BuiltScene BuildScene(const SceneDescription& description, const HapticModelCach
   BuiltScene scene;
   scene.description = description;
   scene.gltf = LoadGltfScene(description.gltf_path);
+  ScaleGltfScene(scene.gltf, description.scale);
   scene.load_s = Seconds(start);
   const std::string& file = description.gltf_path;
 
@@ -228,6 +248,10 @@ BuiltScene BuildScene(const SceneDescription& description, const HapticModelCach
     obj.node_name = inst.node_name;
     obj.node_index = inst.node_index;
     obj.mesh = inst.mesh;
+    const std::string& mesh_name = scene.gltf.meshes[static_cast<std::size_t>(inst.mesh)].name;
+    obj.label = !inst.node_name.empty() ? inst.node_name
+                : !mesh_name.empty()    ? mesh_name
+                                        : "#" + std::to_string(inst.node_index);
     obj.spec = description.defaults;
     for (const auto& [key, spec] : description.nodes) {
       if (KeyMatches(key, inst)) obj.spec = spec;
@@ -262,9 +286,8 @@ BuiltScene BuildScene(const SceneDescription& description, const HapticModelCach
     obj.X_WO.translation = glm::dvec3(inst.X_WN[3]);
     obj.rest_residual = residual;
     if (obj.spec.role == NodeRole::kDisplay) continue;
-    if (progress) progress(obj.node_name, ++built, to_build);
-    const std::string label =
-        obj.node_name.empty() ? "#" + std::to_string(obj.node_index) : obj.node_name;
+    if (progress) progress(obj.label, ++built, to_build);
+    const std::string& label = obj.label;
     if (scene.gltf.meshes[inst.mesh].mesh_N.triangles.empty()) {
       scene.notes.push_back("node '" + label + "' has no triangles: shown only (display)");
       obj.spec.role = NodeRole::kDisplay;
@@ -338,6 +361,43 @@ BuiltScene BuildScene(const SceneDescription& description, const HapticModelCach
     }
   }
 
+  // A scene larger than a desk is most often a file in other units than glTF's metres (CAD
+  // exports in millimetres): say so, and how to scale it.
+  if (!scene.haptic.touchables.empty()) {
+    const glm::dvec3 span = hi - lo;
+    const double largest = std::max({span.x, span.y, span.z});
+    if (largest > kLargestDeskSceneM) {
+      char what[256];
+      std::snprintf(what, sizeof what,
+                    "the touchable objects span %.3g m, larger than a desk (%.0f m): if the file "
+                    "is in millimetres, give it in a scene description with \"units\": \"mm\" "
+                    "(or \"scale\"); scale in use %.6g",
+                    largest, kLargestDeskSceneM, description.scale);
+      scene.notes.push_back(what);
+      scene.warnings.push_back(what);
+    }
+  }
+  for (const SceneNode& obj : scene.objects) {
+    if (!obj.model || obj.spec.role == NodeRole::kDisplay) continue;
+    glm::dvec3 a{std::numeric_limits<double>::max()}, b{-std::numeric_limits<double>::max()};
+    for (const glm::dvec3& p : obj.model->vertices_O) {
+      a = glm::min(a, p);
+      b = glm::max(b, p);
+    }
+    const double size = glm::length(b - a);
+    const double err = obj.report.bake.max_bake_error_m;
+    if (size > 0.0 && err > kLargeBakeErrorFraction * size) {
+      char what[320];
+      std::snprintf(what, sizeof what,
+                    "node '%s': the texture bake's largest error, %.3g m, is %.0f %% of the "
+                    "object's size (%.3g m): its coarse mesh misses the surface there (more "
+                    "\"coarse_triangles\" or a larger \"texture_size\" in a scene description)",
+                    obj.label.c_str(), err, 100.0 * err / size, size);
+      scene.notes.push_back(what);
+      scene.warnings.push_back(what);
+    }
+  }
+
   scene.haptic.name = std::filesystem::path(file).stem().string();
   RigidTransform home;
   if (!scene.haptic.tool) {
@@ -382,6 +442,8 @@ nlohmann::json InspectJson(const BuiltScene& scene) {
   using nlohmann::json;
   json out;
   out["file"] = scene.description.gltf_path;
+  out["scale"] = scene.description.scale;
+  out["warnings"] = scene.warnings;
   out["load_s"] = scene.load_s;
   out["total_s"] = scene.total_s;
   out["tool"] = scene.builtin_probe ? json("built-in probe: " + scene.haptic.tool->name)
@@ -389,7 +451,8 @@ nlohmann::json InspectJson(const BuiltScene& scene) {
   json objects = json::array();
   for (const SceneNode& obj : scene.objects) {
     json o;
-    o["name"] = obj.node_name;
+    o["name"] = obj.label;  // the node's name, else its mesh's, else "#index"
+    o["node_name"] = obj.node_name;
     o["node_index"] = obj.node_index;
     o["role"] = NodeRoleName(obj.spec.role);
     o["full_triangles"] = obj.full_triangles;
@@ -405,6 +468,7 @@ nlohmann::json InspectJson(const BuiltScene& scene) {
       o["bake_max_abs_height_m"] = r.bake.max_abs_height_m;
       o["outward_reach_m"] = r.outward_reach_m;
       o["bake_misses"] = r.bake.misses;
+      o["bake_texels"] = r.bake.texels_baked;
       o["bake_clamped"] = r.bake.clamped;
       // What the texture's size buys (issue 32): the heights a texture of half, a quarter and
       // an eighth the side would lose (largest and RMS: the largest is dominated by the atlas'

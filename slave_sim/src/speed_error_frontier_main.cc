@@ -10,6 +10,7 @@
 #include "haptic_core/model_build/haptic_model_build.h"
 #include "slave_sim/benchmark_scenes.h"
 #include "slave_sim/frontier.h"
+#include "transport/command_line.h"
 
 #ifndef HT_PLOT_FRONTIER_SCRIPT
 #define HT_PLOT_FRONTIER_SCRIPT ""
@@ -59,12 +60,7 @@ int main(int argc, char** argv) {
                  "ground truth: converged when doubling M changes delta by less than this (µm)")
       ->transform([](std::string v) { return std::to_string(std::stod(v) * 1e-6); });
   app.add_flag("--quiet", quiet, "no progress lines");
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    const int rc = app.exit(e);
-    return rc == 0 ? 0 : 2;
-  }
+  if (const auto rc = ht::ParseCommandLine(app, argc, argv, "speed_error_frontier")) return *rc;
   std::string command = "speed_error_frontier";
   for (int i = 1; i < argc; ++i) command += std::string(" ") + argv[i];
   try {

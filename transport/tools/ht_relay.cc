@@ -11,6 +11,7 @@
 #include <exception>
 #include <string>
 
+#include "transport/command_line.h"
 #include "transport/impairment.h"
 
 namespace {
@@ -85,11 +86,7 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   app.add_flag("--quiet", quiet, "no progress lines");
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? 0 : 2;  // --help is not an error
-  }
+  if (const auto rc = ht::ParseCommandLine(app, argc, argv, "ht_relay")) return *rc;
 
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);

@@ -285,6 +285,14 @@ std::vector<glm::dmat4> PoseInstancesAt(const GltfScene& scene, int animation, d
 void PoseInstancesAt(const GltfScene& scene, int animation, double time_s, bool loop,
                      std::vector<glm::dmat4>* X_WN);
 
+/// Scales the whole scene by `factor` about W's origin (a file authored in millimetres takes
+/// 0.001): the roots' rest poses (their `matrix`, or translation and scale), the animations'
+/// translation and scale keys of root nodes, and every instance's X_WN, so that the rest poses,
+/// PoseInstancesAt() and AnimatedNodePosesAt() all give the scaled scene. Meshes stay in their
+/// node frames (the roots' scale carries them). The camera's near and far planes scale too.
+/// Throws std::invalid_argument unless factor is finite and > 0.
+void ScaleGltfScene(GltfScene& scene, double factor);
+
 /// The local pose of one node entry (in its parent frame P) as an animation sets it.
 struct GltfNodePose {
   /// Index into GltfScene::nodes.

@@ -55,11 +55,16 @@ struct SceneDescription {
   std::vector<std::pair<std::string, NodeSpec>> nodes;
   /// The tool node (name or "#index"); "" means the built-in probe (a small ridged block).
   std::string tool_node;
+  /// The glTF file's length unit in metres (ScaleGltfScene): glTF is in metres, but many CAD
+  /// exports are in millimetres. From the description's "scale" (a number > 0) or "units"
+  /// ("m", "cm", "mm", "in", "ft"), at most one of them; 1 by default.
+  double scale = 1.0;
 
   /// Reads a description file. Throws std::runtime_error starting with `path` when the file
   /// cannot be read, is not JSON, has an unknown key, a role that is not tool/touchable/display,
-  /// a non-positive stiffness, a coarse target below 4, or a texture size that is not a power of
-  /// two in [16, 8192].
+  /// a non-positive stiffness, a coarse target below 4, a texture size that is not a power of
+  /// two in [16, 8192], a scale that is not a finite number > 0, units it does not know, or both
+  /// scale and units.
   static SceneDescription LoadFile(const std::string& path);
 
   /// The description of a plain glTF file: every mesh node touchable with `defaults`, built-in
@@ -75,6 +80,8 @@ SceneDescription LoadSceneInput(const std::string& path, const std::string& tool
 struct SceneNode {
   std::string node_name;
   int node_index = -1;
+  /// What messages call the node: its name, else its mesh's name, else "#<node index>".
+  std::string label;
   /// Index into GltfScene::meshes.
   int mesh = -1;
   NodeSpec spec;
@@ -107,15 +114,25 @@ struct BuiltScene {
   /// True when the tool is the built-in probe.
   bool builtin_probe = true;
   /// What the build decided on its own: nodes shown only because they have no triangles or a
-  /// zero (singular) scale.
+  /// zero (singular) scale; and the warnings below.
   std::vector<std::string> notes;
+  /// What a user should look at (also in notes): touchables spanning more than
+  /// kLargestDeskSceneM (most often a file in millimetres), or a node whose bake's largest error
+  /// is above kLargeBakeErrorFraction of its size. slave_sim prints them at start.
+  std::vector<std::string> warnings;
   /// Time to load the glTF file (s) and for the whole build (s).
   double load_s = 0.0;
   double total_s = 0.0;
 };
 
+/// A scene whose touchable objects span more than this (m) gets a warning (BuiltScene::warnings).
+inline constexpr double kLargestDeskSceneM = 2.0;
+/// A node whose bake's largest error exceeds this fraction of its size (its coarse mesh's
+/// bounding-box diagonal) gets a warning.
+inline constexpr double kLargeBakeErrorFraction = 0.05;
+
 /// Progress callback: called before each model is built or loaded from the cache, with the
-/// object's node name, its position among the models to build (from 1) and their count.
+/// object's label (SceneNode::label), its position among the models to build (from 1) and their count.
 using SceneBuildProgress = std::function<void(const std::string& node, int index, int count)>;
 
 /// Loads `description.gltf_path` and builds the haptic model of every tool and touchable node

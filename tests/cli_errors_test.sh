@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# Command-line errors (issue 35): every program answers a bad argument with one line
+# "program: error: ..." on stderr and exit status 2, before it starts anything; a missing key file
+# says how to make one. Usage: tests/cli_errors_test.sh SOURCE_DIR BUILD_DIR
+set -uo pipefail
+src="${1:?source dir}"; build="${2:?build dir}"
+tmp="$(mktemp -d)"; trap 'rm -rf "$tmp"' EXIT
+fail=0
+# expect NAME EXPECTED_SUBSTRING COMMAND...
+expect() {
+  local name="$1" want="$2"; shift 2
+  "$@" > "$tmp/out" 2> "$tmp/err"; local rc=$?
+  local lines; lines=$(grep -c '' "$tmp/err")
+  if [ "$rc" -ne 2 ] || [ "$lines" -ne 1 ] || ! grep -q "^$name: error: " "$tmp/err" ||
+     ! grep -qF -- "$want" "$tmp/err"; then
+    echo "FAIL: $* -> exit $rc, $lines line(s) on stderr (want 2, 1 line '$name: error: ...$want...'):"
+    cat "$tmp/err"; fail=1
+  else
+    echo "ok: $* -> $(cat "$tmp/err")"
+  fi
+}
+expect slave_sim "--grid" "$build/slave_sim/slave_sim" --grid 0
+expect slave_sim "keygen" "$build/slave_sim/slave_sim" --key "$tmp/no_such.key"
+expect master_station "keygen" "$build/master_station/master_station" --key "$tmp/no_such.key"
+expect master_station "--rate" "$build/master_station/master_station" --rate 5
+expect ht_relay "--listen" "$build/transport/ht_relay" --listen
+expect speed_error_frontier "--poses" "$build/slave_sim/speed_error_frontier" --poses 0
+# run-loopback checks its own numbers before it starts slave_sim (no slave.log is written).
+expect run-loopback "--duration" "$src/deploy/run-loopback" --build-dir "$build" --out "$tmp/lb" --duration abc
+[ ! -e "$tmp/lb/slave.log" ] || { echo "FAIL: run-loopback started slave_sim before checking --duration"; fail=1; }
+expect run-loopback "--experiment" "$src/deploy/run-loopback" --build-dir "$build" --out "$tmp/lb" --experiment nope
+exit $fail
