@@ -377,8 +377,10 @@ BuiltScene BuildScene(const SceneDescription& description, const HapticModelCach
       scene.warnings.push_back(what);
     }
   }
+  std::vector<const HapticModel*> warned;  // instances share a model: one warning per model
   for (const SceneNode& obj : scene.objects) {
     if (!obj.model || obj.spec.role == NodeRole::kDisplay) continue;
+    if (std::find(warned.begin(), warned.end(), obj.model.get()) != warned.end()) continue;
     glm::dvec3 a{std::numeric_limits<double>::max()}, b{-std::numeric_limits<double>::max()};
     for (const glm::dvec3& p : obj.model->vertices_O) {
       a = glm::min(a, p);
@@ -395,6 +397,7 @@ BuiltScene BuildScene(const SceneDescription& description, const HapticModelCach
                     obj.label.c_str(), err, 100.0 * err / size, size);
       scene.notes.push_back(what);
       scene.warnings.push_back(what);
+      warned.push_back(obj.model.get());
     }
   }
 
