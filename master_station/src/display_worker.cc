@@ -228,7 +228,7 @@ void DisplayWorker::Run(const std::atomic<bool>& stop) {
       }
       frame.arrow_m_per_n = arrow_m_per_n_;
       frame.background_rgba = kBackground;
-      if (graph.camera && graph.camera->node >= 0 &&
+      if (config_.file_camera && graph.camera && graph.camera->node >= 0 &&
           static_cast<std::size_t>(graph.camera->node) < X_WN.size()) {
         // The scene file's camera: looks along −z of its node, +y up.
         const glm::dmat4& X_WC = X_WN[static_cast<std::size_t>(graph.camera->node)];
@@ -288,6 +288,7 @@ nlohmann::json DisplayWorker::Summary() const {
   j["frames_dir"] = config_.frames_dir;
   j["size"] = {config_.width, config_.height};
   j["frame_rate_hz"] = config_.frame_rate_hz;
+  j["camera"] = config_.file_camera ? "file" : "follow";
   j["renderer"] = renderer_;
   j["frames"] = frames_;
   j["frames_without_scene"] = frames_without_scene_;

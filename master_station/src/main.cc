@@ -131,9 +131,15 @@ int main(int argc, char** argv) {
   app.add_option("--frame-size", frame_size, "display image size, WIDTHxHEIGHT pixels")
       ->capture_default_str();
   double camera_distance_m = 0.0;
+  std::string display_camera = "follow";
+  app.add_option("--display-camera", display_camera,
+                 "the display's camera: follow (behind and above the tool, which stays in view) "
+                 "or file (the scene file's own camera, where it has one)")
+      ->check(CLI::IsMember({"follow", "file"}))
+      ->capture_default_str();
   app.add_option("--camera-distance", camera_distance_m,
                  "distance of the display's camera behind and above the tool, m (0 = five times "
-                 "the tool's radius; a scene file's own camera is used instead when it has one)")
+                 "the tool's radius)")
       ->check(CLI::Range(0.0, 1e4))
       ->capture_default_str();
   app.add_option("--max-frames", max_frames, "stop the display after this many frames (0 = none)")
@@ -310,6 +316,7 @@ int main(int argc, char** argv) {
     config.display.frame_rate_hz = frame_rate_hz;
     config.display.max_frames = max_frames;
     config.display.camera_distance_m = camera_distance_m;
+    config.display.file_camera = display_camera == "file";
     if (std::sscanf(frame_size.c_str(), "%dx%d", &config.display.width, &config.display.height) !=
         2) {
       throw std::invalid_argument("--frame-size " + frame_size +

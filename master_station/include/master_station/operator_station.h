@@ -35,9 +35,13 @@ struct DisplayConfig {
   int height = 480;
   /// Stop rendering after this many frames (0 = none).
   int max_frames = 0;
-  /// Distance of the camera that follows the tool (m; 0 = five times the tool's radius). Not
-  /// used when the scene file has a camera.
+  /// Distance of the camera that follows the tool (m; 0 = five times the tool's radius).
   double camera_distance_m = 0.0;
+  /// Use the scene file's own camera (its first perspective camera) instead of following the
+  /// tool. Off by default: a file's camera frames the whole scene, and the tool, its ghost and
+  /// its force arrows were a few pixels in it (the Duck, 2CylinderEngine; issue 35). Without a
+  /// camera in the file the camera follows the tool either way.
+  bool file_camera = false;
 };
 
 /// Configuration of one run of the station.
