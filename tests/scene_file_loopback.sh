@@ -15,7 +15,7 @@ fi
 rm -rf "$out" && mkdir -p "$out"
 "$build/slave_sim/slave_sim" keygen "$out/k.key" >/dev/null
 "$build/slave_sim/slave_sim" --key "$out/k.key" --listen 127.0.0.1:0 --port-file "$out/port" \
-  --scene "$scene" --cache-dir "$out/cache" --out "$out" --quiet >"$out/slave.log" 2>&1 &
+  --scene "$scene" --cache-dir "$out/cache" --out "$out" >"$out/slave.log" 2>&1 &
 slave=$!
 trap 'kill $slave 2>/dev/null || true' EXIT
 for _ in $(seq 1 240); do [ -s "$out/port" ] && break; sleep 0.5; done
@@ -23,7 +23,7 @@ for _ in $(seq 1 240); do [ -s "$out/port" ] && break; sleep 0.5; done
 origin=$(grep -o 'tool home position in W [-0-9.,]*' "$out/slave.log" | head -1 | cut -d' ' -f6)
 [ -n "$origin" ] || { echo "no home position printed"; cat "$out/slave.log"; exit 1; }
 "$build/master_station/master_station" --key "$out/k.key" --remote "127.0.0.1:$(cat "$out/port")" \
-  --duration 3 --out "$out/m" --display headless --frame-rate 2 --quiet | tee "$out/master.log"
+  --duration 3 --out "$out/m" --display headless --frame-rate 2 | tee "$out/master.log"
 grep -q "workspace centre in W $origin (the remote node's home pose)" "$out/master.log" || {
   echo "the operator's workspace is not at the node's home position $origin"; exit 1; }
 wait $slave

@@ -153,7 +153,9 @@ int main(int argc, char** argv) {
                  "seconds to wait for the first contact model")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  app.add_flag("--quiet", quiet, "no progress lines");
+  app.add_flag("--quiet", quiet,
+               "no progress or start-up lines (errors, warnings, session events and the last "
+               "lines stay)");
   std::string key_file;
   ht::StationConfig defaults;
   int mtu = defaults.mtu, peer_timeout_ms = defaults.peer_timeout_ms, max_grid = 0;
@@ -359,10 +361,12 @@ int main(int argc, char** argv) {
         device = std::make_unique<ht::SimulatedOperatorDevice>(*experiment);
       }
     }
-    std::printf("[master] device: %s; loop %.0f Hz; remote %s; experiment %s (%.2f s)\n",
-                device->capabilities().name.c_str(), rate_hz, remote.c_str(),
-                experiment_name.c_str(), duration_s);
-    std::fflush(stdout);
+    if (!quiet) {
+      std::printf("[master] device: %s; loop %.0f Hz; remote %s; experiment %s (%.2f s)\n",
+                  device->capabilities().name.c_str(), rate_hz, remote.c_str(),
+                  experiment_name.c_str(), duration_s);
+      std::fflush(stdout);
+    }
     // Ctrl-C and SIGTERM: the force is ramped to zero, the device commanded zero and closed,
     // the summary written, exit 0.
     std::signal(SIGINT, OnStopSignal);

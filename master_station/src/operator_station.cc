@@ -270,13 +270,17 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   }
   const RigidTransform X_WM_start = X_WM;
   experiment.SetScene(scene_M);
-  std::printf("[master] workspace centre in W %.4f,%.4f,%.4f (%s); %zu object(s) described\n",
-              X_WM.translation.x, X_WM.translation.y, X_WM.translation.z,
-              !config.workspace_from_remote ? "as configured"
-              : config.workspace_origin_W   ? "--workspace-origin"
-                                            : "the remote node's home pose",
-              targets_M.size());
-  std::fflush(stdout);
+  // Said once the remote node answered (without a session the run ends with an error below, and
+  // the home pose would be a default, not the node's), and not with --quiet.
+  if (counters.connected.load() && config.progress_period_s > 0.0) {
+    std::printf("[master] workspace centre in W %.4f,%.4f,%.4f (%s); %zu object(s) described\n",
+                X_WM.translation.x, X_WM.translation.y, X_WM.translation.z,
+                !config.workspace_from_remote ? "as configured"
+                : config.workspace_origin_W   ? "--workspace-origin"
+                                              : "the remote node's home pose",
+                targets_M.size());
+    std::fflush(stdout);
+  }
   // The tool starts where the experiment's first target puts the handle.
   ToolState tool;
   tool.X_WT = X_WM * experiment.Target(0.0).X_MH;

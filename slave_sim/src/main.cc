@@ -211,7 +211,9 @@ int main(int argc, char** argv) {
   seed_models->add_option("--out", seed_out, "folder to write into (created)")->required();
   seed_models->add_option("--model", seed_names, "only these models (repeatable)");
   seed_models->add_flag("--quiet", quiet, "no progress lines");
-  app.add_flag("--quiet", quiet, "no progress lines");
+  app.add_flag("--quiet", quiet,
+               "no progress or start-up lines (errors, warnings, session events and the last "
+               "line stay)");
   if (const auto rc = ht::ParseCommandLine(app, argc, argv, "slave_sim")) return *rc;
   if (max_window_option->count() == 0) {
     config.pipeline.max_window_extent_m =
@@ -351,9 +353,11 @@ int main(int argc, char** argv) {
                                                    {bench.object_mesh_Fe.get()})
                                  .objects;
       const ht::RigidTransform& home = bench.haptic.X_WT_home;
-      std::printf("[slave] scene %s: tool %s on %s; tool home position in W %.4f,%.4f,%.4f\n",
-                  scene.c_str(), bench.tool_name.c_str(), bench.object_name.c_str(),
-                  home.translation.x, home.translation.y, home.translation.z);
+      if (!quiet) {
+        std::printf("[slave] scene %s: tool %s on %s; tool home position in W %.4f,%.4f,%.4f\n",
+                    scene.c_str(), bench.tool_name.c_str(), bench.object_name.c_str(),
+                    home.translation.x, home.translation.y, home.translation.z);
+      }
     } else {
       if (!std::filesystem::exists(scene)) {
         throw std::invalid_argument("--scene " + scene +
@@ -394,12 +398,14 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "[slave] warning: %s\n", w.c_str());
       }
       const ht::RigidTransform& home = built.haptic.X_WT_home;
-      std::printf(
-          "[slave] scene file %s: %zu touchable(s), tool %s; tool home position in W %.4f,%.4f,"
-          "%.4f (the operator's workspace centre: sent in the Welcome)%s\n",
-          scene.c_str(), built.haptic.touchables.size(),
-          built.builtin_probe ? "built-in probe" : scene_tool.c_str(), home.translation.x,
-          home.translation.y, home.translation.z, watch ? "; watching the file for changes" : "");
+      if (!quiet) {
+        std::printf(
+            "[slave] scene file %s: %zu touchable(s), tool %s; tool home position in W %.4f,%.4f,"
+            "%.4f (the operator's workspace centre: sent in the Welcome)%s\n",
+            scene.c_str(), built.haptic.touchables.size(),
+            built.builtin_probe ? "built-in probe" : scene_tool.c_str(), home.translation.x,
+            home.translation.y, home.translation.z, watch ? "; watching the file for changes" : "");
+      }
     }
     const ht::HapticScene& haptic_scene = file_scene ? file_scene->haptic() : builtin_scene;
     nlohmann::json summary = ht::RunRemoteNode(config, haptic_scene, g_stop);

@@ -122,8 +122,12 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   }
   const std::int64_t warm_up_missing_overlap =
       WarmUpPenetrationDepth(*backend, scene, config.pipeline);
-  std::printf("[slave] %s\n", backend_message.c_str());
-  std::fflush(stdout);
+  // --quiet (progress_period_s 0): no start-up lines either; errors and the last line stay.
+  const bool chatty = config.progress_period_s > 0.0;
+  if (chatty) {
+    std::printf("[slave] %s\n", backend_message.c_str());
+    std::fflush(stdout);
+  }
   auto pipeline =
       std::make_unique<HapticTexturePipeline>(scene, config.pipeline, std::move(backend));
   const std::string backend_at_start(pipeline->backend().name());
@@ -156,12 +160,14 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   caps.scene_objects = static_cast<std::uint16_t>(config.scene_objects.size());
   caps.scene_name = scene.name;
   caps.layout = MakeSceneLayout(scene);
-  std::printf(
-      "[slave] scene '%s': tool '%s', %zu touchable(s), %zu scene object(s) (%zu bytes); "
-      "listening on %s (authenticated)\n",
-      scene.name.c_str(), scene.tool->name.c_str(), scene.touchables.size(),
-      config.scene_objects.size(), scene_bytes, bound.ToString().c_str());
-  std::fflush(stdout);
+  if (chatty) {
+    std::printf(
+        "[slave] scene '%s': tool '%s', %zu touchable(s), %zu scene object(s) (%zu bytes); "
+        "listening on %s (authenticated)\n",
+        scene.name.c_str(), scene.tool->name.c_str(), scene.touchables.size(),
+        config.scene_objects.size(), scene_bytes, bound.ToString().c_str());
+    std::fflush(stdout);
+  }
 
   const std::int64_t start_ns = SteadyNowNs();
   RemoteSession session(config, link, scene_sender, caps, start_ns);
