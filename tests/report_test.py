@@ -8,6 +8,7 @@ broken copies of it (issue 17):
     file and what is wrong, exit status 1, and the plots that can still be drawn.
 Usage: tests/report_test.py SOURCE_DIR   (HT_LOOPBACK_OUT names the run folder)
 """
+import json
 import os
 import re
 import shutil
@@ -43,8 +44,11 @@ def main():
         out = os.path.join(tmp, "full")
         rc, so, se = run_report(source, run, out)
         check(rc == 0, f"report on a good run exits 0 (got {rc}: {se.strip()})")
-        expected = ["position_force.png", "rotation.png", "loop_period.png", "model_age.png",
+        # A fig75 run: no rotation.png (that is fig76's experiment, issue 35).
+        expected = ["position_force.png", "loop_period.png", "model_age.png",
                     "remote_steps.png", "network.png"]
+        check(not os.path.exists(os.path.join(out, "rotation.png")),
+              "no rotation.png for a run without the rotation experiment")
         for name in expected:
             path = os.path.join(out, name)
             check(os.path.exists(path), f"{name} written")
@@ -65,6 +69,35 @@ def main():
             check(os.path.exists(os.path.join(out, ref)), f"index.html's {ref} exists")
         check("operator_rate_hz" in page and "remote_step_p50_us" in page,
               "index.html has the summary's key figures")
+
+        # The same run as fig76 draws rotation.png; as an explore run over two objects (phases
+        # "...@1", "...@2") it draws one row per object and still exits 0.
+        for experiment, phase_of in (("fig76", None),
+                                     ("explore", lambda i, n: ("press@1" if i < n // 2
+                                                                else "slide_x@2"))):
+            copy = os.path.join(tmp, experiment)
+            shutil.copytree(run, copy, ignore=shutil.ignore_patterns("*.png", "index.html"))
+            with open(os.path.join(copy, "summary.json")) as f:
+                s = json.load(f)
+            s["experiment"] = experiment
+            with open(os.path.join(copy, "summary.json"), "w") as f:
+                json.dump(s, f)
+            if phase_of is not None:
+                with open(os.path.join(copy, "trace.csv")) as f:
+                    lines = f.read().splitlines()
+                head = lines[0].split(",")
+                k = head.index("phase")
+                body = [ln.split(",") for ln in lines[1:]]
+                for i, cells in enumerate(body):
+                    cells[k] = phase_of(i, len(body))
+                with open(os.path.join(copy, "trace.csv"), "w") as f:
+                    f.write("\n".join([lines[0]] + [",".join(c) for c in body]) + "\n")
+            rc, so, se = run_report(source, copy, copy)
+            check(rc == 0, f"report on the run as {experiment} exits 0 (got {rc}: {se.strip()})")
+            check(os.path.exists(os.path.join(copy, "position_force.png")),
+                  f"{experiment}: position_force.png written")
+            check(os.path.exists(os.path.join(copy, "rotation.png")) == (experiment == "fig76"),
+                  f"{experiment}: rotation.png only for fig76")
 
         # A truncated trace: the rows that parse are plotted, one error names the file.
         broken = os.path.join(tmp, "truncated")
