@@ -389,6 +389,30 @@ int main(int argc, char** argv) {
         summary["remote_rate_hz"].get<double>(), summary["remote_step_p50_us"].get<double>(),
         summary["rtt_ms_p50"].get<double>(), summary["contacts_max"].get<int>(),
         static_cast<long long>(summary["nonfinite_count"].get<std::int64_t>()));
+    // What a person must see, said once at the end (issue 35): deploy/report lists the same.
+    const auto number = [&](const nlohmann::json& j, const char* key) {
+      return j.is_object() && j.contains(key) && j[key].is_number() ? j[key].get<double>() : 0.0;
+    };
+    if (const double n = number(summary, "saturated_contact_ticks"); n > 0.0) {
+      std::printf(
+          "[master] note: on %.0f ticks a contact pushed with its bound (%.1f N, "
+          "--max-contact-force); the largest contact force was %.2f N: the tool sank in there\n",
+          n, number(summary, "contact_force_bound_n"), number(summary, "contact_force_max_n"));
+    }
+    if (summary.contains("transport") && summary["transport"].contains("rejected_by_reason")) {
+      if (const double bad = number(summary["transport"]["rejected_by_reason"], "bad_mac");
+          bad > 0.0) {
+        std::printf("[master] note: %.0f datagram(s) failed authentication (bad MAC): the two "
+                    "sides use different --key files\n",
+                    bad);
+      }
+    }
+    if (summary.contains("safety")) {
+      if (const double c = number(summary["safety"], "clamped_ticks"); c > 0.0) {
+        std::printf("[master] note: the safety stage clamped the device's force on %.0f ticks\n",
+                    c);
+      }
+    }
     if (!out_dir.empty()) {
       std::printf("[master] trace:   %s/trace.csv\n[master] summary: %s/summary.json\n",
                   out_dir.c_str(), out_dir.c_str());

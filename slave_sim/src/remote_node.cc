@@ -176,6 +176,8 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   const std::int64_t min_period_ns =
       config.max_rate_hz > 0.0 ? static_cast<std::int64_t>(1e9 / config.max_rate_hz) : 0;
   std::int64_t last_progress_ns = start_ns;
+  std::uint64_t bad_mac_said = 0;  // bad-MAC datagrams already said (below)
+  std::int64_t bad_mac_said_ns = start_ns - 5'000'000'000LL;
   std::uint64_t last_progress_steps = 0;
   bool running = true;
   bool reported_fallback = false;
@@ -243,6 +245,17 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
             (SteadyNowNs() - t0) * 1e-6, changed, changed_bytes);
         std::fflush(stdout);
       }
+    }
+    // Datagrams that fail authentication are said, even with --quiet (at most every 5 s): a
+    // wrong key on one side otherwise shows only as an operator that never connects.
+    if (const std::uint64_t bad = link.rejected(wire::DecodeStatus::kBadMac);
+        bad > bad_mac_said && now_loop - bad_mac_said_ns >= 5'000'000'000LL) {
+      std::printf("[slave] note: %llu datagram(s) failed authentication (bad MAC) so far: an "
+                  "operator is using another --key file\n",
+                  static_cast<unsigned long long>(bad));
+      std::fflush(stdout);
+      bad_mac_said = bad;
+      bad_mac_said_ns = now_loop;
     }
     if (!session.open()) {
       socket.WaitReadable(50);
