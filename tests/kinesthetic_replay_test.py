@@ -92,7 +92,7 @@ def main():
             key = os.path.join(tmp, "k.key")
             run([os.path.join(build, "slave_sim", "slave_sim"), "keygen", key])
             r = run([master, "--key", key, "--remote", "127.0.0.1:9", "--device", "replay",
-                     "--replay", out, "--connect-timeout", "0.2", "--quiet"])
+                     "--replay", out, "--connect-timeout", "0.2"])  # the start-up line says it
             text = r.stdout + r.stderr
             check("replay trace" not in text and "(14.35 s)" in text,
                   "master_station --device replay loads it (14.35 s)")
