@@ -14,7 +14,7 @@ import sys
 
 import matplotlib.image as mpimg
 
-from png_checks import check, failures, png_size
+from png_checks import check, failures, linear_rgb, png_size, tool_blue
 
 
 def main():
@@ -42,12 +42,10 @@ def main():
         # The gear (bronze 0.72, 0.50, 0.26 times a shade in 0.3..1) and the tool (steel blue
         # 0.45, 0.55, 0.70 times a shade): both in view, the camera follows the tool.
         # The frames are sRGB images of linear colours: compare in linear terms.
-        srgb = img[..., :3].astype(float)
-        rgb = ((srgb + 0.055) / 1.055) ** 2.4
-        rgb[srgb <= 0.04045] = srgb[srgb <= 0.04045] / 12.92
+        rgb = linear_rgb(img)
         bronze = int(((rgb[..., 0] > rgb[..., 1] + 0.05) & (rgb[..., 1] > rgb[..., 2] + 0.05) &
                       (rgb[..., 0] - rgb[..., 2] > 0.15) & (rgb[..., 0] < 0.85)).sum())
-        blue = int(((rgb[..., 2] > rgb[..., 0] + 0.08) & (rgb[..., 2] > 0.2)).sum())
+        blue = int(tool_blue(rgb).sum())
         check(bronze > 0.02 * w * h, f"{name} shows the gear ({bronze} bronze pixels)")
         check(blue > 0.01 * w * h, f"{name} shows the tool ({blue} blue pixels)")
         # The arrow: kForceArrowColour (1.0, 0.35, 0.05) times a shade in 0.7..1.

@@ -427,7 +427,9 @@ TEST(HardCases, ImpactFasterThanTheModelsCome) {
   PipelineOptions options;
   HapticTexturePipeline pipeline(scene, options);
   const RigidTransform home = BlockOnGearHomePose();
-  auto above = [&](double dz) { return At(home.translation + glm::dvec3(0, 0, dz), home.rotation); };
+  auto above = [&](double dz) {
+    return At(home.translation + glm::dvec3(0, 0, dz), home.rotation);
+  };
   StepTimings t;
   // Where the block touches: the highest pose with a contact of δ0 ≥ 0, found by bisection.
   double lo = -2e-3, hi = 3e-3;

@@ -12,6 +12,8 @@ import sys
 
 import matplotlib.image as mpimg
 
+from png_checks import linear_rgb, tool_blue
+
 
 def main():
     run = sys.argv[1]
@@ -31,10 +33,7 @@ def main():
     shares = []
     for name in frames:
         img = mpimg.imread(os.path.join(frames_dir, name))
-        srgb = img[..., :3].astype(float)
-        rgb = ((srgb + 0.055) / 1.055) ** 2.4
-        rgb[srgb <= 0.04045] = srgb[srgb <= 0.04045] / 12.92
-        blue = ((rgb[..., 2] > rgb[..., 0] + 0.08) & (rgb[..., 2] > 0.2)).sum()
+        blue = tool_blue(linear_rgb(img)).sum()
         shares.append(float(blue) / (img.shape[0] * img.shape[1]))
     seen = sum(1 for x in shares if x >= 0.005)
     print("tool_in_view_test: tool's share of each frame: " +

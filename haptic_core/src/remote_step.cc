@@ -174,8 +174,8 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   return model;
 }
 
-void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
-                                                  const Twist& V_WT_W, StepTimings& timings) {
+void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, const Twist& V_WT_W,
+                                                  StepTimings& timings) {
   num_candidates_ = 0;
   std::size_t triangles_used = 0;
   // A copy of a cluster's list into candidate_triangles_, or All() where the side has no list
@@ -210,9 +210,9 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT,
     const glm::dvec3 v_A =
         V_WT_W.linear + glm::cross(V_WT_W.angular, p.point_A_W - X_WT.translation);
     const double closing = -glm::dot(v_A, p.normal_W);
-    return closing > 0.0 ? std::min(options_.max_speculative_margin_m,
-                                    options_.speculative_lead_s * closing)
-                         : 0.0;
+    return closing > 0.0
+               ? std::min(options_.max_speculative_margin_m, options_.speculative_lead_s * closing)
+               : 0.0;
   };
   for (std::size_t k = 0; k < scene_.touchables.size(); ++k) {
     const TouchableObject& object = scene_.touchables[k];

@@ -402,9 +402,10 @@ int main(int argc, char** argv) {
     if (summary.contains("transport") && summary["transport"].contains("rejected_by_reason")) {
       if (const double bad = number(summary["transport"]["rejected_by_reason"], "bad_mac");
           bad > 0.0) {
-        std::printf("[master] note: %.0f datagram(s) failed authentication (bad MAC): the two "
-                    "sides use different --key files\n",
-                    bad);
+        std::printf(
+            "[master] note: %.0f datagram(s) failed authentication (bad MAC): the two "
+            "sides use different --key files\n",
+            bad);
       }
     }
     if (summary.contains("safety")) {

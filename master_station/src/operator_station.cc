@@ -418,10 +418,8 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
       if (!device.WriteWrench(out.F_H_M, now)) ++device_write_faults;
       if (in.device_ok) {
         ++tool_seq;
-        outgoing.Write({{tick.tool().X_WT, tick.tool().V_WT_W},
-                        now,
-                        tool_seq,
-                        tick.model().num_contacts > 0});
+        outgoing.Write(
+            {{tick.tool().X_WT, tick.tool().V_WT_W}, now, tool_seq, tick.model().num_contacts > 0});
         const ToolStepResult& step = out.step;
         row.X_WT = tick.tool().X_WT;
         row.F_contact_T_W = step.F_contact_T_W;

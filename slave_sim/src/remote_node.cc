@@ -250,9 +250,10 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     // wrong key on one side otherwise shows only as an operator that never connects.
     if (const std::uint64_t bad = link.rejected(wire::DecodeStatus::kBadMac);
         bad > bad_mac_said && now_loop - bad_mac_said_ns >= 5'000'000'000LL) {
-      std::printf("[slave] note: %llu datagram(s) failed authentication (bad MAC) so far: an "
-                  "operator is using another --key file\n",
-                  static_cast<unsigned long long>(bad));
+      std::printf(
+          "[slave] note: %llu datagram(s) failed authentication (bad MAC) so far: an "
+          "operator is using another --key file\n",
+          static_cast<unsigned long long>(bad));
       std::fflush(stdout);
       bad_mac_said = bad;
       bad_mac_said_ns = now_loop;

@@ -126,8 +126,7 @@ DeadbandReason ToolStateDeadband::Decide(const RigidTransform& X_WT, const Twist
     const RigidTransform predicted = ExtrapolatePose(X_sent_, V_sent_, dt);
     const Twist error = PoseDifference(X_WT, predicted);
     const Twist moved = PoseDifference(X_WT, X_sent_);
-    if (glm::length(error.linear) >
-        std::max(k * glm::length(moved.linear), k * floor_p * a)) {
+    if (glm::length(error.linear) > std::max(k * glm::length(moved.linear), k * floor_p * a)) {
       reason = DeadbandReason::kPosition;
     } else if (glm::length(error.angular) >
                std::max(k * glm::length(moved.angular), k * floor_theta * a)) {

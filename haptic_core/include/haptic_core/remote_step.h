@@ -270,8 +270,7 @@ class HapticTexturePipeline {
  private:
   /// Stages 1–3 for every touchable: appends to candidates_ (up to kMaxContacts) and fills the
   /// coarse counts and flags of `timings`.
-  void FindContactCandidates(const RigidTransform& X_WT, const Twist& V_WT_W,
-                             StepTimings& timings);
+  void FindContactCandidates(const RigidTransform& X_WT, const Twist& V_WT_W, StepTimings& timings);
   /// Stage 5: linearizes last_queries_[0, n) into last_results_ with the backend in use (the GPU
   /// backend takes one window size per batch: windows sized from their clusters go to it in one
   /// batch per size); when that

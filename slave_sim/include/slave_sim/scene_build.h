@@ -132,7 +132,8 @@ inline constexpr double kLargestDeskSceneM = 2.0;
 inline constexpr double kLargeBakeErrorFraction = 0.05;
 
 /// Progress callback: called before each model is built or loaded from the cache, with the
-/// object's label (SceneNode::label), its position among the models to build (from 1) and their count.
+/// object's label (SceneNode::label), its position among the models to build (from 1) and their
+/// count.
 using SceneBuildProgress = std::function<void(const std::string& node, int index, int count)>;
 
 /// Loads `description.gltf_path` and builds the haptic model of every tool and touchable node
