@@ -11,6 +11,8 @@ PACKAGES=(
   libgl1-mesa-dri libdraco-dev libtinygltf-dev
   # display frames (PNG) and the scene's base-colour textures (PNG, JPEG)
   libpng-dev libjpeg-dev
+  # the text printed on display frames (stb_easy_font, header only)
+  libstb-dev
   # the display's window (GLFW) and its test under Xvfb
   libglfw3-dev xvfb xauth libx11-dev
   # libraries the build uses

@@ -3,6 +3,8 @@
 deploy/run-loopback with --display headless, one frame per second), issue 17:
   - summary.json's display part: frames written, no error, the renderer named;
   - every frame is a PNG of the stated size and not blank;
+  - the overlay (frame_overlay.h): a black box in the top-left corner with white text, whose
+    pixels change from frame to frame (the time it prints does);
   - what the frames show: the gear's bronze and the tool's steel blue (the materials the scene
     graph gave), and, in a frame taken while the tool pressed on the gear, the force arrow's
     orange (master_station/scene_renderer.h kForceArrowColour) above the gear's top.
@@ -34,11 +36,23 @@ def main():
     check(len(frames) == d.get("frames"), f"{d.get('frames')} frame files (got {len(frames)})")
     w, h = d.get("size", [0, 0])
     arrow_frames = 0
+    check(d.get("overlay") is True, f"the overlay is on by default (got {d.get('overlay')})")
+    overlays = []
     for name in frames:
         path = os.path.join(frames_dir, name)
         check(png_size(path) == (w, h), f"{name} is a {w}x{h} PNG (got {png_size(path)})")
         img = mpimg.imread(path)
         check(float(img[..., :3].std()) > 0.02, f"{name} is not blank")
+        # The overlay's box: rows 4..20, columns 4..200 hold only pure black and pure white, and
+        # both (text on its box); no scene colour shows through.
+        box = img[6:18, 6:200, :3]
+        black = (box.max(axis=-1) == 0.0)
+        white = (box.min(axis=-1) == 1.0)
+        check(bool((black | white).all()), f"{name}: the overlay box is black and white only")
+        check(white.sum() > 0.05 * box.shape[0] * box.shape[1] and black.sum() > 0.3 *
+              box.shape[0] * box.shape[1], f"{name}: text on the overlay box "
+              f"({int(white.sum())} white, {int(black.sum())} black pixels)")
+        overlays.append(white)
         # The gear (bronze 0.72, 0.50, 0.26 times a shade in 0.3..1) and the tool (steel blue
         # 0.45, 0.55, 0.70 times a shade): both in view, the camera follows the tool.
         # The frames are sRGB images of linear colours: compare in linear terms.
@@ -53,6 +67,9 @@ def main():
                       (rgb[..., 2] < 0.12)).sum())
         if orange > 50:
             arrow_frames += 1
+    # The time printed changes from frame to frame, and so do the text's pixels.
+    check(all((a != b).any() for a, b in zip(overlays, overlays[1:])),
+          "each frame's overlay differs from the one before (the time moves on)")
     # The tool presses on the gear for most of fig75: at least one frame shows a force arrow.
     check(arrow_frames >= 1, f"a force arrow in at least one frame (got {arrow_frames})")
     print(f"display_frames_test: {len(frames)} frames, {arrow_frames} with a force arrow, "

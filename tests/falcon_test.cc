@@ -177,9 +177,9 @@ class FakeFalconTransport final : public FalconTransport {
   }
 
   // ---- test side ----
-  void SetHandle(const glm::dvec3& p_MH) {
+  void SetHandle(const glm::dvec3& p_DH) {
     std::lock_guard lock(mutex_);
-    p_MH_ = p_MH;
+    p_DH_ = p_DH;
   }
   // From now on every exchange advances `clock` by step_ns and moves the handle along
   // p0 + t·v (t the simulated time): a hand at constant speed, independent of thread scheduling.
@@ -191,7 +191,7 @@ class FakeFalconTransport final : public FalconTransport {
     trajectory_step_ns_ = step_ns;
     trajectory_t_ns_ = clock->load();
     trajectory_clock_ = clock;
-    p_MH_ = p0 + (trajectory_t_ns_ * 1e-9) * v;
+    p_DH_ = p0 + (trajectory_t_ns_ * 1e-9) * v;
   }
   std::vector<std::string> log() const {
     std::lock_guard lock(mutex_);
@@ -246,10 +246,10 @@ class FakeFalconTransport final : public FalconTransport {
       // at constant speed is then; the device's clock reads the same simulated time.
       trajectory_t_ns_ += trajectory_step_ns_;
       trajectory_clock_->store(trajectory_t_ns_);
-      p_MH_ = trajectory_p0_ + (trajectory_t_ns_ * 1e-9) * trajectory_v_;
+      p_DH_ = trajectory_p0_ + (trajectory_t_ns_ * 1e-9) * trajectory_v_;
     }
     MotorAngles theta{};
-    if (!InverseKinematics(p_MH_, theta)) {
+    if (!InverseKinematics(p_DH_, theta)) {
       Fail("simulated handle outside the reach");
       return;
     }
@@ -282,7 +282,7 @@ class FakeFalconTransport final : public FalconTransport {
   std::deque<std::uint8_t> rx_;
   std::vector<std::string> log_;
   std::string error_;
-  glm::dvec3 p_MH_{0.0};
+  glm::dvec3 p_DH_{0.0};
   glm::dvec3 trajectory_p0_{0.0}, trajectory_v_{0.0};
   std::int64_t trajectory_step_ns_ = 0, trajectory_t_ns_ = 0;
   std::atomic<std::int64_t>* trajectory_clock_ = nullptr;
@@ -329,16 +329,16 @@ bool Home(Rig& rig) {
 
 // ∂p/∂θ by central differences of the forward kinematics (the route independent of
 // HandleJacobian's implicit-function derivation).
-glm::dmat3 FiniteDifferenceJacobian(const glm::dvec3& p_MH) {
+glm::dmat3 FiniteDifferenceJacobian(const glm::dvec3& p_DH) {
   MotorAngles theta{};
-  EXPECT_TRUE(InverseKinematics(p_MH, theta));
+  EXPECT_TRUE(InverseKinematics(p_DH, theta));
   constexpr double h = 1e-6;
   glm::dmat3 J(0.0);
   for (int j = 0; j < 3; ++j) {
     MotorAngles plus = theta, minus = theta;
     plus[j] += h;
     minus[j] -= h;
-    glm::dvec3 p_plus = p_MH, p_minus = p_MH;
+    glm::dvec3 p_plus = p_DH, p_minus = p_DH;
     EXPECT_TRUE(ForwardKinematics(plus, p_plus));
     EXPECT_TRUE(ForwardKinematics(minus, p_minus));
     J[j] = (p_plus - p_minus) / (2.0 * h);
@@ -838,7 +838,7 @@ TEST(FalconDevice, ReadStateFollowsTheHandleAndWriteWrenchReachesTheMotors) {
         [&] {
           rig.device->WriteWrench({F, {0.0, 0.0, 0.0}}, NowNs());
           const bool match = rig.device->ReadState(NowNs(), state) &&
-                             glm::length(state.X_MH.translation - p) < 1e-4;
+                             glm::length(state.X_MH.translation - kR_MD * p) < 1e-4;
           if (!match) {
             requests_at_match = 0;
           } else if (requests_at_match == 0) {
@@ -849,13 +849,17 @@ TEST(FalconDevice, ReadStateFollowsTheHandleAndWriteWrenchReachesTheMotors) {
         },
         500ms))
         << k;
-    max_position_error_m = std::max(max_position_error_m, glm::length(state.X_MH.translation - p));
+    max_position_error_m =
+        std::max(max_position_error_m, glm::length(state.X_MH.translation - kR_MD * p));
     EXPECT_EQ(state.X_MH.rotation, glm::dquat(1.0, 0.0, 0.0, 0.0));
     EXPECT_EQ(state.V_MH_M.angular, glm::dvec3(0.0));
     EXPECT_EQ(state.buttons, 0x5u);
 
-    // The motors get -10000 · (∂p/∂θ)ᵀ F, the Jacobian taken by finite differences here.
-    const glm::dvec3 tau = glm::transpose(FiniteDifferenceJacobian(p)) * F;
+    // The handle is set in D (the kinematics' frame) and read in M (+z up): p_M = kR_MD · p_D.
+    // The motors get -10000 · (∂p_D/∂θ)ᵀ F_D with F_D = kR_MDᵀ F_M, the Jacobian taken by finite
+    // differences here.
+    const glm::dvec3 tau =
+        glm::transpose(FiniteDifferenceJacobian(p)) * (glm::transpose(kR_MD) * F);
     const auto last = rig.fake->last_request();
     ASSERT_TRUE(last.has_value());
     for (int m = 0; m < 3; ++m) {
@@ -873,6 +877,64 @@ TEST(FalconDevice, ReadStateFollowsTheHandleAndWriteWrenchReachesTheMotors) {
   EXPECT_LT(max_position_error_m, 1e-4);
   EXPECT_EQ(rig.fake->malformed_requests(), 0);
   EXPECT_EQ(rig.device->status().kinematics_faults, 0u);
+  rig.device->Close();
+}
+
+TEST(FalconDevice, TheLoopSeesZUpAndYAwayFromTheUser) {
+  // kR_MD is a proper rotation.
+  EXPECT_NEAR(glm::determinant(kR_MD), 1.0, 1e-15);
+  const glm::dmat3 identity = glm::transpose(kR_MD) * kR_MD;
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) EXPECT_EQ(identity[i][j], i == j ? 1.0 : 0.0);
+  }
+  Rig rig = MakeRig();
+  ASSERT_TRUE(Home(rig));
+  struct Case {
+    glm::dvec3 p_DH;  // handle set in the kinematics' frame (+y up, +z towards the user)
+    glm::dvec3 p_MH;  // what the loop must read (+z up, +y away from the user)
+  };
+  const Case cases[] = {{{0.0, 0.02, 0.0}, {0.0, 0.0, 0.02}},   // lifted: up
+                        {{0.0, 0.0, 0.02}, {0.0, -0.02, 0.0}},  // pulled towards the user
+                        {{0.02, 0.0, 0.0}, {0.02, 0.0, 0.0}}};  // to the right
+  for (const Case& c : cases) {
+    rig.fake->SetHandle(c.p_DH);
+    DeviceState state;
+    ASSERT_TRUE(WaitUntil(
+        [&] {
+          return rig.device->ReadState(NowNs(), state) &&
+                 glm::length(state.X_MH.translation - c.p_MH) < 1e-4;
+        },
+        500ms))
+        << "handle at D " << c.p_DH.x << " " << c.p_DH.y << " " << c.p_DH.z;
+  }
+  // An upward force in M pushes the handle up in D: the motors get what (0, F, 0) in D needs.
+  const glm::dvec3 p{0.0, 0.0, 0.0};
+  rig.fake->SetHandle(p);
+  const auto request_with_force = [&](const glm::dvec3& F_M) {
+    std::optional<std::array<std::int16_t, 3>> command;
+    EXPECT_TRUE(WaitUntil(
+        [&] {
+          rig.device->WriteWrench({F_M, {0.0, 0.0, 0.0}}, NowNs());
+          const auto last = rig.fake->last_request();
+          const glm::dvec3 tau =
+              glm::transpose(FiniteDifferenceJacobian(p)) * (glm::transpose(kR_MD) * F_M);
+          if (!last) return false;
+          for (int m = 0; m < 3; ++m) {
+            if (std::abs(last->motor_command[m] + kMotorCommandPerNm * tau[m]) >
+                3.0 + 0.01 * std::abs(kMotorCommandPerNm * tau[m])) {
+              return false;
+            }
+          }
+          command = last->motor_command;
+          return true;
+        },
+        500ms));
+    return command;
+  };
+  const auto up = request_with_force({0.0, 0.0, 3.0});
+  const auto towards_user = request_with_force({0.0, -3.0, 0.0});
+  ASSERT_TRUE(up && towards_user);
+  EXPECT_NE(*up, *towards_user);
   rig.device->Close();
 }
 
@@ -904,7 +966,7 @@ TEST(FalconDevice, VelocityFollowsAHandleMovingAtConstantSpeed) {
     ASSERT_TRUE(wait_for_time(t0 + (21 + k) * 1'000'000LL));
     DeviceState state;
     if (rig.device->ReadState(g_sim_clock_ns.load(), state)) {
-      v_sum += state.V_MH_M.linear;
+      v_sum += glm::transpose(kR_MD) * state.V_MH_M.linear;  // back into D, where v_true is
       ++samples;
     }
   }

@@ -13,6 +13,7 @@
 #include "haptic_core/statistics.h"
 #include "haptic_core/steady_clock.h"
 #include "master_station/display_window.h"
+#include "master_station/frame_overlay.h"
 #include "master_station/png_image.h"
 #include "master_station/scene_renderer.h"
 
@@ -55,13 +56,14 @@ std::vector<bool> UnderTool(const SceneGraphDescription& g) {
 
 DisplayWorker::DisplayWorker(const DisplayConfig& config, const ReceivedScene& scene,
                              TripleBuffer<DisplayToolState>& tool, const glm::dvec3& up_W,
-                             double max_contact_force_n)
+                             double max_contact_force_n, std::vector<std::string> phase_names)
     : config_(config),
       scene_(scene),
       tool_(tool),
       up_W_(up_W),
       max_contact_force_n_(max_contact_force_n > 0.0 ? max_contact_force_n
-                                                     : std::numeric_limits<double>::infinity()) {}
+                                                     : std::numeric_limits<double>::infinity()),
+      phase_names_(std::move(phase_names)) {}
 
 void DisplayWorker::Run(const std::atomic<bool>& stop) {
   std::unique_ptr<SceneRenderer> renderer;
@@ -246,6 +248,23 @@ void DisplayWorker::Run(const std::atomic<bool>& stop) {
       }
       const std::int64_t t0 = SteadyNowNs();
       renderer->Render(frame, &rgba);
+      if (config_.overlay) {
+        // White on a black box: readable over any scene, and told apart from the tool's blue and
+        // the arrows' orange (tests/png_checks.py).
+        static constexpr std::uint8_t kText[4] = {255, 255, 255, 255};
+        static constexpr std::uint8_t kBox[4] = {0, 0, 0, 255};
+        FrameOverlayText text;
+        text.t_s = tool.t_s;
+        if (tool.phase >= 0 && static_cast<std::size_t>(tool.phase) < phase_names_.size()) {
+          text.phase = phase_names_[static_cast<std::size_t>(tool.phase)];
+        }
+        text.force_n = tool.force_n;
+        text.contacts = tool.contacts;
+        // Two pixels per font unit up to 800 pixels wide, three above (glyphs ~14 / 21 px high).
+        const int scale = renderer->width() > 800 ? 3 : 2;
+        DrawTextBox(rgba, renderer->width(), renderer->height(), 4, 4, FormatFrameOverlay(text),
+                    scale, kText, kBox);
+      }
       const std::int64_t t1 = SteadyNowNs();
       if (write_frames) {
         char name[32];
@@ -289,6 +308,7 @@ nlohmann::json DisplayWorker::Summary() const {
   j["size"] = {config_.width, config_.height};
   j["frame_rate_hz"] = config_.frame_rate_hz;
   j["camera"] = config_.file_camera ? "file" : "follow";
+  j["overlay"] = config_.overlay;
   j["renderer"] = renderer_;
   j["frames"] = frames_;
   j["frames_without_scene"] = frames_without_scene_;

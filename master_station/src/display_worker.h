@@ -27,6 +27,9 @@ struct DisplayToolState {
   RigidTransform X_WH;      ///< the device handle's pose mapped into W
   bool have_model = false;  ///< a contact model has arrived
   ContactModel model;       ///< the newest contact model (contacts at its q0)
+  int phase = -1;           ///< the experiment's phase (index into phase_names; −1 = none)
+  double force_n = 0.0;     ///< |F| of the contact force on the tool the loop rendered (N)
+  int contacts = 0;         ///< active contacts in that force
 };
 
 /// Renders frames at config.display.frame_rate_hz until stopped; kHeadless writes them as PNG
@@ -37,10 +40,11 @@ class DisplayWorker {
  public:
   /// `up_W`: the scene's up direction (the Welcome's home pose +z); `max_contact_force_n`: the
   /// loop's bound on a contact's force (N; 0 = none), applied to the arrows as the loop applies it;
-  /// `scene` and `tool` must outlive the worker.
+  /// `phase_names`: the experiment's phases, named in the frames' overlay; `scene` and `tool` must
+  /// outlive the worker.
   DisplayWorker(const DisplayConfig& config, const ReceivedScene& scene,
                 TripleBuffer<DisplayToolState>& tool, const glm::dvec3& up_W,
-                double max_contact_force_n);
+                double max_contact_force_n, std::vector<std::string> phase_names = {});
   void Run(const std::atomic<bool>& stop);
   /// The display's part of summary.json: mode, renderer, frames written, render and write times,
   /// the arrow scale, what went wrong.
@@ -52,6 +56,7 @@ class DisplayWorker {
   TripleBuffer<DisplayToolState>& tool_;
   glm::dvec3 up_W_;
   double max_contact_force_n_;
+  std::vector<std::string> phase_names_;
   std::string renderer_, error_;
   std::uint64_t frames_ = 0, frames_without_scene_ = 0, scene_generations_ = 0;
   std::vector<double> render_ms_, write_ms_;

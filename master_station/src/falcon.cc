@@ -59,7 +59,8 @@ DeviceCapabilities FalconDevice::capabilities() const {
   c.max_rotational_stiffness_nm_per_rad = 0.0;
   c.max_damping_ns_per_m = 20.0;  // CHAI3D cFalconDevice m_maxLinearDamping
   c.rated_loop_rate_hz = 1.0 / config_.exchange_period_s;
-  // Novint: 4" x 4" x 4" 3D touch workspace (H3DAPI wiki): ±2" = ±0.0508 m about M's origin.
+  // Novint: 4" x 4" x 4" 3D touch workspace (H3DAPI wiki): ±2" = ±0.0508 m about M's origin (a
+  // cube: the same in D and M).
   c.workspace_half_extents_m = {0.0508, 0.0508, 0.0508};
   c.dof_in = 3;
   c.dof_out = 3;
@@ -128,8 +129,8 @@ void FalconDevice::IoLoop() noexcept {
   const auto wrench_timeout_ns = static_cast<std::int64_t>(config_.wrench_timeout_s * 1e9);
   const double tau_filter_s = 1.0 / (2.0 * std::numbers::pi * config_.velocity_cutoff_hz);
   ForceCommand force;
-  glm::dvec3 p_MH{0.0};
-  glm::dvec3 v_MH_M{0.0};
+  glm::dvec3 p_DH{0.0};
+  glm::dvec3 v_DH_D{0.0};
   bool have_position = false;
   std::int64_t t_position_ns = 0;
   bool homed = false;
@@ -150,9 +151,9 @@ void FalconDevice::IoLoop() noexcept {
     const bool fresh = force.valid && std::abs(now_ns - force.t_ns) <= wrench_timeout_ns;
     if (homed && have_position && fresh) {
       glm::dmat3 J;
-      if (HandleJacobian(p_MH, J)) {
+      if (HandleJacobian(p_DH, J)) {
         const MotorCommands mc =
-            TorquesToMotorCommands(TorquesForForce(J, force.F_H_M), config_.max_motor_command);
+            TorquesToMotorCommands(TorquesForForce(J, force.F_H_D), config_.max_motor_command);
         request.motor_command = mc.command;
         if (mc.saturated) saturated_.fetch_add(1, std::memory_order_relaxed);
       } else {
@@ -178,18 +179,18 @@ void FalconDevice::IoLoop() noexcept {
         const MotorAngles theta = {EncoderToMotorAngle(response.encoder[0]),
                                    EncoderToMotorAngle(response.encoder[1]),
                                    EncoderToMotorAngle(response.encoder[2])};
-        glm::dvec3 p = have_position ? p_MH : glm::dvec3(0.0);
+        glm::dvec3 p = have_position ? p_DH : glm::dvec3(0.0);
         if (ForwardKinematics(theta, p)) {
           if (have_position) {
             const double dt = static_cast<double>(t_ns - t_position_ns) * 1e-9;
             if (dt > 0.0) {
               const double alpha = dt / (dt + tau_filter_s);
-              v_MH_M += alpha * ((p - p_MH) / dt - v_MH_M);
+              v_DH_D += alpha * ((p - p_DH) / dt - v_DH_D);
             }
           } else {
-            v_MH_M = glm::dvec3(0.0);
+            v_DH_D = glm::dvec3(0.0);
           }
-          p_MH = p;
+          p_DH = p;
           t_position_ns = t_ns;
           have_position = true;
         } else {
@@ -198,8 +199,8 @@ void FalconDevice::IoLoop() noexcept {
       } else {
         have_position = false;
       }
-      sample.p_MH = p_MH;
-      sample.v_MH_M = v_MH_M;
+      sample.p_DH = p_DH;
+      sample.v_DH_D = v_DH_D;
       // A reading whose kinematics failed is not published as new.
       if (!homed || t_position_ns == t_ns) samples_.Write(sample);
     } else if (result == ExchangeResult::kTimeout) {
@@ -231,8 +232,8 @@ bool FalconDevice::ReadState(std::int64_t now_ns, DeviceState& state) noexcept {
   if (now_ns - last_sample_.t_ns > static_cast<std::int64_t>(config_.stale_after_s * 1e9)) {
     return false;
   }
-  state.X_MH = RigidTransform{last_sample_.p_MH, glm::dquat(1.0, 0.0, 0.0, 0.0)};
-  state.V_MH_M = Twist{last_sample_.v_MH_M, glm::dvec3(0.0)};
+  state.X_MH = RigidTransform{kR_MD * last_sample_.p_DH, glm::dquat(1.0, 0.0, 0.0, 0.0)};
+  state.V_MH_M = Twist{kR_MD * last_sample_.v_DH_D, glm::dvec3(0.0)};
   state.buttons = last_sample_.buttons;
   state.timestamp_ns = last_sample_.t_ns;
   return true;
@@ -247,7 +248,7 @@ bool FalconDevice::WriteWrench(const Wrench& F_H_M, std::int64_t now_ns) noexcep
     commands_.Write(command);
     return false;
   }
-  command.F_H_M = F_H_M.force;
+  command.F_H_D = glm::transpose(kR_MD) * F_H_M.force;
   command.valid = true;
   commands_.Write(command);
   return true;

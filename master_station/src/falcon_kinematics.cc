@@ -44,8 +44,8 @@ const std::array<LegTrig, 3>& LegTrigs() noexcept {
   return trig;
 }
 
-glm::dvec3 ToK(const glm::dvec3& p_MH) noexcept {
-  return {p_MH.x, p_MH.y, p_MH.z + kWorkspaceCentreZ_m};
+glm::dvec3 ToK(const glm::dvec3& p_DH) noexcept {
+  return {p_DH.x, p_DH.y, p_DH.z + kWorkspaceCentreZ_m};
 }
 
 // One leg's closure equation and its derivatives at handle point p_K for motor angle theta:
@@ -96,8 +96,8 @@ double MotorAngleToEncoder(double angle_rad) noexcept {
   return (angle_rad - kAngleAtZero_rad) / kRadPerCount;
 }
 
-bool InverseKinematics(const glm::dvec3& p_MH, MotorAngles& theta) noexcept {
-  const glm::dvec3 p_K = ToK(p_MH);
+bool InverseKinematics(const glm::dvec3& p_DH, MotorAngles& theta) noexcept {
+  const glm::dvec3 p_K = ToK(p_DH);
   MotorAngles out{};
   for (int i = 0; i < 3; ++i) {
     const LegTrig& t = LegTrigs()[i];
@@ -120,11 +120,11 @@ bool InverseKinematics(const glm::dvec3& p_MH, MotorAngles& theta) noexcept {
   return true;
 }
 
-bool ForwardKinematics(const MotorAngles& theta, glm::dvec3& p_MH) noexcept {
+bool ForwardKinematics(const MotorAngles& theta, glm::dvec3& p_DH) noexcept {
   for (double th : theta) {
     if (!std::isfinite(th)) return false;
   }
-  glm::dvec3 p_K = ToK(p_MH);
+  glm::dvec3 p_K = ToK(p_DH);
   if (!(std::isfinite(p_K.x) && std::isfinite(p_K.y) && std::isfinite(p_K.z))) {
     p_K = ToK(glm::dvec3(0.0));
   }
@@ -154,14 +154,14 @@ bool ForwardKinematics(const MotorAngles& theta, glm::dvec3& p_MH) noexcept {
   for (int i = 0; i < 3; ++i) {
     if (!(std::abs(check[i] - theta[i]) < 1e-7)) return false;
   }
-  p_MH = p;
+  p_DH = p;
   return true;
 }
 
-bool HandleJacobian(const glm::dvec3& p_MH, glm::dmat3& J) noexcept {
+bool HandleJacobian(const glm::dvec3& p_DH, glm::dmat3& J) noexcept {
   MotorAngles theta{};
-  if (!InverseKinematics(p_MH, theta)) return false;
-  const glm::dvec3 p_K = ToK(p_MH);
+  if (!InverseKinematics(p_DH, theta)) return false;
+  const glm::dvec3 p_K = ToK(p_DH);
   // C_i(p, θ_i) = 0 along any motion: ∇C_i · ṗ + ∂C_i/∂θ_i θ̇_i = 0, so row i of ∂θ/∂p is
   // -∇C_i / (∂C_i/∂θ_i), and J = ∂p/∂θ is its inverse.
   std::array<glm::dvec3, 3> rows;

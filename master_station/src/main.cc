@@ -137,6 +137,10 @@ int main(int argc, char** argv) {
                  "or file (the scene file's own camera, where it has one)")
       ->check(CLI::IsMember({"follow", "file"}))
       ->capture_default_str();
+  bool no_frame_overlay = false;
+  app.add_flag("--no-frame-overlay", no_frame_overlay,
+               "do not print the run time, the phase and the contact force |F| in the display's "
+               "frames");
   app.add_option("--camera-distance", camera_distance_m,
                  "distance of the display's camera behind and above the tool, m (0 = five times "
                  "the tool's radius)")
@@ -319,6 +323,7 @@ int main(int argc, char** argv) {
     config.display.max_frames = max_frames;
     config.display.camera_distance_m = camera_distance_m;
     config.display.file_camera = display_camera == "file";
+    config.display.overlay = !no_frame_overlay;
     if (std::sscanf(frame_size.c_str(), "%dx%d", &config.display.width, &config.display.height) !=
         2) {
       throw std::invalid_argument("--frame-size " + frame_size +
@@ -373,10 +378,6 @@ int main(int argc, char** argv) {
     std::signal(SIGTERM, OnStopSignal);
     config.stop_requested = &g_stop;
     config.trace_max_bytes = static_cast<std::uint64_t>(trace_max_mb * 1024.0 * 1024.0);
-    if (config.run_until_stopped) {
-      std::printf("[master] running until Ctrl-C or SIGTERM (the force is ramped to zero first)\n");
-      std::fflush(stdout);
-    }
     const nlohmann::json summary = ht::RunOperatorStation(config, *device, *experiment);
     if (summary["stopped_by_request"].get<bool>()) {
       std::printf("[master] stopped on request after %.1f s: force ramped to zero, device closed\n",

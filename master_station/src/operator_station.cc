@@ -313,6 +313,13 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
         "; datagrams rejected here: " + std::to_string(network.rejected_total()));
   }
 
+  // Said once the device is open and the first contact model came (issue 35: it used to come before
+  // the device had even opened), with or without --quiet: a person at the device must know how to
+  // end.
+  if (config.run_until_stopped) {
+    std::printf("[master] running until Ctrl-C or SIGTERM (the force is ramped to zero first)\n");
+    std::fflush(stdout);
+  }
   // The haptic loop, on its own thread with real-time priority when permitted.
   // Bounded statistics however long the run: a uniform sample of at most 2^20 ticks.
   const auto sample_capacity = static_cast<std::size_t>(std::min<std::int64_t>(ticks, 1 << 20));
@@ -353,7 +360,8 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
 
   if (display_on) {
     display.emplace(display_config, received_scene, display_tool,
-                    X_WM.rotation * glm::dvec3(0.0, 0.0, 1.0), config.max_contact_force_n);
+                    X_WM.rotation * glm::dvec3(0.0, 0.0, 1.0), config.max_contact_force_n,
+                    experiment.phase_names());
     display_thread = std::thread([&] { display->Run(stop_display); });
   }
 
@@ -434,14 +442,17 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
         contacts_max = std::max(contacts_max, step.active_contacts);
         force_max = std::max(force_max, glm::length(step.F_contact_T_W.force));
       }
+      // The phase the simulated hand was following, when the device is scripted.
+      row.phase = experiment.Target(row.t_s).phase;
       if (display_on && k % kDisplayEveryTicks == 0) {
         display_state.t_s = row.t_s;
         display_state.X_WT = tick.tool().X_WT;
         display_state.X_WH = out.X_WH;
+        display_state.phase = caps.scripted ? row.phase : -1;
+        display_state.force_n = glm::length(row.F_contact_T_W.force);
+        display_state.contacts = row.contacts;
         display_tool.Write(display_state);
       }
-      // The phase the simulated hand was following, when the device is scripted.
-      row.phase = experiment.Target(row.t_s).phase;
       if (row.model_age_ms >= 0.0) model_age_samples.Add(row.model_age_ms);
       const std::int64_t end = SteadyNowNs();
       row.tick_compute_us = static_cast<float>((end - now) * 1e-3);

@@ -18,8 +18,9 @@
 // "A Three Degree of Freedom Parallel Manipulator with Only Translational Degrees of Freedom",
 // PhD thesis, Univ. of Maryland, 1997 (ISR PhD 97-4), as parameterised in libnifalcon.
 //
-// Frames K (the Falcon's kinematic frame), M (device base, origin at the workspace centre) and
-// H (the handle): see falcon_kinematics.h. Orientation is not sensed: R_MH is the identity.
+// Frames K (the Falcon's kinematic frame), D (K moved to the workspace centre), M (the device base
+// the loop sees: D turned so that +z is up, +y away from the user; kR_MD) and H (the handle): see
+// falcon_kinematics.h. Orientation is not sensed: R_MH is the identity.
 
 #include <atomic>
 #include <cstdint>
@@ -100,11 +101,12 @@ class FalconDevice final : public HapticDevice {
   void Open() override;
   /// Commands zero force, stops the I/O thread and releases the transport.
   void Close() noexcept override;
-  /// Newest reading: p_MH (orientation identity), V_MH_M (angular zero), grip buttons. False
+  /// Newest reading: p_DH (orientation identity), V_MH_M (angular zero), grip buttons. False
   /// before Open, until homed, or when the newest reading is older than stale_after_s.
   bool ReadState(std::int64_t now_ns, DeviceState& state) noexcept override;
-  /// Hands F_H_M.force to the I/O thread (the torque is not rendered: 3-DoF). Zero is rendered
-  /// until homed. False before Open or for a non-finite wrench (zero is then commanded).
+  /// Hands F_H_M.force (N, in M), turned into D, to the I/O thread (the torque is not rendered:
+  /// 3-DoF). Zero is rendered until homed. False before Open or for a non-finite wrench (zero is
+  /// then commanded).
   bool WriteWrench(const Wrench& F_H_M, std::int64_t now_ns) noexcept override;
 
   /// Counters and homing state of the I/O thread.
@@ -112,14 +114,14 @@ class FalconDevice final : public HapticDevice {
 
  private:
   struct Sample {
-    glm::dvec3 p_MH{0.0};
-    glm::dvec3 v_MH_M{0.0};
+    glm::dvec3 p_DH{0.0};
+    glm::dvec3 v_DH_D{0.0};
     std::uint32_t buttons = 0;
     bool homed = false;
     std::int64_t t_ns = 0;
   };
   struct ForceCommand {
-    glm::dvec3 F_H_M{0.0};
+    glm::dvec3 F_H_D{0.0};
     std::int64_t t_ns = 0;
     bool valid = false;
   };

@@ -8,11 +8,12 @@
 // parameterised in libnifalcon (github.com/libnifalcon/libnifalcon, BSD; read, not copied).
 //
 // Frames. K is libnifalcon's kinematic frame of the Falcon (z out of the device towards the
-// user, the legs at 105°, -15° and -135° about z). M, the device base frame used everywhere
-// outside the Falcon's kinematics, has K's axes and its origin at the centre of the workspace,
-// 0.11 m out along z (libnifalcon examples/falcon_test_cli/FalconSphereTest.cpp centres its
-// sphere there). H is the handle (the grip centre). Orientation is not sensed: R_MH is the
-// identity.
+// user, +y up, the legs at 105°, -15° and -135° about z). D, the frame every function here works
+// in, has K's axes and its origin at the centre of the workspace, 0.11 m out along z (libnifalcon
+// examples/falcon_test_cli/FalconSphereTest.cpp centres its sphere there). H is the handle (the
+// grip centre). Orientation is not sensed: R_DH is the identity. The device base M that the rest
+// of the product sees (+z up, +y away from the user, +x right: the SpaceMouse's and the replay's
+// axes) is D turned about x: kR_MD below; FalconDevice converts at its ReadState/WriteWrench.
 
 #include <array>
 #include <cstdint>
@@ -31,8 +32,15 @@ using MotorAngles = std::array<double, 3>;
 /// Joint torques about the three actuated axes (N·m), positive in the direction of growing θ1.
 using MotorTorques = glm::dvec3;
 
-/// Position of the workspace centre in K (m): M's origin.
+/// Position of the workspace centre in K (m): D's (and M's) origin.
 inline constexpr double kWorkspaceCentreZ_m = 0.11;
+
+/// R_MD, D's axes in M (columns): D's +x (right) is M's +x, D's +y (up) is M's +z, and D's +z
+/// (towards the user) is M's −y. A proper rotation (det +1); p_M = kR_MD · p_D,
+/// F_D = transpose(kR_MD) · F_M.
+inline constexpr glm::dmat3 kR_MD{1.0, 0.0,  0.0,   // column 0: D's x in M
+                                  0.0, 0.0,  1.0,   // column 1: D's y in M
+                                  0.0, -1.0, 0.0};  // column 2: D's z in M
 
 /// Motor angle θ1 (rad) for an encoder count: 320-slot wheel read in quadrature (1280 counts
 /// per motor turn) on a 14.25 mm shaft driving a 110 mm arm capstan, 35° at count 0
@@ -42,29 +50,29 @@ double EncoderToMotorAngle(double counts) noexcept;
 /// Inverse of EncoderToMotorAngle (counts, not rounded).
 double MotorAngleToEncoder(double angle_rad) noexcept;
 
-/// Closed-form inverse kinematics: the motor angles that put the handle at p_MH (m, in M).
+/// Closed-form inverse kinematics: the motor angles that put the handle at p_DH (m, in D).
 /// False when the point is outside the mechanism's reach. Per leg: the point in the leg's
 /// (u,v,w) frame fixes the parallelogram's out-of-plane angle θ3 from v, and θ1 from the circle
 /// the knee must lie on (Stamper 1997, ch. 3; libnifalcon FalconKinematicStamper::IK chooses
 /// the same branch).
-bool InverseKinematics(const glm::dvec3& p_MH, MotorAngles& theta) noexcept;
+bool InverseKinematics(const glm::dvec3& p_DH, MotorAngles& theta) noexcept;
 
-/// Forward kinematics: the handle position p_MH (m, in M) for motor angles `theta` (rad), by
-/// Newton's method on the three leg-closure equations starting from the value `p_MH` holds
+/// Forward kinematics: the handle position p_DH (m, in D) for motor angles `theta` (rad), by
+/// Newton's method on the three leg-closure equations starting from the value `p_DH` holds
 /// (pass the previous solution; the workspace centre, zero, when there is none). The result is
-/// checked against InverseKinematics. False, `p_MH` untouched, when it does not converge within
+/// checked against InverseKinematics. False, `p_DH` untouched, when it does not converge within
 /// 30 iterations or lands on the other knee branch.
-bool ForwardKinematics(const MotorAngles& theta, glm::dvec3& p_MH) noexcept;
+bool ForwardKinematics(const MotorAngles& theta, glm::dvec3& p_DH) noexcept;
 
-/// The Jacobian J = ∂p_MH/∂θ (m/rad; column j is the handle velocity per unit rate of motor j)
-/// at handle position p_MH, from the implicit-function theorem on the leg-closure equations.
+/// The Jacobian J = ∂p_DH/∂θ (m/rad; column j is the handle velocity per unit rate of motor j)
+/// at handle position p_DH, from the implicit-function theorem on the leg-closure equations.
 /// False near a singularity (|det| of ∂θ/∂p below 1e-9) or outside the reach.
-bool HandleJacobian(const glm::dvec3& p_MH, glm::dmat3& J) noexcept;
+bool HandleJacobian(const glm::dvec3& p_DH, glm::dmat3& J) noexcept;
 
-/// Joint torques that render the force F_H_M (N, on the handle, in M) at the pose whose
+/// Joint torques that render the force F_H_D (N, on the handle, in D) at the pose whose
 /// Jacobian is J: τ = Jᵀ F (virtual work).
-inline MotorTorques TorquesForForce(const glm::dmat3& J, const glm::dvec3& F_H_M) noexcept {
-  return glm::transpose(J) * F_H_M;
+inline MotorTorques TorquesForForce(const glm::dmat3& J, const glm::dvec3& F_H_D) noexcept {
+  return glm::transpose(J) * F_H_D;
 }
 
 /// Motor command units per N·m of joint torque, with the sign flip the firmware wants:

@@ -42,6 +42,9 @@ struct DisplayConfig {
   /// its force arrows were a few pixels in it (the Duck, 2CylinderEngine; issue 35). Without a
   /// camera in the file the camera follows the tool either way.
   bool file_camera = false;
+  /// Print the run time, the experiment's phase and the contact force |F| in each frame's
+  /// top-left corner (frame_overlay.h).
+  bool overlay = true;
 };
 
 /// Configuration of one run of the station.
