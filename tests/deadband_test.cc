@@ -157,6 +157,7 @@ TEST(Deadband, NearContactTheFloorsShrinkToTheContactScale) {
   ToolStateDeadbandConfig c;
   c.weber_fraction = 0.1;
   c.keepalive_s = 10.0;
+  c.contact_floor_hold_s = 0.0;  // the floors alone (the hold: the next test)
   EXPECT_DOUBLE_EQ(c.contact_rotation_floor_scale_rad, c.rotation_floor_scale_rad);
   c.contact_rotation_floor_scale_rad = 2e-3;
   // The largest distance between the tool and the pose the remote node predicts from the states
@@ -205,6 +206,9 @@ TEST(Deadband, NearContactTheFloorsShrinkToTheContactScale) {
     EXPECT_EQ(d.Decide(X, {}, 3 * kMs, true), DeadbandReason::kRotation);
   }
   ToolStateDeadbandConfig bad = c;
+  bad.contact_floor_hold_s = -0.1;
+  EXPECT_THROW(bad.Validate(), std::invalid_argument);
+  bad = c;
   bad.contact_position_floor_scale_m = 0.0;
   EXPECT_THROW(bad.Validate(), std::invalid_argument);
   bad = c;
@@ -226,6 +230,43 @@ ContactModel OneContact(double depth_m, double stiffness, const glm::dvec3& p0) 
   return m;
 }
 
+
+TEST(Deadband, TheContactFloorsOutlastABounceOffTheSurface) {
+  // A block lands, bounces 60 µm off the gear (its model then has no contacts: near_contact
+  // false) and falls back. With the free-space floor at once (0.2 mm at k = 0.1) nothing was sent
+  // while it fell 0.2 mm into the gear, and the next model pushed 1.7 N (issue 32's third note).
+  // Held for contact_floor_hold_s, the contact floor (20 µm) sends the fall at once.
+  ToolStateDeadbandConfig c;
+  c.weber_fraction = 0.1;
+  c.keepalive_s = 10.0;
+  ASSERT_DOUBLE_EQ(c.contact_floor_hold_s, 0.5);
+  // The tool: in contact for 10 ms at rest, then free of contacts and falling at 20 mm/s (the
+  // ExtrapolatePose of a resting state predicts it still); the drop when the first state goes out.
+  auto drop_before_first_send = [&](double hold_s) {
+    ToolStateDeadbandConfig config = c;
+    config.contact_floor_hold_s = hold_s;
+    ToolStateDeadband d(config);
+    RigidTransform X;
+    for (int i = 0; i <= 10; ++i) d.Decide(X, {}, i * kMs, true);
+    for (int i = 1; i < 100; ++i) {
+      X.translation.z = -0.02 * i * 1e-3;
+      if (d.Decide(X, {{0.0, 0.0, -0.02}, {}}, (10 + i) * kMs, false) != DeadbandReason::kNotSent) {
+        return -X.translation.z;
+      }
+    }
+    return 1.0;
+  };
+  // Sent on the first tick past the 20 µm floor (one tick's fall is 20 µm).
+  EXPECT_LE(drop_before_first_send(0.5), 40e-6 + 1e-9);
+  EXPECT_GT(drop_before_first_send(0.0), 0.15e-3);
+  // Past the hold the free-space floors are back: 0.1 mm is not sent 0.6 s after the contact.
+  ToolStateDeadband d(c);
+  RigidTransform X;
+  ASSERT_EQ(d.Decide(X, {}, 0, true), DeadbandReason::kFirst);
+  X.translation.z = 0.1e-3;
+  EXPECT_EQ(d.Decide(X, {}, 600 * kMs, false), DeadbandReason::kNotSent);
+  EXPECT_EQ(d.Decide(X, {}, 601 * kMs, true), DeadbandReason::kPosition);
+}
 TEST(Deadband, ContactModelSentWhenTheHeldOneRendersDifferently) {
   ContactModelDeadbandConfig c;
   c.weber_fraction = 0.1;

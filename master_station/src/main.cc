@@ -258,6 +258,12 @@ int main(int argc, char** argv) {
                  "in free space by default)")
       ->check(CLI::Range(1e-3, 1000.0))
       ->capture_default_str();
+  double contact_hold_ms = 500.0;
+  app.add_option("--deadband-contact-hold-ms", contact_hold_ms,
+                 "the contact floors stay this long after the held model last had contacts, ms "
+                 "(covers a bounce off the surface; 0 = drop them at once)")
+      ->check(CLI::Range(0.0, 60000.0))
+      ->capture_default_str();
   app.add_flag("--float-models", float_models,
                "ask for contact models in the float encoding rather than the compact quantized "
                "one (transport/protocol.h states its error bounds)");
@@ -310,6 +316,7 @@ int main(int argc, char** argv) {
     config.tool_state_deadband.velocity_adaptive = deadband_velocity_adaptive;
     config.tool_state_deadband.velocity_criterion = deadband_velocity;
     config.tool_state_deadband.contact_position_floor_scale_m = contact_floor_mm * 1e-3;
+    config.tool_state_deadband.contact_floor_hold_s = contact_hold_ms * 1e-3;
     config.tool_state_deadband.contact_rotation_floor_scale_rad = contact_floor_mrad * 1e-3;
     config.model_deadband = model_deadband_pct.value_or(deadband_pct) / 100.0;
     config.model_keepalive_s = deadband_keepalive_ms * 1e-3;

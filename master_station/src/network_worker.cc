@@ -166,6 +166,8 @@ nlohmann::json NetworkWorker::Summary() const {
                       config_.tool_state_deadband.contact_position_floor_scale_m * 1e3},
                      {"contact_rotation_floor_scale_mrad",
                       config_.tool_state_deadband.contact_rotation_floor_scale_rad * 1e3},
+                     {"contact_floor_hold_ms",
+                      config_.tool_state_deadband.contact_floor_hold_s * 1e3},
                      {"compact_models", compact_models_},
                      {"tool_states_offered", tool_states_offered_},
                      {"tool_states_held_back", tool_states_held_back_},

@@ -90,6 +90,9 @@ void ToolStateDeadbandConfig::Validate() const {
   CheckPositive(linear_velocity_floor_scale_m_per_s, "tool-state deadband velocity floor scale");
   CheckPositive(angular_velocity_floor_scale_rad_per_s,
                 "tool-state deadband angular velocity floor scale");
+  if (!(contact_floor_hold_s >= 0.0 && std::isfinite(contact_floor_hold_s))) {
+    throw std::invalid_argument("tool-state deadband contact floor hold must be >= 0 s and finite");
+  }
   CheckPositive(keepalive_s, "tool-state keep-alive");
   CheckPositive(adaptive_speed_ref_m_per_s, "tool-state deadband adaptive speed reference");
 }
@@ -110,6 +113,13 @@ DeadbandReason ToolStateDeadband::Decide(const RigidTransform& X_WT, const Twist
   const double k = c.weber_fraction;
   DeadbandReason reason = DeadbandReason::kNotSent;
   const double dt = static_cast<double>(t_ns - t_sent_ns_) * 1e-9;
+  if (near_contact) {
+    have_near_contact_ = true;
+    t_near_contact_ns_ = t_ns;
+  } else if (have_near_contact_ &&
+             static_cast<double>(t_ns - t_near_contact_ns_) * 1e-9 < c.contact_floor_hold_s) {
+    near_contact = true;  // held: the tool has just left contact, or bounced off
+  }
   if (k <= 0.0) {
     reason = DeadbandReason::kOff;
   } else if (!have_sent_) {

@@ -78,6 +78,12 @@ struct ToolStateDeadbandConfig {
   /// the block calm, at twice the tool states of the position floor alone (docs/deadband.md).
   double contact_position_floor_scale_m = 2e-4;
   double contact_rotation_floor_scale_rad = 0.02;
+  /// The contact floors stay for this long after the last tool state decided near contact (s,
+  /// ≥ 0). A block that bounces off the surface gets a model with no contacts at the top of its
+  /// bounce; with the free-space floor at once, it then fell 0.2 mm into the gear before the next
+  /// tool state went out, and the next model pushed 1.7 N (1 in 17 fig75 loopback runs landed in
+  /// 3–4 such bounces; issue 32's third note). Half a second covers a bounce and a lift-off.
+  double contact_floor_hold_s = 0.5;
   double keepalive_s = 0.1;  ///< longest time between two tool states sent (s, > 0)
   /// Also send when the twist itself changed beyond the deadband (Weber fraction of the last
   /// twist sent). Off by default: a changed twist already shows as pose error against the
@@ -97,7 +103,8 @@ struct ToolStateDeadbandConfig {
 /// last state sent at t_s and (p̂, R̂) = ExtrapolatePose(last sent, t − t_s):
 ///   position  |p − p̂| > max(k·|p − p_s|, k·floor_p·a)
 ///   rotation  ∠(R R̂ᵀ) > max(k·∠(R R_sᵀ), k·floor_θ·a)
-/// (floor_p, floor_θ the contact floor scales while near contact, else the free-space ones)
+/// (floor_p, floor_θ the contact floor scales while near contact or within contact_floor_hold_s
+/// of the last decision near contact, else the free-space ones)
 ///   velocity  |v − v_s| > max(k·|v_s|, k·floor_v), the same for ω (with velocity_criterion),
 /// a = 1 + |v|/v_ref with velocity_adaptive, else 1; plus the keep-alive.
 class ToolStateDeadband {
@@ -106,7 +113,7 @@ class ToolStateDeadband {
   /// The decision for the tool state (X_WT, V_WT_W) at time t_ns (ns, the sender's steady
   /// clock). When it returns anything but kNotSent, the state counts as sent (the caller sends
   /// it). `near_contact`: the operator's held contact model has contacts (the contact floors
-  /// apply).
+  /// apply, and go on applying for contact_floor_hold_s after the last such call).
   DeadbandReason Decide(const RigidTransform& X_WT, const Twist& V_WT_W, std::int64_t t_ns,
                         bool near_contact = false) noexcept;
   /// Records a state the caller sent without asking (e.g. a keep-alive while the loop is idle),
@@ -128,6 +135,8 @@ class ToolStateDeadband {
   RigidTransform X_sent_;
   Twist V_sent_;
   std::int64_t t_sent_ns_ = 0;
+  bool have_near_contact_ = false;
+  std::int64_t t_near_contact_ns_ = 0;  ///< the last decision with near_contact
   DeadbandCounts counts_{};
 };
 
