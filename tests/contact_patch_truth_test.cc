@@ -244,6 +244,133 @@ TEST(ContactPatchTruth, SeparatedMeshesAndNonFinitePosesGiveNoTruth) {
   EXPECT_EQ(bad.pairs, 0);
 }
 
+// A flat face pressed δ into the crests of a ridged face (the fig75 block's ridges, 3 mm period,
+// 0.4 mm high, turned to face up): the ridges are texture on one face, so the truth is one contact
+// along the face's normal with F = k δ ẑ (the crests' overlap along ẑ is δ wherever the flat face
+// covers them). Without the merges (issue 32, third stop) the ridge flanks' fine normals split
+// the overlap into patches whose windows overlap, and the truth summed the same penetration
+// more than once.
+TEST(ContactPatchTruth, AFlatFaceOnRidgesIsOneContactNotOnePerFlank) {
+  RidgedBlockParams params;
+  params.full_resolution_grid = 120;
+  const TriangleMesh ridged = MakeRidgedBlockFullResolution(params);
+  const double crest_z = params.half_extents_m.z + params.ridges.amplitude_m;
+  // The ridged block turned upside down: its ridged face is the top, crests at z = crest_z.
+  const RigidTransform X_WFe = At({0, 0, 0}, glm::angleAxis(std::numbers::pi, glm::dvec3(1, 0, 0)));
+  const TriangleMesh tool = Box({-0.01, -0.01, 0.0}, {0.01, 0.01, 0.01});
+  const RayCastSurface tool_rays(tool), env_rays(ridged);
+  ContactPatchTruth merged(tool, ridged, tool_rays, env_rays);
+  ContactPatchTruthOptions old_options;
+  old_options.macro_normal_radius_m = 0.0;
+  old_options.overlap_merge_angle_deg = 0.0;
+  old_options.minor_patch_fraction = 0.0;
+  ContactPatchTruth unmerged(tool, ridged, tool_rays, env_rays, old_options);
+  for (const double delta : {0.05e-3, 0.15e-3, 0.3e-3}) {
+    const RigidTransform X_WT = At({0.0013, -0.0007, crest_z - delta});
+    const PoseTruth t = merged.At(X_WT, RigidTransform{}, X_WFe, kK);
+    const PoseTruth t0 = unmerged.At(X_WT, RigidTransform{}, X_WFe, kK);
+    std::printf("δ %.2f mm: %zu patch(es), Fz %.3f N (k δ %.3f N); unmerged %zu, Fz %.3f N\n",
+                delta * 1e3, t.patches.size(), t.F_T_W.force.z, kK * delta, t0.patches.size(),
+                t0.F_T_W.force.z);
+    ASSERT_EQ(t.patches.size(), 1u) << "δ " << delta;
+    EXPECT_LT(AngleDeg(t.patches[0].window.normal_W, {0, 0, 1}), 2.0);
+    EXPECT_NEAR(t.patches[0].contact.linearization.depth_m, delta, 0.02 * delta + 2e-6);
+    EXPECT_NEAR(t.F_T_W.force.z, kK * delta, 0.05 * kK * delta);
+    EXPECT_LT(glm::length(glm::dvec2(t.F_T_W.force)), 0.05 * kK * delta);
+    EXPECT_GT(t.patches_merged, 0);
+    // The old truth: more patches, and a larger force from the same penetration.
+    EXPECT_GT(t0.patches.size(), 1u);
+    EXPECT_GT(t0.F_T_W.force.z, 1.3 * kK * delta);
+  }
+}
+
+// Two ridged faces interlocked a quarter period off (the fig76 pair: ridges along x, 3 mm period,
+// 0.4 mm high): each tool crest leans on one flank of an environment groove, so the patch's −∇V
+// points along the flanks. Lowered until the meshes touch and then δ further, the depth along
+// the face's normal is δ exactly (lifting by δ separates them); along the flanks' direction it
+// runs into the neighbouring ridges. The truth takes the face's normal (the environment's
+// normals averaged over 5 mm), as the method does, and gives k δ upwards, not many times that.
+TEST(ContactPatchTruth, InterlockedRidgesPushAlongTheFaceNotAlongAFlank) {
+  RidgedBlockParams params;
+  params.full_resolution_grid = 120;
+  const TriangleMesh ridged = MakeRidgedBlockFullResolution(params);
+  const RigidTransform X_WFe = At({0, 0, 0}, glm::angleAxis(std::numbers::pi, glm::dvec3(1, 0, 0)));
+  const RayCastSurface rays(ridged);
+  ContactPatchTruth truth(ridged, ridged, rays, rays);
+  ContactPatchTruthOptions old_options;
+  old_options.macro_normal_radius_m = 0.0;
+  old_options.depth_along_macro_normal = false;
+  old_options.overlap_merge_angle_deg = 0.0;
+  old_options.minor_patch_fraction = 0.0;
+  ContactPatchTruth old_truth(ridged, ridged, rays, rays, old_options);
+  // The tool: the same block, ridges down, 10 mm smaller in x so that its ends stay on the
+  // environment's face; shifted a quarter period in y.
+  const double y_shift = 0.25 * params.ridges.period_m;
+  const auto pose = [&](double z) { return At({0.0, y_shift, z}); };
+  // Where the two first touch: near 2·top + max over y of the two profiles' sum (the tessellation
+  // moves it by tens of µm), then bisected on the pair count within ±0.1 mm of that.
+  const double top = params.half_extents_m.z;  // the faces' mean surfaces
+  double touch = -1.0;
+  for (int i = 0; i <= 20000; ++i) {
+    const double y = -0.5 * params.ridges.period_m + i * 1e-4 * params.ridges.period_m;
+    touch = std::max(touch, params.ridges.Height(-y) + params.ridges.Height(y - y_shift));
+  }
+  double lo = 2.0 * top + touch - 1e-4, hi = 2.0 * top + touch + 1e-4;
+  ASSERT_EQ(truth.At(pose(hi), RigidTransform{}, X_WFe, kK).pairs, 0);
+  ASSERT_GT(truth.At(pose(lo), RigidTransform{}, X_WFe, kK).pairs, 0);
+  for (int i = 0; i < 14; ++i) {  // to 12 nm
+    const double mid = 0.5 * (lo + hi);
+    (truth.At(pose(mid), RigidTransform{}, X_WFe, kK).pairs > 0 ? lo : hi) = mid;
+  }
+  const double delta = 0.1e-3;
+  const PoseTruth t = truth.At(pose(hi - delta), RigidTransform{}, X_WFe, kK);
+  const PoseTruth t0 = old_truth.At(pose(hi - delta), RigidTransform{}, X_WFe, kK);
+  double old_depth = 0.0;
+  for (const TruthPatch& p : t0.patches) {
+    old_depth = std::max(old_depth, p.contact.linearization.depth_m);
+  }
+  std::printf(
+      "interlocked: %zu patch(es), Fz %.3f N, |Fxy| %.3f N (k δ %.3f N); old truth %zu "
+      "patch(es), Fz %.3f N, deepest %.0f µm\n",
+      t.patches.size(), t.F_T_W.force.z, glm::length(glm::dvec2(t.F_T_W.force)), kK * delta,
+      t0.patches.size(), t0.F_T_W.force.z, old_depth * 1e6);
+  ASSERT_FALSE(t.patches.empty());
+  for (const TruthPatch& p : t.patches) {
+    EXPECT_LT(AngleDeg(p.window.normal_W, {0, 0, 1}), 3.0);
+    EXPECT_NEAR(p.contact.linearization.depth_m, delta, 0.05 * delta + 2e-6);
+  }
+  // The volume's gradient still leans along the flanks (T2 keeps it).
+  EXPECT_GT(AngleDeg(-t.dV_dx_W, {0, 0, 1}), 10.0);
+  EXPECT_LT(t.F_T_W.force.z, 1.5 * kK * delta * static_cast<double>(t.patches.size()));
+  // The old truth cut the overlap into flank patches and summed them.
+  EXPECT_GT(t0.patches.size(), t.patches.size());
+  EXPECT_GT(t0.F_T_W.force.z, 1.5 * kK * delta);
+}
+
+// A box pressed into an L corner (a floor and a wall): two contacts 90° apart, which no merge
+// may join.
+TEST(ContactPatchTruth, AnLCornerStaysTwoContacts) {
+  // The floor (z ≤ 0) and the wall (x ≥ 0.02) as two closed boxes in one mesh; the wall stands
+  // 1 mm above the floor so that the two solids do not share a face.
+  TriangleMesh env = Box({-0.06, -0.06, -0.02}, {0.02, 0.06, 0.0});
+  const TriangleMesh wall = Box({0.02, -0.06, 0.001}, {0.04, 0.06, 0.04});
+  const int offset = static_cast<int>(env.vertices.size());
+  env.vertices.insert(env.vertices.end(), wall.vertices.begin(), wall.vertices.end());
+  for (const glm::ivec3& t : wall.triangles) env.triangles.push_back(t + offset);
+  const TriangleMesh tool = Box({-0.01, -0.01, -0.01}, {0.01, 0.01, 0.01});
+  const RayCastSurface tool_rays(tool), env_rays(env);
+  ContactPatchTruth truth(tool, env, tool_rays, env_rays);
+  const double delta = 0.2e-3;
+  // Centre 10 mm − δ above the floor and 10 mm − δ from the wall: pressed δ into both.
+  const RigidTransform X_WT = At({0.02 - 0.01 + delta, 0.0, 0.01 - delta});
+  const PoseTruth t = truth.At(X_WT, RigidTransform{}, RigidTransform{}, kK);
+  ASSERT_EQ(t.patches.size(), 2u);
+  const glm::dvec3 a = t.patches[0].window.normal_W, b = t.patches[1].window.normal_W;
+  EXPECT_NEAR(AngleDeg(a, b), 90.0, 3.0);
+  EXPECT_NEAR(t.F_T_W.force.z, kK * delta, 0.05 * kK * delta);
+  EXPECT_NEAR(t.F_T_W.force.x, -kK * delta, 0.05 * kK * delta);
+}
+
 TEST(ContactPatchTruthOptions, RefusesValuesOutOfRange) {
   ContactPatchTruthOptions o;
   o.merge_distance_m = 0.0;

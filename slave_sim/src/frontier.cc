@@ -565,6 +565,12 @@ void RunPipelineTruth(const BenchmarkScene& scene, const RayCastSurface& tool,
   const PipelineOptions pipeline;  // the method's clustering granularity
   truth_options.merge_distance_m = pipeline.clustering_distance_m;
   truth_options.max_normal_angle_deg = pipeline.clustering_angle_deg;
+  if (!options.truth_merge_patches) {
+    truth_options.macro_normal_radius_m = 0.0;
+    truth_options.depth_along_macro_normal = false;
+    truth_options.overlap_merge_angle_deg = 0.0;
+    truth_options.minor_patch_fraction = 0.0;
+  }
   std::atomic<std::size_t> next{0}, finished{0};
   const auto t0 = Clock::now();
   std::exception_ptr failure;
@@ -746,6 +752,7 @@ struct SceneReport {
   // Pipeline truth figures.
   int truth_patches = 0, truth_poses_intersecting = 0, truth_poses_zero = 0;
   int truth_pairs_truncated = 0;
+  int truth_patches_merged = 0;
   double truth_seconds = 0;
   long long truth_rays = 0;
   std::vector<double> truth_extents_mm;
@@ -953,6 +960,7 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
       rep.truth_poses_intersecting += t.pairs > 0;
       rep.truth_poses_zero += t.pairs > 0 && !(glm::length(t.F_T_W.force) > 0.0);
       rep.truth_pairs_truncated += t.pairs_truncated;
+      rep.truth_patches_merged += t.patches_merged;
       rep.truth_rays += t.rays;
       for (std::size_t q = 0; q < t.patches.size(); ++q) {
         const TruthPatch& patch = t.patches[q];
@@ -1152,10 +1160,14 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
   s << "Two measures of error, each named where it is used (issue 31):\n\n"
        "- **Pipeline truth (T1)**, the headline measure: from the **full-resolution** meshes "
        "alone, at each pose, the intersecting triangle pairs (FCL) grouped into contact patches "
-       "(connected regions at the method's clustering distance and angle); per patch its "
-       "direction n = −∇V (the area-weighted normals of the surfaces inside the other solid; V the "
-       "patch's intersection volume), its centre (their area centroid) and a window holding their "
-       "projection; δ_gt and ∇δ_gt on that window by Embree ray casting (the method's facing and "
+       "(connected regions at the method's clustering distance and angle, then merged where two "
+       "would measure one interpenetration twice: a textured face's flanks, overlapping windows, "
+       "slivers at an edge); per patch its direction n, the flatter surface's normal averaged over "
+       "5 mm (texture finer than that does not tilt it; else −∇V, the area-weighted normals of "
+       "the surfaces inside the other solid, V the patch's intersection volume), its centre "
+       "(their area centroid) and a window holding their projection; `--truth-no-merge` gives "
+       "the truth before issue 32's third stop (no merges, n = −∇V); δ_gt and ∇δ_gt on that window "
+       "by Embree ray casting (the method's facing and "
        "box rules), gradient steps at texel scale (0.1 mm); Φ_gt = Σ −k δ_gt ∇δ_gt. It owns its "
        "contacts: a method's window in the wrong place or along the wrong n, or a contact in no "
        "window, is error. `pipeline force / torque err` is the relative RMS "
@@ -1206,7 +1218,12 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
                  ? 0.0
                  : *std::max_element(rep.truth_extents_mm.begin(), rep.truth_extents_mm.end()),
              3)
-      << " mm); intersecting poses with a zero truth: " << rep.truth_poses_zero
+      << " mm; " << rep.truth_patches_merged
+      << (options.truth_merge_patches
+              ? " more merged into them: neighbours on one face at the 5 mm scale, overlapping "
+                "windows within 60°, or slivers at a patch's edge"
+              : " merged: --truth-no-merge")
+      << "); intersecting poses with a zero truth: " << rep.truth_poses_zero
       << "; pair lists cut at the cap: " << rep.truth_pairs_truncated << "; " << rep.truth_rays
       << " rays in " << Fmt(rep.truth_seconds, 3) << " s.\n\n";
     s << "| setting | method | backend | N | texture | coarse | leaf pairs / contacts | step p50 / "

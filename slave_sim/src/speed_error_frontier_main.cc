@@ -59,6 +59,11 @@ int main(int argc, char** argv) {
   app.add_option("--gt-tolerance-um", options.ground_truth.tolerance_m,
                  "ground truth: converged when doubling M changes delta by less than this (µm)")
       ->transform([](std::string v) { return std::to_string(std::stod(v) * 1e-6); });
+  bool truth_no_merge = false;
+  app.add_flag("--truth-no-merge", truth_no_merge,
+               "pipeline truth as before issue 32's third stop: the single-linkage patches as they "
+               "are (no merges of patches that measure one interpenetration twice) and each "
+               "patch's depth along -grad V rather than the surface's 5 mm normal");
   app.add_flag("--quiet", quiet, "no progress lines");
   if (const auto rc = ht::ParseCommandLine(app, argc, argv, "speed_error_frontier")) return *rc;
   std::string command = "speed_error_frontier";
@@ -72,6 +77,7 @@ int main(int argc, char** argv) {
       options.traces[t.substr(0, eq)] = t.substr(eq + 1);
     }
     options.gpu = !no_gpu;
+    options.truth_merge_patches = !truth_no_merge;
     options.progress = !quiet;
     options.command_line = command;
     // The plot script: in the source tree (a build), else beside an installed binary.

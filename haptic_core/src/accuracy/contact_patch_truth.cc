@@ -33,6 +33,12 @@ void ContactPatchTruthOptions::Validate() const {
   if (!(boundary_cell_m > 0.0) || !(boundary_cell_m <= inside_cell_m))
     fail("boundary_cell_m must be in (0, inside_cell_m]", boundary_cell_m);
   if (max_pairs < 1) fail("max_pairs must be >= 1", max_pairs);
+  if (!(overlap_merge_angle_deg >= 0.0 && overlap_merge_angle_deg <= 180.0))
+    fail("overlap_merge_angle_deg must be in [0, 180]", overlap_merge_angle_deg);
+  if (!(macro_normal_radius_m >= 0.0) || !std::isfinite(macro_normal_radius_m))
+    fail("macro_normal_radius_m must be >= 0", macro_normal_radius_m);
+  if (!(minor_patch_fraction >= 0.0 && minor_patch_fraction < 1.0))
+    fail("minor_patch_fraction must be in [0, 1)", minor_patch_fraction);
   depth.Validate();
 }
 
@@ -122,6 +128,127 @@ void EdgePiercings(const glm::dvec3& a0, const glm::dvec3& a1, const glm::dvec3&
   }
 }
 
+// The point of triangle (a, b, c) closest to p (Ericson, Real-Time Collision Detection, 5.1.5:
+// the Voronoi region of p among the triangle's vertices, edges and face).
+glm::dvec3 ClosestPointOnTriangle(const glm::dvec3& p, const glm::dvec3& a, const glm::dvec3& b,
+                                  const glm::dvec3& c) {
+  const glm::dvec3 ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = glm::dot(ab, ap), d2 = glm::dot(ac, ap);
+  if (d1 <= 0.0 && d2 <= 0.0) return a;
+  const glm::dvec3 bp = p - b;
+  const double d3 = glm::dot(ab, bp), d4 = glm::dot(ac, bp);
+  if (d3 >= 0.0 && d4 <= d3) return b;
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) return a + (d1 / (d1 - d3)) * ab;
+  const glm::dvec3 cp = p - c;
+  const double d5 = glm::dot(ab, cp), d6 = glm::dot(ac, cp);
+  if (d6 >= 0.0 && d5 <= d6) return c;
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) return a + (d2 / (d2 - d6)) * ac;
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) {
+    return b + ((d4 - d3) / ((d4 - d3) + (d5 - d6))) * (c - b);
+  }
+  const double denom = va + vb + vc;
+  if (!(std::abs(denom) > 0.0)) return a;  // degenerate triangle
+  const double v = vb / denom, w = vc / denom;
+  return a + v * ab + w * ac;
+}
+
+// A mesh's surface normal averaged over a ball (its macroscopic normal): the triangles in a hash
+// grid of cell r (each in every cell its bounding box meets), and per query the area of each
+// triangle inside the ball of radius r, estimated by splitting triangles larger than (r/4)² until
+// they are not and counting the pieces whose centroid lies in the ball.
+class SurfaceNormalGrid {
+ public:
+  SurfaceNormalGrid(const TriangleMesh& mesh, const MeshTopology& topology, double r)
+      : mesh_(mesh), topology_(topology), r_(r) {
+    if (!(r > 0.0)) return;
+    stamp_of_.assign(mesh.triangles.size(), 0);
+    for (std::size_t f = 0; f < mesh.triangles.size(); ++f) {
+      const glm::ivec3 t = mesh.triangles[f];
+      const glm::dvec3 a = mesh.vertices[t[0]], b = mesh.vertices[t[1]], c = mesh.vertices[t[2]];
+      const glm::i64vec3 lo = Cell(glm::min(a, glm::min(b, c))),
+                         hi = Cell(glm::max(a, glm::max(b, c)));
+      for (std::int64_t x = lo.x; x <= hi.x; ++x) {
+        for (std::int64_t y = lo.y; y <= hi.y; ++y) {
+          for (std::int64_t z = lo.z; z <= hi.z; ++z) {
+            grid_[Hash({x, y, z})].push_back(static_cast<int>(f));
+          }
+        }
+      }
+    }
+  }
+
+  // The area-weighted mean of the outward normals within r of p_F (mesh frame): its length is
+  // the surface's flatness there (1 on a plane, about 0.7 on a right-angled edge, 0 where no
+  // surface is within r).
+  glm::dvec3 MeanNormal(const glm::dvec3& p_F) const {
+    if (!(r_ > 0.0)) return glm::dvec3(0.0);
+    if (++stamp_ == 0) {
+      std::fill(stamp_of_.begin(), stamp_of_.end(), 0);
+      stamp_ = 1;
+    }
+    const glm::i64vec3 c = Cell(p_F);
+    glm::dvec3 sum(0.0);
+    double weight = 0.0;
+    const double small2 = (0.25 * r_) * (0.25 * r_);
+    for (int dx = -1; dx <= 1; ++dx) {
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dz = -1; dz <= 1; ++dz) {
+          const auto it = grid_.find(Hash(c + glm::i64vec3(dx, dy, dz)));
+          if (it == grid_.end()) continue;
+          for (const int f : it->second) {
+            if (stamp_of_[f] == stamp_) continue;
+            stamp_of_[f] = stamp_;
+            const glm::ivec3 t = mesh_.triangles[f];
+            const glm::dvec3 a = mesh_.vertices[t[0]], b = mesh_.vertices[t[1]],
+                             cc = mesh_.vertices[t[2]];
+            const glm::dvec3 q = ClosestPointOnTriangle(p_F, a, b, cc);
+            if (glm::dot(q - p_F, q - p_F) > r_ * r_) continue;
+            const double inside = AreaInBall(p_F, a, b, cc, topology_.area_m2[f], small2);
+            sum += inside * topology_.normal_F[f];
+            weight += inside;
+          }
+        }
+      }
+    }
+    return weight > 0.0 ? sum / weight : glm::dvec3(0.0);
+  }
+
+ private:
+  glm::i64vec3 Cell(const glm::dvec3& p) const {
+    return glm::i64vec3(std::floor(p.x / r_), std::floor(p.y / r_), std::floor(p.z / r_));
+  }
+  static std::uint64_t Hash(const glm::i64vec3& c) {
+    return static_cast<std::uint64_t>(c.x * 73856093LL) ^
+           static_cast<std::uint64_t>(c.y * 19349663LL) ^
+           static_cast<std::uint64_t>(c.z * 83492791LL);
+  }
+  double AreaInBall(const glm::dvec3& p, const glm::dvec3& a, const glm::dvec3& b,
+                    const glm::dvec3& c, double area, double small2) const {
+    const double e2 =
+        std::max({glm::dot(b - a, b - a), glm::dot(c - b, c - b), glm::dot(a - c, a - c)});
+    if (e2 <= small2) {
+      const glm::dvec3 g = (a + b + c) / 3.0 - p;
+      return glm::dot(g, g) <= r_ * r_ ? area : 0.0;
+    }
+    const glm::dvec3 q = ClosestPointOnTriangle(p, a, b, c);
+    if (glm::dot(q - p, q - p) > r_ * r_) return 0.0;
+    const glm::dvec3 ab = 0.5 * (a + b), bc = 0.5 * (b + c), ca = 0.5 * (c + a);
+    const double quarter = 0.25 * area;
+    return AreaInBall(p, a, ab, ca, quarter, small2) + AreaInBall(p, ab, b, bc, quarter, small2) +
+           AreaInBall(p, ca, bc, c, quarter, small2) + AreaInBall(p, ab, bc, ca, quarter, small2);
+  }
+
+  const TriangleMesh& mesh_;
+  const MeshTopology& topology_;
+  double r_;
+  std::unordered_map<std::uint64_t, std::vector<int>> grid_;
+  mutable std::vector<std::uint32_t> stamp_of_;
+  mutable std::uint32_t stamp_ = 0;
+};
+
 // Union-find with path halving.
 int Find(std::vector<int>& parent, int i) {
   while (parent[i] != i) i = parent[i] = parent[parent[i]];
@@ -138,6 +265,7 @@ struct ContactPatchTruth::Impl {
   ContactPatchTruthOptions options;
   std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>> tool_fcl, environment_fcl;
   GroundTruthDepthSolver solver;
+  SurfaceNormalGrid tool_normals, environment_normals;
   // Per-triangle state of the current pose: 0 unseen, 1 crossing, 2 inside, 3 outside.
   std::vector<std::uint8_t> tool_state, environment_state;
 
@@ -152,7 +280,9 @@ struct ContactPatchTruth::Impl {
         options(o),
         tool_fcl(accuracy_detail::MakeFclMesh(t, "tool")),
         environment_fcl(accuracy_detail::MakeFclMesh(e, "environment")),
-        solver(tr, er, o.depth) {}
+        solver(tr, er, o.depth),
+        tool_normals(tool, tool_topology, o.macro_normal_radius_m),
+        environment_normals(environment, environment_topology, o.macro_normal_radius_m) {}
 
   // What one side's inside surface adds to a patch.
   struct SideSums {
@@ -327,6 +457,7 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
   for (int i = 0; i < np; ++i) grid[hash(cell_of(pairs[i].p_W))].push_back(i);
   std::vector<int> parent(static_cast<std::size_t>(np));
   for (int i = 0; i < np; ++i) parent[i] = i;
+  std::vector<std::pair<int, int>> split_neighbours;
   for (int i = 0; i < np; ++i) {
     const glm::i64vec3 c = cell_of(pairs[i].p_W);
     for (int dx = -1; dx <= 1; ++dx) {
@@ -337,7 +468,11 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
           for (const int j : it->second) {
             if (j <= i) continue;
             const glm::dvec3 dp = pairs[j].p_W - pairs[i].p_W;
-            if (glm::dot(dp, dp) >= d2 || glm::dot(pairs[i].n_W, pairs[j].n_W) < cos_max) continue;
+            if (glm::dot(dp, dp) >= d2) continue;
+            if (glm::dot(pairs[i].n_W, pairs[j].n_W) < cos_max) {
+              split_neighbours.emplace_back(i, j);  // near, but the fine normals disagree
+              continue;
+            }
             const int a = Find(parent, i), b = Find(parent, j);
             if (a != b) parent[std::max(a, b)] = std::min(a, b);
           }
@@ -368,76 +503,198 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
     patch_of[i] = root_patch[r];
   }
 
-  // 3. Inside surfaces per patch. Crossing triangles are marked for all patches first, so that
-  // no flood fill walks into another patch's crossing triangles.
-  m.tool_state.assign(m.tool.triangles.size(), 0);
-  m.environment_state.assign(m.environment.triangles.size(), 0);
-  std::vector<std::vector<int>> tool_crossing(num_patches), env_crossing(num_patches);
-  std::vector<glm::dvec3> provisional_n(num_patches, glm::dvec3(0.0));
-  std::vector<std::vector<glm::dvec3>> pair_points(num_patches);
-  std::vector<int> patch_pairs(num_patches, 0);
-  for (int i = 0; i < np; ++i) {
-    const int q = patch_of[i];
-    ++patch_pairs[q];
-    provisional_n[q] += pairs[i].n_W;
-    pair_points[q].push_back(pairs[i].p_W);
-    if (m.tool_state[pairs[i].tool_tri] == 0) {
-      m.tool_state[pairs[i].tool_tri] = 1;
-      tool_crossing[q].push_back(pairs[i].tool_tri);
+  // 3. Each patch's geometry: inside surfaces, ∇V, direction, centre and window (no δ yet).
+  struct PatchGeometry {
+    TruthPatch patch;
+    glm::dvec3 dV_dx{0.0}, dV_dtheta{0.0};
+    glm::dvec3 macro_normal{0.0};  // zero where undefined
+    double extent = 0.0;
+  };
+  const glm::dvec3 p_WTcm = X_WT.translation;
+  long long geometry_rays = 0;
+  const auto geometry = [&](const std::vector<int>& patch_index, int count) {
+    // Crossing triangles are marked for all patches first, so that no flood fill walks into
+    // another patch's crossing triangles.
+    m.tool_state.assign(m.tool.triangles.size(), 0);
+    m.environment_state.assign(m.environment.triangles.size(), 0);
+    std::vector<std::vector<int>> tool_crossing(count), env_crossing(count);
+    std::vector<glm::dvec3> provisional_n(count, glm::dvec3(0.0));
+    std::vector<std::vector<glm::dvec3>> pair_points(count);
+    std::vector<int> patch_pairs(count, 0);
+    for (int i = 0; i < np; ++i) {
+      const int q = patch_index[i];
+      ++patch_pairs[q];
+      provisional_n[q] += pairs[i].n_W;
+      pair_points[q].push_back(pairs[i].p_W);
+      if (m.tool_state[pairs[i].tool_tri] == 0) {
+        m.tool_state[pairs[i].tool_tri] = 1;
+        tool_crossing[q].push_back(pairs[i].tool_tri);
+      }
+      if (m.environment_state[pairs[i].env_tri] == 0) {
+        m.environment_state[pairs[i].env_tri] = 1;
+        env_crossing[q].push_back(pairs[i].env_tri);
+      }
     }
-    if (m.environment_state[pairs[i].env_tri] == 0) {
-      m.environment_state[pairs[i].env_tri] = 1;
-      env_crossing[q].push_back(pairs[i].env_tri);
+    std::vector<PatchGeometry> result(static_cast<std::size_t>(count));
+    for (int q = 0; q < count; ++q) {
+      const double len = glm::length(provisional_n[q]);
+      const glm::dvec3 n0 = len > 1e-12 ? provisional_n[q] / len : glm::dvec3(0, 0, 1);
+      std::vector<glm::dvec3> points = pair_points[q];
+      // Tool points inside the environment: a ray along +n leaves it through its surface.
+      const Impl::SideSums a =
+          m.InsideSurface(m.tool, m.tool_topology, m.tool_state, tool_crossing[q], X_WFt,
+                          m.environment_rays, X_WFe, n0, p_WTcm, points, geometry_rays);
+      // Environment points inside the tool: a ray along −n leaves the tool.
+      const Impl::SideSums b = m.InsideSurface(
+          m.environment, m.environment_topology, m.environment_state, env_crossing[q], X_WFe,
+          m.tool_rays, X_WFt, -n0, p_WTcm, points, geometry_rays);
+      PatchGeometry& g = result[static_cast<std::size_t>(q)];
+      TruthPatch& patch = g.patch;
+      patch.pairs = patch_pairs[q];
+      patch.tool_inside_area_m2 = a.area;
+      patch.environment_inside_area_m2 = b.area;
+      patch.dV_dx_tool_W = a.sum_an_W;
+      patch.dV_dtheta_tool_W = a.sum_a_r_x_n_W;
+      patch.dV_dx_environment_W = -b.sum_an_W;
+      patch.dV_dtheta_environment_W = -b.sum_a_r_x_n_W;
+      g.dV_dx = 0.5 * (patch.dV_dx_tool_W + patch.dV_dx_environment_W);
+      g.dV_dtheta = 0.5 * (patch.dV_dtheta_tool_W + patch.dV_dtheta_environment_W);
+      const double gl = glm::length(g.dV_dx);
+      glm::dvec3 n = gl > 1e-18 ? -g.dV_dx / gl : n0;
+      // The depth's direction: the environment's macroscopic normal at the patch (texture finer
+      // than macro_normal_radius_m does not tilt it), where it is defined and on n's side.
+      glm::dvec3 centre_for_macro(0.0);
+      if (a.area + b.area > 0.0) {
+        centre_for_macro = (a.sum_ap_W + b.sum_ap_W) / (a.area + b.area);
+      } else {
+        for (const glm::dvec3& p : pair_points[q]) centre_for_macro += p;
+        centre_for_macro /= static_cast<double>(pair_points[q].size());
+      }
+      // Both surfaces' mean normals over the ball; the flatter one (the longer mean) gives the
+      // direction: at a block's edge pressed on a face, the face's. The tool's is turned to point
+      // from the environment to the tool.
+      const glm::dvec3 env_mean =
+          X_WFe.rotation * m.environment_normals.MeanNormal(X_WFe.Inverse() * centre_for_macro);
+      const glm::dvec3 tool_mean =
+          -(X_WFt.rotation * m.tool_normals.MeanNormal(X_WFt.Inverse() * centre_for_macro));
+      const glm::dvec3 flatter =
+          glm::length(env_mean) >= glm::length(tool_mean) ? env_mean : tool_mean;
+      const double flat = glm::length(flatter);
+      g.macro_normal = flat > 1e-9 ? flatter / flat : glm::dvec3(0.0);
+      if (o.depth_along_macro_normal && glm::dot(g.macro_normal, n) > 0.0) n = g.macro_normal;
+      glm::dvec3 centre(0.0);
+      if (a.area + b.area > 0.0) {
+        centre = (a.sum_ap_W + b.sum_ap_W) / (a.area + b.area);
+      } else {
+        for (const glm::dvec3& p : pair_points[q]) centre += p;
+        centre /= static_cast<double>(pair_points[q].size());
+      }
+      // The window holding the inside surfaces' projection.
+      const ContactWindow axes = ContactWindow::Make(centre, n, 1.0, 2);
+      double half = 0.0;
+      for (const glm::dvec3& p : points) {
+        const glm::dvec3 dp = p - centre;
+        half = std::max(
+            {half, std::abs(glm::dot(dp, axes.axis_u_W)), std::abs(glm::dot(dp, axes.axis_v_W))});
+      }
+      g.extent = std::clamp(2.0 * (half + o.window_margin_m), o.min_extent_m, o.max_extent_m);
+      patch.window = ContactWindow::Make(centre, n, g.extent, 50);
+    }
+    return result;
+  };
+  std::vector<PatchGeometry> geometries = geometry(patch_of, num_patches);
+
+  // 3a. Neighbouring patches on one surface: two patches with pairs within merge_distance_m of
+  // each other, split only because their triangles' own normals disagree (a textured face's
+  // ridge flanks), are one patch when the environment's macroscopic normals at their centres
+  // (area-weighted over macro_normal_radius_m) agree within max_normal_angle_deg.
+  if (o.macro_normal_radius_m > 0.0 && num_patches > 1 && !split_neighbours.empty()) {
+    std::vector<glm::dvec3> macro(static_cast<std::size_t>(num_patches));
+    for (int q = 0; q < num_patches; ++q) macro[q] = geometries[q].macro_normal;
+    std::vector<int> patch_parent(static_cast<std::size_t>(num_patches));
+    for (int q = 0; q < num_patches; ++q) patch_parent[q] = q;
+    bool any = false;
+    for (const auto& [i, j] : split_neighbours) {
+      const int a = Find(patch_parent, patch_of[i]), b = Find(patch_parent, patch_of[j]);
+      if (a == b || glm::dot(macro[patch_of[i]], macro[patch_of[j]]) < cos_max) continue;
+      patch_parent[std::max(a, b)] = std::min(a, b);
+      any = true;
+    }
+    if (any) {
+      std::vector<int> renumber(static_cast<std::size_t>(num_patches), -1);
+      int count = 0;
+      for (int q = 0; q < num_patches; ++q) {
+        const int r = Find(patch_parent, q);
+        if (renumber[r] < 0) renumber[r] = count++;
+      }
+      for (int i = 0; i < np; ++i) patch_of[i] = renumber[Find(patch_parent, patch_of[i])];
+      out.patches_merged += num_patches - count;
+      num_patches = count;
+      geometries = geometry(patch_of, num_patches);
     }
   }
-  const glm::dvec3 p_WTcm = X_WT.translation;
-  for (int q = 0; q < num_patches; ++q) {
-    const double len = glm::length(provisional_n[q]);
-    const glm::dvec3 n0 = len > 1e-12 ? provisional_n[q] / len : glm::dvec3(0, 0, 1);
-    std::vector<glm::dvec3> points = pair_points[q];
-    // Tool points inside the environment: a ray along +n leaves it through its surface.
-    const Impl::SideSums a =
-        m.InsideSurface(m.tool, m.tool_topology, m.tool_state, tool_crossing[q], X_WFt,
-                        m.environment_rays, X_WFe, n0, p_WTcm, points, out.rays);
-    // Environment points inside the tool: a ray along −n leaves the tool.
-    const Impl::SideSums b =
-        m.InsideSurface(m.environment, m.environment_topology, m.environment_state, env_crossing[q],
-                        X_WFe, m.tool_rays, X_WFt, -n0, p_WTcm, points, out.rays);
-    TruthPatch patch;
-    patch.pairs = patch_pairs[q];
-    patch.tool_inside_area_m2 = a.area;
-    patch.environment_inside_area_m2 = b.area;
-    patch.dV_dx_tool_W = a.sum_an_W;
-    patch.dV_dtheta_tool_W = a.sum_a_r_x_n_W;
-    patch.dV_dx_environment_W = -b.sum_an_W;
-    patch.dV_dtheta_environment_W = -b.sum_a_r_x_n_W;
-    const glm::dvec3 dV_dx = 0.5 * (patch.dV_dx_tool_W + patch.dV_dx_environment_W);
-    const glm::dvec3 dV_dtheta = 0.5 * (patch.dV_dtheta_tool_W + patch.dV_dtheta_environment_W);
-    out.dV_dx_W += dV_dx;
-    out.dV_dtheta_W += dV_dtheta;
-    const double g = glm::length(dV_dx);
-    const glm::dvec3 n = g > 1e-18 ? -dV_dx / g : n0;
-    glm::dvec3 centre(0.0);
-    if (a.area + b.area > 0.0) {
-      centre = (a.sum_ap_W + b.sum_ap_W) / (a.area + b.area);
-    } else {
-      for (const glm::dvec3& p : pair_points[q]) centre += p;
-      centre /= static_cast<double>(pair_points[q].size());
+
+  // 3b. Patches that measure one interpenetration twice are one patch (ContactPatchTruthOptions::
+  // overlap_merge_angle_deg, minor_patch_fraction): q joins p when q's centre lies in p's window
+  // (its square, and within half its side along n) with directions within the angle, or when q's
+  // |∇_x V| is a small fraction of p's and q's centre lies in p's window grown by the merge
+  // distance (a sliver at p's edge). Then the merged patches' geometry is computed afresh.
+  const double cos_overlap = std::cos(o.overlap_merge_angle_deg * std::numbers::pi / 180.0);
+  for (int round = 0; round < 8 && num_patches > 1; ++round) {
+    std::vector<int> order(static_cast<std::size_t>(num_patches));
+    for (int q = 0; q < num_patches; ++q) order[q] = q;
+    const auto strength = [&](int q) { return glm::length(geometries[q].dV_dx); };
+    std::sort(order.begin(), order.end(), [&](int a, int b) { return strength(a) > strength(b); });
+    std::vector<int> merged_into(static_cast<std::size_t>(num_patches), -1);
+    bool any = false;
+    for (std::size_t ia = 0; ia < order.size(); ++ia) {
+      const int pa = order[ia];
+      if (merged_into[pa] >= 0) continue;
+      const ContactWindow& w = geometries[pa].patch.window;
+      const double half = 0.5 * geometries[pa].extent;
+      for (std::size_t ib = ia + 1; ib < order.size(); ++ib) {
+        const int qb = order[ib];
+        if (merged_into[qb] >= 0) continue;
+        const ContactWindow& wq = geometries[qb].patch.window;
+        const glm::dvec3 dc = wq.center_W - w.center_W;
+        const double du = std::abs(glm::dot(dc, w.axis_u_W));
+        const double dv = std::abs(glm::dot(dc, w.axis_v_W));
+        const double dn = std::abs(glm::dot(dc, w.normal_W));
+        const bool overlapping = o.overlap_merge_angle_deg > 0.0 && du <= half && dv <= half &&
+                                 dn <= half && glm::dot(w.normal_W, wq.normal_W) >= cos_overlap;
+        const double grown = half + o.merge_distance_m;
+        const bool minor = strength(qb) <= o.minor_patch_fraction * strength(pa) && du <= grown &&
+                           dv <= grown && dn <= grown;
+        if (overlapping || minor) {
+          merged_into[qb] = pa;
+          any = true;
+        }
+      }
     }
-    // 4. The window holding the inside surfaces' projection, and T1 on it.
-    const ContactWindow axes = ContactWindow::Make(centre, n, 1.0, 2);
-    double half = 0.0;
-    for (const glm::dvec3& p : points) {
-      const glm::dvec3 dp = p - centre;
-      half = std::max(
-          {half, std::abs(glm::dot(dp, axes.axis_u_W)), std::abs(glm::dot(dp, axes.axis_v_W))});
+    if (!any) break;
+    std::vector<int> renumber(static_cast<std::size_t>(num_patches), -1);
+    int count = 0;
+    for (int q = 0; q < num_patches; ++q) {
+      if (merged_into[q] < 0) renumber[q] = count++;
     }
-    const double extent =
-        std::clamp(2.0 * (half + o.window_margin_m), o.min_extent_m, o.max_extent_m);
-    patch.window = ContactWindow::Make(centre, n, extent, 50);
+    for (int i = 0; i < np; ++i) {
+      const int q = patch_of[i];
+      patch_of[i] = renumber[merged_into[q] >= 0 ? merged_into[q] : q];
+    }
+    out.patches_merged += num_patches - count;
+    num_patches = count;
+    geometries = geometry(patch_of, num_patches);
+  }
+  out.rays += geometry_rays;
+
+  // 4. T1 on each patch's window.
+  for (PatchGeometry& g : geometries) {
+    TruthPatch& patch = g.patch;
+    out.dV_dx_W += g.dV_dx;
+    out.dV_dtheta_W += g.dV_dtheta;
     const int step_resolution =
-        std::max(2, static_cast<int>(std::lround(extent / o.gradient_step_m)));
-    patch.gradient_step_m = extent / step_resolution;
+        std::max(2, static_cast<int>(std::lround(g.extent / o.gradient_step_m)));
+    patch.gradient_step_m = g.extent / step_resolution;
     patch.contact = m.solver.Linearize(X_WT, X_TFt, X_WFe, patch.window, k, step_resolution);
     out.rays += patch.contact.rays;
     out.F_T_W += patch.contact.F_T_W;

@@ -120,6 +120,10 @@ struct FrontierOptions {
   int threads = 2;
   /// The ground truth's resolution and convergence.
   GroundTruthOptions ground_truth;
+  /// The pipeline truth merges patches that measure one interpenetration twice and slivers at a
+  /// patch's edge (ContactPatchTruthOptions::overlap_merge_angle_deg, minor_patch_fraction);
+  /// false: the single-linkage patches as they are (the measure before issue 32's third stop).
+  bool truth_merge_patches = true;
   /// The plotting script (python3 + matplotlib), "" = no plot.
   std::string plot_script;
   /// The command line, for summary.md.

@@ -18,10 +18,16 @@
 //       ∇_x V = ∫_{∂A∩B} n_A dA = −∫_{∂B∩A} n_B dA,
 //       ∇_θ V = ∫_{∂A∩B} (r × n_A) dA = −∫_{∂B∩A} (r × n_B) dA (r from the tool's centre of mass),
 //     the two sides being two routes to one number (their sum is the closed intersection
-//     surface's ∮ n dA = 0). The patch's direction is n = −∇_x V / |∇_x V| (from the environment
-//     towards the tool, the per-cluster penetration direction of Kim, Otaduy, Lin & Manocha 2003
-//     taken over the real surfaces), its centre the inside surfaces' area centroid, and its window
-//     the square on the plane ⟂ n that holds their projection plus a margin.
+//     surface's ∮ n dA = 0). The patch's direction is the macroscopic normal at its centre (the
+//     flatter surface's normals averaged over 5 mm: texture finer than that does not tilt it),
+//     else n = −∇_x V / |∇_x V| (from the environment towards the tool, the per-cluster
+//     penetration direction of Kim, Otaduy, Lin & Manocha 2003 taken over the real surfaces); its
+//     centre is the inside surfaces' area centroid, and its window the square on the plane ⟂ n
+//     that holds their projection plus a margin.
+//  3a. Neighbouring patches split by the fine normals of one textured face, merged when the
+//     environment's macroscopic normals at their centres agree (options below).
+//  3b. Patches whose windows measure one interpenetration twice (overlapping windows with
+//     directions within 60°), and slivers at a larger patch's edge, merged (options below).
 //  4. T1, the pipeline truth: δ and ∇δ on that window by ray casting (GroundTruthDepthSolver,
 //     gradient steps at texel scale), Φ_gt = Σ_patches −k δ ∇δ.
 //  5. T2, the volume truth, independent of the force law: −∇_x V's direction and the lever arm
@@ -43,6 +49,42 @@ struct ContactPatchTruthOptions {
   /// are one region (the method's clustering: PipelineOptions::clustering_distance_m/_angle_deg).
   double merge_distance_m = 5e-3;
   double max_normal_angle_deg = 30.0;
+  /// The macroscopic normal at a patch: each surface's normals averaged, area-weighted, over the
+  /// ball of this radius (m) about the patch's centre; the flatter surface's (the longer mean:
+  /// 1 on a plane, about 0.7 on a right-angled edge) gives it, the tool's turned to point from the
+  /// environment to the tool; so a block's edge pressed on a face takes the face's normal.
+  /// Step 3a: two neighbouring patches (pairs within merge_distance_m) split only by their
+  /// triangles' own normals are one patch when their macroscopic normals agree within
+  /// max_normal_angle_deg. Surface detail finer than this is texture on one face (the method's
+  /// haptic texture), not separate contacts: on fig76 the ridge flanks facing +y and −y made two
+  /// abutting 35 mm patches on one face, each pushing as much as the method's one contact. Two
+  /// faces at 90° (an L corner) stay apart unless both patches' centres lie within this radius
+  /// of the corner. 0 turns this step off.
+  double macro_normal_radius_m = 5e-3;
+  /// δ and ∇δ are taken along the macroscopic normal at the patch (above), not
+  /// along −∇_x V, where that normal is defined and within 90° of −∇_x V. On textured faces a
+  /// patch of ridge flanks has −∇_x V along the flanks (45° on fig76), and the depth along that
+  /// direction runs into the neighbouring ridges: 0.9 mm where the overlap along the face's normal
+  /// was 11 µm (fig76, 72 N against the method's 0.09 N). The method's own direction is its coarse
+  /// surface's normal; detail finer than the radius is its texture. −∇_x V stays the volume
+  /// truth's direction (T2) either way. False: −∇_x V, as before issue 32's third stop.
+  bool depth_along_macro_normal = true;
+  /// Patches that measure one interpenetration twice become one (step 3b above), then their
+  /// geometry is computed afresh: q joins p (the one with the larger |∇_x V|)
+  ///  - when q's centre lies in p's window (inside its square and within half its side along
+  ///    p's n) and their directions are within overlap_merge_angle_deg: on two textured faces
+  ///    whose ridges interlock, the single-linkage regions split by the ridge flanks' normals
+  ///    (facing ±y, 55° apart) had overlapping 35 mm windows, and the truth summed the same
+  ///    penetration two or three times (fig76: 9.8 N against one 1.6 N contact; issue 32's
+  ///    third note); 0 turns this rule off;
+  ///  - when |∇_x V_q| ≤ minor_patch_fraction · |∇_x V_p| and q's centre lies in p's window
+  ///    grown by merge_distance_m: a sliver at p's edge (a block's side face grazing the other
+  ///    block) too small to turn p's direction, whose own direction is ill-defined (fig76: a
+  ///    1e-10 m² sliver along the side normal gave 15 N through a δ gradient across the edge);
+  ///    0 turns this rule off.
+  /// A patch 90° from another (a tool in an L corner: floor and wall) stays its own patch.
+  double overlap_merge_angle_deg = 60.0;
+  double minor_patch_fraction = 0.05;
   /// Window: the inside surfaces' projected half extent plus this on each side (m), the side
   /// clamped to [min_extent_m, max_extent_m].
   double window_margin_m = 1e-3;
@@ -66,8 +108,10 @@ struct ContactPatchTruthOptions {
 
 /// One contact patch of the full-resolution meshes at one pose.
 struct TruthPatch {
-  /// Its window: centre (area centroid of the inside surfaces), n = −∇_x V / |∇_x V| (unit, from
-  /// the environment towards the tool), extent from the inside surfaces' projection; in W, m.
+  /// Its window: centre (area centroid of the inside surfaces), n the macroscopic normal there
+  /// (else −∇_x V / |∇_x V|; unit, from the environment towards the tool; see
+  /// ContactPatchTruthOptions::depth_along_macro_normal), extent from the inside surfaces'
+  /// projection; in W, m.
   ContactWindow window;
   /// Intersecting triangle pairs in it.
   int pairs = 0;
@@ -91,6 +135,8 @@ struct PoseTruth {
   int pairs = 0;
   /// True when FCL's pair list hit options.max_pairs.
   bool pairs_truncated = false;
+  /// Patches folded into another by step 3b (overlapping windows, slivers).
+  int patches_merged = 0;
   std::vector<TruthPatch> patches;
   /// T1: Σ over patches of Φ_gt (N, N·m), on the tool at its centre of mass, in W.
   Wrench F_T_W;
