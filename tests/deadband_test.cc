@@ -230,7 +230,6 @@ ContactModel OneContact(double depth_m, double stiffness, const glm::dvec3& p0) 
   return m;
 }
 
-
 TEST(Deadband, TheContactFloorsOutlastABounceOffTheSurface) {
   // A block lands, bounces 60 µm off the gear (its model then has no contacts: near_contact
   // false) and falls back. With the free-space floor at once (0.2 mm at k = 0.1) nothing was sent

@@ -157,22 +157,22 @@ nlohmann::json NetworkWorker::Summary() const {
   t["mtu"] = mtu_;
   t["scene_name"] = scene_name_;
   {
-    t["deadband"] = {{"tool_state_deadband", deadband_agreed_.tool_state_deadband},
-                     {"model_deadband", deadband_agreed_.model_deadband},
-                     {"tool_state_keepalive_ms", deadband_agreed_.tool_state_keepalive_ms},
-                     {"model_keepalive_ms", deadband_agreed_.model_keepalive_ms},
-                     {"velocity_adaptive", config_.tool_state_deadband.velocity_adaptive},
-                     {"contact_position_floor_scale_mm",
-                      config_.tool_state_deadband.contact_position_floor_scale_m * 1e3},
-                     {"contact_rotation_floor_scale_mrad",
-                      config_.tool_state_deadband.contact_rotation_floor_scale_rad * 1e3},
-                     {"contact_floor_hold_ms",
-                      config_.tool_state_deadband.contact_floor_hold_s * 1e3},
-                     {"compact_models", compact_models_},
-                     {"tool_states_offered", tool_states_offered_},
-                     {"tool_states_held_back", tool_states_held_back_},
-                     {"tool_states_idle_keepalives", idle_keepalives_},
-                     {"tool_state_decisions", ToJson(tool_deadband_.counts())}};
+    t["deadband"] = {
+        {"tool_state_deadband", deadband_agreed_.tool_state_deadband},
+        {"model_deadband", deadband_agreed_.model_deadband},
+        {"tool_state_keepalive_ms", deadband_agreed_.tool_state_keepalive_ms},
+        {"model_keepalive_ms", deadband_agreed_.model_keepalive_ms},
+        {"velocity_adaptive", config_.tool_state_deadband.velocity_adaptive},
+        {"contact_position_floor_scale_mm",
+         config_.tool_state_deadband.contact_position_floor_scale_m * 1e3},
+        {"contact_rotation_floor_scale_mrad",
+         config_.tool_state_deadband.contact_rotation_floor_scale_rad * 1e3},
+        {"contact_floor_hold_ms", config_.tool_state_deadband.contact_floor_hold_s * 1e3},
+        {"compact_models", compact_models_},
+        {"tool_states_offered", tool_states_offered_},
+        {"tool_states_held_back", tool_states_held_back_},
+        {"tool_states_idle_keepalives", idle_keepalives_},
+        {"tool_state_decisions", ToJson(tool_deadband_.counts())}};
   }
   t["clock"] = {{"samples", clock_.rtt_ms_samples().size()},
                 {"offset_ms", clock_.offset_ns() * 1e-6},
