@@ -4,6 +4,8 @@
 // step itself in haptic_core (remote_step.h).
 #include "slave_sim/remote_node.h"
 
+#include <sys/resource.h>
+
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -325,6 +327,20 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   s["listen"] = bound.ToString();
   statistics.AddTo(s);
   s["tool_state_gap_max_ms"] = session.tool_state_gap_max_ns() * 1e-6;
+  // The process's CPU time over the run (user + system, every thread; getrusage), and its share
+  // of one core over the node's wall time: what issue 33's "idle when nothing changes" is
+  // measured by.
+  {
+    struct rusage usage {};
+    getrusage(RUSAGE_SELF, &usage);
+    const double cpu_s =
+        static_cast<double>(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) +
+        static_cast<double>(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec) * 1e-6;
+    const double wall_s = static_cast<double>(SteadyNowNs() - start_ns) * 1e-9;
+    s["cpu_s"] = cpu_s;
+    s["wall_s"] = wall_s;
+    s["cpu_share_of_one_core"] = wall_s > 0.0 ? cpu_s / wall_s : 0.0;
+  }
   s["grid_resolution"] = config.pipeline.grid_resolution;
   s["window_extent_m"] = config.pipeline.window_extent_m;
   s["max_window_extent_m"] = config.pipeline.max_window_extent_m;
