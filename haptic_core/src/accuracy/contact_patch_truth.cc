@@ -128,6 +128,17 @@ void EdgePiercings(const glm::dvec3& a0, const glm::dvec3& a1, const glm::dvec3&
   }
 }
 
+// The cell of a hash grid of cube side `cell` (m) that holds p, and the cell's hash key; used by
+// the pairs' single linkage and by SurfaceNormalGrid.
+glm::i64vec3 GridCell(const glm::dvec3& p, double cell) {
+  return glm::i64vec3(std::floor(p.x / cell), std::floor(p.y / cell), std::floor(p.z / cell));
+}
+std::uint64_t GridHash(const glm::i64vec3& c) {
+  return static_cast<std::uint64_t>(c.x * 73856093LL) ^
+         static_cast<std::uint64_t>(c.y * 19349663LL) ^
+         static_cast<std::uint64_t>(c.z * 83492791LL);
+}
+
 // The point of triangle (a, b, c) closest to p (Ericson, Real-Time Collision Detection, 5.1.5:
 // the Voronoi region of p among the triangle's vertices, edges and face).
 glm::dvec3 ClosestPointOnTriangle(const glm::dvec3& p, const glm::dvec3& a, const glm::dvec3& b,
@@ -168,12 +179,12 @@ class SurfaceNormalGrid {
     for (std::size_t f = 0; f < mesh.triangles.size(); ++f) {
       const glm::ivec3 t = mesh.triangles[f];
       const glm::dvec3 a = mesh.vertices[t[0]], b = mesh.vertices[t[1]], c = mesh.vertices[t[2]];
-      const glm::i64vec3 lo = Cell(glm::min(a, glm::min(b, c))),
-                         hi = Cell(glm::max(a, glm::max(b, c)));
+      const glm::i64vec3 lo = GridCell(glm::min(a, glm::min(b, c)), r),
+                         hi = GridCell(glm::max(a, glm::max(b, c)), r);
       for (std::int64_t x = lo.x; x <= hi.x; ++x) {
         for (std::int64_t y = lo.y; y <= hi.y; ++y) {
           for (std::int64_t z = lo.z; z <= hi.z; ++z) {
-            grid_[Hash({x, y, z})].push_back(static_cast<int>(f));
+            grid_[GridHash({x, y, z})].push_back(static_cast<int>(f));
           }
         }
       }
@@ -189,14 +200,14 @@ class SurfaceNormalGrid {
       std::fill(stamp_of_.begin(), stamp_of_.end(), 0);
       stamp_ = 1;
     }
-    const glm::i64vec3 c = Cell(p_F);
+    const glm::i64vec3 c = GridCell(p_F, r_);
     glm::dvec3 sum(0.0);
     double weight = 0.0;
     const double small2 = (0.25 * r_) * (0.25 * r_);
     for (int dx = -1; dx <= 1; ++dx) {
       for (int dy = -1; dy <= 1; ++dy) {
         for (int dz = -1; dz <= 1; ++dz) {
-          const auto it = grid_.find(Hash(c + glm::i64vec3(dx, dy, dz)));
+          const auto it = grid_.find(GridHash(c + glm::i64vec3(dx, dy, dz)));
           if (it == grid_.end()) continue;
           for (const int f : it->second) {
             if (stamp_of_[f] == stamp_) continue;
@@ -217,14 +228,6 @@ class SurfaceNormalGrid {
   }
 
  private:
-  glm::i64vec3 Cell(const glm::dvec3& p) const {
-    return glm::i64vec3(std::floor(p.x / r_), std::floor(p.y / r_), std::floor(p.z / r_));
-  }
-  static std::uint64_t Hash(const glm::i64vec3& c) {
-    return static_cast<std::uint64_t>(c.x * 73856093LL) ^
-           static_cast<std::uint64_t>(c.y * 19349663LL) ^
-           static_cast<std::uint64_t>(c.z * 83492791LL);
-  }
   double AreaInBall(const glm::dvec3& p, const glm::dvec3& a, const glm::dvec3& b,
                     const glm::dvec3& c, double area, double small2) const {
     const double e2 =
@@ -445,25 +448,17 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
   // grid of that cell), in both cases with agreeing environment normals.
   const double d = o.merge_distance_m, d2 = d * d;
   const double cos_max = std::cos(o.max_normal_angle_deg * std::numbers::pi / 180.0);
-  const auto cell_of = [&](const glm::dvec3& p) {
-    return glm::i64vec3(std::floor(p.x / d), std::floor(p.y / d), std::floor(p.z / d));
-  };
-  const auto hash = [](const glm::i64vec3& c) {
-    return static_cast<std::uint64_t>(c.x * 73856093LL) ^
-           static_cast<std::uint64_t>(c.y * 19349663LL) ^
-           static_cast<std::uint64_t>(c.z * 83492791LL);
-  };
   std::unordered_map<std::uint64_t, std::vector<int>> grid;
-  for (int i = 0; i < np; ++i) grid[hash(cell_of(pairs[i].p_W))].push_back(i);
+  for (int i = 0; i < np; ++i) grid[GridHash(GridCell(pairs[i].p_W, d))].push_back(i);
   std::vector<int> parent(static_cast<std::size_t>(np));
   for (int i = 0; i < np; ++i) parent[i] = i;
   std::vector<std::pair<int, int>> split_neighbours;
   for (int i = 0; i < np; ++i) {
-    const glm::i64vec3 c = cell_of(pairs[i].p_W);
+    const glm::i64vec3 c = GridCell(pairs[i].p_W, d);
     for (int dx = -1; dx <= 1; ++dx) {
       for (int dy = -1; dy <= 1; ++dy) {
         for (int dz = -1; dz <= 1; ++dz) {
-          const auto it = grid.find(hash(c + glm::i64vec3(dx, dy, dz)));
+          const auto it = grid.find(GridHash(c + glm::i64vec3(dx, dy, dz)));
           if (it == grid.end()) continue;
           for (const int j : it->second) {
             if (j <= i) continue;
@@ -561,27 +556,7 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
       g.dV_dtheta = 0.5 * (patch.dV_dtheta_tool_W + patch.dV_dtheta_environment_W);
       const double gl = glm::length(g.dV_dx);
       glm::dvec3 n = gl > 1e-18 ? -g.dV_dx / gl : n0;
-      // The depth's direction: the environment's macroscopic normal at the patch (texture finer
-      // than macro_normal_radius_m does not tilt it), where it is defined and on n's side.
-      glm::dvec3 centre_for_macro(0.0);
-      if (a.area + b.area > 0.0) {
-        centre_for_macro = (a.sum_ap_W + b.sum_ap_W) / (a.area + b.area);
-      } else {
-        for (const glm::dvec3& p : pair_points[q]) centre_for_macro += p;
-        centre_for_macro /= static_cast<double>(pair_points[q].size());
-      }
-      // Both surfaces' mean normals over the ball; the flatter one (the longer mean) gives the
-      // direction: at a block's edge pressed on a face, the face's. The tool's is turned to point
-      // from the environment to the tool.
-      const glm::dvec3 env_mean =
-          X_WFe.rotation * m.environment_normals.MeanNormal(X_WFe.Inverse() * centre_for_macro);
-      const glm::dvec3 tool_mean =
-          -(X_WFt.rotation * m.tool_normals.MeanNormal(X_WFt.Inverse() * centre_for_macro));
-      const glm::dvec3 flatter =
-          glm::length(env_mean) >= glm::length(tool_mean) ? env_mean : tool_mean;
-      const double flat = glm::length(flatter);
-      g.macro_normal = flat > 1e-9 ? flatter / flat : glm::dvec3(0.0);
-      if (o.depth_along_macro_normal && glm::dot(g.macro_normal, n) > 0.0) n = g.macro_normal;
+      // The centre: the inside surfaces' area centroid (the pairs' points' mean without them).
       glm::dvec3 centre(0.0);
       if (a.area + b.area > 0.0) {
         centre = (a.sum_ap_W + b.sum_ap_W) / (a.area + b.area);
@@ -589,6 +564,20 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
         for (const glm::dvec3& p : pair_points[q]) centre += p;
         centre /= static_cast<double>(pair_points[q].size());
       }
+      // The depth's direction: the macroscopic normal at the centre (texture finer than
+      // macro_normal_radius_m does not tilt it), where it is defined and on n's side.
+      // Both surfaces' mean normals over the ball; the flatter one (the longer mean) gives the
+      // direction: at a block's edge pressed on a face, the face's. The tool's is turned to point
+      // from the environment to the tool.
+      const glm::dvec3 env_mean =
+          X_WFe.rotation * m.environment_normals.MeanNormal(X_WFe.Inverse() * centre);
+      const glm::dvec3 tool_mean =
+          -(X_WFt.rotation * m.tool_normals.MeanNormal(X_WFt.Inverse() * centre));
+      const glm::dvec3 flatter =
+          glm::length(env_mean) >= glm::length(tool_mean) ? env_mean : tool_mean;
+      const double flat = glm::length(flatter);
+      g.macro_normal = flat > 1e-9 ? flatter / flat : glm::dvec3(0.0);
+      if (o.depth_along_macro_normal && glm::dot(g.macro_normal, n) > 0.0) n = g.macro_normal;
       // The window holding the inside surfaces' projection.
       const ContactWindow axes = ContactWindow::Make(centre, n, 1.0, 2);
       double half = 0.0;
@@ -603,34 +592,40 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
     return result;
   };
   std::vector<PatchGeometry> geometries = geometry(patch_of, num_patches);
+  // After merges: `root[q]` is the patch q joins (root[r] == r for the patches kept); the patches
+  // are renumbered in order, the pairs follow, and the geometry is computed afresh.
+  const auto regroup = [&](const std::vector<int>& root) {
+    std::vector<int> renumber(static_cast<std::size_t>(num_patches), -1);
+    int count = 0;
+    for (int q = 0; q < num_patches; ++q) {
+      if (root[q] == q) renumber[q] = count++;
+    }
+    for (int i = 0; i < np; ++i) patch_of[i] = renumber[root[patch_of[i]]];
+    out.patches_merged += num_patches - count;
+    num_patches = count;
+    geometries = geometry(patch_of, num_patches);
+  };
 
   // 3a. Neighbouring patches on one surface: two patches with pairs within merge_distance_m of
   // each other, split only because their triangles' own normals disagree (a textured face's
   // ridge flanks), are one patch when the environment's macroscopic normals at their centres
   // (area-weighted over macro_normal_radius_m) agree within max_normal_angle_deg.
   if (o.macro_normal_radius_m > 0.0 && num_patches > 1 && !split_neighbours.empty()) {
-    std::vector<glm::dvec3> macro(static_cast<std::size_t>(num_patches));
-    for (int q = 0; q < num_patches; ++q) macro[q] = geometries[q].macro_normal;
     std::vector<int> patch_parent(static_cast<std::size_t>(num_patches));
     for (int q = 0; q < num_patches; ++q) patch_parent[q] = q;
     bool any = false;
     for (const auto& [i, j] : split_neighbours) {
       const int a = Find(patch_parent, patch_of[i]), b = Find(patch_parent, patch_of[j]);
-      if (a == b || glm::dot(macro[patch_of[i]], macro[patch_of[j]]) < cos_max) continue;
+      if (a == b || glm::dot(geometries[patch_of[i]].macro_normal,
+                             geometries[patch_of[j]].macro_normal) < cos_max) {
+        continue;
+      }
       patch_parent[std::max(a, b)] = std::min(a, b);
       any = true;
     }
     if (any) {
-      std::vector<int> renumber(static_cast<std::size_t>(num_patches), -1);
-      int count = 0;
-      for (int q = 0; q < num_patches; ++q) {
-        const int r = Find(patch_parent, q);
-        if (renumber[r] < 0) renumber[r] = count++;
-      }
-      for (int i = 0; i < np; ++i) patch_of[i] = renumber[Find(patch_parent, patch_of[i])];
-      out.patches_merged += num_patches - count;
-      num_patches = count;
-      geometries = geometry(patch_of, num_patches);
+      for (int q = 0; q < num_patches; ++q) patch_parent[q] = Find(patch_parent, q);
+      regroup(patch_parent);
     }
   }
 
@@ -645,7 +640,7 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
     for (int q = 0; q < num_patches; ++q) order[q] = q;
     const auto strength = [&](int q) { return glm::length(geometries[q].dV_dx); };
     std::sort(order.begin(), order.end(), [&](int a, int b) { return strength(a) > strength(b); });
-    std::vector<int> merged_into(static_cast<std::size_t>(num_patches), -1);
+    std::vector<int> merged_into(static_cast<std::size_t>(num_patches), -1);  // −1: kept
     bool any = false;
     for (std::size_t ia = 0; ia < order.size(); ++ia) {
       const int pa = order[ia];
@@ -672,18 +667,10 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
       }
     }
     if (!any) break;
-    std::vector<int> renumber(static_cast<std::size_t>(num_patches), -1);
-    int count = 0;
     for (int q = 0; q < num_patches; ++q) {
-      if (merged_into[q] < 0) renumber[q] = count++;
+      if (merged_into[q] < 0) merged_into[q] = q;
     }
-    for (int i = 0; i < np; ++i) {
-      const int q = patch_of[i];
-      patch_of[i] = renumber[merged_into[q] >= 0 ? merged_into[q] : q];
-    }
-    out.patches_merged += num_patches - count;
-    num_patches = count;
-    geometries = geometry(patch_of, num_patches);
+    regroup(merged_into);
   }
   out.rays += geometry_rays;
 

@@ -25,7 +25,7 @@
 //     centre is the inside surfaces' area centroid, and its window the square on the plane ⟂ n
 //     that holds their projection plus a margin.
 //  3a. Neighbouring patches split by the fine normals of one textured face, merged when the
-//     environment's macroscopic normals at their centres agree (options below).
+//     macroscopic normals at their centres agree (options below).
 //  3b. Patches whose windows measure one interpenetration twice (overlapping windows with
 //     directions within 60°), and slivers at a larger patch's edge, merged (options below).
 //  4. T1, the pipeline truth: δ and ∇δ on that window by ray casting (GroundTruthDepthSolver,
