@@ -107,6 +107,18 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
         whole_triangles_[i][t] = static_cast<int>(t);
     }
   }
+  // The whole models' hulls, for the free space around the tool (StepTimings).
+  convex_mesh_hulls_.resize(scene.touchables.size() + 1);
+  root_hulls_.assign(scene.touchables.size() + 1, nullptr);
+  for (std::size_t i = 0; i <= scene.touchables.size(); ++i) {
+    const HapticModel& m = i == 0 ? *scene.tool : *scene.touchables[i - 1].model;
+    if (!m.hull_hierarchy.nodes.empty()) {
+      root_hulls_[i] = &m.hull_hierarchy.nodes[0].hull;
+    } else if (std::optional<ConvexHull> hull = ConvexMeshHull(m, 1e-6)) {
+      convex_mesh_hulls_[i] = std::move(*hull);
+      root_hulls_[i] = &convex_mesh_hulls_[i];
+    }
+  }
   // Broad-phase spheres: the root bounding spheres the proximity queries use anyway. Asking each
   // query for both of its models here also fills its cache, so the first step does not.
   object_spheres_O_.reserve(scene.touchables.size());
@@ -214,6 +226,11 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
                ? std::min(options_.max_speculative_margin_m, options_.speculative_lead_s * closing)
                : 0.0;
   };
+  // Free space (StepTimings::free_space_clearance_m): the tolerance a later step could use at most.
+  const double most_speculative =
+      options_.speculative_lead_s > 0.0 ? std::max(0.0, options_.max_speculative_margin_m) : 0.0;
+  double clearance = std::numeric_limits<double>::infinity();
+  bool any_passed = false;
   for (std::size_t k = 0; k < scene_.touchables.size(); ++k) {
     const TouchableObject& object = scene_.touchables[k];
     const double reach = tool.OutwardReach() + object.model->OutwardReach();
@@ -221,9 +238,10 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
     query.tolerance_m = reach + options_.proximity_margin_m + speculative_bound;
     if (options_.local_reach) query.local_reach_margin_m = options_.proximity_margin_m;
     // 1. Broad phase: bounding spheres in W (the objects may move between steps).
-    if (BoundingSphereGap(tool_sphere_O_, X_WT, object_spheres_O_[k], object.X_WO) >
-        query.tolerance_m) {
+    const double gap = BoundingSphereGap(tool_sphere_O_, X_WT, object_spheres_O_[k], object.X_WO);
+    if (gap > query.tolerance_m) {
       ++timings.broad_phase_culled;
+      clearance = std::min(clearance, gap - (reach + options_.proximity_margin_m + most_speculative));
       continue;
     }
     // 2. Hull proximity: leaf hull pairs within the tolerance.
@@ -231,6 +249,19 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
     ProximityQueryStats stats;
     std::span<const HullPairContact> pairs =
         queries_[k].Query(tool, X_WT, *object.model, object.X_WO, query, &stats);
+    if (pairs.empty() && !stats.budget_exhausted && stats.invalid_input == 0) {
+      // Nothing within the tolerance: the free space is the whole hulls' separation (or the
+      // spheres' gap, whichever bound is larger) beyond the largest tolerance.
+      double separation = gap;
+      if (root_hulls_[0] != nullptr && root_hulls_[k + 1] != nullptr) {
+        separation = std::max(separation, HullSeparationBound(*root_hulls_[0], X_WT,
+                                                              *root_hulls_[k + 1], object.X_WO));
+      }
+      clearance = std::min(clearance,
+                           separation - (reach + options_.proximity_margin_m + most_speculative));
+    } else {
+      any_passed = true;
+    }
     ++timings.convex_pairs;
     timings.leaf_pairs += static_cast<int>(pairs.size());
     timings.collision_budget_exhausted |= stats.budget_exhausted;
@@ -309,6 +340,20 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
       }
     }
   }
+  timings.free_space_clearance_m = any_passed ? 0.0 : std::max(0.0, clearance);
+}
+
+double HapticTexturePipeline::ToolMotionBound(const RigidTransform& X_WT_a,
+                                              const RigidTransform& X_WT_b) const noexcept {
+  if (!IsFiniteRigidTransform(X_WT_a) || !IsFiniteRigidTransform(X_WT_b)) {
+    return std::numeric_limits<double>::infinity();
+  }
+  const glm::dvec3 c_O(tool_sphere_O_);
+  const double moved = glm::length(X_WT_b * c_O - X_WT_a * c_O);
+  // ‖(R_b − R_a)·u‖ = 2·sin(θ/2)·|u| = 2·|vec(q_a⁻¹·q_b)|·|u| for unit quaternions.
+  const glm::dquat q = glm::inverse(X_WT_a.rotation) * X_WT_b.rotation;
+  const double turned = 2.0 * glm::length(glm::dvec3(q.x, q.y, q.z)) / std::max(1e-300, glm::length(q));
+  return moved + turned * tool_sphere_O_.w;
 }
 
 void HapticTexturePipeline::RegionWindow(const RigidTransform& X_WT, std::size_t k,

@@ -29,7 +29,18 @@
 #include "transport/session.h"
 
 namespace ht {
+
 namespace {
+
+/// The process's CPU time so far (s): user + system, every thread (getrusage).
+double ProcessCpuSeconds() noexcept {
+  struct rusage usage {};
+  getrusage(RUSAGE_SELF, &usage);
+  return static_cast<double>(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) +
+         static_cast<double>(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec) * 1e-6;
+}
+
+
 
 // A coarse triangle's centroid and outward unit normal (frame O), or false when it has no area.
 bool TriangleFrame(const HapticModel& m, int f, glm::dvec3& centroid_O, glm::dvec3& normal_O) {
@@ -187,6 +198,8 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   const HapticScene* current_scene = &scene;  // the scene the pipeline steps (a reload moves it)
   std::uint64_t scene_reloads = 0;
   std::size_t reload_bytes = 0;
+  std::int64_t first_step_ns = -1;  // the first step's time, and the process's CPU time then
+  double first_step_cpu_s = 0.0;
 
   while (running && !stop.load(std::memory_order_relaxed)) {
     // 1. Receive: at most kDrainPerPass datagrams between steps, so that a flood delays steps,
@@ -271,22 +284,34 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
       continue;
     }
     // 3. The remote step at the newest tool state (extrapolated under a tool-state deadband),
-    // and its contact model to the operator. Under the deadband, a step that would see nothing
-    // new waits: the operator keeps the model it holds, refreshed at the keep-alive.
+    // and its contact model to the operator. A step that would see nothing new (no fresh tool
+    // state, and the same pose or a pose still inside the last step's free space) waits on the
+    // socket: the operator keeps the model it holds, refreshed at the keep-alive.
     const std::int64_t t_step = SteadyNowNs();
     const RigidTransform X_WT = session.ToolPoseForStep(t_step);
-    if (session.StepCanWait(X_WT, static_cast<bool>(config.animate))) {
+    if (session.StepCanWait(X_WT, static_cast<bool>(config.animate),
+                            pipeline->ToolMotionBound(session.last_step_pose(), X_WT))) {
       session.CountSkippedStep();
       session.MaybeSendKeepAlive(t_step);
-      socket.WaitReadable(1);
+      // A pose that holds still (and no scene left to stream) is re-checked every 10 ms: a
+      // datagram wakes the wait at once, and the keep-alives and the manifest run on
+      // timers far longer than that. A pose still moving (extrapolated in free space) or
+      // a scene stream under way is re-checked every millisecond.
+      const bool holds_still = X_WT.translation == session.last_step_pose().translation &&
+                               X_WT.rotation == session.last_step_pose().rotation;
+      socket.WaitReadable(holds_still && scene_sender.queued() == 0 ? 10 : 1);
       continue;
     }
     if (config.animate) config.animate(static_cast<double>(t_step - start_ns) * 1e-9);
+    if (first_step_ns < 0) {  // the scene is built and a session steps: the idle measure starts
+      first_step_ns = t_step;
+      first_step_cpu_s = ProcessCpuSeconds();
+    }
     StepTimings timings;
     wire::ContactModelMessage out;
     out.model = pipeline->Step(X_WT, session.latest_tool_state_seq(), timings,
                                session.latest_tool_state().V_WT_W);
-    session.SteppedAt(X_WT);
+    session.SteppedAt(X_WT, timings.free_space_clearance_m);
     if (pipeline->backend_failures() == 1 && !reported_fallback) {
       reported_fallback = true;
       std::printf("[slave] GPU penetration depth failed (%s); continuing on the CPU backend\n",
@@ -328,18 +353,21 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   statistics.AddTo(s);
   s["tool_state_gap_max_ms"] = session.tool_state_gap_max_ns() * 1e-6;
   // The process's CPU time over the run (user + system, every thread; getrusage), and its share
-  // of one core over the node's wall time: what issue 33's "idle when nothing changes" is
-  // measured by.
+  // of one core over the node's wall time; the same from the first step on (the scene built and
+  // a session stepping): what issue 33's "idle when nothing changes" is measured by.
   {
-    struct rusage usage {};
-    getrusage(RUSAGE_SELF, &usage);
-    const double cpu_s =
-        static_cast<double>(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) +
-        static_cast<double>(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec) * 1e-6;
-    const double wall_s = static_cast<double>(SteadyNowNs() - start_ns) * 1e-9;
+    const double cpu_s = ProcessCpuSeconds();
+    const std::int64_t end_ns = SteadyNowNs();
+    const double wall_s = static_cast<double>(end_ns - start_ns) * 1e-9;
     s["cpu_s"] = cpu_s;
     s["wall_s"] = wall_s;
     s["cpu_share_of_one_core"] = wall_s > 0.0 ? cpu_s / wall_s : 0.0;
+    const double stepping_s =
+        first_step_ns < 0 ? 0.0 : static_cast<double>(end_ns - first_step_ns) * 1e-9;
+    s["cpu_s_since_first_step"] = first_step_ns < 0 ? 0.0 : cpu_s - first_step_cpu_s;
+    s["wall_s_since_first_step"] = stepping_s;
+    s["cpu_share_since_first_step"] =
+        stepping_s > 0.0 ? (cpu_s - first_step_cpu_s) / stepping_s : 0.0;
   }
   s["grid_resolution"] = config.pipeline.grid_resolution;
   s["window_extent_m"] = config.pipeline.window_extent_m;

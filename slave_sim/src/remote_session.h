@@ -60,17 +60,26 @@ class RemoteSession {
   /// the time since it arrived (ExtrapolatePose, the prediction the operator's deadband makes;
   /// at most the tool-state keep-alive ahead, then held); without it, the newest state as is.
   RigidTransform ToolPoseForStep(std::int64_t now_ns) noexcept;
-  /// True when, with the session's tool-state deadband on and no tool state arrived since the
-  /// last step, a step at X_WT (from ToolPoseForStep) would see nothing new: X_WT is
-  /// the last step's pose, the scene does not move, and the last step's model was not held back
-  /// by the model period (it must still go out). A fresh tool state is always stepped.
-  bool StepCanWait(const RigidTransform& X_WT, bool scene_moves) const noexcept;
+  /// True when no tool state arrived since the last step and a step at X_WT (from
+  /// ToolPoseForStep) would see nothing new, so the node waits on its socket instead (issue 33):
+  /// the scene does not move, the last step's model was not held back by the model period (it
+  /// must still go out), and either X_WT is the last step's pose or the last step was in free
+  /// space and no tool point has moved as far since (`tool_motion_m`, the pipeline's
+  /// ToolMotionBound from the last step's pose to X_WT, below that step's
+  /// StepTimings::free_space_clearance_m: the same empty model). A fresh tool state is always
+  /// stepped, so that its answer, and its echo, go out as before.
+  bool StepCanWait(const RigidTransform& X_WT, bool scene_moves,
+                   double tool_motion_m) const noexcept;
+  /// The pose of the last step (identity before the first).
+  const RigidTransform& last_step_pose() const noexcept { return last_step_pose_; }
   /// Counts a loop pass that did not step (StepCanWait).
   void CountSkippedStep() noexcept { ++steps_skipped_; }
-  /// Records that a step ran at X_WT (the newest tool state is then used).
-  void SteppedAt(const RigidTransform& X_WT) noexcept {
+  /// Records that a step ran at X_WT (the newest tool state is then used) and found
+  /// `free_space_clearance_m` (StepTimings) of free space around the tool.
+  void SteppedAt(const RigidTransform& X_WT, double free_space_clearance_m) noexcept {
     fresh_state_ = false;
     last_step_pose_ = X_WT;
+    last_step_clearance_m_ = free_space_clearance_m;
     have_step_pose_ = true;
   }
   /// Sends `out` (its model filled by the step at the pose ToolPoseForStep gave) unless the
@@ -82,7 +91,9 @@ class RemoteSession {
   bool MaybeSendContactModel(wire::ContactModelMessage& out, const StepTimings& timings,
                              std::uint64_t step_count, std::int64_t now_ns);
   /// While steps wait (StepCanWait): sends the last model again (new header, same
-  /// content) when the contact-model keep-alive has passed. Returns true when sent.
+  /// content) when the contact-model keep-alive has passed, echoing the newest tool state whose
+  /// step gave a model the deadband held back (it answers that state too, to within the
+  /// deadband). Returns true when sent.
   bool MaybeSendKeepAlive(std::int64_t now_ns);
   /// Tells the operator the node is stopping (three Goodbyes), when a session is open.
   void SayGoodbye();
@@ -136,8 +147,13 @@ class RemoteSession {
   std::int64_t tool_state_keepalive_ns_ = 0, model_keepalive_ns_ = 0;
   std::int64_t step_extrapolation_ns_ = 0;  ///< of the pose the newest step used
   RigidTransform last_step_pose_;
+  double last_step_clearance_m_ = 0.0;  ///< StepTimings::free_space_clearance_m of the last step
   wire::ContactModelMessage last_sent_;
   std::int64_t last_sent_answer_recv_ns_ = 0;  ///< receive time + extrapolation of its pose
+  /// The newest step whose model the deadband held back (the same model to within it): its tool
+  /// state's echo and answer time, which the next keep-alive carries.
+  std::int64_t held_echo_send_ns_ = 0, held_answer_recv_ns_ = 0;
+  bool have_held_echo_ = false;
   std::uint64_t steps_skipped_ = 0, models_held_back_ = 0, keepalives_sent_ = 0;
   std::uint64_t foreign_hellos_ = 0;
   /// Kink planes of models sent that did not fit their datagram (protocol.h KinkPlaneCapacity),

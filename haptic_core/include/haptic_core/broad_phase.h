@@ -5,6 +5,7 @@
 
 #include <glm/vec4.hpp>
 
+#include "haptic_core/hull_hierarchy.h"
 #include "haptic_core/spatial.h"
 
 namespace ht {
@@ -16,5 +17,16 @@ namespace ht {
 /// non-finite poses before this stage).
 double BoundingSphereGap(const glm::dvec4& sphere_A, const RigidTransform& X_WA,
                          const glm::dvec4& sphere_B, const RigidTransform& X_WB) noexcept;
+
+/// A lower bound (m) of the Euclidean distance between two convex hulls, A (frame A, posed at
+/// X_WA) and B (frame B, at X_WB): the largest gap along any of either hull's outward face
+/// normals between its plane and the other hull's support (separating-axis bound; exact for a
+/// vertex–face or face–face separation, smaller across edges). ≤ 0 when no face plane separates
+/// them (touching, overlapping, or separated only across an edge pair). Returns −∞ when a hull
+/// has no vertices or no planes, or when |planes_A|·|vertices_B| + |planes_B|·|vertices_A|
+/// exceeds `max_work` (a bound too costly to take). Allocation-free; NaN poses give NaN.
+/// Used by the remote step to tell how much free space surrounds the tool (issue 33).
+double HullSeparationBound(const ConvexHull& A, const RigidTransform& X_WA, const ConvexHull& B,
+                           const RigidTransform& X_WB, std::size_t max_work = 65536) noexcept;
 
 }  // namespace ht

@@ -176,6 +176,13 @@ struct StepTimings {
   int clusters = 0;
   /// True when a coarse query stopped at options.collision_budget_us.
   bool collision_budget_exhausted = false;
+  /// Free space (m): when the broad phase ruled out every object, how far any tool point can
+  /// move (HapticTexturePipeline::ToolMotionBound) before a step could find a pair: the smallest
+  /// bounding-sphere gap less the coarse query's largest tolerance (reaches, proximity margin and
+  /// the speculative margin at its cap, whatever the speed). 0 when any object passed the broad
+  /// phase; +∞ without touchables. A step at a pose that moved less than this gives the same
+  /// empty model (the remote node waits instead, issue 33), while the objects stay still.
+  double free_space_clearance_m = 0.0;
 };
 
 /// The remote step (DESIGN.md §1): the remote node's per-step pipeline from a tool pose to a
@@ -207,6 +214,11 @@ class HapticTexturePipeline {
   /// (linear velocity of T's origin, m/s, and angular velocity, rad/s, both along W), for the
   /// speculative contacts (PipelineOptions::speculative_lead_s); zero (a tool at rest) or
   /// non-finite gives none.
+  /// The most any point of the tool's bounding sphere moves (m) between the tool poses X_WT_a and
+  /// X_WT_b (W): |Δ centre| + 2·sin(θ/2)·r, θ the rotation between them. Compare it with
+  /// StepTimings::free_space_clearance_m. Non-finite poses give +∞.
+  double ToolMotionBound(const RigidTransform& X_WT_a, const RigidTransform& X_WT_b) const noexcept;
+
   ContactModel Step(const RigidTransform& X_WT, std::uint64_t tool_state_seq, StepTimings& timings,
                     const Twist& V_WT_W = {});
 
@@ -311,6 +323,11 @@ class HapticTexturePipeline {
   /// coarse mesh is convex (ConvexMeshHull; no planes otherwise), index 0 the tool and k + 1
   /// touchable k, and the indices of all its coarse triangles.
   std::vector<ConvexHull> whole_hulls_;
+  /// Per model (0 the tool, k + 1 touchable k): the hull bounding the whole model, for the free
+  /// space bound (HullSeparationBound): its hierarchy's root, or for a model without hierarchy its
+  /// convex mesh's hull (held in convex_mesh_hulls_); null when neither exists.
+  std::vector<ConvexHull> convex_mesh_hulls_;
+  std::vector<const ConvexHull*> root_hulls_;
   std::vector<std::vector<int>> whole_triangles_;
   std::array<ContactCandidate, kMaxContacts> candidates_{};
   int num_candidates_ = 0;
