@@ -239,5 +239,38 @@ TEST(SceneLayout, AnObjectUnderAnotherIsApproachedAboveTheOneOnTop) {
   EXPECT_LE(layout.targets[0].approach_m, layout.tool_extent_down_m + 0.03 + 1e-9);
 }
 
+TEST(SceneLayout, AFlatTopIsPressedAtItsMiddleNotAtACorner) {
+  // A flat 4 × 4 cm plate (issue 33: explore pressed its corner, the highest vertex that came
+  // first, and slid off its edge). Turned 30° about up and moved, its top's target is the middle
+  // of the top face; a pyramid's is its apex (no flat top: the highest vertex).
+  HapticScene scene;
+  scene.name = "plate";
+  scene.tool = std::make_shared<const HapticModel>(MakeRidgedBlock());
+  const auto flat = [](double, double) { return 0.0; };
+  TouchableObject plate{std::make_shared<const HapticModel>(
+                            MakeTexturedBox({0.02, 0.02, 0.0025}, flat, 16, 0.1, "plate")),
+                        {},
+                        8000.0};
+  plate.X_WO.translation = {0.1, -0.05, 0.0};
+  plate.X_WO.rotation = glm::angleAxis(0.5, glm::dvec3(0.0, 0.0, 1.0));
+  scene.touchables = {plate};
+  scene.X_WT_home.translation = {0.1, -0.05, 0.05};
+  const wire::SceneLayout layout = MakeSceneLayout(scene);
+  ASSERT_EQ(layout.num_targets, 1);
+  EXPECT_NEAR(layout.targets[0].top_W.x, 0.1, 1e-12);
+  EXPECT_NEAR(layout.targets[0].top_W.y, -0.05, 1e-12);
+  EXPECT_NEAR(layout.targets[0].top_W.z, 0.0025, 1e-12);
+  // A tetrahedron standing on a face: its apex.
+  HapticModel tip = MakeRidgedBlock();
+  tip.vertices_O = {{-0.01, -0.01, 0.0}, {0.01, -0.01, 0.0}, {0.0, 0.01, 0.0}, {0.002, 0.0, 0.02}};
+  tip.triangles = {{0, 2, 1}, {0, 1, 3}, {1, 2, 3}, {2, 0, 3}};
+  tip.hull_vertices_O = tip.vertices_O;  // (the other per-triangle arrays are not read here)
+  scene.touchables[0].model = std::make_shared<const HapticModel>(tip);
+  scene.touchables[0].X_WO = {};
+  const wire::SceneLayout apex = MakeSceneLayout(scene);
+  ASSERT_EQ(apex.num_targets, 1);
+  EXPECT_EQ(apex.targets[0].top_W, glm::dvec3(0.002, 0.0, 0.02));
+}
+
 }  // namespace
 }  // namespace ht

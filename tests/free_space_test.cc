@@ -172,3 +172,51 @@ TEST(FreeSpace, AStepInsideTheClearanceFindsNothingAndContactHasNone) {
 
 }  // namespace
 }  // namespace ht
+
+namespace ht {
+namespace {
+
+TEST(RotateModelFrame, TheSurfaceAndTheForcesStayPutWhenThePoseTurnsBack) {
+  // The block on the gear, pressed 0.4 mm: the same step with the block's frame turned a quarter
+  // turn about x (and its pose turned back) gives the same contact wrench in W, and a turn by any
+  // other angle too: the frame is a bookkeeping choice (issue 33 turns tool nodes' frames so that
+  // T's +z is the scene's up).
+  const HapticScene scene = MakeBlockOnGearScene();
+  RigidTransform pressed = scene.X_WT_home;
+  pressed.translation.z -= 0.9e-3;
+  StepTimings timings;
+  HapticTexturePipeline original(scene, PipelineOptions{});
+  const ContactModel m0 = original.Step(pressed, 1, timings);
+  ASSERT_GE(m0.num_contacts, 1);
+  for (const glm::dquat R_NO : {glm::angleAxis(0.5 * std::numbers::pi, glm::dvec3(1, 0, 0)),
+                                glm::angleAxis(0.7, glm::normalize(glm::dvec3(1, 2, 3)))}) {
+    HapticModel turned = *scene.tool;
+    RotateModelFrame(turned, R_NO);
+    EXPECT_NO_THROW(turned.Validate());
+    for (std::size_t v = 0; v < turned.vertices_O.size(); ++v) {
+      EXPECT_LT(glm::length(turned.vertices_O[v] - R_NO * scene.tool->vertices_O[v]), 1e-15);
+    }
+    HapticScene s = scene;
+    s.tool = std::make_shared<const HapticModel>(turned);
+    HapticTexturePipeline p(s, PipelineOptions{});
+    RigidTransform X_WN = pressed;
+    X_WN.rotation = pressed.rotation * glm::inverse(R_NO);
+    const ContactModel m1 = p.Step(X_WN, 1, timings);
+    ASSERT_EQ(m1.num_contacts, m0.num_contacts);
+    const Wrench& F0 = m0.F_T_W_at_q0;
+    const Wrench& F1 = m1.F_T_W_at_q0;
+    EXPECT_LT(glm::length(F1.force - F0.force), 0.02 * glm::length(F0.force) + 1e-9);
+    EXPECT_LT(glm::length(F1.torque - F0.torque), 0.02 * glm::length(F0.torque) + 1e-6);
+  }
+  // A quarter turn about x swaps the y and z principal moments.
+  HapticModel quarter = *scene.tool;
+  RotateModelFrame(quarter, glm::angleAxis(0.5 * std::numbers::pi, glm::dvec3(1, 0, 0)));
+  const glm::dvec3 I = scene.tool->inertia_diagonal_O;
+  EXPECT_NEAR(quarter.inertia_diagonal_O.x, I.x, 1e-12 * I.x);
+  EXPECT_NEAR(quarter.inertia_diagonal_O.y, I.z, 1e-12 * I.z);
+  EXPECT_NEAR(quarter.inertia_diagonal_O.z, I.y, 1e-12 * I.y);
+  EXPECT_THROW(RotateModelFrame(quarter, glm::dquat(2.0, 0.0, 0.0, 0.0)), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace ht

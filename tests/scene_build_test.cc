@@ -252,6 +252,48 @@ TEST_F(SceneBuildTest, ANodeCanBeTheTool) {
       std::runtime_error);
 }
 
+TEST_F(SceneBuildTest, TheHomePoseMapsTheDevicesUpToTheScenesUpWhateverTheToolNodesRotation) {
+  // A Y-up glTF scene (issue 33): the home pose (the operator's workspace frame M) maps M's +z to
+  // +Y and M's +y (away from the user) to −Z, with the built-in probe, a tool node without
+  // rotation and a tool node turned about two axes; a tool node keeps its own orientation and
+  // place at rest (its surface in W is where the file put it).
+  const TriangleMesh slab = RidgedSlab(0.01, 0.02, 0.005, 10);
+  const glm::dmat4 turn = glm::translate(glm::dmat4(1.0), glm::dvec3(0.01, 0.05, -0.02)) *
+                          glm::rotate(glm::dmat4(1.0), 0.6, glm::dvec3(0.0, 0.0, 1.0)) *
+                          glm::rotate(glm::dmat4(1.0), 1.1, glm::dvec3(1.0, 0.0, 0.0));
+  for (const glm::dmat4& X_WN :
+       {glm::translate(glm::dmat4(1.0), glm::dvec3(0.0, 0.05, 0.0)), turn}) {
+    WriteGlb((dir_ / "up.glb").string(),
+             {{"floor", RidgedSlab(0.05, 0.05, 0.005, 20), glm::dmat4(1.0), ""},
+              {"probe", slab, X_WN, ""}});
+    for (const std::string tool : {"", "probe"}) {
+      const BuiltScene s =
+          BuildScene(LoadSceneInput((dir_ / "up.glb").string(), tool), HapticModelCache(""));
+      const glm::dquat& R_WM = s.haptic.X_WT_home.rotation;
+      EXPECT_LT(glm::length(R_WM * glm::dvec3(0, 0, 1) - glm::dvec3(0, 1, 0)), 1e-12) << tool;
+      EXPECT_LT(glm::length(R_WM * glm::dvec3(0, 1, 0) - glm::dvec3(0, 0, -1)), 1e-12) << tool;
+      if (tool.empty()) continue;
+      // At rest the tool's coarse vertices are where the node's matrix puts the slab: its
+      // bounding box in W matches the full mesh's to the coarse mesh's tolerance.
+      glm::dvec3 lo(1e9), hi(-1e9), mesh_lo(1e9), mesh_hi(-1e9);
+      for (const glm::dvec3& p_T : s.haptic.tool->vertices_O) {
+        lo = glm::min(lo, s.objects[1].X_WO * p_T);
+        hi = glm::max(hi, s.objects[1].X_WO * p_T);
+      }
+      for (const glm::dvec3& p : slab.vertices) {
+        const glm::dvec3 p_W(X_WN * glm::dvec4(p, 1.0));
+        mesh_lo = glm::min(mesh_lo, p_W);
+        mesh_hi = glm::max(mesh_hi, p_W);
+      }
+      EXPECT_LT(glm::length(lo - mesh_lo), 1e-3);
+      EXPECT_LT(glm::length(hi - mesh_hi), 1e-3);
+      // T's rest rotation is M's: pressing the device down moves the tool along −Y.
+      EXPECT_LT(glm::length(s.objects[1].X_WO.rotation * glm::dvec3(0, 0, 1) - glm::dvec3(0, 1, 0)),
+                1e-12);
+    }
+  }
+}
+
 TEST_F(SceneBuildTest, PipelineOnAFileSceneCullsFarObjectsAndFindsContactOnTheNearOne) {
   WriteGlb((dir_ / "p.glb").string(),
            {{"floor", RidgedSlab(0.05, 0.05, 0.005, 30), glm::dmat4(1.0), ""},

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <glm/geometric.hpp>
+#include <glm/gtc/quaternion.hpp>
 #include <stdexcept>
 #include <string>
 
@@ -63,6 +64,32 @@ void ShiftModelFrame(HapticModel& m, const glm::dvec3& p_OC) {
     node.hull.center_O -= p_OC;
   }
   m.center_of_mass_O -= p_OC;
+}
+
+void RotateModelFrame(HapticModel& m, const glm::dquat& R_NO) {
+  const double norm = glm::length(R_NO);
+  if (!std::isfinite(norm) || std::abs(norm - 1.0) > 1e-9) {
+    throw std::invalid_argument("RotateModelFrame: the rotation of model '" + m.name +
+                                "' must be a finite unit quaternion");
+  }
+  for (glm::dvec3& p : m.vertices_O) p = R_NO * p;
+  for (glm::dvec3& n : m.corner_normals_O) n = R_NO * n;
+  for (glm::dvec3& p : m.hull_vertices_O) p = R_NO * p;
+  for (HullNode& node : m.hull_hierarchy.nodes) {
+    for (glm::dvec3& p : node.hull.vertices_O) p = R_NO * p;
+    for (glm::dvec4& plane : node.hull.planes_O) {
+      plane = glm::dvec4(R_NO * glm::dvec3(plane), plane.w);  // n·p − d: d is frame-free
+    }
+    node.hull.center_O = R_NO * node.hull.center_O;
+  }
+  m.center_of_mass_O = R_NO * m.center_of_mass_O;
+  const glm::dmat3 R = glm::mat3_cast(R_NO);
+  const glm::dvec3 I = m.inertia_diagonal_O;
+  glm::dvec3 turned(0.0);
+  for (int a = 0; a < 3; ++a) {
+    for (int k = 0; k < 3; ++k) turned[a] += R[k][a] * R[k][a] * I[k];  // (R·diag(I)·Rᵀ)_aa
+  }
+  m.inertia_diagonal_O = turned;
 }
 
 }  // namespace ht

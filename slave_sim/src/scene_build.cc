@@ -215,6 +215,10 @@ SceneDescription LoadSceneInput(const std::string& path, const std::string& tool
   return d;
 }
 
+glm::dquat SceneUpRotation() noexcept {
+  return glm::angleAxis(-0.5 * std::numbers::pi, glm::dvec3(1.0, 0.0, 0.0));
+}
+
 BuiltScene BuildScene(const SceneDescription& description, const HapticModelCache& cache,
                       const SceneBuildProgress& progress) {
   const auto start = std::chrono::steady_clock::now();
@@ -339,14 +343,18 @@ BuiltScene BuildScene(const SceneDescription& description, const HapticModelCach
       first_with_key.emplace(key, i);
     }
     if (obj.spec.role == NodeRole::kTool) {
-      // The tool frame T sits at the tool's centre of mass (HapticTexturePipeline requires it).
+      // The tool frame T sits at the tool's centre of mass (HapticTexturePipeline requires it),
+      // and at the node's rest pose its +z is the scene's up (glTF's +Y): the Welcome's home pose
+      // is the operator's workspace frame M, so the device's up is the scene's up whatever the
+      // node's own rotation (issue 33). The tool keeps the orientation the node gives it.
       const glm::dvec3 com = obj.model->center_of_mass_O;
-      if (glm::length(com) > 0.0) {
-        auto centred = std::make_shared<HapticModel>(*obj.model);
-        ShiftModelFrame(*centred, com);
-        obj.model = std::move(centred);
-        obj.X_WO.translation += obj.X_WO.rotation * com;
-      }
+      const glm::dquat R_TO = glm::inverse(SceneUpRotation()) * obj.X_WO.rotation;
+      auto turned = std::make_shared<HapticModel>(*obj.model);
+      ShiftModelFrame(*turned, com);
+      RotateModelFrame(*turned, R_TO);
+      obj.model = std::move(turned);
+      obj.X_WO.translation += obj.X_WO.rotation * com;
+      obj.X_WO.rotation = SceneUpRotation();
       scene.haptic.tool = obj.model;
       scene.builtin_probe = false;
     } else {
@@ -403,10 +411,11 @@ BuiltScene BuildScene(const SceneDescription& description, const HapticModelCach
 
   scene.haptic.name = std::filesystem::path(file).stem().string();
   RigidTransform home;
+  // T's +z is the scene's up at home (a tool node's frame was turned so above): the probe's
+  // textured face (−z in T) faces the scene's down direction (−Y in W).
+  home.rotation = SceneUpRotation();
   if (!scene.haptic.tool) {
     scene.haptic.tool = std::make_shared<const HapticModel>(MakeRidgedBlock());
-    // The probe's textured face (−z in T) faces the scene's down direction (−Y in W).
-    home.rotation = glm::angleAxis(-0.5 * std::numbers::pi, glm::dvec3(1, 0, 0));
   }
   if (scene.haptic.touchables.empty()) {
     home.translation = glm::dvec3(0.0);

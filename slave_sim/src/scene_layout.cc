@@ -1,8 +1,10 @@
 // The scene as the remote node offers it at join: the block-on-gear demo's meshes for streaming,
 // and the layout every Welcome carries (targets, their bounds and clear approach heights).
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
+#include <vector>
 
 #include "codecs/draco_mesh_codec.h"
 #include "haptic_core/demo/procedural_models.h"
@@ -10,6 +12,55 @@
 #include "slave_sim/remote_node.h"
 
 namespace ht {
+
+namespace {
+
+/// The centre of an object's top (W, m): its coarse triangles that face up (normal within 25° of
+/// up_W) with every corner within `tolerance_m` below the highest vertex `top_W` form its top; the
+/// area-weighted centre of their corners' centroids, brought onto the triangle under it (seen
+/// along up_W) at that triangle's height. The highest vertex when no triangle is under that
+/// centre (a ring's top, a ridge's two flanks) or the top has no area. A flat plate's top is then
+/// its face's middle, not the corner that happens to come first.
+glm::dvec3 TopCentre(const HapticModel& model, const RigidTransform& X_WO, const glm::dvec3& up_W,
+                     const glm::dvec3& top_W, double tolerance_m) {
+  const double top = glm::dot(top_W, up_W);
+  const double cos_max = std::cos(25.0 * 3.14159265358979323846 / 180.0);
+  std::vector<std::array<glm::dvec3, 3>> faces;
+  glm::dvec3 weighted(0.0);
+  double area = 0.0;
+  for (const glm::ivec3& t : model.triangles) {
+    const std::array<glm::dvec3, 3> p{X_WO * model.vertices_O[static_cast<std::size_t>(t[0])],
+                                      X_WO * model.vertices_O[static_cast<std::size_t>(t[1])],
+                                      X_WO * model.vertices_O[static_cast<std::size_t>(t[2])]};
+    const glm::dvec3 n = glm::cross(p[1] - p[0], p[2] - p[0]);
+    const double a = 0.5 * glm::length(n);
+    if (!(a > 0.0) || glm::dot(n, up_W) < cos_max * 2.0 * a) continue;
+    bool near_top = true;
+    for (const glm::dvec3& q : p) near_top = near_top && glm::dot(q, up_W) >= top - tolerance_m;
+    if (!near_top) continue;
+    faces.push_back(p);
+    weighted += a * (p[0] + p[1] + p[2]) / 3.0;
+    area += a;
+  }
+  if (!(area > 0.0)) return top_W;
+  const glm::dvec3 c = weighted / area;
+  for (const auto& p : faces) {
+    // c projected along up_W onto the triangle's plane; inside when its barycentric weights are.
+    const glm::dvec3 n = glm::normalize(glm::cross(p[1] - p[0], p[2] - p[0]));
+    const glm::dvec3 q = c + up_W * (glm::dot(p[0] - c, n) / glm::dot(up_W, n));
+    const glm::dvec3 e0 = p[1] - p[0], e1 = p[2] - p[0], w = q - p[0];
+    const double d00 = glm::dot(e0, e0), d01 = glm::dot(e0, e1), d11 = glm::dot(e1, e1);
+    const double d20 = glm::dot(w, e0), d21 = glm::dot(w, e1);
+    const double det = d00 * d11 - d01 * d01;
+    if (!(det > 0.0)) continue;
+    const double v = (d11 * d20 - d01 * d21) / det, u = (d00 * d21 - d01 * d20) / det;
+    constexpr double kOnEdge = 1e-9;
+    if (v >= -kOnEdge && u >= -kOnEdge && u + v <= 1.0 + kOnEdge) return q;
+  }
+  return top_W;
+}
+
+}  // namespace
 
 DisplayStream BlockOnGearDisplayStream(const HapticScene& scene) {
   const TriangleMesh gear = MakeRidgedGearFullResolution();
@@ -51,6 +102,10 @@ wire::SceneLayout MakeSceneLayout(const HapticScene& scene) {
         t.top_W = p_W;
       }
     }
+    // The top's centre, where the explore experiment presses: within 1 mm (or 2 % of the
+    // object's height) of the highest vertex.
+    const double height = glm::dot(t.box_max_W - t.box_min_W, glm::abs(up_W));
+    t.top_W = TopCentre(*object.model, object.X_WO, up_W, t.top_W, std::max(1e-3, 0.02 * height));
     // The textured surface reaches beyond the coarse mesh by up to the texture's outward reach.
     const double reach = object.model->OutwardReach();
     t.box_min_W -= glm::dvec3(reach);

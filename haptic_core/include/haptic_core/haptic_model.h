@@ -4,6 +4,7 @@
 // hull(s) used by the coarse contact query.
 
 #include <cstdint>
+#include <glm/gtc/quaternion.hpp>
 #include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
 #include <string>
@@ -74,6 +75,15 @@ struct HapticModel {
 /// hierarchy nodes, centre of mass) becomes p − p_OC. Orientation, texture and normals are
 /// unchanged.
 void ShiftModelFrame(HapticModel& model, const glm::dvec3& p_OC);
+
+/// Turns a model's frame about its origin: with R_NO the rotation from the old frame O to the new
+/// frame N (a unit quaternion), every position and direction of the model (coarse vertices,
+/// corner normals, hull vertices, plane normals and centres, hierarchy nodes, centre of mass)
+/// becomes R_NO·p; the surface in W is unchanged when the model's pose becomes X_WN = X_WO·R_NO⁻¹.
+/// The principal moments become the diagonal of R_NO·diag(I)·R_NO⁻¹ (exact for a rotation that
+/// permutes O's axes, such as a quarter turn). Texture coordinates, the texture and texel sizes
+/// are unchanged. Throws std::invalid_argument for a non-finite or non-unit R_NO.
+void RotateModelFrame(HapticModel& model, const glm::dquat& R_NO);
 
 /// A full-resolution triangle mesh (for display, baking and reports), frame O, metres.
 struct TriangleMesh {

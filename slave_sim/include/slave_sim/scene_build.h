@@ -107,7 +107,9 @@ struct BuiltScene {
   std::vector<SceneNode> objects;
   /// The haptic scene: tool (a node, or the built-in probe) and the touchable objects with their
   /// stiffness; X_WT_home puts the tool 1 cm above the top (+Y) of the touchables' bounds (their
-  /// coarse meshes widened by the texture's outward reach).
+  /// coarse meshes widened by the texture's outward reach), its rotation SceneUpRotation(): the
+  /// operator's workspace frame M, whose +z is the scene's up. A tool node's model frame T is
+  /// turned so that the node keeps its own orientation at that pose (RotateModelFrame).
   HapticScene haptic;
   /// For each entry of haptic.touchables, the index of its object in `objects`.
   std::vector<int> touchable_objects;
@@ -124,6 +126,11 @@ struct BuiltScene {
   double load_s = 0.0;
   double total_s = 0.0;
 };
+
+/// The rotation R_WM from the operator's workspace axes (M: +z up, +y away from the user, +x to
+/// the right) to a glTF scene's (W: +Y up, −Z away from a viewer on the default camera, +X to the
+/// right): a quarter turn about x. Every built scene's home pose has it.
+glm::dquat SceneUpRotation() noexcept;
 
 /// A scene whose touchable objects span more than this (m) gets a warning (BuiltScene::warnings).
 inline constexpr double kLargestDeskSceneM = 2.0;

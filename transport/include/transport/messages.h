@@ -72,7 +72,10 @@ struct WelcomeTarget {
   glm::dvec3 box_min_W{0.0};  ///< Axis-aligned bounds in W (m), min ≤ max per axis, widened by
                               ///< the object's texture outward reach.
   glm::dvec3 box_max_W{0.0};
-  glm::dvec3 top_W{0.0};  ///< The object's highest coarse vertex along up_W (m), inside the box.
+  /// The object's top along up_W (m), inside the box: the middle of its upward-facing coarse
+  /// triangles near its highest vertex where that middle lies on them (a plate's top face),
+  /// else its highest coarse vertex.
+  glm::dvec3 top_W{0.0};
   /// Height (m, along up_W, ≥ 0) above top_W where the hand can bring the tool (at the home
   /// orientation) without it touching any object: the remote node checked it.
   double approach_m = 0.0;
