@@ -89,6 +89,7 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     for (int n : {256, 512, 2048}) texture(n);
     coarse(0.5, "coarse0.5x");
     coarse(2.0, "coarse2x");
+    coarse(4.0, "coarse4x");
   }
   FrontierSetting ref = base;
   ref.name = "reference";
