@@ -50,15 +50,16 @@ TEST(FreeSpace, HullSeparationIsExactAcrossAFaceAndNeverAboveTheDistance) {
   const ConvexHull a = Box({0.01, 0.02, 0.03}), b = Box({0.02, 0.01, 0.005});
   // Face to face along x: the gap exactly.
   const RigidTransform X_WA = Pose({0.0, 0.0, 0.0}, 0.0, {0, 0, 1});
-  EXPECT_NEAR(HullSeparationBound(a, X_WA, b, Pose({0.01 + 0.02 + 0.004, 0.003, 0.0}, 0.0,
-                                                   {0, 0, 1})),
-              0.004, 1e-15);
+  EXPECT_NEAR(
+      HullSeparationBound(a, X_WA, b, Pose({0.01 + 0.02 + 0.004, 0.003, 0.0}, 0.0, {0, 0, 1})),
+      0.004, 1e-15);
   // B turned 45° about z, a corner towards A's +x face: vertex to face, still exact.
-  const double corner = 0.02 * std::cos(std::numbers::pi / 4) + 0.01 * std::sin(std::numbers::pi / 4);
-  EXPECT_NEAR(HullSeparationBound(a, X_WA, b,
-                                  Pose({0.01 + corner + 0.002, 0.0, 0.0}, std::numbers::pi / 4,
-                                       {0, 0, 1})),
-              0.002, 1e-12);
+  const double corner =
+      0.02 * std::cos(std::numbers::pi / 4) + 0.01 * std::sin(std::numbers::pi / 4);
+  EXPECT_NEAR(
+      HullSeparationBound(a, X_WA, b,
+                          Pose({0.01 + corner + 0.002, 0.0, 0.0}, std::numbers::pi / 4, {0, 0, 1})),
+      0.002, 1e-12);
   // Overlapping: not positive.
   EXPECT_LE(HullSeparationBound(a, X_WA, b, Pose({0.015, 0.0, 0.0}, 0.3, {1, 2, 3})), 0.0);
   // Too costly, or a hull without planes: no bound.
@@ -76,9 +77,8 @@ TEST(FreeSpace, HullSeparationIsExactAcrossAFaceAndNeverAboveTheDistance) {
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   int separated = 0, useful = 0;
   for (int i = 0; i < 400; ++i) {
-    const RigidTransform X_WB =
-        Pose({0.08 * u(rng), 0.08 * u(rng), 0.08 * u(rng)}, std::numbers::pi * u(rng),
-             {u(rng), u(rng), u(rng) + 1e-3});
+    const RigidTransform X_WB = Pose({0.08 * u(rng), 0.08 * u(rng), 0.08 * u(rng)},
+                                     std::numbers::pi * u(rng), {u(rng), u(rng), u(rng) + 1e-3});
     const double bound = HullSeparationBound(a, X_WA, b, X_WB);
     const std::optional<ConvexContact> c =
         QueryConvexContact(a.vertices_O, X_WA, b.vertices_O, X_WB, 0.2);

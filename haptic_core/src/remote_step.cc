@@ -241,7 +241,8 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
     const double gap = BoundingSphereGap(tool_sphere_O_, X_WT, object_spheres_O_[k], object.X_WO);
     if (gap > query.tolerance_m) {
       ++timings.broad_phase_culled;
-      clearance = std::min(clearance, gap - (reach + options_.proximity_margin_m + most_speculative));
+      clearance =
+          std::min(clearance, gap - (reach + options_.proximity_margin_m + most_speculative));
       continue;
     }
     // 2. Hull proximity: leaf hull pairs within the tolerance.
@@ -352,7 +353,8 @@ double HapticTexturePipeline::ToolMotionBound(const RigidTransform& X_WT_a,
   const double moved = glm::length(X_WT_b * c_O - X_WT_a * c_O);
   // ‖(R_b − R_a)·u‖ = 2·sin(θ/2)·|u| = 2·|vec(q_a⁻¹·q_b)|·|u| for unit quaternions.
   const glm::dquat q = glm::inverse(X_WT_a.rotation) * X_WT_b.rotation;
-  const double turned = 2.0 * glm::length(glm::dvec3(q.x, q.y, q.z)) / std::max(1e-300, glm::length(q));
+  const double turned =
+      2.0 * glm::length(glm::dvec3(q.x, q.y, q.z)) / std::max(1e-300, glm::length(q));
   return moved + turned * tool_sphere_O_.w;
 }
 

@@ -40,8 +40,6 @@ double ProcessCpuSeconds() noexcept {
          static_cast<double>(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec) * 1e-6;
 }
 
-
-
 // A coarse triangle's centroid and outward unit normal (frame O), or false when it has no area.
 bool TriangleFrame(const HapticModel& m, int f, glm::dvec3& centroid_O, glm::dvec3& normal_O) {
   const glm::ivec3 t = m.triangles[static_cast<std::size_t>(f)];

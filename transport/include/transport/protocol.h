@@ -80,8 +80,9 @@
 //     tool_extent_down_m (how far the tool reaches below T along −z, m), u8 n (≤
 //     kMaxWelcomeTargets), per target (40): 3×f32 box_min_W, 3×f32 box_max_W (m, the object's
 //     bounds in W at rest, widened by its texture's outward reach), 3×f32 top_W (its top along the
-//     scene's up: the middle of its flat top, else its highest coarse vertex), f32 approach_m (the hand height above top_W at which the tool
-//     is clear of every touchable). The header carries the new session id.
+//     scene's up: the middle of its flat top, else its highest coarse vertex), f32 approach_m (the
+//     hand height above top_W at which the tool is clear of every touchable). The header carries
+//     the new session id.
 //   Reject R→O (10 + n): u64 client_nonce, u8 RejectReason, u8 n, n bytes of UTF-8 text (n ≤ 200)
 //   Ping O→R (0): its header's send_time_ns is t1.
 //   Pong R→O (24): u64 ping_sequence, i64 t1 (echoed), i64 t2 (remote receive time); the header's
