@@ -288,7 +288,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     const std::int64_t t_step = SteadyNowNs();
     const RigidTransform X_WT = session.ToolPoseForStep(t_step);
     if (session.StepCanWait(X_WT, static_cast<bool>(config.animate),
-                            pipeline->ToolMotionBound(session.last_step_pose(), X_WT))) {
+                            pipeline->ToolMotionBound(session.last_step_pose(), X_WT), t_step)) {
       session.CountSkippedStep();
       session.MaybeSendKeepAlive(t_step);
       // A pose that holds still (and no scene left to stream) is re-checked every 10 ms: a
@@ -297,7 +297,12 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
       // a scene stream under way is re-checked every millisecond.
       const bool holds_still = X_WT.translation == session.last_step_pose().translation &&
                                X_WT.rotation == session.last_step_pose().rotation;
-      socket.WaitReadable(holds_still && scene_sender.queued() == 0 ? 10 : 1);
+      if (const std::int64_t due_ns = session.ModelDueInNs(t_step); due_ns > 0) {
+        // A model held by the model period: stepped again at the period's end, to the µs.
+        socket.WaitReadableNs(std::min<std::int64_t>(due_ns, 1'000'000));
+      } else {
+        socket.WaitReadable(holds_still && scene_sender.queued() == 0 ? 10 : 1);
+      }
       continue;
     }
     if (config.animate) config.animate(static_cast<double>(t_step - start_ns) * 1e-9);

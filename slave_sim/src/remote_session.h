@@ -68,8 +68,17 @@ class RemoteSession {
   /// ToolMotionBound from the last step's pose to X_WT, below that step's
   /// StepTimings::free_space_clearance_m: the same empty model). A fresh tool state is always
   /// stepped, so that its answer, and its echo, go out as before.
-  bool StepCanWait(const RigidTransform& X_WT, bool scene_moves,
-                   double tool_motion_m) const noexcept;
+  /// A model held by the model period at an unchanged pose waits too, until the period's end at
+  /// `now_ns` + ModelDueInNs(now_ns) (the step then would give the same model).
+  bool StepCanWait(const RigidTransform& X_WT, bool scene_moves, double tool_motion_m,
+                   std::int64_t now_ns) const noexcept;
+  /// Time (ns) until a model held by the model period may go out: 0 when none is held or the
+  /// period has passed.
+  std::int64_t ModelDueInNs(std::int64_t now_ns) const noexcept {
+    if (!model_pending_) return 0;
+    const std::int64_t due = last_model_sent_ns_ + model_period_ns_ - now_ns;
+    return due > 0 ? due : 0;
+  }
   /// The pose of the last step (identity before the first).
   const RigidTransform& last_step_pose() const noexcept { return last_step_pose_; }
   /// Counts a loop pass that did not step (StepCanWait).

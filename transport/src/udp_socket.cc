@@ -120,4 +120,11 @@ bool UdpSocket::WaitReadable(int timeout_ms) noexcept {
   return ::poll(&p, 1, timeout_ms) > 0 && (p.revents & POLLIN);
 }
 
+bool UdpSocket::WaitReadableNs(std::int64_t timeout_ns) noexcept {
+  pollfd p{fd_, POLLIN, 0};
+  const std::int64_t ns = timeout_ns > 0 ? timeout_ns : 0;
+  const timespec t{static_cast<time_t>(ns / 1000000000), static_cast<long>(ns % 1000000000)};
+  return ::ppoll(&p, 1, &t, nullptr) > 0 && (p.revents & POLLIN);
+}
+
 }  // namespace ht

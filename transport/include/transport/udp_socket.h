@@ -53,6 +53,9 @@ class UdpSocket {
 
   /// Waits until a datagram is readable or `timeout_ms` passes. Returns true when readable.
   bool WaitReadable(int timeout_ms) noexcept;
+  /// The same to the nanosecond (ppoll): for deadlines shorter than a millisecond. A timeout ≤ 0
+  /// only checks.
+  bool WaitReadableNs(std::int64_t timeout_ns) noexcept;
 
   /// The socket's file descriptor, to wait on it together with other descriptors (poll, ppoll).
   /// The socket keeps owning it: the caller must not close it, and it is invalid once the socket
