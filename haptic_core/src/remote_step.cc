@@ -110,6 +110,7 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
   // The whole models' hulls, for the free space around the tool (StepTimings).
   convex_mesh_hulls_.resize(scene.touchables.size() + 1);
   root_hulls_.assign(scene.touchables.size() + 1, nullptr);
+  free_space_gaps_.assign(scene.touchables.size(), 0.0);
   for (std::size_t i = 0; i <= scene.touchables.size(); ++i) {
     const HapticModel& m = i == 0 ? *scene.tool : *scene.touchables[i - 1].model;
     if (!m.hull_hierarchy.nodes.empty()) {
@@ -231,6 +232,8 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
       options_.speculative_lead_s > 0.0 ? std::max(0.0, options_.max_speculative_margin_m) : 0.0;
   double clearance = std::numeric_limits<double>::infinity();
   bool any_passed = false;
+  std::fill(free_space_gaps_.begin(), free_space_gaps_.end(),
+            std::numeric_limits<double>::quiet_NaN());
   for (std::size_t k = 0; k < scene_.touchables.size(); ++k) {
     const TouchableObject& object = scene_.touchables[k];
     const double reach = tool.OutwardReach() + object.model->OutwardReach();
@@ -251,15 +254,9 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
     std::span<const HullPairContact> pairs =
         queries_[k].Query(tool, X_WT, *object.model, object.X_WO, query, &stats);
     if (pairs.empty() && !stats.budget_exhausted && stats.invalid_input == 0) {
-      // Nothing within the tolerance: the free space is the whole hulls' separation (or the
-      // spheres' gap, whichever bound is larger) beyond the largest tolerance.
-      double separation = gap;
-      if (root_hulls_[0] != nullptr && root_hulls_[k + 1] != nullptr) {
-        separation = std::max(separation, HullSeparationBound(*root_hulls_[0], X_WT,
-                                                              *root_hulls_[k + 1], object.X_WO));
-      }
-      clearance = std::min(clearance,
-                           separation - (reach + options_.proximity_margin_m + most_speculative));
+      // Nothing within the tolerance: its free space is taken after the loop, and only when no
+      // object had a pair (the clearance is 0 otherwise; the hull bound is not free).
+      free_space_gaps_[k] = gap;
     } else {
       any_passed = true;
     }
@@ -339,6 +336,22 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
                                           keep_list(c.object_triangles, c.object_whole_model),
                                           keep_list(c.tool_triangles, c.tool_whole_model)};
       }
+    }
+  }
+  if (!any_passed) {
+    // Every object culled or without a pair: each of the latter's free space is its whole hulls'
+    // separation (or the spheres' gap, whichever bound is larger) beyond the largest tolerance.
+    for (std::size_t k = 0; k < scene_.touchables.size(); ++k) {
+      if (std::isnan(free_space_gaps_[k])) continue;
+      const TouchableObject& object = scene_.touchables[k];
+      double separation = free_space_gaps_[k];
+      if (root_hulls_[0] != nullptr && root_hulls_[k + 1] != nullptr) {
+        separation = std::max(separation, HullSeparationBound(*root_hulls_[0], X_WT,
+                                                              *root_hulls_[k + 1], object.X_WO));
+      }
+      const double reach = tool.OutwardReach() + object.model->OutwardReach();
+      clearance = std::min(clearance,
+                           separation - (reach + options_.proximity_margin_m + most_speculative));
     }
   }
   timings.free_space_clearance_m = any_passed ? 0.0 : std::max(0.0, clearance);

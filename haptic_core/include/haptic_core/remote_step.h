@@ -328,6 +328,9 @@ class HapticTexturePipeline {
   /// convex mesh's hull (held in convex_mesh_hulls_); null when neither exists.
   std::vector<ConvexHull> convex_mesh_hulls_;
   std::vector<const ConvexHull*> root_hulls_;
+  /// Per touchable, the step's scratch: its bounding-sphere gap (m) when the coarse query found no
+  /// pair for it, NaN otherwise (the free space is taken from these after the query loop).
+  std::vector<double> free_space_gaps_;
   std::vector<std::vector<int>> whole_triangles_;
   std::array<ContactCandidate, kMaxContacts> candidates_{};
   int num_candidates_ = 0;
