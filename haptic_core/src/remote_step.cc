@@ -93,32 +93,28 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
   for (const auto& t : scene.touchables) {
     if (!t.model) throw std::invalid_argument("scene '" + scene.name + "' has an empty touchable");
   }
-  // The hulls of models without hierarchy, for windows on their contact region.
+  // The hull of each model without hierarchy whose coarse mesh is convex (within a micrometre:
+  // the procedural models' caps are fans of coplanar triangles), computed once: windows on its
+  // contact region use it (whole_model_region_windows, with its triangle list), and the free
+  // space around the tool takes it, or a hierarchy's root, as the whole model's hull.
   whole_hulls_.resize(scene.touchables.size() + 1);
   whole_triangles_.resize(scene.touchables.size() + 1);
-  for (std::size_t i = 0; i <= scene.touchables.size(); ++i) {
-    const HapticModel& m = i == 0 ? *scene.tool : *scene.touchables[i - 1].model;
-    if (!options_.whole_model_region_windows || !m.hull_hierarchy.nodes.empty()) continue;
-    // Convex within a micrometre (the procedural models' caps are fans of coplanar triangles).
-    if (std::optional<ConvexHull> hull = ConvexMeshHull(m, 1e-6)) {
-      whole_hulls_[i] = std::move(*hull);
-      whole_triangles_[i].resize(m.triangles.size());
-      for (std::size_t t = 0; t < m.triangles.size(); ++t)
-        whole_triangles_[i][t] = static_cast<int>(t);
-    }
-  }
-  // The whole models' hulls, for the free space around the tool (StepTimings).
-  convex_mesh_hulls_.resize(scene.touchables.size() + 1);
   root_hulls_.assign(scene.touchables.size() + 1, nullptr);
   free_space_gaps_.assign(scene.touchables.size(), 0.0);
   for (std::size_t i = 0; i <= scene.touchables.size(); ++i) {
     const HapticModel& m = i == 0 ? *scene.tool : *scene.touchables[i - 1].model;
     if (!m.hull_hierarchy.nodes.empty()) {
       root_hulls_[i] = &m.hull_hierarchy.nodes[0].hull;
-    } else if (std::optional<ConvexHull> hull = ConvexMeshHull(m, 1e-6)) {
-      convex_mesh_hulls_[i] = std::move(*hull);
-      root_hulls_[i] = &convex_mesh_hulls_[i];
+      continue;
     }
+    std::optional<ConvexHull> hull = ConvexMeshHull(m, 1e-6);
+    if (!hull) continue;
+    whole_hulls_[i] = std::move(*hull);
+    root_hulls_[i] = &whole_hulls_[i];
+    if (!options_.whole_model_region_windows) continue;
+    whole_triangles_[i].resize(m.triangles.size());
+    for (std::size_t t = 0; t < m.triangles.size(); ++t)
+      whole_triangles_[i][t] = static_cast<int>(t);
   }
   // Broad-phase spheres: the root bounding spheres the proximity queries use anyway. Asking each
   // query for both of its models here also fills its cache, so the first step does not.
@@ -230,6 +226,11 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
   // Free space (StepTimings::free_space_clearance_m): the tolerance a later step could use at most.
   const double most_speculative =
       options_.speculative_lead_s > 0.0 ? std::max(0.0, options_.max_speculative_margin_m) : 0.0;
+  // What a model pair's separation leaves of free space: less its reaches and the tolerance.
+  const auto free_space = [&](double separation_m, const HapticModel& object_model) {
+    return separation_m - (tool.OutwardReach() + object_model.OutwardReach() +
+                           options_.proximity_margin_m + most_speculative);
+  };
   double clearance = std::numeric_limits<double>::infinity();
   bool any_passed = false;
   std::fill(free_space_gaps_.begin(), free_space_gaps_.end(),
@@ -244,8 +245,7 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
     const double gap = BoundingSphereGap(tool_sphere_O_, X_WT, object_spheres_O_[k], object.X_WO);
     if (gap > query.tolerance_m) {
       ++timings.broad_phase_culled;
-      clearance =
-          std::min(clearance, gap - (reach + options_.proximity_margin_m + most_speculative));
+      clearance = std::min(clearance, free_space(gap, *object.model));
       continue;
     }
     // 2. Hull proximity: leaf hull pairs within the tolerance.
@@ -349,9 +349,7 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
         separation = std::max(separation, HullSeparationBound(*root_hulls_[0], X_WT,
                                                               *root_hulls_[k + 1], object.X_WO));
       }
-      const double reach = tool.OutwardReach() + object.model->OutwardReach();
-      clearance = std::min(clearance,
-                           separation - (reach + options_.proximity_margin_m + most_speculative));
+      clearance = std::min(clearance, free_space(separation, *object.model));
     }
   }
   timings.free_space_clearance_m = any_passed ? 0.0 : std::max(0.0, clearance);
@@ -374,6 +372,7 @@ double HapticTexturePipeline::ToolMotionBound(const RigidTransform& X_WT_a,
 void HapticTexturePipeline::RegionWindow(const RigidTransform& X_WT, std::size_t k,
                                          const glm::dvec3& normal_W, double texture_margin_m,
                                          glm::dvec3& point_W, double& extent_m) {
+  if (!options_.whole_model_region_windows) return;
   const ConvexHull& hull_A = whole_hulls_[0];
   const ConvexHull& hull_B = whole_hulls_[k + 1];
   if (hull_A.planes_O.empty() || hull_B.planes_O.empty()) return;

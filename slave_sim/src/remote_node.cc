@@ -295,8 +295,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
       // datagram wakes the wait at once, and the keep-alives and the manifest run on
       // timers far longer than that. A pose still moving (extrapolated in free space) or
       // a scene stream under way is re-checked every millisecond.
-      const bool holds_still = X_WT.translation == session.last_step_pose().translation &&
-                               X_WT.rotation == session.last_step_pose().rotation;
+      const bool holds_still = session.AtLastStepPose(X_WT);
       if (const std::int64_t due_ns = session.ModelDueInNs(t_step); due_ns > 0) {
         // A model held by the model period: stepped again at the period's end, to the µs.
         socket.WaitReadableNs(std::min<std::int64_t>(due_ns, 1'000'000));

@@ -271,8 +271,7 @@ bool RemoteSession::StepCanWait(const RigidTransform& X_WT, bool scene_moves, do
   // therefore follow the extrapolated pose as fast as they run; only free space and an unchanged
   // pose wait.
   if (fresh_state_ || !have_step_pose_ || scene_moves) return false;
-  const bool same_pose =
-      X_WT.translation == last_step_pose_.translation && X_WT.rotation == last_step_pose_.rotation;
+  const bool same_pose = AtLastStepPose(X_WT);
   // A model held by the model period must still go out: stepped again at its period's end, not
   // before (at the same pose a step gives the same model); a moved pose steps at once.
   if (model_pending_) return same_pose && ModelDueInNs(now) > 0;

@@ -81,6 +81,11 @@ class RemoteSession {
   }
   /// The pose of the last step (identity before the first).
   const RigidTransform& last_step_pose() const noexcept { return last_step_pose_; }
+  /// X_WT is exactly the last step's pose (a step there would give the same model).
+  bool AtLastStepPose(const RigidTransform& X_WT) const noexcept {
+    return X_WT.translation == last_step_pose_.translation &&
+           X_WT.rotation == last_step_pose_.rotation;
+  }
   /// Counts a loop pass that did not step (StepCanWait).
   void CountSkippedStep() noexcept { ++steps_skipped_; }
   /// Records that a step ran at X_WT (the newest tool state is then used) and found

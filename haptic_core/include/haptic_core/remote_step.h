@@ -319,14 +319,14 @@ class HapticTexturePipeline {
   /// The candidates' triangle lists (PipelineOptions::cluster_triangles), copied from the
   /// clusterer, whose lists last only until its next call (one per touchable).
   std::vector<int> candidate_triangles_;
-  /// PipelineOptions::whole_model_region_windows: the hull of each model without hierarchy whose
-  /// coarse mesh is convex (ConvexMeshHull; no planes otherwise), index 0 the tool and k + 1
-  /// touchable k, and the indices of all its coarse triangles.
+  /// The hull of each model without hierarchy whose coarse mesh is convex (ConvexMeshHull; no
+  /// planes otherwise), index 0 the tool and k + 1 touchable k; with
+  /// PipelineOptions::whole_model_region_windows, whole_triangles_ holds the indices of all its
+  /// coarse triangles.
   std::vector<ConvexHull> whole_hulls_;
   /// Per model (0 the tool, k + 1 touchable k): the hull bounding the whole model, for the free
-  /// space bound (HullSeparationBound): its hierarchy's root, or for a model without hierarchy its
-  /// convex mesh's hull (held in convex_mesh_hulls_); null when neither exists.
-  std::vector<ConvexHull> convex_mesh_hulls_;
+  /// space bound (HullSeparationBound): its hierarchy's root, or whole_hulls_'s; null when neither
+  /// exists.
   std::vector<const ConvexHull*> root_hulls_;
   /// Per touchable, the step's scratch: its bounding-sphere gap (m) when the coarse query found no
   /// pair for it, NaN otherwise (the free space is taken from these after the query loop).
