@@ -287,8 +287,10 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     // socket: the operator keeps the model it holds, refreshed at the keep-alive.
     const std::int64_t t_step = SteadyNowNs();
     const RigidTransform X_WT = session.ToolPoseForStep(t_step);
-    if (session.StepCanWait(X_WT, static_cast<bool>(config.animate),
-                            pipeline->ToolMotionBound(session.last_step_pose(), X_WT), t_step)) {
+    const StepCause cause =
+        session.WhyStep(X_WT, static_cast<bool>(config.animate),
+                        pipeline->ToolMotionBound(session.last_step_pose(), X_WT), t_step);
+    if (cause == StepCause::kWait) {
       session.CountSkippedStep();
       session.MaybeSendKeepAlive(t_step);
       // A pose that holds still (and no scene left to stream) is re-checked every 10 ms: a
@@ -314,6 +316,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     out.model = pipeline->Step(X_WT, session.latest_tool_state_seq(), timings,
                                session.latest_tool_state().V_WT_W);
     session.SteppedAt(X_WT, timings.free_space_clearance_m);
+    session.CountStep(cause);
     if (pipeline->backend_failures() == 1 && !reported_fallback) {
       reported_fallback = true;
       std::printf("[slave] GPU penetration depth failed (%s); continuing on the CPU backend\n",
@@ -322,7 +325,8 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     }
     const std::int64_t step_end_ns = SteadyNowNs();
     statistics.Record(static_cast<double>(t_step - start_ns) * 1e-9, t_step, step_end_ns, timings,
-                      out.model.num_contacts);
+                      out.model.num_contacts, session.latest_tool_state_seq(),
+                      static_cast<int>(cause));
     session.MaybeSendContactModel(out, timings, statistics.steps(), step_end_ns);
     // 4. Progress, and the pace (config.max_rate_hz).
     const std::int64_t now = SteadyNowNs();

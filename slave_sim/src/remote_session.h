@@ -19,6 +19,22 @@
 
 namespace ht {
 
+/// Why the remote node stepped on a loop pass, or kWait when it waited on its socket instead
+/// (RemoteSession::WhyStep). Reported per cause in remote_summary.json
+/// (transport.deadband.steps_by_cause, names from StepCauseName).
+enum class StepCause : int {
+  kWait = 0,        ///< no step: nothing new since the last one
+  kFirst,           ///< the session's first step
+  kToolState,       ///< a tool state arrived since the last step
+  kSceneMoves,      ///< the scene is animated (--animate)
+  kModelPeriodEnd,  ///< the last step's model was held by the model period, which has passed
+  kPoseMoved,       ///< the extrapolated pose moved out of the last step's free space
+};
+inline constexpr int kStepCauses = 6;
+/// The cause's name in remote_summary.json ("wait", "first", "tool_state", "scene_moves",
+/// "model_period_end", "pose_moved").
+const char* StepCauseName(StepCause cause) noexcept;
+
 /// Session state and counters of the remote node. Not thread-safe: one thread (the node's loop)
 /// calls everything. Sends through `link` to the session's operator; never throws after
 /// construction except std::bad_alloc from the scene sender's queue.
@@ -60,18 +76,22 @@ class RemoteSession {
   /// the time since it arrived (ExtrapolatePose, the prediction the operator's deadband makes;
   /// at most the tool-state keep-alive ahead, then held); without it, the newest state as is.
   RigidTransform ToolPoseForStep(std::int64_t now_ns) noexcept;
-  /// True when no tool state arrived since the last step and a step at X_WT (from
-  /// ToolPoseForStep) would see nothing new, so the node waits on its socket instead (issue 33):
-  /// the scene does not move, the last step's model was not held back by the model period (it
-  /// must still go out), and either X_WT is the last step's pose or the last step was in free
-  /// space and no tool point has moved as far since (`tool_motion_m`, the pipeline's
-  /// ToolMotionBound from the last step's pose to X_WT, below that step's
-  /// StepTimings::free_space_clearance_m: the same empty model). A fresh tool state is always
-  /// stepped, so that its answer, and its echo, go out as before.
-  /// A model held by the model period at an unchanged pose waits too, until the period's end at
-  /// `now_ns` + ModelDueInNs(now_ns) (the step then would give the same model).
-  bool StepCanWait(const RigidTransform& X_WT, bool scene_moves, double tool_motion_m,
-                   std::int64_t now_ns) const noexcept;
+  /// Why the remote node steps on a loop pass (StepCause), or kWait when a step at X_WT (from
+  /// ToolPoseForStep) would see nothing new, so the node waits on its socket instead (issue 33).
+  /// In order:
+  /// - kToolState: a tool state arrived since the last step (always stepped, so that its answer
+  ///   and its echo go out); kFirst: no step yet; kSceneMoves: the scene is animated.
+  /// - a model held by the model period (its step came less than a period after the last model
+  ///   sent): kWait until the period's end at `now_ns` + ModelDueInNs(now_ns), whatever the
+  ///   pose (a step before then could not go out either), then kModelPeriodEnd at the newest
+  ///   pose.
+  /// - kWait when X_WT is the last step's pose, or when the last step was in free space and no
+  ///   tool point has moved as far since (`tool_motion_m`, the pipeline's ToolMotionBound from
+  ///   the last step's pose to X_WT, below that step's StepTimings::free_space_clearance_m: the
+  ///   same empty model); kPoseMoved otherwise (an extrapolated pose in contact, or out of the
+  ///   last step's free space).
+  StepCause WhyStep(const RigidTransform& X_WT, bool scene_moves, double tool_motion_m,
+                    std::int64_t now_ns) const noexcept;
   /// Time (ns) until a model held by the model period may go out: 0 when none is held or the
   /// period has passed.
   std::int64_t ModelDueInNs(std::int64_t now_ns) const noexcept {
@@ -86,8 +106,10 @@ class RemoteSession {
     return X_WT.translation == last_step_pose_.translation &&
            X_WT.rotation == last_step_pose_.rotation;
   }
-  /// Counts a loop pass that did not step (StepCanWait).
+  /// Counts a loop pass that did not step (WhyStep gave kWait).
   void CountSkippedStep() noexcept { ++steps_skipped_; }
+  /// Counts a step by its cause (WhyStep), reported in SummaryJson's "steps_by_cause".
+  void CountStep(StepCause cause) noexcept { ++steps_by_cause_[static_cast<int>(cause)]; }
   /// Records that a step ran at X_WT (the newest tool state is then used) and found
   /// `free_space_clearance_m` (StepTimings) of free space around the tool.
   void SteppedAt(const RigidTransform& X_WT, double free_space_clearance_m) noexcept {
@@ -104,7 +126,7 @@ class RemoteSession {
   /// when both sides have it. Returns true when sent.
   bool MaybeSendContactModel(wire::ContactModelMessage& out, const StepTimings& timings,
                              std::uint64_t step_count, std::int64_t now_ns);
-  /// While steps wait (StepCanWait): sends the last model again (new header, same
+  /// While steps wait (WhyStep gave kWait): sends the last model again (new header, same
   /// content) when the contact-model keep-alive has passed, echoing the newest tool state whose
   /// step gave a model the deadband held back (it answers that state too, to within the
   /// deadband). Returns true when sent.
@@ -169,6 +191,7 @@ class RemoteSession {
   std::int64_t held_echo_send_ns_ = 0, held_answer_recv_ns_ = 0;
   bool have_held_echo_ = false;
   std::uint64_t steps_skipped_ = 0, models_held_back_ = 0, keepalives_sent_ = 0;
+  std::uint64_t steps_by_cause_[kStepCauses] = {};
   std::uint64_t foreign_hellos_ = 0;
   /// Kink planes of models sent that did not fit their datagram (protocol.h KinkPlaneCapacity),
   /// and those sent.

@@ -23,15 +23,20 @@ class RemoteStepStatistics {
   explicit RemoteStepStatistics(bool keep_trace);
 
   /// One step that began `t_s` seconds after the node started at local time `begin_ns` and ended
-  /// at `end_ns` (ns), with its timings and the contacts of its model. noexcept, no allocation.
+  /// at `end_ns` (ns), with its timings, the contacts of its model, the sequence number of the
+  /// newest tool state it answered and why it ran (`cause`: RemoteSession's StepCause code,
+  /// remote_session.h). noexcept, no allocation.
   void Record(double t_s, std::int64_t begin_ns, std::int64_t end_ns, const StepTimings& timings,
-              int contacts) noexcept;
+              int contacts, std::uint64_t tool_state_seq, int cause) noexcept;
 
   std::uint64_t steps() const noexcept { return steps_; }
 
   /// Writes remote_steps.csv to `path`: `step, t_s, leaf_pairs, clusters, contacts,
-  /// broad_phase_culled, collision_us, texture_us, total_us, budget_exhausted`, one row per kept
-  /// step. Throws std::runtime_error naming the path when it cannot be written.
+  /// broad_phase_culled, collision_us, texture_us, total_us, budget_exhausted, tool_state_seq,
+  /// cause, free_space_clearance_mm`, one row per kept step (`cause`: 1 first step, 2 a tool
+  /// state arrived, 3 the scene moves, 4 a model held by the model period, 5 the extrapolated
+  /// pose left the last step's free space; StepCause in remote_session.h). Throws
+  /// std::runtime_error naming the path when it cannot be written.
   void WriteTrace(const std::string& path) const;
 
   /// Adds steps, rate_hz, step_p50/p99/max_us, steps_in_contact, step_in_contact_p50/p99_us,
@@ -43,6 +48,8 @@ class RemoteStepStatistics {
     double t_s;
     StepTimings timings;
     int contacts;
+    std::uint64_t tool_state_seq;
+    int cause;
   };
   std::uint64_t steps_ = 0;
   std::uint64_t steps_in_contact_ = 0;

@@ -81,8 +81,9 @@ struct RemoteNodeConfig {
   std::function<void(double elapsed_s)> animate;
   /// Where to write one CSV row per remote step once the node stops ("" = don't): `step, t_s,
   /// leaf_pairs, clusters, contacts, broad_phase_culled, collision_us, texture_us, total_us,
-  /// budget_exhausted` (the split of seed Fig. 77). The first 2^20 steps are kept, in memory
-  /// reserved at start, so the step loop never writes a file.
+  /// budget_exhausted, tool_state_seq, cause, free_space_clearance_mm` (the split of seed
+  /// Fig. 77; the newest tool state answered, why the node stepped, the free space it found). The
+  /// first 2^20 steps are kept, in memory reserved at start, so the step loop never writes a file.
   std::string step_trace_path;
 };
 
