@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 
 namespace ht {
 namespace {
@@ -199,6 +200,40 @@ TEST(ContactModel, KinkCurvatureAndStiffnessMatchFiniteDifferences) {
       EXPECT_NEAR(dt[i], e0.K(3 + i, j), 1e-3 * (1 + std::abs(e0.K(3 + i, j)))) << i << " " << j;
     }
   }
+}
+
+// Issue 33's attribution rests on the loop being conservative within one model: the wrench is
+// the negative gradient of the potential (two routes: the potential's central differences and the
+// wrench), unsaturated, with one contact held at the force bound, and inside a kink blend.
+TEST(ContactModel, TheWrenchIsTheNegativeGradientOfThePotential) {
+  const auto check = [](const ContactModel& m, const RigidTransform& X0, double bound,
+                        const char* what) {
+    const ContactModelEvaluation e0 = EvaluateContactModel(m, X0, 1.0, bound);
+    ASSERT_GT(e0.potential_energy_j, 0.0) << what;
+    const double h = 1e-8;
+    for (int j = 0; j < 6; ++j) {
+      Twist d;
+      (j < 3 ? d.linear[j] : d.angular[j - 3]) = h;
+      const double up = EvaluateContactModel(m, Displace(X0, d), 1.0, bound).potential_energy_j;
+      const double down = EvaluateContactModel(m, Displace(X0, {-d.linear, -d.angular}), 1.0, bound)
+                              .potential_energy_j;
+      const double dU = (up - down) / (2 * h);
+      const double F = j < 3 ? e0.F_T_W.force[j] : e0.F_T_W.torque[j - 3];
+      EXPECT_NEAR(-dU, F, 1e-5 * (1 + std::abs(F))) << what << " " << j;
+    }
+  };
+  const ContactModel two = TwoContactModel();
+  check(two, two.X_WT0, std::numeric_limits<double>::infinity(), "unsaturated");
+  // 5000 N/m · 2e-4 m · |(0.3, −0.1, −1)| ≈ 1.05 N: a 0.6 N bound holds the first contact only.
+  const ContactModelEvaluation held = EvaluateContactModel(two, two.X_WT0, 1.0, 0.6);
+  EXPECT_EQ(held.saturated_contacts, 1);
+  check(two, two.X_WT0, 0.6, "one contact saturated");
+  const ContactModel face = RestingFace();
+  check(face, Displace(face.X_WT0, Tilt(kThetaV + 0.25 * kKinkBlendM / (2 * kR))),
+        std::numeric_limits<double>::infinity(), "inside the kink blend");
+  // Half the stiffness, half the potential (the blend's weights scale U linearly).
+  EXPECT_NEAR(EvaluateContactModel(two, two.X_WT0, 0.5).potential_energy_j,
+              0.5 * EvaluateContactModel(two, two.X_WT0).potential_energy_j, 1e-18);
 }
 
 }  // namespace

@@ -16,6 +16,7 @@
 #include "accuracy_test_meshes.h"
 #include "haptic_core/model_build/haptic_model_build.h"
 #include "haptic_core/model_build/mesh_decimation.h"
+#include "haptic_core/model_build/surface_error.h"
 
 namespace ht {
 namespace {
@@ -308,6 +309,65 @@ TEST(HapticModelBuild, BadInputNamesTheModel) {
   HapticModelBuildParams p = SmallParams();
   p.coarse_triangles = 2;
   EXPECT_THROW(BuildHapticModel("wing", UvSphere(0.05, 10, 20), p), std::invalid_argument);
+}
+
+// MeasureSurfaceError (issue 32), a closed form: a 1 cm square model at z = 0 (corner normals +z)
+// under a full-resolution square at z = +50 µm. Untextured, every full-resolution point lies
+// 50 µm outside the model; with a texture of constant h = 50 µm the model holds the surface
+// exactly; a full-resolution square 50 µm below lies inside (distance 50 µm, none outside).
+TEST(SurfaceError, AFlatSquareUnderAnOffsetSurfaceGivesTheOffset) {
+  const double side = 0.01, off = 50e-6;
+  HapticModel m;
+  m.name = "square";
+  m.vertices_O = {{0, 0, 0}, {side, 0, 0}, {side, side, 0}, {0, side, 0}};
+  m.triangles = {{0, 1, 2}, {0, 2, 3}};
+  m.corner_normals_O.assign(6, glm::dvec3(0, 0, 1));
+  m.corner_uvs = {{0, 0}, {1, 0}, {1, 1}, {0, 0}, {1, 1}, {0, 1}};
+  m.textured = {0, 0};
+  m.texel_size_m = {side / 16, side / 16};
+  m.texture = HeightField(16, 16, std::vector<float>(256, static_cast<float>(off)), false, false);
+  const auto square_at = [&](double z) {
+    TriangleMesh t;
+    t.vertices = {{0, 0, z}, {side, 0, z}, {side, side, z}, {0, side, z}};
+    t.triangles = {{0, 1, 2}, {0, 2, 3}};
+    return t;
+  };
+  SurfaceErrorParams params;
+  params.samples = 500;
+  const SurfaceErrorReport untextured = MeasureSurfaceError(m, square_at(off), params);
+  EXPECT_EQ(untextured.samples, 500);
+  EXPECT_NEAR(untextured.p50_m, off, 1e-9);
+  EXPECT_NEAR(untextured.max_m, off, 1e-9);
+  EXPECT_NEAR(untextured.outside_p99_m, off, 1e-9);
+  EXPECT_DOUBLE_EQ(untextured.share_outside, 1.0);
+  const SurfaceErrorReport below = MeasureSurfaceError(m, square_at(-off), params);
+  EXPECT_NEAR(below.p99_m, off, 1e-9);
+  EXPECT_DOUBLE_EQ(below.outside_p99_m, 0.0);
+  EXPECT_DOUBLE_EQ(below.share_outside, 0.0);
+  m.textured = {1, 1};
+  const SurfaceErrorReport textured = MeasureSurfaceError(m, square_at(off), params);
+  EXPECT_LT(textured.max_m, 1e-9);
+  EXPECT_DOUBLE_EQ(textured.share_outside, 0.0);
+  // The same seed gives the same samples.
+  EXPECT_DOUBLE_EQ(MeasureSurfaceError(m, square_at(off), params).p50_m, textured.p50_m);
+  params.samples = 0;
+  EXPECT_THROW(MeasureSurfaceError(m, square_at(off), params), std::invalid_argument);
+  EXPECT_THROW(MeasureSurfaceError(m, TriangleMesh{}, {}), std::invalid_argument);
+}
+
+// A built model: the bumpy sphere's texture holds the bumps that its coarse mesh drops, so the
+// full-resolution surface lies far closer to the textured model than to its coarse mesh alone.
+TEST(SurfaceError, TheBakedTextureHoldsTheBumpsTheCoarseMeshDrops) {
+  const double r = 0.05, a = 0.5e-3;
+  const TriangleMesh full = BumpySphere(r, a, 100, 200);
+  const HapticModelBuild b = BuildHapticModel("bumpy", full, SmallParams());
+  HapticModel coarse = *b.model;
+  std::fill(coarse.textured.begin(), coarse.textured.end(), std::uint8_t{0});
+  const SurfaceErrorReport with = MeasureSurfaceError(*b.model, full);
+  const SurfaceErrorReport without = MeasureSurfaceError(coarse, full);
+  EXPECT_GT(without.p95_m, 0.5 * a);
+  EXPECT_LT(with.p95_m, 0.2 * a);
+  EXPECT_LT(with.share_outside, 0.5 * without.share_outside);
 }
 
 }  // namespace

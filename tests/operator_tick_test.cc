@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 
 #include "allocation_counter.h"  // the tick / step must make no allocation
 #include "haptic_core/demo/demo_scenes.h"
@@ -239,6 +240,46 @@ TEST(OperatorTick, ATickNeverAllocates) {
     tick.Step(k % 97 == 0 ? fault : in);
   }
   EXPECT_EQ(Allocations() - before, 0);
+}
+
+// Issue 33's attribution: the energy a model switch puts into the loop is the contact potential
+// the new model has at the tool's pose less the old one's there (two routes: the counters and
+// EvaluateContactModel at the pose the tool had before the switching tick). The same model again
+// creates nothing; a shallower one takes energy out.
+TEST(OperatorTick, AModelSwitchCreatesTheChangeInContactPotentialAtTheToolsPose) {
+  OperatorTickConfig c = Config();
+  c.model_blend_ticks = 1;  // the whole switch on one tick
+  OperatorTick tick(c, RigidTransform{}, ToolState{});
+  OperatorTickInput in = Pressing(1000000);
+  for (int k = 0; k < 300; ++k) tick.Step(in);  // the tool at −10 mm: 12 mm deep in the wall
+  const double max_force = std::numeric_limits<double>::infinity();
+  ArrivedModel wall = Wall(in.now_ns);
+  const RigidTransform X_before = tick.tool().X_WT;
+  const double U_wall =
+      EvaluateContactModel(wall.model, X_before, 1.0, max_force).potential_energy_j;
+  ASSERT_GT(U_wall, 0.0);
+  in.arrived = &wall;
+  tick.Step(in);
+  EXPECT_NEAR(tick.counters().switch_energy_created_j, U_wall, 1e-12 * U_wall);
+  EXPECT_EQ(tick.counters().switch_ticks_creating, 1);
+  in.arrived = nullptr;
+  for (int k = 0; k < 50; ++k) tick.Step(in);
+  // The same model again: no change in potential wherever the tool is.
+  in.arrived = &wall;
+  tick.Step(in);
+  EXPECT_NEAR(tick.counters().switch_energy_created_j, U_wall, 1e-12 * U_wall);
+  EXPECT_NEAR(tick.counters().switch_energy_absorbed_j, 0.0, 1e-15);
+  // A shallower wall at the same tool pose: its potential less the wall's, taken out.
+  ArrivedModel shallow = wall;
+  shallow.model.contacts[0].depth_m = 1e-3;
+  const RigidTransform X_now = tick.tool().X_WT;
+  const double dU = EvaluateContactModel(shallow.model, X_now, 1.0, max_force).potential_energy_j -
+                    EvaluateContactModel(wall.model, X_now, 1.0, max_force).potential_energy_j;
+  ASSERT_LT(dU, 0.0);
+  in.arrived = &shallow;
+  tick.Step(in);
+  EXPECT_NEAR(tick.counters().switch_energy_absorbed_j, dU, 1e-9 * std::abs(dU));
+  EXPECT_EQ(tick.counters().switch_ticks, 3);
 }
 
 }  // namespace

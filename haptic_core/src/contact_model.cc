@@ -101,11 +101,14 @@ ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const Rig
     // and 1 − β of one contact) add up to the bound at most.
     const double force_per_m = c.stiffness_n_per_m * glm::length(J_active.d_translation_W);
     if (force_per_m * depth > max_contact_force_n) {
-      out.F_T_W += PenaltyWrench(max_contact_force_n / force_per_m, J_active, k);
+      const double held = max_contact_force_n / force_per_m;
+      out.F_T_W += PenaltyWrench(held, J_active, k);
+      out.potential_energy_j += k * (held * depth - 0.5 * held * held);
       ++out.saturated_contacts;
       continue;
     }
     out.F_T_W += PenaltyWrench(depth, J_active, k);
+    out.potential_energy_j += 0.5 * k * depth * depth;
     Eigen::Matrix<double, 6, 1> J;
     J << J_active.d_translation_W.x, J_active.d_translation_W.y, J_active.d_translation_W.z,
         J_active.d_rotation_W.x, J_active.d_rotation_W.y, J_active.d_rotation_W.z;

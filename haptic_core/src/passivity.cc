@@ -53,6 +53,7 @@ Wrench PassivityController::Guard(const Wrench& F, const Twist& V, double h) noe
   Wrench out{s * F.force, s * F.torque};
   ++scaled_ticks_;
   force_scaled_away_ns_ += (1.0 - s) * glm::length(F.force) * h;
+  scaled_away_j_ += (1.0 - s) * p * h;
   return out;
 }
 
@@ -69,7 +70,7 @@ void PassivityController::Commit(const Wrench& F, const Twist& V, double h) noex
 
 void PassivityController::Reset() noexcept {
   energy_j_ = energy_in_j_ = energy_out_j_ = dissipated_j_ = max_alpha_ = 0.0;
-  force_scaled_away_ns_ = 0.0;
+  force_scaled_away_ns_ = scaled_away_j_ = 0.0;
   active_ticks_ = scaled_ticks_ = 0;
 }
 

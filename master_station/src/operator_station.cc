@@ -585,7 +585,27 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
                     {"active_ticks", passivity.active_ticks()},
                     {"max_damping_ns_per_m", passivity.max_alpha()},
                     {"scaled_ticks", passivity.scaled_ticks()},
-                    {"force_scaled_away_Ns", passivity.force_scaled_away_ns()}};
+                    {"force_scaled_away_Ns", passivity.force_scaled_away_ns()},
+                    {"scaled_away_J", passivity.scaled_away_j()}};
+  {
+    // Issue 33: where the loop's energy comes from. Within one contact model the loop is
+    // conservative; the switches (a new model, each blend step, a model dropped mid-blend)
+    // change the contact potential at the tool's pose: what they created is what the
+    // controller (dissipated_J + scaled_away_J) may have to remove.
+    const OperatorTickCounters& tc = tick.counters();
+    const double removed = passivity.dissipated_j() + passivity.scaled_away_j();
+    s["passivity"]["attribution"] = {
+        {"switch_energy_created_J", tc.switch_energy_created_j},
+        {"switch_energy_absorbed_J", tc.switch_energy_absorbed_j},
+        {"switch_ticks", tc.switch_ticks},
+        {"switch_ticks_creating", tc.switch_ticks_creating},
+        {"switch_energy_created_by_model_age_J",
+         {{"below_50ms", tc.switch_energy_created_by_age_j[0]},
+          {"50_to_150ms", tc.switch_energy_created_by_age_j[1]},
+          {"above_150ms", tc.switch_energy_created_by_age_j[2]}}},
+        {"controller_removed_J", removed},
+        {"created_over_removed", removed > 0.0 ? tc.switch_energy_created_j / removed : 0.0}};
+  }
   s["safety"] = {{"nonfinite_ticks", sc.nonfinite},
                  {"fading_ticks", sc.fading},
                  {"braking_ticks", sc.braking},

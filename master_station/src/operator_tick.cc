@@ -45,6 +45,11 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
     ++counters_.workspace_jumps;
   }
 
+  // The contact potential before a model or blend change (issue 33's attribution): evaluated
+  // only on ticks that change it.
+  const bool potential_changes = in.arrived != nullptr || blend_tick_ < config_.model_blend_ticks;
+  const double U_before = potential_changes ? LoopPotential(tool_.X_WT) : 0.0;
+
   // Stage 1: the contact model in use. A model that arrives is taken even while the device read
   // fails (newest wins), unless it comes from before a workspace jump.
   if (in.arrived != nullptr) {
@@ -80,6 +85,7 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
     // the last force down (and back up once the device answers again).
     ++counters_.device_faults;
     out.X_WH = X_WH_last_;
+    AttributeSwitch(potential_changes, U_before, out.model_age_ms);
   } else {
     out.X_WH = X_WM_ * in.device.X_MH;
     X_WH_last_ = out.X_WH;
@@ -88,10 +94,12 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
     // Stage 2: coupling and the implicit step against the (blended) model.
     if (blend_tick_ < config_.model_blend_ticks) {
       ++blend_tick_;
+      AttributeSwitch(potential_changes, U_before, out.model_age_ms);
       out.step =
           simulator_.StepBlended(tool_, out.X_WH, V_WH_W, model_, previous_model_,
                                  static_cast<double>(blend_tick_) / config_.model_blend_ticks, h);
     } else {
+      AttributeSwitch(potential_changes, U_before, out.model_age_ms);
       out.step = simulator_.Step(tool_, out.X_WH, V_WH_W, model_, 1.0, h);
     }
     if (!out.step.ok) ++counters_.nonfinite;
@@ -120,6 +128,31 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
   const glm::dquat R_MW = glm::conjugate(X_WM_.rotation);
   out.F_H_M = {R_MW * F_device_W.force, R_MW * F_device_W.torque};
   return out;
+}
+
+double OperatorTick::LoopPotential(const RigidTransform& X_WT) const noexcept {
+  const double w = std::min(1.0, static_cast<double>(blend_tick_) / config_.model_blend_ticks);
+  const double max_force = simulator_.max_contact_force_n();
+  double U = EvaluateContactModel(model_, X_WT, w, max_force).potential_energy_j;
+  if (w < 1.0)
+    U += EvaluateContactModel(previous_model_, X_WT, 1.0 - w, max_force).potential_energy_j;
+  return U;
+}
+
+void OperatorTick::AttributeSwitch(bool potential_changes, double U_before,
+                                   double model_age_ms) noexcept {
+  if (!potential_changes) return;
+  const double dU = LoopPotential(tool_.X_WT) - U_before;
+  if (!std::isfinite(dU)) return;
+  ++counters_.switch_ticks;
+  if (dU > 0.0) {
+    ++counters_.switch_ticks_creating;
+    counters_.switch_energy_created_j += dU;
+    const int bin = model_age_ms < 50.0 ? 0 : (model_age_ms <= 150.0 ? 1 : 2);
+    counters_.switch_energy_created_by_age_j[bin] += dU;
+  } else {
+    counters_.switch_energy_absorbed_j += dU;
+  }
 }
 
 }  // namespace ht

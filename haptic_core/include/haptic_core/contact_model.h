@@ -69,6 +69,12 @@ struct ContactModelEvaluation {
   int active_contacts = 0;
   /// Largest δ_i(q) (m), or 0 with no contact.
   double max_depth_m = 0.0;
+  /// Potential energy U(q) (J) whose negative gradient Φ is along each active contact's J_i:
+  /// Σ ½ k_i δ_i² (k_i times the stiffness scale), and for a saturated contact (held at δ_s)
+  /// k_i (δ_s δ_i − ½ δ_s²), which grows linearly with δ as its bounded force does. Within one
+  /// model the local loop is conservative in U; a new model (or a blend step) at the same pose
+  /// changes U, which is the energy a model switch puts into the loop (issue 33's attribution).
+  double potential_energy_j = 0.0;
   /// Active contacts whose force was saturated at the bound (see EvaluateContactModel).
   int saturated_contacts = 0;
 };

@@ -58,13 +58,16 @@ class PassivityController {
   /// force taken away that way, Σ (1 − s)·|f|·h (N·s): what passivity cost in force.
   std::int64_t scaled_ticks() const noexcept { return scaled_ticks_; }
   double force_scaled_away_ns() const noexcept { return force_scaled_away_ns_; }
+  /// The energy the scaling kept from the hand, Σ (1 − s)·F·V·h (J): with dissipated_j(), what
+  /// the controller removed from the port.
+  double scaled_away_j() const noexcept { return scaled_away_j_; }
   void Reset() noexcept;
 
  private:
   double min_speed_, max_damping_, angular_weight_m_;
   double energy_j_ = 0.0, energy_in_j_ = 0.0, energy_out_j_ = 0.0, dissipated_j_ = 0.0;
   double max_alpha_ = 0.0;
-  double force_scaled_away_ns_ = 0.0;
+  double force_scaled_away_ns_ = 0.0, scaled_away_j_ = 0.0;
   std::int64_t active_ticks_ = 0, scaled_ticks_ = 0;
 };
 

@@ -394,6 +394,20 @@ HapticModelBuild ReadBuild(ByteReader& r, const std::string& key) {
 
 }  // namespace
 
+namespace {
+
+// MeasureSurfaceError at its defaults, or samples = 0 when it cannot measure (the model is valid,
+// so only a full-resolution mesh without area gets here).
+SurfaceErrorReport MeasuredSurface(const HapticModel& model, const TriangleMesh& full_O) {
+  try {
+    return MeasureSurfaceError(model, full_O);
+  } catch (const std::invalid_argument&) {
+    return {};
+  }
+}
+
+}  // namespace
+
 HapticModelBuild BuildHapticModel(const std::string& name, const TriangleMesh& full_O,
                                   const HapticModelBuildParams& params) {
   const auto start = std::chrono::steady_clock::now();
@@ -471,6 +485,7 @@ HapticModelBuild BuildHapticModel(const std::string& name, const TriangleMesh& f
   SetMassProperties(coarse.mesh, coarse.output_boundary_edges == 0, params.density_kg_per_m3,
                     *model);
   model->Validate();
+  rep.surface = MeasuredSurface(*model, full_O);
   rep.total_s = Seconds(start);
   build.model = std::move(model);
   return build;
@@ -585,6 +600,7 @@ HapticModelBuild BuildHapticModelCached(const std::string& name, const TriangleM
   if (auto hit = cache.Load(key, &why)) {
     hit->report.from_cache = true;
     hit->report.cache_load_s = Seconds(start);
+    hit->report.surface = MeasuredSurface(*hit->model, full_O);
     if (hit->model->name != name) {
       // Same geometry and parameters under another name: share the build, keep this name.
       auto renamed = std::make_shared<HapticModel>(*hit->model);

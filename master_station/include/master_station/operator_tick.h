@@ -92,6 +92,19 @@ struct OperatorTickCounters {
   std::int64_t models_from_before_jump = 0;
   std::int64_t models_used = 0;
   std::int64_t saturated_contact_ticks = 0;  ///< ticks with a contact force held at the bound
+  /// Where the local loop's energy comes from (issue 33's attribution). Within one contact model
+  /// the loop is conservative (ContactModelEvaluation::potential_energy_j); a new model, each
+  /// blend step towards it, and a model dropped mid-blend change the contact potential U at the
+  /// tool's pose q without moving it: ΔU = U_after(q) − U_before(q) on each such tick (the
+  /// blended pair's U, weights as the step uses them). Positive ΔU is energy a switch put into
+  /// the loop, which the passivity stage may later have to remove; negative, energy it took out.
+  double switch_energy_created_j = 0.0;
+  double switch_energy_absorbed_j = 0.0;   ///< Σ of the negative ΔU (≤ 0)
+  std::int64_t switch_ticks = 0;           ///< ticks with a model or blend change
+  std::int64_t switch_ticks_creating = 0;  ///< of those, ticks with ΔU > 0
+  /// The created energy by the age of the model taken (ms at its arrival, the tick's
+  /// model_age_ms): below 50 ms, 50–150 ms, above 150 ms.
+  double switch_energy_created_by_age_j[3] = {0.0, 0.0, 0.0};
 };
 
 /// The operator's tick. Construction may allocate; Step never allocates, locks, blocks or throws.
@@ -133,6 +146,12 @@ class OperatorTick {
   glm::dvec3 jumped_from_W_{0.0};
   bool after_jump_ = false;
   OperatorTickCounters counters_;
+  /// U of the blended pair at X_WT: model_ at weight blend_tick_/ticks, previous_model_ at the
+  /// rest (ContactModelEvaluation::potential_energy_j; J).
+  double LoopPotential(const RigidTransform& X_WT) const noexcept;
+  /// Adds the tick's ΔU (LoopPotential now less `U_before`, evaluated before stage 1 when
+  /// `potential_changes`) to the switch counters; model_age_ms bins the created energy.
+  void AttributeSwitch(bool potential_changes, double U_before, double model_age_ms) noexcept;
 };
 
 }  // namespace ht
