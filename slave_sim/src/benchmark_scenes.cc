@@ -121,6 +121,15 @@ double TouchHeight(const MeshContactBaseline& meshes, const BenchmarkScene& scen
 
 }  // namespace
 
+BenchmarkModelSettings ProductModelSettings(const std::string& name) {
+  BenchmarkModelSettings s;
+  if (name == "fig77") {
+    s.texture_size = 2048;
+    s.coarse_scale = 2.0;
+  }
+  return s;
+}
+
 const std::vector<std::string>& BenchmarkSceneNames() {
   static const std::vector<std::string> names = {"fig75", "fig76", "fig77", "hammer_torus"};
   return names;

@@ -23,6 +23,7 @@
 #include "haptic_core/accuracy/mesh_contact_baseline.h"
 #include "haptic_core/gpu_penetration_depth.h"
 #include "haptic_core/haptic_scene.h"
+#include "haptic_core/model_build/surface_error.h"
 #include "haptic_core/remote_step.h"
 #include "slave_sim/benchmark_scenes.h"
 
@@ -90,6 +91,23 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     coarse(0.5, "coarse0.5x");
     coarse(2.0, "coarse2x");
     coarse(4.0, "coarse4x");
+    // More coarse triangles share the atlas among more charts (issue 32, fifth stop: the
+    // objects' surface error grew with the count at 1024²): at 2048², 4x the seed's count has
+    // the seed's texels per triangle at 1024², and 2x twice as many.
+    for (const auto& [k, name] :
+         {std::pair{2.0, "coarse2x_texture2048"}, std::pair{4.0, "coarse4x_texture2048"}}) {
+      FrontierSetting x = base;
+      x.name = name;
+      x.coarse_scale = k;
+      x.texture_size = 2048;
+      s.push_back(x);
+    }
+  }
+  if (!quick) {
+    FrontierSetting product = base;  // what slave_sim --scene builds (ProductModelSettings)
+    product.name = "product";
+    product.product_models = true;
+    s.push_back(product);
   }
   FrontierSetting ref = base;
   ref.name = "reference";
@@ -317,6 +335,9 @@ struct SettingRun {
   std::string note;
   RigidTransform X_TFt;
   std::int64_t tool_coarse_triangles = 0, object_coarse_triangles = 0;
+  /// How far the full-resolution surfaces lie from the models this setting built
+  /// (MeasureSurfaceError; tool's mesh in T).
+  SurfaceErrorReport tool_surface, object_surface;
   std::vector<PoseRecord> poses;
   std::vector<ContactRecord> contacts;
   /// The contact models' wrenches at PredictionPoses() (empty for the baselines).
@@ -842,6 +863,9 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
     say("%s: building the models (cache: %s)", name.c_str(),
         options.cache_dir.empty() ? "none" : options.cache_dir.c_str());
     std::map<std::tuple<int, double, bool>, std::unique_ptr<BenchmarkScene>> built;
+    std::map<std::tuple<int, double, bool>,
+             std::unique_ptr<std::pair<SurfaceErrorReport, SurfaceErrorReport>>>
+        surface_errors;
     const auto scene_for = [&](const BenchmarkModelSettings& b) -> const BenchmarkScene& {
       auto& slot = built[{b.texture_size, b.coarse_scale, b.textured}];
       if (!slot) {
@@ -903,14 +927,34 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
       SettingRun run;
       run.setting = st;
       ++units_done;
-      if (st.coarse_scale != 1.0 && name == "fig76") {
+      if (st.product_models) {
+        const BenchmarkModelSettings product = ProductModelSettings(name);
+        run.setting.texture_size = product.texture_size;
+        run.setting.coarse_scale = product.coarse_scale;
+      }
+      const FrontierSetting& st_run = run.setting;
+      if (st_run.coarse_scale != 1.0 && name == "fig76") {
         run.skipped = "the striped blocks are boxes of 16 coarse triangles at every scale";
       } else {
         BenchmarkModelSettings b;
-        b.texture_size = st.texture_size;
-        b.coarse_scale = st.coarse_scale;
+        b.texture_size = st_run.texture_size;
+        b.coarse_scale = st_run.coarse_scale;
         b.textured = st.method != FrontierMethod::kCoarseOnly;
         const BenchmarkScene& scene = scene_for(b);
+        {
+          // The models' surface error (issue 32: a representation error the bake's own
+          // validation cannot see), per built scene: the same models give the same figures.
+          auto& surf = surface_errors[{b.texture_size, b.coarse_scale, b.textured}];
+          if (!surf) {
+            TriangleMesh tool_T = *scene.tool_mesh_Ft;
+            for (glm::dvec3& v : tool_T.vertices) v = scene.X_TFt * v;
+            surf = std::make_unique<std::pair<SurfaceErrorReport, SurfaceErrorReport>>(
+                MeasureSurfaceError(*scene.haptic.tool, tool_T),
+                MeasureSurfaceError(*scene.haptic.touchables.at(0).model, *scene.object_mesh_Fe));
+          }
+          run.tool_surface = surf->first;
+          run.object_surface = surf->second;
+        }
         const auto t0 = Clock::now();
         RunSetting(scene, poses, fcl, run);
         for (ContactRecord& c : run.contacts) {
@@ -1063,7 +1107,10 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
          "delta_err_p50_um,delta_err_p95_um,windows,contacts_missed,contacts_invented,"
          "poses_missed,poses_invented,pipeline_force_rel_rms,pipeline_torque_rel_rms,"
          "volume_dir_p50_deg,volume_dir_p95_deg,volume_arm_rel_p50,poses_truth_without_force,"
-         "poses_force_without_truth,prediction_force_rel_rms,prediction_torque_rel_rms,pareto,"
+         "poses_force_without_truth,prediction_force_rel_rms,prediction_torque_rel_rms,"
+         "tool_surface_p99_um,object_surface_p99_um,tool_surface_outside_p99_um,"
+         "object_surface_outside_p99_um,tool_surface_share_outside,"
+         "object_surface_share_outside,pareto,"
          "skipped\n";
     for (const SceneReport& rep : reports) {
       for (const SettingRun& r : rep.runs) {
@@ -1117,12 +1164,18 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
                                        std::to_string(m.poses_force_without_truth),
                                        Fmt(m.prediction_force_rel_rms),
                                        Fmt(m.prediction_torque_rel_rms),
+                                       Fmt(r.tool_surface.p99_m * 1e6),
+                                       Fmt(r.object_surface.p99_m * 1e6),
+                                       Fmt(r.tool_surface.outside_p99_m * 1e6),
+                                       Fmt(r.object_surface.outside_p99_m * 1e6),
+                                       Fmt(r.tool_surface.share_outside),
+                                       Fmt(r.object_surface.share_outside),
                                        std::string(m.pareto ? "1" : "0"),
                                        std::string()}) {
             cells.push_back(c);
           }
         } else {
-          cells.resize(cells.size() + 31);
+          cells.resize(cells.size() + 37);
           cells.push_back(clean(r.skipped));
         }
         for (std::size_t i = 0; i < cells.size(); ++i) o << (i ? "," : "") << cells[i];
@@ -1273,6 +1326,19 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
     for (const SettingRun& r : rep.runs) {  // e.g. a GPU that failed mid-run
       if (!r.note.empty()) s << "Note on " << r.setting.name << ": " << r.note << ".\n";
     }
+    s << "Surface error of the built models (MeasureSurfaceError: full-resolution points against "
+         "the textured coarse model, tool / object; p99 distance, p99 and share of points lying "
+         "outside the model by more than 25 µm, where the method reads the depth low):";
+    for (const SettingRun& r : rep.runs) {
+      if (!r.skipped.empty() || r.tool_surface.samples == 0) continue;
+      s << " " << r.setting.name << " " << Fmt(r.tool_surface.p99_m * 1e6, 3) << " / "
+        << Fmt(r.object_surface.p99_m * 1e6, 3) << " µm, outside "
+        << Fmt(r.tool_surface.outside_p99_m * 1e6, 3) << " / "
+        << Fmt(r.object_surface.outside_p99_m * 1e6, 3) << " µm, "
+        << Fmt(100 * r.tool_surface.share_outside, 3) << " / "
+        << Fmt(100 * r.object_surface.share_outside, 3) << " %;";
+    }
+    s << "\n\n";
     if (fastest) {
       s << "Fastest setting with pipeline force error ≤ 5 %: **" << fastest->setting.name << "**, "
         << Fmt(fastest->m.total_p50 / 1e3, 3) << " ms per step (p50), "

@@ -344,8 +344,9 @@ int main(int argc, char** argv) {
       if (!quiet)
         std::printf("[slave] building scene %s (model cache: %s)\n", scene.c_str(),
                     scene_cache_dir.empty() ? "none" : scene_cache_dir.c_str());
+      const std::string& name = benchmark_scenes.at(scene);
       const ht::BenchmarkScene bench = ht::MakeBenchmarkScene(
-          benchmark_scenes.at(scene), {}, ht::HapticModelCache(scene_cache_dir));
+          name, ht::ProductModelSettings(name), ht::HapticModelCache(scene_cache_dir));
       builtin_scene = bench.haptic;
       builtin_scene.name = scene;
       // The full-resolution meshes in their own frames, with the scene graph, for display.

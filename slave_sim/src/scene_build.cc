@@ -396,13 +396,19 @@ BuiltScene BuildScene(const SceneDescription& description, const HapticModelCach
     }
     const double size = glm::length(b - a);
     const double err = obj.report.bake.max_bake_error_m;
-    if (size > 0.0 && err > kLargeBakeErrorFraction * size) {
-      char what[320];
+    const SurfaceErrorReport& surf = obj.report.surface;
+    const bool bake_misses = size > 0.0 && err > kLargeBakeErrorFraction * size;
+    const bool surface_outside = surf.share_outside > kLargeSurfaceOutsideShare;
+    if (bake_misses || surface_outside) {
+      char what[480];
       std::snprintf(what, sizeof what,
-                    "node '%s': the texture bake's largest error, %.3g m, is %.0f %% of the "
-                    "object's size (%.3g m): its coarse mesh misses the surface there (more "
+                    "node '%s': the texture bake's largest error is %.3g m (%.0f %% of the "
+                    "object's size, %.3g m) and %.1f %% of its full-resolution surface lies more "
+                    "than 25 um outside the model (p99 distance %.3g m): its coarse mesh misses "
+                    "the surface there, and contacts there are felt late or not at all (more "
                     "\"coarse_triangles\" or a larger \"texture_size\" in a scene description)",
-                    obj.label.c_str(), err, 100.0 * err / size, size);
+                    obj.label.c_str(), err, size > 0.0 ? 100.0 * err / size : 0.0, size,
+                    100.0 * surf.share_outside, surf.p99_m);
       scene.notes.push_back(what);
       scene.warnings.push_back(what);
       warned.push_back(obj.model.get());
@@ -479,6 +485,15 @@ nlohmann::json InspectJson(const BuiltScene& scene) {
       o["bake_rms_error_m"] = r.bake.rms_bake_error_m;
       o["bake_max_abs_height_m"] = r.bake.max_abs_height_m;
       o["outward_reach_m"] = r.outward_reach_m;
+      // The other direction (issue 32): full-resolution points against the textured coarse
+      // model (MeasureSurfaceError), which the bake's validation cannot see.
+      o["surface_error"] = {{"samples", r.surface.samples},
+                            {"p50_m", r.surface.p50_m},
+                            {"p95_m", r.surface.p95_m},
+                            {"p99_m", r.surface.p99_m},
+                            {"max_m", r.surface.max_m},
+                            {"outside_p99_m", r.surface.outside_p99_m},
+                            {"share_outside_25um", r.surface.share_outside}};
       o["bake_misses"] = r.bake.misses;
       o["bake_texels"] = r.bake.texels_baked;
       o["bake_clamped"] = r.bake.clamped;

@@ -55,6 +55,13 @@ struct BenchmarkScene {
   std::string note;
 };
 
+/// What `slave_sim --scene` builds the benchmark scene `name` with: the seed's Table 6 coarse
+/// counts at 1024² (the default BenchmarkModelSettings), except fig77 (the file on the CAD
+/// part): twice the seed's coarse triangles at 2048², which issue 32's fifth stop measured more
+/// accurate on every error column of the frontier and faster (docs/frontier/issue32/fifth_stop).
+/// The frontier's "product" setting; its "default" keeps the seed's counts for the comparison.
+BenchmarkModelSettings ProductModelSettings(const std::string& name);
+
 /// The scene names, in the order above.
 const std::vector<std::string>& BenchmarkSceneNames();
 

@@ -31,7 +31,10 @@ struct FrontierSetting {
   FrontierMethod method = FrontierMethod::kTexture;  ///< What computes the wrench.
   int grid = 50;                                     ///< N of the penetration-depth grid.
   int texture_size = 1024;                           ///< Haptic texture side (texels).
-  double coarse_scale = 1.0;    ///< Coarse triangle target × the seed's count.
+  double coarse_scale = 1.0;  ///< Coarse triangle target × the seed's count.
+  /// True: the texture size and coarse scale are the product's for each scene
+  /// (ProductModelSettings), not the two fields above ("product").
+  bool product_models = false;
   std::string backend = "cpu";  ///< "cpu" or "gpu".
   int depth_bits = 32;          ///< GPU depth precision (16 or 32); the CPU works in float.
   /// CPU texture stage: the fast path (the product's) or the reference it replaced (issue 15),

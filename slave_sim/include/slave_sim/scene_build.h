@@ -137,6 +137,9 @@ inline constexpr double kLargestDeskSceneM = 2.0;
 /// A node whose bake's largest error exceeds this fraction of its size (its coarse mesh's
 /// bounding-box diagonal) gets a warning.
 inline constexpr double kLargeBakeErrorFraction = 0.05;
+/// A model whose full-resolution surface lies more than 25 µm outside it (MeasureSurfaceError,
+/// HapticModelBuildReport::surface) on a larger share of its area than this is warned about too.
+inline constexpr double kLargeSurfaceOutsideShare = 0.05;
 
 /// Progress callback: called before each model is built or loaded from the cache, with the
 /// object's label (SceneNode::label), its position among the models to build (from 1) and their
