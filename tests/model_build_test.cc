@@ -350,6 +350,14 @@ TEST(SurfaceError, AFlatSquareUnderAnOffsetSurfaceGivesTheOffset) {
   EXPECT_DOUBLE_EQ(textured.share_outside, 0.0);
   // The same seed gives the same samples.
   EXPECT_DOUBLE_EQ(MeasureSurfaceError(m, square_at(off), params).p50_m, textured.p50_m);
+  // A region: only the triangles near its centre are sampled; one that holds none throws.
+  params.region_center_O = {0.25 * side, 0.75 * side, off};
+  params.region_radius_m = 0.6 * side;
+  m.textured = {0, 0};
+  EXPECT_NEAR(MeasureSurfaceError(m, square_at(off), params).p50_m, off, 1e-9);
+  params.region_center_O = {5 * side, 0, 0};
+  EXPECT_THROW(MeasureSurfaceError(m, square_at(off), params), std::invalid_argument);
+  params.region_radius_m = 0.0;
   params.samples = 0;
   EXPECT_THROW(MeasureSurfaceError(m, square_at(off), params), std::invalid_argument);
   EXPECT_THROW(MeasureSurfaceError(m, TriangleMesh{}, {}), std::invalid_argument);

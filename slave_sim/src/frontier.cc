@@ -338,12 +338,21 @@ struct SettingRun {
   /// How far the full-resolution surfaces lie from the models this setting built
   /// (MeasureSurfaceError; tool's mesh in T).
   SurfaceErrorReport tool_surface, object_surface;
+  /// At the truth patches (with force) of the poses where this setting gives no force: the
+  /// models' surface error within kLocalSurfaceRadiusM of each patch's centre, the p99 distance
+  /// and the p99 outside (m), tool side and object side, one entry per patch.
+  std::vector<double> local_tool_p99_m, local_object_p99_m, local_tool_outside_m,
+      local_object_outside_m;
   std::vector<PoseRecord> poses;
   std::vector<ContactRecord> contacts;
   /// The contact models' wrenches at PredictionPoses() (empty for the baselines).
   std::vector<Wrench> predicted;
   Metrics m;
 };
+
+// Radius (m) of the neighbourhood of a truth patch whose surface error the summary reports for
+// the poses a setting gives no force at.
+constexpr double kLocalSurfaceRadiusM = 2e-3;
 
 // Key of a ground-truth window: the pose, the tool's frame, and the window's geometry, bit for
 // bit (windows of settings that differ only in grid or backend are one job).
@@ -1049,6 +1058,42 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
     for (SettingRun& run : rep.runs) {
       if (!run.skipped.empty()) continue;
       ComputeMetrics(run, jobs, reference_gt, touching, pipeline);
+      if (run.setting.method != FrontierMethod::kCoarseOnly) {
+        // Where the truth pushes and the setting does not: do its models hold the surface
+        // there? The surface error near each such patch (issue 32, fifth stop).
+        const auto found = built.find(
+            {run.setting.texture_size, run.setting.coarse_scale, true});
+        if (found != built.end() && found->second) {
+          const BenchmarkScene& sc = *found->second;
+          TriangleMesh tool_T = *sc.tool_mesh_Ft;
+          for (glm::dvec3& v : tool_T.vertices) v = sc.X_TFt * v;
+          const RigidTransform X_OW = sc.haptic.touchables.at(0).X_WO.Inverse();
+          for (std::size_t k = 0; k < run.poses.size() && k < pipeline.size(); ++k) {
+            if (glm::length(run.poses[k].F.force) > 1e-9) continue;
+            const RigidTransform X_TW = (poses[k] * sc.X_TFt.Inverse()).Inverse();
+            for (const TruthPatch& patch : pipeline[k].patches) {
+              if (!(glm::length(patch.contact.F_T_W.force) > 1e-9)) continue;
+              SurfaceErrorParams local;
+              local.samples = 1024;
+              local.region_radius_m = kLocalSurfaceRadiusM;
+              try {
+                local.region_center_O = X_TW * patch.window.center_W;
+                const SurfaceErrorReport t = MeasureSurfaceError(*sc.haptic.tool, tool_T, local);
+                local.region_center_O = X_OW * patch.window.center_W;
+                const SurfaceErrorReport o =
+                    MeasureSurfaceError(*sc.haptic.touchables.at(0).model, *sc.object_mesh_Fe,
+                                        local);
+                run.local_tool_p99_m.push_back(t.p99_m);
+                run.local_object_p99_m.push_back(o.p99_m);
+                run.local_tool_outside_m.push_back(t.outside_p99_m);
+                run.local_object_outside_m.push_back(o.outside_p99_m);
+              } catch (const std::invalid_argument&) {
+                // No full-resolution surface within the radius on one side: not measured.
+              }
+            }
+          }
+        }
+      }
       if (run.predicted.size() == displaced_truth.size() && !run.predicted.empty()) {
         double fe = 0, fr = 0, te = 0, tr = 0;
         for (std::size_t i = 0; i < displaced_truth.size(); ++i) {
@@ -1339,6 +1384,21 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
         << Fmt(100 * r.object_surface.share_outside, 3) << " %;";
     }
     s << "\n\n";
+    for (const SettingRun& r : rep.runs) {
+      if (r.local_tool_p99_m.empty()) continue;
+      auto t = r.local_tool_p99_m, o = r.local_object_p99_m, to = r.local_tool_outside_m,
+           oo = r.local_object_outside_m;
+      s << "Near the truth patches of the poses where " << r.setting.name
+        << " gives no force (" << t.size() << " patches, within "
+        << Fmt(kLocalSurfaceRadiusM * 1e3, 3) << " mm of each centre): surface error p99, median "
+        << "over the patches / largest, tool " << Fmt(Percentile(t, 0.5) * 1e6, 3) << " / "
+        << Fmt(Percentile(t, 1.0) * 1e6, 3) << " µm, object " << Fmt(Percentile(o, 0.5) * 1e6, 3)
+        << " / " << Fmt(Percentile(o, 1.0) * 1e6, 3) << " µm; outside p99 tool "
+        << Fmt(Percentile(to, 0.5) * 1e6, 3) << " / " << Fmt(Percentile(to, 1.0) * 1e6, 3)
+        << " µm, object " << Fmt(Percentile(oo, 0.5) * 1e6, 3) << " / "
+        << Fmt(Percentile(oo, 1.0) * 1e6, 3) << " µm.\n";
+    }
+    s << "\n";
     if (fastest) {
       s << "Fastest setting with pipeline force error ≤ 5 %: **" << fastest->setting.name << "**, "
         << Fmt(fastest->m.total_p50 / 1e3, 3) << " ms per step (p50), "

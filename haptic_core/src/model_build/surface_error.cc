@@ -67,6 +67,12 @@ SurfaceErrorReport MeasureSurfaceError(const HapticModel& model, const TriangleM
   if (!(params.outside_threshold_m > 0.0) || !std::isfinite(params.outside_threshold_m)) {
     throw std::invalid_argument("MeasureSurfaceError: outside_threshold_m must be finite and > 0");
   }
+  if (!(params.region_radius_m >= 0.0) || !std::isfinite(params.region_radius_m) ||
+      !std::isfinite(params.region_center_O.x) || !std::isfinite(params.region_center_O.y) ||
+      !std::isfinite(params.region_center_O.z)) {
+    throw std::invalid_argument(
+        "MeasureSurfaceError: region_radius_m must be finite and >= 0, its centre finite");
+  }
   const std::size_t nf = model.triangles.size();
   if (nf == 0 || full_O.triangles.empty()) {
     throw std::invalid_argument("MeasureSurfaceError: model '" + model.name +
@@ -97,11 +103,16 @@ SurfaceErrorReport MeasureSurfaceError(const HapticModel& model, const TriangleM
     }
     const glm::dvec3 a = full_O.vertices[t[0]], b = full_O.vertices[t[1]],
                      c = full_O.vertices[t[2]];
-    total += 0.5 * glm::length(glm::cross(b - a, c - a));
+    const bool inside = params.region_radius_m <= 0.0 ||
+                        glm::length((a + b + c) / 3.0 - params.region_center_O) <=
+                            params.region_radius_m;
+    if (inside) total += 0.5 * glm::length(glm::cross(b - a, c - a));
     cumulative.push_back(total);
   }
   if (!(total > 0.0)) {
-    throw std::invalid_argument("MeasureSurfaceError: the full-resolution mesh has no area");
+    throw std::invalid_argument(
+        "MeasureSurfaceError: the full-resolution mesh has no area" +
+        std::string(params.region_radius_m > 0.0 ? " within the region" : ""));
   }
 
   std::mt19937_64 rng(params.seed);

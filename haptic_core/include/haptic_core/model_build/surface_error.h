@@ -22,6 +22,11 @@ struct SurfaceErrorParams {
   /// A sample whose full-resolution point lies outside the model by more than this (m) counts in
   /// SurfaceErrorReport::share_outside; > 0.
   double outside_threshold_m = 25e-6;
+  /// > 0: only full-resolution triangles whose centroid lies within this distance (m) of
+  /// region_center_O are sampled (a contact's neighbourhood); 0 = the whole surface. Finite, >= 0.
+  double region_radius_m = 0.0;
+  /// Centre of that region, frame O (m).
+  glm::dvec3 region_center_O{0.0};
 };
 
 /// Distances (m) from full-resolution surface points to the textured coarse model.
@@ -48,7 +53,8 @@ struct SurfaceErrorReport {
 /// stored. The distance is |p − r| for the triangle that gives the smallest one. Brute force over
 /// the coarse triangles: O(samples·#F), about 0.1–0.5 s for the seed models at 4096 samples.
 /// Throws std::invalid_argument for params out of range, an empty `full_O` or model, a triangle
-/// index out of range, or a model without corner normals and uvs per triangle.
+/// index out of range, a model without corner normals and uvs per triangle, or a region that
+/// holds no full-resolution area.
 SurfaceErrorReport MeasureSurfaceError(const HapticModel& model, const TriangleMesh& full_O,
                                        const SurfaceErrorParams& params = {});
 
