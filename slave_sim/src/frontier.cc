@@ -1061,8 +1061,7 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
       if (run.setting.method != FrontierMethod::kCoarseOnly) {
         // Where the truth pushes and the setting does not: do its models hold the surface
         // there? The surface error near each such patch (issue 32, fifth stop).
-        const auto found = built.find(
-            {run.setting.texture_size, run.setting.coarse_scale, true});
+        const auto found = built.find({run.setting.texture_size, run.setting.coarse_scale, true});
         if (found != built.end() && found->second) {
           const BenchmarkScene& sc = *found->second;
           TriangleMesh tool_T = *sc.tool_mesh_Ft;
@@ -1080,9 +1079,8 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
                 local.region_center_O = X_TW * patch.window.center_W;
                 const SurfaceErrorReport t = MeasureSurfaceError(*sc.haptic.tool, tool_T, local);
                 local.region_center_O = X_OW * patch.window.center_W;
-                const SurfaceErrorReport o =
-                    MeasureSurfaceError(*sc.haptic.touchables.at(0).model, *sc.object_mesh_Fe,
-                                        local);
+                const SurfaceErrorReport o = MeasureSurfaceError(*sc.haptic.touchables.at(0).model,
+                                                                 *sc.object_mesh_Fe, local);
                 run.local_tool_p99_m.push_back(t.p99_m);
                 run.local_object_p99_m.push_back(o.p99_m);
                 run.local_tool_outside_m.push_back(t.outside_p99_m);
@@ -1388,9 +1386,9 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
       if (r.local_tool_p99_m.empty()) continue;
       auto t = r.local_tool_p99_m, o = r.local_object_p99_m, to = r.local_tool_outside_m,
            oo = r.local_object_outside_m;
-      s << "Near the truth patches of the poses where " << r.setting.name
-        << " gives no force (" << t.size() << " patches, within "
-        << Fmt(kLocalSurfaceRadiusM * 1e3, 3) << " mm of each centre): surface error p99, median "
+      s << "Near the truth patches of the poses where " << r.setting.name << " gives no force ("
+        << t.size() << " patches, within " << Fmt(kLocalSurfaceRadiusM * 1e3, 3)
+        << " mm of each centre): surface error p99, median "
         << "over the patches / largest, tool " << Fmt(Percentile(t, 0.5) * 1e6, 3) << " / "
         << Fmt(Percentile(t, 1.0) * 1e6, 3) << " µm, object " << Fmt(Percentile(o, 0.5) * 1e6, 3)
         << " / " << Fmt(Percentile(o, 1.0) * 1e6, 3) << " µm; outside p99 tool "

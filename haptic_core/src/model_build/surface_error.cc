@@ -103,9 +103,9 @@ SurfaceErrorReport MeasureSurfaceError(const HapticModel& model, const TriangleM
     }
     const glm::dvec3 a = full_O.vertices[t[0]], b = full_O.vertices[t[1]],
                      c = full_O.vertices[t[2]];
-    const bool inside = params.region_radius_m <= 0.0 ||
-                        glm::length((a + b + c) / 3.0 - params.region_center_O) <=
-                            params.region_radius_m;
+    const bool inside =
+        params.region_radius_m <= 0.0 ||
+        glm::length((a + b + c) / 3.0 - params.region_center_O) <= params.region_radius_m;
     if (inside) total += 0.5 * glm::length(glm::cross(b - a, c - a));
     cumulative.push_back(total);
   }
