@@ -936,7 +936,7 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
       SettingRun run;
       run.setting = st;
       ++units_done;
-      if (st.product_models) {
+      if (st.product_models || options.on_product_models) {
         const BenchmarkModelSettings product = ProductModelSettings(name);
         run.setting.texture_size = product.texture_size;
         run.setting.coarse_scale = product.coarse_scale;

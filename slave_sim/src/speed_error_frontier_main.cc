@@ -47,6 +47,9 @@ int main(int argc, char** argv) {
                  "e.g. fig75=out/fig75/trace.csv from deploy/run-loopback (repeatable)");
   app.add_option("--cache-dir", options.cache_dir, "model cache folder")->capture_default_str();
   app.add_flag("--no-gpu", no_gpu, "leave out the GPU settings");
+  app.add_flag("--on-product-models", options.on_product_models,
+               "run every setting on the models slave_sim --scene builds (fig77: coarse x2,\n"
+               "2048 texture) instead of the texture size and coarse scale it names");
   app.add_option("--threads", options.threads, "threads for the ground truth")
       ->check(CLI::Range(1, 256))
       ->capture_default_str();

@@ -113,6 +113,10 @@ struct FrontierOptions {
   std::vector<std::string> settings;
   /// In-contact poses per scene (0 = 200, or 12 with quick).
   int poses = 0;
+  /// Every setting on the product's models (ProductModelSettings per scene) instead of the
+  /// texture size and coarse scale it names: to take the product's own errors apart with the
+  /// other settings (e.g. "reference", "grid_only") on the models slave_sim builds.
+  bool on_product_models = false;
   /// Scene name → a run's trace.csv to take the poses from (else ScriptedContactPoses).
   std::map<std::string, std::string> traces;
   /// Model cache folder ("" = none).
