@@ -92,14 +92,14 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
     V_WH_W = {X_WM_.rotation * in.device.V_MH_M.linear, X_WM_.rotation * in.device.V_MH_M.angular};
 
     // Stage 2: coupling and the implicit step against the (blended) model.
-    if (blend_tick_ < config_.model_blend_ticks) {
-      ++blend_tick_;
-      AttributeSwitch(potential_changes, U_before, out.model_age_ms);
+    const bool blending = blend_tick_ < config_.model_blend_ticks;
+    if (blending) ++blend_tick_;
+    AttributeSwitch(potential_changes, U_before, out.model_age_ms);  // at the weights stepped
+    if (blending) {
       out.step =
           simulator_.StepBlended(tool_, out.X_WH, V_WH_W, model_, previous_model_,
                                  static_cast<double>(blend_tick_) / config_.model_blend_ticks, h);
     } else {
-      AttributeSwitch(potential_changes, U_before, out.model_age_ms);
       out.step = simulator_.Step(tool_, out.X_WH, V_WH_W, model_, 1.0, h);
     }
     if (!out.step.ok) ++counters_.nonfinite;

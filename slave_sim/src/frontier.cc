@@ -770,6 +770,57 @@ std::string SeedFigures(const std::string& scene) {
   return "about 2 ms per step (about 500 Hz) with one contact";
 }
 
+// A benchmark scene built at one model setting, with what the surface-error figures need once
+// per build: the full-resolution tool mesh moved into T (the tool model's frame) and both models'
+// MeasureSurfaceError.
+struct BuiltBenchmark {
+  BenchmarkScene scene;
+  TriangleMesh tool_mesh_T;
+  SurfaceErrorReport tool_surface, object_surface;
+};
+
+BuiltBenchmark MakeBuiltBenchmark(BenchmarkScene scene) {
+  BuiltBenchmark b{std::move(scene), {}, {}, {}};
+  b.tool_mesh_T = *b.scene.tool_mesh_Ft;
+  for (glm::dvec3& v : b.tool_mesh_T.vertices) v = b.scene.X_TFt * v;
+  b.tool_surface = MeasureSurfaceError(*b.scene.haptic.tool, b.tool_mesh_T);
+  b.object_surface =
+      MeasureSurfaceError(*b.scene.haptic.touchables.at(0).model, *b.scene.object_mesh_Fe);
+  return b;
+}
+
+// Where the truth pushes and `run` does not: the models' surface error within
+// kLocalSurfaceRadiusM of each truth patch (with force) of the poses where it gives no force
+// (SettingRun::local_*). `poses_WFt` are the tool mesh's poses, `pipeline` their truths.
+void AddLocalSurfaceErrors(const BuiltBenchmark& b, const std::vector<RigidTransform>& poses_WFt,
+                           const std::vector<PoseTruth>& pipeline, SettingRun& run) {
+  const BenchmarkScene& sc = b.scene;
+  const RigidTransform X_OW = sc.haptic.touchables.at(0).X_WO.Inverse();
+  SurfaceErrorParams local;
+  local.samples = 1024;
+  local.region_radius_m = kLocalSurfaceRadiusM;
+  for (std::size_t k = 0; k < run.poses.size() && k < pipeline.size(); ++k) {
+    if (glm::length(run.poses[k].F.force) > 1e-9) continue;
+    const RigidTransform X_TW = (poses_WFt[k] * sc.X_TFt.Inverse()).Inverse();
+    for (const TruthPatch& patch : pipeline[k].patches) {
+      if (!(glm::length(patch.contact.F_T_W.force) > 1e-9)) continue;
+      try {
+        local.region_center_O = X_TW * patch.window.center_W;
+        const SurfaceErrorReport t = MeasureSurfaceError(*sc.haptic.tool, b.tool_mesh_T, local);
+        local.region_center_O = X_OW * patch.window.center_W;
+        const SurfaceErrorReport o =
+            MeasureSurfaceError(*sc.haptic.touchables.at(0).model, *sc.object_mesh_Fe, local);
+        run.local_tool_p99_m.push_back(t.p99_m);
+        run.local_object_p99_m.push_back(o.p99_m);
+        run.local_tool_outside_m.push_back(t.outside_p99_m);
+        run.local_object_outside_m.push_back(o.outside_p99_m);
+      } catch (const std::invalid_argument&) {
+        // No full-resolution surface within the radius on one side: not measured.
+      }
+    }
+  }
+}
+
 struct SceneReport {
   std::string name, tool_file, object_file, mesh_note, pose_source;
   std::int64_t tool_full = 0, object_full = 0;
@@ -871,15 +922,13 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
     rep.name = name;
     say("%s: building the models (cache: %s)", name.c_str(),
         options.cache_dir.empty() ? "none" : options.cache_dir.c_str());
-    std::map<std::tuple<int, double, bool>, std::unique_ptr<BenchmarkScene>> built;
-    std::map<std::tuple<int, double, bool>,
-             std::unique_ptr<std::pair<SurfaceErrorReport, SurfaceErrorReport>>>
-        surface_errors;
-    const auto scene_for = [&](const BenchmarkModelSettings& b) -> const BenchmarkScene& {
+    std::map<std::tuple<int, double, bool>, std::unique_ptr<BuiltBenchmark>> built;
+    const auto built_for = [&](const BenchmarkModelSettings& b) -> const BuiltBenchmark& {
       auto& slot = built[{b.texture_size, b.coarse_scale, b.textured}];
       if (!slot) {
         try {
-          slot = std::make_unique<BenchmarkScene>(MakeBenchmarkScene(name, b, cache));
+          slot = std::make_unique<BuiltBenchmark>(
+              MakeBuiltBenchmark(MakeBenchmarkScene(name, b, cache)));
         } catch (const std::exception& e) {
           throw std::runtime_error("scene " + name + " (texture " + std::to_string(b.texture_size) +
                                    ", coarse x" + Fmt(b.coarse_scale) + "): " + e.what());
@@ -887,7 +936,7 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
       }
       return *slot;
     };
-    const BenchmarkScene& ref = scene_for({});
+    const BenchmarkScene& ref = built_for({}).scene;
     rep.tool_file = ref.tool_name + ".glb";
     rep.object_file = ref.object_name + ".glb";
     rep.tool_full = static_cast<std::int64_t>(ref.tool_mesh_Ft->triangles.size());
@@ -949,21 +998,10 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
         b.texture_size = st_run.texture_size;
         b.coarse_scale = st_run.coarse_scale;
         b.textured = st.method != FrontierMethod::kCoarseOnly;
-        const BenchmarkScene& scene = scene_for(b);
-        {
-          // The models' surface error (issue 32: a representation error the bake's own
-          // validation cannot see), per built scene: the same models give the same figures.
-          auto& surf = surface_errors[{b.texture_size, b.coarse_scale, b.textured}];
-          if (!surf) {
-            TriangleMesh tool_T = *scene.tool_mesh_Ft;
-            for (glm::dvec3& v : tool_T.vertices) v = scene.X_TFt * v;
-            surf = std::make_unique<std::pair<SurfaceErrorReport, SurfaceErrorReport>>(
-                MeasureSurfaceError(*scene.haptic.tool, tool_T),
-                MeasureSurfaceError(*scene.haptic.touchables.at(0).model, *scene.object_mesh_Fe));
-          }
-          run.tool_surface = surf->first;
-          run.object_surface = surf->second;
-        }
+        const BuiltBenchmark& models = built_for(b);
+        const BenchmarkScene& scene = models.scene;
+        run.tool_surface = models.tool_surface;
+        run.object_surface = models.object_surface;
         const auto t0 = Clock::now();
         RunSetting(scene, poses, fcl, run);
         for (ContactRecord& c : run.contacts) {
@@ -1059,37 +1097,9 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
       if (!run.skipped.empty()) continue;
       ComputeMetrics(run, jobs, reference_gt, touching, pipeline);
       if (run.setting.method != FrontierMethod::kCoarseOnly) {
-        // Where the truth pushes and the setting does not: do its models hold the surface
-        // there? The surface error near each such patch (issue 32, fifth stop).
         const auto found = built.find({run.setting.texture_size, run.setting.coarse_scale, true});
         if (found != built.end() && found->second) {
-          const BenchmarkScene& sc = *found->second;
-          TriangleMesh tool_T = *sc.tool_mesh_Ft;
-          for (glm::dvec3& v : tool_T.vertices) v = sc.X_TFt * v;
-          const RigidTransform X_OW = sc.haptic.touchables.at(0).X_WO.Inverse();
-          for (std::size_t k = 0; k < run.poses.size() && k < pipeline.size(); ++k) {
-            if (glm::length(run.poses[k].F.force) > 1e-9) continue;
-            const RigidTransform X_TW = (poses[k] * sc.X_TFt.Inverse()).Inverse();
-            for (const TruthPatch& patch : pipeline[k].patches) {
-              if (!(glm::length(patch.contact.F_T_W.force) > 1e-9)) continue;
-              SurfaceErrorParams local;
-              local.samples = 1024;
-              local.region_radius_m = kLocalSurfaceRadiusM;
-              try {
-                local.region_center_O = X_TW * patch.window.center_W;
-                const SurfaceErrorReport t = MeasureSurfaceError(*sc.haptic.tool, tool_T, local);
-                local.region_center_O = X_OW * patch.window.center_W;
-                const SurfaceErrorReport o = MeasureSurfaceError(*sc.haptic.touchables.at(0).model,
-                                                                 *sc.object_mesh_Fe, local);
-                run.local_tool_p99_m.push_back(t.p99_m);
-                run.local_object_p99_m.push_back(o.p99_m);
-                run.local_tool_outside_m.push_back(t.outside_p99_m);
-                run.local_object_outside_m.push_back(o.outside_p99_m);
-              } catch (const std::invalid_argument&) {
-                // No full-resolution surface within the radius on one side: not measured.
-              }
-            }
-          }
+          AddLocalSurfaceErrors(*found->second, poses, pipeline, run);
         }
       }
       if (run.predicted.size() == displaced_truth.size() && !run.predicted.empty()) {
@@ -1371,7 +1381,9 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
     }
     s << "Surface error of the built models (MeasureSurfaceError: full-resolution points against "
          "the textured coarse model, tool / object; p99 distance, p99 and share of points lying "
-         "outside the model by more than 25 µm, where the method reads the depth low):";
+         "outside the model by more than "
+      << Fmt(SurfaceErrorParams{}.outside_threshold_m * 1e6, 3)
+      << " µm, where the method reads the depth low):";
     for (const SettingRun& r : rep.runs) {
       if (!r.skipped.empty() || r.tool_surface.samples == 0) continue;
       s << " " << r.setting.name << " " << Fmt(r.tool_surface.p99_m * 1e6, 3) << " / "
@@ -1384,8 +1396,8 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
     s << "\n\n";
     for (const SettingRun& r : rep.runs) {
       if (r.local_tool_p99_m.empty()) continue;
-      auto t = r.local_tool_p99_m, o = r.local_object_p99_m, to = r.local_tool_outside_m,
-           oo = r.local_object_outside_m;
+      const std::vector<double>&t = r.local_tool_p99_m, &o = r.local_object_p99_m,
+            &to = r.local_tool_outside_m, &oo = r.local_object_outside_m;
       s << "Near the truth patches of the poses where " << r.setting.name << " gives no force ("
         << t.size() << " patches, within " << Fmt(kLocalSurfaceRadiusM * 1e3, 3)
         << " mm of each centre): surface error p99, median "

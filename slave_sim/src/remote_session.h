@@ -108,7 +108,7 @@ class RemoteSession {
   }
   /// Counts a loop pass that did not step (WhyStep gave kWait).
   void CountSkippedStep() noexcept { ++steps_skipped_; }
-  /// Counts a step by its cause (WhyStep), reported in SummaryJson's "steps_by_cause".
+  /// Counts a step by its cause (WhyStep), reported in StatsJson's "steps_by_cause".
   void CountStep(StepCause cause) noexcept { ++steps_by_cause_[static_cast<int>(cause)]; }
   /// Records that a step ran at X_WT (the newest tool state is then used) and found
   /// `free_space_clearance_m` (StepTimings) of free space around the tool.

@@ -392,10 +392,6 @@ HapticModelBuild ReadBuild(ByteReader& r, const std::string& key) {
   return build;
 }
 
-}  // namespace
-
-namespace {
-
 // MeasureSurfaceError at its defaults, or samples = 0 when it cannot measure (the model is valid,
 // so only a full-resolution mesh without area gets here).
 SurfaceErrorReport MeasuredSurface(const HapticModel& model, const TriangleMesh& full_O) {

@@ -10,6 +10,8 @@
 #include <string>
 #include <vector>
 
+#include "haptic_core/statistics.h"
+
 namespace ht {
 namespace {
 
@@ -45,14 +47,6 @@ glm::dvec3 ClosestBarycentric(const glm::dvec3& p, const glm::dvec3& a, const gl
   if (!(std::abs(denom) > 0.0)) return {1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0};  // degenerate
   const double v = vb / denom, w = vc / denom;
   return {1.0 - v - w, v, w};
-}
-
-double Percentile(std::vector<double>& v, double q) {
-  if (v.empty()) return 0.0;
-  const std::size_t k =
-      std::min(v.size() - 1, static_cast<std::size_t>(q * static_cast<double>(v.size() - 1) + 0.5));
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
-  return v[k];
 }
 
 }  // namespace
