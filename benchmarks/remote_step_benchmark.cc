@@ -155,6 +155,19 @@ int main(int argc, char** argv) {
                    static_cast<double>(refined.seeds) / static_cast<double>(refined.contacts),
                    static_cast<double>(refined.evaluations) / static_cast<double>(refined.contacts),
                    static_cast<double>(refined.raised_um) / static_cast<double>(refined.contacts));
+      std::fprintf(
+          stderr,
+          "remote_step_benchmark: %s: conservative screen: %.1f squares and %.1f leaves "
+          "per contact, deeper than the seeds on %llu contacts (%.1f µm on average), "
+          "%llu stopped at the leaf budget\n",
+          name.c_str(),
+          static_cast<double>(refined.screen_squares) / static_cast<double>(refined.contacts),
+          static_cast<double>(refined.screen_leaves) / static_cast<double>(refined.contacts),
+          static_cast<unsigned long long>(refined.screen_found),
+          refined.screen_found > 0 ? static_cast<double>(refined.screen_raised_um) /
+                                         static_cast<double>(refined.screen_found)
+                                   : 0.0,
+          static_cast<unsigned long long>(refined.screen_truncated));
     }
     std::fflush(stdout);
     if (csv) {

@@ -196,6 +196,50 @@ TEST(DepthRefinement, SinusoidUnderACurvedToolGivesTheClosedFormDepthAndSlope) {
   }
 }
 
+// The conservative screen (issue 32, sixth stop) against a closed form the seeds cannot find: a
+// broad low hump (20 µm, σ 3 mm) and, 10 mm away, a narrow tall spike (40 µm, σ 150 µm) under a
+// flat tool. At every N the grid's filtered cells read the hump deepest (at N = 16 a cell
+// averages the spike to a few micrometres), so the seeds climb the hump; the screen's bounds
+// (the texture's level-0 maxima) keep the spike's squares and its leaf search finds it. δ is
+// max_x h(x) − z0 within the bilinear texture's error; the point is the spike's.
+TEST(DepthRefinement, ScreenFindsTheNarrowPeakTheFilteredGridHides) {
+  constexpr double kHump = 20e-6, kSpike = 40e-6;
+  const glm::dvec2 hump_at{-5e-3, 0.0}, spike_at{5e-3, 3e-3};
+  const auto surface = [=](double x, double y) {
+    const auto g = [&](glm::dvec2 c, double sigma) {
+      const double r2 = (x - c.x) * (x - c.x) + (y - c.y) * (y - c.y);
+      return std::exp(-r2 / (2.0 * sigma * sigma));
+    };
+    return kHump * g(hump_at, 3e-3) + kSpike * g(spike_at, 150e-6);
+  };
+  double peak = 0.0;
+  for (int i = -400; i <= 400; ++i) {
+    for (int j = -400; j <= 400; ++j) {
+      peak = std::max(peak, surface(spike_at.x + i * 1e-6, spike_at.y + j * 1e-6));
+    }
+  }
+  const HapticModel tool = ToolBox([](double, double) { return 0.0; }, 256);
+  const HapticModel env = EnvironmentBox(surface, 1024);
+  const double z0 = 10e-6;
+  for (const int n : {16, 25, 50}) {
+    DepthRefinementOptions seeds_only, screened;
+    seeds_only.conservative_screen = false;
+    screened.conservative_screen = true;
+    const Refined before = LinearizeAndRefine(tool, ToolPose(0.0, 0.0, z0), env, n, seeds_only);
+    const Refined r = LinearizeAndRefine(tool, ToolPose(0.0, 0.0, z0), env, n, screened);
+    // The seeds stay on the hump (the test's premise) ...
+    EXPECT_LT(before.refined.depth_m, kHump - z0 + 1e-6) << "N " << n;
+    // ... the screen finds the spike: the closed form within the bilinear texture's error (a
+    // peak of σ 150 µm between texel centres ~40 µm apart reads up to A·d²/2σ² ≈ 0.7 µm low).
+    EXPECT_NEAR(r.refined.depth_m, peak - z0, 1.0e-6) << "N " << n;
+    EXPECT_NEAR(r.refined.point_W.x, spike_at.x, 40e-6) << "N " << n;
+    EXPECT_NEAR(r.refined.point_W.y, spike_at.y, 40e-6) << "N " << n;
+    std::printf("N %3d: grid δ %.2f µm, seeds %.2f µm, screened %.2f µm (closed form %.2f µm)\n", n,
+                r.grid.depth_m * 1e6, before.refined.depth_m * 1e6, r.refined.depth_m * 1e6,
+                (peak - z0) * 1e6);
+  }
+}
+
 TEST(DepthRefinement, AContactWithoutOverlapIsLeftUnchanged) {
   const HapticModel tool = CurvedTool();
   const HapticModel env = EnvironmentBox(Sinusoid, 256);
@@ -229,6 +273,12 @@ TEST(DepthRefinement, OptionsOutOfRangeAreRefused) {
   EXPECT_THROW(DepthRefiner{o}, std::invalid_argument);
   o = {};
   o.search_floor_texels = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(DepthRefiner{o}, std::invalid_argument);
+  o = {};
+  o.screen_tolerance_m = -1e-6;
+  EXPECT_THROW(DepthRefiner{o}, std::invalid_argument);
+  o = {};
+  o.max_screen_leaves = 0;
   EXPECT_THROW(DepthRefiner{o}, std::invalid_argument);
 }
 

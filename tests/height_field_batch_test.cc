@@ -164,5 +164,65 @@ TEST(HeightFieldLevels, MaxAbsOverBoundsEverySampleOfItsBoxAndIsLocal) {
   EXPECT_EQ(empty.MaxAbsOver(0, 0.0f, 0.0f, 1.0f, 1.0f), 0.0f);
 }
 
+// RangeOver bounds every level-0 sample of its box from both sides (dense samples of random
+// boxes, clamped and periodic textures, boxes crossing a periodic edge, a non-power-of-two size
+// that falls back to the whole range), and is local and tight: far from a spike and a pit its
+// bounds are the low texture's, over the spike its upper bound is the spike and its lower bound
+// is not dragged down by the pit elsewhere.
+TEST(HeightFieldLevels, RangeOverBoundsEveryLevelZeroSampleOfItsBoxFromBothSides) {
+  std::mt19937 rng(2132);
+  std::uniform_real_distribution<float> U(-0.2f, 1.2f), size(0.0f, 0.05f);
+  int checked = 0;
+  for (const int width : {256, 200}) {
+    for (const bool wrap : {false, true}) {
+      std::vector<float> texels(static_cast<std::size_t>(width) * 128);
+      std::uniform_real_distribution<float> h(-1e-4f, 1e-4f);
+      for (float& t : texels) t = h(rng);
+      texels[37 * static_cast<std::size_t>(width) + 150] = 5e-3f;  // a spike at (150, 37)
+      texels[90 * static_cast<std::size_t>(width) + 20] = -4e-3f;  // a pit at (20, 90)
+      const HeightField field(width, 128, std::move(texels), wrap, wrap);
+      for (int trial = 0; trial < 400; ++trial) {
+        const float u0 = U(rng), v0 = U(rng), u1 = u0 + size(rng), v1 = v0 + size(rng);
+        float lo = 0.0f, hi = 0.0f;
+        field.RangeOver(u0, v0, u1, v1, lo, hi);
+        ASSERT_LE(hi, 5e-3f * 1.0001f);
+        ASSERT_GE(lo, -4e-3f * 1.0001f);
+        for (int a = 0; a <= 16; ++a) {
+          for (int b = 0; b <= 16; ++b) {
+            const float u = u0 + (u1 - u0) * static_cast<float>(a) / 16.0f;
+            const float v = v0 + (v1 - v0) * static_cast<float>(b) / 16.0f;
+            const float sample = field.Sample(0, u, v);
+            ASSERT_LE(sample, hi) << "at (" << u << ", " << v << ") wrap " << wrap;
+            ASSERT_GE(sample, lo) << "at (" << u << ", " << v << ") wrap " << wrap;
+            ++checked;
+          }
+        }
+      }
+      float lo = 0.0f, hi = 0.0f;
+      if (width == 256) {
+        // Far from both (u ≈ 0.4, v ≈ 0.6): the low texture's range.
+        field.RangeOver(0.4f, 0.6f, 0.42f, 0.62f, lo, hi);
+        EXPECT_LE(hi, 1.001e-4f);
+        EXPECT_GE(lo, -1.001e-4f);
+        // Over the spike (u ≈ 0.59, v ≈ 0.29): its height above, the low texture's below.
+        field.RangeOver(0.585f, 0.285f, 0.595f, 0.295f, lo, hi);
+        EXPECT_GE(hi, 4.99e-3f);
+        EXPECT_GE(lo, -1.001e-4f);
+      } else {
+        // Not a power of two: the whole texture's range.
+        field.RangeOver(0.4f, 0.6f, 0.42f, 0.62f, lo, hi);
+        EXPECT_GE(hi, 5e-3f);
+        EXPECT_LE(lo, -4e-3f);
+      }
+    }
+  }
+  EXPECT_GT(checked, 400000);
+  const HeightField empty;
+  float lo = 1.0f, hi = 1.0f;
+  empty.RangeOver(0.0f, 0.0f, 1.0f, 1.0f, lo, hi);
+  EXPECT_EQ(lo, 0.0f);
+  EXPECT_EQ(hi, 0.0f);
+}
+
 }  // namespace
 }  // namespace ht

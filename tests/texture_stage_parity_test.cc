@@ -443,6 +443,84 @@ TEST(TextureStageParity, RefinedDepthLiesBetweenTheGridAndTheFullResolutionTruth
       checked > 0 ? refined_error_sum / checked * 1e6 : 0.0);
 }
 
+// The conservative screen (issue 32, sixth stop) on random contacts of the six seed models, two
+// routes to the window's maximum of b − a at level 0: the refined δ0 is never below b − a at any
+// of 3,000 random points of the window (PatchHeightAt at level 0 on every triangle of both
+// models) by more than the screen's tolerance, and never below the seeds-only refinement's δ0.
+// The seeds alone miss some (printed): what the screen is for.
+TEST(TextureStageParity, ScreenedDepthIsNeverBelowAnyLevelZeroPointOfTheWindow) {
+  std::mt19937 rng(3233);
+  CpuPenetrationDepthBackend backend(128);
+  DepthRefinementOptions on;
+  on.conservative_screen = true;
+  DepthRefiner screened(on);
+  DepthRefinementOptions off;
+  off.conservative_screen = false;
+  DepthRefiner seeds_only(off);
+  const double tolerance = DepthRefinementOptions{}.screen_tolerance_m;
+  int checked = 0, seeds_missed = 0;
+  double worst_below_points = -1.0, worst_seeds_below_points = -1.0, raised_sum = 0.0;
+  std::uniform_real_distribution<double> U(-0.5, 0.5);
+  for (const SeedModel which : kAll) {
+    const HapticModel& env = Seed(which);
+    std::vector<int> env_all(env.triangles.size());
+    for (std::size_t f = 0; f < env_all.size(); ++f) env_all[f] = static_cast<int>(f);
+    for (const SeedModel tool_which : {SeedModel::kFile, SeedModel::kBlock}) {
+      const HapticModel& tool = Seed(tool_which);
+      std::vector<int> tool_all(tool.triangles.size());
+      for (std::size_t f = 0; f < tool_all.size(); ++f) tool_all[f] = static_cast<int>(f);
+      for (int trial = 0; trial < 4; ++trial) {
+        const Contact c = RandomContact(tool, env, rng, 50);
+        ContactQuery q;
+        q.environment = &env;
+        q.X_WO = c.X_WO;
+        q.window = c.window;
+        q.stiffness_n_per_m = 8000.0;
+        std::array<DepthSample, kGradientSamples> samples{};
+        ContactLinearization lin;
+        ASSERT_TRUE(backend.LinearizeBatch(tool, c.X_WT, {&q, 1}, {&lin, 1}, samples));
+        if (!std::isfinite(lin.depth_m)) continue;
+        std::array<DepthSample, kGradientSamples> samples_seeds = samples;
+        ContactLinearization lin_seeds = lin;
+        ASSERT_TRUE(screened.Refine(tool, c.X_WT, q, samples, lin));
+        ASSERT_TRUE(seeds_only.Refine(tool, c.X_WT, q, samples_seeds, lin_seeds));
+        SCOPED_TRACE(std::string(SeedModelName(tool_which)) + " on " + SeedModelName(which));
+        EXPECT_GE(lin.depth_m, lin_seeds.depth_m - 1e-12);
+        double points_max = -std::numeric_limits<double>::infinity();
+        for (int k = 0; k < 3000; ++k) {
+          const double s = U(rng) * c.window.extent_m, t = U(rng) * c.window.extent_m;
+          const double b =
+              PatchHeightAt(env, c.X_WO, env_all, c.window, PatchSide::kEnvironment, s, t, 0);
+          const double a =
+              PatchHeightAt(tool, c.X_WT, tool_all, c.window, PatchSide::kTool, s, t, 0);
+          if (std::isfinite(a) && std::isfinite(b)) points_max = std::max(points_max, b - a);
+        }
+        if (!std::isfinite(points_max)) continue;
+        ++checked;
+        EXPECT_GE(lin.depth_m, points_max - tolerance - 1e-9);
+        worst_below_points = std::max(worst_below_points, points_max - lin.depth_m);
+        worst_seeds_below_points =
+            std::max(worst_seeds_below_points, points_max - lin_seeds.depth_m);
+        if (lin_seeds.depth_m < points_max - tolerance) ++seeds_missed;
+        raised_sum += lin.depth_m - lin_seeds.depth_m;
+      }
+    }
+  }
+  EXPECT_GT(checked, 20);
+  EXPECT_GT(screened.counters().screen_squares, 0u);
+  std::printf(
+      "[ screen ] %d contacts: screened δ0 at most %.3g m below the random points' max (seeds "
+      "alone %.3g m, below it on %d contacts); screened above seeds-only by %.2f µm on average; "
+      "%.0f squares, %.1f leaves per contact; %llu truncated\n",
+      checked, worst_below_points, worst_seeds_below_points, seeds_missed,
+      checked > 0 ? raised_sum / checked * 1e6 : 0.0,
+      static_cast<double>(screened.counters().screen_squares) /
+          std::max<double>(1.0, static_cast<double>(screened.counters().contacts)),
+      static_cast<double>(screened.counters().screen_leaves) /
+          std::max<double>(1.0, static_cast<double>(screened.counters().contacts)),
+      static_cast<unsigned long long>(screened.counters().screen_truncated));
+}
+
 // EnvironmentMaxPyramid::MaxOver is at least the largest height of any box (random boxes on
 // random heights with empty cells, odd and even sizes), exactly it for a single cell, and −∞ for
 // an empty box.

@@ -131,6 +131,32 @@ int CellAt(const ContactWindow& w, double s, double t) noexcept {
   return j * n + i;
 }
 
+// The barycentric coordinates of (s, t) on a projected triangle (outside it too).
+void Barycentric(const Projected& P, double s, double t, double& b0, double& b1,
+                 double& b2) noexcept {
+  b0 = ((P.x[1] - s) * (P.y[2] - t) - (P.x[2] - s) * (P.y[1] - t)) * P.inv_area;
+  b1 = ((P.x[2] - s) * (P.y[0] - t) - (P.x[0] - s) * (P.y[2] - t)) * P.inv_area;
+  b2 = 1.0 - b0 - b1;
+}
+
+// Bounds of ValueAt's normal factor N·n over the triangle (N the normalized interpolation of the
+// corner normals): the numerator Σλ·nn_c lies between the corners' nn, and |Σλ·n_c|² =
+// (1 − c)Σλ² + c with c the smallest corner cosine is at least (1 + 2c)/3, so dividing by it
+// can only move the numerator away from 0 by 1/√((1 + 2c)/3). [−1, 1] where c < −0.5.
+void NormalFactorRange(const Projected& P, double& lo, double& hi) noexcept {
+  const double c = std::min({P.cos01, P.cos02, P.cos12});
+  const double nn_lo = std::min({P.nn[0], P.nn[1], P.nn[2]});
+  const double nn_hi = std::max({P.nn[0], P.nn[1], P.nn[2]});
+  if (!(c >= -0.5)) {
+    lo = -1.0;
+    hi = 1.0;
+    return;
+  }
+  const double inv_len = 1.0 / std::sqrt(std::max((1.0 + 2.0 * c) / 3.0, 1e-12));
+  lo = std::max(-1.0, nn_lo >= 0.0 ? nn_lo : nn_lo * inv_len);
+  hi = std::min(1.0, nn_hi >= 0.0 ? nn_hi * inv_len : nn_hi);
+}
+
 }  // namespace
 
 double PatchHeightAt(const HapticModel& model, const RigidTransform& X_WO,
@@ -162,6 +188,18 @@ void DepthRefinementOptions::Validate() const {
     throw std::invalid_argument("depth refinement: search_floor_texels must be > 0, got " +
                                 std::to_string(search_floor_texels));
   }
+  if (!(screen_tolerance_m >= 0.0) || !std::isfinite(screen_tolerance_m)) {
+    throw std::invalid_argument("depth refinement: screen_tolerance_m must be >= 0, got " +
+                                std::to_string(screen_tolerance_m));
+  }
+  if (!std::isfinite(screen_floor_m)) {
+    throw std::invalid_argument("depth refinement: screen_floor_m must be finite, got " +
+                                std::to_string(screen_floor_m));
+  }
+  if (max_screen_leaves < 1) {
+    throw std::invalid_argument("depth refinement: max_screen_leaves must be >= 1, got " +
+                                std::to_string(max_screen_leaves));
+  }
 }
 
 DepthRefiner::DepthRefiner(const DepthRefinementOptions& options, std::size_t max_triangles)
@@ -176,6 +214,8 @@ DepthRefiner::DepthRefiner(const DepthRefinementOptions& options, std::size_t ma
   env_all_.reserve(max_triangles);
   tool_all_.reserve(max_triangles);
   tool_pose_all_.reserve(max_triangles);
+  for (auto& v : env_screen_) v.reserve(max_triangles);
+  for (auto& v : tool_screen_) v.reserve(max_triangles);
 }
 
 void DepthRefiner::ProjectAll(const HapticModel& model, const RigidTransform& X, PatchSide side,
@@ -278,6 +318,207 @@ DepthRefiner::Seed DepthRefiner::Search(std::span<const Projected> tool, const B
     }
   }
   return best;
+}
+
+double DepthRefiner::ScreenThreshold(double best_m) const noexcept {
+  return std::max(best_m, options_.screen_floor_m) + options_.screen_tolerance_m;
+}
+
+double DepthRefiner::SideBound(std::span<const Projected> all, std::span<const int> list,
+                               const HeightField& texture, bool environment,
+                               const Box& square) const noexcept {
+  const double range = window_.depth_range_m();
+  double bound = environment ? -kInf : kInf;
+  for (const int i : list) {
+    const Projected& P = all[static_cast<std::size_t>(i)];
+    // The part of the square the triangle's box covers (ValueAt's 1e-12 margin).
+    const double s0 = std::max(square.s0, P.x0 - 1e-12), s1 = std::min(square.s1, P.x1 + 1e-12);
+    const double t0 = std::max(square.t0, P.y0 - 1e-12), t1 = std::min(square.t1, P.y1 + 1e-12);
+    if (s0 > s1 || t0 > t1) continue;
+    // The coarse height and the texture coordinates are linear on the triangle: over its part
+    // inside the rectangle (the triangle clipped by the rectangle's four sides, at most seven
+    // corners) their extremes are at that polygon's corners.
+    std::array<double, 2 * 9> poly{}, next{};
+    int count = 3;
+    for (int c = 0; c < 3; ++c) {
+      poly[static_cast<std::size_t>(2 * c)] = P.x[c];
+      poly[static_cast<std::size_t>(2 * c + 1)] = P.y[c];
+    }
+    // Keep the side of axis `axis` (0: s, 1: t) where sign·(coordinate − limit) ≤ 0.
+    const auto clip = [&](int axis, double limit, double sign) {
+      int out = 0;
+      for (int k = 0; k < count; ++k) {
+        const double* a = &poly[static_cast<std::size_t>(2 * k)];
+        const double* b = &poly[static_cast<std::size_t>(2 * ((k + 1) % count))];
+        const double fa = sign * (a[axis] - limit), fb = sign * (b[axis] - limit);
+        if (fa <= 0.0) {
+          next[static_cast<std::size_t>(2 * out)] = a[0];
+          next[static_cast<std::size_t>(2 * out + 1)] = a[1];
+          ++out;
+        }
+        if ((fa < 0.0 && fb > 0.0) || (fa > 0.0 && fb < 0.0)) {
+          const double r = fa / (fa - fb);
+          next[static_cast<std::size_t>(2 * out)] = a[0] + r * (b[0] - a[0]);
+          next[static_cast<std::size_t>(2 * out + 1)] = a[1] + r * (b[1] - a[1]);
+          // The crossing lies on the limit exactly (not a rounding away from it).
+          next[static_cast<std::size_t>(2 * out + axis)] = limit;
+          ++out;
+        }
+      }
+      count = out;
+      poly = next;
+    };
+    clip(0, s1, 1.0);
+    if (count > 0) clip(0, s0, -1.0);
+    if (count > 0) clip(1, t1, 1.0);
+    if (count > 0) clip(1, t0, -1.0);
+    if (count == 0) continue;
+    double d_lo = kInf, d_hi = -kInf, u_lo = kInf, u_hi = -kInf, v_lo = kInf, v_hi = -kInf;
+    for (int c = 0; c < count; ++c) {
+      double b0, b1, b2;
+      Barycentric(P, poly[static_cast<std::size_t>(2 * c)],
+                  poly[static_cast<std::size_t>(2 * c + 1)], b0, b1, b2);
+      const double d = b0 * P.d[0] + b1 * P.d[1] + b2 * P.d[2];
+      d_lo = std::min(d_lo, d);
+      d_hi = std::max(d_hi, d);
+      if (P.textured) {
+        const double u = b0 * P.tu[0] + b1 * P.tu[1] + b2 * P.tu[2];
+        const double v = b0 * P.tv[0] + b1 * P.tv[1] + b2 * P.tv[2];
+        u_lo = std::min(u_lo, u);
+        u_hi = std::max(u_hi, u);
+        v_lo = std::min(v_lo, v);
+        v_hi = std::max(v_hi, v);
+      }
+    }
+    // Rounding of the clipped corners: a relative allowance on the heights.
+    const double slack = 1e-9 * (std::abs(d_lo) + std::abs(d_hi)) + 1e-12;
+    d_lo -= slack;
+    d_hi += slack;
+    double lo = d_lo, hi = d_hi;
+    if (P.textured) {
+      // Inside the triangle the coordinates stay within its corners' box.
+      u_lo = std::max(u_lo, static_cast<double>(std::min({P.tu[0], P.tu[1], P.tu[2]})));
+      u_hi = std::min(u_hi, static_cast<double>(std::max({P.tu[0], P.tu[1], P.tu[2]})));
+      v_lo = std::max(v_lo, static_cast<double>(std::min({P.tv[0], P.tv[1], P.tv[2]})));
+      v_hi = std::min(v_hi, static_cast<double>(std::max({P.tv[0], P.tv[1], P.tv[2]})));
+      float h_lo = 0.0f, h_hi = 0.0f;
+      texture.RangeOver(static_cast<float>(std::min(u_lo, u_hi)),
+                        static_cast<float>(std::min(v_lo, v_hi)),
+                        static_cast<float>(std::max(u_lo, u_hi)),
+                        static_cast<float>(std::max(v_lo, v_hi)), h_lo, h_hi);
+      double f_lo, f_hi;
+      NormalFactorRange(P, f_lo, f_hi);
+      const double products[4] = {h_lo * f_lo, h_lo * f_hi, h_hi * f_lo, h_hi * f_hi};
+      lo += *std::min_element(products, products + 4);
+      hi += *std::max_element(products, products + 4);
+    }
+    // Values outside the window's box are ignored (HeightOver).
+    if (hi < -range || lo > range) continue;
+    bound =
+        environment ? std::max(bound, std::min(hi, range)) : std::min(bound, std::max(lo, -range));
+  }
+  return bound;
+}
+
+void DepthRefiner::ScreenSquare(const Box& square, int depth, Seed& best, int& leaves) noexcept {
+  const std::vector<int>& env = env_screen_[static_cast<std::size_t>(depth)];
+  const std::vector<int>& tool = tool_screen_[static_cast<std::size_t>(depth)];
+  const double side = square.s1 - square.s0;
+  double texel = kInf;
+  for (const int i : env) {
+    const Projected& P = env_all_[static_cast<std::size_t>(i)];
+    if (P.textured && P.texel_m > 0.0) texel = std::min(texel, P.texel_m);
+  }
+  for (const int i : tool) {
+    const Projected& P = tool_all_[static_cast<std::size_t>(i)];
+    if (P.textured && P.texel_m > 0.0) texel = std::min(texel, P.texel_m);
+  }
+  if (!std::isfinite(texel)) texel = 0.25 * window_.cell_size_m();
+  if (side <= 2.0 * texel || depth == kMaxScreenDepth) {
+    // A leaf: the local search from a 2×2 sub-grid of the square, free to climb half a square
+    // beyond it.
+    if (leaves >= options_.max_screen_leaves) {
+      truncated_ = true;
+      return;
+    }
+    ++leaves;
+    const double half = 0.5 * side;
+    const Box box{square.s0 - half, square.s1 + half, square.t0 - half, square.t1 + half};
+    env_local_.clear();
+    for (const int i : env) {
+      const Projected& P = env_all_[static_cast<std::size_t>(i)];
+      if (P.x1 < box.s0 || P.x0 > box.s1 || P.y1 < box.t0 || P.y0 > box.t1) continue;
+      env_local_.push_back(P);
+    }
+    tool_local_.clear();
+    for (const int i : tool) {
+      const Projected& P = tool_all_[static_cast<std::size_t>(i)];
+      if (P.x1 < box.s0 || P.x0 > box.s1 || P.y1 < box.t0 || P.y0 > box.t1) continue;
+      tool_local_.push_back(P);
+    }
+    const Seed found =
+        Search(tool_local_, box, 0.5 * (square.s0 + square.s1), 0.5 * (square.t0 + square.t1), half,
+               2, 0.25 * side, options_.search_floor_texels * texel, 0.0, 0.0);
+    if (found.depth_m > best.depth_m) best = found;
+    return;
+  }
+  // Four children, the most promising first.
+  const double sm = 0.5 * (square.s0 + square.s1), tm = 0.5 * (square.t0 + square.t1);
+  std::array<Box, 4> child{Box{square.s0, sm, square.t0, tm}, Box{sm, square.s1, square.t0, tm},
+                           Box{square.s0, sm, tm, square.t1}, Box{sm, square.s1, tm, square.t1}};
+  std::array<double, 4> bound{};
+  std::array<int, 4> order{0, 1, 2, 3};
+  for (int c = 0; c < 4; ++c) {
+    ++squares_;
+    bound[static_cast<std::size_t>(c)] =
+        SideBound(env_all_, env, env_->texture, true, child[static_cast<std::size_t>(c)]) -
+        SideBound(tool_all_, tool, tool_->texture, false, child[static_cast<std::size_t>(c)]);
+  }
+  std::sort(order.begin(), order.end(), [&](int a, int b) {
+    return bound[static_cast<std::size_t>(a)] > bound[static_cast<std::size_t>(b)];
+  });
+  for (const int c : order) {
+    // NaN and −∞ (a side missing) never pass.
+    if (!(bound[static_cast<std::size_t>(c)] > ScreenThreshold(best.depth_m))) continue;
+    const Box& b = child[static_cast<std::size_t>(c)];
+    std::vector<int>& env_next = env_screen_[static_cast<std::size_t>(depth + 1)];
+    std::vector<int>& tool_next = tool_screen_[static_cast<std::size_t>(depth + 1)];
+    env_next.clear();
+    tool_next.clear();
+    for (const int i : env) {
+      const Projected& P = env_all_[static_cast<std::size_t>(i)];
+      if (P.x1 < b.s0 || P.x0 > b.s1 || P.y1 < b.t0 || P.y0 > b.t1) continue;
+      env_next.push_back(i);
+    }
+    for (const int i : tool) {
+      const Projected& P = tool_all_[static_cast<std::size_t>(i)];
+      if (P.x1 < b.s0 || P.x0 > b.s1 || P.y1 < b.t0 || P.y0 > b.t1) continue;
+      tool_next.push_back(i);
+    }
+    ScreenSquare(b, depth + 1, best, leaves);
+    if (truncated_) return;
+  }
+}
+
+void DepthRefiner::Screen(Seed& best) noexcept {
+  squares_ = 0;
+  truncated_ = false;
+  const double half = 0.5 * window_.extent_m;
+  const Box root{-half, half, -half, half};
+  std::vector<int>& env = env_screen_[0];
+  std::vector<int>& tool = tool_screen_[0];
+  env.clear();
+  tool.clear();
+  for (std::size_t i = 0; i < env_all_.size(); ++i) env.push_back(static_cast<int>(i));
+  for (std::size_t i = 0; i < tool_all_.size(); ++i) tool.push_back(static_cast<int>(i));
+  ++squares_;
+  const double bound = SideBound(env_all_, env, env_->texture, true, root) -
+                       SideBound(tool_all_, tool, tool_->texture, false, root);
+  int leaves = 0;
+  if (bound > ScreenThreshold(best.depth_m)) ScreenSquare(root, 0, best, leaves);
+  counters_.screen_squares += squares_;
+  counters_.screen_leaves += static_cast<std::uint64_t>(leaves);
+  if (truncated_) counters_.screen_truncated += 1;
 }
 
 PenetrationGradient DepthRefiner::TexelScaleGradient(const RigidTransform& X_WT,
@@ -440,11 +681,30 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
     base[static_cast<std::size_t>(k)] = refine_cell(seed_cells[k], tool_all_, 0.0, 0.0, true);
     if (best < 0 || base[k].depth_m > base[static_cast<std::size_t>(best)].depth_m) best = k;
   }
-  if (best < 0 || !(base[static_cast<std::size_t>(best)].depth_m > -kInf)) {
+  Seed deepest = best >= 0 ? base[static_cast<std::size_t>(best)] : Seed{-kInf, 0.0, 0.0};
+  // The conservative screen: wherever b − a can still beat the seeds' best.
+  bool screened_deeper = false;
+  if (options_.conservative_screen) {
+    const double from_seeds = deepest.depth_m;
+    Screen(deepest);
+    if (deepest.depth_m > from_seeds) {
+      screened_deeper = true;
+      counters_.screen_found += 1;
+      if (from_seeds > -kInf) {
+        counters_.screen_raised_um +=
+            static_cast<std::uint64_t>(std::llround((deepest.depth_m - from_seeds) * 1e6));
+      }
+      if (num_seeds < kBaseSeedSamples) {
+        base[static_cast<std::size_t>(num_seeds++)] = deepest;  // TexelScaleGradient's seeds
+      } else {
+        base[static_cast<std::size_t>(best)] = deepest;
+      }
+    }
+  }
+  if (!(deepest.depth_m > -kInf)) {
     counters_.evaluations += evaluations_;
     return false;
   }
-  const Seed deepest = base[static_cast<std::size_t>(best)];
 
   const glm::dvec3 point_W = w.center_W + deepest.s * w.axis_u_W + deepest.t * w.axis_v_W;
   if (options_.texel_scale_gradient) {
@@ -467,6 +727,20 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
         ProjectAll(tool, poses[static_cast<std::size_t>(k)], PatchSide::kTool, tool_list_,
                    tool_pose_all_);
         found = refine_cell(sample.cell, tool_pose_all_, 0.0, 0.0, options_.subgrid_rotations);
+      }
+      if (screened_deeper) {
+        // The screen found the maximum away from the seeds: the displaced sample is searched
+        // from there too (its own deepest cell may hold the seeds' lower peak).
+        const int at = CellAt(w, deepest.s, deepest.t);
+        Seed also;
+        if (k <= 4) {
+          const double sign = (k % 2 == 1) ? 1.0 : -1.0;
+          also = refine_cell(at, tool_all_, k <= 2 ? sign * big.h_x : 0.0,
+                             k <= 2 ? 0.0 : sign * big.h_x, options_.subgrid_translations);
+        } else {
+          also = refine_cell(at, tool_pose_all_, 0.0, 0.0, options_.subgrid_rotations);
+        }
+        found = also.depth_m > found.depth_m ? also : found;
       }
       if (found.depth_m > -kInf) sample.depth_m = found.depth_m;
     }

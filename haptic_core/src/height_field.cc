@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -66,8 +67,80 @@ HeightField::HeightField(int width, int height, std::vector<float> texels, bool 
         }
       }
       max_abs_.push_back(std::move(m));
+      std::vector<float> lo(dst.texels.size()), hi(dst.texels.size());
+      for (int y = 0; y < dst.height; ++y) {
+        const int y0 = std::min(2 * y, src.height - 1), y1 = std::min(2 * y + 1, src.height - 1);
+        for (int x = 0; x < dst.width; ++x) {
+          const int x0 = std::min(2 * x, src.width - 1), x1 = std::min(2 * x + 1, src.width - 1);
+          const auto i = [&](int xx, int yy) {
+            return static_cast<std::size_t>(yy) * src.width + xx;
+          };
+          const std::vector<float>& below_lo = k == 1 ? src.texels : min_.back();
+          const std::vector<float>& below_hi = k == 1 ? src.texels : max_.back();
+          const auto o = static_cast<std::size_t>(y) * dst.width + x;
+          lo[o] = std::min(
+              {below_lo[i(x0, y0)], below_lo[i(x1, y0)], below_lo[i(x0, y1)], below_lo[i(x1, y1)]});
+          hi[o] = std::max(
+              {below_hi[i(x0, y0)], below_hi[i(x1, y0)], below_hi[i(x0, y1)], below_hi[i(x1, y1)]});
+        }
+      }
+      min_.push_back(std::move(lo));
+      max_.push_back(std::move(hi));
     }
   }
+}
+
+void HeightField::RangeOver(float u0, float v0, float u1, float v1, float& lo,
+                            float& hi) const noexcept {
+  lo = hi = 0.0f;
+  if (levels_.empty()) return;
+  // Widen a bound away from zero by the rounding allowance (and by an absolute 1e-12 m).
+  constexpr float kRounding = 1e-6f;
+  const auto widen = [&](float& a, float& b) {
+    a -= std::abs(a) * kRounding + 1e-12f;
+    b += std::abs(b) * kRounding + 1e-12f;
+  };
+  lo = min_height_;
+  hi = max_height_;
+  if (min_.size() + 1 != levels_.size() ||
+      !(std::isfinite(u0) && std::isfinite(u1) && std::isfinite(v0) && std::isfinite(v1)) ||
+      std::max(std::abs(u0), std::abs(u1)) > 1e6f || std::max(std::abs(v0), std::abs(v1)) > 1e6f) {
+    widen(lo, hi);
+    return;
+  }
+  const HeightFieldLevel& L = levels_[0];
+  // The taps of Sample at level 0: floor(u·W − 0.5) and the next texel, over the box widened by
+  // 1e-3 texel for Sample's float arithmetic (a float u's rounding moves u·W by ~1e-4 texel at
+  // 2048 texels).
+  const auto taps = [](float a, float b, int n, bool wrap, int& t0, int& t1) {
+    const double l = std::floor(std::min(a, b) * static_cast<double>(n) - 0.5 - 1e-3);
+    const double h = std::floor(std::max(a, b) * static_cast<double>(n) - 0.5 + 1e-3) + 1.0;
+    if (wrap && (l < 0.0 || h > n - 1.0)) return false;
+    t0 = static_cast<int>(std::clamp(l, 0.0, n - 1.0));
+    t1 = static_cast<int>(std::clamp(h, 0.0, n - 1.0));
+    return true;
+  };
+  int x0, x1, y0, y1;
+  if (!taps(u0, u1, L.width, wrap_u_, x0, x1) || !taps(v0, v1, L.height, wrap_v_, y0, y1)) {
+    widen(lo, hi);
+    return;
+  }
+  // The first level where the taps lie under at most 4×4 texels.
+  int s = 0;
+  while (((x1 >> s) - (x0 >> s) > 3 || (y1 >> s) - (y0 >> s) > 3) && s + 1 < num_levels()) ++s;
+  const HeightFieldLevel& K = levels_[static_cast<std::size_t>(s)];
+  const std::vector<float>& K_lo = s == 0 ? K.texels : min_[static_cast<std::size_t>(s - 1)];
+  const std::vector<float>& K_hi = s == 0 ? K.texels : max_[static_cast<std::size_t>(s - 1)];
+  lo = std::numeric_limits<float>::infinity();
+  hi = -std::numeric_limits<float>::infinity();
+  for (int y = y0 >> s; y <= std::min(y1 >> s, K.height - 1); ++y) {
+    for (int x = x0 >> s; x <= std::min(x1 >> s, K.width - 1); ++x) {
+      const auto i = static_cast<std::size_t>(y) * K.width + x;
+      lo = std::min(lo, K_lo[i]);
+      hi = std::max(hi, K_hi[i]);
+    }
+  }
+  widen(lo, hi);
 }
 
 float HeightField::MaxAbsOver(int level, float u0, float v0, float u1, float v1) const noexcept {

@@ -78,6 +78,11 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
   grid_only.name = "grid_only";
   grid_only.refine_depth = false;
   s.push_back(grid_only);
+  // The refinement with the conservative screen after the seeds (issue 32, sixth stop).
+  FrontierSetting screen = base;
+  screen.name = "screen";
+  screen.conservative_screen = true;
+  s.push_back(screen);
   for (int n : {16, 25, 100}) grid(n);
   if (quick) {
     texture(256);
@@ -510,6 +515,7 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.depth_refinement.texel_scale_gradient = st.texel_scale_gradient;
   options.depth_refinement.subgrid_rotations = st.subgrid_rotations;
   options.depth_refinement.subgrid_translations = st.subgrid_translations;
+  options.depth_refinement.conservative_screen = st.conservative_screen;
   if (st.gradient_step_texels > 0.0)
     options.depth_refinement.gradient_step_texels = st.gradient_step_texels;
   // The texture stage's threads are the coarse query's too, as in the product.

@@ -389,13 +389,21 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   s["refine_depth"] = config.pipeline.refine_depth;
   {
     // Stage 5b (issue 32), warm-up included: contacts refined, and per contact the seeds, the
-    // evaluations of b − a and how far δ0 rose above the grid's.
+    // evaluations of b − a and how far δ0 rose above the grid's; the conservative screen's
+    // squares and leaves per contact, the contacts where it found a deeper point than the seeds
+    // (and Σ µm), and those it stopped at its leaf budget.
     const DepthRefinementCounters& r = pipeline->depth_refinement_counters();
     const double n = r.contacts > 0 ? static_cast<double>(r.contacts) : 1.0;
-    s["depth_refinement"] = {{"contacts", r.contacts},
-                             {"seeds_per_contact", static_cast<double>(r.seeds) / n},
-                             {"evaluations_per_contact", static_cast<double>(r.evaluations) / n},
-                             {"depth_raised_um_mean", static_cast<double>(r.raised_um) / n}};
+    s["depth_refinement"] = {
+        {"contacts", r.contacts},
+        {"seeds_per_contact", static_cast<double>(r.seeds) / n},
+        {"evaluations_per_contact", static_cast<double>(r.evaluations) / n},
+        {"depth_raised_um_mean", static_cast<double>(r.raised_um) / n},
+        {"screen_squares_per_contact", static_cast<double>(r.screen_squares) / n},
+        {"screen_leaves_per_contact", static_cast<double>(r.screen_leaves) / n},
+        {"screen_found_deeper", r.screen_found},
+        {"screen_raised_um_sum", r.screen_raised_um},
+        {"screen_truncated", r.screen_truncated}};
   }
   s["grazing_dropped_contacts"] = pipeline->step_faults().grazing_dropped;
   s["unreachable_pairs_dropped"] = pipeline->step_faults().unreachable_pairs;

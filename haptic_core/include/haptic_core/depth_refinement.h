@@ -34,6 +34,7 @@
 // PipelineOptions::refine_depth turns it on (the default); off is the grid alone, the reference
 // (DESIGN.md §4 says why it is not the default yet).
 
+#include <array>
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -87,6 +88,26 @@ struct DepthRefinementOptions {
   /// same reason (fig75 and fig77, 60 poses: the same errors, 7 % less texture time on fig75;
   /// "translations_from_subgrid").
   bool subgrid_translations = false;
+  /// The conservative screen of the base sample (off by default: on the frontier it raises δ0
+  /// little at several times the texture stage's time; docs/frontier/issue32/sixth_stop): after
+  /// the seeds, a branch and
+  /// bound over the window finds every place where b − a can exceed the best found by more than
+  /// screen_tolerance_m. A square's bound is the largest environment height over it minus the
+  /// smallest tool height: per coarse triangle its linear height at the square's corners plus
+  /// the texture's level-0 range under it (HeightField::RangeOver) times the normal factor's
+  /// range, within the window's box. Squares whose bound cannot beat the best are dropped, the
+  /// others split in four down to about two texels, where the local search runs. Off: the seeds
+  /// alone (a level-0 peak under a cell whose filtered value is not among the deepest is missed).
+  bool conservative_screen = false;
+  /// How far above the best a dropped square's bound may reach (m). ≥ 0.
+  double screen_tolerance_m = 1e-6;
+  /// The screen looks for b − a above the larger of the best found and this (m): 0 looks for
+  /// overlap only (a contact whose models do not overlap keeps the seeds' local maximum, which
+  /// only the operator's contact model reads, as an onset distance). Finite.
+  double screen_floor_m = 0.0;
+  /// Most leaf squares the screen searches per contact; past it the screen stops and counts a
+  /// truncation (DepthRefinementCounters::screen_truncated). ≥ 1.
+  int max_screen_leaves = 4096;
 
   /// Throws std::invalid_argument naming a value out of range.
   void Validate() const;
@@ -98,6 +119,14 @@ struct DepthRefinementCounters {
   std::uint64_t seeds = 0;        ///< Base seeds searched.
   std::uint64_t evaluations = 0;  ///< Point evaluations of b − a (each two PatchHeightAt-like).
   std::uint64_t raised_um = 0;    ///< Σ (refined δ0 − sampled δ0), µm (rounded per contact).
+  /// The conservative screen: squares bounded, leaves searched, contacts where it found a
+  /// deeper point than the seeds (and Σ of how much deeper, µm), contacts it stopped at
+  /// max_screen_leaves.
+  std::uint64_t screen_squares = 0;
+  std::uint64_t screen_leaves = 0;
+  std::uint64_t screen_found = 0;
+  std::uint64_t screen_raised_um = 0;
+  std::uint64_t screen_truncated = 0;
 };
 
 /// Refines the linearizations of a texture stage's batch to the finest texture level (see the
@@ -173,8 +202,24 @@ class DepthRefiner {
   Seed Search(std::span<const Projected> tool, const Box& box, double s, double t, double half_side,
               int subsamples, double step, double floor_m, double shift_s, double shift_t) noexcept;
 
+  // The conservative screen (DepthRefinementOptions::conservative_screen): the bound of one
+  // side's triangles `list` (indices into `all`) over a square (the environment's largest height,
+  // −∞ without one; the tool's smallest, +∞ without one), the squares' branch and bound from
+  // `depth` with the triangles of the square in env_screen_[depth] / tool_screen_[depth].
+  double SideBound(std::span<const Projected> all, std::span<const int> list,
+                   const HeightField& texture, bool environment, const Box& square) const noexcept;
+  double ScreenThreshold(double best_m) const noexcept;
+  void ScreenSquare(const Box& square, int depth, Seed& best, int& leaves) noexcept;
+  void Screen(Seed& best) noexcept;
+
   DepthRefinementOptions options_;
   DepthRefinementCounters counters_;
+  // Per depth of the screen's quadtree: the triangles (indices into env_all_ / tool_all_)
+  // overlapping the square at that depth.
+  static constexpr int kMaxScreenDepth = 24;
+  std::array<std::vector<int>, kMaxScreenDepth + 1> env_screen_, tool_screen_;
+  std::uint64_t squares_ = 0;
+  bool truncated_ = false;
   TriangleBoxTreeCache trees_;
   std::vector<int> env_list_, tool_list_;
   std::vector<double> vertex_scratch_;

@@ -62,6 +62,16 @@ class HeightField {
   /// power of two, or the box is not finite. 0 for an empty field. Never allocates.
   float MaxAbsOver(int level, float u0, float v0, float u1, float v1) const noexcept;
 
+  /// Bounds (m) of Sample(0, u, v) over the box u ∈ [u0, u1], v ∈ [v0, v1]: `lo` ≤ every level-0
+  /// bilinear sample in the box ≤ `hi` (a bilinear sample lies between its four taps). Read from
+  /// pyramids of the level-0 minima and maxima under each texel (built with the mip chain) at the
+  /// first level where the taps span at most four texels each way, the box widened by 1e-3 texel
+  /// and the bounds by 1e-6 relative for the float arithmetic: the conservative screen of the
+  /// depth refinement (issue 32: a maximum is bounded by maxima, not by the mip's means). Falls
+  /// back to the whole level 0's [min_height, max_height] (widened the same) where MaxAbsOver
+  /// falls back to its whole bound. {0, 0} for an empty field. Never allocates.
+  void RangeOver(float u0, float v0, float u1, float v1, float& lo, float& hi) const noexcept;
+
   /// What a texture of level `level`'s size would lose (issue 32: "model only what a scene
   /// needs"): over every level-0 texel centre, |level-0 height − Sample(level, ·)| (m), its
   /// largest value and its RMS. A surface with nothing finer than level k's texels loses little
@@ -82,6 +92,8 @@ class HeightField {
   /// Level k ≥ 1's largest |h| of level 0 under each texel (max_abs_[k − 1], the mip's sizes);
   /// empty unless both sizes are powers of two.
   std::vector<std::vector<float>> max_abs_;
+  /// Level k ≥ 1's smallest and largest level-0 h under each texel (RangeOver), as max_abs_.
+  std::vector<std::vector<float>> min_, max_;
   bool wrap_u_ = false;
   bool wrap_v_ = false;
   float min_height_ = 0.0f;

@@ -85,6 +85,8 @@ struct FrontierSetting {
   /// PipelineOptions::depth_refinement.subgrid_translations ("translations_from_subgrid" turns
   /// it on).
   bool subgrid_translations = false;
+  /// PipelineOptions::depth_refinement.conservative_screen ("screen" turns it on).
+  bool conservative_screen = false;
 };
 
 /// The sweep: the default setting (grid 50, 1024² textures, the seed's coarse counts, CPU) first,
