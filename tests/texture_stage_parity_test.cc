@@ -109,6 +109,16 @@ Contact RandomContact(const HapticModel& tool, const HapticModel& env, std::mt19
   return c;
 }
 
+// The texture stage's query of a random contact on `env` (the stiffness of the refinement tests).
+ContactQuery QueryFor(const HapticModel& env, const Contact& c) {
+  ContactQuery q;
+  q.environment = &env;
+  q.X_WO = c.X_WO;
+  q.window = c.window;
+  q.stiffness_n_per_m = 8000.0;
+  return q;
+}
+
 double Ulp(float x) {
   return std::nextafter(std::abs(x), std::numeric_limits<float>::infinity()) - std::abs(x);
 }
@@ -404,11 +414,7 @@ TEST(TextureStageParity, RefinedDepthLiesBetweenTheGridAndTheFullResolutionTruth
       GroundTruthDepthSolver truth(surface(tool_which), surface(which));
       for (int trial = 0; trial < 4; ++trial) {
         const Contact c = RandomContact(tool, env, rng, 50);
-        ContactQuery q;
-        q.environment = &env;
-        q.X_WO = c.X_WO;
-        q.window = c.window;
-        q.stiffness_n_per_m = 8000.0;
+        const ContactQuery q = QueryFor(env, c);
         std::array<DepthSample, kGradientSamples> samples{};
         ContactLinearization lin;
         ASSERT_TRUE(backend.LinearizeBatch(tool, c.X_WT, {&q, 1}, {&lin, 1}, samples));
@@ -471,11 +477,7 @@ TEST(TextureStageParity, ScreenedDepthIsNeverBelowAnyLevelZeroPointOfTheWindow) 
       for (std::size_t f = 0; f < tool_all.size(); ++f) tool_all[f] = static_cast<int>(f);
       for (int trial = 0; trial < 4; ++trial) {
         const Contact c = RandomContact(tool, env, rng, 50);
-        ContactQuery q;
-        q.environment = &env;
-        q.X_WO = c.X_WO;
-        q.window = c.window;
-        q.stiffness_n_per_m = 8000.0;
+        const ContactQuery q = QueryFor(env, c);
         std::array<DepthSample, kGradientSamples> samples{};
         ContactLinearization lin;
         ASSERT_TRUE(backend.LinearizeBatch(tool, c.X_WT, {&q, 1}, {&lin, 1}, samples));

@@ -131,6 +131,11 @@ int CellAt(const ContactWindow& w, double s, double t) noexcept {
   return j * n + i;
 }
 
+// Whether a projected triangle's box on the window plane meets [s0, s1] × [t0, t1] (m).
+bool Overlaps(const Projected& P, double s0, double s1, double t0, double t1) noexcept {
+  return !(P.x1 < s0 || P.x0 > s1 || P.y1 < t0 || P.y0 > t1);
+}
+
 // The barycentric coordinates of (s, t) on a projected triangle (outside it too).
 void Barycentric(const Projected& P, double s, double t, double& b0, double& b1,
                  double& b2) noexcept {
@@ -214,8 +219,10 @@ DepthRefiner::DepthRefiner(const DepthRefinementOptions& options, std::size_t ma
   env_all_.reserve(max_triangles);
   tool_all_.reserve(max_triangles);
   tool_pose_all_.reserve(max_triangles);
-  for (auto& v : env_screen_) v.reserve(max_triangles);
-  for (auto& v : tool_screen_) v.reserve(max_triangles);
+  if (options_.conservative_screen) {
+    for (auto& v : env_screen_) v.reserve(max_triangles);
+    for (auto& v : tool_screen_) v.reserve(max_triangles);
+  }
 }
 
 void DepthRefiner::ProjectAll(const HapticModel& model, const RigidTransform& X, PatchSide side,
@@ -424,14 +431,13 @@ void DepthRefiner::ScreenSquare(const Box& square, int depth, Seed& best, int& l
   const std::vector<int>& env = env_screen_[static_cast<std::size_t>(depth)];
   const std::vector<int>& tool = tool_screen_[static_cast<std::size_t>(depth)];
   const double side = square.s1 - square.s0;
+  // The finer level-0 texel over the square's triangles (TexelOfGathered's rule).
   double texel = kInf;
-  for (const int i : env) {
-    const Projected& P = env_all_[static_cast<std::size_t>(i)];
-    if (P.textured && P.texel_m > 0.0) texel = std::min(texel, P.texel_m);
-  }
-  for (const int i : tool) {
-    const Projected& P = tool_all_[static_cast<std::size_t>(i)];
-    if (P.textured && P.texel_m > 0.0) texel = std::min(texel, P.texel_m);
+  for (const auto& [all, list] : {std::pair{&env_all_, &env}, std::pair{&tool_all_, &tool}}) {
+    for (const int i : *list) {
+      const Projected& P = (*all)[static_cast<std::size_t>(i)];
+      if (P.textured && P.texel_m > 0.0) texel = std::min(texel, P.texel_m);
+    }
   }
   if (!std::isfinite(texel)) texel = 0.25 * window_.cell_size_m();
   if (side <= 2.0 * texel || depth == kMaxScreenDepth) {
@@ -444,18 +450,16 @@ void DepthRefiner::ScreenSquare(const Box& square, int depth, Seed& best, int& l
     ++leaves;
     const double half = 0.5 * side;
     const Box box{square.s0 - half, square.s1 + half, square.t0 - half, square.t1 + half};
-    env_local_.clear();
-    for (const int i : env) {
-      const Projected& P = env_all_[static_cast<std::size_t>(i)];
-      if (P.x1 < box.s0 || P.x0 > box.s1 || P.y1 < box.t0 || P.y0 > box.t1) continue;
-      env_local_.push_back(P);
-    }
-    tool_local_.clear();
-    for (const int i : tool) {
-      const Projected& P = tool_all_[static_cast<std::size_t>(i)];
-      if (P.x1 < box.s0 || P.x0 > box.s1 || P.y1 < box.t0 || P.y0 > box.t1) continue;
-      tool_local_.push_back(P);
-    }
+    const auto gather = [&](const std::vector<Projected>& all, const std::vector<int>& list,
+                            std::vector<Projected>& out) {
+      out.clear();
+      for (const int i : list) {
+        const Projected& P = all[static_cast<std::size_t>(i)];
+        if (Overlaps(P, box.s0, box.s1, box.t0, box.t1)) out.push_back(P);
+      }
+    };
+    gather(env_all_, env, env_local_);
+    gather(tool_all_, tool, tool_local_);
     const Seed found =
         Search(tool_local_, box, 0.5 * (square.s0 + square.s1), 0.5 * (square.t0 + square.t1), half,
                2, 0.25 * side, options_.search_floor_texels * texel, 0.0, 0.0);
@@ -481,20 +485,15 @@ void DepthRefiner::ScreenSquare(const Box& square, int depth, Seed& best, int& l
     // NaN and −∞ (a side missing) never pass.
     if (!(bound[static_cast<std::size_t>(c)] > ScreenThreshold(best.depth_m))) continue;
     const Box& b = child[static_cast<std::size_t>(c)];
-    std::vector<int>& env_next = env_screen_[static_cast<std::size_t>(depth + 1)];
-    std::vector<int>& tool_next = tool_screen_[static_cast<std::size_t>(depth + 1)];
-    env_next.clear();
-    tool_next.clear();
-    for (const int i : env) {
-      const Projected& P = env_all_[static_cast<std::size_t>(i)];
-      if (P.x1 < b.s0 || P.x0 > b.s1 || P.y1 < b.t0 || P.y0 > b.t1) continue;
-      env_next.push_back(i);
-    }
-    for (const int i : tool) {
-      const Projected& P = tool_all_[static_cast<std::size_t>(i)];
-      if (P.x1 < b.s0 || P.x0 > b.s1 || P.y1 < b.t0 || P.y0 > b.t1) continue;
-      tool_next.push_back(i);
-    }
+    const auto keep = [&](const std::vector<Projected>& all, const std::vector<int>& list,
+                          std::vector<int>& out) {
+      out.clear();
+      for (const int i : list) {
+        if (Overlaps(all[static_cast<std::size_t>(i)], b.s0, b.s1, b.t0, b.t1)) out.push_back(i);
+      }
+    };
+    keep(env_all_, env, env_screen_[static_cast<std::size_t>(depth + 1)]);
+    keep(tool_all_, tool, tool_screen_[static_cast<std::size_t>(depth + 1)]);
     ScreenSquare(b, depth + 1, best, leaves);
     if (truncated_) return;
   }
@@ -717,30 +716,26 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
     for (int k = 1; k < kGradientSamples; ++k) {
       DepthSample& sample = samples[static_cast<std::size_t>(k)];
       if (sample.cell < 0) continue;
-      Seed found;
-      if (k <= 4) {
-        // ±h_x along u (1, 2) and v (3, 4): the base pose shifted.
-        const double sign = (k % 2 == 1) ? 1.0 : -1.0;
-        found = refine_cell(sample.cell, tool_all_, k <= 2 ? sign * big.h_x : 0.0,
-                            k <= 2 ? 0.0 : sign * big.h_x, options_.subgrid_translations);
-      } else {
+      if (k > 4) {
         ProjectAll(tool, poses[static_cast<std::size_t>(k)], PatchSide::kTool, tool_list_,
                    tool_pose_all_);
-        found = refine_cell(sample.cell, tool_pose_all_, 0.0, 0.0, options_.subgrid_rotations);
       }
+      // The sample refined from one cell: ±h_x along u (1, 2) and v (3, 4) are the base pose
+      // shifted, the rotations (5…10) the tool at their pose.
+      const auto refine_from = [&](int cell_index) {
+        if (k > 4) {
+          return refine_cell(cell_index, tool_pose_all_, 0.0, 0.0, options_.subgrid_rotations);
+        }
+        const double sign = (k % 2 == 1) ? 1.0 : -1.0;
+        return refine_cell(cell_index, tool_all_, k <= 2 ? sign * big.h_x : 0.0,
+                           k <= 2 ? 0.0 : sign * big.h_x, options_.subgrid_translations);
+      };
+      Seed found = refine_from(sample.cell);
       if (screened_deeper) {
         // The screen found the maximum away from the seeds: the displaced sample is searched
         // from there too (its own deepest cell may hold the seeds' lower peak).
-        const int at = CellAt(w, deepest.s, deepest.t);
-        Seed also;
-        if (k <= 4) {
-          const double sign = (k % 2 == 1) ? 1.0 : -1.0;
-          also = refine_cell(at, tool_all_, k <= 2 ? sign * big.h_x : 0.0,
-                             k <= 2 ? 0.0 : sign * big.h_x, options_.subgrid_translations);
-        } else {
-          also = refine_cell(at, tool_pose_all_, 0.0, 0.0, options_.subgrid_rotations);
-        }
-        found = also.depth_m > found.depth_m ? also : found;
+        const Seed also = refine_from(CellAt(w, deepest.s, deepest.t));
+        if (also.depth_m > found.depth_m) found = also;
       }
       if (found.depth_m > -kInf) sample.depth_m = found.depth_m;
     }

@@ -46,27 +46,16 @@ HeightField::HeightField(int width, int height, std::vector<float> texels, bool 
     }
     levels_.push_back(std::move(dst));
   }
-  // The pyramid of largest |h| (MaxAbsOver), over the mip's footprints: with power-of-two sizes,
-  // texel c of a level lies under texel c / 2 of the next.
+  // The pyramids of the smallest and largest level-0 h (RangeOver; MaxAbsOver reads
+  // max(|min|, |max|) from them), over the mip's footprints: with power-of-two sizes, texel c of
+  // a level lies under texel c / 2 of the next.
   const auto power_of_two = [](int n) { return (n & (n - 1)) == 0; };
   if (power_of_two(width) && power_of_two(height)) {
     for (std::size_t k = 1; k < levels_.size(); ++k) {
       const HeightFieldLevel& src = levels_[k - 1];
       const HeightFieldLevel& dst = levels_[k];
-      std::vector<float> m(dst.texels.size());
-      for (int y = 0; y < dst.height; ++y) {
-        const int y0 = std::min(2 * y, src.height - 1), y1 = std::min(2 * y + 1, src.height - 1);
-        for (int x = 0; x < dst.width; ++x) {
-          const int x0 = std::min(2 * x, src.width - 1), x1 = std::min(2 * x + 1, src.width - 1);
-          const auto at = [&](int xx, int yy) {
-            const auto i = static_cast<std::size_t>(yy) * src.width + xx;
-            return k == 1 ? std::abs(src.texels[i]) : max_abs_.back()[i];
-          };
-          m[static_cast<std::size_t>(y) * dst.width + x] =
-              std::max({at(x0, y0), at(x1, y0), at(x0, y1), at(x1, y1)});
-        }
-      }
-      max_abs_.push_back(std::move(m));
+      const std::vector<float>& below_lo = k == 1 ? src.texels : min_.back();
+      const std::vector<float>& below_hi = k == 1 ? src.texels : max_.back();
       std::vector<float> lo(dst.texels.size()), hi(dst.texels.size());
       for (int y = 0; y < dst.height; ++y) {
         const int y0 = std::min(2 * y, src.height - 1), y1 = std::min(2 * y + 1, src.height - 1);
@@ -75,8 +64,6 @@ HeightField::HeightField(int width, int height, std::vector<float> texels, bool 
           const auto i = [&](int xx, int yy) {
             return static_cast<std::size_t>(yy) * src.width + xx;
           };
-          const std::vector<float>& below_lo = k == 1 ? src.texels : min_.back();
-          const std::vector<float>& below_hi = k == 1 ? src.texels : max_.back();
           const auto o = static_cast<std::size_t>(y) * dst.width + x;
           lo[o] = std::min(
               {below_lo[i(x0, y0)], below_lo[i(x1, y0)], below_lo[i(x0, y1)], below_lo[i(x1, y1)]});
@@ -89,6 +76,23 @@ HeightField::HeightField(int width, int height, std::vector<float> texels, bool 
     }
   }
 }
+
+namespace {
+
+// The texels [t0, t1] along one axis of n texels that Sample's bilinear taps (floor(u·n − 0.5)
+// and the next) reach for coordinates in [a, b], the box widened by `widen` texels each way and
+// the range by `pad` whole texels; clamped to the axis, false where a periodic axis's taps would
+// cross its edge.
+bool Taps(float a, float b, int n, bool wrap, double widen, int pad, int& t0, int& t1) {
+  const double l = std::floor(std::min(a, b) * static_cast<double>(n) - 0.5 - widen) - pad;
+  const double h = std::floor(std::max(a, b) * static_cast<double>(n) - 0.5 + widen) + 1.0 + pad;
+  if (wrap && (l < 0.0 || h > n - 1.0)) return false;
+  t0 = static_cast<int>(std::clamp(l, 0.0, n - 1.0));
+  t1 = static_cast<int>(std::clamp(h, 0.0, n - 1.0));
+  return true;
+}
+
+}  // namespace
 
 void HeightField::RangeOver(float u0, float v0, float u1, float v1, float& lo,
                             float& hi) const noexcept {
@@ -109,19 +113,11 @@ void HeightField::RangeOver(float u0, float v0, float u1, float v1, float& lo,
     return;
   }
   const HeightFieldLevel& L = levels_[0];
-  // The taps of Sample at level 0: floor(u·W − 0.5) and the next texel, over the box widened by
-  // 1e-3 texel for Sample's float arithmetic (a float u's rounding moves u·W by ~1e-4 texel at
-  // 2048 texels).
-  const auto taps = [](float a, float b, int n, bool wrap, int& t0, int& t1) {
-    const double l = std::floor(std::min(a, b) * static_cast<double>(n) - 0.5 - 1e-3);
-    const double h = std::floor(std::max(a, b) * static_cast<double>(n) - 0.5 + 1e-3) + 1.0;
-    if (wrap && (l < 0.0 || h > n - 1.0)) return false;
-    t0 = static_cast<int>(std::clamp(l, 0.0, n - 1.0));
-    t1 = static_cast<int>(std::clamp(h, 0.0, n - 1.0));
-    return true;
-  };
+  // The taps of Sample at level 0 over the box widened by 1e-3 texel for Sample's float
+  // arithmetic (a float u's rounding moves u·W by ~1e-4 texel at 2048 texels).
   int x0, x1, y0, y1;
-  if (!taps(u0, u1, L.width, wrap_u_, x0, x1) || !taps(v0, v1, L.height, wrap_v_, y0, y1)) {
+  if (!Taps(u0, u1, L.width, wrap_u_, 1e-3, 0, x0, x1) ||
+      !Taps(v0, v1, L.height, wrap_v_, 1e-3, 0, y0, y1)) {
     widen(lo, hi);
     return;
   }
@@ -147,25 +143,17 @@ float HeightField::MaxAbsOver(int level, float u0, float v0, float u1, float v1)
   if (levels_.empty()) return 0.0f;
   constexpr float kRounding = 1.0f + 1e-6f;
   const float whole = std::max(std::abs(min_height_), std::abs(max_height_)) * kRounding;
-  if (max_abs_.size() + 1 != levels_.size() ||
+  if (max_.size() + 1 != levels_.size() ||
       !(std::isfinite(u0) && std::isfinite(u1) && std::isfinite(v0) && std::isfinite(v1))) {
     return whole;
   }
   level = std::clamp(level, 0, num_levels() - 1);
   const HeightFieldLevel& L = levels_[static_cast<std::size_t>(level)];
-  // The taps of Sample: floor(u·W − 0.5) and the next texel, widened by a texel each way for
-  // the float arithmetic; clamped axes clamp, periodic ones must stay inside.
-  const auto taps = [](float a, float b, int n, bool wrap, int& lo, int& hi) {
-    const double l = std::floor(std::min(a, b) * static_cast<double>(n) - 0.5) - 1.0;
-    const double h = std::floor(std::max(a, b) * static_cast<double>(n) - 0.5) + 2.0;
-    if (wrap && (l < 0.0 || h > n - 1.0)) return false;
-    lo = static_cast<int>(std::clamp(l, 0.0, n - 1.0));
-    hi = static_cast<int>(std::clamp(h, 0.0, n - 1.0));
-    return true;
-  };
+  // The taps of Sample widened by a texel each way for the float arithmetic.
   int x0, x1, y0, y1;
   if (std::max(std::abs(u0), std::abs(u1)) > 1e6f || std::max(std::abs(v0), std::abs(v1)) > 1e6f ||
-      !taps(u0, u1, L.width, wrap_u_, x0, x1) || !taps(v0, v1, L.height, wrap_v_, y0, y1)) {
+      !Taps(u0, u1, L.width, wrap_u_, 0.0, 1, x0, x1) ||
+      !Taps(v0, v1, L.height, wrap_v_, 0.0, 1, y0, y1)) {
     return whole;
   }
   // The first level up from `level` where the taps lie under at most 2×2 texels.
@@ -179,8 +167,10 @@ float HeightField::MaxAbsOver(int level, float u0, float v0, float u1, float v1)
   for (int y = y0 >> s; y <= std::min(y1 >> s, K.height - 1); ++y) {
     for (int x = x0 >> s; x <= std::min(x1 >> s, K.width - 1); ++x) {
       const auto i = static_cast<std::size_t>(y) * K.width + x;
-      m = std::max(m,
-                   k == 0 ? std::abs(K.texels[i]) : max_abs_[static_cast<std::size_t>(k - 1)][i]);
+      const float a = k == 0 ? std::abs(K.texels[i])
+                             : std::max(std::abs(min_[static_cast<std::size_t>(k - 1)][i]),
+                                        std::abs(max_[static_cast<std::size_t>(k - 1)][i]));
+      m = std::max(m, a);
     }
   }
   return m * kRounding;

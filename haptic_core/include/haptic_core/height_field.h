@@ -52,8 +52,9 @@ class HeightField {
   inline float SampleAt(int level, const HeightFieldLevel& L, float u, float v) const noexcept;
 
   /// An upper bound (m) of |Sample(level, u, v)| over the box u ∈ [u0, u1], v ∈ [v0, v1]: the
-  /// largest level-0 |h| under the texels the box's bilinear taps reach, read from a pyramid of
-  /// such maxima (built with the mip chain, same footprints) at the first level where the taps
+  /// largest level-0 |h| under the texels the box's bilinear taps reach, max(|min|, |max|) of the
+  /// level-0 minima and maxima pyramids (built with the mip chain, same footprints; RangeOver's)
+  /// at the first level where the taps
   /// span at most two texels each way, enlarged by 1e-6 relative for the mip averages' and the
   /// bilinear sample's float rounding. Local where the whole texture's largest |h| is not: on the
   /// seed's hammer 16 mm for the whole texture, 1.6 mm at its 99th percentile (issue 15: the
@@ -64,7 +65,7 @@ class HeightField {
 
   /// Bounds (m) of Sample(0, u, v) over the box u ∈ [u0, u1], v ∈ [v0, v1]: `lo` ≤ every level-0
   /// bilinear sample in the box ≤ `hi` (a bilinear sample lies between its four taps). Read from
-  /// pyramids of the level-0 minima and maxima under each texel (built with the mip chain) at the
+  /// the pyramids of the level-0 minima and maxima under each texel at the
   /// first level where the taps span at most four texels each way, the box widened by 1e-3 texel
   /// and the bounds by 1e-6 relative for the float arithmetic: the conservative screen of the
   /// depth refinement (issue 32: a maximum is bounded by maxima, not by the mip's means). Falls
@@ -89,10 +90,9 @@ class HeightField {
 
  private:
   std::vector<HeightFieldLevel> levels_;
-  /// Level k ≥ 1's largest |h| of level 0 under each texel (max_abs_[k − 1], the mip's sizes);
-  /// empty unless both sizes are powers of two.
-  std::vector<std::vector<float>> max_abs_;
-  /// Level k ≥ 1's smallest and largest level-0 h under each texel (RangeOver), as max_abs_.
+  /// Level k ≥ 1's smallest and largest level-0 h under each texel (min_[k − 1], max_[k − 1],
+  /// the mip's sizes; RangeOver, and MaxAbsOver as max(|min|, |max|)); empty unless both sizes
+  /// are powers of two.
   std::vector<std::vector<float>> min_, max_;
   bool wrap_u_ = false;
   bool wrap_v_ = false;
