@@ -264,6 +264,49 @@ TEST(DepthRefinement, AContactWithoutOverlapIsLeftUnchanged) {
   EXPECT_EQ(refiner.counters().contacts, 0u);
 }
 
+// DepthRefinementOptions::secant_at_kinks_m. The curved tool centred near a trough of the
+// sinusoid (x0 ≈ λ/2) touches the two neighbouring crests' flanks: δ(x0) is the larger of two
+// smooth maxima, a V with its vertex at λ/2, and the samples one cell away lie above the
+// tangent. There even a vanishing tolerance makes the x derivative the samples' secant, which is
+// what the cell-secant gradient computes from the same refined samples (two routes). Near a
+// crest (x0 small) δ is smooth and concave, the samples lie below the tangent, and nothing
+// changes; a tolerance no sample can exceed changes nothing either.
+TEST(DepthRefinement, SecantAtKinksTakesTheCellSecantOnlyAcrossAVertex) {
+  const HapticModel tool = CurvedTool();
+  const HapticModel env = EnvironmentBox(Sinusoid, 1024);
+  DepthRefinementOptions texel, never, always, cell;
+  texel.texel_scale_gradient = never.texel_scale_gradient = always.texel_scale_gradient = true;
+  never.secant_at_kinks_m = 1.0;
+  always.secant_at_kinks_m = 1e-15;
+  for (const double x0 : {0.5 * kLambda + 0.1e-3, 0.15e-3}) {
+    double at = 0.0;
+    const double z0 = ClosedFormDepth(x0, 0.0, at) - 10e-6;  // δ = 10 µm
+    const RigidTransform X_WT = CurvedToolPose(x0, z0);
+    const Refined t = LinearizeAndRefine(tool, X_WT, env, 25, texel);
+    const Refined n = LinearizeAndRefine(tool, X_WT, env, 25, never);
+    const Refined a = LinearizeAndRefine(tool, X_WT, env, 25, always);
+    const Refined c = LinearizeAndRefine(tool, X_WT, env, 25, cell);
+    ASSERT_NEAR(t.refined.depth_m, 10e-6, 0.3e-6) << x0;
+    EXPECT_EQ(n.refined.gradient.d_translation_W, t.refined.gradient.d_translation_W) << x0;
+    EXPECT_EQ(n.refined.gradient.d_rotation_W, t.refined.gradient.d_rotation_W) << x0;
+    const double tangent = t.refined.gradient.d_translation_W.x;
+    const double secant = c.refined.gradient.d_translation_W.x;
+    if (x0 > 0.25 * kLambda) {
+      // Across the vertex: the tangent is one flank's slope, the secant between the two.
+      EXPECT_NEAR(a.refined.gradient.d_translation_W.x, secant, 1e-9);
+      EXPECT_GT(std::abs(tangent - secant), 0.2 * std::abs(tangent));
+    } else {
+      EXPECT_EQ(a.refined.gradient.d_translation_W.x, tangent);
+    }
+    EXPECT_DOUBLE_EQ(a.refined.gradient.d_translation_W.z, -1.0);
+    std::printf("x0 %.2f mm: dδ/dx tangent %+.4f, cell secant %+.4f, with secant_at_kinks %+.4f\n",
+                x0 * 1e3, tangent, secant, a.refined.gradient.d_translation_W.x);
+  }
+  DepthRefinementOptions bad;
+  bad.secant_at_kinks_m = -1e-6;
+  EXPECT_THROW(DepthRefiner{bad}, std::invalid_argument);
+}
+
 TEST(DepthRefinement, OptionsOutOfRangeAreRefused) {
   DepthRefinementOptions o;
   o.gradient_step_texels = 0.0;

@@ -193,6 +193,10 @@ void DepthRefinementOptions::Validate() const {
     throw std::invalid_argument("depth refinement: search_floor_texels must be > 0, got " +
                                 std::to_string(search_floor_texels));
   }
+  if (!(secant_at_kinks_m >= 0.0) || !std::isfinite(secant_at_kinks_m)) {
+    throw std::invalid_argument("depth refinement: secant_at_kinks_m must be >= 0, got " +
+                                std::to_string(secant_at_kinks_m));
+  }
   if (!(screen_tolerance_m >= 0.0) || !std::isfinite(screen_tolerance_m)) {
     throw std::invalid_argument("depth refinement: screen_tolerance_m must be >= 0, got " +
                                 std::to_string(screen_tolerance_m));
@@ -749,6 +753,33 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
   samples[0] = {deepest.depth_m, CellAt(w, deepest.s, deepest.t)};
   lin.depth_m = deepest.depth_m;
   lin.point_W = point_W;
+  if (options_.texel_scale_gradient && options_.refine_rendered_samples &&
+      options_.secant_at_kinks_m > 0.0) {
+    // Per axis, the tangent against the refined samples one cell away: a kink within the cell
+    // takes the secant (DepthRefinementOptions::secant_at_kinks_m).
+    const glm::dvec3 axes[3] = {w.axis_u_W, w.axis_v_W, w.normal_W};
+    const auto across = [&](int first_sample, double step, const glm::dvec3& axis,
+                            glm::dvec3& derivative) {
+      const double plus = samples[static_cast<std::size_t>(first_sample)].depth_m;
+      const double minus = samples[static_cast<std::size_t>(first_sample + 1)].depth_m;
+      if (samples[static_cast<std::size_t>(first_sample)].cell < 0 ||
+          samples[static_cast<std::size_t>(first_sample + 1)].cell < 0 || !(plus > -kInf) ||
+          !(minus > -kInf)) {
+        return;
+      }
+      const double slope = glm::dot(derivative, axis);
+      const double above = std::max(plus - (deepest.depth_m + slope * step),
+                                    minus - (deepest.depth_m - slope * step));
+      if (above > options_.secant_at_kinks_m) {
+        derivative += ((plus - minus) / (2.0 * step) - slope) * axis;
+      }
+    };
+    across(1, big.h_x, axes[0], lin.gradient.d_translation_W);
+    across(3, big.h_x, axes[1], lin.gradient.d_translation_W);
+    for (int a = 0; a < 3; ++a) {
+      across(5 + 2 * a, big.h_theta, axes[a], lin.gradient.d_rotation_W);
+    }
+  }
   if (!options_.texel_scale_gradient) {
     LinearizationFaults faults;
     lin.gradient = AssembleLinearization(w, samples, lin.stiffness_n_per_m, faults).gradient;

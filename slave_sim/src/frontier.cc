@@ -202,16 +202,23 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     // Issue 32: stage 5b's variants (the default refines).
     const FrontierSetting& refined = base;
     // The refined maximum's gradient at texel-scale steps instead of the refined samples'
-    // one-cell secants: 2 texels (the option's default), and 1, 4 and 8.
+    // one-cell secants: 2 texels (the option's default), and 1, 4, 8 and 16; at 2 texels with
+    // the secant where a kink lies within a cell (1, 5 and 20 µm above the tangent).
     FrontierSetting texel_gradient = refined;
     texel_gradient.name = "refined_texel_gradient";
     texel_gradient.texel_scale_gradient = true;
     s.push_back(texel_gradient);
-    for (const double texels : {1.0, 4.0, 8.0}) {
+    for (const double texels : {1.0, 4.0, 8.0, 16.0}) {
       FrontierSetting step = texel_gradient;
       step.name = "refined_texel_gradient_" + std::to_string(static_cast<int>(texels)) + "_texels";
       step.gradient_step_texels = texels;
       s.push_back(step);
+    }
+    for (const int um : {1, 5, 20}) {
+      FrontierSetting kinks = texel_gradient;
+      kinks.name = "refined_texel_gradient_secant_at_kinks_" + std::to_string(um) + "um";
+      kinks.secant_at_kinks_m = um * 1e-6;
+      s.push_back(kinks);
     }
     FrontierSetting subgrid = refined;
     subgrid.name = "refined_rotations_from_subgrid";
@@ -513,6 +520,7 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.kink_planes_own_slope = st.kink_planes_own_slope;
   options.refine_depth = st.refine_depth;
   options.depth_refinement.texel_scale_gradient = st.texel_scale_gradient;
+  options.depth_refinement.secant_at_kinks_m = st.secant_at_kinks_m;
   options.depth_refinement.subgrid_rotations = st.subgrid_rotations;
   options.depth_refinement.subgrid_translations = st.subgrid_translations;
   options.depth_refinement.conservative_screen = st.conservative_screen;

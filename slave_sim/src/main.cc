@@ -115,6 +115,27 @@ int main(int argc, char** argv) {
                "texture's full resolution around the grid's deepest cells (stage 5b,\n"
                "docs/DESIGN.md §4), which the grid's mip-filtered samples read tens of\n"
                "micrometres low; faster by 7-26 % of the step (docs/frontier/issue32)");
+  bool texel_scale_gradient = false;
+  app.add_flag("--texel-scale-gradient", texel_scale_gradient,
+               "each refined contact's gradient as the refined maximum's derivative at\n"
+               "--gradient-step-texels instead of the secant over one grid cell: closer to the\n"
+               "full-resolution truth pose by pose, but where a face lies between two ridges'\n"
+               "flanks it gives one flank's slope and the tool chatters in the closed loop\n"
+               "(docs/frontier/issue32/seventh_stop)");
+  double gradient_step_texels = ht::DepthRefinementOptions{}.gradient_step_texels;
+  app.add_option("--gradient-step-texels", gradient_step_texels,
+                 "with --texel-scale-gradient: its translation step, in level-0 texels of the\n"
+                 "finer surface at the contact point (the rotation step is this over half the\n"
+                 "window)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  double secant_at_kinks_um = ht::DepthRefinementOptions{}.secant_at_kinks_m * 1e6;
+  app.add_option("--secant-at-kinks-um", secant_at_kinks_um,
+                 "with --texel-scale-gradient, per axis: where the samples one grid cell\n"
+                 "away lie above the texel-scale tangent by more than this (a kink: another\n"
+                 "maximum takes over within the cell), the cell's secant instead; 0 = off")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   double speculative_lead_ms = 50.0;
   app.add_option("--speculative-lead-ms", speculative_lead_ms,
                  "speculative contacts: a separated pair beyond the textures' reach is modelled\n"
@@ -309,6 +330,9 @@ int main(int argc, char** argv) {
     config.pipeline.grazing_guard = !no_grazing_guard;
     config.pipeline.kink_planes = !no_kink_planes;
     config.pipeline.refine_depth = !no_refine_depth;
+    config.pipeline.depth_refinement.texel_scale_gradient = texel_scale_gradient;
+    config.pipeline.depth_refinement.gradient_step_texels = gradient_step_texels;
+    config.pipeline.depth_refinement.secant_at_kinks_m = secant_at_kinks_um * 1e-6;
     config.pipeline.speculative_lead_s = speculative_lead_ms * 1e-3;
     if (config.pipeline.rotation_gradient != ht::RotationGradient::kRenderedSamples) {
       if (config.pd_backend == ht::PdBackendChoice::kGpu) {

@@ -30,10 +30,15 @@
 //    level-0 texel at the contact point (m), h_θ = h_x/(W/2) (rad), each displaced pose climbed
 //    from the base's seeds within reach of the deepest and from the point the displacement
 //    carries it to: the derivative itself (tests/depth_refinement_test.cc: a sinusoid under a
-//    paraboloid, where the cell secant at N = 16 even has the wrong sign), but on the frontier
-//    no closer to the pipeline truth on the seed scenes (docs/frontier/issue32). ∂δ/∂x_n = −1.
-// PipelineOptions::refine_depth turns it on (the default); off is the grid alone, the reference
-// (DESIGN.md §4 says why it is not the default yet).
+//    paraboloid, where the cell secant at N = 16 even has the wrong sign). δ is a maximum, so
+//    where another maximum takes over within a cell (a face between two ridges' flanks: a V)
+//    the derivative is one arm's slope and the secant their mean. Posed against the pipeline
+//    truth the derivative is closer, but the operator's model is linear until the next one, and
+//    one arm's slope pushes the tool across the vertex, the next model's back: in the closed loop
+//    the tool chatters (docs/frontier/issue32/seventh_stop), so the secant stays the default.
+//    ∂δ/∂x_n = −1.
+// PipelineOptions::refine_depth turns stage 5b on (the default); off is the grid alone, the
+// reference path.
 
 #include <array>
 #include <cstdint>
@@ -80,6 +85,13 @@ struct DepthRefinementOptions {
   /// The gradient from the refined maximum at texel-scale steps (above); off: the grid's
   /// one-cell secants (h_x = W/N, h_θ = h_x/(W/2)) of the refined rendered samples.
   bool texel_scale_gradient = false;
+  /// With texel_scale_gradient: per axis (translation along u and v, rotation about u, v and n),
+  /// where the refined rendered samples one cell away (±h_x, ±h_θ) lie above the texel-scale
+  /// tangent's prediction by more than this (m) on either side (a kink within the cell), that
+  /// axis's derivative becomes the samples' secant (δ(+h) − δ(−h))/2h. 0 turns it off. ≥ 0;
+  /// needs refine_rendered_samples. (On the seed's ridged scenes nearly every contact has a kink
+  /// within a cell, so this is the secant's error: docs/frontier/issue32/seventh_stop.)
+  double secant_at_kinks_m = 0.0;
   /// The rendered rotation samples (±h_θ about u, v and n) searched from a sub-grid of their
   /// deepest cell's square as the base and the translations are; off (the default): a pattern
   /// search from the cell's centre alone, fewer evaluations at the same error on the frontier

@@ -77,9 +77,12 @@ struct FrontierSetting {
   bool refine_depth = true;
   /// PipelineOptions::depth_refinement.gradient_step_texels (0: the default).
   double gradient_step_texels = 0.0;
-  /// PipelineOptions::depth_refinement.texel_scale_gradient ("texel_scale_gradient" and
-  /// "texel_gradient_K_texels" turn it on).
+  /// PipelineOptions::depth_refinement.texel_scale_gradient ("refined_texel_gradient" and
+  /// "refined_texel_gradient_*" turn it on).
   bool texel_scale_gradient = false;
+  /// PipelineOptions::depth_refinement.secant_at_kinks_m
+  /// ("refined_texel_gradient_secant_at_kinks_Kum" sets it to K µm).
+  double secant_at_kinks_m = 0.0;
   /// PipelineOptions::depth_refinement.subgrid_rotations ("rotations_from_subgrid" turns it on).
   bool subgrid_rotations = false;
   /// PipelineOptions::depth_refinement.subgrid_translations ("translations_from_subgrid" turns
