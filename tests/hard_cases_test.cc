@@ -90,6 +90,51 @@ std::string Fmt(const char* fmt, double a, double b = 0, double c = 0, double d 
   return buf;
 }
 
+// Stage 5a (PipelineOptions::split_windows_at_separated_overlap): a box whose bottom carries two
+// 40 µm bumps 20 mm apart, resting 20 µm above a flat slab, touches it at two places. One
+// window holds both (the coarse models' contact is one face), so one contact pushes with their
+// common δ; split, each bump is a contact of its own with that δ, at its own place: twice the
+// force, the same depth, and no torque about the box's centre (the bumps are symmetric).
+TEST(HardCases, SeparatedContactsOnOneFaceSplitIntoOneWindowEach) {
+  const auto bumps = [](double x, double y) {
+    const auto g = [&](double cx) {
+      return 40e-6 * std::exp(-((x - cx) * (x - cx) + y * y) / (2.0 * 1.5e-3 * 1.5e-3));
+    };
+    return g(-10e-3) + g(10e-3);
+  };
+  const HapticScene scene = BoxOnSlab(std::make_shared<const HapticModel>(
+      MakeTexturedBox({0.02, 0.02, 0.01}, bumps, 512, 0.1, "two_bumps")));
+  const RigidTransform X_WT = At({0.0, 0.0, 0.01 + 20e-6});
+  const auto step = [&](bool split) {
+    PipelineOptions options;
+    options.split_windows_at_separated_overlap = split;
+    HapticTexturePipeline pipeline(scene, options);
+    StepTimings t;
+    return pipeline.Step(X_WT, 1, t);
+  };
+  const ContactModel whole = step(false);
+  const ContactModel split = step(true);
+  ASSERT_EQ(whole.num_contacts, 1);
+  ASSERT_EQ(split.num_contacts, 2);
+  const double delta = whole.contacts[0].depth_m;
+  EXPECT_NEAR(delta, 20e-6, 1.5e-6);
+  double x_sum = 0.0;
+  for (int i = 0; i < split.num_contacts; ++i) {
+    const ContactLinearization& c = split.contacts[static_cast<std::size_t>(i)];
+    EXPECT_NEAR(c.depth_m, delta, 1e-6);
+    EXPECT_NEAR(std::abs(c.point_W.x), 10e-3, 1e-3);
+    x_sum += c.point_W.x;
+  }
+  EXPECT_NEAR(x_sum, 0.0, 1e-3);  // one on each bump
+  const Wrench& F_whole = whole.F_T_W_at_q0;
+  const Wrench& F_split = split.F_T_W_at_q0;
+  EXPECT_NEAR(F_split.force.z, 2.0 * F_whole.force.z, 0.1 * F_whole.force.z);
+  EXPECT_NEAR(F_split.torque.y, 0.0, 0.05 * F_split.force.z * 10e-3);
+  Report("separated contacts on one face",
+         Fmt("one window: %.3f N; split: %.3f N in two contacts (delta %.1f um)", F_whole.force.z,
+             F_split.force.z, delta * 1e6));
+}
+
 TEST(HardCases, CoplanarRestingContact) {
   // Every cell of the window has the same δ: many equal maxima.
   const HapticScene scene = BoxOnSlab(FlatBox({0.02, 0.02, 0.01}));

@@ -347,3 +347,56 @@ TEST(PenetrationDepth, LaneScanDepthIsTheOnePassDefinitionWithTiesInfinitiesAndS
 
 }  // namespace
 }  // namespace ht
+
+namespace ht {
+namespace {
+
+// TexturePenetrationSolver::OverlapRegions (stage 5a, PipelineOptions::
+// split_windows_at_separated_overlap): three 40 µm Gaussian bumps (σ 1 mm) under a flat tool at
+// 20 µm, so each overlaps within about 1.2 mm of its top. Two lie 5 mm apart (2.6 mm of gap)
+// and one 16 mm from them: linked at 5 mm the overlap is two regions, the lone bump's box around
+// its own top; at 20 mm one region; at 1 mm three. Each region's depth is its bump's b − a at the cells (≤ 20 µm,
+// within the filtered grid's loss of a few µm).
+TEST(OverlapRegions, SeparatedBumpsAreSeparateRegionsAtTheClusteringDistance) {
+  const auto bump = [](double x, double y, double cx, double cy) {
+    return 40e-6 * std::exp(-((x - cx) * (x - cx) + (y - cy) * (y - cy)) / (2.0 * 1e-6));
+  };
+  const HapticModel env = testing::EnvironmentBox(
+      [&](double x, double y) {
+        return bump(x, y, -8e-3, 0.0) + bump(x, y, 8e-3, 0.0) + bump(x, y, 8e-3, 5e-3);
+      },
+      1024);
+  const HapticModel tool = testing::ToolBox([](double, double) { return 0.0; }, 512);
+  const RigidTransform X_WT = testing::ToolPose(0.0, 0.0, 20e-6);
+  const ContactWindow w = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.036, 90);
+  TexturePenetrationSolver solver(128);
+  std::array<OverlapRegion, 8> out{};
+  ASSERT_EQ(solver.OverlapRegions(tool, X_WT, env, testing::EnvironmentPose(), w, 5e-3, out), 2);
+  const auto centre_u = [&](const OverlapRegion& g) {
+    return (0.5 * (g.i0 + g.i1 + 1)) * w.cell_size_m() - 0.5 * w.extent_m;
+  };
+  // The pair (two tops) and the lone bump; u is world x here.
+  ASSERT_NEAR(std::abs(glm::dot(w.axis_u_W, glm::dvec3(1, 0, 0))), 1.0, 1e-12);
+  const double u_sign = glm::dot(w.axis_u_W, glm::dvec3(1, 0, 0));
+  int lone = -1;
+  for (int r = 0; r < 2; ++r) {
+    const double x = u_sign * centre_u(out[static_cast<std::size_t>(r)]);
+    if (x < 0.0) lone = r;
+    EXPECT_NEAR(std::abs(x), 8e-3, 0.5e-3) << r;
+    EXPECT_LE(out[static_cast<std::size_t>(r)].depth_m, 20e-6 + 1e-7) << r;
+    EXPECT_GT(out[static_cast<std::size_t>(r)].depth_m, 14e-6) << r;
+  }
+  ASSERT_GE(lone, 0);
+  EXPECT_GT(out[static_cast<std::size_t>(1 - lone)].cells,
+            out[static_cast<std::size_t>(lone)].cells);
+  EXPECT_GE(out[0].depth_m, out[1].depth_m);  // deepest first
+  EXPECT_EQ(solver.OverlapRegions(tool, X_WT, env, testing::EnvironmentPose(), w, 20e-3, out), 1);
+  EXPECT_EQ(solver.OverlapRegions(tool, X_WT, env, testing::EnvironmentPose(), w, 1e-3, out), 3);
+  // Lifted clear of the bumps: no overlap, no region.
+  EXPECT_EQ(solver.OverlapRegions(tool, testing::ToolPose(0.0, 0.0, 60e-6), env,
+                                  testing::EnvironmentPose(), w, 5e-3, out),
+            0);
+}
+
+}  // namespace
+}  // namespace ht

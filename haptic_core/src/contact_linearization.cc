@@ -182,6 +182,7 @@ TexturePenetrationSolver::TexturePenetrationSolver(int max_resolution, int max_t
   first_triangles_.reserve(64);
   env_max_.Reserve(max_resolution);
   tool_bounds_.Reserve(static_cast<size_t>(max_triangles));
+  region_parent_.reserve(cells);
 }
 
 void TexturePenetrationSolver::RenderEnvironment(const HapticModel& environment,
@@ -220,6 +221,92 @@ DepthSample TexturePenetrationSolver::Depth(const HapticModel& tool, const Rigid
   SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool, w.cell_size_m(), tool_triangles_, 0.0,
                        &vertex_scratch_, trees_.For(tool));
   return EvaluateTool(tool, X_WT, w);
+}
+
+int TexturePenetrationSolver::OverlapRegions(const HapticModel& tool, const RigidTransform& X_WT,
+                                             const HapticModel& environment,
+                                             const RigidTransform& X_WO, const ContactWindow& w,
+                                             double link_m, std::span<OverlapRegion> out,
+                                             TriangleSubset environment_triangles,
+                                             TriangleSubset tool_triangles) noexcept {
+  const int n = w.resolution;
+  const auto cells = static_cast<std::size_t>(n) * static_cast<std::size_t>(n);
+  if (n > max_resolution_ || !(link_m >= 0.0)) return 0;
+  RenderEnvironment(environment, X_WO, w, environment_triangles);
+  SelectPatchTrianglesIn(tool_triangles, tool, X_WT, w, PatchSide::kTool, w.cell_size_m(),
+                         tool_triangles_, 0.0, &vertex_scratch_, trees_.For(tool));
+  EvaluateTool(tool, X_WT, w);
+  // Union-find over the overlapping cells; each links to the overlapping cells after it within
+  // link_m (a half disc of offsets), so every pair is tested once.
+  region_parent_.assign(cells, -1);
+  for (std::size_t c = 0; c < cells; ++c) {
+    if (env_heights_[c] - tool_heights_[c] > 0.0f) region_parent_[c] = static_cast<int>(c);
+  }
+  const auto find = [&](int c) {
+    while (region_parent_[static_cast<std::size_t>(c)] != c) {
+      const int up = region_parent_[static_cast<std::size_t>(c)];
+      region_parent_[static_cast<std::size_t>(c)] =
+          region_parent_[static_cast<std::size_t>(up)];  // path halving
+      c = up;
+    }
+    return c;
+  };
+  const double reach = link_m / w.cell_size_m();
+  const int r = static_cast<int>(std::floor(reach));
+  for (int j = 0; j < n; ++j) {
+    for (int i = 0; i < n; ++i) {
+      const int c = j * n + i;
+      if (region_parent_[static_cast<std::size_t>(c)] < 0) continue;
+      for (int dj = 0; dj <= r && j + dj < n; ++dj) {
+        for (int di = (dj == 0 ? 1 : -r); di <= r; ++di) {
+          if (i + di < 0 || i + di >= n || di * di + dj * dj > reach * reach) continue;
+          const int d = (j + dj) * n + (i + di);
+          if (region_parent_[static_cast<std::size_t>(d)] < 0) continue;
+          const int a = find(c), b = find(d);
+          if (a != b) region_parent_[static_cast<std::size_t>(std::max(a, b))] = std::min(a, b);
+        }
+      }
+    }
+  }
+  // Regions in order of their roots, then sorted deepest first; only out.size() kept.
+  int count = 0;
+  const auto keep = out.size();
+  for (std::size_t k = 0; k < keep; ++k) out[k] = OverlapRegion{};
+  // Roots are the smallest cell of their region: one pass numbers them, a second fills boxes.
+  // The regions' slots: a root's slot is found by a scan of the kept ones (few regions).
+  std::array<int, 64> roots{};
+  for (std::size_t c = 0; c < cells; ++c) {
+    if (region_parent_[c] < 0) continue;
+    const int root = find(static_cast<int>(c));
+    int slot = -1;
+    for (int k = 0; k < std::min(count, 64); ++k) {
+      if (roots[static_cast<std::size_t>(k)] == root) slot = k;
+    }
+    if (slot < 0) {
+      if (count < 64) roots[static_cast<std::size_t>(count)] = root;
+      slot = count++;
+    }
+    if (slot >= 64) continue;
+    const int i = static_cast<int>(c % static_cast<std::size_t>(n));
+    const int j = static_cast<int>(c / static_cast<std::size_t>(n));
+    const double depth = static_cast<double>(env_heights_[c]) - tool_heights_[c];
+    // Collected in slot order into `out` while it has room; the rest are only counted.
+    if (static_cast<std::size_t>(slot) >= keep) continue;
+    OverlapRegion& g = out[static_cast<std::size_t>(slot)];
+    if (g.cells == 0) {
+      g = {i, i, j, j, 0, depth};
+    }
+    g.i0 = std::min(g.i0, i);
+    g.i1 = std::max(g.i1, i);
+    g.j0 = std::min(g.j0, j);
+    g.j1 = std::max(g.j1, j);
+    g.cells += 1;
+    g.depth_m = std::max(g.depth_m, depth);
+  }
+  const auto kept = std::min<std::size_t>(keep, static_cast<std::size_t>(count));
+  std::sort(out.begin(), out.begin() + static_cast<std::ptrdiff_t>(kept),
+            [](const OverlapRegion& a, const OverlapRegion& b) { return a.depth_m > b.depth_m; });
+  return count;
 }
 
 std::array<RigidTransform, kGradientSamples> GradientSamplePoses(const RigidTransform& X_WT,

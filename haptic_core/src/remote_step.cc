@@ -75,6 +75,10 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
       // Stage 5b's buffers (about 10 MB at 8192 triangles) only where it runs.
       refiner_(options.depth_refinement, options.refine_depth ? 8192 : 0) {
   options_.Validate();
+  if (options_.split_windows_at_separated_overlap) {
+    region_solver_ = std::make_unique<TexturePenetrationSolver>(
+        std::max(128, options_.grid_resolution), 4096, TextureStagePath::kFast);
+  }
   reachable_pairs_.resize(static_cast<std::size_t>(clusterer_.max_pairs()));
   pair_bounds_.resize(static_cast<std::size_t>(clusterer_.max_pairs()));
   candidate_triangles_.resize(static_cast<std::size_t>(2 * clusterer_.max_triangles()));
@@ -151,6 +155,8 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
                          options_.grid_resolution, last_queries_, step_faults_.bad_windows);
   // Stage 5: texture penetration depth and its gradient, linearized, for the whole batch.
   LinearizeContacts(X_WT, last_num_queries_);
+  // Stage 5a: a window whose overlap is in separated regions becomes one window per region.
+  if (region_solver_) last_num_queries_ = SplitSeparatedOverlap(X_WT, last_num_queries_);
   // Stage 5b: δ refined to the finest texture level, its gradient at texel scale (issue 32).
   if (options_.refine_depth) {
     for (int i = 0; i < last_num_queries_; ++i) {
@@ -398,6 +404,111 @@ std::unique_ptr<PenetrationDepthBackend> HapticTexturePipeline::MakeCpuBackend()
   return std::make_unique<CpuPenetrationDepthBackend>(
       options_.max_window_resolution(), TextureStagePath::kFast, options_.texture_threads,
       options_.rotation_gradient);
+}
+
+int HapticTexturePipeline::MergeRegionsInOneWindow(int count, double cell_m) noexcept {
+  int m = std::min(count, static_cast<int>(regions_.size()));
+  if (count > m) return count;  // more than kept: not split anyway
+  // A region's window: the square of its box's larger side plus the margins, about its centre
+  // (cells along u and v, doubled to stay integral).
+  const double margin_cells = options_.split_window_margin_m / cell_m;
+  const auto half = [&](const OverlapRegion& g) {
+    return 0.5 * std::max(g.i1 - g.i0 + 1, g.j1 - g.j0 + 1) + margin_cells;
+  };
+  bool merged = true;
+  while (merged && m >= 2) {
+    merged = false;
+    for (int p = 0; p < m && !merged; ++p) {
+      for (int q = 0; q < m && !merged; ++q) {
+        if (p == q) continue;
+        OverlapRegion& a = regions_[static_cast<std::size_t>(p)];
+        const OverlapRegion& b = regions_[static_cast<std::size_t>(q)];
+        const double ds = 0.5 * ((b.i0 + b.i1) - (a.i0 + a.i1));
+        const double dt = 0.5 * ((b.j0 + b.j1) - (a.j0 + a.j1));
+        if (std::abs(ds) > half(a) || std::abs(dt) > half(a)) continue;
+        a.i0 = std::min(a.i0, b.i0);
+        a.i1 = std::max(a.i1, b.i1);
+        a.j0 = std::min(a.j0, b.j0);
+        a.j1 = std::max(a.j1, b.j1);
+        a.cells += b.cells;
+        a.depth_m = std::max(a.depth_m, b.depth_m);
+        regions_[static_cast<std::size_t>(q)] = regions_[static_cast<std::size_t>(m - 1)];
+        --m;
+        merged = true;
+      }
+    }
+  }
+  return m;
+}
+
+int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int n) {
+  last_split_windows_ = 0;
+  // The GPU backend takes one window size per batch (LinearizeContacts); the split windows are
+  // sized to their regions, so this stage runs with the CPU backend only.
+  if (backend_->name() == "gpu") return n;
+  const HapticModel& tool = *scene_.tool;
+  int num_new = 0;
+  int kept = 0;
+  for (int i = 0; i < n; ++i) {
+    const ContactQuery& q = last_queries_[static_cast<std::size_t>(i)];
+    int regions = 0;
+    if (std::isfinite(last_results_[static_cast<std::size_t>(i)].depth_m) &&
+        last_results_[static_cast<std::size_t>(i)].depth_m > 0.0) {
+      regions = region_solver_->OverlapRegions(
+          tool, X_WT, *q.environment, q.X_WO, q.window,
+          options_.split_link_m > 0.0 ? options_.split_link_m : options_.clustering_distance_m,
+          regions_, q.environment_triangles, q.tool_triangles);
+    }
+    regions = MergeRegionsInOneWindow(regions, q.window.cell_size_m());
+    const int kept_after = kept + (n - i - 1);  // the windows still to keep, at least
+    const bool split = regions >= 2 && regions <= static_cast<int>(regions_.size()) &&
+                       kept_after + num_new + regions <= options_.max_contacts;
+    if (!split) {
+      // Kept: moved down over the split ones, with its results and samples.
+      if (kept != i) {
+        last_queries_[static_cast<std::size_t>(kept)] = q;
+        last_results_[static_cast<std::size_t>(kept)] = last_results_[static_cast<std::size_t>(i)];
+        std::copy_n(last_samples_.begin() + static_cast<std::ptrdiff_t>(i) * kGradientSamples,
+                    kGradientSamples,
+                    last_samples_.begin() + static_cast<std::ptrdiff_t>(kept) * kGradientSamples);
+      }
+      ++kept;
+      continue;
+    }
+    const ContactWindow& w = q.window;
+    const double cell = w.cell_size_m();
+    for (int r = 0; r < regions; ++r) {
+      const OverlapRegion& g = regions_[static_cast<std::size_t>(r)];
+      // The region's box on the window plane (m from the window's centre), its margin, and the
+      // parent's cell size.
+      const double s_mid = (0.5 * (g.i0 + g.i1 + 1)) * cell - 0.5 * w.extent_m;
+      const double t_mid = (0.5 * (g.j0 + g.j1 + 1)) * cell - 0.5 * w.extent_m;
+      const double side =
+          std::max(g.i1 - g.i0 + 1, g.j1 - g.j0 + 1) * cell + 2.0 * options_.split_window_margin_m;
+      const int resolution = std::clamp(static_cast<int>(std::ceil(side / cell)), 8, w.resolution);
+      const auto sub = ContactWindow::TryMake(w.center_W + s_mid * w.axis_u_W + t_mid * w.axis_v_W,
+                                              w.normal_W, resolution * cell, resolution);
+      if (!sub) continue;
+      ContactQuery& nq = split_queries_[static_cast<std::size_t>(num_new++)];
+      nq = q;
+      nq.window = *sub;
+    }
+    ++last_split_windows_;
+  }
+  if (num_new == 0) return n;
+  std::copy_n(split_queries_.begin(), num_new, last_queries_.begin() + kept);
+  const std::size_t per = kGradientSamples;
+  const bool ok = backend_->LinearizeBatch(
+      tool, X_WT, {last_queries_.data() + kept, static_cast<std::size_t>(num_new)},
+      {last_results_.data() + kept, static_cast<std::size_t>(num_new)},
+      {last_samples_.data() + static_cast<std::size_t>(kept) * per,
+       static_cast<std::size_t>(num_new) * per});
+  if (!ok) {
+    for (int k = kept; k < kept + num_new; ++k) {
+      last_results_[static_cast<std::size_t>(k)].depth_m = -std::numeric_limits<double>::infinity();
+    }
+  }
+  return kept + num_new;
 }
 
 void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n) {

@@ -220,6 +220,23 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
       kinks.secant_at_kinks_m = um * 1e-6;
       s.push_back(kinks);
     }
+    // Stage 5a: a window per separated region of its overlap, with either gradient.
+    FrontierSetting split = refined;
+    split.name = "split_windows_at_separated_overlap";
+    split.split_windows_at_separated_overlap = true;
+    s.push_back(split);
+    FrontierSetting split_texel = split;
+    split_texel.name = "split_windows_texel_gradient";
+    split_texel.texel_scale_gradient = true;
+    s.push_back(split_texel);
+    for (const int mm : {7, 10}) {
+      for (const bool texel : {false, true}) {
+        FrontierSetting linked = texel ? split_texel : split;
+        linked.name = linked.name + "_link" + std::to_string(mm) + "mm";
+        linked.split_link_m = mm * 1e-3;
+        s.push_back(linked);
+      }
+    }
     FrontierSetting subgrid = refined;
     subgrid.name = "refined_rotations_from_subgrid";
     subgrid.subgrid_rotations = true;
@@ -521,6 +538,8 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.refine_depth = st.refine_depth;
   options.depth_refinement.texel_scale_gradient = st.texel_scale_gradient;
   options.depth_refinement.secant_at_kinks_m = st.secant_at_kinks_m;
+  options.split_windows_at_separated_overlap = st.split_windows_at_separated_overlap;
+  options.split_link_m = st.split_link_m;
   options.depth_refinement.subgrid_rotations = st.subgrid_rotations;
   options.depth_refinement.subgrid_translations = st.subgrid_translations;
   options.depth_refinement.conservative_screen = st.conservative_screen;

@@ -136,6 +136,15 @@ int main(int argc, char** argv) {
                  "maximum takes over within the cell), the cell's secant instead; 0 = off")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  double split_windows_link_mm = 0.0;
+  app.add_option(
+         "--split-windows-link-mm", split_windows_link_mm,
+         "stage 5a, off by default (0): a contact window whose overlap falls into regions\n"
+         "farther apart than this (mm) becomes one window per region, each pushing with its\n"
+         "own depth, as contact clustering would group the textured contact\n"
+         "(CPU texture stage; docs/frontier/issue32/seventh_stop)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   double speculative_lead_ms = 50.0;
   app.add_option("--speculative-lead-ms", speculative_lead_ms,
                  "speculative contacts: a separated pair beyond the textures' reach is modelled\n"
@@ -333,6 +342,8 @@ int main(int argc, char** argv) {
     config.pipeline.depth_refinement.texel_scale_gradient = texel_scale_gradient;
     config.pipeline.depth_refinement.gradient_step_texels = gradient_step_texels;
     config.pipeline.depth_refinement.secant_at_kinks_m = secant_at_kinks_um * 1e-6;
+    config.pipeline.split_windows_at_separated_overlap = split_windows_link_mm > 0.0;
+    config.pipeline.split_link_m = split_windows_link_mm * 1e-3;
     config.pipeline.speculative_lead_s = speculative_lead_ms * 1e-3;
     if (config.pipeline.rotation_gradient != ht::RotationGradient::kRenderedSamples) {
       if (config.pd_backend == ht::PdBackendChoice::kGpu) {

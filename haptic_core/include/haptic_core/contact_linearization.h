@@ -189,6 +189,15 @@ enum class TextureStagePath {
 /// environment render and the tool at the 11 poses of GradientSamplePoses (base and ±h along u, v
 /// and about u, v, n; see TextureStagePath for how many renders that takes); the derivative along
 /// n is −1 exactly [L]. Step sizes: h_x = W/N, h_θ = (W/N)/(W/2) [R].
+/// One region of a window's overlap (TexturePenetrationSolver::OverlapRegions): the cells where
+/// b − a > 0 at the base pose, linked when closer than a distance; its bounding box in cells
+/// (i along u, j along v, inclusive), its cell count and its largest b − a (m).
+struct OverlapRegion {
+  int i0 = 0, i1 = -1, j0 = 0, j1 = -1;
+  int cells = 0;
+  double depth_m = 0.0;
+};
+
 class TexturePenetrationSolver {
  public:
   /// Preallocates buffers for windows of up to `max_resolution`² cells and models of up to
@@ -249,6 +258,19 @@ class TexturePenetrationSolver {
                     const HapticModel& environment, const RigidTransform& X_WO,
                     const ContactWindow& window) noexcept;
 
+  /// The overlap of `tool` at X_WT and `environment` at X_WO on `window` (rendered afresh, the
+  /// triangle subsets as Linearize takes them) split into regions: the cells where b − a > 0,
+  /// two of them in one region when their centres are closer than `link_m` (m; single linkage,
+  /// the granularity of contact clustering, contact_clustering.h). Writes the first out.size()
+  /// regions in cell order, sorted deepest first, and returns how many there are (0: no
+  /// overlap). Reserved at
+  /// construction for windows up to the solver's max_resolution; never allocates there.
+  int OverlapRegions(const HapticModel& tool, const RigidTransform& X_WT,
+                     const HapticModel& environment, const RigidTransform& X_WO,
+                     const ContactWindow& window, double link_m, std::span<OverlapRegion> out,
+                     TriangleSubset environment_triangles = TriangleSubset::All(),
+                     TriangleSubset tool_triangles = TriangleSubset::All()) noexcept;
+
   const LinearizationFaults& faults() const noexcept { return faults_; }
 
  private:
@@ -296,6 +318,8 @@ class TexturePenetrationSolver {
   std::array<std::vector<float>, 6> rotation_heights_;
   std::vector<int> env_triangles_;
   std::vector<int> tool_triangles_;
+  /// OverlapRegions' union-find over cells (parent per cell, −1 where no overlap).
+  std::vector<int> region_parent_;
   LinearizationFaults faults_;
 };
 

@@ -135,6 +135,20 @@ struct PipelineOptions {
   bool refine_depth = true;
   /// How stage 5b refines (steps, sub-samples, search floor).
   DepthRefinementOptions depth_refinement;
+  /// Stage 5a (issue 32, seventh stop; off by default, an approximation on the frontier): a
+  /// window whose overlap at the tool's pose falls into regions farther apart than
+  /// clustering_distance_m (TexturePenetrationSolver::OverlapRegions: the base pose rendered
+  /// again on the CPU) becomes one window per region, each the region's box plus
+  /// split_window_margin_m a side at the parent's cell size, linearized afresh: the contact
+  /// clustering of the textured contact rather than of the coarse models', so that two
+  /// separated patches of one face each push with their own δ. Regions whose centre lies in
+  /// another's window are one (as the pipeline truth merges patches, contact_patch_truth.h). A
+  /// window whose regions would take the step past max_contacts stays whole. CPU backend only (the
+  /// GPU backend takes one window size per batch).
+  bool split_windows_at_separated_overlap = false;
+  double split_window_margin_m = 1e-3;
+  /// The regions' linking distance (m); 0: clustering_distance_m.
+  double split_link_m = 0.0;
   /// Speculative contacts (a lead time, s; 0 = off): a separated leaf pair farther apart than
   /// its local texture reach is kept (not dropped by drop_unreachable_pairs) when the tool's
   /// twist given to Step closes it within this time, i.e. when
@@ -288,6 +302,15 @@ class HapticTexturePipeline {
   /// batch per size); when that
   /// backend fails, switches to the CPU backend for good and recomputes the batch.
   void LinearizeContacts(const RigidTransform& X_WT, int n);
+  /// Stage 5a (PipelineOptions::split_windows_at_separated_overlap): replaces each linearized
+  /// window of last_queries_[0, n) whose overlap is in separated regions by one window per region
+  /// (at the end of the batch) and linearizes those; returns the new count.
+  int SplitSeparatedOverlap(const RigidTransform& X_WT, int n);
+  /// Stage 5a: merges regions_[0, count) where one's centre lies inside another's window (the
+  /// square of its box's larger side plus the margins; the pipeline truth's rule for patches that
+  /// measure one interpenetration twice, contact_patch_truth.h step 3b), until none does; returns
+  /// how many are left (count itself when it exceeds regions_).
+  int MergeRegionsInOneWindow(int count, double cell_m) noexcept;
   /// PipelineOptions::whole_model_region_windows: moves `point_W` to the centre of the contact
   /// region of the tool and touchable `k`, both whole convex models, on the window axes of
   /// `normal_W`, and sets `extent_m` to the region's larger side plus 2·texture_margin_m; leaves
@@ -343,6 +366,13 @@ class HapticTexturePipeline {
   std::array<ContactQuery, kMaxContacts> size_queries_{};
   std::array<ContactLinearization, kMaxContacts> size_results_{};
   std::array<int, kMaxContacts> size_index_{};
+  /// Stage 5a (split_windows_at_separated_overlap): the solver that renders a window's overlap
+  /// regions (null when off), its regions, and the windows replacing a split one.
+  std::unique_ptr<TexturePenetrationSolver> region_solver_;
+  std::array<OverlapRegion, 8> regions_{};
+  std::array<ContactQuery, kMaxContacts> split_queries_{};
+  /// Windows split in the last step (for reports).
+  int last_split_windows_ = 0;
   int last_num_queries_ = 0;
   StepFaults step_faults_;
   std::int64_t backend_failures_ = 0;

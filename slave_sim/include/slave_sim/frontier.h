@@ -83,6 +83,11 @@ struct FrontierSetting {
   /// PipelineOptions::depth_refinement.secant_at_kinks_m
   /// ("refined_texel_gradient_secant_at_kinks_Kum" sets it to K µm).
   double secant_at_kinks_m = 0.0;
+  /// PipelineOptions::split_windows_at_separated_overlap ("split_windows_at_separated_overlap"
+  /// turns it on).
+  bool split_windows_at_separated_overlap = false;
+  /// PipelineOptions::split_link_m (0: the default).
+  double split_link_m = 0.0;
   /// PipelineOptions::depth_refinement.subgrid_rotations ("rotations_from_subgrid" turns it on).
   bool subgrid_rotations = false;
   /// PipelineOptions::depth_refinement.subgrid_translations ("translations_from_subgrid" turns
