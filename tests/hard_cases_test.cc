@@ -12,6 +12,7 @@
 #include <limits>
 #include <memory>
 #include <numbers>
+#include <stdexcept>
 #include <string>
 
 #include "haptic_core/contact_model.h"
@@ -130,6 +131,10 @@ TEST(HardCases, SeparatedContactsOnOneFaceSplitIntoOneWindowEach) {
   const Wrench& F_split = split.F_T_W_at_q0;
   EXPECT_NEAR(F_split.force.z, 2.0 * F_whole.force.z, 0.1 * F_whole.force.z);
   EXPECT_NEAR(F_split.torque.y, 0.0, 0.05 * F_split.force.z * 10e-3);
+  PipelineOptions bad;
+  bad.split_windows_at_separated_overlap = true;
+  bad.split_link_m = -1e-3;
+  EXPECT_THROW(HapticTexturePipeline(scene, bad), std::invalid_argument);
   Report("separated contacts on one face",
          Fmt("one window: %.3f N; split: %.3f N in two contacts (delta %.1f um)", F_whole.force.z,
              F_split.force.z, delta * 1e6));

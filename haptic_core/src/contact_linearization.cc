@@ -268,12 +268,12 @@ int TexturePenetrationSolver::OverlapRegions(const HapticModel& tool, const Rigi
       }
     }
   }
-  // Regions in order of their roots, then sorted deepest first; only out.size() kept.
+  // Regions in order of their roots (the first cell of each), then the kept ones sorted deepest
+  // first.
   int count = 0;
   const auto keep = out.size();
   for (std::size_t k = 0; k < keep; ++k) out[k] = OverlapRegion{};
-  // Roots are the smallest cell of their region: one pass numbers them, a second fills boxes.
-  // The regions' slots: a root's slot is found by a scan of the kept ones (few regions).
+  // A root's slot is found by a scan of the roots met so far (few regions; at most 64 counted).
   std::array<int, 64> roots{};
   for (std::size_t c = 0; c < cells; ++c) {
     if (region_parent_[c] < 0) continue;
@@ -283,10 +283,10 @@ int TexturePenetrationSolver::OverlapRegions(const HapticModel& tool, const Rigi
       if (roots[static_cast<std::size_t>(k)] == root) slot = k;
     }
     if (slot < 0) {
-      if (count < 64) roots[static_cast<std::size_t>(count)] = root;
+      if (count == static_cast<int>(roots.size())) continue;  // past 64: not counted further
+      roots[static_cast<std::size_t>(count)] = root;
       slot = count++;
     }
-    if (slot >= 64) continue;
     const int i = static_cast<int>(c % static_cast<std::size_t>(n));
     const int j = static_cast<int>(c / static_cast<std::size_t>(n));
     const double depth = static_cast<double>(env_heights_[c]) - tool_heights_[c];

@@ -46,6 +46,12 @@ void PipelineOptions::Validate() const {
     throw std::invalid_argument("max speculative margin must be >= 0, got " +
                                 std::to_string(max_speculative_margin_m));
   }
+  if (!(split_window_margin_m >= 0.0) || !std::isfinite(split_window_margin_m) ||
+      !(split_link_m >= 0.0) || !std::isfinite(split_link_m)) {
+    throw std::invalid_argument("split window margin and link must be finite and >= 0, got " +
+                                std::to_string(split_window_margin_m) + " and " +
+                                std::to_string(split_link_m));
+  }
   if (max_contacts < 1 || max_contacts > kMaxContacts) {
     throw std::invalid_argument("max contacts must be in [1, " + std::to_string(kMaxContacts) +
                                 "], got " + std::to_string(max_contacts));

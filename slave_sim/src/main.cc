@@ -127,14 +127,14 @@ int main(int argc, char** argv) {
                  "with --texel-scale-gradient: its translation step, in level-0 texels of the\n"
                  "finer surface at the contact point (the rotation step is this over half the\n"
                  "window)")
-      ->check(CLI::PositiveNumber)
+      ->check(CLI::Range(0.01, 1000.0))
       ->capture_default_str();
   double secant_at_kinks_um = ht::DepthRefinementOptions{}.secant_at_kinks_m * 1e6;
   app.add_option("--secant-at-kinks-um", secant_at_kinks_um,
                  "with --texel-scale-gradient, per axis: where the samples one grid cell\n"
                  "away lie above the texel-scale tangent by more than this (a kink: another\n"
                  "maximum takes over within the cell), the cell's secant instead; 0 = off")
-      ->check(CLI::NonNegativeNumber)
+      ->check(CLI::Range(0.0, 1000.0))
       ->capture_default_str();
   double split_windows_link_mm = 0.0;
   app.add_option(
@@ -143,7 +143,7 @@ int main(int argc, char** argv) {
          "farther apart than this (mm) becomes one window per region, each pushing with its\n"
          "own depth, as contact clustering would group the textured contact\n"
          "(CPU texture stage; docs/frontier/issue32/seventh_stop)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(CLI::Range(0.0, 1000.0))
       ->capture_default_str();
   double speculative_lead_ms = 50.0;
   app.add_option("--speculative-lead-ms", speculative_lead_ms,
@@ -355,6 +355,17 @@ int main(int argc, char** argv) {
       if (config.pd_backend == ht::PdBackendChoice::kAuto) {
         std::fprintf(stderr, "slave_sim: --rotation-gradient %s: using the CPU texture stage\n",
                      rotation_gradient.c_str());
+        config.pd_backend = ht::PdBackendChoice::kCpu;
+      }
+    }
+    if (config.pipeline.split_windows_at_separated_overlap) {
+      if (config.pd_backend == ht::PdBackendChoice::kGpu) {
+        throw std::invalid_argument(
+            "--split-windows-link-mm is an option of the CPU texture stage; the GPU backend takes "
+            "one window size per batch (use --pd-backend cpu, or drop the option)");
+      }
+      if (config.pd_backend == ht::PdBackendChoice::kAuto) {
+        std::fprintf(stderr, "slave_sim: --split-windows-link-mm: using the CPU texture stage\n");
         config.pd_backend = ht::PdBackendChoice::kCpu;
       }
     }

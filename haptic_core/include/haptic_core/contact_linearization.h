@@ -263,7 +263,7 @@ class TexturePenetrationSolver {
   /// two of them in one region when their centres are closer than `link_m` (m; single linkage,
   /// the granularity of contact clustering, contact_clustering.h). Writes the first out.size()
   /// regions in cell order, sorted deepest first, and returns how many there are (0: no
-  /// overlap). Reserved at
+  /// overlap; at most 64 are counted). Reserved at
   /// construction for windows up to the solver's max_resolution; never allocates there.
   int OverlapRegions(const HapticModel& tool, const RigidTransform& X_WT,
                      const HapticModel& environment, const RigidTransform& X_WO,
