@@ -215,11 +215,12 @@ DepthSample TexturePenetrationSolver::EvaluateTool(const HapticModel& tool,
 
 DepthSample TexturePenetrationSolver::Depth(const HapticModel& tool, const RigidTransform& X_WT,
                                             const HapticModel& environment,
-                                            const RigidTransform& X_WO,
-                                            const ContactWindow& w) noexcept {
-  RenderEnvironment(environment, X_WO, w);
-  SelectPatchTriangles(tool, X_WT, w, PatchSide::kTool, w.cell_size_m(), tool_triangles_, 0.0,
-                       &vertex_scratch_, trees_.For(tool));
+                                            const RigidTransform& X_WO, const ContactWindow& w,
+                                            TriangleSubset environment_triangles,
+                                            TriangleSubset tool_triangles) noexcept {
+  RenderEnvironment(environment, X_WO, w, environment_triangles);
+  SelectPatchTrianglesIn(tool_triangles, tool, X_WT, w, PatchSide::kTool, w.cell_size_m(),
+                         tool_triangles_, 0.0, &vertex_scratch_, trees_.For(tool));
   return EvaluateTool(tool, X_WT, w);
 }
 
@@ -232,10 +233,7 @@ int TexturePenetrationSolver::OverlapRegions(const HapticModel& tool, const Rigi
   const int n = w.resolution;
   const auto cells = static_cast<std::size_t>(n) * static_cast<std::size_t>(n);
   if (n > max_resolution_ || !(link_m >= 0.0)) return 0;
-  RenderEnvironment(environment, X_WO, w, environment_triangles);
-  SelectPatchTrianglesIn(tool_triangles, tool, X_WT, w, PatchSide::kTool, w.cell_size_m(),
-                         tool_triangles_, 0.0, &vertex_scratch_, trees_.For(tool));
-  EvaluateTool(tool, X_WT, w);
+  Depth(tool, X_WT, environment, X_WO, w, environment_triangles, tool_triangles);
   // Union-find over the overlapping cells; each links to the overlapping cells after it within
   // link_m (a half disc of offsets), so every pair is tested once.
   region_parent_.assign(cells, -1);
@@ -279,7 +277,7 @@ int TexturePenetrationSolver::OverlapRegions(const HapticModel& tool, const Rigi
     if (region_parent_[c] < 0) continue;
     const int root = find(static_cast<int>(c));
     int slot = -1;
-    for (int k = 0; k < std::min(count, 64); ++k) {
+    for (int k = 0; k < count; ++k) {
       if (roots[static_cast<std::size_t>(k)] == root) slot = k;
     }
     if (slot < 0) {

@@ -416,7 +416,7 @@ int HapticTexturePipeline::MergeRegionsInOneWindow(int count, double cell_m) noe
   int m = std::min(count, static_cast<int>(regions_.size()));
   if (count > m) return count;  // more than kept: not split anyway
   // A region's window: the square of its box's larger side plus the margins, about its centre
-  // (cells along u and v, doubled to stay integral).
+  // (in cells along u and v).
   const double margin_cells = options_.split_window_margin_m / cell_m;
   const auto half = [&](const OverlapRegion& g) {
     return 0.5 * std::max(g.i1 - g.i0 + 1, g.j1 - g.j0 + 1) + margin_cells;
@@ -448,7 +448,6 @@ int HapticTexturePipeline::MergeRegionsInOneWindow(int count, double cell_m) noe
 }
 
 int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int n) {
-  last_split_windows_ = 0;
   // The GPU backend takes one window size per batch (LinearizeContacts); the split windows are
   // sized to their regions, so this stage runs with the CPU backend only.
   if (backend_->name() == "gpu") return n;
@@ -494,12 +493,14 @@ int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int
       const int resolution = std::clamp(static_cast<int>(std::ceil(side / cell)), 8, w.resolution);
       const auto sub = ContactWindow::TryMake(w.center_W + s_mid * w.axis_u_W + t_mid * w.axis_v_W,
                                               w.normal_W, resolution * cell, resolution);
-      if (!sub) continue;
+      if (!sub) {
+        ++step_faults_.bad_windows;  // the region stays out of the model, counted
+        continue;
+      }
       ContactQuery& nq = split_queries_[static_cast<std::size_t>(num_new++)];
       nq = q;
       nq.window = *sub;
     }
-    ++last_split_windows_;
   }
   if (num_new == 0) return n;
   std::copy_n(split_queries_.begin(), num_new, last_queries_.begin() + kept);

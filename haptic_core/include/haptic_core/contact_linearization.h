@@ -253,10 +253,12 @@ class TexturePenetrationSolver {
                                  TriangleSubset environment_triangles = TriangleSubset::All(),
                                  TriangleSubset tool_triangles = TriangleSubset::All()) noexcept;
 
-  /// δ only (m), at one tool pose; same conventions as Linearize.
+  /// δ only (m), at one tool pose; same conventions as Linearize (the triangle subsets too).
   DepthSample Depth(const HapticModel& tool, const RigidTransform& X_WT,
                     const HapticModel& environment, const RigidTransform& X_WO,
-                    const ContactWindow& window) noexcept;
+                    const ContactWindow& window,
+                    TriangleSubset environment_triangles = TriangleSubset::All(),
+                    TriangleSubset tool_triangles = TriangleSubset::All()) noexcept;
 
   /// The overlap of `tool` at X_WT and `environment` at X_WO on `window` (rendered afresh, the
   /// triangle subsets as Linearize takes them) split into regions: the cells where b − a > 0,

@@ -240,7 +240,8 @@ class HapticTexturePipeline {
   const LinearizationFaults& faults() const noexcept { return backend_->faults(); }
   /// Faults of the step's own stages (counted, never thrown).
   struct StepFaults {
-    /// Clusters whose window could not be set up (non-finite point, zero normal): skipped.
+    /// Clusters whose window could not be set up (non-finite point, zero normal), and stage 5a
+    /// regions whose window could not: skipped.
     std::int64_t bad_windows = 0;
     /// Contacts dropped by the grazing guard (PipelineOptions::grazing_guard).
     std::int64_t grazing_dropped = 0;
@@ -371,8 +372,6 @@ class HapticTexturePipeline {
   std::unique_ptr<TexturePenetrationSolver> region_solver_;
   std::array<OverlapRegion, 8> regions_{};
   std::array<ContactQuery, kMaxContacts> split_queries_{};
-  /// Windows split in the last step (for reports).
-  int last_split_windows_ = 0;
   int last_num_queries_ = 0;
   StepFaults step_faults_;
   std::int64_t backend_failures_ = 0;
