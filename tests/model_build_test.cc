@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <glm/glm.hpp>
@@ -295,6 +296,108 @@ TEST_F(HapticModelCacheTest, DamagedEntriesAreRebuiltAndOverwritten) {
   EXPECT_FALSE(again.report.from_cache);
   EXPECT_FALSE(again.report.cache_note.empty());
   EXPECT_TRUE(BuildHapticModelCached("s", full, SmallParams(), cache).report.from_cache);
+}
+
+// TextureSizingParams' rule (issue 32) on surface errors of a known form e(S) = floor + c / S
+// (the texture's share halves with each doubling, the coarse mesh's floor stays).
+TEST(TextureSizing, SmallestSizeWithinBudgetElseBeforeADoublingThatDoesNotHelpElseTheLargest) {
+  const auto curve = [](double floor_um, double c_um_texels) {
+    return [=](int size) {
+      SurfaceErrorReport r;
+      r.samples = 4096;
+      r.p99_m = (floor_um + c_um_texels / size) * 1e-6;
+      return r;
+    };
+  };
+  TextureSizingParams p;  // budget 10 µm, 15 %, 256..4096
+  // 2 + 7168/S: 30, 16, 9 µm at 256, 512, 1024: the budget is met at 1024.
+  TextureSizeChoice c = ChooseTextureSize(p, curve(2.0, 7168.0));
+  EXPECT_EQ(c.size, 1024);
+  ASSERT_EQ(c.trials.size(), 3u);
+  EXPECT_EQ(c.trials[0].size, 256);
+  EXPECT_EQ(c.trials[2].size, 1024);
+  EXPECT_NEAR(c.trials[2].surface_p99_m, 9e-6, 1e-12);
+  EXPECT_NE(c.reason.find("within the budget"), std::string::npos) << c.reason;
+  // 20 + 7168/S: 48, 34, 27, 23.5 µm: 1024 → 2048 lowers it by 13 % (< 15 %), so 1024.
+  c = ChooseTextureSize(p, curve(20.0, 7168.0));
+  EXPECT_EQ(c.size, 1024);
+  ASSERT_EQ(c.trials.size(), 4u);
+  EXPECT_NE(c.reason.find("coarse mesh"), std::string::npos) << c.reason;
+  // A floor of 40 µm and little texture detail: 256 already is as good as 512.
+  c = ChooseTextureSize(p, curve(40.0, 512.0));
+  EXPECT_EQ(c.size, 256);
+  // Steady gains but a budget out of reach within max_size.
+  p.max_size = 1024;
+  c = ChooseTextureSize(p, curve(0.0, 20480.0));
+  EXPECT_EQ(c.size, 1024);
+  EXPECT_NE(c.reason.find("largest"), std::string::npos) << c.reason;
+  // No measure: the first size is kept.
+  c = ChooseTextureSize(p, [](int) { return SurfaceErrorReport{}; });
+  EXPECT_EQ(c.size, 256);
+  EXPECT_EQ(c.trials.size(), 1u);
+  // Bad parameters.
+  for (const auto& bad :
+       {std::pair{100, 1024}, std::pair{512, 256}, std::pair{8, 64}, std::pair{256, 16384}}) {
+    TextureSizingParams b;
+    b.min_size = bad.first;
+    b.max_size = bad.second;
+    EXPECT_THROW(ChooseTextureSize(b, curve(0, 1)), std::invalid_argument);
+  }
+  TextureSizingParams b;
+  b.surface_budget_m = 0.0;
+  EXPECT_THROW(b.Validate(), std::invalid_argument);
+  b = {};
+  b.min_improvement = 1.0;
+  EXPECT_THROW(b.Validate(), std::invalid_argument);
+}
+
+// The build chooses per object: at a 5 µm budget a smooth sphere (its texture holds the coarse
+// mesh's chordal gap) needs a smaller atlas than the same sphere with 0.5 mm bumps (measured here:
+// 17 / 4.7 / 1.7 µm at 256 / 512 / 1024 against 66 / 11 / 3.5 µm); the chosen model's surface
+// error is the trial's (two routes: the trial measured a probe model, the report the finished
+// one), and the choice survives the cache.
+TEST_F(HapticModelCacheTest, TextureSizeFromDetailGrowsWithTheSurfacesDetailAndIsCached) {
+  HapticModelBuildParams p = SmallParams();
+  p.texture_sizing.from_detail = true;
+  p.texture_sizing.min_size = 32;
+  p.texture_sizing.max_size = 1024;
+  p.texture_sizing.surface_budget_m = 5e-6;
+  const HapticModelCache cache(dir_.string());
+  const HapticModelBuild smooth =
+      BuildHapticModelCached("smooth", UvSphere(0.05, 100, 200), p, cache);
+  const TriangleMesh bumpy_mesh = BumpySphere(0.05, 0.5e-3, 100, 200);
+  const HapticModelBuild bumpy = BuildHapticModelCached("bumpy", bumpy_mesh, p, cache);
+  for (const HapticModelBuild* b : {&smooth, &bumpy}) {
+    const HapticModelBuildReport& r = b->report;
+    SCOPED_TRACE(r.name + ": " + r.texture_size_reason);
+    for (const TextureSizeTrial& t : r.texture_trials) {
+      std::printf("%s: %d texels, surface p99 %.3g um (%.2f s)\n", r.name.c_str(), t.size,
+                  t.surface_p99_m * 1e6, t.seconds);
+    }
+    ASSERT_FALSE(r.texture_trials.empty());
+    // 32² cannot hold 300 charts: the first size tried is the smallest that can.
+    EXPECT_EQ(r.texture_trials.front().size, SmallestAtlasSize(300, 2));
+    EXPECT_GT(r.texture_trials.front().size, 32);
+    for (std::size_t i = 1; i < r.texture_trials.size(); ++i) {
+      EXPECT_EQ(r.texture_trials[i].size, 2 * r.texture_trials[i - 1].size);
+    }
+    EXPECT_EQ(b->model->texture.level(0).width, r.texture_size);
+    const auto chosen =
+        std::find_if(r.texture_trials.begin(), r.texture_trials.end(),
+                     [&](const TextureSizeTrial& t) { return t.size == r.texture_size; });
+    ASSERT_NE(chosen, r.texture_trials.end());
+    EXPECT_DOUBLE_EQ(chosen->surface_p99_m, r.surface.p99_m);
+  }
+  EXPECT_GT(bumpy.report.texture_size, smooth.report.texture_size);
+  EXPECT_NE(HapticModelCacheKey(bumpy_mesh, p), HapticModelCacheKey(bumpy_mesh, SmallParams()));
+  const HapticModelBuild again = BuildHapticModelCached("bumpy", bumpy_mesh, p, cache);
+  EXPECT_TRUE(again.report.from_cache);
+  EXPECT_EQ(again.report.texture_size, bumpy.report.texture_size);
+  EXPECT_EQ(again.report.texture_size_reason, bumpy.report.texture_size_reason);
+  ASSERT_EQ(again.report.texture_trials.size(), bumpy.report.texture_trials.size());
+  EXPECT_EQ(again.report.texture_trials.back().surface_p99_m,
+            bumpy.report.texture_trials.back().surface_p99_m);
+  ExpectSameModel(*bumpy.model, *again.model);
 }
 
 TEST(HapticModelBuild, BadInputNamesTheModel) {

@@ -227,6 +227,36 @@ TEST_F(SceneBuildTest, DescriptionRolesScaleAndSharedInstances) {
   }
 }
 
+// "texture_size": "auto" (issue 32): each node's atlas from its surface's detail, the choice and
+// its trials in inspect; a node's own fixed size still wins.
+TEST_F(SceneBuildTest, AutoTextureSizeIsChosenPerNodeAndReportedByInspect) {
+  WriteGlb((dir_ / "a.glb").string(),
+           {{"floor", RidgedSlab(0.05, 0.05, 0.005, 20), glm::dmat4(1.0), ""},
+            {"plate", RidgedSlab(0.05, 0.05, 0.005, 20),
+             glm::translate(glm::dmat4(1.0), glm::dvec3(0.2, 0, 0)), ""}});
+  const std::string desc = Write("a.json", R"({"scene": "a.glb",
+    "defaults": {"coarse_triangles": 60, "texture_size": "auto", "texture_budget_um": 20},
+    "nodes": {"plate": {"texture_size": 128}}})");
+  const SceneDescription d = LoadSceneInput(desc);
+  EXPECT_EQ(d.defaults.texture_size, 0);
+  EXPECT_DOUBLE_EQ(d.defaults.texture_budget_m, 20e-6);
+  const BuiltScene s = BuildScene(d, HapticModelCache(""));
+  const nlohmann::json j = InspectJson(s);
+  ASSERT_EQ(j["objects"].size(), 2u);
+  const nlohmann::json& floor = j["objects"][0];
+  ASSERT_TRUE(floor.contains("texture_size_chosen")) << floor.dump();
+  const nlohmann::json& trials = floor["texture_size_chosen"]["trials"];
+  ASSERT_GE(trials.size(), 1u);
+  bool chosen_was_tried = false;
+  for (const nlohmann::json& t : trials) {
+    chosen_was_tried |= t["size"] == floor["texture_size"];
+  }
+  EXPECT_TRUE(chosen_was_tried) << floor.dump();
+  EXPECT_FALSE(floor["texture_size_chosen"]["reason"].get<std::string>().empty());
+  EXPECT_EQ(j["objects"][1]["texture_size"], 128);
+  EXPECT_FALSE(j["objects"][1].contains("texture_size_chosen"));
+}
+
 TEST_F(SceneBuildTest, ANodeCanBeTheTool) {
   const TriangleMesh slab = RidgedSlab(0.01, 0.01, 0.005, 10);
   WriteGlb((dir_ / "t.glb").string(),
@@ -352,6 +382,8 @@ TEST_F(SceneBuildTest, BadDescriptionsAreRefusedNamingTheFileAndTheKey) {
   } cases[] = {
       {R"({"scene": "s.glb", "nodes": {"floor": {"role": "wall"}}})", "role 'wall'"},
       {R"({"scene": "s.glb", "defaults": {"texture_size": 100}})", "power of two"},
+      {R"({"scene": "s.glb", "defaults": {"texture_size": "big"}})", "or \"auto\""},
+      {R"({"scene": "s.glb", "defaults": {"texture_budget_um": 0}})", "micrometres > 0"},
       {R"({"scene": "s.glb", "defaults": {"stiffness_n_per_m": -1}})", "positive stiffness"},
       {R"({"scene": "s.glb", "defaults": {"coarse_triangles": 2}})", "coarse_triangles"},
       {R"({"scene": "s.glb", "defaults": {"stifness_n_per_m": 10}})", "unknown key"},

@@ -15,6 +15,7 @@
 #include "haptic_core/demo/demo_scenes.h"
 #include "haptic_core/demo/procedural_models.h"
 #include "haptic_core/demo/seed_models.h"
+#include "haptic_core/model_build/surface_error.h"
 
 namespace ht {
 namespace {
@@ -62,23 +63,46 @@ std::shared_ptr<const HapticModel> Finish(HapticModel model, bool textured) {
 
 // A seed model through the build cache, its frame moved to its centre of mass when `centred`
 // (the tool frame T); `com_out` gets where that centre was in the mesh's frame.
-std::shared_ptr<const HapticModel> SeedHapticModel(SeedModel model,
-                                                   const BenchmarkModelSettings& settings,
-                                                   const HapticModelCache& cache, bool centred,
-                                                   glm::dvec3* com_out,
-                                                   std::shared_ptr<const TriangleMesh> mesh,
-                                                   const std::string& name) {
+std::shared_ptr<const HapticModel> SeedHapticModel(
+    SeedModel model, const BenchmarkModelSettings& settings, const HapticModelCache& cache,
+    bool centred, glm::dvec3* com_out, std::shared_ptr<const TriangleMesh> mesh,
+    const std::string& name, std::string* texture_note) {
   HapticModelBuildParams params;
   params.coarse_triangles = std::max(
       4, static_cast<int>(
              std::lround(settings.coarse_scale *
                          static_cast<double>(SeedModelSpecOf(model).seed_coarse_triangles))));
-  params.texture.texture_size = settings.texture_size;
+  if (settings.texture_size == 0) {
+    params.texture_sizing.from_detail = true;
+  } else {
+    params.texture.texture_size = settings.texture_size;
+  }
   const HapticModelBuild build = BuildHapticModelCached(name, *mesh, params, cache);
+  if (texture_note != nullptr && settings.texture_size == 0) {
+    *texture_note = name + " " + build.report.texture_size_reason;
+  }
   HapticModel m = *build.model;
   if (com_out != nullptr) *com_out = m.center_of_mass_O;
   if (centred) ShiftModelFrame(m, m.center_of_mass_O);
   return Finish(std::move(m), settings.textured);
+}
+
+// A procedural model at the size its detail needs (texture_size 0, TextureSizingParams'
+// defaults): `make(size)` builds it at one size, measured against `full_O`; `note` gets the
+// reason.
+template <typename Make>
+HapticModel ProceduralAtSize(int texture_size, const TriangleMesh& full_O, const Make& make,
+                             const std::string& name, std::string* note) {
+  if (texture_size != 0) return make(texture_size);
+  std::map<int, HapticModel> made;
+  const TextureSizeChoice choice = ChooseTextureSize({}, [&](int size) {
+    HapticModel m = make(size);
+    const SurfaceErrorReport r = MeasureSurfaceError(m, full_O);
+    made.emplace(size, std::move(m));
+    return r;
+  });
+  if (note != nullptr) *note = name + " " + choice.reason;
+  return std::move(made.at(choice.size));
 }
 
 }  // namespace
@@ -137,11 +161,13 @@ const std::vector<std::string>& BenchmarkSceneNames() {
 
 BenchmarkScene MakeBenchmarkScene(const std::string& name, const BenchmarkModelSettings& settings,
                                   const HapticModelCache& cache) {
-  if (settings.texture_size < 16 || settings.texture_size > 8192 ||
-      (settings.texture_size & (settings.texture_size - 1)) != 0) {
-    throw std::invalid_argument("texture size must be a power of two in [16, 8192], got " +
-                                std::to_string(settings.texture_size));
+  if (settings.texture_size != 0 && (settings.texture_size < 16 || settings.texture_size > 8192 ||
+                                     (settings.texture_size & (settings.texture_size - 1)) != 0)) {
+    throw std::invalid_argument(
+        "texture size must be 0 (from the detail) or a power of two in [16, 8192], got " +
+        std::to_string(settings.texture_size));
   }
+  std::string tool_texture_note, object_texture_note;
   if (!(settings.coarse_scale > 0.0) || settings.coarse_scale > 16.0) {
     throw std::invalid_argument("coarse scale must be in (0, 16], got " +
                                 std::to_string(settings.coarse_scale));
@@ -153,18 +179,30 @@ BenchmarkScene MakeBenchmarkScene(const std::string& name, const BenchmarkModelS
   object.stiffness_n_per_m = kStiffness;
   if (name == "fig75" || name == "fig76") {
     RidgedBlockParams block;
-    block.texture_size = settings.texture_size;
-    scene.haptic.tool = Finish(MakeRidgedBlock(block), settings.textured);
     scene.tool_mesh_Ft = std::make_shared<const TriangleMesh>(MakeRidgedBlockFullResolution());
+    const auto make_block = [&](int size) {
+      RidgedBlockParams b = block;
+      b.texture_size = size;
+      return MakeRidgedBlock(b);
+    };
+    scene.haptic.tool = Finish(ProceduralAtSize(settings.texture_size, *scene.tool_mesh_Ft,
+                                                make_block, "ridged_block", &tool_texture_note),
+                               settings.textured);
     scene.tool_name = "ridged_block";
     scene.X_TFt = RigidTransform::Identity();  // the block's frame is its centre of mass
     if (name == "fig75") {
       RidgedGearParams gear;
-      gear.texture_size = settings.texture_size;
       gear.coarse_segments =
           std::max(8, static_cast<int>(std::lround(400 * settings.coarse_scale)));
-      object.model = Finish(MakeRidgedGear(gear), settings.textured);
       scene.object_mesh_Fe = std::make_shared<const TriangleMesh>(MakeRidgedGearFullResolution());
+      const auto make_gear = [&](int size) {
+        RidgedGearParams g = gear;
+        g.texture_size = size;
+        return MakeRidgedGear(g);
+      };
+      object.model = Finish(ProceduralAtSize(settings.texture_size, *scene.object_mesh_Fe,
+                                             make_gear, "ridged_gear", &object_texture_note),
+                            settings.textured);
       scene.object_name = "ridged_gear";
       scene.haptic.X_WT_home = BlockOnGearHomePose();
       scene.note = "block: 16 coarse triangles at every coarse scale (a box)";
@@ -190,11 +228,11 @@ BenchmarkScene MakeBenchmarkScene(const std::string& name, const BenchmarkModelS
     glm::dvec3 com(0.0);
     scene.tool_mesh_Ft = file ? SeedMesh(tool) : HammerHeadDown();
     scene.tool_name = file ? SeedModelName(tool) : "hammer_head_down";
-    scene.haptic.tool =
-        SeedHapticModel(tool, settings, cache, true, &com, scene.tool_mesh_Ft, scene.tool_name);
+    scene.haptic.tool = SeedHapticModel(tool, settings, cache, true, &com, scene.tool_mesh_Ft,
+                                        scene.tool_name, &tool_texture_note);
     scene.X_TFt.translation = -com;
-    object.model =
-        SeedHapticModel(env, settings, cache, false, nullptr, SeedMesh(env), SeedModelName(env));
+    object.model = SeedHapticModel(env, settings, cache, false, nullptr, SeedMesh(env),
+                                   SeedModelName(env), &object_texture_note);
     scene.object_mesh_Fe = SeedMesh(env);
     scene.object_name = SeedModelName(env);
   } else {
@@ -203,6 +241,10 @@ BenchmarkScene MakeBenchmarkScene(const std::string& name, const BenchmarkModelS
     throw std::invalid_argument("unknown benchmark scene '" + name + "' (known: " + known + ")");
   }
   scene.haptic.touchables.push_back(object);
+  for (const std::string* n : {&tool_texture_note, &object_texture_note}) {
+    if (n->empty()) continue;
+    scene.texture_note += (scene.texture_note.empty() ? "" : "; ") + *n;
+  }
   if (name == "fig77" || name == "hammer_torus") {
     // Home: where the scraping experiment starts, 1 mm above the first full-resolution touch.
     // The file lies flat (teeth down) at x = −3 cm over the part; the hammer (its mesh head

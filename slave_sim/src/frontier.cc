@@ -93,6 +93,15 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     s.push_back(refined16);
   } else {
     for (int n : {256, 512, 2048}) texture(n);
+    // Issue 32: each model's texture size from its surface's detail (TextureSizingParams).
+    FrontierSetting texture_auto = base;
+    texture_auto.name = "texture_auto";
+    texture_auto.texture_size = 0;
+    s.push_back(texture_auto);
+    FrontierSetting coarse2x_auto = texture_auto;
+    coarse2x_auto.name = "coarse2x_texture_auto";
+    coarse2x_auto.coarse_scale = 2.0;
+    s.push_back(coarse2x_auto);
     coarse(0.5, "coarse0.5x");
     coarse(2.0, "coarse2x");
     coarse(4.0, "coarse4x");
@@ -1033,6 +1042,7 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
         b.textured = st.method != FrontierMethod::kCoarseOnly;
         const BuiltBenchmark& models = built_for(b);
         const BenchmarkScene& scene = models.scene;
+        if (!scene.texture_note.empty()) run.note = "texture sizes " + scene.texture_note;
         run.tool_surface = models.tool_surface;
         run.object_surface = models.object_surface;
         const auto t0 = Clock::now();

@@ -55,17 +55,29 @@ void ReadSpec(const std::string& where, const nlohmann::ordered_json& j, NodeSpe
       }
       spec.coarse_triangles = value.get<int>();
     } else if (key == "texture_size") {
-      if (!value.is_number_integer()) throw std::runtime_error(at + ": must be an integer");
+      if (value.is_string() && value.get<std::string>() == "auto") {
+        spec.texture_size = 0;  // from the surface's detail (TextureSizingParams)
+        continue;
+      }
+      if (!value.is_number_integer()) {
+        throw std::runtime_error(at + ": must be an integer or \"auto\"");
+      }
       const auto n = value.get<std::int64_t>();
       if (n < 16 || n > 8192 || (n & (n - 1)) != 0) {
         throw std::runtime_error(at + ": must be a power of two in [16, 8192], got " +
                                  std::to_string(n));
       }
       spec.texture_size = static_cast<int>(n);
+    } else if (key == "texture_budget_um") {
+      if (!value.is_number() || !(value.get<double>() > 0.0) ||
+          !std::isfinite(value.get<double>())) {
+        throw std::runtime_error(at + ": must be a number of micrometres > 0");
+      }
+      spec.texture_budget_m = value.get<double>() * 1e-6;
     } else {
       throw std::runtime_error(at +
                                ": unknown key (known: role, stiffness_n_per_m, "
-                               "coarse_triangles, texture_size)");
+                               "coarse_triangles, texture_size, texture_budget_um)");
     }
   }
 }
@@ -312,7 +324,12 @@ BuiltScene BuildScene(const SceneDescription& description, const HapticModelCach
     }
     HapticModelBuildParams params;
     params.coarse_triangles = obj.spec.coarse_triangles;
-    params.texture.texture_size = obj.spec.texture_size;
+    if (obj.spec.texture_size == 0) {
+      params.texture_sizing.from_detail = true;
+      params.texture_sizing.surface_budget_m = obj.spec.texture_budget_m;
+    } else {
+      params.texture.texture_size = obj.spec.texture_size;
+    }
     const std::string name =
         obj.node_name.empty() ? "node#" + std::to_string(obj.node_index) : obj.node_name;
     const std::string key = HapticModelCacheKey(mesh_O, params);
@@ -482,6 +499,18 @@ nlohmann::json InspectJson(const BuiltScene& scene) {
       o["hull_count"] = r.hull_nodes;
       o["hull_leaves"] = r.hull_leaves;
       o["texture_size"] = r.texture_size;
+      if (!r.texture_trials.empty()) {
+        // "texture_size": "auto" (issue 32): each size baked and its surface error, and why.
+        json trials = json::array();
+        for (const TextureSizeTrial& t : r.texture_trials) {
+          trials.push_back({{"size", t.size},
+                            {"surface_p99_m", t.surface_p99_m},
+                            {"surface_outside_p99_m", t.surface_outside_p99_m},
+                            {"seconds", t.seconds}});
+        }
+        o["texture_size_chosen"] = {{"trials", std::move(trials)},
+                                    {"reason", r.texture_size_reason}};
+      }
       o["bake_max_error_m"] = r.bake.max_bake_error_m;
       o["bake_rms_error_m"] = r.bake.rms_bake_error_m;
       o["bake_max_abs_height_m"] = r.bake.max_abs_height_m;

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <concepts>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -129,6 +130,13 @@ void WriteParams(ByteWriter& w, const HapticModelBuildParams& p) {
   w.F64(p.hulls.max_shadow_gap_m);
   w.F64(p.hulls.leaf_thickness_m);
   w.F64(p.density_kg_per_m3);
+  if (p.texture_sizing.from_detail) {  // fixed-size keys stay those of older builds
+    w.U8(1);
+    w.F64(p.texture_sizing.surface_budget_m);
+    w.F64(p.texture_sizing.min_improvement);
+    w.I32(p.texture_sizing.min_size);
+    w.I32(p.texture_sizing.max_size);
+  }
 }
 
 // Axis-aligned bounds of a point set (lo > hi in every axis when it is empty).
@@ -287,6 +295,18 @@ void WriteBuild(ByteWriter& w, const std::string& key, const HapticModelBuild& b
   w.F64(rep.bake_s);
   w.F64(rep.hulls_s);
   w.F64(rep.total_s);
+  // Optional tail (a file of format 4 may end before it): the texture-size trials of a build
+  // with TextureSizingParams::from_detail.
+  if (!rep.texture_trials.empty()) {
+    w.U64(rep.texture_trials.size());
+    for (const TextureSizeTrial& t : rep.texture_trials) {
+      w.I32(t.size);
+      w.F64(t.surface_p99_m);
+      w.F64(t.surface_outside_p99_m);
+      w.F64(t.seconds);
+    }
+    w.Str(rep.texture_size_reason);
+  }
 }
 
 HapticModelBuild ReadBuild(ByteReader& r, const std::string& key) {
@@ -369,6 +389,16 @@ HapticModelBuild ReadBuild(ByteReader& r, const std::string& key) {
   rep.bake_s = r.F64();
   rep.hulls_s = r.F64();
   rep.total_s = r.F64();
+  if (!r.AtEnd()) {
+    rep.texture_trials.resize(r.Count(4 + 3 * 8));
+    for (TextureSizeTrial& t : rep.texture_trials) {
+      t.size = r.I32();
+      t.surface_p99_m = r.F64();
+      t.surface_outside_p99_m = r.F64();
+      t.seconds = r.F64();
+    }
+    rep.texture_size_reason = r.Str();
+  }
   if (!r.AtEnd()) throw CacheFormatError("trailing bytes");
   try {
     m.Validate();
@@ -404,6 +434,75 @@ SurfaceErrorReport MeasuredSurface(const HapticModel& model, const TriangleMesh&
 
 }  // namespace
 
+void TextureSizingParams::Validate() const {
+  const auto pow2 = [](int n) { return n >= 16 && n <= 8192 && (n & (n - 1)) == 0; };
+  if (!pow2(min_size) || !pow2(max_size) || min_size > max_size) {
+    throw std::invalid_argument(
+        "texture sizing: min_size and max_size must be powers of two with 16 <= min_size <= "
+        "max_size <= 8192, got " +
+        std::to_string(min_size) + " and " + std::to_string(max_size));
+  }
+  if (!(surface_budget_m > 0.0) || !std::isfinite(surface_budget_m)) {
+    throw std::invalid_argument("texture sizing: surface_budget_m must be finite and > 0");
+  }
+  if (!(min_improvement >= 0.0 && min_improvement < 1.0)) {
+    throw std::invalid_argument("texture sizing: min_improvement must be in [0, 1)");
+  }
+}
+
+TextureSizeChoice ChooseTextureSize(const TextureSizingParams& params,
+                                    const std::function<SurfaceErrorReport(int size)>& measure) {
+  params.Validate();
+  TextureSizeChoice c;
+  char why[320];
+  const double budget_um = params.surface_budget_m * 1e6;
+  for (int size = params.min_size;; size *= 2) {
+    const auto start = std::chrono::steady_clock::now();
+    const SurfaceErrorReport e = measure(size);
+    c.trials.push_back({size, e.p99_m, e.outside_p99_m, Seconds(start)});
+    const double p99_um = e.p99_m * 1e6;
+    if (e.samples == 0) {
+      c.size = size;
+      std::snprintf(why, sizeof why,
+                    "%d: the surface error could not be measured (a full-resolution mesh "
+                    "without area), so the first size tried is kept",
+                    size);
+      break;
+    }
+    if (e.p99_m <= params.surface_budget_m) {
+      c.size = size;
+      std::snprintf(why, sizeof why,
+                    "%d: the full-resolution surface lies within %.3g um of the model (p99), "
+                    "within the budget of %.3g um",
+                    size, p99_um, budget_um);
+      break;
+    }
+    if (c.trials.size() >= 2) {
+      const TextureSizeTrial& before = c.trials[c.trials.size() - 2];
+      if (e.p99_m > (1.0 - params.min_improvement) * before.surface_p99_m) {
+        c.size = before.size;
+        std::snprintf(why, sizeof why,
+                      "%d: doubling it to %d moves the surface error p99 only from %.3g to "
+                      "%.3g um (less than %.0f %% lower; budget %.3g um): the error left is the "
+                      "coarse mesh's, not the texture's",
+                      before.size, size, before.surface_p99_m * 1e6, p99_um,
+                      100.0 * params.min_improvement, budget_um);
+        break;
+      }
+    }
+    if (size >= params.max_size) {
+      c.size = size;
+      std::snprintf(why, sizeof why,
+                    "%d, the largest size allowed: the surface error p99 is still %.3g um, above "
+                    "the budget of %.3g um (more coarse triangles may lower it)",
+                    size, p99_um, budget_um);
+      break;
+    }
+  }
+  c.reason = why;
+  return c;
+}
+
 HapticModelBuild BuildHapticModel(const std::string& name, const TriangleMesh& full_O,
                                   const HapticModelBuildParams& params) {
   const auto start = std::chrono::steady_clock::now();
@@ -438,15 +537,71 @@ HapticModelBuild BuildHapticModel(const std::string& name, const TriangleMesh& f
   model->triangles = coarse.mesh.triangles;
 
   auto stage = std::chrono::steady_clock::now();
-  BakedTexture baked;
-  try {
-    baked = BakeHapticTexture(coarse.mesh, full_O, params.texture);
-  } catch (const std::exception& e) {
-    throw std::invalid_argument(name + ": texture bake: " + e.what());
+  const auto bake = [&](int size) {
+    TextureBakeParams texture = params.texture;
+    texture.texture_size = size;
+    try {
+      return BakeHapticTexture(coarse.mesh, full_O, texture);
+    } catch (const std::exception& e) {
+      throw std::invalid_argument(name + ": texture bake at " + std::to_string(size) +
+                                  "²: " + e.what());
+    }
+  };
+  if (params.texture_sizing.from_detail) {
+    TextureSizingParams sizing = params.texture_sizing;
+    try {
+      sizing.Validate();
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument(name + ": " + e.what());
+    }
+    // Sizes whose charts would not fit the coarse triangles are not tried.
+    const int fits = SmallestAtlasSize(static_cast<int>(coarse.mesh.triangles.size()),
+                                       params.texture.gutter_texels);
+    if (fits == 0 || fits > sizing.max_size) {
+      throw std::invalid_argument(name + ": " + std::to_string(coarse.mesh.triangles.size()) +
+                                  " coarse triangles do not fit an atlas of the largest size "
+                                  "allowed (" +
+                                  std::to_string(sizing.max_size) +
+                                  "²): raise max_size or lower coarse_triangles");
+    }
+    sizing.min_size = std::max(sizing.min_size, fits);
+    // Each size baked into a model of its own (the coarse mesh without hulls suffices for the
+    // surface error); the chosen one's texture moves into `model`.
+    std::vector<std::pair<int, HapticModel>> tried;
+    std::vector<TextureBakeReport> reports;
+    const TextureSizeChoice choice = ChooseTextureSize(sizing, [&](int size) {
+      HapticModel m;
+      m.name = name;
+      m.vertices_O = coarse.mesh.vertices;
+      m.triangles = coarse.mesh.triangles;
+      BakedTexture baked = bake(size);
+      reports.push_back(baked.report);
+      ApplyBakedTexture(std::move(baked), m);
+      SurfaceErrorReport surface = MeasuredSurface(m, full_O);
+      // Only the last two sizes can be chosen (the rule keeps the latest or the one before).
+      if (tried.size() == 2) tried.erase(tried.begin());
+      tried.emplace_back(size, std::move(m));
+      return surface;
+    });
+    for (auto& [size, m] : tried) {
+      if (size != choice.size) continue;
+      model->corner_normals_O = std::move(m.corner_normals_O);
+      model->corner_uvs = std::move(m.corner_uvs);
+      model->textured = std::move(m.textured);
+      model->texel_size_m = std::move(m.texel_size_m);
+      model->texture = std::move(m.texture);
+    }
+    for (std::size_t i = 0; i < choice.trials.size(); ++i) {
+      if (choice.trials[i].size == choice.size) rep.bake = reports[i];
+    }
+    rep.texture_trials = choice.trials;
+    rep.texture_size_reason = choice.reason;
+  } else {
+    BakedTexture baked = bake(params.texture.texture_size);
+    rep.bake = baked.report;
+    ApplyBakedTexture(std::move(baked), *model);
   }
-  rep.bake = baked.report;
   rep.bake_s = Seconds(stage);
-  ApplyBakedTexture(std::move(baked), *model);
   rep.texture_size = model->texture.empty() ? 0 : model->texture.level(0).width;
   if (!model->texture.empty()) {
     // 99.9th percentile of the positive heights (see HapticModel::outward_reach_m).

@@ -24,6 +24,14 @@ namespace ht {
 namespace {
 // Smallest chart leg the atlas accepts (texels).
 constexpr int kMinChartTexels = 4;
+
+// Atlas: n×n square cells, two charts per cell, for `triangles` charts.
+int AtlasCellsPerSide(int triangles) noexcept {
+  const int cells_needed = (triangles + 1) / 2;
+  int n = static_cast<int>(std::ceil(std::sqrt(static_cast<double>(cells_needed))));
+  while (n * n < cells_needed) ++n;
+  return std::max(n, 1);
+}
 // Gutter heights are extrapolated this far from the triangle (texels) and held constant beyond:
 // level-0 bilinear samples inside a chart read texels up to √2 texels away from it.
 constexpr double kMaxExtrapolationTexels = 1.5;
@@ -382,6 +390,14 @@ void Dilate(int size, std::vector<float>& h, std::vector<std::uint8_t>& state,
 
 }  // namespace
 
+int SmallestAtlasSize(int triangles, int gutter_texels) noexcept {
+  const int n = AtlasCellsPerSide(std::max(triangles, 1));
+  for (int size = 16; size <= 16384; size *= 2) {
+    if (size / n - 4 * gutter_texels >= kMinChartTexels) return size;
+  }
+  return 0;
+}
+
 BakedTexture BakeHapticTexture(const TriangleMesh& coarse_O, const TriangleMesh& full_O,
                                const TextureBakeParams& params) {
   const auto start = std::chrono::steady_clock::now();
@@ -392,10 +408,7 @@ BakedTexture BakeHapticTexture(const TriangleMesh& coarse_O, const TriangleMesh&
   const int nf = static_cast<int>(coarse_O.triangles.size());
   const int size = params.texture_size;
   const int gutter = params.gutter_texels;
-  // Atlas: n×n square cells of c texels, two charts per cell.
-  const int cells_needed = (nf + 1) / 2;
-  int n = static_cast<int>(std::ceil(std::sqrt(static_cast<double>(cells_needed))));
-  while (n * n < cells_needed) ++n;
+  const int n = AtlasCellsPerSide(nf);
   const int c = size / n;
   const int leg = c - 4 * gutter;
   if (leg < kMinChartTexels) {

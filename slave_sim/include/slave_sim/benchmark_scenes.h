@@ -25,7 +25,9 @@ namespace ht {
 
 /// What the models of a benchmark scene are built with.
 struct BenchmarkModelSettings {
-  /// Haptic texture side (texels; seed: 1024).
+  /// Haptic texture side (texels; seed: 1024); 0: each model's from its surface's detail
+  /// (TextureSizingParams' defaults, haptic_model_build.h; the ridged blocks and gear, which are
+  /// not baked, by the same rule over their procedural textures).
   int texture_size = 1024;
   /// Coarse triangle target as a multiple of the seed's count (Table 6). The ridged blocks keep
   /// their 16 triangles (a box); the gear's prism has 400·scale sides.
@@ -53,6 +55,8 @@ struct BenchmarkScene {
   /// Coarse triangles actually built (tool, object), and a note when a setting does not apply.
   std::int64_t tool_coarse_triangles = 0, object_coarse_triangles = 0;
   std::string note;
+  /// With texture_size 0: each model's chosen size and why ("" otherwise).
+  std::string texture_note;
 };
 
 /// What `slave_sim --scene` builds the benchmark scene `name` with: the seed's Table 6 coarse

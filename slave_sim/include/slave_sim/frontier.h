@@ -30,7 +30,7 @@ struct FrontierSetting {
   std::string name;  ///< Row name in the outputs: "default", "grid16", "texture256", "gpu16", …
   FrontierMethod method = FrontierMethod::kTexture;  ///< What computes the wrench.
   int grid = 50;                                     ///< N of the penetration-depth grid.
-  int texture_size = 1024;                           ///< Haptic texture side (texels).
+  int texture_size = 1024;    ///< Haptic texture side (texels); 0: each model's from its detail.
   double coarse_scale = 1.0;  ///< Coarse triangle target × the seed's count.
   /// True: the texture size and coarse scale are the product's for each scene
   /// (ProductModelSettings), not the two fields above ("product").

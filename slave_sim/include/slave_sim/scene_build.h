@@ -32,15 +32,19 @@ struct NodeSpec {
   double stiffness_n_per_m = 8000.0;
   /// Coarse triangle target.
   int coarse_triangles = 500;
-  /// Haptic texture atlas side (texels, power of two).
+  /// Haptic texture atlas side (texels, power of two); 0 ("auto" in a description): chosen per
+  /// object from its surface's detail (TextureSizingParams, haptic_model_build.h).
   int texture_size = 512;
+  /// With texture_size 0: the surface error p99 (m) a size must reach
+  /// (TextureSizingParams::surface_budget_m; "texture_budget_um" in a description).
+  double texture_budget_m = 10e-6;
 };
 
 /// A scene file and what to build from it. Written as JSON:
 /// ```json
 /// {"scene": "Duck.glb",                      // glTF path, relative to this file's folder
 ///  "defaults": {"role": "touchable", "stiffness_n_per_m": 8000, "coarse_triangles": 500,
-///               "texture_size": 512},
+///               "texture_size": 512},           // or "auto" (with "texture_budget_um": 10)
 ///  "nodes": {"LOD3spShape": {"coarse_triangles": 800}, "camera1": {"role": "display"},
 ///            "#12": {"role": "display"}},     // by node name, or "#" + node index
 ///  "tool": "probe"}                          // node name or "#index"; absent: built-in probe
@@ -62,9 +66,9 @@ struct SceneDescription {
 
   /// Reads a description file. Throws std::runtime_error starting with `path` when the file
   /// cannot be read, is not JSON, has an unknown key, a role that is not tool/touchable/display,
-  /// a non-positive stiffness, a coarse target below 4, a texture size that is not a power of
-  /// two in [16, 8192], a scale that is not a finite number > 0, units it does not know, or both
-  /// scale and units.
+  /// a non-positive stiffness, a coarse target below 4, a texture size that is neither "auto" nor a
+  /// power of two in [16, 8192], a texture budget that is not a number > 0, a scale that is not a
+  /// finite number > 0, units it does not know, or both scale and units.
   static SceneDescription LoadFile(const std::string& path);
 
   /// The description of a plain glTF file: every mesh node touchable with `defaults`, built-in

@@ -4,9 +4,11 @@
 // convex hulls, plus mass properties; cached on disk by content.
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "haptic_core/haptic_model.h"
 #include "haptic_core/model_build/hull_hierarchy_build.h"
@@ -16,12 +18,67 @@
 
 namespace ht {
 
-/// What to build for one object. Every field enters the cache key.
+/// The texture size from the surface's detail (issue 32: "model only what a scene needs"): the
+/// atlas side chosen per object from the error each size leaves between the full-resolution
+/// surface and the textured coarse model (MeasureSurfaceError's p99 distance, surface_error.h),
+/// instead of one size for every object. Our rule [R]: bake at min_size, then double while
+///  - the surface error p99 is above surface_budget_m, and
+///  - the last doubling lowered it by at least min_improvement (a fraction): past the size where
+///    doubling stops helping, what error is left is the coarse mesh's (a fold or a surface no ray
+///    of the coarse surface reaches), not the texture's, and a larger texture is memory and
+///    bandwidth for nothing;
+/// keeping the smallest size that met the budget, else the size before a doubling that did not
+/// help, else max_size. Each trial is a full bake (the atlas layout depends on the size, so a
+/// coarser mip level of one bake is not the smaller bake), about 4^k times a min_size bake.
+struct TextureSizingParams {
+  /// False: TextureBakeParams::texture_size as given. True: the rule above (texture_size is then
+  /// ignored).
+  bool from_detail = false;
+  /// Surface error p99 (m) at which a size is enough; > 0. The default is the depth error the
+  /// issue asks of the texture stage (δ p50 ≤ 10 µm).
+  double surface_budget_m = 10e-6;
+  /// Least fractional drop of the p99 that a doubling must give to be worth it; in [0, 1).
+  double min_improvement = 0.15;
+  /// Sizes tried: powers of two with 16 ≤ min_size ≤ max_size ≤ 8192.
+  int min_size = 256;
+  int max_size = 4096;
+
+  /// Throws std::invalid_argument naming a value out of range.
+  void Validate() const;
+};
+
+/// One size tried by ChooseTextureSize.
+struct TextureSizeTrial {
+  int size = 0;                        ///< Atlas side (texels).
+  double surface_p99_m = 0.0;          ///< SurfaceErrorReport::p99_m of the model at that size.
+  double surface_outside_p99_m = 0.0;  ///< SurfaceErrorReport::outside_p99_m.
+  double seconds = 0.0;                ///< Bake and measure (s).
+};
+
+/// What ChooseTextureSize chose and why.
+struct TextureSizeChoice {
+  int size = 0;
+  std::vector<TextureSizeTrial> trials;
+  /// One sentence with the figures that decided it.
+  std::string reason;
+};
+
+/// Applies TextureSizingParams' rule (from_detail is not read): `measure(size)` builds the model
+/// at that atlas side and returns its surface error (samples = 0 when it cannot be measured: the
+/// size tried is then kept, and the reason says so). Throws std::invalid_argument for bad params,
+/// and what `measure` throws.
+TextureSizeChoice ChooseTextureSize(const TextureSizingParams& params,
+                                    const std::function<SurfaceErrorReport(int size)>& measure);
+
+/// What to build for one object. Every field enters the cache key (texture_sizing's only when
+/// from_detail, so that fixed-size keys are those of older builds).
 struct HapticModelBuildParams {
   /// Coarse triangle target (seed: a few hundred to a few thousand).
   int coarse_triangles = 500;
   /// Haptic texture bake (texture_size is the atlas side in texels).
   TextureBakeParams texture;
+  /// The atlas side per object from its detail (off by default: texture.texture_size).
+  TextureSizingParams texture_sizing;
   /// Convex-hull hierarchy.
   HullHierarchyParams hulls;
   /// Density (kg/m³) for the mass properties of a closed coarse mesh.
@@ -43,6 +100,10 @@ struct HapticModelBuildReport {
   int hull_leaves = 0;
   int hull_depth = 0;
   int texture_size = 0;
+  /// With TextureSizingParams::from_detail: each size tried and why texture_size was chosen
+  /// (stored in the cache with the model); empty trials and reason otherwise.
+  std::vector<TextureSizeTrial> texture_trials;
+  std::string texture_size_reason;
   /// HapticModel::OutwardReach() of the built model (m).
   double outward_reach_m = 0.0;
   TextureBakeReport bake;

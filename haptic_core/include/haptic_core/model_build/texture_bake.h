@@ -120,6 +120,11 @@ struct BakedTexture {
 BakedTexture BakeHapticTexture(const TriangleMesh& coarse_O, const TriangleMesh& full_O,
                                const TextureBakeParams& params = {});
 
+/// The smallest atlas side (a power of two in [16, 16384]) whose charts fit `triangles` coarse
+/// triangles with `gutter_texels` (BakeHapticTexture's layout, chart legs of at least 4 texels);
+/// 0 when none does.
+int SmallestAtlasSize(int triangles, int gutter_texels) noexcept;
+
 /// Moves corner_normals_O, corner_uvs, textured, texel_size_m and texture of `baked` into
 /// `model`, whose vertices_O and triangles must be the coarse mesh that was baked. Throws
 /// std::invalid_argument when the sizes do not match model.triangles.
