@@ -98,7 +98,7 @@ TEST(Fig77Trace, RemoteStepsSplitCollisionAndTextureTime) {
   if (dir == nullptr) GTEST_SKIP() << "HT_FIG77_OUT not set";
   auto steps = LoadSteps(std::string(dir) + "/remote_steps.csv");
   for (const char* c : {"step", "t_s", "leaf_pairs", "clusters", "contacts", "collision_us",
-                        "texture_us", "total_us"}) {
+                        "texture_us", "total_us", "windows", "cells", "grid_1", "grid_14"}) {
     ASSERT_TRUE(steps.count(c)) << "remote_steps.csv has no column " << c;
   }
   std::vector<double> pairs, contacts, texture, total_minus_sum, total;
@@ -112,6 +112,20 @@ TEST(Fig77Trace, RemoteStepsSplitCollisionAndTextureTime) {
                               steps["texture_us"][i]);
     EXPECT_GE(steps["leaf_pairs"][i], steps["contacts"][i]) << "step " << i + 1;
     EXPECT_LE(steps["contacts"][i], 14.0);
+    // Each window's grid N (issue 32): a number per window, 0 past the last, and their squares
+    // sum to the step's cells.
+    const double windows = steps["windows"][i];
+    double cells = 0.0;
+    for (int k = 1; k <= 14; ++k) {
+      const double n = steps["grid_" + std::to_string(k)][i];
+      if (k <= windows) {
+        EXPECT_GE(n, 2.0) << "step " << i + 1 << " window " << k;
+      } else {
+        EXPECT_EQ(n, 0.0) << "step " << i + 1 << " window " << k;
+      }
+      cells += n * n;
+    }
+    if (windows <= 14) EXPECT_EQ(steps["cells"][i], cells) << "step " << i + 1;
   }
   EXPECT_GE(contacts.size(), 500u) << "the seed's Fig. 77 has 500 frames";
   // Total ≈ collision + texture (the rest is assembly): within 5 % of the total on average.

@@ -254,7 +254,7 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     translations_subgrid.name = "refined_translations_from_subgrid";
     translations_subgrid.subgrid_translations = true;
     s.push_back(translations_subgrid);
-    for (const int grid : {16, 25}) {
+    for (const int grid : {16, 25, 35, 70, 100}) {
       FrontierSetting coarse_grid = refined;
       coarse_grid.name = "grid" + std::to_string(grid) + "_refined";
       coarse_grid.grid = grid;

@@ -326,7 +326,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     const std::int64_t step_end_ns = SteadyNowNs();
     statistics.Record(static_cast<double>(t_step - start_ns) * 1e-9, t_step, step_end_ns, timings,
                       out.model.num_contacts, session.latest_tool_state_seq(),
-                      static_cast<int>(cause));
+                      static_cast<int>(cause), pipeline->last_contact_queries());
     session.MaybeSendContactModel(out, timings, statistics.steps(), step_end_ns);
     // 4. Progress, and the pace (config.max_rate_hz).
     const std::int64_t now = SteadyNowNs();

@@ -21,7 +21,8 @@ RemoteStepStatistics::RemoteStepStatistics(bool keep_trace)
 
 void RemoteStepStatistics::Record(double t_s, std::int64_t begin_ns, std::int64_t end_ns,
                                   const StepTimings& timings, int contacts,
-                                  std::uint64_t tool_state_seq, int cause) noexcept {
+                                  std::uint64_t tool_state_seq, int cause,
+                                  std::span<const ContactQuery> windows) noexcept {
   ++steps_;
   if (first_step_ns_ == 0) first_step_ns_ = begin_ns;
   last_step_ns_ = end_ns;
@@ -34,8 +35,16 @@ void RemoteStepStatistics::Record(double t_s, std::int64_t begin_ns, std::int64_
   }
   collision_us_.Add(timings.collision_us);
   texture_us_.Add(timings.texture_us);
-  if (records_.size() < records_.capacity())
-    records_.push_back({t_s, timings, contacts, tool_state_seq, cause});
+  if (records_.size() < records_.capacity()) {
+    StepRecord r{t_s, timings, contacts, tool_state_seq, cause, 0, 0, {}};
+    r.windows = static_cast<int>(windows.size());
+    for (std::size_t k = 0; k < windows.size(); ++k) {
+      const int n = windows[k].window.resolution;
+      r.cells += static_cast<std::int64_t>(n) * n;
+      if (k < r.grids.size()) r.grids[k] = static_cast<std::uint16_t>(std::clamp(n, 0, 65535));
+    }
+    records_.push_back(r);
+  }
 }
 
 void RemoteStepStatistics::WriteTrace(const std::string& path) const {
@@ -43,16 +52,21 @@ void RemoteStepStatistics::WriteTrace(const std::string& path) const {
   if (f == nullptr) throw std::runtime_error("cannot write " + path);
   std::fputs(
       "step,t_s,leaf_pairs,clusters,contacts,broad_phase_culled,collision_us,texture_us,"
-      "total_us,budget_exhausted,tool_state_seq,cause,free_space_clearance_mm\n",
+      "total_us,budget_exhausted,tool_state_seq,cause,free_space_clearance_mm,windows,cells",
       f);
+  for (int k = 1; k <= kMaxContacts; ++k) std::fprintf(f, ",grid_%d", k);
+  std::fputs("\n", f);
   for (std::size_t i = 0; i < records_.size(); ++i) {
     const StepRecord& r = records_[i];
-    std::fprintf(f, "%zu,%.6f,%d,%d,%d,%d,%.2f,%.2f,%.2f,%d,%llu,%d,%.3f\n", i + 1, r.t_s,
+    std::fprintf(f, "%zu,%.6f,%d,%d,%d,%d,%.2f,%.2f,%.2f,%d,%llu,%d,%.3f,%d,%lld", i + 1, r.t_s,
                  r.timings.leaf_pairs, r.timings.clusters, r.contacts, r.timings.broad_phase_culled,
                  r.timings.collision_us, r.timings.texture_us, r.timings.total_us,
                  r.timings.collision_budget_exhausted ? 1 : 0,
                  static_cast<unsigned long long>(r.tool_state_seq), r.cause,
-                 r.timings.free_space_clearance_m * 1e3);
+                 r.timings.free_space_clearance_m * 1e3, r.windows,
+                 static_cast<long long>(r.cells));
+    for (const std::uint16_t n : r.grids) std::fprintf(f, ",%d", static_cast<int>(n));
+    std::fputs("\n", f);
   }
   if (std::fclose(f) != 0) throw std::runtime_error("cannot write " + path);
 }

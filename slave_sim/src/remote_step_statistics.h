@@ -3,8 +3,10 @@
 // percentiles, contacts) and the per-step trace remote_steps.csv (the split of seed Fig. 77).
 // Private to slave_sim: RunRemoteNode (remote_node.cc) records every step here.
 
+#include <array>
 #include <cstdint>
 #include <nlohmann/json.hpp>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -26,16 +28,22 @@ class RemoteStepStatistics {
   /// at `end_ns` (ns), with its timings, the contacts of its model, the sequence number of the
   /// newest tool state it answered and why it ran (`cause`: RemoteSession's StepCause code,
   /// remote_session.h). noexcept, no allocation.
+  /// `windows`: the step's contact windows (HapticTexturePipeline::last_contact_queries()), whose
+  /// grid N (ContactWindow::resolution, chosen per window from its cluster's extent) the trace
+  /// keeps, the first kMaxContacts of them.
   void Record(double t_s, std::int64_t begin_ns, std::int64_t end_ns, const StepTimings& timings,
-              int contacts, std::uint64_t tool_state_seq, int cause) noexcept;
+              int contacts, std::uint64_t tool_state_seq, int cause,
+              std::span<const ContactQuery> windows = {}) noexcept;
 
   std::uint64_t steps() const noexcept { return steps_; }
 
   /// Writes remote_steps.csv to `path`: `step, t_s, leaf_pairs, clusters, contacts,
   /// broad_phase_culled, collision_us, texture_us, total_us, budget_exhausted, tool_state_seq,
-  /// cause, free_space_clearance_mm`, one row per kept step (`cause`: 1 first step, 2 a tool
-  /// state arrived, 3 the scene moves, 4 a model held by the model period, 5 the extrapolated
-  /// pose left the last step's free space; StepCause in remote_session.h). Throws
+  /// cause, free_space_clearance_mm, windows, cells, grid_1 … grid_14`, one row per kept step
+  /// (`cause`: 1 first step, 2 a tool state arrived, 3 the scene moves, 4 a model held by the
+  /// model period, 5 the extrapolated pose left the last step's free space; StepCause in
+  /// remote_session.h; `windows` the contact windows linearized, `cells` their Σ N², the texture
+  /// stage's work, and grid_k the k-th window's N, 0 past the last). Throws
   /// std::runtime_error naming the path when it cannot be written.
   void WriteTrace(const std::string& path) const;
 
@@ -50,6 +58,9 @@ class RemoteStepStatistics {
     int contacts;
     std::uint64_t tool_state_seq;
     int cause;
+    int windows;
+    std::int64_t cells;
+    std::array<std::uint16_t, kMaxContacts> grids;
   };
   std::uint64_t steps_ = 0;
   std::uint64_t steps_in_contact_ = 0;
