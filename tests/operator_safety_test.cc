@@ -149,9 +149,10 @@ TEST(Passivity, TheControllerKeepsTheOperatorsOutputBelowTheInput) {
 }
 
 // With the damping capped (4 × a device's rated 5 N·s/m, as the station does) the damping alone
-// cannot dissipate what the delayed wall creates: the wrench itself is scaled down, and the
-// energy observed never goes negative (it used to, by up to 0.1 mJ through the relay).
-TEST(Passivity, WhenTheDampingCapBindsTheForceIsScaledAndEnergyStaysNonNegative) {
+// cannot dissipate what the delayed wall creates: the guard cuts the force along the motion
+// (here all of it: the wall is 1-DoF), and the energy observed never goes negative (it used to, by
+// up to 0.1 mJ through the relay).
+TEST(Passivity, WhenTheDampingCapBindsTheGuardCutsTheForceAndEnergyStaysNonNegative) {
   for (int delay : {25, 75, 150}) {
     const WallRun uncapped_off = RunDelayedWall(delay, false);
     const WallRun r = RunDelayedWall(delay, true, 5000.0, 20.0);
@@ -161,13 +162,54 @@ TEST(Passivity, WhenTheDampingCapBindsTheForceIsScaledAndEnergyStaysNonNegative)
     EXPECT_GT(r.scaled_away_ns, 0.0);
     EXPECT_LT(uncapped_off.min_energy, 0.0);
   }
-  // The guard alone: a wrench doing work on the hand with no energy stored is zeroed.
+  // The guard alone: a wrench along the motion doing work on the hand with no energy stored is
+  // cut to nothing (to rounding: no energy the port could feel).
   PassivityController pc(1e-4, 1.0);
   const Twist V{{0.1, 0, 0}, {}};
   const Wrench out = pc.Guard(Wrench{{2.0, 0, 0}, {}}, V, 1e-3);
-  EXPECT_EQ(out.force.x, 0.0);
+  EXPECT_NEAR(out.force.x, 0.0, 1e-12);
   // And leaves alone a wrench the hand does work against.
   EXPECT_EQ(pc.Guard(Wrench{{-2.0, 0, 0}, {}}, V, 1e-3).force.x, -2.0);
+}
+
+// The guard cuts only the part of the wrench that does work (issue 33): a tool sliding along +x
+// while the surface pushes it up (+z) and along the slide, with no energy stored, keeps its
+// normal force and loses only the component along the motion; with some energy stored, the
+// power left is exactly what the store allows (two routes: the power computed from the result,
+// and E/h); a rotation is cut the same way about its axis.
+TEST(Passivity, TheGuardCutsOnlyTheWrenchAlongTheHandsMotion) {
+  const double h = 1e-3;
+  const Twist slide{{0.05, 0.0, 0.01}, {}};  // mostly along x, rising a little
+  const Wrench F{{0.4, 0.3, 2.0}, {}};       // power 0.02 + 0.02 = 0.04 W
+  PassivityController empty(1e-4, 1.0);
+  const Wrench out = empty.Guard(F, slide, h);
+  EXPECT_NEAR(DevicePower(out, slide), 0.0, 1e-15);
+  EXPECT_EQ(out.force.y, 0.3);  // ⟂ to the motion: untouched
+  // The cut is along the motion: F − out ∥ V, and no larger than F's component along V.
+  const glm::dvec3 cut = F.force - out.force;
+  EXPECT_NEAR(glm::length(glm::cross(cut, slide.linear)), 0.0, 1e-12);
+  EXPECT_NEAR(glm::length(cut), DevicePower(F, slide) / glm::length(slide.linear), 1e-12);
+  // The normal force stays but for the motion's small rise (scaling would have zeroed it):
+  // β = F·V / |V|² = 0.04 / 0.0026.
+  EXPECT_NEAR(out.force.z, 2.0 - 0.04 / 0.0026 * 0.01, 1e-12);
+  EXPECT_EQ(empty.scaled_ticks(), 1);
+  EXPECT_NEAR(empty.force_scaled_away_ns(), glm::length(cut) * h, 1e-15);
+
+  // 10 µJ stored: the power allowed over the tick is E/h = 0.01 W.
+  PassivityController stored(1e-4, 1.0);
+  stored.Commit(Wrench{{-1.0, 0, 0}, {}}, Twist{{0.01, 0, 0}, {}}, h);  // hand pushes: +10 µJ
+  ASSERT_NEAR(stored.observed_energy_j(), 1e-5, 1e-18);
+  const Wrench part = stored.Guard(F, slide, h);
+  EXPECT_NEAR(DevicePower(part, slide), stored.observed_energy_j() / h, 1e-12);
+  stored.Commit(part, slide, h);
+  EXPECT_GE(stored.observed_energy_j(), -1e-18);
+
+  // A torque along the hand's spin is cut about the spin's axis, its other axes kept.
+  PassivityController spin(1e-4, 1.0, 0.05);
+  const Twist twist{{}, {0.0, 0.0, 2.0}};
+  const Wrench T = spin.Guard(Wrench{{}, {0.1, 0.0, 0.05}}, twist, h);
+  EXPECT_NEAR(T.torque.z, 0.0, 1e-15);
+  EXPECT_EQ(T.torque.x, 0.1);
 }
 
 }  // namespace

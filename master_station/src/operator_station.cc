@@ -586,6 +586,7 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
                     {"max_damping_ns_per_m", passivity.max_alpha()},
                     {"scaled_ticks", passivity.scaled_ticks()},
                     {"force_scaled_away_Ns", passivity.force_scaled_away_ns()},
+                    {"force_damped_away_Ns", passivity.force_damped_away_ns()},
                     {"scaled_away_J", passivity.scaled_away_j()}};
   {
     // Issue 33: where the loop's energy comes from. Within one contact model the loop is

@@ -31,14 +31,17 @@ class PassivityController {
   /// Given the wrench about to be commanded and the hand's twist over the tick of length `h_s`,
   /// returns the wrench with passivity damping added when the step would make E negative:
   /// F' = F − α·Ṽ with α ≥ 0 chosen so that E_k = 0 exactly (Ṽ weights rotation by
-  /// angular_weight_m). When α is capped (max_damping) and that is not enough, the damped wrench
-  /// is then scaled down as Guard() does, so that E_k never goes negative. Does not update E
+  /// angular_weight_m). When α is capped (max_damping) and that is not enough, Guard() takes the
+  /// rest along the same twist, so that E_k never goes negative. Does not update E
   /// (call Commit with what was really sent).
   Wrench Apply(const Wrench& F_device_W, const Twist& V_hand_W, double h_s) noexcept;
   /// The last word before the device: when commanding F over the tick would make E negative
-  /// (F·V > 0 and E − F·V·h < 0), returns s·F with the largest s ∈ [0, 1] that keeps E ≥ 0
-  /// (s = 0 once E is spent); F unchanged otherwise. For a wrench a later stage (the safety
-  /// stage's rate limit) changed after Apply. Counted in scaled_ticks and force_scaled_away_ns.
+  /// (F·V > 0 and E − F·V·h < 0), returns F − β·Ṽ (Ṽ = (v, L²ω), L = angular_weight_m) with the
+  /// β ≥ 0 that brings F·V down to max(E, 0)/h: the least change of F that keeps E ≥ 0, taken
+  /// from the part of F along the hand's motion only (at most that part: β·|Ṽ| ≤ F·V/|Ṽ|); the
+  /// part of F that does no work is kept. F unchanged otherwise. For a wrench a later stage (the
+  /// safety stage's rate limit) changed after Apply, and for Apply's capped damping when that is
+  /// not enough. Counted in scaled_ticks, force_scaled_away_ns (|Δf|·h) and scaled_away_j.
   Wrench Guard(const Wrench& F_device_W, const Twist& V_hand_W, double h_s) noexcept;
   /// Records the wrench actually commanded (after any later safety stage) over the tick.
   void Commit(const Wrench& F_commanded_W, const Twist& V_hand_W, double h_s) noexcept;
@@ -54,12 +57,15 @@ class PassivityController {
   std::int64_t active_ticks() const noexcept { return active_ticks_; }
   /// Largest damping coefficient it applied (N·s/m).
   double max_alpha() const noexcept { return max_alpha_; }
-  /// Ticks where the wrench had to be scaled down (capped damping not enough, or Guard), and the
-  /// force taken away that way, Σ (1 − s)·|f|·h (N·s): what passivity cost in force.
+  /// Ticks where Guard cut the wrench (capped damping not enough, or after the safety stage),
+  /// and the force taken away that way, Σ |f − f'|·h (N·s): what the guard cost in force.
   std::int64_t scaled_ticks() const noexcept { return scaled_ticks_; }
   double force_scaled_away_ns() const noexcept { return force_scaled_away_ns_; }
-  /// The energy the scaling kept from the hand, Σ (1 − s)·F·V·h (J): with dissipated_j(), what
-  /// the controller removed from the port.
+  /// The force Apply's damping took away, Σ α·|v|·h (N·s): with force_scaled_away_ns(), all the
+  /// force the passivity stage removed.
+  double force_damped_away_ns() const noexcept { return force_damped_away_ns_; }
+  /// The energy the guard kept from the hand, Σ (F − F')·V·h (J): with dissipated_j(), what the
+  /// controller removed from the port.
   double scaled_away_j() const noexcept { return scaled_away_j_; }
   void Reset() noexcept;
 
@@ -67,7 +73,7 @@ class PassivityController {
   double min_speed_, max_damping_, angular_weight_m_;
   double energy_j_ = 0.0, energy_in_j_ = 0.0, energy_out_j_ = 0.0, dissipated_j_ = 0.0;
   double max_alpha_ = 0.0;
-  double force_scaled_away_ns_ = 0.0, scaled_away_j_ = 0.0;
+  double force_scaled_away_ns_ = 0.0, force_damped_away_ns_ = 0.0, scaled_away_j_ = 0.0;
   std::int64_t active_ticks_ = 0, scaled_ticks_ = 0;
 };
 
