@@ -150,6 +150,9 @@ BenchmarkModelSettings ProductModelSettings(const std::string& name) {
   if (name == "fig77") {
     s.texture_size = 2048;
     s.coarse_scale = 2.0;
+  } else if (name == "hammer_torus") {
+    s.texture_size = 0;  // from each model's detail: 4096² for both (eighth stop)
+    s.coarse_scale = 2.0;
   }
   return s;
 }

@@ -60,9 +60,14 @@ struct BenchmarkScene {
 };
 
 /// What `slave_sim --scene` builds the benchmark scene `name` with: the seed's Table 6 coarse
-/// counts at 1024² (the default BenchmarkModelSettings), except fig77 (the file on the CAD
-/// part): twice the seed's coarse triangles at 2048², which issue 32's fifth stop measured more
-/// accurate on every error column of the frontier and faster (docs/frontier/issue32/fifth_stop).
+/// counts at 1024² (the default BenchmarkModelSettings), except
+///  - fig77 (the file on the CAD part): twice the seed's coarse triangles at 2048², which issue
+///    32's fifth stop measured more accurate on every error column of the frontier and faster
+///    (docs/frontier/issue32/fifth_stop);
+///  - hammer_torus: twice the seed's coarse triangles, each texture sized from its model's
+///    detail (texture_size 0: 4096² for both), more accurate on every error column of the
+///    frontier, at about a third more step time and 260 MB more memory
+///    (docs/frontier/issue32/eighth_stop).
 /// The frontier's "product" setting; its "default" keeps the seed's counts for the comparison.
 BenchmarkModelSettings ProductModelSettings(const std::string& name);
 
