@@ -1391,7 +1391,9 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
       if (st.name == "default") def = &r;
       s << "| " << st.name << " | " << FrontierMethodName(st.method) << " | "
         << (st.backend == "gpu" ? "gpu " + std::to_string(st.depth_bits) + "-bit" : "cpu") << " | "
-        << st.grid << " | " << st.texture_size << " | ×" << Fmt(st.coarse_scale) << " | ";
+        << st.grid << " | "
+        << (st.texture_size == 0 ? std::string("auto") : std::to_string(st.texture_size)) << " | ×"
+        << Fmt(st.coarse_scale) << " | ";
       if (!r.skipped.empty()) {
         s << "skipped: " << r.skipped << " |||||||||||||||\n";
         continue;
