@@ -34,7 +34,8 @@ int main(int argc, char** argv) {
       ->delimiter(',');
   app.add_option("--coarse-scales", scales, "coarse counts as multiples of the seed's")
       ->delimiter(',');
-  app.add_option("--max-size", max_size, "largest size baked")->check(CLI::Range(256, 8192));
+  app.add_option("--max-size", max_size, "largest size baked (a power of two)")
+      ->check(CLI::IsMember({256, 512, 1024, 2048, 4096, 8192}));
   CLI11_PARSE(app, argc, argv);
 
   std::printf(
@@ -94,6 +95,11 @@ int main(int argc, char** argv) {
                     e.outside_p99_m * 1e6, e.share_outside, s);
         std::fflush(stdout);
         all.push_back({size, e.p99_m, e.outside_p99_m, s});
+      }
+      if (all.empty()) {
+        std::fprintf(stderr, "%s x%g: no size up to %d fits its coarse triangles\n", name.c_str(),
+                     scale, max_size);
+        continue;
       }
       // The rule on the measured sizes (no second bake).
       ht::TextureSizingParams rule;

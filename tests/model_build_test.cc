@@ -390,6 +390,18 @@ TEST_F(HapticModelCacheTest, TextureSizeFromDetailGrowsWithTheSurfacesDetailAndI
   }
   EXPECT_GT(bumpy.report.texture_size, smooth.report.texture_size);
   EXPECT_NE(HapticModelCacheKey(bumpy_mesh, p), HapticModelCacheKey(bumpy_mesh, SmallParams()));
+  // Keys: a fixed-size build's does not see the sizing fields (older entries stay valid); a
+  // sized build's does not see the bake's own size, and does see the budget.
+  HapticModelBuildParams fixed = SmallParams();
+  const std::string fixed_key = HapticModelCacheKey(bumpy_mesh, fixed);
+  fixed.texture_sizing.surface_budget_m = 1e-6;
+  fixed.texture_sizing.max_size = 512;
+  EXPECT_EQ(HapticModelCacheKey(bumpy_mesh, fixed), fixed_key);
+  HapticModelBuildParams sized = p;
+  sized.texture.texture_size = 2048;
+  EXPECT_EQ(HapticModelCacheKey(bumpy_mesh, sized), HapticModelCacheKey(bumpy_mesh, p));
+  sized.texture_sizing.surface_budget_m = 4e-6;
+  EXPECT_NE(HapticModelCacheKey(bumpy_mesh, sized), HapticModelCacheKey(bumpy_mesh, p));
   const HapticModelBuild again = BuildHapticModelCached("bumpy", bumpy_mesh, p, cache);
   EXPECT_TRUE(again.report.from_cache);
   EXPECT_EQ(again.report.texture_size, bumpy.report.texture_size);

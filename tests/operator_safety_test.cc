@@ -5,6 +5,7 @@
 #include <cmath>
 #include <deque>
 #include <numbers>
+#include <random>
 
 #include "haptic_core/passivity.h"
 #include "haptic_core/wrench_safety.h"
@@ -210,6 +211,37 @@ TEST(Passivity, TheGuardCutsOnlyTheWrenchAlongTheHandsMotion) {
   const Wrench T = spin.Guard(Wrench{{}, {0.1, 0.0, 0.05}}, twist, h);
   EXPECT_NEAR(T.torque.z, 0.0, 1e-15);
   EXPECT_EQ(T.torque.x, 0.1);
+
+  // Power from the torque alone, a force ⟂ to the motion: the force is kept as it is (a cut in
+  // the weighted metric would have added a side force the safety stage never saw).
+  PassivityController torque_only(1e-4, 1.0, 0.05);
+  const Twist sliding_spin{{0.1, 0.0, 0.0}, {0.0, 0.0, 2.0}};
+  const Wrench W = torque_only.Guard(Wrench{{0.0, 0.0, 2.0}, {0.0, 0.0, 0.05}}, sliding_spin, h);
+  EXPECT_EQ(W.force, glm::dvec3(0.0, 0.0, 2.0));
+  EXPECT_NEAR(W.torque.z, 0.0, 1e-15);
+  // Both halves doing work (0.1 W each) with 0.1 mJ stored (0.1 W allowed): each gives up half
+  // of its power, and neither grows.
+  PassivityController both(1e-4, 1.0, 0.05);
+  both.Commit(Wrench{{-1.0, 0, 0}, {}}, Twist{{0.1, 0, 0}, {}}, h);  // +0.1 mJ
+  const Wrench B = both.Guard(Wrench{{1.0, 0.0, 0.0}, {0.0, 0.0, 0.05}}, sliding_spin, h);
+  EXPECT_NEAR(DevicePower(B, sliding_spin), 0.1, 1e-12);
+  EXPECT_NEAR(B.force.x, 0.5, 1e-12);
+  EXPECT_NEAR(B.torque.z, 0.025, 1e-12);
+  // Random wrenches and twists: never above what the store allows, and neither half grows.
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int i = 0; i < 2000; ++i) {
+    PassivityController g(1e-4, 1.0, 0.05);
+    if (i % 2) g.Commit(Wrench{{-u(rng) - 1.0, 0, 0}, {}}, Twist{{1e-3, 0, 0}, {}}, h);
+    const Wrench F_in{{u(rng), u(rng), u(rng)}, {0.1 * u(rng), 0.1 * u(rng), 0.1 * u(rng)}};
+    const Twist V_in{{0.1 * u(rng), 0.1 * u(rng), 0.1 * u(rng)}, {u(rng), u(rng), u(rng)}};
+    const double E = g.observed_energy_j();
+    const Wrench G = g.Guard(F_in, V_in, h);
+    EXPECT_LE(DevicePower(G, V_in) * h, std::max(E, DevicePower(F_in, V_in) * h) + 1e-15);
+    EXPECT_GE(E - DevicePower(G, V_in) * h, -1e-15) << i;
+    EXPECT_LE(glm::length(G.force), glm::length(F_in.force) + 1e-12) << i;
+    EXPECT_LE(glm::length(G.torque), glm::length(F_in.torque) + 1e-12) << i;
+  }
 }
 
 }  // namespace

@@ -41,7 +41,7 @@ Wrench PassivityController::Apply(const Wrench& F, const Twist& V, double h) noe
   dissipated_j_ += alpha * speed2 * h;
   force_damped_away_ns_ += alpha * glm::length(V.linear) * h;
   if (alpha > max_alpha_) max_alpha_ = alpha;
-  // The capped damping was not enough: scale the wrench itself down to what keeps E_k ≥ 0.
+  // The capped damping was not enough: the guard cuts what is left along the motion.
   return Guard(out, V, h);
 }
 
@@ -49,24 +49,26 @@ Wrench PassivityController::Guard(const Wrench& F, const Twist& V, double h) noe
   const double p = DevicePower(F, V);
   if (!(p > 0.0) || !(h > 0.0) || !std::isfinite(p)) return F;  // no work done on the hand
   if (energy_j_ - p * h >= 0.0) return F;
-  // The least change of F (in the weighted metric) whose power keeps E ≥ 0: only the part of F
-  // along the hand's weighted twist does work, so only that part is cut, by β·(v, L²ω) with
-  //   p' = p − β·speed2 = max(E, 0)/h.
-  // The cut is at most F's component along the motion (β·|Ṽ| ≤ p/|Ṽ|); the rest of F, which
-  // does no work, is kept (scaling the whole wrench dropped the normal force of a sliding tool
-  // for a tick whenever the hand's motion met an empty energy store: docs/hard-cases.md).
-  const double L2 = angular_weight_m_ * angular_weight_m_;
-  const double speed2 = glm::dot(V.linear, V.linear) + L2 * glm::dot(V.angular, V.angular);
+  // The power to take away, Δ = p − max(E, 0)/h, is taken from the halves that do positive
+  // work, in proportion to it: the force's share r_f by cutting f along v, the torque's r_τ by
+  // cutting τ along ω. Each cut is at most that half's own component along its motion
+  // (r ≤ its power), so neither |f| nor |τ| grows and what does no work is kept (scaling the whole
+  // wrench dropped the normal force of a sliding tool for a tick whenever the hand's motion met
+  // an empty energy store: docs/hard-cases.md).
   const double allowed = std::max(energy_j_, 0.0) / h;
+  const double excess = p - allowed;
+  const double p_f = glm::dot(F.force, V.linear), p_t = glm::dot(F.torque, V.angular);
+  const double pf_pos = std::max(p_f, 0.0), pt_pos = std::max(p_t, 0.0);
+  const double v2 = glm::dot(V.linear, V.linear), w2 = glm::dot(V.angular, V.angular);
   Wrench out = F;
-  if (speed2 > 0.0 && std::isfinite(speed2)) {
-    const double beta = (p - allowed) / speed2;
-    out.force -= beta * V.linear;
-    out.torque -= beta * L2 * V.angular;
+  if (pf_pos + pt_pos > 0.0) {
+    const double r_f = excess * pf_pos / (pf_pos + pt_pos);
+    const double r_t = excess - r_f;
+    if (r_f > 0.0 && v2 > 0.0) out.force -= (std::min(r_f, pf_pos) / v2) * V.linear;
+    if (r_t > 0.0 && w2 > 0.0) out.torque -= (std::min(r_t, pt_pos) / w2) * V.angular;
   }
   // Rounding leaves the power a few ulps off what is allowed (with an empty store, ±1e-18 W):
-  // that is no energy the port could feel. Past 1e-15 J over the tick (a twist too small to
-  // carry the cut), what is left is scaled.
+  // that is no energy the port could feel. Past 1e-15 J over the tick, what is left is scaled.
   const double p_out = DevicePower(out, V);
   if (!((p_out - allowed) * h <= 1e-15) || !std::isfinite(p_out)) {
     const double s =

@@ -120,8 +120,8 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
                               out.safety_actions);
   const double gain = std::isnan(in.output_gain) ? 0.0 : std::clamp(in.output_gain, 0.0, 1.0);
   if (gain < 1.0) F_device_W = {gain * F_device_W.force, gain * F_device_W.torque};
-  // The safety stage's rate limit can hold back a drop passivity asked for: the guard scales
-  // what is left so that the observed energy never goes negative.
+  // The safety stage's rate limit can hold back a drop passivity asked for: the guard cuts what
+  // is left along the hand's motion so that the observed energy never goes negative.
   if (config_.passivity) F_device_W = passivity_.Guard(F_device_W, V_WH_W, h);
   passivity_.Commit(F_device_W, V_WH_W, h);
   out.F_device_W = F_device_W;

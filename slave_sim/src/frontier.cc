@@ -583,7 +583,8 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
     }
   }
   if (pipeline.backend_failures() > 0) {
-    run.note = "backend failed, CPU used: " + pipeline.fallback_reason();
+    run.note += (run.note.empty() ? "" : "; ") +
+                ("backend failed, CPU used: " + pipeline.fallback_reason());
     run.renderer = pipeline.backend().description();
   }
   // The model's prediction, after the timed steps: each sampled pose's model at its displaced

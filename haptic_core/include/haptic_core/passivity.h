@@ -36,12 +36,13 @@ class PassivityController {
   /// (call Commit with what was really sent).
   Wrench Apply(const Wrench& F_device_W, const Twist& V_hand_W, double h_s) noexcept;
   /// The last word before the device: when commanding F over the tick would make E negative
-  /// (F·V > 0 and E − F·V·h < 0), returns F − β·Ṽ (Ṽ = (v, L²ω), L = angular_weight_m) with the
-  /// β ≥ 0 that brings F·V down to max(E, 0)/h: the least change of F that keeps E ≥ 0, taken
-  /// from the part of F along the hand's motion only (at most that part: β·|Ṽ| ≤ F·V/|Ṽ|); the
-  /// part of F that does no work is kept. F unchanged otherwise. For a wrench a later stage (the
-  /// safety stage's rate limit) changed after Apply, and for Apply's capped damping when that is
-  /// not enough. Counted in scaled_ticks, force_scaled_away_ns (|Δf|·h) and scaled_away_j.
+  /// (F·V > 0 and E − F·V·h < 0), returns F with its power brought down to max(E, 0)/h by
+  /// cutting the halves that do positive work, in proportion to that work: f by a multiple of v
+  /// and τ by a multiple of ω, each cut at most that half's own component along its motion, so
+  /// that neither |f| nor |τ| grows and a force or torque that does no work (⟂ to its motion) is
+  /// kept. F unchanged otherwise. For a wrench a later stage (the safety stage's rate limit)
+  /// changed after Apply, and for Apply's capped damping when that is not enough. Counted in
+  /// scaled_ticks, force_scaled_away_ns (|Δf|·h) and scaled_away_j.
   Wrench Guard(const Wrench& F_device_W, const Twist& V_hand_W, double h_s) noexcept;
   /// Records the wrench actually commanded (after any later safety stage) over the tick.
   void Commit(const Wrench& F_commanded_W, const Twist& V_hand_W, double h_s) noexcept;

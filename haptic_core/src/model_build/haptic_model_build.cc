@@ -118,7 +118,8 @@ class ByteReader {
 
 void WriteParams(ByteWriter& w, const HapticModelBuildParams& p) {
   w.I32(p.coarse_triangles);
-  w.I32(p.texture.texture_size);
+  // With texture sizing the bake's own size is not used: it does not split the cache.
+  w.I32(p.texture_sizing.from_detail ? 0 : p.texture.texture_size);
   w.I32(p.texture.gutter_texels);
   w.F64(p.texture.crease_angle_deg);
   w.F64(p.texture.max_ray_distance_m);
@@ -390,13 +391,25 @@ HapticModelBuild ReadBuild(ByteReader& r, const std::string& key) {
   rep.hulls_s = r.F64();
   rep.total_s = r.F64();
   if (!r.AtEnd()) {
+    // The trials of a from_detail build: at least one, powers of two in [16, 8192] doubling
+    // from one to the next, the model's own size among them.
     rep.texture_trials.resize(r.Count(4 + 3 * 8));
-    for (TextureSizeTrial& t : rep.texture_trials) {
+    if (rep.texture_trials.empty()) throw CacheFormatError("texture trials: none");
+    bool has_own_size = false;
+    const int own_size = m.texture.empty() ? 0 : m.texture.level(0).width;
+    for (std::size_t i = 0; i < rep.texture_trials.size(); ++i) {
+      TextureSizeTrial& t = rep.texture_trials[i];
       t.size = r.I32();
       t.surface_p99_m = r.F64();
       t.surface_outside_p99_m = r.F64();
       t.seconds = r.F64();
+      const bool pow2 = t.size >= 16 && t.size <= 8192 && (t.size & (t.size - 1)) == 0;
+      if (!pow2 || (i > 0 && t.size != 2 * rep.texture_trials[i - 1].size)) {
+        throw CacheFormatError("texture trials: bad size " + std::to_string(t.size));
+      }
+      has_own_size |= t.size == own_size;
     }
+    if (!has_own_size) throw CacheFormatError("texture trials: the model's size is not among them");
     rep.texture_size_reason = r.Str();
   }
   if (!r.AtEnd()) throw CacheFormatError("trailing bytes");
@@ -465,7 +478,7 @@ TextureSizeChoice ChooseTextureSize(const TextureSizingParams& params,
       c.size = size;
       std::snprintf(why, sizeof why,
                     "%d: the surface error could not be measured (a full-resolution mesh "
-                    "without area), so the first size tried is kept",
+                    "without area), so this size is kept",
                     size);
       break;
     }
