@@ -98,10 +98,13 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     texture_auto.name = "texture_auto";
     texture_auto.texture_size = 0;
     s.push_back(texture_auto);
-    FrontierSetting coarse2x_auto = texture_auto;
-    coarse2x_auto.name = "coarse2x_texture_auto";
-    coarse2x_auto.coarse_scale = 2.0;
-    s.push_back(coarse2x_auto);
+    for (const auto& [k, name] :
+         {std::pair{2.0, "coarse2x_texture_auto"}, std::pair{4.0, "coarse4x_texture_auto"}}) {
+      FrontierSetting x = texture_auto;
+      x.name = name;
+      x.coarse_scale = k;
+      s.push_back(x);
+    }
     coarse(0.5, "coarse0.5x");
     coarse(2.0, "coarse2x");
     coarse(4.0, "coarse4x");
