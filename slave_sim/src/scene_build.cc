@@ -417,16 +417,18 @@ BuiltScene BuildScene(const SceneDescription& description, const HapticModelCach
     const bool bake_misses = size > 0.0 && err > kLargeBakeErrorFraction * size;
     const bool surface_outside = surf.share_outside > kLargeSurfaceOutsideShare;
     if (bake_misses || surface_outside) {
-      char what[480];
+      char what[560];
       std::snprintf(what, sizeof what,
                     "node '%s': the texture bake's largest error is %.3g m (%.0f %% of the "
                     "object's size, %.3g m) and %.1f %% of its full-resolution surface lies more "
                     "than %.0f um outside the model (p99 distance %.3g m): its coarse mesh misses "
                     "the surface there, and contacts there are felt late or not at all (more "
-                    "\"coarse_triangles\" or a larger \"texture_size\" in a scene description)",
+                    "\"coarse_triangles\" or %s in a scene description)",
                     obj.label.c_str(), err, size > 0.0 ? 100.0 * err / size : 0.0, size,
                     100.0 * surf.share_outside, SurfaceErrorParams{}.outside_threshold_m * 1e6,
-                    surf.p99_m);
+                    surf.p99_m,
+                    obj.spec.texture_size == 0 ? "a smaller \"texture_budget_um\""
+                                               : "a larger \"texture_size\" (or \"auto\")");
       scene.notes.push_back(what);
       scene.warnings.push_back(what);
       warned.push_back(obj.model.get());
