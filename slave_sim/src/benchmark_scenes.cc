@@ -98,6 +98,8 @@ HapticModel ProceduralAtSize(int texture_size, const TriangleMesh& full_O, const
   const TextureSizeChoice choice = ChooseTextureSize({}, [&](int size) {
     HapticModel m = make(size);
     const SurfaceErrorReport r = MeasureSurfaceError(m, full_O);
+    // The rule keeps this size or the one before: larger textures are not held longer.
+    made.erase(size / 4);
     made.emplace(size, std::move(m));
     return r;
   });

@@ -59,10 +59,13 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     x.texture_size = n;
     s.push_back(x);
   };
-  const auto coarse = [&](double k, const char* name) {
+  // Coarse triangles k × the seed's, at a texture size (0: each model's from its detail).
+  const auto coarse = [&](double k, const char* name,
+                          int texture_size = FrontierSetting{}.texture_size) {
     FrontierSetting x = base;
     x.name = name;
     x.coarse_scale = k;
+    x.texture_size = texture_size;
     s.push_back(x);
   };
   const auto gpu = [&](int bits) {
@@ -94,31 +97,17 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
   } else {
     for (int n : {256, 512, 2048}) texture(n);
     // Issue 32: each model's texture size from its surface's detail (TextureSizingParams).
-    FrontierSetting texture_auto = base;
-    texture_auto.name = "texture_auto";
-    texture_auto.texture_size = 0;
-    s.push_back(texture_auto);
-    for (const auto& [k, name] :
-         {std::pair{2.0, "coarse2x_texture_auto"}, std::pair{4.0, "coarse4x_texture_auto"}}) {
-      FrontierSetting x = texture_auto;
-      x.name = name;
-      x.coarse_scale = k;
-      s.push_back(x);
-    }
+    coarse(1.0, "texture_auto", 0);
+    coarse(2.0, "coarse2x_texture_auto", 0);
+    coarse(4.0, "coarse4x_texture_auto", 0);
     coarse(0.5, "coarse0.5x");
     coarse(2.0, "coarse2x");
     coarse(4.0, "coarse4x");
     // More coarse triangles share the atlas among more charts (issue 32, fifth stop: the
     // objects' surface error grew with the count at 1024²): at 2048², 4x the seed's count has
     // the seed's texels per triangle at 1024², and 2x twice as many.
-    for (const auto& [k, name] :
-         {std::pair{2.0, "coarse2x_texture2048"}, std::pair{4.0, "coarse4x_texture2048"}}) {
-      FrontierSetting x = base;
-      x.name = name;
-      x.coarse_scale = k;
-      x.texture_size = 2048;
-      s.push_back(x);
-    }
+    coarse(2.0, "coarse2x_texture2048", 2048);
+    coarse(4.0, "coarse4x_texture2048", 2048);
   }
   if (!quick) {
     FrontierSetting product = base;  // what slave_sim --scene builds (ProductModelSettings)

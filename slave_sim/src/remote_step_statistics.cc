@@ -36,12 +36,10 @@ void RemoteStepStatistics::Record(double t_s, std::int64_t begin_ns, std::int64_
   collision_us_.Add(timings.collision_us);
   texture_us_.Add(timings.texture_us);
   if (records_.size() < records_.capacity()) {
-    StepRecord r{t_s, timings, contacts, tool_state_seq, cause, 0, 0, {}};
+    StepRecord r{t_s, timings, contacts, tool_state_seq, cause, 0, {}};
     r.windows = static_cast<int>(windows.size());
-    for (std::size_t k = 0; k < windows.size(); ++k) {
-      const int n = windows[k].window.resolution;
-      r.cells += static_cast<std::int64_t>(n) * n;
-      if (k < r.grids.size()) r.grids[k] = static_cast<std::uint16_t>(std::clamp(n, 0, 65535));
+    for (std::size_t k = 0; k < windows.size() && k < r.grids.size(); ++k) {
+      r.grids[k] = static_cast<std::uint16_t>(std::clamp(windows[k].window.resolution, 0, 65535));
     }
     records_.push_back(r);
   }
@@ -58,13 +56,14 @@ void RemoteStepStatistics::WriteTrace(const std::string& path) const {
   std::fputs("\n", f);
   for (std::size_t i = 0; i < records_.size(); ++i) {
     const StepRecord& r = records_[i];
+    long long cells = 0;  // Σ N² over the windows kept
+    for (const std::uint16_t n : r.grids) cells += static_cast<long long>(n) * n;
     std::fprintf(f, "%zu,%.6f,%d,%d,%d,%d,%.2f,%.2f,%.2f,%d,%llu,%d,%.3f,%d,%lld", i + 1, r.t_s,
                  r.timings.leaf_pairs, r.timings.clusters, r.contacts, r.timings.broad_phase_culled,
                  r.timings.collision_us, r.timings.texture_us, r.timings.total_us,
                  r.timings.collision_budget_exhausted ? 1 : 0,
                  static_cast<unsigned long long>(r.tool_state_seq), r.cause,
-                 r.timings.free_space_clearance_m * 1e3, r.windows,
-                 static_cast<long long>(r.cells));
+                 r.timings.free_space_clearance_m * 1e3, r.windows, cells);
     for (const std::uint16_t n : r.grids) std::fprintf(f, ",%d", static_cast<int>(n));
     std::fputs("\n", f);
   }

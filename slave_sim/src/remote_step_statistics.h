@@ -59,8 +59,7 @@ class RemoteStepStatistics {
     std::uint64_t tool_state_seq;
     int cause;
     int windows;
-    std::int64_t cells;
-    std::array<std::uint16_t, kMaxContacts> grids;
+    std::array<std::uint16_t, kMaxContacts> grids;  // each window's N, 0 past the last
   };
   std::uint64_t steps_ = 0;
   std::uint64_t steps_in_contact_ = 0;

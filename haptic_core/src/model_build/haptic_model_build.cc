@@ -29,6 +29,11 @@ constexpr char kCacheMagic[8] = {'H', 'T', 'M', 'O', 'D', 'E', 'L', '1'};
 // Bounds on what a cache file may claim (the loader never allocates beyond them).
 constexpr std::uint64_t kMaxCacheCount = 64ULL << 20;
 
+// A size TextureSizingParams may name: a power of two in [16, 8192].
+bool IsSizingSize(int n) noexcept {
+  return n >= 16 && n <= 8192 && std::has_single_bit(static_cast<unsigned>(n));
+}
+
 double Seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
 }
@@ -403,8 +408,7 @@ HapticModelBuild ReadBuild(ByteReader& r, const std::string& key) {
       t.surface_p99_m = r.F64();
       t.surface_outside_p99_m = r.F64();
       t.seconds = r.F64();
-      const bool pow2 = t.size >= 16 && t.size <= 8192 && (t.size & (t.size - 1)) == 0;
-      if (!pow2 || (i > 0 && t.size != 2 * rep.texture_trials[i - 1].size)) {
+      if (!IsSizingSize(t.size) || (i > 0 && t.size != 2 * rep.texture_trials[i - 1].size)) {
         throw CacheFormatError("texture trials: bad size " + std::to_string(t.size));
       }
       has_own_size |= t.size == own_size;
@@ -448,8 +452,7 @@ SurfaceErrorReport MeasuredSurface(const HapticModel& model, const TriangleMesh&
 }  // namespace
 
 void TextureSizingParams::Validate() const {
-  const auto pow2 = [](int n) { return n >= 16 && n <= 8192 && (n & (n - 1)) == 0; };
-  if (!pow2(min_size) || !pow2(max_size) || min_size > max_size) {
+  if (!IsSizingSize(min_size) || !IsSizingSize(max_size) || min_size > max_size) {
     throw std::invalid_argument(
         "texture sizing: min_size and max_size must be powers of two with 16 <= min_size <= "
         "max_size <= 8192, got " +

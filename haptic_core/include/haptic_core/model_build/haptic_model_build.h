@@ -57,7 +57,7 @@ struct TextureSizeTrial {
 
 /// What ChooseTextureSize chose and why.
 struct TextureSizeChoice {
-  int size = 0;
+  int size = 0;  ///< Atlas side chosen (texels): the last size tried or the one before.
   std::vector<TextureSizeTrial> trials;
   /// One sentence with the figures that decided it.
   std::string reason;
