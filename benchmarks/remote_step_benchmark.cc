@@ -65,13 +65,20 @@ int main(int argc, char** argv) {
                  "cell's r x dδ/dx); warp and lever are approximations")
       ->check(CLI::IsMember({"rendered", "warp", "lever"}))
       ->capture_default_str();
-  bool no_refinement = false, texel_gradient = false;
+  bool no_refinement = false, texel_gradient = false, translation_kinks = false,
+       secant_rotation = false;
   app.add_flag("--no-refine-depth", no_refinement,
                "stage 5b off: the grid's cell samples alone (by default each contact's depth is "
                "refined to the texture's full resolution)");
   app.add_flag("--texel-gradient", texel_gradient,
                "stage 5b's gradient at texel-scale steps instead of the refined samples' one-cell\n"
                "secants");
+  app.add_flag("--translation-kink-planes", translation_kinks,
+               "with --texel-gradient: the arms of each contact's V along the window's axes as\n"
+               "kink planes (DepthRefinementOptions::translation_kink_planes)");
+  app.add_flag("--secant-rotation-gradient", secant_rotation,
+               "with --texel-gradient: its translation part only, the rotation part the one-cell\n"
+               "secant");
   app.add_option("--csv", csv_path, "write one row per scene here");
   app.add_option("--cache-dir", cache_dir, "model cache folder")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
@@ -111,6 +118,8 @@ int main(int argc, char** argv) {
     options.rotation_gradient = ht::ParseRotationGradient(rotation);
     options.refine_depth = !no_refinement;
     options.depth_refinement.texel_scale_gradient = texel_gradient;
+    options.depth_refinement.translation_kink_planes = translation_kinks;
+    options.depth_refinement.texel_scale_rotation = !secant_rotation;
     ht::HapticTexturePipeline pipeline(
         scene.haptic, options,
         std::make_unique<ht::CpuPenetrationDepthBackend>(

@@ -681,14 +681,14 @@ TEST(Messages, TheManifestCarriesEverySceneObjectKindAndNoOther) {
 }
 
 TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
-  // Versions 5 and 6 changed neither Hello nor Reject: a version-5 or 4 operator's Hello is this
-  // version's bytes with its number in the header; a version-3 one has the 32-byte body without
-  // deadband terms.
-  EXPECT_EQ(kProtocolVersion, 6);
-  EXPECT_EQ(kMinProtocolVersion, 6);
+  // Versions 5, 6 and 7 changed neither Hello nor Reject: a version-6, 5 or 4 operator's Hello is
+  // this version's bytes with its number in the header; a version-3 one has the 32-byte body
+  // without deadband terms.
+  EXPECT_EQ(kProtocolVersion, 7);
+  EXPECT_EQ(kMinProtocolVersion, 7);
   const MacKey key = TestKey();
   for (const std::uint16_t version :
-       {std::uint16_t{5}, std::uint16_t{4}, std::uint16_t{3}, std::uint16_t{2}}) {
+       {std::uint16_t{6}, std::uint16_t{5}, std::uint16_t{4}, std::uint16_t{3}, std::uint16_t{2}}) {
     HelloMessage hello;
     hello.client_nonce = 0xfeedu + version;
     hello.min_version = hello.max_version = version;
@@ -748,9 +748,10 @@ TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
   }
 }
 
-// Kink planes (protocol version 6): each contact's planes come back with it, both encodings; a
-// model with more than fit its datagram sends the first ones, contact by contact; a plane naming
-// a contact that is not there, a contact's fifth plane or a non-finite plane is refused.
+// Kink planes (protocol version 6; version 7 their own translation slopes): each contact's planes
+// come back with it, both encodings; a model with more than fit its datagram sends the first
+// ones, contact by contact; a plane naming a contact that is not there, a contact's
+// (kMaxKinkPlanes + 1)-th plane or a non-finite plane is refused.
 TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
   const MacKey key = TestKey();
   for (const bool compact : {false, true}) {
@@ -759,9 +760,11 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
       int planes = 0;
       for (int i = 0; i < n; ++i) {
         ContactLinearization& c = m.model.contacts[i];
-        c.num_kink_planes = 1 + i % kMaxKinkPlanes;
+        c.num_kink_planes = 1 + i % 4;
         for (int p = 0; p < c.num_kink_planes; ++p) {
-          c.kink_planes[p] = {c.depth_m - 1e-5 * (p + 1), {0.001 * p, -0.02 + 0.001 * i, 0.003}};
+          c.kink_planes[p] = {c.depth_m - 1e-5 * (p + 1),
+                              {0.001 * p, -0.02 + 0.001 * i, 0.003},
+                              {0.05 * p, -0.1, 0.0}};
         }
         planes += c.num_kink_planes;
       }
@@ -793,6 +796,10 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
           EXPECT_EQ(b.kink_planes[p].depth_m, static_cast<float>(a.kink_planes[p].depth_m));
           EXPECT_EQ(b.kink_planes[p].d_rotation_W.y,
                     static_cast<float>(a.kink_planes[p].d_rotation_W.y));
+          EXPECT_EQ(b.kink_planes[p].d_translation_offset_W.x,
+                    static_cast<float>(a.kink_planes[p].d_translation_offset_W.x));
+          EXPECT_EQ(b.kink_planes[p].d_translation_offset_W.y,
+                    static_cast<float>(a.kink_planes[p].d_translation_offset_W.y));
         }
         got += expected;
       }
@@ -800,7 +807,8 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
       if (n == 7) EXPECT_EQ(sent, planes) << "the seed's 7 contacts carry all their planes";
     }
   }
-  // Refused: the first plane's contact index out of range, a fifth plane of one contact, NaN.
+  // Refused: the first plane's contact index out of range, a (kMaxKinkPlanes + 1)-th plane of one
+  // contact, NaN.
   for (const bool compact : {false, true}) {
     ContactModelMessage m = SampleModel(2);
     m.model.contacts[1].num_kink_planes = kMaxKinkPlanes;
@@ -818,7 +826,7 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
     };
     EXPECT_EQ(patched([](Datagram&) {}), DecodeStatus::kOk);
     EXPECT_EQ(patched([&](Datagram& d) { d.bytes[planes_at] = 2; }), DecodeStatus::kBadValue);
-    // Five planes of contact 1: append one more, counted.
+    // kMaxKinkPlanes + 1 planes of contact 1: append one more, counted.
     EXPECT_EQ(patched([&](Datagram& d) {
                 d.bytes[planes_at - 1] = kMaxKinkPlanes + 1;
                 std::copy_n(d.bytes.begin() + planes_at, kKinkPlaneBytes, d.bytes.begin() + d.size);
@@ -827,6 +835,9 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
               DecodeStatus::kBadValue);
     const float nan = std::nanf("");
     EXPECT_EQ(patched([&](Datagram& d) { std::memcpy(&d.bytes[planes_at + 1], &nan, 4); }),
+              DecodeStatus::kNonFinite);
+    // ... and a NaN translation slope (after u8 contact, f32 depth, 3×f32 ∂δ/∂θ).
+    EXPECT_EQ(patched([&](Datagram& d) { std::memcpy(&d.bytes[planes_at + 1 + 16], &nan, 4); }),
               DecodeStatus::kNonFinite);
     // A count above what fits: refused before any plane is read.
     EXPECT_EQ(patched([&](Datagram& d) { d.bytes[planes_at - 1] = 255; }), DecodeStatus::kBadCount);

@@ -138,7 +138,7 @@ TEST(Session, NegotiatesTheCommonGround) {
   EXPECT_EQ(r.reason, wire::RejectReason::kCapabilities);
   EXPECT_NE(r.message().find("50"), std::string_view::npos);
   hello = {};
-  hello.min_version = hello.max_version = 7;
+  hello.min_version = hello.max_version = 8;
   EXPECT_FALSE(NegotiateSession(hello, caps, w, r));
   EXPECT_EQ(r.reason, wire::RejectReason::kVersion);
 }

@@ -20,10 +20,10 @@ Wrench PenaltyWrench(double depth_m, const PenetrationGradient& J,
 
 int AddKinkPlanes(const ContactWindow& w, std::span<const DepthSample> samples,
                   const glm::dvec3& p_WT, ContactLinearization& lin, bool own_slope) noexcept {
-  lin.num_kink_planes = 0;
+  lin.num_kink_planes = std::clamp(lin.num_kink_planes, 0, kMaxKinkPlanes);
   if (samples.size() < static_cast<std::size_t>(kGradientSamples) || !std::isfinite(lin.depth_m) ||
       samples[0].cell < 0) {
-    return 0;
+    return lin.num_kink_planes;
   }
   const double h = GradientSteps::For(w).h_theta;
   const glm::dvec3& J_x = lin.gradient.d_translation_W;
@@ -60,10 +60,15 @@ int AddKinkPlanes(const ContactWindow& w, std::span<const DepthSample> samples,
     }
     if (std::isfinite(s0)) d_rotation += (s0 - glm::dot(d_rotation, axes[a])) * axes[a];
   }
+  // The planes already held (translation arms) share the contact's rotation slope.
+  for (int m = 0; m < lin.num_kink_planes; ++m) {
+    lin.kink_planes[static_cast<std::size_t>(m)].d_rotation_W +=
+        d_rotation - lin.gradient.d_rotation_W;
+  }
   lin.gradient.d_rotation_W = d_rotation;
   for (int a = 0; a < 2; ++a) {
     if (!kinked[a]) continue;
-    for (int side = 0; side < 2; ++side) {
+    for (int side = 0; side < 2 && lin.num_kink_planes < kMaxKinkPlanes; ++side) {
       const DepthSample& s = samples[static_cast<std::size_t>(5 + 2 * a + side)];
       if (s.cell == samples[0].cell) continue;  // the contact's own plane already
       const double sign = side == 0 ? 1.0 : -1.0;

@@ -9,42 +9,49 @@ namespace ht {
 double ContactDepthAt(const ContactLinearization& c, const Twist& dq, PenetrationGradient* gradient,
                       Stiffness6* curvature) noexcept {
   const int n = std::clamp(c.num_kink_planes, 0, kMaxKinkPlanes);
-  const glm::dvec3& J_x = c.gradient.d_translation_W;
-  const double along_x = glm::dot(J_x, dq.linear);
-  // Plane values and rotation gradients: index 0 the contact's own, 1..n its kink planes.
+  // Plane values and gradients: index 0 the contact's own, 1..n its kink planes.
   std::array<double, kMaxKinkPlanes + 1> d{};
-  std::array<glm::dvec3, kMaxKinkPlanes + 1> r{};
+  std::array<glm::dvec3, kMaxKinkPlanes + 1> t{};  // ∂δ_i/∂x
+  std::array<glm::dvec3, kMaxKinkPlanes + 1> r{};  // ∂δ_i/∂θ
   d[0] = c.depth_m + c.gradient.Dot(dq);
+  t[0] = c.gradient.d_translation_W;
   r[0] = c.gradient.d_rotation_W;
+  const auto finite3 = [](const glm::dvec3& a) {
+    return std::isfinite(a.x) && std::isfinite(a.y) && std::isfinite(a.z);
+  };
   int top = 0;
   for (int m = 0; m < n; ++m) {
     const KinkPlane& p = c.kink_planes[static_cast<std::size_t>(m)];
     const std::size_t i = static_cast<std::size_t>(m + 1);
-    d[i] = p.depth_m + (along_x + glm::dot(p.d_rotation_W, dq.angular));
+    t[i] = c.gradient.d_translation_W + p.d_translation_offset_W;
     r[i] = p.d_rotation_W;
-    if (!std::isfinite(d[i]) || !std::isfinite(r[i].x) || !std::isfinite(r[i].y) ||
-        !std::isfinite(r[i].z)) {
+    d[i] = p.depth_m + (glm::dot(t[i], dq.linear) + glm::dot(r[i], dq.angular));
+    if (!std::isfinite(d[i]) || !finite3(t[i]) || !finite3(r[i])) {
       d[i] = -std::numeric_limits<double>::infinity();
       continue;
     }
     if (d[i] > d[static_cast<std::size_t>(top)]) top = m + 1;
   }
   const double eps = kKinkBlendM;
+  const glm::dvec3 t_top = t[static_cast<std::size_t>(top)];
   const glm::dvec3 r_top = r[static_cast<std::size_t>(top)];
   double depth = d[static_cast<std::size_t>(top)];
-  glm::dvec3 blend(0.0);
+  glm::dvec3 blend_t(0.0), blend_r(0.0);
   double weight = 0.0;
   if (curvature != nullptr) curvature->setZero();
   for (int i = 0; i <= n; ++i) {
     const double gap = depth - d[static_cast<std::size_t>(i)];
     if (i == top || !(gap < eps)) continue;  // also skips −∞ and NaN
     const double w = (eps - gap) / (2.0 * eps);
-    const glm::dvec3 diff = r[static_cast<std::size_t>(i)] - r_top;
-    blend += w * diff;
+    const glm::dvec3 diff_t = t[static_cast<std::size_t>(i)] - t_top;
+    const glm::dvec3 diff_r = r[static_cast<std::size_t>(i)] - r_top;
+    blend_t += w * diff_t;
+    blend_r += w * diff_r;
     weight += w;
     if (curvature != nullptr) {
-      const Eigen::Vector3d e(diff.x, diff.y, diff.z);
-      curvature->bottomRightCorner<3, 3>().noalias() += (1.0 / (2.0 * eps)) * (e * e.transpose());
+      Eigen::Matrix<double, 6, 1> e;
+      e << diff_t.x, diff_t.y, diff_t.z, diff_r.x, diff_r.y, diff_r.z;
+      curvature->noalias() += (1.0 / (2.0 * eps)) * (e * e.transpose());
     }
   }
   // The blend's lift here, less its lift at q0 (planes that tie at q0: a level face on a flat, or
@@ -72,8 +79,11 @@ double ContactDepthAt(const ContactLinearization& c, const Twist& dq, Penetratio
                    : -std::numeric_limits<double>::infinity();
       },
       n);
-  if (weight > 1.0) blend /= weight;  // three or more planes at a tie: a convex combination
-  if (gradient != nullptr) *gradient = {J_x, r_top + blend};
+  if (weight > 1.0) {  // three or more planes at a tie: a convex combination
+    blend_t /= weight;
+    blend_r /= weight;
+  }
+  if (gradient != nullptr) *gradient = {t_top + blend_t, r_top + blend_r};
   return depth + lift - lift0;
 }
 

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -196,6 +197,11 @@ void DepthRefinementOptions::Validate() const {
   if (!(secant_at_kinks_m >= 0.0) || !std::isfinite(secant_at_kinks_m)) {
     throw std::invalid_argument("depth refinement: secant_at_kinks_m must be >= 0, got " +
                                 std::to_string(secant_at_kinks_m));
+  }
+  if (!(translation_kink_tolerance_m >= 0.0) || !std::isfinite(translation_kink_tolerance_m)) {
+    throw std::invalid_argument(
+        "depth refinement: translation_kink_tolerance_m must be >= 0, got " +
+        std::to_string(translation_kink_tolerance_m));
   }
   if (!(screen_tolerance_m >= 0.0) || !std::isfinite(screen_tolerance_m)) {
     throw std::invalid_argument("depth refinement: screen_tolerance_m must be >= 0, got " +
@@ -556,13 +562,22 @@ PenetrationGradient DepthRefiner::TexelScaleGradient(const RigidTransform& X_WT,
   const auto poses = GradientSamplePoses(X_WT, w, {h_x, h_theta});
   std::array<double, 10> displaced{};
   displaced.fill(-kInf);
+  texel_num_seeds_ = num_near;
+  for (int m = 0; m < num_near; ++m) {
+    texel_seeds_[static_cast<std::size_t>(m)] =
+        base[static_cast<std::size_t>(order[static_cast<std::size_t>(m)])];
+  }
+  texel_reach_m_ = reach;
   for (int m = 0; m < num_near; ++m) {
     const Seed& sd = base[static_cast<std::size_t>(order[static_cast<std::size_t>(m)])];
     const double margin = reach + 4.0 * texel;
     const Box box{sd.s - margin, sd.s + margin, sd.t - margin, sd.t + margin};
     GatherEnvironment(box.s0, box.s1, box.t0, box.t1);
     GatherTool(tool_all_, box.s0 - reach, box.s1 + reach, box.t0 - reach, box.t1 + reach);
-    for (int k = 0; k < 10; ++k) {  // sample k + 1 of the table: ±u, ±v, ±θu, ±θv, ±θn
+    // Sample k + 1 of the table: ±u, ±v, ±θu, ±θv, ±θn (the translations alone where the rotation
+    // part is the secant's: DepthRefinementOptions::texel_scale_rotation).
+    const int displacements = options_.texel_scale_rotation ? 10 : 4;
+    for (int k = 0; k < displacements; ++k) {
       const int axis = k / 2;
       const double sign = (k % 2 == 0) ? 1.0 : -1.0;
       double shift_s = 0.0, shift_t = 0.0;
@@ -603,10 +618,141 @@ PenetrationGradient DepthRefiner::TexelScaleGradient(const RigidTransform& X_WT,
     if (minus > -kInf) return (deepest.depth_m - minus) / step;
     return 0.0;
   };
+  for (int k = 0; k < 4; ++k) texel_displaced_[static_cast<std::size_t>(k)] = displaced[k];
+  texel_step_m_ = h_x;
+  texel_m_ = texel;
   PenetrationGradient g;
   g.d_translation_W = central(0, h_x) * u + central(1, h_x) * v - n;
   g.d_rotation_W = central(2, h_theta) * u + central(3, h_theta) * v + central(4, h_theta) * n;
   return g;
+}
+
+double DepthRefiner::ClimbShifted(double shift_s, double shift_t) noexcept {
+  double best = -kInf;
+  const double reach = std::max(std::abs(shift_s), std::abs(shift_t)) + texel_reach_m_;
+  for (int m = 0; m < texel_num_seeds_; ++m) {
+    const Seed& sd = texel_seeds_[static_cast<std::size_t>(m)];
+    const double margin = reach + 4.0 * texel_m_;
+    const Box box{sd.s - margin, sd.s + margin, sd.t - margin, sd.t + margin};
+    GatherEnvironment(box.s0, box.s1, box.t0, box.t1);
+    GatherTool(tool_all_, box.s0 - reach, box.s1 + reach, box.t0 - reach, box.t1 + reach);
+    const double floor_m = options_.search_floor_texels * texel_m_;
+    // From the seed's point (the environment's feature) and from it carried by the shift (the
+    // tool's), as TexelScaleGradient climbs.
+    best = std::max(
+        {best,
+         Search(tool_local_, box, sd.s, sd.t, 0.0, 1, texel_m_, floor_m, shift_s, shift_t).depth_m,
+         Search(tool_local_, box, sd.s + shift_s, sd.t + shift_t, 0.0, 1, texel_m_, floor_m,
+                shift_s, shift_t)
+             .depth_m});
+  }
+  return best;
+}
+
+int DepthRefiner::TexelKinkPlanes(const Seed& deepest, ContactLinearization& lin) noexcept {
+  const double h = texel_step_m_;
+  if (!(h > 0.0)) return 0;
+  const glm::dvec3 axes[2] = {window_.axis_u_W, window_.axis_v_W};
+  int added = 0;
+  for (int a = 0; a < 2 && lin.num_kink_planes < kMaxKinkPlanes; ++a) {
+    const double plus = texel_displaced_[static_cast<std::size_t>(2 * a)];
+    const double minus = texel_displaced_[static_cast<std::size_t>(2 * a + 1)];
+    if (!(plus > -kInf) || !(minus > -kInf)) continue;
+    if (!(0.5 * (plus + minus) - deepest.depth_m > options_.translation_kink_tolerance_m)) continue;
+    // Each arm from its two samples at h and 2h on its side (the vertex lies within h of q0).
+    const double plus2 = ClimbShifted(a == 0 ? 2.0 * h : 0.0, a == 1 ? 2.0 * h : 0.0);
+    const double minus2 = ClimbShifted(a == 0 ? -2.0 * h : 0.0, a == 1 ? -2.0 * h : 0.0);
+    const double slope = glm::dot(lin.gradient.d_translation_W, axes[a]);
+    struct Arm {
+      double slope, at_q0;
+    };
+    Arm arms[2] = {{-kInf, -kInf}, {-kInf, -kInf}};
+    if (plus2 > -kInf) arms[0] = {(plus2 - plus) / h, plus - (plus2 - plus)};
+    if (minus2 > -kInf) arms[1] = {(minus - minus2) / h, minus + (minus - minus2)};
+    const auto valid = [](const Arm& arm) {
+      return std::isfinite(arm.slope) && std::isfinite(arm.at_q0);
+    };
+    if (!valid(arms[0]) || !valid(arms[1])) continue;
+    // The deeper arm at q0 becomes the contact's own slope along a and the other a plane, so that
+    // one pair ties at q0 instead of three planes (each tie lowers the model by its lift at q0,
+    // ContactDepthAt); at q0 the blend of the two is their mean, the central difference.
+    const int own = arms[0].at_q0 >= arms[1].at_q0 ? 0 : 1;
+    const Arm& other = arms[1 - own];
+    lin.gradient.d_translation_W += (arms[own].slope - slope) * axes[a];
+    KinkPlane p;
+    p.depth_m = std::min(other.at_q0, lin.depth_m);
+    p.d_rotation_W = lin.gradient.d_rotation_W;
+    p.d_translation_offset_W = (other.slope - arms[own].slope) * axes[a];
+    lin.kink_planes[static_cast<std::size_t>(lin.num_kink_planes++)] = p;
+    ++added;
+  }
+  counters_.translation_kink_planes += static_cast<std::uint64_t>(added);
+  return added;
+}
+
+int DepthRefiner::TranslationKinkPlanes(std::span<const Seed> found, const Seed& deepest,
+                                        double h_x, ContactLinearization& lin) noexcept {
+  const ContactWindow& w = window_;
+  const glm::dvec3 axes[2] = {w.axis_u_W, w.axis_v_W};
+  int added = 0;
+  for (int a = 0; a < 2; ++a) {
+    const double slope = glm::dot(lin.gradient.d_translation_W, axes[a]);
+    for (int side = 0; side < 2 && lin.num_kink_planes < kMaxKinkPlanes; ++side) {
+      const Seed& f = found[static_cast<std::size_t>(2 * a + side)];
+      const double sign = side == 0 ? 1.0 : -1.0;
+      if (!(f.depth_m > -kInf)) continue;
+      const double above = f.depth_m - (deepest.depth_m + sign * slope * h_x);
+      if (!(above > options_.translation_kink_tolerance_m)) continue;
+      // The arm's slope: the refined maximum's central difference at ±h_x ± h_t, climbed from the
+      // sample's refined point and from that point carried by the extra shift.
+      const double shift = sign * h_x;
+      GatherEnvironment(f.s - h_x, f.s + h_x, f.t - h_x, f.t + h_x);
+      GatherTool(tool_all_, f.s - 2.0 * h_x, f.s + 2.0 * h_x, f.t - 2.0 * h_x, f.t + 2.0 * h_x);
+      const double texel = TexelOfGathered(tool_local_);
+      const double h_t = options_.gradient_step_texels * texel;
+      const double margin = h_t + 4.0 * texel;
+      const Box box{f.s - margin, f.s + margin, f.t - margin, f.t + margin};
+      GatherEnvironment(box.s0, box.s1, box.t0, box.t1);
+      const double reach = std::abs(shift) + h_t;
+      GatherTool(tool_all_, box.s0 - reach, box.s1 + reach, box.t0 - reach, box.t1 + reach);
+      const double floor_m = options_.search_floor_texels * texel;
+      double at[2] = {-kInf, -kInf};  // at shift + h_t, shift − h_t
+      for (int e = 0; e < 2; ++e) {
+        const double extra = e == 0 ? h_t : -h_t;
+        const double shift_s = a == 0 ? shift + extra : 0.0;
+        const double shift_t = a == 1 ? shift + extra : 0.0;
+        const double moved_s = f.s + (a == 0 ? extra : 0.0);
+        const double moved_t = f.t + (a == 1 ? extra : 0.0);
+        const Seed at_point =
+            Search(tool_local_, box, f.s, f.t, 0.0, 1, texel, floor_m, shift_s, shift_t);
+        const Seed at_moved =
+            Search(tool_local_, box, moved_s, moved_t, 0.0, 1, texel, floor_m, shift_s, shift_t);
+        at[e] = std::max(at_point.depth_m, at_moved.depth_m);
+      }
+      double arm = 0.0;
+      if (at[0] > -kInf && at[1] > -kInf) {
+        arm = (at[0] - at[1]) / (2.0 * h_t);
+      } else if (at[0] > -kInf) {
+        arm = (at[0] - f.depth_m) / h_t;
+      } else if (at[1] > -kInf) {
+        arm = (f.depth_m - at[1]) / h_t;
+      } else {
+        continue;
+      }
+      // Convex across the cell: the arm on the + side rises faster than the contact's plane, the
+      // arm on the − side falls faster (seen going +a).
+      if (!(sign * (arm - slope) > 0.0) || !std::isfinite(arm)) continue;
+      KinkPlane p;
+      p.depth_m = std::min(f.depth_m - shift * arm, lin.depth_m);
+      p.d_rotation_W = lin.gradient.d_rotation_W;
+      p.d_translation_offset_W = (arm - slope) * axes[a];
+      if (!std::isfinite(p.depth_m)) continue;
+      lin.kink_planes[static_cast<std::size_t>(lin.num_kink_planes++)] = p;
+      ++added;
+    }
+  }
+  counters_.translation_kink_planes += static_cast<std::uint64_t>(added);
+  return added;
 }
 
 double DepthRefiner::TexelOfGathered(std::span<const Projected> tool_tris) const noexcept {
@@ -715,7 +861,10 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
   }
 
   // The rendered displaced samples, each from its own deepest cell at its own pose.
-  if (options_.refine_rendered_samples || !options_.texel_scale_gradient) {
+  std::array<Seed, 4> translation_found{};
+  translation_found.fill(Seed{-kInf, 0.0, 0.0});
+  if (options_.refine_rendered_samples || !options_.texel_scale_gradient ||
+      !options_.texel_scale_rotation) {
     const auto poses = GradientSamplePoses(X_WT, w);
     for (int k = 1; k < kGradientSamples; ++k) {
       DepthSample& sample = samples[static_cast<std::size_t>(k)];
@@ -742,6 +891,7 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
         if (also.depth_m > found.depth_m) found = also;
       }
       if (found.depth_m > -kInf) sample.depth_m = found.depth_m;
+      if (k <= 4) translation_found[static_cast<std::size_t>(k - 1)] = found;
     }
   }
 
@@ -780,9 +930,18 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
       across(5 + 2 * a, big.h_theta, axes[a], lin.gradient.d_rotation_W);
     }
   }
-  if (!options_.texel_scale_gradient) {
+  const bool texel_rotation = options_.texel_scale_gradient && options_.texel_scale_rotation;
+  if (!texel_rotation) {
+    // The refined rendered samples' one-cell secants: the whole gradient, or (texel-scale
+    // translation only) its rotation part.
     LinearizationFaults faults;
-    lin.gradient = AssembleLinearization(w, samples, lin.stiffness_n_per_m, faults).gradient;
+    const PenetrationGradient secant =
+        AssembleLinearization(w, samples, lin.stiffness_n_per_m, faults).gradient;
+    if (options_.texel_scale_gradient) {
+      lin.gradient.d_rotation_W = secant.d_rotation_W;
+    } else {
+      lin.gradient = secant;
+    }
     // Without rotated samples (RotationGradient::kContactLever: only the base pose is drawn) the
     // rotation part stays the lever's, now at the refined deepest point: (r × ∂δ/∂x).
     bool rotations_drawn = true;
@@ -793,6 +952,12 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
       lin.gradient.d_rotation_W =
           glm::cross(point_W - X_WT.translation, lin.gradient.d_translation_W);
     }
+  }
+  lin.num_kink_planes = 0;
+  if (options_.texel_scale_gradient && options_.texel_kink_planes) TexelKinkPlanes(deepest, lin);
+  if (options_.texel_scale_gradient && options_.refine_rendered_samples &&
+      options_.translation_kink_planes) {
+    TranslationKinkPlanes(translation_found, deepest, big.h_x, lin);
   }
   return true;
 }

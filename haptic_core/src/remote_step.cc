@@ -163,6 +163,8 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   LinearizeContacts(X_WT, last_num_queries_);
   // Stage 5a: a window whose overlap is in separated regions becomes one window per region.
   if (region_solver_) last_num_queries_ = SplitSeparatedOverlap(X_WT, last_num_queries_);
+  // Kink planes are added below (stage 5b's translation arms, then the rotation arms).
+  for (int i = 0; i < last_num_queries_; ++i) last_results_[i].num_kink_planes = 0;
   // Stage 5b: δ refined to the finest texture level, its gradient at texel scale (issue 32).
   if (options_.refine_depth) {
     for (int i = 0; i < last_num_queries_; ++i) {

@@ -60,6 +60,14 @@ Wrench ToolSimulator::CouplingWrench(const ToolState& s, const RigidTransform& X
               c.b_rotation_nms_per_rad * (V_WH_W.angular - s.V_WT_W.angular)};
 }
 
+void ToolSimulator::set_contact_damping(double beta_s) {
+  if (!(beta_s >= 0.0) || !std::isfinite(beta_s)) {
+    throw std::invalid_argument("the contact damping must be >= 0 s and finite, got " +
+                                std::to_string(beta_s));
+  }
+  contact_damping_s_ = beta_s;
+}
+
 void ToolSimulator::set_max_contact_force(double max_contact_force_n) {
   if (!(max_contact_force_n > 0.0)) {
     throw std::invalid_argument("the bound on a contact's force must be > 0 N (+inf = none), got " +
@@ -142,9 +150,13 @@ ToolStepResult ToolSimulator::Integrate(ToolState& s, const RigidTransform& X_WH
   A.topLeftCorner<3, 3>().diagonal().array() += h * c.b_translation_ns_per_m;
   A.bottomRightCorner<3, 3>().diagonal().array() += h * c.b_rotation_nms_per_rad;
   A.noalias() -= (h * h) * K;
+  // Contact damping D_c = β·K_c (set_contact_damping): A −= h·D_c, and D_c·V_n joins the force.
+  const double beta = contact_damping_s_;
+  if (beta > 0.0) A.noalias() -= (h * beta) * contact.K;
 
   const Vector6 V = ToVector(s.V_WT_W);
-  const Vector6 rhs = h * (ToVector(F_total) + h * (K * V));
+  Vector6 rhs = h * (ToVector(F_total) + h * (K * V));
+  if (beta > 0.0) rhs.noalias() += (h * beta) * (contact.K * V);
   const Eigen::LDLT<Stiffness6> ldlt(A);
   const Vector6 dV = ldlt.solve(rhs);
   const Vector6 V_next = V + dV;

@@ -203,6 +203,13 @@ int main(int argc, char** argv) {
                  "Falcon firmware image (not shipped; e.g. from libnifalcon's or Novint's files)");
   bool no_passivity = false;
   double model_timeout_s = defaults.safety.model_timeout_s;
+  double contact_damping_ms = defaults.contact_damping_s * 1e3;
+  app.add_option("--contact-damping-ms", contact_damping_ms,
+                 "contact damping of the simulated tool, proportional to the contact stiffness\n"
+                 "(D = beta K, beta in ms; a contact of stiffness k on the tool's mass m gets the\n"
+                 "damping ratio beta sqrt(k/m)/2); 0 = none")
+      ->check(CLI::Range(0.0, 1000.0))
+      ->capture_default_str();
   double max_contact_force_n = defaults.max_contact_force_n;
   app.add_option("--max-contact-force", max_contact_force_n,
                  "bound on each contact's force on the simulated tool, N (0 = none): a contact\n"
@@ -309,6 +316,7 @@ int main(int argc, char** argv) {
     config.max_model_rate_hz = max_model_rate;
     config.passivity = !no_passivity;
     config.max_contact_force_n = max_contact_force_n;
+    config.contact_damping_s = contact_damping_ms * 1e-3;
     config.safety.model_timeout_s = model_timeout_s;
     config.tool_state_deadband.weber_fraction =
         tool_state_deadband_pct.value_or(deadband_pct) / 100.0;

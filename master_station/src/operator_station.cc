@@ -351,6 +351,7 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   tick_config.max_contact_force_n = config.max_contact_force_n > 0.0
                                         ? config.max_contact_force_n
                                         : std::numeric_limits<double>::infinity();
+  tick_config.contact_damping_s = config.contact_damping_s;
   OperatorTick tick(tick_config, X_WM, tool);
   const PassivityController& passivity = tick.passivity();
   const WrenchSafetyFilter& safety = tick.safety();

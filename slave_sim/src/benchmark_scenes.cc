@@ -336,7 +336,7 @@ std::vector<RigidTransform> ScriptedContactPoses(const BenchmarkScene& scene, in
 }
 
 std::vector<RigidTransform> PosesFromTrace(const std::string& path, const BenchmarkScene& scene,
-                                           int count) {
+                                           int count, double from_s) {
   std::ifstream in(path);
   if (!in) throw std::runtime_error(path + ": cannot read the trace");
   std::string line;
@@ -346,10 +346,10 @@ std::vector<RigidTransform> PosesFromTrace(const std::string& path, const Benchm
     std::stringstream header(line);
     for (std::string c; std::getline(header, c, ',');) columns.push_back(c);
   }
-  const char* wanted[] = {"tool_x",  "tool_y",  "tool_z",  "tool_rx",
-                          "tool_ry", "tool_rz", "contacts"};
-  int index[7];
-  for (int k = 0; k < 7; ++k) {
+  const char* wanted[] = {"tool_x",  "tool_y",  "tool_z",   "tool_rx",
+                          "tool_ry", "tool_rz", "contacts", "t_s"};
+  int index[8];
+  for (int k = 0; k < 8; ++k) {
     const auto it = std::find(columns.begin(), columns.end(), wanted[k]);
     if (it == columns.end()) {
       throw std::runtime_error(path + ": no column '" + wanted[k] +
@@ -363,14 +363,14 @@ std::vector<RigidTransform> PosesFromTrace(const std::string& path, const Benchm
     std::stringstream row(line);
     for (std::string c; std::getline(row, c, ',');) cells.push_back(c);
     if (cells.size() != columns.size()) continue;  // a truncated last row
-    double v[7];
+    double v[8];
     bool ok = true;
-    for (int k = 0; k < 7; ++k) {
+    for (int k = 0; k < 8; ++k) {
       char* end = nullptr;
       v[k] = std::strtod(cells[index[k]].c_str(), &end);
       ok = ok && end != cells[index[k]].c_str() && std::isfinite(v[k]);
     }
-    if (!ok || v[6] < 1.0) continue;
+    if (!ok || v[6] < 1.0 || (from_s >= 0.0 && v[7] < from_s)) continue;
     RigidTransform X_WT;
     X_WT.translation = {v[0], v[1], v[2]};
     X_WT.rotation = QuaternionFromRotationVector({v[3], v[4], v[5]});
@@ -379,6 +379,7 @@ std::vector<RigidTransform> PosesFromTrace(const std::string& path, const Benchm
   if (in_contact.empty()) throw std::runtime_error(path + ": no row in contact");
   std::vector<RigidTransform> out;
   const int n = std::min<int>(count, static_cast<int>(in_contact.size()));
+  if (from_s >= 0.0) return {in_contact.begin(), in_contact.begin() + n};
   for (int i = 0; i < n; ++i) {
     out.push_back(in_contact[static_cast<std::size_t>((i + 0.5) * in_contact.size() / n)]);
   }

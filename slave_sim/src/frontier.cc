@@ -215,6 +215,33 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
       step.gradient_step_texels = texels;
       s.push_back(step);
     }
+    FrontierSetting translation_kinks = texel_gradient;
+    translation_kinks.name = "refined_texel_gradient_translation_kinks";
+    translation_kinks.translation_kink_planes = true;
+    s.push_back(translation_kinks);
+    FrontierSetting translation_only = texel_gradient;
+    translation_only.name = "refined_texel_translation_gradient";
+    translation_only.texel_scale_rotation = false;
+    s.push_back(translation_only);
+    FrontierSetting translation_only_kinks = translation_only;
+    translation_only_kinks.name = "refined_texel_translation_gradient_translation_kinks";
+    translation_only_kinks.translation_kink_planes = true;
+    s.push_back(translation_only_kinks);
+    FrontierSetting translation_only_texel_kinks = translation_only;
+    translation_only_texel_kinks.name = "refined_texel_translation_gradient_texel_kinks";
+    translation_only_texel_kinks.texel_kink_planes = true;
+    s.push_back(translation_only_texel_kinks);
+    FrontierSetting translation_only_both_kinks = translation_only_kinks;
+    translation_only_both_kinks.name = "refined_texel_translation_gradient_both_kinks";
+    translation_only_both_kinks.texel_kink_planes = true;
+    s.push_back(translation_only_both_kinks);
+    for (const double texels : {4.0, 8.0}) {
+      FrontierSetting step = translation_only_both_kinks;
+      step.name = "refined_texel_translation_gradient_both_kinks_" +
+                  std::to_string(static_cast<int>(texels)) + "_texels";
+      step.gradient_step_texels = texels;
+      s.push_back(step);
+    }
     for (const int um : {1, 5, 20}) {
       FrontierSetting kinks = texel_gradient;
       kinks.name = "refined_texel_gradient_secant_at_kinks_" + std::to_string(um) + "um";
@@ -355,6 +382,14 @@ struct Metrics {
   // displacements. NaN for the baselines, which send no model.
   double prediction_force_rel_rms = std::numeric_limits<double>::quiet_NaN();
   double prediction_torque_rel_rms = std::numeric_limits<double>::quiet_NaN();
+  // Model switches along consecutive trace rows (FrontierOptions::trace_from_s): |F| of the
+  // jump the operator's loop meets when the model made switch_lag rows earlier, evaluated at this
+  // row's pose, gives way to this row's model (N): p50, p99, max and how many exceed 0.2 N. NaN
+  // (and 0) without consecutive poses.
+  double switch_jump_p50_n = std::numeric_limits<double>::quiet_NaN();
+  double switch_jump_p99_n = std::numeric_limits<double>::quiet_NaN();
+  double switch_jump_max_n = std::numeric_limits<double>::quiet_NaN();
+  int switch_jumps_over_0_2_n = 0;
   bool pareto = false;
 };
 
@@ -476,7 +511,7 @@ std::vector<RigidTransform> PredictionPoses(const std::vector<RigidTransform>& p
 }
 
 void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& poses_WFt,
-                const MeshContactBaseline& fcl, SettingRun& run) {
+                const MeshContactBaseline& fcl, int switch_lag, SettingRun& run) {
   const FrontierSetting& st = run.setting;
   run.X_TFt = scene.X_TFt;
   run.tool_coarse_triangles = scene.tool_coarse_triangles;
@@ -539,6 +574,9 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.refine_depth = st.refine_depth;
   options.depth_refinement.texel_scale_gradient = st.texel_scale_gradient;
   options.depth_refinement.secant_at_kinks_m = st.secant_at_kinks_m;
+  options.depth_refinement.translation_kink_planes = st.translation_kink_planes;
+  options.depth_refinement.texel_scale_rotation = st.texel_scale_rotation;
+  options.depth_refinement.texel_kink_planes = st.texel_kink_planes;
   options.split_windows_at_separated_overlap = st.split_windows_at_separated_overlap;
   options.split_link_m = st.split_link_m;
   options.depth_refinement.subgrid_rotations = st.subgrid_rotations;
@@ -587,6 +625,26 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
     for (const Twist& d : PredictionDisplacements()) {
       run.predicted.push_back(EvaluateContactModel(models[k], Displace(X_WT, d)).F_T_W);
     }
+  }
+  // Model switches along consecutive poses: the model of switch_lag poses earlier at this pose
+  // against this pose's own.
+  if (switch_lag > 0 && poses_WFt.size() > static_cast<std::size_t>(switch_lag)) {
+    std::vector<double> jumps;
+    for (std::size_t k = static_cast<std::size_t>(switch_lag); k < poses_WFt.size(); ++k) {
+      const RigidTransform X_WT = poses_WFt[k] * X_FtT;
+      const Wrench held =
+          EvaluateContactModel(models[k - static_cast<std::size_t>(switch_lag)], X_WT).F_T_W;
+      jumps.push_back(glm::length(held.force - models[k].F_T_W_at_q0.force));
+    }
+    std::sort(jumps.begin(), jumps.end());
+    const auto at = [&](double q) {
+      return jumps[static_cast<std::size_t>(q * static_cast<double>(jumps.size() - 1))];
+    };
+    run.m.switch_jump_p50_n = at(0.5);
+    run.m.switch_jump_p99_n = at(0.99);
+    run.m.switch_jump_max_n = jumps.back();
+    run.m.switch_jumps_over_0_2_n = static_cast<int>(
+        std::count_if(jumps.begin(), jumps.end(), [](double j) { return j > 0.2; }));
   }
 }
 
@@ -994,8 +1052,9 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
               "from them through the model cache";
     std::vector<RigidTransform> poses;
     const auto trace = options.traces.find(name);
+    const bool consecutive = trace != options.traces.end() && options.trace_from_s >= 0.0;
     if (trace != options.traces.end()) {
-      poses = PosesFromTrace(trace->second, ref, pose_count);
+      poses = PosesFromTrace(trace->second, ref, pose_count, options.trace_from_s);
       rep.pose_source = "rows in contact of the run trace " + trace->second;
     } else {
       say("%s: finding %d in-contact poses on the full-resolution meshes", name.c_str(),
@@ -1039,7 +1098,7 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
         run.tool_surface = models.tool_surface;
         run.object_surface = models.object_surface;
         const auto t0 = Clock::now();
-        RunSetting(scene, poses, fcl, run);
+        RunSetting(scene, poses, fcl, consecutive ? options.switch_lag_rows : 0, run);
         for (ContactRecord& c : run.contacts) {
           const std::string key =
               GtKey(c.pose, run.X_TFt, c.query.window, c.query.stiffness_n_per_m);
@@ -1199,7 +1258,8 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
          "poses_force_without_truth,prediction_force_rel_rms,prediction_torque_rel_rms,"
          "tool_surface_p99_um,object_surface_p99_um,tool_surface_outside_p99_um,"
          "object_surface_outside_p99_um,tool_surface_share_outside,"
-         "object_surface_share_outside,pareto,"
+         "object_surface_share_outside,switch_jump_p50_n,switch_jump_p99_n,switch_jump_max_n,"
+         "switch_jumps_over_0_2_n,pareto,"
          "skipped\n";
     for (const SceneReport& rep : reports) {
       for (const SettingRun& r : rep.runs) {
@@ -1259,12 +1319,16 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
                                        Fmt(r.object_surface.outside_p99_m * 1e6),
                                        Fmt(r.tool_surface.share_outside),
                                        Fmt(r.object_surface.share_outside),
+                                       Fmt(m.switch_jump_p50_n),
+                                       Fmt(m.switch_jump_p99_n),
+                                       Fmt(m.switch_jump_max_n),
+                                       std::to_string(m.switch_jumps_over_0_2_n),
                                        std::string(m.pareto ? "1" : "0"),
                                        std::string()}) {
             cells.push_back(c);
           }
         } else {
-          cells.resize(cells.size() + 37);
+          cells.resize(cells.size() + 41);
           cells.push_back(clean(r.skipped));
         }
         for (std::size_t i = 0; i < cells.size(); ++i) o << (i ? "," : "") << cells[i];

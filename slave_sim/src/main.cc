@@ -136,6 +136,22 @@ int main(int argc, char** argv) {
                  "maximum takes over within the cell), the cell's secant instead; 0 = off")
       ->check(CLI::Range(0.0, 1000.0))
       ->capture_default_str();
+  bool secant_rotation_gradient = false;
+  app.add_flag("--secant-rotation-gradient", secant_rotation_gradient,
+               "with --texel-scale-gradient: only its translation part at texel scale, the\n"
+               "rotation part the one-cell secant as by default (at texel scale a face resting on\n"
+               "ridges rocks between its tilt's arms; issue 32, ninth stop)");
+  bool translation_kink_planes = false;
+  app.add_flag("--translation-kink-planes", translation_kink_planes,
+               "with --texel-scale-gradient: each contact also carries the arms of its\n"
+               "depth's V along the window's two in-plane axes (a face between two ridges'\n"
+               "flanks), so that the operator's loop finds the vertex between two models\n"
+               "instead of being pushed across it by one arm (issue 32, ninth stop)");
+  bool texel_kink_planes = false;
+  app.add_flag("--texel-kink-planes", texel_kink_planes,
+               "with --texel-scale-gradient: where the depth is convex within the texel-scale\n"
+               "step along a window axis (a V's vertex at the tool), its two one-sided slopes as\n"
+               "kink planes through the contact's depth");
   double split_windows_link_mm = 0.0;
   app.add_option(
          "--split-windows-link-mm", split_windows_link_mm,
@@ -342,6 +358,19 @@ int main(int argc, char** argv) {
     config.pipeline.depth_refinement.texel_scale_gradient = texel_scale_gradient;
     config.pipeline.depth_refinement.gradient_step_texels = gradient_step_texels;
     config.pipeline.depth_refinement.secant_at_kinks_m = secant_at_kinks_um * 1e-6;
+    config.pipeline.depth_refinement.translation_kink_planes = translation_kink_planes;
+    config.pipeline.depth_refinement.texel_scale_rotation = !secant_rotation_gradient;
+    config.pipeline.depth_refinement.texel_kink_planes = texel_kink_planes;
+    if (secant_rotation_gradient && !texel_scale_gradient) {
+      throw std::invalid_argument(
+          "--secant-rotation-gradient needs --texel-scale-gradient (without it the whole "
+          "gradient is the secant already)");
+    }
+    if (translation_kink_planes && !texel_scale_gradient) {
+      throw std::invalid_argument(
+          "--translation-kink-planes needs --texel-scale-gradient (the arms are the texel-scale "
+          "slopes on either side of the vertex)");
+    }
     config.pipeline.split_windows_at_separated_overlap = split_windows_link_mm > 0.0;
     config.pipeline.split_link_m = split_windows_link_mm * 1e-3;
     config.pipeline.speculative_lead_s = speculative_lead_ms * 1e-3;

@@ -391,7 +391,8 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     // Stage 5b (issue 32), warm-up included: contacts refined, and per contact the seeds, the
     // evaluations of b − a and how far δ0 rose above the grid's; the conservative screen's
     // squares and leaves per contact, the contacts where it found a deeper point than the seeds
-    // (and Σ µm), and those it stopped at its leaf budget.
+    // (and Σ µm), and those it stopped at its leaf budget; the translation arms added as kink
+    // planes (DepthRefinementOptions::translation_kink_planes, texel_kink_planes).
     const DepthRefinementCounters& r = pipeline->depth_refinement_counters();
     const double n = r.contacts > 0 ? static_cast<double>(r.contacts) : 1.0;
     s["depth_refinement"] = {
@@ -403,7 +404,8 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
         {"screen_leaves_per_contact", static_cast<double>(r.screen_leaves) / n},
         {"screen_found_deeper", r.screen_found},
         {"screen_raised_um_sum", r.screen_raised_um},
-        {"screen_truncated", r.screen_truncated}};
+        {"screen_truncated", r.screen_truncated},
+        {"translation_kink_planes", r.translation_kink_planes}};
   }
   s["grazing_dropped_contacts"] = pipeline->step_faults().grazing_dropped;
   s["unreachable_pairs_dropped"] = pipeline->step_faults().unreachable_pairs;

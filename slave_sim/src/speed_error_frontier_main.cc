@@ -45,6 +45,16 @@ int main(int argc, char** argv) {
   app.add_option("--trace", traces,
                  "SCENE=FILE: take that scene's poses from a run's trace.csv (rows in contact),\n"
                  "e.g. fig75=out/fig75/trace.csv from deploy/run-loopback (repeatable)");
+  app.add_option("--trace-from", options.trace_from_s,
+                 "with --trace: the --poses consecutive rows in contact from this time (s) on\n"
+                 "instead of rows spread over the run, and the model-switch measure along them\n"
+                 "(frontier.csv switch_jump_*: the held model at each row's pose against that\n"
+                 "row's own)")
+      ->check(CLI::Range(0.0, 1e6));
+  app.add_option("--switch-lag-rows", options.switch_lag_rows,
+                 "with --trace-from: rows between the held model and the next (the model's age)")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
   app.add_option("--cache-dir", options.cache_dir, "model cache folder")->capture_default_str();
   app.add_flag("--no-gpu", no_gpu, "leave out the GPU settings");
   app.add_flag("--on-product-models", options.on_product_models,

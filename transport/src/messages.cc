@@ -297,13 +297,15 @@ static_assert(kMaxKinkPlanesPerContact == kMaxKinkPlanes);
 struct WireKinkPlane {
   std::uint8_t contact = 0;
   float depth_m = 0.0f;
-  std::array<float, 3> d_rotation{};  ///< ∂δ_m/∂θ (m/rad)
+  std::array<float, 3> d_rotation{};            ///< ∂δ_m/∂θ (m/rad)
+  std::array<float, 3> d_translation_offset{};  ///< ∂δ_m/∂x less the contact's ∂δ/∂x
 };
 
 constexpr void Fields(auto& a, Of<WireKinkPlane> auto& p) {
   a(p.contact);
   a(p.depth_m);
   for (auto& v : p.d_rotation) a(v);
+  for (auto& v : p.d_translation_offset) a(v);
 }
 
 /// The kink planes of contacts [0, n) of `model` in wire order (contact by contact), at most
@@ -320,7 +322,10 @@ constexpr std::size_t FlattenKinkPlanes(const ContactModel& model, std::size_t n
       out[k++] = {static_cast<std::uint8_t>(i),
                   static_cast<float>(kp.depth_m),
                   {static_cast<float>(kp.d_rotation_W.x), static_cast<float>(kp.d_rotation_W.y),
-                   static_cast<float>(kp.d_rotation_W.z)}};
+                   static_cast<float>(kp.d_rotation_W.z)},
+                  {static_cast<float>(kp.d_translation_offset_W.x),
+                   static_cast<float>(kp.d_translation_offset_W.y),
+                   static_cast<float>(kp.d_translation_offset_W.z)}};
     }
   }
   return k;
@@ -336,7 +341,9 @@ bool DistributeKinkPlanes(std::span<const WireKinkPlane> planes, std::size_t n,
     ContactLinearization& c = model.contacts[w.contact];
     if (c.num_kink_planes >= kMaxKinkPlanes) return false;
     c.kink_planes[static_cast<std::size_t>(c.num_kink_planes++)] = {
-        w.depth_m, glm::dvec3(w.d_rotation[0], w.d_rotation[1], w.d_rotation[2])};
+        w.depth_m, glm::dvec3(w.d_rotation[0], w.d_rotation[1], w.d_rotation[2]),
+        glm::dvec3(w.d_translation_offset[0], w.d_translation_offset[1],
+                   w.d_translation_offset[2])};
   }
   return true;
 }
@@ -629,7 +636,10 @@ DecodeStatus Check(const ContactModelMessage& m) {
     if (c.stiffness_n_per_m < 0.0) return DecodeStatus::kBadValue;
     for (int p = 0; p < std::clamp(c.num_kink_planes, 0, kMaxKinkPlanes); ++p) {
       const KinkPlane& kp = c.kink_planes[static_cast<std::size_t>(p)];
-      if (!std::isfinite(kp.depth_m) || !Finite3(kp.d_rotation_W)) return DecodeStatus::kNonFinite;
+      if (!std::isfinite(kp.depth_m) || !Finite3(kp.d_rotation_W) ||
+          !Finite3(kp.d_translation_offset_W)) {
+        return DecodeStatus::kNonFinite;
+      }
     }
   }
   if (const DecodeStatus s = CheckPose(m.model.X_WT0); s != DecodeStatus::kOk) return s;
@@ -753,7 +763,10 @@ DecodeStatus Check(const CompactContactModelBody& m) {
   std::array<int, kMaxWireContacts> planes_of{};
   for (int j = 0; j < m.num_kink_planes; ++j) {
     const WireKinkPlane& p = m.kink_planes[static_cast<std::size_t>(j)];
-    if (!std::isfinite(p.depth_m) || !AllFinite(p.d_rotation)) return DecodeStatus::kNonFinite;
+    if (!std::isfinite(p.depth_m) || !AllFinite(p.d_rotation) ||
+        !AllFinite(p.d_translation_offset)) {
+      return DecodeStatus::kNonFinite;
+    }
     if (p.contact >= m.num_contacts || ++planes_of[p.contact] > kMaxKinkPlanes) {
       return DecodeStatus::kBadValue;
     }

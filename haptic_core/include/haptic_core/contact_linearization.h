@@ -26,16 +26,21 @@ struct PenetrationGradient {
   }
 };
 
-/// Most kink planes one contact carries (issue 31, change 5): the two arms of δ's V about each of
-/// the window's in-plane rotation axes u and v.
-inline constexpr int kMaxKinkPlanes = 4;
+/// Most kink planes one contact carries: the two arms of δ's V about each of the window's in-plane
+/// rotation axes u and v (issue 31, change 5), and along each of its in-plane translation axes
+/// (issue 32, ninth stop: DepthRefinementOptions::translation_kink_planes).
+inline constexpr int kMaxKinkPlanes = 8;
 
-/// A further plane of a contact's depth (issue 31, change 5), sharing the contact's translation
-/// gradient: δ_m(q) = depth_m + ∂δ/∂x·Δx + d_rotation_W·Δθ, Δq = q ⊖ q0 (world axes, rotation
-/// about the tool's centre of mass).
+/// A further plane of a contact's depth (issue 31, change 5; its own translation slope since
+/// issue 32's ninth stop): δ_m(q) = depth_m + (∂δ/∂x + d_translation_offset_W)·Δx +
+/// d_rotation_W·Δθ, Δq = q ⊖ q0 (world axes, rotation about the tool's centre of mass), ∂δ/∂x the
+/// contact's. The rotation planes (AddKinkPlanes) share the contact's ∂δ/∂x (offset zero); a
+/// translation arm has its own.
 struct KinkPlane {
   double depth_m = 0.0;          ///< δ_m at q0 (m), at most the contact's δ0.
   glm::dvec3 d_rotation_W{0.0};  ///< ∂δ_m/∂θ (m/rad).
+  /// ∂δ_m/∂x less the contact's ∂δ/∂x (dimensionless, W); zero: the contact's own.
+  glm::dvec3 d_translation_offset_W{0.0};
 };
 
 /// The linearized contact that the remote node sends and the operator loop evaluates:
@@ -71,8 +76,10 @@ struct ContactLinearization {
 ///  - each arm whose cell is not the deepest one is a plane through its sample with its cell's
 ///    slope along a (the contact's ∂δ/∂θ along the other axes), lowered to δ0 where it would
 ///    exceed δ0 at q0.
-/// Elsewhere nothing changes. Replaces lin's planes; none when δ0 is not finite or the base sample
-/// lacks a cell. Returns the number of planes. noexcept, allocation-free.
+/// Elsewhere nothing changes. Appends to the planes lin already holds (stage 5b's translation
+/// arms, which take the contact's new ∂δ/∂θ along a kinked axis too), up to kMaxKinkPlanes; adds
+/// none when δ0 is not finite or the base sample lacks a cell. Returns lin's number of planes.
+/// noexcept, allocation-free.
 /// With `own_slope` false the contact's ∂δ/∂θ stays the secant and only arms whose cell is not
 /// the deepest one are added (an approximation placed on the frontier).
 int AddKinkPlanes(const ContactWindow& window, std::span<const DepthSample> samples,

@@ -41,17 +41,17 @@ inline constexpr double kKinkBlendM = 10e-6;
 
 /// δ of contact `c` at the pose change Δq = q ⊖ q0 (Δq.linear in m, Δq.angular in rad, world
 /// axes): the largest of its planes, δ0 + J·Δq and each kink plane's δ_m + J_m·Δq (J_m =
-/// (∂δ/∂x, ∂δ_m/∂θ)), with a quadratic blend where another plane comes within kKinkBlendM of the
-/// largest one (gap g < ε: δ += (ε − g)²/(4ε), J += w·(J_i − J_max) with w = (ε − g)/(2ε); the
-/// weights are normalized when they add up to more than 1), less that lift at q0, so that
-/// δ(q0) = δ0 always (planes that tie at q0, a level face on a flat, add no depth there; a
+/// (∂δ/∂x + the plane's offset, ∂δ_m/∂θ)), with a quadratic blend where another plane comes within
+/// kKinkBlendM of the largest one (gap g < ε: δ += (ε − g)²/(4ε), J += w·(J_i − J_max) with w = (ε
+/// − g)/(2ε); the weights are normalized when they add up to more than 1), less that lift at q0, so
+/// that δ(q0) = δ0 always (planes that tie at q0, a level face on a flat, add no depth there; a
 /// touching contact pushes with nothing). Without planes, δ0 + J·Δq exactly.
 /// The blend makes the gradient continuous through the V's vertex: at a tie the two arms bear
 /// half each, so a face resting on two edges finds its equilibrium instead of chattering between
 /// them tick by tick (each plane alone flips the torque from one edge's to the other's).
 /// `gradient` (optional) receives ∇δ; `curvature` (optional) receives ∇²δ (6×6, world axes,
-/// rows/cols as Stiffness6; only its rotation block is non-zero: the planes share ∂δ/∂x), the
-/// blend's Σ (J_max − J_i)(J_max − J_i)ᵀ/(2ε), which the implicit tool step needs in K to stay
+/// rows/cols as Stiffness6; only its rotation block is non-zero where the planes share ∂δ/∂x),
+/// the blend's Σ (J_max − J_i)(J_max − J_i)ᵀ/(2ε), which the implicit tool step needs in K to stay
 /// stable there. Non-finite planes are skipped. noexcept, allocation-free (1 kHz loop).
 double ContactDepthAt(const ContactLinearization& c, const Twist& dq,
                       PenetrationGradient* gradient = nullptr,

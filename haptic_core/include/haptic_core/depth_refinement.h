@@ -85,6 +85,12 @@ struct DepthRefinementOptions {
   /// The gradient from the refined maximum at texel-scale steps (above); off: the grid's
   /// one-cell secants (h_x = W/N, h_θ = h_x/(W/2)) of the refined rendered samples.
   bool texel_scale_gradient = false;
+  /// With texel_scale_gradient: its rotation part at texel scale too (h_θ = h_x/(W/2)); off: the
+  /// translation part at texel scale and the rotation part the refined rendered samples' one-cell
+  /// secant, as without texel_scale_gradient (needs refine_rendered_samples). A face resting on
+  /// ridges rocks between the arms of its tilt's V: at texel scale each model holds one arm's
+  /// slope (issue 32, ninth stop: the fig75 slide's tool rocked by 10 mrad within 60 ms).
+  bool texel_scale_rotation = true;
   /// With texel_scale_gradient: per axis (translation along u and v, rotation about u, v and n),
   /// where the refined rendered samples one cell away (±h_x, ±h_θ) lie above the texel-scale
   /// tangent's prediction by more than this (m) on either side (a kink within the cell), that
@@ -92,6 +98,33 @@ struct DepthRefinementOptions {
   /// needs refine_rendered_samples. (On the seed's ridged scenes nearly every contact has a kink
   /// within a cell, so this is the secant's error: docs/frontier/issue32/seventh_stop.)
   double secant_at_kinks_m = 0.0;
+  /// With texel_scale_gradient and refine_rendered_samples (issue 32, ninth stop): the arms of
+  /// δ's V along the window's in-plane translation axes as kink planes (KinkPlane, with their own
+  /// translation slope). Per axis a ∈ {u, v} and side ±, where the refined rendered sample one
+  /// cell away (δ± at ±h_x) lies above the texel-scale tangent (δ0 ± h_x·∂δ/∂a) by more than
+  /// translation_kink_tolerance_m, the depth is convex across the cell (a V: the tool's texture
+  /// passes from one peak of the other's to the next). That arm's slope s is the texel-scale
+  /// central difference of the refined maximum climbed from the sample's refined point at
+  /// ±h_x ± h_t (h_t = gradient_step_texels texels); the plane passes through (±h_x, δ±) with
+  /// slope s along a, the contact's along the other axes, lowered to δ0 where it would exceed it
+  /// at q0, and is kept only when s lies beyond the contact's slope on that side (convex). The
+  /// operator's loop then finds the vertex between two models (ContactDepthAt) instead of pushing
+  /// the tool across it with one arm's slope until the next (the texel gradient's chatter:
+  /// docs/frontier/issue32/seventh_stop). δ0 and the wrench at q0 are unchanged. Off: no
+  /// translation arms (the default until the frontier and the loop say otherwise).
+  bool translation_kink_planes = false;
+  /// How far above the tangent (m) a translation sample must lie to make an arm. ≥ 0.
+  double translation_kink_tolerance_m = 1e-6;
+  /// With texel_scale_gradient: the arms of a V whose vertex lies within the texel-scale step
+  /// (h_t) of q0: per axis a ∈ {u, v}, where the mean of the gradient's samples δ(q0 ± h_t·a)
+  /// lies above δ0 by more than translation_kink_tolerance_m (convex at texel scale), the refined
+  /// maximum is climbed at ±2h_t too, and each arm is the line through its side's two samples
+  /// (h_t and 2h_t). The arm that is deeper at q0 becomes the contact's own slope along a, the
+  /// other a kink plane (lowered to δ0 where it would exceed it at q0): the model holds the V's
+  /// vertex near q0 instead of the central difference through it (two climbs per kinked axis).
+  /// At q0 the two planes blend to their mean; away from the vertex the model is the arms less
+  /// their blend's lift at q0 (ε/4 = 2.5 µm where they tie, ContactDepthAt).
+  bool texel_kink_planes = false;
   /// The rendered rotation samples (±h_θ about u, v and n) searched from a sub-grid of their
   /// deepest cell's square as the base and the translations are; off (the default): a pattern
   /// search from the cell's centre alone, fewer evaluations at the same error on the frontier
@@ -140,6 +173,9 @@ struct DepthRefinementCounters {
   std::uint64_t screen_found = 0;
   std::uint64_t screen_raised_um = 0;
   std::uint64_t screen_truncated = 0;
+  /// Translation arms added as kink planes (DepthRefinementOptions::translation_kink_planes and
+  /// texel_kink_planes).
+  std::uint64_t translation_kink_planes = 0;
 };
 
 /// Refines the linearizations of a texture stage's batch to the finest texture level (see the
@@ -196,6 +232,17 @@ class DepthRefiner {
   PenetrationGradient TexelScaleGradient(const RigidTransform& X_WT, std::span<const Seed> base,
                                          int num_seeds, const Seed& deepest,
                                          const glm::dvec3& point_W) noexcept;
+  // DepthRefinementOptions::translation_kink_planes: the arms of δ's V along u and v from the
+  // refined translation samples `found` (index k − 1 for rendered sample k = 1…4, at ±h_x),
+  // appended to lin's planes (which this first clears). Returns the planes added.
+  int TranslationKinkPlanes(std::span<const Seed> found, const Seed& deepest, double h_x,
+                            ContactLinearization& lin) noexcept;
+  // DepthRefinementOptions::texel_kink_planes: from TexelScaleGradient's translation samples
+  // (texel_displaced_, texel_step_m_), appended to lin's planes. Returns the planes added.
+  int TexelKinkPlanes(const Seed& deepest, ContactLinearization& lin) noexcept;
+  // The refined maximum with the tool shifted by (shift_s, shift_t) on the window plane (m),
+  // climbed from TexelScaleGradient's seeds.
+  double ClimbShifted(double shift_s, double shift_t) noexcept;
   // The triangles of `list` facing the side's way, projected on the window at pose X.
   void ProjectAll(const HapticModel& model, const RigidTransform& X, PatchSide side,
                   std::span<const int> list, std::vector<Projected>& out) noexcept;
@@ -246,6 +293,14 @@ class DepthRefiner {
   RigidTransform X_WO_;
   ContactWindow window_;
   std::uint64_t evaluations_ = 0;
+  // TexelScaleGradient's refined maxima at ±h_t along u and v (−∞ where none), and h_t (m).
+  std::array<double, 4> texel_displaced_{};
+  double texel_step_m_ = 0.0;
+  // TexelScaleGradient's seeds within reach (deepest first), its reach and texel (m).
+  std::array<Seed, 8> texel_seeds_{};
+  int texel_num_seeds_ = 0;
+  double texel_reach_m_ = 0.0;
+  double texel_m_ = 0.0;
 };
 
 }  // namespace ht

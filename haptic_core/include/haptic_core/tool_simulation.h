@@ -83,6 +83,15 @@ class ToolSimulator {
   /// EvaluateContactModel by Step and StepBlended. Throws std::invalid_argument unless > 0.
   void set_max_contact_force(double max_contact_force_n);
   double max_contact_force_n() const noexcept { return max_contact_force_n_; }
+  /// Contact damping proportional to the contact stiffness (Rayleigh damping of the penalty
+  /// contact): D_c = β·K_c, K_c the contact model's stiffness (6×6, negative semidefinite), so the
+  /// contact force gains β·K_c·V (N, N·m) against the tool's twist V along the contacts'
+  /// gradients, integrated implicitly with the rest (A = M − h(D + D_c) − h²K). β in seconds:
+  /// a contact of stiffness k on the tool's mass m gets the damping ratio ζ = β·√(k/m)/2. 0 (the
+  /// default): none. Dissipative for any β ≥ 0. Throws std::invalid_argument unless β ≥ 0 and
+  /// finite.
+  void set_contact_damping(double beta_s);
+  double contact_damping_s() const noexcept { return contact_damping_s_; }
 
  private:
   ToolStepResult Integrate(ToolState& state, const RigidTransform& X_WH, const Twist& V_WH_W,
@@ -91,6 +100,7 @@ class ToolSimulator {
   ToolInertia inertia_;
   VirtualCoupling coupling_;
   double max_contact_force_n_ = std::numeric_limits<double>::infinity();
+  double contact_damping_s_ = 0.0;
 };
 
 }  // namespace ht

@@ -98,6 +98,9 @@ struct StationConfig {
   /// delivered stiffness. A contact beyond it pushes with the bound and adds no stiffness
   /// (EvaluateContactModel); docs/hard-cases.md has the grazing contacts it is for.
   double max_contact_force_n = 5.0;
+  /// Contact damping β (s) of the simulated tool: D_c = β·K_c (ToolSimulator::set_contact_damping;
+  /// 0 = none).
+  double contact_damping_s = 0.0;
   /// The safety stage before the device (force/torque caps are further bounded by the device's
   /// capabilities; the contact model's age is measured on the local clock from its send time).
   SafetyLimits safety{.max_force_n = 1e9, .max_torque_nm = 1e9, .model_timeout_s = 0.5};

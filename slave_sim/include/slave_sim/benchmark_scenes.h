@@ -92,9 +92,11 @@ BenchmarkScene MakeBenchmarkScene(const std::string& name, const BenchmarkModelS
 std::vector<RigidTransform> ScriptedContactPoses(const BenchmarkScene& scene, int count);
 
 /// Poses X_WFt from a run's trace.csv (master_station: tool_x..tool_rz is X_WT), keeping rows
-/// with at least one contact, `count` of them evenly spread. Throws std::runtime_error naming the
+/// with at least one contact, `count` of them evenly spread, or with `from_s` ≥ 0 the first
+/// `count` of them at or after t_s = from_s (s), consecutive. Throws std::runtime_error naming the
 /// file when it cannot be read or lacks the columns.
 std::vector<RigidTransform> PosesFromTrace(const std::string& trace_csv,
-                                           const BenchmarkScene& scene, int count);
+                                           const BenchmarkScene& scene, int count,
+                                           double from_s = -1.0);
 
 }  // namespace ht

@@ -83,6 +83,14 @@ struct FrontierSetting {
   /// PipelineOptions::depth_refinement.secant_at_kinks_m
   /// ("refined_texel_gradient_secant_at_kinks_Kum" sets it to K µm).
   double secant_at_kinks_m = 0.0;
+  /// PipelineOptions::depth_refinement.translation_kink_planes
+  /// ("refined_texel_gradient_translation_kinks" turns it on).
+  bool translation_kink_planes = false;
+  /// PipelineOptions::depth_refinement.texel_scale_rotation ("refined_texel_translation_gradient*"
+  /// turn it off).
+  bool texel_scale_rotation = true;
+  /// PipelineOptions::depth_refinement.texel_kink_planes ("*_texel_kinks", "*_both_kinks").
+  bool texel_kink_planes = false;
   /// PipelineOptions::split_windows_at_separated_overlap ("split_windows_at_separated_overlap"
   /// turns it on).
   bool split_windows_at_separated_overlap = false;
@@ -129,6 +137,14 @@ struct FrontierOptions {
   bool on_product_models = false;
   /// Scene name → a run's trace.csv to take the poses from (else ScriptedContactPoses).
   std::map<std::string, std::string> traces;
+  /// With traces: ≥ 0 takes `poses` consecutive rows in contact from this time (s) on instead of
+  /// spreading them over the run (PosesFromTrace), and adds the model-switch measure: along
+  /// those rows, the model made switch_lag_rows rows earlier evaluated at each row's pose against
+  /// that row's own model (frontier.csv switch_jump_*: the force steps a delayed linear model
+  /// leaves the operator's loop, on one trajectory for every setting). −1: spread, no measure.
+  double trace_from_s = -1.0;
+  /// Rows between the held model and the next one (the loop's model age in ticks). ≥ 1.
+  int switch_lag_rows = 2;
   /// Model cache folder ("" = none).
   std::string cache_dir;
   /// Include the GPU settings (through EGL; llvmpipe without a GPU).

@@ -35,10 +35,11 @@
 //     X_WT0: 3×f64 + 4×f64   F_T_W at q0: 3×f64 force (N), 3×f64 torque (N·m)
 //     u8 num_contacts (0..kMaxWireContacts), then per contact (88): f64 depth_m, 3×f64 ∂δ/∂x,
 //     3×f64 ∂δ/∂θ (m/rad), f64 stiffness (N/m), 3×f32 point_W (m), 3×f32 normal_W (unit);
-//     then the kink planes (version 6): u8 num_kink_planes (at most KinkPlaneCapacity(): as many
-//     as fit the datagram), per plane (kKinkPlaneBytes, 17): u8 contact (< num_contacts), f32
-//     depth_m (δ_m at q0, m), 3×f32 ∂δ_m/∂θ (m/rad); the plane shares its contact's ∂δ/∂x, and the
-//     contact's depth is the largest of its planes (haptic_core/contact_linearization.h,
+//     then the kink planes (version 6; version 7 added each plane's translation slope): u8
+//     num_kink_planes (at most KinkPlaneCapacity(): as many as fit the datagram), per plane
+//     (kKinkPlaneBytes, 29): u8 contact (< num_contacts), f32 depth_m (δ_m at q0, m), 3×f32
+//     ∂δ_m/∂θ (m/rad), 3×f32 ∂δ_m/∂x less the contact's ∂δ/∂x (zero for a plane that shares it);
+//     the contact's depth is the largest of its planes (haptic_core/contact_linearization.h,
 //     ContactDepthAt). Planes go contact by contact, in order; a sender whose model has more than
 //     fit leaves the last ones out (the remote node counts them). Rejected: a plane naming a
 //     contact ≥ num_contacts or a contact's (kMaxKinkPlanesPerContact + 1)-th plane (kBadValue),
@@ -144,11 +145,12 @@ inline constexpr std::uint32_t kMagic = 0x504C5448u;  // bytes 'H' 'T' 'L' 'P'
 /// (SceneObjectKind kSceneGraph, kImage) and NodePoses. Versions 1 to 4 are not accepted; a remote
 /// node answers a Hello of another version whose MAC verifies with a Reject (kVersion) in that
 /// Hello's header version (the Hello's first 12 body bytes and the Reject body are laid out alike
-/// in versions 2 to 6), so that an older operator is told why. Version 6 added the kink planes
-/// after the contacts of ContactModel and CompactContactModel (issue 31); version 5 is no longer
-/// accepted.
-inline constexpr std::uint16_t kProtocolVersion = 6;
-inline constexpr std::uint16_t kMinProtocolVersion = 6;
+/// in versions 2 to 7), so that an older operator is told why. Version 6 added the kink planes
+/// after the contacts of ContactModel and CompactContactModel (issue 31); version 7 each plane's
+/// own translation slope (issue 32: the arms of δ's V along the window's axes). Versions 5 and 6
+/// are no longer accepted.
+inline constexpr std::uint16_t kProtocolVersion = 7;
+inline constexpr std::uint16_t kMinProtocolVersion = 7;
 
 /// Message types; values are part of the protocol and never reused.
 enum class MessageType : std::uint8_t {
@@ -207,12 +209,12 @@ inline constexpr std::size_t kContactModelFixedBytes = 8 * 4 + 4 * 3 + 7 * 8 + 6
 inline constexpr std::size_t kContactBytes = 8 + 6 * 8 + 8 + 3 * 4 + 3 * 4;
 inline constexpr std::size_t kCompactContactModelFixedBytes = 4 * 8 + 3 * 2 + 3 * 8 + 10 * 4 + 1;
 inline constexpr std::size_t kCompactContactBytes = 4 + 6 * 4 + 4 + 3 * 2 + 2 * 2;
-/// One kink plane on the wire: u8 contact, f32 depth_m, 3×f32 ∂δ_m/∂θ; and the u8 count before
-/// them.
-inline constexpr std::size_t kKinkPlaneBytes = 1 + 4 * 4;
+/// One kink plane on the wire: u8 contact, f32 depth_m, 3×f32 ∂δ_m/∂θ, 3×f32 ∂δ_m/∂x offset; and
+/// the u8 count before them.
+inline constexpr std::size_t kKinkPlaneBytes = 1 + 7 * 4;
 inline constexpr std::size_t kKinkPlaneCountBytes = 1;
 /// Most kink planes per contact (haptic_core's kMaxKinkPlanes) and per model.
-inline constexpr int kMaxKinkPlanesPerContact = 4;
+inline constexpr int kMaxKinkPlanesPerContact = 8;
 inline constexpr std::size_t kDeadbandTermsBytes = 12;
 inline constexpr std::size_t kHelloBodyBytes = 32 + kDeadbandTermsBytes;
 inline constexpr std::size_t kSceneNameBytes = 32;
@@ -245,7 +247,7 @@ inline constexpr std::size_t kMinMtuBytes = 548;
 /// Contacts that fit in one contact-model datagram.
 inline constexpr int kMaxWireContacts = 14;
 /// Most kink planes of one contact model on the wire.
-inline constexpr int kMaxWireKinkPlanes = kMaxWireContacts * 4;
+inline constexpr int kMaxWireKinkPlanes = kMaxWireContacts * kMaxKinkPlanesPerContact;
 /// Kink planes that fit one datagram after `num_contacts` contacts of `contact_bytes` each and a
 /// fixed part of `fixed_bytes` (kContactModelFixedBytes and kContactBytes, or the compact ones):
 /// at most kMaxWireKinkPlanes. A receiver refuses a larger count (kBadCount).
@@ -317,9 +319,9 @@ static_assert(kHeaderBytes + kCompactContactModelFixedBytes +
               "a full compact contact model must fit in one datagram");
 static_assert(KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, kMaxWireContacts) >= 1,
               "a full contact model carries at least one kink plane");
-static_assert(KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, 7) >=
-                  7 * kMaxKinkPlanesPerContact,
-              "a compact model of the seed's 7 contacts carries all their kink planes");
+static_assert(KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, 7) >= 7 * 4,
+              "a compact model of the seed's 7 contacts carries four kink planes each (the "
+              "rotation arms, or two axes' translation arms)");
 static_assert(kHeaderBytes + kSceneManifestFixedBytes + kMaxManifestEntries * kManifestEntryBytes +
                       kMacBytes <=
                   kMinMtuBytes,
