@@ -562,12 +562,6 @@ PenetrationGradient DepthRefiner::TexelScaleGradient(const RigidTransform& X_WT,
   const auto poses = GradientSamplePoses(X_WT, w, {h_x, h_theta});
   std::array<double, 10> displaced{};
   displaced.fill(-kInf);
-  texel_num_seeds_ = num_near;
-  for (int m = 0; m < num_near; ++m) {
-    texel_seeds_[static_cast<std::size_t>(m)] =
-        base[static_cast<std::size_t>(order[static_cast<std::size_t>(m)])];
-  }
-  texel_reach_m_ = reach;
   for (int m = 0; m < num_near; ++m) {
     const Seed& sd = base[static_cast<std::size_t>(order[static_cast<std::size_t>(m)])];
     const double margin = reach + 4.0 * texel;
@@ -618,76 +612,10 @@ PenetrationGradient DepthRefiner::TexelScaleGradient(const RigidTransform& X_WT,
     if (minus > -kInf) return (deepest.depth_m - minus) / step;
     return 0.0;
   };
-  for (int k = 0; k < 4; ++k) texel_displaced_[static_cast<std::size_t>(k)] = displaced[k];
-  texel_step_m_ = h_x;
-  texel_m_ = texel;
   PenetrationGradient g;
   g.d_translation_W = central(0, h_x) * u + central(1, h_x) * v - n;
   g.d_rotation_W = central(2, h_theta) * u + central(3, h_theta) * v + central(4, h_theta) * n;
   return g;
-}
-
-double DepthRefiner::ClimbShifted(double shift_s, double shift_t) noexcept {
-  double best = -kInf;
-  const double reach = std::max(std::abs(shift_s), std::abs(shift_t)) + texel_reach_m_;
-  for (int m = 0; m < texel_num_seeds_; ++m) {
-    const Seed& sd = texel_seeds_[static_cast<std::size_t>(m)];
-    const double margin = reach + 4.0 * texel_m_;
-    const Box box{sd.s - margin, sd.s + margin, sd.t - margin, sd.t + margin};
-    GatherEnvironment(box.s0, box.s1, box.t0, box.t1);
-    GatherTool(tool_all_, box.s0 - reach, box.s1 + reach, box.t0 - reach, box.t1 + reach);
-    const double floor_m = options_.search_floor_texels * texel_m_;
-    // From the seed's point (the environment's feature) and from it carried by the shift (the
-    // tool's), as TexelScaleGradient climbs.
-    best = std::max(
-        {best,
-         Search(tool_local_, box, sd.s, sd.t, 0.0, 1, texel_m_, floor_m, shift_s, shift_t).depth_m,
-         Search(tool_local_, box, sd.s + shift_s, sd.t + shift_t, 0.0, 1, texel_m_, floor_m,
-                shift_s, shift_t)
-             .depth_m});
-  }
-  return best;
-}
-
-int DepthRefiner::TexelKinkPlanes(const Seed& deepest, ContactLinearization& lin) noexcept {
-  const double h = texel_step_m_;
-  if (!(h > 0.0)) return 0;
-  const glm::dvec3 axes[2] = {window_.axis_u_W, window_.axis_v_W};
-  int added = 0;
-  for (int a = 0; a < 2 && lin.num_kink_planes < kMaxKinkPlanes; ++a) {
-    const double plus = texel_displaced_[static_cast<std::size_t>(2 * a)];
-    const double minus = texel_displaced_[static_cast<std::size_t>(2 * a + 1)];
-    if (!(plus > -kInf) || !(minus > -kInf)) continue;
-    if (!(0.5 * (plus + minus) - deepest.depth_m > options_.translation_kink_tolerance_m)) continue;
-    // Each arm from its two samples at h and 2h on its side (the vertex lies within h of q0).
-    const double plus2 = ClimbShifted(a == 0 ? 2.0 * h : 0.0, a == 1 ? 2.0 * h : 0.0);
-    const double minus2 = ClimbShifted(a == 0 ? -2.0 * h : 0.0, a == 1 ? -2.0 * h : 0.0);
-    const double slope = glm::dot(lin.gradient.d_translation_W, axes[a]);
-    struct Arm {
-      double slope, at_q0;
-    };
-    Arm arms[2] = {{-kInf, -kInf}, {-kInf, -kInf}};
-    if (plus2 > -kInf) arms[0] = {(plus2 - plus) / h, plus - (plus2 - plus)};
-    if (minus2 > -kInf) arms[1] = {(minus - minus2) / h, minus + (minus - minus2)};
-    const auto valid = [](const Arm& arm) {
-      return std::isfinite(arm.slope) && std::isfinite(arm.at_q0);
-    };
-    if (!valid(arms[0]) || !valid(arms[1])) continue;
-    // The deeper arm at q0 becomes the contact's own slope along a and the other a plane, so that
-    // one pair ties at q0 instead of three planes (each tie lowers the model by its lift at q0,
-    // ContactDepthAt); at q0 the blend of the two is their mean, the central difference.
-    const int own = arms[0].at_q0 >= arms[1].at_q0 ? 0 : 1;
-    const Arm& other = arms[1 - own];
-    lin.gradient.d_translation_W += (arms[own].slope - slope) * axes[a];
-    KinkPlane p;
-    p.depth_m = std::min(other.at_q0, lin.depth_m);
-    p.d_rotation_W = lin.gradient.d_rotation_W;
-    p.d_translation_offset_W = (other.slope - arms[own].slope) * axes[a];
-    lin.kink_planes[static_cast<std::size_t>(lin.num_kink_planes++)] = p;
-    ++added;
-  }
-  counters_.translation_kink_planes += static_cast<std::uint64_t>(added);
-  return added;
 }
 
 int DepthRefiner::TranslationKinkPlanes(std::span<const Seed> found, const Seed& deepest,
@@ -954,7 +882,6 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
     }
   }
   lin.num_kink_planes = 0;
-  if (options_.texel_scale_gradient && options_.texel_kink_planes) TexelKinkPlanes(deepest, lin);
   if (options_.texel_scale_gradient && options_.refine_rendered_samples &&
       options_.translation_kink_planes) {
     TranslationKinkPlanes(translation_found, deepest, big.h_x, lin);

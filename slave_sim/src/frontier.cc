@@ -227,21 +227,6 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     translation_only_kinks.name = "refined_texel_translation_gradient_translation_kinks";
     translation_only_kinks.translation_kink_planes = true;
     s.push_back(translation_only_kinks);
-    FrontierSetting translation_only_texel_kinks = translation_only;
-    translation_only_texel_kinks.name = "refined_texel_translation_gradient_texel_kinks";
-    translation_only_texel_kinks.texel_kink_planes = true;
-    s.push_back(translation_only_texel_kinks);
-    FrontierSetting translation_only_both_kinks = translation_only_kinks;
-    translation_only_both_kinks.name = "refined_texel_translation_gradient_both_kinks";
-    translation_only_both_kinks.texel_kink_planes = true;
-    s.push_back(translation_only_both_kinks);
-    for (const double texels : {4.0, 8.0}) {
-      FrontierSetting step = translation_only_both_kinks;
-      step.name = "refined_texel_translation_gradient_both_kinks_" +
-                  std::to_string(static_cast<int>(texels)) + "_texels";
-      step.gradient_step_texels = texels;
-      s.push_back(step);
-    }
     for (const int um : {1, 5, 20}) {
       FrontierSetting kinks = texel_gradient;
       kinks.name = "refined_texel_gradient_secant_at_kinks_" + std::to_string(um) + "um";
@@ -576,7 +561,6 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.depth_refinement.secant_at_kinks_m = st.secant_at_kinks_m;
   options.depth_refinement.translation_kink_planes = st.translation_kink_planes;
   options.depth_refinement.texel_scale_rotation = st.texel_scale_rotation;
-  options.depth_refinement.texel_kink_planes = st.texel_kink_planes;
   options.split_windows_at_separated_overlap = st.split_windows_at_separated_overlap;
   options.split_link_m = st.split_link_m;
   options.depth_refinement.subgrid_rotations = st.subgrid_rotations;

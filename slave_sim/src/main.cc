@@ -147,11 +147,6 @@ int main(int argc, char** argv) {
                "depth's V along the window's two in-plane axes (a face between two ridges'\n"
                "flanks), so that the operator's loop finds the vertex between two models\n"
                "instead of being pushed across it by one arm (issue 32, ninth stop)");
-  bool texel_kink_planes = false;
-  app.add_flag("--texel-kink-planes", texel_kink_planes,
-               "with --texel-scale-gradient: where the depth is convex within the texel-scale\n"
-               "step along a window axis (a V's vertex at the tool), its two one-sided slopes as\n"
-               "kink planes through the contact's depth");
   double split_windows_link_mm = 0.0;
   app.add_option(
          "--split-windows-link-mm", split_windows_link_mm,
@@ -360,7 +355,6 @@ int main(int argc, char** argv) {
     config.pipeline.depth_refinement.secant_at_kinks_m = secant_at_kinks_um * 1e-6;
     config.pipeline.depth_refinement.translation_kink_planes = translation_kink_planes;
     config.pipeline.depth_refinement.texel_scale_rotation = !secant_rotation_gradient;
-    config.pipeline.depth_refinement.texel_kink_planes = texel_kink_planes;
     if (secant_rotation_gradient && !texel_scale_gradient) {
       throw std::invalid_argument(
           "--secant-rotation-gradient needs --texel-scale-gradient (without it the whole "

@@ -392,7 +392,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     // evaluations of b − a and how far δ0 rose above the grid's; the conservative screen's
     // squares and leaves per contact, the contacts where it found a deeper point than the seeds
     // (and Σ µm), and those it stopped at its leaf budget; the translation arms added as kink
-    // planes (DepthRefinementOptions::translation_kink_planes, texel_kink_planes).
+    // planes (DepthRefinementOptions::translation_kink_planes).
     const DepthRefinementCounters& r = pipeline->depth_refinement_counters();
     const double n = r.contacts > 0 ? static_cast<double>(r.contacts) : 1.0;
     s["depth_refinement"] = {

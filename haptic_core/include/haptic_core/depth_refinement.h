@@ -115,16 +115,6 @@ struct DepthRefinementOptions {
   bool translation_kink_planes = false;
   /// How far above the tangent (m) a translation sample must lie to make an arm. ≥ 0.
   double translation_kink_tolerance_m = 1e-6;
-  /// With texel_scale_gradient: the arms of a V whose vertex lies within the texel-scale step
-  /// (h_t) of q0: per axis a ∈ {u, v}, where the mean of the gradient's samples δ(q0 ± h_t·a)
-  /// lies above δ0 by more than translation_kink_tolerance_m (convex at texel scale), the refined
-  /// maximum is climbed at ±2h_t too, and each arm is the line through its side's two samples
-  /// (h_t and 2h_t). The arm that is deeper at q0 becomes the contact's own slope along a, the
-  /// other a kink plane (lowered to δ0 where it would exceed it at q0): the model holds the V's
-  /// vertex near q0 instead of the central difference through it (two climbs per kinked axis).
-  /// At q0 the two planes blend to their mean; away from the vertex the model is the arms less
-  /// their blend's lift at q0 (ε/4 = 2.5 µm where they tie, ContactDepthAt).
-  bool texel_kink_planes = false;
   /// The rendered rotation samples (±h_θ about u, v and n) searched from a sub-grid of their
   /// deepest cell's square as the base and the translations are; off (the default): a pattern
   /// search from the cell's centre alone, fewer evaluations at the same error on the frontier
@@ -173,8 +163,7 @@ struct DepthRefinementCounters {
   std::uint64_t screen_found = 0;
   std::uint64_t screen_raised_um = 0;
   std::uint64_t screen_truncated = 0;
-  /// Translation arms added as kink planes (DepthRefinementOptions::translation_kink_planes and
-  /// texel_kink_planes).
+  /// Translation arms added as kink planes (DepthRefinementOptions::translation_kink_planes).
   std::uint64_t translation_kink_planes = 0;
 };
 
@@ -237,12 +226,6 @@ class DepthRefiner {
   // appended to lin's planes (which this first clears). Returns the planes added.
   int TranslationKinkPlanes(std::span<const Seed> found, const Seed& deepest, double h_x,
                             ContactLinearization& lin) noexcept;
-  // DepthRefinementOptions::texel_kink_planes: from TexelScaleGradient's translation samples
-  // (texel_displaced_, texel_step_m_), appended to lin's planes. Returns the planes added.
-  int TexelKinkPlanes(const Seed& deepest, ContactLinearization& lin) noexcept;
-  // The refined maximum with the tool shifted by (shift_s, shift_t) on the window plane (m),
-  // climbed from TexelScaleGradient's seeds.
-  double ClimbShifted(double shift_s, double shift_t) noexcept;
   // The triangles of `list` facing the side's way, projected on the window at pose X.
   void ProjectAll(const HapticModel& model, const RigidTransform& X, PatchSide side,
                   std::span<const int> list, std::vector<Projected>& out) noexcept;
@@ -293,14 +276,6 @@ class DepthRefiner {
   RigidTransform X_WO_;
   ContactWindow window_;
   std::uint64_t evaluations_ = 0;
-  // TexelScaleGradient's refined maxima at ±h_t along u and v (−∞ where none), and h_t (m).
-  std::array<double, 4> texel_displaced_{};
-  double texel_step_m_ = 0.0;
-  // TexelScaleGradient's seeds within reach (deepest first), its reach and texel (m).
-  std::array<Seed, 8> texel_seeds_{};
-  int texel_num_seeds_ = 0;
-  double texel_reach_m_ = 0.0;
-  double texel_m_ = 0.0;
 };
 
 }  // namespace ht

@@ -89,8 +89,6 @@ struct FrontierSetting {
   /// PipelineOptions::depth_refinement.texel_scale_rotation ("refined_texel_translation_gradient*"
   /// turn it off).
   bool texel_scale_rotation = true;
-  /// PipelineOptions::depth_refinement.texel_kink_planes ("*_texel_kinks", "*_both_kinks").
-  bool texel_kink_planes = false;
   /// PipelineOptions::split_windows_at_separated_overlap ("split_windows_at_separated_overlap"
   /// turns it on).
   bool split_windows_at_separated_overlap = false;
