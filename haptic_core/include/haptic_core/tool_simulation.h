@@ -88,8 +88,9 @@ class ToolSimulator {
   /// contact force gains β·K_c·V (N, N·m) against the tool's twist V along the contacts'
   /// gradients, integrated implicitly with the rest (A = M − h(D + D_c) − h²K). β in seconds:
   /// a contact of stiffness k on the tool's mass m gets the damping ratio ζ = β·√(k/m)/2. 0 (the
-  /// default): none. Dissipative for any β ≥ 0. Throws std::invalid_argument unless β ≥ 0 and
-  /// finite.
+  /// default): none. Dissipative for any β ≥ 0, but linear: the contact force
+  /// −k(δ + β·dδ/dt)·∇δ attracts a tool leaving faster than δ/β. Throws std::invalid_argument
+  /// unless β ≥ 0 and finite.
   void set_contact_damping(double beta_s);
   double contact_damping_s() const noexcept { return contact_damping_s_; }
 
