@@ -31,6 +31,28 @@ TEST(ContactModel, EvaluatedAtQ0EqualsTheSumOfPenaltyWrenches) {
   EXPECT_EQ(e.active_contacts, 2);
 }
 
+// G, the depth-weighted stiffness behind Hunt–Crossley damping: Σ k_i δ_i J_i J_iᵀ by hand, and
+// zero for a contact that only touches (δ = 0), where −K is not.
+TEST(ContactModel, DepthWeightedStiffnessIsSumOfKDeltaJJt) {
+  const ContactModel m = TwoContactModel();
+  const ContactModelEvaluation e = EvaluateContactModel(m, m.X_WT0);
+  Stiffness6 expected = Stiffness6::Zero();
+  for (int i = 0; i < 2; ++i) {
+    const ContactLinearization& c = m.contacts[i];
+    Eigen::Matrix<double, 6, 1> J;
+    J << c.gradient.d_translation_W.x, c.gradient.d_translation_W.y, c.gradient.d_translation_W.z,
+        c.gradient.d_rotation_W.x, c.gradient.d_rotation_W.y, c.gradient.d_rotation_W.z;
+    expected += c.stiffness_n_per_m * c.depth_m * (J * J.transpose());
+  }
+  EXPECT_LT((e.G - expected).norm(), 1e-12 * expected.norm());
+  ContactModel touching = m;
+  touching.num_contacts = 1;
+  touching.contacts[0].depth_m = 1e-12;
+  const ContactModelEvaluation t = EvaluateContactModel(touching, touching.X_WT0);
+  EXPECT_LT(t.G.norm(), 1e-6);
+  EXPECT_GT((-t.K).norm(), 1000.0);
+}
+
 TEST(ContactModel, StiffnessMatchesFiniteDifferencesOfTheWrench) {
   const ContactModel m = TwoContactModel();
   const ContactModelEvaluation e0 = EvaluateContactModel(m, m.X_WT0);

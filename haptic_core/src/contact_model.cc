@@ -123,6 +123,7 @@ ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const Rig
     J << J_active.d_translation_W.x, J_active.d_translation_W.y, J_active.d_translation_W.z,
         J_active.d_rotation_W.x, J_active.d_rotation_W.y, J_active.d_rotation_W.z;
     out.K.noalias() -= k * (J * J.transpose());
+    out.G.noalias() += (k * depth) * (J * J.transpose());
     if (c.num_kink_planes > 0) out.K.noalias() -= (k * depth) * curvature;
   }
   return out;

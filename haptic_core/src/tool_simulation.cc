@@ -60,12 +60,13 @@ Wrench ToolSimulator::CouplingWrench(const ToolState& s, const RigidTransform& X
               c.b_rotation_nms_per_rad * (V_WH_W.angular - s.V_WT_W.angular)};
 }
 
-void ToolSimulator::set_contact_damping(double beta_s) {
-  if (!(beta_s >= 0.0) || !std::isfinite(beta_s)) {
-    throw std::invalid_argument("the contact damping must be >= 0 s and finite, got " +
-                                std::to_string(beta_s));
+void ToolSimulator::set_contact_damping_hunt_crossley(double alpha_s_per_m) {
+  if (!(alpha_s_per_m >= 0.0) || !std::isfinite(alpha_s_per_m)) {
+    throw std::invalid_argument(
+        "the Hunt-Crossley contact damping must be >= 0 s/m and finite, got " +
+        std::to_string(alpha_s_per_m));
   }
-  contact_damping_s_ = beta_s;
+  hunt_crossley_s_per_m_ = alpha_s_per_m;
 }
 
 void ToolSimulator::set_max_contact_force(double max_contact_force_n) {
@@ -115,6 +116,7 @@ ToolStepResult ToolSimulator::StepBlended(ToolState& s, const RigidTransform& X_
   a.F_T_W.force += b.F_T_W.force;
   a.F_T_W.torque += b.F_T_W.torque;
   a.K += b.K;
+  a.G += b.G;
   a.active_contacts = beta >= 0.5 ? a.active_contacts : b.active_contacts;
   a.saturated_contacts = beta >= 0.5 ? a.saturated_contacts : b.saturated_contacts;
   a.max_depth_m = std::max(a.max_depth_m, b.max_depth_m);
@@ -150,13 +152,14 @@ ToolStepResult ToolSimulator::Integrate(ToolState& s, const RigidTransform& X_WH
   A.topLeftCorner<3, 3>().diagonal().array() += h * c.b_translation_ns_per_m;
   A.bottomRightCorner<3, 3>().diagonal().array() += h * c.b_rotation_nms_per_rad;
   A.noalias() -= (h * h) * K;
-  // Contact damping D_c = β·K_c (set_contact_damping): A −= h·D_c, and D_c·V_n joins the force.
-  const double beta = contact_damping_s_;
-  if (beta > 0.0) A.noalias() -= (h * beta) * contact.K;
+  // Hunt–Crossley contact damping D_c = −α·G (set_contact_damping_hunt_crossley): A −= h·D_c,
+  // and D_c·V_n joins the force.
+  const double alpha = hunt_crossley_s_per_m_;
+  if (alpha > 0.0) A.noalias() += (h * alpha) * contact.G;
 
   const Vector6 V = ToVector(s.V_WT_W);
   Vector6 rhs = h * (ToVector(F_total) + h * (K * V));
-  if (beta > 0.0) rhs.noalias() += (h * beta) * (contact.K * V);
+  if (alpha > 0.0) rhs.noalias() -= (h * alpha) * (contact.G * V);
   const Eigen::LDLT<Stiffness6> ldlt(A);
   const Vector6 dV = ldlt.solve(rhs);
   const Vector6 V_next = V + dV;

@@ -203,12 +203,14 @@ int main(int argc, char** argv) {
                  "Falcon firmware image (not shipped; e.g. from libnifalcon's or Novint's files)");
   bool no_passivity = false;
   double model_timeout_s = defaults.safety.model_timeout_s;
-  double contact_damping_ms = defaults.contact_damping_s * 1e3;
-  app.add_option("--contact-damping-ms", contact_damping_ms,
-                 "contact damping of the simulated tool, proportional to the contact stiffness\n"
-                 "(D = beta K, beta in ms; a contact of stiffness k on the tool's mass m gets the\n"
-                 "damping ratio beta sqrt(k/m)/2); 0 = none")
-      ->check(CLI::Range(0.0, 1000.0))
+  double hunt_crossley = defaults.hunt_crossley_s_per_m;
+  app.add_option(
+         "--contact-damping-hc", hunt_crossley,
+         "Hunt-Crossley contact damping of the simulated tool, alpha in s/m: each\n"
+         "contact's force -k depth (1 + alpha d(depth)/dt); it grows with the depth and\n"
+         "vanishes at first touch (at a 0.1 mm press, 20 s/m damps as a 2 ms linear damper\n"
+         "would; docs/frontier/issue32/ninth_stop); 0 = none")
+      ->check(CLI::Range(0.0, 10000.0))
       ->capture_default_str();
   double max_contact_force_n = defaults.max_contact_force_n;
   app.add_option("--max-contact-force", max_contact_force_n,
@@ -316,7 +318,7 @@ int main(int argc, char** argv) {
     config.max_model_rate_hz = max_model_rate;
     config.passivity = !no_passivity;
     config.max_contact_force_n = max_contact_force_n;
-    config.contact_damping_s = contact_damping_ms * 1e-3;
+    config.hunt_crossley_s_per_m = hunt_crossley;
     config.safety.model_timeout_s = model_timeout_s;
     config.tool_state_deadband.weber_fraction =
         tool_state_deadband_pct.value_or(deadband_pct) / 100.0;

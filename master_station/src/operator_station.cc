@@ -351,7 +351,7 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   tick_config.max_contact_force_n = config.max_contact_force_n > 0.0
                                         ? config.max_contact_force_n
                                         : std::numeric_limits<double>::infinity();
-  tick_config.contact_damping_s = config.contact_damping_s;
+  tick_config.hunt_crossley_s_per_m = config.hunt_crossley_s_per_m;
   OperatorTick tick(tick_config, X_WM, tool);
   const PassivityController& passivity = tick.passivity();
   const WrenchSafetyFilter& safety = tick.safety();
@@ -542,6 +542,7 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
     s["display"] = {{"mode", "none"}};
   }
   s["contact_force_bound_n"] = config.max_contact_force_n;
+  s["contact_damping_hunt_crossley_s_per_m"] = config.hunt_crossley_s_per_m;
   s["saturated_contact_ticks"] = tick.counters().saturated_contact_ticks;
   s["tool_mass_kg"] = tool_inertia.mass_kg;
   s["device"] = caps.name;

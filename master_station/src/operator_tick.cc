@@ -23,7 +23,7 @@ OperatorTick::OperatorTick(const OperatorTickConfig& config, const RigidTransfor
   }
   if (!(config.h_s > 0.0)) throw std::invalid_argument("tick length must be positive");
   simulator_.set_max_contact_force(config.max_contact_force_n);
-  simulator_.set_contact_damping(config.contact_damping_s);
+  simulator_.set_contact_damping_hunt_crossley(config.hunt_crossley_s_per_m);
 }
 
 OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {

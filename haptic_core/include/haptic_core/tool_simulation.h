@@ -83,16 +83,18 @@ class ToolSimulator {
   /// EvaluateContactModel by Step and StepBlended. Throws std::invalid_argument unless > 0.
   void set_max_contact_force(double max_contact_force_n);
   double max_contact_force_n() const noexcept { return max_contact_force_n_; }
-  /// Contact damping proportional to the contact stiffness (Rayleigh damping of the penalty
-  /// contact): D_c = β·K_c, K_c the contact model's stiffness (6×6, negative semidefinite), so the
-  /// contact force gains β·K_c·V (N, N·m) against the tool's twist V along the contacts'
-  /// gradients, integrated implicitly with the rest (A = M − h(D + D_c) − h²K). β in seconds:
-  /// a contact of stiffness k on the tool's mass m gets the damping ratio ζ = β·√(k/m)/2. 0 (the
-  /// default): none. Dissipative for any β ≥ 0, but linear: the contact force
-  /// −k(δ + β·dδ/dt)·∇δ attracts a tool leaving faster than δ/β. Throws std::invalid_argument
-  /// unless β ≥ 0 and finite.
-  void set_contact_damping(double beta_s);
-  double contact_damping_s() const noexcept { return contact_damping_s_; }
+  /// Hunt–Crossley contact damping (Hunt & Crossley 1975): each active contact's force becomes
+  /// −k_i δ_i (1 + α·dδ_i/dt) ∇δ_i, dδ_i/dt = J_i·V, i.e. the damping D = −α·G
+  /// (ContactModelEvaluation::G), integrated implicitly with the coupling's damping
+  /// (A = M − h(D_coupling + D) − h²K; D·V_n joins the force). The damping grows with the depth
+  /// and vanishes at first touch: a linear damper β·K (tried, issue 32's ninth stop) attracts a
+  /// tool that leaves faster than δ/β, this one only above 1/α whatever the depth. At depth δ it
+  /// damps as β = α·δ would: a contact of stiffness k on the tool's mass m gets the damping ratio
+  /// ζ = α·δ·√(k/m)/2. α in s/m; 0 (the default here): none; the operator station's default is
+  /// OperatorStationConfig::hunt_crossley_s_per_m. Throws std::invalid_argument unless α ≥ 0 and
+  /// finite.
+  void set_contact_damping_hunt_crossley(double alpha_s_per_m);
+  double contact_damping_hunt_crossley_s_per_m() const noexcept { return hunt_crossley_s_per_m_; }
 
  private:
   ToolStepResult Integrate(ToolState& state, const RigidTransform& X_WH, const Twist& V_WH_W,
@@ -101,7 +103,7 @@ class ToolSimulator {
   ToolInertia inertia_;
   VirtualCoupling coupling_;
   double max_contact_force_n_ = std::numeric_limits<double>::infinity();
-  double contact_damping_s_ = 0.0;
+  double hunt_crossley_s_per_m_ = 0.0;
 };
 
 }  // namespace ht

@@ -98,9 +98,13 @@ struct StationConfig {
   /// delivered stiffness. A contact beyond it pushes with the bound and adds no stiffness
   /// (EvaluateContactModel); docs/hard-cases.md has the grazing contacts it is for.
   double max_contact_force_n = 5.0;
-  /// Contact damping β (s) of the simulated tool: D_c = β·K_c (ToolSimulator::set_contact_damping;
-  /// 0 = none).
-  double contact_damping_s = 0.0;
+  /// Hunt–Crossley contact damping α (s/m) of the simulated tool: each contact's force
+  /// −kδ(1 + α·dδ/dt)∇δ (ToolSimulator::set_contact_damping_hunt_crossley; 0 = none). 20 s/m
+  /// damps a 0.1 mm press as β = 2 ms would (ζ ≈ 0.3 for the 0.1 kg tool on 10⁴ N/m): on the
+  /// fig75 slide it cuts the contact force's one-tick steps above 0.2 N from 76–88 to 28–37, the
+  /// device's above 0.1 N from 15–17 to 3–5, and leaves the force felt on the recorded human
+  /// motion within the run-to-run spread (docs/frontier/issue32/ninth_stop).
+  double hunt_crossley_s_per_m = 20.0;
   /// The safety stage before the device (force/torque caps are further bounded by the device's
   /// capabilities; the contact model's age is measured on the local clock from its send time).
   SafetyLimits safety{.max_force_n = 1e9, .max_torque_nm = 1e9, .model_timeout_s = 0.5};

@@ -39,8 +39,8 @@ struct OperatorTickConfig {
   /// Bound on each contact's force on the simulated tool (N; +∞ = none): DESIGN.md §5's bounded
   /// delivered stiffness (ToolSimulator::set_max_contact_force).
   double max_contact_force_n = std::numeric_limits<double>::infinity();
-  /// Contact damping β (s) of the simulated tool (ToolSimulator::set_contact_damping; 0 = none).
-  double contact_damping_s = 0.0;
+  /// Hunt–Crossley contact damping α (s/m; ToolSimulator::set_contact_damping_hunt_crossley).
+  double hunt_crossley_s_per_m = 0.0;
 };
 
 /// When a contact model was made and what its remote step cost.
