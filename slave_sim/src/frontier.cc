@@ -620,13 +620,9 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
           EvaluateContactModel(models[k - static_cast<std::size_t>(switch_lag)], X_WT).F_T_W;
       jumps.push_back(glm::length(held.force - models[k].F_T_W_at_q0.force));
     }
-    std::sort(jumps.begin(), jumps.end());
-    const auto at = [&](double q) {
-      return jumps[static_cast<std::size_t>(q * static_cast<double>(jumps.size() - 1))];
-    };
-    run.m.switch_jump_p50_n = at(0.5);
-    run.m.switch_jump_p99_n = at(0.99);
-    run.m.switch_jump_max_n = jumps.back();
+    run.m.switch_jump_p50_n = Percentile(jumps, 0.5);
+    run.m.switch_jump_p99_n = Percentile(jumps, 0.99);
+    run.m.switch_jump_max_n = *std::max_element(jumps.begin(), jumps.end());
     run.m.switch_jumps_over_0_2_n = static_cast<int>(
         std::count_if(jumps.begin(), jumps.end(), [](double j) { return j > 0.2; }));
   }

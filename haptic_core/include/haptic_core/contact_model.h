@@ -77,7 +77,8 @@ struct ContactModelEvaluation {
   double potential_energy_j = 0.0;
   /// Active contacts whose force was saturated at the bound (see EvaluateContactModel).
   int saturated_contacts = 0;
-  /// G = Σ_{δ_i>0, unsaturated} k_i δ_i J_i J_iᵀ (N; positive semi-definite, 6×6 as K): the
+  /// G = Σ_{δ_i>0, unsaturated} k_i δ_i J_i J_iᵀ (positive semi-definite, 6×6, rows/cols as K;
+  /// N in its translation block, N·m/rad and N·m²/rad² where rotation enters): the
   /// depth-weighted stiffness, from which a Hunt–Crossley contact damping D = −α·G (α in s/m)
   /// gives each contact the force −k_i δ_i α (J_i·V) J_i, which vanishes with δ_i
   /// (ToolSimulator::set_contact_damping_hunt_crossley).

@@ -87,7 +87,8 @@ struct DepthRefinementOptions {
   bool texel_scale_gradient = false;
   /// With texel_scale_gradient: its rotation part at texel scale too (h_θ = h_x/(W/2)); off: the
   /// translation part at texel scale and the rotation part the refined rendered samples' one-cell
-  /// secant, as without texel_scale_gradient (needs refine_rendered_samples). A face resting on
+  /// secant, as without texel_scale_gradient (the rendered samples are then refined whatever
+  /// refine_rendered_samples says). A face resting on
   /// ridges rocks between the arms of its tilt's V: at texel scale each model holds one arm's
   /// slope (issue 32, ninth stop: the fig75 slide's tool rocked by 10 mrad within 60 ms).
   bool texel_scale_rotation = true;
@@ -222,8 +223,8 @@ class DepthRefiner {
                                          int num_seeds, const Seed& deepest,
                                          const glm::dvec3& point_W) noexcept;
   // DepthRefinementOptions::translation_kink_planes: the arms of δ's V along u and v from the
-  // refined translation samples `found` (index k − 1 for rendered sample k = 1…4, at ±h_x),
-  // appended to lin's planes (which this first clears). Returns the planes added.
+  // refined translation samples `found` (index k − 1 for rendered sample k = 1…4, at ±h_x, m),
+  // appended to lin's planes up to kMaxKinkPlanes. Returns the planes added.
   int TranslationKinkPlanes(std::span<const Seed> found, const Seed& deepest, double h_x,
                             ContactLinearization& lin) noexcept;
   // The triangles of `list` facing the side's way, projected on the window at pose X.
