@@ -8,6 +8,7 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <glm/gtc/quaternion.hpp>
 #include <limits>
 #include <memory>
@@ -20,6 +21,7 @@
 #include "haptic_core/demo/demo_scenes.h"
 #include "haptic_core/demo/procedural_models.h"
 #include "haptic_core/haptic_scene.h"
+#include "haptic_core/model_build/hull_hierarchy_build.h"
 #include "haptic_core/penetration_depth.h"
 #include "haptic_core/remote_step.h"
 #include "haptic_core/stability_map.h"
@@ -138,6 +140,94 @@ TEST(HardCases, SeparatedContactsOnOneFaceSplitIntoOneWindowEach) {
   Report("separated contacts on one face",
          Fmt("one window: %.3f N; split: %.3f N in two contacts (delta %.1f um)", F_whole.force.z,
              F_split.force.z, delta * 1e6));
+}
+
+// Stage 5c (PipelineOptions::share_connected_contacts): a flat box face pressed on the end cap
+// of a smooth cylinder (the gear model without ridges) overlaps it over the whole 50 mm disc. The
+// cylinder's hull hierarchy has small leaves, and windows may not exceed 20 mm, so the coarse
+// clustering leaves the disc in several windows, each reading the whole δ: the default pushes k·δ
+// once per window. Shared, the windows over one connected overlap push k·δ once, as the pipeline
+// truth's one patch does. A 30 mm groove across the box's face leaves two overlaps 30 mm apart
+// (the link is 5 mm): the windows over each share its penalty, and the two push 2·k·δ.
+TEST(HardCases, OneOverlapInSeveralWindowsPushesOnce) {
+  RidgedGearParams gp;
+  gp.amplitude_m = 0.0;  // a smooth cylinder
+  gp.texture_size = 64;
+  gp.coarse_segments = 120;
+  auto gear_model = MakeRidgedGear(gp);
+  HullHierarchyParams hp;
+  hp.max_leaf_triangles = 8;
+  gear_model.hull_hierarchy =
+      BuildConvexHullHierarchy(gear_model.vertices_O, gear_model.triangles, hp);
+  ASSERT_GT(gear_model.hull_hierarchy.nodes.size(), 8u);
+  const auto scene_with = [&](std::function<double(double, double)> bottom) {
+    HapticScene s;
+    s.name = "box_on_cap";
+    s.tool = std::make_shared<const HapticModel>(
+        MakeTexturedBox({0.03, 0.03, 0.005}, std::move(bottom), 512, 0.1, "box"));
+    TouchableObject gear;
+    gear.model = std::make_shared<const HapticModel>(gear_model);
+    gear.stiffness_n_per_m = kK;
+    s.touchables.push_back(gear);
+    return s;
+  };
+  // The box's bottom (−z in its frame) against the cap at x = +L/2 (facing +x).
+  const double press = 50e-6;
+  const RigidTransform X_WT = At({0.5 * gp.length_m + 0.005 - press, 0.0, 0.0},
+                                 glm::angleAxis(0.5 * std::numbers::pi, glm::dvec3(0, 1, 0)));
+  const auto step = [&](const HapticScene& scene, bool share, double link_m = 0.0) {
+    PipelineOptions options;
+    options.max_window_extent_m = options.window_extent_m;
+    options.share_connected_contacts = share;
+    options.share_link_m = link_m;
+    HapticTexturePipeline pipeline(scene, options);
+    StepTimings t;
+    ContactModel m = pipeline.Step(X_WT, 1, t);
+    return std::make_pair(m, pipeline.step_faults().shared_contacts);
+  };
+  const HapticScene flat = scene_with([](double, double) { return 0.0; });
+  const auto [apart, none_shared] = step(flat, false);
+  const auto [shared, num_shared] = step(flat, true);
+  ASSERT_GE(apart.num_contacts, 2);
+  ASSERT_EQ(shared.num_contacts, apart.num_contacts);  // the same contacts, sharing one penalty
+  EXPECT_EQ(none_shared, 0);
+  EXPECT_EQ(num_shared, shared.num_contacts);
+  double delta = 0.0;
+  for (int i = 0; i < apart.num_contacts; ++i) {
+    delta = std::max(delta, apart.contacts[static_cast<std::size_t>(i)].depth_m);
+    EXPECT_NEAR(apart.contacts[static_cast<std::size_t>(i)].depth_m, press, 5e-6) << i;
+  }
+  const double F_apart = apart.F_T_W_at_q0.force.x;
+  const double F_shared = shared.F_T_W_at_q0.force.x;
+  EXPECT_NEAR(F_apart, apart.num_contacts * kK * press, 0.1 * apart.num_contacts * kK * press);
+  EXPECT_NEAR(F_shared, kK * delta, 0.02 * kK * delta);
+  // Grooved: two overlaps 30 mm apart, each a region of its own. Each window renders only its
+  // cluster's triangles (sectors of the cap) clipped to its 20 mm square, so the overlap between
+  // two windows over one part can go unrendered: at the 5 mm link the 40 mm chord of one part
+  // reads as two regions (three groups, 1.2 N); a 10 mm link bridges that and still parts the
+  // two overlaps.
+  const HapticScene grooved =
+      scene_with([](double x, double) { return std::abs(x) < 15e-3 ? -1e-3 : 0.0; });
+  const auto [g_apart, g_none] = step(grooved, false);
+  const auto [g_shared, g_num] = step(grooved, true, 10e-3);
+  ASSERT_GE(g_apart.num_contacts, 3);
+  double g_delta = 0.0;
+  for (int i = 0; i < g_apart.num_contacts; ++i) {
+    g_delta = std::max(g_delta, g_apart.contacts[static_cast<std::size_t>(i)].depth_m);
+  }
+  EXPECT_NEAR(g_delta, press, 5e-6);
+  EXPECT_GT(g_apart.F_T_W_at_q0.force.x, 2.5 * kK * g_delta);
+  EXPECT_NEAR(g_shared.F_T_W_at_q0.force.x, 2.0 * kK * g_delta, 0.04 * kK * g_delta);
+  PipelineOptions bad;
+  bad.share_connected_contacts = true;
+  bad.share_temperature_m = 0.0;
+  EXPECT_THROW(HapticTexturePipeline(flat, bad), std::invalid_argument);
+  Report("one overlap in several windows",
+         Fmt("%.0f windows over one disc: %.3f N apart, %.3f N shared (k delta = %.3f N); two "
+             "overlaps: ",
+             static_cast<double>(apart.num_contacts), F_apart, F_shared, kK * delta) +
+             Fmt("%.3f N (%.0f windows; %.3f N apart)", g_shared.F_T_W_at_q0.force.x,
+                 static_cast<double>(g_shared.num_contacts), g_apart.F_T_W_at_q0.force.x));
 }
 
 TEST(HardCases, CoplanarRestingContact) {

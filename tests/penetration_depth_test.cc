@@ -10,6 +10,7 @@
 #include <random>
 #include <vector>
 
+#include "haptic_core/connected_contacts.h"
 #include "haptic_core/contact_linearization.h"
 #include "test_scenes.h"
 
@@ -276,6 +277,108 @@ TEST(PenetrationDepth, WindowRejectsBadArguments) {
   EXPECT_THROW(ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 1), std::invalid_argument);
   const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0.3, -0.2, 0.9}, 0.02, 50);
   EXPECT_NEAR(glm::dot(glm::cross(w.axis_u_W, w.axis_v_W), w.normal_W), 1.0, 1e-12);
+}
+
+// Stage 5c's footprints (connected_contacts.h): the overlap of the bumps above as blocks. With
+// one-cell blocks the occupied count is the regions' cell count (two routes to one number); two
+// windows, one over each bump, 16 mm apart, link at 20 mm and not at the clustering distance;
+// the pair of bumps 5 mm apart link at 5 mm + a block.
+TEST(OverlapOccupancy, BlocksHoldTheOverlapAndLinkAtTheirDistance) {
+  const auto bump = [](double x, double y, double cx, double cy) {
+    return 40e-6 * std::exp(-((x - cx) * (x - cx) + (y - cy) * (y - cy)) / (2.0 * 1e-6));
+  };
+  const HapticModel env = testing::EnvironmentBox(
+      [&](double x, double y) {
+        return bump(x, y, -8e-3, 0.0) + bump(x, y, 8e-3, 0.0) + bump(x, y, 8e-3, 5e-3);
+      },
+      1024);
+  const HapticModel tool = testing::ToolBox([](double, double) { return 0.0; }, 512);
+  const RigidTransform X_WT = testing::ToolPose(0.0, 0.0, 20e-6);
+  TexturePenetrationSolver solver(128);
+  const ContactWindow whole = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.036, 90);
+  std::array<OverlapRegion, 8> regions{};
+  const int count =
+      solver.OverlapRegions(tool, X_WT, env, testing::EnvironmentPose(), whole, 1e-3, regions);
+  ASSERT_EQ(count, 3);
+  int cells = 0;
+  for (int r = 0; r < count; ++r) cells += regions[static_cast<std::size_t>(r)].cells;
+  std::vector<std::uint8_t> occupancy(90 * 90);
+  EXPECT_EQ(
+      solver.OverlapOccupancy(tool, X_WT, env, testing::EnvironmentPose(), whole, 1, occupancy),
+      cells);
+  // Too small a buffer, a bad block size: −1, nothing written.
+  std::vector<std::uint8_t> small(10, 7);
+  EXPECT_EQ(solver.OverlapOccupancy(tool, X_WT, env, testing::EnvironmentPose(), whole, 1, small),
+            -1);
+  EXPECT_EQ(small[0], 7);
+  EXPECT_EQ(
+      solver.OverlapOccupancy(tool, X_WT, env, testing::EnvironmentPose(), whole, 0, occupancy),
+      -1);
+  // One window over each side's bumps (12 mm, 0.4 mm cells, 3-cell blocks).
+  const auto footprint = [&](glm::dvec3 centre, std::vector<std::uint8_t>& storage) {
+    const ContactWindow w = ContactWindow::Make(centre, {0.0, 0.0, 1.0}, 0.012, 30);
+    storage.assign(10 * 10, 0);
+    const int occupied =
+        solver.OverlapOccupancy(tool, X_WT, env, testing::EnvironmentPose(), w, 3, storage);
+    EXPECT_GT(occupied, 0);
+    return OverlapFootprint{w, 3, 10, storage};
+  };
+  std::vector<std::uint8_t> sa, sb;
+  const OverlapFootprint left = footprint({-8e-3, 0.0, 0.0}, sa);
+  const OverlapFootprint right = footprint({8e-3, 2.5e-3, 0.0}, sb);
+  EXPECT_FALSE(FootprintsWithin(left, right, 5e-3));
+  EXPECT_FALSE(FootprintsWithin(right, left, 5e-3));
+  EXPECT_TRUE(FootprintsWithin(left, right, 20e-3));
+  EXPECT_TRUE(FootprintsWithin(right, left, 20e-3));
+  EXPECT_FALSE(FootprintCentroidInside(left, right, 1e-3));
+  // The right window holds two bumps 5 mm apart: its own footprint links to itself, and a
+  // window over the upper bump alone lies inside the right one's overlap window.
+  EXPECT_TRUE(FootprintsWithin(right, right, 1e-3));
+  std::vector<std::uint8_t> sc;
+  const OverlapFootprint upper = footprint({8e-3, 5e-3, 0.0}, sc);
+  EXPECT_TRUE(FootprintsWithin(right, upper, 1e-3));
+  EXPECT_TRUE(FootprintCentroidInside(right, upper, 1e-3));
+  // Malformed or empty: never linked.
+  OverlapFootprint empty = left;
+  empty.blocks_per_side = 0;
+  EXPECT_FALSE(FootprintsWithin(empty, right, 20e-3));
+  EXPECT_FALSE(FootprintsWithin(left, right, 0.0));
+  EXPECT_FALSE(FootprintCentroidInside(empty, right, 1e-3));
+}
+
+// PenaltySharesByDepth: sums to 1; equal depths share equally; a contact deeper by 10 τ takes
+// almost all; continuous in the depths; non-finite depths get nothing.
+TEST(PenaltyShares, SoftMaximumOfTheDepths) {
+  std::array<double, 3> s{};
+  PenaltySharesByDepth(std::array<double, 3>{100e-6, 100e-6, 100e-6}, 5e-6, s);
+  for (double x : s) EXPECT_NEAR(x, 1.0 / 3.0, 1e-12);
+  PenaltySharesByDepth(std::array<double, 3>{150e-6, 100e-6, 50e-6}, 5e-6, s);
+  EXPECT_NEAR(s[0] + s[1] + s[2], 1.0, 1e-12);
+  EXPECT_GT(s[0], 1.0 - 1e-4);
+  // The group's depth Σ s δ lies between the mean and the deepest.
+  const auto group_depth = [&](std::array<double, 3> d) {
+    PenaltySharesByDepth(d, 5e-6, s);
+    return s[0] * d[0] + s[1] * d[1] + s[2] * d[2];
+  };
+  EXPECT_NEAR(group_depth({150e-6, 100e-6, 50e-6}), 150e-6, 50e-6 * std::exp(-10.0) * 1.01);
+  EXPECT_LE(group_depth({101e-6, 100e-6, 99e-6}), 101e-6);
+  EXPECT_GE(group_depth({101e-6, 100e-6, 99e-6}), 100e-6);
+  // Continuous where the deepest contact changes.
+  const double a = group_depth({100e-6 + 1e-12, 100e-6, 0.0});
+  const double b = group_depth({100e-6, 100e-6 + 1e-12, 0.0});
+  EXPECT_NEAR(a, b, 1e-11);
+  const double inf = std::numeric_limits<double>::infinity();
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  PenaltySharesByDepth(std::array<double, 3>{-inf, 100e-6, nan}, 5e-6, s);
+  EXPECT_EQ(s[0], 0.0);
+  EXPECT_EQ(s[1], 1.0);
+  EXPECT_EQ(s[2], 0.0);
+  PenaltySharesByDepth(std::array<double, 3>{-inf, nan, inf}, 5e-6, s);
+  EXPECT_EQ(s[0] + s[1] + s[2], 0.0);
+  PenaltySharesByDepth(std::array<double, 3>{100e-6, 50e-6, nan}, 0.0, s);  // τ = 0: equal
+  EXPECT_EQ(s[0], 0.5);
+  EXPECT_EQ(s[1], 0.5);
+  EXPECT_EQ(s[2], 0.0);
 }
 
 }  // namespace

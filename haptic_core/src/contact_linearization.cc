@@ -312,6 +312,34 @@ int TexturePenetrationSolver::OverlapRegions(const HapticModel& tool, const Rigi
   return count;
 }
 
+int TexturePenetrationSolver::OverlapOccupancy(const HapticModel& tool, const RigidTransform& X_WT,
+                                               const HapticModel& environment,
+                                               const RigidTransform& X_WO, const ContactWindow& w,
+                                               int block_cells, std::span<std::uint8_t> occupancy,
+                                               TriangleSubset environment_triangles,
+                                               TriangleSubset tool_triangles) noexcept {
+  const int n = w.resolution;
+  if (block_cells < 1 || n > max_resolution_) return -1;
+  const int nb = (n + block_cells - 1) / block_cells;
+  const auto blocks = static_cast<std::size_t>(nb) * static_cast<std::size_t>(nb);
+  if (occupancy.size() < blocks) return -1;
+  Depth(tool, X_WT, environment, X_WO, w, environment_triangles, tool_triangles);
+  std::fill_n(occupancy.begin(), blocks, std::uint8_t{0});
+  int occupied = 0;
+  for (int j = 0; j < n; ++j) {
+    for (int i = 0; i < n; ++i) {
+      const auto c =
+          static_cast<std::size_t>(j) * static_cast<std::size_t>(n) + static_cast<std::size_t>(i);
+      if (!(env_heights_[c] - tool_heights_[c] > 0.0f)) continue;
+      std::uint8_t& b = occupancy[static_cast<std::size_t>(j / block_cells) * nb +
+                                  static_cast<std::size_t>(i / block_cells)];
+      occupied += b == 0 ? 1 : 0;
+      b = 1;
+    }
+  }
+  return occupied;
+}
+
 std::array<RigidTransform, kGradientSamples> GradientSamplePoses(const RigidTransform& X_WT,
                                                                  const ContactWindow& w) noexcept {
   return GradientSamplePoses(X_WT, w, GradientSteps::For(w));

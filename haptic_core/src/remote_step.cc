@@ -7,6 +7,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <glm/geometric.hpp>
+#include <glm/trigonometric.hpp>
 #include <limits>
 #include <optional>
 #include <stdexcept>
@@ -14,6 +16,7 @@
 #include <thread>
 
 #include "haptic_core/broad_phase.h"
+#include "haptic_core/connected_contacts.h"
 #include "haptic_core/contact_assembly.h"
 #include "haptic_core/contact_region.h"
 
@@ -52,6 +55,14 @@ void PipelineOptions::Validate() const {
                                 std::to_string(split_window_margin_m) + " and " +
                                 std::to_string(split_link_m));
   }
+  if (!(share_link_m >= 0.0) || !std::isfinite(share_link_m)) {
+    throw std::invalid_argument("share link must be finite and >= 0, got " +
+                                std::to_string(share_link_m));
+  }
+  if (!(share_temperature_m > 0.0) || !std::isfinite(share_temperature_m)) {
+    throw std::invalid_argument("share temperature must be positive and finite, got " +
+                                std::to_string(share_temperature_m));
+  }
   if (max_contacts < 1 || max_contacts > kMaxContacts) {
     throw std::invalid_argument("max contacts must be in [1, " + std::to_string(kMaxContacts) +
                                 "], got " + std::to_string(max_contacts));
@@ -81,9 +92,16 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
       // Stage 5b's buffers (about 10 MB at 8192 triangles) only where it runs.
       refiner_(options.depth_refinement, options.refine_depth ? 8192 : 0) {
   options_.Validate();
-  if (options_.split_windows_at_separated_overlap) {
+  if (options_.split_windows_at_separated_overlap || options_.share_connected_contacts) {
+    // Stage 5c renders whole windows, up to the largest.
     region_solver_ = std::make_unique<TexturePenetrationSolver>(
-        std::max(128, options_.grid_resolution), 4096, TextureStagePath::kFast);
+        std::max({128, options_.grid_resolution,
+                  options_.share_connected_contacts ? options_.max_window_resolution() : 0}),
+        4096, TextureStagePath::kFast);
+  }
+  if (options_.share_connected_contacts) {
+    sharing_occupancy_.assign(
+        static_cast<std::size_t>(kMaxContacts) * kMaxSharingBlocks * kMaxSharingBlocks, 0);
   }
   reachable_pairs_.resize(static_cast<std::size_t>(clusterer_.max_pairs()));
   pair_bounds_.resize(static_cast<std::size_t>(clusterer_.max_pairs()));
@@ -162,7 +180,9 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   // Stage 5: texture penetration depth and its gradient, linearized, for the whole batch.
   LinearizeContacts(X_WT, last_num_queries_);
   // Stage 5a: a window whose overlap is in separated regions becomes one window per region.
-  if (region_solver_) last_num_queries_ = SplitSeparatedOverlap(X_WT, last_num_queries_);
+  if (region_solver_ && options_.split_windows_at_separated_overlap) {
+    last_num_queries_ = SplitSeparatedOverlap(X_WT, last_num_queries_);
+  }
   // Kink planes are added below (stage 5b's translation arms, then the rotation arms).
   for (int i = 0; i < last_num_queries_; ++i) last_results_[i].num_kink_planes = 0;
   // Stage 5b: δ refined to the finest texture level, its gradient at texel scale (issue 32).
@@ -188,6 +208,8 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   step_faults_.grazing_dropped +=
       DropGrazingContacts({last_queries_.data(), static_cast<std::size_t>(last_num_queries_)},
                           {last_results_.data(), static_cast<std::size_t>(last_num_queries_)});
+  // Stage 5c: contacts whose overlaps are one region share one penalty.
+  ShareConnectedContacts(X_WT, last_num_queries_);
   // Stage 6: the contact model.
   AssembleContactModel(last_linearizations(), model);
   const auto t2 = Clock::now();
@@ -571,6 +593,20 @@ void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n)
   }
   backend_ = MakeCpuBackend();
   backend_->LinearizeBatch(tool, X_WT, batch, batch_out, samples_out);
+}
+
+void HapticTexturePipeline::ShareConnectedContacts(const RigidTransform& X_WT, int n) noexcept {
+  if (!options_.share_connected_contacts || !region_solver_ || n < 2) return;
+  ContactSharingOptions sharing;
+  sharing.link_m =
+      options_.share_link_m > 0.0 ? options_.share_link_m : options_.clustering_distance_m;
+  sharing.max_normal_angle_deg = options_.clustering_angle_deg;
+  sharing.centroid_in_window = options_.share_centroid_in_window;
+  sharing.temperature_m = options_.share_temperature_m;
+  step_faults_.shared_contacts += ht::ShareConnectedContacts(
+      *scene_.tool, X_WT, {last_queries_.data(), static_cast<std::size_t>(n)},
+      {last_results_.data(), static_cast<std::size_t>(n)}, sharing, *region_solver_,
+      sharing_occupancy_);
 }
 
 }  // namespace ht

@@ -156,6 +156,12 @@ int main(int argc, char** argv) {
          "(CPU texture stage; docs/frontier/issue32/seventh_stop)")
       ->check(CLI::Range(0.0, 1000.0))
       ->capture_default_str();
+  app.add_flag("--share-connected-contacts", config.pipeline.share_connected_contacts,
+               "stage 5c, off by default: contacts on one object whose textured overlaps come\n"
+               "within the clustering distance of each other are one contact region and share\n"
+               "one penalty, as the pipeline truth links its patches (a large flat contact that\n"
+               "the coarse clustering left in two windows pushes once, not twice; the overlaps\n"
+               "are rendered again on the CPU; issue 32, tenth stop)");
   double speculative_lead_ms = 50.0;
   app.add_option("--speculative-lead-ms", speculative_lead_ms,
                  "speculative contacts: a separated pair beyond the textures' reach is modelled\n"

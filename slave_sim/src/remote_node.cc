@@ -413,6 +413,8 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   s["speculative_lead_ms"] = config.pipeline.speculative_lead_s * 1e3;
   s["triangle_lists_overflowed"] = pipeline->step_faults().triangle_lists_overflowed;
   s["region_windows"] = pipeline->step_faults().region_windows;
+  s["share_connected_contacts"] = config.pipeline.share_connected_contacts;
+  s["shared_contacts"] = pipeline->step_faults().shared_contacts;
   s["pd_backend"] = {{"requested", ToString(config.pd_backend)},
                      {"used", backend_at_start},
                      {"used_at_end", std::string(pipeline->backend().name())},

@@ -280,6 +280,20 @@ class TexturePenetrationSolver {
                      TriangleSubset environment_triangles = TriangleSubset::All(),
                      TriangleSubset tool_triangles = TriangleSubset::All()) noexcept;
 
+  /// The overlap of `tool` at X_WT and `environment` at X_WO on `window` (rendered afresh, the
+  /// triangle subsets as Linearize takes them) as an occupancy of blocks of `block_cells` ×
+  /// `block_cells` cells: `occupancy[bj · nb + bi]` = 1 where a cell of block (bi along u, bj along
+  /// v) has b − a > 0, else 0, with nb = ceil(N / block_cells). Returns the number of occupied
+  /// blocks (0: no overlap), or −1, writing nothing, when block_cells < 1, the window exceeds the
+  /// solver's max_resolution, or `occupancy` holds fewer than nb² entries. Never allocates within
+  /// the reserve (stage 5c of the remote step, remote_step.h).
+  int OverlapOccupancy(const HapticModel& tool, const RigidTransform& X_WT,
+                       const HapticModel& environment, const RigidTransform& X_WO,
+                       const ContactWindow& window, int block_cells,
+                       std::span<std::uint8_t> occupancy,
+                       TriangleSubset environment_triangles = TriangleSubset::All(),
+                       TriangleSubset tool_triangles = TriangleSubset::All()) noexcept;
+
   const LinearizationFaults& faults() const noexcept { return faults_; }
 
  private:

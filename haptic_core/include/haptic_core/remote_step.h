@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "haptic_core/connected_contacts.h"
 #include "haptic_core/contact_clustering.h"
 #include "haptic_core/contact_linearization.h"
 #include "haptic_core/contact_model.h"
@@ -149,6 +150,24 @@ struct PipelineOptions {
   double split_window_margin_m = 1e-3;
   /// The regions' linking distance (m); 0: clustering_distance_m.
   double split_link_m = 0.0;
+  /// Stage 5c (issue 32, tenth stop; off by default, an approximation on the frontier): contacts
+  /// on one object whose normals agree within clustering_angle_deg and whose textured overlaps at
+  /// the tool's pose come within clustering_distance_m of each other (the pipeline truth's patch
+  /// linkage, contact_patch_truth.h) are one region and share one penalty: each keeps its δ, J
+  /// and kink planes, and its stiffness becomes k·s_i with the shares of PenaltySharesByDepth
+  /// (connected_contacts.h, temperature share_temperature_m). The coarse clustering leaves such
+  /// contacts apart where their merged window would exceed max_window_extent_m (the hammer's face
+  /// on the torus: two windows, each reading the whole δ). The overlaps are rendered again on the
+  /// CPU (TexturePenetrationSolver::OverlapOccupancy, blocks of about a quarter of the link), and
+  /// only for contacts with δ0 > 0 that have such a neighbour within reach of their windows.
+  bool share_connected_contacts = false;
+  /// Stage 5c also links two contacts when the centroid of one's overlap lies in the other's
+  /// overlap window (FootprintCentroidInside, 1 mm margin: the pipeline truth's rule for patches
+  /// that measure one interpenetration twice).
+  bool share_centroid_in_window = true;
+  /// Stage 5c's linking distance (m); 0: clustering_distance_m.
+  double share_link_m = 0.0;
+  double share_temperature_m = 5e-6;
   /// Speculative contacts (a lead time, s; 0 = off): a separated leaf pair farther apart than
   /// its local texture reach is kept (not dropped by drop_unreachable_pairs) when the tool's
   /// twist given to Step closes it within this time, i.e. when
@@ -257,6 +276,9 @@ class HapticTexturePipeline {
     /// Windows centred on and sized from the contact region of two whole models
     /// (PipelineOptions::whole_model_region_windows); not a fault, a count.
     std::int64_t region_windows = 0;
+    /// Contacts whose penalty stage 5c shared with a linked contact
+    /// (PipelineOptions::share_connected_contacts); not a fault, a count.
+    std::int64_t shared_contacts = 0;
   };
   const StepFaults& step_faults() const noexcept { return step_faults_; }
   /// The backend in use: the one given, or the CPU backend after that one failed.
@@ -370,6 +392,11 @@ class HapticTexturePipeline {
   /// Stage 5a (split_windows_at_separated_overlap): the solver that renders a window's overlap
   /// regions (null when off), its regions, and the windows replacing a split one.
   std::unique_ptr<TexturePenetrationSolver> region_solver_;
+  /// Stage 5c: shares the penalty of contacts [0, n) whose overlaps are one region
+  /// (PipelineOptions::share_connected_contacts). Allocation-free.
+  void ShareConnectedContacts(const RigidTransform& X_WT, int n) noexcept;
+  /// Stage 5c's scratch: the block occupancy of each contact (kMaxSharingBlocks² a contact).
+  std::vector<std::uint8_t> sharing_occupancy_;
   std::array<OverlapRegion, 8> regions_{};
   std::array<ContactQuery, kMaxContacts> split_queries_{};
   int last_num_queries_ = 0;
