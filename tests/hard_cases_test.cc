@@ -175,11 +175,10 @@ TEST(HardCases, OneOverlapInSeveralWindowsPushesOnce) {
   const double press = 50e-6;
   const RigidTransform X_WT = At({0.5 * gp.length_m + 0.005 - press, 0.0, 0.0},
                                  glm::angleAxis(0.5 * std::numbers::pi, glm::dvec3(0, 1, 0)));
-  const auto step = [&](const HapticScene& scene, bool share, double link_m = 0.0) {
+  const auto step = [&](const HapticScene& scene, bool share) {
     PipelineOptions options;
     options.max_window_extent_m = options.window_extent_m;
     options.share_connected_contacts = share;
-    options.share_link_m = link_m;
     HapticTexturePipeline pipeline(scene, options);
     StepTimings t;
     ContactModel m = pipeline.Step(X_WT, 1, t);
@@ -203,13 +202,13 @@ TEST(HardCases, OneOverlapInSeveralWindowsPushesOnce) {
   EXPECT_NEAR(F_shared, kK * delta, 0.02 * kK * delta);
   // Grooved: two overlaps 30 mm apart, each a region of its own. Each window renders only its
   // cluster's triangles (sectors of the cap) clipped to its 20 mm square, so the overlap between
-  // two windows over one part can go unrendered: at the 5 mm link the 40 mm chord of one part
-  // reads as two regions (three groups, 1.2 N); a 10 mm link bridges that and still parts the
-  // two overlaps.
+  // two windows over one part can go unrendered (a 5 mm link without fade read the 40 mm chord of
+  // one part as two regions, 1.2 N); the default 10 mm link bridges that and still parts the two
+  // overlaps (λ = 0 past 15 mm).
   const HapticScene grooved =
       scene_with([](double x, double) { return std::abs(x) < 15e-3 ? -1e-3 : 0.0; });
   const auto [g_apart, g_none] = step(grooved, false);
-  const auto [g_shared, g_num] = step(grooved, true, 10e-3);
+  const auto [g_shared, g_num] = step(grooved, true);
   ASSERT_GE(g_apart.num_contacts, 3);
   double g_delta = 0.0;
   for (int i = 0; i < g_apart.num_contacts; ++i) {
@@ -221,6 +220,9 @@ TEST(HardCases, OneOverlapInSeveralWindowsPushesOnce) {
   PipelineOptions bad;
   bad.share_connected_contacts = true;
   bad.share_temperature_m = 0.0;
+  EXPECT_THROW(HapticTexturePipeline(flat, bad), std::invalid_argument);
+  bad.share_temperature_m = 5e-6;
+  bad.share_link_m = 0.0;
   EXPECT_THROW(HapticTexturePipeline(flat, bad), std::invalid_argument);
   Report("one overlap in several windows",
          Fmt("%.0f windows over one disc: %.3f N apart, %.3f N shared (k delta = %.3f N); two "

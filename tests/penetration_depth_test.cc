@@ -280,10 +280,10 @@ TEST(PenetrationDepth, WindowRejectsBadArguments) {
 }
 
 // Stage 5c's footprints (connected_contacts.h): the overlap of the bumps above as blocks. With
-// one-cell blocks the occupied count is the regions' cell count (two routes to one number); two
-// windows, one over each bump, 16 mm apart, link at 20 mm and not at the clustering distance;
-// the pair of bumps 5 mm apart link at 5 mm + a block.
-TEST(OverlapOccupancy, BlocksHoldTheOverlapAndLinkAtTheirDistance) {
+// one-cell blocks the occupied count is the regions' cell count (two routes to one number); the
+// gap between two windows' overlaps, one over each side's bumps, is the bumps' 16 mm less their
+// overlaps' radii; the link fades with it.
+TEST(OverlapOccupancy, BlocksHoldTheOverlapAndGiveTheGapBetweenOverlaps) {
   const auto bump = [](double x, double y, double cx, double cy) {
     return 40e-6 * std::exp(-((x - cx) * (x - cx) + (y - cy) * (y - cy)) / (2.0 * 1e-6));
   };
@@ -314,71 +314,90 @@ TEST(OverlapOccupancy, BlocksHoldTheOverlapAndLinkAtTheirDistance) {
   EXPECT_EQ(
       solver.OverlapOccupancy(tool, X_WT, env, testing::EnvironmentPose(), whole, 0, occupancy),
       -1);
-  // One window over each side's bumps (12 mm, 0.4 mm cells, 3-cell blocks).
+  // One window over each side's bumps (12 mm, 0.4 mm cells, 1-cell blocks).
   const auto footprint = [&](glm::dvec3 centre, std::vector<std::uint8_t>& storage) {
     const ContactWindow w = ContactWindow::Make(centre, {0.0, 0.0, 1.0}, 0.012, 30);
-    storage.assign(10 * 10, 0);
+    storage.assign(30 * 30, 0);
     const int occupied =
-        solver.OverlapOccupancy(tool, X_WT, env, testing::EnvironmentPose(), w, 3, storage);
+        solver.OverlapOccupancy(tool, X_WT, env, testing::EnvironmentPose(), w, 1, storage);
     EXPECT_GT(occupied, 0);
-    return OverlapFootprint{w, 3, 10, storage};
+    return OverlapFootprint{w, 1, 30, storage};
   };
   std::vector<std::uint8_t> sa, sb;
   const OverlapFootprint left = footprint({-8e-3, 0.0, 0.0}, sa);
   const OverlapFootprint right = footprint({8e-3, 2.5e-3, 0.0}, sb);
-  EXPECT_FALSE(FootprintsWithin(left, right, 5e-3));
-  EXPECT_FALSE(FootprintsWithin(right, left, 5e-3));
-  EXPECT_TRUE(FootprintsWithin(left, right, 20e-3));
-  EXPECT_TRUE(FootprintsWithin(right, left, 20e-3));
-  EXPECT_FALSE(FootprintCentroidInside(left, right, 1e-3));
-  // The right window holds two bumps 5 mm apart: its own footprint links to itself, and a
-  // window over the upper bump alone lies inside the right one's overlap window.
-  EXPECT_TRUE(FootprintsWithin(right, right, 1e-3));
-  std::vector<std::uint8_t> sc;
-  const OverlapFootprint upper = footprint({8e-3, 5e-3, 0.0}, sc);
-  EXPECT_TRUE(FootprintsWithin(right, upper, 1e-3));
-  EXPECT_TRUE(FootprintCentroidInside(right, upper, 1e-3));
-  // Malformed or empty: never linked.
+  // Each bump overlaps where 40 µm·exp(−r²/2σ²) > 20 µm: r < σ·sqrt(2 ln 2) = 1.18 mm.
+  const double radius = 1e-3 * std::sqrt(2.0 * std::log(2.0));
+  const double gap = FootprintGap(left, right);
+  EXPECT_NEAR(gap, 16e-3 - 2.0 * radius, 0.5e-3);      // to within the cells
+  EXPECT_EQ(FootprintGap(right, left), gap);           // symmetric
+  EXPECT_LE(FootprintGap(left, right, 20e-3), 20e-3);  // an early stop still links
+  EXPECT_NEAR(FootprintGap(right, right), 0.0, 1e-12);
+  EXPECT_EQ(OverlapLink(gap, 5e-3, 5e-3), 0.0);
+  EXPECT_EQ(OverlapLink(gap, 15e-3, 5e-3), 1.0);
+  EXPECT_NEAR(OverlapLink(gap, gap - 2.5e-3, 5e-3), 0.5, 1e-9);
+  EXPECT_EQ(OverlapLink(gap, gap - 1e-9, 0.0), 0.0);  // no fade: a step at the link
+  EXPECT_EQ(OverlapLink(std::numeric_limits<double>::quiet_NaN(), 10e-3, 5e-3), 0.0);
+  // Malformed or empty: no gap.
   OverlapFootprint empty = left;
   empty.blocks_per_side = 0;
-  EXPECT_FALSE(FootprintsWithin(empty, right, 20e-3));
-  EXPECT_FALSE(FootprintsWithin(left, right, 0.0));
-  EXPECT_FALSE(FootprintCentroidInside(empty, right, 1e-3));
+  EXPECT_EQ(FootprintGap(empty, right), std::numeric_limits<double>::infinity());
 }
 
-// PenaltySharesByDepth: sums to 1; equal depths share equally; a contact deeper by 10 τ takes
-// almost all; continuous in the depths; non-finite depths get nothing.
-TEST(PenaltyShares, SoftMaximumOfTheDepths) {
+// LinkedPenaltyShares: unlinked contacts keep their penalty; a linked pair or clique shares the
+// soft maximum of its depths (Σ s = 1, computed here by hand: two routes); continuous in the
+// depths and the links; non-finite depths get nothing.
+TEST(PenaltyShares, SoftMaximumOverLinkedContacts) {
   std::array<double, 3> s{};
-  PenaltySharesByDepth(std::array<double, 3>{100e-6, 100e-6, 100e-6}, 5e-6, s);
+  const std::array<double, 9> none{};
+  const std::array<double, 9> all{0, 1, 1, 1, 0, 1, 1, 1, 0};
+  LinkedPenaltyShares(std::array<double, 3>{100e-6, 50e-6, 20e-6}, none, 5e-6, s);
+  for (double x : s) EXPECT_EQ(x, 1.0);
+  LinkedPenaltyShares(std::array<double, 3>{100e-6, 100e-6, 100e-6}, all, 5e-6, s);
   for (double x : s) EXPECT_NEAR(x, 1.0 / 3.0, 1e-12);
-  PenaltySharesByDepth(std::array<double, 3>{150e-6, 100e-6, 50e-6}, 5e-6, s);
+  const std::array<double, 3> d{102e-6, 100e-6, 95e-6};
+  LinkedPenaltyShares(d, all, 5e-6, s);
+  double z = 0.0;
+  for (double x : d) z += std::exp(x / 5e-6);
+  for (int i = 0; i < 3; ++i) EXPECT_NEAR(s[i], std::exp(d[i] / 5e-6) / z, 1e-12) << i;
   EXPECT_NEAR(s[0] + s[1] + s[2], 1.0, 1e-12);
+  // The clique pushes between the mean and the deepest; a contact deeper by 10 τ takes nearly all.
+  const double group = s[0] * d[0] + s[1] * d[1] + s[2] * d[2];
+  EXPECT_LE(group, d[0]);
+  EXPECT_GE(group, (d[0] + d[1] + d[2]) / 3.0);
+  LinkedPenaltyShares(std::array<double, 3>{150e-6, 100e-6, 50e-6}, all, 5e-6, s);
   EXPECT_GT(s[0], 1.0 - 1e-4);
-  // The group's depth Σ s δ lies between the mean and the deepest.
-  const auto group_depth = [&](std::array<double, 3> d) {
-    PenaltySharesByDepth(d, 5e-6, s);
-    return s[0] * d[0] + s[1] * d[1] + s[2] * d[2];
-  };
-  EXPECT_NEAR(group_depth({150e-6, 100e-6, 50e-6}), 150e-6, 50e-6 * std::exp(-10.0) * 1.01);
-  EXPECT_LE(group_depth({101e-6, 100e-6, 99e-6}), 101e-6);
-  EXPECT_GE(group_depth({101e-6, 100e-6, 99e-6}), 100e-6);
-  // Continuous where the deepest contact changes.
-  const double a = group_depth({100e-6 + 1e-12, 100e-6, 0.0});
-  const double b = group_depth({100e-6, 100e-6 + 1e-12, 0.0});
-  EXPECT_NEAR(a, b, 1e-11);
+  // Continuous where the deepest contact changes, and as a link fades in.
+  std::array<double, 3> s2{};
+  LinkedPenaltyShares(std::array<double, 3>{100e-6 + 1e-12, 100e-6, 0.0}, all, 5e-6, s);
+  LinkedPenaltyShares(std::array<double, 3>{100e-6, 100e-6 + 1e-12, 0.0}, all, 5e-6, s2);
+  for (int i = 0; i < 3; ++i) EXPECT_NEAR(s[i], s2[i], 1e-6) << i;
+  const std::array<double, 4> faint{0, 1e-9, 1e-9, 0};
+  std::array<double, 2> p{};
+  LinkedPenaltyShares(std::array<double, 2>{100e-6, 100e-6}, faint, 5e-6, p);
+  EXPECT_NEAR(p[0], 1.0, 1e-8);
+  const std::array<double, 4> half{0, 0.5, 0.5, 0};
+  LinkedPenaltyShares(std::array<double, 2>{100e-6, 100e-6}, half, 5e-6, p);
+  EXPECT_NEAR(p[0], 2.0 / 3.0, 1e-12);
+  // A chain 0–1–2 (0 and 2 unlinked): its closure links the ends, at its weakest link.
+  std::array<double, 9> chain{0, 1, 0, 1, 0, 0.5, 0, 0.5, 0};
+  StrongestPathLinks(chain, 3);
+  EXPECT_EQ(chain[2], 0.5);
+  EXPECT_EQ(chain[6], 0.5);
+  EXPECT_EQ(chain[1], 1.0);
+  std::array<double, 9> full_chain{0, 1, 0, 1, 0, 1, 0, 1, 0};
+  StrongestPathLinks(full_chain, 3);
+  EXPECT_EQ(full_chain, all);
+  // Non-finite depths take no part; a short links span writes nothing.
   const double inf = std::numeric_limits<double>::infinity();
   const double nan = std::numeric_limits<double>::quiet_NaN();
-  PenaltySharesByDepth(std::array<double, 3>{-inf, 100e-6, nan}, 5e-6, s);
+  LinkedPenaltyShares(std::array<double, 3>{-inf, 100e-6, nan}, all, 5e-6, s);
   EXPECT_EQ(s[0], 0.0);
   EXPECT_EQ(s[1], 1.0);
   EXPECT_EQ(s[2], 0.0);
-  PenaltySharesByDepth(std::array<double, 3>{-inf, nan, inf}, 5e-6, s);
-  EXPECT_EQ(s[0] + s[1] + s[2], 0.0);
-  PenaltySharesByDepth(std::array<double, 3>{100e-6, 50e-6, nan}, 0.0, s);  // τ = 0: equal
-  EXPECT_EQ(s[0], 0.5);
-  EXPECT_EQ(s[1], 0.5);
-  EXPECT_EQ(s[2], 0.0);
+  s = {7.0, 7.0, 7.0};
+  LinkedPenaltyShares(std::array<double, 3>{1e-6, 1e-6, 1e-6}, std::array<double, 4>{}, 5e-6, s);
+  EXPECT_EQ(s[0], 7.0);
 }
 
 }  // namespace

@@ -48,88 +48,82 @@ bool OccupiedBox(const OverlapFootprint& f, glm::dvec3& lo, glm::dvec3& hi) noex
 
 }  // namespace
 
-bool FootprintsWithin(const OverlapFootprint& a, const OverlapFootprint& b,
-                      double link_m) noexcept {
-  if (!(link_m > 0.0) || !Valid(a) || !Valid(b)) return false;
-  glm::dvec3 lo_a, hi_a, lo_b, hi_b;
-  if (!OccupiedBox(a, lo_a, hi_a) || !OccupiedBox(b, lo_b, hi_b)) return false;
-  const glm::dvec3 gap = glm::max(glm::dvec3(0.0), glm::max(lo_a - hi_b, lo_b - hi_a));
-  if (glm::dot(gap, gap) >= link_m * link_m) return false;
+double FootprintGap(const OverlapFootprint& a, const OverlapFootprint& b,
+                    double enough_m) noexcept {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  if (!Valid(a) || !Valid(b)) return kInf;
+  glm::dvec3 lo_b, hi_b, lo_a, hi_a;
+  if (!OccupiedBox(a, lo_a, hi_a) || !OccupiedBox(b, lo_b, hi_b)) return kInf;
+  double best2 = kInf;
+  const double enough2 = enough_m > 0.0 ? enough_m * enough_m : -1.0;
   const int na = a.blocks_per_side, nb = b.blocks_per_side;
   for (int aj = 0; aj < na; ++aj) {
     for (int ai = 0; ai < na; ++ai) {
       if (a.occupancy[static_cast<std::size_t>(aj) * na + ai] == 0) continue;
       const glm::dvec3 p = BlockCenter(a, ai, aj);
-      // Blocks of b whose centre lies outside p's box by a link cannot be linked to it.
-      if (glm::any(glm::lessThan(p + link_m, lo_b)) || glm::any(glm::greaterThan(p - link_m, hi_b)))
-        continue;
+      // b's box bounds every distance from p: skip p when the box is no nearer than the best.
+      const glm::dvec3 out = glm::max(glm::dvec3(0.0), glm::max(lo_b - p, p - hi_b));
+      if (glm::dot(out, out) >= best2) continue;
       for (int bj = 0; bj < nb; ++bj) {
         for (int bi = 0; bi < nb; ++bi) {
           if (b.occupancy[static_cast<std::size_t>(bj) * nb + bi] == 0) continue;
           const glm::dvec3 d = BlockCenter(b, bi, bj) - p;
-          if (glm::dot(d, d) < link_m * link_m) return true;
+          best2 = std::min(best2, glm::dot(d, d));
+          if (best2 < enough2) return std::sqrt(best2);
         }
       }
     }
   }
-  return false;
+  return std::sqrt(best2);
 }
 
-bool FootprintCentroidInside(const OverlapFootprint& a, const OverlapFootprint& b,
-                             double margin_m) noexcept {
-  if (!Valid(a) || !Valid(b) || !(margin_m >= 0.0)) return false;
-  const ContactWindow& w = a.window;
-  double u0 = std::numeric_limits<double>::infinity(), u1 = -u0, v0 = u0, v1 = -u0;
-  const int na = a.blocks_per_side;
-  for (int bj = 0; bj < na; ++bj) {
-    for (int bi = 0; bi < na; ++bi) {
-      if (a.occupancy[static_cast<std::size_t>(bj) * na + bi] == 0) continue;
-      const glm::dvec3 d = BlockCenter(a, bi, bj) - w.center_W;
-      u0 = std::min(u0, glm::dot(d, w.axis_u_W));
-      u1 = std::max(u1, glm::dot(d, w.axis_u_W));
-      v0 = std::min(v0, glm::dot(d, w.axis_v_W));
-      v1 = std::max(v1, glm::dot(d, w.axis_v_W));
-    }
-  }
-  if (!(u1 >= u0)) return false;
-  const double block_m = a.block_cells * w.cell_size_m();
-  const double half = 0.5 * (std::max(u1 - u0, v1 - v0) + block_m) + margin_m;
-  glm::dvec3 sum(0.0);
-  int count = 0;
-  const int nb = b.blocks_per_side;
-  for (int bj = 0; bj < nb; ++bj) {
-    for (int bi = 0; bi < nb; ++bi) {
-      if (b.occupancy[static_cast<std::size_t>(bj) * nb + bi] == 0) continue;
-      sum += BlockCenter(b, bi, bj);
-      ++count;
-    }
-  }
-  if (count == 0) return false;
-  const glm::dvec3 d = sum / static_cast<double>(count) - w.center_W;
-  return std::abs(glm::dot(d, w.axis_u_W) - 0.5 * (u0 + u1)) <= half &&
-         std::abs(glm::dot(d, w.axis_v_W) - 0.5 * (v0 + v1)) <= half &&
-         std::abs(glm::dot(d, w.normal_W)) <= half;
+double OverlapLink(double gap_m, double link_m, double fade_m) noexcept {
+  if (std::isnan(gap_m)) return 0.0;
+  if (gap_m <= link_m) return 1.0;
+  if (!(fade_m > 0.0)) return 0.0;
+  return std::clamp(1.0 - (gap_m - link_m) / fade_m, 0.0, 1.0);
 }
 
-void PenaltySharesByDepth(std::span<const double> depths_m, double temperature_m,
-                          std::span<double> shares) noexcept {
-  const std::size_t n = std::min(depths_m.size(), shares.size());
+void LinkedPenaltyShares(std::span<const double> depths_m, std::span<const double> links,
+                         double temperature_m, std::span<double> shares) noexcept {
+  const std::size_t n = depths_m.size();
+  if (shares.size() < n || links.size() < n * n) return;
+  const double tau = temperature_m > 0.0 && std::isfinite(temperature_m) ? temperature_m : 1e-6;
   double deepest = -std::numeric_limits<double>::infinity();
-  int finite = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!std::isfinite(depths_m[i])) continue;
-    deepest = std::max(deepest, depths_m[i]);
-    ++finite;
+  for (double d : depths_m) {
+    if (std::isfinite(d)) deepest = std::max(deepest, d);
   }
-  const bool equal = !(temperature_m > 0.0) || !std::isfinite(temperature_m);
-  double sum = 0.0;
+  const auto e = [&](std::size_t i) { return std::exp((depths_m[i] - deepest) / tau); };
   for (std::size_t i = 0; i < n; ++i) {
-    shares[i] = !std::isfinite(depths_m[i]) ? 0.0
-                : equal                     ? 1.0
-                                            : std::exp((depths_m[i] - deepest) / temperature_m);
-    sum += shares[i];
+    if (!std::isfinite(depths_m[i])) {
+      shares[i] = 0.0;
+      continue;
+    }
+    double rivals = 0.0;
+    for (std::size_t j = 0; j < n; ++j) {
+      if (j == i || !std::isfinite(depths_m[j])) continue;
+      const double l = std::clamp(links[i * n + j], 0.0, 1.0);
+      rivals += l * e(j);
+    }
+    shares[i] = e(i) / (e(i) + rivals);
   }
-  for (std::size_t i = 0; i < n; ++i) shares[i] = finite > 0 ? shares[i] / sum : 0.0;
+}
+
+void StrongestPathLinks(std::span<double> links, int n) noexcept {
+  if (n <= 0 || links.size() < static_cast<std::size_t>(n) * static_cast<std::size_t>(n)) return;
+  const auto at = [&](int i, int j) -> double& {
+    return links[static_cast<std::size_t>(i) * static_cast<std::size_t>(n) +
+                 static_cast<std::size_t>(j)];
+  };
+  for (int k = 0; k < n; ++k) {
+    for (int i = 0; i < n; ++i) {
+      if (i == k) continue;
+      for (int j = 0; j < n; ++j) {
+        if (j == i || j == k) continue;
+        at(i, j) = std::max(at(i, j), std::min(at(i, k), at(k, j)));
+      }
+    }
+  }
 }
 
 int ShareConnectedContacts(const HapticModel& tool, const RigidTransform& X_WT,
@@ -141,9 +135,7 @@ int ShareConnectedContacts(const HapticModel& tool, const RigidTransform& X_WT,
       std::min({queries.size(), results.size(), static_cast<std::size_t>(kMaxContacts)}));
   const auto per_contact = static_cast<std::size_t>(kMaxSharingBlocks) * kMaxSharingBlocks;
   if (n < 2 || !(options.link_m > 0.0) || scratch.size() < per_contact * n) return 0;
-  const double link = options.link_m;
-  // The margin of an overlap's window (the pipeline truth's window_margin_m).
-  constexpr double kShareMargin = 1e-3;
+  const double reach_m = options.link_m + std::max(0.0, options.fade_m);
   const double cos_angle = std::cos(glm::radians(options.max_normal_angle_deg));
   const auto positive = [&](int i) {
     const double d = results[static_cast<std::size_t>(i)].depth_m;
@@ -165,7 +157,7 @@ int ShareConnectedContacts(const HapticModel& tool, const RigidTransform& X_WT,
       if (!positive(i) || !positive(j) || !may_link(i, j)) continue;
       const ContactWindow& a = queries[static_cast<std::size_t>(i)].window;
       const ContactWindow& b = queries[static_cast<std::size_t>(j)].window;
-      const double reach = 0.5 * std::sqrt(2.0) * (a.extent_m + b.extent_m) + link;
+      const double reach = 0.5 * std::sqrt(2.0) * (a.extent_m + b.extent_m) + reach_m;
       if (glm::length(a.center_W - b.center_W) > reach) continue;
       needed[static_cast<std::size_t>(i)] = needed[static_cast<std::size_t>(j)] = true;
       any = true;
@@ -179,7 +171,8 @@ int ShareConnectedContacts(const HapticModel& tool, const RigidTransform& X_WT,
     const ContactQuery& q = queries[static_cast<std::size_t>(i)];
     // Blocks of about a quarter of the link, at most kMaxSharingBlocks a side.
     const int n_cells = q.window.resolution;
-    int block = std::max(1, static_cast<int>(std::ceil(0.25 * link / q.window.cell_size_m())));
+    int block =
+        std::max(1, static_cast<int>(std::ceil(0.25 * options.link_m / q.window.cell_size_m())));
     block = std::max(block, (n_cells + kMaxSharingBlocks - 1) / kMaxSharingBlocks);
     const int nb = (n_cells + block - 1) / block;
     const std::span<std::uint8_t> occupancy(
@@ -191,48 +184,44 @@ int ShareConnectedContacts(const HapticModel& tool, const RigidTransform& X_WT,
     footprints[static_cast<std::size_t>(i)] = {q.window, block, nb, occupancy};
     occupied[static_cast<std::size_t>(i)] = true;
   }
-  // Single linkage over the contacts (union-find), then one penalty per group.
-  std::array<int, kMaxContacts> parent{};
-  for (int i = 0; i < n; ++i) parent[static_cast<std::size_t>(i)] = i;
-  const auto find = [&](int i) {
-    while (parent[static_cast<std::size_t>(i)] != i) i = parent[static_cast<std::size_t>(i)];
-    return i;
-  };
+  // The links of the rendered contacts, then their shares.
+  std::array<int, kMaxContacts> index{};
+  int m = 0;
   for (int i = 0; i < n; ++i) {
-    for (int j = i + 1; j < n; ++j) {
-      if (!occupied[static_cast<std::size_t>(i)] || !occupied[static_cast<std::size_t>(j)] ||
-          !may_link(i, j) || find(i) == find(j)) {
-        continue;
-      }
-      const OverlapFootprint& a = footprints[static_cast<std::size_t>(i)];
-      const OverlapFootprint& b = footprints[static_cast<std::size_t>(j)];
-      if (FootprintsWithin(a, b, link) ||
-          (options.centroid_in_window && (FootprintCentroidInside(a, b, kShareMargin) ||
-                                          FootprintCentroidInside(b, a, kShareMargin)))) {
-        parent[static_cast<std::size_t>(std::max(find(i), find(j)))] = std::min(find(i), find(j));
-      }
-    }
+    if (occupied[static_cast<std::size_t>(i)]) index[static_cast<std::size_t>(m++)] = i;
   }
-  int shared = 0;
+  if (m < 2) return 0;
+  std::array<double, kMaxContacts * kMaxContacts> links{};
   std::array<double, kMaxContacts> depths{}, shares{};
-  std::array<int, kMaxContacts> members{};
-  for (int root = 0; root < n; ++root) {
-    int m = 0;
-    for (int i = 0; i < n; ++i) {
-      if (!occupied[static_cast<std::size_t>(i)] || find(i) != root) continue;
-      members[static_cast<std::size_t>(m)] = i;
-      depths[static_cast<std::size_t>(m++)] = results[static_cast<std::size_t>(i)].depth_m;
+  bool linked = false;
+  for (int a = 0; a < m; ++a) {
+    const int i = index[static_cast<std::size_t>(a)];
+    depths[static_cast<std::size_t>(a)] = results[static_cast<std::size_t>(i)].depth_m;
+    for (int b = a + 1; b < m; ++b) {
+      const int j = index[static_cast<std::size_t>(b)];
+      double l = 0.0;
+      if (may_link(i, j)) {
+        l = OverlapLink(FootprintGap(footprints[static_cast<std::size_t>(i)],
+                                     footprints[static_cast<std::size_t>(j)], options.link_m),
+                        options.link_m, options.fade_m);
+      }
+      links[static_cast<std::size_t>(a * m + b)] = links[static_cast<std::size_t>(b * m + a)] = l;
+      linked = linked || l > 0.0;
     }
-    if (m < 2) continue;
-    PenaltySharesByDepth({depths.data(), static_cast<std::size_t>(m)}, options.temperature_m,
-                         {shares.data(), static_cast<std::size_t>(m)});
-    for (int k = 0; k < m; ++k) {
-      results[static_cast<std::size_t>(members[static_cast<std::size_t>(k)])].stiffness_n_per_m *=
-          shares[static_cast<std::size_t>(k)];
-    }
-    shared += m;
   }
-  return shared;
+  if (!linked) return 0;
+  const auto count = static_cast<std::size_t>(m);
+  StrongestPathLinks({links.data(), count * count}, m);
+  LinkedPenaltyShares({depths.data(), count}, {links.data(), count * count}, options.temperature_m,
+                      {shares.data(), count});
+  int changed = 0;
+  for (int a = 0; a < m; ++a) {
+    const double s = shares[static_cast<std::size_t>(a)];
+    if (s >= 1.0) continue;
+    results[static_cast<std::size_t>(index[static_cast<std::size_t>(a)])].stiffness_n_per_m *= s;
+    ++changed;
+  }
+  return changed;
 }
 
 }  // namespace ht

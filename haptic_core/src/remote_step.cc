@@ -55,9 +55,11 @@ void PipelineOptions::Validate() const {
                                 std::to_string(split_window_margin_m) + " and " +
                                 std::to_string(split_link_m));
   }
-  if (!(share_link_m >= 0.0) || !std::isfinite(share_link_m)) {
-    throw std::invalid_argument("share link must be finite and >= 0, got " +
-                                std::to_string(share_link_m));
+  if (!(share_link_m > 0.0) || !std::isfinite(share_link_m) || !(share_fade_m >= 0.0) ||
+      !std::isfinite(share_fade_m)) {
+    throw std::invalid_argument("share link must be finite and > 0 and its fade >= 0, got " +
+                                std::to_string(share_link_m) + " and " +
+                                std::to_string(share_fade_m));
   }
   if (!(share_temperature_m > 0.0) || !std::isfinite(share_temperature_m)) {
     throw std::invalid_argument("share temperature must be positive and finite, got " +
@@ -598,10 +600,9 @@ void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n)
 void HapticTexturePipeline::ShareConnectedContacts(const RigidTransform& X_WT, int n) noexcept {
   if (!options_.share_connected_contacts || !region_solver_ || n < 2) return;
   ContactSharingOptions sharing;
-  sharing.link_m =
-      options_.share_link_m > 0.0 ? options_.share_link_m : options_.clustering_distance_m;
+  sharing.link_m = options_.share_link_m;
+  sharing.fade_m = options_.share_fade_m;
   sharing.max_normal_angle_deg = options_.clustering_angle_deg;
-  sharing.centroid_in_window = options_.share_centroid_in_window;
   sharing.temperature_m = options_.share_temperature_m;
   step_faults_.shared_contacts += ht::ShareConnectedContacts(
       *scene_.tool, X_WT, {last_queries_.data(), static_cast<std::size_t>(n)},

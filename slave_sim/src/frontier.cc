@@ -255,16 +255,16 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     share.name = "share_connected_contacts";
     share.share_connected_contacts = true;
     s.push_back(share);
-    FrontierSetting share_link = share;
-    share_link.name = "share_connected_contacts_link_only";
-    share_link.share_centroid_in_window = false;
-    s.push_back(share_link);
-    for (const int mm : {7, 10, 15}) {
+    for (const int mm : {5, 15}) {
       FrontierSetting t = share;
       t.name = "share_connected_contacts_link" + std::to_string(mm) + "mm";
       t.share_link_m = mm * 1e-3;
       s.push_back(t);
     }
+    FrontierSetting share_step = share;
+    share_step.name = "share_connected_contacts_no_fade";
+    share_step.share_fade_m = 0.0;
+    s.push_back(share_step);
     for (const int um : {1, 20}) {
       FrontierSetting t = share;
       t.name = "share_connected_contacts_" + std::to_string(um) + "um";
@@ -584,8 +584,8 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.depth_refinement.texel_scale_rotation = st.texel_scale_rotation;
   options.split_windows_at_separated_overlap = st.split_windows_at_separated_overlap;
   options.share_connected_contacts = st.share_connected_contacts;
-  options.share_centroid_in_window = st.share_centroid_in_window;
-  options.share_link_m = st.share_link_m;
+  if (st.share_link_m >= 0.0) options.share_link_m = st.share_link_m;
+  if (st.share_fade_m >= 0.0) options.share_fade_m = st.share_fade_m;
   if (st.share_temperature_m > 0.0) options.share_temperature_m = st.share_temperature_m;
   options.split_link_m = st.split_link_m;
   options.depth_refinement.subgrid_rotations = st.subgrid_rotations;

@@ -5,8 +5,9 @@
 // (the hammer's face on the torus) becomes two windows, each over its own coarse triangles, each
 // reading the same penetration depth: the sum of their forces is twice what one patch pushes. The
 // pipeline truth (accuracy/contact_patch_truth.h) links the overlapping surface within the
-// clustering distance into one patch with one δ; this stage does the same with the textured
-// overlap the windows render, and shares the penalty k among the linked contacts.
+// clustering distance into one patch with one δ; this stage links the textured overlaps the
+// windows render and shares the penalty k among linked contacts, continuously in their depths and
+// in the gap between their overlaps.
 
 #include <cstdint>
 #include <span>
@@ -30,59 +31,66 @@ struct OverlapFootprint {
   std::span<const std::uint8_t> occupancy;
 };
 
-/// True when an occupied block of `a` and one of `b` have centres closer than `link_m` (m, in
-/// W). The blocks stand for their cells, so the test is the cells' single linkage to within a
-/// block's diagonal. False when either footprint is empty or malformed (blocks_per_side ≤ 0,
-/// occupancy shorter than blocks_per_side²) or link_m is not positive. noexcept, allocation-free;
-/// O(occupied_a · occupied_b) at worst, with an early exit and a bounding-box test first.
-bool FootprintsWithin(const OverlapFootprint& a, const OverlapFootprint& b, double link_m) noexcept;
+/// The smallest distance (m, in W) between the centres of an occupied block of `a` and one of
+/// `b`: the gap between the two overlaps to within a block's diagonal. Stops at the first pair
+/// closer than `enough_m` (m) and returns that pair's distance. +∞ when either footprint is empty
+/// or malformed (blocks_per_side ≤ 0, occupancy shorter than blocks_per_side²). noexcept,
+/// allocation-free; O(occupied_a · occupied_b) at worst.
+double FootprintGap(const OverlapFootprint& a, const OverlapFootprint& b,
+                    double enough_m = 0.0) noexcept;
 
-/// True when the centroid of `b`'s occupied blocks lies in `a`'s overlap window: the square about
-/// the centre of a's occupied cells' box (on a's window plane) whose side is that box's larger side
-/// plus `margin_m` (m) on each side, within half that side along a's normal. This is the pipeline
-/// truth's rule for patches that measure one interpenetration twice
-/// (ContactPatchTruthOptions::overlap_merge_angle_deg); not symmetric. False for an empty or
-/// malformed footprint. noexcept, allocation-free.
-bool FootprintCentroidInside(const OverlapFootprint& a, const OverlapFootprint& b,
-                             double margin_m) noexcept;
+/// The link λ ∈ [0, 1] of two overlaps `gap_m` apart (m): 1 up to `link_m`, falling linearly to
+/// 0 at link_m + fade_m (fade_m > 0; 0 gives a step at link_m), 0 for a NaN gap.
+double OverlapLink(double gap_m, double link_m, double fade_m) noexcept;
 
-/// The shares s_i (Σ s_i = 1) of one group of linked contacts' penalty, from their depths δ_i (m):
-/// s_i = exp((δ_i − δ_max)/τ) / Σ_j exp((δ_j − δ_max)/τ) with τ = `temperature_m` (m, > 0). The
-/// group then pushes with Σ s_i k δ_i J_i: the deepest contact's kδ J where one is deeper by
-/// several τ (one patch, one δ, as the pipeline truth has it), the mean of equally deep ones, and
-/// continuous in the depths between (no step when the deepest contact changes). Non-finite depths
-/// get share 0; all non-finite or τ ≤ 0 (or NaN): equal shares over the finite ones (none: all 0).
-/// `shares` must be as long as `depths_m`. noexcept, allocation-free.
-void PenaltySharesByDepth(std::span<const double> depths_m, double temperature_m,
-                          std::span<double> shares) noexcept;
+/// The shares s_i ∈ (0, 1] of linked contacts' penalties: with e_i = exp((δ_i − δ_max)/τ),
+///   s_i = e_i / (e_i + Σ_{j≠i} λ_ij e_j),
+/// λ_ij = λ_ji ∈ [0, 1] the links (`links[i · n + j]`, n = depths_m.size(), the diagonal unread),
+/// τ = `temperature_m` (m, > 0). Unlinked contacts keep their whole penalty (s = 1); a group whose
+/// members are all linked to each other (λ = 1) pushes Σ s_i k δ_i J_i with Σ s_i = 1, which is
+/// the deepest contact's k δ J where one is deeper by several τ (one patch, one δ, as the pipeline
+/// truth has it) and the mean of equally deep ones; s is continuous in the depths and the links
+/// (no step when the deepest contact changes or a link fades in). A chain (i linked to j, j to k,
+/// not i to k) sums to more than 1. Non-finite depths get s = 0 and take no part; τ ≤ 0 or NaN: τ
+/// = 1 µm. `shares` must be as long as depths_m and `links` hold n² entries (else nothing is
+/// written). noexcept, allocation-free.
+void LinkedPenaltyShares(std::span<const double> depths_m, std::span<const double> links,
+                         double temperature_m, std::span<double> shares) noexcept;
+
+/// The strongest-path closure of n×n links (`links[i · n + j]`, symmetric, in place): each entry
+/// becomes the largest, over all paths from i to j, of the smallest link along the path
+/// (max–min, Floyd–Warshall). With links of 0 and 1 this is single linkage's connected components
+/// (a chain's ends are linked); it is continuous in the links. Nothing happens when links holds
+/// fewer than n² entries. O(n³), noexcept, allocation-free.
+void StrongestPathLinks(std::span<double> links, int n) noexcept;
 
 /// How ShareConnectedContacts links contacts and shares their penalty.
 struct ContactSharingOptions {
-  /// Single linkage of the overlaps (m; FootprintsWithin): the clustering distance.
-  double link_m = 5e-3;
+  /// Overlaps closer than this (m; FootprintGap) are one region: λ = 1.
+  double link_m = 10e-3;
+  /// λ falls to 0 over this much more gap (m).
+  double fade_m = 5e-3;
   /// Normals within this angle (deg) may link (the clustering angle).
   double max_normal_angle_deg = 30.0;
-  /// Also link when one overlap's centroid lies in the other's overlap window
-  /// (FootprintCentroidInside, 1 mm margin).
-  bool centroid_in_window = true;
-  /// τ of PenaltySharesByDepth (m).
+  /// τ of LinkedPenaltyShares (m).
   double temperature_m = 5e-6;
 };
 
-/// Most blocks a side of one contact's footprint (its blocks grow past a quarter of the link on
+/// Most blocks a side of one contact's footprint (blocks grow past a quarter of the link on
 /// windows wider than this many quarter links).
 inline constexpr int kMaxSharingBlocks = 64;
 
-/// Stage 5c: links the contacts [0, n) (n = min of the spans' sizes and kMaxContacts) with δ0 > 0
-/// that lie on one object (same model and pose) with normals within the angle and whose overlaps
-/// link (FootprintsWithin, or FootprintCentroidInside both ways), single linkage, and multiplies
-/// each linked contact's stiffness_n_per_m by its share within its group
-/// (PenaltySharesByDepth). Each footprint is `solver`'s OverlapOccupancy of the contact's window
-/// at X_WT (frame T at the tool's centre of mass, m) with its triangle subsets, in blocks of about
-/// link/4, rendered only for contacts that have a candidate partner within reach of their windows.
-/// `scratch` holds kMaxSharingBlocks² bytes per contact. Returns how many contacts were shared
-/// (0 when fewer than two are positive, link_m ≤ 0, or scratch is short: nothing changes).
-/// noexcept; allocation-free within the solver's reserve.
+/// Stage 5c: among the contacts [0, n) (n = min of the spans' sizes and kMaxContacts), those with
+/// δ0 > 0 on one object (same model and pose) with normals within the angle get links
+/// λ = OverlapLink(FootprintGap) of their overlaps, closed over paths (StrongestPathLinks: a
+/// region spread over a chain of windows is one), and each contact's stiffness_n_per_m is
+/// multiplied by its share (LinkedPenaltyShares). Each footprint is `solver`'s OverlapOccupancy
+/// of the contact's window at X_WT (frame T at the tool's centre of mass, m) with its triangle
+/// subsets, in blocks of about a quarter of the link, rendered only for contacts that have a
+/// candidate partner within reach of their windows. `scratch` holds kMaxSharingBlocks² bytes per
+/// contact. Returns how many contacts' stiffness changed (0 when fewer than two are positive,
+/// link_m ≤ 0, or scratch is short: nothing changes). noexcept; allocation-free within the
+/// solver's reserve.
 int ShareConnectedContacts(const HapticModel& tool, const RigidTransform& X_WT,
                            std::span<const ContactQuery> queries,
                            std::span<ContactLinearization> results,

@@ -150,23 +150,23 @@ struct PipelineOptions {
   double split_window_margin_m = 1e-3;
   /// The regions' linking distance (m); 0: clustering_distance_m.
   double split_link_m = 0.0;
-  /// Stage 5c (issue 32, tenth stop; off by default, an approximation on the frontier): contacts
-  /// on one object whose normals agree within clustering_angle_deg and whose textured overlaps at
-  /// the tool's pose come within clustering_distance_m of each other (the pipeline truth's patch
-  /// linkage, contact_patch_truth.h) are one region and share one penalty: each keeps its δ, J
-  /// and kink planes, and its stiffness becomes k·s_i with the shares of PenaltySharesByDepth
-  /// (connected_contacts.h, temperature share_temperature_m). The coarse clustering leaves such
-  /// contacts apart where their merged window would exceed max_window_extent_m (the hammer's face
-  /// on the torus: two windows, each reading the whole δ). The overlaps are rendered again on the
-  /// CPU (TexturePenetrationSolver::OverlapOccupancy, blocks of about a quarter of the link), and
-  /// only for contacts with δ0 > 0 that have such a neighbour within reach of their windows.
+  /// Stage 5c (issue 32, tenth stop): contacts on one object whose normals agree within
+  /// clustering_angle_deg and whose textured overlaps at the tool's pose come within share_link_m
+  /// of each other are one region and share one penalty (ShareConnectedContacts,
+  /// connected_contacts.h): each keeps its δ, J and kink planes, and its stiffness becomes k·s_i,
+  /// so that a region pushes with about its deepest contact's k·δ, as the pipeline truth's one
+  /// patch does (contact_patch_truth.h). The coarse clustering leaves such contacts apart where
+  /// their merged window would exceed max_window_extent_m (the hammer's face on the torus: two
+  /// windows, each reading the whole δ). The link is share_link_m, twice the clustering
+  /// distance, because each window renders only its cluster's triangles clipped to its square,
+  /// so the overlap between two neighbouring windows can go unrendered (7 mm on a hammer pose);
+  /// it fades out over share_fade_m more gap. The overlaps are rendered again on the CPU
+  /// (TexturePenetrationSolver::OverlapOccupancy), only for contacts with δ0 > 0 that have such a
+  /// neighbour within reach of their windows. Off: every contact pushes with its whole k.
   bool share_connected_contacts = false;
-  /// Stage 5c also links two contacts when the centroid of one's overlap lies in the other's
-  /// overlap window (FootprintCentroidInside, 1 mm margin: the pipeline truth's rule for patches
-  /// that measure one interpenetration twice).
-  bool share_centroid_in_window = true;
-  /// Stage 5c's linking distance (m); 0: clustering_distance_m.
-  double share_link_m = 0.0;
+  double share_link_m = 10e-3;
+  double share_fade_m = 5e-3;
+  /// τ of the shares (LinkedPenaltyShares, m).
   double share_temperature_m = 5e-6;
   /// Speculative contacts (a lead time, s; 0 = off): a separated leaf pair farther apart than
   /// its local texture reach is kept (not dropped by drop_unreachable_pairs) when the tool's

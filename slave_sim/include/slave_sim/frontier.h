@@ -94,14 +94,12 @@ struct FrontierSetting {
   bool split_windows_at_separated_overlap = false;
   /// PipelineOptions::split_link_m (0: the default).
   double split_link_m = 0.0;
-  /// PipelineOptions::share_connected_contacts ("share_connected_contacts*" turn it on) and
-  /// share_temperature_m (0: the default).
+  /// PipelineOptions::share_connected_contacts ("share_connected_contacts*" turn it on), and
+  /// share_link_m, share_fade_m (< 0: the defaults) and share_temperature_m (0: the default).
   bool share_connected_contacts = false;
+  double share_link_m = -1.0;
+  double share_fade_m = -1.0;
   double share_temperature_m = 0.0;
-  /// PipelineOptions::share_centroid_in_window ("share_connected_contacts_link_only" turns it off).
-  bool share_centroid_in_window = true;
-  /// PipelineOptions::share_link_m (0: the default; "share_connected_contacts_link*mm").
-  double share_link_m = 0.0;
   /// PipelineOptions::depth_refinement.subgrid_rotations ("rotations_from_subgrid" turns it on).
   bool subgrid_rotations = false;
   /// PipelineOptions::depth_refinement.subgrid_translations ("translations_from_subgrid" turns
