@@ -261,6 +261,10 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
       t.share_link_m = mm * 1e-3;
       s.push_back(t);
     }
+    FrontierSetting unshared = refined;
+    unshared.name = "no_shared_contacts";
+    unshared.share_connected_contacts = false;
+    s.push_back(unshared);
     FrontierSetting share_step = share;
     share_step.name = "share_connected_contacts_no_fade";
     share_step.share_fade_m = 0.0;

@@ -156,12 +156,13 @@ int main(int argc, char** argv) {
          "(CPU texture stage; docs/frontier/issue32/seventh_stop)")
       ->check(CLI::Range(0.0, 1000.0))
       ->capture_default_str();
-  app.add_flag("--share-connected-contacts", config.pipeline.share_connected_contacts,
-               "stage 5c, off by default: contacts on one object whose textured overlaps come\n"
-               "within the clustering distance of each other are one contact region and share\n"
-               "one penalty, as the pipeline truth links its patches (a large flat contact that\n"
-               "the coarse clustering left in two windows pushes once, not twice; the overlaps\n"
-               "are rendered again on the CPU; issue 32, tenth stop)");
+  bool no_share_connected_contacts = false;
+  app.add_flag("--no-share-connected-contacts", no_share_connected_contacts,
+               "every contact pushes with its whole penalty: by default contacts on one object\n"
+               "whose textured overlaps come within 10 mm of each other are one contact region\n"
+               "and share one penalty (stage 5c), as the pipeline truth links its patches: a\n"
+               "large flat contact that the coarse clustering left in two windows pushes once,\n"
+               "not twice (docs/frontier/issue32/tenth_stop)");
   double speculative_lead_ms = 50.0;
   app.add_option("--speculative-lead-ms", speculative_lead_ms,
                  "speculative contacts: a separated pair beyond the textures' reach is modelled\n"
@@ -371,6 +372,7 @@ int main(int argc, char** argv) {
           "--translation-kink-planes needs --texel-scale-gradient (the arms are the texel-scale "
           "slopes on either side of the vertex)");
     }
+    config.pipeline.share_connected_contacts = !no_share_connected_contacts;
     config.pipeline.split_windows_at_separated_overlap = split_windows_link_mm > 0.0;
     config.pipeline.split_link_m = split_windows_link_mm * 1e-3;
     config.pipeline.speculative_lead_s = speculative_lead_ms * 1e-3;

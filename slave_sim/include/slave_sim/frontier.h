@@ -94,9 +94,9 @@ struct FrontierSetting {
   bool split_windows_at_separated_overlap = false;
   /// PipelineOptions::split_link_m (0: the default).
   double split_link_m = 0.0;
-  /// PipelineOptions::share_connected_contacts ("share_connected_contacts*" turn it on), and
+  /// PipelineOptions::share_connected_contacts ("no_shared_contacts" turns it off), and
   /// share_link_m, share_fade_m (< 0: the defaults) and share_temperature_m (0: the default).
-  bool share_connected_contacts = false;
+  bool share_connected_contacts = true;
   double share_link_m = -1.0;
   double share_fade_m = -1.0;
   double share_temperature_m = 0.0;
