@@ -279,21 +279,35 @@ TEST(PenetrationDepth, WindowRejectsBadArguments) {
   EXPECT_NEAR(glm::dot(glm::cross(w.axis_u_W, w.axis_v_W), w.normal_W), 1.0, 1e-12);
 }
 
-// Stage 5c's footprints (connected_contacts.h): the overlap of the bumps above as blocks. With
+// Three 40 µm Gaussian bumps (σ = 1 mm) on a flat environment, at (−8, 0), (8, 0) and (8, 5) mm,
+// under a flat tool 20 µm above their base: the scene of the OverlapRegions and OverlapOccupancy
+// tests.
+struct ThreeBumps {
+  HapticModel env, tool;
+  RigidTransform X_WT;
+};
+ThreeBumps MakeThreeBumps() {
+  const auto bump = [](double x, double y, double cx, double cy) {
+    return 40e-6 * std::exp(-((x - cx) * (x - cx) + (y - cy) * (y - cy)) / (2.0 * 1e-6));
+  };
+  return {testing::EnvironmentBox(
+              [&](double x, double y) {
+                return bump(x, y, -8e-3, 0.0) + bump(x, y, 8e-3, 0.0) + bump(x, y, 8e-3, 5e-3);
+              },
+              1024),
+          testing::ToolBox([](double, double) { return 0.0; }, 512),
+          testing::ToolPose(0.0, 0.0, 20e-6)};
+}
+
+// Stage 5c's footprints (connected_contacts.h): the overlap of the three bumps as blocks. With
 // one-cell blocks the occupied count is the regions' cell count (two routes to one number); the
 // gap between two windows' overlaps, one over each side's bumps, is the bumps' 16 mm less their
 // overlaps' radii; the link fades with it.
 TEST(OverlapOccupancy, BlocksHoldTheOverlapAndGiveTheGapBetweenOverlaps) {
-  const auto bump = [](double x, double y, double cx, double cy) {
-    return 40e-6 * std::exp(-((x - cx) * (x - cx) + (y - cy) * (y - cy)) / (2.0 * 1e-6));
-  };
-  const HapticModel env = testing::EnvironmentBox(
-      [&](double x, double y) {
-        return bump(x, y, -8e-3, 0.0) + bump(x, y, 8e-3, 0.0) + bump(x, y, 8e-3, 5e-3);
-      },
-      1024);
-  const HapticModel tool = testing::ToolBox([](double, double) { return 0.0; }, 512);
-  const RigidTransform X_WT = testing::ToolPose(0.0, 0.0, 20e-6);
+  const ThreeBumps scene = MakeThreeBumps();
+  const HapticModel& env = scene.env;
+  const HapticModel& tool = scene.tool;
+  const RigidTransform X_WT = scene.X_WT;
   TexturePenetrationSolver solver(128);
   const ContactWindow whole = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.036, 90);
   std::array<OverlapRegion, 8> regions{};
@@ -480,16 +494,10 @@ namespace {
 // its own top; at 20 mm one region; at 1 mm three. Each region's depth is its bump's b − a at the
 // cells (≤ 20 µm, within the filtered grid's loss of a few µm).
 TEST(OverlapRegions, SeparatedBumpsAreSeparateRegionsAtTheClusteringDistance) {
-  const auto bump = [](double x, double y, double cx, double cy) {
-    return 40e-6 * std::exp(-((x - cx) * (x - cx) + (y - cy) * (y - cy)) / (2.0 * 1e-6));
-  };
-  const HapticModel env = testing::EnvironmentBox(
-      [&](double x, double y) {
-        return bump(x, y, -8e-3, 0.0) + bump(x, y, 8e-3, 0.0) + bump(x, y, 8e-3, 5e-3);
-      },
-      1024);
-  const HapticModel tool = testing::ToolBox([](double, double) { return 0.0; }, 512);
-  const RigidTransform X_WT = testing::ToolPose(0.0, 0.0, 20e-6);
+  const ThreeBumps scene = MakeThreeBumps();
+  const HapticModel& env = scene.env;
+  const HapticModel& tool = scene.tool;
+  const RigidTransform X_WT = scene.X_WT;
   const ContactWindow w = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.036, 90);
   TexturePenetrationSolver solver(128);
   std::array<OverlapRegion, 8> out{};

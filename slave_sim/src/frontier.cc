@@ -250,11 +250,8 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
         s.push_back(linked);
       }
     }
-    // Stage 5c: contacts whose overlaps are one region share one penalty.
-    FrontierSetting share = refined;
-    share.name = "share_connected_contacts";
-    share.share_connected_contacts = true;
-    s.push_back(share);
+    // Stage 5c (on in the default): its link, fade and temperature varied, and off.
+    const FrontierSetting& share = refined;
     for (const int mm : {5, 15}) {
       FrontierSetting t = share;
       t.name = "share_connected_contacts_link" + std::to_string(mm) + "mm";

@@ -25,10 +25,10 @@ namespace ht {
 /// (TexturePenetrationSolver::OverlapOccupancy): `occupancy[bj · blocks_per_side + bi]` is 1 where
 /// a cell of block (bi along u, bj along v; block_cells cells a side) has b − a > 0.
 struct OverlapFootprint {
-  ContactWindow window;
-  int block_cells = 1;
-  int blocks_per_side = 0;
-  std::span<const std::uint8_t> occupancy;
+  ContactWindow window;     ///< The window rendered (centre and axes in W, m).
+  int block_cells = 1;      ///< Cells a block side (≥ 1); a block is block_cells · W/N m a side.
+  int blocks_per_side = 0;  ///< ceil(N / block_cells).
+  std::span<const std::uint8_t> occupancy;  ///< blocks_per_side² entries, 0 or 1.
 };
 
 /// The smallest distance (m, in W) between the centres of an occupied block of `a` and one of
