@@ -328,6 +328,68 @@ TEST(Deadband, AModelHeldBackRendersWithinTheDeadbandOfTheNewOne) {
   }
 }
 
+TEST(Deadband, TheDepthCriterionSendsWhereTheHeldModelsDepthChangesAndNowhereElse) {
+  // A contact on a 45° flank (∂δ/∂y = 1, ∂δ/∂z = −1; nothing along x), 50 µm deep. With the
+  // pose floors wide (0.2 mm at k = 0.1), the depth criterion alone decides: the threshold is
+  // max(k·δ, k·floor) = 5 µm of depth, which the flank reaches at 5 µm of y and never along x.
+  ToolStateDeadbandConfig c;
+  c.weber_fraction = 0.1;
+  c.keepalive_s = 10.0;
+  c.contact_position_floor_scale_m = 2e-3;
+  c.contact_depth_floor_scale_m = 20e-6;
+  ContactModel held;
+  held.num_contacts = 1;
+  held.contacts[0].depth_m = 50e-6;
+  held.contacts[0].gradient.d_translation_W = {0.0, 1.0, -1.0};
+  held.contacts[0].stiffness_n_per_m = 8000.0;
+  held.contacts[0].normal_W = {0.0, -std::numbers::sqrt2 / 2, std::numbers::sqrt2 / 2};
+  const auto decide_after = [&](const glm::dvec3& move, const ContactModel* model,
+                                const ToolStateDeadbandConfig& config) {
+    ToolStateDeadband d(config);
+    RigidTransform X;
+    EXPECT_EQ(d.Decide(X, {}, 0, true, model), DeadbandReason::kFirst);
+    X.translation = move;
+    return d.Decide(X, {}, kMs, true, model);
+  };
+  EXPECT_EQ(decide_after({100e-6, 0.0, 0.0}, &held, c), DeadbandReason::kNotSent);
+  EXPECT_EQ(decide_after({0.0, 4e-6, 0.0}, &held, c), DeadbandReason::kNotSent);
+  // 6 µm along y: the depth at the tool is 56 µm, k·δ = 5.6 µm < 6 µm.
+  EXPECT_EQ(decide_after({0.0, 6e-6, 0.0}, &held, c), DeadbandReason::kDepth);
+  // Up the normal by 6 µm changes the depth by 6·√2 µm; along the flank, nothing.
+  const glm::dvec3 n = held.contacts[0].normal_W;
+  EXPECT_EQ(decide_after(-6e-6 * n, &held, c), DeadbandReason::kDepth);
+  const glm::dvec3 along_flank{0.0, std::numbers::sqrt2 / 2, std::numbers::sqrt2 / 2};
+  EXPECT_EQ(decide_after(50e-6 * along_flank, &held, c), DeadbandReason::kNotSent);
+  // Deeper contacts get a wider threshold (k·δ): at 200 µm, 15 µm of y stays inside.
+  ContactModel deep = held;
+  deep.contacts[0].depth_m = 200e-6;
+  EXPECT_EQ(decide_after({0.0, 15e-6, 0.0}, &deep, c), DeadbandReason::kNotSent);
+  EXPECT_EQ(decide_after({0.0, 25e-6, 0.0}, &deep, c), DeadbandReason::kDepth);
+  // A contact 1 mm apart at both poses is not looked at; no model, or the criterion off, sends
+  // nothing either.
+  ContactModel apart = held;
+  apart.contacts[0].depth_m = -1e-3;
+  EXPECT_EQ(decide_after({0.0, 50e-6, 0.0}, &apart, c), DeadbandReason::kNotSent);
+  EXPECT_EQ(decide_after({0.0, 6e-6, 0.0}, nullptr, c), DeadbandReason::kNotSent);
+  ToolStateDeadbandConfig off = c;
+  off.contact_depth_floor_scale_m = 0.0;
+  EXPECT_EQ(decide_after({0.0, 6e-6, 0.0}, &held, off), DeadbandReason::kNotSent);
+  // In free space (no contact floors held) the criterion does not apply.
+  {
+    ToolStateDeadbandConfig free_space = c;
+    free_space.contact_floor_hold_s = 0.0;
+    ToolStateDeadband d(free_space);
+    RigidTransform X;
+    ASSERT_EQ(d.Decide(X, {}, 0, false, &held), DeadbandReason::kFirst);
+    X.translation.y = 6e-6;
+    EXPECT_EQ(d.Decide(X, {}, kMs, false, &held), DeadbandReason::kNotSent);
+  }
+  ToolStateDeadbandConfig bad = c;
+  bad.contact_depth_floor_scale_m = -1e-6;
+  EXPECT_THROW(bad.Validate(), std::invalid_argument);
+  EXPECT_STREQ(ToString(DeadbandReason::kDepth), "depth");
+}
+
 TEST(Deadband, ConfigsRefuseNonsense) {
   ToolStateDeadbandConfig t;
   t.weber_fraction = 1.5;

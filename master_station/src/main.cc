@@ -267,6 +267,16 @@ int main(int argc, char** argv) {
                  "in free space by default)")
       ->check(CLI::Range(1e-3, 1000.0))
       ->capture_default_str();
+  double contact_depth_floor_um =
+      ht::ToolStateDeadbandConfig{}.contact_depth_floor_scale_m * 1e6;
+  app.add_option("--deadband-contact-depth-floor-um", contact_depth_floor_um,
+                 "near contact, also send a tool state when a contact's depth in the held model "
+                 "differs between the tool's pose and the remote node's prediction by more than "
+                 "the deadband times max(depth, this), um (0 = off): the remote node linearizes "
+                 "at its prediction, so this bounds that point's depth error where the depth "
+                 "changes fast (a ridge's flank) and nowhere else")
+      ->check(CLI::Range(0.0, 10000.0))
+      ->capture_default_str();
   double contact_hold_ms = 500.0;
   app.add_option("--deadband-contact-hold-ms", contact_hold_ms,
                  "the contact floors stay this long after the held model last had contacts, ms "
@@ -327,6 +337,7 @@ int main(int argc, char** argv) {
     config.tool_state_deadband.velocity_criterion = deadband_velocity;
     config.tool_state_deadband.contact_position_floor_scale_m = contact_floor_mm * 1e-3;
     config.tool_state_deadband.contact_floor_hold_s = contact_hold_ms * 1e-3;
+    config.tool_state_deadband.contact_depth_floor_scale_m = contact_depth_floor_um * 1e-6;
     config.tool_state_deadband.contact_rotation_floor_scale_rad = contact_floor_mrad * 1e-3;
     config.model_deadband = model_deadband_pct.value_or(deadband_pct) / 100.0;
     config.model_keepalive_s = deadband_keepalive_ms * 1e-3;

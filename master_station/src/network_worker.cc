@@ -89,7 +89,8 @@ void NetworkWorker::Run(const std::atomic<bool>& stop) {
       have_last = true;
       ++tool_states_offered_;
       if (tool_deadband_.Decide(state.message.X_WT, state.message.V_WT_W, state.time_ns,
-                                state.near_contact) != DeadbandReason::kNotSent) {
+                                state.near_contact,
+                                &held_model_) != DeadbandReason::kNotSent) {
         Send(state);
         last_send_ns = now;
       } else {
@@ -168,6 +169,8 @@ nlohmann::json NetworkWorker::Summary() const {
         {"contact_rotation_floor_scale_mrad",
          config_.tool_state_deadband.contact_rotation_floor_scale_rad * 1e3},
         {"contact_floor_hold_ms", config_.tool_state_deadband.contact_floor_hold_s * 1e3},
+        {"contact_depth_floor_scale_um",
+         config_.tool_state_deadband.contact_depth_floor_scale_m * 1e6},
         {"compact_models", compact_models_},
         {"tool_states_offered", tool_states_offered_},
         {"tool_states_held_back", tool_states_held_back_},
@@ -300,6 +303,7 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
         deadband.weber_fraction = w.deadband.tool_state_deadband;
         deadband.keepalive_s = w.deadband.tool_state_keepalive_ms * 1e-3;
         tool_deadband_.Configure(deadband);
+        held_model_ = {};  // a new session: no model yet
       }
       deadband_agreed_ = w.deadband;
       compact_models_ = (w.codecs & wire::kCodecCompactContactModel) != 0;
@@ -375,6 +379,7 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
       }
       last_remote_ns_ = now;
       last_remote_steps_ = model.message.remote_step_count;
+      held_model_ = model.message.model;
       incoming_.Write(model);
       return;
     }

@@ -112,6 +112,9 @@ class NetworkWorker {
   std::uint32_t session_ = 0;
   /// The tool-state stream's perceptual deadband, as agreed in the Welcome.
   ToolStateDeadband tool_deadband_{{}};
+  /// The newest contact model received: what the operator renders from, for the tool-state
+  /// deadband's depth criterion (ToolStateDeadbandConfig::contact_depth_floor_scale_m).
+  ContactModel held_model_{};
   wire::DeadbandTerms deadband_agreed_;
   bool compact_models_ = false;
   std::uint64_t tool_states_offered_ = 0, tool_states_held_back_ = 0, idle_keepalives_ = 0;

@@ -60,6 +60,8 @@ const char* ToString(DeadbandReason reason) noexcept {
       return "torque";
     case DeadbandReason::kStiffness:
       return "stiffness";
+    case DeadbandReason::kDepth:
+      return "depth";
   }
   return "unknown";
 }
@@ -93,6 +95,10 @@ void ToolStateDeadbandConfig::Validate() const {
   if (!(contact_floor_hold_s >= 0.0 && std::isfinite(contact_floor_hold_s))) {
     throw std::invalid_argument("tool-state deadband contact floor hold must be >= 0 s and finite");
   }
+  if (!(contact_depth_floor_scale_m >= 0.0 && std::isfinite(contact_depth_floor_scale_m))) {
+    throw std::invalid_argument(
+        "tool-state deadband contact depth floor scale must be >= 0 m and finite");
+  }
   CheckPositive(keepalive_s, "tool-state keep-alive");
   CheckPositive(adaptive_speed_ref_m_per_s, "tool-state deadband adaptive speed reference");
 }
@@ -107,8 +113,31 @@ void ContactModelDeadbandConfig::Validate() const {
   CheckPositive(keepalive_s, "contact-model keep-alive");
 }
 
+namespace {
+
+// Whether a contact of `model` has a depth at X_WT and at `predicted` that differ by more than
+// max(k·δ, k·floor) (ToolStateDeadbandConfig::contact_depth_floor_scale_m).
+bool DepthLeftPrediction(const ContactModel& model, const RigidTransform& X_WT,
+                         const RigidTransform& predicted, double k, double floor_m) noexcept {
+  const int n = std::clamp(model.num_contacts, 0, kMaxContacts);
+  if (n == 0) return false;
+  const Twist dq = PoseDifference(X_WT, model.X_WT0);
+  const Twist dq_predicted = PoseDifference(predicted, model.X_WT0);
+  for (int i = 0; i < n; ++i) {
+    const double d = ContactDepthAt(model.contacts[i], dq);
+    const double d_predicted = ContactDepthAt(model.contacts[i], dq_predicted);
+    if (!std::isfinite(d) || !std::isfinite(d_predicted)) continue;
+    if (d < -floor_m && d_predicted < -floor_m) continue;
+    if (std::abs(d - d_predicted) > std::max(k * std::max(d, 0.0), k * floor_m)) return true;
+  }
+  return false;
+}
+
+}  // namespace
+
 DeadbandReason ToolStateDeadband::Decide(const RigidTransform& X_WT, const Twist& V_WT_W,
-                                         std::int64_t t_ns, bool near_contact) noexcept {
+                                         std::int64_t t_ns, bool near_contact,
+                                         const ContactModel* held_model) noexcept {
   const ToolStateDeadbandConfig& c = config_;
   const double k = c.weber_fraction;
   DeadbandReason reason = DeadbandReason::kNotSent;
@@ -141,6 +170,10 @@ DeadbandReason ToolStateDeadband::Decide(const RigidTransform& X_WT, const Twist
     } else if (glm::length(error.angular) >
                std::max(k * glm::length(moved.angular), k * floor_theta * a)) {
       reason = DeadbandReason::kRotation;
+    } else if (near_contact && c.contact_depth_floor_scale_m > 0.0 && held_model != nullptr &&
+               DepthLeftPrediction(*held_model, X_WT, predicted, k,
+                                   c.contact_depth_floor_scale_m)) {
+      reason = DeadbandReason::kDepth;
     } else if (!c.velocity_criterion) {
       // Pose only: the twist is sent with every pose, for the receiver's extrapolation.
     } else if (glm::length(V_WT_W.linear - V_sent_.linear) >

@@ -48,8 +48,9 @@ enum class DeadbandReason : std::uint8_t {
   kForce,            ///< the rendered force changed
   kTorque,           ///< the rendered torque changed
   kStiffness,        ///< the rendered stiffness (translational or rotational block) changed
+  kDepth,            ///< a contact's depth at the tool left its depth at the prediction
 };
-inline constexpr int kDeadbandReasonCount = static_cast<int>(DeadbandReason::kStiffness) + 1;
+inline constexpr int kDeadbandReasonCount = static_cast<int>(DeadbandReason::kDepth) + 1;
 /// Decisions per reason, indexed by DeadbandReason.
 using DeadbandCounts = std::array<std::uint64_t, kDeadbandReasonCount>;
 /// {"reason": count} for the reasons with a non-zero count, for summaries.
@@ -84,6 +85,15 @@ struct ToolStateDeadbandConfig {
   /// tool state went out, and the next model pushed 1.7 N (1 in 17 fig75 loopback runs landed in
   /// 3–4 such bounces; issue 32's third note). Half a second covers a bounce and a lift-off.
   double contact_floor_hold_s = 0.5;
+  /// Depth criterion near contact (issue 32, eleventh stop), 0 = off: with the held contact
+  /// model given to Decide, a tool state is also sent when, for a contact of that model, the
+  /// depth it gives at the tool's pose and at the remote node's prediction differ by more than
+  /// max(k·δ, k·this) (m; δ the contact's depth at the tool, ContactDepthAt with its kink
+  /// planes). The remote node linearizes each model at the pose it predicts, so this bounds the
+  /// depth error of that linearization point where the held model says the depth changes fast
+  /// (a ridge's flank, a rotation about a long lever), and nowhere else. Contacts whose depth is
+  /// below −this at both poses are not looked at.
+  double contact_depth_floor_scale_m = 0.0;
   double keepalive_s = 0.1;  ///< longest time between two tool states sent (s, > 0)
   /// Also send when the twist itself changed beyond the deadband (Weber fraction of the last
   /// twist sent). Off by default: a changed twist already shows as pose error against the
@@ -114,8 +124,11 @@ class ToolStateDeadband {
   /// clock). When it returns anything but kNotSent, the state counts as sent (the caller sends
   /// it). `near_contact`: the operator's held contact model has contacts (the contact floors
   /// apply, and go on applying for contact_floor_hold_s after the last such call).
+  /// `held_model` (optional): the contact model the operator renders from, for the depth
+  /// criterion (contact_depth_floor_scale_m).
   DeadbandReason Decide(const RigidTransform& X_WT, const Twist& V_WT_W, std::int64_t t_ns,
-                        bool near_contact = false) noexcept;
+                        bool near_contact = false,
+                        const ContactModel* held_model = nullptr) noexcept;
   /// Records a state the caller sent without asking (e.g. a keep-alive while the loop is idle),
   /// so that the next decision predicts from it.
   void NoteSent(const RigidTransform& X_WT, const Twist& V_WT_W, std::int64_t t_ns) noexcept;
