@@ -6,6 +6,11 @@
 
 namespace ht {
 
+namespace {
+// Time over which the energy reserve's shortfall is made up (s).
+constexpr double kReserveRefillS = 0.1;
+}  // namespace
+
 double DevicePower(const Wrench& F, const Twist& V) noexcept {
   return glm::dot(F.force, V.linear) + glm::dot(F.torque, V.angular);
 }
@@ -24,16 +29,38 @@ PassivityController::PassivityController(double min_speed, double max_damping_ns
   }
 }
 
+void PassivityController::set_energy_reserve(double reserve_j, double refill_fraction) {
+  if (!(reserve_j >= 0.0) || !std::isfinite(reserve_j) || !(refill_fraction >= 0.0) ||
+      !(refill_fraction < 1.0)) {
+    throw std::invalid_argument(
+        "passivity controller: the energy reserve must be finite and >= 0, the refill fraction "
+        "in [0, 1)");
+  }
+  reserve_j_ = reserve_j;
+  refill_fraction_ = refill_fraction;
+}
+
 Wrench PassivityController::Apply(const Wrench& F, const Twist& V, double h) noexcept {
   const double predicted = energy_j_ - DevicePower(F, V) * h;
-  if (predicted >= 0.0) return F;
+  const bool refill = predicted >= 0.0;  // passive this tick; only the reserve is short
+  if (refill && (predicted >= reserve_j_ || refill_fraction_ <= 0.0)) return F;
   // Weighted twist: rotation counts as motion of a point angular_weight_m from the axis.
   const double L2 = angular_weight_m_ * angular_weight_m_;
   const double speed2 = glm::dot(V.linear, V.linear) + L2 * glm::dot(V.angular, V.angular);
   if (speed2 <= min_speed_ * min_speed_ || !(h > 0.0)) return F;
-  // F' = F − α (v, L² ω): F'·V = F·V − α·speed2, and E_k = predicted + α·speed2·h = 0.
-  double alpha = -predicted / (speed2 * h);
+  // F' = F − α (v, L² ω): F'·V = F·V − α·speed2, and E_k = predicted + α·speed2·h = 0. Refilling,
+  // the shortfall is made up over kReserveRefillS rather than one tick (α grows from zero as E
+  // falls below the reserve: no step in the force), with α·|Ṽ| ≤ refill_fraction·|F̃| in the same
+  // weighting.
+  double alpha = refill ? (reserve_j_ - predicted) / (speed2 * kReserveRefillS)
+                        : -predicted / (speed2 * h);
   if (max_damping_ > 0.0 && alpha > max_damping_) alpha = max_damping_;
+  if (refill) {
+    const double wrench_norm =
+        std::sqrt(glm::dot(F.force, F.force) + glm::dot(F.torque, F.torque) / L2);
+    alpha = std::min(alpha, refill_fraction_ * wrench_norm / std::sqrt(speed2));
+    if (!(alpha > 0.0)) return F;
+  }
   Wrench out = F;
   out.force -= alpha * V.linear;
   out.torque -= alpha * L2 * V.angular;

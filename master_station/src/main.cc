@@ -221,6 +221,19 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_flag("--no-passivity", no_passivity,
                "turn off the time-domain passivity controller (for comparison only)");
+  double passivity_reserve_mj = ht::StationConfig{}.passivity_reserve_j * 1e3;
+  app.add_option("--passivity-reserve-mj", passivity_reserve_mj,
+                 "energy the passivity controller keeps in store, mJ (0 = none): while the "
+                 "observed energy is below it, a damping of at most --passivity-refill-pct of "
+                 "the wrench refills it, so that a hand too slow for the damping to act draws on "
+                 "the store instead of a cut of the force")
+      ->check(CLI::Range(0.0, 1000.0))
+      ->capture_default_str();
+  double passivity_refill_pct = ht::StationConfig{}.passivity_refill_fraction * 100.0;
+  app.add_option("--passivity-refill-pct", passivity_refill_pct,
+                 "the most the reserve's refill may change the wrench, percent of it")
+      ->check(CLI::Range(0.0, 99.0))
+      ->capture_default_str();
   app.add_option("--model-timeout", model_timeout_s,
                  "fade the force to zero when the contact model is older than this, s")
       ->check(CLI::Range(0.01, 60.0))
@@ -329,6 +342,8 @@ int main(int argc, char** argv) {
     config.passivity = !no_passivity;
     config.max_contact_force_n = max_contact_force_n;
     config.hunt_crossley_s_per_m = hunt_crossley;
+    config.passivity_reserve_j = passivity_reserve_mj * 1e-3;
+    config.passivity_refill_fraction = passivity_refill_pct / 100.0;
     config.safety.model_timeout_s = model_timeout_s;
     config.tool_state_deadband.weber_fraction =
         tool_state_deadband_pct.value_or(deadband_pct) / 100.0;

@@ -107,6 +107,14 @@ void StationConfig::Validate() const {
     throw std::invalid_argument("model blend ticks must be within 1..100");
   }
   if (reconnect_period_ms < 10) throw std::invalid_argument("reconnect period must be >= 10 ms");
+  if (!(passivity_reserve_j >= 0.0 && passivity_reserve_j <= 1.0)) {
+    throw std::invalid_argument("passivity reserve must be within 0..1 J, got " +
+                                std::to_string(passivity_reserve_j));
+  }
+  if (!(passivity_refill_fraction >= 0.0 && passivity_refill_fraction < 1.0)) {
+    throw std::invalid_argument("passivity refill fraction must be within [0, 1), got " +
+                                std::to_string(passivity_refill_fraction));
+  }
   if (max_grid < 0 || max_grid > 65535) throw std::invalid_argument("max grid must be 0..65535");
   coupling.Validate();
   safety.Validate();
@@ -347,6 +355,8 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   // ticks, well inside what a 1 kHz device renders); energy it cannot dissipate in one tick stays
   // in the observer (E < 0) and is dissipated on the next ones.
   tick_config.passivity_max_damping_ns_per_m = 4.0 * caps.max_damping_ns_per_m;
+  tick_config.passivity_reserve_j = config.passivity_reserve_j;
+  tick_config.passivity_refill_fraction = config.passivity_refill_fraction;
   tick_config.h_s = h;
   tick_config.max_contact_force_n = config.max_contact_force_n > 0.0
                                         ? config.max_contact_force_n
@@ -589,7 +599,9 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
                     {"scaled_ticks", passivity.scaled_ticks()},
                     {"force_scaled_away_Ns", passivity.force_scaled_away_ns()},
                     {"force_damped_away_Ns", passivity.force_damped_away_ns()},
-                    {"scaled_away_J", passivity.scaled_away_j()}};
+                    {"scaled_away_J", passivity.scaled_away_j()},
+                    {"reserve_J", config.passivity_reserve_j},
+                    {"refill_fraction", config.passivity_refill_fraction}};
   {
     // Issue 33: where the loop's energy comes from. Within one contact model the loop is
     // conservative; the switches (a new model, each blend step, a model dropped mid-blend)

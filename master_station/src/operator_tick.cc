@@ -22,6 +22,7 @@ OperatorTick::OperatorTick(const OperatorTickConfig& config, const RigidTransfor
                                 std::to_string(config.model_blend_ticks));
   }
   if (!(config.h_s > 0.0)) throw std::invalid_argument("tick length must be positive");
+  passivity_.set_energy_reserve(config.passivity_reserve_j, config.passivity_refill_fraction);
   simulator_.set_max_contact_force(config.max_contact_force_n);
   simulator_.set_contact_damping_hunt_crossley(config.hunt_crossley_s_per_m);
 }

@@ -28,6 +28,19 @@ class PassivityController {
   PassivityController(double min_speed = 1e-4, double max_damping_ns_per_m = 0.0,
                       double angular_weight_m = 0.05);
 
+  /// An energy reserve (off by default): while the observed energy would fall below
+  /// `reserve_j` (J, ≥ 0) but stay ≥ 0, Apply adds damping that makes up the shortfall over
+  /// 0.1 s (so that it grows from zero as E falls below the reserve), changing the wrench by at
+  /// most `refill_fraction` of itself (weighted as the twist; in [0, 1))
+  /// and never above max_damping: no drag in free space, and below a force's just-noticeable
+  /// difference in contact. A later tick whose hand moves too slowly for the damping to act (a
+  /// turn's reversal, where taking a small power away over a speed near zero is a large cut of
+  /// the force) then draws on the store instead of the guard. E ≥ 0 is kept exactly as without
+  /// it: below zero the capped damping and the guard act as before. Throws
+  /// std::invalid_argument for values out of range or not finite.
+  void set_energy_reserve(double reserve_j, double refill_fraction);
+  double energy_reserve_j() const noexcept { return reserve_j_; }
+
   /// Given the wrench about to be commanded and the hand's twist over the tick of length `h_s`,
   /// returns the wrench with passivity damping added when the step would make E negative:
   /// F' = F − α·Ṽ with α ≥ 0 chosen so that E_k = 0 exactly (Ṽ weights rotation by
@@ -72,6 +85,7 @@ class PassivityController {
 
  private:
   double min_speed_, max_damping_, angular_weight_m_;
+  double reserve_j_ = 0.0, refill_fraction_ = 0.0;
   double energy_j_ = 0.0, energy_in_j_ = 0.0, energy_out_j_ = 0.0, dissipated_j_ = 0.0;
   double max_alpha_ = 0.0;
   double force_scaled_away_ns_ = 0.0, force_damped_away_ns_ = 0.0, scaled_away_j_ = 0.0;

@@ -34,6 +34,10 @@ struct OperatorTickConfig {
   bool passivity = true;
   /// Cap on the damping the passivity controller adds (N·s/m; 0 = none).
   double passivity_max_damping_ns_per_m = 0.0;
+  /// The passivity controller's energy reserve (J; 0 = none) and the most its refill may change
+  /// the wrench, a fraction of it (PassivityController::set_energy_reserve).
+  double passivity_reserve_j = 0.0;
+  double passivity_refill_fraction = 0.0;
   /// Tick length h (s).
   double h_s = 1e-3;
   /// Bound on each contact's force on the simulated tool (N; +∞ = none): DESIGN.md §5's bounded
