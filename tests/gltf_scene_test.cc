@@ -1098,6 +1098,20 @@ TEST_F(GltfSceneMadeFiles, BufferShorterThanItsAccessorIsRefused) {
   ExpectLoadError(Write(doc));
 }
 
+TEST_F(GltfSceneMadeFiles, ImageInAViewPastItsBufferIsRefusedNotReadPastTheEnd) {
+  // tinygltf hands an image in a buffer view to the image callback without checking the view
+  // against its buffer (the scene loader's fuzz target found a read 16 kB past a buffer's end).
+  nlohmann::json doc = Doc(Zigzag(), {}, 4);
+  const std::size_t view = doc["bufferViews"].size();
+  doc["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", 60}, {"byteLength", 16302}});
+  doc["images"] = nlohmann::json::array({{{"bufferView", view}, {"mimeType", "image/png"}}});
+  EXPECT_NE(ExpectLoadError(Write(doc)).find("runs past its buffer of 72 bytes"),
+            std::string::npos);
+  // Inside the buffer the bytes are kept as they are.
+  doc["bufferViews"][view]["byteLength"] = 12;
+  EXPECT_NO_THROW(LoadGltfScene(Write(doc).string()));
+}
+
 TEST_F(GltfSceneMadeFiles, AttributesOfDifferentLengthsAreRefused) {
   nlohmann::json doc = Doc(Zigzag(), {}, 4);
   doc["accessors"].push_back(doc["accessors"][0]);

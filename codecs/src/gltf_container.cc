@@ -17,6 +17,7 @@
 // gltf_internal.h is included first: it includes tiny_gltf.h, whose implementation must see only
 // its own configuration.
 
+#include <algorithm>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
@@ -104,8 +105,36 @@ GlbLayout ParseGlbLayout(const std::vector<unsigned char>& bytes) {
 }
 
 // Keeps an image's bytes as the file has them (PNG, JPEG): the display streams them undecoded.
-bool KeepImageBytes(tinygltf::Image* image, const int, std::string*, std::string*, int, int,
-                    const unsigned char* bytes, int size, void*) {
+// `user_data` is the model being loaded. tinygltf hands an image stored in a buffer view over as
+// &buffer.data[byteOffset] and byteLength without checking them against the buffer's size (a
+// fuzzed file read past it), so such an image is refused here unless its view lies inside its
+// buffer; the buffers and views are parsed before the images.
+bool KeepImageBytes(tinygltf::Image* image, const int index, std::string* err, std::string*, int,
+                    int, const unsigned char* bytes, int size, void* user_data) {
+  const auto* model = static_cast<const tinygltf::Model*>(user_data);
+  if (model != nullptr && image->bufferView >= 0) {
+    const auto view_index = static_cast<std::size_t>(image->bufferView);
+    const bool view_ok = view_index < model->bufferViews.size();
+    const tinygltf::BufferView* view = view_ok ? &model->bufferViews[view_index] : nullptr;
+    const bool buffer_ok = view != nullptr && view->buffer >= 0 &&
+                           static_cast<std::size_t>(view->buffer) < model->buffers.size();
+    const std::size_t buffer_size =
+        buffer_ok ? model->buffers[static_cast<std::size_t>(view->buffer)].data.size() : 0;
+    if (!buffer_ok || view->byteOffset > buffer_size ||
+        view->byteLength > buffer_size - view->byteOffset ||
+        view->byteLength != static_cast<std::size_t>(std::max(size, 0))) {
+      if (err != nullptr) {
+        *err += "image[" + std::to_string(index) + "] bufferView " +
+                std::to_string(image->bufferView) +
+                (buffer_ok ? " (bytes " + std::to_string(view->byteOffset) + " + " +
+                                 std::to_string(view->byteLength) + ") runs past its buffer of " +
+                                 std::to_string(buffer_size) + " bytes"
+                           : " names no buffer") +
+                "\n";
+      }
+      return false;
+    }
+  }
   if (bytes != nullptr && size > 0) image->image.assign(bytes, bytes + size);
   image->as_is = true;
   return true;
@@ -185,8 +214,8 @@ tinygltf::Model ParseWithTinyGltf(const std::string& path,
   }
 
   tinygltf::TinyGLTF loader;
-  loader.SetImageLoader(&KeepImageBytes, nullptr);
   tinygltf::Model model;
+  loader.SetImageLoader(&KeepImageBytes, &model);
   std::string err;
   std::string warn;
   const std::string base_dir = std::filesystem::path(path).parent_path().string();
