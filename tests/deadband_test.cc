@@ -355,7 +355,8 @@ TEST(Deadband, TheDepthCriterionSendsWhereTheHeldModelsDepthChangesAndNowhereEls
   EXPECT_EQ(decide_after({0.0, 4e-6, 0.0}, &held, c), DeadbandReason::kNotSent);
   // 6 µm along y: the depth at the tool is 56 µm, k·δ = 5.6 µm < 6 µm.
   EXPECT_EQ(decide_after({0.0, 6e-6, 0.0}, &held, c), DeadbandReason::kDepth);
-  // Up the normal by 6 µm changes the depth by 6·√2 µm; along the flank, nothing.
+  // Into the flank (against its normal) by 6 µm changes the depth by 6·√2 µm; along the flank,
+  // nothing.
   const glm::dvec3 n = held.contacts[0].normal_W;
   EXPECT_EQ(decide_after(-6e-6 * n, &held, c), DeadbandReason::kDepth);
   const glm::dvec3 along_flank{0.0, std::numbers::sqrt2 / 2, std::numbers::sqrt2 / 2};
@@ -365,6 +366,32 @@ TEST(Deadband, TheDepthCriterionSendsWhereTheHeldModelsDepthChangesAndNowhereEls
   deep.contacts[0].depth_m = 200e-6;
   EXPECT_EQ(decide_after({0.0, 15e-6, 0.0}, &deep, c), DeadbandReason::kNotSent);
   EXPECT_EQ(decide_after({0.0, 25e-6, 0.0}, &deep, c), DeadbandReason::kDepth);
+  // The depth is compared with the remote node's prediction, not with the last pose sent: a tool
+  // sliding up the flank at the twist it sent stays; one that stops leaves the prediction.
+  {
+    const Twist V_up_flank{{0.0, 1e-3, 0.0}, {}};  // 1 mm/s along y: 1 µm of depth a ms
+    ToolStateDeadband d(c);
+    RigidTransform X;
+    ASSERT_EQ(d.Decide(X, V_up_flank, 0, true, &held), DeadbandReason::kFirst);
+    X.translation.y = 10e-6;  // 10 ms later, where the prediction is
+    EXPECT_EQ(d.Decide(X, V_up_flank, 10 * kMs, true, &held), DeadbandReason::kNotSent);
+    EXPECT_EQ(d.Decide(X, {}, 20 * kMs, true, &held), DeadbandReason::kDepth);  // stopped
+  }
+  // A rotation counts through the contact's rotation gradient: 1 m/rad of lever, 6 µrad.
+  {
+    ContactModel lever = held;
+    lever.contacts[0].gradient.d_translation_W = {0.0, 0.0, -1.0};
+    lever.contacts[0].gradient.d_rotation_W = {1.0, 0.0, 0.0};
+    ToolStateDeadbandConfig wide = c;
+    wide.contact_rotation_floor_scale_rad = 1.0;  // the rotation floor out of the way
+    ToolStateDeadband d(wide);
+    RigidTransform X;
+    ASSERT_EQ(d.Decide(X, {}, 0, true, &lever), DeadbandReason::kFirst);
+    X.rotation = QuaternionFromRotationVector({4e-6, 0.0, 0.0});
+    EXPECT_EQ(d.Decide(X, {}, kMs, true, &lever), DeadbandReason::kNotSent);
+    X.rotation = QuaternionFromRotationVector({6e-6, 0.0, 0.0});
+    EXPECT_EQ(d.Decide(X, {}, 2 * kMs, true, &lever), DeadbandReason::kDepth);
+  }
   // A contact 1 mm apart at both poses is not looked at; no model, or the criterion off, sends
   // nothing either.
   ContactModel apart = held;

@@ -245,18 +245,19 @@ TEST(Passivity, TheGuardCutsOnlyTheWrenchAlongTheHandsMotion) {
   }
 }
 
-/// A hand resting on a contact that pushes it with 0.85 N, swaying 0.1 mm up and down at 1.5 Hz
-/// (at most 0.94 mm/s), where the force follows the hand's depth 5 ms late at 1,000 N/m: each
-/// cycle gives back about 1.5 µJ more than it took, as fig76's model switches do on its turns.
-/// The store the sway fills on the way down empties on the way up, and its last microjoules run
-/// out where the hand turns, slowest. Returns the largest one-tick drop of the delivered force
-/// and the controller's figures.
+/// What RunSlowSway measured.
 struct SwayRun {
   double largest_drop_n = 0.0, min_energy = 0.0, energy_in = 0.0, energy_out = 0.0;
   double largest_refill_change = 0.0;  ///< largest |F − F'| / |F| on ticks that stayed passive
   std::int64_t scaled_ticks = 0;
 };
 
+/// A hand resting on a contact that pushes it with 0.85 N, swaying 0.1 mm up and down at 1.5 Hz
+/// (at most 0.94 mm/s), where the force follows the hand's depth 5 ms late at 1,000 N/m: each
+/// cycle gives back about 1.5 µJ more than it took, as fig76's model switches do on its turns.
+/// The store the sway fills on the way down empties on the way up, and its last microjoules run
+/// out where the hand turns, slowest. Returns the largest one-tick drop of the delivered force
+/// and the controller's figures, with a reserve of `reserve_j` refilled by at most 5 %.
 SwayRun RunSlowSway(double reserve_j) {
   PassivityController pc(1e-4, 160.0, 0.05);
   pc.set_energy_reserve(reserve_j, 0.05);
@@ -330,6 +331,18 @@ TEST(Passivity, AnEnergyReserveRefilledGentlyKeepsASlowHandFromTheGuardsCut) {
   const Twist rise{{0.1, 0.0, 0.0}, {}};
   const Wrench g = near_full.Apply(Wrench{{1e-2, 0.0, 0.0}, {}}, rise, kH);  // 1 µJ out
   EXPECT_NEAR(g.force.x, 1e-2 - 1e-3 * 0.1, 1e-12);
+  EXPECT_EQ(refill.refill_ticks(), 1);
+  EXPECT_EQ(refill.active_ticks(), 0);  // the refill is counted apart
+  EXPECT_NEAR(refill.force_refilled_ns(), 0.5 * 0.1 * kH, 1e-15);
+  // At or above the reserve nothing changes.
+  PassivityController full(1e-4, 160.0, 0.05);
+  full.set_energy_reserve(1e-3, 0.05);
+  full.Commit(Wrench{{1.0, 0, 0}, {}}, Twist{{-2e-3, 0, 0}, {}}, 1.0);  // +2 mJ stored
+  const Wrench F_full{{0.3, 0.2, 0.9}, {0.01, 0.0, 0.0}};
+  const Wrench kept = full.Apply(F_full, Twist{{0.0, 0.0, 1e-3}, {}}, kH);
+  EXPECT_EQ(kept.force, F_full.force);
+  EXPECT_EQ(kept.torque, F_full.torque);
+  EXPECT_EQ(full.refill_ticks(), 0);
   EXPECT_THROW(refill.set_energy_reserve(-1.0, 0.05), std::invalid_argument);
   EXPECT_THROW(refill.set_energy_reserve(1e-3, 1.0), std::invalid_argument);
 }

@@ -6,7 +6,9 @@ Usage: dropouts.py RUN_DIR [RUN_DIR ...] [--phase NAME]
 Per run, over the trace's ticks (of one phase if given): the device force's one-tick changes
 above 0.2 N, the single-tick dropouts (|F| below 30 % of both neighbours, which exceed 0.15 N),
 the contact force's one-tick changes above 0.2 N, and summary.json's passivity figures
-(scaled_ticks, force_scaled_away_Ns, dissipated_J, active_ticks) with the device force's impulse.
+(scaled_ticks, force_scaled_away_Ns, dissipated_J, active_ticks) with the device force's impulse,
+and the energy reserve's refill (force_refilled_Ns, refill_ticks; counted apart since issue 32's
+eleventh stop, in the damping's figures before).
 """
 import csv
 import json
@@ -40,7 +42,10 @@ def main(argv):
               f"({100 * s.get('force_scaled_away_Ns', 0) / max(impulse, 1e-12):.1f} %), "
               f"damped away {s.get('force_damped_away_Ns', float('nan')):.4f} N·s "
               f"({100 * s.get('force_damped_away_Ns', float('nan')) / max(impulse, 1e-12):.1f} %), "
-              f"dissipated {s.get('dissipated_J', 0) * 1e3:.3f} mJ")
+              f"dissipated {s.get('dissipated_J', 0) * 1e3:.3f} mJ; reserve refill "
+              f"{s.get('force_refilled_Ns', 0):.4f} N·s "
+              f"({100 * s.get('force_refilled_Ns', 0) / max(impulse, 1e-12):.1f} %) on "
+              f"{s.get('refill_ticks', 0)} ticks")
 
 
 if __name__ == "__main__":

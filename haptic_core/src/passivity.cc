@@ -48,22 +48,31 @@ Wrench PassivityController::Apply(const Wrench& F, const Twist& V, double h) noe
   const double L2 = angular_weight_m_ * angular_weight_m_;
   const double speed2 = glm::dot(V.linear, V.linear) + L2 * glm::dot(V.angular, V.angular);
   if (speed2 <= min_speed_ * min_speed_ || !(h > 0.0)) return F;
-  // F' = F − α (v, L² ω): F'·V = F·V − α·speed2, and E_k = predicted + α·speed2·h = 0. Refilling,
-  // the shortfall is made up over kReserveRefillS rather than one tick (α grows from zero as E
-  // falls below the reserve: no step in the force), with α·|Ṽ| ≤ refill_fraction·|F̃| in the same
-  // weighting.
-  double alpha = refill ? (reserve_j_ - predicted) / (speed2 * kReserveRefillS)
-                        : -predicted / (speed2 * h);
-  if (max_damping_ > 0.0 && alpha > max_damping_) alpha = max_damping_;
-  if (refill) {
+  // The reserve's refill: the shortfall made up over kReserveRefillS rather than one tick (α
+  // grows from zero as E falls below the reserve: no step in the force), with α·|Ṽ| ≤
+  // refill_fraction·|F̃| in the same weighting (zero for a zero wrench).
+  double alpha_refill = 0.0;
+  if (reserve_j_ > 0.0 && refill_fraction_ > 0.0) {
     const double wrench_norm =
         std::sqrt(glm::dot(F.force, F.force) + glm::dot(F.torque, F.torque) / L2);
-    alpha = std::min(alpha, refill_fraction_ * wrench_norm / std::sqrt(speed2));
-    if (!(alpha > 0.0)) return F;
+    alpha_refill = std::min((reserve_j_ - predicted) / (speed2 * kReserveRefillS),
+                            refill_fraction_ * wrench_norm / std::sqrt(speed2));
   }
+  // F' = F − α (v, L² ω): F'·V = F·V − α·speed2. Below zero, α makes E_k = predicted +
+  // α·speed2·h = 0, and no less than the refill's (so that the damping does not drop where E
+  // crosses zero).
+  double alpha = refill ? alpha_refill : std::max(-predicted / (speed2 * h), alpha_refill);
+  if (max_damping_ > 0.0 && alpha > max_damping_) alpha = max_damping_;
+  if (!(alpha > 0.0)) return F;
   Wrench out = F;
   out.force -= alpha * V.linear;
   out.torque -= alpha * L2 * V.angular;
+  if (refill) {
+    ++refill_ticks_;
+    refilled_j_ += alpha * speed2 * h;
+    force_refilled_ns_ += alpha * glm::length(V.linear) * h;
+    return out;  // E stays ≥ 0: F'·V ≤ F·V
+  }
   ++active_ticks_;
   dissipated_j_ += alpha * speed2 * h;
   force_damped_away_ns_ += alpha * glm::length(V.linear) * h;
@@ -122,7 +131,8 @@ void PassivityController::Commit(const Wrench& F, const Twist& V, double h) noex
 void PassivityController::Reset() noexcept {
   energy_j_ = energy_in_j_ = energy_out_j_ = dissipated_j_ = max_alpha_ = 0.0;
   force_scaled_away_ns_ = force_damped_away_ns_ = scaled_away_j_ = 0.0;
-  active_ticks_ = scaled_ticks_ = 0;
+  refilled_j_ = force_refilled_ns_ = 0.0;
+  active_ticks_ = scaled_ticks_ = refill_ticks_ = 0;
 }
 
 }  // namespace ht

@@ -112,8 +112,9 @@ class NetworkWorker {
   std::uint32_t session_ = 0;
   /// The tool-state stream's perceptual deadband, as agreed in the Welcome.
   ToolStateDeadband tool_deadband_{{}};
-  /// The newest contact model received: what the operator renders from, for the tool-state
-  /// deadband's depth criterion (ToolStateDeadbandConfig::contact_depth_floor_scale_m).
+  /// The newest contact model received (the loop renders from it or blends towards it), for the
+  /// tool-state deadband's depth criterion (ToolStateDeadbandConfig::contact_depth_floor_scale_m).
+  /// Written and read on the network thread only.
   ContactModel held_model_{};
   wire::DeadbandTerms deadband_agreed_;
   bool compact_models_ = false;

@@ -601,7 +601,10 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
                     {"force_damped_away_Ns", passivity.force_damped_away_ns()},
                     {"scaled_away_J", passivity.scaled_away_j()},
                     {"reserve_J", config.passivity_reserve_j},
-                    {"refill_fraction", config.passivity_refill_fraction}};
+                    {"refill_fraction", config.passivity_refill_fraction},
+                    {"refill_ticks", passivity.refill_ticks()},
+                    {"refilled_J", passivity.refilled_j()},
+                    {"force_refilled_Ns", passivity.force_refilled_ns()}};
   {
     // Issue 33: where the loop's energy comes from. Within one contact model the loop is
     // conservative; the switches (a new model, each blend step, a model dropped mid-blend)

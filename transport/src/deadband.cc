@@ -115,14 +115,14 @@ void ContactModelDeadbandConfig::Validate() const {
 
 namespace {
 
-// Whether a contact of `model` has a depth at X_WT and at `predicted` that differ by more than
-// max(k·δ, k·floor) (ToolStateDeadbandConfig::contact_depth_floor_scale_m).
+// Whether a contact of `model` has a depth at X_WT and at X_WT_predicted that differ by more than
+// max(k·δ, k·floor) (ToolStateDeadbandConfig::contact_depth_floor_scale_m; m).
 bool DepthLeftPrediction(const ContactModel& model, const RigidTransform& X_WT,
-                         const RigidTransform& predicted, double k, double floor_m) noexcept {
+                         const RigidTransform& X_WT_predicted, double k, double floor_m) noexcept {
   const int n = std::clamp(model.num_contacts, 0, kMaxContacts);
   if (n == 0) return false;
   const Twist dq = PoseDifference(X_WT, model.X_WT0);
-  const Twist dq_predicted = PoseDifference(predicted, model.X_WT0);
+  const Twist dq_predicted = PoseDifference(X_WT_predicted, model.X_WT0);
   for (int i = 0; i < n; ++i) {
     const double d = ContactDepthAt(model.contacts[i], dq);
     const double d_predicted = ContactDepthAt(model.contacts[i], dq_predicted);
@@ -162,8 +162,8 @@ DeadbandReason ToolStateDeadband::Decide(const RigidTransform& X_WT, const Twist
         near_contact ? c.contact_position_floor_scale_m : c.position_floor_scale_m;
     const double floor_theta =
         near_contact ? c.contact_rotation_floor_scale_rad : c.rotation_floor_scale_rad;
-    const RigidTransform predicted = ExtrapolatePose(X_sent_, V_sent_, dt);
-    const Twist error = PoseDifference(X_WT, predicted);
+    const RigidTransform X_WT_predicted = ExtrapolatePose(X_sent_, V_sent_, dt);
+    const Twist error = PoseDifference(X_WT, X_WT_predicted);
     const Twist moved = PoseDifference(X_WT, X_sent_);
     if (glm::length(error.linear) > std::max(k * glm::length(moved.linear), k * floor_p * a)) {
       reason = DeadbandReason::kPosition;
@@ -171,7 +171,7 @@ DeadbandReason ToolStateDeadband::Decide(const RigidTransform& X_WT, const Twist
                std::max(k * glm::length(moved.angular), k * floor_theta * a)) {
       reason = DeadbandReason::kRotation;
     } else if (near_contact && c.contact_depth_floor_scale_m > 0.0 && held_model != nullptr &&
-               DepthLeftPrediction(*held_model, X_WT, predicted, k,
+               DepthLeftPrediction(*held_model, X_WT, X_WT_predicted, k,
                                    c.contact_depth_floor_scale_m)) {
       reason = DeadbandReason::kDepth;
     } else if (!c.velocity_criterion) {

@@ -4,7 +4,9 @@
 // 2004; Hannaford & Ryu, "Time-domain passivity control of haptic interfaces", IEEE TRA 18(1),
 // 2002). The observer integrates the energy the operator puts into the rest of the system (the
 // device, the virtual coupling, the tool and the network-delayed contact model); the controller
-// adds exactly the damping needed to keep that energy non-negative, and nothing otherwise.
+// adds the damping needed to keep that energy non-negative, and otherwise nothing, unless an
+// energy reserve is set (set_energy_reserve): then a gentle damping also refills the store while
+// the energy is below the reserve.
 
 #include <cstdint>
 
@@ -32,21 +34,32 @@ class PassivityController {
   /// `reserve_j` (J, ≥ 0) but stay ≥ 0, Apply adds damping that makes up the shortfall over
   /// 0.1 s (so that it grows from zero as E falls below the reserve), changing the wrench by at
   /// most `refill_fraction` of itself (weighted as the twist; in [0, 1))
-  /// and never above max_damping: no drag in free space, and below a force's just-noticeable
-  /// difference in contact. A later tick whose hand moves too slowly for the damping to act (a
+  /// and never above max_damping: nothing where the wrench is zero, at most that fraction of the
+  /// small coupling force in free space, and below a force's just-noticeable difference in
+  /// contact. A later tick whose hand moves too slowly for the damping to act (a
   /// turn's reversal, where taking a small power away over a speed near zero is a large cut of
   /// the force) then draws on the store instead of the guard. E ≥ 0 is kept exactly as without
   /// it: below zero the capped damping and the guard act as before. Throws
   /// std::invalid_argument for values out of range or not finite.
   void set_energy_reserve(double reserve_j, double refill_fraction);
+  /// The reserve (J) and the refill's largest change of the wrench, a fraction of it.
   double energy_reserve_j() const noexcept { return reserve_j_; }
+  double refill_fraction() const noexcept { return refill_fraction_; }
+  /// Ticks where only the reserve's refill damped, the energy it dissipated (J) and the force it
+  /// took, Σ α·|v|·h (N·s). Not in active_ticks, dissipated_j or force_damped_away_ns, which
+  /// count the damping that kept E ≥ 0.
+  std::int64_t refill_ticks() const noexcept { return refill_ticks_; }
+  double refilled_j() const noexcept { return refilled_j_; }
+  double force_refilled_ns() const noexcept { return force_refilled_ns_; }
 
   /// Given the wrench about to be commanded and the hand's twist over the tick of length `h_s`,
   /// returns the wrench with passivity damping added when the step would make E negative:
   /// F' = F − α·Ṽ with α ≥ 0 chosen so that E_k = 0 exactly (Ṽ weights rotation by
-  /// angular_weight_m). When α is capped (max_damping) and that is not enough, Guard() takes the
-  /// rest along the same twist, so that E_k never goes negative. Does not update E
-  /// (call Commit with what was really sent).
+  /// angular_weight_m), and with a reserve set no less than the refill's α. When α is capped
+  /// (max_damping) and that is not enough, Guard() takes the rest along the same twist, so that
+  /// E_k never goes negative. With a reserve set, while E_k would stay ≥ 0 but fall below it,
+  /// the refill's damping alone (set_energy_reserve; counted apart: refill_ticks). Does not
+  /// update E (call Commit with what was really sent).
   Wrench Apply(const Wrench& F_device_W, const Twist& V_hand_W, double h_s) noexcept;
   /// The last word before the device: when commanding F over the tick would make E negative
   /// (F·V > 0 and E − F·V·h < 0), returns F with its power brought down to max(E, 0)/h by
@@ -86,6 +99,8 @@ class PassivityController {
  private:
   double min_speed_, max_damping_, angular_weight_m_;
   double reserve_j_ = 0.0, refill_fraction_ = 0.0;
+  double refilled_j_ = 0.0, force_refilled_ns_ = 0.0;
+  std::int64_t refill_ticks_ = 0;
   double energy_j_ = 0.0, energy_in_j_ = 0.0, energy_out_j_ = 0.0, dissipated_j_ = 0.0;
   double max_alpha_ = 0.0;
   double force_scaled_away_ns_ = 0.0, force_damped_away_ns_ = 0.0, scaled_away_j_ = 0.0;

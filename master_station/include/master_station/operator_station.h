@@ -104,15 +104,16 @@ struct StationConfig {
   /// fig75 slide it cuts the contact force's one-tick steps above 0.2 N from 76–88 to 28–37, the
   /// device's above 0.1 N from 15–17 to 3–5, and leaves the force felt on the recorded human
   /// motion within the run-to-run spread (docs/frontier/issue32/ninth_stop).
-  /// The passivity controller's energy reserve (J; 0 = none) and the largest change of the
-  /// wrench its refill may make, a fraction of the wrench (PassivityController::
-  /// set_energy_reserve): the store a slow hand draws on instead of the guard's cut. With
-  /// 0.1 mJ and 5 %, fig76's turns lost their one-tick force dips (device steps above 0.2 N
-  /// 16–31 → 0 in 12 s, the guard's ticks 455–578 → 0) at the same damping (0.1 % of the
+  double hunt_crossley_s_per_m = 20.0;
+  /// The passivity controller's energy reserve (J, in [0, 1]; 0 = none): the store a slow hand
+  /// draws on instead of the guard's cut (PassivityController::set_energy_reserve). With 0.1 mJ,
+  /// fig76's turns lost their one-tick force dips (device steps above 0.2 N 2–31 in 12 s over
+  /// seven runs → 0 in four, the guard's ticks 262–578 → 0) at the same damping (0.1 % of the
   /// force's impulse; issue 33, docs/passivity/README.md).
   double passivity_reserve_j = 1e-4;
+  /// The largest change of the wrench the reserve's refill may make, a fraction of the wrench
+  /// (in [0, 1)).
   double passivity_refill_fraction = 0.05;
-  double hunt_crossley_s_per_m = 20.0;
   /// The safety stage before the device (force/torque caps are further bounded by the device's
   /// capabilities; the contact model's age is measured on the local clock from its send time).
   SafetyLimits safety{.max_force_n = 1e9, .max_torque_nm = 1e9, .model_timeout_s = 0.5};

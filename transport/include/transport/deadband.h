@@ -92,7 +92,8 @@ struct ToolStateDeadbandConfig {
   /// planes). The remote node linearizes each model at the pose it predicts, so this bounds the
   /// depth error of that linearization point where the held model says the depth changes fast
   /// (a ridge's flank, a rotation about a long lever), and nowhere else. Contacts whose depth is
-  /// below −this at both poses are not looked at.
+  /// below −this at both poses are not looked at. The velocity-adaptive factor does not widen
+  /// it (a depth error is felt as such at any speed).
   double contact_depth_floor_scale_m = 0.0;
   double keepalive_s = 0.1;  ///< longest time between two tool states sent (s, > 0)
   /// Also send when the twist itself changed beyond the deadband (Weber fraction of the last
@@ -115,6 +116,8 @@ struct ToolStateDeadbandConfig {
 ///   rotation  ∠(R R̂ᵀ) > max(k·∠(R R_sᵀ), k·floor_θ·a)
 /// (floor_p, floor_θ the contact floor scales while near contact or within contact_floor_hold_s
 /// of the last decision near contact, else the free-space ones)
+///   depth     |δ_i(q) − δ_i(q̂)| > max(k·max(δ_i(q), 0), k·floor_δ) for a contact i of the held
+///             model (near contact, with contact_depth_floor_scale_m = floor_δ > 0 and a model),
 ///   velocity  |v − v_s| > max(k·|v_s|, k·floor_v), the same for ω (with velocity_criterion),
 /// a = 1 + |v|/v_ref with velocity_adaptive, else 1; plus the keep-alive.
 class ToolStateDeadband {
@@ -124,8 +127,8 @@ class ToolStateDeadband {
   /// clock). When it returns anything but kNotSent, the state counts as sent (the caller sends
   /// it). `near_contact`: the operator's held contact model has contacts (the contact floors
   /// apply, and go on applying for contact_floor_hold_s after the last such call).
-  /// `held_model` (optional): the contact model the operator renders from, for the depth
-  /// criterion (contact_depth_floor_scale_m).
+  /// `held_model` (optional): the newest contact model the operator received (what it renders
+  /// from, or blends towards), for the depth criterion (contact_depth_floor_scale_m).
   DeadbandReason Decide(const RigidTransform& X_WT, const Twist& V_WT_W, std::int64_t t_ns,
                         bool near_contact = false,
                         const ContactModel* held_model = nullptr) noexcept;

@@ -28,6 +28,6 @@ for run in args:
     for i in ev:
         if slips and i - slips[-1][-1] <= 5: slips[-1].append(i)
         else: slips.append([i])
-    drops = [np.linalg.norm(D[s[-1] + 2] - D[s[0] - 1]) for s in slips]
+    drops = [np.linalg.norm(D[min(s[-1] + 2, len(D) - 1)] - D[max(s[0] - 1, 0)]) for s in slips]
     print(f"{run}: sticking ticks {keep.sum()}, device hp RMS {hd*1e3:.1f} mN, contact hp RMS {hc*1e3:.0f} mN; "
           f"slips {len(slips)}, drop per slip {', '.join(f'{d:.2f}' for d in drops)} N")
