@@ -107,7 +107,7 @@ struct StationConfig {
   double hunt_crossley_s_per_m = 20.0;
   /// The passivity controller's energy reserve (J, in [0, 1]; 0 = none): the store a slow hand
   /// draws on instead of the guard's cut (PassivityController::set_energy_reserve). With 0.1 mJ,
-  /// fig76's turns lost their one-tick force dips (device steps above 0.2 N 2–31 in 12 s over
+  /// fig76's turns lost their one-tick force dips (device steps above 0.2 N 2–25 in 12 s over
   /// seven runs → 0 in four, the guard's ticks 262–578 → 0) at the same damping (0.1 % of the
   /// force's impulse; issue 33, docs/passivity/README.md).
   double passivity_reserve_j = 1e-4;
