@@ -304,10 +304,10 @@ TEST(Passivity, AnEnergyReserveRefilledGentlyKeepsASlowHandFromTheGuardsCut) {
   EXPECT_EQ(reserve.scaled_ticks, 0);
   EXPECT_LT(reserve.largest_drop_n, 0.02);
   EXPECT_LE(reserve.largest_refill_change, 0.05 + 1e-12);
-  std::printf("[slow sway] largest one-tick drop %.3f N without the reserve (%lld guard ticks), "
-              "%.4f N with 0.1 mJ\n",
-              none.largest_drop_n, static_cast<long long>(none.scaled_ticks),
-              reserve.largest_drop_n);
+  std::printf(
+      "[slow sway] largest one-tick drop %.3f N without the reserve (%lld guard ticks), "
+      "%.4f N with 0.1 mJ\n",
+      none.largest_drop_n, static_cast<long long>(none.scaled_ticks), reserve.largest_drop_n);
 
   // No drag in free space: a zero wrench stays zero however empty the store.
   PassivityController free_space(1e-4, 160.0, 0.05);

@@ -280,8 +280,7 @@ int main(int argc, char** argv) {
                  "in free space by default)")
       ->check(CLI::Range(1e-3, 1000.0))
       ->capture_default_str();
-  double contact_depth_floor_um =
-      ht::ToolStateDeadbandConfig{}.contact_depth_floor_scale_m * 1e6;
+  double contact_depth_floor_um = ht::ToolStateDeadbandConfig{}.contact_depth_floor_scale_m * 1e6;
   app.add_option("--deadband-contact-depth-floor-um", contact_depth_floor_um,
                  "near contact, also send a tool state when a contact's depth in the held model "
                  "differs between the tool's pose and the remote node's prediction by more than "

@@ -89,8 +89,7 @@ void NetworkWorker::Run(const std::atomic<bool>& stop) {
       have_last = true;
       ++tool_states_offered_;
       if (tool_deadband_.Decide(state.message.X_WT, state.message.V_WT_W, state.time_ns,
-                                state.near_contact,
-                                &held_model_) != DeadbandReason::kNotSent) {
+                                state.near_contact, &held_model_) != DeadbandReason::kNotSent) {
         Send(state);
         last_send_ns = now;
       } else {
