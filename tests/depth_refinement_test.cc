@@ -377,6 +377,154 @@ TEST(DepthRefinement, TranslationArmsHoldTheVAcrossATrough) {
   EXPECT_THROW(DepthRefiner{bad}, std::invalid_argument);
 }
 
+// Parallax (DepthRefinementOptions::parallax, docs/frontier/issue32/twelfth_stop): the
+// environment box's textured face tilted by θ about y from the window's n = z. Its displaced
+// surface in the face's own frame is (x, y, h(x)), in world R_y(θ)·(x, y, h(x)) = (x cosθ +
+// h sinθ, y, −x sinθ + h cosθ); its height along z at world s solves x cosθ + h(x) sinθ = s
+// (monotone here: |h'| sinθ < cosθ), by bisection: a route independent of the texture and of
+// the fixed-point steps.
+RigidTransform TiltedEnvironmentPose(double theta) {
+  RigidTransform R;
+  R.rotation = glm::angleAxis(theta, glm::dvec3(0.0, 1.0, 0.0));
+  return R * EnvironmentPose();
+}
+
+double DisplacedHeightAlongZ(const std::function<double(double)>& h, double theta, double s) {
+  double lo = -0.03, hi = 0.03;
+  for (int i = 0; i < 200; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (mid * std::cos(theta) + h(mid) * std::sin(theta) < s ? lo : hi) = mid;
+  }
+  const double x = 0.5 * (lo + hi);
+  return -x * std::sin(theta) + h(x) * std::cos(theta);
+}
+
+std::vector<int> AllTriangles(const HapticModel& m) {
+  std::vector<int> all(m.triangles.size());
+  for (std::size_t f = 0; f < all.size(); ++f) all[f] = static_cast<int>(f);
+  return all;
+}
+
+// A constant height h0 on a facet tilted by θ is the facet's offset plane: along n it stands
+// h0/cosθ above the facet. The render's form, h0·(N·n), reads h0·cosθ: 0.73 mm low at 50°.
+TEST(DepthRefinement, ParallaxReadsAConstantHeightOnATiltedFacetAsItsOffsetPlane) {
+  constexpr double kH0 = 0.8e-3;
+  const double theta = 50.0 * std::numbers::pi / 180.0;
+  const HapticModel env = EnvironmentBox([](double, double) { return kH0; }, 256);
+  const RigidTransform X = TiltedEnvironmentPose(theta);
+  const ContactWindow w = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.02, 50);
+  const std::vector<int> all = AllTriangles(env);
+  for (const double s : {-4e-3, -1.3e-3, 0.0, 0.7e-3, 5e-3}) {
+    for (const double t : {-3e-3, 0.0, 2e-3}) {
+      const double expected = DisplacedHeightAlongZ([](double) { return kH0; }, theta, s);
+      EXPECT_NEAR(expected, -s * std::tan(theta) + kH0 / std::cos(theta), 1e-9);
+      const double parallax =
+          PatchHeightAt(env, X, all, w, PatchSide::kEnvironment, s, t, 0, /*parallax=*/true);
+      const double render = PatchHeightAt(env, X, all, w, PatchSide::kEnvironment, s, t, 0);
+      EXPECT_NEAR(parallax, expected, 0.5e-6) << s << " " << t;
+      EXPECT_NEAR(render, -s * std::tan(theta) + kH0 * std::cos(theta), 0.5e-6) << s << " " << t;
+      EXPECT_GT(expected - render, 0.7e-3) << s << " " << t;
+    }
+  }
+}
+
+// A sinusoid of 0.2 mm amplitude and 2 mm period on a facet tilted by 40°: the parallax height
+// matches the displaced surface's (bisection above) within the texture's bilinear error at 200
+// random points; the render's form misses it by tens of micrometres.
+TEST(DepthRefinement, ParallaxOnATiltedSinusoidMatchesTheDisplacedSurface) {
+  constexpr double kAmp = 200e-6;
+  const auto h = [](double x) { return kAmp * std::cos(kK * x); };
+  const double theta = 40.0 * std::numbers::pi / 180.0;
+  const HapticModel env = EnvironmentBox([&](double x, double) { return h(x); }, 1024);
+  const RigidTransform X = TiltedEnvironmentPose(theta);
+  const ContactWindow w = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.02, 50);
+  const std::vector<int> all = AllTriangles(env);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> U(-6e-3, 6e-3);
+  double worst_parallax = 0.0, worst_render = 0.0;
+  int settled = 0;
+  for (int i = 0; i < 200; ++i) {
+    const double s = U(rng), t = U(rng);
+    const double expected = DisplacedHeightAlongZ(h, theta, s);
+    const double parallax =
+        PatchHeightAt(env, X, all, w, PatchSide::kEnvironment, s, t, 0, /*parallax=*/true);
+    const double render = PatchHeightAt(env, X, all, w, PatchSide::kEnvironment, s, t, 0);
+    if (std::isfinite(parallax)) {
+      ++settled;
+      worst_parallax = std::max(worst_parallax, std::abs(parallax - expected));
+    }
+    worst_render = std::max(worst_render, std::abs(render - expected));
+  }
+  std::printf("tilted sinusoid: parallax worst %.2f um over %d points, render worst %.1f um\n",
+              worst_parallax * 1e6, settled, worst_render * 1e6);
+  EXPECT_EQ(settled, 200);
+  EXPECT_LT(worst_parallax, 3e-6);
+  EXPECT_GT(worst_render, 50e-6);
+}
+
+// Where the coarse normal is n (the face untilted) the parallax is the render's form exactly.
+TEST(DepthRefinement, ParallaxIsTheRendersFormWhereTheNormalIsTheWindows) {
+  const HapticModel env = EnvironmentBox(Sinusoid, 512);
+  const ContactWindow w = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.02, 50);
+  const std::vector<int> all = AllTriangles(env);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> U(-9e-3, 9e-3);
+  for (int i = 0; i < 100; ++i) {
+    const double s = U(rng), t = U(rng);
+    const double render =
+        PatchHeightAt(env, EnvironmentPose(), all, w, PatchSide::kEnvironment, s, t, 0);
+    ASSERT_TRUE(std::isfinite(render));
+    EXPECT_NEAR(PatchHeightAt(env, EnvironmentPose(), all, w, PatchSide::kEnvironment, s, t, 0,
+                              /*parallax=*/true),
+                render, 1e-12);
+  }
+}
+
+// Stage 5b with parallax on a contact whose environment facet is tilted 30° under a 0.8 mm
+// height (fig77's case, smaller): the curved tool's paraboloid pressed into the offset plane;
+// the refined δ0 is the displaced surface's closed form, where the render's form reads it
+// h0·(1/cosθ − cosθ) = 0.23 mm low.
+TEST(DepthRefinement, RefinedWithParallaxATiltedFacetsDepthIsTheDisplacedSurfaces) {
+  constexpr double kH0 = 0.8e-3;
+  const double theta = 30.0 * std::numbers::pi / 180.0;
+  const HapticModel env = EnvironmentBox([](double, double) { return kH0; }, 256);
+  const HapticModel tool = CurvedTool();
+  // The paraboloid's lowest point at (x0, 0, z0); the offset plane's height there is
+  // −x0 tanθ + h0/cosθ and δ = max over x of plane − paraboloid, in closed form: the tangent
+  // point lies where the paraboloid's slope (x − x0)/R equals the plane's, −tanθ.
+  const double x0 = 0.5e-3, z0 = kH0 / std::cos(theta) - x0 * std::tan(theta) - 60e-6;
+  const double xs = x0 - kR * std::tan(theta);
+  const double plane = -xs * std::tan(theta) + kH0 / std::cos(theta);
+  const double expected = plane - ((xs - x0) * (xs - x0) / (2.0 * kR) + z0);
+  ASSERT_GT(xs, x0 - kToolHalf);
+  ContactQuery q;
+  q.environment = &env;
+  q.X_WO = TiltedEnvironmentPose(theta);
+  q.window = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.02, 50);
+  q.stiffness_n_per_m = 1000.0;
+  CpuPenetrationDepthBackend backend(128);
+  std::vector<DepthSample> samples(kGradientSamples);
+  std::vector<ContactLinearization> out(1);
+  const RigidTransform X_WT = CurvedToolPose(x0, z0);
+  ASSERT_TRUE(backend.LinearizeBatch(tool, X_WT, {&q, 1}, out, samples));
+  for (const bool parallax : {false, true}) {
+    DepthRefinementOptions o;
+    o.parallax = parallax;
+    DepthRefiner refiner(o);
+    ContactLinearization lin = out[0];
+    std::vector<DepthSample> s = samples;
+    const bool refined = refiner.Refine(tool, X_WT, q, s, lin);
+    std::printf("tilted facet: parallax %d refined %d delta %.1f um, closed form %.1f um\n",
+                int(parallax), int(refined), lin.depth_m * 1e6, expected * 1e6);
+    if (parallax) {
+      ASSERT_TRUE(refined);
+      EXPECT_NEAR(lin.depth_m, expected, 5e-6);
+    } else {
+      EXPECT_LT(lin.depth_m, expected - 200e-6);
+    }
+  }
+}
+
 TEST(DepthRefinement, OptionsOutOfRangeAreRefused) {
   DepthRefinementOptions o;
   o.gradient_step_texels = 0.0;
@@ -392,6 +540,13 @@ TEST(DepthRefinement, OptionsOutOfRangeAreRefused) {
   EXPECT_THROW(DepthRefiner{o}, std::invalid_argument);
   o = {};
   o.max_screen_leaves = 0;
+  EXPECT_THROW(DepthRefiner{o}, std::invalid_argument);
+  o = {};
+  o.parallax = true;
+  o.conservative_screen = true;
+  EXPECT_THROW(DepthRefiner{o}, std::invalid_argument);
+  o = {};
+  o.parallax_iterations = 0;
   EXPECT_THROW(DepthRefiner{o}, std::invalid_argument);
 }
 

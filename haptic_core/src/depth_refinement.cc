@@ -29,7 +29,7 @@ using Projected = DepthRefiner::Projected;
 // Triangle f of `m` posed at X on window w, when it faces the side's way (as the render tests
 // it) and its projection is not edge-on.
 bool ProjectTriangle(const HapticModel& m, const RigidTransform& X, const ContactWindow& w, int f,
-                     PatchSide side, Projected& out) noexcept {
+                     PatchSide side, Projected& out, bool parallax = false) noexcept {
   const glm::ivec3 tri = m.triangles[static_cast<std::size_t>(f)];
   glm::dvec3 p[3];
   for (int c = 0; c < 3; ++c) {
@@ -69,13 +69,92 @@ bool ProjectTriangle(const HapticModel& m, const RigidTransform& X, const Contac
   out.y1 = std::max({out.y[0], out.y[1], out.y[2]});
   out.textured = m.textured[static_cast<std::size_t>(f)] != 0 && !m.texture.empty();
   out.texel_m = m.texel_size_m[static_cast<std::size_t>(f)];
+  out.parallax = parallax && out.textured;
+  out.reach = 0.0;
+  if (out.parallax) {
+    for (int c = 0; c < 3; ++c) {
+      const glm::dvec3 N_W = X.rotation * m.corner_normals_O[k + c];
+      out.nu[c] = glm::dot(N_W, w.axis_u_W);
+      out.nv[c] = glm::dot(N_W, w.axis_v_W);
+    }
+    // The displaced surface lies within |h|·|N⊥| ≤ max |h| of the coarse triangle's projection.
+    out.reach = static_cast<double>(m.texture.MaxAbsOver(
+        0, std::min({out.tu[0], out.tu[1], out.tu[2]}), std::min({out.tv[0], out.tv[1], out.tv[2]}),
+        std::max({out.tu[0], out.tu[1], out.tu[2]}), std::max({out.tv[0], out.tv[1], out.tv[2]})));
+    if (!std::isfinite(out.reach)) out.reach = 0.0;
+    out.x0 -= out.reach;
+    out.x1 += out.reach;
+    out.y0 -= out.reach;
+    out.y1 += out.reach;
+  }
   return true;
+}
+
+// The parallax value of one projected triangle at (s, t) (DepthRefinementOptions::parallax): the
+// height along n of the displaced surface r(q) = q + h(q)·N(q) where it crosses the line through
+// (s, t) along n, q on the triangle. Damped fixed-point steps q ← q + ω((s, t) − h(q)·N⊥(q) − q)
+// from q = (s, t), q kept on the triangle (barycentrics clamped), ω from the last two steps (a
+// secant along the step); settled when the step is under a hundredth of a level-0 texel (the
+// height's error is that times the surface's slope). NaN where it does not
+// settle within `iterations` or settles only on the triangle's border with the step still
+// pointing out (a neighbour holds that point). Level 0, bilinear.
+double ParallaxValue(const Projected& P, const HeightField& texture, double s, double t,
+                     int iterations) noexcept {
+  constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+  if (s < P.x0 - 1e-12 || s > P.x1 + 1e-12 || t < P.y0 - 1e-12 || t > P.y1 + 1e-12) return kNaN;
+  const HeightFieldLevel& L = texture.level(0);
+  const double tol = std::max(0.01 * P.texel_m, 1e-9);
+  double qs = s, qt = t, omega = 1.0, previous = kInf, gs_last = 0.0, gt_last = 0.0;
+  for (int k = 0; k < iterations; ++k) {
+    double b0 = ((P.x[1] - qs) * (P.y[2] - qt) - (P.x[2] - qs) * (P.y[1] - qt)) * P.inv_area;
+    double b1 = ((P.x[2] - qs) * (P.y[0] - qt) - (P.x[0] - qs) * (P.y[2] - qt)) * P.inv_area;
+    double b2 = 1.0 - b0 - b1;
+    if (b0 < 0.0 || b1 < 0.0 || b2 < 0.0) {
+      b0 = std::max(b0, 0.0);
+      b1 = std::max(b1, 0.0);
+      b2 = std::max(b2, 0.0);
+      const double sum = b0 + b1 + b2;
+      if (!(sum > 0.0)) return kNaN;
+      b0 /= sum;
+      b1 /= sum;
+      b2 /= sum;
+      qs = b0 * P.x[0] + b1 * P.x[1] + b2 * P.x[2];
+      qt = b0 * P.y[0] + b1 * P.y[1] + b2 * P.y[2];
+    }
+    const double len2 = b0 * b0 + b1 * b1 + b2 * b2 +
+                        2.0 * (b0 * b1 * P.cos01 + b0 * b2 * P.cos02 + b1 * b2 * P.cos12);
+    if (!(len2 > 1e-12)) return kNaN;
+    const double inv_len = 1.0 / std::sqrt(len2);
+    const double Nn = (b0 * P.nn[0] + b1 * P.nn[1] + b2 * P.nn[2]) * inv_len;
+    const double Nu = (b0 * P.nu[0] + b1 * P.nu[1] + b2 * P.nu[2]) * inv_len;
+    const double Nv = (b0 * P.nv[0] + b1 * P.nv[1] + b2 * P.nv[2]) * inv_len;
+    const auto u = static_cast<float>(b0 * P.tu[0] + b1 * P.tu[1] + b2 * P.tu[2]);
+    const auto v = static_cast<float>(b0 * P.tv[0] + b1 * P.tv[1] + b2 * P.tv[2]);
+    const double h = static_cast<double>(texture.SampleAt(0, L, u, v));
+    const double gs = s - h * Nu - qs, gt = t - h * Nv - qt;
+    const double g2 = gs * gs + gt * gt;
+    if (g2 <= tol * tol) return b0 * P.d[0] + b1 * P.d[1] + b2 * P.d[2] + h * Nn;
+    if (k > 0) {
+      // The step's ratio to the last one along it estimates the damped map's contraction
+      // ρ = 1 − ω(1 − λ); ω/(1 − ρ) = 1/(1 − λ) is the step that would land on the fixed point
+      // were the map linear (a secant). ρ ≥ 1 (growing): halve.
+      const double rho = (gs * gs_last + gt * gt_last) / previous;
+      omega = rho < 0.95 ? std::clamp(omega / (1.0 - rho), 0.05, 1.5) : 0.5 * omega;
+    }
+    previous = g2;
+    gs_last = gs;
+    gt_last = gt;
+    qs += omega * gs;
+    qt += omega * gt;
+  }
+  return kNaN;
 }
 
 // The render's value of one projected triangle at (s, t), or NaN where it does not cover it.
 // `level` −1: the footprint level for `cell_m`.
 double ValueAt(const Projected& P, const HeightField& texture, double s, double t, int level,
-               double cell_m) noexcept {
+               double cell_m, int parallax_iterations = 12) noexcept {
+  if (P.parallax && level == 0) return ParallaxValue(P, texture, s, t, parallax_iterations);
   if (s < P.x0 - 1e-12 || s > P.x1 + 1e-12 || t < P.y0 - 1e-12 || t > P.y1 + 1e-12) {
     return std::numeric_limits<double>::quiet_NaN();
   }
@@ -106,10 +185,11 @@ double ValueAt(const Projected& P, const HeightField& texture, double s, double 
 // The envelope of `list` at (s, t): the largest value for the environment, the smallest for the
 // tool, within the box ±range.
 double HeightOver(std::span<const Projected> list, const HeightField& texture, bool keep_max,
-                  double range, double s, double t, int level, double cell_m) noexcept {
+                  double range, double s, double t, int level, double cell_m,
+                  int parallax_iterations = 12) noexcept {
   double best = keep_max ? -kInf : kInf;
   for (const Projected& P : list) {
-    const double value = ValueAt(P, texture, s, t, level, cell_m);
+    const double value = ValueAt(P, texture, s, t, level, cell_m, parallax_iterations);
     if (!(std::abs(value) <= range)) continue;  // NaN (not covered) or outside the box
     best = keep_max ? std::max(best, value) : std::min(best, value);
   }
@@ -166,13 +246,13 @@ void NormalFactorRange(const Projected& P, double& lo, double& hi) noexcept {
 
 double PatchHeightAt(const HapticModel& model, const RigidTransform& X_WO,
                      std::span<const int> triangles, const ContactWindow& window, PatchSide side,
-                     double s_m, double t_m, int level) noexcept {
+                     double s_m, double t_m, int level, bool parallax) noexcept {
   const bool keep_max = side == PatchSide::kEnvironment;
   double best = keep_max ? -kInf : kInf;
   Projected P;
   for (const int f : triangles) {
     if (f < 0 || static_cast<std::size_t>(f) >= model.triangles.size()) continue;
-    if (!ProjectTriangle(model, X_WO, window, f, side, P)) continue;
+    if (!ProjectTriangle(model, X_WO, window, f, side, P, parallax && level == 0)) continue;
     const double value = ValueAt(P, model.texture, s_m, t_m, level, window.cell_size_m());
     if (!(std::abs(value) <= window.depth_range_m())) continue;
     best = keep_max ? std::max(best, value) : std::min(best, value);
@@ -210,6 +290,15 @@ void DepthRefinementOptions::Validate() const {
     throw std::invalid_argument("depth refinement: screen_floor_m must be finite, got " +
                                 std::to_string(screen_floor_m));
   }
+  if (parallax && conservative_screen) {
+    throw std::invalid_argument(
+        "depth refinement: parallax and conservative_screen cannot be on together (the screen's "
+        "bounds are the render's form)");
+  }
+  if (parallax_iterations < 1 || parallax_iterations > 64) {
+    throw std::invalid_argument("depth refinement: parallax_iterations must be in [1, 64], got " +
+                                std::to_string(parallax_iterations));
+  }
   if (max_screen_leaves < 1) {
     throw std::invalid_argument("depth refinement: max_screen_leaves must be >= 1, got " +
                                 std::to_string(max_screen_leaves));
@@ -239,7 +328,7 @@ void DepthRefiner::ProjectAll(const HapticModel& model, const RigidTransform& X,
   out.clear();
   Projected P;
   for (const int f : list) {
-    if (!ProjectTriangle(model, X, window_, f, side, P)) continue;
+    if (!ProjectTriangle(model, X, window_, f, side, P, options_.parallax)) continue;
     P.face = f;
     out.push_back(P);
   }
@@ -266,7 +355,9 @@ void DepthRefiner::MoveTool(const RigidTransform& X_WT) noexcept {
   tool_moved_.clear();
   Projected P;
   for (const Projected& L : tool_local_) {
-    if (!ProjectTriangle(*tool_, X_WT, window_, L.face, PatchSide::kTool, P)) continue;
+    if (!ProjectTriangle(*tool_, X_WT, window_, L.face, PatchSide::kTool, P, options_.parallax)) {
+      continue;
+    }
     P.face = L.face;
     tool_moved_.push_back(P);
   }
@@ -276,9 +367,11 @@ double DepthRefiner::Difference(std::span<const Projected> tool, double s, doubl
                                 double shift_t) noexcept {
   ++evaluations_;
   const double range = window_.depth_range_m();
-  const double b = HeightOver(env_local_, env_->texture, true, range, s, t, 0, 0.0);
+  const int it = options_.parallax_iterations;
+  const double b = HeightOver(env_local_, env_->texture, true, range, s, t, 0, 0.0, it);
   if (!(b > -kInf)) return -kInf;
-  const double a = HeightOver(tool, tool_->texture, false, range, s - shift_s, t - shift_t, 0, 0.0);
+  const double a =
+      HeightOver(tool, tool_->texture, false, range, s - shift_s, t - shift_t, 0, 0.0, it);
   if (!(a < kInf)) return -kInf;
   return b - a;
 }

@@ -233,6 +233,16 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
       kinks.secant_at_kinks_m = um * 1e-6;
       s.push_back(kinks);
     }
+    // Stage 5b read through the displaced surface (parallax), alone and with the texel-scale
+    // translation slope.
+    FrontierSetting parallax = refined;
+    parallax.name = "parallax";
+    parallax.parallax = true;
+    s.push_back(parallax);
+    FrontierSetting parallax_texel = translation_only;
+    parallax_texel.name = "parallax_texel_translation_gradient";
+    parallax_texel.parallax = true;
+    s.push_back(parallax_texel);
     // Stage 5a: a window per separated region of its overlap, with either gradient.
     FrontierSetting split = refined;
     split.name = "split_windows_at_separated_overlap";
@@ -592,6 +602,7 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.depth_refinement.subgrid_rotations = st.subgrid_rotations;
   options.depth_refinement.subgrid_translations = st.subgrid_translations;
   options.depth_refinement.conservative_screen = st.conservative_screen;
+  options.depth_refinement.parallax = st.parallax;
   if (st.gradient_step_texels > 0.0)
     options.depth_refinement.gradient_step_texels = st.gradient_step_texels;
   // The texture stage's threads are the coarse query's too, as in the product.

@@ -115,6 +115,12 @@ int main(int argc, char** argv) {
                "texture's full resolution around the grid's deepest cells (stage 5b,\n"
                "docs/DESIGN.md §4), which the grid's mip-filtered samples read tens of\n"
                "micrometres low; faster by 7-26 % of the step (docs/frontier/issue32)");
+  bool parallax = false;
+  app.add_flag("--parallax", parallax,
+               "stage 5b reads each height where the textured surface p + h*N crosses the line\n"
+               "along the window's normal (parallax) instead of h*(N.n) at the coarse point\n"
+               "under it, which on coarse facets tilted from the normal under large heights\n"
+               "reads another part of the surface (docs/frontier/issue32/twelfth_stop)");
   bool texel_scale_gradient = false;
   app.add_flag("--texel-scale-gradient", texel_scale_gradient,
                "each refined contact's gradient as the refined maximum's derivative at\n"
@@ -358,6 +364,7 @@ int main(int argc, char** argv) {
     config.pipeline.kink_planes = !no_kink_planes;
     config.pipeline.refine_depth = !no_refine_depth;
     config.pipeline.depth_refinement.texel_scale_gradient = texel_scale_gradient;
+    config.pipeline.depth_refinement.parallax = parallax;
     config.pipeline.depth_refinement.gradient_step_texels = gradient_step_texels;
     config.pipeline.depth_refinement.secant_at_kinks_m = secant_at_kinks_um * 1e-6;
     config.pipeline.depth_refinement.translation_kink_planes = translation_kink_planes;

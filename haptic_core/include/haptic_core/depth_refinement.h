@@ -63,10 +63,16 @@ namespace ht {
 /// (LevelForFootprint), so that at a cell centre this is the reference render's value (a test
 /// compares them). Heights with |height| > window.depth_range_m() are outside the window's box
 /// and ignored. Returns −∞ (kEnvironment) or +∞ (kTool) where no triangle covers the point.
+/// With `parallax` (level 0 only; DepthRefinementOptions::parallax) each triangle's value is
+/// instead that of its displaced surface p + h(p)·N(p) where it crosses the line through (s, t)
+/// along n (ParallaxValue in the .cc): the render's h·(N·n) at the coarse point under (s, t)
+/// reads a point h·|N − (N·n)n| to the side of it, which on a coarse facet tilted from n under a
+/// texture of large height is another part of the surface (fig77: 1.35 mm low under a 0.9 mm
+/// height on a facet 54° from n; docs/frontier/issue32/twelfth_stop).
 /// Never allocates, never throws.
 double PatchHeightAt(const HapticModel& model, const RigidTransform& X_WO,
                      std::span<const int> triangles, const ContactWindow& window, PatchSide side,
-                     double s_m, double t_m, int level = 0) noexcept;
+                     double s_m, double t_m, int level = 0, bool parallax = false) noexcept;
 
 /// How the depth is refined (issue 32).
 struct DepthRefinementOptions {
@@ -136,6 +142,17 @@ struct DepthRefinementOptions {
   /// others split in four down to about two texels, where the local search runs. Off: the seeds
   /// alone (a level-0 peak under a cell whose filtered value is not among the deepest is missed).
   bool conservative_screen = false;
+  /// Parallax: each height read where the displaced surface p + h(p)·N(p) crosses the line along
+  /// n through the point (PatchHeightAt's `parallax`), found by damped fixed-point steps
+  /// q ← (s, t) − h(q)·N⊥(q) on each coarse triangle (at most parallax_iterations, until the
+  /// step is under a hundredth of a level-0 texel; a triangle whose steps leave it or do not settle
+  /// holds no value there), instead of the render's h·(N·n) at the coarse point under (s, t).
+  /// Where N ∥ n (flat coarse faces under the window: fig75, fig76) nothing changes. The grid
+  /// (stage 5, the backend's render) still seeds the search with the render's form. Not with
+  /// conservative_screen (its bounds are the render's form; Validate throws).
+  bool parallax = false;
+  /// Most fixed-point steps of the parallax per triangle and point; in [1, 64].
+  int parallax_iterations = 12;
   /// How far above the best a dropped square's bound may reach (m). ≥ 0.
   double screen_tolerance_m = 1e-6;
   /// The screen looks for b − a above the larger of the best found and this (m): 0 looks for
@@ -196,6 +213,11 @@ class DepthRefiner {
   /// corner normals' cosines, and its bounding box on the window plane.
   struct Projected {
     double x[3], y[3], d[3], nn[3];
+    // The corner normals' components along u and v (parallax only) and the bound of the
+    // displaced surface's lateral reach (m) that widened the box.
+    double nu[3], nv[3];
+    double reach;
+    bool parallax;
     double inv_area;
     float tu[3], tv[3];
     double cos01, cos02, cos12;

@@ -107,6 +107,8 @@ struct FrontierSetting {
   bool subgrid_translations = false;
   /// PipelineOptions::depth_refinement.conservative_screen ("screen" turns it on).
   bool conservative_screen = false;
+  /// PipelineOptions::depth_refinement.parallax ("parallax*" turn it on).
+  bool parallax = false;
 };
 
 /// The sweep: the default setting (grid 50, 1024² textures, the seed's coarse counts, CPU) first,
