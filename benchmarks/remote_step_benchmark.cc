@@ -82,6 +82,10 @@ int main(int argc, char** argv) {
   bool no_sharing = false;
   app.add_flag("--no-share-connected-contacts", no_sharing,
                "every contact its whole penalty (stage 5c off, as before issue 32's tenth stop)");
+  bool parallax = false;
+  app.add_flag("--parallax", parallax,
+               "stage 5b reads heights through the displaced surface (DepthRefinementOptions::"
+               "parallax)");
   app.add_option("--csv", csv_path, "write one row per scene here");
   app.add_option("--cache-dir", cache_dir, "model cache folder")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
@@ -121,6 +125,7 @@ int main(int argc, char** argv) {
     options.rotation_gradient = ht::ParseRotationGradient(rotation);
     options.refine_depth = !no_refinement;
     options.share_connected_contacts = !no_sharing;
+    options.depth_refinement.parallax = parallax;
     options.depth_refinement.texel_scale_gradient = texel_gradient;
     options.depth_refinement.translation_kink_planes = translation_kinks;
     options.depth_refinement.texel_scale_rotation = !secant_rotation;

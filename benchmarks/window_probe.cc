@@ -177,6 +177,12 @@ int main(int argc, char** argv) {
             dd[c] = glm::dot(p[c], w.normal_W);
             nn[c] = glm::dot(X.rotation * m.corner_normals_O[3 * f + c], w.normal_W);
           }
+          {
+            const std::vector<int> one{static_cast<int>(f)};
+            const double v1 = ht::PatchHeightAt(m, X, one, w, is_tool ? ht::PatchSide::kTool : ht::PatchSide::kEnvironment, d.at_uv_m.x, d.at_uv_m.y, 0, true);
+            if (std::isfinite(v1) && std::abs(v1) < 5e-3)
+              std::printf("  [any] %s tri %zu parallax alone %.1f um textured %d\n", is_tool ? "tool" : "object", f, v1 * 1e6, int(m.textured[f]));
+          }
           const double area = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]);
           if (std::abs(area) < 1e-18) continue;
           const double s0 = d.at_uv_m.x, t0 = d.at_uv_m.y;
@@ -215,6 +221,11 @@ int main(int argc, char** argv) {
             }
           }
           std::printf("  parallax value %.1f um\n", pv * 1e6);
+          {
+            const std::vector<int> one{static_cast<int>(f)};
+            std::printf("  PatchHeightAt parallax on this triangle alone: %.1f um\n",
+                        ht::PatchHeightAt(m, X, one, w, is_tool ? ht::PatchSide::kTool : ht::PatchSide::kEnvironment, s0, t0, 0, true) * 1e6);
+          }
           std::printf("  %s tri %zu facing %+.3f coarse %.1f um h %.1f um N.n %.3f value %.1f um textured %d\n",
                       is_tool ? "tool" : "object", f, facing, hc * 1e6, h * 1e6, ndn,
                       (hc + h * ndn) * 1e6, int(m.textured[f]));

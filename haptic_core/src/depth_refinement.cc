@@ -77,11 +77,26 @@ bool ProjectTriangle(const HapticModel& m, const RigidTransform& X, const Contac
       out.nu[c] = glm::dot(N_W, w.axis_u_W);
       out.nv[c] = glm::dot(N_W, w.axis_v_W);
     }
-    // The displaced surface lies within |h|·|N⊥| ≤ max |h| of the coarse triangle's projection.
-    out.reach = static_cast<double>(m.texture.MaxAbsOver(
-        0, std::min({out.tu[0], out.tu[1], out.tu[2]}), std::min({out.tv[0], out.tv[1], out.tv[2]}),
-        std::max({out.tu[0], out.tu[1], out.tu[2]}), std::max({out.tv[0], out.tv[1], out.tv[2]})));
-    if (!std::isfinite(out.reach)) out.reach = 0.0;
+    // The displaced surface lies within |h|·|N⊥| of the coarse triangle's projection. The
+    // normalized interpolation's |N⊥| is at most the corners' largest over the interpolation's
+    // least length, √((1 + 2c)/3) with c the smallest corner cosine (NormalFactorRange).
+    double lateral = 0.0;
+    for (int c = 0; c < 3; ++c) {
+      lateral = std::max(lateral, std::sqrt(out.nu[c] * out.nu[c] + out.nv[c] * out.nv[c]));
+    }
+    if (!(lateral > 1e-12)) {
+      out.parallax = false;  // N ∥ n at every corner: the render's form is exact
+      return true;
+    }
+    const double c_min = std::min({out.cos01, out.cos02, out.cos12});
+    lateral = std::min(1.0, lateral / std::sqrt(std::max((1.0 + 2.0 * c_min) / 3.0, 1e-12)));
+    out.max_abs_h = static_cast<double>(m.texture.MaxAbsOver(
+                              0, std::min({out.tu[0], out.tu[1], out.tu[2]}),
+                              std::min({out.tv[0], out.tv[1], out.tv[2]}),
+                              std::max({out.tu[0], out.tu[1], out.tu[2]}),
+                              std::max({out.tv[0], out.tv[1], out.tv[2]})));
+    if (!std::isfinite(out.max_abs_h)) out.max_abs_h = 0.0;
+    out.reach = lateral * out.max_abs_h;
     out.x0 -= out.reach;
     out.x1 += out.reach;
     out.y0 -= out.reach;
@@ -95,21 +110,33 @@ bool ProjectTriangle(const HapticModel& m, const RigidTransform& X, const Contac
 // (s, t) along n, q on the triangle. Damped fixed-point steps q ← q + ω((s, t) − h(q)·N⊥(q) − q)
 // from q = (s, t), q kept on the triangle (barycentrics clamped), ω from the last two steps (a
 // secant along the step); settled when the step is under a hundredth of a level-0 texel (the
-// height's error is that times the surface's slope). NaN where it does not
-// settle within `iterations` or settles only on the triangle's border with the step still
-// pointing out (a neighbour holds that point). Level 0, bilinear.
+// height's error is that times the surface's slope). NaN where it does not settle within
+// `iterations`, or where q is pushed out of the triangle twice running (the line meets the
+// displaced surface beyond this triangle's edge): then `edge`, when given, gets the clamped
+// point's height and the lateral miss g = (s, t) − (q + h·N⊥) (m), which the envelope uses to
+// bridge a crack (Envelope). Level 0, bilinear.
+struct ParallaxEdge {
+  double value = 0.0, gs = 0.0, gt = 0.0;
+  double limit = 0.0;  // the widest crack it may bridge: 2·max |h| of its triangle (m)
+  bool valid = false;
+};
+
 double ParallaxValue(const Projected& P, const HeightField& texture, double s, double t,
-                     int iterations) noexcept {
+                     int iterations, ParallaxEdge* edge) noexcept {
   constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+  if (edge != nullptr) edge->valid = false;
   if (s < P.x0 - 1e-12 || s > P.x1 + 1e-12 || t < P.y0 - 1e-12 || t > P.y1 + 1e-12) return kNaN;
   const HeightFieldLevel& L = texture.level(0);
   const double tol = std::max(0.01 * P.texel_m, 1e-9);
   double qs = s, qt = t, omega = 1.0, previous = kInf, gs_last = 0.0, gt_last = 0.0;
+  bool was_clamped = false;
   for (int k = 0; k < iterations; ++k) {
     double b0 = ((P.x[1] - qs) * (P.y[2] - qt) - (P.x[2] - qs) * (P.y[1] - qt)) * P.inv_area;
     double b1 = ((P.x[2] - qs) * (P.y[0] - qt) - (P.x[0] - qs) * (P.y[2] - qt)) * P.inv_area;
     double b2 = 1.0 - b0 - b1;
+    bool clamped = false;
     if (b0 < 0.0 || b1 < 0.0 || b2 < 0.0) {
+      clamped = true;
       b0 = std::max(b0, 0.0);
       b1 = std::max(b1, 0.0);
       b2 = std::max(b2, 0.0);
@@ -131,9 +158,16 @@ double ParallaxValue(const Projected& P, const HeightField& texture, double s, d
     const auto u = static_cast<float>(b0 * P.tu[0] + b1 * P.tu[1] + b2 * P.tu[2]);
     const auto v = static_cast<float>(b0 * P.tv[0] + b1 * P.tv[1] + b2 * P.tv[2]);
     const double h = static_cast<double>(texture.SampleAt(0, L, u, v));
+    const double value = b0 * P.d[0] + b1 * P.d[1] + b2 * P.d[2] + h * Nn;
     const double gs = s - h * Nu - qs, gt = t - h * Nv - qt;
     const double g2 = gs * gs + gt * gt;
-    if (g2 <= tol * tol) return b0 * P.d[0] + b1 * P.d[1] + b2 * P.d[2] + h * Nn;
+    if (g2 <= tol * tol) return value;
+    if (clamped && was_clamped) {
+      // Pushed out twice running: the line meets the displaced surface beyond this edge.
+      if (edge != nullptr) *edge = {value, gs, gt, 2.0 * P.max_abs_h, true};
+      return kNaN;
+    }
+    was_clamped = clamped;
     if (k > 0) {
       // The step's ratio to the last one along it estimates the damped map's contraction
       // ρ = 1 − ω(1 − λ); ω/(1 − ρ) = 1/(1 − λ) is the step that would land on the fixed point
@@ -150,11 +184,70 @@ double ParallaxValue(const Projected& P, const HeightField& texture, double s, d
   return kNaN;
 }
 
-// The render's value of one projected triangle at (s, t), or NaN where it does not cover it.
-// `level` −1: the footprint level for `cell_m`.
+// The envelope of one side at one point over triangles (largest for the environment, smallest for
+// the tool, within the box ±range). With parallax, where no displaced surface crosses the line
+// (a crack: at a crease the corner normals of two triangles differ, and their displaced surfaces
+// part by |h|·|N_A − N_B|), the crack is bridged: of the triangles whose line met their surface
+// beyond an edge, the two nearest on opposite sides (misses g_A·g_B < 0, |g_A| + |g_B| at most
+// 2·max |h| of either: the widest gap |h|·|N_A − N_B| can open) give the height interpolated
+// linearly across the gap between their edges, a skirt joining the two surfaces. Fixed storage:
+// never allocates.
+class Envelope {
+ public:
+  Envelope(bool keep_max, double range) noexcept
+      : keep_max_(keep_max), range_(range), best_(keep_max ? -kInf : kInf) {}
+  void Add(double value) noexcept {
+    if (!(std::abs(value) <= range_)) return;  // NaN (not covered) or outside the box
+    best_ = keep_max_ ? std::max(best_, value) : std::min(best_, value);
+  }
+  void AddEdge(const ParallaxEdge& e) noexcept {
+    if (!e.valid || !(std::abs(e.value) <= range_)) return;
+    const double g = std::hypot(e.gs, e.gt);
+    if (!(g <= e.limit)) return;
+    if (count_ < kEdges) {
+      edges_[count_++] = e;
+      return;
+    }
+    // Keep the nearest kEdges: replace the farthest.
+    int far = 0;
+    for (int i = 1; i < kEdges; ++i) {
+      if (std::hypot(edges_[i].gs, edges_[i].gt) > std::hypot(edges_[far].gs, edges_[far].gt)) {
+        far = i;
+      }
+    }
+    if (g < std::hypot(edges_[far].gs, edges_[far].gt)) edges_[far] = e;
+  }
+  double Finish() const noexcept {
+    if (!std::isinf(best_) || count_ < 2) return best_;
+    double best = best_, best_gap = kInf;
+    for (int i = 0; i < count_; ++i) {
+      for (int j = i + 1; j < count_; ++j) {
+        const ParallaxEdge& A = edges_[i];
+        const ParallaxEdge& B = edges_[j];
+        if (!(A.gs * B.gs + A.gt * B.gt < 0.0)) continue;  // not on opposite sides
+        const double ga = std::hypot(A.gs, A.gt), gb = std::hypot(B.gs, B.gt);
+        if (!(ga + gb <= std::min(A.limit, B.limit)) || ga + gb > best_gap) continue;
+        best_gap = ga + gb;
+        best = (A.value * gb + B.value * ga) / (ga + gb);
+      }
+    }
+    return best;
+  }
+
+ private:
+  static constexpr int kEdges = 8;
+  bool keep_max_;
+  double range_;
+  double best_;
+  std::array<ParallaxEdge, kEdges> edges_{};
+  int count_ = 0;
+};
+
 double ValueAt(const Projected& P, const HeightField& texture, double s, double t, int level,
-               double cell_m, int parallax_iterations = 12) noexcept {
-  if (P.parallax && level == 0) return ParallaxValue(P, texture, s, t, parallax_iterations);
+               double cell_m, int parallax_iterations = 12,
+               ParallaxEdge* edge = nullptr) noexcept {
+  if (edge != nullptr) edge->valid = false;
+  if (P.parallax && level == 0) return ParallaxValue(P, texture, s, t, parallax_iterations, edge);
   if (s < P.x0 - 1e-12 || s > P.x1 + 1e-12 || t < P.y0 - 1e-12 || t > P.y1 + 1e-12) {
     return std::numeric_limits<double>::quiet_NaN();
   }
@@ -187,13 +280,13 @@ double ValueAt(const Projected& P, const HeightField& texture, double s, double 
 double HeightOver(std::span<const Projected> list, const HeightField& texture, bool keep_max,
                   double range, double s, double t, int level, double cell_m,
                   int parallax_iterations = 12) noexcept {
-  double best = keep_max ? -kInf : kInf;
+  Envelope envelope(keep_max, range);
+  ParallaxEdge edge;
   for (const Projected& P : list) {
-    const double value = ValueAt(P, texture, s, t, level, cell_m, parallax_iterations);
-    if (!(std::abs(value) <= range)) continue;  // NaN (not covered) or outside the box
-    best = keep_max ? std::max(best, value) : std::min(best, value);
+    envelope.Add(ValueAt(P, texture, s, t, level, cell_m, parallax_iterations, &edge));
+    envelope.AddEdge(edge);
   }
-  return best;
+  return envelope.Finish();
 }
 
 // Window coordinates (m) of cell `index`'s centre.
@@ -247,17 +340,16 @@ void NormalFactorRange(const Projected& P, double& lo, double& hi) noexcept {
 double PatchHeightAt(const HapticModel& model, const RigidTransform& X_WO,
                      std::span<const int> triangles, const ContactWindow& window, PatchSide side,
                      double s_m, double t_m, int level, bool parallax) noexcept {
-  const bool keep_max = side == PatchSide::kEnvironment;
-  double best = keep_max ? -kInf : kInf;
+  Envelope envelope(side == PatchSide::kEnvironment, window.depth_range_m());
+  ParallaxEdge edge;
   Projected P;
   for (const int f : triangles) {
     if (f < 0 || static_cast<std::size_t>(f) >= model.triangles.size()) continue;
     if (!ProjectTriangle(model, X_WO, window, f, side, P, parallax && level == 0)) continue;
-    const double value = ValueAt(P, model.texture, s_m, t_m, level, window.cell_size_m());
-    if (!(std::abs(value) <= window.depth_range_m())) continue;
-    best = keep_max ? std::max(best, value) : std::min(best, value);
+    envelope.Add(ValueAt(P, model.texture, s_m, t_m, level, window.cell_size_m(), 12, &edge));
+    envelope.AddEdge(edge);
   }
-  return best;
+  return envelope.Finish();
 }
 
 void DepthRefinementOptions::Validate() const {

@@ -217,6 +217,8 @@ class DepthRefiner {
     // displaced surface's lateral reach (m) that widened the box.
     double nu[3], nv[3];
     double reach;
+    // The texture's largest |h| under it (m; HeightField::MaxAbsOver).
+    double max_abs_h;
     bool parallax;
     double inv_area;
     float tu[3], tv[3];
