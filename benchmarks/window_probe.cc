@@ -3,15 +3,21 @@
 // (PatchHeightAt at level 0 and at the grid's mip level), and the largest b − a a dense level-0
 // scan of the whole window finds, beside what the method reported (contacts.csv delta_m). Tells a
 // search that missed a peak the models hold (the scan finds more than the method reported) from
-// models that do not hold it (the scan finds less than the truth).
+// models that do not hold it (the scan finds less than the truth). Also the full-resolution
+// surfaces' own heights at the truth's maximum, the models' surface error (MeasureSurfaceError)
+// within 2 mm of it, and the same reads and scan with parallax (DepthRefinementOptions::parallax,
+// issue 32's twelfth stop).
 //
 // Usage: window_probe --out-dir FRONTIER_OUT --scene fig77 --setting default --pose 0 --contact 1
 //        [--models seed|product] [--scan N] [--cache-dir DIR]
+// Debugging: WINDOW_PROBE_TRIANGLES=1 lists every triangle under the point (its coarse height,
+// N·n, texture height and the render's value) and every triangle whose parallax alone holds it;
+// WINDOW_PROBE_AT_MM=S,T probes window point (S, T) mm instead of the truth's maximum.
 
 #include <CLI/CLI.hpp>
 #include <cmath>
-#include <cstdlib>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <limits>
 #include <map>
@@ -20,8 +26,8 @@
 #include <vector>
 
 #include "haptic_core/accuracy/ground_truth_depth.h"
-#include "haptic_core/model_build/surface_error.h"
 #include "haptic_core/depth_refinement.h"
+#include "haptic_core/model_build/surface_error.h"
 #include "haptic_core/penetration_depth.h"
 #include "slave_sim/benchmark_scenes.h"
 
@@ -108,7 +114,7 @@ int main(int argc, char** argv) {
     const ht::HapticModel& env = *sc.haptic.touchables.at(0).model;
     const ht::RayCastSurface tool_rays(*sc.tool_mesh_Ft), env_rays(*sc.object_mesh_Fe);
     ht::GroundTruthDepthSolver truth(tool_rays, env_rays);
-    const ht::GroundTruthDepth d = truth.ConvergedDepth(X_WFt, X_WO, w);
+    ht::GroundTruthDepth d = truth.ConvergedDepth(X_WFt, X_WO, w);
     std::printf("method (contacts.csv): delta %.1f um; its truth on the window %.1f um\n",
                 Num(row, "delta_m") * 1e6, Num(row, "delta_gt_m") * 1e6);
     std::printf("truth: delta %.1f um at (%.3f, %.3f) mm on the window (M %d)\n", d.depth_m * 1e6,
@@ -134,7 +140,8 @@ int main(int argc, char** argv) {
         ht::SurfaceErrorParams sp;
         sp.samples = 2048;
         sp.region_radius_m = 2e-3;
-        const glm::dvec3 hit_W = is_tool ? q_W + (ta - R) * w.normal_W : q_W + (R - tb) * w.normal_W;
+        const glm::dvec3 hit_W =
+            is_tool ? q_W + (ta - R) * w.normal_W : q_W + (R - tb) * w.normal_W;
         sp.region_center_O = is_tool ? X_TW * hit_W : X_FeW * hit_W;
         const ht::SurfaceErrorReport e = ht::MeasureSurfaceError(
             is_tool ? tool : env, is_tool ? tool_T : *sc.object_mesh_Fe, sp);
@@ -144,6 +151,11 @@ int main(int argc, char** argv) {
             is_tool ? "tool" : "object", e.p50_m * 1e6, e.p95_m * 1e6, e.max_m * 1e6,
             e.outside_p99_m * 1e6, e.share_outside);
       }
+    }
+    if (const char* at = std::getenv("WINDOW_PROBE_AT_MM")) {  // probe this point instead
+      double ps = 0.0, pt = 0.0;
+      if (std::sscanf(at, "%lf,%lf", &ps, &pt) == 2) d.at_uv_m = {ps * 1e-3, pt * 1e-3};
+      std::printf("probing (%.3f, %.3f) mm instead of the truth's maximum\n", ps, pt);
     }
     std::vector<int> tool_tris, env_tris;
     ht::SelectPatchTriangles(tool, X_WT, w, ht::PatchSide::kTool, w.cell_size_m(), tool_tris);
@@ -156,10 +168,12 @@ int main(int argc, char** argv) {
       for (std::size_t i = 0; i < all_env.size(); ++i) all_env[i] = static_cast<int>(i);
       const double b = ht::PatchHeightAt(env, X_WO, all_env, w, ht::PatchSide::kEnvironment,
                                          d.at_uv_m.x, d.at_uv_m.y, 0);
-      const double a = ht::PatchHeightAt(tool, X_WT, all_tool, w, ht::PatchSide::kTool,
-                                         d.at_uv_m.x, d.at_uv_m.y, 0);
-      std::printf("models at the truth's maximum over all their triangles: object b %.1f um, "
-                  "tool a %.1f um\n", b * 1e6, a * 1e6);
+      const double a = ht::PatchHeightAt(tool, X_WT, all_tool, w, ht::PatchSide::kTool, d.at_uv_m.x,
+                                         d.at_uv_m.y, 0);
+      std::printf(
+          "models at the truth's maximum over all their triangles: object b %.1f um, "
+          "tool a %.1f um\n",
+          b * 1e6, a * 1e6);
     }
     if (std::getenv("WINDOW_PROBE_TRIANGLES") != nullptr) {
       // Every object triangle under the truth's maximum: its coarse height along n, N·n, the
@@ -170,18 +184,21 @@ int main(int argc, char** argv) {
         for (std::size_t f = 0; f < m.triangles.size(); ++f) {
           glm::dvec3 p[3];
           double x[3], y[3], dd[3], nn[3];
-          for (int c = 0; c < 3; ++c) {
-            p[c] = X * m.vertices_O[m.triangles[f][c]] - w.center_W;
-            x[c] = glm::dot(p[c], w.axis_u_W);
-            y[c] = glm::dot(p[c], w.axis_v_W);
-            dd[c] = glm::dot(p[c], w.normal_W);
-            nn[c] = glm::dot(X.rotation * m.corner_normals_O[3 * f + c], w.normal_W);
+          for (int k = 0; k < 3; ++k) {
+            p[k] = X * m.vertices_O[m.triangles[f][k]] - w.center_W;
+            x[k] = glm::dot(p[k], w.axis_u_W);
+            y[k] = glm::dot(p[k], w.axis_v_W);
+            dd[k] = glm::dot(p[k], w.normal_W);
+            nn[k] = glm::dot(X.rotation * m.corner_normals_O[3 * f + k], w.normal_W);
           }
           {
             const std::vector<int> one{static_cast<int>(f)};
-            const double v1 = ht::PatchHeightAt(m, X, one, w, is_tool ? ht::PatchSide::kTool : ht::PatchSide::kEnvironment, d.at_uv_m.x, d.at_uv_m.y, 0, true);
+            const double v1 = ht::PatchHeightAt(
+                m, X, one, w, is_tool ? ht::PatchSide::kTool : ht::PatchSide::kEnvironment,
+                d.at_uv_m.x, d.at_uv_m.y, 0, true);
             if (std::isfinite(v1) && std::abs(v1) < 5e-3)
-              std::printf("  [any] %s tri %zu parallax alone %.1f um textured %d\n", is_tool ? "tool" : "object", f, v1 * 1e6, int(m.textured[f]));
+              std::printf("  [any] %s tri %zu parallax alone %.1f um textured %d\n",
+                          is_tool ? "tool" : "object", f, v1 * 1e6, int(m.textured[f]));
           }
           const double area = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]);
           if (std::abs(area) < 1e-18) continue;
@@ -193,42 +210,19 @@ int main(int argc, char** argv) {
           const glm::dvec3 cr = glm::cross(p[1] - p[0], p[2] - p[0]);
           const double facing = glm::dot(cr, w.normal_W) / glm::length(cr);
           const double hc = b0 * dd[0] + b1 * dd[1] + b2 * dd[2];
-          const float u = static_cast<float>(b0 * m.corner_uvs[3 * f].x + b1 * m.corner_uvs[3 * f + 1].x + b2 * m.corner_uvs[3 * f + 2].x);
-          const float v = static_cast<float>(b0 * m.corner_uvs[3 * f].y + b1 * m.corner_uvs[3 * f + 1].y + b2 * m.corner_uvs[3 * f + 2].y);
+          const float u =
+              static_cast<float>(b0 * m.corner_uvs[3 * f].x + b1 * m.corner_uvs[3 * f + 1].x +
+                                 b2 * m.corner_uvs[3 * f + 2].x);
+          const float v =
+              static_cast<float>(b0 * m.corner_uvs[3 * f].y + b1 * m.corner_uvs[3 * f + 1].y +
+                                 b2 * m.corner_uvs[3 * f + 2].y);
           const double h = m.textured[f] ? m.texture.SampleAt(0, m.texture.level(0), u, v) : 0.0;
           const double ndn = b0 * nn[0] + b1 * nn[1] + b2 * nn[2];
-          // Parallax: the coarse point q whose displaced point q + h(q)·N(q) lies on the ray
-          // through (s, t) along n, by fixed-point steps (barycentrics extrapolated).
-          double pv = NAN;
-          {
-            glm::dvec3 N[3];
-            for (int c = 0; c < 3; ++c) N[c] = X.rotation * m.corner_normals_O[3 * f + c];
-            double qs = s0, qt = t0;
-            for (int it = 0; it < 12; ++it) {
-              const double c0 = ((x[1] - qs) * (y[2] - qt) - (x[2] - qs) * (y[1] - qt)) / area;
-              const double c1 = ((x[2] - qs) * (y[0] - qt) - (x[0] - qs) * (y[2] - qt)) / area;
-              const double c2 = 1.0 - c0 - c1;
-              const float uu = static_cast<float>(c0 * m.corner_uvs[3 * f].x + c1 * m.corner_uvs[3 * f + 1].x + c2 * m.corner_uvs[3 * f + 2].x);
-              const float vv = static_cast<float>(c0 * m.corner_uvs[3 * f].y + c1 * m.corner_uvs[3 * f + 1].y + c2 * m.corner_uvs[3 * f + 2].y);
-              const double hh = m.textured[f] ? m.texture.SampleAt(0, m.texture.level(0), uu, vv) : 0.0;
-              const glm::dvec3 Nq = glm::normalize(c0 * N[0] + c1 * N[1] + c2 * N[2]);
-              const double ds = hh * glm::dot(Nq, w.axis_u_W), dt = hh * glm::dot(Nq, w.axis_v_W);
-              pv = (c0 * dd[0] + c1 * dd[1] + c2 * dd[2] + hh * glm::dot(Nq, w.normal_W));
-              const double ns = s0 - ds, nt = t0 - dt;
-              if (it < 11) { qs = 0.5 * qs + 0.5 * ns; qt = 0.5 * qt + 0.5 * nt; }
-              if (it == 11) std::printf("    parallax: q off by %.1f um, bary %.2f %.2f %.2f\n",
-                  std::hypot(ns - qs, nt - qt) * 1e6, c0, c1, c2);
-            }
-          }
-          std::printf("  parallax value %.1f um\n", pv * 1e6);
-          {
-            const std::vector<int> one{static_cast<int>(f)};
-            std::printf("  PatchHeightAt parallax on this triangle alone: %.1f um\n",
-                        ht::PatchHeightAt(m, X, one, w, is_tool ? ht::PatchSide::kTool : ht::PatchSide::kEnvironment, s0, t0, 0, true) * 1e6);
-          }
-          std::printf("  %s tri %zu facing %+.3f coarse %.1f um h %.1f um N.n %.3f value %.1f um textured %d\n",
-                      is_tool ? "tool" : "object", f, facing, hc * 1e6, h * 1e6, ndn,
-                      (hc + h * ndn) * 1e6, int(m.textured[f]));
+          std::printf(
+              "  %s tri %zu facing %+.3f coarse %.1f um h %.1f um N.n %.3f value %.1f um textured "
+              "%d\n",
+              is_tool ? "tool" : "object", f, facing, hc * 1e6, h * 1e6, ndn, (hc + h * ndn) * 1e6,
+              int(m.textured[f]));
         }
       }
     }
@@ -247,28 +241,30 @@ int main(int argc, char** argv) {
                                          d.at_uv_m.x, d.at_uv_m.y, 0, true);
       const double a = ht::PatchHeightAt(tool, X_WT, tool_tris, w, ht::PatchSide::kTool,
                                          d.at_uv_m.x, d.at_uv_m.y, 0, true);
-      std::printf("models at the truth's maximum, level 0 with parallax: object b %.1f um, tool a "
-                  "%.1f um, b - a %.1f um\n", b * 1e6, a * 1e6, (b - a) * 1e6);
+      std::printf(
+          "models at the truth's maximum, level 0 with parallax: object b %.1f um, tool a "
+          "%.1f um, b - a %.1f um\n",
+          b * 1e6, a * 1e6, (b - a) * 1e6);
     }
     for (const bool parallax : {false, true}) {
-    double best = -std::numeric_limits<double>::infinity(), best_s = 0.0, best_t = 0.0;
-    for (int i = 0; i < scan; ++i) {
-      for (int j = 0; j < scan; ++j) {
-        const double s = ((i + 0.5) / scan - 0.5) * extent, t = ((j + 0.5) / scan - 0.5) * extent;
-        const double b = ht::PatchHeightAt(env, X_WO, env_tris, w, ht::PatchSide::kEnvironment,
-                                           s, t, 0, parallax);
-        const double a =
-            ht::PatchHeightAt(tool, X_WT, tool_tris, w, ht::PatchSide::kTool, s, t, 0, parallax);
-        if (std::isfinite(a) && std::isfinite(b) && b - a > best) {
-          best = b - a;
-          best_s = s;
-          best_t = t;
+      double best = -std::numeric_limits<double>::infinity(), best_s = 0.0, best_t = 0.0;
+      for (int i = 0; i < scan; ++i) {
+        for (int j = 0; j < scan; ++j) {
+          const double s = ((i + 0.5) / scan - 0.5) * extent, t = ((j + 0.5) / scan - 0.5) * extent;
+          const double b = ht::PatchHeightAt(env, X_WO, env_tris, w, ht::PatchSide::kEnvironment, s,
+                                             t, 0, parallax);
+          const double a =
+              ht::PatchHeightAt(tool, X_WT, tool_tris, w, ht::PatchSide::kTool, s, t, 0, parallax);
+          if (std::isfinite(a) && std::isfinite(b) && b - a > best) {
+            best = b - a;
+            best_s = s;
+            best_t = t;
+          }
         }
       }
-    }
-    std::printf("level-0 scan%s (%d x %d): largest b - a %.1f um at (%.3f, %.3f) mm\n",
-                parallax ? " with parallax" : "", scan, scan, best * 1e6, best_s * 1e3,
-                best_t * 1e3);
+      std::printf("level-0 scan%s (%d x %d): largest b - a %.1f um at (%.3f, %.3f) mm\n",
+                  parallax ? " with parallax" : "", scan, scan, best * 1e6, best_s * 1e3,
+                  best_t * 1e3);
     }
   } catch (const std::exception& e) {
     std::fprintf(stderr, "window_probe: error: %s\n", e.what());

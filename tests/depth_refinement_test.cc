@@ -22,6 +22,7 @@
 #include "haptic_core/contact_linearization.h"
 #include "haptic_core/contact_model.h"
 #include "haptic_core/demo/procedural_models.h"
+#include "haptic_core/height_field.h"
 #include "haptic_core/penetration_depth.h"
 #include "haptic_core/penetration_depth_backend.h"
 #include "test_scenes.h"
@@ -477,6 +478,38 @@ TEST(DepthRefinement, ParallaxIsTheRendersFormWhereTheNormalIsTheWindows) {
     EXPECT_NEAR(PatchHeightAt(env, EnvironmentPose(), all, w, PatchSide::kEnvironment, s, t, 0,
                               /*parallax=*/true),
                 render, 1e-12);
+  }
+}
+
+// A convex crease whose two faces keep their own corner normals (a roof of slope α, constant
+// height h0): the offset planes z = ∓x·tanα + h0/cosα part over |x| < h0·sinα, where no
+// displaced surface crosses the line along z. The skirt bridges the crack at the planes' edge
+// height h0·cosα (both edges stand there), so the envelope has no hole; outside it the offset
+// planes are read exactly.
+TEST(DepthRefinement, ParallaxBridgesTheCrackAtACreaseWithSplitNormals) {
+  constexpr double kL = 0.01, kH0 = 0.5e-3;
+  const double alpha = 20.0 * std::numbers::pi / 180.0, c = std::cos(alpha), sn = std::sin(alpha);
+  HapticModel roof;
+  roof.name = "roof";
+  roof.vertices_O = {
+      {0.0, -kL, 0.0}, {0.0, kL, 0.0}, {-kL * c, 0.0, -kL * sn}, {kL * c, 0.0, -kL * sn}};
+  roof.triangles = {{0, 1, 2}, {1, 0, 3}};
+  const glm::dvec3 nA(-sn, 0.0, c), nB(sn, 0.0, c);
+  roof.corner_normals_O = {nA, nA, nA, nB, nB, nB};
+  roof.corner_uvs = {{0.1f, 0.1f}, {0.4f, 0.1f}, {0.1f, 0.4f},
+                     {0.6f, 0.6f}, {0.9f, 0.6f}, {0.6f, 0.9f}};
+  roof.textured = {1, 1};
+  roof.texel_size_m = {kL / 4.0, kL / 4.0};
+  roof.texture =
+      HeightField(16, 16, std::vector<float>(256, static_cast<float>(kH0)), false, false);
+  const ContactWindow w = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.02, 50);
+  const std::vector<int> all = AllTriangles(roof);
+  const RigidTransform X;
+  const double gap = kH0 * sn;
+  for (const double x : {-3.0 * gap, -1.5 * gap, -0.5 * gap, 0.0, 0.7 * gap, 2.0 * gap}) {
+    const double h = PatchHeightAt(roof, X, all, w, PatchSide::kEnvironment, x, 1e-3, 0, true);
+    const double expected = std::abs(x) < gap ? kH0 * c : -std::abs(x) * std::tan(alpha) + kH0 / c;
+    EXPECT_NEAR(h, expected, 0.2e-6) << x;
   }
 }
 

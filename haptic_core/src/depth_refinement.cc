@@ -91,12 +91,17 @@ bool ProjectTriangle(const HapticModel& m, const RigidTransform& X, const Contac
     const double c_min = std::min({out.cos01, out.cos02, out.cos12});
     lateral = std::min(1.0, lateral / std::sqrt(std::max((1.0 + 2.0 * c_min) / 3.0, 1e-12)));
     out.max_abs_h = static_cast<double>(m.texture.MaxAbsOver(
-                              0, std::min({out.tu[0], out.tu[1], out.tu[2]}),
-                              std::min({out.tv[0], out.tv[1], out.tv[2]}),
-                              std::max({out.tu[0], out.tu[1], out.tu[2]}),
-                              std::max({out.tv[0], out.tv[1], out.tv[2]})));
+        0, std::min({out.tu[0], out.tu[1], out.tu[2]}), std::min({out.tv[0], out.tv[1], out.tv[2]}),
+        std::max({out.tu[0], out.tu[1], out.tu[2]}), std::max({out.tv[0], out.tv[1], out.tv[2]})));
     if (!std::isfinite(out.max_abs_h)) out.max_abs_h = 0.0;
     out.reach = lateral * out.max_abs_h;
+    // Each edge's altitude over the opposite corner (m): barycentric b_c · altitude_c is the
+    // signed distance from edge c (the one opposite corner c) on the window plane.
+    for (int c = 0; c < 3; ++c) {
+      const int e0 = (c + 1) % 3, e1 = (c + 2) % 3;
+      const double len = std::hypot(out.x[e1] - out.x[e0], out.y[e1] - out.y[e0]);
+      out.altitude[c] = len > 0.0 ? std::abs(area) / len : 0.0;
+    }
     out.x0 -= out.reach;
     out.x1 += out.reach;
     out.y0 -= out.reach;
@@ -117,7 +122,9 @@ bool ProjectTriangle(const HapticModel& m, const RigidTransform& X, const Contac
 // bridge a crack (Envelope). Level 0, bilinear.
 struct ParallaxEdge {
   double value = 0.0, gs = 0.0, gt = 0.0;
-  double limit = 0.0;  // the widest crack it may bridge: 2·max |h| of its triangle (m)
+  double qs = 0.0, qt = 0.0;  // the clamped coarse point on the window plane (m)
+  double limit = 0.0;         // the widest crack it may bridge: 2·|h| there (m)
+  double texel = 0.0;         // its triangle's level-0 texel (m)
   bool valid = false;
 };
 
@@ -126,6 +133,16 @@ double ParallaxValue(const Projected& P, const HeightField& texture, double s, d
   constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
   if (edge != nullptr) edge->valid = false;
   if (s < P.x0 - 1e-12 || s > P.x1 + 1e-12 || t < P.y0 - 1e-12 || t > P.y1 + 1e-12) return kNaN;
+  {
+    // Farther than the reach from the triangle's projection: no foot q on it.
+    const double b0 = ((P.x[1] - s) * (P.y[2] - t) - (P.x[2] - s) * (P.y[1] - t)) * P.inv_area;
+    const double b1 = ((P.x[2] - s) * (P.y[0] - t) - (P.x[0] - s) * (P.y[2] - t)) * P.inv_area;
+    const double b2 = 1.0 - b0 - b1;
+    if (b0 * P.altitude[0] < -P.reach || b1 * P.altitude[1] < -P.reach ||
+        b2 * P.altitude[2] < -P.reach) {
+      return kNaN;
+    }
+  }
   const HeightFieldLevel& L = texture.level(0);
   const double tol = std::max(0.01 * P.texel_m, 1e-9);
   double qs = s, qt = t, omega = 1.0, previous = kInf, gs_last = 0.0, gt_last = 0.0;
@@ -164,7 +181,7 @@ double ParallaxValue(const Projected& P, const HeightField& texture, double s, d
     if (g2 <= tol * tol) return value;
     if (clamped && was_clamped) {
       // Pushed out twice running: the line meets the displaced surface beyond this edge.
-      if (edge != nullptr) *edge = {value, gs, gt, 2.0 * P.max_abs_h, true};
+      if (edge != nullptr) *edge = {value, gs, gt, qs, qt, 2.0 * std::abs(h), P.texel_m, true};
       return kNaN;
     }
     was_clamped = clamped;
@@ -188,10 +205,11 @@ double ParallaxValue(const Projected& P, const HeightField& texture, double s, d
 // the tool, within the box ±range). With parallax, where no displaced surface crosses the line
 // (a crack: at a crease the corner normals of two triangles differ, and their displaced surfaces
 // part by |h|·|N_A − N_B|), the crack is bridged: of the triangles whose line met their surface
-// beyond an edge, the two nearest on opposite sides (misses g_A·g_B < 0, |g_A| + |g_B| at most
-// 2·max |h| of either: the widest gap |h|·|N_A − N_B| can open) give the height interpolated
-// linearly across the gap between their edges, a skirt joining the two surfaces. Fixed storage:
-// never allocates.
+// beyond an edge, two stopped at one point of a shared edge (within kCreaseTexels texels), on
+// opposite sides (misses g_A·g_B < 0) and no farther apart than the widest gap that height can
+// open (|g_A| + |g_B| ≤ 2|h|), the nearest such pair, give the height interpolated linearly
+// across the gap between their edges: a skirt joining the two surfaces. Fixed storage: never
+// allocates.
 class Envelope {
  public:
   Envelope(bool keep_max, double range) noexcept
@@ -225,8 +243,12 @@ class Envelope {
         const ParallaxEdge& A = edges_[i];
         const ParallaxEdge& B = edges_[j];
         if (!(A.gs * B.gs + A.gt * B.gt < 0.0)) continue;  // not on opposite sides
+        // One crease: both lines were stopped at one point of a shared edge.
+        if (!(std::hypot(A.qs - B.qs, A.qt - B.qt) <= kCreaseTexels * std::max(A.texel, B.texel))) {
+          continue;
+        }
         const double ga = std::hypot(A.gs, A.gt), gb = std::hypot(B.gs, B.gt);
-        if (!(ga + gb <= std::min(A.limit, B.limit)) || ga + gb > best_gap) continue;
+        if (!(ga + gb <= std::max(A.limit, B.limit)) || ga + gb > best_gap) continue;
         best_gap = ga + gb;
         best = (A.value * gb + B.value * ga) / (ga + gb);
       }
@@ -236,6 +258,7 @@ class Envelope {
 
  private:
   static constexpr int kEdges = 8;
+  static constexpr double kCreaseTexels = 2.0;
   bool keep_max_;
   double range_;
   double best_;
@@ -244,8 +267,7 @@ class Envelope {
 };
 
 double ValueAt(const Projected& P, const HeightField& texture, double s, double t, int level,
-               double cell_m, int parallax_iterations = 12,
-               ParallaxEdge* edge = nullptr) noexcept {
+               double cell_m, int parallax_iterations = 12, ParallaxEdge* edge = nullptr) noexcept {
   if (edge != nullptr) edge->valid = false;
   if (P.parallax && level == 0) return ParallaxValue(P, texture, s, t, parallax_iterations, edge);
   if (s < P.x0 - 1e-12 || s > P.x1 + 1e-12 || t < P.y0 - 1e-12 || t > P.y1 + 1e-12) {

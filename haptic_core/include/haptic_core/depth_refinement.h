@@ -219,6 +219,8 @@ class DepthRefiner {
     double reach;
     // The texture's largest |h| under it (m; HeightField::MaxAbsOver).
     double max_abs_h;
+    // The projection's altitude over each corner (m), for the reach test.
+    double altitude[3];
     bool parallax;
     double inv_area;
     float tu[3], tv[3];
