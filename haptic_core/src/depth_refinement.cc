@@ -99,7 +99,8 @@ bool ProjectTriangle(const HapticModel& m, const RigidTransform& X, const Contac
     // signed distance from edge c (the one opposite corner c) on the window plane.
     for (int c = 0; c < 3; ++c) {
       const int e0 = (c + 1) % 3, e1 = (c + 2) % 3;
-      const double len = std::hypot(out.x[e1] - out.x[e0], out.y[e1] - out.y[e0]);
+      const double dx = out.x[e1] - out.x[e0], dy = out.y[e1] - out.y[e0];
+      const double len = std::sqrt(dx * dx + dy * dy);
       out.altitude[c] = len > 0.0 ? std::abs(area) / len : 0.0;
     }
     out.x0 -= out.reach;
@@ -116,10 +117,10 @@ bool ProjectTriangle(const HapticModel& m, const RigidTransform& X, const Contac
 // from q = (s, t), q kept on the triangle (barycentrics clamped), ω from the last two steps (a
 // secant along the step); settled when the step is under a hundredth of a level-0 texel (the
 // height's error is that times the surface's slope). NaN where it does not settle within
-// `iterations`, or where q is pushed out of the triangle twice running (the line meets the
-// displaced surface beyond this triangle's edge): then `edge`, when given, gets the clamped
-// point's height and the lateral miss g = (s, t) − (q + h·N⊥) (m), which the envelope uses to
-// bridge a crack (Envelope). Level 0, bilinear.
+// `iterations`, or where q is clamped onto the triangle and the step leads out again (the line
+// meets the displaced surface beyond this triangle's edge): then `edge`, when given, gets the
+// clamped point's height and the lateral miss g = (s, t) − (q + h·N⊥) (m), which the envelope uses
+// to bridge a crack (Envelope). Level 0, bilinear.
 struct ParallaxEdge {
   double value = 0.0, gs = 0.0, gt = 0.0;
   double qs = 0.0, qt = 0.0;  // the clamped coarse point on the window plane (m)
@@ -146,7 +147,6 @@ double ParallaxValue(const Projected& P, const HeightField& texture, double s, d
   const HeightFieldLevel& L = texture.level(0);
   const double tol = std::max(0.01 * P.texel_m, 1e-9);
   double qs = s, qt = t, omega = 1.0, previous = kInf, gs_last = 0.0, gt_last = 0.0;
-  bool was_clamped = false;
   for (int k = 0; k < iterations; ++k) {
     double b0 = ((P.x[1] - qs) * (P.y[2] - qt) - (P.x[2] - qs) * (P.y[1] - qt)) * P.inv_area;
     double b1 = ((P.x[2] - qs) * (P.y[0] - qt) - (P.x[0] - qs) * (P.y[2] - qt)) * P.inv_area;
@@ -179,12 +179,6 @@ double ParallaxValue(const Projected& P, const HeightField& texture, double s, d
     const double gs = s - h * Nu - qs, gt = t - h * Nv - qt;
     const double g2 = gs * gs + gt * gt;
     if (g2 <= tol * tol) return value;
-    if (clamped && was_clamped) {
-      // Pushed out twice running: the line meets the displaced surface beyond this edge.
-      if (edge != nullptr) *edge = {value, gs, gt, qs, qt, 2.0 * std::abs(h), P.texel_m, true};
-      return kNaN;
-    }
-    was_clamped = clamped;
     if (k > 0) {
       // The step's ratio to the last one along it estimates the damped map's contraction
       // ρ = 1 − ω(1 − λ); ω/(1 − ρ) = 1/(1 − λ) is the step that would land on the fixed point
@@ -195,6 +189,19 @@ double ParallaxValue(const Projected& P, const HeightField& texture, double s, d
     previous = g2;
     gs_last = gs;
     gt_last = gt;
+    if (clamped) {
+      // Clamped here and the next point outside too: the line meets the displaced surface
+      // beyond this edge (the next step would clamp again).
+      const double ns = qs + omega * gs, nt = qt + omega * gt;
+      const double c0 =
+          ((P.x[1] - ns) * (P.y[2] - nt) - (P.x[2] - ns) * (P.y[1] - nt)) * P.inv_area;
+      const double c1 =
+          ((P.x[2] - ns) * (P.y[0] - nt) - (P.x[0] - ns) * (P.y[2] - nt)) * P.inv_area;
+      if (c0 < 0.0 || c1 < 0.0 || 1.0 - c0 - c1 < 0.0) {
+        if (edge != nullptr) *edge = {value, gs, gt, qs, qt, 2.0 * std::abs(h), P.texel_m, true};
+        return kNaN;
+      }
+    }
     qs += omega * gs;
     qt += omega * gt;
   }
@@ -219,21 +226,24 @@ class Envelope {
     best_ = keep_max_ ? std::max(best_, value) : std::min(best_, value);
   }
   void AddEdge(const ParallaxEdge& e) noexcept {
-    if (!e.valid || !(std::abs(e.value) <= range_)) return;
-    const double g = std::hypot(e.gs, e.gt);
+    // Only a point no displaced surface crosses needs a bridge: once one has, edges are moot.
+    if (!e.valid || !std::isinf(best_) || !(std::abs(e.value) <= range_)) return;
+    const double g = std::sqrt(e.gs * e.gs + e.gt * e.gt);
     if (!(g <= e.limit)) return;
     if (count_ < kEdges) {
-      edges_[count_++] = e;
+      edges_[count_] = e;
+      miss_[count_++] = g;
       return;
     }
     // Keep the nearest kEdges: replace the farthest.
     int far = 0;
     for (int i = 1; i < kEdges; ++i) {
-      if (std::hypot(edges_[i].gs, edges_[i].gt) > std::hypot(edges_[far].gs, edges_[far].gt)) {
-        far = i;
-      }
+      if (miss_[i] > miss_[far]) far = i;
     }
-    if (g < std::hypot(edges_[far].gs, edges_[far].gt)) edges_[far] = e;
+    if (g < miss_[far]) {
+      edges_[far] = e;
+      miss_[far] = g;
+    }
   }
   double Finish() const noexcept {
     if (!std::isinf(best_) || count_ < 2) return best_;
@@ -247,7 +257,7 @@ class Envelope {
         if (!(std::hypot(A.qs - B.qs, A.qt - B.qt) <= kCreaseTexels * std::max(A.texel, B.texel))) {
           continue;
         }
-        const double ga = std::hypot(A.gs, A.gt), gb = std::hypot(B.gs, B.gt);
+        const double ga = miss_[i], gb = miss_[j];
         if (!(ga + gb <= std::max(A.limit, B.limit)) || ga + gb > best_gap) continue;
         best_gap = ga + gb;
         best = (A.value * gb + B.value * ga) / (ga + gb);
@@ -263,6 +273,7 @@ class Envelope {
   double range_;
   double best_;
   std::array<ParallaxEdge, kEdges> edges_{};
+  std::array<double, kEdges> miss_{};  // |g| of each edge (m)
   int count_ = 0;
 };
 
