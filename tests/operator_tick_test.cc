@@ -326,5 +326,180 @@ TEST(OperatorTick, TheEnergyReserveKeepsEnergyNonNegativeAndCountsItsRefillApart
   }
 }
 
+// Issue 33's energy-paced switch, on the swaying press of the test above (models alternating
+// between two depths every 7 ticks, so that every other switch puts energy into the loop): the
+// blend steps that would create more than the loop has dissipated are held short, and the
+// passivity controller has less to remove (its damping and the guard's cut, energy and force),
+// with E ≥ 0, out ≤ in and no allocation either way.
+TEST(OperatorTick, AnEnergyPacedSwitchLeavesThePassivityControllerLessToRemove) {
+  double removed_j[2] = {0.0, 0.0}, removed_ns[2] = {0.0, 0.0};
+  for (const bool paced : {false, true}) {
+    OperatorTickConfig c = Config();
+    c.energy_paced_switch = paced;
+    OperatorTick tick(c, RigidTransform{}, ToolState{});
+    ArrivedModel walls[2] = {Wall(0), Wall(0)};
+    walls[1].model.contacts[0].depth_m = 2.3e-3;
+    double min_energy = 0.0;
+    std::int64_t allocations = 0;
+    for (int k = 0; k < 3000; ++k) {
+      const double t = k * kH, w = 2.0 * std::numbers::pi * 2.0;
+      OperatorTickInput in = Pressing(static_cast<std::int64_t>(k) * 1000000 + 1000000);
+      in.device.X_MH.translation.z = -10e-3 + 1e-3 * std::sin(w * t);
+      in.device.V_MH_M.linear.z = 1e-3 * w * std::cos(w * t);
+      ArrivedModel& wall = walls[(k / 7) % 2];
+      wall.tool_state_sent_ns = wall.built_local_ns = in.now_ns;
+      if (k % 7 == 0) in.arrived = &wall;
+      const std::int64_t before = Allocations();
+      tick.Step(in);
+      allocations += Allocations() - before;
+      min_energy = std::min(min_energy, tick.passivity().observed_energy_j());
+    }
+    const PassivityController& p = tick.passivity();
+    EXPECT_GE(min_energy, -1e-12) << paced;
+    EXPECT_LE(p.energy_out_j(), p.energy_in_j() + 1e-12) << paced;
+    EXPECT_EQ(allocations, 0) << paced;
+    removed_j[paced] = p.dissipated_j() + p.scaled_away_j();
+    removed_ns[paced] = p.force_damped_away_ns() + p.force_scaled_away_ns();
+    if (paced) {
+      EXPECT_GT(tick.counters().paced_ticks, 0);
+    } else {
+      EXPECT_EQ(tick.counters().paced_ticks, 0);
+    }
+  }
+  ASSERT_GT(removed_j[0], 0.0) << "the plain switch should leave the controller work";
+  EXPECT_LT(removed_j[1], 0.5 * removed_j[0]);
+  EXPECT_LT(removed_ns[1], removed_ns[0]);
+}
+
+// The hold is bounded. The handle is lowered onto a wall from above (the wall taken in free
+// space creates nothing, so nothing is paced), and the press settles: the coupling's damping has
+// dissipated some energy, the loop's margin. A wall 8 mm deeper is then far beyond it: its blend
+// goes only as far as the margin allows and is held short for energy_paced_max_hold_ticks
+// ticks. A model arriving meanwhile replaces the pair's deeper model: the collapse takes energy
+// out and creates none. The deep wall again, held from the start, goes on at the plain rate once
+// the hold runs out, and model_blend_ticks later it is wholly in use (the contact wrench the step
+// used is the new model's alone at the tool's pose; two routes: the step and
+// EvaluateContactModel).
+TEST(OperatorTick, AnEnergyPacedSwitchIsHeldNoLongerThanItsBound) {
+  OperatorTickConfig c = Config();
+  c.energy_paced_switch = true;
+  c.energy_paced_max_hold_ticks = 10;
+  c.passivity_reserve_j = 0.0;
+  ToolState start;
+  start.X_WT.translation = {0, 0, 5e-3};  // 3 mm above the wall's surface (z = 2 mm)
+  OperatorTick tick(c, RigidTransform{}, start);
+  std::int64_t now = 0;
+  ArrivedModel wall = Wall(now);
+  OperatorTickInput in = Pressing(now);
+  // Lowered from +5 to −4 mm over 0.5 s, then held: about 5 N, within the device's force cap
+  // (a clamped force would do less work at the port than the coupling stores).
+  for (int k = 0; k < 800; ++k) {
+    in.now_ns = now += 1000000;
+    const double s = std::min(1.0, k / 500.0);
+    in.device.X_MH.translation.z = 5e-3 - 9e-3 * s;
+    in.device.V_MH_M.linear.z = k < 500 ? -9e-3 / 0.5 : 0.0;
+    wall.tool_state_sent_ns = wall.built_local_ns = now;  // fresh: the safety stage fades a
+    in.arrived = k % 100 == 0 ? &wall : nullptr;          // model older than its timeout
+    tick.Step(in);
+  }
+  in.arrived = nullptr;
+  EXPECT_EQ(tick.counters().paced_ticks, 0) << "a wall taken in free space creates nothing";
+  ArrivedModel deep = Wall(now);
+  deep.model.contacts[0].depth_m = 10e-3;
+  const double energy_j = tick.passivity().observed_energy_j();  // E ≥ E − S, the margin
+  ASSERT_GT(energy_j, 0.0);
+  const double dU = EvaluateContactModel(deep.model, tick.tool().X_WT).potential_energy_j -
+                    EvaluateContactModel(wall.model, tick.tool().X_WT).potential_energy_j;
+  ASSERT_GT(dU, 4.0 * energy_j) << "the deep wall should be far beyond the margin";
+  in.arrived = &deep;
+  for (int k = 0; k < 10; ++k) {
+    in.now_ns = now += 1000000;
+    tick.Step(in);
+    in.arrived = nullptr;
+  }
+  EXPECT_EQ(tick.counters().paced_ticks, 10);
+  EXPECT_EQ(tick.counters().paced_hold_expired_ticks, 0);
+  EXPECT_LT(tick.counters().switch_energy_created_j, energy_j) << "at most the margin";
+  EXPECT_GT(tick.counters().switch_energy_created_j, 0.0) << "the margin was used";
+  // Mid-blend, the first wall again: the pair collapses onto its shallower (older) model.
+  const double created = tick.counters().switch_energy_created_j;
+  const double absorbed = tick.counters().switch_energy_absorbed_j;
+  in.arrived = &wall;
+  in.now_ns = now += 1000000;
+  tick.Step(in);
+  EXPECT_EQ(tick.counters().paced_collapses_to_older, 1);
+  EXPECT_EQ(tick.counters().switch_energy_created_j, created);
+  EXPECT_LT(tick.counters().switch_energy_absorbed_j, absorbed);
+  for (int k = 0; k < 4; ++k) {  // the same wall blends in at the plain rate: U does not change
+    in.now_ns = now += 1000000;
+    tick.Step(in);
+    in.arrived = nullptr;
+  }
+  EXPECT_EQ(tick.counters().paced_ticks, 10);
+  // The deep wall again, held from the start: 10 ticks short, then the plain rate.
+  in.arrived = &deep;
+  for (int k = 0; k < 10 + c.model_blend_ticks - 1; ++k) {
+    in.now_ns = now += 1000000;
+    tick.Step(in);
+    in.arrived = nullptr;
+  }
+  EXPECT_EQ(tick.counters().paced_ticks, 20);
+  EXPECT_GE(tick.counters().paced_hold_expired_ticks, 1);
+  in.now_ns = now += 1000000;
+  const RigidTransform X_before = tick.tool().X_WT;
+  const OperatorTickOutput out = tick.Step(in);
+  const Wrench expected =
+      EvaluateContactModel(deep.model, X_before, 1.0, c.max_contact_force_n).F_T_W;
+  EXPECT_NEAR(out.step.F_contact_T_W.force.z, expected.force.z, 1e-9 * std::abs(expected.force.z));
+}
+
+// The energy-paced switch's ledger, where it has a known value. In free space, with the tool
+// starting on the handle, the loop's margin (the energy put in through the coupling less what the
+// loop stores) is what the coupling's damping and the implicit step have dissipated: never below
+// zero, growing while the hand sways. With the tool pressed still on a wall, a switch to a deeper
+// wall in one tick takes the change in contact potential at the tool's pose from it (two routes:
+// the margin before and after, and EvaluateContactModel).
+TEST(OperatorTick, TheLoopsMarginIsWhatItDissipatedAndASwitchTakesItsEnergyFromIt) {
+  {
+    ToolState start;
+    start.X_WT.translation = {0.0, 0.0, 23e-3};  // on the handle's first pose
+    OperatorTick tick(Config(), RigidTransform{}, start);
+    double min_margin = 0.0;
+    for (int k = 0; k < 3000; ++k) {
+      const double t = k * kH, w = 2.0 * std::numbers::pi * 1.5;
+      OperatorTickInput in = Pressing(static_cast<std::int64_t>(k + 1) * 1000000);
+      in.device.X_MH.translation = {0.02 * std::sin(w * t), 0.0, 20e-3 + 3e-3 * std::cos(w * t)};
+      in.device.V_MH_M.linear = {0.02 * w * std::cos(w * t), 0.0, -3e-3 * w * std::sin(w * t)};
+      tick.Step(in);
+      min_margin = std::min(min_margin, tick.loop_margin_j());
+    }
+    EXPECT_GE(min_margin, -1e-12);
+    EXPECT_GT(tick.loop_margin_j(), 1e-4);
+  }
+  OperatorTickConfig c = Config();
+  c.model_blend_ticks = 1;
+  OperatorTick tick(c, RigidTransform{}, ToolState{});
+  std::int64_t now = 0;
+  ArrivedModel wall = Wall(now);
+  OperatorTickInput in = Pressing(now);
+  in.device.X_MH.translation.z = -4e-3;
+  for (int k = 0; k < 1000; ++k) {  // settle (about 5 N)
+    in.now_ns = now += 1000000;
+    wall.tool_state_sent_ns = wall.built_local_ns = now;
+    in.arrived = k % 100 == 0 ? &wall : nullptr;
+    tick.Step(in);
+  }
+  ArrivedModel deeper = Wall(now);
+  deeper.model.contacts[0].depth_m = 2.2e-3;
+  const double dU = EvaluateContactModel(deeper.model, tick.tool().X_WT).potential_energy_j -
+                    EvaluateContactModel(wall.model, tick.tool().X_WT).potential_energy_j;
+  ASSERT_GT(dU, 0.0);
+  const double before = tick.loop_margin_j();
+  in.arrived = &deeper;
+  in.now_ns = now += 1000000;
+  tick.Step(in);
+  EXPECT_NEAR(tick.loop_margin_j() - before, -dU, 0.05 * dU);
+}
+
 }  // namespace
 }  // namespace ht
