@@ -72,10 +72,11 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
       }
     }
     if (take) {
-      // The model in use is blended out over the next ticks. Mid-blend, with the energy-paced
-      // switch, the pair collapses onto whichever of its models holds less energy at the tool's
-      // pose: U of the pair is a weighted mean of the two, so that choice creates none.
-      if (config_.energy_paced_switch && blend_weight_ < 1.0 &&
+      // The model in use is blended out over the next ticks. While the energy-paced switch
+      // holds a blend short, the pair collapses onto whichever of its models holds less energy
+      // at the tool's pose: U of the pair is a weighted mean of the two, so that choice
+      // creates none.
+      if (config_.energy_paced_switch && blend_weight_ < 1.0 && paced_hold_ticks_ > 0 &&
           ModelPotential(previous_model_, tool_.X_WT) < ModelPotential(model_, tool_.X_WT)) {
         ++counters_.paced_collapses_to_older;  // previous_model_ stays
       } else {
@@ -109,7 +110,15 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
     const bool blending = blend_weight_ < 1.0;
     if (blending) {
       blend_weight_ = NextBlendWeight(out.X_WH);
-      if (blend_weight_ >= 1.0) paced_hold_ticks_ = 0;
+      if (blend_weight_ >= 1.0) {
+        paced_hold_ticks_ = 0;
+        // What a blend could not pay from the margin (its hold ran out) is the passivity
+        // controller's to meet: the ledger does not carry it into the next switch's budget.
+        if (config_.energy_paced_switch) {
+          const double margin = loop_energy_in_j_ - LoopStoredEnergy(out.X_WH);
+          if (margin < 0.0) loop_energy_in_j_ -= margin;
+        }
+      }
     }
     AttributeSwitch(potential_changes, U_before, out.model_age_ms);  // at the weights stepped
     if (blending) {

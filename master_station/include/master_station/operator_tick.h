@@ -40,8 +40,11 @@ struct OperatorTickConfig {
   /// earlier switches created. While M − ΔU stays above the passivity reserve, the loop gives
   /// back no more than it was given: the energy a delayed model brings in is paid from what the
   /// loop has dissipated instead of being cut from the device's force later. A step that would
-  /// lower U goes at the plain rate, and a model that arrives mid-blend replaces whichever of
-  /// the blended pair holds more energy at the tool's pose (a collapse that creates none).
+  /// lower U goes at the plain rate; a model that arrives while a blend is held short replaces
+  /// whichever of the blended pair holds more energy at the tool's pose (a collapse that creates
+  /// none); what a blend could not pay when its hold ran out is left to the passivity controller
+  /// (the margin is set back to zero when that blend ends, not carried into the next budget).
+  /// docs/passivity/README.md has the delay grid: it helps at 150 ms and hurts at 25–75 ms.
   bool energy_paced_switch = false;
   /// Longest run of ticks a paced blend may be held short (≥ 1); then it goes on at the plain
   /// rate and the passivity controller meets what it creates, so that no model is held back
