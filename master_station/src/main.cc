@@ -234,16 +234,6 @@ int main(int argc, char** argv) {
                  "the most the reserve's refill may change the wrench, percent of it")
       ->check(CLI::Range(0.0, 99.0))
       ->capture_default_str();
-  bool energy_paced_switch = false;
-  app.add_flag("--energy-paced-switch", energy_paced_switch,
-               "pace each new contact model's blend by the energy the local loop has dissipated:\n"
-               "a switch that would put energy into the loop waits for the margin instead of\n"
-               "the passivity controller cutting the force later (issue 33)");
-  int energy_paced_max_hold_ms = ht::StationConfig{}.energy_paced_max_hold_ms;
-  app.add_option("--energy-paced-hold-ms", energy_paced_max_hold_ms,
-                 "longest a paced blend is held short before it goes on, ms")
-      ->check(CLI::Range(1, 1000))
-      ->capture_default_str();
   app.add_option("--model-timeout", model_timeout_s,
                  "fade the force to zero when the contact model is older than this, s")
       ->check(CLI::Range(0.01, 60.0))
@@ -353,8 +343,6 @@ int main(int argc, char** argv) {
     config.hunt_crossley_s_per_m = hunt_crossley;
     config.passivity_reserve_j = passivity_reserve_mj * 1e-3;
     config.passivity_refill_fraction = passivity_refill_pct / 100.0;
-    config.energy_paced_switch = energy_paced_switch;
-    config.energy_paced_max_hold_ms = energy_paced_max_hold_ms;
     config.safety.model_timeout_s = model_timeout_s;
     config.tool_state_deadband.weber_fraction =
         tool_state_deadband_pct.value_or(deadband_pct) / 100.0;

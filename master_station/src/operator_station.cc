@@ -115,10 +115,6 @@ void StationConfig::Validate() const {
     throw std::invalid_argument("passivity refill fraction must be within [0, 1), got " +
                                 std::to_string(passivity_refill_fraction));
   }
-  if (energy_paced_max_hold_ms < 1 || energy_paced_max_hold_ms > 1000) {
-    throw std::invalid_argument("the energy-paced switch's hold must be within 1..1000 ms, got " +
-                                std::to_string(energy_paced_max_hold_ms));
-  }
   if (max_grid < 0 || max_grid > 65535) throw std::invalid_argument("max grid must be 0..65535");
   coupling.Validate();
   safety.Validate();
@@ -361,9 +357,6 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   tick_config.passivity_max_damping_ns_per_m = 4.0 * caps.max_damping_ns_per_m;
   tick_config.passivity_reserve_j = config.passivity_reserve_j;
   tick_config.passivity_refill_fraction = config.passivity_refill_fraction;
-  tick_config.energy_paced_switch = config.energy_paced_switch;
-  tick_config.energy_paced_max_hold_ticks =
-      std::max(1, static_cast<int>(std::lround(config.energy_paced_max_hold_ms * 1e-3 / h)));
   tick_config.h_s = h;
   tick_config.max_contact_force_n = config.max_contact_force_n > 0.0
                                         ? config.max_contact_force_n
@@ -628,10 +621,6 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
          {{"below_50ms", tc.switch_energy_created_by_age_j[0]},
           {"50_to_150ms", tc.switch_energy_created_by_age_j[1]},
           {"above_150ms", tc.switch_energy_created_by_age_j[2]}}},
-        {"energy_paced_switch", config.energy_paced_switch},
-        {"paced_ticks", tc.paced_ticks},
-        {"paced_hold_expired_ticks", tc.paced_hold_expired_ticks},
-        {"paced_collapses_to_older", tc.paced_collapses_to_older},
         {"controller_removed_J", removed},
         {"created_over_removed", removed > 0.0 ? tc.switch_energy_created_j / removed : 0.0}};
   }

@@ -15,14 +15,11 @@ OperatorTick::OperatorTick(const OperatorTickConfig& config, const RigidTransfor
       safety_(config.safety),
       X_WM_(X_WM),
       tool_(tool_start),
-      X_WH_last_(tool_start.X_WT) {
+      X_WH_last_(tool_start.X_WT),
+      blend_tick_(config.model_blend_ticks) {
   if (config.model_blend_ticks < 1) {
     throw std::invalid_argument("model blend ticks must be >= 1, got " +
                                 std::to_string(config.model_blend_ticks));
-  }
-  if (config.energy_paced_max_hold_ticks < 1) {
-    throw std::invalid_argument("the energy-paced switch's hold must be >= 1 tick, got " +
-                                std::to_string(config.energy_paced_max_hold_ticks));
   }
   if (!(config.h_s > 0.0)) throw std::invalid_argument("tick length must be positive");
   passivity_.set_energy_reserve(config.passivity_reserve_j, config.passivity_refill_fraction);
@@ -46,14 +43,13 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
     workspace_shift_M_ = in.workspace_shift_M;
     model_ = ContactModel{};
     previous_model_ = ContactModel{};
-    blend_weight_ = 1.0;
-    paced_hold_ticks_ = 0;
+    blend_tick_ = config_.model_blend_ticks;
     ++counters_.workspace_jumps;
   }
 
   // The contact potential before a model or blend change (issue 33's attribution): evaluated
   // only on ticks that change it.
-  const bool potential_changes = in.arrived != nullptr || blend_weight_ < 1.0;
+  const bool potential_changes = in.arrived != nullptr || blend_tick_ < config_.model_blend_ticks;
   const double U_before = potential_changes ? LoopPotential(tool_.X_WT) : 0.0;
 
   // Stage 1: the contact model in use. A model that arrives is taken even while the device read
@@ -72,17 +68,8 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
       }
     }
     if (take) {
-      // The model in use is blended out over the next ticks. While the energy-paced switch
-      // holds a blend short, the pair collapses onto whichever of its models holds less energy
-      // at the tool's pose: U of the pair is a weighted mean of the two, so that choice
-      // creates none.
-      if (config_.energy_paced_switch && blend_weight_ < 1.0 && paced_hold_ticks_ > 0 &&
-          ModelPotential(previous_model_, tool_.X_WT) < ModelPotential(model_, tool_.X_WT)) {
-        ++counters_.paced_collapses_to_older;  // previous_model_ stays
-      } else {
-        previous_model_ = model_;
-      }
-      blend_weight_ = 0.0;
+      previous_model_ = model_;  // blended out over the next model_blend_ticks ticks
+      blend_tick_ = 0;
       model_ = in.arrived->model;
       model_stamp_ = *in.arrived;  // the stamp only: the model itself is in model_
       have_model_ = true;
@@ -107,32 +94,18 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
     V_WH_W = {X_WM_.rotation * in.device.V_MH_M.linear, X_WM_.rotation * in.device.V_MH_M.angular};
 
     // Stage 2: coupling and the implicit step against the (blended) model.
-    const bool blending = blend_weight_ < 1.0;
-    if (blending) {
-      blend_weight_ = NextBlendWeight(out.X_WH);
-      if (blend_weight_ >= 1.0) {
-        paced_hold_ticks_ = 0;
-        // What a blend could not pay from the margin (its hold ran out) is the passivity
-        // controller's to meet: the ledger does not carry it into the next switch's budget.
-        if (config_.energy_paced_switch) {
-          const double margin = loop_energy_in_j_ - LoopStoredEnergy(out.X_WH);
-          if (margin < 0.0) loop_energy_in_j_ -= margin;
-        }
-      }
-    }
+    const bool blending = blend_tick_ < config_.model_blend_ticks;
+    if (blending) ++blend_tick_;
     AttributeSwitch(potential_changes, U_before, out.model_age_ms);  // at the weights stepped
     if (blending) {
-      out.step = simulator_.StepBlended(tool_, out.X_WH, V_WH_W, model_, previous_model_,
-                                        blend_weight_, h);
+      out.step =
+          simulator_.StepBlended(tool_, out.X_WH, V_WH_W, model_, previous_model_,
+                                 static_cast<double>(blend_tick_) / config_.model_blend_ticks, h);
     } else {
       out.step = simulator_.Step(tool_, out.X_WH, V_WH_W, model_, 1.0, h);
     }
     if (!out.step.ok) ++counters_.nonfinite;
     if (out.step.saturated_contacts > 0) ++counters_.saturated_contact_ticks;
-    // The energy the hand put into the local loop through the coupling (what the loop may
-    // store or dissipate; the device's wrench after passivity and safety may differ).
-    const double loop_power_w = DevicePower(out.step.F_coupling_T_W, V_WH_W);
-    if (std::isfinite(loop_power_w)) loop_energy_in_j_ += loop_power_w * h;
     F_device_W = -out.step.F_coupling_T_W;
     if (!IsFinite(F_device_W)) {
       ++counters_.nonfinite;
@@ -160,60 +133,12 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
 }
 
 double OperatorTick::LoopPotential(const RigidTransform& X_WT) const noexcept {
-  const double w = std::clamp(blend_weight_, 0.0, 1.0);
+  const double w = std::min(1.0, static_cast<double>(blend_tick_) / config_.model_blend_ticks);
   const double max_force = simulator_.max_contact_force_n();
   double U = EvaluateContactModel(model_, X_WT, w, max_force).potential_energy_j;
   if (w < 1.0)
     U += EvaluateContactModel(previous_model_, X_WT, 1.0 - w, max_force).potential_energy_j;
   return U;
-}
-
-double OperatorTick::ModelPotential(const ContactModel& model,
-                                    const RigidTransform& X_WT) const noexcept {
-  return EvaluateContactModel(model, X_WT, 1.0, simulator_.max_contact_force_n())
-      .potential_energy_j;
-}
-
-double OperatorTick::LoopStoredEnergy(const RigidTransform& X_WH) const noexcept {
-  const VirtualCoupling& c = simulator_.coupling();
-  const Twist d = PoseDifference(X_WH, tool_.X_WT);
-  const double coupling = 0.5 * c.k_translation_n_per_m * glm::dot(d.linear, d.linear) +
-                          0.5 * c.k_rotation_nm_per_rad * glm::dot(d.angular, d.angular);
-  const ToolInertia& I = simulator_.inertia();
-  const glm::dvec3 w_T = glm::conjugate(tool_.X_WT.rotation) * tool_.V_WT_W.angular;
-  const double kinetic =
-      0.5 * I.mass_kg * glm::dot(tool_.V_WT_W.linear, tool_.V_WT_W.linear) +
-      0.5 * (I.inertia_diagonal_T.x * w_T.x * w_T.x + I.inertia_diagonal_T.y * w_T.y * w_T.y +
-             I.inertia_diagonal_T.z * w_T.z * w_T.z);
-  return coupling + kinetic + LoopPotential(tool_.X_WT);
-}
-
-double OperatorTick::NextBlendWeight(const RigidTransform& X_WH) noexcept {
-  const double plain = std::min(1.0, blend_weight_ + 1.0 / config_.model_blend_ticks);
-  // Snap the last step onto 1 (1/ticks need not add up to 1 exactly).
-  const double full = 1.0 - plain < 1e-9 ? 1.0 : plain;
-  if (!config_.energy_paced_switch) return full;
-  // U is linear in the weight (EvaluateContactModel scales each k_i, saturated contacts too),
-  // so the step creates (w' − w)·D with D the new model's U less the previous one's.
-  const double D = ModelPotential(model_, tool_.X_WT) - ModelPotential(previous_model_, tool_.X_WT);
-  if (!(D > 0.0)) {  // takes energy out, or none (NaN: no pacing on what cannot be judged)
-    paced_hold_ticks_ = 0;
-    return full;
-  }
-  const double margin =
-      loop_energy_in_j_ - LoopStoredEnergy(X_WH) - passivity_.energy_reserve_j();
-  const double allowed = std::max(0.0, margin) / D;
-  if (allowed >= full - blend_weight_) {
-    paced_hold_ticks_ = 0;
-    return full;
-  }
-  if (paced_hold_ticks_ >= config_.energy_paced_max_hold_ticks) {
-    ++counters_.paced_hold_expired_ticks;  // held long enough: the controller meets the rest
-    return full;
-  }
-  ++paced_hold_ticks_;
-  ++counters_.paced_ticks;
-  return blend_weight_ + allowed;
 }
 
 void OperatorTick::AttributeSwitch(bool potential_changes, double U_before,

@@ -114,11 +114,6 @@ struct StationConfig {
   /// The largest change of the wrench the reserve's refill may make, a fraction of the wrench
   /// (in [0, 1)).
   double passivity_refill_fraction = 0.05;
-  /// Energy-paced model switch (OperatorTickConfig::energy_paced_switch, issue 33): a blend step
-  /// that would put energy into the local loop goes only as far as the energy the loop has
-  /// dissipated allows, held at most `energy_paced_max_hold_ms` (1..1000) before it goes on.
-  bool energy_paced_switch = false;
-  int energy_paced_max_hold_ms = 50;
   /// The safety stage before the device (force/torque caps are further bounded by the device's
   /// capabilities; the contact model's age is measured on the local clock from its send time).
   SafetyLimits safety{.max_force_n = 1e9, .max_torque_nm = 1e9, .model_timeout_s = 0.5};

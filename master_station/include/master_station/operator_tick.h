@@ -30,26 +30,6 @@ struct OperatorTickConfig {
   SafetyLimits safety;
   /// Ticks over which a newly arrived contact model is blended in (≥ 1).
   int model_blend_ticks = 4;
-  /// Energy-paced model switch (issue 33; off = the plain blend). A blend step that would raise
-  /// the contact potential at the tool's pose (ΔU > 0: energy the switch puts into the local
-  /// loop) goes only as far as the loop's energy margin allows: the margin M = E_loop − S is the
-  /// energy the hand has put into the loop through the coupling (E_loop = Σ F_coupling·V_hand·h,
-  /// before passivity and safety change the device's wrench) less all the loop stores now (S: the
-  /// coupling's springs, the tool's kinetic energy and the blended contact potential), i.e. what
-  /// the coupling, the contacts' damping and the implicit step have dissipated so far less what
-  /// earlier switches created. While M − ΔU stays above the passivity reserve, the loop gives
-  /// back no more than it was given: the energy a delayed model brings in is paid from what the
-  /// loop has dissipated instead of being cut from the device's force later. A step that would
-  /// lower U goes at the plain rate; a model that arrives while a blend is held short replaces
-  /// whichever of the blended pair holds more energy at the tool's pose (a collapse that creates
-  /// none); what a blend could not pay when its hold ran out is left to the passivity controller
-  /// (the margin is set back to zero when that blend ends, not carried into the next budget).
-  /// docs/passivity/README.md has the delay grid: it helps at 150 ms and hurts at 25–75 ms.
-  bool energy_paced_switch = false;
-  /// Longest run of ticks a paced blend may be held short (≥ 1); then it goes on at the plain
-  /// rate and the passivity controller meets what it creates, so that no model is held back
-  /// longer than this (ms at 1 kHz).
-  int energy_paced_max_hold_ticks = 50;
   /// Run the passivity controller (else the observer only watches).
   bool passivity = true;
   /// Cap on the damping the passivity controller adds (N·s/m; 0 = none).
@@ -131,13 +111,6 @@ struct OperatorTickCounters {
   /// The created energy by the age of the model taken (ms at its arrival, the tick's
   /// model_age_ms): below 50 ms, 50–150 ms, above 150 ms.
   double switch_energy_created_by_age_j[3] = {0.0, 0.0, 0.0};
-  /// The energy-paced switch (OperatorTickConfig::energy_paced_switch): ticks whose blend step
-  /// was shortened or held for want of margin, ticks where the hold ran out and the step went
-  /// on at the plain rate, and mid-blend arrivals that replaced the newer model of the pair (it
-  /// held more energy than the older one).
-  std::int64_t paced_ticks = 0;
-  std::int64_t paced_hold_expired_ticks = 0;
-  std::int64_t paced_collapses_to_older = 0;
 };
 
 /// The operator's tick. Construction may allocate; Step never allocates, locks, blocks or throws.
@@ -162,11 +135,6 @@ class OperatorTick {
   const ModelStamp& model_stamp() const noexcept { return model_stamp_; }
   /// The contact model in use (the newest taken; empty before the first).
   const ContactModel& model() const noexcept { return model_; }
-  /// The local loop's energy margin now (J): Σ F_coupling·V_hand·h less what the loop stores
-  /// (OperatorTickConfig::energy_paced_switch). Within one model it is what the loop has
-  /// dissipated, never negative but for the integration's own error; each switch takes its ΔU
-  /// from it.
-  double loop_margin_j() const noexcept { return loop_energy_in_j_ - LoopStoredEnergy(X_WH_last_); }
 
  private:
   OperatorTickConfig config_;
@@ -177,30 +145,16 @@ class OperatorTick {
   ToolState tool_;
   RigidTransform X_WH_last_;
   ContactModel model_{}, previous_model_{};
-  /// The blend's weight on model_ (previous_model_ has the rest); 1 once blended in.
-  double blend_weight_ = 1.0;
-  /// Consecutive ticks the paced blend was held short.
-  int paced_hold_ticks_ = 0;
-  /// Σ F_coupling·V_hand·h (J): the energy the hand has put into the local loop through the
-  /// coupling, whatever the later stages did to the device's wrench.
-  double loop_energy_in_j_ = 0.0;
+  int blend_tick_;
   bool have_model_ = false;
   ModelStamp model_stamp_{};
   glm::dvec3 workspace_shift_M_{0.0};
   glm::dvec3 jumped_from_W_{0.0};
   bool after_jump_ = false;
   OperatorTickCounters counters_;
-  /// U of the blended pair at X_WT: model_ at weight blend_weight_, previous_model_ at the
+  /// U of the blended pair at X_WT: model_ at weight blend_tick_/ticks, previous_model_ at the
   /// rest (ContactModelEvaluation::potential_energy_j; J).
   double LoopPotential(const RigidTransform& X_WT) const noexcept;
-  /// U of one model alone (weight 1) at X_WT (J).
-  double ModelPotential(const ContactModel& model, const RigidTransform& X_WT) const noexcept;
-  /// S: the energy the local loop stores with the handle at X_WH: the coupling's translational and rotational springs, the tool's kinetic energy and
-  /// LoopPotential at the tool's pose (J).
-  double LoopStoredEnergy(const RigidTransform& X_WH) const noexcept;
-  /// The blend's next weight: one plain step (1/model_blend_ticks), shortened by the
-  /// energy-paced switch when it is on and the step would create more than the margin allows.
-  double NextBlendWeight(const RigidTransform& X_WH) noexcept;
   /// Adds the tick's ΔU (LoopPotential now less `U_before`, evaluated before stage 1 when
   /// `potential_changes`) to the switch counters; model_age_ms bins the created energy.
   void AttributeSwitch(bool potential_changes, double U_before, double model_age_ms) noexcept;

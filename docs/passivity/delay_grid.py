@@ -1,13 +1,18 @@
 #!/usr/bin/python3
 """Issue 33's passivity grid, two or more operator settings alternated cell by cell (one session,
-one binary): one-way delay x loss on the gear (block-on-gear, fig75) and the stiff wall, each run
-`deploy/run-loopback --duration D --pd-backend cpu --impair delay=..,loss=..,seed=..` with the
-arm's --master-args. Prints per run and per arm: the device force's impulse, the share of it the
-passivity stage took (guard cut, damping, refill), out <= in, the switch energy created and the
-energy-paced switch's counters, and model age p50 / p99 (trace.csv model_age_ms).
+one binary, or one binary per arm with --arm-build): one-way delay x loss on the gear
+(block-on-gear, fig75) and the stiff wall, each run `deploy/run-loopback --duration D
+--pd-backend cpu --impair delay=..,loss=..,seed=..` with the arm's --master-args. Prints per run:
+the device force's impulse (trace.csv), the share of it the passivity stage took (the guard's
+cut, the damping, the reserve's refill; summary.json passivity), out <= in, the energy the model
+switches created and the controller removed (passivity.attribution), model age p50 / p99
+(trace.csv model_age_ms) and the device force's one-tick steps above 0.2 N; then a table of
+guard + damping per cell and arm. grid.json keeps every figure.
 
-Usage: paced_grid.py OUT_DIR [--delays 0,25,75,150] [--losses 0,10,20] [--wall 50:10,150:10]
-         [--duration 4] [--repeats 1] --arm NAME="--master-args..." [--arm ...]
+Usage: delay_grid.py OUT_DIR [--delays 0,25,75,150] [--losses 0,10,20] [--wall 50:10,150:10]
+         [--duration 4] [--repeats 1] [--build-dir build] --arm NAME="--master-args..." [--arm ...]
+Example (the record in README.md): delay_grid.py /tmp/grid --losses 0,10 --duration 5 \
+         --arm base="" --arm reserve20="--passivity-reserve-mj 20"
 """
 import argparse
 import csv
@@ -48,8 +53,6 @@ def read_run(d):
         "out_le_in": s.get("operator_energy_out_J", 0) <= s.get("operator_energy_in_J", 0) + 1e-12,
         "created_J": a.get("switch_energy_created_J", float("nan")),
         "removed_J": a.get("controller_removed_J", float("nan")),
-        "paced_ticks": a.get("paced_ticks", 0),
-        "hold_expired": a.get("paced_hold_expired_ticks", 0),
         "age_p50": quantile(ages, 0.5),
         "age_p99": quantile(ages, 0.99),
         "steps_0.2N": steps,
@@ -93,7 +96,7 @@ def main():
                 print(f"{scene} d{delay} l{loss} {name}: impulse {m['impulse_Ns']:.3f} N·s, guard "
                       f"{m['guard_pct']:.1f} %, damping {m['damping_pct']:.1f} %, refill {m['refill_pct']:.1f} %, "
                       f"out<=in {m['out_le_in']}, created {m['created_J']:.4f} J, removed {m['removed_J']:.4f} J, "
-                      f"paced {m['paced_ticks']} (expired {m['hold_expired']}), age p50/p99 "
+                      f"age p50/p99 "
                       f"{m['age_p50']:.1f}/{m['age_p99']:.1f} ms, steps>0.2N {m['steps_0.2N']}", flush=True)
     with open(os.path.join(o.out, "grid.json"), "w") as f:
         json.dump(results, f, indent=1)
