@@ -58,6 +58,14 @@ const HapticModel& Seed(SeedModel which, double* bake_error_m = nullptr) {
   return *slot.first;
 }
 
+// The full-resolution mesh a seed model is baked from, as a ray-casting surface (built once).
+const RayCastSurface& FullResolutionSurface(SeedModel which) {
+  static std::map<SeedModel, std::unique_ptr<RayCastSurface>> surfaces;
+  auto& slot = surfaces[which];
+  if (!slot) slot = std::make_unique<RayCastSurface>(MakeSeedModelFullResolution(which));
+  return *slot;
+}
+
 constexpr SeedModel kAll[] = {SeedModel::kBlock,   SeedModel::kGear, SeedModel::kHammer,
                               SeedModel::kCadPart, SeedModel::kFile, SeedModel::kTorus};
 
@@ -400,18 +408,12 @@ TEST(TextureStageParity, RefinedDepthLiesBetweenTheGridAndTheFullResolutionTruth
   int checked = 0;
   double raised_sum = 0.0, worst_below_grid = 0.0, worst_above_truth = 0.0;
   double grid_error_sum = 0.0, refined_error_sum = 0.0;
-  std::map<SeedModel, std::unique_ptr<RayCastSurface>> surfaces;
-  const auto surface = [&](SeedModel m) -> const RayCastSurface& {
-    auto& s = surfaces[m];
-    if (!s) s = std::make_unique<RayCastSurface>(MakeSeedModelFullResolution(m));
-    return *s;
-  };
   for (const SeedModel which : kAll) {
     double env_bake = 0.0, tool_bake = 0.0;
     const HapticModel& env = Seed(which, &env_bake);
     for (const SeedModel tool_which : {SeedModel::kFile, SeedModel::kBlock}) {
       const HapticModel& tool = Seed(tool_which, &tool_bake);
-      GroundTruthDepthSolver truth(surface(tool_which), surface(which));
+      GroundTruthDepthSolver truth(FullResolutionSurface(tool_which), FullResolutionSurface(which));
       for (int trial = 0; trial < 4; ++trial) {
         const Contact c = RandomContact(tool, env, rng, 50);
         const ContactQuery q = QueryFor(env, c);
@@ -463,18 +465,12 @@ TEST(TextureStageParity, ParallaxDepthIsBoundedByTheTruthAndCloserToItThanTheRen
   DepthRefiner parallax(o);
   int checked = 0;
   double render_error_sum = 0.0, parallax_error_sum = 0.0, worst_above_truth = 0.0;
-  std::map<SeedModel, std::unique_ptr<RayCastSurface>> surfaces;
-  const auto surface = [&](SeedModel m) -> const RayCastSurface& {
-    auto& s = surfaces[m];
-    if (!s) s = std::make_unique<RayCastSurface>(MakeSeedModelFullResolution(m));
-    return *s;
-  };
   for (const SeedModel which : kAll) {
     double env_bake = 0.0, tool_bake = 0.0;
     const HapticModel& env = Seed(which, &env_bake);
     for (const SeedModel tool_which : {SeedModel::kFile, SeedModel::kBlock}) {
       const HapticModel& tool = Seed(tool_which, &tool_bake);
-      GroundTruthDepthSolver truth(surface(tool_which), surface(which));
+      GroundTruthDepthSolver truth(FullResolutionSurface(tool_which), FullResolutionSurface(which));
       for (int trial = 0; trial < 4; ++trial) {
         const Contact c = RandomContact(tool, env, rng, 50);
         const ContactQuery q = QueryFor(env, c);

@@ -26,6 +26,22 @@ constexpr int kBaseSeedSamples = 5;
 
 using Projected = DepthRefiner::Projected;
 
+// The barycentric coordinates of (s, t) on a projected triangle (outside it too).
+void Barycentric(const Projected& P, double s, double t, double& b0, double& b1,
+                 double& b2) noexcept {
+  b0 = ((P.x[1] - s) * (P.y[2] - t) - (P.x[2] - s) * (P.y[1] - t)) * P.inv_area;
+  b1 = ((P.x[2] - s) * (P.y[0] - t) - (P.x[0] - s) * (P.y[2] - t)) * P.inv_area;
+  b2 = 1.0 - b0 - b1;
+}
+
+// The least length of the normalized interpolation's denominator |Σλ·n_c| over the triangle:
+// |Σλ·n_c|² = (1 − c)Σλ² + c with c the smallest corner cosine is at least (1 + 2c)/3 (floored
+// at 1e-12 where c < −0.5). Dividing by it can grow a normal component by at most its inverse.
+double MinNormalInterpolationLength(const Projected& P) noexcept {
+  const double c = std::min({P.cos01, P.cos02, P.cos12});
+  return std::sqrt(std::max((1.0 + 2.0 * c) / 3.0, 1e-12));
+}
+
 // Triangle f of `m` posed at X on window w, when it faces the side's way (as the render tests
 // it) and its projection is not edge-on.
 bool ProjectTriangle(const HapticModel& m, const RigidTransform& X, const ContactWindow& w, int f,
@@ -88,13 +104,12 @@ bool ProjectTriangle(const HapticModel& m, const RigidTransform& X, const Contac
       out.parallax = false;  // N ∥ n at every corner: the render's form is exact
       return true;
     }
-    const double c_min = std::min({out.cos01, out.cos02, out.cos12});
-    lateral = std::min(1.0, lateral / std::sqrt(std::max((1.0 + 2.0 * c_min) / 3.0, 1e-12)));
-    out.max_abs_h = static_cast<double>(m.texture.MaxAbsOver(
+    lateral = std::min(1.0, lateral / MinNormalInterpolationLength(out));
+    double max_abs_h = static_cast<double>(m.texture.MaxAbsOver(
         0, std::min({out.tu[0], out.tu[1], out.tu[2]}), std::min({out.tv[0], out.tv[1], out.tv[2]}),
         std::max({out.tu[0], out.tu[1], out.tu[2]}), std::max({out.tv[0], out.tv[1], out.tv[2]})));
-    if (!std::isfinite(out.max_abs_h)) out.max_abs_h = 0.0;
-    out.reach = lateral * out.max_abs_h;
+    if (!std::isfinite(max_abs_h)) max_abs_h = 0.0;
+    out.reach = lateral * max_abs_h;
     // Each edge's altitude over the opposite corner (m): barycentric b_c · altitude_c is the
     // signed distance from edge c (the one opposite corner c) on the window plane.
     for (int c = 0; c < 3; ++c) {
@@ -136,9 +151,8 @@ double ParallaxValue(const Projected& P, const HeightField& texture, double s, d
   if (s < P.x0 - 1e-12 || s > P.x1 + 1e-12 || t < P.y0 - 1e-12 || t > P.y1 + 1e-12) return kNaN;
   {
     // Farther than the reach from the triangle's projection: no foot q on it.
-    const double b0 = ((P.x[1] - s) * (P.y[2] - t) - (P.x[2] - s) * (P.y[1] - t)) * P.inv_area;
-    const double b1 = ((P.x[2] - s) * (P.y[0] - t) - (P.x[0] - s) * (P.y[2] - t)) * P.inv_area;
-    const double b2 = 1.0 - b0 - b1;
+    double b0, b1, b2;
+    Barycentric(P, s, t, b0, b1, b2);
     if (b0 * P.altitude[0] < -P.reach || b1 * P.altitude[1] < -P.reach ||
         b2 * P.altitude[2] < -P.reach) {
       return kNaN;
@@ -148,9 +162,8 @@ double ParallaxValue(const Projected& P, const HeightField& texture, double s, d
   const double tol = std::max(0.01 * P.texel_m, 1e-9);
   double qs = s, qt = t, omega = 1.0, previous = kInf, gs_last = 0.0, gt_last = 0.0;
   for (int k = 0; k < iterations; ++k) {
-    double b0 = ((P.x[1] - qs) * (P.y[2] - qt) - (P.x[2] - qs) * (P.y[1] - qt)) * P.inv_area;
-    double b1 = ((P.x[2] - qs) * (P.y[0] - qt) - (P.x[0] - qs) * (P.y[2] - qt)) * P.inv_area;
-    double b2 = 1.0 - b0 - b1;
+    double b0, b1, b2;
+    Barycentric(P, qs, qt, b0, b1, b2);
     bool clamped = false;
     if (b0 < 0.0 || b1 < 0.0 || b2 < 0.0) {
       clamped = true;
@@ -192,12 +205,9 @@ double ParallaxValue(const Projected& P, const HeightField& texture, double s, d
     if (clamped) {
       // Clamped here and the next point outside too: the line meets the displaced surface
       // beyond this edge (the next step would clamp again).
-      const double ns = qs + omega * gs, nt = qt + omega * gt;
-      const double c0 =
-          ((P.x[1] - ns) * (P.y[2] - nt) - (P.x[2] - ns) * (P.y[1] - nt)) * P.inv_area;
-      const double c1 =
-          ((P.x[2] - ns) * (P.y[0] - nt) - (P.x[0] - ns) * (P.y[2] - nt)) * P.inv_area;
-      if (c0 < 0.0 || c1 < 0.0 || 1.0 - c0 - c1 < 0.0) {
+      double c0, c1, c2;
+      Barycentric(P, qs + omega * gs, qt + omega * gt, c0, c1, c2);
+      if (c0 < 0.0 || c1 < 0.0 || c2 < 0.0) {
         if (edge != nullptr) *edge = {value, gs, gt, qs, qt, 2.0 * std::abs(h), P.texel_m, true};
         return kNaN;
       }
@@ -278,15 +288,14 @@ class Envelope {
 };
 
 double ValueAt(const Projected& P, const HeightField& texture, double s, double t, int level,
-               double cell_m, int parallax_iterations = 12, ParallaxEdge* edge = nullptr) noexcept {
+               double cell_m, int parallax_iterations, ParallaxEdge* edge) noexcept {
   if (edge != nullptr) edge->valid = false;
   if (P.parallax && level == 0) return ParallaxValue(P, texture, s, t, parallax_iterations, edge);
   if (s < P.x0 - 1e-12 || s > P.x1 + 1e-12 || t < P.y0 - 1e-12 || t > P.y1 + 1e-12) {
     return std::numeric_limits<double>::quiet_NaN();
   }
-  const double b0 = ((P.x[1] - s) * (P.y[2] - t) - (P.x[2] - s) * (P.y[1] - t)) * P.inv_area;
-  const double b1 = ((P.x[2] - s) * (P.y[0] - t) - (P.x[0] - s) * (P.y[2] - t)) * P.inv_area;
-  const double b2 = 1.0 - b0 - b1;
+  double b0, b1, b2;
+  Barycentric(P, s, t, b0, b1, b2);
   if (b0 < kEdgeTolerance || b1 < kEdgeTolerance || b2 < kEdgeTolerance) {
     return std::numeric_limits<double>::quiet_NaN();
   }
@@ -312,7 +321,7 @@ double ValueAt(const Projected& P, const HeightField& texture, double s, double 
 // tool, within the box ±range.
 double HeightOver(std::span<const Projected> list, const HeightField& texture, bool keep_max,
                   double range, double s, double t, int level, double cell_m,
-                  int parallax_iterations = 12) noexcept {
+                  int parallax_iterations) noexcept {
   Envelope envelope(keep_max, range);
   ParallaxEdge edge;
   for (const Projected& P : list) {
@@ -342,14 +351,6 @@ bool Overlaps(const Projected& P, double s0, double s1, double t0, double t1) no
   return !(P.x1 < s0 || P.x0 > s1 || P.y1 < t0 || P.y0 > t1);
 }
 
-// The barycentric coordinates of (s, t) on a projected triangle (outside it too).
-void Barycentric(const Projected& P, double s, double t, double& b0, double& b1,
-                 double& b2) noexcept {
-  b0 = ((P.x[1] - s) * (P.y[2] - t) - (P.x[2] - s) * (P.y[1] - t)) * P.inv_area;
-  b1 = ((P.x[2] - s) * (P.y[0] - t) - (P.x[0] - s) * (P.y[2] - t)) * P.inv_area;
-  b2 = 1.0 - b0 - b1;
-}
-
 // Bounds of ValueAt's normal factor N·n over the triangle (N the normalized interpolation of the
 // corner normals): the numerator Σλ·nn_c lies between the corners' nn, and |Σλ·n_c|² =
 // (1 − c)Σλ² + c with c the smallest corner cosine is at least (1 + 2c)/3, so dividing by it
@@ -363,7 +364,7 @@ void NormalFactorRange(const Projected& P, double& lo, double& hi) noexcept {
     hi = 1.0;
     return;
   }
-  const double inv_len = 1.0 / std::sqrt(std::max((1.0 + 2.0 * c) / 3.0, 1e-12));
+  const double inv_len = 1.0 / MinNormalInterpolationLength(P);
   lo = std::max(-1.0, nn_lo >= 0.0 ? nn_lo : nn_lo * inv_len);
   hi = std::min(1.0, nn_hi >= 0.0 ? nn_hi * inv_len : nn_hi);
 }
@@ -379,7 +380,8 @@ double PatchHeightAt(const HapticModel& model, const RigidTransform& X_WO,
   for (const int f : triangles) {
     if (f < 0 || static_cast<std::size_t>(f) >= model.triangles.size()) continue;
     if (!ProjectTriangle(model, X_WO, window, f, side, P, parallax && level == 0)) continue;
-    envelope.Add(ValueAt(P, model.texture, s_m, t_m, level, window.cell_size_m(), 12, &edge));
+    envelope.Add(ValueAt(P, model.texture, s_m, t_m, level, window.cell_size_m(),
+                         DepthRefinementOptions{}.parallax_iterations, &edge));
     envelope.AddEdge(edge);
   }
   return envelope.Finish();

@@ -217,8 +217,6 @@ class DepthRefiner {
     // displaced surface's lateral reach (m) that widened the box.
     double nu[3], nv[3];
     double reach;
-    // The texture's largest |h| under it (m; HeightField::MaxAbsOver).
-    double max_abs_h;
     // The projection's altitude over each corner (m), for the reach test.
     double altitude[3];
     bool parallax;
