@@ -191,15 +191,13 @@ int main(int argc, char** argv) {
             dd[k] = glm::dot(p[k], w.normal_W);
             nn[k] = glm::dot(X.rotation * m.corner_normals_O[3 * f + k], w.normal_W);
           }
-          {
-            const std::vector<int> one{static_cast<int>(f)};
-            const double v1 = ht::PatchHeightAt(
-                m, X, one, w, is_tool ? ht::PatchSide::kTool : ht::PatchSide::kEnvironment,
-                d.at_uv_m.x, d.at_uv_m.y, 0, true);
-            if (std::isfinite(v1) && std::abs(v1) < 5e-3)
-              std::printf("  [any] %s tri %zu parallax alone %.1f um textured %d\n",
-                          is_tool ? "tool" : "object", f, v1 * 1e6, int(m.textured[f]));
-          }
+          const std::vector<int> one{static_cast<int>(f)};
+          const ht::PatchSide side = is_tool ? ht::PatchSide::kTool : ht::PatchSide::kEnvironment;
+          const double v1 =
+              ht::PatchHeightAt(m, X, one, w, side, d.at_uv_m.x, d.at_uv_m.y, 0, true);
+          if (std::isfinite(v1) && std::abs(v1) < 5e-3)
+            std::printf("  [any] %s tri %zu parallax alone %.1f um textured %d\n",
+                        is_tool ? "tool" : "object", f, v1 * 1e6, int(m.textured[f]));
           const double area = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]);
           if (std::abs(area) < 1e-18) continue;
           const double s0 = d.at_uv_m.x, t0 = d.at_uv_m.y;
@@ -217,11 +215,14 @@ int main(int argc, char** argv) {
               static_cast<float>(b0 * m.corner_uvs[3 * f].y + b1 * m.corner_uvs[3 * f + 1].y +
                                  b2 * m.corner_uvs[3 * f + 2].y);
           const double h = m.textured[f] ? m.texture.SampleAt(0, m.texture.level(0), u, v) : 0.0;
+          // N·n of the corners' plain interpolation (the render normalizes it; its value below is
+          // the library's own, PatchHeightAt).
           const double ndn = b0 * nn[0] + b1 * nn[1] + b2 * nn[2];
+          const double render = ht::PatchHeightAt(m, X, one, w, side, s0, t0, 0);
           std::printf(
-              "  %s tri %zu facing %+.3f coarse %.1f um h %.1f um N.n %.3f value %.1f um textured "
-              "%d\n",
-              is_tool ? "tool" : "object", f, facing, hc * 1e6, h * 1e6, ndn, (hc + h * ndn) * 1e6,
+              "  %s tri %zu facing %+.3f coarse %.1f um h %.1f um N.n %.3f render's value %.1f um "
+              "textured %d\n",
+              is_tool ? "tool" : "object", f, facing, hc * 1e6, h * 1e6, ndn, render * 1e6,
               int(m.textured[f]));
         }
       }

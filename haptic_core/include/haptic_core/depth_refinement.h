@@ -67,8 +67,7 @@ namespace ht {
 /// instead that of its displaced surface p + h(p)·N(p) where it crosses the line through (s, t)
 /// along n (ParallaxValue in the .cc): the render's h·(N·n) at the coarse point under (s, t)
 /// reads a point h·|N − (N·n)n| to the side of it, which on a coarse facet tilted from n under a
-/// texture of large height is another part of the surface (fig77: 1.35 mm low under a 0.9 mm
-/// height on a facet 54° from n; docs/frontier/issue32/twelfth_stop).
+/// texture of large height is another part of the surface (docs/frontier/issue32/twelfth_stop).
 /// Never allocates, never throws.
 double PatchHeightAt(const HapticModel& model, const RigidTransform& X_WO,
                      std::span<const int> triangles, const ContactWindow& window, PatchSide side,

@@ -96,12 +96,10 @@ struct StationConfig {
   bool passivity = true;
   /// Bound on each contact's force on the simulated tool (N; 0 = none): DESIGN.md §5's bounded
   /// delivered stiffness. A contact beyond it pushes with the bound and adds no stiffness
-  /// (EvaluateContactModel); docs/hard-cases.md has the grazing contacts it was for. Twice the
-  /// simulated operator's and a Falcon's force (about 10 N): it no longer engages on the seed's
-  /// scenes without delay (fig77 runs peak at 10–16 N per contact without a bound since the
-  /// grazing guard), and it still stops a pathological contact's thousands of newtons; at 5 N it
-  /// engaged on 72–324 ticks of every delayed 5 s run and on 15–75 of fig77's 10,000, where each
-  /// engagement is a step in the force the operator feels (docs/hard-cases.md).
+  /// (EvaluateContactModel): a guard against a contact whose depth is not a height field's
+  /// (docs/hard-cases.md). The default is twice what the simulated operator and a Falcon render
+  /// (about 10 N), so that an ordinary press never meets it; each engagement is a step in the force
+  /// the operator feels (docs/hard-cases.md has the runs that chose it).
   double max_contact_force_n = 20.0;
   /// Hunt–Crossley contact damping α (s/m) of the simulated tool: each contact's force
   /// −kδ(1 + α·dδ/dt)∇δ (ToolSimulator::set_contact_damping_hunt_crossley; 0 = none). 20 s/m
