@@ -8,6 +8,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <glm/gtc/quaternion.hpp>
@@ -264,6 +265,7 @@ TEST(ContactPatchTruth, AFlatFaceOnRidgesIsOneContactNotOnePerFlank) {
   old_options.macro_normal_radius_m = 0.0;
   old_options.overlap_merge_angle_deg = 0.0;
   old_options.minor_patch_fraction = 0.0;
+  old_options.share_fade_m = 0.0;
   ContactPatchTruth unmerged(tool, ridged, tool_rays, env_rays, old_options);
   for (const double delta : {0.05e-3, 0.15e-3, 0.3e-3}) {
     const RigidTransform X_WT = At({0.0013, -0.0007, crest_z - delta});
@@ -302,6 +304,7 @@ TEST(ContactPatchTruth, InterlockedRidgesPushAlongTheFaceNotAlongAFlank) {
   old_options.depth_along_macro_normal = false;
   old_options.overlap_merge_angle_deg = 0.0;
   old_options.minor_patch_fraction = 0.0;
+  old_options.share_fade_m = 0.0;
   ContactPatchTruth old_truth(ridged, ridged, rays, rays, old_options);
   // The tool: the same block, ridges down, 10 mm smaller in x so that its ends stay on the
   // environment's face; shifted a quarter period in y.
@@ -371,6 +374,85 @@ TEST(ContactPatchTruth, AnLCornerStaysTwoContacts) {
   EXPECT_NEAR(t.F_T_W.force.x, -kK * delta, 0.05 * kK * delta);
 }
 
+// Two feet (6 × 6 mm, one mesh) pressed δ into the slab, their inner faces g apart. Below the
+// merge distance (5 mm) their overlaps are one patch pushing k δ; far apart, two pushing 2 k δ.
+// Step 4a: in between, each of the two equally deep patches takes s = 1/(1 + λ), λ = 1 at 5 mm
+// falling to 0 at 5 + 5 mm of the gap between their intersection curves, so F = 2 k δ / (1 + λ),
+// which has no step where the feet's patches part. With the fade off (the truth before) it steps
+// from k δ to 2 k δ there.
+TEST(ContactPatchTruth, NeighbouringPatchesShareOnePenaltyThatFadesAsTheyPart) {
+  const double w = 6e-3, delta = 0.2e-3;
+  const auto feet = [&](double g) {
+    TriangleMesh m = Box({-0.5 * g - w, -0.5 * w, 0.0}, {-0.5 * g, 0.5 * w, 0.01});
+    const TriangleMesh b = Box({0.5 * g, -0.5 * w, 0.0}, {0.5 * g + w, 0.5 * w, 0.01});
+    const int offset = static_cast<int>(m.vertices.size());
+    m.vertices.insert(m.vertices.end(), b.vertices.begin(), b.vertices.end());
+    for (const glm::ivec3& t : b.triangles) m.triangles.push_back(t + offset);
+    return m;
+  };
+  // The slab as two halves 0.1 mm apart at x = 0, so that no slab triangle lies under both feet
+  // (pairs that share a triangle are one patch however far apart: a whole-face triangle under
+  // both feet would link them at any distance).
+  TriangleMesh slab = Box({-0.06, -0.06, -0.02}, {-0.5e-4, 0.06, 0.0});
+  {
+    const TriangleMesh right = Box({0.5e-4, -0.06, -0.02}, {0.06, 0.06, 0.0});
+    const int offset = static_cast<int>(slab.vertices.size());
+    slab.vertices.insert(slab.vertices.end(), right.vertices.begin(), right.vertices.end());
+    for (const glm::ivec3& t : right.triangles) slab.triangles.push_back(t + offset);
+  }
+  const RayCastSurface env_rays(slab);
+  const auto force_at = [&](double g, double fade_m, PoseTruth* out = nullptr) {
+    const TriangleMesh tool = feet(g);
+    const RayCastSurface tool_rays(tool);
+    ContactPatchTruthOptions o;
+    o.share_fade_m = fade_m;
+    ContactPatchTruth truth(tool, slab, tool_rays, env_rays, o);
+    const PoseTruth t = truth.At(At({0.0, 0.0, -delta}), RigidTransform{}, RigidTransform{}, kK);
+    if (out != nullptr) *out = t;
+    return t.F_T_W.force.z;
+  };
+  const double kd = kK * delta;
+  // Apart by far more than the fade: two patches, nothing shared.
+  PoseTruth far;
+  EXPECT_NEAR(force_at(30e-3, 5e-3, &far), 2.0 * kd, 0.02 * kd);
+  ASSERT_EQ(far.patches.size(), 2u);
+  EXPECT_EQ(far.patches_shared, 0);
+  // Close: one patch.
+  PoseTruth close;
+  EXPECT_NEAR(force_at(3e-3, 5e-3, &close), kd, 0.02 * kd);
+  ASSERT_EQ(close.patches.size(), 1u);
+  // Swept across the parting: F = 2kδ/(1 + λ(gap)) on the gap each patch reports, and no step.
+  double previous = std::nan(""), largest_step = 0.0;
+  int shared = 0;
+  for (double g = 3e-3; g <= 12.01e-3; g += 0.5e-3) {
+    PoseTruth t;
+    const double f = force_at(g, 5e-3, &t);
+    if (t.patches.size() == 2) {
+      const double gap = t.patches[0].gap_to_neighbour_m;
+      EXPECT_NEAR(gap, t.patches[1].gap_to_neighbour_m, 1e-12);
+      EXPECT_GE(gap, 5e-3 - 1e-9) << "two patches closer than the merge distance, g " << g;
+      const double lambda = std::clamp(1.0 - (gap - 5e-3) / 5e-3, 0.0, 1.0);
+      EXPECT_NEAR(f, 2.0 * kd / (1.0 + lambda), 0.02 * kd) << "g " << g << " gap " << gap;
+      shared += t.patches_shared > 0;
+    }
+    if (std::isfinite(previous)) largest_step = std::max(largest_step, std::abs(f - previous));
+    previous = f;
+  }
+  EXPECT_GE(shared, 3) << "the sweep should cross the fade";
+  // A 0.5 mm step of the gap moves λ by 0.1, and 2/(1 + λ) has its steepest slope, 2, at λ = 0:
+  // the force moves by at most 0.2 k δ a step (it moved by k δ at once before the fade).
+  EXPECT_LT(largest_step, 0.21 * kd);
+  // Without the fade: the step of k δ where the patches part.
+  double step_off = 0.0;
+  previous = std::nan("");
+  for (double g = 3e-3; g <= 8.01e-3; g += 0.5e-3) {
+    const double f = force_at(g, 0.0);
+    if (std::isfinite(previous)) step_off = std::max(step_off, std::abs(f - previous));
+    previous = f;
+  }
+  EXPECT_GT(step_off, 0.8 * kd);
+}
+
 TEST(ContactPatchTruthOptions, RefusesValuesOutOfRange) {
   ContactPatchTruthOptions o;
   o.merge_distance_m = 0.0;
@@ -380,6 +462,12 @@ TEST(ContactPatchTruthOptions, RefusesValuesOutOfRange) {
   EXPECT_THROW(o.Validate(), std::invalid_argument);
   o = {};
   o.gradient_step_m = std::nan("");
+  EXPECT_THROW(o.Validate(), std::invalid_argument);
+  o = {};
+  o.share_fade_m = -1e-3;
+  EXPECT_THROW(o.Validate(), std::invalid_argument);
+  o = {};
+  o.share_temperature_m = 0.0;
   EXPECT_THROW(o.Validate(), std::invalid_argument);
 }
 

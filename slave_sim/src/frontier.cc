@@ -706,6 +706,7 @@ void RunPipelineTruth(const BenchmarkScene& scene, const RayCastSurface& tool,
   const PipelineOptions pipeline;  // the method's clustering granularity
   truth_options.merge_distance_m = pipeline.clustering_distance_m;
   truth_options.max_normal_angle_deg = pipeline.clustering_angle_deg;
+  truth_options.share_fade_m = options.truth_share_fade_m;
   if (!options.truth_merge_patches) {
     truth_options.macro_normal_radius_m = 0.0;
     truth_options.depth_along_macro_normal = false;
@@ -944,7 +945,7 @@ struct SceneReport {
   // Pipeline truth figures.
   int truth_patches = 0, truth_poses_intersecting = 0, truth_poses_zero = 0;
   int truth_pairs_truncated = 0;
-  int truth_patches_merged = 0;
+  int truth_patches_merged = 0, truth_patches_shared = 0;
   double truth_seconds = 0;
   long long truth_rays = 0;
   std::vector<double> truth_extents_mm;
@@ -1023,7 +1024,7 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
         "window_nx,window_ny,window_nz,window_ux,window_uy,window_uz,window_extent_m,delta_gt_m,"
         "fx_gt,fy_gt,fz_gt,tx_gt,ty_gt,tz_gt,tool_com_x,tool_com_y,tool_com_z,stiffness_n_per_m,"
         "gradient_step_m,pairs,tool_inside_area_m2,object_inside_area_m2,dV_dx,dV_dy,dV_dz,"
-        "dV_dthx,dV_dthy,dV_dthz,gt_samples_per_side,gt_converged\n";
+        "dV_dthx,dV_dthy,dV_dthz,gt_samples_per_side,gt_converged,share,gap_to_neighbour_m\n";
   std::vector<SceneReport> reports;
   const int total_units = static_cast<int>(scenes.size() * settings.size());
   int units_done = 0;
@@ -1165,6 +1166,7 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
       rep.truth_poses_zero += t.pairs > 0 && !(glm::length(t.F_T_W.force) > 0.0);
       rep.truth_pairs_truncated += t.pairs_truncated;
       rep.truth_patches_merged += t.patches_merged;
+      rep.truth_patches_shared += t.patches_shared;
       rep.truth_rays += t.rays;
       for (std::size_t q = 0; q < t.patches.size(); ++q) {
         const TruthPatch& patch = t.patches[q];
@@ -1188,7 +1190,8 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
            << patch.pairs << ',' << patch.tool_inside_area_m2 << ','
            << patch.environment_inside_area_m2 << ',' << gx.x << ',' << gx.y << ',' << gx.z << ','
            << gt.x << ',' << gt.y << ',' << gt.z << ',' << patch.contact.base.samples_per_side
-           << ',' << (patch.contact.base.converged ? 1 : 0) << '\n';
+           << ',' << (patch.contact.base.converged ? 1 : 0) << ',' << patch.share << ','
+           << patch.gap_to_neighbour_m << '\n';
       }
     }
     rep.gt_windows = jobs.size();
@@ -1447,7 +1450,14 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
               ? " more merged into them: neighbours on one face at the 5 mm scale, overlapping "
                 "windows within 60°, or slivers at a patch's edge"
               : " merged: --truth-no-merge")
-      << "); intersecting poses with a zero truth: " << rep.truth_poses_zero
+      << "); "
+      << (options.truth_share_fade_m > 0.0
+              ? std::to_string(rep.truth_patches_shared) +
+                    " patches share their penalty with a neighbour within the clustering distance "
+                    "plus " +
+                    Fmt(options.truth_share_fade_m * 1e3, 3) + " mm"
+              : std::string("patches never share (--truth-share-fade-mm 0)"))
+      << "; intersecting poses with a zero truth: " << rep.truth_poses_zero
       << "; pair lists cut at the cap: " << rep.truth_pairs_truncated << "; " << rep.truth_rays
       << " rays in " << Fmt(rep.truth_seconds, 3) << " s.\n\n";
     s << "| setting | method | backend | N | texture | coarse | leaf pairs / contacts | step p50 / "

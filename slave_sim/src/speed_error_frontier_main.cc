@@ -77,6 +77,13 @@ int main(int argc, char** argv) {
                "pipeline truth as before issue 32's third stop: the single-linkage patches as they "
                "are (no merges of patches that measure one interpenetration twice) and each "
                "patch's depth along -grad V rather than the surface's 5 mm normal");
+  double truth_share_fade_mm = ht::ContactPatchTruthOptions{}.share_fade_m * 1e3;
+  app.add_option("--truth-share-fade-mm", truth_share_fade_mm,
+                 "pipeline truth: neighbouring patches share one penalty, fading out over this "
+                 "distance (mm) past the clustering distance (contact_patch_truth.h, step 4a); "
+                 "0: separate patches always sum (the truth before issue 32's fourteenth stop)")
+      ->check(CLI::Range(0.0, 1000.0))
+      ->capture_default_str();
   app.add_flag("--quiet", quiet, "no progress lines");
   if (const auto rc = ht::ParseCommandLine(app, argc, argv, "speed_error_frontier")) return *rc;
   std::string command = "speed_error_frontier";
@@ -91,6 +98,7 @@ int main(int argc, char** argv) {
     }
     options.gpu = !no_gpu;
     options.truth_merge_patches = !truth_no_merge;
+    options.truth_share_fade_m = truth_share_fade_mm * 1e-3;
     options.progress = !quiet;
     options.command_line = command;
     // The plot script: in the source tree (a build), else beside an installed binary.

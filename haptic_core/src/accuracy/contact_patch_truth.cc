@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "fcl_mesh.h"
+#include "haptic_core/connected_contacts.h"
 
 namespace ht {
 
@@ -33,6 +34,10 @@ void ContactPatchTruthOptions::Validate() const {
   if (!(boundary_cell_m > 0.0) || !(boundary_cell_m <= inside_cell_m))
     fail("boundary_cell_m must be in (0, inside_cell_m]", boundary_cell_m);
   if (max_pairs < 1) fail("max_pairs must be >= 1", max_pairs);
+  if (!(share_fade_m >= 0.0) || !std::isfinite(share_fade_m))
+    fail("share_fade_m must be >= 0", share_fade_m);
+  if (!(share_temperature_m > 0.0) || !std::isfinite(share_temperature_m))
+    fail("share_temperature_m must be > 0", share_temperature_m);
   if (!(overlap_merge_angle_deg >= 0.0 && overlap_merge_angle_deg <= 180.0))
     fail("overlap_merge_angle_deg must be in [0, 180]", overlap_merge_angle_deg);
   if (!(macro_normal_radius_m >= 0.0) || !std::isfinite(macro_normal_radius_m))
@@ -684,8 +689,69 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
     patch.gradient_step_m = g.extent / step_resolution;
     patch.contact = m.solver.Linearize(X_WT, X_TFt, X_WFe, patch.window, k, step_resolution);
     out.rays += patch.contact.rays;
-    out.F_T_W += patch.contact.F_T_W;
     out.patches.push_back(std::move(patch));
+  }
+
+  // 4a. Shares: the gap between two patches is the least distance between their pairs' points
+  // (the intersection curves that step 2 links), counted where their directions agree; λ fades
+  // from 1 at merge_distance_m to 0 at merge_distance_m + share_fade_m.
+  const int P = static_cast<int>(out.patches.size());
+  if (P > 1 && o.share_fade_m > 0.0) {
+    const double reach = o.merge_distance_m + o.share_fade_m;
+    std::vector<double> gap(static_cast<std::size_t>(P) * P,
+                            std::numeric_limits<double>::infinity());
+    std::unordered_map<std::uint64_t, std::vector<int>> near;
+    for (int i = 0; i < np; ++i) near[GridHash(GridCell(pairs[i].p_W, reach))].push_back(i);
+    for (int i = 0; i < np; ++i) {
+      const int pi = patch_of[i];
+      const glm::i64vec3 c = GridCell(pairs[i].p_W, reach);
+      for (int dx = -1; dx <= 1; ++dx) {
+        for (int dy = -1; dy <= 1; ++dy) {
+          for (int dz = -1; dz <= 1; ++dz) {
+            const auto it = near.find(GridHash(c + glm::i64vec3(dx, dy, dz)));
+            if (it == near.end()) continue;
+            for (const int j : it->second) {
+              const int pj = patch_of[j];
+              if (pj <= pi) continue;
+              const double dist = glm::distance(pairs[i].p_W, pairs[j].p_W);
+              double& g = gap[static_cast<std::size_t>(pi) * P + pj];
+              g = std::min(g, dist);
+            }
+          }
+        }
+      }
+    }
+    std::vector<double> links(static_cast<std::size_t>(P) * P, 0.0);
+    for (int a = 0; a < P; ++a) {
+      for (int b = a + 1; b < P; ++b) {
+        const double g = gap[static_cast<std::size_t>(a) * P + b];
+        if (glm::dot(out.patches[a].window.normal_W, out.patches[b].window.normal_W) < cos_max) {
+          continue;
+        }
+        out.patches[a].gap_to_neighbour_m = std::min(out.patches[a].gap_to_neighbour_m, g);
+        out.patches[b].gap_to_neighbour_m = std::min(out.patches[b].gap_to_neighbour_m, g);
+        const double l = OverlapLink(g, o.merge_distance_m, o.share_fade_m);
+        links[static_cast<std::size_t>(a) * P + b] = links[static_cast<std::size_t>(b) * P + a] = l;
+      }
+    }
+    StrongestPathLinks(links, P);
+    std::vector<double> depths(static_cast<std::size_t>(P)), shares(static_cast<std::size_t>(P));
+    for (int a = 0; a < P; ++a) {
+      const double dm = out.patches[a].contact.linearization.depth_m;
+      // Patches without force take no part (a zero-force patch must not take a share).
+      depths[a] = glm::length(out.patches[a].contact.F_T_W.force) > 0.0 && std::isfinite(dm)
+                      ? dm
+                      : std::numeric_limits<double>::quiet_NaN();
+    }
+    LinkedPenaltyShares(depths, links, o.share_temperature_m, shares);
+    for (int a = 0; a < P; ++a) {
+      out.patches[a].share = std::isfinite(depths[a]) ? shares[a] : 1.0;
+      out.patches_shared += out.patches[a].share < 1.0;
+    }
+  }
+  for (const TruthPatch& patch : out.patches) {
+    out.F_T_W.force += patch.share * patch.contact.F_T_W.force;
+    out.F_T_W.torque += patch.share * patch.contact.F_T_W.torque;
   }
   return out;
 }

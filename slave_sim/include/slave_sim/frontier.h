@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "haptic_core/accuracy/contact_patch_truth.h"
 #include "haptic_core/accuracy/ground_truth_depth.h"
 #include "haptic_core/contact_linearization.h"
 #include "haptic_core/contact_model.h"
@@ -163,6 +164,9 @@ struct FrontierOptions {
   /// patch's edge (ContactPatchTruthOptions::overlap_merge_angle_deg, minor_patch_fraction);
   /// false: the single-linkage patches as they are (the measure before issue 32's third stop).
   bool truth_merge_patches = true;
+  /// The pipeline truth's share fade (ContactPatchTruthOptions::share_fade_m, m; 0: separate
+  /// patches always sum, the measure before issue 32's fourteenth stop).
+  double truth_share_fade_m = ContactPatchTruthOptions{}.share_fade_m;
   /// The plotting script (python3 + matplotlib), "" = no plot.
   std::string plot_script;
   /// The command line, for summary.md.

@@ -29,11 +29,22 @@
 //  3b. Patches whose windows measure one interpenetration twice (overlapping windows with
 //     directions within 60°), and slivers at a larger patch's edge, merged (options below).
 //  4. T1, the pipeline truth: δ and ∇δ on that window by ray casting (GroundTruthDepthSolver,
-//     gradient steps at texel scale), Φ_gt = Σ_patches −k δ ∇δ.
+//     gradient steps at texel scale), Φ_gt = Σ_patches s_p · (−k δ_p ∇δ_p).
+//  4a. The shares s_p (issue 32's fourteenth stop): patches merge in step 2 when their
+//     intersection curves come within merge_distance_m, and a merged patch pushes its deepest
+//     point's k δ where the two pushed k δ_1 + k δ_2 a moment before; along a trajectory that is
+//     a step in force, the measure's own (fig76's trace: |ΔF| > 0.5 N on 166 of 399 consecutive
+//     poses 48 µm apart). So neighbouring patches share their penalty, fading out as they part:
+//     λ_pq = 1 at merge_distance_m, falling linearly to 0 at merge_distance_m + share_fade_m,
+//     closed over paths, s_p = e_p / (e_p + Σ_q λ_pq e_q), e = exp((δ − δ_max)/τ)
+//     (connected_contacts.h's StrongestPathLinks and LinkedPenaltyShares, the law the method's
+//     stage 5c uses on its own windows). At the merge distance s ≈ 1 on the deeper patch, as the
+//     merged patch has it; share_fade_m = 0 gives the truth before (every s = 1).
 //  5. T2, the volume truth, independent of the force law: −∇_x V's direction and the lever arm
 //     |∇_θ V| / |∇_x V| (what a volume penalty k_V·V would give as |τ|/|F|), so that distributed
 //     and grazing contact are judged by direction and arm, not by stiffness.
 
+#include <limits>
 #include <memory>
 #include <vector>
 
@@ -97,6 +108,13 @@ struct ContactPatchTruthOptions {
   /// only where a sub-triangle's corners and centroid disagree, down to boundary_cell_m (m).
   double inside_cell_m = 2e-3;
   double boundary_cell_m = 5e-5;
+  /// Step 4a: neighbouring patches' shared penalty fades out over this distance (m) past
+  /// merge_distance_m, measured between their intersection curves (the pairs' points) where their
+  /// directions agree within max_normal_angle_deg; 0 turns the sharing off (the truth before
+  /// issue 32's fourteenth stop: separate patches always sum).
+  double share_fade_m = 5e-3;
+  /// τ of the shares' soft maximum (m, > 0): patches deeper by several τ take the whole penalty.
+  double share_temperature_m = 5e-6;
   /// Most intersecting pairs gathered per pose (FCL's num_max_contacts).
   int max_pairs = 1 << 20;
   /// δ's ray casting on each window.
@@ -125,8 +143,15 @@ struct TruthPatch {
   /// The translation step of ∇δ_gt's central differences (m): options' gradient_step_m rounded so
   /// that a whole number of steps spans the window; the rotation step is this over half the window.
   double gradient_step_m = 0.0;
-  /// T1 on the window: δ_gt, ∇δ_gt (steps at texel scale), Φ_gt on the tool at its centre of mass.
+  /// T1 on the window: δ_gt, ∇δ_gt (steps at texel scale), Φ_gt on the tool at its centre of mass
+  /// (the patch's own, before its share).
   GroundTruthContact contact;
+  /// Its share s ∈ [0, 1] of that penalty (step 4a; 1 when no other patch is within
+  /// merge_distance_m + share_fade_m): PoseTruth::F_T_W sums s · contact.F_T_W.
+  double share = 1.0;
+  /// The gap (m) from its intersection curve to the nearest other patch's with a direction within
+  /// max_normal_angle_deg; +∞ when there is none within merge_distance_m + share_fade_m.
+  double gap_to_neighbour_m = std::numeric_limits<double>::infinity();
 };
 
 /// The truth at one pose.
@@ -137,8 +162,10 @@ struct PoseTruth {
   bool pairs_truncated = false;
   /// Patches folded into another by step 3b (overlapping windows, slivers).
   int patches_merged = 0;
+  /// Patches whose share (step 4a) is below 1.
+  int patches_shared = 0;
   std::vector<TruthPatch> patches;
-  /// T1: Σ over patches of Φ_gt (N, N·m), on the tool at its centre of mass, in W.
+  /// T1: Σ over patches of s · Φ_gt (N, N·m), on the tool at its centre of mass, in W.
   Wrench F_T_W;
   /// T2: Σ over patches of the mean of both routes' ∇V (m², m³/rad), in W.
   glm::dvec3 dV_dx_W{0.0}, dV_dtheta_W{0.0};
