@@ -167,17 +167,23 @@ TEST_F(FrontierOutput, PipelineTruthOwnsItsPatchesAndItsErrorRecomputes) {
         "obj_px",    "obj_py",    "obj_pz",    "obj_qw",    "obj_qx",          "obj_qy",
         "obj_qz",    "window_cx", "window_cy", "window_cz", "window_nx",       "window_ny",
         "window_nz", "window_ux", "window_uy", "window_uz", "window_extent_m", "delta_gt_m",
-        "fx_gt",     "fy_gt",     "fz_gt",     "tx_gt",     "ty_gt",           "tz_gt"}) {
+        "fx_gt",     "fy_gt",     "fz_gt",     "tx_gt",     "ty_gt",           "tz_gt",
+        "share",     "gap_to_neighbour_m"}) {
     EXPECT_NE(std::find(p.columns.begin(), p.columns.end(), n), p.columns.end()) << n;
   }
   ASSERT_FALSE(p.rows.empty());
   std::map<std::string, std::map<int, std::array<double, 3>>> truth;  // scene → pose → F_gt
   for (const auto& r : p.rows) {
     EXPECT_GT(Num(r, "delta_gt_m"), 0.0);
+    // Each patch's own Φ_gt times its share of a penalty shared with neighbouring patches
+    // (contact_patch_truth.h, step 4a).
+    const double share = Num(r, "share");
+    EXPECT_GT(share, 0.0);
+    EXPECT_LE(share, 1.0);
     auto& f = truth[r.at("scene")][static_cast<int>(Num(r, "pose_id"))];
-    f[0] += Num(r, "fx_gt");
-    f[1] += Num(r, "fy_gt");
-    f[2] += Num(r, "fz_gt");
+    f[0] += share * Num(r, "fx_gt");
+    f[1] += share * Num(r, "fy_gt");
+    f[2] += share * Num(r, "fz_gt");
   }
   const Table f = ReadCsv(dir_ + "/frontier.csv");
   const Table c = ReadCsv(dir_ + "/contacts.csv");

@@ -1153,11 +1153,13 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
     std::vector<PoseTruth> pipeline;
     RunPipelineTruth(ref, tool_rays, object_rays, poses, options, pipeline);
     // The truth at the prediction measure's displaced poses.
-    const std::vector<RigidTransform> displaced = PredictionPoses(poses, ref.X_TFt);
-    say("%s: pipeline truth of %zu displaced poses (model prediction)", name.c_str(),
-        displaced.size());
     std::vector<PoseTruth> displaced_truth;
-    RunPipelineTruth(ref, tool_rays, object_rays, displaced, options, displaced_truth);
+    if (options.model_prediction) {
+      const std::vector<RigidTransform> displaced = PredictionPoses(poses, ref.X_TFt);
+      say("%s: pipeline truth of %zu displaced poses (model prediction)", name.c_str(),
+          displaced.size());
+      RunPipelineTruth(ref, tool_rays, object_rays, displaced, options, displaced_truth);
+    }
     rep.truth_seconds = Seconds(t_truth);
     for (std::size_t k = 0; k < pipeline.size(); ++k) {
       const PoseTruth& t = pipeline[k];

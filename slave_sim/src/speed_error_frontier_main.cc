@@ -84,6 +84,10 @@ int main(int argc, char** argv) {
                  "0: separate patches always sum (the truth before issue 32's fourteenth stop)")
       ->check(CLI::Range(0.0, 1000.0))
       ->capture_default_str();
+  bool no_model_prediction = false;
+  app.add_flag("--no-model-prediction", no_model_prediction,
+               "skip the model-prediction measure (a second pipeline truth at displaced, deeper "
+               "poses, which takes about as long as the first); its columns are left empty");
   app.add_flag("--quiet", quiet, "no progress lines");
   if (const auto rc = ht::ParseCommandLine(app, argc, argv, "speed_error_frontier")) return *rc;
   std::string command = "speed_error_frontier";
@@ -99,6 +103,7 @@ int main(int argc, char** argv) {
     options.gpu = !no_gpu;
     options.truth_merge_patches = !truth_no_merge;
     options.truth_share_fade_m = truth_share_fade_mm * 1e-3;
+    options.model_prediction = !no_model_prediction;
     options.progress = !quiet;
     options.command_line = command;
     // The plot script: in the source tree (a build), else beside an installed binary.

@@ -25,8 +25,11 @@ def main():
         poses[r["scene"]].add(int(r["pose_id"]))
     truth = collections.defaultdict(lambda: np.zeros(6))
     for r in csv.DictReader(open(f"{d}/patches.csv")):
+        # Each patch's share of a shared penalty (patches.csv's share column since issue 32's
+        # fourteenth stop; older runs have none: 1).
+        share = float(r.get("share") or 1.0)
         truth[(r["scene"], int(r["pose_id"]))] += [
-            float(r[k]) for k in ("fx_gt", "fy_gt", "fz_gt", "tx_gt", "ty_gt", "tz_gt")]
+            share * float(r[k]) for k in ("fx_gt", "fy_gt", "fz_gt", "tx_gt", "ty_gt", "tz_gt")]
         poses[r["scene"]].add(int(r["pose_id"]))
     rng = np.random.default_rng(1)
     for scene in sorted(poses):

@@ -167,6 +167,10 @@ struct FrontierOptions {
   /// The pipeline truth's share fade (ContactPatchTruthOptions::share_fade_m, m; 0: separate
   /// patches always sum, the measure before issue 32's fourteenth stop).
   double truth_share_fade_m = ContactPatchTruthOptions{}.share_fade_m;
+  /// The model-prediction measure (the operator's linearized model at displaced poses against the
+  /// pipeline truth there): a second pipeline truth, on deeper poses, which costs about as much as
+  /// the first; false leaves its columns NaN.
+  bool model_prediction = true;
   /// The plotting script (python3 + matplotlib), "" = no plot.
   std::string plot_script;
   /// The command line, for summary.md.

@@ -26,7 +26,9 @@ def steps(get):
     return np.linalg.norm(np.diff(F, axis=0), axis=1)
 
 
-series = {"pipeline truth": steps(lambda i: [sum(float(r[k]) for r in P[i]) for k in ("fx_gt", "fy_gt", "fz_gt")])}
+# Each patch's share (patches.csv's share column since issue 32's fourteenth stop; else 1).
+series = {"pipeline truth": steps(lambda i: [sum(float(r.get("share") or 1.0) * float(r[k]) for r in P[i])
+                                             for k in ("fx_gt", "fy_gt", "fz_gt")])}
 counts = {"pipeline truth": [len(P[i]) for i in ids]}
 for s in C:
     series[s] = steps(lambda i, s=s: [sum(float(r[k]) for r in C[s][i]) for k in ("fx", "fy", "fz")])
