@@ -162,13 +162,13 @@ TEST_F(FrontierOutput, ForceErrorRecomputesFromTheContacts) {
 TEST_F(FrontierOutput, PipelineTruthOwnsItsPatchesAndItsErrorRecomputes) {
   const Table p = ReadCsv(dir_ + "/patches.csv");
   for (const char* n :
-       {"scene",     "pose_id",   "patch",     "tool",      "object",          "tool_px",
-        "tool_py",   "tool_pz",   "tool_qw",   "tool_qx",   "tool_qy",         "tool_qz",
-        "obj_px",    "obj_py",    "obj_pz",    "obj_qw",    "obj_qx",          "obj_qy",
-        "obj_qz",    "window_cx", "window_cy", "window_cz", "window_nx",       "window_ny",
-        "window_nz", "window_ux", "window_uy", "window_uz", "window_extent_m", "delta_gt_m",
-        "fx_gt",     "fy_gt",     "fz_gt",     "tx_gt",     "ty_gt",           "tz_gt",
-        "share",     "gap_to_neighbour_m"}) {
+       {"scene", "pose_id", "patch", "tool", "object", "tool_px", "tool_py", "tool_pz", "tool_qw",
+        "tool_qx", "tool_qy", "tool_qz", "obj_px", "obj_py", "obj_pz", "obj_qw", "obj_qx", "obj_qy",
+        "obj_qz", "window_cx", "window_cy", "window_cz", "window_nx", "window_ny", "window_nz",
+        "window_ux", "window_uy", "window_uz", "window_extent_m", "delta_gt_m", "fx_gt", "fy_gt",
+        "fz_gt", "tx_gt", "ty_gt", "tz_gt",
+        // Step 4a of the truth: each patch's share and the gap that sets it.
+        "share", "gap_to_neighbour_m"}) {
     EXPECT_NE(std::find(p.columns.begin(), p.columns.end(), n), p.columns.end()) << n;
   }
   ASSERT_FALSE(p.rows.empty());

@@ -127,6 +127,43 @@ ContactQuery QueryFor(const HapticModel& env, const Contact& c) {
   return q;
 }
 
+// One random contact of a seed pair linearized on the 50×50 grid (the CPU backend), for the
+// refinement tests: the file and the block as tools on each of the six seed models, 4 contacts a
+// pair; the ones whose grid δ0 is not finite are skipped.
+struct SeedContact {
+  SeedModel tool_which, env_which;
+  const HapticModel* tool;
+  const HapticModel* env;
+  double tool_bake_m, env_bake_m;  // the models' bake errors (Seed)
+  Contact c;
+  ContactQuery q;
+  std::array<DepthSample, kGradientSamples> samples;
+  ContactLinearization lin;  // the grid's
+};
+
+// Calls f(SeedContact&) for each such contact, in a fixed order of pairs, drawing each contact
+// from `rng` just before its call (f may draw from it too).
+template <class F>
+void ForEachSeedContact(std::mt19937& rng, CpuPenetrationDepthBackend& backend, F&& f) {
+  for (const SeedModel which : kAll) {
+    for (const SeedModel tool_which : {SeedModel::kFile, SeedModel::kBlock}) {
+      SeedContact x{};
+      x.env_which = which;
+      x.tool_which = tool_which;
+      x.env = &Seed(which, &x.env_bake_m);
+      x.tool = &Seed(tool_which, &x.tool_bake_m);
+      for (int trial = 0; trial < 4; ++trial) {
+        x.c = RandomContact(*x.tool, *x.env, rng, 50);
+        x.q = QueryFor(*x.env, x.c);
+        x.samples = {};
+        ASSERT_TRUE(backend.LinearizeBatch(*x.tool, x.c.X_WT, {&x.q, 1}, {&x.lin, 1}, x.samples));
+        if (!std::isfinite(x.lin.depth_m)) continue;
+        f(x);
+      }
+    }
+  }
+}
+
 double Ulp(float x) {
   return std::nextafter(std::abs(x), std::numeric_limits<float>::infinity()) - std::abs(x);
 }
@@ -408,36 +445,26 @@ TEST(TextureStageParity, RefinedDepthLiesBetweenTheGridAndTheFullResolutionTruth
   int checked = 0;
   double raised_sum = 0.0, worst_below_grid = 0.0, worst_above_truth = 0.0;
   double grid_error_sum = 0.0, refined_error_sum = 0.0;
-  for (const SeedModel which : kAll) {
-    double env_bake = 0.0, tool_bake = 0.0;
-    const HapticModel& env = Seed(which, &env_bake);
-    for (const SeedModel tool_which : {SeedModel::kFile, SeedModel::kBlock}) {
-      const HapticModel& tool = Seed(tool_which, &tool_bake);
-      GroundTruthDepthSolver truth(FullResolutionSurface(tool_which), FullResolutionSurface(which));
-      for (int trial = 0; trial < 4; ++trial) {
-        const Contact c = RandomContact(tool, env, rng, 50);
-        const ContactQuery q = QueryFor(env, c);
-        std::array<DepthSample, kGradientSamples> samples{};
-        ContactLinearization lin;
-        ASSERT_TRUE(backend.LinearizeBatch(tool, c.X_WT, {&q, 1}, {&lin, 1}, samples));
-        if (!std::isfinite(lin.depth_m)) continue;
-        const double grid = lin.depth_m;
-        ASSERT_TRUE(refiner.Refine(tool, c.X_WT, q, samples, lin));
-        const GroundTruthDepth gt = truth.ConvergedDepth(c.X_WT, c.X_WO, c.window);
-        if (!std::isfinite(gt.depth_m)) continue;
-        ++checked;
-        SCOPED_TRACE(std::string(SeedModelName(tool_which)) + " on " + SeedModelName(which));
-        EXPECT_GE(lin.depth_m, grid - 1e-7);
-        EXPECT_LE(lin.depth_m, gt.depth_m + env_bake + tool_bake + 1e-6)
-            << "bake errors " << env_bake << " + " << tool_bake;
-        raised_sum += lin.depth_m - grid;
-        grid_error_sum += std::abs(grid - gt.depth_m);
-        refined_error_sum += std::abs(lin.depth_m - gt.depth_m);
-        worst_below_grid = std::max(worst_below_grid, grid - lin.depth_m);
-        worst_above_truth = std::max(worst_above_truth, lin.depth_m - gt.depth_m);
-      }
-    }
-  }
+  ForEachSeedContact(rng, backend, [&](SeedContact& x) {
+    const Contact& c = x.c;
+    ContactLinearization& lin = x.lin;
+    const double grid = lin.depth_m;
+    ASSERT_TRUE(refiner.Refine(*x.tool, c.X_WT, x.q, x.samples, lin));
+    GroundTruthDepthSolver truth(FullResolutionSurface(x.tool_which),
+                                 FullResolutionSurface(x.env_which));
+    const GroundTruthDepth gt = truth.ConvergedDepth(c.X_WT, c.X_WO, c.window);
+    if (!std::isfinite(gt.depth_m)) return;
+    ++checked;
+    SCOPED_TRACE(std::string(SeedModelName(x.tool_which)) + " on " + SeedModelName(x.env_which));
+    EXPECT_GE(lin.depth_m, grid - 1e-7);
+    EXPECT_LE(lin.depth_m, gt.depth_m + x.env_bake_m + x.tool_bake_m + 1e-6)
+        << "bake errors " << x.env_bake_m << " + " << x.tool_bake_m;
+    raised_sum += lin.depth_m - grid;
+    grid_error_sum += std::abs(grid - gt.depth_m);
+    refined_error_sum += std::abs(lin.depth_m - gt.depth_m);
+    worst_below_grid = std::max(worst_below_grid, grid - lin.depth_m);
+    worst_above_truth = std::max(worst_above_truth, lin.depth_m - gt.depth_m);
+  });
   EXPECT_GT(checked, 20);
   // Over the contacts, the refined δ0 is closer to the truth than the grid's (the bake bounds
   // above are loose, millimetres at the 512² textures' sharp edges).
@@ -465,35 +492,25 @@ TEST(TextureStageParity, ParallaxDepthIsBoundedByTheTruthAndCloserToItThanTheRen
   DepthRefiner parallax(o);
   int checked = 0;
   double render_error_sum = 0.0, parallax_error_sum = 0.0, worst_above_truth = 0.0;
-  for (const SeedModel which : kAll) {
-    double env_bake = 0.0, tool_bake = 0.0;
-    const HapticModel& env = Seed(which, &env_bake);
-    for (const SeedModel tool_which : {SeedModel::kFile, SeedModel::kBlock}) {
-      const HapticModel& tool = Seed(tool_which, &tool_bake);
-      GroundTruthDepthSolver truth(FullResolutionSurface(tool_which), FullResolutionSurface(which));
-      for (int trial = 0; trial < 4; ++trial) {
-        const Contact c = RandomContact(tool, env, rng, 50);
-        const ContactQuery q = QueryFor(env, c);
-        std::array<DepthSample, kGradientSamples> samples{};
-        ContactLinearization lin;
-        ASSERT_TRUE(backend.LinearizeBatch(tool, c.X_WT, {&q, 1}, {&lin, 1}, samples));
-        if (!std::isfinite(lin.depth_m)) continue;
-        ContactLinearization lin_p = lin;
-        std::array<DepthSample, kGradientSamples> samples_p = samples;
-        ASSERT_TRUE(render_form.Refine(tool, c.X_WT, q, samples, lin));
-        if (!parallax.Refine(tool, c.X_WT, q, samples_p, lin_p)) continue;
-        const GroundTruthDepth gt = truth.ConvergedDepth(c.X_WT, c.X_WO, c.window);
-        if (!std::isfinite(gt.depth_m)) continue;
-        ++checked;
-        SCOPED_TRACE(std::string(SeedModelName(tool_which)) + " on " + SeedModelName(which));
-        EXPECT_LE(lin_p.depth_m, gt.depth_m + env_bake + tool_bake + 1e-6)
-            << "bake errors " << env_bake << " + " << tool_bake;
-        render_error_sum += std::abs(lin.depth_m - gt.depth_m);
-        parallax_error_sum += std::abs(lin_p.depth_m - gt.depth_m);
-        worst_above_truth = std::max(worst_above_truth, lin_p.depth_m - gt.depth_m);
-      }
-    }
-  }
+  ForEachSeedContact(rng, backend, [&](SeedContact& x) {
+    const Contact& c = x.c;
+    ContactLinearization& lin = x.lin;
+    ContactLinearization lin_p = lin;
+    std::array<DepthSample, kGradientSamples> samples_p = x.samples;
+    ASSERT_TRUE(render_form.Refine(*x.tool, c.X_WT, x.q, x.samples, lin));
+    if (!parallax.Refine(*x.tool, c.X_WT, x.q, samples_p, lin_p)) return;
+    GroundTruthDepthSolver truth(FullResolutionSurface(x.tool_which),
+                                 FullResolutionSurface(x.env_which));
+    const GroundTruthDepth gt = truth.ConvergedDepth(c.X_WT, c.X_WO, c.window);
+    if (!std::isfinite(gt.depth_m)) return;
+    ++checked;
+    SCOPED_TRACE(std::string(SeedModelName(x.tool_which)) + " on " + SeedModelName(x.env_which));
+    EXPECT_LE(lin_p.depth_m, gt.depth_m + x.env_bake_m + x.tool_bake_m + 1e-6)
+        << "bake errors " << x.env_bake_m << " + " << x.tool_bake_m;
+    render_error_sum += std::abs(lin.depth_m - gt.depth_m);
+    parallax_error_sum += std::abs(lin_p.depth_m - gt.depth_m);
+    worst_above_truth = std::max(worst_above_truth, lin_p.depth_m - gt.depth_m);
+  });
   EXPECT_GT(checked, 20);
   EXPECT_LT(parallax_error_sum, render_error_sum);
   std::printf(

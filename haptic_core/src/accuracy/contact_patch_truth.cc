@@ -133,8 +133,7 @@ void EdgePiercings(const glm::dvec3& a0, const glm::dvec3& a1, const glm::dvec3&
   }
 }
 
-// The cell of a hash grid of cube side `cell` (m) that holds p, and the cell's hash key; used by
-// the pairs' single linkage and by SurfaceNormalGrid.
+// The cell of a hash grid of cube side `cell` (m) that holds p, and the cell's hash key.
 glm::i64vec3 GridCell(const glm::dvec3& p, double cell) {
   return glm::i64vec3(std::floor(p.x / cell), std::floor(p.y / cell), std::floor(p.z / cell));
 }
@@ -143,6 +142,35 @@ std::uint64_t GridHash(const glm::i64vec3& c) {
          static_cast<std::uint64_t>(c.y * 19349663LL) ^
          static_cast<std::uint64_t>(c.z * 83492791LL);
 }
+
+// Indices in a hash grid of cube side `cell` (m): whatever lies within `cell` of a point is among
+// the entries of the 27 cells about the point's own (ForEachNear; farther ones too, and those of
+// cells whose keys collide). Used by the pairs' single linkage, the patches' gaps (step 4a) and
+// SurfaceNormalGrid.
+class CellGrid {
+ public:
+  explicit CellGrid(double cell) : cell_(cell) {}
+  void Add(const glm::dvec3& p, int index) { AddToCell(GridCell(p, cell_), index); }
+  void AddToCell(const glm::i64vec3& c, int index) { cells_[GridHash(c)].push_back(index); }
+  // Calls f(index) for each entry of the 27 cells about the one holding p.
+  template <class F>
+  void ForEachNear(const glm::dvec3& p, F&& f) const {
+    const glm::i64vec3 c = GridCell(p, cell_);
+    for (int dx = -1; dx <= 1; ++dx) {
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dz = -1; dz <= 1; ++dz) {
+          const auto it = cells_.find(GridHash(c + glm::i64vec3(dx, dy, dz)));
+          if (it == cells_.end()) continue;
+          for (const int j : it->second) f(j);
+        }
+      }
+    }
+  }
+
+ private:
+  double cell_;
+  std::unordered_map<std::uint64_t, std::vector<int>> cells_;
+};
 
 // The point of triangle (a, b, c) closest to p (Ericson, Real-Time Collision Detection, 5.1.5:
 // the Voronoi region of p among the triangle's vertices, edges and face).
@@ -178,7 +206,7 @@ glm::dvec3 ClosestPointOnTriangle(const glm::dvec3& p, const glm::dvec3& a, cons
 class SurfaceNormalGrid {
  public:
   SurfaceNormalGrid(const TriangleMesh& mesh, const MeshTopology& topology, double r)
-      : mesh_(mesh), topology_(topology), r_(r) {
+      : mesh_(mesh), topology_(topology), r_(r), grid_(r) {
     if (!(r > 0.0)) return;
     stamp_of_.assign(mesh.triangles.size(), 0);
     for (std::size_t f = 0; f < mesh.triangles.size(); ++f) {
@@ -189,7 +217,7 @@ class SurfaceNormalGrid {
       for (std::int64_t x = lo.x; x <= hi.x; ++x) {
         for (std::int64_t y = lo.y; y <= hi.y; ++y) {
           for (std::int64_t z = lo.z; z <= hi.z; ++z) {
-            grid_[GridHash({x, y, z})].push_back(static_cast<int>(f));
+            grid_.AddToCell({x, y, z}, static_cast<int>(f));
           }
         }
       }
@@ -205,30 +233,21 @@ class SurfaceNormalGrid {
       std::fill(stamp_of_.begin(), stamp_of_.end(), 0);
       stamp_ = 1;
     }
-    const glm::i64vec3 c = GridCell(p_F, r_);
     glm::dvec3 sum(0.0);
     double weight = 0.0;
     const double small2 = (0.25 * r_) * (0.25 * r_);
-    for (int dx = -1; dx <= 1; ++dx) {
-      for (int dy = -1; dy <= 1; ++dy) {
-        for (int dz = -1; dz <= 1; ++dz) {
-          const auto it = grid_.find(GridHash(c + glm::i64vec3(dx, dy, dz)));
-          if (it == grid_.end()) continue;
-          for (const int f : it->second) {
-            if (stamp_of_[f] == stamp_) continue;
-            stamp_of_[f] = stamp_;
-            const glm::ivec3 t = mesh_.triangles[f];
-            const glm::dvec3 a = mesh_.vertices[t[0]], b = mesh_.vertices[t[1]],
-                             cc = mesh_.vertices[t[2]];
-            const glm::dvec3 q = ClosestPointOnTriangle(p_F, a, b, cc);
-            if (glm::dot(q - p_F, q - p_F) > r_ * r_) continue;
-            const double inside = AreaInBall(p_F, a, b, cc, topology_.area_m2[f], small2);
-            sum += inside * topology_.normal_F[f];
-            weight += inside;
-          }
-        }
-      }
-    }
+    grid_.ForEachNear(p_F, [&](int f) {
+      if (stamp_of_[f] == stamp_) return;
+      stamp_of_[f] = stamp_;
+      const glm::ivec3 t = mesh_.triangles[f];
+      const glm::dvec3 a = mesh_.vertices[t[0]], b = mesh_.vertices[t[1]],
+                       cc = mesh_.vertices[t[2]];
+      const glm::dvec3 q = ClosestPointOnTriangle(p_F, a, b, cc);
+      if (glm::dot(q - p_F, q - p_F) > r_ * r_) return;
+      const double inside = AreaInBall(p_F, a, b, cc, topology_.area_m2[f], small2);
+      sum += inside * topology_.normal_F[f];
+      weight += inside;
+    });
     return weight > 0.0 ? sum / weight : glm::dvec3(0.0);
   }
 
@@ -252,7 +271,7 @@ class SurfaceNormalGrid {
   const TriangleMesh& mesh_;
   const MeshTopology& topology_;
   double r_;
-  std::unordered_map<std::uint64_t, std::vector<int>> grid_;
+  CellGrid grid_;
   mutable std::vector<std::uint32_t> stamp_of_;
   mutable std::uint32_t stamp_ = 0;
 };
@@ -453,32 +472,23 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
   // grid of that cell), in both cases with agreeing environment normals.
   const double d = o.merge_distance_m, d2 = d * d;
   const double cos_max = std::cos(o.max_normal_angle_deg * std::numbers::pi / 180.0);
-  std::unordered_map<std::uint64_t, std::vector<int>> grid;
-  for (int i = 0; i < np; ++i) grid[GridHash(GridCell(pairs[i].p_W, d))].push_back(i);
+  CellGrid grid(d);
+  for (int i = 0; i < np; ++i) grid.Add(pairs[i].p_W, i);
   std::vector<int> parent(static_cast<std::size_t>(np));
   for (int i = 0; i < np; ++i) parent[i] = i;
   std::vector<std::pair<int, int>> split_neighbours;
   for (int i = 0; i < np; ++i) {
-    const glm::i64vec3 c = GridCell(pairs[i].p_W, d);
-    for (int dx = -1; dx <= 1; ++dx) {
-      for (int dy = -1; dy <= 1; ++dy) {
-        for (int dz = -1; dz <= 1; ++dz) {
-          const auto it = grid.find(GridHash(c + glm::i64vec3(dx, dy, dz)));
-          if (it == grid.end()) continue;
-          for (const int j : it->second) {
-            if (j <= i) continue;
-            const glm::dvec3 dp = pairs[j].p_W - pairs[i].p_W;
-            if (glm::dot(dp, dp) >= d2) continue;
-            if (glm::dot(pairs[i].n_W, pairs[j].n_W) < cos_max) {
-              split_neighbours.emplace_back(i, j);  // near, but the fine normals disagree
-              continue;
-            }
-            const int a = Find(parent, i), b = Find(parent, j);
-            if (a != b) parent[std::max(a, b)] = std::min(a, b);
-          }
-        }
+    grid.ForEachNear(pairs[i].p_W, [&](int j) {
+      if (j <= i) return;
+      const glm::dvec3 dp = pairs[j].p_W - pairs[i].p_W;
+      if (glm::dot(dp, dp) >= d2) return;
+      if (glm::dot(pairs[i].n_W, pairs[j].n_W) < cos_max) {
+        split_neighbours.emplace_back(i, j);  // near, but the fine normals disagree
+        return;
       }
-    }
+      const int a = Find(parent, i), b = Find(parent, j);
+      if (a != b) parent[std::max(a, b)] = std::min(a, b);
+    });
   }
   const auto link_shared = [&](auto triangle_of) {
     std::unordered_map<int, int> first;  // triangle → first pair holding it
@@ -700,26 +710,16 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
     const double reach = o.merge_distance_m + o.share_fade_m;
     std::vector<double> gap(static_cast<std::size_t>(P) * P,
                             std::numeric_limits<double>::infinity());
-    std::unordered_map<std::uint64_t, std::vector<int>> near;
-    for (int i = 0; i < np; ++i) near[GridHash(GridCell(pairs[i].p_W, reach))].push_back(i);
+    CellGrid near(reach);
+    for (int i = 0; i < np; ++i) near.Add(pairs[i].p_W, i);
     for (int i = 0; i < np; ++i) {
       const int pi = patch_of[i];
-      const glm::i64vec3 c = GridCell(pairs[i].p_W, reach);
-      for (int dx = -1; dx <= 1; ++dx) {
-        for (int dy = -1; dy <= 1; ++dy) {
-          for (int dz = -1; dz <= 1; ++dz) {
-            const auto it = near.find(GridHash(c + glm::i64vec3(dx, dy, dz)));
-            if (it == near.end()) continue;
-            for (const int j : it->second) {
-              const int pj = patch_of[j];
-              if (pj <= pi) continue;
-              const double dist = glm::distance(pairs[i].p_W, pairs[j].p_W);
-              double& g = gap[static_cast<std::size_t>(pi) * P + pj];
-              g = std::min(g, dist);
-            }
-          }
-        }
-      }
+      near.ForEachNear(pairs[i].p_W, [&](int j) {
+        const int pj = patch_of[j];
+        if (pj <= pi) return;
+        double& g = gap[static_cast<std::size_t>(pi) * P + pj];
+        g = std::min(g, glm::distance(pairs[i].p_W, pairs[j].p_W));
+      });
     }
     std::vector<double> links(static_cast<std::size_t>(P) * P, 0.0);
     for (int a = 0; a < P; ++a) {
