@@ -206,6 +206,47 @@ int main(int argc, char** argv) {
                  "Weber fraction); a Hello asking more is refused with a Reject that says so")
       ->check(CLI::Range(0.0, 99.0))
       ->capture_default_str();
+  // The contact-model deadband's floors (the Weber fraction k itself is the operator's, agreed
+  // in the Hello): each threshold is max(k·|value|, k·floor), ContactModelDeadbandConfig.
+  app.add_option("--model-deadband-force-floor", config.model_deadband.force_floor_scale_n,
+                 "contact-model deadband: force floor scale, N (the floor is k times it)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--model-deadband-torque-floor", config.model_deadband.torque_floor_scale_nm,
+                 "contact-model deadband: torque floor scale, N*m (the floor is k times it)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--model-deadband-stiffness-floor",
+                 config.model_deadband.stiffness_floor_scale_n_per_m,
+                 "contact-model deadband: floor scale of the stiffness's translational block,\n"
+                 "N/m (the floor is k times it)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--model-deadband-rotational-stiffness-floor",
+                 config.model_deadband.rotational_stiffness_floor_scale_nm_per_rad,
+                 "contact-model deadband: floor scale of the stiffness's rotational block,\n"
+                 "N*m/rad (the floor is k times it)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--model-deadband-probe-m", config.model_deadband.probe_position_scale_m,
+                 "contact-model deadband, felt-wrench rule: translation probe scale, m (the probe\n"
+                 "is k times it: how far the operator's tool may be from q0)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--model-deadband-probe-rad", config.model_deadband.probe_rotation_scale_rad,
+                 "contact-model deadband, felt-wrench rule: rotation probe scale, rad (the probe\n"
+                 "is k times it)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  std::string model_rule = ht::ToString(config.model_deadband.rule);
+  app.add_option("--model-deadband-rule", model_rule,
+                 "contact-model deadband: how the held model and a new one are compared:\n"
+                 "probes (the wrench at q0, then at the probe poses a tool-state deadband's\n"
+                 "step away), probe-mean (the wrench averaged over q0 and the probes), entries\n"
+                 "(the wrench at q0, then the stiffness blocks' entries: the rule before\n"
+                 "issue 33); docs/deadband.md")
+      ->check(CLI::IsMember({"probes", "probe-mean", "entries"}))
+      ->capture_default_str();
   app.add_option("--out", out_dir,
                  "directory for remote_summary.json and remote_steps.csv (one row per step)");
   app.add_option("--port-file", port_file, "write the bound UDP port to this file");
@@ -274,6 +315,7 @@ int main(int argc, char** argv) {
         ht::kDefaultMaxWindowPerWindow * config.pipeline.window_extent_m;
   }
   config.max_deadband = max_deadband_pct / 100.0;
+  config.model_deadband.rule = ht::ParseContactModelDeadbandRule(model_rule);
   config.gpu.instanced_draws = !per_render_draws;
 
   if (*seed_models) {
