@@ -21,6 +21,7 @@ expect() {
 }
 expect slave_sim "--grid" "$build/slave_sim/slave_sim" --grid 0
 expect slave_sim "--split-windows-link-mm" "$build/slave_sim/slave_sim" --split-windows-link-mm -1
+expect slave_sim "--model-deadband-torque-floor" "$build/slave_sim/slave_sim" --model-deadband-torque-floor 0
 expect slave_sim "keygen" "$build/slave_sim/slave_sim" --key "$tmp/no_such.key"
 expect master_station "keygen" "$build/master_station/master_station" --key "$tmp/no_such.key"
 expect master_station "--rate" "$build/master_station/master_station" --rate 5

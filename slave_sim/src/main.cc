@@ -210,42 +210,23 @@ int main(int argc, char** argv) {
   // in the Hello): each threshold is max(k·|value|, k·floor), ContactModelDeadbandConfig.
   app.add_option("--model-deadband-force-floor", config.model_deadband.force_floor_scale_n,
                  "contact-model deadband: force floor scale, N (the floor is k times it)")
-      ->check(CLI::PositiveNumber)
+      ->check(CLI::Range(1e-3, 1e3))
       ->capture_default_str();
   app.add_option("--model-deadband-torque-floor", config.model_deadband.torque_floor_scale_nm,
                  "contact-model deadband: torque floor scale, N*m (the floor is k times it)")
-      ->check(CLI::PositiveNumber)
+      ->check(CLI::Range(1e-5, 1e2))
       ->capture_default_str();
   app.add_option("--model-deadband-stiffness-floor",
                  config.model_deadband.stiffness_floor_scale_n_per_m,
                  "contact-model deadband: floor scale of the stiffness's translational block,\n"
                  "N/m (the floor is k times it)")
-      ->check(CLI::PositiveNumber)
+      ->check(CLI::Range(1e-3, 1e9))
       ->capture_default_str();
   app.add_option("--model-deadband-rotational-stiffness-floor",
                  config.model_deadband.rotational_stiffness_floor_scale_nm_per_rad,
                  "contact-model deadband: floor scale of the stiffness's rotational block,\n"
                  "N*m/rad (the floor is k times it)")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  app.add_option("--model-deadband-probe-m", config.model_deadband.probe_position_scale_m,
-                 "contact-model deadband, felt-wrench rule: translation probe scale, m (the probe\n"
-                 "is k times it: how far the operator's tool may be from q0)")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  app.add_option("--model-deadband-probe-rad", config.model_deadband.probe_rotation_scale_rad,
-                 "contact-model deadband, felt-wrench rule: rotation probe scale, rad (the probe\n"
-                 "is k times it)")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  std::string model_rule = ht::ToString(config.model_deadband.rule);
-  app.add_option("--model-deadband-rule", model_rule,
-                 "contact-model deadband: how the held model and a new one are compared:\n"
-                 "probes (the wrench at q0, then at the probe poses a tool-state deadband's\n"
-                 "step away), probe-mean (the wrench averaged over q0 and the probes), entries\n"
-                 "(the wrench at q0, then the stiffness blocks' entries: the rule before\n"
-                 "issue 33); docs/deadband.md")
-      ->check(CLI::IsMember({"probes", "probe-mean", "entries"}))
+      ->check(CLI::Range(1e-6, 1e6))
       ->capture_default_str();
   app.add_option("--out", out_dir,
                  "directory for remote_summary.json and remote_steps.csv (one row per step)");
@@ -315,7 +296,6 @@ int main(int argc, char** argv) {
         ht::kDefaultMaxWindowPerWindow * config.pipeline.window_extent_m;
   }
   config.max_deadband = max_deadband_pct / 100.0;
-  config.model_deadband.rule = ht::ParseContactModelDeadbandRule(model_rule);
   config.gpu.instanced_draws = !per_render_draws;
 
   if (*seed_models) {

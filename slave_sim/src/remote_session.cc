@@ -446,8 +446,7 @@ nlohmann::json RemoteSession::StatsJson(std::size_t scene_objects, std::size_t s
       {"steps_skipped", steps_skipped_},
       {"steps_by_cause", steps_by_cause},
       {"keepalives_sent", keepalives_sent_},
-      {"model_decisions", ToJson(model_deadband_.counts())},
-      {"model_rule", ToString(model_deadband_.config().rule)}};
+      {"model_decisions", ToJson(model_deadband_.counts())}};
   transport["kink_planes"] = {{"sent", kink_planes_sent_}, {"left_out", kink_planes_left_out_}};
   transport["mtu"] = config_.mtu;
   transport["node_poses"] = {{"rate_hz", config_.display_rate_hz},

@@ -66,28 +66,6 @@ const char* ToString(DeadbandReason reason) noexcept {
   return "unknown";
 }
 
-const char* ToString(ContactModelDeadbandRule rule) noexcept {
-  switch (rule) {
-    case ContactModelDeadbandRule::kStiffnessEntries:
-      return "entries";
-    case ContactModelDeadbandRule::kProbeMax:
-      return "probes";
-    case ContactModelDeadbandRule::kProbeMean:
-      return "probe-mean";
-  }
-  return "?";
-}
-
-ContactModelDeadbandRule ParseContactModelDeadbandRule(const std::string& text) {
-  for (const ContactModelDeadbandRule r :
-       {ContactModelDeadbandRule::kStiffnessEntries, ContactModelDeadbandRule::kProbeMax,
-        ContactModelDeadbandRule::kProbeMean}) {
-    if (text == ToString(r)) return r;
-  }
-  throw std::invalid_argument(
-      "contact-model deadband rule must be entries, probes or probe-mean, got '" + text + "'");
-}
-
 nlohmann::json ToJson(const DeadbandCounts& counts) {
   nlohmann::json out = nlohmann::json::object();
   for (int i = 0; i < kDeadbandReasonCount; ++i) {
@@ -133,8 +111,6 @@ void ContactModelDeadbandConfig::Validate() const {
   CheckPositive(rotational_stiffness_floor_scale_nm_per_rad,
                 "contact-model deadband rotational stiffness floor scale");
   CheckPositive(keepalive_s, "contact-model keep-alive");
-  CheckPositive(probe_position_scale_m, "contact-model deadband translation probe scale");
-  CheckPositive(probe_rotation_scale_rad, "contact-model deadband rotation probe scale");
 }
 
 namespace {
@@ -237,61 +213,12 @@ DeadbandReason ContactModelDeadband::Decide(const ContactModel& model, std::int6
     const ContactModelEvaluation now = EvaluateContactModel(model, model.X_WT0);
     const double stiffness_t = Frobenius3(now.K, 0, 0);
     const double stiffness_r = Frobenius3(now.K, 3, 3);
-    // Force, then torque, beyond max(k·|value|, k·floor) of the new model's.
-    const auto differs = [&](const Wrench& h, const Wrench& m) {
-      if (glm::length(h.force - m.force) >
-          std::max(k * glm::length(m.force), k * c.force_floor_scale_n)) {
-        return DeadbandReason::kForce;
-      }
-      if (glm::length(h.torque - m.torque) >
-          std::max(k * glm::length(m.torque), k * c.torque_floor_scale_nm)) {
-        return DeadbandReason::kTorque;
-      }
-      return DeadbandReason::kNotSent;
-    };
-    // The probe poses: ±k·scale along and about each world axis.
-    const auto probe = [&](int i) {
-      const double sign = (i & 1) != 0 ? -1.0 : 1.0;
-      const int axis = (i >> 1) % 3;
-      Twist dq{};
-      if (i < 6) {
-        dq.linear[axis] = sign * k * c.probe_position_scale_m;
-      } else {
-        dq.angular[axis] = sign * k * c.probe_rotation_scale_rad;
-      }
-      return Displace(model.X_WT0, dq);
-    };
-    if (c.rule == ContactModelDeadbandRule::kProbeMean) {
-      // The wrench each model renders over the probes' neighbourhood, averaged (q0 and the 12).
-      Wrench mh = held.F_T_W, mm = now.F_T_W;
-      for (int i = 0; i < 12; ++i) {
-        const RigidTransform X = probe(i);
-        const Wrench h = EvaluateContactModel(held_, X).F_T_W,
-                     m = EvaluateContactModel(model, X).F_T_W;
-        mh.force += h.force;
-        mh.torque += h.torque;
-        mm.force += m.force;
-        mm.torque += m.torque;
-      }
-      mh.force /= 13.0;
-      mh.torque /= 13.0;
-      mm.force /= 13.0;
-      mm.torque /= 13.0;
-      reason = differs(mh, mm);
-    } else {
-      reason = differs(held.F_T_W, now.F_T_W);
-    }
-    if (reason != DeadbandReason::kNotSent || c.rule == ContactModelDeadbandRule::kProbeMean) {
-      // decided
-    } else if (c.rule == ContactModelDeadbandRule::kProbeMax) {
-      // The wrench a probe away from q0, where the operator may render either model.
-      for (int i = 0; i < 12 && reason == DeadbandReason::kNotSent; ++i) {
-        const RigidTransform X = probe(i);
-        if (differs(EvaluateContactModel(held_, X).F_T_W, EvaluateContactModel(model, X).F_T_W) !=
-            DeadbandReason::kNotSent) {
-          reason = DeadbandReason::kStiffness;
-        }
-      }
+    if (glm::length(held.F_T_W.force - now.F_T_W.force) >
+        std::max(k * glm::length(now.F_T_W.force), k * c.force_floor_scale_n)) {
+      reason = DeadbandReason::kForce;
+    } else if (glm::length(held.F_T_W.torque - now.F_T_W.torque) >
+               std::max(k * glm::length(now.F_T_W.torque), k * c.torque_floor_scale_nm)) {
+      reason = DeadbandReason::kTorque;
     } else if ((held.K.block<3, 3>(0, 0) - now.K.block<3, 3>(0, 0)).norm() >
                    std::max(k * stiffness_t, k * c.stiffness_floor_scale_n_per_m) ||
                (held.K.block<3, 3>(3, 3) - now.K.block<3, 3>(3, 3)).norm() >

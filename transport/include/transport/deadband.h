@@ -22,7 +22,6 @@
 #include <array>
 #include <cstdint>
 #include <nlohmann/json.hpp>
-#include <string>
 
 #include "haptic_core/contact_model.h"
 #include "haptic_core/spatial.h"
@@ -157,18 +156,6 @@ class ToolStateDeadband {
   DeadbandCounts counts_{};
 };
 
-/// How the contact-model deadband compares the held model with the new one (see
-/// ContactModelDeadbandConfig::rule).
-enum class ContactModelDeadbandRule : std::uint8_t {
-  kStiffnessEntries,  ///< wrench at q0, then ‖ΔK‖_F per block (issue 18)
-  kProbeMax,          ///< wrench at q0, then at each probe pose (kStiffness)
-  kProbeMean,         ///< the wrench averaged over q0 and the probe poses
-};
-/// "entries", "probes", "probe-mean".
-const char* ToString(ContactModelDeadbandRule rule) noexcept;
-/// The inverse of ToString; throws std::invalid_argument naming the choices.
-ContactModelDeadbandRule ParseContactModelDeadbandRule(const std::string& text);
-
 /// Contact-model deadband. Thresholds are max(k·|value|, k·floor scale).
 struct ContactModelDeadbandConfig {
   double weber_fraction = 0.0;                   ///< k ∈ [0, 1); 0 = off (every model is sent)
@@ -177,16 +164,6 @@ struct ContactModelDeadbandConfig {
   double stiffness_floor_scale_n_per_m = 200.0;  ///< translational block of K (N/m)
   double rotational_stiffness_floor_scale_nm_per_rad = 0.2;  ///< rotational block (N·m/rad)
   double keepalive_s = 0.1;  ///< longest time between two models sent (s, > 0)
-  /// How the stiffness is judged (issue 33, tried; docs/deadband.md): kStiffnessEntries (the
-  /// default, issue 18's rule); kProbeMax: besides q0, the held and the new model are evaluated at
-  /// the twelve poses q0 ⊕ ±k·probe_position_scale_m along each world axis and ±k·probe_rotation_
-  /// scale_rad about each (about the tool's centre of mass: how far the operator's tool may be
-  /// from the remote node's prediction before the tool-state deadband sends), and M is sent when
-  /// force or torque differ beyond max(k·|value|, k·floor) at any (reason kStiffness);
-  /// kProbeMean: the wrench averaged over q0 and the twelve probes, compared once.
-  ContactModelDeadbandRule rule = ContactModelDeadbandRule::kStiffnessEntries;
-  double probe_position_scale_m = 2e-4;    ///< translation probe ÷ k (m, > 0)
-  double probe_rotation_scale_rad = 0.02;  ///< rotation probe ÷ k (rad, > 0)
   /// Throws std::invalid_argument naming the field when a value is out of range or not finite.
   void Validate() const;
 };
@@ -196,9 +173,8 @@ struct ContactModelDeadbandConfig {
 /// renders there; M is sent when
 ///   the number of contacts differs, or
 ///   |F_H − F_M| > max(k·|F_M|, k·floor_F) (force; likewise torque), or
-///   (rule kStiffnessEntries, the default) ‖K_H − K_M‖_F > max(k·‖K_M‖_F, k·floor_K) for K's
-///   translational 3×3 block and, separately, its rotational 3×3 block (Frobenius norms; the
-///   coupling blocks follow from these two), or the probes' tests (the other rules),
+///   ‖K_H − K_M‖_F > max(k·‖K_M‖_F, k·floor_K) for K's translational 3×3 block and, separately,
+///   its rotational 3×3 block (Frobenius norms; the coupling blocks follow from these two),
 /// or the keep-alive has passed. F_M and K_M are M evaluated at its own q0.
 class ContactModelDeadband {
  public:
