@@ -158,56 +158,35 @@ ContactModel RestingFace() {
 
 Twist Tilt(double theta) { return {{0, 0, 0}, {0, theta, 0}}; }
 
-// The blend's lift at q0, which ContactDepthAt takes off everywhere so that δ(q0) = δ0: the two
-// arms of the V differ by `gap0` there.
-double LiftAtQ0(double gap0, double eps) {
-  return gap0 < eps ? (eps - gap0) * (eps - gap0) / (4 * eps) : 0.0;
-}
-
 TEST(ContactModel, KinkPlanesGiveTheVAndBlendOnlyAtItsVertex) {
   const ContactModel m = RestingFace();
   const ContactLinearization& c = m.contacts[0];
-  // ε grows with the contact's depth: 120 µm here (δ0), so the arms blend while their gap is
-  // below δ0, over ±3 mrad of tilt about the vertex.
-  const double eps = KinkBlendWidth(c);
-  ASSERT_DOUBLE_EQ(eps, std::max(kKinkBlendM, kKinkBlendDepthFraction * c.depth_m));
-  const double blend_half_width = eps / (2 * kR);  // rad: the arms' gap reaches ε
-  const double lift0 = LiftAtQ0(2 * kR * std::abs(kThetaV), eps);
-  EXPECT_DOUBLE_EQ(ContactDepthAt(c, Tilt(0.0)), c.depth_m);  // δ(q0) = δ0 exactly
+  const double blend_half_width = kKinkBlendM / (2 * kR);  // rad: the arms' gap reaches ε
   double largest_step = 0.0, previous = 0.0;
-  const int n = 16000;
-  int outside = 0;
+  const int n = 4000;
   for (int i = 0; i <= n; ++i) {
-    const double theta = kThetaV - 8e-3 + 16e-3 * i / n;
+    const double theta = kThetaV - 2e-3 + 4e-3 * i / n;
     PenetrationGradient J;
     const double depth = ContactDepthAt(c, Tilt(theta), &J);
-    const double v = kDepthV + kR * std::abs(theta - kThetaV) - lift0;
+    const double v = kDepthV + kR * std::abs(theta - kThetaV);
     if (std::abs(theta - kThetaV) > blend_half_width) {
       // The V exactly, along the bearing arm's gradient.
-      ++outside;
       EXPECT_NEAR(depth, v, 1e-15) << theta;
       EXPECT_NEAR(J.d_rotation_W.y, theta > kThetaV ? kR : -kR, 1e-15) << theta;
     } else {
       EXPECT_GE(depth, v - 1e-15) << theta;
-      EXPECT_LE(depth, v + eps / 4 + 1e-15) << theta;
+      EXPECT_LE(depth, v + kKinkBlendM / 4 + 1e-15) << theta;
     }
     EXPECT_EQ(J.d_translation_W, c.gradient.d_translation_W);
     if (i > 0) largest_step = std::max(largest_step, std::abs(J.d_rotation_W.y - previous));
     previous = J.d_rotation_W.y;
   }
-  EXPECT_GT(outside, n / 4);
-  // Continuous: the 16000 steps of 1 µrad cross the 6 mrad-wide blend in about 6000 steps.
+  // Continuous: the 4000 steps of 1 µrad cross the 0.5 mrad-wide blend in about 500 steps.
   EXPECT_LT(largest_step, 0.01 * 2 * kR);
   // At the vertex both edges bear half: no torque.
   PenetrationGradient J;
-  EXPECT_NEAR(ContactDepthAt(c, Tilt(kThetaV), &J), kDepthV + eps / 4 - lift0, 1e-15);
+  EXPECT_NEAR(ContactDepthAt(c, Tilt(kThetaV), &J), kDepthV + kKinkBlendM / 4, 1e-15);
   EXPECT_NEAR(J.d_rotation_W.y, 0.0, 1e-15);
-  // A shallow contact keeps the least width: a face 4 µm deep blends over kKinkBlendM.
-  ContactLinearization shallow = c;
-  shallow.depth_m = 4e-6;
-  EXPECT_DOUBLE_EQ(KinkBlendWidth(shallow), kKinkBlendM);
-  shallow.depth_m = std::nan("");
-  EXPECT_DOUBLE_EQ(KinkBlendWidth(shallow), kKinkBlendM);
   // Without kink planes: the contact's own plane, δ0 + J·Δq.
   ContactLinearization one = c;
   one.num_kink_planes = 0;
@@ -219,7 +198,7 @@ TEST(ContactModel, KinkCurvatureAndStiffnessMatchFiniteDifferences) {
   // Inside the blend (a quarter of its half-width from the vertex), two routes to one number:
   // the curvature against differences of the gradient, and K against differences of the wrench.
   const ContactModel m = RestingFace();
-  const double theta0 = kThetaV + 0.25 * KinkBlendWidth(m.contacts[0]) / (2 * kR);
+  const double theta0 = kThetaV + 0.25 * kKinkBlendM / (2 * kR);
   PenetrationGradient J0;
   Stiffness6 H;
   ContactDepthAt(m.contacts[0], Tilt(theta0), &J0, &H);
@@ -260,29 +239,27 @@ TEST(ContactModel, TranslationKinkPlanesGiveTheVInPosition) {
   c.kink_planes[0].depth_m = d_v - s * (0.0 - x_v);
   c.kink_planes[0].d_rotation_W = c.gradient.d_rotation_W;
   c.kink_planes[0].d_translation_offset_W = {-2.0 * s, 0.0, 0.0};
-  const double eps = KinkBlendWidth(c);
-  const double blend_half_width = eps / (2 * s);
-  const double lift0 = LiftAtQ0(2 * s * std::abs(x_v), eps);
+  const double blend_half_width = kKinkBlendM / (2 * s);
   double largest_step = 0.0, previous = 0.0;
-  const int n = 8000;
+  const int n = 4000;
   for (int i = 0; i <= n; ++i) {
-    const double x = x_v - 2e-4 + 4e-4 * i / n;
+    const double x = x_v - 1e-4 + 2e-4 * i / n;
     PenetrationGradient J;
     const double depth = ContactDepthAt(c, {{x, 0.0, 0.0}, {0.0, 0.0, 0.0}}, &J);
-    const double v = d_v + s * std::abs(x - x_v) - lift0;
+    const double v = d_v + s * std::abs(x - x_v);
     if (std::abs(x - x_v) > blend_half_width) {
       EXPECT_NEAR(depth, v, 1e-15) << x;
       EXPECT_NEAR(J.d_translation_W.x, x > x_v ? s : -s, 1e-15) << x;
     } else {
       EXPECT_GE(depth, v - 1e-15) << x;
-      EXPECT_LE(depth, v + eps / 4 + 1e-15) << x;
+      EXPECT_LE(depth, v + kKinkBlendM / 4 + 1e-15) << x;
     }
     EXPECT_EQ(J.d_translation_W.z, -1.0);
     EXPECT_EQ(J.d_rotation_W, c.gradient.d_rotation_W);  // the arms share ∂δ/∂θ
     if (i > 0) largest_step = std::max(largest_step, std::abs(J.d_translation_W.x - previous));
     previous = J.d_translation_W.x;
   }
-  EXPECT_LT(largest_step, 0.01 * 2 * s);  // continuous across the ≈100 µm-wide blend
+  EXPECT_LT(largest_step, 0.01 * 2 * s);  // continuous across the ≈17 µm-wide blend
   // Inside the blend: the curvature against differences of the gradient, translation block only.
   const double x0 = x_v + 0.25 * blend_half_width, h = 1e-10;
   PenetrationGradient J0, J1;
@@ -327,8 +304,7 @@ TEST(ContactModel, TheWrenchIsTheNegativeGradientOfThePotential) {
   EXPECT_EQ(held.saturated_contacts, 1);
   check(two, two.X_WT0, 0.6, "one contact saturated");
   const ContactModel face = RestingFace();
-  check(face,
-        Displace(face.X_WT0, Tilt(kThetaV + 0.25 * KinkBlendWidth(face.contacts[0]) / (2 * kR))),
+  check(face, Displace(face.X_WT0, Tilt(kThetaV + 0.25 * kKinkBlendM / (2 * kR))),
         std::numeric_limits<double>::infinity(), "inside the kink blend");
   // ... and inside the blend of a translation arm (its own ∂δ/∂x: offset −2·0.4 along x).
   ContactModel slope = face;

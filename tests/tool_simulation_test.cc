@@ -209,7 +209,7 @@ TEST(ToolSimulation, AFaceRestingOnTwoEdgesSettlesWithoutChattering) {
   EXPECT_EQ(flips, 0);
   // Where it rests: the contact's torque balances the coupling's, within the vertex's blend.
   EXPECT_NEAR(step.F_contact_T_W.torque.y + step.F_coupling_T_W.torque.y, 0.0, 1e-6);
-  EXPECT_NEAR(tilt.back(), theta_v, KinkBlendWidth(c) / (2 * r));
+  EXPECT_NEAR(tilt.back(), theta_v, kKinkBlendM / (2 * r));
 }
 
 }  // namespace

@@ -6,11 +6,6 @@
 
 namespace ht {
 
-double KinkBlendWidth(const ContactLinearization& c) noexcept {
-  if (!std::isfinite(c.depth_m)) return kKinkBlendM;
-  return std::max(kKinkBlendM, kKinkBlendDepthFraction * c.depth_m);
-}
-
 double ContactDepthAt(const ContactLinearization& c, const Twist& dq, PenetrationGradient* gradient,
                       Stiffness6* curvature) noexcept {
   const int n = std::clamp(c.num_kink_planes, 0, kMaxKinkPlanes);
@@ -37,7 +32,7 @@ double ContactDepthAt(const ContactLinearization& c, const Twist& dq, Penetratio
     }
     if (d[i] > d[static_cast<std::size_t>(top)]) top = m + 1;
   }
-  const double eps = KinkBlendWidth(c);
+  const double eps = kKinkBlendM;
   const glm::dvec3 t_top = t[static_cast<std::size_t>(top)];
   const glm::dvec3 r_top = r[static_cast<std::size_t>(top)];
   double depth = d[static_cast<std::size_t>(top)];

@@ -34,36 +34,25 @@ struct ContactModel {
   Wrench F_T_W_at_q0;
 };
 
-/// Least depth width ε (m) over which a contact's planes blend (ContactDepthAt): a tilt of ε/(2r)
-/// (r the lever of the arms, 0.25 mrad for the fig75 block's 2 cm edges) is the width of the V's
-/// rounded vertex.
+/// Depth width ε (m) over which a contact's planes blend (ContactDepthAt): a tilt of ε/(2r) (r the
+/// lever of the arms, 0.25 mrad for the fig75 block's 2 cm edges) is the width of the V's rounded
+/// vertex.
 inline constexpr double kKinkBlendM = 10e-6;
-/// The blend's width as a fraction of the contact's depth δ0 at q0 (issue 32, fifteenth stop):
-/// ε = max(kKinkBlendM, kKinkBlendDepthFraction·δ0). A face pressed δ0 into a flat bears on both
-/// of its edges until a tilt lifts the shallower one out, that is while the arms' gap g stays
-/// below δ0; the blend hands the force from both edges (g = 0, half each) to the deeper one alone
-/// over that same gap. With a fixed 10 µm the model put a 60 µm-deep resting face's whole force on
-/// one edge at 10 µm of tilt, where the pipeline truth (its secant over texel-scale steps, about
-/// 100 µm at a 2 cm edge) and the volume truth read a lever near the face's centre.
-inline constexpr double kKinkBlendDepthFraction = 1.0;
-/// ε of contact `c` (m): max(kKinkBlendM, kKinkBlendDepthFraction·c.depth_m); kKinkBlendM when
-/// depth_m is not finite.
-double KinkBlendWidth(const ContactLinearization& c) noexcept;
 
 /// δ of contact `c` at the pose change Δq = q ⊖ q0 (Δq.linear in m, Δq.angular in rad, world
 /// axes): the largest of its planes, δ0 + J·Δq and each kink plane's δ_m + J_m·Δq (J_m =
 /// (∂δ/∂x + the plane's offset, ∂δ_m/∂θ)), with a quadratic blend where another plane comes within
-/// ε = KinkBlendWidth(c) of the largest one (gap g < ε: δ += (ε − g)²/(4ε), J += w·(J_i − J_max)
-/// with w = (ε − g)/(2ε); the weights are normalized when they add up to more than 1), less that
-/// lift at q0, so that δ(q0) = δ0 always (planes that tie at q0, a level face on a flat, add no
-/// depth there; a touching contact pushes with nothing). Without planes, δ0 + J·Δq exactly. The
-/// blend makes the gradient continuous through the V's vertex: at a tie the two arms bear half
-/// each, so a face resting on two edges finds its equilibrium instead of chattering between them
-/// tick by tick (each plane alone flips the torque from one edge's to the other's). `gradient`
-/// (optional) receives ∇δ; `curvature` (optional) receives ∇²δ (6×6, world axes, rows/cols as
-/// Stiffness6; only its rotation block is non-zero where the planes share ∂δ/∂x), the blend's Σ
-/// (J_max − J_i)(J_max − J_i)ᵀ/(2ε), which the implicit tool step needs in K to stay stable there.
-/// Non-finite planes are skipped. noexcept, allocation-free (1 kHz loop).
+/// kKinkBlendM of the largest one (gap g < ε: δ += (ε − g)²/(4ε), J += w·(J_i − J_max) with w = (ε
+/// − g)/(2ε); the weights are normalized when they add up to more than 1), less that lift at q0, so
+/// that δ(q0) = δ0 always (planes that tie at q0, a level face on a flat, add no depth there; a
+/// touching contact pushes with nothing). Without planes, δ0 + J·Δq exactly.
+/// The blend makes the gradient continuous through the V's vertex: at a tie the two arms bear
+/// half each, so a face resting on two edges finds its equilibrium instead of chattering between
+/// them tick by tick (each plane alone flips the torque from one edge's to the other's).
+/// `gradient` (optional) receives ∇δ; `curvature` (optional) receives ∇²δ (6×6, world axes,
+/// rows/cols as Stiffness6; only its rotation block is non-zero where the planes share ∂δ/∂x),
+/// the blend's Σ (J_max − J_i)(J_max − J_i)ᵀ/(2ε), which the implicit tool step needs in K to stay
+/// stable there. Non-finite planes are skipped. noexcept, allocation-free (1 kHz loop).
 double ContactDepthAt(const ContactLinearization& c, const Twist& dq,
                       PenetrationGradient* gradient = nullptr,
                       Stiffness6* curvature = nullptr) noexcept;
