@@ -4,7 +4,8 @@ ticks whose contact force (fx..fz) or device force (device_fx..fz) changed by mo
 tick, the largest device step, the tool's tilt ripple (tool_rx and tool_ry less their 50-tick
 trailing mean, RMS, mrad: the resting face rocking between its edges), the contact torque's
 one-tick change (median, mN·m) and the device torque (RMS, mN·m); then the run's passivity figures
-from summary.json (force scaled away over the device force's impulse).
+from summary.json (force scaled and damped away over the device force's impulse, and the energy
+the model switches created).
 
 Usage: loop_summary.py RUN_DIR [RUN_DIR ...]"""
 import csv
@@ -48,9 +49,11 @@ def main(runs):
         s = json.load(open(os.path.join(run, "summary.json")))
         p = s.get("passivity", {})
         impulse = np.linalg.norm(D, axis=1).sum() * 1e-3
-        away = p.get("force_scaled_away_Ns", 0.0)
-        print(f"{os.path.basename(run.rstrip('/'))}: scaled away {100 * away / (away + impulse):.1f} %, "
-              f"guard ticks {p.get('guard_ticks', '?')}")
+        away = p.get("force_scaled_away_Ns", 0.0) + p.get("force_damped_away_Ns", 0.0)
+        created = p.get("attribution", {}).get("switch_energy_created_J", float("nan"))
+        print(f"{os.path.basename(run.rstrip('/'))}: passivity scaled + damped away "
+              f"{100 * away / (away + impulse):.1f} % of the device impulse, model switches "
+              f"created {1e3 * created:.1f} mJ")
         for line in out:
             print("   " + line)
     return 0
