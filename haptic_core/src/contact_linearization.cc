@@ -10,9 +10,6 @@
 #include <string>
 
 namespace ht {
-namespace {
-constexpr double kInfinity = std::numeric_limits<double>::infinity();
-}  // namespace
 
 Wrench PenaltyWrench(double depth_m, const PenetrationGradient& J,
                      double stiffness_n_per_m) noexcept {
@@ -22,8 +19,7 @@ Wrench PenaltyWrench(double depth_m, const PenetrationGradient& J,
 }
 
 int AddKinkPlanes(const ContactWindow& w, std::span<const DepthSample> samples,
-                  const glm::dvec3& p_WT, ContactLinearization& lin, bool own_slope,
-                  std::span<const KinkArm> arms) noexcept {
+                  const glm::dvec3& p_WT, ContactLinearization& lin, bool own_slope) noexcept {
   lin.num_kink_planes = std::clamp(lin.num_kink_planes, 0, kMaxKinkPlanes);
   if (samples.size() < static_cast<std::size_t>(kGradientSamples) || !std::isfinite(lin.depth_m) ||
       samples[0].cell < 0) {
@@ -77,21 +73,9 @@ int AddKinkPlanes(const ContactWindow& w, std::span<const DepthSample> samples,
       if (s.cell == samples[0].cell) continue;  // the contact's own plane already
       const double sign = side == 0 ? 1.0 : -1.0;
       KinkPlane p;
-      const std::size_t arm_index = static_cast<std::size_t>(2 * a + side);
-      const bool measured = arm_index < arms.size() && arms[arm_index].depth_m > -kInfinity &&
-                            std::isfinite(arms[arm_index].depth_m);
-      if (measured) {
-        // The arm as stage 5b measured it at q0: its own depth and its point's lever.
-        const double slope_at_q0 =
-            glm::dot(glm::cross(arms[arm_index].point_W - p_WT, J_x), axes[a]);
-        p.d_rotation_W = d_rotation + (slope_at_q0 - glm::dot(d_rotation, axes[a])) * axes[a];
-        p.depth_m = std::min(arms[arm_index].depth_m, lin.depth_m);
-      } else {
-        p.d_rotation_W =
-            d_rotation + (arm_slope[a][side] - glm::dot(d_rotation, axes[a])) * axes[a];
-        // Through the sample: δ_m(q0 ⊕ sign·h_θ·a) = δ_s; never above δ0 at q0.
-        p.depth_m = std::min(s.depth_m - sign * h * arm_slope[a][side], lin.depth_m);
-      }
+      p.d_rotation_W = d_rotation + (arm_slope[a][side] - glm::dot(d_rotation, axes[a])) * axes[a];
+      // Through the sample: δ_m(q0 ⊕ sign·h_θ·a) = δ_s; never above δ0 at q0.
+      p.depth_m = std::min(s.depth_m - sign * h * arm_slope[a][side], lin.depth_m);
       if (!std::isfinite(p.depth_m) || !std::isfinite(p.d_rotation_W.x) ||
           !std::isfinite(p.d_rotation_W.y) || !std::isfinite(p.d_rotation_W.z)) {
         continue;

@@ -915,8 +915,7 @@ double DepthRefiner::TexelOfGathered(std::span<const Projected> tool_tris) const
 
 bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
                           const ContactQuery& query, std::span<DepthSample> samples,
-                          ContactLinearization& lin, std::span<KinkArm> arms) noexcept {
-  for (KinkArm& arm : arms) arm = KinkArm{};
+                          ContactLinearization& lin) noexcept {
   if (samples.size() < static_cast<std::size_t>(kGradientSamples) || samples[0].cell < 0 ||
       query.environment == nullptr) {
     return false;
@@ -1040,15 +1039,6 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
       }
       if (found.depth_m > -kInf) sample.depth_m = found.depth_m;
       if (k <= 4) translation_found[static_cast<std::size_t>(k - 1)] = found;
-      // A tilt's arm (about u or v) measured at the base pose: the local maximum at q0 near where
-      // the tilted tool found its deepest point (the box keeps the climb on that arm's edge).
-      const std::size_t arm = static_cast<std::size_t>(k - 5);
-      if (k >= 5 && k <= 8 && arm < arms.size() && found.depth_m > -kInf) {
-        const Seed at_q0 = refine_cell(CellAt(w, found.s, found.t), tool_all_, 0.0, 0.0, false);
-        if (at_q0.depth_m > -kInf) {
-          arms[arm] = {at_q0.depth_m, w.center_W + at_q0.s * w.axis_u_W + at_q0.t * w.axis_v_W};
-        }
-      }
     }
   }
 

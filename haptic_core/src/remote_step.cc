@@ -187,26 +187,21 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   }
   // Kink planes are added below (stage 5b's translation arms, then the rotation arms).
   for (int i = 0; i < last_num_queries_; ++i) last_results_[i].num_kink_planes = 0;
-  last_arms_.fill(KinkArm{});
   // Stage 5b: δ refined to the finest texture level, its gradient at texel scale (issue 32).
   if (options_.refine_depth) {
     for (int i = 0; i < last_num_queries_; ++i) {
       refiner_.Refine(*scene_.tool, X_WT, last_queries_[i],
                       {last_samples_.data() + static_cast<std::size_t>(i) * kGradientSamples,
                        static_cast<std::size_t>(kGradientSamples)},
-                      last_results_[i], {last_arms_.data() + static_cast<std::size_t>(i) * 4, 4});
+                      last_results_[i]);
     }
   }
   if (options_.kink_planes) {
     for (int i = 0; i < last_num_queries_; ++i) {
-      AddKinkPlanes(
-          last_queries_[i].window,
-          {last_samples_.data() + static_cast<std::size_t>(i) * kGradientSamples,
-           static_cast<std::size_t>(kGradientSamples)},
-          X_WT.translation, last_results_[i], options_.kink_planes_own_slope,
-          options_.kink_arms_at_q0
-              ? std::span<const KinkArm>(last_arms_.data() + static_cast<std::size_t>(i) * 4, 4)
-              : std::span<const KinkArm>());
+      AddKinkPlanes(last_queries_[i].window,
+                    {last_samples_.data() + static_cast<std::size_t>(i) * kGradientSamples,
+                     static_cast<std::size_t>(kGradientSamples)},
+                    X_WT.translation, last_results_[i], options_.kink_planes_own_slope);
     }
   }
   // The grazing guard: a δ its coarse geometry cannot hold is the sideways overlap along a

@@ -200,10 +200,6 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     keep_secant.name = "kink_planes_keep_secant";
     keep_secant.kink_planes_own_slope = false;
     s.push_back(keep_secant);
-    FrontierSetting extrapolated = base;
-    extrapolated.name = "kink_arms_extrapolated";
-    extrapolated.kink_arms_at_q0 = false;
-    s.push_back(extrapolated);
     // Issue 32: stage 5b's variants (the default refines).
     const FrontierSetting& refined = base;
     // The refined maximum's gradient at texel-scale steps instead of the refined samples'
@@ -592,7 +588,6 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.whole_model_region_windows = st.whole_model_region_windows;
   options.kink_planes = st.kink_planes;
   options.kink_planes_own_slope = st.kink_planes_own_slope;
-  options.kink_arms_at_q0 = st.kink_arms_at_q0;
   options.refine_depth = st.refine_depth;
   options.depth_refinement.texel_scale_gradient = st.texel_scale_gradient;
   options.depth_refinement.secant_at_kinks_m = st.secant_at_kinks_m;

@@ -4,7 +4,6 @@
 
 #include <array>
 #include <cstdint>
-#include <limits>
 #include <span>
 #include <string>
 #include <vector>
@@ -42,14 +41,6 @@ struct KinkPlane {
   glm::dvec3 d_rotation_W{0.0};  ///< ∂δ_m/∂θ (m/rad).
   /// ∂δ_m/∂x less the contact's ∂δ/∂x (dimensionless, W); zero: the contact's own.
   glm::dvec3 d_translation_offset_W{0.0};
-};
-
-/// One arm of a resting face's V measured at the base pose q0 (stage 5b, depth_refinement.h): the
-/// local maximum of b − a at q0 climbed from where the rotated sample found its deepest point,
-/// and that point on the window plane (m, W). depth_m = −∞: not measured.
-struct KinkArm {
-  double depth_m = -std::numeric_limits<double>::infinity();
-  glm::dvec3 point_W{0.0};
 };
 
 /// The linearized contact that the remote node sends and the operator loop evaluates:
@@ -91,15 +82,9 @@ struct ContactLinearization {
 /// noexcept, allocation-free.
 /// With `own_slope` false the contact's ∂δ/∂θ stays the secant and only arms whose cell is not
 /// the deepest one are added (an approximation placed on the frontier).
-/// With `arms` (stage 5b's KinkArm per in-plane rotation sample, samples 5…8 in order; empty
-/// without stage 5b), an arm that was measured at q0 gives its plane directly: δ_m = the arm's
-/// local maximum at q0 (at most δ0) and its lever slope from the arm's refined point, instead of
-/// the sample's depth carried back over h_θ along its cell centre's lever (issue 32, fifteenth
-/// stop: over h_θ = 40 mrad a half-cell lever error put the plane 16 µm high, the clamp to δ0
-/// tied the arms at q0, and every model put the V's vertex where the tool was).
 int AddKinkPlanes(const ContactWindow& window, std::span<const DepthSample> samples,
-                  const glm::dvec3& p_WT, ContactLinearization& lin, bool own_slope = true,
-                  std::span<const KinkArm> arms = {}) noexcept;
+                  const glm::dvec3& p_WT, ContactLinearization& lin,
+                  bool own_slope = true) noexcept;
 
 /// Penalty wrench on the tool at its centre of mass, expressed in W, for depth δ and gradient J:
 /// Φ = −k·max(δ, 0)·J (force N, torque N·m) [L]. Zero when δ ≤ 0 or δ is not finite.

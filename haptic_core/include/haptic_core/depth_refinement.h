@@ -201,13 +201,8 @@ class DepthRefiner {
   /// becomes the cell holding the refined point), and `lin` the backend's linearization: its δ0,
   /// point and gradient are replaced (stiffness and normal kept). Returns false, changing
   /// nothing, when the base sample has no overlap or the refinement finds none. noexcept.
-  /// `arms` (optional, 4 entries for samples 5…8: ±h_θ about u, then about v): each rotated
-  /// sample's arm measured at the base pose, the local maximum of b − a at X_WT climbed from the
-  /// sample's refined point (AddKinkPlanes' planes then need no extrapolation over h_θ); entries
-  /// not measured are left at −∞.
   bool Refine(const HapticModel& tool, const RigidTransform& X_WT, const ContactQuery& query,
-              std::span<DepthSample> samples, ContactLinearization& lin,
-              std::span<KinkArm> arms = {}) noexcept;
+              std::span<DepthSample> samples, ContactLinearization& lin) noexcept;
 
   const DepthRefinementCounters& counters() const noexcept { return counters_; }
   const DepthRefinementOptions& options() const noexcept { return options_; }

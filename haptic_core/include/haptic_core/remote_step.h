@@ -127,12 +127,6 @@ struct PipelineOptions {
   /// (AddKinkPlanes). Off: the secant of the ±h_θ samples stays, and only the arm the deepest cell
   /// is not on is added (placed on the frontier as "kink_planes_keep_secant").
   bool kink_planes_own_slope = true;
-  /// With kink_planes and refine_depth (issue 32, fifteenth stop): each arm's plane from the arm
-  /// as stage 5b measured it at q0 (its local maximum there and that point's lever; KinkArm),
-  /// instead of the rotated sample's depth carried back over h_θ along its cell centre's lever,
-  /// which tied the arms at q0 within about 0.2 mrad of a resting face's vertex. Off: the
-  /// extrapolation (the frontier's "kink_arms_extrapolated").
-  bool kink_arms_at_q0 = true;
   /// Stage 5b (issue 32): δ refined from the grid's cell samples to the finest texture level
   /// (DepthRefiner, depth_refinement.h), after either backend. On: on the frontier it reads δ
   /// within a few micrometres where the grid alone is tens low, and lowers the force error. Off
@@ -394,8 +388,6 @@ class HapticTexturePipeline {
   std::array<ContactLinearization, kMaxContacts> last_results_{};
   /// The depth samples of last_queries_ (kGradientSamples each, query-major), for kink planes.
   std::array<DepthSample, kMaxContacts * kGradientSamples> last_samples_{};
-  // Stage 5b's rotation arms measured at q0, 4 per contact (DepthRefiner::Refine's `arms`).
-  std::array<KinkArm, kMaxContacts * 4> last_arms_{};
   std::array<DepthSample, kMaxContacts * kGradientSamples> size_samples_{};
   /// One window size's queries and results (the GPU backend's batches), and their indices.
   std::array<ContactQuery, kMaxContacts> size_queries_{};

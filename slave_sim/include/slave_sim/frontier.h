@@ -73,8 +73,6 @@ struct FrontierSetting {
   bool kink_planes = true;
   /// PipelineOptions::kink_planes_own_slope ("kink_planes_keep_secant" turns it off).
   bool kink_planes_own_slope = true;
-  /// PipelineOptions::kink_arms_at_q0 ("kink_arms_extrapolated" turns it off).
-  bool kink_arms_at_q0 = true;
   /// PipelineOptions::refine_depth (on; "grid_only" and the grid-size settings "gridN" turn it
   /// off, the "gridN_refined" settings keep it).
   bool refine_depth = true;
