@@ -164,6 +164,13 @@ void ForEachSeedContact(std::mt19937& rng, CpuPenetrationDepthBackend& backend, 
   }
 }
 
+// The full-resolution truth's δ on the contact's window (GroundTruthDepthSolver, converged).
+double FullResolutionDepth(const SeedContact& x) {
+  GroundTruthDepthSolver truth(FullResolutionSurface(x.tool_which),
+                               FullResolutionSurface(x.env_which));
+  return truth.ConvergedDepth(x.c.X_WT, x.c.X_WO, x.c.window).depth_m;
+}
+
 double Ulp(float x) {
   return std::nextafter(std::abs(x), std::numeric_limits<float>::infinity()) - std::abs(x);
 }
@@ -450,20 +457,18 @@ TEST(TextureStageParity, RefinedDepthLiesBetweenTheGridAndTheFullResolutionTruth
     ContactLinearization& lin = x.lin;
     const double grid = lin.depth_m;
     ASSERT_TRUE(refiner.Refine(*x.tool, c.X_WT, x.q, x.samples, lin));
-    GroundTruthDepthSolver truth(FullResolutionSurface(x.tool_which),
-                                 FullResolutionSurface(x.env_which));
-    const GroundTruthDepth gt = truth.ConvergedDepth(c.X_WT, c.X_WO, c.window);
-    if (!std::isfinite(gt.depth_m)) return;
+    const double gt_depth_m = FullResolutionDepth(x);
+    if (!std::isfinite(gt_depth_m)) return;
     ++checked;
     SCOPED_TRACE(std::string(SeedModelName(x.tool_which)) + " on " + SeedModelName(x.env_which));
     EXPECT_GE(lin.depth_m, grid - 1e-7);
-    EXPECT_LE(lin.depth_m, gt.depth_m + x.env_bake_m + x.tool_bake_m + 1e-6)
+    EXPECT_LE(lin.depth_m, gt_depth_m + x.env_bake_m + x.tool_bake_m + 1e-6)
         << "bake errors " << x.env_bake_m << " + " << x.tool_bake_m;
     raised_sum += lin.depth_m - grid;
-    grid_error_sum += std::abs(grid - gt.depth_m);
-    refined_error_sum += std::abs(lin.depth_m - gt.depth_m);
+    grid_error_sum += std::abs(grid - gt_depth_m);
+    refined_error_sum += std::abs(lin.depth_m - gt_depth_m);
     worst_below_grid = std::max(worst_below_grid, grid - lin.depth_m);
-    worst_above_truth = std::max(worst_above_truth, lin.depth_m - gt.depth_m);
+    worst_above_truth = std::max(worst_above_truth, lin.depth_m - gt_depth_m);
   });
   EXPECT_GT(checked, 20);
   // Over the contacts, the refined δ0 is closer to the truth than the grid's (the bake bounds
@@ -499,17 +504,15 @@ TEST(TextureStageParity, ParallaxDepthIsBoundedByTheTruthAndCloserToItThanTheRen
     std::array<DepthSample, kGradientSamples> samples_p = x.samples;
     ASSERT_TRUE(render_form.Refine(*x.tool, c.X_WT, x.q, x.samples, lin));
     if (!parallax.Refine(*x.tool, c.X_WT, x.q, samples_p, lin_p)) return;
-    GroundTruthDepthSolver truth(FullResolutionSurface(x.tool_which),
-                                 FullResolutionSurface(x.env_which));
-    const GroundTruthDepth gt = truth.ConvergedDepth(c.X_WT, c.X_WO, c.window);
-    if (!std::isfinite(gt.depth_m)) return;
+    const double gt_depth_m = FullResolutionDepth(x);
+    if (!std::isfinite(gt_depth_m)) return;
     ++checked;
     SCOPED_TRACE(std::string(SeedModelName(x.tool_which)) + " on " + SeedModelName(x.env_which));
-    EXPECT_LE(lin_p.depth_m, gt.depth_m + x.env_bake_m + x.tool_bake_m + 1e-6)
+    EXPECT_LE(lin_p.depth_m, gt_depth_m + x.env_bake_m + x.tool_bake_m + 1e-6)
         << "bake errors " << x.env_bake_m << " + " << x.tool_bake_m;
-    render_error_sum += std::abs(lin.depth_m - gt.depth_m);
-    parallax_error_sum += std::abs(lin_p.depth_m - gt.depth_m);
-    worst_above_truth = std::max(worst_above_truth, lin_p.depth_m - gt.depth_m);
+    render_error_sum += std::abs(lin.depth_m - gt_depth_m);
+    parallax_error_sum += std::abs(lin_p.depth_m - gt_depth_m);
+    worst_above_truth = std::max(worst_above_truth, lin_p.depth_m - gt_depth_m);
   });
   EXPECT_GT(checked, 20);
   EXPECT_LT(parallax_error_sum, render_error_sum);
