@@ -24,7 +24,9 @@ out = sys.argv[1]
 mode = sys.argv[2] if len(sys.argv) > 2 else "still"
 remote = json.load(open(f"{out}/remote_summary.json"))
 t = remote["transport"]
-states = t["streams"]["tool_state"]["received"]
+# Tool states come as compact_tool_state (the default encoding) or tool_state.
+states = sum(t["streams"].get(name, {}).get("received", 0)
+             for name in ("tool_state", "compact_tool_state"))
 steps = remote["steps"]
 skipped = t["deadband"]["steps_skipped"]
 by_cause = t["deadband"]["steps_by_cause"]

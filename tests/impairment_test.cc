@@ -506,7 +506,8 @@ TEST(MessageTypeName, NamesKnownTypesAndNumbersTheRest) {
   // here.
   EXPECT_EQ(MessageTypeName(12), "compact_contact_model");
   EXPECT_EQ(MessageTypeName(13), "node_poses");
-  EXPECT_EQ(MessageTypeName(14), "type_14");
+  EXPECT_EQ(MessageTypeName(14), "compact_tool_state");
+  EXPECT_EQ(MessageTypeName(15), "type_15");
   EXPECT_EQ(MessageTypeName(255), "type_255");
 }
 

@@ -56,6 +56,10 @@ DecodeStatus OpenAndDecode(std::span<const std::uint8_t> bytes, const MacKey& ke
       ContactModelMessage m;
       return DecodeContactModel(body, m);
     }
+    case MessageType::kCompactToolState: {
+      ToolStateMessage m;
+      return DecodeCompactToolState(body, m);
+    }
     case MessageType::kCompactContactModel: {
       ContactModelMessage m;
       return DecodeCompactContactModel(body, m);
@@ -184,6 +188,10 @@ std::vector<Datagram> OneOfEach(const MacKey& key) {
   out.push_back(EncodeSceneNack(h, n, key));
   out.push_back(EncodeCompactContactModel(h, SampleModel(kMaxWireContacts), key));
   out.push_back(EncodeNodePoses(h, SamplePoses(kMaxNodePosesPerDatagram), key));
+  ToolStateMessage tool;
+  tool.X_WT.translation = {0.1, -0.2, 0.3};
+  tool.V_WT_W = {{0.01, 0.0, -0.02}, {0.5, 0.0, 0.0}};
+  out.push_back(EncodeCompactToolState(h, tool, key));
   return out;
 }
 
@@ -570,7 +578,7 @@ TEST(NodePoses, AFullDatagramRoundTripsAndFitsTheSmallestMtu) {
   EXPECT_EQ(none.size, kHeaderBytes + kNodePosesFixedBytes + kMacBytes);
   EXPECT_EQ(OpenAndDecode(none.view(), key), DecodeStatus::kOk);
   EXPECT_STREQ(ToString(MessageType::kNodePoses), "node_poses");
-  EXPECT_EQ(static_cast<int>(MessageType::kNodePoses), kMaxMessageType);
+  EXPECT_EQ(static_cast<int>(MessageType::kCompactToolState), kMaxMessageType);
 }
 
 TEST(NodePoses, BadCountsSizesValuesAndMacsAreRejected) {

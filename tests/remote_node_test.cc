@@ -7,6 +7,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <limits>
 #include <thread>
 #include <vector>
 
@@ -178,6 +179,68 @@ TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
             4);  // A, A again, 999 twice (A replayed is rejected)
   EXPECT_GE(t["streams"]["scene_fragment"]["sent"].get<int>(), 3);  // 3000 B in 1396 B pieces
   EXPECT_GE(summary["steps"].get<int>(), 1);
+}
+
+TEST(RemoteNode, AgreesOnCompactToolStatesAndAnswersThemAsTheF64Ones) {
+  const HapticScene scene = MakeBlockOnGearScene();
+  const RemoteNodeConfig config = LocalNodeConfig(TestKey(31), "remote_node_compact_test.port");
+  std::atomic<bool> stop{false};
+  nlohmann::json summary;
+  std::thread node([&] { summary = RunRemoteNode(config, scene, stop); });
+  const std::uint16_t port = AwaitPort(config.port_file);
+  ASSERT_NE(port, 0);
+  const SocketAddress remote = SocketAddress::Parse("127.0.0.1:" + std::to_string(port));
+  UdpSocket socket(SocketAddress::Parse("127.0.0.1:0"));
+
+  wire::HelloMessage hello;
+  hello.client_nonce = 77;
+  hello.codecs = wire::kCodecDracoMesh | wire::kCodecCompactToolState;
+  socket.SendTo(wire::EncodeHello({wire::MessageType::kHello, 0, 1, 0}, hello, config.key).view(),
+                remote);
+  wire::Header h;
+  wire::WelcomeMessage welcome;
+  ASSERT_TRUE(Await(socket, config.key, wire::MessageType::kWelcome, h, [&](auto body) {
+    return wire::DecodeWelcome(body, welcome) == wire::DecodeStatus::kOk;
+  }));
+  EXPECT_EQ(welcome.codecs, wire::kCodecDracoMesh | wire::kCodecCompactToolState);
+  const std::uint32_t session = h.session_id;
+
+  // The same press as the f64 test above, compact: the model answers it.
+  wire::ToolStateMessage state;
+  state.X_WT = scene.X_WT_home;
+  state.X_WT.translation.z -= 0.5e-3;
+  socket.SendTo(wire::EncodeCompactToolState({wire::MessageType::kCompactToolState, session, 1, 0},
+                                             state, config.key)
+                    .view(),
+                remote);
+  wire::ContactModelMessage model;
+  ASSERT_TRUE(Await(socket, config.key, wire::MessageType::kContactModel, h, [&](auto body) {
+    return wire::DecodeContactModel(body, model) == wire::DecodeStatus::kOk;
+  }));
+  EXPECT_EQ(model.model.tool_state_seq, 1u);
+  ASSERT_EQ(model.model.num_contacts, 1);
+  EXPECT_GT(model.model.contacts[0].depth_m, 0.0);
+  EXPECT_GT(model.model.F_T_W_at_q0.force.z, 0.0);
+  // The model is linearized where the compact state put the tool (within its position bound).
+  EXPECT_LE(glm::length(model.model.X_WT0.translation - state.X_WT.translation), 1e-6);
+  // A compact state with a NaN twist is authenticated, then refused as non-finite.
+  wire::ToolStateMessage bad = state;
+  bad.V_WT_W.angular.y = std::numeric_limits<double>::quiet_NaN();
+  socket.SendTo(wire::EncodeCompactToolState({wire::MessageType::kCompactToolState, session, 2, 0},
+                                             bad, config.key)
+                    .view(),
+                remote);
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  socket.SendTo(
+      wire::EncodeGoodbye({wire::MessageType::kGoodbye, session, 1, 0}, config.key).view(), remote);
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  stop = true;
+  node.join();
+  const nlohmann::json& t = summary["transport"];
+  EXPECT_EQ(t["rejected_by_reason"]["non_finite"].get<int>(), 1);
+  EXPECT_EQ(t["streams"]["compact_tool_state"]["received"].get<int>(), 1);
+  EXPECT_EQ(t["streams"]["compact_tool_state"]["rejected"].get<int>(), 1);
+  EXPECT_EQ(t["streams"].value("tool_state", nlohmann::json::object()).value("received", 0), 0);
 }
 
 TEST(RemoteNode, RefusesAnOperatorOfAnotherVersionAndHoldsBackModelsThatSayNothingNew) {

@@ -50,6 +50,15 @@ std::string ModelStream(const nlohmann::json& streams) {
              : "contact_model";
 }
 
+/// The stream that carried the tool states: compact_tool_state (the default encoding) or
+/// tool_state (--float-tool-states).
+std::string ToolStream(const nlohmann::json& streams) {
+  return streams.contains("compact_tool_state") &&
+                 streams["compact_tool_state"].value("sent", 0) > 0
+             ? "compact_tool_state"
+             : "tool_state";
+}
+
 TEST_F(ImpairedRun, TheSessionHeldAndNothingWentNonFinite) {
   const auto& t = s_["transport"];
   EXPECT_EQ(s_["nonfinite_count"].get<int>(), 0);
@@ -117,9 +126,10 @@ void ExpectMatches(const nlohmann::json& rx, const nlohmann::json& relay, double
 }
 
 TEST_F(ImpairedRun, ToolStateCountsMatchTheRelay) {
-  const auto& relay = s_["relay"]["up"]["tool_state"];
-  const auto& sent = s_["transport"]["streams"]["tool_state"];
-  const auto& rx = s_["remote"]["transport"]["streams"]["tool_state"];
+  const std::string stream = ToolStream(s_["transport"]["streams"]);
+  const auto& relay = s_["relay"]["up"][stream];
+  const auto& sent = s_["transport"]["streams"][stream];
+  const auto& rx = s_["remote"]["transport"]["streams"][stream];
   // Everything the operator sent reached the relay (loopback/veth lose nothing by themselves).
   EXPECT_EQ(Get(sent, "sent"), Get(relay, "received"));
   const double delay_s = s_["relay"].value("up_delay_s", 0.2);

@@ -242,7 +242,7 @@ int main(int argc, char** argv) {
   double deadband_pct = kDefaultDeadbandPercent;
   std::optional<double> tool_state_deadband_pct, model_deadband_pct;
   double deadband_keepalive_ms = 100.0;
-  bool deadband_velocity_adaptive = false, float_models = false;
+  bool deadband_velocity_adaptive = false, float_models = false, float_tool_states = false;
   app.add_option("--deadband", deadband_pct,
                  "perceptual deadband on both streams, percent (a Weber fraction: a tool state or "
                  "contact model is sent only when it differs from what the other side predicts "
@@ -295,6 +295,9 @@ int main(int argc, char** argv) {
                  "(covers a bounce off the surface; 0 = drop them at once)")
       ->check(CLI::Range(0.0, 60000.0))
       ->capture_default_str();
+  app.add_flag("--float-tool-states", float_tool_states,
+               "send tool states in the f64 encoding (164 bytes) rather than the compact quantized "
+               "one (92 bytes; transport/protocol.h states its error bounds)");
   app.add_flag("--float-models", float_models,
                "ask for contact models in the float encoding rather than the compact quantized "
                "one (transport/protocol.h states its error bounds)");
@@ -356,6 +359,7 @@ int main(int argc, char** argv) {
     config.model_deadband = model_deadband_pct.value_or(deadband_pct) / 100.0;
     config.model_keepalive_s = deadband_keepalive_ms * 1e-3;
     config.compact_models = !float_models;
+    config.compact_tool_states = !float_tool_states;
     config.out_dir = out_dir;
     config.display.mode = display_mode == "headless" ? ht::DisplayConfig::Mode::kHeadless
                           : display_mode == "window" ? ht::DisplayConfig::Mode::kWindow

@@ -85,6 +85,8 @@ void NetworkWorker::Run(const std::atomic<bool>& stop) {
     }
     OutgoingToolState state;
     if (outgoing_.Read(state)) {
+      // The deadband predicts from what the remote node will decode.
+      if (compact_tool_states_) state.message = wire::CompactToolStateAsReceived(state.message);
       last = state;
       have_last = true;
       ++tool_states_offered_;
@@ -171,6 +173,7 @@ nlohmann::json NetworkWorker::Summary() const {
         {"contact_depth_floor_scale_um",
          config_.tool_state_deadband.contact_depth_floor_scale_m * 1e6},
         {"compact_models", compact_models_},
+        {"compact_tool_states", compact_tool_states_},
         {"tool_states_offered", tool_states_offered_},
         {"tool_states_held_back", tool_states_held_back_},
         {"tool_states_idle_keepalives", idle_keepalives_},
@@ -251,8 +254,9 @@ void NetworkWorker::SendHello() {
   hello.mtu = static_cast<std::uint16_t>(config_.mtu);
   hello.heartbeat_ms = static_cast<std::uint16_t>(config_.heartbeat_ms);
   hello.peer_timeout_ms = static_cast<std::uint16_t>(config_.peer_timeout_ms);
-  hello.codecs =
-      wire::kCodecDracoMesh | (config_.compact_models ? wire::kCodecCompactContactModel : 0u);
+  hello.codecs = wire::kCodecDracoMesh |
+                 (config_.compact_models ? wire::kCodecCompactContactModel : 0u) |
+                 (config_.compact_tool_states ? wire::kCodecCompactToolState : 0u);
   hello.deadband.tool_state_deadband =
       static_cast<float>(config_.tool_state_deadband.weber_fraction);
   hello.deadband.model_deadband = static_cast<float>(config_.model_deadband);
@@ -306,6 +310,7 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
       }
       deadband_agreed_ = w.deadband;
       compact_models_ = (w.codecs & wire::kCodecCompactContactModel) != 0;
+      compact_tool_states_ = (w.codecs & wire::kCodecCompactToolState) != 0;
       scene_name_ = std::string(w.name());
       {
         std::lock_guard<std::mutex> lock(layout_mutex_);
@@ -537,6 +542,12 @@ void NetworkWorker::CheckScene(std::int64_t now) {
 }
 
 void NetworkWorker::Send(const OutgoingToolState& s) {
+  if (compact_tool_states_) {
+    wire::Header h = link_.NextHeader(wire::MessageType::kCompactToolState, session_);
+    h.send_time_ns = s.time_ns;
+    link_.Send(wire::EncodeCompactToolState(h, s.message, config_.key), config_.remote_address);
+    return;
+  }
   wire::Header h = link_.NextHeader(wire::MessageType::kToolState, session_);
   h.send_time_ns = s.time_ns;
   link_.Send(wire::EncodeToolState(h, s.message, config_.key), config_.remote_address);

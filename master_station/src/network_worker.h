@@ -118,6 +118,7 @@ class NetworkWorker {
   ContactModel held_model_{};
   wire::DeadbandTerms deadband_agreed_;
   bool compact_models_ = false;
+  bool compact_tool_states_ = false;  ///< agreed in Welcome
   std::uint64_t tool_states_offered_ = 0, tool_states_held_back_ = 0, idle_keepalives_ = 0;
   std::uint64_t hello_nonce_ = 0;
   std::int64_t attempt_start_ns_ = 0;

@@ -167,7 +167,8 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   caps.max_model_rate_hz = static_cast<float>(config.max_rate_hz);
   caps.peer_timeout_ms = static_cast<std::uint16_t>(config.peer_timeout_ms);
   caps.max_deadband = static_cast<float>(config.max_deadband);
-  caps.codecs = wire::kCodecDracoMesh | wire::kCodecCompactContactModel;
+  caps.codecs =
+      wire::kCodecDracoMesh | wire::kCodecCompactContactModel | wire::kCodecCompactToolState;
   caps.scene_objects = static_cast<std::uint16_t>(config.scene_objects.size());
   caps.scene_name = scene.name;
   caps.layout = MakeSceneLayout(scene);
@@ -338,7 +339,9 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
           "contacts %d  tool states %llu  rejected %llu\n",
           (statistics.steps() - last_progress_steps) / dt, timings.total_us, timings.collision_us,
           timings.texture_us, out.model.num_contacts,
-          static_cast<unsigned long long>(link.stats(wire::MessageType::kToolState).received),
+          static_cast<unsigned long long>(
+              link.stats(wire::MessageType::kToolState).received +
+              link.stats(wire::MessageType::kCompactToolState).received),
           static_cast<unsigned long long>(link.rejected_total()));
       std::fflush(stdout);
       last_progress_ns = now;

@@ -44,9 +44,13 @@ bool RemoteSession::OnDatagram(std::span<const std::uint8_t> datagram, const Soc
     case wire::MessageType::kHello:
       OnHello(header, body, from, now);
       break;
-    case wire::MessageType::kToolState: {
+    case wire::MessageType::kToolState:
+    case wire::MessageType::kCompactToolState: {
       wire::ToolStateMessage message;
-      if (const auto st = wire::DecodeToolState(body, message); st != wire::DecodeStatus::kOk) {
+      const auto st = header.type == wire::MessageType::kToolState
+                          ? wire::DecodeToolState(body, message)
+                          : wire::DecodeCompactToolState(body, message);
+      if (st != wire::DecodeStatus::kOk) {
         link_.CountBodyRejected(header.type, st);
         break;
       }

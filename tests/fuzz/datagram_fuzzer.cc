@@ -79,6 +79,13 @@ void DecodeBody(const ht::wire::Header& h, std::span<const std::uint8_t> body) {
       if (DecodeToolState(body, m) == DecodeStatus::kOk) Check(ht::IsFiniteRigidTransform(m.X_WT));
       break;
     }
+    case MessageType::kCompactToolState: {
+      ToolStateMessage m;
+      if (DecodeCompactToolState(body, m) == DecodeStatus::kOk) {
+        Check(ht::IsFiniteRigidTransform(m.X_WT) && ht::IsFinite(m.V_WT_W));
+      }
+      break;
+    }
     case MessageType::kContactModel: {
       ContactModelMessage m;
       if (DecodeContactModel(body, m) == DecodeStatus::kOk)

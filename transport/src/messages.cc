@@ -449,6 +449,19 @@ constexpr void Fields(auto& a, Of<CompactContactModelBody> auto& m) {
   for (std::size_t j = 0; j < k; ++j) Fields(a, m.kink_planes[j]);
 }
 
+/// A CompactToolState body as it is on the wire (protocol.h).
+struct CompactToolStateBody {
+  std::array<float, 3> p_WT{};            ///< m
+  std::uint64_t q_WT_smallest_three = 0;  ///< index and three 20-bit components
+  std::array<std::uint16_t, 6> V_WT_W{};  ///< binary16: linear (m/s), then angular (rad/s)
+};
+
+constexpr void Fields(auto& a, Of<CompactToolStateBody> auto& m) {
+  Each(a, m.p_WT);
+  a(m.q_WT_smallest_three);
+  Each(a, m.V_WT_W);
+}
+
 constexpr void Fields(auto& a, Of<DeadbandTerms> auto& d) {
   a(d.tool_state_deadband);
   a(d.model_deadband);
@@ -587,6 +600,7 @@ static_assert(SizeOf<CompactContactModelBody>().bytes ==
                   kKinkPlaneBytes);
 static_assert(SizeOf<CompactContactModelBody>().counted_bytes ==
               kCompactContactBytes + kKinkPlaneBytes);
+static_assert(SizeOf<CompactToolStateBody>().bytes == kCompactToolStateBodyBytes);
 static_assert(SizeOf<HelloMessage>().bytes == kHelloBodyBytes);
 static_assert(SizeOf<WelcomeMessage>().bytes == kWelcomeFixedBytes + kWelcomeTargetBytes);
 static_assert(SizeOf<WelcomeMessage>().counted_bytes == kWelcomeTargetBytes);
@@ -816,6 +830,133 @@ ContactModelMessage DequantizeContactModel(const CompactContactModelBody& b) noe
   return m;
 }
 
+// CompactToolState (protocol.h).
+
+/// `v` as IEEE-754 binary16 bits, rounded to nearest (ties to even); NaN stays NaN, ±∞ stays ±∞,
+/// a finite value beyond ±kCompactTwistMax becomes ±kCompactTwistMax.
+std::uint16_t ToBinary16(double v) noexcept {
+  if (std::isnan(v)) return 0x7E00;
+  const std::uint16_t sign = std::signbit(v) ? 0x8000 : 0x0000;
+  if (std::isinf(v)) return sign | 0x7C00;
+  const double a = std::min(std::abs(v), kCompactTwistMax);
+  if (a == 0.0) return sign;
+  int e = 0;
+  std::frexp(a, &e);  // a = m·2^e, m ∈ [0.5, 1)
+  const int exponent = std::max(e - 1, -14);  // a = 1.f·2^exponent, or a subnormal below 2^-14
+  // a in units of the binary16 step at this exponent (2^(exponent − 10)): exact, then rounded.
+  double steps = std::nearbyint(std::ldexp(a, 10 - exponent));
+  if (exponent == -14 && steps < 1024.0) return sign | static_cast<std::uint16_t>(steps);
+  int biased = exponent + 15;
+  if (steps >= 2048.0) {  // rounded up to the next power of two
+    steps = 1024.0;
+    ++biased;
+  }
+  return sign | static_cast<std::uint16_t>(biased << 10) |
+         static_cast<std::uint16_t>(static_cast<int>(steps) - 1024);
+}
+
+/// The value of binary16 bits (NaN and ±∞ included).
+double FromBinary16(std::uint16_t h) noexcept {
+  const double sign = (h & 0x8000) ? -1.0 : 1.0;
+  const int biased = (h >> 10) & 0x1F;
+  const int fraction = h & 0x3FF;
+  if (biased == 0x1F) {
+    return fraction ? std::numeric_limits<double>::quiet_NaN()
+                    : sign * std::numeric_limits<double>::infinity();
+  }
+  if (biased == 0) return sign * std::ldexp(fraction, -24);
+  return sign * std::ldexp(1024 + fraction, biased - 25);
+}
+
+bool IsFiniteBinary16(std::uint16_t h) noexcept { return ((h >> 10) & 0x1F) != 0x1F; }
+
+constexpr std::uint64_t kQuaternionFieldMask = (std::uint64_t{1} << kCompactQuaternionBits) - 1;
+
+/// The unit quaternion `q` (w, x, y, z) as "smallest three" (protocol.h).
+std::uint64_t EncodeSmallestThree(const glm::dquat& q_in) noexcept {
+  glm::dquat q = glm::normalize(q_in);
+  const std::array<double, 4> c0{q.w, q.x, q.y, q.z};
+  int largest = 0;
+  for (int k = 1; k < 4; ++k) {
+    if (std::abs(c0[k]) > std::abs(c0[largest])) largest = k;
+  }
+  const double flip = c0[largest] < 0.0 ? -1.0 : 1.0;
+  std::uint64_t bits = static_cast<std::uint64_t>(largest);
+  int slot = 0;
+  for (int k = 0; k < 4; ++k) {
+    if (k == largest) continue;
+    const double steps = std::clamp(std::round(flip * c0[k] / kCompactQuaternionStep),
+                                    -static_cast<double>(kCompactQuaternionMax),
+                                    static_cast<double>(kCompactQuaternionMax));
+    const auto field = static_cast<std::uint64_t>(static_cast<std::int64_t>(steps)) &
+                       kQuaternionFieldMask;
+    bits |= field << (2 + kCompactQuaternionBits * slot++);
+  }
+  return bits;
+}
+
+/// The unit quaternion of "smallest three" bits; false for bits no unit quaternion encodes to.
+bool DecodeSmallestThree(std::uint64_t bits, glm::dquat& q) noexcept {
+  if (bits >> (2 + 3 * kCompactQuaternionBits)) return false;
+  const int largest = static_cast<int>(bits & 3);
+  std::array<double, 4> c{};
+  double sum2 = 0.0;
+  int slot = 0;
+  for (int k = 0; k < 4; ++k) {
+    if (k == largest) continue;
+    auto field = static_cast<std::int64_t>((bits >> (2 + kCompactQuaternionBits * slot++)) &
+                                           kQuaternionFieldMask);
+    if (field >= (std::int64_t{1} << (kCompactQuaternionBits - 1))) {
+      field -= std::int64_t{1} << kCompactQuaternionBits;  // two's complement
+    }
+    if (field < -kCompactQuaternionMax) return false;
+    c[k] = static_cast<double>(field) * kCompactQuaternionStep;
+    sum2 += c[k] * c[k];
+  }
+  if (sum2 > 1.0 + 1e-9) return false;  // (rounding alone never takes a real one past 0.75)
+  c[largest] = std::sqrt(std::max(0.0, 1.0 - sum2));
+  q = glm::normalize(glm::dquat(c[0], c[1], c[2], c[3]));
+  return true;
+}
+
+CompactToolStateBody QuantizeToolState(const ToolStateMessage& m) noexcept {
+  CompactToolStateBody b;
+  const bool pose_ok = CheckPose(m.X_WT) == DecodeStatus::kOk;
+  for (int k = 0; k < 3; ++k) b.p_WT[k] = F32(m.X_WT.translation[k]);
+  if (pose_ok) {
+    b.q_WT_smallest_three = EncodeSmallestThree(m.X_WT.rotation);
+  } else {
+    b.p_WT[0] = std::numeric_limits<float>::quiet_NaN();  // the receiver rejects it: kNonFinite
+  }
+  for (int k = 0; k < 3; ++k) {
+    b.V_WT_W[k] = ToBinary16(m.V_WT_W.linear[k]);
+    b.V_WT_W[3 + k] = ToBinary16(m.V_WT_W.angular[k]);
+  }
+  return b;
+}
+
+DecodeStatus Check(const CompactToolStateBody& m) {
+  if (!AllFinite(m.p_WT) ||
+      !std::ranges::all_of(m.V_WT_W, [](std::uint16_t h) { return IsFiniteBinary16(h); })) {
+    return DecodeStatus::kNonFinite;
+  }
+  glm::dquat q;
+  if (!DecodeSmallestThree(m.q_WT_smallest_three, q)) return DecodeStatus::kBadValue;
+  return DecodeStatus::kOk;
+}
+
+/// The tool state a CompactToolState body stands for; `b` passed Check().
+ToolStateMessage DequantizeToolState(const CompactToolStateBody& b) noexcept {
+  ToolStateMessage m;
+  m.X_WT.translation = glm::dvec3(b.p_WT[0], b.p_WT[1], b.p_WT[2]);
+  DecodeSmallestThree(b.q_WT_smallest_three, m.X_WT.rotation);
+  for (int k = 0; k < 3; ++k) {
+    m.V_WT_W.linear[k] = FromBinary16(b.V_WT_W[k]);
+    m.V_WT_W.angular[k] = FromBinary16(b.V_WT_W[3 + k]);
+  }
+  return m;
+}
+
 DecodeStatus Check(const DeadbandTerms& d) {
   if (!std::isfinite(d.tool_state_deadband) || !std::isfinite(d.model_deadband)) {
     return DecodeStatus::kNonFinite;
@@ -1031,6 +1172,8 @@ const char* ToString(MessageType t) noexcept {
       return "compact_contact_model";
     case MessageType::kNodePoses:
       return "node_poses";
+    case MessageType::kCompactToolState:
+      return "compact_tool_state";
   }
   return "unknown";
 }
@@ -1038,6 +1181,18 @@ const char* ToString(MessageType t) noexcept {
 Datagram EncodeToolState(const Header& header, const ToolStateMessage& m,
                          const MacKey& key) noexcept {
   return Encode(header, MessageType::kToolState, m, key);
+}
+
+Datagram EncodeCompactToolState(const Header& header, const ToolStateMessage& m,
+                                const MacKey& key) noexcept {
+  return Encode(header, MessageType::kCompactToolState, QuantizeToolState(m), key);
+}
+
+ToolStateMessage CompactToolStateAsReceived(const ToolStateMessage& m) noexcept {
+  const CompactToolStateBody b = QuantizeToolState(m);
+  if (Check(b) != DecodeStatus::kOk) return m;
+  const ToolStateMessage out = DequantizeToolState(b);
+  return Check(out) == DecodeStatus::kOk ? out : m;
 }
 
 Datagram EncodeContactModel(const Header& header, const ContactModelMessage& m,
@@ -1161,6 +1316,17 @@ DecodeStatus DecodeEmpty(std::span<const std::uint8_t> body) noexcept {
 
 DecodeStatus DecodeToolState(std::span<const std::uint8_t> body, ToolStateMessage& m) noexcept {
   return Decode(body, m);
+}
+
+DecodeStatus DecodeCompactToolState(std::span<const std::uint8_t> body,
+                                    ToolStateMessage& m) noexcept {
+  CompactToolStateBody wire;
+  if (const DecodeStatus s = Decode(body, wire); s != DecodeStatus::kOk) return s;
+  const ToolStateMessage out = DequantizeToolState(wire);
+  // What the f64 decoder would accept (finite by construction once `wire` passed its checks).
+  if (const DecodeStatus s = Check(out); s != DecodeStatus::kOk) return s;
+  m = out;
+  return DecodeStatus::kOk;
 }
 
 DecodeStatus DecodeContactModel(std::span<const std::uint8_t> body,

@@ -133,6 +133,10 @@ struct StationConfig {
   /// Ask for contact models in the compact quantized encoding (transport/protocol.h) when the
   /// remote node has it; false keeps the float encoding.
   bool compact_models = true;
+  /// Ask to send tool states as CompactToolState (92 bytes a datagram instead of 164;
+  /// transport/protocol.h states its error bounds) rather than ToolState; used when the remote
+  /// node agrees (Welcome's codecs).
+  bool compact_tool_states = true;
 
   /// The display of the remote scene (none by default).
   DisplayConfig display;

@@ -235,6 +235,17 @@ Datagram EncodeContactModel(const Header& header, const ContactModelMessage& mes
 /// [0, kCompactMaxTimeUs].
 Datagram EncodeCompactContactModel(const Header& header, const ContactModelMessage& message,
                                    const MacKey& key) noexcept;
+/// The same tool state quantized as CompactToolState (protocol.h states the layout and each
+/// field's largest error): p_WT as f32, R_WT as "smallest three" in 20 bits each, the twist as
+/// binary16. Never undefined for any input: a non-finite field is sent non-finite (a quaternion
+/// with one as a NaN position) so that the receiver rejects the datagram (kNonFinite), as it would
+/// the f64 encoding; a twist component beyond ±kCompactTwistMax is sent as ±kCompactTwistMax.
+Datagram EncodeCompactToolState(const Header& header, const ToolStateMessage& message,
+                                const MacKey& key) noexcept;
+/// What the receiver of EncodeCompactToolState(message) decodes, without the wire: the sender's
+/// perceptual deadband predicts from this (transport/deadband.h), so that both sides extrapolate
+/// the same state. A message the receiver would reject comes back unchanged.
+ToolStateMessage CompactToolStateAsReceived(const ToolStateMessage& message) noexcept;
 Datagram EncodeGoodbye(const Header& header, const MacKey& key) noexcept;
 Datagram EncodeHello(const Header& header, const HelloMessage& message, const MacKey& key) noexcept;
 Datagram EncodeWelcome(const Header& header, const WelcomeMessage& message,
@@ -283,6 +294,11 @@ DecodeStatus PeekHeader(std::span<const std::uint8_t> datagram, Header& header) 
 // checked; `message` is written only on kOk.
 DecodeStatus DecodeToolState(std::span<const std::uint8_t> body,
                              ToolStateMessage& message) noexcept;
+/// CompactToolState into the message the f64 encoding decodes to (R_WT unit). kTooShort/kTooLong
+/// unless the length is exactly kCompactToolStateBodyBytes, kNonFinite for a non-finite f32 or
+/// f16, kBadValue for a quaternion field that no unit quaternion encodes to.
+DecodeStatus DecodeCompactToolState(std::span<const std::uint8_t> body,
+                                    ToolStateMessage& message) noexcept;
 DecodeStatus DecodeContactModel(std::span<const std::uint8_t> body,
                                 ContactModelMessage& message) noexcept;
 /// CompactContactModel into the message the float encoding decodes to: X_WT0's quaternion

@@ -24,6 +24,17 @@
 // Bodies (operator = O, remote node = R):
 //   ToolState O→R (104): X_WT: p_WT 3×f64 (m), R_WT 4×f64 quaternion; V_WT_W: linear 3×f64 (m/s),
 //     angular 3×f64 (rad/s). T is the tool frame at its centre of mass, W the remote world.
+//   CompactToolState O→R (kCompactToolStateBodyBytes, 32): the same tool state quantized, sent
+//     instead of ToolState when both sides set kCodecCompactToolState and decoded into the same
+//     message (the f64 encoding stays available). p_WT 3×f32 (m); R_WT as u64 "smallest three":
+//     bits 0–1 the index (0 w, 1 x, 2 y, 3 z) of the component of largest magnitude, made
+//     positive (q and −q are one rotation), bits 2–21, 22–41, 42–61 the other three in w, x, y, z
+//     order as signed 20-bit integers (two's complement) in units of
+//     kCompactQuaternionStep = (1/√2)/(2¹⁹ − 1), bits 62–63 zero; the receiver restores the
+//     largest as √(1 − Σ others²) and normalizes. V_WT_W: linear 3×f16 (m/s), angular 3×f16
+//     (rad/s), IEEE-754 binary16, round to nearest, clamped to ±65504 at the sender. Rejected:
+//     a non-finite f32 or f16 (kNonFinite), bits 62–63 set, a component of −2¹⁹ or the three
+//     others' squares summing above 1 (kBadValue). Errors: kCompactToolState*Error* below.
 //   ContactModel R→O (kContactModelFixedBytes + n·kContactBytes):
 //     u64 tool_state_seq  i64 tool_state_send_time_ns (echoed)  i64 hold_ns (remote time between
 //     receiving that tool state and sending this)  u64 remote_step_count. Under a tool-state
@@ -167,8 +178,9 @@ enum class MessageType : std::uint8_t {
   kSceneManifest = 11,
   kCompactContactModel = 12,
   kNodePoses = 13,
+  kCompactToolState = 14,
 };
-inline constexpr int kMaxMessageType = 13;
+inline constexpr int kMaxMessageType = 14;
 
 /// Why a remote node refused a Hello.
 enum class RejectReason : std::uint8_t {
@@ -182,6 +194,9 @@ inline constexpr std::uint32_t kCodecDracoMesh = 1u << 0;
 /// Contact models go as CompactContactModel (quantized) instead of ContactModel when both sides
 /// set it.
 inline constexpr std::uint32_t kCodecCompactContactModel = 1u << 1;
+/// Tool states go as CompactToolState (quantized, 92 bytes a datagram instead of 164) instead of
+/// ToolState when both sides set it.
+inline constexpr std::uint32_t kCodecCompactToolState = 1u << 2;
 
 /// What a scene object's bytes are.
 enum class SceneObjectKind : std::uint8_t {
@@ -205,6 +220,7 @@ inline constexpr std::size_t kHeaderBytes = 28;
 inline constexpr std::size_t kMacBytes = 32;     // crypto_auth_BYTES
 inline constexpr std::size_t kMacKeyBytes = 32;  // crypto_auth_KEYBYTES
 inline constexpr std::size_t kToolStateBodyBytes = 13 * 8;
+inline constexpr std::size_t kCompactToolStateBodyBytes = 3 * 4 + 8 + 6 * 2;
 inline constexpr std::size_t kContactModelFixedBytes = 8 * 4 + 4 * 3 + 7 * 8 + 6 * 8 + 1;
 inline constexpr std::size_t kContactBytes = 8 + 6 * 8 + 8 + 3 * 4 + 3 * 4;
 inline constexpr std::size_t kCompactContactModelFixedBytes = 4 * 8 + 3 * 2 + 3 * 8 + 10 * 4 + 1;
@@ -303,6 +319,26 @@ inline constexpr double kCompactRotationErrorRad = 0x1p-22;
 /// Times: |error| ≤ 0.5 µs within [0, kCompactMaxTimeUs]; below 0 they are sent as 0, above as
 /// kCompactMaxTimeUs.
 inline constexpr double kCompactTimeErrorUs = 0.5;
+
+// CompactToolState: its quaternion step and the largest difference between each field as decoded
+// and as the sender had it (tests/compact_tool_state_test.cc checks each on random states).
+/// Bits of each of the three smaller quaternion components, and their step: the largest magnitude
+/// of a component that is not the largest is 1/√2.
+inline constexpr int kCompactQuaternionBits = 20;
+inline constexpr std::int32_t kCompactQuaternionMax = (1 << (kCompactQuaternionBits - 1)) - 1;
+inline constexpr double kCompactQuaternionStep = 0.70710678118654752 / kCompactQuaternionMax;
+/// p_WT: per axis |error| ≤ 2⁻²⁴·|p| (f32, round to nearest: 0.06 µm at 1 m from W's origin).
+inline constexpr double kCompactToolStatePositionRelativeError = 0x1p-24;
+/// R_WT: angle ≤ 1.3e-5 rad (0.26 µm at a 20 mm lever). Each of the three components moves by
+/// ≤ step/2 (‖Δ‖ ≤ √3·step/2); the restored largest, ≥ 1/2, moves by ≤ ‖c‖·‖Δ‖/(1/2) with
+/// ‖c‖ ≤ √3/2; so the quaternion moves by ≤ (1 + √3)·√3·step/2 = 2.37·step, normalizing at most
+/// doubles that, and the angle is twice the chord: ≤ 9.5·step = 1.28e-5 rad.
+inline constexpr double kCompactToolStateRotationErrorRad = 1.3e-5;
+/// V_WT_W: per component |error| ≤ 2⁻¹¹·|v| + 2⁻²⁵ (binary16 round to nearest; the 2⁻²⁵ is for
+/// its subnormals below 6.1e-5) within ±65504; beyond, the component is sent as ±65504.
+inline constexpr double kCompactTwistRelativeError = 0x1p-11;
+inline constexpr double kCompactTwistAbsoluteError = 0x1p-25;
+inline constexpr double kCompactTwistMax = 65504.0;
 
 /// Bytes of one object carried per SceneFragment when datagrams are at most `mtu` bytes.
 constexpr std::size_t FragmentPayloadBytes(std::size_t mtu) noexcept {
