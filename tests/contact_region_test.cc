@@ -15,6 +15,7 @@
 #include <limits>
 #include <memory>
 #include <numbers>
+#include <random>
 #include <set>
 #include <vector>
 
@@ -354,6 +355,125 @@ TEST(ContactRegion, RegionOfABlockOnTheGearIsItsFaceAlongTheRidgeLine) {
   EXPECT_FALSE(PairRegionBounds(block, LevelBlockOnGear(0.0, -2e-3), *hull_A, all_A, gear,
                                 scene.touchables[0].X_WO, *hull_B, all_B, margin, {0, 0, 0},
                                 {1, 0, 0}, {0, 1, 0}, b));
+}
+
+// The plain clipping that PairRegionBounds shortcuts (contact_region.cc skips far triangles and
+// idle planes): every triangle moved into the hull's frame and clipped by every plane in turn
+// (Sutherland–Hodgman), the box of every polygon vertex on u, v. Written out here as a second
+// route, so that the shortcuts are held to the same bits.
+bool PlainClippedBox(const HapticModel& patch, const RigidTransform& X_HP, const RigidTransform& X_WH,
+                     const ConvexHull& hull, double margin, const glm::dvec3& origin_W,
+                     const glm::dvec3& u_W, const glm::dvec3& v_W, RegionBounds& box) {
+  bool any = false;
+  box = {};
+  for (const glm::ivec3& t : patch.triangles) {
+    std::vector<glm::dvec3> poly = {X_HP * patch.vertices_O[static_cast<std::size_t>(t[0])],
+                                    X_HP * patch.vertices_O[static_cast<std::size_t>(t[1])],
+                                    X_HP * patch.vertices_O[static_cast<std::size_t>(t[2])]};
+    bool outside = false, crosses = false;
+    for (const glm::dvec4& pl : hull.planes_O) {
+      const glm::dvec3 n(pl);
+      const double d = pl.w + margin;
+      const double s0 = glm::dot(n, poly[0]) - d, s1 = glm::dot(n, poly[1]) - d,
+                   s2 = glm::dot(n, poly[2]) - d;
+      if (s0 > 0.0 && s1 > 0.0 && s2 > 0.0) {
+        outside = true;
+        break;
+      }
+      if (s0 > 0.0 || s1 > 0.0 || s2 > 0.0) crosses = true;
+    }
+    if (outside) continue;
+    if (crosses) {
+      for (const glm::dvec4& pl : hull.planes_O) {
+        if (poly.size() + 1 > 64) {
+          poly.clear();
+          break;
+        }
+        const glm::dvec3 n(pl);
+        const double d = pl.w + margin;
+        std::vector<glm::dvec3> kept;
+        for (std::size_t i = 0; i < poly.size(); ++i) {
+          const glm::dvec3& p = poly[i];
+          const glm::dvec3& q = poly[(i + 1) % poly.size()];
+          const double sp = glm::dot(n, p) - d, sq = glm::dot(n, q) - d;
+          if (sp <= 0.0) kept.push_back(p);
+          if ((sp <= 0.0) != (sq <= 0.0)) kept.push_back(p + (sp / (sp - sq)) * (q - p));
+        }
+        poly = kept;
+        if (poly.size() < 3) break;
+      }
+      if (poly.size() < 3) continue;
+    }
+    for (const glm::dvec3& p : poly) {
+      const glm::dvec3 d = X_WH * p - origin_W;
+      const double u = glm::dot(d, u_W), v = glm::dot(d, v_W);
+      if (!any) {
+        box = {u, u, v, v};
+        any = true;
+      }
+      box.min_u = std::min(box.min_u, u);
+      box.max_u = std::max(box.max_u, u);
+      box.min_v = std::min(box.min_v, v);
+      box.max_v = std::max(box.max_v, v);
+    }
+  }
+  return any;
+}
+
+TEST(ContactRegion, PairRegionBoundsGivesThePlainClippingsBitsOnRandomPoses) {
+  const HapticScene scene = MakeBlockOnGearScene();
+  const HapticModel& block = *scene.tool;
+  const HapticModel& gear = *scene.touchables[0].model;
+  const RigidTransform& X_WO = scene.touchables[0].X_WO;
+  const std::optional<ConvexHull> hull_A = ConvexMeshHull(block, 1e-6);
+  const std::optional<ConvexHull> hull_B = ConvexMeshHull(gear, 1e-6);
+  ASSERT_TRUE(hull_A && hull_B);
+  std::vector<int> all_A(block.triangles.size()), all_B(gear.triangles.size());
+  for (std::size_t i = 0; i < all_A.size(); ++i) all_A[i] = static_cast<int>(i);
+  for (std::size_t i = 0; i < all_B.size(); ++i) all_B[i] = static_cast<int>(i);
+  std::mt19937 rng(31);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  int regions = 0;
+  for (int i = 0; i < 300; ++i) {
+    // Resting, pressed, tilted, slid off the end and lifted clear, with margins up to 2 mm.
+    RigidTransform X_WT = LevelBlockOnGear(0.03 * unit(rng), 1e-3 * unit(rng));
+    X_WT.translation.y += 0.01 * unit(rng);
+    X_WT.rotation = QuaternionFromRotationVector({0.1 * unit(rng), 0.1 * unit(rng), unit(rng)});
+    const double margin = 1e-3 * (1.0 + unit(rng));
+    const glm::dvec3 origin_W = X_WT.translation + glm::dvec3(0.0, 0.0, -0.01);
+    const glm::dvec3 u_W = glm::normalize(glm::dvec3(1.0, 0.2 * unit(rng), 0.0));
+    const glm::dvec3 v_W = glm::normalize(glm::cross(glm::dvec3(0.0, 0.0, 1.0), u_W));
+    RegionBounds got;
+    const bool found = PairRegionBounds(block, X_WT, *hull_A, all_A, gear, X_WO, *hull_B, all_B,
+                                        margin, origin_W, u_W, v_W, got);
+    // The same steps as PairRegionBounds, each part by the plain clipping.
+    const RigidTransform X_TO = X_WT.Inverse() * X_WO;
+    RegionBounds object_part, tool_part, want;
+    const bool plain =
+        PlainClippedBox(gear, X_TO, X_WT, *hull_A, margin, origin_W, u_W, v_W, object_part) &&
+        PlainClippedBox(block, X_TO.Inverse(), X_WO, *hull_B, margin, origin_W, u_W, v_W,
+                        tool_part);
+    ASSERT_EQ(found, plain) << i;
+    if (!found) continue;
+    ++regions;
+    want.min_u = std::max(object_part.min_u, tool_part.min_u);
+    want.max_u = std::min(object_part.max_u, tool_part.max_u);
+    want.min_v = std::max(object_part.min_v, tool_part.min_v);
+    want.max_v = std::min(object_part.max_v, tool_part.max_v);
+    if (!(want.min_u <= want.max_u && want.min_v <= want.max_v)) {
+      want.min_u = std::min(object_part.min_u, tool_part.min_u);
+      want.max_u = std::max(object_part.max_u, tool_part.max_u);
+      want.min_v = std::min(object_part.min_v, tool_part.min_v);
+      want.max_v = std::max(object_part.max_v, tool_part.max_v);
+    }
+    EXPECT_EQ(got.min_u, want.min_u) << i;
+    EXPECT_EQ(got.max_u, want.max_u) << i;
+    EXPECT_EQ(got.min_v, want.min_v) << i;
+    EXPECT_EQ(got.max_v, want.max_v) << i;
+  }
+  // Both outcomes were exercised.
+  EXPECT_GT(regions, 30);
+  EXPECT_LT(regions, 290);
 }
 
 // Tilting the resting block about y through level: δ(θ) is a V whose arms are the face's two

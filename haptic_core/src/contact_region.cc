@@ -5,6 +5,8 @@
 #include <cmath>
 #include <cstddef>
 #include <glm/geometric.hpp>
+#include <glm/gtc/quaternion.hpp>
+#include <limits>
 #include <optional>
 #include <span>
 #include <vector>
@@ -19,9 +21,30 @@ bool IsLeaf(const HapticModel& m, int node) noexcept {
          m.hull_hierarchy.nodes[static_cast<std::size_t>(node)].is_leaf();
 }
 
+// Two shortcuts keep ForEachClippedTriangle's results bit for bit while skipping work that
+// cannot change them (each is conservative by kSkipSlackM plus a relative part, some eight orders
+// of magnitude above the rounding of the sums it guards):
+// - Far triangles: with at most kMaxFarPlanes hull planes, the planes are moved into the patch
+//   model's frame once per call, and a triangle whose three corners lie beyond one of them by the
+//   slack is skipped before its corners are transformed (the exact test would find it outside that
+//   plane too).
+// - Planes far from the whole patch: with more planes than that, the patch's bounding sphere
+//   (its corners', taken once per call) sorts them: a plane the sphere lies inside by the slack is
+//   idle for every triangle (dropped from every test below), and one it lies beyond by the slack
+//   has every triangle outside (nothing to visit).
+// - Idle planes: Sutherland–Hodgman runs only over the planes some corner of the triangle lies
+//   beyond or within the slack of. A plane that has every corner inside by the slack has every
+//   point of the clipped polygon (convex combinations of the corners) inside too, so its pass
+//   would copy the polygon unchanged.
+constexpr double kSkipSlackM = 1e-9;
+constexpr double kSkipSlackRelative = 1e-9;
+constexpr int kMaxFarPlanes = 32;
+constexpr int kMaxActivePlanes = 256;
+constexpr int kMaxNearPlanes = 256;
+
 // Calls visit(polygon, count) with each triangle of `triangles` (indices into `patch_model`'s
 // coarse triangles, vertices mapped into the hull's frame by X_HP) clipped to the planes of `hull`
-// moved out by `margin` (m), the polygon in the hull's frame. A triangle whose clipped polygon
+// moved out by `margin`, the polygon in the hull's frame. A triangle whose clipped polygon
 // would exceed kMaxPolygon vertices, or with a bad index, is skipped.
 template <typename Visit>
 void ForEachClippedTriangle(const HapticModel& patch_model, std::span<const int> triangles,
@@ -29,7 +52,60 @@ void ForEachClippedTriangle(const HapticModel& patch_model, std::span<const int>
                             Visit&& visit) noexcept {
   if (hull.planes_O.empty()) return;
   const std::size_t num_vertices = patch_model.vertices_O.size();
+  const std::size_t num_planes = hull.planes_O.size();
+  const double slack =
+      kSkipSlackM + kSkipSlackRelative * (glm::length(X_HP.translation) + std::abs(margin));
+  // The hull's planes in the patch model's frame P: n_P = R_HPᵀ·n, d_P = d + margin − n·p_HP.
+  std::array<glm::dvec4, kMaxFarPlanes> far_planes_P{};
+  const int num_far_planes = num_planes <= kMaxFarPlanes ? static_cast<int>(num_planes) : 0;
+  const glm::dquat R_PH = glm::conjugate(X_HP.rotation);
+  for (int k = 0; k < num_far_planes; ++k) {
+    const glm::dvec4& pl = hull.planes_O[static_cast<std::size_t>(k)];
+    const glm::dvec3 n(pl);
+    const double d_P = pl.w + margin - glm::dot(n, X_HP.translation);
+    far_planes_P[static_cast<std::size_t>(k)] = glm::dvec4(R_PH * n, d_P + slack * (1.0 + std::abs(d_P)));
+  }
+  // With many planes, those near the patch's bounding sphere (all of them when too many are).
+  std::array<int, kMaxNearPlanes> near{};
+  int num_near = -1;  // −1: every plane
+  if (num_far_planes == 0) {
+    glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
+    for (const int f : triangles) {
+      if (f < 0 || static_cast<std::size_t>(f) >= patch_model.triangles.size()) continue;
+      const glm::ivec3 t = patch_model.triangles[static_cast<std::size_t>(f)];
+      for (int c = 0; c < 3; ++c) {
+        if (t[c] < 0 || static_cast<std::size_t>(t[c]) >= num_vertices) continue;
+        const glm::dvec3& p = patch_model.vertices_O[static_cast<std::size_t>(t[c])];
+        lo = glm::min(lo, p);
+        hi = glm::max(hi, p);
+      }
+    }
+    if (!(lo.x <= hi.x && lo.y <= hi.y && lo.z <= hi.z)) return;  // no valid corner
+    const glm::dvec3 center_P = 0.5 * (lo + hi);
+    const double radius = 0.5 * glm::length(hi - lo);
+    const glm::dvec3 center_H = X_HP * center_P;
+    if (std::isfinite(radius) && std::isfinite(center_H.x) && std::isfinite(center_H.y) &&
+        std::isfinite(center_H.z)) {
+      num_near = 0;
+      for (std::size_t k = 0; k < num_planes; ++k) {
+        const glm::dvec4& pl = hull.planes_O[k];
+        const double d = pl.w + margin;
+        const double s_center = glm::dot(glm::dvec3(pl), center_H) - d;
+        const double guard = radius + slack * (1.0 + std::abs(d) + radius);
+        if (s_center > guard) return;  // every corner beyond this plane: nothing inside
+        if (s_center < -guard) continue;  // every corner inside by the slack: idle
+        if (num_near == kMaxNearPlanes) {
+          num_near = -1;
+          break;
+        }
+        near[static_cast<std::size_t>(num_near++)] = static_cast<int>(k);
+      }
+    }
+  }
+  const int num_tested = num_near < 0 ? static_cast<int>(num_planes) : num_near;
   std::array<glm::dvec3, kMaxPolygon> a{}, b{};
+  std::array<int, kMaxActivePlanes> active{};
+  int last_far = 0;
   for (const int f : triangles) {
     if (f < 0 || static_cast<std::size_t>(f) >= patch_model.triangles.size()) continue;
     const glm::ivec3 t = patch_model.triangles[static_cast<std::size_t>(f)];
@@ -38,12 +114,30 @@ void ForEachClippedTriangle(const HapticModel& patch_model, std::span<const int>
       if (t[c] < 0 || static_cast<std::size_t>(t[c]) >= num_vertices) bad_index = true;
     }
     if (bad_index) continue;
-    a[0] = X_HP * patch_model.vertices_O[static_cast<std::size_t>(t[0])];
-    a[1] = X_HP * patch_model.vertices_O[static_cast<std::size_t>(t[1])];
-    a[2] = X_HP * patch_model.vertices_O[static_cast<std::size_t>(t[2])];
+    const glm::dvec3& p0 = patch_model.vertices_O[static_cast<std::size_t>(t[0])];
+    const glm::dvec3& p1 = patch_model.vertices_O[static_cast<std::size_t>(t[1])];
+    const glm::dvec3& p2 = patch_model.vertices_O[static_cast<std::size_t>(t[2])];
+    // The plane that culled the previous triangle first (neighbours tend to share it).
+    bool far = false;
+    for (int j = 0; j < num_far_planes && !far; ++j) {
+      const int k = j == 0 ? last_far : (j <= last_far ? j - 1 : j);
+      const glm::dvec4& pl = far_planes_P[static_cast<std::size_t>(k)];
+      const glm::dvec3 n(pl);
+      far = glm::dot(n, p0) > pl.w && glm::dot(n, p1) > pl.w && glm::dot(n, p2) > pl.w;
+      if (far) last_far = k;
+    }
+    if (far) continue;
+    a[0] = X_HP * p0;
+    a[1] = X_HP * p1;
+    a[2] = X_HP * p2;
     // Quick tests: wholly outside one plane (nothing), or inside all of them (the whole triangle).
     bool outside = false, crosses = false;
-    for (const glm::dvec4& pl : hull.planes_O) {
+    int num_active = 0;
+    int last_active = -1;
+    for (int tested = 0; tested < num_tested; ++tested) {
+      const std::size_t k =
+          num_near < 0 ? static_cast<std::size_t>(tested) : static_cast<std::size_t>(near[static_cast<std::size_t>(tested)]);
+      const glm::dvec4& pl = hull.planes_O[k];
       const glm::dvec3 n(pl);
       const double d = pl.w + margin;
       const double s0 = glm::dot(n, a[0]) - d, s1 = glm::dot(n, a[1]) - d,
@@ -53,20 +147,32 @@ void ForEachClippedTriangle(const HapticModel& patch_model, std::span<const int>
         break;
       }
       if (s0 > 0.0 || s1 > 0.0 || s2 > 0.0) crosses = true;
+      const double idle_below = -slack * (1.0 + std::abs(d));
+      if (s0 > idle_below || s1 > idle_below || s2 > idle_below) {
+        if (num_active < kMaxActivePlanes) active[static_cast<std::size_t>(num_active)] =
+            static_cast<int>(k);
+        ++num_active;
+        last_active = static_cast<int>(k);
+      }
     }
     if (outside) continue;
     int count = 3;
     const glm::dvec3* polygon = a.data();
     if (crosses) {
       // Sutherland–Hodgman: keep n·p − d ≤ 0 of every plane. A convex polygon gains at most one
-      // vertex per plane.
+      // vertex per plane. Over the active planes only (all of them if there are too many to list).
+      const bool listed = num_active <= kMaxActivePlanes;
+      const int passes = listed ? num_active : static_cast<int>(num_planes);
       glm::dvec3* in = a.data();
       glm::dvec3* out = b.data();
-      for (const glm::dvec4& pl : hull.planes_O) {
+      for (int pass = 0; pass < passes; ++pass) {
         if (count + 1 > kMaxPolygon) {
           count = 0;
           break;
         }
+        const glm::dvec4& pl =
+            hull.planes_O[static_cast<std::size_t>(listed ? active[static_cast<std::size_t>(pass)]
+                                                          : pass)];
         const glm::dvec3 n(pl);
         const double d = pl.w + margin;
         int kept = 0;
@@ -80,6 +186,11 @@ void ForEachClippedTriangle(const HapticModel& patch_model, std::span<const int>
         count = kept;
         std::swap(in, out);
         if (count < 3) break;
+      }
+      // A full polygon meets the size check again at any idle plane after the last active one.
+      if (listed && count + 1 > kMaxPolygon &&
+          last_active + 1 < static_cast<int>(num_planes)) {
+        count = 0;
       }
       if (count < 3) continue;
       polygon = in;
