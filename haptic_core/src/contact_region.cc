@@ -21,9 +21,10 @@ bool IsLeaf(const HapticModel& m, int node) noexcept {
          m.hull_hierarchy.nodes[static_cast<std::size_t>(node)].is_leaf();
 }
 
-// Two shortcuts keep ForEachClippedTriangle's results bit for bit while skipping work that
-// cannot change them (each is conservative by kSkipSlackM plus a relative part, some eight orders
-// of magnitude above the rounding of the sums it guards):
+// Shortcuts keep ForEachClippedTriangle's results bit for bit while skipping work that cannot
+// change them (each is conservative by kSkipSlackM plus a relative part, some eight orders of
+// magnitude above the rounding of the sums it guards for coordinates, offsets and margins below
+// about 10⁵ m; a non-finite pose or margin visits nothing):
 // - Far triangles: with at most kMaxFarPlanes hull planes, the planes are moved into the patch
 //   model's frame once per call, and a triangle whose three corners lie beyond one of them by the
 //   slack is skipped before its corners are transformed (the exact test would find it outside that
@@ -50,25 +51,35 @@ template <typename Visit>
 void ForEachClippedTriangle(const HapticModel& patch_model, std::span<const int> triangles,
                             const RigidTransform& X_HP, const ConvexHull& hull, double margin,
                             Visit&& visit) noexcept {
-  if (hull.planes_O.empty()) return;
+  const glm::dquat& q_HP = X_HP.rotation;
+  const bool finite_pose = std::isfinite(X_HP.translation.x) && std::isfinite(X_HP.translation.y) &&
+                           std::isfinite(X_HP.translation.z) && std::isfinite(q_HP.w) &&
+                           std::isfinite(q_HP.x) && std::isfinite(q_HP.y) && std::isfinite(q_HP.z);
+  if (hull.planes_O.empty() || !std::isfinite(margin) || !finite_pose) return;
   const std::size_t num_vertices = patch_model.vertices_O.size();
   const std::size_t num_planes = hull.planes_O.size();
   const double slack =
       kSkipSlackM + kSkipSlackRelative * (glm::length(X_HP.translation) + std::abs(margin));
   // The hull's planes in the patch model's frame P: n_P = R_HPᵀ·n, d_P = d + margin − n·p_HP.
   std::array<glm::dvec4, kMaxFarPlanes> far_planes_P{};
-  const int num_far_planes = num_planes <= kMaxFarPlanes ? static_cast<int>(num_planes) : 0;
+  // The frame shortcuts assume X_HP rotates (a unit quaternion, as poses composed from unit
+  // ones are to rounding); the idle-plane one works on the transformed corners and holds anyway.
+  const double norm2 = q_HP.w * q_HP.w + q_HP.x * q_HP.x + q_HP.y * q_HP.y + q_HP.z * q_HP.z;
+  const bool rotates = std::abs(norm2 - 1.0) <= 1e-12;
+  const int num_far_planes =
+      rotates && num_planes <= kMaxFarPlanes ? static_cast<int>(num_planes) : 0;
   const glm::dquat R_PH = glm::conjugate(X_HP.rotation);
   for (int k = 0; k < num_far_planes; ++k) {
     const glm::dvec4& pl = hull.planes_O[static_cast<std::size_t>(k)];
     const glm::dvec3 n(pl);
     const double d_P = pl.w + margin - glm::dot(n, X_HP.translation);
-    far_planes_P[static_cast<std::size_t>(k)] = glm::dvec4(R_PH * n, d_P + slack * (1.0 + std::abs(d_P)));
+    far_planes_P[static_cast<std::size_t>(k)] =
+        glm::dvec4(R_PH * n, d_P + slack * (1.0 + std::abs(d_P)));
   }
   // With many planes, those near the patch's bounding sphere (all of them when too many are).
   std::array<int, kMaxNearPlanes> near{};
   int num_near = -1;  // −1: every plane
-  if (num_far_planes == 0) {
+  if (rotates && num_far_planes == 0) {
     glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
     for (const int f : triangles) {
       if (f < 0 || static_cast<std::size_t>(f) >= patch_model.triangles.size()) continue;
@@ -147,8 +158,9 @@ void ForEachClippedTriangle(const HapticModel& patch_model, std::span<const int>
         break;
       }
       if (s0 > 0.0 || s1 > 0.0 || s2 > 0.0) crosses = true;
+      // Idle only when every corner is inside by the slack (a NaN leaves the plane active).
       const double idle_below = -slack * (1.0 + std::abs(d));
-      if (s0 > idle_below || s1 > idle_below || s2 > idle_below) {
+      if (!(s0 <= idle_below && s1 <= idle_below && s2 <= idle_below)) {
         if (num_active < kMaxActivePlanes) active[static_cast<std::size_t>(num_active)] =
             static_cast<int>(k);
         ++num_active;

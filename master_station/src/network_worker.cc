@@ -85,12 +85,13 @@ void NetworkWorker::Run(const std::atomic<bool>& stop) {
     }
     OutgoingToolState state;
     if (outgoing_.Read(state)) {
-      // The deadband predicts from what the remote node will decode.
-      if (compact_tool_states_) state.message = wire::CompactToolStateAsReceived(state.message);
       last = state;
       have_last = true;
       ++tool_states_offered_;
-      if (tool_deadband_.Decide(state.message.X_WT, state.message.V_WT_W, state.time_ns,
+      // The deadband predicts from what the remote node will decode; the state itself is what
+      // is encoded (quantizing a quantized rotation again can pick another largest component).
+      const wire::ToolStateMessage received = AsReceived(state.message);
+      if (tool_deadband_.Decide(received.X_WT, received.V_WT_W, state.time_ns,
                                 state.near_contact, &held_model_) != DeadbandReason::kNotSent) {
         Send(state);
         last_send_ns = now;
@@ -105,7 +106,8 @@ void NetworkWorker::Run(const std::atomic<bool>& stop) {
       last.time_ns = now;
       last.message.V_WT_W = {};
       Send(last);
-      tool_deadband_.NoteSent(last.message.X_WT, last.message.V_WT_W, now);
+      const wire::ToolStateMessage received = AsReceived(last.message);
+      tool_deadband_.NoteSent(received.X_WT, received.V_WT_W, now);
       ++idle_keepalives_;
       last_send_ns = now;
     }
@@ -539,6 +541,10 @@ void NetworkWorker::CheckScene(std::int64_t now) {
     std::printf("[master] scene updated: a new object version arrived (%zu mesh(es))\n", meshes);
   }
   std::fflush(stdout);
+}
+
+wire::ToolStateMessage NetworkWorker::AsReceived(const wire::ToolStateMessage& m) const noexcept {
+  return compact_tool_states_ ? wire::CompactToolStateAsReceived(m) : m;
 }
 
 void NetworkWorker::Send(const OutgoingToolState& s) {

@@ -89,7 +89,11 @@ class NetworkWorker {
   /// them to the received scene.
   void CheckScene(std::int64_t now);
 
+  /// Sends `s` as the session agreed: CompactToolState (quantized from s as it is) or ToolState.
   void Send(const OutgoingToolState& s);
+  /// The tool state `m` as the remote node will decode it in this session (the compact encoding's
+  /// rounding, or `m` itself): what the tool-state deadband predicts from.
+  wire::ToolStateMessage AsReceived(const wire::ToolStateMessage& m) const noexcept;
 
   const StationConfig& config_;
   UdpSocket socket_;

@@ -921,8 +921,17 @@ bool DecodeSmallestThree(std::uint64_t bits, glm::dquat& q) noexcept {
 
 CompactToolStateBody QuantizeToolState(const ToolStateMessage& m) noexcept {
   CompactToolStateBody b;
-  const bool pose_ok = CheckPose(m.X_WT) == DecodeStatus::kOk;
-  for (int k = 0; k < 3; ++k) b.p_WT[k] = F32(m.X_WT.translation[k]);
+  const double f32_max = std::numeric_limits<float>::max();
+  bool pose_ok = CheckPose(m.X_WT) == DecodeStatus::kOk;
+  for (int k = 0; k < 3; ++k) {
+    const double p = m.X_WT.translation[k];
+    if (!(std::abs(p) <= f32_max)) {
+      pose_ok = false;  // beyond f32 (or NaN): converting would be undefined
+      b.p_WT[k] = 0.0f;
+    } else {
+      b.p_WT[k] = F32(p);
+    }
+  }
   if (pose_ok) {
     b.q_WT_smallest_three = EncodeSmallestThree(m.X_WT.rotation);
   } else {

@@ -239,12 +239,17 @@ Datagram EncodeCompactContactModel(const Header& header, const ContactModelMessa
 /// field's largest error): p_WT as f32, R_WT as "smallest three" in 20 bits each, the twist as
 /// binary16. Never undefined for any input: a non-finite field is sent non-finite (a quaternion
 /// with one as a NaN position) so that the receiver rejects the datagram (kNonFinite), as it would
-/// the f64 encoding; a twist component beyond ±kCompactTwistMax is sent as ±kCompactTwistMax.
+/// the f64 encoding; so is a position coordinate beyond f32's range (±3.4e38 m), which the f64
+/// encoding would carry; a twist component beyond ±kCompactTwistMax is sent as
+/// ±kCompactTwistMax.
 Datagram EncodeCompactToolState(const Header& header, const ToolStateMessage& message,
                                 const MacKey& key) noexcept;
 /// What the receiver of EncodeCompactToolState(message) decodes, without the wire: the sender's
 /// perceptual deadband predicts from this (transport/deadband.h), so that both sides extrapolate
-/// the same state. A message the receiver would reject comes back unchanged.
+/// the same state. A message the receiver would reject comes back unchanged. Encode `message`,
+/// not this: quantizing the result again is not always the identity (where two quaternion
+/// components tie, the restored largest can come out below the other and the second encoding
+/// leaves out another component, 1.6e-6 rad away).
 ToolStateMessage CompactToolStateAsReceived(const ToolStateMessage& message) noexcept;
 Datagram EncodeGoodbye(const Header& header, const MacKey& key) noexcept;
 Datagram EncodeHello(const Header& header, const HelloMessage& message, const MacKey& key) noexcept;
@@ -296,7 +301,8 @@ DecodeStatus DecodeToolState(std::span<const std::uint8_t> body,
                              ToolStateMessage& message) noexcept;
 /// CompactToolState into the message the f64 encoding decodes to (R_WT unit). kTooShort/kTooLong
 /// unless the length is exactly kCompactToolStateBodyBytes, kNonFinite for a non-finite f32 or
-/// f16, kBadValue for a quaternion field that no unit quaternion encodes to.
+/// f16, kBadValue for a quaternion field with bits 62–63 set, a component of −2¹⁹, or the three
+/// components' squares summing above 1 + 1e-9 (an encoder never sends more than 0.75).
 DecodeStatus DecodeCompactToolState(std::span<const std::uint8_t> body,
                                     ToolStateMessage& message) noexcept;
 DecodeStatus DecodeContactModel(std::span<const std::uint8_t> body,

@@ -34,7 +34,7 @@
 //     largest as √(1 − Σ others²) and normalizes. V_WT_W: linear 3×f16 (m/s), angular 3×f16
 //     (rad/s), IEEE-754 binary16, round to nearest, clamped to ±65504 at the sender. Rejected:
 //     a non-finite f32 or f16 (kNonFinite), bits 62–63 set, a component of −2¹⁹ or the three
-//     others' squares summing above 1 (kBadValue). Errors: kCompactToolState*Error* below.
+//     others' squares summing above 1 + 1e-9 (kBadValue; an encoder never sends above 0.75). Errors: kCompactToolState*Error* below.
 //   ContactModel R→O (kContactModelFixedBytes + n·kContactBytes):
 //     u64 tool_state_seq  i64 tool_state_send_time_ns (echoed)  i64 hold_ns (remote time between
 //     receiving that tool state and sending this)  u64 remote_step_count. Under a tool-state
@@ -327,7 +327,9 @@ inline constexpr double kCompactTimeErrorUs = 0.5;
 inline constexpr int kCompactQuaternionBits = 20;
 inline constexpr std::int32_t kCompactQuaternionMax = (1 << (kCompactQuaternionBits - 1)) - 1;
 inline constexpr double kCompactQuaternionStep = 0.70710678118654752 / kCompactQuaternionMax;
-/// p_WT: per axis |error| ≤ 2⁻²⁴·|p| (f32, round to nearest: 0.06 µm at 1 m from W's origin).
+/// p_WT: per axis |error| ≤ 2⁻²⁴·|p| + 2⁻¹⁵⁰ (f32, round to nearest: 0.06 µm at 1 m from W's
+/// origin; the 2⁻¹⁵⁰ is for f32 subnormals). Beyond f32's range the coordinate is sent as NaN and
+/// the receiver rejects the datagram.
 inline constexpr double kCompactToolStatePositionRelativeError = 0x1p-24;
 /// R_WT: angle ≤ 1.3e-5 rad (0.26 µm at a 20 mm lever). Each of the three components moves by
 /// ≤ step/2 (‖Δ‖ ≤ √3·step/2); the restored largest, ≥ 1/2, moves by ≤ ‖c‖·‖Δ‖/(1/2) with
