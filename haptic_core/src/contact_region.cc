@@ -36,7 +36,8 @@ bool IsLeaf(const HapticModel& m, int node) noexcept {
 // - Idle planes: Sutherland–Hodgman runs only over the planes some corner of the triangle lies
 //   beyond or within the slack of. A plane that has every corner inside by the slack has every
 //   point of the clipped polygon (convex combinations of the corners) inside too, so its pass
-//   would copy the polygon unchanged.
+//   would copy the polygon unchanged. Likewise a pass whose plane has every vertex of the
+//   polygon so far inside (n·p − d ≤ 0, computed as the pass would) is skipped exactly.
 constexpr double kSkipSlackM = 1e-9;
 constexpr double kSkipSlackRelative = 1e-9;
 constexpr int kMaxFarPlanes = 32;
@@ -115,6 +116,7 @@ void ForEachClippedTriangle(const HapticModel& patch_model, std::span<const int>
   }
   const int num_tested = num_near < 0 ? static_cast<int>(num_planes) : num_near;
   std::array<glm::dvec3, kMaxPolygon> a{}, b{};
+  std::array<double, kMaxPolygon> side{};
   std::array<int, kMaxActivePlanes> active{};
   int last_far = 0;
   for (const int f : triangles) {
@@ -187,11 +189,21 @@ void ForEachClippedTriangle(const HapticModel& patch_model, std::span<const int>
                                                           : pass)];
         const glm::dvec3 n(pl);
         const double d = pl.w + margin;
+        // Each vertex's side once (the same expression, so the same bits, as the pair test below
+        // used to evaluate twice); a plane every vertex is inside of would copy the polygon.
+        bool cuts = false;
+        for (int i = 0; i < count; ++i) {
+          side[static_cast<std::size_t>(i)] = glm::dot(n, in[i]) - d;
+          cuts = cuts || !(side[static_cast<std::size_t>(i)] <= 0.0);
+        }
+        if (!cuts) continue;
         int kept = 0;
         for (int i = 0; i < count; ++i) {
+          const int j = i + 1 == count ? 0 : i + 1;
           const glm::dvec3& p = in[i];
-          const glm::dvec3& q = in[(i + 1) % count];
-          const double sp = glm::dot(n, p) - d, sq = glm::dot(n, q) - d;
+          const glm::dvec3& q = in[j];
+          const double sp = side[static_cast<std::size_t>(i)];
+          const double sq = side[static_cast<std::size_t>(j)];
           if (sp <= 0.0) out[kept++] = p;
           if ((sp <= 0.0) != (sq <= 0.0)) out[kept++] = p + (sp / (sp - sq)) * (q - p);
         }
