@@ -74,7 +74,8 @@ DecodeStatus RoundTrip(const ToolStateMessage& m, ToolStateMessage& out) {
 /// The body (32 bytes) of a CompactToolState datagram of `m`.
 std::vector<std::uint8_t> Body(const ToolStateMessage& m) {
   const Datagram d = EncodeCompactToolState({}, m, TestKey());
-  return {d.bytes.begin() + kHeaderBytes, d.bytes.begin() + kHeaderBytes + kCompactToolStateBodyBytes};
+  return {d.bytes.begin() + kHeaderBytes,
+          d.bytes.begin() + kHeaderBytes + kCompactToolStateBodyBytes};
 }
 
 /// Decodes the twist's linear x from a state whose only non-zero twist component is `v`.
@@ -106,9 +107,8 @@ TEST(CompactToolState, RandomStatesComeBackWithinTheStatedBounds) {
       const double e = std::abs(out.X_WT.translation[k] - p);
       ASSERT_LE(e, kCompactToolStatePositionRelativeError * std::abs(p) + 0x1p-150) << i;
       worst_position = std::max(worst_position, e / std::abs(p));
-      for (const auto& [sent, got] :
-           {std::pair{m.V_WT_W.linear[k], out.V_WT_W.linear[k]},
-            std::pair{m.V_WT_W.angular[k], out.V_WT_W.angular[k]}}) {
+      for (const auto& [sent, got] : {std::pair{m.V_WT_W.linear[k], out.V_WT_W.linear[k]},
+                                      std::pair{m.V_WT_W.angular[k], out.V_WT_W.angular[k]}}) {
         const double bound =
             kCompactTwistRelativeError * std::abs(sent) + kCompactTwistAbsoluteError;
         ASSERT_LE(std::abs(got - sent), bound) << i << " " << sent;
@@ -286,8 +286,8 @@ TEST(CompactToolState, NonFiniteAndImpossibleBodiesAreRefused) {
     StoreLe(std::bit_cast<std::uint32_t>(std::numeric_limits<float>::infinity()), b.data() + at);
     EXPECT_EQ(DecodeCompactToolState(b, out), DecodeStatus::kNonFinite) << at;
   }
-  for (const std::uint16_t h : {std::uint16_t{0x7C00}, std::uint16_t{0xFC00},
-                                std::uint16_t{0x7E00}, std::uint16_t{0x7C01}}) {
+  for (const std::uint16_t h : {std::uint16_t{0x7C00}, std::uint16_t{0xFC00}, std::uint16_t{0x7E00},
+                                std::uint16_t{0x7C01}}) {
     std::vector<std::uint8_t> b = good;
     StoreLe(h, b.data() + 30);
     EXPECT_EQ(DecodeCompactToolState(b, out), DecodeStatus::kNonFinite) << h;

@@ -314,6 +314,13 @@ TEST(ContactRegion, ConvexMeshHullHoldsTheBoxAndRefusesADentedOne) {
   EXPECT_FALSE(ConvexMeshHull(dented, 1e-9).has_value());
 }
 
+// The indices of every coarse triangle of `model`, in order.
+std::vector<int> AllTriangles(const HapticModel& model) {
+  std::vector<int> all(model.triangles.size());
+  for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<int>(i);
+  return all;
+}
+
 // The block of seed Fig. 75 level on the gear, pressed 0.1 mm (its bottom face at the gear's top).
 RigidTransform LevelBlockOnGear(double x_m, double press_m) {
   RigidTransform X;
@@ -329,9 +336,7 @@ TEST(ContactRegion, RegionOfABlockOnTheGearIsItsFaceAlongTheRidgeLine) {
   const std::optional<ConvexHull> hull_A = ConvexMeshHull(block, 1e-6);
   const std::optional<ConvexHull> hull_B = ConvexMeshHull(gear, 1e-6);
   ASSERT_TRUE(hull_A && hull_B);
-  std::vector<int> all_A(block.triangles.size()), all_B(gear.triangles.size());
-  for (std::size_t i = 0; i < all_A.size(); ++i) all_A[i] = static_cast<int>(i);
-  for (std::size_t i = 0; i < all_B.size(); ++i) all_B[i] = static_cast<int>(i);
+  const std::vector<int> all_A = AllTriangles(block), all_B = AllTriangles(gear);
   const double margin = 1e-3;
   for (const double x : {0.0, 0.012}) {
     const RigidTransform X_WT = LevelBlockOnGear(x, 0.1e-3);
@@ -362,10 +367,10 @@ TEST(ContactRegion, RegionOfABlockOnTheGearIsItsFaceAlongTheRidgeLine) {
 // (Sutherland–Hodgman), the box of every polygon vertex on u, v. Written out here as a second
 // route, so that the shortcuts are held to the same bits.
 // `full` counts the triangles dropped at the 64-vertex limit.
-bool PlainClippedBox(const HapticModel& patch, const RigidTransform& X_HP, const RigidTransform& X_WH,
-                     const ConvexHull& hull, double margin, const glm::dvec3& origin_W,
-                     const glm::dvec3& u_W, const glm::dvec3& v_W, RegionBounds& box,
-                     int& full) {
+bool PlainClippedBox(const HapticModel& patch, const RigidTransform& X_HP,
+                     const RigidTransform& X_WH, const ConvexHull& hull, double margin,
+                     const glm::dvec3& origin_W, const glm::dvec3& u_W, const glm::dvec3& v_W,
+                     RegionBounds& box, int& full) {
   bool any = false;
   box = {};
   for (const glm::ivec3& t : patch.triangles) {
@@ -431,9 +436,7 @@ TEST(ContactRegion, PairRegionBoundsGivesThePlainClippingsBitsOnRandomPoses) {
   const std::optional<ConvexHull> hull_A = ConvexMeshHull(block, 1e-6);
   const std::optional<ConvexHull> hull_B = ConvexMeshHull(gear, 1e-6);
   ASSERT_TRUE(hull_A && hull_B);
-  std::vector<int> all_A(block.triangles.size()), all_B(gear.triangles.size());
-  for (std::size_t i = 0; i < all_A.size(); ++i) all_A[i] = static_cast<int>(i);
-  for (std::size_t i = 0; i < all_B.size(); ++i) all_B[i] = static_cast<int>(i);
+  const std::vector<int> all_A = AllTriangles(block), all_B = AllTriangles(gear);
   std::mt19937 rng(31);
   std::uniform_real_distribution<double> unit(-1.0, 1.0);
   int regions = 0, full = 0;
@@ -453,10 +456,9 @@ TEST(ContactRegion, PairRegionBoundsGivesThePlainClippingsBitsOnRandomPoses) {
     const RigidTransform X_TO = X_WT.Inverse() * X_WO;
     RegionBounds object_part, tool_part, want;
     const bool plain =
-        PlainClippedBox(gear, X_TO, X_WT, *hull_A, margin, origin_W, u_W, v_W, object_part,
-                        full) &&
-        PlainClippedBox(block, X_TO.Inverse(), X_WO, *hull_B, margin, origin_W, u_W, v_W,
-                        tool_part, full);
+        PlainClippedBox(gear, X_TO, X_WT, *hull_A, margin, origin_W, u_W, v_W, object_part, full) &&
+        PlainClippedBox(block, X_TO.Inverse(), X_WO, *hull_B, margin, origin_W, u_W, v_W, tool_part,
+                        full);
     ASSERT_EQ(found, plain) << i;
     if (!found) continue;
     ++regions;
@@ -479,8 +481,10 @@ TEST(ContactRegion, PairRegionBoundsGivesThePlainClippingsBitsOnRandomPoses) {
   // by the gear's facets near its top).
   EXPECT_GT(regions, 30);
   EXPECT_LT(regions, 300);
-  std::printf("[ region bounds ] %d of 300 poses with a region; %d triangles at the 64-vertex "
-              "limit\n", regions, full);
+  std::printf(
+      "[ region bounds ] %d of 300 poses with a region; %d triangles at the 64-vertex "
+      "limit\n",
+      regions, full);
   EXPECT_GT(full, 0);
 }
 

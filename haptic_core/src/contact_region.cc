@@ -44,6 +44,131 @@ constexpr int kMaxFarPlanes = 32;
 constexpr int kMaxActivePlanes = 256;
 constexpr int kMaxNearPlanes = 256;
 
+// True when every component of X is finite (its rotation need not be unit).
+bool FinitePose(const RigidTransform& X) noexcept {
+  const glm::dquat& q = X.rotation;
+  return std::isfinite(X.translation.x) && std::isfinite(X.translation.y) &&
+         std::isfinite(X.translation.z) && std::isfinite(q.w) && std::isfinite(q.x) &&
+         std::isfinite(q.y) && std::isfinite(q.z);
+}
+
+// The far-triangle shortcut: the hull's planes moved out by `margin` and into the patch's frame P
+// (n_P = R_HPᵀ·n, d_P = d + margin − n·p_HP), each pushed out by the slack, for hulls of at most
+// kMaxFarPlanes planes (count 0 otherwise, or when not `enabled`).
+struct FarPlanes {
+  std::array<glm::dvec4, kMaxFarPlanes> planes_P{};
+  int count = 0;
+  int last_culled = 0;  ///< tried first: neighbouring triangles tend to share it
+
+  FarPlanes(const ConvexHull& hull, const RigidTransform& X_HP, double margin, double slack,
+            bool enabled) noexcept {
+    if (!enabled || hull.planes_O.size() > static_cast<std::size_t>(kMaxFarPlanes)) return;
+    count = static_cast<int>(hull.planes_O.size());
+    const glm::dquat R_PH = glm::conjugate(X_HP.rotation);
+    for (int k = 0; k < count; ++k) {
+      const glm::dvec4& pl = hull.planes_O[static_cast<std::size_t>(k)];
+      const glm::dvec3 n(pl);
+      const double d_P = pl.w + margin - glm::dot(n, X_HP.translation);
+      planes_P[static_cast<std::size_t>(k)] =
+          glm::dvec4(R_PH * n, d_P + slack * (1.0 + std::abs(d_P)));
+    }
+  }
+
+  // Whether the corners p0..p2 (frame P) all lie beyond one of the planes.
+  bool Culls(const glm::dvec3& p0, const glm::dvec3& p1, const glm::dvec3& p2) noexcept {
+    for (int j = 0; j < count; ++j) {
+      const int k = j == 0 ? last_culled : (j <= last_culled ? j - 1 : j);
+      const glm::dvec4& pl = planes_P[static_cast<std::size_t>(k)];
+      const glm::dvec3 n(pl);
+      if (glm::dot(n, p0) > pl.w && glm::dot(n, p1) > pl.w && glm::dot(n, p2) > pl.w) {
+        last_culled = k;
+        return true;
+      }
+    }
+    return false;
+  }
+};
+
+// The planes-far-from-the-patch shortcut: the planes of `hull` (moved out by `margin`) that the
+// bounding sphere of `triangles`' corners, mapped by X_HP, is neither inside of nor beyond by the
+// slack, in order, into `near`. Returns false when the sphere lies beyond a plane or no corner is
+// valid (no triangle has a part inside); num_near is −1 (test every plane) when the sphere is not
+// finite or more than kMaxNearPlanes planes are near.
+bool SelectNearPlanes(const HapticModel& patch_model, std::span<const int> triangles,
+                      const RigidTransform& X_HP, const ConvexHull& hull, double margin,
+                      double slack, std::array<int, kMaxNearPlanes>& near, int& num_near) noexcept {
+  num_near = -1;
+  glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
+  for (const int f : triangles) {
+    if (f < 0 || static_cast<std::size_t>(f) >= patch_model.triangles.size()) continue;
+    const glm::ivec3 t = patch_model.triangles[static_cast<std::size_t>(f)];
+    for (int c = 0; c < 3; ++c) {
+      if (t[c] < 0 || static_cast<std::size_t>(t[c]) >= patch_model.vertices_O.size()) continue;
+      const glm::dvec3& p = patch_model.vertices_O[static_cast<std::size_t>(t[c])];
+      lo = glm::min(lo, p);
+      hi = glm::max(hi, p);
+    }
+  }
+  if (!(lo.x <= hi.x && lo.y <= hi.y && lo.z <= hi.z)) return false;
+  const double radius = 0.5 * glm::length(hi - lo);
+  const glm::dvec3 center_H = X_HP * (0.5 * (lo + hi));
+  if (!std::isfinite(radius) || !std::isfinite(center_H.x) || !std::isfinite(center_H.y) ||
+      !std::isfinite(center_H.z)) {
+    return true;
+  }
+  int listed = 0;
+  for (std::size_t k = 0; k < hull.planes_O.size(); ++k) {
+    const glm::dvec4& pl = hull.planes_O[k];
+    const double d = pl.w + margin;
+    const double s_center = glm::dot(glm::dvec3(pl), center_H) - d;
+    const double guard = radius + slack * (1.0 + std::abs(d) + radius);
+    if (s_center > guard) return false;  // every corner beyond this plane: nothing inside
+    if (s_center < -guard) continue;     // every corner inside by the slack: idle
+    if (listed == kMaxNearPlanes) return true;
+    near[static_cast<std::size_t>(listed++)] = static_cast<int>(k);
+  }
+  num_near = listed;
+  return true;
+}
+
+// Sutherland–Hodgman: clips the convex polygon in[0, count) to n·p − d ≤ 0 of the planes
+// hull.planes_O[plane(pass)] (moved out by `margin`), pass = 0..passes−1, ping-ponging between
+// `in` and `out` (kMaxPolygon each; `side` as scratch). A convex polygon gains at most one vertex
+// a plane; the polygon is dropped (count 0) where another plane could overflow it. Returns the
+// clipped polygon and sets `count` (below 3: nothing left).
+template <typename PlaneOfPass>
+const glm::dvec3* ClipPolygon(const ConvexHull& hull, double margin, int passes,
+                              PlaneOfPass&& plane, glm::dvec3* in, glm::dvec3* out, double* side,
+                              int& count) noexcept {
+  for (int pass = 0; pass < passes; ++pass) {
+    if (count + 1 > kMaxPolygon) {
+      count = 0;
+      break;
+    }
+    const glm::dvec4& pl = hull.planes_O[static_cast<std::size_t>(plane(pass))];
+    const glm::dvec3 n(pl);
+    const double d = pl.w + margin;
+    // Each vertex's side once; a plane every vertex is inside of would copy the polygon.
+    bool cuts = false;
+    for (int i = 0; i < count; ++i) {
+      side[i] = glm::dot(n, in[i]) - d;
+      cuts = cuts || !(side[i] <= 0.0);
+    }
+    if (!cuts) continue;
+    int kept = 0;
+    for (int i = 0; i < count; ++i) {
+      const int j = i + 1 == count ? 0 : i + 1;
+      const double sp = side[i], sq = side[j];
+      if (sp <= 0.0) out[kept++] = in[i];
+      if ((sp <= 0.0) != (sq <= 0.0)) out[kept++] = in[i] + (sp / (sp - sq)) * (in[j] - in[i]);
+    }
+    count = kept;
+    std::swap(in, out);
+    if (count < 3) break;
+  }
+  return in;
+}
+
 // Calls visit(polygon, count) with each triangle of `triangles` (indices into `patch_model`'s
 // coarse triangles, vertices mapped into the hull's frame by X_HP) clipped to the planes of `hull`
 // moved out by `margin`, the polygon in the hull's frame. A triangle whose clipped polygon
@@ -52,73 +177,27 @@ template <typename Visit>
 void ForEachClippedTriangle(const HapticModel& patch_model, std::span<const int> triangles,
                             const RigidTransform& X_HP, const ConvexHull& hull, double margin,
                             Visit&& visit) noexcept {
-  const glm::dquat& q_HP = X_HP.rotation;
-  const bool finite_pose = std::isfinite(X_HP.translation.x) && std::isfinite(X_HP.translation.y) &&
-                           std::isfinite(X_HP.translation.z) && std::isfinite(q_HP.w) &&
-                           std::isfinite(q_HP.x) && std::isfinite(q_HP.y) && std::isfinite(q_HP.z);
-  if (hull.planes_O.empty() || !std::isfinite(margin) || !finite_pose) return;
+  if (hull.planes_O.empty() || !std::isfinite(margin) || !FinitePose(X_HP)) return;
   const std::size_t num_vertices = patch_model.vertices_O.size();
   const std::size_t num_planes = hull.planes_O.size();
   const double slack =
       kSkipSlackM + kSkipSlackRelative * (glm::length(X_HP.translation) + std::abs(margin));
-  // The hull's planes in the patch model's frame P: n_P = R_HPᵀ·n, d_P = d + margin − n·p_HP.
-  std::array<glm::dvec4, kMaxFarPlanes> far_planes_P{};
   // The frame shortcuts assume X_HP rotates (a unit quaternion, as poses composed from unit
   // ones are to rounding); the idle-plane one works on the transformed corners and holds anyway.
+  const glm::dquat& q_HP = X_HP.rotation;
   const double norm2 = q_HP.w * q_HP.w + q_HP.x * q_HP.x + q_HP.y * q_HP.y + q_HP.z * q_HP.z;
   const bool rotates = std::abs(norm2 - 1.0) <= 1e-12;
-  const int num_far_planes =
-      rotates && num_planes <= kMaxFarPlanes ? static_cast<int>(num_planes) : 0;
-  const glm::dquat R_PH = glm::conjugate(X_HP.rotation);
-  for (int k = 0; k < num_far_planes; ++k) {
-    const glm::dvec4& pl = hull.planes_O[static_cast<std::size_t>(k)];
-    const glm::dvec3 n(pl);
-    const double d_P = pl.w + margin - glm::dot(n, X_HP.translation);
-    far_planes_P[static_cast<std::size_t>(k)] =
-        glm::dvec4(R_PH * n, d_P + slack * (1.0 + std::abs(d_P)));
-  }
-  // With many planes, those near the patch's bounding sphere (all of them when too many are).
+  FarPlanes far(hull, X_HP, margin, slack, rotates);
   std::array<int, kMaxNearPlanes> near{};
   int num_near = -1;  // −1: every plane
-  if (rotates && num_far_planes == 0) {
-    glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
-    for (const int f : triangles) {
-      if (f < 0 || static_cast<std::size_t>(f) >= patch_model.triangles.size()) continue;
-      const glm::ivec3 t = patch_model.triangles[static_cast<std::size_t>(f)];
-      for (int c = 0; c < 3; ++c) {
-        if (t[c] < 0 || static_cast<std::size_t>(t[c]) >= num_vertices) continue;
-        const glm::dvec3& p = patch_model.vertices_O[static_cast<std::size_t>(t[c])];
-        lo = glm::min(lo, p);
-        hi = glm::max(hi, p);
-      }
-    }
-    if (!(lo.x <= hi.x && lo.y <= hi.y && lo.z <= hi.z)) return;  // no valid corner
-    const glm::dvec3 center_P = 0.5 * (lo + hi);
-    const double radius = 0.5 * glm::length(hi - lo);
-    const glm::dvec3 center_H = X_HP * center_P;
-    if (std::isfinite(radius) && std::isfinite(center_H.x) && std::isfinite(center_H.y) &&
-        std::isfinite(center_H.z)) {
-      num_near = 0;
-      for (std::size_t k = 0; k < num_planes; ++k) {
-        const glm::dvec4& pl = hull.planes_O[k];
-        const double d = pl.w + margin;
-        const double s_center = glm::dot(glm::dvec3(pl), center_H) - d;
-        const double guard = radius + slack * (1.0 + std::abs(d) + radius);
-        if (s_center > guard) return;  // every corner beyond this plane: nothing inside
-        if (s_center < -guard) continue;  // every corner inside by the slack: idle
-        if (num_near == kMaxNearPlanes) {
-          num_near = -1;
-          break;
-        }
-        near[static_cast<std::size_t>(num_near++)] = static_cast<int>(k);
-      }
-    }
+  if (rotates && far.count == 0 &&
+      !SelectNearPlanes(patch_model, triangles, X_HP, hull, margin, slack, near, num_near)) {
+    return;
   }
   const int num_tested = num_near < 0 ? static_cast<int>(num_planes) : num_near;
   std::array<glm::dvec3, kMaxPolygon> a{}, b{};
   std::array<double, kMaxPolygon> side{};
   std::array<int, kMaxActivePlanes> active{};
-  int last_far = 0;
   for (const int f : triangles) {
     if (f < 0 || static_cast<std::size_t>(f) >= patch_model.triangles.size()) continue;
     const glm::ivec3 t = patch_model.triangles[static_cast<std::size_t>(f)];
@@ -130,94 +209,47 @@ void ForEachClippedTriangle(const HapticModel& patch_model, std::span<const int>
     const glm::dvec3& p0 = patch_model.vertices_O[static_cast<std::size_t>(t[0])];
     const glm::dvec3& p1 = patch_model.vertices_O[static_cast<std::size_t>(t[1])];
     const glm::dvec3& p2 = patch_model.vertices_O[static_cast<std::size_t>(t[2])];
-    // The plane that culled the previous triangle first (neighbours tend to share it).
-    bool far = false;
-    for (int j = 0; j < num_far_planes && !far; ++j) {
-      const int k = j == 0 ? last_far : (j <= last_far ? j - 1 : j);
-      const glm::dvec4& pl = far_planes_P[static_cast<std::size_t>(k)];
-      const glm::dvec3 n(pl);
-      far = glm::dot(n, p0) > pl.w && glm::dot(n, p1) > pl.w && glm::dot(n, p2) > pl.w;
-      if (far) last_far = k;
-    }
-    if (far) continue;
+    if (far.Culls(p0, p1, p2)) continue;
     a[0] = X_HP * p0;
     a[1] = X_HP * p1;
     a[2] = X_HP * p2;
-    // Quick tests: wholly outside one plane (nothing), or inside all of them (the whole triangle).
+    // Quick tests: wholly outside one plane (nothing), or inside all of them (the whole triangle);
+    // and the planes some corner is beyond or near (the others' passes would copy the polygon).
     bool outside = false, crosses = false;
     int num_active = 0;
     int last_active = -1;
-    for (int tested = 0; tested < num_tested; ++tested) {
-      const std::size_t k =
-          num_near < 0 ? static_cast<std::size_t>(tested) : static_cast<std::size_t>(near[static_cast<std::size_t>(tested)]);
-      const glm::dvec4& pl = hull.planes_O[k];
+    for (int tested = 0; tested < num_tested && !outside; ++tested) {
+      const int k = num_near < 0 ? tested : near[static_cast<std::size_t>(tested)];
+      const glm::dvec4& pl = hull.planes_O[static_cast<std::size_t>(k)];
       const glm::dvec3 n(pl);
       const double d = pl.w + margin;
       const double s0 = glm::dot(n, a[0]) - d, s1 = glm::dot(n, a[1]) - d,
                    s2 = glm::dot(n, a[2]) - d;
-      if (s0 > 0.0 && s1 > 0.0 && s2 > 0.0) {
-        outside = true;
-        break;
-      }
-      if (s0 > 0.0 || s1 > 0.0 || s2 > 0.0) crosses = true;
+      outside = s0 > 0.0 && s1 > 0.0 && s2 > 0.0;
+      crosses = crosses || s0 > 0.0 || s1 > 0.0 || s2 > 0.0;
       // Idle only when every corner is inside by the slack (a NaN leaves the plane active).
       const double idle_below = -slack * (1.0 + std::abs(d));
       if (!(s0 <= idle_below && s1 <= idle_below && s2 <= idle_below)) {
-        if (num_active < kMaxActivePlanes) active[static_cast<std::size_t>(num_active)] =
-            static_cast<int>(k);
+        if (num_active < kMaxActivePlanes) active[static_cast<std::size_t>(num_active)] = k;
         ++num_active;
-        last_active = static_cast<int>(k);
+        last_active = k;
       }
     }
     if (outside) continue;
     int count = 3;
     const glm::dvec3* polygon = a.data();
     if (crosses) {
-      // Sutherland–Hodgman: keep n·p − d ≤ 0 of every plane. A convex polygon gains at most one
-      // vertex per plane. Over the active planes only (all of them if there are too many to list).
+      // Over the active planes only (all of them if there are too many to list).
       const bool listed = num_active <= kMaxActivePlanes;
-      const int passes = listed ? num_active : static_cast<int>(num_planes);
-      glm::dvec3* in = a.data();
-      glm::dvec3* out = b.data();
-      for (int pass = 0; pass < passes; ++pass) {
-        if (count + 1 > kMaxPolygon) {
-          count = 0;
-          break;
-        }
-        const glm::dvec4& pl =
-            hull.planes_O[static_cast<std::size_t>(listed ? active[static_cast<std::size_t>(pass)]
-                                                          : pass)];
-        const glm::dvec3 n(pl);
-        const double d = pl.w + margin;
-        // Each vertex's side once (the same expression, so the same bits, as the pair test below
-        // used to evaluate twice); a plane every vertex is inside of would copy the polygon.
-        bool cuts = false;
-        for (int i = 0; i < count; ++i) {
-          side[static_cast<std::size_t>(i)] = glm::dot(n, in[i]) - d;
-          cuts = cuts || !(side[static_cast<std::size_t>(i)] <= 0.0);
-        }
-        if (!cuts) continue;
-        int kept = 0;
-        for (int i = 0; i < count; ++i) {
-          const int j = i + 1 == count ? 0 : i + 1;
-          const glm::dvec3& p = in[i];
-          const glm::dvec3& q = in[j];
-          const double sp = side[static_cast<std::size_t>(i)];
-          const double sq = side[static_cast<std::size_t>(j)];
-          if (sp <= 0.0) out[kept++] = p;
-          if ((sp <= 0.0) != (sq <= 0.0)) out[kept++] = p + (sp / (sp - sq)) * (q - p);
-        }
-        count = kept;
-        std::swap(in, out);
-        if (count < 3) break;
-      }
+      polygon = ClipPolygon(
+          hull, margin, listed ? num_active : static_cast<int>(num_planes),
+          [&](int pass) { return listed ? active[static_cast<std::size_t>(pass)] : pass; },
+          a.data(), b.data(), side.data(), count);
       // A full polygon meets the size check again at any idle plane after the last active one.
-      if (listed && count + 1 > kMaxPolygon &&
-          last_active + 1 < static_cast<int>(num_planes)) {
+      if (listed && count + 1 > kMaxPolygon && last_active + 1 < static_cast<int>(num_planes)) {
         count = 0;
       }
       if (count < 3) continue;
-      polygon = in;
     }
     visit(polygon, count);
   }

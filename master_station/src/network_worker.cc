@@ -91,8 +91,8 @@ void NetworkWorker::Run(const std::atomic<bool>& stop) {
       // The deadband predicts from what the remote node will decode; the state itself is what
       // is encoded (quantizing a quantized rotation again can pick another largest component).
       const wire::ToolStateMessage received = AsReceived(state.message);
-      if (tool_deadband_.Decide(received.X_WT, received.V_WT_W, state.time_ns,
-                                state.near_contact, &held_model_) != DeadbandReason::kNotSent) {
+      if (tool_deadband_.Decide(received.X_WT, received.V_WT_W, state.time_ns, state.near_contact,
+                                &held_model_) != DeadbandReason::kNotSent) {
         Send(state);
         last_send_ns = now;
       } else {

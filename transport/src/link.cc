@@ -37,8 +37,8 @@ std::int64_t ClockSync::rtt_ns() const noexcept {
 bool Accepts(LinkRole role, wire::MessageType type) noexcept {
   using T = wire::MessageType;
   if (role == LinkRole::kRemote) {
-    return type == T::kToolState || type == T::kCompactToolState || type == T::kHello || type == T::kPing ||
-           type == T::kSceneNack || type == T::kGoodbye;
+    return type == T::kToolState || type == T::kCompactToolState || type == T::kHello ||
+           type == T::kPing || type == T::kSceneNack || type == T::kGoodbye;
   }
   return type == T::kContactModel || type == T::kCompactContactModel || type == T::kWelcome ||
          type == T::kReject || type == T::kPong || type == T::kSceneFragment ||

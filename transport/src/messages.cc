@@ -833,7 +833,8 @@ ContactModelMessage DequantizeContactModel(const CompactContactModelBody& b) noe
 // CompactToolState (protocol.h).
 
 /// `v` as IEEE-754 binary16 bits, rounded to nearest (ties to even); NaN stays NaN, ±∞ stays ±∞,
-/// a finite value beyond ±kCompactTwistMax becomes ±kCompactTwistMax.
+/// a finite value beyond ±kCompactTwistMax becomes ±kCompactTwistMax. (glm::packHalf1x16 goes
+/// through float, rounding twice, and rounds ties up: not the bound protocol.h states.)
 std::uint16_t ToBinary16(double v) noexcept {
   if (std::isnan(v)) return 0x7E00;
   const std::uint16_t sign = std::signbit(v) ? 0x8000 : 0x0000;
@@ -841,7 +842,7 @@ std::uint16_t ToBinary16(double v) noexcept {
   const double a = std::min(std::abs(v), kCompactTwistMax);
   if (a == 0.0) return sign;
   int e = 0;
-  std::frexp(a, &e);  // a = m·2^e, m ∈ [0.5, 1)
+  std::frexp(a, &e);                          // a = m·2^e, m ∈ [0.5, 1)
   const int exponent = std::max(e - 1, -14);  // a = 1.f·2^exponent, or a subnormal below 2^-14
   // a in units of the binary16 step at this exponent (2^(exponent − 10)): exact, then rounded.
   double steps = std::nearbyint(std::ldexp(a, 10 - exponent));
@@ -888,8 +889,8 @@ std::uint64_t EncodeSmallestThree(const glm::dquat& q_in) noexcept {
     const double steps = std::clamp(std::round(flip * c0[k] / kCompactQuaternionStep),
                                     -static_cast<double>(kCompactQuaternionMax),
                                     static_cast<double>(kCompactQuaternionMax));
-    const auto field = static_cast<std::uint64_t>(static_cast<std::int64_t>(steps)) &
-                       kQuaternionFieldMask;
+    const auto field =
+        static_cast<std::uint64_t>(static_cast<std::int64_t>(steps)) & kQuaternionFieldMask;
     bits |= field << (2 + kCompactQuaternionBits * slot++);
   }
   return bits;
@@ -1117,6 +1118,20 @@ DecodeStatus Decode(std::span<const std::uint8_t> body, Msg& m) noexcept {
   return DecodeStatus::kOk;
 }
 
+/// Reads a quantized body (`Wire`, its structure and values checked), then the message it stands
+/// for, checked as the full-precision decoder checks it (finite by construction once the body
+/// passed); `m` is written only on kOk.
+template <class Wire, class Msg, class Dequantize>
+DecodeStatus DecodeQuantized(std::span<const std::uint8_t> body, Msg& m,
+                             Dequantize&& dequantize) noexcept {
+  Wire wire;
+  if (const DecodeStatus s = Decode(body, wire); s != DecodeStatus::kOk) return s;
+  const Msg out = dequantize(wire);
+  if (const DecodeStatus s = Check(out); s != DecodeStatus::kOk) return s;
+  m = out;
+  return DecodeStatus::kOk;
+}
+
 }  // namespace
 
 const char* ToString(DecodeStatus s) noexcept {
@@ -1329,13 +1344,7 @@ DecodeStatus DecodeToolState(std::span<const std::uint8_t> body, ToolStateMessag
 
 DecodeStatus DecodeCompactToolState(std::span<const std::uint8_t> body,
                                     ToolStateMessage& m) noexcept {
-  CompactToolStateBody wire;
-  if (const DecodeStatus s = Decode(body, wire); s != DecodeStatus::kOk) return s;
-  const ToolStateMessage out = DequantizeToolState(wire);
-  // What the f64 decoder would accept (finite by construction once `wire` passed its checks).
-  if (const DecodeStatus s = Check(out); s != DecodeStatus::kOk) return s;
-  m = out;
-  return DecodeStatus::kOk;
+  return DecodeQuantized<CompactToolStateBody>(body, m, DequantizeToolState);
 }
 
 DecodeStatus DecodeContactModel(std::span<const std::uint8_t> body,
@@ -1345,13 +1354,7 @@ DecodeStatus DecodeContactModel(std::span<const std::uint8_t> body,
 
 DecodeStatus DecodeCompactContactModel(std::span<const std::uint8_t> body,
                                        ContactModelMessage& m) noexcept {
-  CompactContactModelBody wire;
-  if (const DecodeStatus s = Decode(body, wire); s != DecodeStatus::kOk) return s;
-  const ContactModelMessage out = DequantizeContactModel(wire);
-  // What the float decoder would accept (finite by construction once `wire` passed its checks).
-  if (const DecodeStatus s = Check(out); s != DecodeStatus::kOk) return s;
-  m = out;
-  return DecodeStatus::kOk;
+  return DecodeQuantized<CompactContactModelBody>(body, m, DequantizeContactModel);
 }
 
 DecodeStatus DecodeHello(std::span<const std::uint8_t> body, HelloMessage& m) noexcept {

@@ -34,7 +34,8 @@
 //     largest as √(1 − Σ others²) and normalizes. V_WT_W: linear 3×f16 (m/s), angular 3×f16
 //     (rad/s), IEEE-754 binary16, round to nearest, clamped to ±65504 at the sender. Rejected:
 //     a non-finite f32 or f16 (kNonFinite), bits 62–63 set, a component of −2¹⁹ or the three
-//     others' squares summing above 1 + 1e-9 (kBadValue; an encoder never sends above 0.75). Errors: kCompactToolState*Error* below.
+//     others' squares summing above 1 + 1e-9 (kBadValue; an encoder never sends above 0.75).
+//     Errors: kCompactToolState*Error* below.
 //   ContactModel R→O (kContactModelFixedBytes + n·kContactBytes):
 //     u64 tool_state_seq  i64 tool_state_send_time_ns (echoed)  i64 hold_ns (remote time between
 //     receiving that tool state and sending this)  u64 remote_step_count. Under a tool-state
