@@ -249,12 +249,13 @@ TEST(TextureStageParity, FastRenderDrawsTheReferenceHeightsOnAllSixSeedModels) {
 // as the depth scan of the whole render, with every kernel and whatever first cell it is given
 // (the base's deepest, none, a random one); and it does cull (cells the whole render covers are
 // left undrawn), so the comparison is not between two whole renders. With and without a
-// TriangleBoundCache shared by a contact's renders.
+// TriangleBoundCache shared by a contact's renders, and with and without the environment's row
+// blocks (EnvironmentRowMax), which skip whole rows of a triangle.
 TEST(TextureStageParity, CulledToolRenderGivesTheWholeRendersDepth) {
   std::mt19937 rng(77);
   std::vector<int> env_triangles, tool_triangles;
   int compared = 0, in_contact = 0;
-  long long whole_cells = 0, drawn_cells = 0;
+  long long whole_cells = 0, drawn_cells = 0, rows_skipped = 0;
   for (const SeedModel which : kAll) {
     const HapticModel& env = Seed(which);
     const HapticModel& tool = Seed(kAll[(static_cast<int>(which) + 2) % 6]);
@@ -270,6 +271,10 @@ TEST(TextureStageParity, CulledToolRenderGivesTheWholeRendersDepth) {
       env_max.Reserve(n);
       env_max.Build(env_h, n);
       ASSERT_EQ(env_max.resolution(), n);
+      EnvironmentRowMax row_max;
+      row_max.Reserve(n);
+      row_max.Build(env_h, n);
+      ASSERT_EQ(row_max.resolution(), n);
       const GradientSteps h = GradientSteps::For(c.window);
       SelectPatchTriangles(tool, c.X_WT, c.window, PatchSide::kTool, 2.0 * h.h_x + 0.05,
                            tool_triangles, h.h_theta + 1e-9);
@@ -296,6 +301,8 @@ TEST(TextureStageParity, CulledToolRenderGivesTheWholeRendersDepth) {
             hints.first_cell = first;
             hints.env_max = first == base_cell ? &env_max : nullptr;
             hints.bounds = first != -1 ? &bounds : nullptr;
+            // The row cull with the pyramid (as the solver uses them), alone, and not at all.
+            hints.env_row_max = first != -1 || trial % 2 == 0 ? &row_max : nullptr;
             // Now and then a first pass with only some of the triangles (any subset is valid).
             std::vector<int> some;
             if (first == random_cell && p % 2 == 1) {
@@ -311,6 +318,7 @@ TEST(TextureStageParity, CulledToolRenderGivesTheWholeRendersDepth) {
                 << SeedModelName(which) << " pose " << p << ": " << got.depth_m << " vs "
                 << want.depth_m;
             ++compared;
+            rows_skipped += hints.rows_skipped;
             if (kernel == SampleKernel::kBest && first == base_cell && want.cell >= 0) {
               for (std::size_t k = 0; k < cells; ++k) {
                 whole_cells += std::isfinite(whole[k]) && std::isfinite(env_h[k]);
@@ -326,8 +334,60 @@ TEST(TextureStageParity, CulledToolRenderGivesTheWholeRendersDepth) {
   EXPECT_GT(compared, 2000);
   // It culls: fewer cells drawn than the whole renders cover (where the environment is too).
   EXPECT_LT(drawn_cells, whole_cells * 9 / 10) << drawn_cells << " of " << whole_cells;
+  // The row cull does skip rows (so its comparisons above are not of a cull that never acts).
+  EXPECT_GT(rows_skipped, 1000);
+  RecordProperty("rows_skipped", std::to_string(rows_skipped));
   RecordProperty("drawn_cells", std::to_string(drawn_cells));
   RecordProperty("whole_cells", std::to_string(whole_cells));
+}
+
+// EnvironmentRowMax::MaxOver against a scan of the cells: at least every cell's height over the
+// span (NaN heights passed over), never more than the largest over the blocks it reads, −∞ for an
+// empty or all −∞ span; spans clamped to the window.
+TEST(TextureStageParity, EnvironmentRowMaxBoundsEachSpan) {
+  std::mt19937 rng(4711);
+  std::uniform_real_distribution<float> U(-0.01f, 0.01f);
+  for (const int n : {1, 7, 8, 9, 37, 50}) {
+    std::vector<float> env(static_cast<std::size_t>(n) * n);
+    for (float& h : env) {
+      const auto r = rng() % 20;
+      h = r == 0   ? -std::numeric_limits<float>::infinity()
+          : r == 1 ? std::numeric_limits<float>::quiet_NaN()
+                   : U(rng);
+    }
+    EnvironmentRowMax row_max;
+    row_max.Reserve(n);
+    row_max.Build(env, n);
+    ASSERT_EQ(row_max.resolution(), n);
+    for (int trial = 0; trial < 400; ++trial) {
+      const int j = static_cast<int>(rng() % n);
+      const int i0 = static_cast<int>(rng() % (n + 4)) - 2,
+                i1 = static_cast<int>(rng() % (n + 4)) - 2;
+      float want = -std::numeric_limits<float>::infinity();
+      float blocks = -std::numeric_limits<float>::infinity();
+      const int a = std::max(i0, 0), b = std::min(i1, n - 1);
+      for (int i = a; i <= b; ++i) {
+        const float h = env[static_cast<std::size_t>(j) * n + i];
+        if (h > want) want = h;
+      }
+      if (a <= b) {
+        const int k = EnvironmentRowMax::kBlock;
+        for (int i = (a / k) * k; i < std::min(n, (b / k + 1) * k); ++i) {
+          const float h = env[static_cast<std::size_t>(j) * n + i];
+          if (h > blocks) blocks = h;
+        }
+      }
+      const float got = row_max.MaxOver(j, i0, i1);
+      EXPECT_GE(got, want) << n << " row " << j << " [" << i0 << ", " << i1 << "]";
+      EXPECT_EQ(got, blocks) << n << " row " << j << " [" << i0 << ", " << i1 << "]";
+    }
+  }
+  // Too small a reserve: nothing is built (and nothing allocated).
+  EnvironmentRowMax small;
+  small.Reserve(8);
+  std::vector<float> env(50 * 50, 0.0f);
+  small.Build(env, 50);
+  EXPECT_EQ(small.resolution(), 0);
 }
 
 // Slivers, needles and triangles with an edge almost along a row: the fast render's row spans

@@ -186,6 +186,7 @@ TexturePenetrationSolver::TexturePenetrationSolver(int max_resolution, int max_t
   vertex_scratch_.reserve(static_cast<size_t>(max_triangles));  // a closed mesh: V ≈ F/2
   first_triangles_.reserve(64);
   env_max_.Reserve(max_resolution);
+  env_row_max_.Reserve(max_resolution);
   tool_bounds_.Reserve(static_cast<size_t>(max_triangles));
   region_parent_.reserve(cells);
 }
@@ -542,6 +543,7 @@ ContactLinearization TexturePenetrationSolver::Linearize(
         // per contact), not for a few large ones (the block on the gear).
         const bool pyramid = cull && tool_triangles_.size() > kPyramidTriangles;
         if (pyramid) env_max_.Build(env_heights_, w.resolution);
+        if (cull) env_row_max_.Build(env_heights_, w.resolution);
         tool_bounds_.Reset(tool, w.cell_size_m());
         for (int i = 5; i < kGradientSamples; ++i) {
           if (!cull) {
@@ -553,6 +555,7 @@ ContactLinearization TexturePenetrationSolver::Linearize(
           ToolDepthCull hints;
           hints.first_cell = samples[0].cell;
           hints.env_max = pyramid ? &env_max_ : nullptr;
+          hints.env_row_max = &env_row_max_;
           hints.bounds = &tool_bounds_;
           if (i == 5) {
             hints.first_triangles_out = &first_triangles_;

@@ -1167,6 +1167,8 @@ struct DepthCull {
   std::vector<int>* first_triangles_out;  // gets the triangles the first pass drew, or nullptr
   const EnvironmentMaxPyramid* env_max;   // whole triangles skipped by it, or nullptr
   TriangleBoundCache* bounds;             // levels and texture bounds, or nullptr
+  const EnvironmentRowMax* env_row_max;   // whole rows of a triangle skipped by it, or nullptr
+  int rows_skipped = 0;                   // out: the rows env_row_max skipped
 };
 
 void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
@@ -1443,6 +1445,26 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
       const double g2 = -gx0 - gx1;
       const double inv_gx0 = gx0 != 0.0 ? 1.0 / gx0 : 0.0, inv_gx1 = gx1 != 0.0 ? 1.0 / gx1 : 0.0,
                    inv_g2 = g2 != 0.0 ? 1.0 / g2 : 0.0;
+      // A row of this triangle whose cells [ia, ib] none can pass the per-cell cull (RowCull):
+      // the environment's largest height over the span (whole blocks, so at least the cells'),
+      // less the lower of the coarse heights b·d at the span's two ends (b·d is affine along the
+      // row; the ends are computed as the per-cell test computes them, and the 1e-12 m slack
+      // covers the rounding of the cells between), below the cut. The cells such a row would cover are all dropped by
+      // the per-cell test, so skipping it draws the same cells.
+      const EnvironmentRowMax* const row_max = row_cull_ptr != nullptr &&
+                                                       cull->env_row_max != nullptr &&
+                                                       cull->env_row_max->resolution() == nt
+                                                   ? cull->env_row_max
+                                                   : nullptr;
+      const auto row_cannot_reach = [&](int j, int ia, int ib, double r0, double r1) {
+        const auto coarse = [&](int i) {
+          const double px = i + 0.5;
+          const double b0 = r0 + gx0 * px, b1 = r1 + gx1 * px, b2 = 1.0 - b0 - b1;
+          return b0 * d[0] + b1 * d[1] + b2 * d[2];
+        };
+        const double lowest = std::min(coarse(ia), coarse(ib)) - 1e-12;
+        return !(static_cast<double>(row_max->MaxOver(j, ia, ib)) - lowest >= row_cull.cut);
+      };
 #ifdef HT_RASTER_AVX2
       if (textured && avx2_rows) {
         // The spans of up to kRows rows at a time (RowSpansAvx2, the bits of the loop below), then
@@ -1458,6 +1480,11 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
                        span_ib);
           for (int k = 0; k < rows; ++k) {
             const int ia = span_ia[k], ib = span_ib[k], row_start = (jb + k) * nt;
+            if (row_max != nullptr && ia <= ib &&
+                row_cannot_reach(jb + k, ia, ib, span_r0[k], span_r1[k])) {
+              ++cull->rows_skipped;
+              continue;
+            }
             constexpr int kChunk = kBatch / 2;
             for (int start = ia; start <= ib; start += kChunk) {
               const int end = std::min(ib, start + kChunk - 1);
@@ -1503,6 +1530,10 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
         const int lo_t = static_cast<int>(lo_c), hi_t = static_cast<int>(hi_c);
         const int ia = std::max(i0, lo_t + static_cast<int>(lo_c > lo_t));
         const int ib = std::min(i1, hi_t - static_cast<int>(hi_c < hi_t));
+        if (row_max != nullptr && ia <= ib && row_cannot_reach(j, ia, ib, r0, r1)) {
+          ++cull->rows_skipped;
+          continue;
+        }
         float* row = &heights[static_cast<size_t>(j) * nt];
         for (int i = ia; i <= ib; ++i) {
           const double px = i + 0.5;
@@ -1552,6 +1583,49 @@ void TriangleBoundCache::Reset(const HapticModel& model, double cell_size_m) noe
     for (Entry& e : entries_) e.stamp = 0;
     stamp_ = 1;
   }
+}
+
+void EnvironmentRowMax::Reserve(int max_resolution) {
+  const int blocks = (max_resolution + kBlock - 1) / kBlock;
+  storage_.reserve(static_cast<std::size_t>(std::max(max_resolution, 0)) *
+                   static_cast<std::size_t>(std::max(blocks, 0)));
+}
+
+void EnvironmentRowMax::Build(std::span<const float> env_heights, int n) noexcept {
+  resolution_ = 0;
+  if (n <= 0 || env_heights.size() < static_cast<std::size_t>(n) * n) return;
+  const int blocks = (n + kBlock - 1) / kBlock;
+  const std::size_t total = static_cast<std::size_t>(n) * static_cast<std::size_t>(blocks);
+  if (storage_.capacity() < total) return;  // never allocates
+  storage_.resize(total);
+  const int full = n / kBlock;  // blocks of kBlock cells; the last may be shorter
+  for (int j = 0; j < n; ++j) {
+    const float* row = env_heights.data() + static_cast<std::size_t>(j) * n;
+    float* dst = storage_.data() + static_cast<std::size_t>(j) * blocks;
+    for (int b = 0; b < full; ++b) {
+      const float* cell = row + b * kBlock;
+#if defined(__SSE2__)
+      // MAXPS(x, m) is x > m ? x : m: a NaN x is passed over (m starts at −∞, never NaN).
+      const __m128 minus_inf = _mm_set1_ps(-std::numeric_limits<float>::infinity());
+      __m128 m4 = _mm_max_ps(_mm_loadu_ps(cell), minus_inf);
+      m4 = _mm_max_ps(_mm_loadu_ps(cell + 4), m4);
+      m4 = _mm_max_ps(_mm_shuffle_ps(m4, m4, _MM_SHUFFLE(1, 0, 3, 2)), m4);
+      m4 = _mm_max_ps(_mm_shuffle_ps(m4, m4, _MM_SHUFFLE(2, 3, 0, 1)), m4);
+      dst[b] = _mm_cvtss_f32(m4);
+#else
+      float m = -std::numeric_limits<float>::infinity();
+      for (int i = 0; i < kBlock; ++i) m = cell[i] > m ? cell[i] : m;
+      dst[b] = m;
+#endif
+    }
+    if (full < blocks) {
+      float m = -std::numeric_limits<float>::infinity();
+      for (int i = full * kBlock; i < n; ++i) m = row[i] > m ? row[i] : m;
+      dst[full] = m;
+    }
+  }
+  blocks_ = blocks;
+  resolution_ = n;
 }
 
 void EnvironmentMaxPyramid::Reserve(int max_resolution) {
@@ -1644,6 +1718,7 @@ DepthSample RenderToolDepth(const HapticModel& tool, const RigidTransform& X_WT,
   const int n = w.resolution;
   const auto cells = static_cast<std::size_t>(n) * n;
   hints.cells_drawn = 0;
+  hints.rows_skipped = 0;
   if (hints.first_triangles_out != nullptr) hints.first_triangles_out->clear();
   const int first_cell = hints.first_cell;
   if (n <= 0 || env_heights.size() < cells || heights.size() < cells) {
@@ -1659,9 +1734,12 @@ DepthSample RenderToolDepth(const HapticModel& tool, const RigidTransform& X_WT,
       hints.first_triangles,
       hints.first_triangles_out,
       hints.env_max != nullptr && hints.env_max->resolution() == n ? hints.env_max : nullptr,
-      hints.bounds};
+      hints.bounds,
+      hints.env_row_max != nullptr && hints.env_row_max->resolution() == n ? hints.env_row_max
+                                                                           : nullptr};
   RenderHeightsFastImpl(tool, X_WT, triangles, w, PatchSide::kTool, 0, heights, kernel, &cull);
   hints.cells_drawn = cull.drawn.count;
+  hints.rows_skipped = cull.rows_skipped;
   // The scan over the rows drawn (every other cell is +∞, which no scan takes), row by row in
   // increasing cell order: the whole scan's cell and bits.
   FirstLargestDifference scan;

@@ -329,6 +329,8 @@ class TexturePenetrationSolver {
   std::vector<int> first_triangles_;
   /// The environment render's max pyramid, for the culled rotation renders.
   EnvironmentMaxPyramid env_max_;
+  /// Its row blocks, for the culled rotation renders' rows.
+  EnvironmentRowMax env_row_max_;
   /// The tool triangles' levels and texture bounds, shared by a contact's culled rotation renders.
   TriangleBoundCache tool_bounds_;
   std::vector<float> env_heights_;

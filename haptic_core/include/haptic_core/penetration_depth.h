@@ -3,8 +3,10 @@
 // This CPU path is the reference that the GPU backend must match.
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <glm/vec3.hpp>
+#include <limits>
 #include <optional>
 #include <span>
 #include <vector>
@@ -273,6 +275,39 @@ class EnvironmentMaxPyramid {
   std::vector<int> offset_, size_;  // level k ≥ 1 at storage_[offset_[k]], size_[k]² entries
 };
 
+/// The environment's largest height over each row's blocks of kBlock cells (window cell j·N + i
+/// in block i / kBlock of row j), for RenderToolDepth's cull of whole rows: a tool triangle's row
+/// whose largest environment height over its covered span, less the row's smallest coarse tool
+/// height there (at one end of the span: the coarse height is affine along a row), cannot reach
+/// the lower bound holds no cell the per-cell test would keep, and is skipped before its cells
+/// are covered. Heights in the window's frame along n (m), as the render's.
+class EnvironmentRowMax {
+ public:
+  static constexpr int kBlock = 8;
+  /// Reserves for windows up to `max_resolution` cells a side (Build then never allocates).
+  void Reserve(int max_resolution);
+  /// The row blocks of `env_heights` (N×N, N = resolution); builds nothing (resolution() 0)
+  /// when env_heights is too short or the reserve too small. NaN heights are passed over (the
+  /// per-cell test drops those cells). Never allocates.
+  void Build(std::span<const float> env_heights, int resolution) noexcept;
+  /// N of the last Build (0: none).
+  int resolution() const noexcept { return resolution_; }
+  /// The largest height over cells [i0, i1] of row j (clamped to the window), or more (whole
+  /// blocks are read); −∞ for an empty span. Precondition: resolution() > 0, 0 ≤ j < N.
+  float MaxOver(int j, int i0, int i1) const noexcept {
+    i0 = i0 < 0 ? 0 : i0;
+    i1 = i1 > resolution_ - 1 ? resolution_ - 1 : i1;
+    float m = -std::numeric_limits<float>::infinity();
+    const float* row = storage_.data() + static_cast<std::size_t>(j) * blocks_;
+    for (int b = i0 / kBlock; b <= i1 / kBlock && i0 <= i1; ++b) m = row[b] > m ? row[b] : m;
+    return m;
+  }
+
+ private:
+  int resolution_ = 0, blocks_ = 0;
+  std::vector<float> storage_;
+};
+
 /// What RenderToolDepth's cull computes per tool triangle that does not change with the tool's
 /// pose: the triangle's mip level for the window's cell size (HeightField::LevelForFootprint) and
 /// the largest |h| under its texture coordinates at that level (HeightField::MaxAbsOver), kept for
@@ -334,11 +369,17 @@ struct ToolDepthCull {
   /// whose largest environment height over its cell box, less its smallest corner height, cannot
   /// reach the lower bound is skipped whole.
   const EnvironmentMaxPyramid* env_max = nullptr;
+  /// The environment's row blocks (built from env_heights), or nullptr: with it, a triangle's
+  /// row whose largest environment height over its span, less its smallest coarse height there,
+  /// cannot reach the lower bound is skipped whole.
+  const EnvironmentRowMax* env_row_max = nullptr;
   /// Each triangle's level and texture bound, shared by the renders of one window (Reset for
   /// this window and the tool), or nullptr: computed per render.
   TriangleBoundCache* bounds = nullptr;
   /// Out: how many cells were textured and drawn.
   int cells_drawn = 0;
+  /// Out: how many rows of triangles env_row_max skipped whole.
+  int rows_skipped = 0;
 };
 
 /// DirectionalPenetrationDepth(env_heights, tool render) for the tool render that
