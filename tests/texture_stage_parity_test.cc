@@ -279,7 +279,7 @@ TEST(TextureStageParity, CulledToolRenderGivesTheWholeRendersDepth) {
       SelectPatchTriangles(tool, c.X_WT, c.window, PatchSide::kTool, 2.0 * h.h_x + 0.05,
                            tool_triangles, h.h_theta + 1e-9);
       const auto poses = GradientSamplePoses(c.X_WT, c.window);
-      std::vector<float> whole(cells), partial(cells);
+      std::vector<float> whole(cells), partial(cells), partial_plain(cells);
       int base_cell = -1;
       // One cache of levels and texture bounds for the contact's renders (as the solver keeps),
       // filled by whichever render meets a triangle first.
@@ -313,6 +313,24 @@ TEST(TextureStageParity, CulledToolRenderGivesTheWholeRendersDepth) {
             }
             const DepthSample got = RenderToolDepth(tool, poses[p], tool_triangles, c.window, env_h,
                                                     partial, hints, kernel);
+            if (hints.env_row_max != nullptr) {
+              // The row cull skips only rows the per-cell cull would empty, and keeps their
+              // flushes: without it, the very same partial render and count of cells drawn.
+              ToolDepthCull plain = hints;
+              plain.env_row_max = nullptr;
+              std::vector<int> plain_first;
+              if (hints.first_triangles_out != nullptr) {
+                plain_first.reserve(hints.first_triangles_out->capacity());
+                plain.first_triangles_out = &plain_first;
+              }
+              const DepthSample without = RenderToolDepth(tool, poses[p], tool_triangles, c.window,
+                                                          env_h, partial_plain, plain, kernel);
+              ASSERT_EQ(without.cell, got.cell);
+              ASSERT_EQ(std::memcmp(partial.data(), partial_plain.data(), cells * sizeof(float)), 0)
+                  << SeedModelName(which) << " pose " << p;
+              ASSERT_EQ(plain.cells_drawn, hints.cells_drawn);
+              EXPECT_EQ(plain.rows_skipped, 0);
+            }
             ASSERT_EQ(got.cell, want.cell) << SeedModelName(which) << " pose " << p;
             ASSERT_EQ(std::memcmp(&got.depth_m, &want.depth_m, sizeof(double)), 0)
                 << SeedModelName(which) << " pose " << p << ": " << got.depth_m << " vs "

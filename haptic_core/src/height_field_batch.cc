@@ -149,6 +149,26 @@ std::size_t SampleSse2(const HeightFieldLevel& L, bool wrap_u, bool wrap_v, cons
   return _mm512_min_epi32(_mm512_max_epi32(i, _mm512_setzero_si512()), size_minus_1);
 }
 
+// Texels index[l] and index[l] + 1 of each lane l in `pair` as `left` and `right` (one 64-bit
+// load per lane, eight lanes a gather); lanes outside `pair` are 0 (no load: index + 1 may lie
+// past the level there).
+[[HT_AVX512_TARGET]] inline void PairGatherAvx512(const float* texels, __m512i index,
+                                                  __mmask16 pair, __m512& left,
+                                                  __m512& right) noexcept {
+  const __m512i zero = _mm512_setzero_si512();
+  const __m512i lo = _mm512_mask_i32gather_epi64(zero, static_cast<__mmask8>(pair),
+                                                 _mm512_castsi512_si256(index), texels, 4);
+  const __m512i hi = _mm512_mask_i32gather_epi64(zero, static_cast<__mmask8>(pair >> 8),
+                                                 _mm512_extracti64x4_epi64(index, 1), texels, 4);
+  const __m512i l = _mm512_inserti64x4(_mm512_castsi256_si512(_mm512_cvtepi64_epi32(lo)),
+                                       _mm512_cvtepi64_epi32(hi), 1);
+  const __m512i r =
+      _mm512_inserti64x4(_mm512_castsi256_si512(_mm512_cvtepi64_epi32(_mm512_srli_epi64(lo, 32))),
+                         _mm512_cvtepi64_epi32(_mm512_srli_epi64(hi, 32)), 1);
+  left = _mm512_castsi512_ps(l);
+  right = _mm512_castsi512_ps(r);
+}
+
 [[HT_AVX512_TARGET]] std::size_t SampleAvx512(const HeightFieldLevel& L, bool wrap_u, bool wrap_v,
                                               const float* u, const float* v, float* h,
                                               std::size_t n) noexcept {
@@ -179,10 +199,20 @@ std::size_t SampleSse2(const HeightFieldLevel& L, bool wrap_u, bool wrap_v, cons
     const __m512i ya = _mm512_mullo_epi32(AddressAvx512(y0, hm1, wrap_v), width);
     const __m512i yb =
         _mm512_mullo_epi32(AddressAvx512(_mm512_add_epi32(y0, one), hm1, wrap_v), width);
-    const __m512 a0 = _mm512_i32gather_ps(_mm512_add_epi32(ya, xa), texels, 4);
-    const __m512 a1 = _mm512_i32gather_ps(_mm512_add_epi32(ya, xb), texels, 4);
-    const __m512 b0 = _mm512_i32gather_ps(_mm512_add_epi32(yb, xa), texels, 4);
-    const __m512 b1 = _mm512_i32gather_ps(_mm512_add_epi32(yb, xb), texels, 4);
+    // Where xb = xa + 1 (every lane but those at a clamped or wrapped edge) the two taps of a row
+    // are adjacent texels: one 64-bit gather brings both (half the loads), the low half the
+    // left tap. The other lanes gather each tap alone. The same texels either way.
+    const __mmask16 pair = _mm512_cmpeq_epi32_mask(xb, _mm512_add_epi32(xa, one));
+    __m512 a0, a1, b0, b1;
+    PairGatherAvx512(texels, _mm512_add_epi32(ya, xa), pair, a0, a1);
+    PairGatherAvx512(texels, _mm512_add_epi32(yb, xa), pair, b0, b1);
+    if (pair != 0xFFFF) {
+      const __mmask16 alone = static_cast<__mmask16>(~pair);
+      a0 = _mm512_mask_i32gather_ps(a0, alone, _mm512_add_epi32(ya, xa), texels, 4);
+      a1 = _mm512_mask_i32gather_ps(a1, alone, _mm512_add_epi32(ya, xb), texels, 4);
+      b0 = _mm512_mask_i32gather_ps(b0, alone, _mm512_add_epi32(yb, xa), texels, 4);
+      b1 = _mm512_mask_i32gather_ps(b1, alone, _mm512_add_epi32(yb, xb), texels, 4);
+    }
     const __m512 top = _mm512_add_ps(a0, _mm512_mul_ps(tx, _mm512_sub_ps(a1, a0)));
     const __m512 bottom = _mm512_add_ps(b0, _mm512_mul_ps(tx, _mm512_sub_ps(b1, b0)));
     const __m512 value = _mm512_add_ps(top, _mm512_mul_ps(ty, _mm512_sub_ps(bottom, top)));

@@ -1447,10 +1447,12 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
                    inv_g2 = g2 != 0.0 ? 1.0 / g2 : 0.0;
       // A row of this triangle whose cells [ia, ib] none can pass the per-cell cull (RowCull):
       // the environment's largest height over the span (whole blocks, so at least the cells'),
-      // less the lower of the coarse heights b·d at the span's two ends (b·d is affine along the
-      // row; the ends are computed as the per-cell test computes them, and the 1e-12 m slack
-      // covers the rounding of the cells between), below the cut. The cells such a row would cover are all dropped by
-      // the per-cell test, so skipping it draws the same cells.
+      // less the lower of the coarse heights b·d at the span's two ends, below the cut. b·d is
+      // affine along the row and the ends are computed as the per-cell test computes them; the
+      // cells between differ from that line by the rounding of b (about 1e-13 at N ≤ 128, |b| ≤ 1
+      // over a span) times |d| (≤ 0.1 m in a window's box), far below the 1e-12 m slack. Every
+      // cell such a row would cover is dropped by the per-cell test, so it is skipped (its
+      // chunks' flushes kept: the render draws the cells it draws without the row cull).
       const EnvironmentRowMax* const row_max = row_cull_ptr != nullptr &&
                                                        cull->env_row_max != nullptr &&
                                                        cull->env_row_max->resolution() == nt
@@ -1480,12 +1482,19 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
                        span_ib);
           for (int k = 0; k < rows; ++k) {
             const int ia = span_ia[k], ib = span_ib[k], row_start = (jb + k) * nt;
+            constexpr int kChunk = kBatch / 2;
             if (row_max != nullptr && ia <= ib &&
                 row_cannot_reach(jb + k, ia, ib, span_r0[k], span_r1[k])) {
+              // The flushes its chunks would have made (they raise the lower bound the next
+              // triangles' cuts start from), so that the render draws the very cells it draws
+              // without the row cull.
+              for (int start = ia; start <= ib; start += kChunk) {
+                const int end = std::min(ib, start + kChunk - 1);
+                if (batch_count + (end - start + 8) > kBatch) flush();
+              }
               ++cull->rows_skipped;
               continue;
             }
-            constexpr int kChunk = kBatch / 2;
             for (int start = ia; start <= ib; start += kChunk) {
               const int end = std::min(ib, start + kChunk - 1);
               if (batch_count + (end - start + 8) > kBatch) flush();

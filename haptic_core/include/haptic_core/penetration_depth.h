@@ -279,8 +279,9 @@ class EnvironmentMaxPyramid {
 /// in block i / kBlock of row j), for RenderToolDepth's cull of whole rows: a tool triangle's row
 /// whose largest environment height over its covered span, less the row's smallest coarse tool
 /// height there (at one end of the span: the coarse height is affine along a row), cannot reach
-/// the lower bound holds no cell the per-cell test would keep, and is skipped before its cells
-/// are covered. Heights in the window's frame along n (m), as the render's.
+/// the cut (the lower bound less the triangle's texture bound and the rounding margin) holds no
+/// cell the per-cell test would keep, and is skipped before its cells are covered. Heights in
+/// the window's frame along n (m), as the render's.
 class EnvironmentRowMax {
  public:
   static constexpr int kBlock = 8;
@@ -371,7 +372,8 @@ struct ToolDepthCull {
   const EnvironmentMaxPyramid* env_max = nullptr;
   /// The environment's row blocks (built from env_heights), or nullptr: with it, a triangle's
   /// row whose largest environment height over its span, less its smallest coarse height there,
-  /// cannot reach the lower bound is skipped whole.
+  /// cannot reach the cut (as for a cell: the lower bound less the triangle's texture bound and
+  /// the margin) is skipped whole. The same cells are drawn either way.
   const EnvironmentRowMax* env_row_max = nullptr;
   /// Each triangle's level and texture bound, shared by the renders of one window (Reset for
   /// this window and the tool), or nullptr: computed per render.
