@@ -400,6 +400,22 @@ TEST(TextureStageParity, EnvironmentRowMaxBoundsEachSpan) {
       EXPECT_EQ(got, blocks) << n << " row " << j << " [" << i0 << ", " << i1 << "]";
     }
   }
+  // A row with no environment (all −∞, or NaN) and an empty span: −∞, so no row is kept for them.
+  {
+    const int n = 20;
+    std::vector<float> env(static_cast<std::size_t>(n) * n, 0.001f);
+    for (int i = 0; i < n; ++i) {
+      env[static_cast<std::size_t>(3) * n + i] = -std::numeric_limits<float>::infinity();
+      env[static_cast<std::size_t>(4) * n + i] = std::numeric_limits<float>::quiet_NaN();
+    }
+    EnvironmentRowMax row_max;
+    row_max.Reserve(n);
+    row_max.Build(env, n);
+    EXPECT_EQ(row_max.MaxOver(3, 0, n - 1), -std::numeric_limits<float>::infinity());
+    EXPECT_EQ(row_max.MaxOver(4, 0, n - 1), -std::numeric_limits<float>::infinity());
+    EXPECT_EQ(row_max.MaxOver(5, 9, 8), -std::numeric_limits<float>::infinity());
+    EXPECT_EQ(row_max.MaxOver(5, 0, n - 1), 0.001f);
+  }
   // Too small a reserve: nothing is built (and nothing allocated).
   EnvironmentRowMax small;
   small.Reserve(8);
