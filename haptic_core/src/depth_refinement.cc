@@ -136,12 +136,16 @@ bool ProjectTriangle(const HapticModel& m, const RigidTransform& X, const Contac
 // meets the displaced surface beyond this triangle's edge): then `edge`, when given, gets the
 // clamped point's height and the lateral miss g = (s, t) − (q + h·N⊥) (m), which the envelope uses
 // to bridge a crack (Envelope). Level 0, bilinear.
+// No default member initializers: an Envelope holds eight of these per evaluation of a height
+// and reads only those it filled, so they are left uninitialized there (zeroing them took a tenth
+// of stage 5b's instructions); a lone edge is value-initialized where it is declared
+// (`ParallaxEdge e{}`).
 struct ParallaxEdge {
-  double value = 0.0, gs = 0.0, gt = 0.0;
-  double qs = 0.0, qt = 0.0;  // the clamped coarse point on the window plane (m)
-  double limit = 0.0;         // the widest crack it may bridge: 2·|h| there (m)
-  double texel = 0.0;         // its triangle's level-0 texel (m)
-  bool valid = false;
+  double value, gs, gt;
+  double qs, qt;  // the clamped coarse point on the window plane (m)
+  double limit;   // the widest crack it may bridge: 2·|h| there (m)
+  double texel;   // its triangle's level-0 texel (m)
+  bool valid;
 };
 
 double ParallaxValue(const Projected& P, const HeightField& texture, double s, double t,
@@ -282,8 +286,9 @@ class Envelope {
   bool keep_max_;
   double range_;
   double best_;
-  std::array<ParallaxEdge, kEdges> edges_{};
-  std::array<double, kEdges> miss_{};  // |g| of each edge (m)
+  // Entries [0, count_) are filled (AddEdge); the rest are never read.
+  std::array<ParallaxEdge, kEdges> edges_;
+  std::array<double, kEdges> miss_;  // |g| of each edge (m)
   int count_ = 0;
 };
 
@@ -323,7 +328,7 @@ double HeightOver(std::span<const Projected> list, const HeightField& texture, b
                   double range, double s, double t, int level, double cell_m,
                   int parallax_iterations) noexcept {
   Envelope envelope(keep_max, range);
-  ParallaxEdge edge;
+  ParallaxEdge edge{};
   for (const Projected& P : list) {
     envelope.Add(ValueAt(P, texture, s, t, level, cell_m, parallax_iterations, &edge));
     envelope.AddEdge(edge);
@@ -375,7 +380,7 @@ double PatchHeightAt(const HapticModel& model, const RigidTransform& X_WO,
                      std::span<const int> triangles, const ContactWindow& window, PatchSide side,
                      double s_m, double t_m, int level, bool parallax) noexcept {
   Envelope envelope(side == PatchSide::kEnvironment, window.depth_range_m());
-  ParallaxEdge edge;
+  ParallaxEdge edge{};
   Projected P;
   for (const int f : triangles) {
     if (f < 0 || static_cast<std::size_t>(f) >= model.triangles.size()) continue;
