@@ -318,11 +318,6 @@ TEST(TextureStageParity, CulledToolRenderGivesTheWholeRendersDepth) {
               // flushes: without it, the very same partial render and count of cells drawn.
               ToolDepthCull plain = hints;
               plain.env_row_max = nullptr;
-              std::vector<int> plain_first;
-              if (hints.first_triangles_out != nullptr) {
-                plain_first.reserve(hints.first_triangles_out->capacity());
-                plain.first_triangles_out = &plain_first;
-              }
               const DepthSample without = RenderToolDepth(tool, poses[p], tool_triangles, c.window,
                                                           env_h, partial_plain, plain, kernel);
               ASSERT_EQ(without.cell, got.cell);

@@ -44,14 +44,6 @@ constexpr int kMaxFarPlanes = 32;
 constexpr int kMaxActivePlanes = 256;
 constexpr int kMaxNearPlanes = 256;
 
-// True when every component of X is finite (its rotation need not be unit).
-bool FinitePose(const RigidTransform& X) noexcept {
-  const glm::dquat& q = X.rotation;
-  return std::isfinite(X.translation.x) && std::isfinite(X.translation.y) &&
-         std::isfinite(X.translation.z) && std::isfinite(q.w) && std::isfinite(q.x) &&
-         std::isfinite(q.y) && std::isfinite(q.z);
-}
-
 // The far-triangle shortcut: the hull's planes moved out by `margin` and into the patch's frame P
 // (n_P = R_HPᵀ·n, d_P = d + margin − n·p_HP), each pushed out by the slack, for hulls of at most
 // kMaxFarPlanes planes (count 0 otherwise, or when not `enabled`).
@@ -177,7 +169,7 @@ template <typename Visit>
 void ForEachClippedTriangle(const HapticModel& patch_model, std::span<const int> triangles,
                             const RigidTransform& X_HP, const ConvexHull& hull, double margin,
                             Visit&& visit) noexcept {
-  if (hull.planes_O.empty() || !std::isfinite(margin) || !FinitePose(X_HP)) return;
+  if (hull.planes_O.empty() || !std::isfinite(margin) || !IsFinite(X_HP)) return;
   const std::size_t num_vertices = patch_model.vertices_O.size();
   const std::size_t num_planes = hull.planes_O.size();
   const double slack =

@@ -1453,11 +1453,8 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
       // over a span) times |d| (≤ 0.1 m in a window's box), far below the 1e-12 m slack. Every
       // cell such a row would cover is dropped by the per-cell test, so it is skipped (its
       // chunks' flushes kept: the render draws the cells it draws without the row cull).
-      const EnvironmentRowMax* const row_max = row_cull_ptr != nullptr &&
-                                                       cull->env_row_max != nullptr &&
-                                                       cull->env_row_max->resolution() == nt
-                                                   ? cull->env_row_max
-                                                   : nullptr;
+      const EnvironmentRowMax* const row_max =
+          row_cull_ptr != nullptr ? cull->env_row_max : nullptr;  // its resolution checked
       const auto row_cannot_reach = [&](int j, int ia, int ib, double r0, double r1) {
         const auto coarse = [&](int i) {
           const double px = i + 0.5;
@@ -1483,21 +1480,15 @@ void RenderHeightsFastImpl(const HapticModel& model, const RigidTransform& X_WO,
           for (int k = 0; k < rows; ++k) {
             const int ia = span_ia[k], ib = span_ib[k], row_start = (jb + k) * nt;
             constexpr int kChunk = kBatch / 2;
-            if (row_max != nullptr && ia <= ib &&
-                row_cannot_reach(jb + k, ia, ib, span_r0[k], span_r1[k])) {
-              // The flushes its chunks would have made (they raise the lower bound the next
-              // triangles' cuts start from), so that the render draws the very cells it draws
-              // without the row cull.
-              for (int start = ia; start <= ib; start += kChunk) {
-                const int end = std::min(ib, start + kChunk - 1);
-                if (batch_count + (end - start + 8) > kBatch) flush();
-              }
-              ++cull->rows_skipped;
-              continue;
-            }
+            const bool skip = row_max != nullptr && ia <= ib &&
+                              row_cannot_reach(jb + k, ia, ib, span_r0[k], span_r1[k]);
+            if (skip) ++cull->rows_skipped;
             for (int start = ia; start <= ib; start += kChunk) {
               const int end = std::min(ib, start + kChunk - 1);
+              // A skipped row still makes its chunks' flushes (they raise the lower bound the next
+              // triangles' cuts start from), so the render draws the cells it draws without it.
               if (batch_count + (end - start + 8) > kBatch) flush();
+              if (skip) continue;
               batch_count +=
                   avx512_rows
                       ? CoverRowAvx512(span_r0[k], gx0, span_r1[k], gx1, start, end, row_start,

@@ -43,13 +43,14 @@ RigidTransform Displace(const RigidTransform& X0, const Twist& delta) noexcept {
           glm::normalize(QuaternionFromRotationVector(delta.angular) * X0.rotation)};
 }
 
-bool IsFiniteRigidTransform(const RigidTransform& X) noexcept {
+bool IsFinite(const RigidTransform& X) noexcept {
   const glm::dquat& q = X.rotation;
-  if (!Finite3(X.translation) || !std::isfinite(q.w) || !std::isfinite(q.x) ||
-      !std::isfinite(q.y) || !std::isfinite(q.z)) {
-    return false;
-  }
-  return std::abs(glm::length(q) - 1.0) < 1e-3;
+  return Finite3(X.translation) && std::isfinite(q.w) && std::isfinite(q.x) && std::isfinite(q.y) &&
+         std::isfinite(q.z);
+}
+
+bool IsFiniteRigidTransform(const RigidTransform& X) noexcept {
+  return IsFinite(X) && std::abs(glm::length(X.rotation) - 1.0) < 1e-3;
 }
 
 bool IsFinite(const Twist& V) noexcept { return Finite3(V.linear) && Finite3(V.angular); }

@@ -86,6 +86,9 @@ RigidTransform Displace(const RigidTransform& X0, const Twist& delta) noexcept;
 
 /// True when every component is finite and the quaternion has a norm within 1e-3 of one.
 bool IsFiniteRigidTransform(const RigidTransform& X) noexcept;
+/// True when every component (translation, m; quaternion w, x, y, z) is finite, whatever the
+/// quaternion's norm.
+bool IsFinite(const RigidTransform& X) noexcept;
 
 /// True when every component is finite.
 bool IsFinite(const Twist& V) noexcept;
