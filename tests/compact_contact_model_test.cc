@@ -413,7 +413,7 @@ TEST(CompactContactModel, BytesSitWhereProtocolHSaysAndAreFewerThanTheFloatEncod
 
     // The fields at their offsets.
     const auto b = BodyOf(compact);
-    EXPECT_EQ(compact.bytes[6], 12);  // the type
+    EXPECT_EQ(compact.bytes[kHeaderTypeOffset], 12);  // the type
     EXPECT_EQ(Get<std::uint64_t>(b, kAtSeq), m.model.tool_state_seq);
     EXPECT_EQ(Get<std::int64_t>(b, kAtSendTime), m.tool_state_send_time_ns);
     EXPECT_EQ(Get<std::int64_t>(b, kAtHold), m.hold_ns);

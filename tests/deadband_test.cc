@@ -8,6 +8,7 @@
 #include <numbers>
 #include <random>
 
+#include "legacy_datagram.h"
 #include "transport/messages.h"
 #include "transport/session.h"
 
@@ -507,15 +508,11 @@ TEST(DeadbandNegotiation, AHelloOfAnotherVersionIsOpenedForARejectInItsVersion) 
   hello.min_version = hello.max_version = 3;
   wire::Header h;
   h.sequence = 1;
-  wire::Datagram d = wire::EncodeHello(h, hello, key);
-  // Rewrite it as a version-3 operator would send it: header version 3, the v3 body (32 bytes:
-  // no deadband terms), a new MAC.
-  d.bytes[4] = 3;
-  d.bytes[5] = 0;
-  d.size = wire::kHeaderBytes + 32;
-  ComputeMac(std::span<const std::uint8_t>(d.bytes.data(), d.size), key,
-             std::span<std::uint8_t, wire::kMacBytes>(d.bytes.data() + d.size, wire::kMacBytes));
-  d.size += wire::kMacBytes;
+  // As a version-3 operator sends it: the 28-byte header of versions 2 to 7 with version 3, the v3
+  // body (32 bytes: no deadband terms), the whole 32-byte MAC.
+  const wire::Datagram own = wire::EncodeHello(h, hello, key);
+  const wire::Datagram d =
+      test::LegacyDatagram(3, wire::MessageType::kHello, 1, test::BodyOf(own).first(32), key);
   wire::Header got;
   std::span<const std::uint8_t> body;
   EXPECT_EQ(wire::OpenDatagram(d.view(), key, got, body), wire::DecodeStatus::kBadVersion);
@@ -528,24 +525,28 @@ TEST(DeadbandNegotiation, AHelloOfAnotherVersionIsOpenedForARejectInItsVersion) 
   EXPECT_EQ(wire::OpenForeignHello(d.view(), MacKey::Generate(), foreign),
             wire::DecodeStatus::kBadMac);
   // This version's own Hello is not foreign, and neither is a newer one (its layout is unknown).
-  EXPECT_EQ(wire::OpenForeignHello(wire::EncodeHello(h, {}, key).view(), key, foreign),
-            wire::DecodeStatus::kBadVersion);
-  wire::Datagram newer = d;
-  newer.bytes[4] = static_cast<std::uint8_t>(wire::kProtocolVersion + 1);
+  EXPECT_EQ(wire::OpenForeignHello(own.view(), key, foreign), wire::DecodeStatus::kBadVersion);
+  wire::Datagram newer = own;
+  newer.bytes[wire::kHeaderVersionOffset] = static_cast<std::uint8_t>(wire::kProtocolVersion + 1);
   newer.size -= wire::kMacBytes;
   ComputeMac(
       std::span<const std::uint8_t>(newer.bytes.data(), newer.size), key,
       std::span<std::uint8_t, wire::kMacBytes>(newer.bytes.data() + newer.size, wire::kMacBytes));
   newer.size += wire::kMacBytes;
   EXPECT_EQ(wire::OpenForeignHello(newer.view(), key, foreign), wire::DecodeStatus::kBadVersion);
-  // The Reject goes out in version 3: its header says 3 and its body is the v3 Reject.
+  // The Reject goes out in version 3: the old header with 3 in it, the v3 Reject body, the whole
+  // MAC.
   wire::RejectMessage reject;
   reject.client_nonce = foreign.client_nonce;
   reject.reason = wire::RejectReason::kVersion;
   const wire::Datagram r = wire::EncodeReject(h, reject, key, 3);
-  EXPECT_EQ(r.bytes[4], 3);
-  EXPECT_EQ(r.bytes[5], 0);
-  EXPECT_EQ(r.size, wire::kHeaderBytes + wire::kRejectFixedBytes + wire::kMacBytes);
+  const test::LegacyHeader rh = test::ReadLegacyHeader(r.view());
+  EXPECT_EQ(rh.magic, wire::kLegacyMagic);
+  EXPECT_EQ(rh.version, 3);
+  EXPECT_EQ(rh.type, static_cast<std::uint8_t>(wire::MessageType::kReject));
+  EXPECT_EQ(rh.flags, 0);
+  EXPECT_EQ(r.size, wire::kLegacyHeaderBytes + wire::kRejectFixedBytes + wire::kLegacyMacBytes);
+  EXPECT_TRUE(test::LegacyMacVerifies(r.view(), key));
 }
 
 }  // namespace

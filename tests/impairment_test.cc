@@ -22,6 +22,8 @@
 #include <thread>
 #include <vector>
 
+#include "transport/auth.h"
+#include "transport/messages.h"
 #include "transport/udp_socket.h"
 
 extern char** environ;
@@ -456,6 +458,9 @@ TEST(ImpairmentModel, RejectsOutOfRangeSpec) {
 // ---------------------------------------------------------------------------------------------
 // Classification and statistics.
 
+/// A datagram in the header layout of protocol versions 2 to 7 (28 bytes: "HTLP", u16 version, u8
+/// type, u8 flags, u32 session, u64 sequence at 12, i64 send time at 20), which the relay still
+/// classifies; the relay tests below read the sequence and send time back from its bytes.
 std::vector<std::uint8_t> WireDatagram(std::uint8_t type, std::uint64_t sequence,
                                        std::int64_t send_time_ns, std::size_t size = 36) {
   std::vector<std::uint8_t> b(std::max<std::size_t>(size, 28), 0);  // header, then cut to size
@@ -478,6 +483,16 @@ std::uint64_t ReadU64(const std::uint8_t* p) {
 }
 
 TEST(ClassifyDatagram, ReadsTypeAfterMagicElseOther) {
+  // This version's layout: "HT", the version, the type at offset 3.
+  const MacKey key = MacKey::Generate();
+  const wire::Datagram tool = wire::EncodeCompactToolState({}, wire::ToolStateMessage{}, key);
+  EXPECT_EQ(ClassifyDatagram(tool.view()), int(wire::MessageType::kCompactToolState));
+  EXPECT_EQ(ClassifyDatagram(tool.view().first(4)), int(wire::MessageType::kCompactToolState));
+  EXPECT_EQ(ClassifyDatagram(tool.view().first(3)), 0);  // too short for the type byte
+  wire::Datagram other_version = tool;
+  other_version.bytes[wire::kHeaderVersionOffset] = wire::kProtocolVersion + 1;
+  EXPECT_EQ(ClassifyDatagram(other_version.view()), 0);
+  // The layout of versions 2 to 7: "HTLP", the type at offset 6.
   EXPECT_EQ(ClassifyDatagram(WireDatagram(1, 0, 0)), 1);
   EXPECT_EQ(ClassifyDatagram(WireDatagram(11, 0, 0, 7)), 11);
   EXPECT_EQ(ClassifyDatagram(WireDatagram(200, 0, 0)), 200);
@@ -492,9 +507,12 @@ TEST(ClassifyDatagram, ReadsTypeAfterMagicElseOther) {
       0);
 }
 
-TEST(ClassifyDatagram, MagicIsHtlpInByteOrder) {
-  const auto d = WireDatagram(3, 0, 0);
-  EXPECT_EQ(std::string(d.begin(), d.begin() + 4), "HTLP");
+TEST(ClassifyDatagram, MagicIsHtInByteOrderAndWasHtlp) {
+  const wire::Datagram d = wire::EncodePing({}, MacKey::Generate());
+  EXPECT_EQ(std::string(d.bytes.begin(), d.bytes.begin() + 2), "HT");
+  EXPECT_EQ(d.bytes[wire::kHeaderVersionOffset], wire::kProtocolVersion);
+  const auto legacy = WireDatagram(3, 0, 0);
+  EXPECT_EQ(std::string(legacy.begin(), legacy.begin() + 4), "HTLP");
 }
 
 TEST(MessageTypeName, NamesKnownTypesAndNumbersTheRest) {

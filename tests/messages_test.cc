@@ -3,13 +3,18 @@
 #include "transport/messages.h"
 
 #include <gtest/gtest.h>
+#include <sodium.h>
 
 #include <algorithm>
 #include <cstring>
 #include <limits>
 #include <numbers>
 #include <random>
+#include <string>
 #include <vector>
+
+#include "haptic_core/byte_order.h"
+#include "legacy_datagram.h"
 
 namespace ht::wire {
 namespace {
@@ -201,7 +206,7 @@ TEST(Messages, EveryTypeRoundTripsThroughOpen) {
   ASSERT_EQ(all.size(), static_cast<std::size_t>(kMaxMessageType));
   for (const Datagram& d : all) {
     EXPECT_LE(d.size, kMaxDatagramBytes);
-    EXPECT_EQ(OpenAndDecode(d.view(), key), DecodeStatus::kOk) << int(d.bytes[6]);
+    EXPECT_EQ(OpenAndDecode(d.view(), key), DecodeStatus::kOk) << DatagramType(d.view());
   }
 }
 
@@ -213,12 +218,13 @@ TEST(Messages, FieldsSurviveTheRoundTrip) {
   m.X_WT.translation = {1, 2, 3};
   m.X_WT.rotation = QuaternionFromRotationVector({0.1, 0.2, 0.3});
   m.V_WT_W = {{0.4, 0.5, 0.6}, {-0.7, 0.8, -0.9}};
-  const Datagram d = EncodeToolState({MessageType::kToolState, 0xabcdef01u, 99, -5}, m, key);
+  const Datagram d =
+      EncodeToolState({MessageType::kToolState, 0xabcdef01u, 99, 1234567891234}, m, key);
   ASSERT_EQ(d.size, kHeaderBytes + kToolStateBodyBytes + kMacBytes);
   ASSERT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kOk);
   EXPECT_EQ(h.session_id, 0xabcdef01u);
   EXPECT_EQ(h.sequence, 99u);
-  EXPECT_EQ(h.send_time_ns, -5);
+  EXPECT_EQ(h.send_time_ns, 1234567891000);  // whole µs on the wire
   ToolStateMessage m2;
   ASSERT_EQ(DecodeToolState(body, m2), DecodeStatus::kOk);
   EXPECT_EQ(m2.X_WT.translation, m.X_WT.translation);
@@ -300,7 +306,7 @@ TEST(Messages, TruncatedBodiesThatStillCarryAValidMacAreRejected) {
   const MacKey key = TestKey();
   for (const Datagram& d : OneOfEach(key)) {
     const std::size_t body = d.size - kHeaderBytes - kMacBytes;
-    const int type = d.bytes[6];
+    const int type = DatagramType(d.view());
     for (std::size_t cut = 1; cut <= body; ++cut) {
       if (type == int(MessageType::kReject) || type == int(MessageType::kSceneFragment)) {
         if (cut < body && type == int(MessageType::kSceneFragment)) continue;  // shorter payload
@@ -326,7 +332,7 @@ TEST(Messages, AnySingleBitFlipIsRejected) {
       Datagram f = d;
       f.bytes[bit / 8] ^= static_cast<std::uint8_t>(1u << (bit % 8));
       ASSERT_NE(OpenAndDecode(f.view(), key), DecodeStatus::kOk)
-          << "type " << int(d.bytes[6]) << " bit " << bit;
+          << "type " << DatagramType(d.view()) << " bit " << bit;
       ++flips;
     }
   }
@@ -350,11 +356,14 @@ TEST(Messages, HeaderFieldsAreCheckedBeforeTheMac) {
     return OpenAndDecode(d.view(), key);
   };
   EXPECT_EQ(mutate(0, 0x00), DecodeStatus::kBadMagic);
-  EXPECT_EQ(mutate(4, 0x01), DecodeStatus::kBadVersion);  // version 1 is no longer accepted
-  EXPECT_EQ(mutate(6, 0x7f), DecodeStatus::kUnknownType);
-  EXPECT_EQ(mutate(6, 0x00), DecodeStatus::kUnknownType);
-  EXPECT_EQ(mutate(7, 0x01), DecodeStatus::kBadFlags);
-  EXPECT_EQ(mutate(9, 0x01), DecodeStatus::kBadMac);  // session id changed
+  EXPECT_EQ(mutate(1, 0x00), DecodeStatus::kBadMagic);
+  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x07), DecodeStatus::kBadVersion);  // 7 no longer
+  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x09), DecodeStatus::kBadVersion);
+  EXPECT_EQ(mutate(kHeaderTypeOffset, 0x7f), DecodeStatus::kUnknownType);
+  EXPECT_EQ(mutate(kHeaderTypeOffset, 0x00), DecodeStatus::kUnknownType);
+  EXPECT_EQ(mutate(5, 0x01), DecodeStatus::kBadMac);   // session id changed
+  EXPECT_EQ(mutate(9, 0x01), DecodeStatus::kBadMac);   // sequence changed
+  EXPECT_EQ(mutate(13, 0x01), DecodeStatus::kBadMac);  // send time changed
   EXPECT_EQ(mutate(good.size - 1, good.bytes[good.size - 1] ^ 1), DecodeStatus::kBadMac);
 }
 
@@ -501,15 +510,11 @@ TEST(Messages, RandomBytesNeverOpenOrCrash) {
   for (int i = 0; i < 20000; ++i) {
     const std::size_t len = rng() % buf.size();
     for (std::size_t k = 0; k < len; ++k) buf[k] = static_cast<std::uint8_t>(rng());
-    if (len >= 8 && i % 2 == 0) {  // a valid-looking header, so that the MAC is what refuses it
+    if (len >= 4 && i % 2 == 0) {  // a valid-looking header, so that the MAC is what refuses it
       buf[0] = 'H';
       buf[1] = 'T';
-      buf[2] = 'L';
-      buf[3] = 'P';
-      buf[4] = kProtocolVersion;
-      buf[5] = 0;
-      buf[6] = static_cast<std::uint8_t>(1 + rng() % kMaxMessageType);
-      buf[7] = 0;
+      buf[kHeaderVersionOffset] = kProtocolVersion;
+      buf[kHeaderTypeOffset] = static_cast<std::uint8_t>(1 + rng() % kMaxMessageType);
     }
     accepted += OpenAndDecode({buf.data(), len}, key) == DecodeStatus::kOk;
   }
@@ -689,24 +694,21 @@ TEST(Messages, TheManifestCarriesEverySceneObjectKindAndNoOther) {
 }
 
 TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
-  // Versions 5, 6 and 7 changed neither Hello nor Reject: a version-6, 5 or 4 operator's Hello is
-  // this version's bytes with its number in the header; a version-3 one has the 32-byte body
-  // without deadband terms.
-  EXPECT_EQ(kProtocolVersion, 7);
-  EXPECT_EQ(kMinProtocolVersion, 7);
+  // Versions 4 to 8 changed neither the Hello body nor the Reject body; version 3's Hello body is
+  // the first 32 bytes (no deadband terms). Versions 2 to 7 had the 28-byte header and the whole
+  // 32-byte MAC (test::LegacyDatagram writes them byte by byte).
+  EXPECT_EQ(kProtocolVersion, 8);
+  EXPECT_EQ(kMinProtocolVersion, 8);
   const MacKey key = TestKey();
-  for (const std::uint16_t version :
-       {std::uint16_t{6}, std::uint16_t{5}, std::uint16_t{4}, std::uint16_t{3}, std::uint16_t{2}}) {
+  for (const std::uint16_t version : {std::uint16_t{7}, std::uint16_t{6}, std::uint16_t{5},
+                                      std::uint16_t{4}, std::uint16_t{3}, std::uint16_t{2}}) {
     HelloMessage hello;
     hello.client_nonce = 0xfeedu + version;
     hello.min_version = hello.max_version = version;
-    Datagram d = EncodeHello({MessageType::kHello, 0, 1, 0}, hello, key);
-    d.size -= kMacBytes;
-    d.bytes[4] = static_cast<std::uint8_t>(version);
-    if (version < 4) d.size = kHeaderBytes + 32;
-    ComputeMac(d.view(), key,
-               std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size, kMacBytes));
-    d.size += kMacBytes;
+    const Datagram own = EncodeHello({MessageType::kHello, 0, 1, 0}, hello, key);
+    std::span<const std::uint8_t> hello_body = test::BodyOf(own);
+    if (version < 4) hello_body = hello_body.first(32);
+    const Datagram d = test::LegacyDatagram(version, MessageType::kHello, 1, hello_body, key);
     Header h;
     std::span<const std::uint8_t> body;
     EXPECT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kBadVersion) << version;
@@ -717,42 +719,130 @@ TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
     EXPECT_EQ(foreign.max_version, version);
     EXPECT_EQ(foreign.client_nonce, 0xfeedu + version);
     EXPECT_EQ(OpenForeignHello(d.view(), TestKey(3), foreign), DecodeStatus::kBadMac);
-    // The Reject in that version: its header says so and its body is the one versions 2..6 share.
+    // Cut before its nonce, or with its MAC truncated as this version's: refused.
+    EXPECT_EQ(
+        OpenForeignHello(d.view().first(kLegacyHeaderBytes + 11 + kLegacyMacBytes), key, foreign),
+        DecodeStatus::kTooShort);
+    EXPECT_EQ(
+        OpenForeignHello(d.view().first(d.size - (kLegacyMacBytes - kMacBytes)), key, foreign),
+        DecodeStatus::kBadMac);
+    // The Reject in that version: the old header with the version in it, the body every version
+    // since 2 shares, the whole MAC.
     RejectMessage reject;
     reject.client_nonce = foreign.client_nonce;
     reject.reason = RejectReason::kVersion;
     reject.text_length = 4;
     std::copy_n("v5!!", 4, reject.text.begin());
     const Datagram r = EncodeReject({MessageType::kReject, 0, 1, 0}, reject, key, version);
-    EXPECT_EQ(r.bytes[4], version);
-    EXPECT_EQ(r.bytes[5], 0);
-    EXPECT_EQ(r.size, kHeaderBytes + kRejectFixedBytes + 4 + kMacBytes);
-    EXPECT_TRUE(VerifyMac(r.view(), key));
-    // Read back as this version would (header version patched to 6, MAC recomputed).
-    Datagram as_own = r;
-    as_own.size -= kMacBytes;
-    as_own.bytes[4] = static_cast<std::uint8_t>(kProtocolVersion);
-    ComputeMac(as_own.view(), key,
-               std::span<std::uint8_t, kMacBytes>(as_own.bytes.data() + as_own.size, kMacBytes));
-    as_own.size += kMacBytes;
-    ASSERT_EQ(OpenDatagram(as_own.view(), key, h, body), DecodeStatus::kOk);
+    const test::LegacyHeader rh = test::ReadLegacyHeader(r.view());
+    EXPECT_EQ(rh.magic, kLegacyMagic);
+    EXPECT_EQ(rh.version, version);
+    EXPECT_EQ(rh.type, static_cast<std::uint8_t>(MessageType::kReject));
+    EXPECT_EQ(rh.flags, 0);
+    EXPECT_EQ(r.size, kLegacyHeaderBytes + kRejectFixedBytes + 4 + kLegacyMacBytes);
+    EXPECT_TRUE(test::LegacyMacVerifies(r.view(), key));
+    EXPECT_FALSE(VerifyMac(r.view(), key));  // not this version's MAC
     RejectMessage back;
-    ASSERT_EQ(DecodeReject(body, back), DecodeStatus::kOk);
+    ASSERT_EQ(DecodeReject(r.view().subspan(kLegacyHeaderBytes,
+                                            r.size - kLegacyHeaderBytes - kLegacyMacBytes),
+                           back),
+              DecodeStatus::kOk);
     EXPECT_EQ(back.client_nonce, 0xfeedu + version);
     EXPECT_EQ(back.message(), "v5!!");
   }
-  // Neither this version's own Hello nor a newer or older-than-2 one is foreign.
+  // Neither this version's own Hello, nor a newer one, nor an old-layout one older than 2 is
+  // foreign; a Reject asked in this version is this version's.
   ForeignHello foreign;
   const Datagram own = EncodeHello({MessageType::kHello, 0, 1, 0}, HelloMessage{}, key);
   EXPECT_EQ(OpenForeignHello(own.view(), key, foreign), DecodeStatus::kBadVersion);
-  for (const std::uint8_t version : {std::uint8_t{1}, std::uint8_t{7}}) {
-    Datagram d = own;
-    d.size -= kMacBytes;
-    d.bytes[4] = version;
-    ComputeMac(d.view(), key,
-               std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size, kMacBytes));
-    d.size += kMacBytes;
-    EXPECT_EQ(OpenForeignHello(d.view(), key, foreign), DecodeStatus::kBadVersion) << int(version);
+  Datagram newer = own;
+  newer.size -= kMacBytes;
+  newer.bytes[kHeaderVersionOffset] = kProtocolVersion + 1;
+  ComputeMac(newer.view(), key,
+             std::span<std::uint8_t, kMacBytes>(newer.bytes.data() + newer.size, kMacBytes));
+  newer.size += kMacBytes;
+  EXPECT_EQ(OpenForeignHello(newer.view(), key, foreign), DecodeStatus::kBadVersion);
+  for (const std::uint16_t version : {std::uint16_t{1}, std::uint16_t{8}, std::uint16_t{9}}) {
+    const Datagram d =
+        test::LegacyDatagram(version, MessageType::kHello, 1, test::BodyOf(own), key);
+    EXPECT_EQ(OpenForeignHello(d.view(), key, foreign), DecodeStatus::kBadVersion) << version;
+  }
+  const Datagram r =
+      EncodeReject({MessageType::kReject, 0, 1, 0}, RejectMessage{}, key, kProtocolVersion);
+  Header h;
+  std::span<const std::uint8_t> body;
+  EXPECT_EQ(OpenDatagram(r.view(), key, h, body), DecodeStatus::kOk);
+}
+
+// RFC 4231 test case 2 (HMAC-SHA-256, key "Jefe", data "what do ya want for nothing?"): a key
+// shorter than the hash's block is padded with zeros, so the 32-byte key "Jefe" + 28 zeros gives
+// the published value, of which the wire MAC is the first 16 bytes (RFC 4868's HMAC-SHA-256-128).
+TEST(Messages, TheMacIsHmacSha256TruncatedTo128Bits) {
+  MacKey key;
+  std::copy_n("Jefe", 4, key.bytes.begin());
+  const std::string data = "what do ya want for nothing?";
+  std::array<std::uint8_t, kMacBytes> mac{};
+  ComputeMac({reinterpret_cast<const std::uint8_t*>(data.data()), data.size()}, key, mac);
+  const std::array<std::uint8_t, 16> expected = {0x5b, 0xdc, 0xc1, 0x46, 0xbf, 0x60, 0x75, 0x4e,
+                                                 0x6a, 0x04, 0x24, 0x26, 0x08, 0x95, 0x75, 0xc7};
+  EXPECT_EQ(mac, expected);
+  std::vector<std::uint8_t> datagram(data.begin(), data.end());
+  datagram.insert(datagram.end(), mac.begin(), mac.end());
+  EXPECT_TRUE(VerifyMac(datagram, key));
+  datagram[3] ^= 1;
+  EXPECT_FALSE(VerifyMac(datagram, key));
+  EXPECT_FALSE(VerifyMac(std::span(datagram).first(kMacBytes - 1), key));
+}
+
+// Version 8's header: the sequence as u32 and the send time as whole µs in 48 bits, each written
+// at its offset (protocol.h); the MAC is HMAC-SHA-256-128.
+TEST(Messages, TheHeaderCarriesSequenceAndTimeInItsOwnWidths) {
+  const MacKey key = TestKey();
+  const std::int64_t big_ns = 0x0000'ABCD'1234'5678LL * 1000 + 999;  // 48 bits of µs, 999 ns more
+  const Datagram d = EncodePing({MessageType::kPing, 0x01020304u, 0xA1B2C3D4u, big_ns}, key);
+  ASSERT_EQ(d.size, kHeaderBytes + kMacBytes);
+  EXPECT_EQ(LoadLe<std::uint16_t>(d.bytes.data()), kMagic);
+  EXPECT_EQ(d.bytes[kHeaderVersionOffset], kProtocolVersion);
+  EXPECT_EQ(d.bytes[kHeaderTypeOffset], static_cast<std::uint8_t>(MessageType::kPing));
+  EXPECT_EQ(LoadLe<std::uint32_t>(d.bytes.data() + 4), 0x01020304u);
+  EXPECT_EQ(LoadLe<std::uint32_t>(d.bytes.data() + 8), 0xA1B2C3D4u);
+  EXPECT_EQ(LoadLe<std::uint32_t>(d.bytes.data() + 12), 0x12345678u);
+  EXPECT_EQ(LoadLe<std::uint16_t>(d.bytes.data() + 16), 0xABCDu);
+  Header h;
+  std::span<const std::uint8_t> body;
+  ASSERT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kOk);
+  EXPECT_EQ(h.send_time_ns, big_ns - 999);
+  EXPECT_EQ(h.sequence, 0xA1B2C3D4u);
+  // Past the widths: the sequence saturates at the stream's last number, the time clamps.
+  const Datagram past = EncodePing(
+      {MessageType::kPing, 1, std::uint64_t{1} << 40, kMaxSendTimeUs * 1000 + 5000}, key);
+  ASSERT_EQ(OpenDatagram(past.view(), key, h, body), DecodeStatus::kOk);
+  EXPECT_EQ(h.sequence, 0xFFFFFFFFu);
+  EXPECT_EQ(h.send_time_ns, kMaxSendTimeUs * 1000);
+  const Datagram before = EncodePing({MessageType::kPing, 1, 1, -5}, key);
+  ASSERT_EQ(OpenDatagram(before.view(), key, h, body), DecodeStatus::kOk);
+  EXPECT_EQ(h.send_time_ns, 0);
+  // The MAC is the first 16 bytes of HMAC-SHA-256 over header and body, built here from SHA-256
+  // by RFC 2104's formula H((K ⊕ opad) ‖ H((K ⊕ ipad) ‖ m)), not by libsodium's HMAC.
+  std::array<std::uint8_t, 64> inner_key{}, outer_key{};
+  for (std::size_t i = 0; i < 64; ++i) {
+    const std::uint8_t k = i < key.bytes.size() ? key.bytes[i] : 0;
+    inner_key[i] = k ^ 0x36;
+    outer_key[i] = k ^ 0x5c;
+  }
+  std::vector<std::uint8_t> inner(inner_key.begin(), inner_key.end());
+  inner.insert(inner.end(), d.bytes.begin(), d.bytes.begin() + kHeaderBytes);
+  std::array<std::uint8_t, crypto_hash_sha256_BYTES> inner_hash{}, hmac{};
+  crypto_hash_sha256(inner_hash.data(), inner.data(), inner.size());
+  std::vector<std::uint8_t> outer(outer_key.begin(), outer_key.end());
+  outer.insert(outer.end(), inner_hash.begin(), inner_hash.end());
+  crypto_hash_sha256(hmac.data(), outer.data(), outer.size());
+  EXPECT_TRUE(std::equal(hmac.begin(), hmac.begin() + kMacBytes, d.bytes.begin() + kHeaderBytes));
+  // Every one of the 16 MAC bytes counts.
+  for (std::size_t i = 0; i < kMacBytes; ++i) {
+    Datagram f = d;
+    f.bytes[kHeaderBytes + i] ^= 0x80;
+    EXPECT_EQ(OpenDatagram(f.view(), key, h, body), DecodeStatus::kBadMac) << i;
   }
 }
 

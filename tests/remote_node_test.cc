@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "haptic_core/demo/demo_scenes.h"
+#include "legacy_datagram.h"
 #include "transport/auth.h"
 #include "transport/messages.h"
 
@@ -177,7 +178,7 @@ TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
   EXPECT_EQ(t["streams"]["tool_state"]["duplicate"].get<int>(), 1);
   EXPECT_EQ(t["streams"]["hello"]["received"].get<int>(),
             4);  // A, A again, 999 twice (A replayed is rejected)
-  EXPECT_GE(t["streams"]["scene_fragment"]["sent"].get<int>(), 3);  // 3000 B in 1396 B pieces
+  EXPECT_GE(t["streams"]["scene_fragment"]["sent"].get<int>(), 3);  // 3000 B in 1422 B pieces
   EXPECT_GE(summary["steps"].get<int>(), 1);
 }
 
@@ -259,13 +260,10 @@ TEST(RemoteNode, RefusesAnOperatorOfAnotherVersionAndHoldsBackModelsThatSayNothi
   wire::HelloMessage hello;
   hello.client_nonce = 4242;
   hello.min_version = hello.max_version = 3;
-  wire::Datagram old = wire::EncodeHello({wire::MessageType::kHello, 0, 1, 0}, hello, config.key);
-  old.bytes[4] = 3;
-  old.size = wire::kHeaderBytes + 32;
-  ComputeMac(
-      old.view(), config.key,
-      std::span<std::uint8_t, wire::kMacBytes>(old.bytes.data() + old.size, wire::kMacBytes));
-  old.size += wire::kMacBytes;
+  const wire::Datagram own =
+      wire::EncodeHello({wire::MessageType::kHello, 0, 1, 0}, hello, config.key);
+  const wire::Datagram old = test::LegacyDatagram(3, wire::MessageType::kHello, 1,
+                                                  test::BodyOf(own).first(32), config.key);
   ASSERT_TRUE(socket.SendTo(old.view(), remote));
   bool refused = false;
   std::array<std::uint8_t, wire::kMaxDatagramBytes> buf{};
@@ -274,26 +272,27 @@ TEST(RemoteNode, RefusesAnOperatorOfAnotherVersionAndHoldsBackModelsThatSayNothi
     SocketAddress from;
     while (auto n = socket.ReceiveFrom(buf, from)) {
       const std::span<const std::uint8_t> d(buf.data(), *n);
-      if (*n < wire::kHeaderBytes + wire::kRejectFixedBytes + wire::kMacBytes || buf[4] != 3 ||
-          buf[6] != static_cast<std::uint8_t>(wire::MessageType::kReject)) {
+      const test::LegacyHeader header = test::ReadLegacyHeader(d);
+      if (*n < wire::kLegacyHeaderBytes + wire::kRejectFixedBytes + wire::kLegacyMacBytes ||
+          header.magic != wire::kLegacyMagic || header.version != 3 ||
+          header.type != static_cast<std::uint8_t>(wire::MessageType::kReject)) {
         continue;
       }
-      ASSERT_TRUE(VerifyMac(d, config.key));
+      ASSERT_TRUE(test::LegacyMacVerifies(d, config.key));
       // The v3 Reject body: u64 nonce, u8 reason, u8 n, text.
+      const std::uint8_t* b = buf.data() + wire::kLegacyHeaderBytes;
       std::uint64_t nonce = 0;
-      for (int b = 7; b >= 0; --b) nonce = (nonce << 8) | buf[wire::kHeaderBytes + b];
+      for (int k = 7; k >= 0; --k) nonce = (nonce << 8) | b[k];
       EXPECT_EQ(nonce, 4242u);
-      EXPECT_EQ(buf[wire::kHeaderBytes + 8],
-                static_cast<std::uint8_t>(wire::RejectReason::kVersion));
-      const std::string text(reinterpret_cast<const char*>(buf.data() + wire::kHeaderBytes + 10),
-                             buf[wire::kHeaderBytes + 9]);
+      EXPECT_EQ(b[8], static_cast<std::uint8_t>(wire::RejectReason::kVersion));
+      const std::string text(reinterpret_cast<const char*>(b + 10), b[9]);
       EXPECT_NE(text.find("operator speaks 3..3"), std::string::npos) << text;
       refused = true;
     }
   }
   ASSERT_TRUE(refused);
 
-  // 2. A version-4 operator asks for a 10 % deadband on both streams and compact models.
+  // 2. An operator of this version asks for a 10 % deadband on both streams and compact models.
   hello = {};
   hello.client_nonce = 4343;
   hello.codecs = wire::kCodecDracoMesh | wire::kCodecCompactContactModel;

@@ -138,7 +138,7 @@ TEST(Session, NegotiatesTheCommonGround) {
   EXPECT_EQ(r.reason, wire::RejectReason::kCapabilities);
   EXPECT_NE(r.message().find("50"), std::string_view::npos);
   hello = {};
-  hello.min_version = hello.max_version = 8;
+  hello.min_version = hello.max_version = wire::kProtocolVersion + 1;
   EXPECT_FALSE(NegotiateSession(hello, caps, w, r));
   EXPECT_EQ(r.reason, wire::RejectReason::kVersion);
 }
@@ -167,6 +167,9 @@ TEST(ClockSync, RecoversAKnownOffsetFromAsymmetricNoise) {
   EXPECT_LE(std::llabs(c.offset_ns() - offset), c.rtt_ns() / 2);
   EXPECT_GE(c.rtt_ns(), 2 * base_delay);
   EXPECT_FALSE(c.AddSample(10, 5, 6, 9));  // t4 < t1
+  // t3 is a header's whole µs: up to 1 µs before t2 it is rounding, beyond it an impossible sample.
+  EXPECT_TRUE(c.AddSample(0, 5000, 4001, 10000));
+  EXPECT_FALSE(c.AddSample(0, 5000, 3999, 10000));
 }
 
 std::vector<std::uint8_t> RandomBytes(std::size_t n, std::uint32_t seed) {
@@ -362,8 +365,10 @@ TEST(SceneStream, ANewerVersionSupersedesAnUnfinishedOlderOne) {
   for (const auto& m : sender.Manifest()) rx.OnManifest(m, 3);
   EXPECT_TRUE(rx.SceneComplete());
   // A late fragment of version 1 is stale.
-  std::vector<std::uint8_t> old(1396, 0);
-  EXPECT_EQ(rx.Add({9, 1, 10000, 3, 8, old}, 4), SceneReassembler::Outcome::kStale);
+  const std::size_t payload = wire::FragmentPayloadBytes(1472);
+  std::vector<std::uint8_t> old(payload, 0);
+  const auto old_count = static_cast<std::uint16_t>((10000 + payload - 1) / payload);
+  EXPECT_EQ(rx.Add({9, 1, 10000, 3, old_count, old}, 4), SceneReassembler::Outcome::kStale);
 }
 
 TEST(SceneStream, ReassemblyMemoryIsBounded) {
@@ -372,19 +377,28 @@ TEST(SceneStream, ReassemblyMemoryIsBounded) {
   limits.max_total_bytes = 150000;
   limits.max_objects = 4;
   SceneReassembler rx(1472, limits);
-  std::vector<std::uint8_t> piece(1396, 1);
-  EXPECT_EQ(rx.Add({1, 1, 200000, 0, 144, piece}, 0), SceneReassembler::Outcome::kOverLimit);
-  EXPECT_EQ(rx.Add({1, 1, 90000, 0, 65, piece}, 0), SceneReassembler::Outcome::kAccepted);
-  EXPECT_EQ(rx.Add({2, 1, 90000, 0, 65, piece}, 0), SceneReassembler::Outcome::kOverLimit);
+  const std::size_t payload = wire::FragmentPayloadBytes(1472);
+  const auto count = [&](std::size_t bytes) {
+    return static_cast<std::uint16_t>((bytes + payload - 1) / payload);
+  };
+  std::vector<std::uint8_t> piece(payload, 1);
+  EXPECT_EQ(rx.Add({1, 1, 200000, 0, count(200000), piece}, 0),
+            SceneReassembler::Outcome::kOverLimit);
+  EXPECT_EQ(rx.Add({1, 1, 90000, 0, count(90000), piece}, 0), SceneReassembler::Outcome::kAccepted);
+  EXPECT_EQ(rx.Add({2, 1, 90000, 0, count(90000), piece}, 0),
+            SceneReassembler::Outcome::kOverLimit);
   EXPECT_EQ(rx.bytes_held(), 90000u);
   for (std::uint32_t id = 3; id < 10; ++id) rx.Add({id, 1, 2000, 0, 2, piece}, 0);
   EXPECT_LE(rx.bytes_held(), limits.max_total_bytes);
   EXPECT_GT(rx.stats().fragments_over_limit, 2u);
   // Fragments that disagree with their object are refused, not copied out of bounds.
   std::vector<std::uint8_t> small(10, 1);
-  EXPECT_EQ(rx.Add({1, 1, 90000, 1, 65, small}, 0), SceneReassembler::Outcome::kInconsistent);
-  EXPECT_EQ(rx.Add({1, 1, 90000, 1, 66, piece}, 0), SceneReassembler::Outcome::kInconsistent);
-  EXPECT_EQ(rx.Add({1, 1, 90001, 1, 65, piece}, 0), SceneReassembler::Outcome::kInconsistent);
+  EXPECT_EQ(rx.Add({1, 1, 90000, 1, count(90000), small}, 0),
+            SceneReassembler::Outcome::kInconsistent);
+  EXPECT_EQ(rx.Add({1, 1, 90000, 1, static_cast<std::uint16_t>(count(90000) + 1), piece}, 0),
+            SceneReassembler::Outcome::kInconsistent);
+  EXPECT_EQ(rx.Add({1, 1, 90001, 1, count(90000), piece}, 0),
+            SceneReassembler::Outcome::kInconsistent);
 }
 
 TEST(SceneStream, ADigestMismatchIsDetectedAndRepaired) {

@@ -178,6 +178,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   Header h;
   std::span<const std::uint8_t> body;
   if (OpenDatagram(input, Key(), h, body) == DecodeStatus::kOk) DecodeBody(h, body);
+  ForeignHello foreign;
+  (void)OpenForeignHello(input, Key(), foreign);
+  (void)DatagramType(input);
   DecodeGraph(input);
   // Sealed: the same bytes behind a valid MAC.
   if (size >= kHeaderBytes && size + kMacBytes <= kMaxDatagramBytes) {

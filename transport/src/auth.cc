@@ -5,6 +5,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <array>
 #include <cerrno>
 #include <cstring>
 #include <fstream>
@@ -19,7 +20,10 @@ void EnsureSodium() {
   if (init < 0) throw std::runtime_error("libsodium failed to initialise (sodium_init)");
 }
 
-static_assert(wire::kMacBytes == crypto_auth_BYTES);
+static_assert(wire::kFullMacBytes == crypto_auth_BYTES);
+static_assert(wire::kMacBytes * 2 == crypto_auth_hmacsha256_BYTES,
+              "the wire MAC is HMAC-SHA-256 truncated to half its output (RFC 4868)");
+static_assert(wire::kMacKeyBytes == crypto_auth_hmacsha256_KEYBYTES);
 static_assert(wire::kMacKeyBytes == crypto_auth_KEYBYTES);
 
 }  // namespace
@@ -109,14 +113,30 @@ void WriteKeyFile(const std::string& path, const MacKey& key, bool overwrite) {
   if (!ok) throw std::runtime_error("cannot write key file " + path);
 }
 
+void ComputeFullMac(std::span<const std::uint8_t> message, const MacKey& key,
+                    std::span<std::uint8_t, wire::kFullMacBytes> mac) noexcept {
+  crypto_auth(mac.data(), message.data(), message.size(), key.bytes.data());
+}
+
 void ComputeMac(std::span<const std::uint8_t> message, const MacKey& key,
                 std::span<std::uint8_t, wire::kMacBytes> mac) noexcept {
-  crypto_auth(mac.data(), message.data(), message.size(), key.bytes.data());
+  std::array<std::uint8_t, crypto_auth_hmacsha256_BYTES> full;
+  crypto_auth_hmacsha256(full.data(), message.data(), message.size(), key.bytes.data());
+  std::memcpy(mac.data(), full.data(), wire::kMacBytes);
 }
 
 bool VerifyMac(std::span<const std::uint8_t> datagram, const MacKey& key) noexcept {
   if (datagram.size() < wire::kMacBytes) return false;
   const std::size_t n = datagram.size() - wire::kMacBytes;
+  std::array<std::uint8_t, wire::kMacBytes> expected;
+  ComputeMac(datagram.first(n), key, expected);
+  // sodium_memcmp runs in time independent of where the bytes differ.
+  return sodium_memcmp(expected.data(), datagram.data() + n, wire::kMacBytes) == 0;
+}
+
+bool VerifyFullMac(std::span<const std::uint8_t> datagram, const MacKey& key) noexcept {
+  if (datagram.size() < wire::kFullMacBytes) return false;
+  const std::size_t n = datagram.size() - wire::kFullMacBytes;
   return crypto_auth_verify(datagram.data() + n, datagram.data(), n, key.bytes.data()) == 0;
 }
 

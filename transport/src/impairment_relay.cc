@@ -33,10 +33,7 @@ namespace ht {
 // Classification and statistics.
 
 std::uint8_t ClassifyDatagram(std::span<const std::uint8_t> bytes) noexcept {
-  if (bytes.size() < 7) return 0;
-  const std::uint32_t magic = LoadLe<std::uint32_t>(bytes.data());
-  if (magic != wire::kMagic) return 0;
-  return bytes[6];
+  return static_cast<std::uint8_t>(wire::DatagramType(bytes));
 }
 
 std::string MessageTypeName(std::uint8_t type) {

@@ -6,7 +6,8 @@ namespace ht {
 
 bool ClockSync::AddSample(std::int64_t t1, std::int64_t t2, std::int64_t t3,
                           std::int64_t t4) noexcept {
-  if (t4 < t1 || t3 < t2) return false;
+  if (t4 < t1 || t3 < t2 - 1000) return false;
+  t3 = std::max(t3, t2);  // the header's send time is whole µs
   Sample s;
   s.rtt_ns = (t4 - t1) - (t3 - t2);
   if (s.rtt_ns < 0) s.rtt_ns = 0;
@@ -58,7 +59,7 @@ wire::Header SecureLink::NextHeader(wire::MessageType type, std::uint32_t sessio
 }
 
 bool SecureLink::Send(const wire::Datagram& d, const SocketAddress& to) noexcept {
-  const int type = d.size > 6 ? d.bytes[6] : 0;
+  const int type = wire::DatagramType(d.view());
   StreamStats& s = stats_[static_cast<std::size_t>(type < kTypes ? type : 0)];
   if (socket_.SendTo(d.view(), to)) {
     ++s.sent;

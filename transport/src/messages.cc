@@ -88,6 +88,13 @@ class Writer {
                std::span<std::uint8_t, kMacBytes>(d_.bytes.data() + d_.size, kMacBytes));
     d_.size += kMacBytes;
   }
+  /// Seal with the whole 32-byte MAC of versions 2 to 7.
+  void SealFull(const MacKey& key) {
+    ComputeFullMac(
+        {d_.bytes.data(), d_.size}, key,
+        std::span<std::uint8_t, kFullMacBytes>(d_.bytes.data() + d_.size, kFullMacBytes));
+    d_.size += kFullMacBytes;
+  }
 
  private:
   Datagram& d_;
@@ -250,10 +257,23 @@ constexpr void Pose(auto& a, Of<RigidTransform> auto& X) {
   a(X.rotation.z);
 }
 
-/// The header as it is on the wire (protocol.h).
+/// The header as it is on the wire (protocol.h); the u48 send time as its low 32 and high 16 bits
+/// (the same little-endian bytes).
 struct WireHeader {
-  std::uint32_t magic = kMagic;
-  std::uint16_t version = kProtocolVersion;
+  std::uint16_t magic = kMagic;
+  std::uint8_t version = static_cast<std::uint8_t>(kProtocolVersion);
+  std::uint8_t type = 0;
+  std::uint32_t session_id = 0;
+  std::uint32_t sequence = 0;
+  std::uint32_t send_time_us_low = 0;
+  std::uint16_t send_time_us_high = 0;
+};
+
+/// The header of versions 2 to 7 (protocol.h), read from an older operator's Hello and written in
+/// the Reject that answers it.
+struct LegacyWireHeader {
+  std::uint32_t magic = kLegacyMagic;
+  std::uint16_t version = 0;
   std::uint8_t type = 0;
   std::uint8_t flags = 0;
   std::uint32_t session_id = 0;
@@ -261,10 +281,32 @@ struct WireHeader {
   std::int64_t send_time_ns = 0;
 };
 
+/// The header of `type` for `header`: the sequence saturated at 2³² − 1 (the stream's last) and
+/// the send time as whole µs, clamped to [0, kMaxSendTimeUs].
+WireHeader ToWire(const Header& header, MessageType type) noexcept {
+  const std::int64_t us = std::clamp<std::int64_t>(header.send_time_ns / 1000, 0, kMaxSendTimeUs);
+  return {.type = static_cast<std::uint8_t>(type),
+          .session_id = header.session_id,
+          .sequence = static_cast<std::uint32_t>(
+              std::min<std::uint64_t>(header.sequence, std::numeric_limits<std::uint32_t>::max())),
+          .send_time_us_low = static_cast<std::uint32_t>(us),
+          .send_time_us_high = static_cast<std::uint16_t>(us >> 32)};
+}
+
 /// The body of Goodbye and Ping.
 struct EmptyBody {};
 
 constexpr void Fields(auto& a, Of<WireHeader> auto& h) {
+  a(h.magic);
+  a(h.version);
+  a(h.type);
+  a(h.session_id);
+  a(h.sequence);
+  a(h.send_time_us_low);
+  a(h.send_time_us_high);
+}
+
+constexpr void Fields(auto& a, Of<LegacyWireHeader> auto& h) {
   a(h.magic);
   a(h.version);
   a(h.type);
@@ -591,6 +633,7 @@ constexpr Sizer SizeOf() {
 }
 
 static_assert(SizeOf<WireHeader>().bytes == kHeaderBytes);
+static_assert(SizeOf<LegacyWireHeader>().bytes == kLegacyHeaderBytes);
 static_assert(SizeOf<ToolStateMessage>().bytes == kToolStateBodyBytes);
 static_assert(SizeOf<ContactModelMessage>().bytes ==
               kContactModelFixedBytes + kContactBytes + kKinkPlaneCountBytes);
@@ -1090,15 +1133,11 @@ DecodeStatus Check(const NodePosesMessage& m) {
 
 /// Header, body and MAC: the one encoder of every message type.
 template <class Body>
-Datagram Encode(const Header& header, MessageType type, const Body& body, const MacKey& key,
-                std::uint16_t version = kProtocolVersion) noexcept {
+Datagram Encode(const Header& header, MessageType type, const Body& body,
+                const MacKey& key) noexcept {
   Datagram d;
   Writer w(d);
-  const WireHeader h{.version = version,
-                     .type = static_cast<std::uint8_t>(type),
-                     .session_id = header.session_id,
-                     .sequence = header.sequence,
-                     .send_time_ns = header.send_time_ns};
+  const WireHeader h = ToWire(header, type);
   Fields(w, h);
   Fields(w, body);
   w.Seal(key);
@@ -1251,28 +1290,45 @@ Datagram EncodeReject(const Header& header, const RejectMessage& m, const MacKey
 
 Datagram EncodeReject(const Header& header, const RejectMessage& m, const MacKey& key,
                       std::uint16_t version) noexcept {
-  return Encode(header, MessageType::kReject, m, key, version);
+  if (version == kProtocolVersion) return EncodeReject(header, m, key);
+  Datagram d;
+  Writer w(d);
+  const LegacyWireHeader h{.version = version,
+                           .type = static_cast<std::uint8_t>(MessageType::kReject),
+                           .session_id = header.session_id,
+                           .sequence = header.sequence,
+                           .send_time_ns = header.send_time_ns};
+  Fields(w, h);
+  Fields(w, m);
+  w.SealFull(key);
+  return d;
 }
 
 DecodeStatus OpenForeignHello(std::span<const std::uint8_t> bytes, const MacKey& key,
                               ForeignHello& hello) noexcept {
   if (bytes.size() > kMaxDatagramBytes) return DecodeStatus::kTooLong;
-  if (bytes.size() < kHeaderBytes + 12 + kMacBytes) return DecodeStatus::kTooShort;
-  Reader r(bytes.first(kHeaderBytes + 12));
-  WireHeader w;
+  if (bytes.size() < 4) return DecodeStatus::kTooShort;
+  // This version's layout: only the magic and version are read; it is this version (open it with
+  // OpenDatagram) or a newer one, whose layout is unknown here (dropped: a newer operator falls
+  // back to this version itself).
+  if (LoadLe<std::uint32_t>(bytes.data()) != kLegacyMagic) {
+    if (LoadLe<std::uint16_t>(bytes.data()) != kMagic) return DecodeStatus::kBadMagic;
+    return DecodeStatus::kBadVersion;
+  }
+  if (bytes.size() < kLegacyHeaderBytes + 12 + kLegacyMacBytes) return DecodeStatus::kTooShort;
+  Reader r(bytes.first(kLegacyHeaderBytes + 12));
+  LegacyWireHeader w;
   Fields(r, w);
   std::uint16_t min_version = 0, max_version = 0;
   std::uint64_t nonce = 0;
   r(min_version);
   r(max_version);
   r(nonce);
-  if (w.magic != kMagic) return DecodeStatus::kBadMagic;
-  // Only the older versions whose Hello and Reject are laid out like this one's (2..5): a newer
-  // operator is dropped (its layout is unknown here; it falls back to this version itself).
-  if (w.version < 2 || w.version >= kProtocolVersion) return DecodeStatus::kBadVersion;
+  // Versions 2 to 7 share this header and the Hello's and Reject's first fields.
+  if (w.version < 2 || w.version >= 8) return DecodeStatus::kBadVersion;
   if (w.flags != 0) return DecodeStatus::kBadFlags;
   if (w.type != static_cast<std::uint8_t>(MessageType::kHello)) return DecodeStatus::kUnexpected;
-  if (!VerifyMac(bytes, key)) return DecodeStatus::kBadMac;
+  if (!VerifyFullMac(bytes, key)) return DecodeStatus::kBadMac;
   hello = {.header_version = w.version,
            .min_version = min_version,
            .max_version = max_version,
@@ -1312,13 +1368,22 @@ DecodeStatus PeekHeader(std::span<const std::uint8_t> bytes, Header& h) noexcept
   Fields(r, w);
   if (w.magic != kMagic) return DecodeStatus::kBadMagic;
   if (w.version != kProtocolVersion) return DecodeStatus::kBadVersion;
-  if (w.flags != 0) return DecodeStatus::kBadFlags;
   if (w.type < 1 || w.type > kMaxMessageType) return DecodeStatus::kUnknownType;
   h.type = static_cast<MessageType>(w.type);
   h.session_id = w.session_id;
   h.sequence = w.sequence;
-  h.send_time_ns = w.send_time_ns;
+  h.send_time_ns =
+      1000 * (static_cast<std::int64_t>(w.send_time_us_high) << 32 | w.send_time_us_low);
   return DecodeStatus::kOk;
+}
+
+int DatagramType(std::span<const std::uint8_t> bytes) noexcept {
+  if (bytes.size() > kHeaderTypeOffset && LoadLe<std::uint16_t>(bytes.data()) == kMagic &&
+      bytes[kHeaderVersionOffset] == kProtocolVersion) {
+    return bytes[kHeaderTypeOffset];
+  }
+  if (bytes.size() > 6 && LoadLe<std::uint32_t>(bytes.data()) == kLegacyMagic) return bytes[6];
+  return 0;
 }
 
 DecodeStatus OpenDatagram(std::span<const std::uint8_t> bytes, const MacKey& key, Header& h,

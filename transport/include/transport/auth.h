@@ -1,6 +1,7 @@
 #pragma once
-// Datagram authentication: a pre-shared key, its file, the per-datagram MAC (libsodium
-// crypto_auth = HMAC-SHA-512-256) and the anti-replay window on sequence numbers.
+// Datagram authentication: a pre-shared key, its file, the per-datagram MAC (HMAC-SHA-256-128 since
+// protocol version 8: libsodium's crypto_auth_hmacsha256 truncated to 128 bits; versions 2 to 7
+// had crypto_auth, HMAC-SHA-512-256) and the anti-replay window on sequence numbers.
 
 #include <array>
 #include <cstdint>
@@ -11,7 +12,7 @@
 
 namespace ht {
 
-/// A 32-byte pre-shared key for crypto_auth. Both sides hold the same key.
+/// A 32-byte pre-shared key for the MAC. Both sides hold the same key.
 struct MacKey {
   std::array<std::uint8_t, wire::kMacKeyBytes> bytes{};
 
@@ -33,13 +34,24 @@ MacKey LoadKeyFile(const std::string& path);
 /// std::runtime_error when the file exists and !overwrite, or cannot be written.
 void WriteKeyFile(const std::string& path, const MacKey& key, bool overwrite);
 
-/// Computes the MAC of `message` into `mac` (kMacBytes). Never fails.
+/// Computes the wire MAC of `message` into `mac`: HMAC-SHA-256-128 under `key`, the first
+/// kMacBytes (16) of HMAC-SHA-256 (RFC 2104; truncated to half the hash's output as RFC 2104 §5
+/// recommends and RFC 4868 specifies for IPsec). Never fails.
 void ComputeMac(std::span<const std::uint8_t> message, const MacKey& key,
                 std::span<std::uint8_t, wire::kMacBytes> mac) noexcept;
 
-/// Verifies, in constant time, that the last kMacBytes of `datagram` are the MAC of the bytes
-/// before them. False when the datagram is shorter than a MAC or the MAC does not verify.
+/// Verifies, in constant time, that the last kMacBytes of `datagram` are the wire MAC of the
+/// bytes before them. False when the datagram is shorter than a MAC or the MAC does not verify.
 bool VerifyMac(std::span<const std::uint8_t> datagram, const MacKey& key) noexcept;
+
+/// The whole 32-byte HMAC-SHA-512-256 (crypto_auth) of `message`: the MAC of protocol versions 2
+/// to 7, for answering an older operator's Hello. Never fails.
+void ComputeFullMac(std::span<const std::uint8_t> message, const MacKey& key,
+                    std::span<std::uint8_t, wire::kFullMacBytes> mac) noexcept;
+
+/// VerifyMac for a datagram of versions 2 to 7, whose last kFullMacBytes are the whole
+/// crypto_auth of the bytes before them.
+bool VerifyFullMac(std::span<const std::uint8_t> datagram, const MacKey& key) noexcept;
 
 /// BLAKE2b-128 digest (crypto_generichash, unkeyed) of `bytes`: names the content of a scene
 /// object end to end, independently of the per-datagram MACs.

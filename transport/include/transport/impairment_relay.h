@@ -20,10 +20,10 @@
 
 namespace ht {
 
-/// Classifies a datagram by its wire header (transport/protocol.h): when its first 4 bytes are
-/// the little-endian u32 wire::kMagic ("HTLP") and it has at least 7 bytes, returns the message
-/// type byte at offset 6 (1..255); otherwise returns 0, meaning "other" (a type byte of 0 is
-/// also "other").
+/// Classifies a datagram by its wire header (transport/protocol.h, wire::DatagramType): when it
+/// starts with this version's magic ("HT") and version, returns the message type byte at offset 3;
+/// with the magic of versions 2 to 7 ("HTLP") and at least 7 bytes, the type byte at offset 6
+/// (1..255); otherwise 0, meaning "other" (a type byte of 0 is also "other").
 std::uint8_t ClassifyDatagram(std::span<const std::uint8_t> bytes) noexcept;
 
 /// Name of a message type for the statistics: 0 "other", 1 tool_state, 2 contact_model,

@@ -36,7 +36,9 @@ class ClockSync {
  public:
   static constexpr int kSamples = 8;
   /// t1: ping sent (local clock), t2: ping received (remote), t3: pong sent (remote), t4: pong
-  /// received (local). Samples with t4 < t1 or t3 < t2 are ignored (returns false).
+  /// received (local). t1 and t3 come from headers, in whole µs (protocol.h), so t3 may read up to
+  /// 1 µs before t2: then t3 is taken as t2. Samples with t4 < t1 or t3 < t2 − 1 µs are ignored
+  /// (returns false).
   bool AddSample(std::int64_t t1, std::int64_t t2, std::int64_t t3, std::int64_t t4) noexcept;
   /// True once a sample has been taken.
   bool valid() const noexcept { return count_ > 0; }

@@ -19,7 +19,10 @@ namespace ht::wire {
 struct Header {
   MessageType type = MessageType::kToolState;
   std::uint32_t session_id = 0;
+  /// On the wire a u32: an encoder sends a larger number as 2³² − 1 (protocol.h).
   std::uint64_t sequence = 0;
+  /// The sender's steady clock (ns). On the wire whole µs: an encoder sends ⌊ns/1000⌋ clamped to
+  /// [0, kMaxSendTimeUs], a decoder gives that times 1000.
   std::int64_t send_time_ns = 0;
 };
 
@@ -271,29 +274,37 @@ Datagram EncodeSceneNack(const Header& header, const SceneNackMessage& message,
 Datagram EncodeNodePoses(const Header& header, const NodePosesMessage& message,
                          const MacKey& key) noexcept;
 
-/// A Hello in another protocol version than this one, read only as far as versions 2 to 5 agree.
+/// A Hello of protocol versions 2 to 7 (their 28-byte header and 32-byte MAC), read only as far as
+/// those versions agree.
 struct ForeignHello {
   std::uint16_t header_version = 0;  ///< the version in its header (the sender's own)
   std::uint16_t min_version = 0, max_version = 0;
   std::uint64_t client_nonce = 0;
 };
-/// Opens a Hello of an older protocol version (2 ≤ version < kProtocolVersion), so that the
-/// remote node can refuse that operator with a Reject it understands. kOk when the magic, flags
-/// and type match, the MAC verifies under `key` and the body has at least its first 12 bytes;
-/// kBadVersion for this version (open it with OpenDatagram instead) or a version outside that
-/// range.
+/// Opens a Hello of an older protocol version (2 ≤ version ≤ 7, kLegacyHeaderBytes header,
+/// kLegacyMacBytes MAC), so that the remote node can refuse that operator with a Reject it
+/// understands. kOk when the magic, flags and type match, the whole MAC verifies under `key` and
+/// the body has at least its first 12 bytes; kBadVersion for a datagram of this version's layout
+/// (open it with OpenDatagram instead) or a version outside that range; kBadMagic for anything
+/// else.
 DecodeStatus OpenForeignHello(std::span<const std::uint8_t> datagram, const MacKey& key,
                               ForeignHello& hello) noexcept;
-/// A Reject with `version` in its header (the body is laid out alike in versions 2 to 5).
+/// A Reject with `version` in its header: this version's layout for kProtocolVersion, else the
+/// layout of versions 2 to 7 (28-byte header, 32-byte MAC; the body is laid out alike in versions
+/// 2 to 8).
 Datagram EncodeReject(const Header& header, const RejectMessage& message, const MacKey& key,
                       std::uint16_t version) noexcept;
 
-/// Checks a received datagram's size limits, header (magic, version, flags, known type) and MAC,
-/// in that order, and on kOk gives the header and the body (between header and MAC).
+/// Checks a received datagram's size limits, header (magic, version, known type) and MAC, in that
+/// order, and on kOk gives the header (send_time_ns is the sender's whole µs times 1000; sequence
+/// is at most 2³² − 1) and the body (between header and MAC).
 DecodeStatus OpenDatagram(std::span<const std::uint8_t> datagram, const MacKey& key, Header& header,
                           std::span<const std::uint8_t>& body) noexcept;
 /// Reads only the header fields (no MAC check); for relays and counters. kOk or the first problem.
 DecodeStatus PeekHeader(std::span<const std::uint8_t> datagram, Header& header) noexcept;
+/// The message type byte of a datagram of this version's layout, or of versions 2 to 7 (their
+/// magic); 0 for anything else. No MAC check: for counters and the impairment relay.
+int DatagramType(std::span<const std::uint8_t> datagram) noexcept;
 
 // Body decoders: `body` is what OpenDatagram gave; exact length, counts, finiteness and values are
 // checked; `message` is written only on kOk.

@@ -8,18 +8,29 @@
 // Quaternions: w, x, y, z. Units are SI (m, rad, N, N·m, s), times in nanoseconds of the sender's
 // steady clock (the clocks of the two sides are unrelated; see Ping/Pong).
 //
-// Header layout (28 bytes):
-//   offset 0  u32 magic            kMagic ("HTLP" read as little-endian u32)
-//   offset 4  u16 version          kProtocolVersion
-//   offset 6  u8  type             MessageType
-//   offset 7  u8  flags            0 (reserved; non-zero is rejected)
-//   offset 8  u32 session_id       0 in Hello; otherwise the id the remote node gave in Welcome
-//   offset 12 u64 sequence         per sender, session and message type, starting at 1
-//   offset 20 i64 send_time_ns     sender's steady clock at send
+// Header layout (kHeaderBytes, 18; version 8):
+//   offset 0  u16 magic            kMagic ("HT" read as little-endian u16)
+//   offset 2  u8  version          kProtocolVersion
+//   offset 3  u8  type             MessageType
+//   offset 4  u32 session_id       0 in Hello; otherwise the id the remote node gave in Welcome
+//   offset 8  u32 sequence         per sender, session and message type, starting at 1; a stream
+//                                  stops at 2³² − 1 datagrams in one session (49 days at 1 kHz):
+//                                  its later datagrams are refused as replays, and a new session
+//                                  starts it again
+//   offset 12 u48 send_time_us     sender's steady clock at send, whole µs (the low 48 bits: 8.9
+//                                  years of uptime), read back as send_time_ns = 1000·send_time_us
 //
-// MAC (32 bytes, last in the datagram): libsodium crypto_auth (HMAC-SHA-512-256) under the
-// pre-shared key, over every byte before it (header and body). A datagram whose MAC does not verify
-// is dropped before any body field is read.
+// MAC (kMacBytes, 16, last in the datagram): HMAC-SHA-256-128 under the pre-shared key, over every
+// byte before it (header and body): HMAC-SHA-256 (libsodium crypto_auth_hmacsha256) truncated to
+// its first 128 bits, half the hash's output as RFC 2104 §5 recommends (IPsec's
+// HMAC-SHA-256-128, RFC 4868). Verified in constant time. A datagram whose MAC does not verify is
+// dropped before any body field is read.
+//
+// Versions 2 to 7 had a 28-byte header (u32 magic kLegacyMagic "HTLP", u16 version, u8 type, u8
+// flags = 0, u32 session_id, u64 sequence, i64 send_time_ns) and a 32-byte MAC, libsodium
+// crypto_auth (HMAC-SHA-512-256) (kLegacyHeaderBytes, kLegacyMacBytes). A remote node still reads a
+// Hello of that layout, only to answer it with a Reject of that layout (OpenForeignHello,
+// EncodeReject with a version).
 //
 // Bodies (operator = O, remote node = R):
 //   ToolState O→R (104): X_WT: p_WT 3×f64 (m), R_WT 4×f64 quaternion; V_WT_W: linear 3×f64 (m/s),
@@ -149,20 +160,24 @@
 
 namespace ht::wire {
 
-inline constexpr std::uint32_t kMagic = 0x504C5448u;  // bytes 'H' 'T' 'L' 'P'
+inline constexpr std::uint16_t kMagic = 0x5448u;  // bytes 'H' 'T'
+/// The header's first four bytes in versions 2 to 7 ("HTLP" read as little-endian u32).
+inline constexpr std::uint32_t kLegacyMagic = 0x504C5448u;  // bytes 'H' 'T' 'L' 'P'
 /// Version 2 added authentication, sessions, clock sync and scene streaming; version 3 the scene
 /// layout in Welcome (home pose, tool inertia, where the touchable objects are); version 4 the
 /// perceptual deadband terms in Hello and Welcome and the compact contact model; version 5 the
 /// scene as a scene: meshes in their own frames, the scene-graph and image objects
-/// (SceneObjectKind kSceneGraph, kImage) and NodePoses. Versions 1 to 4 are not accepted; a remote
-/// node answers a Hello of another version whose MAC verifies with a Reject (kVersion) in that
-/// Hello's header version (the Hello's first 12 body bytes and the Reject body are laid out alike
-/// in versions 2 to 7), so that an older operator is told why. Version 6 added the kink planes
-/// after the contacts of ContactModel and CompactContactModel (issue 31); version 7 each plane's
-/// own translation slope (issue 32: the arms of δ's V along the window's axes). Versions 5 and 6
-/// are no longer accepted.
-inline constexpr std::uint16_t kProtocolVersion = 7;
-inline constexpr std::uint16_t kMinProtocolVersion = 7;
+/// (SceneObjectKind kSceneGraph, kImage) and NodePoses. Version 6 added the kink planes after the
+/// contacts of ContactModel and CompactContactModel (issue 31); version 7 each plane's own
+/// translation slope (issue 32: the arms of δ's V along the window's axes). Version 8 (issue 33:
+/// tool states within 50 kbit/s) has the 18-byte header above instead of 28 bytes and a 16-byte
+/// MAC (HMAC-SHA-256-128) instead of 32 (HMAC-SHA-512-256); every body is as in version 7. Only
+/// version 8 is accepted. A remote node answers a Hello of versions 2 to 7 whose MAC verifies with
+/// a Reject (kVersion) in that Hello's own layout and header version (the Hello's first 12 body
+/// bytes and the Reject body are laid out alike in versions 2 to 8), so that an older operator is
+/// told why.
+inline constexpr std::uint16_t kProtocolVersion = 8;
+inline constexpr std::uint16_t kMinProtocolVersion = 8;
 
 /// Message types; values are part of the protocol and never reused.
 enum class MessageType : std::uint8_t {
@@ -195,7 +210,7 @@ inline constexpr std::uint32_t kCodecDracoMesh = 1u << 0;
 /// Contact models go as CompactContactModel (quantized) instead of ContactModel when both sides
 /// set it.
 inline constexpr std::uint32_t kCodecCompactContactModel = 1u << 1;
-/// Tool states go as CompactToolState (quantized, 92 bytes a datagram instead of 164) instead of
+/// Tool states go as CompactToolState (quantized, 66 bytes a datagram instead of 138) instead of
 /// ToolState when both sides set it.
 inline constexpr std::uint32_t kCodecCompactToolState = 1u << 2;
 
@@ -217,9 +232,20 @@ inline constexpr std::size_t kSceneGraphNodeMinBytes = 1 + 4 + 10 * 8 + 4 + 4 + 
 inline constexpr std::size_t kSceneMaterialMinBytes = 1 + 4 * 4 + 4 + 1;
 inline constexpr std::size_t kSceneGraphCameraBytes = 4 + 3 * 8;
 
-inline constexpr std::size_t kHeaderBytes = 28;
-inline constexpr std::size_t kMacBytes = 32;     // crypto_auth_BYTES
-inline constexpr std::size_t kMacKeyBytes = 32;  // crypto_auth_KEYBYTES
+inline constexpr std::size_t kHeaderBytes = 18;
+/// Offsets of the version and type bytes in the header.
+inline constexpr std::size_t kHeaderVersionOffset = 2;
+inline constexpr std::size_t kHeaderTypeOffset = 3;
+/// The header's send time is whole µs in 48 bits.
+inline constexpr std::int64_t kMaxSendTimeUs = (std::int64_t{1} << 48) - 1;
+/// The MAC on the wire: HMAC-SHA-256's 32 bytes truncated to 16.
+inline constexpr std::size_t kMacBytes = 16;
+/// crypto_auth's output (crypto_auth_BYTES, HMAC-SHA-512-256): the MAC of versions 2 to 7.
+inline constexpr std::size_t kFullMacBytes = 32;
+/// Header and MAC of versions 2 to 7.
+inline constexpr std::size_t kLegacyHeaderBytes = 28;
+inline constexpr std::size_t kLegacyMacBytes = kFullMacBytes;
+inline constexpr std::size_t kMacKeyBytes = 32;  // crypto_auth(_hmacsha256)_KEYBYTES
 inline constexpr std::size_t kToolStateBodyBytes = 13 * 8;
 inline constexpr std::size_t kCompactToolStateBodyBytes = 3 * 4 + 8 + 6 * 2;
 inline constexpr std::size_t kContactModelFixedBytes = 8 * 4 + 4 * 3 + 7 * 8 + 6 * 8 + 1;
