@@ -792,6 +792,15 @@ TEST(Messages, TheMacIsHmacSha256TruncatedTo128Bits) {
   datagram[3] ^= 1;
   EXPECT_FALSE(VerifyMac(datagram, key));
   EXPECT_FALSE(VerifyMac(std::span(datagram).first(kMacBytes - 1), key));
+  // RFC 4231 test case 5, the truncation case: key 0x0c × 20, "Test With Truncation", HMAC-SHA-256
+  // truncated to 128 bits.
+  MacKey key5;
+  std::fill_n(key5.bytes.begin(), 20, std::uint8_t{0x0c});
+  const std::string data5 = "Test With Truncation";
+  ComputeMac({reinterpret_cast<const std::uint8_t*>(data5.data()), data5.size()}, key5, mac);
+  const std::array<std::uint8_t, 16> expected5 = {0xa3, 0xb6, 0x16, 0x74, 0x73, 0x10, 0x0e, 0xe0,
+                                                  0x6e, 0x0c, 0x79, 0x6c, 0x29, 0x55, 0x55, 0x2b};
+  EXPECT_EQ(mac, expected5);
 }
 
 // Version 8's header: the sequence as u32 and the send time as whole µs in 48 bits, each written

@@ -10,6 +10,7 @@
 
 #include "transport/auth.h"
 #include "transport/link.h"
+#include "transport/messages.h"
 #include "transport/scene_stream.h"
 #include "transport/session.h"
 
@@ -141,6 +142,45 @@ TEST(Session, NegotiatesTheCommonGround) {
   hello.min_version = hello.max_version = wire::kProtocolVersion + 1;
   EXPECT_FALSE(NegotiateSession(hello, caps, w, r));
   EXPECT_EQ(r.reason, wire::RejectReason::kVersion);
+}
+
+// The header's sequence is a u32: near its end the link asks for a new session, at its end a
+// stream's number stops (the receiver refuses the repeats as replays), and a new session starts
+// every stream again.
+TEST(SecureLink, AStreamNearItsLastSequenceAsksForANewSession) {
+  UdpSocket socket(SocketAddress::Parse("127.0.0.1:0"));
+  const MacKey key = MacKey::Generate();
+  SecureLink sender(socket, key, LinkRole::kOperator), receiver(socket, key, LinkRole::kRemote);
+  const wire::ToolStateMessage state;
+  const auto open = [&](const wire::Header& h) {
+    wire::Header got;
+    std::span<const std::uint8_t> body;
+    bool late = false;
+    return receiver.Open(wire::EncodeCompactToolState(h, state, key).view(), 7, got, body, late);
+  };
+  EXPECT_FALSE(sender.SequencesNearlyUsedUp());
+  sender.StartSequencesAt(wire::kSequenceRenewAt - 2);
+  EXPECT_EQ(open(sender.NextHeader(wire::MessageType::kCompactToolState, 7)),
+            wire::DecodeStatus::kOk);
+  EXPECT_FALSE(sender.SequencesNearlyUsedUp());
+  EXPECT_EQ(open(sender.NextHeader(wire::MessageType::kCompactToolState, 7)),
+            wire::DecodeStatus::kOk);
+  EXPECT_TRUE(sender.SequencesNearlyUsedUp());
+  // At the last number the stream stops: its repeats are refused.
+  sender.StartSequencesAt(wire::kMaxSequence - 1);
+  const wire::Header last = sender.NextHeader(wire::MessageType::kCompactToolState, 7);
+  EXPECT_EQ(last.sequence, wire::kMaxSequence);
+  EXPECT_EQ(open(last), wire::DecodeStatus::kOk);
+  const wire::Header again = sender.NextHeader(wire::MessageType::kCompactToolState, 7);
+  EXPECT_EQ(again.sequence, wire::kMaxSequence);
+  EXPECT_EQ(open(again), wire::DecodeStatus::kReplayed);
+  // A new session: every stream starts at 1 again, and the receiver's windows too.
+  sender.ResetSession();
+  receiver.ResetSession();
+  EXPECT_FALSE(sender.SequencesNearlyUsedUp());
+  const wire::Header first = sender.NextHeader(wire::MessageType::kCompactToolState, 7);
+  EXPECT_EQ(first.sequence, 1u);
+  EXPECT_EQ(open(first), wire::DecodeStatus::kOk);
 }
 
 TEST(Session, NonceHistoryRefusesRepeats) {

@@ -295,9 +295,10 @@ int main(int argc, char** argv) {
                  "(covers a bounce off the surface; 0 = drop them at once)")
       ->check(CLI::Range(0.0, 60000.0))
       ->capture_default_str();
-  app.add_flag("--float-tool-states", float_tool_states,
-               "send tool states in the f64 encoding (164 bytes) rather than the compact quantized "
-               "one (92 bytes; transport/protocol.h states its error bounds)");
+  app.add_flag(
+      "--float-tool-states", float_tool_states,
+      "send tool states in the f64 encoding (138 bytes a datagram) rather than the compact "
+      "quantized one (66 bytes; transport/protocol.h states its error bounds)");
   app.add_flag("--float-models", float_models,
                "ask for contact models in the float encoding rather than the compact quantized "
                "one (transport/protocol.h states its error bounds)");

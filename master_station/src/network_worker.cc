@@ -66,6 +66,16 @@ void NetworkWorker::Run(const std::atomic<bool>& stop) {
       std::fflush(stdout);
       EndSession();
     }
+    if (session_ != 0 && link_.SequencesNearlyUsedUp()) {
+      // A stream's u32 sequence numbers are nearly used up (wire::kSequenceRenewAt, 49 days at
+      // 1 kHz): a new session starts them again.
+      ++sessions_renewed_;
+      std::printf("[master] a stream has used %llu sequence numbers; starting a new session\n",
+                  static_cast<unsigned long long>(wire::kSequenceRenewAt));
+      std::fflush(stdout);
+      SayGoodbye();
+      EndSession();
+    }
     if (session_ == 0) {
       if (counters_.rejected.load()) break;
       if (hello_nonce_ != 0 &&
@@ -127,16 +137,16 @@ void NetworkWorker::Run(const std::atomic<bool>& stop) {
       }
     });
   }
-  if (session_ != 0) {
-    const wire::Datagram d =
-        wire::EncodeGoodbye(link_.NextHeader(wire::MessageType::kGoodbye, session_), config_.key);
-    link_.Send(d, config_.remote_address);
-    // Retries carry new sequence numbers (a copy of the same datagram would be a replay).
-    for (int i = 0; i < 2; ++i) {
-      link_.Send(
-          wire::EncodeGoodbye(link_.NextHeader(wire::MessageType::kGoodbye, session_), config_.key),
-          config_.remote_address);
-    }
+  SayGoodbye();
+}
+
+void NetworkWorker::SayGoodbye() {
+  if (session_ == 0) return;
+  // Retries carry new sequence numbers (a copy of the same datagram would be a replay).
+  for (int i = 0; i < 3; ++i) {
+    link_.Send(
+        wire::EncodeGoodbye(link_.NextHeader(wire::MessageType::kGoodbye, session_), config_.key),
+        config_.remote_address);
   }
 }
 
@@ -157,6 +167,7 @@ nlohmann::json NetworkWorker::Summary() const {
   t["peers_lost"] = peers_lost_;
   t["peer_lost_detected_after_ms"] = loss_detected_after_ms_;
   t["remote_goodbyes"] = remote_goodbyes_;
+  t["sessions_renewed"] = sessions_renewed_;
   t["hellos_sent"] = hellos_sent_;
   t["mtu"] = mtu_;
   t["scene_name"] = scene_name_;

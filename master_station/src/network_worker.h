@@ -81,6 +81,8 @@ class NetworkWorker {
   void SendHello();
 
   void EndSession();
+  /// Goodbye three times (new sequence numbers each) when a session is open.
+  void SayGoodbye();
 
   void Handle(std::span<const std::uint8_t> datagram, const SocketAddress& from);
 
@@ -131,6 +133,7 @@ class NetworkWorker {
   std::int64_t handshake_rtt_ns_ = 0;
   std::int64_t heartbeat_ns_ = 100000000, peer_timeout_ns_ = 500000000, session_start_ns_ = 0;
   std::uint64_t sessions_ = 0, peers_lost_ = 0, remote_goodbyes_ = 0, hellos_sent_ = 0;
+  std::uint64_t sessions_renewed_ = 0;  // ended because a stream's sequence numbers ran low
   std::size_t mtu_ = 0, expected_objects_ = 0;
   std::string scene_name_, reject_text_;
   mutable std::mutex layout_mutex_;

@@ -213,6 +213,14 @@ void RemoteSession::CheckPeerTimeout(std::int64_t now) {
     std::snprintf(why, sizeof(why), "operator lost (nothing authenticated for %.0f ms)",
                   (now - last_heard) * 1e-6);
     Close(why);
+    return;
+  }
+  if (session_ != 0 && link_.SequencesNearlyUsedUp()) {
+    // One of this side's streams has nearly used its u32 sequence numbers: the operator reconnects
+    // on the Goodbye, and the new session starts them again.
+    ++sessions_renewed_;
+    SayGoodbye();
+    Close("a stream's sequence numbers are nearly used up; the operator reconnects");
   }
 }
 
@@ -434,6 +442,7 @@ nlohmann::json RemoteSession::StatsJson(std::size_t scene_objects, std::size_t s
   }
   transport["sessions"] = sessions_;
   transport["goodbyes"] = goodbyes_;
+  transport["sessions_renewed"] = sessions_renewed_;
   transport["peers_lost"] = peers_lost_;
   transport["hello_replayed"] = hello_replayed_;
   transport["hello_retransmits"] = hello_retransmits_;

@@ -52,7 +52,8 @@ class RemoteSession {
   bool OnDatagram(std::span<const std::uint8_t> datagram, const SocketAddress& from,
                   std::int64_t now_ns);
   /// Closes the session when nothing authenticated has come from the operator for the peer
-  /// timeout (counted in peers_lost).
+  /// timeout (counted in peers_lost), or, after a Goodbye, when one of this side's streams has
+  /// nearly used its sequence numbers (SecureLink::SequencesNearlyUsedUp; sessions_renewed).
   void CheckPeerTimeout(std::int64_t now_ns);
   /// Sends scene fragments as the pacing budget (config.scene_rate_bytes_per_s) allows, and the
   /// manifest every 250 ms. Only while a session is open and the operator has shown that it holds
@@ -209,6 +210,7 @@ class RemoteSession {
   std::int64_t latest_send_time_ns_ = 0, latest_recv_ns_ = 0, max_gap_ns_ = 0;
 
   std::uint64_t sessions_ = 0, goodbyes_ = 0, peers_lost_ = 0, hello_replayed_ = 0;
+  std::uint64_t sessions_renewed_ = 0;
   std::uint64_t hello_retransmits_ = 0, hello_deferred_ = 0, rejects_sent_ = 0;
   std::uint64_t nacks_accepted_ = 0, nacks_ignored_ = 0;
 };

@@ -6,7 +6,7 @@ namespace ht {
 
 bool ClockSync::AddSample(std::int64_t t1, std::int64_t t2, std::int64_t t3,
                           std::int64_t t4) noexcept {
-  if (t4 < t1 || t3 < t2 - 1000) return false;
+  if (t4 < t1 || (t3 < t2 && t2 - t3 > 1000)) return false;
   t3 = std::max(t3, t2);  // the header's send time is whole µs
   Sample s;
   s.rtt_ns = (t4 - t1) - (t3 - t2);
@@ -53,9 +53,20 @@ wire::Header SecureLink::NextHeader(wire::MessageType type, std::uint32_t sessio
   wire::Header h;
   h.type = type;
   h.session_id = session_id;
-  h.sequence = ++next_sequence_[static_cast<int>(type)];
+  std::uint64_t& next = next_sequence_[static_cast<int>(type)];
+  if (next < wire::kMaxSequence) ++next;
+  h.sequence = next;
   h.send_time_ns = SteadyNowNs();
   return h;
+}
+
+bool SecureLink::SequencesNearlyUsedUp() const noexcept {
+  return std::any_of(next_sequence_.begin(), next_sequence_.end(),
+                     [](std::uint64_t s) { return s >= wire::kSequenceRenewAt; });
+}
+
+void SecureLink::StartSequencesAt(std::uint64_t last_sent) noexcept {
+  next_sequence_.fill(std::min(last_sent, wire::kMaxSequence));
 }
 
 bool SecureLink::Send(const wire::Datagram& d, const SocketAddress& to) noexcept {

@@ -287,8 +287,7 @@ WireHeader ToWire(const Header& header, MessageType type) noexcept {
   const std::int64_t us = std::clamp<std::int64_t>(header.send_time_ns / 1000, 0, kMaxSendTimeUs);
   return {.type = static_cast<std::uint8_t>(type),
           .session_id = header.session_id,
-          .sequence = static_cast<std::uint32_t>(
-              std::min<std::uint64_t>(header.sequence, std::numeric_limits<std::uint32_t>::max())),
+          .sequence = static_cast<std::uint32_t>(std::min(header.sequence, kMaxSequence)),
           .send_time_us_low = static_cast<std::uint32_t>(us),
           .send_time_us_high = static_cast<std::uint16_t>(us >> 32)};
 }
@@ -1290,7 +1289,9 @@ Datagram EncodeReject(const Header& header, const RejectMessage& m, const MacKey
 
 Datagram EncodeReject(const Header& header, const RejectMessage& m, const MacKey& key,
                       std::uint16_t version) noexcept {
-  if (version == kProtocolVersion) return EncodeReject(header, m, key);
+  // This version, or one whose layout is unknown here (the caller only asks for versions a
+  // foreign Hello had: 2 to kLastLegacyVersion), in this version's layout.
+  if (version < 2 || version > kLastLegacyVersion) return EncodeReject(header, m, key);
   Datagram d;
   Writer w(d);
   const LegacyWireHeader h{.version = version,
@@ -1325,7 +1326,7 @@ DecodeStatus OpenForeignHello(std::span<const std::uint8_t> bytes, const MacKey&
   r(max_version);
   r(nonce);
   // Versions 2 to 7 share this header and the Hello's and Reject's first fields.
-  if (w.version < 2 || w.version >= 8) return DecodeStatus::kBadVersion;
+  if (w.version < 2 || w.version > kLastLegacyVersion) return DecodeStatus::kBadVersion;
   if (w.flags != 0) return DecodeStatus::kBadFlags;
   if (w.type != static_cast<std::uint8_t>(MessageType::kHello)) return DecodeStatus::kUnexpected;
   if (!VerifyFullMac(bytes, key)) return DecodeStatus::kBadMac;

@@ -49,7 +49,7 @@ Statistics (--stats): {"spec": {"up": ..., "down": ...}, "up": {...}, "down": {.
 direction has the counters received, dropped_loss, dropped_queue, dropped_oversize, duplicated,
 reordered, forwarded (datagrams actually sent, copies included), send_errors, bytes_in,
 bytes_out, in_flight_at_exit, then the same per message type (tool_state, contact_model, ...,
-"other" for datagrams without the protocol's magic).)";
+"other" for datagrams of neither this protocol version's header nor the older one's).)";
 
 ht::ImpairmentSpec ParseSpecOption(const std::string& option, const std::string& text) {
   try {

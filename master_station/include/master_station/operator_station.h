@@ -133,7 +133,7 @@ struct StationConfig {
   /// Ask for contact models in the compact quantized encoding (transport/protocol.h) when the
   /// remote node has it; false keeps the float encoding.
   bool compact_models = true;
-  /// Ask to send tool states as CompactToolState (92 bytes a datagram instead of 164;
+  /// Ask to send tool states as CompactToolState (66 bytes a datagram instead of 138;
   /// transport/protocol.h states its error bounds) rather than ToolState; used when the remote
   /// node agrees (Welcome's codecs).
   bool compact_tool_states = true;

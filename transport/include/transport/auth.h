@@ -35,8 +35,8 @@ MacKey LoadKeyFile(const std::string& path);
 void WriteKeyFile(const std::string& path, const MacKey& key, bool overwrite);
 
 /// Computes the wire MAC of `message` into `mac`: HMAC-SHA-256-128 under `key`, the first
-/// kMacBytes (16) of HMAC-SHA-256 (RFC 2104; truncated to half the hash's output as RFC 2104 §5
-/// recommends and RFC 4868 specifies for IPsec). Never fails.
+/// kMacBytes (16) of HMAC-SHA-256 (RFC 2104), truncated to half the hash's output, the shortest RFC
+/// 2104 §5 recommends, as RFC 4868 specifies for IPsec. Never fails.
 void ComputeMac(std::span<const std::uint8_t> message, const MacKey& key,
                 std::span<std::uint8_t, wire::kMacBytes> mac) noexcept;
 

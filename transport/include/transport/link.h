@@ -80,7 +80,16 @@ class SecureLink {
   SecureLink(UdpSocket& socket, const MacKey& key, LinkRole role);
 
   /// The header for the next datagram of `type` in `session` (sequence assigned, send time now).
+  /// A stream's sequence stops at wire::kMaxSequence (its later datagrams are refused as replays):
+  /// end the session before, when SequencesNearlyUsedUp().
   wire::Header NextHeader(wire::MessageType type, std::uint32_t session_id) noexcept;
+  /// True when one of the streams this side sends has reached wire::kSequenceRenewAt in this
+  /// session (49 days at 1 kHz): the session should end (Goodbye) and a new one start.
+  bool SequencesNearlyUsedUp() const noexcept;
+  /// Makes every stream's last sent number `last_sent` (at most wire::kMaxSequence), as if that
+  /// many had been sent in this session; for tests of what happens near the end. ResetSession
+  /// undoes it.
+  void StartSequencesAt(std::uint64_t last_sent) noexcept;
   /// Sends a sealed datagram to `to` and counts it under its type. False if the socket refused.
   bool Send(const wire::Datagram& datagram, const SocketAddress& to) noexcept;
 

@@ -284,14 +284,15 @@ struct ForeignHello {
 /// Opens a Hello of an older protocol version (2 ≤ version ≤ 7, kLegacyHeaderBytes header,
 /// kLegacyMacBytes MAC), so that the remote node can refuse that operator with a Reject it
 /// understands. kOk when the magic, flags and type match, the whole MAC verifies under `key` and
-/// the body has at least its first 12 bytes; kBadVersion for a datagram of this version's layout
-/// (open it with OpenDatagram instead) or a version outside that range; kBadMagic for anything
-/// else.
+/// the body has at least its first 12 bytes; otherwise the first problem: kTooLong, kTooShort,
+/// kBadMagic (neither layout's magic), kBadVersion (a datagram of this version's layout, to be
+/// opened with OpenDatagram, or a version outside 2 to 7), kBadFlags, kUnexpected (not a Hello),
+/// kBadMac.
 DecodeStatus OpenForeignHello(std::span<const std::uint8_t> datagram, const MacKey& key,
                               ForeignHello& hello) noexcept;
-/// A Reject with `version` in its header: this version's layout for kProtocolVersion, else the
-/// layout of versions 2 to 7 (28-byte header, 32-byte MAC; the body is laid out alike in versions
-/// 2 to 8).
+/// A Reject with `version` in its header: for 2 ≤ version ≤ kLastLegacyVersion the layout of
+/// those versions (28-byte header, 32-byte MAC; the body is laid out alike in versions 2 to 8),
+/// else this version's own Reject.
 Datagram EncodeReject(const Header& header, const RejectMessage& message, const MacKey& key,
                       std::uint16_t version) noexcept;
 

@@ -5,24 +5,25 @@
 //
 // All integers and IEEE-754 floats are little-endian, written and read field by field (never by
 // casting a struct over bytes). Wire order of 6-vectors: force then torque, linear then angular.
-// Quaternions: w, x, y, z. Units are SI (m, rad, N, N·m, s), times in nanoseconds of the sender's
-// steady clock (the clocks of the two sides are unrelated; see Ping/Pong).
+// Quaternions: w, x, y, z. Units are SI (m, rad, N, N·m, s); times in bodies are nanoseconds of
+// the sender's steady clock, the header's send time whole µs of it (the clocks of the two sides
+// are unrelated; see Ping/Pong).
 //
 // Header layout (kHeaderBytes, 18; version 8):
 //   offset 0  u16 magic            kMagic ("HT" read as little-endian u16)
 //   offset 2  u8  version          kProtocolVersion
 //   offset 3  u8  type             MessageType
 //   offset 4  u32 session_id       0 in Hello; otherwise the id the remote node gave in Welcome
-//   offset 8  u32 sequence         per sender, session and message type, starting at 1; a stream
-//                                  stops at 2³² − 1 datagrams in one session (49 days at 1 kHz):
-//                                  its later datagrams are refused as replays, and a new session
-//                                  starts it again
+//   offset 8  u32 sequence         per sender, session and message type, starting at 1, at most
+//                                  2³² − 1 (kMaxSequence); a sender ends the session (Goodbye) when
+//                                  one of its streams reaches kSequenceRenewAt (49 days at 1 kHz),
+//                                  and the operator opens a new one
 //   offset 12 u48 send_time_us     sender's steady clock at send, whole µs (the low 48 bits: 8.9
 //                                  years of uptime), read back as send_time_ns = 1000·send_time_us
 //
 // MAC (kMacBytes, 16, last in the datagram): HMAC-SHA-256-128 under the pre-shared key, over every
 // byte before it (header and body): HMAC-SHA-256 (libsodium crypto_auth_hmacsha256) truncated to
-// its first 128 bits, half the hash's output as RFC 2104 §5 recommends (IPsec's
+// its first 128 bits: half the hash's output, the shortest RFC 2104 §5 recommends (IPsec's
 // HMAC-SHA-256-128, RFC 4868). Verified in constant time. A datagram whose MAC does not verify is
 // dropped before any body field is read.
 //
@@ -238,6 +239,13 @@ inline constexpr std::size_t kHeaderVersionOffset = 2;
 inline constexpr std::size_t kHeaderTypeOffset = 3;
 /// The header's send time is whole µs in 48 bits.
 inline constexpr std::int64_t kMaxSendTimeUs = (std::int64_t{1} << 48) - 1;
+/// The header's sequence is a u32: a stream's last number, and the number at which its sender ends
+/// the session so that the operator opens a new one (2¹⁶ numbers before the last are left for the
+/// datagrams still sent while it does).
+inline constexpr std::uint64_t kMaxSequence = 0xFFFF'FFFFu;
+inline constexpr std::uint64_t kSequenceRenewAt = kMaxSequence - (1u << 16);
+/// The newest protocol version whose header and MAC are the 28-byte, 32-byte ones.
+inline constexpr std::uint16_t kLastLegacyVersion = 7;
 /// The MAC on the wire: HMAC-SHA-256's 32 bytes truncated to 16.
 inline constexpr std::size_t kMacBytes = 16;
 /// crypto_auth's output (crypto_auth_BYTES, HMAC-SHA-512-256): the MAC of versions 2 to 7.
