@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <limits>
@@ -242,6 +243,75 @@ TEST(RemoteNode, AgreesOnCompactToolStatesAndAnswersThemAsTheF64Ones) {
   EXPECT_EQ(t["streams"]["compact_tool_state"]["received"].get<int>(), 1);
   EXPECT_EQ(t["streams"]["compact_tool_state"]["rejected"].get<int>(), 1);
   EXPECT_EQ(t["streams"].value("tool_state", nlohmann::json::object()).value("received", 0), 0);
+}
+
+// The header's sequence is a u32 (protocol version 8): a node whose streams near its end says
+// Goodbye and closes the session (the operator then opens a new one), instead of sending numbers
+// the operator would refuse as replays.
+TEST(RemoteNode, EndsASessionWhoseSequenceNumbersRunLow) {
+  const HapticScene scene = MakeBlockOnGearScene();
+  RemoteNodeConfig config = LocalNodeConfig(TestKey(41), "remote_node_renew_test.port");
+  config.start_sequences_at = wire::kSequenceRenewAt - 20;
+  std::atomic<bool> stop{false};
+  nlohmann::json summary;
+  std::thread node([&] { summary = RunRemoteNode(config, scene, stop); });
+  const std::uint16_t port = AwaitPort(config.port_file);
+  ASSERT_NE(port, 0);
+  const SocketAddress remote = SocketAddress::Parse("127.0.0.1:" + std::to_string(port));
+  UdpSocket socket(SocketAddress::Parse("127.0.0.1:0"));
+  std::uint32_t sessions[2] = {0, 0};
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    wire::HelloMessage hello;
+    hello.client_nonce = 900 + static_cast<std::uint64_t>(attempt);
+    socket.SendTo(wire::EncodeHello({wire::MessageType::kHello, 0, 1, 0}, hello, config.key).view(),
+                  remote);
+    wire::Header h;
+    wire::WelcomeMessage welcome;
+    ASSERT_TRUE(Await(socket, config.key, wire::MessageType::kWelcome, h, [&](auto body) {
+      return wire::DecodeWelcome(body, welcome) == wire::DecodeStatus::kOk &&
+             welcome.client_nonce == hello.client_nonce;
+    })) << attempt;
+    sessions[attempt] = h.session_id;
+    // Pressed tool states, a millisecond apart: contact models (and the scene) answer them, each
+    // on its own stream, until one of them reaches kSequenceRenewAt.
+    wire::ToolStateMessage state;
+    state.X_WT = scene.X_WT_home;
+    state.X_WT.translation.z -= 0.5e-3;
+    bool goodbye = false;
+    std::uint64_t highest = 0;
+    std::array<std::uint8_t, wire::kMaxDatagramBytes> buf{};
+    for (std::uint64_t seq = 1; seq <= 300 && !goodbye; ++seq) {
+      socket.SendTo(
+          wire::EncodeCompactToolState({wire::MessageType::kCompactToolState, h.session_id, seq, 0},
+                                       state, config.key)
+              .view(),
+          remote);
+      socket.WaitReadable(1);
+      SocketAddress from;
+      while (auto n = socket.ReceiveFrom(buf, from)) {
+        wire::Header got;
+        std::span<const std::uint8_t> body;
+        if (wire::OpenDatagram({buf.data(), *n}, config.key, got, body) !=
+                wire::DecodeStatus::kOk ||
+            got.session_id != h.session_id) {
+          continue;
+        }
+        if (got.type == wire::MessageType::kGoodbye) goodbye = true;
+        if (got.type != wire::MessageType::kGoodbye && got.type != wire::MessageType::kWelcome) {
+          highest = std::max(highest, got.sequence);
+        }
+      }
+    }
+    EXPECT_TRUE(goodbye) << attempt;
+    // Every stream stayed below its last number; the one that ended the session reached the mark.
+    EXPECT_GE(highest, wire::kSequenceRenewAt) << attempt;
+    EXPECT_LT(highest, wire::kMaxSequence) << attempt;
+  }
+  EXPECT_NE(sessions[0], sessions[1]);
+  stop = true;
+  node.join();
+  EXPECT_EQ(summary["transport"]["sessions_renewed"].get<int>(), 2);
+  EXPECT_EQ(summary["transport"]["sessions"].get<int>(), 2);
 }
 
 TEST(RemoteNode, RefusesAnOperatorOfAnotherVersionAndHoldsBackModelsThatSayNothingNew) {

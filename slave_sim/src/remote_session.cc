@@ -164,6 +164,7 @@ void RemoteSession::OnHello(const wire::Header& header, std::span<const std::uin
   std::uint32_t id = RandomSessionId();
   while (id == session_) id = RandomSessionId();
   link_.ResetSession();
+  if (config_.start_sequences_at != 0) link_.StartSequencesAt(config_.start_sequences_at);
   session_ = id;
   session_nonce_ = hello.client_nonce;
   peer_ = from;

@@ -41,6 +41,9 @@ struct RemoteNodeConfig {
   double progress_period_s = 1.0;
   /// Say goodbye to the operator when stopped (false simulates a crash, for tests).
   bool goodbye_on_stop = true;
+  /// Each session's streams start after this sequence number (0: at 1), for tests of what happens
+  /// near the end of the header's u32 sequence (wire::kSequenceRenewAt: Goodbye, a new session).
+  std::uint64_t start_sequences_at = 0;
   /// Pre-shared key: every datagram is authenticated with it (see transport/protocol.h).
   MacKey key;
   /// Largest datagram for scene fragments (bytes, kMinMtuBytes..kMaxDatagramBytes); a session uses
