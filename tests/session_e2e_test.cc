@@ -180,6 +180,38 @@ TEST(SessionEndToEnd, TheOperatorReconnectsToARestartedRemoteNode) {
 namespace ht {
 namespace {
 
+// The header's sequence is a u32 (protocol version 8): an operator whose stream nears its end opens
+// a new session (without a Goodbye, which would stop a node run without --stay, as this one is),
+// and the remote node never sees a number past the mark.
+TEST(SessionEndToEnd, TheOperatorRenewsASessionWhoseSequenceNumbersRunLow) {
+  const MacKey key = MacKey::Generate();
+  const HapticScene scene = MakeBlockOnGearScene();
+  const std::uint16_t remote_port = FreePort(), operator_port = FreePort();
+  std::atomic<bool> stop_remote{false};
+  nlohmann::json remote_summary;
+  std::thread remote(
+      [&] { remote_summary = RunRemoteNode(RemoteConfig(key, remote_port), scene, stop_remote); });
+  StationConfig config = OperatorConfig(key, remote_port, operator_port);
+  config.start_sequences_at = wire::kSequenceRenewAt - 50;  // each session's streams, near the end
+  const auto experiment = MakeExperiment("fig75", 2.5);
+  SimulatedOperatorDevice device(*experiment);
+  const nlohmann::json s = RunOperatorStation(config, device, *experiment);
+  stop_remote = true;
+  remote.join();
+
+  const auto& t = s["transport"];
+  EXPECT_EQ(s["ticks"].get<int>(), 2500);
+  EXPECT_EQ(s["nonfinite_count"].get<int>(), 0);
+  EXPECT_GE(t["sessions_renewed"].get<int>(), 1);
+  EXPECT_GE(t["sessions"].get<int>(), 2);
+  EXPECT_EQ(t["peers_lost"].get<int>(), 0);
+  const auto& r = remote_summary["transport"];
+  EXPECT_EQ(r["goodbyes"].get<int>(), 0);  // it ran on: the renewal said no Goodbye
+  EXPECT_GE(r["sessions"].get<int>(), 2);
+  // Nothing the operator sent went past the mark and came back refused as a replay.
+  EXPECT_EQ(r["rejected_by_reason"].value("replayed", 0), 0);
+}
+
 TEST(SessionEndToEnd, AStopRequestWhileWaitingForTheRemoteNodeEndsTheWait) {
   // Nobody listens at the remote port: without the stop the station would wait the whole
   // 30 s connect timeout and then report that no remote node answered.

@@ -68,12 +68,13 @@ void NetworkWorker::Run(const std::atomic<bool>& stop) {
     }
     if (session_ != 0 && link_.SequencesNearlyUsedUp()) {
       // A stream's u32 sequence numbers are nearly used up (wire::kSequenceRenewAt, 49 days at
-      // 1 kHz): a new session starts them again.
+      // 1 kHz): a new session starts them again. No Goodbye (a node run without --stay would
+      // exit on it): the new Hello is deferred by the node until this session has been silent
+      // for its peer timeout, while the loop renders the model it holds.
       ++sessions_renewed_;
       std::printf("[master] a stream has used %llu sequence numbers; starting a new session\n",
                   static_cast<unsigned long long>(wire::kSequenceRenewAt));
       std::fflush(stdout);
-      SayGoodbye();
       EndSession();
     }
     if (session_ == 0) {
@@ -306,6 +307,7 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
         return;  // an answer to an older Hello, or a replay
       }
       link_.ResetSession();
+      if (config_.start_sequences_at != 0) link_.StartSequencesAt(config_.start_sequences_at);
       session_ = header.session_id;
       ++sessions_;
       hello_nonce_ = 0;  // the next attempt (after a loss) gets a new nonce

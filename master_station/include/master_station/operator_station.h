@@ -73,6 +73,9 @@ struct StationConfig {
   VirtualCoupling coupling;
   /// How long to wait for the first contact model before giving up (s).
   double connect_timeout_s = 10.0;
+  /// Each session's streams start after this sequence number (0: at 1), for tests of what happens
+  /// near the end of the header's u32 sequence (wire::kSequenceRenewAt: Goodbye, a new session).
+  std::uint64_t start_sequences_at = 0;
   /// Directory for trace.csv and summary.json ("" = write nothing).
   std::string out_dir;
   /// Print progress lines to stdout every `progress_period_s` (0 = never).

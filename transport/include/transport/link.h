@@ -84,7 +84,7 @@ class SecureLink {
   /// end the session before, when SequencesNearlyUsedUp().
   wire::Header NextHeader(wire::MessageType type, std::uint32_t session_id) noexcept;
   /// True when one of the streams this side sends has reached wire::kSequenceRenewAt in this
-  /// session (49 days at 1 kHz): the session should end (Goodbye) and a new one start.
+  /// session (49 days at 1 kHz): the session should end and a new one start.
   bool SequencesNearlyUsedUp() const noexcept;
   /// Makes every stream's last sent number `last_sent` (at most wire::kMaxSequence), as if that
   /// many had been sent in this session; for tests of what happens near the end. ResetSession

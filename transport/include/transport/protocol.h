@@ -15,9 +15,11 @@
 //   offset 3  u8  type             MessageType
 //   offset 4  u32 session_id       0 in Hello; otherwise the id the remote node gave in Welcome
 //   offset 8  u32 sequence         per sender, session and message type, starting at 1, at most
-//                                  2³² − 1 (kMaxSequence); a sender ends the session (Goodbye) when
-//                                  one of its streams reaches kSequenceRenewAt (49 days at 1 kHz),
-//                                  and the operator opens a new one
+//                                  2³² − 1 (kMaxSequence). When one of a side's streams reaches
+//                                  kSequenceRenewAt (49 days at 1 kHz) the session ends: the remote
+//                                  node says Goodbye and the operator reconnects; the operator
+//                                  sends a new Hello, which the node takes once the old session
+//                                  has been silent for its peer timeout
 //   offset 12 u48 send_time_us     sender's steady clock at send, whole µs (the low 48 bits: 8.9
 //                                  years of uptime), read back as send_time_ns = 1000·send_time_us
 //
@@ -240,8 +242,8 @@ inline constexpr std::size_t kHeaderTypeOffset = 3;
 /// The header's send time is whole µs in 48 bits.
 inline constexpr std::int64_t kMaxSendTimeUs = (std::int64_t{1} << 48) - 1;
 /// The header's sequence is a u32: a stream's last number, and the number at which its sender ends
-/// the session so that the operator opens a new one (2¹⁶ numbers before the last are left for the
-/// datagrams still sent while it does).
+/// the session so that a new one starts (2¹⁶ numbers before the last are left for the datagrams
+/// still sent while it does).
 inline constexpr std::uint64_t kMaxSequence = 0xFFFF'FFFFu;
 inline constexpr std::uint64_t kSequenceRenewAt = kMaxSequence - (1u << 16);
 /// The newest protocol version whose header and MAC are the 28-byte, 32-byte ones.
