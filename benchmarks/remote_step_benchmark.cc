@@ -86,6 +86,10 @@ int main(int argc, char** argv) {
   app.add_flag("--parallax", parallax,
                "stage 5b reads heights through the displaced surface (DepthRefinementOptions::"
                "parallax)");
+  bool translation_patch = false;
+  app.add_flag("--translation-patch", translation_patch,
+               "stage 5b: each contact's depth over in-plane translations of the tool "
+               "(DepthRefinementOptions::translation_patch)");
   app.add_option("--csv", csv_path, "write one row per scene here");
   app.add_option("--cache-dir", cache_dir, "model cache folder")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
@@ -126,6 +130,7 @@ int main(int argc, char** argv) {
     options.refine_depth = !no_refinement;
     options.share_connected_contacts = !no_sharing;
     options.depth_refinement.parallax = parallax;
+    options.depth_refinement.translation_patch = translation_patch;
     options.depth_refinement.texel_scale_gradient = texel_gradient;
     options.depth_refinement.translation_kink_planes = translation_kinks;
     options.depth_refinement.texel_scale_rotation = !secant_rotation;

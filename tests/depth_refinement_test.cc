@@ -558,6 +558,83 @@ TEST(DepthRefinement, RefinedWithParallaxATiltedFacetsDepthIsTheDisplacedSurface
   }
 }
 
+// The translation patch (DepthRefinementOptions::translation_patch, issue 32's nineteenth stop)
+// under the curved tool on the sinusoid (N = 50: nodes 0.4 mm apart, the patch ±0.8 mm, the
+// period 2 mm). Two routes to each node: the patch's value and the refinement run afresh with the
+// tool translated to that node. The closed form between the nodes: the model with the patch
+// follows the pushing depth max(δ, 0) over the patch where the linear model leaves it within a
+// fraction of the period. At q0 the patch changes nothing.
+TEST(DepthRefinement, TranslationPatchHoldsTheDepthOverTheToolsSlide) {
+  const HapticModel tool = CurvedTool();
+  const HapticModel env = EnvironmentBox(Sinusoid, 1024);
+  DepthRefinementOptions with_patch;
+  with_patch.translation_patch = true;
+  constexpr int n = 50;
+  const double h = 0.02 / n;
+  constexpr int R = kTranslationPatchRadius;
+  for (const double x0 : {0.15e-3, 0.55e-3, -0.4e-3}) {
+    double at = 0.0;
+    const double z0 = ClosedFormDepth(x0, 0.0, at) - 15e-6;
+    const Refined plain = LinearizeAndRefine(tool, CurvedToolPose(x0, z0), env, n);
+    const Refined patched = LinearizeAndRefine(tool, CurvedToolPose(x0, z0), env, n, with_patch);
+    const ContactLinearization& c = patched.refined;
+    // At q0 the contact is the default's.
+    EXPECT_EQ(plain.refined.patch.step_m, 0.0);
+    ASSERT_EQ(c.patch.step_m, h);
+    EXPECT_EQ(c.depth_m, plain.refined.depth_m);
+    EXPECT_EQ(c.gradient.d_translation_W, plain.refined.gradient.d_translation_W);
+    EXPECT_EQ(c.gradient.d_rotation_W, plain.refined.gradient.d_rotation_W);
+    PenetrationGradient g0;
+    EXPECT_DOUBLE_EQ(ContactDepthAt(c, Twist{}, &g0), c.depth_m);
+    EXPECT_NEAR(glm::length(g0.d_translation_W - c.gradient.d_translation_W), 0.0, 1e-12);
+    // Each node against the refinement at the translated pose (the window stays where it is).
+    for (int j = -R; j <= R; ++j) {
+      for (int i = -R; i <= R; ++i) {
+        RigidTransform X_moved = CurvedToolPose(x0, z0);
+        X_moved.translation += glm::dvec3(i * h, j * h, 0.0);
+        const Refined moved = LinearizeAndRefine(tool, X_moved, env, n);
+        const double node =
+            c.depth_m +
+            c.patch.depth_m[static_cast<std::size_t>((j + R) * kTranslationPatchSide + (i + R))];
+        EXPECT_NEAR(node, moved.refined.depth_m, 0.3e-6)
+            << "x0 " << x0 << " node " << i << ", " << j;
+        Twist dq;
+        dq.linear = {i * h, j * h, 0.0};
+        EXPECT_NEAR(ContactDepthAt(c, dq), node, 1e-9) << "the interpolant passes its nodes";
+      }
+    }
+    // Between the nodes, against the closed form (crests run along y: a slide along x).
+    double patch_sq = 0.0, linear_sq = 0.0;
+    for (const double dx : {-0.7e-3, -0.5e-3, -0.3e-3, -0.1e-3, 0.1e-3, 0.3e-3, 0.5e-3, 0.7e-3}) {
+      double unused = 0.0;
+      const double truth = std::max(ClosedFormDepth(x0 + dx, z0, unused), 0.0);
+      Twist dq;
+      dq.linear = {dx, 0.0, 0.0};
+      // The depth that pushes (a separated pose pushes with nothing however far apart: the
+      // 0.4 mm nodes do not hold the trough between two crests' maxima, 0.2 mm wide).
+      const double with = std::max(ContactDepthAt(c, dq), 0.0);
+      const double without = std::max(ContactDepthAt(plain.refined, dq), 0.0);
+      patch_sq += (with - truth) * (with - truth);
+      linear_sq += (without - truth) * (without - truth);
+      std::printf("x0 %+.2f mm dx %+.1f mm: closed form %.2f µm, patch %.2f µm, linear %.2f µm\n",
+                  x0 * 1e3, dx * 1e3, truth * 1e6, with * 1e6, without * 1e6);
+    }
+    const double patch_rms = std::sqrt(patch_sq / 8.0), linear_rms = std::sqrt(linear_sq / 8.0);
+    EXPECT_LT(patch_rms, 0.25 * linear_rms) << "x0 " << x0;
+    EXPECT_LT(patch_rms, 2e-6) << "x0 " << x0;
+  }
+  // A patch with a non-finite node is not read: the planes alone.
+  const Refined r = LinearizeAndRefine(tool, CurvedToolPose(0.15e-3, 10e-6), env, n, with_patch);
+  ContactLinearization broken = r.refined;
+  broken.patch.depth_m[3] = std::numeric_limits<float>::quiet_NaN();
+  ContactLinearization none = r.refined;
+  none.patch.step_m = 0.0;
+  Twist dq;
+  dq.linear = {0.5e-3, 0.2e-3, -1e-6};
+  EXPECT_EQ(ContactDepthAt(broken, dq), ContactDepthAt(none, dq));
+  EXPECT_NE(ContactDepthAt(r.refined, dq), ContactDepthAt(none, dq));
+}
+
 TEST(DepthRefinement, OptionsOutOfRangeAreRefused) {
   DepthRefinementOptions o;
   o.gradient_step_texels = 0.0;

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "haptic_core/byte_order.h"
+#include "haptic_core/contact_model.h"
 #include "legacy_datagram.h"
 
 namespace ht::wire {
@@ -235,7 +236,7 @@ TEST(Messages, FieldsSurviveTheRoundTrip) {
     const ContactModelMessage cm = SampleModel(n);
     const Datagram dc = EncodeContactModel({MessageType::kContactModel, 7, 3, 11}, cm, key);
     ASSERT_EQ(dc.size, kHeaderBytes + kContactModelFixedBytes + n * kContactBytes +
-                           kKinkPlaneCountBytes + kMacBytes);
+                           kKinkPlaneCountBytes + kTranslationPatchCountBytes + kMacBytes);
     ASSERT_EQ(OpenDatagram(dc.view(), key, h, body), DecodeStatus::kOk);
     ContactModelMessage out;
     ASSERT_EQ(DecodeContactModel(body, out), DecodeStatus::kOk) << n;
@@ -358,7 +359,8 @@ TEST(Messages, HeaderFieldsAreCheckedBeforeTheMac) {
   EXPECT_EQ(mutate(0, 0x00), DecodeStatus::kBadMagic);
   EXPECT_EQ(mutate(1, 0x00), DecodeStatus::kBadMagic);
   EXPECT_EQ(mutate(kHeaderVersionOffset, 0x07), DecodeStatus::kBadVersion);  // 7 no longer
-  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x09), DecodeStatus::kBadVersion);
+  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x08), DecodeStatus::kBadVersion);  // nor 8
+  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0a), DecodeStatus::kBadVersion);
   EXPECT_EQ(mutate(kHeaderTypeOffset, 0x7f), DecodeStatus::kUnknownType);
   EXPECT_EQ(mutate(kHeaderTypeOffset, 0x00), DecodeStatus::kUnknownType);
   EXPECT_EQ(mutate(5, 0x01), DecodeStatus::kBadMac);   // session id changed
@@ -694,11 +696,11 @@ TEST(Messages, TheManifestCarriesEverySceneObjectKindAndNoOther) {
 }
 
 TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
-  // Versions 4 to 8 changed neither the Hello body nor the Reject body; version 3's Hello body is
+  // Versions 4 to 9 changed neither the Hello body nor the Reject body; version 3's Hello body is
   // the first 32 bytes (no deadband terms). Versions 2 to 7 had the 28-byte header and the whole
   // 32-byte MAC (test::LegacyDatagram writes them byte by byte).
-  EXPECT_EQ(kProtocolVersion, 8);
-  EXPECT_EQ(kMinProtocolVersion, 8);
+  EXPECT_EQ(kProtocolVersion, 9);
+  EXPECT_EQ(kMinProtocolVersion, 9);
   const MacKey key = TestKey();
   for (const std::uint16_t version : {std::uint16_t{7}, std::uint16_t{6}, std::uint16_t{5},
                                       std::uint16_t{4}, std::uint16_t{3}, std::uint16_t{2}}) {
@@ -762,10 +764,47 @@ TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
              std::span<std::uint8_t, kMacBytes>(newer.bytes.data() + newer.size, kMacBytes));
   newer.size += kMacBytes;
   EXPECT_EQ(OpenForeignHello(newer.view(), key, foreign), DecodeStatus::kBadVersion);
-  for (const std::uint16_t version : {std::uint16_t{1}, std::uint16_t{8}, std::uint16_t{9}}) {
+  for (const std::uint16_t version :
+       {std::uint16_t{1}, std::uint16_t{8}, std::uint16_t{9}, std::uint16_t{10}}) {
     const Datagram d =
         test::LegacyDatagram(version, MessageType::kHello, 1, test::BodyOf(own), key);
     EXPECT_EQ(OpenForeignHello(d.view(), key, foreign), DecodeStatus::kBadVersion) << version;
+  }
+  // Version 8 (this header and MAC, no translation patches): its Hello is this version's with
+  // the version byte 8 and its own MAC; it gets a Reject in this layout with version 8.
+  {
+    HelloMessage hello;
+    hello.client_nonce = 0xbeef08u;
+    hello.min_version = hello.max_version = 8;
+    Datagram v8 = EncodeHello({MessageType::kHello, 0, 1, 0}, hello, key);
+    v8.size -= kMacBytes;
+    v8.bytes[kHeaderVersionOffset] = 8;
+    ComputeMac(v8.view(), key,
+               std::span<std::uint8_t, kMacBytes>(v8.bytes.data() + v8.size, kMacBytes));
+    v8.size += kMacBytes;
+    Header h8;
+    std::span<const std::uint8_t> body8;
+    EXPECT_EQ(OpenDatagram(v8.view(), key, h8, body8), DecodeStatus::kBadVersion);
+    ASSERT_EQ(OpenForeignHello(v8.view(), key, foreign), DecodeStatus::kOk);
+    EXPECT_EQ(foreign.header_version, 8);
+    EXPECT_EQ(foreign.max_version, 8);
+    EXPECT_EQ(foreign.client_nonce, 0xbeef08u);
+    EXPECT_EQ(OpenForeignHello(v8.view(), TestKey(3), foreign), DecodeStatus::kBadMac);
+    EXPECT_EQ(OpenForeignHello(v8.view().first(kHeaderBytes + 11 + kMacBytes), key, foreign),
+              DecodeStatus::kTooShort);
+    RejectMessage reject;
+    reject.client_nonce = 0xbeef08u;
+    reject.reason = RejectReason::kVersion;
+    const Datagram r8 = EncodeReject({MessageType::kReject, 0, 1, 0}, reject, key, 8);
+    EXPECT_EQ(LoadLe<std::uint16_t>(r8.bytes.data()), kMagic);
+    EXPECT_EQ(r8.bytes[kHeaderVersionOffset], 8);
+    EXPECT_EQ(r8.bytes[kHeaderTypeOffset], static_cast<std::uint8_t>(MessageType::kReject));
+    EXPECT_TRUE(VerifyMac(r8.view(), key));
+    RejectMessage back;
+    ASSERT_EQ(
+        DecodeReject(r8.view().subspan(kHeaderBytes, r8.size - kHeaderBytes - kMacBytes), back),
+        DecodeStatus::kOk);
+    EXPECT_EQ(back.client_nonce, 0xbeef08u);
   }
   const Datagram r =
       EncodeReject({MessageType::kReject, 0, 1, 0}, RejectMessage{}, key, kProtocolVersion);
@@ -885,7 +924,8 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
       EXPECT_EQ(d.size, kHeaderBytes +
                             (compact ? kCompactContactModelFixedBytes + n * kCompactContactBytes
                                      : kContactModelFixedBytes + n * kContactBytes) +
-                            kKinkPlaneCountBytes + sent * kKinkPlaneBytes + kMacBytes);
+                            kKinkPlaneCountBytes + sent * kKinkPlaneBytes +
+                            kTranslationPatchCountBytes + kMacBytes);
       Header h;
       std::span<const std::uint8_t> body;
       ASSERT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kOk);
@@ -921,7 +961,8 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
     m.model.contacts[1].num_kink_planes = kMaxKinkPlanes;
     const Datagram good =
         compact ? EncodeCompactContactModel({}, m, key) : EncodeContactModel({}, m, key);
-    const std::size_t planes_at = good.size - kMacBytes - kMaxKinkPlanes * kKinkPlaneBytes;
+    const std::size_t planes_at =
+        good.size - kMacBytes - kTranslationPatchCountBytes - kMaxKinkPlanes * kKinkPlaneBytes;
     const auto patched = [&](auto&& edit) {
       Datagram d = good;
       d.size -= kMacBytes;
@@ -936,8 +977,11 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
     // kMaxKinkPlanes + 1 planes of contact 1: append one more, counted.
     EXPECT_EQ(patched([&](Datagram& d) {
                 d.bytes[planes_at - 1] = kMaxKinkPlanes + 1;
-                std::copy_n(d.bytes.begin() + planes_at, kKinkPlaneBytes, d.bytes.begin() + d.size);
+                // Over the patch count (0), which then follows it again.
+                std::copy_n(d.bytes.begin() + planes_at, kKinkPlaneBytes,
+                            d.bytes.begin() + d.size - 1);
                 d.size += kKinkPlaneBytes;
+                d.bytes[d.size - 1] = 0;
               }),
               DecodeStatus::kBadValue);
     const float nan = std::nanf("");
@@ -948,6 +992,133 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
               DecodeStatus::kNonFinite);
     // A count above what fits: refused before any plane is read.
     EXPECT_EQ(patched([&](Datagram& d) { d.bytes[planes_at - 1] = 255; }), DecodeStatus::kBadCount);
+  }
+}
+
+// Translation patches (protocol version 9): each contact's patch travels with it in both
+// encodings, its nodes within half a quantization step (scale/2) and its axes within one i16 step,
+// so that the depth the operator's loop reads at a displaced pose is the sender's within a
+// fraction of a micrometre; a model with more patches than fit sends the first ones; a patch that
+// is not finite at the sender is not sent; a receiver refuses an index out of range, a second
+// patch of one contact, a marked node, a zero step and a count above what fits.
+TEST(Messages, TranslationPatchesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
+  const MacKey key = TestKey();
+  std::mt19937 rng(909);
+  std::uniform_real_distribution<double> node(-300e-6, 300e-6);
+  const auto with_patches = [&](int n) {
+    ContactModelMessage m = SampleModel(n);
+    for (int i = 0; i < n; ++i) {
+      TranslationPatch& p = m.model.contacts[i].patch;
+      p.step_m = 0.4e-3 + 1e-5 * i;
+      const double a = 0.3 * i;
+      p.axis_u_W = {std::cos(a), std::sin(a), 0.0};
+      p.axis_v_W = {-std::sin(a), std::cos(a), 0.0};
+      for (float& v : p.depth_m) v = static_cast<float>(node(rng));
+      p.depth_m[kTranslationPatchSide * kTranslationPatchSide / 2] = 0.0f;
+    }
+    return m;
+  };
+  for (const bool compact : {false, true}) {
+    for (const int n : {1, 3, 7, kMaxWireContacts}) {
+      const ContactModelMessage m = with_patches(n);
+      const Datagram d =
+          compact ? EncodeCompactContactModel({}, m, key) : EncodeContactModel({}, m, key);
+      ASSERT_LE(d.size, kMaxDatagramBytes);
+      const int fit =
+          compact
+              ? TranslationPatchCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, n, 0)
+              : TranslationPatchCapacity(kContactModelFixedBytes, kContactBytes, n, 0);
+      const int sent = std::min(n, fit);
+      EXPECT_EQ(d.size, kHeaderBytes +
+                            (compact ? kCompactContactModelFixedBytes + n * kCompactContactBytes
+                                     : kContactModelFixedBytes + n * kContactBytes) +
+                            kKinkPlaneCountBytes + kTranslationPatchCountBytes +
+                            sent * kTranslationPatchBytes + kMacBytes);
+      Header h;
+      std::span<const std::uint8_t> body;
+      ASSERT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kOk);
+      ContactModelMessage out;
+      ASSERT_EQ(compact ? DecodeCompactContactModel(body, out) : DecodeContactModel(body, out),
+                DecodeStatus::kOk)
+          << compact << " " << n;
+      for (int i = 0; i < n; ++i) {
+        const TranslationPatch& a = m.model.contacts[i].patch;
+        const TranslationPatch& b = out.model.contacts[i].patch;
+        if (i >= sent) {
+          EXPECT_EQ(b.step_m, 0.0) << "left out: the planes alone";
+          continue;
+        }
+        EXPECT_EQ(b.step_m, static_cast<double>(static_cast<float>(a.step_m)));
+        EXPECT_LT(glm::length(b.axis_u_W - a.axis_u_W), 2.0 / kCompactI16Max);
+        EXPECT_LT(glm::length(b.axis_v_W - a.axis_v_W), 2.0 / kCompactI16Max);
+        double largest = 0.0;
+        for (const float v : a.depth_m) largest = std::max(largest, std::abs(double{v}));
+        for (std::size_t k = 0; k < a.depth_m.size(); ++k) {
+          EXPECT_NEAR(b.depth_m[k], a.depth_m[k], 0.5 * largest / kCompactI16Max + 1e-9) << k;
+        }
+        // What the loop reads 0.5 mm and 0.3 mm away.
+        Twist dq;
+        dq.linear = {0.5e-3, -0.3e-3, 0.0};
+        ContactLinearization ca = m.model.contacts[i];
+        ContactLinearization cb = out.model.contacts[i];
+        cb.depth_m = ca.depth_m;  // the compact contact's own f32 rounding left aside
+        cb.gradient = ca.gradient;
+        EXPECT_NEAR(ContactDepthAt(cb, dq), ContactDepthAt(ca, dq), 0.05e-6) << compact << i;
+      }
+    }
+  }
+  // A patch with a NaN node is not sent; its contact goes with its planes alone.
+  {
+    ContactModelMessage m = with_patches(2);
+    m.model.contacts[0].patch.depth_m[3] = std::numeric_limits<float>::quiet_NaN();
+    for (const bool compact : {false, true}) {
+      const Datagram d =
+          compact ? EncodeCompactContactModel({}, m, key) : EncodeContactModel({}, m, key);
+      Header h;
+      std::span<const std::uint8_t> body;
+      ASSERT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kOk);
+      ContactModelMessage out;
+      ASSERT_EQ(compact ? DecodeCompactContactModel(body, out) : DecodeContactModel(body, out),
+                DecodeStatus::kOk);
+      EXPECT_EQ(out.model.contacts[0].patch.step_m, 0.0);
+      EXPECT_GT(out.model.contacts[1].patch.step_m, 0.0);
+    }
+  }
+  // Refused.
+  for (const bool compact : {false, true}) {
+    const ContactModelMessage m = with_patches(2);
+    const Datagram good =
+        compact ? EncodeCompactContactModel({}, m, key) : EncodeContactModel({}, m, key);
+    const std::size_t patches_at = good.size - kMacBytes - 2 * kTranslationPatchBytes;
+    const auto patched = [&](auto&& edit) {
+      Datagram d = good;
+      d.size -= kMacBytes;
+      edit(d);
+      ComputeMac(d.view(), key,
+                 std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size, kMacBytes));
+      d.size += kMacBytes;
+      return OpenAndDecode(d.view(), key);
+    };
+    EXPECT_EQ(patched([](Datagram&) {}), DecodeStatus::kOk);
+    EXPECT_EQ(patched([&](Datagram& d) { d.bytes[patches_at] = 2; }), DecodeStatus::kBadValue);
+    EXPECT_EQ(patched([&](Datagram& d) { d.bytes[patches_at + kTranslationPatchBytes] = 0; }),
+              DecodeStatus::kBadValue)
+        << "a second patch of contact 0";
+    // The first node (after u8 contact, f32 step, 6×i16 axes, f32 scale) marked not finite.
+    const std::size_t node0 = patches_at + 1 + 4 + 12 + 4;
+    EXPECT_EQ(patched([&](Datagram& d) {
+                d.bytes[node0] = 0x00;
+                d.bytes[node0 + 1] = 0x80;
+              }),
+              DecodeStatus::kNonFinite);
+    EXPECT_EQ(patched([&](Datagram& d) { std::fill_n(&d.bytes[patches_at + 1], 4, 0); }),
+              DecodeStatus::kBadValue)
+        << "a zero step";
+    EXPECT_EQ(patched([&](Datagram& d) { std::fill_n(&d.bytes[patches_at + 5], 6, 0); }),
+              DecodeStatus::kBadValue)
+        << "a zero axis";
+    EXPECT_EQ(patched([&](Datagram& d) { d.bytes[patches_at - 1] = 255; }),
+              DecodeStatus::kBadCount);
   }
 }
 

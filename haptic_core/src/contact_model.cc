@@ -1,10 +1,79 @@
 #include "haptic_core/contact_model.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 
 namespace ht {
+namespace {
+
+// Catmull–Rom weights of the nodes −1, 0, 1, 2 of a unit segment at f ∈ [0, 1], and their
+// derivatives along f.
+void CatmullRomWeights(double f, std::array<double, 4>& w, std::array<double, 4>& dw) noexcept {
+  const double f2 = f * f, f3 = f2 * f;
+  w = {0.5 * (-f3 + 2.0 * f2 - f), 0.5 * (3.0 * f3 - 5.0 * f2 + 2.0),
+       0.5 * (-3.0 * f3 + 4.0 * f2 + f), 0.5 * (f3 - f2)};
+  dw = {0.5 * (-3.0 * f2 + 4.0 * f - 1.0), 0.5 * (9.0 * f2 - 10.0 * f),
+        0.5 * (-9.0 * f2 + 8.0 * f + 1.0), 0.5 * (3.0 * f2 - 2.0 * f)};
+}
+
+// The translation patch's residual at the in-plane displacement Δq.linear (TranslationPatch): the
+// bicubic interpolant of its nodes (linear ghosts one node past each edge; the displacement
+// clamped to the patch) less its tangent at q0. Its gradient along u and v (W) is added to
+// `d_translation` where the displacement lies inside the patch. 0 for no patch or a non-finite
+// one.
+double PatchResidual(const TranslationPatch& p, const glm::dvec3& dx,
+                     glm::dvec3& d_translation) noexcept {
+  constexpr int R = kTranslationPatchRadius;
+  constexpr int S = kTranslationPatchSide;
+  const double h = p.step_m;
+  if (!(h > 0.0) || !std::isfinite(h)) return 0.0;
+  for (const float v : p.depth_m) {
+    if (!std::isfinite(v)) return 0.0;
+  }
+  const auto node = [&](int i, int j) {
+    return static_cast<double>(p.depth_m[(j + R) * S + (i + R)]);
+  };
+  // Nodes −R−1 … R+1: past an edge, the line through the edge's two nodes.
+  const auto at = [&](int i, int j) {
+    const auto row = [&](int ii) {
+      if (j < -R) return 2.0 * node(ii, -R) - node(ii, -R + 1);
+      if (j > R) return 2.0 * node(ii, R) - node(ii, R - 1);
+      return node(ii, j);
+    };
+    if (i < -R) return 2.0 * row(-R) - row(-R + 1);
+    if (i > R) return 2.0 * row(R) - row(R - 1);
+    return row(i);
+  };
+  const double x_raw = glm::dot(dx, p.axis_u_W) / h;
+  const double y_raw = glm::dot(dx, p.axis_v_W) / h;
+  if (!std::isfinite(x_raw) || !std::isfinite(y_raw)) return 0.0;
+  const double x = std::clamp(x_raw, -static_cast<double>(R), static_cast<double>(R));
+  const double y = std::clamp(y_raw, -static_cast<double>(R), static_cast<double>(R));
+  const int i0 = std::min(static_cast<int>(std::floor(x)), R - 1);
+  const int j0 = std::min(static_cast<int>(std::floor(y)), R - 1);
+  std::array<double, 4> wx, dwx, wy, dwy;
+  CatmullRomWeights(x - i0, wx, dwx);
+  CatmullRomWeights(y - j0, wy, dwy);
+  double value = 0.0, d_x = 0.0, d_y = 0.0;
+  for (int b = 0; b < 4; ++b) {
+    for (int a = 0; a < 4; ++a) {
+      const double v = at(i0 - 1 + a, j0 - 1 + b);
+      value += wx[static_cast<std::size_t>(a)] * wy[static_cast<std::size_t>(b)] * v;
+      d_x += dwx[static_cast<std::size_t>(a)] * wy[static_cast<std::size_t>(b)] * v;
+      d_y += wx[static_cast<std::size_t>(a)] * dwy[static_cast<std::size_t>(b)] * v;
+    }
+  }
+  // The interpolant's tangent at q0 (per node spacing): its central differences there.
+  const double g_x = 0.5 * (node(1, 0) - node(-1, 0));
+  const double g_y = 0.5 * (node(0, 1) - node(0, -1));
+  if (x == x_raw) d_translation += ((d_x - g_x) / h) * p.axis_u_W;
+  if (y == y_raw) d_translation += ((d_y - g_y) / h) * p.axis_v_W;
+  return value - (g_x * x + g_y * y);
+}
+
+}  // namespace
 
 double ContactDepthAt(const ContactLinearization& c, const Twist& dq, PenetrationGradient* gradient,
                       Stiffness6* curvature) noexcept {
@@ -83,8 +152,10 @@ double ContactDepthAt(const ContactLinearization& c, const Twist& dq, Penetratio
     blend_t /= weight;
     blend_r /= weight;
   }
-  if (gradient != nullptr) *gradient = {t_top + blend_t, r_top + blend_r};
-  return depth + lift - lift0;
+  glm::dvec3 patch_t(0.0);
+  const double patch = PatchResidual(c.patch, dq.linear, patch_t);
+  if (gradient != nullptr) *gradient = {t_top + blend_t + patch_t, r_top + blend_r};
+  return depth + lift - lift0 + patch;
 }
 
 ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const RigidTransform& X_WT,

@@ -15,6 +15,7 @@ namespace ht {
 namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr float kInf32 = std::numeric_limits<float>::infinity();
 // Barycentric tolerance of a point on a triangle's edge (the render's kEdgeTolerance).
 constexpr double kEdgeTolerance = -1e-9;
 // Spacing of a seed's sub-grid, in level-0 texels (the pattern search refines from its best).
@@ -449,6 +450,11 @@ DepthRefiner::DepthRefiner(const DepthRefinementOptions& options, std::size_t ma
   env_all_.reserve(max_triangles);
   tool_all_.reserve(max_triangles);
   tool_pose_all_.reserve(max_triangles);
+  if (options_.translation_patch) {
+    constexpr std::size_t kSide = 160 + 2 * kTranslationPatchRadius;
+    patch_env_heights_.reserve(kSide * kSide);
+    patch_tool_heights_.reserve(kSide * kSide);
+  }
   if (options_.conservative_screen) {
     for (auto& v : env_screen_) v.reserve(max_triangles);
     for (auto& v : tool_screen_) v.reserve(max_triangles);
@@ -907,6 +913,94 @@ int DepthRefiner::TranslationKinkPlanes(std::span<const Seed> found, const Seed&
   return added;
 }
 
+void DepthRefiner::FillTranslationPatch(const RigidTransform& X_WT, const Seed& deepest,
+                                        std::span<const Seed> found, double h,
+                                        ContactLinearization& lin) noexcept {
+  constexpr int R = kTranslationPatchRadius;
+  constexpr int S = kTranslationPatchSide;
+  const ContactWindow& w = window_;
+  TranslationPatch& patch = lin.patch;
+  patch = TranslationPatch{};
+  patch.step_m = h;
+  patch.axis_u_W = w.axis_u_W;
+  patch.axis_v_W = w.axis_v_W;
+  const double slope_u = glm::dot(lin.gradient.d_translation_W, w.axis_u_W);
+  const double slope_v = glm::dot(lin.gradient.d_translation_W, w.axis_v_W);
+  // The window's grid at the base pose, the tool's grown by R cells: node (i, j), the tool moved
+  // by (i, j) cells, is the tool's render read (−i, −j) cells over (as the four rendered
+  // translation samples are), so each node's deepest cell is found over the whole window.
+  const int n = w.resolution, nt = n + 2 * R;
+  patch_env_heights_.assign(static_cast<std::size_t>(n) * n, -kInf32);
+  patch_tool_heights_.assign(static_cast<std::size_t>(nt) * nt, kInf32);
+  RenderPatchHeightsFast(*env_, X_WO_, env_list_, w, PatchSide::kEnvironment, 0,
+                         patch_env_heights_);
+  RenderPatchHeightsFast(*tool_, X_WT, tool_list_, w, PatchSide::kTool, R, patch_tool_heights_);
+  std::array<Seed, static_cast<std::size_t>(S * S)> at{};
+  at.fill(Seed{-kInf, 0.0, 0.0});
+  const auto index = [](int i, int j) { return static_cast<std::size_t>((j + R) * S + (i + R)); };
+  at[index(0, 0)] = deepest;
+  // The rendered samples one step away (1: +u, 2: −u, 3: +v, 4: −v), already refined.
+  const std::array<std::array<int, 2>, 4> rendered{{{1, 0}, {-1, 0}, {0, 1}, {0, -1}}};
+  for (std::size_t k = 0; k < rendered.size() && k < found.size(); ++k) {
+    at[index(rendered[k][0], rendered[k][1])] = found[k];
+  }
+  const double cell = w.cell_size_m();
+  // Ring by ring, so that each node's neighbour towards q0 is done first.
+  for (int ring = 1; ring <= R; ++ring) {
+    for (int j = -ring; j <= ring; ++j) {
+      for (int i = -ring; i <= ring; ++i) {
+        if (std::max(std::abs(i), std::abs(j)) != ring) continue;
+        Seed& node = at[index(i, j)];
+        if (node.depth_m > -kInf) continue;  // a refined rendered sample
+        const double shift_s = i * h, shift_t = j * h;
+        // A pattern search from (s, t) over a square of half side `half` (sub-sampled on the
+        // grid's cell when `subgrid`).
+        const auto climb = [&](double s, double t, double half, bool subgrid) {
+          const Box box{s - half - cell, s + half + cell, t - half - cell, t + half + cell};
+          GatherEnvironment(box.s0, box.s1, box.t0, box.t1);
+          GatherTool(tool_all_, box.s0 - shift_s, box.s1 - shift_s, box.t0 - shift_t,
+                     box.t1 - shift_t);
+          if (env_local_.empty() || tool_local_.empty()) return;
+          const double texel = TexelOfGathered(tool_local_);
+          const double floor_m = options_.search_floor_texels * texel;
+          const int g =
+              subgrid
+                  ? std::clamp(static_cast<int>(std::ceil(2.0 * half / (kSubsampleTexels * texel))),
+                               1, options_.max_subsamples)
+                  : 1;
+          const Seed r = Search(tool_local_, box, s, t, half, g, 0.5 * (2.0 * half / g), floor_m,
+                                shift_s, shift_t);
+          if (r.depth_m > node.depth_m) node = r;
+        };
+        const DepthSample grid = DirectionalPenetrationDepthShifted(patch_env_heights_, n,
+                                                                    patch_tool_heights_, R, -i, -j);
+        if (grid.cell >= 0) {
+          double s = 0.0, t = 0.0;
+          CellCoordinates(w, grid.cell, s, t);
+          climb(s, t, 0.75 * cell, options_.subgrid_translations);
+        }
+        // The neighbour one step nearer q0: its maximum carried by that step (a tool feature).
+        const int ni = i - (i > 0) + (i < 0), nj = j - (j > 0) + (j < 0);
+        const Seed& near = at[index(ni, nj)];
+        if (near.depth_m > -kInf) {
+          climb(near.s + (i - ni) * h, near.t + (j - nj) * h, 0.25 * h, false);
+          climb(near.s, near.t, 0.25 * h, false);
+        }
+      }
+    }
+  }
+  for (int j = -R; j <= R; ++j) {
+    for (int i = -R; i <= R; ++i) {
+      const Seed& node = at[index(i, j)];
+      const double value = (node.depth_m > -kInf && std::isfinite(node.depth_m))
+                               ? node.depth_m - deepest.depth_m
+                               : (slope_u * i + slope_v * j) * h;
+      patch.depth_m[index(i, j)] = static_cast<float>(value);
+    }
+  }
+  patch.depth_m[index(0, 0)] = 0.0f;
+}
+
 double DepthRefiner::TexelOfGathered(std::span<const Projected> tool_tris) const noexcept {
   double texel = kInf;
   for (const Projected& P : env_local_) {
@@ -1109,6 +1203,13 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
   if (options_.texel_scale_gradient && options_.refine_rendered_samples &&
       options_.translation_kink_planes) {
     TranslationKinkPlanes(translation_found, deepest, big.h_x, lin);
+  }
+  lin.patch = TranslationPatch{};
+  if (options_.translation_patch) {
+    const std::uint64_t before = evaluations_;
+    FillTranslationPatch(X_WT, deepest, translation_found, big.h_x, lin);
+    counters_.translation_patches += 1;
+    counters_.evaluations += evaluations_ - before;
   }
   return true;
 }

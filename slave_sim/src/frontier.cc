@@ -233,6 +233,16 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
       kinks.secant_at_kinks_m = um * 1e-6;
       s.push_back(kinks);
     }
+    // Issue 32, nineteenth stop: each contact's depth over in-plane translations (a 5×5 patch at
+    // the grid's step), for the model-prediction measure.
+    FrontierSetting patch = refined;
+    patch.name = "translation_patch";
+    patch.translation_patch = true;
+    s.push_back(patch);
+    FrontierSetting patch_texel = translation_only;
+    patch_texel.name = "translation_patch_texel_translation_gradient";
+    patch_texel.translation_patch = true;
+    s.push_back(patch_texel);
     // Stage 5b read through the displaced surface (parallax), alone and with the texel-scale
     // translation slope.
     FrontierSetting parallax = refined;
@@ -501,10 +511,11 @@ std::string MachineLine() {
 // Runs the timed steps of one setting on one scene (single thread).
 double SquaredNorm(const glm::dvec3& v) { return glm::dot(v, v); }
 
-// The displacements of the model-prediction measure: ±1 mrad about W's x and y and ±0.1 mm along
-// them, about the tool's centre of mass (a tilt of a resting face either way, a slide).
-std::array<Twist, 8> PredictionDisplacements() {
-  const double a = 1e-3, d = 1e-4;
+// The displacements of the model-prediction measure: ±a about W's x and y and ±d along them
+// (FrontierOptions::prediction_rotation_rad, prediction_translation_m: 1 mrad and 0.1 mm by
+// default), about the tool's centre of mass (a tilt of a resting face either way, a slide).
+std::array<Twist, 8> PredictionDisplacements(const FrontierOptions& options) {
+  const double a = options.prediction_rotation_rad, d = options.prediction_translation_m;
   return {Twist{{0, 0, 0}, {a, 0, 0}},  Twist{{0, 0, 0}, {-a, 0, 0}}, Twist{{0, 0, 0}, {0, a, 0}},
           Twist{{0, 0, 0}, {0, -a, 0}}, Twist{{d, 0, 0}, {0, 0, 0}},  Twist{{-d, 0, 0}, {0, 0, 0}},
           Twist{{0, d, 0}, {0, 0, 0}},  Twist{{0, -d, 0}, {0, 0, 0}}};
@@ -516,11 +527,12 @@ std::size_t PredictionStride(std::size_t poses) { return std::max<std::size_t>(1
 // The displaced tool-mesh poses X_WFt of the prediction measure: each sampled pose's tool (frame
 // T, X_TFt from the mesh frame) displaced by each of PredictionDisplacements().
 std::vector<RigidTransform> PredictionPoses(const std::vector<RigidTransform>& poses_WFt,
-                                            const RigidTransform& X_TFt) {
+                                            const RigidTransform& X_TFt,
+                                            const FrontierOptions& options) {
   std::vector<RigidTransform> out;
   const RigidTransform X_FtT = X_TFt.Inverse();
   for (std::size_t k = 0; k < poses_WFt.size(); k += PredictionStride(poses_WFt.size())) {
-    for (const Twist& d : PredictionDisplacements()) {
+    for (const Twist& d : PredictionDisplacements(options)) {
       out.push_back(Displace(poses_WFt[k] * X_FtT, d) * X_TFt);
     }
   }
@@ -528,7 +540,8 @@ std::vector<RigidTransform> PredictionPoses(const std::vector<RigidTransform>& p
 }
 
 void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& poses_WFt,
-                const MeshContactBaseline& fcl, int switch_lag, SettingRun& run) {
+                const MeshContactBaseline& fcl, int switch_lag,
+                const FrontierOptions& frontier_options, SettingRun& run) {
   const FrontierSetting& st = run.setting;
   run.X_TFt = scene.X_TFt;
   run.tool_coarse_triangles = scene.tool_coarse_triangles;
@@ -603,6 +616,7 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.depth_refinement.subgrid_translations = st.subgrid_translations;
   options.depth_refinement.conservative_screen = st.conservative_screen;
   options.depth_refinement.parallax = st.parallax;
+  options.depth_refinement.translation_patch = st.translation_patch;
   if (st.gradient_step_texels > 0.0)
     options.depth_refinement.gradient_step_texels = st.gradient_step_texels;
   // The texture stage's threads are the coarse query's too, as in the product.
@@ -643,7 +657,7 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   const std::size_t stride = PredictionStride(poses_WFt.size());
   for (std::size_t k = 0; k < poses_WFt.size(); k += stride) {
     const RigidTransform X_WT = poses_WFt[k] * X_FtT;
-    for (const Twist& d : PredictionDisplacements()) {
+    for (const Twist& d : PredictionDisplacements(frontier_options)) {
       run.predicted.push_back(EvaluateContactModel(models[k], Displace(X_WT, d)).F_T_W);
     }
   }
@@ -1116,7 +1130,7 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
         run.tool_surface = models.tool_surface;
         run.object_surface = models.object_surface;
         const auto t0 = Clock::now();
-        RunSetting(scene, poses, fcl, consecutive ? options.switch_lag_rows : 0, run);
+        RunSetting(scene, poses, fcl, consecutive ? options.switch_lag_rows : 0, options, run);
         for (ContactRecord& c : run.contacts) {
           const std::string key =
               GtKey(c.pose, run.X_TFt, c.query.window, c.query.stiffness_n_per_m);
@@ -1155,7 +1169,7 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
     // The truth at the prediction measure's displaced poses.
     std::vector<PoseTruth> displaced_truth;
     if (options.model_prediction) {
-      const std::vector<RigidTransform> displaced = PredictionPoses(poses, ref.X_TFt);
+      const std::vector<RigidTransform> displaced = PredictionPoses(poses, ref.X_TFt, options);
       say("%s: pipeline truth of %zu displaced poses (model prediction)", name.c_str(),
           displaced.size());
       RunPipelineTruth(ref, tool_rays, object_rays, displaced, options, displaced_truth);
@@ -1413,8 +1427,11 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
        "err` (RMS; pose p50), torque, direction and δ errors and missed / invented windows use "
        "it; poses missed / invented are against FCL's intersection test.\n"
        "- **Model prediction** (issue 31, change 5), what the operator's 1 kHz loop renders "
-       "between two models: the contact models of about 20 poses spread evenly, evaluated 1 mrad "
-       "either way about W's x and y and 0.1 mm either way along them, against the **pipeline "
+       "between two models: the contact models of about 20 poses spread evenly, evaluated "
+    << Fmt(options.prediction_rotation_rad * 1e3, 3) << " mrad either way about W's x and y and "
+    << Fmt(options.prediction_translation_m * 1e3, 3)
+    << " mm either way along them (`--prediction-rotation-mrad`, `--prediction-translation-mm`), "
+       "against the **pipeline "
        "truth** at those displaced poses; `model prediction F / τ err` is the relative RMS over "
        "them. A face resting on ridges tilted past its V's vertex gets the other edge's torque "
        "only from a model that carries the kink.\n\n"

@@ -88,6 +88,18 @@ int main(int argc, char** argv) {
   app.add_flag("--no-model-prediction", no_model_prediction,
                "skip the model-prediction measure (a second pipeline truth at displaced, deeper "
                "poses, which takes about as long as the first); its columns are left empty");
+  double prediction_mm = options.prediction_translation_m * 1e3;
+  app.add_option("--prediction-translation-mm", prediction_mm,
+                 "model-prediction measure: displace the tool by ± this along W's x and y (mm); "
+                 "a round trip's travel (0.5–1 mm at 10–20 mm/s and 50 ms) asks more of a model "
+                 "than the default")
+      ->check(CLI::Range(1e-4, 10.0))
+      ->capture_default_str();
+  double prediction_mrad = options.prediction_rotation_rad * 1e3;
+  app.add_option("--prediction-rotation-mrad", prediction_mrad,
+                 "model-prediction measure: tilt the tool by ± this about W's x and y (mrad)")
+      ->check(CLI::Range(1e-3, 100.0))
+      ->capture_default_str();
   app.add_flag("--quiet", quiet, "no progress lines");
   if (const auto rc = ht::ParseCommandLine(app, argc, argv, "speed_error_frontier")) return *rc;
   std::string command = "speed_error_frontier";
@@ -104,6 +116,8 @@ int main(int argc, char** argv) {
     options.truth_merge_patches = !truth_no_merge;
     options.truth_share_fade_m = truth_share_fade_mm * 1e-3;
     options.model_prediction = !no_model_prediction;
+    options.prediction_translation_m = prediction_mm * 1e-3;
+    options.prediction_rotation_rad = prediction_mrad * 1e-3;
     options.progress = !quiet;
     options.command_line = command;
     // The plot script: in the source tree (a build), else beside an installed binary.

@@ -391,20 +391,171 @@ bool DistributeKinkPlanes(std::span<const WireKinkPlane> planes, std::size_t n,
 
 /// The kink-plane section after the contacts (protocol.h): the Writer and the Sizer flatten the
 /// model's planes, the Reader reads them and gives them to their contacts.
-constexpr void KinkPlanes(auto& a, auto& model, std::size_t n, int capacity) {
+constexpr std::size_t KinkPlanes(auto& a, auto& model, std::size_t n, int capacity) {
   std::array<WireKinkPlane, kMaxWireKinkPlanes> planes{};
   std::size_t k = 0;
   if constexpr (!requires { a.Reject(DecodeStatus::kOk); }) {
     k = FlattenKinkPlanes(model, n, capacity, planes);
-    const std::size_t sent =
-        Count<std::uint8_t>(a, k, static_cast<std::size_t>(capacity), kKinkPlaneBytes);
+    const std::size_t sent = CountBefore<std::uint8_t>(
+        a, k, static_cast<std::size_t>(capacity), kKinkPlaneBytes, kTranslationPatchCountBytes);
     for (std::size_t j = 0; j < std::min(sent, k); ++j) Fields(a, planes[j]);
+    return std::min(sent, k);
   } else {
-    k = Count<std::uint8_t>(a, k, static_cast<std::size_t>(std::max(capacity, 0)), kKinkPlaneBytes);
+    k = CountBefore<std::uint8_t>(a, k, static_cast<std::size_t>(std::max(capacity, 0)),
+                                  kKinkPlaneBytes, kTranslationPatchCountBytes);
     for (std::size_t j = 0; j < k; ++j) Fields(a, planes[j]);
     if (a.ok() && !DistributeKinkPlanes({planes.data(), k}, n, model)) {
       a.Reject(DecodeStatus::kBadValue);
     }
+    return k;
+  }
+}
+
+/// One translation patch as it is on the wire (protocol.h, version 9).
+struct WirePatch {
+  std::uint8_t contact = 0;
+  float step_m = 0.0f;
+  std::array<std::int16_t, 3> axis_u{};  ///< unit vector · kCompactI16Max
+  std::array<std::int16_t, 3> axis_v{};
+  float scale_m = 0.0f;  ///< m per node unit
+  std::array<std::int16_t, kTranslationPatchNodes> nodes{};
+};
+
+constexpr void Fields(auto& a, Of<WirePatch> auto& p) {
+  a(p.contact);
+  a(p.step_m);
+  for (auto& v : p.axis_u) a(v);
+  for (auto& v : p.axis_v) a(v);
+  a(p.scale_m);
+  for (auto& v : p.nodes) a(v);
+}
+
+static_assert(kTranslationPatchNodes + 1 == kTranslationPatchSide * kTranslationPatchSide);
+
+/// The patch's index of wire node k (the centre left out).
+constexpr std::size_t PatchIndexOfWireNode(int k) noexcept {
+  constexpr int centre = (kTranslationPatchSide * kTranslationPatchSide) / 2;
+  return static_cast<std::size_t>(k < centre ? k : k + 1);
+}
+
+/// round(v) within ±kCompactI16Max; constexpr-friendly (no std::round).
+constexpr std::int16_t PatchI16(double v) noexcept {
+  const double limit = kCompactI16Max;
+  const double c = v < -limit ? -limit : (v > limit ? limit : v);
+  return static_cast<std::int16_t>(c < 0.0 ? c - 0.5 : c + 0.5);
+}
+
+/// `p` as it goes on the wire for contact `contact`; false (nothing to send) for no patch or a
+/// non-finite one.
+constexpr bool QuantizePatch(const TranslationPatch& p, std::uint8_t contact,
+                             WirePatch& out) noexcept {
+  const auto finite = [](double v) { return v == v && v - v == 0.0; };
+  if (!(p.step_m > 0.0) || !finite(p.step_m)) return false;
+  double largest = 0.0;
+  for (const float v : p.depth_m) {
+    if (!finite(v)) return false;
+    largest = std::max(largest, v < 0.0f ? -static_cast<double>(v) : static_cast<double>(v));
+  }
+  for (int k = 0; k < 3; ++k) {
+    if (!finite(p.axis_u_W[k]) || !finite(p.axis_v_W[k])) return false;
+  }
+  out = {};
+  out.contact = contact;
+  out.step_m = static_cast<float>(p.step_m);
+  for (int k = 0; k < 3; ++k) {
+    out.axis_u[static_cast<std::size_t>(k)] = PatchI16(p.axis_u_W[k] * kCompactI16Max);
+    out.axis_v[static_cast<std::size_t>(k)] = PatchI16(p.axis_v_W[k] * kCompactI16Max);
+  }
+  out.scale_m = static_cast<float>(largest / kCompactI16Max);
+  const double scale = static_cast<double>(out.scale_m);
+  for (int k = 0; k < kTranslationPatchNodes; ++k) {
+    const double v = p.depth_m[PatchIndexOfWireNode(k)];
+    out.nodes[static_cast<std::size_t>(k)] = scale > 0.0 ? PatchI16(v / scale) : 0;
+  }
+  return true;
+}
+
+/// The patches of contacts [0, n) of `model` in wire order (contact by contact, those that have
+/// one), at most `capacity`, into `out`; returns how many.
+constexpr std::size_t FlattenPatches(const ContactModel& model, std::size_t n, int capacity,
+                                     std::span<WirePatch> out) noexcept {
+  std::size_t k = 0;
+  const std::size_t cap = std::min(out.size(), static_cast<std::size_t>(std::max(capacity, 0)));
+  for (std::size_t i = 0; i < n && k < cap; ++i) {
+    if (QuantizePatch(model.contacts[i].patch, static_cast<std::uint8_t>(i), out[k])) ++k;
+  }
+  return k;
+}
+
+/// A wire patch's values: kOk, kNonFinite (a marked node or axis, a non-finite step or scale) or
+/// kBadValue (a step or scale out of range, an axis shorter than 0.5).
+DecodeStatus CheckPatch(const WirePatch& p) noexcept {
+  const auto marked = [](const auto& values) {
+    for (const std::int16_t v : values) {
+      if (v == kCompactNotFinite) return true;
+    }
+    return false;
+  };
+  if (!std::isfinite(p.step_m) || !std::isfinite(p.scale_m) || marked(p.axis_u) ||
+      marked(p.axis_v) || marked(p.nodes)) {
+    return DecodeStatus::kNonFinite;
+  }
+  if (!(p.step_m > 0.0f) || p.step_m > kMaxTranslationPatchStepM || p.scale_m < 0.0f) {
+    return DecodeStatus::kBadValue;
+  }
+  for (const auto* axis : {&p.axis_u, &p.axis_v}) {
+    double norm2 = 0.0;
+    for (const std::int16_t v : *axis) norm2 += static_cast<double>(v) * v;
+    if (!(std::sqrt(norm2) >= 0.5 * kCompactI16Max)) return DecodeStatus::kBadValue;
+  }
+  return DecodeStatus::kOk;
+}
+
+/// Gives each wire patch (values checked by CheckPatch) to its contact of `model` (whose first `n`
+/// contacts were read); false when one names a contact ≥ n or a contact's second patch.
+bool DistributePatches(std::span<const WirePatch> patches, std::size_t n,
+                       ContactModel& model) noexcept {
+  for (std::size_t i = 0; i < n; ++i) model.contacts[i].patch = TranslationPatch{};
+  for (const WirePatch& w : patches) {
+    if (w.contact >= n) return false;
+    TranslationPatch& p = model.contacts[w.contact].patch;
+    if (p.step_m > 0.0) return false;
+    const auto axis = [](const std::array<std::int16_t, 3>& a) {
+      return glm::normalize(glm::dvec3(a[0], a[1], a[2]));
+    };
+    p.step_m = w.step_m;
+    p.axis_u_W = axis(w.axis_u);
+    p.axis_v_W = axis(w.axis_v);
+    p.depth_m.fill(0.0f);
+    for (int k = 0; k < kTranslationPatchNodes; ++k) {
+      p.depth_m[PatchIndexOfWireNode(k)] =
+          static_cast<float>(static_cast<double>(w.nodes[static_cast<std::size_t>(k)]) * w.scale_m);
+    }
+  }
+  return true;
+}
+
+/// The translation-patch section after the kink planes (protocol.h, version 9), as KinkPlanes.
+constexpr void TranslationPatches(auto& a, auto& model, std::size_t n, int capacity) {
+  std::array<WirePatch, kMaxWireContacts> patches{};
+  std::size_t k = 0;
+  if constexpr (!requires { a.Reject(DecodeStatus::kOk); }) {
+    k = FlattenPatches(model, n, capacity, patches);
+    const std::size_t sent =
+        Count<std::uint8_t>(a, k, static_cast<std::size_t>(capacity), kTranslationPatchBytes);
+    for (std::size_t j = 0; j < std::min(sent, k); ++j) Fields(a, patches[j]);
+  } else {
+    k = Count<std::uint8_t>(a, k, static_cast<std::size_t>(std::max(capacity, 0)),
+                            kTranslationPatchBytes);
+    for (std::size_t j = 0; j < k; ++j) Fields(a, patches[j]);
+    if (!a.ok()) return;
+    for (std::size_t j = 0; j < k; ++j) {
+      if (const DecodeStatus s = CheckPatch(patches[j]); s != DecodeStatus::kOk) {
+        a.Reject(s);
+        return;
+      }
+    }
+    if (!DistributePatches({patches.data(), k}, n, model)) a.Reject(DecodeStatus::kBadValue);
   }
 }
 
@@ -419,11 +570,16 @@ constexpr void Fields(auto& a, Of<ContactModelMessage> auto& m) {
   Pose(a, m.model.X_WT0);
   Vec(a, m.model.F_T_W_at_q0.force);
   Vec(a, m.model.F_T_W_at_q0.torque);
-  const std::size_t n = CountBefore<std::uint8_t>(a, m.model.num_contacts, kMaxWireContacts,
-                                                  kContactBytes, kKinkPlaneCountBytes);
+  const std::size_t n =
+      CountBefore<std::uint8_t>(a, m.model.num_contacts, kMaxWireContacts, kContactBytes,
+                                kKinkPlaneCountBytes + kTranslationPatchCountBytes);
   for (std::size_t i = 0; i < n; ++i) Fields(a, m.model.contacts[i]);
-  KinkPlanes(a, m.model, n,
-             KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, static_cast<int>(n)));
+  const std::size_t planes =
+      KinkPlanes(a, m.model, n,
+                 KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, static_cast<int>(n)));
+  TranslationPatches(a, m.model, n,
+                     TranslationPatchCapacity(kContactModelFixedBytes, kContactBytes,
+                                              static_cast<int>(n), static_cast<int>(planes)));
 }
 
 /// One contact of a CompactContactModel as it is on the wire (protocol.h).
@@ -453,6 +609,8 @@ struct CompactContactModelBody {
   std::array<CompactContact, kMaxWireContacts> contacts{};
   int num_kink_planes = 0;
   std::array<WireKinkPlane, kMaxWireKinkPlanes> kink_planes{};
+  int num_patches = 0;
+  std::array<WirePatch, kMaxWireContacts> patches{};
 };
 
 // Every element of an array of scalars, in order.
@@ -480,14 +638,21 @@ constexpr void Fields(auto& a, Of<CompactContactModelBody> auto& m) {
   Vec(a, m.p_WT0);
   Each(a, m.q_WT0);
   Each(a, m.F_T_W_at_q0);
-  const std::size_t n = CountBefore<std::uint8_t>(a, m.num_contacts, kMaxWireContacts,
-                                                  kCompactContactBytes, kKinkPlaneCountBytes);
+  const std::size_t n =
+      CountBefore<std::uint8_t>(a, m.num_contacts, kMaxWireContacts, kCompactContactBytes,
+                                kKinkPlaneCountBytes + kTranslationPatchCountBytes);
   for (std::size_t i = 0; i < n; ++i) Fields(a, m.contacts[i]);
   const int capacity =
       KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, static_cast<int>(n));
-  const std::size_t k = Count<std::uint8_t>(a, m.num_kink_planes,
-                                            static_cast<std::size_t>(capacity), kKinkPlaneBytes);
+  const std::size_t k =
+      CountBefore<std::uint8_t>(a, m.num_kink_planes, static_cast<std::size_t>(capacity),
+                                kKinkPlaneBytes, kTranslationPatchCountBytes);
   for (std::size_t j = 0; j < k; ++j) Fields(a, m.kink_planes[j]);
+  const int patch_capacity = TranslationPatchCapacity(
+      kCompactContactModelFixedBytes, kCompactContactBytes, static_cast<int>(n), m.num_kink_planes);
+  const std::size_t np = Count<std::uint8_t>(
+      a, m.num_patches, static_cast<std::size_t>(patch_capacity), kTranslationPatchBytes);
+  for (std::size_t j = 0; j < np; ++j) Fields(a, m.patches[j]);
 }
 
 /// A CompactToolState body as it is on the wire (protocol.h).
@@ -634,14 +799,17 @@ constexpr Sizer SizeOf() {
 static_assert(SizeOf<WireHeader>().bytes == kHeaderBytes);
 static_assert(SizeOf<LegacyWireHeader>().bytes == kLegacyHeaderBytes);
 static_assert(SizeOf<ToolStateMessage>().bytes == kToolStateBodyBytes);
-static_assert(SizeOf<ContactModelMessage>().bytes ==
-              kContactModelFixedBytes + kContactBytes + kKinkPlaneCountBytes);
-static_assert(SizeOf<ContactModelMessage>().counted_bytes == kContactBytes + kKinkPlaneBytes);
+static_assert(SizeOf<ContactModelMessage>().bytes == kContactModelFixedBytes + kContactBytes +
+                                                         kKinkPlaneCountBytes +
+                                                         kTranslationPatchCountBytes);
+static_assert(SizeOf<ContactModelMessage>().counted_bytes ==
+              kContactBytes + kKinkPlaneBytes + kTranslationPatchBytes);
 static_assert(SizeOf<CompactContactModelBody>().bytes ==
               kCompactContactModelFixedBytes + kCompactContactBytes + kKinkPlaneCountBytes +
-                  kKinkPlaneBytes);
+                  kKinkPlaneBytes + kTranslationPatchCountBytes + kTranslationPatchBytes);
 static_assert(SizeOf<CompactContactModelBody>().counted_bytes ==
-              kCompactContactBytes + kKinkPlaneBytes);
+              kCompactContactBytes + kKinkPlaneBytes + kTranslationPatchBytes);
+static_assert(SizeOf<WirePatch>().bytes == kTranslationPatchBytes);
 static_assert(SizeOf<CompactToolStateBody>().bytes == kCompactToolStateBodyBytes);
 static_assert(SizeOf<HelloMessage>().bytes == kHelloBodyBytes);
 static_assert(SizeOf<WelcomeMessage>().bytes == kWelcomeFixedBytes + kWelcomeTargetBytes);
@@ -795,6 +963,11 @@ CompactContactModelBody QuantizeContactModel(const ContactModelMessage& m) noexc
   b.num_kink_planes = static_cast<int>(FlattenKinkPlanes(
       model, static_cast<std::size_t>(n),
       KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, n), b.kink_planes));
+  b.num_patches = static_cast<int>(
+      FlattenPatches(model, static_cast<std::size_t>(n),
+                     TranslationPatchCapacity(kCompactContactModelFixedBytes, kCompactContactBytes,
+                                              n, b.num_kink_planes),
+                     b.patches));
   return b;
 }
 
@@ -826,6 +999,13 @@ DecodeStatus Check(const CompactContactModelBody& m) {
     if (p.contact >= m.num_contacts || ++planes_of[p.contact] > kMaxKinkPlanes) {
       return DecodeStatus::kBadValue;
     }
+  }
+  std::array<bool, kMaxWireContacts> patched{};
+  for (int j = 0; j < m.num_patches; ++j) {
+    const WirePatch& p = m.patches[static_cast<std::size_t>(j)];
+    if (const DecodeStatus s = CheckPatch(p); s != DecodeStatus::kOk) return s;
+    if (p.contact >= m.num_contacts || patched[p.contact]) return DecodeStatus::kBadValue;
+    patched[p.contact] = true;
   }
   if (!Finite3(m.p_WT0) || !AllFinite(m.q_WT0)) return DecodeStatus::kNonFinite;
   double norm2 = 0.0;
@@ -869,6 +1049,9 @@ ContactModelMessage DequantizeContactModel(const CompactContactModelBody& b) noe
   // Check() found every plane's contact and count valid.
   DistributeKinkPlanes({b.kink_planes.data(), static_cast<std::size_t>(b.num_kink_planes)},
                        static_cast<std::size_t>(b.num_contacts), model);
+  // Check() found every patch's values, contact and count valid.
+  DistributePatches({b.patches.data(), static_cast<std::size_t>(b.num_patches)},
+                    static_cast<std::size_t>(b.num_contacts), model);
   return m;
 }
 
@@ -1289,8 +1472,19 @@ Datagram EncodeReject(const Header& header, const RejectMessage& m, const MacKey
 
 Datagram EncodeReject(const Header& header, const RejectMessage& m, const MacKey& key,
                       std::uint16_t version) noexcept {
+  // An older version in this layout (8 to kProtocolVersion − 1): this layout with its number.
+  if (version >= kFirstShortHeaderVersion && version < kProtocolVersion) {
+    Datagram d;
+    Writer w(d);
+    WireHeader h = ToWire(header, MessageType::kReject);
+    h.version = static_cast<std::uint8_t>(version);
+    Fields(w, h);
+    Fields(w, m);
+    w.Seal(key);
+    return d;
+  }
   // This version, or one whose layout is unknown here (the caller only asks for versions a
-  // foreign Hello had: 2 to kLastLegacyVersion), in this version's layout.
+  // foreign Hello had: 2 to kProtocolVersion − 1), in this version's layout.
   if (version < 2 || version > kLastLegacyVersion) return EncodeReject(header, m, key);
   Datagram d;
   Writer w(d);
@@ -1309,12 +1503,32 @@ DecodeStatus OpenForeignHello(std::span<const std::uint8_t> bytes, const MacKey&
                               ForeignHello& hello) noexcept {
   if (bytes.size() > kMaxDatagramBytes) return DecodeStatus::kTooLong;
   if (bytes.size() < 4) return DecodeStatus::kTooShort;
-  // This version's layout: only the magic and version are read; it is this version (open it with
-  // OpenDatagram) or a newer one, whose layout is unknown here (dropped: a newer operator falls
-  // back to this version itself).
+  // This version's layout: this version (open it with OpenDatagram) or a newer one, whose
+  // layout is unknown here (dropped: a newer operator falls back to this version itself), are
+  // kBadVersion; an older one (kFirstShortHeaderVersion to kProtocolVersion − 1: the same header
+  // and MAC) is read as far as the Hello's first fields.
   if (LoadLe<std::uint32_t>(bytes.data()) != kLegacyMagic) {
     if (LoadLe<std::uint16_t>(bytes.data()) != kMagic) return DecodeStatus::kBadMagic;
-    return DecodeStatus::kBadVersion;
+    const std::uint8_t version = bytes[kHeaderVersionOffset];
+    if (version < kFirstShortHeaderVersion || version >= kProtocolVersion) {
+      return DecodeStatus::kBadVersion;
+    }
+    if (bytes.size() < kHeaderBytes + 12 + kMacBytes) return DecodeStatus::kTooShort;
+    Reader r(bytes.first(kHeaderBytes + 12));
+    WireHeader w;
+    Fields(r, w);
+    std::uint16_t min_version = 0, max_version = 0;
+    std::uint64_t nonce = 0;
+    r(min_version);
+    r(max_version);
+    r(nonce);
+    if (w.type != static_cast<std::uint8_t>(MessageType::kHello)) return DecodeStatus::kUnexpected;
+    if (!VerifyMac(bytes, key)) return DecodeStatus::kBadMac;
+    hello = {.header_version = w.version,
+             .min_version = min_version,
+             .max_version = max_version,
+             .client_nonce = nonce};
+    return DecodeStatus::kOk;
   }
   if (bytes.size() < kLegacyHeaderBytes + 12 + kLegacyMacBytes) return DecodeStatus::kTooShort;
   Reader r(bytes.first(kLegacyHeaderBytes + 12));

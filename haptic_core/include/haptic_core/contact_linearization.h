@@ -43,6 +43,31 @@ struct KinkPlane {
   glm::dvec3 d_translation_offset_W{0.0};
 };
 
+/// Half-width, in steps, of a contact's translation patch (TranslationPatch): the patch holds
+/// (2R + 1)² depths.
+inline constexpr int kTranslationPatchRadius = 2;
+/// Nodes per side of a translation patch.
+inline constexpr int kTranslationPatchSide = 2 * kTranslationPatchRadius + 1;
+
+/// A contact's depth over in-plane translations of the tool (issue 32, nineteenth stop; our
+/// construction [R]): δ at the tool poses q0 displaced by (i·h, j·h) along the window's u and v
+/// (i, j ∈ [−R, R], R = kTranslationPatchRadius), each the refined maximum of b − a at that pose
+/// (DepthRefinementOptions::translation_patch). A linear model holds a ridge's slope only until
+/// the tool has moved a fraction of the ridge's period; the patch holds δ over ±R·h, so that a
+/// model read a round trip after its q0 (issue 33) or a linearization point a deadband away from
+/// the tool (issue 32, eleventh stop) still gives the surface's depth there. ContactDepthAt adds
+/// its residual to the planes: the patch's bicubic (Catmull–Rom) interpolant less its tangent at
+/// q0, so that δ and ∇δ at q0 are the contact's own.
+struct TranslationPatch {
+  /// Node spacing h (m); 0: no patch.
+  double step_m = 0.0;
+  /// The window's in-plane axes u and v (unit, W) the nodes are displaced along.
+  glm::dvec3 axis_u_W{1.0, 0.0, 0.0};
+  glm::dvec3 axis_v_W{0.0, 1.0, 0.0};
+  /// δ(i·h, j·h) − δ0 (m) at index (j + R)·kTranslationPatchSide + (i + R); the centre is 0.
+  std::array<float, kTranslationPatchSide * kTranslationPatchSide> depth_m{};
+};
+
 /// The linearized contact that the remote node sends and the operator loop evaluates:
 /// δ_i(q) ≈ depth_m + J·(q ⊖ q0) with stiffness k (DESIGN.md §5), or, with kink planes, the
 /// largest of that plane and theirs, blended over a few micrometres (ContactDepthAt,
@@ -58,6 +83,9 @@ struct ContactLinearization {
   /// Valid entries of kink_planes (0..kMaxKinkPlanes; values outside count as clamped).
   int num_kink_planes = 0;
   std::array<KinkPlane, kMaxKinkPlanes> kink_planes{};
+  /// δ over in-plane translations (step_m = 0: none, the planes alone). The remote node's
+  /// option; not carried on the wire (protocol version 8 sends the planes).
+  TranslationPatch patch;
 };
 
 /// Adds kink planes to `lin` (issue 31, change 5) from its kGradientSamples depth samples (the

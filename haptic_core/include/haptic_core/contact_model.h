@@ -52,7 +52,14 @@ inline constexpr double kKinkBlendM = 10e-6;
 /// `gradient` (optional) receives ∇δ; `curvature` (optional) receives ∇²δ (6×6, world axes,
 /// rows/cols as Stiffness6; only its rotation block is non-zero where the planes share ∂δ/∂x),
 /// the blend's Σ (J_max − J_i)(J_max − J_i)ᵀ/(2ε), which the implicit tool step needs in K to stay
-/// stable there. Non-finite planes are skipped. noexcept, allocation-free (1 kHz loop).
+/// stable there. Non-finite planes are skipped.
+/// With a translation patch (c.patch.step_m > 0; TranslationPatch) the patch's residual is added:
+/// its Catmull–Rom bicubic interpolant at the in-plane part of Δq.linear (clamped to ±R·h; linear
+/// ghosts one node past each edge) less the interpolant's tangent at q0, so that δ(q0) and ∇δ(q0)
+/// are unchanged and, where the contact's ∂δ/∂x along u and v is the nodes' central difference
+/// (the default secant), δ over the patch is the interpolant's. Its gradient is added to ∂δ/∂x
+/// inside the patch; it adds no curvature. A patch with a non-finite node is ignored.
+/// noexcept, allocation-free (1 kHz loop).
 double ContactDepthAt(const ContactLinearization& c, const Twist& dq,
                       PenetrationGradient* gradient = nullptr,
                       Stiffness6* curvature = nullptr) noexcept;

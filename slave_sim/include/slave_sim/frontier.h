@@ -110,6 +110,8 @@ struct FrontierSetting {
   bool conservative_screen = false;
   /// PipelineOptions::depth_refinement.parallax ("parallax*" turn it on).
   bool parallax = false;
+  /// PipelineOptions::depth_refinement.translation_patch ("translation_patch" turns it on).
+  bool translation_patch = false;
 };
 
 /// The sweep: the default setting (grid 50, 1024² textures, the seed's coarse counts, CPU) first,
@@ -171,6 +173,10 @@ struct FrontierOptions {
   /// pipeline truth there): a second pipeline truth, on deeper poses, which costs about as much as
   /// the first; false leaves its columns NaN.
   bool model_prediction = true;
+  /// The model-prediction measure's displacements: ±this along W's x and y (m, > 0) …
+  double prediction_translation_m = 1e-4;
+  /// … and ±this about them (rad, > 0), each about the tool's centre of mass.
+  double prediction_rotation_rad = 1e-3;
   /// The plotting script (python3 + matplotlib), "" = no plot.
   std::string plot_script;
   /// The command line, for summary.md.

@@ -274,24 +274,26 @@ Datagram EncodeSceneNack(const Header& header, const SceneNackMessage& message,
 Datagram EncodeNodePoses(const Header& header, const NodePosesMessage& message,
                          const MacKey& key) noexcept;
 
-/// A Hello of protocol versions 2 to 7 (their 28-byte header and 32-byte MAC), read only as far as
-/// those versions agree.
+/// A Hello of an older protocol version (2 to 7: their 28-byte header and 32-byte MAC; 8 to
+/// kProtocolVersion − 1: this header and MAC), read only as far as those versions agree.
 struct ForeignHello {
   std::uint16_t header_version = 0;  ///< the version in its header (the sender's own)
   std::uint16_t min_version = 0, max_version = 0;
   std::uint64_t client_nonce = 0;
 };
 /// Opens a Hello of an older protocol version (2 ≤ version ≤ 7, kLegacyHeaderBytes header,
-/// kLegacyMacBytes MAC), so that the remote node can refuse that operator with a Reject it
-/// understands. kOk when the magic, flags and type match, the whole MAC verifies under `key` and
-/// the body has at least its first 12 bytes; otherwise the first problem: kTooLong, kTooShort,
-/// kBadMagic (neither layout's magic), kBadVersion (a datagram of this version's layout, to be
-/// opened with OpenDatagram, or a version outside 2 to 7), kBadFlags, kUnexpected (not a Hello),
+/// kLegacyMacBytes MAC; or kFirstShortHeaderVersion ≤ version < kProtocolVersion in this header
+/// and MAC), so that the remote node can refuse that operator with a Reject it understands. kOk
+/// when the magic, flags and type match, the MAC verifies under `key` and the body has at least
+/// its first 12 bytes; otherwise the first problem: kTooLong, kTooShort, kBadMagic (neither
+/// layout's magic), kBadVersion (a datagram of this version, to be opened with OpenDatagram, a
+/// newer one, or a legacy-layout version outside 2 to 7), kBadFlags, kUnexpected (not a Hello),
 /// kBadMac.
 DecodeStatus OpenForeignHello(std::span<const std::uint8_t> datagram, const MacKey& key,
                               ForeignHello& hello) noexcept;
 /// A Reject with `version` in its header: for 2 ≤ version ≤ kLastLegacyVersion the layout of
-/// those versions (28-byte header, 32-byte MAC; the body is laid out alike in versions 2 to 8),
+/// those versions (28-byte header, 32-byte MAC; the body is laid out alike in versions 2 to 9);
+/// for kFirstShortHeaderVersion ≤ version < kProtocolVersion this layout with that version;
 /// else this version's own Reject.
 Datagram EncodeReject(const Header& header, const RejectMessage& message, const MacKey& key,
                       std::uint16_t version) noexcept;

@@ -70,6 +70,18 @@
 //     fit leaves the last ones out (the remote node counts them). Rejected: a plane naming a
 //     contact ≥ num_contacts or a contact's (kMaxKinkPlanesPerContact + 1)-th plane (kBadValue),
 //     a non-finite field (kNonFinite). The compact model carries the same section, alike.
+//     Then the translation patches (version 9, issue 32's nineteenth stop: δ over in-plane
+//     translations of the tool, haptic_core's TranslationPatch): u8 num_patches (at most
+//     TranslationPatchCapacity(): as many as fit after the planes), per patch
+//     (kTranslationPatchBytes, 69): u8 contact (< num_contacts, one patch per contact), f32
+//     step_m (node spacing h, m, finite, in (0, kMaxTranslationPatchStepM]), 3×i16 axis u and
+//     3×i16 axis v (unit vectors ·32767; normalized on receipt), f32 scale (m per node unit,
+//     finite, ≥ 0), 24×i16 nodes (δ(i·h, j·h) − δ0 = node·scale, row by row, j then i from −2 to
+//     2, the centre left out: it is 0). A node or axis of −32768 (kCompactNotFinite) or an axis
+//     shorter than 0.5 is rejected (kNonFinite, kBadValue); a patch naming a contact ≥
+//     num_contacts or a contact's second patch, or a step or scale out of range (kBadValue). A
+//     contact whose patch is not finite at the sender goes without one; the nodes' largest error
+//     is scale/2 (kTranslationPatch*). The compact model carries the same section, alike.
 //   CompactContactModel R→O (kCompactContactModelFixedBytes + n·kCompactContactBytes): the same
 //     model quantized, sent instead of ContactModel when both sides set kCodecCompactContactModel
 //     and decoded into the same message (the float encoding stays available). u64 tool_state_seq,
@@ -87,7 +99,7 @@
 //     at the sender, and the receiver rejects the datagram (kNonFinite) as it would ContactModel
 //     with a NaN. The largest error of each field is a kCompact*Error* constant below. Then the
 //     kink planes as in ContactModel (u8 count, 17 bytes each, f32 fields:
-//     kCompactF32RelativeError).
+//     kCompactF32RelativeError), then the translation patches as in ContactModel.
 //   Goodbye O↔R (0): clean close of the session (the operator at the end of a run, the remote
 //     node when stopped); sent three times with new sequence numbers.
 //   Hello O→R (44): u16 min_version, u16 max_version, u64 client_nonce, f32 tool_state_rate_hz,
@@ -174,13 +186,15 @@ inline constexpr std::uint32_t kLegacyMagic = 0x504C5448u;  // bytes 'H' 'T' 'L'
 /// contacts of ContactModel and CompactContactModel (issue 31); version 7 each plane's own
 /// translation slope (issue 32: the arms of δ's V along the window's axes). Version 8 (issue 33:
 /// tool states within 50 kbit/s) has the 18-byte header above instead of 28 bytes and a 16-byte
-/// MAC (HMAC-SHA-256-128) instead of 32 (HMAC-SHA-512-256); every body is as in version 7. Only
-/// version 8 is accepted. A remote node answers a Hello of versions 2 to 7 whose MAC verifies with
-/// a Reject (kVersion) in that Hello's own layout and header version (the Hello's first 12 body
-/// bytes and the Reject body are laid out alike in versions 2 to 8), so that an older operator is
-/// told why.
-inline constexpr std::uint16_t kProtocolVersion = 8;
-inline constexpr std::uint16_t kMinProtocolVersion = 8;
+/// MAC (HMAC-SHA-256-128) instead of 32 (HMAC-SHA-512-256); every body is as in version 7.
+/// Version 9 (issue 32's nineteenth stop) adds the translation patches after the kink planes of
+/// ContactModel and CompactContactModel; header, MAC and every other body are as in version 8.
+/// Only version 9 is accepted. A remote node answers a Hello of versions 2 to 8 whose MAC
+/// verifies with a Reject (kVersion) in that Hello's own layout and header version (the Hello's
+/// first 12 body bytes and the Reject body are laid out alike in versions 2 to 9), so that an
+/// older operator is told why.
+inline constexpr std::uint16_t kProtocolVersion = 9;
+inline constexpr std::uint16_t kMinProtocolVersion = 9;
 
 /// Message types; values are part of the protocol and never reused.
 enum class MessageType : std::uint8_t {
@@ -248,6 +262,9 @@ inline constexpr std::uint64_t kMaxSequence = 0xFFFF'FFFFu;
 inline constexpr std::uint64_t kSequenceRenewAt = kMaxSequence - (1u << 16);
 /// The newest protocol version whose header and MAC are the 28-byte, 32-byte ones.
 inline constexpr std::uint16_t kLastLegacyVersion = 7;
+/// The first protocol version with this header and MAC (versions from it to kProtocolVersion − 1
+/// are older operators in this layout).
+inline constexpr std::uint16_t kFirstShortHeaderVersion = 8;
 /// The MAC on the wire: HMAC-SHA-256's 32 bytes truncated to 16.
 inline constexpr std::size_t kMacBytes = 16;
 /// crypto_auth's output (crypto_auth_BYTES, HMAC-SHA-512-256): the MAC of versions 2 to 7.
@@ -268,6 +285,14 @@ inline constexpr std::size_t kKinkPlaneBytes = 1 + 7 * 4;
 inline constexpr std::size_t kKinkPlaneCountBytes = 1;
 /// Most kink planes per contact (haptic_core's kMaxKinkPlanes) and per model.
 inline constexpr int kMaxKinkPlanesPerContact = 8;
+/// One translation patch on the wire: u8 contact, f32 step, 2×3×i16 axes, f32 scale, 24×i16
+/// nodes; and the u8 count before them (version 9).
+inline constexpr int kTranslationPatchNodes = 24;
+inline constexpr std::size_t kTranslationPatchBytes =
+    1 + 4 + 6 * 2 + 4 + kTranslationPatchNodes * 2;
+inline constexpr std::size_t kTranslationPatchCountBytes = 1;
+/// Largest node spacing (m) a receiver accepts.
+inline constexpr double kMaxTranslationPatchStepM = 0.1;
 inline constexpr std::size_t kDeadbandTermsBytes = 12;
 inline constexpr std::size_t kHelloBodyBytes = 32 + kDeadbandTermsBytes;
 inline constexpr std::size_t kSceneNameBytes = 32;
@@ -309,11 +334,27 @@ constexpr int KinkPlaneCapacity(std::size_t fixed_bytes, std::size_t contact_byt
   const std::size_t used =
       kHeaderBytes + fixed_bytes +
       static_cast<std::size_t>(num_contacts < 0 ? 0 : num_contacts) * contact_bytes +
-      kKinkPlaneCountBytes + kMacBytes;
+      kKinkPlaneCountBytes + kTranslationPatchCountBytes + kMacBytes;
   if (used >= kMaxDatagramBytes) return 0;
   const std::size_t fit = (kMaxDatagramBytes - used) / kKinkPlaneBytes;
   return fit < static_cast<std::size_t>(kMaxWireKinkPlanes) ? static_cast<int>(fit)
                                                             : kMaxWireKinkPlanes;
+}
+/// Translation patches that fit one datagram after the contacts and `num_kink_planes` kink planes
+/// (as KinkPlaneCapacity): at most kMaxWireContacts (one per contact). A receiver refuses a larger
+/// count (kBadCount).
+constexpr int TranslationPatchCapacity(std::size_t fixed_bytes, std::size_t contact_bytes,
+                                       int num_contacts, int num_kink_planes) noexcept {
+  const std::size_t used =
+      kHeaderBytes + fixed_bytes +
+      static_cast<std::size_t>(num_contacts < 0 ? 0 : num_contacts) * contact_bytes +
+      kKinkPlaneCountBytes +
+      static_cast<std::size_t>(num_kink_planes < 0 ? 0 : num_kink_planes) * kKinkPlaneBytes +
+      kTranslationPatchCountBytes + kMacBytes;
+  if (used >= kMaxDatagramBytes) return 0;
+  const std::size_t fit = (kMaxDatagramBytes - used) / kTranslationPatchBytes;
+  return fit < static_cast<std::size_t>(kMaxWireContacts) ? static_cast<int>(fit)
+                                                          : kMaxWireContacts;
 }
 /// Largest scene object (bytes) a sender fragments or a receiver reassembles.
 inline constexpr std::uint32_t kMaxSceneObjectBytes = 64u << 20;
