@@ -587,17 +587,23 @@ TEST(DepthRefinement, TranslationPatchHoldsTheDepthOverTheToolsSlide) {
     PenetrationGradient g0;
     EXPECT_DOUBLE_EQ(ContactDepthAt(c, Twist{}, &g0), c.depth_m);
     EXPECT_NEAR(glm::length(g0.d_translation_W - c.gradient.d_translation_W), 0.0, 1e-12);
-    // Each node against the refinement at the translated pose (the window stays where it is).
+    // Each node against the refinement at the translated pose (the window stays where it is),
+    // also with the nodes climbed from their neighbours' maxima too.
+    DepthRefinementOptions climbs = with_patch;
+    climbs.translation_patch_neighbour_climbs = true;
+    const ContactLinearization from_grid =
+        LinearizeAndRefine(tool, CurvedToolPose(x0, z0), env, n, climbs).refined;
     for (int j = -R; j <= R; ++j) {
       for (int i = -R; i <= R; ++i) {
         RigidTransform X_moved = CurvedToolPose(x0, z0);
         X_moved.translation += glm::dvec3(i * h, j * h, 0.0);
         const Refined moved = LinearizeAndRefine(tool, X_moved, env, n);
-        const double node =
-            c.depth_m +
-            c.patch.depth_m[static_cast<std::size_t>((j + R) * kTranslationPatchSide + (i + R))];
+        const auto k = static_cast<std::size_t>((j + R) * kTranslationPatchSide + (i + R));
+        const double node = c.depth_m + c.patch.depth_m[k];
         EXPECT_NEAR(node, moved.refined.depth_m, 0.3e-6)
             << "x0 " << x0 << " node " << i << ", " << j;
+        EXPECT_NEAR(from_grid.depth_m + from_grid.patch.depth_m[k], moved.refined.depth_m, 0.3e-6)
+            << "with neighbour climbs: x0 " << x0 << " node " << i << ", " << j;
         Twist dq;
         dq.linear = {i * h, j * h, 0.0};
         EXPECT_NEAR(ContactDepthAt(c, dq), node, 1e-9) << "the interpolant passes its nodes";

@@ -12,6 +12,7 @@
 #include <thread>
 #include <vector>
 
+#include "haptic_core/contact_model.h"
 #include "haptic_core/demo/demo_scenes.h"
 #include "legacy_datagram.h"
 #include "transport/auth.h"
@@ -243,6 +244,75 @@ TEST(RemoteNode, AgreesOnCompactToolStatesAndAnswersThemAsTheF64Ones) {
   EXPECT_EQ(t["streams"]["compact_tool_state"]["received"].get<int>(), 1);
   EXPECT_EQ(t["streams"]["compact_tool_state"]["rejected"].get<int>(), 1);
   EXPECT_EQ(t["streams"].value("tool_state", nlohmann::json::object()).value("received", 0), 0);
+}
+
+// Protocol version 9: a node run with --translation-patch (DepthRefinementOptions::
+// translation_patch) sends each contact's patch with its compact model over a real socket; the
+// operator's side reads the depth at a node as δ0 plus that node, and the node counts what it
+// sent. Without the option no patch goes.
+TEST(RemoteNode, SendsEachContactsTranslationPatchWhenAsked) {
+  const HapticScene scene = MakeBlockOnGearScene();
+  for (const bool patch : {true, false}) {
+    RemoteNodeConfig config = LocalNodeConfig(TestKey(41), "remote_node_patch_test.port");
+    config.pipeline.depth_refinement.translation_patch = patch;
+    std::atomic<bool> stop{false};
+    nlohmann::json summary;
+    std::thread node([&] { summary = RunRemoteNode(config, scene, stop); });
+    const std::uint16_t port = AwaitPort(config.port_file);
+    ASSERT_NE(port, 0);
+    const SocketAddress remote = SocketAddress::Parse("127.0.0.1:" + std::to_string(port));
+    UdpSocket socket(SocketAddress::Parse("127.0.0.1:0"));
+    wire::HelloMessage hello;
+    hello.client_nonce = 91 + patch;
+    hello.codecs = wire::kCodecDracoMesh | wire::kCodecCompactContactModel;
+    socket.SendTo(wire::EncodeHello({wire::MessageType::kHello, 0, 1, 0}, hello, config.key).view(),
+                  remote);
+    wire::Header h;
+    wire::WelcomeMessage welcome;
+    ASSERT_TRUE(Await(socket, config.key, wire::MessageType::kWelcome, h, [&](auto body) {
+      return wire::DecodeWelcome(body, welcome) == wire::DecodeStatus::kOk;
+    }));
+    const std::uint32_t session = h.session_id;
+    wire::ToolStateMessage state;
+    state.X_WT = scene.X_WT_home;
+    state.X_WT.translation.z -= 0.5e-3;
+    socket.SendTo(
+        wire::EncodeToolState({wire::MessageType::kToolState, session, 1, 0}, state, config.key)
+            .view(),
+        remote);
+    wire::ContactModelMessage model;
+    ASSERT_TRUE(
+        Await(socket, config.key, wire::MessageType::kCompactContactModel, h, [&](auto body) {
+          return wire::DecodeCompactContactModel(body, model) == wire::DecodeStatus::kOk;
+        }));
+    ASSERT_GE(model.model.num_contacts, 1);
+    const ContactLinearization& c = model.model.contacts[0];
+    if (patch) {
+      ASSERT_GT(c.patch.step_m, 0.0);
+      EXPECT_NEAR(glm::length(c.patch.axis_u_W), 1.0, 1e-9);
+      EXPECT_NEAR(glm::dot(c.patch.axis_u_W, c.patch.axis_v_W), 0.0, 1e-4);
+      // At node (2, −1) the loop reads δ0 plus that node.
+      Twist dq;
+      dq.linear = c.patch.step_m * (2.0 * c.patch.axis_u_W - c.patch.axis_v_W);
+      const std::size_t k = static_cast<std::size_t>(1 * kTranslationPatchSide + 4);
+      EXPECT_NEAR(ContactDepthAt(c, dq), c.depth_m + c.patch.depth_m[k], 1e-9);
+    } else {
+      EXPECT_EQ(c.patch.step_m, 0.0);
+    }
+    socket.SendTo(
+        wire::EncodeGoodbye({wire::MessageType::kGoodbye, session, 2, 0}, config.key).view(),
+        remote);
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    stop = true;
+    node.join();
+    const nlohmann::json& t = summary["transport"]["translation_patches"];
+    if (patch) {
+      EXPECT_GE(t["sent"].get<int>(), 1);
+    } else {
+      EXPECT_EQ(t["sent"].get<int>(), 0);
+    }
+    EXPECT_EQ(t["left_out"].get<int>(), 0);
+  }
 }
 
 // The header's sequence is a u32 (protocol version 8): a node whose streams near its end says

@@ -10,7 +10,8 @@ switches created and the controller removed (passivity.attribution), model age p
 guard + damping per cell and arm. grid.json keeps every figure.
 
 Usage: delay_grid.py OUT_DIR [--delays 0,25,75,150] [--losses 0,10,20] [--wall 50:10,150:10]
-         [--duration 4] [--repeats 1] [--build-dir build] --arm NAME="--master-args..." [--arm ...]
+         [--duration 4] [--repeats 1] [--build-dir build] --arm NAME="MASTER ARGS[::SLAVE ARGS]"
+         [--arm ...]
 Example (the record in README.md): delay_grid.py /tmp/grid --losses 0,10 --duration 5 \
          --arm base="" --arm reserve20="--passivity-reserve-mj 20"
 """
@@ -70,7 +71,12 @@ def main():
     ap.add_argument("--build-dir", default="build")
     ap.add_argument("--arm", action="append", required=True)
     o = ap.parse_args()
-    arms = [a.split("=", 1) if "=" in a else (a, "") for a in o.arm]
+    # NAME=MASTER_ARGS, or NAME=MASTER_ARGS::SLAVE_ARGS for an arm that changes the remote node.
+    arms = []
+    for a in o.arm:
+        name, args = a.split("=", 1) if "=" in a else (a, "")
+        margs, _, sargs = args.partition("::")
+        arms.append((name, margs.strip(), sargs.strip()))
     cells = [("block-on-gear", int(d), int(l)) for d in o.delays.split(",") for l in o.losses.split(",")]
     if o.wall:
         cells += [("stiff-wall", int(x.split(":")[0]), int(x.split(":")[1])) for x in o.wall.split(",")]
@@ -78,12 +84,12 @@ def main():
     results = []
     for scene, delay, loss in cells:
         for r in range(o.repeats):
-            for name, margs in arms:
+            for name, margs, sargs in arms:
                 d = os.path.join(o.out, f"{scene}_d{delay}_l{loss}_r{r}_{name}")
                 cmd = [os.path.join(repo, "deploy/run-loopback"), "--build-dir", o.build_dir, "--out", d,
                        "--duration", o.duration, "--pd-backend", "cpu", "--scene", scene,
                        "--display", "none", "--no-report",
-                       "--master-args", ("--quiet " + margs).strip(), "--slave-args", "--quiet"]
+                       "--master-args", ("--quiet " + margs).strip(), "--slave-args", ("--quiet " + sargs).strip()]
                 if delay or loss:
                     cmd += ["--impair", f"delay={delay}ms,loss={loss}%,seed={delay}{loss}7"]
                 rc = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode
@@ -100,11 +106,11 @@ def main():
                       f"{m['age_p50']:.1f}/{m['age_p99']:.1f} ms, steps>0.2N {m['steps_0.2N']}", flush=True)
     with open(os.path.join(o.out, "grid.json"), "w") as f:
         json.dump(results, f, indent=1)
-    print("\n| scene | delay (ms) | loss | " + " | ".join(f"{n}: guard + damping (%)" for n, _ in arms) + " |")
+    print("\n| scene | delay (ms) | loss | " + " | ".join(f"{n}: guard + damping (%)" for n, _, _ in arms) + " |")
     print("|---|---:|---:|" + "---:|" * len(arms))
     for scene, delay, loss in cells:
         row = f"| {scene} | {delay} | {loss} % |"
-        for name, _ in arms:
+        for name, _, _ in arms:
             ms = [m for m in results if (m["scene"], m["delay"], m["loss"], m["arm"]) == (scene, delay, loss, name)]
             row += " " + " / ".join(f"{m['guard_pct'] + m['damping_pct']:.1f}" for m in ms) + " |"
         print(row)

@@ -982,7 +982,7 @@ void DepthRefiner::FillTranslationPatch(const RigidTransform& X_WT, const Seed& 
         // The neighbour one step nearer q0: its maximum carried by that step (a tool feature).
         const int ni = i - (i > 0) + (i < 0), nj = j - (j > 0) + (j < 0);
         const Seed& near = at[index(ni, nj)];
-        if (near.depth_m > -kInf) {
+        if (options_.translation_patch_neighbour_climbs && near.depth_m > -kInf) {
           climb(near.s + (i - ni) * h, near.t + (j - nj) * h, 0.25 * h, false);
           climb(near.s, near.t, 0.25 * h, false);
         }

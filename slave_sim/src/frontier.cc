@@ -239,6 +239,10 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     patch.name = "translation_patch";
     patch.translation_patch = true;
     s.push_back(patch);
+    FrontierSetting patch_climbs = patch;
+    patch_climbs.name = "translation_patch_neighbour_climbs";
+    patch_climbs.translation_patch_neighbour_climbs = true;
+    s.push_back(patch_climbs);
     FrontierSetting patch_texel = translation_only;
     patch_texel.name = "translation_patch_texel_translation_gradient";
     patch_texel.translation_patch = true;
@@ -617,6 +621,8 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.depth_refinement.conservative_screen = st.conservative_screen;
   options.depth_refinement.parallax = st.parallax;
   options.depth_refinement.translation_patch = st.translation_patch;
+  options.depth_refinement.translation_patch_neighbour_climbs =
+      st.translation_patch_neighbour_climbs;
   if (st.gradient_step_texels > 0.0)
     options.depth_refinement.gradient_step_texels = st.gradient_step_texels;
   // The texture stage's threads are the coarse query's too, as in the product.

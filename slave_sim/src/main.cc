@@ -121,6 +121,13 @@ int main(int argc, char** argv) {
                "along the window's normal (parallax) instead of h*(N.n) at the coarse point\n"
                "under it, which on coarse facets tilted from the normal under large heights\n"
                "reads another part of the surface (docs/frontier/issue32/twelfth_stop)");
+  bool translation_patch = false;
+  app.add_flag("--translation-patch", translation_patch,
+               "send each contact's depth over in-plane translations of the tool with its model\n"
+               "(a 5x5 patch one grid cell apart, 69 bytes a contact): the operator's loop then\n"
+               "follows the texture's ridges a round trip or a deadband away from where the\n"
+               "model was made instead of extending the tangent (issue 32, nineteenth stop;\n"
+               "the remote step 20-80 % slower on the seed's scenes)");
   bool texel_scale_gradient = false;
   app.add_flag("--texel-scale-gradient", texel_scale_gradient,
                "each refined contact's gradient as the refined maximum's derivative at\n"
@@ -387,6 +394,12 @@ int main(int argc, char** argv) {
     config.pipeline.refine_depth = !no_refine_depth;
     config.pipeline.depth_refinement.texel_scale_gradient = texel_scale_gradient;
     config.pipeline.depth_refinement.parallax = parallax;
+    config.pipeline.depth_refinement.translation_patch = translation_patch;
+    if (translation_patch && no_refine_depth) {
+      throw std::invalid_argument(
+          "--translation-patch needs stage 5b (drop --no-refine-depth): the patch's nodes are "
+          "refined maxima");
+    }
     config.pipeline.depth_refinement.gradient_step_texels = gradient_step_texels;
     config.pipeline.depth_refinement.secant_at_kinks_m = secant_at_kinks_um * 1e-6;
     config.pipeline.depth_refinement.translation_kink_planes = translation_kink_planes;

@@ -395,7 +395,8 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     // evaluations of b − a and how far δ0 rose above the grid's; the conservative screen's
     // squares and leaves per contact, the contacts where it found a deeper point than the seeds
     // (and Σ µm), and those it stopped at its leaf budget; the translation arms added as kink
-    // planes (DepthRefinementOptions::translation_kink_planes).
+    // planes (DepthRefinementOptions::translation_kink_planes); the contacts given a translation
+    // patch, and whether the option is on.
     const DepthRefinementCounters& r = pipeline->depth_refinement_counters();
     const double n = r.contacts > 0 ? static_cast<double>(r.contacts) : 1.0;
     s["depth_refinement"] = {
@@ -408,7 +409,9 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
         {"screen_found_deeper", r.screen_found},
         {"screen_raised_um_sum", r.screen_raised_um},
         {"screen_truncated", r.screen_truncated},
-        {"translation_kink_planes", r.translation_kink_planes}};
+        {"translation_kink_planes", r.translation_kink_planes},
+        {"translation_patches", r.translation_patches},
+        {"translation_patch", config.pipeline.depth_refinement.translation_patch}};
   }
   s["grazing_dropped_contacts"] = pipeline->step_faults().grazing_dropped;
   s["unreachable_pairs_dropped"] = pipeline->step_faults().unreachable_pairs;

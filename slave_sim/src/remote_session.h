@@ -197,6 +197,8 @@ class RemoteSession {
   /// Kink planes of models sent that did not fit their datagram (protocol.h KinkPlaneCapacity),
   /// and those sent.
   std::uint64_t kink_planes_left_out_ = 0, kink_planes_sent_ = 0;
+  // Translation patches sent, and those that did not fit the datagram after the planes.
+  std::uint64_t patches_left_out_ = 0, patches_sent_ = 0;
   // Display poses (NodePoses) of the moving scene nodes.
   std::int64_t start_ns_ = 0;  ///< the node's start: the scene's clock (animate) counts from it
   std::uint32_t graph_version_ = 0;  ///< version of the kSceneGraph object (0 = none streamed)

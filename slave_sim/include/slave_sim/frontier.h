@@ -112,6 +112,9 @@ struct FrontierSetting {
   bool parallax = false;
   /// PipelineOptions::depth_refinement.translation_patch ("translation_patch" turns it on).
   bool translation_patch = false;
+  /// PipelineOptions::depth_refinement.translation_patch_neighbour_climbs
+  /// ("translation_patch_neighbour_climbs" turns it on).
+  bool translation_patch_neighbour_climbs = false;
 };
 
 /// The sweep: the default setting (grid 50, 1024² textures, the seed's coarse counts, CPU) first,
