@@ -641,6 +641,60 @@ TEST(DepthRefinement, TranslationPatchHoldsTheDepthOverTheToolsSlide) {
   EXPECT_NE(ContactDepthAt(r.refined, dq), ContactDepthAt(none, dq));
 }
 
+// The patch's lever (DepthRefinementOptions::translation_patch_follows_rotation): a turn Δθ
+// reads the patch at the contact's slide Δθ × lever. Two routes: the residual of a turn equals
+// the residual of that slide as a translation, and the gradient the loop gets is the derivative
+// of the depth it gets (central differences, away from the nodes, where the bicubic's curvature
+// jumps, and from the patch's edge, where the residual's slope stops).
+TEST(DepthRefinement, APatchWithALeverIsReadWhereATurnSlidesTheContact) {
+  const HapticModel tool = CurvedTool();
+  const HapticModel env = EnvironmentBox(Sinusoid, 1024);
+  DepthRefinementOptions o;
+  o.translation_patch = true;
+  o.translation_patch_follows_rotation = true;
+  const double x0 = 0.55e-3;
+  double at = 0.0;
+  const double z0 = ClosedFormDepth(x0, 0.0, at) - 15e-6;
+  const ContactLinearization c =
+      LinearizeAndRefine(tool, CurvedToolPose(x0, z0), env, 50, o).refined;
+  ASSERT_GT(c.patch.step_m, 0.0);
+  // The refined point (on the window plane) less the tool's centre of mass.
+  EXPECT_NEAR(glm::length(c.patch.lever_W - (c.point_W - CurvedToolPose(x0, z0).translation)), 0.0,
+              1e-12);
+  ContactLinearization c_turned = c;
+  c_turned.patch.lever_W = {0.0, 0.02, -0.01};  // a contact 20 mm off the axis of a turn about z
+  ContactLinearization no_lever = c_turned;
+  no_lever.patch.lever_W = glm::dvec3(0.0);
+  const auto linear = [&](const Twist& dq) { return c.depth_m + c.gradient.Dot(dq); };
+  for (const double turn : {-0.03, -0.01, 0.013, 0.027}) {
+    Twist rot;
+    rot.angular = {0.0, 0.0, turn};
+    Twist slide;
+    slide.linear = glm::cross(rot.angular, c_turned.patch.lever_W);
+    EXPECT_NEAR(ContactDepthAt(c_turned, rot) - linear(rot),
+                ContactDepthAt(no_lever, slide) - linear(slide), 1e-12)
+        << turn;
+    EXPECT_NE(ContactDepthAt(c_turned, rot), linear(rot)) << "the slide crosses the ridges";
+    // The gradient against central differences, about z and along x.
+    PenetrationGradient g;
+    ContactDepthAt(c_turned, rot, &g);
+    const double e = 1e-7;
+    Twist up = rot, down = rot;
+    up.angular.z += e;
+    down.angular.z -= e;
+    EXPECT_NEAR(g.d_rotation_W.z,
+                (ContactDepthAt(c_turned, up) - ContactDepthAt(c_turned, down)) / (2.0 * e), 1e-6)
+        << turn;
+    up = rot;
+    down = rot;
+    up.linear.x += e;
+    down.linear.x -= e;
+    EXPECT_NEAR(g.d_translation_W.x,
+                (ContactDepthAt(c_turned, up) - ContactDepthAt(c_turned, down)) / (2.0 * e), 1e-6)
+        << turn;
+  }
+}
+
 TEST(DepthRefinement, OptionsOutOfRangeAreRefused) {
   DepthRefinementOptions o;
   o.gradient_step_texels = 0.0;

@@ -1013,6 +1013,7 @@ TEST(Messages, TranslationPatchesTravelWithTheirContactsAndWhatDoesNotFitIsLeftO
       const double a = 0.3 * i;
       p.axis_u_W = {std::cos(a), std::sin(a), 0.0};
       p.axis_v_W = {-std::sin(a), std::cos(a), 0.0};
+      p.lever_W = {0.01 - 1e-3 * i, -0.004, -0.012};
       for (float& v : p.depth_m) v = static_cast<float>(node(rng));
       p.depth_m[kTranslationPatchSide * kTranslationPatchSide / 2] = 0.0f;
     }
@@ -1051,14 +1052,17 @@ TEST(Messages, TranslationPatchesTravelWithTheirContactsAndWhatDoesNotFitIsLeftO
         EXPECT_EQ(b.step_m, static_cast<double>(static_cast<float>(a.step_m)));
         EXPECT_LT(glm::length(b.axis_u_W - a.axis_u_W), 2.0 / kCompactI16Max);
         EXPECT_LT(glm::length(b.axis_v_W - a.axis_v_W), 2.0 / kCompactI16Max);
+        EXPECT_LT(glm::length(b.lever_W - a.lever_W), kCompactPointStepM);
         double largest = 0.0;
         for (const float v : a.depth_m) largest = std::max(largest, std::abs(double{v}));
         for (std::size_t k = 0; k < a.depth_m.size(); ++k) {
           EXPECT_NEAR(b.depth_m[k], a.depth_m[k], 0.5 * largest / kCompactI16Max + 1e-9) << k;
         }
-        // What the loop reads 0.5 mm and 0.3 mm away.
+        // What the loop reads 0.5 mm and 0.3 mm away, turned 20 mrad about z (the lever slides
+        // the contact 0.2 mm more).
         Twist dq;
         dq.linear = {0.5e-3, -0.3e-3, 0.0};
+        dq.angular = {0.0, 0.0, 0.02};
         ContactLinearization ca = m.model.contacts[i];
         ContactLinearization cb = out.model.contacts[i];
         cb.depth_m = ca.depth_m;  // the compact contact's own f32 rounding left aside

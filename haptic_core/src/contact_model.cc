@@ -152,9 +152,14 @@ double ContactDepthAt(const ContactLinearization& c, const Twist& dq, Penetratio
     blend_t /= weight;
     blend_r /= weight;
   }
+  // The patch at the contact's slide: Δx, plus Δθ × lever where the patch follows rotation
+  // (∂/∂Δθ of g·(Δθ × r) is r × g).
   glm::dvec3 patch_t(0.0);
-  const double patch = PatchResidual(c.patch, dq.linear, patch_t);
-  if (gradient != nullptr) *gradient = {t_top + blend_t + patch_t, r_top + blend_r};
+  const bool lever = c.patch.lever_W != glm::dvec3(0.0) && finite3(c.patch.lever_W);
+  const glm::dvec3 slide = lever ? dq.linear + glm::cross(dq.angular, c.patch.lever_W) : dq.linear;
+  const double patch = PatchResidual(c.patch, slide, patch_t);
+  const glm::dvec3 patch_r = lever ? glm::cross(c.patch.lever_W, patch_t) : glm::dvec3(0.0);
+  if (gradient != nullptr) *gradient = {t_top + blend_t + patch_t, r_top + blend_r + patch_r};
   return depth + lift - lift0 + patch;
 }
 

@@ -999,6 +999,9 @@ void DepthRefiner::FillTranslationPatch(const RigidTransform& X_WT, const Seed& 
     }
   }
   patch.depth_m[index(0, 0)] = 0.0f;
+  if (options_.translation_patch_follows_rotation) {
+    patch.lever_W = w.center_W + deepest.s * w.axis_u_W + deepest.t * w.axis_v_W - X_WT.translation;
+  }
 }
 
 double DepthRefiner::TexelOfGathered(std::span<const Projected> tool_tris) const noexcept {

@@ -239,6 +239,10 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     patch.name = "translation_patch";
     patch.translation_patch = true;
     s.push_back(patch);
+    FrontierSetting patch_rotation = patch;
+    patch_rotation.name = "translation_patch_follows_rotation";
+    patch_rotation.translation_patch_follows_rotation = true;
+    s.push_back(patch_rotation);
     FrontierSetting patch_climbs = patch;
     patch_climbs.name = "translation_patch_neighbour_climbs";
     patch_climbs.translation_patch_neighbour_climbs = true;
@@ -518,11 +522,18 @@ double SquaredNorm(const glm::dvec3& v) { return glm::dot(v, v); }
 // The displacements of the model-prediction measure: ±a about W's x and y and ±d along them
 // (FrontierOptions::prediction_rotation_rad, prediction_translation_m: 1 mrad and 0.1 mm by
 // default), about the tool's centre of mass (a tilt of a resting face either way, a slide).
-std::array<Twist, 8> PredictionDisplacements(const FrontierOptions& options) {
+std::vector<Twist> PredictionDisplacements(const FrontierOptions& options) {
   const double a = options.prediction_rotation_rad, d = options.prediction_translation_m;
-  return {Twist{{0, 0, 0}, {a, 0, 0}},  Twist{{0, 0, 0}, {-a, 0, 0}}, Twist{{0, 0, 0}, {0, a, 0}},
-          Twist{{0, 0, 0}, {0, -a, 0}}, Twist{{d, 0, 0}, {0, 0, 0}},  Twist{{-d, 0, 0}, {0, 0, 0}},
-          Twist{{0, d, 0}, {0, 0, 0}},  Twist{{0, -d, 0}, {0, 0, 0}}};
+  std::vector<Twist> out = {Twist{{0, 0, 0}, {a, 0, 0}}, Twist{{0, 0, 0}, {-a, 0, 0}},
+                            Twist{{0, 0, 0}, {0, a, 0}}, Twist{{0, 0, 0}, {0, -a, 0}},
+                            Twist{{d, 0, 0}, {0, 0, 0}}, Twist{{-d, 0, 0}, {0, 0, 0}},
+                            Twist{{0, d, 0}, {0, 0, 0}}, Twist{{0, -d, 0}, {0, 0, 0}}};
+  // FrontierOptions::prediction_yaw_rad: a turn about W's z (the seed's Fig. 76 turns so).
+  if (options.prediction_yaw_rad > 0.0) {
+    out.push_back(Twist{{0, 0, 0}, {0, 0, options.prediction_yaw_rad}});
+    out.push_back(Twist{{0, 0, 0}, {0, 0, -options.prediction_yaw_rad}});
+  }
+  return out;
 }
 
 // Every how many poses the prediction measure samples (about 20 poses, 8 displacements each).
@@ -623,6 +634,8 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.depth_refinement.translation_patch = st.translation_patch;
   options.depth_refinement.translation_patch_neighbour_climbs =
       st.translation_patch_neighbour_climbs;
+  options.depth_refinement.translation_patch_follows_rotation =
+      st.translation_patch_follows_rotation;
   if (st.gradient_step_texels > 0.0)
     options.depth_refinement.gradient_step_texels = st.gradient_step_texels;
   // The texture stage's threads are the coarse query's too, as in the product.

@@ -124,10 +124,14 @@ int main(int argc, char** argv) {
   bool translation_patch = false;
   app.add_flag("--translation-patch", translation_patch,
                "send each contact's depth over in-plane translations of the tool with its model\n"
-               "(a 5x5 patch one grid cell apart, 69 bytes a contact): the operator's loop then\n"
+               "(a 5x5 patch one grid cell apart, 75 bytes a contact): the operator's loop then\n"
                "follows the texture's ridges a round trip or a deadband away from where the\n"
                "model was made instead of extending the tangent (issue 32, nineteenth stop;\n"
                "the remote step 20-80 % slower on the seed's scenes)");
+  bool translation_patch_follows_rotation = false;
+  app.add_flag("--translation-patch-follows-rotation", translation_patch_follows_rotation,
+               "with --translation-patch: the loop also reads the patch where a turn of the tool\n"
+               "slides the contact (its lever from the tool's centre of mass)");
   bool texel_scale_gradient = false;
   app.add_flag("--texel-scale-gradient", texel_scale_gradient,
                "each refined contact's gradient as the refined maximum's derivative at\n"
@@ -395,6 +399,11 @@ int main(int argc, char** argv) {
     config.pipeline.depth_refinement.texel_scale_gradient = texel_scale_gradient;
     config.pipeline.depth_refinement.parallax = parallax;
     config.pipeline.depth_refinement.translation_patch = translation_patch;
+    config.pipeline.depth_refinement.translation_patch_follows_rotation =
+        translation_patch_follows_rotation;
+    if (translation_patch_follows_rotation && !translation_patch) {
+      throw std::invalid_argument("--translation-patch-follows-rotation needs --translation-patch");
+    }
     if (translation_patch && no_refine_depth) {
       throw std::invalid_argument(
           "--translation-patch needs stage 5b (drop --no-refine-depth): the patch's nodes are "

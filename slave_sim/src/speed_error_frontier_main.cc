@@ -100,6 +100,12 @@ int main(int argc, char** argv) {
                  "model-prediction measure: tilt the tool by ± this about W's x and y (mrad)")
       ->check(CLI::Range(1e-3, 100.0))
       ->capture_default_str();
+  double prediction_yaw_mrad = 0.0;
+  app.add_option("--prediction-yaw-mrad", prediction_yaw_mrad,
+                 "model-prediction measure: also turn the tool by ± this about W's z (mrad; 0: "
+                 "no turn, as before)")
+      ->check(CLI::Range(0.0, 1000.0))
+      ->capture_default_str();
   app.add_flag("--quiet", quiet, "no progress lines");
   if (const auto rc = ht::ParseCommandLine(app, argc, argv, "speed_error_frontier")) return *rc;
   std::string command = "speed_error_frontier";
@@ -118,6 +124,7 @@ int main(int argc, char** argv) {
     options.model_prediction = !no_model_prediction;
     options.prediction_translation_m = prediction_mm * 1e-3;
     options.prediction_rotation_rad = prediction_mrad * 1e-3;
+    options.prediction_yaw_rad = prediction_yaw_mrad * 1e-3;
     options.progress = !quiet;
     options.command_line = command;
     // The plot script: in the source tree (a build), else beside an installed binary.

@@ -419,6 +419,7 @@ struct WirePatch {
   std::array<std::int16_t, 3> axis_v{};
   float scale_m = 0.0f;  ///< m per node unit
   std::array<std::int16_t, kTranslationPatchNodes> nodes{};
+  std::array<std::int16_t, 3> lever{};  ///< units of kCompactPointStepM; zero: translations only
 };
 
 constexpr void Fields(auto& a, Of<WirePatch> auto& p) {
@@ -428,6 +429,7 @@ constexpr void Fields(auto& a, Of<WirePatch> auto& p) {
   for (auto& v : p.axis_v) a(v);
   a(p.scale_m);
   for (auto& v : p.nodes) a(v);
+  for (auto& v : p.lever) a(v);
 }
 
 static_assert(kTranslationPatchNodes + 1 == kTranslationPatchSide * kTranslationPatchSide);
@@ -457,7 +459,7 @@ constexpr bool QuantizePatch(const TranslationPatch& p, std::uint8_t contact,
     largest = std::max(largest, v < 0.0f ? -static_cast<double>(v) : static_cast<double>(v));
   }
   for (int k = 0; k < 3; ++k) {
-    if (!finite(p.axis_u_W[k]) || !finite(p.axis_v_W[k])) return false;
+    if (!finite(p.axis_u_W[k]) || !finite(p.axis_v_W[k]) || !finite(p.lever_W[k])) return false;
   }
   out = {};
   out.contact = contact;
@@ -465,6 +467,7 @@ constexpr bool QuantizePatch(const TranslationPatch& p, std::uint8_t contact,
   for (int k = 0; k < 3; ++k) {
     out.axis_u[static_cast<std::size_t>(k)] = PatchI16(p.axis_u_W[k] * kCompactI16Max);
     out.axis_v[static_cast<std::size_t>(k)] = PatchI16(p.axis_v_W[k] * kCompactI16Max);
+    out.lever[static_cast<std::size_t>(k)] = PatchI16(p.lever_W[k] / kCompactPointStepM);
   }
   out.scale_m = static_cast<float>(largest / kCompactI16Max);
   const double scale = static_cast<double>(out.scale_m);
@@ -497,7 +500,7 @@ DecodeStatus CheckPatch(const WirePatch& p) noexcept {
     return false;
   };
   if (!std::isfinite(p.step_m) || !std::isfinite(p.scale_m) || marked(p.axis_u) ||
-      marked(p.axis_v) || marked(p.nodes)) {
+      marked(p.axis_v) || marked(p.nodes) || marked(p.lever)) {
     return DecodeStatus::kNonFinite;
   }
   if (!(p.step_m > 0.0f) || p.step_m > kMaxTranslationPatchStepM || p.scale_m < 0.0f) {
@@ -526,6 +529,7 @@ bool DistributePatches(std::span<const WirePatch> patches, std::size_t n,
     p.step_m = w.step_m;
     p.axis_u_W = axis(w.axis_u);
     p.axis_v_W = axis(w.axis_v);
+    p.lever_W = kCompactPointStepM * glm::dvec3(w.lever[0], w.lever[1], w.lever[2]);
     p.depth_m.fill(0.0f);
     for (int k = 0; k < kTranslationPatchNodes; ++k) {
       p.depth_m[PatchIndexOfWireNode(k)] =

@@ -66,6 +66,11 @@ struct TranslationPatch {
   glm::dvec3 axis_v_W{0.0, 1.0, 0.0};
   /// δ(i·h, j·h) − δ0 (m) at index (j + R)·kTranslationPatchSide + (i + R); the centre is 0.
   std::array<float, kTranslationPatchSide * kTranslationPatchSide> depth_m{};
+  /// The contact point less the tool's centre of mass at q0 (m, W), or zero. Non-zero: a rotation
+  /// Δθ of the tool also slides its surface at the contact by Δθ × lever, and the patch is read at
+  /// the in-plane part of Δx + Δθ × lever (DepthRefinementOptions::
+  /// translation_patch_follows_rotation).
+  glm::dvec3 lever_W{0.0};
 };
 
 /// The linearized contact that the remote node sends and the operator loop evaluates:

@@ -58,7 +58,9 @@ inline constexpr double kKinkBlendM = 10e-6;
 /// ghosts one node past each edge) less the interpolant's tangent at q0, so that δ(q0) and ∇δ(q0)
 /// are unchanged and, where the contact's ∂δ/∂x along u and v is the nodes' central difference
 /// (the default secant), δ over the patch is the interpolant's. Its gradient is added to ∂δ/∂x
-/// inside the patch; it adds no curvature. A patch with a non-finite node is ignored.
+/// inside the patch; it adds no curvature. A patch with a non-finite node is ignored. With a
+/// lever (TranslationPatch::lever_W non-zero) the patch is read at Δx + Δθ × lever instead of Δx,
+/// and its gradient r × g is added to ∂δ/∂θ.
 /// noexcept, allocation-free (1 kHz loop).
 double ContactDepthAt(const ContactLinearization& c, const Twist& dq,
                       PenetrationGradient* gradient = nullptr,

@@ -135,6 +135,11 @@ struct DepthRefinementOptions {
   /// alone, the same model prediction on the frontier at 25–35 % less patch time
   /// (docs/frontier/issue32/nineteenth_stop).
   bool translation_patch_neighbour_climbs = false;
+  /// With translation_patch: the patch's lever is set (TranslationPatch::lever_W, the refined
+  /// deepest point less the tool's centre of mass), so that the loop reads the patch at the
+  /// contact's slide under a rotation too (a turn about n slides a contact 10 mm off the axis by
+  /// 10 µm a milliradian). Off: translations only.
+  bool translation_patch_follows_rotation = false;
   /// How far above the tangent (m) a translation sample must lie to make an arm. ≥ 0.
   double translation_kink_tolerance_m = 1e-6;
   /// The rendered rotation samples (±h_θ about u, v and n) searched from a sub-grid of their

@@ -115,6 +115,9 @@ struct FrontierSetting {
   /// PipelineOptions::depth_refinement.translation_patch_neighbour_climbs
   /// ("translation_patch_neighbour_climbs" turns it on).
   bool translation_patch_neighbour_climbs = false;
+  /// PipelineOptions::depth_refinement.translation_patch_follows_rotation
+  /// ("translation_patch_follows_rotation" turns it on).
+  bool translation_patch_follows_rotation = false;
 };
 
 /// The sweep: the default setting (grid 50, 1024² textures, the seed's coarse counts, CPU) first,
@@ -180,6 +183,9 @@ struct FrontierOptions {
   double prediction_translation_m = 1e-4;
   /// … and ±this about them (rad, > 0), each about the tool's centre of mass.
   double prediction_rotation_rad = 1e-3;
+  /// … and, when > 0, ±this about W's z too (rad; 0: none, the measure before issue 32's
+  /// nineteenth stop).
+  double prediction_yaw_rad = 0.0;
   /// The plotting script (python3 + matplotlib), "" = no plot.
   std::string plot_script;
   /// The command line, for summary.md.

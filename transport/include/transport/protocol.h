@@ -73,11 +73,13 @@
 //     Then the translation patches (version 9, issue 32's nineteenth stop: δ over in-plane
 //     translations of the tool, haptic_core's TranslationPatch): u8 num_patches (at most
 //     TranslationPatchCapacity(): as many as fit after the planes), per patch
-//     (kTranslationPatchBytes, 69): u8 contact (< num_contacts, one patch per contact), f32
+//     (kTranslationPatchBytes, 75): u8 contact (< num_contacts, one patch per contact), f32
 //     step_m (node spacing h, m, finite, in (0, kMaxTranslationPatchStepM]), 3×i16 axis u and
 //     3×i16 axis v (unit vectors ·32767; normalized on receipt), f32 scale (m per node unit,
 //     finite, ≥ 0), 24×i16 nodes (δ(i·h, j·h) − δ0 = node·scale, row by row, j then i from −2 to
-//     2, the centre left out: it is 0). A node or axis of −32768 (kCompactNotFinite) or an axis
+//     2, the centre left out: it is 0), 3×i16 lever (the contact point less the tool's centre of
+//     mass at q0, units of kCompactPointStepM; zero: the patch follows translations only). A
+//     node, axis or lever of −32768 (kCompactNotFinite) or an axis
 //     shorter than 0.5 is rejected (kNonFinite, kBadValue); a patch naming a contact ≥
 //     num_contacts or a contact's second patch, or a step or scale out of range (kBadValue). A
 //     contact whose patch is not finite at the sender goes without one; the nodes' largest error
@@ -286,10 +288,10 @@ inline constexpr std::size_t kKinkPlaneCountBytes = 1;
 /// Most kink planes per contact (haptic_core's kMaxKinkPlanes) and per model.
 inline constexpr int kMaxKinkPlanesPerContact = 8;
 /// One translation patch on the wire: u8 contact, f32 step, 2×3×i16 axes, f32 scale, 24×i16
-/// nodes; and the u8 count before them (version 9).
+/// nodes, 3×i16 lever; and the u8 count before them (version 9).
 inline constexpr int kTranslationPatchNodes = 24;
 inline constexpr std::size_t kTranslationPatchBytes =
-    1 + 4 + 6 * 2 + 4 + kTranslationPatchNodes * 2;
+    1 + 4 + 6 * 2 + 4 + kTranslationPatchNodes * 2 + 3 * 2;
 inline constexpr std::size_t kTranslationPatchCountBytes = 1;
 /// Largest node spacing (m) a receiver accepts.
 inline constexpr double kMaxTranslationPatchStepM = 0.1;
