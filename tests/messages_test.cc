@@ -48,6 +48,18 @@ ContactModelMessage SampleModel(int contacts) {
   return m;
 }
 
+/// `d` with `edit` applied to all its bytes before the MAC, header included (it may change
+/// d.size), sealed again with `key` (Resealed below edits the body alone): a datagram whose MAC
+/// verifies, so that what the edit made is what a receiver checks.
+template <class Edit>
+Datagram EditedAndSealed(Datagram d, const MacKey& key, Edit&& edit) {
+  d.size -= kMacBytes;
+  edit(d);
+  ComputeMac(d.view(), key, std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size, kMacBytes));
+  d.size += kMacBytes;
+  return d;
+}
+
 /// Opens with `key` and decodes the body as the header's type says; kOk only if both pass.
 DecodeStatus OpenAndDecode(std::span<const std::uint8_t> bytes, const MacKey& key) {
   Header h;
@@ -757,12 +769,8 @@ TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
   ForeignHello foreign;
   const Datagram own = EncodeHello({MessageType::kHello, 0, 1, 0}, HelloMessage{}, key);
   EXPECT_EQ(OpenForeignHello(own.view(), key, foreign), DecodeStatus::kBadVersion);
-  Datagram newer = own;
-  newer.size -= kMacBytes;
-  newer.bytes[kHeaderVersionOffset] = kProtocolVersion + 1;
-  ComputeMac(newer.view(), key,
-             std::span<std::uint8_t, kMacBytes>(newer.bytes.data() + newer.size, kMacBytes));
-  newer.size += kMacBytes;
+  const Datagram newer = EditedAndSealed(
+      own, key, [](Datagram& d) { d.bytes[kHeaderVersionOffset] = kProtocolVersion + 1; });
   EXPECT_EQ(OpenForeignHello(newer.view(), key, foreign), DecodeStatus::kBadVersion);
   for (const std::uint16_t version :
        {std::uint16_t{1}, std::uint16_t{8}, std::uint16_t{9}, std::uint16_t{10}}) {
@@ -776,12 +784,9 @@ TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
     HelloMessage hello;
     hello.client_nonce = 0xbeef08u;
     hello.min_version = hello.max_version = 8;
-    Datagram v8 = EncodeHello({MessageType::kHello, 0, 1, 0}, hello, key);
-    v8.size -= kMacBytes;
-    v8.bytes[kHeaderVersionOffset] = 8;
-    ComputeMac(v8.view(), key,
-               std::span<std::uint8_t, kMacBytes>(v8.bytes.data() + v8.size, kMacBytes));
-    v8.size += kMacBytes;
+    const Datagram v8 =
+        EditedAndSealed(EncodeHello({MessageType::kHello, 0, 1, 0}, hello, key), key,
+                        [](Datagram& d) { d.bytes[kHeaderVersionOffset] = 8; });
     Header h8;
     std::span<const std::uint8_t> body8;
     EXPECT_EQ(OpenDatagram(v8.view(), key, h8, body8), DecodeStatus::kBadVersion);
@@ -964,13 +969,7 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
     const std::size_t planes_at =
         good.size - kMacBytes - kTranslationPatchCountBytes - kMaxKinkPlanes * kKinkPlaneBytes;
     const auto patched = [&](auto&& edit) {
-      Datagram d = good;
-      d.size -= kMacBytes;
-      edit(d);
-      ComputeMac(d.view(), key,
-                 std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size, kMacBytes));
-      d.size += kMacBytes;
-      return OpenAndDecode(d.view(), key);
+      return OpenAndDecode(EditedAndSealed(good, key, edit).view(), key);
     };
     EXPECT_EQ(patched([](Datagram&) {}), DecodeStatus::kOk);
     EXPECT_EQ(patched([&](Datagram& d) { d.bytes[planes_at] = 2; }), DecodeStatus::kBadValue);
@@ -1095,13 +1094,7 @@ TEST(Messages, TranslationPatchesTravelWithTheirContactsAndWhatDoesNotFitIsLeftO
         compact ? EncodeCompactContactModel({}, m, key) : EncodeContactModel({}, m, key);
     const std::size_t patches_at = good.size - kMacBytes - 2 * kTranslationPatchBytes;
     const auto patched = [&](auto&& edit) {
-      Datagram d = good;
-      d.size -= kMacBytes;
-      edit(d);
-      ComputeMac(d.view(), key,
-                 std::span<std::uint8_t, kMacBytes>(d.bytes.data() + d.size, kMacBytes));
-      d.size += kMacBytes;
-      return OpenAndDecode(d.view(), key);
+      return OpenAndDecode(EditedAndSealed(good, key, edit).view(), key);
     };
     EXPECT_EQ(patched([](Datagram&) {}), DecodeStatus::kOk);
     EXPECT_EQ(patched([&](Datagram& d) { d.bytes[patches_at] = 2; }), DecodeStatus::kBadValue);

@@ -61,6 +61,29 @@ std::uint16_t AwaitPort(const std::string& port_file) {
   return 0;
 }
 
+/// The tool at the scene's home pose pressed 0.5 mm down (onto the gear's ridges), at rest.
+wire::ToolStateMessage PressedAtHome(const HapticScene& scene) {
+  wire::ToolStateMessage state;
+  state.X_WT = scene.X_WT_home;
+  state.X_WT.translation.z -= 0.5e-3;
+  return state;
+}
+
+/// Sends `hello` to `remote` and waits for the Welcome that echoes its nonce, into `welcome`;
+/// returns the session it opened, 0 when none came.
+std::uint32_t OpenSession(UdpSocket& socket, const SocketAddress& remote, const MacKey& key,
+                          const wire::HelloMessage& hello, wire::WelcomeMessage& welcome) {
+  socket.SendTo(wire::EncodeHello({wire::MessageType::kHello, 0, 1, 0}, hello, key).view(), remote);
+  wire::Header h;
+  if (!Await(socket, key, wire::MessageType::kWelcome, h, [&](auto body) {
+        return wire::DecodeWelcome(body, welcome) == wire::DecodeStatus::kOk &&
+               welcome.client_nonce == hello.client_nonce;
+      })) {
+    return 0;
+  }
+  return h.session_id;
+}
+
 /// A node on 127.0.0.1 (any port, written to TempDir()/port_file_name, stale file removed),
 /// quiet, staying up after a goodbye, authenticating with `key`.
 RemoteNodeConfig LocalNodeConfig(const MacKey& key, const std::string& port_file_name) {
@@ -91,9 +114,7 @@ TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
   const std::uint8_t garbage[] = {1,  2,  3,  4,  5,  6,  7,  8,  9,  10, 11, 12, 13, 14, 15,
                                   16, 17, 18, 19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30};
   for (int i = 0; i < 5; ++i) socket.SendTo(garbage, remote);
-  wire::ToolStateMessage state;
-  state.X_WT = scene.X_WT_home;
-  state.X_WT.translation.z -= 0.5e-3;  // pressed onto the ridges
+  const wire::ToolStateMessage state = PressedAtHome(scene);
   // Before any session, even an authenticated tool state is refused.
   socket.SendTo(
       wire::EncodeToolState({wire::MessageType::kToolState, 77, 1, 0}, state, config.key).view(),
@@ -209,9 +230,7 @@ TEST(RemoteNode, AgreesOnCompactToolStatesAndAnswersThemAsTheF64Ones) {
   const std::uint32_t session = h.session_id;
 
   // The same press as the f64 test above, compact: the model answers it.
-  wire::ToolStateMessage state;
-  state.X_WT = scene.X_WT_home;
-  state.X_WT.translation.z -= 0.5e-3;
+  const wire::ToolStateMessage state = PressedAtHome(scene);
   socket.SendTo(wire::EncodeCompactToolState({wire::MessageType::kCompactToolState, session, 1, 0},
                                              state, config.key)
                     .view(),
@@ -265,17 +284,11 @@ TEST(RemoteNode, SendsEachContactsTranslationPatchWhenAsked) {
     wire::HelloMessage hello;
     hello.client_nonce = 91 + patch;
     hello.codecs = wire::kCodecDracoMesh | wire::kCodecCompactContactModel;
-    socket.SendTo(wire::EncodeHello({wire::MessageType::kHello, 0, 1, 0}, hello, config.key).view(),
-                  remote);
-    wire::Header h;
     wire::WelcomeMessage welcome;
-    ASSERT_TRUE(Await(socket, config.key, wire::MessageType::kWelcome, h, [&](auto body) {
-      return wire::DecodeWelcome(body, welcome) == wire::DecodeStatus::kOk;
-    }));
-    const std::uint32_t session = h.session_id;
-    wire::ToolStateMessage state;
-    state.X_WT = scene.X_WT_home;
-    state.X_WT.translation.z -= 0.5e-3;
+    const std::uint32_t session = OpenSession(socket, remote, config.key, hello, welcome);
+    ASSERT_NE(session, 0u);
+    wire::Header h;
+    const wire::ToolStateMessage state = PressedAtHome(scene);
     socket.SendTo(
         wire::EncodeToolState({wire::MessageType::kToolState, session, 1, 0}, state, config.key)
             .view(),
@@ -333,29 +346,21 @@ TEST(RemoteNode, EndsASessionWhoseSequenceNumbersRunLow) {
   for (int attempt = 0; attempt < 2; ++attempt) {
     wire::HelloMessage hello;
     hello.client_nonce = 900 + static_cast<std::uint64_t>(attempt);
-    socket.SendTo(wire::EncodeHello({wire::MessageType::kHello, 0, 1, 0}, hello, config.key).view(),
-                  remote);
-    wire::Header h;
     wire::WelcomeMessage welcome;
-    ASSERT_TRUE(Await(socket, config.key, wire::MessageType::kWelcome, h, [&](auto body) {
-      return wire::DecodeWelcome(body, welcome) == wire::DecodeStatus::kOk &&
-             welcome.client_nonce == hello.client_nonce;
-    })) << attempt;
-    sessions[attempt] = h.session_id;
+    sessions[attempt] = OpenSession(socket, remote, config.key, hello, welcome);
+    ASSERT_NE(sessions[attempt], 0u) << attempt;
+    const std::uint32_t session = sessions[attempt];
     // Pressed tool states, a millisecond apart: contact models (and the scene) answer them, each
     // on its own stream, until one of them reaches kSequenceRenewAt.
-    wire::ToolStateMessage state;
-    state.X_WT = scene.X_WT_home;
-    state.X_WT.translation.z -= 0.5e-3;
+    const wire::ToolStateMessage state = PressedAtHome(scene);
     bool goodbye = false;
     std::uint64_t highest = 0;
     std::array<std::uint8_t, wire::kMaxDatagramBytes> buf{};
     for (std::uint64_t seq = 1; seq <= 300 && !goodbye; ++seq) {
-      socket.SendTo(
-          wire::EncodeCompactToolState({wire::MessageType::kCompactToolState, h.session_id, seq, 0},
-                                       state, config.key)
-              .view(),
-          remote);
+      socket.SendTo(wire::EncodeCompactToolState(
+                        {wire::MessageType::kCompactToolState, session, seq, 0}, state, config.key)
+                        .view(),
+                    remote);
       socket.WaitReadable(1);
       SocketAddress from;
       while (auto n = socket.ReceiveFrom(buf, from)) {
@@ -363,7 +368,7 @@ TEST(RemoteNode, EndsASessionWhoseSequenceNumbersRunLow) {
         std::span<const std::uint8_t> body;
         if (wire::OpenDatagram({buf.data(), *n}, config.key, got, body) !=
                 wire::DecodeStatus::kOk ||
-            got.session_id != h.session_id) {
+            got.session_id != session) {
           continue;
         }
         if (got.type == wire::MessageType::kGoodbye) goodbye = true;
@@ -449,9 +454,7 @@ TEST(RemoteNode, RefusesAnOperatorOfAnotherVersionAndHoldsBackModelsThatSayNothi
   const std::uint32_t session = h.session_id;
   // One tool state, at rest and pressed on the ridges, then nothing: the node has nothing new to
   // compute, skips its steps and keeps the operator's model alive every 100 ms.
-  wire::ToolStateMessage state;
-  state.X_WT = scene.X_WT_home;
-  state.X_WT.translation.z -= 0.5e-3;
+  const wire::ToolStateMessage state = PressedAtHome(scene);
   socket.SendTo(
       wire::EncodeToolState({wire::MessageType::kToolState, session, 1, 0}, state, config.key)
           .view(),

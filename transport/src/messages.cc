@@ -1317,13 +1317,15 @@ DecodeStatus Check(const NodePosesMessage& m) {
   return DecodeStatus::kOk;
 }
 
-/// Header, body and MAC: the one encoder of every message type.
+/// Header, body and MAC: the one encoder of every message type; `version` goes in the header
+/// (another than kProtocolVersion only for a Reject to an older operator of this layout).
 template <class Body>
-Datagram Encode(const Header& header, MessageType type, const Body& body,
-                const MacKey& key) noexcept {
+Datagram Encode(const Header& header, MessageType type, const Body& body, const MacKey& key,
+                std::uint16_t version = kProtocolVersion) noexcept {
   Datagram d;
   Writer w(d);
-  const WireHeader h = ToWire(header, type);
+  WireHeader h = ToWire(header, type);
+  h.version = static_cast<std::uint8_t>(version);
   Fields(w, h);
   Fields(w, body);
   w.Seal(key);
@@ -1478,14 +1480,7 @@ Datagram EncodeReject(const Header& header, const RejectMessage& m, const MacKey
                       std::uint16_t version) noexcept {
   // An older version in this layout (8 to kProtocolVersion − 1): this layout with its number.
   if (version >= kFirstShortHeaderVersion && version < kProtocolVersion) {
-    Datagram d;
-    Writer w(d);
-    WireHeader h = ToWire(header, MessageType::kReject);
-    h.version = static_cast<std::uint8_t>(version);
-    Fields(w, h);
-    Fields(w, m);
-    w.Seal(key);
-    return d;
+    return Encode(header, MessageType::kReject, m, key, version);
   }
   // This version, or one whose layout is unknown here (the caller only asks for versions a
   // foreign Hello had: 2 to kProtocolVersion − 1), in this version's layout.
@@ -1503,10 +1498,28 @@ Datagram EncodeReject(const Header& header, const RejectMessage& m, const MacKey
   return d;
 }
 
+/// The header of layout `H` (`header_bytes`) and the Hello's first fields, which versions 2 to 9
+/// lay out alike: u16 min_version, u16 max_version, u64 client_nonce. kTooShort unless `bytes`
+/// holds them and a MAC of `mac_bytes`.
+template <class H>
+DecodeStatus ReadHelloStart(std::span<const std::uint8_t> bytes, std::size_t header_bytes,
+                            std::size_t mac_bytes, H& h, ForeignHello& hello) noexcept {
+  if (bytes.size() < header_bytes + 12 + mac_bytes) return DecodeStatus::kTooShort;
+  Reader r(bytes.first(header_bytes + 12));
+  Fields(r, h);
+  r(hello.min_version);
+  r(hello.max_version);
+  r(hello.client_nonce);
+  hello.header_version = h.version;
+  return DecodeStatus::kOk;
+}
+
 DecodeStatus OpenForeignHello(std::span<const std::uint8_t> bytes, const MacKey& key,
                               ForeignHello& hello) noexcept {
   if (bytes.size() > kMaxDatagramBytes) return DecodeStatus::kTooLong;
   if (bytes.size() < 4) return DecodeStatus::kTooShort;
+  constexpr auto kHello = static_cast<std::uint8_t>(MessageType::kHello);
+  ForeignHello read;
   // This version's layout: this version (open it with OpenDatagram) or a newer one, whose
   // layout is unknown here (dropped: a newer operator falls back to this version itself), are
   // kBadVersion; an older one (kFirstShortHeaderVersion to kProtocolVersion − 1: the same header
@@ -1517,41 +1530,27 @@ DecodeStatus OpenForeignHello(std::span<const std::uint8_t> bytes, const MacKey&
     if (version < kFirstShortHeaderVersion || version >= kProtocolVersion) {
       return DecodeStatus::kBadVersion;
     }
-    if (bytes.size() < kHeaderBytes + 12 + kMacBytes) return DecodeStatus::kTooShort;
-    Reader r(bytes.first(kHeaderBytes + 12));
     WireHeader w;
-    Fields(r, w);
-    std::uint16_t min_version = 0, max_version = 0;
-    std::uint64_t nonce = 0;
-    r(min_version);
-    r(max_version);
-    r(nonce);
-    if (w.type != static_cast<std::uint8_t>(MessageType::kHello)) return DecodeStatus::kUnexpected;
+    if (const DecodeStatus s = ReadHelloStart(bytes, kHeaderBytes, kMacBytes, w, read);
+        s != DecodeStatus::kOk) {
+      return s;
+    }
+    if (w.type != kHello) return DecodeStatus::kUnexpected;
     if (!VerifyMac(bytes, key)) return DecodeStatus::kBadMac;
-    hello = {.header_version = w.version,
-             .min_version = min_version,
-             .max_version = max_version,
-             .client_nonce = nonce};
+    hello = read;
     return DecodeStatus::kOk;
   }
-  if (bytes.size() < kLegacyHeaderBytes + 12 + kLegacyMacBytes) return DecodeStatus::kTooShort;
-  Reader r(bytes.first(kLegacyHeaderBytes + 12));
   LegacyWireHeader w;
-  Fields(r, w);
-  std::uint16_t min_version = 0, max_version = 0;
-  std::uint64_t nonce = 0;
-  r(min_version);
-  r(max_version);
-  r(nonce);
+  if (const DecodeStatus s = ReadHelloStart(bytes, kLegacyHeaderBytes, kLegacyMacBytes, w, read);
+      s != DecodeStatus::kOk) {
+    return s;
+  }
   // Versions 2 to 7 share this header and the Hello's and Reject's first fields.
   if (w.version < 2 || w.version > kLastLegacyVersion) return DecodeStatus::kBadVersion;
   if (w.flags != 0) return DecodeStatus::kBadFlags;
-  if (w.type != static_cast<std::uint8_t>(MessageType::kHello)) return DecodeStatus::kUnexpected;
+  if (w.type != kHello) return DecodeStatus::kUnexpected;
   if (!VerifyFullMac(bytes, key)) return DecodeStatus::kBadMac;
-  hello = {.header_version = w.version,
-           .min_version = min_version,
-           .max_version = max_version,
-           .client_nonce = nonce};
+  hello = read;
   return DecodeStatus::kOk;
 }
 
