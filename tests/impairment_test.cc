@@ -508,7 +508,7 @@ TEST(ClassifyDatagram, ReadsTypeAfterMagicElseOther) {
 }
 
 TEST(ClassifyDatagram, MagicIsHtInByteOrderAndWasHtlp) {
-  const wire::Datagram d = wire::EncodePing({}, MacKey::Generate());
+  const wire::Datagram d = wire::EncodePing({}, {}, MacKey::Generate());
   EXPECT_EQ(std::string(d.bytes.begin(), d.bytes.begin() + 2), "HT");
   EXPECT_EQ(d.bytes[wire::kHeaderVersionOffset], wire::kProtocolVersion);
   const auto legacy = WireDatagram(3, 0, 0);

@@ -83,8 +83,11 @@ DecodeStatus OpenAndDecode(std::span<const std::uint8_t> bytes, const MacKey& ke
       return DecodeCompactContactModel(body, m);
     }
     case MessageType::kGoodbye:
-    case MessageType::kPing:
       return DecodeEmpty(body);
+    case MessageType::kPing: {
+      PingMessage m;
+      return DecodePing(body, m);
+    }
     case MessageType::kHello: {
       HelloMessage m;
       return DecodeHello(body, m);
@@ -185,7 +188,7 @@ std::vector<Datagram> OneOfEach(const MacKey& key) {
   r.text_length = 5;
   std::copy_n("grid!", 5, r.text.begin());
   out.push_back(EncodeReject(h, r, key));
-  out.push_back(EncodePing(h, key));
+  out.push_back(EncodePing(h, {123456}, key));
   out.push_back(EncodePong(h, {9, 100, 200}, key));
   SceneFragmentMessage f{7, 2, 3000,
                          1, 3, std::span<const std::uint8_t>(object).subspan(1396, 1396)};
@@ -372,7 +375,8 @@ TEST(Messages, HeaderFieldsAreCheckedBeforeTheMac) {
   EXPECT_EQ(mutate(1, 0x00), DecodeStatus::kBadMagic);
   EXPECT_EQ(mutate(kHeaderVersionOffset, 0x07), DecodeStatus::kBadVersion);  // 7 no longer
   EXPECT_EQ(mutate(kHeaderVersionOffset, 0x08), DecodeStatus::kBadVersion);  // nor 8
-  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0a), DecodeStatus::kBadVersion);
+  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x09), DecodeStatus::kBadVersion);  // nor 9
+  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0b), DecodeStatus::kBadVersion);
   EXPECT_EQ(mutate(kHeaderTypeOffset, 0x7f), DecodeStatus::kUnknownType);
   EXPECT_EQ(mutate(kHeaderTypeOffset, 0x00), DecodeStatus::kUnknownType);
   EXPECT_EQ(mutate(5, 0x01), DecodeStatus::kBadMac);   // session id changed
@@ -708,11 +712,11 @@ TEST(Messages, TheManifestCarriesEverySceneObjectKindAndNoOther) {
 }
 
 TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
-  // Versions 4 to 9 changed neither the Hello body nor the Reject body; version 3's Hello body is
+  // Versions 4 to 10 changed neither the Hello body nor the Reject body; version 3's Hello body is
   // the first 32 bytes (no deadband terms). Versions 2 to 7 had the 28-byte header and the whole
   // 32-byte MAC (test::LegacyDatagram writes them byte by byte).
-  EXPECT_EQ(kProtocolVersion, 9);
-  EXPECT_EQ(kMinProtocolVersion, 9);
+  EXPECT_EQ(kProtocolVersion, 10);
+  EXPECT_EQ(kMinProtocolVersion, 10);
   const MacKey key = TestKey();
   for (const std::uint16_t version : {std::uint16_t{7}, std::uint16_t{6}, std::uint16_t{5},
                                       std::uint16_t{4}, std::uint16_t{3}, std::uint16_t{2}}) {
@@ -773,43 +777,44 @@ TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
       own, key, [](Datagram& d) { d.bytes[kHeaderVersionOffset] = kProtocolVersion + 1; });
   EXPECT_EQ(OpenForeignHello(newer.view(), key, foreign), DecodeStatus::kBadVersion);
   for (const std::uint16_t version :
-       {std::uint16_t{1}, std::uint16_t{8}, std::uint16_t{9}, std::uint16_t{10}}) {
+       {std::uint16_t{1}, std::uint16_t{8}, std::uint16_t{9}, std::uint16_t{10}, std::uint16_t{11}}) {
     const Datagram d =
         test::LegacyDatagram(version, MessageType::kHello, 1, test::BodyOf(own), key);
     EXPECT_EQ(OpenForeignHello(d.view(), key, foreign), DecodeStatus::kBadVersion) << version;
   }
-  // Version 8 (this header and MAC, no translation patches): its Hello is this version's with
-  // the version byte 8 and its own MAC; it gets a Reject in this layout with version 8.
-  {
+  // Versions 8 (this header and MAC, no translation patches) and 9 (an empty Ping): its Hello is
+  // this version's with that version byte and its own MAC; it gets a Reject in this layout with
+  // that version.
+  for (const std::uint8_t old : {std::uint8_t{8}, std::uint8_t{9}}) {
     HelloMessage hello;
-    hello.client_nonce = 0xbeef08u;
-    hello.min_version = hello.max_version = 8;
+    hello.client_nonce = 0xbeef00u + old;
+    hello.min_version = hello.max_version = old;
     const Datagram v8 =
         EditedAndSealed(EncodeHello({MessageType::kHello, 0, 1, 0}, hello, key), key,
-                        [](Datagram& d) { d.bytes[kHeaderVersionOffset] = 8; });
+                        [old](Datagram& d) { d.bytes[kHeaderVersionOffset] = old; });
     Header h8;
     std::span<const std::uint8_t> body8;
     EXPECT_EQ(OpenDatagram(v8.view(), key, h8, body8), DecodeStatus::kBadVersion);
     ASSERT_EQ(OpenForeignHello(v8.view(), key, foreign), DecodeStatus::kOk);
-    EXPECT_EQ(foreign.header_version, 8);
-    EXPECT_EQ(foreign.max_version, 8);
-    EXPECT_EQ(foreign.client_nonce, 0xbeef08u);
+    EXPECT_EQ(foreign.header_version, old);
+    EXPECT_EQ(foreign.max_version, old);
+    EXPECT_EQ(foreign.client_nonce, 0xbeef00u + old);
     EXPECT_EQ(OpenForeignHello(v8.view(), TestKey(3), foreign), DecodeStatus::kBadMac);
     EXPECT_EQ(OpenForeignHello(v8.view().first(kHeaderBytes + 11 + kMacBytes), key, foreign),
               DecodeStatus::kTooShort);
     RejectMessage reject;
-    reject.client_nonce = 0xbeef08u;
+    reject.client_nonce = 0xbeef00u + old;
     reject.reason = RejectReason::kVersion;
-    const Datagram r8 = EncodeReject({MessageType::kReject, 0, 1, 0}, reject, key, 8);
+    const Datagram r8 = EncodeReject({MessageType::kReject, 0, 1, 0}, reject, key, old);
     EXPECT_EQ(LoadLe<std::uint16_t>(r8.bytes.data()), kMagic);
-    EXPECT_EQ(r8.bytes[kHeaderVersionOffset], 8);
+    EXPECT_EQ(r8.bytes[kHeaderVersionOffset], old);
     EXPECT_EQ(r8.bytes[kHeaderTypeOffset], static_cast<std::uint8_t>(MessageType::kReject));
     EXPECT_TRUE(VerifyMac(r8.view(), key));
     RejectMessage back;
     ASSERT_EQ(
         DecodeReject(r8.view().subspan(kHeaderBytes, r8.size - kHeaderBytes - kMacBytes), back),
         DecodeStatus::kOk);
-    EXPECT_EQ(back.client_nonce, 0xbeef08u);
+    EXPECT_EQ(back.client_nonce, 0xbeef00u + old);
   }
   const Datagram r =
       EncodeReject({MessageType::kReject, 0, 1, 0}, RejectMessage{}, key, kProtocolVersion);
@@ -847,13 +852,35 @@ TEST(Messages, TheMacIsHmacSha256TruncatedTo128Bits) {
   EXPECT_EQ(mac, expected5);
 }
 
+// Protocol version 10: a Ping carries the operator's round trip as a u32 of µs (the remote node
+// decides from it whether to send translation patches); its body is exactly that.
+TEST(Messages, APingCarriesTheOperatorsRoundTrip) {
+  const MacKey key = TestKey();
+  for (const std::uint32_t rtt_us : {0u, 1u, 10'000u, 0xFFFF'FFFFu}) {
+    const Datagram d = EncodePing({MessageType::kPing, 3, 4, 5000}, {rtt_us}, key);
+    ASSERT_EQ(d.size, kHeaderBytes + kPingBodyBytes + kMacBytes);
+    EXPECT_EQ(LoadLe<std::uint32_t>(d.bytes.data() + kHeaderBytes), rtt_us);
+    Header h;
+    std::span<const std::uint8_t> body;
+    ASSERT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kOk);
+    PingMessage back;
+    ASSERT_EQ(DecodePing(body, back), DecodeStatus::kOk);
+    EXPECT_EQ(back.operator_rtt_us, rtt_us);
+    EXPECT_EQ(DecodePing(body.first(3), back), DecodeStatus::kTooShort);
+    // Version 9's empty Ping is refused, not read as a zero round trip.
+    EXPECT_EQ(DecodePing(body.first(0), back), DecodeStatus::kTooShort);
+    std::array<std::uint8_t, kPingBodyBytes + 1> longer{};
+    EXPECT_EQ(DecodePing(longer, back), DecodeStatus::kTooLong);
+  }
+}
+
 // Version 8's header: the sequence as u32 and the send time as whole µs in 48 bits, each written
 // at its offset (protocol.h); the MAC is HMAC-SHA-256-128.
 TEST(Messages, TheHeaderCarriesSequenceAndTimeInItsOwnWidths) {
   const MacKey key = TestKey();
   const std::int64_t big_ns = 0x0000'ABCD'1234'5678LL * 1000 + 999;  // 48 bits of µs, 999 ns more
-  const Datagram d = EncodePing({MessageType::kPing, 0x01020304u, 0xA1B2C3D4u, big_ns}, key);
-  ASSERT_EQ(d.size, kHeaderBytes + kMacBytes);
+  const Datagram d = EncodePing({MessageType::kPing, 0x01020304u, 0xA1B2C3D4u, big_ns}, {}, key);
+  ASSERT_EQ(d.size, kHeaderBytes + kPingBodyBytes + kMacBytes);
   EXPECT_EQ(LoadLe<std::uint16_t>(d.bytes.data()), kMagic);
   EXPECT_EQ(d.bytes[kHeaderVersionOffset], kProtocolVersion);
   EXPECT_EQ(d.bytes[kHeaderTypeOffset], static_cast<std::uint8_t>(MessageType::kPing));
@@ -868,11 +895,11 @@ TEST(Messages, TheHeaderCarriesSequenceAndTimeInItsOwnWidths) {
   EXPECT_EQ(h.sequence, 0xA1B2C3D4u);
   // Past the widths: the sequence saturates at the stream's last number, the time clamps.
   const Datagram past = EncodePing(
-      {MessageType::kPing, 1, std::uint64_t{1} << 40, kMaxSendTimeUs * 1000 + 5000}, key);
+      {MessageType::kPing, 1, std::uint64_t{1} << 40, kMaxSendTimeUs * 1000 + 5000}, {}, key);
   ASSERT_EQ(OpenDatagram(past.view(), key, h, body), DecodeStatus::kOk);
   EXPECT_EQ(h.sequence, 0xFFFFFFFFu);
   EXPECT_EQ(h.send_time_ns, kMaxSendTimeUs * 1000);
-  const Datagram before = EncodePing({MessageType::kPing, 1, 1, -5}, key);
+  const Datagram before = EncodePing({MessageType::kPing, 1, 1, -5}, {}, key);
   ASSERT_EQ(OpenDatagram(before.view(), key, h, body), DecodeStatus::kOk);
   EXPECT_EQ(h.send_time_ns, 0);
   // The MAC is the first 16 bytes of HMAC-SHA-256 over header and body, built here from SHA-256
@@ -884,17 +911,18 @@ TEST(Messages, TheHeaderCarriesSequenceAndTimeInItsOwnWidths) {
     outer_key[i] = k ^ 0x5c;
   }
   std::vector<std::uint8_t> inner(inner_key.begin(), inner_key.end());
-  inner.insert(inner.end(), d.bytes.begin(), d.bytes.begin() + kHeaderBytes);
+  inner.insert(inner.end(), d.bytes.begin(), d.bytes.begin() + kHeaderBytes + kPingBodyBytes);
   std::array<std::uint8_t, crypto_hash_sha256_BYTES> inner_hash{}, hmac{};
   crypto_hash_sha256(inner_hash.data(), inner.data(), inner.size());
   std::vector<std::uint8_t> outer(outer_key.begin(), outer_key.end());
   outer.insert(outer.end(), inner_hash.begin(), inner_hash.end());
   crypto_hash_sha256(hmac.data(), outer.data(), outer.size());
-  EXPECT_TRUE(std::equal(hmac.begin(), hmac.begin() + kMacBytes, d.bytes.begin() + kHeaderBytes));
+  const std::size_t mac_at = kHeaderBytes + kPingBodyBytes;
+  EXPECT_TRUE(std::equal(hmac.begin(), hmac.begin() + kMacBytes, d.bytes.begin() + mac_at));
   // Every one of the 16 MAC bytes counts.
   for (std::size_t i = 0; i < kMacBytes; ++i) {
     Datagram f = d;
-    f.bytes[kHeaderBytes + i] ^= 0x80;
+    f.bytes[mac_at + i] ^= 0x80;
     EXPECT_EQ(OpenDatagram(f.view(), key, h, body), DecodeStatus::kBadMac) << i;
   }
 }

@@ -8,6 +8,7 @@
 #include <array>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <limits>
 #include <thread>
 #include <vector>
@@ -268,12 +269,31 @@ TEST(RemoteNode, AgreesOnCompactToolStatesAndAnswersThemAsTheF64Ones) {
 // Protocol version 9: a node run with --translation-patch (DepthRefinementOptions::
 // translation_patch) sends each contact's patch with its compact model over a real socket; the
 // operator's side reads the depth at a node as δ0 plus that node, and the node counts what it
-// sent. Without the option no patch goes.
-TEST(RemoteNode, SendsEachContactsTranslationPatchWhenAsked) {
+// sent. Version 10: without the option, the patches go while the round trip the operator's Ping
+// reports reaches RemoteNodeConfig::translation_patch_rtt_ms, and not before a Ping, below it,
+// or with the threshold infinite.
+TEST(RemoteNode, SendsEachContactsTranslationPatchWhenAskedOrWhenTheRoundTripIsLong) {
   const HapticScene scene = MakeBlockOnGearScene();
-  for (const bool patch : {true, false}) {
+  // Always (the option), by the operator's round trip (protocol version 10: its Ping carries it;
+  // RemoteNodeConfig::translation_patch_rtt_ms, 10 ms by default) long and short, and never.
+  struct Case {
+    const char* name;
+    bool always;
+    double rtt_ms_threshold;
+    std::uint32_t operator_rtt_us;  // 0: no Ping before the tool state
+    bool patch;
+  };
+  const Case cases[] = {{"always", true, 10.0, 0, true},
+                        {"round trip 50 ms", false, 10.0, 50'000, true},
+                        {"round trip 2 ms", false, 10.0, 2'000, false},
+                        {"no ping", false, 10.0, 0, false},
+                        {"never", false, std::numeric_limits<double>::infinity(), 50'000, false}};
+  int nonce = 0;
+  for (const Case& k : cases) {
+    SCOPED_TRACE(k.name);
     RemoteNodeConfig config = LocalNodeConfig(TestKey(41), "remote_node_patch_test.port");
-    config.pipeline.depth_refinement.translation_patch = patch;
+    config.pipeline.depth_refinement.translation_patch = k.always;
+    config.translation_patch_rtt_ms = k.rtt_ms_threshold;
     std::atomic<bool> stop{false};
     nlohmann::json summary;
     std::thread node([&] { summary = RunRemoteNode(config, scene, stop); });
@@ -282,17 +302,28 @@ TEST(RemoteNode, SendsEachContactsTranslationPatchWhenAsked) {
     const SocketAddress remote = SocketAddress::Parse("127.0.0.1:" + std::to_string(port));
     UdpSocket socket(SocketAddress::Parse("127.0.0.1:0"));
     wire::HelloMessage hello;
-    hello.client_nonce = 91 + patch;
+    hello.client_nonce = 91 + nonce++;
     hello.codecs = wire::kCodecDracoMesh | wire::kCodecCompactContactModel;
     wire::WelcomeMessage welcome;
     const std::uint32_t session = OpenSession(socket, remote, config.key, hello, welcome);
     ASSERT_NE(session, 0u);
     wire::Header h;
+    std::uint32_t sequence = 1;
+    if (k.operator_rtt_us > 0) {
+      socket.SendTo(wire::EncodePing({wire::MessageType::kPing, session, sequence++, 0},
+                                     {k.operator_rtt_us}, config.key)
+                        .view(),
+                    remote);
+      wire::PongMessage pong;
+      ASSERT_TRUE(Await(socket, config.key, wire::MessageType::kPong, h, [&](auto body) {
+        return wire::DecodePong(body, pong) == wire::DecodeStatus::kOk;
+      }));
+    }
     const wire::ToolStateMessage state = PressedAtHome(scene);
-    socket.SendTo(
-        wire::EncodeToolState({wire::MessageType::kToolState, session, 1, 0}, state, config.key)
-            .view(),
-        remote);
+    socket.SendTo(wire::EncodeToolState({wire::MessageType::kToolState, session, sequence++, 0},
+                                        state, config.key)
+                      .view(),
+                  remote);
     wire::ContactModelMessage model;
     ASSERT_TRUE(
         Await(socket, config.key, wire::MessageType::kCompactContactModel, h, [&](auto body) {
@@ -300,31 +331,36 @@ TEST(RemoteNode, SendsEachContactsTranslationPatchWhenAsked) {
         }));
     ASSERT_GE(model.model.num_contacts, 1);
     const ContactLinearization& c = model.model.contacts[0];
-    if (patch) {
+    if (k.patch) {
       ASSERT_GT(c.patch.step_m, 0.0);
       EXPECT_NEAR(glm::length(c.patch.axis_u_W), 1.0, 1e-9);
       EXPECT_NEAR(glm::dot(c.patch.axis_u_W, c.patch.axis_v_W), 0.0, 1e-4);
       // At node (2, −1) the loop reads δ0 plus that node.
       Twist dq;
       dq.linear = c.patch.step_m * (2.0 * c.patch.axis_u_W - c.patch.axis_v_W);
-      const std::size_t k = static_cast<std::size_t>(1 * kTranslationPatchSide + 4);
-      EXPECT_NEAR(ContactDepthAt(c, dq), c.depth_m + c.patch.depth_m[k], 1e-9);
+      const std::size_t n = static_cast<std::size_t>(1 * kTranslationPatchSide + 4);
+      EXPECT_NEAR(ContactDepthAt(c, dq), c.depth_m + c.patch.depth_m[n], 1e-9);
     } else {
       EXPECT_EQ(c.patch.step_m, 0.0);
     }
-    socket.SendTo(
-        wire::EncodeGoodbye({wire::MessageType::kGoodbye, session, 2, 0}, config.key).view(),
-        remote);
+    socket.SendTo(wire::EncodeGoodbye({wire::MessageType::kGoodbye, session, sequence++, 0},
+                                      config.key)
+                      .view(),
+                  remote);
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
     stop = true;
     node.join();
     const nlohmann::json& t = summary["transport"]["translation_patches"];
-    if (patch) {
+    if (k.patch) {
       EXPECT_GE(t["sent"].get<int>(), 1);
     } else {
       EXPECT_EQ(t["sent"].get<int>(), 0);
     }
     EXPECT_EQ(t["left_out"].get<int>(), 0);
+    const nlohmann::json& by_rtt = summary["translation_patch_by_rtt"];
+    EXPECT_NEAR(by_rtt["operator_rtt_ms_last"].get<double>(), k.operator_rtt_us * 1e-3, 1e-9);
+    EXPECT_EQ(by_rtt["steps_with_patch"].get<int>() > 0, k.patch);
+    EXPECT_EQ(by_rtt["rtt_ms"].is_null(), !std::isfinite(k.rtt_ms_threshold));
   }
 }
 
@@ -477,7 +513,7 @@ TEST(RemoteNode, RefusesAnOperatorOfAnotherVersionAndHoldsBackModelsThatSayNothi
   while (std::chrono::steady_clock::now() < start + std::chrono::milliseconds(450)) {
     if (std::chrono::steady_clock::now() >= next_ping) {
       socket.SendTo(
-          wire::EncodePing({wire::MessageType::kPing, session, ping_sequence++, 0}, config.key)
+          wire::EncodePing({wire::MessageType::kPing, session, ping_sequence++, 0}, {}, config.key)
               .view(),
           remote);
       next_ping += std::chrono::milliseconds(100);

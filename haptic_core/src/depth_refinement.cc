@@ -450,7 +450,7 @@ DepthRefiner::DepthRefiner(const DepthRefinementOptions& options, std::size_t ma
   env_all_.reserve(max_triangles);
   tool_all_.reserve(max_triangles);
   tool_pose_all_.reserve(max_triangles);
-  if (options_.translation_patch) {
+  if (max_triangles > 0) {  // also with the patch off: SetTranslationPatch may turn it on
     constexpr std::size_t kSide = 160 + 2 * kTranslationPatchRadius;
     patch_env_heights_.reserve(kSide * kSide);
     patch_tool_heights_.reserve(kSide * kSide);

@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <ctime>
 #include <exception>
+#include <limits>
 #include <optional>
 
 #include "codecs/draco_mesh_codec.h"
@@ -123,8 +124,14 @@ void NetworkWorker::Run(const std::atomic<bool>& stop) {
       last_send_ns = now;
     }
     if (now - last_ping_ns >= heartbeat_ns_) {
+      // The round trip measured so far goes with the probe (the remote node's
+      // translation_patch_rtt_ms decides from it).
+      const std::int64_t rtt_ns = clock_.valid() ? clock_.rtt_ns() : handshake_rtt_ns_;
+      wire::PingMessage ping;
+      ping.operator_rtt_us = static_cast<std::uint32_t>(
+          std::clamp<std::int64_t>(rtt_ns / 1000, 0, std::numeric_limits<std::uint32_t>::max()));
       link_.Send(
-          wire::EncodePing(link_.NextHeader(wire::MessageType::kPing, session_), config_.key),
+          wire::EncodePing(link_.NextHeader(wire::MessageType::kPing, session_), ping, config_.key),
           config_.remote_address);
       last_ping_ns = now;
     }

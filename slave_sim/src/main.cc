@@ -10,6 +10,7 @@
 #include <exception>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
 
@@ -127,7 +128,19 @@ int main(int argc, char** argv) {
                "(a 5x5 patch one grid cell apart, 75 bytes a contact): the operator's loop then\n"
                "follows the texture's ridges a round trip or a deadband away from where the\n"
                "model was made instead of extending the tangent (issue 32, nineteenth stop;\n"
-               "the remote step 20-80 % slower on the seed's scenes)");
+               "the remote step 20-80 % slower on the seed's scenes). Always, whatever the\n"
+               "round trip (by default only from --translation-patch-rtt-ms)");
+  double translation_patch_rtt_ms = 10.0;
+  app.add_option("--translation-patch-rtt-ms", translation_patch_rtt_ms,
+                 "send the translation patches (as --translation-patch does) while the round\n"
+                 "trip the operator measures is at least this (ms; its pings carry it): a model\n"
+                 "a round trip old then still holds the ridges where the hand has moved. Below\n"
+                 "it the step pays nothing for them (default 10: half a grid cell of hand\n"
+                 "motion at 20-50 mm/s; issue 33)")
+      ->check(CLI::NonNegativeNumber);
+  bool no_translation_patch = false;
+  app.add_flag("--no-translation-patch", no_translation_patch,
+               "never send translation patches, whatever the round trip");
   bool translation_patch_follows_rotation = false;
   app.add_flag("--translation-patch-follows-rotation", translation_patch_follows_rotation,
                "with --translation-patch: the loop also reads the patch where a turn of the tool\n"
@@ -404,6 +417,13 @@ int main(int argc, char** argv) {
     if (translation_patch_follows_rotation && !translation_patch) {
       throw std::invalid_argument("--translation-patch-follows-rotation needs --translation-patch");
     }
+    if (translation_patch && no_translation_patch) {
+      throw std::invalid_argument(
+          "--translation-patch and --no-translation-patch contradict each other: give one");
+    }
+    config.translation_patch_rtt_ms = no_translation_patch
+                                          ? std::numeric_limits<double>::infinity()
+                                          : translation_patch_rtt_ms;
     if (translation_patch && no_refine_depth) {
       throw std::invalid_argument(
           "--translation-patch needs stage 5b (drop --no-refine-depth): the patch's nodes are "

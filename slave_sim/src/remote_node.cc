@@ -113,6 +113,11 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
                                 std::to_string(config.max_deadband));
   }
   config.model_deadband.Validate();
+  if (!(config.translation_patch_rtt_ms >= 0.0)) {
+    throw std::invalid_argument(
+        "translation patch round trip must be >= 0 ms (infinite: never by the round trip), got " +
+        std::to_string(config.translation_patch_rtt_ms));
+  }
   if (!(config.display_rate_hz >= 1.0 && config.display_rate_hz <= 1000.0)) {
     throw std::invalid_argument("display rate must be 1..1000 Hz, got " +
                                 std::to_string(config.display_rate_hz));
@@ -193,6 +198,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   std::uint64_t last_progress_steps = 0;
   bool running = true;
   bool reported_fallback = false;
+  std::uint64_t steps_with_patch = 0, patch_switches = 0;
   std::vector<StreamObject> reload_objects;
   const HapticScene* current_scene = &scene;  // the scene the pipeline steps (a reload moves it)
   std::uint64_t scene_reloads = 0;
@@ -312,6 +318,17 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
       first_step_ns = t_step;
       first_step_cpu_s = ProcessCpuSeconds();
     }
+    // The translation patches while the operator's round trip is long (or always, by option).
+    const bool patch = config.pipeline.depth_refinement.translation_patch ||
+                       (std::isfinite(config.translation_patch_rtt_ms) &&
+                        session.operator_rtt_ns() > 0 &&
+                        static_cast<double>(session.operator_rtt_ns()) >=
+                            config.translation_patch_rtt_ms * 1e6);
+    if (patch != pipeline->translation_patch()) {
+      pipeline->SetTranslationPatch(patch);
+      ++patch_switches;
+    }
+    if (patch) ++steps_with_patch;
     StepTimings timings;
     wire::ContactModelMessage out;
     out.model = pipeline->Step(X_WT, session.latest_tool_state_seq(), timings,
@@ -412,6 +429,14 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
         {"translation_kink_planes", r.translation_kink_planes},
         {"translation_patches", r.translation_patches},
         {"translation_patch", config.pipeline.depth_refinement.translation_patch}};
+    // Whether the patches went by the operator's round trip (translation_patch_rtt_ms).
+    s["translation_patch_by_rtt"] = {
+        {"rtt_ms", std::isfinite(config.translation_patch_rtt_ms)
+                       ? nlohmann::json(config.translation_patch_rtt_ms)
+                       : nlohmann::json(nullptr)},
+        {"operator_rtt_ms_last", static_cast<double>(session.operator_rtt_ns()) * 1e-6},
+        {"steps_with_patch", steps_with_patch},
+        {"switches", patch_switches}};
   }
   s["grazing_dropped_contacts"] = pipeline->step_faults().grazing_dropped;
   s["unreachable_pairs_dropped"] = pipeline->step_faults().unreachable_pairs;

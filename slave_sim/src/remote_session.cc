@@ -68,10 +68,12 @@ bool RemoteSession::OnDatagram(std::span<const std::uint8_t> datagram, const Soc
       break;
     }
     case wire::MessageType::kPing: {
-      if (const auto st = wire::DecodeEmpty(body); st != wire::DecodeStatus::kOk) {
+      wire::PingMessage ping;
+      if (const auto st = wire::DecodePing(body, ping); st != wire::DecodeStatus::kOk) {
         link_.CountBodyRejected(header.type, st);
         break;
       }
+      operator_rtt_ns_ = std::int64_t{ping.operator_rtt_us} * 1000;
       wire::PongMessage pong{header.sequence, header.send_time_ns, now};
       link_.Send(
           wire::EncodePong(link_.NextHeader(wire::MessageType::kPong, session_), pong, config_.key),
@@ -193,6 +195,7 @@ void RemoteSession::OnHello(const wire::Header& header, std::span<const std::uin
   model_keepalive_ns_ = std::int64_t{welcome.deadband.model_keepalive_ms} * 1000000;
   compact_models_ = (welcome.codecs & wire::kCodecCompactContactModel) != 0;
   have_step_pose_ = have_sent_model_ = model_pending_ = have_held_echo_ = false;
+  operator_rtt_ns_ = 0;
   link_.Send(wire::EncodeWelcome(link_.NextHeader(wire::MessageType::kWelcome, session_), welcome,
                                  config_.key),
              peer_);

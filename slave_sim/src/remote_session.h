@@ -144,6 +144,9 @@ class RemoteSession {
   std::uint64_t latest_tool_state_seq() const noexcept { return state_seq_; }
   /// Longest gap between two tool states of one session (ns).
   std::int64_t tool_state_gap_max_ns() const noexcept { return max_gap_ns_; }
+  /// The round trip the operator's newest Ping reported (ns, PingMessage::operator_rtt_us; 0:
+  /// none yet in this session).
+  std::int64_t operator_rtt_ns() const noexcept { return operator_rtt_ns_; }
 
   /// The link's statistics with the session counters (sessions, goodbyes, peers lost, Hello
   /// replays, retransmits, deferrals, rejects) and the scene stream's, for the run summary.
@@ -210,6 +213,7 @@ class RemoteSession {
   std::uint64_t state_seq_ = 0;
   wire::ToolStateMessage latest_;
   std::int64_t latest_send_time_ns_ = 0, latest_recv_ns_ = 0, max_gap_ns_ = 0;
+  std::int64_t operator_rtt_ns_ = 0;
 
   std::uint64_t sessions_ = 0, goodbyes_ = 0, peers_lost_ = 0, hello_replayed_ = 0;
   std::uint64_t sessions_renewed_ = 0;

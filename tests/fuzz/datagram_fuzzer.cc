@@ -100,9 +100,13 @@ void DecodeBody(const ht::wire::Header& h, std::span<const std::uint8_t> body) {
       break;
     }
     case MessageType::kGoodbye:
-    case MessageType::kPing:
       (void)DecodeEmpty(body);
       break;
+    case MessageType::kPing: {
+      PingMessage m;
+      (void)DecodePing(body, m);
+      break;
+    }
     case MessageType::kHello: {
       HelloMessage m;
       if (DecodeHello(body, m) == DecodeStatus::kOk) Check(m.mtu >= kMinMtuBytes);

@@ -731,6 +731,8 @@ constexpr void Fields(auto& a, Of<RejectMessage> auto& m) {
   a.Bytes(m.text, n);
 }
 
+constexpr void Fields(auto& a, Of<PingMessage> auto& m) { a(m.operator_rtt_us); }
+
 constexpr void Fields(auto& a, Of<PongMessage> auto& m) {
   a(m.ping_sequence);
   a(m.t1_ns);
@@ -819,6 +821,7 @@ static_assert(SizeOf<HelloMessage>().bytes == kHelloBodyBytes);
 static_assert(SizeOf<WelcomeMessage>().bytes == kWelcomeFixedBytes + kWelcomeTargetBytes);
 static_assert(SizeOf<WelcomeMessage>().counted_bytes == kWelcomeTargetBytes);
 static_assert(SizeOf<RejectMessage>().bytes == kRejectFixedBytes + 1);
+static_assert(SizeOf<PingMessage>().bytes == kPingBodyBytes);
 static_assert(SizeOf<PongMessage>().bytes == kPongBodyBytes);
 static_assert(SizeOf<SceneFragmentMessage>().bytes == kSceneFragmentFixedBytes);
 static_assert(SizeOf<SceneManifestMessage>().bytes ==
@@ -1264,6 +1267,8 @@ DecodeStatus Check(const RejectMessage& m) {
   return reason < 1 || reason > 3 ? DecodeStatus::kBadValue : DecodeStatus::kOk;
 }
 
+DecodeStatus Check(const PingMessage&) { return DecodeStatus::kOk; }
+
 DecodeStatus Check(const PongMessage& m) {
   return m.ping_sequence == 0 ? DecodeStatus::kBadValue : DecodeStatus::kOk;
 }
@@ -1460,8 +1465,8 @@ Datagram EncodeGoodbye(const Header& header, const MacKey& key) noexcept {
   return Encode(header, MessageType::kGoodbye, EmptyBody{}, key);
 }
 
-Datagram EncodePing(const Header& header, const MacKey& key) noexcept {
-  return Encode(header, MessageType::kPing, EmptyBody{}, key);
+Datagram EncodePing(const Header& header, const PingMessage& m, const MacKey& key) noexcept {
+  return Encode(header, MessageType::kPing, m, key);
 }
 
 Datagram EncodeHello(const Header& header, const HelloMessage& m, const MacKey& key) noexcept {
@@ -1618,6 +1623,10 @@ DecodeStatus OpenDatagram(std::span<const std::uint8_t> bytes, const MacKey& key
 
 DecodeStatus DecodeEmpty(std::span<const std::uint8_t> body) noexcept {
   EmptyBody m;
+  return Decode(body, m);
+}
+
+DecodeStatus DecodePing(std::span<const std::uint8_t> body, PingMessage& m) noexcept {
   return Decode(body, m);
 }
 

@@ -229,6 +229,11 @@ class DepthRefiner {
 
   const DepthRefinementCounters& counters() const noexcept { return counters_; }
   const DepthRefinementOptions& options() const noexcept { return options_; }
+  /// Turns DepthRefinementOptions::translation_patch on or off for the contacts refined from now
+  /// on (the remote node's choice by the operator's round trip, RemoteNodeConfig::
+  /// translation_patch_rtt_ms). noexcept; the patch's buffers are reserved at construction, so
+  /// that Refine allocates no more with it on than off.
+  void SetTranslationPatch(bool on) noexcept { options_.translation_patch = on; }
 
   /// One coarse triangle projected on a window at one pose (internal; public for the .cc's
   /// helpers): corners along u, v and n (m), the normal factors N_c·n, texture coordinates, the

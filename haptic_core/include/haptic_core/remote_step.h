@@ -319,6 +319,12 @@ class HapticTexturePipeline {
   const DepthRefinementCounters& depth_refinement_counters() const noexcept {
     return refiner_.counters();
   }
+  /// Whether stage 5b gives each contact a translation patch from the next Step() on
+  /// (DepthRefinementOptions::translation_patch, which sets it at construction); nothing without
+  /// PipelineOptions::refine_depth. The remote node turns it on while the operator's round trip
+  /// is long (RemoteNodeConfig::translation_patch_rtt_ms). noexcept, allocation-free.
+  void SetTranslationPatch(bool on) noexcept { refiner_.SetTranslationPatch(on); }
+  bool translation_patch() const noexcept { return refiner_.options().translation_patch; }
 
  private:
   /// Stages 1–3 for every touchable: appends to candidates_ (up to kMaxContacts) and fills the

@@ -130,6 +130,14 @@ struct RejectMessage {
   std::string_view message() const noexcept { return {text.data(), text_length}; }
 };
 
+/// Operator → remote: a clock-sync probe (its header's send time is t1) that also tells the remote
+/// node the round trip the operator measured (protocol version 10).
+struct PingMessage {
+  /// The operator's round trip (µs): ClockSync::rtt_ns, or the Hello/Welcome exchange's before
+  /// the first Pong; 0: not measured yet. Saturates at 2³² − 1.
+  std::uint32_t operator_rtt_us = 0;
+};
+
 /// Remote → operator: answer to a Ping (NTP-style timestamps; t3 is the header's send time).
 struct PongMessage {
   std::uint64_t ping_sequence = 0;
@@ -260,7 +268,7 @@ Datagram EncodeWelcome(const Header& header, const WelcomeMessage& message,
                        const MacKey& key) noexcept;
 Datagram EncodeReject(const Header& header, const RejectMessage& message,
                       const MacKey& key) noexcept;
-Datagram EncodePing(const Header& header, const MacKey& key) noexcept;
+Datagram EncodePing(const Header& header, const PingMessage& message, const MacKey& key) noexcept;
 Datagram EncodePong(const Header& header, const PongMessage& message, const MacKey& key) noexcept;
 /// The payload is cut to what fits in kMaxDatagramBytes.
 Datagram EncodeSceneFragment(const Header& header, const SceneFragmentMessage& message,
@@ -344,8 +352,10 @@ DecodeStatus DecodeSceneNack(std::span<const std::uint8_t> body,
 /// checked here (the receiver checks them against its scene graph).
 DecodeStatus DecodeNodePoses(std::span<const std::uint8_t> body,
                              NodePosesMessage& message) noexcept;
-/// Bodies that must be empty (Goodbye, Ping).
+/// Bodies that must be empty (Goodbye).
 DecodeStatus DecodeEmpty(std::span<const std::uint8_t> body) noexcept;
+/// Ping: kTooShort / kTooLong unless the body is kPingBodyBytes; every value is valid.
+DecodeStatus DecodePing(std::span<const std::uint8_t> body, PingMessage& message) noexcept;
 
 static_assert(kMaxWireContacts == kMaxContacts, "wire and model contact limits must agree");
 

@@ -125,7 +125,11 @@
 //     hand height above top_W at which the tool is clear of every touchable). The header carries
 //     the new session id.
 //   Reject R→O (10 + n): u64 client_nonce, u8 RejectReason, u8 n, n bytes of UTF-8 text (n ≤ 200)
-//   Ping O→R (0): its header's send_time_ns is t1.
+//   Ping O→R (4): u32 operator_rtt_us, the round trip the operator's clock sync measured last
+//     (µs, the best of its recent samples, ClockSync::rtt_ns; before the first Pong the
+//     Hello/Welcome exchange's; 0: none yet), so that the remote node can send what a model
+//     needs a round trip old (RemoteNodeConfig::translation_patch_rtt_ms). Its header's
+//     send_time_ns is t1.
 //   Pong R→O (24): u64 ping_sequence, i64 t1 (echoed), i64 t2 (remote receive time); the header's
 //     send_time_ns is t3 (NTP's four timestamps with the operator's receive time t4).
 //   SceneFragment R→O (16 + payload, payload ≥ 1): u32 object_id, u32 version, u32 object_bytes,
@@ -191,12 +195,13 @@ inline constexpr std::uint32_t kLegacyMagic = 0x504C5448u;  // bytes 'H' 'T' 'L'
 /// MAC (HMAC-SHA-256-128) instead of 32 (HMAC-SHA-512-256); every body is as in version 7.
 /// Version 9 (issue 32's nineteenth stop) adds the translation patches after the kink planes of
 /// ContactModel and CompactContactModel; header, MAC and every other body are as in version 8.
-/// Only version 9 is accepted. A remote node answers a Hello of versions 2 to 8 whose MAC
-/// verifies with a Reject (kVersion) in that Hello's own layout and header version (the Hello's
-/// first 12 body bytes and the Reject body are laid out alike in versions 2 to 9), so that an
-/// older operator is told why.
-inline constexpr std::uint16_t kProtocolVersion = 9;
-inline constexpr std::uint16_t kMinProtocolVersion = 9;
+/// Version 10 (issue 33) gives Ping a body, the operator's measured round trip; every other body
+/// is as in version 9. Only version 10 is accepted. A remote node answers a Hello of versions 2
+/// to 9 whose MAC verifies with a Reject (kVersion) in that Hello's own layout and header version
+/// (the Hello's first 12 body bytes and the Reject body are laid out alike in versions 2 to 10),
+/// so that an older operator is told why.
+inline constexpr std::uint16_t kProtocolVersion = 10;
+inline constexpr std::uint16_t kMinProtocolVersion = 10;
 
 /// Message types; values are part of the protocol and never reused.
 enum class MessageType : std::uint8_t {
@@ -305,6 +310,7 @@ inline constexpr std::size_t kWelcomeTargetBytes = 10 * 4;
 inline constexpr int kMaxWelcomeTargets = 8;
 inline constexpr std::size_t kRejectFixedBytes = 10;
 inline constexpr std::size_t kMaxRejectText = 200;
+inline constexpr std::size_t kPingBodyBytes = 4;
 inline constexpr std::size_t kPongBodyBytes = 24;
 inline constexpr std::size_t kSceneFragmentFixedBytes = 16;
 inline constexpr std::size_t kSceneManifestFixedBytes = 5;
