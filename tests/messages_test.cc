@@ -776,8 +776,8 @@ TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
   const Datagram newer = EditedAndSealed(
       own, key, [](Datagram& d) { d.bytes[kHeaderVersionOffset] = kProtocolVersion + 1; });
   EXPECT_EQ(OpenForeignHello(newer.view(), key, foreign), DecodeStatus::kBadVersion);
-  for (const std::uint16_t version :
-       {std::uint16_t{1}, std::uint16_t{8}, std::uint16_t{9}, std::uint16_t{10}, std::uint16_t{11}}) {
+  for (const std::uint16_t version : {std::uint16_t{1}, std::uint16_t{8}, std::uint16_t{9},
+                                      std::uint16_t{10}, std::uint16_t{11}}) {
     const Datagram d =
         test::LegacyDatagram(version, MessageType::kHello, 1, test::BodyOf(own), key);
     EXPECT_EQ(OpenForeignHello(d.view(), key, foreign), DecodeStatus::kBadVersion) << version;

@@ -343,10 +343,10 @@ TEST(RemoteNode, SendsEachContactsTranslationPatchWhenAskedOrWhenTheRoundTripIsL
     } else {
       EXPECT_EQ(c.patch.step_m, 0.0);
     }
-    socket.SendTo(wire::EncodeGoodbye({wire::MessageType::kGoodbye, session, sequence++, 0},
-                                      config.key)
-                      .view(),
-                  remote);
+    socket.SendTo(
+        wire::EncodeGoodbye({wire::MessageType::kGoodbye, session, sequence++, 0}, config.key)
+            .view(),
+        remote);
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
     stop = true;
     node.join();

@@ -137,10 +137,11 @@ int main(int argc, char** argv) {
                  "a round trip old then still holds the ridges where the hand has moved. Below\n"
                  "it the step pays nothing for them (default 10: half a grid cell of hand\n"
                  "motion at 20-50 mm/s; issue 33)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(CLI::Range(0.0, 60000.0));
   bool no_translation_patch = false;
   app.add_flag("--no-translation-patch", no_translation_patch,
-               "never send translation patches, whatever the round trip");
+               "never send translation patches, whatever the round trip")
+      ->excludes("--translation-patch");
   bool translation_patch_follows_rotation = false;
   app.add_flag("--translation-patch-follows-rotation", translation_patch_follows_rotation,
                "with --translation-patch: the loop also reads the patch where a turn of the tool\n"
@@ -417,13 +418,8 @@ int main(int argc, char** argv) {
     if (translation_patch_follows_rotation && !translation_patch) {
       throw std::invalid_argument("--translation-patch-follows-rotation needs --translation-patch");
     }
-    if (translation_patch && no_translation_patch) {
-      throw std::invalid_argument(
-          "--translation-patch and --no-translation-patch contradict each other: give one");
-    }
-    config.translation_patch_rtt_ms = no_translation_patch
-                                          ? std::numeric_limits<double>::infinity()
-                                          : translation_patch_rtt_ms;
+    config.translation_patch_rtt_ms =
+        no_translation_patch ? std::numeric_limits<double>::infinity() : translation_patch_rtt_ms;
     if (translation_patch && no_refine_depth) {
       throw std::invalid_argument(
           "--translation-patch needs stage 5b (drop --no-refine-depth): the patch's nodes are "

@@ -319,11 +319,10 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
       first_step_cpu_s = ProcessCpuSeconds();
     }
     // The translation patches while the operator's round trip is long (or always, by option).
-    const bool patch = config.pipeline.depth_refinement.translation_patch ||
-                       (std::isfinite(config.translation_patch_rtt_ms) &&
-                        session.operator_rtt_ns() > 0 &&
-                        static_cast<double>(session.operator_rtt_ns()) >=
-                            config.translation_patch_rtt_ms * 1e6);
+    const bool patch =
+        config.pipeline.depth_refinement.translation_patch ||
+        (std::isfinite(config.translation_patch_rtt_ms) && session.operator_rtt_ns() > 0 &&
+         static_cast<double>(session.operator_rtt_ns()) >= config.translation_patch_rtt_ms * 1e6);
     if (patch != pipeline->translation_patch()) {
       pipeline->SetTranslationPatch(patch);
       ++patch_switches;
