@@ -360,6 +360,7 @@ TEST(RemoteNode, SendsEachContactsTranslationPatchWhenAskedOrWhenTheRoundTripIsL
     const nlohmann::json& by_rtt = summary["translation_patch_by_rtt"];
     EXPECT_NEAR(by_rtt["operator_rtt_ms_last"].get<double>(), k.operator_rtt_us * 1e-3, 1e-9);
     EXPECT_EQ(by_rtt["steps_with_patch"].get<int>() > 0, k.patch);
+    EXPECT_EQ(by_rtt["on_at_end"].get<bool>(), k.patch);
     EXPECT_EQ(by_rtt["rtt_ms"].is_null(), !std::isfinite(k.rtt_ms_threshold));
   }
 }

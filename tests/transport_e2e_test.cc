@@ -3,6 +3,7 @@
 // agree with what the relay says it did. The run's directory comes from HT_LOOPBACK_OUT.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -74,6 +75,23 @@ TEST_F(ImpairedRun, TheSessionHeldAndNothingWentNonFinite) {
   EXPECT_GT(t["streams"][ModelStream(t["streams"])]["received"].get<int>(), 0);
   EXPECT_EQ(t["rejected_by_reason"].value("bad_mac", 0), 0);
   EXPECT_EQ(s_["remote"]["transport"]["rejected_by_reason"].value("bad_mac", 0), 0);
+}
+
+// Protocol version 10: the operator's Pings carry the round trip it measures, and the remote node
+// sends translation patches while that is at least its threshold (10 ms by default): on at the
+// run's end exactly when the last round trip reported reaches it, and used on some steps then.
+TEST_F(ImpairedRun, TheRemoteNodeHearsTheRoundTripAndSendsPatchesFromIt) {
+  const nlohmann::json& by = s_["remote"]["translation_patch_by_rtt"];
+  ASSERT_FALSE(by["rtt_ms"].is_null()) << "the run turned the round-trip rule off";
+  const double threshold_ms = by["rtt_ms"].get<double>();
+  const double reported_ms = by["operator_rtt_ms_last"].get<double>();
+  const double operator_p50_ms = s_["transport"]["clock"]["rtt_ms_p50"].get<double>();
+  EXPECT_GT(reported_ms, 0.0);
+  // The operator reports the best of its recent samples: at most its median (a sample's jitter
+  // apart), and not far below it.
+  EXPECT_NEAR(reported_ms, operator_p50_ms, std::max(2.0, 0.3 * operator_p50_ms));
+  EXPECT_EQ(by["on_at_end"].get<bool>(), reported_ms >= threshold_ms) << by.dump();
+  if (reported_ms >= threshold_ms) EXPECT_GT(by["steps_with_patch"].get<int>(), 0);
 }
 
 TEST_F(ImpairedRun, TheSceneArrivedWholeAndDecodes) {

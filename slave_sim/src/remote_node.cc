@@ -435,6 +435,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
                        : nlohmann::json(nullptr)},
         {"operator_rtt_ms_last", static_cast<double>(session.operator_rtt_ns()) * 1e-6},
         {"steps_with_patch", steps_with_patch},
+        {"on_at_end", pipeline->translation_patch()},
         {"switches", patch_switches}};
   }
   s["grazing_dropped_contacts"] = pipeline->step_faults().grazing_dropped;
