@@ -24,6 +24,7 @@ expect slave_sim "--split-windows-link-mm" "$build/slave_sim/slave_sim" --split-
 expect slave_sim "--model-deadband-torque-floor" "$build/slave_sim/slave_sim" --model-deadband-torque-floor 0
 expect slave_sim "--translation-patch-rtt-ms" "$build/slave_sim/slave_sim" --translation-patch-rtt-ms -1
 expect slave_sim "excludes" "$build/slave_sim/slave_sim" --translation-patch --no-translation-patch
+expect slave_sim "excludes" "$build/slave_sim/slave_sim" --translation-patch --translation-patch-rtt-ms 5
 expect slave_sim "keygen" "$build/slave_sim/slave_sim" --key "$tmp/no_such.key"
 expect master_station "keygen" "$build/master_station/master_station" --key "$tmp/no_such.key"
 expect master_station "--rate" "$build/master_station/master_station" --rate 5

@@ -88,8 +88,11 @@ struct Refined {
   std::vector<DepthSample> samples;
 };
 
+// `patch_switched_on`: the refiner is built with `options` and its translation patch turned on
+// afterwards (DepthRefiner::SetTranslationPatch, as the remote node does by the round trip).
 Refined LinearizeAndRefine(const HapticModel& tool, const RigidTransform& X_WT,
-                           const HapticModel& env, int n, DepthRefinementOptions options = {}) {
+                           const HapticModel& env, int n, DepthRefinementOptions options = {},
+                           bool patch_switched_on = false) {
   ContactQuery q;
   q.environment = &env;
   q.X_WO = EnvironmentPose();
@@ -103,6 +106,7 @@ Refined LinearizeAndRefine(const HapticModel& tool, const RigidTransform& X_WT,
   r.grid = out[0];
   r.refined = out[0];
   DepthRefiner refiner(options);
+  if (patch_switched_on) refiner.SetTranslationPatch(true);
   EXPECT_TRUE(refiner.Refine(tool, X_WT, q, r.samples, r.refined));
   EXPECT_GT(refiner.counters().evaluations, 0u);
   return r;
@@ -578,6 +582,12 @@ TEST(DepthRefinement, TranslationPatchHoldsTheDepthOverTheToolsSlide) {
     const Refined plain = LinearizeAndRefine(tool, CurvedToolPose(x0, z0), env, n);
     const Refined patched = LinearizeAndRefine(tool, CurvedToolPose(x0, z0), env, n, with_patch);
     const ContactLinearization& c = patched.refined;
+    // A refiner built without the patch and switched on later gives the same patch.
+    const ContactLinearization switched =
+        LinearizeAndRefine(tool, CurvedToolPose(x0, z0), env, n, {}, true).refined;
+    EXPECT_EQ(switched.patch.step_m, c.patch.step_m);
+    EXPECT_EQ(switched.patch.depth_m, c.patch.depth_m);
+    EXPECT_EQ(switched.depth_m, c.depth_m);
     // At q0 the contact is the default's.
     EXPECT_EQ(plain.refined.patch.step_m, 0.0);
     ASSERT_EQ(c.patch.step_m, h);

@@ -867,7 +867,8 @@ TEST(Messages, APingCarriesTheOperatorsRoundTrip) {
     ASSERT_EQ(DecodePing(body, back), DecodeStatus::kOk);
     EXPECT_EQ(back.operator_rtt_us, rtt_us);
     EXPECT_EQ(DecodePing(body.first(3), back), DecodeStatus::kTooShort);
-    // Version 9's empty Ping is refused, not read as a zero round trip.
+    // An empty body (version 9's Ping, were it opened as this version's) is refused, not read as
+    // a zero round trip.
     EXPECT_EQ(DecodePing(body.first(0), back), DecodeStatus::kTooShort);
     std::array<std::uint8_t, kPingBodyBytes + 1> longer{};
     EXPECT_EQ(DecodePing(longer, back), DecodeStatus::kTooLong);

@@ -85,6 +85,17 @@ std::uint32_t OpenSession(UdpSocket& socket, const SocketAddress& remote, const 
   return h.session_id;
 }
 
+/// Stops a node's thread and joins it however the test leaves its scope (an ASSERT returns
+/// early; a joinable std::thread destroyed would end the whole test binary).
+struct StopAndJoin {
+  std::atomic<bool>& stop;
+  std::thread& thread;
+  ~StopAndJoin() {
+    stop = true;
+    if (thread.joinable()) thread.join();
+  }
+};
+
 /// A node on 127.0.0.1 (any port, written to TempDir()/port_file_name, stale file removed),
 /// quiet, staying up after a goodbye, authenticating with `key`.
 RemoteNodeConfig LocalNodeConfig(const MacKey& key, const std::string& port_file_name) {
@@ -297,6 +308,7 @@ TEST(RemoteNode, SendsEachContactsTranslationPatchWhenAskedOrWhenTheRoundTripIsL
     std::atomic<bool> stop{false};
     nlohmann::json summary;
     std::thread node([&] { summary = RunRemoteNode(config, scene, stop); });
+    StopAndJoin guard{stop, node};
     const std::uint16_t port = AwaitPort(config.port_file);
     ASSERT_NE(port, 0);
     const SocketAddress remote = SocketAddress::Parse("127.0.0.1:" + std::to_string(port));
@@ -359,10 +371,80 @@ TEST(RemoteNode, SendsEachContactsTranslationPatchWhenAskedOrWhenTheRoundTripIsL
     EXPECT_EQ(t["left_out"].get<int>(), 0);
     const nlohmann::json& by_rtt = summary["translation_patch_by_rtt"];
     EXPECT_NEAR(by_rtt["operator_rtt_ms_last"].get<double>(), k.operator_rtt_us * 1e-3, 1e-9);
-    EXPECT_EQ(by_rtt["steps_with_patch"].get<int>() > 0, k.patch);
+    EXPECT_EQ(by_rtt["steps_with_patch_on"].get<int>() > 0, k.patch);
+    EXPECT_EQ(by_rtt["switches"].get<int>(), k.patch && !k.always ? 1 : 0);
     EXPECT_EQ(by_rtt["on_at_end"].get<bool>(), k.patch);
     EXPECT_EQ(by_rtt["rtt_ms"].is_null(), !std::isfinite(k.rtt_ms_threshold));
   }
+}
+
+// Once on, the patches stay on until the round trip falls below kTranslationPatchOffFraction of
+// the threshold (a round trip near it does not switch them at every Ping), and the first model
+// after a switch goes out whatever the contact-model deadband says.
+TEST(RemoteNode, TurnsPatchesOffOnlyWellBelowTheThreshold) {
+  const HapticScene scene = MakeBlockOnGearScene();
+  RemoteNodeConfig config = LocalNodeConfig(TestKey(43), "remote_node_patch_off_test.port");
+  ASSERT_EQ(config.translation_patch_rtt_ms, 10.0);
+  std::atomic<bool> stop{false};
+  nlohmann::json summary;
+  std::thread node([&] { summary = RunRemoteNode(config, scene, stop); });
+  StopAndJoin guard{stop, node};
+  const std::uint16_t port = AwaitPort(config.port_file);
+  ASSERT_NE(port, 0);
+  const SocketAddress remote = SocketAddress::Parse("127.0.0.1:" + std::to_string(port));
+  UdpSocket socket(SocketAddress::Parse("127.0.0.1:0"));
+  wire::HelloMessage hello;
+  hello.client_nonce = 97;
+  hello.codecs = wire::kCodecDracoMesh | wire::kCodecCompactContactModel;
+  wire::WelcomeMessage welcome;
+  const std::uint32_t session = OpenSession(socket, remote, config.key, hello, welcome);
+  ASSERT_NE(session, 0u);
+  wire::Header h;
+  std::uint32_t sequence = 1;
+  const auto ping = [&](std::uint32_t rtt_us) {
+    socket.SendTo(
+        wire::EncodePing({wire::MessageType::kPing, session, sequence++, 0}, {rtt_us}, config.key)
+            .view(),
+        remote);
+    wire::PongMessage pong;
+    return Await(socket, config.key, wire::MessageType::kPong, h, [&](auto body) {
+      return wire::DecodePong(body, pong) == wire::DecodeStatus::kOk;
+    });
+  };
+  const wire::ToolStateMessage state = PressedAtHome(scene);
+  const auto step = [&] {
+    socket.SendTo(wire::EncodeToolState({wire::MessageType::kToolState, session, sequence++, 0},
+                                        state, config.key)
+                      .view(),
+                  remote);
+  };
+  // The next compact model whose patch is (or is not) there.
+  const auto model_with_patch = [&](bool patch) {
+    wire::ContactModelMessage model;
+    return Await(socket, config.key, wire::MessageType::kCompactContactModel, h, [&](auto body) {
+      return wire::DecodeCompactContactModel(body, model) == wire::DecodeStatus::kOk &&
+             model.model.num_contacts >= 1 && (model.model.contacts[0].patch.step_m > 0.0) == patch;
+    });
+  };
+  ASSERT_TRUE(ping(50'000));  // 50 ms: on
+  step();
+  ASSERT_TRUE(model_with_patch(true));
+  ASSERT_TRUE(ping(9'000));  // 9 ms: above 0.8 × 10 ms, stays on
+  step();
+  ASSERT_TRUE(ping(2'000));  // 2 ms: off, and the same pose's model goes out without patches
+  step();
+  EXPECT_TRUE(model_with_patch(false));
+  socket.SendTo(
+      wire::EncodeGoodbye({wire::MessageType::kGoodbye, session, sequence++, 0}, config.key).view(),
+      remote);
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  stop = true;
+  node.join();
+  const nlohmann::json& by_rtt = summary["translation_patch_by_rtt"];
+  EXPECT_EQ(by_rtt["switches"].get<int>(), 2) << by_rtt.dump();
+  EXPECT_FALSE(by_rtt["on_at_end"].get<bool>());
+  EXPECT_NEAR(by_rtt["operator_rtt_ms_last"].get<double>(), 2.0, 1e-9);
+  EXPECT_GE(summary["transport"]["translation_patches"]["sent"].get<int>(), 1);
 }
 
 // The header's sequence is a u32 (protocol version 8): a node whose streams near its end says

@@ -402,6 +402,11 @@ void DepthRefinementOptions::Validate() const {
     throw std::invalid_argument("depth refinement: max_subsamples must be in [1, 16], got " +
                                 std::to_string(max_subsamples));
   }
+  if (!(translation_patch_floor_texels >= 0.0) || !std::isfinite(translation_patch_floor_texels)) {
+    throw std::invalid_argument(
+        "depth refinement: translation_patch_floor_texels must be >= 0, got " +
+        std::to_string(translation_patch_floor_texels));
+  }
   if (!(search_floor_texels > 0.0) || !std::isfinite(search_floor_texels)) {
     throw std::invalid_argument("depth refinement: search_floor_texels must be > 0, got " +
                                 std::to_string(search_floor_texels));
@@ -438,9 +443,14 @@ void DepthRefinementOptions::Validate() const {
   }
 }
 
-DepthRefiner::DepthRefiner(const DepthRefinementOptions& options, std::size_t max_triangles)
+DepthRefiner::DepthRefiner(const DepthRefinementOptions& options, std::size_t max_triangles,
+                           int max_resolution)
     : options_(options) {
   options_.Validate();
+  if (max_resolution < 1) {
+    throw std::invalid_argument("depth refinement: max_resolution must be >= 1, got " +
+                                std::to_string(max_resolution));
+  }
   env_list_.reserve(max_triangles);
   tool_list_.reserve(max_triangles);
   vertex_scratch_.reserve(max_triangles);
@@ -451,9 +461,10 @@ DepthRefiner::DepthRefiner(const DepthRefinementOptions& options, std::size_t ma
   tool_all_.reserve(max_triangles);
   tool_pose_all_.reserve(max_triangles);
   if (max_triangles > 0) {  // also with the patch off: SetTranslationPatch may turn it on
-    constexpr std::size_t kSide = 160 + 2 * kTranslationPatchRadius;
-    patch_env_heights_.reserve(kSide * kSide);
-    patch_tool_heights_.reserve(kSide * kSide);
+    const auto n = static_cast<std::size_t>(max_resolution);
+    const std::size_t side = n + 2 * kTranslationPatchRadius;
+    patch_env_heights_.reserve(n * n);
+    patch_tool_heights_.reserve(side * side);
   }
   if (options_.conservative_screen) {
     for (auto& v : env_screen_) v.reserve(max_triangles);
@@ -962,7 +973,10 @@ void DepthRefiner::FillTranslationPatch(const RigidTransform& X_WT, const Seed& 
                      box.t1 - shift_t);
           if (env_local_.empty() || tool_local_.empty()) return;
           const double texel = TexelOfGathered(tool_local_);
-          const double floor_m = options_.search_floor_texels * texel;
+          const double floor_m = (options_.translation_patch_floor_texels > 0.0
+                                      ? options_.translation_patch_floor_texels
+                                      : options_.search_floor_texels) *
+                                 texel;
           const int g =
               subgrid
                   ? std::clamp(static_cast<int>(std::ceil(2.0 * half / (kSubsampleTexels * texel))),

@@ -92,7 +92,8 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
       options_(options),
       backend_(std::move(backend)),
       // Stage 5b's buffers (about 10 MB at 8192 triangles) only where it runs.
-      refiner_(options.depth_refinement, options.refine_depth ? 8192 : 0) {
+      refiner_(options.depth_refinement, options.refine_depth ? 8192 : 0,
+               options.max_window_resolution()) {
   options_.Validate();
   if (options_.split_windows_at_separated_overlap || options_.share_connected_contacts) {
     // Stage 5c renders whole windows, up to the largest.

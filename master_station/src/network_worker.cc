@@ -125,11 +125,17 @@ void NetworkWorker::Run(const std::atomic<bool>& stop) {
     }
     if (now - last_ping_ns >= heartbeat_ns_) {
       // The round trip measured so far goes with the probe (the remote node's
-      // translation_patch_rtt_ms decides from it).
-      const std::int64_t rtt_ns = clock_.valid() ? clock_.rtt_ns() : handshake_rtt_ns_;
+      // translation_patch_rtt_ms decides from it); 0 until a Pong came back (the handshake's
+      // time counts from the first Hello of its nonce, retransmissions included).
+      const std::int64_t rtt_ns = clock_.valid() ? clock_.rtt_ns() : 0;
       wire::PingMessage ping;
       ping.operator_rtt_us = static_cast<std::uint32_t>(
           std::clamp<std::int64_t>(rtt_ns / 1000, 0, std::numeric_limits<std::uint32_t>::max()));
+      reported_rtt_us_ = ping.operator_rtt_us;
+      if (ping.operator_rtt_us > 0) {
+        reported_rtt_min_us_ = std::min(reported_rtt_min_us_, ping.operator_rtt_us);
+        reported_rtt_max_us_ = std::max(reported_rtt_max_us_, ping.operator_rtt_us);
+      }
       link_.Send(
           wire::EncodePing(link_.NextHeader(wire::MessageType::kPing, session_), ping, config_.key),
           config_.remote_address);
@@ -200,11 +206,15 @@ nlohmann::json NetworkWorker::Summary() const {
         {"tool_states_idle_keepalives", idle_keepalives_},
         {"tool_state_decisions", ToJson(tool_deadband_.counts())}};
   }
-  t["clock"] = {{"samples", clock_.rtt_ms_samples().size()},
-                {"offset_ms", clock_.offset_ns() * 1e-6},
-                {"offset_uncertainty_ms", clock_.rtt_ns() * 0.5e-6},
-                {"rtt_ms_p50", Percentile(clock_.rtt_ms_samples(), 0.5)},
-                {"rtt_ms_p99", Percentile(clock_.rtt_ms_samples(), 0.99)}};
+  t["clock"] = {
+      {"samples", clock_.rtt_ms_samples().size()},
+      {"rtt_reported_ms_last", reported_rtt_us_ * 1e-3},
+      {"rtt_reported_ms_min", reported_rtt_max_us_ > 0 ? reported_rtt_min_us_ * 1e-3 : 0.0},
+      {"rtt_reported_ms_max", reported_rtt_max_us_ * 1e-3},
+      {"offset_ms", clock_.offset_ns() * 1e-6},
+      {"offset_uncertainty_ms", clock_.rtt_ns() * 0.5e-6},
+      {"rtt_ms_p50", Percentile(clock_.rtt_ms_samples(), 0.5)},
+      {"rtt_ms_p99", Percentile(clock_.rtt_ms_samples(), 0.99)}};
   t["streams"]["contact_model"]["rtt_ms_p50"] = Percentile(rtt_ms_, 0.5);
   t["streams"]["contact_model"]["rtt_ms_p99"] = Percentile(rtt_ms_, 0.99);
   t["streams"]["contact_model"]["one_way_ms_p50"] = Percentile(one_way_ms_, 0.5);

@@ -131,6 +131,10 @@ class NetworkWorker {
   /// First Hello of the attempt to its Welcome (ns): the round trip until Ping/Pong measure it
   /// (an over-estimate when a Hello was retransmitted, which only delays the first repairs).
   std::int64_t handshake_rtt_ns_ = 0;
+  // The round trip the last Ping told the remote node (µs, PingMessage::operator_rtt_us), and the
+  // smallest and largest non-zero one told.
+  std::uint32_t reported_rtt_us_ = 0;
+  std::uint32_t reported_rtt_min_us_ = 0xFFFF'FFFFu, reported_rtt_max_us_ = 0;
   std::int64_t heartbeat_ns_ = 100000000, peer_timeout_ns_ = 500000000, session_start_ns_ = 0;
   std::uint64_t sessions_ = 0, peers_lost_ = 0, remote_goodbyes_ = 0, hellos_sent_ = 0;
   std::uint64_t sessions_renewed_ = 0;  // ended because a stream's sequence numbers ran low

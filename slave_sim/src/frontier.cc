@@ -247,6 +247,12 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     patch_climbs.name = "translation_patch_neighbour_climbs";
     patch_climbs.translation_patch_neighbour_climbs = true;
     s.push_back(patch_climbs);
+    for (const int texels : {1, 2}) {
+      FrontierSetting patch_floor = patch;
+      patch_floor.name = "translation_patch_floor" + std::to_string(texels);
+      patch_floor.translation_patch_floor_texels = texels;
+      s.push_back(patch_floor);
+    }
     FrontierSetting patch_texel = translation_only;
     patch_texel.name = "translation_patch_texel_translation_gradient";
     patch_texel.translation_patch = true;
@@ -634,6 +640,7 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.depth_refinement.translation_patch = st.translation_patch;
   options.depth_refinement.translation_patch_neighbour_climbs =
       st.translation_patch_neighbour_climbs;
+  options.depth_refinement.translation_patch_floor_texels = st.translation_patch_floor_texels;
   options.depth_refinement.translation_patch_follows_rotation =
       st.translation_patch_follows_rotation;
   if (st.gradient_step_texels > 0.0)

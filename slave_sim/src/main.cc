@@ -122,30 +122,35 @@ int main(int argc, char** argv) {
                "along the window's normal (parallax) instead of h*(N.n) at the coarse point\n"
                "under it, which on coarse facets tilted from the normal under large heights\n"
                "reads another part of the surface (docs/frontier/issue32/twelfth_stop)");
+  double translation_patch_rtt_ms = ht::RemoteNodeConfig{}.translation_patch_rtt_ms;
+  auto* rtt_option =
+      app.add_option(
+             "--translation-patch-rtt-ms", translation_patch_rtt_ms,
+             "each contact model also carries its contacts' depth over in-plane\n"
+             "translations of the tool (a 5x5 patch one grid cell apart, 75 bytes a\n"
+             "contact) while the round trip the operator measures (its pings carry it) is\n"
+             "at least this many ms, and until it falls below 0.8 of it: the operator's\n"
+             "loop then follows the texture's ridges a round trip away from where the\n"
+             "model was made instead of extending the tangent. The remote step costs\n"
+             "20-80 % more while they go, nothing below. 10 ms is half a grid cell of hand\n"
+             "motion at 20-50 mm/s with the default --window and --grid (0.4 mm cells);\n"
+             "0: from the first measured round trip (issue 33; docs/passivity)")
+          ->capture_default_str()
+          ->check(CLI::Range(0.0, 60000.0));
   bool translation_patch = false;
   app.add_flag("--translation-patch", translation_patch,
-               "send each contact's depth over in-plane translations of the tool with its model\n"
-               "(a 5x5 patch one grid cell apart, 75 bytes a contact): the operator's loop then\n"
-               "follows the texture's ridges a round trip or a deadband away from where the\n"
-               "model was made instead of extending the tangent (issue 32, nineteenth stop;\n"
-               "the remote step 20-80 % slower on the seed's scenes). Always, whatever the\n"
-               "round trip (by default only from --translation-patch-rtt-ms)");
-  double translation_patch_rtt_ms = 10.0;
-  app.add_option("--translation-patch-rtt-ms", translation_patch_rtt_ms,
-                 "send the translation patches (as --translation-patch does) while the round\n"
-                 "trip the operator measures is at least this (ms; its pings carry it): a model\n"
-                 "a round trip old then still holds the ridges where the hand has moved. Below\n"
-                 "it the step pays nothing for them (default 10: half a grid cell of hand\n"
-                 "motion at 20-50 mm/s; issue 33)")
-      ->check(CLI::Range(0.0, 60000.0));
+               "always send the translation patches, whatever the round trip")
+      ->excludes(rtt_option);
   bool no_translation_patch = false;
   app.add_flag("--no-translation-patch", no_translation_patch,
                "never send translation patches, whatever the round trip")
-      ->excludes("--translation-patch");
+      ->excludes("--translation-patch")
+      ->excludes(rtt_option);
   bool translation_patch_follows_rotation = false;
   app.add_flag("--translation-patch-follows-rotation", translation_patch_follows_rotation,
-               "with --translation-patch: the loop also reads the patch where a turn of the tool\n"
-               "slides the contact (its lever from the tool's centre of mass)");
+               "whenever translation patches go: the loop also reads the patch where a turn of\n"
+               "the tool slides the contact (its lever from the tool's centre of mass)")
+      ->excludes("--no-translation-patch");
   bool texel_scale_gradient = false;
   app.add_flag("--texel-scale-gradient", texel_scale_gradient,
                "each refined contact's gradient as the refined maximum's derivative at\n"
@@ -415,15 +420,12 @@ int main(int argc, char** argv) {
     config.pipeline.depth_refinement.translation_patch = translation_patch;
     config.pipeline.depth_refinement.translation_patch_follows_rotation =
         translation_patch_follows_rotation;
-    if (translation_patch_follows_rotation && !translation_patch) {
-      throw std::invalid_argument("--translation-patch-follows-rotation needs --translation-patch");
-    }
     config.translation_patch_rtt_ms =
         no_translation_patch ? std::numeric_limits<double>::infinity() : translation_patch_rtt_ms;
-    if (translation_patch && no_refine_depth) {
+    if ((translation_patch || rtt_option->count() > 0) && no_refine_depth) {
       throw std::invalid_argument(
-          "--translation-patch needs stage 5b (drop --no-refine-depth): the patch's nodes are "
-          "refined maxima");
+          std::string(translation_patch ? "--translation-patch" : "--translation-patch-rtt-ms") +
+          " needs stage 5b (drop --no-refine-depth): the patch's nodes are refined maxima");
     }
     config.pipeline.depth_refinement.gradient_step_texels = gradient_step_texels;
     config.pipeline.depth_refinement.secant_at_kinks_m = secant_at_kinks_um * 1e-6;

@@ -198,7 +198,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   std::uint64_t last_progress_steps = 0;
   bool running = true;
   bool reported_fallback = false;
-  std::uint64_t steps_with_patch = 0, patch_switches = 0;
+  std::uint64_t steps_with_patch_on = 0, patch_switches = 0;
   std::vector<StreamObject> reload_objects;
   const HapticScene* current_scene = &scene;  // the scene the pipeline steps (a reload moves it)
   std::uint64_t scene_reloads = 0;
@@ -236,8 +236,10 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
             gpu->Upload(*next->tool);
             for (const TouchableObject& t : next->touchables) gpu->Upload(*t.model);
           }
+          const bool patch_was_on = pipeline->translation_patch();
           pipeline =
               std::make_unique<HapticTexturePipeline>(*next, config.pipeline, std::move(kept));
+          pipeline->SetTranslationPatch(patch_was_on);  // the round trip's choice goes on
         } catch (const std::exception& e) {
           // The GPU refused the new models: the CPU backend, as after a failed batch.
           std::printf("[slave] the %s backend failed on the rebuilt scene (%s); CPU backend\n",
@@ -318,16 +320,25 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
       first_step_ns = t_step;
       first_step_cpu_s = ProcessCpuSeconds();
     }
-    // The translation patches while the operator's round trip is long (or always, by option).
-    const bool patch =
-        config.pipeline.depth_refinement.translation_patch ||
-        (std::isfinite(config.translation_patch_rtt_ms) && session.operator_rtt_ns() > 0 &&
-         static_cast<double>(session.operator_rtt_ns()) >= config.translation_patch_rtt_ms * 1e6);
-    if (patch != pipeline->translation_patch()) {
-      pipeline->SetTranslationPatch(patch);
-      ++patch_switches;
+    // The translation patches while the operator's round trip is long (or always, by option):
+    // on from translation_patch_rtt_ms, off again below kTranslationPatchOffFraction of it, so
+    // that a round trip near the threshold does not switch them at every Ping. A switch sends
+    // the next model whatever the deadband (it compares forces, not patches).
+    if (config.pipeline.refine_depth) {
+      const bool was_on = pipeline->translation_patch();
+      const double rtt_ms = static_cast<double>(session.operator_rtt_ns()) * 1e-6;
+      const double threshold_ms = config.translation_patch_rtt_ms;
+      const bool patch =
+          config.pipeline.depth_refinement.translation_patch ||
+          (std::isfinite(threshold_ms) && session.operator_rtt_ns() > 0 &&
+           rtt_ms >= (was_on ? kTranslationPatchOffFraction * threshold_ms : threshold_ms));
+      if (patch != was_on) {
+        pipeline->SetTranslationPatch(patch);
+        session.ResendNextModel();
+        ++patch_switches;
+      }
+      if (patch) ++steps_with_patch_on;
     }
-    if (patch) ++steps_with_patch;
     StepTimings timings;
     wire::ContactModelMessage out;
     out.model = pipeline->Step(X_WT, session.latest_tool_state_seq(), timings,
@@ -434,7 +445,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
                        ? nlohmann::json(config.translation_patch_rtt_ms)
                        : nlohmann::json(nullptr)},
         {"operator_rtt_ms_last", static_cast<double>(session.operator_rtt_ns()) * 1e-6},
-        {"steps_with_patch", steps_with_patch},
+        {"steps_with_patch_on", steps_with_patch_on},
         {"on_at_end", pipeline->translation_patch()},
         {"switches", patch_switches}};
   }

@@ -73,7 +73,9 @@ bool RemoteSession::OnDatagram(std::span<const std::uint8_t> datagram, const Soc
         link_.CountBodyRejected(header.type, st);
         break;
       }
-      operator_rtt_ns_ = std::int64_t{ping.operator_rtt_us} * 1000;
+      // A Ping that arrived after a newer one (reordered) answers its Pong but does not replace
+      // the newer round trip.
+      if (!late) operator_rtt_ns_ = std::int64_t{ping.operator_rtt_us} * 1000;
       wire::PongMessage pong{header.sequence, header.send_time_ns, now};
       link_.Send(
           wire::EncodePong(link_.NextHeader(wire::MessageType::kPong, session_), pong, config_.key),

@@ -145,8 +145,11 @@ class RemoteSession {
   /// Longest gap between two tool states of one session (ns).
   std::int64_t tool_state_gap_max_ns() const noexcept { return max_gap_ns_; }
   /// The round trip the operator's newest Ping reported (ns, PingMessage::operator_rtt_us; 0:
-  /// none yet in this session).
+  /// none yet in this session, or the operator has not measured one yet).
   std::int64_t operator_rtt_ns() const noexcept { return operator_rtt_ns_; }
+  /// The next model goes out whatever the contact-model deadband says (counted as its "first"):
+  /// for a change the deadband does not compare, such as translation patches turned on or off.
+  void ResendNextModel() noexcept { model_deadband_.Configure(model_deadband_.config()); }
 
   /// The link's statistics with the session counters (sessions, goodbyes, peers lost, Hello
   /// replays, retransmits, deferrals, rejects) and the scene stream's, for the run summary.

@@ -292,7 +292,7 @@ WireHeader ToWire(const Header& header, MessageType type) noexcept {
           .send_time_us_high = static_cast<std::uint16_t>(us >> 32)};
 }
 
-/// The body of Goodbye and Ping.
+/// The body of Goodbye.
 struct EmptyBody {};
 
 constexpr void Fields(auto& a, Of<WireHeader> auto& h) {

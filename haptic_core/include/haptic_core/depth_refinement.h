@@ -119,16 +119,18 @@ struct DepthRefinementOptions {
   /// docs/frontier/issue32/seventh_stop). δ0 and the wrench at q0 are unchanged. Off: no
   /// translation arms (the default until the frontier and the loop say otherwise).
   bool translation_kink_planes = false;
-  /// The contact's translation patch (TranslationPatch, issue 32's nineteenth stop; an option,
-  /// off): δ at the base pose translated by (i·h, j·h) along u and v, i, j ∈ [−R, R], h = W/N (the
-  /// grid's translation step, so that the nodes one step away are the refined rendered samples
-  /// ±h_x and the patch's tangent at q0 is the default's secant). The window's grid is rendered
-  /// once more at the base pose with the tool grown by R cells (RenderPatchHeightsFast), each
-  /// other node's deepest cell found over the whole window by reading the tool's render shifted
-  /// (DirectionalPenetrationDepthShifted), and refined at level 0 as the rendered translation
-  /// samples are (and, with translation_patch_neighbour_climbs, from the neighbouring node's
-  /// maximum). A node without overlap holds the contact's linear prediction. Two renders, 20
-  /// scans and 20 pattern searches more per contact than the default.
+  /// The contact's translation patch (TranslationPatch, issue 32's nineteenth stop; off here,
+  /// and the remote node turns it on by the operator's round trip, DepthRefiner::
+  /// SetTranslationPatch and RemoteNodeConfig::translation_patch_rtt_ms): δ at the base pose
+  /// translated by (i·h, j·h) along u and v, i, j ∈ [−R, R], h = W/N (the grid's translation step,
+  /// so that the nodes one step away are the refined rendered samples ±h_x and the patch's tangent
+  /// at q0 is the default's secant). The window's grid is rendered once more at the base pose with
+  /// the tool grown by R cells (RenderPatchHeightsFast), each other node's deepest cell found over
+  /// the whole window by reading the tool's render shifted (DirectionalPenetrationDepthShifted),
+  /// and refined at level 0 as the rendered translation samples are (and, with
+  /// translation_patch_neighbour_climbs, from the neighbouring node's maximum). A node without
+  /// overlap holds the contact's linear prediction. Two renders, 20 scans and 20 pattern searches
+  /// more per contact than the default.
   bool translation_patch = false;
   /// With translation_patch: also climb each node from its neighbour's maximum (one step nearer
   /// q0), where it stays and carried by the step; off (the default): from the grid's deepest cell
@@ -140,6 +142,10 @@ struct DepthRefinementOptions {
   /// contact's slide under a rotation too (a turn about n slides a contact 10 mm off the axis by
   /// 10 µm a milliradian). Off: translations only.
   bool translation_patch_follows_rotation = false;
+  /// With translation_patch: the pattern search's floor for the patch's nodes (texels, as
+  /// search_floor_texels); 0: search_floor_texels. A coarser floor takes fewer evaluations of
+  /// b − a per node. ≥ 0.
+  double translation_patch_floor_texels = 0.0;
   /// How far above the tangent (m) a translation sample must lie to make an arm. ≥ 0.
   double translation_kink_tolerance_m = 1e-6;
   /// The rendered rotation samples (±h_θ about u, v and n) searched from a sub-grid of their
@@ -209,13 +215,16 @@ struct DepthRefinementCounters {
 
 /// Refines the linearizations of a texture stage's batch to the finest texture level (see the
 /// header comment). One per thread; preallocates at construction and never allocates in Refine
-/// (unless a window holds more coarse triangles than reserved).
+/// (unless a window holds more coarse triangles, or more cells a side, than reserved).
 class DepthRefiner {
  public:
-  /// Reserves for windows of up to `max_triangles` coarse triangles per side. Throws
-  /// std::invalid_argument for bad options.
+  /// Reserves for windows of up to `max_triangles` coarse triangles per side and, when
+  /// max_triangles > 0, translation patches (DepthRefinementOptions::translation_patch, on now or
+  /// by SetTranslationPatch later) on windows of up to `max_resolution` cells a side
+  /// (PipelineOptions::max_window_resolution). Throws std::invalid_argument for bad options or a
+  /// max_resolution below 1.
   explicit DepthRefiner(const DepthRefinementOptions& options = {},
-                        std::size_t max_triangles = 8192);
+                        std::size_t max_triangles = 8192, int max_resolution = 160);
 
   /// Refines one contact that a backend linearized: `query` as the backend got it (the
   /// environment, its pose, the window, the triangle subsets), the tool posed at X_WT (frame T at
@@ -231,8 +240,8 @@ class DepthRefiner {
   const DepthRefinementOptions& options() const noexcept { return options_; }
   /// Turns DepthRefinementOptions::translation_patch on or off for the contacts refined from now
   /// on (the remote node's choice by the operator's round trip, RemoteNodeConfig::
-  /// translation_patch_rtt_ms). noexcept; the patch's buffers are reserved at construction, so
-  /// that Refine allocates no more with it on than off.
+  /// translation_patch_rtt_ms). noexcept; the patch's buffers are reserved at construction (for
+  /// windows up to its max_resolution), so that Refine allocates no more with it on than off.
   void SetTranslationPatch(bool on) noexcept { options_.translation_patch = on; }
 
   /// One coarse triangle projected on a window at one pose (internal; public for the .cc's

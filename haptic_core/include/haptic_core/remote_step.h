@@ -324,7 +324,12 @@ class HapticTexturePipeline {
   /// PipelineOptions::refine_depth. The remote node turns it on while the operator's round trip
   /// is long (RemoteNodeConfig::translation_patch_rtt_ms). noexcept, allocation-free.
   void SetTranslationPatch(bool on) noexcept { refiner_.SetTranslationPatch(on); }
-  bool translation_patch() const noexcept { return refiner_.options().translation_patch; }
+  /// Whether stage 5b fills translation patches in the next Step(): the last SetTranslationPatch,
+  /// else DepthRefinementOptions::translation_patch; always false without
+  /// PipelineOptions::refine_depth (stage 5b does not run).
+  bool translation_patch() const noexcept {
+    return options_.refine_depth && refiner_.options().translation_patch;
+  }
 
  private:
   /// Stages 1–3 for every touchable: appends to candidates_ (up to kMaxContacts) and fills the

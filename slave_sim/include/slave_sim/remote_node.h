@@ -21,6 +21,10 @@
 
 namespace ht {
 
+/// Once on, translation patches stay on until the operator's round trip falls below this fraction
+/// of RemoteNodeConfig::translation_patch_rtt_ms.
+inline constexpr double kTranslationPatchOffFraction = 0.8;
+
 /// Configuration of the remote node.
 struct RemoteNodeConfig {
   SocketAddress listen_address = SocketAddress::Parse("127.0.0.1:47000");
@@ -62,7 +66,10 @@ struct RemoteNodeConfig {
   /// texture's ridges where the tool has moved meanwhile (issue 33: at 25 ms one way the share of
   /// the force the passivity stage takes falls from about a fifth to a few per cent); below it the
   /// step pays nothing for them. Infinite: only pipeline.depth_refinement.translation_patch
-  /// decides (true: always). Must not be NaN or negative; nothing without
+  /// decides (true: always); 0: from the first Ping that reports a measured round trip. Once on,
+  /// the patches go until the round trip falls below kTranslationPatchOffFraction of this (so
+  /// that one near it does not switch them at every Ping). RunRemoteNode throws
+  /// std::invalid_argument for NaN or a negative value; nothing happens without
   /// pipeline.refine_depth. The default, 10 ms, is the round trip in which a hand at 20–50 mm/s
   /// moves half a grid cell of the seed's windows (0.4 mm), where the tangent alone starts to miss
   /// the ridges (docs/passivity/README.md, "The patch by the round trip").

@@ -133,8 +133,8 @@ struct RejectMessage {
 /// Operator → remote: a clock-sync probe (its header's send time is t1) that also tells the remote
 /// node the round trip the operator measured (protocol version 10).
 struct PingMessage {
-  /// The operator's round trip (µs): ClockSync::rtt_ns, or the Hello/Welcome exchange's before
-  /// the first Pong; 0: not measured yet. Saturates at 2³² − 1.
+  /// The operator's round trip (µs): ClockSync::rtt_ns, the smallest of its last 8 samples;
+  /// 0 before the first Pong. Saturates at 2³² − 1.
   std::uint32_t operator_rtt_us = 0;
 };
 
@@ -300,7 +300,8 @@ struct ForeignHello {
 DecodeStatus OpenForeignHello(std::span<const std::uint8_t> datagram, const MacKey& key,
                               ForeignHello& hello) noexcept;
 /// A Reject with `version` in its header: for 2 ≤ version ≤ kLastLegacyVersion the layout of
-/// those versions (28-byte header, 32-byte MAC; the body is laid out alike in versions 2 to 9);
+/// those versions (28-byte header, 32-byte MAC; the body is laid out alike in versions 2 to
+/// kProtocolVersion);
 /// for kFirstShortHeaderVersion ≤ version < kProtocolVersion this layout with that version;
 /// else this version's own Reject.
 Datagram EncodeReject(const Header& header, const RejectMessage& message, const MacKey& key,
