@@ -556,6 +556,48 @@ TEST(RemoteNode, RefusesAnOperatorOfAnotherVersionAndHoldsBackModelsThatSayNothi
   }
   ASSERT_TRUE(refused);
 
+  // 1b. The previous version (this header and MAC: version 9, whose Ping was empty) gets a Reject
+  // in this layout with its own version.
+  {
+    wire::HelloMessage previous;
+    previous.client_nonce = 4299;
+    previous.min_version = previous.max_version = wire::kProtocolVersion - 1;
+    wire::Datagram d =
+        wire::EncodeHello({wire::MessageType::kHello, 0, 1, 0}, previous, config.key);
+    d.size -= wire::kMacBytes;
+    d.bytes[wire::kHeaderVersionOffset] = static_cast<std::uint8_t>(wire::kProtocolVersion - 1);
+    ComputeMac(d.view(), config.key,
+               std::span<std::uint8_t, wire::kMacBytes>(d.bytes.data() + d.size, wire::kMacBytes));
+    d.size += wire::kMacBytes;
+    ASSERT_TRUE(socket.SendTo(d.view(), remote));
+    bool refused_previous = false;
+    for (int i = 0; i < 300 && !refused_previous; ++i) {
+      socket.WaitReadable(10);
+      SocketAddress from;
+      while (auto n = socket.ReceiveFrom(buf, from)) {
+        const std::span<const std::uint8_t> r(buf.data(), *n);
+        if (*n < wire::kHeaderBytes + wire::kRejectFixedBytes + wire::kMacBytes ||
+            r[wire::kHeaderVersionOffset] != wire::kProtocolVersion - 1 ||
+            r[wire::kHeaderTypeOffset] != static_cast<std::uint8_t>(wire::MessageType::kReject)) {
+          continue;
+        }
+        ASSERT_TRUE(VerifyMac(r, config.key));
+        wire::RejectMessage reject;
+        ASSERT_EQ(
+            wire::DecodeReject(
+                r.subspan(wire::kHeaderBytes, *n - wire::kHeaderBytes - wire::kMacBytes), reject),
+            wire::DecodeStatus::kOk);
+        EXPECT_EQ(reject.client_nonce, 4299u);
+        EXPECT_EQ(reject.reason, wire::RejectReason::kVersion);
+        const std::string speaks = "operator speaks " + std::to_string(wire::kProtocolVersion - 1);
+        EXPECT_NE(std::string(reject.message()).find(speaks), std::string::npos)
+            << reject.message();
+        refused_previous = true;
+      }
+    }
+    ASSERT_TRUE(refused_previous);
+  }
+
   // 2. An operator of this version asks for a 10 % deadband on both streams and compact models.
   hello = {};
   hello.client_nonce = 4343;
@@ -626,9 +668,9 @@ TEST(RemoteNode, RefusesAnOperatorOfAnotherVersionAndHoldsBackModelsThatSayNothi
   stop = true;
   node.join();
   const nlohmann::json& t = summary["transport"];
-  EXPECT_EQ(t["foreign_version_hellos"].get<int>(), 1);
+  EXPECT_EQ(t["foreign_version_hellos"].get<int>(), 2);  // version 3 and the previous one
   EXPECT_EQ(t["hello_replayed"].get<int>(), 1);
-  EXPECT_EQ(t["rejects_sent"].get<int>(), 1);
+  EXPECT_EQ(t["rejects_sent"].get<int>(), 2);
   EXPECT_EQ(t["peers_lost"].get<int>(), 0);
   // The node waited instead of stepping: a pass that holds still waits up to 10 ms on the socket
   // (pings wake it), so 450 ms hold some tens of passes, each counted, and only a few steps.

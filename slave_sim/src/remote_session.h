@@ -3,7 +3,8 @@
 // operator session at a time, opened by an authenticated Hello with a fresh nonce, welcomed or
 // refused after negotiation (transport/session.h), closed on Goodbye or when the operator is
 // silent for the peer timeout; the newest tool state kept for the next remote step; pings
-// answered; scene fragments paced and NACKs served; contact models sent at the negotiated rate.
+// answered, and the round trip they report kept; scene fragments paced and NACKs served; contact
+// models sent at the negotiated rate.
 // Private to slave_sim: RunRemoteNode (remote_node.cc) drives it.
 
 #include <cstdint>
