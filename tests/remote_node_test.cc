@@ -117,6 +117,7 @@ TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
   std::atomic<bool> stop{false};
   nlohmann::json summary;
   std::thread node([&] { summary = RunRemoteNode(config, scene, stop); });
+  StopAndJoin guard{stop, node};
 
   const std::uint16_t port = AwaitPort(config.port_file);
   ASSERT_NE(port, 0);
@@ -223,6 +224,7 @@ TEST(RemoteNode, AgreesOnCompactToolStatesAndAnswersThemAsTheF64Ones) {
   std::atomic<bool> stop{false};
   nlohmann::json summary;
   std::thread node([&] { summary = RunRemoteNode(config, scene, stop); });
+  StopAndJoin guard{stop, node};
   const std::uint16_t port = AwaitPort(config.port_file);
   ASSERT_NE(port, 0);
   const SocketAddress remote = SocketAddress::Parse("127.0.0.1:" + std::to_string(port));
@@ -457,6 +459,7 @@ TEST(RemoteNode, EndsASessionWhoseSequenceNumbersRunLow) {
   std::atomic<bool> stop{false};
   nlohmann::json summary;
   std::thread node([&] { summary = RunRemoteNode(config, scene, stop); });
+  StopAndJoin guard{stop, node};
   const std::uint16_t port = AwaitPort(config.port_file);
   ASSERT_NE(port, 0);
   const SocketAddress remote = SocketAddress::Parse("127.0.0.1:" + std::to_string(port));
@@ -514,6 +517,7 @@ TEST(RemoteNode, RefusesAnOperatorOfAnotherVersionAndHoldsBackModelsThatSayNothi
   std::atomic<bool> stop{false};
   nlohmann::json summary;
   std::thread node([&] { summary = RunRemoteNode(config, scene, stop); });
+  StopAndJoin guard{stop, node};
   const std::uint16_t port = AwaitPort(config.port_file);
   ASSERT_NE(port, 0);
   const SocketAddress remote = SocketAddress::Parse("127.0.0.1:" + std::to_string(port));
