@@ -128,8 +128,8 @@ int main(int argc, char** argv) {
              "--translation-patch-rtt-ms", translation_patch_rtt_ms,
              "each contact model also carries its contacts' depth over in-plane\n"
              "translations of the tool (a 5x5 patch one grid cell apart, 75 bytes a\n"
-             "contact) while the round trip the operator measures (its pings carry it) is\n"
-             "at least this many ms, and until it falls below 0.8 of it: the operator's\n"
+             "contact) from when the round trip the operator measures (its pings carry\n"
+             "it) reaches this many ms until it falls below 0.8 of it: the operator's\n"
              "loop then follows the texture's ridges a round trip away from where the\n"
              "model was made instead of extending the tangent. The remote step costs\n"
              "20-80 % more while they go, nothing below. 10 ms is half a grid cell of hand\n"

@@ -268,6 +268,8 @@ Datagram EncodeWelcome(const Header& header, const WelcomeMessage& message,
                        const MacKey& key) noexcept;
 Datagram EncodeReject(const Header& header, const RejectMessage& message,
                       const MacKey& key) noexcept;
+/// A Ping (operator → remote): the header's send time is t1 of the clock sync; the body carries
+/// the operator's round trip (PingMessage). Never fails.
 Datagram EncodePing(const Header& header, const PingMessage& message, const MacKey& key) noexcept;
 Datagram EncodePong(const Header& header, const PongMessage& message, const MacKey& key) noexcept;
 /// The payload is cut to what fits in kMaxDatagramBytes.
