@@ -85,15 +85,34 @@ std::uint32_t OpenSession(UdpSocket& socket, const SocketAddress& remote, const 
   return h.session_id;
 }
 
-/// Stops a node's thread and joins it however the test leaves its scope (an ASSERT returns
-/// early; a joinable std::thread destroyed would end the whole test binary).
-struct StopAndJoin {
-  std::atomic<bool>& stop;
-  std::thread& thread;
-  ~StopAndJoin() {
-    stop = true;
-    if (thread.joinable()) thread.join();
+/// A node running `config` on `scene` on its own thread for one test: started at construction,
+/// `remote` its bound address (port 0: it wrote no port file within 4 s). Stop() ends the run and
+/// returns its summary; the destructor stops and joins it however the test leaves its scope (an
+/// ASSERT returns early; a joinable std::thread destroyed would end the whole test binary).
+/// `config` and `scene` must outlive it.
+class RunningNode {
+ public:
+  RunningNode(const RemoteNodeConfig& config, const HapticScene& scene)
+      : thread_([this, &config, &scene] { summary_ = RunRemoteNode(config, scene, stop_); }) {
+    port = AwaitPort(config.port_file);
+    remote = SocketAddress::Parse("127.0.0.1:" + std::to_string(port));
   }
+  RunningNode(const RunningNode&) = delete;
+  RunningNode& operator=(const RunningNode&) = delete;
+  ~RunningNode() { Stop(); }
+  /// Stops the node and waits for it; its summary (RunRemoteNode's).
+  const nlohmann::json& Stop() {
+    stop_ = true;
+    if (thread_.joinable()) thread_.join();
+    return summary_;
+  }
+  std::uint16_t port = 0;
+  SocketAddress remote;
+
+ private:
+  std::atomic<bool> stop_{false};
+  nlohmann::json summary_;
+  std::thread thread_;  // last: started once the members it writes exist
 };
 
 /// A node on 127.0.0.1 (any port, written to TempDir()/port_file_name, stale file removed),
@@ -114,14 +133,10 @@ TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
   RemoteNodeConfig config = LocalNodeConfig(TestKey(11), "remote_node_test.port");
   config.scene_objects.push_back(
       {5, ht::wire::SceneObjectKind::kDracoMesh, std::vector<std::uint8_t>(3000, 0x42)});
-  std::atomic<bool> stop{false};
-  nlohmann::json summary;
-  std::thread node([&] { summary = RunRemoteNode(config, scene, stop); });
-  StopAndJoin guard{stop, node};
+  RunningNode node(config, scene);
 
-  const std::uint16_t port = AwaitPort(config.port_file);
-  ASSERT_NE(port, 0);
-  const SocketAddress remote = SocketAddress::Parse("127.0.0.1:" + std::to_string(port));
+  ASSERT_NE(node.port, 0);
+  const SocketAddress remote = node.remote;
   UdpSocket socket(SocketAddress::Parse("127.0.0.1:0"));
 
   const std::uint8_t garbage[] = {1,  2,  3,  4,  5,  6,  7,  8,  9,  10, 11, 12, 13, 14, 15,
@@ -194,12 +209,7 @@ TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
   EXPECT_NE(session2, session);
   socket.SendTo(hello_datagram.view(), remote);
   std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  stop = true;
-  for (int i = 0; i < 200 && !summary.is_object(); ++i) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  }
-  stop = true;
-  node.join();
+  const nlohmann::json summary = node.Stop();
   const nlohmann::json& t = summary["transport"];
   EXPECT_EQ(t["rejected_by_reason"]["bad_magic"].get<int>(), 5);
   EXPECT_EQ(t["rejected_by_reason"]["bad_mac"].get<int>(), 2);
@@ -221,13 +231,9 @@ TEST(RemoteNode, OpensASessionAnswersToolStatesAndCountsWhatItDrops) {
 TEST(RemoteNode, AgreesOnCompactToolStatesAndAnswersThemAsTheF64Ones) {
   const HapticScene scene = MakeBlockOnGearScene();
   const RemoteNodeConfig config = LocalNodeConfig(TestKey(31), "remote_node_compact_test.port");
-  std::atomic<bool> stop{false};
-  nlohmann::json summary;
-  std::thread node([&] { summary = RunRemoteNode(config, scene, stop); });
-  StopAndJoin guard{stop, node};
-  const std::uint16_t port = AwaitPort(config.port_file);
-  ASSERT_NE(port, 0);
-  const SocketAddress remote = SocketAddress::Parse("127.0.0.1:" + std::to_string(port));
+  RunningNode node(config, scene);
+  ASSERT_NE(node.port, 0);
+  const SocketAddress remote = node.remote;
   UdpSocket socket(SocketAddress::Parse("127.0.0.1:0"));
 
   wire::HelloMessage hello;
@@ -270,8 +276,7 @@ TEST(RemoteNode, AgreesOnCompactToolStatesAndAnswersThemAsTheF64Ones) {
   socket.SendTo(
       wire::EncodeGoodbye({wire::MessageType::kGoodbye, session, 1, 0}, config.key).view(), remote);
   std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  stop = true;
-  node.join();
+  const nlohmann::json summary = node.Stop();
   const nlohmann::json& t = summary["transport"];
   EXPECT_EQ(t["rejected_by_reason"]["non_finite"].get<int>(), 1);
   EXPECT_EQ(t["streams"]["compact_tool_state"]["received"].get<int>(), 1);
@@ -307,13 +312,9 @@ TEST(RemoteNode, SendsEachContactsTranslationPatchWhenAskedOrWhenTheRoundTripIsL
     RemoteNodeConfig config = LocalNodeConfig(TestKey(41), "remote_node_patch_test.port");
     config.pipeline.depth_refinement.translation_patch = k.always;
     config.translation_patch_rtt_ms = k.rtt_ms_threshold;
-    std::atomic<bool> stop{false};
-    nlohmann::json summary;
-    std::thread node([&] { summary = RunRemoteNode(config, scene, stop); });
-    StopAndJoin guard{stop, node};
-    const std::uint16_t port = AwaitPort(config.port_file);
-    ASSERT_NE(port, 0);
-    const SocketAddress remote = SocketAddress::Parse("127.0.0.1:" + std::to_string(port));
+    RunningNode node(config, scene);
+    ASSERT_NE(node.port, 0);
+    const SocketAddress remote = node.remote;
     UdpSocket socket(SocketAddress::Parse("127.0.0.1:0"));
     wire::HelloMessage hello;
     hello.client_nonce = 91 + nonce++;
@@ -362,8 +363,7 @@ TEST(RemoteNode, SendsEachContactsTranslationPatchWhenAskedOrWhenTheRoundTripIsL
             .view(),
         remote);
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    stop = true;
-    node.join();
+    const nlohmann::json summary = node.Stop();
     const nlohmann::json& t = summary["transport"]["translation_patches"];
     if (k.patch) {
       EXPECT_GE(t["sent"].get<int>(), 1);
@@ -387,13 +387,9 @@ TEST(RemoteNode, TurnsPatchesOffOnlyWellBelowTheThreshold) {
   const HapticScene scene = MakeBlockOnGearScene();
   RemoteNodeConfig config = LocalNodeConfig(TestKey(43), "remote_node_patch_off_test.port");
   ASSERT_EQ(config.translation_patch_rtt_ms, 10.0);
-  std::atomic<bool> stop{false};
-  nlohmann::json summary;
-  std::thread node([&] { summary = RunRemoteNode(config, scene, stop); });
-  StopAndJoin guard{stop, node};
-  const std::uint16_t port = AwaitPort(config.port_file);
-  ASSERT_NE(port, 0);
-  const SocketAddress remote = SocketAddress::Parse("127.0.0.1:" + std::to_string(port));
+  RunningNode node(config, scene);
+  ASSERT_NE(node.port, 0);
+  const SocketAddress remote = node.remote;
   UdpSocket socket(SocketAddress::Parse("127.0.0.1:0"));
   wire::HelloMessage hello;
   hello.client_nonce = 97;
@@ -440,8 +436,7 @@ TEST(RemoteNode, TurnsPatchesOffOnlyWellBelowTheThreshold) {
       wire::EncodeGoodbye({wire::MessageType::kGoodbye, session, sequence++, 0}, config.key).view(),
       remote);
   std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  stop = true;
-  node.join();
+  const nlohmann::json summary = node.Stop();
   const nlohmann::json& by_rtt = summary["translation_patch_by_rtt"];
   EXPECT_EQ(by_rtt["switches"].get<int>(), 2) << by_rtt.dump();
   EXPECT_FALSE(by_rtt["on_at_end"].get<bool>());
@@ -456,13 +451,9 @@ TEST(RemoteNode, EndsASessionWhoseSequenceNumbersRunLow) {
   const HapticScene scene = MakeBlockOnGearScene();
   RemoteNodeConfig config = LocalNodeConfig(TestKey(41), "remote_node_renew_test.port");
   config.start_sequences_at = wire::kSequenceRenewAt - 20;
-  std::atomic<bool> stop{false};
-  nlohmann::json summary;
-  std::thread node([&] { summary = RunRemoteNode(config, scene, stop); });
-  StopAndJoin guard{stop, node};
-  const std::uint16_t port = AwaitPort(config.port_file);
-  ASSERT_NE(port, 0);
-  const SocketAddress remote = SocketAddress::Parse("127.0.0.1:" + std::to_string(port));
+  RunningNode node(config, scene);
+  ASSERT_NE(node.port, 0);
+  const SocketAddress remote = node.remote;
   UdpSocket socket(SocketAddress::Parse("127.0.0.1:0"));
   std::uint32_t sessions[2] = {0, 0};
   for (int attempt = 0; attempt < 2; ++attempt) {
@@ -505,8 +496,7 @@ TEST(RemoteNode, EndsASessionWhoseSequenceNumbersRunLow) {
     EXPECT_LT(highest, wire::kMaxSequence) << attempt;
   }
   EXPECT_NE(sessions[0], sessions[1]);
-  stop = true;
-  node.join();
+  const nlohmann::json summary = node.Stop();
   EXPECT_EQ(summary["transport"]["sessions_renewed"].get<int>(), 2);
   EXPECT_EQ(summary["transport"]["sessions"].get<int>(), 2);
 }
@@ -514,13 +504,9 @@ TEST(RemoteNode, EndsASessionWhoseSequenceNumbersRunLow) {
 TEST(RemoteNode, RefusesAnOperatorOfAnotherVersionAndHoldsBackModelsThatSayNothingNew) {
   const HapticScene scene = MakeBlockOnGearScene();
   const RemoteNodeConfig config = LocalNodeConfig(TestKey(21), "remote_node_deadband_test.port");
-  std::atomic<bool> stop{false};
-  nlohmann::json summary;
-  std::thread node([&] { summary = RunRemoteNode(config, scene, stop); });
-  StopAndJoin guard{stop, node};
-  const std::uint16_t port = AwaitPort(config.port_file);
-  ASSERT_NE(port, 0);
-  const SocketAddress remote = SocketAddress::Parse("127.0.0.1:" + std::to_string(port));
+  RunningNode node(config, scene);
+  ASSERT_NE(node.port, 0);
+  const SocketAddress remote = node.remote;
   UdpSocket socket(SocketAddress::Parse("127.0.0.1:0"));
 
   // 1. A version-3 operator's Hello (header version 3, the 32-byte v3 body) gets a Reject in
@@ -669,8 +655,7 @@ TEST(RemoteNode, RefusesAnOperatorOfAnotherVersionAndHoldsBackModelsThatSayNothi
     EXPECT_GE(copies[i].hold_ns - previous_hold, 50'000'000) << i;  // ≥ 50 ms apart at the node
     if (i > 0) EXPECT_GE(arrivals[i] - arrivals[i - 1], std::chrono::milliseconds(20)) << i;
   }
-  stop = true;
-  node.join();
+  const nlohmann::json summary = node.Stop();
   const nlohmann::json& t = summary["transport"];
   EXPECT_EQ(t["foreign_version_hellos"].get<int>(), 2);  // version 3 and the previous one
   EXPECT_EQ(t["hello_replayed"].get<int>(), 1);

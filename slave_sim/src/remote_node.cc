@@ -103,6 +103,18 @@ std::int64_t WarmUpPenetrationDepth(PenetrationDepthBackend& backend, const Hapt
   return backend.faults().missing_overlap;
 }
 
+// Whether the next step fills translation patches (RemoteNodeConfig::translation_patch_rtt_ms):
+// always with the option, else from the threshold on and, once on (`on_now`), until the round
+// trip the operator reported (ns; 0: none yet) falls below kTranslationPatchOffFraction of it.
+bool TranslationPatchWanted(const RemoteNodeConfig& config, std::int64_t operator_rtt_ns,
+                            bool on_now) noexcept {
+  if (config.pipeline.depth_refinement.translation_patch) return true;
+  const double threshold_ms = config.translation_patch_rtt_ms;
+  if (!std::isfinite(threshold_ms) || operator_rtt_ns <= 0) return false;
+  const double rtt_ms = static_cast<double>(operator_rtt_ns) * 1e-6;
+  return rtt_ms >= (on_now ? kTranslationPatchOffFraction * threshold_ms : threshold_ms);
+}
+
 }  // namespace
 
 nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& scene,
@@ -320,18 +332,11 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
       first_step_ns = t_step;
       first_step_cpu_s = ProcessCpuSeconds();
     }
-    // The translation patches while the operator's round trip is long (or always, by option):
-    // on from translation_patch_rtt_ms, off again below kTranslationPatchOffFraction of it, so
-    // that a round trip near the threshold does not switch them at every Ping. A switch sends
-    // the next model whatever the deadband (it compares forces, not patches).
+    // The translation patches by the operator's round trip. A switch sends the next model
+    // whatever the deadband (it compares forces, not patches).
     if (config.pipeline.refine_depth) {
       const bool was_on = pipeline->translation_patch();
-      const double rtt_ms = static_cast<double>(session.operator_rtt_ns()) * 1e-6;
-      const double threshold_ms = config.translation_patch_rtt_ms;
-      const bool patch =
-          config.pipeline.depth_refinement.translation_patch ||
-          (std::isfinite(threshold_ms) && session.operator_rtt_ns() > 0 &&
-           rtt_ms >= (was_on ? kTranslationPatchOffFraction * threshold_ms : threshold_ms));
+      const bool patch = TranslationPatchWanted(config, session.operator_rtt_ns(), was_on);
       if (patch != was_on) {
         pipeline->SetTranslationPatch(patch);
         session.ResendNextModel();

@@ -150,7 +150,7 @@ class RemoteSession {
   std::int64_t operator_rtt_ns() const noexcept { return operator_rtt_ns_; }
   /// The next model goes out whatever the contact-model deadband says (counted as its "first"):
   /// for a change the deadband does not compare, such as translation patches turned on or off.
-  void ResendNextModel() noexcept { model_deadband_.Configure(model_deadband_.config()); }
+  void ResendNextModel() noexcept { model_deadband_.ForgetHeld(); }
 
   /// The link's statistics with the session counters (sessions, goodbyes, peers lost, Hello
   /// replays, retransmits, deferrals, rejects) and the scene stream's, for the run summary.

@@ -319,8 +319,8 @@ class HapticTexturePipeline {
   const DepthRefinementCounters& depth_refinement_counters() const noexcept {
     return refiner_.counters();
   }
-  /// Whether stage 5b gives each contact a translation patch from the next Step() on
-  /// (DepthRefinementOptions::translation_patch, which sets it at construction); nothing without
+  /// Turns stage 5b's translation patch (DepthRefinementOptions::translation_patch, which sets
+  /// it at construction) on or off from the next Step() on; nothing without
   /// PipelineOptions::refine_depth. The remote node turns it on while the operator's round trip
   /// is long (RemoteNodeConfig::translation_patch_rtt_ms). noexcept, allocation-free.
   void SetTranslationPatch(bool on) noexcept { refiner_.SetTranslationPatch(on); }

@@ -60,19 +60,17 @@ struct RemoteNodeConfig {
   /// stream; a Hello asking more is refused with a Reject that says so.
   double max_deadband = 0.5;
   /// Round trip (ms) from which each contact's translation patch goes with the contact models
-  /// (TranslationPatch, DepthRefinementOptions::translation_patch): while the round trip that the
-  /// operator's newest Ping reports (PingMessage::operator_rtt_us) is at least this, stage 5b
-  /// fills the patches, so that a model rendered a round trip after its pose still holds the
-  /// texture's ridges where the tool has moved meanwhile (issue 33: at 25 ms one way the share of
-  /// the force the passivity stage takes falls from about a fifth to a few per cent); below it the
-  /// step pays nothing for them. Infinite: only pipeline.depth_refinement.translation_patch
-  /// decides (true: always); 0: from the first Ping that reports a measured round trip. Once on,
-  /// the patches go until the round trip falls below kTranslationPatchOffFraction of this (so
-  /// that one near it does not switch them at every Ping). RunRemoteNode throws
-  /// std::invalid_argument for NaN or a negative value; nothing happens without
-  /// pipeline.refine_depth. The default, 10 ms, is the round trip in which a hand at 20–50 mm/s
-  /// moves half a grid cell of the seed's windows (0.4 mm), where the tangent alone starts to miss
-  /// the ridges (docs/passivity/README.md, "The patch by the round trip").
+  /// (TranslationPatch, DepthRefinementOptions::translation_patch): from when the round trip that
+  /// the operator's newest Ping reports (PingMessage::operator_rtt_us) reaches this, stage 5b
+  /// fills the patches, so that a model used a round trip after its pose still holds the
+  /// texture's ridges where the tool has moved meanwhile, until it falls below
+  /// kTranslationPatchOffFraction of this (so that one near it does not switch them at every
+  /// Ping); below it the step pays nothing for them. Infinite: only
+  /// pipeline.depth_refinement.translation_patch decides (true: always); 0: from the first Ping
+  /// that reports a measured round trip. RunRemoteNode throws std::invalid_argument for NaN or a
+  /// negative value; nothing happens without pipeline.refine_depth. The default, 10 ms, is the
+  /// round trip in which a hand at 20–50 mm/s moves half a grid cell of the seed's windows
+  /// (0.4 mm); its measurements are in docs/passivity/README.md ("The patch by the round trip").
   double translation_patch_rtt_ms = 10.0;
   /// Floors and keep-alive of the contact-model deadband; its Weber fraction and keep-alive come
   /// from the session (the operator asks them in its Hello).

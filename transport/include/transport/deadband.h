@@ -189,8 +189,11 @@ class ContactModelDeadband {
   /// on across sessions.
   void Configure(const ContactModelDeadbandConfig& config) noexcept {
     config_ = config;
-    have_sent_ = false;
+    ForgetHeld();
   }
+  /// Forgets the held model: the next Decide sends (kFirst), for a change of the model that
+  /// Decide does not compare (e.g. translation patches turned on or off).
+  void ForgetHeld() noexcept { have_sent_ = false; }
   const ContactModelDeadbandConfig& config() const noexcept { return config_; }
   /// The last model sent (valid after the first Decide that sent).
   const ContactModel& held() const noexcept { return held_; }
