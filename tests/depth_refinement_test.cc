@@ -651,11 +651,83 @@ TEST(DepthRefinement, TranslationPatchHoldsTheDepthOverTheToolsSlide) {
   EXPECT_NE(ContactDepthAt(r.refined, dq), ContactDepthAt(none, dq));
 }
 
+// Past the patch's edge (±R·h) the model holds instead of carrying a ridge's slope on: the in-plane
+// slope fades from the interpolant's at the edge to zero within a node spacing. Against the
+// closed form, however far the tool slides along x, the depth stays within the sinusoid's own
+// range plus that fade, where the tangent carried on from the edge is off by more; and the
+// gradient the loop gets is the derivative of the depth it gets through the edge and beyond,
+// along x and, past the edge along x, along y too (the cross term): a conservative field whose
+// force has no step at the edge.
+TEST(DepthRefinement, PastThePatchsEdgeTheDepthHoldsInsteadOfCarryingTheSlopeOn) {
+  const HapticModel tool = CurvedTool();
+  const HapticModel env = EnvironmentBox(Sinusoid, 1024);
+  DepthRefinementOptions with_patch;
+  with_patch.translation_patch = true;
+  constexpr int n = 50;
+  const double h = 0.02 / n;
+  const double edge = kTranslationPatchRadius * h;
+  double held_sq = 0.0, carried_sq = 0.0;
+  for (const double x0 : {0.15e-3, 0.55e-3, -0.4e-3}) {
+    double at = 0.0;
+    const double z0 = ClosedFormDepth(x0, 0.0, at) - 15e-6;
+    const ContactLinearization c =
+        LinearizeAndRefine(tool, CurvedToolPose(x0, z0), env, n, with_patch).refined;
+    ASSERT_EQ(c.patch.step_m, h);
+    const auto depth = [&](double dx, double dy, PenetrationGradient* g = nullptr) {
+      Twist dq;
+      dq.linear = {dx, dy, 0.0};
+      return ContactDepthAt(c, dq, g);
+    };
+    for (const double side : {-1.0, 1.0}) {
+      const double at_edge = depth(side * edge, 0.0);
+      const double held = depth(side * (edge + h), 0.0);
+      for (const double dx : {1.5e-3, 2.5e-3, 4e-3, 20e-3}) {
+        EXPECT_NEAR(depth(side * dx, 0.0), held, 1e-9) << "x0 " << x0 << " dx " << side * dx;
+        double unused = 0.0;
+        const double truth = ClosedFormDepth(x0 + side * dx, z0, unused);
+        if (dx > 5e-3) continue;
+        EXPECT_LT(std::abs(depth(side * dx, 0.0) - truth), 3.0 * kA)
+            << "x0 " << x0 << " dx " << side * dx;
+        const double carried =
+            at_edge + c.gradient.d_translation_W.x * side * (dx - edge);  // the tangent, on
+        held_sq += (depth(side * dx, 0.0) - truth) * (depth(side * dx, 0.0) - truth);
+        carried_sq += (carried - truth) * (carried - truth);
+        std::printf("x0 %+.2f mm dx %+.1f mm: closed form %.1f µm, held %.1f µm, carried %.1f µm\n",
+                    x0 * 1e3, side * dx * 1e3, truth * 1e6, depth(side * dx, 0.0) * 1e6,
+                    carried * 1e6);
+      }
+      // The gradient against central differences, either side of the edge and past the fade.
+      for (const double dx : {edge - 0.05e-3, edge - 1e-6, edge + 1e-6, edge + 0.04e-3,
+                              edge + 0.2e-3, edge + h - 1e-6, edge + h + 0.1e-3}) {
+        for (const double dy : {0.0, 0.3e-3}) {
+          PenetrationGradient g;
+          depth(side * dx, dy, &g);
+          const double e = 1e-7;
+          EXPECT_NEAR(g.d_translation_W.x,
+                      (depth(side * dx + e, dy) - depth(side * dx - e, dy)) / (2.0 * e), 1e-5)
+              << "x0 " << x0 << " dx " << side * dx << " dy " << dy;
+          EXPECT_NEAR(g.d_translation_W.y,
+                      (depth(side * dx, dy + e) - depth(side * dx, dy - e)) / (2.0 * e), 1e-5)
+              << "x0 " << x0 << " dx " << side * dx << " dy " << dy;
+        }
+      }
+      // No step in the slope at the edge.
+      PenetrationGradient in, out;
+      depth(side * (edge - 1e-9), 0.0, &in);
+      depth(side * (edge + 1e-9), 0.0, &out);
+      EXPECT_NEAR(in.d_translation_W.x, out.d_translation_W.x, 1e-5) << "x0 " << x0;
+    }
+  }
+  EXPECT_LT(held_sq, 0.25 * carried_sq)
+      << "held against the tangent carried on from the edge, RMS over the slides: the test tells "
+         "the two apart";
+}
+
 // The patch's lever (DepthRefinementOptions::translation_patch_follows_rotation): a turn Δθ
 // reads the patch at the contact's slide Δθ × lever. Two routes: the residual of a turn equals
 // the residual of that slide as a translation, and the gradient the loop gets is the derivative
 // of the depth it gets (central differences, away from the nodes, where the bicubic's curvature
-// jumps, and from the patch's edge, where the residual's slope stops).
+// jumps, and inside the patch's edge).
 TEST(DepthRefinement, APatchWithALeverIsReadWhereATurnSlidesTheContact) {
   const HapticModel tool = CurvedTool();
   const HapticModel env = EnvironmentBox(Sinusoid, 1024);

@@ -18,11 +18,16 @@ void CatmullRomWeights(double f, std::array<double, 4>& w, std::array<double, 4>
         0.5 * (-9.0 * f2 + 8.0 * f + 1.0), 0.5 * (3.0 * f2 - 2.0 * f)};
 }
 
+// How far past a translation patch's edge its slope fades to zero (node spacings): short, so that
+// little of the edge's slope is carried on, and not zero, so that the gradient stays continuous
+// (docs/passivity/README.md, "Past the patch's edge": a quarter and one spacing measured).
+constexpr double kPatchFadeSpacings = 0.25;
+
 // The translation patch's residual at the in-plane displacement Δq.linear (TranslationPatch): the
 // bicubic interpolant of its nodes (linear ghosts one node past each edge; the displacement
-// clamped to the patch) less its tangent at q0. Its gradient along u and v (W) is added to
-// `d_translation` where the displacement lies inside the patch. 0 for no patch or a non-finite
-// one.
+// clamped to the patch) less its tangent at q0; past an edge, the interpolant's slope there
+// fading to zero over kPatchFadeSpacings. Its gradient along u and v (W) is added to
+// `d_translation`. 0 for no patch or a non-finite one.
 double PatchResidual(const TranslationPatch& p, const glm::dvec3& dx,
                      glm::dvec3& d_translation) noexcept {
   constexpr int R = kTranslationPatchRadius;
@@ -56,13 +61,15 @@ double PatchResidual(const TranslationPatch& p, const glm::dvec3& dx,
   std::array<double, 4> wx, dwx, wy, dwy;
   CatmullRomWeights(x - i0, wx, dwx);
   CatmullRomWeights(y - j0, wy, dwy);
-  double value = 0.0, d_x = 0.0, d_y = 0.0;
+  double value = 0.0, d_x = 0.0, d_y = 0.0, d_xy = 0.0;
   for (int b = 0; b < 4; ++b) {
     for (int a = 0; a < 4; ++a) {
       const double v = at(i0 - 1 + a, j0 - 1 + b);
-      value += wx[static_cast<std::size_t>(a)] * wy[static_cast<std::size_t>(b)] * v;
-      d_x += dwx[static_cast<std::size_t>(a)] * wy[static_cast<std::size_t>(b)] * v;
-      d_y += wx[static_cast<std::size_t>(a)] * dwy[static_cast<std::size_t>(b)] * v;
+      const auto ua = static_cast<std::size_t>(a), ub = static_cast<std::size_t>(b);
+      value += wx[ua] * wy[ub] * v;
+      d_x += dwx[ua] * wy[ub] * v;
+      d_y += wx[ua] * dwy[ub] * v;
+      d_xy += dwx[ua] * dwy[ub] * v;
     }
   }
   // The interpolant's tangent at q0 (per node spacing): its central differences there.
@@ -70,7 +77,26 @@ double PatchResidual(const TranslationPatch& p, const glm::dvec3& dx,
   const double g_y = 0.5 * (node(0, 1) - node(0, -1));
   if (x == x_raw) d_translation += ((d_x - g_x) / h) * p.axis_u_W;
   if (y == y_raw) d_translation += ((d_y - g_y) / h) * p.axis_v_W;
-  return value - (g_x * x + g_y * y);
+  // Past an edge (e = the displacement beyond it, in node spacings) nothing is known of the
+  // surface: the in-plane slope fades from the interpolant's at the edge to zero over L =
+  // kPatchFadeSpacings and the depth then holds (the edge's depth plus L/2 of its slope), so that δ
+  // and ∇δ stay continuous and a ridge's slope is not carried on past the patch into where the next
+  // ridge may be (docs/passivity/README.md, "Past the patch's edge"). Along an edge the slope at
+  // the edge varies with the other coordinate: that cross term is in the gradient too, so that it
+  // stays the depth's derivative (a conservative field).
+  double beyond = 0.0;
+  constexpr double L = kPatchFadeSpacings;
+  const auto fade = [&](double e, double slope_at_edge, double tangent, const glm::dvec3& axis,
+                        bool other_inside, const glm::dvec3& other_axis) {
+    const double a = std::abs(e);
+    const double held = a < L ? e - 0.5 * e * a / L : std::copysign(0.5 * L, e);
+    beyond += slope_at_edge * held - tangent * e;
+    d_translation += ((slope_at_edge * std::max(1.0 - a / L, 0.0) - tangent) / h) * axis;
+    if (other_inside) d_translation += (d_xy * held / h) * other_axis;
+  };
+  if (x != x_raw) fade(x_raw - x, d_x, g_x, p.axis_u_W, y == y_raw, p.axis_v_W);
+  if (y != y_raw) fade(y_raw - y, d_y, g_y, p.axis_v_W, x == x_raw, p.axis_u_W);
+  return value - (g_x * x + g_y * y) + beyond;
 }
 
 }  // namespace

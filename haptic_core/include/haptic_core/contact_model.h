@@ -57,8 +57,11 @@ inline constexpr double kKinkBlendM = 10e-6;
 /// its Catmull–Rom bicubic interpolant at the in-plane part of Δq.linear (clamped to ±R·h; linear
 /// ghosts one node past each edge) less the interpolant's tangent at q0, so that δ(q0) and ∇δ(q0)
 /// are unchanged and, where the contact's ∂δ/∂x along u and v is the nodes' central difference
-/// (the default secant), δ over the patch is the interpolant's. Its gradient is added to ∂δ/∂x
-/// inside the patch; it adds no curvature. A patch with a non-finite node is ignored. With a
+/// (the default secant), δ over the patch is the interpolant's. Past an edge the in-plane slope
+/// fades from the interpolant's there to zero over a quarter node spacing and δ then holds in the
+/// plane (nothing is known of the surface there: the tangent at q0 carried on past a ridge read
+/// the tool deep into the next flank), with ∇δ continuous. Its gradient is added to ∂δ/∂x; it
+/// adds no curvature. A patch with a non-finite node is ignored. With a
 /// lever (TranslationPatch::lever_W non-zero) the patch is read at Δx + Δθ × lever instead of Δx,
 /// and its gradient r × g is added to ∂δ/∂θ.
 /// noexcept, allocation-free (1 kHz loop).
