@@ -11,7 +11,9 @@ guard + damping per cell and arm. grid.json keeps every figure.
 
 Usage: delay_grid.py OUT_DIR [--delays 0,25,75,150] [--losses 0,10,20] [--wall 50:10,150:10]
          [--duration 4] [--repeats 1] [--build-dir build] --arm NAME="MASTER ARGS[::SLAVE ARGS]"
-         [--arm ...]
+         [--arm ...] [--arm-build NAME=BUILD_DIR ...]
+--arm-build runs that arm's executables from BUILD_DIR instead of --build-dir (a before/after
+pair of builds, alternated run by run).
 Example (the record in README.md): delay_grid.py /tmp/grid --losses 0,10 --duration 5 \
          --arm base="" --arm reserve20="--passivity-reserve-mj 20"
 """
@@ -70,13 +72,25 @@ def main():
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--build-dir", default="build")
     ap.add_argument("--arm", action="append", required=True)
+    ap.add_argument("--arm-build", action="append", default=[])
     o = ap.parse_args()
+    arm_build = {}
+    for a in o.arm_build:
+        if "=" not in a:
+            ap.error(f"--arm-build {a!r}: expected NAME=BUILD_DIR")
+        name, d = a.split("=", 1)
+        if not os.path.isdir(d):
+            ap.error(f"--arm-build {a!r}: {d} is not a directory")
+        arm_build[name] = d
     # NAME=MASTER_ARGS, or NAME=MASTER_ARGS::SLAVE_ARGS for an arm that changes the remote node.
     arms = []
     for a in o.arm:
         name, args = a.split("=", 1) if "=" in a else (a, "")
         margs, _, sargs = args.partition("::")
         arms.append((name, margs.strip(), sargs.strip()))
+    for name in arm_build:
+        if name not in [a[0] for a in arms]:
+            ap.error(f"--arm-build {name}: no --arm of that name")
     cells = [("block-on-gear", int(d), int(l)) for d in o.delays.split(",") for l in o.losses.split(",")]
     if o.wall:
         cells += [("stiff-wall", int(x.split(":")[0]), int(x.split(":")[1])) for x in o.wall.split(",")]
@@ -86,7 +100,7 @@ def main():
         for r in range(o.repeats):
             for name, margs, sargs in arms:
                 d = os.path.join(o.out, f"{scene}_d{delay}_l{loss}_r{r}_{name}")
-                cmd = [os.path.join(repo, "deploy/run-loopback"), "--build-dir", o.build_dir, "--out", d,
+                cmd = [os.path.join(repo, "deploy/run-loopback"), "--build-dir", arm_build.get(name, o.build_dir), "--out", d,
                        "--duration", o.duration, "--pd-backend", "cpu", "--scene", scene,
                        "--display", "none", "--no-report",
                        "--master-args", ("--quiet " + margs).strip(), "--slave-args", ("--quiet " + sargs).strip()]
