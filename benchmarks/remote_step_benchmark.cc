@@ -90,6 +90,12 @@ int main(int argc, char** argv) {
   app.add_flag("--translation-patch", translation_patch,
                "stage 5b: each contact's depth over in-plane translations of the tool "
                "(DepthRefinementOptions::translation_patch)");
+  int translation_patch_spacing_cells = 1;
+  app.add_option("--translation-patch-spacing-cells", translation_patch_spacing_cells,
+                 "with --translation-patch: the nodes' spacing in grid cells "
+                 "(DepthRefinementOptions::translation_patch_spacing_cells)")
+      ->check(CLI::Range(1, ht::kMaxTranslationPatchSpacing))
+      ->capture_default_str();
   app.add_option("--csv", csv_path, "write one row per scene here");
   app.add_option("--cache-dir", cache_dir, "model cache folder")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
@@ -131,6 +137,7 @@ int main(int argc, char** argv) {
     options.share_connected_contacts = !no_sharing;
     options.depth_refinement.parallax = parallax;
     options.depth_refinement.translation_patch = translation_patch;
+    options.depth_refinement.translation_patch_spacing_cells = translation_patch_spacing_cells;
     options.depth_refinement.texel_scale_gradient = texel_gradient;
     options.depth_refinement.translation_kink_planes = translation_kinks;
     options.depth_refinement.texel_scale_rotation = !secant_rotation;

@@ -651,6 +651,52 @@ TEST(DepthRefinement, TranslationPatchHoldsTheDepthOverTheToolsSlide) {
   EXPECT_NE(ContactDepthAt(r.refined, dq), ContactDepthAt(none, dq));
 }
 
+// DepthRefinementOptions::translation_patch_spacing_cells: nodes m cells apart, each the refined
+// depth at the tool translated there (searched, not the rendered samples, which lie one cell
+// away), so that the patch spans ±2m cells; the model passes its nodes (the contact's secant is
+// not the nodes' central difference here, and is what the patch's residual is taken from one
+// node on), and δ and ∇δ at q0 are the contact's own.
+TEST(DepthRefinement, APatchTwoCellsApartHoldsItsNodesTwiceAsFar) {
+  const HapticModel tool = CurvedTool();
+  const HapticModel env = EnvironmentBox(Sinusoid, 1024);
+  DepthRefinementOptions wide;
+  wide.translation_patch = true;
+  wide.translation_patch_spacing_cells = 2;
+  constexpr int n = 50;
+  const double h = 2.0 * 0.02 / n;
+  constexpr int R = kTranslationPatchRadius;
+  const double x0 = 0.55e-3;
+  double at = 0.0;
+  const double z0 = ClosedFormDepth(x0, 0.0, at) - 15e-6;
+  const Refined plain = LinearizeAndRefine(tool, CurvedToolPose(x0, z0), env, n);
+  const ContactLinearization c =
+      LinearizeAndRefine(tool, CurvedToolPose(x0, z0), env, n, wide).refined;
+  ASSERT_EQ(c.patch.step_m, h);
+  EXPECT_EQ(c.depth_m, plain.refined.depth_m);
+  EXPECT_EQ(c.gradient.d_translation_W, plain.refined.gradient.d_translation_W);
+  PenetrationGradient g0;
+  EXPECT_DOUBLE_EQ(ContactDepthAt(c, Twist{}, &g0), c.depth_m);
+  EXPECT_NEAR(glm::length(g0.d_translation_W - c.gradient.d_translation_W), 0.0, 1e-12);
+  for (int j = -R; j <= R; ++j) {
+    for (int i = -R; i <= R; ++i) {
+      RigidTransform X_moved = CurvedToolPose(x0, z0);
+      X_moved.translation += glm::dvec3(i * h, j * h, 0.0);
+      const Refined moved = LinearizeAndRefine(tool, X_moved, env, n);
+      const auto k = static_cast<std::size_t>((j + R) * kTranslationPatchSide + (i + R));
+      const double node = c.depth_m + c.patch.depth_m[k];
+      EXPECT_NEAR(node, moved.refined.depth_m, 0.3e-6) << "node " << i << ", " << j;
+      Twist dq;
+      dq.linear = {i * h, j * h, 0.0};
+      EXPECT_NEAR(ContactDepthAt(c, dq), node, 1e-9) << "the model passes its nodes";
+    }
+  }
+  DepthRefinementOptions bad = wide;
+  for (const int cells : {0, kMaxTranslationPatchSpacing + 1}) {
+    bad.translation_patch_spacing_cells = cells;
+    EXPECT_THROW(DepthRefiner{bad}, std::invalid_argument) << cells;
+  }
+}
+
 // Past the patch's edge (±R·h) the model holds instead of carrying a ridge's slope on: the in-plane
 // slope fades from the interpolant's at the edge to zero within a node spacing. Against the
 // closed form, however far the tool slides along x, the depth stays within the sinusoid's own

@@ -25,10 +25,13 @@ constexpr double kPatchFadeSpacings = 0.25;
 
 // The translation patch's residual at the in-plane displacement Δq.linear (TranslationPatch): the
 // bicubic interpolant of its nodes (linear ghosts one node past each edge; the displacement
-// clamped to the patch) less its tangent at q0; past an edge, the interpolant's slope there
-// fading to zero over kPatchFadeSpacings. Its gradient along u and v (W) is added to
-// `d_translation`. 0 for no patch or a non-finite one.
-double PatchResidual(const TranslationPatch& p, const glm::dvec3& dx,
+// clamped to the patch) less the contact's own linear part there, so that δ passes the nodes;
+// past an edge, the interpolant's slope there fading to zero over kPatchFadeSpacings. The
+// linear part subtracted is the interpolant's tangent at q0 near q0 and the contact's in-plane
+// slope (`slope_W`, ∂δ/∂x) from one node on, joined by a smoothstep; the two are one where the
+// nodes are one cell apart (the central difference is the contact's secant). Its gradient along
+// u and v (W) is added to `d_translation`. 0 for no patch or a non-finite one.
+double PatchResidual(const TranslationPatch& p, const glm::dvec3& dx, const glm::dvec3& slope_W,
                      glm::dvec3& d_translation) noexcept {
   constexpr int R = kTranslationPatchRadius;
   constexpr int S = kTranslationPatchSide;
@@ -72,11 +75,22 @@ double PatchResidual(const TranslationPatch& p, const glm::dvec3& dx,
       d_xy += dwx[ua] * dwy[ub] * v;
     }
   }
-  // The interpolant's tangent at q0 (per node spacing): its central differences there.
+  // The linear part subtracted, per node spacing: T(x) = g·x − (g − c)·x·φ(|x|), g the
+  // interpolant's tangent at q0 (its central difference), c the contact's slope, φ(a) = 3a² − 2a³
+  // up to a = 1 and 1 beyond, so that T′(0) = g (∇δ(q0) is the contact's) and T(x) = c·x from one
+  // node on (δ passes the nodes). T′(x) = g − (g − c)·(9a² − 8a³) up to a = 1, c beyond.
   const double g_x = 0.5 * (node(1, 0) - node(-1, 0));
   const double g_y = 0.5 * (node(0, 1) - node(0, -1));
-  if (x == x_raw) d_translation += ((d_x - g_x) / h) * p.axis_u_W;
-  if (y == y_raw) d_translation += ((d_y - g_y) / h) * p.axis_v_W;
+  const double c_x = glm::dot(slope_W, p.axis_u_W) * h, c_y = glm::dot(slope_W, p.axis_v_W) * h;
+  const auto tangent = [](double x, double g, double c, double& dT) {
+    const double a = std::min(std::abs(x), 1.0);
+    dT = g - (g - c) * a * a * (9.0 - 8.0 * a);
+    return g * x - (g - c) * x * a * a * (3.0 - 2.0 * a);
+  };
+  double dT_x = 0.0, dT_y = 0.0;
+  const double T = tangent(x, g_x, c_x, dT_x) + tangent(y, g_y, c_y, dT_y);
+  if (x == x_raw) d_translation += ((d_x - dT_x) / h) * p.axis_u_W;
+  if (y == y_raw) d_translation += ((d_y - dT_y) / h) * p.axis_v_W;
   // Past an edge (e = the displacement beyond it, in node spacings) nothing is known of the
   // surface: the in-plane slope fades from the interpolant's at the edge to zero over L =
   // kPatchFadeSpacings and the depth then holds (the edge's depth plus L/2 of its slope), so that δ
@@ -94,9 +108,9 @@ double PatchResidual(const TranslationPatch& p, const glm::dvec3& dx,
     d_translation += ((slope_at_edge * std::max(1.0 - a / L, 0.0) - tangent) / h) * axis;
     if (other_inside) d_translation += (d_xy * held / h) * other_axis;
   };
-  if (x != x_raw) fade(x_raw - x, d_x, g_x, p.axis_u_W, y == y_raw, p.axis_v_W);
-  if (y != y_raw) fade(y_raw - y, d_y, g_y, p.axis_v_W, x == x_raw, p.axis_u_W);
-  return value - (g_x * x + g_y * y) + beyond;
+  if (x != x_raw) fade(x_raw - x, d_x, c_x, p.axis_u_W, y == y_raw, p.axis_v_W);
+  if (y != y_raw) fade(y_raw - y, d_y, c_y, p.axis_v_W, x == x_raw, p.axis_u_W);
+  return value - T + beyond;
 }
 
 }  // namespace
@@ -183,7 +197,7 @@ double ContactDepthAt(const ContactLinearization& c, const Twist& dq, Penetratio
   glm::dvec3 patch_t(0.0);
   const bool lever = c.patch.lever_W != glm::dvec3(0.0) && finite3(c.patch.lever_W);
   const glm::dvec3 slide = lever ? dq.linear + glm::cross(dq.angular, c.patch.lever_W) : dq.linear;
-  const double patch = PatchResidual(c.patch, slide, patch_t);
+  const double patch = PatchResidual(c.patch, slide, c.gradient.d_translation_W, patch_t);
   const glm::dvec3 patch_r = lever ? glm::cross(c.patch.lever_W, patch_t) : glm::dvec3(0.0);
   if (gradient != nullptr) *gradient = {t_top + blend_t + patch_t, r_top + blend_r + patch_r};
   return depth + lift - lift0 + patch;

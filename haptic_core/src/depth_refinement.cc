@@ -407,6 +407,13 @@ void DepthRefinementOptions::Validate() const {
         "depth refinement: translation_patch_floor_texels must be >= 0, got " +
         std::to_string(translation_patch_floor_texels));
   }
+  if (translation_patch_spacing_cells < 1 ||
+      translation_patch_spacing_cells > kMaxTranslationPatchSpacing) {
+    throw std::invalid_argument(
+        "depth refinement: translation_patch_spacing_cells must be in [1, " +
+        std::to_string(kMaxTranslationPatchSpacing) + "], got " +
+        std::to_string(translation_patch_spacing_cells));
+  }
   if (!(search_floor_texels > 0.0) || !std::isfinite(search_floor_texels)) {
     throw std::invalid_argument("depth refinement: search_floor_texels must be > 0, got " +
                                 std::to_string(search_floor_texels));
@@ -462,7 +469,7 @@ DepthRefiner::DepthRefiner(const DepthRefinementOptions& options, std::size_t ma
   tool_pose_all_.reserve(max_triangles);
   if (max_triangles > 0) {  // also with the patch off: SetTranslationPatch may turn it on
     const auto n = static_cast<std::size_t>(max_resolution);
-    const std::size_t side = n + 2 * kTranslationPatchRadius;
+    const std::size_t side = n + 2 * kTranslationPatchRadius * kMaxTranslationPatchSpacing;
     patch_env_heights_.reserve(n * n);
     patch_tool_heights_.reserve(side * side);
   }
@@ -925,10 +932,13 @@ int DepthRefiner::TranslationKinkPlanes(std::span<const Seed> found, const Seed&
 }
 
 void DepthRefiner::FillTranslationPatch(const RigidTransform& X_WT, const Seed& deepest,
-                                        std::span<const Seed> found, double h,
+                                        std::span<const Seed> found, double cell_step,
                                         ContactLinearization& lin) noexcept {
   constexpr int R = kTranslationPatchRadius;
   constexpr int S = kTranslationPatchSide;
+  const int m = options_.translation_patch_spacing_cells;
+  const double h = m * cell_step;  // the nodes' spacing
+  const int grow = R * m;          // cells the tool's render is grown by
   const ContactWindow& w = window_;
   TranslationPatch& patch = lin.patch;
   patch = TranslationPatch{};
@@ -937,22 +947,23 @@ void DepthRefiner::FillTranslationPatch(const RigidTransform& X_WT, const Seed& 
   patch.axis_v_W = w.axis_v_W;
   const double slope_u = glm::dot(lin.gradient.d_translation_W, w.axis_u_W);
   const double slope_v = glm::dot(lin.gradient.d_translation_W, w.axis_v_W);
-  // The window's grid at the base pose, the tool's grown by R cells: node (i, j), the tool moved
-  // by (i, j) cells, is the tool's render read (−i, −j) cells over (as the four rendered
+  // The window's grid at the base pose, the tool's grown by R·m cells: node (i, j), the tool moved
+  // by (i·m, j·m) cells, is the tool's render read (−i·m, −j·m) cells over (as the four rendered
   // translation samples are), so each node's deepest cell is found over the whole window.
-  const int n = w.resolution, nt = n + 2 * R;
+  const int n = w.resolution, nt = n + 2 * grow;
   patch_env_heights_.assign(static_cast<std::size_t>(n) * n, -kInf32);
   patch_tool_heights_.assign(static_cast<std::size_t>(nt) * nt, kInf32);
   RenderPatchHeightsFast(*env_, X_WO_, env_list_, w, PatchSide::kEnvironment, 0,
                          patch_env_heights_);
-  RenderPatchHeightsFast(*tool_, X_WT, tool_list_, w, PatchSide::kTool, R, patch_tool_heights_);
+  RenderPatchHeightsFast(*tool_, X_WT, tool_list_, w, PatchSide::kTool, grow, patch_tool_heights_);
   std::array<Seed, static_cast<std::size_t>(S * S)> at{};
   at.fill(Seed{-kInf, 0.0, 0.0});
   const auto index = [](int i, int j) { return static_cast<std::size_t>((j + R) * S + (i + R)); };
   at[index(0, 0)] = deepest;
-  // The rendered samples one step away (1: +u, 2: −u, 3: +v, 4: −v), already refined.
+  // The rendered samples one cell away (1: +u, 2: −u, 3: +v, 4: −v), already refined: the nodes
+  // one step away when the spacing is one cell.
   const std::array<std::array<int, 2>, 4> rendered{{{1, 0}, {-1, 0}, {0, 1}, {0, -1}}};
-  for (std::size_t k = 0; k < rendered.size() && k < found.size(); ++k) {
+  for (std::size_t k = 0; m == 1 && k < rendered.size() && k < found.size(); ++k) {
     at[index(rendered[k][0], rendered[k][1])] = found[k];
   }
   const double cell = w.cell_size_m();
@@ -986,8 +997,8 @@ void DepthRefiner::FillTranslationPatch(const RigidTransform& X_WT, const Seed& 
                                 shift_s, shift_t);
           if (r.depth_m > node.depth_m) node = r;
         };
-        const DepthSample grid = DirectionalPenetrationDepthShifted(patch_env_heights_, n,
-                                                                    patch_tool_heights_, R, -i, -j);
+        const DepthSample grid = DirectionalPenetrationDepthShifted(
+            patch_env_heights_, n, patch_tool_heights_, grow, -i * m, -j * m);
         if (grid.cell >= 0) {
           double s = 0.0, t = 0.0;
           CellCoordinates(w, grid.cell, s, t);

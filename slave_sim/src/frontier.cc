@@ -253,6 +253,12 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
       patch_floor.translation_patch_floor_texels = texels;
       s.push_back(patch_floor);
     }
+    for (const int cells : {2, 3}) {
+      FrontierSetting patch_spacing = patch;
+      patch_spacing.name = "translation_patch_spacing" + std::to_string(cells);
+      patch_spacing.translation_patch_spacing_cells = cells;
+      s.push_back(patch_spacing);
+    }
     FrontierSetting patch_texel = translation_only;
     patch_texel.name = "translation_patch_texel_translation_gradient";
     patch_texel.translation_patch = true;
@@ -641,6 +647,7 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   options.depth_refinement.translation_patch_neighbour_climbs =
       st.translation_patch_neighbour_climbs;
   options.depth_refinement.translation_patch_floor_texels = st.translation_patch_floor_texels;
+  options.depth_refinement.translation_patch_spacing_cells = st.translation_patch_spacing_cells;
   options.depth_refinement.translation_patch_follows_rotation =
       st.translation_patch_follows_rotation;
   if (st.gradient_step_texels > 0.0)

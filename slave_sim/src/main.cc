@@ -151,6 +151,13 @@ int main(int argc, char** argv) {
                "whenever translation patches go: the loop also reads the patch where a turn of\n"
                "the tool slides the contact (its lever from the tool's centre of mass)")
       ->excludes("--no-translation-patch");
+  int translation_patch_spacing_cells = 1;
+  app.add_option("--translation-patch-spacing-cells", translation_patch_spacing_cells,
+                 "whenever translation patches go: their nodes' spacing in grid cells, so that\n"
+                 "a patch spans ±2 spacings (wider for a tool that moves further in a round trip,\n"
+                 "coarser on the ridges)")
+      ->check(CLI::Range(1, ht::kMaxTranslationPatchSpacing))
+      ->capture_default_str();
   bool texel_scale_gradient = false;
   app.add_flag("--texel-scale-gradient", texel_scale_gradient,
                "each refined contact's gradient as the refined maximum's derivative at\n"
@@ -420,6 +427,8 @@ int main(int argc, char** argv) {
     config.pipeline.depth_refinement.translation_patch = translation_patch;
     config.pipeline.depth_refinement.translation_patch_follows_rotation =
         translation_patch_follows_rotation;
+    config.pipeline.depth_refinement.translation_patch_spacing_cells =
+        translation_patch_spacing_cells;
     config.translation_patch_rtt_ms =
         no_translation_patch ? std::numeric_limits<double>::infinity() : translation_patch_rtt_ms;
     if ((translation_patch || rtt_option->count() > 0) && no_refine_depth) {

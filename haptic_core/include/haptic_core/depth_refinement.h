@@ -74,6 +74,9 @@ double PatchHeightAt(const HapticModel& model, const RigidTransform& X_WO,
                      double s_m, double t_m, int level = 0, bool parallax = false) noexcept;
 
 /// How the depth is refined (issue 32).
+/// Largest DepthRefinementOptions::translation_patch_spacing_cells.
+inline constexpr int kMaxTranslationPatchSpacing = 4;
+
 struct DepthRefinementOptions {
   /// Translation step of the gradient in level-0 texels of the finer surface at the contact
   /// point; the rotation step is this over half the window. > 0.
@@ -146,6 +149,11 @@ struct DepthRefinementOptions {
   /// search_floor_texels); 0: search_floor_texels. A coarser floor takes fewer evaluations of
   /// b − a per node. ≥ 0.
   double translation_patch_floor_texels = 0.0;
+  /// With translation_patch: the nodes' spacing in grid cells (1 … kMaxTranslationPatchSpacing),
+  /// so that the patch spans ±2·spacing cells: wider for a tool that moves further in a round
+  /// trip, coarser on the ridges. At 1 the nodes one step away are the rendered samples; at more,
+  /// every node is searched.
+  int translation_patch_spacing_cells = 1;
   /// How far above the tangent (m) a translation sample must lie to make an arm. ≥ 0.
   double translation_kink_tolerance_m = 1e-6;
   /// The rendered rotation samples (±h_θ about u, v and n) searched from a sub-grid of their
@@ -287,11 +295,12 @@ class DepthRefiner {
   // appended to lin's planes up to kMaxKinkPlanes. Returns the planes added.
   int TranslationKinkPlanes(std::span<const Seed> found, const Seed& deepest, double h_x,
                             ContactLinearization& lin) noexcept;
-  // DepthRefinementOptions::translation_patch: lin.patch at step h (m, the window's cell) for the
-  // tool at X_WT, from the deepest (q0's maximum) and the refined translation samples `found`
-  // (index k − 1 for rendered sample k = 1…4, at ±h along u and ±h along v).
+  // DepthRefinementOptions::translation_patch: lin.patch at step translation_patch_spacing_cells
+  // × cell_step (m, cell_step the window's cell) for the tool at X_WT, from the deepest (q0's
+  // maximum) and, at a spacing of one cell, the refined translation samples `found` (index k − 1
+  // for rendered sample k = 1…4, at ±cell_step along u and along v).
   void FillTranslationPatch(const RigidTransform& X_WT, const Seed& deepest,
-                            std::span<const Seed> found, double h,
+                            std::span<const Seed> found, double cell_step,
                             ContactLinearization& lin) noexcept;
   // The triangles of `list` facing the side's way, projected on the window at pose X.
   void ProjectAll(const HapticModel& model, const RigidTransform& X, PatchSide side,

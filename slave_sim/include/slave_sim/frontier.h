@@ -118,6 +118,9 @@ struct FrontierSetting {
   /// PipelineOptions::depth_refinement.translation_patch_floor_texels
   /// ("translation_patch_floor1", "translation_patch_floor2").
   double translation_patch_floor_texels = 0.0;
+  /// PipelineOptions::depth_refinement.translation_patch_spacing_cells
+  /// ("translation_patch_spacing2", "translation_patch_spacing3").
+  int translation_patch_spacing_cells = 1;
   /// PipelineOptions::depth_refinement.translation_patch_follows_rotation
   /// ("translation_patch_follows_rotation" turns it on).
   bool translation_patch_follows_rotation = false;
