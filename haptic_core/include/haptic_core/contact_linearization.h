@@ -56,8 +56,9 @@ inline constexpr int kTranslationPatchSide = 2 * kTranslationPatchRadius + 1;
 /// the tool has moved a fraction of the ridge's period; the patch holds δ over ±R·h, so that a
 /// model read a round trip after its q0 (issue 33) or a linearization point a deadband away from
 /// the tool (issue 32, eleventh stop) still gives the surface's depth there. ContactDepthAt adds
-/// its residual to the planes: the patch's bicubic (Catmull–Rom) interpolant less its tangent at
-/// q0, so that δ and ∇δ at q0 are the contact's own.
+/// its residual to the planes: the patch's bicubic (Catmull–Rom) interpolant less a linear part,
+/// so that δ and ∇δ at q0 are the contact's own and δ passes the nodes; past the patch's edge δ
+/// holds (contact_model.h).
 struct TranslationPatch {
   /// Node spacing h (m); 0: no patch.
   double step_m = 0.0;

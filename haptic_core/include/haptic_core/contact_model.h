@@ -55,9 +55,10 @@ inline constexpr double kKinkBlendM = 10e-6;
 /// stable there. Non-finite planes are skipped.
 /// With a translation patch (c.patch.step_m > 0; TranslationPatch) the patch's residual is added:
 /// its Catmull–Rom bicubic interpolant at the in-plane part of Δq.linear (clamped to ±R·h; linear
-/// ghosts one node past each edge) less the interpolant's tangent at q0, so that δ(q0) and ∇δ(q0)
-/// are unchanged and, where the contact's ∂δ/∂x along u and v is the nodes' central difference
-/// (the default secant), δ over the patch is the interpolant's. Past an edge the in-plane slope
+/// ghosts one node past each edge) less a linear part: the interpolant's tangent at q0 there,
+/// the contact's own in-plane ∂δ/∂x from one node on, joined by a smoothstep (the two are one
+/// where the nodes are one cell apart and ∂δ/∂x is the default secant). So δ(q0) and ∇δ(q0)
+/// are unchanged and δ passes the nodes. Past an edge the in-plane slope
 /// fades from the interpolant's there to zero over a quarter node spacing and δ then holds in the
 /// plane (nothing is known of the surface there: the tangent at q0 carried on past a ridge read
 /// the tool deep into the next flank), with ∇δ continuous. Its gradient is added to ∂δ/∂x; it

@@ -127,8 +127,9 @@ struct DepthRefinementOptions {
   /// SetTranslationPatch and RemoteNodeConfig::translation_patch_rtt_ms): δ at the base pose
   /// translated by (i·h, j·h) along u and v, i, j ∈ [−R, R], h = W/N (the grid's translation step,
   /// so that the nodes one step away are the refined rendered samples ±h_x and the patch's tangent
-  /// at q0 is the default's secant). The window's grid is rendered once more at the base pose with
-  /// the tool grown by R cells (RenderPatchHeightsFast), each other node's deepest cell found over
+  /// at q0 is the default's secant; translation_patch_spacing_cells × W/N with that option). The
+  /// window's grid is rendered once more at the base pose with the tool grown by R spacings
+  /// (RenderPatchHeightsFast), each other node's deepest cell found over
   /// the whole window by reading the tool's render shifted (DirectionalPenetrationDepthShifted),
   /// and refined at level 0 as the rendered translation samples are (and, with
   /// translation_patch_neighbour_climbs, from the neighbouring node's maximum). A node without
