@@ -82,13 +82,13 @@ double PatchResidual(const TranslationPatch& p, const glm::dvec3& dx, const glm:
   const double g_x = 0.5 * (node(1, 0) - node(-1, 0));
   const double g_y = 0.5 * (node(0, 1) - node(0, -1));
   const double c_x = glm::dot(slope_W, p.axis_u_W) * h, c_y = glm::dot(slope_W, p.axis_v_W) * h;
-  const auto tangent = [](double x, double g, double c, double& dT) {
-    const double a = std::min(std::abs(x), 1.0);
+  const auto linear_part = [](double s, double g, double c, double& dT) {
+    const double a = std::min(std::abs(s), 1.0);
     dT = g - (g - c) * a * a * (9.0 - 8.0 * a);
-    return g * x - (g - c) * x * a * a * (3.0 - 2.0 * a);
+    return g * s - (g - c) * s * a * a * (3.0 - 2.0 * a);
   };
   double dT_x = 0.0, dT_y = 0.0;
-  const double T = tangent(x, g_x, c_x, dT_x) + tangent(y, g_y, c_y, dT_y);
+  const double T = linear_part(x, g_x, c_x, dT_x) + linear_part(y, g_y, c_y, dT_y);
   if (x == x_raw) d_translation += ((d_x - dT_x) / h) * p.axis_u_W;
   if (y == y_raw) d_translation += ((d_y - dT_y) / h) * p.axis_v_W;
   // Past an edge (e = the displacement beyond it, in node spacings) nothing is known of the
@@ -100,12 +100,12 @@ double PatchResidual(const TranslationPatch& p, const glm::dvec3& dx, const glm:
   // stays the depth's derivative (a conservative field).
   double beyond = 0.0;
   constexpr double L = kPatchFadeSpacings;
-  const auto fade = [&](double e, double slope_at_edge, double tangent, const glm::dvec3& axis,
+  const auto fade = [&](double e, double slope_at_edge, double linear_slope, const glm::dvec3& axis,
                         bool other_inside, const glm::dvec3& other_axis) {
     const double a = std::abs(e);
     const double held = a < L ? e - 0.5 * e * a / L : std::copysign(0.5 * L, e);
-    beyond += slope_at_edge * held - tangent * e;
-    d_translation += ((slope_at_edge * std::max(1.0 - a / L, 0.0) - tangent) / h) * axis;
+    beyond += slope_at_edge * held - linear_slope * e;
+    d_translation += ((slope_at_edge * std::max(1.0 - a / L, 0.0) - linear_slope) / h) * axis;
     if (other_inside) d_translation += (d_xy * held / h) * other_axis;
   };
   if (x != x_raw) fade(x_raw - x, d_x, c_x, p.axis_u_W, y == y_raw, p.axis_v_W);
