@@ -568,6 +568,21 @@ TEST(DepthRefinement, RefinedWithParallaxATiltedFacetsDepthIsTheDisplacedSurface
 // tool translated to that node. The closed form between the nodes: the model with the patch
 // follows the pushing depth max(δ, 0) over the patch where the linear model leaves it within a
 // fraction of the period. At q0 the patch changes nothing.
+// Index of node (i, j) in TranslationPatch::depth_m.
+std::size_t PatchIndex(int i, int j) {
+  constexpr int R = kTranslationPatchRadius;
+  return static_cast<std::size_t>((j + R) * kTranslationPatchSide + (i + R));
+}
+
+// What node (i, j) of a patch with spacing h (m) made at the curved tool's pose (x0, z0) should
+// hold: the refined depth (m) with the tool translated there, the window staying where it is.
+double RefinedDepthAtNode(const HapticModel& tool, const HapticModel& env, int n, double x0,
+                          double z0, int i, int j, double h) {
+  RigidTransform X_moved = CurvedToolPose(x0, z0);
+  X_moved.translation += glm::dvec3(i * h, j * h, 0.0);
+  return LinearizeAndRefine(tool, X_moved, env, n).refined.depth_m;
+}
+
 TEST(DepthRefinement, TranslationPatchHoldsTheDepthOverTheToolsSlide) {
   const HapticModel tool = CurvedTool();
   const HapticModel env = EnvironmentBox(Sinusoid, 1024);
@@ -605,14 +620,11 @@ TEST(DepthRefinement, TranslationPatchHoldsTheDepthOverTheToolsSlide) {
         LinearizeAndRefine(tool, CurvedToolPose(x0, z0), env, n, climbs).refined;
     for (int j = -R; j <= R; ++j) {
       for (int i = -R; i <= R; ++i) {
-        RigidTransform X_moved = CurvedToolPose(x0, z0);
-        X_moved.translation += glm::dvec3(i * h, j * h, 0.0);
-        const Refined moved = LinearizeAndRefine(tool, X_moved, env, n);
-        const auto k = static_cast<std::size_t>((j + R) * kTranslationPatchSide + (i + R));
+        const double moved = RefinedDepthAtNode(tool, env, n, x0, z0, i, j, h);
+        const std::size_t k = PatchIndex(i, j);
         const double node = c.depth_m + c.patch.depth_m[k];
-        EXPECT_NEAR(node, moved.refined.depth_m, 0.3e-6)
-            << "x0 " << x0 << " node " << i << ", " << j;
-        EXPECT_NEAR(from_grid.depth_m + from_grid.patch.depth_m[k], moved.refined.depth_m, 0.3e-6)
+        EXPECT_NEAR(node, moved, 0.3e-6) << "x0 " << x0 << " node " << i << ", " << j;
+        EXPECT_NEAR(from_grid.depth_m + from_grid.patch.depth_m[k], moved, 0.3e-6)
             << "with neighbour climbs: x0 " << x0 << " node " << i << ", " << j;
         Twist dq;
         dq.linear = {i * h, j * h, 0.0};
@@ -679,12 +691,9 @@ TEST(DepthRefinement, APatchTwoCellsApartHoldsItsNodesTwiceAsFar) {
   EXPECT_NEAR(glm::length(g0.d_translation_W - c.gradient.d_translation_W), 0.0, 1e-12);
   for (int j = -R; j <= R; ++j) {
     for (int i = -R; i <= R; ++i) {
-      RigidTransform X_moved = CurvedToolPose(x0, z0);
-      X_moved.translation += glm::dvec3(i * h, j * h, 0.0);
-      const Refined moved = LinearizeAndRefine(tool, X_moved, env, n);
-      const auto k = static_cast<std::size_t>((j + R) * kTranslationPatchSide + (i + R));
-      const double node = c.depth_m + c.patch.depth_m[k];
-      EXPECT_NEAR(node, moved.refined.depth_m, 0.3e-6) << "node " << i << ", " << j;
+      const double node = c.depth_m + c.patch.depth_m[PatchIndex(i, j)];
+      EXPECT_NEAR(node, RefinedDepthAtNode(tool, env, n, x0, z0, i, j, h), 0.3e-6)
+          << "node " << i << ", " << j;
       Twist dq;
       dq.linear = {i * h, j * h, 0.0};
       EXPECT_NEAR(ContactDepthAt(c, dq), node, 1e-9) << "the model passes its nodes";

@@ -963,8 +963,10 @@ void DepthRefiner::FillTranslationPatch(const RigidTransform& X_WT, const Seed& 
   // The rendered samples one cell away (1: +u, 2: −u, 3: +v, 4: −v), already refined: the nodes
   // one step away when the spacing is one cell.
   const std::array<std::array<int, 2>, 4> rendered{{{1, 0}, {-1, 0}, {0, 1}, {0, -1}}};
-  for (std::size_t k = 0; m == 1 && k < rendered.size() && k < found.size(); ++k) {
-    at[index(rendered[k][0], rendered[k][1])] = found[k];
+  if (m == 1) {
+    for (std::size_t k = 0; k < rendered.size() && k < found.size(); ++k) {
+      at[index(rendered[k][0], rendered[k][1])] = found[k];
+    }
   }
   const double cell = w.cell_size_m();
   // Ring by ring, so that each node's neighbour towards q0 is done first.

@@ -58,11 +58,11 @@ inline constexpr double kKinkBlendM = 10e-6;
 /// ghosts one node past each edge) less a linear part: the interpolant's tangent at q0 there,
 /// the contact's own in-plane ∂δ/∂x from one node on, joined by a smoothstep (the two are one
 /// where the nodes are one cell apart and ∂δ/∂x is the default secant). So δ(q0) and ∇δ(q0)
-/// are unchanged and δ passes the nodes. Past an edge the in-plane slope
-/// fades from the interpolant's there to zero over a quarter node spacing and δ then holds in the
-/// plane (nothing is known of the surface there: the tangent at q0 carried on past a ridge read
-/// the tool deep into the next flank), with ∇δ continuous. Its gradient is added to ∂δ/∂x; it
-/// adds no curvature. A patch with a non-finite node is ignored. With a
+/// are unchanged and δ passes the nodes. Past an edge the in-plane slope fades from the
+/// interpolant's there to zero over a quarter node spacing and δ then holds in the plane (nothing
+/// is known of the surface there: the tangent at q0 carried on past a ridge read the tool deep
+/// into the next flank), with ∇δ continuous. Its gradient is added to ∂δ/∂x; it adds no
+/// curvature. A patch with a non-finite node is ignored. With a
 /// lever (TranslationPatch::lever_W non-zero) the patch is read at Δx + Δθ × lever instead of Δx,
 /// and its gradient r × g is added to ∂δ/∂θ.
 /// noexcept, allocation-free (1 kHz loop).
