@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "haptic_core/contact_assembly.h"
 #include "haptic_core/contact_model.h"
 #include "haptic_core/spatial.h"
 #include "transport/link.h"
@@ -28,6 +29,9 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kInf = std::numeric_limits<double>::infinity();
 /// The f32 subnormal spacing protocol.h adds to the f32 and gradient bounds.
 constexpr double kF32Tiny = 0x1p-150;
+/// The receiver's clock when it decodes (ns; 58 days of uptime): RandomModel's echoes lie up to 2 s
+/// before it, as a model's echo does (its tool state was sent a round trip earlier).
+constexpr std::int64_t kNowNs = 5'000'000'000'000'000;
 
 MacKey TestKey() {
   MacKey k;
@@ -59,7 +63,7 @@ ContactModelMessage RandomModel(std::mt19937& rng, int contacts) {
                              Uniform(rng, -0.5, 0.5)};
   std::normal_distribution<double> g;
   model.X_WT0.rotation = glm::normalize(glm::dquat(g(rng), g(rng), g(rng), g(rng)));
-  model.tool_state_seq = Random64(rng);
+  model.tool_state_seq = rng();  // a header sequence: u32
   model.num_contacts = contacts;
   for (int i = 0; i < contacts; ++i) {
     ContactLinearization& c = model.contacts[i];
@@ -70,9 +74,9 @@ ContactModelMessage RandomModel(std::mt19937& rng, int contacts) {
     c.point_W = model.X_WT0.translation + RandomUnit(rng) * Uniform(rng, 0.0, 0.3);
     c.normal_W = RandomUnit(rng);
   }
-  model.F_T_W_at_q0 = {{Uniform(rng, -50, 50), Uniform(rng, -50, 50), Uniform(rng, -50, 50)},
-                       {Uniform(rng, -2, 2), Uniform(rng, -2, 2), Uniform(rng, -2, 2)}};
-  m.tool_state_send_time_ns = static_cast<std::int64_t>(Random64(rng) >> 1);
+  // As the sender assembles it (AssembleContactModel): the contacts' wrench at q0.
+  model.F_T_W_at_q0 = ContactModelWrenchAtQ0(model);
+  m.tool_state_send_time_ns = kNowNs - static_cast<std::int64_t>(Uniform(rng, 0.0, 2e9));
   m.hold_ns = static_cast<std::int64_t>(rng());
   m.remote_step_count = Random64(rng);
   m.collision_us = static_cast<float>(Uniform(rng, 0.0, 60000.0));
@@ -99,7 +103,7 @@ DecodeStatus OpenCompact(const Datagram& d, const MacKey& key, ContactModelMessa
   std::span<const std::uint8_t> body;
   if (const DecodeStatus s = OpenDatagram(d.view(), key, h, body); s != DecodeStatus::kOk) return s;
   EXPECT_EQ(h.type, MessageType::kCompactContactModel);
-  return DecodeCompactContactModel(body, out);
+  return DecodeCompactContactModel(body, out, kNowNs);
 }
 
 DecodeStatus OpenFloat(const Datagram& d, const MacKey& key, ContactModelMessage& out) {
@@ -131,10 +135,21 @@ void Put(std::vector<std::uint8_t>& b, std::size_t at, T value) {
   for (std::size_t i = 0; i < sizeof(T); ++i) b[at + i] = static_cast<std::uint8_t>(u >> (8 * i));
 }
 
-// Offsets in the body (protocol.h, CompactContactModel).
-constexpr std::size_t kAtSeq = 0, kAtSendTime = 8, kAtHold = 16, kAtSteps = 24, kAtTimes = 32;
-constexpr std::size_t kAtP = 38, kAtQ = 62, kAtWrench = 78;
-constexpr std::size_t kAtCount = 102, kAtContacts = 103;
+// Offsets in the body (protocol.h, CompactContactModel, version 11).
+constexpr std::size_t kAtSeq = 0, kAtSendTime = 4, kAtHold = 8, kAtSteps = 12, kAtTimes = 16;
+constexpr std::size_t kAtP = 22, kAtQ = 34;
+constexpr std::size_t kAtCount = 44, kAtContacts = 45;
+
+/// Bits [at, at + width) of the body's 80-bit quaternion field (10 bytes, little-endian), read
+/// byte by byte.
+std::uint64_t QuaternionBits(std::span<const std::uint8_t> b, int at, int width) {
+  std::uint64_t v = 0;
+  for (int i = 0; i < width; ++i) {
+    const int bit = at + i;
+    v |= std::uint64_t{(b[kAtQ + static_cast<std::size_t>(bit / 8)] >> (bit % 8)) & 1u} << i;
+  }
+  return v;
+}
 // Within a contact.
 constexpr std::size_t kAtDepth = 0, kAtDx = 4, kAtDtheta = 16, kAtK = 28, kAtPoint = 32,
                       kAtNormal = 38;
@@ -203,33 +218,54 @@ void ExpectSane(const ContactModelMessage& m) {
 TEST(CompactContactModel, RandomModelsComeBackWithinTheStatedBounds) {
   const MacKey key = TestKey();
   std::mt19937 rng(18);
-  Worst time{"time_us"}, rotation{"rotation_rad"}, wrench{"F_T_W_at_q0"}, depth{"depth_m"},
-      stiffness{"stiffness"}, d_x{"d_translation"}, d_theta{"d_rotation"}, point{"point_m"},
-      normal{"normal_rad"};
+  Worst time{"time_us"}, echo{"echo_and_hold_ns"}, position{"position_m"}, rotation{"rotation_rad"},
+      wrench{"F_T_W_at_q0"}, depth{"depth_m"}, stiffness{"stiffness"}, d_x{"d_translation"},
+      d_theta{"d_rotation"}, point{"point_m"}, normal{"normal_rad"};
   for (int trial = 0; trial < 2000; ++trial) {
     const int n = trial % (kMaxWireContacts + 1);
     const ContactModelMessage m = RandomModel(rng, n);
     const Datagram d = EncodeCompactContactModel(TestHeader(), m, key);
     ContactModelMessage out;
     ASSERT_EQ(OpenCompact(d, key, out), DecodeStatus::kOk) << trial;
-    EXPECT_EQ(out.model.tool_state_seq, m.model.tool_state_seq);
-    EXPECT_EQ(out.tool_state_send_time_ns, m.tool_state_send_time_ns);
-    EXPECT_EQ(out.hold_ns, m.hold_ns);
-    EXPECT_EQ(out.remote_step_count, m.remote_step_count);
+    EXPECT_EQ(out.model.tool_state_seq, m.model.tool_state_seq);  // a u32, sent whole
+    // Whole µs, within ±2³¹ µs of the receiver's clock (here 0–2 s before it).
+    EXPECT_EQ(out.tool_state_send_time_ns % 1000, 0);
+    EXPECT_EQ(out.hold_ns % 1000, 0);
+    echo.Add(static_cast<double>(std::abs(out.tool_state_send_time_ns - m.tool_state_send_time_ns)),
+             1e3 * kCompactTimeErrorUs);
+    echo.Add(static_cast<double>(std::abs(out.hold_ns - m.hold_ns)), 1e3 * kCompactTimeErrorUs);
+    EXPECT_EQ(out.remote_step_count, m.remote_step_count & 0xFFFF'FFFFu);
     for (const auto& [a, b] :
          {std::pair{out.collision_us, m.collision_us}, std::pair{out.texture_us, m.texture_us},
           std::pair{out.step_us, m.step_us}}) {
       time.Add(std::abs(double{a} - double{b}), kCompactTimeErrorUs);
     }
-    EXPECT_EQ(out.model.X_WT0.translation, m.model.X_WT0.translation);
+    for (int k = 0; k < 3; ++k) {
+      const double p = m.model.X_WT0.translation[k];
+      position.Add(std::abs(out.model.X_WT0.translation[k] - p),
+                   kCompactModelPositionRelativeError * std::abs(p) + kF32Tiny);
+    }
     rotation.Add(RotationAngle(out.model.X_WT0.rotation, m.model.X_WT0.rotation),
                  kCompactRotationErrorRad);
     EXPECT_NEAR(glm::length(out.model.X_WT0.rotation), 1.0, 1e-12);
-    for (int k = 0; k < 3; ++k) {
+    // Not sent: summed again from the decoded contacts. Each term k·δ·J has three f32 factors
+    // (≤ 2⁻²⁴ each, so ≤ 4·2⁻²⁴ of the term with margin), against the sender's f64 sum.
+    {
+      Wrench scale{};
+      for (int i = 0; i < n; ++i) {
+        const ContactLinearization& c = m.model.contacts[i];
+        const double kd = c.stiffness_n_per_m * std::max(c.depth_m, 0.0);
+        scale.force += kd * glm::abs(c.gradient.d_translation_W);
+        scale.torque += kd * glm::abs(c.gradient.d_rotation_W);
+      }
       const Wrench& a = out.model.F_T_W_at_q0;
       const Wrench& b = m.model.F_T_W_at_q0;
-      wrench.Add(std::abs(a.force[k] - b.force[k]), F32Bound(b.force[k]));
-      wrench.Add(std::abs(a.torque[k] - b.torque[k]), F32Bound(b.torque[k]));
+      for (int k = 0; k < 3; ++k) {
+        wrench.Add(std::abs(a.force[k] - b.force[k]),
+                   4.0 * kCompactF32RelativeError * scale.force[k] + 1e-12);
+        wrench.Add(std::abs(a.torque[k] - b.torque[k]),
+                   4.0 * kCompactF32RelativeError * scale.torque[k] + 1e-12);
+      }
     }
     ASSERT_EQ(out.model.num_contacts, n);
     for (int i = 0; i < n; ++i) {
@@ -250,7 +286,8 @@ TEST(CompactContactModel, RandomModelsComeBackWithinTheStatedBounds) {
       EXPECT_NEAR(glm::length(a.normal_W), 1.0, 1e-12);
     }
   }
-  for (const Worst& w : {time, rotation, wrench, depth, stiffness, d_x, d_theta, point, normal}) {
+  for (const Worst& w :
+       {time, echo, position, rotation, wrench, depth, stiffness, d_x, d_theta, point, normal}) {
     EXPECT_LE(w.ratio, 1.0) << w.name << ": largest error " << w.error;
     std::cout << "[ measured ] " << w.name << ": largest error " << w.error << " = " << w.ratio
               << " of its bound\n";
@@ -333,9 +370,13 @@ TEST(CompactContactModel, EvaluatedWrenchAndStiffnessAgreeWithTheFloatEncoding) 
       const RigidTransform X_WT = Displace(ref.model.X_WT0, step);
       const ContactModelEvaluation a = EvaluateContactModel(ref.model, X_WT);
       const ContactModelEvaluation b = EvaluateContactModel(cmp.model, X_WT);
-      // q ⊖ q0: the translation is sent exactly; the rotation vector moves by at most about the
-      // rotation error of X_WT0 (twice it, for margin).
+      // q ⊖ q0: the translation moves by p_WT0's f32 rounding (e_p, a length); the rotation
+      // vector by at most about the rotation error of X_WT0 (twice it, for margin).
       const Twist dq = PoseDifference(X_WT, ref.model.X_WT0);
+      const glm::dvec3& p0 = ref.model.X_WT0.translation;
+      const double e_p = sqrt3 * (kCompactModelPositionRelativeError *
+                                      std::max({std::abs(p0.x), std::abs(p0.y), std::abs(p0.z)}) +
+                                  kF32Tiny);
       const double dx = glm::length(dq.linear);
       const double dtheta = glm::length(dq.angular) + 2.0 * kCompactRotationErrorRad;
       double bound_force = 0.0, bound_torque = 0.0, bound_K = 0.0, scale_F = 0.0, scale_K = 0.0;
@@ -350,7 +391,7 @@ TEST(CompactContactModel, EvaluatedWrenchAndStiffnessAgreeWithTheFloatEncoding) 
         const double delta = c.depth_m + c.gradient.Dot(dq);
         // |δ' − δ|: δ0 as f32, J' − J times q ⊖ q0, J times the moved rotation vector.
         const double e_delta = F32Bound(c.depth_m) + sqrt3 * e_x * dx + sqrt3 * e_theta * dtheta +
-                               jr * 2.0 * kCompactRotationErrorRad;
+                               jr * 2.0 * kCompactRotationErrorRad + jx_c * e_p;
         const double d = std::max(delta, 0.0);  // max(·, 0) moves by at most e_delta
         // k'd'J' − kdJ = (k' − k)d'J' + k(d' − d)J' + kd(J' − J).
         bound_force += dk * (d + e_delta) * jx_c + k * e_delta * jx_c + k * d * sqrt3 * e_x;
@@ -393,8 +434,7 @@ TEST(CompactContactModel, BytesSitWhereProtocolHSaysAndAreFewerThanTheFloatEncod
   const MacKey key = TestKey();
   std::mt19937 rng(3);
   // protocol.h's layout counted by hand.
-  EXPECT_EQ(kCompactContactModelFixedBytes,
-            std::size_t{8 + 8 + 8 + 8 + 3 * 2 + 3 * 8 + 4 * 4 + 6 * 4 + 1});
+  EXPECT_EQ(kCompactContactModelFixedBytes, std::size_t{4 + 4 + 4 + 4 + 3 * 2 + 3 * 4 + 10 + 1});
   EXPECT_EQ(kCompactContactBytes, std::size_t{4 + 3 * 4 + 3 * 4 + 4 + 3 * 2 + 2 * 2});
   EXPECT_EQ(kAtContacts, kCompactContactModelFixedBytes);
   std::string sizes;
@@ -415,15 +455,28 @@ TEST(CompactContactModel, BytesSitWhereProtocolHSaysAndAreFewerThanTheFloatEncod
     // The fields at their offsets.
     const auto b = BodyOf(compact);
     EXPECT_EQ(compact.bytes[kHeaderTypeOffset], 12);  // the type
-    EXPECT_EQ(Get<std::uint64_t>(b, kAtSeq), m.model.tool_state_seq);
-    EXPECT_EQ(Get<std::int64_t>(b, kAtSendTime), m.tool_state_send_time_ns);
-    EXPECT_EQ(Get<std::int64_t>(b, kAtHold), m.hold_ns);
-    EXPECT_EQ(Get<std::uint64_t>(b, kAtSteps), m.remote_step_count);
+    EXPECT_EQ(Get<std::uint32_t>(b, kAtSeq), m.model.tool_state_seq);
+    // The echo's and hold's whole µs (rounded to nearest), the echo's low 32 bits.
+    EXPECT_EQ(Get<std::uint32_t>(b, kAtSendTime),
+              static_cast<std::uint32_t>((m.tool_state_send_time_ns + 500) / 1000));
+    EXPECT_EQ(Get<std::uint32_t>(b, kAtHold), static_cast<std::uint32_t>((m.hold_ns + 500) / 1000));
+    EXPECT_EQ(Get<std::uint32_t>(b, kAtSteps), static_cast<std::uint32_t>(m.remote_step_count));
     EXPECT_EQ(Get<std::uint16_t>(b, kAtTimes + 4), std::lround(m.step_us));
-    EXPECT_EQ(Get<double>(b, kAtP + 16), m.model.X_WT0.translation.z);
-    EXPECT_EQ(Get<float>(b, kAtQ), static_cast<float>(m.model.X_WT0.rotation.w));
-    EXPECT_EQ(Get<float>(b, kAtQ + 12), static_cast<float>(m.model.X_WT0.rotation.z));
-    EXPECT_EQ(Get<float>(b, kAtWrench + 20), static_cast<float>(m.model.F_T_W_at_q0.torque.z));
+    EXPECT_EQ(Get<float>(b, kAtP + 8), static_cast<float>(m.model.X_WT0.translation.z));
+    // Smallest three: the index of the largest |component| (w, x, y, z), then the other three in
+    // 26-bit two's complement, each the component (sign of the largest made +) over the step.
+    const glm::dquat& q = m.model.X_WT0.rotation;
+    const std::array<double, 4> qc{q.w, q.x, q.y, q.z};
+    const auto largest = static_cast<std::size_t>(QuaternionBits(b, 0, 2));
+    for (std::size_t k = 0; k < 4; ++k) EXPECT_GE(std::abs(qc[largest]), std::abs(qc[k]));
+    int slot = 0;
+    for (std::size_t k = 0; k < 4; ++k) {
+      if (k == largest) continue;
+      auto field = static_cast<std::int64_t>(QuaternionBits(b, 2 + 26 * slot++, 26));
+      if (field >= (std::int64_t{1} << 25)) field -= std::int64_t{1} << 26;
+      const double expected = std::copysign(1.0, qc[largest]) * qc[k] / kCompactModelQuaternionStep;
+      EXPECT_LE(std::abs(static_cast<double>(field) - expected), 0.5 + 1e-6) << k;
+    }
     EXPECT_EQ(Get<std::uint8_t>(b, kAtCount), n);
     for (int i = 0; i < n; ++i) {
       const ContactLinearization& c = m.model.contacts[i];
@@ -432,8 +485,10 @@ TEST(CompactContactModel, BytesSitWhereProtocolHSaysAndAreFewerThanTheFloatEncod
       EXPECT_EQ(Get<float>(b, at + kAtK), static_cast<float>(c.stiffness_n_per_m));
       EXPECT_EQ(Get<float>(b, at + kAtDx + 4), static_cast<float>(c.gradient.d_translation_W.y));
       EXPECT_EQ(Get<float>(b, at + kAtDtheta + 8), static_cast<float>(c.gradient.d_rotation_W.z));
+      // From p_WT0 as the receiver reads it (f32).
+      const double p0x = static_cast<float>(m.model.X_WT0.translation.x);
       EXPECT_EQ(Get<std::int16_t>(b, at + kAtPoint),
-                std::lround((c.point_W.x - m.model.X_WT0.translation.x) / kCompactPointStepM));
+                std::lround((c.point_W.x - p0x) / kCompactPointStepM));
       // The octahedral u of an upper-hemisphere normal is x/‖n‖₁.
       if (c.normal_W.z >= 0.0) {
         const double l1 = std::abs(c.normal_W.x) + std::abs(c.normal_W.y) + c.normal_W.z;
@@ -450,31 +505,32 @@ TEST(CompactContactModel, EveryTruncationAndWrongLengthOrCountIsRefused) {
   for (const int n : {0, 3, kMaxWireContacts}) {
     const std::vector<std::uint8_t> body = CompactBody(RandomModel(rng, n), key);
     ContactModelMessage out;
-    ASSERT_EQ(DecodeCompactContactModel(body, out), DecodeStatus::kOk);
+    ASSERT_EQ(DecodeCompactContactModel(body, out, kNowNs), DecodeStatus::kOk);
     out.hold_ns = -12345;  // must stay as it is whenever decoding fails
     for (std::size_t len = 0; len < body.size(); ++len) {
-      EXPECT_EQ(DecodeCompactContactModel(std::span(body).first(len), out), DecodeStatus::kTooShort)
+      EXPECT_EQ(DecodeCompactContactModel(std::span(body).first(len), out, kNowNs),
+                DecodeStatus::kTooShort)
           << n << " " << len;
     }
     std::vector<std::uint8_t> longer = body;
     longer.push_back(0);
-    EXPECT_EQ(DecodeCompactContactModel(longer, out), DecodeStatus::kTooLong);
+    EXPECT_EQ(DecodeCompactContactModel(longer, out, kNowNs), DecodeStatus::kTooLong);
     // A count above kMaxWireContacts, with the bytes it would need or without.
     std::vector<std::uint8_t> over = body;
     over[kAtCount] = kMaxWireContacts + 1;
     over.resize(kCompactContactModelFixedBytes + (kMaxWireContacts + 1) * kCompactContactBytes);
-    EXPECT_EQ(DecodeCompactContactModel(over, out), DecodeStatus::kBadCount);
+    EXPECT_EQ(DecodeCompactContactModel(over, out, kNowNs), DecodeStatus::kBadCount);
     over[kAtCount] = 255;
-    EXPECT_EQ(DecodeCompactContactModel(over, out), DecodeStatus::kBadCount);
+    EXPECT_EQ(DecodeCompactContactModel(over, out, kNowNs), DecodeStatus::kBadCount);
     // A count that disagrees with the length.
     if (n > 0 && n < kMaxWireContacts) {
       std::vector<std::uint8_t> wrong = body;
       wrong[kAtCount] = static_cast<std::uint8_t>(n + 1);
-      EXPECT_EQ(DecodeCompactContactModel(wrong, out), DecodeStatus::kTooShort);
+      EXPECT_EQ(DecodeCompactContactModel(wrong, out, kNowNs), DecodeStatus::kTooShort);
       // One fewer: the kink-plane section (protocol version 6) then starts inside the last
       // contact, and its count, length or values refuse it.
       wrong[kAtCount] = static_cast<std::uint8_t>(n - 1);
-      EXPECT_NE(DecodeCompactContactModel(wrong, out), DecodeStatus::kOk);
+      EXPECT_NE(DecodeCompactContactModel(wrong, out, kNowNs), DecodeStatus::kOk);
     }
     EXPECT_EQ(out.hold_ns, -12345);
   }
@@ -527,37 +583,54 @@ TEST(CompactContactModel, MarkedAndImpossibleValuesAreRefused) {
            {"depth NaN", c1 + kAtDepth, Case::kF32, kNaN, DecodeStatus::kNonFinite},
            {"stiffness inf", c1 + kAtK, Case::kF32, big, DecodeStatus::kNonFinite},
            {"stiffness negative", c1 + kAtK, Case::kF32, -1.0, DecodeStatus::kBadValue},
-           {"quaternion NaN", kAtQ + 4, Case::kF32, kNaN, DecodeStatus::kNonFinite},
-           {"quaternion w far from unit", kAtQ, Case::kF32, 1.5, DecodeStatus::kBadValue},
-           {"wrench inf", kAtWrench + 8, Case::kF32, -big, DecodeStatus::kNonFinite},
            {"p_WT0 NaN", kAtP, Case::kF32, kNaN, DecodeStatus::kNonFinite},
+           {"p_WT0 inf", kAtP + 8, Case::kF32, -big, DecodeStatus::kNonFinite},
            {"time marker", kAtTimes + 2, Case::kU16, kCompactTimeNotFinite,
             DecodeStatus::kNonFinite},
        }) {
     std::vector<std::uint8_t> bad = body;
     if (t.kind == Case::kI16) Put(bad, t.at, static_cast<std::int16_t>(t.value));
     if (t.kind == Case::kU16) Put(bad, t.at, static_cast<std::uint16_t>(t.value));
-    if (t.kind == Case::kF32 && t.at == kAtP) Put(bad, t.at, t.value);  // p_WT0 is f64
-    if (t.kind == Case::kF32 && t.at != kAtP) Put(bad, t.at, static_cast<float>(t.value));
+    if (t.kind == Case::kF32) Put(bad, t.at, static_cast<float>(t.value));
     ContactModelMessage out;
-    EXPECT_EQ(DecodeCompactContactModel(bad, out), t.expected) << t.what;
+    EXPECT_EQ(DecodeCompactContactModel(bad, out, kNowNs), t.expected) << t.what;
   }
-  // A zero quaternion is refused; one a little off unit (within 1e-3) is accepted and normalized.
-  std::vector<std::uint8_t> q = body;
-  for (int i = 0; i < 4; ++i) Put(q, kAtQ + 4 * i, 0.0f);
+  // Quaternion bits no unit quaternion encodes to: a component of −2²⁵ (the one 26-bit value
+  // outside ±(2²⁵ − 1)), or three components whose squares sum above 1 (each 0.7, 0.7, 0.7).
+  // Three components of ±(2²⁵ − 1)·step = ±1/√2 with the largest restored as 0 are a value.
+  const auto quaternion = [&](int largest, std::int64_t c0, std::int64_t c1, std::int64_t c2) {
+    std::vector<std::uint8_t> q = body;
+    std::array<std::uint8_t, 10> field{};
+    const auto put = [&](int at, int width, std::uint64_t v) {
+      for (int i = 0; i < width; ++i) {
+        if ((v >> i) & 1u) field[static_cast<std::size_t>((at + i) / 8)] |= 1u << ((at + i) % 8);
+      }
+    };
+    put(0, 2, static_cast<std::uint64_t>(largest));
+    put(2, 26, static_cast<std::uint64_t>(c0));
+    put(28, 26, static_cast<std::uint64_t>(c1));
+    put(54, 26, static_cast<std::uint64_t>(c2));
+    std::copy(field.begin(), field.end(), q.begin() + kAtQ);
+    return q;
+  };
   ContactModelMessage out;
-  EXPECT_EQ(DecodeCompactContactModel(q, out), DecodeStatus::kBadValue);
-  q = body;
-  for (int i = 0; i < 4; ++i)
-    Put(q, kAtQ + 4 * i, Get<float>(std::span(q), kAtQ + 4 * i) * 1.0005f);
-  ASSERT_EQ(DecodeCompactContactModel(q, out), DecodeStatus::kOk);
+  const std::int64_t max = kCompactModelQuaternionMax;
+  const auto seven_tenths = static_cast<std::int64_t>(0.7 / kCompactModelQuaternionStep);
+  EXPECT_EQ(DecodeCompactContactModel(quaternion(0, -max - 1, 0, 0), out, kNowNs),
+            DecodeStatus::kBadValue);
+  EXPECT_EQ(DecodeCompactContactModel(quaternion(3, seven_tenths, seven_tenths, -seven_tenths), out,
+                                      kNowNs),
+            DecodeStatus::kBadValue);
+  ASSERT_EQ(DecodeCompactContactModel(quaternion(2, max, -max, 0), out, kNowNs), DecodeStatus::kOk);
   EXPECT_NEAR(glm::length(out.model.X_WT0.rotation), 1.0, 1e-12);
+  EXPECT_NEAR(std::abs(out.model.X_WT0.rotation.w), std::sqrt(0.5), 1e-7);
+  EXPECT_NEAR(std::abs(out.model.X_WT0.rotation.x), std::sqrt(0.5), 1e-7);
   // The extreme i16 values other than the marker are values: ±32767 steps.
   std::vector<std::uint8_t> edge = body;
   Put(edge, c1 + kAtPoint, std::int16_t{-32767});
   Put(edge, c1 + kAtNormal, std::int16_t{32767});
   Put(edge, c1 + kAtNormal + 2, std::int16_t{-32767});
-  ASSERT_EQ(DecodeCompactContactModel(edge, out), DecodeStatus::kOk);
+  ASSERT_EQ(DecodeCompactContactModel(edge, out, kNowNs), DecodeStatus::kOk);
   EXPECT_NEAR(out.model.contacts[1].point_W.x - out.model.X_WT0.translation.x, -kCompactPointRangeM,
               1e-12);
   EXPECT_NEAR(glm::length(out.model.contacts[1].normal_W), 1.0, 1e-12);
@@ -598,9 +671,9 @@ TEST(CompactContactModel, NonFiniteFieldsAreRefusedAtTheReceiverAndFarValuesClam
             [](ContactModelMessage& m) { m.model.contacts[2].normal_W = glm::dvec3(0.0); }, false},
            {"p_WT0 NaN", [](ContactModelMessage& m) { m.model.X_WT0.translation.y = kNaN; }, true},
            {"rotation NaN", [](ContactModelMessage& m) { m.model.X_WT0.rotation.x = kNaN; }, true},
-           {"force NaN", [](ContactModelMessage& m) { m.model.F_T_W_at_q0.force.x = kNaN; }, true},
-           {"torque inf", [](ContactModelMessage& m) { m.model.F_T_W_at_q0.torque.z = kInf; },
-            true},
+           // Finite, but beyond f32's range (the float encoding carries it as f64).
+           {"p_WT0 1e300", [](ContactModelMessage& m) { m.model.X_WT0.translation.z = 1e300; },
+            false},
            {"collision_us NaN",
             [](ContactModelMessage& m) {
               m.collision_us = std::numeric_limits<float>::quiet_NaN();
@@ -635,7 +708,8 @@ TEST(CompactContactModel, NonFiniteFieldsAreRefusedAtTheReceiverAndFarValuesClam
   m.collision_us = 1e7f;
   m.texture_us = -5.0f;
   m.step_us = 65534.4f;
-  m.remote_step_count = std::numeric_limits<std::uint64_t>::max();
+  m.remote_step_count = std::numeric_limits<std::uint64_t>::max() - 6;
+  m.hold_ns = std::int64_t{1} << 50;  // beyond the u32 µs: sent as 2³² − 1 µs
   for (int i = 0; i < m.model.num_contacts; ++i) m.model.contacts[i].gradient = {};
   ContactModelMessage out;
   ASSERT_EQ(OpenCompact(EncodeCompactContactModel(TestHeader(), m, key), key, out),
@@ -647,7 +721,8 @@ TEST(CompactContactModel, NonFiniteFieldsAreRefusedAtTheReceiverAndFarValuesClam
   EXPECT_EQ(out.collision_us, static_cast<float>(kCompactMaxTimeUs));
   EXPECT_EQ(out.texture_us, 0.0f);
   EXPECT_EQ(out.step_us, 65534.0f);
-  EXPECT_EQ(out.remote_step_count, std::numeric_limits<std::uint64_t>::max());
+  EXPECT_EQ(out.remote_step_count, 0xFFFF'FFFFu - 6);  // its low 32 bits
+  EXPECT_EQ(out.hold_ns, std::int64_t{0xFFFF'FFFF} * 1000);
   for (int i = 0; i < out.model.num_contacts; ++i) {
     EXPECT_EQ(out.model.contacts[i].gradient.d_translation_W, glm::dvec3(0.0));
     EXPECT_EQ(out.model.contacts[i].gradient.d_rotation_W, glm::dvec3(0.0));
@@ -672,7 +747,7 @@ TEST(CompactContactModel, BitFlipsAndRandomBodiesNeverCrashNorDecodeToNonFiniteV
       body[bit / 8] = static_cast<std::uint8_t>(body[bit / 8] ^ (1u << (bit % 8)));
     }
     ContactModelMessage out;
-    if (DecodeCompactContactModel(body, out) == DecodeStatus::kOk) {
+    if (DecodeCompactContactModel(body, out, kNowNs) == DecodeStatus::kOk) {
       ++accepted;
       ExpectSane(out);
       if (::testing::Test::HasFailure()) return;
@@ -690,7 +765,7 @@ TEST(CompactContactModel, BitFlipsAndRandomBodiesNeverCrashNorDecodeToNonFiniteV
       noise[kAtCount] = static_cast<std::uint8_t>(n);
     }
     ContactModelMessage out;
-    if (DecodeCompactContactModel(noise, out) == DecodeStatus::kOk) {
+    if (DecodeCompactContactModel(noise, out, kNowNs) == DecodeStatus::kOk) {
       ++accepted;
       ExpectSane(out);
       if (::testing::Test::HasFailure()) return;
@@ -700,6 +775,96 @@ TEST(CompactContactModel, BitFlipsAndRandomBodiesNeverCrashNorDecodeToNonFiniteV
   }
   std::cout << "[ measured ] corrupted bodies: " << accepted << " decoded (all finite), " << refused
             << " refused\n";
+}
+
+// Version 11 sends the echo as the low 32 bits of its whole µs: the receiver takes the time
+// within ±2³¹ µs of its own clock, so a model's echo comes back right across the wrap of those
+// bits, a round trip or 35 minutes old, and even a little ahead of the receiver's clock.
+TEST(CompactContactModel, TheEchoComesBackAcrossTheWrapOfItsLow32Bits) {
+  const MacKey key = TestKey();
+  std::mt19937 rng(33);
+  const ContactModelMessage base = RandomModel(rng, 2);
+  const std::int64_t wrap_us = std::int64_t{1} << 32;
+  for (const std::int64_t wraps : {std::int64_t{1}, std::int64_t{1000}, std::int64_t{2000000}}) {
+    for (const std::int64_t echo_offset_ns :
+         {-3'000'000'000LL, -1'499LL, -500LL, -499LL, 0LL, 499LL, 2'000'000'000LL}) {
+      for (const std::int64_t age_ns :
+           {150'000'000LL, 1LL, 35LL * 60 * 1'000'000'000, -1'000'000'000LL}) {
+        ContactModelMessage m = base;
+        m.tool_state_send_time_ns = wraps * wrap_us * 1000 + echo_offset_ns;
+        const std::vector<std::uint8_t> body = CompactBody(m, key);
+        ContactModelMessage out;
+        ASSERT_EQ(DecodeCompactContactModel(body, out, m.tool_state_send_time_ns + age_ns),
+                  DecodeStatus::kOk);
+        EXPECT_LE(std::abs(out.tool_state_send_time_ns - m.tool_state_send_time_ns), 500)
+            << wraps << " " << echo_offset_ns << " " << age_ns;
+        EXPECT_EQ(out.tool_state_send_time_ns % 1000, 0);
+      }
+    }
+  }
+  // Older than 2³¹ µs (35.8 min) the bits name a time 2³² µs later: the bound is stated, not
+  // stretched.
+  ContactModelMessage m = base;
+  m.tool_state_send_time_ns = kNowNs;
+  ContactModelMessage out;
+  ASSERT_EQ(DecodeCompactContactModel(CompactBody(m, key), out,
+                                      kNowNs + (wrap_us / 2 + 1'000'000) * 1000),
+            DecodeStatus::kOk);
+  EXPECT_EQ(out.tool_state_send_time_ns, kNowNs + wrap_us * 1000);
+}
+
+// Version 11 does not send the wrench at q0: the receiver sums it from the contacts as the
+// sender's AssembleContactModel did, kink planes included (a plane at the contact's own δ0 is the
+// V's vertex, where the loop blends the arms' slopes). Two routes: the assembly's incremental sum
+// over the linearizations at the sender, and the receiver's sum over what it decoded.
+TEST(CompactContactModel, TheWrenchAtQ0IsTheSendersAssemblyOfTheContactsItCarries) {
+  const MacKey key = TestKey();
+  std::mt19937 rng(41);
+  int pressed = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    const ContactModelMessage shape = RandomModel(rng, 1 + trial % kMaxWireContacts);
+    std::vector<ContactLinearization> lins(shape.model.contacts.begin(),
+                                           shape.model.contacts.begin() + shape.model.num_contacts);
+    for (ContactLinearization& c : lins) {
+      c.num_kink_planes = static_cast<int>(rng() % 3);
+      for (int j = 0; j < c.num_kink_planes; ++j) {
+        KinkPlane& kp = c.kink_planes[static_cast<std::size_t>(j)];
+        kp.depth_m = j == 0 ? c.depth_m : c.depth_m - Uniform(rng, 0.0, 1e-4);
+        kp.d_rotation_W = RandomUnit(rng) * Uniform(rng, 0.0, 0.05);
+        kp.d_translation_offset_W = RandomUnit(rng) * Uniform(rng, 0.0, 0.2);
+      }
+    }
+    ContactModelMessage m = shape;
+    m.model.num_contacts = 0;
+    m.model.F_T_W_at_q0 = {};
+    ASSERT_EQ(AssembleContactModel(lins, m.model), static_cast<int>(lins.size()));
+    ContactModelMessage out;
+    ASSERT_EQ(OpenCompact(EncodeCompactContactModel(TestHeader(), m, key), key, out),
+              DecodeStatus::kOk);
+    // Each term is k·δ·J of f32 factors (≤ 2⁻²⁴ each; 8·2⁻²⁴ of the term with margin). Where a
+    // plane lies within the blend width kKinkBlendM of the deepest, the slope is a blend whose
+    // weight moves by (change of the gap)/(2·kKinkBlendM): each depth's f32 rounding moves the
+    // gap, and with it the term by k·δ·|J_plane − J_contact| times that.
+    double bound = 1e-12;
+    for (const ContactLinearization& c : lins) {
+      const double kd = c.stiffness_n_per_m * std::max(c.depth_m, 0.0);
+      bound += 8.0 * kCompactF32RelativeError * kd *
+               (glm::length(c.gradient.d_translation_W) + glm::length(c.gradient.d_rotation_W));
+      for (int j = 0; j < c.num_kink_planes; ++j) {
+        const KinkPlane& kp = c.kink_planes[static_cast<std::size_t>(j)];
+        const double gap_moves = 2.0 * (F32Bound(c.depth_m) + F32Bound(kp.depth_m));
+        bound += kd * gap_moves / (2.0 * kKinkBlendM) *
+                 (glm::length(kp.d_translation_offset_W) +
+                  glm::length(kp.d_rotation_W - c.gradient.d_rotation_W));
+      }
+    }
+    const Wrench& a = out.model.F_T_W_at_q0;
+    const Wrench& b = m.model.F_T_W_at_q0;
+    EXPECT_LE(glm::length(a.force - b.force), bound) << trial;
+    EXPECT_LE(glm::length(a.torque - b.torque), bound) << trial;
+    if (glm::length(b.force) > 0.0) ++pressed;
+  }
+  EXPECT_GT(pressed, 100);  // most models press (half the depths are positive)
 }
 
 TEST(CompactContactModel, IsATypeOfItsOwnThatTheOperatorAccepts) {

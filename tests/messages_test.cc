@@ -80,7 +80,7 @@ DecodeStatus OpenAndDecode(std::span<const std::uint8_t> bytes, const MacKey& ke
     }
     case MessageType::kCompactContactModel: {
       ContactModelMessage m;
-      return DecodeCompactContactModel(body, m);
+      return DecodeCompactContactModel(body, m, /*receive_time_ns=*/0);
     }
     case MessageType::kGoodbye:
       return DecodeEmpty(body);
@@ -376,7 +376,8 @@ TEST(Messages, HeaderFieldsAreCheckedBeforeTheMac) {
   EXPECT_EQ(mutate(kHeaderVersionOffset, 0x07), DecodeStatus::kBadVersion);  // 7 no longer
   EXPECT_EQ(mutate(kHeaderVersionOffset, 0x08), DecodeStatus::kBadVersion);  // nor 8
   EXPECT_EQ(mutate(kHeaderVersionOffset, 0x09), DecodeStatus::kBadVersion);  // nor 9
-  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0b), DecodeStatus::kBadVersion);
+  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0a), DecodeStatus::kBadVersion);  // nor 10
+  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0c), DecodeStatus::kBadVersion);
   EXPECT_EQ(mutate(kHeaderTypeOffset, 0x7f), DecodeStatus::kUnknownType);
   EXPECT_EQ(mutate(kHeaderTypeOffset, 0x00), DecodeStatus::kUnknownType);
   EXPECT_EQ(mutate(5, 0x01), DecodeStatus::kBadMac);   // session id changed
@@ -712,11 +713,11 @@ TEST(Messages, TheManifestCarriesEverySceneObjectKindAndNoOther) {
 }
 
 TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
-  // Versions 4 to 10 changed neither the Hello body nor the Reject body; version 3's Hello body is
+  // Versions 4 to 11 changed neither the Hello body nor the Reject body; version 3's Hello body is
   // the first 32 bytes (no deadband terms). Versions 2 to 7 had the 28-byte header and the whole
   // 32-byte MAC (test::LegacyDatagram writes them byte by byte).
-  EXPECT_EQ(kProtocolVersion, 10);
-  EXPECT_EQ(kMinProtocolVersion, 10);
+  EXPECT_EQ(kProtocolVersion, 11);
+  EXPECT_EQ(kMinProtocolVersion, 11);
   const MacKey key = TestKey();
   for (const std::uint16_t version : {std::uint16_t{7}, std::uint16_t{6}, std::uint16_t{5},
                                       std::uint16_t{4}, std::uint16_t{3}, std::uint16_t{2}}) {
@@ -777,15 +778,15 @@ TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
       own, key, [](Datagram& d) { d.bytes[kHeaderVersionOffset] = kProtocolVersion + 1; });
   EXPECT_EQ(OpenForeignHello(newer.view(), key, foreign), DecodeStatus::kBadVersion);
   for (const std::uint16_t version : {std::uint16_t{1}, std::uint16_t{8}, std::uint16_t{9},
-                                      std::uint16_t{10}, std::uint16_t{11}}) {
+                                      std::uint16_t{10}, std::uint16_t{11}, std::uint16_t{12}}) {
     const Datagram d =
         test::LegacyDatagram(version, MessageType::kHello, 1, test::BodyOf(own), key);
     EXPECT_EQ(OpenForeignHello(d.view(), key, foreign), DecodeStatus::kBadVersion) << version;
   }
-  // Versions 8 (this header and MAC, no translation patches) and 9 (an empty Ping): its Hello is
-  // this version's with that version byte and its own MAC; it gets a Reject in this layout with
-  // that version.
-  for (const std::uint8_t old : {std::uint8_t{8}, std::uint8_t{9}}) {
+  // Versions 8 (this header and MAC, no translation patches), 9 (an empty Ping) and 10 (the
+  // 103-byte compact model): its Hello is this version's with that version byte and its own MAC;
+  // it gets a Reject in this layout with that version.
+  for (const std::uint8_t old : {std::uint8_t{8}, std::uint8_t{9}, std::uint8_t{10}}) {
     HelloMessage hello;
     hello.client_nonce = 0xbeef00u + old;
     hello.min_version = hello.max_version = old;
@@ -931,7 +932,8 @@ TEST(Messages, TheHeaderCarriesSequenceAndTimeInItsOwnWidths) {
 // Kink planes (protocol version 6; version 7 their own translation slopes): each contact's planes
 // come back with it, both encodings; a model with more than fit its datagram sends the first
 // ones, contact by contact; a plane naming a contact that is not there, a contact's
-// (kMaxKinkPlanes + 1)-th plane or a non-finite plane is refused.
+// (kMaxKinkPlanes + 1)-th plane or a non-finite plane is refused. The compact encoding (version
+// 11) leaves a plane's translation-slope offset off the wire when it is zero (17 bytes, not 29).
 TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
   const MacKey key = TestKey();
   for (const bool compact : {false, true}) {
@@ -942,9 +944,10 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
         ContactLinearization& c = m.model.contacts[i];
         c.num_kink_planes = 1 + i % 4;
         for (int p = 0; p < c.num_kink_planes; ++p) {
+          // Every other plane shares the contact's translation slope (a rotation arm).
           c.kink_planes[p] = {c.depth_m - 1e-5 * (p + 1),
                               {0.001 * p, -0.02 + 0.001 * i, 0.003},
-                              {0.05 * p, -0.1, 0.0}};
+                              (i + p) % 2 == 0 ? glm::dvec3(0.0) : glm::dvec3(0.05 * p, -0.1, 0.0)};
         }
         planes += c.num_kink_planes;
       }
@@ -955,16 +958,25 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
           compact ? KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, n)
                   : KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, n);
       const int sent = std::min(planes, fit);
+      std::size_t plane_bytes = 0;  // the first `sent` planes, contact by contact
+      for (int i = 0, k = 0; i < n; ++i) {
+        for (int p = 0; p < m.model.contacts[i].num_kink_planes && k < sent; ++p, ++k) {
+          const bool shares =
+              m.model.contacts[i].kink_planes[p].d_translation_offset_W == glm::dvec3(0.0);
+          plane_bytes += compact && shares ? kCompactKinkPlaneBytes : kKinkPlaneBytes;
+        }
+      }
       EXPECT_EQ(d.size, kHeaderBytes +
                             (compact ? kCompactContactModelFixedBytes + n * kCompactContactBytes
                                      : kContactModelFixedBytes + n * kContactBytes) +
-                            kKinkPlaneCountBytes + sent * kKinkPlaneBytes +
-                            kTranslationPatchCountBytes + kMacBytes);
+                            kKinkPlaneCountBytes + plane_bytes + kTranslationPatchCountBytes +
+                            kMacBytes);
       Header h;
       std::span<const std::uint8_t> body;
       ASSERT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kOk);
       ContactModelMessage out;
-      ASSERT_EQ(compact ? DecodeCompactContactModel(body, out) : DecodeContactModel(body, out),
+      ASSERT_EQ(compact ? DecodeCompactContactModel(body, out, /*receive_time_ns=*/0)
+                        : DecodeContactModel(body, out),
                 DecodeStatus::kOk)
           << compact << " " << n;
       int got = 0;
@@ -981,6 +993,7 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
                     static_cast<float>(a.kink_planes[p].d_translation_offset_W.x));
           EXPECT_EQ(b.kink_planes[p].d_translation_offset_W.y,
                     static_cast<float>(a.kink_planes[p].d_translation_offset_W.y));
+          EXPECT_EQ(b.kink_planes[p].d_translation_offset_W.z, 0.0);
         }
         got += expected;
       }
@@ -989,10 +1002,11 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
     }
   }
   // Refused: the first plane's contact index out of range, a (kMaxKinkPlanes + 1)-th plane of one
-  // contact, NaN.
+  // contact, NaN. Planes with their own translation slope: 29 bytes in both encodings.
   for (const bool compact : {false, true}) {
     ContactModelMessage m = SampleModel(2);
     m.model.contacts[1].num_kink_planes = kMaxKinkPlanes;
+    for (KinkPlane& kp : m.model.contacts[1].kink_planes) kp.d_translation_offset_W = {0, 0.1, 0};
     const Datagram good =
         compact ? EncodeCompactContactModel({}, m, key) : EncodeContactModel({}, m, key);
     const std::size_t planes_at =
@@ -1001,7 +1015,14 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
       return OpenAndDecode(EditedAndSealed(good, key, edit).view(), key);
     };
     EXPECT_EQ(patched([](Datagram&) {}), DecodeStatus::kOk);
-    EXPECT_EQ(patched([&](Datagram& d) { d.bytes[planes_at] = 2; }), DecodeStatus::kBadValue);
+    // (The compact plane's byte keeps its "own slope" bit, so that the rest still reads.)
+    EXPECT_EQ(patched([&](Datagram& d) {
+                d.bytes[planes_at] = compact ? 2 | kCompactKinkPlaneOwnSlope : 2;
+              }),
+              DecodeStatus::kBadValue);
+    if (compact) {
+      EXPECT_EQ(good.bytes[planes_at], 1 | kCompactKinkPlaneOwnSlope);
+    }
     // kMaxKinkPlanes + 1 planes of contact 1: append one more, counted.
     EXPECT_EQ(patched([&](Datagram& d) {
                 d.bytes[planes_at - 1] = kMaxKinkPlanes + 1;
@@ -1067,7 +1088,8 @@ TEST(Messages, TranslationPatchesTravelWithTheirContactsAndWhatDoesNotFitIsLeftO
       std::span<const std::uint8_t> body;
       ASSERT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kOk);
       ContactModelMessage out;
-      ASSERT_EQ(compact ? DecodeCompactContactModel(body, out) : DecodeContactModel(body, out),
+      ASSERT_EQ(compact ? DecodeCompactContactModel(body, out, /*receive_time_ns=*/0)
+                        : DecodeContactModel(body, out),
                 DecodeStatus::kOk)
           << compact << " " << n;
       for (int i = 0; i < n; ++i) {
@@ -1110,7 +1132,8 @@ TEST(Messages, TranslationPatchesTravelWithTheirContactsAndWhatDoesNotFitIsLeftO
       std::span<const std::uint8_t> body;
       ASSERT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kOk);
       ContactModelMessage out;
-      ASSERT_EQ(compact ? DecodeCompactContactModel(body, out) : DecodeContactModel(body, out),
+      ASSERT_EQ(compact ? DecodeCompactContactModel(body, out, /*receive_time_ns=*/0)
+                        : DecodeContactModel(body, out),
                 DecodeStatus::kOk);
       EXPECT_EQ(out.model.contacts[0].patch.step_m, 0.0);
       EXPECT_GT(out.model.contacts[1].patch.step_m, 0.0);

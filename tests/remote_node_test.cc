@@ -342,7 +342,8 @@ TEST(RemoteNode, SendsEachContactsTranslationPatchWhenAskedOrWhenTheRoundTripIsL
     wire::ContactModelMessage model;
     ASSERT_TRUE(
         Await(socket, config.key, wire::MessageType::kCompactContactModel, h, [&](auto body) {
-          return wire::DecodeCompactContactModel(body, model) == wire::DecodeStatus::kOk;
+          return wire::DecodeCompactContactModel(body, model, /*receive_time_ns=*/0) ==
+                 wire::DecodeStatus::kOk;
         }));
     ASSERT_GE(model.model.num_contacts, 1);
     const ContactLinearization& c = model.model.contacts[0];
@@ -420,7 +421,8 @@ TEST(RemoteNode, TurnsPatchesOffOnlyWellBelowTheThreshold) {
   const auto model_with_patch = [&](bool patch) {
     wire::ContactModelMessage model;
     return Await(socket, config.key, wire::MessageType::kCompactContactModel, h, [&](auto body) {
-      return wire::DecodeCompactContactModel(body, model) == wire::DecodeStatus::kOk &&
+      return wire::DecodeCompactContactModel(body, model, /*receive_time_ns=*/0) ==
+                 wire::DecodeStatus::kOk &&
              model.model.num_contacts >= 1 && (model.model.contacts[0].patch.step_m > 0.0) == patch;
     });
   };
@@ -612,7 +614,8 @@ TEST(RemoteNode, RefusesAnOperatorOfAnotherVersionAndHoldsBackModelsThatSayNothi
       remote);
   wire::ContactModelMessage first;
   ASSERT_TRUE(Await(socket, config.key, wire::MessageType::kCompactContactModel, h, [&](auto b) {
-    return wire::DecodeCompactContactModel(b, first) == wire::DecodeStatus::kOk;
+    return wire::DecodeCompactContactModel(b, first, /*receive_time_ns=*/0) ==
+           wire::DecodeStatus::kOk;
   }));
   ASSERT_EQ(first.model.num_contacts, 1);
   // The same v3 Hello played again gets no second Reject.
@@ -640,7 +643,8 @@ TEST(RemoteNode, RefusesAnOperatorOfAnotherVersionAndHoldsBackModelsThatSayNothi
       wire::ContactModelMessage m;
       if (wire::OpenDatagram({buf.data(), *n}, config.key, h, body) == wire::DecodeStatus::kOk &&
           h.type == wire::MessageType::kCompactContactModel &&
-          wire::DecodeCompactContactModel(body, m) == wire::DecodeStatus::kOk) {
+          wire::DecodeCompactContactModel(body, m, /*receive_time_ns=*/0) ==
+              wire::DecodeStatus::kOk) {
         arrivals.push_back(std::chrono::steady_clock::now());
         copies.push_back(m);
       }

@@ -1,5 +1,6 @@
 #include "haptic_core/contact_assembly.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace ht {
@@ -18,6 +19,18 @@ int AssembleContactModel(std::span<const ContactLinearization> contacts,
     ++appended;
   }
   return appended;
+}
+
+Wrench ContactModelWrenchAtQ0(const ContactModel& model) noexcept {
+  Wrench F{};
+  const int n = std::clamp(model.num_contacts, 0, kMaxContacts);
+  for (int i = 0; i < n; ++i) {
+    const ContactLinearization& c = model.contacts[static_cast<std::size_t>(i)];
+    PenetrationGradient J;
+    const double depth = ContactDepthAt(c, Twist{}, &J);
+    F += PenaltyWrench(depth, J, c.stiffness_n_per_m);
+  }
+  return F;
 }
 
 }  // namespace ht

@@ -11,13 +11,6 @@
 
 namespace ht {
 
-Wrench PenaltyWrench(double depth_m, const PenetrationGradient& J,
-                     double stiffness_n_per_m) noexcept {
-  if (!(depth_m > 0.0) || !std::isfinite(depth_m)) return {};
-  const double s = -stiffness_n_per_m * depth_m;
-  return {s * J.d_translation_W, s * J.d_rotation_W};
-}
-
 int AddKinkPlanes(const ContactWindow& w, std::span<const DepthSample> samples,
                   const glm::dvec3& p_WT, ContactLinearization& lin, bool own_slope) noexcept {
   lin.num_kink_planes = std::clamp(lin.num_kink_planes, 0, kMaxKinkPlanes);

@@ -115,6 +115,16 @@ double PatchResidual(const TranslationPatch& p, const glm::dvec3& dx, const glm:
 
 }  // namespace
 
+// Declared in contact_linearization.h; defined here, beside the loop's evaluation that uses it, so
+// that a receiver of contact models (transport's decoder, its fuzz target) links without the
+// remote step's texture stage.
+Wrench PenaltyWrench(double depth_m, const PenetrationGradient& J,
+                     double stiffness_n_per_m) noexcept {
+  if (!(depth_m > 0.0) || !std::isfinite(depth_m)) return {};
+  const double s = -stiffness_n_per_m * depth_m;
+  return {s * J.d_translation_W, s * J.d_rotation_W};
+}
+
 double ContactDepthAt(const ContactLinearization& c, const Twist& dq, PenetrationGradient* gradient,
                       Stiffness6* curvature) noexcept {
   const int n = std::clamp(c.num_kink_planes, 0, kMaxKinkPlanes);

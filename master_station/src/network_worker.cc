@@ -166,8 +166,7 @@ void NetworkWorker::SayGoodbye() {
 
 double NetworkWorker::RemoteRateHz() const {
   if (last_remote_ns_ <= first_remote_ns_) return 0.0;
-  return static_cast<double>(last_remote_steps_ - first_remote_steps_) /
-         ((last_remote_ns_ - first_remote_ns_) * 1e-9);
+  return static_cast<double>(remote_steps_) / ((last_remote_ns_ - first_remote_ns_) * 1e-9);
 }
 
 wire::SceneLayout NetworkWorker::layout() const {
@@ -384,7 +383,7 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
       IncomingModel model;
       if (const auto st = header.type == wire::MessageType::kContactModel
                               ? wire::DecodeContactModel(body, model.message)
-                              : wire::DecodeCompactContactModel(body, model.message);
+                              : wire::DecodeCompactContactModel(body, model.message, now);
           st != wire::DecodeStatus::kOk) {
         link_.CountBodyRejected(header.type, st);
         return;
@@ -409,12 +408,14 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
           contact_step_us_.size() < contact_step_us_.capacity()) {
         contact_step_us_.push_back(model.message.step_us);
       }
+      const auto steps_low = static_cast<std::uint32_t>(model.message.remote_step_count);
       if (first_remote_ns_ == 0) {
         first_remote_ns_ = now;
-        first_remote_steps_ = model.message.remote_step_count;
+      } else {
+        remote_steps_ += static_cast<std::uint32_t>(steps_low - last_remote_steps_low_);
       }
       last_remote_ns_ = now;
-      last_remote_steps_ = model.message.remote_step_count;
+      last_remote_steps_low_ = steps_low;
       held_model_ = model.message.model;
       incoming_.Write(model);
       return;

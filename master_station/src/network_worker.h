@@ -149,7 +149,10 @@ class NetworkWorker {
   std::vector<double> rtt_ms_, one_way_ms_, remote_step_us_, contact_step_us_, collision_us_,
       texture_us_;
   std::int64_t first_remote_ns_ = 0, last_remote_ns_ = 0;
-  std::uint64_t first_remote_steps_ = 0, last_remote_steps_ = 0;
+  /// The remote node's steps since the first model, counted modulo 2³² between models (a compact
+  /// model carries the low 32 bits of its step count), and the last model's low 32 bits.
+  std::uint64_t remote_steps_ = 0;
+  std::uint32_t last_remote_steps_low_ = 0;
 };
 
 }  // namespace ht::station

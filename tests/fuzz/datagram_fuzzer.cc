@@ -94,7 +94,7 @@ void DecodeBody(const ht::wire::Header& h, std::span<const std::uint8_t> body) {
     }
     case MessageType::kCompactContactModel: {
       ContactModelMessage m;
-      if (DecodeCompactContactModel(body, m) == DecodeStatus::kOk)
+      if (DecodeCompactContactModel(body, m, /*receive_time_ns=*/0) == DecodeStatus::kOk)
         Check(m.model.num_contacts <= kMaxWireContacts &&
               ht::IsFiniteRigidTransform(m.model.X_WT0));
       break;

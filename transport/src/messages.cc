@@ -9,6 +9,7 @@
 #include <type_traits>
 
 #include "haptic_core/byte_order.h"
+#include "haptic_core/contact_assembly.h"
 
 namespace ht::wire {
 namespace {
@@ -596,23 +597,33 @@ struct CompactContact {
   std::array<std::int16_t, 2> normal_oct{};    ///< octahedral (u, v)·kCompactI16Max
 };
 
+/// A kink plane of CompactContactModel (protocol.h, version 11): WireKinkPlane's fields, the
+/// translation slope's offset on the wire only when bit kCompactKinkPlaneOwnSlope of `contact`
+/// says the plane has one (the rotation arms share the contact's: 17 bytes instead of 29).
+struct CompactWireKinkPlane {
+  std::uint8_t contact = 0;  ///< the contact's index | kCompactKinkPlaneOwnSlope
+  float depth_m = 0.0f;
+  std::array<float, 3> d_rotation{};            ///< ∂δ_m/∂θ (m/rad)
+  std::array<float, 3> d_translation_offset{};  ///< ∂δ_m/∂x less the contact's ∂δ/∂x
+};
+
 /// A CompactContactModel body as it is on the wire: what QuantizeContactModel() makes of a
 /// ContactModelMessage and DequantizeContactModel() turns back into one.
 struct CompactContactModelBody {
-  std::uint64_t tool_state_seq = 0;
-  std::int64_t tool_state_send_time_ns = 0;
-  std::int64_t hold_ns = 0;
-  std::uint64_t remote_step_count = 0;
+  std::uint32_t tool_state_seq = 0;
+  std::uint32_t tool_state_send_time_us = 0;  ///< the echo's whole µs, low 32 bits
+  std::uint32_t hold_us = 0;
+  std::uint32_t remote_step_count = 0;  ///< low 32 bits
   std::uint16_t collision_us = 0;
   std::uint16_t texture_us = 0;
   std::uint16_t step_us = 0;
-  glm::dvec3 p_WT0{0.0};
-  std::array<float, 4> q_WT0{1.0f, 0.0f, 0.0f, 0.0f};  ///< w, x, y, z
-  std::array<float, 6> F_T_W_at_q0{};                  ///< force (N) then torque (N·m)
+  std::array<float, 3> p_WT0{};
+  std::uint64_t q_WT0_low = 0;   ///< bits 0–63 of the 80-bit "smallest three"
+  std::uint16_t q_WT0_high = 0;  ///< bits 64–79
   int num_contacts = 0;
   std::array<CompactContact, kMaxWireContacts> contacts{};
   int num_kink_planes = 0;
-  std::array<WireKinkPlane, kMaxWireKinkPlanes> kink_planes{};
+  std::array<CompactWireKinkPlane, kMaxWireKinkPlanes> kink_planes{};
   int num_patches = 0;
   std::array<WirePatch, kMaxWireContacts> patches{};
 };
@@ -631,26 +642,35 @@ constexpr void Fields(auto& a, Of<CompactContact> auto& c) {
   Each(a, c.normal_oct);
 }
 
+constexpr void Fields(auto& a, Of<CompactWireKinkPlane> auto& p) {
+  a(p.contact);  // read first: the Reader knows from it whether the offset follows
+  a(p.depth_m);
+  Each(a, p.d_rotation);
+  if ((p.contact & kCompactKinkPlaneOwnSlope) != 0) Each(a, p.d_translation_offset);
+}
+
 constexpr void Fields(auto& a, Of<CompactContactModelBody> auto& m) {
   a(m.tool_state_seq);
-  a(m.tool_state_send_time_ns);
-  a(m.hold_ns);
+  a(m.tool_state_send_time_us);
+  a(m.hold_us);
   a(m.remote_step_count);
   a(m.collision_us);
   a(m.texture_us);
   a(m.step_us);
-  Vec(a, m.p_WT0);
-  Each(a, m.q_WT0);
-  Each(a, m.F_T_W_at_q0);
+  Each(a, m.p_WT0);
+  a(m.q_WT0_low);
+  a(m.q_WT0_high);
   const std::size_t n =
       CountBefore<std::uint8_t>(a, m.num_contacts, kMaxWireContacts, kCompactContactBytes,
                                 kKinkPlaneCountBytes + kTranslationPatchCountBytes);
   for (std::size_t i = 0; i < n; ++i) Fields(a, m.contacts[i]);
   const int capacity =
       KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, static_cast<int>(n));
+  // Counted as if each plane were kKinkPlaneBytes (as ContactModel's): the bound on the count is
+  // the same whatever the planes carry; the bytes left are checked against the shortest plane.
   const std::size_t k =
       CountBefore<std::uint8_t>(a, m.num_kink_planes, static_cast<std::size_t>(capacity),
-                                kKinkPlaneBytes, kTranslationPatchCountBytes);
+                                kCompactKinkPlaneBytes, kTranslationPatchCountBytes);
   for (std::size_t j = 0; j < k; ++j) Fields(a, m.kink_planes[j]);
   const int patch_capacity = TranslationPatchCapacity(
       kCompactContactModelFixedBytes, kCompactContactBytes, static_cast<int>(n), m.num_kink_planes);
@@ -812,9 +832,10 @@ static_assert(SizeOf<ContactModelMessage>().counted_bytes ==
               kContactBytes + kKinkPlaneBytes + kTranslationPatchBytes);
 static_assert(SizeOf<CompactContactModelBody>().bytes ==
               kCompactContactModelFixedBytes + kCompactContactBytes + kKinkPlaneCountBytes +
-                  kKinkPlaneBytes + kTranslationPatchCountBytes + kTranslationPatchBytes);
+                  kCompactKinkPlaneBytes + kTranslationPatchCountBytes + kTranslationPatchBytes);
 static_assert(SizeOf<CompactContactModelBody>().counted_bytes ==
-              kCompactContactBytes + kKinkPlaneBytes + kTranslationPatchBytes);
+              kCompactContactBytes + kCompactKinkPlaneBytes + kTranslationPatchBytes);
+static_assert(SizeOf<CompactWireKinkPlane>().bytes == kCompactKinkPlaneBytes);
 static_assert(SizeOf<WirePatch>().bytes == kTranslationPatchBytes);
 static_assert(SizeOf<CompactToolStateBody>().bytes == kCompactToolStateBodyBytes);
 static_assert(SizeOf<HelloMessage>().bytes == kHelloBodyBytes);
@@ -936,23 +957,119 @@ glm::dvec3 DecodeOctahedral(const std::array<std::int16_t, 2>& uv) noexcept {
   return glm::normalize(p);  // ‖p‖₁ = 1, so ‖p‖ ≥ 1/√3
 }
 
+/// Bit `at + i` of the 80-bit field (lo: bits 0–63, hi: bits 64–79) set from bit i of `value`,
+/// for i < width.
+void PutBits80(std::uint64_t& lo, std::uint16_t& hi, int at, int width,
+               std::uint64_t value) noexcept {
+  for (int i = 0; i < width; ++i) {
+    if (((value >> i) & 1u) == 0) continue;
+    const int bit = at + i;
+    if (bit < 64) {
+      lo |= std::uint64_t{1} << bit;
+    } else {
+      hi = static_cast<std::uint16_t>(hi | (1u << (bit - 64)));
+    }
+  }
+}
+
+/// Bits [at, at + width) of the 80-bit field, as an unsigned value.
+std::uint64_t GetBits80(std::uint64_t lo, std::uint16_t hi, int at, int width) noexcept {
+  std::uint64_t value = 0;
+  for (int i = 0; i < width; ++i) {
+    const int bit = at + i;
+    const std::uint64_t b =
+        bit < 64 ? (lo >> bit) & 1u : (static_cast<unsigned>(hi) >> (bit - 64)) & 1u;
+    value |= b << i;
+  }
+  return value;
+}
+
+/// The unit quaternion `q` (finite, not zero) as the contact model's 80-bit "smallest three"
+/// (protocol.h, version 11).
+void EncodeModelSmallestThree(const glm::dquat& q_in, std::uint64_t& lo,
+                              std::uint16_t& hi) noexcept {
+  const glm::dquat q = glm::normalize(q_in);
+  const std::array<double, 4> c{q.w, q.x, q.y, q.z};
+  int largest = 0;
+  for (int k = 1; k < 4; ++k) {
+    if (std::abs(c[k]) > std::abs(c[largest])) largest = k;
+  }
+  const double flip = c[largest] < 0.0 ? -1.0 : 1.0;
+  lo = 0;
+  hi = 0;
+  PutBits80(lo, hi, 0, 2, static_cast<std::uint64_t>(largest));
+  const auto max = static_cast<double>(kCompactModelQuaternionMax);
+  int slot = 0;
+  for (int k = 0; k < 4; ++k) {
+    if (k == largest) continue;
+    const double steps =
+        std::clamp(std::round(flip * c[k] / kCompactModelQuaternionStep), -max, max);
+    PutBits80(lo, hi, 2 + kCompactModelQuaternionBits * slot++, kCompactModelQuaternionBits,
+              static_cast<std::uint64_t>(static_cast<std::int64_t>(steps)));
+  }
+}
+
+/// The unit quaternion of the contact model's 80-bit "smallest three"; false for bits no unit
+/// quaternion encodes to (a component of −2²⁵, or squares summing above 1 + 1e-9).
+bool DecodeModelSmallestThree(std::uint64_t lo, std::uint16_t hi, glm::dquat& q) noexcept {
+  const auto largest = static_cast<int>(GetBits80(lo, hi, 0, 2));
+  std::array<double, 4> c{};
+  double sum2 = 0.0;
+  int slot = 0;
+  constexpr std::int64_t kHalf = std::int64_t{1} << (kCompactModelQuaternionBits - 1);
+  for (int k = 0; k < 4; ++k) {
+    if (k == largest) continue;
+    auto field = static_cast<std::int64_t>(
+        GetBits80(lo, hi, 2 + kCompactModelQuaternionBits * slot++, kCompactModelQuaternionBits));
+    if (field >= kHalf) field -= 2 * kHalf;  // two's complement
+    if (field < -kCompactModelQuaternionMax) return false;
+    c[k] = static_cast<double>(field) * kCompactModelQuaternionStep;
+    sum2 += c[k] * c[k];
+  }
+  if (sum2 > 1.0 + 1e-9) return false;  // (rounding alone never takes a real one past 0.75)
+  c[largest] = std::sqrt(std::max(0.0, 1.0 - sum2));
+  q = glm::normalize(glm::dquat(c[0], c[1], c[2], c[3]));
+  return true;
+}
+
+/// Whole µs of `ns`, rounded to nearest (ties up), for any i64.
+std::int64_t RoundToWholeUs(std::int64_t ns) noexcept {
+  std::int64_t q = ns / 1000;
+  std::int64_t r = ns % 1000;
+  if (r < 0) {
+    q -= 1;
+    r += 1000;
+  }
+  return r >= 500 ? q + 1 : q;
+}
+
 CompactContactModelBody QuantizeContactModel(const ContactModelMessage& m) noexcept {
   const ContactModel& model = m.model;
   CompactContactModelBody b;
-  b.tool_state_seq = model.tool_state_seq;
-  b.tool_state_send_time_ns = m.tool_state_send_time_ns;
-  b.hold_ns = m.hold_ns;
-  b.remote_step_count = m.remote_step_count;
+  // Low 32 bits: a tool state's sequence is a header sequence (u32); the receiver unwraps the echo
+  // against its own clock and counts steps modulo 2³².
+  b.tool_state_seq = static_cast<std::uint32_t>(model.tool_state_seq);
+  b.tool_state_send_time_us = static_cast<std::uint32_t>(
+      static_cast<std::uint64_t>(RoundToWholeUs(m.tool_state_send_time_ns)));
+  b.hold_us = static_cast<std::uint32_t>(
+      std::clamp<std::int64_t>(RoundToWholeUs(m.hold_ns), 0, 0xFFFF'FFFF));
+  b.remote_step_count = static_cast<std::uint32_t>(m.remote_step_count);
   b.collision_us = QuantizeTimeUs(m.collision_us);
   b.texture_us = QuantizeTimeUs(m.texture_us);
   b.step_us = QuantizeTimeUs(m.step_us);
   const glm::dvec3& p_WT0 = model.X_WT0.translation;
-  const glm::dquat& q = model.X_WT0.rotation;
-  b.p_WT0 = p_WT0;
-  b.q_WT0 = {F32(q.w), F32(q.x), F32(q.y), F32(q.z)};
-  const Wrench& F = model.F_T_W_at_q0;
-  b.F_T_W_at_q0 = {F32(F.force.x),  F32(F.force.y),  F32(F.force.z),
-                   F32(F.torque.x), F32(F.torque.y), F32(F.torque.z)};
+  const double f32_max = std::numeric_limits<float>::max();
+  bool pose_ok = CheckPose(model.X_WT0) == DecodeStatus::kOk;
+  for (int k = 0; k < 3; ++k) {
+    // Beyond f32 (or NaN) converting would be undefined: sent as NaN, the receiver rejects it.
+    if (!(std::abs(p_WT0[k]) <= f32_max)) pose_ok = false;
+    b.p_WT0[k] = pose_ok ? F32(p_WT0[k]) : 0.0f;
+  }
+  if (pose_ok) {
+    EncodeModelSmallestThree(model.X_WT0.rotation, b.q_WT0_low, b.q_WT0_high);
+  } else {
+    b.p_WT0[0] = std::numeric_limits<float>::quiet_NaN();  // the receiver rejects it: kNonFinite
+  }
   const int n = std::clamp(model.num_contacts, 0, kMaxWireContacts);
   b.num_contacts = n;
   for (int i = 0; i < n; ++i) {
@@ -963,13 +1080,26 @@ CompactContactModelBody QuantizeContactModel(const ContactModelMessage& m) noexc
     for (int k = 0; k < 3; ++k) {
       w.d_translation[k] = F32(c.gradient.d_translation_W[k]);
       w.d_rotation[k] = F32(c.gradient.d_rotation_W[k]);
-      w.point_offset[k] = QuantizeI16(c.point_W[k] - p_WT0[k], kCompactPointStepM);
+      // From p_WT0 as the receiver reads it (f32), so that the point's error is the offset's.
+      w.point_offset[k] =
+          QuantizeI16(c.point_W[k] - static_cast<double>(b.p_WT0[k]), kCompactPointStepM);
     }
     w.normal_oct = EncodeOctahedral(c.normal_W);
   }
+  std::array<WireKinkPlane, kMaxWireKinkPlanes> planes{};
   b.num_kink_planes = static_cast<int>(FlattenKinkPlanes(
       model, static_cast<std::size_t>(n),
-      KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, n), b.kink_planes));
+      KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, n), planes));
+  for (int j = 0; j < b.num_kink_planes; ++j) {
+    const WireKinkPlane& w = planes[static_cast<std::size_t>(j)];
+    // A plane with its own translation slope says so; one that shares the contact's (every
+    // rotation arm) leaves the zero offset off the wire. A non-finite offset goes, for the
+    // receiver to refuse.
+    const bool own = std::ranges::any_of(w.d_translation_offset, [](float v) { return v != 0.0f; });
+    b.kink_planes[static_cast<std::size_t>(j)] = {
+        static_cast<std::uint8_t>(w.contact | (own ? kCompactKinkPlaneOwnSlope : 0u)), w.depth_m,
+        w.d_rotation, w.d_translation_offset};
+  }
   b.num_patches = static_cast<int>(
       FlattenPatches(model, static_cast<std::size_t>(n),
                      TranslationPatchCapacity(kCompactContactModelFixedBytes, kCompactContactBytes,
@@ -998,12 +1128,14 @@ DecodeStatus Check(const CompactContactModelBody& m) {
   }
   std::array<int, kMaxWireContacts> planes_of{};
   for (int j = 0; j < m.num_kink_planes; ++j) {
-    const WireKinkPlane& p = m.kink_planes[static_cast<std::size_t>(j)];
+    const CompactWireKinkPlane& p = m.kink_planes[static_cast<std::size_t>(j)];
     if (!std::isfinite(p.depth_m) || !AllFinite(p.d_rotation) ||
         !AllFinite(p.d_translation_offset)) {
       return DecodeStatus::kNonFinite;
     }
-    if (p.contact >= m.num_contacts || ++planes_of[p.contact] > kMaxKinkPlanes) {
+    const int contact = p.contact & ~kCompactKinkPlaneOwnSlope;
+    if (contact >= m.num_contacts ||
+        ++planes_of[static_cast<std::size_t>(contact)] > kMaxKinkPlanes) {
       return DecodeStatus::kBadValue;
     }
   }
@@ -1014,32 +1146,34 @@ DecodeStatus Check(const CompactContactModelBody& m) {
     if (p.contact >= m.num_contacts || patched[p.contact]) return DecodeStatus::kBadValue;
     patched[p.contact] = true;
   }
-  if (!Finite3(m.p_WT0) || !AllFinite(m.q_WT0)) return DecodeStatus::kNonFinite;
-  double norm2 = 0.0;
-  for (const float v : m.q_WT0) norm2 += static_cast<double>(v) * v;
-  if (!(std::abs(std::sqrt(norm2) - 1.0) < 1e-3)) return DecodeStatus::kBadValue;
-  if (!AllFinite(m.F_T_W_at_q0) || m.collision_us == kCompactTimeNotFinite ||
-      m.texture_us == kCompactTimeNotFinite || m.step_us == kCompactTimeNotFinite) {
+  if (!AllFinite(m.p_WT0)) return DecodeStatus::kNonFinite;
+  glm::dquat q;
+  if (!DecodeModelSmallestThree(m.q_WT0_low, m.q_WT0_high, q)) return DecodeStatus::kBadValue;
+  if (m.collision_us == kCompactTimeNotFinite || m.texture_us == kCompactTimeNotFinite ||
+      m.step_us == kCompactTimeNotFinite) {
     return DecodeStatus::kNonFinite;
   }
   return DecodeStatus::kOk;
 }
 
-/// The model a CompactContactModel body stands for; `b` passed Check().
-ContactModelMessage DequantizeContactModel(const CompactContactModelBody& b) noexcept {
+/// The model a CompactContactModel body stands for; `b` passed Check(). The echo is the time
+/// within ±2³¹ µs of `receive_time_ns` (the receiver's clock) whose whole µs end in the bits sent.
+ContactModelMessage DequantizeContactModel(const CompactContactModelBody& b,
+                                           std::int64_t receive_time_ns) noexcept {
   ContactModelMessage m;
   ContactModel& model = m.model;
   model.tool_state_seq = b.tool_state_seq;
-  m.tool_state_send_time_ns = b.tool_state_send_time_ns;
-  m.hold_ns = b.hold_ns;
+  const std::int64_t now_us = RoundToWholeUs(receive_time_ns);
+  const auto ahead = static_cast<std::int32_t>(
+      b.tool_state_send_time_us - static_cast<std::uint32_t>(static_cast<std::uint64_t>(now_us)));
+  m.tool_state_send_time_ns = (now_us + ahead) * 1000;
+  m.hold_ns = static_cast<std::int64_t>(b.hold_us) * 1000;
   m.remote_step_count = b.remote_step_count;
   m.collision_us = static_cast<float>(b.collision_us);
   m.texture_us = static_cast<float>(b.texture_us);
   m.step_us = static_cast<float>(b.step_us);
-  model.X_WT0.translation = b.p_WT0;
-  model.X_WT0.rotation = glm::normalize(glm::dquat(b.q_WT0[0], b.q_WT0[1], b.q_WT0[2], b.q_WT0[3]));
-  const std::array<float, 6>& F = b.F_T_W_at_q0;
-  model.F_T_W_at_q0 = {glm::dvec3(F[0], F[1], F[2]), glm::dvec3(F[3], F[4], F[5])};
+  model.X_WT0.translation = glm::dvec3(b.p_WT0[0], b.p_WT0[1], b.p_WT0[2]);
+  DecodeModelSmallestThree(b.q_WT0_low, b.q_WT0_high, model.X_WT0.rotation);
   model.num_contacts = b.num_contacts;
   for (int i = 0; i < b.num_contacts; ++i) {
     const CompactContact& w = b.contacts[i];
@@ -1054,11 +1188,20 @@ ContactModelMessage DequantizeContactModel(const CompactContactModelBody& b) noe
     c.normal_W = DecodeOctahedral(w.normal_oct);
   }
   // Check() found every plane's contact and count valid.
-  DistributeKinkPlanes({b.kink_planes.data(), static_cast<std::size_t>(b.num_kink_planes)},
+  std::array<WireKinkPlane, kMaxWireKinkPlanes> planes{};
+  for (int j = 0; j < b.num_kink_planes; ++j) {
+    const CompactWireKinkPlane& p = b.kink_planes[static_cast<std::size_t>(j)];
+    planes[static_cast<std::size_t>(j)] = {
+        static_cast<std::uint8_t>(p.contact & ~kCompactKinkPlaneOwnSlope), p.depth_m, p.d_rotation,
+        p.d_translation_offset};  // zero unless it was sent
+  }
+  DistributeKinkPlanes({planes.data(), static_cast<std::size_t>(b.num_kink_planes)},
                        static_cast<std::size_t>(b.num_contacts), model);
   // Check() found every patch's values, contact and count valid.
   DistributePatches({b.patches.data(), static_cast<std::size_t>(b.num_patches)},
                     static_cast<std::size_t>(b.num_contacts), model);
+  // Not on the wire (version 11): the sender summed it the same way (AssembleContactModel).
+  model.F_T_W_at_q0 = ContactModelWrenchAtQ0(model);
   return m;
 }
 
@@ -1644,9 +1787,12 @@ DecodeStatus DecodeContactModel(std::span<const std::uint8_t> body,
   return Decode(body, m);
 }
 
-DecodeStatus DecodeCompactContactModel(std::span<const std::uint8_t> body,
-                                       ContactModelMessage& m) noexcept {
-  return DecodeQuantized<CompactContactModelBody>(body, m, DequantizeContactModel);
+DecodeStatus DecodeCompactContactModel(std::span<const std::uint8_t> body, ContactModelMessage& m,
+                                       std::int64_t receive_time_ns) noexcept {
+  return DecodeQuantized<CompactContactModelBody>(
+      body, m, [receive_time_ns](const CompactContactModelBody& b) {
+        return DequantizeContactModel(b, receive_time_ns);
+      });
 }
 
 DecodeStatus DecodeHello(std::span<const std::uint8_t> body, HelloMessage& m) noexcept {

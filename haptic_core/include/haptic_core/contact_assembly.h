@@ -18,4 +18,12 @@ namespace ht {
 int AssembleContactModel(std::span<const ContactLinearization> contacts,
                          ContactModel& model) noexcept;
 
+/// The wrench on the tool at its centre of mass, in W (N, N·m), of `model`'s contacts
+/// [0, num_contacts) at the model's own linearization point q0: Σ PenaltyWrench(δ_i, J_i, k_i)
+/// with δ_i, J_i from ContactDepthAt at zero displacement, as the operator's loop evaluates a
+/// contact there and as AssembleContactModel sums model.F_T_W_at_q0. A compact contact model
+/// (protocol version 11) does not carry that wrench: its receiver restores it with this. A
+/// contact with a non-finite field gives a non-finite wrench. noexcept, allocation-free.
+Wrench ContactModelWrenchAtQ0(const ContactModel& model) noexcept;
+
 }  // namespace ht

@@ -239,9 +239,11 @@ Datagram EncodeToolState(const Header& header, const ToolStateMessage& message,
 Datagram EncodeContactModel(const Header& header, const ContactModelMessage& message,
                             const MacKey& key) noexcept;
 /// The same model quantized as CompactContactModel (protocol.h states the layout and each field's
-/// largest error). Contacts beyond kMaxWireContacts are not sent. Never undefined for any input: a
-/// NaN or infinite field, or a zero normal, is sent marked so that the receiver rejects the
-/// datagram (kNonFinite), as it would the float encoding of it; a point farther than
+/// largest error; F_T_W_at_q0 is not sent, the receiver sums it from the contacts). Contacts beyond
+/// kMaxWireContacts are not sent. Never undefined for any input: a NaN or infinite field, a zero
+/// normal, a pose that is not a finite rigid transform or a position beyond f32's range, is sent
+/// marked so that the receiver rejects the datagram (kNonFinite), as it would the float encoding
+/// of it; a point farther than
 /// kCompactPointRangeM from X_WT0 along an axis is clamped to that range; times are clamped to
 /// [0, kCompactMaxTimeUs].
 Datagram EncodeCompactContactModel(const Header& header, const ContactModelMessage& message,
@@ -332,12 +334,21 @@ DecodeStatus DecodeCompactToolState(std::span<const std::uint8_t> body,
                                     ToolStateMessage& message) noexcept;
 DecodeStatus DecodeContactModel(std::span<const std::uint8_t> body,
                                 ContactModelMessage& message) noexcept;
-/// CompactContactModel into the message the float encoding decodes to: X_WT0's quaternion
-/// normalized, normals unit. kBadCount for more than kMaxWireContacts contacts, kTooShort/kTooLong
-/// unless the length is exact, kNonFinite for a non-finite field or a marked one, kBadValue for a
-/// negative stiffness or a quaternion whose norm is not within 1e-3 of 1.
+/// CompactContactModel (protocol version 11) into the message the float encoding decodes to:
+/// X_WT0's rotation unit, normals unit; F_T_W_at_q0, which the compact body does not carry, summed
+/// from the decoded contacts at q0 (ContactModelWrenchAtQ0, as the sender's AssembleContactModel
+/// made it); tool_state_send_time_ns, sent as the low 32 bits of its whole µs, taken as the time
+/// within ±2³¹ µs (±35.8 min) of `receive_time_ns`, the receiver's steady clock in ns (the clock
+/// whose times its tool states carry): so the echo is right for any model whose pose answered a
+/// tool state sent within 35 minutes; hold_ns and the echo come back as whole µs;
+/// remote_step_count is the low 32 bits of the sender's count. kBadCount for more than
+/// kMaxWireContacts contacts, kTooShort/kTooLong unless the length is exact, kNonFinite for a
+/// non-finite field or a marked one (a pose the sender could not send arrives as a NaN
+/// position), kBadValue for a negative stiffness or quaternion bits no unit quaternion encodes
+/// to. On any failure `message` is left as it was.
 DecodeStatus DecodeCompactContactModel(std::span<const std::uint8_t> body,
-                                       ContactModelMessage& message) noexcept;
+                                       ContactModelMessage& message,
+                                       std::int64_t receive_time_ns) noexcept;
 DecodeStatus DecodeHello(std::span<const std::uint8_t> body, HelloMessage& message) noexcept;
 DecodeStatus DecodeWelcome(std::span<const std::uint8_t> body, WelcomeMessage& message) noexcept;
 DecodeStatus DecodeReject(std::span<const std::uint8_t> body, RejectMessage& message) noexcept;

@@ -86,12 +86,28 @@
 //     is scale/2 (kTranslationPatch*). The compact model carries the same section, alike.
 //   CompactContactModel R→O (kCompactContactModelFixedBytes + n·kCompactContactBytes): the same
 //     model quantized, sent instead of ContactModel when both sides set kCodecCompactContactModel
-//     and decoded into the same message (the float encoding stays available). u64 tool_state_seq,
-//     i64 tool_state_send_time_ns, i64 hold_ns, u64 remote_step_count (as in ContactModel);
+//     and decoded into the same message (the float encoding stays available). Version 11 (issue
+//     33) cut its fixed part from 103 to 45 bytes:
+//     u32 tool_state_seq (the tool state's header sequence, a u32 since version 8);
+//     u32 tool_state_send_time_us: the echo (as in ContactModel) in whole µs of the operator's
+//       clock, rounded to nearest, its low 32 bits: the receiver takes the time within ±2³¹ µs
+//       (±35.8 min) of its own clock whose low bits these are (DecodeCompactContactModel);
+//     u32 hold_us: ContactModel's hold_ns rounded to whole µs, clamped to [0, 2³² − 1] (71.6 min;
+//       a remote node's hold is never negative);
+//     u32 remote_step_count, its low 32 bits (a receiver counts steps between models modulo 2³²);
 //     u16 collision_us, u16 texture_us, u16 step_us (rounded to µs, clamped to [0, 65534];
-//     65535 = not finite)   X_WT0: p_WT0 3×f64, quaternion 4×f32 (renormalized on receipt)
-//     F_T_W at q0: 6×f32
-//     u8 num_contacts (0..kMaxWireContacts), then per contact (42): f32 depth_m, 3×f32 ∂δ/∂x,
+//     65535 = not finite);
+//     X_WT0: p_WT0 3×f32 (m; a coordinate beyond f32's range is sent as NaN and rejected), R_WT0
+//       as "smallest three" in 80 bits, u64 low then u16 high: bits 0–1 the index (0 w, 1 x, 2 y,
+//       3 z) of the component of largest magnitude, made positive, bits 2–27, 28–53, 54–79 the
+//       other three in w, x, y, z order as signed 26-bit integers in units of
+//       kCompactModelQuaternionStep = (1/√2)/(2²⁵ − 1); rejected as CompactToolState's is (a
+//       component of −2²⁵, or the three squares summing above 1 + 1e-9: kBadValue);
+//     u8 num_contacts (0..kMaxWireContacts).
+//     F_T_W at q0 is not sent: the receiver sums it from the contacts it decoded, each at q0 as
+//     the operator's loop evaluates it (ContactModelWrenchAtQ0, haptic_core/contact_assembly.h),
+//     which is how the sender's AssembleContactModel made it.
+//     Per contact (42): f32 depth_m, 3×f32 ∂δ/∂x,
 //     3×f32 ∂δ/∂θ (m/rad), f32 stiffness (N/m), 3×i16 point_W − p_WT0
 //     (units of kCompactPointStepM, each axis clamped to ±32767: the point is for display),
 //     2×i16 normal_W octahedral (u, v)·32767: p = n/‖n‖₁, (u, v) = (p_x, p_y) where p_z ≥ 0, else
@@ -100,8 +116,14 @@
 //     −32768 (kCompactNotFinite) marks a value, or normal, that was not finite (or a zero normal)
 //     at the sender, and the receiver rejects the datagram (kNonFinite) as it would ContactModel
 //     with a NaN. The largest error of each field is a kCompact*Error* constant below. Then the
-//     kink planes as in ContactModel (u8 count, 17 bytes each, f32 fields:
-//     kCompactF32RelativeError), then the translation patches as in ContactModel.
+//     kink planes (u8 count, at most KinkPlaneCapacity() as in ContactModel, i.e. as if each were
+//     kKinkPlaneBytes), each (version 11) u8 contact | kCompactKinkPlaneOwnSlope (0x80), f32
+//     depth_m, 3×f32 ∂δ_m/∂θ, and only when that bit is set 3×f32 ∂δ_m/∂x less the contact's:
+//     17 bytes for a plane that shares the contact's translation slope (every rotation arm), 29
+//     for one with its own (the translation arms, DepthRefinementOptions::
+//     translation_kink_planes); the sender sets the bit when an offset component is not 0 in f32.
+//     Checked as in ContactModel (the contact is the byte less the bit). Then the translation
+//     patches as in ContactModel.
 //   Goodbye O↔R (0): clean close of the session (the operator at the end of a run, the remote
 //     node when stopped); sent three times with new sequence numbers.
 //   Hello O→R (44): u16 min_version, u16 max_version, u64 client_nonce, f32 tool_state_rate_hz,
@@ -195,12 +217,15 @@ inline constexpr std::uint32_t kLegacyMagic = 0x504C5448u;  // bytes 'H' 'T' 'L'
 /// Version 9 (issue 32's nineteenth stop) adds the translation patches after the kink planes of
 /// ContactModel and CompactContactModel; header, MAC and every other body are as in version 8.
 /// Version 10 (issue 33) gives Ping a body, the operator's measured round trip; every other body
-/// is as in version 9. Only version 10 is accepted. A remote node answers a Hello of versions 2
-/// to 9 whose MAC verifies with a Reject (kVersion) in that Hello's own layout and header version
-/// (the Hello's first 12 body bytes and the Reject body are laid out alike in versions 2 to 10),
+/// is as in version 9. Version 11 (issue 33: contact models toward 100 kbit/s) has the leaner
+/// CompactContactModel above (a 45-byte fixed part instead of 103: u32 sequence, echo, hold and
+/// step count, f32 position, an 80-bit quaternion, no wrench at q0; a kink plane that shares its
+/// contact's translation slope in 17 bytes instead of 29); every other body is as in version 10. Only version 11 is accepted. A remote node answers a Hello of versions 2
+/// to 10 whose MAC verifies with a Reject (kVersion) in that Hello's own layout and header version
+/// (the Hello's first 12 body bytes and the Reject body are laid out alike in versions 2 to 11),
 /// so that an older operator is told why.
-inline constexpr std::uint16_t kProtocolVersion = 10;
-inline constexpr std::uint16_t kMinProtocolVersion = 10;
+inline constexpr std::uint16_t kProtocolVersion = 11;
+inline constexpr std::uint16_t kMinProtocolVersion = 11;
 
 /// Message types; values are part of the protocol and never reused.
 enum class MessageType : std::uint8_t {
@@ -283,11 +308,19 @@ inline constexpr std::size_t kToolStateBodyBytes = 13 * 8;
 inline constexpr std::size_t kCompactToolStateBodyBytes = 3 * 4 + 8 + 6 * 2;
 inline constexpr std::size_t kContactModelFixedBytes = 8 * 4 + 4 * 3 + 7 * 8 + 6 * 8 + 1;
 inline constexpr std::size_t kContactBytes = 8 + 6 * 8 + 8 + 3 * 4 + 3 * 4;
-inline constexpr std::size_t kCompactContactModelFixedBytes = 4 * 8 + 3 * 2 + 3 * 8 + 10 * 4 + 1;
+/// u32 sequence, echo, hold and step count; 3×u16 times; 3×f32 position; 80-bit quaternion
+/// (u64 + u16); u8 contact count (version 11; 103 bytes in versions 4 to 10).
+inline constexpr std::size_t kCompactContactModelFixedBytes = 4 * 4 + 3 * 2 + 3 * 4 + 8 + 2 + 1;
 inline constexpr std::size_t kCompactContactBytes = 4 + 6 * 4 + 4 + 3 * 2 + 2 * 2;
 /// One kink plane on the wire: u8 contact, f32 depth_m, 3×f32 ∂δ_m/∂θ, 3×f32 ∂δ_m/∂x offset; and
 /// the u8 count before them.
 inline constexpr std::size_t kKinkPlaneBytes = 1 + 7 * 4;
+/// A CompactContactModel kink plane (version 11): u8 contact | kCompactKinkPlaneOwnSlope, f32
+/// depth_m, 3×f32 ∂δ_m/∂θ, and the 3×f32 ∂δ_m/∂x offset (kCompactKinkPlaneSlopeBytes) only when
+/// that bit is set.
+inline constexpr std::size_t kCompactKinkPlaneBytes = 1 + 4 * 4;
+inline constexpr std::size_t kCompactKinkPlaneSlopeBytes = 3 * 4;
+inline constexpr std::uint8_t kCompactKinkPlaneOwnSlope = 0x80;
 inline constexpr std::size_t kKinkPlaneCountBytes = 1;
 /// Most kink planes per contact (haptic_core's kMaxKinkPlanes) and per model.
 inline constexpr int kMaxKinkPlanesPerContact = 8;
@@ -380,7 +413,7 @@ inline constexpr std::uint16_t kCompactTimeNotFinite = 65535;
 /// Step (m) of a contact point's offset from p_WT0, and the offset's reach per axis (±0.655 m).
 inline constexpr double kCompactPointStepM = 20e-6;
 inline constexpr double kCompactPointRangeM = kCompactI16Max * kCompactPointStepM;
-/// f32 fields (depth_m, gradients, stiffness, F_T_W at q0): |error| ≤ 2⁻²⁴·|value| + 2⁻¹⁵⁰
+/// f32 fields (depth_m, gradients, stiffness): |error| ≤ 2⁻²⁴·|value| + 2⁻¹⁵⁰
 /// (round to nearest; the 2⁻¹⁵⁰ is for f32 subnormals). Beyond f32's range a value becomes infinite
 /// and the receiver rejects the datagram.
 inline constexpr double kCompactF32RelativeError = 0x1p-24;
@@ -398,11 +431,23 @@ inline constexpr double kCompactPointErrorM = 0.5 * kCompactPointStepM;
 /// onto the octahedron ‖p‖₁ = 1 is √3-Lipschitz; the octahedron is ≥ 1/√3 from the origin.
 /// (The bound is nearly reached: 4·10⁶ random directions gave 6.45e-5 rad.)
 inline constexpr double kCompactNormalErrorRad = 6.5e-5;
-/// X_WT0's rotation: angle ≤ 2⁻²² rad. Rounding each component to f32 (≤ 2⁻²⁴ relative) moves the
-/// unit quaternion by ≤ 2⁻²⁴, the rotation by twice that: 2⁻²³, stated with a factor 2 of margin.
+/// X_WT0's rotation, "smallest three" in 26 bits each (version 11), and its step: the largest
+/// magnitude of a component that is not the largest is 1/√2.
+inline constexpr int kCompactModelQuaternionBits = 26;
+inline constexpr std::int64_t kCompactModelQuaternionMax =
+    (std::int64_t{1} << (kCompactModelQuaternionBits - 1)) - 1;
+inline constexpr double kCompactModelQuaternionStep =
+    0.70710678118654752 / static_cast<double>(kCompactModelQuaternionMax);
+/// X_WT0's rotation: angle ≤ 2⁻²² rad (2.4e-7; 5 nm at a 20 mm lever). By CompactToolState's
+/// argument (kCompactToolStateRotationErrorRad) the angle is ≤ 9.5·kCompactModelQuaternionStep
+/// = 2.0e-7 rad. (Versions 4 to 10 sent 4×f32 within the same bound.)
 inline constexpr double kCompactRotationErrorRad = 0x1p-22;
+/// p_WT0: per axis |error| ≤ 2⁻²⁴·|p| + 2⁻¹⁵⁰ (f32, round to nearest: 0.06 µm at 1 m from W's
+/// origin, the tool state's own precision, kCompactToolStatePositionRelativeError).
+inline constexpr double kCompactModelPositionRelativeError = 0x1p-24;
 /// Times: |error| ≤ 0.5 µs within [0, kCompactMaxTimeUs]; below 0 they are sent as 0, above as
-/// kCompactMaxTimeUs.
+/// kCompactMaxTimeUs. The echo and the hold: |error| ≤ 0.5 µs (rounded to whole µs; the echo
+/// within ±2³¹ µs of the receiver's clock, the hold within [0, 2³² − 1] µs).
 inline constexpr double kCompactTimeErrorUs = 0.5;
 
 // CompactToolState: its quaternion step and the largest difference between each field as decoded
