@@ -287,7 +287,8 @@ TEST(OperatorTick, AModelSwitchCreatesTheChangeInContactPotentialAtTheToolsPose)
 // The station's default energy reserve, through the tick: a handle swaying 1 mm into a wall
 // whose models alternate between two depths (each switch puts energy in or takes it out). E stays
 // non-negative and out ≤ in as without the reserve; the refill acts and is counted apart from the
-// damping that keeps E ≥ 0; the tick still makes no allocation.
+// damping that keeps E ≥ 0; the tick still makes no allocation. The force each tick reports the
+// stage took (trace.csv's passivity_removed_n) sums to what the controller counted.
 TEST(OperatorTick, TheEnergyReserveKeepsEnergyNonNegativeAndCountsItsRefillApart) {
   for (const double reserve_j : {0.0, 1e-4}) {
     OperatorTickConfig c = Config();
@@ -296,7 +297,7 @@ TEST(OperatorTick, TheEnergyReserveKeepsEnergyNonNegativeAndCountsItsRefillApart
     OperatorTick tick(c, RigidTransform{}, ToolState{});
     ArrivedModel walls[2] = {Wall(0), Wall(0)};
     walls[1].model.contacts[0].depth_m = 2.1e-3;
-    double min_energy = 0.0;
+    double min_energy = 0.0, removed_ns = 0.0;
     std::int64_t allocations = 0;
     for (int k = 0; k < 2000; ++k) {
       const double t = k * kH, w = 2.0 * std::numbers::pi * 2.0;
@@ -307,8 +308,10 @@ TEST(OperatorTick, TheEnergyReserveKeepsEnergyNonNegativeAndCountsItsRefillApart
       wall.tool_state_sent_ns = wall.built_local_ns = in.now_ns;
       if (k % 7 == 0) in.arrived = &wall;
       const std::int64_t before = Allocations();
-      tick.Step(in);
+      const OperatorTickOutput out = tick.Step(in);
       allocations += Allocations() - before;
+      EXPECT_GE(out.passivity_removed_n, 0.0);
+      removed_ns += out.passivity_removed_n * kH;
       min_energy = std::min(min_energy, tick.passivity().observed_energy_j());
     }
     const PassivityController& p = tick.passivity();
@@ -316,6 +319,12 @@ TEST(OperatorTick, TheEnergyReserveKeepsEnergyNonNegativeAndCountsItsRefillApart
     EXPECT_LE(p.energy_out_j(), p.energy_in_j() + 1e-12) << reserve_j;
     EXPECT_EQ(allocations, 0) << reserve_j;
     EXPECT_DOUBLE_EQ(p.energy_reserve_j(), reserve_j);
+    // The handle moves along z only: the damping's force is α·|v| along it, so the two sums of
+    // the same forces agree to rounding.
+    const double counted =
+        p.force_damped_away_ns() + p.force_refilled_ns() + p.force_scaled_away_ns();
+    EXPECT_GT(counted, 0.0) << reserve_j;
+    EXPECT_NEAR(removed_ns, counted, 1e-9 * counted + 1e-15) << reserve_j;
     if (reserve_j > 0.0) {
       EXPECT_GT(p.refill_ticks(), 0);
       EXPECT_GT(p.refilled_j(), 0.0);

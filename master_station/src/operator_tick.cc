@@ -115,7 +115,11 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
       ++counters_.nonfinite;
     }
     // Stage 3: passivity (energy a delayed model created is dissipated).
-    if (config_.passivity) F_device_W = passivity_.Apply(F_device_W, V_WH_W, h);
+    if (config_.passivity) {
+      const glm::dvec3 before = F_device_W.force;
+      F_device_W = passivity_.Apply(F_device_W, V_WH_W, h);
+      out.passivity_removed_n += glm::length(before - F_device_W.force);
+    }
   }
   // Stage 4: safety, on every tick. Then the observer records what the device really gets.
   F_device_W = safety_.Filter(F_device_W, V_WH_W, model_staleness_s, in.link_connected, h,
@@ -124,7 +128,11 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
   if (gain < 1.0) F_device_W = {gain * F_device_W.force, gain * F_device_W.torque};
   // The safety stage's rate limit can hold back a drop passivity asked for: the guard cuts what
   // is left along the hand's motion so that the observed energy never goes negative.
-  if (config_.passivity) F_device_W = passivity_.Guard(F_device_W, V_WH_W, h);
+  if (config_.passivity) {
+    const glm::dvec3 before = F_device_W.force;
+    F_device_W = passivity_.Guard(F_device_W, V_WH_W, h);
+    out.passivity_removed_n += glm::length(before - F_device_W.force);
+  }
   passivity_.Commit(F_device_W, V_WH_W, h);
   out.F_device_W = F_device_W;
   const glm::dquat R_MW = glm::conjugate(X_WM_.rotation);

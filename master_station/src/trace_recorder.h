@@ -25,6 +25,7 @@ struct TraceRow {
   float remote_collision_us = 0.0f;
   float remote_texture_us = 0.0f;
   float remote_step_us = 0.0f;
+  double passivity_removed_n = 0.0;  ///< OperatorTickOutput::passivity_removed_n (N)
 };
 
 /// Writes the header line of trace.csv.

@@ -88,6 +88,12 @@ struct OperatorTickOutput {
   RigidTransform X_WH;         ///< Handle pose in W this tick (the last good one after a fault).
   double model_age_ms = -1.0;  ///< Age of the tool pose the model in use answers; −1 = none.
   std::uint32_t safety_actions = 0;
+  /// What the passivity stage took off the device's force this tick (N, ≥ 0): |ΔF| of Apply's
+  /// damping (and its refill) plus |ΔF| of Guard's cut; 0 with passivity off. Its sum over a run
+  /// times the tick is about the summary's force_damped_away_Ns + force_refilled_Ns +
+  /// force_scaled_away_Ns; per tick it says where in a run they were taken (trace.csv's
+  /// passivity_removed_n).
+  double passivity_removed_n = 0.0;
 };
 
 /// Counters of the tick's faults and events.
