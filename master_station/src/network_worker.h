@@ -150,7 +150,8 @@ class NetworkWorker {
       texture_us_;
   std::int64_t first_remote_ns_ = 0, last_remote_ns_ = 0;
   /// The remote node's steps since the first model, counted modulo 2³² between models (a compact
-  /// model carries the low 32 bits of its step count), and the last model's low 32 bits.
+  /// model carries the low 32 bits of its step count; a count that goes back is a restarted
+  /// node's, counted from its 0), and the last model's low 32 bits.
   std::uint64_t remote_steps_ = 0;
   std::uint32_t last_remote_steps_low_ = 0;
 };
