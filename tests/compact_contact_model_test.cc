@@ -867,6 +867,27 @@ TEST(CompactContactModel, TheWrenchAtQ0IsTheSendersAssemblyOfTheContactsItCarrie
   EXPECT_GT(pressed, 100);  // most models press (half the depths are positive)
 }
 
+// The operator counts the remote node's steps from the low 32 bits a compact model carries:
+// across the wrap of those bits, and from 0 again behind a restarted node.
+TEST(CompactContactModel, RemoteStepsAreCountedAcrossTheWrapAndARestart) {
+  EXPECT_EQ(RemoteStepsBetween(100, 250), 150u);
+  EXPECT_EQ(RemoteStepsBetween(0xFFFF'FFF0u, 0x10u), 0x20u);  // the count's low bits wrapped
+  EXPECT_EQ(RemoteStepsBetween(7, 7), 0u);
+  EXPECT_EQ(RemoteStepsBetween(5'000'000, 1'200), 1'200u);  // a restarted node: its own count
+  // Summed over a stream of models whose full count passes 2³² twice, the sum is the count's.
+  std::uint64_t count = 0xFFFF'0000u, total = 0;
+  std::uint32_t last = static_cast<std::uint32_t>(count);
+  const std::uint64_t first = count;
+  for (int k = 0; k < 20000; ++k) {
+    count += 1 + static_cast<std::uint64_t>(k % 7) * 60'000'000;  // up to 3.6e8 steps between
+    const auto low = static_cast<std::uint32_t>(count);
+    total += RemoteStepsBetween(last, low);
+    last = low;
+  }
+  ASSERT_GT(count - first, 2 * (std::uint64_t{1} << 32));
+  EXPECT_EQ(total, count - first);
+}
+
 TEST(CompactContactModel, IsATypeOfItsOwnThatTheOperatorAccepts) {
   const MacKey key = TestKey();
   std::mt19937 rng(1);

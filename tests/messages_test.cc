@@ -945,9 +945,10 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
         c.num_kink_planes = 1 + i % 4;
         for (int p = 0; p < c.num_kink_planes; ++p) {
           // Every other plane shares the contact's translation slope (a rotation arm).
-          c.kink_planes[p] = {c.depth_m - 1e-5 * (p + 1),
-                              {0.001 * p, -0.02 + 0.001 * i, 0.003},
-                              (i + p) % 2 == 0 ? glm::dvec3(0.0) : glm::dvec3(0.05 * p, -0.1, 0.0)};
+          c.kink_planes[p] = {
+              c.depth_m - 1e-5 * (p + 1),
+              {0.001 * p, -0.02 + 0.001 * i, 0.003},
+              (i + p) % 2 == 0 ? glm::dvec3(0.0) : glm::dvec3(0.05 * p, -0.1, 0.02 * (p + 1))};
         }
         planes += c.num_kink_planes;
       }
@@ -993,7 +994,8 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
                     static_cast<float>(a.kink_planes[p].d_translation_offset_W.x));
           EXPECT_EQ(b.kink_planes[p].d_translation_offset_W.y,
                     static_cast<float>(a.kink_planes[p].d_translation_offset_W.y));
-          EXPECT_EQ(b.kink_planes[p].d_translation_offset_W.z, 0.0);
+          EXPECT_EQ(b.kink_planes[p].d_translation_offset_W.z,
+                    static_cast<float>(a.kink_planes[p].d_translation_offset_W.z));
         }
         got += expected;
       }

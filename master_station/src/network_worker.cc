@@ -412,10 +412,7 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
       if (first_remote_ns_ == 0) {
         first_remote_ns_ = now;
       } else {
-        // Modulo 2³²; a count that went back (a restarted remote node counts from 0 again) adds
-        // the new node's count instead of nearly 2³².
-        const auto delta = static_cast<std::uint32_t>(steps_low - last_remote_steps_low_);
-        remote_steps_ += delta < 0x8000'0000u ? delta : steps_low;
+        remote_steps_ += wire::RemoteStepsBetween(last_remote_steps_low_, steps_low);
       }
       last_remote_ns_ = now;
       last_remote_steps_low_ = steps_low;

@@ -94,7 +94,13 @@ void DecodeBody(const ht::wire::Header& h, std::span<const std::uint8_t> body) {
     }
     case MessageType::kCompactContactModel: {
       ContactModelMessage m;
-      if (DecodeCompactContactModel(body, m, /*receive_time_ns=*/0) == DecodeStatus::kOk)
+      // The receiver's clock from the fuzzed header: near 0, or near the i64 limits (the echo's
+      // unwrap must stay defined for any clock).
+      const auto t = static_cast<std::int64_t>(h.send_time_ns);
+      const std::int64_t receive_ns = (h.sequence % 3 == 0)   ? t
+                                      : (h.sequence % 3 == 1) ? INT64_MAX - t
+                                                              : INT64_MIN + t;
+      if (DecodeCompactContactModel(body, m, receive_ns) == DecodeStatus::kOk)
         Check(m.model.num_contacts <= kMaxWireContacts &&
               ht::IsFiniteRigidTransform(m.model.X_WT0));
       break;

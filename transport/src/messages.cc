@@ -1166,7 +1166,9 @@ ContactModelMessage DequantizeContactModel(const CompactContactModelBody& b,
   const std::int64_t now_us = RoundToWholeUs(receive_time_ns);
   const auto ahead = static_cast<std::int32_t>(
       b.tool_state_send_time_us - static_cast<std::uint32_t>(static_cast<std::uint64_t>(now_us)));
-  m.tool_state_send_time_ns = (now_us + ahead) * 1000;
+  // Clamped so that ×1000 stays an i64 for any receive time (a steady clock never comes near).
+  constexpr std::int64_t kMaxUs = std::numeric_limits<std::int64_t>::max() / 1000 - (1LL << 32);
+  m.tool_state_send_time_ns = std::clamp<std::int64_t>(now_us + ahead, -kMaxUs, kMaxUs) * 1000;
   m.hold_ns = static_cast<std::int64_t>(b.hold_us) * 1000;
   m.remote_step_count = b.remote_step_count;
   m.collision_us = static_cast<float>(b.collision_us);

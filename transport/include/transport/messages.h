@@ -337,10 +337,11 @@ DecodeStatus DecodeContactModel(std::span<const std::uint8_t> body,
 /// CompactContactModel (protocol version 11) into the message the float encoding decodes to:
 /// X_WT0's rotation unit, normals unit; F_T_W_at_q0, which the compact body does not carry, summed
 /// from the decoded contacts at q0 (ContactModelWrenchAtQ0, as the sender's AssembleContactModel
-/// made it); tool_state_send_time_ns, sent as the low 32 bits of its whole µs, taken as the time
-/// within ±2³¹ µs (±35.8 min) of `receive_time_ns`, the receiver's steady clock in ns (the clock
-/// whose times its tool states carry): so the echo is right for any model whose pose answered a
-/// tool state sent within 35 minutes; hold_ns and the echo come back as whole µs;
+/// made it; where kink planes were left out for room, from the planes that came: the wrench of
+/// the model the receiver holds); tool_state_send_time_ns, sent as the low 32 bits of its whole µs,
+/// taken as the time within ±2³¹ µs (±35.8 min) of `receive_time_ns`, the receiver's steady clock
+/// in ns (the clock whose times its tool states carry): so the echo is right for any model whose
+/// pose answered a tool state sent within 35 minutes; hold_ns and the echo come back as whole µs;
 /// remote_step_count is the low 32 bits of the sender's count. kBadCount for more than
 /// kMaxWireContacts contacts, kTooShort/kTooLong unless the length is exact, kNonFinite for a
 /// non-finite field or a marked one (a pose the sender could not send arrives as a NaN
@@ -349,6 +350,14 @@ DecodeStatus DecodeContactModel(std::span<const std::uint8_t> body,
 DecodeStatus DecodeCompactContactModel(std::span<const std::uint8_t> body,
                                        ContactModelMessage& message,
                                        std::int64_t receive_time_ns) noexcept;
+/// The remote node's steps between two contact models, from the low 32 bits of their
+/// remote_step_count (all a compact model carries): the difference modulo 2³², or, when that is
+/// 2³¹ or more (the count went back: a restarted node counts from 0 again), the newer count
+/// itself.
+constexpr std::uint32_t RemoteStepsBetween(std::uint32_t previous_low, std::uint32_t low) noexcept {
+  const std::uint32_t delta = low - previous_low;
+  return delta < 0x8000'0000u ? delta : low;
+}
 DecodeStatus DecodeHello(std::span<const std::uint8_t> body, HelloMessage& message) noexcept;
 DecodeStatus DecodeWelcome(std::span<const std::uint8_t> body, WelcomeMessage& message) noexcept;
 DecodeStatus DecodeReject(std::span<const std::uint8_t> body, RejectMessage& message) noexcept;

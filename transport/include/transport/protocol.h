@@ -69,7 +69,8 @@
 //     ContactDepthAt). Planes go contact by contact, in order; a sender whose model has more than
 //     fit leaves the last ones out (the remote node counts them). Rejected: a plane naming a
 //     contact ≥ num_contacts or a contact's (kMaxKinkPlanesPerContact + 1)-th plane (kBadValue),
-//     a non-finite field (kNonFinite). The compact model carries the same section, alike.
+//     a non-finite field (kNonFinite). The compact model carries the same section with 17-byte
+//     planes where the offset is zero (version 11, below).
 //     Then the translation patches (version 9, issue 32's nineteenth stop: δ over in-plane
 //     translations of the tool, haptic_core's TranslationPatch): u8 num_patches (at most
 //     TranslationPatchCapacity(): as many as fit after the planes), per patch
@@ -220,10 +221,11 @@ inline constexpr std::uint32_t kLegacyMagic = 0x504C5448u;  // bytes 'H' 'T' 'L'
 /// is as in version 9. Version 11 (issue 33: contact models toward 100 kbit/s) has the leaner
 /// CompactContactModel above (a 45-byte fixed part instead of 103: u32 sequence, echo, hold and
 /// step count, f32 position, an 80-bit quaternion, no wrench at q0; a kink plane that shares its
-/// contact's translation slope in 17 bytes instead of 29); every other body is as in version 10. Only version 11 is accepted. A remote node answers a Hello of versions 2
-/// to 10 whose MAC verifies with a Reject (kVersion) in that Hello's own layout and header version
-/// (the Hello's first 12 body bytes and the Reject body are laid out alike in versions 2 to 11),
-/// so that an older operator is told why.
+/// contact's translation slope in 17 bytes instead of 29); every other body is as in version 10.
+/// Only version 11 is accepted. A remote node answers a Hello of versions 2 to 10 whose MAC
+/// verifies with a Reject (kVersion) in that Hello's own layout and header version (the Hello's
+/// first 12 body bytes and the Reject body are laid out alike in versions 2 to 11), so that an
+/// older operator is told why.
 inline constexpr std::uint16_t kProtocolVersion = 11;
 inline constexpr std::uint16_t kMinProtocolVersion = 11;
 
@@ -423,8 +425,9 @@ inline constexpr double kCompactF32RelativeError = 0x1p-24;
 /// ridge crest, where the float model lets the tool roll off the crest sideways (1.1 mm, 0.4 N)
 /// once rounding noise breaks the symmetry: a 33 % RMS difference in the device force. Small
 /// components matter; f32 keeps them.
-/// Contact point: per axis |error| ≤ kCompactPointStepM/2 (plus the double rounding of p_WT0 +
-/// offset) where |point_W − p_WT0| ≤ kCompactPointRangeM − kCompactPointErrorM on that axis;
+/// Contact point: per axis |error| ≤ kCompactPointStepM/2 (plus the double rounding of the
+/// receiver's p_WT0 + offset; the offset is taken from p_WT0 as the receiver reads it, f32 since
+/// version 11) where |point_W − p_WT0| ≤ kCompactPointRangeM − kCompactPointErrorM on that axis;
 /// beyond, the axis is clamped to ±kCompactPointRangeM from p_WT0.
 inline constexpr double kCompactPointErrorM = 0.5 * kCompactPointStepM;
 /// Normal: angle ≤ √18/65534 = 6.474e-5 rad. Rounding moves (u, v) by ≤ √2/65534; unfolding (u, v)
