@@ -4,6 +4,17 @@
 #include <cmath>
 
 namespace ht {
+namespace {
+
+// One contact's PenaltyWrench at q0, as the operator's loop evaluates it there (its planes may
+// blend at q0).
+Wrench WrenchAtQ0(const ContactLinearization& c) noexcept {
+  PenetrationGradient J;
+  const double depth = ContactDepthAt(c, Twist{}, &J);
+  return PenaltyWrench(depth, J, c.stiffness_n_per_m);
+}
+
+}  // namespace
 
 int AssembleContactModel(std::span<const ContactLinearization> contacts,
                          ContactModel& model) noexcept {
@@ -12,10 +23,7 @@ int AssembleContactModel(std::span<const ContactLinearization> contacts,
     if (!std::isfinite(lin.depth_m)) continue;  // no overlap of the patches on the window
     if (model.num_contacts >= kMaxContacts) break;
     model.contacts[model.num_contacts++] = lin;
-    // At q0, as the operator's loop evaluates it (a contact's planes may blend there).
-    PenetrationGradient J;
-    const double depth = ContactDepthAt(lin, Twist{}, &J);
-    model.F_T_W_at_q0 += PenaltyWrench(depth, J, lin.stiffness_n_per_m);
+    model.F_T_W_at_q0 += WrenchAtQ0(lin);
     ++appended;
   }
   return appended;
@@ -24,12 +32,7 @@ int AssembleContactModel(std::span<const ContactLinearization> contacts,
 Wrench ContactModelWrenchAtQ0(const ContactModel& model) noexcept {
   Wrench F{};
   const int n = std::clamp(model.num_contacts, 0, kMaxContacts);
-  for (int i = 0; i < n; ++i) {
-    const ContactLinearization& c = model.contacts[static_cast<std::size_t>(i)];
-    PenetrationGradient J;
-    const double depth = ContactDepthAt(c, Twist{}, &J);
-    F += PenaltyWrench(depth, J, c.stiffness_n_per_m);
-  }
+  for (int i = 0; i < n; ++i) F += WrenchAtQ0(model.contacts[static_cast<std::size_t>(i)]);
   return F;
 }
 

@@ -984,10 +984,13 @@ std::uint64_t GetBits80(std::uint64_t lo, std::uint16_t hi, int at, int width) n
   return value;
 }
 
-/// The unit quaternion `q` (finite, not zero) as the contact model's 80-bit "smallest three"
-/// (protocol.h, version 11).
-void EncodeModelSmallestThree(const glm::dquat& q_in, std::uint64_t& lo,
-                              std::uint16_t& hi) noexcept {
+/// "Smallest three" of the unit quaternion `q_in` (finite, not zero; protocol.h), `bits` bits a
+/// component: put(at, width, value) writes the index of the largest |component| (0 w, 1 x, 2 y,
+/// 3 z, made positive) at bit 0 in 2 bits, then the other three in w, x, y, z order at bits 2,
+/// 2 + bits, 2 + 2·bits as two's complement in units of `step` ((1/√2)/(2^(bits−1) − 1)).
+/// CompactToolState's 20-bit u64 and CompactContactModel's 26-bit 80-bit field share it.
+template <class Put>
+void EncodeSmallestThreeBits(const glm::dquat& q_in, int bits, double step, Put&& put) noexcept {
   const glm::dquat q = glm::normalize(q_in);
   const std::array<double, 4> c{q.w, q.x, q.y, q.z};
   int largest = 0;
@@ -995,41 +998,53 @@ void EncodeModelSmallestThree(const glm::dquat& q_in, std::uint64_t& lo,
     if (std::abs(c[k]) > std::abs(c[largest])) largest = k;
   }
   const double flip = c[largest] < 0.0 ? -1.0 : 1.0;
-  lo = 0;
-  hi = 0;
-  PutBits80(lo, hi, 0, 2, static_cast<std::uint64_t>(largest));
-  const auto max = static_cast<double>(kCompactModelQuaternionMax);
+  put(0, 2, static_cast<std::uint64_t>(largest));
+  const auto max = static_cast<double>((std::int64_t{1} << (bits - 1)) - 1);
   int slot = 0;
   for (int k = 0; k < 4; ++k) {
     if (k == largest) continue;
-    const double steps =
-        std::clamp(std::round(flip * c[k] / kCompactModelQuaternionStep), -max, max);
-    PutBits80(lo, hi, 2 + kCompactModelQuaternionBits * slot++, kCompactModelQuaternionBits,
-              static_cast<std::uint64_t>(static_cast<std::int64_t>(steps)));
+    const double steps = std::clamp(std::round(flip * c[k] / step), -max, max);
+    put(2 + bits * slot++, bits, static_cast<std::uint64_t>(static_cast<std::int64_t>(steps)));
   }
 }
 
-/// The unit quaternion of the contact model's 80-bit "smallest three"; false for bits no unit
-/// quaternion encodes to (a component of −2²⁵, or squares summing above 1 + 1e-9).
-bool DecodeModelSmallestThree(std::uint64_t lo, std::uint16_t hi, glm::dquat& q) noexcept {
-  const auto largest = static_cast<int>(GetBits80(lo, hi, 0, 2));
+/// The unit quaternion of "smallest three" read through get(at, width) (the bits at [at, at +
+/// width), unsigned), laid out as EncodeSmallestThreeBits writes it; false for bits no unit
+/// quaternion encodes to (a component of −2^(bits−1), or squares summing above 1 + 1e-9).
+template <class Get>
+bool DecodeSmallestThreeBits(int bits, double step, Get&& get, glm::dquat& q) noexcept {
+  const auto largest = static_cast<int>(get(0, 2));
+  const std::int64_t half = std::int64_t{1} << (bits - 1);
   std::array<double, 4> c{};
   double sum2 = 0.0;
   int slot = 0;
-  constexpr std::int64_t kHalf = std::int64_t{1} << (kCompactModelQuaternionBits - 1);
   for (int k = 0; k < 4; ++k) {
     if (k == largest) continue;
-    auto field = static_cast<std::int64_t>(
-        GetBits80(lo, hi, 2 + kCompactModelQuaternionBits * slot++, kCompactModelQuaternionBits));
-    if (field >= kHalf) field -= 2 * kHalf;  // two's complement
-    if (field < -kCompactModelQuaternionMax) return false;
-    c[k] = static_cast<double>(field) * kCompactModelQuaternionStep;
+    auto field = static_cast<std::int64_t>(get(2 + bits * slot++, bits));
+    if (field >= half) field -= 2 * half;  // two's complement
+    if (field < -(half - 1)) return false;
+    c[k] = static_cast<double>(field) * step;
     sum2 += c[k] * c[k];
   }
   if (sum2 > 1.0 + 1e-9) return false;  // (rounding alone never takes a real one past 0.75)
   c[largest] = std::sqrt(std::max(0.0, 1.0 - sum2));
   q = glm::normalize(glm::dquat(c[0], c[1], c[2], c[3]));
   return true;
+}
+
+/// The contact model's rotation as its 80-bit "smallest three" (protocol.h, version 11).
+void EncodeModelSmallestThree(const glm::dquat& q, std::uint64_t& lo, std::uint16_t& hi) noexcept {
+  lo = 0;
+  hi = 0;
+  EncodeSmallestThreeBits(
+      q, kCompactModelQuaternionBits, kCompactModelQuaternionStep,
+      [&](int at, int width, std::uint64_t v) { PutBits80(lo, hi, at, width, v); });
+}
+
+bool DecodeModelSmallestThree(std::uint64_t lo, std::uint16_t hi, glm::dquat& q) noexcept {
+  return DecodeSmallestThreeBits(
+      kCompactModelQuaternionBits, kCompactModelQuaternionStep,
+      [&](int at, int width) { return GetBits80(lo, hi, at, width); }, q);
 }
 
 /// Whole µs of `ns`, rounded to nearest (ties up), for any i64.
@@ -1248,53 +1263,23 @@ double FromBinary16(std::uint16_t h) noexcept {
 
 bool IsFiniteBinary16(std::uint16_t h) noexcept { return ((h >> 10) & 0x1F) != 0x1F; }
 
-constexpr std::uint64_t kQuaternionFieldMask = (std::uint64_t{1} << kCompactQuaternionBits) - 1;
-
-/// The unit quaternion `q` (w, x, y, z) as "smallest three" (protocol.h).
-std::uint64_t EncodeSmallestThree(const glm::dquat& q_in) noexcept {
-  glm::dquat q = glm::normalize(q_in);
-  const std::array<double, 4> c0{q.w, q.x, q.y, q.z};
-  int largest = 0;
-  for (int k = 1; k < 4; ++k) {
-    if (std::abs(c0[k]) > std::abs(c0[largest])) largest = k;
-  }
-  const double flip = c0[largest] < 0.0 ? -1.0 : 1.0;
-  std::uint64_t bits = static_cast<std::uint64_t>(largest);
-  int slot = 0;
-  for (int k = 0; k < 4; ++k) {
-    if (k == largest) continue;
-    const double steps = std::clamp(std::round(flip * c0[k] / kCompactQuaternionStep),
-                                    -static_cast<double>(kCompactQuaternionMax),
-                                    static_cast<double>(kCompactQuaternionMax));
-    const auto field =
-        static_cast<std::uint64_t>(static_cast<std::int64_t>(steps)) & kQuaternionFieldMask;
-    bits |= field << (2 + kCompactQuaternionBits * slot++);
-  }
+/// The unit quaternion `q` as CompactToolState's "smallest three" (20 bits a component, u64).
+std::uint64_t EncodeSmallestThree(const glm::dquat& q) noexcept {
+  std::uint64_t bits = 0;
+  EncodeSmallestThreeBits(q, kCompactQuaternionBits, kCompactQuaternionStep,
+                          [&](int at, int width, std::uint64_t v) {
+                            bits |= (v & ((std::uint64_t{1} << width) - 1)) << at;
+                          });
   return bits;
 }
 
-/// The unit quaternion of "smallest three" bits; false for bits no unit quaternion encodes to.
+/// The unit quaternion of CompactToolState's "smallest three" bits; false for bits no unit
+/// quaternion encodes to (bits 62–63 set among them).
 bool DecodeSmallestThree(std::uint64_t bits, glm::dquat& q) noexcept {
   if (bits >> (2 + 3 * kCompactQuaternionBits)) return false;
-  const int largest = static_cast<int>(bits & 3);
-  std::array<double, 4> c{};
-  double sum2 = 0.0;
-  int slot = 0;
-  for (int k = 0; k < 4; ++k) {
-    if (k == largest) continue;
-    auto field = static_cast<std::int64_t>((bits >> (2 + kCompactQuaternionBits * slot++)) &
-                                           kQuaternionFieldMask);
-    if (field >= (std::int64_t{1} << (kCompactQuaternionBits - 1))) {
-      field -= std::int64_t{1} << kCompactQuaternionBits;  // two's complement
-    }
-    if (field < -kCompactQuaternionMax) return false;
-    c[k] = static_cast<double>(field) * kCompactQuaternionStep;
-    sum2 += c[k] * c[k];
-  }
-  if (sum2 > 1.0 + 1e-9) return false;  // (rounding alone never takes a real one past 0.75)
-  c[largest] = std::sqrt(std::max(0.0, 1.0 - sum2));
-  q = glm::normalize(glm::dquat(c[0], c[1], c[2], c[3]));
-  return true;
+  return DecodeSmallestThreeBits(
+      kCompactQuaternionBits, kCompactQuaternionStep,
+      [bits](int at, int width) { return (bits >> at) & ((std::uint64_t{1} << width) - 1); }, q);
 }
 
 CompactToolStateBody QuantizeToolState(const ToolStateMessage& m) noexcept {

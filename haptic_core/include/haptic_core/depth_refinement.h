@@ -73,10 +73,10 @@ double PatchHeightAt(const HapticModel& model, const RigidTransform& X_WO,
                      std::span<const int> triangles, const ContactWindow& window, PatchSide side,
                      double s_m, double t_m, int level = 0, bool parallax = false) noexcept;
 
-/// How the depth is refined (issue 32).
 /// Largest DepthRefinementOptions::translation_patch_spacing_cells.
 inline constexpr int kMaxTranslationPatchSpacing = 4;
 
+/// How the depth is refined (issue 32).
 struct DepthRefinementOptions {
   /// Translation step of the gradient in level-0 texels of the finer surface at the contact
   /// point; the rotation step is this over half the window. > 0.
