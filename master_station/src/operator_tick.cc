@@ -22,6 +22,10 @@ OperatorTick::OperatorTick(const OperatorTickConfig& config, const RigidTransfor
                                 std::to_string(config.model_blend_ticks));
   }
   if (!(config.h_s > 0.0)) throw std::invalid_argument("tick length must be positive");
+  if (config.passivity_release_ticks < 0) {
+    throw std::invalid_argument("passivity release ticks must be >= 0, got " +
+                                std::to_string(config.passivity_release_ticks));
+  }
   passivity_.set_energy_reserve(config.passivity_reserve_j, config.passivity_refill_fraction);
   simulator_.set_max_contact_force(config.max_contact_force_n);
   simulator_.set_contact_damping_hunt_crossley(config.hunt_crossley_s_per_m);
@@ -43,6 +47,7 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
     workspace_shift_M_ = in.workspace_shift_M;
     model_ = ContactModel{};
     previous_model_ = ContactModel{};
+    depth_offset_m_ = 0.0;
     blend_tick_ = config_.model_blend_ticks;
     ++counters_.workspace_jumps;
   }
@@ -71,6 +76,7 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
       previous_model_ = model_;  // blended out over the next model_blend_ticks ticks
       blend_tick_ = 0;
       model_ = in.arrived->model;
+      depth_offset_m_ = 0.0;       // the new model as it came; BoundSwitchEnergy may offset it
       model_stamp_ = *in.arrived;  // the stamp only: the model itself is in model_
       have_model_ = true;
       ++counters_.models_used;
@@ -82,6 +88,7 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
 
   Wrench F_device_W;
   Twist V_WH_W;
+  double f_after_apply = 0.0;  // |f| after Apply (N), for the release
   if (!in.device_ok) {
     // The device read failed: hold the tool, observe no motion, and let the safety stage ramp
     // the last force down (and back up once the device answers again).
@@ -96,6 +103,10 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
     // Stage 2: coupling and the implicit step against the (blended) model.
     const bool blending = blend_tick_ < config_.model_blend_ticks;
     if (blending) ++blend_tick_;
+    if (config_.energy_bounded_switch && have_model_) {
+      BoundSwitchEnergy(potential_changes, potential_changes ? U_before : 0.0);
+    }
+    out.depth_offset_m = depth_offset_m_;
     AttributeSwitch(potential_changes, U_before, out.model_age_ms);  // at the weights stepped
     if (blending) {
       out.step =
@@ -119,6 +130,7 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
       const glm::dvec3 before = F_device_W.force;
       F_device_W = passivity_.Apply(F_device_W, V_WH_W, h);
       out.passivity_removed_n += glm::length(before - F_device_W.force);
+      f_after_apply = glm::length(F_device_W.force);
     }
   }
   // Stage 4: safety, on every tick. Then the observer records what the device really gets.
@@ -131,6 +143,20 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
   if (config_.passivity) {
     const glm::dvec3 before = F_device_W.force;
     F_device_W = passivity_.Guard(F_device_W, V_WH_W, h);
+    // The release: a force the stage cut comes back over passivity_release_ticks ticks.
+    // The fraction kept is the passivity stage's own (Apply's, then Guard's), not the safety
+    // stage's clamps or ramps.
+    if (config_.passivity_release_ticks > 0 && in.device_ok) {
+      const auto ratio = [](double a, double b) { return b > 1e-9 ? std::min(1.0, a / b) : 1.0; };
+      double kept = ratio(f_after_apply, glm::length(out.step.F_coupling_T_W.force)) *
+                    ratio(glm::length(F_device_W.force), glm::length(before));
+      if (kept > passivity_release_gain_) {
+        const double s = passivity_release_gain_ / kept;
+        F_device_W = {s * F_device_W.force, s * F_device_W.torque};
+        kept = passivity_release_gain_;
+      }
+      passivity_release_gain_ = std::min(1.0, kept + 1.0 / config_.passivity_release_ticks);
+    }
     out.passivity_removed_n += glm::length(before - F_device_W.force);
   }
   passivity_.Commit(F_device_W, V_WH_W, h);
@@ -138,6 +164,55 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
   const glm::dquat R_MW = glm::conjugate(X_WM_.rotation);
   out.F_H_M = {R_MW * F_device_W.force, R_MW * F_device_W.torque};
   return out;
+}
+
+void OperatorTick::SetDepthOffset(double offset_m) noexcept {
+  const double d = offset_m - depth_offset_m_;
+  if (d == 0.0) return;
+  for (int i = 0; i < model_.num_contacts; ++i) {
+    ContactLinearization& c = model_.contacts[static_cast<std::size_t>(i)];
+    c.depth_m -= d;
+    for (int m = 0; m < c.num_kink_planes; ++m)
+      c.kink_planes[static_cast<std::size_t>(m)].depth_m -= d;
+  }
+  depth_offset_m_ = offset_m;
+}
+
+void OperatorTick::BoundSwitchEnergy(bool potential_changes, double U_ref) noexcept {
+  const double o = depth_offset_m_;
+  if (!potential_changes && o == 0.0) return;  // nothing changed and nothing to give back
+  const double spare = std::max(0.0, passivity_.observed_energy_j() -
+                                         (config_.passivity ? passivity_.energy_reserve_j() : 0.0));
+  if (!potential_changes) U_ref = LoopPotential(tool_.X_WT);  // the offset's return alone
+  const double limit = U_ref + config_.switch_energy_spend_fraction * spare;
+  // The largest offset worth looking at: where no contact of model_ is in (its U is then 0).
+  const ContactModelEvaluation now = EvaluateContactModel(model_, tool_.X_WT);
+  double o_hi = now.active_contacts > 0 ? o + now.max_depth_m : o;
+  // On a tick that only gives the offset back, it shrinks at least at the release rate.
+  if (!potential_changes && std::isfinite(config_.switch_offset_release_ms)) {
+    o_hi = std::min(o_hi, std::max(0.0, o - depth_offset_peak_m_ * config_.h_s * 1e3 /
+                                                config_.switch_offset_release_ms));
+  }
+  SetDepthOffset(0.0);
+  if (!std::isfinite(o_hi) || LoopPotential(tool_.X_WT) <= limit) {  // within the budget
+    if (potential_changes) depth_offset_peak_m_ = 0.0;
+    return;
+  }
+  // U at the tool falls as the offset grows: bisect for the smallest offset within the limit.
+  double lo = 0.0, hi = o_hi;
+  for (int k = 0; k < 16; ++k) {
+    const double mid = 0.5 * (lo + hi);
+    SetDepthOffset(mid);
+    if (LoopPotential(tool_.X_WT) <= limit) {
+      hi = mid;
+    } else {
+      lo = mid;
+    }
+  }
+  SetDepthOffset(hi);
+  if (potential_changes) depth_offset_peak_m_ = std::max(depth_offset_peak_m_, hi);
+  ++counters_.switch_offset_ticks;
+  counters_.switch_offset_max_m = std::max(counters_.switch_offset_max_m, hi);
 }
 
 double OperatorTick::LoopPotential(const RigidTransform& X_WT) const noexcept {

@@ -38,6 +38,35 @@ struct OperatorTickConfig {
   /// the wrench, a fraction of it (PassivityController::set_energy_reserve).
   double passivity_reserve_j = 0.0;
   double passivity_refill_fraction = 0.0;
+  /// Release of the passivity stage's cuts (ticks; 0 = off): after a tick where the passivity
+  /// stage kept only a fraction r of the coupling force (Apply's damping and Guard's cut
+  /// together, |f_out|/|f_in|), the next tick's device wrench is held to at most
+  /// min(1, r + 1/release_ticks) of that tick's coupling force, so a cut force comes back over
+  /// up to release_ticks ticks instead of in one. Without it a hand that keeps stopping while
+  /// the observed energy is short gets the whole force back on each tick it stands still (its
+  /// power is zero there) and none while it moves: a train of one-tick pulses of the full force
+  /// (1.7 N at 170 Hz on fig75 at 75 ms one way; docs/passivity/README.md). Scaling a wrench
+  /// down keeps the observed energy non-negative (its power scales with it), so passivity holds.
+  int passivity_release_ticks = 0;
+  /// Energy-bounded model switches (false = off): a new contact model, and each step of its
+  /// blend, may raise the contact potential U at the tool's pose by no more than the energy the
+  /// passivity observer holds spare, switch_energy_spend_fraction × max(0, E − reserve); beyond
+  /// that the model in use is rendered with a depth offset o ≥ 0 (every δ_i less o: the surface
+  /// moved out of the tool), the smallest that keeps the bound. Each later tick gives o back as
+  /// the same budget allows, so the surface returns as the operator's own work (pressing into
+  /// it) and the observer's store pay for it, instead of the tool being pushed out by the stored
+  /// energy of a model that came late and the guard cutting the device's force until the hand
+  /// has paid (the pulse train of docs/passivity/README.md). A passive model update in the sense
+  /// of model-mediated teleoperation (Mitra & Niemeyer 2008; Xu, Cizmeci & Steinbach 2015).
+  bool energy_bounded_switch = false;
+  /// The share of the observer's spare energy a tick may spend on a switch or on giving the
+  /// offset back ((0, 1]).
+  double switch_energy_spend_fraction = 0.1;
+  /// The longest an offset is held (ms, > 0; +∞ = as long as the budget says): whatever the
+  /// budget, the offset shrinks each tick by at least its largest value since the last switch
+  /// over this time, so that a surface whose return the budget cannot pay for (a hand resting
+  /// on it) comes back anyway and the passivity stage takes the rest.
+  double switch_offset_release_ms = std::numeric_limits<double>::infinity();
   /// Tick length h (s).
   double h_s = 1e-3;
   /// Bound on each contact's force on the simulated tool (N; +∞ = none): DESIGN.md §5's bounded
@@ -87,6 +116,9 @@ struct OperatorTickOutput {
   ToolStepResult step;         ///< The tool step (default when the device read failed).
   RigidTransform X_WH;         ///< Handle pose in W this tick (the last good one after a fault).
   double model_age_ms = -1.0;  ///< Age of the tool pose the model in use answers; −1 = none.
+  /// The depth offset the model in use is rendered with this tick (m, ≥ 0;
+  /// OperatorTickConfig::energy_bounded_switch).
+  double depth_offset_m = 0.0;
   std::uint32_t safety_actions = 0;
   /// What the passivity stage took off the device's force this tick (N, ≥ 0): |ΔF| of Apply's
   /// damping (and its refill) plus |ΔF| of Guard's cut; 0 with passivity off. Its sum over a run
@@ -117,6 +149,9 @@ struct OperatorTickCounters {
   /// The created energy by the age of the model taken (ms at its arrival, the tick's
   /// model_age_ms): below 50 ms, 50–150 ms, above 150 ms.
   double switch_energy_created_by_age_j[3] = {0.0, 0.0, 0.0};
+  /// Ticks rendered with a depth offset (energy_bounded_switch), and the largest offset (m).
+  std::int64_t switch_offset_ticks = 0;
+  double switch_offset_max_m = 0.0;
 };
 
 /// The operator's tick. Construction may allocate; Step never allocates, locks, blocks or throws.
@@ -158,6 +193,17 @@ class OperatorTick {
   glm::dvec3 jumped_from_W_{0.0};
   bool after_jump_ = false;
   OperatorTickCounters counters_;
+  /// The passivity stage's release (passivity_release_ticks): the largest fraction of the
+  /// coupling force the next tick may pass.
+  double passivity_release_gain_ = 1.0;
+  /// The depth offset applied to model_'s depths (m, ≥ 0; energy_bounded_switch).
+  double depth_offset_m_ = 0.0;
+  double depth_offset_peak_m_ = 0.0;  ///< the largest offset since the last switch (m)
+  /// Sets model_'s depth offset to `offset_m` (shifts every contact's and kink plane's depth).
+  void SetDepthOffset(double offset_m) noexcept;
+  /// The energy bound of a switch or a blend step (potential_changes) or the offset's return:
+  /// the smallest offset whose loop potential at the tool is within the budget of `U_ref`.
+  void BoundSwitchEnergy(bool potential_changes, double U_ref) noexcept;
   /// U of the blended pair at X_WT: model_ at weight blend_tick_/ticks, previous_model_ at the
   /// rest (ContactModelEvaluation::potential_energy_j; J).
   double LoopPotential(const RigidTransform& X_WT) const noexcept;
