@@ -14,7 +14,9 @@
 // remote step's own time (a fixed `--step-ms`). So its errors are the deadband's, not a run's.
 //
 // Usage: deadband_lockstep [--replay FILE | --experiment fig75] [--arm NAME:KEY=V,...]...
-//        [--delay-ms D] [--out DIR]
+//        [--delay-ms D] [--loss-pct L] [--reference-delay-ms D0] [--seeds K] [--out DIR]
+// Exit status: 0 done; 2 bad arguments (one line saying which); 1 a run failed (e.g. an
+// unreadable replay file).
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -351,8 +353,8 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
         arm.tool.weber_fraction > 0.0
             ? std::clamp<std::int64_t>(t_r - remote.recv_ns, 0, keepalive_ns)
             : 0;
-    const RigidTransform X_WT =
-        ExtrapolatePose(remote.latest.X_WT, remote.latest.V_WT_W, extrapolation_ns * 1e-9);
+    const RigidTransform X_WT = ExtrapolatePose(remote.latest.X_WT, remote.latest.V_WT_W,
+                                                static_cast<double>(extrapolation_ns) * 1e-9);
     StepTimings timings;
     wire::ContactModelMessage message;
     message.model = pipeline.Step(X_WT, remote.seq, timings, remote.latest.V_WT_W);
@@ -514,11 +516,16 @@ int main(int argc, char** argv) {
     const int rc = app.exit(e);
     return rc == 0 ? 0 : 2;
   }
+  std::vector<Arm> arms;
+  const Arm reference = ParseArm("reference:deadband=0");
   try {
-    std::vector<Arm> arms;
     if (arm_texts.empty()) arm_texts.push_back("default");
-    Arm reference = ParseArm("reference:deadband=0");
     for (const std::string& t : arm_texts) arms.push_back(ParseArm(t));
+  } catch (const std::invalid_argument& e) {
+    std::fprintf(stderr, "deadband_lockstep: %s\n", e.what());
+    return 2;
+  }
+  try {
     std::fprintf(stderr, "deadband_lockstep: building block-on-gear...\n");
     const ht::HapticScene scene = ht::MakeBlockOnGearScene();
     setup.scene = &scene;
@@ -551,13 +558,13 @@ int main(int argc, char** argv) {
         const double d = r.duration_s;
         const nlohmann::json j = {
             {"seed", k},
-            {"tool_states_per_s", r.tool_states / d},
-            {"tool_state_kbit_s", r.tool_state_bytes * 8e-3 / d},
+            {"tool_states_per_s", static_cast<double>(r.tool_states) / d},
+            {"tool_state_kbit_s", static_cast<double>(r.tool_state_bytes) * 8e-3 / d},
             {"tool_state_reduction_pct",
              100.0 * (1.0 - static_cast<double>(r.tool_states) /
                                 static_cast<double>(std::max<std::int64_t>(1, ref.tool_states)))},
-            {"models_per_s", r.models / d},
-            {"model_kbit_s", r.model_bytes * 8e-3 / d},
+            {"models_per_s", static_cast<double>(r.models) / d},
+            {"model_kbit_s", static_cast<double>(r.model_bytes) * 8e-3 / d},
             {"model_reduction_pct",
              100.0 * (1.0 - static_cast<double>(r.models) /
                                 static_cast<double>(std::max<std::int64_t>(1, ref.models)))},
@@ -583,7 +590,7 @@ int main(int argc, char** argv) {
           hi = std::max(hi, e);
         }
         const double mean = x.empty() ? 0.0 : sum / static_cast<double>(x.size());
-        char text[96];
+        char text[128];
         char a[32], b[32], c[32];
         std::snprintf(a, sizeof(a), format, mean);
         std::snprintf(b, sizeof(b), format, lo);

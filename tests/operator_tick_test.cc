@@ -335,5 +335,111 @@ TEST(OperatorTick, TheEnergyReserveKeepsEnergyNonNegativeAndCountsItsRefillApart
   }
 }
 
+// The energy-bounded switch (OperatorTickConfig::energy_bounded_switch), against the switch test
+// above: the same wall arriving with the tool 12 mm deep and the observer holding no energy (the
+// handle has not moved) creates no contact potential at all; the model is rendered with an offset
+// that puts its surface at the tool (no contact force on that tick), and the offset comes back
+// only as the handle's work pays for it, or within switch_offset_release_ms whatever the budget.
+// Every tick keeps E ≥ 0 and makes no allocation.
+TEST(OperatorTick, AnEnergyBoundedSwitchCreatesNoMoreThanTheObserverHoldsSpare) {
+  for (const double release_ms : {std::numeric_limits<double>::infinity(), 50.0}) {
+    OperatorTickConfig c = Config();
+    c.model_blend_ticks = 1;
+    c.energy_bounded_switch = true;
+    c.switch_energy_spend_fraction = 1.0;
+    c.switch_offset_release_ms = release_ms;
+    OperatorTick tick(c, RigidTransform{}, ToolState{});
+    OperatorTickInput in = Pressing(1000000);
+    for (int k = 0; k < 300; ++k) tick.Step(in);  // the tool at −10 mm, the handle still: E = 0
+    ASSERT_EQ(tick.passivity().observed_energy_j(), 0.0);
+    ArrivedModel wall = Wall(in.now_ns);
+    const double U_wall = EvaluateContactModel(wall.model, tick.tool().X_WT).potential_energy_j;
+    ASSERT_GT(U_wall, 0.0);
+    in.arrived = &wall;
+    const OperatorTickOutput first = tick.Step(in);
+    in.arrived = nullptr;
+    EXPECT_LE(tick.counters().switch_energy_created_j, 1e-12 * U_wall) << release_ms;
+    // The offset is the wall's depth at the tool (12 mm), to the bisection's resolution.
+    EXPECT_NEAR(first.depth_offset_m, 12e-3, 5e-6) << release_ms;
+    EXPECT_LT(glm::length(first.step.F_contact_T_W.force), 8000.0 * 12e-3 / 16384.0 * 2.0);
+    // The handle held still: without a release time the offset stays (nothing pays for it); with
+    // one it is gone within that time.
+    double offset = first.depth_offset_m, min_energy = 0.0;
+    std::int64_t allocations = 0;
+    for (int k = 0; k < 60; ++k) {
+      in.now_ns += 1000000;
+      const std::int64_t before = Allocations();
+      const OperatorTickOutput out = tick.Step(in);
+      allocations += Allocations() - before;
+      EXPECT_LE(out.depth_offset_m, offset + 1e-15) << "tick " << k;  // it only comes back
+      offset = out.depth_offset_m;
+      min_energy = std::min(min_energy, tick.passivity().observed_energy_j());
+    }
+    if (std::isinf(release_ms)) {
+      EXPECT_NEAR(offset, first.depth_offset_m, 1e-4) << "nothing paid for its return";
+    } else {
+      EXPECT_EQ(offset, 0.0) << "50 ms after the switch";
+    }
+    // The handle pressing further in (−z at 20 mm/s): its work pays for the offset's return.
+    for (int k = 0; k < 400; ++k) {
+      in.now_ns += 1000000;
+      in.device.X_MH.translation.z -= 20e-3 * kH;
+      in.device.V_MH_M.linear.z = -20e-3;
+      const std::int64_t before = Allocations();
+      const OperatorTickOutput out = tick.Step(in);
+      allocations += Allocations() - before;
+      offset = out.depth_offset_m;
+      min_energy = std::min(min_energy, tick.passivity().observed_energy_j());
+    }
+    EXPECT_LT(offset, 0.5 * first.depth_offset_m) << release_ms;
+    EXPECT_GE(min_energy, -1e-12) << release_ms;
+    EXPECT_EQ(allocations, 0) << release_ms;
+  }
+}
+
+// The passivity stage's release (OperatorTickConfig::passivity_release_ticks): a handle resting
+// 10 mm deep in the wall (E = 0: it has not moved) jerks up for one tick, so the guard cuts the
+// device's force to nothing; when it stands still again the force used to come back whole on the
+// next tick, and comes back over the release's ticks with it.
+TEST(OperatorTick, ThePassivityReleaseBringsACutForceBackOverItsTicks) {
+  for (const int release_ticks : {0, 10}) {
+    OperatorTickConfig c = Config();
+    c.passivity_release_ticks = release_ticks;
+    OperatorTick tick(c, RigidTransform{}, ToolState{});
+    ArrivedModel wall = Wall(1000000);
+    OperatorTickInput in = Pressing(1000000);
+    in.arrived = &wall;
+    double resting = 0.0;
+    for (int k = 0; k < 500; ++k) {
+      in.now_ns += 1000000;
+      wall.tool_state_sent_ns = wall.built_local_ns = in.now_ns;
+      resting = glm::length(tick.Step(in).F_device_W.force);
+      in.arrived = k % 2 ? &wall : nullptr;
+    }
+    ASSERT_GT(resting, 1.0);
+    in.arrived = nullptr;
+    in.now_ns += 1000000;
+    in.device.V_MH_M.linear.z = 0.05;  // up, along the force: power to the hand that E lacks
+    const double cut = glm::length(tick.Step(in).F_device_W.force);
+    EXPECT_LT(cut, 0.05 * resting) << release_ticks;
+    in.device.V_MH_M.linear.z = 0.0;
+    double previous = cut, min_energy = tick.passivity().observed_energy_j();
+    for (int k = 0; k < 30; ++k) {
+      in.now_ns += 1000000;
+      const double f = glm::length(tick.Step(in).F_device_W.force);
+      min_energy = std::min(min_energy, tick.passivity().observed_energy_j());
+      if (release_ticks == 0 && k == 0) {
+        EXPECT_GT(f, 0.9 * resting) << "without the release the force is back at once";
+      }
+      if (release_ticks > 0) {
+        EXPECT_LE(f - previous, resting / release_ticks * 1.05 + 1e-9) << "tick " << k;
+      }
+      previous = f;
+    }
+    EXPECT_GT(previous, 0.9 * resting) << release_ticks;  // back in the end
+    EXPECT_GE(min_energy, -1e-12) << release_ticks;
+  }
+}
+
 }  // namespace
 }  // namespace ht

@@ -187,17 +187,15 @@ void OperatorTick::BoundSwitchEnergy(bool potential_changes, double U_ref) noexc
   const double limit = U_ref + config_.switch_energy_spend_fraction * spare;
   // The largest offset worth looking at: where no contact of model_ is in (its U is then 0).
   const ContactModelEvaluation now = EvaluateContactModel(model_, tool_.X_WT);
-  double o_hi = now.active_contacts > 0 ? o + now.max_depth_m : o;
+  // A tick that changes nothing only gives the offset back (it never grows there).
+  double o_hi = potential_changes && now.active_contacts > 0 ? o + now.max_depth_m : o;
   // On a tick that only gives the offset back, it shrinks at least at the release rate.
   if (!potential_changes && std::isfinite(config_.switch_offset_release_ms)) {
     o_hi = std::min(o_hi, std::max(0.0, o - depth_offset_peak_m_ * config_.h_s * 1e3 /
                                                 config_.switch_offset_release_ms));
   }
   SetDepthOffset(0.0);
-  if (!std::isfinite(o_hi) || LoopPotential(tool_.X_WT) <= limit) {  // within the budget
-    if (potential_changes) depth_offset_peak_m_ = 0.0;
-    return;
-  }
+  if (!std::isfinite(o_hi) || LoopPotential(tool_.X_WT) <= limit) return;  // within the budget
   // U at the tool falls as the offset grows: bisect for the smallest offset within the limit.
   double lo = 0.0, hi = o_hi;
   for (int k = 0; k < 16; ++k) {
