@@ -25,6 +25,7 @@
 #include <deque>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -53,11 +54,13 @@ struct Arm {
   std::string name;
   ht::ToolStateDeadbandConfig tool;
   ht::ContactModelDeadbandConfig model;
-  /// The operator tick's passivity options (OperatorTickConfig; the reference has them off).
-  int passivity_release_ticks = 0;
-  bool energy_bounded_switch = false;
+  /// The operator tick's passivity options (OperatorTickConfig), master_station's defaults
+  /// unless the arm says otherwise (the reference has the defaults).
+  int passivity_release_ticks =
+      static_cast<int>(std::lround(ht::StationConfig{}.passivity_release_ms));
+  bool energy_bounded_switch = ht::StationConfig{}.energy_bounded_switch;
   double switch_energy_spend_fraction = ht::OperatorTickConfig{}.switch_energy_spend_fraction;
-  double switch_offset_release_ms = ht::OperatorTickConfig{}.switch_offset_release_ms;
+  double switch_offset_release_ms = ht::StationConfig{}.switch_offset_release_ms;
 };
 
 /// What one arm's run gives, tick by tick and in all.
@@ -136,8 +139,8 @@ Arm ParseArm(const std::string& text) {
       arm.energy_bounded_switch = v != 0.0;
     } else if (key == "switch_spend") {
       arm.switch_energy_spend_fraction = v;
-    } else if (key == "offset_release_ms") {
-      arm.switch_offset_release_ms = v;
+    } else if (key == "offset_release_ms") {  // 0 = as long as the budget says
+      arm.switch_offset_release_ms = v > 0.0 ? v : std::numeric_limits<double>::infinity();
     } else if (key == "force_floor") {
       arm.model.force_floor_scale_n = v;
     } else if (key == "torque_floor") {
@@ -457,14 +460,19 @@ int main(int argc, char** argv) {
       "compact encodings and the remote step in one process, 1 ms a tick, a fixed one-way delay.\n"
       "Each --arm is judged tick for tick against a reference with both deadbands off, made in\n"
       "the same run (the loopback's run-to-run noise, 1.5-7 % in device force, is not in it).\n"
-      "Scene: block-on-gear (seed Fig. 75), CPU penetration depth."};
+      "CPU penetration depth."};
   Setup setup;
   std::vector<std::string> arm_texts;
-  std::string out_dir;
+  std::string out_dir, scene_name = "block-on-gear";
   int seeds = 3;
   app.add_option("--replay", setup.replay_file,
                  "a handle trajectory CSV (master_station --device replay; e.g. from\n"
                  "deploy/kinesthetic-replay); default: the simulated hand of --experiment");
+  app.add_option("--scene", scene_name,
+                 "built-in scene: block-on-gear (seed Fig. 75) or stiff-wall (the same block on a\n"
+                 "flat wall five times stiffer)")
+      ->check(CLI::IsMember({"block-on-gear", "stiff-wall"}))
+      ->capture_default_str();
   app.add_option("--experiment", setup.experiment, "the simulated hand's script")
       ->check(CLI::IsMember({"fig75", "fig76", "explore"}))
       ->capture_default_str();
@@ -502,8 +510,9 @@ int main(int argc, char** argv) {
                  "(the tool-state deadband, as master_station's --deadband-*), force_floor,\n"
                  "torque_floor, stiffness_floor, rotational_stiffness_floor (the contact-model\n"
                  "floor scales, as slave_sim's --model-deadband-*-floor); release_ticks,\n"
-                 "energy_bounded_switch (0/1), switch_spend (the operator tick's passivity\n"
-                 "options, OperatorTickConfig; off in the reference)");
+                 "energy_bounded_switch (0/1), switch_spend, offset_release_ms (the operator\n"
+                 "tick's passivity options, OperatorTickConfig; master_station's defaults, as\n"
+                 "in the reference, unless given)");
   app.add_flag("--translation-patch", setup.pipeline.depth_refinement.translation_patch,
                "every contact model carries its translation patch (slave_sim --translation-patch;\n"
                "by default the remote node sends patches from a 10 ms round trip)");
@@ -526,8 +535,9 @@ int main(int argc, char** argv) {
     return 2;
   }
   try {
-    std::fprintf(stderr, "deadband_lockstep: building block-on-gear...\n");
-    const ht::HapticScene scene = ht::MakeBlockOnGearScene();
+    std::fprintf(stderr, "deadband_lockstep: building %s...\n", scene_name.c_str());
+    const ht::HapticScene scene =
+        scene_name == "stiff-wall" ? ht::MakeStiffWallScene() : ht::MakeBlockOnGearScene();
     setup.scene = &scene;
     setup.pipeline.texture_threads = 1;
     std::fprintf(stderr, "deadband_lockstep: reference (both deadbands off)...\n");
@@ -538,6 +548,7 @@ int main(int argc, char** argv) {
     const ArmRun ref = RunArm(reference_setup, reference);
     nlohmann::json summary;
     summary["input"] = setup.replay_file.empty() ? setup.experiment : setup.replay_file;
+    summary["scene"] = scene_name;
     summary["duration_s"] = ref.duration_s;
     summary["delay_ms"] = setup.delay_ms;
     summary["step_ms"] = setup.step_ms;

@@ -352,7 +352,7 @@ TEST(OperatorTick, AnEnergyBoundedSwitchCreatesNoMoreThanTheObserverHoldsSpare) 
     OperatorTickInput in = Pressing(1000000);
     for (int k = 0; k < 300; ++k) tick.Step(in);  // the tool at −10 mm, the handle still: E = 0
     ASSERT_EQ(tick.passivity().observed_energy_j(), 0.0);
-    ArrivedModel wall = Wall(in.now_ns);
+    ArrivedModel wall = Wall(in.now_ns - 150000000);  // answering a pose 150 ms old
     const double U_wall = EvaluateContactModel(wall.model, tick.tool().X_WT).potential_energy_j;
     ASSERT_GT(U_wall, 0.0);
     in.arrived = &wall;
@@ -395,6 +395,19 @@ TEST(OperatorTick, AnEnergyBoundedSwitchCreatesNoMoreThanTheObserverHoldsSpare) 
     EXPECT_GE(min_energy, -1e-12) << release_ms;
     EXPECT_EQ(allocations, 0) << release_ms;
   }
+  // A young model (answering a pose under switch_bound_min_age_ms old) is not bounded: the
+  // switch creates the wall's whole potential, as without the option.
+  OperatorTickConfig c = Config();
+  c.model_blend_ticks = 1;
+  c.energy_bounded_switch = true;
+  OperatorTick tick(c, RigidTransform{}, ToolState{});
+  OperatorTickInput in = Pressing(1000000);
+  for (int k = 0; k < 300; ++k) tick.Step(in);
+  ArrivedModel wall = Wall(in.now_ns - 2000000);  // 2 ms old
+  const double U_wall = EvaluateContactModel(wall.model, tick.tool().X_WT).potential_energy_j;
+  in.arrived = &wall;
+  EXPECT_EQ(tick.Step(in).depth_offset_m, 0.0);
+  EXPECT_NEAR(tick.counters().switch_energy_created_j, U_wall, 1e-12 * U_wall);
 }
 
 // The passivity stage's release (OperatorTickConfig::passivity_release_ticks): a handle resting

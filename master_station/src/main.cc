@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <exception>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <random>
@@ -234,6 +235,25 @@ int main(int argc, char** argv) {
                  "the most the reserve's refill may change the wrench, percent of it")
       ->check(CLI::Range(0.0, 99.0))
       ->capture_default_str();
+  double passivity_release_ms = ht::StationConfig{}.passivity_release_ms;
+  app.add_option("--passivity-release-ms", passivity_release_ms,
+                 "a force the passivity stage cut comes back over this long instead of on the "
+                 "next tick, ms (0 = at once; docs/passivity/README.md, \"The pulse train under "
+                 "delay\")")
+      ->check(CLI::Range(0.0, 10000.0))
+      ->capture_default_str();
+  bool no_energy_bounded_switch = false;
+  app.add_flag("--no-energy-bounded-switch", no_energy_bounded_switch,
+               "let a new contact model put its whole stored energy into the loop at once (by "
+               "default it may raise the contact potential at the tool by no more than the "
+               "passivity observer holds spare; beyond that its surface is moved out of the "
+               "tool and given back as that energy allows, within --switch-offset-release-ms)");
+  double switch_offset_release_ms = ht::StationConfig{}.switch_offset_release_ms;
+  app.add_option("--switch-offset-release-ms", switch_offset_release_ms,
+                 "the longest the energy-bounded switch holds its surface offset, ms (0 = as "
+                 "long as the energy budget says)")
+      ->check(CLI::Range(0.0, 1e9))
+      ->capture_default_str();
   app.add_option("--model-timeout", model_timeout_s,
                  "fade the force to zero when the contact model is older than this, s")
       ->check(CLI::Range(0.01, 60.0))
@@ -347,6 +367,11 @@ int main(int argc, char** argv) {
     config.hunt_crossley_s_per_m = hunt_crossley;
     config.passivity_reserve_j = passivity_reserve_mj * 1e-3;
     config.passivity_refill_fraction = passivity_refill_pct / 100.0;
+    config.passivity_release_ms = passivity_release_ms;
+    config.energy_bounded_switch = !no_energy_bounded_switch;
+    config.switch_offset_release_ms = switch_offset_release_ms > 0.0
+                                          ? switch_offset_release_ms
+                                          : std::numeric_limits<double>::infinity();
     config.safety.model_timeout_s = model_timeout_s;
     config.tool_state_deadband.weber_fraction =
         tool_state_deadband_pct.value_or(deadband_pct) / 100.0;

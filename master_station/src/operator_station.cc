@@ -115,6 +115,14 @@ void StationConfig::Validate() const {
     throw std::invalid_argument("passivity refill fraction must be within [0, 1), got " +
                                 std::to_string(passivity_refill_fraction));
   }
+  if (!(passivity_release_ms >= 0.0 && passivity_release_ms <= 10000.0)) {
+    throw std::invalid_argument("passivity release must be within 0..10000 ms, got " +
+                                std::to_string(passivity_release_ms));
+  }
+  if (!(switch_offset_release_ms > 0.0)) {  // +∞ allowed; NaN refused
+    throw std::invalid_argument("switch offset release must be > 0 ms, got " +
+                                std::to_string(switch_offset_release_ms));
+  }
   if (max_grid < 0 || max_grid > 65535) throw std::invalid_argument("max grid must be 0..65535");
   coupling.Validate();
   safety.Validate();
@@ -357,6 +365,10 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   tick_config.passivity_max_damping_ns_per_m = 4.0 * caps.max_damping_ns_per_m;
   tick_config.passivity_reserve_j = config.passivity_reserve_j;
   tick_config.passivity_refill_fraction = config.passivity_refill_fraction;
+  tick_config.passivity_release_ticks =
+      static_cast<int>(std::lround(config.passivity_release_ms * 1e-3 * config.loop_rate_hz));
+  tick_config.energy_bounded_switch = config.energy_bounded_switch;
+  tick_config.switch_offset_release_ms = config.switch_offset_release_ms;
   tick_config.h_s = h;
   tick_config.max_contact_force_n = config.max_contact_force_n > 0.0
                                         ? config.max_contact_force_n
@@ -592,20 +604,28 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   s["force_clamped_ticks"] = sc.clamped;
   s["operator_energy_in_J"] = passivity.energy_in_j();
   s["operator_energy_out_J"] = passivity.energy_out_j();
-  s["passivity"] = {{"enabled", config.passivity},
-                    {"observed_energy_J", passivity.observed_energy_j()},
-                    {"dissipated_J", passivity.dissipated_j()},
-                    {"active_ticks", passivity.active_ticks()},
-                    {"max_damping_ns_per_m", passivity.max_alpha()},
-                    {"scaled_ticks", passivity.scaled_ticks()},
-                    {"force_scaled_away_Ns", passivity.force_scaled_away_ns()},
-                    {"force_damped_away_Ns", passivity.force_damped_away_ns()},
-                    {"scaled_away_J", passivity.scaled_away_j()},
-                    {"reserve_J", config.passivity_reserve_j},
-                    {"refill_fraction", config.passivity_refill_fraction},
-                    {"refill_ticks", passivity.refill_ticks()},
-                    {"refilled_J", passivity.refilled_j()},
-                    {"force_refilled_Ns", passivity.force_refilled_ns()}};
+  s["passivity"] = {
+      {"enabled", config.passivity},
+      {"observed_energy_J", passivity.observed_energy_j()},
+      {"dissipated_J", passivity.dissipated_j()},
+      {"active_ticks", passivity.active_ticks()},
+      {"max_damping_ns_per_m", passivity.max_alpha()},
+      {"scaled_ticks", passivity.scaled_ticks()},
+      {"force_scaled_away_Ns", passivity.force_scaled_away_ns()},
+      {"force_damped_away_Ns", passivity.force_damped_away_ns()},
+      {"scaled_away_J", passivity.scaled_away_j()},
+      {"reserve_J", config.passivity_reserve_j},
+      {"refill_fraction", config.passivity_refill_fraction},
+      {"release_ms", config.passivity_release_ms},
+      {"energy_bounded_switch", config.energy_bounded_switch},
+      {"switch_offset_release_ms", std::isfinite(config.switch_offset_release_ms)
+                                       ? nlohmann::json(config.switch_offset_release_ms)
+                                       : nlohmann::json(nullptr)},
+      {"switch_offset_ticks", tick.counters().switch_offset_ticks},
+      {"switch_offset_max_um", tick.counters().switch_offset_max_m * 1e6},
+      {"refill_ticks", passivity.refill_ticks()},
+      {"refilled_J", passivity.refilled_j()},
+      {"force_refilled_Ns", passivity.force_refilled_ns()}};
   {
     // Issue 33: where the loop's energy comes from. Within one contact model the loop is
     // conservative; the switches (a new model, each blend step, a model dropped mid-blend)

@@ -26,6 +26,18 @@ OperatorTick::OperatorTick(const OperatorTickConfig& config, const RigidTransfor
     throw std::invalid_argument("passivity release ticks must be >= 0, got " +
                                 std::to_string(config.passivity_release_ticks));
   }
+  if (!(config.switch_energy_spend_fraction > 0.0 && config.switch_energy_spend_fraction <= 1.0)) {
+    throw std::invalid_argument("switch energy spend fraction must be in (0, 1], got " +
+                                std::to_string(config.switch_energy_spend_fraction));
+  }
+  if (!(config.switch_bound_min_age_ms >= 0.0)) {
+    throw std::invalid_argument("switch bound min age must be >= 0 ms, got " +
+                                std::to_string(config.switch_bound_min_age_ms));
+  }
+  if (!(config.switch_offset_release_ms > 0.0)) {
+    throw std::invalid_argument("switch offset release must be > 0 ms, got " +
+                                std::to_string(config.switch_offset_release_ms));
+  }
   passivity_.set_energy_reserve(config.passivity_reserve_j, config.passivity_refill_fraction);
   simulator_.set_max_contact_force(config.max_contact_force_n);
   simulator_.set_contact_damping_hunt_crossley(config.hunt_crossley_s_per_m);
@@ -55,6 +67,7 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
   // The contact potential before a model or blend change (issue 33's attribution): evaluated
   // only on ticks that change it.
   const bool potential_changes = in.arrived != nullptr || blend_tick_ < config_.model_blend_ticks;
+  bool took_model = false;  // a new model was taken this tick (stage 1)
   const double U_before = potential_changes ? LoopPotential(tool_.X_WT) : 0.0;
 
   // Stage 1: the contact model in use. A model that arrives is taken even while the device read
@@ -76,7 +89,11 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
       previous_model_ = model_;  // blended out over the next model_blend_ticks ticks
       blend_tick_ = 0;
       model_ = in.arrived->model;
-      depth_offset_m_ = 0.0;       // the new model as it came; BoundSwitchEnergy may offset it
+      // The new model as it came: BoundSwitchEnergy gives it the offset in use (an episode
+      // goes on across models) or, at an onset, its own.
+      inherited_offset_m_ = depth_offset_m_;
+      depth_offset_m_ = 0.0;
+      took_model = true;
       model_stamp_ = *in.arrived;  // the stamp only: the model itself is in model_
       have_model_ = true;
       ++counters_.models_used;
@@ -104,7 +121,7 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
     const bool blending = blend_tick_ < config_.model_blend_ticks;
     if (blending) ++blend_tick_;
     if (config_.energy_bounded_switch && have_model_) {
-      BoundSwitchEnergy(potential_changes, potential_changes ? U_before : 0.0);
+      BoundSwitchEnergy(took_model, potential_changes ? U_before : 0.0, out.model_age_ms);
     }
     out.depth_offset_m = depth_offset_m_;
     AttributeSwitch(potential_changes, U_before, out.model_age_ms);  // at the weights stepped
@@ -178,39 +195,61 @@ void OperatorTick::SetDepthOffset(double offset_m) noexcept {
   depth_offset_m_ = offset_m;
 }
 
-void OperatorTick::BoundSwitchEnergy(bool potential_changes, double U_ref) noexcept {
-  const double o = depth_offset_m_;
-  if (!potential_changes && o == 0.0) return;  // nothing changed and nothing to give back
+void OperatorTick::BoundSwitchEnergy(bool took_model, double U_before,
+                                     double model_age_ms) noexcept {
   const double spare = std::max(0.0, passivity_.observed_energy_j() -
                                          (config_.passivity ? passivity_.energy_reserve_j() : 0.0));
-  if (!potential_changes) U_ref = LoopPotential(tool_.X_WT);  // the offset's return alone
-  const double limit = U_ref + config_.switch_energy_spend_fraction * spare;
-  // The largest offset worth looking at: where no contact of model_ is in (its U is then 0).
-  const ContactModelEvaluation now = EvaluateContactModel(model_, tool_.X_WT);
-  // A tick that changes nothing only gives the offset back (it never grows there).
-  double o_hi = potential_changes && now.active_contacts > 0 ? o + now.max_depth_m : o;
-  // On a tick that only gives the offset back, it shrinks at least at the release rate.
-  if (!potential_changes && std::isfinite(config_.switch_offset_release_ms)) {
-    o_hi = std::min(o_hi, std::max(0.0, o - depth_offset_peak_m_ * config_.h_s * 1e3 /
-                                                config_.switch_offset_release_ms));
-  }
-  SetDepthOffset(0.0);
-  if (!std::isfinite(o_hi) || LoopPotential(tool_.X_WT) <= limit) return;  // within the budget
-  // U at the tool falls as the offset grows: bisect for the smallest offset within the limit.
-  double lo = 0.0, hi = o_hi;
-  for (int k = 0; k < 16; ++k) {
-    const double mid = 0.5 * (lo + hi);
-    SetDepthOffset(mid);
-    if (LoopPotential(tool_.X_WT) <= limit) {
-      hi = mid;
-    } else {
-      lo = mid;
+  const double budget = config_.switch_energy_spend_fraction * spare;
+  // The smallest offset in [0, o_hi] whose loop potential at the tool is within `limit`, or
+  // o_hi when none is (U at the tool falls as the offset grows).
+  const auto smallest_within = [&](double o_hi, double limit) {
+    SetDepthOffset(0.0);
+    if (!std::isfinite(o_hi) || o_hi <= 0.0 || LoopPotential(tool_.X_WT) <= limit) return 0.0;
+    double lo = 0.0, hi = o_hi;
+    for (int k = 0; k < 16; ++k) {
+      const double mid = 0.5 * (lo + hi);
+      SetDepthOffset(mid);
+      if (LoopPotential(tool_.X_WT) <= limit) {
+        hi = mid;
+      } else {
+        lo = mid;
+      }
     }
+    return hi;
+  };
+  if (took_model) {
+    const double inherited = inherited_offset_m_;
+    inherited_offset_m_ = 0.0;
+    if (inherited == 0.0) {
+      // An onset: the loop rendered no contact at the tool and this model has one, whose whole
+      // stored energy would go in at once; it may add at most the budget (old models only).
+      if (!(U_before <= 0.0) || !(model_age_ms >= config_.switch_bound_min_age_ms)) return;
+      const ContactModelEvaluation raw = EvaluateContactModel(model_, tool_.X_WT);
+      if (raw.active_contacts == 0) return;
+      const double o = smallest_within(raw.max_depth_m, U_before + budget);
+      SetDepthOffset(o);
+      depth_offset_peak_m_ = o;
+      if (o > 0.0) {
+        ++counters_.switch_offset_ticks;
+        counters_.switch_offset_max_m = std::max(counters_.switch_offset_max_m, o);
+      }
+      return;
+    }
+    SetDepthOffset(inherited);  // the episode goes on with the new model
   }
-  SetDepthOffset(hi);
-  if (potential_changes) depth_offset_peak_m_ = std::max(depth_offset_peak_m_, hi);
-  ++counters_.switch_offset_ticks;
-  counters_.switch_offset_max_m = std::max(counters_.switch_offset_max_m, hi);
+  const double o = depth_offset_m_;
+  if (o == 0.0) return;
+  // Giving the offset back: at least at the release rate (from the onset's offset), and further
+  // as far as the budget pays for.
+  double o_hi = o;
+  if (std::isfinite(config_.switch_offset_release_ms)) {
+    o_hi = std::max(
+        0.0, o - depth_offset_peak_m_ * config_.h_s * 1e3 / config_.switch_offset_release_ms);
+  }
+  const double limit = LoopPotential(tool_.X_WT) + budget;  // U at the offset in use
+  const double o_new = smallest_within(o_hi, limit);
+  SetDepthOffset(o_new);
+  if (o_new > 0.0) ++counters_.switch_offset_ticks;
 }
 
 double OperatorTick::LoopPotential(const RigidTransform& X_WT) const noexcept {

@@ -6,6 +6,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
@@ -120,6 +121,20 @@ struct StationConfig {
   /// The largest change of the wrench the reserve's refill may make, a fraction of the wrench
   /// (in [0, 1)).
   double passivity_refill_fraction = 0.05;
+  /// The passivity stage's release (ms, ≥ 0; 0 = off): a force the stage cut comes back over
+  /// this long instead of on the next tick (OperatorTickConfig::passivity_release_ticks).
+  /// Energy-bounded onsets (OperatorTickConfig::energy_bounded_switch) and the longest their
+  /// depth offset is held (ms, > 0; +∞ = as the energy budget allows). On by default together
+  /// (issue 33, docs/passivity/README.md, "The pulse train under delay"): without them a late
+  /// model's stored energy was cut by the guard in one-tick pulses of the whole force. Loopback,
+  /// 5 s, two runs a cell, before → after: device-force steps above 0.2 N 176–196 → 11–12 on the
+  /// gear at 75 ms one way, 17–27 → 4–5 at 150 ms, 190–291 → 10–12 on the stiff wall at 50 ms
+  /// with 10 % loss, 62–152 → 1 at 150 ms; guard + damping 18.8–19.2 → 11.6–12.0 %,
+  /// 8.3–8.7 → 5.1–5.2 %, 10.5–18.4 → 2.9–5.2 %, 13.9–27.6 → 3.3–3.6 % of the device force's
+  /// impulse, which itself falls 2–8 %; nothing changes undelayed or at 25 ms.
+  double passivity_release_ms = 20.0;
+  bool energy_bounded_switch = true;
+  double switch_offset_release_ms = 200.0;
   /// The safety stage before the device (force/torque caps are further bounded by the device's
   /// capabilities; the contact model's age is measured on the local clock from its send time).
   SafetyLimits safety{.max_force_n = 1e9, .max_torque_nm = 1e9, .model_timeout_s = 0.5};

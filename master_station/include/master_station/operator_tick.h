@@ -48,25 +48,33 @@ struct OperatorTickConfig {
   /// (1.7 N at 170 Hz on fig75 at 75 ms one way; docs/passivity/README.md). Scaling a wrench
   /// down keeps the observed energy non-negative (its power scales with it), so passivity holds.
   int passivity_release_ticks = 0;
-  /// Energy-bounded model switches (false = off): a new contact model, and each step of its
-  /// blend, may raise the contact potential U at the tool's pose by no more than the energy the
-  /// passivity observer holds spare, switch_energy_spend_fraction × max(0, E − reserve); beyond
-  /// that the model in use is rendered with a depth offset o ≥ 0 (every δ_i less o: the surface
-  /// moved out of the tool), the smallest that keeps the bound. Each later tick gives o back as
-  /// the same budget allows, so the surface returns as the operator's own work (pressing into
-  /// it) and the observer's store pay for it, instead of the tool being pushed out by the stored
-  /// energy of a model that came late and the guard cutting the device's force until the hand
-  /// has paid (the pulse train of docs/passivity/README.md). A passive model update in the sense
-  /// of model-mediated teleoperation (Mitra & Niemeyer 2008; Xu, Cizmeci & Steinbach 2015).
+  /// Energy-bounded onsets (false = off): a contact model that arrives while the loop renders no
+  /// contact at the tool and has one there (an onset: the tool already inside the surface of a
+  /// model that came late) may raise the contact potential U at the tool's pose by no more than
+  /// the energy the passivity observer holds spare, switch_energy_spend_fraction ×
+  /// max(0, E − reserve); beyond that it is rendered with a depth offset o ≥ 0 (every δ_i less
+  /// o: the surface moved out of the tool), the smallest that keeps the bound. The offset goes on
+  /// with the models that follow and is given back every tick, as far as the same budget pays
+  /// for (the operator's own work pressing in, the observer's store) and at least over
+  /// switch_offset_release_ms, instead of the tool being pushed out by the stored energy at once
+  /// and the guard cutting the device's force until the hand has paid (the pulse train of
+  /// docs/passivity/README.md). A passive model update in the sense of model-mediated
+  /// teleoperation (Mitra & Niemeyer 2008; Xu, Cizmeci & Steinbach 2015).
   bool energy_bounded_switch = false;
   /// The share of the observer's spare energy a tick may spend on a switch or on giving the
   /// offset back ((0, 1]).
-  double switch_energy_spend_fraction = 0.1;
+  double switch_energy_spend_fraction = 1.0;
   /// The longest an offset is held (ms, > 0; +∞ = as long as the budget says): whatever the
-  /// budget, the offset shrinks each tick by at least its largest value since the last switch
-  /// over this time, so that a surface whose return the budget cannot pay for (a hand resting
-  /// on it) comes back anyway and the passivity stage takes the rest.
+  /// budget, the offset shrinks each tick by at least its value at the onset over this time, so
+  /// that a surface whose return the budget cannot pay for (a hand resting on it) comes back
+  /// anyway and the passivity stage takes the rest.
   double switch_offset_release_ms = std::numeric_limits<double>::infinity();
+  /// The bound applies to models at least this old (ms, the tick's model_age_ms, ≥ 0): a model
+  /// answering a pose under 10 ms old stores little the hand has not already paid for, and the
+  /// passivity stage's reserve handles it. (Bounding every switch, an earlier form of this
+  /// option, held offsets of up to 0.38 mm on a third of fig76's undelayed ticks and made the
+  /// simulated tool's contact force step: steps above 0.2 N 69 → 2,137 in 12 s.)
+  double switch_bound_min_age_ms = 10.0;
   /// Tick length h (s).
   double h_s = 1e-3;
   /// Bound on each contact's force on the simulated tool (N; +∞ = none): DESIGN.md §5's bounded
@@ -158,7 +166,9 @@ struct OperatorTickCounters {
 class OperatorTick {
  public:
   /// The workspace starts at X_WM and the tool at `tool_start`. Throws std::invalid_argument for
-  /// bad inertia, coupling or safety limits, or model_blend_ticks < 1.
+  /// bad inertia, coupling or safety limits, model_blend_ticks < 1, passivity_release_ticks < 0,
+  /// switch_energy_spend_fraction outside (0, 1], switch_offset_release_ms not > 0 or
+  /// switch_bound_min_age_ms not ≥ 0.
   OperatorTick(const OperatorTickConfig& config, const RigidTransform& X_WM,
                const ToolState& tool_start);
 
@@ -198,12 +208,16 @@ class OperatorTick {
   double passivity_release_gain_ = 1.0;
   /// The depth offset applied to model_'s depths (m, ≥ 0; energy_bounded_switch).
   double depth_offset_m_ = 0.0;
-  double depth_offset_peak_m_ = 0.0;  ///< the largest offset since the last switch (m)
+  double depth_offset_peak_m_ = 0.0;  ///< the offset at the episode's onset (m)
+  double inherited_offset_m_ = 0.0;   ///< the offset in use when a new model was taken (m)
   /// Sets model_'s depth offset to `offset_m` (shifts every contact's and kink plane's depth).
   void SetDepthOffset(double offset_m) noexcept;
-  /// The energy bound of a switch or a blend step (potential_changes) or the offset's return:
-  /// the smallest offset whose loop potential at the tool is within the budget of `U_ref`.
-  void BoundSwitchEnergy(bool potential_changes, double U_ref) noexcept;
+  /// The energy-bounded onset, after stage 1 and the blend step: at an onset (`took_model`
+  /// with no offset in use, no contact potential before it, `U_before`, and a model at least
+  /// switch_bound_min_age_ms old) the smallest offset that keeps the potential at the tool
+  /// within the budget; otherwise the offset in use (carried to a new model) given back, at
+  /// least at the release rate and further as the budget pays for.
+  void BoundSwitchEnergy(bool took_model, double U_before, double model_age_ms) noexcept;
   /// U of the blended pair at X_WT: model_ at weight blend_tick_/ticks, previous_model_ at the
   /// rest (ContactModelEvaluation::potential_energy_j; J).
   double LoopPotential(const RigidTransform& X_WT) const noexcept;
