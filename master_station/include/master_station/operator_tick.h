@@ -59,7 +59,8 @@ struct OperatorTickConfig {
   /// switch_offset_release_ms, instead of the tool being pushed out by the stored energy at once
   /// and the guard cutting the device's force until the hand has paid (the pulse train of
   /// docs/passivity/README.md). A passive model update in the sense of model-mediated
-  /// teleoperation (Mitra & Niemeyer 2008; Xu, Cizmeci & Steinbach 2015).
+  /// teleoperation (Mitra & Niemeyer, DSCC 2008; Song, Ding, Shang & Liang, IJARS 2018, who
+  /// restrain the force step of a model update).
   bool energy_bounded_switch = false;
   /// The share of the observer's spare energy a tick may spend on a switch or on giving the
   /// offset back ((0, 1]).
