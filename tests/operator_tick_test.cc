@@ -362,11 +362,20 @@ TEST(OperatorTick, AnEnergyBoundedSwitchCreatesNoMoreThanTheObserverHoldsSpare) 
     // The offset is the wall's depth at the tool (12 mm), to the bisection's resolution.
     EXPECT_NEAR(first.depth_offset_m, 12e-3, 5e-6) << release_ms;
     EXPECT_LT(glm::length(first.step.F_contact_T_W.force), 8000.0 * 12e-3 / 16384.0 * 2.0);
+    // The next model (the same wall, as old) carries the offset on: no new onset, no jump.
+    in.now_ns += 1000000;
+    ArrivedModel again = Wall(in.now_ns - 150000000);
+    in.arrived = &again;
+    const OperatorTickOutput second = tick.Step(in);
+    in.arrived = nullptr;
+    EXPECT_GT(second.depth_offset_m, 0.9 * first.depth_offset_m) << release_ms;
+    EXPECT_LE(second.depth_offset_m, first.depth_offset_m + 1e-15) << release_ms;
+    EXPECT_LE(tick.counters().switch_energy_created_j, 1e-3 * U_wall) << release_ms;
     // The handle held still: without a release time the offset stays (nothing pays for it); with
     // one it is gone within that time.
-    double offset = first.depth_offset_m, min_energy = 0.0;
+    double offset = second.depth_offset_m, min_energy = 0.0;
     std::int64_t allocations = 0;
-    for (int k = 0; k < 60; ++k) {
+    for (int k = 0; k < 59; ++k) {
       in.now_ns += 1000000;
       const std::int64_t before = Allocations();
       const OperatorTickOutput out = tick.Step(in);

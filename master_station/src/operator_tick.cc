@@ -89,10 +89,11 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
       previous_model_ = model_;  // blended out over the next model_blend_ticks ticks
       blend_tick_ = 0;
       model_ = in.arrived->model;
-      // The new model as it came: BoundSwitchEnergy gives it the offset in use (an episode
-      // goes on across models) or, at an onset, its own.
-      inherited_offset_m_ = depth_offset_m_;
+      // An offset in use goes on with the new model (an episode spans models); without one
+      // BoundSwitchEnergy may give it its own at an onset.
+      const double carried = depth_offset_m_;
       depth_offset_m_ = 0.0;
+      SetDepthOffset(carried);
       took_model = true;
       model_stamp_ = *in.arrived;  // the stamp only: the model itself is in model_
       have_model_ = true;
@@ -217,25 +218,20 @@ void OperatorTick::BoundSwitchEnergy(bool took_model, double U_before,
     }
     return hi;
   };
-  if (took_model) {
-    const double inherited = inherited_offset_m_;
-    inherited_offset_m_ = 0.0;
-    if (inherited == 0.0) {
-      // An onset: the loop rendered no contact at the tool and this model has one, whose whole
-      // stored energy would go in at once; it may add at most the budget (old models only).
-      if (!(U_before <= 0.0) || !(model_age_ms >= config_.switch_bound_min_age_ms)) return;
-      const ContactModelEvaluation raw = EvaluateContactModel(model_, tool_.X_WT);
-      if (raw.active_contacts == 0) return;
-      const double o = smallest_within(raw.max_depth_m, U_before + budget);
-      SetDepthOffset(o);
-      depth_offset_peak_m_ = o;
-      if (o > 0.0) {
-        ++counters_.switch_offset_ticks;
-        counters_.switch_offset_max_m = std::max(counters_.switch_offset_max_m, o);
-      }
-      return;
+  if (took_model && depth_offset_m_ == 0.0) {
+    // An onset: the loop rendered no contact at the tool and this model has one, whose whole
+    // stored energy would go in at once; it may add at most the budget (old models only).
+    if (!(U_before <= 0.0) || !(model_age_ms >= config_.switch_bound_min_age_ms)) return;
+    const ContactModelEvaluation raw = EvaluateContactModel(model_, tool_.X_WT);
+    if (raw.active_contacts == 0) return;
+    const double o = smallest_within(raw.max_depth_m, U_before + budget);
+    SetDepthOffset(o);
+    depth_offset_peak_m_ = o;
+    if (o > 0.0) {
+      ++counters_.switch_offset_ticks;
+      counters_.switch_offset_max_m = std::max(counters_.switch_offset_max_m, o);
     }
-    SetDepthOffset(inherited);  // the episode goes on with the new model
+    return;
   }
   const double o = depth_offset_m_;
   if (o == 0.0) return;

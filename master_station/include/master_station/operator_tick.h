@@ -210,14 +210,13 @@ class OperatorTick {
   /// The depth offset applied to model_'s depths (m, ≥ 0; energy_bounded_switch).
   double depth_offset_m_ = 0.0;
   double depth_offset_peak_m_ = 0.0;  ///< the offset at the episode's onset (m)
-  double inherited_offset_m_ = 0.0;   ///< the offset in use when a new model was taken (m)
   /// Sets model_'s depth offset to `offset_m` (shifts every contact's and kink plane's depth).
   void SetDepthOffset(double offset_m) noexcept;
   /// The energy-bounded onset, after stage 1 and the blend step: at an onset (`took_model`
   /// with no offset in use, no contact potential before it, `U_before`, and a model at least
   /// switch_bound_min_age_ms old) the smallest offset that keeps the potential at the tool
-  /// within the budget; otherwise the offset in use (carried to a new model) given back, at
-  /// least at the release rate and further as the budget pays for.
+  /// within the budget; otherwise the offset in use (stage 1 carries it to a new model) given
+  /// back, at least at the release rate and further as the budget pays for.
   void BoundSwitchEnergy(bool took_model, double U_before, double model_age_ms) noexcept;
   /// U of the blended pair at X_WT: model_ at weight blend_tick_/ticks, previous_model_ at the
   /// rest (ContactModelEvaluation::potential_energy_j; J).
