@@ -54,13 +54,11 @@ struct Arm {
   std::string name;
   ht::ToolStateDeadbandConfig tool;
   ht::ContactModelDeadbandConfig model;
-  /// The operator tick's passivity options (OperatorTickConfig), master_station's defaults
-  /// unless the arm says otherwise (the reference has the defaults).
-  int passivity_release_ticks =
-      static_cast<int>(std::lround(ht::StationConfig{}.passivity_release_ms));
-  bool energy_bounded_switch = ht::StationConfig{}.energy_bounded_switch;
+  /// The operator station's settings (master_station's defaults unless the arm says otherwise:
+  /// the passivity release and the energy-bounded onsets), and the one tick option the station
+  /// does not set.
+  ht::StationConfig station;
   double switch_energy_spend_fraction = ht::OperatorTickConfig{}.switch_energy_spend_fraction;
-  double switch_offset_release_ms = ht::StationConfig{}.switch_offset_release_ms;
 };
 
 /// What one arm's run gives, tick by tick and in all.
@@ -96,13 +94,9 @@ double ParseNumber(const std::string& key, const std::string& text) {
 /// rotational_stiffness_floor (the contact-model floor scales, as slave_sim's
 /// --model-deadband-*-floor). Defaults: master_station's and slave_sim's, deadband 10 %.
 Arm ParseArm(const std::string& text) {
-  Arm arm;
+  Arm arm;  // the floors and hold: ToolStateDeadbandConfig's defaults, master_station's too
   arm.tool.weber_fraction = 0.1;
   arm.model.weber_fraction = 0.1;
-  // master_station's defaults (main.cc): the contact floors 0.2 mm and 20 mrad, hold 0.5 s.
-  arm.tool.contact_position_floor_scale_m = 2e-4;
-  arm.tool.contact_rotation_floor_scale_rad = 0.02;
-  arm.tool.contact_floor_hold_s = 0.5;
   const std::size_t colon = text.find(':');
   arm.name = text.substr(0, colon);
   if (arm.name.empty()) throw std::invalid_argument("--arm " + text + ": no name before ':'");
@@ -133,14 +127,14 @@ Arm ParseArm(const std::string& text) {
       arm.tool.contact_depth_floor_scale_m = v * 1e-6;
     } else if (key == "contact_hold_ms") {
       arm.tool.contact_floor_hold_s = v * 1e-3;
-    } else if (key == "release_ticks") {
-      arm.passivity_release_ticks = static_cast<int>(v);
+    } else if (key == "release_ticks") {  // ticks of 1 ms
+      arm.station.passivity_release_ms = v;
     } else if (key == "energy_bounded_switch") {
-      arm.energy_bounded_switch = v != 0.0;
+      arm.station.energy_bounded_switch = v != 0.0;
     } else if (key == "switch_spend") {
       arm.switch_energy_spend_fraction = v;
     } else if (key == "offset_release_ms") {  // 0 = as long as the budget says
-      arm.switch_offset_release_ms = v > 0.0 ? v : std::numeric_limits<double>::infinity();
+      arm.station.switch_offset_release_ms = v > 0.0 ? v : std::numeric_limits<double>::infinity();
     } else if (key == "force_floor") {
       arm.model.force_floor_scale_n = v;
     } else if (key == "torque_floor") {
@@ -155,6 +149,7 @@ Arm ParseArm(const std::string& text) {
   }
   arm.tool.Validate();
   arm.model.Validate();
+  arm.station.Validate();
   return arm;
 }
 
@@ -165,12 +160,12 @@ struct InFlight {
   T value;
 };
 
-struct RemoteState {
-  ht::wire::ToolStateMessage latest;
+/// A tool state as the remote node holds it: as decoded, its sequence number and the
+/// operator's send time (ns, the one clock).
+struct SentToolState {
+  ht::wire::ToolStateMessage message;
   std::uint64_t seq = 0;
-  std::int64_t sent_ns = 0;  ///< the operator's send time of `latest`
-  std::int64_t recv_ns = 0;
-  bool have = false;
+  std::int64_t sent_ns = 0;
 };
 
 struct Setup {
@@ -197,28 +192,8 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
   using namespace ht;
   const wire::SceneLayout layout = MakeSceneLayout(*setup.scene);
   const RigidTransform X_WM = layout.X_WT_home;
-  StationConfig station;  // master_station's defaults
   std::unique_ptr<Experiment> experiment = MakeExperiment(setup.experiment, setup.duration_s);
-  ExperimentScene scene_M;
-  scene_M.tool_extent_down_m = layout.tool_extent_down_m;
-  const RigidTransform X_MW = X_WM.Inverse();
-  for (int i = 0; i < layout.num_targets; ++i) {  // as RunOperatorStation does from the Welcome
-    const wire::WelcomeTarget& t = layout.targets[static_cast<std::size_t>(i)];
-    ExperimentTarget e;
-    e.box_min_M = glm::dvec3(std::numeric_limits<double>::infinity());
-    e.box_max_M = -e.box_min_M;
-    for (int c = 0; c < 8; ++c) {
-      const glm::dvec3 corner_W{(c & 1) ? t.box_max_W.x : t.box_min_W.x,
-                                (c & 2) ? t.box_max_W.y : t.box_min_W.y,
-                                (c & 4) ? t.box_max_W.z : t.box_min_W.z};
-      e.box_min_M = glm::min(e.box_min_M, X_MW * corner_W);
-      e.box_max_M = glm::max(e.box_max_M, X_MW * corner_W);
-    }
-    e.top_M = X_MW * t.top_W;
-    e.approach_z_M = e.top_M.z + t.approach_m;
-    scene_M.targets.push_back(e);
-  }
-  experiment->SetScene(scene_M);
+  experiment->SetScene(ExperimentSceneInM(layout, X_WM));  // as RunOperatorStation does
   std::unique_ptr<HapticDevice> device;
   double duration_s = setup.duration_s;
   if (!setup.replay_file.empty()) {
@@ -232,26 +207,11 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
   device->Open();
   const DeviceCapabilities caps = device->capabilities();
 
-  OperatorTickConfig tc;
-  tc.inertia = layout.tool_mass_kg > 0.0
-                   ? ToolInertia{layout.tool_mass_kg, layout.tool_inertia_diagonal_T}
-                   : station.tool_inertia;
-  tc.coupling = station.coupling;
-  tc.safety = station.safety;
-  tc.safety.max_force_n = std::max(1e-9, std::min(tc.safety.max_force_n, caps.max_force_n));
-  tc.safety.max_torque_nm = std::max(1e-9, std::min(tc.safety.max_torque_nm, caps.max_torque_nm));
-  tc.model_blend_ticks = station.model_blend_ticks;
-  tc.passivity = station.passivity;
-  tc.passivity_max_damping_ns_per_m = 4.0 * caps.max_damping_ns_per_m;
-  tc.passivity_reserve_j = station.passivity_reserve_j;
-  tc.passivity_refill_fraction = station.passivity_refill_fraction;
-  tc.h_s = 1e-3;
-  tc.passivity_release_ticks = arm.passivity_release_ticks;
-  tc.energy_bounded_switch = arm.energy_bounded_switch;
+  const ToolInertia inertia = layout.tool_mass_kg > 0.0
+                                  ? ToolInertia{layout.tool_mass_kg, layout.tool_inertia_diagonal_T}
+                                  : arm.station.tool_inertia;
+  OperatorTickConfig tc = OperatorTickConfigFor(arm.station, caps, inertia, 1e-3);
   tc.switch_energy_spend_fraction = arm.switch_energy_spend_fraction;
-  tc.switch_offset_release_ms = arm.switch_offset_release_ms;
-  tc.max_contact_force_n = station.max_contact_force_n;
-  tc.hunt_crossley_s_per_m = station.hunt_crossley_s_per_m;
   ToolState tool;
   tool.X_WT = X_WM * experiment->Target(0.0).X_MH;
   tool.X_WT.translation.x += setup.start_offset_m;
@@ -280,12 +240,12 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
   const std::int64_t keepalive_ns = static_cast<std::int64_t>(arm.tool.keepalive_s * 1e9);
   const auto ticks = static_cast<std::int64_t>(std::llround(duration_s * 1e3));
 
-  std::deque<InFlight<std::pair<wire::ToolStateMessage, std::uint64_t>>> to_remote;
+  std::deque<InFlight<SentToolState>> to_remote;
   std::deque<InFlight<ArrivedModel>> to_operator;
-  RemoteState remote;
-  ContactModel held_model{};  // the newest model the operator received (its deadband's)
+  SentToolState remote;              // the newest tool state the remote node holds
+  std::int64_t remote_recv_ns = -1;  // when it arrived (< 0: none yet)
+  ContactModel held_model{};         // the newest model the operator received (its deadband's)
   std::uint64_t tool_seq = 0, model_seq = 0;
-  std::map<std::uint64_t, std::int64_t> sent_time_of_seq;
   ArmRun run;
   run.duration_s = static_cast<double>(ticks) * 1e-3;
   ArrivedModel arrived;
@@ -335,38 +295,33 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
           static_cast<std::int64_t>(wire::EncodeCompactToolState(h, state, key).size);
       ++run.tool_states;
       if (uniform(loss_to_remote) >= setup.loss) {
-        to_remote.push_back({now + delay_ns, {received, tool_seq}});
-        sent_time_of_seq[tool_seq] = now;
+        to_remote.push_back({now + delay_ns, {received, tool_seq, now}});
       }
     }
     // The remote node, right after this tick's tool state has arrived: one step at the newest
     // state, extrapolated under a tool-state deadband as RemoteSession::ToolPoseForStep does.
     const std::int64_t t_r = now + delay_ns;
     while (!to_remote.empty() && to_remote.front().arrive_ns <= t_r) {
-      remote.latest = to_remote.front().value.first;
-      remote.seq = to_remote.front().value.second;
-      remote.sent_ns = sent_time_of_seq[remote.seq];
-      remote.recv_ns = to_remote.front().arrive_ns;
-      remote.have = true;
-      sent_time_of_seq.erase(remote.seq);
+      remote = to_remote.front().value;
+      remote_recv_ns = to_remote.front().arrive_ns;
       to_remote.pop_front();
     }
-    if (!remote.have) continue;
+    if (remote_recv_ns < 0) continue;
     const std::int64_t extrapolation_ns =
         arm.tool.weber_fraction > 0.0
-            ? std::clamp<std::int64_t>(t_r - remote.recv_ns, 0, keepalive_ns)
+            ? std::clamp<std::int64_t>(t_r - remote_recv_ns, 0, keepalive_ns)
             : 0;
-    const RigidTransform X_WT = ExtrapolatePose(remote.latest.X_WT, remote.latest.V_WT_W,
+    const RigidTransform X_WT = ExtrapolatePose(remote.message.X_WT, remote.message.V_WT_W,
                                                 static_cast<double>(extrapolation_ns) * 1e-9);
     StepTimings timings;
     wire::ContactModelMessage message;
-    message.model = pipeline.Step(X_WT, remote.seq, timings, remote.latest.V_WT_W);
+    message.model = pipeline.Step(X_WT, remote.seq, timings, remote.message.V_WT_W);
     const std::int64_t sent_ns = t_r + step_ns;
     const DeadbandReason model_why = model_deadband.Decide(message.model, sent_ns);
     ++run.model_decisions[static_cast<std::size_t>(model_why)];
     if (model_why == DeadbandReason::kNotSent) continue;
     message.tool_state_send_time_ns = remote.sent_ns + extrapolation_ns;
-    message.hold_ns = sent_ns - (remote.recv_ns + extrapolation_ns);
+    message.hold_ns = sent_ns - (remote_recv_ns + extrapolation_ns);
     message.remote_step_count = static_cast<std::uint64_t>(k + 1);
     wire::Header h;
     h.type = wire::MessageType::kCompactContactModel;

@@ -153,6 +153,65 @@ void StationConfig::Validate() const {
   }
 }
 
+ExperimentScene ExperimentSceneInM(const wire::SceneLayout& layout, const RigidTransform& X_WM) {
+  ExperimentScene scene_M;
+  scene_M.tool_extent_down_m = layout.tool_extent_down_m;
+  const RigidTransform X_MW = X_WM.Inverse();
+  const int n =
+      std::min(static_cast<int>(layout.num_targets), static_cast<int>(layout.targets.size()));
+  for (int i = 0; i < n; ++i) {
+    const wire::WelcomeTarget& t = layout.targets[static_cast<std::size_t>(i)];
+    ExperimentTarget e;
+    e.box_min_M = glm::dvec3(std::numeric_limits<double>::infinity());
+    e.box_max_M = -e.box_min_M;
+    for (int c = 0; c < 8; ++c) {  // the box's corners in M, and their bounds
+      const glm::dvec3 corner_W{(c & 1) ? t.box_max_W.x : t.box_min_W.x,
+                                (c & 2) ? t.box_max_W.y : t.box_min_W.y,
+                                (c & 4) ? t.box_max_W.z : t.box_min_W.z};
+      const glm::dvec3 corner_M = X_MW * corner_W;
+      e.box_min_M = glm::min(e.box_min_M, corner_M);
+      e.box_max_M = glm::max(e.box_max_M, corner_M);
+    }
+    e.top_M = X_MW * t.top_W;
+    e.approach_z_M = e.top_M.z + t.approach_m;
+    scene_M.targets.push_back(e);
+  }
+  return scene_M;
+}
+
+OperatorTickConfig OperatorTickConfigFor(const StationConfig& config,
+                                         const DeviceCapabilities& caps, const ToolInertia& inertia,
+                                         double h_s) {
+  OperatorTickConfig tick_config;
+  tick_config.inertia = inertia;
+  tick_config.coupling = config.coupling;
+  // The device's own limits bound the configured ones (a device without force output gets a
+  // vanishing limit: it renders nothing).
+  tick_config.safety = config.safety;
+  tick_config.safety.max_force_n =
+      std::max(1e-9, std::min(config.safety.max_force_n, caps.max_force_n));
+  tick_config.safety.max_torque_nm =
+      std::max(1e-9, std::min(config.safety.max_torque_nm, caps.max_torque_nm));
+  tick_config.model_blend_ticks = config.model_blend_ticks;
+  tick_config.passivity = config.passivity;
+  // The added damping is capped (4 x the device's rated damping: the controller acts for single
+  // ticks, well inside what a 1 kHz device renders); energy it cannot dissipate in one tick stays
+  // in the observer (E < 0) and is dissipated on the next ones.
+  tick_config.passivity_max_damping_ns_per_m = 4.0 * caps.max_damping_ns_per_m;
+  tick_config.passivity_reserve_j = config.passivity_reserve_j;
+  tick_config.passivity_refill_fraction = config.passivity_refill_fraction;
+  tick_config.passivity_release_ticks =
+      static_cast<int>(std::lround(config.passivity_release_ms * 1e-3 / h_s));
+  tick_config.energy_bounded_switch = config.energy_bounded_switch;
+  tick_config.switch_offset_release_ms = config.switch_offset_release_ms;
+  tick_config.h_s = h_s;
+  tick_config.max_contact_force_n = config.max_contact_force_n > 0.0
+                                        ? config.max_contact_force_n
+                                        : std::numeric_limits<double>::infinity();
+  tick_config.hunt_crossley_s_per_m = config.hunt_crossley_s_per_m;
+  return tick_config;
+}
+
 nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& device,
                                   Experiment& experiment) {
   config.Validate();
@@ -254,35 +313,17 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   RigidTransform X_WM = config.X_WM;
   ToolInertia tool_inertia = config.tool_inertia;
   ExperimentScene scene_M;
-  std::vector<ExperimentTarget>& targets_M = scene_M.targets;
+  const std::vector<ExperimentTarget>& targets_M = scene_M.targets;
   if (counters.connected.load()) {
     const wire::SceneLayout layout = network.layout();
     if (config.workspace_from_remote) {
       X_WM = layout.X_WT_home;
       if (config.workspace_origin_W) X_WM.translation = *config.workspace_origin_W;
     }
-    scene_M.tool_extent_down_m = layout.tool_extent_down_m;
     if (layout.tool_mass_kg > 0.0) {
       tool_inertia = {layout.tool_mass_kg, layout.tool_inertia_diagonal_T};
     }
-    const RigidTransform X_MW = X_WM.Inverse();
-    for (int i = 0; i < layout.num_targets; ++i) {
-      const wire::WelcomeTarget& t = layout.targets[static_cast<std::size_t>(i)];
-      ExperimentTarget e;
-      e.box_min_M = glm::dvec3(std::numeric_limits<double>::infinity());
-      e.box_max_M = -e.box_min_M;
-      for (int c = 0; c < 8; ++c) {  // the box's corners in M, and their bounds
-        const glm::dvec3 corner_W{(c & 1) ? t.box_max_W.x : t.box_min_W.x,
-                                  (c & 2) ? t.box_max_W.y : t.box_min_W.y,
-                                  (c & 4) ? t.box_max_W.z : t.box_min_W.z};
-        const glm::dvec3 corner_M = X_MW * corner_W;
-        e.box_min_M = glm::min(e.box_min_M, corner_M);
-        e.box_max_M = glm::max(e.box_max_M, corner_M);
-      }
-      e.top_M = X_MW * t.top_W;
-      e.approach_z_M = e.top_M.z + t.approach_m;
-      targets_M.push_back(e);
-    }
+    scene_M = ExperimentSceneInM(layout, X_WM);
   }
   const RigidTransform X_WM_start = X_WM;
   experiment.SetScene(scene_M);
@@ -347,33 +388,8 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
   std::atomic<int> progress_contacts{0}, progress_phase{0};
   std::atomic<double> progress_force{0.0}, progress_age_ms{-1.0};
   std::int64_t overruns = 0, device_write_faults = 0;
-  SafetyLimits safety_limits = config.safety;
-  // The device's own limits bound the configured ones (a device without force output gets a
-  // vanishing limit: it renders nothing).
-  safety_limits.max_force_n = std::max(1e-9, std::min(safety_limits.max_force_n, caps.max_force_n));
-  safety_limits.max_torque_nm =
-      std::max(1e-9, std::min(safety_limits.max_torque_nm, caps.max_torque_nm));
-  OperatorTickConfig tick_config;
-  tick_config.inertia = tool_inertia;
-  tick_config.coupling = config.coupling;
-  tick_config.safety = safety_limits;
-  tick_config.model_blend_ticks = config.model_blend_ticks;
-  tick_config.passivity = config.passivity;
-  // The added damping is capped (4 x the device's rated damping: the controller acts for single
-  // ticks, well inside what a 1 kHz device renders); energy it cannot dissipate in one tick stays
-  // in the observer (E < 0) and is dissipated on the next ones.
-  tick_config.passivity_max_damping_ns_per_m = 4.0 * caps.max_damping_ns_per_m;
-  tick_config.passivity_reserve_j = config.passivity_reserve_j;
-  tick_config.passivity_refill_fraction = config.passivity_refill_fraction;
-  tick_config.passivity_release_ticks =
-      static_cast<int>(std::lround(config.passivity_release_ms * 1e-3 * config.loop_rate_hz));
-  tick_config.energy_bounded_switch = config.energy_bounded_switch;
-  tick_config.switch_offset_release_ms = config.switch_offset_release_ms;
-  tick_config.h_s = h;
-  tick_config.max_contact_force_n = config.max_contact_force_n > 0.0
-                                        ? config.max_contact_force_n
-                                        : std::numeric_limits<double>::infinity();
-  tick_config.hunt_crossley_s_per_m = config.hunt_crossley_s_per_m;
+  const OperatorTickConfig tick_config = OperatorTickConfigFor(config, caps, tool_inertia, h);
+  const SafetyLimits& safety_limits = tick_config.safety;
   OperatorTick tick(tick_config, X_WM, tool);
   const PassivityController& passivity = tick.passivity();
   const WrenchSafetyFilter& safety = tick.safety();

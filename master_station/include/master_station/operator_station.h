@@ -15,8 +15,10 @@
 #include "haptic_core/wrench_safety.h"
 #include "master_station/experiment.h"
 #include "master_station/haptic_device.h"
+#include "master_station/operator_tick.h"
 #include "transport/auth.h"
 #include "transport/deadband.h"
+#include "transport/messages.h"
 #include "transport/udp_socket.h"
 
 namespace ht {
@@ -165,6 +167,22 @@ struct StationConfig {
   /// without a frames folder or out_dir, a window display without a display server, ...).
   void Validate() const;
 };
+
+/// The experiment's scene in the device base M from a Welcome's layout (X_WM: the workspace,
+/// M in W): each target's bounds in W taken through its eight corners into an axis-aligned box
+/// in M (m), its top and approach height in M, and the tool's extent below its centre (m). At
+/// most layout.targets' capacity of targets; never throws but std::bad_alloc.
+ExperimentScene ExperimentSceneInM(const wire::SceneLayout& layout, const RigidTransform& X_WM);
+
+/// The operator tick's configuration the station runs with a device of capabilities `caps`, a
+/// tool of `inertia` (kg, kg·m² along T's axes) and a tick of `h_s` (s, > 0): the configured
+/// force and torque limits bounded by the device's (N, N·m; a device without force output gets
+/// 1e-9), the passivity controller's damping capped at 4 × the device's rated damping (N·s/m),
+/// passivity_release_ms in ticks (rounded), a contact-force bound of 0 read as none. Does not
+/// validate (the tick's constructor throws std::invalid_argument for what it refuses).
+OperatorTickConfig OperatorTickConfigFor(const StationConfig& config,
+                                         const DeviceCapabilities& caps, const ToolInertia& inertia,
+                                         double h_s);
 
 /// Runs `experiment` with `device` against the remote node: opens an authenticated session
 /// (Hello/Welcome; the Welcome's scene layout places the workspace and is given to the experiment
