@@ -35,13 +35,15 @@
 #include <vector>
 
 #include "haptic_core/demo/demo_scenes.h"
-#include "haptic_core/gpu_penetration_depth.h"
+#include "haptic_core/penetration_depth_backend.h"
 #include "haptic_core/remote_step.h"
 #include "master_station/experiment.h"
 #include "master_station/operator_station.h"
 #include "master_station/operator_tick.h"
 #include "master_station/replay_device.h"
 #include "master_station/simulated_operator.h"
+#include "slave_sim/benchmark_scenes.h"
+#include "slave_sim/frontier.h"
 #include "slave_sim/remote_node.h"
 #include "transport/auth.h"
 #include "transport/deadband.h"
@@ -59,6 +61,9 @@ struct Arm {
   /// does not set.
   ht::StationConfig station;
   double switch_energy_spend_fraction = ht::OperatorTickConfig{}.switch_energy_spend_fraction;
+  /// The remote step's setting, by its frontier name (speed_error_frontier --list-settings):
+  /// its PipelineOptions and CPU backend choices. Empty: the run's own (--reference-setting).
+  std::string setting;
 };
 
 /// What one arm's run gives, tick by tick and in all.
@@ -92,7 +97,9 @@ double ParseNumber(const std::string& key, const std::string& text) {
 /// keepalive_ms (both), contact_floor_mm, contact_floor_mrad, contact_depth_floor_um,
 /// contact_hold_ms (tool states), force_floor, torque_floor, stiffness_floor,
 /// rotational_stiffness_floor (the contact-model floor scales, as slave_sim's
-/// --model-deadband-*-floor). Defaults: master_station's and slave_sim's, deadband 10 %.
+/// --model-deadband-*-floor), release_ticks, energy_bounded_switch, switch_spend,
+/// offset_release_ms (the operator tick's passivity options), setting (a frontier setting's name:
+/// the remote step's options). Defaults: master_station's and slave_sim's, deadband 10 %.
 Arm ParseArm(const std::string& text) {
   Arm arm;  // the floors and hold: ToolStateDeadbandConfig's defaults, master_station's too
   arm.tool.weber_fraction = 0.1;
@@ -110,6 +117,11 @@ Arm ParseArm(const std::string& text) {
       throw std::invalid_argument("--arm " + text + ": '" + item + "' is not KEY=VALUE");
     }
     const std::string key = item.substr(0, eq);
+    if (key == "setting") {  // the one key that takes a name
+      arm.setting = item.substr(eq + 1);
+      ht::FrontierSettingNamed(arm.setting);  // throws naming it when there is none
+      continue;
+    }
     const double v = ParseNumber(key, item.substr(eq + 1));
     if (key == "deadband") {
       arm.tool.weber_fraction = arm.model.weber_fraction = v / 100.0;
@@ -170,7 +182,10 @@ struct SentToolState {
 
 struct Setup {
   const ht::HapticScene* scene = nullptr;
-  ht::PipelineOptions pipeline;
+  /// The remote step's setting when an arm names none (a frontier setting's name).
+  std::string setting = "default";
+  /// With --translation-patch: every model carries its patch, whatever the round trip.
+  bool translation_patch = false;
   std::string replay_file;
   std::string experiment = "fig75";
   double duration_s = 5.0;
@@ -219,16 +234,21 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
 
   // The translation patches by the round trip, as the remote node's default
   // (RemoteNodeConfig::translation_patch_rtt_ms, 10 ms): here on from the first step.
-  PipelineOptions options = setup.pipeline;
-  if (2.0 * setup.delay_ms + setup.step_ms >= RemoteNodeConfig{}.translation_patch_rtt_ms) {
+  const FrontierSetting setting =
+      FrontierSettingNamed(arm.setting.empty() ? setup.setting : arm.setting);
+  PipelineOptions options = PipelineOptionsFor(setting);
+  options.texture_threads = 1;
+  if (setup.translation_patch ||
+      2.0 * setup.delay_ms + setup.step_ms >= RemoteNodeConfig{}.translation_patch_rtt_ms) {
     options.depth_refinement.translation_patch = true;
   }
-  std::string backend_message;  // the CPU backend, as slave_sim --pd-backend cpu makes it
+  // The CPU backend with the setting's texture path and rotation gradient (as the frontier makes
+  // it; with the default setting, what slave_sim --pd-backend cpu makes).
   HapticTexturePipeline pipeline(
       *setup.scene, options,
-      MakePenetrationDepthBackend(PdBackendChoice::kCpu, GpuPenetrationDepthOptions{},
-                                  options.max_window_resolution(), backend_message,
-                                  options.texture_threads, options.rotation_gradient));
+      std::make_unique<CpuPenetrationDepthBackend>(std::max(2, options.max_window_resolution()),
+                                                   setting.texture_path, options.texture_threads,
+                                                   setting.rotation_gradient));
   ToolStateDeadband tool_deadband(arm.tool);
   ContactModelDeadband model_deadband(arm.model);
   const MacKey key{};  // the MAC is computed as on the wire; its key does not matter here
@@ -398,6 +418,35 @@ int StepsAbove(const std::vector<glm::dvec3>& v, double n) {
   return c;
 }
 
+/// The q-quantile of the one-tick change |v[i] − v[i−1]| (nearest rank; 0 for fewer than two).
+double StepQuantile(const std::vector<glm::dvec3>& v, double q) {
+  std::vector<double> d;
+  for (std::size_t i = 1; i < v.size(); ++i) d.push_back(glm::length(v[i] - v[i - 1]));
+  if (d.empty()) return 0.0;
+  const auto k = static_cast<std::size_t>(std::llround(q * static_cast<double>(d.size() - 1)));
+  std::nth_element(d.begin(), d.begin() + static_cast<std::ptrdiff_t>(k), d.end());
+  return d[k];
+}
+
+/// What a hand feels as ripple (mN): the RMS of v less its centred 50-tick moving mean (a
+/// high-pass at about 20 Hz; the eleventh stop's stick_ripple measure on one clock).
+double HighPassRmsMilli(const std::vector<glm::dvec3>& v) {
+  constexpr std::size_t kHalf = 25;
+  if (v.size() <= 2 * kHalf) return 0.0;
+  std::vector<glm::dvec3> prefix(v.size() + 1, glm::dvec3(0.0));
+  for (std::size_t i = 0; i < v.size(); ++i) prefix[i + 1] = prefix[i] + v[i];
+  double sum = 0.0;
+  std::size_t n = 0;
+  for (std::size_t i = kHalf; i + kHalf < v.size(); ++i) {
+    const glm::dvec3 mean =
+        (prefix[i + kHalf + 1] - prefix[i - kHalf]) / static_cast<double>(2 * kHalf + 1);
+    const glm::dvec3 d = v[i] - mean;
+    sum += glm::dot(d, d);
+    ++n;
+  }
+  return 1e3 * std::sqrt(sum / static_cast<double>(n));
+}
+
 double PassivityShare(const ArmRun& r) {
   double removed = 0.0, impulse = 0.0;
   for (std::size_t i = 0; i < r.device_force_W.size(); ++i) {
@@ -424,12 +473,23 @@ int main(int argc, char** argv) {
                  "a handle trajectory CSV (master_station --device replay; e.g. from\n"
                  "deploy/kinesthetic-replay); default: the simulated hand of --experiment");
   app.add_option("--scene", scene_name,
-                 "built-in scene: block-on-gear (seed Fig. 75) or stiff-wall (the same block on a\n"
-                 "flat wall five times stiffer)")
-      ->check(CLI::IsMember({"block-on-gear", "stiff-wall"}))
+                 "built-in scene, as slave_sim --scene: block-on-gear (seed Fig. 75), stiff-wall\n"
+                 "(the same block on a flat wall five times stiffer), striped-blocks (seed\n"
+                 "Fig. 76), file-on-cad-part (Fig. 77), hammer-on-torus; the benchmark scenes'\n"
+                 "models are built or read from --cache-dir as slave_sim does")
+      ->check(CLI::IsMember(
+          {"block-on-gear", "stiff-wall", "striped-blocks", "file-on-cad-part", "hammer-on-torus"}))
       ->capture_default_str();
-  app.add_option("--experiment", setup.experiment, "the simulated hand's script")
-      ->check(CLI::IsMember({"fig75", "fig76", "explore"}))
+  std::string cache_dir = ht::HapticModelCache::DefaultDir();
+  app.add_option("--cache-dir", cache_dir, "model cache folder (the benchmark scenes)")
+      ->capture_default_str();
+  std::string experiment;
+  app.add_option("--experiment", experiment,
+                 "the simulated hand's script (default: fig76 on striped-blocks, else fig75)")
+      ->check(CLI::IsMember({"fig75", "fig76", "explore"}));
+  app.add_option("--reference-setting", setup.setting,
+                 "the remote step's setting of the reference and of every arm that names none\n"
+                 "(a frontier setting's name: speed_error_frontier --list-settings)")
       ->capture_default_str();
   app.add_option("--duration", setup.duration_s, "seconds, with the simulated hand")
       ->check(CLI::Range(0.1, 600.0))
@@ -467,8 +527,10 @@ int main(int argc, char** argv) {
                  "floor scales, as slave_sim's --model-deadband-*-floor); release_ticks,\n"
                  "energy_bounded_switch (0/1), switch_spend, offset_release_ms (the operator\n"
                  "tick's passivity options, OperatorTickConfig; master_station's defaults, as\n"
-                 "in the reference, unless given)");
-  app.add_flag("--translation-patch", setup.pipeline.depth_refinement.translation_patch,
+                 "in the reference, unless given); setting=NAME, the remote step's setting by\n"
+                 "its frontier name (speed_error_frontier --list-settings; default\n"
+                 "--reference-setting)");
+  app.add_flag("--translation-patch", setup.translation_patch,
                "every contact model carries its translation patch (slave_sim --translation-patch;\n"
                "by default the remote node sends patches from a 10 ms round trip)");
   app.add_option("--out", out_dir,
@@ -483,6 +545,10 @@ int main(int argc, char** argv) {
   std::vector<Arm> arms;
   const Arm reference = ParseArm("reference:deadband=0");
   try {
+    ht::FrontierSettingNamed(setup.setting);
+    setup.experiment = !experiment.empty()              ? experiment
+                       : scene_name == "striped-blocks" ? "fig76"
+                                                        : "fig75";
     if (arm_texts.empty()) arm_texts.push_back("default");
     for (const std::string& t : arm_texts) arms.push_back(ParseArm(t));
   } catch (const std::invalid_argument& e) {
@@ -491,10 +557,23 @@ int main(int argc, char** argv) {
   }
   try {
     std::fprintf(stderr, "deadband_lockstep: building %s...\n", scene_name.c_str());
-    const ht::HapticScene scene =
-        scene_name == "stiff-wall" ? ht::MakeStiffWallScene() : ht::MakeBlockOnGearScene();
+    const std::map<std::string, std::string> benchmark_scenes = {
+        {"striped-blocks", "fig76"},
+        {"file-on-cad-part", "fig77"},
+        {"hammer-on-torus", "hammer_torus"}};
+    ht::HapticScene scene;
+    if (scene_name == "stiff-wall") {
+      scene = ht::MakeStiffWallScene();
+    } else if (scene_name == "block-on-gear") {
+      scene = ht::MakeBlockOnGearScene();
+    } else {  // as slave_sim --scene builds it
+      const std::string& name = benchmark_scenes.at(scene_name);
+      scene = ht::MakeBenchmarkScene(name, ht::ProductModelSettings(name),
+                                     ht::HapticModelCache(cache_dir))
+                  .haptic;
+      scene.name = scene_name;
+    }
     setup.scene = &scene;
-    setup.pipeline.texture_threads = 1;
     std::fprintf(stderr, "deadband_lockstep: reference (both deadbands off)...\n");
     setup.loss = loss_pct / 100.0;
     Setup reference_setup = setup;
@@ -504,6 +583,7 @@ int main(int argc, char** argv) {
     nlohmann::json summary;
     summary["input"] = setup.replay_file.empty() ? setup.experiment : setup.replay_file;
     summary["scene"] = scene_name;
+    summary["reference_setting"] = setup.setting;
     summary["duration_s"] = ref.duration_s;
     summary["delay_ms"] = setup.delay_ms;
     summary["step_ms"] = setup.step_ms;
@@ -512,8 +592,9 @@ int main(int argc, char** argv) {
     std::printf(
         "| arm | tool states /s | kbit/s | reduction %% | models /s | kbit/s | reduction %% | "
         "device F err %% | device tau err %% | contact F err %% | largest device dF (N) | "
-        "passivity share %% | device dF > 0.5 N |\n"
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+        "passivity share %% | device dF > 0.5 N | device dF > 0.2 N | contact dF > 0.2 N | "
+        "contact dF p99 (N) | device ripple (mN) |\n"
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     // One arm over its seeds: every figure's mean, and min–max where the seeds differ.
     const auto report = [&](const std::string& name, const std::vector<ArmRun>& runs,
                             bool skip_first) {
@@ -540,6 +621,10 @@ int main(int argc, char** argv) {
             {"largest_device_force_step_n", LargestStep(r.device_force_W)},
             {"passivity_share_pct", PassivityShare(r)},
             {"device_force_steps_above_0_5n", StepsAbove(r.device_force_W, 0.5)},
+            {"device_force_steps_above_0_2n", StepsAbove(r.device_force_W, 0.2)},
+            {"contact_force_steps_above_0_2n", StepsAbove(r.contact_force_W, 0.2)},
+            {"contact_force_step_p99_n", StepQuantile(r.contact_force_W, 0.99)},
+            {"device_force_ripple_mn", HighPassRmsMilli(r.device_force_W)},
             {"tool_state_decisions", ht::ToJson(r.tool_decisions)},
             {"model_decisions", ht::ToJson(r.model_decisions)}};
         for (const auto& [key, value] : j.items()) {
@@ -569,8 +654,10 @@ int main(int argc, char** argv) {
         return std::string(text);
       };
       std::printf(
-          "| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n", name.c_str(),
-          cell("tool_states_per_s", "%.0f").c_str(), cell("tool_state_kbit_s", "%.1f").c_str(),
+          "| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s "
+          "|\n",
+          name.c_str(), cell("tool_states_per_s", "%.0f").c_str(),
+          cell("tool_state_kbit_s", "%.1f").c_str(),
           cell("tool_state_reduction_pct", "%.1f").c_str(), cell("models_per_s", "%.0f").c_str(),
           cell("model_kbit_s", "%.1f").c_str(), cell("model_reduction_pct", "%.1f").c_str(),
           cell("device_force_error_pct", "%.2f").c_str(),
@@ -578,9 +665,18 @@ int main(int argc, char** argv) {
           cell("contact_force_error_pct", "%.2f").c_str(),
           cell("largest_device_force_step_n", "%.3f").c_str(),
           cell("passivity_share_pct", "%.2f").c_str(),
-          cell("device_force_steps_above_0_5n", "%.0f").c_str());
+          cell("device_force_steps_above_0_5n", "%.0f").c_str(),
+          cell("device_force_steps_above_0_2n", "%.0f").c_str(),
+          cell("contact_force_steps_above_0_2n", "%.0f").c_str(),
+          cell("contact_force_step_p99_n", "%.3f").c_str(),
+          cell("device_force_ripple_mn", "%.1f").c_str());
       std::fflush(stdout);
       summary["arms"].push_back({{"arm", name}, {"seeds", per_seed}});
+      if (const auto it =
+              std::find_if(arms.begin(), arms.end(), [&](const Arm& a) { return a.name == name; });
+          it != arms.end()) {
+        summary["arms"].back()["setting"] = it->setting.empty() ? setup.setting : it->setting;
+      }
       if (!out_dir.empty()) {
         std::filesystem::create_directories(out_dir);
         if (!skip_first) WriteTrace(out_dir + "/" + name + ".csv", runs[0]);  // seed 0

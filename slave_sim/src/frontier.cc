@@ -41,6 +41,52 @@ const char* FrontierMethodName(FrontierMethod method) noexcept {
   return "?";
 }
 
+PipelineOptions PipelineOptionsFor(const FrontierSetting& st) {
+  PipelineOptions options;
+  options.grid_resolution = st.grid;
+  options.max_contacts = st.max_contacts;
+  options.local_reach = st.local_reach;
+  options.rotation_gradient = st.rotation_gradient;
+  options.grazing_guard = st.grazing_guard;
+  options.grazing_guard_local_reach = st.grazing_guard_local_reach;
+  if (st.max_window_extent_m > 0.0) options.max_window_extent_m = st.max_window_extent_m;
+  options.drop_unreachable_pairs = st.drop_unreachable_pairs;
+  options.region_normals = st.region_normals;
+  options.size_windows_from_clusters = st.size_windows_from_clusters;
+  options.cluster_triangles = st.cluster_triangles;
+  options.share_leaves_between_disjoint_windows = st.share_leaves_between_disjoint_windows;
+  options.whole_model_region_windows = st.whole_model_region_windows;
+  options.kink_planes = st.kink_planes;
+  options.kink_planes_own_slope = st.kink_planes_own_slope;
+  options.refine_depth = st.refine_depth;
+  options.depth_refinement.texel_scale_gradient = st.texel_scale_gradient;
+  options.depth_refinement.secant_at_kinks_m = st.secant_at_kinks_m;
+  options.depth_refinement.translation_kink_planes = st.translation_kink_planes;
+  options.depth_refinement.texel_scale_rotation = st.texel_scale_rotation;
+  options.split_windows_at_separated_overlap = st.split_windows_at_separated_overlap;
+  options.share_connected_contacts = st.share_connected_contacts;
+  if (st.share_link_m >= 0.0) options.share_link_m = st.share_link_m;
+  if (st.share_fade_m >= 0.0) options.share_fade_m = st.share_fade_m;
+  if (st.share_temperature_m > 0.0) options.share_temperature_m = st.share_temperature_m;
+  options.split_link_m = st.split_link_m;
+  options.depth_refinement.subgrid_rotations = st.subgrid_rotations;
+  options.depth_refinement.subgrid_translations = st.subgrid_translations;
+  options.depth_refinement.conservative_screen = st.conservative_screen;
+  options.depth_refinement.parallax = st.parallax;
+  options.depth_refinement.translation_patch = st.translation_patch;
+  options.depth_refinement.translation_patch_neighbour_climbs =
+      st.translation_patch_neighbour_climbs;
+  options.depth_refinement.translation_patch_floor_texels = st.translation_patch_floor_texels;
+  options.depth_refinement.translation_patch_spacing_cells = st.translation_patch_spacing_cells;
+  options.depth_refinement.translation_patch_follows_rotation =
+      st.translation_patch_follows_rotation;
+  if (st.gradient_step_texels > 0.0)
+    options.depth_refinement.gradient_step_texels = st.gradient_step_texels;
+  // The texture stage's threads are the coarse query's too, as in the product.
+  options.texture_threads = st.texture_threads;
+  return options;
+}
+
 std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
   std::vector<FrontierSetting> s;
   const FrontierSetting base{"default"};
@@ -320,10 +366,10 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     translations_subgrid.name = "refined_translations_from_subgrid";
     translations_subgrid.subgrid_translations = true;
     s.push_back(translations_subgrid);
-    for (const int grid : {16, 25, 35, 70, 100}) {
+    for (const int n : {16, 25, 35, 70, 100}) {
       FrontierSetting coarse_grid = refined;
-      coarse_grid.name = "grid" + std::to_string(grid) + "_refined";
-      coarse_grid.grid = grid;
+      coarse_grid.name = "grid" + std::to_string(n) + "_refined";
+      coarse_grid.grid = n;
       s.push_back(coarse_grid);
     }
     FrontierSetting at_witness = base;
@@ -368,6 +414,19 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
   f.method = FrontierMethod::kFullResolutionFcl;
   s.push_back(f);
   return s;
+}
+
+FrontierSetting FrontierSettingNamed(const std::string& name, bool with_gpu) {
+  for (FrontierSetting& st : FrontierSettings(false, with_gpu)) {
+    if (st.name != name) continue;
+    if (st.method != FrontierMethod::kTexture) {
+      throw std::invalid_argument("frontier setting '" + name +
+                                  "' is a baseline, not a setting of the remote step");
+    }
+    return st;
+  }
+  throw std::invalid_argument("no frontier setting named '" + name +
+                              "' (speed_error_frontier --list-settings lists them)");
 }
 
 namespace {
@@ -612,48 +671,7 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
         max_resolution, st.texture_path, st.texture_threads, st.rotation_gradient);
   }
   run.renderer = backend->description();
-  PipelineOptions options;
-  options.grid_resolution = st.grid;
-  options.max_contacts = st.max_contacts;
-  options.local_reach = st.local_reach;
-  options.rotation_gradient = st.rotation_gradient;
-  options.grazing_guard = st.grazing_guard;
-  options.grazing_guard_local_reach = st.grazing_guard_local_reach;
-  if (st.max_window_extent_m > 0.0) options.max_window_extent_m = st.max_window_extent_m;
-  options.drop_unreachable_pairs = st.drop_unreachable_pairs;
-  options.region_normals = st.region_normals;
-  options.size_windows_from_clusters = st.size_windows_from_clusters;
-  options.cluster_triangles = st.cluster_triangles;
-  options.share_leaves_between_disjoint_windows = st.share_leaves_between_disjoint_windows;
-  options.whole_model_region_windows = st.whole_model_region_windows;
-  options.kink_planes = st.kink_planes;
-  options.kink_planes_own_slope = st.kink_planes_own_slope;
-  options.refine_depth = st.refine_depth;
-  options.depth_refinement.texel_scale_gradient = st.texel_scale_gradient;
-  options.depth_refinement.secant_at_kinks_m = st.secant_at_kinks_m;
-  options.depth_refinement.translation_kink_planes = st.translation_kink_planes;
-  options.depth_refinement.texel_scale_rotation = st.texel_scale_rotation;
-  options.split_windows_at_separated_overlap = st.split_windows_at_separated_overlap;
-  options.share_connected_contacts = st.share_connected_contacts;
-  if (st.share_link_m >= 0.0) options.share_link_m = st.share_link_m;
-  if (st.share_fade_m >= 0.0) options.share_fade_m = st.share_fade_m;
-  if (st.share_temperature_m > 0.0) options.share_temperature_m = st.share_temperature_m;
-  options.split_link_m = st.split_link_m;
-  options.depth_refinement.subgrid_rotations = st.subgrid_rotations;
-  options.depth_refinement.subgrid_translations = st.subgrid_translations;
-  options.depth_refinement.conservative_screen = st.conservative_screen;
-  options.depth_refinement.parallax = st.parallax;
-  options.depth_refinement.translation_patch = st.translation_patch;
-  options.depth_refinement.translation_patch_neighbour_climbs =
-      st.translation_patch_neighbour_climbs;
-  options.depth_refinement.translation_patch_floor_texels = st.translation_patch_floor_texels;
-  options.depth_refinement.translation_patch_spacing_cells = st.translation_patch_spacing_cells;
-  options.depth_refinement.translation_patch_follows_rotation =
-      st.translation_patch_follows_rotation;
-  if (st.gradient_step_texels > 0.0)
-    options.depth_refinement.gradient_step_texels = st.gradient_step_texels;
-  // The texture stage's threads are the coarse query's too, as in the product.
-  options.texture_threads = st.texture_threads;
+  const PipelineOptions options = PipelineOptionsFor(st);
   HapticTexturePipeline pipeline(scene.haptic, options, std::move(backend));
   StepTimings timings;
   for (int i = 0; i < 3 && !poses_WFt.empty(); ++i) {  // warm-up: caches, GPU uploads

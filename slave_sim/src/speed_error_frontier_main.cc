@@ -30,7 +30,12 @@ int main(int argc, char** argv) {
   std::vector<std::string> traces;
   options.cache_dir = ht::HapticModelCache::DefaultDir();
   bool no_gpu = false, quiet = false;
-  app.add_option("--out", options.out_dir, "output folder (created)")->required();
+  app.add_option("--out", options.out_dir,
+                 "output folder (created; required unless --list-settings)");
+  bool list_settings = false;
+  app.add_flag("--list-settings", list_settings,
+               "print every setting's name (what --setting and deadband_lockstep's setting= take)\n"
+               "and exit");
   app.add_flag("--quick", options.quick,
                "fig75 and fig76 only, 12 poses, 10 settings: a few minutes (what ctest runs)");
   std::string scene_list;
@@ -108,6 +113,16 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_flag("--quiet", quiet, "no progress lines");
   if (const auto rc = ht::ParseCommandLine(app, argc, argv, "speed_error_frontier")) return *rc;
+  if (list_settings) {
+    for (const ht::FrontierSetting& st : ht::FrontierSettings(false, !no_gpu)) {
+      std::printf("%s\n", st.name.c_str());
+    }
+    return 0;
+  }
+  if (options.out_dir.empty()) {
+    std::fprintf(stderr, "speed_error_frontier: --out is required (the folder for the results)\n");
+    return 2;
+  }
   std::string command = "speed_error_frontier";
   for (int i = 1; i < argc; ++i) command += std::string(" ") + argv[i];
   try {

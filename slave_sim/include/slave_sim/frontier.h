@@ -13,6 +13,7 @@
 #include "haptic_core/accuracy/ground_truth_depth.h"
 #include "haptic_core/contact_linearization.h"
 #include "haptic_core/contact_model.h"
+#include "haptic_core/remote_step.h"
 
 namespace ht {
 
@@ -137,6 +138,15 @@ struct FrontierSetting {
 /// `quick` keeps grids 16, 25 and 100, texture 256, coarse ×2, reference, the GPU at 16 bits and
 /// both baselines.
 std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu);
+
+/// The remote step's options of a texture-method setting (`st.method` kTexture): every
+/// PipelineOptions field the setting names, the rest PipelineOptions' defaults. The backend's own
+/// choices (texture path, rotation gradient, GPU depth bits) are the caller's to make from `st`.
+PipelineOptions PipelineOptionsFor(const FrontierSetting& st);
+
+/// The setting of FrontierSettings(false, with_gpu) named `name`; throws std::invalid_argument
+/// naming it when there is none, or when it is not a texture-method setting.
+FrontierSetting FrontierSettingNamed(const std::string& name, bool with_gpu = false);
 
 /// Options of a run.
 struct FrontierOptions {
