@@ -192,8 +192,13 @@ struct Setup {
   double delay_ms = 0.1;
   double reference_delay_ms = -1.0;  ///< the reference arm's delay (< 0: delay_ms)
   double step_ms = 0.3;
-  /// The tool's start shifted along W's x (m): a seed (kSeedOffsetM apart).
+  /// The tool's start shifted along `seed_axis` of W (m): a seed (--seed-step-um apart).
   double start_offset_m = 0.0;
+  int seed_axis = 0;  ///< 0, 1, 2: W's x, y, z
+  /// Each datagram's delay is delay_ms plus a draw from [0, jitter_ms] (ms; 0: none), from a
+  /// generator seeded with `seed` (datagrams keep their order: a later one never overtakes).
+  double jitter_ms = 0.0;
+  int seed = 0;
   /// Share of datagrams lost on each stream ([0, 1)), drawn from a generator seeded alike in
   /// every run (the same datagram numbers are lost in every arm).
   double loss = 0.0;
@@ -201,7 +206,7 @@ struct Setup {
 
 /// One seed's shift of the tool's start (m): far below anything the method resolves, enough to
 /// change which ridge crest the rocking tool meets first.
-constexpr double kSeedOffsetM = 1e-6;
+constexpr double kSeedOffsetM = 1e-6;  // the default --seed-step-um
 
 ArmRun RunArm(const Setup& setup, const Arm& arm) {
   using namespace ht;
@@ -229,7 +234,7 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
   tc.switch_energy_spend_fraction = arm.switch_energy_spend_fraction;
   ToolState tool;
   tool.X_WT = X_WM * experiment->Target(0.0).X_MH;
-  tool.X_WT.translation.x += setup.start_offset_m;
+  tool.X_WT.translation[setup.seed_axis] += setup.start_offset_m;
   OperatorTick tick(tc, X_WM, tool);
 
   // The translation patches by the round trip, as the remote node's default
@@ -270,6 +275,10 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
   run.duration_s = static_cast<double>(ticks) * 1e-3;
   ArrivedModel arrived;
   std::mt19937_64 loss_to_remote(7), loss_to_operator(11);
+  std::mt19937_64 jitter_rng(1000 + static_cast<std::uint64_t>(setup.seed));
+  const auto jitter_ns = static_cast<std::int64_t>(std::llround(setup.jitter_ms * 1e6));
+  std::uniform_int_distribution<std::int64_t> jitter(0, jitter_ns);
+  std::int64_t last_to_remote_ns = 0, last_to_operator_ns = 0;  // arrivals keep their order
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
   for (std::int64_t k = 0; k < ticks; ++k) {
     const std::int64_t now = t0 + k * kTickNs;
@@ -315,7 +324,10 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
           static_cast<std::int64_t>(wire::EncodeCompactToolState(h, state, key).size);
       ++run.tool_states;
       if (uniform(loss_to_remote) >= setup.loss) {
-        to_remote.push_back({now + delay_ns, {received, tool_seq, now}});
+        const std::int64_t arrive =
+            std::max(last_to_remote_ns, now + delay_ns + (jitter_ns > 0 ? jitter(jitter_rng) : 0));
+        last_to_remote_ns = arrive;
+        to_remote.push_back({arrive, {received, tool_seq, now}});
       }
     }
     // The remote node, right after this tick's tool state has arrived: one step at the newest
@@ -355,7 +367,9 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     wire::Header opened;
     std::span<const std::uint8_t> body;
     wire::ContactModelMessage decoded;
-    const std::int64_t arrive_ns = sent_ns + delay_ns;
+    const std::int64_t arrive_ns = std::max(
+        last_to_operator_ns, sent_ns + delay_ns + (jitter_ns > 0 ? jitter(jitter_rng) : 0));
+    last_to_operator_ns = arrive_ns;
     if (wire::OpenDatagram(d.view(), key, opened, body) != wire::DecodeStatus::kOk ||
         wire::DecodeCompactContactModel(body, decoded, arrive_ns) != wire::DecodeStatus::kOk) {
       throw std::runtime_error("a contact model did not decode (tick " + std::to_string(k) + ")");
@@ -512,11 +526,29 @@ int main(int argc, char** argv) {
                  "state arrived")
       ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
-  app.add_option("--seeds", seeds,
-                 "runs per arm, the tool's start 1 um apart along x (seed k: k um); each arm is\n"
-                 "judged against the reference's seed 0, and the reference's other seeds show\n"
-                 "how far such a start moves by itself")
+  app.add_option(
+         "--seeds", seeds,
+         "runs per arm, the tool's start --seed-step-um apart along --seed-axis (seed k:\n"
+         "k steps); each arm is judged against the reference's seed 0, and the reference's\n"
+         "other seeds show how far such a start moves by itself")
       ->check(CLI::Range(1, 100))
+      ->capture_default_str();
+  app.add_option(
+         "--jitter-ms", setup.jitter_ms,
+         "each datagram's delay varies by a draw from [0, this] (ms; seed k draws from its\n"
+         "own generator; the reference too, unless --seeds 1): the loopback's timing noise,\n"
+         "which on fig76 decides the block's course where a start offset does not")
+      ->check(CLI::Range(0.0, 100.0))
+      ->capture_default_str();
+  double seed_step_um = kSeedOffsetM * 1e6;
+  app.add_option("--seed-step-um", seed_step_um,
+                 "how far apart the seeds' starts are (um; on fig76 a 1 um step along x changes\n"
+                 "nothing, and the block can settle in either of two places)")
+      ->check(CLI::Range(0.0, 1000.0))
+      ->capture_default_str();
+  std::string seed_axis = "x";
+  app.add_option("--seed-axis", seed_axis, "W's axis the seeds' starts are shifted along")
+      ->check(CLI::IsMember({"x", "y", "z"}))
       ->capture_default_str();
   app.add_option("--arm", arm_texts,
                  "NAME:KEY=V,...: an arm (repeatable; default one arm 'default' at 10 %).\n"
@@ -542,10 +574,12 @@ int main(int argc, char** argv) {
     const int rc = app.exit(e);
     return rc == 0 ? 0 : 2;
   }
+  const double seed_step_m = seed_step_um * 1e-6;
   std::vector<Arm> arms;
   const Arm reference = ParseArm("reference:deadband=0");
   try {
     ht::FrontierSettingNamed(setup.setting);
+    setup.seed_axis = seed_axis == "x" ? 0 : seed_axis == "y" ? 1 : 2;
     setup.experiment = !experiment.empty()              ? experiment
                        : scene_name == "striped-blocks" ? "fig76"
                                                         : "fig75";
@@ -589,6 +623,9 @@ int main(int argc, char** argv) {
     summary["step_ms"] = setup.step_ms;
     summary["reference_delay_ms"] = reference_setup.delay_ms;
     summary["loss_pct"] = loss_pct;
+    summary["jitter_ms"] = setup.jitter_ms;
+    summary["seed_step_um"] = seed_step_um;
+    summary["seed_axis"] = seed_axis;
     std::printf(
         "| arm | tool states /s | kbit/s | reduction %% | models /s | kbit/s | reduction %% | "
         "device F err %% | device tau err %% | contact F err %% | largest device dF (N) | "
@@ -691,7 +728,8 @@ int main(int argc, char** argv) {
     std::vector<ArmRun> reference_runs{ref};
     for (int k = 1; k < seeds; ++k) {
       Setup s2 = reference_setup;
-      s2.start_offset_m = k * kSeedOffsetM;
+      s2.start_offset_m = k * seed_step_m;
+      s2.seed = k;
       reference_runs.push_back(RunArm(s2, reference));
     }
     if (seeds > 1) report("reference (seeds 1.. against 0)", reference_runs, true);
@@ -700,7 +738,8 @@ int main(int argc, char** argv) {
       std::vector<ArmRun> runs;
       for (int k = 0; k < seeds; ++k) {
         Setup s2 = setup;
-        s2.start_offset_m = k * kSeedOffsetM;
+        s2.start_offset_m = k * seed_step_m;
+        s2.seed = k;
         runs.push_back(RunArm(s2, arm));
       }
       report(arm.name, runs, false);
