@@ -73,6 +73,7 @@ struct ArmRun {
   std::vector<int> contacts, model_arrived;
   std::vector<double> depth_offset_m;
   std::vector<glm::dvec3> p_WT, p_WH;
+  std::vector<glm::dvec3> theta_WT;  ///< R_WT as a rotation vector (rad, W)
   std::int64_t tool_states = 0, tool_state_bytes = 0;
   std::int64_t models = 0, model_bytes = 0;
   ht::DeadbandCounts tool_decisions{}, model_decisions{};
@@ -137,6 +138,8 @@ Arm ParseArm(const std::string& text) {
       arm.tool.contact_rotation_floor_scale_rad = v * 1e-3;
     } else if (key == "contact_depth_floor_um") {
       arm.tool.contact_depth_floor_scale_m = v * 1e-6;
+    } else if (key == "velocity_criterion") {  // master_station --deadband-velocity
+      arm.tool.velocity_criterion = v != 0.0;
     } else if (key == "contact_hold_ms") {
       arm.tool.contact_floor_hold_s = v * 1e-3;
     } else if (key == "release_ticks") {  // ticks of 1 ms
@@ -307,6 +310,7 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     run.depth_offset_m.push_back(out.depth_offset_m);
     run.model_arrived.push_back(have_arrived ? 1 : 0);
     run.p_WT.push_back(tick.tool().X_WT.translation);
+    run.theta_WT.push_back(RotationVectorFromQuaternion(tick.tool().X_WT.rotation));
     run.p_WH.push_back(out.X_WH.translation);
     // Its tool state, through the operator's deadband (on what the remote node will decode).
     ++tool_seq;
@@ -405,13 +409,14 @@ double LargestStep(const std::vector<glm::dvec3>& v) {
   return m;
 }
 
-/// One row per tick: what the operator felt and why.
+/// One row per tick: what the operator felt and why; tool_x..tool_z and tool_rx..tool_rz are X_WT
+/// as master_station's trace.csv has it (speed_error_frontier --trace reads it).
 void WriteTrace(const std::string& path, const ArmRun& r) {
   std::ofstream f(path);
   if (!f) throw std::runtime_error("cannot write " + path);
   f << "t_s,device_fx,device_fy,device_fz,device_tx,device_ty,device_tz,contact_fx,contact_fy,"
        "contact_fz,passivity_removed_n,model_age_ms,contacts,model_arrived,tool_x,tool_y,tool_z,"
-       "hand_x,hand_y,hand_z,depth_offset_um\n";
+       "hand_x,hand_y,hand_z,depth_offset_um,tool_rx,tool_ry,tool_rz\n";
   for (std::size_t i = 0; i < r.device_force_W.size(); ++i) {
     const auto v = [&](const glm::dvec3& a) { f << ',' << a.x << ',' << a.y << ',' << a.z; };
     f << static_cast<double>(i) * 1e-3;
@@ -422,7 +427,9 @@ void WriteTrace(const std::string& path, const ArmRun& r) {
       << r.model_arrived[i];
     v(r.p_WT[i]);
     v(r.p_WH[i]);
-    f << ',' << r.depth_offset_m[i] * 1e6 << '\n';
+    f << ',' << r.depth_offset_m[i] * 1e6;
+    v(r.theta_WT[i]);
+    f << '\n';
   }
 }
 
@@ -553,7 +560,8 @@ int main(int argc, char** argv) {
   app.add_option("--arm", arm_texts,
                  "NAME:KEY=V,...: an arm (repeatable; default one arm 'default' at 10 %).\n"
                  "Keys: deadband, tool_deadband, model_deadband (%), keepalive_ms,\n"
-                 "contact_floor_mm, contact_floor_mrad, contact_depth_floor_um, contact_hold_ms\n"
+                 "contact_floor_mm, contact_floor_mrad, contact_depth_floor_um, contact_hold_ms,\n"
+                 "velocity_criterion (0/1)\n"
                  "(the tool-state deadband, as master_station's --deadband-*), force_floor,\n"
                  "torque_floor, stiffness_floor, rotational_stiffness_floor (the contact-model\n"
                  "floor scales, as slave_sim's --model-deadband-*-floor); release_ticks,\n"

@@ -58,3 +58,9 @@ S=(--arm default --arm default_nodb:deadband=0
    --arm texel_translation_nodb:setting=refined_texel_translation_gradient,deadband=0)
 "$B" --scene striped-blocks --seeds 2 --duration 12 "${S[@]}" --out "$out/split_fig76" > "$out/split_fig76.md"
 "$B" --seeds 2 "${S[@]}" --out "$out/split_fig75" > "$out/split_fig75.md"
+# The texel translation slope on fig75 with the loopback's timing noise (three seeds, 0.5 ms
+# jitter), with and without the deadbands and with a 5 um contact position floor.
+T=refined_texel_translation_gradient
+"$B" --seeds 3 --jitter-ms 0.5 --arm default --arm default_nodb:deadband=0 --arm tex:setting=$T \
+  --arm tex_nodb:setting=$T,deadband=0 --arm tex_floor5um:setting=$T,contact_floor_mm=0.05 \
+  --out "$out/texel_fig75_jitter" > "$out/texel_fig75_jitter.md"
