@@ -64,3 +64,6 @@ T=refined_texel_translation_gradient
 "$B" --seeds 3 --jitter-ms 0.5 --arm default --arm default_nodb:deadband=0 --arm tex:setting=$T \
   --arm tex_nodb:setting=$T,deadband=0 --arm tex_floor5um:setting=$T,contact_floor_mm=0.05 \
   --out "$out/texel_fig75_jitter" > "$out/texel_fig75_jitter.md"
+# fig76's two courses (course.png): the reference, the default and the 0.2 mrad floor, seed 0.
+/usr/bin/python3 "$repo/docs/deadband/twenty_fourth_stop/course_plot.py" "$out/course.png" \
+  "$out/fig76_jitter/reference.csv" "$out/fig76_jitter/default.csv" "$out/fig76_jitter/rot0.2.csv"
