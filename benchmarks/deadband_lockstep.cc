@@ -37,6 +37,7 @@
 #include "haptic_core/demo/demo_scenes.h"
 #include "haptic_core/penetration_depth_backend.h"
 #include "haptic_core/remote_step.h"
+#include "haptic_core/statistics.h"
 #include "master_station/experiment.h"
 #include "master_station/operator_station.h"
 #include "master_station/operator_tick.h"
@@ -439,14 +440,12 @@ int StepsAbove(const std::vector<glm::dvec3>& v, double n) {
   return c;
 }
 
-/// The q-quantile of the one-tick change |v[i] − v[i−1]| (nearest rank; 0 for fewer than two).
+/// The q-quantile of the one-tick change |v[i] − v[i−1]| (nearest rank, Percentile; 0 for fewer
+/// than two).
 double StepQuantile(const std::vector<glm::dvec3>& v, double q) {
   std::vector<double> d;
   for (std::size_t i = 1; i < v.size(); ++i) d.push_back(glm::length(v[i] - v[i - 1]));
-  if (d.empty()) return 0.0;
-  const auto k = static_cast<std::size_t>(std::llround(q * static_cast<double>(d.size() - 1)));
-  std::nth_element(d.begin(), d.begin() + static_cast<std::ptrdiff_t>(k), d.end());
-  return d[k];
+  return ht::Percentile(std::move(d), q);
 }
 
 /// What a hand feels as ripple (mN): the RMS of v less its centred 50-tick moving mean (a
@@ -599,17 +598,13 @@ int main(int argc, char** argv) {
   }
   try {
     std::fprintf(stderr, "deadband_lockstep: building %s...\n", scene_name.c_str());
-    const std::map<std::string, std::string> benchmark_scenes = {
-        {"striped-blocks", "fig76"},
-        {"file-on-cad-part", "fig77"},
-        {"hammer-on-torus", "hammer_torus"}};
     ht::HapticScene scene;
     if (scene_name == "stiff-wall") {
       scene = ht::MakeStiffWallScene();
     } else if (scene_name == "block-on-gear") {
       scene = ht::MakeBlockOnGearScene();
     } else {  // as slave_sim --scene builds it
-      const std::string& name = benchmark_scenes.at(scene_name);
+      const std::string name = ht::BenchmarkSceneOfBuiltin(scene_name);
       scene = ht::MakeBenchmarkScene(name, ht::ProductModelSettings(name),
                                      ht::HapticModelCache(cache_dir))
                   .haptic;
@@ -641,8 +636,9 @@ int main(int argc, char** argv) {
         "contact dF p99 (N) | device ripple (mN) |\n"
         "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     // One arm over its seeds: every figure's mean, and min–max where the seeds differ.
-    const auto report = [&](const std::string& name, const std::vector<ArmRun>& runs,
-                            bool skip_first) {
+    // `arm`: null for the reference's seeds against its first.
+    const auto report = [&](const std::string& name, const Arm* arm,
+                            const std::vector<ArmRun>& runs, bool skip_first) {
       std::map<std::string, std::vector<double>> v;
       nlohmann::json per_seed = nlohmann::json::array();
       for (std::size_t k = skip_first ? 1 : 0; k < runs.size(); ++k) {
@@ -717,10 +713,8 @@ int main(int argc, char** argv) {
           cell("device_force_ripple_mn", "%.1f").c_str());
       std::fflush(stdout);
       summary["arms"].push_back({{"arm", name}, {"seeds", per_seed}});
-      if (const auto it =
-              std::find_if(arms.begin(), arms.end(), [&](const Arm& a) { return a.name == name; });
-          it != arms.end()) {
-        summary["arms"].back()["setting"] = it->setting.empty() ? setup.setting : it->setting;
+      if (arm != nullptr) {
+        summary["arms"].back()["setting"] = arm->setting.empty() ? setup.setting : arm->setting;
       }
       if (!out_dir.empty()) {
         std::filesystem::create_directories(out_dir);
@@ -740,7 +734,7 @@ int main(int argc, char** argv) {
       s2.seed = k;
       reference_runs.push_back(RunArm(s2, reference));
     }
-    if (seeds > 1) report("reference (seeds 1.. against 0)", reference_runs, true);
+    if (seeds > 1) report("reference (seeds 1.. against 0)", nullptr, reference_runs, true);
     for (const Arm& arm : arms) {
       std::fprintf(stderr, "deadband_lockstep: arm %s...\n", arm.name.c_str());
       std::vector<ArmRun> runs;
@@ -750,7 +744,7 @@ int main(int argc, char** argv) {
         s2.seed = k;
         runs.push_back(RunArm(s2, arm));
       }
-      report(arm.name, runs, false);
+      report(arm.name, &arm, runs, false);
     }
     if (!out_dir.empty()) {
       std::filesystem::create_directories(out_dir);

@@ -164,6 +164,13 @@ const std::vector<std::string>& BenchmarkSceneNames() {
   return names;
 }
 
+std::string BenchmarkSceneOfBuiltin(const std::string& scene) {
+  if (scene == "striped-blocks") return "fig76";
+  if (scene == "file-on-cad-part") return "fig77";
+  if (scene == "hammer-on-torus") return "hammer_torus";
+  return {};
+}
+
 BenchmarkScene MakeBenchmarkScene(const std::string& name, const BenchmarkModelSettings& settings,
                                   const HapticModelCache& cache) {
   if (settings.texture_size != 0 && (settings.texture_size < 16 || settings.texture_size > 8192 ||

@@ -11,7 +11,6 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
-#include <map>
 #include <nlohmann/json.hpp>
 
 #include "codecs/draco_mesh_codec.h"
@@ -488,20 +487,17 @@ int main(int argc, char** argv) {
       std::filesystem::create_directories(out_dir);
       config.step_trace_path = out_dir + "/remote_steps.csv";
     }
-    const std::map<std::string, std::string> benchmark_scenes = {
-        {"striped-blocks", "fig76"},
-        {"file-on-cad-part", "fig77"},
-        {"hammer-on-torus", "hammer_torus"}};
+    const std::string benchmark_name = ht::BenchmarkSceneOfBuiltin(scene);
     if (scene == "block-on-gear" || scene == "stiff-wall") {
       builtin_scene = scene == "stiff-wall" ? ht::MakeStiffWallScene() : ht::MakeBlockOnGearScene();
       config.scene_objects = ht::BlockOnGearDisplayStream(builtin_scene).objects;
-    } else if (benchmark_scenes.count(scene) != 0) {
+    } else if (!benchmark_name.empty()) {
       if (!quiet)
         std::printf("[slave] building scene %s (model cache: %s)\n", scene.c_str(),
                     scene_cache_dir.empty() ? "none" : scene_cache_dir.c_str());
-      const std::string& name = benchmark_scenes.at(scene);
-      const ht::BenchmarkScene bench = ht::MakeBenchmarkScene(
-          name, ht::ProductModelSettings(name), ht::HapticModelCache(scene_cache_dir));
+      const ht::BenchmarkScene bench =
+          ht::MakeBenchmarkScene(benchmark_name, ht::ProductModelSettings(benchmark_name),
+                                 ht::HapticModelCache(scene_cache_dir));
       builtin_scene = bench.haptic;
       builtin_scene.name = scene;
       // The full-resolution meshes in their own frames, with the scene graph, for display.

@@ -74,6 +74,12 @@ BenchmarkModelSettings ProductModelSettings(const std::string& name);
 /// The scene names, in the order above.
 const std::vector<std::string>& BenchmarkSceneNames();
 
+/// The benchmark scene that `slave_sim --scene NAME` builds for its built-in scene NAME, with
+/// ProductModelSettings: "striped-blocks" → "fig76", "file-on-cad-part" → "fig77",
+/// "hammer-on-torus" → "hammer_torus". Empty for any other name (block-on-gear and stiff-wall
+/// are made by demo_scenes.h, anything else is a file).
+std::string BenchmarkSceneOfBuiltin(const std::string& scene);
+
 /// Builds scene `name` with `settings`; models from files go through `cache` (the seed models are
 /// generated procedurally, then decimated, baked and cached; about a minute each when cold).
 /// Throws std::invalid_argument for an unknown name (listing the known ones) or bad settings, and
