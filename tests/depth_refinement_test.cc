@@ -246,6 +246,82 @@ TEST(DepthRefinement, ScreenFindsTheNarrowPeakTheFilteredGridHides) {
   }
 }
 
+// DepthRefinementOptions::seed_from_last_step: the narrow peak of the test above, hidden from the
+// whole window's filtered grid, found on a step whose window holds it alone, is kept on the next
+// step over the whole window; forgotten, the whole window's seeds stay on the hump as without the
+// option, bit for bit.
+TEST(DepthRefinement, ASeedFromTheLastStepKeepsTheNarrowPeakTheFilteredGridHides) {
+  constexpr double kHump = 20e-6, kSpike = 40e-6;
+  const glm::dvec2 hump_at{-5e-3, 0.0}, spike_at{5e-3, 3e-3};
+  const auto surface = [=](double x, double y) {
+    const auto g = [&](glm::dvec2 c, double sigma) {
+      const double r2 = (x - c.x) * (x - c.x) + (y - c.y) * (y - c.y);
+      return std::exp(-r2 / (2.0 * sigma * sigma));
+    };
+    return kHump * g(hump_at, 3e-3) + kSpike * g(spike_at, 150e-6);
+  };
+  double peak = 0.0;
+  for (int i = -400; i <= 400; ++i) {
+    for (int j = -400; j <= 400; ++j) {
+      peak = std::max(peak, surface(spike_at.x + i * 1e-6, spike_at.y + j * 1e-6));
+    }
+  }
+  const HapticModel tool = ToolBox([](double, double) { return 0.0; }, 256);
+  const HapticModel env = EnvironmentBox(surface, 1024);
+  const double z0 = 10e-6;
+  const RigidTransform X_WT = ToolPose(0.0, 0.0, z0);
+  CpuPenetrationDepthBackend backend(128);
+  const auto refine = [&](DepthRefiner& refiner, glm::dvec3 centre, double extent, int n,
+                          const HapticModel* environment = nullptr) {
+    ContactQuery q;
+    q.environment = environment != nullptr ? environment : &env;
+    q.X_WO = EnvironmentPose();
+    q.window = ContactWindow::Make(centre, {0.0, 0.0, 1.0}, extent, n);
+    q.stiffness_n_per_m = 1000.0;
+    std::vector<DepthSample> samples(kGradientSamples);
+    std::vector<ContactLinearization> out(1);
+    EXPECT_TRUE(backend.LinearizeBatch(tool, X_WT, {&q, 1}, out, samples));
+    refiner.BeginStep();
+    EXPECT_TRUE(refiner.Refine(tool, X_WT, q, samples, out[0]));
+    return out[0];
+  };
+  DepthRefinementOptions with;
+  with.seed_from_last_step = true;
+  DepthRefiner seeded(with), alone{DepthRefinementOptions{}};
+  const glm::dvec3 spike_W{spike_at.x, spike_at.y, 0.0}, origin{0.0, 0.0, 0.0};
+  // Step 1: a 4 mm window around the spike; its own grid finds it.
+  const ContactLinearization first = refine(seeded, spike_W, 4e-3, 16);
+  EXPECT_NEAR(first.depth_m, peak - z0, 1.0e-6);
+  EXPECT_EQ(seeded.counters().last_step_found, 0u);
+  // Step 2: the whole 20 mm window, whose grid's seeds stay on the hump (the screen test's
+  // premise, checked below): the last step's point finds the spike.
+  const ContactLinearization kept = refine(seeded, origin, 0.02, 50);
+  EXPECT_NEAR(kept.depth_m, peak - z0, 1.0e-6);
+  EXPECT_NEAR(kept.point_W.x, spike_at.x, 40e-6);
+  EXPECT_NEAR(kept.point_W.y, spike_at.y, 40e-6);
+  EXPECT_EQ(seeded.counters().last_step_seeds, 1u);
+  EXPECT_EQ(seeded.counters().last_step_found, 1u);
+  // The displaced samples were searched from the spike too: the slope there is the spike's
+  // (zero at its top, within the secant's one-cell step over a σ of 150 µm), not the hump's.
+  const ContactLinearization hump = refine(alone, origin, 0.02, 50);
+  EXPECT_LT(hump.depth_m, kHump - z0 + 1e-6);
+  EXPECT_LT(std::abs(kept.gradient.d_translation_W.x), 0.05);
+  EXPECT_LT(std::abs(kept.gradient.d_translation_W.y), 0.05);
+  // Forgotten: the whole window again starts from its grid alone, as without the option.
+  seeded.ForgetLastStep();
+  const ContactLinearization forgotten = refine(seeded, origin, 0.02, 50);
+  EXPECT_EQ(forgotten.depth_m, hump.depth_m);
+  EXPECT_EQ(forgotten.point_W, hump.point_W);
+  EXPECT_EQ(forgotten.gradient.d_translation_W, hump.gradient.d_translation_W);
+  EXPECT_EQ(forgotten.gradient.d_rotation_W, hump.gradient.d_rotation_W);
+  // A point found on another environment model is no seed: after the spike's step, the whole
+  // window on a copy of the model (another object) starts from its grid alone.
+  const HapticModel copy = env;
+  refine(seeded, spike_W, 4e-3, 16);
+  const ContactLinearization on_copy = refine(seeded, origin, 0.02, 50, &copy);
+  EXPECT_EQ(on_copy.depth_m, hump.depth_m);
+}
+
 TEST(DepthRefinement, AContactWithoutOverlapIsLeftUnchanged) {
   const HapticModel tool = CurvedTool();
   const HapticModel env = EnvironmentBox(Sinusoid, 256);

@@ -479,6 +479,12 @@ DepthRefiner::DepthRefiner(const DepthRefinementOptions& options, std::size_t ma
   }
 }
 
+void DepthRefiner::BeginStep() noexcept {
+  last_ = next_;
+  num_last_ = num_next_;
+  num_next_ = 0;
+}
+
 void DepthRefiner::ProjectAll(const HapticModel& model, const RigidTransform& X, PatchSide side,
                               std::span<const int> list, std::vector<Projected>& out) noexcept {
   out.clear();
@@ -1126,6 +1132,37 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
       }
     }
   }
+  // The last step's deepest points within this window (seed_from_last_step).
+  if (options_.seed_from_last_step) {
+    const double half_extent = 0.5 * w.extent_m;
+    for (int k = 0; k < num_last_; ++k) {
+      const LastStepPoint& last = last_[static_cast<std::size_t>(k)];
+      if (last.environment != env_) continue;
+      const glm::dvec3 r = X_WT.rotation * last.p_T + X_WT.translation - w.center_W;
+      const double s = glm::dot(r, w.axis_u_W), t = glm::dot(r, w.axis_v_W);
+      if (!(std::abs(s) <= half_extent && std::abs(t) <= half_extent)) continue;
+      ++counters_.last_step_seeds;
+      const double half = 0.75 * cell;
+      const Box box{s - half - cell, s + half + cell, t - half - cell, t + half + cell};
+      GatherEnvironment(box.s0, box.s1, box.t0, box.t1);
+      GatherTool(tool_all_, box.s0, box.s1, box.t0, box.t1);
+      const double floor_m = options_.search_floor_texels * TexelOfGathered(tool_local_);
+      const Seed found = Search(tool_local_, box, s, t, half, 1, 0.5 * half, floor_m, 0.0, 0.0);
+      if (!(found.depth_m > deepest.depth_m)) continue;
+      ++counters_.last_step_found;
+      if (deepest.depth_m > -kInf) {
+        counters_.last_step_raised_um +=
+            static_cast<std::uint64_t>(std::llround((found.depth_m - deepest.depth_m) * 1e6));
+      }
+      deepest = found;
+      screened_deeper = true;  // the displaced samples are searched from it too
+      if (num_seeds < kBaseSeedSamples) {
+        base[static_cast<std::size_t>(num_seeds++)] = deepest;  // TexelScaleGradient's seeds
+      } else {
+        base[static_cast<std::size_t>(best)] = deepest;
+      }
+    }
+  }
   if (!(deepest.depth_m > -kInf)) {
     counters_.evaluations += evaluations_;
     return false;
@@ -1179,6 +1216,10 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
   samples[0] = {deepest.depth_m, CellAt(w, deepest.s, deepest.t)};
   lin.depth_m = deepest.depth_m;
   lin.point_W = point_W;
+  if (options_.seed_from_last_step && num_next_ < kMaxLastStepSeeds) {
+    next_[static_cast<std::size_t>(num_next_++)] = {
+        env_, glm::conjugate(X_WT.rotation) * (point_W - X_WT.translation)};
+  }
   if (options_.texel_scale_gradient && options_.refine_rendered_samples &&
       options_.secant_at_kinks_m > 0.0) {
     // Per axis, the tangent against the refined samples one cell away: a kink within the cell

@@ -190,6 +190,7 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   for (int i = 0; i < last_num_queries_; ++i) last_results_[i].num_kink_planes = 0;
   // Stage 5b: δ refined to the finest texture level, its gradient at texel scale (issue 32).
   if (options_.refine_depth) {
+    refiner_.BeginStep();
     for (int i = 0; i < last_num_queries_; ++i) {
       refiner_.Refine(*scene_.tool, X_WT, last_queries_[i],
                       {last_samples_.data() + static_cast<std::size_t>(i) * kGradientSamples,

@@ -73,6 +73,7 @@ PipelineOptions PipelineOptionsFor(const FrontierSetting& st) {
   options.depth_refinement.subgrid_translations = st.subgrid_translations;
   options.depth_refinement.conservative_screen = st.conservative_screen;
   options.depth_refinement.parallax = st.parallax;
+  options.depth_refinement.seed_from_last_step = st.seed_from_last_step;
   options.depth_refinement.translation_patch = st.translation_patch;
   options.depth_refinement.translation_patch_neighbour_climbs =
       st.translation_patch_neighbour_climbs;
@@ -160,6 +161,19 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     product.name = "product";
     product.product_models = true;
     s.push_back(product);
+    // The product's models read through the displaced surface (issue 32, twenty-fifth stop).
+    FrontierSetting product_parallax = product;
+    product_parallax.name = "product_parallax";
+    product_parallax.parallax = true;
+    s.push_back(product_parallax);
+    FrontierSetting product_seeds = product;
+    product_seeds.name = "product_last_step_seeds";
+    product_seeds.seed_from_last_step = true;
+    s.push_back(product_seeds);
+    FrontierSetting product_parallax_seeds = product_parallax;
+    product_parallax_seeds.name = "product_parallax_last_step_seeds";
+    product_parallax_seeds.seed_from_last_step = true;
+    s.push_back(product_parallax_seeds);
   }
   FrontierSetting ref = base;
   ref.name = "reference";
@@ -315,6 +329,15 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     parallax.name = "parallax";
     parallax.parallax = true;
     s.push_back(parallax);
+    // Seeds from the last step (on a trace's consecutive rows), alone and with parallax.
+    FrontierSetting seeds = refined;
+    seeds.name = "last_step_seeds";
+    seeds.seed_from_last_step = true;
+    s.push_back(seeds);
+    FrontierSetting parallax_seeds = parallax;
+    parallax_seeds.name = "parallax_last_step_seeds";
+    parallax_seeds.seed_from_last_step = true;
+    s.push_back(parallax_seeds);
     FrontierSetting parallax_texel = translation_only;
     parallax_texel.name = "parallax_texel_translation_gradient";
     parallax_texel.parallax = true;
@@ -626,7 +649,7 @@ std::vector<RigidTransform> PredictionPoses(const std::vector<RigidTransform>& p
 }
 
 void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& poses_WFt,
-                const MeshContactBaseline& fcl, int switch_lag,
+                const MeshContactBaseline& fcl, bool consecutive, int switch_lag,
                 const FrontierOptions& frontier_options, SettingRun& run) {
   const FrontierSetting& st = run.setting;
   run.X_TFt = scene.X_TFt;
@@ -680,6 +703,8 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   std::vector<ContactModel> models;
   models.reserve(poses_WFt.size());
   for (std::size_t k = 0; k < poses_WFt.size(); ++k) {
+    // A spread pose does not follow the last: its contacts start from their own grid alone.
+    if (k == 0 || !consecutive) pipeline.ForgetLastStep();
     const ContactModel model = pipeline.Step(poses_WFt[k] * X_FtT, k, timings);
     models.push_back(model);
     PoseRecord p;
@@ -1181,7 +1206,8 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
         run.tool_surface = models.tool_surface;
         run.object_surface = models.object_surface;
         const auto t0 = Clock::now();
-        RunSetting(scene, poses, fcl, consecutive ? options.switch_lag_rows : 0, options, run);
+        RunSetting(scene, poses, fcl, consecutive, consecutive ? options.switch_lag_rows : 0,
+                   options, run);
         for (ContactRecord& c : run.contacts) {
           const std::string key =
               GtKey(c.pose, run.X_TFt, c.query.window, c.query.stiffness_n_per_m);

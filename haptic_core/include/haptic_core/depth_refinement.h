@@ -188,6 +188,18 @@ struct DepthRefinementOptions {
   bool parallax = false;
   /// Most fixed-point steps of the parallax per triangle and point; in [1, 64].
   int parallax_iterations = 12;
+  /// Seeds from the last step (issue 32, twenty-fifth stop): the refined deepest point of every
+  /// contact of the previous step (DepthRefiner::BeginStep), kept in the tool's frame T, is one
+  /// more seed of each contact on the same environment model whose window it falls in, searched
+  /// as a base seed is. The grid's seeds are the deepest cells of a box-filtered render; a narrow
+  /// peak whose filtered cell is not among them is missed on some steps and found on the next
+  /// (along the fig77 scrape δ dipped by 40–100 µm for one step in twenty, docs/frontier/
+  /// issue32/twenty_fifth_stop). A maximum found once is kept while it stays the maximum. A seed
+  /// only adds a candidate: δ0 is never below the seeds-only value, and the result still depends
+  /// on the pose alone once the last step's points are forgotten (DepthRefiner::ForgetLastStep).
+  /// When it gives the deepest point, the ten displaced samples are searched from there too (as
+  /// the screen's). Off: each step from its own grid alone.
+  bool seed_from_last_step = false;
   /// How far above the best a dropped square's bound may reach (m). ≥ 0.
   double screen_tolerance_m = 1e-6;
   /// The screen looks for b − a above the larger of the best found and this (m): 0 looks for
@@ -220,6 +232,11 @@ struct DepthRefinementCounters {
   std::uint64_t translation_kink_planes = 0;
   /// Contacts given a translation patch (DepthRefinementOptions::translation_patch).
   std::uint64_t translation_patches = 0;
+  /// DepthRefinementOptions::seed_from_last_step: last-step seeds searched, and contacts where
+  /// one gave a deeper point than the grid's seeds (and Σ of how much deeper, µm).
+  std::uint64_t last_step_seeds = 0;
+  std::uint64_t last_step_found = 0;
+  std::uint64_t last_step_raised_um = 0;
 };
 
 /// Refines the linearizations of a texture stage's batch to the finest texture level (see the
@@ -252,6 +269,16 @@ class DepthRefiner {
   /// translation_patch_rtt_ms). noexcept; the patch's buffers are reserved at construction (for
   /// windows up to its max_resolution), so that Refine allocates no more with it on than off.
   void SetTranslationPatch(bool on) noexcept { options_.translation_patch = on; }
+  /// DepthRefinementOptions::seed_from_last_step: the deepest points of the contacts refined
+  /// since the last call become the seeds of the contacts refined from now on (at most
+  /// kMaxLastStepSeeds, the first ones kept), and the buffer for this step's starts empty. Call
+  /// once per step before its contacts. noexcept, allocation-free.
+  void BeginStep() noexcept;
+  /// Forgets the last step's points and this step's so far: the next contacts have their grid's
+  /// seeds alone, as a first step (e.g. before a pose that does not follow the last one).
+  void ForgetLastStep() noexcept { num_last_ = num_next_ = 0; }
+  /// Most points kept from one step.
+  static constexpr int kMaxLastStepSeeds = 16;
 
   /// One coarse triangle projected on a window at one pose (internal; public for the .cc's
   /// helpers): corners along u, v and n (m), the normal factors N_c·n, texture coordinates, the
@@ -356,6 +383,14 @@ class DepthRefiner {
   RigidTransform X_WO_;
   ContactWindow window_;
   std::uint64_t evaluations_ = 0;
+  // DepthRefinementOptions::seed_from_last_step: the last step's deepest points (p_T in the tool's
+  // frame, with their environment model) and this step's so far.
+  struct LastStepPoint {
+    const HapticModel* environment;
+    glm::dvec3 p_T;
+  };
+  std::array<LastStepPoint, kMaxLastStepSeeds> last_{}, next_{};
+  int num_last_ = 0, num_next_ = 0;
 };
 
 }  // namespace ht

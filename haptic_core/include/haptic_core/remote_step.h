@@ -324,6 +324,10 @@ class HapticTexturePipeline {
   /// PipelineOptions::refine_depth. The remote node turns it on while the operator's round trip
   /// is long (RemoteNodeConfig::translation_patch_rtt_ms). noexcept, allocation-free.
   void SetTranslationPatch(bool on) noexcept { refiner_.SetTranslationPatch(on); }
+  /// Stage 5b's seeds from the last step (DepthRefinementOptions::seed_from_last_step) forgotten:
+  /// the next step's contacts start from their grid alone, as after construction (for a pose that
+  /// does not follow the last one, e.g. the frontier's spread poses). noexcept.
+  void ForgetLastStep() noexcept { refiner_.ForgetLastStep(); }
   /// Whether stage 5b fills translation patches in the next Step(): the last SetTranslationPatch,
   /// else DepthRefinementOptions::translation_patch; always false without
   /// PipelineOptions::refine_depth (stage 5b does not run).
