@@ -86,10 +86,10 @@ int main(int argc, char** argv) {
   app.add_flag("--parallax", parallax,
                "stage 5b reads heights through the displaced surface (DepthRefinementOptions::"
                "parallax)");
-  bool seed_from_last_step = false;
-  app.add_flag("--seed-from-last-step", seed_from_last_step,
-               "stage 5b also seeds from the last step's deepest points (DepthRefinementOptions::"
-               "seed_from_last_step; a pose's repeats follow each other)");
+  bool no_seed_from_last_step = false;
+  app.add_flag("--no-seed-from-last-step", no_seed_from_last_step,
+               "stage 5b without the last step's deepest points as seeds (by default a pose's "
+               "repeats seed each other: DepthRefinementOptions::seed_from_last_step)");
   bool translation_patch = false;
   app.add_flag("--translation-patch", translation_patch,
                "stage 5b: each contact's depth over in-plane translations of the tool "
@@ -140,7 +140,7 @@ int main(int argc, char** argv) {
     options.refine_depth = !no_refinement;
     options.share_connected_contacts = !no_sharing;
     options.depth_refinement.parallax = parallax;
-    options.depth_refinement.seed_from_last_step = seed_from_last_step;
+    options.depth_refinement.seed_from_last_step = !no_seed_from_last_step;
     options.depth_refinement.translation_patch = translation_patch;
     options.depth_refinement.translation_patch_spacing_cells = translation_patch_spacing_cells;
     options.depth_refinement.texel_scale_gradient = texel_gradient;

@@ -166,14 +166,10 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     product_parallax.name = "product_parallax";
     product_parallax.parallax = true;
     s.push_back(product_parallax);
-    FrontierSetting product_seeds = product;
-    product_seeds.name = "product_last_step_seeds";
-    product_seeds.seed_from_last_step = true;
-    s.push_back(product_seeds);
-    FrontierSetting product_parallax_seeds = product_parallax;
-    product_parallax_seeds.name = "product_parallax_last_step_seeds";
-    product_parallax_seeds.seed_from_last_step = true;
-    s.push_back(product_parallax_seeds);
+    FrontierSetting product_alone = product;
+    product_alone.name = "product_no_last_step_seeds";
+    product_alone.seed_from_last_step = false;
+    s.push_back(product_alone);
   }
   FrontierSetting ref = base;
   ref.name = "reference";
@@ -329,15 +325,16 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     parallax.name = "parallax";
     parallax.parallax = true;
     s.push_back(parallax);
-    // Seeds from the last step (on a trace's consecutive rows), alone and with parallax.
-    FrontierSetting seeds = refined;
-    seeds.name = "last_step_seeds";
-    seeds.seed_from_last_step = true;
-    s.push_back(seeds);
-    FrontierSetting parallax_seeds = parallax;
-    parallax_seeds.name = "parallax_last_step_seeds";
-    parallax_seeds.seed_from_last_step = true;
-    s.push_back(parallax_seeds);
+    // Without the seeds from the last step (they count on a trace's consecutive rows only),
+    // alone and with parallax: the default before issue 32's twenty-fifth stop.
+    FrontierSetting alone = refined;
+    alone.name = "no_last_step_seeds";
+    alone.seed_from_last_step = false;
+    s.push_back(alone);
+    FrontierSetting parallax_alone = parallax;
+    parallax_alone.name = "parallax_no_last_step_seeds";
+    parallax_alone.seed_from_last_step = false;
+    s.push_back(parallax_alone);
     FrontierSetting parallax_texel = translation_only;
     parallax_texel.name = "parallax_texel_translation_gradient";
     parallax_texel.parallax = true;

@@ -121,13 +121,13 @@ int main(int argc, char** argv) {
                "along the window's normal (parallax) instead of h*(N.n) at the coarse point\n"
                "under it, which on coarse facets tilted from the normal under large heights\n"
                "reads another part of the surface (docs/frontier/issue32/twelfth_stop)");
-  bool seed_from_last_step = ht::DepthRefinementOptions{}.seed_from_last_step;
-  app.add_flag("--seed-from-last-step,!--no-seed-from-last-step", seed_from_last_step,
-               "stage 5b also searches each contact from the previous step's deepest point (kept\n"
-               "in the tool's frame), so that a narrow peak the filtered grid finds on one step\n"
-               "and misses on the next is not lost for a step (docs/frontier/issue32/\n"
-               "twenty_fifth_stop)")
-      ->capture_default_str();
+  bool no_seed_from_last_step = false;
+  app.add_flag("--no-seed-from-last-step", no_seed_from_last_step,
+               "each step's contacts from their own grid alone: by default stage 5b also\n"
+               "searches each contact from the previous step's deepest point (kept in the\n"
+               "tool's frame), so that a narrow peak the filtered grid finds on one step and\n"
+               "misses on the next is not lost for that step (docs/frontier/issue32/\n"
+               "twenty_fifth_stop)");
   double translation_patch_rtt_ms = ht::RemoteNodeConfig{}.translation_patch_rtt_ms;
   auto* rtt_option =
       app.add_option(
@@ -430,7 +430,7 @@ int main(int argc, char** argv) {
     config.pipeline.refine_depth = !no_refine_depth;
     config.pipeline.depth_refinement.texel_scale_gradient = texel_scale_gradient;
     config.pipeline.depth_refinement.parallax = parallax;
-    config.pipeline.depth_refinement.seed_from_last_step = seed_from_last_step;
+    config.pipeline.depth_refinement.seed_from_last_step = !no_seed_from_last_step;
     config.pipeline.depth_refinement.translation_patch = translation_patch;
     config.pipeline.depth_refinement.translation_patch_follows_rotation =
         translation_patch_follows_rotation;

@@ -111,10 +111,11 @@ struct FrontierSetting {
   bool conservative_screen = false;
   /// PipelineOptions::depth_refinement.parallax ("parallax*" turn it on).
   bool parallax = false;
-  /// PipelineOptions::depth_refinement.seed_from_last_step ("*last_step_seeds" turn it on). The
-  /// frontier forgets the last step before each pose unless the poses are a trace's consecutive
-  /// rows (FrontierOptions::trace_from_s), where each pose follows the last as in the loop.
-  bool seed_from_last_step = false;
+  /// PipelineOptions::depth_refinement.seed_from_last_step ("*no_last_step_seeds" turn it off).
+  /// The frontier forgets the last step before each pose unless the poses are a trace's
+  /// consecutive rows (FrontierOptions::trace_from_s), where each pose follows the last as in the
+  /// loop: on spread poses it changes nothing.
+  bool seed_from_last_step = true;
   /// PipelineOptions::depth_refinement.translation_patch ("translation_patch" turns it on).
   bool translation_patch = false;
   /// PipelineOptions::depth_refinement.translation_patch_neighbour_climbs
