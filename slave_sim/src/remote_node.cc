@@ -428,7 +428,8 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     // squares and leaves per contact, the contacts where it found a deeper point than the seeds
     // (and Σ µm), and those it stopped at its leaf budget; the translation arms added as kink
     // planes (DepthRefinementOptions::translation_kink_planes); the contacts given a translation
-    // patch, and whether the option is on.
+    // patch, and whether the option is on; the last step's seeds searched, the contacts where one
+    // was deeper than the grid's seeds (and Σ µm), and whether they are on.
     const DepthRefinementCounters& r = pipeline->depth_refinement_counters();
     const double n = r.contacts > 0 ? static_cast<double>(r.contacts) : 1.0;
     s["depth_refinement"] = {
@@ -443,7 +444,11 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
         {"screen_truncated", r.screen_truncated},
         {"translation_kink_planes", r.translation_kink_planes},
         {"translation_patches", r.translation_patches},
-        {"translation_patch", config.pipeline.depth_refinement.translation_patch}};
+        {"translation_patch", config.pipeline.depth_refinement.translation_patch},
+        {"last_step_seeds", r.last_step_seeds},
+        {"last_step_found_deeper", r.last_step_found},
+        {"last_step_raised_um_sum", r.last_step_raised_um},
+        {"seed_from_last_step", config.pipeline.depth_refinement.seed_from_last_step}};
     // Whether the patches went by the operator's round trip (translation_patch_rtt_ms).
     s["translation_patch_by_rtt"] = {
         {"rtt_ms", std::isfinite(config.translation_patch_rtt_ms)
