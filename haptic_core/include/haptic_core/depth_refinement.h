@@ -193,17 +193,18 @@ struct DepthRefinementOptions {
   /// more seed of each contact on the same environment model whose window it falls in, searched
   /// as a base seed is. The grid's seeds are the deepest cells of a box-filtered render; a narrow
   /// peak whose filtered cell is not among them is missed on some steps and found on the next
-  /// (along the fig77 scrape δ dipped by 40–100 µm for one step in twenty, docs/frontier/
-  /// issue32/twenty_fifth_stop). A maximum found once is kept while it stays the maximum. A seed
-  /// only adds a candidate: δ0 is never below the seeds-only value, and the result still depends
-  /// on the pose alone once the last step's points are forgotten (DepthRefiner::ForgetLastStep).
-  /// When it gives the deepest point, the ten displaced samples are searched from there too (as
-  /// the screen's). On by default: along three 500-tick stretches of the fig77 scrape the force's
-  /// one-tick changes above 0.2 N went 22 / 12 / 35 → 14 / 0 / 23 (the truth's 13 / 0 / 0) and the
-  /// force error 37.7 / 43.5 / 35.3 → 36.7 / 44.8 / 29.7 %; in the closed loop the contact force's
-  /// steps above 0.2 N fell by a third to nineteen twentieths on fig76, fig77 and the hammer and
-  /// stayed on fig75. Off (`slave_sim --no-seed-from-last-step`, the frontier's
-  /// "no_last_step_seeds"): each step from its own grid alone.
+  /// (along the fig77 scrape δ dipped by 40–100 µm for single steps, a force step above 0.2 N on
+  /// 12 of 430 rows where the truth had none, docs/frontier/issue32/twenty_fifth_stop). A maximum
+  /// found once is kept while it stays the maximum. A seed only adds a candidate: δ0 is never below
+  /// the seeds-only value, and the result still depends on the pose alone once the last step's
+  /// points are forgotten (DepthRefiner::ForgetLastStep). When it gives the deepest point, the ten
+  /// displaced samples are searched from there too (as the screen's). On by default: along three
+  /// 500-tick stretches of the fig77 scrape the force's one-tick changes above 0.2 N went 22 / 12 /
+  /// 35 → 14 / 0 / 23 (the truth's 13 / 0 / 0) and the force error 37.7 / 43.5 / 35.3 → 36.7 / 44.8
+  /// / 29.7 %; in the closed loop the contact force's steps above 0.2 N fell by a third to nineteen
+  /// twentieths on fig76, fig77 and the hammer and stayed on fig75. Off (`slave_sim
+  /// --no-seed-from-last-step`, the frontier's "no_last_step_seeds"): each step from its own grid
+  /// alone.
   bool seed_from_last_step = true;
   /// How far above the best a dropped square's bound may reach (m). ≥ 0.
   double screen_tolerance_m = 1e-6;
