@@ -335,6 +335,12 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     parallax_alone.name = "parallax_no_last_step_seeds";
     parallax_alone.seed_from_last_step = false;
     s.push_back(parallax_alone);
+    // Parallax with one plane per contact: whether the resting block's rocking in the closed
+    // loop comes with the kink planes' V (issue 32, twenty-fifth stop).
+    FrontierSetting parallax_one_plane = parallax;
+    parallax_one_plane.name = "parallax_no_kink_planes";
+    parallax_one_plane.kink_planes = false;
+    s.push_back(parallax_one_plane);
     FrontierSetting parallax_texel = translation_only;
     parallax_texel.name = "parallax_texel_translation_gradient";
     parallax_texel.parallax = true;
