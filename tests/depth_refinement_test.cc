@@ -202,6 +202,28 @@ TEST(DepthRefinement, SinusoidUnderACurvedToolGivesTheClosedFormDepthAndSlope) {
   }
 }
 
+// A broad low hump (kHump, σ 3 mm, at kHumpAt) and, 10 mm away, a narrow tall spike (kSpike,
+// σ 150 µm, at kSpikeAt): heights (m) over world (x, y) (m), and the spike's top, max h, by a
+// 1 µm scan around it (m).
+constexpr double kHump = 20e-6, kSpike = 40e-6;
+constexpr glm::dvec2 kHumpAt{-5e-3, 0.0}, kSpikeAt{5e-3, 3e-3};
+double HumpAndSpike(double x, double y) {
+  const auto g = [&](glm::dvec2 c, double sigma) {
+    const double r2 = (x - c.x) * (x - c.x) + (y - c.y) * (y - c.y);
+    return std::exp(-r2 / (2.0 * sigma * sigma));
+  };
+  return kHump * g(kHumpAt, 3e-3) + kSpike * g(kSpikeAt, 150e-6);
+}
+double SpikeTop() {
+  double peak = 0.0;
+  for (int i = -400; i <= 400; ++i) {
+    for (int j = -400; j <= 400; ++j) {
+      peak = std::max(peak, HumpAndSpike(kSpikeAt.x + i * 1e-6, kSpikeAt.y + j * 1e-6));
+    }
+  }
+  return peak;
+}
+
 // The conservative screen (issue 32, sixth stop) against a closed form the seeds cannot find: a
 // broad low hump (20 µm, σ 3 mm) and, 10 mm away, a narrow tall spike (40 µm, σ 150 µm) under a
 // flat tool. At every N the grid's filtered cells read the hump deepest (at N = 16 a cell
@@ -209,21 +231,9 @@ TEST(DepthRefinement, SinusoidUnderACurvedToolGivesTheClosedFormDepthAndSlope) {
 // (the texture's level-0 maxima) keep the spike's squares and its leaf search finds it. δ is
 // max_x h(x) − z0 within the bilinear texture's error; the point is the spike's.
 TEST(DepthRefinement, ScreenFindsTheNarrowPeakTheFilteredGridHides) {
-  constexpr double kHump = 20e-6, kSpike = 40e-6;
-  const glm::dvec2 hump_at{-5e-3, 0.0}, spike_at{5e-3, 3e-3};
-  const auto surface = [=](double x, double y) {
-    const auto g = [&](glm::dvec2 c, double sigma) {
-      const double r2 = (x - c.x) * (x - c.x) + (y - c.y) * (y - c.y);
-      return std::exp(-r2 / (2.0 * sigma * sigma));
-    };
-    return kHump * g(hump_at, 3e-3) + kSpike * g(spike_at, 150e-6);
-  };
-  double peak = 0.0;
-  for (int i = -400; i <= 400; ++i) {
-    for (int j = -400; j <= 400; ++j) {
-      peak = std::max(peak, surface(spike_at.x + i * 1e-6, spike_at.y + j * 1e-6));
-    }
-  }
+  const auto surface = HumpAndSpike;
+  const glm::dvec2 spike_at = kSpikeAt;
+  const double peak = SpikeTop();
   const HapticModel tool = ToolBox([](double, double) { return 0.0; }, 256);
   const HapticModel env = EnvironmentBox(surface, 1024);
   const double z0 = 10e-6;
@@ -251,21 +261,9 @@ TEST(DepthRefinement, ScreenFindsTheNarrowPeakTheFilteredGridHides) {
 // step over the whole window; forgotten, the whole window's seeds stay on the hump as without the
 // option, bit for bit.
 TEST(DepthRefinement, ASeedFromTheLastStepKeepsTheNarrowPeakTheFilteredGridHides) {
-  constexpr double kHump = 20e-6, kSpike = 40e-6;
-  const glm::dvec2 hump_at{-5e-3, 0.0}, spike_at{5e-3, 3e-3};
-  const auto surface = [=](double x, double y) {
-    const auto g = [&](glm::dvec2 c, double sigma) {
-      const double r2 = (x - c.x) * (x - c.x) + (y - c.y) * (y - c.y);
-      return std::exp(-r2 / (2.0 * sigma * sigma));
-    };
-    return kHump * g(hump_at, 3e-3) + kSpike * g(spike_at, 150e-6);
-  };
-  double peak = 0.0;
-  for (int i = -400; i <= 400; ++i) {
-    for (int j = -400; j <= 400; ++j) {
-      peak = std::max(peak, surface(spike_at.x + i * 1e-6, spike_at.y + j * 1e-6));
-    }
-  }
+  const auto surface = HumpAndSpike;
+  const glm::dvec2 spike_at = kSpikeAt;
+  const double peak = SpikeTop();
   const HapticModel tool = ToolBox([](double, double) { return 0.0; }, 256);
   const HapticModel env = EnvironmentBox(surface, 1024);
   const double z0 = 10e-6;

@@ -1071,12 +1071,11 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
   ProjectAll(*env_, X_WO_, PatchSide::kEnvironment, env_list_, env_all_);
   ProjectAll(tool, X_WT, PatchSide::kTool, tool_list_, tool_all_);
 
-  // One rendered sample's deepest cell refined at a pose: the tool at X (shifted in-plane by
-  // (shift_s, shift_t) where X is the base pose).
-  const auto refine_cell = [&](int cell_index, std::span<const Projected> tool_at, double shift_s,
-                               double shift_t, bool subgrid) -> Seed {
-    double s = 0.0, t = 0.0;
-    CellCoordinates(w, cell_index, s, t);
+  // A search from the window point (s, t) (m) within the 1.75-cell square around it, the tool at
+  // X (shifted in-plane by (shift_s, shift_t) where X is the base pose): a sub-grid over its
+  // 1.5-cell square first with `subgrid`, else a pattern search from the point alone.
+  const auto refine_at = [&](double s, double t, std::span<const Projected> tool_at, double shift_s,
+                             double shift_t, bool subgrid) -> Seed {
     const double half = 0.75 * cell;
     const Box box{s - half - cell, s + half + cell, t - half - cell, t + half + cell};
     GatherEnvironment(box.s0, box.s1, box.t0, box.t1);
@@ -1089,6 +1088,13 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
                              1, options_.max_subsamples);
     return Search(tool_local_, box, s, t, half, g, 0.5 * (2.0 * half / g), floor_m, shift_s,
                   shift_t);
+  };
+  // One rendered sample's deepest cell refined at a pose.
+  const auto refine_cell = [&](int cell_index, std::span<const Projected> tool_at, double shift_s,
+                               double shift_t, bool subgrid) -> Seed {
+    double s = 0.0, t = 0.0;
+    CellCoordinates(w, cell_index, s, t);
+    return refine_at(s, t, tool_at, shift_s, shift_t, subgrid);
   };
 
   // The base: every distinct deepest cell of the samples is a seed.
@@ -1113,54 +1119,48 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
     if (best < 0 || base[k].depth_m > base[static_cast<std::size_t>(best)].depth_m) best = k;
   }
   Seed deepest = best >= 0 ? base[static_cast<std::size_t>(best)] : Seed{-kInf, 0.0, 0.0};
+  // A deeper point found away from the grid's seeds (the screen, the last step) becomes deepest
+  // and one of the base seeds (TexelScaleGradient's), and the displaced samples are searched
+  // from it too. Returns how much deeper (µm, rounded; 0 when the seeds found nothing).
+  bool deeper_away_from_seeds = false;
+  const auto take_deeper = [&](const Seed& found) -> std::uint64_t {
+    const std::uint64_t raised =
+        deepest.depth_m > -kInf
+            ? static_cast<std::uint64_t>(std::llround((found.depth_m - deepest.depth_m) * 1e6))
+            : 0;
+    deepest = found;
+    deeper_away_from_seeds = true;
+    if (num_seeds < kBaseSeedSamples) {
+      base[static_cast<std::size_t>(num_seeds++)] = deepest;
+    } else {
+      base[static_cast<std::size_t>(best)] = deepest;
+    }
+    return raised;
+  };
   // The conservative screen: wherever b − a can still beat the seeds' best.
-  bool screened_deeper = false;
   if (options_.conservative_screen) {
-    const double from_seeds = deepest.depth_m;
-    Screen(deepest);
-    if (deepest.depth_m > from_seeds) {
-      screened_deeper = true;
+    Seed screened = deepest;
+    Screen(screened);
+    if (screened.depth_m > deepest.depth_m) {
       counters_.screen_found += 1;
-      if (from_seeds > -kInf) {
-        counters_.screen_raised_um +=
-            static_cast<std::uint64_t>(std::llround((deepest.depth_m - from_seeds) * 1e6));
-      }
-      if (num_seeds < kBaseSeedSamples) {
-        base[static_cast<std::size_t>(num_seeds++)] = deepest;  // TexelScaleGradient's seeds
-      } else {
-        base[static_cast<std::size_t>(best)] = deepest;
-      }
+      counters_.screen_raised_um += take_deeper(screened);
     }
   }
-  // The last step's deepest points within this window (seed_from_last_step).
+  // The last step's deepest points within this window (seed_from_last_step), each searched by a
+  // pattern search from the point (it was a refined maximum one step ago: no sub-grid).
   if (options_.seed_from_last_step) {
     const double half_extent = 0.5 * w.extent_m;
     for (int k = 0; k < num_last_; ++k) {
       const LastStepPoint& last = last_[static_cast<std::size_t>(k)];
       if (last.environment != env_) continue;
-      const glm::dvec3 r = X_WT.rotation * last.p_T + X_WT.translation - w.center_W;
+      const glm::dvec3 r = X_WT * last.p_T - w.center_W;
       const double s = glm::dot(r, w.axis_u_W), t = glm::dot(r, w.axis_v_W);
       if (!(std::abs(s) <= half_extent && std::abs(t) <= half_extent)) continue;
       ++counters_.last_step_seeds;
-      const double half = 0.75 * cell;
-      const Box box{s - half - cell, s + half + cell, t - half - cell, t + half + cell};
-      GatherEnvironment(box.s0, box.s1, box.t0, box.t1);
-      GatherTool(tool_all_, box.s0, box.s1, box.t0, box.t1);
-      const double floor_m = options_.search_floor_texels * TexelOfGathered(tool_local_);
-      const Seed found = Search(tool_local_, box, s, t, half, 1, 0.5 * half, floor_m, 0.0, 0.0);
+      const Seed found = refine_at(s, t, tool_all_, 0.0, 0.0, false);
       if (!(found.depth_m > deepest.depth_m)) continue;
       ++counters_.last_step_found;
-      if (deepest.depth_m > -kInf) {
-        counters_.last_step_raised_um +=
-            static_cast<std::uint64_t>(std::llround((found.depth_m - deepest.depth_m) * 1e6));
-      }
-      deepest = found;
-      screened_deeper = true;  // the displaced samples are searched from it too
-      if (num_seeds < kBaseSeedSamples) {
-        base[static_cast<std::size_t>(num_seeds++)] = deepest;  // TexelScaleGradient's seeds
-      } else {
-        base[static_cast<std::size_t>(best)] = deepest;
-      }
+      counters_.last_step_raised_um += take_deeper(found);
     }
   }
   if (!(deepest.depth_m > -kInf)) {
@@ -1197,9 +1197,10 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
                            k <= 2 ? 0.0 : sign * big.h_x, options_.subgrid_translations);
       };
       Seed found = refine_from(sample.cell);
-      if (screened_deeper) {
-        // The screen found the maximum away from the seeds: the displaced sample is searched
-        // from there too (its own deepest cell may hold the seeds' lower peak).
+      if (deeper_away_from_seeds) {
+        // The screen or the last step found the maximum away from the seeds: the displaced
+        // sample is searched from there too (its own deepest cell may hold the seeds' lower
+        // peak).
         const Seed also = refine_from(CellAt(w, deepest.s, deepest.t));
         if (also.depth_m > found.depth_m) found = also;
       }
@@ -1217,6 +1218,7 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
   lin.depth_m = deepest.depth_m;
   lin.point_W = point_W;
   if (options_.seed_from_last_step && num_next_ < kMaxLastStepSeeds) {
+    // p_T = R_WTᵀ (p_W − p_WT): the point in the tool's frame.
     next_[static_cast<std::size_t>(num_next_++)] = {
         env_, glm::conjugate(X_WT.rotation) * (point_W - X_WT.translation)};
   }

@@ -190,8 +190,9 @@ struct DepthRefinementOptions {
   int parallax_iterations = 12;
   /// Seeds from the last step (issue 32, twenty-fifth stop): the refined deepest point of every
   /// contact of the previous step (DepthRefiner::BeginStep), kept in the tool's frame T, is one
-  /// more seed of each contact on the same environment model whose window it falls in, searched
-  /// as a base seed is. The grid's seeds are the deepest cells of a box-filtered render; a narrow
+  /// more seed of each contact on the same environment model whose window it falls in: a pattern
+  /// search from the point (no sub-grid) within the 1.75-cell square a base seed's search keeps
+  /// to. The grid's seeds are the deepest cells of a box-filtered render; a narrow
   /// peak whose filtered cell is not among them is missed on some steps and found on the next
   /// (along the fig77 scrape δ dipped by 40–100 µm for single steps, a force step above 0.2 N on
   /// 12 of 430 rows where the truth had none, docs/frontier/issue32/twenty_fifth_stop). A maximum
