@@ -555,7 +555,17 @@ DepthRefiner::Seed DepthRefiner::Search(std::span<const Projected> tool, const B
     return false;
   };
   if (subsamples <= 1) {
-    consider(s, t);
+    // A start just off the surface (a rendered cell's centre a few micrometres past the edge of
+    // a face whose displaced surface, with parallax, ends inside it) reads nothing: its four
+    // neighbours at the pattern's steps are tried, nearest first, until one reads a depth.
+    if (!consider(s, t)) {
+      for (double probe = std::max(floor_m, step / 64.0);
+           probe > 0.0 && probe <= step && !(best.depth_m > -kInf); probe *= 2.0) {
+        for (const auto& d : {std::array<int, 2>{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
+          consider(s + d[0] * probe, t + d[1] * probe);
+        }
+      }
+    }
   } else {
     const double spacing = 2.0 * half_side / subsamples;
     for (int j = 0; j < subsamples; ++j) {

@@ -351,8 +351,9 @@ class DepthRefiner {
   double Difference(std::span<const Projected> tool, double s, double t, double shift_s,
                     double shift_t) noexcept;
   // The best of a sub-grid of `subsamples`² points over the square of half side `half_side`
-  // around (s, t) (the point alone for 1), then a pattern search from it with `step` halved down
-  // to `floor_m`, staying in `box`.
+  // around (s, t) (the point alone for 1; where that reads nothing, the first of its four
+  // neighbours that does, from max(floor_m, step/64) doubling up to `step`), then a pattern search
+  // from it with `step` halved down to `floor_m`, staying in `box`.
   Seed Search(std::span<const Projected> tool, const Box& box, double s, double t, double half_side,
               int subsamples, double step, double floor_m, double shift_s, double shift_t) noexcept;
 
