@@ -13,7 +13,7 @@ namespace ht {
 
 int AddKinkPlanes(const ContactWindow& w, std::span<const DepthSample> samples,
                   const glm::dvec3& p_WT, ContactLinearization& lin, bool own_slope,
-                  bool bearing_by_arm_gap) noexcept {
+                  bool hang_other_arm) noexcept {
   lin.num_kink_planes = std::clamp(lin.num_kink_planes, 0, kMaxKinkPlanes);
   if (samples.size() < static_cast<std::size_t>(kGradientSamples) || !std::isfinite(lin.depth_m) ||
       samples[0].cell < 0) {
@@ -39,47 +39,22 @@ int AddKinkPlanes(const ContactWindow& w, std::span<const DepthSample> samples,
     // whose two edges bear in turn). Elsewhere the secant of the samples stays.
     kinked[a] = arm_slope[a][0] > 0.0 && arm_slope[a][1] < 0.0;
   }
-  // Each kinked axis's arms at q0: A± = δ(±h_θ) ∓ h_θ·s±, the arm's plane through its sample
-  // extrapolated back to q0 (DepthSample depths, m).
-  double arm_at_q0[2][2] = {{0.0, 0.0}, {0.0, 0.0}};
-  // With bearing_by_arm_gap: along a sharp kinked axis, the arm that bears at q0 (0: plus, 1:
-  // minus), −1 elsewhere.
-  int bearing[2] = {-1, -1};
-  for (int a = 0; a < 2; ++a) {
-    if (!kinked[a]) continue;
-    arm_at_q0[a][0] = samples[static_cast<std::size_t>(5 + 2 * a)].depth_m - h * arm_slope[a][0];
-    arm_at_q0[a][1] = samples[static_cast<std::size_t>(6 + 2 * a)].depth_m + h * arm_slope[a][1];
-    if (!own_slope || !bearing_by_arm_gap) continue;
-    // Sharp where the arms cross within an eighth of h_θ·(s+ − s−) of δ0: a V through q0 crosses
-    // at δ0, a rounded depth (curvature κ, s± = ±κh_θ) a quarter of it below.
-    const double crossing = std::max(arm_at_q0[a][0], arm_at_q0[a][1]);
-    const double rounded_drop = 0.25 * h * (arm_slope[a][0] - arm_slope[a][1]);
-    if (!std::isfinite(crossing) || !(crossing - lin.depth_m >= -0.5 * rounded_drop)) continue;
-    bearing[a] = arm_at_q0[a][0] >= arm_at_q0[a][1] ? 0 : 1;
-  }
-  // At q0 the bearing arm's slope is the gradient along a kinked axis: the secant across the V's
-  // vertex reads the two arms' mean.
+  // At q0 the deepest cell's own slope is the gradient along a kinked axis: the secant across the
+  // V's vertex reads the two arms' mean. Only where the deepest cell bears like one of the arms
+  // (its slope within 10 % of that arm's: a sharp V, tilted by h_θ the face still bears on the
+  // same edge); on a rounded contact the deepest cell moves with any tilt, and its single cell's
+  // slope is the noisier estimate. bearing[a]: the arm it bears like (0: plus, 1: minus), or −1.
   glm::dvec3 d_rotation = lin.gradient.d_rotation_W;
+  int bearing[2] = {-1, -1};
   for (int a = 0; a < 2 && own_slope; ++a) {
     if (!kinked[a]) continue;
-    double s_bearing = 0.0;
-    if (bearing_by_arm_gap) {
-      if (bearing[a] < 0) continue;
-      s_bearing = arm_slope[a][bearing[a]];
-    } else {
-      // Only where the deepest cell bears like one of the arms (its slope within 10 % of that
-      // arm's: a sharp V, tilted by h_θ the face still bears on the same edge); on a rounded
-      // contact the deepest cell moves with any tilt, and its single cell's slope is the noisier
-      // estimate.
-      s_bearing = slope(samples[0].cell, axes[a]);
-      if (!(std::abs(s_bearing - arm_slope[a][0]) <= 0.1 * std::abs(arm_slope[a][0]) ||
-            std::abs(s_bearing - arm_slope[a][1]) <= 0.1 * std::abs(arm_slope[a][1]))) {
-        continue;
-      }
-    }
-    if (std::isfinite(s_bearing)) {
-      d_rotation += (s_bearing - glm::dot(d_rotation, axes[a])) * axes[a];
-    }
+    const double s0 = slope(samples[0].cell, axes[a]);
+    if (!std::isfinite(s0)) continue;
+    const double off_plus = std::abs(s0 - arm_slope[a][0]) / std::abs(arm_slope[a][0]);
+    const double off_minus = std::abs(s0 - arm_slope[a][1]) / std::abs(arm_slope[a][1]);
+    if (!(std::min(off_plus, off_minus) <= 0.1)) continue;
+    bearing[a] = off_plus <= off_minus ? 0 : 1;
+    d_rotation += (s0 - glm::dot(d_rotation, axes[a])) * axes[a];
   }
   // The planes already held (translation arms) share the contact's rotation slope.
   for (int m = 0; m < lin.num_kink_planes; ++m) {
@@ -89,19 +64,24 @@ int AddKinkPlanes(const ContactWindow& w, std::span<const DepthSample> samples,
   lin.gradient.d_rotation_W = d_rotation;
   for (int a = 0; a < 2; ++a) {
     if (!kinked[a]) continue;
+    // Each arm at q0: A± = δ(±h_θ) ∓ h_θ·s±, its plane through its sample (m).
+    const double arm_at_q0[2] = {
+        samples[static_cast<std::size_t>(5 + 2 * a)].depth_m - h * arm_slope[a][0],
+        samples[static_cast<std::size_t>(6 + 2 * a)].depth_m + h * arm_slope[a][1]};
     for (int side = 0; side < 2 && lin.num_kink_planes < kMaxKinkPlanes; ++side) {
+      const DepthSample& s = samples[static_cast<std::size_t>(5 + 2 * a + side)];
       KinkPlane p;
       p.d_rotation_W = d_rotation + (arm_slope[a][side] - glm::dot(d_rotation, axes[a])) * axes[a];
-      if (bearing[a] >= 0) {
+      if (hang_other_arm && bearing[a] >= 0) {
         if (side == bearing[a]) continue;  // the contact's own plane
-        // The other arm below δ0 by the arms' gap at q0: the V's shape from its two samples,
-        // hung from δ0 (the refined maximum), so that the arms tie where the samples' arms do.
-        p.depth_m = lin.depth_m - std::abs(arm_at_q0[a][0] - arm_at_q0[a][1]);
+        // The other arm below δ0 by the arms' gap at q0 (none where it reads deeper: a tie): the
+        // V's shape from its two samples, hung from δ0, so that the arms tie where the samples'
+        // arms cross. Each A alone is off by its lever's error times h_θ.
+        p.depth_m = lin.depth_m - std::max(arm_at_q0[bearing[a]] - arm_at_q0[side], 0.0);
       } else {
-        const DepthSample& s = samples[static_cast<std::size_t>(5 + 2 * a + side)];
         if (s.cell == samples[0].cell) continue;  // the contact's own plane already
         // Through the sample: δ_m(q0 ⊕ sign·h_θ·a) = δ_s; never above δ0 at q0.
-        p.depth_m = std::min(arm_at_q0[a][side], lin.depth_m);
+        p.depth_m = std::min(arm_at_q0[side], lin.depth_m);
       }
       if (!std::isfinite(p.depth_m) || !std::isfinite(p.d_rotation_W.x) ||
           !std::isfinite(p.d_rotation_W.y) || !std::isfinite(p.d_rotation_W.z)) {

@@ -204,7 +204,7 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
                     {last_samples_.data() + static_cast<std::size_t>(i) * kGradientSamples,
                      static_cast<std::size_t>(kGradientSamples)},
                     X_WT.translation, last_results_[i], options_.kink_planes_own_slope,
-                    options_.kink_bearing_by_arm_gap);
+                    options_.kink_hang_other_arm);
     }
   }
   // The grazing guard: a δ its coarse geometry cannot hold is the sideways overlap along a

@@ -58,7 +58,7 @@ PipelineOptions PipelineOptionsFor(const FrontierSetting& st) {
   options.whole_model_region_windows = st.whole_model_region_windows;
   options.kink_planes = st.kink_planes;
   options.kink_planes_own_slope = st.kink_planes_own_slope;
-  options.kink_bearing_by_arm_gap = st.kink_bearing_by_arm_gap;
+  options.kink_hang_other_arm = st.kink_hang_other_arm;
   options.refine_depth = st.refine_depth;
   options.depth_refinement.texel_scale_gradient = st.texel_scale_gradient;
   options.depth_refinement.secant_at_kinks_m = st.secant_at_kinks_m;
@@ -257,10 +257,10 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     keep_secant.name = "kink_planes_keep_secant";
     keep_secant.kink_planes_own_slope = false;
     s.push_back(keep_secant);
-    FrontierSetting by_cell = base;
-    by_cell.name = "kink_bearing_by_deepest_cell";
-    by_cell.kink_bearing_by_arm_gap = false;
-    s.push_back(by_cell);
+    FrontierSetting hang = base;
+    hang.name = "kink_hang_other_arm";
+    hang.kink_hang_other_arm = true;
+    s.push_back(hang);
     // Issue 32: stage 5b's variants (the default refines).
     const FrontierSetting& refined = base;
     // The refined maximum's gradient at texel-scale steps instead of the refined samples'
@@ -330,10 +330,10 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     parallax.name = "parallax";
     parallax.parallax = true;
     s.push_back(parallax);
-    FrontierSetting parallax_by_cell = parallax;
-    parallax_by_cell.name = "parallax_kink_bearing_by_deepest_cell";
-    parallax_by_cell.kink_bearing_by_arm_gap = false;
-    s.push_back(parallax_by_cell);
+    FrontierSetting parallax_hang = parallax;
+    parallax_hang.name = "parallax_kink_hang_other_arm";
+    parallax_hang.kink_hang_other_arm = true;
+    s.push_back(parallax_hang);
     // Without the seeds from the last step (they count on a trace's consecutive rows only),
     // alone and with parallax: the default before issue 32's twenty-fifth stop.
     FrontierSetting alone = refined;

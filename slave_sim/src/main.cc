@@ -122,6 +122,14 @@ int main(int argc, char** argv) {
                "under it, which on coarse facets tilted from the normal under large heights\n"
                "reads another part of the surface (docs/frontier/issue32/twelfth_stop)");
   bool no_seed_from_last_step = false;
+  bool kink_hang_other_arm = false;
+  app.add_flag(
+      "--kink-hang-other-arm", kink_hang_other_arm,
+      "where a contact's depth is a V in the tool's tilt (a face resting on ridges), hang\n"
+      "the arm it does not bear on below its depth by the two arms' gap instead of through\n"
+      "its own sample: the resting block's torque turns over smoothly through level, but\n"
+      "the torque error against the truth is a little higher and the striped blocks' loop\n"
+      "rougher (docs/frontier/issue32/twenty_sixth_stop)");
   app.add_flag("--no-seed-from-last-step", no_seed_from_last_step,
                "each step's contacts from their own grid alone: by default stage 5b also\n"
                "searches each contact from the previous step's deepest point (kept in the\n"
@@ -431,6 +439,7 @@ int main(int argc, char** argv) {
     config.pipeline.depth_refinement.texel_scale_gradient = texel_scale_gradient;
     config.pipeline.depth_refinement.parallax = parallax;
     config.pipeline.depth_refinement.seed_from_last_step = !no_seed_from_last_step;
+    config.pipeline.kink_hang_other_arm = kink_hang_other_arm;
     config.pipeline.depth_refinement.translation_patch = translation_patch;
     config.pipeline.depth_refinement.translation_patch_follows_rotation =
         translation_patch_follows_rotation;

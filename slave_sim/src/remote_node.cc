@@ -448,7 +448,8 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
         {"last_step_seeds", r.last_step_seeds},
         {"last_step_found_deeper", r.last_step_found},
         {"last_step_raised_um_sum", r.last_step_raised_um},
-        {"seed_from_last_step", config.pipeline.depth_refinement.seed_from_last_step}};
+        {"seed_from_last_step", config.pipeline.depth_refinement.seed_from_last_step},
+        {"kink_hang_other_arm", config.pipeline.kink_hang_other_arm}};
     // Whether the patches went by the operator's round trip (translation_patch_rtt_ms).
     s["translation_patch_by_rtt"] = {
         {"rtt_ms", std::isfinite(config.translation_patch_rtt_ms)

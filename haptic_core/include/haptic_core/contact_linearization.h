@@ -101,32 +101,32 @@ struct ContactLinearization {
 /// the cell's own depth moves under a rotation about a). Where s(c+) > 0 > s(c−) the depth is a V
 /// in the tilt (a face resting on ridges: tilted either way, the edge that rises bears). Each arm
 /// is the plane through its sample with its cell's slope along a; at q0 it reads
-/// A± = δ(±h_θ) ∓ h_θ·s(c±).
-///  - With `bearing_by_arm_gap` (the default; issue 32, twenty-sixth stop): where the arms cross
-///    within h_θ·(s+ − s−)/8 of δ0 (a sharp V: a V through q0 crosses at δ0, a rounded depth of
-///    curvature κ, s± = ±κh_θ, a quarter of h_θ·(s+ − s−) below), the arm with the larger A bears:
-///    the contact's ∂δ/∂θ along a becomes its slope, and the other arm is a plane |A+ − A−| below
-///    δ0 at q0. The arms' gap is a difference of two samples h_θ either side, each taken with the
-///    face well into its arm, so it passes through zero once, at the samples' vertex, as the tool
-///    tilts, and the blend (ContactDepthAt) turns the torque over smoothly there; each A alone is
-///    off by the lever's error times h_θ (a few µm at a cell's 2 %).
-///  - Without it (the form before that stop), where the deepest cell at q0 bears like one of the
-///    arms (its slope within 10 % of that arm's), the contact's ∂δ/∂θ along a becomes that cell's
-///    slope, and each arm whose cell is not the deepest one is a plane through its sample lowered
-///    to δ0 where it would exceed δ0 at q0. Near a level face the deepest cell moves between the
-///    face's edges and its middle by a micrometre of texture, and the torque at q0 with it (the
-///    fig75 block: a sawtooth of ±20 mN·m within ±0.5 mrad of level).
-/// On a rounded contact the secant of the samples stays (the hammer's torque error on the
-/// frontier: 66 % with the secant, 70 % with the cell's slope), with both arms as planes lowered
-/// to δ0. Elsewhere nothing changes. δ0 and ∂δ/∂x are never changed. Appends to the planes lin
-/// already holds (stage 5b's translation arms, which take the contact's new ∂δ/∂θ along a kinked
-/// axis too), up to kMaxKinkPlanes; adds none when δ0 is not finite or the base sample lacks a
-/// cell. Returns lin's number of planes. noexcept, allocation-free.
-/// With `own_slope` false the contact's ∂δ/∂θ stays the secant and only arms whose cell is not
-/// the deepest one are added (an approximation placed on the frontier).
+/// A± = δ(±h_θ) ∓ h_θ·s(c±). Then
+///  - where the deepest cell bears like one of the arms (its slope within 10 % of that arm's: a
+///    sharp V, the face tilted by h_θ still bears on the same edge), the contact's ∂δ/∂θ along a
+///    becomes that cell's slope (the secant of the samples across the vertex reads the mean of
+///    the two arms: the fig75 block pressed on one edge got a tenth of that edge's lever), so δ0
+///    is unchanged and the wrench at q0 follows the bearing edge; on a rounded contact the secant
+///    stays (the hammer's torque error on the frontier: 66 % with the secant, 70 % with the cell's
+///    slope); `own_slope` false keeps the secant everywhere;
+///  - with `hang_other_arm` (an option; issue 32, twenty-sixth stop), where the deepest cell
+///    bears like an arm, the other arm is a plane below δ0 by max(A_bearing − A_other, 0): the
+///    arms' gap is a difference of two samples taken h_θ either side, with the face well into
+///    each arm, so it goes through zero where the samples' arms cross and the blend
+///    (ContactDepthAt) turns the torque over there; each A alone is off by its lever's error times
+///    h_θ (a cell's centre is up to half a cell from the bearing point: on the fig75 block 2 % of
+///    the lever, 7–9 µm at q0, most of the blend's 10 µm, which put the other arm level with δ0 a
+///    quarter of a milliradian past the vertex and dropped the torque to the secant's there: a
+///    sawtooth of 12–20 mN·m within ±0.5 mrad of level);
+///  - elsewhere, and without `hang_other_arm`, each arm whose cell is not the deepest one is a
+///    plane through its sample, lowered to δ0 where it would exceed δ0 at q0.
+/// Elsewhere nothing changes. δ0 and ∂δ/∂x are never changed. Appends to the planes lin already
+/// holds (stage 5b's translation arms, which take the contact's new ∂δ/∂θ along a kinked axis
+/// too), up to kMaxKinkPlanes; adds none when δ0 is not finite or the base sample lacks a cell.
+/// Returns lin's number of planes. noexcept, allocation-free.
 int AddKinkPlanes(const ContactWindow& window, std::span<const DepthSample> samples,
                   const glm::dvec3& p_WT, ContactLinearization& lin, bool own_slope = true,
-                  bool bearing_by_arm_gap = true) noexcept;
+                  bool hang_other_arm = false) noexcept;
 
 /// Penalty wrench on the tool at its centre of mass, expressed in W, for depth δ and gradient J:
 /// Φ = −k·max(δ, 0)·J (force N, torque N·m) [L]. Zero when δ ≤ 0 or δ is not finite.

@@ -127,11 +127,14 @@ struct PipelineOptions {
   /// (AddKinkPlanes). Off: the secant of the ±h_θ samples stays, and only the arm the deepest cell
   /// is not on is added (placed on the frontier as "kink_planes_keep_secant").
   bool kink_planes_own_slope = true;
-  /// With kink_planes_own_slope: along a sharp kinked axis the bearing arm is the one whose plane
-  /// reads deeper at q0 and the other arm's plane hangs below δ0 by the arms' gap (AddKinkPlanes;
-  /// issue 32, twenty-sixth stop). Off: the deepest cell's slope where it matches an arm's, the
-  /// form before (the frontier's "kink_bearing_by_deepest_cell").
-  bool kink_bearing_by_arm_gap = true;
+  /// With kink_planes_own_slope: where the deepest cell bears like one arm, the other arm's plane
+  /// hangs below δ0 by the arms' gap at q0 instead of going through its own sample
+  /// (AddKinkPlanes' hang_other_arm; issue 32, twenty-sixth stop): the resting fig75 block's
+  /// torque then turns over monotonically through level instead of in a sawtooth, and the block
+  /// lies still in the loop, but the torque error against the pipeline truth is 0.3–1.1 points
+  /// higher and fig76's loop rougher, so it is an option (`slave_sim --kink-hang-other-arm`, the
+  /// frontier's "kink_hang_other_arm").
+  bool kink_hang_other_arm = false;
   /// Stage 5b (issue 32): δ refined from the grid's cell samples to the finest texture level
   /// (DepthRefiner, depth_refinement.h), after either backend. On: on the frontier it reads δ
   /// within a few micrometres where the grid alone is tens low, and lowers the force error. Off

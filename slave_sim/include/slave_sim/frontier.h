@@ -74,9 +74,9 @@ struct FrontierSetting {
   bool kink_planes = true;
   /// PipelineOptions::kink_planes_own_slope ("kink_planes_keep_secant" turns it off).
   bool kink_planes_own_slope = true;
-  /// PipelineOptions::kink_bearing_by_arm_gap ("kink_bearing_by_deepest_cell" and
-  /// "parallax_kink_bearing_by_deepest_cell" turn it off).
-  bool kink_bearing_by_arm_gap = true;
+  /// PipelineOptions::kink_hang_other_arm ("kink_hang_other_arm" and
+  /// "parallax_kink_hang_other_arm" turn it on).
+  bool kink_hang_other_arm = false;
   /// PipelineOptions::refine_depth (on; "grid_only" and the grid-size settings "gridN" turn it
   /// off, the "gridN_refined" settings keep it).
   bool refine_depth = true;
