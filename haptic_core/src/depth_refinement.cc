@@ -554,6 +554,9 @@ DepthRefiner::Seed DepthRefiner::Search(std::span<const Projected> tool, const B
     }
     return false;
   };
+  // The four neighbours along u and v.
+  static constexpr std::array<std::array<int, 2>, 4> kDirections{
+      {{1, 0}, {-1, 0}, {0, 1}, {0, -1}}};
   if (subsamples <= 1) {
     // A start just off the surface (a rendered cell's centre a few micrometres past the edge of
     // a face whose displaced surface, with parallax, ends inside it) reads nothing: its four
@@ -561,7 +564,7 @@ DepthRefiner::Seed DepthRefiner::Search(std::span<const Projected> tool, const B
     if (!consider(s, t)) {
       for (double probe = std::max(floor_m, step / 64.0);
            probe > 0.0 && probe <= step && !(best.depth_m > -kInf); probe *= 2.0) {
-        for (const auto& d : {std::array<int, 2>{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
+        for (const auto& d : kDirections) {
           consider(s + d[0] * probe, t + d[1] * probe);
         }
       }
@@ -577,8 +580,6 @@ DepthRefiner::Seed DepthRefiner::Search(std::span<const Projected> tool, const B
   if (!(best.depth_m > -kInf)) return best;
   // Pattern search over the four neighbours along u and v at `step`, halved when none is
   // better.
-  static constexpr std::array<std::array<int, 2>, 4> kDirections{
-      {{1, 0}, {-1, 0}, {0, 1}, {0, -1}}};
   // First improvement: the direction that last improved is tried first, and the search moves
   // as soon as a neighbour is better.
   int moves = 0, last = 0;

@@ -113,11 +113,9 @@ struct ContactLinearization {
 ///    bears like an arm, the other arm is a plane below δ0 by max(A_bearing − A_other, 0): the
 ///    arms' gap is a difference of two samples taken h_θ either side, with the face well into
 ///    each arm, so it goes through zero where the samples' arms cross and the blend
-///    (ContactDepthAt) turns the torque over there; each A alone is off by its lever's error times
-///    h_θ (a cell's centre is up to half a cell from the bearing point: on the fig75 block 2 % of
-///    the lever, 7–9 µm at q0, most of the blend's 10 µm, which put the other arm level with δ0 a
-///    quarter of a milliradian past the vertex and dropped the torque to the secant's there: a
-///    sawtooth of 12–20 mN·m within ±0.5 mrad of level);
+///    (ContactDepthAt) turns the torque over there, whereas each A alone is off by its cell
+///    lever's error times h_θ (a cell's centre is up to half a cell from the bearing point), which
+///    can put the other arm level with δ0 past the vertex and the torque back to the secant's;
 ///  - elsewhere, and without `hang_other_arm`, each arm whose cell is not the deepest one is a
 ///    plane through its sample, lowered to δ0 where it would exceed δ0 at q0.
 /// Elsewhere nothing changes. δ0 and ∂δ/∂x are never changed. Appends to the planes lin already

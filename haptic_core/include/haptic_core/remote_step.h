@@ -129,11 +129,10 @@ struct PipelineOptions {
   bool kink_planes_own_slope = true;
   /// With kink_planes_own_slope: where the deepest cell bears like one arm, the other arm's plane
   /// hangs below δ0 by the arms' gap at q0 instead of going through its own sample
-  /// (AddKinkPlanes' hang_other_arm; issue 32, twenty-sixth stop): the resting fig75 block's
-  /// torque then turns over monotonically through level instead of in a sawtooth, and the block
-  /// lies still in the loop, but the torque error against the pipeline truth is 0.3–1.1 points
-  /// higher and fig76's loop rougher, so it is an option (`slave_sim --kink-hang-other-arm`, the
-  /// frontier's "kink_hang_other_arm").
+  /// (AddKinkPlanes' hang_other_arm; issue 32, twenty-sixth stop), so that a resting face's torque
+  /// turns over monotonically through level. Off by default: on the frontier its torque error is
+  /// higher and the striped blocks' loop rougher (docs/frontier/issue32/twenty_sixth_stop;
+  /// `slave_sim --kink-hang-other-arm`, the frontier's "kink_hang_other_arm").
   bool kink_hang_other_arm = false;
   /// Stage 5b (issue 32): δ refined from the grid's cell samples to the finest texture level
   /// (DepthRefiner, depth_refinement.h), after either backend. On: on the frontier it reads δ
