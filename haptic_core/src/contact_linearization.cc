@@ -69,7 +69,6 @@ int AddKinkPlanes(const ContactWindow& w, std::span<const DepthSample> samples,
         samples[static_cast<std::size_t>(5 + 2 * a)].depth_m - h * arm_slope[a][0],
         samples[static_cast<std::size_t>(6 + 2 * a)].depth_m + h * arm_slope[a][1]};
     for (int side = 0; side < 2 && lin.num_kink_planes < kMaxKinkPlanes; ++side) {
-      const DepthSample& s = samples[static_cast<std::size_t>(5 + 2 * a + side)];
       KinkPlane p;
       p.d_rotation_W = d_rotation + (arm_slope[a][side] - glm::dot(d_rotation, axes[a])) * axes[a];
       if (hang_other_arm && bearing[a] >= 0) {
@@ -79,8 +78,9 @@ int AddKinkPlanes(const ContactWindow& w, std::span<const DepthSample> samples,
         // arms cross. Each A alone is off by its lever's error times h_θ.
         p.depth_m = lin.depth_m - std::max(arm_at_q0[bearing[a]] - arm_at_q0[side], 0.0);
       } else {
-        if (s.cell == samples[0].cell) continue;  // the contact's own plane already
-        // Through the sample: δ_m(q0 ⊕ sign·h_θ·a) = δ_s; never above δ0 at q0.
+        // The contact's own plane already.
+        if (samples[static_cast<std::size_t>(5 + 2 * a + side)].cell == samples[0].cell) continue;
+        // Through the sample: δ_m(q0 ⊕ ±h_θ·a) = δ(±h_θ); never above δ0 at q0.
         p.depth_m = std::min(arm_at_q0[side], lin.depth_m);
       }
       if (!std::isfinite(p.depth_m) || !std::isfinite(p.d_rotation_W.x) ||

@@ -122,6 +122,12 @@ int main(int argc, char** argv) {
                "under it, which on coarse facets tilted from the normal under large heights\n"
                "reads another part of the surface (docs/frontier/issue32/twelfth_stop)");
   bool no_seed_from_last_step = false;
+  app.add_flag("--no-seed-from-last-step", no_seed_from_last_step,
+               "each step's contacts from their own grid alone: by default stage 5b also\n"
+               "searches each contact from the previous step's deepest point (kept in the\n"
+               "tool's frame), so that a narrow peak the filtered grid finds on one step and\n"
+               "misses on the next is not lost for that step (docs/frontier/issue32/\n"
+               "twenty_fifth_stop)");
   bool kink_hang_other_arm = false;
   app.add_flag(
       "--kink-hang-other-arm", kink_hang_other_arm,
@@ -130,12 +136,6 @@ int main(int argc, char** argv) {
       "its own sample: the resting block's torque turns over smoothly through level, but\n"
       "the torque error against the truth is a little higher and the striped blocks' loop\n"
       "rougher (docs/frontier/issue32/twenty_sixth_stop)");
-  app.add_flag("--no-seed-from-last-step", no_seed_from_last_step,
-               "each step's contacts from their own grid alone: by default stage 5b also\n"
-               "searches each contact from the previous step's deepest point (kept in the\n"
-               "tool's frame), so that a narrow peak the filtered grid finds on one step and\n"
-               "misses on the next is not lost for that step (docs/frontier/issue32/\n"
-               "twenty_fifth_stop)");
   double translation_patch_rtt_ms = ht::RemoteNodeConfig{}.translation_patch_rtt_ms;
   auto* rtt_option =
       app.add_option(

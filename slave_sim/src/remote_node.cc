@@ -421,6 +421,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
       (pipeline->backend_failures() == 0 ? warm_up_missing_overlap : 0);
   s["grazing_guard"] = config.pipeline.grazing_guard;
   s["kink_planes"] = config.pipeline.kink_planes;
+  s["kink_hang_other_arm"] = config.pipeline.kink_hang_other_arm;
   s["refine_depth"] = config.pipeline.refine_depth;
   {
     // Stage 5b (issue 32), warm-up included: contacts refined, and per contact the seeds, the
@@ -448,8 +449,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
         {"last_step_seeds", r.last_step_seeds},
         {"last_step_found_deeper", r.last_step_found},
         {"last_step_raised_um_sum", r.last_step_raised_um},
-        {"seed_from_last_step", config.pipeline.depth_refinement.seed_from_last_step},
-        {"kink_hang_other_arm", config.pipeline.kink_hang_other_arm}};
+        {"seed_from_last_step", config.pipeline.depth_refinement.seed_from_last_step}};
     // Whether the patches went by the operator's round trip (translation_patch_rtt_ms).
     s["translation_patch_by_rtt"] = {
         {"rtt_ms", std::isfinite(config.translation_patch_rtt_ms)
