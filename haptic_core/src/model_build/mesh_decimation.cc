@@ -7,6 +7,7 @@
 #include <OpenMesh/Tools/Decimater/ModQuadricT.hh>
 #include <chrono>
 #include <cmath>
+#include <mutex>
 #include <stdexcept>
 #include <string>
 #include <unordered_map>
@@ -30,6 +31,32 @@ struct PositionHash {
   std::size_t operator()(const glm::dvec3& p) const noexcept {
     const auto h = [](double x) { return std::hash<double>{}(x == 0.0 ? 0.0 : x); };
     return h(p.x) ^ (h(p.y) * 0x9e3779b97f4a7c15ULL) ^ (h(p.z) * 0xc2b2ae3d27d4eb4fULL);
+  }
+};
+
+// OpenMesh's error stream is one for the process: while any decimation on any thread adds faces,
+// it stays off (the first to start turns it off, the last to end back on).
+class SilenceOmerr {
+ public:
+  SilenceOmerr() {
+    const std::lock_guard<std::mutex> lock(Mutex());
+    if (Count()++ == 0) omerr().disable();
+  }
+  ~SilenceOmerr() {
+    const std::lock_guard<std::mutex> lock(Mutex());
+    if (--Count() == 0) omerr().enable();
+  }
+  SilenceOmerr(const SilenceOmerr&) = delete;
+  SilenceOmerr& operator=(const SilenceOmerr&) = delete;
+
+ private:
+  static std::mutex& Mutex() {
+    static std::mutex m;
+    return m;
+  }
+  static int& Count() {
+    static int n = 0;
+    return n;
   }
 };
 
@@ -80,10 +107,7 @@ DecimationResult DecimateQuadric(const TriangleMesh& full, int target_triangles)
   result.welded_vertices = static_cast<std::int64_t>(mesh.n_vertices());
 
   const auto nv = static_cast<int>(full.vertices.size());
-  struct SilenceOmerr {
-    SilenceOmerr() { omerr().disable(); }
-    ~SilenceOmerr() { omerr().enable(); }
-  } silence;
+  const SilenceOmerr silence;
   for (std::size_t f = 0; f < full.triangles.size(); ++f) {
     const glm::ivec3& t = full.triangles[f];
     for (int c = 0; c < 3; ++c) {

@@ -173,7 +173,8 @@ class HapticModelCache {
 
 /// BuildHapticModel() through `cache`: a hit returns the stored model (report.from_cache, with the
 /// stored stage times kept and cache_load_s set); a miss builds, stores (a failed store is noted in
-/// report.cache_note, not thrown) and returns.
+/// report.cache_note, not thrown) and returns. Builds of different models may run on several
+/// threads at once (each entry is written to a file of its own and renamed into place).
 HapticModelBuild BuildHapticModelCached(const std::string& name, const TriangleMesh& full_O,
                                         const HapticModelBuildParams& params,
                                         const HapticModelCache& cache);

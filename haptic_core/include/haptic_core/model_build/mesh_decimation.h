@@ -47,6 +47,9 @@ struct DecimationResult {
 /// Throws std::invalid_argument when `target_triangles` < 4, a vertex is not finite, or a
 /// triangle indexes a vertex out of range; std::runtime_error when no triangle of the input
 /// forms a manifold surface.
+///
+/// Calls on different meshes may run on several threads at once (OpenMesh's error stream, which
+/// is silenced while faces are added, is shared and counted).
 DecimationResult DecimateQuadric(const TriangleMesh& full, int target_triangles);
 
 }  // namespace ht
