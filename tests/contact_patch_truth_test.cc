@@ -66,8 +66,8 @@ double AngleDeg(const glm::dvec3& a, const glm::dvec3& b) {
 const TriangleMesh kSlab = Box({-0.06, -0.06, -0.02}, {0.06, 0.06, 0.0});
 
 struct Rig {
-  Rig(const TriangleMesh& tool, const TriangleMesh& env)
-      : tool_rays(tool), env_rays(env), truth(tool, env, tool_rays, env_rays) {}
+  Rig(const TriangleMesh& tool, const TriangleMesh& env, const ContactPatchTruthOptions& o = {})
+      : tool_rays(tool), env_rays(env), truth(tool, env, tool_rays, env_rays, o) {}
   RayCastSurface tool_rays, env_rays;
   ContactPatchTruth truth;
 };
@@ -204,6 +204,50 @@ TEST(ContactPatchTruth, TiltedBoxOnItsEdgeAgreesWithTheVolumeComputedAnotherWay)
     EXPECT_NEAR(p.dV_dtheta_tool_W.y, dV_dthy, 0.03 * std::abs(dV_dthy));
     EXPECT_NEAR(p.dV_dtheta_environment_W.y, dV_dthy, 0.03 * std::abs(dV_dthy));
   }
+}
+
+// A box on a slab tilted by 1 mrad about y bears on its lower edge: δ(θ) is a V whose arm is the
+// edge's lever, so τ_y = (edge × k δ ẑ)_y, the 10° case's closed form. A tilt step of a 1 µm lift
+// at the window's edge (about 0.09 mrad here) reads the arm; the default, a texel's lift (0.1 mm
+// over half the window, about 9 mrad), reads the secant across the V's vertex, |θ|/h of it.
+TEST(ContactPatchTruth, TiltedAMilliradianABoxBearsOnItsEdgeWithTheWholeLever) {
+  const glm::dvec3 half(0.01, 0.01, 0.005);
+  const double theta = 1e-3, delta = 0.1e-3;
+  const glm::dquat R = AboutY(theta);
+  const glm::dvec3 edge_T = R * glm::dvec3(-half.x, 0, -half.z);
+  const glm::dvec3 edge_T2 = R * glm::dvec3(half.x, 0, -half.z);
+  const glm::dvec3 low = edge_T.z < edge_T2.z ? edge_T : edge_T2;
+  const RigidTransform X_WT = At({0, 0, -delta - low.z}, R);
+  const glm::dvec3 F(0, 0, kK * delta);
+  const double closed_form = glm::cross(low, F).y;
+  double secant_torque = 0.0;
+  EXPECT_EQ(ContactPatchTruthOptions{}.tilt_lift_m, 0.0);
+  for (const double lift : {1e-6, 0.0}) {
+    ContactPatchTruthOptions o;
+    o.tilt_lift_m = lift;
+    Rig rig(Box(-half, half), kSlab, o);
+    const PoseTruth t = rig.truth.At(X_WT, RigidTransform{}, RigidTransform{}, kK);
+    ASSERT_EQ(t.patches.size(), 1u);
+    const TruthPatch& p = t.patches[0];
+    EXPECT_NEAR(p.contact.linearization.depth_m, delta, 1e-7);
+    EXPECT_NEAR(t.F_T_W.force.z, F.z, 0.01 * F.z);
+    if (lift > 0.0) {
+      EXPECT_NEAR(p.tilt_step_rad, lift / (0.5 * p.window.extent_m), 1e-12);
+      EXPECT_LT(p.tilt_step_rad, 0.2 * theta);
+      EXPECT_NEAR(t.F_T_W.torque.y, closed_form, 0.02 * std::abs(closed_form));
+      EXPECT_NEAR(t.F_T_W.torque.x, 0.0, 0.02 * std::abs(closed_form));
+    } else {
+      EXPECT_NEAR(p.tilt_step_rad, p.gradient_step_m / (0.5 * p.window.extent_m), 1e-12);
+      secant_torque = t.F_T_W.torque.y;
+      // The secant across the vertex: θ/h of the arm.
+      EXPECT_NEAR(secant_torque, closed_form * theta / p.tilt_step_rad,
+                  0.05 * std::abs(closed_form));
+    }
+  }
+  std::printf(
+      "[pipeline truth] box tilted 1 mrad: τ_y %.4g N·m closed form (and a 1 µm tilt "
+      "step), %.4g with the default texel tilt step\n",
+      closed_form, secant_torque);
 }
 
 // A long bar tilted 2° touches the plane at one end only. A 2 cm window borrowed from the bar's

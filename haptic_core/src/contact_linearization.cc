@@ -392,8 +392,7 @@ struct Differences {
   }
   // ∂δ/∂x: central differences along u and v; moving the tool along +n lifts every tool height
   // by the same amount, so ∂δ/∂x_n = −1 exactly.
-  glm::dvec3 Translation() const noexcept {
-    const double h_x = GradientSteps::For(w).h_x;
+  glm::dvec3 Translation(double h_x) const noexcept {
     return Central(0, h_x) * w.axis_u_W + Central(1, h_x) * w.axis_v_W - w.normal_W;
   }
 };
@@ -421,14 +420,20 @@ ContactLinearization AssembleLinearization(const ContactWindow& w,
                                            std::span<const DepthSample> samples,
                                            double stiffness_n_per_m,
                                            LinearizationFaults& faults) noexcept {
+  const GradientSteps h = GradientSteps::For(w);
+  return AssembleLinearization(w, samples, h.h_x, h.h_theta, h.h_theta, stiffness_n_per_m, faults);
+}
+
+ContactLinearization AssembleLinearization(const ContactWindow& w,
+                                           std::span<const DepthSample> samples, double h_x,
+                                           double h_tilt, double h_yaw, double stiffness_n_per_m,
+                                           LinearizationFaults& faults) noexcept {
   ContactLinearization out;
   if (!StartLinearization(w, samples, kGradientSamples, stiffness_n_per_m, out)) return out;
   const Differences d{w, samples, faults};
-  const double h_theta = GradientSteps::For(w).h_theta;
-  out.gradient.d_translation_W = d.Translation();
-  out.gradient.d_rotation_W = d.Central(2, h_theta) * w.axis_u_W +
-                              d.Central(3, h_theta) * w.axis_v_W +
-                              d.Central(4, h_theta) * w.normal_W;
+  out.gradient.d_translation_W = d.Translation(h_x);
+  out.gradient.d_rotation_W = d.Central(2, h_tilt) * w.axis_u_W +
+                              d.Central(3, h_tilt) * w.axis_v_W + d.Central(4, h_yaw) * w.normal_W;
   return out;
 }
 
@@ -439,7 +444,7 @@ ContactLinearization AssembleLeverLinearization(const ContactWindow& w,
   ContactLinearization out;
   if (!StartLinearization(w, samples, 5, stiffness_n_per_m, out)) return out;
   const Differences d{w, samples, faults};
-  out.gradient.d_translation_W = d.Translation();
+  out.gradient.d_translation_W = d.Translation(GradientSteps::For(w).h_x);
   // The tool point p moves by Δx + Δθ × r: δ changes by ∂δ/∂x·(Δθ × r) = (r × ∂δ/∂x)·Δθ.
   out.gradient.d_rotation_W = glm::cross(r_W, out.gradient.d_translation_W);
   return out;

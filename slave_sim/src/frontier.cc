@@ -809,6 +809,7 @@ void RunPipelineTruth(const BenchmarkScene& scene, const RayCastSurface& tool,
   truth_options.merge_distance_m = pipeline.clustering_distance_m;
   truth_options.max_normal_angle_deg = pipeline.clustering_angle_deg;
   truth_options.share_fade_m = options.truth_share_fade_m;
+  truth_options.tilt_lift_m = options.truth_tilt_lift_m;
   if (!options.truth_merge_patches) {
     truth_options.macro_normal_radius_m = 0.0;
     truth_options.depth_along_macro_normal = false;
@@ -1126,7 +1127,8 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
         "window_nx,window_ny,window_nz,window_ux,window_uy,window_uz,window_extent_m,delta_gt_m,"
         "fx_gt,fy_gt,fz_gt,tx_gt,ty_gt,tz_gt,tool_com_x,tool_com_y,tool_com_z,stiffness_n_per_m,"
         "gradient_step_m,pairs,tool_inside_area_m2,object_inside_area_m2,dV_dx,dV_dy,dV_dz,"
-        "dV_dthx,dV_dthy,dV_dthz,gt_samples_per_side,gt_converged,share,gap_to_neighbour_m\n";
+        "dV_dthx,dV_dthy,dV_dthz,gt_samples_per_side,gt_converged,share,gap_to_neighbour_m,"
+        "tilt_step_rad\n";
   std::vector<SceneReport> reports;
   const int total_units = static_cast<int>(scenes.size() * settings.size());
   int units_done = 0;
@@ -1296,7 +1298,7 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
            << patch.environment_inside_area_m2 << ',' << gx.x << ',' << gx.y << ',' << gx.z << ','
            << gt.x << ',' << gt.y << ',' << gt.z << ',' << patch.contact.base.samples_per_side
            << ',' << (patch.contact.base.converged ? 1 : 0) << ',' << patch.share << ','
-           << patch.gap_to_neighbour_m << '\n';
+           << patch.gap_to_neighbour_m << ',' << patch.tilt_step_rad << '\n';
       }
     }
     rep.gt_windows = jobs.size();
@@ -1565,6 +1567,11 @@ void RunSpeedErrorFrontier(const FrontierOptions& options) {
                     "plus " +
                     Fmt(options.truth_share_fade_m * 1e3, 3) + " mm"
               : std::string("patches never share (--truth-share-fade-mm 0)"))
+      << "; tilt steps "
+      << (options.truth_tilt_lift_m > 0.0
+              ? "lift the window's edge by " + Fmt(options.truth_tilt_lift_m * 1e6, 3) +
+                    " um (--truth-tilt-lift-um)"
+              : std::string("lift the window's edge by a texel step"))
       << "; intersecting poses with a zero truth: " << rep.truth_poses_zero
       << "; pair lists cut at the cap: " << rep.truth_pairs_truncated << "; " << rep.truth_rays
       << " rays in " << Fmt(rep.truth_seconds, 3) << " s.\n\n";

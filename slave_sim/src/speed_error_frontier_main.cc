@@ -89,6 +89,15 @@ int main(int argc, char** argv) {
                  "0: separate patches always sum (the truth before issue 32's fourteenth stop)")
       ->check(CLI::Range(0.0, 1000.0))
       ->capture_default_str();
+  double truth_tilt_lift_um = ht::ContactPatchTruthOptions{}.tilt_lift_m * 1e6;
+  app.add_option("--truth-tilt-lift-um", truth_tilt_lift_um,
+                 "pipeline truth: the tilt step of its rotation gradient as the lift (um) it "
+                 "gives a point half the window from the centre (contact_patch_truth.h); 0: a "
+                 "texel step's lift (0.1 mm, about 5 mrad), which rounds a resting face's torque "
+                 "over +-5 mrad; 1: reads a resting face's arms, and one crest's lever where an "
+                 "edge lies across many")
+      ->check(CLI::Range(0.0, 1000.0))
+      ->capture_default_str();
   bool no_model_prediction = false;
   app.add_flag("--no-model-prediction", no_model_prediction,
                "skip the model-prediction measure (a second pipeline truth at displaced, deeper "
@@ -136,6 +145,7 @@ int main(int argc, char** argv) {
     options.gpu = !no_gpu;
     options.truth_merge_patches = !truth_no_merge;
     options.truth_share_fade_m = truth_share_fade_mm * 1e-3;
+    options.truth_tilt_lift_m = truth_tilt_lift_um * 1e-6;
     options.model_prediction = !no_model_prediction;
     options.prediction_translation_m = prediction_mm * 1e-3;
     options.prediction_rotation_rad = prediction_mrad * 1e-3;

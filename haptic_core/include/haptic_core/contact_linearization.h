@@ -169,6 +169,12 @@ ContactLinearization AssembleLinearization(const ContactWindow& window,
                                            std::span<const DepthSample> samples,
                                            double stiffness_n_per_m,
                                            LinearizationFaults& faults) noexcept;
+/// The same with the samples taken at explicit steps: h_x (m) along u and v, h_tilt (rad) about u
+/// and v, h_yaw (rad) about n (the pipeline truth's with a fine tilt step, ground_truth_depth.h).
+ContactLinearization AssembleLinearization(const ContactWindow& window,
+                                           std::span<const DepthSample> samples, double h_x,
+                                           double h_tilt, double h_yaw, double stiffness_n_per_m,
+                                           LinearizationFaults& faults) noexcept;
 
 /// How the rotation part of ∇δ is found (issue 15).
 enum class RotationGradient {

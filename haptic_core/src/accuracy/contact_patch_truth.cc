@@ -29,6 +29,8 @@ void ContactPatchTruthOptions::Validate() const {
     fail("extents must satisfy 0 < min_extent_m <= max_extent_m", min_extent_m);
   if (!(gradient_step_m > 0.0) || !std::isfinite(gradient_step_m))
     fail("gradient_step_m must be > 0", gradient_step_m);
+  if (!(tilt_lift_m >= 0.0) || !std::isfinite(tilt_lift_m))
+    fail("tilt_lift_m must be >= 0", tilt_lift_m);
   if (!(inside_cell_m > 0.0) || !std::isfinite(inside_cell_m))
     fail("inside_cell_m must be > 0", inside_cell_m);
   if (!(boundary_cell_m > 0.0) || !(boundary_cell_m <= inside_cell_m))
@@ -697,7 +699,10 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
     const int step_resolution =
         std::max(2, static_cast<int>(std::lround(g.extent / o.gradient_step_m)));
     patch.gradient_step_m = g.extent / step_resolution;
-    patch.contact = m.solver.Linearize(X_WT, X_TFt, X_WFe, patch.window, k, step_resolution);
+    patch.tilt_step_rad = o.tilt_lift_m > 0.0 ? o.tilt_lift_m / (0.5 * g.extent)
+                                              : patch.gradient_step_m / (0.5 * g.extent);
+    patch.contact = m.solver.Linearize(X_WT, X_TFt, X_WFe, patch.window, k, step_resolution,
+                                       patch.tilt_step_rad);
     out.rays += patch.contact.rays;
     out.patches.push_back(std::move(patch));
   }

@@ -354,13 +354,23 @@ GroundTruthDepth GroundTruthDepthSolver::ConvergedDepth(const RigidTransform& X_
   }
 }
 
-GroundTruthContact GroundTruthDepthSolver::Linearize(
-    const RigidTransform& X_WT, const RigidTransform& X_TFt, const RigidTransform& X_WFe,
-    const ContactWindow& window, double stiffness_n_per_m, int step_resolution) {
+GroundTruthContact GroundTruthDepthSolver::Linearize(const RigidTransform& X_WT,
+                                                     const RigidTransform& X_TFt,
+                                                     const RigidTransform& X_WFe,
+                                                     const ContactWindow& window,
+                                                     double stiffness_n_per_m, int step_resolution,
+                                                     double tilt_step_rad) {
   ContactWindow w = window;
   // The seed's grid fixes the step table for every method compared, unless the caller sets it.
   w.resolution = step_resolution > 0 ? step_resolution : 50;
-  const std::array<RigidTransform, kGradientSamples> poses = GradientSamplePoses(X_WT, w);
+  const GradientSteps table = GradientSteps::For(w);
+  const double h_tilt = tilt_step_rad > 0.0 ? tilt_step_rad : table.h_theta;
+  // The tilts (samples 5-8) at h_tilt, the yaw (9, 10) at the table's h_θ.
+  std::array<RigidTransform, kGradientSamples> poses =
+      GradientSamplePoses(X_WT, w, {table.h_x, h_tilt});
+  const std::array<RigidTransform, kGradientSamples> table_poses = GradientSamplePoses(X_WT, w);
+  poses[9] = table_poses[9];
+  poses[10] = table_poses[10];
   GroundTruthContact out;
   out.base = ConvergedDepth(poses[0] * X_TFt, X_WFe, w);
   long long rays = out.base.rays;
@@ -372,7 +382,8 @@ GroundTruthContact GroundTruthDepthSolver::Linearize(
     samples[i] = {d.depth_m, std::isfinite(d.depth_m) ? 0 : -1};
   }
   LinearizationFaults faults;
-  out.linearization = AssembleLinearization(w, samples, stiffness_n_per_m, faults);
+  out.linearization = AssembleLinearization(w, samples, table.h_x, h_tilt, table.h_theta,
+                                            stiffness_n_per_m, faults);
   out.linearization.point_W =
       w.center_W + out.base.at_uv_m.x * w.axis_u_W + out.base.at_uv_m.y * w.axis_v_W;
   out.F_T_W =

@@ -199,6 +199,9 @@ struct FrontierOptions {
   /// The pipeline truth's share fade (ContactPatchTruthOptions::share_fade_m, m; 0: separate
   /// patches always sum, the measure before issue 32's fourteenth stop).
   double truth_share_fade_m = ContactPatchTruthOptions{}.share_fade_m;
+  /// The pipeline truth's tilt step as a lift at half the window (ContactPatchTruthOptions::
+  /// tilt_lift_m, m; 0: a texel step's lift, the default measure).
+  double truth_tilt_lift_m = ContactPatchTruthOptions{}.tilt_lift_m;
   /// The model-prediction measure (the operator's linearized model at displaced poses against the
   /// pipeline truth there): a second pipeline truth, on deeper poses, which costs about as much as
   /// the first; false leaves its columns NaN.

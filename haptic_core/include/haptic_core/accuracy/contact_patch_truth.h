@@ -29,7 +29,8 @@
 //  3b. Patches whose windows measure one interpenetration twice (overlapping windows with
 //     directions within 60°), and slivers at a larger patch's edge, merged (options below).
 //  4. T1, the pipeline truth: δ and ∇δ on that window by ray casting (GroundTruthDepthSolver,
-//     gradient steps at texel scale), Φ_gt = Σ_patches s_p · (−k δ_p ∇δ_p).
+//     gradient steps at texel scale; tilt_lift_m below sharpens the tilts), Φ_gt = Σ_patches
+//     s_p · (−k δ_p ∇δ_p).
 //  4a. The shares s_p (issue 32's fourteenth stop): patches merge in step 2 when their
 //     intersection curves come within merge_distance_m, and a merged patch pushes its deepest
 //     point's k δ where the two pushed k δ_1 + k δ_2 a moment before; along a trajectory that is
@@ -102,8 +103,22 @@ struct ContactPatchTruthOptions {
   double min_extent_m = 2e-3;
   double max_extent_m = 0.12;
   /// Translation step of ∇δ's central differences (m): texel scale (the seed's 1024² textures
-  /// over objects of about 10 cm: 0.1 mm). The rotation step is this over half the window.
+  /// over objects of about 10 cm: 0.1 mm). The yaw step (about n) is this over half the window:
+  /// it moves the window's edge along the surface by one step.
   double gradient_step_m = 1e-4;
+  /// Tilt step (about u and v) of ∇δ's central differences as the lift along n it gives a point
+  /// half the window from its centre (m): h_tilt = tilt_lift_m / (W/2); 0 (the default): the yaw's
+  /// step, h_x/(W/2), about 5 mrad on a 41.6 mm window, which lifts the window's edge by a whole
+  /// h_x. A tilt moves points along n, where δ answers at once, so δ(θ) has kinks wherever the
+  /// bearing point changes: a face resting on ridges is a V whose arms are its edges' levers, and
+  /// the default's secant reads |θ|/h of the arm within h of level (a box tilted 1 mrad: 0.88
+  /// against k·δ·r = 8.0 mN·m; fig75's resting block at 0.6 mrad: 2.8 against about 21). A lift
+  /// of 1 µm (0.05 mrad) reads those arms within 3 %, but an edge across many crests (fig75's
+  /// spread poses, the hammer's knurl on the torus) then reads one crest's lever where the
+  /// default, and the method, average a few: the torque error on the frontier's spread poses
+  /// rises (fig75 22.4 → 23.9 %, hammer 54.8 → 65.4 %; issue 32's twenty-seventh stop), so the
+  /// default keeps the texel step and the fine tilt is a second measure for resting faces.
+  double tilt_lift_m = 0.0;
   /// Crossing triangles' inside part: split in four until no edge exceeds inside_cell_m (m), then
   /// only where a sub-triangle's corners and centroid disagree, down to boundary_cell_m (m).
   double inside_cell_m = 2e-3;
@@ -141,8 +156,11 @@ struct TruthPatch {
   glm::dvec3 dV_dx_tool_W{0.0}, dV_dtheta_tool_W{0.0};
   glm::dvec3 dV_dx_environment_W{0.0}, dV_dtheta_environment_W{0.0};
   /// The translation step of ∇δ_gt's central differences (m): options' gradient_step_m rounded so
-  /// that a whole number of steps spans the window; the rotation step is this over half the window.
+  /// that a whole number of steps spans the window; the yaw step is this over half the window.
   double gradient_step_m = 0.0;
+  /// The tilt step about u and v (rad): options' tilt_lift_m over half the window, or the yaw's
+  /// step when that is 0.
+  double tilt_step_rad = 0.0;
   /// T1 on the window: δ_gt, ∇δ_gt (steps at texel scale), Φ_gt on the tool at its centre of mass
   /// (the patch's own, before its share).
   GroundTruthContact contact;

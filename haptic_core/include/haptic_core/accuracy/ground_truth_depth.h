@@ -134,9 +134,14 @@ class GroundTruthDepthSolver {
   /// (ConvergedDepth) and used for the 10 perturbed poses.
   /// `step_resolution` N' sets the step table instead (h_x = W/N', h_θ = h_x/(W/2); 0 = the seed's
   /// 50): the pipeline truth (contact_patch_truth.h) takes its steps at texel scale.
+  /// `tilt_step_rad` > 0 sets the step of the tilts about u and v instead (the yaw about n keeps
+  /// the table's h_θ): a tilt lifts points along n, by h·r at a lever r, so the table's h_θ
+  /// (which lifts the window's edge by a whole h_x) rounds a resting face's V over ±h_θ
+  /// (ContactPatchTruthOptions::tilt_lift_m).
   GroundTruthContact Linearize(const RigidTransform& X_WT, const RigidTransform& X_TFt,
                                const RigidTransform& X_WFe, const ContactWindow& window,
-                               double stiffness_n_per_m, int step_resolution = 0);
+                               double stiffness_n_per_m, int step_resolution = 0,
+                               double tilt_step_rad = 0.0);
 
  private:
   struct Sample {
