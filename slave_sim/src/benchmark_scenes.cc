@@ -243,18 +243,14 @@ BenchmarkScene MakeBenchmarkScene(const std::string& name, const BenchmarkModelS
     scene.tool_name = file ? SeedModelName(tool) : "hammer_head_down";
     // The two models are independent: the object's is built on a second thread while this one
     // builds the tool's (a cold cache spends 6-36 s per model in the decimation; the results are
-    // the same bits either way).
+    // the same bits either way). Should the tool's build throw, the future's destructor waits
+    // for the object's, which writes into object_texture_note (declared before it).
     auto object_build = std::async(std::launch::async, [&] {
       return SeedHapticModel(env, settings, cache, false, nullptr, SeedMesh(env),
                              SeedModelName(env), &object_texture_note);
     });
-    try {
-      scene.haptic.tool = SeedHapticModel(tool, settings, cache, true, &com, scene.tool_mesh_Ft,
-                                          scene.tool_name, &tool_texture_note);
-    } catch (...) {
-      object_build.wait();  // it writes into this frame's notes
-      throw;
-    }
+    scene.haptic.tool = SeedHapticModel(tool, settings, cache, true, &com, scene.tool_mesh_Ft,
+                                        scene.tool_name, &tool_texture_note);
     scene.X_TFt.translation = -com;
     object.model = object_build.get();
     scene.object_mesh_Fe = SeedMesh(env);

@@ -39,25 +39,19 @@ struct PositionHash {
 class SilenceOmerr {
  public:
   SilenceOmerr() {
-    const std::lock_guard<std::mutex> lock(Mutex());
-    if (Count()++ == 0) omerr().disable();
+    const std::lock_guard<std::mutex> lock(mutex_);
+    if (count_++ == 0) omerr().disable();
   }
   ~SilenceOmerr() {
-    const std::lock_guard<std::mutex> lock(Mutex());
-    if (--Count() == 0) omerr().enable();
+    const std::lock_guard<std::mutex> lock(mutex_);
+    if (--count_ == 0) omerr().enable();
   }
   SilenceOmerr(const SilenceOmerr&) = delete;
   SilenceOmerr& operator=(const SilenceOmerr&) = delete;
 
  private:
-  static std::mutex& Mutex() {
-    static std::mutex m;
-    return m;
-  }
-  static int& Count() {
-    static int n = 0;
-    return n;
-  }
+  static inline std::mutex mutex_;
+  static inline int count_ = 0;
 };
 
 std::int64_t CountBoundaryEdges(const DecimationMesh& mesh) {

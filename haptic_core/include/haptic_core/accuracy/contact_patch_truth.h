@@ -107,17 +107,12 @@ struct ContactPatchTruthOptions {
   /// it moves the window's edge along the surface by one step.
   double gradient_step_m = 1e-4;
   /// Tilt step (about u and v) of ∇δ's central differences as the lift along n it gives a point
-  /// half the window from its centre (m): h_tilt = tilt_lift_m / (W/2); 0 (the default): the yaw's
-  /// step, h_x/(W/2), about 5 mrad on a 41.6 mm window, which lifts the window's edge by a whole
-  /// h_x. A tilt moves points along n, where δ answers at once, so δ(θ) has kinks wherever the
-  /// bearing point changes: a face resting on ridges is a V whose arms are its edges' levers, and
-  /// the default's secant reads |θ|/h of the arm within h of level (a box tilted 1 mrad: 0.88
-  /// against k·δ·r = 8.0 mN·m; fig75's resting block at 0.6 mrad: 2.8 against about 21). A lift
-  /// of 1 µm (0.05 mrad) reads those arms within 3 %, but an edge across many crests (fig75's
-  /// spread poses, the hammer's knurl on the torus) then reads one crest's lever where the
-  /// default, and the method, average a few: the torque error on the frontier's spread poses
-  /// rises (fig75 22.4 → 23.9 %, hammer 54.8 → 65.4 %; issue 32's twenty-seventh stop), so the
-  /// default keeps the texel step and the fine tilt is a second measure for resting faces.
+  /// half the window from its centre (m): h_tilt = tilt_lift_m / (W/2). 0 (the default): the
+  /// yaw's step h_x/(W/2), which lifts the window's edge by a whole h_x. A tilt moves points along
+  /// n, so δ(θ) has a kink wherever the bearing point changes (a face resting on two supports: a
+  /// V whose arms are their levers), and a secant over ±h reads |θ|/h of an arm within h of the
+  /// kink. A small lift (1 µm) reads the arms, and also each crest's own lever where an edge lies
+  /// across many crests; docs/frontier/issue32/twenty_seventh_stop compares the two measures.
   double tilt_lift_m = 0.0;
   /// Crossing triangles' inside part: split in four until no edge exceeds inside_cell_m (m), then
   /// only where a sub-triangle's corners and centroid disagree, down to boundary_cell_m (m).
