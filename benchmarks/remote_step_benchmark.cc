@@ -82,10 +82,10 @@ int main(int argc, char** argv) {
   bool no_sharing = false;
   app.add_flag("--no-share-connected-contacts", no_sharing,
                "every contact its whole penalty (stage 5c off, as before issue 32's tenth stop)");
-  bool parallax = false;
-  app.add_flag("--parallax", parallax,
+  bool parallax = true;
+  app.add_flag("--parallax,!--no-parallax", parallax,
                "stage 5b reads heights through the displaced surface (DepthRefinementOptions::"
-               "parallax)");
+               "parallax, on by default); --no-parallax: the render's form h*(N.n)");
   bool no_seed_from_last_step = false;
   app.add_flag("--no-seed-from-last-step", no_seed_from_last_step,
                "stage 5b without the last step's deepest points as seeds (by default a pose's "

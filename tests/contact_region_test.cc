@@ -610,17 +610,19 @@ TEST(ContactRegion, WithTheOtherArmHungTheRestingBlocksTorqueTurnsOverSmoothlyTh
     }
     return out;
   };
-  PipelineOptions hung;
+  // The render's form h·(N·n) (parallax off) and parallax (the default), each with the other arm
+  // as it is and hung.
+  PipelineOptions render;
+  render.depth_refinement.parallax = false;
+  PipelineOptions hung = render;
   hung.kink_hang_other_arm = true;
   PipelineOptions hung_parallax = hung;
   hung_parallax.depth_refinement.parallax = true;
-  PipelineOptions parallax;
-  parallax.depth_refinement.parallax = true;
-  const Sweep h = sweep(hung), hp = sweep(hung_parallax), d = sweep(PipelineOptions{}),
-              dp = sweep(parallax);
+  const PipelineOptions parallax;
+  const Sweep h = sweep(hung), hp = sweep(hung_parallax), d = sweep(render), dp = sweep(parallax);
   std::printf(
       "[block on gear through level] ticks where the torque does not restore: %d hung, %d hung "
-      "with parallax, %d default; largest step over the blend's: %.3g, %.3g, %.3g\n",
+      "with parallax, %d other arm as it is; largest step over the blend's: %.3g, %.3g, %.3g\n",
       h.non_restoring, hp.non_restoring, d.non_restoring, h.worst_ratio, hp.worst_ratio,
       d.worst_ratio);
   EXPECT_EQ(h.non_restoring, 0);

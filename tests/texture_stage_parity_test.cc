@@ -573,15 +573,19 @@ TEST(TextureStageParity, FastSolverGivesTheReferenceDepthsAndGradients) {
       in_contact, worst_depth, worst_dx, worst_dr);
 }
 
-// Stage 5b (issue 32) on random contacts of the six seed models: the refined δ0 is never below
-// the grid's (it climbs from the grid's deepest cells at the finest level, where a cell's
-// filtered value is a mean of what the climb sees), and never above the full-resolution truth
-// (Embree on the meshes the models were baked from, on the same window) by more than the two
-// textures' own bake errors.
+// Stage 5b (issue 32) in the render's form (parallax off: the form the grid renders) on random
+// contacts of the six seed models: the refined δ0 is never below the grid's (it climbs from the
+// grid's deepest cells at the finest level, where a cell's filtered value is a mean of what the
+// climb sees), and never above the full-resolution truth (Embree on the meshes the models were
+// baked from, on the same window) by more than the two textures' own bake errors. (With parallax,
+// the default, δ0 reads another surface than the grid's form where a facet is tilted from n, so
+// it may lie below the grid's: the next test bounds it by the truth.)
 TEST(TextureStageParity, RefinedDepthLiesBetweenTheGridAndTheFullResolutionTruth) {
   std::mt19937 rng(3232);
   CpuPenetrationDepthBackend backend(128);
-  DepthRefiner refiner;
+  DepthRefinementOptions render_form;
+  render_form.parallax = false;
+  DepthRefiner refiner(render_form);
   int checked = 0;
   double raised_sum = 0.0, worst_below_grid = 0.0, worst_above_truth = 0.0;
   double grid_error_sum = 0.0, refined_error_sum = 0.0;
@@ -619,14 +623,16 @@ TEST(TextureStageParity, RefinedDepthLiesBetweenTheGridAndTheFullResolutionTruth
 // Stage 5b with parallax (issue 32, twelfth stop) on the same kind of random contacts of the six
 // seed models: the refined δ0 is never above the full-resolution truth by more than the two
 // textures' bake errors, and over the contacts it is closer to the truth than the render's form
-// (the default refinement) on these models, whose coarse facets lie at an angle to the windows
-// under heights of up to millimetres.
+// (parallax off) on these models, whose coarse facets lie at an angle to the windows under
+// heights of up to millimetres.
 TEST(TextureStageParity, ParallaxDepthIsBoundedByTheTruthAndCloserToItThanTheRendersForm) {
   std::mt19937 rng(3233);
   CpuPenetrationDepthBackend backend(128);
-  DepthRefiner render_form;
+  DepthRefinementOptions off;
+  off.parallax = false;
+  DepthRefiner render_form(off);
   DepthRefinementOptions o;
-  o.parallax = true;
+  ASSERT_TRUE(o.parallax) << "parallax is the default";
   DepthRefiner parallax(o);
   int checked = 0;
   double render_error_sum = 0.0, parallax_error_sum = 0.0, worst_above_truth = 0.0;
@@ -666,9 +672,11 @@ TEST(TextureStageParity, ScreenedDepthIsNeverBelowAnyLevelZeroPointOfTheWindow) 
   CpuPenetrationDepthBackend backend(128);
   DepthRefinementOptions on;
   on.conservative_screen = true;
+  on.parallax = false;  // the screen bounds the render's form (PatchHeightAt at level 0, below)
   DepthRefiner screened(on);
   DepthRefinementOptions off;
   off.conservative_screen = false;
+  off.parallax = false;
   DepthRefiner seeds_only(off);
   const double tolerance = DepthRefinementOptions{}.screen_tolerance_m;
   int checked = 0, seeds_missed = 0;

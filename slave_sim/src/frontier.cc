@@ -133,6 +133,7 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
   FrontierSetting screen = base;
   screen.name = "screen";
   screen.conservative_screen = true;
+  screen.parallax = false;  // the screen's bounds are the render's form
   s.push_back(screen);
   for (int n : {16, 25, 100}) grid(n);
   if (quick) {
@@ -162,11 +163,12 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     product.name = "product";
     product.product_models = true;
     s.push_back(product);
-    // The product's models read through the displaced surface (issue 32, twenty-fifth stop).
-    FrontierSetting product_parallax = product;
-    product_parallax.name = "product_parallax";
-    product_parallax.parallax = true;
-    s.push_back(product_parallax);
+    // The product's models with the render's form instead of parallax (the default before issue
+    // 32's twenty-eighth stop).
+    FrontierSetting product_no_parallax = product;
+    product_no_parallax.name = "product_no_parallax";
+    product_no_parallax.parallax = false;
+    s.push_back(product_no_parallax);
     FrontierSetting product_alone = product;
     product_alone.name = "product_no_last_step_seeds";
     product_alone.seed_from_last_step = false;
@@ -324,36 +326,32 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     patch_texel.name = "translation_patch_texel_translation_gradient";
     patch_texel.translation_patch = true;
     s.push_back(patch_texel);
-    // Stage 5b read through the displaced surface (parallax), alone and with the texel-scale
-    // translation slope.
-    FrontierSetting parallax = refined;
-    parallax.name = "parallax";
-    parallax.parallax = true;
-    s.push_back(parallax);
-    FrontierSetting parallax_hang = parallax;
-    parallax_hang.name = "parallax_kink_hang_other_arm";
-    parallax_hang.kink_hang_other_arm = true;
-    s.push_back(parallax_hang);
+    // Stage 5b with the render's form h·(N·n) at the coarse point instead of parallax (the
+    // default before issue 32's twenty-eighth stop), alone and with the hung other arm.
+    FrontierSetting no_parallax = refined;
+    no_parallax.name = "no_parallax";
+    no_parallax.parallax = false;
+    s.push_back(no_parallax);
+    FrontierSetting no_parallax_hang = no_parallax;
+    no_parallax_hang.name = "no_parallax_kink_hang_other_arm";
+    no_parallax_hang.kink_hang_other_arm = true;
+    s.push_back(no_parallax_hang);
     // Without the seeds from the last step (they count on a trace's consecutive rows only),
-    // alone and with parallax: the default before issue 32's twenty-fifth stop.
+    // with and without parallax: the default before issue 32's twenty-fifth stop.
     FrontierSetting alone = refined;
     alone.name = "no_last_step_seeds";
     alone.seed_from_last_step = false;
     s.push_back(alone);
-    FrontierSetting parallax_alone = parallax;
-    parallax_alone.name = "parallax_no_last_step_seeds";
-    parallax_alone.seed_from_last_step = false;
-    s.push_back(parallax_alone);
-    // Parallax with one plane per contact: whether the resting block's rocking in the closed
-    // loop comes with the kink planes' V (issue 32, twenty-fifth stop).
-    FrontierSetting parallax_one_plane = parallax;
-    parallax_one_plane.name = "parallax_no_kink_planes";
-    parallax_one_plane.kink_planes = false;
-    s.push_back(parallax_one_plane);
-    FrontierSetting parallax_texel = translation_only;
-    parallax_texel.name = "parallax_texel_translation_gradient";
-    parallax_texel.parallax = true;
-    s.push_back(parallax_texel);
+    FrontierSetting no_parallax_alone = no_parallax;
+    no_parallax_alone.name = "no_parallax_no_last_step_seeds";
+    no_parallax_alone.seed_from_last_step = false;
+    s.push_back(no_parallax_alone);
+    // One plane per contact without parallax: the resting block's rocking in the closed loop
+    // (issue 32, twenty-fifth stop) against the kink planes' V.
+    FrontierSetting no_parallax_one_plane = no_parallax;
+    no_parallax_one_plane.name = "no_parallax_no_kink_planes";
+    no_parallax_one_plane.kink_planes = false;
+    s.push_back(no_parallax_one_plane);
     // Stage 5a: a window per separated region of its overlap, with either gradient.
     FrontierSetting split = refined;
     split.name = "split_windows_at_separated_overlap";

@@ -422,6 +422,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   s["grazing_guard"] = config.pipeline.grazing_guard;
   s["kink_planes"] = config.pipeline.kink_planes;
   s["kink_hang_other_arm"] = config.pipeline.kink_hang_other_arm;
+  s["parallax"] = config.pipeline.depth_refinement.parallax;
   s["refine_depth"] = config.pipeline.refine_depth;
   {
     // Stage 5b (issue 32), warm-up included: contacts refined, and per contact the seeds, the

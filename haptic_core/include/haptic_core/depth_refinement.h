@@ -184,8 +184,12 @@ struct DepthRefinementOptions {
   /// holds no value there), instead of the render's h·(N·n) at the coarse point under (s, t).
   /// Where N ∥ n (flat coarse faces under the window: fig75, fig76) nothing changes. The grid
   /// (stage 5, the backend's render) still seeds the search with the render's form. Not with
-  /// conservative_screen (its bounds are the render's form; Validate throws).
-  bool parallax = false;
+  /// conservative_screen (its bounds are the render's form; Validate throws). On by default
+  /// (issue 32, twenty-eighth stop): on the frontier's spread poses it is no less accurate than
+  /// the render's form on any scene and reads fig77 far closer to the pipeline truth
+  /// (docs/frontier/issue32/twenty_eighth_stop); off (`slave_sim --no-parallax`): the render's
+  /// form, 3–37 % less time per step there.
+  bool parallax = true;
   /// Most fixed-point steps of the parallax per triangle and point; in [1, 64].
   int parallax_iterations = 12;
   /// Seeds from the last step (issue 32, twenty-fifth stop): the refined deepest point of every

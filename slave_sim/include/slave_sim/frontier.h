@@ -112,8 +112,9 @@ struct FrontierSetting {
   bool subgrid_translations = false;
   /// PipelineOptions::depth_refinement.conservative_screen ("screen" turns it on).
   bool conservative_screen = false;
-  /// PipelineOptions::depth_refinement.parallax ("parallax*" turn it on).
-  bool parallax = false;
+  /// PipelineOptions::depth_refinement.parallax (on; "no_parallax*", "product_no_parallax" and
+  /// "screen" turn it off).
+  bool parallax = true;
   /// PipelineOptions::depth_refinement.seed_from_last_step ("*no_last_step_seeds" turn it off).
   /// The frontier forgets the last step before each pose unless the poses are a trace's
   /// consecutive rows (FrontierOptions::trace_from_s), where each pose follows the last as in the
