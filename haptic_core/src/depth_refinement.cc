@@ -154,21 +154,20 @@ double ParallaxValue(const Projected& P, const HeightField& texture, double s, d
   constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
   if (edge != nullptr) edge->valid = false;
   if (s < P.x0 - 1e-12 || s > P.x1 + 1e-12 || t < P.y0 - 1e-12 || t > P.y1 + 1e-12) return kNaN;
-  {
-    // Farther than the reach from the triangle's projection: no foot q on it.
-    double b0, b1, b2;
-    Barycentric(P, s, t, b0, b1, b2);
-    if (b0 * P.altitude[0] < -P.reach || b1 * P.altitude[1] < -P.reach ||
-        b2 * P.altitude[2] < -P.reach) {
-      return kNaN;
-    }
+  // (s, t)'s barycentrics: the reach test's and the first step's (q starts at (s, t)).
+  double s_b0, s_b1, s_b2;
+  Barycentric(P, s, t, s_b0, s_b1, s_b2);
+  // Farther than the reach from the triangle's projection: no foot q on it.
+  if (s_b0 * P.altitude[0] < -P.reach || s_b1 * P.altitude[1] < -P.reach ||
+      s_b2 * P.altitude[2] < -P.reach) {
+    return kNaN;
   }
   const HeightFieldLevel& L = texture.level(0);
   const double tol = std::max(0.01 * P.texel_m, 1e-9);
   double qs = s, qt = t, omega = 1.0, previous = kInf, gs_last = 0.0, gt_last = 0.0;
   for (int k = 0; k < iterations; ++k) {
-    double b0, b1, b2;
-    Barycentric(P, qs, qt, b0, b1, b2);
+    double b0 = s_b0, b1 = s_b1, b2 = s_b2;
+    if (k > 0) Barycentric(P, qs, qt, b0, b1, b2);
     bool clamped = false;
     if (b0 < 0.0 || b1 < 0.0 || b2 < 0.0) {
       clamped = true;

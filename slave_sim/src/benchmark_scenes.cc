@@ -154,8 +154,8 @@ BenchmarkModelSettings ProductModelSettings(const std::string& name) {
     s.texture_size = 2048;
     s.coarse_scale = 2.0;
   } else if (name == "hammer_torus") {
-    s.texture_size = 0;  // from each model's detail: 4096² for both (eighth stop)
-    s.coarse_scale = 2.0;
+    s.texture_size = 0;    // from each model's detail: 4096² for both (eighth stop)
+    s.coarse_scale = 4.0;  // twenty-eighth stop: force error 18.3 → 15.0 % with parallax
   }
   return s;
 }
