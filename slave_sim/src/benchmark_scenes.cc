@@ -155,7 +155,7 @@ BenchmarkModelSettings ProductModelSettings(const std::string& name) {
     s.coarse_scale = 2.0;
   } else if (name == "hammer_torus") {
     s.texture_size = 0;    // from each model's detail: 4096² for both (eighth stop)
-    s.coarse_scale = 4.0;  // twenty-eighth stop: force error 18.3 → 15.0 % with parallax
+    s.coarse_scale = 4.0;  // issue 32's twenty-eighth stop
   }
   return s;
 }

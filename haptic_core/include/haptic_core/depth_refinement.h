@@ -185,10 +185,9 @@ struct DepthRefinementOptions {
   /// Where N ∥ n (flat coarse faces under the window: fig75, fig76) nothing changes. The grid
   /// (stage 5, the backend's render) still seeds the search with the render's form. Not with
   /// conservative_screen (its bounds are the render's form; Validate throws). On by default
-  /// (issue 32, twenty-eighth stop): on the frontier's spread poses it is no less accurate than
-  /// the render's form on any scene and reads fig77 far closer to the pipeline truth
-  /// (docs/frontier/issue32/twenty_eighth_stop); off (`slave_sim --no-parallax`): the render's
-  /// form, 3–37 % less time per step there.
+  /// (issue 32's twenty-eighth stop; its measurements are in
+  /// docs/frontier/issue32/twenty_eighth_stop); off (`slave_sim --no-parallax`): the render's
+  /// form, which takes fewer evaluations where facets are tilted from n.
   bool parallax = true;
   /// Most fixed-point steps of the parallax per triangle and point; in [1, 64].
   int parallax_iterations = 12;

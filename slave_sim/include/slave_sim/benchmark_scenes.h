@@ -65,11 +65,8 @@ struct BenchmarkScene {
 ///    32's fifth stop measured more accurate on every error column of the frontier and faster
 ///    (docs/frontier/issue32/fifth_stop);
 ///  - hammer_torus: four times the seed's coarse triangles, each texture sized from its model's
-///    detail (texture_size 0: 4096² for both). Twice the seed's count, sized so, was more
-///    accurate on every error column of the frontier than the seed's models, at about a third
-///    more step time and 260 MB more memory (docs/frontier/issue32/eighth_stop); with parallax
-///    four times is more accurate again in force (18.3 → 15.0 %) and torque (52.2 → 47.9 %) for
-///    a coarse query about two thirds longer (docs/frontier/issue32/twenty_eighth_stop).
+///    detail (texture_size 0: 4096² for both; docs/frontier/issue32/eighth_stop and
+///    twenty_eighth_stop measured the choice).
 /// The frontier's "product" setting; its "default" keeps the seed's counts for the comparison.
 BenchmarkModelSettings ProductModelSettings(const std::string& name);
 
