@@ -6,15 +6,20 @@
 // (slave_sim/frontier.h), and parity of fast paths with the reference is tested
 // (tests/texture_stage_parity_test.cc).
 //
+// --ab OPTION steps a second pipeline, the same but for OPTION turned the other way, on the same
+// poses, interleaved step by step (A then B, then B then A on the next pose), and prints its row
+// beside: a comparison that one shared machine's noise cannot tilt, since both see it alike.
+//
 // Usage: remote_step_benchmark [--scenes fig75,fig76,fig77,hammer_torus] [--poses N]
 //                              [--repeats R] [--grid N] [--threads T] [--path fast|reference]
-//                              [--no-refine-depth] [--texel-gradient] [--csv FILE]
-//                              [--cache-dir D]
+//                              [--no-refine-depth] [--texel-gradient] [--ab OPTION]
+//                              [--csv FILE] [--cache-dir D]
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cstdio>
 #include <fstream>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -100,6 +105,13 @@ int main(int argc, char** argv) {
                  "(DepthRefinementOptions::translation_patch_spacing_cells)")
       ->check(CLI::Range(1, ht::kMaxTranslationPatchSpacing))
       ->capture_default_str();
+  std::string ab;
+  app.add_option("--ab", ab,
+                 "also step a pipeline with this option of stage 5b turned the other way, "
+                 "interleaved step by step with the first on the same poses, and print its row "
+                 "(B) beside: edge-reach-skip (DepthRefinementOptions::edge_reach_skip), parallax, "
+                 "seed-from-last-step")
+      ->check(CLI::IsMember({"edge-reach-skip", "parallax", "seed-from-last-step"}));
   app.add_option("--csv", csv_path, "write one row per scene here");
   app.add_option("--cache-dir", cache_dir, "model cache folder")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
@@ -112,7 +124,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "remote_step_benchmark: cannot write %s\n", csv_path.c_str());
       return 1;
     }
-    csv << "scene,poses,steps,step_p50_us,step_p90_us,coarse_p50_us,texture_p50_us,"
+    csv << "scene,arm,poses,steps,step_p50_us,step_p90_us,coarse_p50_us,texture_p50_us,"
            "texture_per_contact_us,leaf_pairs_mean,contacts_mean,contacts_max\n";
   }
   std::printf("%-13s %5s %9s %9s %9s %9s %12s %8s %9s %4s\n", "scene", "poses", "step p50",
@@ -146,72 +158,115 @@ int main(int argc, char** argv) {
     options.depth_refinement.texel_scale_gradient = texel_gradient;
     options.depth_refinement.translation_kink_planes = translation_kinks;
     options.depth_refinement.texel_scale_rotation = !secant_rotation;
-    ht::HapticTexturePipeline pipeline(
-        scene.haptic, options,
-        std::make_unique<ht::CpuPenetrationDepthBackend>(
-            std::max(128, grid),
-            path == "fast" ? ht::TextureStagePath::kFast : ht::TextureStagePath::kReference,
-            threads, options.rotation_gradient));
+    // Arm A is the options as given; arm B (with --ab) the same with one option flipped.
+    ht::PipelineOptions options_b = options;
+    std::string label_b;
+    if (ab == "edge-reach-skip") {
+      options_b.depth_refinement.edge_reach_skip = !options.depth_refinement.edge_reach_skip;
+      label_b =
+          options_b.depth_refinement.edge_reach_skip ? "edge-reach-skip" : "no-edge-reach-skip";
+    } else if (ab == "parallax") {
+      options_b.depth_refinement.parallax = !options.depth_refinement.parallax;
+      label_b = options_b.depth_refinement.parallax ? "parallax" : "no-parallax";
+    } else if (ab == "seed-from-last-step") {
+      options_b.depth_refinement.seed_from_last_step =
+          !options.depth_refinement.seed_from_last_step;
+      label_b = options_b.depth_refinement.seed_from_last_step ? "seed-from-last-step"
+                                                               : "no-seed-from-last-step";
+    }
+    struct Arm {
+      std::string label;
+      std::unique_ptr<ht::HapticTexturePipeline> pipeline;
+      std::vector<double> step_us, coarse_us, texture_us, per_contact_us;
+      double pairs_sum = 0.0, contacts_sum = 0.0;
+      int contacts_max = 0;
+      std::uint64_t seq = 1;
+    };
+    std::vector<Arm> arms;
+    for (const ht::PipelineOptions* o : {&options, &options_b}) {
+      if (o == &options_b && ab.empty()) break;
+      Arm arm;
+      arm.label = o == &options ? "A" : "B: " + label_b;
+      arm.pipeline = std::make_unique<ht::HapticTexturePipeline>(
+          scene.haptic, *o,
+          std::make_unique<ht::CpuPenetrationDepthBackend>(
+              std::max(128, grid),
+              path == "fast" ? ht::TextureStagePath::kFast : ht::TextureStagePath::kReference,
+              threads, o->rotation_gradient));
+      arms.push_back(std::move(arm));
+    }
     const ht::RigidTransform X_FtT = scene.X_TFt.Inverse();
-    std::vector<double> step_us, coarse_us, texture_us, per_contact_us;
-    double pairs_sum = 0.0, contacts_sum = 0.0;
-    int contacts_max = 0;
     ht::StepTimings timings;
-    pipeline.Step(poses_WFt.empty() ? scene.haptic.X_WT_home : poses_WFt[0] * X_FtT, 0,
-                  timings);  // warm-up
-    std::uint64_t seq = 1;
-    for (const ht::RigidTransform& X_WFt : poses_WFt) {
-      const ht::RigidTransform X_WT = X_WFt * X_FtT;
+    for (Arm& arm : arms) {
+      arm.pipeline->Step(poses_WFt.empty() ? scene.haptic.X_WT_home : poses_WFt[0] * X_FtT, 0,
+                         timings);  // warm-up
+    }
+    const auto step = [&](Arm& arm, const ht::RigidTransform& X_WT, int r) {
+      arm.pipeline->Step(X_WT, arm.seq++, timings);
+      arm.step_us.push_back(timings.total_us);
+      arm.coarse_us.push_back(timings.collision_us);
+      arm.texture_us.push_back(timings.texture_us);
+      const int queried = static_cast<int>(arm.pipeline->last_contact_queries().size());
+      if (queried > 0) arm.per_contact_us.push_back(timings.texture_us / queried);
+      if (r == 0) {
+        arm.pairs_sum += timings.leaf_pairs;
+        arm.contacts_sum += queried;
+        arm.contacts_max = std::max(arm.contacts_max, queried);
+      }
+    };
+    for (std::size_t k = 0; k < poses_WFt.size(); ++k) {
+      const ht::RigidTransform X_WT = poses_WFt[k] * X_FtT;
       for (int r = 0; r < repeats; ++r) {
-        pipeline.Step(X_WT, seq++, timings);
-        step_us.push_back(timings.total_us);
-        coarse_us.push_back(timings.collision_us);
-        texture_us.push_back(timings.texture_us);
-        const int queried = static_cast<int>(pipeline.last_contact_queries().size());
-        if (queried > 0) per_contact_us.push_back(timings.texture_us / queried);
-        if (r == 0) {
-          pairs_sum += timings.leaf_pairs;
-          contacts_sum += queried;
-          contacts_max = std::max(contacts_max, queried);
+        if (arms.size() == 2 && (k + static_cast<std::size_t>(r)) % 2 == 1) {
+          step(arms[1], X_WT, r);
+          step(arms[0], X_WT, r);
+        } else {
+          for (Arm& arm : arms) step(arm, X_WT, r);
         }
       }
     }
     const double n = std::max<double>(1.0, static_cast<double>(poses_WFt.size()));
-    std::printf("%-13s %5zu %9.1f %9.1f %9.1f %9.1f %12.1f %8.1f %9.2f %4d\n", name.c_str(),
-                poses_WFt.size(), ht::Percentile(step_us, 0.5), ht::Percentile(step_us, 0.9),
-                ht::Percentile(coarse_us, 0.5), ht::Percentile(texture_us, 0.5),
-                ht::Percentile(per_contact_us, 0.5), pairs_sum / n, contacts_sum / n, contacts_max);
-    const ht::DepthRefinementCounters& refined = pipeline.depth_refinement_counters();
-    if (refined.contacts > 0) {
-      std::fprintf(stderr,
-                   "remote_step_benchmark: %s: stage 5b refined %llu contacts, %.1f seeds and "
-                   "%.0f evaluations of b - a per contact, δ0 raised %.1f µm on average\n",
-                   name.c_str(), static_cast<unsigned long long>(refined.contacts),
-                   static_cast<double>(refined.seeds) / static_cast<double>(refined.contacts),
-                   static_cast<double>(refined.evaluations) / static_cast<double>(refined.contacts),
-                   static_cast<double>(refined.raised_um) / static_cast<double>(refined.contacts));
-      std::fprintf(
-          stderr,
-          "remote_step_benchmark: %s: conservative screen: %.1f squares and %.1f leaves "
-          "per contact, deeper than the seeds on %llu contacts (%.1f µm on average), "
-          "%llu stopped at the leaf budget\n",
-          name.c_str(),
-          static_cast<double>(refined.screen_squares) / static_cast<double>(refined.contacts),
-          static_cast<double>(refined.screen_leaves) / static_cast<double>(refined.contacts),
-          static_cast<unsigned long long>(refined.screen_found),
-          refined.screen_found > 0 ? static_cast<double>(refined.screen_raised_um) /
-                                         static_cast<double>(refined.screen_found)
-                                   : 0.0,
-          static_cast<unsigned long long>(refined.screen_truncated));
+    for (const Arm& arm : arms) {
+      const std::string row_name = arms.size() == 1 ? name : name + " " + arm.label;
+      std::printf("%-13s %5zu %9.1f %9.1f %9.1f %9.1f %12.1f %8.1f %9.2f %4d\n", row_name.c_str(),
+                  poses_WFt.size(), ht::Percentile(arm.step_us, 0.5),
+                  ht::Percentile(arm.step_us, 0.9), ht::Percentile(arm.coarse_us, 0.5),
+                  ht::Percentile(arm.texture_us, 0.5), ht::Percentile(arm.per_contact_us, 0.5),
+                  arm.pairs_sum / n, arm.contacts_sum / n, arm.contacts_max);
+      const ht::DepthRefinementCounters& refined = arm.pipeline->depth_refinement_counters();
+      if (refined.contacts > 0) {
+        std::fprintf(
+            stderr,
+            "remote_step_benchmark: %s: stage 5b refined %llu contacts, %.1f seeds and "
+            "%.0f evaluations of b - a per contact, δ0 raised %.1f µm on average\n",
+            row_name.c_str(), static_cast<unsigned long long>(refined.contacts),
+            static_cast<double>(refined.seeds) / static_cast<double>(refined.contacts),
+            static_cast<double>(refined.evaluations) / static_cast<double>(refined.contacts),
+            static_cast<double>(refined.raised_um) / static_cast<double>(refined.contacts));
+        std::fprintf(
+            stderr,
+            "remote_step_benchmark: %s: conservative screen: %.1f squares and %.1f leaves "
+            "per contact, deeper than the seeds on %llu contacts (%.1f µm on average), "
+            "%llu stopped at the leaf budget\n",
+            row_name.c_str(),
+            static_cast<double>(refined.screen_squares) / static_cast<double>(refined.contacts),
+            static_cast<double>(refined.screen_leaves) / static_cast<double>(refined.contacts),
+            static_cast<unsigned long long>(refined.screen_found),
+            refined.screen_found > 0 ? static_cast<double>(refined.screen_raised_um) /
+                                           static_cast<double>(refined.screen_found)
+                                     : 0.0,
+            static_cast<unsigned long long>(refined.screen_truncated));
+      }
+      if (csv) {
+        csv << name << ',' << (arms.size() == 1 ? "A" : arm.label) << ',' << poses_WFt.size() << ','
+            << arm.step_us.size() << ',' << ht::Percentile(arm.step_us, 0.5) << ','
+            << ht::Percentile(arm.step_us, 0.9) << ',' << ht::Percentile(arm.coarse_us, 0.5) << ','
+            << ht::Percentile(arm.texture_us, 0.5) << ',' << ht::Percentile(arm.per_contact_us, 0.5)
+            << ',' << arm.pairs_sum / n << ',' << arm.contacts_sum / n << ',' << arm.contacts_max
+            << '\n';
+      }
     }
     std::fflush(stdout);
-    if (csv) {
-      csv << name << ',' << poses_WFt.size() << ',' << step_us.size() << ','
-          << ht::Percentile(step_us, 0.5) << ',' << ht::Percentile(step_us, 0.9) << ','
-          << ht::Percentile(coarse_us, 0.5) << ',' << ht::Percentile(texture_us, 0.5) << ','
-          << ht::Percentile(per_contact_us, 0.5) << ',' << pairs_sum / n << ',' << contacts_sum / n
-          << ',' << contacts_max << '\n';
-    }
   }
   std::printf(
       "(times in us; contacts = windows linearized per step; CPU %s path, %d texture "
