@@ -109,9 +109,8 @@ int main(int argc, char** argv) {
   app.add_option("--ab", ab,
                  "also step a pipeline with this option of stage 5b turned the other way, "
                  "interleaved step by step with the first on the same poses, and print its row "
-                 "(B) beside: edge-reach-skip (DepthRefinementOptions::edge_reach_skip), parallax, "
-                 "seed-from-last-step")
-      ->check(CLI::IsMember({"edge-reach-skip", "parallax", "seed-from-last-step"}));
+                 "(B) beside: parallax (DepthRefinementOptions::parallax), seed-from-last-step")
+      ->check(CLI::IsMember({"parallax", "seed-from-last-step"}));
   app.add_option("--csv", csv_path, "write one row per scene here");
   app.add_option("--cache-dir", cache_dir, "model cache folder")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
@@ -161,11 +160,7 @@ int main(int argc, char** argv) {
     // Arm A is the options as given; arm B (with --ab) the same with one option flipped.
     ht::PipelineOptions options_b = options;
     std::string label_b;
-    if (ab == "edge-reach-skip") {
-      options_b.depth_refinement.edge_reach_skip = !options.depth_refinement.edge_reach_skip;
-      label_b =
-          options_b.depth_refinement.edge_reach_skip ? "edge-reach-skip" : "no-edge-reach-skip";
-    } else if (ab == "parallax") {
+    if (ab == "parallax") {
       options_b.depth_refinement.parallax = !options.depth_refinement.parallax;
       label_b = options_b.depth_refinement.parallax ? "parallax" : "no-parallax";
     } else if (ab == "seed-from-last-step") {

@@ -44,12 +44,9 @@ double MinNormalInterpolationLength(const Projected& P) noexcept {
 }
 
 // Triangle f of `m` posed at X on window w, when it faces the side's way (as the render tests
-// it) and its projection is not edge-on. `bounds_from`, when given, is triangle f projected at
-// another pose: its texture bounds (which do not depend on the pose) are copied, not read again.
-// `edge_reach` (with parallax): also each edge's outward reach (Projected::edge_reach).
+// it) and its projection is not edge-on.
 bool ProjectTriangle(const HapticModel& m, const RigidTransform& X, const ContactWindow& w, int f,
-                     PatchSide side, Projected& out, bool parallax = false,
-                     const Projected* bounds_from = nullptr, bool edge_reach = true) noexcept {
+                     PatchSide side, Projected& out, bool parallax = false) noexcept {
   const glm::ivec3 tri = m.triangles[static_cast<std::size_t>(f)];
   glm::dvec3 p[3];
   for (int c = 0; c < 3; ++c) {
@@ -91,7 +88,6 @@ bool ProjectTriangle(const HapticModel& m, const RigidTransform& X, const Contac
   out.texel_m = m.texel_size_m[static_cast<std::size_t>(f)];
   out.parallax = parallax && out.textured;
   out.reach = 0.0;
-  out.texture_bounds = false;
   if (out.parallax) {
     for (int c = 0; c < 3; ++c) {
       const glm::dvec3 N_W = X.rotation * m.corner_normals_O[k + c];
@@ -110,22 +106,9 @@ bool ProjectTriangle(const HapticModel& m, const RigidTransform& X, const Contac
       return true;
     }
     lateral = std::min(1.0, lateral / MinNormalInterpolationLength(out));
-    if (bounds_from != nullptr && bounds_from->texture_bounds) {
-      out.h_max_abs = bounds_from->h_max_abs;
-      out.h_lo = bounds_from->h_lo;
-      out.h_hi = bounds_from->h_hi;
-    } else {
-      const float u0 = std::min({out.tu[0], out.tu[1], out.tu[2]});
-      const float v0 = std::min({out.tv[0], out.tv[1], out.tv[2]});
-      const float u1 = std::max({out.tu[0], out.tu[1], out.tu[2]});
-      const float v1 = std::max({out.tv[0], out.tv[1], out.tv[2]});
-      out.h_max_abs = m.texture.MaxAbsOver(0, u0, v0, u1, v1);
-      out.h_lo = -kInf32;
-      out.h_hi = kInf32;
-      if (edge_reach) m.texture.RangeOver(u0, v0, u1, v1, out.h_lo, out.h_hi);
-    }
-    out.texture_bounds = true;
-    double max_abs_h = static_cast<double>(out.h_max_abs);
+    double max_abs_h = static_cast<double>(m.texture.MaxAbsOver(
+        0, std::min({out.tu[0], out.tu[1], out.tu[2]}), std::min({out.tv[0], out.tv[1], out.tv[2]}),
+        std::max({out.tu[0], out.tu[1], out.tu[2]}), std::max({out.tv[0], out.tv[1], out.tv[2]})));
     if (!std::isfinite(max_abs_h)) max_abs_h = 0.0;
     out.reach = lateral * max_abs_h;
     // Each edge's altitude over the opposite corner (m): barycentric b_c · altitude_c is the
@@ -135,33 +118,6 @@ bool ProjectTriangle(const HapticModel& m, const RigidTransform& X, const Contac
       const double dx = out.x[e1] - out.x[e0], dy = out.y[e1] - out.y[e0];
       const double len = std::sqrt(dx * dx + dy * dy);
       out.altitude[c] = len > 0.0 ? std::abs(area) / len : 0.0;
-    }
-    // Each edge's outward reach: the foot q of a crossing lies on the triangle, so a point
-    // (s, t) = q + h·N⊥ + g (|g| within the fixed point's tolerance) lies at most
-    // max h·(N⊥·o_c) past edge c's line. h lies in RangeOver's [lo, hi] over the triangle's
-    // texture box; N·o_c = Σλ(N_c·o_c)/|Σλ·N_c| between the corners' values, moved away from 0
-    // by at most the interpolation's least length (as NormalFactorRange), and within ±1.
-    const float h_lo = out.h_lo, h_hi = out.h_hi;
-    const double inv_min_len = 1.0 / MinNormalInterpolationLength(out);
-    for (int c = 0; c < 3; ++c) {
-      if (!std::isfinite(h_lo) || !std::isfinite(h_hi) || !(out.altitude[c] > 0.0)) {
-        out.edge_reach[c] = kInf;  // no bound: the read goes on to the fixed point
-        continue;
-      }
-      const int e0 = (c + 1) % 3, e1 = (c + 2) % 3;
-      // o_c = −∇b_c · altitude_c, ∇b_c = (y_e0 − y_e1, x_e1 − x_e0)/area.
-      const double ou = -(out.y[e0] - out.y[e1]) * out.inv_area * out.altitude[c];
-      const double ov = -(out.x[e1] - out.x[e0]) * out.inv_area * out.altitude[c];
-      double a_lo = kInf, a_hi = -kInf;
-      for (int i = 0; i < 3; ++i) {
-        const double a = out.nu[i] * ou + out.nv[i] * ov;
-        a_lo = std::min(a_lo, a);
-        a_hi = std::max(a_hi, a);
-      }
-      a_lo = std::max(-1.0, a_lo >= 0.0 ? a_lo : a_lo * inv_min_len);
-      a_hi = std::min(1.0, a_hi >= 0.0 ? a_hi * inv_min_len : a_hi);
-      const double lo = static_cast<double>(h_lo), hi = static_cast<double>(h_hi);
-      out.edge_reach[c] = std::max({lo * a_lo, lo * a_hi, hi * a_lo, hi * a_hi});
     }
     out.x0 -= out.reach;
     out.x1 += out.reach;
@@ -193,12 +149,8 @@ struct ParallaxEdge {
   bool valid;
 };
 
-// With `skipped` given, a point farther past an edge's line than that edge's outward reach
-// (Projected::edge_reach, plus the tolerance) returns NaN at once and sets *skipped: no crossing
-// can lie on this triangle, though the fixed point would have stopped at the edge and reported it
-// for a crack's bridge (HeightOver's second pass). Without it every read within the reach runs.
 double ParallaxValue(const Projected& P, const HeightField& texture, double s, double t,
-                     int iterations, ParallaxEdge* edge, bool* skipped) noexcept {
+                     int iterations, ParallaxEdge* edge) noexcept {
   constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
   if (edge != nullptr) edge->valid = false;
   if (s < P.x0 - 1e-12 || s > P.x1 + 1e-12 || t < P.y0 - 1e-12 || t > P.y1 + 1e-12) return kNaN;
@@ -210,19 +162,8 @@ double ParallaxValue(const Projected& P, const HeightField& texture, double s, d
       s_b2 * P.altitude[2] < -P.reach) {
     return kNaN;
   }
-  const double tol = std::max(0.01 * P.texel_m, 1e-9);
-  if (skipped != nullptr) {
-    // Signed distance past edge c's line: −b_c·altitude_c. A crossing within the tolerance
-    // lies at most edge_reach_c + tol past it.
-    const double margin = tol + 1e-9;
-    if (-s_b0 * P.altitude[0] > P.edge_reach[0] + margin ||
-        -s_b1 * P.altitude[1] > P.edge_reach[1] + margin ||
-        -s_b2 * P.altitude[2] > P.edge_reach[2] + margin) {
-      *skipped = true;
-      return kNaN;
-    }
-  }
   const HeightFieldLevel& L = texture.level(0);
+  const double tol = std::max(0.01 * P.texel_m, 1e-9);
   double qs = s, qt = t, omega = 1.0, previous = kInf, gs_last = 0.0, gt_last = 0.0;
   for (int k = 0; k < iterations; ++k) {
     double b0 = s_b0, b1 = s_b1, b2 = s_b2;
@@ -318,8 +259,6 @@ class Envelope {
       miss_[far] = g;
     }
   }
-  // Whether some surface crossed the line within the box (Finish then ignores the edges).
-  bool Crossed() const noexcept { return !std::isinf(best_); }
   double Finish() const noexcept {
     if (!std::isinf(best_) || count_ < 2) return best_;
     double best = best_, best_gap = kInf;
@@ -354,12 +293,9 @@ class Envelope {
 };
 
 double ValueAt(const Projected& P, const HeightField& texture, double s, double t, int level,
-               double cell_m, int parallax_iterations, ParallaxEdge* edge,
-               bool* skipped = nullptr) noexcept {
+               double cell_m, int parallax_iterations, ParallaxEdge* edge) noexcept {
   if (edge != nullptr) edge->valid = false;
-  if (P.parallax && level == 0) {
-    return ParallaxValue(P, texture, s, t, parallax_iterations, edge, skipped);
-  }
+  if (P.parallax && level == 0) return ParallaxValue(P, texture, s, t, parallax_iterations, edge);
   if (s < P.x0 - 1e-12 || s > P.x1 + 1e-12 || t < P.y0 - 1e-12 || t > P.y1 + 1e-12) {
     return std::numeric_limits<double>::quiet_NaN();
   }
@@ -390,22 +326,7 @@ double ValueAt(const Projected& P, const HeightField& texture, double s, double 
 // tool, within the box ±range.
 double HeightOver(std::span<const Projected> list, const HeightField& texture, bool keep_max,
                   double range, double s, double t, int level, double cell_m,
-                  int parallax_iterations, bool edge_reach_skip) noexcept {
-  // First pass: parallax reads past an edge's outward reach are skipped (they cannot cross). A
-  // crossing found there is the envelope as the full pass would give it (a skipped read is NaN
-  // either way, and edges matter only where nothing crosses).
-  bool skipped = false;
-  if (edge_reach_skip) {
-    Envelope envelope(keep_max, range);
-    ParallaxEdge edge{};
-    for (const Projected& P : list) {
-      envelope.Add(ValueAt(P, texture, s, t, level, cell_m, parallax_iterations, &edge, &skipped));
-      envelope.AddEdge(edge);
-    }
-    if (!skipped || envelope.Crossed()) return envelope.Finish();
-  }
-  // The skip off, or nothing crossed and some read was skipped: every read, so that the crack's
-  // bridge sees the edges the skipped reads stop at, in the same order.
+                  int parallax_iterations) noexcept {
   Envelope envelope(keep_max, range);
   ParallaxEdge edge{};
   for (const Projected& P : list) {
@@ -457,32 +378,18 @@ void NormalFactorRange(const Projected& P, double& lo, double& hi) noexcept {
 
 double PatchHeightAt(const HapticModel& model, const RigidTransform& X_WO,
                      std::span<const int> triangles, const ContactWindow& window, PatchSide side,
-                     double s_m, double t_m, int level, bool parallax,
-                     EdgeReachSkip edge_reach) noexcept {
-  // Stage 5b's two passes (HeightOver): the first skips the parallax reads past an edge's
-  // outward reach, the second reads everything where nothing crossed and a read was skipped.
-  bool skipped = false;
-  for (int pass = edge_reach == EdgeReachSkip::kOff ? 1 : 0; pass < 2; ++pass) {
-    Envelope envelope(side == PatchSide::kEnvironment, window.depth_range_m());
-    ParallaxEdge edge{};
-    Projected P;
-    for (const int f : triangles) {
-      if (f < 0 || static_cast<std::size_t>(f) >= model.triangles.size()) continue;
-      if (!ProjectTriangle(model, X_WO, window, f, side, P, parallax && level == 0, nullptr,
-                           edge_reach != EdgeReachSkip::kOff)) {
-        continue;
-      }
-      envelope.Add(ValueAt(P, model.texture, s_m, t_m, level, window.cell_size_m(),
-                           DepthRefinementOptions{}.parallax_iterations, &edge,
-                           pass == 0 ? &skipped : nullptr));
-      envelope.AddEdge(edge);
-    }
-    if (pass == 1 || !skipped || envelope.Crossed() ||
-        edge_reach == EdgeReachSkip::kFirstPassOnly) {
-      return envelope.Finish();
-    }
+                     double s_m, double t_m, int level, bool parallax) noexcept {
+  Envelope envelope(side == PatchSide::kEnvironment, window.depth_range_m());
+  ParallaxEdge edge{};
+  Projected P;
+  for (const int f : triangles) {
+    if (f < 0 || static_cast<std::size_t>(f) >= model.triangles.size()) continue;
+    if (!ProjectTriangle(model, X_WO, window, f, side, P, parallax && level == 0)) continue;
+    envelope.Add(ValueAt(P, model.texture, s_m, t_m, level, window.cell_size_m(),
+                         DepthRefinementOptions{}.parallax_iterations, &edge));
+    envelope.AddEdge(edge);
   }
-  return side == PatchSide::kEnvironment ? -kInf : kInf;  // not reached
+  return envelope.Finish();
 }
 
 void DepthRefinementOptions::Validate() const {
@@ -582,10 +489,7 @@ void DepthRefiner::ProjectAll(const HapticModel& model, const RigidTransform& X,
   out.clear();
   Projected P;
   for (const int f : list) {
-    if (!ProjectTriangle(model, X, window_, f, side, P, options_.parallax, nullptr,
-                         options_.edge_reach_skip)) {
-      continue;
-    }
+    if (!ProjectTriangle(model, X, window_, f, side, P, options_.parallax)) continue;
     P.face = f;
     out.push_back(P);
   }
@@ -612,8 +516,7 @@ void DepthRefiner::MoveTool(const RigidTransform& X_WT) noexcept {
   tool_moved_.clear();
   Projected P;
   for (const Projected& L : tool_local_) {
-    if (!ProjectTriangle(*tool_, X_WT, window_, L.face, PatchSide::kTool, P, options_.parallax, &L,
-                         options_.edge_reach_skip)) {
+    if (!ProjectTriangle(*tool_, X_WT, window_, L.face, PatchSide::kTool, P, options_.parallax)) {
       continue;
     }
     P.face = L.face;
@@ -626,11 +529,10 @@ double DepthRefiner::Difference(std::span<const Projected> tool, double s, doubl
   ++evaluations_;
   const double range = window_.depth_range_m();
   const int it = options_.parallax_iterations;
-  const bool skip = options_.edge_reach_skip;
-  const double b = HeightOver(env_local_, env_->texture, true, range, s, t, 0, 0.0, it, skip);
+  const double b = HeightOver(env_local_, env_->texture, true, range, s, t, 0, 0.0, it);
   if (!(b > -kInf)) return -kInf;
   const double a =
-      HeightOver(tool, tool_->texture, false, range, s - shift_s, t - shift_t, 0, 0.0, it, skip);
+      HeightOver(tool, tool_->texture, false, range, s - shift_s, t - shift_t, 0, 0.0, it);
   if (!(a < kInf)) return -kInf;
   return b - a;
 }

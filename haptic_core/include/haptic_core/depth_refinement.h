@@ -68,26 +68,10 @@ namespace ht {
 /// along n (ParallaxValue in the .cc): the render's h·(N·n) at the coarse point under (s, t)
 /// reads a point h·|N − (N·n)n| to the side of it, which on a coarse facet tilted from n under a
 /// texture of large height is another part of the surface (docs/frontier/issue32/twelfth_stop).
-/// `edge_reach` (parallax only) says how the triangles a point lies past are read; the value is
-/// the same for kOff and kTwoPasses, bit for bit (a test compares them).
 /// Never allocates, never throws.
-enum class EdgeReachSkip {
-  /// Every triangle within its reach box runs the fixed point.
-  kOff,
-  /// Stage 5b's reads: a first pass skips the triangles the point lies farther past an edge of
-  /// than the displaced surface can reach outward there (a bound from the texture's level-0
-  /// range under the triangle and its corner normals: no crossing can lie on them), and a second
-  /// pass reads every triangle only where nothing crossed and one was skipped, so that the
-  /// crack's bridge sees the edges the skipped reads stop at.
-  kTwoPasses,
-  /// The first pass alone (for tests of the bound: a triangle whose surface crosses the line is
-  /// never skipped).
-  kFirstPassOnly,
-};
 double PatchHeightAt(const HapticModel& model, const RigidTransform& X_WO,
                      std::span<const int> triangles, const ContactWindow& window, PatchSide side,
-                     double s_m, double t_m, int level = 0, bool parallax = false,
-                     EdgeReachSkip edge_reach = EdgeReachSkip::kTwoPasses) noexcept;
+                     double s_m, double t_m, int level = 0, bool parallax = false) noexcept;
 
 /// Largest DepthRefinementOptions::translation_patch_spacing_cells.
 inline constexpr int kMaxTranslationPatchSpacing = 4;
@@ -207,11 +191,6 @@ struct DepthRefinementOptions {
   bool parallax = true;
   /// Most fixed-point steps of the parallax per triangle and point; in [1, 64].
   int parallax_iterations = 12;
-  /// With parallax, each read first skips the triangles the point lies farther past an edge of
-  /// than their displaced surface reaches outward (EdgeReachSkip::kTwoPasses; issue 32's
-  /// twenty-ninth stop): the same values bit for bit, fewer fixed-point steps. Off: every
-  /// triangle within its reach box runs the fixed point (the reference for parity and timing).
-  bool edge_reach_skip = true;
   /// Seeds from the last step (issue 32, twenty-fifth stop): the refined deepest point of every
   /// contact of the previous step (DepthRefiner::BeginStep), kept in the tool's frame T, is one
   /// more seed of each contact on the same environment model whose window it falls in: a pattern
@@ -322,16 +301,6 @@ class DepthRefiner {
     double reach;
     // The projection's altitude over each corner (m), for the reach test.
     double altitude[3];
-    // Per edge (the one opposite corner c), the largest outward lateral displacement h·(N⊥·o_c)
-    // of the displaced surface over the triangle (m, o_c the edge's outward unit normal on the
-    // window plane; may be negative): a point farther than this past the edge's line has no
-    // foot on the triangle (parallax only; the envelope's first pass).
-    double edge_reach[3];
-    // The texture's bounds under the triangle's texture box (parallax only, where
-    // texture_bounds): MaxAbsOver at level 0 and RangeOver's lo and hi (m). They do not depend
-    // on the pose, so a triangle projected again copies them.
-    float h_max_abs, h_lo, h_hi;
-    bool texture_bounds;
     bool parallax;
     double inv_area;
     float tu[3], tv[3];
