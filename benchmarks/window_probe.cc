@@ -12,7 +12,9 @@
 //        [--models seed|product] [--scan N] [--cache-dir DIR]
 // Debugging: WINDOW_PROBE_TRIANGLES=1 lists every triangle under the point (its coarse height,
 // N·n, texture height and the render's value) and every triangle whose parallax alone holds it;
-// WINDOW_PROBE_AT_MM=S,T probes window point (S, T) mm instead of the truth's maximum.
+// WINDOW_PROBE_AT_MM=S,T probes window point (S, T) mm instead of the truth's maximum;
+// WINDOW_PROBE_DISPLACED_UM=R lists the object's displaced-surface samples within R µm of the
+// point's line along n.
 
 #include <CLI/CLI.hpp>
 #include <cmath>
@@ -174,6 +176,67 @@ int main(int argc, char** argv) {
           "models at the truth's maximum over all their triangles: object b %.1f um, "
           "tool a %.1f um\n",
           b * 1e6, a * 1e6);
+    }
+    if (const char* near_um = std::getenv("WINDOW_PROBE_DISPLACED_UM")) {
+      // The object's displaced surface p + h·N sampled densely (each triangle with a corner
+      // within 5 mm of the point, 120 steps a side): the samples whose position on the window
+      // plane lies within the given distance of the point, with their height along n. Tells a
+      // displaced surface that holds the point (the parallax's fixed point missed it) from one
+      // with a hole there.
+      const double r = std::atof(near_um) * 1e-6;
+      const glm::dvec3 q_W = w.center_W + d.at_uv_m.x * w.axis_u_W + d.at_uv_m.y * w.axis_v_W;
+      double best = -INFINITY;
+      int hits = 0;
+      constexpr int kSteps = 120;
+      for (std::size_t f = 0; f < env.triangles.size(); ++f) {
+        glm::dvec3 P[3], N[3];
+        bool near = false;
+        for (int k = 0; k < 3; ++k) {
+          P[k] = X_WO * env.vertices_O[static_cast<std::size_t>(env.triangles[f][k])];
+          N[k] = X_WO.rotation * env.corner_normals_O[3 * f + static_cast<std::size_t>(k)];
+          near = near || glm::length(P[k] - q_W) < 5e-3;
+        }
+        if (!near) continue;
+        double f_best = -INFINITY, f_h = 0.0, f_nn = 0.0, f_lat = 0.0;
+        int f_hits = 0;
+        for (int i = 0; i <= kSteps; ++i) {
+          for (int j = 0; i + j <= kSteps; ++j) {
+            const double b1 = double(i) / kSteps, b2 = double(j) / kSteps, b0 = 1.0 - b1 - b2;
+            const glm::dvec3 pq = b0 * P[0] + b1 * P[1] + b2 * P[2];
+            const glm::dvec3 Nq = glm::normalize(b0 * N[0] + b1 * N[1] + b2 * N[2]);
+            const float u =
+                static_cast<float>(b0 * env.corner_uvs[3 * f].x + b1 * env.corner_uvs[3 * f + 1].x +
+                                   b2 * env.corner_uvs[3 * f + 2].x);
+            const float v =
+                static_cast<float>(b0 * env.corner_uvs[3 * f].y + b1 * env.corner_uvs[3 * f + 1].y +
+                                   b2 * env.corner_uvs[3 * f + 2].y);
+            const double h =
+                env.textured[f] ? env.texture.SampleAt(0, env.texture.level(0), u, v) : 0.0;
+            const glm::dvec3 rq = pq + h * Nq - q_W;
+            const double lat = std::hypot(glm::dot(rq, w.axis_u_W), glm::dot(rq, w.axis_v_W));
+            if (lat > r) continue;
+            ++f_hits;
+            const double along = glm::dot(rq, w.normal_W);
+            if (along > f_best) {
+              f_best = along;
+              f_h = h;
+              f_nn = glm::dot(Nq, w.normal_W);
+              f_lat = lat;
+            }
+          }
+        }
+        if (f_hits == 0) continue;
+        hits += f_hits;
+        best = std::max(best, f_best);
+        const glm::dvec3 cr = glm::cross(P[1] - P[0], P[2] - P[0]);
+        std::printf(
+            "  displaced object tri %zu: %d samples within %.0f um, highest along n %.1f um "
+            "(h %.1f um, N.n %.3f, %.1f um off the line), facing %+.3f\n",
+            f, f_hits, r * 1e6, f_best * 1e6, f_h * 1e6, f_nn, f_lat * 1e6,
+            glm::dot(cr, w.normal_W) / glm::length(cr));
+      }
+      std::printf("displaced object surface near the point: %d samples, highest %.1f um\n", hits,
+                  best * 1e6);
     }
     if (std::getenv("WINDOW_PROBE_TRIANGLES") != nullptr) {
       // Every object triangle under the truth's maximum: its coarse height along n, N·n, the
