@@ -105,19 +105,12 @@ int main(int argc, char** argv) {
                  "(DepthRefinementOptions::translation_patch_spacing_cells)")
       ->check(CLI::Range(1, ht::kMaxTranslationPatchSpacing))
       ->capture_default_str();
-  int overlap_scan = 0;
-  app.add_option("--overlap-scan", overlap_scan,
-                 "stage 5b's overlap scan where the seeds find none: N x N points "
-                 "(DepthRefinementOptions::overlap_scan; 0: off)")
-      ->check(CLI::Range(0, 64))
-      ->capture_default_str();
   std::string ab;
   app.add_option("--ab", ab,
                  "also step a pipeline with this option of stage 5b turned the other way, "
                  "interleaved step by step with the first on the same poses, and print its row "
-                 "(B) beside: parallax (DepthRefinementOptions::parallax), seed-from-last-step, "
-                 "overlap-scan (B: --overlap-scan's N where A has 0)")
-      ->check(CLI::IsMember({"parallax", "seed-from-last-step", "overlap-scan"}));
+                 "(B) beside: parallax (DepthRefinementOptions::parallax), seed-from-last-step")
+      ->check(CLI::IsMember({"parallax", "seed-from-last-step"}));
   app.add_option("--csv", csv_path, "write one row per scene here");
   app.add_option("--cache-dir", cache_dir, "model cache folder")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
@@ -159,7 +152,6 @@ int main(int argc, char** argv) {
     options.share_connected_contacts = !no_sharing;
     options.depth_refinement.parallax = parallax;
     options.depth_refinement.seed_from_last_step = !no_seed_from_last_step;
-    options.depth_refinement.overlap_scan = ab == "overlap-scan" ? 0 : overlap_scan;
     options.depth_refinement.translation_patch = translation_patch;
     options.depth_refinement.translation_patch_spacing_cells = translation_patch_spacing_cells;
     options.depth_refinement.texel_scale_gradient = texel_gradient;
@@ -171,9 +163,6 @@ int main(int argc, char** argv) {
     if (ab == "parallax") {
       options_b.depth_refinement.parallax = !options.depth_refinement.parallax;
       label_b = options_b.depth_refinement.parallax ? "parallax" : "no-parallax";
-    } else if (ab == "overlap-scan") {
-      options_b.depth_refinement.overlap_scan = overlap_scan;
-      label_b = "overlap-scan " + std::to_string(overlap_scan);
     } else if (ab == "seed-from-last-step") {
       options_b.depth_refinement.seed_from_last_step =
           !options.depth_refinement.seed_from_last_step;
@@ -249,14 +238,6 @@ int main(int argc, char** argv) {
             static_cast<double>(refined.seeds) / static_cast<double>(refined.contacts),
             static_cast<double>(refined.evaluations) / static_cast<double>(refined.contacts),
             static_cast<double>(refined.raised_um) / static_cast<double>(refined.contacts));
-        if (refined.overlap_scans > 0) {
-          std::fprintf(stderr,
-                       "remote_step_benchmark: %s: overlap scan on %llu contacts, deeper on %llu "
-                       "(%llu from no overlap to overlap)\n",
-                       row_name.c_str(), static_cast<unsigned long long>(refined.overlap_scans),
-                       static_cast<unsigned long long>(refined.overlap_scan_found),
-                       static_cast<unsigned long long>(refined.overlap_scan_overlaps));
-        }
         std::fprintf(
             stderr,
             "remote_step_benchmark: %s: conservative screen: %.1f squares and %.1f leaves "

@@ -443,10 +443,6 @@ void DepthRefinementOptions::Validate() const {
     throw std::invalid_argument("depth refinement: parallax_iterations must be in [1, 64], got " +
                                 std::to_string(parallax_iterations));
   }
-  if (overlap_scan < 0 || overlap_scan > 64) {
-    throw std::invalid_argument("depth refinement: overlap_scan must be in [0, 64], got " +
-                                std::to_string(overlap_scan));
-  }
   if (max_screen_leaves < 1) {
     throw std::invalid_argument("depth refinement: max_screen_leaves must be >= 1, got " +
                                 std::to_string(max_screen_leaves));
@@ -1175,32 +1171,6 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
       if (!(found.depth_m > deepest.depth_m)) continue;
       ++counters_.last_step_found;
       counters_.last_step_raised_um += take_deeper(found);
-    }
-  }
-  // The overlap scan (overlap_scan): where nothing so far overlaps, the whole window at level 0
-  // with parallax on a coarse grid, and a search from its best point.
-  if (options_.overlap_scan > 0 && options_.parallax && !(deepest.depth_m > 0.0)) {
-    ++counters_.overlap_scans;
-    const int n = options_.overlap_scan;
-    const double half_extent = 0.5 * w.extent_m;
-    GatherEnvironment(-half_extent, half_extent, -half_extent, half_extent);
-    GatherTool(tool_all_, -half_extent, half_extent, -half_extent, half_extent);
-    Seed scanned{-kInf, 0.0, 0.0};
-    for (int j = 0; j < n; ++j) {
-      for (int i = 0; i < n; ++i) {
-        const double s = ((i + 0.5) / n - 0.5) * w.extent_m;
-        const double t = ((j + 0.5) / n - 0.5) * w.extent_m;
-        const double d = Difference(tool_local_, s, t, 0.0, 0.0);
-        if (d > scanned.depth_m) scanned = {d, s, t};
-      }
-    }
-    if (scanned.depth_m > deepest.depth_m) {
-      Seed found = refine_at(scanned.s, scanned.t, tool_all_, 0.0, 0.0, true);
-      if (!(found.depth_m > scanned.depth_m)) found = scanned;
-      const bool overlap = found.depth_m > 0.0 && !(deepest.depth_m > 0.0);
-      ++counters_.overlap_scan_found;
-      counters_.overlap_scan_raised_um += take_deeper(found);
-      if (overlap) ++counters_.overlap_scan_overlaps;
     }
   }
   if (!(deepest.depth_m > -kInf)) {

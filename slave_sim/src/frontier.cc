@@ -75,7 +75,6 @@ PipelineOptions PipelineOptionsFor(const FrontierSetting& st) {
   options.depth_refinement.conservative_screen = st.conservative_screen;
   options.depth_refinement.parallax = st.parallax;
   options.depth_refinement.seed_from_last_step = st.seed_from_last_step;
-  options.depth_refinement.overlap_scan = st.overlap_scan;
   options.depth_refinement.translation_patch = st.translation_patch;
   options.depth_refinement.translation_patch_neighbour_climbs =
       st.translation_patch_neighbour_climbs;
@@ -174,13 +173,6 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     product_alone.name = "product_no_last_step_seeds";
     product_alone.seed_from_last_step = false;
     s.push_back(product_alone);
-    // The overlap scan where the seeds find none (issue 32's twenty-ninth stop).
-    for (const int n : {16, 25}) {
-      FrontierSetting scan = product;
-      scan.name = "product_overlap_scan" + std::to_string(n);
-      scan.overlap_scan = n;
-      s.push_back(scan);
-    }
   }
   FrontierSetting ref = base;
   ref.name = "reference";
@@ -354,14 +346,6 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     no_parallax_alone.name = "no_parallax_no_last_step_seeds";
     no_parallax_alone.seed_from_last_step = false;
     s.push_back(no_parallax_alone);
-    // With parallax, a coarse scan of the window where the seeds find no overlap (issue 32's
-    // twenty-ninth stop).
-    for (const int n : {16, 25}) {
-      FrontierSetting scan = refined;
-      scan.name = "overlap_scan" + std::to_string(n);
-      scan.overlap_scan = n;
-      s.push_back(scan);
-    }
     // One plane per contact without parallax: the resting block's rocking in the closed loop
     // (issue 32, twenty-fifth stop) against the kink planes' V.
     FrontierSetting no_parallax_one_plane = no_parallax;

@@ -130,13 +130,6 @@ int main(int argc, char** argv) {
                "tool's frame), so that a narrow peak the filtered grid finds on one step and\n"
                "misses on the next is not lost for that step (docs/frontier/issue32/\n"
                "twenty_fifth_stop)");
-  int overlap_scan = 0;
-  app.add_option("--overlap-scan", overlap_scan,
-                 "with parallax: where stage 5b's seeds find no overlap, scan the window on an\n"
-                 "N x N grid for one the render's seeds missed and search from its best point\n"
-                 "(0: off; docs/frontier/issue32/twenty_ninth_stop)")
-      ->check(CLI::Range(0, 64))
-      ->capture_default_str();
   bool kink_hang_other_arm = false;
   app.add_flag(
       "--kink-hang-other-arm", kink_hang_other_arm,
@@ -448,7 +441,6 @@ int main(int argc, char** argv) {
     config.pipeline.depth_refinement.texel_scale_gradient = texel_scale_gradient;
     config.pipeline.depth_refinement.parallax = parallax;
     config.pipeline.depth_refinement.seed_from_last_step = !no_seed_from_last_step;
-    config.pipeline.depth_refinement.overlap_scan = overlap_scan;
     config.pipeline.kink_hang_other_arm = kink_hang_other_arm;
     config.pipeline.depth_refinement.translation_patch = translation_patch;
     config.pipeline.depth_refinement.translation_patch_follows_rotation =

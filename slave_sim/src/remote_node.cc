@@ -450,12 +450,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
         {"last_step_seeds", r.last_step_seeds},
         {"last_step_found_deeper", r.last_step_found},
         {"last_step_raised_um_sum", r.last_step_raised_um},
-        {"seed_from_last_step", config.pipeline.depth_refinement.seed_from_last_step},
-        {"overlap_scan", config.pipeline.depth_refinement.overlap_scan},
-        {"overlap_scans", r.overlap_scans},
-        {"overlap_scan_found_deeper", r.overlap_scan_found},
-        {"overlap_scan_raised_um_sum", r.overlap_scan_raised_um},
-        {"overlap_scan_overlaps", r.overlap_scan_overlaps}};
+        {"seed_from_last_step", config.pipeline.depth_refinement.seed_from_last_step}};
     // Whether the patches went by the operator's round trip (translation_patch_rtt_ms).
     s["translation_patch_by_rtt"] = {
         {"rtt_ms", std::isfinite(config.translation_patch_rtt_ms)

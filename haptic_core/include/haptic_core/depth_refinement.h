@@ -210,14 +210,6 @@ struct DepthRefinementOptions {
   /// --no-seed-from-last-step`, the frontier's "no_last_step_seeds"): each step from its own grid
   /// alone.
   bool seed_from_last_step = true;
-  /// With parallax, a scan for an overlap the seeds missed (issue 32's twenty-ninth stop): where
-  /// the seeds' best b − a (the grid's, the screen's, the last step's) is ≤ 0, b − a at level 0
-  /// with parallax on an N×N grid of the window's points, and a search from the best of them,
-  /// which becomes the deepest point when it is deeper (its displaced samples searched from it
-  /// too). The grid's seeds come from the render's form, which on facets tilted from the window
-  /// under millimetre heights (fig77) reads the surface elsewhere, so a peak the displaced
-  /// surface holds can lie outside every seed's square. 0: off. In [0, 64].
-  int overlap_scan = 0;
   /// How far above the best a dropped square's bound may reach (m). ≥ 0.
   double screen_tolerance_m = 1e-6;
   /// The screen looks for b − a above the larger of the best found and this (m): 0 looks for
@@ -255,13 +247,6 @@ struct DepthRefinementCounters {
   std::uint64_t last_step_seeds = 0;
   std::uint64_t last_step_found = 0;
   std::uint64_t last_step_raised_um = 0;
-  /// DepthRefinementOptions::overlap_scan: contacts scanned, contacts where the scan found a
-  /// deeper point (and Σ of how much deeper, µm), and those of them it took from no overlap to
-  /// overlap.
-  std::uint64_t overlap_scans = 0;
-  std::uint64_t overlap_scan_found = 0;
-  std::uint64_t overlap_scan_raised_um = 0;
-  std::uint64_t overlap_scan_overlaps = 0;
 };
 
 /// Refines the linearizations of a texture stage's batch to the finest texture level (see the

@@ -120,9 +120,6 @@ struct FrontierSetting {
   /// consecutive rows (FrontierOptions::trace_from_s), where each pose follows the last as in the
   /// loop: on spread poses it changes nothing.
   bool seed_from_last_step = true;
-  /// PipelineOptions::depth_refinement.overlap_scan ("overlap_scan16", "overlap_scan25" and
-  /// their "product_" forms; 0: off).
-  int overlap_scan = 0;
   /// PipelineOptions::depth_refinement.translation_patch ("translation_patch" turns it on).
   bool translation_patch = false;
   /// PipelineOptions::depth_refinement.translation_patch_neighbour_climbs
