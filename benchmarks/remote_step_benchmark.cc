@@ -109,8 +109,9 @@ int main(int argc, char** argv) {
   app.add_option("--ab", ab,
                  "also step a pipeline with this option of stage 5b turned the other way, "
                  "interleaved step by step with the first on the same poses, and print its row "
-                 "(B) beside: parallax (DepthRefinementOptions::parallax), seed-from-last-step")
-      ->check(CLI::IsMember({"parallax", "seed-from-last-step"}));
+                 "(B) beside: parallax (DepthRefinementOptions::parallax), seed-from-last-step, "
+                 "tool-leaves-follow (PipelineOptions::tool_leaves_follow_object_leaves)")
+      ->check(CLI::IsMember({"parallax", "seed-from-last-step", "tool-leaves-follow"}));
   app.add_option("--csv", csv_path, "write one row per scene here");
   app.add_option("--cache-dir", cache_dir, "model cache folder")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
@@ -163,6 +164,10 @@ int main(int argc, char** argv) {
     if (ab == "parallax") {
       options_b.depth_refinement.parallax = !options.depth_refinement.parallax;
       label_b = options_b.depth_refinement.parallax ? "parallax" : "no-parallax";
+    } else if (ab == "tool-leaves-follow") {
+      options_b.tool_leaves_follow_object_leaves = !options.tool_leaves_follow_object_leaves;
+      label_b = options_b.tool_leaves_follow_object_leaves ? "tool-leaves-follow"
+                                                           : "no-tool-leaves-follow";
     } else if (ab == "seed-from-last-step") {
       options_b.depth_refinement.seed_from_last_step =
           !options.depth_refinement.seed_from_last_step;

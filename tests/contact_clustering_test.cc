@@ -258,6 +258,76 @@ TEST(ContactClustering, LeafSharedByTwoClustersGoesToTheClusterOfItsDeepestPair)
   EXPECT_EQ(clusters[1].tool_triangles.size(), 6u);
 }
 
+// Issue 32's twenty-ninth stop: with tool_leaves_follow_object_leaves every kept pair has its
+// two leaves in one cluster. The corner above: tool leaf 1 meets object leaf 0 only on the +z
+// face, but object leaf 0 went to the +x cluster (its deepest pair), so pair (1, 0) is rendered in
+// no window unless tool leaf 1 follows it there. On random pairs: every pair held by some
+// cluster, the object's lists unchanged, and each object triangle still in one cluster.
+TEST(ContactClustering, ToolLeavesFollowTheirPairsObjectLeaves) {
+  const std::vector<HullPairContact> corner = {
+      MakePair({0, 0, 0}, {0, 0, 1}, -3e-4, 0, 1),
+      MakePair({0, 1e-3, 0}, {0, 0, 1}, -1e-4, 1, 0),
+      MakePair({2e-3, 0, 1e-3}, {1, 0, 0}, -2e-4, 2, 0),
+      MakePair({2e-3, 1e-3, 1e-3}, {1, 0, 0}, -1e-4, 3, 2),
+  };
+  const auto list = [](std::span<const int> v) { return std::set<int>(v.begin(), v.end()); };
+  // Whether some cluster renders both leaves of `pair` (leaf i holds triangles 3i..3i+2).
+  const auto held = [&](std::span<const ContactCluster> clusters, const HullPairContact& pair) {
+    return std::any_of(clusters.begin(), clusters.end(), [&](const ContactCluster& c) {
+      return list(c.tool_triangles).count(3 * pair.node_A) > 0 &&
+             list(c.object_triangles).count(3 * pair.node_B) > 0;
+    });
+  };
+  ClusteringOptions options;
+  ContactClusterer before_clusterer, after_clusterer;
+  auto before = before_clusterer.Cluster(corner, MakeLeaves(4), MakeLeaves(3), options);
+  options.tool_leaves_follow_object_leaves = true;
+  auto after = after_clusterer.Cluster(corner, MakeLeaves(4), MakeLeaves(3), options);
+  ASSERT_EQ(before.size(), 2u);
+  ASSERT_EQ(after.size(), 2u);
+  EXPECT_FALSE(held(before, corner[1]));
+  for (const HullPairContact& p : corner) EXPECT_TRUE(held(after, p)) << p.node_A << p.node_B;
+  // Tool leaf 1 is now in both windows: the +z one (its own pair's) and the +x one.
+  EXPECT_EQ(list(after[0].tool_triangles), (std::set<int>{0, 1, 2, 3, 4, 5}));
+  EXPECT_EQ(list(after[1].tool_triangles), (std::set<int>{3, 4, 5, 6, 7, 8, 9, 10, 11}));
+  for (std::size_t c = 0; c < 2; ++c) {
+    EXPECT_EQ(list(before[c].object_triangles), list(after[c].object_triangles));
+  }
+
+  std::mt19937 rng(29);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  std::uniform_int_distribution<int> leaf(0, 11);
+  int checked = 0;
+  for (int trial = 0; trial < 50; ++trial) {
+    std::vector<HullPairContact> pairs;
+    for (int i = 0; i < 40; ++i) {
+      const glm::dvec3 n =
+          trial % 2 == 0 ? glm::dvec3(0, 0, 1) : RandomUnitNear({0, 0, 1}, 1.5, rng);
+      pairs.push_back(MakePair({0.02 * U(rng), 0.02 * U(rng), 0.005 * U(rng)}, n,
+                               -2e-4 * (1.0 + U(rng)), leaf(rng), leaf(rng)));
+    }
+    options.tool_leaves_follow_object_leaves = false;
+    before = before_clusterer.Cluster(pairs, MakeLeaves(12), MakeLeaves(12), options);
+    options.tool_leaves_follow_object_leaves = true;
+    after = after_clusterer.Cluster(pairs, MakeLeaves(12), MakeLeaves(12), options);
+    ASSERT_EQ(before.size(), after.size());
+    std::set<int> object_seen;
+    for (std::size_t c = 0; c < after.size(); ++c) {
+      EXPECT_EQ(list(before[c].object_triangles), list(after[c].object_triangles));
+      const std::set<int> a = list(after[c].tool_triangles);
+      for (const int t : before[c].tool_triangles) EXPECT_EQ(a.count(t), 1u);  // nothing lost
+      for (const int t : after[c].object_triangles) EXPECT_TRUE(object_seen.insert(t).second);
+    }
+    // Where no cluster was dropped every pair is kept, and each is held by one cluster.
+    if (after_clusterer.dropped_for_capacity() > 0) continue;
+    ++checked;
+    for (const HullPairContact& p : pairs) {
+      EXPECT_TRUE(held(after, p)) << "trial " << trial << " pair " << p.node_A << " " << p.node_B;
+    }
+  }
+  EXPECT_GE(checked, 25);
+}
+
 TEST(ContactClustering, LeafSharedByClustersWithDisjointWindowsServesEachOfThem) {
   // Object leaf 0 (one large face) is met by three clusters: A (deepest) and B 5 cm apart along
   // its up normal, whose 2 cm windows are disjoint, and C 5 mm from A along a normal 90° away

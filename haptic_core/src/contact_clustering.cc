@@ -81,7 +81,8 @@ ContactClusterer::ContactClusterer(int max_pairs, int max_triangles)
   work_.resize(n);
   kept_.resize(n);
   work_to_out_.resize(n);
-  leaf_entries_.resize(n);
+  leaf_entries_.resize(2 * n);
+  object_leaf_cluster_.resize(n);
   triangles_.resize(static_cast<std::size_t>(max_triangles));
   out_.resize(n);
 }
@@ -171,9 +172,17 @@ bool ContactClusterer::WindowsOverlap(int a, int b) const noexcept {
          std::abs(glm::dot(d, n)) < 2.0 * half_sum;
 }
 
+int ContactClusterer::ObjectLeafCluster(int leaf) const noexcept {
+  const auto first = object_leaf_cluster_.begin();
+  const auto last = first + num_object_leaves_;
+  const auto it = std::lower_bound(first, last, std::pair<int, int>{leaf, -1});
+  return it != last && it->first == leaf ? it->second : -1;
+}
+
 int ContactClusterer::AssignTriangles(const ConvexHullHierarchy& hulls, bool tool_side,
                                       int num_records, int num_out, int write_at,
-                                      bool share_disjoint) noexcept {
+                                      bool share_disjoint, bool follow_object_leaves,
+                                      bool placement_only) noexcept {
   const int num_nodes = static_cast<int>(hulls.nodes.size());
   int num_entries = 0;
   for (int r = 0; r < num_records; ++r) {
@@ -190,7 +199,14 @@ int ContactClusterer::AssignTriangles(const ConvexHullHierarchy& hulls, bool too
       ++stats_.invalid_nodes;
       continue;
     }
-    leaf_entries_[num_entries++] = {leaf, rec.signed_distance_m, rec.input_index, out};
+    leaf_entries_[num_entries++] = {leaf, rec.signed_distance_m, rec.input_index, out, false};
+    if (follow_object_leaves && tool_side) {
+      // The pair's object leaf's cluster also holds this tool leaf.
+      const int with = ObjectLeafCluster(rec.node_B);
+      if (with >= 0) {  // also where it is the pair's own cluster: kept though not the deepest
+        leaf_entries_[num_entries++] = {leaf, rec.signed_distance_m, rec.input_index, with, true};
+      }
+    }
   }
   const auto first = leaf_entries_.begin();
   // Per leaf, its deepest pair first (ties: lowest input index), then keep one entry per leaf.
@@ -198,7 +214,8 @@ int ContactClusterer::AssignTriangles(const ConvexHullHierarchy& hulls, bool too
     if (a.leaf != b.leaf) return a.leaf < b.leaf;
     if (a.signed_distance_m != b.signed_distance_m)
       return a.signed_distance_m < b.signed_distance_m;
-    return a.input_index < b.input_index;
+    if (a.input_index != b.input_index) return a.input_index < b.input_index;
+    return !a.follows && b.follows;  // a pair's own cluster before the one it follows into
   });
   int num_leaves = 0;
   int group = 0;  // the first kept entry of the current leaf
@@ -209,14 +226,31 @@ int ContactClusterer::AssignTriangles(const ConvexHullHierarchy& hulls, bool too
       leaf_entries_[num_leaves++] = entry;
       continue;
     }
+    bool held = false;
+    for (int k = group; k < num_leaves && !held; ++k)
+      held = leaf_entries_[k].cluster == entry.cluster;
+    if (held) continue;
+    if (entry.follows) {  // a tool leaf following its pair's object leaf
+      leaf_entries_[num_leaves++] = entry;
+      continue;
+    }
     if (!share_disjoint) continue;
     // A further cluster of this leaf: kept when its window overlaps none of those holding it.
     bool overlaps = false;
     for (int k = group; k < num_leaves && !overlaps; ++k) {
-      overlaps = leaf_entries_[k].cluster == entry.cluster ||
-                 WindowsOverlap(leaf_entries_[k].cluster, entry.cluster);
+      overlaps = WindowsOverlap(leaf_entries_[k].cluster, entry.cluster);
     }
     if (!overlaps) leaf_entries_[num_leaves++] = entry;
+  }
+  if (placement_only) {
+    // The object's placement, first cluster per leaf (the deepest pair's entry comes first).
+    num_object_leaves_ = 0;
+    for (int i = 0; i < num_leaves; ++i) {
+      if (i > 0 && leaf_entries_[i - 1].leaf == leaf_entries_[i].leaf) continue;
+      object_leaf_cluster_[static_cast<std::size_t>(num_object_leaves_++)] = {
+          leaf_entries_[i].leaf, leaf_entries_[i].cluster};
+    }
+    return write_at;
   }
   std::sort(first, first + num_leaves, [](const LeafEntry& a, const LeafEntry& b) {
     return a.cluster != b.cluster ? a.cluster < b.cluster : a.leaf < b.leaf;
@@ -428,7 +462,11 @@ std::span<const ContactCluster> ContactClusterer::Cluster(
 
   // 4. Triangles: each leaf to the cluster of its deepest kept pair.
   const bool share = options.share_leaves_between_disjoint_windows;
-  const int written = AssignTriangles(tool_hulls, /*tool_side=*/true, n, num_out, 0, share);
+  const bool follow = options.tool_leaves_follow_object_leaves;
+  // With follow, the object's leaves are placed first (without writing) so that the tool's can
+  // follow them; the tool's triangles are written first either way.
+  if (follow) AssignTriangles(object_hulls, /*tool_side=*/false, n, num_out, 0, share, false, true);
+  const int written = AssignTriangles(tool_hulls, /*tool_side=*/true, n, num_out, 0, share, follow);
   AssignTriangles(object_hulls, /*tool_side=*/false, n, num_out, written, share);
   return {out_.data(), static_cast<std::size_t>(num_out)};
 }

@@ -353,6 +353,8 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
     clustering.max_contacts = options_.max_contacts;
     clustering.share_leaves_between_disjoint_windows =
         options_.cluster_triangles && options_.share_leaves_between_disjoint_windows;
+    clustering.tool_leaves_follow_object_leaves =
+        options_.cluster_triangles && options_.tool_leaves_follow_object_leaves;
     const std::span<const ContactCluster> clusters = clusterer_.Cluster(
         pairs, tool.hull_hierarchy, object.model->hull_hierarchy, clustering, pair_bounds);
     timings.clusters += static_cast<int>(clusters.size());

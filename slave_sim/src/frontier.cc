@@ -55,6 +55,7 @@ PipelineOptions PipelineOptionsFor(const FrontierSetting& st) {
   options.size_windows_from_clusters = st.size_windows_from_clusters;
   options.cluster_triangles = st.cluster_triangles;
   options.share_leaves_between_disjoint_windows = st.share_leaves_between_disjoint_windows;
+  options.tool_leaves_follow_object_leaves = st.tool_leaves_follow_object_leaves;
   options.whole_model_region_windows = st.whole_model_region_windows;
   options.kink_planes = st.kink_planes;
   options.kink_planes_own_slope = st.kink_planes_own_slope;
@@ -169,6 +170,10 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     product_no_parallax.name = "product_no_parallax";
     product_no_parallax.parallax = false;
     s.push_back(product_no_parallax);
+    FrontierSetting product_follow = product;
+    product_follow.name = "product_tool_leaves_follow";
+    product_follow.tool_leaves_follow_object_leaves = true;
+    s.push_back(product_follow);
     FrontierSetting product_alone = product;
     product_alone.name = "product_no_last_step_seeds";
     product_alone.seed_from_last_step = false;
@@ -251,6 +256,10 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     whole_leaves.name = "leaves_to_deepest_pair";
     whole_leaves.share_leaves_between_disjoint_windows = false;
     s.push_back(whole_leaves);
+    FrontierSetting follow = base;
+    follow.name = "tool_leaves_follow";
+    follow.tool_leaves_follow_object_leaves = true;
+    s.push_back(follow);
     FrontierSetting one_plane = base;
     one_plane.name = "no_kink_planes";
     one_plane.kink_planes = false;

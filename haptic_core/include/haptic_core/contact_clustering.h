@@ -12,6 +12,7 @@
 #include <glm/vec3.hpp>
 #include <limits>
 #include <span>
+#include <utility>
 #include <vector>
 
 #include "haptic_core/contact_model.h"
@@ -49,6 +50,14 @@ struct ClusteringOptions {
   /// test of pass 2). One large leaf (a hammer's flat face on a torus) then serves each contact
   /// region it touches, and no part of it is rendered in two windows, which do not overlap.
   bool share_leaves_between_disjoint_windows = false;
+  /// Pass 4, after the object's leaves are placed (issue 32's twenty-ninth stop): each tool leaf
+  /// of a kept pair also goes to the cluster holding that pair's object leaf (its deepest pair's
+  /// cluster), so that every kept pair has both its leaves in one window. Without it a pair whose
+  /// tool leaf went to one cluster and object leaf to another is rendered in no window: the
+  /// full-resolution surfaces interpenetrate there and no contact feels it (the hammer's seven
+  /// poses without force on the frontier's spread poses). Each object leaf stays in its
+  /// clusters as before, so a pair is counted only in a window that holds its object leaf.
+  bool tool_leaves_follow_object_leaves = false;
 
   /// True when every field is finite and in its documented range. Never throws.
   bool IsValid() const noexcept;
@@ -138,10 +147,14 @@ struct ClusteringStats {
 ///      none such they are dropped. Kept clusters' depths are unchanged by these merges.
 ///   4. Triangles: each leaf met in a kept pair goes to the cluster holding its deepest pair
 ///      (and, with share_leaves_between_disjoint_windows, to each further cluster whose window
-///      is disjoint from those of the clusters holding it).
+///      is disjoint from those of the clusters holding it; with
+///      tool_leaves_follow_object_leaves, each tool leaf also to the cluster holding each of its
+///      pairs' object leaves).
 /// Windows that overlap with different normals (a corner, two faces) stay separate. The same
 /// texture is still not counted twice because each coarse triangle is listed in one cluster only,
-/// or in several whose windows do not overlap.
+/// or in several whose windows do not overlap (a tool leaf that follows its pairs' object leaves
+/// may be listed in overlapping windows, but each object leaf is not, so a pair of leaves is
+/// still rendered together in one window only).
 /// The texture stage's facing test (face normal·n > kPatchFacingThreshold) alone would not ensure
 /// it: a triangle faces two windows whose normals are α apart whenever cos(α/2) > 0.05, i.e. for
 /// all α < 174.3°; it only separates nearly opposite windows. A leaf's triangles that do not face
@@ -208,7 +221,8 @@ class ContactClusterer {
     int leaf;
     double signed_distance_m;
     int input_index;
-    int cluster;  // final output index
+    int cluster;   // final output index
+    bool follows;  // tool_leaves_follow_object_leaves: kept whatever the windows
   };
 
   void Refresh(WorkCluster& c, const ClusteringOptions& options) const noexcept;
@@ -219,7 +233,11 @@ class ContactClusterer {
                 const ClusteringOptions& options) const noexcept;
   void Absorb(int into, int from) noexcept;
   int AssignTriangles(const ConvexHullHierarchy& hulls, bool tool_side, int num_records,
-                      int num_out, int write_at, bool share_disjoint) noexcept;
+                      int num_out, int write_at, bool share_disjoint,
+                      bool follow_object_leaves = false, bool placement_only = false) noexcept;
+  // The cluster holding object leaf `leaf` first (its deepest kept pair's), from
+  // object_leaf_cluster_; −1 when none.
+  int ObjectLeafCluster(int leaf) const noexcept;
   // Whether output clusters a and b have windows that overlap (pass 2's box test on their
   // points, normals and extents).
   bool WindowsOverlap(int a, int b) const noexcept;
@@ -232,6 +250,10 @@ class ContactClusterer {
   std::vector<int> kept_;
   std::vector<int> work_to_out_;
   std::vector<LeafEntry> leaf_entries_;
+  // (object leaf, its first cluster), sorted by leaf: the object side's placement, for
+  // tool_leaves_follow_object_leaves.
+  std::vector<std::pair<int, int>> object_leaf_cluster_;
+  int num_object_leaves_ = 0;
   std::vector<int> triangles_;
   std::vector<ContactCluster> out_;
   ClusteringStats stats_;

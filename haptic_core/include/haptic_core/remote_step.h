@@ -108,6 +108,10 @@ struct PipelineOptions {
   /// (ClusteringOptions::share_leaves_between_disjoint_windows), instead of only the cluster of
   /// its deepest pair, which leaves the other contact regions of one large leaf unrendered.
   bool share_leaves_between_disjoint_windows = true;
+  /// With cluster_triangles: each tool leaf of a kept pair also goes to the cluster holding the
+  /// pair's object leaf (ClusteringOptions::tool_leaves_follow_object_leaves), so that no pair's
+  /// overlap falls between two windows.
+  bool tool_leaves_follow_object_leaves = false;
   /// Windows on the contact region of two models without hierarchy (issue 31, change 1, third
   /// stop): where a cluster is the single pair of two whole convex models (the procedural scenes:
   /// a block resting on a gear), its point is the hulls' witness point, which on parallel faces is

@@ -65,6 +65,9 @@ struct FrontierSetting {
   bool size_windows_from_clusters = true;
   /// PipelineOptions::cluster_triangles ("windows_pick_by_box" turns it off).
   bool cluster_triangles = true;
+  /// PipelineOptions::tool_leaves_follow_object_leaves ("tool_leaves_follow",
+  /// "product_tool_leaves_follow").
+  bool tool_leaves_follow_object_leaves = false;
   /// PipelineOptions::share_leaves_between_disjoint_windows ("leaves_to_deepest_pair" turns it
   /// off).
   bool share_leaves_between_disjoint_windows = true;
