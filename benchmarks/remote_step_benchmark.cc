@@ -7,8 +7,9 @@
 // (tests/texture_stage_parity_test.cc).
 //
 // --ab OPTION steps a second pipeline, the same but for OPTION turned the other way, on the same
-// poses, interleaved step by step (A then B, then B then A on the next pose), and prints its row
-// beside: a comparison that one shared machine's noise cannot tilt, since both see it alike.
+// poses, interleaved step by step (the order A, B or B, A alternating from step to step), and
+// prints its row beside: a comparison that one shared machine's noise cannot tilt, since both
+// arms see it alike.
 //
 // Usage: remote_step_benchmark [--scenes fig75,fig76,fig77,hammer_torus] [--poses N]
 //                              [--repeats R] [--grid N] [--threads T] [--path fast|reference]
@@ -107,7 +108,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   std::string ab;
   app.add_option("--ab", ab,
-                 "also step a pipeline with this option of stage 5b turned the other way, "
+                 "also step a pipeline with this option of the remote step turned the other way, "
                  "interleaved step by step with the first on the same poses, and print its row "
                  "(B) beside: parallax (DepthRefinementOptions::parallax), seed-from-last-step, "
                  "tool-leaves-follow (PipelineOptions::tool_leaves_follow_object_leaves)")

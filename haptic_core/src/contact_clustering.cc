@@ -196,7 +196,7 @@ int ContactClusterer::AssignTriangles(const ConvexHullHierarchy& hulls, bool too
       continue;
     }
     if (leaf < 0 || leaf >= num_nodes || !hulls.nodes[leaf].is_leaf()) {
-      ++stats_.invalid_nodes;
+      if (!placement_only) ++stats_.invalid_nodes;  // counted once, in the writing pass
       continue;
     }
     leaf_entries_[num_entries++] = {leaf, rec.signed_distance_m, rec.input_index, out, false};
