@@ -162,18 +162,16 @@ int main(int argc, char** argv) {
     // Arm A is the options as given; arm B (with --ab) the same with one option flipped.
     ht::PipelineOptions options_b = options;
     std::string label_b;
-    if (ab == "parallax") {
-      options_b.depth_refinement.parallax = !options.depth_refinement.parallax;
-      label_b = options_b.depth_refinement.parallax ? "parallax" : "no-parallax";
-    } else if (ab == "tool-leaves-follow") {
-      options_b.tool_leaves_follow_object_leaves = !options.tool_leaves_follow_object_leaves;
-      label_b = options_b.tool_leaves_follow_object_leaves ? "tool-leaves-follow"
-                                                           : "no-tool-leaves-follow";
-    } else if (ab == "seed-from-last-step") {
-      options_b.depth_refinement.seed_from_last_step =
-          !options.depth_refinement.seed_from_last_step;
-      label_b = options_b.depth_refinement.seed_from_last_step ? "seed-from-last-step"
-                                                               : "no-seed-from-last-step";
+    // The flag --ab names, in a pipeline's options (null without --ab).
+    const auto ab_flag = [&](ht::PipelineOptions& o) -> bool* {
+      if (ab == "parallax") return &o.depth_refinement.parallax;
+      if (ab == "seed-from-last-step") return &o.depth_refinement.seed_from_last_step;
+      if (ab == "tool-leaves-follow") return &o.tool_leaves_follow_object_leaves;
+      return nullptr;
+    };
+    if (bool* flag = ab_flag(options_b)) {
+      *flag = !*flag;
+      label_b = (*flag ? "" : "no-") + ab;
     }
     struct Arm {
       std::string label;

@@ -35,6 +35,18 @@
 
 namespace {
 
+// Level 0's texture height (m) of model m's face f at barycentrics (b0, b1, b2) of its corners
+// (the corners' texture coordinates interpolated, bilinear); 0 on an untextured face.
+double Level0HeightAt(const ht::HapticModel& m, std::size_t f, double b0, double b1, double b2) {
+  if (!m.textured[f]) return 0.0;
+  const std::size_t k = 3 * f;
+  const auto u = static_cast<float>(b0 * m.corner_uvs[k].x + b1 * m.corner_uvs[k + 1].x +
+                                    b2 * m.corner_uvs[k + 2].x);
+  const auto v = static_cast<float>(b0 * m.corner_uvs[k].y + b1 * m.corner_uvs[k + 1].y +
+                                    b2 * m.corner_uvs[k + 2].y);
+  return m.texture.SampleAt(0, m.texture.level(0), u, v);
+}
+
 // The row of contacts.csv for (scene, setting, pose, contact), as name → text; throws when the
 // file cannot be read or holds no such row.
 std::map<std::string, std::string> FindRow(const std::string& path, const std::string& scene,
@@ -204,14 +216,7 @@ int main(int argc, char** argv) {
             const double b1 = double(i) / kSteps, b2 = double(j) / kSteps, b0 = 1.0 - b1 - b2;
             const glm::dvec3 pq = b0 * P[0] + b1 * P[1] + b2 * P[2];
             const glm::dvec3 Nq = glm::normalize(b0 * N[0] + b1 * N[1] + b2 * N[2]);
-            const float u =
-                static_cast<float>(b0 * env.corner_uvs[3 * f].x + b1 * env.corner_uvs[3 * f + 1].x +
-                                   b2 * env.corner_uvs[3 * f + 2].x);
-            const float v =
-                static_cast<float>(b0 * env.corner_uvs[3 * f].y + b1 * env.corner_uvs[3 * f + 1].y +
-                                   b2 * env.corner_uvs[3 * f + 2].y);
-            const double h =
-                env.textured[f] ? env.texture.SampleAt(0, env.texture.level(0), u, v) : 0.0;
+            const double h = Level0HeightAt(env, f, b0, b1, b2);
             const glm::dvec3 rq = pq + h * Nq - q_W;
             const double lat = std::hypot(glm::dot(rq, w.axis_u_W), glm::dot(rq, w.axis_v_W));
             if (lat > r) continue;
@@ -271,13 +276,7 @@ int main(int argc, char** argv) {
           const glm::dvec3 cr = glm::cross(p[1] - p[0], p[2] - p[0]);
           const double facing = glm::dot(cr, w.normal_W) / glm::length(cr);
           const double hc = b0 * dd[0] + b1 * dd[1] + b2 * dd[2];
-          const float u =
-              static_cast<float>(b0 * m.corner_uvs[3 * f].x + b1 * m.corner_uvs[3 * f + 1].x +
-                                 b2 * m.corner_uvs[3 * f + 2].x);
-          const float v =
-              static_cast<float>(b0 * m.corner_uvs[3 * f].y + b1 * m.corner_uvs[3 * f + 1].y +
-                                 b2 * m.corner_uvs[3 * f + 2].y);
-          const double h = m.textured[f] ? m.texture.SampleAt(0, m.texture.level(0), u, v) : 0.0;
+          const double h = Level0HeightAt(m, f, b0, b1, b2);
           // N·n of the corners' plain interpolation (the render normalizes it; its value below is
           // the library's own, PatchHeightAt).
           const double ndn = b0 * nn[0] + b1 * nn[1] + b2 * nn[2];

@@ -465,8 +465,12 @@ std::span<const ContactCluster> ContactClusterer::Cluster(
   const bool follow = options.tool_leaves_follow_object_leaves;
   // With follow, the object's leaves are placed first (without writing) so that the tool's can
   // follow them; the tool's triangles are written first either way.
-  if (follow) AssignTriangles(object_hulls, /*tool_side=*/false, n, num_out, 0, share, false, true);
-  const int written = AssignTriangles(tool_hulls, /*tool_side=*/true, n, num_out, 0, share, follow);
+  if (follow) {
+    AssignTriangles(object_hulls, /*tool_side=*/false, n, num_out, 0, share,
+                    /*follow_object_leaves=*/false, /*placement_only=*/true);
+  }
+  const int written = AssignTriangles(tool_hulls, /*tool_side=*/true, n, num_out, 0, share,
+                                      /*follow_object_leaves=*/follow);
   AssignTriangles(object_hulls, /*tool_side=*/false, n, num_out, written, share);
   return {out_.data(), static_cast<std::size_t>(num_out)};
 }
