@@ -142,6 +142,69 @@ TEST(HardCases, SeparatedContactsOnOneFaceSplitIntoOneWindowEach) {
              F_split.force.z, delta * 1e6));
 }
 
+// Stage 5a in its continuous form (split_keeps_parent_window, split_bridge_fade_m,
+// split_birth_ramp_m, split_keeps_parent_rotation_step; issue 32's thirtieth stop): a box whose
+// bottom carries two 40 µm bumps (σ 3 mm) 20 mm apart is lowered onto a flat slab in 1 µm steps.
+// High up, the two overlaps are far apart and each bump pushes with its own δ: about twice the
+// one window's force, as the seventh stop's split. As the box sinks the overlaps widen, and at a
+// gap of 10 mm (the link: r = σ·sqrt(2 ln(40 µm / h)) = 5 mm at h ≈ 10 µm) they become one
+// region, pushing k·δ once. The bridge level goes to 0 as they touch, so the force falls to the
+// one window's without a step: between consecutive heights it changes by no more than a few k·Δz
+// (two contacts' k·Δz plus the weight's own slope); and where the other bump's weight is
+// negligible the model is the unsplit window's, wrench for wrench.
+TEST(HardCases, AContinuousSplitJoinsTwoSupportsWithoutAStep) {
+  const auto bumps = [](double x, double y) {
+    const auto g = [&](double cx) {
+      return 40e-6 * std::exp(-((x - cx) * (x - cx) + y * y) / (2.0 * 3e-3 * 3e-3));
+    };
+    return g(-10e-3) + g(10e-3);
+  };
+  const HapticScene scene = BoxOnSlab(std::make_shared<const HapticModel>(
+      MakeTexturedBox({0.03, 0.02, 0.01}, bumps, 512, 0.1, "two_wide_bumps")));
+  PipelineOptions whole_options;
+  PipelineOptions continuous = whole_options;
+  continuous.split_windows_at_separated_overlap = true;
+  continuous.split_link_m = 10e-3;
+  continuous.split_birth_ramp_m = 10e-6;  // a quarter of the bumps' height
+  continuous.split_bridge_fade_m = 10e-6;
+  continuous.split_keeps_parent_rotation_step = true;
+  continuous.split_keeps_parent_window = true;
+  HapticTexturePipeline whole(scene, whole_options);
+  HapticTexturePipeline split(scene, continuous);
+  StepTimings t;
+  double largest_step = 0.0, previous = -1.0, far_ratio = 0.0;
+  int equal_models = 0, compared = 0;
+  for (int h_um = 30; h_um >= 2; --h_um) {
+    const RigidTransform X_WT = At({0.0, 0.0, 0.01 + h_um * 1e-6});
+    const ContactModel a = whole.Step(X_WT, 1, t);
+    const ContactModel b = split.Step(X_WT, 1, t);
+    ASSERT_EQ(a.num_contacts, 1) << h_um;
+    const double fz = b.F_T_W_at_q0.force.z;
+    if (h_um == 30) far_ratio = fz / a.F_T_W_at_q0.force.z;
+    if (previous >= 0.0) largest_step = std::max(largest_step, std::abs(fz - previous));
+    previous = fz;
+    if (b.num_contacts == 1) {
+      ++compared;
+      equal_models += b.F_T_W_at_q0.force == a.F_T_W_at_q0.force &&
+                      b.F_T_W_at_q0.torque == a.F_T_W_at_q0.torque;
+    }
+  }
+  EXPECT_NEAR(far_ratio, 2.0, 0.15);        // two supports, each its k·δ
+  EXPECT_LT(largest_step, 4.0 * kK * 1e-6);  // no step where the supports join
+  EXPECT_GT(compared, 3);                    // the joined heights: one region, one window
+  EXPECT_EQ(equal_models, compared);
+  PipelineOptions bad = continuous;
+  bad.split_bridge_fade_m = -1e-6;
+  EXPECT_THROW(HapticTexturePipeline(scene, bad), std::invalid_argument);
+  bad.split_bridge_fade_m = 0.0;
+  bad.split_birth_ramp_m = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(HapticTexturePipeline(scene, bad), std::invalid_argument);
+  Report("a continuous split",
+         Fmt("two supports: %.2f x the one window's force; largest step while they join: %.4f N "
+             "(k dz = %.4f N)",
+             far_ratio, largest_step, kK * 1e-6));
+}
+
 // Stage 5c (PipelineOptions::share_connected_contacts): a flat box face pressed on the end cap
 // of a smooth cylinder (the gear model without ridges) overlaps it over the whole 50 mm disc. The
 // cylinder's hull hierarchy has small leaves, and windows may not exceed 20 mm, so the coarse

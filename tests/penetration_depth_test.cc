@@ -528,5 +528,55 @@ TEST(OverlapRegions, SeparatedBumpsAreSeparateRegionsAtTheClusteringDistance) {
             0);
 }
 
+// OverlapRegions' bridge levels (stage 5a's bridge fade, PipelineOptions::split_bridge_fade_m):
+// the three bumps linked at 1 mm are three regions. The pair 5 mm apart joins at the level where
+// its superlevel sets come within the link: by symmetry on the segment between the tops, t* =
+// f(2.5 mm − L/2) − 20 µm with f the two bumps' sum, −14.1 µm (±0.2 mm of cells: −15.7 to
+// −11.8 µm). The lone bump joins only where the flat between them is reached, at −20 µm. The
+// deepest keeps −∞; above a 17 µm floor the lone one is never reached. Lowering the flat tool by
+// 5 µm raises every b − a by 5 µm, and every bridge level with it (two routes to one number).
+TEST(OverlapRegions, BridgeLevelsAreTheSaddlesOfTheOverlapsMergeTree) {
+  const ThreeBumps scene = MakeThreeBumps();
+  const ContactWindow w = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.036, 90);
+  TexturePenetrationSolver solver(128);
+  const auto bridges = [&](double tool_z, double floor) {
+    std::array<OverlapRegion, 8> out{};
+    const int count = solver.OverlapRegions(scene.tool, testing::ToolPose(0.0, 0.0, tool_z),
+                                            scene.env, testing::EnvironmentPose(), w, 1e-3, out,
+                                            TriangleSubset::All(), TriangleSubset::All(), floor);
+    EXPECT_EQ(count, 3);
+    std::vector<double> levels;
+    for (int r = 0; r < 3; ++r) {
+      const OverlapRegion& g = out[static_cast<std::size_t>(r)];
+      // The peak cell is the region's deepest sample.
+      const int i = g.peak_cell % w.resolution, j = g.peak_cell / w.resolution;
+      EXPECT_TRUE(i >= g.i0 && i <= g.i1 && j >= g.j0 && j <= g.j1) << r;
+      levels.push_back(g.bridge_m);
+    }
+    EXPECT_EQ(out[0].bridge_m, -std::numeric_limits<double>::infinity());  // the deepest
+    std::sort(levels.begin(), levels.end());
+    return levels;
+  };
+  // Without a floor nothing is computed.
+  for (const double level : bridges(20e-6, 0.0)) {
+    EXPECT_EQ(level, -std::numeric_limits<double>::infinity());
+  }
+  const auto f = [](double y_mm) {
+    return 40.0 * (std::exp(-y_mm * y_mm / 2.0) + std::exp(-(y_mm - 5.0) * (y_mm - 5.0) / 2.0));
+  };
+  EXPECT_NEAR(f(2.0) - 20.0, -14.14, 0.01);
+  const std::vector<double> at20 = bridges(20e-6, 30e-6);
+  EXPECT_EQ(at20[0], -std::numeric_limits<double>::infinity());
+  EXPECT_NEAR(at20[1], -20e-6, 0.3e-6);  // the lone bump, over the flat
+  EXPECT_GT(at20[2], (f(2.2) - 20.0) * 1e-6);
+  EXPECT_LT(at20[2], (f(1.8) - 20.0) * 1e-6);
+  const std::vector<double> floor17 = bridges(20e-6, 17e-6);
+  EXPECT_EQ(floor17[1], -std::numeric_limits<double>::infinity());
+  EXPECT_NEAR(floor17[2], at20[2], 1e-9);
+  const std::vector<double> at15 = bridges(15e-6, 30e-6);
+  EXPECT_NEAR(at15[1] - at20[1], 5e-6, 0.05e-6);
+  EXPECT_NEAR(at15[2] - at20[2], 5e-6, 0.05e-6);
+}
+
 }  // namespace
 }  // namespace ht

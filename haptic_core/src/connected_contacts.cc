@@ -130,7 +130,7 @@ int ShareConnectedContacts(const HapticModel& tool, const RigidTransform& X_WT,
                            std::span<const ContactQuery> queries,
                            std::span<ContactLinearization> results,
                            const ContactSharingOptions& options, TexturePenetrationSolver& solver,
-                           std::span<std::uint8_t> scratch) noexcept {
+                           std::span<std::uint8_t> scratch, std::span<const int> family) noexcept {
   const int n = static_cast<int>(
       std::min({queries.size(), results.size(), static_cast<std::size_t>(kMaxContacts)}));
   const auto per_contact = static_cast<std::size_t>(kMaxSharingBlocks) * kMaxSharingBlocks;
@@ -142,9 +142,14 @@ int ShareConnectedContacts(const HapticModel& tool, const RigidTransform& X_WT,
     return std::isfinite(d) && d > 0.0;
   };
   // Two contacts may be one region: one object, normals within the clustering angle.
+  const bool families = family.size() >= queries.size();
   const auto may_link = [&](int i, int j) {
     const ContactQuery& a = queries[static_cast<std::size_t>(i)];
     const ContactQuery& b = queries[static_cast<std::size_t>(j)];
+    if (families && family[static_cast<std::size_t>(i)] >= 0 &&
+        family[static_cast<std::size_t>(i)] == family[static_cast<std::size_t>(j)]) {
+      return false;
+    }
     return a.environment == b.environment && a.X_WO.translation == b.X_WO.translation &&
            a.X_WO.rotation == b.X_WO.rotation &&
            glm::dot(a.window.normal_W, b.window.normal_W) >= cos_angle;

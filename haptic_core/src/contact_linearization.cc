@@ -196,6 +196,10 @@ TexturePenetrationSolver::TexturePenetrationSolver(int max_resolution, int max_t
   env_row_max_.Reserve(max_resolution);
   tool_bounds_.Reserve(static_cast<size_t>(max_triangles));
   region_parent_.reserve(cells);
+  bridge_order_.reserve(cells);
+  bridge_parent_.reserve(cells);
+  bridge_peak_.reserve(cells);
+  bridge_level_.reserve(cells);
 }
 
 void TexturePenetrationSolver::RenderEnvironment(const HapticModel& environment,
@@ -242,7 +246,8 @@ int TexturePenetrationSolver::OverlapRegions(const HapticModel& tool, const Rigi
                                              const RigidTransform& X_WO, const ContactWindow& w,
                                              double link_m, std::span<OverlapRegion> out,
                                              TriangleSubset environment_triangles,
-                                             TriangleSubset tool_triangles) noexcept {
+                                             TriangleSubset tool_triangles,
+                                             double bridge_floor_m) noexcept {
   const int n = w.resolution;
   const auto cells = static_cast<std::size_t>(n) * static_cast<std::size_t>(n);
   if (n > max_resolution_ || !(link_m >= 0.0)) return 0;
@@ -305,19 +310,89 @@ int TexturePenetrationSolver::OverlapRegions(const HapticModel& tool, const Rigi
     if (static_cast<std::size_t>(slot) >= keep) continue;
     OverlapRegion& g = out[static_cast<std::size_t>(slot)];
     if (g.cells == 0) {
-      g = {i, i, j, j, 0, depth};
+      g = {i, i, j, j, 0, depth, static_cast<int>(c)};
     }
     g.i0 = std::min(g.i0, i);
     g.i1 = std::max(g.i1, i);
     g.j0 = std::min(g.j0, j);
     g.j1 = std::max(g.j1, j);
     g.cells += 1;
-    g.depth_m = std::max(g.depth_m, depth);
+    if (depth > g.depth_m) {
+      g.depth_m = depth;
+      g.peak_cell = static_cast<int>(c);
+    }
   }
   const auto kept = std::min<std::size_t>(keep, static_cast<std::size_t>(count));
+  if (bridge_floor_m > 0.0 && count >= 2) {
+    BridgeLevels(n, r, reach, static_cast<float>(-bridge_floor_m));
+    for (std::size_t k = 0; k < kept; ++k) {
+      OverlapRegion& g = out[k];
+      const float level = bridge_level_[static_cast<std::size_t>(g.peak_cell)];
+      g.bridge_m = std::isfinite(level) ? static_cast<double>(level)
+                                        : -std::numeric_limits<double>::infinity();
+    }
+  }
   std::sort(out.begin(), out.begin() + static_cast<std::ptrdiff_t>(kept),
             [](const OverlapRegion& a, const OverlapRegion& b) { return a.depth_m > b.depth_m; });
   return count;
+}
+
+void TexturePenetrationSolver::BridgeLevels(int n, int r, double reach, float floor) noexcept {
+  const auto cells = static_cast<std::size_t>(n) * static_cast<std::size_t>(n);
+  const auto depth = [&](std::size_t c) { return env_heights_[c] - tool_heights_[c]; };
+  bridge_order_.clear();
+  for (std::size_t c = 0; c < cells; ++c) {
+    if (depth(c) > floor) bridge_order_.push_back(static_cast<int>(c));  // NaN and −∞ drop out
+  }
+  std::sort(bridge_order_.begin(), bridge_order_.end(), [&](int a, int b) {
+    const float da = depth(static_cast<std::size_t>(a)), db = depth(static_cast<std::size_t>(b));
+    return da > db || (da == db && a < b);
+  });
+  bridge_parent_.assign(cells, -1);
+  bridge_peak_.assign(cells, -1);
+  bridge_level_.assign(cells, -std::numeric_limits<float>::infinity());
+  const auto find = [&](int c) {
+    while (bridge_parent_[static_cast<std::size_t>(c)] != c) {
+      const int up = bridge_parent_[static_cast<std::size_t>(c)];
+      bridge_parent_[static_cast<std::size_t>(c)] = bridge_parent_[static_cast<std::size_t>(up)];
+      c = up;
+    }
+    return c;
+  };
+  // Kruskal over the superlevel sets: each cell, in decreasing b − a, joins the reached cells
+  // within the link. Where it joins two components, the one with the lower peak ends there (the
+  // elder rule), and if both peaks overlap and the level is ≤ 0 that is its bridge level: above
+  // 0 they are one region already.
+  for (const int c : bridge_order_) {
+    const auto uc = static_cast<std::size_t>(c);
+    bridge_parent_[uc] = c;
+    bridge_peak_[uc] = c;
+    const float level = depth(uc);
+    const int i = c % n, j = c / n;
+    for (int dj = -r; dj <= r; ++dj) {
+      if (j + dj < 0 || j + dj >= n) continue;
+      for (int di = -r; di <= r; ++di) {
+        if (i + di < 0 || i + di >= n || di * di + dj * dj > reach * reach) continue;
+        const int d = (j + dj) * n + (i + di);
+        if (bridge_parent_[static_cast<std::size_t>(d)] < 0) continue;
+        int a = find(c), b = find(d);
+        if (a == b) continue;
+        int pa = bridge_peak_[static_cast<std::size_t>(a)];
+        int pb = bridge_peak_[static_cast<std::size_t>(b)];
+        if (depth(static_cast<std::size_t>(pa)) < depth(static_cast<std::size_t>(pb)) ||
+            (depth(static_cast<std::size_t>(pa)) == depth(static_cast<std::size_t>(pb)) &&
+             pa > pb)) {
+          std::swap(a, b);
+          std::swap(pa, pb);
+        }
+        // a holds the elder (deeper) peak; b's component ends here.
+        if (level <= 0.0f && depth(static_cast<std::size_t>(pb)) > 0.0f) {
+          bridge_level_[static_cast<std::size_t>(pb)] = level;
+        }
+        bridge_parent_[static_cast<std::size_t>(b)] = a;
+      }
+    }
+  }
 }
 
 int TexturePenetrationSolver::OverlapOccupancy(const HapticModel& tool, const RigidTransform& X_WT,

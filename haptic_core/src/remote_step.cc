@@ -22,6 +22,12 @@
 
 namespace ht {
 
+namespace {
+// Stage 5a with split_keeps_parent_window: a region whose weight is below this gets no window
+// (its force would be under 0.1 % of its k·δ).
+constexpr double kSplitNegligibleWeight = 1e-3;
+}  // namespace
+
 void PipelineOptions::Validate() const {
   depth_refinement.Validate();
   if (grid_resolution < 2 || grid_resolution > 1024) {
@@ -50,10 +56,13 @@ void PipelineOptions::Validate() const {
                                 std::to_string(max_speculative_margin_m));
   }
   if (!(split_window_margin_m >= 0.0) || !std::isfinite(split_window_margin_m) ||
-      !(split_link_m >= 0.0) || !std::isfinite(split_link_m)) {
-    throw std::invalid_argument("split window margin and link must be finite and >= 0, got " +
-                                std::to_string(split_window_margin_m) + " and " +
-                                std::to_string(split_link_m));
+      !(split_link_m >= 0.0) || !std::isfinite(split_link_m) || !(split_birth_ramp_m >= 0.0) ||
+      !std::isfinite(split_birth_ramp_m) || !(split_bridge_fade_m >= 0.0) ||
+      !std::isfinite(split_bridge_fade_m)) {
+    throw std::invalid_argument(
+        "split window margin, link, birth ramp and bridge fade must be finite and >= 0, got " +
+        std::to_string(split_window_margin_m) + ", " + std::to_string(split_link_m) + ", " +
+        std::to_string(split_birth_ramp_m) + " and " + std::to_string(split_bridge_fade_m));
   }
   if (!(share_link_m > 0.0) || !std::isfinite(share_link_m) || !(share_fade_m >= 0.0) ||
       !std::isfinite(share_fade_m)) {
@@ -185,6 +194,11 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   // Stage 5a: a window whose overlap is in separated regions becomes one window per region.
   if (region_solver_ && options_.split_windows_at_separated_overlap) {
     last_num_queries_ = SplitSeparatedOverlap(X_WT, last_num_queries_);
+  }
+  // Stage 5a's birth ramp: a region other than its window's deepest fades in with its overlap.
+  for (int k = 0; k < split_count_; ++k) {
+    last_results_[static_cast<std::size_t>(split_first_ + k)].stiffness_n_per_m *=
+        split_weights_[static_cast<std::size_t>(k)];
   }
   // Kink planes are added below (stage 5b's translation arms, then the rotation arms).
   for (int i = 0; i < last_num_queries_; ++i) last_results_[i].num_kink_planes = 0;
@@ -468,7 +482,11 @@ int HapticTexturePipeline::MergeRegionsInOneWindow(int count, double cell_m) noe
         a.j0 = std::min(a.j0, b.j0);
         a.j1 = std::max(a.j1, b.j1);
         a.cells += b.cells;
-        a.depth_m = std::max(a.depth_m, b.depth_m);
+        if (b.depth_m > a.depth_m) {  // the merged region goes on as the deeper one
+          a.depth_m = b.depth_m;
+          a.peak_cell = b.peak_cell;
+          a.bridge_m = b.bridge_m;
+        }
         regions_[static_cast<std::size_t>(q)] = regions_[static_cast<std::size_t>(m - 1)];
         --m;
         merged = true;
@@ -481,6 +499,8 @@ int HapticTexturePipeline::MergeRegionsInOneWindow(int count, double cell_m) noe
 int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int n) {
   // The GPU backend takes one window size per batch (LinearizeContacts); the split windows are
   // sized to their regions, so this stage runs with the CPU backend only.
+  split_count_ = 0;
+  split_family_.fill(-1);
   if (backend_->name() == "gpu") return n;
   const HapticModel& tool = *scene_.tool;
   int num_new = 0;
@@ -493,13 +513,14 @@ int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int
       regions = region_solver_->OverlapRegions(
           tool, X_WT, *q.environment, q.X_WO, q.window,
           options_.split_link_m > 0.0 ? options_.split_link_m : options_.clustering_distance_m,
-          regions_, q.environment_triangles, q.tool_triangles);
+          regions_, q.environment_triangles, q.tool_triangles, options_.split_bridge_fade_m);
     }
-    regions = MergeRegionsInOneWindow(regions, q.window.cell_size_m());
+    const bool parent_window = options_.split_keeps_parent_window;
+    if (!parent_window) regions = MergeRegionsInOneWindow(regions, q.window.cell_size_m());
     const int kept_after = kept + (n - i - 1);  // the windows still to keep, at least
     const bool split = regions >= 2 && regions <= static_cast<int>(regions_.size()) &&
                        kept_after + num_new + regions <= options_.max_contacts;
-    if (!split) {
+    if (!split || parent_window) {
       // Kept: moved down over the split ones, with its results and samples.
       if (kept != i) {
         last_queries_[static_cast<std::size_t>(kept)] = q;
@@ -509,12 +530,27 @@ int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int
                     last_samples_.begin() + static_cast<std::ptrdiff_t>(kept) * kGradientSamples);
       }
       ++kept;
-      continue;
+      if (!split) continue;
     }
-    const ContactWindow& w = q.window;
+    // With split_keeps_parent_window the deepest region is the parent's window as linearized
+    // (kept above), so a window whose other regions fade out is the unsplit window.
+    const ContactWindow& w =
+        last_queries_[static_cast<std::size_t>(parent_window ? kept - 1 : i)].window;
     const double cell = w.cell_size_m();
-    for (int r = 0; r < regions; ++r) {
+    // The regions are sorted deepest first (OverlapRegions): regions_[0] holds the window's d_max.
+    const double ramp = std::min(options_.split_birth_ramp_m, regions_[0].depth_m);
+    for (int r = parent_window ? 1 : 0; r < regions; ++r) {
       const OverlapRegion& g = regions_[static_cast<std::size_t>(r)];
+      const auto smoothstep = [](double x) {
+        x = std::clamp(x, 0.0, 1.0);
+        return x * x * (3.0 - 2.0 * x);
+      };
+      double weight = 1.0;
+      if (r > 0 && ramp > 0.0) weight *= smoothstep(g.depth_m / ramp);
+      if (r > 0 && options_.split_bridge_fade_m > 0.0) {
+        weight *= smoothstep(-g.bridge_m / options_.split_bridge_fade_m);
+      }
+      if (parent_window && weight < kSplitNegligibleWeight) continue;  // pushes nothing
       // The region's box on the window plane (m from the window's centre), its margin, and the
       // parent's cell size.
       const double s_mid = (0.5 * (g.i0 + g.i1 + 1)) * cell - 0.5 * w.extent_m;
@@ -528,12 +564,25 @@ int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int
         ++step_faults_.bad_windows;  // the region stays out of the model, counted
         continue;
       }
+      split_weights_[static_cast<std::size_t>(num_new)] = weight;
+      split_parent_[static_cast<std::size_t>(num_new)] = parent_window ? kept - 1 : -1;
       ContactQuery& nq = split_queries_[static_cast<std::size_t>(num_new++)];
-      nq = q;
+      nq = last_queries_[static_cast<std::size_t>(parent_window ? kept - 1 : i)];
       nq.window = *sub;
+      if (options_.split_keeps_parent_rotation_step) {
+        nq.window.gradient_extent_m = w.gradient_extent_m > 0.0 ? w.gradient_extent_m : w.extent_m;
+      }
     }
   }
   if (num_new == 0) return n;
+  split_first_ = kept;
+  split_count_ = num_new;
+  for (int k = 0; k < num_new; ++k) {
+    const int parent = split_parent_[static_cast<std::size_t>(k)];
+    if (parent < 0) continue;
+    split_family_[static_cast<std::size_t>(parent)] = parent;
+    split_family_[static_cast<std::size_t>(kept + k)] = parent;
+  }
   std::copy_n(split_queries_.begin(), num_new, last_queries_.begin() + kept);
   const std::size_t per = kGradientSamples;
   const bool ok = backend_->LinearizeBatch(
@@ -612,7 +661,10 @@ void HapticTexturePipeline::ShareConnectedContacts(const RigidTransform& X_WT, i
   step_faults_.shared_contacts += ht::ShareConnectedContacts(
       *scene_.tool, X_WT, {last_queries_.data(), static_cast<std::size_t>(n)},
       {last_results_.data(), static_cast<std::size_t>(n)}, sharing, *region_solver_,
-      sharing_occupancy_);
+      sharing_occupancy_,
+      options_.split_windows_at_separated_overlap && options_.split_keeps_parent_window
+          ? std::span<const int>(split_family_.data(), static_cast<std::size_t>(n))
+          : std::span<const int>());
 }
 
 }  // namespace ht

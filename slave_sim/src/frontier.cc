@@ -71,6 +71,10 @@ PipelineOptions PipelineOptionsFor(const FrontierSetting& st) {
   if (st.share_fade_m >= 0.0) options.share_fade_m = st.share_fade_m;
   if (st.share_temperature_m > 0.0) options.share_temperature_m = st.share_temperature_m;
   options.split_link_m = st.split_link_m;
+  options.split_birth_ramp_m = st.split_birth_ramp_m;
+  options.split_keeps_parent_rotation_step = st.split_keeps_parent_rotation_step;
+  options.split_bridge_fade_m = st.split_bridge_fade_m;
+  options.split_keeps_parent_window = st.split_keeps_parent_window;
   options.depth_refinement.subgrid_rotations = st.subgrid_rotations;
   options.depth_refinement.subgrid_translations = st.subgrid_translations;
   options.depth_refinement.conservative_screen = st.conservative_screen;
@@ -376,6 +380,36 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
         linked.name = linked.name + "_link" + std::to_string(mm) + "mm";
         linked.split_link_m = mm * 1e-3;
         s.push_back(linked);
+      }
+    }
+    // Stage 5a made continuous (issue 32's thirtieth stop), one piece at a time at a 10 mm link:
+    // the birth ramp, then the parent's rotation step, then the bridge fade, then the parent's
+    // window ("split_continuous_<R>um": all four, ramp and fade R).
+    FrontierSetting ramped = split;
+    ramped.name = "split_link10mm_ramp50um";
+    ramped.split_link_m = 10e-3;
+    ramped.split_birth_ramp_m = 50e-6;
+    s.push_back(ramped);
+    FrontierSetting parent_step = ramped;
+    parent_step.name = "split_link10mm_ramp50um_parent_step";
+    parent_step.split_keeps_parent_rotation_step = true;
+    s.push_back(parent_step);
+    FrontierSetting bridged = parent_step;
+    bridged.name = "split_link10mm_ramp50um_parent_step_bridge50um";
+    bridged.split_bridge_fade_m = 50e-6;
+    s.push_back(bridged);
+    for (const int um : {20, 50, 100}) {
+      for (const bool texel : {false, true}) {
+        if (texel && um != 50) continue;
+        FrontierSetting continuous = texel ? split_texel : split;
+        continuous.name = std::string(texel ? "split_continuous_texel_" : "split_continuous_") +
+                          std::to_string(um) + "um";
+        continuous.split_link_m = 10e-3;
+        continuous.split_birth_ramp_m = um * 1e-6;
+        continuous.split_keeps_parent_rotation_step = true;
+        continuous.split_bridge_fade_m = um * 1e-6;
+        continuous.split_keeps_parent_window = true;
+        s.push_back(continuous);
       }
     }
     // Stage 5c (on in the default): its link, fade and temperature varied, and off.

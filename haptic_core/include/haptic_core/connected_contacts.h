@@ -89,12 +89,16 @@ inline constexpr int kMaxSharingBlocks = 64;
 /// subsets, in blocks of about a quarter of the link, rendered only for contacts that have a
 /// candidate partner within reach of their windows. `scratch` holds kMaxSharingBlocks² bytes per
 /// contact. Returns how many contacts' stiffness changed (0 when fewer than two are positive,
-/// link_m ≤ 0, or scratch is short: nothing changes). noexcept; allocation-free within the
+/// link_m ≤ 0, or scratch is short: nothing changes). `family`, where it is as long as
+/// `queries`, names each contact's family (≥ 0; −1: none): contacts of one family never link
+/// (stage 5a's split regions and the parent window they lie in, which its bridge fade weighs
+/// instead, PipelineOptions::split_keeps_parent_window). noexcept; allocation-free within the
 /// solver's reserve.
 int ShareConnectedContacts(const HapticModel& tool, const RigidTransform& X_WT,
                            std::span<const ContactQuery> queries,
                            std::span<ContactLinearization> results,
                            const ContactSharingOptions& options, TexturePenetrationSolver& solver,
-                           std::span<std::uint8_t> scratch) noexcept;
+                           std::span<std::uint8_t> scratch,
+                           std::span<const int> family = {}) noexcept;
 
 }  // namespace ht

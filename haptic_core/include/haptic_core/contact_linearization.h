@@ -4,6 +4,7 @@
 
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <span>
 #include <string>
 #include <vector>
@@ -141,13 +142,16 @@ struct LinearizationFaults {
 inline constexpr int kGradientSamples = 11;
 
 /// Step sizes of the central differences for `window`: h_x = W/N (m), h_θ = (W/N)/(W/2) (rad),
-/// one grid-cell footprint at the patch border [R].
+/// one grid-cell footprint at the patch border [R]; W in h_θ is window.gradient_extent_m where
+/// that is set (stage 5a's split windows: their parent's).
 struct GradientSteps {
   double h_x;      ///< Translation step along u and v (m).
   double h_theta;  ///< Rotation step about u, v and n (rad), about the tool's centre of mass.
   static GradientSteps For(const ContactWindow& window) noexcept {
     const double h_x = window.cell_size_m();
-    return {h_x, h_x / (0.5 * window.extent_m)};
+    const double lever_extent =
+        window.gradient_extent_m > 0.0 ? window.gradient_extent_m : window.extent_m;
+    return {h_x, h_x / (0.5 * lever_extent)};
   }
 };
 
@@ -245,10 +249,18 @@ enum class TextureStagePath {
 /// One region of a window's overlap (TexturePenetrationSolver::OverlapRegions): the cells where
 /// b − a > 0 at the base pose, linked when closer than a distance; its bounding box in cells
 /// (i along u, j along v, inclusive), its cell count and its largest b − a (m).
+///
+/// With a bridge floor (OverlapRegions' bridge_floor_m > 0) each region also carries its bridge
+/// level: the highest level t ≤ 0 at which the cells with b − a > t, linked the same way, join it
+/// to a deeper region (m; the saddle of the overlap's merge tree, by the elder rule), or −∞ where
+/// they do not above −bridge_floor_m (and for the deepest). It is continuous in the pose, and it
+/// reaches 0 as two regions touch and become one, which the regions' count is not.
 struct OverlapRegion {
   int i0 = 0, i1 = -1, j0 = 0, j1 = -1;
   int cells = 0;
   double depth_m = 0.0;
+  int peak_cell = -1;  ///< The cell (j·N + i) of depth_m.
+  double bridge_m = -std::numeric_limits<double>::infinity();
 };
 
 class TexturePenetrationSolver {
@@ -318,13 +330,16 @@ class TexturePenetrationSolver {
   /// two of them in one region when their centres are closer than `link_m` (m; single linkage,
   /// the granularity of contact clustering, contact_clustering.h). Writes the first out.size()
   /// regions in cell order, sorted deepest first, and returns how many there are (0: no
-  /// overlap; at most 64 are counted). Reserved at
+  /// overlap; at most 64 are counted). With `bridge_floor_m` > 0 and two regions or more, each
+  /// region's bridge level too (OverlapRegion::bridge_m; a second union-find over the cells with
+  /// b − a > −bridge_floor_m in decreasing order). Reserved at
   /// construction for windows up to the solver's max_resolution; never allocates there.
   int OverlapRegions(const HapticModel& tool, const RigidTransform& X_WT,
                      const HapticModel& environment, const RigidTransform& X_WO,
                      const ContactWindow& window, double link_m, std::span<OverlapRegion> out,
                      TriangleSubset environment_triangles = TriangleSubset::All(),
-                     TriangleSubset tool_triangles = TriangleSubset::All()) noexcept;
+                     TriangleSubset tool_triangles = TriangleSubset::All(),
+                     double bridge_floor_m = 0.0) noexcept;
 
   /// The overlap of `tool` at X_WT and `environment` at X_WO on `window` (rendered afresh, the
   /// triangle subsets as Linearize takes them) as an occupancy of blocks of `block_cells` ×
@@ -391,6 +406,16 @@ class TexturePenetrationSolver {
   std::vector<int> tool_triangles_;
   /// OverlapRegions' union-find over cells (parent per cell, −1 where no overlap).
   std::vector<int> region_parent_;
+  /// OverlapRegions' bridge pass over the current render (n × n cells, the link's reach in
+  /// cells r and reach, the level floor), into bridge_level_ per peak cell.
+  void BridgeLevels(int n, int r, double reach, float floor) noexcept;
+  /// OverlapRegions' bridge pass: the cells above the floor in decreasing b − a, their
+  /// union-find (−1: not reached yet), each root's peak cell, and the level each peak's
+  /// component joined a deeper one.
+  std::vector<int> bridge_order_;
+  std::vector<int> bridge_parent_;
+  std::vector<int> bridge_peak_;
+  std::vector<float> bridge_level_;
   LinearizationFaults faults_;
 };
 

@@ -28,6 +28,11 @@ struct ContactWindow {
   glm::dvec3 axis_v_W{0.0, 1.0, 0.0};  ///< Unit, u × v = n.
   double extent_m = 0.02;              ///< W: side length (m).
   int resolution = 50;                 ///< N: cells per side (seed: 50).
+  /// The extent (m) whose half is the rotation steps' lever (GradientSteps::For: h_θ = h_x /
+  /// (this / 2)); 0: extent_m. Stage 5a's split windows keep their parent's, so that a region's
+  /// rotation secant does not grow as its box shrinks (a 10 mm box at the seed's 0.8 mm cells
+  /// would step 0.16 rad) nor move when its box changes by a cell.
+  double gradient_extent_m = 0.0;
 
   /// Builds a window with u the projection of world x on the plane ⟂ n (world y when n is within
   /// 25° of x), v = n × u. Throws std::invalid_argument for a non-finite or zero normal, a

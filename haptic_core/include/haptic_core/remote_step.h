@@ -161,6 +161,35 @@ struct PipelineOptions {
   double split_window_margin_m = 1e-3;
   /// The regions' linking distance (m); 0: clustering_distance_m.
   double split_link_m = 0.0;
+  /// Stage 5a's birth ramp (m; 0: none, the seventh stop's split): a region other than the
+  /// window's deepest pushes with k·w, w = smoothstep(d_r / min(ramp, d_max)), where d_r is the
+  /// region's deepest cell sample of b − a on the parent's grid (OverlapRegion::depth_m) and d_max
+  /// the window's. A region appears when a cell centre first overlaps, with its refined δ
+  /// already tens of micrometres (a ridge between cell centres), and goes as suddenly: on fig76's
+  /// rocking block the count flips between 1 and 3 from tick to tick (docs/frontier/issue32/
+  /// thirtieth_stop). d_r crosses zero continuously, so the region's force fades in and out with
+  /// it; the deepest region keeps w = 1, so a split with one region newborn is the whole window's
+  /// force. The weight is taken at q0 and held over the model (its gradient is not in ∇δ).
+  double split_birth_ramp_m = 0.0;
+  /// Stage 5a: each split window takes its rotation steps from its parent's extent
+  /// (ContactWindow::gradient_extent_m) instead of its own, so h_θ is the parent's whatever the
+  /// region's box. Off: h_θ = h_x / (W_region / 2), the seventh stop's split.
+  bool split_keeps_parent_rotation_step = false;
+  /// Stage 5a's bridge fade (m; 0: none): a region other than the window's deepest pushes with
+  /// k·w·smoothstep(−t / fade), t its bridge level (OverlapRegion::bridge_m: the level ≤ 0 at
+  /// which the window's b − a, linked as the regions are, joins it to a deeper region). Two
+  /// regions that are about to touch (t → 0⁻) push as the one region they become, so the force
+  /// does not step by k·δ when the overlap between them crosses zero (an edge resting on stripes
+  /// along its length: one region or two from tick to tick, docs/frontier/issue32/
+  /// thirtieth_stop); regions whose gap stays below −fade push with their own δ.
+  double split_bridge_fade_m = 0.0;
+  /// Stage 5a: the window's deepest region stays the parent's whole window as stage 5 linearized
+  /// it, and only the other regions get windows of their own (weighted as above; one whose
+  /// weight is below 10⁻³ gets none), without merging regions whose centre lies in another's
+  /// window. So the split of a window whose other regions fade out is the unsplit window, and the
+  /// deepest region's δ and gradient do not change with its box. Off: every region gets its box's
+  /// window (the seventh stop's split).
+  bool split_keeps_parent_window = false;
   /// Stage 5c (issue 32, tenth stop): contacts on one object whose normals agree within
   /// clustering_angle_deg and whose textured overlaps at the tool's pose come within share_link_m
   /// of each other are one region and share one penalty (ShareConnectedContacts,
@@ -429,6 +458,17 @@ class HapticTexturePipeline {
   std::vector<std::uint8_t> sharing_occupancy_;
   std::array<OverlapRegion, 8> regions_{};
   std::array<ContactQuery, kMaxContacts> split_queries_{};
+  /// Stage 5a: each split window's birth-ramp weight (split_birth_ramp_m), in split_queries_'
+  /// order, applied to its stiffness after stage 5b.
+  std::array<double, kMaxContacts> split_weights_{};
+  /// Stage 5a: the first split window in last_queries_ and how many follow (0: none this step).
+  int split_first_ = 0;
+  int split_count_ = 0;
+  /// Stage 5a with split_keeps_parent_window: each split window's parent (its index in
+  /// last_queries_), and each contact's family for stage 5c (−1: none; a parent and its split
+  /// windows share one, and never share a penalty, ShareConnectedContacts).
+  std::array<int, kMaxContacts> split_parent_{};
+  std::array<int, kMaxContacts> split_family_{};
   int last_num_queries_ = 0;
   StepFaults step_faults_;
   std::int64_t backend_failures_ = 0;

@@ -102,6 +102,14 @@ struct FrontierSetting {
   bool split_windows_at_separated_overlap = false;
   /// PipelineOptions::split_link_m (0: the default).
   double split_link_m = 0.0;
+  /// PipelineOptions::split_birth_ramp_m (0: none; "split_*_ramp<U>um" set it).
+  double split_birth_ramp_m = 0.0;
+  /// PipelineOptions::split_keeps_parent_rotation_step ("split_*_parent_step*" set it).
+  bool split_keeps_parent_rotation_step = false;
+  /// PipelineOptions::split_bridge_fade_m (0: none; "split_*_bridge<U>um" set it).
+  double split_bridge_fade_m = 0.0;
+  /// PipelineOptions::split_keeps_parent_window ("split_*_parent_window" set it).
+  bool split_keeps_parent_window = false;
   /// PipelineOptions::share_connected_contacts ("no_shared_contacts" turns it off), and
   /// share_link_m, share_fade_m (< 0: the defaults) and share_temperature_m (0: the default).
   bool share_connected_contacts = true;
