@@ -195,7 +195,8 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   if (region_solver_ && options_.split_windows_at_separated_overlap) {
     last_num_queries_ = SplitSeparatedOverlap(X_WT, last_num_queries_);
   }
-  // Stage 5a's birth ramp: a region other than its window's deepest fades in with its overlap.
+  // Stage 5a's weights (split_birth_ramp_m, split_bridge_fade_m): a region other than its
+  // window's deepest fades in with its overlap and out as it joins a deeper one.
   for (int k = 0; k < split_count_; ++k) {
     last_results_[static_cast<std::size_t>(split_first_ + k)].stiffness_n_per_m *=
         split_weights_[static_cast<std::size_t>(k)];
