@@ -64,6 +64,19 @@ HapticScene BoxOnSlab(std::shared_ptr<const HapticModel> tool) {
   return s;
 }
 
+// BoxOnSlab with a tool box of half extents `half_extents_m` (m) whose bottom carries two 40 µm
+// Gaussian bumps of width `sigma_m` (m) at x = ±10 mm in its frame.
+HapticScene TwoBumpsOnSlab(const glm::dvec3& half_extents_m, double sigma_m, const char* name) {
+  const auto bumps = [sigma_m](double x, double y) {
+    const auto g = [&](double cx) {
+      return 40e-6 * std::exp(-((x - cx) * (x - cx) + y * y) / (2.0 * sigma_m * sigma_m));
+    };
+    return g(-10e-3) + g(10e-3);
+  };
+  return BoxOnSlab(
+      std::make_shared<const HapticModel>(MakeTexturedBox(half_extents_m, bumps, 512, 0.1, name)));
+}
+
 RigidTransform At(glm::dvec3 p, glm::dquat R = glm::dquat(1, 0, 0, 0)) {
   RigidTransform X;
   X.translation = p;
@@ -99,14 +112,7 @@ std::string Fmt(const char* fmt, double a, double b = 0, double c = 0, double d 
 // common δ; split, each bump is a contact of its own with that δ, at its own place: twice the
 // force, the same depth, and no torque about the box's centre (the bumps are symmetric).
 TEST(HardCases, SeparatedContactsOnOneFaceSplitIntoOneWindowEach) {
-  const auto bumps = [](double x, double y) {
-    const auto g = [&](double cx) {
-      return 40e-6 * std::exp(-((x - cx) * (x - cx) + y * y) / (2.0 * 1.5e-3 * 1.5e-3));
-    };
-    return g(-10e-3) + g(10e-3);
-  };
-  const HapticScene scene = BoxOnSlab(std::make_shared<const HapticModel>(
-      MakeTexturedBox({0.02, 0.02, 0.01}, bumps, 512, 0.1, "two_bumps")));
+  const HapticScene scene = TwoBumpsOnSlab({0.02, 0.02, 0.01}, 1.5e-3, "two_bumps");
   const RigidTransform X_WT = At({0.0, 0.0, 0.01 + 20e-6});
   const auto step = [&](bool split) {
     PipelineOptions options;
@@ -153,14 +159,7 @@ TEST(HardCases, SeparatedContactsOnOneFaceSplitIntoOneWindowEach) {
 // (two contacts' k·Δz plus the weight's own slope); and where the other bump's weight is
 // negligible the model is the unsplit window's, wrench for wrench.
 TEST(HardCases, AContinuousSplitJoinsTwoSupportsWithoutAStep) {
-  const auto bumps = [](double x, double y) {
-    const auto g = [&](double cx) {
-      return 40e-6 * std::exp(-((x - cx) * (x - cx) + y * y) / (2.0 * 3e-3 * 3e-3));
-    };
-    return g(-10e-3) + g(10e-3);
-  };
-  const HapticScene scene = BoxOnSlab(std::make_shared<const HapticModel>(
-      MakeTexturedBox({0.03, 0.02, 0.01}, bumps, 512, 0.1, "two_wide_bumps")));
+  const HapticScene scene = TwoBumpsOnSlab({0.03, 0.02, 0.01}, 3e-3, "two_wide_bumps");
   PipelineOptions whole_options;
   PipelineOptions continuous = whole_options;
   continuous.split_windows_at_separated_overlap = true;
@@ -189,7 +188,7 @@ TEST(HardCases, AContinuousSplitJoinsTwoSupportsWithoutAStep) {
                       b.F_T_W_at_q0.torque == a.F_T_W_at_q0.torque;
     }
   }
-  EXPECT_NEAR(far_ratio, 2.0, 0.15);        // two supports, each its k·δ
+  EXPECT_NEAR(far_ratio, 2.0, 0.15);         // two supports, each its k·δ
   EXPECT_LT(largest_step, 4.0 * kK * 1e-6);  // no step where the supports join
   EXPECT_GT(compared, 3);                    // the joined heights: one region, one window
   EXPECT_EQ(equal_models, compared);

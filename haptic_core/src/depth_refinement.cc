@@ -807,8 +807,7 @@ PenetrationGradient DepthRefiner::TexelScaleGradient(const RigidTransform& X_WT,
   GatherTool(tool_all_, deepest.s - cell, deepest.s + cell, deepest.t - cell, deepest.t + cell);
   const double texel = TexelOfGathered(tool_local_);
   const double h_x = options_.gradient_step_texels * texel;
-  const double h_theta =
-      h_x / (0.5 * (w.gradient_extent_m > 0.0 ? w.gradient_extent_m : w.extent_m));
+  const double h_theta = h_x / (0.5 * w.gradient_lever_extent_m());
   const double reach = h_x + h_theta * glm::length(point_W - X_WT.translation);
   const double floor_m = options_.search_floor_texels * texel;
   // The base seeds within reach of the deepest (a small step cannot bring a far, lower peak

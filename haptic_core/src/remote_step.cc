@@ -26,6 +26,12 @@ namespace {
 // Stage 5a with split_keeps_parent_window: a region whose weight is below this gets no window
 // (its force would be under 0.1 % of its k·δ).
 constexpr double kSplitNegligibleWeight = 1e-3;
+
+// 3x² − 2x³ of x clamped to [0, 1]: 0 below, 1 above, with zero slope at both ends.
+double Smoothstep(double x) noexcept {
+  x = std::clamp(x, 0.0, 1.0);
+  return x * x * (3.0 - 2.0 * x);
+}
 }  // namespace
 
 void PipelineOptions::Validate() const {
@@ -535,21 +541,16 @@ int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int
     }
     // With split_keeps_parent_window the deepest region is the parent's window as linearized
     // (kept above), so a window whose other regions fade out is the unsplit window.
-    const ContactWindow& w =
-        last_queries_[static_cast<std::size_t>(parent_window ? kept - 1 : i)].window;
+    const ContactWindow& w = q.window;
     const double cell = w.cell_size_m();
     // The regions are sorted deepest first (OverlapRegions): regions_[0] holds the window's d_max.
     const double ramp = std::min(options_.split_birth_ramp_m, regions_[0].depth_m);
     for (int r = parent_window ? 1 : 0; r < regions; ++r) {
       const OverlapRegion& g = regions_[static_cast<std::size_t>(r)];
-      const auto smoothstep = [](double x) {
-        x = std::clamp(x, 0.0, 1.0);
-        return x * x * (3.0 - 2.0 * x);
-      };
       double weight = 1.0;
-      if (r > 0 && ramp > 0.0) weight *= smoothstep(g.depth_m / ramp);
+      if (r > 0 && ramp > 0.0) weight *= Smoothstep(g.depth_m / ramp);
       if (r > 0 && options_.split_bridge_fade_m > 0.0) {
-        weight *= smoothstep(-g.bridge_m / options_.split_bridge_fade_m);
+        weight *= Smoothstep(-g.bridge_m / options_.split_bridge_fade_m);
       }
       if (parent_window && weight < kSplitNegligibleWeight) continue;  // pushes nothing
       // The region's box on the window plane (m from the window's centre), its margin, and the
@@ -568,10 +569,10 @@ int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int
       split_weights_[static_cast<std::size_t>(num_new)] = weight;
       split_parent_[static_cast<std::size_t>(num_new)] = parent_window ? kept - 1 : -1;
       ContactQuery& nq = split_queries_[static_cast<std::size_t>(num_new++)];
-      nq = last_queries_[static_cast<std::size_t>(parent_window ? kept - 1 : i)];
+      nq = q;
       nq.window = *sub;
       if (options_.split_keeps_parent_rotation_step) {
-        nq.window.gradient_extent_m = w.gradient_extent_m > 0.0 ? w.gradient_extent_m : w.extent_m;
+        nq.window.gradient_extent_m = w.gradient_lever_extent_m();
       }
     }
   }

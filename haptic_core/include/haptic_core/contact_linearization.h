@@ -149,9 +149,7 @@ struct GradientSteps {
   double h_theta;  ///< Rotation step about u, v and n (rad), about the tool's centre of mass.
   static GradientSteps For(const ContactWindow& window) noexcept {
     const double h_x = window.cell_size_m();
-    const double lever_extent =
-        window.gradient_extent_m > 0.0 ? window.gradient_extent_m : window.extent_m;
-    return {h_x, h_x / (0.5 * lever_extent)};
+    return {h_x, h_x / (0.5 * window.gradient_lever_extent_m())};
   }
 };
 

@@ -34,6 +34,12 @@ struct ContactWindow {
   /// would step 0.16 rad) nor move when its box changes by a cell.
   double gradient_extent_m = 0.0;
 
+  /// The extent (m) whose half is the rotation steps' lever: gradient_extent_m where set (> 0),
+  /// else extent_m.
+  double gradient_lever_extent_m() const noexcept {
+    return gradient_extent_m > 0.0 ? gradient_extent_m : extent_m;
+  }
+
   /// Builds a window with u the projection of world x on the plane ⟂ n (world y when n is within
   /// 25° of x), v = n × u. Throws std::invalid_argument for a non-finite or zero normal, a
   /// non-positive extent, or a resolution outside [2, 1024].
