@@ -182,7 +182,7 @@ void WarpedRotationSamples(std::span<const float> env, std::span<const float> to
 
 TexturePenetrationSolver::TexturePenetrationSolver(int max_resolution, int max_triangles,
                                                    TextureStagePath path)
-    : path_(path) {
+    : path_(path), links_(max_resolution) {
   const size_t cells = static_cast<size_t>(max_resolution) * max_resolution;
   env_heights_.reserve(cells);
   tool_heights_.reserve(cells);
@@ -196,9 +196,7 @@ TexturePenetrationSolver::TexturePenetrationSolver(int max_resolution, int max_t
   env_row_max_.Reserve(max_resolution);
   tool_bounds_.Reserve(static_cast<size_t>(max_triangles));
   region_parent_.reserve(cells);
-  bridge_order_.reserve(cells);
-  bridge_parent_.reserve(cells);
-  bridge_peak_.reserve(cells);
+  overlap_depth_.reserve(cells);
   bridge_level_.reserve(cells);
 }
 
@@ -252,38 +250,13 @@ int TexturePenetrationSolver::OverlapRegions(const HapticModel& tool, const Rigi
   const auto cells = static_cast<std::size_t>(n) * static_cast<std::size_t>(n);
   if (n > max_resolution_ || !(link_m >= 0.0)) return 0;
   Depth(tool, X_WT, environment, X_WO, w, environment_triangles, tool_triangles);
-  // Union-find over the overlapping cells; each links to the overlapping cells after it within
-  // link_m (a half disc of offsets), so every pair is tested once.
-  region_parent_.assign(cells, -1);
-  for (std::size_t c = 0; c < cells; ++c) {
-    if (env_heights_[c] - tool_heights_[c] > 0.0f) region_parent_[c] = static_cast<int>(c);
-  }
-  const auto find = [&](int c) {
-    while (region_parent_[static_cast<std::size_t>(c)] != c) {
-      const int up = region_parent_[static_cast<std::size_t>(c)];
-      region_parent_[static_cast<std::size_t>(c)] =
-          region_parent_[static_cast<std::size_t>(up)];  // path halving
-      c = up;
-    }
-    return c;
-  };
+  // Single linkage over the overlapping cells (overlap_links.h): region_parent_[c] is the first
+  // cell of c's region, −1 where b − a ≤ 0.
+  overlap_depth_.resize(cells);
+  for (std::size_t c = 0; c < cells; ++c) overlap_depth_[c] = env_heights_[c] - tool_heights_[c];
+  region_parent_.resize(cells);
   const double reach = link_m / w.cell_size_m();
-  const int r = static_cast<int>(std::floor(reach));
-  for (int j = 0; j < n; ++j) {
-    for (int i = 0; i < n; ++i) {
-      const int c = j * n + i;
-      if (region_parent_[static_cast<std::size_t>(c)] < 0) continue;
-      for (int dj = 0; dj <= r && j + dj < n; ++dj) {
-        for (int di = (dj == 0 ? 1 : -r); di <= r; ++di) {
-          if (i + di < 0 || i + di >= n || di * di + dj * dj > reach * reach) continue;
-          const int d = (j + dj) * n + (i + di);
-          if (region_parent_[static_cast<std::size_t>(d)] < 0) continue;
-          const int a = find(c), b = find(d);
-          if (a != b) region_parent_[static_cast<std::size_t>(std::max(a, b))] = std::min(a, b);
-        }
-      }
-    }
-  }
+  if (links_.Components(overlap_depth_, n, reach, region_parent_) < 0) return 0;
   // Regions in order of their roots (the first cell of each), then the kept ones sorted deepest
   // first.
   int count = 0;
@@ -293,7 +266,7 @@ int TexturePenetrationSolver::OverlapRegions(const HapticModel& tool, const Rigi
   std::array<int, 64> roots{};
   for (std::size_t c = 0; c < cells; ++c) {
     if (region_parent_[c] < 0) continue;
-    const int root = find(static_cast<int>(c));
+    const int root = region_parent_[c];
     int slot = -1;
     for (int k = 0; k < count; ++k) {
       if (roots[static_cast<std::size_t>(k)] == root) slot = k;
@@ -324,7 +297,9 @@ int TexturePenetrationSolver::OverlapRegions(const HapticModel& tool, const Rigi
   }
   const auto kept = std::min<std::size_t>(keep, static_cast<std::size_t>(count));
   if (bridge_floor_m > 0.0 && count >= 2) {
-    BridgeLevels(n, r, reach, static_cast<float>(-bridge_floor_m));
+    bridge_level_.resize(cells);
+    links_.BridgeLevels(overlap_depth_, n, reach, static_cast<float>(-bridge_floor_m),
+                        bridge_level_);
     for (std::size_t k = 0; k < kept; ++k) {
       OverlapRegion& g = out[k];
       const float level = bridge_level_[static_cast<std::size_t>(g.peak_cell)];
@@ -335,64 +310,6 @@ int TexturePenetrationSolver::OverlapRegions(const HapticModel& tool, const Rigi
   std::sort(out.begin(), out.begin() + static_cast<std::ptrdiff_t>(kept),
             [](const OverlapRegion& a, const OverlapRegion& b) { return a.depth_m > b.depth_m; });
   return count;
-}
-
-void TexturePenetrationSolver::BridgeLevels(int n, int r, double reach, float floor) noexcept {
-  const auto cells = static_cast<std::size_t>(n) * static_cast<std::size_t>(n);
-  const auto depth = [&](std::size_t c) { return env_heights_[c] - tool_heights_[c]; };
-  bridge_order_.clear();
-  for (std::size_t c = 0; c < cells; ++c) {
-    if (depth(c) > floor) bridge_order_.push_back(static_cast<int>(c));  // NaN and −∞ drop out
-  }
-  std::sort(bridge_order_.begin(), bridge_order_.end(), [&](int a, int b) {
-    const float da = depth(static_cast<std::size_t>(a)), db = depth(static_cast<std::size_t>(b));
-    return da > db || (da == db && a < b);
-  });
-  bridge_parent_.assign(cells, -1);
-  bridge_peak_.assign(cells, -1);
-  bridge_level_.assign(cells, -std::numeric_limits<float>::infinity());
-  const auto find = [&](int c) {
-    while (bridge_parent_[static_cast<std::size_t>(c)] != c) {
-      const int up = bridge_parent_[static_cast<std::size_t>(c)];
-      bridge_parent_[static_cast<std::size_t>(c)] = bridge_parent_[static_cast<std::size_t>(up)];
-      c = up;
-    }
-    return c;
-  };
-  // Kruskal over the superlevel sets: each cell, in decreasing b − a, joins the reached cells
-  // within the link. Where it joins two components, the one with the lower peak ends there (the
-  // elder rule), and if both peaks overlap and the level is ≤ 0 that is its bridge level: above
-  // 0 they are one region already.
-  for (const int c : bridge_order_) {
-    const auto uc = static_cast<std::size_t>(c);
-    bridge_parent_[uc] = c;
-    bridge_peak_[uc] = c;
-    const float level = depth(uc);
-    const int i = c % n, j = c / n;
-    for (int dj = -r; dj <= r; ++dj) {
-      if (j + dj < 0 || j + dj >= n) continue;
-      for (int di = -r; di <= r; ++di) {
-        if (i + di < 0 || i + di >= n || di * di + dj * dj > reach * reach) continue;
-        const int d = (j + dj) * n + (i + di);
-        if (bridge_parent_[static_cast<std::size_t>(d)] < 0) continue;
-        int a = find(c), b = find(d);
-        if (a == b) continue;
-        int pa = bridge_peak_[static_cast<std::size_t>(a)];
-        int pb = bridge_peak_[static_cast<std::size_t>(b)];
-        if (depth(static_cast<std::size_t>(pa)) < depth(static_cast<std::size_t>(pb)) ||
-            (depth(static_cast<std::size_t>(pa)) == depth(static_cast<std::size_t>(pb)) &&
-             pa > pb)) {
-          std::swap(a, b);
-          std::swap(pa, pb);
-        }
-        // a holds the elder (deeper) peak; b's component ends here.
-        if (level <= 0.0f && depth(static_cast<std::size_t>(pb)) > 0.0f) {
-          bridge_level_[static_cast<std::size_t>(pb)] = level;
-        }
-        bridge_parent_[static_cast<std::size_t>(b)] = a;
-      }
-    }
-  }
 }
 
 int TexturePenetrationSolver::OverlapOccupancy(const HapticModel& tool, const RigidTransform& X_WT,

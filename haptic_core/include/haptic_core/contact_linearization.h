@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "haptic_core/haptic_model.h"
+#include "haptic_core/overlap_links.h"
 #include "haptic_core/penetration_depth.h"
 #include "haptic_core/spatial.h"
 
@@ -402,17 +403,11 @@ class TexturePenetrationSolver {
   std::array<std::vector<float>, 6> rotation_heights_;
   std::vector<int> env_triangles_;
   std::vector<int> tool_triangles_;
-  /// OverlapRegions' union-find over cells (parent per cell, −1 where no overlap).
+  /// OverlapRegions' single linkage (overlap_links.h): its cells' b − a, each cell's region
+  /// (its first cell; −1 where no overlap), and the bridge level per peak cell.
+  OverlapCellLinks links_;
+  std::vector<float> overlap_depth_;
   std::vector<int> region_parent_;
-  /// OverlapRegions' bridge pass over the current render (n × n cells, the link's reach in
-  /// cells r and reach, the level floor), into bridge_level_ per peak cell.
-  void BridgeLevels(int n, int r, double reach, float floor) noexcept;
-  /// OverlapRegions' bridge pass: the cells above the floor in decreasing b − a, their
-  /// union-find (−1: not reached yet), each root's peak cell, and the level each peak's
-  /// component joined a deeper one.
-  std::vector<int> bridge_order_;
-  std::vector<int> bridge_parent_;
-  std::vector<int> bridge_peak_;
   std::vector<float> bridge_level_;
   LinearizationFaults faults_;
 };
