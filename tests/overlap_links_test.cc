@@ -149,6 +149,26 @@ TEST(OverlapCellLinks, ComponentsAndBridgeLevelsAreTheCellByCellPassesBitForBit)
           std::vector<float> level(f.size(), 3.0f);
           ASSERT_TRUE(links.BridgeLevels(f, n, reach, floor, level));
           const std::vector<float> expected_level = ReferenceBridgeLevels(f, n, reach, floor);
+          // Asked for the components' peaks only, the pass may stop early: their levels are the
+          // full pass's.
+          std::vector<int> peaks;
+          for (std::size_t c = 0; c < f.size(); ++c) {
+            if (parent[c] != static_cast<int>(c)) continue;
+            int peak = static_cast<int>(c);
+            for (std::size_t e = 0; e < f.size(); ++e) {
+              if (parent[e] == parent[c] && f[e] > f[static_cast<std::size_t>(peak)]) {
+                peak = static_cast<int>(e);
+              }
+            }
+            peaks.push_back(peak);
+          }
+          std::vector<float> peak_level(f.size(), 3.0f);
+          ASSERT_TRUE(links.BridgeLevels(f, n, reach, floor, peak_level, peaks));
+          for (const int p : peaks) {
+            ASSERT_EQ(peak_level[static_cast<std::size_t>(p)],
+                      expected_level[static_cast<std::size_t>(p)])
+                << "n " << n << " reach " << reach << " peak " << p;
+          }
           for (std::size_t c = 0; c < f.size(); ++c) {
             ASSERT_EQ(level[c], expected_level[c])
                 << "n " << n << " reach " << reach << " cell " << c;

@@ -298,8 +298,11 @@ int TexturePenetrationSolver::OverlapRegions(const HapticModel& tool, const Rigi
   const auto kept = std::min<std::size_t>(keep, static_cast<std::size_t>(count));
   if (bridge_floor_m > 0.0 && count >= 2) {
     bridge_level_.resize(cells);
+    // Only the kept regions' peaks are read: the pass stops once each has its level.
+    std::array<int, 64> peaks{};
+    for (std::size_t k = 0; k < kept; ++k) peaks[k] = out[k].peak_cell;
     links_.BridgeLevels(overlap_depth_, n, reach, static_cast<float>(-bridge_floor_m),
-                        bridge_level_);
+                        bridge_level_, std::span<const int>(peaks.data(), kept));
     for (std::size_t k = 0; k < kept; ++k) {
       OverlapRegion& g = out[k];
       const float level = bridge_level_[static_cast<std::size_t>(g.peak_cell)];

@@ -125,7 +125,7 @@ int OverlapCellLinks::Components(std::span<const float> depth, int n, double rea
 }
 
 bool OverlapCellLinks::BridgeLevels(std::span<const float> depth, int n, double reach, float floor,
-                                    std::span<float> level) noexcept {
+                                    std::span<float> level, std::span<const int> peaks) noexcept {
   if (level.size() != depth.size() || !Prepare(n, reach, depth.size())) return false;
   const auto cells = depth.size();
   order_.clear();
@@ -140,10 +140,28 @@ bool OverlapCellLinks::BridgeLevels(std::span<const float> depth, int n, double 
   peak_.assign(cells, -1);
   std::fill(level.begin(), level.end(), -std::numeric_limits<float>::infinity());
   const auto d = [&](int c) { return depth[static_cast<std::size_t>(c)]; };
+  // The wanted peaks still without a level (the deepest cell never gets one); −1: all wanted.
+  const auto wanted = [&](int c) {
+    return std::find(peaks.begin(), peaks.end(), c) != peaks.end();
+  };
+  int open = -1;
+  if (!peaks.empty() && !order_.empty()) {
+    open = 0;
+    for (std::size_t k = 0; k < peaks.size(); ++k) {
+      const int p = peaks[k];
+      if (p < 0 || static_cast<std::size_t>(p) >= cells || p == order_[0]) continue;
+      if (std::find(peaks.begin(), peaks.begin() + static_cast<std::ptrdiff_t>(k), p) !=
+          peaks.begin() + static_cast<std::ptrdiff_t>(k)) {
+        continue;  // listed twice
+      }
+      ++open;
+    }
+  }
   // Kruskal over the superlevel sets. A cell's links are made before its bit is set, so that
   // every run of set bits in a row is one component when it is read (a cell's row neighbours
   // joined it when the later of them was added).
   for (const int c : order_) {
+    if (open == 0) break;  // every wanted peak has its level
     const auto uc = static_cast<std::size_t>(c);
     parent_[uc] = c;
     peak_[uc] = c;
@@ -158,7 +176,10 @@ bool OverlapCellLinks::BridgeLevels(std::span<const float> depth, int n, double 
         std::swap(pa, pb);
       }
       // a holds the elder (deeper) peak; b's component ends here.
-      if (t <= 0.0f && d(pb) > 0.0f) level[static_cast<std::size_t>(pb)] = t;
+      if (t <= 0.0f && d(pb) > 0.0f) {
+        level[static_cast<std::size_t>(pb)] = t;
+        if (open > 0 && wanted(pb)) --open;
+      }
       parent_[static_cast<std::size_t>(b)] = a;
     };
     if (r_ >= 1) {

@@ -398,7 +398,7 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     bridged.name = "split_link10mm_ramp50um_parent_step_bridge50um";
     bridged.split_bridge_fade_m = 50e-6;
     s.push_back(bridged);
-    for (const int um : {20, 50, 100}) {
+    for (const int um : {20, 50, 100, 200, 400}) {
       for (const bool texel : {false, true}) {
         if (texel && um != 50) continue;
         FrontierSetting continuous = texel ? split_texel : split;

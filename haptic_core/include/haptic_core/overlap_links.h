@@ -36,8 +36,12 @@ class OverlapCellLinks {
   /// t ≤ 0 at which the region of that peak joins a deeper one (the saddle). Every other entry of
   /// `level` is −∞. `depth` and `level` hold n² entries; returns false, writing nothing, on a size
   /// mismatch or a negative or NaN reach.
+  ///
+  /// With `peaks` (cells whose level is wanted, e.g. the regions' peak cells) the pass stops as
+  /// soon as each of them other than the deepest cell has its level: their levels are the full
+  /// pass's, other entries may stay −∞. On a wide floor most cells lie below the saddles.
   bool BridgeLevels(std::span<const float> depth, int n, double reach, float floor,
-                    std::span<float> level) noexcept;
+                    std::span<float> level, std::span<const int> peaks = {}) noexcept;
 
  private:
   /// Sets up the row bitsets (all clear) and the half widths for a reach; false on bad input.
