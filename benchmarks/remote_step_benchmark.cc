@@ -112,9 +112,9 @@ int main(int argc, char** argv) {
                  "interleaved step by step with the first on the same poses, and print its row "
                  "(B) beside: parallax (DepthRefinementOptions::parallax), seed-from-last-step, "
                  "tool-leaves-follow (PipelineOptions::tool_leaves_follow_object_leaves), "
-                 "split-continuous (stage 5a's split in its continuous form: a 10 mm link, the "
-                 "parent's window and rotation step, birth ramp and bridge fade of 100 um, as the "
-                 "frontier's split_continuous_100um)")
+                 "split-continuous (stage 5a's split in its continuous form, on by default since "
+                 "issue 32's thirty-first stop: B without it; until then B was the split with "
+                 "100 um fades, the frontier's split_continuous_100um)")
       ->check(CLI::IsMember(
           {"parallax", "seed-from-last-step", "tool-leaves-follow", "split-continuous"}));
   app.add_option("--csv", csv_path, "write one row per scene here");
@@ -163,13 +163,6 @@ int main(int argc, char** argv) {
     options.depth_refinement.texel_scale_gradient = texel_gradient;
     options.depth_refinement.translation_kink_planes = translation_kinks;
     options.depth_refinement.texel_scale_rotation = !secant_rotation;
-    if (ab == "split-continuous") {  // the form, in both arms; the split itself is flipped
-      options.split_link_m = 10e-3;
-      options.split_birth_ramp_m = 100e-6;
-      options.split_bridge_fade_m = 100e-6;
-      options.split_keeps_parent_rotation_step = true;
-      options.split_keeps_parent_window = true;
-    }
     // Arm A is the options as given; arm B (with --ab) the same with one option flipped.
     ht::PipelineOptions options_b = options;
     std::string label_b;

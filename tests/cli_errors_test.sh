@@ -24,6 +24,7 @@ expect slave_sim "--split-windows-link-mm" "$build/slave_sim/slave_sim" --split-
 expect slave_sim "--split-continuous-um" "$build/slave_sim/slave_sim" --split-continuous-um -5
 "$build/slave_sim/slave_sim" keygen "$tmp/k.key" > /dev/null 2>&1
 expect slave_sim "CPU texture stage" "$build/slave_sim/slave_sim" --key "$tmp/k.key" --split-continuous-um 50 --pd-backend gpu
+expect slave_sim "--no-split" "$build/slave_sim/slave_sim" --key "$tmp/k.key" --no-split --split-continuous-um 100
 expect slave_sim "--model-deadband-torque-floor" "$build/slave_sim/slave_sim" --model-deadband-torque-floor 0
 expect slave_sim "--translation-patch-rtt-ms" "$build/slave_sim/slave_sim" --translation-patch-rtt-ms -1
 expect slave_sim "excludes" "$build/slave_sim/slave_sim" --translation-patch --no-translation-patch

@@ -115,8 +115,13 @@ TEST(HardCases, SeparatedContactsOnOneFaceSplitIntoOneWindowEach) {
   const HapticScene scene = TwoBumpsOnSlab({0.02, 0.02, 0.01}, 1.5e-3, "two_bumps");
   const RigidTransform X_WT = At({0.0, 0.0, 0.01 + 20e-6});
   const auto step = [&](bool split) {
-    PipelineOptions options;
+    PipelineOptions options;  // the seventh stop's plain split, at the clustering distance
     options.split_windows_at_separated_overlap = split;
+    options.split_link_m = 0.0;
+    options.split_birth_ramp_m = 0.0;
+    options.split_bridge_fade_m = 0.0;
+    options.split_keeps_parent_rotation_step = false;
+    options.split_keeps_parent_window = false;
     HapticTexturePipeline pipeline(scene, options);
     StepTimings t;
     return pipeline.Step(X_WT, 1, t);
@@ -161,6 +166,7 @@ TEST(HardCases, SeparatedContactsOnOneFaceSplitIntoOneWindowEach) {
 TEST(HardCases, AContinuousSplitJoinsTwoSupportsWithoutAStep) {
   const HapticScene scene = TwoBumpsOnSlab({0.03, 0.02, 0.01}, 3e-3, "two_wide_bumps");
   PipelineOptions whole_options;
+  whole_options.split_windows_at_separated_overlap = false;
   PipelineOptions continuous = whole_options;
   continuous.split_windows_at_separated_overlap = true;
   continuous.split_link_m = 10e-3;

@@ -366,7 +366,18 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     no_parallax_one_plane.kink_planes = false;
     s.push_back(no_parallax_one_plane);
     // Stage 5a: a window per separated region of its overlap, with either gradient.
-    FrontierSetting split = refined;
+    // Stage 5a off: the default before issue 32's thirty-first stop. The split settings below
+    // start from it and set the pieces they name.
+    FrontierSetting no_split = refined;
+    no_split.name = "no_split";
+    no_split.split_windows_at_separated_overlap = false;
+    no_split.split_link_m = 0.0;
+    no_split.split_birth_ramp_m = 0.0;
+    no_split.split_keeps_parent_rotation_step = false;
+    no_split.split_bridge_fade_m = 0.0;
+    no_split.split_keeps_parent_window = false;
+    s.push_back(no_split);
+    FrontierSetting split = no_split;
     split.name = "split_windows_at_separated_overlap";
     split.split_windows_at_separated_overlap = true;
     s.push_back(split);

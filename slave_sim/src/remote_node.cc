@@ -141,6 +141,10 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   std::string gl_renderer, gl_version, gl_vendor;
   bool gpu_instanced_draws = false;
   if (auto* gpu = dynamic_cast<GpuPenetrationDepthBackend*>(backend.get())) {
+    // Stage 5a (the split) runs with the CPU texture stage only (HapticTexturePipeline).
+    if (config.pipeline.split_windows_at_separated_overlap) {
+      backend_message += "; stage 5a's split is off on the GPU backend (--pd-backend cpu has it)";
+    }
     gpu_instanced_draws = gpu->instanced_draws();
     gl_renderer = gpu->info().renderer;
     gl_version = gpu->info().version;

@@ -147,20 +147,20 @@ struct PipelineOptions {
   bool refine_depth = true;
   /// How stage 5b refines (steps, sub-samples, search floor).
   DepthRefinementOptions depth_refinement;
-  /// Stage 5a (issue 32, seventh stop; off by default, an approximation on the frontier): a
-  /// window whose overlap at the tool's pose falls into regions farther apart than
-  /// clustering_distance_m (TexturePenetrationSolver::OverlapRegions: the base pose rendered
-  /// again on the CPU) becomes one window per region, each the region's box plus
+  /// Stage 5a (issue 32, seventh stop; on by default in its continuous form since the
+  /// thirty-first stop, below): a window whose overlap at the tool's pose falls into regions
+  /// farther apart than split_link_m (TexturePenetrationSolver::OverlapRegions: the base pose
+  /// rendered again on the CPU) becomes one window per region, each the region's box plus
   /// split_window_margin_m a side at the parent's cell size, linearized afresh: the contact
   /// clustering of the textured contact rather than of the coarse models', so that two
   /// separated patches of one face each push with their own δ. Regions whose centre lies in
   /// another's window are one (as the pipeline truth merges patches, contact_patch_truth.h). A
   /// window whose regions would take the step past max_contacts stays whole. CPU backend only (the
-  /// GPU backend takes one window size per batch).
-  bool split_windows_at_separated_overlap = false;
+  /// GPU backend takes one window size per batch: there the step runs without it).
+  bool split_windows_at_separated_overlap = true;
   double split_window_margin_m = 1e-3;
   /// The regions' linking distance (m); 0: clustering_distance_m.
-  double split_link_m = 0.0;
+  double split_link_m = 10e-3;
   /// Stage 5a's birth ramp (m; 0: none, the seventh stop's split): a region other than the
   /// window's deepest pushes with k·w, w = smoothstep(d_r / min(ramp, d_max)), where d_r is the
   /// region's deepest cell sample of b − a on the parent's grid (OverlapRegion::depth_m) and d_max
@@ -170,26 +170,31 @@ struct PipelineOptions {
   /// thirtieth_stop). d_r crosses zero continuously, so the region's force fades in and out with
   /// it; the deepest region keeps w = 1, so a split with one region newborn is the whole window's
   /// force. The weight is taken at q0 and held over the model (its gradient is not in ∇δ).
-  double split_birth_ramp_m = 0.0;
+  double split_birth_ramp_m = 400e-6;
   /// Stage 5a: each split window takes its rotation steps from its parent's extent
   /// (ContactWindow::gradient_extent_m) instead of its own, so h_θ is the parent's whatever the
   /// region's box. Off: h_θ = h_x / (W_region / 2), the seventh stop's split.
-  bool split_keeps_parent_rotation_step = false;
+  bool split_keeps_parent_rotation_step = true;
   /// Stage 5a's bridge fade (m; 0: none): a region other than the window's deepest pushes with
   /// k·w·smoothstep(−t / fade), t its bridge level (OverlapRegion::bridge_m: the level ≤ 0 at
   /// which the window's b − a, linked as the regions are, joins it to a deeper region). Two
   /// regions that are about to touch (t → 0⁻) push as the one region they become, so the force
   /// does not step by k·δ when the overlap between them crosses zero (an edge resting on stripes
   /// along its length: one region or two from tick to tick, docs/frontier/issue32/
-  /// thirtieth_stop); regions whose gap stays below −fade push with their own δ.
-  double split_bridge_fade_m = 0.0;
+  /// thirtieth_stop); regions whose gap stays below −fade push with their own δ. The force of
+  /// the pair falls from k·(δ_1 + δ_2) to k·δ_1 over the fade as the tool presses in: along the
+  /// normal the pair's stiffness is k·(1 + w + δ_2·∂w/∂δ), whose least value over the fade is
+  /// 0.62·k at fig76's 190 µm supports with 400 µm, 0 with 200 µm and −1.4·k with 100 µm (a
+  /// negative stiffness the loop rocks on: 11, 135 and 256 contact-force steps above 0.2 N on
+  /// one clock, the unsplit window 6; docs/frontier/issue32/thirty_first_stop).
+  double split_bridge_fade_m = 400e-6;
   /// Stage 5a: the window's deepest region stays the parent's whole window as stage 5 linearized
   /// it, and only the other regions get windows of their own (weighted as above; one whose
   /// weight is below 10⁻³ gets none), without merging regions whose centre lies in another's
   /// window. So the split of a window whose other regions fade out is the unsplit window, and the
   /// deepest region's δ and gradient do not change with its box. Off: every region gets its box's
   /// window (the seventh stop's split).
-  bool split_keeps_parent_window = false;
+  bool split_keeps_parent_window = true;
   /// Stage 5c (issue 32, tenth stop): contacts on one object whose normals agree within
   /// clustering_angle_deg and whose textured overlaps at the tool's pose come within share_link_m
   /// of each other are one region and share one penalty (ShareConnectedContacts,

@@ -97,19 +97,21 @@ struct FrontierSetting {
   /// PipelineOptions::depth_refinement.texel_scale_rotation ("refined_texel_translation_gradient*"
   /// turn it off).
   bool texel_scale_rotation = true;
-  /// PipelineOptions::split_windows_at_separated_overlap ("split_windows_at_separated_overlap"
-  /// turns it on).
-  bool split_windows_at_separated_overlap = false;
-  /// PipelineOptions::split_link_m (0: the default).
-  double split_link_m = 0.0;
-  /// PipelineOptions::split_birth_ramp_m (0: none; "split_*_ramp<U>um" set it).
-  double split_birth_ramp_m = 0.0;
-  /// PipelineOptions::split_keeps_parent_rotation_step ("split_*_parent_step*" set it).
-  bool split_keeps_parent_rotation_step = false;
-  /// PipelineOptions::split_bridge_fade_m (0: none; "split_*_bridge<U>um" set it).
-  double split_bridge_fade_m = 0.0;
-  /// PipelineOptions::split_keeps_parent_window ("split_*_parent_window" set it).
-  bool split_keeps_parent_window = false;
+  /// Stage 5a, PipelineOptions' split_* fields, at their defaults (the continuous split at a
+  /// 10 mm link, ramp and fade 400 µm, since issue 32's thirty-first stop). "no_split" turns it
+  /// off; the split settings ("split_windows_at_separated_overlap*", "split_link10mm_*",
+  /// "split_continuous_*") start from "no_split" and set the pieces they name.
+  bool split_windows_at_separated_overlap = true;
+  /// PipelineOptions::split_link_m (0: clustering_distance_m).
+  double split_link_m = 10e-3;
+  /// PipelineOptions::split_birth_ramp_m (0: none).
+  double split_birth_ramp_m = 400e-6;
+  /// PipelineOptions::split_keeps_parent_rotation_step.
+  bool split_keeps_parent_rotation_step = true;
+  /// PipelineOptions::split_bridge_fade_m (0: none).
+  double split_bridge_fade_m = 400e-6;
+  /// PipelineOptions::split_keeps_parent_window.
+  bool split_keeps_parent_window = true;
   /// PipelineOptions::share_connected_contacts ("no_shared_contacts" turns it off), and
   /// share_link_m, share_fade_m (< 0: the defaults) and share_temperature_m (0: the default).
   bool share_connected_contacts = true;
