@@ -471,6 +471,14 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   s["speculative_lead_ms"] = config.pipeline.speculative_lead_s * 1e3;
   s["triangle_lists_overflowed"] = pipeline->step_faults().triangle_lists_overflowed;
   s["region_windows"] = pipeline->step_faults().region_windows;
+  // Stage 5a (issue 32, thirty-first stop): asked for, and whether the backend at the end runs it
+  // (the CPU texture stage does, the GPU backend does not).
+  s["split"] = {{"on", config.pipeline.split_windows_at_separated_overlap},
+                {"runs", config.pipeline.split_windows_at_separated_overlap &&
+                             std::string(pipeline->backend().name()) != "gpu"},
+                {"link_mm", std::round(config.pipeline.split_link_m * 1e6) / 1e3},
+                {"birth_ramp_um", std::round(config.pipeline.split_birth_ramp_m * 1e9) / 1e3},
+                {"bridge_fade_um", std::round(config.pipeline.split_bridge_fade_m * 1e9) / 1e3}};
   s["share_connected_contacts"] = config.pipeline.share_connected_contacts;
   s["shared_contacts"] = pipeline->step_faults().shared_contacts;
   s["pd_backend"] = {{"requested", ToString(config.pd_backend)},
