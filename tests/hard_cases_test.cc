@@ -210,6 +210,44 @@ TEST(HardCases, AContinuousSplitJoinsTwoSupportsWithoutAStep) {
              far_ratio, largest_step, kK * 1e-6));
 }
 
+// Stage 5a's bridge fade in micrometres against one in proportion to the region's depth
+// (PipelineOptions::split_bridge_fade_per_depth; issue 32's thirty-first stop). The box with two
+// 40 µm bumps 20 mm apart rests 20 µm above the slab: each bump overlaps by d_r ≈ 20 µm, and the
+// flat between them is 20 µm above the slab, so the second support's bridge level is t ≈ −20 µm.
+// The default's 400 µm fade weighs it by smoothstep(20/400) ≈ 0.007: the pair pushes about what
+// one window does. A fade of c·d_r weighs it by smoothstep(1/c): 0.5 at c = 2, about 1.5 × the
+// one window's force, and more as c falls.
+TEST(HardCases, AFadePerDepthKeepsAShallowSecondSupport) {
+  const HapticScene scene = TwoBumpsOnSlab({0.02, 0.02, 0.01}, 1.5e-3, "two_bumps");
+  const RigidTransform X_WT = At({0.0, 0.0, 0.01 + 20e-6});
+  const auto force = [&](bool split, double per_depth) {
+    PipelineOptions options;
+    options.split_windows_at_separated_overlap = split;
+    options.split_bridge_fade_per_depth = per_depth;
+    HapticTexturePipeline pipeline(scene, options);
+    StepTimings t;
+    return pipeline.Step(X_WT, 1, t).F_T_W_at_q0.force.z;
+  };
+  const double whole = force(false, 0.0);
+  ASSERT_GT(whole, 0.0);
+  const double microns = force(true, 0.0) / whole;
+  const double c1 = force(true, 1.0) / whole;
+  const double c2 = force(true, 2.0) / whole;
+  const double c4 = force(true, 4.0) / whole;
+  EXPECT_LT(microns, 1.05);
+  EXPECT_NEAR(c2, 1.5, 0.2);
+  EXPECT_GT(c1, c2);
+  EXPECT_GT(c2, c4);
+  EXPECT_GT(c4, microns);
+  PipelineOptions bad;
+  bad.split_bridge_fade_per_depth = -1.0;
+  EXPECT_THROW(HapticTexturePipeline(scene, bad), std::invalid_argument);
+  Report("a fade per depth",
+         Fmt("second support 20 um deep, 20 um from joining: force / one window's %.3f (400 um "
+             "fade), %.3f (c = 1), %.3f (c = 2), %.3f (c = 4)",
+             microns, c1, c2, c4));
+}
+
 // Stage 5c (PipelineOptions::share_connected_contacts): a flat box face pressed on the end cap
 // of a smooth cylinder (the gear model without ridges) overlaps it over the whole 50 mm disc. The
 // cylinder's hull hierarchy has small leaves, and windows may not exceed 20 mm, so the coarse

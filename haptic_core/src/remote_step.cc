@@ -64,11 +64,14 @@ void PipelineOptions::Validate() const {
   if (!(split_window_margin_m >= 0.0) || !std::isfinite(split_window_margin_m) ||
       !(split_link_m >= 0.0) || !std::isfinite(split_link_m) || !(split_birth_ramp_m >= 0.0) ||
       !std::isfinite(split_birth_ramp_m) || !(split_bridge_fade_m >= 0.0) ||
-      !std::isfinite(split_bridge_fade_m)) {
+      !std::isfinite(split_bridge_fade_m) || !(split_bridge_fade_per_depth >= 0.0) ||
+      !std::isfinite(split_bridge_fade_per_depth)) {
     throw std::invalid_argument(
-        "split window margin, link, birth ramp and bridge fade must be finite and >= 0, got " +
+        "split window margin, link, birth ramp, bridge fade and fade per depth must be finite "
+        "and >= 0, got " +
         std::to_string(split_window_margin_m) + ", " + std::to_string(split_link_m) + ", " +
-        std::to_string(split_birth_ramp_m) + " and " + std::to_string(split_bridge_fade_m));
+        std::to_string(split_birth_ramp_m) + ", " + std::to_string(split_bridge_fade_m) + " and " +
+        std::to_string(split_bridge_fade_per_depth));
   }
   if (!(share_link_m > 0.0) || !std::isfinite(share_link_m) || !(share_fade_m >= 0.0) ||
       !std::isfinite(share_fade_m)) {
@@ -515,12 +518,17 @@ int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int
   for (int i = 0; i < n; ++i) {
     const ContactQuery& q = last_queries_[static_cast<std::size_t>(i)];
     int regions = 0;
-    if (std::isfinite(last_results_[static_cast<std::size_t>(i)].depth_m) &&
-        last_results_[static_cast<std::size_t>(i)].depth_m > 0.0) {
+    const double parent_depth = last_results_[static_cast<std::size_t>(i)].depth_m;
+    if (std::isfinite(parent_depth) && parent_depth > 0.0) {
+      // With a fade per depth, the floor reaches the deepest region's fade (the window's refined
+      // δ bounds every region's cell samples from above, up to the refinement's few µm).
+      const double relative = options_.split_bridge_fade_per_depth;
+      const double floor =
+          relative > 0.0 ? relative * parent_depth * 1.1 : options_.split_bridge_fade_m;
       regions = region_solver_->OverlapRegions(
           tool, X_WT, *q.environment, q.X_WO, q.window,
           options_.split_link_m > 0.0 ? options_.split_link_m : options_.clustering_distance_m,
-          regions_, q.environment_triangles, q.tool_triangles, options_.split_bridge_fade_m);
+          regions_, q.environment_triangles, q.tool_triangles, floor);
     }
     const bool parent_window = options_.split_keeps_parent_window;
     if (!parent_window) regions = MergeRegionsInOneWindow(regions, q.window.cell_size_m());
@@ -549,9 +557,10 @@ int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int
       const OverlapRegion& g = regions_[static_cast<std::size_t>(r)];
       double weight = 1.0;
       if (r > 0 && ramp > 0.0) weight *= Smoothstep(g.depth_m / ramp);
-      if (r > 0 && options_.split_bridge_fade_m > 0.0) {
-        weight *= Smoothstep(-g.bridge_m / options_.split_bridge_fade_m);
-      }
+      const double fade = options_.split_bridge_fade_per_depth > 0.0
+                              ? options_.split_bridge_fade_per_depth * g.depth_m
+                              : options_.split_bridge_fade_m;
+      if (r > 0 && fade > 0.0) weight *= Smoothstep(-g.bridge_m / fade);
       if (parent_window && weight < kSplitNegligibleWeight) continue;  // pushes nothing
       // The region's box on the window plane (m from the window's centre), its margin, and the
       // parent's cell size.

@@ -75,6 +75,7 @@ PipelineOptions PipelineOptionsFor(const FrontierSetting& st) {
   options.split_keeps_parent_rotation_step = st.split_keeps_parent_rotation_step;
   options.split_bridge_fade_m = st.split_bridge_fade_m;
   options.split_keeps_parent_window = st.split_keeps_parent_window;
+  options.split_bridge_fade_per_depth = st.split_bridge_fade_per_depth;
   options.depth_refinement.subgrid_rotations = st.subgrid_rotations;
   options.depth_refinement.subgrid_translations = st.subgrid_translations;
   options.depth_refinement.conservative_screen = st.conservative_screen;
@@ -422,6 +423,16 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
         continuous.split_keeps_parent_window = true;
         s.push_back(continuous);
       }
+    }
+    // The default's split with its bridge fade in proportion to each region's depth (issue 32's
+    // thirty-first stop): "split_fade_per_depth<C>x", C = 1.5, 2, 3.
+    for (const double c : {1.5, 2.0, 3.0}) {
+      FrontierSetting relative = base;
+      char name[64];
+      std::snprintf(name, sizeof name, "split_fade_per_depth%gx", c);
+      relative.name = name;
+      relative.split_bridge_fade_per_depth = c;
+      s.push_back(relative);
     }
     // Stage 5c (on in the default): its link, fade and temperature varied, and off.
     const FrontierSetting& share = refined;

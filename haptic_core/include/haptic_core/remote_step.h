@@ -188,6 +188,13 @@ struct PipelineOptions {
   /// negative stiffness the loop rocks on: 11, 135 and 256 contact-force steps above 0.2 N on
   /// one clock, the unsplit window 6; docs/frontier/issue32/thirty_first_stop).
   double split_bridge_fade_m = 400e-6;
+  /// Stage 5a's bridge fade in proportion to the region's depth (0: off, the default): with
+  /// c > 0 a region's fade is c·d_r (d_r its deepest cell sample, OverlapRegion::depth_m) in
+  /// place of split_bridge_fade_m, so the pair's stiffness along the normal,
+  /// k·(1 + w + δ_2·∂w/∂δ), stays at least 0.37·k at c = 1.5 and 0.59·k at c = 2 at any depth,
+  /// and a shallow support whose gap is shallow too still pushes (a 400 µm fade weighs a 20 µm
+  /// support 20 µm from joining out to 0.7 %). An option of issue 32's thirty-first stop.
+  double split_bridge_fade_per_depth = 0.0;
   /// Stage 5a: the window's deepest region stays the parent's whole window as stage 5 linearized
   /// it, and only the other regions get windows of their own (weighted as above; one whose
   /// weight is below 10⁻³ gets none), without merging regions whose centre lies in another's

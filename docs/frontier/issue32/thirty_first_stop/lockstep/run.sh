@@ -22,3 +22,11 @@ for sc in hammer-on-torus block-on-gear file-on-cad-part; do
   $B --scene "$sc" --seeds 1 --duration 5 --arm default:setting=no_split \
     --arm c400:setting=split_continuous_400um --out "$out/$sc" > "$out/${sc}_deadbands.md"
 done
+# The fade in proportion to the region's depth (split_fade_per_depth<C>x), against the unsplit
+# window ("default" here is no_split), fig76 without and with the deadbands.
+$B --scene striped-blocks --seeds 1 --duration 12 --arm default:deadband=0 \
+  --arm r15:setting=split_fade_per_depth1.5x,deadband=0 --arm r2:setting=split_fade_per_depth2x,deadband=0 \
+  --arm r3:setting=split_fade_per_depth3x,deadband=0 --out "$out/rel_nodb" > "$out/fig76_nodb_fade_per_depth.md"
+$B --scene striped-blocks --seeds 1 --duration 12 --arm default --arm r15:setting=split_fade_per_depth1.5x \
+  --arm r2:setting=split_fade_per_depth2x --arm r3:setting=split_fade_per_depth3x --out "$out/rel_db" \
+  > "$out/fig76_deadbands_fade_per_depth.md"
