@@ -64,7 +64,6 @@ OverlapCellLinks::OverlapCellLinks(int max_resolution) {
 bool OverlapCellLinks::Prepare(int n, double reach, std::size_t cells) noexcept {
   if (n < 1 || !(reach >= 0.0)) return false;
   if (cells != static_cast<std::size_t>(n) * static_cast<std::size_t>(n)) return false;
-  n_ = n;
   words_ = (n + 63) / 64;
   rows_.assign(static_cast<std::size_t>(n) * static_cast<std::size_t>(words_), 0);
   // Links reach at most the grid's side: a larger reach links what n − 1 does.

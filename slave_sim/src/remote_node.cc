@@ -475,7 +475,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   // (the CPU texture stage does, the GPU backend does not).
   s["split"] = {{"on", config.pipeline.split_windows_at_separated_overlap},
                 {"runs", config.pipeline.split_windows_at_separated_overlap &&
-                             std::string(pipeline->backend().name()) != "gpu"},
+                             pipeline->backend().name() != "gpu"},
                 {"link_mm", std::round(config.pipeline.split_link_m * 1e6) / 1e3},
                 {"birth_ramp_um", std::round(config.pipeline.split_birth_ramp_m * 1e9) / 1e3},
                 {"bridge_fade_um", std::round(config.pipeline.split_bridge_fade_m * 1e9) / 1e3}};

@@ -48,7 +48,6 @@ class OverlapCellLinks {
   bool Prepare(int n, double reach, std::size_t cells) noexcept;
   int Find(std::span<int> parent, int c) const noexcept;
 
-  int n_ = 0;
   int words_ = 0;  ///< 64-bit words a row.
   int r_ = 0;      ///< floor(reach).
   std::vector<std::uint64_t> rows_;

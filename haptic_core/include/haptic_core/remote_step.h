@@ -190,10 +190,12 @@ struct PipelineOptions {
   double split_bridge_fade_m = 400e-6;
   /// Stage 5a's bridge fade in proportion to the region's depth (0: off, the default): with
   /// c > 0 a region's fade is c·d_r (d_r its deepest cell sample, OverlapRegion::depth_m) in
-  /// place of split_bridge_fade_m, so the pair's stiffness along the normal,
-  /// k·(1 + w + δ_2·∂w/∂δ), stays at least 0.37·k at c = 1.5 and 0.59·k at c = 2 at any depth,
-  /// and a shallow support whose gap is shallow too still pushes (a 400 µm fade weighs a 20 µm
-  /// support 20 µm from joining out to 0.7 %). An option of issue 32's thirty-first stop.
+  /// place of split_bridge_fade_m, so a shallow support whose gap is shallow too still pushes (a
+  /// 400 µm fade weighs a 20 µm support 20 µm from joining out to 0.7 %, c = 2 to 50 %). As the
+  /// tool presses in d_r grows with the bridge level, so the pair's least stiffness along the
+  /// normal is about k·(1 + w − S'(x)·(1 + c·x)/c), x = −t/(c·d_r): 0 at c = 2, and on one clock
+  /// fig76 rocks (221–285 contact steps above 0.2 N against 11; docs/frontier/issue32/
+  /// thirty_first_stop). Off: an option of issue 32's thirty-first stop.
   double split_bridge_fade_per_depth = 0.0;
   /// Stage 5a: the window's deepest region stays the parent's whole window as stage 5 linearized
   /// it, and only the other regions get windows of their own (weighted as above; one whose
