@@ -12,6 +12,7 @@
 
 #include "haptic_core/connected_contacts.h"
 #include "haptic_core/contact_linearization.h"
+#include "haptic_core/penetration_depth_backend.h"
 #include "test_scenes.h"
 
 namespace ht {
@@ -576,6 +577,90 @@ TEST(OverlapRegions, BridgeLevelsAreTheSaddlesOfTheOverlapsMergeTree) {
   const std::vector<double> at15 = bridges(15e-6, 30e-6);
   EXPECT_NEAR(at15[1] - at20[1], 5e-6, 0.05e-6);
   EXPECT_NEAR(at15[2] - at20[2], 5e-6, 0.05e-6);
+}
+
+// Stage 5a reads its regions from stage 5's base render (PenetrationDepthBackend::base_overlap,
+// PipelineOptions::split_reuses_base_render; issue 32's thirty-second stop) instead of rendering
+// the base pose again. Two routes to one set of regions: the field the backend kept and a fresh
+// render give the same regions, boxes, cell counts and peak cells, with depths and bridge levels
+// within float rounding of the window's heights, on every texture-stage path (the fast path
+// alone and with parallel renders, the reference path) and with the tool tilted. The field's
+// largest value is stage 5's δ0 itself. Nothing is kept where a side has no surface on the
+// window (δ0 = −∞), nor when keeping is off.
+TEST(OverlapRegions, StageFivesBaseRenderGivesTheRenderedRegions) {
+  const ThreeBumps scene = MakeThreeBumps();
+  const ContactWindow w = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.036, 90);
+  ContactQuery q;
+  q.environment = &scene.env;
+  q.X_WO = testing::EnvironmentPose();
+  q.window = w;
+  q.stiffness_n_per_m = 1000.0;
+  struct Path {
+    TextureStagePath path;
+    int threads;
+  };
+  int compared = 0;
+  for (const Path p : {Path{TextureStagePath::kFast, 1}, Path{TextureStagePath::kFast, 2},
+                       Path{TextureStagePath::kReference, 1}}) {
+    CpuPenetrationDepthBackend backend(128, p.path, p.threads);
+    TexturePenetrationSolver solver(128, 4096, p.path);
+    for (const double tilt : {0.0, 2e-3}) {
+      RigidTransform X_WT = testing::ToolPose(0.3e-3, -0.2e-3, 18e-6);
+      X_WT.rotation = glm::angleAxis(tilt, glm::normalize(glm::dvec3(1.0, 2.0, 0.0)));
+      std::array<ContactLinearization, 1> out{};
+      backend.set_keep_base_overlap(false);
+      ASSERT_TRUE(backend.LinearizeBatch(scene.tool, X_WT, {&q, 1}, out));
+      EXPECT_TRUE(backend.base_overlap(0).empty());
+      backend.set_keep_base_overlap(true);
+      ASSERT_TRUE(backend.LinearizeBatch(scene.tool, X_WT, {&q, 1}, out));
+      const std::span<const float> field = backend.base_overlap(0);
+      ASSERT_EQ(field.size(), static_cast<std::size_t>(w.resolution) * w.resolution);
+      EXPECT_TRUE(backend.base_overlap(1).empty());  // past the batch
+      EXPECT_EQ(static_cast<float>(out[0].depth_m), *std::max_element(field.begin(), field.end()));
+      for (const double link : {1e-3, 5e-3}) {
+        std::array<OverlapRegion, 8> kept{}, rendered{};
+        const int a = solver.OverlapRegions(field, w, link, kept, 30e-6);
+        const int b = solver.OverlapRegions(scene.tool, X_WT, scene.env, q.X_WO, w, link, rendered,
+                                            TriangleSubset::All(), TriangleSubset::All(), 30e-6);
+        ASSERT_EQ(a, b) << tilt << " " << link;
+        ASSERT_GE(a, 2);
+        for (int r = 0; r < a; ++r) {
+          const OverlapRegion& x = kept[static_cast<std::size_t>(r)];
+          const OverlapRegion& y = rendered[static_cast<std::size_t>(r)];
+          EXPECT_EQ(x.i0, y.i0);
+          EXPECT_EQ(x.i1, y.i1);
+          EXPECT_EQ(x.j0, y.j0);
+          EXPECT_EQ(x.j1, y.j1);
+          EXPECT_EQ(x.cells, y.cells);
+          EXPECT_EQ(x.peak_cell, y.peak_cell);
+          EXPECT_NEAR(x.depth_m, y.depth_m, 1e-9);
+          if (std::isfinite(y.bridge_m)) {
+            EXPECT_NEAR(x.bridge_m, y.bridge_m, 1e-9);
+          } else {
+            EXPECT_EQ(x.bridge_m, y.bridge_m);
+          }
+          ++compared;
+        }
+      }
+      // Lifted clear: δ0 < 0, the field kept, no region in it.
+      ASSERT_TRUE(
+          backend.LinearizeBatch(scene.tool, testing::ToolPose(0.0, 0.0, 60e-6), {&q, 1}, out));
+      EXPECT_LT(out[0].depth_m, 0.0);
+      std::array<OverlapRegion, 8> none{};
+      EXPECT_EQ(solver.OverlapRegions(backend.base_overlap(0), w, 1e-3, none), 0);
+      // Moved off the window: no tool surface over it (δ0 = −∞), nothing kept.
+      ASSERT_TRUE(
+          backend.LinearizeBatch(scene.tool, testing::ToolPose(0.5, 0.0, 18e-6), {&q, 1}, out));
+      EXPECT_EQ(out[0].depth_m, -std::numeric_limits<double>::infinity());
+      EXPECT_TRUE(backend.base_overlap(0).empty());
+    }
+  }
+  EXPECT_GE(compared, 24);
+  // A field shorter than the window's cells gives no region.
+  TexturePenetrationSolver solver(128);
+  std::array<OverlapRegion, 8> out{};
+  const std::vector<float> short_field(10, 1.0f);
+  EXPECT_EQ(solver.OverlapRegions(short_field, w, 1e-3, out), 0);
 }
 
 }  // namespace

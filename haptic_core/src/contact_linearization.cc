@@ -250,13 +250,23 @@ int TexturePenetrationSolver::OverlapRegions(const HapticModel& tool, const Rigi
   const auto cells = static_cast<std::size_t>(n) * static_cast<std::size_t>(n);
   if (n > max_resolution_ || !(link_m >= 0.0)) return 0;
   Depth(tool, X_WT, environment, X_WO, w, environment_triangles, tool_triangles);
-  // Single linkage over the overlapping cells (overlap_links.h): region_parent_[c] is the first
-  // cell of c's region, −1 where b − a ≤ 0.
   overlap_depth_.resize(cells);
   for (std::size_t c = 0; c < cells; ++c) overlap_depth_[c] = env_heights_[c] - tool_heights_[c];
+  return OverlapRegions(overlap_depth_, w, link_m, out, bridge_floor_m);
+}
+
+int TexturePenetrationSolver::OverlapRegions(std::span<const float> overlap, const ContactWindow& w,
+                                             double link_m, std::span<OverlapRegion> out,
+                                             double bridge_floor_m) noexcept {
+  const int n = w.resolution;
+  const auto cells = static_cast<std::size_t>(n) * static_cast<std::size_t>(n);
+  if (n > max_resolution_ || !(link_m >= 0.0) || overlap.size() < cells) return 0;
+  overlap = overlap.first(cells);
+  // Single linkage over the overlapping cells (overlap_links.h): region_parent_[c] is the first
+  // cell of c's region, −1 where b − a ≤ 0.
   region_parent_.resize(cells);
   const double reach = link_m / w.cell_size_m();
-  if (links_.Components(overlap_depth_, n, reach, region_parent_) < 0) return 0;
+  if (links_.Components(overlap, n, reach, region_parent_) < 0) return 0;
   // Regions in order of their roots (the first cell of each), then the kept ones sorted deepest
   // first.
   int count = 0;
@@ -278,7 +288,7 @@ int TexturePenetrationSolver::OverlapRegions(const HapticModel& tool, const Rigi
     }
     const int i = static_cast<int>(c % static_cast<std::size_t>(n));
     const int j = static_cast<int>(c / static_cast<std::size_t>(n));
-    const double depth = static_cast<double>(env_heights_[c]) - tool_heights_[c];
+    const double depth = overlap[c];
     // Collected in slot order into `out` while it has room; the rest are only counted.
     if (static_cast<std::size_t>(slot) >= keep) continue;
     OverlapRegion& g = out[static_cast<std::size_t>(slot)];
@@ -301,8 +311,8 @@ int TexturePenetrationSolver::OverlapRegions(const HapticModel& tool, const Rigi
     // Only the kept regions' peaks are read: the pass stops once each has its level.
     std::array<int, 64> peaks{};
     for (std::size_t k = 0; k < kept; ++k) peaks[k] = out[k].peak_cell;
-    links_.BridgeLevels(overlap_depth_, n, reach, static_cast<float>(-bridge_floor_m),
-                        bridge_level_, std::span<const int>(peaks.data(), kept));
+    links_.BridgeLevels(overlap, n, reach, static_cast<float>(-bridge_floor_m), bridge_level_,
+                        std::span<const int>(peaks.data(), kept));
     for (std::size_t k = 0; k < kept; ++k) {
       OverlapRegion& g = out[k];
       const float level = bridge_level_[static_cast<std::size_t>(g.peak_cell)];
@@ -449,8 +459,19 @@ ContactLinearization TexturePenetrationSolver::Linearize(
     const HapticModel& tool, const RigidTransform& X_WT, const HapticModel& environment,
     const RigidTransform& X_WO, const ContactWindow& w, double stiffness_n_per_m,
     std::span<DepthSample> samples_out, TriangleSubset environment_triangles,
-    TriangleSubset tool_triangles) noexcept {
+    TriangleSubset tool_triangles, std::span<float> base_overlap_out) noexcept {
   const GradientSteps h = GradientSteps::For(w);
+  // The base pose's b − a (base_overlap_out), from the tool heights `t` (stride, border cells).
+  const auto keep_base_overlap = [&](const std::vector<float>& t, int stride, int border) {
+    const int n = w.resolution;
+    if (base_overlap_out.size() < static_cast<std::size_t>(n) * n) return;
+    for (int j = 0; j < n; ++j) {
+      const float* a = t.data() + static_cast<std::size_t>(j + border) * stride + border;
+      const float* b = env_heights_.data() + static_cast<std::size_t>(j) * n;
+      float* o = base_overlap_out.data() + static_cast<std::size_t>(j) * n;
+      for (int i = 0; i < n; ++i) o[i] = b[i] - a[i];
+    }
+  };
 
   const bool from_base = rotation_gradient_ != RotationGradient::kRenderedSamples;
   RenderEnvironment(environment, X_WO, w, environment_triangles);
@@ -468,6 +489,7 @@ ContactLinearization TexturePenetrationSolver::Linearize(
     const int n = w.resolution, nt = n + 2;
     if (path_ == TextureStagePath::kFast) {
       RenderGrownBase(tool, X_WT, w, samples);
+      if (samples[0].cell >= 0) keep_base_overlap(tool_ext_heights_, nt, 1);
     } else {
       // The reference: the grown window (the same centre, axes and cell centres, one more cell
       // on each side, and the window's own box along n) and the translations at their poses.
@@ -480,6 +502,7 @@ ContactLinearization TexturePenetrationSolver::Linearize(
                          w.depth_range_m());
       samples[0] = EvaluateTool(tool, X_WT, w);
       if (samples[0].cell >= 0) {
+        keep_base_overlap(tool_heights_, n, 0);
         const auto poses = GradientSamplePoses(X_WT, w);
         for (int i = 1; i < 5; ++i) samples[i] = EvaluateTool(tool, poses[i], w);
       }
@@ -579,9 +602,11 @@ ContactLinearization TexturePenetrationSolver::Linearize(
         if (cull) ++culled_contacts_;
       }
     }
+    if (samples[0].cell >= 0) keep_base_overlap(tool_ext_heights_, w.resolution + 2, 1);
   } else {
     samples[0] = EvaluateTool(tool, X_WT, w);
     if (samples[0].cell >= 0) {
+      keep_base_overlap(tool_heights_, w.resolution, 0);
       const auto poses = GradientSamplePoses(X_WT, w);
       for (int i = 1; i < kGradientSamples; ++i) samples[i] = EvaluateTool(tool, poses[i], w);
     }

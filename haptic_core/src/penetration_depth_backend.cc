@@ -5,6 +5,7 @@
 #include <oneapi/tbb/task_arena.h>
 
 #include <algorithm>
+#include <limits>
 
 namespace ht {
 
@@ -15,6 +16,7 @@ struct CpuPenetrationDepthBackend::Arena {
 
 CpuPenetrationDepthBackend::CpuPenetrationDepthBackend(int max_resolution, TextureStagePath path,
                                                        int threads, RotationGradient rotation) {
+  max_resolution_ = max_resolution;
   const int n = std::max(threads, 1);
   solvers_.reserve(static_cast<std::size_t>(n));
   for (int i = 0; i < n; ++i) {
@@ -49,19 +51,44 @@ std::string CpuPenetrationDepthBackend::description() const {
   return d;
 }
 
+void CpuPenetrationDepthBackend::set_keep_base_overlap(bool on) {
+  keep_base_overlap_ = on;
+  base_overlap_cells_.fill(0);
+  if (on) {
+    base_overlaps_.resize(base_overlap_cells_.size() * static_cast<std::size_t>(max_resolution_) *
+                          static_cast<std::size_t>(max_resolution_));
+  }
+}
+
+std::span<const float> CpuPenetrationDepthBackend::base_overlap(std::size_t i) const noexcept {
+  if (i >= base_overlap_cells_.size() || base_overlap_cells_[i] == 0) return {};
+  const auto slot_cells = static_cast<std::size_t>(max_resolution_) * max_resolution_;
+  return std::span<const float>(base_overlaps_).subspan(i * slot_cells, base_overlap_cells_[i]);
+}
+
 bool CpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const RigidTransform& X_WT,
                                                 std::span<const ContactQuery> queries,
                                                 std::span<ContactLinearization> out,
                                                 std::span<DepthSample> samples_out) noexcept {
   if (out.size() < queries.size()) return false;
   const bool want_samples = samples_out.size() >= queries.size() * kGradientSamples;
+  base_overlap_cells_.fill(0);
+  const auto slot_cells = static_cast<std::size_t>(max_resolution_) * max_resolution_;
   const auto one = [&](TexturePenetrationSolver& solver, std::size_t i) {
     const ContactQuery& q = queries[i];
+    const auto cells = static_cast<std::size_t>(q.window.resolution) * q.window.resolution;
+    const bool keep = keep_base_overlap_ && i < base_overlap_cells_.size() && cells <= slot_cells;
     out[i] =
         solver.Linearize(tool, X_WT, *q.environment, q.X_WO, q.window, q.stiffness_n_per_m,
                          want_samples ? samples_out.subspan(i * kGradientSamples, kGradientSamples)
                                       : std::span<DepthSample>{},
-                         q.environment_triangles, q.tool_triangles);
+                         q.environment_triangles, q.tool_triangles,
+                         keep ? std::span<float>(base_overlaps_).subspan(i * slot_cells, cells)
+                              : std::span<float>{});
+    // Linearize writes the field exactly when the base pose overlaps.
+    if (keep && out[i].depth_m > -std::numeric_limits<double>::infinity()) {
+      base_overlap_cells_[i] = cells;
+    }
   };
   bool done = false;
   if (arena_ && !queries.empty()) {

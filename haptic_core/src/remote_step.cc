@@ -134,6 +134,10 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
     queries_.back().SetThreads(options_.texture_threads);
   }
   if (!backend_) backend_ = MakeCpuBackend();
+  // Stage 5a reads stage 5's base render instead of rendering the base pose again.
+  if (options_.split_windows_at_separated_overlap && options_.split_reuses_base_render) {
+    backend_->set_keep_base_overlap(true);
+  }
   if (!scene.tool) throw std::invalid_argument("scene '" + scene.name + "' has no tool");
   if (glm::length(scene.tool->center_of_mass_O) > 1e-9) {
     throw std::invalid_argument("tool model '" + scene.tool->name +
@@ -525,10 +529,15 @@ int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int
       const double relative = options_.split_bridge_fade_per_depth;
       const double floor =
           relative > 0.0 ? relative * parent_depth * 1.1 : options_.split_bridge_fade_m;
-      regions = region_solver_->OverlapRegions(
-          tool, X_WT, *q.environment, q.X_WO, q.window,
-          options_.split_link_m > 0.0 ? options_.split_link_m : options_.clustering_distance_m,
-          regions_, q.environment_triangles, q.tool_triangles, floor);
+      const double link =
+          options_.split_link_m > 0.0 ? options_.split_link_m : options_.clustering_distance_m;
+      // Stage 5's base render where the backend kept it (the CPU backend), else rendered again.
+      const std::span<const float> base = backend_->base_overlap(static_cast<std::size_t>(i));
+      regions = !base.empty()
+                    ? region_solver_->OverlapRegions(base, q.window, link, regions_, floor)
+                    : region_solver_->OverlapRegions(tool, X_WT, *q.environment, q.X_WO, q.window,
+                                                     link, regions_, q.environment_triangles,
+                                                     q.tool_triangles, floor);
     }
     const bool parent_window = options_.split_keeps_parent_window;
     if (!parent_window) regions = MergeRegionsInOneWindow(regions, q.window.cell_size_m());
@@ -659,6 +668,9 @@ void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n)
     fallback_reason_ = std::string(backend_->name()) + ": " + backend_->last_error();
   }
   backend_ = MakeCpuBackend();
+  if (options_.split_windows_at_separated_overlap && options_.split_reuses_base_render) {
+    backend_->set_keep_base_overlap(true);
+  }
   backend_->LinearizeBatch(tool, X_WT, batch, batch_out, samples_out);
 }
 

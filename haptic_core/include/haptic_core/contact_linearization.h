@@ -310,12 +310,21 @@ class TexturePenetrationSolver {
   /// kWarpedBaseRender they are the warped estimates). `environment_triangles` and
   /// `tool_triangles` restrict which coarse triangles of each side may be rendered (the contact's
   /// cluster's own, issue 31; default: all, picked by the window alone).
+  ///
+  /// When `base_overlap_out` holds N² entries and both sides have surface on the window at the
+  /// base pose (depth_m > −∞; negative where they are apart), the base pose's overlap field is
+  /// written there: b − a per cell (m along the window normal, float,
+  /// row-major j·N + i; −∞ where a side has no surface), the field OverlapRegions renders afresh,
+  /// here from this call's own base render (under kFast the base on the window grown by a cell,
+  /// whose inner N² cells are the window's; the tool's triangles picked with the gradient's
+  /// margins, a superset of Depth's). Untouched otherwise.
   ContactLinearization Linearize(const HapticModel& tool, const RigidTransform& X_WT,
                                  const HapticModel& environment, const RigidTransform& X_WO,
                                  const ContactWindow& window, double stiffness_n_per_m,
                                  std::span<DepthSample> samples_out = {},
                                  TriangleSubset environment_triangles = TriangleSubset::All(),
-                                 TriangleSubset tool_triangles = TriangleSubset::All()) noexcept;
+                                 TriangleSubset tool_triangles = TriangleSubset::All(),
+                                 std::span<float> base_overlap_out = {}) noexcept;
 
   /// δ only (m), at one tool pose; same conventions as Linearize (the triangle subsets too).
   DepthSample Depth(const HapticModel& tool, const RigidTransform& X_WT,
@@ -339,6 +348,16 @@ class TexturePenetrationSolver {
                      TriangleSubset environment_triangles = TriangleSubset::All(),
                      TriangleSubset tool_triangles = TriangleSubset::All(),
                      double bridge_floor_m = 0.0) noexcept;
+
+  /// OverlapRegions on a given overlap field instead of a fresh render: `overlap` holds the
+  /// window's N² values of b − a at the base pose (m, row-major j·N + i; ≤ 0 or −∞ where the
+  /// patches do not overlap), as Linearize's `base_overlap_out` keeps them. The rendering overload
+  /// is this one on its own render, so one field gives the same regions, order, depths and bridge
+  /// levels either way. Returns 0 when `overlap` holds fewer than N² values, the window exceeds
+  /// the solver's max_resolution, or link_m is negative or NaN. Never allocates within the
+  /// reserve.
+  int OverlapRegions(std::span<const float> overlap, const ContactWindow& window, double link_m,
+                     std::span<OverlapRegion> out, double bridge_floor_m = 0.0) noexcept;
 
   /// The overlap of `tool` at X_WT and `environment` at X_WO on `window` (rendered afresh, the
   /// triangle subsets as Linearize takes them) as an occupancy of blocks of `block_cells` ×

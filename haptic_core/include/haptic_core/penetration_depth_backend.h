@@ -3,6 +3,8 @@
 // reference, or the GPU (haptic_core_gpu). Both take the same batch and give the same numbers to
 // within the GPU's depth quantum.
 
+#include <array>
+#include <cstddef>
 #include <limits>
 #include <memory>
 #include <span>
@@ -11,6 +13,7 @@
 #include <vector>
 
 #include "haptic_core/contact_linearization.h"
+#include "haptic_core/contact_model.h"
 #include "haptic_core/haptic_model.h"
 #include "haptic_core/penetration_depth.h"
 #include "haptic_core/spatial.h"
@@ -58,6 +61,21 @@ class PenetrationDepthBackend {
                               std::span<ContactLinearization> out,
                               std::span<DepthSample> samples_out = {}) noexcept = 0;
 
+  /// Whether LinearizeBatch keeps each query's overlap field at the base pose for base_overlap()
+  /// (off by default; stage 5a of the remote step turns it on so as not to render the base pose
+  /// again). Turning it on reserves the fields (allocates: call it at set-up). A backend that
+  /// cannot keep them ignores it (the default; the GPU backend).
+  virtual void set_keep_base_overlap(bool on) { (void)on; }
+  /// Query i's overlap field at the base pose from the last LinearizeBatch: N² floats of b − a
+  /// (m along the window normal, row-major j·N + i; TexturePenetrationSolver::Linearize's
+  /// `base_overlap_out`). Empty where not kept: keeping off or not supported, i past the last
+  /// batch or the reserve, or a side without surface on the window (depth −∞). Valid until the next
+  /// batch.
+  virtual std::span<const float> base_overlap(std::size_t i) const noexcept {
+    (void)i;
+    return {};
+  }
+
   /// Why the last failed batch failed ("" when none failed).
   virtual const std::string& last_error() const noexcept = 0;
   /// Numerical faults met while linearizing (counted, never thrown).
@@ -85,6 +103,10 @@ class CpuPenetrationDepthBackend final : public PenetrationDepthBackend {
   bool LinearizeBatch(const HapticModel& tool, const RigidTransform& X_WT,
                       std::span<const ContactQuery> queries, std::span<ContactLinearization> out,
                       std::span<DepthSample> samples_out = {}) noexcept override;
+  /// Reserves kMaxContacts fields of max_resolution² floats (a batch's queries past those are
+  /// not kept).
+  void set_keep_base_overlap(bool on) override;
+  std::span<const float> base_overlap(std::size_t i) const noexcept override;
   const std::string& last_error() const noexcept override { return last_error_; }
   const LinearizationFaults& faults() const noexcept override { return faults_; }
   /// Worker threads of a batch (1 = the calling thread alone).
@@ -100,6 +122,12 @@ class CpuPenetrationDepthBackend final : public PenetrationDepthBackend {
   struct Arena;  // the oneTBB task arena, kept out of this header
   std::vector<TexturePenetrationSolver> solvers_;
   std::unique_ptr<Arena> arena_;
+  int max_resolution_ = 0;
+  /// set_keep_base_overlap: kMaxContacts slots of max_resolution_² floats, and each slot's cell
+  /// count in the last batch (0: not kept).
+  bool keep_base_overlap_ = false;
+  std::vector<float> base_overlaps_;
+  std::array<std::size_t, kMaxContacts> base_overlap_cells_{};
   LinearizationFaults faults_;
   std::string last_error_;
 };

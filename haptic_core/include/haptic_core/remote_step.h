@@ -197,6 +197,13 @@ struct PipelineOptions {
   /// fig76 rocks (221–285 contact steps above 0.2 N against 11; docs/frontier/issue32/
   /// thirty_first_stop). Off: an option of issue 32's thirty-first stop.
   double split_bridge_fade_per_depth = 0.0;
+  /// Stage 5a finds a window's regions on stage 5's own base render where the backend keeps it
+  /// (PenetrationDepthBackend::base_overlap: the CPU backend), instead of rendering the base
+  /// pose again (false: rendered again, as until issue 32's thirty-second stop). The two fields
+  /// differ only where the render's triangles or rounding do (stage 5 picks the tool's
+  /// triangles with the gradient's margins and, on the fast path, renders the base on the
+  /// window grown by a cell): docs/frontier/issue32/thirty_second_stop.
+  bool split_reuses_base_render = true;
   /// Stage 5a: the window's deepest region stays the parent's whole window as stage 5 linearized
   /// it, and only the other regions get windows of their own (weighted as above; one whose
   /// weight is below 10⁻³ gets none), without merging regions whose centre lies in another's
