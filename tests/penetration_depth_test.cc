@@ -608,14 +608,23 @@ TEST(OverlapRegions, StageFivesBaseRenderGivesTheRenderedRegions) {
       RigidTransform X_WT = testing::ToolPose(0.3e-3, -0.2e-3, 18e-6);
       X_WT.rotation = glm::angleAxis(tilt, glm::normalize(glm::dvec3(1.0, 2.0, 0.0)));
       std::array<ContactLinearization, 1> out{};
-      backend.set_keep_base_overlap(false);
+      backend.set_keep_base_overlap(0);
       ASSERT_TRUE(backend.LinearizeBatch(scene.tool, X_WT, {&q, 1}, out));
       EXPECT_TRUE(backend.base_overlap(0).empty());
-      backend.set_keep_base_overlap(true);
+      backend.set_keep_base_overlap(w.resolution);
       ASSERT_TRUE(backend.LinearizeBatch(scene.tool, X_WT, {&q, 1}, out));
       const std::span<const float> field = backend.base_overlap(0);
       ASSERT_EQ(field.size(), static_cast<std::size_t>(w.resolution) * w.resolution);
       EXPECT_TRUE(backend.base_overlap(1).empty());  // past the batch
+      {
+        // A window larger than the reserve is not kept.
+        CpuPenetrationDepthBackend small(128, p.path, p.threads);
+        small.set_keep_base_overlap(w.resolution - 1);
+        std::array<ContactLinearization, 1> o{};
+        ASSERT_TRUE(small.LinearizeBatch(scene.tool, X_WT, {&q, 1}, o));
+        EXPECT_TRUE(small.base_overlap(0).empty());
+        EXPECT_EQ(o[0].depth_m, out[0].depth_m);
+      }
       EXPECT_EQ(static_cast<float>(out[0].depth_m), *std::max_element(field.begin(), field.end()));
       for (const double link : {1e-3, 5e-3}) {
         std::array<OverlapRegion, 8> kept{}, rendered{};

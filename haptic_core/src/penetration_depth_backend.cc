@@ -16,7 +16,6 @@ struct CpuPenetrationDepthBackend::Arena {
 
 CpuPenetrationDepthBackend::CpuPenetrationDepthBackend(int max_resolution, TextureStagePath path,
                                                        int threads, RotationGradient rotation) {
-  max_resolution_ = max_resolution;
   const int n = std::max(threads, 1);
   solvers_.reserve(static_cast<std::size_t>(n));
   for (int i = 0; i < n; ++i) {
@@ -51,18 +50,17 @@ std::string CpuPenetrationDepthBackend::description() const {
   return d;
 }
 
-void CpuPenetrationDepthBackend::set_keep_base_overlap(bool on) {
-  keep_base_overlap_ = on;
+void CpuPenetrationDepthBackend::set_keep_base_overlap(int max_resolution) {
+  keep_resolution_ = std::max(max_resolution, 0);
   base_overlap_cells_.fill(0);
-  if (on) {
-    base_overlaps_.resize(base_overlap_cells_.size() * static_cast<std::size_t>(max_resolution_) *
-                          static_cast<std::size_t>(max_resolution_));
-  }
+  const auto slot = static_cast<std::size_t>(keep_resolution_) * keep_resolution_;
+  base_overlaps_.assign(base_overlap_cells_.size() * slot, 0.0f);
+  if (keep_resolution_ == 0) base_overlaps_.shrink_to_fit();
 }
 
 std::span<const float> CpuPenetrationDepthBackend::base_overlap(std::size_t i) const noexcept {
   if (i >= base_overlap_cells_.size() || base_overlap_cells_[i] == 0) return {};
-  const auto slot_cells = static_cast<std::size_t>(max_resolution_) * max_resolution_;
+  const auto slot_cells = static_cast<std::size_t>(keep_resolution_) * keep_resolution_;
   return std::span<const float>(base_overlaps_).subspan(i * slot_cells, base_overlap_cells_[i]);
 }
 
@@ -73,11 +71,11 @@ bool CpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
   if (out.size() < queries.size()) return false;
   const bool want_samples = samples_out.size() >= queries.size() * kGradientSamples;
   base_overlap_cells_.fill(0);
-  const auto slot_cells = static_cast<std::size_t>(max_resolution_) * max_resolution_;
+  const auto slot_cells = static_cast<std::size_t>(keep_resolution_) * keep_resolution_;
   const auto one = [&](TexturePenetrationSolver& solver, std::size_t i) {
     const ContactQuery& q = queries[i];
     const auto cells = static_cast<std::size_t>(q.window.resolution) * q.window.resolution;
-    const bool keep = keep_base_overlap_ && i < base_overlap_cells_.size() && cells <= slot_cells;
+    const bool keep = keep_resolution_ > 0 && i < base_overlap_cells_.size() && cells <= slot_cells;
     out[i] =
         solver.Linearize(tool, X_WT, *q.environment, q.X_WO, q.window, q.stiffness_n_per_m,
                          want_samples ? samples_out.subspan(i * kGradientSamples, kGradientSamples)

@@ -136,7 +136,7 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
   if (!backend_) backend_ = MakeCpuBackend();
   // Stage 5a reads stage 5's base render instead of rendering the base pose again.
   if (options_.split_windows_at_separated_overlap && options_.split_reuses_base_render) {
-    backend_->set_keep_base_overlap(true);
+    backend_->set_keep_base_overlap(options_.max_window_resolution());
   }
   if (!scene.tool) throw std::invalid_argument("scene '" + scene.name + "' has no tool");
   if (glm::length(scene.tool->center_of_mass_O) > 1e-9) {
@@ -669,7 +669,7 @@ void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n)
   }
   backend_ = MakeCpuBackend();
   if (options_.split_windows_at_separated_overlap && options_.split_reuses_base_render) {
-    backend_->set_keep_base_overlap(true);
+    backend_->set_keep_base_overlap(options_.max_window_resolution());
   }
   backend_->LinearizeBatch(tool, X_WT, batch, batch_out, samples_out);
 }

@@ -61,11 +61,12 @@ class PenetrationDepthBackend {
                               std::span<ContactLinearization> out,
                               std::span<DepthSample> samples_out = {}) noexcept = 0;
 
-  /// Whether LinearizeBatch keeps each query's overlap field at the base pose for base_overlap()
-  /// (off by default; stage 5a of the remote step turns it on so as not to render the base pose
-  /// again). Turning it on reserves the fields (allocates: call it at set-up). A backend that
-  /// cannot keep them ignores it (the default; the GPU backend).
-  virtual void set_keep_base_overlap(bool on) { (void)on; }
+  /// Whether LinearizeBatch keeps each query's overlap field at the base pose for base_overlap(),
+  /// for windows of up to `max_resolution`² cells (0, the default: off; stage 5a of the remote
+  /// step turns it on for its largest window so as not to render the base pose again). Turning it
+  /// on reserves the fields (allocates: call it at set-up). A backend that cannot keep them
+  /// ignores it (the default; the GPU backend).
+  virtual void set_keep_base_overlap(int max_resolution) { (void)max_resolution; }
   /// Query i's overlap field at the base pose from the last LinearizeBatch: N² floats of b − a
   /// (m along the window normal, row-major j·N + i; TexturePenetrationSolver::Linearize's
   /// `base_overlap_out`). Empty where not kept: keeping off or not supported, i past the last
@@ -103,9 +104,9 @@ class CpuPenetrationDepthBackend final : public PenetrationDepthBackend {
   bool LinearizeBatch(const HapticModel& tool, const RigidTransform& X_WT,
                       std::span<const ContactQuery> queries, std::span<ContactLinearization> out,
                       std::span<DepthSample> samples_out = {}) noexcept override;
-  /// Reserves kMaxContacts fields of max_resolution² floats (a batch's queries past those are
-  /// not kept).
-  void set_keep_base_overlap(bool on) override;
+  /// Reserves kMaxContacts fields of max_resolution² floats (a batch's queries past those, and
+  /// larger windows, are not kept); max_resolution ≤ 0 turns keeping off and frees them.
+  void set_keep_base_overlap(int max_resolution) override;
   std::span<const float> base_overlap(std::size_t i) const noexcept override;
   const std::string& last_error() const noexcept override { return last_error_; }
   const LinearizationFaults& faults() const noexcept override { return faults_; }
@@ -122,10 +123,9 @@ class CpuPenetrationDepthBackend final : public PenetrationDepthBackend {
   struct Arena;  // the oneTBB task arena, kept out of this header
   std::vector<TexturePenetrationSolver> solvers_;
   std::unique_ptr<Arena> arena_;
-  int max_resolution_ = 0;
-  /// set_keep_base_overlap: kMaxContacts slots of max_resolution_² floats, and each slot's cell
-  /// count in the last batch (0: not kept).
-  bool keep_base_overlap_ = false;
+  /// set_keep_base_overlap: kMaxContacts slots of keep_resolution_² floats (0: off), and each
+  /// slot's cell count in the last batch (0: not kept).
+  int keep_resolution_ = 0;
   std::vector<float> base_overlaps_;
   std::array<std::size_t, kMaxContacts> base_overlap_cells_{};
   LinearizationFaults faults_;
