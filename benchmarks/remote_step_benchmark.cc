@@ -114,10 +114,10 @@ int main(int argc, char** argv) {
                  "tool-leaves-follow (PipelineOptions::tool_leaves_follow_object_leaves), "
                  "split-continuous (stage 5a's split in its continuous form, on by default since "
                  "issue 32's thirty-first stop: B without it; until then B was the split with "
-                 "100 um fades, the frontier's split_continuous_100um), split-reuses-base-render "
+                 "100 um fades, the frontier's split_continuous_100um), reuse-base-render "
                  "(stage 5a's regions from stage 5's base render; B renders the base again)")
       ->check(CLI::IsMember({"parallax", "seed-from-last-step", "tool-leaves-follow",
-                             "split-continuous", "split-reuses-base-render"}));
+                             "split-continuous", "reuse-base-render"}));
   app.add_option("--csv", csv_path, "write one row per scene here");
   app.add_option("--cache-dir", cache_dir, "model cache folder")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
@@ -173,7 +173,7 @@ int main(int argc, char** argv) {
       if (ab == "seed-from-last-step") return &o.depth_refinement.seed_from_last_step;
       if (ab == "tool-leaves-follow") return &o.tool_leaves_follow_object_leaves;
       if (ab == "split-continuous") return &o.split_windows_at_separated_overlap;
-      if (ab == "split-reuses-base-render") return &o.split_reuses_base_render;
+      if (ab == "reuse-base-render") return &o.reuse_base_render;
       return nullptr;
     };
     if (bool* flag = ab_flag(options_b)) {

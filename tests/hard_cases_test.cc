@@ -281,10 +281,11 @@ TEST(HardCases, OneOverlapInSeveralWindowsPushesOnce) {
   const double press = 50e-6;
   const RigidTransform X_WT = At({0.5 * gp.length_m + 0.005 - press, 0.0, 0.0},
                                  glm::angleAxis(0.5 * std::numbers::pi, glm::dvec3(0, 1, 0)));
-  const auto step = [&](const HapticScene& scene, bool share) {
+  const auto step = [&](const HapticScene& scene, bool share, bool reuse = true) {
     PipelineOptions options;
     options.max_window_extent_m = options.window_extent_m;
     options.share_connected_contacts = share;
+    options.reuse_base_render = reuse;
     HapticTexturePipeline pipeline(scene, options);
     StepTimings t;
     ContactModel m = pipeline.Step(X_WT, 1, t);
@@ -323,6 +324,20 @@ TEST(HardCases, OneOverlapInSeveralWindowsPushesOnce) {
   EXPECT_NEAR(g_delta, press, 5e-6);
   EXPECT_GT(g_apart.F_T_W_at_q0.force.x, 2.5 * kK * g_delta);
   EXPECT_NEAR(g_shared.F_T_W_at_q0.force.x, 2.0 * kK * g_delta, 0.04 * kK * g_delta);
+  // Two routes to the footprints (PipelineOptions::reuse_base_render): read from stage 5's render
+  // (the default) or rendered again, the same shares and wrench.
+  for (const HapticScene* s : {&flat, &grooved}) {
+    const auto [reused, reused_count] = step(*s, true, true);
+    const auto [again, again_count] = step(*s, true, false);
+    EXPECT_EQ(reused_count, again_count);
+    ASSERT_EQ(reused.num_contacts, again.num_contacts);
+    EXPECT_EQ(reused.F_T_W_at_q0.force, again.F_T_W_at_q0.force);
+    EXPECT_EQ(reused.F_T_W_at_q0.torque, again.F_T_W_at_q0.torque);
+    for (int i = 0; i < reused.num_contacts; ++i) {
+      EXPECT_EQ(reused.contacts[static_cast<std::size_t>(i)].stiffness_n_per_m,
+                again.contacts[static_cast<std::size_t>(i)].stiffness_n_per_m);
+    }
+  }
   PipelineOptions bad;
   bad.share_connected_contacts = true;
   bad.share_temperature_m = 0.0;

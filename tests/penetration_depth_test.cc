@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <numbers>
 #include <random>
@@ -580,10 +581,11 @@ TEST(OverlapRegions, BridgeLevelsAreTheSaddlesOfTheOverlapsMergeTree) {
 }
 
 // Stage 5a reads its regions from stage 5's base render (PenetrationDepthBackend::base_overlap,
-// PipelineOptions::split_reuses_base_render; issue 32's thirty-second stop) instead of rendering
+// PipelineOptions::reuse_base_render; issue 32's thirty-second stop) instead of rendering
 // the base pose again. Two routes to one set of regions: the field the backend kept and a fresh
 // render give the same regions, boxes, cell counts and peak cells, with depths and bridge levels
-// within float rounding of the window's heights, on every texture-stage path (the fast path
+// within float rounding of the window's heights, and stage 5c's block occupancy the same bytes,
+// on every texture-stage path (the fast path
 // alone and with parallel renders, the reference path) and with the tool tilted. The field's
 // largest value is stage 5's δ0 itself. Nothing is kept where a side has no surface on the
 // window (δ0 = −∞), nor when keeping is off.
@@ -626,6 +628,15 @@ TEST(OverlapRegions, StageFivesBaseRenderGivesTheRenderedRegions) {
         EXPECT_EQ(o[0].depth_m, out[0].depth_m);
       }
       EXPECT_EQ(static_cast<float>(out[0].depth_m), *std::max_element(field.begin(), field.end()));
+      for (const int block : {1, 4}) {
+        std::array<std::uint8_t, 90 * 90> by_field{}, by_render{};
+        const int a = solver.OverlapOccupancy(field, w, block, by_field);
+        const int b =
+            solver.OverlapOccupancy(scene.tool, X_WT, scene.env, q.X_WO, w, block, by_render);
+        EXPECT_GT(a, 0);
+        EXPECT_EQ(a, b);
+        EXPECT_EQ(by_field, by_render);
+      }
       for (const double link : {1e-3, 5e-3}) {
         std::array<OverlapRegion, 8> kept{}, rendered{};
         const int a = solver.OverlapRegions(field, w, link, kept, 30e-6);
@@ -670,6 +681,8 @@ TEST(OverlapRegions, StageFivesBaseRenderGivesTheRenderedRegions) {
   std::array<OverlapRegion, 8> out{};
   const std::vector<float> short_field(10, 1.0f);
   EXPECT_EQ(solver.OverlapRegions(short_field, w, 1e-3, out), 0);
+  std::array<std::uint8_t, 90 * 90> occupancy{};
+  EXPECT_EQ(solver.OverlapOccupancy(short_field, w, 1, occupancy), -1);
 }
 
 }  // namespace

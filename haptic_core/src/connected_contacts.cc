@@ -130,7 +130,8 @@ int ShareConnectedContacts(const HapticModel& tool, const RigidTransform& X_WT,
                            std::span<const ContactQuery> queries,
                            std::span<ContactLinearization> results,
                            const ContactSharingOptions& options, TexturePenetrationSolver& solver,
-                           std::span<std::uint8_t> scratch, std::span<const int> family) noexcept {
+                           std::span<std::uint8_t> scratch, std::span<const int> family,
+                           std::span<const std::span<const float>> base_overlaps) noexcept {
   const int n = static_cast<int>(
       std::min({queries.size(), results.size(), static_cast<std::size_t>(kMaxContacts)}));
   const auto per_contact = static_cast<std::size_t>(kMaxSharingBlocks) * kMaxSharingBlocks;
@@ -183,8 +184,13 @@ int ShareConnectedContacts(const HapticModel& tool, const RigidTransform& X_WT,
     const std::span<std::uint8_t> occupancy(
         scratch.data() + static_cast<std::size_t>(i) * per_contact,
         static_cast<std::size_t>(nb) * nb);
-    const int count = solver.OverlapOccupancy(tool, X_WT, *q.environment, q.X_WO, q.window, block,
-                                              occupancy, q.environment_triangles, q.tool_triangles);
+    const bool kept = base_overlaps.size() >= queries.size() &&
+                      !base_overlaps[static_cast<std::size_t>(i)].empty();
+    const int count =
+        kept ? solver.OverlapOccupancy(base_overlaps[static_cast<std::size_t>(i)], q.window, block,
+                                       occupancy)
+             : solver.OverlapOccupancy(tool, X_WT, *q.environment, q.X_WO, q.window, block,
+                                       occupancy, q.environment_triangles, q.tool_triangles);
     if (count <= 0) continue;
     footprints[static_cast<std::size_t>(i)] = {q.window, block, nb, occupancy};
     occupied[static_cast<std::size_t>(i)] = true;

@@ -334,16 +334,32 @@ int TexturePenetrationSolver::OverlapOccupancy(const HapticModel& tool, const Ri
   const int n = w.resolution;
   if (block_cells < 1 || n > max_resolution_) return -1;
   const int nb = (n + block_cells - 1) / block_cells;
-  const auto blocks = static_cast<std::size_t>(nb) * static_cast<std::size_t>(nb);
-  if (occupancy.size() < blocks) return -1;
+  if (occupancy.size() < static_cast<std::size_t>(nb) * static_cast<std::size_t>(nb)) return -1;
   Depth(tool, X_WT, environment, X_WO, w, environment_triangles, tool_triangles);
+  const auto cells = static_cast<std::size_t>(n) * static_cast<std::size_t>(n);
+  overlap_depth_.resize(cells);
+  for (std::size_t c = 0; c < cells; ++c) overlap_depth_[c] = env_heights_[c] - tool_heights_[c];
+  return OverlapOccupancy(overlap_depth_, w, block_cells, occupancy);
+}
+
+int TexturePenetrationSolver::OverlapOccupancy(std::span<const float> overlap,
+                                               const ContactWindow& w, int block_cells,
+                                               std::span<std::uint8_t> occupancy) const noexcept {
+  const int n = w.resolution;
+  if (block_cells < 1 || n > max_resolution_) return -1;
+  const int nb = (n + block_cells - 1) / block_cells;
+  const auto blocks = static_cast<std::size_t>(nb) * static_cast<std::size_t>(nb);
+  if (occupancy.size() < blocks ||
+      overlap.size() < static_cast<std::size_t>(n) * static_cast<std::size_t>(n)) {
+    return -1;
+  }
   std::fill_n(occupancy.begin(), blocks, std::uint8_t{0});
   int occupied = 0;
   for (int j = 0; j < n; ++j) {
     for (int i = 0; i < n; ++i) {
       const auto c =
           static_cast<std::size_t>(j) * static_cast<std::size_t>(n) + static_cast<std::size_t>(i);
-      if (!(env_heights_[c] - tool_heights_[c] > 0.0f)) continue;
+      if (!(overlap[c] > 0.0f)) continue;
       std::uint8_t& b = occupancy[static_cast<std::size_t>(j / block_cells) * nb +
                                   static_cast<std::size_t>(i / block_cells)];
       occupied += b == 0 ? 1 : 0;

@@ -135,8 +135,13 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
   }
   if (!backend_) backend_ = MakeCpuBackend();
   // Stage 5a reads stage 5's base render instead of rendering the base pose again.
-  if (options_.split_windows_at_separated_overlap && options_.split_reuses_base_render) {
+  if (ReusesBaseRender()) {
     backend_->set_keep_base_overlap(options_.max_window_resolution());
+    if (options_.split_windows_at_separated_overlap) {
+      base_field_store_.resize(static_cast<std::size_t>(kMaxContacts) *
+                               static_cast<std::size_t>(options_.max_window_resolution()) *
+                               static_cast<std::size_t>(options_.max_window_resolution()));
+    }
   }
   if (!scene.tool) throw std::invalid_argument("scene '" + scene.name + "' has no tool");
   if (glm::length(scene.tool->center_of_mass_O) > 1e-9) {
@@ -204,6 +209,11 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
                          options_.grid_resolution, last_queries_, step_faults_.bad_windows);
   // Stage 5: texture penetration depth and its gradient, linearized, for the whole batch.
   LinearizeContacts(X_WT, last_num_queries_);
+  for (int i = 0; i < last_num_queries_; ++i) {
+    base_fields_[static_cast<std::size_t>(i)] =
+        ReusesBaseRender() ? backend_->base_overlap(static_cast<std::size_t>(i))
+                           : std::span<const float>{};
+  }
   // Stage 5a: a window whose overlap is in separated regions becomes one window per region.
   if (region_solver_ && options_.split_windows_at_separated_overlap) {
     last_num_queries_ = SplitSeparatedOverlap(X_WT, last_num_queries_);
@@ -532,7 +542,7 @@ int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int
       const double link =
           options_.split_link_m > 0.0 ? options_.split_link_m : options_.clustering_distance_m;
       // Stage 5's base render where the backend kept it (the CPU backend), else rendered again.
-      const std::span<const float> base = backend_->base_overlap(static_cast<std::size_t>(i));
+      const std::span<const float> base = base_fields_[static_cast<std::size_t>(i)];
       regions = !base.empty()
                     ? region_solver_->OverlapRegions(base, q.window, link, regions_, floor)
                     : region_solver_->OverlapRegions(tool, X_WT, *q.environment, q.X_WO, q.window,
@@ -547,6 +557,7 @@ int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int
     if (!split || parent_window) {
       // Kept: moved down over the split ones, with its results and samples.
       if (kept != i) {
+        base_fields_[static_cast<std::size_t>(kept)] = base_fields_[static_cast<std::size_t>(i)];
         last_queries_[static_cast<std::size_t>(kept)] = q;
         last_results_[static_cast<std::size_t>(kept)] = last_results_[static_cast<std::size_t>(i)];
         std::copy_n(last_samples_.begin() + static_cast<std::ptrdiff_t>(i) * kGradientSamples,
@@ -604,12 +615,35 @@ int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int
     split_family_[static_cast<std::size_t>(kept + k)] = parent;
   }
   std::copy_n(split_queries_.begin(), num_new, last_queries_.begin() + kept);
+  // The split windows' batch overwrites the backend's first num_new fields: the kept contacts'
+  // fields are copied out first (a few thousand floats each), into slots of their own.
+  if (!base_field_store_.empty()) {
+    const auto slot = base_field_store_.size() / static_cast<std::size_t>(kMaxContacts);
+    for (int k = 0; k < kept; ++k) {
+      std::span<const float>& f = base_fields_[static_cast<std::size_t>(k)];
+      if (f.empty() || f.size() > slot) {
+        f = {};
+        continue;
+      }
+      float* to = base_field_store_.data() + static_cast<std::size_t>(k) * slot;
+      std::copy(f.begin(), f.end(), to);
+      f = {to, f.size()};
+    }
+  } else {
+    // No room to keep them (a GPU backend that fell back to the CPU): rendered again in 5c.
+    std::fill_n(base_fields_.begin(), kept, std::span<const float>{});
+  }
   const std::size_t per = kGradientSamples;
   const bool ok = backend_->LinearizeBatch(
       tool, X_WT, {last_queries_.data() + kept, static_cast<std::size_t>(num_new)},
       {last_results_.data() + kept, static_cast<std::size_t>(num_new)},
       {last_samples_.data() + static_cast<std::size_t>(kept) * per,
        static_cast<std::size_t>(num_new) * per});
+  for (int k = 0; k < num_new; ++k) {
+    base_fields_[static_cast<std::size_t>(kept + k)] =
+        ok && ReusesBaseRender() ? backend_->base_overlap(static_cast<std::size_t>(k))
+                                 : std::span<const float>{};
+  }
   if (!ok) {
     for (int k = kept; k < kept + num_new; ++k) {
       last_results_[static_cast<std::size_t>(k)].depth_m = -std::numeric_limits<double>::infinity();
@@ -668,9 +702,7 @@ void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n)
     fallback_reason_ = std::string(backend_->name()) + ": " + backend_->last_error();
   }
   backend_ = MakeCpuBackend();
-  if (options_.split_windows_at_separated_overlap && options_.split_reuses_base_render) {
-    backend_->set_keep_base_overlap(options_.max_window_resolution());
-  }
+  if (ReusesBaseRender()) backend_->set_keep_base_overlap(options_.max_window_resolution());
   backend_->LinearizeBatch(tool, X_WT, batch, batch_out, samples_out);
 }
 
@@ -687,7 +719,13 @@ void HapticTexturePipeline::ShareConnectedContacts(const RigidTransform& X_WT, i
       sharing_occupancy_,
       options_.split_windows_at_separated_overlap && options_.split_keeps_parent_window
           ? std::span<const int>(split_family_.data(), static_cast<std::size_t>(n))
-          : std::span<const int>());
+          : std::span<const int>(),
+      std::span<const std::span<const float>>(base_fields_.data(), static_cast<std::size_t>(n)));
+}
+
+bool HapticTexturePipeline::ReusesBaseRender() const noexcept {
+  return options_.reuse_base_render && backend_->name() == "cpu" &&
+         (options_.split_windows_at_separated_overlap || options_.share_connected_contacts);
 }
 
 }  // namespace ht

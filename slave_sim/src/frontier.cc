@@ -76,7 +76,7 @@ PipelineOptions PipelineOptionsFor(const FrontierSetting& st) {
   options.split_bridge_fade_m = st.split_bridge_fade_m;
   options.split_keeps_parent_window = st.split_keeps_parent_window;
   options.split_bridge_fade_per_depth = st.split_bridge_fade_per_depth;
-  options.split_reuses_base_render = st.split_reuses_base_render;
+  options.reuse_base_render = st.reuse_base_render;
   options.depth_refinement.subgrid_rotations = st.subgrid_rotations;
   options.depth_refinement.subgrid_translations = st.subgrid_translations;
   options.depth_refinement.conservative_screen = st.conservative_screen;
@@ -438,8 +438,8 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     // The default with stage 5a's base pose rendered again instead of read from stage 5's
     // render (issue 32's thirty-second stop: the route before).
     FrontierSetting render_again = base;
-    render_again.name = "split_render_base_again";
-    render_again.split_reuses_base_render = false;
+    render_again.name = "render_base_again";
+    render_again.reuse_base_render = false;
     s.push_back(render_again);
     // Stage 5c (on in the default): its link, fade and temperature varied, and off.
     const FrontierSetting& share = refined;

@@ -92,13 +92,16 @@ inline constexpr int kMaxSharingBlocks = 64;
 /// link_m ≤ 0, or scratch is short: nothing changes). `family`, where it is as long as
 /// `queries`, names each contact's family (≥ 0; −1: none): contacts of one family never link
 /// (stage 5a's split regions and the parent window they lie in, which its bridge fade weighs
-/// instead, PipelineOptions::split_keeps_parent_window). noexcept; allocation-free within the
-/// solver's reserve.
+/// instead, PipelineOptions::split_keeps_parent_window). `base_overlaps`, where it is as long
+/// as `queries`, gives each contact's overlap field at the base pose (stage 5's own render,
+/// PenetrationDepthBackend::base_overlap; empty: none): a contact with one is not rendered again
+/// (the same footprint from the same field). noexcept; allocation-free within the solver's
+/// reserve.
 int ShareConnectedContacts(const HapticModel& tool, const RigidTransform& X_WT,
                            std::span<const ContactQuery> queries,
                            std::span<ContactLinearization> results,
                            const ContactSharingOptions& options, TexturePenetrationSolver& solver,
-                           std::span<std::uint8_t> scratch,
-                           std::span<const int> family = {}) noexcept;
+                           std::span<std::uint8_t> scratch, std::span<const int> family = {},
+                           std::span<const std::span<const float>> base_overlaps = {}) noexcept;
 
 }  // namespace ht

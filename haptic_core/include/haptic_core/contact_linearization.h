@@ -373,6 +373,14 @@ class TexturePenetrationSolver {
                        TriangleSubset environment_triangles = TriangleSubset::All(),
                        TriangleSubset tool_triangles = TriangleSubset::All()) noexcept;
 
+  /// OverlapOccupancy on a given overlap field instead of a fresh render (`overlap`: the window's
+  /// N² values of b − a at the base pose, m, row-major j·N + i, as Linearize's
+  /// `base_overlap_out` keeps them; the rendering overload is this one on its own render).
+  /// Returns −1, writing nothing, as that one does, and also when `overlap` holds fewer than N²
+  /// values.
+  int OverlapOccupancy(std::span<const float> overlap, const ContactWindow& window, int block_cells,
+                       std::span<std::uint8_t> occupancy) const noexcept;
+
   const LinearizationFaults& faults() const noexcept { return faults_; }
 
  private:

@@ -197,13 +197,15 @@ struct PipelineOptions {
   /// fig76 rocks (221–285 contact steps above 0.2 N against 11; docs/frontier/issue32/
   /// thirty_first_stop). Off: an option of issue 32's thirty-first stop.
   double split_bridge_fade_per_depth = 0.0;
-  /// Stage 5a finds a window's regions on stage 5's own base render where the backend keeps it
-  /// (PenetrationDepthBackend::base_overlap: the CPU backend), instead of rendering the base
-  /// pose again (false: rendered again, as until issue 32's thirty-second stop). The two fields
-  /// differ only where the render's triangles or rounding do (stage 5 picks the tool's
-  /// triangles with the gradient's margins and, on the fast path, renders the base on the
-  /// window grown by a cell): docs/frontier/issue32/thirty_second_stop.
-  bool split_reuses_base_render = true;
+  /// Stages 5a and 5c read the base pose's overlap (b − a per cell) from stage 5's own render
+  /// where the backend keeps it (PenetrationDepthBackend::base_overlap: the CPU backend), instead
+  /// of rendering the base pose again on each window: 5a for its regions, 5c for its footprints
+  /// (false: rendered again, as until issue 32's thirty-second stop). The two fields can differ
+  /// only where the renders' triangles or rounding do (stage 5 picks the tool's triangles with
+  /// the gradient's margins and, on the fast path, renders the base on the window grown by a
+  /// cell); on the frontier's 4,006 contacts the models are the same to the last digit
+  /// (docs/frontier/issue32/thirty_second_stop).
+  bool reuse_base_render = true;
   /// Stage 5a: the window's deepest region stays the parent's whole window as stage 5 linearized
   /// it, and only the other regions get windows of their own (weighted as above; one whose
   /// weight is below 10⁻³ gets none), without merging regions whose centre lies in another's
@@ -490,6 +492,15 @@ class HapticTexturePipeline {
   /// windows share one, and never share a penalty, ShareConnectedContacts).
   std::array<int, kMaxContacts> split_parent_{};
   std::array<int, kMaxContacts> split_family_{};
+  /// reuse_base_render: each contact's overlap field at the base pose from stage 5's render
+  /// (PenetrationDepthBackend::base_overlap; empty: none), in last_queries_' order, for stages 5a
+  /// and 5c; and where the kept contacts' fields are copied before stage 5a's own batch
+  /// overwrites the backend's (kMaxContacts fields of max_window_resolution² floats).
+  std::array<std::span<const float>, kMaxContacts> base_fields_{};
+  std::vector<float> base_field_store_;
+  /// Whether stages 5a and 5c read stage 5's render (reuse_base_render, a stage that needs it on,
+  /// and a backend that keeps it).
+  bool ReusesBaseRender() const noexcept;
   int last_num_queries_ = 0;
   StepFaults step_faults_;
   std::int64_t backend_failures_ = 0;

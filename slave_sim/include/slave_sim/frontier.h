@@ -114,8 +114,8 @@ struct FrontierSetting {
   bool split_keeps_parent_window = true;
   /// PipelineOptions::split_bridge_fade_per_depth (0: off; "split_fade_per_depth<C>x" set it).
   double split_bridge_fade_per_depth = 0.0;
-  /// PipelineOptions::split_reuses_base_render ("split_render_base_again" turns it off).
-  bool split_reuses_base_render = true;
+  /// PipelineOptions::reuse_base_render ("render_base_again" turns it off).
+  bool reuse_base_render = true;
   /// PipelineOptions::share_connected_contacts ("no_shared_contacts" turns it off), and
   /// share_link_m, share_fade_m (< 0: the defaults) and share_temperature_m (0: the default).
   bool share_connected_contacts = true;
