@@ -83,7 +83,7 @@ bool CpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
                          q.environment_triangles, q.tool_triangles,
                          keep ? std::span<float>(base_overlaps_).subspan(i * slot_cells, cells)
                               : std::span<float>{});
-    // Linearize writes the field exactly when the base pose overlaps.
+    // Linearize writes the field exactly when both sides have surface there (δ0 > −∞).
     if (keep && out[i].depth_m > -std::numeric_limits<double>::infinity()) {
       base_overlap_cells_[i] = cells;
     }

@@ -134,14 +134,11 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
     queries_.back().SetThreads(options_.texture_threads);
   }
   if (!backend_) backend_ = MakeCpuBackend();
-  // Stage 5a reads stage 5's base render instead of rendering the base pose again.
+  // Stages 5a and 5c read stage 5's base render instead of rendering the base pose again.
   if (ReusesBaseRender()) {
-    backend_->set_keep_base_overlap(options_.max_window_resolution());
-    if (options_.split_windows_at_separated_overlap) {
-      base_field_store_.resize(static_cast<std::size_t>(kMaxContacts) *
-                               static_cast<std::size_t>(options_.max_window_resolution()) *
-                               static_cast<std::size_t>(options_.max_window_resolution()));
-    }
+    const auto r = static_cast<std::size_t>(KeptFieldResolution());
+    backend_->set_keep_base_overlap(KeptFieldResolution());
+    if (options_.split_windows_at_separated_overlap) base_field_store_.resize(kMaxContacts * r * r);
   }
   if (!scene.tool) throw std::invalid_argument("scene '" + scene.name + "' has no tool");
   if (glm::length(scene.tool->center_of_mass_O) > 1e-9) {
@@ -702,7 +699,7 @@ void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n)
     fallback_reason_ = std::string(backend_->name()) + ": " + backend_->last_error();
   }
   backend_ = MakeCpuBackend();
-  if (ReusesBaseRender()) backend_->set_keep_base_overlap(options_.max_window_resolution());
+  if (ReusesBaseRender()) backend_->set_keep_base_overlap(KeptFieldResolution());
   backend_->LinearizeBatch(tool, X_WT, batch, batch_out, samples_out);
 }
 
@@ -721,6 +718,10 @@ void HapticTexturePipeline::ShareConnectedContacts(const RigidTransform& X_WT, i
           ? std::span<const int>(split_family_.data(), static_cast<std::size_t>(n))
           : std::span<const int>(),
       std::span<const std::span<const float>>(base_fields_.data(), static_cast<std::size_t>(n)));
+}
+
+int HapticTexturePipeline::KeptFieldResolution() const noexcept {
+  return std::min(options_.max_window_resolution(), kMaxKeptFieldResolution);
 }
 
 bool HapticTexturePipeline::ReusesBaseRender() const noexcept {

@@ -62,8 +62,8 @@ class PenetrationDepthBackend {
                               std::span<DepthSample> samples_out = {}) noexcept = 0;
 
   /// Whether LinearizeBatch keeps each query's overlap field at the base pose for base_overlap(),
-  /// for windows of up to `max_resolution`² cells (0, the default: off; stage 5a of the remote
-  /// step turns it on for its largest window so as not to render the base pose again). Turning it
+  /// for windows of up to `max_resolution`² cells (0, the default: off; stages 5a and 5c of the
+  /// remote step turn it on so as not to render the base pose again). Turning it
   /// on reserves the fields (allocates: call it at set-up). A backend that cannot keep them
   /// ignores it (the default; the GPU backend).
   virtual void set_keep_base_overlap(int max_resolution) { (void)max_resolution; }

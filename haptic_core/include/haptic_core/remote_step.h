@@ -501,6 +501,11 @@ class HapticTexturePipeline {
   /// Whether stages 5a and 5c read stage 5's render (reuse_base_render, a stage that needs it on,
   /// and a backend that keeps it).
   bool ReusesBaseRender() const noexcept;
+  /// The largest window whose field is kept: max_window_resolution() (150 at the defaults), at
+  /// most kMaxKeptFieldResolution (3.7 MB of fields in the backend and as much here; larger
+  /// windows, from grids or windows far past the defaults, are rendered again).
+  int KeptFieldResolution() const noexcept;
+  static constexpr int kMaxKeptFieldResolution = 256;
   int last_num_queries_ = 0;
   StepFaults step_faults_;
   std::int64_t backend_failures_ = 0;
