@@ -90,9 +90,12 @@ int OverlapCellLinks::Components(std::span<const float> depth, int n, double rea
                                  std::span<int> parent) noexcept {
   if (parent.size() != depth.size() || !Prepare(n, reach, depth.size())) return -1;
   const auto cells = depth.size();
+  // With a reach of a cell or more, each run of set cells starts as one component, a star about
+  // its first cell (its smallest index, so roots stay first cells).
   for (std::size_t c = 0; c < cells; ++c) {
     const bool set = depth[c] > 0.0f;
-    parent[c] = set ? static_cast<int>(c) : -1;
+    const bool run_goes_on = set && r_ >= 1 && c % n != 0 && parent[c - 1] >= 0;
+    parent[c] = !set ? -1 : run_goes_on ? parent[c - 1] : static_cast<int>(c);
     if (set) rows_[c / n * words_ + (c % n) / 64] |= std::uint64_t{1} << (c % n % 64);
   }
   const auto link = [&](int c, int d) {
@@ -100,17 +103,21 @@ int OverlapCellLinks::Components(std::span<const float> depth, int n, double rea
     if (a != b) parent[static_cast<std::size_t>(std::max(a, b))] = std::min(a, b);
   };
   if (r_ >= 1) {
-    // Each set cell links to one cell of every run within reach in its row (after it) and the r
-    // rows below; cells of one run link through their row neighbours (distance 1).
+    // Each run of set cells [i0, i1] is one component already (above), and a cell dj rows below is
+    // within reach of one of its cells exactly when it lies in [i0 − w, i1 + w], w the half width
+    // at dj: so each run links its first cell to one cell of every run in that range of the r rows
+    // below, and of its own row after it.
     for (int j = 0; j < n; ++j) {
       const std::uint64_t* row = rows_.data() + static_cast<std::size_t>(j) * words_;
-      for (int i = NextSet(row, 0, n - 1); i >= 0; i = NextSet(row, i + 1, n - 1)) {
-        const int c = j * n + i;
+      for (int i0 = NextSet(row, 0, n - 1); i0 >= 0;) {
+        const int i1 = NextClear(row, i0, n - 1) - 1;
+        const int c = j * n + i0;
         for (int dj = 0; dj <= r_ && j + dj < n; ++dj) {
           const int w = half_width_[static_cast<std::size_t>(dj)];
           ForEachRun(rows_.data() + static_cast<std::size_t>(j + dj) * words_, j + dj, n,
-                     dj == 0 ? i + 1 : i - w, i + w, [&](int d) { link(c, d); });
+                     dj == 0 ? i1 + 1 : i0 - w, i1 + w, [&](int d) { link(c, d); });
         }
+        i0 = i1 + 1 < n ? NextSet(row, i1 + 1, n - 1) : -1;
       }
     }
   }

@@ -5,6 +5,8 @@
 // at a 10 mm link on a 0.4 mm grid that is about 2,000 neighbours a cell. Both passes here visit
 // one cell of each run of set cells a row instead: cells next to each other in a row are within
 // any reach ≥ 1, so a run is already one component and linking one of its cells links them all.
+// Components also scans once per run rather than per cell: a row's cells within reach of some
+// cell of the run [i0, i1] are those in [i0 − w, i1 + w], w the disc's half width at that row.
 // The components and levels are those of the cell-by-cell passes, bit for bit
 // (tests/overlap_links_test.cc checks them against the cell-by-cell form on random grids).
 
