@@ -135,10 +135,12 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
   }
   if (!backend_) backend_ = MakeCpuBackend();
   // Stages 5a and 5c read stage 5's base render instead of rendering the base pose again.
-  if (ReusesBaseRender()) {
+  if (ReusesBaseRender()) backend_->set_keep_base_overlap(KeptFieldResolution());
+  // Stage 5a's copies of the kept contacts' fields, whatever the backend (a GPU backend that
+  // falls back to the CPU keeps fields from then on).
+  if (options_.reuse_base_render && options_.split_windows_at_separated_overlap) {
     const auto r = static_cast<std::size_t>(KeptFieldResolution());
-    backend_->set_keep_base_overlap(KeptFieldResolution());
-    if (options_.split_windows_at_separated_overlap) base_field_store_.resize(kMaxContacts * r * r);
+    base_field_store_.resize(kMaxContacts * r * r);
   }
   if (!scene.tool) throw std::invalid_argument("scene '" + scene.name + "' has no tool");
   if (glm::length(scene.tool->center_of_mass_O) > 1e-9) {
@@ -613,22 +615,18 @@ int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int
   }
   std::copy_n(split_queries_.begin(), num_new, last_queries_.begin() + kept);
   // The split windows' batch overwrites the backend's first num_new fields: the kept contacts'
-  // fields are copied out first (a few thousand floats each), into slots of their own.
-  if (!base_field_store_.empty()) {
-    const auto slot = base_field_store_.size() / static_cast<std::size_t>(kMaxContacts);
-    for (int k = 0; k < kept; ++k) {
-      std::span<const float>& f = base_fields_[static_cast<std::size_t>(k)];
-      if (f.empty() || f.size() > slot) {
-        f = {};
-        continue;
-      }
-      float* to = base_field_store_.data() + static_cast<std::size_t>(k) * slot;
-      std::copy(f.begin(), f.end(), to);
-      f = {to, f.size()};
+  // fields are copied out first (a few thousand floats each), into slots of their own (a field
+  // there is only with reuse_base_render, which reserves the slots).
+  const auto slot = base_field_store_.size() / static_cast<std::size_t>(kMaxContacts);
+  for (int k = 0; k < kept; ++k) {
+    std::span<const float>& f = base_fields_[static_cast<std::size_t>(k)];
+    if (f.empty() || f.size() > slot) {
+      f = {};  // rendered again in 5c
+      continue;
     }
-  } else {
-    // No room to keep them (a GPU backend that fell back to the CPU): rendered again in 5c.
-    std::fill_n(base_fields_.begin(), kept, std::span<const float>{});
+    float* to = base_field_store_.data() + static_cast<std::size_t>(k) * slot;
+    std::copy(f.begin(), f.end(), to);
+    f = {to, f.size()};
   }
   const std::size_t per = kGradientSamples;
   const bool ok = backend_->LinearizeBatch(

@@ -435,8 +435,8 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
       relative.split_bridge_fade_per_depth = c;
       s.push_back(relative);
     }
-    // The default with stage 5a's base pose rendered again instead of read from stage 5's
-    // render (issue 32's thirty-second stop: the route before).
+    // The default with stages 5a and 5c rendering the base pose again instead of reading stage
+    // 5's render (issue 32's thirty-second stop: the route before).
     FrontierSetting render_again = base;
     render_again.name = "render_base_again";
     render_again.reuse_base_render = false;

@@ -495,7 +495,8 @@ class HapticTexturePipeline {
   /// reuse_base_render: each contact's overlap field at the base pose from stage 5's render
   /// (PenetrationDepthBackend::base_overlap; empty: none), in last_queries_' order, for stages 5a
   /// and 5c; and where the kept contacts' fields are copied before stage 5a's own batch
-  /// overwrites the backend's (kMaxContacts fields of max_window_resolution² floats).
+  /// overwrites the backend's (kMaxContacts fields of KeptFieldResolution()² floats, reserved
+  /// with reuse_base_render and the split on).
   std::array<std::span<const float>, kMaxContacts> base_fields_{};
   std::vector<float> base_field_store_;
   /// Whether stages 5a and 5c read stage 5's render (reuse_base_render, a stage that needs it on,
