@@ -115,9 +115,18 @@ int main(int argc, char** argv) {
                  "split-continuous (stage 5a's split in its continuous form, on by default since "
                  "issue 32's thirty-first stop: B without it; until then B was the split with "
                  "100 um fades, the frontier's split_continuous_100um), reuse-base-render "
-                 "(stage 5a's regions from stage 5's base render; B renders the base again)")
+                 "(stage 5a's regions from stage 5's base render; B renders the base again), "
+                 "parallax-offset-seeds (DepthRefinementOptions::parallax_offset_seeds), "
+                 "clustering-angle (PipelineOptions::clustering_angle_deg: B at 30 deg where A "
+                 "is not, else at 60)")
       ->check(CLI::IsMember({"parallax", "seed-from-last-step", "tool-leaves-follow",
-                             "split-continuous", "reuse-base-render"}));
+                             "split-continuous", "reuse-base-render", "parallax-offset-seeds",
+                             "clustering-angle"}));
+  bool product_models = false;
+  app.add_flag("--product-models", product_models,
+               "step the models slave_sim --scene builds (ProductModelSettings: fig77 and the "
+               "hammer at twice or four times the seed's coarse count with textures from their "
+               "detail) instead of the seed's counts at 1024^2");
   app.add_option("--csv", csv_path, "write one row per scene here");
   app.add_option("--cache-dir", cache_dir, "model cache folder")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
@@ -141,7 +150,9 @@ int main(int argc, char** argv) {
     try {
       std::fprintf(stderr, "remote_step_benchmark: %s: building (cache %s)...\n", name.c_str(),
                    cache_dir.c_str());
-      scene = ht::MakeBenchmarkScene(name, ht::BenchmarkModelSettings{}, cache);
+      scene = ht::MakeBenchmarkScene(
+          name, product_models ? ht::ProductModelSettings(name) : ht::BenchmarkModelSettings{},
+          cache);
       std::fprintf(stderr, "remote_step_benchmark: %s: finding %d in-contact poses...\n",
                    name.c_str(), poses);
       poses_WFt = ht::ScriptedContactPoses(scene, poses);
@@ -174,11 +185,16 @@ int main(int argc, char** argv) {
       if (ab == "tool-leaves-follow") return &o.tool_leaves_follow_object_leaves;
       if (ab == "split-continuous") return &o.split_windows_at_separated_overlap;
       if (ab == "reuse-base-render") return &o.reuse_base_render;
+      if (ab == "parallax-offset-seeds") return &o.depth_refinement.parallax_offset_seeds;
       return nullptr;
     };
     if (bool* flag = ab_flag(options_b)) {
       *flag = !*flag;
       label_b = (*flag ? "" : "no-") + ab;
+    } else if (ab == "clustering-angle") {
+      options_b.clustering_angle_deg = options.clustering_angle_deg != 30.0 ? 30.0 : 60.0;
+      label_b =
+          "clustering-angle-" + std::to_string(static_cast<int>(options_b.clustering_angle_deg));
     }
     struct Arm {
       std::string label;

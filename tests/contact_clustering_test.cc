@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "haptic_core/penetration_depth.h"
+#include "haptic_core/remote_step.h"
 
 // Counts every global allocation of this test binary, to check that Cluster() makes none after
 // warm-up. Kept out of line so that GCC does not pair an inlined malloc with a free
@@ -207,6 +208,52 @@ TEST(ContactClustering, CornerSpotsWithinMergeDistanceButNormals90DegApartStaySe
   EXPECT_NEAR(glm::length(clusters[1].normal_W - glm::dvec3(1, 0, 0)), 0.0, 1e-12);
   // Their windows overlap (2 mm apart, ≥ 2 mm wide each): still two contacts.
   EXPECT_EQ(clusterer.stats().clusters_pass2, 2);
+}
+
+// Issue 32's thirty-third stop: the pipeline clusters at 60° (PipelineOptions::
+// clustering_angle_deg). One contact region whose hull pairs carry normals 45° apart (a curved or
+// thin coarse hull) was two contacts at 30°, and object leaf 0, whose deepest pair is on the
+// tilted side, went there while tool leaf 1, which overlaps it, stayed with the other: pair
+// (1, 0) was rendered in no window. At the pipeline's angle it is one contact holding every
+// leaf; faces 90° apart (an L corner) stay two.
+TEST(ContactClustering, OneRegionsPairs45DegApartAreOneContactAtThePipelinesAngle) {
+  const double c = std::cos(std::numbers::pi / 4.0);
+  const std::vector<HullPairContact> pairs = {
+      MakePair({0, 0, 0}, {0, 0, 1}, -3e-4, 0, 1),
+      MakePair({0, 1e-3, 0}, {0, 0, 1}, -1e-4, 1, 0),
+      MakePair({1e-3, 0, 0}, {0, c, c}, -2e-4, 2, 0),
+  };
+  // Whether some cluster lists both leaves of a pair (tool leaf a, object leaf b; 3 triangles
+  // each).
+  const auto rendered = [](std::span<const ContactCluster> clusters, int a, int b) {
+    return std::any_of(clusters.begin(), clusters.end(), [&](const ContactCluster& k) {
+      const bool has_a = std::find(k.tool_triangles.begin(), k.tool_triangles.end(), 3 * a) !=
+                         k.tool_triangles.end();
+      const bool has_b = std::find(k.object_triangles.begin(), k.object_triangles.end(), 3 * b) !=
+                         k.object_triangles.end();
+      return has_a && has_b;
+    });
+  };
+  ClusteringOptions before;
+  before.max_normal_angle_deg = 30.0;
+  ContactClusterer clusterer;
+  auto clusters = clusterer.Cluster(pairs, MakeLeaves(3), MakeLeaves(2), before);
+  ASSERT_EQ(clusters.size(), 2u);
+  EXPECT_FALSE(rendered(clusters, 1, 0)) << "at 30° the pair (1, 0) lies in no window";
+  ClusteringOptions now;
+  now.max_normal_angle_deg = PipelineOptions{}.clustering_angle_deg;
+  EXPECT_EQ(now.max_normal_angle_deg, 60.0);
+  clusters = clusterer.Cluster(pairs, MakeLeaves(3), MakeLeaves(2), now);
+  ASSERT_EQ(clusters.size(), 1u);
+  ExpectWellFormed(clusters, now);
+  for (const HullPairContact& p : pairs) EXPECT_TRUE(rendered(clusters, p.node_A, p.node_B));
+  // The corner of the test above, at the pipeline's angle: still two contacts.
+  std::vector<HullPairContact> corner;
+  for (int i = 0; i < 5; ++i) {
+    corner.push_back(MakePair({0.0, 0.3e-3 * i, 0.0}, {0, 0, 1}, -2e-4, i, 10 + i));
+    corner.push_back(MakePair({2e-3, 0.3e-3 * i, 1e-3}, {1, 0, 0}, -1e-4, 5 + i, 15 + i));
+  }
+  EXPECT_EQ(clusterer.Cluster(corner, MakeLeaves(10), MakeLeaves(20), now).size(), 2u);
 }
 
 // Issue 31's grazing guard: each cluster reports the largest of its members' depth bounds, and

@@ -173,7 +173,7 @@ TEST(ContactRegion, LeafPairDirectionIsTheTiltedPlatesNormal) {
     }
   }
   ASSERT_GE(pairs, 2);
-  EXPECT_LT(worst, PipelineOptions{}.clustering_angle_deg);
+  EXPECT_LT(worst, 30.0) << "within the clustering angle before issue 32's thirty-third stop";
   EXPECT_LT(AngleDeg(sum, n_plate), 3.0);
   std::printf(
       "[contact region] %d leaf pairs with a region (%.2f mm² in all): their sum %.2f° "

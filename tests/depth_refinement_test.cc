@@ -638,6 +638,73 @@ TEST(DepthRefinement, RefinedWithParallaxATiltedFacetsDepthIsTheDisplacedSurface
   }
 }
 
+// Seeds carried by parallax (DepthRefinementOptions::parallax_offset_seeds, issue 32's
+// thirty-third stop): a Gaussian bump of 0.8 mm on a facet tilted 50°, under the tool's flat face
+// tilted alike, 60 µm into the bump along the facet's normal. Along the window's n = z the two
+// parallel planes stand (A − g)/cosθ apart at the bump's top, the closed form. The render's form
+// reads the bump at its coarse point, A·sinθ = 0.61 mm (three cells at N = 100) beside where its
+// displaced top lies, and there it reads no overlap at all; the carried seed is searched where
+// the top is.
+TEST(DepthRefinement, ParallaxOffsetSeedsFindTheBumpTheRendersFormPutsBeside) {
+  constexpr double kBump = 0.8e-3, kSigma = 0.4e-3, kPress = 60e-6;
+  const double theta = 50.0 * std::numbers::pi / 180.0;
+  const HapticModel env = EnvironmentBox(
+      [](double x, double y) {
+        return kBump * std::exp(-(x * x + y * y) / (2.0 * kSigma * kSigma));
+      },
+      1024);
+  const HapticModel tool = ToolBox([](double, double) { return 0.0; });
+  RigidTransform tilt;
+  tilt.rotation = glm::angleAxis(theta, glm::dvec3(0.0, 1.0, 0.0));
+  const RigidTransform X_WT = tilt * ToolPose(0.0, 0.0, kBump - kPress);
+  const double expected = kPress / std::cos(theta);
+  ContactQuery q;
+  q.environment = &env;
+  q.X_WO = TiltedEnvironmentPose(theta);
+  q.window = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.02, 100);
+  q.stiffness_n_per_m = 1000.0;
+  CpuPenetrationDepthBackend backend(128);
+  std::vector<DepthSample> samples(kGradientSamples);
+  std::vector<ContactLinearization> out(1);
+  ASSERT_TRUE(backend.LinearizeBatch(tool, X_WT, {&q, 1}, out, samples));
+  EXPECT_LT(out[0].depth_m, 0.0) << "the render's form reads no overlap";
+  double with = 0.0, without = 0.0;
+  for (const bool offset : {false, true}) {
+    DepthRefinementOptions o;
+    o.parallax_offset_seeds = offset;
+    DepthRefiner refiner(o);
+    ContactLinearization lin = out[0];
+    std::vector<DepthSample> s = samples;
+    refiner.Refine(tool, X_WT, q, s, lin);
+    std::printf(
+        "bump on a 50 deg facet: offset seeds %d, delta %.1f um (closed form %.1f um), "
+        "%llu carried seeds\n",
+        int(offset), lin.depth_m * 1e6, expected * 1e6,
+        static_cast<unsigned long long>(refiner.counters().parallax_offset_seeds));
+    (offset ? with : without) = lin.depth_m;
+    if (offset) {
+      EXPECT_GT(refiner.counters().parallax_offset_seeds, 0u);
+      EXPECT_GT(refiner.counters().parallax_offset_found, 0u);
+    } else {
+      EXPECT_EQ(refiner.counters().parallax_offset_seeds, 0u);
+    }
+  }
+  EXPECT_NEAR(with, expected, 3e-6);
+  EXPECT_GE(with, without) << "a carried seed only adds a candidate";
+  // Without parallax the option does nothing: the render's form alone.
+  DepthRefinementOptions plain;
+  plain.parallax = false;
+  DepthRefinementOptions plain_offset = plain;
+  plain_offset.parallax_offset_seeds = true;
+  DepthRefiner a(plain), b(plain_offset);
+  ContactLinearization la = out[0], lb = out[0];
+  std::vector<DepthSample> sa = samples, sb = samples;
+  a.Refine(tool, X_WT, q, sa, la);
+  b.Refine(tool, X_WT, q, sb, lb);
+  EXPECT_EQ(la.depth_m, lb.depth_m);
+  EXPECT_EQ(b.counters().parallax_offset_seeds, 0u);
+}
+
 // The translation patch (DepthRefinementOptions::translation_patch, issue 32's nineteenth stop)
 // under the curved tool on the sinusoid (N = 50: nodes 0.4 mm apart, the patch ±0.8 mm, the
 // period 2 mm). Two routes to each node: the patch's value and the refinement run afresh with the

@@ -336,6 +336,49 @@ double HeightOver(std::span<const Projected> list, const HeightField& texture, b
   return envelope.Finish();
 }
 
+// Where parallax carries the render's value at (s, t) (DepthRefinementOptions::
+// parallax_offset_seeds): the envelope's triangle at (s, t) in the render's form at level 0 (the
+// largest value for the environment, the smallest for the tool, within the box ±range) reads the
+// surface point h·N of its coarse point under (s, t), which lies at (s, t) + h·N⊥ on the window
+// plane. Writes that offset (m along u and v); false where no triangle covers (s, t) or the
+// envelope's triangle has no parallax (N ∥ n, untextured).
+bool ParallaxOffset(std::span<const Projected> list, const HeightField& texture, bool keep_max,
+                    double range, double s, double t, double& ds, double& dt) noexcept {
+  double best = keep_max ? -kInf : kInf;
+  bool found = false, parallax = false;
+  const HeightFieldLevel& L = texture.level(0);
+  for (const Projected& P : list) {
+    double b0, b1, b2;
+    Barycentric(P, s, t, b0, b1, b2);
+    if (b0 < kEdgeTolerance || b1 < kEdgeTolerance || b2 < kEdgeTolerance) continue;
+    double value = b0 * P.d[0] + b1 * P.d[1] + b2 * P.d[2];
+    double h = 0.0, Nu = 0.0, Nv = 0.0;
+    if (P.textured) {
+      const double len2 = b0 * b0 + b1 * b1 + b2 * b2 +
+                          2.0 * (b0 * b1 * P.cos01 + b0 * b2 * P.cos02 + b1 * b2 * P.cos12);
+      if (!(len2 > 1e-12)) continue;
+      const double inv_len = 1.0 / std::sqrt(len2);
+      const auto u = static_cast<float>(b0 * P.tu[0] + b1 * P.tu[1] + b2 * P.tu[2]);
+      const auto v = static_cast<float>(b0 * P.tv[0] + b1 * P.tv[1] + b2 * P.tv[2]);
+      h = static_cast<double>(texture.SampleAt(0, L, u, v));
+      value += h * (b0 * P.nn[0] + b1 * P.nn[1] + b2 * P.nn[2]) * inv_len;
+      if (P.parallax) {
+        Nu = (b0 * P.nu[0] + b1 * P.nu[1] + b2 * P.nu[2]) * inv_len;
+        Nv = (b0 * P.nv[0] + b1 * P.nv[1] + b2 * P.nv[2]) * inv_len;
+      }
+    }
+    if (!(std::abs(value) <= range)) continue;
+    if (keep_max ? value > best : value < best) {
+      best = value;
+      found = true;
+      parallax = P.parallax;
+      ds = h * Nu;
+      dt = h * Nv;
+    }
+  }
+  return found && parallax;
+}
+
 // Window coordinates (m) of cell `index`'s centre.
 void CellCoordinates(const ContactWindow& w, int index, double& s, double& t) noexcept {
   const int n = w.resolution;
@@ -1147,6 +1190,33 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
     }
     return raised;
   };
+  // The grid's seeds carried by parallax (parallax_offset_seeds): where each side's envelope
+  // reads its surface point, more than half a cell away.
+  if (options_.parallax && options_.parallax_offset_seeds) {
+    const double half_extent = 0.5 * w.extent_m, range = w.depth_range_m();
+    const int grid_seeds = num_seeds;
+    for (int k = 0; k < grid_seeds; ++k) {
+      double s = 0.0, t = 0.0;
+      CellCoordinates(w, seed_cells[static_cast<std::size_t>(k)], s, t);
+      for (const bool environment : {true, false}) {
+        double ds = 0.0, dt = 0.0;
+        if (!ParallaxOffset(environment ? std::span<const Projected>(env_all_)
+                                        : std::span<const Projected>(tool_all_),
+                            environment ? env_->texture : tool.texture, environment, range, s, t,
+                            ds, dt)) {
+          continue;
+        }
+        if (ds * ds + dt * dt < 0.25 * cell * cell) continue;
+        const double cs = std::clamp(s + ds, -half_extent, half_extent),
+                     ct = std::clamp(t + dt, -half_extent, half_extent);
+        ++counters_.parallax_offset_seeds;
+        const Seed found = refine_at(cs, ct, tool_all_, 0.0, 0.0, true);
+        if (!(found.depth_m > deepest.depth_m)) continue;
+        ++counters_.parallax_offset_found;
+        counters_.parallax_offset_raised_um += take_deeper(found);
+      }
+    }
+  }
   // The conservative screen: wherever b − a can still beat the seeds' best.
   if (options_.conservative_screen) {
     Seed screened = deepest;

@@ -123,6 +123,18 @@ int main(int argc, char** argv) {
                "heights reads another part of the surface; --no-parallax: the render's form,\n"
                "less accurate on such surfaces and 3-37 % faster there\n"
                "(docs/frontier/issue32/twenty_eighth_stop)");
+  bool no_parallax_offset_seeds = false;
+  app.add_flag("--no-parallax-offset-seeds", no_parallax_offset_seeds,
+               "stage 5b searches only the grid's deepest cells: by default it also searches\n"
+               "where parallax carries them (a facet tilted from the window's normal under a\n"
+               "large height shows its peak up to several cells beside where the grid's\n"
+               "render puts it; docs/frontier/issue32/thirty_third_stop)");
+  double clustering_angle_deg = ht::PipelineOptions{}.clustering_angle_deg;
+  app.add_option("--clustering-angle-deg", clustering_angle_deg,
+                 "contact clustering: leaf pairs (and clusters) whose normals differ by less than\n"
+                 "this merge into one contact (degrees; 30 before issue 32's thirty-third stop)")
+      ->check(CLI::Range(1.0, 89.0))
+      ->capture_default_str();
   bool no_seed_from_last_step = false;
   app.add_flag("--no-seed-from-last-step", no_seed_from_last_step,
                "each step's contacts from their own grid alone: by default stage 5b also\n"
@@ -456,6 +468,8 @@ int main(int argc, char** argv) {
     config.pipeline.depth_refinement.texel_scale_gradient = texel_scale_gradient;
     config.pipeline.depth_refinement.parallax = parallax;
     config.pipeline.depth_refinement.seed_from_last_step = !no_seed_from_last_step;
+    config.pipeline.depth_refinement.parallax_offset_seeds = !no_parallax_offset_seeds;
+    config.pipeline.clustering_angle_deg = clustering_angle_deg;
     config.pipeline.kink_hang_other_arm = kink_hang_other_arm;
     config.pipeline.depth_refinement.translation_patch = translation_patch;
     config.pipeline.depth_refinement.translation_patch_follows_rotation =

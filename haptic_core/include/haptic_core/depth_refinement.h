@@ -191,6 +191,18 @@ struct DepthRefinementOptions {
   bool parallax = true;
   /// Most fixed-point steps of the parallax per triangle and point; in [1, 64].
   int parallax_iterations = 12;
+  /// With parallax: seeds where parallax carries the grid's deepest cells (issue 32,
+  /// thirty-third stop). The grid is the render's form, which reads at (s, t) the surface point
+  /// of the coarse point under it, h·N⊥ to the side of where that point lies (N⊥ the normal's part
+  /// in the window plane). Where a coarse facet is tilted from n under a large height that is more
+  /// than the seed's square (fig77's product models: 1.2 mm, three cells), so the parallax maximum
+  /// was searched nowhere and a window whose models overlap read no contact. Each base seed's cell
+  /// centre is carried by each side's h·N⊥ there (the envelope's triangle at level 0), and where
+  /// that moves it by more than half a cell, the carried point is searched as a seed is (sub-grid
+  /// and pattern search). A seed only adds a candidate: δ0 is never below the value without it.
+  /// On by default (`slave_sim --no-parallax-offset-seeds`, the frontier's
+  /// "no_parallax_offset_seeds": off).
+  bool parallax_offset_seeds = true;
   /// Seeds from the last step (issue 32, twenty-fifth stop): the refined deepest point of every
   /// contact of the previous step (DepthRefiner::BeginStep), kept in the tool's frame T, is one
   /// more seed of each contact on the same environment model whose window it falls in: a pattern
@@ -238,6 +250,11 @@ struct DepthRefinementCounters {
   std::uint64_t screen_found = 0;
   std::uint64_t screen_raised_um = 0;
   std::uint64_t screen_truncated = 0;
+  /// parallax_offset_seeds: points searched, and contacts where one gave the deepest point (and
+  /// Σ of how much deeper, µm).
+  std::uint64_t parallax_offset_seeds = 0;
+  std::uint64_t parallax_offset_found = 0;
+  std::uint64_t parallax_offset_raised_um = 0;
   /// Translation arms added as kink planes (DepthRefinementOptions::translation_kink_planes).
   std::uint64_t translation_kink_planes = 0;
   /// Contacts given a translation patch (DepthRefinementOptions::translation_patch).

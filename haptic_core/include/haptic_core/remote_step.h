@@ -49,9 +49,17 @@ struct PipelineOptions {
   /// pairs first, the step reports when it stopped early.
   double collision_budget_us = 0.0;
   /// Contact clustering (DESIGN.md §3): leaf pairs whose points are closer than this (m) and whose
-  /// normals differ by less than clustering_angle_deg merge into one contact.
+  /// normals differ by less than clustering_angle_deg merge into one contact. The angle is 60°
+  /// since issue 32's thirty-third stop (30° before): on curved and thin coarse hulls (the file on
+  /// the CAD part) the hull pairs of one contact region carry normals 30–60° apart, so at 30° one
+  /// region made several windows, and a leaf goes to its deepest pair's window only, so a tool
+  /// leaf and the object leaf it overlaps could land in different windows and be rendered in none
+  /// (fig77's product models: 11 of 200 poses whose meshes interpenetrate had no force, 7 at 60°,
+  /// and along the scrape on one clock the contact force's one-tick spikes above 0.2 N went
+  /// 15 → 0; docs/frontier/issue32/thirty_third_stop). Faces 90° apart (an L corner) stay apart.
+  /// Stage 5c links contacts within the same angle.
   double clustering_distance_m = 5e-3;
-  double clustering_angle_deg = 30.0;
+  double clustering_angle_deg = 60.0;
   /// Local reach in the coarse query (ProximityQueryOptions::local_reach_margin_m, with
   /// proximity_margin_m as the margin): each hull-node pair's tolerance from the two nodes' own
   /// texture heights instead of both models' largest. An approximation, placed on the

@@ -137,6 +137,12 @@ struct FrontierSetting {
   /// consecutive rows (FrontierOptions::trace_from_s), where each pose follows the last as in the
   /// loop: on spread poses it changes nothing.
   bool seed_from_last_step = true;
+  /// PipelineOptions::depth_refinement.parallax_offset_seeds ("no_parallax_offset_seeds" and
+  /// "before_thirty_third_stop" turn it off).
+  bool parallax_offset_seeds = true;
+  /// PipelineOptions::clustering_angle_deg ("clustering_angle_N" sets N°; the pipeline truth's
+  /// patches keep ContactPatchTruthOptions' 30° whatever the method's angle).
+  double clustering_angle_deg = PipelineOptions{}.clustering_angle_deg;
   /// PipelineOptions::depth_refinement.translation_patch ("translation_patch" turns it on).
   bool translation_patch = false;
   /// PipelineOptions::depth_refinement.translation_patch_neighbour_climbs
