@@ -454,7 +454,10 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
         {"last_step_seeds", r.last_step_seeds},
         {"last_step_found_deeper", r.last_step_found},
         {"last_step_raised_um_sum", r.last_step_raised_um},
-        {"seed_from_last_step", config.pipeline.depth_refinement.seed_from_last_step}};
+        {"seed_from_last_step", config.pipeline.depth_refinement.seed_from_last_step},
+        {"parallax_offset_seeds", r.parallax_offset_seeds},
+        {"parallax_offset_found_deeper", r.parallax_offset_found},
+        {"parallax_offset_raised_um_sum", r.parallax_offset_raised_um}};
     // Whether the patches went by the operator's round trip (translation_patch_rtt_ms).
     s["translation_patch_by_rtt"] = {
         {"rtt_ms", std::isfinite(config.translation_patch_rtt_ms)

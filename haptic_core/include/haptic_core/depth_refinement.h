@@ -16,6 +16,9 @@
 //    among them is not searched (tests/texture_stage_parity_test.cc: on random contacts of the
 //    six seed models the refined δ0 is never below the grid's and is closer to the truth).
 //    DepthRefinementOptions::conservative_screen (off by default) adds one after the seeds.
+//    With parallax, each seed's cell carried by either side's h·N⊥ there is one more seed
+//    (parallax_offset_seeds, on): the grid is the render's form, which shows a tilted facet's
+//    peak that far beside where it lies.
 //  - At each seed, b − a is evaluated at level 0 (PatchHeightAt: the same coarse surface, normal
 //    factor and box rule as the render, the texture sampled bilinearly at its full resolution) on
 //    a sub-grid of about four texels' spacing over the seed's 1.5-cell square, then a pattern
