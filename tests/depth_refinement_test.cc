@@ -470,6 +470,30 @@ RigidTransform TiltedEnvironmentPose(double theta) {
   return R * EnvironmentPose();
 }
 
+// Stage 5's grid on a contact with the environment tilted by θ (TiltedEnvironmentPose), the
+// window's n = z at the origin, 20 mm, N cells: the query, its samples and its linearization, and
+// whether the backend linearized it.
+struct TiltedContact {
+  bool ok = false;
+  ContactQuery query;
+  std::vector<DepthSample> samples;
+  ContactLinearization grid;
+};
+TiltedContact LinearizeOnTiltedFacet(const HapticModel& tool, const RigidTransform& X_WT,
+                                     const HapticModel& env, double theta, int n) {
+  TiltedContact c;
+  c.query.environment = &env;
+  c.query.X_WO = TiltedEnvironmentPose(theta);
+  c.query.window = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.02, n);
+  c.query.stiffness_n_per_m = 1000.0;
+  CpuPenetrationDepthBackend backend(128);
+  c.samples.resize(kGradientSamples);
+  std::vector<ContactLinearization> out(1);
+  c.ok = backend.LinearizeBatch(tool, X_WT, {&c.query, 1}, out, c.samples);
+  c.grid = out[0];
+  return c;
+}
+
 double DisplacedHeightAlongZ(const std::function<double(double)>& h, double theta, double s) {
   double lo = -0.03, hi = 0.03;
   for (int i = 0; i < 200; ++i) {
@@ -610,22 +634,16 @@ TEST(DepthRefinement, RefinedWithParallaxATiltedFacetsDepthIsTheDisplacedSurface
   const double plane = -xs * std::tan(theta) + kH0 / std::cos(theta);
   const double expected = plane - ((xs - x0) * (xs - x0) / (2.0 * kR) + z0);
   ASSERT_GT(xs, x0 - kToolHalf);
-  ContactQuery q;
-  q.environment = &env;
-  q.X_WO = TiltedEnvironmentPose(theta);
-  q.window = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.02, 50);
-  q.stiffness_n_per_m = 1000.0;
-  CpuPenetrationDepthBackend backend(128);
-  std::vector<DepthSample> samples(kGradientSamples);
-  std::vector<ContactLinearization> out(1);
   const RigidTransform X_WT = CurvedToolPose(x0, z0);
-  ASSERT_TRUE(backend.LinearizeBatch(tool, X_WT, {&q, 1}, out, samples));
+  const TiltedContact c = LinearizeOnTiltedFacet(tool, X_WT, env, theta, 50);
+  ASSERT_TRUE(c.ok);
+  const ContactQuery& q = c.query;
   for (const bool parallax : {false, true}) {
     DepthRefinementOptions o;
     o.parallax = parallax;
     DepthRefiner refiner(o);
-    ContactLinearization lin = out[0];
-    std::vector<DepthSample> s = samples;
+    ContactLinearization lin = c.grid;
+    std::vector<DepthSample> s = c.samples;
     const bool refined = refiner.Refine(tool, X_WT, q, s, lin);
     std::printf("tilted facet: parallax %d refined %d delta %.1f um, closed form %.1f um\n",
                 int(parallax), int(refined), lin.depth_m * 1e6, expected * 1e6);
@@ -658,23 +676,17 @@ TEST(DepthRefinement, ParallaxOffsetSeedsFindTheBumpTheRendersFormPutsBeside) {
   tilt.rotation = glm::angleAxis(theta, glm::dvec3(0.0, 1.0, 0.0));
   const RigidTransform X_WT = tilt * ToolPose(0.0, 0.0, kBump - kPress);
   const double expected = kPress / std::cos(theta);
-  ContactQuery q;
-  q.environment = &env;
-  q.X_WO = TiltedEnvironmentPose(theta);
-  q.window = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.02, 100);
-  q.stiffness_n_per_m = 1000.0;
-  CpuPenetrationDepthBackend backend(128);
-  std::vector<DepthSample> samples(kGradientSamples);
-  std::vector<ContactLinearization> out(1);
-  ASSERT_TRUE(backend.LinearizeBatch(tool, X_WT, {&q, 1}, out, samples));
-  EXPECT_LT(out[0].depth_m, 0.0) << "the render's form reads no overlap";
+  const TiltedContact c = LinearizeOnTiltedFacet(tool, X_WT, env, theta, 100);
+  ASSERT_TRUE(c.ok);
+  const ContactQuery& q = c.query;
+  EXPECT_LT(c.grid.depth_m, 0.0) << "the render's form reads no overlap";
   double with = 0.0, without = 0.0;
   for (const bool offset : {false, true}) {
     DepthRefinementOptions o;
     o.parallax_offset_seeds = offset;
     DepthRefiner refiner(o);
-    ContactLinearization lin = out[0];
-    std::vector<DepthSample> s = samples;
+    ContactLinearization lin = c.grid;
+    std::vector<DepthSample> s = c.samples;
     refiner.Refine(tool, X_WT, q, s, lin);
     std::printf(
         "bump on a 50 deg facet: offset seeds %d, delta %.1f um (closed form %.1f um), "
@@ -697,8 +709,8 @@ TEST(DepthRefinement, ParallaxOffsetSeedsFindTheBumpTheRendersFormPutsBeside) {
   DepthRefinementOptions plain_offset = plain;
   plain_offset.parallax_offset_seeds = true;
   DepthRefiner a(plain), b(plain_offset);
-  ContactLinearization la = out[0], lb = out[0];
-  std::vector<DepthSample> sa = samples, sb = samples;
+  ContactLinearization la = c.grid, lb = c.grid;
+  std::vector<DepthSample> sa = c.samples, sb = c.samples;
   a.Refine(tool, X_WT, q, sa, la);
   b.Refine(tool, X_WT, q, sb, lb);
   EXPECT_EQ(la.depth_m, lb.depth_m);

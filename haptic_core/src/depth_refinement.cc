@@ -127,6 +127,20 @@ bool ProjectTriangle(const HapticModel& m, const RigidTransform& X, const Contac
   return true;
 }
 
+// The corner data interpolated at barycentrics (b0, b1, b2) of a projected triangle: len2 the
+// squared length |Σλ·n_c|² of the corner normals' blend (from the corner cosines; divide the
+// blended components by its root to normalize), and the texture coordinates (u, v).
+struct CornerBlend {
+  double len2;
+  float u, v;
+};
+CornerBlend Blend(const Projected& P, double b0, double b1, double b2) noexcept {
+  return {b0 * b0 + b1 * b1 + b2 * b2 +
+              2.0 * (b0 * b1 * P.cos01 + b0 * b2 * P.cos02 + b1 * b2 * P.cos12),
+          static_cast<float>(b0 * P.tu[0] + b1 * P.tu[1] + b2 * P.tu[2]),
+          static_cast<float>(b0 * P.tv[0] + b1 * P.tv[1] + b2 * P.tv[2])};
+}
+
 // The parallax value of one projected triangle at (s, t) (DepthRefinementOptions::parallax): the
 // height along n of the displaced surface r(q) = q + h(q)·N(q) where it crosses the line through
 // (s, t) along n, q on the triangle. Damped fixed-point steps q ← q + ω((s, t) − h(q)·N⊥(q) − q)
@@ -182,16 +196,13 @@ double ParallaxValue(const Projected& P, const HeightField& texture, double s, d
       qs = b0 * P.x[0] + b1 * P.x[1] + b2 * P.x[2];
       qt = b0 * P.y[0] + b1 * P.y[1] + b2 * P.y[2];
     }
-    const double len2 = b0 * b0 + b1 * b1 + b2 * b2 +
-                        2.0 * (b0 * b1 * P.cos01 + b0 * b2 * P.cos02 + b1 * b2 * P.cos12);
-    if (!(len2 > 1e-12)) return kNaN;
-    const double inv_len = 1.0 / std::sqrt(len2);
+    const CornerBlend blend = Blend(P, b0, b1, b2);
+    if (!(blend.len2 > 1e-12)) return kNaN;
+    const double inv_len = 1.0 / std::sqrt(blend.len2);
     const double Nn = (b0 * P.nn[0] + b1 * P.nn[1] + b2 * P.nn[2]) * inv_len;
     const double Nu = (b0 * P.nu[0] + b1 * P.nu[1] + b2 * P.nu[2]) * inv_len;
     const double Nv = (b0 * P.nv[0] + b1 * P.nv[1] + b2 * P.nv[2]) * inv_len;
-    const auto u = static_cast<float>(b0 * P.tu[0] + b1 * P.tu[1] + b2 * P.tu[2]);
-    const auto v = static_cast<float>(b0 * P.tv[0] + b1 * P.tv[1] + b2 * P.tv[2]);
-    const double h = static_cast<double>(texture.SampleAt(0, L, u, v));
+    const double h = static_cast<double>(texture.SampleAt(0, L, blend.u, blend.v));
     const double value = b0 * P.d[0] + b1 * P.d[1] + b2 * P.d[2] + h * Nn;
     const double gs = s - h * Nu - qs, gt = t - h * Nv - qt;
     const double g2 = gs * gs + gt * gt;
@@ -306,12 +317,11 @@ double ValueAt(const Projected& P, const HeightField& texture, double s, double 
   }
   double value = b0 * P.d[0] + b1 * P.d[1] + b2 * P.d[2];
   if (P.textured) {
-    const auto u = static_cast<float>(b0 * P.tu[0] + b1 * P.tu[1] + b2 * P.tu[2]);
-    const auto v = static_cast<float>(b0 * P.tv[0] + b1 * P.tv[1] + b2 * P.tv[2]);
-    const double len2 = b0 * b0 + b1 * b1 + b2 * b2 +
-                        2.0 * (b0 * b1 * P.cos01 + b0 * b2 * P.cos02 + b1 * b2 * P.cos12);
-    const double ndotn =
-        len2 > 1e-12 ? (b0 * P.nn[0] + b1 * P.nn[1] + b2 * P.nn[2]) / std::sqrt(len2) : 0.0;
+    const CornerBlend blend = Blend(P, b0, b1, b2);
+    const float u = blend.u, v = blend.v;
+    const double ndotn = blend.len2 > 1e-12
+                             ? (b0 * P.nn[0] + b1 * P.nn[1] + b2 * P.nn[2]) / std::sqrt(blend.len2)
+                             : 0.0;
     if (level == 0) {
       value += static_cast<double>(texture.SampleAt(0, texture.level(0), u, v)) * ndotn;
     } else {
@@ -354,13 +364,10 @@ bool ParallaxOffset(std::span<const Projected> list, const HeightField& texture,
     double value = b0 * P.d[0] + b1 * P.d[1] + b2 * P.d[2];
     double h = 0.0, Nu = 0.0, Nv = 0.0;
     if (P.textured) {
-      const double len2 = b0 * b0 + b1 * b1 + b2 * b2 +
-                          2.0 * (b0 * b1 * P.cos01 + b0 * b2 * P.cos02 + b1 * b2 * P.cos12);
-      if (!(len2 > 1e-12)) continue;
-      const double inv_len = 1.0 / std::sqrt(len2);
-      const auto u = static_cast<float>(b0 * P.tu[0] + b1 * P.tu[1] + b2 * P.tu[2]);
-      const auto v = static_cast<float>(b0 * P.tv[0] + b1 * P.tv[1] + b2 * P.tv[2]);
-      h = static_cast<double>(texture.SampleAt(0, L, u, v));
+      const CornerBlend blend = Blend(P, b0, b1, b2);
+      if (!(blend.len2 > 1e-12)) continue;
+      const double inv_len = 1.0 / std::sqrt(blend.len2);
+      h = static_cast<double>(texture.SampleAt(0, L, blend.u, blend.v));
       value += h * (b0 * P.nn[0] + b1 * P.nn[1] + b2 * P.nn[2]) * inv_len;
       if (P.parallax) {
         Nu = (b0 * P.nu[0] + b1 * P.nu[1] + b2 * P.nu[2]) * inv_len;
