@@ -151,6 +151,8 @@ Arm ParseArm(const std::string& text) {
       arm.switch_energy_spend_fraction = v;
     } else if (key == "offset_release_ms") {  // 0 = as long as the budget says
       arm.station.switch_offset_release_ms = v > 0.0 ? v : std::numeric_limits<double>::infinity();
+    } else if (key == "contact_damping_hc") {  // s/m, master_station --contact-damping-hc
+      arm.station.hunt_crossley_s_per_m = v;
     } else if (key == "force_floor") {
       arm.model.force_floor_scale_n = v;
     } else if (key == "torque_floor") {
@@ -564,7 +566,8 @@ int main(int argc, char** argv) {
                  "(the tool-state deadband, as master_station's --deadband-*), force_floor,\n"
                  "torque_floor, stiffness_floor, rotational_stiffness_floor (the contact-model\n"
                  "floor scales, as slave_sim's --model-deadband-*-floor); release_ticks,\n"
-                 "energy_bounded_switch (0/1), switch_spend, offset_release_ms (the operator\n"
+                 "energy_bounded_switch (0/1), switch_spend, offset_release_ms, contact_damping_hc "
+                 "(the operator\n"
                  "tick's passivity options, OperatorTickConfig; master_station's defaults, as\n"
                  "in the reference, unless given); setting=NAME, the remote step's setting by\n"
                  "its frontier name (speed_error_frontier --list-settings; default\n"

@@ -118,10 +118,11 @@ int main(int argc, char** argv) {
                  "(stage 5a's regions from stage 5's base render; B renders the base again), "
                  "parallax-offset-seeds (DepthRefinementOptions::parallax_offset_seeds), "
                  "clustering-angle (PipelineOptions::clustering_angle_deg: B at 30 deg where A "
-                 "is not, else at 60)")
+                 "is not, else at 60), neighbour-peak-seeds "
+                 "(DepthRefinementOptions::neighbour_peak_seeds)")
       ->check(CLI::IsMember({"parallax", "seed-from-last-step", "tool-leaves-follow",
                              "split-continuous", "reuse-base-render", "parallax-offset-seeds",
-                             "clustering-angle"}));
+                             "clustering-angle", "neighbour-peak-seeds"}));
   bool product_models = false;
   app.add_flag("--product-models", product_models,
                "step the models slave_sim --scene builds (ProductModelSettings: fig77 and the "
@@ -186,6 +187,7 @@ int main(int argc, char** argv) {
       if (ab == "split-continuous") return &o.split_windows_at_separated_overlap;
       if (ab == "reuse-base-render") return &o.reuse_base_render;
       if (ab == "parallax-offset-seeds") return &o.depth_refinement.parallax_offset_seeds;
+      if (ab == "neighbour-peak-seeds") return &o.depth_refinement.neighbour_peak_seeds;
       return nullptr;
     };
     if (bool* flag = ab_flag(options_b)) {

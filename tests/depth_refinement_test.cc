@@ -818,6 +818,130 @@ TEST(DepthRefinement, TranslationPatchHoldsTheDepthOverTheToolsSlide) {
   EXPECT_NE(ContactDepthAt(r.refined, dq), ContactDepthAt(none, dq));
 }
 
+// DepthRefinementOptions::translation_patch_step_texels (issue 32, thirty-fourth stop): the
+// curved tool just beside the sinusoid's trough, where δ is a V in x (the contact passes from one
+// crest to the next), with the texel-scale translation slope and a patch whose nodes are that
+// slope's own steps (2 texels). Two routes to each node: the patch and the refinement run afresh
+// with the tool translated there. The loop's model follows the V across its vertex where the
+// single plane cannot, and the curvature it gives the implicit step (ContactModelEvaluation::K)
+// is the derivative of its force (a second route, by central differences), there and only there:
+// at a crest, where δ is concave, and for a patch wider than kPatchCurvatureMaxStepM, K is the
+// planes' −k·J·Jᵀ.
+TEST(DepthRefinement, ATexelScalePatchHoldsTheVOfATroughAndGivesItsCurvatureToTheLoop) {
+  const HapticModel tool = CurvedTool();
+  const HapticModel env = EnvironmentBox(Sinusoid, 1024);
+  DepthRefinementOptions texel, patched;
+  texel.texel_scale_gradient = patched.texel_scale_gradient = true;
+  texel.texel_scale_rotation = patched.texel_scale_rotation = false;
+  texel.neighbour_peak_seeds = patched.neighbour_peak_seeds = true;
+  patched.translation_patch = true;
+  patched.translation_patch_step_texels = 2.0;
+  constexpr int n = 25;
+  constexpr int R = kTranslationPatchRadius;
+  double at = 0.0;
+  const double x0 = 0.5 * kLambda + 10e-6;
+  const double z0 = ClosedFormDepth(x0, 0.0, at) - 10e-6;
+  const Refined plain = LinearizeAndRefine(tool, CurvedToolPose(x0, z0), env, n, texel);
+  const Refined p = LinearizeAndRefine(tool, CurvedToolPose(x0, z0), env, n, patched);
+  const ContactLinearization& c = p.refined;
+  // At q0 the contact is the texel slope's own.
+  EXPECT_EQ(c.depth_m, plain.refined.depth_m);
+  EXPECT_EQ(c.gradient.d_translation_W, plain.refined.gradient.d_translation_W);
+  const double h = c.patch.step_m;
+  ASSERT_GT(h, 0.0);
+  EXPECT_LT(h, 0.25 * (0.02 / n)) << "texel scale, not the grid's cell";
+  EXPECT_LE(h, kPatchCurvatureMaxStepM);
+  // δ0 against the closed form (10 µm by construction); without the neighbouring peaks the
+  // refinement reads the far flank.
+  EXPECT_NEAR(c.depth_m, 10e-6, 0.2e-6);
+  DepthRefinementOptions no_peaks = texel;
+  no_peaks.neighbour_peak_seeds = false;
+  const Refined far = LinearizeAndRefine(tool, CurvedToolPose(x0, z0), env, n, no_peaks);
+  std::printf("δ0 with the neighbouring peaks %.3f µm, without %.3f µm, closed form 10.000 µm\n",
+              c.depth_m * 1e6, far.refined.depth_m * 1e6);
+  EXPECT_LT(far.refined.depth_m, 9e-6);
+  EXPECT_LT(far.refined.gradient.d_translation_W.x * c.gradient.d_translation_W.x, 0.0)
+      << "the far flank's slope has the other sign";
+  // Each node against the closed form at the translated pose (δ does not vary along y).
+  for (int j = -R; j <= R; ++j) {
+    for (int i = -R; i <= R; ++i) {
+      double unused = 0.0;
+      const double truth = ClosedFormDepth(x0 + i * h, z0, unused);
+      const double node = c.depth_m + c.patch.depth_m[PatchIndex(i, j)];
+      EXPECT_NEAR(node, truth, 0.2e-6) << "node " << i << ", " << j;
+    }
+  }
+  // Across the vertex (x = λ/2, 10 µm from q0) against the closed form: with the patch the
+  // model turns with the V, the single plane carries one flank's slope on.
+  double patch_sq = 0.0, plane_sq = 0.0;
+  for (const double dx : {-20e-6, -16e-6, -12e-6, -8e-6, -4e-6, 4e-6, 12e-6, 20e-6}) {
+    double unused = 0.0;
+    const double truth = ClosedFormDepth(x0 + dx, z0, unused);
+    Twist dq;
+    dq.linear = {dx, 0.0, 0.0};
+    const double with = ContactDepthAt(c, dq), without = ContactDepthAt(plain.refined, dq);
+    patch_sq += (with - truth) * (with - truth);
+    plane_sq += (without - truth) * (without - truth);
+  }
+  const double patch_rms = std::sqrt(patch_sq / 8.0), plane_rms = std::sqrt(plane_sq / 8.0);
+  std::printf(
+      "texel patch (h %.1f µm) across the trough's vertex: model %.3f µm RMS from the "
+      "closed form, the single plane %.3f µm\n",
+      h * 1e6, patch_rms * 1e6, plane_rms * 1e6);
+  EXPECT_LT(patch_rms, 0.3 * plane_rms);
+  // The implicit step's stiffness against the force's central difference, at the vertex (where
+  // the patch curves) and as a plane alone.
+  ContactModel model;
+  model.num_contacts = 1;
+  model.contacts[0] = c;
+  model.X_WT0 = CurvedToolPose(x0, z0);
+  const auto force_x = [&](const ContactModel& m, double dx) {
+    RigidTransform X = m.X_WT0;
+    X.translation.x += dx;
+    return EvaluateContactModel(m, X).F_T_W.force.x;
+  };
+  const auto stiffness_xx = [&](const ContactModel& m, double dx) {
+    RigidTransform X = m.X_WT0;
+    X.translation.x += dx;
+    return EvaluateContactModel(m, X).K(0, 0);
+  };
+  const double dx = -10e-6, e = 0.05e-6;
+  const double k_fd = (force_x(model, dx + e) - force_x(model, dx - e)) / (2.0 * e);
+  const double k_model = stiffness_xx(model, dx);
+  std::printf("at the vertex: K_xx %.1f N/m, ∂F_x/∂x by central differences %.1f N/m\n", k_model,
+              k_fd);
+  EXPECT_NEAR(k_model, k_fd, 0.02 * std::abs(k_fd));
+  const double k_planes =
+      -c.stiffness_n_per_m * c.gradient.d_translation_W.x * c.gradient.d_translation_W.x;
+  EXPECT_LT(k_model, 3.0 * k_planes) << "the vertex's curvature is most of the stiffness";
+  // A patch wider than kPatchCurvatureMaxStepM (its nodes stretched): no curvature in K.
+  ContactModel wide = model;
+  wide.contacts[0].patch.step_m = 2.0 * kPatchCurvatureMaxStepM;
+  RigidTransform X0 = model.X_WT0;
+  const Stiffness6 K_wide = EvaluateContactModel(wide, X0).K;
+  Eigen::Matrix<double, 6, 1> J;
+  J << c.gradient.d_translation_W.x, c.gradient.d_translation_W.y, c.gradient.d_translation_W.z,
+      c.gradient.d_rotation_W.x, c.gradient.d_rotation_W.y, c.gradient.d_rotation_W.z;
+  const Stiffness6 K_planes = -c.stiffness_n_per_m * (J * J.transpose());
+  EXPECT_LT((K_wide - K_planes).norm(), 1e-9 * K_planes.norm());
+  // At a crest δ is concave: K is the planes' (the convex part only).
+  const double xc = 0.15e-3;
+  const double zc = ClosedFormDepth(xc, 0.0, at) - 10e-6;
+  ContactModel crest;
+  crest.num_contacts = 1;
+  crest.contacts[0] = LinearizeAndRefine(tool, CurvedToolPose(xc, zc), env, n, patched).refined;
+  crest.X_WT0 = CurvedToolPose(xc, zc);
+  const ContactLinearization& cc = crest.contacts[0];
+  ASSERT_GT(cc.patch.step_m, 0.0);
+  Eigen::Matrix<double, 6, 1> Jc;
+  Jc << cc.gradient.d_translation_W.x, cc.gradient.d_translation_W.y, cc.gradient.d_translation_W.z,
+      cc.gradient.d_rotation_W.x, cc.gradient.d_rotation_W.y, cc.gradient.d_rotation_W.z;
+  const Stiffness6 K_crest = EvaluateContactModel(crest, crest.X_WT0).K;
+  const Stiffness6 K_crest_planes = -cc.stiffness_n_per_m * (Jc * Jc.transpose());
+  EXPECT_LT((K_crest - K_crest_planes).norm(), 0.05 * std::abs(K_crest_planes(2, 2)));
+  for (int k = 0; k < 6; ++k) EXPECT_LE(K_crest(k, k), K_crest_planes(k, k) + 1e-9);
+}
+
 // DepthRefinementOptions::translation_patch_spacing_cells: nodes m cells apart, each the refined
 // depth at the tool translated there (searched, not the rendered samples, which lie one cell
 // away), so that the patch spans ±2m cells; the model passes its nodes (the contact's secant is
@@ -1009,6 +1133,11 @@ TEST(DepthRefinement, OptionsOutOfRangeAreRefused) {
   EXPECT_THROW(DepthRefiner{o}, std::invalid_argument);
   o = {};
   o.parallax_iterations = 0;
+  EXPECT_THROW(DepthRefiner{o}, std::invalid_argument);
+  o = {};
+  o.translation_patch_step_texels = -1.0;
+  EXPECT_THROW(DepthRefiner{o}, std::invalid_argument);
+  o.translation_patch_step_texels = std::numeric_limits<double>::infinity();
   EXPECT_THROW(DepthRefiner{o}, std::invalid_argument);
 }
 

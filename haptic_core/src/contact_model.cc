@@ -10,12 +10,15 @@ namespace {
 
 // Catmull–Rom weights of the nodes −1, 0, 1, 2 of a unit segment at f ∈ [0, 1], and their
 // derivatives along f.
-void CatmullRomWeights(double f, std::array<double, 4>& w, std::array<double, 4>& dw) noexcept {
+void CatmullRomWeights(double f, std::array<double, 4>& w, std::array<double, 4>& dw,
+                       std::array<double, 4>& ddw) noexcept {
   const double f2 = f * f, f3 = f2 * f;
   w = {0.5 * (-f3 + 2.0 * f2 - f), 0.5 * (3.0 * f3 - 5.0 * f2 + 2.0),
        0.5 * (-3.0 * f3 + 4.0 * f2 + f), 0.5 * (f3 - f2)};
   dw = {0.5 * (-3.0 * f2 + 4.0 * f - 1.0), 0.5 * (9.0 * f2 - 10.0 * f),
         0.5 * (-9.0 * f2 + 8.0 * f + 1.0), 0.5 * (3.0 * f2 - 2.0 * f)};
+  ddw = {0.5 * (-6.0 * f + 4.0), 0.5 * (18.0 * f - 10.0), 0.5 * (-18.0 * f + 8.0),
+         0.5 * (6.0 * f - 2.0)};
 }
 
 // How far past a translation patch's edge its slope fades to zero (node spacings): short, so that
@@ -30,9 +33,11 @@ constexpr double kPatchFadeSpacings = 0.25;
 // linear part subtracted is the interpolant's tangent at q0 near q0 and the contact's in-plane
 // slope (`slope_W`, ∂δ/∂x) from one node on, joined by a smoothstep; the two are one where the
 // nodes are one cell apart (the central difference is the contact's secant). Its gradient along
-// u and v (W) is added to `d_translation`. 0 for no patch or a non-finite one.
+// u and v (W) is added to `d_translation`, and where `hessian` is given and Δq lies inside the
+// patch its second derivative along u and v (W, 1/m; zero past an edge) is added to it. 0 for no
+// patch or a non-finite one.
 double PatchResidual(const TranslationPatch& p, const glm::dvec3& dx, const glm::dvec3& slope_W,
-                     glm::dvec3& d_translation) noexcept {
+                     glm::dvec3& d_translation, glm::dmat3* hessian = nullptr) noexcept {
   constexpr int R = kTranslationPatchRadius;
   constexpr int S = kTranslationPatchSide;
   const double h = p.step_m;
@@ -61,10 +66,10 @@ double PatchResidual(const TranslationPatch& p, const glm::dvec3& dx, const glm:
   const double y = std::clamp(y_raw, -static_cast<double>(R), static_cast<double>(R));
   const int i0 = std::min(static_cast<int>(std::floor(x)), R - 1);
   const int j0 = std::min(static_cast<int>(std::floor(y)), R - 1);
-  std::array<double, 4> wx, dwx, wy, dwy;
-  CatmullRomWeights(x - i0, wx, dwx);
-  CatmullRomWeights(y - j0, wy, dwy);
-  double value = 0.0, d_x = 0.0, d_y = 0.0, d_xy = 0.0;
+  std::array<double, 4> wx, dwx, ddwx, wy, dwy, ddwy;
+  CatmullRomWeights(x - i0, wx, dwx, ddwx);
+  CatmullRomWeights(y - j0, wy, dwy, ddwy);
+  double value = 0.0, d_x = 0.0, d_y = 0.0, d_xy = 0.0, d_xx = 0.0, d_yy = 0.0;
   for (int b = 0; b < 4; ++b) {
     for (int a = 0; a < 4; ++a) {
       const double v = at(i0 - 1 + a, j0 - 1 + b);
@@ -73,6 +78,8 @@ double PatchResidual(const TranslationPatch& p, const glm::dvec3& dx, const glm:
       d_x += dwx[ua] * wy[ub] * v;
       d_y += wx[ua] * dwy[ub] * v;
       d_xy += dwx[ua] * dwy[ub] * v;
+      d_xx += ddwx[ua] * wy[ub] * v;
+      d_yy += wx[ua] * ddwy[ub] * v;
     }
   }
   // The linear part subtracted, per node spacing: T(x) = g·x − (g − c)·x·φ(|x|), g the
@@ -91,6 +98,21 @@ double PatchResidual(const TranslationPatch& p, const glm::dvec3& dx, const glm:
   const double T = linear_part(x, g_x, c_x, dT_x) + linear_part(y, g_y, c_y, dT_y);
   if (x == x_raw) d_translation += ((d_x - dT_x) / h) * p.axis_u_W;
   if (y == y_raw) d_translation += ((d_y - dT_y) / h) * p.axis_v_W;
+  if (hessian != nullptr && x == x_raw && y == y_raw) {
+    // T″(s) = −(g − c)·sign(s)·(18a − 24a²) up to a = 1, 0 beyond.
+    const auto linear_second = [](double s, double g, double c) {
+      const double a = std::min(std::abs(s), 1.0);
+      return a < 1.0 ? -(g - c) * std::copysign(a * (18.0 - 24.0 * a), s) : 0.0;
+    };
+    const double h2 = h * h;
+    const double hxx = (d_xx - linear_second(x, g_x, c_x)) / h2;
+    const double hyy = (d_yy - linear_second(y, g_y, c_y)) / h2;
+    const double hxy = d_xy / h2;
+    const glm::dvec3& u = p.axis_u_W;
+    const glm::dvec3& v = p.axis_v_W;
+    *hessian += hxx * glm::outerProduct(u, u) + hyy * glm::outerProduct(v, v) +
+                hxy * (glm::outerProduct(u, v) + glm::outerProduct(v, u));
+  }
   // Past an edge (e = the displacement beyond it, in node spacings) nothing is known of the
   // surface: the in-plane slope fades from the interpolant's at the edge to zero over L =
   // kPatchFadeSpacings and the depth then holds (the edge's depth plus L/2 of its slope), so that δ
@@ -207,7 +229,47 @@ double ContactDepthAt(const ContactLinearization& c, const Twist& dq, Penetratio
   glm::dvec3 patch_t(0.0);
   const bool lever = c.patch.lever_W != glm::dvec3(0.0) && finite3(c.patch.lever_W);
   const glm::dvec3 slide = lever ? dq.linear + glm::cross(dq.angular, c.patch.lever_W) : dq.linear;
-  const double patch = PatchResidual(c.patch, slide, c.gradient.d_translation_W, patch_t);
+  glm::dmat3 patch_hessian(0.0);
+  const double patch = PatchResidual(c.patch, slide, c.gradient.d_translation_W, patch_t,
+                                     curvature != nullptr ? &patch_hessian : nullptr);
+  if (curvature != nullptr && c.patch.step_m > 0.0 && c.patch.step_m <= kPatchCurvatureMaxStepM) {
+    // The patch's curvature along the window's plane, its convex part only (a ridge's top, where
+    // it is concave, is left to the planes: K stays negative semi-definite), through the slide:
+    // ∂slide/∂(Δx, Δθ) = [I, −[r]×] with a lever, [I, 0] without.
+    const glm::dvec3& u = c.patch.axis_u_W;
+    const glm::dvec3& v = c.patch.axis_v_W;
+    const double a = glm::dot(u, patch_hessian * u), b = glm::dot(u, patch_hessian * v),
+                 e = glm::dot(v, patch_hessian * v);
+    const double mean = 0.5 * (a + e), radius = std::sqrt(0.25 * (a - e) * (a - e) + b * b);
+    const double l1 = mean + radius, l2 = mean - radius;
+    if (std::isfinite(l1) && std::isfinite(l2) && l1 > 0.0) {
+      // Eigenvectors of [[a, b], [b, d]] in (u, v): e1 for l1, e2 ⊥ e1 for l2.
+      double e1u = b, e1v = l1 - a;
+      if (std::abs(b) < 1e-300 && std::abs(l1 - a) < 1e-300) {
+        e1u = a >= e ? 1.0 : 0.0;
+        e1v = a >= e ? 0.0 : 1.0;
+      }
+      const double len = std::hypot(e1u, e1v);
+      e1u /= len;
+      e1v /= len;
+      const glm::dvec3 e1 = e1u * u + e1v * v, e2 = -e1v * u + e1u * v;
+      Eigen::Matrix<double, 3, 6> A = Eigen::Matrix<double, 3, 6>::Zero();
+      A.leftCols<3>().setIdentity();
+      if (lever) {
+        const glm::dvec3& lw = c.patch.lever_W;
+        Eigen::Matrix3d rx;
+        rx << 0.0, -lw.z, lw.y, lw.z, 0.0, -lw.x, -lw.y, lw.x, 0.0;
+        A.rightCols<3>() = -rx;
+      }
+      const auto add = [&](double l, const glm::dvec3& dir) {
+        if (!(l > 0.0)) return;
+        const Eigen::Matrix<double, 1, 6> row = Eigen::RowVector3d(dir.x, dir.y, dir.z) * A;
+        curvature->noalias() += l * (row.transpose() * row);
+      };
+      add(l1, e1);
+      add(l2, e2);
+    }
+  }
   const glm::dvec3 patch_r = lever ? glm::cross(c.patch.lever_W, patch_t) : glm::dvec3(0.0);
   if (gradient != nullptr) *gradient = {t_top + blend_t + patch_t, r_top + blend_r + patch_r};
   return depth + lift - lift0 + patch;
@@ -227,8 +289,8 @@ ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const Rig
     const double k = c.stiffness_n_per_m * scale;
     if (!std::isfinite(c.depth_m) || !std::isfinite(k) || !(k > 0.0)) continue;
     PenetrationGradient J_active;
-    const double depth =
-        ContactDepthAt(c, dq, &J_active, c.num_kink_planes > 0 ? &curvature : nullptr);
+    const bool curved = c.num_kink_planes > 0 || c.patch.step_m > 0.0;
+    const double depth = ContactDepthAt(c, dq, &J_active, curved ? &curvature : nullptr);
     if (!(depth > 0.0)) continue;
     ++out.active_contacts;
     out.max_depth_m = std::max(out.max_depth_m, depth);
@@ -250,7 +312,7 @@ ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const Rig
         J_active.d_rotation_W.x, J_active.d_rotation_W.y, J_active.d_rotation_W.z;
     out.K.noalias() -= k * (J * J.transpose());
     out.G.noalias() += (k * depth) * (J * J.transpose());
-    if (c.num_kink_planes > 0) out.K.noalias() -= (k * depth) * curvature;
+    if (curved) out.K.noalias() -= (k * depth) * curvature;
   }
   return out;
 }

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -456,6 +457,11 @@ void DepthRefinementOptions::Validate() const {
         "depth refinement: translation_patch_floor_texels must be >= 0, got " +
         std::to_string(translation_patch_floor_texels));
   }
+  if (!(translation_patch_step_texels >= 0.0) || !std::isfinite(translation_patch_step_texels)) {
+    throw std::invalid_argument(
+        "depth refinement: translation_patch_step_texels must be >= 0, got " +
+        std::to_string(translation_patch_step_texels));
+  }
   if (translation_patch_spacing_cells < 1 ||
       translation_patch_spacing_cells > kMaxTranslationPatchSpacing) {
     throw std::invalid_argument(
@@ -844,6 +850,22 @@ void DepthRefiner::Screen(Seed& best) noexcept {
   if (truncated_) counters_.screen_truncated += 1;
 }
 
+int DepthRefiner::SeedsNear(std::span<const Seed> base, int num_seeds, const Seed& deepest,
+                            double reach, std::span<int> order) noexcept {
+  const int n = std::min(num_seeds, static_cast<int>(order.size()));
+  for (int k = 0; k < n; ++k) order[static_cast<std::size_t>(k)] = k;
+  std::sort(order.begin(), order.begin() + n, [&](int a, int b) {
+    return base[static_cast<std::size_t>(a)].depth_m > base[static_cast<std::size_t>(b)].depth_m;
+  });
+  int num_near = 0;
+  while (num_near < std::min(n, 4) &&
+         base[static_cast<std::size_t>(order[static_cast<std::size_t>(num_near)])].depth_m >=
+             deepest.depth_m - 4.0 * reach) {
+    ++num_near;
+  }
+  return num_near;
+}
+
 PenetrationGradient DepthRefiner::TexelScaleGradient(const RigidTransform& X_WT,
                                                      std::span<const Seed> base, int num_seeds,
                                                      const Seed& deepest,
@@ -863,16 +885,7 @@ PenetrationGradient DepthRefiner::TexelScaleGradient(const RigidTransform& X_WT,
   // The base seeds within reach of the deepest (a small step cannot bring a far, lower peak
   // above it), deepest first, at most four.
   std::array<int, kBaseSeedSamples> order{};
-  for (int k = 0; k < num_seeds; ++k) order[static_cast<std::size_t>(k)] = k;
-  std::sort(order.begin(), order.begin() + num_seeds, [&](int a, int b) {
-    return base[static_cast<std::size_t>(a)].depth_m > base[static_cast<std::size_t>(b)].depth_m;
-  });
-  int num_near = 0;
-  while (num_near < std::min(num_seeds, 4) &&
-         base[static_cast<std::size_t>(order[static_cast<std::size_t>(num_near)])].depth_m >=
-             deepest.depth_m - 4.0 * reach) {
-    ++num_near;
-  }
+  const int num_near = SeedsNear(base, num_seeds, deepest, reach, order);
   const auto poses = GradientSamplePoses(X_WT, w, {h_x, h_theta});
   std::array<double, 10> displaced{};
   displaced.fill(-kInf);
@@ -1097,6 +1110,94 @@ void DepthRefiner::FillTranslationPatch(const RigidTransform& X_WT, const Seed& 
   }
 }
 
+void DepthRefiner::FillTexelTranslationPatch(std::span<const Seed> base, int num_seeds,
+                                             std::span<const Seed> found, const Seed& deepest,
+                                             ContactLinearization& lin) noexcept {
+  constexpr int R = kTranslationPatchRadius;
+  constexpr int S = kTranslationPatchSide;
+  const ContactWindow& w = window_;
+  const double cell = w.cell_size_m();
+  GatherEnvironment(deepest.s - cell, deepest.s + cell, deepest.t - cell, deepest.t + cell);
+  GatherTool(tool_all_, deepest.s - cell, deepest.s + cell, deepest.t - cell, deepest.t + cell);
+  const double texel = TexelOfGathered(tool_local_);
+  const double h = options_.translation_patch_step_texels * texel;
+  const double reach = R * h;
+  const double floor_m = options_.search_floor_texels * texel;
+  TranslationPatch& patch = lin.patch;
+  patch = TranslationPatch{};
+  patch.step_m = h;
+  patch.axis_u_W = w.axis_u_W;
+  patch.axis_v_W = w.axis_v_W;
+  // The base seeds within reach of the deepest, deepest first, at most four (as
+  // TexelScaleGradient).
+  std::array<int, kBaseSeedSamples> order{};
+  const int num_near = SeedsNear(base, num_seeds, deepest, reach, order);
+  std::array<double, static_cast<std::size_t>(S * S)> node{};
+  node.fill(-kInf);
+
+  const auto index = [](int i, int j) { return static_cast<std::size_t>((j + R) * S + (i + R)); };
+  for (int m = 0; m < num_near; ++m) {
+    const Seed& sd = base[static_cast<std::size_t>(order[static_cast<std::size_t>(m)])];
+    const double margin = reach + 4.0 * texel;
+    const Box box{sd.s - margin, sd.s + margin, sd.t - margin, sd.t + margin};
+    GatherEnvironment(box.s0, box.s1, box.t0, box.t1);
+    GatherTool(tool_all_, box.s0 - reach, box.s1 + reach, box.t0 - reach, box.t1 + reach);
+    for (int j = -R; j <= R; ++j) {
+      for (int i = -R; i <= R; ++i) {
+        if (i == 0 && j == 0) continue;
+        const double shift_s = i * h, shift_t = j * h;
+        // The maximum may stay with the environment's feature (the seed's point) or move with
+        // the tool's (the seed's point carried by the shift): both starts are climbed.
+        const Seed at_seed =
+            Search(tool_local_, box, sd.s, sd.t, 0.0, 1, texel, floor_m, shift_s, shift_t);
+        const Seed at_moved = Search(tool_local_, box, sd.s + shift_s, sd.t + shift_t, 0.0, 1,
+                                     texel, floor_m, shift_s, shift_t);
+        double& d = node[index(i, j)];
+        d = std::max({d, at_seed.depth_m, at_moved.depth_m});
+      }
+    }
+  }
+  // A peak that a shift brings above the deepest one (the other flank across a trough, whose V
+  // the patch is for) need not be among the base seeds, whose cells lie next to the deepest's or
+  // on it: each node is also climbed from the neighbouring peaks (neighbour_peak_seeds) and the
+  // refined rendered translation samples' maxima (±1 cell along u and v), from the point and
+  // from the point carried by the shift.
+  const auto climb_from = [&](const Seed& f) {
+    if (!(f.depth_m > -kInf)) return;
+    const double margin = reach + 4.0 * texel;
+    const Box box{f.s - margin, f.s + margin, f.t - margin, f.t + margin};
+    GatherEnvironment(box.s0, box.s1, box.t0, box.t1);
+    GatherTool(tool_all_, box.s0 - reach, box.s1 + reach, box.t0 - reach, box.t1 + reach);
+    for (int j = -R; j <= R; ++j) {
+      for (int i = -R; i <= R; ++i) {
+        if (i == 0 && j == 0) continue;
+        const double shift_s = i * h, shift_t = j * h;
+        const Seed at_seed =
+            Search(tool_local_, box, f.s, f.t, 0.0, 1, texel, floor_m, shift_s, shift_t);
+        const Seed at_moved = Search(tool_local_, box, f.s + shift_s, f.t + shift_t, 0.0, 1, texel,
+                                     floor_m, shift_s, shift_t);
+        double& d = node[index(i, j)];
+        d = std::max({d, at_seed.depth_m, at_moved.depth_m});
+      }
+    }
+  };
+  for (int k = 0; k < num_neighbour_peaks_; ++k) {
+    climb_from(neighbour_peaks_[static_cast<std::size_t>(k)]);
+  }
+  for (const Seed& f : found) climb_from(f);
+  const double slope_u = glm::dot(lin.gradient.d_translation_W, w.axis_u_W);
+  const double slope_v = glm::dot(lin.gradient.d_translation_W, w.axis_v_W);
+  for (int j = -R; j <= R; ++j) {
+    for (int i = -R; i <= R; ++i) {
+      const double d = node[index(i, j)];
+      const double value =
+          (d > -kInf && std::isfinite(d)) ? d - deepest.depth_m : (slope_u * i + slope_v * j) * h;
+      patch.depth_m[index(i, j)] = static_cast<float>(value);
+    }
+  }
+  patch.depth_m[index(0, 0)] = 0.0f;
+}
+
 double DepthRefiner::TexelOfGathered(std::span<const Projected> tool_tris) const noexcept {
   double texel = kInf;
   for (const Projected& P : env_local_) {
@@ -1250,6 +1351,45 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
       counters_.last_step_raised_um += take_deeper(found);
     }
   }
+  // The neighbouring peaks (neighbour_peak_seeds): climbs from half a cell and a cell from the
+  // deepest along ±u and ±v, where the other flank across a trough lies (its cell is next to
+  // the deepest's, and so never a seed of its own).
+  num_neighbour_peaks_ = 0;
+  if (options_.neighbour_peak_seeds && deepest.depth_m > -kInf) {
+    const double half_extent = 0.5 * w.extent_m;
+    const Seed from = deepest;
+    static constexpr std::array<std::array<int, 2>, 4> kAxes{{{1, 0}, {-1, 0}, {0, 1}, {0, -1}}};
+    for (const auto& a : kAxes) {
+      for (const double along : {0.5 * cell, cell}) {
+        const double s = std::clamp(from.s + a[0] * along, -half_extent, half_extent);
+        const double t = std::clamp(from.t + a[1] * along, -half_extent, half_extent);
+        const Box box{s - cell, s + cell, t - cell, t + cell};
+        GatherEnvironment(box.s0, box.s1, box.t0, box.t1);
+        GatherTool(tool_all_, box.s0, box.s1, box.t0, box.t1);
+        const double texel = TexelOfGathered(tool_local_);
+        const Seed found = Search(tool_local_, box, s, t, 0.0, 1, 2.0 * texel,
+                                  options_.search_floor_texels * texel, 0.0, 0.0);
+        ++counters_.neighbour_peak_seeds;
+        if (!(found.depth_m > -kInf)) continue;
+        // Distinct from the deepest and from the peaks kept (two texels apart).
+        const auto near = [&](const Seed& o) {
+          return std::hypot(o.s - found.s, o.t - found.t) < 2.0 * texel;
+        };
+        bool seen = near(from);
+        for (int k = 0; k < num_neighbour_peaks_ && !seen; ++k) {
+          seen = near(neighbour_peaks_[static_cast<std::size_t>(k)]);
+        }
+        if (seen) continue;
+        if (num_neighbour_peaks_ < kMaxNeighbourPeaks) {
+          neighbour_peaks_[static_cast<std::size_t>(num_neighbour_peaks_++)] = found;
+        }
+        if (found.depth_m > deepest.depth_m) {
+          ++counters_.neighbour_peak_found;
+          counters_.neighbour_peak_raised_um += take_deeper(found);
+        }
+      }
+    }
+  }
   if (!(deepest.depth_m > -kInf)) {
     counters_.evaluations += evaluations_;
     return false;
@@ -1367,7 +1507,11 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
   lin.patch = TranslationPatch{};
   if (options_.translation_patch) {
     const std::uint64_t before = evaluations_;
-    FillTranslationPatch(X_WT, deepest, translation_found, big.h_x, lin);
+    if (options_.translation_patch_step_texels > 0.0) {
+      FillTexelTranslationPatch(base, num_seeds, translation_found, deepest, lin);
+    } else {
+      FillTranslationPatch(X_WT, deepest, translation_found, big.h_x, lin);
+    }
     counters_.translation_patches += 1;
     counters_.evaluations += evaluations_ - before;
   }

@@ -89,6 +89,8 @@ PipelineOptions PipelineOptionsFor(const FrontierSetting& st) {
       st.translation_patch_neighbour_climbs;
   options.depth_refinement.translation_patch_floor_texels = st.translation_patch_floor_texels;
   options.depth_refinement.translation_patch_spacing_cells = st.translation_patch_spacing_cells;
+  options.depth_refinement.translation_patch_step_texels = st.translation_patch_step_texels;
+  options.depth_refinement.neighbour_peak_seeds = st.neighbour_peak_seeds;
   options.depth_refinement.translation_patch_follows_rotation =
       st.translation_patch_follows_rotation;
   if (st.gradient_step_texels > 0.0)
@@ -190,6 +192,7 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     product_before.name = "product_before_thirty_third_stop";
     product_before.parallax_offset_seeds = false;
     product_before.clustering_angle_deg = 30.0;
+    product_before.neighbour_peak_seeds = false;  // on since the thirty-fourth stop
     s.push_back(product_before);
   }
   FrontierSetting ref = base;
@@ -276,6 +279,7 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     FrontierSetting before33 = no_offset;
     before33.name = "before_thirty_third_stop";
     before33.clustering_angle_deg = 30.0;
+    before33.neighbour_peak_seeds = false;  // on since the thirty-fourth stop
     s.push_back(before33);
     FrontierSetting by_box = base;
     by_box.name = "windows_pick_by_box";
@@ -364,6 +368,27 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     patch_texel.name = "translation_patch_texel_translation_gradient";
     patch_texel.translation_patch = true;
     s.push_back(patch_texel);
+    // The texel-scale translation slope with a patch whose nodes are that slope's own steps
+    // (2 texels): the V between two flanks and its curvature go to the loop.
+    FrontierSetting texel_patch = translation_only;
+    texel_patch.name = "texel_patch";
+    texel_patch.translation_patch = true;
+    texel_patch.translation_patch_step_texels = 2.0;
+    s.push_back(texel_patch);
+    // Stage 5b without the neighbouring peaks as seeds (the default before issue 32's
+    // thirty-fourth stop), and the texel-scale translation slope without them.
+    FrontierSetting no_neighbour_peaks = refined;
+    no_neighbour_peaks.name = "no_neighbour_peak_seeds";
+    no_neighbour_peaks.neighbour_peak_seeds = false;
+    s.push_back(no_neighbour_peaks);
+    FrontierSetting texel_no_neighbour_peaks = translation_only;
+    texel_no_neighbour_peaks.name = "texel_translation_gradient_no_neighbour_peaks";
+    texel_no_neighbour_peaks.neighbour_peak_seeds = false;
+    s.push_back(texel_no_neighbour_peaks);
+    FrontierSetting texel_patch_rotation = texel_patch;
+    texel_patch_rotation.name = "texel_patch_follows_rotation";
+    texel_patch_rotation.translation_patch_follows_rotation = true;
+    s.push_back(texel_patch_rotation);
     // Stage 5b with the render's form h·(N·n) at the coarse point instead of parallax (the
     // default before issue 32's twenty-eighth stop), alone and with the hung other arm.
     FrontierSetting no_parallax = refined;

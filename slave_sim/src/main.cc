@@ -129,6 +129,12 @@ int main(int argc, char** argv) {
                "where parallax carries them (a facet tilted from the window's normal under a\n"
                "large height shows its peak up to several cells beside where the grid's\n"
                "render puts it; docs/frontier/issue32/thirty_third_stop)");
+  bool no_neighbour_peak_seeds = false;
+  app.add_flag("--no-neighbour-peak-seeds", no_neighbour_peak_seeds,
+               "stage 5b does not search half a cell and a cell beside its deepest point for a\n"
+               "neighbouring peak: by default it does (beside a trough's vertex the other\n"
+               "flank's maximum lies in the next cell, which is never a seed of its own; it costs\n"
+               "4-35 % of the texture stage; docs/frontier/issue32/thirty_fourth_stop)");
   double clustering_angle_deg = ht::PipelineOptions{}.clustering_angle_deg;
   app.add_option("--clustering-angle-deg", clustering_angle_deg,
                  "contact clustering: leaf pairs (and clusters) whose normals differ by less than\n"
@@ -186,6 +192,16 @@ int main(int argc, char** argv) {
                  "coarser on the ridges)")
       ->check(CLI::Range(1, ht::kMaxTranslationPatchSpacing))
       ->capture_default_str();
+  double translation_patch_step_texels = 0.0;
+  auto* patch_texels_option = app.add_option(
+      "--translation-patch-step-texels", translation_patch_step_texels,
+      "whenever translation patches go: their nodes' spacing in level-0 texels instead of\n"
+      "grid cells (with --texel-scale-gradient --secant-rotation-gradient and 2, the\n"
+      "slope's own steps): the loop then holds a V between two ridges' flanks and its\n"
+      "curvature (fig75's valleys no longer ring), over +/-2 spacings only, so pair it\n"
+      "with --translation-patch on a loopback or LAN (docs/frontier/issue32/\n"
+      "thirty_fourth_stop)");
+  patch_texels_option->check(CLI::Range(0.0, 64.0))->excludes("--translation-patch-spacing-cells");
   bool texel_scale_gradient = false;
   app.add_flag("--texel-scale-gradient", texel_scale_gradient,
                "each refined contact's gradient as the refined maximum's derivative at\n"
@@ -469,6 +485,7 @@ int main(int argc, char** argv) {
     config.pipeline.depth_refinement.parallax = parallax;
     config.pipeline.depth_refinement.seed_from_last_step = !no_seed_from_last_step;
     config.pipeline.depth_refinement.parallax_offset_seeds = !no_parallax_offset_seeds;
+    config.pipeline.depth_refinement.neighbour_peak_seeds = !no_neighbour_peak_seeds;
     config.pipeline.clustering_angle_deg = clustering_angle_deg;
     config.pipeline.kink_hang_other_arm = kink_hang_other_arm;
     config.pipeline.depth_refinement.translation_patch = translation_patch;
@@ -476,6 +493,12 @@ int main(int argc, char** argv) {
         translation_patch_follows_rotation;
     config.pipeline.depth_refinement.translation_patch_spacing_cells =
         translation_patch_spacing_cells;
+    config.pipeline.depth_refinement.translation_patch_step_texels = translation_patch_step_texels;
+    if (translation_patch_step_texels > 0.0 && no_translation_patch) {
+      throw std::invalid_argument(
+          "--translation-patch-step-texels sets the patches' spacing, and --no-translation-patch "
+          "sends none: drop one");
+    }
     config.translation_patch_rtt_ms =
         no_translation_patch ? std::numeric_limits<double>::infinity() : translation_patch_rtt_ms;
     if ((translation_patch || rtt_option->count() > 0) && no_refine_depth) {

@@ -457,7 +457,10 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
         {"seed_from_last_step", config.pipeline.depth_refinement.seed_from_last_step},
         {"parallax_offset_seeds", r.parallax_offset_seeds},
         {"parallax_offset_found_deeper", r.parallax_offset_found},
-        {"parallax_offset_raised_um_sum", r.parallax_offset_raised_um}};
+        {"parallax_offset_raised_um_sum", r.parallax_offset_raised_um},
+        {"neighbour_peak_seeds", r.neighbour_peak_seeds},
+        {"neighbour_peak_found_deeper", r.neighbour_peak_found},
+        {"neighbour_peak_raised_um_sum", r.neighbour_peak_raised_um}};
     // Whether the patches went by the operator's round trip (translation_patch_rtt_ms).
     s["translation_patch_by_rtt"] = {
         {"rtt_ms", std::isfinite(config.translation_patch_rtt_ms)

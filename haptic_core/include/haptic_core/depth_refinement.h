@@ -158,6 +158,15 @@ struct DepthRefinementOptions {
   /// trip, coarser on the ridges. At 1 the nodes one step away are the rendered samples; at more,
   /// every node is searched.
   int translation_patch_spacing_cells = 1;
+  /// With translation_patch: the nodes' spacing in level-0 texels of the finer surface at the
+  /// contact point instead of grid cells (0: translation_patch_spacing_cells), each node the
+  /// refined maximum climbed as texel_scale_gradient's translation samples are (from the base
+  /// seeds within reach of the deepest and from the point the displacement carries each to). At
+  /// gradient_step_texels with texel_scale_gradient, the nodes one step away are that gradient's
+  /// samples, so the patch's tangent at q0 is the contact's slope and the loop reads δ over
+  /// ±2 steps, the vertex of a V between two flanks included, and its curvature in the implicit
+  /// step's K (ContactDepthAt). ≥ 0.
+  double translation_patch_step_texels = 0.0;
   /// How far above the tangent (m) a translation sample must lie to make an arm. ≥ 0.
   double translation_kink_tolerance_m = 1e-6;
   /// The rendered rotation samples (±h_θ about u, v and n) searched from a sub-grid of their
@@ -225,6 +234,17 @@ struct DepthRefinementOptions {
   /// --no-seed-from-last-step`, the frontier's "no_last_step_seeds"): each step from its own grid
   /// alone.
   bool seed_from_last_step = true;
+  /// Neighbouring peaks as seeds (issue 32, thirty-fourth stop; on): pattern searches from half a
+  /// cell and a cell from the deepest point along ±u and ±v (steps of two texels), each a seed,
+  /// and the deepest where it is deeper. Beside a trough's vertex the other flank's maximum lies
+  /// in the cell next to the deepest's, which is never a seed of its own (a cell next to a seed
+  /// is skipped), so the refined δ0 read the wrong flank, with a lateral slope of the wrong sign:
+  /// the curved tool 10 µm past the sinusoid's trough read 7.5 µm on the far flank where the
+  /// closed form is 10.0 on the near one (tests/depth_refinement_test.cc). The texel-scale patch
+  /// climbs its nodes from them too. Product models: fig77's force error 24.0 → 23.2 %, the
+  /// hammer's 14.4 → 14.1 %, δ p50 10.3 → 9.5 and 10.4 → 9.1 µm; the block scenes unchanged
+  /// (docs/frontier/issue32/thirty_fourth_stop).
+  bool neighbour_peak_seeds = true;
   /// How far above the best a dropped square's bound may reach (m). ≥ 0.
   double screen_tolerance_m = 1e-6;
   /// The screen looks for b − a above the larger of the best found and this (m): 0 looks for
@@ -267,6 +287,11 @@ struct DepthRefinementCounters {
   std::uint64_t last_step_seeds = 0;
   std::uint64_t last_step_found = 0;
   std::uint64_t last_step_raised_um = 0;
+  /// DepthRefinementOptions::neighbour_peak_seeds: searches, and contacts where a neighbouring
+  /// peak was deeper than the seeds' best (and Σ of how much deeper, µm).
+  std::uint64_t neighbour_peak_seeds = 0;
+  std::uint64_t neighbour_peak_found = 0;
+  std::uint64_t neighbour_peak_raised_um = 0;
 };
 
 /// Refines the linearizations of a texture stage's batch to the finest texture level (see the
@@ -342,6 +367,11 @@ class DepthRefiner {
   // The finer level-0 texel (m) of env_local_ and `tool_tris` (a quarter cell where neither is
   // textured: a smooth coarse surface is linear inside its triangles).
   double TexelOfGathered(std::span<const Projected> tool_tris) const noexcept;
+  // The base seeds `base` [0, num_seeds) within 4·reach (m) below `deepest`, deepest first, at
+  // most four (a small step cannot bring a far, lower peak above the deepest): their indices in
+  // order[0, returned count).
+  static int SeedsNear(std::span<const Seed> base, int num_seeds, const Seed& deepest, double reach,
+                       std::span<int> order) noexcept;
   // DepthRefinementOptions::texel_scale_gradient: central differences of the refined maximum at
   // texel-scale steps, climbed from the base seeds `base` [0, num_seeds) within reach of
   // `deepest` (point_W its point on the window plane, m, W).
@@ -360,6 +390,13 @@ class DepthRefiner {
   void FillTranslationPatch(const RigidTransform& X_WT, const Seed& deepest,
                             std::span<const Seed> found, double cell_step,
                             ContactLinearization& lin) noexcept;
+  // DepthRefinementOptions::translation_patch_step_texels > 0: lin.patch at that many texels,
+  // its nodes climbed from the base seeds `base` [0, num_seeds) within reach of `deepest` as
+  // TexelScaleGradient's translation samples are, and from the refined rendered translation
+  // samples' maxima `found` (index k − 1 for rendered sample k = 1…4; −∞ where none).
+  void FillTexelTranslationPatch(std::span<const Seed> base, int num_seeds,
+                                 std::span<const Seed> found, const Seed& deepest,
+                                 ContactLinearization& lin) noexcept;
   // The triangles of `list` facing the side's way, projected on the window at pose X.
   void ProjectAll(const HapticModel& model, const RigidTransform& X, PatchSide side,
                   std::span<const int> list, std::vector<Projected>& out) noexcept;
@@ -422,6 +459,10 @@ class DepthRefiner {
   };
   std::array<LastStepPoint, kMaxLastStepSeeds> last_{}, next_{};
   int num_last_ = 0, num_next_ = 0;
+  // This contact's neighbouring peaks (DepthRefinementOptions::neighbour_peak_seeds).
+  static constexpr int kMaxNeighbourPeaks = 8;
+  std::array<Seed, kMaxNeighbourPeaks> neighbour_peaks_{};
+  int num_neighbour_peaks_ = 0;
 };
 
 }  // namespace ht

@@ -154,6 +154,10 @@ struct FrontierSetting {
   /// PipelineOptions::depth_refinement.translation_patch_spacing_cells
   /// ("translation_patch_spacing2", "translation_patch_spacing3").
   int translation_patch_spacing_cells = 1;
+  /// PipelineOptions::depth_refinement.translation_patch_step_texels (0: cells).
+  double translation_patch_step_texels = 0.0;
+  /// PipelineOptions::depth_refinement.neighbour_peak_seeds.
+  bool neighbour_peak_seeds = true;
   /// PipelineOptions::depth_refinement.translation_patch_follows_rotation
   /// ("translation_patch_follows_rotation" turns it on).
   bool translation_patch_follows_rotation = false;
