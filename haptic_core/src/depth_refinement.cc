@@ -6,7 +6,6 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <cstdio>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -1134,34 +1133,10 @@ void DepthRefiner::FillTexelTranslationPatch(std::span<const Seed> base, int num
   const int num_near = SeedsNear(base, num_seeds, deepest, reach, order);
   std::array<double, static_cast<std::size_t>(S * S)> node{};
   node.fill(-kInf);
-
   const auto index = [](int i, int j) { return static_cast<std::size_t>((j + R) * S + (i + R)); };
-  for (int m = 0; m < num_near; ++m) {
-    const Seed& sd = base[static_cast<std::size_t>(order[static_cast<std::size_t>(m)])];
-    const double margin = reach + 4.0 * texel;
-    const Box box{sd.s - margin, sd.s + margin, sd.t - margin, sd.t + margin};
-    GatherEnvironment(box.s0, box.s1, box.t0, box.t1);
-    GatherTool(tool_all_, box.s0 - reach, box.s1 + reach, box.t0 - reach, box.t1 + reach);
-    for (int j = -R; j <= R; ++j) {
-      for (int i = -R; i <= R; ++i) {
-        if (i == 0 && j == 0) continue;
-        const double shift_s = i * h, shift_t = j * h;
-        // The maximum may stay with the environment's feature (the seed's point) or move with
-        // the tool's (the seed's point carried by the shift): both starts are climbed.
-        const Seed at_seed =
-            Search(tool_local_, box, sd.s, sd.t, 0.0, 1, texel, floor_m, shift_s, shift_t);
-        const Seed at_moved = Search(tool_local_, box, sd.s + shift_s, sd.t + shift_t, 0.0, 1,
-                                     texel, floor_m, shift_s, shift_t);
-        double& d = node[index(i, j)];
-        d = std::max({d, at_seed.depth_m, at_moved.depth_m});
-      }
-    }
-  }
-  // A peak that a shift brings above the deepest one (the other flank across a trough, whose V
-  // the patch is for) need not be among the base seeds, whose cells lie next to the deepest's or
-  // on it: each node is also climbed from the neighbouring peaks (neighbour_peak_seeds) and the
-  // refined rendered translation samples' maxima (±1 cell along u and v), from the point and
-  // from the point carried by the shift.
+  // Every node climbed from a start `f`: from its point (the maximum stays with the
+  // environment's feature) and from its point carried by the node's shift (it moves with the
+  // tool's).
   const auto climb_from = [&](const Seed& f) {
     if (!(f.depth_m > -kInf)) return;
     const double margin = reach + 4.0 * texel;
@@ -1181,6 +1156,14 @@ void DepthRefiner::FillTexelTranslationPatch(std::span<const Seed> base, int num
       }
     }
   };
+  // The starts: the base seeds within reach, and, since a peak that a shift brings above the
+  // deepest one (the other flank across a trough, whose V the patch is for) need not be among
+  // them (their cells lie next to the deepest's or on it), the neighbouring peaks
+  // (neighbour_peak_seeds) and the refined rendered translation samples' maxima (±1 cell along u
+  // and v).
+  for (int m = 0; m < num_near; ++m) {
+    climb_from(base[static_cast<std::size_t>(order[static_cast<std::size_t>(m)])]);
+  }
   for (int k = 0; k < num_neighbour_peaks_; ++k) {
     climb_from(neighbour_peaks_[static_cast<std::size_t>(k)]);
   }
