@@ -1,5 +1,6 @@
 #include "haptic_core/contact_model.h"
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -21,6 +22,12 @@ void CatmullRomWeights(double f, std::array<double, 4>& w, std::array<double, 4>
          0.5 * (6.0 * f - 2.0)};
 }
 
+// Whether ContactDepthAt gives the patch's curvature to the implicit step (a patch no wider than
+// kPatchCurvatureMaxStepM between nodes).
+bool PatchGivesCurvature(const TranslationPatch& p) noexcept {
+  return p.step_m > 0.0 && p.step_m <= kPatchCurvatureMaxStepM;
+}
+
 // How far past a translation patch's edge its slope fades to zero (node spacings): short, so that
 // little of the edge's slope is carried on, and not zero, so that the gradient stays continuous
 // (docs/passivity/README.md, "Past the patch's edge": a quarter and one spacing measured).
@@ -33,11 +40,12 @@ constexpr double kPatchFadeSpacings = 0.25;
 // linear part subtracted is the interpolant's tangent at q0 near q0 and the contact's in-plane
 // slope (`slope_W`, ∂δ/∂x) from one node on, joined by a smoothstep; the two are one where the
 // nodes are one cell apart (the central difference is the contact's secant). Its gradient along
-// u and v (W) is added to `d_translation`, and where `hessian` is given and Δq lies inside the
-// patch its second derivative along u and v (W, 1/m; zero past an edge) is added to it. 0 for no
-// patch or a non-finite one.
+// u and v (W) is added to `d_translation`, and where `hessian` is given it receives the residual's
+// second derivatives in the patch's (u, v) basis (1/m; zero past an edge). 0 for no patch or a
+// non-finite one.
 double PatchResidual(const TranslationPatch& p, const glm::dvec3& dx, const glm::dvec3& slope_W,
-                     glm::dvec3& d_translation, glm::dmat3* hessian = nullptr) noexcept {
+                     glm::dvec3& d_translation, Eigen::Matrix2d* hessian = nullptr) noexcept {
+  if (hessian != nullptr) hessian->setZero();
   constexpr int R = kTranslationPatchRadius;
   constexpr int S = kTranslationPatchSide;
   const double h = p.step_m;
@@ -104,14 +112,8 @@ double PatchResidual(const TranslationPatch& p, const glm::dvec3& dx, const glm:
       const double a = std::min(std::abs(s), 1.0);
       return a < 1.0 ? -(g - c) * std::copysign(a * (18.0 - 24.0 * a), s) : 0.0;
     };
-    const double h2 = h * h;
-    const double hxx = (d_xx - linear_second(x, g_x, c_x)) / h2;
-    const double hyy = (d_yy - linear_second(y, g_y, c_y)) / h2;
-    const double hxy = d_xy / h2;
-    const glm::dvec3& u = p.axis_u_W;
-    const glm::dvec3& v = p.axis_v_W;
-    *hessian += hxx * glm::outerProduct(u, u) + hyy * glm::outerProduct(v, v) +
-                hxy * (glm::outerProduct(u, v) + glm::outerProduct(v, u));
+    *hessian << d_xx - linear_second(x, g_x, c_x), d_xy, d_xy, d_yy - linear_second(y, g_y, c_y);
+    *hessian /= h * h;
   }
   // Past an edge (e = the displacement beyond it, in node spacings) nothing is known of the
   // surface: the in-plane slope fades from the interpolant's at the edge to zero over L =
@@ -229,30 +231,24 @@ double ContactDepthAt(const ContactLinearization& c, const Twist& dq, Penetratio
   glm::dvec3 patch_t(0.0);
   const bool lever = c.patch.lever_W != glm::dvec3(0.0) && finite3(c.patch.lever_W);
   const glm::dvec3 slide = lever ? dq.linear + glm::cross(dq.angular, c.patch.lever_W) : dq.linear;
-  glm::dmat3 patch_hessian(0.0);
+  const bool curved_patch = curvature != nullptr && PatchGivesCurvature(c.patch);
+  Eigen::Matrix2d patch_hessian;
   const double patch = PatchResidual(c.patch, slide, c.gradient.d_translation_W, patch_t,
-                                     curvature != nullptr ? &patch_hessian : nullptr);
-  if (curvature != nullptr && c.patch.step_m > 0.0 && c.patch.step_m <= kPatchCurvatureMaxStepM) {
+                                     curved_patch ? &patch_hessian : nullptr);
+  if (curved_patch) {
     // The patch's curvature along the window's plane, its convex part only (a ridge's top, where
     // it is concave, is left to the planes: K stays negative semi-definite), through the slide:
-    // ∂slide/∂(Δx, Δθ) = [I, −[r]×] with a lever, [I, 0] without.
-    const glm::dvec3& u = c.patch.axis_u_W;
-    const glm::dvec3& v = c.patch.axis_v_W;
-    const double a = glm::dot(u, patch_hessian * u), b = glm::dot(u, patch_hessian * v),
-                 e = glm::dot(v, patch_hessian * v);
-    const double mean = 0.5 * (a + e), radius = std::sqrt(0.25 * (a - e) * (a - e) + b * b);
-    const double l1 = mean + radius, l2 = mean - radius;
-    if (std::isfinite(l1) && std::isfinite(l2) && l1 > 0.0) {
-      // Eigenvectors of [[a, b], [b, d]] in (u, v): e1 for l1, e2 ⊥ e1 for l2.
-      double e1u = b, e1v = l1 - a;
-      if (std::abs(b) < 1e-300 && std::abs(l1 - a) < 1e-300) {
-        e1u = a >= e ? 1.0 : 0.0;
-        e1v = a >= e ? 0.0 : 1.0;
-      }
-      const double len = std::hypot(e1u, e1v);
-      e1u /= len;
-      e1v /= len;
-      const glm::dvec3 e1 = e1u * u + e1v * v, e2 = -e1v * u + e1u * v;
+    // ∂slide/∂(Δx, Δθ) = B·[I, −[r]×] with a lever, B·[I, 0] without, B = [u v] (3×2).
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen;
+    eigen.computeDirect(patch_hessian);
+    const Eigen::Vector2d l = eigen.eigenvalues().cwiseMax(0.0);
+    if (l.allFinite() && l.maxCoeff() > 0.0) {
+      const Eigen::Matrix2d convex =
+          eigen.eigenvectors() * l.asDiagonal() * eigen.eigenvectors().transpose();
+      const glm::dvec3& u = c.patch.axis_u_W;
+      const glm::dvec3& v = c.patch.axis_v_W;
+      Eigen::Matrix<double, 3, 2> B;
+      B << u.x, v.x, u.y, v.y, u.z, v.z;
       Eigen::Matrix<double, 3, 6> A = Eigen::Matrix<double, 3, 6>::Zero();
       A.leftCols<3>().setIdentity();
       if (lever) {
@@ -261,13 +257,8 @@ double ContactDepthAt(const ContactLinearization& c, const Twist& dq, Penetratio
         rx << 0.0, -lw.z, lw.y, lw.z, 0.0, -lw.x, -lw.y, lw.x, 0.0;
         A.rightCols<3>() = -rx;
       }
-      const auto add = [&](double l, const glm::dvec3& dir) {
-        if (!(l > 0.0)) return;
-        const Eigen::Matrix<double, 1, 6> row = Eigen::RowVector3d(dir.x, dir.y, dir.z) * A;
-        curvature->noalias() += l * (row.transpose() * row);
-      };
-      add(l1, e1);
-      add(l2, e2);
+      const Eigen::Matrix<double, 2, 6> BA = B.transpose() * A;
+      curvature->noalias() += BA.transpose() * convex * BA;
     }
   }
   const glm::dvec3 patch_r = lever ? glm::cross(c.patch.lever_W, patch_t) : glm::dvec3(0.0);
@@ -289,7 +280,7 @@ ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const Rig
     const double k = c.stiffness_n_per_m * scale;
     if (!std::isfinite(c.depth_m) || !std::isfinite(k) || !(k > 0.0)) continue;
     PenetrationGradient J_active;
-    const bool curved = c.num_kink_planes > 0 || c.patch.step_m > 0.0;
+    const bool curved = c.num_kink_planes > 0 || PatchGivesCurvature(c.patch);
     const double depth = ContactDepthAt(c, dq, &J_active, curved ? &curvature : nullptr);
     if (!(depth > 0.0)) continue;
     ++out.active_contacts;
