@@ -65,6 +65,16 @@ struct Arm {
   /// The remote step's setting, by its frontier name (speed_error_frontier --list-settings):
   /// its PipelineOptions and CPU backend choices. Empty: the run's own (--reference-setting).
   std::string setting;
+  /// The remote step's speculative lead (s; < 0: the setting's, PipelineOptions::
+  /// speculative_lead_s), as slave_sim --speculative-lead-ms.
+  double speculative_lead_s = -1.0;
+  /// Its largest margin (m; < 0: PipelineOptions::max_speculative_margin_m).
+  double speculative_margin_m = -1.0;
+  /// Its floor (m; < 0: the remote node's by the round trip, speculative_speed_m_per_s).
+  double speculative_floor_m = -1.0;
+  /// The remote node's RemoteNodeConfig::speculative_speed_m_per_s (m/s), whose floor follows
+  /// the run's round trip (2 × delay + step time).
+  double speculative_speed_m_per_s = ht::RemoteNodeConfig{}.speculative_speed_m_per_s;
 };
 
 /// What one arm's run gives, tick by tick and in all.
@@ -153,6 +163,18 @@ Arm ParseArm(const std::string& text) {
       arm.station.switch_offset_release_ms = v > 0.0 ? v : std::numeric_limits<double>::infinity();
     } else if (key == "contact_damping_hc") {  // s/m, master_station --contact-damping-hc
       arm.station.hunt_crossley_s_per_m = v;
+    } else if (key == "speculative_lead_ms") {  // slave_sim --speculative-lead-ms
+      if (!(v >= 0.0)) throw std::invalid_argument("--arm: speculative_lead_ms must be >= 0");
+      arm.speculative_lead_s = v * 1e-3;
+    } else if (key == "speculative_margin_mm") {  // PipelineOptions::max_speculative_margin_m
+      if (!(v >= 0.0)) throw std::invalid_argument("--arm: speculative_margin_mm must be >= 0");
+      arm.speculative_margin_m = v * 1e-3;
+    } else if (key == "speculative_speed_mm_s") {  // slave_sim --speculative-speed-mm-s
+      if (!(v >= 0.0)) throw std::invalid_argument("--arm: speculative_speed_mm_s must be >= 0");
+      arm.speculative_speed_m_per_s = v * 1e-3;
+    } else if (key == "speculative_floor_mm") {  // a fixed PipelineOptions::speculative_floor_m
+      if (!(v >= 0.0)) throw std::invalid_argument("--arm: speculative_floor_mm must be >= 0");
+      arm.speculative_floor_m = v * 1e-3;
     } else if (key == "force_floor") {
       arm.model.force_floor_scale_n = v;
     } else if (key == "torque_floor") {
@@ -249,6 +271,18 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
       FrontierSettingNamed(arm.setting.empty() ? setup.setting : arm.setting);
   PipelineOptions options = PipelineOptionsFor(setting);
   options.texture_threads = 1;
+  if (arm.speculative_lead_s >= 0.0) options.speculative_lead_s = arm.speculative_lead_s;
+  if (arm.speculative_margin_m >= 0.0) options.max_speculative_margin_m = arm.speculative_margin_m;
+  if (arm.speculative_floor_m >= 0.0) {
+    options.speculative_floor_m = arm.speculative_floor_m;
+  } else {
+    // As the remote node sets it from the round trip its operator reports.
+    RemoteNodeConfig node;
+    node.speculative_speed_m_per_s = arm.speculative_speed_m_per_s;
+    const double rtt_ms = 2.0 * setup.delay_ms + setup.step_ms;
+    options.speculative_floor_m =
+        SpeculativeFloorForRoundTrip(node, static_cast<std::int64_t>(std::llround(rtt_ms * 1e6)));
+  }
   if (setup.translation_patch ||
       2.0 * setup.delay_ms + setup.step_ms >= RemoteNodeConfig{}.translation_patch_rtt_ms) {
     options.depth_refinement.translation_patch = true;
@@ -558,20 +592,24 @@ int main(int argc, char** argv) {
   app.add_option("--seed-axis", seed_axis, "W's axis the seeds' starts are shifted along")
       ->check(CLI::IsMember({"x", "y", "z"}))
       ->capture_default_str();
-  app.add_option("--arm", arm_texts,
-                 "NAME:KEY=V,...: an arm (repeatable; default one arm 'default' at 10 %).\n"
-                 "Keys: deadband, tool_deadband, model_deadband (%), keepalive_ms,\n"
-                 "contact_floor_mm, contact_floor_mrad, contact_depth_floor_um, contact_hold_ms,\n"
-                 "velocity_criterion (0/1)\n"
-                 "(the tool-state deadband, as master_station's --deadband-*), force_floor,\n"
-                 "torque_floor, stiffness_floor, rotational_stiffness_floor (the contact-model\n"
-                 "floor scales, as slave_sim's --model-deadband-*-floor); release_ticks,\n"
-                 "energy_bounded_switch (0/1), switch_spend, offset_release_ms, contact_damping_hc "
-                 "(the operator\n"
-                 "tick's passivity options, OperatorTickConfig; master_station's defaults, as\n"
-                 "in the reference, unless given); setting=NAME, the remote step's setting by\n"
-                 "its frontier name (speed_error_frontier --list-settings; default\n"
-                 "--reference-setting)");
+  app.add_option(
+      "--arm", arm_texts,
+      "NAME:KEY=V,...: an arm (repeatable; default one arm 'default' at 10 %).\n"
+      "Keys: deadband, tool_deadband, model_deadband (%), keepalive_ms,\n"
+      "contact_floor_mm, contact_floor_mrad, contact_depth_floor_um, contact_hold_ms,\n"
+      "velocity_criterion (0/1)\n"
+      "(the tool-state deadband, as master_station's --deadband-*), force_floor,\n"
+      "torque_floor, stiffness_floor, rotational_stiffness_floor (the contact-model\n"
+      "floor scales, as slave_sim's --model-deadband-*-floor); release_ticks,\n"
+      "energy_bounded_switch (0/1), switch_spend, offset_release_ms, contact_damping_hc "
+      "(the operator\n"
+      "tick's passivity options, OperatorTickConfig; master_station's defaults, as\n"
+      "in the reference, unless given); speculative_lead_ms (slave_sim\n"
+      "--speculative-lead-ms), speculative_margin_mm, speculative_speed_mm_s (slave_sim\n"
+      "--speculative-speed-mm-s: the floor by the round trip) or a fixed\n"
+      "speculative_floor_mm; setting=NAME, the remote step's setting by\n"
+      "its frontier name (speed_error_frontier --list-settings; default\n"
+      "--reference-setting)");
   app.add_flag("--translation-patch", setup.translation_patch,
                "every contact model carries its translation patch (slave_sim --translation-patch;\n"
                "by default the remote node sends patches from a 10 ms round trip)");

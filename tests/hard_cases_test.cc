@@ -739,6 +739,73 @@ TEST(HardCases, ImpactFasterThanTheModelsCome) {
   EXPECT_THROW(bad.Validate(), std::invalid_argument);
 }
 
+TEST(HardCases, ASurfaceARoundTripAwayIsInTheModelOfAToolAtRest) {
+  // Under a long delay a model answers a tool pose a round trip old: the hand may since have
+  // pressed down onto a surface the pose was clear of (the seed's z phase lifts and presses at
+  // up to 22 mm/s; at 150 ms one way the model comes 300 ms after its pose). With the speculative
+  // floor (PipelineOptions::speculative_floor_m, set by the remote node from the round trip) the
+  // model of a tool at rest 2 mm above the gear already holds the gear, separated (δ0 < 0, no
+  // force), and 0.1 mm inside the gear its local model pushes as a fresh step there does;
+  // without the floor it holds nothing. Beside a touching pair the floor adds nothing.
+  const HapticScene scene = MakeBlockOnGearScene();
+  PipelineOptions plain;
+  plain.speculative_lead_s = 0.0;
+  HapticTexturePipeline without(scene, plain);
+  PipelineOptions floored = plain;
+  floored.speculative_floor_m = 3e-3;
+  HapticTexturePipeline with(scene, floored);
+  EXPECT_DOUBLE_EQ(with.speculative_floor_m(), 3e-3);
+  const RigidTransform home = BlockOnGearHomePose();
+  auto above = [&](double dz) {
+    return At(home.translation + glm::dvec3(0, 0, dz), home.rotation);
+  };
+  StepTimings t;
+  double lo = -2e-3, hi = 3e-3;  // where the block touches (bisection, as above)
+  for (int i = 0; i < 30; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    const ContactModel m = without.Step(above(mid), 1, t);
+    (m.num_contacts > 0 && m.contacts[0].depth_m >= 0.0 ? lo : hi) = mid;
+  }
+  const double touch_dz = lo;
+  const RigidTransform X0 = above(touch_dz + 2e-3);
+  EXPECT_EQ(without.Step(X0, 2, t).num_contacts, 0);
+  const std::int64_t speculative_before = with.step_faults().speculative_pairs;
+  const ContactModel m = with.Step(X0, 2, t);  // at rest: no twist
+  ASSERT_GE(m.num_contacts, 1);
+  EXPECT_GT(with.step_faults().speculative_pairs, speculative_before);
+  EXPECT_NEAR(m.contacts[0].depth_m, -2e-3, 30e-6);  // the gap, to the grid's accuracy
+  EXPECT_EQ(glm::length(m.F_T_W_at_q0.force), 0.0);
+  const RigidTransform X1 = above(touch_dz - 0.1e-3);
+  const ContactModelEvaluation local = EvaluateContactModel(m, X1);
+  HapticTexturePipeline fresh_pipeline(scene, plain);
+  const ContactModel fresh = fresh_pipeline.Step(X1, 3, t);
+  ASSERT_GE(fresh.num_contacts, 1);
+  const double fresh_fz = fresh.F_T_W_at_q0.force.z;
+  EXPECT_GT(fresh_fz, 0.1);
+  EXPECT_NEAR(local.F_T_W.force.z, fresh_fz, 0.1 * fresh_fz);
+  // Beyond the floor: nothing.
+  EXPECT_EQ(with.Step(above(touch_dz + 4e-3), 4, t).num_contacts, 0);
+  // Touching, the floored step's model is the plain one's.
+  const ContactModel touching_plain = without.Step(X1, 5, t);
+  const ContactModel touching_floored = with.Step(X1, 5, t);
+  ASSERT_EQ(touching_floored.num_contacts, touching_plain.num_contacts);
+  EXPECT_EQ(touching_floored.F_T_W_at_q0.force.z, touching_plain.F_T_W_at_q0.force.z);
+  // The setter: a negative or non-finite floor is none.
+  with.SetSpeculativeFloor(-1.0);
+  EXPECT_EQ(with.speculative_floor_m(), 0.0);
+  with.SetSpeculativeFloor(kNaN);
+  EXPECT_EQ(with.speculative_floor_m(), 0.0);
+  EXPECT_EQ(with.Step(X0, 6, t).num_contacts, 0);
+  PipelineOptions bad;
+  bad.speculative_floor_m = -1e-3;
+  EXPECT_THROW(bad.Validate(), std::invalid_argument);
+  Report("a surface a round trip away",
+         Fmt("block at rest 2 mm above the gear, floor 3 mm: model δ0 = %.0f µm (separated, no "
+             "force; none without the floor); 0.1 mm into the gear its local model pushes %.2f N, "
+             "a fresh step %.2f N",
+             m.contacts[0].depth_m * 1e6, local.F_T_W.force.z, fresh_fz));
+}
+
 TEST(HardCases, NonFinitePosesFromTheNetwork) {
   const HapticScene scene = MakeBlockOnGearScene();
   RigidTransform bad = BlockOnGearHomePose();

@@ -381,6 +381,80 @@ TEST(RemoteNode, SendsEachContactsTranslationPatchWhenAskedOrWhenTheRoundTripIsL
   }
 }
 
+// Issue 33's thirty-fifth stop: the node sets the speculative floor from the round trip its
+// operator's Ping reports (RemoteNodeConfig::speculative_speed_m_per_s × the round trip, at most
+// max_speculative_floor_m), so that the model of a tool at rest 2 mm above the gear holds the gear
+// (δ0 < 0) under a 200 ms round trip and nothing without a measured one.
+TEST(RemoteNode, ModelsASurfaceARoundTripAwayFromTheRoundTripItsOperatorReports) {
+  RemoteNodeConfig defaults;
+  EXPECT_EQ(SpeculativeFloorForRoundTrip(defaults, 0), 0.0);
+  EXPECT_NEAR(SpeculativeFloorForRoundTrip(defaults, 200'000'000), 5e-3, 1e-12);
+  EXPECT_NEAR(SpeculativeFloorForRoundTrip(defaults, 1'000'000), 25e-6, 1e-12);
+  EXPECT_EQ(SpeculativeFloorForRoundTrip(defaults, 2'000'000'000),
+            defaults.max_speculative_floor_m);
+  RemoteNodeConfig off;
+  off.speculative_speed_m_per_s = 0.0;
+  EXPECT_EQ(SpeculativeFloorForRoundTrip(off, 200'000'000), 0.0);
+  const HapticScene scene = MakeBlockOnGearScene();
+  int nonce = 0;
+  for (const std::uint32_t rtt_us : {200'000u, 0u}) {
+    SCOPED_TRACE(rtt_us);
+    RemoteNodeConfig config = LocalNodeConfig(TestKey(42), "remote_node_floor_test.port");
+    config.pipeline.speculative_lead_s = 0.0;  // at rest anyway: the floor alone
+    RunningNode node(config, scene);
+    ASSERT_NE(node.port, 0);
+    const SocketAddress remote = node.remote;
+    UdpSocket socket(SocketAddress::Parse("127.0.0.1:0"));
+    wire::HelloMessage hello;
+    hello.client_nonce = 191 + nonce++;
+    hello.codecs = wire::kCodecDracoMesh | wire::kCodecCompactContactModel;
+    wire::WelcomeMessage welcome;
+    const std::uint32_t session = OpenSession(socket, remote, config.key, hello, welcome);
+    ASSERT_NE(session, 0u);
+    wire::Header h;
+    std::uint32_t sequence = 1;
+    if (rtt_us > 0) {
+      socket.SendTo(
+          wire::EncodePing({wire::MessageType::kPing, session, sequence++, 0}, {rtt_us}, config.key)
+              .view(),
+          remote);
+      wire::PongMessage pong;
+      ASSERT_TRUE(Await(socket, config.key, wire::MessageType::kPong, h, [&](auto body) {
+        return wire::DecodePong(body, pong) == wire::DecodeStatus::kOk;
+      }));
+    }
+    wire::ToolStateMessage state;
+    state.X_WT = scene.X_WT_home;
+    state.X_WT.translation.z += 2e-3;  // at rest, 2 mm above its home on the gear
+    socket.SendTo(wire::EncodeToolState({wire::MessageType::kToolState, session, sequence++, 0},
+                                        state, config.key)
+                      .view(),
+                  remote);
+    wire::ContactModelMessage model;
+    ASSERT_TRUE(
+        Await(socket, config.key, wire::MessageType::kCompactContactModel, h, [&](auto body) {
+          return wire::DecodeCompactContactModel(body, model, /*receive_time_ns=*/0) ==
+                 wire::DecodeStatus::kOk;
+        }));
+    if (rtt_us > 0) {
+      ASSERT_GE(model.model.num_contacts, 1);
+      EXPECT_LT(model.model.contacts[0].depth_m, -1.5e-3);  // separated by about 2 mm
+      EXPECT_GT(model.model.contacts[0].depth_m, -3e-3);
+    } else {
+      EXPECT_EQ(model.model.num_contacts, 0);
+    }
+    socket.SendTo(
+        wire::EncodeGoodbye({wire::MessageType::kGoodbye, session, sequence++, 0}, config.key)
+            .view(),
+        remote);
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    const nlohmann::json summary = node.Stop();
+    const nlohmann::json& f = summary["speculative_floor"];
+    EXPECT_NEAR(f["last_mm"].get<double>(), rtt_us > 0 ? 5.0 : 0.0, 1e-9);
+    EXPECT_NEAR(f["speed_mm_per_s"].get<double>(), 25.0, 1e-9);
+  }
+}
+
 // Once on, the patches stay on until the round trip falls below kTranslationPatchOffFraction of
 // the threshold (a round trip near it does not switch them at every Ping), and the first model
 // after a switch goes out whatever the contact-model deadband says.

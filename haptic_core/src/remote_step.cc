@@ -57,6 +57,10 @@ void PipelineOptions::Validate() const {
     throw std::invalid_argument("speculative lead must be in [0, 10] s, got " +
                                 std::to_string(speculative_lead_s));
   }
+  if (!(speculative_floor_m >= 0.0) || !std::isfinite(speculative_floor_m)) {
+    throw std::invalid_argument("speculative floor must be >= 0, got " +
+                                std::to_string(speculative_floor_m));
+  }
   if (!(max_speculative_margin_m >= 0.0) || !std::isfinite(max_speculative_margin_m)) {
     throw std::invalid_argument("max speculative margin must be >= 0, got " +
                                 std::to_string(max_speculative_margin_m));
@@ -285,25 +289,32 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
   const bool speculate = options_.speculative_lead_s > 0.0 &&
                          options_.max_speculative_margin_m > 0.0 && IsFinite(V_WT_W) &&
                          (V_WT_W.linear != glm::dvec3(0.0) || V_WT_W.angular != glm::dvec3(0.0));
-  const double speculative_bound =
-      !speculate ? 0.0
-                 : std::min(options_.max_speculative_margin_m,
-                            options_.speculative_lead_s *
-                                (glm::length(V_WT_W.linear) +
-                                 glm::length(V_WT_W.angular) *
-                                     (glm::length(glm::dvec3(tool_sphere_O_)) + tool_sphere_O_.w)));
+  const double floor_m = options_.speculative_floor_m;
+  const double speculative_bound = std::max(
+      floor_m,
+      !speculate
+          ? 0.0
+          : std::min(options_.max_speculative_margin_m,
+                     options_.speculative_lead_s *
+                         (glm::length(V_WT_W.linear) +
+                          glm::length(V_WT_W.angular) *
+                              (glm::length(glm::dvec3(tool_sphere_O_)) + tool_sphere_O_.w))));
+  // The floor serves an object the tool does not touch yet (set per object below): beside a
+  // touching pair, a separated one would only join its cluster and widen its window.
+  double object_floor_m = floor_m;
   const auto speculative_margin = [&](const HullPairContact& p) {
-    if (!speculate) return 0.0;
+    if (!speculate) return object_floor_m;
     const glm::dvec3 v_A =
         V_WT_W.linear + glm::cross(V_WT_W.angular, p.point_A_W - X_WT.translation);
     const double closing = -glm::dot(v_A, p.normal_W);
-    return closing > 0.0
-               ? std::min(options_.max_speculative_margin_m, options_.speculative_lead_s * closing)
-               : 0.0;
+    return std::max(object_floor_m, closing > 0.0 ? std::min(options_.max_speculative_margin_m,
+                                                             options_.speculative_lead_s * closing)
+                                                  : 0.0);
   };
   // Free space (StepTimings::free_space_clearance_m): the tolerance a later step could use at most.
-  const double most_speculative =
-      options_.speculative_lead_s > 0.0 ? std::max(0.0, options_.max_speculative_margin_m) : 0.0;
+  const double most_speculative = std::max(
+      floor_m,
+      options_.speculative_lead_s > 0.0 ? std::max(0.0, options_.max_speculative_margin_m) : 0.0);
   // What a model pair's separation leaves of free space: less its reaches and the tolerance.
   const auto free_space = [&](double separation_m, const HapticModel& object_model) {
     return separation_m - (tool.OutwardReach() + object_model.OutwardReach() +
@@ -350,6 +361,16 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
     std::span<const double> pair_bounds;
     if (options_.drop_unreachable_pairs || options_.region_normals ||
         (local_bounds && pairs.size() <= reachable_pairs_.size())) {
+      object_floor_m = floor_m;
+      if (floor_m > 0.0) {
+        for (const HullPairContact& p : pairs) {
+          if (p.signed_distance_m <= queries_[k].NodeReach(tool, p.node_A) +
+                                         queries_[k].NodeReach(*object.model, p.node_B)) {
+            object_floor_m = 0.0;  // touching (within the textures' reach): no floor
+            break;
+          }
+        }
+      }
       std::size_t kept = 0;
       for (const HullPairContact& p : pairs) {
         if (kept == reachable_pairs_.size()) break;

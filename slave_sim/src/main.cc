@@ -265,6 +265,21 @@ int main(int argc, char** argv) {
                "and share one penalty (stage 5c), as the pipeline truth links its patches: a\n"
                "large flat contact that the coarse clustering left in two windows pushes once,\n"
                "not twice (docs/frontier/issue32/tenth_stop)");
+  double speculative_speed_mm_s = ht::RemoteNodeConfig{}.speculative_speed_m_per_s * 1e3;
+  app.add_option("--speculative-speed-mm-s", speculative_speed_mm_s,
+                 "speculative contacts by the round trip: the step also models every surface\n"
+                 "within this speed times the operator's round trip of the tool (at most\n"
+                 "--max-speculative-floor-mm; depth < 0, no force yet) while the tool touches\n"
+                 "nothing, so that under delay a hand that lifts and presses again feels the\n"
+                 "surface where it is, not a round trip later inside it (0 = off; a loopback's\n"
+                 "or a LAN's round trip makes it a few micrometres)")
+      ->check(CLI::Range(0.0, 10000.0))
+      ->capture_default_str();
+  double max_speculative_floor_mm = ht::RemoteNodeConfig{}.max_speculative_floor_m * 1e3;
+  app.add_option("--max-speculative-floor-mm", max_speculative_floor_mm,
+                 "the largest distance --speculative-speed-mm-s models surfaces at (mm)")
+      ->check(CLI::Range(0.0, 100.0))
+      ->capture_default_str();
   double speculative_lead_ms = 50.0;
   app.add_option("--speculative-lead-ms", speculative_lead_ms,
                  "speculative contacts: a separated pair beyond the textures' reach is modelled\n"
@@ -536,6 +551,8 @@ int main(int argc, char** argv) {
           "--split-continuous-um");
     }
     config.pipeline.speculative_lead_s = speculative_lead_ms * 1e-3;
+    config.speculative_speed_m_per_s = speculative_speed_mm_s * 1e-3;
+    config.max_speculative_floor_m = max_speculative_floor_mm * 1e-3;
     if (config.pipeline.rotation_gradient != ht::RotationGradient::kRenderedSamples) {
       if (config.pd_backend == ht::PdBackendChoice::kGpu) {
         throw std::invalid_argument("--rotation-gradient " + rotation_gradient +

@@ -117,6 +117,13 @@ bool TranslationPatchWanted(const RemoteNodeConfig& config, std::int64_t operato
 
 }  // namespace
 
+double SpeculativeFloorForRoundTrip(const RemoteNodeConfig& config,
+                                    std::int64_t operator_rtt_ns) noexcept {
+  if (!(config.speculative_speed_m_per_s > 0.0) || operator_rtt_ns <= 0) return 0.0;
+  return std::min(config.max_speculative_floor_m,
+                  config.speculative_speed_m_per_s * static_cast<double>(operator_rtt_ns) * 1e-9);
+}
+
 nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& scene,
                              const std::atomic<bool>& stop) {
   config.pipeline.Validate();
@@ -129,6 +136,15 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
     throw std::invalid_argument(
         "translation patch round trip must be >= 0 ms (infinite: never by the round trip), got " +
         std::to_string(config.translation_patch_rtt_ms));
+  }
+  if (!(config.speculative_speed_m_per_s >= 0.0) ||
+      !std::isfinite(config.speculative_speed_m_per_s)) {
+    throw std::invalid_argument("speculative speed must be a finite value >= 0 m/s, got " +
+                                std::to_string(config.speculative_speed_m_per_s));
+  }
+  if (!(config.max_speculative_floor_m >= 0.0) || !std::isfinite(config.max_speculative_floor_m)) {
+    throw std::invalid_argument("max speculative floor must be a finite value >= 0 m, got " +
+                                std::to_string(config.max_speculative_floor_m));
   }
   if (!(config.display_rate_hz >= 1.0 && config.display_rate_hz <= 1000.0)) {
     throw std::invalid_argument("display rate must be 1..1000 Hz, got " +
@@ -215,6 +231,7 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   bool running = true;
   bool reported_fallback = false;
   std::uint64_t steps_with_patch_on = 0, patch_switches = 0;
+  double largest_speculative_floor_m = 0.0;
   std::vector<StreamObject> reload_objects;
   const HapticScene* current_scene = &scene;  // the scene the pipeline steps (a reload moves it)
   std::uint64_t scene_reloads = 0;
@@ -348,6 +365,12 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
       }
       if (patch) ++steps_with_patch_on;
     }
+    // The speculative floor by the operator's round trip (speculative_speed_m_per_s).
+    if (config.speculative_speed_m_per_s > 0.0) {
+      const double floor_m = SpeculativeFloorForRoundTrip(config, session.operator_rtt_ns());
+      pipeline->SetSpeculativeFloor(floor_m);
+      largest_speculative_floor_m = std::max(largest_speculative_floor_m, floor_m);
+    }
     StepTimings timings;
     wire::ContactModelMessage out;
     out.model = pipeline->Step(X_WT, session.latest_tool_state_seq(), timings,
@@ -475,6 +498,10 @@ nlohmann::json RunRemoteNode(const RemoteNodeConfig& config, const HapticScene& 
   s["unreachable_pairs_dropped"] = pipeline->step_faults().unreachable_pairs;
   s["speculative_pairs"] = pipeline->step_faults().speculative_pairs;
   s["speculative_lead_ms"] = config.pipeline.speculative_lead_s * 1e3;
+  s["speculative_floor"] = {{"speed_mm_per_s", config.speculative_speed_m_per_s * 1e3},
+                            {"max_mm", config.max_speculative_floor_m * 1e3},
+                            {"last_mm", pipeline->speculative_floor_m() * 1e3},
+                            {"largest_mm", largest_speculative_floor_m * 1e3}};
   s["triangle_lists_overflowed"] = pipeline->step_faults().triangle_lists_overflowed;
   s["region_windows"] = pipeline->step_faults().region_windows;
   // Stage 5a (issue 32, thirty-first stop): asked for, and whether the backend at the end runs it

@@ -3,6 +3,7 @@
 // named stages (see HapticTexturePipeline below, and remote_step.cc).
 
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -258,6 +259,17 @@ struct PipelineOptions {
   double speculative_lead_s = 0.05;
   /// Most speculative margin (m) beyond the texture reach, whatever the speed.
   double max_speculative_margin_m = 2e-3;
+  /// The speculative margin's floor (m; 0: none, ≥ 0): on an object the tool does not touch yet
+  /// (no leaf pair within its texture reach), a separated leaf pair within its reach plus this is
+  /// kept whatever the tool's twist, so that a model answering a tool pose a round trip old still
+  /// holds the surfaces the hand can reach meanwhile: a hand that lifts and presses again, or
+  /// turns towards a surface after the pose was taken, finds the surface in its local model
+  /// instead of a round trip later, 1-2 mm inside it (issue 33's thirty-fifth stop: on the gear
+  /// at 75 ms one way the felt force's error 48.7 -> 37.4 % and the passivity stage's share
+  /// 15.6 -> 4.7 %; docs/passivity/README.md). Beside a touching pair it adds nothing (the pair
+  /// would only join its cluster). The remote node sets it from the operator's round trip
+  /// (SetSpeculativeFloor, RemoteNodeConfig::speculative_speed_m_per_s).
+  double speculative_floor_m = 0.0;
 
   /// Throws std::invalid_argument naming a value out of range.
   void Validate() const;
@@ -395,6 +407,13 @@ class HapticTexturePipeline {
   /// PipelineOptions::refine_depth. The remote node turns it on while the operator's round trip
   /// is long (RemoteNodeConfig::translation_patch_rtt_ms). noexcept, allocation-free.
   void SetTranslationPatch(bool on) noexcept { refiner_.SetTranslationPatch(on); }
+  /// PipelineOptions::speculative_floor_m (m) from the next Step() on; a negative or non-finite
+  /// value is taken as 0. The remote node sets it from the operator's round trip. noexcept.
+  void SetSpeculativeFloor(double floor_m) noexcept {
+    options_.speculative_floor_m = std::isfinite(floor_m) && floor_m > 0.0 ? floor_m : 0.0;
+  }
+  /// The floor the next Step() uses (m).
+  double speculative_floor_m() const noexcept { return options_.speculative_floor_m; }
   /// Stage 5b's seeds from the last step (DepthRefinementOptions::seed_from_last_step) forgotten:
   /// the next step's contacts start from their grid alone, as after construction (for a pose that
   /// does not follow the last one, e.g. the frontier's spread poses). noexcept.

@@ -72,6 +72,21 @@ struct RemoteNodeConfig {
   /// round trip in which a hand at 20–50 mm/s moves half a grid cell of the seed's windows
   /// (0.4 mm); its measurements are in docs/passivity/README.md ("The patch by the round trip").
   double translation_patch_rtt_ms = 10.0;
+  /// The speculative floor by the round trip (PipelineOptions::speculative_floor_m, issue 33's
+  /// thirty-fifth stop): before each step the node sets the floor to this hand speed (m/s) times
+  /// the round trip the operator's newest Ping reports, at most max_speculative_floor_m. A model
+  /// answers a tool pose a round trip old; a hand at this speed can meanwhile have covered that
+  /// much towards a surface the pose was clear of (lifted and pressed again, turned towards it),
+  /// and the model then holds that surface already (δ0 < 0, no force until the tool reaches it
+  /// on the operator's local model). At a loopback's or a LAN's round trip (≤ 1 ms) the floor is
+  /// a few micrometres and changes nothing; at 150 ms one way with the defaults, 6 mm. 0 turns
+  /// it off (the pipeline's own floor stays). RunRemoteNode throws std::invalid_argument for a
+  /// negative or non-finite value. The default, 25 mm/s, covers the seed's scripted press (about
+  /// 22 mm/s at its fastest) and the recorded human motion (14 mm/s); its measurements are in
+  /// docs/passivity/README.md ("Surfaces a round trip away").
+  double speculative_speed_m_per_s = 0.025;
+  /// The largest floor set by the round trip (m, ≥ 0).
+  double max_speculative_floor_m = 6e-3;
   /// Floors and keep-alive of the contact-model deadband; its Weber fraction and keep-alive come
   /// from the session (the operator asks them in its Hello).
   ContactModelDeadbandConfig model_deadband;
@@ -120,6 +135,12 @@ DisplayStream BlockOnGearDisplayStream(const HapticScene& scene);
 /// nothing (checked with HullProximityQuery against every touchable). Never throws except
 /// std::bad_alloc.
 wire::SceneLayout MakeSceneLayout(const HapticScene& scene);
+
+/// The speculative floor (m) the node sets for a round trip (ns; ≤ 0: none measured yet):
+/// config.speculative_speed_m_per_s × the round trip, at most config.max_speculative_floor_m; 0
+/// when the speed is 0 or no round trip is known. noexcept.
+double SpeculativeFloorForRoundTrip(const RemoteNodeConfig& config,
+                                    std::int64_t operator_rtt_ns) noexcept;
 
 /// Runs the node on `scene` until `stop` becomes true (or a goodbye arrives when
 /// exit_on_goodbye). Sessions: a Hello (authenticated, fresh nonce) opens one, replacing any
