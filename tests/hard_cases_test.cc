@@ -806,6 +806,56 @@ TEST(HardCases, ASurfaceARoundTripAwayIsInTheModelOfAToolAtRest) {
              m.contacts[0].depth_m * 1e6, local.F_T_W.force.z, fresh_fz));
 }
 
+TEST(HardCases, ASurfaceARoundTripAwayNeverTakesATouchingObjectsContactSlot) {
+  // A wall 2 mm beside the block, first among the touchables, and the gear under the block, which
+  // presses 0.1 mm into it: with room for one contact only, the floor's separated contact on the
+  // untouched wall must not take the slot of the gear's, which pushes.
+  HapticScene scene = MakeBlockOnGearScene();
+  const RigidTransform home = BlockOnGearHomePose();
+  PipelineOptions plain;
+  plain.speculative_lead_s = 0.0;
+  StepTimings t;
+  double lo = -2e-3, hi = 3e-3;  // where the block touches the gear (bisection, as above)
+  {
+    HapticTexturePipeline gear_only(scene, plain);
+    for (int i = 0; i < 30; ++i) {
+      const double mid = 0.5 * (lo + hi);
+      const ContactModel m =
+          gear_only.Step(At(home.translation + glm::dvec3(0, 0, mid), home.rotation), 1, t);
+      (m.num_contacts > 0 && m.contacts[0].depth_m >= 0.0 ? lo : hi) = mid;
+    }
+  }
+  const RigidTransform X = At(home.translation + glm::dvec3(0, 0, lo - 0.1e-3), home.rotation);
+  double min_x = std::numeric_limits<double>::infinity();
+  for (const glm::dvec3& v : scene.tool->vertices_O) min_x = std::min(min_x, (X * v).x);
+  const glm::dvec3 half{0.01, 0.03, 0.03};
+  TouchableObject wall;
+  wall.model = std::make_shared<const HapticModel>(
+      MakeTexturedBox(half, [](double, double) { return 0.0; }, 16, 2.0, "side_wall"));
+  wall.X_WO.translation = {min_x - 2e-3 - half.x, X.translation.y, X.translation.z};
+  wall.stiffness_n_per_m = 8000.0;
+  scene.touchables.insert(scene.touchables.begin(), wall);
+  PipelineOptions floored = plain;
+  floored.speculative_floor_m = 3e-3;
+  HapticTexturePipeline room(scene, floored);
+  const ContactModel both = room.Step(X, 2, t);
+  ASSERT_EQ(both.num_contacts, 2);  // the wall, separated, and the gear
+  int separated = 0;
+  for (int i = 0; i < both.num_contacts; ++i) separated += both.contacts[i].depth_m < 0.0 ? 1 : 0;
+  EXPECT_EQ(separated, 1);
+  PipelineOptions one = floored;
+  one.max_contacts = 1;
+  HapticTexturePipeline tight(scene, one);
+  const ContactModel m = tight.Step(X, 3, t);
+  ASSERT_EQ(m.num_contacts, 1);
+  EXPECT_GT(m.contacts[0].depth_m, 0.0);
+  EXPECT_GT(m.F_T_W_at_q0.force.z, 0.1);
+  Report("a surface a round trip away beside a touching one",
+         Fmt("a wall 2 mm beside the block, first in the scene, floor 3 mm: two contacts (one "
+             "separated); with room for one, the gear's (δ0 = %.0f µm, %.2f N up)",
+             m.contacts[0].depth_m * 1e6, m.F_T_W_at_q0.force.z));
+}
+
 TEST(HardCases, NonFinitePosesFromTheNetwork) {
   const HapticScene scene = MakeBlockOnGearScene();
   RigidTransform bad = BlockOnGearHomePose();

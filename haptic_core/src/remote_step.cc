@@ -301,7 +301,7 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
                               (glm::length(glm::dvec3(tool_sphere_O_)) + tool_sphere_O_.w))));
   // The floor serves an object the tool does not touch yet (set per object below): beside a
   // touching pair, a separated one would only join its cluster and widen its window.
-  double object_floor_m = floor_m;
+  double object_floor_m = 0.0;
   const auto speculative_margin = [&](const HullPairContact& p) {
     if (!speculate) return object_floor_m;
     const glm::dvec3 v_A =
@@ -322,11 +322,13 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
   };
   double clearance = std::numeric_limits<double>::infinity();
   bool any_passed = false;
+  int num_floor_candidates = 0;
   std::fill(free_space_gaps_.begin(), free_space_gaps_.end(),
             std::numeric_limits<double>::quiet_NaN());
   for (std::size_t k = 0; k < scene_.touchables.size(); ++k) {
     const TouchableObject& object = scene_.touchables[k];
     const double reach = tool.OutwardReach() + object.model->OutwardReach();
+    object_floor_m = 0.0;  // set below from the object's pairs
     ProximityQueryOptions query;
     query.tolerance_m = reach + options_.proximity_margin_m + speculative_bound;
     if (options_.local_reach) query.local_reach_margin_m = options_.proximity_margin_m;
@@ -416,8 +418,11 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
     const std::span<const ContactCluster> clusters = clusterer_.Cluster(
         pairs, tool.hull_hierarchy, object.model->hull_hierarchy, clustering, pair_bounds);
     timings.clusters += static_cast<int>(clusters.size());
+    // An object kept by the floor alone waits until every touching object has its candidates.
+    const bool floor_only = object_floor_m > 0.0;
     for (const ContactCluster& c : clusters) {
-      if (num_candidates_ < options_.max_contacts) {
+      if (floor_only ? num_floor_candidates < options_.max_contacts
+                     : num_candidates_ < options_.max_contacts) {
         const glm::dvec3 normal_W = c.normal_W;
         const double bound = !options_.grazing_guard ? std::numeric_limits<double>::infinity()
                              : std::isfinite(c.depth_bound_m)
@@ -429,15 +434,24 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
             options_.size_windows_from_clusters) {
           RegionWindow(X_WT, k, normal_W, reach, point_W, extent);
         }
-        candidates_[num_candidates_++] = {&object,
-                                          point_W,
-                                          normal_W,
-                                          extent,
-                                          bound,
-                                          keep_list(c.object_triangles, c.object_whole_model),
-                                          keep_list(c.tool_triangles, c.tool_whole_model)};
+        const ContactCandidate candidate{&object,
+                                         point_W,
+                                         normal_W,
+                                         extent,
+                                         bound,
+                                         keep_list(c.object_triangles, c.object_whole_model),
+                                         keep_list(c.tool_triangles, c.tool_whole_model)};
+        if (floor_only) {
+          floor_candidates_[static_cast<std::size_t>(num_floor_candidates++)] = candidate;
+        } else {
+          candidates_[static_cast<std::size_t>(num_candidates_++)] = candidate;
+        }
       }
     }
+  }
+  for (int i = 0; i < num_floor_candidates && num_candidates_ < options_.max_contacts; ++i) {
+    candidates_[static_cast<std::size_t>(num_candidates_++)] =
+        floor_candidates_[static_cast<std::size_t>(i)];
   }
   if (!any_passed) {
     // Every object culled or without a pair: each of the latter's free space is its whole hulls'

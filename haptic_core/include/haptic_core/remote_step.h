@@ -489,6 +489,9 @@ class HapticTexturePipeline {
   std::vector<std::vector<int>> whole_triangles_;
   std::array<ContactCandidate, kMaxContacts> candidates_{};
   int num_candidates_ = 0;
+  // Candidates of objects kept by the speculative floor alone (touched nowhere): they take only
+  // the slots the touching objects leave, after those (FindContactCandidates).
+  std::array<ContactCandidate, kMaxContacts> floor_candidates_{};
   std::array<ContactQuery, kMaxContacts> last_queries_{};
   std::array<ContactLinearization, kMaxContacts> last_results_{};
   /// The depth samples of last_queries_ (kGradientSamples each, query-major), for kink planes.
