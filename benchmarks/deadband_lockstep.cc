@@ -105,6 +105,12 @@ double ParseNumber(const std::string& key, const std::string& text) {
   return v;
 }
 
+/// `v` when it is ≥ 0; throws std::invalid_argument naming --arm's `key` otherwise.
+double NonNegative(const std::string& key, double v) {
+  if (!(v >= 0.0)) throw std::invalid_argument("--arm: " + key + " must be >= 0");
+  return v;
+}
+
 /// "NAME:KEY=V,KEY=V": keys deadband (both streams, %), tool_deadband, model_deadband (%),
 /// keepalive_ms (both), contact_floor_mm, contact_floor_mrad, contact_depth_floor_um,
 /// contact_hold_ms (tool states), force_floor, torque_floor, stiffness_floor,
@@ -164,17 +170,13 @@ Arm ParseArm(const std::string& text) {
     } else if (key == "contact_damping_hc") {  // s/m, master_station --contact-damping-hc
       arm.station.hunt_crossley_s_per_m = v;
     } else if (key == "speculative_lead_ms") {  // slave_sim --speculative-lead-ms
-      if (!(v >= 0.0)) throw std::invalid_argument("--arm: speculative_lead_ms must be >= 0");
-      arm.speculative_lead_s = v * 1e-3;
+      arm.speculative_lead_s = NonNegative(key, v) * 1e-3;
     } else if (key == "speculative_margin_mm") {  // PipelineOptions::max_speculative_margin_m
-      if (!(v >= 0.0)) throw std::invalid_argument("--arm: speculative_margin_mm must be >= 0");
-      arm.speculative_margin_m = v * 1e-3;
+      arm.speculative_margin_m = NonNegative(key, v) * 1e-3;
     } else if (key == "speculative_speed_mm_s") {  // slave_sim --speculative-speed-mm-s
-      if (!(v >= 0.0)) throw std::invalid_argument("--arm: speculative_speed_mm_s must be >= 0");
-      arm.speculative_speed_m_per_s = v * 1e-3;
+      arm.speculative_speed_m_per_s = NonNegative(key, v) * 1e-3;
     } else if (key == "speculative_floor_mm") {  // a fixed PipelineOptions::speculative_floor_m
-      if (!(v >= 0.0)) throw std::invalid_argument("--arm: speculative_floor_mm must be >= 0");
-      arm.speculative_floor_m = v * 1e-3;
+      arm.speculative_floor_m = NonNegative(key, v) * 1e-3;
     } else if (key == "force_floor") {
       arm.model.force_floor_scale_n = v;
     } else if (key == "torque_floor") {
@@ -273,18 +275,18 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
   options.texture_threads = 1;
   if (arm.speculative_lead_s >= 0.0) options.speculative_lead_s = arm.speculative_lead_s;
   if (arm.speculative_margin_m >= 0.0) options.max_speculative_margin_m = arm.speculative_margin_m;
+  // The round trip the operator would report, from which the remote node sets the floor and the
+  // patches.
+  const double rtt_ms = 2.0 * setup.delay_ms + setup.step_ms;
   if (arm.speculative_floor_m >= 0.0) {
     options.speculative_floor_m = arm.speculative_floor_m;
   } else {
-    // As the remote node sets it from the round trip its operator reports.
     RemoteNodeConfig node;
     node.speculative_speed_m_per_s = arm.speculative_speed_m_per_s;
-    const double rtt_ms = 2.0 * setup.delay_ms + setup.step_ms;
     options.speculative_floor_m =
         SpeculativeFloorForRoundTrip(node, static_cast<std::int64_t>(std::llround(rtt_ms * 1e6)));
   }
-  if (setup.translation_patch ||
-      2.0 * setup.delay_ms + setup.step_ms >= RemoteNodeConfig{}.translation_patch_rtt_ms) {
+  if (setup.translation_patch || rtt_ms >= RemoteNodeConfig{}.translation_patch_rtt_ms) {
     options.depth_refinement.translation_patch = true;
   }
   // The CPU backend with the setting's texture path and rotation gradient (as the frontier makes
@@ -601,15 +603,13 @@ int main(int argc, char** argv) {
       "(the tool-state deadband, as master_station's --deadband-*), force_floor,\n"
       "torque_floor, stiffness_floor, rotational_stiffness_floor (the contact-model\n"
       "floor scales, as slave_sim's --model-deadband-*-floor); release_ticks,\n"
-      "energy_bounded_switch (0/1), switch_spend, offset_release_ms, contact_damping_hc "
-      "(the operator\n"
-      "tick's passivity options, OperatorTickConfig; master_station's defaults, as\n"
-      "in the reference, unless given); speculative_lead_ms (slave_sim\n"
+      "energy_bounded_switch (0/1), switch_spend, offset_release_ms, contact_damping_hc\n"
+      "(the operator tick's passivity options, OperatorTickConfig; master_station's\n"
+      "defaults, as in the reference, unless given); speculative_lead_ms (slave_sim\n"
       "--speculative-lead-ms), speculative_margin_mm, speculative_speed_mm_s (slave_sim\n"
       "--speculative-speed-mm-s: the floor by the round trip) or a fixed\n"
-      "speculative_floor_mm; setting=NAME, the remote step's setting by\n"
-      "its frontier name (speed_error_frontier --list-settings; default\n"
-      "--reference-setting)");
+      "speculative_floor_mm; setting=NAME, the remote step's setting by its frontier\n"
+      "name (speed_error_frontier --list-settings; default --reference-setting)");
   app.add_flag("--translation-patch", setup.translation_patch,
                "every contact model carries its translation patch (slave_sim --translation-patch;\n"
                "by default the remote node sends patches from a 10 ms round trip)");

@@ -96,6 +96,25 @@ ContactModel StepAt(const HapticScene& scene, const RigidTransform& X_WT,
   return m;
 }
 
+// The block's home pose on the gear (BlockOnGearHomePose) moved dz (m) along W's z.
+RigidTransform BlockAboveHome(double dz) {
+  const RigidTransform home = BlockOnGearHomePose();
+  return At(home.translation + glm::dvec3(0, 0, dz), home.rotation);
+}
+
+// Where the block touches the gear: the highest dz (m; BlockAboveHome) at which a step of
+// `pipeline` (no twist) has a contact of δ0 ≥ 0, by bisection over [−2, 3] mm.
+double BlockTouchDz(HapticTexturePipeline& pipeline) {
+  StepTimings t;
+  double lo = -2e-3, hi = 3e-3;
+  for (int i = 0; i < 30; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    const ContactModel m = pipeline.Step(BlockAboveHome(mid), 1, t);
+    (m.num_contacts > 0 && m.contacts[0].depth_m >= 0.0 ? lo : hi) = mid;
+  }
+  return lo;
+}
+
 void Report(const char* name, const std::string& what) {
   std::printf("[hard case] %s: %s\n", name, what.c_str());
 }
@@ -689,19 +708,9 @@ TEST(HardCases, ImpactFasterThanTheModelsCome) {
   const HapticScene scene = MakeBlockOnGearScene();
   PipelineOptions options;
   HapticTexturePipeline pipeline(scene, options);
-  const RigidTransform home = BlockOnGearHomePose();
-  auto above = [&](double dz) {
-    return At(home.translation + glm::dvec3(0, 0, dz), home.rotation);
-  };
+  const auto above = BlockAboveHome;
   StepTimings t;
-  // Where the block touches: the highest pose with a contact of δ0 ≥ 0, found by bisection.
-  double lo = -2e-3, hi = 3e-3;
-  for (int i = 0; i < 30; ++i) {
-    const double mid = 0.5 * (lo + hi);
-    const ContactModel m = pipeline.Step(above(mid), 1, t);
-    (m.num_contacts > 0 && m.contacts[0].depth_m >= 0.0 ? lo : hi) = mid;
-  }
-  const double touch_dz = lo;
+  const double touch_dz = BlockTouchDz(pipeline);
   const RigidTransform X0 = above(touch_dz + 0.9e-3);
   const Twist falling{{0.0, 0.0, -0.05}, {}};
   EXPECT_EQ(pipeline.Step(X0, 2, t).num_contacts, 0);
@@ -755,18 +764,9 @@ TEST(HardCases, ASurfaceARoundTripAwayIsInTheModelOfAToolAtRest) {
   floored.speculative_floor_m = 3e-3;
   HapticTexturePipeline with(scene, floored);
   EXPECT_DOUBLE_EQ(with.speculative_floor_m(), 3e-3);
-  const RigidTransform home = BlockOnGearHomePose();
-  auto above = [&](double dz) {
-    return At(home.translation + glm::dvec3(0, 0, dz), home.rotation);
-  };
+  const auto above = BlockAboveHome;
   StepTimings t;
-  double lo = -2e-3, hi = 3e-3;  // where the block touches (bisection, as above)
-  for (int i = 0; i < 30; ++i) {
-    const double mid = 0.5 * (lo + hi);
-    const ContactModel m = without.Step(above(mid), 1, t);
-    (m.num_contacts > 0 && m.contacts[0].depth_m >= 0.0 ? lo : hi) = mid;
-  }
-  const double touch_dz = lo;
+  const double touch_dz = BlockTouchDz(without);
   const RigidTransform X0 = above(touch_dz + 2e-3);
   EXPECT_EQ(without.Step(X0, 2, t).num_contacts, 0);
   const std::int64_t speculative_before = with.step_faults().speculative_pairs;
@@ -811,27 +811,21 @@ TEST(HardCases, ASurfaceARoundTripAwayNeverTakesATouchingObjectsContactSlot) {
   // presses 0.1 mm into it: with room for one contact only, the floor's separated contact on the
   // untouched wall must not take the slot of the gear's, which pushes.
   HapticScene scene = MakeBlockOnGearScene();
-  const RigidTransform home = BlockOnGearHomePose();
   PipelineOptions plain;
   plain.speculative_lead_s = 0.0;
   StepTimings t;
-  double lo = -2e-3, hi = 3e-3;  // where the block touches the gear (bisection, as above)
-  {
+  double touch_dz = 0.0;
+  {  // before the wall joins the scene (a pipeline holds its scene)
     HapticTexturePipeline gear_only(scene, plain);
-    for (int i = 0; i < 30; ++i) {
-      const double mid = 0.5 * (lo + hi);
-      const ContactModel m =
-          gear_only.Step(At(home.translation + glm::dvec3(0, 0, mid), home.rotation), 1, t);
-      (m.num_contacts > 0 && m.contacts[0].depth_m >= 0.0 ? lo : hi) = mid;
-    }
+    touch_dz = BlockTouchDz(gear_only);
   }
-  const RigidTransform X = At(home.translation + glm::dvec3(0, 0, lo - 0.1e-3), home.rotation);
+  const RigidTransform X = BlockAboveHome(touch_dz - 0.1e-3);
   double min_x = std::numeric_limits<double>::infinity();
   for (const glm::dvec3& v : scene.tool->vertices_O) min_x = std::min(min_x, (X * v).x);
   const glm::dvec3 half{0.01, 0.03, 0.03};
   TouchableObject wall;
-  wall.model = std::make_shared<const HapticModel>(
-      MakeTexturedBox(half, [](double, double) { return 0.0; }, 16, 2.0, "side_wall"));
+  wall.model = std::make_shared<const HapticModel>(MakeTexturedBox(
+      half, [](double, double) { return 0.0; }, 16, 2.0, "side_wall"));
   wall.X_WO.translation = {min_x - 2e-3 - half.x, X.translation.y, X.translation.z};
   wall.stiffness_n_per_m = 8000.0;
   scene.touchables.insert(scene.touchables.begin(), wall);

@@ -85,6 +85,19 @@ std::uint32_t OpenSession(UdpSocket& socket, const SocketAddress& remote, const 
   return h.session_id;
 }
 
+/// Sends a Ping reporting the operator's round trip `rtt_us` (µs) in `session` with the next
+/// `sequence`, and waits for the node's Pong; false when none came.
+bool PingWithRoundTrip(UdpSocket& socket, const SocketAddress& remote, const MacKey& key,
+                       std::uint32_t session, std::uint32_t& sequence, std::uint32_t rtt_us) {
+  socket.SendTo(
+      wire::EncodePing({wire::MessageType::kPing, session, sequence++, 0}, {rtt_us}, key).view(),
+      remote);
+  wire::Header h;
+  wire::PongMessage pong;
+  return Await(socket, key, wire::MessageType::kPong, h,
+               [&](auto body) { return wire::DecodePong(body, pong) == wire::DecodeStatus::kOk; });
+}
+
 /// A node running `config` on `scene` on its own thread for one test: started at construction,
 /// `remote` its bound address (port 0: it wrote no port file within 4 s). Stop() ends the run and
 /// returns its summary; the destructor stops and joins it however the test leaves its scope (an
@@ -325,14 +338,8 @@ TEST(RemoteNode, SendsEachContactsTranslationPatchWhenAskedOrWhenTheRoundTripIsL
     wire::Header h;
     std::uint32_t sequence = 1;
     if (k.operator_rtt_us > 0) {
-      socket.SendTo(wire::EncodePing({wire::MessageType::kPing, session, sequence++, 0},
-                                     {k.operator_rtt_us}, config.key)
-                        .view(),
-                    remote);
-      wire::PongMessage pong;
-      ASSERT_TRUE(Await(socket, config.key, wire::MessageType::kPong, h, [&](auto body) {
-        return wire::DecodePong(body, pong) == wire::DecodeStatus::kOk;
-      }));
+      ASSERT_TRUE(
+          PingWithRoundTrip(socket, remote, config.key, session, sequence, k.operator_rtt_us));
     }
     const wire::ToolStateMessage state = PressedAtHome(scene);
     socket.SendTo(wire::EncodeToolState({wire::MessageType::kToolState, session, sequence++, 0},
@@ -414,14 +421,7 @@ TEST(RemoteNode, ModelsASurfaceARoundTripAwayFromTheRoundTripItsOperatorReports)
     wire::Header h;
     std::uint32_t sequence = 1;
     if (rtt_us > 0) {
-      socket.SendTo(
-          wire::EncodePing({wire::MessageType::kPing, session, sequence++, 0}, {rtt_us}, config.key)
-              .view(),
-          remote);
-      wire::PongMessage pong;
-      ASSERT_TRUE(Await(socket, config.key, wire::MessageType::kPong, h, [&](auto body) {
-        return wire::DecodePong(body, pong) == wire::DecodeStatus::kOk;
-      }));
+      ASSERT_TRUE(PingWithRoundTrip(socket, remote, config.key, session, sequence, rtt_us));
     }
     wire::ToolStateMessage state;
     state.X_WT = scene.X_WT_home;
@@ -475,14 +475,7 @@ TEST(RemoteNode, TurnsPatchesOffOnlyWellBelowTheThreshold) {
   wire::Header h;
   std::uint32_t sequence = 1;
   const auto ping = [&](std::uint32_t rtt_us) {
-    socket.SendTo(
-        wire::EncodePing({wire::MessageType::kPing, session, sequence++, 0}, {rtt_us}, config.key)
-            .view(),
-        remote);
-    wire::PongMessage pong;
-    return Await(socket, config.key, wire::MessageType::kPong, h, [&](auto body) {
-      return wire::DecodePong(body, pong) == wire::DecodeStatus::kOk;
-    });
+    return PingWithRoundTrip(socket, remote, config.key, session, sequence, rtt_us);
   };
   const wire::ToolStateMessage state = PressedAtHome(scene);
   const auto step = [&] {

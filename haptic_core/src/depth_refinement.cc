@@ -656,6 +656,15 @@ DepthRefiner::Seed DepthRefiner::Search(std::span<const Projected> tool, const B
   return best;
 }
 
+double DepthRefiner::ClimbBoth(std::span<const Projected> tool, const Box& box, double s, double t,
+                               double moved_s, double moved_t, double step, double floor_m,
+                               double shift_s, double shift_t) noexcept {
+  const Seed at_point = Search(tool, box, s, t, 0.0, 1, step, floor_m, shift_s, shift_t);
+  const Seed at_moved =
+      Search(tool, box, moved_s, moved_t, 0.0, 1, step, floor_m, shift_s, shift_t);
+  return std::max(at_point.depth_m, at_moved.depth_m);
+}
+
 double DepthRefiner::ScreenThreshold(double best_m) const noexcept {
   return std::max(best_m, options_.screen_floor_m) + options_.screen_tolerance_m;
 }
@@ -921,12 +930,9 @@ PenetrationGradient DepthRefiner::TexelScaleGradient(const RigidTransform& X_WT,
         moved_s = glm::dot(moved_W, u);
         moved_t = glm::dot(moved_W, v);
       }
-      const Seed at_seed =
-          Search(tool_tris, box, sd.s, sd.t, 0.0, 1, texel, floor_m, shift_s, shift_t);
-      const Seed at_moved =
-          Search(tool_tris, box, moved_s, moved_t, 0.0, 1, texel, floor_m, shift_s, shift_t);
-      displaced[static_cast<std::size_t>(k)] =
-          std::max({displaced[static_cast<std::size_t>(k)], at_seed.depth_m, at_moved.depth_m});
+      double& d = displaced[static_cast<std::size_t>(k)];
+      d = std::max(d, ClimbBoth(tool_tris, box, sd.s, sd.t, moved_s, moved_t, texel, floor_m,
+                                shift_s, shift_t));
     }
   }
   // Central differences, one-sided where a displaced pose found no overlap.
@@ -1134,9 +1140,8 @@ void DepthRefiner::FillTexelTranslationPatch(std::span<const Seed> base, int num
   std::array<double, static_cast<std::size_t>(S * S)> node{};
   node.fill(-kInf);
   const auto index = [](int i, int j) { return static_cast<std::size_t>((j + R) * S + (i + R)); };
-  // Every node climbed from a start `f`: from its point (the maximum stays with the
-  // environment's feature) and from its point carried by the node's shift (it moves with the
-  // tool's).
+  // Every node climbed from a start `f` (ClimbBoth: from its point and from its point carried by
+  // the node's shift).
   const auto climb_from = [&](const Seed& f) {
     if (!(f.depth_m > -kInf)) return;
     const double margin = reach + 4.0 * texel;
@@ -1147,12 +1152,9 @@ void DepthRefiner::FillTexelTranslationPatch(std::span<const Seed> base, int num
       for (int i = -R; i <= R; ++i) {
         if (i == 0 && j == 0) continue;
         const double shift_s = i * h, shift_t = j * h;
-        const Seed at_seed =
-            Search(tool_local_, box, f.s, f.t, 0.0, 1, texel, floor_m, shift_s, shift_t);
-        const Seed at_moved = Search(tool_local_, box, f.s + shift_s, f.t + shift_t, 0.0, 1, texel,
-                                     floor_m, shift_s, shift_t);
         double& d = node[index(i, j)];
-        d = std::max({d, at_seed.depth_m, at_moved.depth_m});
+        d = std::max(d, ClimbBoth(tool_local_, box, f.s, f.t, f.s + shift_s, f.t + shift_t, texel,
+                                  floor_m, shift_s, shift_t));
       }
     }
   };

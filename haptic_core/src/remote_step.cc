@@ -299,10 +299,10 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
                          (glm::length(V_WT_W.linear) +
                           glm::length(V_WT_W.angular) *
                               (glm::length(glm::dvec3(tool_sphere_O_)) + tool_sphere_O_.w))));
-  // The floor serves an object the tool does not touch yet (set per object below): beside a
-  // touching pair, a separated one would only join its cluster and widen its window.
-  double object_floor_m = 0.0;
-  const auto speculative_margin = [&](const HullPairContact& p) {
+  // A separated pair's margin beyond its reach: the lead's at its closing speed, at least
+  // `object_floor_m` (the floor, for an object the tool touches nowhere; 0 beside a touching
+  // pair, where a separated one would only join its cluster and widen its window).
+  const auto speculative_margin = [&](const HullPairContact& p, double object_floor_m) {
     if (!speculate) return object_floor_m;
     const glm::dvec3 v_A =
         V_WT_W.linear + glm::cross(V_WT_W.angular, p.point_A_W - X_WT.translation);
@@ -328,7 +328,6 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
   for (std::size_t k = 0; k < scene_.touchables.size(); ++k) {
     const TouchableObject& object = scene_.touchables[k];
     const double reach = tool.OutwardReach() + object.model->OutwardReach();
-    object_floor_m = 0.0;  // set below from the object's pairs
     ProximityQueryOptions query;
     query.tolerance_m = reach + options_.proximity_margin_m + speculative_bound;
     if (options_.local_reach) query.local_reach_margin_m = options_.proximity_margin_m;
@@ -361,25 +360,24 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
     const double cell = options_.window_extent_m / options_.grid_resolution;
     const bool local_bounds = options_.grazing_guard && options_.grazing_guard_local_reach;
     std::span<const double> pair_bounds;
+    // The floor for this object's separated pairs: PipelineOptions::speculative_floor_m where the
+    // tool touches it nowhere (no pair within its textures' reach), else 0.
+    double object_floor_m = 0.0;
     if (options_.drop_unreachable_pairs || options_.region_normals ||
         (local_bounds && pairs.size() <= reachable_pairs_.size())) {
-      object_floor_m = floor_m;
-      if (floor_m > 0.0) {
-        for (const HullPairContact& p : pairs) {
-          if (p.signed_distance_m <= queries_[k].NodeReach(tool, p.node_A) +
-                                         queries_[k].NodeReach(*object.model, p.node_B)) {
-            object_floor_m = 0.0;  // touching (within the textures' reach): no floor
-            break;
-          }
-        }
-      }
+      const bool touching =
+          floor_m > 0.0 && std::any_of(pairs.begin(), pairs.end(), [&](const HullPairContact& p) {
+            return p.signed_distance_m <= queries_[k].NodeReach(tool, p.node_A) +
+                                              queries_[k].NodeReach(*object.model, p.node_B);
+          });
+      object_floor_m = touching ? 0.0 : floor_m;
       std::size_t kept = 0;
       for (const HullPairContact& p : pairs) {
         if (kept == reachable_pairs_.size()) break;
         const double pair_reach =
             queries_[k].NodeReach(tool, p.node_A) + queries_[k].NodeReach(*object.model, p.node_B);
         if (options_.drop_unreachable_pairs && p.signed_distance_m > pair_reach) {
-          if (p.signed_distance_m > pair_reach + speculative_margin(p)) {
+          if (p.signed_distance_m > pair_reach + speculative_margin(p, object_floor_m)) {
             ++step_faults_.unreachable_pairs;
             continue;
           }

@@ -416,6 +416,13 @@ class DepthRefiner {
   // from it with `step` halved down to `floor_m`, staying in `box`.
   Seed Search(std::span<const Projected> tool, const Box& box, double s, double t, double half_side,
               int subsamples, double step, double floor_m, double shift_s, double shift_t) noexcept;
+  // The larger depth (m; −∞ where neither reads one) of two pattern searches (Search's, from
+  // `step` down to `floor_m`, in `box`) with the tool shifted in-plane by (shift_s, shift_t) (m):
+  // from (s, t), where the maximum stays with the environment's feature, and from (moved_s,
+  // moved_t), the point the displacement carries it to, where it moves with the tool's.
+  double ClimbBoth(std::span<const Projected> tool, const Box& box, double s, double t,
+                   double moved_s, double moved_t, double step, double floor_m, double shift_s,
+                   double shift_t) noexcept;
 
   // The conservative screen (DepthRefinementOptions::conservative_screen): the bound of one
   // side's triangles `list` (indices into `all`) over a square (the environment's largest height,
