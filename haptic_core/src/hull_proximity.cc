@@ -16,6 +16,7 @@
 #include <string>
 
 #include "haptic_core/broad_phase.h"
+#include "task_pools.h"
 
 namespace ht {
 namespace {
@@ -552,6 +553,7 @@ void HullProximityQuery::SetThreads(int threads) {
     w.front.reserve(kFrontCapacity);
   }
   arena_ = std::make_shared<Arena>(threads);
+  internal::WarmTaskPools(arena_->arena);  // so that a query's tasks do not allocate
   workers_ = std::move(workers);
 }
 

@@ -7,6 +7,8 @@
 #include <algorithm>
 #include <limits>
 
+#include "task_pools.h"
+
 namespace ht {
 
 struct CpuPenetrationDepthBackend::Arena {
@@ -24,6 +26,7 @@ CpuPenetrationDepthBackend::CpuPenetrationDepthBackend(int max_resolution, Textu
   }
   if (n > 1) {
     arena_ = std::make_unique<Arena>(n);
+    internal::WarmTaskPools(arena_->arena);  // so that a batch's tasks do not allocate
     // Renders of one contact as tasks too, so that a step with fewer contacts than threads uses
     // them all (each render has its own buffer: the same results). Without rendered rotations a
     // contact has one tool render, so only the contacts are spread.

@@ -140,6 +140,15 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
   if (!backend_) backend_ = MakeCpuBackend();
   // Stages 5a and 5c read stage 5's base render instead of rendering the base pose again.
   if (ReusesBaseRender()) backend_->set_keep_base_overlap(KeptFieldResolution());
+  // What a failing GPU backend falls back on, ready before the first step (LinearizeContacts).
+  if (backend_->name() != "cpu") {
+    cpu_fallback_ = MakeCpuBackend();
+    if (options_.reuse_base_render &&
+        (options_.split_windows_at_separated_overlap || options_.share_connected_contacts)) {
+      cpu_fallback_->set_keep_base_overlap(KeptFieldResolution());
+    }
+  }
+  fallback_reason_.reserve(kMaxFallbackReason);
   // Stage 5a's copies of the kept contacts' fields, whatever the backend (a GPU backend that
   // falls back to the CPU keeps fields from then on).
   if (options_.reuse_base_render && options_.split_windows_at_separated_overlap) {
@@ -188,7 +197,7 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
 }
 
 ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64_t seq,
-                                         StepTimings& timings, const Twist& V_WT_W) {
+                                         StepTimings& timings, const Twist& V_WT_W) noexcept {
   using Clock = std::chrono::steady_clock;
   const auto us = [](Clock::duration d) {
     return std::chrono::duration<double, std::micro>(d).count();
@@ -266,7 +275,7 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
 }
 
 void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, const Twist& V_WT_W,
-                                                  StepTimings& timings) {
+                                                  StepTimings& timings) noexcept {
   num_candidates_ = 0;
   std::size_t triangles_used = 0;
   // A copy of a cluster's list into candidate_triangles_, or All() where the side has no list
@@ -552,7 +561,7 @@ int HapticTexturePipeline::MergeRegionsInOneWindow(int count, double cell_m) noe
   return m;
 }
 
-int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int n) {
+int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int n) noexcept {
   // The GPU backend takes one window size per batch (LinearizeContacts); the split windows are
   // sized to their regions, so this stage runs with the CPU backend only.
   split_count_ = 0;
@@ -680,7 +689,7 @@ int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int
   return kept + num_new;
 }
 
-void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n) {
+void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n) noexcept {
   if (n == 0) return;
   const HapticModel& tool = *scene_.tool;
   const std::span<const ContactQuery> batch(last_queries_.data(), static_cast<std::size_t>(n));
@@ -727,10 +736,16 @@ void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n)
   }
   // The GPU failed (context lost, GL error): this step and all later ones on the CPU.
   if (backend_failures_++ == 0) {
-    fallback_reason_ = std::string(backend_->name()) + ": " + backend_->last_error();
+    // Within the reserved capacity: no allocation.
+    const auto append = [this](std::string_view text) {
+      fallback_reason_.append(text.substr(
+          0, std::min(text.size(), fallback_reason_.capacity() - fallback_reason_.size())));
+    };
+    append(backend_->name());
+    append(": ");
+    append(backend_->last_error());
   }
-  backend_ = MakeCpuBackend();
-  if (ReusesBaseRender()) backend_->set_keep_base_overlap(KeptFieldResolution());
+  if (cpu_fallback_) backend_ = std::move(cpu_fallback_);
   backend_->LinearizeBatch(tool, X_WT, batch, batch_out, samples_out);
 }
 

@@ -339,8 +339,12 @@ class HapticTexturePipeline {
   /// StepTimings::free_space_clearance_m. Non-finite poses give +∞.
   double ToolMotionBound(const RigidTransform& X_WT_a, const RigidTransform& X_WT_b) const noexcept;
 
+  /// Nothing throws, and after a warm-up over the scene's contact counts nothing allocates,
+  /// through any allocator (remote_step_alloc_test, on the block on the gear and on the seed's
+  /// hull hierarchies): the scratch is the pipeline's own, and the CPU backend a failing GPU
+  /// backend falls back on is built with the pipeline.
   ContactModel Step(const RigidTransform& X_WT, std::uint64_t tool_state_seq, StepTimings& timings,
-                    const Twist& V_WT_W = {});
+                    const Twist& V_WT_W = {}) noexcept;
 
   /// Faults of the backend in use.
   const LinearizationFaults& faults() const noexcept { return backend_->faults(); }
@@ -428,16 +432,17 @@ class HapticTexturePipeline {
  private:
   /// Stages 1–3 for every touchable: appends to candidates_ (up to kMaxContacts) and fills the
   /// coarse counts and flags of `timings`.
-  void FindContactCandidates(const RigidTransform& X_WT, const Twist& V_WT_W, StepTimings& timings);
+  void FindContactCandidates(const RigidTransform& X_WT, const Twist& V_WT_W,
+                             StepTimings& timings) noexcept;
   /// Stage 5: linearizes last_queries_[0, n) into last_results_ with the backend in use (the GPU
   /// backend takes one window size per batch: windows sized from their clusters go to it in one
   /// batch per size); when that
   /// backend fails, switches to the CPU backend for good and recomputes the batch.
-  void LinearizeContacts(const RigidTransform& X_WT, int n);
+  void LinearizeContacts(const RigidTransform& X_WT, int n) noexcept;
   /// Stage 5a (PipelineOptions::split_windows_at_separated_overlap): replaces each linearized
   /// window of last_queries_[0, n) whose overlap is in separated regions by one window per region
   /// (at the end of the batch) and linearizes those; returns the new count.
-  int SplitSeparatedOverlap(const RigidTransform& X_WT, int n);
+  int SplitSeparatedOverlap(const RigidTransform& X_WT, int n) noexcept;
   /// Stage 5a: merges regions_[0, count) where one's centre lies inside another's window (the
   /// square of its box's larger side plus the margins; the pipeline truth's rule for patches that
   /// measure one interpenetration twice, contact_patch_truth.h step 3b), until none does; returns
@@ -540,7 +545,13 @@ class HapticTexturePipeline {
   int last_num_queries_ = 0;
   StepFaults step_faults_;
   std::int64_t backend_failures_ = 0;
+  /// Reserved at construction (kMaxFallbackReason characters; a longer reason is cut), so that
+  /// the failing step writes it without allocating.
   std::string fallback_reason_;
+  static constexpr std::size_t kMaxFallbackReason = 512;
+  /// The CPU backend a backend other than the CPU's falls back on, built with the pipeline (null
+  /// when the backend in use is the CPU's).
+  std::unique_ptr<PenetrationDepthBackend> cpu_fallback_;
 };
 
 }  // namespace ht
