@@ -15,8 +15,8 @@
 #include "haptic_core/contact_model.h"
 #include "haptic_core/spatial.h"
 #include "master_station/lock_free.h"
-#include "master_station/operator_station.h"
 #include "master_station/received_scene.h"
+#include "master_station/station_config.h"
 
 namespace ht::station {
 

@@ -8,7 +8,7 @@
 #include <stdexcept>
 #include <utility>
 
-#include "master_station/simulated_operator.h"
+#include "master_station/operator_hand.h"
 
 namespace ht {
 namespace {

@@ -16,8 +16,8 @@
 
 #include "haptic_core/steady_clock.h"
 #include "master_station/lock_free.h"
-#include "master_station/operator_station.h"
 #include "master_station/received_scene.h"
+#include "master_station/station_config.h"
 #include "transport/deadband.h"
 #include "transport/link.h"
 #include "transport/messages.h"

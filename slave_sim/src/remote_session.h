@@ -12,7 +12,7 @@
 #include <span>
 #include <vector>
 
-#include "slave_sim/remote_node.h"
+#include "slave_sim/remote_node_config.h"
 #include "transport/link.h"
 #include "transport/messages.h"
 #include "transport/scene_stream.h"

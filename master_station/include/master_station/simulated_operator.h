@@ -7,26 +7,9 @@
 
 #include "master_station/experiment.h"
 #include "master_station/haptic_device.h"
+#include "master_station/operator_hand.h"
 
 namespace ht {
-
-/// Impedance of the simulated hand (translational and rotational).
-struct OperatorHandParams {
-  double mass_kg = 0.5;
-  double stiffness_n_per_m = 800.0;
-  double damping_ns_per_m = 25.0;
-  double inertia_kg_m2 = 5e-4;
-  double rotational_stiffness_nm_per_rad = 2.0;
-  double rotational_damping_nms_per_rad = 0.04;
-  int substeps = 10;  ///< Semi-implicit Euler substeps per ReadState interval.
-  /// Force control along z (HandZControl::kPress): while the felt upward force is below a quarter
-  /// of the wanted one, the hand's z target comes down at the fast speed (above the target's
-  /// slow_below_z_m) or the slow speed (below it); then it moves at gain·(felt − wanted), within
-  /// the same bound downwards and the slow speed upwards. kLift rises at the slow speed.
-  double press_gain_m_per_s_per_n = 0.02;
-  double press_fast_speed_m_per_s = 0.25;
-  double press_slow_speed_m_per_s = 0.05;
-};
 
 /// Simulated 6-DoF impedance device with a scripted hand. Capabilities are those of a
 /// desktop 6-DoF device (10 N, 1 N·m, 3,000 N/m at 1 kHz, ±0.1 m workspace).
