@@ -1,7 +1,7 @@
 #pragma once
 // The x86 SIMD set-up the texture stage's two kernel files share (height_field_batch.cc,
-// penetration_depth.cc): the intrinsics where GCC or Clang targets x86-64 (HT_X86_SIMD), and the
-// function attribute of their AVX-512 kernels. Both files are built with -ffp-contract=off
+// remote_step/5_raster_kernels.h): the intrinsics where GCC or Clang targets x86-64 (HT_X86_SIMD),
+// and the function attribute of their AVX-512 kernels. Both files are built with -ffp-contract=off
 // (haptic_core/CMakeLists.txt): AVX-512 F has FMA instructions, and no multiply-add may be fused,
 // so that every kernel writes the scalar code's bits. Which kernel runs is asked at run time
 // (CpuHasAvx2, CpuHasAvx512 in height_field_batch.h).

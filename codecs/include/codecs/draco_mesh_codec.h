@@ -8,7 +8,7 @@
 #include <span>
 #include <vector>
 
-#include "haptic_core/haptic_model.h"
+#include "haptic_core/mesh.h"
 
 namespace ht {
 

@@ -21,7 +21,7 @@
 #include <string>
 #include <vector>
 
-#include "haptic_core/haptic_model.h"
+#include "haptic_core/mesh.h"
 
 namespace ht {
 

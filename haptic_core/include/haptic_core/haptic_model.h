@@ -12,6 +12,7 @@
 
 #include "haptic_core/height_field.h"
 #include "haptic_core/hull_hierarchy.h"
+#include "haptic_core/mesh.h"
 
 namespace ht {
 
@@ -84,13 +85,5 @@ void ShiftModelFrame(HapticModel& model, const glm::dvec3& p_OC);
 /// permutes O's axes, such as a quarter turn). Texture coordinates, the texture and texel sizes
 /// are unchanged. Throws std::invalid_argument for a non-finite or non-unit R_NO.
 void RotateModelFrame(HapticModel& model, const glm::dquat& R_NO);
-
-/// A full-resolution triangle mesh (for display, baking and reports), frame O, metres.
-struct TriangleMesh {
-  /// Vertices, #V.
-  std::vector<glm::dvec3> vertices;
-  /// Triangles, #F, counter-clockwise seen from outside.
-  std::vector<glm::ivec3> triangles;
-};
 
 }  // namespace ht

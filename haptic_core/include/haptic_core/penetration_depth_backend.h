@@ -14,29 +14,12 @@
 
 #include "haptic_core/contact_linearization.h"
 #include "haptic_core/contact_model.h"
+#include "haptic_core/contact_windows.h"
 #include "haptic_core/haptic_model.h"
 #include "haptic_core/penetration_depth.h"
 #include "haptic_core/spatial.h"
 
 namespace ht {
-
-/// One contact of a batch: the environment object O at X_WO, the window found by the coarse
-/// query, and O's penalty stiffness k (N/m).
-struct ContactQuery {
-  const HapticModel* environment = nullptr;  ///< Must outlive the call; not null.
-  RigidTransform X_WO;
-  ContactWindow window;
-  double stiffness_n_per_m = 0.0;
-  /// The largest δ the coarse geometry allows this contact (m): the cluster's coarse penetration
-  /// plus the texture reach plus a cell (issue 31's grazing guard, PipelineOptions); +∞ for none.
-  /// The backends ignore it; the remote step drops a contact whose δ0 exceeds it.
-  double depth_bound_m = std::numeric_limits<double>::infinity();
-  /// The coarse triangles of the environment and of the tool this contact may render (issue 31,
-  /// change 4: the contact's cluster's own leaves, so that no triangle is rendered in two windows
-  /// of one step); All(): picked by the window alone. Views: the lists must outlive the batch.
-  TriangleSubset environment_triangles = TriangleSubset::All();
-  TriangleSubset tool_triangles = TriangleSubset::All();
-};
 
 /// Computes, for all contacts of one remote step, δ and its gradient (kGradientSamples depth
 /// evaluations each). Implementations preallocate at construction; a batch does not allocate.

@@ -1,6 +1,6 @@
 #pragma once
 // The remote step: the remote node's pipeline from a tool pose to a contact model, as a list of
-// named stages (see HapticTexturePipeline below, and remote_step.cc).
+// named stages (see HapticTexturePipeline below, and src/remote_step/, a file per stage).
 
 #include <array>
 #include <cmath>

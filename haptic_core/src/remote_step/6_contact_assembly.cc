@@ -1,7 +1,7 @@
-#include "haptic_core/contact_assembly.h"
-
 #include <algorithm>
 #include <cmath>
+
+#include "haptic_core/contact_assembly.h"
 
 namespace ht {
 namespace {

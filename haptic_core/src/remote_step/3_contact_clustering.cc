@@ -1,5 +1,3 @@
-#include "haptic_core/contact_clustering.h"
-
 #include <algorithm>
 #include <cmath>
 #include <glm/geometric.hpp>
@@ -7,6 +5,8 @@
 #include <numbers>
 #include <stdexcept>
 #include <string>
+
+#include "haptic_core/contact_clustering.h"
 
 namespace ht {
 namespace {

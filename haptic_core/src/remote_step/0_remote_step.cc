@@ -2,8 +2,6 @@
 // after it (broad_phase, hull_proximity, contact_clustering, contact_windows,
 // penetration_depth_backend and contact_linearization, contact_assembly).
 
-#include "haptic_core/remote_step.h"
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -19,6 +17,7 @@
 #include "haptic_core/connected_contacts.h"
 #include "haptic_core/contact_assembly.h"
 #include "haptic_core/contact_region.h"
+#include "haptic_core/remote_step.h"
 
 namespace ht {
 

@@ -1,14 +1,14 @@
 // Stage 5b: the penetration depth refined to the finest texture level (issue 32); see
 // depth_refinement.h for the method.
 
-#include "haptic_core/depth_refinement.h"
-
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
 #include <string>
+
+#include "haptic_core/depth_refinement.h"
 
 namespace ht {
 

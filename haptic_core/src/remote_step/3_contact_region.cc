@@ -1,5 +1,3 @@
-#include "haptic_core/contact_region.h"
-
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -10,6 +8,8 @@
 #include <optional>
 #include <span>
 #include <vector>
+
+#include "haptic_core/contact_region.h"
 
 namespace ht {
 namespace {

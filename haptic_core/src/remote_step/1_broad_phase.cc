@@ -1,7 +1,7 @@
-#include "haptic_core/broad_phase.h"
-
 #include <glm/geometric.hpp>
 #include <limits>
+
+#include "haptic_core/broad_phase.h"
 
 namespace ht {
 

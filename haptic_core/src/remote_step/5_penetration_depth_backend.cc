@@ -1,5 +1,3 @@
-#include "haptic_core/penetration_depth_backend.h"
-
 #include <oneapi/tbb/blocked_range.h>
 #include <oneapi/tbb/parallel_for.h>
 #include <oneapi/tbb/task_arena.h>
@@ -7,7 +5,8 @@
 #include <algorithm>
 #include <limits>
 
-#include "task_pools.h"
+#include "../task_pools.h"
+#include "haptic_core/penetration_depth_backend.h"
 
 namespace ht {
 

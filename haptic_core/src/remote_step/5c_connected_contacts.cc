@@ -1,11 +1,11 @@
-#include "haptic_core/connected_contacts.h"
-
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <glm/geometric.hpp>
 #include <glm/trigonometric.hpp>
 #include <limits>
+
+#include "haptic_core/connected_contacts.h"
 
 namespace ht {
 namespace {

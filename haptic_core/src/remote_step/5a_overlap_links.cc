@@ -1,9 +1,9 @@
-#include "haptic_core/overlap_links.h"
-
 #include <algorithm>
 #include <bit>
 #include <cmath>
 #include <limits>
+
+#include "haptic_core/overlap_links.h"
 
 namespace ht {
 namespace {

@@ -1,5 +1,3 @@
-#include "haptic_core/hull_proximity.h"
-
 #include <ccd/ccd.h>
 #include <oneapi/tbb/blocked_range.h>
 #include <oneapi/tbb/parallel_for.h>
@@ -15,8 +13,9 @@
 #include <stdexcept>
 #include <string>
 
+#include "../task_pools.h"
 #include "haptic_core/broad_phase.h"
-#include "task_pools.h"
+#include "haptic_core/hull_proximity.h"
 
 namespace ht {
 namespace {

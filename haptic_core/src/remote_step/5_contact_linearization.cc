@@ -1,5 +1,3 @@
-#include "haptic_core/contact_linearization.h"
-
 #include <oneapi/tbb/parallel_for.h>
 #include <oneapi/tbb/task_arena.h>
 
@@ -8,6 +6,8 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
+
+#include "haptic_core/contact_linearization.h"
 
 namespace ht {
 
