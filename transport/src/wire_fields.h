@@ -1,0 +1,604 @@
+#pragma once
+// Every message's wire layout, written once as a Fields(archive, message) function that the
+// Writer and the Reader both walk (internal to the wire format's files); the sizes checked against
+// protocol.h at compile time.
+
+#include "wire_archive.h"
+
+namespace ht::wire::detail {
+
+/// The header as it is on the wire (protocol.h); the u48 send time as its low 32 and high 16 bits
+/// (the same little-endian bytes).
+struct WireHeader {
+  std::uint16_t magic = kMagic;
+  std::uint8_t version = static_cast<std::uint8_t>(kProtocolVersion);
+  std::uint8_t type = 0;
+  std::uint32_t session_id = 0;
+  std::uint32_t sequence = 0;
+  std::uint32_t send_time_us_low = 0;
+  std::uint16_t send_time_us_high = 0;
+};
+
+/// The header of versions 2 to 7 (protocol.h), read from an older operator's Hello and written in
+/// the Reject that answers it.
+struct LegacyWireHeader {
+  std::uint32_t magic = kLegacyMagic;
+  std::uint16_t version = 0;
+  std::uint8_t type = 0;
+  std::uint8_t flags = 0;
+  std::uint32_t session_id = 0;
+  std::uint64_t sequence = 0;
+  std::int64_t send_time_ns = 0;
+};
+
+/// The header of `type` for `header`: the sequence saturated at 2³² − 1 (the stream's last) and
+/// the send time as whole µs, clamped to [0, kMaxSendTimeUs].
+inline WireHeader ToWire(const Header& header, MessageType type) noexcept {
+  const std::int64_t us = std::clamp<std::int64_t>(header.send_time_ns / 1000, 0, kMaxSendTimeUs);
+  return {.type = static_cast<std::uint8_t>(type),
+          .session_id = header.session_id,
+          .sequence = static_cast<std::uint32_t>(std::min(header.sequence, kMaxSequence)),
+          .send_time_us_low = static_cast<std::uint32_t>(us),
+          .send_time_us_high = static_cast<std::uint16_t>(us >> 32)};
+}
+
+/// The body of Goodbye.
+struct EmptyBody {};
+
+constexpr void Fields(auto& a, Of<WireHeader> auto& h) {
+  a(h.magic);
+  a(h.version);
+  a(h.type);
+  a(h.session_id);
+  a(h.sequence);
+  a(h.send_time_us_low);
+  a(h.send_time_us_high);
+}
+
+constexpr void Fields(auto& a, Of<LegacyWireHeader> auto& h) {
+  a(h.magic);
+  a(h.version);
+  a(h.type);
+  a(h.flags);
+  a(h.session_id);
+  a(h.sequence);
+  a(h.send_time_ns);
+}
+
+constexpr void Fields(auto&, Of<EmptyBody> auto&) {}
+
+constexpr void Fields(auto& a, Of<ToolStateMessage> auto& m) {
+  Pose(a, m.X_WT);
+  Vec(a, m.V_WT_W.linear);
+  Vec(a, m.V_WT_W.angular);
+}
+
+constexpr void Fields(auto& a, Of<ContactLinearization> auto& c) {
+  a(c.depth_m);
+  Vec(a, c.gradient.d_translation_W);
+  Vec(a, c.gradient.d_rotation_W);
+  a(c.stiffness_n_per_m);
+  Vec32(a, c.point_W);
+  Vec32(a, c.normal_W);
+}
+
+static_assert(kMaxKinkPlanesPerContact == kMaxKinkPlanes);
+
+/// One kink plane as it is on the wire (protocol.h).
+struct WireKinkPlane {
+  std::uint8_t contact = 0;
+  float depth_m = 0.0f;
+  std::array<float, 3> d_rotation{};            ///< ∂δ_m/∂θ (m/rad)
+  std::array<float, 3> d_translation_offset{};  ///< ∂δ_m/∂x less the contact's ∂δ/∂x
+};
+
+constexpr void Fields(auto& a, Of<WireKinkPlane> auto& p) {
+  a(p.contact);
+  a(p.depth_m);
+  for (auto& v : p.d_rotation) a(v);
+  for (auto& v : p.d_translation_offset) a(v);
+}
+
+/// The kink planes of contacts [0, n) of `model` in wire order (contact by contact), at most
+/// `capacity` of them, into `out`; returns how many.
+constexpr std::size_t FlattenKinkPlanes(const ContactModel& model, std::size_t n, int capacity,
+                                        std::span<WireKinkPlane> out) noexcept {
+  std::size_t k = 0;
+  const std::size_t cap = std::min(out.size(), static_cast<std::size_t>(std::max(capacity, 0)));
+  for (std::size_t i = 0; i < n && k < cap; ++i) {
+    const ContactLinearization& c = model.contacts[i];
+    const int planes = std::clamp(c.num_kink_planes, 0, kMaxKinkPlanes);
+    for (int p = 0; p < planes && k < cap; ++p) {
+      const KinkPlane& kp = c.kink_planes[static_cast<std::size_t>(p)];
+      out[k++] = {static_cast<std::uint8_t>(i),
+                  static_cast<float>(kp.depth_m),
+                  {static_cast<float>(kp.d_rotation_W.x), static_cast<float>(kp.d_rotation_W.y),
+                   static_cast<float>(kp.d_rotation_W.z)},
+                  {static_cast<float>(kp.d_translation_offset_W.x),
+                   static_cast<float>(kp.d_translation_offset_W.y),
+                   static_cast<float>(kp.d_translation_offset_W.z)}};
+    }
+  }
+  return k;
+}
+
+/// Gives each wire plane to its contact of `model` (whose first `n` contacts were read); false
+/// when one names a contact ≥ n or a contact's (kMaxKinkPlanes + 1)-th plane.
+inline bool DistributeKinkPlanes(std::span<const WireKinkPlane> planes, std::size_t n,
+                                 ContactModel& model) noexcept {
+  for (std::size_t i = 0; i < n; ++i) model.contacts[i].num_kink_planes = 0;
+  for (const WireKinkPlane& w : planes) {
+    if (w.contact >= n) return false;
+    ContactLinearization& c = model.contacts[w.contact];
+    if (c.num_kink_planes >= kMaxKinkPlanes) return false;
+    c.kink_planes[static_cast<std::size_t>(c.num_kink_planes++)] = {
+        w.depth_m, glm::dvec3(w.d_rotation[0], w.d_rotation[1], w.d_rotation[2]),
+        glm::dvec3(w.d_translation_offset[0], w.d_translation_offset[1],
+                   w.d_translation_offset[2])};
+  }
+  return true;
+}
+
+/// The kink-plane section after the contacts (protocol.h): the Writer and the Sizer flatten the
+/// model's planes, the Reader reads them and gives them to their contacts.
+constexpr std::size_t KinkPlanes(auto& a, auto& model, std::size_t n, int capacity) {
+  std::array<WireKinkPlane, kMaxWireKinkPlanes> planes{};
+  std::size_t k = 0;
+  if constexpr (!requires { a.Reject(DecodeStatus::kOk); }) {
+    k = FlattenKinkPlanes(model, n, capacity, planes);
+    const std::size_t sent = CountBefore<std::uint8_t>(
+        a, k, static_cast<std::size_t>(capacity), kKinkPlaneBytes, kTranslationPatchCountBytes);
+    for (std::size_t j = 0; j < std::min(sent, k); ++j) Fields(a, planes[j]);
+    return std::min(sent, k);
+  } else {
+    k = CountBefore<std::uint8_t>(a, k, static_cast<std::size_t>(std::max(capacity, 0)),
+                                  kKinkPlaneBytes, kTranslationPatchCountBytes);
+    for (std::size_t j = 0; j < k; ++j) Fields(a, planes[j]);
+    if (a.ok() && !DistributeKinkPlanes({planes.data(), k}, n, model)) {
+      a.Reject(DecodeStatus::kBadValue);
+    }
+    return k;
+  }
+}
+
+/// One translation patch as it is on the wire (protocol.h, version 9).
+struct WirePatch {
+  std::uint8_t contact = 0;
+  float step_m = 0.0f;
+  std::array<std::int16_t, 3> axis_u{};  ///< unit vector · kCompactI16Max
+  std::array<std::int16_t, 3> axis_v{};
+  float scale_m = 0.0f;  ///< m per node unit
+  std::array<std::int16_t, kTranslationPatchNodes> nodes{};
+  std::array<std::int16_t, 3> lever{};  ///< units of kCompactPointStepM; zero: translations only
+};
+
+constexpr void Fields(auto& a, Of<WirePatch> auto& p) {
+  a(p.contact);
+  a(p.step_m);
+  for (auto& v : p.axis_u) a(v);
+  for (auto& v : p.axis_v) a(v);
+  a(p.scale_m);
+  for (auto& v : p.nodes) a(v);
+  for (auto& v : p.lever) a(v);
+}
+
+static_assert(kTranslationPatchNodes + 1 == kTranslationPatchSide * kTranslationPatchSide);
+
+/// The patch's index of wire node k (the centre left out).
+constexpr std::size_t PatchIndexOfWireNode(int k) noexcept {
+  constexpr int centre = (kTranslationPatchSide * kTranslationPatchSide) / 2;
+  return static_cast<std::size_t>(k < centre ? k : k + 1);
+}
+
+/// round(v) within ±kCompactI16Max; constexpr-friendly (no std::round).
+constexpr std::int16_t PatchI16(double v) noexcept {
+  const double limit = kCompactI16Max;
+  const double c = v < -limit ? -limit : (v > limit ? limit : v);
+  return static_cast<std::int16_t>(c < 0.0 ? c - 0.5 : c + 0.5);
+}
+
+/// `p` as it goes on the wire for contact `contact`; false (nothing to send) for no patch or a
+/// non-finite one.
+constexpr bool QuantizePatch(const TranslationPatch& p, std::uint8_t contact,
+                             WirePatch& out) noexcept {
+  const auto finite = [](double v) { return v == v && v - v == 0.0; };
+  if (!(p.step_m > 0.0) || !finite(p.step_m)) return false;
+  double largest = 0.0;
+  for (const float v : p.depth_m) {
+    if (!finite(v)) return false;
+    largest = std::max(largest, v < 0.0f ? -static_cast<double>(v) : static_cast<double>(v));
+  }
+  for (int k = 0; k < 3; ++k) {
+    if (!finite(p.axis_u_W[k]) || !finite(p.axis_v_W[k]) || !finite(p.lever_W[k])) return false;
+  }
+  out = {};
+  out.contact = contact;
+  out.step_m = static_cast<float>(p.step_m);
+  for (int k = 0; k < 3; ++k) {
+    out.axis_u[static_cast<std::size_t>(k)] = PatchI16(p.axis_u_W[k] * kCompactI16Max);
+    out.axis_v[static_cast<std::size_t>(k)] = PatchI16(p.axis_v_W[k] * kCompactI16Max);
+    out.lever[static_cast<std::size_t>(k)] = PatchI16(p.lever_W[k] / kCompactPointStepM);
+  }
+  out.scale_m = static_cast<float>(largest / kCompactI16Max);
+  const double scale = static_cast<double>(out.scale_m);
+  for (int k = 0; k < kTranslationPatchNodes; ++k) {
+    const double v = p.depth_m[PatchIndexOfWireNode(k)];
+    out.nodes[static_cast<std::size_t>(k)] = scale > 0.0 ? PatchI16(v / scale) : 0;
+  }
+  return true;
+}
+
+/// The patches of contacts [0, n) of `model` in wire order (contact by contact, those that have
+/// one), at most `capacity`, into `out`; returns how many.
+constexpr std::size_t FlattenPatches(const ContactModel& model, std::size_t n, int capacity,
+                                     std::span<WirePatch> out) noexcept {
+  std::size_t k = 0;
+  const std::size_t cap = std::min(out.size(), static_cast<std::size_t>(std::max(capacity, 0)));
+  for (std::size_t i = 0; i < n && k < cap; ++i) {
+    if (QuantizePatch(model.contacts[i].patch, static_cast<std::uint8_t>(i), out[k])) ++k;
+  }
+  return k;
+}
+
+/// A wire patch's values: kOk, kNonFinite (a marked node or axis, a non-finite step or scale) or
+/// kBadValue (a step or scale out of range, an axis shorter than 0.5).
+inline DecodeStatus CheckPatch(const WirePatch& p) noexcept {
+  const auto marked = [](const auto& values) {
+    for (const std::int16_t v : values) {
+      if (v == kCompactNotFinite) return true;
+    }
+    return false;
+  };
+  if (!std::isfinite(p.step_m) || !std::isfinite(p.scale_m) || marked(p.axis_u) ||
+      marked(p.axis_v) || marked(p.nodes) || marked(p.lever)) {
+    return DecodeStatus::kNonFinite;
+  }
+  if (!(p.step_m > 0.0f) || p.step_m > kMaxTranslationPatchStepM || p.scale_m < 0.0f) {
+    return DecodeStatus::kBadValue;
+  }
+  for (const auto* axis : {&p.axis_u, &p.axis_v}) {
+    double norm2 = 0.0;
+    for (const std::int16_t v : *axis) norm2 += static_cast<double>(v) * v;
+    if (!(std::sqrt(norm2) >= 0.5 * kCompactI16Max)) return DecodeStatus::kBadValue;
+  }
+  return DecodeStatus::kOk;
+}
+
+/// Gives each wire patch (values checked by CheckPatch) to its contact of `model` (whose first `n`
+/// contacts were read); false when one names a contact ≥ n or a contact's second patch.
+inline bool DistributePatches(std::span<const WirePatch> patches, std::size_t n,
+                              ContactModel& model) noexcept {
+  for (std::size_t i = 0; i < n; ++i) model.contacts[i].patch = TranslationPatch{};
+  for (const WirePatch& w : patches) {
+    if (w.contact >= n) return false;
+    TranslationPatch& p = model.contacts[w.contact].patch;
+    if (p.step_m > 0.0) return false;
+    const auto axis = [](const std::array<std::int16_t, 3>& a) {
+      return glm::normalize(glm::dvec3(a[0], a[1], a[2]));
+    };
+    p.step_m = w.step_m;
+    p.axis_u_W = axis(w.axis_u);
+    p.axis_v_W = axis(w.axis_v);
+    p.lever_W = kCompactPointStepM * glm::dvec3(w.lever[0], w.lever[1], w.lever[2]);
+    p.depth_m.fill(0.0f);
+    for (int k = 0; k < kTranslationPatchNodes; ++k) {
+      p.depth_m[PatchIndexOfWireNode(k)] =
+          static_cast<float>(static_cast<double>(w.nodes[static_cast<std::size_t>(k)]) * w.scale_m);
+    }
+  }
+  return true;
+}
+
+/// The translation-patch section after the kink planes (protocol.h, version 9), as KinkPlanes.
+constexpr void TranslationPatches(auto& a, auto& model, std::size_t n, int capacity) {
+  std::array<WirePatch, kMaxWireContacts> patches{};
+  std::size_t k = 0;
+  if constexpr (!requires { a.Reject(DecodeStatus::kOk); }) {
+    k = FlattenPatches(model, n, capacity, patches);
+    const std::size_t sent =
+        Count<std::uint8_t>(a, k, static_cast<std::size_t>(capacity), kTranslationPatchBytes);
+    for (std::size_t j = 0; j < std::min(sent, k); ++j) Fields(a, patches[j]);
+  } else {
+    k = Count<std::uint8_t>(a, k, static_cast<std::size_t>(std::max(capacity, 0)),
+                            kTranslationPatchBytes);
+    for (std::size_t j = 0; j < k; ++j) Fields(a, patches[j]);
+    if (!a.ok()) return;
+    for (std::size_t j = 0; j < k; ++j) {
+      if (const DecodeStatus s = CheckPatch(patches[j]); s != DecodeStatus::kOk) {
+        a.Reject(s);
+        return;
+      }
+    }
+    if (!DistributePatches({patches.data(), k}, n, model)) a.Reject(DecodeStatus::kBadValue);
+  }
+}
+
+constexpr void Fields(auto& a, Of<ContactModelMessage> auto& m) {
+  a(m.model.tool_state_seq);
+  a(m.tool_state_send_time_ns);
+  a(m.hold_ns);
+  a(m.remote_step_count);
+  a(m.collision_us);
+  a(m.texture_us);
+  a(m.step_us);
+  Pose(a, m.model.X_WT0);
+  Vec(a, m.model.F_T_W_at_q0.force);
+  Vec(a, m.model.F_T_W_at_q0.torque);
+  const std::size_t n =
+      CountBefore<std::uint8_t>(a, m.model.num_contacts, kMaxWireContacts, kContactBytes,
+                                kKinkPlaneCountBytes + kTranslationPatchCountBytes);
+  for (std::size_t i = 0; i < n; ++i) Fields(a, m.model.contacts[i]);
+  const std::size_t planes =
+      KinkPlanes(a, m.model, n,
+                 KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, static_cast<int>(n)));
+  TranslationPatches(a, m.model, n,
+                     TranslationPatchCapacity(kContactModelFixedBytes, kContactBytes,
+                                              static_cast<int>(n), static_cast<int>(planes)));
+}
+
+/// One contact of a CompactContactModel as it is on the wire (protocol.h).
+struct CompactContact {
+  float depth_m = 0.0f;
+  std::array<float, 3> d_translation{};  ///< ∂δ/∂x
+  std::array<float, 3> d_rotation{};     ///< ∂δ/∂θ (m/rad)
+  float stiffness_n_per_m = 0.0f;
+  std::array<std::int16_t, 3> point_offset{};  ///< point_W − p_WT0 in units of kCompactPointStepM
+  std::array<std::int16_t, 2> normal_oct{};    ///< octahedral (u, v)·kCompactI16Max
+};
+
+/// A kink plane of CompactContactModel (protocol.h, version 11): WireKinkPlane's fields, the
+/// translation slope's offset on the wire only when bit kCompactKinkPlaneOwnSlope of `contact`
+/// says the plane has one (the rotation arms share the contact's: 17 bytes instead of 29).
+struct CompactWireKinkPlane {
+  std::uint8_t contact = 0;  ///< the contact's index | kCompactKinkPlaneOwnSlope
+  float depth_m = 0.0f;
+  std::array<float, 3> d_rotation{};            ///< ∂δ_m/∂θ (m/rad)
+  std::array<float, 3> d_translation_offset{};  ///< ∂δ_m/∂x less the contact's ∂δ/∂x
+};
+
+/// A CompactContactModel body as it is on the wire: what QuantizeContactModel() makes of a
+/// ContactModelMessage and DequantizeContactModel() turns back into one.
+struct CompactContactModelBody {
+  std::uint32_t tool_state_seq = 0;
+  std::uint32_t tool_state_send_time_us = 0;  ///< the echo's whole µs, low 32 bits
+  std::uint32_t hold_us = 0;
+  std::uint32_t remote_step_count = 0;  ///< low 32 bits
+  std::uint16_t collision_us = 0;
+  std::uint16_t texture_us = 0;
+  std::uint16_t step_us = 0;
+  std::array<float, 3> p_WT0{};
+  std::uint64_t q_WT0_low = 0;   ///< bits 0–63 of the 80-bit "smallest three"
+  std::uint16_t q_WT0_high = 0;  ///< bits 64–79
+  int num_contacts = 0;
+  std::array<CompactContact, kMaxWireContacts> contacts{};
+  int num_kink_planes = 0;
+  std::array<CompactWireKinkPlane, kMaxWireKinkPlanes> kink_planes{};
+  int num_patches = 0;
+  std::array<WirePatch, kMaxWireContacts> patches{};
+};
+
+// Every element of an array of scalars, in order.
+constexpr void Each(auto& a, auto& values) {
+  for (auto& v : values) a(v);
+}
+
+constexpr void Fields(auto& a, Of<CompactContact> auto& c) {
+  a(c.depth_m);
+  Each(a, c.d_translation);
+  Each(a, c.d_rotation);
+  a(c.stiffness_n_per_m);
+  Each(a, c.point_offset);
+  Each(a, c.normal_oct);
+}
+
+constexpr void Fields(auto& a, Of<CompactWireKinkPlane> auto& p) {
+  a(p.contact);  // read first: the Reader knows from it whether the offset follows
+  a(p.depth_m);
+  Each(a, p.d_rotation);
+  if ((p.contact & kCompactKinkPlaneOwnSlope) != 0) Each(a, p.d_translation_offset);
+}
+
+constexpr void Fields(auto& a, Of<CompactContactModelBody> auto& m) {
+  a(m.tool_state_seq);
+  a(m.tool_state_send_time_us);
+  a(m.hold_us);
+  a(m.remote_step_count);
+  a(m.collision_us);
+  a(m.texture_us);
+  a(m.step_us);
+  Each(a, m.p_WT0);
+  a(m.q_WT0_low);
+  a(m.q_WT0_high);
+  const std::size_t n =
+      CountBefore<std::uint8_t>(a, m.num_contacts, kMaxWireContacts, kCompactContactBytes,
+                                kKinkPlaneCountBytes + kTranslationPatchCountBytes);
+  for (std::size_t i = 0; i < n; ++i) Fields(a, m.contacts[i]);
+  const int capacity =
+      KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, static_cast<int>(n));
+  // Counted as if each plane were kKinkPlaneBytes (as ContactModel's): the bound on the count is
+  // the same whatever the planes carry; the bytes left are checked against the shortest plane.
+  const std::size_t k =
+      CountBefore<std::uint8_t>(a, m.num_kink_planes, static_cast<std::size_t>(capacity),
+                                kCompactKinkPlaneBytes, kTranslationPatchCountBytes);
+  for (std::size_t j = 0; j < k; ++j) Fields(a, m.kink_planes[j]);
+  const int patch_capacity = TranslationPatchCapacity(
+      kCompactContactModelFixedBytes, kCompactContactBytes, static_cast<int>(n), m.num_kink_planes);
+  const std::size_t np = Count<std::uint8_t>(
+      a, m.num_patches, static_cast<std::size_t>(patch_capacity), kTranslationPatchBytes);
+  for (std::size_t j = 0; j < np; ++j) Fields(a, m.patches[j]);
+}
+
+/// A CompactToolState body as it is on the wire (protocol.h).
+struct CompactToolStateBody {
+  std::array<float, 3> p_WT{};            ///< m
+  std::uint64_t q_WT_smallest_three = 0;  ///< index and three 20-bit components
+  std::array<std::uint16_t, 6> V_WT_W{};  ///< binary16: linear (m/s), then angular (rad/s)
+};
+
+constexpr void Fields(auto& a, Of<CompactToolStateBody> auto& m) {
+  Each(a, m.p_WT);
+  a(m.q_WT_smallest_three);
+  Each(a, m.V_WT_W);
+}
+
+constexpr void Fields(auto& a, Of<DeadbandTerms> auto& d) {
+  a(d.tool_state_deadband);
+  a(d.model_deadband);
+  a(d.tool_state_keepalive_ms);
+  a(d.model_keepalive_ms);
+}
+
+constexpr void Fields(auto& a, Of<HelloMessage> auto& m) {
+  a(m.min_version);
+  a(m.max_version);
+  a(m.client_nonce);
+  a(m.tool_state_rate_hz);
+  a(m.max_model_rate_hz);
+  a(m.max_grid);
+  a(m.mtu);
+  a(m.codecs);
+  a(m.heartbeat_ms);
+  a(m.peer_timeout_ms);
+  Fields(a, m.deadband);
+}
+
+constexpr void Fields(auto& a, Of<WelcomeTarget> auto& t) {
+  Vec32(a, t.box_min_W);
+  Vec32(a, t.box_max_W);
+  Vec32(a, t.top_W);
+  a.F32(t.approach_m);
+}
+
+constexpr void Fields(auto& a, Of<WelcomeMessage> auto& m) {
+  a(m.client_nonce);
+  a(m.version);
+  a(m.tool_state_rate_hz);
+  a(m.model_rate_hz);
+  a(m.grid);
+  a(m.window_m);
+  a(m.mtu);
+  a(m.codecs);
+  a(m.heartbeat_ms);
+  a(m.peer_timeout_ms);
+  Fields(a, m.deadband);
+  a(m.scene_objects);
+  a.Text(m.scene_name_length, m.scene_name);
+  auto& l = m.layout;
+  Pose(a, l.X_WT_home);
+  a.F32(l.tool_mass_kg);
+  Vec32(a, l.tool_inertia_diagonal_T);
+  a.F32(l.tool_extent_down_m);
+  const std::size_t n =
+      Count<std::uint8_t>(a, l.num_targets, kMaxWelcomeTargets, kWelcomeTargetBytes);
+  for (std::size_t i = 0; i < n; ++i) Fields(a, l.targets[i]);
+}
+
+constexpr void Fields(auto& a, Of<RejectMessage> auto& m) {
+  a(m.client_nonce);
+  a(m.reason);
+  const std::size_t n = Count<std::uint8_t>(a, m.text_length, kMaxRejectText, 1);
+  a.Bytes(m.text, n);
+}
+
+constexpr void Fields(auto& a, Of<PingMessage> auto& m) { a(m.operator_rtt_us); }
+
+constexpr void Fields(auto& a, Of<PongMessage> auto& m) {
+  a(m.ping_sequence);
+  a(m.t1_ns);
+  a(m.t2_ns);
+}
+
+constexpr void Fields(auto& a, Of<SceneFragmentMessage> auto& m) {
+  a(m.object_id);
+  a(m.version);
+  a(m.object_bytes);
+  a(m.fragment_index);
+  a(m.fragment_count);
+  a.Payload(m.payload);
+}
+
+constexpr void Fields(auto& a, Of<ManifestEntry> auto& e) {
+  a(e.object_id);
+  a(e.version);
+  a(e.object_bytes);
+  a(e.fragment_count);
+  a(e.kind);
+  a.Bytes(e.digest, kSceneDigestBytes);
+}
+
+constexpr void Fields(auto& a, Of<SceneManifestMessage> auto& m) {
+  a(m.total_objects);
+  a(m.first_index);
+  const std::size_t n = Count<std::uint8_t>(a, m.count, kMaxManifestEntries, kManifestEntryBytes);
+  for (std::size_t i = 0; i < n; ++i) Fields(a, m.entries[i]);
+}
+
+constexpr void Fields(auto& a, Of<SceneNackMessage> auto& m) {
+  a(m.object_id);
+  a(m.version);
+  const std::size_t n = Count<std::uint16_t>(a, m.count, kMaxNackIndices, 2);
+  for (std::size_t i = 0; i < n; ++i) a(m.missing[i]);
+}
+
+constexpr void Fields(auto& a, Of<NodePose> auto& p) {
+  a(p.node);
+  a(p.translation.x);
+  a(p.translation.y);
+  a(p.translation.z);
+  a(p.rotation.w);
+  a(p.rotation.x);
+  a(p.rotation.y);
+  a(p.rotation.z);
+  a(p.scale.x);
+  a(p.scale.y);
+  a(p.scale.z);
+}
+
+constexpr void Fields(auto& a, Of<NodePosesMessage> auto& m) {
+  a(m.graph_version);
+  a(m.scene_time_s);
+  const std::size_t n = Count<std::uint8_t>(a, m.count, kMaxNodePosesPerDatagram, kNodePoseBytes);
+  for (std::size_t i = 0; i < n; ++i) Fields(a, m.poses[i]);
+}
+
+/// Msg's field list measured: bytes with one element per count, and the bytes the counts declare
+/// their elements take.
+template <class Msg>
+constexpr Sizer SizeOf() {
+  Sizer s;
+  Msg m;
+  Fields(s, m);
+  return s;
+}
+
+static_assert(SizeOf<WireHeader>().bytes == kHeaderBytes);
+static_assert(SizeOf<LegacyWireHeader>().bytes == kLegacyHeaderBytes);
+static_assert(SizeOf<ToolStateMessage>().bytes == kToolStateBodyBytes);
+static_assert(SizeOf<ContactModelMessage>().bytes == kContactModelFixedBytes + kContactBytes +
+                                                         kKinkPlaneCountBytes +
+                                                         kTranslationPatchCountBytes);
+static_assert(SizeOf<ContactModelMessage>().counted_bytes ==
+              kContactBytes + kKinkPlaneBytes + kTranslationPatchBytes);
+static_assert(SizeOf<CompactContactModelBody>().bytes ==
+              kCompactContactModelFixedBytes + kCompactContactBytes + kKinkPlaneCountBytes +
+                  kCompactKinkPlaneBytes + kTranslationPatchCountBytes + kTranslationPatchBytes);
+static_assert(SizeOf<CompactContactModelBody>().counted_bytes ==
+              kCompactContactBytes + kCompactKinkPlaneBytes + kTranslationPatchBytes);
+static_assert(SizeOf<CompactWireKinkPlane>().bytes == kCompactKinkPlaneBytes);
+static_assert(SizeOf<WirePatch>().bytes == kTranslationPatchBytes);
+static_assert(SizeOf<CompactToolStateBody>().bytes == kCompactToolStateBodyBytes);
+static_assert(SizeOf<HelloMessage>().bytes == kHelloBodyBytes);
+static_assert(SizeOf<WelcomeMessage>().bytes == kWelcomeFixedBytes + kWelcomeTargetBytes);
+static_assert(SizeOf<WelcomeMessage>().counted_bytes == kWelcomeTargetBytes);
+static_assert(SizeOf<RejectMessage>().bytes == kRejectFixedBytes + 1);
+static_assert(SizeOf<PingMessage>().bytes == kPingBodyBytes);
+static_assert(SizeOf<PongMessage>().bytes == kPongBodyBytes);
+static_assert(SizeOf<SceneFragmentMessage>().bytes == kSceneFragmentFixedBytes);
+static_assert(SizeOf<SceneManifestMessage>().bytes ==
+              kSceneManifestFixedBytes + kManifestEntryBytes);
+static_assert(SizeOf<SceneManifestMessage>().counted_bytes == kManifestEntryBytes);
+static_assert(SizeOf<SceneNackMessage>().bytes == kSceneNackFixedBytes + 2);
+static_assert(SizeOf<NodePosesMessage>().bytes == kNodePosesFixedBytes + kNodePoseBytes);
+static_assert(SizeOf<NodePosesMessage>().counted_bytes == kNodePoseBytes);
+
+}  // namespace ht::wire::detail
