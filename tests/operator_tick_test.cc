@@ -140,7 +140,8 @@ TEST(OperatorTick, AWorkspaceJumpDropsModelsOfTheOldPlace) {
   OperatorTickInput in;
   in.now_ns = 1000000;
   tick.Step(in);
-  in.workspace_shift_M = {0.5, 0, 0};  // go 50 cm along x
+  EXPECT_TRUE(tick.ShiftWorkspace({0.5, 0, 0}));   // go 50 cm along x
+  EXPECT_FALSE(tick.ShiftWorkspace({0.5, 0, 0}));  // already there
   tick.Step(in);
   EXPECT_EQ(tick.counters().workspace_jumps, 1);
   EXPECT_NEAR(tick.X_WM().translation.x, 0.5, 1e-12);
@@ -163,7 +164,7 @@ TEST(OperatorTick, AModelArrivingOnTheJumpsOwnTickIsJudgedAgainstTheNewPlace) {
   in.now_ns = 1000000;
   tick.Step(in);
   ArrivedModel old_place = Wall(in.now_ns);  // linearized at the origin
-  in.workspace_shift_M = {0.5, 0, 0};
+  tick.ShiftWorkspace({0.5, 0, 0});          // the driver's jump, before the tick
   in.arrived = &old_place;
   tick.Step(in);
   EXPECT_EQ(tick.counters().workspace_jumps, 1);
@@ -172,7 +173,7 @@ TEST(OperatorTick, AModelArrivingOnTheJumpsOwnTickIsJudgedAgainstTheNewPlace) {
   // A model of the new place arriving on a later jump's tick is taken.
   ArrivedModel new_place = Wall(in.now_ns);
   new_place.model.X_WT0.translation = {0.6, 0, 0};
-  in.workspace_shift_M = {0.6, 0, 0};
+  tick.ShiftWorkspace({0.6, 0, 0});
   in.arrived = &new_place;
   const OperatorTickOutput out = tick.Step(in);
   EXPECT_EQ(tick.counters().workspace_jumps, 2);
@@ -238,7 +239,7 @@ TEST(OperatorTick, ATickNeverAllocates) {
   for (int k = 0; k < 5000; ++k) {
     in.now_ns = fault.now_ns = (k + 1) * 1000000LL;
     in.arrived = k % 3 == 0 ? &wall : nullptr;
-    in.workspace_shift_M = k == 2500 ? glm::dvec3(0.01, 0, 0) : in.workspace_shift_M;
+    if (k == 2500) tick.ShiftWorkspace({0.01, 0, 0});
     tick.Step(k % 97 == 0 ? fault : in);
   }
   EXPECT_EQ(Allocations() - before, 0);

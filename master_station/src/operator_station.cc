@@ -436,7 +436,7 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
         // A scripted "go to" (HandTarget::workspace_shift_M), on the device's own clock (time 0
         // at its first reading, this tick's `now`).
         if (experiment_t0 < 0) experiment_t0 = now;
-        in.workspace_shift_M = experiment.Target((now - experiment_t0) * 1e-9).workspace_shift_M;
+        tick.ShiftWorkspace(experiment.Target((now - experiment_t0) * 1e-9).workspace_shift_M);
       }
       if (incoming.Read(received)) {
         arrived.model = received.message.model;

@@ -1,12 +1,15 @@
 #pragma once
 // The operator's haptic tick as one unit (issue 16): the device state in, the device wrench out,
 // with no thread, socket or clock of its own, so that tests run it tick by tick. Stages, in
-// order (DESIGN.md §5):
-//   1. the contact model in use: a newly arrived one is blended in over a few ticks; after a
-//      scripted workspace jump, models linearized nearer the old place than the tool are dropped;
-//   2. virtual coupling and the implicit (linearized backward-Euler) tool step against it;
-//   3. passivity: the time-domain passivity controller (Ryu, Kwon & Hannaford 2004);
-//   4. safety: non-finite → zero, fade when stale or the link is lost, brake, clamp, rate limit;
+// order (DESIGN.md §5), one file each in master_station/src/operator/, whose listing is this order:
+//   1. the contact model in use: a newly arrived one is taken, the one before kept for the blend;
+//      after a scripted workspace jump (ShiftWorkspace, the experiment driver's, between ticks),
+//      models linearized nearer the old place than the tool are dropped;
+//   2. the blend from the model before to the new one over a few ticks, and the energy-bounded
+//      switch (a late model's onset rendered with a depth offset);
+//   3. virtual coupling and the implicit (linearized backward-Euler) tool step against the blend;
+//   4. passivity: the time-domain passivity controller (Ryu, Kwon & Hannaford 2004);
+//   5. safety: non-finite → zero, fade when stale or the link is lost, brake, clamp, rate limit;
 //      then the passivity guard scales what is left if the energy observed would go negative.
 // Every tick's wrench passes the safety stage, a failed device read included: the device then
 // gets the safety stage's ramp to zero, and a later recovery ramps back up instead of jumping.
@@ -109,9 +112,6 @@ struct OperatorTickInput {
   DeviceState device;                     ///< X_MH, V_MH_M when device_ok
   const ArrivedModel* arrived = nullptr;  ///< a new model, or null
   bool link_connected = true;
-  /// A scripted "go to" (HandTarget::workspace_shift_M, m in M): when it differs from the
-  /// last one the workspace and the tool jump together by the difference.
-  glm::dvec3 workspace_shift_M{0.0};
   /// Scales the device's wrench after the safety stage and before the passivity observer
   /// records it, clamped to [0, 1] (NaN = 0): the ramp to zero when a stop is requested. The
   /// observer then accounts the wrench the device really gets.
@@ -176,6 +176,13 @@ class OperatorTick {
   /// Runs the stages above once.
   OperatorTickOutput Step(const OperatorTickInput& in) noexcept;
 
+  /// A scripted "go to" (HandTarget::workspace_shift_M, m in M), for the experiment driver to
+  /// call between ticks while the device works: when `workspace_shift_M` differs from the last
+  /// one, the workspace and the tool jump together by the difference, in free space, the models
+  /// in use are dropped, and stage 1 drops those of the old place still in flight. Returns
+  /// whether it jumped.
+  bool ShiftWorkspace(const glm::dvec3& workspace_shift_M) noexcept;
+
   const ToolState& tool() const noexcept { return tool_; }
   const RigidTransform& X_WM() const noexcept { return X_WM_; }
   /// The scripted workspace shift in effect (m, in M at the start).
@@ -210,6 +217,29 @@ class OperatorTick {
   /// The depth offset applied to model_'s depths (m, ≥ 0; energy_bounded_switch).
   double depth_offset_m_ = 0.0;
   double depth_offset_peak_m_ = 0.0;  ///< the offset at the episode's onset (m)
+  /// Stage 1: takes `arrived` (null: none) as the model in use, the one before kept for the
+  /// blend, unless it is from before a workspace jump; returns whether it was taken.
+  bool TakeArrivedModel(const ArrivedModel* arrived) noexcept;
+  /// Stage 2: advances the blend, bounds the switch's energy (BoundSwitchEnergy) and attributes
+  /// it (AttributeSwitch); returns whether this tick blends.
+  bool StepBlend(bool took_model, bool potential_changes, double U_before,
+                 OperatorTickOutput& out) noexcept;
+  /// Stage 3: the coupling and the tool step against the model (blended when `blending`), from
+  /// the handle at X_WH with twist V_WH_W (W); returns the device's wrench in W (zero when not
+  /// finite, counted).
+  Wrench StepTool(const RigidTransform& X_WH, const Twist& V_WH_W, bool blending,
+                  OperatorTickOutput& out) noexcept;
+  /// Stage 4 before safety: the passivity controller's damping of `F_device_W`; `f_after_apply`
+  /// gets |f| after it (N) for the release.
+  Wrench ApplyPassivity(const Wrench& F_device_W, const Twist& V_WH_W, OperatorTickOutput& out,
+                        double& f_after_apply) noexcept;
+  /// Stage 5: the safety filter and the stop ramp's gain.
+  Wrench LimitWrench(const Wrench& F_device_W, const Twist& V_WH_W, double model_staleness_s,
+                     const OperatorTickInput& in, OperatorTickOutput& out) noexcept;
+  /// Stage 4 after safety: the guard, the release of what the stage cut, and the observer's
+  /// record (Commit) of the wrench returned, which the device gets.
+  Wrench GuardPassivity(const Wrench& F_device_W, const Twist& V_WH_W, bool device_ok,
+                        double f_after_apply, OperatorTickOutput& out) noexcept;
   /// Sets model_'s depth offset to `offset_m` (shifts every contact's and kink plane's depth).
   void SetDepthOffset(double offset_m) noexcept;
   /// The energy-bounded onset, after stage 1 and the blend step: at an onset (`took_model`
