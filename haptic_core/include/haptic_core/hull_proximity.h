@@ -48,11 +48,8 @@ struct ProximityQueryOptions {
   /// then: where the hulls' support intervals along that axis are still more than the tolerance
   /// apart (a lower bound of their distance) the pair is dropped without GJK
   /// (ProximityQueryStats::coherent_culls). Never changes which pairs are reported (a
-  /// penetrating pair's depth estimate can only get closer to the true depth). Measured
-  /// (benchmarks/hull_proximity_benchmark.cc, BM_HullProximity coherence:0/1, tool sliding 1 µm
-  /// per frame, ε = 1 mm): the warm start alone was 0–10 % faster, within the machine's noise;
-  /// with the separating-direction test, hammer on torus 50 → 39 µs (38 of 54 leaf pairs
-  /// dropped without GJK) and file on CAD part 111 → 105 µs.
+  /// penetrating pair's depth estimate can only get closer to the true depth). Measured:
+  /// docs/measurements.md.
   ///
   /// Front tracking (Ehmann & Lin, "Accurate and fast proximity queries between polyhedra using
   /// convex surface decomposition", Eurographics 2001): without a budget, the traversal starts
@@ -64,8 +61,7 @@ struct ProximityQueryOptions {
   /// pairs are reported. Fronts are not pulled up: when one has grown past twice the size of the
   /// last front made from the roots (plus 64), the next call starts from the roots again, as it
   /// does after a call with a budget, on other models, or once a model's cache entry was rebuilt.
-  /// Measured with fig77_scrape (500 frames of the file scraping the CAD part, ε = 8.2 mm): query
-  /// p50 953–958 → 636–637 µs, p95 1432–1503 → 943–964 µs.
+  /// Measured: docs/measurements.md.
   bool temporal_coherence = true;
   /// Local reach (issue 15; an approximation, placed on the speed-vs-error frontier): when ≥ 0,
   /// a node pair's tolerance is min(tolerance_m, reach_A(node) + reach_B(node) +
@@ -76,8 +72,8 @@ struct ProximityQueryOptions {
   double local_reach_margin_m = -1.0;
   /// Internal node pairs' GJK runs to the exact hull distance (the behaviour before issue 15's
   /// coarse-query work). Otherwise, when no budget is set, it stops once the two hulls are known
-  /// to be within the pair's tolerance (then the pair descends whatever the distance), which
-  /// makes the query 20–30 % faster on the seed scenes at the product's tolerance. Either way the
+  /// to be within the pair's tolerance (then the pair descends whatever the distance; measured:
+  /// docs/measurements.md). Either way the
   /// same leaf pairs are reported with the same contacts in the same order; only the traversal's
   /// keys differ. With a budget the exact distances are kept: there the best-first order decides
   /// which pairs are found. For tests and before/after measurements.

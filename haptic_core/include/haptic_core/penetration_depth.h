@@ -36,8 +36,7 @@ inline constexpr double kPatchFacingThreshold = 0.05;
 /// `triangles_out` is cleared first; it does not allocate once its capacity reaches the model's
 /// triangle count. With `vertex_scratch` whose capacity holds one double per vertex, each
 /// vertex's coordinate along the window's u axis is computed once instead of once per triangle
-/// corner (the same triangles; in penetration_depth_benchmark, whose 1,600-triangle gear makes
-/// this the larger call, its share of the time fell from 13.5 % to 10.3 %); it is not grown.
+/// corner (the same triangles; measured: docs/measurements.md); it is not grown.
 ///
 /// With `tree` built from `model` (TriangleBoxTree::BuiltFrom), only the triangles of the tree's
 /// leaves whose boxes reach the window grown by the margin (and its box along n, grown likewise)

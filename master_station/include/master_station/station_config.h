@@ -105,16 +105,12 @@ struct StationConfig {
   double max_contact_force_n = 20.0;
   /// Hunt–Crossley contact damping α (s/m) of the simulated tool: each contact's force
   /// −kδ(1 + α·dδ/dt)∇δ (ToolSimulator::set_contact_damping_hunt_crossley; 0 = none). 20 s/m
-  /// damps a 0.1 mm press as β = 2 ms would (ζ ≈ 0.3 for the 0.1 kg tool on 10⁴ N/m): on the
-  /// fig75 slide it cuts the contact force's one-tick steps above 0.2 N from 76–88 to 28–37, the
-  /// device's above 0.1 N from 15–17 to 3–5, and leaves the force felt on the recorded human
-  /// motion within the run-to-run spread (docs/frontier/issue32/ninth_stop).
+  /// damps a 0.1 mm press as β = 2 ms would (ζ ≈ 0.3 for the 0.1 kg tool on 10⁴ N/m); measured:
+  /// docs/measurements.md.
   double hunt_crossley_s_per_m = 20.0;
   /// The passivity controller's energy reserve (J, in [0, 1]; 0 = none): the store a slow hand
-  /// draws on instead of the guard's cut (PassivityController::set_energy_reserve). With 0.1 mJ,
-  /// fig76's turns lost their one-tick force dips (device steps above 0.2 N 2–25 in 12 s over
-  /// seven runs → 0 in four, the guard's ticks 262–578 → 0) at the same damping (0.1 % of the
-  /// force's impulse; issue 33, docs/passivity/README.md).
+  /// draws on instead of the guard's cut (PassivityController::set_energy_reserve); measured:
+  /// docs/measurements.md.
   double passivity_reserve_j = 1e-4;
   /// The largest change of the wrench the reserve's refill may make, a fraction of the wrench
   /// (in [0, 1)).
@@ -124,12 +120,8 @@ struct StationConfig {
   /// Energy-bounded onsets (OperatorTickConfig::energy_bounded_switch) and the longest their
   /// depth offset is held (ms, > 0; +∞ = as the energy budget allows). On by default together
   /// (issue 33, docs/passivity/README.md, "The pulse train under delay"): without them a late
-  /// model's stored energy was cut by the guard in one-tick pulses of the whole force. Loopback,
-  /// 5 s, two runs a cell, before → after: device-force steps above 0.2 N 176–196 → 11–12 on the
-  /// gear at 75 ms one way, 17–27 → 4–5 at 150 ms, 190–291 → 10–12 on the stiff wall at 50 ms
-  /// with 10 % loss, 62–152 → 1 at 150 ms; guard + damping 18.8–19.2 → 11.6–12.0 %,
-  /// 8.3–8.7 → 5.1–5.2 %, 10.5–18.4 → 2.9–5.2 %, 13.9–27.6 → 3.3–3.6 % of the device force's
-  /// impulse, which itself falls 2–8 %; nothing changes undelayed or at 25 ms.
+  /// model's stored energy is cut by the guard in one-tick pulses of the whole force. Measured:
+  /// docs/measurements.md.
   double passivity_release_ms = 20.0;
   bool energy_bounded_switch = true;
   double switch_offset_release_ms = 200.0;
