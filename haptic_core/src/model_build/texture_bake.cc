@@ -1,7 +1,5 @@
 #include "haptic_core/model_build/texture_bake.h"
 
-#include <embree3/rtcore.h>
-
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -19,6 +17,8 @@
 #include <string>
 #include <thread>
 #include <utility>
+
+#include "haptic_core/ray_cast_surface.h"
 
 namespace ht {
 namespace {
@@ -186,102 +186,24 @@ std::vector<glm::dvec3> CornerNormals(const TriangleMesh& m, double crease_angle
   return out;
 }
 
-// Embree device and scene holding the full-resolution mesh, released on scope exit.
-class RayScene {
- public:
-  RayScene(const TriangleMesh& full, const glm::dvec3& origin) {
-    device_ = rtcNewDevice(nullptr);
-    if (device_ == nullptr) throw std::runtime_error("BakeHapticTexture: rtcNewDevice failed");
-    scene_ = rtcNewScene(device_);
-    rtcSetSceneFlags(scene_, RTC_SCENE_FLAG_ROBUST);
-    rtcSetSceneBuildQuality(scene_, RTC_BUILD_QUALITY_HIGH);
-    RTCGeometry geom = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
-    auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0,
-                                                           RTC_FORMAT_FLOAT3, 3 * sizeof(float),
-                                                           full.vertices.size()));
-    auto* ib = static_cast<unsigned*>(
-        rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                                3 * sizeof(unsigned), full.triangles.size()));
-    if (vb == nullptr || ib == nullptr) {
-      rtcReleaseGeometry(geom);
-      Check("rtcSetNewGeometryBuffer");
-      throw std::runtime_error("BakeHapticTexture: Embree buffer allocation failed");
-    }
-    for (size_t i = 0; i < full.vertices.size(); ++i) {
-      const glm::dvec3 p = full.vertices[i] - origin;
-      vb[3 * i] = static_cast<float>(p.x);
-      vb[3 * i + 1] = static_cast<float>(p.y);
-      vb[3 * i + 2] = static_cast<float>(p.z);
-    }
-    for (size_t f = 0; f < full.triangles.size(); ++f) {
-      for (int c = 0; c < 3; ++c) ib[3 * f + c] = static_cast<unsigned>(full.triangles[f][c]);
-    }
-    rtcCommitGeometry(geom);
-    rtcAttachGeometry(scene_, geom);
-    rtcReleaseGeometry(geom);
-    rtcCommitScene(scene_);
-    Check("rtcCommitScene");
+// Signed distance h (m) from `p_S` along unit `n` to the nearer of the first surfaces of
+// `rays` above (+n) and below (−n) within `range`. Both rays start `range`·1e-6 behind p so that
+// a surface through p itself is found. Returns false when neither ray hits.
+bool NearestAlongNormal(const RayCastSurface& rays, const glm::dvec3& p, const glm::dvec3& n,
+                        double range, double& h) noexcept {
+  const double eps = 1e-6 * range;
+  const double up = rays.FirstHit(p - eps * n, n, range + eps);
+  const double down = rays.FirstHit(p + eps * n, -n, range + eps);
+  const bool hit_up = up >= 0.0, hit_down = down >= 0.0;
+  if (!hit_up && !hit_down) return false;
+  const double h_up = up - eps, h_down = -(down - eps);
+  if (hit_up && hit_down) {
+    h = std::abs(h_up) <= std::abs(h_down) ? h_up : h_down;
+  } else {
+    h = hit_up ? h_up : h_down;
   }
-  ~RayScene() {
-    if (scene_ != nullptr) rtcReleaseScene(scene_);
-    if (device_ != nullptr) rtcReleaseDevice(device_);
-  }
-  RayScene(const RayScene&) = delete;
-  RayScene& operator=(const RayScene&) = delete;
-
-  // Distance (m) to the first surface along unit `dir` from `org` within [0, tfar], or a negative
-  // value when there is none. Thread-safe.
-  double Cast(const glm::dvec3& org, const glm::dvec3& dir, double tfar) const {
-    RTCIntersectContext context;
-    rtcInitIntersectContext(&context);
-    RTCRayHit rh;
-    rh.ray.org_x = static_cast<float>(org.x);
-    rh.ray.org_y = static_cast<float>(org.y);
-    rh.ray.org_z = static_cast<float>(org.z);
-    rh.ray.tnear = 0.0f;
-    rh.ray.dir_x = static_cast<float>(dir.x);
-    rh.ray.dir_y = static_cast<float>(dir.y);
-    rh.ray.dir_z = static_cast<float>(dir.z);
-    rh.ray.time = 0.0f;
-    rh.ray.tfar = static_cast<float>(tfar);
-    rh.ray.mask = 0xFFFFFFFFu;
-    rh.ray.id = 0;
-    rh.ray.flags = 0;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(scene_, &context, &rh);
-    return rh.hit.geomID == RTC_INVALID_GEOMETRY_ID ? -1.0 : static_cast<double>(rh.ray.tfar);
-  }
-
-  // Signed distance h (m) from `p` along unit `n` to the nearer of the first surfaces above (+n)
-  // and below (-n) within `range`. Both rays start `range`·1e-6 behind p so that a surface
-  // through p itself is found. Returns false when neither ray hits.
-  bool NearestAlongNormal(const glm::dvec3& p, const glm::dvec3& n, double range, double& h) const {
-    const double eps = 1e-6 * range;
-    const double up = Cast(p - eps * n, n, range + eps);
-    const double down = Cast(p + eps * n, -n, range + eps);
-    const bool hit_up = up >= 0.0, hit_down = down >= 0.0;
-    if (!hit_up && !hit_down) return false;
-    const double h_up = up - eps, h_down = -(down - eps);
-    if (hit_up && hit_down) {
-      h = std::abs(h_up) <= std::abs(h_down) ? h_up : h_down;
-    } else {
-      h = hit_up ? h_up : h_down;
-    }
-    return true;
-  }
-
- private:
-  void Check(const char* what) const {
-    const RTCError err = rtcGetDeviceError(device_);
-    if (err != RTC_ERROR_NONE) {
-      throw std::runtime_error(std::string("BakeHapticTexture: Embree error ") +
-                               std::to_string(static_cast<int>(err)) + " after " + what);
-    }
-  }
-  RTCDevice device_ = nullptr;
-  RTCScene scene_ = nullptr;
-};
+  return true;
+}
 
 // One chart: the affine map from atlas texel coordinates (texel centres at i + 0.5) to barycentric
 // coordinates of its triangle.
@@ -505,7 +427,7 @@ BakedTexture BakeHapticTexture(const TriangleMesh& coarse_O, const TriangleMesh&
     return f < nf ? f : -1;
   };
 
-  const RayScene rays(full_O, origin_O);
+  const RayCastSurface rays(full_O, origin_O);
   // Coarse surface point (frame of the Embree scene) and unit normal at barycentric b.
   const auto surface = [&](int f, double b1, double b2, glm::dvec3& p, glm::dvec3& nrm) {
     const glm::ivec3 t = coarse_O.triangles[f];
@@ -548,7 +470,7 @@ BakedTexture BakeHapticTexture(const TriangleMesh& coarse_O, const TriangleMesh&
           glm::dvec3 p, nrm;
           if (!surface(f, b.x, b.y, p, nrm)) return false;
           cnt.rays += 2;
-          return rays.NearestAlongNormal(p, nrm, range, out_h);
+          return NearestAlongNormal(rays, p, nrm, range, out_h);
         };
         const glm::dvec2 q(x + 0.5, y + 0.5);
         const glm::dvec2 q_edge = ClosestOnTriangle(q, ch.t);
@@ -648,7 +570,7 @@ BakedTexture BakeHapticTexture(const TriangleMesh& coarse_O, const TriangleMesh&
       glm::dvec3 p, nrm;
       double cast = 0.0;
       rep.rays += 2;
-      if (!surface(f, b1, b2, p, nrm) || !rays.NearestAlongNormal(p, nrm, range, cast)) {
+      if (!surface(f, b1, b2, p, nrm) || !NearestAlongNormal(rays, p, nrm, range, cast)) {
         ++rep.validation_misses;
         continue;
       }

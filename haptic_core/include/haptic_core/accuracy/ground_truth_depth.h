@@ -19,44 +19,10 @@
 #include "haptic_core/contact_linearization.h"
 #include "haptic_core/haptic_model.h"
 #include "haptic_core/penetration_depth.h"
+#include "haptic_core/ray_cast_surface.h"
 #include "haptic_core/spatial.h"
 
 namespace ht {
-
-/// A full-resolution triangle mesh, frame F of its file, ready for ray casting (Embree 3, float
-/// vertices: about 10 nm of rounding at 10 cm from F's origin). Immutable after construction and
-/// safe to query from several threads.
-class RayCastSurface {
- public:
-  /// Builds the ray-casting structure over `mesh_F` (#V vertices, #F triangles, counter-clockwise
-  /// seen from outside, metres). Degenerate triangles are kept but never face a ray. Throws
-  /// std::invalid_argument for an empty mesh, a non-finite vertex or an index out of range, and
-  /// std::runtime_error when Embree fails.
-  explicit RayCastSurface(const TriangleMesh& mesh_F);
-  ~RayCastSurface();
-  RayCastSurface(const RayCastSurface&) = delete;
-  RayCastSurface& operator=(const RayCastSurface&) = delete;
-
-  /// Distance (m) along the unit direction `dir_F` from `org_F` (both in frame F) to the first
-  /// surface point within [0, tfar_m] whose triangle faces the ray (unit face normal · dir_F <
-  /// −kPatchFacingThreshold); −1 when there is none. Thread-safe.
-  double FirstFacingHit(const glm::dvec3& org_F, const glm::dvec3& dir_F,
-                        double tfar_m) const noexcept;
-
-  /// True when `p_F` is inside the closed mesh: the first surface that a ray from `p_F` along the
-  /// unit direction `dir_F` meets, whichever way it faces, faces away from the ray (unit face
-  /// normal · dir_F > 0: the ray leaves the solid there). A point with nothing along the ray is
-  /// outside. Exact for a closed, outward-oriented mesh up to float rounding (~10 nm at 10 cm);
-  /// the direction only matters for rays through edges. Thread-safe.
-  bool IsInside(const glm::dvec3& p_F, const glm::dvec3& dir_F) const noexcept;
-
-  /// Triangles of the mesh.
-  std::size_t triangle_count() const noexcept;
-
- private:
-  struct Impl;
-  std::unique_ptr<Impl> impl_;
-};
 
 /// How hard the ground truth works for one window.
 struct GroundTruthOptions {
