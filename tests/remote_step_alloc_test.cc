@@ -9,6 +9,7 @@
 
 #include <cctype>
 #include <glm/gtc/quaternion.hpp>
+#include <ostream>
 #include <string>
 #include <vector>
 
@@ -83,6 +84,10 @@ INSTANTIATE_TEST_SUITE_P(ThreadsAndRotationGradients, RemoteStepAlloc,
 struct SeedSceneCase {
   const char* scene;
   int threads;
+  // The test's name in ctest's listing (instead of the parameter's bytes).
+  friend void PrintTo(const SeedSceneCase& c, std::ostream* os) {
+    *os << c.scene << " on " << c.threads << " thread(s)";
+  }
 };
 class RemoteStepAllocSeedScenes : public ::testing::TestWithParam<SeedSceneCase> {};
 

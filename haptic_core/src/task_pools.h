@@ -11,11 +11,13 @@
 
 namespace ht::internal {
 
-/// Runs, in `arena`, a few rounds of a parallel_for of 256 tasks each running an isolated
-/// parallel_for of 16 (each spinning about a microsecond so that the threads steal from each
-/// other), so that every thread of the arena has held that many tasks at once. A few
-/// milliseconds; call it where the arena is made, not in a step. Ignores exceptions (out of
-/// memory: the pools stay as they are).
+/// Runs, in `arena`, rounds of a parallel_for of 256 tasks each running an isolated parallel_for
+/// of 16 (each spinning about a microsecond so that the threads steal from each other): four, and
+/// more until every slot of the arena has run a task that spawned, at most for a second (on a
+/// loaded machine a worker may join only after the calling thread has done a round alone: it
+/// then held no tasks, and the step's first tasks on it allocated, which the allocation test saw
+/// with two busy processes beside it). A few milliseconds unloaded; call it where the arena is
+/// made, not in a step. Ignores exceptions (out of memory: the pools stay as they are).
 void WarmTaskPools(oneapi::tbb::task_arena& arena) noexcept;
 
 }  // namespace ht::internal

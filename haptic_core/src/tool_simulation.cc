@@ -132,7 +132,7 @@ ToolStepResult ToolSimulator::Integrate(ToolState& s, const RigidTransform& X_WH
   result.saturated_contacts = contact.saturated_contacts;
 
   const VirtualCoupling& c = coupling_;
-  const Wrench F_total = contact.F_T_W + CouplingWrench(s, X_WH, V_WH_W);
+  const Wrench F_T_W_total = contact.F_T_W + CouplingWrench(s, X_WH, V_WH_W);
 
   // Mass matrix in W: diag(m I, R I_T Rᵀ).
   const glm::dmat3 R = glm::mat3_cast(s.X_WT.rotation);
@@ -158,7 +158,7 @@ ToolStepResult ToolSimulator::Integrate(ToolState& s, const RigidTransform& X_WH
   if (alpha > 0.0) A.noalias() += (h * alpha) * contact.G;
 
   const Vector6 V = ToVector(s.V_WT_W);
-  Vector6 rhs = h * (ToVector(F_total) + h * (K * V));
+  Vector6 rhs = h * (ToVector(F_T_W_total) + h * (K * V));
   if (alpha > 0.0) rhs.noalias() -= (h * alpha) * (contact.G * V);
   const Eigen::LDLT<Stiffness6> ldlt(A);
   const Vector6 dV = ldlt.solve(rhs);

@@ -51,7 +51,7 @@ WrenchSafetyFilter::WrenchSafetyFilter(const SafetyLimits& limits) : limits_(lim
   limits_.Validate();
 }
 
-Wrench WrenchSafetyFilter::Filter(const Wrench& F_desired_W, const Twist& V_hand_W,
+Wrench WrenchSafetyFilter::Filter(const Wrench& F_desired_W, const Twist& V_WH_W,
                                   double model_staleness_s, bool link_up, double h,
                                   std::uint32_t& actions) noexcept {
   actions = kSafetyNone;
@@ -74,11 +74,10 @@ Wrench WrenchSafetyFilter::Filter(const Wrench& F_desired_W, const Twist& V_hand
     ++counters_.fading;
   }
   // Brake: above the speed limit the device only dissipates.
-  if (IsFinite(V_hand_W) &&
-      (glm::length(V_hand_W.linear) > limits_.brake_speed_m_per_s ||
-       glm::length(V_hand_W.angular) > limits_.brake_angular_speed_rad_per_s)) {
-    F.force = -limits_.brake_damping_ns_per_m * V_hand_W.linear;
-    F.torque = -limits_.brake_damping_nms_per_rad * V_hand_W.angular;
+  if (IsFinite(V_WH_W) && (glm::length(V_WH_W.linear) > limits_.brake_speed_m_per_s ||
+                           glm::length(V_WH_W.angular) > limits_.brake_angular_speed_rad_per_s)) {
+    F.force = -limits_.brake_damping_ns_per_m * V_WH_W.linear;
+    F.torque = -limits_.brake_damping_nms_per_rad * V_WH_W.angular;
     actions |= kSafetyBraking;
     ++counters_.braking;
   }

@@ -207,7 +207,9 @@ void DisplayWorker::Run(const std::atomic<bool>& stop) {
         // −k·max(δ(q), 0)·J with δ(q) the largest of the contact's planes (ContactDepthAt,
         // DESIGN.md §5), drawn at the contact point moved with the tool since q0.
         const Twist dq = PoseDifference(tool.X_WT, tool.model.X_WT0);
-        const RigidTransform X_moved = tool.X_WT * tool.model.X_WT0.Inverse();
+        // X_WT · X_WT0⁻¹: carries a point fixed to the tool from where it was at q0 to where it is
+        // now, both in W.
+        const RigidTransform X_displacement_W = tool.X_WT * tool.model.X_WT0.Inverse();
         for (int k = 0; k < tool.model.num_contacts; ++k) {
           const ContactLinearization& cl = tool.model.contacts[static_cast<std::size_t>(k)];
           PenetrationGradient J;
@@ -225,7 +227,7 @@ void DisplayWorker::Run(const std::atomic<bool>& stop) {
             ++arrows_saturated_;
           }
           ++arrows_;
-          frame.arrows.push_back({X_moved * cl.point_W, force});
+          frame.arrows.push_back({X_displacement_W * cl.point_W, force});
         }
       }
       frame.arrow_m_per_n = arrow_m_per_n_;

@@ -15,8 +15,8 @@
 namespace ht {
 
 /// Passivity observer and controller for one impedance-type port (velocity in, wrench out).
-/// Sign convention: F_device_W is the wrench the device applies to the hand (N, N·m, in W, at the
-/// handle), V_hand_W the hand's twist (m/s, rad/s, in W). The device does work on the hand at the
+/// Sign convention: F_H_W is the wrench the device applies to the hand (N, N·m, in W, at the
+/// handle), V_WH_W the hand's twist (m/s, rad/s, in W). The device does work on the hand at the
 /// rate F·V; the hand does work on the system at −F·V. The observed energy
 ///   E_k = Σ_{i≤k} −(F_i · V_i) h   (J)
 /// is what the operator has put in minus what the system has given back; the port is passive
@@ -60,7 +60,7 @@ class PassivityController {
   /// E_k never goes negative. With a reserve set, while E_k would stay ≥ 0 but fall below it,
   /// the refill's damping alone (set_energy_reserve; counted apart: refill_ticks). Does not
   /// update E (call Commit with what was really sent).
-  Wrench Apply(const Wrench& F_device_W, const Twist& V_hand_W, double h_s) noexcept;
+  Wrench Apply(const Wrench& F_H_W, const Twist& V_WH_W, double h_s) noexcept;
   /// The last word before the device: when commanding F over the tick would make E negative
   /// (F·V > 0 and E − F·V·h < 0), returns F with its power brought down to max(E, 0)/h by
   /// cutting the halves that do positive work, in proportion to that work: f by a multiple of v
@@ -69,9 +69,9 @@ class PassivityController {
   /// kept. F unchanged otherwise. For a wrench a later stage (the safety stage's rate limit)
   /// changed after Apply, and for Apply's capped damping when that is not enough. Counted in
   /// scaled_ticks, force_scaled_away_ns (|Δf|·h) and scaled_away_j.
-  Wrench Guard(const Wrench& F_device_W, const Twist& V_hand_W, double h_s) noexcept;
+  Wrench Guard(const Wrench& F_H_W, const Twist& V_WH_W, double h_s) noexcept;
   /// Records the wrench actually commanded (after any later safety stage) over the tick.
-  void Commit(const Wrench& F_commanded_W, const Twist& V_hand_W, double h_s) noexcept;
+  void Commit(const Wrench& F_H_W, const Twist& V_WH_W, double h_s) noexcept;
 
   /// E_k (J): operator's input minus output so far (≥ 0 while passive).
   double observed_energy_j() const noexcept { return energy_j_; }
@@ -108,6 +108,6 @@ class PassivityController {
 };
 
 /// Power the device delivers to the hand, F·V = f·v + τ·ω (W).
-double DevicePower(const Wrench& F_device_W, const Twist& V_hand_W) noexcept;
+double DevicePower(const Wrench& F_H_W, const Twist& V_WH_W) noexcept;
 
 }  // namespace ht

@@ -50,13 +50,13 @@ class WrenchSafetyFilter {
   explicit WrenchSafetyFilter(const SafetyLimits& limits);
 
   /// Filters the desired device wrench F_desired_W (on the hand, in W: N, N·m) for a tick of `h_s`
-  /// seconds. `V_hand_W` is the hand's twist in W (m/s, rad/s);
+  /// seconds. `V_WH_W` is the hand's twist in W (m/s, rad/s);
   /// `model_staleness_s` the seconds since the remote node sent the contact model in use (its
   /// send time on the local clock; negative = no model yet, which counts as fresh: free motion
   /// has no model). Not the "model age" of traces and summaries, which is the age of the tool
   /// pose the model answers (one round trip more); `link_up` false when the remote node is lost.
   /// Returns the wrench to command, in W; `actions` gets the SafetyAction bits of this tick.
-  Wrench Filter(const Wrench& F_desired_W, const Twist& V_hand_W, double model_staleness_s,
+  Wrench Filter(const Wrench& F_desired_W, const Twist& V_WH_W, double model_staleness_s,
                 bool link_up, double h_s, std::uint32_t& actions) noexcept;
 
   /// Current fade gain in [0, 1].
