@@ -24,7 +24,7 @@ void WarmTaskPools(oneapi::tbb::task_arena& arena) noexcept {
     return std::all_of(spawned_in.begin(), spawned_in.begin() + slots,
                        [](const std::atomic<bool>& s) { return s.load(); });
   };
-  const auto deadline = Clock::now() + std::chrono::seconds(1);
+  const auto deadline = Clock::now() + std::chrono::milliseconds(250);
   try {
     for (int round = 0; round < 4 || (!all_spawned() && Clock::now() < deadline); ++round) {
       arena.execute([&] {

@@ -13,7 +13,7 @@ namespace ht::internal {
 
 /// Runs, in `arena`, rounds of a parallel_for of 256 tasks each running an isolated parallel_for
 /// of 16 (each spinning about a microsecond so that the threads steal from each other): four, and
-/// more until every slot of the arena has run a task that spawned, at most for a second (on a
+/// more until every slot of the arena has run a task that spawned, for at most 250 ms (on a
 /// loaded machine a worker may join only after the calling thread has done a round alone: it
 /// then held no tasks, and the step's first tasks on it allocated, which the allocation test saw
 /// with two busy processes beside it). A few milliseconds unloaded; call it where the arena is
