@@ -161,11 +161,10 @@ int main(int argc, char** argv) {
   app.add_flag("--quiet", quiet,
                "no progress or start-up lines (errors, warnings, session events and the last "
                "lines stay)");
-  std::string key_file;
+  ht::KeyFileOptions key;
   ht::StationConfig defaults;
   int mtu = defaults.mtu, peer_timeout_ms = defaults.peer_timeout_ms, max_grid = 0;
-  app.add_option("--key", key_file, "pre-shared key file (64 hex characters, mode 0600); required")
-      ->check(CLI::ExistingFile);
+  ht::AddKeyOption(app, key);
   app.add_option("--mtu", mtu, "largest UDP datagram for scene-update fragments, bytes")
       ->check(CLI::Range(548, 1472))
       ->capture_default_str();
@@ -322,14 +321,7 @@ int main(int argc, char** argv) {
   app.add_flag("--float-models", float_models,
                "ask for contact models in the float encoding rather than the compact quantized "
                "one (transport/protocol.h states its error bounds)");
-  std::string keygen_path;
-  bool keygen_force = false;
-  CLI::App* keygen = app.add_subcommand(
-      "keygen",
-      "write a new random pre-shared key (mode 0600) to PATH and exit; copy the same\n"
-      "file to the other machine");
-  keygen->add_option("path", keygen_path, "where to write the key")->required();
-  keygen->add_flag("--force", keygen_force, "overwrite an existing file");
+  ht::AddKeygenCommand(app, key);
   std::string merge_summary, merge_remote;
   CLI::App* merge = app.add_subcommand(
       "merge-summary", "add the remote node's remote_summary.json into summary.json and exit");
@@ -341,23 +333,15 @@ int main(int argc, char** argv) {
 
   try {
     if (*merge) return MergeSummary(merge_summary, merge_remote, merge_relay);
-    if (*keygen) {
-      ht::WriteKeyFile(keygen_path, ht::MacKey::Generate(), keygen_force);
-      std::printf("master_station: wrote a new key to %s (mode 0600); copy it to the other side\n",
-                  keygen_path.c_str());
-      return 0;
-    }
-    if (key_file.empty()) {
-      throw std::invalid_argument(
-          "--key FILE is required: every datagram is authenticated (create a key with: "
-          "master_station keygen FILE, and give slave_sim the same file)");
-    }
+    if (ht::RunKeygenIfAsked(key, "master_station")) return 0;
+    const ht::MacKey mac_key =
+        ht::LoadKeyOption(key, "master_station keygen FILE, and give slave_sim the same file");
     ht::StationConfig config;
     config.remote_address = ht::SocketAddress::Parse(remote);
     config.local_address = ht::SocketAddress::Parse(bind);
     config.loop_rate_hz = rate_hz;
     config.connect_timeout_s = connect_timeout_s;
-    config.key = ht::LoadKeyFile(key_file);
+    config.key = mac_key;
     config.mtu = mtu;
     config.peer_timeout_ms = peer_timeout_ms;
     config.max_grid = max_grid;

@@ -342,10 +342,9 @@ int main(int argc, char** argv) {
   app.add_option("--out", out_dir,
                  "directory for remote_summary.json and remote_steps.csv (one row per step)");
   app.add_option("--port-file", port_file, "write the bound UDP port to this file");
-  std::string key_file;
+  ht::KeyFileOptions key;
   int mtu = 1472;
-  app.add_option("--key", key_file, "pre-shared key file (64 hex characters, mode 0600); required")
-      ->check(CLI::ExistingFile);
+  ht::AddKeyOption(app, key);
   app.add_option("--mtu", mtu, "largest UDP datagram for scene-update fragments, bytes")
       ->check(CLI::Range(548, 1472))
       ->capture_default_str();
@@ -358,14 +357,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1e4, 1e9))
       ->capture_default_str();
   app.add_flag("--stay", stay, "keep running after the operator says goodbye");
-  std::string keygen_path;
-  bool keygen_force = false;
-  CLI::App* keygen = app.add_subcommand(
-      "keygen",
-      "write a new random pre-shared key (mode 0600) to PATH and exit; copy the same\n"
-      "file to the other machine");
-  keygen->add_option("path", keygen_path, "where to write the key")->required();
-  keygen->add_flag("--force", keygen_force, "overwrite an existing file");
+  ht::AddKeygenCommand(app, key);
   std::string inspect_path, inspect_tool, cache_dir = ht::HapticModelCache::DefaultDir();
   bool no_cache = false;
   CLI::App* inspect = app.add_subcommand(
@@ -477,18 +469,8 @@ int main(int argc, char** argv) {
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);
   try {
-    if (*keygen) {
-      ht::WriteKeyFile(keygen_path, ht::MacKey::Generate(), keygen_force);
-      std::printf("slave_sim: wrote a new key to %s (mode 0600); copy it to the other side\n",
-                  keygen_path.c_str());
-      return 0;
-    }
-    if (key_file.empty()) {
-      throw std::invalid_argument(
-          "--key FILE is required: every datagram is authenticated (create a key with: slave_sim "
-          "keygen FILE)");
-    }
-    config.key = ht::LoadKeyFile(key_file);
+    if (ht::RunKeygenIfAsked(key, "slave_sim")) return 0;
+    config.key = ht::LoadKeyOption(key, "slave_sim keygen FILE");
     config.mtu = static_cast<std::size_t>(mtu);
     config.listen_address = ht::SocketAddress::Parse(listen);
     config.pd_backend = ht::ParsePdBackendChoice(pd_backend);

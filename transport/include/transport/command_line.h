@@ -5,7 +5,10 @@
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <optional>
+#include <stdexcept>
 #include <string>
+
+#include "transport/auth.h"
 
 namespace ht {
 
@@ -34,6 +37,55 @@ inline std::optional<int> ParseCommandLine(CLI::App& app, int argc, const char* 
     return 2;
   }
   return std::nullopt;
+}
+
+/// The pre-shared key's command line, the same on both sides (issue 34: written once): `--key
+/// FILE` and the `keygen PATH [--force]` subcommand.
+struct KeyFileOptions {
+  std::string key_file;     ///< --key
+  std::string keygen_path;  ///< keygen's PATH
+  bool keygen_force = false;
+  CLI::App* keygen = nullptr;  ///< the subcommand, once added
+};
+
+/// Adds `--key FILE` (it must exist) to `app`; `options` must outlive the parse.
+inline void AddKeyOption(CLI::App& app, KeyFileOptions& options) {
+  app.add_option("--key", options.key_file,
+                 "pre-shared key file (64 hex characters, mode 0600); required")
+      ->check(CLI::ExistingFile);
+}
+
+/// Adds the `keygen PATH [--force]` subcommand to `app`; `options` must outlive the parse.
+inline void AddKeygenCommand(CLI::App& app, KeyFileOptions& options) {
+  options.keygen = app.add_subcommand(
+      "keygen",
+      "write a new random pre-shared key (mode 0600) to PATH and exit; copy the same\n"
+      "file to the other machine");
+  options.keygen->add_option("path", options.keygen_path, "where to write the key")->required();
+  options.keygen->add_flag("--force", options.keygen_force, "overwrite an existing file");
+}
+
+/// After the parse: when `keygen` was given, writes a new random key to its PATH (WriteKeyFile,
+/// which throws when the file exists without --force or cannot be written), says so on stdout as
+/// `program`, and returns true (the program then exits 0); false otherwise.
+inline bool RunKeygenIfAsked(const KeyFileOptions& options, const char* program) {
+  if (options.keygen == nullptr || !*options.keygen) return false;
+  WriteKeyFile(options.keygen_path, MacKey::Generate(), options.keygen_force);
+  std::printf("%s: wrote a new key to %s (mode 0600); copy it to the other side\n", program,
+              options.keygen_path.c_str());
+  return true;
+}
+
+/// The key of `--key` (LoadKeyFile). Throws std::invalid_argument when --key was not given:
+/// "--key FILE is required: every datagram is authenticated (create a key with: `how_to_make`)",
+/// and what LoadKeyFile throws for a bad file.
+inline MacKey LoadKeyOption(const KeyFileOptions& options, const std::string& how_to_make) {
+  if (options.key_file.empty()) {
+    throw std::invalid_argument(
+        "--key FILE is required: every datagram is authenticated (create a key with: " +
+        how_to_make + ")");
+  }
+  return LoadKeyFile(options.key_file);
 }
 
 }  // namespace ht
