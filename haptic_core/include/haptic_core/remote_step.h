@@ -534,8 +534,10 @@ class HapticTexturePipeline {
   /// with reuse_base_render and the split on).
   std::array<std::span<const float>, kMaxContacts> base_fields_{};
   std::vector<float> base_field_store_;
-  /// Whether stages 5a and 5c read stage 5's render (reuse_base_render, a stage that needs it on,
-  /// and a backend that keeps it).
+  /// Whether the options ask stages 5a and 5c to read stage 5's render (reuse_base_render and a
+  /// stage that needs it on), whatever the backend.
+  bool WantsBaseRender() const noexcept;
+  /// WantsBaseRender() with a backend that keeps the render (the CPU's).
   bool ReusesBaseRender() const noexcept;
   /// The largest window whose field is kept: max_window_resolution() (150 at the defaults), at
   /// most kMaxKeptFieldResolution (3.7 MB of fields in the backend and as much here; larger

@@ -142,10 +142,7 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
   // What a failing GPU backend falls back on, ready before the first step (LinearizeContacts).
   if (backend_->name() != "cpu") {
     cpu_fallback_ = MakeCpuBackend();
-    if (options_.reuse_base_render &&
-        (options_.split_windows_at_separated_overlap || options_.share_connected_contacts)) {
-      cpu_fallback_->set_keep_base_overlap(KeptFieldResolution());
-    }
+    if (WantsBaseRender()) cpu_fallback_->set_keep_base_overlap(KeptFieldResolution());
   }
   fallback_reason_.reserve(kMaxFallbackReason);
   // Stage 5a's copies of the kept contacts' fields, whatever the backend (a GPU backend that
@@ -769,9 +766,13 @@ int HapticTexturePipeline::KeptFieldResolution() const noexcept {
   return std::min(options_.max_window_resolution(), kMaxKeptFieldResolution);
 }
 
-bool HapticTexturePipeline::ReusesBaseRender() const noexcept {
-  return options_.reuse_base_render && backend_->name() == "cpu" &&
+bool HapticTexturePipeline::WantsBaseRender() const noexcept {
+  return options_.reuse_base_render &&
          (options_.split_windows_at_separated_overlap || options_.share_connected_contacts);
+}
+
+bool HapticTexturePipeline::ReusesBaseRender() const noexcept {
+  return WantsBaseRender() && backend_->name() == "cpu";
 }
 
 }  // namespace ht
