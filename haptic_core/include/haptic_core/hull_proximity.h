@@ -63,18 +63,17 @@ struct ProximityQueryOptions {
   /// does after a call with a budget, on other models, or once a model's cache entry was rebuilt.
   /// Measured: docs/measurements.md.
   bool temporal_coherence = true;
-  /// Local reach (issue 15; an approximation, placed on the speed-vs-error frontier): when ≥ 0,
+  /// Local reach (an approximation, placed on the speed-vs-error frontier): when ≥ 0,
   /// a node pair's tolerance is min(tolerance_m, reach_A(node) + reach_B(node) +
   /// local_reach_margin_m), with a node's reach the largest positive texture height over its
   /// triangles (level 0, the triangle's texel box grown by a texel; capped at the model's
   /// OutwardReach()). Far leaves whose own textures are flat then stop counting. Negative: off
   /// (tolerance_m everywhere).
   double local_reach_margin_m = -1.0;
-  /// Internal node pairs' GJK runs to the exact hull distance (the behaviour before issue 15's
-  /// coarse-query work). Otherwise, when no budget is set, it stops once the two hulls are known
-  /// to be within the pair's tolerance (then the pair descends whatever the distance; measured:
-  /// docs/measurements.md). Either way the
-  /// same leaf pairs are reported with the same contacts in the same order; only the traversal's
+  /// Internal node pairs' GJK runs to the exact hull distance. Otherwise, when no budget is set,
+  /// it stops once the two hulls are known to be within the pair's tolerance (then the pair
+  /// descends whatever the distance; measured: docs/measurements.md). Either way the same leaf
+  /// pairs are reported with the same contacts in the same order; only the traversal's
   /// keys differ. With a budget the exact distances are kept: there the best-first order decides
   /// which pairs are found. For tests and before/after measurements.
   bool exact_internal_distances = false;
