@@ -103,7 +103,8 @@ class GpuPenetrationDepthBackend final : public PenetrationDepthBackend {
   void BreakProgramForTesting() noexcept;
 
  private:
-  struct GpuModel;
+  struct GpuModel;  // src/gpu/gpu_model.h
+  struct Batch;     // one LinearizeBatch call's steps (src/gpu/gpu_batch.cc)
   explicit GpuPenetrationDepthBackend(const GpuPenetrationDepthOptions& options);
   void Initialize();
   GpuModel* ModelFor(const HapticModel& model);

@@ -1,0 +1,18 @@
+// A model uploaded for the GPU penetration depth: its corners' vertex array (gpu_shaders.h's
+// layout) and its height-field texture with the mip levels. Internal to src/gpu/.
+#pragma once
+
+#include <GLES3/gl31.h>
+
+#include "haptic_core/gpu_penetration_depth.h"
+
+namespace ht {
+
+struct GpuPenetrationDepthBackend::GpuModel {
+  GLuint vao = 0, vbo = 0, texture = 0;
+  GLsizei corners = 0;
+  int num_levels = 1;
+  int wrap_u = 0, wrap_v = 0;
+};
+
+}  // namespace ht
