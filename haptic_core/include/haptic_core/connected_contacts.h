@@ -1,13 +1,13 @@
 #pragma once
-// Stage 5c of the remote step (remote_step.h; issue 32, tenth stop): contacts whose overlaps form
-// one connected region share one penalty. The coarse clustering (contact_clustering.h) cannot
-// merge two clusters whose merged window would exceed its largest side, so a large flat contact
-// (the hammer's face on the torus) becomes two windows, each over its own coarse triangles, each
-// reading the same penetration depth: the sum of their forces is twice what one patch pushes. The
-// pipeline truth (accuracy/contact_patch_truth.h) links the overlapping surface within the
-// clustering distance into one patch with one δ; this stage links the textured overlaps the
-// windows render and shares the penalty k among linked contacts, continuously in their depths and
-// in the gap between their overlaps.
+// Stage 5c of the remote step (remote_step.h): contacts whose overlaps form one connected region
+// share one penalty. The coarse clustering (contact_clustering.h) cannot merge two clusters whose
+// merged window would exceed its largest side, so a large flat contact (the hammer's face on the
+// torus) becomes two windows, each over its own coarse triangles, each reading the same penetration
+// depth: the sum of their forces is twice what one patch pushes. The pipeline truth
+// (accuracy/contact_patch_truth.h) links the overlapping surface within the clustering distance
+// into one patch with one δ; this stage links the textured overlaps the windows render and shares
+// the penalty k among linked contacts, continuously in their depths and in the gap between their
+// overlaps.
 
 #include <cstdint>
 #include <span>

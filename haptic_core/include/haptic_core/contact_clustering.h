@@ -50,13 +50,13 @@ struct ClusteringOptions {
   /// test of pass 2). One large leaf (a hammer's flat face on a torus) then serves each contact
   /// region it touches, and no part of it is rendered in two windows, which do not overlap.
   bool share_leaves_between_disjoint_windows = false;
-  /// Pass 4, after the object's leaves are placed (issue 32's twenty-ninth stop): each tool leaf
-  /// of a kept pair also goes to the cluster holding that pair's object leaf (its deepest pair's
-  /// cluster), so that every kept pair has both its leaves in one window. Without it a pair whose
-  /// tool leaf went to one cluster and object leaf to another is rendered in no window: the
-  /// full-resolution surfaces interpenetrate there and no contact feels it (the hammer's seven
-  /// poses without force on the frontier's spread poses). Each object leaf stays in its
-  /// clusters as before, so a pair is counted only in a window that holds its object leaf.
+  /// Pass 4, after the object's leaves are placed: each tool leaf of a kept pair also goes to the
+  /// cluster holding that pair's object leaf (its deepest pair's cluster), so that every kept pair
+  /// has both its leaves in one window. Without it a pair whose tool leaf went to one cluster and
+  /// object leaf to another is rendered in no window: the full-resolution surfaces interpenetrate
+  /// there and no contact feels it (the hammer's seven poses without force on the frontier's spread
+  /// poses). Each object leaf stays in its clusters as before, so a pair is counted only in
+  /// a window that holds its object leaf.
   bool tool_leaves_follow_object_leaves = false;
 
   /// True when every field is finite and in its documented range. Never throws.

@@ -30,14 +30,13 @@ struct PenetrationGradient {
 
 /// Most kink planes one contact carries: the two arms of δ's V about each of the window's in-plane
 /// rotation axes u and v (issue 31, change 5), and along each of its in-plane translation axes
-/// (issue 32, ninth stop: DepthRefinementOptions::translation_kink_planes).
+/// (DepthRefinementOptions::translation_kink_planes).
 inline constexpr int kMaxKinkPlanes = 8;
 
-/// A further plane of a contact's depth (issue 31, change 5; its own translation slope since
-/// issue 32's ninth stop): δ_m(q) = depth_m + (∂δ/∂x + d_translation_offset_W)·Δx +
-/// d_rotation_W·Δθ, Δq = q ⊖ q0 (world axes, rotation about the tool's centre of mass), ∂δ/∂x the
-/// contact's. The rotation planes (AddKinkPlanes) share the contact's ∂δ/∂x (offset zero); a
-/// translation arm has its own.
+/// A further plane of a contact's depth (issue 31, change 5):
+/// δ_m(q) = depth_m + (∂δ/∂x + d_translation_offset_W)·Δx + d_rotation_W·Δθ, Δq = q ⊖ q0 (world
+/// axes, rotation about the tool's centre of mass), ∂δ/∂x the contact's. The rotation planes
+/// (AddKinkPlanes) share the contact's ∂δ/∂x (offset zero); a translation arm has its own.
 struct KinkPlane {
   double depth_m = 0.0;          ///< δ_m at q0 (m), at most the contact's δ0.
   glm::dvec3 d_rotation_W{0.0};  ///< ∂δ_m/∂θ (m/rad).
@@ -51,16 +50,16 @@ inline constexpr int kTranslationPatchRadius = 2;
 /// Nodes per side of a translation patch.
 inline constexpr int kTranslationPatchSide = 2 * kTranslationPatchRadius + 1;
 
-/// A contact's depth over in-plane translations of the tool (issue 32, nineteenth stop; our
-/// construction [R]): δ at the tool poses q0 displaced by (i·h, j·h) along the window's u and v
-/// (i, j ∈ [−R, R], R = kTranslationPatchRadius), each the refined maximum of b − a at that pose
+/// A contact's depth over in-plane translations of the tool (our construction [R]): δ at the tool
+/// poses q0 displaced by (i·h, j·h) along the window's u and v (i, j ∈ [−R, R],
+/// R = kTranslationPatchRadius), each the refined maximum of b − a at that pose
 /// (DepthRefinementOptions::translation_patch). A linear model holds a ridge's slope only until
 /// the tool has moved a fraction of the ridge's period; the patch holds δ over ±R·h, so that a
 /// model read a round trip after its q0 (issue 33) or a linearization point a deadband away from
-/// the tool (issue 32, eleventh stop) still gives the surface's depth there. ContactDepthAt adds
-/// its residual to the planes: the patch's bicubic (Catmull–Rom) interpolant less a linear part,
-/// so that δ and ∇δ at q0 are the contact's own and δ passes the nodes; past the patch's edge δ
-/// holds (contact_model.h).
+/// the tool still gives the surface's depth there. ContactDepthAt adds its residual to the
+/// planes: the patch's bicubic (Catmull–Rom) interpolant less a linear part, so that δ and ∇δ at
+/// q0 are the contact's own and δ passes the nodes; past the patch's edge δ holds
+/// (contact_model.h).
 struct TranslationPatch {
   /// Node spacing h (m); 0: no patch.
   double step_m = 0.0;
@@ -107,17 +106,16 @@ struct ContactLinearization {
 ///  - where the deepest cell bears like one of the arms (its slope within 10 % of that arm's: a
 ///    sharp V, the face tilted by h_θ still bears on the same edge), the contact's ∂δ/∂θ along a
 ///    becomes that cell's slope (the secant of the samples across the vertex reads the mean of
-///    the two arms: the fig75 block pressed on one edge got a tenth of that edge's lever), so δ0
-///    is unchanged and the wrench at q0 follows the bearing edge; on a rounded contact the secant
-///    stays (the hammer's torque error on the frontier: 66 % with the secant, 70 % with the cell's
-///    slope); `own_slope` false keeps the secant everywhere;
-///  - with `hang_other_arm` (an option; issue 32, twenty-sixth stop), where the deepest cell
-///    bears like an arm, the other arm is a plane below δ0 by max(A_bearing − A_other, 0): the
-///    arms' gap is a difference of two samples taken h_θ either side, with the face well into
-///    each arm, so it goes through zero where the samples' arms cross and the blend
-///    (ContactDepthAt) turns the torque over there, whereas each A alone is off by its cell
-///    lever's error times h_θ (a cell's centre is up to half a cell from the bearing point), which
-///    can put the other arm level with δ0 past the vertex and the torque back to the secant's;
+///    the two arms, far below the bearing edge's lever), so δ0 is unchanged and the wrench at q0
+///    follows the bearing edge; on a rounded contact the secant stays (measured:
+///    docs/measurements.md); `own_slope` false keeps the secant everywhere;
+///  - with `hang_other_arm` (an option), where the deepest cell bears like an arm, the other arm is
+///    a plane below δ0 by max(A_bearing − A_other, 0): the arms' gap is a difference of two samples
+///    taken h_θ either side, with the face well into each arm, so it goes through zero where the
+///    samples' arms cross and the blend (ContactDepthAt) turns the torque over there, whereas each
+///    A alone is off by its cell lever's error times h_θ (a cell's centre is up to half a cell from
+///    the bearing point), which can put the other arm level with δ0 past the vertex and the torque
+///    back to the secant's;
 ///  - elsewhere, and without `hang_other_arm`, each arm whose cell is not the deepest one is a
 ///    plane through its sample, lowered to δ0 where it would exceed δ0 at q0.
 /// Elsewhere nothing changes. δ0 and ∂δ/∂x are never changed. Appends to the planes lin already

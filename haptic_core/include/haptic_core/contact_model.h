@@ -42,10 +42,9 @@ inline constexpr double kKinkBlendM = 10e-6;
 /// Largest translation-patch spacing (m) whose curvature ContactDepthAt gives the implicit step:
 /// a patch at texel scale (DepthRefinementOptions::translation_patch_step_texels, 80 µm on the
 /// seed's 1024² textures) holds the vertex of a V between two flanks within its nodes, and without
-/// its curvature in K the loop met that stiffness only one model later (fig75's valleys rang at
-/// 60–70 Hz: docs/frontier/issue32/thirty_fourth_stop). Patches a grid cell apart (0.4–0.8 mm, the
-/// remote node's under delay) keep K as before: with their curvature the gear at 25 and 150 ms
-/// one way was no better on one clock (device steps above 0.2 N at 150 ms 13 → 17).
+/// its curvature in K the loop meets that stiffness only one model later (fig75's valleys ring).
+/// Patches a grid cell apart (0.4–0.8 mm, the remote node's under delay) add no curvature to K:
+/// with it the loop is no better there (measured: docs/measurements.md).
 inline constexpr double kPatchCurvatureMaxStepM = 0.25e-3;
 
 /// δ of contact `c` at the pose change Δq = q ⊖ q0 (Δq.linear in m, Δq.angular in rad, world

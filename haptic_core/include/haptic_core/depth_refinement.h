@@ -5,8 +5,8 @@
 // Why. The grid samples each cell centre at the mip level whose texel matches the cell
 // (HeightField::LevelForFootprint), a 2×2 box filter per level: a peak is first averaged (a mean
 // is never above the maximum) and then missed between two centres, so δ reads low by tens of
-// micrometres on the seed models (issue 32: 60–90 µm p50), which at the runs' shallow presses is
-// most of the force.
+// micrometres on the seed models (measured: docs/measurements.md), which at the runs' shallow
+// presses is most of the force.
 //
 // How (our construction [R]; the depth is Otaduy & Lin's max over the window of b − a [L]):
 //  - Seeds: the deepest cells of the base sample and of the four in-plane translation samples
@@ -38,7 +38,7 @@
 //    the derivative is one arm's slope and the secant their mean. Posed against the pipeline
 //    truth the derivative is closer, but the operator's model is linear until the next one, and
 //    one arm's slope pushes the tool across the vertex, the next model's back: in the closed loop
-//    the tool chatters (docs/frontier/issue32/seventh_stop), so the secant stays the default.
+//    the tool chatters, so the secant stays the default (measured: docs/measurements.md).
 //    ∂δ/∂x_n = −1.
 // PipelineOptions::refine_depth turns stage 5b on (the default); off is the grid alone, the
 // reference path.
@@ -70,7 +70,7 @@ namespace ht {
 /// instead that of its displaced surface p + h(p)·N(p) where it crosses the line through (s, t)
 /// along n (ParallaxValue in the .cc): the render's h·(N·n) at the coarse point under (s, t)
 /// reads a point h·|N − (N·n)n| to the side of it, which on a coarse facet tilted from n under a
-/// texture of large height is another part of the surface (docs/frontier/issue32/twelfth_stop).
+/// texture of large height is another part of the surface.
 /// Never allocates, never throws.
 double PatchHeightAt(const HapticModel& model, const RigidTransform& X_WO,
                      std::span<const int> triangles, const ContactWindow& window, PatchSide side,
@@ -101,19 +101,19 @@ struct DepthRefinementOptions {
   /// secant, as without texel_scale_gradient (the rendered samples are then refined whatever
   /// refine_rendered_samples says). A face resting on
   /// ridges rocks between the arms of its tilt's V: at texel scale each model holds one arm's
-  /// slope (issue 32, ninth stop: the fig75 slide's tool rocked by 10 mrad within 60 ms).
+  /// slope (measured: docs/measurements.md).
   bool texel_scale_rotation = true;
   /// With texel_scale_gradient: per axis (translation along u and v, rotation about u, v and n),
   /// where the refined rendered samples one cell away (±h_x, ±h_θ) lie above the texel-scale
   /// tangent's prediction by more than this (m) on either side (a kink within the cell), that
   /// axis's derivative becomes the samples' secant (δ(+h) − δ(−h))/2h. 0 turns it off. ≥ 0;
   /// needs refine_rendered_samples. (On the seed's ridged scenes nearly every contact has a kink
-  /// within a cell, so this is the secant's error: docs/frontier/issue32/seventh_stop.)
+  /// within a cell, so this is the secant's error: docs/measurements.md.)
   double secant_at_kinks_m = 0.0;
-  /// With texel_scale_gradient and refine_rendered_samples (issue 32, ninth stop): the arms of
-  /// δ's V along the window's in-plane translation axes as kink planes (KinkPlane, with their own
-  /// translation slope). Per axis a ∈ {u, v} and side ±, where the refined rendered sample one
-  /// cell away (δ± at ±h_x) lies above the texel-scale tangent (δ0 ± h_x·∂δ/∂a) by more than
+  /// With texel_scale_gradient and refine_rendered_samples (issue 32): the arms of δ's V along the
+  /// window's in-plane translation axes as kink planes (KinkPlane, with their own translation
+  /// slope). Per axis a ∈ {u, v} and side ±, where the refined rendered sample one cell away
+  /// (δ± at ±h_x) lies above the texel-scale tangent (δ0 ± h_x·∂δ/∂a) by more than
   /// translation_kink_tolerance_m, the depth is convex across the cell (a V: the tool's texture
   /// passes from one peak of the other's to the next). That arm's slope s is the texel-scale
   /// central difference of the refined maximum climbed from the sample's refined point at
@@ -121,13 +121,13 @@ struct DepthRefinementOptions {
   /// slope s along a, the contact's along the other axes, lowered to δ0 where it would exceed it
   /// at q0, and is kept only when s lies beyond the contact's slope on that side (convex). The
   /// operator's loop then finds the vertex between two models (ContactDepthAt) instead of pushing
-  /// the tool across it with one arm's slope until the next (the texel gradient's chatter:
-  /// docs/frontier/issue32/seventh_stop). δ0 and the wrench at q0 are unchanged. Off: no
-  /// translation arms (the default until the frontier and the loop say otherwise).
+  /// the tool across it with one arm's slope until the next (the texel gradient's chatter,
+  /// above). δ0 and the wrench at q0 are unchanged. Off: no translation arms (the default until the
+  /// frontier and the loop say otherwise).
   bool translation_kink_planes = false;
-  /// The contact's translation patch (TranslationPatch, issue 32's nineteenth stop; off here,
-  /// and the remote node turns it on by the operator's round trip, DepthRefiner::
-  /// SetTranslationPatch and RemoteNodeConfig::translation_patch_rtt_ms): δ at the base pose
+  /// The contact's translation patch (TranslationPatch; off here, and the remote node turns it on
+  /// by the operator's round trip, DepthRefiner::SetTranslationPatch and
+  /// RemoteNodeConfig::translation_patch_rtt_ms): δ at the base pose
   /// translated by (i·h, j·h) along u and v, i, j ∈ [−R, R], h = W/N (the grid's translation step,
   /// so that the nodes one step away are the refined rendered samples ±h_x and the patch's tangent
   /// at q0 is the default's secant; translation_patch_spacing_cells × W/N with that option). The
@@ -141,8 +141,7 @@ struct DepthRefinementOptions {
   bool translation_patch = false;
   /// With translation_patch: also climb each node from its neighbour's maximum (one step nearer
   /// q0), where it stays and carried by the step; off (the default): from the grid's deepest cell
-  /// alone, the same model prediction on the frontier at 25–35 % less patch time
-  /// (docs/frontier/issue32/nineteenth_stop).
+  /// alone, the same model prediction at less patch time (measured: docs/measurements.md).
   bool translation_patch_neighbour_climbs = false;
   /// With translation_patch: the patch's lever is set (TranslationPatch::lever_W, the refined
   /// deepest point less the tool's centre of mass), so that the loop reads the patch at the
@@ -171,16 +170,14 @@ struct DepthRefinementOptions {
   double translation_kink_tolerance_m = 1e-6;
   /// The rendered rotation samples (±h_θ about u, v and n) searched from a sub-grid of their
   /// deepest cell's square as the base and the translations are; off (the default): a pattern
-  /// search from the cell's centre alone, fewer evaluations at the same error on the frontier
-  /// (fig75 and fig77, 60 poses: every figure equal to 3 digits; "rotations_from_subgrid").
+  /// search from the cell's centre alone, fewer evaluations at the same error (measured:
+  /// docs/measurements.md; the frontier's "rotations_from_subgrid").
   bool subgrid_rotations = false;
   /// The same for the rendered translation samples (±h_x along u and v), off by default for the
-  /// same reason (fig75 and fig77, 60 poses: the same errors, 7 % less texture time on fig75;
-  /// "translations_from_subgrid").
+  /// same reason (measured: docs/measurements.md; the frontier's "translations_from_subgrid").
   bool subgrid_translations = false;
-  /// The conservative screen of the base sample (off by default: on the frontier it raises δ0
-  /// little at several times the texture stage's time; docs/frontier/issue32/sixth_stop): after
-  /// the seeds, a branch and
+  /// The conservative screen of the base sample (off by default: it raises δ0 little at several
+  /// times the texture stage's time; measured: docs/measurements.md): after the seeds, a branch and
   /// bound over the window finds every place where b − a can exceed the best found by more than
   /// screen_tolerance_m. A square's bound is the largest environment height over it minus the
   /// smallest tool height: per coarse triangle its linear height at the square's corners plus
@@ -197,53 +194,44 @@ struct DepthRefinementOptions {
   /// Where N ∥ n (flat coarse faces under the window: fig75, fig76) nothing changes. The grid
   /// (stage 5, the backend's render) still seeds the search with the render's form. Not with
   /// conservative_screen (its bounds are the render's form; Validate throws). On by default
-  /// (issue 32's twenty-eighth stop; its measurements are in
-  /// docs/frontier/issue32/twenty_eighth_stop); off (`slave_sim --no-parallax`): the render's
-  /// form, which takes fewer evaluations where facets are tilted from n.
+  /// (measured: docs/measurements.md); off (`slave_sim --no-parallax`): the render's form, which
+  /// takes fewer evaluations where facets are tilted from n.
   bool parallax = true;
   /// Most fixed-point steps of the parallax per triangle and point; in [1, 64].
   int parallax_iterations = 12;
-  /// With parallax: seeds where parallax carries the grid's deepest cells (issue 32,
-  /// thirty-third stop). The grid is the render's form, which reads at (s, t) the surface point
-  /// of the coarse point under it, h·N⊥ to the side of where that point lies (N⊥ the normal's part
-  /// in the window plane). Where a coarse facet is tilted from n under a large height that is more
-  /// than the seed's square (fig77's product models: 1.2 mm, three cells), so the parallax maximum
-  /// was searched nowhere and a window whose models overlap read no contact. Each base seed's cell
-  /// centre is carried by each side's h·N⊥ there (the envelope's triangle at level 0), and where
-  /// that moves it by more than half a cell, the carried point is searched as a seed is (sub-grid
-  /// and pattern search). A seed only adds a candidate: δ0 is never below the value without it.
-  /// On by default (`slave_sim --no-parallax-offset-seeds`, the frontier's
-  /// "no_parallax_offset_seeds": off).
+  /// With parallax: seeds where parallax carries the grid's deepest cells. The grid is the render's
+  /// form, which reads at (s, t) the surface point of the coarse point under it, h·N⊥ to the side
+  /// of where that point lies (N⊥ the normal's part in the window plane). Where a coarse facet is
+  /// tilted from n under a large height that is more than the seed's square (fig77's product
+  /// models: 1.2 mm, three cells), so the parallax maximum was searched nowhere and a window whose
+  /// models overlap read no contact. Each base seed's cell centre is carried by each side's h·N⊥
+  /// there (the envelope's triangle at level 0), and where that moves it by more than half a cell,
+  /// the carried point is searched as a seed is (sub-grid and pattern search). A seed only adds
+  /// a candidate: δ0 is never below the value without it. On by default (`slave_sim
+  /// --no-parallax-offset-seeds`, the frontier's "no_parallax_offset_seeds": off).
   bool parallax_offset_seeds = true;
-  /// Seeds from the last step (issue 32, twenty-fifth stop): the refined deepest point of every
-  /// contact of the previous step (DepthRefiner::BeginStep), kept in the tool's frame T, is one
-  /// more seed of each contact on the same environment model whose window it falls in: a pattern
-  /// search from the point (no sub-grid) within the 1.75-cell square a base seed's search keeps
-  /// to. The grid's seeds are the deepest cells of a box-filtered render; a narrow
+  /// Seeds from the last step: the refined deepest point of every contact of the previous step
+  /// (DepthRefiner::BeginStep), kept in the tool's frame T, is one more seed of each contact on the
+  /// same environment model whose window it falls in: a pattern search from the point (no sub-grid)
+  /// within the 1.75-cell square a base seed's search keeps to. The grid's seeds are the deepest
+  /// cells of a box-filtered render; a narrow
   /// peak whose filtered cell is not among them is missed on some steps and found on the next
-  /// (along the fig77 scrape δ dipped by 40–100 µm for single steps, a force step above 0.2 N on
-  /// 12 of 430 rows where the truth had none, docs/frontier/issue32/twenty_fifth_stop). A maximum
-  /// found once is kept while it stays the maximum. A seed only adds a candidate: δ0 is never below
-  /// the seeds-only value, and the result still depends on the pose alone once the last step's
-  /// points are forgotten (DepthRefiner::ForgetLastStep). When it gives the deepest point, the ten
-  /// displaced samples are searched from there too (as the screen's). On by default: along three
-  /// 500-tick stretches of the fig77 scrape the force's one-tick changes above 0.2 N went 22 / 12 /
-  /// 35 → 14 / 0 / 23 (the truth's 13 / 0 / 0) and the force error 37.7 / 43.5 / 35.3 → 36.7 / 44.8
-  /// / 29.7 %; in the closed loop the contact force's steps above 0.2 N fell by a third to nineteen
-  /// twentieths on fig76, fig77 and the hammer and stayed on fig75. Off (`slave_sim
-  /// --no-seed-from-last-step`, the frontier's "no_last_step_seeds"): each step from its own grid
-  /// alone.
+  /// (δ dips for single steps; measured: docs/measurements.md). A maximum found once is kept while
+  /// it stays the maximum. A seed only adds a candidate: δ0 is never below the seeds-only value,
+  /// and the result still depends on the pose alone once the last step's points are forgotten
+  /// (DepthRefiner::ForgetLastStep). When it gives the deepest point, the ten displaced samples
+  /// are searched from there too (as the screen's). On by default (measured:
+  /// docs/measurements.md). Off (`slave_sim --no-seed-from-last-step`, the frontier's
+  /// "no_last_step_seeds"): each step from its own grid alone.
   bool seed_from_last_step = true;
-  /// Neighbouring peaks as seeds (issue 32, thirty-fourth stop; on): pattern searches from half a
-  /// cell and a cell from the deepest point along ±u and ±v (steps of two texels), each a seed,
-  /// and the deepest where it is deeper. Beside a trough's vertex the other flank's maximum lies
-  /// in the cell next to the deepest's, which is never a seed of its own (a cell next to a seed
+  /// Neighbouring peaks as seeds (on): pattern searches from half a cell and a cell from the
+  /// deepest point along ±u and ±v (steps of two texels), each a seed, and the deepest where it is
+  /// deeper. Beside a trough's vertex the other flank's maximum lies in the cell next to the
+  /// deepest's, which is never a seed of its own (a cell next to a seed
   /// is skipped), so the refined δ0 read the wrong flank, with a lateral slope of the wrong sign:
   /// the curved tool 10 µm past the sinusoid's trough read 7.5 µm on the far flank where the
   /// closed form is 10.0 on the near one (tests/depth_refinement_test.cc). The texel-scale patch
-  /// climbs its nodes from them too. Product models: fig77's force error 24.0 → 23.2 %, the
-  /// hammer's 14.4 → 14.1 %, δ p50 10.3 → 9.5 and 10.4 → 9.1 µm; the block scenes unchanged
-  /// (docs/frontier/issue32/thirty_fourth_stop).
+  /// climbs its nodes from them too. Measured: docs/measurements.md.
   bool neighbour_peak_seeds = true;
   /// How far above the best a dropped square's bound may reach (m). ≥ 0.
   double screen_tolerance_m = 1e-6;

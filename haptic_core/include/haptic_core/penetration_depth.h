@@ -181,8 +181,8 @@ void RenderPatchHeights(const HapticModel& model, const RigidTransform& X_WO,
 ///   rows at a time and a row's cells tested four at a time, eight with AVX-512 (kernel kBest);
 /// - a textured triangle's covered cells are gathered, then their texture coordinates, normal
 ///   factors and heights computed eight at a time (AVX-512 with kBest; AVX2 four, SSE2 two) and
-///   their texture samples taken together (SampleLevelBatch with `kernel`; per sample 1.7× faster
-///   with SSE2 and 4.8× with AVX2 than one at a time in a micro-benchmark here);
+///   their texture samples taken together (SampleLevelBatch with `kernel`; measured:
+///   docs/measurements.md);
 /// - every SIMD step writes the bits of the scalar code (no FMA), which kScalar runs; kAvx2 runs
 ///   the AVX2 steps where the CPU also has AVX-512 (the tests compare both with kScalar);
 /// - flat-shaded triangles (equal corner normals) skip the normal's per-cell length (a 1e-16

@@ -36,10 +36,8 @@ struct PipelineOptions {
   /// while the merged window fits it (contact clustering's pass 2), so that one contact region
   /// (a hammer's face along a torus) gets one window instead of several overlapping ones of which
   /// only one holds the region's leaves (cluster_triangles). The default is
-  /// kDefaultMaxWindowPerWindow × the default window_extent_m (6 cm; issue 31's second stop: on
-  /// the frontier, against fixed 2 cm windows, the hammer's pipeline force error 52 → 39 %, fig77's
-  /// 58 → 54 %, 0.2–0.4 ms slower per step, docs/frontier/issue31). Equal to window_extent_m:
-  /// every window W×W.
+  /// kDefaultMaxWindowPerWindow × the default window_extent_m (6 cm; measured:
+  /// docs/measurements.md). Equal to window_extent_m: every window W×W.
   double max_window_extent_m = 0.06;
   /// True: a window's side is its cluster's extent (between window_extent_m and
   /// max_window_extent_m, N scaled to keep the cell). False: every window is window_extent_m wide
@@ -50,15 +48,12 @@ struct PipelineOptions {
   /// pairs first, the step reports when it stopped early.
   double collision_budget_us = 0.0;
   /// Contact clustering (DESIGN.md §3): leaf pairs whose points are closer than this (m) and whose
-  /// normals differ by less than clustering_angle_deg merge into one contact. The angle is 60°
-  /// since issue 32's thirty-third stop (30° before): on curved and thin coarse hulls (the file on
-  /// the CAD part) the hull pairs of one contact region carry normals 30–60° apart, so at 30° one
-  /// region made several windows, and a leaf goes to its deepest pair's window only, so a tool
-  /// leaf and the object leaf it overlaps could land in different windows and be rendered in none
-  /// (fig77's product models: 11 of 200 poses whose meshes interpenetrate had no force, 7 at 60°,
-  /// and along the scrape on one clock the contact force's one-tick spikes above 0.2 N went
-  /// 15 → 0; docs/frontier/issue32/thirty_third_stop). Faces 90° apart (an L corner) stay apart.
-  /// Stage 5c links contacts within the same angle.
+  /// normals differ by less than clustering_angle_deg merge into one contact. The angle is 60°: on
+  /// curved and thin coarse hulls (the file on the CAD part) the hull pairs of one contact region
+  /// carry normals 30–60° apart, so at 30° one region makes several windows, and a leaf goes to
+  /// its deepest pair's window only, so a tool leaf and the object leaf it overlaps could land in
+  /// different windows and be rendered in none (measured: docs/measurements.md). Faces 90° apart
+  /// (an L corner) stay apart. Stage 5c links contacts within the same angle.
   double clustering_distance_m = 5e-3;
   double clustering_angle_deg = 60.0;
   /// Local reach in the coarse query (ProximityQueryOptions::local_reach_margin_m, with
@@ -121,9 +116,9 @@ struct PipelineOptions {
   /// pair's object leaf (ClusteringOptions::tool_leaves_follow_object_leaves), so that no pair's
   /// overlap falls between two windows.
   bool tool_leaves_follow_object_leaves = false;
-  /// Windows on the contact region of two models without hierarchy (issue 31, change 1, third
-  /// stop): where a cluster is the single pair of two whole convex models (the procedural scenes:
-  /// a block resting on a gear), its point is the hulls' witness point, which on parallel faces is
+  /// Windows on the contact region of two models without hierarchy (issue 31, change 1): where
+  /// a cluster is the single pair of two whole convex models (the procedural scenes: a block
+  /// resting on a gear), its point is the hulls' witness point, which on parallel faces is
   /// a corner, and its spread is zero, so a 2 cm window sat on one edge of a 4 cm face and saw one
   /// arm of the face's rocking V (docs/hard-cases.md). On: the window is centred on the pair's
   /// region (PairRegionBounds, contact_region.h: each model's coarse triangles within the other's
@@ -142,103 +137,94 @@ struct PipelineOptions {
   bool kink_planes_own_slope = true;
   /// With kink_planes_own_slope: where the deepest cell bears like one arm, the other arm's plane
   /// hangs below δ0 by the arms' gap at q0 instead of going through its own sample
-  /// (AddKinkPlanes' hang_other_arm; issue 32, twenty-sixth stop), so that a resting face's torque
-  /// turns over monotonically through level. Off by default: on the frontier its torque error is
-  /// higher and the striped blocks' loop rougher (docs/frontier/issue32/twenty_sixth_stop;
-  /// `slave_sim --kink-hang-other-arm`, the frontier's "kink_hang_other_arm").
+  /// (AddKinkPlanes' hang_other_arm), so that a resting face's torque turns over monotonically
+  /// through level. Off by default: on the frontier its torque error is higher and the striped
+  /// blocks' loop rougher (measured: docs/measurements.md; `slave_sim --kink-hang-other-arm`, the
+  /// frontier's "kink_hang_other_arm").
   bool kink_hang_other_arm = false;
   /// Stage 5b (issue 32): δ refined from the grid's cell samples to the finest texture level
-  /// (DepthRefiner, depth_refinement.h), after either backend. On: on the frontier it reads δ
-  /// within a few micrometres where the grid alone is tens low, and lowers the force error. Off
-  /// (`slave_sim --no-refine-depth`, the frontier's "grid_only"): the grid's cell samples, the
-  /// reference for parity. It was off at first because a resting fig75 block bounced with it in
-  /// the closed loop; that came from the tool-state deadband's floor (docs/deadband.md).
+  /// (DepthRefiner, depth_refinement.h), after either backend. On: δ to the finest level, and a
+  /// lower force error (measured: docs/measurements.md). Off (`slave_sim --no-refine-depth`, the
+  /// frontier's "grid_only"): the grid's cell samples, the reference for parity.
   bool refine_depth = true;
   /// How stage 5b refines (steps, sub-samples, search floor).
   DepthRefinementOptions depth_refinement;
-  /// Stage 5a (issue 32, seventh stop; on by default in its continuous form since the
-  /// thirty-first stop, below): a window whose overlap at the tool's pose falls into regions
-  /// farther apart than split_link_m (TexturePenetrationSolver::OverlapRegions: the base pose
-  /// rendered again on the CPU) becomes one window per region, each the region's box plus
-  /// split_window_margin_m a side at the parent's cell size, linearized afresh: the contact
-  /// clustering of the textured contact rather than of the coarse models', so that two
-  /// separated patches of one face each push with their own δ. Regions whose centre lies in
-  /// another's window are one (as the pipeline truth merges patches, contact_patch_truth.h). A
-  /// window whose regions would take the step past max_contacts stays whole. CPU backend only (the
-  /// GPU backend takes one window size per batch: there the step runs without it).
+  /// Stage 5a (issue 32; on by default, with the weights below): a window whose overlap at the
+  /// tool's pose falls into regions farther apart than split_link_m
+  /// (TexturePenetrationSolver::OverlapRegions: the base pose rendered again on the CPU) becomes
+  /// one window per region, each the region's box plus split_window_margin_m a side at the parent's
+  /// cell size, linearized afresh: the contact clustering of the textured contact rather than of
+  /// the coarse models', so that two separated patches of one face each push with their own δ.
+  /// Regions whose centre lies in another's window are one (as the pipeline truth merges patches,
+  /// contact_patch_truth.h). A window whose regions would take the step past max_contacts stays
+  /// whole. CPU backend only (the GPU backend takes one window size per batch: there the step runs
+  /// without it).
   bool split_windows_at_separated_overlap = true;
   double split_window_margin_m = 1e-3;
   /// The regions' linking distance (m); 0: clustering_distance_m.
   double split_link_m = 10e-3;
-  /// Stage 5a's birth ramp (m; 0: none, the seventh stop's split): a region other than the
-  /// window's deepest pushes with k·w, w = smoothstep(d_r / min(ramp, d_max)), where d_r is the
-  /// region's deepest cell sample of b − a on the parent's grid (OverlapRegion::depth_m) and d_max
-  /// the window's. A region appears when a cell centre first overlaps, with its refined δ
-  /// already tens of micrometres (a ridge between cell centres), and goes as suddenly: on fig76's
-  /// rocking block the count flips between 1 and 3 from tick to tick (docs/frontier/issue32/
-  /// thirtieth_stop). d_r crosses zero continuously, so the region's force fades in and out with
-  /// it; the deepest region keeps w = 1, so a split with one region newborn is the whole window's
-  /// force. The weight is taken at q0 and held over the model (its gradient is not in ∇δ).
+  /// Stage 5a's birth ramp (m; 0: none): a region other than the window's deepest pushes with
+  /// k·w, w = smoothstep(d_r / min(ramp, d_max)), where d_r is the region's deepest cell sample of
+  /// b − a on the parent's grid (OverlapRegion::depth_m) and d_max the window's. A region appears
+  /// when a cell centre first overlaps, with its refined δ already tens of micrometres (a ridge
+  /// between cell centres), and goes as suddenly (the count of regions flips from tick to tick;
+  /// measured: docs/measurements.md). d_r crosses zero continuously, so the region's force fades
+  /// in and out with it; the deepest region keeps w = 1, so a split with one region newborn is the
+  /// whole window's force. The weight is taken at q0 and held over the model (its gradient is not
+  /// in ∇δ).
   double split_birth_ramp_m = 400e-6;
   /// Stage 5a: each split window takes its rotation steps from its parent's extent
   /// (ContactWindow::gradient_extent_m) instead of its own, so h_θ is the parent's whatever the
-  /// region's box. Off: h_θ = h_x / (W_region / 2), the seventh stop's split.
+  /// region's box. Off: h_θ = h_x / (W_region / 2).
   bool split_keeps_parent_rotation_step = true;
   /// Stage 5a's bridge fade (m; 0: none): a region other than the window's deepest pushes with
   /// k·w·smoothstep(−t / fade), t its bridge level (OverlapRegion::bridge_m: the level ≤ 0 at
   /// which the window's b − a, linked as the regions are, joins it to a deeper region). Two
   /// regions that are about to touch (t → 0⁻) push as the one region they become, so the force
   /// does not step by k·δ when the overlap between them crosses zero (an edge resting on stripes
-  /// along its length: one region or two from tick to tick, docs/frontier/issue32/
-  /// thirtieth_stop); regions whose gap stays below −fade push with their own δ. The force of
-  /// the pair falls from k·(δ_1 + δ_2) to k·δ_1 over the fade as the tool presses in: along the
-  /// normal the pair's stiffness is k·(1 + w + δ_2·∂w/∂δ), whose least value over the fade is
-  /// 0.62·k at fig76's 190 µm supports with 400 µm, 0 with 200 µm and −1.4·k with 100 µm (a
-  /// negative stiffness the loop rocks on: 11, 135 and 256 contact-force steps above 0.2 N on
-  /// one clock, the unsplit window 6; docs/frontier/issue32/thirty_first_stop).
+  /// along its length: one region or two from tick to tick); regions whose gap stays below −fade
+  /// push with their own δ. The force of the pair falls from k·(δ_1 + δ_2) to k·δ_1 over the
+  /// fade as the tool presses in: along the normal the pair's stiffness is k·(1 + w + δ_2·∂w/∂δ),
+  /// whose least value over the fade falls to zero and below as the fade shortens towards the
+  /// supports' depth (a negative stiffness the loop rocks on; measured: docs/measurements.md).
   double split_bridge_fade_m = 400e-6;
   /// Stage 5a's bridge fade in proportion to the region's depth (0: off, the default): with
   /// c > 0 a region's fade is c·d_r (d_r its deepest cell sample, OverlapRegion::depth_m) in
   /// place of split_bridge_fade_m, so a shallow support whose gap is shallow too still pushes (a
   /// 400 µm fade weighs a 20 µm support 20 µm from joining out to 0.7 %, c = 2 to 50 %). As the
   /// tool presses in d_r grows with the bridge level, so the pair's least stiffness along the
-  /// normal is about k·(1 + w − S'(x)·(1 + c·x)/c), x = −t/(c·d_r): 0 at c = 2, and on one clock
-  /// fig76 rocks (221–285 contact steps above 0.2 N against 11; docs/frontier/issue32/
-  /// thirty_first_stop). Off: an option of issue 32's thirty-first stop.
+  /// normal is about k·(1 + w − S'(x)·(1 + c·x)/c), x = −t/(c·d_r): 0 at c = 2, where the loop
+  /// rocks (measured: docs/measurements.md).
   double split_bridge_fade_per_depth = 0.0;
   /// Stages 5a and 5c read the base pose's overlap (b − a per cell) from stage 5's own render
   /// where the backend keeps it (PenetrationDepthBackend::base_overlap: the CPU backend), instead
   /// of rendering the base pose again on each window: 5a for its regions, 5c for its footprints
-  /// (false: rendered again, as until issue 32's thirty-second stop). The two fields can differ
-  /// only where the renders' triangles or rounding do (stage 5 picks the tool's triangles with
-  /// the gradient's margins and, on the fast path, renders the base on the window grown by a
-  /// cell); on the frontier's 4,006 contacts the models are the same to the last digit
-  /// (docs/frontier/issue32/thirty_second_stop).
+  /// (false: rendered again). The two fields can differ only where the renders' triangles or
+  /// rounding do (stage 5 picks the tool's triangles with the gradient's margins and, on the fast
+  /// path, renders the base on the window grown by a cell); measured: docs/measurements.md.
   bool reuse_base_render = true;
   /// Stage 5a: the window's deepest region stays the parent's whole window as stage 5 linearized
   /// it, and only the other regions get windows of their own (weighted as above; one whose
   /// weight is below 10⁻³ gets none), without merging regions whose centre lies in another's
   /// window. So the split of a window whose other regions fade out is the unsplit window, and the
   /// deepest region's δ and gradient do not change with its box. Off: every region gets its box's
-  /// window (the seventh stop's split).
+  /// window.
   bool split_keeps_parent_window = true;
-  /// Stage 5c (issue 32, tenth stop): contacts on one object whose normals agree within
-  /// clustering_angle_deg and whose textured overlaps at the tool's pose come within share_link_m
-  /// of each other are one region and share one penalty (ShareConnectedContacts,
-  /// connected_contacts.h): each keeps its δ, J and kink planes, and its stiffness becomes k·s_i,
-  /// so that a region pushes with about its deepest contact's k·δ, as the pipeline truth's one
-  /// patch does (contact_patch_truth.h). The coarse clustering leaves such contacts apart where
-  /// their merged window would exceed max_window_extent_m (the hammer's face on the torus: two
-  /// windows, each reading the whole δ). The link is share_link_m, twice the clustering
-  /// distance, because each window renders only its cluster's triangles clipped to its square,
-  /// so the overlap between two neighbouring windows can go unrendered (7 mm on a hammer pose);
-  /// it fades out over share_fade_m more gap. The overlaps are rendered again on the CPU
-  /// (TexturePenetrationSolver::OverlapOccupancy), only for contacts with δ0 > 0 that have such a
-  /// neighbour within reach of their windows, so a step with one contact per object pays
-  /// nothing. On by default: on the frontier the hammer's force error falls 36.1 → 24.4 % at
-  /// +16 % of its step, and fig75, fig76 and fig77 are unchanged (docs/frontier/issue32/
-  /// tenth_stop). Off (`slave_sim --no-share-connected-contacts`, the frontier's
-  /// "no_shared_contacts"): every contact pushes with its whole k.
+  /// Stage 5c (issue 32): contacts on one object whose normals agree within clustering_angle_deg
+  /// and whose textured overlaps at the tool's pose come within share_link_m of each other are one
+  /// region and share one penalty (ShareConnectedContacts, connected_contacts.h): each keeps its δ,
+  /// J and kink planes, and its stiffness becomes k·s_i, so that a region pushes with about its
+  /// deepest contact's k·δ, as the pipeline truth's one patch does (contact_patch_truth.h). The
+  /// coarse clustering leaves such contacts apart where their merged window would exceed
+  /// max_window_extent_m (the hammer's face on the torus: two windows, each reading the whole δ).
+  /// The link is share_link_m, twice the clustering distance, because each window renders only its
+  /// cluster's triangles clipped to its square, so the overlap between two neighbouring windows
+  /// can go unrendered (measured: docs/measurements.md); it fades out over share_fade_m more gap.
+  /// The overlaps are rendered again on the CPU (TexturePenetrationSolver::OverlapOccupancy), only
+  /// for contacts with δ0 > 0 that have such a neighbour within reach of their windows, so a step
+  /// with one contact per object pays nothing. On by default (measured: docs/measurements.md). Off
+  /// (`slave_sim --no-share-connected-contacts`, the frontier's "no_shared_contacts"): every
+  /// contact pushes with its whole k.
   bool share_connected_contacts = true;
   double share_link_m = 10e-3;
   double share_fade_m = 5e-3;
@@ -252,10 +238,10 @@ struct PipelineOptions {
   /// The contact it starts has δ0 < 0 (separated) and pushes with nothing until the operator's
   /// tool closes the gap on its local model: the surface is in the model before the tool
   /// reaches it, however late the model. Without it a model made a few milliseconds before an
-  /// impact had no contact, the tool went into the surface with no force until the next model,
-  /// and that model's spring gave back more energy than the press took (on fig75 with a 10 ms
-  /// remote step, a block bouncing by 1.7 mm; DESIGN.md §5). A tool at rest or sliding along a
-  /// surface (no closing speed) gets the contacts it got before.
+  /// impact has no contact, the tool goes into the surface with no force until the next model,
+  /// and that model's spring gives back more energy than the press took (DESIGN.md §5; measured:
+  /// docs/measurements.md). A tool at rest or sliding along a surface (no closing speed) gets the
+  /// contacts it got before.
   double speculative_lead_s = 0.05;
   /// Most speculative margin (m) beyond the texture reach, whatever the speed.
   double max_speculative_margin_m = 2e-3;
@@ -264,11 +250,10 @@ struct PipelineOptions {
   /// kept whatever the tool's twist, so that a model answering a tool pose a round trip old still
   /// holds the surfaces the hand can reach meanwhile: a hand that lifts and presses again, or
   /// turns towards a surface after the pose was taken, finds the surface in its local model
-  /// instead of a round trip later, 1-2 mm inside it (issue 33's thirty-fifth stop: on the gear
-  /// at 75 ms one way the felt force's error 48.7 -> 37.4 % and the passivity stage's share
-  /// 15.6 -> 4.7 %; docs/passivity/README.md). Beside a touching pair it adds nothing (the pair
-  /// would only join its cluster). The remote node sets it from the operator's round trip
-  /// (SetSpeculativeFloor, RemoteNodeConfig::speculative_speed_m_per_s).
+  /// instead of a round trip later, 1-2 mm inside it (measured: docs/measurements.md). Beside a
+  /// touching pair it adds nothing (the pair would only join its cluster). The remote node sets it
+  /// from the operator's round trip (SetSpeculativeFloor,
+  /// RemoteNodeConfig::speculative_speed_m_per_s).
   double speculative_floor_m = 0.0;
 
   /// Throws std::invalid_argument naming a value out of range.

@@ -87,10 +87,10 @@ class ToolSimulator {
   /// −k_i δ_i (1 + α·dδ_i/dt) ∇δ_i, dδ_i/dt = J_i·V, i.e. the damping D = −α·G
   /// (ContactModelEvaluation::G), integrated implicitly with the coupling's damping
   /// (A = M − h(D_coupling + D) − h²K; D·V_n joins the force). The damping grows with the depth
-  /// and vanishes at first touch: a linear damper β·K (tried, issue 32's ninth stop) attracts a
-  /// tool that leaves faster than δ/β, this one only above 1/α whatever the depth. At depth δ it
-  /// damps as β = α·δ would: a contact of stiffness k on the tool's mass m gets the damping ratio
-  /// ζ = α·δ·√(k/m)/2. α in s/m; 0 (the default here): none; the operator station's default is
+  /// and vanishes at first touch: a linear damper β·K attracts a tool that leaves faster than δ/β,
+  /// this one only above 1/α whatever the depth. At depth δ it damps as β = α·δ would: a contact of
+  /// stiffness k on the tool's mass m gets the damping ratio ζ = α·δ·√(k/m)/2. α in s/m; 0 (the
+  /// default here): none; the operator station's default is
   /// OperatorStationConfig::hunt_crossley_s_per_m. Throws std::invalid_argument unless α ≥ 0 and
   /// finite.
   void set_contact_damping_hunt_crossley(double alpha_s_per_m);

@@ -48,8 +48,8 @@ struct OperatorTickConfig {
   /// up to release_ticks ticks instead of in one. Without it a hand that keeps stopping while
   /// the observed energy is short gets the whole force back on each tick it stands still (its
   /// power is zero there) and none while it moves: a train of one-tick pulses of the full force
-  /// (1.7 N at 170 Hz on fig75 at 75 ms one way; docs/passivity/README.md). Scaling a wrench
-  /// down keeps the observed energy non-negative (its power scales with it), so passivity holds.
+  /// (measured: docs/measurements.md). Scaling a wrench down keeps the observed energy non-negative
+  /// (its power scales with it), so passivity holds.
   int passivity_release_ticks = 0;
   /// Energy-bounded onsets (false = off): a contact model that arrives while the loop renders no
   /// contact at the tool and has one there (an onset: the tool already inside the surface of a
@@ -61,7 +61,7 @@ struct OperatorTickConfig {
   /// for (the operator's own work pressing in, the observer's store) and at least over
   /// switch_offset_release_ms, instead of the tool being pushed out by the stored energy at once
   /// and the guard cutting the device's force until the hand has paid (the pulse train of
-  /// docs/passivity/README.md). A passive model update in the sense of model-mediated
+  /// passivity_release_ticks). A passive model update in the sense of model-mediated
   /// teleoperation (Mitra & Niemeyer, DSCC 2008; Song, Ding, Shang & Liang, IJARS 2018, who
   /// restrain the force step of a model update).
   bool energy_bounded_switch = false;
@@ -75,9 +75,8 @@ struct OperatorTickConfig {
   double switch_offset_release_ms = std::numeric_limits<double>::infinity();
   /// The bound applies to models at least this old (ms, the tick's model_age_ms, ≥ 0): a model
   /// answering a pose under 10 ms old stores little the hand has not already paid for, and the
-  /// passivity stage's reserve handles it. (Bounding every switch, an earlier form of this
-  /// option, held offsets of up to 0.38 mm on a third of fig76's undelayed ticks and made the
-  /// simulated tool's contact force step: steps above 0.2 N 69 → 2,137 in 12 s.)
+  /// passivity stage's reserve handles it. Bounding every switch holds offsets on undelayed ticks
+  /// and makes the simulated tool's contact force step (measured: docs/measurements.md).
   double switch_bound_min_age_ms = 10.0;
   /// Tick length h (s).
   double h_s = 1e-3;

@@ -61,13 +61,11 @@ struct BenchmarkScene {
 
 /// What `slave_sim --scene` builds the benchmark scene `name` with: the seed's Table 6 coarse
 /// counts at 1024² (the default BenchmarkModelSettings), except
-///  - fig77 (the file on the CAD part): twice the seed's coarse triangles at 2048², which issue
-///    32's fifth stop measured more accurate on every error column of the frontier and faster
-///    (docs/frontier/issue32/fifth_stop);
+///  - fig77 (the file on the CAD part): twice the seed's coarse triangles at 2048²;
 ///  - hammer_torus: four times the seed's coarse triangles, each texture sized from its model's
-///    detail (texture_size 0: 4096² for both; docs/frontier/issue32/eighth_stop and
-///    twenty_eighth_stop measured the choice).
-/// The frontier's "product" setting; its "default" keeps the seed's counts for the comparison.
+///    detail (texture_size 0: 4096² for both).
+/// Measured: docs/measurements.md. The frontier's "product" setting; its "default" keeps the
+/// seed's counts for the comparison.
 BenchmarkModelSettings ProductModelSettings(const std::string& name);
 
 /// The scene names, in the order above.
