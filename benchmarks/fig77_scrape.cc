@@ -83,6 +83,8 @@ int main(int argc, char** argv) {
               options.tolerance_m * 1e3, file->OutwardReach() * 1e3, part->OutwardReach() * 1e3);
 
   ht::HullProximityQuery timed_query, probe_query;
+  const ht::HullBounds file_bounds = ht::HullBounds::Of(*file);
+  const ht::HullBounds part_bounds = ht::HullBounds::Of(*part);
   ht::ContactClusterer clusterer;
   std::ofstream csv(csv_path);
   csv << "frame,x_m,y_m,yaw_rad,z_m,pairs,contacts,min_signed_distance_m,query_us,"
@@ -102,14 +104,15 @@ int main(int argc, char** argv) {
     for (int it = 0; it < 40; ++it) {
       const double mid = 0.5 * (lo + hi);
       X_WA.translation = glm::dvec3(x, y, mid);
-      const auto p = probe_query.Query(*file, X_WA, *part, X_WB, probe);
+      const auto p = probe_query.Query(*file, file_bounds, X_WA, *part, part_bounds, X_WB, probe);
       const double deepest = p.empty() ? 1.0 : p.front().signed_distance_m;
       (deepest < -0.3e-3 ? lo : hi) = mid;
     }
     X_WA.translation = glm::dvec3(x, y, hi);
     ht::ProximityQueryStats stats;
     const auto t0 = std::chrono::steady_clock::now();
-    const auto pairs = timed_query.Query(*file, X_WA, *part, X_WB, options, &stats);
+    const auto pairs =
+        timed_query.Query(*file, file_bounds, X_WA, *part, part_bounds, X_WB, options, &stats);
     const auto t1 = std::chrono::steady_clock::now();
     const auto clusters =
         clusterer.Cluster(pairs, file->hull_hierarchy, part->hull_hierarchy, clustering);

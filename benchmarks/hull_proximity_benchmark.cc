@@ -72,10 +72,11 @@ fcl::Transform3d FclPose(const ht::RigidTransform& X) {
 ht::RigidTransform Sink(const ht::HapticModel& A, ht::RigidTransform start,
                         const ht::HapticModel& B, double depth_m) {
   ht::HullProximityQuery q;
+  const ht::HullBounds bounds_A = ht::HullBounds::Of(A), bounds_B = ht::HullBounds::Of(B);
   ht::ProximityQueryOptions opt;
   auto deepest = [&](double z) {
     start.translation.z = z;
-    const auto pairs = q.Query(A, start, B, ht::RigidTransform{}, opt);
+    const auto pairs = q.Query(A, bounds_A, start, B, bounds_B, ht::RigidTransform{}, opt);
     return pairs.empty() ? 1.0 : pairs[0].signed_distance_m;
   };
   double hi = start.translation.z;
@@ -126,6 +127,8 @@ ht::RigidTransform Frame(const Scene& s, int i) {
 void BM_HullProximity(benchmark::State& state) {
   const Scene& s = GetScene(static_cast<int>(state.range(0)));
   ht::HullProximityQuery q;
+  const ht::HullBounds tool_bounds = ht::HullBounds::Of(*s.tool);
+  const ht::HullBounds env_bounds = ht::HullBounds::Of(*s.env);
   ht::ProximityQueryOptions opt;
   opt.tolerance_m = s.tolerance_m;
   opt.temporal_coherence = state.range(1) != 0;
@@ -133,7 +136,8 @@ void BM_HullProximity(benchmark::State& state) {
   double pairs = 0, tests = 0, leaf_tests = 0, culls = 0, min_sd = 0;
   int i = 0;
   for (auto _ : state) {
-    const auto r = q.Query(*s.tool, Frame(s, i++), *s.env, ht::RigidTransform{}, opt, &st);
+    const auto r = q.Query(*s.tool, tool_bounds, Frame(s, i++), *s.env, env_bounds,
+                           ht::RigidTransform{}, opt, &st);
     benchmark::DoNotOptimize(r.data());
     pairs += st.pairs_found;
     tests += st.node_pairs_tested;

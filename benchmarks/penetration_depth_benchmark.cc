@@ -9,6 +9,7 @@
 #include <benchmark/benchmark.h>
 
 #include <cstdlib>
+#include <memory>
 #include <random>
 #include <vector>
 
@@ -22,6 +23,9 @@ namespace {
 struct Models {
   ht::HapticModel block = ht::MakeRidgedBlock(ht::RidgedBlockParams{});
   ht::HapticModel gear = ht::MakeRidgedGear(ht::RidgedGearParams{});
+  // Their box trees, built with the models as the remote step builds its scene's.
+  std::unique_ptr<ht::TriangleBoxTree> block_tree = ht::TriangleBoxTree::ForModel(block);
+  std::unique_ptr<ht::TriangleBoxTree> gear_tree = ht::TriangleBoxTree::ForModel(gear);
 };
 
 const Models& SharedModels() {
@@ -41,6 +45,8 @@ std::vector<ht::ContactQuery> MakeQueries(int count, int grid) {
     q.push_back({&m.gear, ht::RigidTransform::Identity(),
                  ht::ContactWindow::Make({0.012 * U(rng), 0.004 * U(rng), r}, n, 0.02, grid),
                  8000.0});
+    q.back().environment_triangles.tree = m.gear_tree.get();
+    q.back().tool_triangles.tree = m.block_tree.get();
   }
   return q;
 }

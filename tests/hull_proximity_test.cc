@@ -235,10 +235,14 @@ class TorusLBlock : public ::testing::Test {
   static void SetUpTestSuite() {
     torus_ = new HapticModel(MakeModel(MakeTorus(22, 12, 0.05, 0.015)));  // 528 triangles
     block_ = new HapticModel(MakeModel(MakeLBlock()));
+    torus_bounds_ = new HullBounds(HullBounds::Of(*torus_));
+    block_bounds_ = new HullBounds(HullBounds::Of(*block_));
   }
   static void TearDownTestSuite() {
     delete torus_;
     delete block_;
+    delete torus_bounds_;
+    delete block_bounds_;
   }
   // A random pose of the L-block near the torus tube.
   static RigidTransform RandomPose(std::mt19937_64& rng) {
@@ -249,9 +253,14 @@ class TorusLBlock : public ::testing::Test {
   }
   static HapticModel* torus_;
   static HapticModel* block_;
+  // The models' bounds, built once as the remote step builds its scene's.
+  static HullBounds* torus_bounds_;
+  static HullBounds* block_bounds_;
 };
 HapticModel* TorusLBlock::torus_ = nullptr;
 HapticModel* TorusLBlock::block_ = nullptr;
+HullBounds* TorusLBlock::torus_bounds_ = nullptr;
+HullBounds* TorusLBlock::block_bounds_ = nullptr;
 
 // Check 1 (object level, against FCL on the same coarse triangles, 2000 random poses):
 // FCL within ε (triangles collide, or mesh distance ≤ ε) ⇒ our query finds pairs (hulls contain
@@ -294,7 +303,7 @@ TEST_F(TorusLBlock, AgreesWithFclMeshDistanceAtRandomPoses) {
       d_fcl = dres.min_distance;
     }
     ProximityQueryStats st;
-    const auto pairs = query.Query(A, X_WA, B, X_WB, opt, &st);
+    const auto pairs = query.Query(A, *block_bounds_, X_WA, B, *torus_bounds_, X_WB, opt, &st);
     CheckPairs(pairs, A, X_WA, B, X_WB, eps);
     const bool fcl_near = collide || d_fcl <= eps;
     const bool ours_near = !pairs.empty();
@@ -359,7 +368,7 @@ TEST_F(TorusLBlock, FindsExactlyTheLeafPairsWithinToleranceByBruteForce) {
     }
     previous = X_WA;
     ProximityQueryStats st;
-    const auto pairs = query.Query(A, X_WA, B, X_WB, opt, &st);
+    const auto pairs = query.Query(A, *block_bounds_, X_WA, B, *torus_bounds_, X_WB, opt, &st);
     fronts += st.front_pairs > 0;
     std::set<std::pair<int, int>> ours;
     for (const auto& c : pairs) ours.emplace(c.node_A, c.node_B);
@@ -403,7 +412,8 @@ TEST_F(TorusLBlock, BudgetsReturnValidSubsetsDeepestFirst) {
     opt.tolerance_m = 2e-3;
     opt.temporal_coherence = false;
     ProximityQueryStats full_st;
-    const auto full_span = query.Query(A, X_WA, *torus_, RigidTransform{}, opt, &full_st);
+    const auto full_span = query.Query(A, *block_bounds_, X_WA, *torus_, *torus_bounds_,
+                                       RigidTransform{}, opt, &full_st);
     const std::vector<HullPairContact> full(full_span.begin(), full_span.end());
     EXPECT_FALSE(full_st.budget_exhausted);
     if (full.size() < 4) continue;
@@ -416,7 +426,7 @@ TEST_F(TorusLBlock, BudgetsReturnValidSubsetsDeepestFirst) {
     ProximityQueryOptions tiny = opt;
     tiny.time_budget_us = 1e-3;
     ProximityQueryStats st;
-    auto sub = query.Query(A, X_WA, B, RigidTransform{}, tiny, &st);
+    auto sub = query.Query(A, *block_bounds_, X_WA, B, *torus_bounds_, RigidTransform{}, tiny, &st);
     EXPECT_TRUE(st.budget_exhausted);
     EXPECT_LE(sub.size(), full.size());
     for (const auto& c : sub) {
@@ -425,7 +435,8 @@ TEST_F(TorusLBlock, BudgetsReturnValidSubsetsDeepestFirst) {
     // Large time budget: the full set.
     ProximityQueryOptions large = opt;
     large.time_budget_us = 1e6;
-    auto all = query.Query(A, X_WA, B, RigidTransform{}, large, &st);
+    auto all =
+        query.Query(A, *block_bounds_, X_WA, B, *torus_bounds_, RigidTransform{}, large, &st);
     EXPECT_FALSE(st.budget_exhausted);
     ASSERT_EQ(all.size(), full.size());
     for (std::size_t i = 0; i < all.size(); ++i) EXPECT_TRUE(same(all[i], full[i]));
@@ -437,7 +448,8 @@ TEST_F(TorusLBlock, BudgetsReturnValidSubsetsDeepestFirst) {
     for (int q = 0; q < 2; ++q) {
       ProximityQueryOptions part_opt = opt;
       part_opt.max_node_pair_tests = std::max(1, budget_work * (2 + q) / 4);
-      auto part = query.Query(A, X_WA, B, RigidTransform{}, part_opt, &st);
+      auto part =
+          query.Query(A, *block_bounds_, X_WA, B, *torus_bounds_, RigidTransform{}, part_opt, &st);
       EXPECT_TRUE(st.budget_exhausted);
       for (const auto& c : part) {
         EXPECT_TRUE(std::any_of(full.begin(), full.end(), [&](auto& f) { return same(f, c); }));
@@ -472,11 +484,12 @@ TEST_F(TorusLBlock, TemporalCoherenceGivesTheSamePairs) {
     const RigidTransform X_WA = Pose({0.05 * std::cos(t), 0.05 * std::sin(t), 0.019 - 0.00001 * k},
                                      AxisAngle({std::sin(t), 1, 0.3}, t));
     ProximityQueryStats st;
-    auto a = with.Query(A, X_WA, B, RigidTransform{}, on, &st);
+    auto a = with.Query(A, *block_bounds_, X_WA, B, *torus_bounds_, RigidTransform{}, on, &st);
     hits += st.coherent_hits;
     culls += st.coherent_culls;
     ProximityQueryStats st_off;
-    auto b = without.Query(A, X_WA, B, RigidTransform{}, off, &st_off);
+    auto b =
+        without.Query(A, *block_bounds_, X_WA, B, *torus_bounds_, RigidTransform{}, off, &st_off);
     ASSERT_EQ(st_off.coherent_culls, 0);
     ASSERT_EQ(st_off.front_pairs, 0);
     fronts += st.front_pairs > 0;
@@ -507,10 +520,11 @@ TEST_F(TorusLBlock, TemporalCoherenceGivesTheSamePairs) {
   EXPECT_GT(fronts, 300);
 }
 
-// A model replaced at its address between two coherent calls (a coarser torus, with fewer hull
-// nodes than the front's pairs name): the query sees the new hierarchy (its cache entry is
-// rebuilt), starts from the roots instead of the old front, and reports what a fresh query does.
-TEST_F(TorusLBlock, AModelReplacedAtItsAddressStartsFromTheRoots) {
+// Temporal coherence holds between calls on the same bounds only: a model rebuilt (a coarser
+// torus, with fewer hull nodes than the front's pairs name) comes with new bounds, and the query
+// starts from the roots instead of the old front and reports what a fresh query does. Bounds that
+// do not fit their model are refused.
+TEST_F(TorusLBlock, NewBoundsStartFromTheRoots) {
   const HapticModel& A = *block_;
   HapticModel B = *torus_;
   HullProximityQuery coherent_query, fresh_query;
@@ -518,13 +532,24 @@ TEST_F(TorusLBlock, AModelReplacedAtItsAddressStartsFromTheRoots) {
   opt.tolerance_m = 3e-3;
   const RigidTransform X_WA = Pose({0.05, 0.0, 0.017}, AxisAngle({0, 1, 0.2}, 0.4));
   ProximityQueryStats st;
-  ASSERT_FALSE(coherent_query.Query(A, X_WA, B, RigidTransform{}, opt, &st).empty());
-  coherent_query.Query(A, X_WA, B, RigidTransform{}, opt, &st);
+  const HullBounds old_bounds = HullBounds::Of(B);
+  ASSERT_FALSE(
+      coherent_query.Query(A, *block_bounds_, X_WA, B, old_bounds, RigidTransform{}, opt, &st)
+          .empty());
+  coherent_query.Query(A, *block_bounds_, X_WA, B, old_bounds, RigidTransform{}, opt, &st);
   ASSERT_GT(st.front_pairs, 0);  // the second call started from the first one's front
   const std::size_t old_nodes = B.hull_hierarchy.nodes.size();
   B = MakeModel(MakeTorus(10, 6, 0.05, 0.015));  // the same address, a smaller hierarchy
   ASSERT_LT(B.hull_hierarchy.nodes.size(), old_nodes);
-  const auto got = coherent_query.Query(A, X_WA, B, RigidTransform{}, opt, &st);
+  // The old bounds no longer fit: refused, with nothing reported.
+  EXPECT_TRUE(
+      coherent_query.Query(A, *block_bounds_, X_WA, B, old_bounds, RigidTransform{}, opt, &st)
+          .empty());
+  EXPECT_EQ(st.invalid_input, 1);
+  const HullBounds new_bounds = HullBounds::Of(B);
+  EXPECT_NE(new_bounds.id, old_bounds.id);
+  const auto got =
+      coherent_query.Query(A, *block_bounds_, X_WA, B, new_bounds, RigidTransform{}, opt, &st);
   EXPECT_EQ(st.front_pairs, 0);
   const std::vector<HullPairContact> mine(got.begin(), got.end());
   const auto want = fresh_query.Query(A, X_WA, B, RigidTransform{}, opt);
@@ -575,12 +600,15 @@ TEST(HullProximityHardCases, EdgeEdgeCrossing) {
   const double h = 0.01 * std::sqrt(2.0);
   const RigidTransform X_WB = Pose({0, 0, 0}, AxisAngle({0, 1, 0}, std::numbers::pi / 4));
   HullProximityQuery q;
+  // One query along the sequence, with coherence (the bounds built once): the touching pose
+  // takes the separated pose's normal as a candidate.
+  const HullBounds bounds = HullBounds::Of(box);
   ProximityQueryOptions opt;
   opt.tolerance_m = 2e-3;
   for (double gap : {1e-3, 0.0, -1e-3}) {
     const RigidTransform X_WA =
         Pose({0, 0, 2 * h + gap}, AxisAngle({1, 0, 0}, std::numbers::pi / 4));
-    const auto pairs = q.Query(box, X_WA, box, X_WB, opt);
+    const auto pairs = q.Query(box, bounds, X_WA, box, bounds, X_WB, opt);
     const auto c = Only(pairs);
     CheckPairs(pairs, box, X_WA, box, X_WB, opt.tolerance_m);
     if (gap >= 0) {
@@ -757,9 +785,9 @@ TEST(HullProximityHardCases, BadInputAndCapacity) {
 // Bounding spheres contain their hulls' vertices.
 TEST(HullProximityHardCases, BoundingSpheresContainHulls) {
   const HapticModel torus = MakeModel(MakeTorus(22, 12, 0.05, 0.015));
-  HullProximityQuery q;
+  const HullBounds q = HullBounds::Of(torus);
   for (std::size_t i = 0; i < torus.hull_hierarchy.nodes.size(); ++i) {
-    const glm::dvec4 s = q.BoundingSphere(torus, static_cast<int>(i));
+    const glm::dvec4 s = q.Sphere(static_cast<int>(i));
     for (const auto& v : torus.hull_hierarchy.nodes[i].hull.vertices_O) {
       EXPECT_LE(glm::length(v - glm::dvec3(s)), s.w * (1 + 1e-12));
     }
@@ -771,10 +799,10 @@ TEST(HullProximityHardCases, BoundingSpheresContainHulls) {
 // most nodes.
 TEST(HullProximityHardCases, OrientedBoxesContainHulls) {
   const HapticModel torus = MakeModel(MakeTorus(22, 12, 0.05, 0.015));
-  HullProximityQuery q;
+  const HullBounds q = HullBounds::Of(torus);
   int tighter = 0;
   for (std::size_t i = 0; i < torus.hull_hierarchy.nodes.size(); ++i) {
-    const HullProximityQuery::OrientedBox b = q.BoundingBox(torus, static_cast<int>(i));
+    const OrientedBox& b = q.Box(static_cast<int>(i));
     for (int r = 0; r < 3; ++r) {
       for (int c = 0; c < 3; ++c) {
         EXPECT_NEAR(glm::dot(b.axes_O[r], b.axes_O[c]), r == c ? 1.0 : 0.0, 1e-12);
@@ -794,8 +822,7 @@ TEST(HullProximityHardCases, OrientedBoxesContainHulls) {
   }
   // Principal axes beat the model's axes on most of a torus's nodes (tilted patches).
   EXPECT_GT(tighter, static_cast<int>(torus.hull_hierarchy.nodes.size()) / 2);
-  EXPECT_THROW(q.BoundingBox(torus, static_cast<int>(torus.hull_hierarchy.nodes.size())),
-               std::out_of_range);
+  EXPECT_THROW(q.Box(static_cast<int>(torus.hull_hierarchy.nodes.size())), std::out_of_range);
 }
 
 }  // namespace

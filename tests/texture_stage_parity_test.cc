@@ -745,8 +745,9 @@ TEST(TextureStageParity, ScreenedDepthIsNeverBelowAnyLevelZeroPointOfTheWindow) 
 // vertex scratch): the same triangles in the same order, on random contacts of the six seed
 // models and the procedural gear (a convex model without a hull hierarchy), with windows of
 // several sizes, margins and facing slacks, on both sides, at random poses, and on windows far
-// from any triangle. A tree built from another model, or from this one before it was edited in
-// place, is not used.
+// from any triangle; also carried by a triangle subset (TriangleSubset::tree). A tree that does
+// not fit the model (another model's counts) is not used; a model edited in place is selected
+// right through a tree built again.
 TEST(TextureStageParity, BoxTreeSelectsTheScansTriangles) {
   std::mt19937 rng(1515);
   std::uniform_real_distribution<double> U(-1.0, 1.0);
@@ -763,8 +764,8 @@ TEST(TextureStageParity, BoxTreeSelectsTheScansTriangles) {
     TriangleBoxTree env_tree, tool_tree;
     env_tree.Build(env);
     tool_tree.Build(tool);
-    ASSERT_TRUE(env_tree.BuiltFrom(env));
-    ASSERT_FALSE(env_tree.BuiltFrom(tool));
+    ASSERT_TRUE(env_tree.Fits(env));
+    ASSERT_TRUE(tool_tree.Fits(tool));
     EXPECT_EQ(env_tree.triangles().size(), env.triangles.size());
     std::vector<int> sorted;
     for (const TriangleBoxTree::Triangle& t : env_tree.triangles()) sorted.push_back(t.index);
@@ -799,10 +800,17 @@ TEST(TextureStageParity, BoxTreeSelectsTheScansTriangles) {
             SelectPatchTriangles(m, X, c.window, side, margin, through_tree, slack, nullptr, &tree);
             ASSERT_EQ(scan, scratch_scan) << m.name << " trial " << trial;
             ASSERT_EQ(scan, through_tree) << m.name << " trial " << trial << " margin " << margin;
-            // A tree of another model is ignored: the scan.
-            SelectPatchTriangles(m, X, c.window, side, margin, through_tree, slack, nullptr,
-                                 &other);
-            ASSERT_EQ(scan, through_tree) << m.name << " (another model's tree)";
+            // The same tree carried by the subset.
+            TriangleSubset all = TriangleSubset::All();
+            all.tree = &tree;
+            SelectPatchTrianglesIn(all, m, X, c.window, side, margin, through_tree, slack);
+            ASSERT_EQ(scan, through_tree) << m.name << " (the subset's tree)";
+            // A tree that does not fit the model is ignored: the scan.
+            if (!other.Fits(m)) {
+              SelectPatchTriangles(m, X, c.window, side, margin, through_tree, slack, nullptr,
+                                   &other);
+              ASSERT_EQ(scan, through_tree) << m.name << " (another model's tree)";
+            }
             selected += static_cast<long>(scan.size());
             ++compared;
             empty += scan.empty() ? 1 : 0;
@@ -816,51 +824,33 @@ TEST(TextureStageParity, BoxTreeSelectsTheScansTriangles) {
   EXPECT_GT(empty, 10);
   EXPECT_GT(compared - empty, compared / 2);
 
-  // A model edited in place after its tree was built (its frame shifted, as ShiftModelFrame
-  // does): the tree is stale and not used; rebuilt, it is.
+  // A model edited in place (its frame shifted, as ShiftModelFrame does) is derived anew: its
+  // tree built again selects what the scan selects.
   HapticModel edited = Seed(SeedModel::kCadPart);
+  ShiftModelFrame(edited, glm::dvec3(0.01, 0.0, 0.0));
   TriangleBoxTree tree;
   tree.Build(edited);
-  ASSERT_TRUE(tree.BuiltFrom(edited));
-  ShiftModelFrame(edited, glm::dvec3(0.01, 0.0, 0.0));
-  EXPECT_FALSE(tree.BuiltFrom(edited));
+  ASSERT_TRUE(tree.Fits(edited));
   const Contact c = RandomContact(Seed(SeedModel::kFile), edited, rng, 50);
   SelectPatchTriangles(edited, c.X_WO, c.window, PatchSide::kEnvironment, 0.0, scan);
   SelectPatchTriangles(edited, c.X_WO, c.window, PatchSide::kEnvironment, 0.0, through_tree, 0.0,
                        nullptr, &tree);
   EXPECT_EQ(scan, through_tree);
   EXPECT_FALSE(scan.empty());
-  tree.Build(edited);
-  EXPECT_TRUE(tree.BuiltFrom(edited));
-  SelectPatchTriangles(edited, c.X_WO, c.window, PatchSide::kEnvironment, 0.0, through_tree, 0.0,
-                       nullptr, &tree);
-  EXPECT_EQ(scan, through_tree);
 }
 
-// The solver's and the GPU backend's cache of box trees: eight models at once, none for a small
-// model, none (and nothing built) while all eight are in use, a stale slot reused, and a model
-// edited in place rebuilt.
-TEST(TextureStageParity, BoxTreeCacheKeepsEightModelsAndReusesStaleSlots) {
-  std::vector<HapticModel> models(TriangleBoxTreeCache::kSlots + 1, Seed(SeedModel::kCadPart));
-  TriangleBoxTreeCache cache;
-  for (int k = 0; k < TriangleBoxTreeCache::kSlots; ++k) {
-    const TriangleBoxTree* tree = cache.For(models[static_cast<std::size_t>(k)]);
-    ASSERT_NE(tree, nullptr);
-    EXPECT_TRUE(tree->BuiltFrom(models[static_cast<std::size_t>(k)]));
-    EXPECT_EQ(cache.For(models[static_cast<std::size_t>(k)]), tree);  // kept, not rebuilt
-  }
-  HapticModel& ninth = models.back();
-  EXPECT_EQ(cache.For(ninth), nullptr);                    // all eight in use
-  EXPECT_EQ(cache.For(Seed(SeedModel::kBlock)), nullptr);  // 16 triangles: the scan
-  for (std::uint64_t k = 0; k <= TriangleBoxTreeCache::kStaleCalls; ++k) cache.For(models[0]);
-  const TriangleBoxTree* ninth_tree = cache.For(ninth);  // the others went stale
-  ASSERT_NE(ninth_tree, nullptr);
-  EXPECT_TRUE(ninth_tree->BuiltFrom(ninth));
-  EXPECT_TRUE(cache.For(models[0])->BuiltFrom(models[0]));
-  ShiftModelFrame(models[0], glm::dvec3(0.0, 0.002, 0.0));
-  const TriangleBoxTree* edited = cache.For(models[0]);
-  ASSERT_NE(edited, nullptr);
-  EXPECT_TRUE(edited->BuiltFrom(models[0]));
+// TriangleBoxTree::ForModel: a tree that fits for a model of many triangles, none (the scan) for
+// one of fewer than kMinTriangles; a cleared tree fits no model with triangles.
+TEST(TextureStageParity, BoxTreeForModelSkipsSmallModels) {
+  const HapticModel& part = Seed(SeedModel::kCadPart);
+  const std::unique_ptr<TriangleBoxTree> tree = TriangleBoxTree::ForModel(part);
+  ASSERT_NE(tree, nullptr);
+  EXPECT_TRUE(tree->Fits(part));
+  const HapticModel& block = Seed(SeedModel::kBlock);
+  ASSERT_LT(block.triangles.size(), TriangleBoxTree::kMinTriangles);
+  EXPECT_EQ(TriangleBoxTree::ForModel(block), nullptr);
+  tree->Clear();
+  EXPECT_FALSE(tree->Fits(part));
 }
 
 // The tool's triangles with each triangle's own rotation margin (2 h_x + h_θ·r, r its farthest
@@ -1104,17 +1094,19 @@ TEST(LocalReach, ReportsTheGlobalPairsWithinEachPairsOwnTolerance) {
   const HapticModel& file = Seed(SeedModel::kFile);
   const HapticModel& part = Seed(SeedModel::kCadPart);
   HullProximityQuery global_query(1 << 14), local_query(1 << 14);
+  const HullBounds file_bounds = HullBounds::Of(file), part_bounds = HullBounds::Of(part);
   // Node reaches: within [0, OutwardReach()], a parent at least its children.
   for (const HapticModel* m : {&file, &part}) {
     const auto& nodes = m->hull_hierarchy.nodes;
+    const HullBounds& bounds = m == &file ? file_bounds : part_bounds;
     ASSERT_FALSE(nodes.empty());
     for (std::size_t k = 0; k < nodes.size(); ++k) {
-      const double r = global_query.NodeReach(*m, static_cast<int>(k));
+      const double r = bounds.Reach(static_cast<int>(k));
       EXPECT_GE(r, 0.0);
       EXPECT_LE(r, m->OutwardReach());
       for (const int c : nodes[k].children) {
         if (c >= 0) {
-          EXPECT_GE(r, global_query.NodeReach(*m, c));
+          EXPECT_GE(r, bounds.Reach(c));
         }
       }
     }
@@ -1130,12 +1122,11 @@ TEST(LocalReach, ReportsTheGlobalPairsWithinEachPairsOwnTolerance) {
     global.temporal_coherence = false;
     ProximityQueryOptions local = global;
     local.local_reach_margin_m = margin;
-    const auto g = global_query.Query(file, c.X_WT, part, c.X_WO, global);
+    const auto g = global_query.Query(file, file_bounds, c.X_WT, part, part_bounds, c.X_WO, global);
     std::set<std::pair<int, int>> want;
     for (const HullPairContact& p : g) {
-      const double own =
-          std::min(global.tolerance_m, global_query.NodeReach(file, p.node_A) +
-                                           global_query.NodeReach(part, p.node_B) + margin);
+      const double own = std::min(
+          global.tolerance_m, file_bounds.Reach(p.node_A) + part_bounds.Reach(p.node_B) + margin);
       if (p.signed_distance_m <= own) {
         want.insert({p.node_A, p.node_B});
       } else {
@@ -1143,15 +1134,15 @@ TEST(LocalReach, ReportsTheGlobalPairsWithinEachPairsOwnTolerance) {
       }
     }
     std::set<std::pair<int, int>> got;
-    for (const HullPairContact& p : local_query.Query(file, c.X_WT, part, c.X_WO, local)) {
+    for (const HullPairContact& p :
+         local_query.Query(file, file_bounds, c.X_WT, part, part_bounds, c.X_WO, local)) {
       got.insert({p.node_A, p.node_B});
     }
     // Pairs within 1e-9 m of their tolerance may go either way (GJK's early exit): compare the
     // rest exactly.
     for (const HullPairContact& p : g) {
-      const double own =
-          std::min(global.tolerance_m, global_query.NodeReach(file, p.node_A) +
-                                           global_query.NodeReach(part, p.node_B) + margin);
+      const double own = std::min(
+          global.tolerance_m, file_bounds.Reach(p.node_A) + part_bounds.Reach(p.node_B) + margin);
       if (std::abs(p.signed_distance_m - own) < 1e-9) {
         want.erase({p.node_A, p.node_B});
         got.erase({p.node_A, p.node_B});
@@ -1218,6 +1209,7 @@ TEST(CoarseQueryParity, StoppingInternalGjkWithinTheToleranceReportsTheSamePairs
   for (const auto& [tool_model, env_model] : kCoarseScenes) {
     const HapticModel& tool = Seed(tool_model);
     const HapticModel& env = Seed(env_model);
+    const HullBounds tool_bounds = HullBounds::Of(tool), env_bounds = HullBounds::Of(env);
     HullProximityQuery exact_query(1 << 14), near_query(1 << 14);
     ProximityQueryOptions exact;
     exact.tolerance_m = tool.OutwardReach() + env.OutwardReach() + 0.5e-3;
@@ -1231,9 +1223,10 @@ TEST(CoarseQueryParity, StoppingInternalGjkWithinTheToleranceReportsTheSamePairs
       for (int frame = 0; frame < 5; ++frame) {
         // Slide by up to 0.2 mm per frame.
         c.X_WT.translation += 0.2e-3 * glm::dvec3(U(rng), U(rng), U(rng));
-        const auto a = exact_query.Query(tool, c.X_WT, env, c.X_WO, exact);
+        const auto a = exact_query.Query(tool, tool_bounds, c.X_WT, env, env_bounds, c.X_WO, exact);
         const std::vector<HullPairContact> want(a.begin(), a.end());
-        ExpectSamePairs(want, near_query.Query(tool, c.X_WT, env, c.X_WO, near),
+        ExpectSamePairs(want,
+                        near_query.Query(tool, tool_bounds, c.X_WT, env, env_bounds, c.X_WO, near),
                         SeedModelName(tool_model));
         compared += static_cast<int>(want.size());
       }
@@ -1252,6 +1245,7 @@ TEST(CoarseQueryParity, TwoThreadsReportWhatOneReports) {
   for (const auto& [tool_model, env_model] : kCoarseScenes) {
     const HapticModel& tool = Seed(tool_model);
     const HapticModel& env = Seed(env_model);
+    const HullBounds tool_bounds = HullBounds::Of(tool), env_bounds = HullBounds::Of(env);
     for (const bool local : {false, true}) {
       HullProximityQuery one(1 << 14), two(1 << 14);
       two.SetThreads(2);
@@ -1266,9 +1260,11 @@ TEST(CoarseQueryParity, TwoThreadsReportWhatOneReports) {
         for (int frame = 0; frame < 5; ++frame) {
           c.X_WT.translation += 0.2e-3 * glm::dvec3(U(rng), U(rng), U(rng));
           ProximityQueryStats s1, s2;
-          const auto a = one.Query(tool, c.X_WT, env, c.X_WO, options, &s1);
+          const auto a =
+              one.Query(tool, tool_bounds, c.X_WT, env, env_bounds, c.X_WO, options, &s1);
           const std::vector<HullPairContact> want(a.begin(), a.end());
-          const auto got = two.Query(tool, c.X_WT, env, c.X_WO, options, &s2);
+          const auto got =
+              two.Query(tool, tool_bounds, c.X_WT, env, env_bounds, c.X_WO, options, &s2);
           ExpectSamePairs(want, got, SeedModelName(tool_model));
           EXPECT_EQ(s1.node_pairs_tested, s2.node_pairs_tested);
           EXPECT_EQ(s1.leaf_pairs_tested, s2.leaf_pairs_tested);

@@ -400,9 +400,6 @@ class TexturePenetrationSolver {
   /// this.
   static constexpr std::size_t kPyramidTriangles = 32;
 
-  /// Box trees of the models met, for SelectPatchTriangles.
-  TriangleBoxTreeCache trees_;
-
   TextureStagePath path_;
   RotationGradient rotation_gradient_ = RotationGradient::kRenderedSamples;
   CullRotations cull_rotations_ = CullRotations::kWhenItPays;

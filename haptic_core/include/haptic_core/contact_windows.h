@@ -18,6 +18,7 @@
 namespace ht {
 
 struct ContactLinearization;  // contact_linearization.h: stage 5's result
+class TriangleBoxTree;        // penetration_depth.h: a model's triangles in a box tree
 
 /// The orthographic sampling window of one contact: a W×W square on the plane through `center_W`
 /// perpendicular to `normal_W`, sampled at N×N cell centres. Cell (i, j) (i along u, j along v)
@@ -70,11 +71,17 @@ struct ContactWindow {
 struct TriangleSubset {
   std::span<const int> indices;
   bool all = true;
+  /// The model's box tree (TriangleBoxTree, built with the scene: the remote step builds its
+  /// models' in its constructor), which narrows the scan of All(); null: the whole scan (the same
+  /// triangles, slower). Must outlive the batch.
+  const TriangleBoxTree* tree = nullptr;
 
   /// Every triangle of the model.
   static TriangleSubset All() noexcept { return {}; }
   /// Only `indices` (none when empty).
-  static TriangleSubset Of(std::span<const int> indices) noexcept { return {indices, false}; }
+  static TriangleSubset Of(std::span<const int> indices) noexcept {
+    return {indices, false, nullptr};
+  }
 };
 
 /// One contact of a batch: the environment object O at X_WO, the window found by the coarse

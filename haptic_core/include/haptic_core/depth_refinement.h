@@ -430,7 +430,6 @@ class DepthRefiner {
   std::array<std::vector<int>, kMaxScreenDepth + 1> env_screen_, tool_screen_;
   std::uint64_t squares_ = 0;
   bool truncated_ = false;
-  TriangleBoxTreeCache trees_;
   std::vector<int> env_list_, tool_list_;
   std::vector<double> vertex_scratch_;
   // The window's triangles projected once per contact (the tool at the base pose, and at one

@@ -153,9 +153,8 @@ class GpuPenetrationDepthBackend final : public PenetrationDepthBackend {
   };
   std::vector<EnvGroup> env_groups_;
   PatchRange tool_union_;
-  std::vector<std::uint32_t> union_mark_;  // per triangle: the stamp of the range holding it
-  std::uint32_t union_stamp_ = 0;          // the range being gathered
-  TriangleBoxTreeCache trees_;
+  std::vector<std::uint32_t> union_mark_;     // per triangle: the stamp of the range holding it
+  std::uint32_t union_stamp_ = 0;             // the range being gathered
   std::vector<RigidTransform> sample_poses_;  // scratch, #max_contacts*kGradientSamples
   std::vector<DepthSample> samples_;          // scratch, same size
   LinearizationFaults faults_;

@@ -60,7 +60,7 @@ struct ProximityQueryOptions {
   /// of the traversal tree, so every leaf pair is still decided by the exact tests: the same
   /// pairs are reported. Fronts are not pulled up: when one has grown past twice the size of the
   /// last front made from the roots (plus 64), the next call starts from the roots again, as it
-  /// does after a call with a budget, on other models, or once a model's cache entry was rebuilt.
+  /// does after a call with a budget or on other bounds (HullBounds::id).
   /// Measured: docs/measurements.md.
   bool temporal_coherence = true;
   /// Local reach (an approximation, placed on the speed-vs-error frontier): when ≥ 0,
@@ -115,26 +115,60 @@ struct ProximityQueryStats {
   double query_us = 0.0;
 };
 
+/// A box holding a hull: centre (m) and unit axes (columns) in the model's frame O, and the
+/// half-extents (m) along them; the axes are the principal axes of the hull's vertices
+/// (Gottschalk, Lin & Manocha 1996, "OBBTree"), the extents their vertices' range, padded for
+/// rounding.
+struct OrientedBox {
+  glm::dvec3 center_O{0.0};
+  glm::dmat3 axes_O{1.0};
+  glm::dvec3 half_extents_m{0.0};
+};
+
+/// The coarse query's bounds of one model, one entry per node of its hull hierarchy (one for a
+/// model without hierarchy, whose single hull is hull_vertices_O; node −1 reads it): derived data,
+/// built once with the model's set-up (HullBounds::Of; the remote step builds its scene's in its
+/// constructor) and read by every HullProximityQuery::Query on the model. Frame O, metres.
+struct HullBounds {
+  /// Per node: bounding sphere centre (xyz, the hull's centre_O, or for a single hull its
+  /// vertices' centroid) and radius (w, the largest vertex distance from it).
+  std::vector<glm::dvec4> spheres_O;
+  /// Per node: an oriented box holding the node's hull (a box too big to cull anything for a
+  /// hull without vertices).
+  std::vector<OrientedBox> boxes_O;
+  /// Per node: the outward texture reach (m): the largest positive level-0 texture height over
+  /// the node's triangles, each triangle's texel box grown by a texel (bilinear samples reach that
+  /// far), capped at the model's OutwardReach() (a triangle whose box touches a wrapped border
+  /// counts the cap); ProximityQueryOptions::local_reach_margin_m reads it.
+  std::vector<double> reach_m;
+  /// A number no other HullBounds::Of call gives (copies keep it): a query's temporal coherence
+  /// holds only between calls on the same two bounds' ids.
+  std::uint64_t id = 0;
+
+  /// Builds the bounds of `model` (allocates; throws std::bad_alloc only).
+  static HullBounds Of(const HapticModel& model);
+  /// True when these bounds have one entry per node of `model` (one for a model without
+  /// hierarchy): the check Query makes before reading them.
+  bool Fits(const HapticModel& model) const noexcept;
+  /// Node `node`'s sphere, box and reach (node < 0: entry 0). Throw std::out_of_range for a node
+  /// the bounds do not have.
+  glm::dvec4 Sphere(int node) const { return spheres_O.at(Index(node)); }
+  const OrientedBox& Box(int node) const { return boxes_O.at(Index(node)); }
+  double Reach(int node) const { return reach_m.at(Index(node)); }
+
+ private:
+  static std::size_t Index(int node) noexcept {
+    return node < 0 ? 0 : static_cast<std::size_t>(node);
+  }
+};
+
 /// The proximity query between the convex-hull hierarchies of two posed HapticModels, with all
-/// working memory preallocated: after the first calls on a pair of models (warm-up: the per-model
-/// bounding spheres and boxes are computed and cached on first sight of a model, and the traversal
-/// queue grows to its working size), a call allocates nothing. Not thread-safe: one object per
-/// thread.
-///
-/// Models are cached by address (with their node count and node storage address as a check): a
-/// model must not be changed or destroyed and replaced at the same address while cached; call
-/// ClearCache() after changing models.
+/// working memory preallocated: given the models' HullBounds, after the first calls on a pair of
+/// models (warm-up: the traversal queue grows to its working size) a call allocates nothing. Not
+/// thread-safe: one object per thread.
 class HullProximityQuery {
  public:
-  /// A box holding a hull: centre (m) and unit axes (columns) in the model's frame O, and the
-  /// half-extents (m) along them; the axes are the principal axes of the hull's vertices
-  /// (Gottschalk, Lin & Manocha 1996, "OBBTree"), the extents their vertices' range, padded for
-  /// rounding.
-  struct OrientedBox {
-    glm::dvec3 center_O{0.0};
-    glm::dmat3 axes_O{1.0};
-    glm::dvec3 half_extents_m{0.0};
-  };
+  using OrientedBox = ht::OrientedBox;
   /// Preallocates room for `max_pairs` (≥ 1) results and a traversal queue. Throws
   /// std::invalid_argument when max_pairs < 1.
   explicit HullProximityQuery(int max_pairs = 4096);
@@ -160,7 +194,19 @@ class HullProximityQuery {
   /// point of the overlap region (MPR's) along n, at the two hulls' supporting planes, so
   /// point_A_W − point_B_W = signed_distance_m · normal_W to rounding.
   ///
+  /// `bounds_A` and `bounds_B` are the models' HullBounds; bounds that do not fit their model
+  /// (HullBounds::Fits) give no pairs and count ProximityQueryStats::invalid_input. Temporal
+  /// coherence carries over between calls on the same two bounds (their ids) only.
+  ///
   /// The returned span points into this object and is valid until the next call.
+  std::span<const HullPairContact> Query(const HapticModel& A, const HullBounds& bounds_A,
+                                         const RigidTransform& X_WA, const HapticModel& B,
+                                         const HullBounds& bounds_B, const RigidTransform& X_WB,
+                                         const ProximityQueryOptions& options,
+                                         ProximityQueryStats* stats = nullptr) noexcept;
+  /// The same with both models' bounds built for this call (allocates; no temporal coherence
+  /// between calls): for one-off queries and tests. An allocation failure gives no pairs and
+  /// counts ProximityQueryStats::numerical_faults.
   std::span<const HullPairContact> Query(const HapticModel& A, const RigidTransform& X_WA,
                                          const HapticModel& B, const RigidTransform& X_WB,
                                          const ProximityQueryOptions& options,
@@ -176,40 +222,12 @@ class HullProximityQuery {
   /// Threads the traversal may use (SetThreads; 1 by default).
   int threads() const noexcept { return workers_.empty() ? 1 : static_cast<int>(workers_.size()); }
 
-  /// Forgets the cached per-model data and the previous call's pairs, separating directions and
-  /// front (allocation-free).
-  void ClearCache() noexcept;
-
-  /// The bounding sphere this object uses for node `node` of `model` (−1: the single hull of a
-  /// model without hierarchy): centre in O (m) in xyz, radius (m) in w. For tests. Caches the
-  /// model (may allocate on first sight).
-  glm::dvec4 BoundingSphere(const HapticModel& model, int node);
-  /// The oriented box this object uses for node `node` of `model` (−1: the single hull of a model
-  /// without hierarchy), frame O. For tests. Caches the model (may allocate on first sight).
-  /// Throws std::out_of_range for a node the model does not have.
-  OrientedBox BoundingBox(const HapticModel& model, int node);
-  /// The outward texture reach (m) of `node` of `model` (node < 0 or a model without a hierarchy:
-  /// the model's OutwardReach()), as the local-reach option uses it. Cached like the spheres.
-  double NodeReach(const HapticModel& model, int node);
+  /// Forgets the previous call's pairs, separating directions and front (allocation-free): the
+  /// next call starts from the roots.
+  void ClearCoherence() noexcept;
 
   // The implementation's private types are declared here so that the object can hold them by
   // value (no pimpl allocation); they are not part of the API.
-  struct ModelEntry {
-    const HapticModel* model = nullptr;
-    const void* nodes_data = nullptr;
-    std::size_t node_count = 0;
-    std::size_t hull_vertex_count = 0;
-    /// Per node (one for a single-hull model): bounding sphere centre (xyz, the hull's vertex
-    /// centroid) and radius (w, the largest vertex distance from it), m, frame O.
-    std::vector<glm::dvec4> spheres_O;
-    /// Per node (one for a single-hull model): the node's outward texture reach (m), see
-    /// ProximityQueryOptions::local_reach_margin_m.
-    std::vector<double> reach_m;
-    /// Per node (one for a single-hull model): an oriented box holding the node's hull, frame O.
-    std::vector<OrientedBox> boxes_O;
-    /// Use stamp for least-recently-used replacement.
-    std::uint64_t last_use = 0;
-  };
   struct QueueEntry {
     double key_m;  ///< Lower bound of the signed distance of every leaf pair below (m).
     int node_A;
@@ -249,8 +267,6 @@ class HullProximityQuery {
   };
 
  private:
-  const ModelEntry& Entry(const HapticModel& model);
-
   int capacity_;
   std::vector<HullPairContact> results_;
   std::vector<QueueEntry> queue_;
@@ -266,12 +282,9 @@ class HullProximityQuery {
   std::vector<FrontPair> next_front_;
   bool front_valid_ = false;
   std::size_t front_base_ = 0;
-  std::uint64_t entry_builds_ = 0;  // model entries built (Entry), to tell a cached model anew
-  const HapticModel* previous_A_ = nullptr;
-  const HapticModel* previous_B_ = nullptr;
-  static constexpr int kCacheSlots = 8;
-  ModelEntry cache_[kCacheSlots];
-  std::uint64_t use_counter_ = 0;
+  // The bounds' ids of the previous call (0: none), for temporal coherence.
+  std::uint64_t previous_A_ = 0;
+  std::uint64_t previous_B_ = 0;
   struct Arena;  // the oneTBB task arena, kept out of this header
   std::shared_ptr<Arena> arena_;
   std::vector<Worker> workers_;

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <glm/vec3.hpp>
 #include <limits>
+#include <memory>
 #include <optional>
 #include <span>
 #include <vector>
@@ -38,12 +39,13 @@ inline constexpr double kPatchFacingThreshold = 0.05;
 /// vertex's coordinate along the window's u axis is computed once instead of once per triangle
 /// corner (the same triangles; measured: docs/measurements.md); it is not grown.
 ///
-/// With `tree` built from `model` (TriangleBoxTree::BuiltFrom), only the triangles of the tree's
-/// leaves whose boxes reach the window grown by the margin (and its box along n, grown likewise)
-/// are tested, with the same tests and the same arithmetic: the same triangles in the same
-/// (increasing) order as the whole scan (tested), at a cost that grows with the triangles near the
-/// window rather than with the model. A tree built from another model is ignored (the scan).
-/// The tree path does not use `vertex_scratch`.
+/// With `tree` built from `model` (TriangleBoxTree::Build; the caller keeps the two together),
+/// only the triangles of the tree's leaves whose boxes reach the window grown by the margin (and
+/// its box along n, grown likewise) are tested, with the same tests and the same arithmetic: the
+/// same triangles in the same (increasing) order as the whole scan (tested), at a cost that grows
+/// with the triangles near the window rather than with the model. A tree that does not fit the
+/// model (TriangleBoxTree::Fits) is ignored (the scan). The tree path does not use
+/// `vertex_scratch`.
 ///
 /// With `margin_per_radius` k > 0, each triangle's margin is margin_m + k·r, r the distance of its
 /// farthest corner from the model frame's origin (m): the reach of a rotation by up to k radians
@@ -61,8 +63,9 @@ void SelectPatchTriangles(const HapticModel& model, const RigidTransform& X_WO,
 /// (indices out of range are skipped; a triangle listed twice is picked twice), the result sorted
 /// increasing, so that a subset holding
 /// every triangle the scan would pick gives the scan's list. With subset.all, SelectPatchTriangles
-/// itself (`vertex_scratch` and `tree` are only used then). noexcept; `triangles_out` does not
-/// allocate once its capacity reaches the model's triangle count.
+/// itself, through `tree`, else subset.tree (`vertex_scratch` and the tree are only used then).
+/// noexcept; `triangles_out` does not allocate once its capacity reaches the model's triangle
+/// count.
 void SelectPatchTrianglesIn(TriangleSubset subset, const HapticModel& model,
                             const RigidTransform& X_WO, const ContactWindow& window, PatchSide side,
                             double margin_m, std::vector<int>& triangles_out,
@@ -80,17 +83,20 @@ void SelectPatchTrianglesIn(TriangleSubset subset, const HapticModel& model,
 class TriangleBoxTree {
  public:
   static constexpr int kLeafTriangles = 8;
-  /// Builds the tree over `model`'s triangles (replacing any earlier one) and remembers which
-  /// model and storage it was built from. Throws std::bad_alloc only; a model without triangles
-  /// gives an empty tree (which BuiltFrom still matches: SelectPatchTriangles then finds none).
+  /// Models of fewer triangles get no tree (ForModel): the scan costs less than the walk.
+  static constexpr std::size_t kMinTriangles = 64;
+  /// Builds the tree over `model`'s triangles (replacing any earlier one): derived data of the
+  /// model, built with it; a model edited afterwards needs a new Build. Throws std::bad_alloc
+  /// only; a model without triangles gives an empty tree (SelectPatchTriangles then finds none).
   /// Triangle corners out of the vertex range are not checked (HapticModel::Validate does).
   void Build(const HapticModel& model);
-  /// True when the tree was built from `model` (its address) and the model still has the same
-  /// vertex and triangle storage: addresses, counts, and its first and last vertex and triangle.
-  /// A model edited in place between those (ShiftModelFrame moves every vertex, so it is caught)
-  /// needs a new Build.
-  bool BuiltFrom(const HapticModel& model) const noexcept;
-  /// Forgets the model (BuiltFrom false for every model); keeps the storage.
+  /// The tree of `model`, or null for a model of fewer than kMinTriangles triangles. Throws
+  /// std::bad_alloc only.
+  static std::unique_ptr<TriangleBoxTree> ForModel(const HapticModel& model);
+  /// True when the tree was built over as many triangles and vertices as `model` has: the check
+  /// SelectPatchTriangles makes before reading it.
+  bool Fits(const HapticModel& model) const noexcept;
+  /// Forgets the triangles (Fits false but for a model without any); keeps the storage.
   void Clear() noexcept;
 
   /// One node: its box (centre and half extents, m, in O, widened by a relative 1e-12 so that
@@ -123,37 +129,8 @@ class TriangleBoxTree {
                 std::vector<int>& order, int begin, int end);
   std::vector<Node> nodes_;
   std::vector<Triangle> triangles_data_;  // in leaf order
-  const HapticModel* model_ = nullptr;
-  const void* vertices_ = nullptr;
-  const void* triangles_ = nullptr;
   std::size_t vertex_count_ = 0, triangle_count_ = 0;
-  glm::dvec3 first_vertex_{0.0}, last_vertex_{0.0};
-  glm::ivec3 first_triangle_{0}, last_triangle_{0};
-};
-
-/// The box trees of the models a texture stage meets, for SelectPatchTriangles: up to kSlots
-/// models, each built once (on first sight; this allocates) and kept while it is used.
-class TriangleBoxTreeCache {
- public:
-  static constexpr int kSlots = 8;
-  /// Models of fewer triangles are scanned (nullptr): the scan costs less than the walk.
-  static constexpr std::size_t kMinTriangles = 64;
-  /// A slot is reused for a new model only when unused for this many calls.
-  static constexpr std::uint64_t kStaleCalls = 4096;
-  /// The tree of `model`, or nullptr (the whole scan): for a model of fewer than kMinTriangles
-  /// triangles, when every slot holds a model used within the last kStaleCalls calls (nothing is
-  /// built then, nor allocated), or when building runs out of memory. A model seen for the first
-  /// time, or edited since its tree was built (TriangleBoxTree::BuiltFrom), is built into a free
-  /// or stale slot.
-  const TriangleBoxTree* For(const HapticModel& model) noexcept;
-
- private:
-  struct Slot {
-    TriangleBoxTree tree;
-    std::uint64_t last_use = 0;  // 0: never built
-  };
-  std::array<Slot, kSlots> slots_;
-  std::uint64_t clock_ = 0;
+  bool built_ = false;
 };
 
 /// Renders the heights along n (m, relative to the window centre) of the textured surface of

@@ -83,13 +83,13 @@ struct PipelineOptions {
   /// are no height fields and δ measures the sideways overlap, bounded only by the window's box
   /// (DESIGN.md §4, docs/hard-cases.md). Off: every contact is kept.
   bool grazing_guard = true;
-  /// The guard's texture reach: each pair's two leaves' own (HullProximityQuery::NodeReach; a
+  /// The guard's texture reach: each pair's two leaves' own (HullBounds::reach_m; a
   /// cluster takes its members' largest bound), or both whole models' OutwardReach() (false). The
   /// models' reach is their largest texture height anywhere (5.4 mm on the seed's CAD part, whose
   /// pressed contacts are a fraction of a millimetre), so the local one is the tighter bound.
   bool grazing_guard_local_reach = true;
   /// Separated leaf pairs farther apart than their two leaves' own outward texture reach
-  /// (HullProximityQuery::NodeReach) start no cluster (issue 31): they cannot touch through the
+  /// (HullBounds::reach_m) start no cluster (issue 31): they cannot touch through the
   /// textures, and would only add windows without overlap. Off: every pair the query found.
   bool drop_unreachable_pairs = true;
   /// The contact direction from the contact region (issue 31, change 2, after Kim, Otaduy, Lin &
@@ -449,6 +449,14 @@ class HapticTexturePipeline {
   DepthRefiner refiner_;
   /// One proximity query per touchable object (each keeps its own last-frame pairs).
   std::vector<HullProximityQuery> queries_;
+  /// The coarse query's bounds of the tool and of every touchable (HullBounds::Of), built here
+  /// with the scene.
+  HullBounds tool_bounds_;
+  std::vector<HullBounds> object_bounds_;
+  /// The texture stage's box trees of the tool and of every touchable (TriangleBoxTree::ForModel;
+  /// null: scanned), built here with the scene and carried by each query's triangle subsets.
+  std::unique_ptr<TriangleBoxTree> tool_tree_;
+  std::vector<std::unique_ptr<TriangleBoxTree>> object_trees_;
   /// Broad phase: root bounding spheres of the tool (frame T) and of every touchable (its frame
   /// O), centre in xyz and radius in w (m), so that objects far from the tool cost one distance
   /// test per step.

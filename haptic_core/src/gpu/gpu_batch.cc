@@ -317,14 +317,13 @@ struct GpuPenetrationDepthBackend::Batch {
     const ContactQuery& q = queries[c];
     SelectPatchTrianglesIn(q.environment_triangles, *q.environment, q.X_WO, q.window,
                            PatchSide::kEnvironment, q.window.cell_size_m(), b.patch_triangles_, 0.0,
-                           nullptr, b.trees_.For(*q.environment));
+                           nullptr, nullptr);
   }
   void SelectTool(int c) {
     const ContactWindow& w = queries[c].window;
     const GradientSteps h = GradientSteps::For(w);
     SelectPatchTrianglesIn(queries[c].tool_triangles, tool, X_WT, w, PatchSide::kTool, 2.0 * h.h_x,
-                           b.patch_triangles_, h.h_theta + 1e-9, nullptr, b.trees_.For(tool),
-                           h.h_theta);
+                           b.patch_triangles_, h.h_theta + 1e-9, nullptr, nullptr, h.h_theta);
   }
   // A range of the element buffer: begun, then patch_triangles_ appended to it one or more times
   // (each triangle once: a triangle is marked with the range's stamp when it enters, so that an

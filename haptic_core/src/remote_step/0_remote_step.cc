@@ -97,13 +97,20 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
     for (std::size_t t = 0; t < m.triangles.size(); ++t)
       whole_triangles_[i][t] = static_cast<int>(t);
   }
-  // Broad-phase spheres: the root bounding spheres the proximity queries use anyway. Asking each
-  // query for both of its models here also fills its cache, so the first step does not.
+  // The coarse query's bounds, and the broad phase's spheres: the roots' bounding spheres.
+  tool_bounds_ = HullBounds::Of(*scene.tool);
+  tool_sphere_O_ = tool_bounds_.Sphere(0);
+  object_bounds_.reserve(scene.touchables.size());
   object_spheres_O_.reserve(scene.touchables.size());
-  tool_sphere_O_ = HullProximityQuery().BoundingSphere(*scene.tool, 0);
-  for (std::size_t i = 0; i < scene.touchables.size(); ++i) {
-    object_spheres_O_.push_back(queries_[i].BoundingSphere(*scene.touchables[i].model, 0));
-    queries_[i].BoundingSphere(*scene.tool, 0);
+  for (const TouchableObject& t : scene.touchables) {
+    object_bounds_.push_back(HullBounds::Of(*t.model));
+    object_spheres_O_.push_back(object_bounds_.back().Sphere(0));
+  }
+  // The texture stage's box trees (null for models the scan costs less on).
+  tool_tree_ = TriangleBoxTree::ForModel(*scene.tool);
+  object_trees_.reserve(scene.touchables.size());
+  for (const TouchableObject& t : scene.touchables) {
+    object_trees_.push_back(TriangleBoxTree::ForModel(*t.model));
   }
 }
 
@@ -191,16 +198,22 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
   std::size_t triangles_used = 0;
   // A copy of a cluster's list into candidate_triangles_, or All() where the side has no list
   // (no hierarchy) or it does not fit.
-  const auto keep_list = [&](std::span<const int> list, bool whole_model) {
-    if (!options_.cluster_triangles || whole_model) return TriangleSubset::All();
-    if (list.size() > candidate_triangles_.size() - triangles_used) {
-      ++step_faults_.triangle_lists_overflowed;
-      return TriangleSubset::All();
+  // A cluster's triangles as a candidate's subset, with its model's box tree (for All()).
+  const auto keep_list = [&](std::span<const int> list, bool whole_model,
+                             const TriangleBoxTree* tree) {
+    TriangleSubset subset = TriangleSubset::All();
+    if (options_.cluster_triangles && !whole_model) {
+      if (list.size() > candidate_triangles_.size() - triangles_used) {
+        ++step_faults_.triangle_lists_overflowed;
+      } else {
+        int* first = candidate_triangles_.data() + triangles_used;
+        std::copy(list.begin(), list.end(), first);
+        triangles_used += list.size();
+        subset = TriangleSubset::Of({first, list.size()});
+      }
     }
-    int* first = candidate_triangles_.data() + triangles_used;
-    std::copy(list.begin(), list.end(), first);
-    triangles_used += list.size();
-    return TriangleSubset::Of({first, list.size()});
+    subset.tree = tree;
+    return subset;
   };
   const HapticModel& tool = *scene_.tool;
   // Speculative contacts (PipelineOptions::speculative_lead_s): the most any tool point can close
@@ -261,8 +274,8 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
     // 2. Hull proximity: leaf hull pairs within the tolerance.
     query.time_budget_us = options_.collision_budget_us;
     ProximityQueryStats stats;
-    std::span<const HullPairContact> pairs =
-        queries_[k].Query(tool, X_WT, *object.model, object.X_WO, query, &stats);
+    std::span<const HullPairContact> pairs = queries_[k].Query(
+        tool, tool_bounds_, X_WT, *object.model, object_bounds_[k], object.X_WO, query, &stats);
     if (pairs.empty() && !stats.budget_exhausted && stats.invalid_input == 0) {
       // Nothing within the tolerance: its free space is taken after the loop, and only when no
       // object had a pair (the clearance is 0 otherwise; the hull bound is not free).
@@ -287,15 +300,14 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
         (local_bounds && pairs.size() <= reachable_pairs_.size())) {
       const bool touching =
           floor_m > 0.0 && std::any_of(pairs.begin(), pairs.end(), [&](const HullPairContact& p) {
-            return p.signed_distance_m <= queries_[k].NodeReach(tool, p.node_A) +
-                                              queries_[k].NodeReach(*object.model, p.node_B);
+            return p.signed_distance_m <=
+                   tool_bounds_.Reach(p.node_A) + object_bounds_[k].Reach(p.node_B);
           });
       object_floor_m = touching ? 0.0 : floor_m;
       std::size_t kept = 0;
       for (const HullPairContact& p : pairs) {
         if (kept == reachable_pairs_.size()) break;
-        const double pair_reach =
-            queries_[k].NodeReach(tool, p.node_A) + queries_[k].NodeReach(*object.model, p.node_B);
+        const double pair_reach = tool_bounds_.Reach(p.node_A) + object_bounds_[k].Reach(p.node_B);
         if (options_.drop_unreachable_pairs && p.signed_distance_m > pair_reach) {
           if (p.signed_distance_m > pair_reach + speculative_margin(p, object_floor_m)) {
             ++step_faults_.unreachable_pairs;
@@ -352,13 +364,14 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
             options_.size_windows_from_clusters) {
           RegionWindow(X_WT, k, normal_W, reach, point_W, extent);
         }
-        const ContactCandidate candidate{&object,
-                                         point_W,
-                                         normal_W,
-                                         extent,
-                                         bound,
-                                         keep_list(c.object_triangles, c.object_whole_model),
-                                         keep_list(c.tool_triangles, c.tool_whole_model)};
+        const ContactCandidate candidate{
+            &object,
+            point_W,
+            normal_W,
+            extent,
+            bound,
+            keep_list(c.object_triangles, c.object_whole_model, object_trees_[k].get()),
+            keep_list(c.tool_triangles, c.tool_whole_model, tool_tree_.get())};
         if (floor_only) {
           floor_candidates_[static_cast<std::size_t>(num_floor_candidates++)] = candidate;
         } else {
@@ -413,8 +426,7 @@ void HapticTexturePipeline::RegionWindow(const RigidTransform& X_WT, std::size_t
       ContactWindow::TryMake(point_W, normal_W, options_.window_extent_m, 2);
   if (!axes) return;
   const TouchableObject& object = scene_.touchables[k];
-  const double pair_reach =
-      queries_[k].NodeReach(*scene_.tool, -1) + queries_[k].NodeReach(*object.model, -1);
+  const double pair_reach = tool_bounds_.Reach(-1) + object_bounds_[k].Reach(-1);
   RegionBounds b;
   if (!PairRegionBounds(*scene_.tool, X_WT, hull_A, whole_triangles_[0], *object.model, object.X_WO,
                         hull_B, whole_triangles_[k + 1], pair_reach, point_W, axes->axis_u_W,

@@ -1,7 +1,8 @@
 // Stage 2's bounds per hull node (hull_proximity.h): bounding spheres, oriented boxes
-// (Gottschalk, Lin & Manocha 1996) and the texture's outward reach, cached per model.
+// (Gottschalk, Lin & Manocha 1996) and the texture's outward reach (HullBounds::Of).
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <glm/geometric.hpp>
 #include <limits>
@@ -16,7 +17,7 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 // Per node of `model`'s hierarchy (or one value for a model without one): the largest positive
 // level-0 texture height over the node's triangles, each triangle's texel box grown by a texel
 // (bilinear samples reach that far), capped at the model's OutwardReach(). A triangle whose box
-// touches a wrapped border counts the cap. Allocates `out` (warm-up only).
+// touches a wrapped border counts the cap. Allocates `out`.
 void ComputeNodeReach(const HapticModel& model, std::vector<double>& out) {
   const double cap = model.OutwardReach();
   const auto& nodes = model.hull_hierarchy.nodes;
@@ -87,8 +88,8 @@ void ComputeNodeReach(const HapticModel& model, std::vector<double>& out) {
 // covariance; Gottschalk, Lin & Manocha 1996), its extents the vertices' range along each axis,
 // padded by 1e-9 of the box's size (and 1e-12 m) so that rounding in the query's box tests can
 // never leave a vertex outside. No vertices: a box too big to cull anything.
-HullProximityQuery::OrientedBox FitOrientedBox(const std::vector<glm::dvec3>& vertices) {
-  HullProximityQuery::OrientedBox box;
+OrientedBox FitOrientedBox(const std::vector<glm::dvec3>& vertices) {
+  OrientedBox box;
   if (vertices.empty()) {  // a box that culls nothing
     box.half_extents_m = glm::dvec3(1e30);
     return box;
@@ -127,23 +128,9 @@ HullProximityQuery::OrientedBox FitOrientedBox(const std::vector<glm::dvec3>& ve
 
 }  // namespace
 
-const HullProximityQuery::ModelEntry& HullProximityQuery::Entry(const HapticModel& model) {
-  ++use_counter_;
+HullBounds HullBounds::Of(const HapticModel& model) {
+  static std::atomic<std::uint64_t> next_id{1};
   const auto& nodes = model.hull_hierarchy.nodes;
-  for (ModelEntry& e : cache_) {
-    if (e.model == &model && e.nodes_data == static_cast<const void*>(nodes.data()) &&
-        e.node_count == nodes.size() && e.hull_vertex_count == model.hull_vertices_O.size()) {
-      e.last_use = use_counter_;
-      return e;
-    }
-  }
-  ModelEntry* slot = &cache_[0];
-  for (ModelEntry& e : cache_) {
-    if (e.last_use < slot->last_use) slot = &e;
-  }
-  // The slot is named for `model` only once its spheres are complete: if their allocation throws,
-  // the slot stays empty rather than claiming a model it holds no spheres for.
-  slot->model = nullptr;
   auto sphere = [](const std::vector<glm::dvec3>& vertices, const glm::dvec3* center) {
     glm::dvec3 c(0.0);
     if (center != nullptr) {
@@ -156,43 +143,26 @@ const HullProximityQuery::ModelEntry& HullProximityQuery::Entry(const HapticMode
     for (const auto& v : vertices) r2 = std::max(r2, glm::dot(v - c, v - c));
     return glm::dvec4(c, std::sqrt(r2));
   };
-  slot->spheres_O.clear();
-  slot->boxes_O.clear();
+  HullBounds b;
   if (nodes.empty()) {
-    slot->spheres_O.push_back(sphere(model.hull_vertices_O, nullptr));
-    slot->boxes_O.push_back(FitOrientedBox(model.hull_vertices_O));
+    b.spheres_O.push_back(sphere(model.hull_vertices_O, nullptr));
+    b.boxes_O.push_back(FitOrientedBox(model.hull_vertices_O));
   } else {
-    slot->spheres_O.reserve(nodes.size());
-    slot->boxes_O.reserve(nodes.size());
+    b.spheres_O.reserve(nodes.size());
+    b.boxes_O.reserve(nodes.size());
     for (const HullNode& node : nodes) {
-      slot->spheres_O.push_back(sphere(node.hull.vertices_O, &node.hull.center_O));
-      slot->boxes_O.push_back(FitOrientedBox(node.hull.vertices_O));
+      b.spheres_O.push_back(sphere(node.hull.vertices_O, &node.hull.center_O));
+      b.boxes_O.push_back(FitOrientedBox(node.hull.vertices_O));
     }
   }
-  ComputeNodeReach(model, slot->reach_m);
-  ++entry_builds_;
-  slot->model = &model;
-  slot->nodes_data = nodes.data();
-  slot->node_count = nodes.size();
-  slot->hull_vertex_count = model.hull_vertices_O.size();
-  slot->last_use = use_counter_;
-  return *slot;
+  ComputeNodeReach(model, b.reach_m);
+  b.id = next_id.fetch_add(1, std::memory_order_relaxed);
+  return b;
 }
 
-double HullProximityQuery::NodeReach(const HapticModel& model, int node) {
-  const ModelEntry& e = Entry(model);
-  return e.reach_m.at(node < 0 ? 0 : static_cast<std::size_t>(node));
-}
-
-HullProximityQuery::OrientedBox HullProximityQuery::BoundingBox(const HapticModel& model,
-                                                                int node) {
-  const ModelEntry& e = Entry(model);
-  return e.boxes_O.at(node < 0 ? 0 : static_cast<std::size_t>(node));
-}
-
-glm::dvec4 HullProximityQuery::BoundingSphere(const HapticModel& model, int node) {
-  const ModelEntry& e = Entry(model);
-  return e.spheres_O.at(node < 0 ? 0 : static_cast<std::size_t>(node));
+bool HullBounds::Fits(const HapticModel& model) const noexcept {
+  const std::size_t n = std::max<std::size_t>(model.hull_hierarchy.nodes.size(), 1);
+  return spheres_O.size() == n && boxes_O.size() == n && reach_m.size() == n;
 }
 
 }  // namespace ht

@@ -32,8 +32,6 @@ using hull_geometry::PosedHull;
 using Clock = std::chrono::steady_clock;
 using CoherentPair = HullProximityQuery::CoherentPair;
 using FrontPair = HullProximityQuery::FrontPair;
-using ModelEntry = HullProximityQuery::ModelEntry;
-using OrientedBox = HullProximityQuery::OrientedBox;
 using QueueEntry = HullProximityQuery::QueueEntry;
 using Worker = HullProximityQuery::Worker;
 
@@ -84,7 +82,7 @@ TraversalLists ListsOf(Worker& w) noexcept {
   return {w.queue, w.results, w.current, w.current_far, w.front, w.st};
 }
 
-// What one Query() call's set-up fixed (the models, B's pose in A's frame, their cached bounds,
+// What one Query() call's set-up fixed (the models, B's pose in A's frame, their bounds,
 // the options, the previous call's coherent pairs) and the tests of one node pair. Reads nothing
 // else, and writes only the lists it is given (and front_overflow), so that workers may run it at
 // once on their own lists.
@@ -98,10 +96,10 @@ class NodePairTraversal {
   struct Setup {
     const HapticModel& A;
     const RigidTransform& X_WA;
-    const ModelEntry& entry_A;
+    const HullBounds& bounds_A;
     const HapticModel& B;
     const RigidTransform& X_WB;
-    const ModelEntry& entry_B;
+    const HullBounds& bounds_B;
     const ProximityQueryOptions& options;
     // The previous call's pairs within and beyond their tolerance (sorted by PairLess), read
     // where `coherent`.
@@ -126,8 +124,8 @@ class NodePairTraversal {
 
   // A lower bound (m) of the distance between the two nodes' bounding spheres.
   double SphereBound(int node_A, int node_B) const noexcept {
-    const glm::dvec4& a = s_.entry_A.spheres_O[Slot(node_A)];
-    const glm::dvec4& b = s_.entry_B.spheres_O[Slot(node_B)];
+    const glm::dvec4& a = s_.bounds_A.spheres_O[Slot(node_A)];
+    const glm::dvec4& b = s_.bounds_B.spheres_O[Slot(node_B)];
     return glm::length(glm::dvec3(a) - (R_AB_ * glm::dvec3(b) + p_AB_)) - a.w - b.w;
   }
 
@@ -138,8 +136,8 @@ class NodePairTraversal {
   // six. The test's nine edge-pair axes are left out: they cost more than they cull
   // (docs/measurements.md).
   double BoxGap(int node_A, int node_B, double stop) const noexcept {
-    const OrientedBox& a = s_.entry_A.boxes_O[Slot(node_A)];
-    const OrientedBox& b = s_.entry_B.boxes_O[Slot(node_B)];
+    const OrientedBox& a = s_.bounds_A.boxes_O[Slot(node_A)];
+    const OrientedBox& b = s_.bounds_B.boxes_O[Slot(node_B)];
     const glm::dmat3 R = glm::transpose(a.axes_O) * (R_AB_ * b.axes_O);  // R[j][i] = a_i · b_j
     const glm::dvec3 t = (R_AB_ * b.center_O + p_AB_ - a.center_O) * a.axes_O;  // along a_i
     const glm::dvec3& ea = a.half_extents_m;
@@ -162,18 +160,18 @@ class NodePairTraversal {
   // The tolerance (m) of a node pair: ε, or with local reach the pair's own (never larger).
   double PairTolerance(int node_A, int node_B) const noexcept {
     if (!local_reach_) return eps_;
-    const double ra = s_.entry_A.reach_m[Slot(node_A)];
-    const double rb = s_.entry_B.reach_m[Slot(node_B)];
+    const double ra = s_.bounds_A.reach_m[Slot(node_A)];
+    const double rb = s_.bounds_B.reach_m[Slot(node_B)];
     return std::min(eps_, ra + rb + s_.options.local_reach_margin_m);
   }
 
   // Node `node` of A (−1: its single hull), posed in A's frame.
   PosedHull PoseA(int node) const noexcept {
-    return Pose(s_.A, s_.entry_A, s_.X_WA, nullptr, nullptr, glm::dvec3(0.0), node);
+    return Pose(s_.A, s_.bounds_A, s_.X_WA, nullptr, nullptr, glm::dvec3(0.0), node);
   }
   // Node `node` of B (−1: its single hull), posed in A's frame.
   PosedHull PoseB(int node) const noexcept {
-    return Pose(s_.B, s_.entry_B, s_.X_WB, &R_AB_, &R_BA_, p_AB_, node);
+    return Pose(s_.B, s_.bounds_B, s_.X_WB, &R_AB_, &R_BA_, p_AB_, node);
   }
 
   // The first node pair of a traversal from the roots: queued unless its spheres and boxes cull
@@ -272,9 +270,9 @@ class NodePairTraversal {
     return node < 0 || m.hull_hierarchy.nodes[static_cast<std::size_t>(node)].is_leaf();
   }
 
-  // Node `node` of m (frame O, cached bounds e, world pose X_WO) posed in the query frame by
+  // Node `node` of m (frame O, bounds e, world pose X_WO) posed in the query frame by
   // (R_QO, p_QO); R_QO null: O is the query frame.
-  static PosedHull Pose(const HapticModel& m, const ModelEntry& e, const RigidTransform& X_WO,
+  static PosedHull Pose(const HapticModel& m, const HullBounds& e, const RigidTransform& X_WO,
                         const glm::dmat3* R_QO, const glm::dmat3* R_OQ, const glm::dvec3& p_QO,
                         int node) noexcept {
     PosedHull h;
@@ -650,19 +648,12 @@ void HullProximityQuery::SetThreads(int threads) {
   workers_ = std::move(workers);
 }
 
-void HullProximityQuery::ClearCache() noexcept {
-  for (ModelEntry& e : cache_) {
-    e.model = nullptr;
-    e.nodes_data = nullptr;
-    e.node_count = 0;
-    e.hull_vertex_count = 0;
-    e.spheres_O.clear();
-  }
+void HullProximityQuery::ClearCoherence() noexcept {
   previous_.clear();
   previous_far_.clear();
   front_.clear();
   front_valid_ = false;
-  previous_A_ = previous_B_ = nullptr;
+  previous_A_ = previous_B_ = 0;
 }
 
 std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
@@ -671,6 +662,26 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
                                                            const RigidTransform& X_WB,
                                                            const ProximityQueryOptions& options,
                                                            ProximityQueryStats* stats) noexcept {
+  HullBounds bounds_A, bounds_B;
+  try {
+    bounds_A = HullBounds::Of(A);
+    bounds_B = HullBounds::Of(B);
+  } catch (...) {
+    results_.clear();
+    ClearCoherence();
+    if (stats != nullptr) {
+      *stats = ProximityQueryStats{};
+      stats->numerical_faults = 1;
+    }
+    return {};
+  }
+  return Query(A, bounds_A, X_WA, B, bounds_B, X_WB, options, stats);
+}
+
+std::span<const HullPairContact> HullProximityQuery::Query(
+    const HapticModel& A, const HullBounds& bounds_A, const RigidTransform& X_WA,
+    const HapticModel& B, const HullBounds& bounds_B, const RigidTransform& X_WB,
+    const ProximityQueryOptions& options, ProximityQueryStats* stats) noexcept {
   const Clock::time_point t0 = Clock::now();
   ProximityQueryStats st;
   results_.clear();
@@ -688,7 +699,8 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
   };
 
   if (!IsFiniteRigidTransform(X_WA) || !IsFiniteRigidTransform(X_WB) || !(eps >= 0.0) ||
-      !std::isfinite(eps) || !std::isfinite(options.time_budget_us)) {
+      !std::isfinite(eps) || !std::isfinite(options.time_budget_us) || !bounds_A.Fits(A) ||
+      !bounds_B.Fits(B)) {
     st.invalid_input = 1;
     previous_.clear();
     previous_far_.clear();
@@ -703,24 +715,13 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
     front_valid_ = false;
     return finish();
   }
-  // Warm-up allocations happen here only (first sight of a model).
-  const ModelEntry* entry_A;
-  const ModelEntry* entry_B;
-  const std::uint64_t entry_builds = entry_builds_;
-  try {
-    entry_A = &Entry(A);
-    entry_B = &Entry(B);
-  } catch (...) {
-    st.numerical_faults = 1;
-    front_valid_ = false;
-    return finish();
-  }
   const double budget_us = options.time_budget_us > 0.0 ? options.time_budget_us : kInf;
   const bool unlimited = !(budget_us < kInf) && options.max_node_pair_tests <= 0;
-  const bool coherent = options.temporal_coherence && previous_A_ == &A && previous_B_ == &B;
+  const bool coherent = options.temporal_coherence && bounds_A.id != 0 && bounds_B.id != 0 &&
+                        previous_A_ == bounds_A.id && previous_B_ == bounds_B.id;
   const bool track_front = options.temporal_coherence && !a_single && !b_single && unlimited;
   NodePairTraversal traversal(
-      {A, X_WA, *entry_A, B, X_WB, *entry_B, options, previous_, previous_far_, coherent,
+      {A, X_WA, bounds_A, B, X_WB, bounds_B, options, previous_, previous_far_, coherent,
        track_front, unlimited,
        static_cast<std::size_t>(std::clamp(options.max_pairs, 0, capacity_))});
   TraversalLists main_lists{queue_, results_, current_, current_far_, next_front_, st};
@@ -729,11 +730,10 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
   const std::size_t split_at =
       arena_ != nullptr && unlimited && !a_single && !b_single ? 16 * workers_.size() : 0;
 
-  // Where the traversal starts: the previous call's front (front tracking), or the two roots.
-  // Not from a front whose models were cached anew since (a model changed at its address: its
-  // node indices may no longer exist).
-  const bool use_front = track_front && coherent && front_valid_ && entry_builds_ == entry_builds &&
-                         front_.size() <= 2 * front_base_ + 64;
+  // Where the traversal starts: the previous call's front (front tracking, on the same two
+  // bounds), or the two roots.
+  const bool use_front =
+      track_front && coherent && front_valid_ && front_.size() <= 2 * front_base_ + 64;
   // With workers, each takes its share of the front (RunOnWorkers).
   const bool front_on_workers = use_front && split_at > 0;
   if (use_front) {
@@ -765,8 +765,8 @@ std::span<const HullPairContact> HullProximityQuery::Query(const HapticModel& A,
   front_valid_ = track_front && !st.budget_exhausted && !traversal.front_overflow.load();
   if (front_valid_ && !use_front) front_base_ = next_front_.size();
   front_.swap(next_front_);
-  previous_A_ = &A;
-  previous_B_ = &B;
+  previous_A_ = bounds_A.id;
+  previous_B_ = bounds_B.id;
   return finish();
 }
 

@@ -206,7 +206,7 @@ void TexturePenetrationSolver::RenderEnvironment(const HapticModel& environment,
   const size_t cells = static_cast<size_t>(w.resolution) * w.resolution;
   env_heights_.assign(cells, -std::numeric_limits<float>::infinity());
   SelectPatchTrianglesIn(subset, environment, X_WO, w, PatchSide::kEnvironment, w.cell_size_m(),
-                         env_triangles_, 0.0, &vertex_scratch_, trees_.For(environment));
+                         env_triangles_, 0.0, &vertex_scratch_, nullptr);
   if (path_ == TextureStagePath::kFast) {
     RenderPatchHeightsFast(environment, X_WO, env_triangles_, w, PatchSide::kEnvironment, 0,
                            env_heights_);
@@ -235,7 +235,7 @@ DepthSample TexturePenetrationSolver::Depth(const HapticModel& tool, const Rigid
                                             TriangleSubset tool_triangles) noexcept {
   RenderEnvironment(environment, X_WO, w, environment_triangles);
   SelectPatchTrianglesIn(tool_triangles, tool, X_WT, w, PatchSide::kTool, w.cell_size_m(),
-                         tool_triangles_, 0.0, &vertex_scratch_, trees_.For(tool));
+                         tool_triangles_, 0.0, &vertex_scratch_, nullptr);
   return EvaluateTool(tool, X_WT, w);
 }
 
@@ -496,7 +496,7 @@ ContactLinearization TexturePenetrationSolver::Linearize(
   // the window grown by a cell.
   SelectPatchTrianglesIn(tool_triangles, tool, X_WT, w, PatchSide::kTool, 2.0 * h.h_x,
                          tool_triangles_, from_base ? 1e-9 : h.h_theta + 1e-9, &vertex_scratch_,
-                         trees_.For(tool), from_base ? 0.0 : h.h_theta);
+                         nullptr, from_base ? 0.0 : h.h_theta);
   std::array<DepthSample, kGradientSamples> samples;
   for (DepthSample& s : samples) s = {-std::numeric_limits<double>::infinity(), -1};
   glm::dvec3 lever_W(0.0);  // RotationGradient::kContactLever

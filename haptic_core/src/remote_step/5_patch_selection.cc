@@ -1,12 +1,13 @@
 // Stage 5's choice of the coarse triangles a window renders (penetration_depth.h):
 // SelectPatchTriangles and its subset form, and the box tree over a model's triangles that
-// narrows the scan (TriangleBoxTree, TriangleBoxTreeCache).
+// narrows the scan (TriangleBoxTree).
 
 #include <algorithm>
 #include <cmath>
 #include <glm/geometric.hpp>
 #include <glm/gtc/quaternion.hpp>
 #include <limits>
+#include <memory>
 #include <numeric>
 #include <span>
 #include <vector>
@@ -131,7 +132,8 @@ void SelectPatchTrianglesImpl(const HapticModel& model, const RigidTransform& X_
     return;
   }
   const glm::dvec3* vertices = model.vertices_O.data();
-  if (tree != nullptr && tree->BuiltFrom(model)) {
+  if (tree == nullptr) tree = subset.tree;
+  if (tree != nullptr && tree->Fits(model)) {
     // The leaves whose boxes reach the window, then the same tests on their triangles, in
     // increasing order. A box's extent along an axis a is c·a ± |a|·half; the slack (10⁻¹² of
     // the magnitudes) far exceeds the rounding of that and of a corner's p·a + offset, so a box
@@ -231,9 +233,8 @@ int TreeDepth(std::span<const TriangleBoxTree::Node> nodes, int index) noexcept 
 void TriangleBoxTree::Clear() noexcept {
   nodes_.clear();
   triangles_data_.clear();
-  model_ = nullptr;
-  vertices_ = triangles_ = nullptr;
   vertex_count_ = triangle_count_ = 0;
+  built_ = false;
 }
 
 void TriangleBoxTree::Build(const HapticModel& model) {
@@ -270,19 +271,16 @@ void TriangleBoxTree::Build(const HapticModel& model) {
     Clear();
     return;
   }
-  model_ = &model;
-  vertices_ = model.vertices_O.data();
-  triangles_ = model.triangles.data();
   vertex_count_ = model.vertices_O.size();
   triangle_count_ = nf;
-  if (vertex_count_ > 0) {
-    first_vertex_ = model.vertices_O.front();
-    last_vertex_ = model.vertices_O.back();
-  }
-  if (nf > 0) {
-    first_triangle_ = model.triangles.front();
-    last_triangle_ = model.triangles.back();
-  }
+  built_ = true;
+}
+
+std::unique_ptr<TriangleBoxTree> TriangleBoxTree::ForModel(const HapticModel& model) {
+  if (model.triangles.size() < kMinTriangles) return nullptr;
+  auto tree = std::make_unique<TriangleBoxTree>();
+  tree->Build(model);
+  return tree;
 }
 
 int TriangleBoxTree::BuildNode(const HapticModel& model, const std::vector<glm::dvec3>& centroids,
@@ -322,47 +320,9 @@ int TriangleBoxTree::BuildNode(const HapticModel& model, const std::vector<glm::
   return index;
 }
 
-const TriangleBoxTree* TriangleBoxTreeCache::For(const HapticModel& model) noexcept {
-  if (model.triangles.size() < kMinTriangles) return nullptr;
-  ++clock_;
-  Slot* replace = nullptr;
-  for (Slot& slot : slots_) {
-    if (slot.last_use != 0 && slot.tree.BuiltFrom(model)) {
-      slot.last_use = clock_;
-      return &slot.tree;
-    }
-    // A never-built slot first, else the least recently used one if it is stale.
-    if (replace == nullptr || slot.last_use < replace->last_use) replace = &slot;
-  }
-  if (replace->last_use != 0 && clock_ - replace->last_use <= kStaleCalls) {
-    return nullptr;  // every slot in use: the whole scan, without building (or allocating)
-  }
-  try {
-    replace->tree.Build(model);
-  } catch (...) {  // std::bad_alloc
-    replace->tree.Clear();
-    replace->last_use = 0;
-    return nullptr;
-  }
-  replace->last_use = clock_;
-  return &replace->tree;
-}
-
-bool TriangleBoxTree::BuiltFrom(const HapticModel& model) const noexcept {
-  if (model_ != &model || vertices_ != model.vertices_O.data() ||
-      triangles_ != model.triangles.data() || vertex_count_ != model.vertices_O.size() ||
-      triangle_count_ != model.triangles.size()) {
-    return false;
-  }
-  if (vertex_count_ > 0 &&
-      (model.vertices_O.front() != first_vertex_ || model.vertices_O.back() != last_vertex_)) {
-    return false;
-  }
-  if (triangle_count_ > 0 &&
-      (model.triangles.front() != first_triangle_ || model.triangles.back() != last_triangle_)) {
-    return false;
-  }
-  return true;
+bool TriangleBoxTree::Fits(const HapticModel& model) const noexcept {
+  return built_ && vertex_count_ == model.vertices_O.size() &&
+         triangle_count_ == model.triangles.size();
 }
 
 }  // namespace ht
