@@ -43,6 +43,9 @@ TEST(Explore, TheOperatorFoundTheObjectsAndPressedOnThem) {
   EXPECT_TRUE(s["workspace"]["from_remote"].get<bool>());
   const int targets = s["workspace"]["targets"].get<int>();
   EXPECT_GE(targets, 1);
+  // Each target described in M, as many as counted.
+  ASSERT_TRUE(s["workspace"].contains("targets_M"));
+  EXPECT_EQ(static_cast<int>(s["workspace"]["targets_M"].size()), targets);
   const Trace t = LoadTrace(OutDir());
   ASSERT_GT(t.phase.size(), 1000u);
   EXPECT_EQ(t.phase.front(), "transfer@1");

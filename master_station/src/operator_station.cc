@@ -48,7 +48,6 @@ OperatorStationRun::OperatorStationRun(const StationConfig& config, HapticDevice
                                       : static_cast<std::int64_t>(std::ceil(
                                             experiment.duration_s() * config.loop_rate_hz))),
       period_ns_(static_cast<std::int64_t>(std::llround(1e9 / config.loop_rate_hz))),
-      network_(config, outgoing_, incoming_, counters_, received_scene_),
       display_config_(config.display),
       X_WM_(config.X_WM),
       tool_inertia_(config.tool_inertia) {
@@ -58,6 +57,13 @@ OperatorStationRun::OperatorStationRun(const StationConfig& config, HapticDevice
     trace_ = std::fopen(path.c_str(), "w");
     if (!trace_) throw std::runtime_error("cannot write " + path);
     WriteTraceHeader(trace_);
+  }
+  try {
+    network_.emplace(config, outgoing_, incoming_, counters_, received_scene_);
+  } catch (...) {
+    if (trace_) std::fclose(trace_);
+    trace_ = nullptr;
+    throw;
   }
   // The display (off the loop): the loop hands it the tool, handle and model every few ticks.
   if (display_config_.mode == DisplayConfig::Mode::kHeadless && display_config_.frames_dir.empty())
@@ -69,13 +75,25 @@ OperatorStationRun::OperatorStationRun(const StationConfig& config, HapticDevice
     device_.Open();
   } catch (...) {
     if (trace_) std::fclose(trace_);
+    trace_ = nullptr;
     throw;
   }
-  network_thread_ = std::thread([this] { network_.Run(stop_network_); });
-  recorder_thread_ = std::thread([this] { RecorderThread(); });
+  network_thread_ = std::thread([this] { network_->Run(stop_network_); });
+  try {
+    recorder_thread_ = std::thread([this] { RecorderThread(); });
+  } catch (...) {
+    StopWorkers();
+    throw;
+  }
 }
 
-OperatorStationRun::~OperatorStationRun() { StopWorkers(); }
+OperatorStationRun::~OperatorStationRun() {
+  try {
+    StopWorkers();
+  } catch (...) {
+    // A device that fails to close on an error path: the error being thrown is the one to see.
+  }
+}
 
 void OperatorStationRun::RecorderThread() {
   TraceRow row;
@@ -135,7 +153,7 @@ void OperatorStationRun::WaitForSession() {
   }
   ThrowIfStopped("the session");
   if (counters_.connected.load()) {
-    const wire::SceneLayout layout = network_.layout();
+    const wire::SceneLayout layout = network_->layout();
     if (config_.workspace_from_remote) {
       X_WM_ = layout.X_WT_home;
       if (config_.workspace_origin_W) X_WM_.translation = *config_.workspace_origin_W;
@@ -172,11 +190,12 @@ void OperatorStationRun::WaitForFirstModel() {
   }
   if (counters_.model_accepted.load() != 0) return;
   ThrowIfStopped("the first contact model");
+  if (counters_.model_accepted.load() != 0) return;  // came while the stop was checked
   const bool connected = counters_.connected.load();
   StopWorkers();
   if (counters_.rejected.load()) {
     throw std::runtime_error("the remote node at " + config_.remote_address.ToString() +
-                             " refused the session: " + network_.reject_text());
+                             " refused the session: " + network_->reject_text());
   }
   char timeout[32];
   std::snprintf(timeout, sizeof(timeout), "%g", config_.connect_timeout_s);
@@ -188,7 +207,7 @@ void OperatorStationRun::WaitForFirstModel() {
                    "use the same --key file, and is it a release that speaks protocol v" +
                        std::to_string(wire::kProtocolVersion) +
                        "? an older remote node drops this station's Hello unanswered)") +
-      "; datagrams rejected here: " + std::to_string(network_.rejected_total()));
+      "; datagrams rejected here: " + std::to_string(network_->rejected_total()));
 }
 
 void OperatorStationRun::RunHapticLoop() {
@@ -208,8 +227,8 @@ void OperatorStationRun::RunHapticLoop() {
                      experiment_.phase_names());
     display_thread_ = std::thread([this] { display_->Run(stop_display_); });
   }
-  const std::int64_t started = SteadyNowNs();
   std::thread loop_thread([this] { LoopThread(); });
+  const std::int64_t started = SteadyNowNs();
   PrintProgressUntilDone();
   loop_thread.join();
   elapsed_s_ = (SteadyNowNs() - started) * 1e-9;

@@ -98,7 +98,7 @@ class OperatorStationRun {
   SpscRing<TraceRow> rows_{16384};
   Counters counters_;
   ReceivedScene received_scene_;
-  NetworkWorker network_;
+  std::optional<NetworkWorker> network_;  // made once the trace is open (it binds the socket)
   DisplayConfig display_config_;
   bool display_on_ = false;
   TripleBuffer<DisplayToolState> display_tool_;

@@ -30,7 +30,7 @@ nlohmann::json OperatorStationRun::Summary() const {
       {"targets", scene_M_.targets.size()},
       {"jumps", tick_->counters().workspace_jumps},
       {"models_dropped_from_before_a_jump", tick_->counters().models_from_before_jump},
-      {"scene_M_.targets",
+      {"targets_M",
        [&] {
          nlohmann::json list = nlohmann::json::array();
          for (const ExperimentTarget& t : scene_M_.targets) {
@@ -68,15 +68,15 @@ nlohmann::json OperatorStationRun::Summary() const {
   s["operator_tick_max_us"] = Percentile(rec.compute_us.values(), 1.0);
   s["operator_overruns"] = rec.overruns;
   s["realtime_priority"] = rec.realtime_note;
-  s["remote_rate_hz"] = network_.RemoteRateHz();
-  s["remote_step_p50_us"] = Percentile(network_.remote_step_us(), 0.5);
-  s["remote_step_p99_us"] = Percentile(network_.remote_step_us(), 0.99);
-  s["remote_step_in_contact_p50_us"] = Percentile(network_.contact_step_us(), 0.5);
-  s["remote_step_in_contact_p99_us"] = Percentile(network_.contact_step_us(), 0.99);
-  s["remote_collision_p50_us"] = Percentile(network_.collision_us(), 0.5);
-  s["remote_texture_p50_us"] = Percentile(network_.texture_us(), 0.5);
-  s["rtt_ms_p50"] = Percentile(network_.rtt_ms(), 0.5);
-  s["rtt_ms_p99"] = Percentile(network_.rtt_ms(), 0.99);
+  s["remote_rate_hz"] = network_->RemoteRateHz();
+  s["remote_step_p50_us"] = Percentile(network_->remote_step_us(), 0.5);
+  s["remote_step_p99_us"] = Percentile(network_->remote_step_us(), 0.99);
+  s["remote_step_in_contact_p50_us"] = Percentile(network_->contact_step_us(), 0.5);
+  s["remote_step_in_contact_p99_us"] = Percentile(network_->contact_step_us(), 0.99);
+  s["remote_collision_p50_us"] = Percentile(network_->collision_us(), 0.5);
+  s["remote_texture_p50_us"] = Percentile(network_->texture_us(), 0.5);
+  s["rtt_ms_p50"] = Percentile(network_->rtt_ms(), 0.5);
+  s["rtt_ms_p99"] = Percentile(network_->rtt_ms(), 0.99);
   s["model_age_ms_p50"] = Percentile(ages, 0.5);
   s["model_age_ms_p99"] = Percentile(ages, 0.99);
   s["contacts_max"] = rec.contacts_max;
@@ -142,7 +142,7 @@ nlohmann::json OperatorStationRun::Summary() const {
   s["device_write_faults"] = rec.device_write_faults;
   s["trace_rows_dropped"] = rows_dropped_.load();
   s["trace_rows_over_cap"] = rows_over_cap_;
-  s["transport"] = network_.Summary();
+  s["transport"] = network_->Summary();
   // Packet and bit rates per stream: this side's datagrams (sent plus received) of the whole
   // session, handshake and scene included, over the loop's run time (payload bytes: header,
   // body and MAC; UDP and IP headers not counted). The remote node's own counts are merged under
@@ -154,8 +154,8 @@ nlohmann::json OperatorStationRun::Summary() const {
     stream["kbit_per_s"] = bytes * 8e-3 / std::max(elapsed_s_, 1e-9);
   }
   s["clock_offset_ms"] = s["transport"]["clock"]["offset_ms"];
-  s["model_one_way_ms_p50"] = Percentile(network_.one_way_ms(), 0.5);
-  s["model_one_way_ms_p99"] = Percentile(network_.one_way_ms(), 0.99);
+  s["model_one_way_ms_p50"] = Percentile(network_->one_way_ms(), 0.5);
+  s["model_one_way_ms_p99"] = Percentile(network_->one_way_ms(), 0.99);
   return s;
 }
 

@@ -128,7 +128,7 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   const PipelineOptions options = PipelineOptionsFor(st);
   HapticTexturePipeline pipeline(scene.haptic, options, std::move(backend));
   StepTimings timings;
-  for (int i = 0; i < 3 && !poses_WFt.empty(); ++i) {  // warm-up: caches, GPU uploads
+  for (int i = 0; i < 3 && !poses_WFt.empty(); ++i) {  // warm-up: scratch growth, GPU uploads
     pipeline.Step(poses_WFt.front() * X_FtT, 0, timings);
   }
   std::vector<ContactModel> models;

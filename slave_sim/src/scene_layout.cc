@@ -119,14 +119,25 @@ wire::SceneLayout MakeSceneLayout(const HapticScene& scene) {
   // checked with the coarse proximity query against every touchable at tolerance
   // min(reach, 2 cm) + 1 mm; the home height (clear of everything) at worst.
   HullProximityQuery query(16);
+  // The models' bounds, built once for every check below.
+  const HullBounds tool_bounds = scene.tool ? HullBounds::Of(*scene.tool) : HullBounds{};
+  std::vector<HullBounds> object_bounds;
+  object_bounds.reserve(scene.touchables.size());
+  for (const TouchableObject& o : scene.touchables) {
+    object_bounds.push_back(o.model ? HullBounds::Of(*o.model) : HullBounds{});
+  }
   const auto clear = [&](const RigidTransform& X_WT) {
-    for (const TouchableObject& o : scene.touchables) {
+    for (std::size_t k = 0; k < scene.touchables.size(); ++k) {
+      const TouchableObject& o = scene.touchables[k];
       if (!o.model) continue;
       ProximityQueryOptions options;
       options.tolerance_m = std::min(o.model->OutwardReach(), 0.02) + 1e-3;
       options.max_pairs = 1;
       options.temporal_coherence = false;
-      if (!query.Query(*scene.tool, X_WT, *o.model, o.X_WO, options).empty()) return false;
+      if (!query.Query(*scene.tool, tool_bounds, X_WT, *o.model, object_bounds[k], o.X_WO, options)
+               .empty()) {
+        return false;
+      }
     }
     return true;
   };

@@ -41,12 +41,12 @@ struct ProximityQueryOptions {
   /// Capacity (pairs). Clamped to the capacity given to the constructor. When more pairs are
   /// within ε, the shallowest ones are dropped and counted in ProximityQueryStats::pairs_dropped.
   int max_pairs = 4096;
-  /// Temporal coherence: a leaf pair that was reported by the previous call (same two models)
-  /// starts GJK from its previous separating direction, and its previous normal is one more
-  /// candidate direction when it penetrates. A leaf pair that the previous call tested and found
-  /// farther apart than its tolerance is first tested along the direction GJK separated it by
-  /// then: where the hulls' support intervals along that axis are still more than the tolerance
-  /// apart (a lower bound of their distance) the pair is dropped without GJK
+  /// Temporal coherence: a leaf pair that was reported by the previous call (on the same two
+  /// bounds, HullBounds::id) starts GJK from its previous separating direction, and its previous
+  /// normal is one more candidate direction when it penetrates. A leaf pair that the previous call
+  /// tested and found farther apart than its tolerance is first tested along the direction GJK
+  /// separated it by then: where the hulls' support intervals along that axis are still more than
+  /// the tolerance apart (a lower bound of their distance) the pair is dropped without GJK
   /// (ProximityQueryStats::coherent_culls). Never changes which pairs are reported (a
   /// penetrating pair's depth estimate can only get closer to the true depth). Measured:
   /// docs/measurements.md.
@@ -148,7 +148,9 @@ struct HullBounds {
   /// Builds the bounds of `model` (allocates; throws std::bad_alloc only).
   static HullBounds Of(const HapticModel& model);
   /// True when these bounds have one entry per node of `model` (one for a model without
-  /// hierarchy): the check Query makes before reading them.
+  /// hierarchy): the check Query makes before reading them, which keeps its indices in range; it
+  /// cannot tell another model of the same node count, or this one edited in place (the caller
+  /// keeps bounds with their model).
   bool Fits(const HapticModel& model) const noexcept;
   /// Node `node`'s sphere, box and reach (node < 0: entry 0). Throw std::out_of_range for a node
   /// the bounds do not have.

@@ -43,8 +43,9 @@ inline constexpr double kPatchFacingThreshold = 0.05;
 /// only the triangles of the tree's leaves whose boxes reach the window grown by the margin (and
 /// its box along n, grown likewise) are tested, with the same tests and the same arithmetic: the
 /// same triangles in the same (increasing) order as the whole scan (tested), at a cost that grows
-/// with the triangles near the window rather than with the model. A tree that does not fit the
-/// model (TriangleBoxTree::Fits) is ignored (the scan). The tree path does not use
+/// with the triangles near the window rather than with the model. A tree whose triangle or
+/// vertex count differs from the model's (TriangleBoxTree::Fits) is ignored (the scan); a tree of
+/// another model with the same counts is not caught. The tree path does not use
 /// `vertex_scratch`.
 ///
 /// With `margin_per_radius` k > 0, each triangle's margin is margin_m + k·r, r the distance of its
@@ -94,9 +95,10 @@ class TriangleBoxTree {
   /// std::bad_alloc only.
   static std::unique_ptr<TriangleBoxTree> ForModel(const HapticModel& model);
   /// True when the tree was built over as many triangles and vertices as `model` has: the check
-  /// SelectPatchTriangles makes before reading it.
+  /// SelectPatchTriangles makes before reading it, which keeps its indices in range; it cannot
+  /// tell another model of the same counts, or this one edited in place.
   bool Fits(const HapticModel& model) const noexcept;
-  /// Forgets the triangles (Fits false but for a model without any); keeps the storage.
+  /// Forgets the triangles (Fits false for every model); keeps the storage.
   void Clear() noexcept;
 
   /// One node: its box (centre and half extents, m, in O, widened by a relative 1e-12 so that
