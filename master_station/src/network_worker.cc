@@ -185,11 +185,8 @@ nlohmann::json NetworkWorker::Summary() const {
   t["mtu"] = mtu_;
   t["scene_name"] = scene_name_;
   {
-    t["deadband"] = {
-        {"tool_state_deadband", deadband_agreed_.tool_state_deadband},
-        {"model_deadband", deadband_agreed_.model_deadband},
-        {"tool_state_keepalive_ms", deadband_agreed_.tool_state_keepalive_ms},
-        {"model_keepalive_ms", deadband_agreed_.model_keepalive_ms},
+    t["deadband"] = ToJson(deadband_agreed_);
+    t["deadband"].update(nlohmann::json{
         {"velocity_adaptive", config_.tool_state_deadband.velocity_adaptive},
         {"contact_position_floor_scale_mm",
          config_.tool_state_deadband.contact_position_floor_scale_m * 1e3},
@@ -203,7 +200,7 @@ nlohmann::json NetworkWorker::Summary() const {
         {"tool_states_offered", tool_states_offered_},
         {"tool_states_held_back", tool_states_held_back_},
         {"tool_states_idle_keepalives", idle_keepalives_},
-        {"tool_state_decisions", ToJson(tool_deadband_.counts())}};
+        {"tool_state_decisions", ToJson(tool_deadband_.counts())}});
   }
   t["clock"] = {
       {"samples", clock_.rtt_ms_samples().size()},

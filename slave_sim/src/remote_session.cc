@@ -469,17 +469,14 @@ nlohmann::json RemoteSession::StatsJson(std::size_t scene_objects, std::size_t s
   transport["hello_deferred"] = hello_deferred_;
   transport["rejects_sent"] = rejects_sent_;
   transport["foreign_version_hellos"] = foreign_hellos_;
-  transport["deadband"] = {
-      {"tool_state_deadband", session_welcome_.deadband.tool_state_deadband},
-      {"model_deadband", session_welcome_.deadband.model_deadband},
-      {"tool_state_keepalive_ms", session_welcome_.deadband.tool_state_keepalive_ms},
-      {"model_keepalive_ms", session_welcome_.deadband.model_keepalive_ms},
-      {"compact_models", compact_models_},
-      {"models_held_back", models_held_back_},
-      {"steps_skipped", steps_skipped_},
-      {"steps_by_cause", steps_by_cause},
-      {"keepalives_sent", keepalives_sent_},
-      {"model_decisions", ToJson(model_deadband_.counts())}};
+  transport["deadband"] = ToJson(session_welcome_.deadband);
+  transport["deadband"].update(
+      nlohmann::json{{"compact_models", compact_models_},
+                     {"models_held_back", models_held_back_},
+                     {"steps_skipped", steps_skipped_},
+                     {"steps_by_cause", steps_by_cause},
+                     {"keepalives_sent", keepalives_sent_},
+                     {"model_decisions", ToJson(model_deadband_.counts())}});
   transport["kink_planes"] = {{"sent", kink_planes_sent_}, {"left_out", kink_planes_left_out_}};
   transport["translation_patches"] = {{"sent", patches_sent_}, {"left_out", patches_left_out_}};
   transport["mtu"] = config_.mtu;

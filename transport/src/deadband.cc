@@ -5,6 +5,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "transport/messages.h"
+
 namespace ht {
 namespace {
 
@@ -64,6 +66,13 @@ const char* ToString(DeadbandReason reason) noexcept {
       return "depth";
   }
   return "unknown";
+}
+
+nlohmann::json ToJson(const wire::DeadbandTerms& terms) {
+  return {{"tool_state_deadband", terms.tool_state_deadband},
+          {"model_deadband", terms.model_deadband},
+          {"tool_state_keepalive_ms", terms.tool_state_keepalive_ms},
+          {"model_keepalive_ms", terms.model_keepalive_ms}};
 }
 
 nlohmann::json ToJson(const DeadbandCounts& counts) {

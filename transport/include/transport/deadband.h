@@ -55,6 +55,13 @@ inline constexpr int kDeadbandReasonCount = static_cast<int>(DeadbandReason::kDe
 using DeadbandCounts = std::array<std::uint64_t, kDeadbandReasonCount>;
 /// {"reason": count} for the reasons with a non-zero count, for summaries.
 nlohmann::json ToJson(const DeadbandCounts& counts);
+namespace wire {
+struct DeadbandTerms;  // messages.h
+}  // namespace wire
+/// A session's agreed terms for both sides' summaries: {"tool_state_deadband", "model_deadband"
+/// (Weber fractions), "tool_state_keepalive_ms", "model_keepalive_ms"}; each side adds its own
+/// counts to the object.
+nlohmann::json ToJson(const wire::DeadbandTerms& terms);
 /// "not_sent", "off", "first", "keep_alive", "position", ... for summaries.
 const char* ToString(DeadbandReason reason) noexcept;
 
