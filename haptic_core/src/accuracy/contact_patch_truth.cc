@@ -60,6 +60,39 @@ using patch_truth::SurfaceNormalGrid;
 
 }  // namespace
 
+namespace {
+
+// An intersecting triangle pair of the full-resolution meshes at one pose.
+struct Pair {
+  int tool_tri, env_tri;
+  glm::dvec3 p_W, n_W;  // midpoint of the centroids; environment normal
+};
+
+// A patch's geometry before its depth: the patch, ∇V, the macroscopic normal and the window side.
+struct PatchGeometry {
+  TruthPatch patch;
+  glm::dvec3 dV_dx{0.0}, dV_dtheta{0.0};
+  glm::dvec3 macro_normal{0.0};  // zero where undefined
+  double extent = 0.0;
+};
+
+// One pose's state through ContactPatchTruth::At's steps.
+struct PoseState {
+  RigidTransform X_WT, X_TFt, X_WFe, X_WFt;
+  double k = 0.0;
+  PoseTruth out;
+  std::vector<Pair> pairs;
+  // Each pair's patch, the patches' count, and the pairs near each other whose fine normals
+  // disagree (candidates for step 3a).
+  std::vector<int> patch_of;
+  int num_patches = 0;
+  std::vector<std::pair<int, int>> split_neighbours;
+  std::vector<PatchGeometry> geometries;
+  long long geometry_rays = 0;
+};
+
+}  // namespace
+
 struct ContactPatchTruth::Impl {
   TriangleMesh tool, environment;
   MeshTopology tool_topology, environment_topology;
@@ -171,6 +204,24 @@ struct ContactPatchTruth::Impl {
     }
     return s;
   }
+  // ContactPatchTruth::At's steps on one pose's state, in order.
+  // 1. Every intersecting triangle pair (false: none).
+  bool FindIntersectingPairs(PoseState& s);
+  // 2. Patches: single linkage of the pairs.
+  void LinkPairsIntoPatches(PoseState& s);
+  // 3. Each patch's geometry: inside surfaces, ∇V, direction, centre and window (no δ yet).
+  std::vector<PatchGeometry> Geometries(PoseState& s, const std::vector<int>& patch_index,
+                                        int count);
+  // After merges: `root[q]` is the patch q joins; the patches renumbered, their geometry anew.
+  void Regroup(PoseState& s, const std::vector<int>& root);
+  // 3a. Neighbouring patches on one surface merged.
+  void MergeNeighboursOnOneSurface(PoseState& s);
+  // 3b. Patches that measure one interpenetration twice merged.
+  void MergeDoubleCounted(PoseState& s);
+  // 4. T1 on each patch's window.
+  void LinearizePatches(PoseState& s);
+  // 4a. Shares between neighbouring patches, then the pose's wrench.
+  void SharePenalties(PoseState& s);
 };
 
 ContactPatchTruth::ContactPatchTruth(const TriangleMesh& tool_Ft,
@@ -184,33 +235,24 @@ ContactPatchTruth::ContactPatchTruth(const TriangleMesh& tool_Ft,
 
 ContactPatchTruth::~ContactPatchTruth() = default;
 
-PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform& X_TFt,
-                                const RigidTransform& X_WFe, double k) {
-  PoseTruth out;
-  if (!IsFiniteRigidTransform(X_WT) || !IsFiniteRigidTransform(X_TFt) ||
-      !IsFiniteRigidTransform(X_WFe)) {
-    return out;
-  }
-  Impl& m = *impl_;
-  const ContactPatchTruthOptions& o = m.options;
-  const RigidTransform X_WFt = X_WT * X_TFt;
-
-  // 1. Every intersecting triangle pair (b1: tool triangle, b2: environment triangle).
-  fcl::CollisionObjectd tool(m.tool_fcl, accuracy_detail::ToFcl(X_WFt));
-  fcl::CollisionObjectd env(m.environment_fcl, accuracy_detail::ToFcl(X_WFe));
+bool ContactPatchTruth::Impl::FindIntersectingPairs(PoseState& s) {
+  Impl& m = *this;
+  const ContactPatchTruthOptions& o = options;
+  const RigidTransform& X_WFt = s.X_WFt;
+  const RigidTransform& X_WFe = s.X_WFe;
+  PoseTruth& out = s.out;
+  std::vector<Pair>& pairs = s.pairs;
+  fcl::CollisionObjectd tool_object(m.tool_fcl, accuracy_detail::ToFcl(X_WFt));
+  fcl::CollisionObjectd env_object(m.environment_fcl, accuracy_detail::ToFcl(X_WFe));
   fcl::CollisionRequestd request(static_cast<std::size_t>(o.max_pairs), false);
   fcl::CollisionResultd result;
-  fcl::collide(&tool, &env, request, result);
+  fcl::collide(&tool_object, &env_object, request, result);
   const int np = static_cast<int>(result.numContacts());
   out.pairs = np;
   out.pairs_truncated = np >= o.max_pairs;
-  if (np == 0) return out;
+  if (np == 0) return false;
 
-  struct Pair {
-    int tool_tri, env_tri;
-    glm::dvec3 p_W, n_W;  // midpoint of the centroids; environment normal
-  };
-  std::vector<Pair> pairs(static_cast<std::size_t>(np));
+  pairs.assign(static_cast<std::size_t>(np), Pair{});
   const auto centroid = [](const TriangleMesh& mesh, int f, const RigidTransform& X) {
     const glm::ivec3 t = mesh.triangles[f];
     return X * ((mesh.vertices[t[0]] + mesh.vertices[t[1]] + mesh.vertices[t[2]]) / 3.0);
@@ -242,17 +284,22 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
                                centroid(m.environment, p.env_tri, X_WFe));
     p.n_W = X_WFe.rotation * m.environment_topology.normal_F[p.env_tri];
   }
+  return true;
+}
 
-  // 2. Patches: single linkage of pairs that share a triangle (the intersection curve runs from
-  // pair to pair through shared triangles) or whose points are within merge_distance_m (a hash
-  // grid of that cell), in both cases with agreeing environment normals.
+void ContactPatchTruth::Impl::LinkPairsIntoPatches(PoseState& s) {
+  const ContactPatchTruthOptions& o = options;
+  const std::vector<Pair>& pairs = s.pairs;
+  const int np = static_cast<int>(pairs.size());
+  std::vector<std::pair<int, int>>& split_neighbours = s.split_neighbours;
+  std::vector<int>& patch_of = s.patch_of;
+  int& num_patches = s.num_patches;
   const double d = o.merge_distance_m, d2 = d * d;
   const double cos_max = std::cos(o.max_normal_angle_deg * std::numbers::pi / 180.0);
   CellGrid grid(d);
   for (int i = 0; i < np; ++i) grid.Add(pairs[i].p_W, i);
   std::vector<int> parent(static_cast<std::size_t>(np));
   for (int i = 0; i < np; ++i) parent[i] = i;
-  std::vector<std::pair<int, int>> split_neighbours;
   for (int i = 0; i < np; ++i) {
     grid.ForEachNear(pairs[i].p_W, [&](int j) {
       if (j <= i) return;
@@ -280,127 +327,135 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
   };
   link_shared([](const Pair& p) { return p.tool_tri; });
   link_shared([](const Pair& p) { return p.env_tri; });
-  std::vector<int> patch_of(static_cast<std::size_t>(np), -1);
+  patch_of.assign(static_cast<std::size_t>(np), -1);
   std::vector<int> root_patch(static_cast<std::size_t>(np), -1);
-  int num_patches = 0;
+  num_patches = 0;
   for (int i = 0; i < np; ++i) {
     const int r = Find(parent, i);
     if (root_patch[r] < 0) root_patch[r] = num_patches++;
     patch_of[i] = root_patch[r];
   }
+}
 
-  // 3. Each patch's geometry: inside surfaces, ∇V, direction, centre and window (no δ yet).
-  struct PatchGeometry {
-    TruthPatch patch;
-    glm::dvec3 dV_dx{0.0}, dV_dtheta{0.0};
-    glm::dvec3 macro_normal{0.0};  // zero where undefined
-    double extent = 0.0;
-  };
-  const glm::dvec3 p_WTcm = X_WT.translation;
-  long long geometry_rays = 0;
-  const auto geometry = [&](const std::vector<int>& patch_index, int count) {
-    // Crossing triangles are marked for all patches first, so that no flood fill walks into
-    // another patch's crossing triangles.
-    m.tool_state.assign(m.tool.triangles.size(), 0);
-    m.environment_state.assign(m.environment.triangles.size(), 0);
-    std::vector<std::vector<int>> tool_crossing(count), env_crossing(count);
-    std::vector<glm::dvec3> provisional_n(count, glm::dvec3(0.0));
-    std::vector<std::vector<glm::dvec3>> pair_points(count);
-    std::vector<int> patch_pairs(count, 0);
-    for (int i = 0; i < np; ++i) {
-      const int q = patch_index[i];
-      ++patch_pairs[q];
-      provisional_n[q] += pairs[i].n_W;
-      pair_points[q].push_back(pairs[i].p_W);
-      if (m.tool_state[pairs[i].tool_tri] == 0) {
-        m.tool_state[pairs[i].tool_tri] = 1;
-        tool_crossing[q].push_back(pairs[i].tool_tri);
-      }
-      if (m.environment_state[pairs[i].env_tri] == 0) {
-        m.environment_state[pairs[i].env_tri] = 1;
-        env_crossing[q].push_back(pairs[i].env_tri);
-      }
+std::vector<PatchGeometry> ContactPatchTruth::Impl::Geometries(PoseState& s,
+                                                               const std::vector<int>& patch_index,
+                                                               int count) {
+  Impl& m = *this;
+  const ContactPatchTruthOptions& o = options;
+  const std::vector<Pair>& pairs = s.pairs;
+  const int np = static_cast<int>(pairs.size());
+  const RigidTransform& X_WFt = s.X_WFt;
+  const RigidTransform& X_WFe = s.X_WFe;
+  const glm::dvec3 p_WTcm = s.X_WT.translation;
+  long long& geometry_rays = s.geometry_rays;
+  // Crossing triangles are marked for all patches first, so that no flood fill walks into
+  // another patch's crossing triangles.
+  m.tool_state.assign(m.tool.triangles.size(), 0);
+  m.environment_state.assign(m.environment.triangles.size(), 0);
+  std::vector<std::vector<int>> tool_crossing(count), env_crossing(count);
+  std::vector<glm::dvec3> provisional_n(count, glm::dvec3(0.0));
+  std::vector<std::vector<glm::dvec3>> pair_points(count);
+  std::vector<int> patch_pairs(count, 0);
+  for (int i = 0; i < np; ++i) {
+    const int q = patch_index[i];
+    ++patch_pairs[q];
+    provisional_n[q] += pairs[i].n_W;
+    pair_points[q].push_back(pairs[i].p_W);
+    if (m.tool_state[pairs[i].tool_tri] == 0) {
+      m.tool_state[pairs[i].tool_tri] = 1;
+      tool_crossing[q].push_back(pairs[i].tool_tri);
     }
-    std::vector<PatchGeometry> result(static_cast<std::size_t>(count));
-    for (int q = 0; q < count; ++q) {
-      const double len = glm::length(provisional_n[q]);
-      const glm::dvec3 n0 = len > 1e-12 ? provisional_n[q] / len : glm::dvec3(0, 0, 1);
-      std::vector<glm::dvec3> points = pair_points[q];
-      // Tool points inside the environment: a ray along +n leaves it through its surface.
-      const Impl::SideSums a =
-          m.InsideSurface(m.tool, m.tool_topology, m.tool_state, tool_crossing[q], X_WFt,
-                          m.environment_rays, X_WFe, n0, p_WTcm, points, geometry_rays);
-      // Environment points inside the tool: a ray along −n leaves the tool.
-      const Impl::SideSums b = m.InsideSurface(
-          m.environment, m.environment_topology, m.environment_state, env_crossing[q], X_WFe,
-          m.tool_rays, X_WFt, -n0, p_WTcm, points, geometry_rays);
-      PatchGeometry& g = result[static_cast<std::size_t>(q)];
-      TruthPatch& patch = g.patch;
-      patch.pairs = patch_pairs[q];
-      patch.tool_inside_area_m2 = a.area;
-      patch.environment_inside_area_m2 = b.area;
-      patch.dV_dx_tool_W = a.sum_an_W;
-      patch.dV_dtheta_tool_W = a.sum_a_r_x_n_W;
-      patch.dV_dx_environment_W = -b.sum_an_W;
-      patch.dV_dtheta_environment_W = -b.sum_a_r_x_n_W;
-      g.dV_dx = 0.5 * (patch.dV_dx_tool_W + patch.dV_dx_environment_W);
-      g.dV_dtheta = 0.5 * (patch.dV_dtheta_tool_W + patch.dV_dtheta_environment_W);
-      const double gl = glm::length(g.dV_dx);
-      glm::dvec3 n = gl > 1e-18 ? -g.dV_dx / gl : n0;
-      // The centre: the inside surfaces' area centroid (the pairs' points' mean without them).
-      glm::dvec3 centre(0.0);
-      if (a.area + b.area > 0.0) {
-        centre = (a.sum_ap_W + b.sum_ap_W) / (a.area + b.area);
-      } else {
-        for (const glm::dvec3& p : pair_points[q]) centre += p;
-        centre /= static_cast<double>(pair_points[q].size());
-      }
-      // The depth's direction: the macroscopic normal at the centre (texture finer than
-      // macro_normal_radius_m does not tilt it), where it is defined and on n's side.
-      // Both surfaces' mean normals over the ball; the flatter one (the longer mean) gives the
-      // direction: at a block's edge pressed on a face, the face's. The tool's is turned to point
-      // from the environment to the tool.
-      const glm::dvec3 env_mean =
-          X_WFe.rotation * m.environment_normals.MeanNormal(X_WFe.Inverse() * centre);
-      const glm::dvec3 tool_mean =
-          -(X_WFt.rotation * m.tool_normals.MeanNormal(X_WFt.Inverse() * centre));
-      const glm::dvec3 flatter =
-          glm::length(env_mean) >= glm::length(tool_mean) ? env_mean : tool_mean;
-      const double flat = glm::length(flatter);
-      g.macro_normal = flat > 1e-9 ? flatter / flat : glm::dvec3(0.0);
-      if (o.depth_along_macro_normal && glm::dot(g.macro_normal, n) > 0.0) n = g.macro_normal;
-      // The window holding the inside surfaces' projection.
-      const ContactWindow axes = ContactWindow::Make(centre, n, 1.0, 2);
-      double half = 0.0;
-      for (const glm::dvec3& p : points) {
-        const glm::dvec3 dp = p - centre;
-        half = std::max(
-            {half, std::abs(glm::dot(dp, axes.axis_u_W)), std::abs(glm::dot(dp, axes.axis_v_W))});
-      }
-      g.extent = std::clamp(2.0 * (half + o.window_margin_m), o.min_extent_m, o.max_extent_m);
-      patch.window = ContactWindow::Make(centre, n, g.extent, 50);
+    if (m.environment_state[pairs[i].env_tri] == 0) {
+      m.environment_state[pairs[i].env_tri] = 1;
+      env_crossing[q].push_back(pairs[i].env_tri);
     }
-    return result;
-  };
-  std::vector<PatchGeometry> geometries = geometry(patch_of, num_patches);
-  // After merges: `root[q]` is the patch q joins (root[r] == r for the patches kept); the patches
-  // are renumbered in order, the pairs follow, and the geometry is computed afresh.
-  const auto regroup = [&](const std::vector<int>& root) {
-    std::vector<int> renumber(static_cast<std::size_t>(num_patches), -1);
-    int count = 0;
-    for (int q = 0; q < num_patches; ++q) {
-      if (root[q] == q) renumber[q] = count++;
+  }
+  std::vector<PatchGeometry> result(static_cast<std::size_t>(count));
+  for (int q = 0; q < count; ++q) {
+    const double len = glm::length(provisional_n[q]);
+    const glm::dvec3 n0 = len > 1e-12 ? provisional_n[q] / len : glm::dvec3(0, 0, 1);
+    std::vector<glm::dvec3> points = pair_points[q];
+    // Tool points inside the environment: a ray along +n leaves it through its surface.
+    const Impl::SideSums a =
+        m.InsideSurface(m.tool, m.tool_topology, m.tool_state, tool_crossing[q], X_WFt,
+                        m.environment_rays, X_WFe, n0, p_WTcm, points, geometry_rays);
+    // Environment points inside the tool: a ray along −n leaves the tool.
+    const Impl::SideSums b =
+        m.InsideSurface(m.environment, m.environment_topology, m.environment_state, env_crossing[q],
+                        X_WFe, m.tool_rays, X_WFt, -n0, p_WTcm, points, geometry_rays);
+    PatchGeometry& g = result[static_cast<std::size_t>(q)];
+    TruthPatch& patch = g.patch;
+    patch.pairs = patch_pairs[q];
+    patch.tool_inside_area_m2 = a.area;
+    patch.environment_inside_area_m2 = b.area;
+    patch.dV_dx_tool_W = a.sum_an_W;
+    patch.dV_dtheta_tool_W = a.sum_a_r_x_n_W;
+    patch.dV_dx_environment_W = -b.sum_an_W;
+    patch.dV_dtheta_environment_W = -b.sum_a_r_x_n_W;
+    g.dV_dx = 0.5 * (patch.dV_dx_tool_W + patch.dV_dx_environment_W);
+    g.dV_dtheta = 0.5 * (patch.dV_dtheta_tool_W + patch.dV_dtheta_environment_W);
+    const double gl = glm::length(g.dV_dx);
+    glm::dvec3 n = gl > 1e-18 ? -g.dV_dx / gl : n0;
+    // The centre: the inside surfaces' area centroid (the pairs' points' mean without them).
+    glm::dvec3 centre(0.0);
+    if (a.area + b.area > 0.0) {
+      centre = (a.sum_ap_W + b.sum_ap_W) / (a.area + b.area);
+    } else {
+      for (const glm::dvec3& p : pair_points[q]) centre += p;
+      centre /= static_cast<double>(pair_points[q].size());
     }
-    for (int i = 0; i < np; ++i) patch_of[i] = renumber[root[patch_of[i]]];
-    out.patches_merged += num_patches - count;
-    num_patches = count;
-    geometries = geometry(patch_of, num_patches);
-  };
+    // The depth's direction: the macroscopic normal at the centre (texture finer than
+    // macro_normal_radius_m does not tilt it), where it is defined and on n's side.
+    // Both surfaces' mean normals over the ball; the flatter one (the longer mean) gives the
+    // direction: at a block's edge pressed on a face, the face's. The tool's is turned to point
+    // from the environment to the tool.
+    const glm::dvec3 env_mean =
+        X_WFe.rotation * m.environment_normals.MeanNormal(X_WFe.Inverse() * centre);
+    const glm::dvec3 tool_mean =
+        -(X_WFt.rotation * m.tool_normals.MeanNormal(X_WFt.Inverse() * centre));
+    const glm::dvec3 flatter =
+        glm::length(env_mean) >= glm::length(tool_mean) ? env_mean : tool_mean;
+    const double flat = glm::length(flatter);
+    g.macro_normal = flat > 1e-9 ? flatter / flat : glm::dvec3(0.0);
+    if (o.depth_along_macro_normal && glm::dot(g.macro_normal, n) > 0.0) n = g.macro_normal;
+    // The window holding the inside surfaces' projection.
+    const ContactWindow axes = ContactWindow::Make(centre, n, 1.0, 2);
+    double half = 0.0;
+    for (const glm::dvec3& p : points) {
+      const glm::dvec3 dp = p - centre;
+      half = std::max(
+          {half, std::abs(glm::dot(dp, axes.axis_u_W)), std::abs(glm::dot(dp, axes.axis_v_W))});
+    }
+    g.extent = std::clamp(2.0 * (half + o.window_margin_m), o.min_extent_m, o.max_extent_m);
+    patch.window = ContactWindow::Make(centre, n, g.extent, 50);
+  }
+  return result;
+}
 
-  // 3a. Neighbouring patches on one surface: two patches with pairs within merge_distance_m of
-  // each other, split only because their triangles' own normals disagree (a textured face's
-  // ridge flanks), are one patch when the environment's macroscopic normals at their centres
-  // (area-weighted over macro_normal_radius_m) agree within max_normal_angle_deg.
+void ContactPatchTruth::Impl::Regroup(PoseState& s, const std::vector<int>& root) {
+  const int np = static_cast<int>(s.pairs.size());
+  std::vector<int>& patch_of = s.patch_of;
+  int& num_patches = s.num_patches;
+  PoseTruth& out = s.out;
+  std::vector<PatchGeometry>& geometries = s.geometries;
+  std::vector<int> renumber(static_cast<std::size_t>(num_patches), -1);
+  int count = 0;
+  for (int q = 0; q < num_patches; ++q) {
+    if (root[q] == q) renumber[q] = count++;
+  }
+  for (int i = 0; i < np; ++i) patch_of[i] = renumber[root[patch_of[i]]];
+  out.patches_merged += num_patches - count;
+  num_patches = count;
+  geometries = Geometries(s, patch_of, num_patches);
+}
+
+void ContactPatchTruth::Impl::MergeNeighboursOnOneSurface(PoseState& s) {
+  const ContactPatchTruthOptions& o = options;
+  const double cos_max = std::cos(o.max_normal_angle_deg * std::numbers::pi / 180.0);
+  const int num_patches = s.num_patches;
+  const std::vector<std::pair<int, int>>& split_neighbours = s.split_neighbours;
+  const std::vector<int>& patch_of = s.patch_of;
+  const std::vector<PatchGeometry>& geometries = s.geometries;
   if (o.macro_normal_radius_m > 0.0 && num_patches > 1 && !split_neighbours.empty()) {
     std::vector<int> patch_parent(static_cast<std::size_t>(num_patches));
     for (int q = 0; q < num_patches; ++q) patch_parent[q] = q;
@@ -416,15 +471,15 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
     }
     if (any) {
       for (int q = 0; q < num_patches; ++q) patch_parent[q] = Find(patch_parent, q);
-      regroup(patch_parent);
+      Regroup(s, patch_parent);
     }
   }
+}
 
-  // 3b. Patches that measure one interpenetration twice are one patch (ContactPatchTruthOptions::
-  // overlap_merge_angle_deg, minor_patch_fraction): q joins p when q's centre lies in p's window
-  // (its square, and within half its side along n) with directions within the angle, or when q's
-  // |∇_x V| is a small fraction of p's and q's centre lies in p's window grown by the merge
-  // distance (a sliver at p's edge). Then the merged patches' geometry is computed afresh.
+void ContactPatchTruth::Impl::MergeDoubleCounted(PoseState& s) {
+  const ContactPatchTruthOptions& o = options;
+  const int& num_patches = s.num_patches;
+  const std::vector<PatchGeometry>& geometries = s.geometries;
   const double cos_overlap = std::cos(o.overlap_merge_angle_deg * std::numbers::pi / 180.0);
   for (int round = 0; round < 8 && num_patches > 1; ++round) {
     std::vector<int> order(static_cast<std::size_t>(num_patches));
@@ -461,11 +516,19 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
     for (int q = 0; q < num_patches; ++q) {
       if (merged_into[q] < 0) merged_into[q] = q;
     }
-    regroup(merged_into);
+    Regroup(s, merged_into);
   }
-  out.rays += geometry_rays;
+}
 
-  // 4. T1 on each patch's window.
+void ContactPatchTruth::Impl::LinearizePatches(PoseState& s) {
+  Impl& m = *this;
+  const ContactPatchTruthOptions& o = options;
+  const RigidTransform& X_WT = s.X_WT;
+  const RigidTransform& X_TFt = s.X_TFt;
+  const RigidTransform& X_WFe = s.X_WFe;
+  const double k = s.k;
+  PoseTruth& out = s.out;
+  std::vector<PatchGeometry>& geometries = s.geometries;
   for (PatchGeometry& g : geometries) {
     TruthPatch& patch = g.patch;
     out.dV_dx_W += g.dV_dx;
@@ -480,10 +543,15 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
     out.rays += patch.contact.rays;
     out.patches.push_back(std::move(patch));
   }
+}
 
-  // 4a. Shares: the gap between two patches is the least distance between their pairs' points
-  // (the intersection curves that step 2 links), counted where their directions agree; λ fades
-  // from 1 at merge_distance_m to 0 at merge_distance_m + share_fade_m.
+void ContactPatchTruth::Impl::SharePenalties(PoseState& s) {
+  const ContactPatchTruthOptions& o = options;
+  const double cos_max = std::cos(o.max_normal_angle_deg * std::numbers::pi / 180.0);
+  PoseTruth& out = s.out;
+  const std::vector<Pair>& pairs = s.pairs;
+  const int np = static_cast<int>(pairs.size());
+  const std::vector<int>& patch_of = s.patch_of;
   const int P = static_cast<int>(out.patches.size());
   if (P > 1 && o.share_fade_m > 0.0) {
     const double reach = o.merge_distance_m + o.share_fade_m;
@@ -532,7 +600,30 @@ PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform
     out.F_T_W.force += patch.share * patch.contact.F_T_W.force;
     out.F_T_W.torque += patch.share * patch.contact.F_T_W.torque;
   }
-  return out;
+}
+
+PoseTruth ContactPatchTruth::At(const RigidTransform& X_WT, const RigidTransform& X_TFt,
+                                const RigidTransform& X_WFe, double k) {
+  if (!IsFiniteRigidTransform(X_WT) || !IsFiniteRigidTransform(X_TFt) ||
+      !IsFiniteRigidTransform(X_WFe)) {
+    return PoseTruth{};
+  }
+  Impl& m = *impl_;
+  PoseState s;
+  s.X_WT = X_WT;
+  s.X_TFt = X_TFt;
+  s.X_WFe = X_WFe;
+  s.X_WFt = X_WT * X_TFt;
+  s.k = k;
+  if (!m.FindIntersectingPairs(s)) return s.out;              // 1.
+  m.LinkPairsIntoPatches(s);                                  // 2.
+  s.geometries = m.Geometries(s, s.patch_of, s.num_patches);  // 3.
+  m.MergeNeighboursOnOneSurface(s);                           // 3a.
+  m.MergeDoubleCounted(s);                                    // 3b.
+  s.out.rays += s.geometry_rays;
+  m.LinearizePatches(s);  // 4.
+  m.SharePenalties(s);    // 4a.
+  return s.out;
 }
 
 }  // namespace ht
