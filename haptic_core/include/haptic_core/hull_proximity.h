@@ -170,7 +170,6 @@ struct HullBounds {
 /// thread-safe: one object per thread.
 class HullProximityQuery {
  public:
-  using OrientedBox = ht::OrientedBox;
   /// Preallocates room for `max_pairs` (≥ 1) results and a traversal queue. Throws
   /// std::invalid_argument when max_pairs < 1.
   explicit HullProximityQuery(int max_pairs = 4096);

@@ -449,19 +449,15 @@ class HapticTexturePipeline {
   DepthRefiner refiner_;
   /// One proximity query per touchable object (each keeps its own last-frame pairs).
   std::vector<HullProximityQuery> queries_;
-  /// The coarse query's bounds of the tool and of every touchable (HullBounds::Of), built here
-  /// with the scene.
+  /// The coarse query's bounds of the tool (frame T) and of every touchable (its frame O)
+  /// (HullBounds::Of), built here with the scene. Their root spheres (spheres_O[0]) are the broad
+  /// phase's, so that objects far from the tool cost one distance test per step.
   HullBounds tool_bounds_;
   std::vector<HullBounds> object_bounds_;
   /// The texture stage's box trees of the tool and of every touchable (TriangleBoxTree::ForModel;
   /// null: scanned), built here with the scene and carried by each query's triangle subsets.
   std::unique_ptr<TriangleBoxTree> tool_tree_;
   std::vector<std::unique_ptr<TriangleBoxTree>> object_trees_;
-  /// Broad phase: root bounding spheres of the tool (frame T) and of every touchable (its frame
-  /// O), centre in xyz and radius in w (m), so that objects far from the tool cost one distance
-  /// test per step.
-  glm::dvec4 tool_sphere_O_{0.0};
-  std::vector<glm::dvec4> object_spheres_O_;
   ContactClusterer clusterer_;
   /// The leaf pairs within their local texture reach (PipelineOptions::drop_unreachable_pairs),
   /// as many as the clusterer takes.

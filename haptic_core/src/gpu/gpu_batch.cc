@@ -316,8 +316,7 @@ struct GpuPenetrationDepthBackend::Batch {
   void SelectEnvironment(int c) {
     const ContactQuery& q = queries[c];
     SelectPatchTrianglesIn(q.environment_triangles, *q.environment, q.X_WO, q.window,
-                           PatchSide::kEnvironment, q.window.cell_size_m(), b.patch_triangles_, 0.0,
-                           nullptr, nullptr);
+                           PatchSide::kEnvironment, q.window.cell_size_m(), b.patch_triangles_);
   }
   void SelectTool(int c) {
     const ContactWindow& w = queries[c].window;

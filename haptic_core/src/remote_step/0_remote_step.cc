@@ -97,15 +97,11 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
     for (std::size_t t = 0; t < m.triangles.size(); ++t)
       whole_triangles_[i][t] = static_cast<int>(t);
   }
-  // The coarse query's bounds, and the broad phase's spheres: the roots' bounding spheres.
+  // The coarse query's bounds (their root spheres are the broad phase's).
   tool_bounds_ = HullBounds::Of(*scene.tool);
-  tool_sphere_O_ = tool_bounds_.Sphere(0);
   object_bounds_.reserve(scene.touchables.size());
-  object_spheres_O_.reserve(scene.touchables.size());
-  for (const TouchableObject& t : scene.touchables) {
+  for (const TouchableObject& t : scene.touchables)
     object_bounds_.push_back(HullBounds::Of(*t.model));
-    object_spheres_O_.push_back(object_bounds_.back().Sphere(0));
-  }
   // The texture stage's box trees (null for models the scan costs less on).
   tool_tree_ = TriangleBoxTree::ForModel(*scene.tool);
   object_trees_.reserve(scene.touchables.size());
@@ -223,15 +219,16 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
                          options_.max_speculative_margin_m > 0.0 && IsFinite(V_WT_W) &&
                          (V_WT_W.linear != glm::dvec3(0.0) || V_WT_W.angular != glm::dvec3(0.0));
   const double floor_m = options_.speculative_floor_m;
+  // The broad phase's spheres: the coarse bounds' roots (tool in T, each object in its O).
+  const glm::dvec4& tool_sphere_O = tool_bounds_.spheres_O[0];
   const double speculative_bound = std::max(
       floor_m,
-      !speculate
-          ? 0.0
-          : std::min(options_.max_speculative_margin_m,
-                     options_.speculative_lead_s *
-                         (glm::length(V_WT_W.linear) +
-                          glm::length(V_WT_W.angular) *
-                              (glm::length(glm::dvec3(tool_sphere_O_)) + tool_sphere_O_.w))));
+      !speculate ? 0.0
+                 : std::min(options_.max_speculative_margin_m,
+                            options_.speculative_lead_s *
+                                (glm::length(V_WT_W.linear) +
+                                 glm::length(V_WT_W.angular) *
+                                     (glm::length(glm::dvec3(tool_sphere_O)) + tool_sphere_O.w))));
   // A separated pair's margin beyond its reach: the lead's at its closing speed, at least
   // `object_floor_m` (the floor, for an object the tool touches nowhere; 0 beside a touching
   // pair, where a separated one would only join its cluster and widen its window).
@@ -265,7 +262,8 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
     query.tolerance_m = reach + options_.proximity_margin_m + speculative_bound;
     if (options_.local_reach) query.local_reach_margin_m = options_.proximity_margin_m;
     // 1. Broad phase: bounding spheres in W (the objects may move between steps).
-    const double gap = BoundingSphereGap(tool_sphere_O_, X_WT, object_spheres_O_[k], object.X_WO);
+    const double gap =
+        BoundingSphereGap(tool_sphere_O, X_WT, object_bounds_[k].spheres_O[0], object.X_WO);
     if (gap > query.tolerance_m) {
       ++timings.broad_phase_culled;
       clearance = std::min(clearance, free_space(gap, *object.model));
@@ -406,13 +404,13 @@ double HapticTexturePipeline::ToolMotionBound(const RigidTransform& X_WT_a,
   if (!IsFiniteRigidTransform(X_WT_a) || !IsFiniteRigidTransform(X_WT_b)) {
     return std::numeric_limits<double>::infinity();
   }
-  const glm::dvec3 c_O(tool_sphere_O_);
+  const glm::dvec3 c_O(tool_bounds_.spheres_O[0]);
   const double moved = glm::length(X_WT_b * c_O - X_WT_a * c_O);
   // ‖(R_b − R_a)·u‖ = 2·sin(θ/2)·|u| = 2·|vec(q_a⁻¹·q_b)|·|u| for unit quaternions.
   const glm::dquat q = glm::inverse(X_WT_a.rotation) * X_WT_b.rotation;
   const double turned =
       2.0 * glm::length(glm::dvec3(q.x, q.y, q.z)) / std::max(1e-300, glm::length(q));
-  return moved + turned * tool_sphere_O_.w;
+  return moved + turned * tool_bounds_.spheres_O[0].w;
 }
 
 void HapticTexturePipeline::RegionWindow(const RigidTransform& X_WT, std::size_t k,

@@ -105,7 +105,7 @@ void TexturePenetrationSolver::RenderEnvironment(const HapticModel& environment,
   const size_t cells = static_cast<size_t>(w.resolution) * w.resolution;
   env_heights_.assign(cells, -std::numeric_limits<float>::infinity());
   SelectPatchTrianglesIn(subset, environment, X_WO, w, PatchSide::kEnvironment, w.cell_size_m(),
-                         env_triangles_, 0.0, &vertex_scratch_, nullptr);
+                         env_triangles_, 0.0, &vertex_scratch_);
   if (path_ == TextureStagePath::kFast) {
     RenderPatchHeightsFast(environment, X_WO, env_triangles_, w, PatchSide::kEnvironment, 0,
                            env_heights_);
@@ -134,7 +134,7 @@ DepthSample TexturePenetrationSolver::Depth(const HapticModel& tool, const Rigid
                                             TriangleSubset tool_triangles) noexcept {
   RenderEnvironment(environment, X_WO, w, environment_triangles);
   SelectPatchTrianglesIn(tool_triangles, tool, X_WT, w, PatchSide::kTool, w.cell_size_m(),
-                         tool_triangles_, 0.0, &vertex_scratch_, nullptr);
+                         tool_triangles_, 0.0, &vertex_scratch_);
   return EvaluateTool(tool, X_WT, w);
 }
 

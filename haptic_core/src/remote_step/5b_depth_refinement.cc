@@ -277,10 +277,9 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
   const GradientSteps big = GradientSteps::For(w);
   evaluations_ = 0;
   SelectPatchTrianglesIn(query.environment_triangles, *env_, X_WO_, w, PatchSide::kEnvironment,
-                         cell, env_list_, 0.0, &vertex_scratch_, nullptr);
+                         cell, env_list_, 0.0, &vertex_scratch_);
   SelectPatchTrianglesIn(query.tool_triangles, tool, X_WT, w, PatchSide::kTool, 2.0 * big.h_x,
-                         tool_list_, big.h_theta + 1e-9, &vertex_scratch_, nullptr,
-                         big.h_theta);
+                         tool_list_, big.h_theta + 1e-9, &vertex_scratch_, nullptr, big.h_theta);
   ProjectAll(*env_, X_WO_, PatchSide::kEnvironment, env_list_, env_all_);
   ProjectAll(tool, X_WT, PatchSide::kTool, tool_list_, tool_all_);
 
