@@ -26,6 +26,9 @@ namespace ht {
 /// (PipelineOptions::max_window_extent_m; slave_sim applies it to a --window given alone).
 inline constexpr double kDefaultMaxWindowPerWindow = 3.0;
 
+struct RemoteStepModel;  // src/remote_step/0_remote_step_data.h: what the step derives
+struct RemoteStepData;   // and what it writes
+
 /// Options of the per-step pipeline.
 struct PipelineOptions {
   int grid_resolution = 50;  ///< N of the penetration-depth grid (seed: 50).
@@ -313,23 +316,28 @@ class HapticTexturePipeline {
   /// is not T's origin.
   HapticTexturePipeline(const HapticScene& scene, const PipelineOptions& options,
                         std::unique_ptr<PenetrationDepthBackend> backend = nullptr);
+  ~HapticTexturePipeline();
+  HapticTexturePipeline(HapticTexturePipeline&&) noexcept;
+  HapticTexturePipeline(const HapticTexturePipeline&) = delete;
+  HapticTexturePipeline& operator=(const HapticTexturePipeline&) = delete;
 
   /// Builds the contact model at tool pose X_WT (q0), tagging it with `tool_state_seq`.
   /// A non-finite pose gives an empty model. Fills `timings`. `V_WT_W` is the tool's twist
   /// (linear velocity of T's origin, m/s, and angular velocity, rad/s, both along W), for the
   /// speculative contacts (PipelineOptions::speculative_lead_s); zero (a tool at rest) or
   /// non-finite gives none.
+  /// Nothing throws, and after a warm-up over the scene's contact counts nothing allocates,
+  /// through any allocator (remote_step_alloc_test, on the block on the gear and on the seed's
+  /// hull hierarchies): the step writes only its data block (RemoteStepData, preallocated at
+  /// construction) and the stage objects in it, and the CPU backend a failing GPU backend falls
+  /// back on is built with the pipeline.
+  ContactModel Step(const RigidTransform& X_WT, std::uint64_t tool_state_seq, StepTimings& timings,
+                    const Twist& V_WT_W = {}) noexcept;
+
   /// The most any point of the tool's bounding sphere moves (m) between the tool poses X_WT_a and
   /// X_WT_b (W): |Δ centre| + 2·sin(θ/2)·r, θ the rotation between them. Compare it with
   /// StepTimings::free_space_clearance_m. Non-finite poses give +∞.
   double ToolMotionBound(const RigidTransform& X_WT_a, const RigidTransform& X_WT_b) const noexcept;
-
-  /// Nothing throws, and after a warm-up over the scene's contact counts nothing allocates,
-  /// through any allocator (remote_step_alloc_test, on the block on the gear and on the seed's
-  /// hull hierarchies): the scratch is the pipeline's own, and the CPU backend a failing GPU
-  /// backend falls back on is built with the pipeline.
-  ContactModel Step(const RigidTransform& X_WT, std::uint64_t tool_state_seq, StepTimings& timings,
-                    const Twist& V_WT_W = {}) noexcept;
 
   /// Faults of the backend in use.
   const LinearizationFaults& faults() const noexcept { return backend_->faults(); }
@@ -356,7 +364,7 @@ class HapticTexturePipeline {
     /// (PipelineOptions::share_connected_contacts); not a fault, a count.
     std::int64_t shared_contacts = 0;
   };
-  const StepFaults& step_faults() const noexcept { return step_faults_; }
+  const StepFaults& step_faults() const noexcept;
   /// The backend in use: the one given, or the CPU backend after that one failed.
   const PenetrationDepthBackend& backend() const noexcept { return *backend_; }
   /// Gives up the backend in use (for a pipeline built on a new scene, e.g. after the scene file
@@ -372,30 +380,21 @@ class HapticTexturePipeline {
   /// (object, its pose X_WO, window, stiffness), in the order they were linearized. Valid until
   /// the next Step(). For accuracy studies (the speed-vs-error frontier recomputes each window's
   /// ground truth); the step itself does not need them.
-  std::span<const ContactQuery> last_contact_queries() const noexcept {
-    return {last_queries_.data(), static_cast<std::size_t>(last_num_queries_)};
-  }
+  std::span<const ContactQuery> last_contact_queries() const noexcept;
   /// The linearization of each of last_contact_queries() (depth_m = −∞ where the patches did not
   /// overlap on the window, so that the step left that contact out of its model).
-  std::span<const ContactLinearization> last_linearizations() const noexcept {
-    return {last_results_.data(), static_cast<std::size_t>(last_num_queries_)};
-  }
+  std::span<const ContactLinearization> last_linearizations() const noexcept;
   /// The kGradientSamples depth samples of each of last_contact_queries() (query-major,
   /// GradientSamplePoses() order), as stage 5b left them (refined where PipelineOptions::
   /// refine_depth is on). Valid until the next Step().
-  std::span<const DepthSample> last_depth_samples() const noexcept {
-    return {last_samples_.data(), static_cast<std::size_t>(last_num_queries_) *
-                                      static_cast<std::size_t>(kGradientSamples)};
-  }
+  std::span<const DepthSample> last_depth_samples() const noexcept;
   /// What stage 5b did since construction.
-  const DepthRefinementCounters& depth_refinement_counters() const noexcept {
-    return refiner_.counters();
-  }
+  const DepthRefinementCounters& depth_refinement_counters() const noexcept;
   /// Turns stage 5b's translation patch (DepthRefinementOptions::translation_patch, which sets
   /// it at construction) on or off from the next Step() on; nothing without
   /// PipelineOptions::refine_depth. The remote node turns it on while the operator's round trip
   /// is long (RemoteNodeConfig::translation_patch_rtt_ms). noexcept, allocation-free.
-  void SetTranslationPatch(bool on) noexcept { refiner_.SetTranslationPatch(on); }
+  void SetTranslationPatch(bool on) noexcept;
   /// PipelineOptions::speculative_floor_m (m) from the next Step() on; a negative or non-finite
   /// value is taken as 0. The remote node sets it from the operator's round trip. noexcept.
   void SetSpeculativeFloor(double floor_m) noexcept {
@@ -406,143 +405,69 @@ class HapticTexturePipeline {
   /// Stage 5b's seeds from the last step (DepthRefinementOptions::seed_from_last_step) forgotten:
   /// the next step's contacts start from their grid alone, as after construction (for a pose that
   /// does not follow the last one, e.g. the frontier's spread poses). noexcept.
-  void ForgetLastStep() noexcept { refiner_.ForgetLastStep(); }
+  void ForgetLastStep() noexcept;
   /// Whether stage 5b fills translation patches in the next Step(): the last SetTranslationPatch,
   /// else DepthRefinementOptions::translation_patch; always false without
   /// PipelineOptions::refine_depth (stage 5b does not run).
-  bool translation_patch() const noexcept {
-    return options_.refine_depth && refiner_.options().translation_patch;
-  }
+  bool translation_patch() const noexcept;
 
  private:
-  /// Stages 1–3 for every touchable: appends to candidates_ (up to kMaxContacts) and fills the
-  /// coarse counts and flags of `timings`.
+  /// Stages 1–3 for every touchable: appends to the data's candidates (up to kMaxContacts) and
+  /// fills the coarse counts and flags of `timings`.
   void FindContactCandidates(const RigidTransform& X_WT, const Twist& V_WT_W,
                              StepTimings& timings) noexcept;
-  /// Stage 5: linearizes last_queries_[0, n) into last_results_ with the backend in use (the GPU
-  /// backend takes one window size per batch: windows sized from their clusters go to it in one
-  /// batch per size); when that
-  /// backend fails, switches to the CPU backend for good and recomputes the batch.
+  /// Stage 5: linearizes the data's last_queries[0, n) into last_results with the backend in use
+  /// (the GPU backend takes one window size per batch: windows sized from their clusters go to it
+  /// in one batch per size); when that backend fails, switches to the CPU backend for good and
+  /// recomputes the batch.
   void LinearizeContacts(const RigidTransform& X_WT, int n) noexcept;
   /// Stage 5a (PipelineOptions::split_windows_at_separated_overlap): replaces each linearized
-  /// window of last_queries_[0, n) whose overlap is in separated regions by one window per region
+  /// window of last_queries[0, n) whose overlap is in separated regions by one window per region
   /// (at the end of the batch) and linearizes those; returns the new count.
   int SplitSeparatedOverlap(const RigidTransform& X_WT, int n) noexcept;
-  /// Stage 5a: merges regions_[0, count) where one's centre lies inside another's window (the
-  /// square of its box's larger side plus the margins; the pipeline truth's rule for patches that
-  /// measure one interpenetration twice, contact_patch_truth.h step 3b), until none does; returns
-  /// how many are left (count itself when it exceeds regions_).
+  /// Stage 5a: merges the data's regions[0, count) where one's centre lies inside another's
+  /// window (the square of its box's larger side plus the margins; the pipeline truth's rule for
+  /// patches that measure one interpenetration twice, contact_patch_truth.h step 3b), until none
+  /// does; returns how many are left (count itself when it exceeds the regions kept).
   int MergeRegionsInOneWindow(int count, double cell_m) noexcept;
   /// PipelineOptions::whole_model_region_windows: moves `point_W` to the centre of the contact
   /// region of the tool and touchable `k`, both whole convex models, on the window axes of
   /// `normal_W`, and sets `extent_m` to the region's larger side plus 2·texture_margin_m; leaves
   /// both unchanged when a model has no hull or the region is empty.
   void RegionWindow(const RigidTransform& X_WT, std::size_t k, const glm::dvec3& normal_W,
-                    double texture_margin_m, glm::dvec3& point_W, double& extent_m);
-  /// The CPU backend of these options (fast path, texture_threads threads).
-  std::unique_ptr<PenetrationDepthBackend> MakeCpuBackend() const;
-
-  const HapticScene& scene_;
-  PipelineOptions options_;
-  std::unique_ptr<PenetrationDepthBackend> backend_;
-  /// Stage 5b (PipelineOptions::refine_depth).
-  DepthRefiner refiner_;
-  /// One proximity query per touchable object (each keeps its own last-frame pairs).
-  std::vector<HullProximityQuery> queries_;
-  /// The coarse query's bounds of the tool (frame T) and of every touchable (its frame O)
-  /// (HullBounds::Of), built here with the scene. Their root spheres (spheres_O[0]) are the broad
-  /// phase's, so that objects far from the tool cost one distance test per step.
-  HullBounds tool_bounds_;
-  std::vector<HullBounds> object_bounds_;
-  /// The texture stage's box trees of the tool and of every touchable (TriangleBoxTree::ForModel;
-  /// null: scanned), built here with the scene and carried by each query's triangle subsets.
-  std::unique_ptr<TriangleBoxTree> tool_tree_;
-  std::vector<std::unique_ptr<TriangleBoxTree>> object_trees_;
-  ContactClusterer clusterer_;
-  /// The leaf pairs within their local texture reach (PipelineOptions::drop_unreachable_pairs),
-  /// as many as the clusterer takes.
-  std::vector<HullPairContact> reachable_pairs_;
-  /// The grazing guard's bound of each pair of a query
-  /// (PipelineOptions::grazing_guard_local_reach).
-  std::vector<double> pair_bounds_;
-  /// The candidates' triangle lists (PipelineOptions::cluster_triangles), copied from the
-  /// clusterer, whose lists last only until its next call (one per touchable).
-  std::vector<int> candidate_triangles_;
-  /// The hull of each model without hierarchy whose coarse mesh is convex (ConvexMeshHull; no
-  /// planes otherwise), index 0 the tool and k + 1 touchable k; with
-  /// PipelineOptions::whole_model_region_windows, whole_triangles_ holds the indices of all its
-  /// coarse triangles.
-  std::vector<ConvexHull> whole_hulls_;
-  /// Per model (0 the tool, k + 1 touchable k): the hull bounding the whole model, for the free
-  /// space bound (HullSeparationBound): its hierarchy's root, or whole_hulls_'s; null when neither
-  /// exists.
-  std::vector<const ConvexHull*> root_hulls_;
-  /// Per touchable, the step's scratch: its bounding-sphere gap (m) when the coarse query found no
-  /// pair for it, NaN otherwise (the free space is taken from these after the query loop).
-  std::vector<double> free_space_gaps_;
-  std::vector<std::vector<int>> whole_triangles_;
-  std::array<ContactCandidate, kMaxContacts> candidates_{};
-  int num_candidates_ = 0;
-  // Candidates of objects kept by the speculative floor alone (touched nowhere): they take only
-  // the slots the touching objects leave, after those (FindContactCandidates).
-  std::array<ContactCandidate, kMaxContacts> floor_candidates_{};
-  std::array<ContactQuery, kMaxContacts> last_queries_{};
-  std::array<ContactLinearization, kMaxContacts> last_results_{};
-  /// The depth samples of last_queries_ (kGradientSamples each, query-major), for kink planes.
-  std::array<DepthSample, kMaxContacts * kGradientSamples> last_samples_{};
-  std::array<DepthSample, kMaxContacts * kGradientSamples> size_samples_{};
-  /// One window size's queries and results (the GPU backend's batches), and their indices.
-  std::array<ContactQuery, kMaxContacts> size_queries_{};
-  std::array<ContactLinearization, kMaxContacts> size_results_{};
-  std::array<int, kMaxContacts> size_index_{};
-  /// Stage 5a (split_windows_at_separated_overlap): the solver that renders a window's overlap
-  /// regions (null when off), its regions, and the windows replacing a split one.
-  std::unique_ptr<TexturePenetrationSolver> region_solver_;
+                    double texture_margin_m, glm::dvec3& point_W, double& extent_m) noexcept;
   /// Stage 5c: shares the penalty of contacts [0, n) whose overlaps are one region
   /// (PipelineOptions::share_connected_contacts). Allocation-free.
   void ShareConnectedContacts(const RigidTransform& X_WT, int n) noexcept;
-  /// Stage 5c's scratch: the block occupancy of each contact (kMaxSharingBlocks² a contact).
-  std::vector<std::uint8_t> sharing_occupancy_;
-  std::array<OverlapRegion, 8> regions_{};
-  std::array<ContactQuery, kMaxContacts> split_queries_{};
-  /// Stage 5a: each split window's birth-ramp weight (split_birth_ramp_m), in split_queries_'
-  /// order, applied to its stiffness after stage 5b.
-  std::array<double, kMaxContacts> split_weights_{};
-  /// Stage 5a: the first split window in last_queries_ and how many follow (0: none this step).
-  int split_first_ = 0;
-  int split_count_ = 0;
-  /// Stage 5a with split_keeps_parent_window: each split window's parent (its index in
-  /// last_queries_), and each contact's family for stage 5c (−1: none; a parent and its split
-  /// windows share one, and never share a penalty, ShareConnectedContacts).
-  std::array<int, kMaxContacts> split_parent_{};
-  std::array<int, kMaxContacts> split_family_{};
-  /// reuse_base_render: each contact's overlap field at the base pose from stage 5's render
-  /// (PenetrationDepthBackend::base_overlap; empty: none), in last_queries_' order, for stages 5a
-  /// and 5c; and where the kept contacts' fields are copied before stage 5a's own batch
-  /// overwrites the backend's (kMaxContacts fields of KeptFieldResolution()² floats, reserved
-  /// with reuse_base_render and the split on).
-  std::array<std::span<const float>, kMaxContacts> base_fields_{};
-  std::vector<float> base_field_store_;
+  /// The CPU backend of these options (fast path, texture_threads threads).
+  std::unique_ptr<PenetrationDepthBackend> MakeCpuBackend() const;
   /// Whether the options ask stages 5a and 5c to read stage 5's render (reuse_base_render and a
   /// stage that needs it on), whatever the backend.
   bool WantsBaseRender() const noexcept;
   /// WantsBaseRender() with a backend that keeps the render (the CPU's).
   bool ReusesBaseRender() const noexcept;
   /// The largest window whose field is kept: max_window_resolution() (150 at the defaults), at
-  /// most kMaxKeptFieldResolution (3.7 MB of fields in the backend and as much here; larger
-  /// windows, from grids or windows far past the defaults, are rendered again).
+  /// most kMaxKeptFieldResolution (3.7 MB of fields in the backend and as much in the data;
+  /// larger windows, from grids or windows far past the defaults, are rendered again).
   int KeptFieldResolution() const noexcept;
   static constexpr int kMaxKeptFieldResolution = 256;
-  int last_num_queries_ = 0;
-  StepFaults step_faults_;
+
+  const HapticScene& scene_;
+  PipelineOptions options_;
+  /// What the step derives from the scene, built at construction, constant afterwards
+  /// (src/remote_step/0_remote_step_data.h).
+  std::unique_ptr<const RemoteStepModel> model_;
+  /// Everything the step writes, preallocated at construction (0_remote_step_data.h).
+  std::unique_ptr<RemoteStepData> data_;
+  std::unique_ptr<PenetrationDepthBackend> backend_;
+  /// The CPU backend a backend other than the CPU's falls back on, built with the pipeline (null
+  /// when the backend in use is the CPU's).
+  std::unique_ptr<PenetrationDepthBackend> cpu_fallback_;
   std::int64_t backend_failures_ = 0;
   /// Reserved at construction (kMaxFallbackReason characters; a longer reason is cut), so that
   /// the failing step writes it without allocating.
   std::string fallback_reason_;
   static constexpr std::size_t kMaxFallbackReason = 512;
-  /// The CPU backend a backend other than the CPU's falls back on, built with the pipeline (null
-  /// when the backend in use is the CPU's).
-  std::unique_ptr<PenetrationDepthBackend> cpu_fallback_;
 };
 
 }  // namespace ht

@@ -13,6 +13,7 @@
 #include <string>
 #include <thread>
 
+#include "0_remote_step_data.h"
 #include "haptic_core/broad_phase.h"
 #include "haptic_core/connected_contacts.h"
 #include "haptic_core/contact_assembly.h"
@@ -24,33 +25,18 @@ namespace ht {
 HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
                                              const PipelineOptions& options,
                                              std::unique_ptr<PenetrationDepthBackend> backend)
-    : scene_(scene),
-      options_(options),
-      backend_(std::move(backend)),
-      // Stage 5b's buffers (about 10 MB at 8192 triangles) only where it runs.
-      refiner_(options.depth_refinement, options.refine_depth ? 8192 : 0,
-               options.max_window_resolution()) {
+    : scene_(scene), options_(options), backend_(std::move(backend)) {
   options_.Validate();
-  if (options_.split_windows_at_separated_overlap || options_.share_connected_contacts) {
-    // Stage 5c renders whole windows, up to the largest.
-    region_solver_ = std::make_unique<TexturePenetrationSolver>(
-        std::max({128, options_.grid_resolution,
-                  options_.share_connected_contacts ? options_.max_window_resolution() : 0}),
-        4096, TextureStagePath::kFast);
+  if (!scene.tool) throw std::invalid_argument("scene '" + scene.name + "' has no tool");
+  if (glm::length(scene.tool->center_of_mass_O) > 1e-9) {
+    throw std::invalid_argument("tool model '" + scene.tool->name +
+                                "' must have its centre of mass at its frame origin");
   }
-  if (options_.share_connected_contacts) {
-    sharing_occupancy_.assign(
-        static_cast<std::size_t>(kMaxContacts) * kMaxSharingBlocks * kMaxSharingBlocks, 0);
+  for (const auto& t : scene.touchables) {
+    if (!t.model) throw std::invalid_argument("scene '" + scene.name + "' has an empty touchable");
   }
-  reachable_pairs_.resize(static_cast<std::size_t>(clusterer_.max_pairs()));
-  pair_bounds_.resize(static_cast<std::size_t>(clusterer_.max_pairs()));
-  candidate_triangles_.resize(static_cast<std::size_t>(2 * clusterer_.max_triangles()));
-  queries_.reserve(scene.touchables.size());
-  for (std::size_t i = 0; i < scene.touchables.size(); ++i) {
-    queries_.emplace_back();
-    // The coarse query's traversal on the texture stage's threads too (the same pairs).
-    queries_.back().SetThreads(options_.texture_threads);
-  }
+  model_ = std::make_unique<const RemoteStepModel>(scene, options_);
+  data_ = std::make_unique<RemoteStepData>(scene, options_, KeptFieldResolution());
   if (!backend_) backend_ = MakeCpuBackend();
   // Stages 5a and 5c read stage 5's base render instead of rendering the base pose again.
   if (ReusesBaseRender()) backend_->set_keep_base_overlap(KeptFieldResolution());
@@ -60,68 +46,24 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
     if (WantsBaseRender()) cpu_fallback_->set_keep_base_overlap(KeptFieldResolution());
   }
   fallback_reason_.reserve(kMaxFallbackReason);
-  // Stage 5a's copies of the kept contacts' fields, whatever the backend (a GPU backend that
-  // falls back to the CPU keeps fields from then on).
-  if (options_.reuse_base_render && options_.split_windows_at_separated_overlap) {
-    const auto r = static_cast<std::size_t>(KeptFieldResolution());
-    base_field_store_.resize(kMaxContacts * r * r);
-  }
-  if (!scene.tool) throw std::invalid_argument("scene '" + scene.name + "' has no tool");
-  if (glm::length(scene.tool->center_of_mass_O) > 1e-9) {
-    throw std::invalid_argument("tool model '" + scene.tool->name +
-                                "' must have its centre of mass at its frame origin");
-  }
-  for (const auto& t : scene.touchables) {
-    if (!t.model) throw std::invalid_argument("scene '" + scene.name + "' has an empty touchable");
-  }
-  // The hull of each model without hierarchy whose coarse mesh is convex (within a micrometre:
-  // the procedural models' caps are fans of coplanar triangles), computed once: windows on its
-  // contact region use it (whole_model_region_windows, with its triangle list), and the free
-  // space around the tool takes it, or a hierarchy's root, as the whole model's hull.
-  whole_hulls_.resize(scene.touchables.size() + 1);
-  whole_triangles_.resize(scene.touchables.size() + 1);
-  root_hulls_.assign(scene.touchables.size() + 1, nullptr);
-  free_space_gaps_.assign(scene.touchables.size(), 0.0);
-  for (std::size_t i = 0; i <= scene.touchables.size(); ++i) {
-    const HapticModel& m = i == 0 ? *scene.tool : *scene.touchables[i - 1].model;
-    if (!m.hull_hierarchy.nodes.empty()) {
-      root_hulls_[i] = &m.hull_hierarchy.nodes[0].hull;
-      continue;
-    }
-    std::optional<ConvexHull> hull = ConvexMeshHull(m, 1e-6);
-    if (!hull) continue;
-    whole_hulls_[i] = std::move(*hull);
-    root_hulls_[i] = &whole_hulls_[i];
-    if (!options_.whole_model_region_windows) continue;
-    whole_triangles_[i].resize(m.triangles.size());
-    for (std::size_t t = 0; t < m.triangles.size(); ++t)
-      whole_triangles_[i][t] = static_cast<int>(t);
-  }
-  // The coarse query's bounds (their root spheres are the broad phase's).
-  tool_bounds_ = HullBounds::Of(*scene.tool);
-  object_bounds_.reserve(scene.touchables.size());
-  for (const TouchableObject& t : scene.touchables)
-    object_bounds_.push_back(HullBounds::Of(*t.model));
-  // The texture stage's box trees (null for models the scan costs less on).
-  tool_tree_ = TriangleBoxTree::ForModel(*scene.tool);
-  object_trees_.reserve(scene.touchables.size());
-  for (const TouchableObject& t : scene.touchables) {
-    object_trees_.push_back(TriangleBoxTree::ForModel(*t.model));
-  }
 }
+
+HapticTexturePipeline::~HapticTexturePipeline() = default;
+HapticTexturePipeline::HapticTexturePipeline(HapticTexturePipeline&&) noexcept = default;
 
 ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64_t seq,
                                          StepTimings& timings, const Twist& V_WT_W) noexcept {
+  RemoteStepData& d = *data_;
   using Clock = std::chrono::steady_clock;
-  const auto us = [](Clock::duration d) {
-    return std::chrono::duration<double, std::micro>(d).count();
+  const auto us = [](Clock::duration elapsed) {
+    return std::chrono::duration<double, std::micro>(elapsed).count();
   };
   const auto t0 = Clock::now();
   ContactModel model;
   model.X_WT0 = X_WT;
   model.tool_state_seq = seq;
   timings = {};
-  last_num_queries_ = 0;
+  d.last_num_queries = 0;
   if (!IsFiniteRigidTransform(X_WT)) return model;
 
   // Stages 1–3: broad phase, hull proximity, contact clustering.
@@ -129,56 +71,56 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   const auto t1 = Clock::now();
   // Stage 4: one window per cluster. The batch lives in members, so that last_contact_queries()
   // can show it after the step.
-  last_num_queries_ =
-      MakeContactQueries({candidates_.data(), static_cast<std::size_t>(num_candidates_)},
+  d.last_num_queries =
+      MakeContactQueries({d.candidates.data(), static_cast<std::size_t>(d.num_candidates)},
                          options_.window_extent_m, options_.max_window_extent_m,
-                         options_.grid_resolution, last_queries_, step_faults_.bad_windows);
+                         options_.grid_resolution, d.last_queries, d.step_faults.bad_windows);
   // Stage 5: texture penetration depth and its gradient, linearized, for the whole batch.
-  LinearizeContacts(X_WT, last_num_queries_);
-  for (int i = 0; i < last_num_queries_; ++i) {
-    base_fields_[static_cast<std::size_t>(i)] =
+  LinearizeContacts(X_WT, d.last_num_queries);
+  for (int i = 0; i < d.last_num_queries; ++i) {
+    d.base_fields[static_cast<std::size_t>(i)] =
         ReusesBaseRender() ? backend_->base_overlap(static_cast<std::size_t>(i))
                            : std::span<const float>{};
   }
   // Stage 5a: a window whose overlap is in separated regions becomes one window per region.
-  if (region_solver_ && options_.split_windows_at_separated_overlap) {
-    last_num_queries_ = SplitSeparatedOverlap(X_WT, last_num_queries_);
+  if (d.region_solver && options_.split_windows_at_separated_overlap) {
+    d.last_num_queries = SplitSeparatedOverlap(X_WT, d.last_num_queries);
   }
   // Stage 5a's weights (split_birth_ramp_m, split_bridge_fade_m): a region other than its
   // window's deepest fades in with its overlap and out as it joins a deeper one.
-  for (int k = 0; k < split_count_; ++k) {
-    last_results_[static_cast<std::size_t>(split_first_ + k)].stiffness_n_per_m *=
-        split_weights_[static_cast<std::size_t>(k)];
+  for (int k = 0; k < d.split_count; ++k) {
+    d.last_results[static_cast<std::size_t>(d.split_first + k)].stiffness_n_per_m *=
+        d.split_weights[static_cast<std::size_t>(k)];
   }
   // Kink planes are added below (stage 5b's translation arms, then the rotation arms).
-  for (int i = 0; i < last_num_queries_; ++i) last_results_[i].num_kink_planes = 0;
+  for (int i = 0; i < d.last_num_queries; ++i) d.last_results[i].num_kink_planes = 0;
   // Stage 5b: δ refined to the finest texture level, its gradient at texel scale (issue 32).
   if (options_.refine_depth) {
-    refiner_.BeginStep();
-    for (int i = 0; i < last_num_queries_; ++i) {
-      refiner_.Refine(*scene_.tool, X_WT, last_queries_[i],
-                      {last_samples_.data() + static_cast<std::size_t>(i) * kGradientSamples,
-                       static_cast<std::size_t>(kGradientSamples)},
-                      last_results_[i]);
+    d.refiner.BeginStep();
+    for (int i = 0; i < d.last_num_queries; ++i) {
+      d.refiner.Refine(*scene_.tool, X_WT, d.last_queries[i],
+                       {d.last_samples.data() + static_cast<std::size_t>(i) * kGradientSamples,
+                        static_cast<std::size_t>(kGradientSamples)},
+                       d.last_results[i]);
     }
   }
   if (options_.kink_planes) {
-    for (int i = 0; i < last_num_queries_; ++i) {
-      AddKinkPlanes(last_queries_[i].window,
-                    {last_samples_.data() + static_cast<std::size_t>(i) * kGradientSamples,
+    for (int i = 0; i < d.last_num_queries; ++i) {
+      AddKinkPlanes(d.last_queries[i].window,
+                    {d.last_samples.data() + static_cast<std::size_t>(i) * kGradientSamples,
                      static_cast<std::size_t>(kGradientSamples)},
-                    X_WT.translation, last_results_[i], options_.kink_planes_own_slope,
+                    X_WT.translation, d.last_results[i], options_.kink_planes_own_slope,
                     options_.kink_hang_other_arm);
     }
   }
   // The grazing guard: a δ its coarse geometry cannot hold is the sideways overlap along a
   // grazing direction, not a penetration; the contact is left out of the model (its linearization
   // reads −∞, as a contact whose patches do not overlap).
-  step_faults_.grazing_dropped +=
-      DropGrazingContacts({last_queries_.data(), static_cast<std::size_t>(last_num_queries_)},
-                          {last_results_.data(), static_cast<std::size_t>(last_num_queries_)});
+  d.step_faults.grazing_dropped +=
+      DropGrazingContacts({d.last_queries.data(), static_cast<std::size_t>(d.last_num_queries)},
+                          {d.last_results.data(), static_cast<std::size_t>(d.last_num_queries)});
   // Stage 5c: contacts whose overlaps are one region share one penalty.
-  ShareConnectedContacts(X_WT, last_num_queries_);
+  ShareConnectedContacts(X_WT, d.last_num_queries);
   // Stage 6: the contact model.
   AssembleContactModel(last_linearizations(), model);
   const auto t2 = Clock::now();
@@ -190,19 +132,21 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
 
 void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, const Twist& V_WT_W,
                                                   StepTimings& timings) noexcept {
-  num_candidates_ = 0;
+  RemoteStepData& d = *data_;
+  const RemoteStepModel& m = *model_;
+  d.num_candidates = 0;
   std::size_t triangles_used = 0;
-  // A copy of a cluster's list into candidate_triangles_, or All() where the side has no list
+  // A copy of a cluster's list into d.candidate_triangles, or All() where the side has no list
   // (no hierarchy) or it does not fit.
   // A cluster's triangles as a candidate's subset, with its model's box tree (for All()).
   const auto keep_list = [&](std::span<const int> list, bool whole_model,
                              const TriangleBoxTree* tree) {
     TriangleSubset subset = TriangleSubset::All();
     if (options_.cluster_triangles && !whole_model) {
-      if (list.size() > candidate_triangles_.size() - triangles_used) {
-        ++step_faults_.triangle_lists_overflowed;
+      if (list.size() > d.candidate_triangles.size() - triangles_used) {
+        ++d.step_faults.triangle_lists_overflowed;
       } else {
-        int* first = candidate_triangles_.data() + triangles_used;
+        int* first = d.candidate_triangles.data() + triangles_used;
         std::copy(list.begin(), list.end(), first);
         triangles_used += list.size();
         subset = TriangleSubset::Of({first, list.size()});
@@ -220,7 +164,7 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
                          (V_WT_W.linear != glm::dvec3(0.0) || V_WT_W.angular != glm::dvec3(0.0));
   const double floor_m = options_.speculative_floor_m;
   // The broad phase's spheres: the coarse bounds' roots (tool in T, each object in its O).
-  const glm::dvec4& tool_sphere_O = tool_bounds_.spheres_O[0];
+  const glm::dvec4& tool_sphere_O = m.tool_bounds.spheres_O[0];
   const double speculative_bound = std::max(
       floor_m,
       !speculate ? 0.0
@@ -253,7 +197,7 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
   double clearance = std::numeric_limits<double>::infinity();
   bool any_passed = false;
   int num_floor_candidates = 0;
-  std::fill(free_space_gaps_.begin(), free_space_gaps_.end(),
+  std::fill(d.free_space_gaps.begin(), d.free_space_gaps.end(),
             std::numeric_limits<double>::quiet_NaN());
   for (std::size_t k = 0; k < scene_.touchables.size(); ++k) {
     const TouchableObject& object = scene_.touchables[k];
@@ -263,7 +207,7 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
     if (options_.local_reach) query.local_reach_margin_m = options_.proximity_margin_m;
     // 1. Broad phase: bounding spheres in W (the objects may move between steps).
     const double gap =
-        BoundingSphereGap(tool_sphere_O, X_WT, object_bounds_[k].spheres_O[0], object.X_WO);
+        BoundingSphereGap(tool_sphere_O, X_WT, m.object_bounds[k].spheres_O[0], object.X_WO);
     if (gap > query.tolerance_m) {
       ++timings.broad_phase_culled;
       clearance = std::min(clearance, free_space(gap, *object.model));
@@ -272,12 +216,12 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
     // 2. Hull proximity: leaf hull pairs within the tolerance.
     query.time_budget_us = options_.collision_budget_us;
     ProximityQueryStats stats;
-    std::span<const HullPairContact> pairs = queries_[k].Query(
-        tool, tool_bounds_, X_WT, *object.model, object_bounds_[k], object.X_WO, query, &stats);
+    std::span<const HullPairContact> pairs = d.queries[k].Query(
+        tool, m.tool_bounds, X_WT, *object.model, m.object_bounds[k], object.X_WO, query, &stats);
     if (pairs.empty() && !stats.budget_exhausted && stats.invalid_input == 0) {
       // Nothing within the tolerance: its free space is taken after the loop, and only when no
       // object had a pair (the clearance is 0 otherwise; the hull bound is not free).
-      free_space_gaps_[k] = gap;
+      d.free_space_gaps[k] = gap;
     } else {
       any_passed = true;
     }
@@ -295,26 +239,27 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
     // tool touches it nowhere (no pair within its textures' reach), else 0.
     double object_floor_m = 0.0;
     if (options_.drop_unreachable_pairs || options_.region_normals ||
-        (local_bounds && pairs.size() <= reachable_pairs_.size())) {
+        (local_bounds && pairs.size() <= d.reachable_pairs.size())) {
       const bool touching =
           floor_m > 0.0 && std::any_of(pairs.begin(), pairs.end(), [&](const HullPairContact& p) {
             return p.signed_distance_m <=
-                   tool_bounds_.Reach(p.node_A) + object_bounds_[k].Reach(p.node_B);
+                   m.tool_bounds.Reach(p.node_A) + m.object_bounds[k].Reach(p.node_B);
           });
       object_floor_m = touching ? 0.0 : floor_m;
       std::size_t kept = 0;
       for (const HullPairContact& p : pairs) {
-        if (kept == reachable_pairs_.size()) break;
-        const double pair_reach = tool_bounds_.Reach(p.node_A) + object_bounds_[k].Reach(p.node_B);
+        if (kept == d.reachable_pairs.size()) break;
+        const double pair_reach =
+            m.tool_bounds.Reach(p.node_A) + m.object_bounds[k].Reach(p.node_B);
         if (options_.drop_unreachable_pairs && p.signed_distance_m > pair_reach) {
           if (p.signed_distance_m > pair_reach + speculative_margin(p, object_floor_m)) {
-            ++step_faults_.unreachable_pairs;
+            ++d.step_faults.unreachable_pairs;
             continue;
           }
-          ++step_faults_.speculative_pairs;
+          ++d.step_faults.speculative_pairs;
         }
-        pair_bounds_[kept] = std::max(0.0, -p.signed_distance_m) + pair_reach + cell;
-        HullPairContact& kept_pair = reachable_pairs_[kept++];
+        d.pair_bounds[kept] = std::max(0.0, -p.signed_distance_m) + pair_reach + cell;
+        HullPairContact& kept_pair = d.reachable_pairs[kept++];
         kept_pair = p;
         if (options_.region_normals) {
           // The pair's direction from its contact region: the coarse triangles of each leaf
@@ -325,8 +270,8 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
           if (len > 0.0) kept_pair.normal_W = region / len;
         }
       }
-      pairs = {reachable_pairs_.data(), kept};
-      if (local_bounds) pair_bounds = {pair_bounds_.data(), kept};
+      pairs = {d.reachable_pairs.data(), kept};
+      if (local_bounds) pair_bounds = {d.pair_bounds.data(), kept};
     }
     if (pairs.empty()) continue;
     // 3. Contact clustering: one window per cluster, sized from its members' spread between the
@@ -343,14 +288,14 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
         options_.cluster_triangles && options_.share_leaves_between_disjoint_windows;
     clustering.tool_leaves_follow_object_leaves =
         options_.cluster_triangles && options_.tool_leaves_follow_object_leaves;
-    const std::span<const ContactCluster> clusters = clusterer_.Cluster(
+    const std::span<const ContactCluster> clusters = d.clusterer.Cluster(
         pairs, tool.hull_hierarchy, object.model->hull_hierarchy, clustering, pair_bounds);
     timings.clusters += static_cast<int>(clusters.size());
     // An object kept by the floor alone waits until every touching object has its candidates.
     const bool floor_only = object_floor_m > 0.0;
     for (const ContactCluster& c : clusters) {
       if (floor_only ? num_floor_candidates < options_.max_contacts
-                     : num_candidates_ < options_.max_contacts) {
+                     : d.num_candidates < options_.max_contacts) {
         const glm::dvec3 normal_W = c.normal_W;
         const double bound = !options_.grazing_guard ? std::numeric_limits<double>::infinity()
                              : std::isfinite(c.depth_bound_m)
@@ -368,30 +313,30 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
             normal_W,
             extent,
             bound,
-            keep_list(c.object_triangles, c.object_whole_model, object_trees_[k].get()),
-            keep_list(c.tool_triangles, c.tool_whole_model, tool_tree_.get())};
+            keep_list(c.object_triangles, c.object_whole_model, m.object_trees[k].get()),
+            keep_list(c.tool_triangles, c.tool_whole_model, m.tool_tree.get())};
         if (floor_only) {
-          floor_candidates_[static_cast<std::size_t>(num_floor_candidates++)] = candidate;
+          d.floor_candidates[static_cast<std::size_t>(num_floor_candidates++)] = candidate;
         } else {
-          candidates_[static_cast<std::size_t>(num_candidates_++)] = candidate;
+          d.candidates[static_cast<std::size_t>(d.num_candidates++)] = candidate;
         }
       }
     }
   }
-  for (int i = 0; i < num_floor_candidates && num_candidates_ < options_.max_contacts; ++i) {
-    candidates_[static_cast<std::size_t>(num_candidates_++)] =
-        floor_candidates_[static_cast<std::size_t>(i)];
+  for (int i = 0; i < num_floor_candidates && d.num_candidates < options_.max_contacts; ++i) {
+    d.candidates[static_cast<std::size_t>(d.num_candidates++)] =
+        d.floor_candidates[static_cast<std::size_t>(i)];
   }
   if (!any_passed) {
     // Every object culled or without a pair: each of the latter's free space is its whole hulls'
     // separation (or the spheres' gap, whichever bound is larger) beyond the largest tolerance.
     for (std::size_t k = 0; k < scene_.touchables.size(); ++k) {
-      if (std::isnan(free_space_gaps_[k])) continue;
+      if (std::isnan(d.free_space_gaps[k])) continue;
       const TouchableObject& object = scene_.touchables[k];
-      double separation = free_space_gaps_[k];
-      if (root_hulls_[0] != nullptr && root_hulls_[k + 1] != nullptr) {
-        separation = std::max(separation, HullSeparationBound(*root_hulls_[0], X_WT,
-                                                              *root_hulls_[k + 1], object.X_WO));
+      double separation = d.free_space_gaps[k];
+      if (m.root_hulls[0] != nullptr && m.root_hulls[k + 1] != nullptr) {
+        separation = std::max(separation, HullSeparationBound(*m.root_hulls[0], X_WT,
+                                                              *m.root_hulls[k + 1], object.X_WO));
       }
       clearance = std::min(clearance, free_space(separation, *object.model));
     }
@@ -401,40 +346,43 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
 
 double HapticTexturePipeline::ToolMotionBound(const RigidTransform& X_WT_a,
                                               const RigidTransform& X_WT_b) const noexcept {
+  const RemoteStepModel& m = *model_;
   if (!IsFiniteRigidTransform(X_WT_a) || !IsFiniteRigidTransform(X_WT_b)) {
     return std::numeric_limits<double>::infinity();
   }
-  const glm::dvec3 c_O(tool_bounds_.spheres_O[0]);
+  const glm::dvec3 c_O(m.tool_bounds.spheres_O[0]);
   const double moved = glm::length(X_WT_b * c_O - X_WT_a * c_O);
   // ‖(R_b − R_a)·u‖ = 2·sin(θ/2)·|u| = 2·|vec(q_a⁻¹·q_b)|·|u| for unit quaternions.
   const glm::dquat q = glm::inverse(X_WT_a.rotation) * X_WT_b.rotation;
   const double turned =
       2.0 * glm::length(glm::dvec3(q.x, q.y, q.z)) / std::max(1e-300, glm::length(q));
-  return moved + turned * tool_bounds_.spheres_O[0].w;
+  return moved + turned * m.tool_bounds.spheres_O[0].w;
 }
 
 void HapticTexturePipeline::RegionWindow(const RigidTransform& X_WT, std::size_t k,
                                          const glm::dvec3& normal_W, double texture_margin_m,
-                                         glm::dvec3& point_W, double& extent_m) {
+                                         glm::dvec3& point_W, double& extent_m) noexcept {
+  RemoteStepData& d = *data_;
+  const RemoteStepModel& m = *model_;
   if (!options_.whole_model_region_windows) return;
-  const ConvexHull& hull_A = whole_hulls_[0];
-  const ConvexHull& hull_B = whole_hulls_[k + 1];
+  const ConvexHull& hull_A = m.whole_hulls[0];
+  const ConvexHull& hull_B = m.whole_hulls[k + 1];
   if (hull_A.planes_O.empty() || hull_B.planes_O.empty()) return;
   const std::optional<ContactWindow> axes =
       ContactWindow::TryMake(point_W, normal_W, options_.window_extent_m, 2);
   if (!axes) return;
   const TouchableObject& object = scene_.touchables[k];
-  const double pair_reach = tool_bounds_.Reach(-1) + object_bounds_[k].Reach(-1);
+  const double pair_reach = m.tool_bounds.Reach(-1) + m.object_bounds[k].Reach(-1);
   RegionBounds b;
-  if (!PairRegionBounds(*scene_.tool, X_WT, hull_A, whole_triangles_[0], *object.model, object.X_WO,
-                        hull_B, whole_triangles_[k + 1], pair_reach, point_W, axes->axis_u_W,
-                        axes->axis_v_W, b)) {
+  if (!PairRegionBounds(*scene_.tool, X_WT, hull_A, m.whole_triangles[0], *object.model,
+                        object.X_WO, hull_B, m.whole_triangles[k + 1], pair_reach, point_W,
+                        axes->axis_u_W, axes->axis_v_W, b)) {
     return;
   }
   point_W +=
       0.5 * (b.min_u + b.max_u) * axes->axis_u_W + 0.5 * (b.min_v + b.max_v) * axes->axis_v_W;
   extent_m = std::max(b.max_u - b.min_u, b.max_v - b.min_v) + 2.0 * texture_margin_m;
-  ++step_faults_.region_windows;
+  ++d.step_faults.region_windows;
 }
 
 std::unique_ptr<PenetrationDepthBackend> HapticTexturePipeline::MakeCpuBackend() const {
@@ -444,44 +392,46 @@ std::unique_ptr<PenetrationDepthBackend> HapticTexturePipeline::MakeCpuBackend()
 }
 
 void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n) noexcept {
+  RemoteStepData& d = *data_;
   if (n == 0) return;
   const HapticModel& tool = *scene_.tool;
-  const std::span<const ContactQuery> batch(last_queries_.data(), static_cast<std::size_t>(n));
-  const std::span<ContactLinearization> batch_out(last_results_.data(),
+  const std::span<const ContactQuery> batch(d.last_queries.data(), static_cast<std::size_t>(n));
+  const std::span<ContactLinearization> batch_out(d.last_results.data(),
                                                   static_cast<std::size_t>(n));
   const std::size_t per = kGradientSamples;
-  const std::span<DepthSample> samples_out(last_samples_.data(), static_cast<std::size_t>(n) * per);
+  const std::span<DepthSample> samples_out(d.last_samples.data(),
+                                           static_cast<std::size_t>(n) * per);
   // The GPU backend encodes one window extent and grid per batch: with windows sized from their
   // clusters, one batch per size (the CPU backend takes them mixed).
   bool mixed = false;
   for (int i = 1; i < n; ++i) {
-    mixed = mixed || last_queries_[i].window.resolution != last_queries_[0].window.resolution ||
-            last_queries_[i].window.extent_m != last_queries_[0].window.extent_m;
+    mixed = mixed || d.last_queries[i].window.resolution != d.last_queries[0].window.resolution ||
+            d.last_queries[i].window.extent_m != d.last_queries[0].window.extent_m;
   }
   if (mixed && backend_->name() == "gpu") {
     bool ok = true;
     std::array<bool, kMaxContacts> done{};
     for (int first = 0; first < n && ok; ++first) {
       if (done[first]) continue;
-      const ContactWindow& w = last_queries_[first].window;
+      const ContactWindow& w = d.last_queries[first].window;
       int m = 0;
       for (int i = first; i < n; ++i) {
-        if (done[i] || last_queries_[i].window.resolution != w.resolution ||
-            last_queries_[i].window.extent_m != w.extent_m) {
+        if (done[i] || d.last_queries[i].window.resolution != w.resolution ||
+            d.last_queries[i].window.extent_m != w.extent_m) {
           continue;
         }
         done[i] = true;
-        size_index_[m] = i;
-        size_queries_[m++] = last_queries_[i];
+        d.size_index[m] = i;
+        d.size_queries[m++] = d.last_queries[i];
       }
       const auto count = static_cast<std::size_t>(m);
-      ok = backend_->LinearizeBatch(tool, X_WT, {size_queries_.data(), count},
-                                    {size_results_.data(), count},
-                                    {size_samples_.data(), count * per});
+      ok = backend_->LinearizeBatch(tool, X_WT, {d.size_queries.data(), count},
+                                    {d.size_results.data(), count},
+                                    {d.size_samples.data(), count * per});
       for (int k = 0; ok && k < m; ++k) {
-        last_results_[size_index_[k]] = size_results_[k];
-        std::copy_n(size_samples_.data() + static_cast<std::size_t>(k) * per, per,
-                    last_samples_.data() + static_cast<std::size_t>(size_index_[k]) * per);
+        d.last_results[d.size_index[k]] = d.size_results[k];
+        std::copy_n(d.size_samples.data() + static_cast<std::size_t>(k) * per, per,
+                    d.last_samples.data() + static_cast<std::size_t>(d.size_index[k]) * per);
       }
     }
     if (ok) return;
@@ -504,20 +454,21 @@ void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n)
 }
 
 void HapticTexturePipeline::ShareConnectedContacts(const RigidTransform& X_WT, int n) noexcept {
-  if (!options_.share_connected_contacts || !region_solver_ || n < 2) return;
+  RemoteStepData& d = *data_;
+  if (!options_.share_connected_contacts || !d.region_solver || n < 2) return;
   ContactSharingOptions sharing;
   sharing.link_m = options_.share_link_m;
   sharing.fade_m = options_.share_fade_m;
   sharing.max_normal_angle_deg = options_.clustering_angle_deg;
   sharing.temperature_m = options_.share_temperature_m;
-  step_faults_.shared_contacts += ht::ShareConnectedContacts(
-      *scene_.tool, X_WT, {last_queries_.data(), static_cast<std::size_t>(n)},
-      {last_results_.data(), static_cast<std::size_t>(n)}, sharing, *region_solver_,
-      sharing_occupancy_,
+  d.step_faults.shared_contacts += ht::ShareConnectedContacts(
+      *scene_.tool, X_WT, {d.last_queries.data(), static_cast<std::size_t>(n)},
+      {d.last_results.data(), static_cast<std::size_t>(n)}, sharing, *d.region_solver,
+      d.sharing_occupancy,
       options_.split_windows_at_separated_overlap && options_.split_keeps_parent_window
-          ? std::span<const int>(split_family_.data(), static_cast<std::size_t>(n))
+          ? std::span<const int>(d.split_family.data(), static_cast<std::size_t>(n))
           : std::span<const int>(),
-      std::span<const std::span<const float>>(base_fields_.data(), static_cast<std::size_t>(n)));
+      std::span<const std::span<const float>>(d.base_fields.data(), static_cast<std::size_t>(n)));
 }
 
 int HapticTexturePipeline::KeptFieldResolution() const noexcept {
@@ -531,6 +482,37 @@ bool HapticTexturePipeline::WantsBaseRender() const noexcept {
 
 bool HapticTexturePipeline::ReusesBaseRender() const noexcept {
   return WantsBaseRender() && backend_->name() == "cpu";
+}
+
+const HapticTexturePipeline::StepFaults& HapticTexturePipeline::step_faults() const noexcept {
+  return data_->step_faults;
+}
+
+std::span<const ContactQuery> HapticTexturePipeline::last_contact_queries() const noexcept {
+  return {data_->last_queries.data(), static_cast<std::size_t>(data_->last_num_queries)};
+}
+
+std::span<const ContactLinearization> HapticTexturePipeline::last_linearizations() const noexcept {
+  return {data_->last_results.data(), static_cast<std::size_t>(data_->last_num_queries)};
+}
+
+std::span<const DepthSample> HapticTexturePipeline::last_depth_samples() const noexcept {
+  return {data_->last_samples.data(), static_cast<std::size_t>(data_->last_num_queries) *
+                                          static_cast<std::size_t>(kGradientSamples)};
+}
+
+const DepthRefinementCounters& HapticTexturePipeline::depth_refinement_counters() const noexcept {
+  return data_->refiner.counters();
+}
+
+void HapticTexturePipeline::SetTranslationPatch(bool on) noexcept {
+  data_->refiner.SetTranslationPatch(on);
+}
+
+void HapticTexturePipeline::ForgetLastStep() noexcept { data_->refiner.ForgetLastStep(); }
+
+bool HapticTexturePipeline::translation_patch() const noexcept {
+  return options_.refine_depth && data_->refiner.options().translation_patch;
 }
 
 }  // namespace ht

@@ -7,6 +7,7 @@
 #include <glm/geometric.hpp>
 #include <limits>
 
+#include "0_remote_step_data.h"
 #include "haptic_core/contact_region.h"
 #include "haptic_core/remote_step.h"
 
@@ -26,7 +27,8 @@ double Smoothstep(double x) noexcept {
 }  // namespace
 
 int HapticTexturePipeline::MergeRegionsInOneWindow(int count, double cell_m) noexcept {
-  int m = std::min(count, static_cast<int>(regions_.size()));
+  RemoteStepData& d = *data_;
+  int m = std::min(count, static_cast<int>(d.regions.size()));
   if (count > m) return count;  // more than kept: not split anyway
   // A region's window: the square of its box's larger side plus the margins, about its centre
   // (in cells along u and v).
@@ -40,8 +42,8 @@ int HapticTexturePipeline::MergeRegionsInOneWindow(int count, double cell_m) noe
     for (int p = 0; p < m && !merged; ++p) {
       for (int q = 0; q < m && !merged; ++q) {
         if (p == q) continue;
-        OverlapRegion& a = regions_[static_cast<std::size_t>(p)];
-        const OverlapRegion& b = regions_[static_cast<std::size_t>(q)];
+        OverlapRegion& a = d.regions[static_cast<std::size_t>(p)];
+        const OverlapRegion& b = d.regions[static_cast<std::size_t>(q)];
         const double ds = 0.5 * ((b.i0 + b.i1) - (a.i0 + a.i1));
         const double dt = 0.5 * ((b.j0 + b.j1) - (a.j0 + a.j1));
         if (std::abs(ds) > half(a) || std::abs(dt) > half(a)) continue;
@@ -55,7 +57,7 @@ int HapticTexturePipeline::MergeRegionsInOneWindow(int count, double cell_m) noe
           a.peak_cell = b.peak_cell;
           a.bridge_m = b.bridge_m;
         }
-        regions_[static_cast<std::size_t>(q)] = regions_[static_cast<std::size_t>(m - 1)];
+        d.regions[static_cast<std::size_t>(q)] = d.regions[static_cast<std::size_t>(m - 1)];
         --m;
         merged = true;
       }
@@ -65,18 +67,19 @@ int HapticTexturePipeline::MergeRegionsInOneWindow(int count, double cell_m) noe
 }
 
 int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int n) noexcept {
+  RemoteStepData& d = *data_;
   // The GPU backend takes one window size per batch (LinearizeContacts); the split windows are
   // sized to their regions, so this stage runs with the CPU backend only.
-  split_count_ = 0;
-  split_family_.fill(-1);
+  d.split_count = 0;
+  d.split_family.fill(-1);
   if (backend_->name() == "gpu") return n;
   const HapticModel& tool = *scene_.tool;
   int num_new = 0;
   int kept = 0;
   for (int i = 0; i < n; ++i) {
-    const ContactQuery& q = last_queries_[static_cast<std::size_t>(i)];
+    const ContactQuery& q = d.last_queries[static_cast<std::size_t>(i)];
     int regions = 0;
-    const double parent_depth = last_results_[static_cast<std::size_t>(i)].depth_m;
+    const double parent_depth = d.last_results[static_cast<std::size_t>(i)].depth_m;
     if (std::isfinite(parent_depth) && parent_depth > 0.0) {
       // With a fade per depth, the floor reaches the deepest region's fade (the window's refined
       // δ bounds every region's cell samples from above, up to the refinement's few µm).
@@ -86,27 +89,28 @@ int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int
       const double link =
           options_.split_link_m > 0.0 ? options_.split_link_m : options_.clustering_distance_m;
       // Stage 5's base render where the backend kept it (the CPU backend), else rendered again.
-      const std::span<const float> base = base_fields_[static_cast<std::size_t>(i)];
+      const std::span<const float> base = d.base_fields[static_cast<std::size_t>(i)];
       regions = !base.empty()
-                    ? region_solver_->OverlapRegions(base, q.window, link, regions_, floor)
-                    : region_solver_->OverlapRegions(tool, X_WT, *q.environment, q.X_WO, q.window,
-                                                     link, regions_, q.environment_triangles,
-                                                     q.tool_triangles, floor);
+                    ? d.region_solver->OverlapRegions(base, q.window, link, d.regions, floor)
+                    : d.region_solver->OverlapRegions(tool, X_WT, *q.environment, q.X_WO, q.window,
+                                                      link, d.regions, q.environment_triangles,
+                                                      q.tool_triangles, floor);
     }
     const bool parent_window = options_.split_keeps_parent_window;
     if (!parent_window) regions = MergeRegionsInOneWindow(regions, q.window.cell_size_m());
     const int kept_after = kept + (n - i - 1);  // the windows still to keep, at least
-    const bool split = regions >= 2 && regions <= static_cast<int>(regions_.size()) &&
+    const bool split = regions >= 2 && regions <= static_cast<int>(d.regions.size()) &&
                        kept_after + num_new + regions <= options_.max_contacts;
     if (!split || parent_window) {
       // Kept: moved down over the split ones, with its results and samples.
       if (kept != i) {
-        base_fields_[static_cast<std::size_t>(kept)] = base_fields_[static_cast<std::size_t>(i)];
-        last_queries_[static_cast<std::size_t>(kept)] = q;
-        last_results_[static_cast<std::size_t>(kept)] = last_results_[static_cast<std::size_t>(i)];
-        std::copy_n(last_samples_.begin() + static_cast<std::ptrdiff_t>(i) * kGradientSamples,
+        d.base_fields[static_cast<std::size_t>(kept)] = d.base_fields[static_cast<std::size_t>(i)];
+        d.last_queries[static_cast<std::size_t>(kept)] = q;
+        d.last_results[static_cast<std::size_t>(kept)] =
+            d.last_results[static_cast<std::size_t>(i)];
+        std::copy_n(d.last_samples.begin() + static_cast<std::ptrdiff_t>(i) * kGradientSamples,
                     kGradientSamples,
-                    last_samples_.begin() + static_cast<std::ptrdiff_t>(kept) * kGradientSamples);
+                    d.last_samples.begin() + static_cast<std::ptrdiff_t>(kept) * kGradientSamples);
       }
       ++kept;
       if (!split) continue;
@@ -115,10 +119,10 @@ int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int
     // (kept above), so a window whose other regions fade out is the unsplit window.
     const ContactWindow& w = q.window;
     const double cell = w.cell_size_m();
-    // The regions are sorted deepest first (OverlapRegions): regions_[0] holds the window's d_max.
-    const double ramp = std::min(options_.split_birth_ramp_m, regions_[0].depth_m);
+    // The regions are sorted deepest first (OverlapRegions): d.regions[0] holds the window's d_max.
+    const double ramp = std::min(options_.split_birth_ramp_m, d.regions[0].depth_m);
     for (int r = parent_window ? 1 : 0; r < regions; ++r) {
-      const OverlapRegion& g = regions_[static_cast<std::size_t>(r)];
+      const OverlapRegion& g = d.regions[static_cast<std::size_t>(r)];
       double weight = 1.0;
       if (r > 0 && ramp > 0.0) weight *= Smoothstep(g.depth_m / ramp);
       const double fade = options_.split_bridge_fade_per_depth > 0.0
@@ -136,12 +140,12 @@ int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int
       const auto sub = ContactWindow::TryMake(w.center_W + s_mid * w.axis_u_W + t_mid * w.axis_v_W,
                                               w.normal_W, resolution * cell, resolution);
       if (!sub) {
-        ++step_faults_.bad_windows;  // the region stays out of the model, counted
+        ++d.step_faults.bad_windows;  // the region stays out of the model, counted
         continue;
       }
-      split_weights_[static_cast<std::size_t>(num_new)] = weight;
-      split_parent_[static_cast<std::size_t>(num_new)] = parent_window ? kept - 1 : -1;
-      ContactQuery& nq = split_queries_[static_cast<std::size_t>(num_new++)];
+      d.split_weights[static_cast<std::size_t>(num_new)] = weight;
+      d.split_parent[static_cast<std::size_t>(num_new)] = parent_window ? kept - 1 : -1;
+      ContactQuery& nq = d.split_queries[static_cast<std::size_t>(num_new++)];
       nq = q;
       nq.window = *sub;
       if (options_.split_keeps_parent_rotation_step) {
@@ -150,43 +154,44 @@ int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int
     }
   }
   if (num_new == 0) return n;
-  split_first_ = kept;
-  split_count_ = num_new;
+  d.split_first = kept;
+  d.split_count = num_new;
   for (int k = 0; k < num_new; ++k) {
-    const int parent = split_parent_[static_cast<std::size_t>(k)];
+    const int parent = d.split_parent[static_cast<std::size_t>(k)];
     if (parent < 0) continue;
-    split_family_[static_cast<std::size_t>(parent)] = parent;
-    split_family_[static_cast<std::size_t>(kept + k)] = parent;
+    d.split_family[static_cast<std::size_t>(parent)] = parent;
+    d.split_family[static_cast<std::size_t>(kept + k)] = parent;
   }
-  std::copy_n(split_queries_.begin(), num_new, last_queries_.begin() + kept);
+  std::copy_n(d.split_queries.begin(), num_new, d.last_queries.begin() + kept);
   // The split windows' batch overwrites the backend's first num_new fields: the kept contacts'
   // fields are copied out first (a few thousand floats each), into slots of their own (a field
   // there is only with reuse_base_render, which reserves the slots).
-  const auto slot = base_field_store_.size() / static_cast<std::size_t>(kMaxContacts);
+  const auto slot = d.base_field_store.size() / static_cast<std::size_t>(kMaxContacts);
   for (int k = 0; k < kept; ++k) {
-    std::span<const float>& f = base_fields_[static_cast<std::size_t>(k)];
+    std::span<const float>& f = d.base_fields[static_cast<std::size_t>(k)];
     if (f.empty() || f.size() > slot) {
       f = {};  // rendered again in 5c
       continue;
     }
-    float* to = base_field_store_.data() + static_cast<std::size_t>(k) * slot;
+    float* to = d.base_field_store.data() + static_cast<std::size_t>(k) * slot;
     std::copy(f.begin(), f.end(), to);
     f = {to, f.size()};
   }
   const std::size_t per = kGradientSamples;
   const bool ok = backend_->LinearizeBatch(
-      tool, X_WT, {last_queries_.data() + kept, static_cast<std::size_t>(num_new)},
-      {last_results_.data() + kept, static_cast<std::size_t>(num_new)},
-      {last_samples_.data() + static_cast<std::size_t>(kept) * per,
+      tool, X_WT, {d.last_queries.data() + kept, static_cast<std::size_t>(num_new)},
+      {d.last_results.data() + kept, static_cast<std::size_t>(num_new)},
+      {d.last_samples.data() + static_cast<std::size_t>(kept) * per,
        static_cast<std::size_t>(num_new) * per});
   for (int k = 0; k < num_new; ++k) {
-    base_fields_[static_cast<std::size_t>(kept + k)] =
+    d.base_fields[static_cast<std::size_t>(kept + k)] =
         ok && ReusesBaseRender() ? backend_->base_overlap(static_cast<std::size_t>(k))
                                  : std::span<const float>{};
   }
   if (!ok) {
     for (int k = kept; k < kept + num_new; ++k) {
-      last_results_[static_cast<std::size_t>(k)].depth_m = -std::numeric_limits<double>::infinity();
+      d.last_results[static_cast<std::size_t>(k)].depth_m =
+          -std::numeric_limits<double>::infinity();
     }
   }
   return kept + num_new;

@@ -1,0 +1,141 @@
+#pragma once
+// The remote step's two blocks, after MuJoCo's mjModel and mjData (docs/STYLE.md): what the step
+// derives from its scene once and never changes (RemoteStepModel), and everything the step writes
+// (RemoteStepData), both built by HapticTexturePipeline's constructor (remote_step.h). The stage
+// functions (0_remote_step.cc, 5a_window_split.cc) read the first and write the second; nothing
+// in either is resized after construction.
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "haptic_core/connected_contacts.h"
+#include "haptic_core/contact_clustering.h"
+#include "haptic_core/contact_linearization.h"
+#include "haptic_core/contact_region.h"
+#include "haptic_core/contact_windows.h"
+#include "haptic_core/depth_refinement.h"
+#include "haptic_core/haptic_scene.h"
+#include "haptic_core/hull_proximity.h"
+#include "haptic_core/penetration_depth.h"
+#include "haptic_core/remote_step.h"
+
+namespace ht {
+
+/// What the remote step derives from its scene's models (index 0 the tool, in frame T; k + 1
+/// touchable k, in its frame O), built once at construction and read-only afterwards. The scene
+/// holds its models as shared_ptr<const HapticModel>, so none changes under it.
+struct RemoteStepModel {
+  /// Builds every field from `scene` (which has a tool and no empty touchable; checked by the
+  /// pipeline first). `options.whole_model_region_windows` decides whether whole_triangles is
+  /// filled. Allocates; throws only std::bad_alloc.
+  RemoteStepModel(const HapticScene& scene, const PipelineOptions& options);
+
+  /// The coarse query's bounds (HullBounds::Of) of the tool and of every touchable. Their root
+  /// spheres (spheres_O[0]) are the broad phase's, so that objects far from the tool cost one
+  /// distance test per step.
+  HullBounds tool_bounds;
+  std::vector<HullBounds> object_bounds;
+  /// The texture stage's box trees (TriangleBoxTree::ForModel; null where the scan costs less),
+  /// carried by each contact's triangle subsets.
+  std::unique_ptr<TriangleBoxTree> tool_tree;
+  std::vector<std::unique_ptr<TriangleBoxTree>> object_trees;
+  /// Per model: its hull when it has no hierarchy and its coarse mesh is convex within a
+  /// micrometre (ConvexMeshHull; no planes otherwise).
+  std::vector<ConvexHull> whole_hulls;
+  /// Per model: the hull bounding the whole model, for the free-space bound
+  /// (HullSeparationBound): its hierarchy's root, or its whole_hulls entry; null when neither
+  /// exists.
+  std::vector<const ConvexHull*> root_hulls;
+  /// Per model with a whole hull, with PipelineOptions::whole_model_region_windows: the indices of
+  /// all its coarse triangles (empty otherwise).
+  std::vector<std::vector<int>> whole_triangles;
+};
+
+/// Everything the remote step writes, preallocated at construction for the scene's contact
+/// counts (kMaxContacts contacts, the clusterer's pair and triangle limits), so that the step
+/// allocates nothing after warm-up. The stage objects keep the state they carry from one step to
+/// the next (the coarse query's coherence, stage 5b's seeds) and their own scratch.
+struct RemoteStepData {
+  /// `kept_field_resolution`: the side (cells) of the largest overlap field stage 5a copies
+  /// (HapticTexturePipeline::KeptFieldResolution). Allocates; throws std::invalid_argument for
+  /// options Validate() refuses (the pipeline validates first) and std::bad_alloc.
+  RemoteStepData(const HapticScene& scene, const PipelineOptions& options,
+                 int kept_field_resolution);
+
+  // ---- The stage objects.
+  /// Stage 2: one proximity query per touchable (each keeps its own last-frame pairs).
+  std::vector<HullProximityQuery> queries;
+  /// Stage 3.
+  ContactClusterer clusterer;
+  /// Stage 5b (PipelineOptions::refine_depth): its buffers, and its seeds from the last step.
+  DepthRefiner refiner;
+  /// Stages 5a and 5c (split_windows_at_separated_overlap, share_connected_contacts): the solver
+  /// that renders a window's overlap regions; null when both are off.
+  std::unique_ptr<TexturePenetrationSolver> region_solver;
+
+  // ---- Stages 1–3 (FindContactCandidates).
+  /// The leaf pairs within their local texture reach (PipelineOptions::drop_unreachable_pairs),
+  /// as many as the clusterer takes, and the grazing guard's bound of each
+  /// (PipelineOptions::grazing_guard_local_reach).
+  std::vector<HullPairContact> reachable_pairs;
+  std::vector<double> pair_bounds;
+  /// The candidates' triangle lists (PipelineOptions::cluster_triangles), copied from the
+  /// clusterer, whose lists last only until its next call (one per touchable).
+  std::vector<int> candidate_triangles;
+  /// Per touchable: its bounding-sphere gap (m) when the coarse query found no pair for it, NaN
+  /// otherwise (the free space is taken from these after the query loop).
+  std::vector<double> free_space_gaps;
+  std::array<ContactCandidate, kMaxContacts> candidates{};
+  int num_candidates = 0;
+  /// Candidates of objects kept by the speculative floor alone (touched nowhere): they take only
+  /// the slots the touching objects leave, after those.
+  std::array<ContactCandidate, kMaxContacts> floor_candidates{};
+
+  // ---- Stages 4–6: the batch (HapticTexturePipeline::last_contact_queries() and the rest).
+  std::array<ContactQuery, kMaxContacts> last_queries{};
+  std::array<ContactLinearization, kMaxContacts> last_results{};
+  /// The depth samples of last_queries (kGradientSamples each, query-major), for kink planes.
+  std::array<DepthSample, kMaxContacts * kGradientSamples> last_samples{};
+  int last_num_queries = 0;
+  /// Stage 5: one window size's queries, results, samples and their indices in last_queries (the
+  /// GPU backend's batches).
+  std::array<ContactQuery, kMaxContacts> size_queries{};
+  std::array<ContactLinearization, kMaxContacts> size_results{};
+  std::array<DepthSample, kMaxContacts * kGradientSamples> size_samples{};
+  std::array<int, kMaxContacts> size_index{};
+  /// reuse_base_render: each contact's overlap field at the base pose from stage 5's render
+  /// (PenetrationDepthBackend::base_overlap; empty: none), in last_queries' order, for stages 5a
+  /// and 5c; and where the kept contacts' fields are copied before stage 5a's own batch
+  /// overwrites the backend's (kMaxContacts fields of kept_field_resolution² floats, reserved
+  /// with reuse_base_render and the split on).
+  std::array<std::span<const float>, kMaxContacts> base_fields{};
+  std::vector<float> base_field_store;
+
+  // ---- Stage 5a (split_windows_at_separated_overlap).
+  /// A window's overlap regions, and the windows replacing a split one.
+  std::array<OverlapRegion, 8> regions{};
+  std::array<ContactQuery, kMaxContacts> split_queries{};
+  /// Each split window's birth-ramp weight (split_birth_ramp_m), in split_queries' order,
+  /// applied to its stiffness after stage 5b.
+  std::array<double, kMaxContacts> split_weights{};
+  /// The first split window in last_queries and how many follow (0: none this step).
+  int split_first = 0;
+  int split_count = 0;
+  /// With split_keeps_parent_window: each split window's parent (its index in last_queries), and
+  /// each contact's family for stage 5c (−1: none; a parent and its split windows share one, and
+  /// never share a penalty).
+  std::array<int, kMaxContacts> split_parent{};
+  std::array<int, kMaxContacts> split_family{};
+
+  // ---- Stage 5c (share_connected_contacts).
+  /// The block occupancy of each contact (kMaxSharingBlocks² a contact).
+  std::vector<std::uint8_t> sharing_occupancy;
+
+  /// What the stages counted (HapticTexturePipeline::step_faults()).
+  HapticTexturePipeline::StepFaults step_faults;
+};
+
+}  // namespace ht
