@@ -1,0 +1,511 @@
+// slave_sim's command line (node_command_line.h): the options by group, in --help's order, and
+// what they make of the node's configuration.
+
+#include "node_command_line.h"
+
+#include <cstdio>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+#include "slave_sim/watched_scene.h"
+
+namespace ht {
+namespace {
+
+// The address, the scene and its model cache.
+void AddSceneOptions(CLI::App& app, NodeCommandLine& cl) {
+  app.add_option("--listen", cl.listen, "UDP address HOST:PORT to listen on (port 0 = any free)")
+      ->capture_default_str();
+  app.add_option("--scene", cl.scene,
+                 "built-in scene: block-on-gear (seed Fig. 75), stiff-wall (the same block on a\n"
+                 "flat wall five times stiffer, a stability hard case), striped-blocks (two\n"
+                 "interlocked striped blocks, seed Fig. 76), file-on-cad-part (seed Fig. 77) or\n"
+                 "hammer-on-torus (seed Fig. 73; these two build the seed models through the\n"
+                 "cache, about a minute each when cold); or a scene file (.gltf,\n"
+                 ".glb, or a scene description .json), built through the model cache (see\n"
+                 "'slave_sim inspect'); its glTF animation 0, if any, plays in a loop")
+      ->capture_default_str();
+  app.add_option("--tool", cl.scene_tool,
+                 "with a scene file: the node (name or #index) that is the tool; default the\n"
+                 "description's, else the built-in probe");
+  app.add_flag("--no-watch", cl.no_watch,
+               "with a scene file: do not watch it (by default a change of the file on disk\n"
+               "rebuilds the scene through the cache, switches the pipeline to it between two\n"
+               "steps and streams the changed meshes to the operator)");
+  app.add_option("--cache-dir", cl.scene_cache_dir,
+                 "with a scene file or a seed-model scene: the model cache folder")
+      ->capture_default_str();
+}
+
+// The contact windows' grid and sizes, and the texture stage's threads.
+void AddWindowOptions(CLI::App& app, NodeCommandLine& cl) {
+  app.add_option("--grid", cl.config.pipeline.grid_resolution,
+                 "penetration-depth grid N (N x N cells per contact)")
+      ->check(CLI::Range(2, 1024))
+      ->capture_default_str();
+  app.add_option("--window", cl.config.pipeline.window_extent_m,
+                 "smallest contact window side W in metres (with the grid N: the cell W/N)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cl.max_window_option =
+      app.add_option("--max-window", cl.config.pipeline.max_window_extent_m,
+                     "largest contact window side in metres: a cluster spread wider than W gets a\n"
+                     "window sized to it at the same cell (N grows with it); overlapping windows\n"
+                     "with agreeing normals merge while they fit. Default 3 x --window; equal to\n"
+                     "--window: every window W x W")
+          ->check(CLI::PositiveNumber)
+          ->capture_default_str();
+  cl.config.pipeline.texture_threads = DefaultTextureThreads();
+  app.add_option("--texture-threads", cl.config.pipeline.texture_threads,
+                 "threads of the CPU texture stage (a step's contacts spread over them); the\n"
+                 "default leaves one core to the operator on a loopback machine")
+      ->check(CLI::Range(1, 256))
+      ->capture_default_str();
+}
+
+// The texture stage's gradient, the grazing guard, kink planes, stage 5b's depth refinement
+// and its seeds, and contact clustering's angle.
+void AddDepthOptions(CLI::App& app, NodeCommandLine& cl) {
+  app.add_option("--rotation-gradient", cl.rotation_gradient,
+                 "rotation part of each contact's gradient (CPU texture stage): rendered (six\n"
+                 "rotated tool renders), warp (rotation samples from the base render) or lever\n"
+                 "(the deepest cell's r x dδ/dx); warp and lever render the tool once per contact\n"
+                 "instead of seven times and are approximations: see docs/frontier/issue15")
+      ->check(CLI::IsMember({"rendered", "warp", "lever"}))
+      ->capture_default_str();
+  app.add_flag("--no-grazing-guard", cl.no_grazing_guard,
+               "keep contacts whose depth exceeds what their coarse geometry allows (the\n"
+               "cluster's hull penetration + both texture reaches + a cell); by default they are\n"
+               "dropped and counted (remote_summary.json grazing_dropped_contacts): along a\n"
+               "grazing direction the depth is a sideways overlap, not a penetration");
+  app.add_flag("--no-kink-planes", cl.no_kink_planes,
+               "send one plane per contact: by default a contact whose depth is a V in the tilt\n"
+               "(a face resting on ridges, its two edges bearing in turn) also carries the V's\n"
+               "arms, so that the operator's loop finds where the torque flips between two models\n"
+               "(docs/hard-cases.md)");
+  app.add_flag("--no-refine-depth", cl.no_refine_depth,
+               "the grid's cell samples alone: by default each contact's depth is refined to the\n"
+               "texture's full resolution around the grid's deepest cells (stage 5b,\n"
+               "docs/DESIGN.md §4), which the grid's mip-filtered samples read tens of\n"
+               "micrometres low; faster by 7-26 % of the step (docs/frontier/issue32)");
+  app.add_flag("--parallax,!--no-parallax", cl.parallax,
+               "stage 5b reads each height where the textured surface p + h*N crosses the line\n"
+               "along the window's normal (parallax; on by default) instead of h*(N.n) at the\n"
+               "coarse point under it, which on coarse facets tilted from the normal under large\n"
+               "heights reads another part of the surface; --no-parallax: the render's form,\n"
+               "less accurate on such surfaces and 3-37 % faster there\n"
+               "(docs/frontier/issue32/twenty_eighth_stop)");
+  app.add_flag("--no-parallax-offset-seeds", cl.no_parallax_offset_seeds,
+               "stage 5b searches only the grid's deepest cells: by default it also searches\n"
+               "where parallax carries them (a facet tilted from the window's normal under a\n"
+               "large height shows its peak up to several cells beside where the grid's\n"
+               "render puts it; docs/frontier/issue32/thirty_third_stop)");
+  app.add_flag("--no-neighbour-peak-seeds", cl.no_neighbour_peak_seeds,
+               "stage 5b does not search half a cell and a cell beside its deepest point for a\n"
+               "neighbouring peak: by default it does (beside a trough's vertex the other\n"
+               "flank's maximum lies in the next cell, which is never a seed of its own; it costs\n"
+               "4-35 % of the texture stage; docs/frontier/issue32/thirty_fourth_stop)");
+  app.add_option("--clustering-angle-deg", cl.clustering_angle_deg,
+                 "contact clustering: leaf pairs (and clusters) whose normals differ by less than\n"
+                 "this merge into one contact (degrees; 30 before issue 32's thirty-third stop)")
+      ->check(CLI::Range(1.0, 89.0))
+      ->capture_default_str();
+  app.add_flag("--no-seed-from-last-step", cl.no_seed_from_last_step,
+               "each step's contacts from their own grid alone: by default stage 5b also\n"
+               "searches each contact from the previous step's deepest point (kept in the\n"
+               "tool's frame), so that a narrow peak the filtered grid finds on one step and\n"
+               "misses on the next is not lost for that step (docs/frontier/issue32/\n"
+               "twenty_fifth_stop)");
+  app.add_flag(
+      "--kink-hang-other-arm", cl.kink_hang_other_arm,
+      "where a contact's depth is a V in the tool's tilt (a face resting on ridges), hang\n"
+      "the arm it does not bear on below its depth by the two arms' gap instead of through\n"
+      "its own sample: the resting block's torque turns over smoothly through level, but\n"
+      "the torque error against the truth is a little higher and the striped blocks' loop\n"
+      "rougher (docs/frontier/issue32/twenty_sixth_stop)");
+}
+
+// Translation patches, and stage 5b's texel-scale gradient.
+void AddTranslationPatchOptions(CLI::App& app, NodeCommandLine& cl) {
+  cl.rtt_option =
+      app.add_option(
+             "--translation-patch-rtt-ms", cl.translation_patch_rtt_ms,
+             "each contact model also carries its contacts' depth over in-plane\n"
+             "translations of the tool (a 5x5 patch one grid cell apart, 75 bytes a\n"
+             "contact) from when the round trip the operator measures (its pings carry\n"
+             "it) reaches this many ms until it falls below 0.8 of it: the operator's\n"
+             "loop then follows the texture's ridges a round trip away from where the\n"
+             "model was made instead of extending the tangent. The remote step costs\n"
+             "20-80 % more while they go, nothing below. 10 ms is half a grid cell of hand\n"
+             "motion at 20-50 mm/s with the default --window and --grid (0.4 mm cells);\n"
+             "0: from the first measured round trip (issue 33; docs/passivity)")
+          ->capture_default_str()
+          ->check(CLI::Range(0.0, 60000.0));
+  app.add_flag("--translation-patch", cl.translation_patch,
+               "always send the translation patches, whatever the round trip")
+      ->excludes(cl.rtt_option);
+  app.add_flag("--no-translation-patch", cl.no_translation_patch,
+               "never send translation patches, whatever the round trip")
+      ->excludes("--translation-patch")
+      ->excludes(cl.rtt_option);
+  app.add_flag("--translation-patch-follows-rotation", cl.translation_patch_follows_rotation,
+               "whenever translation patches go: the loop also reads the patch where a turn of\n"
+               "the tool slides the contact (its lever from the tool's centre of mass)")
+      ->excludes("--no-translation-patch");
+  app.add_option("--translation-patch-spacing-cells", cl.translation_patch_spacing_cells,
+                 "whenever translation patches go: their nodes' spacing in grid cells, so that\n"
+                 "a patch spans ±2 spacings (wider for a tool that moves further in a round trip,\n"
+                 "coarser on the ridges)")
+      ->check(CLI::Range(1, kMaxTranslationPatchSpacing))
+      ->capture_default_str();
+  auto* patch_texels_option = app.add_option(
+      "--translation-patch-step-texels", cl.translation_patch_step_texels,
+      "whenever translation patches go: their nodes' spacing in level-0 texels instead of\n"
+      "grid cells (with --texel-scale-gradient --secant-rotation-gradient and 2, the\n"
+      "slope's own steps): the loop then holds a V between two ridges' flanks and its\n"
+      "curvature (fig75's valleys no longer ring), over +/-2 spacings only, so pair it\n"
+      "with --translation-patch on a loopback or LAN (docs/frontier/issue32/\n"
+      "thirty_fourth_stop)");
+  patch_texels_option->check(CLI::Range(0.0, 64.0))->excludes("--translation-patch-spacing-cells");
+  app.add_flag("--texel-scale-gradient", cl.texel_scale_gradient,
+               "each refined contact's gradient as the refined maximum's derivative at\n"
+               "--gradient-step-texels instead of the secant over one grid cell: closer to the\n"
+               "full-resolution truth pose by pose, but where a face lies between two ridges'\n"
+               "flanks it gives one flank's slope and the tool chatters in the closed loop\n"
+               "(docs/frontier/issue32/seventh_stop)");
+  app.add_option("--gradient-step-texels", cl.gradient_step_texels,
+                 "with --texel-scale-gradient: its translation step, in level-0 texels of the\n"
+                 "finer surface at the contact point (the rotation step is this over half the\n"
+                 "window)")
+      ->check(CLI::Range(0.01, 1000.0))
+      ->capture_default_str();
+  app.add_option("--secant-at-kinks-um", cl.secant_at_kinks_um,
+                 "with --texel-scale-gradient, per axis: where the samples one grid cell\n"
+                 "away lie above the texel-scale tangent by more than this (a kink: another\n"
+                 "maximum takes over within the cell), the cell's secant instead; 0 = off")
+      ->check(CLI::Range(0.0, 1000.0))
+      ->capture_default_str();
+  app.add_flag("--secant-rotation-gradient", cl.secant_rotation_gradient,
+               "with --texel-scale-gradient: only its translation part at texel scale, the\n"
+               "rotation part the one-cell secant as by default (at texel scale a face resting on\n"
+               "ridges rocks between its tilt's arms; issue 32, ninth stop)");
+  app.add_flag("--translation-kink-planes", cl.translation_kink_planes,
+               "with --texel-scale-gradient: each contact also carries the arms of its\n"
+               "depth's V along the window's two in-plane axes (a face between two ridges'\n"
+               "flanks), so that the operator's loop finds the vertex between two models\n"
+               "instead of being pushed across it by one arm (issue 32, ninth stop)");
+}
+
+// Stages 5a (the split) and 5c (shared penalties).
+void AddSplitAndSharingOptions(CLI::App& app, NodeCommandLine& cl) {
+  app.add_option(
+         "--split-windows-link-mm", cl.split_windows_link_mm,
+         "stage 5a: a contact window whose overlap falls into regions farther apart than this\n"
+         "(mm) also pushes with each other region's own depth, as contact clustering would\n"
+         "group the textured contact (CPU texture stage; docs/frontier/issue32/seventh_stop)")
+      ->check(CLI::Range(0.1, 1000.0))
+      ->capture_default_str();
+  app.add_option(
+         "--split-continuous-um", cl.split_continuous_um,
+         "stage 5a's fades (um): the deepest region keeps the whole window, each other region\n"
+         "fades in with its overlap and out as it joins a deeper one over this depth (birth\n"
+         "ramp and bridge fade); narrower fades are closer to the truth on the frontier but\n"
+         "rock the loop (100 um: fig76 25.5 % force error, 256 contact steps on one clock;\n"
+         "400 um: 28.6 %, 11; without the split 39.8 %, 6). 0: the seventh stop's plain\n"
+         "split (docs/frontier/issue32/thirty_first_stop)")
+      ->check(CLI::Range(0.0, 1000.0))
+      ->capture_default_str();
+  app.add_flag("--no-split", cl.no_split,
+               "stage 5a off: one window per contact cluster whatever its overlap (the default\n"
+               "before issue 32's thirty-first stop; the GPU texture stage always runs without\n"
+               "the split)");
+  app.add_flag("--no-share-connected-contacts", cl.no_share_connected_contacts,
+               "every contact pushes with its whole penalty: by default contacts on one object\n"
+               "whose textured overlaps come within 10 mm of each other are one contact region\n"
+               "and share one penalty (stage 5c), as the pipeline truth links its patches: a\n"
+               "large flat contact that the coarse clustering left in two windows pushes once,\n"
+               "not twice (docs/frontier/issue32/tenth_stop)");
+}
+
+// Speculative contacts.
+void AddSpeculativeOptions(CLI::App& app, NodeCommandLine& cl) {
+  app.add_option("--speculative-speed-mm-s", cl.speculative_speed_mm_s,
+                 "speculative contacts by the round trip: the step also models every surface\n"
+                 "within this speed times the operator's round trip of the tool (at most\n"
+                 "--max-speculative-floor-mm; depth < 0, no force yet) while the tool touches\n"
+                 "nothing, so that under delay a hand that lifts and presses again feels the\n"
+                 "surface where it is, not a round trip later inside it (0 = off; a loopback's\n"
+                 "or a LAN's round trip makes it a few micrometres)")
+      ->check(CLI::Range(0.0, 10000.0))
+      ->capture_default_str();
+  app.add_option("--max-speculative-floor-mm", cl.max_speculative_floor_mm,
+                 "the largest distance --speculative-speed-mm-s models surfaces at (mm)")
+      ->check(CLI::Range(0.0, 100.0))
+      ->capture_default_str();
+  app.add_option("--speculative-lead-ms", cl.speculative_lead_ms,
+                 "speculative contacts: a separated pair beyond the textures' reach is modelled\n"
+                 "(depth < 0, no force yet) when the tool closes it within this time at its\n"
+                 "twist, so that the operator's local model has the surface before the tool\n"
+                 "reaches it however late the model (0 = off; at most 2 mm ahead)")
+      ->check(CLI::Range(0.0, 10000.0))
+      ->capture_default_str();
+}
+
+// Where the texture penetration depth runs.
+void AddBackendOptions(CLI::App& app, NodeCommandLine& cl) {
+  app.add_option("--pd-backend", cl.pd_backend,
+                 "where the texture penetration depth runs: cpu (software rasterizer), gpu\n"
+                 "(headless EGL, OpenGL ES 3.1; Mesa llvmpipe when there is no GPU), or auto (a\n"
+                 "hardware GPU when one starts, else cpu). A GPU that cannot start or fails\n"
+                 "mid-run falls back to cpu with a message")
+      ->check(CLI::IsMember({"cpu", "gpu", "auto"}))
+      ->capture_default_str();
+  app.add_option("--depth-bits", cl.config.gpu.depth_bits,
+                 "GPU depth buffer precision: 16 (fixed point, as the seed) or 32 (float)")
+      ->check(CLI::IsMember({16, 32}))
+      ->capture_default_str();
+  app.add_flag("--gpu-per-render-draws", cl.per_render_draws,
+               "GPU backend: one draw per render (12 per contact), not one instanced draw per\n"
+               "side per batch (the default where the driver has GL_EXT_clip_cull_distance); the\n"
+               "same depths within a quantum, for a driver whose instancing misbehaves");
+}
+
+// Rates, deadbands, files, the key and the UDP stream.
+void AddStreamOptions(CLI::App& app, NodeCommandLine& cl) {
+  app.add_option("--max-rate", cl.config.max_rate_hz, "cap on the step rate in Hz (0 = none)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  app.add_option("--display-rate", cl.config.display_rate_hz,
+                 "rate of the moving scene nodes' poses streamed for the operator's display (Hz)")
+      ->check(CLI::Range(1.0, 1000.0))
+      ->capture_default_str();
+  app.add_option("--max-deadband", cl.max_deadband_pct,
+                 "largest perceptual deadband an operator may ask on either stream, percent (a "
+                 "Weber fraction); a Hello asking more is refused with a Reject that says so")
+      ->check(CLI::Range(0.0, 99.0))
+      ->capture_default_str();
+  // The contact-model deadband's floors (the Weber fraction k itself is the operator's, agreed
+  // in the Hello): each threshold is max(k·|value|, k·floor), ContactModelDeadbandConfig.
+  app.add_option("--model-deadband-force-floor", cl.config.model_deadband.force_floor_scale_n,
+                 "contact-model deadband: force floor scale, N (the floor is k times it)")
+      ->check(CLI::Range(1e-3, 1e3))
+      ->capture_default_str();
+  app.add_option("--model-deadband-torque-floor", cl.config.model_deadband.torque_floor_scale_nm,
+                 "contact-model deadband: torque floor scale, N*m (the floor is k times it)")
+      ->check(CLI::Range(1e-5, 1e2))
+      ->capture_default_str();
+  app.add_option("--model-deadband-stiffness-floor",
+                 cl.config.model_deadband.stiffness_floor_scale_n_per_m,
+                 "contact-model deadband: floor scale of the stiffness's translational block,\n"
+                 "N/m (the floor is k times it)")
+      ->check(CLI::Range(1e-3, 1e9))
+      ->capture_default_str();
+  app.add_option("--model-deadband-rotational-stiffness-floor",
+                 cl.config.model_deadband.rotational_stiffness_floor_scale_nm_per_rad,
+                 "contact-model deadband: floor scale of the stiffness's rotational block,\n"
+                 "N*m/rad (the floor is k times it)")
+      ->check(CLI::Range(1e-6, 1e6))
+      ->capture_default_str();
+  app.add_option("--out", cl.out_dir,
+                 "directory for remote_summary.json and remote_steps.csv (one row per step)");
+  app.add_option("--port-file", cl.port_file, "write the bound UDP port to this file");
+  AddKeyOption(app, cl.key);
+  app.add_option("--mtu", cl.mtu, "largest UDP datagram for scene-update fragments, bytes")
+      ->check(CLI::Range(548, 1472))
+      ->capture_default_str();
+  app.add_option("--peer-timeout", cl.config.peer_timeout_ms,
+                 "declare the operator lost after this long without an authenticated datagram, ms")
+      ->check(CLI::Range(50, 60000))
+      ->capture_default_str();
+  app.add_option("--scene-rate", cl.config.scene_rate_bytes_per_s,
+                 "pace of scene-update fragments, bytes per second")
+      ->check(CLI::Range(1e4, 1e9))
+      ->capture_default_str();
+  app.add_flag("--stay", cl.stay, "keep running after the operator says goodbye");
+  AddKeygenCommand(app, cl.key);
+}
+
+// 'inspect' and 'seed-models'.
+void AddSubcommands(CLI::App& app, NodeCommandLine& cl) {
+  cl.inspect = app.add_subcommand(
+      "inspect",
+      "load a scene (a glTF 2.0 .gltf/.glb file, or a scene description .json naming one),\n"
+      "build the haptic model of every tool and touchable node (coarse mesh, haptic texture,\n"
+      "convex-hull hierarchy) or load it from the cache, and print one JSON object: per object\n"
+      "its name, role, full and coarse triangle counts, hull count, texture size, bake error and\n"
+      "time per stage. Progress goes to stderr. A bad file gives a one-line error and exit 2");
+  cl.inspect->add_option("file", cl.inspect_path, "scene file (.gltf, .glb or .json)")->required();
+  cl.inspect->add_option(
+      "--tool", cl.inspect_tool,
+      "node (name or #index) that is the tool; default: the description's, else\n"
+      "the built-in probe (a small ridged block)");
+  cl.inspect
+      ->add_option("--cache-dir", cl.cache_dir,
+                   "folder of built models, keyed by content and build parameters\n"
+                   "(default: $HT_CACHE_DIR, else $XDG_CACHE_HOME/haptic_teleop, else\n"
+                   "~/.cache/haptic_teleop)")
+      ->capture_default_str();
+  cl.inspect->add_flag("--no-cache", cl.no_cache, "build every model, read and write no cache");
+  cl.inspect->add_flag("--quiet", cl.quiet, "no progress lines on stderr");
+  cl.seed_models = app.add_subcommand(
+      "seed-models",
+      "generate the seed's six benchmark models (block, gear, hammer, cad_part, file, torus;\n"
+      "seed Table 6) procedurally at the seed's full-resolution triangle counts and write each as\n"
+      "DIR/NAME.glb with a scene description DIR/NAME.json (coarse target = the seed's coarse\n"
+      "count, 1024x1024 texture); then 'slave_sim inspect DIR/NAME.json' builds it");
+  cl.seed_models->add_option("--out", cl.seed_out, "folder to write into (created)")->required();
+  cl.seed_models->add_option("--model", cl.seed_names, "only these models (repeatable)");
+  cl.seed_models->add_flag("--quiet", cl.quiet, "no progress lines");
+}
+
+// The key, the address and the stream's own settings.
+void FinishStreamConfig(const NodeCommandLine& cl, RemoteNodeConfig& config) {
+  config.key = LoadKeyOption(cl.key, "slave_sim keygen FILE");
+  config.mtu = static_cast<std::size_t>(cl.mtu);
+  config.listen_address = SocketAddress::Parse(cl.listen);
+  config.pd_backend = ParsePdBackendChoice(cl.pd_backend);
+  if (cl.max_window_option->count() == 0) {
+    config.pipeline.max_window_extent_m =
+        kDefaultMaxWindowPerWindow * config.pipeline.window_extent_m;
+  }
+  config.max_deadband = cl.max_deadband_pct / 100.0;
+  config.gpu.instanced_draws = !cl.per_render_draws;
+  config.port_file = cl.port_file;
+  config.exit_on_goodbye = !cl.stay;
+  config.progress_period_s = cl.quiet ? 0.0 : 1.0;
+  if (!cl.out_dir.empty()) config.step_trace_path = cl.out_dir + "/remote_steps.csv";
+}
+
+// The texture stage's gradient, stage 5b, clustering, and the translation patches.
+void FinishDepthConfig(const NodeCommandLine& cl, RemoteNodeConfig& config) {
+  PipelineOptions& pipeline = config.pipeline;
+  DepthRefinementOptions& refinement = pipeline.depth_refinement;
+  pipeline.rotation_gradient = ParseRotationGradient(cl.rotation_gradient);
+  pipeline.grazing_guard = !cl.no_grazing_guard;
+  pipeline.kink_planes = !cl.no_kink_planes;
+  pipeline.refine_depth = !cl.no_refine_depth;
+  refinement.texel_scale_gradient = cl.texel_scale_gradient;
+  refinement.parallax = cl.parallax;
+  refinement.seed_from_last_step = !cl.no_seed_from_last_step;
+  refinement.parallax_offset_seeds = !cl.no_parallax_offset_seeds;
+  refinement.neighbour_peak_seeds = !cl.no_neighbour_peak_seeds;
+  pipeline.clustering_angle_deg = cl.clustering_angle_deg;
+  pipeline.kink_hang_other_arm = cl.kink_hang_other_arm;
+  refinement.translation_patch = cl.translation_patch;
+  refinement.translation_patch_follows_rotation = cl.translation_patch_follows_rotation;
+  refinement.translation_patch_spacing_cells = cl.translation_patch_spacing_cells;
+  refinement.translation_patch_step_texels = cl.translation_patch_step_texels;
+  if (cl.translation_patch_step_texels > 0.0 && cl.no_translation_patch) {
+    throw std::invalid_argument(
+        "--translation-patch-step-texels sets the patches' spacing, and --no-translation-patch "
+        "sends none: drop one");
+  }
+  config.translation_patch_rtt_ms = cl.no_translation_patch
+                                        ? std::numeric_limits<double>::infinity()
+                                        : cl.translation_patch_rtt_ms;
+  if ((cl.translation_patch || cl.rtt_option->count() > 0) && cl.no_refine_depth) {
+    throw std::invalid_argument(
+        std::string(cl.translation_patch ? "--translation-patch" : "--translation-patch-rtt-ms") +
+        " needs stage 5b (drop --no-refine-depth): the patch's nodes are refined maxima");
+  }
+  refinement.gradient_step_texels = cl.gradient_step_texels;
+  refinement.secant_at_kinks_m = cl.secant_at_kinks_um * 1e-6;
+  refinement.translation_kink_planes = cl.translation_kink_planes;
+  refinement.texel_scale_rotation = !cl.secant_rotation_gradient;
+  if (cl.secant_rotation_gradient && !cl.texel_scale_gradient) {
+    throw std::invalid_argument(
+        "--secant-rotation-gradient needs --texel-scale-gradient (without it the whole "
+        "gradient is the secant already)");
+  }
+  if (cl.translation_kink_planes && !cl.texel_scale_gradient) {
+    throw std::invalid_argument(
+        "--translation-kink-planes needs --texel-scale-gradient (the arms are the texel-scale "
+        "slopes on either side of the vertex)");
+  }
+}
+
+// Stages 5a and 5c, and speculative contacts. Returns whether a split option was given.
+bool FinishSplitConfig(const CLI::App& app, const NodeCommandLine& cl, RemoteNodeConfig& config) {
+  PipelineOptions& pipeline = config.pipeline;
+  pipeline.share_connected_contacts = !cl.no_share_connected_contacts;
+  pipeline.split_windows_at_separated_overlap = !cl.no_split;
+  pipeline.split_link_m = cl.split_windows_link_mm * 1e-3;
+  const bool continuous = cl.split_continuous_um > 0.0;
+  pipeline.split_birth_ramp_m = cl.split_continuous_um * 1e-6;
+  pipeline.split_bridge_fade_m = cl.split_continuous_um * 1e-6;
+  pipeline.split_keeps_parent_rotation_step = continuous;
+  pipeline.split_keeps_parent_window = continuous;
+  const bool split_asked =
+      app.count("--split-windows-link-mm") > 0 || app.count("--split-continuous-um") > 0;
+  if (cl.no_split && split_asked) {
+    throw std::invalid_argument(
+        "--no-split turns stage 5a off; drop it or --split-windows-link-mm / "
+        "--split-continuous-um");
+  }
+  pipeline.speculative_lead_s = cl.speculative_lead_ms * 1e-3;
+  config.speculative_speed_m_per_s = cl.speculative_speed_mm_s * 1e-3;
+  config.max_speculative_floor_m = cl.max_speculative_floor_mm * 1e-3;
+  return split_asked;
+}
+
+// The CPU texture stage's own options against --pd-backend: an error with gpu, the CPU stage (or
+// the option off) with auto.
+void FinishBackendChoice(const NodeCommandLine& cl, bool split_asked, RemoteNodeConfig& config) {
+  if (config.pipeline.rotation_gradient != RotationGradient::kRenderedSamples) {
+    if (config.pd_backend == PdBackendChoice::kGpu) {
+      throw std::invalid_argument("--rotation-gradient " + cl.rotation_gradient +
+                                  " is an option of the CPU texture stage; the GPU backend "
+                                  "renders the rotated samples (use --pd-backend cpu, or drop "
+                                  "the option)");
+    }
+    if (config.pd_backend == PdBackendChoice::kAuto) {
+      std::fprintf(stderr, "slave_sim: --rotation-gradient %s: using the CPU texture stage\n",
+                   cl.rotation_gradient.c_str());
+      config.pd_backend = PdBackendChoice::kCpu;
+    }
+  }
+  if (config.pipeline.split_windows_at_separated_overlap &&
+      config.pd_backend == PdBackendChoice::kGpu) {
+    if (split_asked) {
+      throw std::invalid_argument(
+          "--split-windows-link-mm and --split-continuous-um are options of the CPU texture "
+          "stage; the GPU backend takes one window size per batch (use --pd-backend cpu, or "
+          "drop the option)");
+    }
+    std::fprintf(stderr,
+                 "slave_sim: stage 5a's split is a CPU texture stage option: off with "
+                 "--pd-backend gpu\n");
+    config.pipeline.split_windows_at_separated_overlap = false;
+  }
+}
+
+}  // namespace
+
+void AddNodeOptions(CLI::App& app, NodeCommandLine& cl) {
+  app.set_config("--config", "",
+                 "read options from a TOML file (key = value, long option names without dashes);\n"
+                 "command-line options override it");
+  AddSceneOptions(app, cl);
+  AddWindowOptions(app, cl);
+  AddDepthOptions(app, cl);
+  AddTranslationPatchOptions(app, cl);
+  AddSplitAndSharingOptions(app, cl);
+  AddSpeculativeOptions(app, cl);
+  AddBackendOptions(app, cl);
+  AddStreamOptions(app, cl);
+  AddSubcommands(app, cl);
+  app.add_flag("--quiet", cl.quiet,
+               "no progress or start-up lines (errors, warnings, session events and the last "
+               "line stay)");
+}
+
+void FinishNodeConfig(const CLI::App& app, NodeCommandLine& cl) {
+  RemoteNodeConfig& config = cl.config;
+  FinishStreamConfig(cl, config);
+  FinishDepthConfig(cl, config);
+  const bool split_asked = FinishSplitConfig(app, cl, config);
+  FinishBackendChoice(cl, split_asked, config);
+}
+
+}  // namespace ht

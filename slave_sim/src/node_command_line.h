@@ -1,0 +1,115 @@
+#pragma once
+// slave_sim's command line: its options by group, what they make of the node's configuration
+// (RemoteNodeConfig), and its two subcommands. main.cc is the list of calls.
+
+#include <CLI/CLI.hpp>
+#include <string>
+#include <vector>
+
+#include "haptic_core/model_build/haptic_model_build.h"
+#include "slave_sim/remote_node.h"
+#include "transport/command_line.h"
+
+namespace ht {
+
+/// The command line's values. Options that map one to one onto the node's configuration are
+/// bound to `config` itself; the others (flags that turn a default off, units other than SI,
+/// choices by name) are kept here until FinishNodeConfig. Bound by address: do not move it after
+/// AddNodeOptions.
+struct NodeCommandLine {
+  RemoteNodeConfig config;
+
+  // The address and the scene (AddSceneOptions).
+  std::string listen = "127.0.0.1:47000";
+  std::string scene = "block-on-gear";
+  std::string scene_tool;
+  std::string scene_cache_dir = HapticModelCache::DefaultDir();
+  bool no_watch = false;
+
+  // The windows (AddWindowOptions): whether --max-window was given.
+  CLI::Option* max_window_option = nullptr;
+
+  // The texture stage's gradient, stage 5b and clustering (AddDepthOptions).
+  std::string rotation_gradient = "rendered";
+  bool no_grazing_guard = false;
+  bool no_kink_planes = false;
+  bool no_refine_depth = false;
+  bool parallax = true;
+  bool no_parallax_offset_seeds = false;
+  bool no_neighbour_peak_seeds = false;
+  double clustering_angle_deg = PipelineOptions{}.clustering_angle_deg;
+  bool no_seed_from_last_step = false;
+  bool kink_hang_other_arm = false;
+
+  // Translation patches and the texel-scale gradient (AddTranslationPatchOptions).
+  double translation_patch_rtt_ms = RemoteNodeConfig{}.translation_patch_rtt_ms;
+  CLI::Option* rtt_option = nullptr;
+  bool translation_patch = false;
+  bool no_translation_patch = false;
+  bool translation_patch_follows_rotation = false;
+  int translation_patch_spacing_cells = 1;
+  double translation_patch_step_texels = 0.0;
+  bool texel_scale_gradient = false;
+  double gradient_step_texels = DepthRefinementOptions{}.gradient_step_texels;
+  double secant_at_kinks_um = DepthRefinementOptions{}.secant_at_kinks_m * 1e6;
+  bool secant_rotation_gradient = false;
+  bool translation_kink_planes = false;
+
+  // Stages 5a and 5c (AddSplitAndSharingOptions).
+  double split_windows_link_mm = 10.0;
+  double split_continuous_um = 400.0;
+  bool no_split = false;
+  bool no_share_connected_contacts = false;
+
+  // Speculative contacts (AddSpeculativeOptions).
+  double speculative_speed_mm_s = RemoteNodeConfig{}.speculative_speed_m_per_s * 1e3;
+  double max_speculative_floor_mm = RemoteNodeConfig{}.max_speculative_floor_m * 1e3;
+  double speculative_lead_ms = 50.0;
+
+  // The texture stage's backend (AddBackendOptions).
+  std::string pd_backend = "auto";
+  bool per_render_draws = false;
+
+  // The stream (AddStreamOptions).
+  double max_deadband_pct = 50.0;
+  std::string out_dir;
+  std::string port_file;
+  KeyFileOptions key;
+  int mtu = 1472;
+  bool stay = false;
+  bool quiet = false;
+
+  // 'slave_sim inspect FILE'.
+  CLI::App* inspect = nullptr;
+  std::string inspect_path;
+  std::string inspect_tool;
+  std::string cache_dir = HapticModelCache::DefaultDir();
+  bool no_cache = false;
+
+  // 'slave_sim seed-models --out DIR'.
+  CLI::App* seed_models = nullptr;
+  std::string seed_out;
+  std::vector<std::string> seed_names;
+};
+
+/// Adds every option, the keygen command and both subcommands to `app`, bound to `cl`, in the
+/// order --help lists them.
+void AddNodeOptions(CLI::App& app, NodeCommandLine& cl);
+
+/// After parsing: fills cl.config from the values kept in `cl` (units, defaults that depend on
+/// other options, the key file). Throws std::invalid_argument, with the options named, for
+/// options that contradict each other (e.g. --no-split with --split-continuous-um, a CPU-only
+/// option with --pd-backend gpu) and what LoadKeyOption and SocketAddress::Parse throw; prints to
+/// stderr where it turns an option off or picks the CPU texture stage for another option.
+void FinishNodeConfig(const CLI::App& app, NodeCommandLine& cl);
+
+/// 'slave_sim seed-models': writes the seed's six benchmark models (or cl.seed_names) as
+/// DIR/NAME.glb with a scene description DIR/NAME.json. Returns the exit code: 0, or 2 after
+/// printing the error (an unknown model name, a file that cannot be written).
+int RunSeedModelsCommand(const NodeCommandLine& cl);
+
+/// 'slave_sim inspect FILE': builds (or loads from the cache) every model of the scene and prints
+/// one JSON object. Returns the exit code: 0, or 2 after printing a one-line error.
+int RunInspectCommand(const NodeCommandLine& cl);
+
+}  // namespace ht
