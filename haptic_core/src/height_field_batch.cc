@@ -13,7 +13,7 @@ namespace ht {
 
 namespace {
 
-bool IsPowerOfTwo(int n) noexcept { return n > 0 && (n & (n - 1)) == 0; }
+[[maybe_unused]] bool IsPowerOfTwo(int n) noexcept { return n > 0 && (n & (n - 1)) == 0; }
 
 void SampleScalar(const HeightField& field, int level, const HeightFieldLevel& L, const float* u,
                   const float* v, float* h, std::size_t n) noexcept {

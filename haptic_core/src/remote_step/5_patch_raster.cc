@@ -9,7 +9,7 @@
 #include <limits>
 #include <span>
 
-#include "5_raster_kernels.h"
+#include "5_raster_largest_difference.h"
 #include "haptic_core/penetration_depth.h"
 
 namespace ht {
