@@ -1,6 +1,7 @@
 // The speed-vs-error frontier's records (frontier.h): what a run measures per setting, contact
 // and scene, and the writers of its files. Internal to slave_sim/src (frontier.cc runs the
-// sweep, frontier_report.cc writes frontier.csv and summary.md, the CSV rows and headers).
+// sweep, frontier_setting_run.cc one setting's timed steps, frontier_metrics.cc the metrics,
+// frontier_report.cc writes frontier.csv and summary.md, the CSV rows and headers).
 #pragma once
 
 #include <chrono>
@@ -15,8 +16,10 @@
 
 #include "haptic_core/accuracy/contact_patch_truth.h"
 #include "haptic_core/accuracy/ground_truth_depth.h"
+#include "haptic_core/accuracy/mesh_contact_baseline.h"
 #include "haptic_core/model_build/surface_error.h"
 #include "haptic_core/remote_step.h"
+#include "slave_sim/benchmark_scenes.h"
 #include "slave_sim/frontier.h"
 
 namespace ht::frontier {
@@ -162,6 +165,30 @@ class PartialFile {
   std::ofstream out_;
 };
 
+// frontier_setting_run.cc:
+// Key of a ground-truth window: the pose, the tool's frame, and the window's geometry, bit for
+// bit (windows of settings that differ only in grid or backend are one job).
+std::string GtKey(int pose, const RigidTransform& X_TFt, const ContactWindow& w, double k);
+// The displacements of the model-prediction measure: ±a about W's x and y and ±d along them
+// (FrontierOptions::prediction_rotation_rad, prediction_translation_m: 1 mrad and 0.1 mm by
+// default), about the tool's centre of mass (a tilt of a resting face either way, a slide), and
+// ± FrontierOptions::prediction_yaw_rad about W's z where it is set.
+std::vector<Twist> PredictionDisplacements(const FrontierOptions& options);
+// Every how many poses the prediction measure samples (about 20 poses).
+std::size_t PredictionStride(std::size_t poses);
+// The displaced tool-mesh poses X_WFt of the prediction measure: each sampled pose's tool (frame
+// T, X_TFt from the mesh frame) displaced by each of PredictionDisplacements().
+std::vector<RigidTransform> PredictionPoses(const std::vector<RigidTransform>& poses_WFt,
+                                            const RigidTransform& X_TFt,
+                                            const FrontierOptions& options);
+// Runs the timed steps of setting run.setting on `scene` at the tool-mesh poses `poses_WFt`
+// (single thread; `consecutive`: one pose after the other as a trace's rows, with `switch_lag`
+// rows of lag; FCL's setting on `fcl`), filling `run`'s records.
+void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& poses_WFt,
+                const MeshContactBaseline& fcl, bool consecutive, int switch_lag,
+                const FrontierOptions& frontier_options, SettingRun& run);
+
+// frontier_metrics.cc:
 // The metrics of `run` (run.m): timings, the texture-stage errors against the jobs' ground truth
 // (the baselines against `reference_gt`, the default setting's per pose), poses missed or
 // invented against FCL's `touching`, and the errors against the pipeline and volume truths.
