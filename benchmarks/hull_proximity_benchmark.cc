@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "haptic_core/accuracy/fcl_mesh.h"
 #include "haptic_core/demo/seed_models.h"
 #include "haptic_core/hull_proximity.h"
 #include "haptic_core/model_build/haptic_model_build.h"
@@ -45,26 +46,6 @@ std::shared_ptr<const ht::HapticModel> Build(ht::SeedModel model) {
             << build.report.hull_nodes << " nodes" << (build.report.from_cache ? " (cached)" : "")
             << "\n";
   return build.model;
-}
-
-std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>> FclMesh(const ht::HapticModel& m) {
-  auto bvh = std::make_shared<fcl::BVHModel<fcl::OBBRSSd>>();
-  std::vector<fcl::Vector3d> v;
-  std::vector<fcl::Triangle> t;
-  for (const auto& p : m.vertices_O) v.emplace_back(p.x, p.y, p.z);
-  for (const auto& f : m.triangles) t.emplace_back(f.x, f.y, f.z);
-  bvh->beginModel();
-  bvh->addSubModel(v, t);
-  bvh->endModel();
-  return bvh;
-}
-
-fcl::Transform3d FclPose(const ht::RigidTransform& X) {
-  fcl::Transform3d T = fcl::Transform3d::Identity();
-  T.linear() =
-      fcl::Quaterniond(X.rotation.w, X.rotation.x, X.rotation.y, X.rotation.z).toRotationMatrix();
-  T.translation() = fcl::Vector3d(X.translation.x, X.translation.y, X.translation.z);
-  return T;
 }
 
 // Lowers the tool along −z from `start` (clear of B) in 1 mm steps until its deepest pair
@@ -113,8 +94,8 @@ Scene& GetScene(int which) {
   // measured with the step itself by fig77_scrape and the speed-vs-error frontier.
   s.tolerance_m = 1e-3;
   s.X_WA = Sink(*s.tool, s.X_WA, *s.env, 3e-4);
-  s.fcl_tool = FclMesh(*s.tool);
-  s.fcl_env = FclMesh(*s.env);
+  s.fcl_tool = ht::MakeFclMesh({s.tool->vertices_O, s.tool->triangles}, "coarse tool");
+  s.fcl_env = ht::MakeFclMesh({s.env->vertices_O, s.env->triangles}, "coarse environment");
   return scenes.emplace(which, std::move(s)).first->second;
 }
 
@@ -166,7 +147,7 @@ void BM_FclCollideAllContacts(benchmark::State& state) {
   double contacts = 0;
   int i = 0;
   for (auto _ : state) {
-    fcl::CollisionObjectd tool(s.fcl_tool, FclPose(Frame(s, i++)));
+    fcl::CollisionObjectd tool(s.fcl_tool, ht::ToFcl(Frame(s, i++)));
     fcl::CollisionResultd res;
     fcl::collide(&tool, &env, req, res);
     contacts += static_cast<double>(res.numContacts());
@@ -187,7 +168,7 @@ void BM_FclDistance(benchmark::State& state) {
   double d = 0;
   int i = 0;
   for (auto _ : state) {
-    fcl::CollisionObjectd tool(s.fcl_tool, FclPose(Frame(s, i++)));
+    fcl::CollisionObjectd tool(s.fcl_tool, ht::ToFcl(Frame(s, i++)));
     fcl::DistanceResultd res;
     fcl::distance(&tool, &env, req, res);
     d = res.min_distance;

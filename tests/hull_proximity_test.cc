@@ -23,6 +23,7 @@
 #include <utility>
 #include <vector>
 
+#include "haptic_core/accuracy/fcl_mesh.h"
 #include "haptic_core/demo/procedural_models.h"
 #include "haptic_core/model_build/hull_hierarchy_build.h"
 
@@ -205,26 +206,6 @@ double MaxLeafDiameter(const HapticModel& m) {
   return d;
 }
 
-std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>> FclMesh(const HapticModel& m) {
-  auto bvh = std::make_shared<fcl::BVHModel<fcl::OBBRSSd>>();
-  std::vector<fcl::Vector3d> v;
-  std::vector<fcl::Triangle> t;
-  for (const auto& p : m.vertices_O) v.emplace_back(p.x, p.y, p.z);
-  for (const auto& f : m.triangles) t.emplace_back(f.x, f.y, f.z);
-  bvh->beginModel();
-  bvh->addSubModel(v, t);
-  bvh->endModel();
-  return bvh;
-}
-
-fcl::Transform3d FclPose(const RigidTransform& X) {
-  fcl::Transform3d T = fcl::Transform3d::Identity();
-  T.linear() =
-      fcl::Quaterniond(X.rotation.w, X.rotation.x, X.rotation.y, X.rotation.z).toRotationMatrix();
-  T.translation() = fcl::Vector3d(X.translation.x, X.translation.y, X.translation.z);
-  return T;
-}
-
 glm::dquat RandomRotation(std::mt19937_64& rng) {
   std::normal_distribution<double> g;
   return glm::normalize(glm::dquat(g(rng), g(rng), g(rng), g(rng)));
@@ -276,10 +257,10 @@ TEST_F(TorusLBlock, AgreesWithFclMeshDistanceAtRandomPoses) {
             << " leaves\n";
   const double eps = 2e-3;
   const double reach = std::max(MaxLeafDiameter(A), MaxLeafDiameter(B));
-  auto fa = FclMesh(A);
-  auto fb = FclMesh(B);
+  auto fa = MakeFclMesh({A.vertices_O, A.triangles}, "coarse");
+  auto fb = MakeFclMesh({B.vertices_O, B.triangles}, "coarse");
   const RigidTransform X_WB = Pose({0, 0, 0});
-  fcl::CollisionObjectd ob(fb, FclPose(X_WB));
+  fcl::CollisionObjectd ob(fb, ToFcl(X_WB));
   HullProximityQuery query;
   ProximityQueryOptions opt;
   opt.tolerance_m = eps;
@@ -288,7 +269,7 @@ TEST_F(TorusLBlock, AgreesWithFclMeshDistanceAtRandomPoses) {
   std::vector<double> excess;  // FCL distance − our min distance, FCL separated and we found pairs
   for (int k = 0; k < 2000; ++k) {
     const RigidTransform X_WA = RandomPose(rng);
-    fcl::CollisionObjectd oa(fa, FclPose(X_WA));
+    fcl::CollisionObjectd oa(fa, ToFcl(X_WA));
     fcl::CollisionRequestd creq;
     fcl::CollisionResultd cres;
     fcl::collide(&oa, &ob, creq, cres);

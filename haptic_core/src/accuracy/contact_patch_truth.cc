@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "contact_patch_geometry.h"
-#include "fcl_mesh.h"
+#include "haptic_core/accuracy/fcl_mesh.h"
 #include "haptic_core/connected_contacts.h"
 
 namespace ht {
@@ -114,8 +114,8 @@ struct ContactPatchTruth::Impl {
         tool_rays(tr),
         environment_rays(er),
         options(o),
-        tool_fcl(accuracy_detail::MakeFclMesh(t, "tool")),
-        environment_fcl(accuracy_detail::MakeFclMesh(e, "environment")),
+        tool_fcl(MakeFclMesh(t, "tool")),
+        environment_fcl(MakeFclMesh(e, "environment")),
         solver(tr, er, o.depth),
         tool_normals(tool, tool_topology, o.macro_normal_radius_m),
         environment_normals(environment, environment_topology, o.macro_normal_radius_m) {}
@@ -242,8 +242,8 @@ bool ContactPatchTruth::Impl::FindIntersectingPairs(PoseState& s) {
   const RigidTransform& X_WFe = s.X_WFe;
   PoseTruth& out = s.out;
   std::vector<Pair>& pairs = s.pairs;
-  fcl::CollisionObjectd tool_object(m.tool_fcl, accuracy_detail::ToFcl(X_WFt));
-  fcl::CollisionObjectd env_object(m.environment_fcl, accuracy_detail::ToFcl(X_WFe));
+  fcl::CollisionObjectd tool_object(m.tool_fcl, ToFcl(X_WFt));
+  fcl::CollisionObjectd env_object(m.environment_fcl, ToFcl(X_WFe));
   fcl::CollisionRequestd request(static_cast<std::size_t>(o.max_pairs), false);
   fcl::CollisionResultd result;
   fcl::collide(&tool_object, &env_object, request, result);

@@ -1,10 +1,10 @@
-#include "fcl_mesh.h"
+#include "haptic_core/accuracy/fcl_mesh.h"
 
 #include <stdexcept>
 #include <string>
 #include <vector>
 
-namespace ht::accuracy_detail {
+namespace ht {
 
 std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>> MakeFclMesh(const TriangleMesh& mesh,
                                                          const char* what) {
@@ -39,4 +39,4 @@ fcl::Transform3d ToFcl(const RigidTransform& X) {
   return T;
 }
 
-}  // namespace ht::accuracy_detail
+}  // namespace ht

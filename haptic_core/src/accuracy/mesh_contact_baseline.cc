@@ -7,11 +7,9 @@
 #include <string>
 #include <vector>
 
-#include "fcl_mesh.h"
+#include "haptic_core/accuracy/fcl_mesh.h"
 
 namespace ht {
-using accuracy_detail::MakeFclMesh;
-using accuracy_detail::ToFcl;
 
 struct MeshContactBaseline::Impl {
   std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>> tool, environment;
