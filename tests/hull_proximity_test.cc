@@ -601,6 +601,21 @@ TEST(HullProximityHardCases, EdgeEdgeCrossing) {
     std::cout << "edge-edge gap " << gap << ": sd " << c.signed_distance_m << " n (" << c.normal_W.x
               << ", " << c.normal_W.y << ", " << c.normal_W.z << ")\n";
   }
+  // A fresh query at the touching pose (no coherence: no earlier normal to take): MPR finds no
+  // overlap on a touching pair and the face normals give a face diagonal's 7 mm; the hulls moved
+  // a hair apart give GJK's normal, +z, with the overlap of the pair as posed.
+  for (const double turn : {0.0, 0.3, 1.1}) {
+    const RigidTransform X_WA = Pose(
+        {0, 0, 2 * h}, AxisAngle({0, 0, 1}, turn) * AxisAngle({1, 0, 0}, std::numbers::pi / 4));
+    HullProximityQuery fresh;
+    const auto pairs = fresh.Query(box, X_WA, box, X_WB, opt);
+    const auto c = Only(pairs);
+    CheckPairs(pairs, box, X_WA, box, X_WB, opt.tolerance_m);
+    EXPECT_NEAR(c.signed_distance_m, 0.0, 1e-9) << turn;
+    EXPECT_NEAR(c.normal_W.z, 1.0, 1e-6) << turn;
+    std::cout << "fresh edge-edge touching, turn " << turn << ": sd " << c.signed_distance_m
+              << " n (" << c.normal_W.x << ", " << c.normal_W.y << ", " << c.normal_W.z << ")\n";
+  }
 }
 
 // Vertex-face: A's corner pointing down onto B's top face. Gap ±0.5 mm → ±0.5 mm exactly

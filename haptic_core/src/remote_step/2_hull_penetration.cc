@@ -1,6 +1,7 @@
 // The contact of a touching or penetrating hull pair: the direction of least overlap among
-// libccd MPR's, both hulls' face normals and the previous call's normal (HullProximityQuery::Query
-// gives the method and its accuracy).
+// libccd MPR's, both hulls' face normals, the previous call's normal and, for a touching pair,
+// GJK's direction with the hulls moved a hair apart (HullProximityQuery::Query gives the method
+// and its accuracy).
 #include <ccd/ccd.h>
 
 #include <cmath>
@@ -14,6 +15,11 @@ namespace {
 // Largest plane × vertex product for the face-normal candidates of a penetrating pair (bounds
 // the cost for big single hulls; leaf hulls are far below it).
 constexpr std::size_t kMaxFaceCandidateWork = 65536;
+
+// How far a touching pair is moved apart to find its contact normal, relative to the pair's size
+// (the hulls' radii and their centres' distance): far above GJK's kTouch_m on any model between a
+// millimetre and a few metres, far below what moves the closest features.
+constexpr double kTouchNudge = 1e-7;
 
 // ------------------------------------------------------------------------------------------------
 // libccd callbacks on PosedHull (for MPR on touching/penetrating leaf pairs).
@@ -76,6 +82,31 @@ HullPairContact PenetrationContact(const PosedHull& A, const PosedHull& B,
     }
   }
   if (previous_normal_W != nullptr) consider(*previous_normal_W, Overlap(A, B, *previous_normal_W));
+  if (rc != 0) {
+    // MPR found no overlap: the hulls touch (GJK's distance is below kTouch_m). Where they touch
+    // edge to edge no face normal realizes the contact (a face's overlap is the other hull's
+    // whole reach past the edge), so A is moved off B a hair along the centres' direction, which
+    // separates two touching hulls (their separating plane's normal n has n·(c_A − c_B) > 0), and
+    // GJK's direction there, the closest features' normal (for two edges their cross product),
+    // is a candidate with its overlap taken on the pair as posed.
+    const glm::dvec3 c = A.center_W - B.center_W;
+    const double len = glm::length(c);
+    if (len > 0.0 && std::isfinite(len) && A.map != PosedHull::Map::kIdentity) {
+      const double hair = kTouchNudge * (A.radius_m + B.radius_m + len);
+      const glm::dvec3 shift = (hair / len) * c;
+      RigidTransform X_WO_moved = *A.X_WO;
+      X_WO_moved.translation += shift;
+      PosedHull moved = A;
+      moved.X_WO = &X_WO_moved;
+      moved.p_WO += shift;
+      moved.center_W += shift;
+      const GjkResult g = GjkDistance(moved, B, c, kInf);
+      if (g.status == GjkStatus::kSeparated && g.distance_m > 0.0) {
+        const glm::dvec3 n = g.v / g.distance_m;
+        if (IsFiniteVec(n)) consider(n, Overlap(A, B, n));
+      }
+    }
+  }
   if (!(best_overlap < kInf)) {
     // Nothing usable (no planes and MPR failed): the centre direction.
     glm::dvec3 n = A.center_W - B.center_W;
