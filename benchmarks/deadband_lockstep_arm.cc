@@ -261,8 +261,8 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     }
     const OperatorTickOutput out = tick.Step(in);
     device->WriteWrench(out.F_H_M, now);
-    run.device_force_W.push_back(out.F_device_W.force);
-    run.device_torque_W.push_back(out.F_device_W.torque);
+    run.device_force_W.push_back(out.F_H_W.force);
+    run.device_torque_W.push_back(out.F_H_W.torque);
     run.contact_force_W.push_back(out.step.F_contact_T_W.force);
     run.passivity_removed_n.push_back(out.passivity_removed_n);
     run.model_age_ms.push_back(out.model_age_ms);

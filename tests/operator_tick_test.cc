@@ -63,7 +63,7 @@ TEST(OperatorTick, AFailedDeviceReadRampsDownAndTheRecoveryRampsUp) {
   for (int k = 0; k < 500; ++k) {  // settle while pressing
     in.now_ns = now += 1000000;
     wall.tool_state_sent_ns = wall.built_local_ns = now;
-    last = glm::length(tick.Step(in).F_device_W.force);
+    last = glm::length(tick.Step(in).F_H_W.force);
     in.arrived = k % 2 ? &wall : nullptr;
   }
   pressing = last;
@@ -74,7 +74,7 @@ TEST(OperatorTick, AFailedDeviceReadRampsDownAndTheRecoveryRampsUp) {
   int ticks_to_zero = -1;
   for (int k = 0; k < 20; ++k) {
     fault.now_ns = now += 1000000;
-    const double f = glm::length(tick.Step(fault).F_device_W.force);
+    const double f = glm::length(tick.Step(fault).F_H_W.force);
     EXPECT_LE(std::abs(f - last), max_step) << "fault tick " << k;
     EXPECT_LE(f, last + 1e-12);
     if (ticks_to_zero < 0 && f == 0.0) ticks_to_zero = k + 1;
@@ -89,7 +89,7 @@ TEST(OperatorTick, AFailedDeviceReadRampsDownAndTheRecoveryRampsUp) {
     in = Pressing(now += 1000000);
     wall.tool_state_sent_ns = wall.built_local_ns = now;
     in.arrived = &wall;
-    const double f = glm::length(tick.Step(in).F_device_W.force);
+    const double f = glm::length(tick.Step(in).F_H_W.force);
     EXPECT_LE(std::abs(f - last), max_step) << "recovery tick " << k;
     if (ticks_to_full < 0 && f > 0.99 * pressing) ticks_to_full = k + 1;
     last = f;
@@ -109,7 +109,7 @@ TEST(OperatorTick, FreeSpaceGivesNoForceAndTheToolFollowsTheHandle) {
     out = tick.Step(in);
   }
   EXPECT_NEAR(tick.tool().X_WT.translation.x, 0.01, 1e-6);
-  EXPECT_NEAR(glm::length(out.F_device_W.force), 0.0, 1e-6);
+  EXPECT_NEAR(glm::length(out.F_H_W.force), 0.0, 1e-6);
   EXPECT_EQ(out.model_age_ms, -1.0);
 }
 
@@ -202,8 +202,8 @@ TEST(OperatorTick, TheStopRampScalesTheWrenchBeforeThePassivityObserverRecordsIt
     if (k == 299) in.output_gain = 0.5;
     out_b = b.Step(in);
   }
-  ASSERT_GT(glm::length(out_a.F_device_W.force), 0.1);
-  EXPECT_NEAR(out_b.F_device_W.force.z, 0.5 * out_a.F_device_W.force.z, 1e-12);
+  ASSERT_GT(glm::length(out_a.F_H_W.force), 0.1);
+  EXPECT_NEAR(out_b.F_H_W.force.z, 0.5 * out_a.F_H_W.force.z, 1e-12);
   EXPECT_NEAR(out_b.F_H_M.force.z, 0.5 * out_a.F_H_M.force.z, 1e-12);
   EXPECT_EQ(before_a, before_b);
   const double step_a = a.passivity().observed_energy_j() - before_a;
@@ -213,7 +213,7 @@ TEST(OperatorTick, TheStopRampScalesTheWrenchBeforeThePassivityObserverRecordsIt
   // Gain 0 (and NaN, treated as 0): nothing reaches the device.
   OperatorTickInput in = Pressing(now);
   in.output_gain = std::nan("");
-  EXPECT_EQ(b.Step(in).F_device_W.force, glm::dvec3(0.0));
+  EXPECT_EQ(b.Step(in).F_H_W.force, glm::dvec3(0.0));
 }
 
 TEST(OperatorTick, NonFiniteDeviceReadingsGiveZeroWrench) {
@@ -222,8 +222,8 @@ TEST(OperatorTick, NonFiniteDeviceReadingsGiveZeroWrench) {
   in.now_ns = 1000000;
   in.device.X_MH.translation = {std::nan(""), 0, 0};
   const OperatorTickOutput out = tick.Step(in);
-  EXPECT_TRUE(IsFinite(out.F_device_W));
-  EXPECT_EQ(glm::length(out.F_device_W.force), 0.0);
+  EXPECT_TRUE(IsFinite(out.F_H_W));
+  EXPECT_EQ(glm::length(out.F_H_W.force), 0.0);
   EXPECT_GE(tick.counters().nonfinite, 1);
   EXPECT_TRUE(IsFiniteRigidTransform(tick.tool().X_WT));
 }
@@ -436,20 +436,20 @@ TEST(OperatorTick, ThePassivityReleaseBringsACutForceBackOverItsTicks) {
     for (int k = 0; k < 500; ++k) {
       in.now_ns += 1000000;
       wall.tool_state_sent_ns = wall.built_local_ns = in.now_ns;
-      resting = glm::length(tick.Step(in).F_device_W.force);
+      resting = glm::length(tick.Step(in).F_H_W.force);
       in.arrived = k % 2 ? &wall : nullptr;
     }
     ASSERT_GT(resting, 1.0);
     in.arrived = nullptr;
     in.now_ns += 1000000;
     in.device.V_MH_M.linear.z = 0.05;  // up, along the force: power to the hand that E lacks
-    const double cut = glm::length(tick.Step(in).F_device_W.force);
+    const double cut = glm::length(tick.Step(in).F_H_W.force);
     EXPECT_LT(cut, 0.05 * resting) << release_ticks;
     in.device.V_MH_M.linear.z = 0.0;
     double previous = cut, min_energy = tick.passivity().observed_energy_j();
     for (int k = 0; k < 30; ++k) {
       in.now_ns += 1000000;
-      const double f = glm::length(tick.Step(in).F_device_W.force);
+      const double f = glm::length(tick.Step(in).F_H_W.force);
       min_energy = std::min(min_energy, tick.passivity().observed_energy_j());
       if (release_ticks == 0 && k == 0) {
         EXPECT_GT(f, 0.9 * resting) << "without the release the force is back at once";

@@ -447,8 +447,8 @@ int main(int argc, char** argv) {
         summary["rtt_ms_p50"].get<double>(), summary["contacts_max"].get<int>(),
         static_cast<long long>(summary["nonfinite_count"].get<std::int64_t>()));
     // What a person must see, said once at the end (issue 35): deploy/report lists the same.
-    const auto number = [&](const nlohmann::json& j, const char* key) {
-      return j.is_object() && j.contains(key) && j[key].is_number() ? j[key].get<double>() : 0.0;
+    const auto number = [&](const nlohmann::json& j, const char* name) {
+      return j.is_object() && j.contains(name) && j[name].is_number() ? j[name].get<double>() : 0.0;
     };
     if (const double n = number(summary, "saturated_contact_ticks"); n > 0.0) {
       std::printf(

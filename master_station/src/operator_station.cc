@@ -303,7 +303,7 @@ void OperatorStationRun::LoopThread() {
       row.contacts = step.active_contacts;
       row.depth_m = step.max_depth_m;
       row.p_WH = out.X_WH.translation;
-      row.F_device_W = out.F_device_W;
+      row.F_H_W = out.F_H_W;
       row.passivity_removed_n = out.passivity_removed_n;
       row.model_age_ms = out.model_age_ms;
       row.remote_collision_us = tick.model_stamp().collision_us;

@@ -24,11 +24,10 @@ long WriteTraceRow(std::FILE* f, const TraceRow& r, const std::vector<std::strin
       r.t_s, phase, p.x, p.y, p.z, rv.x, rv.y, rv.z, r.F_contact_T_W.force.x,
       r.F_contact_T_W.force.y, r.F_contact_T_W.force.z, r.F_contact_T_W.torque.x,
       r.F_contact_T_W.torque.y, r.F_contact_T_W.torque.z, r.contacts, r.model_age_ms, r.p_WH.x,
-      r.p_WH.y, r.p_WH.z, r.F_device_W.force.x, r.F_device_W.force.y, r.F_device_W.force.z,
-      r.F_device_W.torque.x, r.F_device_W.torque.y, r.F_device_W.torque.z, r.depth_m,
-      static_cast<double>(r.tick_compute_us), static_cast<double>(r.remote_collision_us),
-      static_cast<double>(r.remote_texture_us), static_cast<double>(r.remote_step_us),
-      r.passivity_removed_n);
+      r.p_WH.y, r.p_WH.z, r.F_H_W.force.x, r.F_H_W.force.y, r.F_H_W.force.z, r.F_H_W.torque.x,
+      r.F_H_W.torque.y, r.F_H_W.torque.z, r.depth_m, static_cast<double>(r.tick_compute_us),
+      static_cast<double>(r.remote_collision_us), static_cast<double>(r.remote_texture_us),
+      static_cast<double>(r.remote_step_us), r.passivity_removed_n);
   return n < 0 ? 0 : n;
 }
 

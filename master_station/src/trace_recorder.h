@@ -19,7 +19,7 @@ struct TraceRow {
   int contacts = 0;
   double model_age_ms = -1.0;
   glm::dvec3 p_WH{0.0};
-  Wrench F_device_W;
+  Wrench F_H_W;
   double depth_m = 0.0;
   float tick_compute_us = 0.0f;
   float remote_collision_us = 0.0f;

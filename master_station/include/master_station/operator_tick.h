@@ -120,7 +120,7 @@ struct OperatorTickInput {
 /// One tick's outputs.
 struct OperatorTickOutput {
   Wrench F_H_M;                ///< To command to the device: on the handle, in M (N, N·m).
-  Wrench F_device_W;           ///< The same in W.
+  Wrench F_H_W;                ///< The same in W.
   ToolStepResult step;         ///< The tool step (default when the device read failed).
   RigidTransform X_WH;         ///< Handle pose in W this tick (the last good one after a fault).
   double model_age_ms = -1.0;  ///< Age of the tool pose the model in use answers; −1 = none.
@@ -228,16 +228,16 @@ class OperatorTick {
   /// finite, counted).
   Wrench StepTool(const RigidTransform& X_WH, const Twist& V_WH_W, bool blending,
                   OperatorTickOutput& out) noexcept;
-  /// Stage 4 before safety: the passivity controller's damping of `F_device_W`; `f_after_apply`
+  /// Stage 4 before safety: the passivity controller's damping of `F_H_W`; `f_after_apply`
   /// gets |f| after it (N) for the release.
-  Wrench ApplyPassivity(const Wrench& F_device_W, const Twist& V_WH_W, OperatorTickOutput& out,
+  Wrench ApplyPassivity(const Wrench& F_H_W, const Twist& V_WH_W, OperatorTickOutput& out,
                         double& f_after_apply) noexcept;
   /// Stage 5: the safety filter and the stop ramp's gain.
-  Wrench LimitWrench(const Wrench& F_device_W, const Twist& V_WH_W, double model_staleness_s,
+  Wrench LimitWrench(const Wrench& F_H_W, const Twist& V_WH_W, double model_staleness_s,
                      const OperatorTickInput& in, OperatorTickOutput& out) noexcept;
   /// Stage 4 after safety: the guard, the release of what the stage cut, and the observer's
   /// record (Commit) of the wrench returned, which the device gets.
-  Wrench GuardPassivity(const Wrench& F_device_W, const Twist& V_WH_W, bool device_ok,
+  Wrench GuardPassivity(const Wrench& F_H_W, const Twist& V_WH_W, bool device_ok,
                         double f_after_apply, OperatorTickOutput& out) noexcept;
   /// Sets model_'s depth offset to `offset_m` (shifts every contact's and kink plane's depth).
   void SetDepthOffset(double offset_m) noexcept;

@@ -60,7 +60,7 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
   const double model_staleness_s =
       have_model_ ? (in.now_ns - model_stamp_.built_local_ns) * 1e-9 : -1.0;
 
-  Wrench F_device_W;
+  Wrench F_H_W;
   Twist V_WH_W;
   double f_after_apply = 0.0;  // |f| after passivity's Apply (N), for its release
   if (!in.device_ok) {
@@ -76,17 +76,17 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
     // Stage 2: the blend from the model before to the one in use, its switch energy bounded.
     const bool blending = StepBlend(took_model, potential_changes, U_before, out);
     // Stage 3: virtual coupling and the implicit tool step against the (blended) model.
-    F_device_W = StepTool(out.X_WH, V_WH_W, blending, out);
+    F_H_W = StepTool(out.X_WH, V_WH_W, blending, out);
     // Stage 4: passivity (energy a delayed model created is dissipated).
-    F_device_W = ApplyPassivity(F_device_W, V_WH_W, out, f_after_apply);
+    F_H_W = ApplyPassivity(F_H_W, V_WH_W, out, f_after_apply);
   }
   // Stage 5: safety, on every tick, then the stop ramp's gain; then stage 4's guard and release,
   // and the observer records what the device really gets.
-  F_device_W = LimitWrench(F_device_W, V_WH_W, model_staleness_s, in, out);
-  F_device_W = GuardPassivity(F_device_W, V_WH_W, in.device_ok, f_after_apply, out);
-  out.F_device_W = F_device_W;
+  F_H_W = LimitWrench(F_H_W, V_WH_W, model_staleness_s, in, out);
+  F_H_W = GuardPassivity(F_H_W, V_WH_W, in.device_ok, f_after_apply, out);
+  out.F_H_W = F_H_W;
   const glm::dquat R_MW = glm::conjugate(X_WM_.rotation);
-  out.F_H_M = {R_MW * F_device_W.force, R_MW * F_device_W.torque};
+  out.F_H_M = {R_MW * F_H_W.force, R_MW * F_H_W.torque};
   return out;
 }
 

@@ -21,15 +21,15 @@ Wrench OperatorTick::StepTool(const RigidTransform& X_WH, const Twist& V_WH_W, b
   }
   if (!out.step.ok) ++counters_.nonfinite;
   if (out.step.saturated_contacts > 0) ++counters_.saturated_contact_ticks;
-  Wrench F_device_W = -out.step.F_coupling_T_W;
-  if (!IsFinite(F_device_W)) {
+  Wrench F_H_W = -out.step.F_coupling_T_W;
+  if (!IsFinite(F_H_W)) {
     ++counters_.nonfinite;
-    F_device_W = {};
+    F_H_W = {};
   }
   if (!IsFinite(out.step.F_contact_T_W) || !IsFiniteRigidTransform(tool_.X_WT)) {
     ++counters_.nonfinite;
   }
-  return F_device_W;
+  return F_H_W;
 }
 
 }  // namespace ht

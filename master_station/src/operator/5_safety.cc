@@ -9,10 +9,9 @@
 
 namespace ht {
 
-Wrench OperatorTick::LimitWrench(const Wrench& F_device_W, const Twist& V_WH_W,
-                                 double model_staleness_s, const OperatorTickInput& in,
-                                 OperatorTickOutput& out) noexcept {
-  Wrench F = safety_.Filter(F_device_W, V_WH_W, model_staleness_s, in.link_connected, config_.h_s,
+Wrench OperatorTick::LimitWrench(const Wrench& F_H_W, const Twist& V_WH_W, double model_staleness_s,
+                                 const OperatorTickInput& in, OperatorTickOutput& out) noexcept {
+  Wrench F = safety_.Filter(F_H_W, V_WH_W, model_staleness_s, in.link_connected, config_.h_s,
                             out.safety_actions);
   const double gain = std::isnan(in.output_gain) ? 0.0 : std::clamp(in.output_gain, 0.0, 1.0);
   if (gain < 1.0) F = {gain * F.force, gain * F.torque};
