@@ -391,9 +391,6 @@ TEST_F(GpuTest, GlErrorInABatchSwitchesThePipelineToTheCpu) {
   EXPECT_EQ(after.F_T_W_at_q0.torque, expected.F_T_W_at_q0.torque);
 }
 
-}  // namespace
-}  // namespace ht
-
 namespace ht {
 namespace {
 
@@ -458,6 +455,50 @@ TEST_F(GpuTest, Fig75PathGivesTheSameWrenchesWithEitherBackend) {
   EXPECT_EQ(gpu.backend().name(), "gpu");
   std::printf("Fig. 75 path: %d frames, %d pressing; RMS |F| %.4f N, RMS |F_gpu − F_cpu| %.2g N\n",
               frames, in_contact, std::sqrt(sum_f2 / frames), std::sqrt(sum_df2 / frames));
+}
+
+}  // namespace
+}  // namespace ht
+
+// A backend moved to a pipeline on another scene (slave_sim's scene reload) renders that scene's
+// models: the pipeline's constructor hands it the scene (UseScene), which uploads the new models
+// and lets the old ones go. While their uploads are kept, the old models are held, so no new
+// model can take a freed model's address and find its upload.
+TEST_F(GpuTest, ABackendMovedToAnotherSceneRendersThatScenesModels) {
+  PipelineOptions options;
+  options.refine_depth = false;
+  std::unique_ptr<PenetrationDepthBackend> backend;
+  std::weak_ptr<const HapticModel> old_gear;
+  {
+    const HapticScene gear_scene = MakeBlockOnGearScene();
+    HapticTexturePipeline on_gear(gear_scene, options, MakeGpu(16));
+    RigidTransform pressed = gear_scene.X_WT_home;
+    pressed.translation.z -= 0.9e-3;
+    StepTimings t;
+    ASSERT_GE(on_gear.Step(pressed, 1, t).num_contacts, 1);
+    old_gear = gear_scene.touchables.at(0).model;
+    backend = on_gear.ReleaseBackend();
+  }
+  // The scene is gone, its gear is not: the backend holds it with its upload.
+  EXPECT_FALSE(old_gear.expired());
+  const HapticScene wall_scene = MakeStiffWallScene();
+  HapticTexturePipeline moved(wall_scene, options, std::move(backend));
+  EXPECT_TRUE(old_gear.expired()) << "the new scene's pipeline let the old gear's upload go";
+  HapticTexturePipeline fresh(wall_scene, options, MakeGpu(16));
+  int in_contact = 0;
+  for (int i = 0; i < 20; ++i) {
+    RigidTransform X = wall_scene.X_WT_home;
+    X.translation += glm::dvec3(-4e-3 + 0.4e-3 * i, 0.0, -0.3e-3 - 0.03e-3 * i);
+    StepTimings t;
+    const ContactModel a = moved.Step(X, i, t);
+    const ContactModel b = fresh.Step(X, i, t);
+    ASSERT_EQ(a.num_contacts, b.num_contacts) << i;
+    in_contact += a.num_contacts > 0 ? 1 : 0;
+    // The same uploads, shaders and batches: the same bits.
+    EXPECT_EQ(a.F_T_W_at_q0.force, b.F_T_W_at_q0.force) << i;
+    EXPECT_EQ(a.F_T_W_at_q0.torque, b.F_T_W_at_q0.torque) << i;
+  }
+  EXPECT_GE(in_contact, 10);
 }
 
 }  // namespace

@@ -161,9 +161,8 @@ RemoteNodeRun::RemoteNodeRun(const RemoteNodeConfig& config, const HapticScene& 
     gl_renderer_ = gpu->info().renderer;
     gl_version_ = gpu->info().version;
     gl_vendor_ = gpu->info().vendor;
-    gpu->Upload(*scene.tool);  // textures once per model, before the first step
-    for (const TouchableObject& t : scene.touchables) gpu->Upload(*t.model);
   }
+  backend->UseScene(scene);  // the GPU's uploads, once per model, before the warm-up
   warm_up_missing_overlap_ = WarmUpPenetrationDepth(*backend, scene, config.pipeline);
   // --quiet (progress_period_s 0): no start-up lines either; errors and the last line stay.
   const bool chatty = config.progress_period_s > 0.0;
@@ -258,13 +257,8 @@ void RemoteNodeRun::SwitchToReloadedScene() {
   const auto t0 = SteadyNowNs();
   std::unique_ptr<PenetrationDepthBackend> kept = pipeline_->ReleaseBackend();
   try {
-    if (auto* gpu = dynamic_cast<GpuPenetrationDepthBackend*>(kept.get())) {
-      // Uploads are keyed by the model's address: the old models' go (a new model may reuse a
-      // freed address), the new ones are uploaded before the first step.
-      gpu->ForgetModels();
-      gpu->Upload(*next->tool);
-      for (const TouchableObject& t : next->touchables) gpu->Upload(*t.model);
-    }
+    // The new pipeline moves the backend to the new scene (UseScene: the GPU uploads the new
+    // models before the first step and frees the old ones').
     const bool patch_was_on = pipeline_->translation_patch();
     pipeline_ = std::make_unique<HapticTexturePipeline>(*next, config_.pipeline, std::move(kept));
     pipeline_->SetTranslationPatch(patch_was_on);  // the round trip's choice goes on

@@ -72,8 +72,10 @@ class GpuPenetrationDepthBackend final : public PenetrationDepthBackend {
   std::string_view name() const noexcept override { return "gpu"; }
   /// "<GL_RENDERER> (<GL_VERSION>, <platform>, <bits>-bit depth[, instanced draws])".
   std::string description() const override;
-  /// See PenetrationDepthBackend. A model seen for the first time is uploaded (vertex buffer and
-  /// texture with its mip chain, allocated once and kept); later batches only set uniforms.
+  /// See PenetrationDepthBackend. The models of the scene given to UseScene are uploaded (vertex
+  /// buffer and texture with its mip chain) and later batches only set uniforms; any other model
+  /// is uploaded when a batch first meets it and kept by its address, until the next UseScene or
+  /// ForgetModels (a caller that frees such a model and makes another must call one of them).
   /// Returns false on a GL error or lost context, more queries than max_contacts, a grid larger
   /// than max_resolution, or mixed grid resolutions or window extents in one batch.
   bool LinearizeBatch(const HapticModel& tool, const RigidTransform& X_WT,
@@ -82,10 +84,11 @@ class GpuPenetrationDepthBackend final : public PenetrationDepthBackend {
   const std::string& last_error() const noexcept override { return last_error_; }
   const LinearizationFaults& faults() const noexcept override { return faults_; }
 
-  /// Uploads `model` now rather than at its first batch. Throws GpuError on a GL error.
-  void Upload(const HapticModel& model);
-  /// Frees every uploaded model (a new scene replaces them: uploads are keyed by the model's
-  /// address, which a freed model's successor may reuse). The next batch or Upload uploads again.
+  /// See PenetrationDepthBackend: uploads the scene's tool and touchables (a model already
+  /// uploaded for this scene or the last one, and held since, is kept), holding them, and frees
+  /// every other upload. Throws GpuError when an upload fails.
+  void UseScene(const HapticScene& scene) override;
+  /// Frees every uploaded model; the next batch or UseScene uploads again.
   void ForgetModels() noexcept;
 
   const GpuInfo& info() const noexcept { return context_->info(); }
@@ -108,6 +111,8 @@ class GpuPenetrationDepthBackend final : public PenetrationDepthBackend {
   explicit GpuPenetrationDepthBackend(const GpuPenetrationDepthOptions& options);
   void Initialize();
   GpuModel* ModelFor(const HapticModel& model);
+  /// Deletes m's GL objects (the context is current).
+  static void DeleteModel(GpuModel& m) noexcept;
   bool Fail(std::string why) noexcept;
 
   GpuPenetrationDepthOptions options_;

@@ -16,6 +16,7 @@
 #include "haptic_core/contact_model.h"
 #include "haptic_core/contact_windows.h"
 #include "haptic_core/haptic_model.h"
+#include "haptic_core/haptic_scene.h"
 #include "haptic_core/penetration_depth.h"
 #include "haptic_core/spatial.h"
 
@@ -43,6 +44,15 @@ class PenetrationDepthBackend {
                               std::span<const ContactQuery> queries,
                               std::span<ContactLinearization> out,
                               std::span<DepthSample> samples_out = {}) noexcept = 0;
+
+  /// The scene the next batches run on (HapticTexturePipeline's constructor calls it with its
+  /// scene): a backend that keeps data per model (the GPU backend's uploads) makes it now for the
+  /// scene's tool and touchables, holds each of those models (so that no other model takes its
+  /// address while the data is kept), and frees what it kept for any other model. The default
+  /// (the CPU backend, which keeps nothing per model) does nothing. Allocates; throws what making
+  /// the data throws (GpuError for a failed upload). Call it from the thread that created the
+  /// backend.
+  virtual void UseScene(const HapticScene& scene) { (void)scene; }
 
   /// Whether LinearizeBatch keeps each query's overlap field at the base pose for base_overlap(),
   /// for windows of up to `max_resolution`² cells (0, the default: off; stages 5a and 5c of the

@@ -4,6 +4,8 @@
 
 #include <GLES3/gl31.h>
 
+#include <memory>
+
 #include "haptic_core/gpu_penetration_depth.h"
 
 namespace ht {
@@ -13,6 +15,9 @@ struct GpuPenetrationDepthBackend::GpuModel {
   GLsizei corners = 0;
   int num_levels = 1;
   int wrap_u = 0, wrap_v = 0;
+  /// The model uploaded, held while its upload is kept (UseScene), so that no other model takes
+  /// its address; null for a model a batch met first.
+  std::shared_ptr<const HapticModel> held;
 };
 
 }  // namespace ht

@@ -226,13 +226,47 @@ GpuPenetrationDepthBackend::~GpuPenetrationDepthBackend() {
 
 void GpuPenetrationDepthBackend::ForgetModels() noexcept {
   if (context_ && context_->MakeCurrent()) {
-    for (auto& [key, m] : models_) {
-      glDeleteVertexArrays(1, &m->vao);
-      glDeleteBuffers(1, &m->vbo);
-      glDeleteTextures(1, &m->texture);
-    }
+    for (auto& [key, m] : models_) DeleteModel(*m);
   }
   models_.clear();
+}
+
+void GpuPenetrationDepthBackend::DeleteModel(GpuModel& m) noexcept {
+  glDeleteVertexArrays(1, &m.vao);
+  glDeleteBuffers(1, &m.vbo);
+  glDeleteTextures(1, &m.texture);
+  m = GpuModel{};
+}
+
+void GpuPenetrationDepthBackend::UseScene(const HapticScene& scene) {
+  std::vector<std::shared_ptr<const HapticModel>> wanted;
+  if (scene.tool) wanted.push_back(scene.tool);
+  for (const TouchableObject& t : scene.touchables) {
+    if (t.model) wanted.push_back(t.model);
+  }
+  // Kept: the uploads of the scene's models that were held since they were made (a held model
+  // is the one at its address); freed: every other, a batch's first-sight uploads among them
+  // (their model may be gone and its address another's).
+  for (auto it = models_.begin(); it != models_.end();) {
+    const bool keep = it->second->held != nullptr &&
+                      std::any_of(wanted.begin(), wanted.end(), [&](const auto& p) {
+                        return p.get() == it->first && p == it->second->held;
+                      });
+    if (keep) {
+      ++it;
+      continue;
+    }
+    DeleteModel(*it->second);
+    it = models_.erase(it);
+  }
+  for (const std::shared_ptr<const HapticModel>& model : wanted) {
+    GpuModel* m = ModelFor(*model);
+    if (m == nullptr) {
+      throw GpuError("GPU penetration depth: upload of model '" + model->name +
+                     "' failed: " + last_error_);
+    }
+    m->held = model;
+  }
 }
 
 std::string GpuPenetrationDepthBackend::description() const {
@@ -251,13 +285,6 @@ void GpuPenetrationDepthBackend::BreakProgramForTesting() noexcept {
   glDeleteProgram(render_program_);
   glDeleteProgram(instanced_program_);
   broken_ = true;
-}
-
-void GpuPenetrationDepthBackend::Upload(const HapticModel& model) {
-  if (ModelFor(model) == nullptr) {
-    throw GpuError("GPU penetration depth: upload of model '" + model.name +
-                   "' failed: " + last_error_);
-  }
 }
 
 GpuPenetrationDepthBackend::GpuModel* GpuPenetrationDepthBackend::ModelFor(

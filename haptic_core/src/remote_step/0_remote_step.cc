@@ -38,6 +38,8 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
   model_ = std::make_unique<const RemoteStepModel>(scene, options_);
   data_ = std::make_unique<RemoteStepData>(scene, options_, KeptFieldResolution());
   if (!backend_) backend_ = MakeCpuBackend();
+  // What the backend keeps per model (the GPU's uploads) for this scene's models, now.
+  backend_->UseScene(scene);
   // Stages 5a and 5c read stage 5's base render instead of rendering the base pose again.
   if (ReusesBaseRender()) backend_->set_keep_base_overlap(KeptFieldResolution());
   // What a failing GPU backend falls back on, ready before the first step (LinearizeContacts).
