@@ -724,7 +724,9 @@ TEST(RemoteNode, RefusesAnOperatorOfAnotherVersionAndHoldsBackModelsThatSayNothi
     EXPECT_EQ(copies[i].model.tool_state_seq, first.model.tool_state_seq);
     const std::int64_t previous_hold = i == 0 ? first.hold_ns : copies[i - 1].hold_ns;
     EXPECT_GE(copies[i].hold_ns - previous_hold, 50'000'000) << i;  // ≥ 50 ms apart at the node
-    if (i > 0) EXPECT_GE(arrivals[i] - arrivals[i - 1], std::chrono::milliseconds(20)) << i;
+    if (i > 0) {
+      EXPECT_GE(arrivals[i] - arrivals[i - 1], std::chrono::milliseconds(20)) << i;
+    }
   }
   const nlohmann::json summary = node.Stop();
   const nlohmann::json& t = summary["transport"];
