@@ -22,7 +22,8 @@ install(TARGETS haptic_core haptic_demo_models EXPORT haptic_teleop_targets
 install(DIRECTORY ${PROJECT_SOURCE_DIR}/haptic_core/include/haptic_core
         DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}
         PATTERN "model_build" EXCLUDE PATTERN "accuracy" EXCLUDE
-        PATTERN "gpu_penetration_depth.h" EXCLUDE PATTERN "egl_context.h" EXCLUDE)
+        PATTERN "gpu_penetration_depth.h" EXCLUDE PATTERN "egl_context.h" EXCLUDE
+        PATTERN "gl_program.h" EXCLUDE)
 install(EXPORT haptic_teleop_targets NAMESPACE haptic_teleop::
         FILE haptic_teleopTargets.cmake
         DESTINATION ${CMAKE_INSTALL_LIBDIR}/cmake/haptic_teleop)

@@ -15,6 +15,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "haptic_core/gl_program.h"
 #include "master_station/png_image.h"
 #include "render_geometry.h"
 
@@ -31,6 +32,8 @@ using render::UnitCone;
 using render::UnitCylinder;
 using render::UnitOctahedron;
 
+// Who the GL helpers name in their errors.
+constexpr const char* kWho = "scene renderer";
 constexpr int kMaxSide = 4096;
 constexpr std::size_t kMaxTriangles = std::size_t{1} << 24;
 constexpr int kFloatsPerVertex = 8;                    // position_N 3, face normal_N 3, uv 2
@@ -96,80 +99,22 @@ void main() {
 }
 )";
 
-std::string GlErrorNames() {
-  std::string errors;
-  for (int i = 0; i < 16; ++i) {
-    const GLenum e = glGetError();
-    if (e == GL_NO_ERROR) break;
-    if (!errors.empty()) errors += ", ";
-    switch (e) {
-      case GL_INVALID_ENUM:
-        errors += "GL_INVALID_ENUM";
-        break;
-      case GL_INVALID_VALUE:
-        errors += "GL_INVALID_VALUE";
-        break;
-      case GL_INVALID_OPERATION:
-        errors += "GL_INVALID_OPERATION";
-        break;
-      case GL_INVALID_FRAMEBUFFER_OPERATION:
-        errors += "GL_INVALID_FRAMEBUFFER_OPERATION";
-        break;
-      case GL_OUT_OF_MEMORY:
-        errors += "GL_OUT_OF_MEMORY";
-        break;
-      default:
-        errors += "GL error " + std::to_string(e);
-    }
-  }
-  return errors;
-}
-
 void ThrowOnGlError(const char* where) {
-  if (const std::string e = GlErrorNames(); !e.empty()) {
+  if (const std::string e = gl::DrainGlErrors(); !e.empty()) {
     throw GpuError(std::string("scene renderer: ") + where + ": " + e);
   }
 }
 
-GLuint Compile(GLenum stage, const char* source, const char* what) {
-  const GLuint shader = glCreateShader(stage);
-  glShaderSource(shader, 1, &source, nullptr);
-  glCompileShader(shader);
-  GLint ok = GL_FALSE;
-  glGetShaderiv(shader, GL_COMPILE_STATUS, &ok);
-  if (ok == GL_TRUE) return shader;
-  GLint length = 0;
-  glGetShaderiv(shader, GL_INFO_LOG_LENGTH, &length);
-  std::string log(static_cast<std::size_t>(std::max(length, 1)), '\0');
-  glGetShaderInfoLog(shader, static_cast<GLsizei>(log.size()), nullptr, log.data());
-  glDeleteShader(shader);
-  throw GpuError(std::string("scene renderer: the ") + what + " failed to compile: " + log.c_str());
-}
-
 GLuint BuildProgram() {
-  const GLuint vs = Compile(GL_VERTEX_SHADER, kVertexShader, "vertex shader");
+  const GLuint vs = gl::CompileShader(GL_VERTEX_SHADER, kVertexShader, kWho, "vertex shader");
   GLuint fs = 0;
   try {
-    fs = Compile(GL_FRAGMENT_SHADER, kFragmentShader, "fragment shader");
+    fs = gl::CompileShader(GL_FRAGMENT_SHADER, kFragmentShader, kWho, "fragment shader");
   } catch (...) {
     glDeleteShader(vs);
     throw;
   }
-  const GLuint program = glCreateProgram();
-  glAttachShader(program, vs);
-  glAttachShader(program, fs);
-  glLinkProgram(program);
-  glDeleteShader(vs);
-  glDeleteShader(fs);
-  GLint ok = GL_FALSE;
-  glGetProgramiv(program, GL_LINK_STATUS, &ok);
-  if (ok == GL_TRUE) return program;
-  GLint length = 0;
-  glGetProgramiv(program, GL_INFO_LOG_LENGTH, &length);
-  std::string log(static_cast<std::size_t>(std::max(length, 1)), '\0');
-  glGetProgramInfoLog(program, static_cast<GLsizei>(log.size()), nullptr, log.data());
-  glDeleteProgram(program);
-  throw GpuError(std::string("scene renderer: the shader program failed to link: ") + log.c_str());
+  return gl::LinkProgram({vs, fs}, kWho, "shader program");
 }
 
 }  // namespace
@@ -449,7 +394,7 @@ int SceneRenderer::AddTexture(std::span<const std::uint8_t> rgba_top_down, int w
   glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, GL_REPEAT);
   glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_REPEAT);
   glBindTexture(GL_TEXTURE_2D, 0);
-  if (const std::string e = GlErrorNames(); !e.empty()) {
+  if (const std::string e = gl::DrainGlErrors(); !e.empty()) {
     glDeleteTextures(1, &texture);
     throw GpuError("scene renderer: texture upload: " + e);
   }

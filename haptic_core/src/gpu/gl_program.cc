@@ -1,13 +1,14 @@
-#include "gl_program.h"
+#include "haptic_core/gl_program.h"
 
 #include <algorithm>
+#include <string>
 
 #include "haptic_core/egl_context.h"
 
-namespace ht::gpu {
+namespace ht::gl {
 namespace {
 
-const char* GlErrorName(GLenum e) {
+std::string GlErrorName(GLenum e) {
   switch (e) {
     case GL_INVALID_ENUM:
       return "GL_INVALID_ENUM";
@@ -20,7 +21,7 @@ const char* GlErrorName(GLenum e) {
     case GL_OUT_OF_MEMORY:
       return "GL_OUT_OF_MEMORY";
     default:
-      return "GL error";
+      return "GL error " + std::to_string(e);
   }
 }
 
@@ -37,7 +38,7 @@ std::string DrainGlErrors() {
   return errors;
 }
 
-GLuint CompileShader(GLenum stage, const std::string& source, const char* what) {
+GLuint CompileShader(GLenum stage, const std::string& source, const char* who, const char* what) {
   const GLuint shader = glCreateShader(stage);
   const char* text = source.c_str();
   glShaderSource(shader, 1, &text, nullptr);
@@ -50,13 +51,12 @@ GLuint CompileShader(GLenum stage, const std::string& source, const char* what) 
     std::string log(static_cast<size_t>(std::max(length, 1)), '\0');
     glGetShaderInfoLog(shader, length, nullptr, log.data());
     glDeleteShader(shader);
-    throw GpuError(std::string("GPU penetration depth: the ") + what +
-                   " failed to compile: " + log.c_str());
+    throw GpuError(std::string(who) + ": the " + what + " failed to compile: " + log.c_str());
   }
   return shader;
 }
 
-GLuint LinkProgram(std::initializer_list<GLuint> shaders, const char* what) {
+GLuint LinkProgram(std::initializer_list<GLuint> shaders, const char* who, const char* what) {
   const GLuint program = glCreateProgram();
   for (GLuint s : shaders) glAttachShader(program, s);
   glLinkProgram(program);
@@ -69,10 +69,9 @@ GLuint LinkProgram(std::initializer_list<GLuint> shaders, const char* what) {
     std::string log(static_cast<size_t>(std::max(length, 1)), '\0');
     glGetProgramInfoLog(program, length, nullptr, log.data());
     glDeleteProgram(program);
-    throw GpuError(std::string("GPU penetration depth: the ") + what +
-                   " failed to link: " + log.c_str());
+    throw GpuError(std::string(who) + ": the " + what + " failed to link: " + log.c_str());
   }
   return program;
 }
 
-}  // namespace ht::gpu
+}  // namespace ht::gl

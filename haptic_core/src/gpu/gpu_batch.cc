@@ -14,9 +14,9 @@
 #include <limits>
 #include <string>
 
-#include "gl_program.h"
 #include "gpu_model.h"
 #include "gpu_shaders.h"
+#include "haptic_core/gl_program.h"
 #include "haptic_core/gpu_penetration_depth.h"
 
 namespace ht {
@@ -292,7 +292,7 @@ struct GpuPenetrationDepthBackend::Batch {
     glBindBuffer(GL_SHADER_STORAGE_BUFFER, b.results_);
     const void* mapped = glMapBufferRange(GL_SHADER_STORAGE_BUFFER, 0, bytes, GL_MAP_READ_BIT);
     if (mapped == nullptr) {
-      const std::string e = gpu::DrainGlErrors();
+      const std::string e = gl::DrainGlErrors();
       glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, 0);
       return b.Fail("cannot map the result buffer (" +
                     (e.empty() ? std::string("no GL error") : e) + ")");
@@ -496,7 +496,7 @@ bool GpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
   batch.Reduce();
   if (options_.profile_stages) glFinish();
   const auto t3 = Clock::now();
-  if (const std::string e = gpu::DrainGlErrors(); !e.empty()) {
+  if (const std::string e = gl::DrainGlErrors(); !e.empty()) {
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, 0);
     return Fail("GL error during the batch: " + e);
   }

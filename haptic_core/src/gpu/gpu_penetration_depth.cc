@@ -12,14 +12,15 @@
 #include <stdexcept>
 #include <string>
 
-#include "gl_program.h"
 #include "gpu_model.h"
 #include "gpu_shaders.h"
+#include "haptic_core/gl_program.h"
 
 namespace ht {
 
-using gpu::CompileShader;
-using gpu::DrainGlErrors;
+using gl::CompileShader;
+using gl::DrainGlErrors;
+using gl::LinkProgram;
 using gpu::kFloatsPerCorner;
 using gpu::kInstancedVertexMain;
 using gpu::kRangeSlack;
@@ -27,7 +28,9 @@ using gpu::kReduceComputeShader;
 using gpu::kRenderFragmentShader;
 using gpu::kRenderVertexMain;
 using gpu::kVertexCommon;
-using gpu::LinkProgram;
+
+// Who the GL helpers name in their errors.
+constexpr const char* kWho = "GPU penetration depth";
 
 GpuPenetrationDepthBackend::GpuPenetrationDepthBackend(const GpuPenetrationDepthOptions& options)
     : options_(options) {}
@@ -65,13 +68,13 @@ void GpuPenetrationDepthBackend::Initialize() {
   if (options_.inject_shader_compile_error) fragment += "\nthis is not GLSL;\n";
   render_program_ = LinkProgram(
       {CompileShader(GL_VERTEX_SHADER,
-                     std::string("#version 310 es\n") + kVertexCommon + kRenderVertexMain,
+                     std::string("#version 310 es\n") + kVertexCommon + kRenderVertexMain, kWho,
                      "height vertex shader"),
-       CompileShader(GL_FRAGMENT_SHADER, fragment, "height fragment shader")},
-      "height program");
+       CompileShader(GL_FRAGMENT_SHADER, fragment, kWho, "height fragment shader")},
+      kWho, "height program");
   reduce_program_ = LinkProgram(
-      {CompileShader(GL_COMPUTE_SHADER, kReduceComputeShader, "reduction compute shader")},
-      "reduction program");
+      {CompileShader(GL_COMPUTE_SHADER, kReduceComputeShader, kWho, "reduction compute shader")},
+      kWho, "reduction program");
 
   const auto loc = [](GLuint p, const char* name) { return glGetUniformLocation(p, name); };
   ru_ = {loc(render_program_, "u_row_u"),       loc(render_program_, "u_row_v"),
@@ -164,9 +167,9 @@ void GpuPenetrationDepthBackend::Initialize() {
                          std::string("#version 310 es\n#extension GL_EXT_clip_cull_distance : "
                                      "require\n") +
                              kVertexCommon + kInstancedVertexMain,
-                         "instanced vertex shader"),
-           CompileShader(GL_FRAGMENT_SHADER, fragment, "height fragment shader")},
-          "instanced height program");
+                         kWho, "instanced vertex shader"),
+           CompileShader(GL_FRAGMENT_SHADER, fragment, kWho, "height fragment shader")},
+          kWho, "instanced height program");
       const auto iloc = [&](const char* name) {
         return glGetUniformLocation(instanced_program_, name);
       };
