@@ -391,6 +391,9 @@ TEST_F(GpuTest, GlErrorInABatchSwitchesThePipelineToTheCpu) {
   EXPECT_EQ(after.F_T_W_at_q0.torque, expected.F_T_W_at_q0.torque);
 }
 
+}  // namespace
+}  // namespace ht
+
 namespace ht {
 namespace {
 
@@ -457,9 +460,6 @@ TEST_F(GpuTest, Fig75PathGivesTheSameWrenchesWithEitherBackend) {
               frames, in_contact, std::sqrt(sum_f2 / frames), std::sqrt(sum_df2 / frames));
 }
 
-}  // namespace
-}  // namespace ht
-
 // A backend moved to a pipeline on another scene (slave_sim's scene reload) renders that scene's
 // models: the pipeline's constructor hands it the scene (UseScene), which uploads the new models
 // and lets the old ones go. While their uploads are kept, the old models are held, so no new
@@ -484,19 +484,30 @@ TEST_F(GpuTest, ABackendMovedToAnotherSceneRendersThatScenesModels) {
   const HapticScene wall_scene = MakeStiffWallScene();
   HapticTexturePipeline moved(wall_scene, options, std::move(backend));
   EXPECT_TRUE(old_gear.expired()) << "the new scene's pipeline let the old gear's upload go";
+  // Each backend is stepped while its own context is current (the one made last on the thread):
+  // the moved one's models first, then a fresh backend's on the same poses.
+  const auto run = [&](HapticTexturePipeline& p) {
+    std::vector<ContactModel> models;
+    for (int i = 0; i < 20; ++i) {
+      RigidTransform X = wall_scene.X_WT_home;
+      X.translation += glm::dvec3(-4e-3 + 0.4e-3 * i, 0.0, -0.3e-3 - 0.03e-3 * i);
+      StepTimings t;
+      models.push_back(p.Step(X, i, t));
+    }
+    EXPECT_EQ(p.backend_failures(), 0) << p.fallback_reason();
+    EXPECT_EQ(p.backend().name(), "gpu");
+    return models;
+  };
+  const std::vector<ContactModel> a = run(moved);
   HapticTexturePipeline fresh(wall_scene, options, MakeGpu(16));
+  const std::vector<ContactModel> b = run(fresh);
   int in_contact = 0;
-  for (int i = 0; i < 20; ++i) {
-    RigidTransform X = wall_scene.X_WT_home;
-    X.translation += glm::dvec3(-4e-3 + 0.4e-3 * i, 0.0, -0.3e-3 - 0.03e-3 * i);
-    StepTimings t;
-    const ContactModel a = moved.Step(X, i, t);
-    const ContactModel b = fresh.Step(X, i, t);
-    ASSERT_EQ(a.num_contacts, b.num_contacts) << i;
-    in_contact += a.num_contacts > 0 ? 1 : 0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    ASSERT_EQ(a[i].num_contacts, b[i].num_contacts) << i;
+    in_contact += a[i].num_contacts > 0 ? 1 : 0;
     // The same uploads, shaders and batches: the same bits.
-    EXPECT_EQ(a.F_T_W_at_q0.force, b.F_T_W_at_q0.force) << i;
-    EXPECT_EQ(a.F_T_W_at_q0.torque, b.F_T_W_at_q0.torque) << i;
+    EXPECT_EQ(a[i].F_T_W_at_q0.force, b[i].F_T_W_at_q0.force) << i;
+    EXPECT_EQ(a[i].F_T_W_at_q0.torque, b[i].F_T_W_at_q0.torque) << i;
   }
   EXPECT_GE(in_contact, 10);
 }

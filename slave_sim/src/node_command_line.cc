@@ -8,8 +8,6 @@
 #include <stdexcept>
 #include <string>
 
-#include "slave_sim/watched_scene.h"
-
 namespace ht {
 namespace {
 

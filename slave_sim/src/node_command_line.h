@@ -14,9 +14,13 @@ namespace ht {
 
 /// The command line's values. Options that map one to one onto the node's configuration are
 /// bound to `config` itself; the others (flags that turn a default off, units other than SI,
-/// choices by name) are kept here until FinishNodeConfig. Bound by address: do not move it after
-/// AddNodeOptions.
+/// choices by name) are kept here until FinishNodeConfig. Bound by address (neither copied nor
+/// moved).
 struct NodeCommandLine {
+  NodeCommandLine() = default;
+  NodeCommandLine(const NodeCommandLine&) = delete;
+  NodeCommandLine& operator=(const NodeCommandLine&) = delete;
+
   RemoteNodeConfig config;
 
   // The address and the scene (AddSceneOptions).

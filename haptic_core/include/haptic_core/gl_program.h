@@ -1,12 +1,14 @@
 // Small OpenGL ES helpers of the EGL context's users (haptic_egl): shader compilation, program
 // linking and the GL error queue, for the GPU penetration depth and the operator's display. They
-// need a current context (EglContext). Not installed.
+// need a current context (EglContext); their errors are GpuError (egl_context.h). Not installed.
 #pragma once
 
 #include <GLES3/gl31.h>
 
 #include <initializer_list>
 #include <string>
+
+#include "haptic_core/egl_context.h"
 
 namespace ht::gl {
 

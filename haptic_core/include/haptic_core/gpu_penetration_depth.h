@@ -86,7 +86,8 @@ class GpuPenetrationDepthBackend final : public PenetrationDepthBackend {
 
   /// See PenetrationDepthBackend: uploads the scene's tool and touchables (a model already
   /// uploaded for this scene or the last one, and held since, is kept), holding them, and frees
-  /// every other upload. Throws GpuError when an upload fails.
+  /// every other upload; makes the backend's context current first. Throws GpuError when the
+  /// context cannot be made current or an upload fails.
   void UseScene(const HapticScene& scene) override;
   /// Frees every uploaded model; the next batch or UseScene uploads again.
   void ForgetModels() noexcept;

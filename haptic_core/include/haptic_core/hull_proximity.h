@@ -191,9 +191,10 @@ class HullProximityQuery {
   /// finds no overlap (the hulls touch), GJK's direction with A moved apart by 1e-7 of the pair's
   /// size, the one with the smallest overlap of the hulls' support intervals along it, and
   /// signed_distance_m is −that overlap: exact for vertex-face and face-face contact (a face
-  /// normal realizes the penetration depth) and for touching pairs of any features (within
-  /// 1e-11 m on crossing edges, tested), otherwise never shallower than the true penetration
-  /// depth (any direction's overlap bounds the depth from above). Witness points lie on the line through a
+  /// normal realizes the penetration depth) and for touching pairs whose closest features the
+  /// hair's move separates (edges touching crosswise: within 1e-11 m, tested), otherwise never
+  /// shallower than the true penetration depth (any direction's overlap bounds the depth from
+  /// above). Witness points lie on the line through a
   /// point of the overlap region (MPR's) along n, at the two hulls' supporting planes, so
   /// point_A_W − point_B_W = signed_distance_m · normal_W to rounding.
   ///

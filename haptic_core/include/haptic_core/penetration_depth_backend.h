@@ -16,11 +16,12 @@
 #include "haptic_core/contact_model.h"
 #include "haptic_core/contact_windows.h"
 #include "haptic_core/haptic_model.h"
-#include "haptic_core/haptic_scene.h"
 #include "haptic_core/penetration_depth.h"
 #include "haptic_core/spatial.h"
 
 namespace ht {
+
+struct HapticScene;  // haptic_scene.h
 
 /// Computes, for all contacts of one remote step, δ and its gradient (kGradientSamples depth
 /// evaluations each). Implementations preallocate at construction; a batch does not allocate.

@@ -2,22 +2,17 @@
 // The remote step: the remote node's pipeline from a tool pose to a contact model, as a list of
 // named stages (see HapticTexturePipeline below, and src/remote_step/, a file per stage).
 
-#include <array>
 #include <cmath>
 #include <cstdint>
 #include <memory>
 #include <span>
 #include <string>
-#include <vector>
 
-#include "haptic_core/connected_contacts.h"
-#include "haptic_core/contact_clustering.h"
 #include "haptic_core/contact_linearization.h"
 #include "haptic_core/contact_model.h"
 #include "haptic_core/contact_windows.h"
 #include "haptic_core/depth_refinement.h"
 #include "haptic_core/haptic_scene.h"
-#include "haptic_core/hull_proximity.h"
 #include "haptic_core/penetration_depth_backend.h"
 
 namespace ht {
@@ -311,13 +306,18 @@ struct StepTimings {
 class HapticTexturePipeline {
  public:
   /// Keeps a reference to `scene`, which must outlive the pipeline. `backend` computes the
-  /// penetration depth (null: the CPU backend, fast path, texture_threads threads). Throws
-  /// std::invalid_argument for bad options, a scene without a tool, or a tool whose centre of mass
-  /// is not T's origin.
+  /// penetration depth (null: the CPU backend, fast path, texture_threads threads); the
+  /// constructor hands it the scene (PenetrationDepthBackend::UseScene: the GPU backend uploads
+  /// the scene's models then). Builds the step's constant model (the coarse bounds, box trees and
+  /// whole hulls of the scene's models) and its data block. Throws std::invalid_argument for bad
+  /// options, a scene without a tool or with an empty touchable, or a tool whose centre of mass
+  /// is not T's origin; what UseScene throws (GpuError for a failed upload); std::bad_alloc. A
+  /// constructor that throws destroys `backend`.
   HapticTexturePipeline(const HapticScene& scene, const PipelineOptions& options,
                         std::unique_ptr<PenetrationDepthBackend> backend = nullptr);
   ~HapticTexturePipeline();
-  HapticTexturePipeline(HapticTexturePipeline&&) noexcept;
+  /// Takes `other`'s model, data and backends; `other` may then only be destroyed.
+  HapticTexturePipeline(HapticTexturePipeline&& other) noexcept;
   HapticTexturePipeline(const HapticTexturePipeline&) = delete;
   HapticTexturePipeline& operator=(const HapticTexturePipeline&) = delete;
 
@@ -328,9 +328,10 @@ class HapticTexturePipeline {
   /// non-finite gives none.
   /// Nothing throws, and after a warm-up over the scene's contact counts nothing allocates,
   /// through any allocator (remote_step_alloc_test, on the block on the gear and on the seed's
-  /// hull hierarchies): the step writes only its data block (RemoteStepData, preallocated at
-  /// construction) and the stage objects in it, and the CPU backend a failing GPU backend falls
-  /// back on is built with the pipeline.
+  /// hull hierarchies): the step writes its data block (RemoteStepData, preallocated at
+  /// construction, with the stage objects in it), its backend and, when the backend fails, the
+  /// fallback's count and reason (reserved) and the switch to the CPU backend built with the
+  /// pipeline.
   ContactModel Step(const RigidTransform& X_WT, std::uint64_t tool_state_seq, StepTimings& timings,
                     const Twist& V_WT_W = {}) noexcept;
 

@@ -114,8 +114,8 @@ struct ContactPatchTruth::Impl {
         tool_rays(tr),
         environment_rays(er),
         options(o),
-        tool_fcl(MakeFclMesh(t, "tool")),
-        environment_fcl(MakeFclMesh(e, "environment")),
+        tool_fcl(MakeFclMesh(t, "full-resolution tool")),
+        environment_fcl(MakeFclMesh(e, "full-resolution environment")),
         solver(tr, er, o.depth),
         tool_normals(tool, tool_topology, o.macro_normal_radius_m),
         environment_normals(environment, environment_topology, o.macro_normal_radius_m) {}

@@ -9,7 +9,7 @@ namespace ht {
 std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>> MakeFclMesh(const TriangleMesh& mesh,
                                                          const char* what) {
   if (mesh.vertices.empty() || mesh.triangles.empty()) {
-    throw std::invalid_argument(std::string("full-resolution ") + what + " mesh is empty");
+    throw std::invalid_argument(std::string(what) + " mesh is empty");
   }
   const int nv = static_cast<int>(mesh.vertices.size());
   std::vector<fcl::Vector3d> v;
@@ -19,8 +19,7 @@ std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>> MakeFclMesh(const TriangleMesh& mes
   t.reserve(mesh.triangles.size());
   for (const glm::ivec3& f : mesh.triangles) {
     if (f.x < 0 || f.y < 0 || f.z < 0 || f.x >= nv || f.y >= nv || f.z >= nv) {
-      throw std::invalid_argument(std::string("full-resolution ") + what +
-                                  " mesh has a vertex index out of range");
+      throw std::invalid_argument(std::string(what) + " mesh has a vertex index out of range");
     }
     t.emplace_back(f.x, f.y, f.z);
   }

@@ -18,8 +18,8 @@ struct MeshContactBaseline::Impl {
 MeshContactBaseline::MeshContactBaseline(const TriangleMesh& tool_Ft,
                                          const TriangleMesh& environment_Fe)
     : impl_(std::make_unique<Impl>()) {
-  impl_->tool = MakeFclMesh(tool_Ft, "tool");
-  impl_->environment = MakeFclMesh(environment_Fe, "environment");
+  impl_->tool = MakeFclMesh(tool_Ft, "full-resolution tool");
+  impl_->environment = MakeFclMesh(environment_Fe, "full-resolution environment");
 }
 
 MeshContactBaseline::~MeshContactBaseline() = default;

@@ -242,6 +242,11 @@ void GpuPenetrationDepthBackend::DeleteModel(GpuModel& m) noexcept {
 }
 
 void GpuPenetrationDepthBackend::UseScene(const HapticScene& scene) {
+  if (!context_ || !context_->MakeCurrent()) {
+    throw GpuError(
+        "GPU penetration depth: cannot make its EGL context current for the scene's "
+        "models");
+  }
   std::vector<std::shared_ptr<const HapticModel>> wanted;
   if (scene.tool) wanted.push_back(scene.tool);
   for (const TouchableObject& t : scene.touchables) {

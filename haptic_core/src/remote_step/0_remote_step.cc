@@ -71,8 +71,8 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   // Stages 1–3: broad phase, hull proximity, contact clustering.
   FindContactCandidates(X_WT, V_WT_W, timings);
   const auto t1 = Clock::now();
-  // Stage 4: one window per cluster. The batch lives in members, so that last_contact_queries()
-  // can show it after the step.
+  // Stage 4: one window per cluster. The batch lives in the data block, so that
+  // last_contact_queries() can show it after the step.
   d.last_num_queries =
       MakeContactQueries({d.candidates.data(), static_cast<std::size_t>(d.num_candidates)},
                          options_.window_extent_m, options_.max_window_extent_m,

@@ -83,7 +83,8 @@ HullPairContact PenetrationContact(const PosedHull& A, const PosedHull& B,
   }
   if (previous_normal_W != nullptr) consider(*previous_normal_W, Overlap(A, B, *previous_normal_W));
   if (rc != 0) {
-    // MPR found no overlap: the hulls touch (GJK's distance is below kTouch_m). Where they touch
+    // MPR found no overlap: the hulls touch (GJK's distance is below kTouch_m; leaf pairs come on
+    // the quaternion path, whose pose the copy below moves). Where they touch
     // edge to edge no face normal realizes the contact (a face's overlap is the other hull's
     // whole reach past the edge), so A is moved off B a hair along the centres' direction, which
     // separates two touching hulls (their separating plane's normal n has n·(c_A − c_B) > 0), and
@@ -91,7 +92,7 @@ HullPairContact PenetrationContact(const PosedHull& A, const PosedHull& B,
     // is a candidate with its overlap taken on the pair as posed.
     const glm::dvec3 c = A.center_W - B.center_W;
     const double len = glm::length(c);
-    if (len > 0.0 && std::isfinite(len) && A.map != PosedHull::Map::kIdentity) {
+    if (len > 0.0 && std::isfinite(len) && A.map == PosedHull::Map::kQuaternion) {
       const double hair = kTouchNudge * (A.radius_m + B.radius_m + len);
       const glm::dvec3 shift = (hair / len) * c;
       RigidTransform X_WO_moved = *A.X_WO;
