@@ -46,14 +46,13 @@ void AddWindowOptions(CLI::App& app, NodeCommandLine& cl) {
                  "smallest contact window side W in metres (with the grid N: the cell W/N)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  cl.max_window_option =
-      app.add_option("--max-window", cl.config.pipeline.max_window_extent_m,
-                     "largest contact window side in metres: a cluster spread wider than W gets a\n"
-                     "window sized to it at the same cell (N grows with it); overlapping windows\n"
-                     "with agreeing normals merge while they fit. Default 3 x --window; equal to\n"
-                     "--window: every window W x W")
-          ->check(CLI::PositiveNumber)
-          ->capture_default_str();
+  app.add_option("--max-window", cl.config.pipeline.max_window_extent_m,
+                 "largest contact window side in metres: a cluster spread wider than W gets a\n"
+                 "window sized to it at the same cell (N grows with it); overlapping windows\n"
+                 "with agreeing normals merge while they fit. Default 3 x --window; equal to\n"
+                 "--window: every window W x W")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   cl.config.pipeline.texture_threads = DefaultTextureThreads();
   app.add_option("--texture-threads", cl.config.pipeline.texture_threads,
                  "threads of the CPU texture stage (a step's contacts spread over them); the\n"
@@ -126,7 +125,7 @@ void AddDepthOptions(CLI::App& app, NodeCommandLine& cl) {
 
 // Translation patches, and stage 5b's texel-scale gradient.
 void AddTranslationPatchOptions(CLI::App& app, NodeCommandLine& cl) {
-  cl.rtt_option =
+  CLI::Option* rtt_option =
       app.add_option(
              "--translation-patch-rtt-ms", cl.translation_patch_rtt_ms,
              "each contact model also carries its contacts' depth over in-plane\n"
@@ -142,11 +141,11 @@ void AddTranslationPatchOptions(CLI::App& app, NodeCommandLine& cl) {
           ->check(CLI::Range(0.0, 60000.0));
   app.add_flag("--translation-patch", cl.translation_patch,
                "always send the translation patches, whatever the round trip")
-      ->excludes(cl.rtt_option);
+      ->excludes(rtt_option);
   app.add_flag("--no-translation-patch", cl.no_translation_patch,
                "never send translation patches, whatever the round trip")
       ->excludes("--translation-patch")
-      ->excludes(cl.rtt_option);
+      ->excludes(rtt_option);
   app.add_flag("--translation-patch-follows-rotation", cl.translation_patch_follows_rotation,
                "whenever translation patches go: the loop also reads the patch where a turn of\n"
                "the tool slides the contact (its lever from the tool's centre of mass)")
@@ -358,12 +357,12 @@ void AddSubcommands(CLI::App& app, NodeCommandLine& cl) {
 }
 
 // The key, the address and the stream's own settings.
-void FinishStreamConfig(const NodeCommandLine& cl, RemoteNodeConfig& config) {
+void FinishStreamConfig(const CLI::App& app, const NodeCommandLine& cl, RemoteNodeConfig& config) {
   config.key = LoadKeyOption(cl.key, "slave_sim keygen FILE");
   config.mtu = static_cast<std::size_t>(cl.mtu);
   config.listen_address = SocketAddress::Parse(cl.listen);
   config.pd_backend = ParsePdBackendChoice(cl.pd_backend);
-  if (cl.max_window_option->count() == 0) {
+  if (app.count("--max-window") == 0) {
     config.pipeline.max_window_extent_m =
         kDefaultMaxWindowPerWindow * config.pipeline.window_extent_m;
   }
@@ -376,7 +375,7 @@ void FinishStreamConfig(const NodeCommandLine& cl, RemoteNodeConfig& config) {
 }
 
 // The texture stage's gradient, stage 5b, clustering, and the translation patches.
-void FinishDepthConfig(const NodeCommandLine& cl, RemoteNodeConfig& config) {
+void FinishDepthConfig(const CLI::App& app, const NodeCommandLine& cl, RemoteNodeConfig& config) {
   PipelineOptions& pipeline = config.pipeline;
   DepthRefinementOptions& refinement = pipeline.depth_refinement;
   pipeline.rotation_gradient = ParseRotationGradient(cl.rotation_gradient);
@@ -402,7 +401,7 @@ void FinishDepthConfig(const NodeCommandLine& cl, RemoteNodeConfig& config) {
   config.translation_patch_rtt_ms = cl.no_translation_patch
                                         ? std::numeric_limits<double>::infinity()
                                         : cl.translation_patch_rtt_ms;
-  if ((cl.translation_patch || cl.rtt_option->count() > 0) && cl.no_refine_depth) {
+  if ((cl.translation_patch || app.count("--translation-patch-rtt-ms") > 0) && cl.no_refine_depth) {
     throw std::invalid_argument(
         std::string(cl.translation_patch ? "--translation-patch" : "--translation-patch-rtt-ms") +
         " needs stage 5b (drop --no-refine-depth): the patch's nodes are refined maxima");
@@ -500,8 +499,8 @@ void AddNodeOptions(CLI::App& app, NodeCommandLine& cl) {
 
 void FinishNodeConfig(const CLI::App& app, NodeCommandLine& cl) {
   RemoteNodeConfig& config = cl.config;
-  FinishStreamConfig(cl, config);
-  FinishDepthConfig(cl, config);
+  FinishStreamConfig(app, cl, config);
+  FinishDepthConfig(app, cl, config);
   const bool split_asked = FinishSplitConfig(app, cl, config);
   FinishBackendChoice(cl, split_asked, config);
 }

@@ -30,9 +30,6 @@ struct NodeCommandLine {
   std::string scene_cache_dir = HapticModelCache::DefaultDir();
   bool no_watch = false;
 
-  // The windows (AddWindowOptions): whether --max-window was given.
-  CLI::Option* max_window_option = nullptr;
-
   // The texture stage's gradient, stage 5b and clustering (AddDepthOptions).
   std::string rotation_gradient = "rendered";
   bool no_grazing_guard = false;
@@ -47,7 +44,6 @@ struct NodeCommandLine {
 
   // Translation patches and the texel-scale gradient (AddTranslationPatchOptions).
   double translation_patch_rtt_ms = RemoteNodeConfig{}.translation_patch_rtt_ms;
-  CLI::Option* rtt_option = nullptr;
   bool translation_patch = false;
   bool no_translation_patch = false;
   bool translation_patch_follows_rotation = false;

@@ -60,8 +60,9 @@ struct RemoteStepModel {
 /// the next (the coarse query's coherence, stage 5b's seeds) and their own scratch.
 struct RemoteStepData {
   /// `kept_field_resolution`: the side (cells) of the largest overlap field stage 5a copies
-  /// (HapticTexturePipeline::KeptFieldResolution). Allocates; throws std::invalid_argument for
-  /// options Validate() refuses (the pipeline validates first) and std::bad_alloc.
+  /// (HapticTexturePipeline::KeptFieldResolution). Allocates; throws what DepthRefiner's
+  /// constructor throws for bad depth-refinement options (std::invalid_argument; the pipeline
+  /// validates them first) and std::bad_alloc.
   RemoteStepData(const HapticScene& scene, const PipelineOptions& options,
                  int kept_field_resolution);
 

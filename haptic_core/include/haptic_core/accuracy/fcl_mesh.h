@@ -18,7 +18,7 @@ namespace ht {
 std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>> MakeFclMesh(const TriangleMesh& mesh,
                                                          const char* what);
 
-/// X as FCL's isometry.
+/// A pose X_AB (m, unit quaternion) as FCL's isometry between the same frames.
 fcl::Transform3d ToFcl(const RigidTransform& X);
 
 }  // namespace ht
