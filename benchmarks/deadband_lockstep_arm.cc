@@ -4,6 +4,7 @@
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <deque>
@@ -63,7 +64,8 @@ double NonNegative(const std::string& key, double v) {
 /// rotational_stiffness_floor (the contact-model floor scales, as slave_sim's
 /// --model-deadband-*-floor), release_ticks, energy_bounded_switch, switch_spend,
 /// offset_release_ms (the operator tick's passivity options), setting (a frontier setting's name:
-/// the remote step's options). Defaults: master_station's and slave_sim's, deadband 10 %.
+/// the remote step's options), depth_fields, field_min_margin_mm, field_smooth_max_um,
+/// field_offset_to_q0 (the contact model as depth fields). Defaults: master_station's and slave_sim's, deadband 10 %.
 
 /// A message in flight: it arrives at `arrive_ns`.
 template <typename T>
@@ -141,6 +143,15 @@ Arm ParseArm(const std::string& text) {
       arm.speculative_speed_m_per_s = NonNegative(key, v) * 1e-3;
     } else if (key == "speculative_floor_mm") {  // a fixed PipelineOptions::speculative_floor_m
       arm.speculative_floor_m = NonNegative(key, v) * 1e-3;
+    } else if (key == "depth_fields") {  // the contact model as depth fields (0 / 1)
+      arm.depth_fields = v != 0.0;
+    } else if (key == "field_min_margin_mm") {
+      arm.depth_field_min_margin_m = NonNegative(key, v) * 1e-3;
+    } else if (key == "field_smooth_max_um") {
+      if (!(v > 0.0)) throw std::invalid_argument("--arm: field_smooth_max_um must be > 0");
+      arm.depth_field_smooth_max_m = v * 1e-6;
+    } else if (key == "field_offset_to_q0") {
+      arm.depth_field_offset_to_q0 = v != 0.0;
     } else if (key == "force_floor") {
       arm.model.force_floor_scale_n = v;
     } else if (key == "torque_floor") {
@@ -207,7 +218,16 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     options.speculative_floor_m =
         SpeculativeFloorForRoundTrip(node, static_cast<std::int64_t>(std::llround(rtt_ms * 1e6)));
   }
-  if (setup.translation_patch || rtt_ms >= RemoteNodeConfig{}.translation_patch_rtt_ms) {
+  if (arm.depth_fields) {
+    options.depth_fields = true;
+    options.depth_field_margin_m =
+        std::max(arm.depth_field_min_margin_m, arm.speculative_speed_m_per_s * rtt_ms * 1e-3);
+    if (arm.depth_field_smooth_max_m > 0.0) {
+      options.depth_field_smooth_max_m = arm.depth_field_smooth_max_m;
+    }
+    options.depth_field_offset_to_q0 = arm.depth_field_offset_to_q0;
+  } else if (setup.translation_patch ||
+             rtt_ms >= RemoteNodeConfig{}.translation_patch_rtt_ms) {
     options.depth_refinement.translation_patch = true;
   }
   // The CPU backend with the setting's texture path and rotation gradient (as the frontier makes
@@ -230,6 +250,10 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
 
   std::deque<InFlight<SentToolState>> to_remote;
   std::deque<InFlight<ArrivedModel>> to_operator;
+  // The depth fields each model in flight carries (in to_operator's order).
+  std::deque<std::vector<DepthField>> fields_to_operator;
+  std::vector<DepthField> arrived_fields;
+  std::vector<DepthField*> arrived_field_ptrs;
   SentToolState remote;              // the newest tool state the remote node holds
   std::int64_t remote_recv_ns = -1;  // when it arrived (< 0: none yet)
   ContactModel held_model{};         // the newest model the operator received (its deadband's)
@@ -250,16 +274,25 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     in.now_ns = now;
     in.device_ok = device->ReadState(now, in.device);
     bool have_arrived = false;
+    arrived_field_ptrs.clear();
     while (!to_operator.empty() && to_operator.front().arrive_ns <= now) {
       arrived = to_operator.front().value;
       to_operator.pop_front();
+      arrived_fields = std::move(fields_to_operator.front());
+      fields_to_operator.pop_front();
       have_arrived = true;
     }
     if (have_arrived) {
       in.arrived = &arrived;
       held_model = arrived.model;
+      for (DepthField& f : arrived_fields) arrived_field_ptrs.push_back(&f);
+      in.arrived_fields = arrived_field_ptrs;
     }
+    const auto tick_start = std::chrono::steady_clock::now();
     const OperatorTickOutput out = tick.Step(in);
+    run.tick_us.push_back(
+        std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - tick_start)
+            .count());
     device->WriteWrench(out.F_H_M, now);
     run.device_force_W.push_back(out.F_H_W.force);
     run.device_torque_W.push_back(out.F_H_W.torque);
@@ -267,6 +300,8 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     run.passivity_removed_n.push_back(out.passivity_removed_n);
     run.model_age_ms.push_back(out.model_age_ms);
     run.contacts.push_back(out.step.active_contacts);
+    run.field_contacts.push_back(out.step.field_contacts);
+    run.field_fallbacks.push_back(out.step.field_fallbacks);
     run.depth_offset_m.push_back(out.depth_offset_m);
     run.model_arrived.push_back(have_arrived ? 1 : 0);
     run.p_WT.push_back(tick.tool().X_WT.translation);
@@ -340,12 +375,27 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     }
     ArrivedModel a;
     a.model = decoded.model;
+    // The depth fields travel beside the model here (not yet on the wire): the contacts keep
+    // their fields' ids through the encoding, in order.
+    std::vector<DepthField> fields(pipeline.last_depth_fields().begin(),
+                                   pipeline.last_depth_fields().end());
+    if (a.model.num_contacts != message.model.num_contacts) {
+      throw std::runtime_error("the compact encoding changed the contact count (tick " +
+                               std::to_string(k) + ")");
+    }
+    for (int c = 0; c < a.model.num_contacts; ++c) {
+      a.model.contacts[static_cast<std::size_t>(c)].depth_field_id =
+          message.model.contacts[static_cast<std::size_t>(c)].depth_field_id;
+    }
     a.tool_state_sent_ns = decoded.tool_state_send_time_ns;
     a.built_local_ns = sent_ns;
     a.collision_us = static_cast<float>(timings.collision_us);
     a.texture_us = static_cast<float>(timings.texture_us);
     a.step_us = static_cast<float>(timings.total_us);
-    if (uniform(loss_to_operator) >= setup.loss) to_operator.push_back({arrive_ns, a});
+    if (uniform(loss_to_operator) >= setup.loss) {
+      to_operator.push_back({arrive_ns, a});
+      fields_to_operator.push_back(std::move(fields));
+    }
   }
   device->Close();
   return run;

@@ -38,6 +38,15 @@ struct Arm {
   /// The remote node's RemoteNodeConfig::speculative_speed_m_per_s (m/s), whose floor follows
   /// the run's round trip (2 × delay + step time).
   double speculative_speed_m_per_s = ht::RemoteNodeConfig{}.speculative_speed_m_per_s;
+  /// The contact model as depth fields (PipelineOptions::depth_fields), evaluated by the
+  /// operator's tick at its tool pose; their travel margin is speculative_speed_m_per_s times the
+  /// run's round trip, at least depth_field_min_margin_m.
+  bool depth_fields = false;
+  double depth_field_min_margin_m = 1e-3;
+  /// The fields' smooth-maximum width (m; < 0: PipelineOptions' default) and whether they are
+  /// offset to the contact's refined δ0 at q0 (PipelineOptions::depth_field_offset_to_q0).
+  double depth_field_smooth_max_m = -1.0;
+  bool depth_field_offset_to_q0 = true;
 };
 
 /// What one arm's run gives, tick by tick and in all.
@@ -45,6 +54,10 @@ struct ArmRun {
   std::vector<glm::dvec3> device_force_W, device_torque_W, contact_force_W;
   std::vector<double> passivity_removed_n, model_age_ms;
   std::vector<int> contacts, model_arrived;
+  /// Per tick: contacts the tool step rendered from a depth field, and those that fell back.
+  std::vector<int> field_contacts, field_fallbacks;
+  /// Per tick: the operator tick's own time (µs, this machine's clock; the tick only).
+  std::vector<double> tick_us;
   std::vector<double> depth_offset_m;
   std::vector<glm::dvec3> p_WT, p_WH;
   std::vector<glm::dvec3> theta_WT;  ///< R_WT as a rotation vector (rad, W)
@@ -100,6 +113,10 @@ int StepsAbove(const std::vector<glm::dvec3>& v, double n);
 double StepQuantile(const std::vector<glm::dvec3>& v, double q);
 /// The RMS (×1000: mN for a force in N) of `v` less its 51-tick moving mean: the ripple.
 double HighPassRmsMilli(const std::vector<glm::dvec3>& v);
+/// The q-quantile of `v` (0 when empty).
+double Quantile(std::vector<double> v, double q);
+/// Share of ticks (%) whose count in `per_tick` is above zero.
+double FieldTickShare(const std::vector<int>& per_tick);
 /// What the passivity controller removed over the device force's impulse, Σ removed / Σ|F| (%).
 double PassivityShare(const ArmRun& r);
 

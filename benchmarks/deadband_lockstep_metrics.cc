@@ -96,4 +96,17 @@ double PassivityShare(const ArmRun& r) {
   return impulse > 0.0 ? 100.0 * removed / impulse : 0.0;
 }
 
+double Quantile(std::vector<double> v, double q) {
+  if (v.empty()) return 0.0;
+  const auto k = static_cast<std::size_t>(std::clamp(q, 0.0, 1.0) * static_cast<double>(v.size() - 1));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  return v[k];
+}
+
+double FieldTickShare(const std::vector<int>& per_tick) {
+  if (per_tick.empty()) return 0.0;
+  const auto n = std::count_if(per_tick.begin(), per_tick.end(), [](int c) { return c > 0; });
+  return 100.0 * static_cast<double>(n) / static_cast<double>(per_tick.size());
+}
+
 }  // namespace lockstep

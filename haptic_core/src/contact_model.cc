@@ -267,8 +267,8 @@ double ContactDepthAt(const ContactLinearization& c, const Twist& dq, Penetratio
 }
 
 ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const RigidTransform& X_WT,
-                                            double stiffness_scale,
-                                            double max_contact_force_n) noexcept {
+                                            double stiffness_scale, double max_contact_force_n,
+                                            const DepthFieldCache* fields) noexcept {
   ContactModelEvaluation out;
   if (!IsFiniteRigidTransform(X_WT) || !IsFiniteRigidTransform(model.X_WT0)) return out;
   const double scale = std::clamp(std::isfinite(stiffness_scale) ? stiffness_scale : 0.0, 0.0, 1.0);
@@ -280,8 +280,22 @@ ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const Rig
     const double k = c.stiffness_n_per_m * scale;
     if (!std::isfinite(c.depth_m) || !std::isfinite(k) || !(k > 0.0)) continue;
     PenetrationGradient J_active;
-    const bool curved = c.num_kink_planes > 0 || PatchGivesCurvature(c.patch);
-    const double depth = ContactDepthAt(c, dq, &J_active, curved ? &curvature : nullptr);
+    bool curved = c.num_kink_planes > 0 || PatchGivesCurvature(c.patch);
+    double depth;
+    const DepthField* field =
+        fields != nullptr && c.depth_field_id != 0 ? fields->Find(c.depth_field_id) : nullptr;
+    DepthFieldEvaluation fe;
+    if (field != nullptr) fe = DepthFieldDepthAt(*field, X_WT);
+    if (fe.valid) {
+      ++out.field_contacts;
+      depth = fe.depth_m + c.depth_field_shift_m;
+      J_active = fe.gradient;
+      curvature = fe.curvature;
+      curved = true;
+    } else {
+      if (fields != nullptr && c.depth_field_id != 0) ++out.field_fallbacks;
+      depth = ContactDepthAt(c, dq, &J_active, curved ? &curvature : nullptr);
+    }
     if (!(depth > 0.0)) continue;
     ++out.active_contacts;
     out.max_depth_m = std::max(out.max_depth_m, depth);

@@ -79,7 +79,7 @@ void ToolSimulator::set_max_contact_force(double max_contact_force_n) {
 
 ToolStepResult ToolSimulator::Step(ToolState& s, const RigidTransform& X_WH, const Twist& V_WH_W,
                                    const ContactModel& model, double stiffness_scale,
-                                   double h) const noexcept {
+                                   double h, const DepthFieldCache* fields) const noexcept {
   ToolStepResult result;
   if (!IsFiniteRigidTransform(X_WH) || !IsFinite(V_WH_W) || !(h > 0.0) || !std::isfinite(h)) {
     result.ok = false;  // hold the tool where it is, at rest
@@ -91,14 +91,14 @@ ToolStepResult ToolSimulator::Step(ToolState& s, const RigidTransform& X_WH, con
     result.ok = false;
   }
   return Integrate(s, X_WH, V_WH_W,
-                   EvaluateContactModel(model, s.X_WT, stiffness_scale, max_contact_force_n_), h,
+                   EvaluateContactModel(model, s.X_WT, stiffness_scale, max_contact_force_n_, fields), h,
                    result);
 }
 
 ToolStepResult ToolSimulator::StepBlended(ToolState& s, const RigidTransform& X_WH,
                                           const Twist& V_WH_W, const ContactModel& current,
                                           const ContactModel& previous, double blend,
-                                          double h) const noexcept {
+                                          double h, const DepthFieldCache* fields) const noexcept {
   ToolStepResult result;
   if (!IsFiniteRigidTransform(X_WH) || !IsFinite(V_WH_W) || !(h > 0.0) || !std::isfinite(h)) {
     result.ok = false;
@@ -110,9 +110,9 @@ ToolStepResult ToolSimulator::StepBlended(ToolState& s, const RigidTransform& X_
     result.ok = false;
   }
   const double beta = std::isfinite(blend) ? std::clamp(blend, 0.0, 1.0) : 1.0;
-  ContactModelEvaluation a = EvaluateContactModel(current, s.X_WT, beta, max_contact_force_n_);
+  ContactModelEvaluation a = EvaluateContactModel(current, s.X_WT, beta, max_contact_force_n_, fields);
   const ContactModelEvaluation b =
-      EvaluateContactModel(previous, s.X_WT, 1.0 - beta, max_contact_force_n_);
+      EvaluateContactModel(previous, s.X_WT, 1.0 - beta, max_contact_force_n_, fields);
   a.F_T_W.force += b.F_T_W.force;
   a.F_T_W.torque += b.F_T_W.torque;
   a.K += b.K;
@@ -120,6 +120,8 @@ ToolStepResult ToolSimulator::StepBlended(ToolState& s, const RigidTransform& X_
   a.active_contacts = beta >= 0.5 ? a.active_contacts : b.active_contacts;
   a.saturated_contacts = beta >= 0.5 ? a.saturated_contacts : b.saturated_contacts;
   a.max_depth_m = std::max(a.max_depth_m, b.max_depth_m);
+  a.field_contacts = beta >= 0.5 ? a.field_contacts : b.field_contacts;
+  a.field_fallbacks = beta >= 0.5 ? a.field_fallbacks : b.field_fallbacks;
   return Integrate(s, X_WH, V_WH_W, a, h, result);
 }
 
@@ -129,6 +131,8 @@ ToolStepResult ToolSimulator::Integrate(ToolState& s, const RigidTransform& X_WH
   result.F_contact_T_W = contact.F_T_W;
   result.active_contacts = contact.active_contacts;
   result.max_depth_m = contact.max_depth_m;
+  result.field_contacts = contact.field_contacts;
+  result.field_fallbacks = contact.field_fallbacks;
   result.saturated_contacts = contact.saturated_contacts;
 
   const VirtualCoupling& c = coupling_;

@@ -93,6 +93,13 @@ struct ContactLinearization {
   /// δ over in-plane translations (step_m = 0: none, the planes alone). The remote node's
   /// option; not carried on the wire (protocol version 8 sends the planes).
   TranslationPatch patch;
+  /// The contact's depth field (depth_field.h; 0: none). Where the evaluator holds that field and
+  /// the tool is within its travel margin, δ and ∇δ are the field's at the tool's pose
+  /// (EvaluateContactModel); elsewhere the planes above are the fallback.
+  std::uint32_t depth_field_id = 0;
+  /// Added to the field's δ (m): the operator's depth offset (the energy-bounded switch), which
+  /// it also subtracts from depth_m.
+  double depth_field_shift_m = 0.0;
 };
 
 /// Adds kink planes to `lin` (issue 31, change 5) from its kGradientSamples depth samples (the

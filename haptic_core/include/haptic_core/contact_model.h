@@ -8,6 +8,7 @@
 #include <limits>
 
 #include "haptic_core/contact_linearization.h"
+#include "haptic_core/depth_field.h"
 #include "haptic_core/spatial.h"
 
 namespace ht {
@@ -107,6 +108,10 @@ struct ContactModelEvaluation {
   /// gives each contact the force −k_i δ_i α (J_i·V) J_i, which vanishes with δ_i
   /// (ToolSimulator::set_contact_damping_hunt_crossley).
   Stiffness6 G = Stiffness6::Zero();
+  /// Contacts whose δ came from their depth field, and contacts with a field that fell back to
+  /// their linearization (the field missing from the cache, or the tool beyond its margin).
+  int field_contacts = 0;
+  int field_fallbacks = 0;
 };
 
 /// Evaluates `model` at tool pose X_WT: δ_i(q) = δ0_i + J_i·(q ⊖ q0), or with kink planes the
@@ -123,8 +128,14 @@ struct ContactModelEvaluation {
 /// the sideways overlap of patches that are not height fields (docs/hard-cases.md) then pushes with
 /// the bound, not with thousands of newtons. noexcept and allocation-free: callable from the 1 kHz
 /// loop.
+///
+/// With `fields`, a contact with a depth field (ContactLinearization::depth_field_id) that the
+/// cache holds and whose travel margin holds the tool takes δ, ∇δ and the smooth maximum's
+/// curvature from the field at X_WT (DepthFieldDepthAt, plus depth_field_shift_m) instead of its
+/// planes; otherwise its planes, and the fallback is counted.
 ContactModelEvaluation EvaluateContactModel(
     const ContactModel& model, const RigidTransform& X_WT, double stiffness_scale = 1.0,
-    double max_contact_force_n = std::numeric_limits<double>::infinity()) noexcept;
+    double max_contact_force_n = std::numeric_limits<double>::infinity(),
+    const DepthFieldCache* fields = nullptr) noexcept;
 
 }  // namespace ht

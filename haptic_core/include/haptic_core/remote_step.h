@@ -10,6 +10,7 @@
 
 #include "haptic_core/contact_linearization.h"
 #include "haptic_core/contact_model.h"
+#include "haptic_core/depth_field.h"
 #include "haptic_core/contact_windows.h"
 #include "haptic_core/depth_refinement.h"
 #include "haptic_core/haptic_scene.h"
@@ -254,6 +255,21 @@ struct PipelineOptions {
   /// RemoteNodeConfig::speculative_speed_m_per_s).
   double speculative_floor_m = 0.0;
 
+  /// Stage 5d: each contact of the model also carries its depth field (depth_field.h), the two
+  /// surfaces over its window grown by depth_field_margin_m on each side (rounded up to cells,
+  /// and capped at kMaxDepthFieldSide nodes a side), which the operator's loop evaluates at the
+  /// tool's pose every tick. The contact's linearization stays, as the loop's fallback beyond the
+  /// margin. HapticTexturePipeline::last_depth_fields() holds them after the step.
+  bool depth_fields = false;
+  /// The travel margin (m, ≥ 0): how far the tool may move from q0 before a field no longer
+  /// holds. The remote node sets it from the operator's round trip (SetDepthFieldMargin).
+  double depth_field_margin_m = 2e-3;
+  /// The fields' smooth-maximum width ε (m, > 0; DepthField::smooth_max_m).
+  double depth_field_smooth_max_m = kDepthFieldSmoothMaxM;
+  /// True: each field is offset so that it reads the contact's δ0 at q0 (the texture stage's
+  /// refined depth, stage 5b) there (DepthField::depth_offset_m); false: the field's own maximum.
+  bool depth_field_offset_to_q0 = true;
+
   /// Throws std::invalid_argument naming a value out of range.
   void Validate() const;
   /// The largest grid N a window of these options can have: ceil(N · max_window_extent_m /
@@ -401,6 +417,15 @@ class HapticTexturePipeline {
   void SetSpeculativeFloor(double floor_m) noexcept {
     options_.speculative_floor_m = std::isfinite(floor_m) && floor_m > 0.0 ? floor_m : 0.0;
   }
+  /// PipelineOptions::depth_field_margin_m (m) from the next Step() on; a negative or
+  /// non-finite value is taken as 0. noexcept.
+  void SetDepthFieldMargin(double margin_m) noexcept {
+    options_.depth_field_margin_m = std::isfinite(margin_m) && margin_m > 0.0 ? margin_m : 0.0;
+  }
+  /// The depth fields of the last Step()'s model (PipelineOptions::depth_fields), the field of
+  /// each contact that refers to one (ContactLinearization::depth_field_id). Valid until the
+  /// next Step().
+  std::span<const DepthField> last_depth_fields() const noexcept;
   /// The floor the next Step() uses (m).
   double speculative_floor_m() const noexcept { return options_.speculative_floor_m; }
   /// Stage 5b's seeds from the last step (DepthRefinementOptions::seed_from_last_step) forgotten:

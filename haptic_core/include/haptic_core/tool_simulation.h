@@ -47,6 +47,10 @@ struct ToolStepResult {
   double max_depth_m = 0.0;
   /// Active contacts whose force was held at the simulator's bound this step.
   int saturated_contacts = 0;
+  /// Contacts rendered from their depth field, and contacts whose field fell back to their
+  /// linearization (ContactModelEvaluation).
+  int field_contacts = 0;
+  int field_fallbacks = 0;
   /// False when the step produced a non-finite state; the tool was then reset onto the handle.
   bool ok = true;
 };
@@ -62,8 +66,10 @@ class ToolSimulator {
   /// evaluated with its stiffness scaled by `stiffness_scale` ∈ [0, 1]. Updates `state`.
   /// noexcept and allocation-free. Non-finite inputs or results reset the tool onto the handle
   /// (or hold it when the handle pose itself is not finite) and return ok = false.
+  /// `fields`: the depth fields the model's contacts refer to (EvaluateContactModel), or null.
   ToolStepResult Step(ToolState& state, const RigidTransform& X_WH, const Twist& V_WH_W,
-                      const ContactModel& model, double stiffness_scale, double h_s) const noexcept;
+                      const ContactModel& model, double stiffness_scale, double h_s,
+                      const DepthFieldCache* fields = nullptr) const noexcept;
 
   /// Like Step, with a newly received contact model blended in: contact wrench and stiffness are
   /// blend·(current) + (1 − blend)·(previous), blend ∈ [0, 1] (clamped; NaN counts as 1). Ramping
@@ -71,7 +77,8 @@ class ToolSimulator {
   /// |ΔΦ|/ticks (DESIGN.md §5).
   ToolStepResult StepBlended(ToolState& state, const RigidTransform& X_WH, const Twist& V_WH_W,
                              const ContactModel& current, const ContactModel& previous,
-                             double blend, double h_s) const noexcept;
+                             double blend, double h_s,
+                             const DepthFieldCache* fields = nullptr) const noexcept;
   /// Coupling wrench on the tool at its centre of mass, in W: k (p_H − p_T) + b (v_H − v_T) and
   /// k_r·rotvec(R_H R_Tᵀ) + b_r (ω_H − ω_T).
   Wrench CouplingWrench(const ToolState& state, const RigidTransform& X_WH,

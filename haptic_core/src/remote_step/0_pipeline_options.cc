@@ -37,6 +37,14 @@ void PipelineOptions::Validate() const {
     throw std::invalid_argument("speculative floor must be >= 0, got " +
                                 std::to_string(speculative_floor_m));
   }
+  if (!(depth_field_margin_m >= 0.0) || !std::isfinite(depth_field_margin_m)) {
+    throw std::invalid_argument("depth_field_margin_m must be >= 0 and finite, got " +
+                                std::to_string(depth_field_margin_m));
+  }
+  if (!(depth_field_smooth_max_m > 0.0) || !std::isfinite(depth_field_smooth_max_m)) {
+    throw std::invalid_argument("depth_field_smooth_max_m must be > 0 and finite, got " +
+                                std::to_string(depth_field_smooth_max_m));
+  }
   if (!(max_speculative_margin_m >= 0.0) || !std::isfinite(max_speculative_margin_m)) {
     throw std::invalid_argument("max speculative margin must be >= 0, got " +
                                 std::to_string(max_speculative_margin_m));

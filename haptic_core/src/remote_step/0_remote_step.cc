@@ -123,6 +123,12 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
                           {d.last_results.data(), static_cast<std::size_t>(d.last_num_queries)});
   // Stage 5c: contacts whose overlaps are one region share one penalty.
   ShareConnectedContacts(X_WT, d.last_num_queries);
+  // Stage 5d: each contact's depth field, the two surfaces over its window and travel margin.
+  if (options_.depth_fields) {
+    RenderContactDepthFields(*scene_.tool, X_WT, options_, d);
+  } else {
+    d.num_fields = 0;
+  }
   // Stage 6: the contact model.
   AssembleContactModel(last_linearizations(), model);
   const auto t2 = Clock::now();
@@ -496,6 +502,10 @@ std::span<const ContactQuery> HapticTexturePipeline::last_contact_queries() cons
 
 std::span<const ContactLinearization> HapticTexturePipeline::last_linearizations() const noexcept {
   return {data_->last_results.data(), static_cast<std::size_t>(data_->last_num_queries)};
+}
+
+std::span<const DepthField> HapticTexturePipeline::last_depth_fields() const noexcept {
+  return {data_->fields.data(), static_cast<std::size_t>(data_->num_fields)};
 }
 
 std::span<const DepthSample> HapticTexturePipeline::last_depth_samples() const noexcept {

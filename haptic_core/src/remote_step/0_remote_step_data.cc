@@ -71,6 +71,9 @@ RemoteStepData::RemoteStepData(const HapticScene& scene, const PipelineOptions& 
     // The coarse query's traversal on the texture stage's threads too (the same pairs).
     queries.back().SetThreads(options.texture_threads);
   }
+  if (options.depth_fields) {
+    for (DepthField& f : fields) f.Reserve();
+  }
   // Stage 5a's copies of the kept contacts' fields, whatever the backend (a GPU backend that
   // falls back to the CPU keeps fields from then on).
   if (options.reuse_base_render && options.split_windows_at_separated_overlap) {

@@ -20,6 +20,7 @@
 #include "haptic_core/haptic_scene.h"
 #include "haptic_core/hull_proximity.h"
 #include "haptic_core/penetration_depth.h"
+#include "haptic_core/depth_field.h"
 #include "haptic_core/remote_step.h"
 
 namespace ht {
@@ -135,8 +136,24 @@ struct RemoteStepData {
   /// The block occupancy of each contact (kMaxSharingBlocks² a contact).
   std::vector<std::uint8_t> sharing_occupancy;
 
+  // ---- Stage 5d (depth_fields).
+  /// Its renderer, the fields of the last model (the first num_fields), and the last id given.
+  DepthFieldRenderer field_renderer;
+  std::array<DepthField, kMaxContacts> fields{};
+  int num_fields = 0;
+  std::uint32_t last_field_id = 0;
+
   /// What the stages counted (HapticTexturePipeline::step_faults()).
   HapticTexturePipeline::StepFaults step_faults;
 };
+
+/// Stage 5d (PipelineOptions::depth_fields): renders the depth field of each of the data's
+/// last_queries[0, last_num_queries) whose linearization is finite into d.fields (ids counting on
+/// from d.last_field_id), sets the linearization's depth_field_id, and with
+/// depth_field_offset_to_q0 offsets the field to read its δ0 at X_WT. A contact whose field
+/// cannot be made keeps id 0 (its linearization alone). Returns d.num_fields. Never allocates
+/// within the data's reserve.
+int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT,
+                             const PipelineOptions& options, RemoteStepData& d) noexcept;
 
 }  // namespace ht

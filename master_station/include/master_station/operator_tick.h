@@ -1,4 +1,6 @@
 #pragma once
+
+#include <span>
 // The operator's haptic tick as one unit (issue 16): the device state in, the device wrench out,
 // with no thread, socket or clock of its own, so that tests run it tick by tick. Stages, in
 // order (DESIGN.md §5), one file each in master_station/src/operator/, whose listing is this order:
@@ -110,6 +112,10 @@ struct OperatorTickInput {
   bool device_ok = true;
   DeviceState device;                     ///< X_MH, V_MH_M when device_ok
   const ArrivedModel* arrived = nullptr;  ///< a new model, or null
+  /// The depth fields that came with `arrived` (prepared: DepthField::Prepare), taken into the
+  /// tick's cache before the model (their buffers are swapped with the cache's, never copied:
+  /// each pointer leaves holding an evicted field's buffers, to be reused by the caller).
+  std::span<DepthField* const> arrived_fields;
   bool link_connected = true;
   /// Scales the device's wrench after the safety stage and before the passivity observer
   /// records it, clamped to [0, 1] (NaN = 0): the ramp to zero when a stop is requested. The
@@ -160,6 +166,12 @@ struct OperatorTickCounters {
   /// Ticks rendered with a depth offset (energy_bounded_switch), and the largest offset (m).
   std::int64_t switch_offset_ticks = 0;
   double switch_offset_max_m = 0.0;
+  /// Ticks whose tool step rendered a contact from its depth field, and ticks on which a contact
+  /// with a field fell back to its linearization (the field missing, or the tool past its
+  /// travel margin); fields the cache refused.
+  std::int64_t field_ticks = 0;
+  std::int64_t field_fallback_ticks = 0;
+  std::int64_t fields_refused = 0;
 };
 
 /// The operator's tick. Construction may allocate; Step never allocates, locks, blocks or throws.
@@ -203,6 +215,11 @@ class OperatorTick {
   ToolState tool_;
   RigidTransform X_WH_last_;
   ContactModel model_{}, previous_model_{};
+  /// The depth fields the models in use refer to (2·kMaxContacts + 4 slots).
+  DepthFieldCache fields_;
+  /// Stage 1: takes the fields that came with `in.arrived` into fields_, keeping those the model
+  /// in use and the arriving one refer to.
+  void TakeArrivedFields(const OperatorTickInput& in) noexcept;
   int blend_tick_;
   bool have_model_ = false;
   ModelStamp model_stamp_{};

@@ -20,6 +20,7 @@ OperatorTick::OperatorTick(const OperatorTickConfig& config, const RigidTransfor
       X_WM_(X_WM),
       tool_(tool_start),
       X_WH_last_(tool_start.X_WT),
+      fields_(2 * kMaxContacts + 4),
       blend_tick_(config.model_blend_ticks) {
   if (config.model_blend_ticks < 1) {
     throw std::invalid_argument("model blend ticks must be >= 1, got " +
@@ -54,7 +55,8 @@ OperatorTickOutput OperatorTick::Step(const OperatorTickInput& in) noexcept {
   const bool potential_changes = in.arrived != nullptr || blend_tick_ < config_.model_blend_ticks;
   const double U_before = potential_changes ? LoopPotential(tool_.X_WT) : 0.0;
 
-  // Stage 1: the contact model in use.
+  // Stage 1: the contact model in use, with its depth fields.
+  TakeArrivedFields(in);
   const bool took_model = TakeArrivedModel(in.arrived);
   if (have_model_) out.model_age_ms = (in.now_ns - model_stamp_.tool_state_sent_ns) * 1e-6;
   const double model_staleness_s =

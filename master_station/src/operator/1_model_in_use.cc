@@ -3,6 +3,7 @@
 // jump, models linearized nearer the old place than the tool are dropped.
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 #include "master_station/operator_tick.h"
@@ -37,12 +38,31 @@ bool OperatorTick::TakeArrivedModel(const ArrivedModel* arrived) noexcept {
   return true;
 }
 
+void OperatorTick::TakeArrivedFields(const OperatorTickInput& in) noexcept {
+  if (in.arrived_fields.empty()) return;
+  std::array<std::uint32_t, 2 * kMaxContacts> keep{};
+  std::size_t n = 0;
+  const ContactModel* in_use[2] = {&model_,
+                                   in.arrived != nullptr ? &in.arrived->model : nullptr};
+  for (const ContactModel* m : in_use) {
+    if (m == nullptr) continue;
+    for (int i = 0; i < std::clamp(m->num_contacts, 0, kMaxContacts); ++i) {
+      const std::uint32_t id = m->contacts[static_cast<std::size_t>(i)].depth_field_id;
+      if (id != 0 && n < keep.size()) keep[n++] = id;
+    }
+  }
+  for (DepthField* f : in.arrived_fields) {
+    if (f != nullptr && !fields_.Take(*f, {keep.data(), n})) ++counters_.fields_refused;
+  }
+}
+
 void OperatorTick::SetDepthOffset(double offset_m) noexcept {
   const double d = offset_m - depth_offset_m_;
   if (d == 0.0) return;
   for (int i = 0; i < model_.num_contacts; ++i) {
     ContactLinearization& c = model_.contacts[static_cast<std::size_t>(i)];
     c.depth_m -= d;
+    c.depth_field_shift_m -= d;
     for (int m = 0; m < c.num_kink_planes; ++m)
       c.kink_planes[static_cast<std::size_t>(m)].depth_m -= d;
   }

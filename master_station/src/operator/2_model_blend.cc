@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "master_station/operator_tick.h"
 
@@ -47,7 +48,8 @@ void OperatorTick::BoundSwitchEnergy(bool took_model, double U_before,
     // An onset: the loop rendered no contact at the tool and this model has one, whose whole
     // stored energy would go in at once; it may add at most the budget (old models only).
     if (!(U_before <= 0.0) || !(model_age_ms >= config_.switch_bound_min_age_ms)) return;
-    const ContactModelEvaluation raw = EvaluateContactModel(model_, tool_.X_WT);
+    const ContactModelEvaluation raw = EvaluateContactModel(
+        model_, tool_.X_WT, 1.0, std::numeric_limits<double>::infinity(), &fields_);
     if (raw.active_contacts == 0) return;
     const double o = smallest_within(raw.max_depth_m, U_before + budget);
     SetDepthOffset(o);
@@ -76,9 +78,10 @@ void OperatorTick::BoundSwitchEnergy(bool took_model, double U_before,
 double OperatorTick::LoopPotential(const RigidTransform& X_WT) const noexcept {
   const double w = std::min(1.0, static_cast<double>(blend_tick_) / config_.model_blend_ticks);
   const double max_force = simulator_.max_contact_force_n();
-  double U = EvaluateContactModel(model_, X_WT, w, max_force).potential_energy_j;
+  double U = EvaluateContactModel(model_, X_WT, w, max_force, &fields_).potential_energy_j;
   if (w < 1.0)
-    U += EvaluateContactModel(previous_model_, X_WT, 1.0 - w, max_force).potential_energy_j;
+    U += EvaluateContactModel(previous_model_, X_WT, 1.0 - w, max_force, &fields_)
+             .potential_energy_j;
   return U;
 }
 

@@ -15,11 +15,14 @@ Wrench OperatorTick::StepTool(const RigidTransform& X_WH, const Twist& V_WH_W, b
   if (blending) {
     out.step =
         simulator_.StepBlended(tool_, X_WH, V_WH_W, model_, previous_model_,
-                               static_cast<double>(blend_tick_) / config_.model_blend_ticks, h);
+                               static_cast<double>(blend_tick_) / config_.model_blend_ticks, h,
+                               &fields_);
   } else {
-    out.step = simulator_.Step(tool_, X_WH, V_WH_W, model_, 1.0, h);
+    out.step = simulator_.Step(tool_, X_WH, V_WH_W, model_, 1.0, h, &fields_);
   }
   if (!out.step.ok) ++counters_.nonfinite;
+  if (out.step.field_contacts > 0) ++counters_.field_ticks;
+  if (out.step.field_fallbacks > 0) ++counters_.field_fallback_ticks;
   if (out.step.saturated_contacts > 0) ++counters_.saturated_contact_ticks;
   Wrench F_H_W = -out.step.F_coupling_T_W;
   if (!IsFinite(F_H_W)) {

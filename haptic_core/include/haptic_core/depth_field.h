@@ -1,0 +1,161 @@
+#pragma once
+// The contact model's depth field (DESIGN.md §5): the two surfaces of one contact window, the
+// environment's heights b and the tool's heights a along the window's normal on its grid, over
+// the window grown by a travel margin. The operator's loop evaluates the seed's directional
+// penetration depth δ = max over cells of (b − a) on them at the tool's current pose, every tick,
+// instead of a linearization taken at the pose q0 the remote node answered.
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <limits>
+#include <span>
+#include <vector>
+
+#include "haptic_core/contact_linearization.h"
+#include "haptic_core/contact_windows.h"
+#include "haptic_core/spatial.h"
+
+namespace ht {
+
+/// Width ε (m) of a depth field's smooth maximum (DepthFieldDepthAt): δ = ε·ln Σ exp(δ_j/ε) over
+/// the tool's nodes j, which lies within [max δ_j, max δ_j + ε·ln M] (M the nodes within a few ε
+/// of the maximum), so that ∇δ is continuous where the deepest node changes (a face tilting over
+/// the edge it rests on, a slide over a ridge's crest) and the implicit step can be given the
+/// maximum's curvature.
+inline constexpr double kDepthFieldSmoothMaxM = 2e-6;
+
+/// Largest number of nodes per side of a depth field's grid (the window's N plus twice the travel
+/// margin, in cells): bounds the memory the operator's loop preallocates per field.
+inline constexpr int kMaxDepthFieldSide = 192;
+
+/// One contact window's two surfaces (our construction [R] on the seed's directional penetration
+/// depth [S][L]). Frame F is the window's at the render: origin at grid node (0, 0), x along the
+/// window's u, y along v, z along its normal n (from the environment towards the tool); node
+/// (i, j) lies at (i·h, j·h, 0) in F, h = cell_m.
+///  - env_height_m[j·nx + i] = b: the height along z_F of the environment's surface facing +n
+///    under the node (m; its largest over the node's cell, as the texture stage renders it), NaN
+///    where the environment has no surface there. b is fixed in the environment's frame.
+///  - tool_height_m[j·nx + i] = a: the height along z_F of the tool's surface facing −n at the
+///    pose X_WT0 (m; its smallest), NaN where none. The tool's nodes are points of the tool
+///    p_F(i, j) = (i·h, j·h, a) at X_WT0, which move rigidly with the tool.
+/// At a tool pose X_WT each tool node j moves to s_j = X_FW·X_WT·X_WT0⁻¹·X_WF·p_F(j) and reads the
+/// environment there: δ_j = b(s_j.x, s_j.y) − s_j.z, b interpolated between nodes by a
+/// Catmull–Rom bicubic (its gradient continuous across cell edges). The field is valid while every
+/// tool node moved at most travel_margin_m from where it was at X_WT0 (DepthFieldDepthAt).
+struct DepthField {
+  /// The remote node's id of this field within its session (0: no field).
+  std::uint32_t id = 0;
+  RigidTransform X_WF;  ///< Frame F in W (m).
+  double cell_m = 0.0;  ///< Node spacing h (m), > 0.
+  int nx = 0, ny = 0;   ///< Nodes along x_F and y_F (2..kMaxDepthFieldSide).
+  std::vector<float> env_height_m;   ///< b, #nx·ny, row-major j·nx + i (m).
+  std::vector<float> tool_height_m;  ///< a at X_WT0, #nx·ny, row-major j·nx + i (m).
+  RigidTransform X_WT0;              ///< The tool pose a was rendered at (T at the tool's CoM).
+  /// How far (m) the tool's surface may move from where it was at X_WT0 before the field is no
+  /// longer valid: the margin by which the grid exceeds the window on each side.
+  double travel_margin_m = 0.0;
+  /// Added to the smooth maximum (m): the remote node's refined δ at q0 less the field's own
+  /// there, so that the field reads at q0 what the texture stage's refinement found
+  /// (DepthRefinementOptions); 0 for the field alone.
+  double depth_offset_m = 0.0;
+  /// Smooth-maximum width ε (m, > 0).
+  double smooth_max_m = kDepthFieldSmoothMaxM;
+
+  // Derived by Prepare (the receiver's work, off the loop).
+  /// Per grid cell (i, j) (between nodes i, i+1 and j, j+1; #nx·ny, row-major, the last row and
+  /// column unused): an upper bound on the bicubic b over that cell (m), −∞ where its 4×4 stencil
+  /// is incomplete (no interpolant there).
+  std::vector<float> env_bound_m;
+  /// The largest distance (m) of a tool node from the tool's centre of mass at X_WT0.
+  double tool_radius_m = 0.0;
+  bool prepared = false;
+
+  /// Checks the field (id ≠ 0, finite frames, h > 0 and finite, nx and ny in
+  /// [4, kMaxDepthFieldSide], both maps #nx·ny, margin ≥ 0, ε > 0, offset finite) and derives
+  /// env_bound_m and tool_radius_m. Allocates only when the buffers' capacity is short. Returns
+  /// false, leaving prepared false, on a bad field.
+  bool Prepare();
+  /// Reserves every buffer for kMaxDepthFieldSide² nodes, so that assigning a field into this one
+  /// (CopyFrom) never allocates.
+  void Reserve();
+  /// Copies `other` into this field's buffers (no allocation within the reserve; noexcept:
+  /// beyond the reserve it leaves this field empty, id 0).
+  void CopyFrom(const DepthField& other) noexcept;
+};
+
+/// What DepthFieldDepthAt found.
+struct DepthFieldEvaluation {
+  /// δ (m): the smooth maximum over the tool nodes that read an environment, plus the offset;
+  /// −∞ when none does.
+  double depth_m = -std::numeric_limits<double>::infinity();
+  /// The deepest node's own δ_j plus the offset (m; the plain maximum, which depth_m exceeds by
+  /// the smooth maximum's lift, at most ε·ln(nodes_evaluated)); −∞ when none.
+  double max_node_depth_m = -std::numeric_limits<double>::infinity();
+  /// ∇δ with respect to the tool's pose (x of its centre of mass, θ about it; world axes).
+  PenetrationGradient gradient;
+  /// ∇²δ's part from the smooth maximum (6×6, world axes, rows/cols as Stiffness6: translation
+  /// then rotation): the weights' covariance of the nodes' gradients over ε, positive
+  /// semi-definite (the curvature of δ's kinks, which the implicit step needs in K).
+  Eigen::Matrix<double, 6, 6> curvature = Eigen::Matrix<double, 6, 6>::Zero();
+  /// False when the tool moved farther than the field's travel margin (nothing is computed) or
+  /// the field is not prepared.
+  bool valid = false;
+  /// Tool nodes whose exact depth was computed (the others were pruned by the bound).
+  int nodes_evaluated = 0;
+};
+
+/// Evaluates `field` at tool pose X_WT (T at the tool's centre of mass, W): each tool node's
+/// depth δ_j = b(s_j) − s_j.z (DepthField), δ = smooth_max_m·ln Σ_j exp(δ_j / smooth_max_m) +
+/// depth_offset_m over the nodes whose bicubic stencil is complete, with ∇δ = Σ w_j ∇δ_j (w the
+/// softmax weights) and ∇δ_j = (g_j, r_j × g_j), g_j = R_WF·(∂b/∂x, ∂b/∂y, −1), r_j the node less
+/// the centre of mass (W). Nodes whose depth is more than 30 ε below the maximum (weight below
+/// 1e-13) are skipped by the per-cell bound without changing the result beyond that. The field
+/// is invalid (valid false) when |Δx| + |Δθ|·tool_radius_m exceeds travel_margin_m, Δq = X_WT ⊖
+/// X_WT0. noexcept, allocation-free: callable from the 1 kHz loop.
+DepthFieldEvaluation DepthFieldDepthAt(const DepthField& field, const RigidTransform& X_WT) noexcept;
+
+/// Renders a contact's depth field on the remote node (the texture stage's CPU raster,
+/// RenderPatchHeightsFast): the query's window grown by `margin_cells` cells on each side, the
+/// environment at query.X_WO and the tool at X_WT (T at its centre of mass), each restricted to
+/// the query's triangle subsets, both with the textures' mip level at the window's cell. Keeps its
+/// triangle lists between calls (allocates only while they grow).
+class DepthFieldRenderer {
+ public:
+  /// Writes the field into `out` (id `id`, X_WT0 = X_WT, margin margin_cells·h, offset 0, ε
+  /// `smooth_max_m`) and prepares it; returns false when the grown grid would exceed
+  /// kMaxDepthFieldSide nodes a side or the field does not prepare (out.prepared false then).
+  bool Render(const HapticModel& tool, const RigidTransform& X_WT, const ContactQuery& query,
+              int margin_cells, std::uint32_t id, double smooth_max_m, DepthField& out);
+
+ private:
+  std::vector<int> env_triangles_, tool_triangles_;
+};
+
+/// A fixed set of prepared fields, by id, for the operator's loop: preallocated at construction,
+/// so that taking a field in and looking one up never allocate.
+class DepthFieldCache {
+ public:
+  /// `slots` fields of up to kMaxDepthFieldSide² nodes each (allocates; throws
+  /// std::invalid_argument unless slots ≥ 1).
+  explicit DepthFieldCache(int slots);
+  /// The field with `id`, or null (id 0: null).
+  const DepthField* Find(std::uint32_t id) const noexcept;
+  /// Takes the prepared `field` in (DepthField::Prepare, the sender's or the receiver's work off
+  /// the loop), replacing a field of the same id, else a free slot, else the oldest slot not in
+  /// `keep` (ids the models in use refer to). Swaps buffers with `field` (no copy, no
+  /// allocation): `field` leaves holding the evicted field's buffers. Returns false, taking
+  /// nothing, when the field is not prepared or every slot is kept.
+  bool Take(DepthField& field, std::span<const std::uint32_t> keep) noexcept;
+  int size() const noexcept { return static_cast<int>(slots_.size()); }
+  /// Fields taken in since construction, and those refused (bad, or no slot).
+  std::int64_t taken() const noexcept { return taken_; }
+  std::int64_t refused() const noexcept { return refused_; }
+
+ private:
+  std::vector<DepthField> slots_;
+  std::vector<std::uint64_t> stamp_;  // when each slot was filled (0: free)
+  std::uint64_t clock_ = 0;
+  std::int64_t taken_ = 0, refused_ = 0;
+};
+
+}  // namespace ht

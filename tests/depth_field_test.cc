@@ -1,0 +1,368 @@
+// The contact model's depth field (depth_field.h): closed forms, the gradient against finite
+// differences, the pruned smooth maximum against every node's own depth, the field against the
+// texture stage's fresh render at displaced poses, the cache, and no allocation in the loop's
+// calls.
+
+#include "haptic_core/depth_field.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <glm/gtc/quaternion.hpp>
+#include <random>
+
+#include "allocation_counter.h"
+#include "haptic_core/penetration_depth.h"
+#include "test_scenes.h"
+
+namespace ht {
+namespace {
+
+using testing_support::Allocations;
+
+constexpr double kPi = 3.14159265358979323846;
+
+/// A field on an n×n grid of spacing h with frame F at X_WF, its maps from callbacks (NaN: none),
+/// the tool at X_WT0, prepared.
+DepthField MakeField(int n, double h, const RigidTransform& X_WF, const RigidTransform& X_WT0,
+                     double (*env)(double, double), double (*tool)(double, double),
+                     double margin_m = 1e-3) {
+  DepthField f;
+  f.id = 7;
+  f.X_WF = X_WF;
+  f.cell_m = h;
+  f.nx = f.ny = n;
+  f.X_WT0 = X_WT0;
+  f.travel_margin_m = margin_m;
+  for (int j = 0; j < n; ++j) {
+    for (int i = 0; i < n; ++i) {
+      f.env_height_m.push_back(static_cast<float>(env(i * h, j * h)));
+      f.tool_height_m.push_back(static_cast<float>(tool(i * h, j * h)));
+    }
+  }
+  EXPECT_TRUE(f.Prepare());
+  return f;
+}
+
+RigidTransform TurnedFrame() {
+  RigidTransform X;
+  X.translation = {0.1, -0.05, 0.02};
+  X.rotation = glm::normalize(glm::dquat(0.9, 0.2, -0.3, 0.1));
+  return X;
+}
+
+constexpr int kN = 40;
+constexpr double kH = 0.5e-3;
+constexpr double kD = 50e-6;  // the flat face's overlap with the flat plate (m)
+
+double Flat(double, double) { return 0.0; }
+// A 10 mm square face 50 µm into the plate, on nodes 10..29.
+double FaceInto(double x, double y) {
+  const double lo = 10 * kH - 1e-9, hi = 29 * kH + 1e-9;
+  return x >= lo && x <= hi && y >= lo && y <= hi ? -kD : std::nan("");
+}
+
+// The tool's centre of mass 5 mm above the face's centre, along z_F.
+RigidTransform ToolAboveFace(const RigidTransform& X_WF) {
+  RigidTransform X_WT;
+  X_WT.translation = X_WF * glm::dvec3(19.5 * kH, 19.5 * kH, 5e-3);
+  X_WT.rotation = X_WF.rotation;
+  return X_WT;
+}
+
+TEST(DepthField, FlatFaceOnFlatPlateReadsItsOverlapPushesAlongTheNormalAndFollowsThePress) {
+  const RigidTransform X_WF = TurnedFrame();
+  const RigidTransform X_WT0 = ToolAboveFace(X_WF);
+  const DepthField f = MakeField(kN, kH, X_WF, X_WT0, Flat, FaceInto);
+  const glm::dvec3 n_W = X_WF.rotation * glm::dvec3(0, 0, 1);
+  const DepthFieldEvaluation e = DepthFieldDepthAt(f, X_WT0);
+  ASSERT_TRUE(e.valid);
+  // The smooth maximum of 400 tied nodes: within [max, max + ε ln 400].
+  EXPECT_GE(e.depth_m, kD - 1e-9);
+  EXPECT_LE(e.depth_m, kD + f.smooth_max_m * std::log(400.0) + 1e-9);
+  EXPECT_NEAR(glm::length(e.gradient.d_translation_W + n_W), 0.0, 1e-6);
+  // Centred under the centre of mass: no lever.
+  EXPECT_NEAR(glm::length(e.gradient.d_rotation_W), 0.0, 1e-6);
+  // Pressed 100 µm further along −n: the depth grows by exactly that; slid 0.7 mm in the plane
+  // over the flat plate: unchanged.
+  RigidTransform pressed = X_WT0;
+  pressed.translation -= 100e-6 * n_W;
+  EXPECT_NEAR(DepthFieldDepthAt(f, pressed).depth_m - e.depth_m, 100e-6, 1e-9);
+  RigidTransform slid = X_WT0;
+  slid.translation += 0.7e-3 * (X_WF.rotation * glm::dvec3(0.6, 0.8, 0.0));
+  EXPECT_NEAR(DepthFieldDepthAt(f, slid).depth_m, e.depth_m, 1e-9);
+}
+
+TEST(DepthField, TiltedFaceSumsItsMovedNodesAsTheirSmoothMaximumAndLevers) {
+  // The second route: every face node moved rigidly with the tool over the flat plate (b = 0
+  // exactly, so the interpolant is exact), their smooth maximum and softmax-weighted levers.
+  const RigidTransform X_WF = TurnedFrame();
+  const RigidTransform X_WT0 = ToolAboveFace(X_WF);
+  const DepthField f = MakeField(kN, kH, X_WF, X_WT0, Flat, FaceInto);
+  const double eps = f.smooth_max_m;
+  for (const double theta : {0.5e-3, 2e-3, -5e-3, 10e-3}) {
+    const glm::dvec3 axis_W = X_WF.rotation * glm::normalize(glm::dvec3(1.0, 0.4, 0.0));
+    const RigidTransform X_WT = Displace(X_WT0, Twist{glm::dvec3(0.0), theta * axis_W});
+    const RigidTransform D = X_WF.Inverse() * X_WT * X_WT0.Inverse() * X_WF;
+    const glm::dvec3 c_F = X_WF.Inverse() * X_WT.translation;
+    double deepest = -1.0;
+    for (int j = 10; j <= 29; ++j) {
+      for (int i = 10; i <= 29; ++i) deepest = std::max(deepest, -(D * glm::dvec3(i * kH, j * kH, -kD)).z);
+    }
+    double sum = 0.0;
+    glm::dvec3 torque_F{0.0};
+    for (int j = 10; j <= 29; ++j) {
+      for (int i = 10; i <= 29; ++i) {
+        const glm::dvec3 s = D * glm::dvec3(i * kH, j * kH, -kD);
+        const double w = std::exp((-s.z - deepest) / eps);
+        sum += w;
+        torque_F += w * glm::cross(s - c_F, glm::dvec3(0.0, 0.0, -1.0));
+      }
+    }
+    const DepthFieldEvaluation e = DepthFieldDepthAt(f, X_WT);
+    ASSERT_TRUE(e.valid) << theta;
+    EXPECT_NEAR(e.max_node_depth_m, deepest, 1e-10) << theta;  // a float map
+    EXPECT_NEAR(e.depth_m, deepest + eps * std::log(sum), 1e-10) << theta;
+    const glm::dvec3 expected_W = X_WF.rotation * (torque_F / sum);
+    EXPECT_NEAR(glm::length(e.gradient.d_rotation_W - expected_W), 0.0, 1e-9) << theta;
+    // The lowest corner bears more as the tilt grows: the lever about the axis grows towards the
+    // face's half diagonal's.
+  }
+}
+
+constexpr double kAmplitude = 100e-6, kPeriod = 4e-3;
+double Sinusoid(double x, double) { return kAmplitude * std::sin(2.0 * kPi * x / kPeriod); }
+// One tool node, at grid node (20, 20), 30 µm below the sinusoid's mean.
+double PointTool(double x, double y) {
+  return std::abs(x - 20 * kH) < 1e-9 && std::abs(y - 20 * kH) < 1e-9 ? -30e-6 : std::nan("");
+}
+
+TEST(DepthField, PointSlidOverASinusoidReadsItsHeightAndSlopeBetweenNodes) {
+  const RigidTransform X_WF = TurnedFrame();
+  RigidTransform X_WT0;
+  X_WT0.translation = X_WF * glm::dvec3(20 * kH, 20 * kH, 3e-3);
+  X_WT0.rotation = X_WF.rotation;
+  const DepthField f = MakeField(kN, kH, X_WF, X_WT0, Sinusoid, PointTool, 6e-3);
+  const glm::dvec3 x_W = X_WF.rotation * glm::dvec3(1, 0, 0);
+  double largest_error = 0.0, largest_slope_error = 0.0;
+  for (double dx = -3e-3; dx <= 3e-3; dx += 0.123e-3) {
+    RigidTransform X_WT = X_WT0;
+    X_WT.translation += dx * x_W;
+    const DepthFieldEvaluation e = DepthFieldDepthAt(f, X_WT);
+    ASSERT_TRUE(e.valid);
+    const double x = 20 * kH + dx;
+    const double truth = kAmplitude * std::sin(2.0 * kPi * x / kPeriod) + 30e-6;
+    const double slope = kAmplitude * 2.0 * kPi / kPeriod * std::cos(2.0 * kPi * x / kPeriod);
+    largest_error = std::max(largest_error, std::abs(e.depth_m - truth));
+    largest_slope_error =
+        std::max(largest_slope_error, std::abs(glm::dot(e.gradient.d_translation_W, x_W) - slope));
+  }
+  // Catmull–Rom at 8 nodes a period: within 1 % of the amplitude, the slope within 10 % of its
+  // largest (2π·A/λ = 0.157; measured 8 %: the interpolant's slope is a cubic's, coarser than
+  // its value).
+  EXPECT_LT(largest_error, 0.01 * kAmplitude);
+  EXPECT_LT(largest_slope_error, 0.10 * 2.0 * kPi * kAmplitude / kPeriod);
+}
+
+// A rough environment and a rough tool face (smooth enough between nodes for a finite difference).
+double Rough(double x, double y) {
+  return 40e-6 * std::sin(1700.0 * x + 0.3) * std::cos(2300.0 * y) + 15e-6 * std::sin(5100.0 * y);
+}
+double RoughFace(double x, double y) {
+  const double lo = 8 * kH - 1e-9, hi = 31 * kH + 1e-9;
+  if (!(x >= lo && x <= hi && y >= lo && y <= hi)) return std::nan("");
+  return -30e-6 + 20e-6 * std::cos(2900.0 * x) * std::sin(1100.0 * y + 1.0);
+}
+
+TEST(DepthField, GradientIsTheDerivativeOfTheDepthAlongEachOfTheSixAxes) {
+  const RigidTransform X_WF = TurnedFrame();
+  const RigidTransform X_WT0 = ToolAboveFace(X_WF);
+  const DepthField f = MakeField(kN, kH, X_WF, X_WT0, Rough, RoughFace, 3e-3);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int trial = 0; trial < 20; ++trial) {
+    const Twist dq{glm::dvec3(u(rng), u(rng), u(rng)) * 0.6e-3,
+                   glm::dvec3(u(rng), u(rng), u(rng)) * 8e-3};
+    const RigidTransform X_WT = Displace(X_WT0, dq);
+    const DepthFieldEvaluation e = DepthFieldDepthAt(f, X_WT);
+    ASSERT_TRUE(e.valid);
+    const double g[6] = {e.gradient.d_translation_W.x, e.gradient.d_translation_W.y,
+                         e.gradient.d_translation_W.z, e.gradient.d_rotation_W.x,
+                         e.gradient.d_rotation_W.y, e.gradient.d_rotation_W.z};
+    for (int k = 0; k < 6; ++k) {
+      const double step = k < 3 ? 1e-8 : 1e-7;
+      Twist d{};
+      if (k < 3) d.linear[k] = step; else d.angular[k - 3] = step;
+      Twist dm{};
+      if (k < 3) dm.linear[k] = -step; else dm.angular[k - 3] = -step;
+      const double fd = (DepthFieldDepthAt(f, Displace(X_WT, d)).depth_m -
+                         DepthFieldDepthAt(f, Displace(X_WT, dm)).depth_m) /
+                        (2.0 * step);
+      const double scale = k < 3 ? 1.0 : 0.01;  // m/m; m/rad over a 1 cm lever
+      EXPECT_NEAR(g[k], fd, 1e-4 * scale) << "trial " << trial << " axis " << k;
+    }
+  }
+}
+
+TEST(DepthField, PrunedSmoothMaximumEqualsTheSumOverEveryNodeAlone) {
+  const RigidTransform X_WF = TurnedFrame();
+  const RigidTransform X_WT0 = ToolAboveFace(X_WF);
+  DepthField f = MakeField(kN, kH, X_WF, X_WT0, Rough, RoughFace, 3e-3);
+  // A wide ε (many nodes weigh, none is pruned) and the default (the bound prunes).
+  for (const double eps : {8e-6, kDepthFieldSmoothMaxM}) {
+  f.smooth_max_m = eps;
+  ASSERT_TRUE(f.Prepare());
+  const RigidTransform X_WT =
+      Displace(X_WT0, Twist{glm::dvec3(0.3e-3, -0.2e-3, 0.0), glm::dvec3(2e-3, 1e-3, 4e-3)});
+  const DepthFieldEvaluation whole = DepthFieldDepthAt(f, X_WT);
+  // The second route: a field per tool node (the same environment), each its node's δ_j.
+  DepthField one = f;
+  double m = -1.0;
+  std::vector<double> depths;
+  for (std::size_t k = 0; k < f.tool_height_m.size(); ++k) {
+    if (!std::isfinite(f.tool_height_m[k])) continue;
+    std::fill(one.tool_height_m.begin(), one.tool_height_m.end(), std::nanf(""));
+    one.tool_height_m[k] = f.tool_height_m[k];
+    ASSERT_TRUE(one.Prepare());
+    const DepthFieldEvaluation e = DepthFieldDepthAt(one, X_WT);
+    if (!std::isfinite(e.depth_m)) continue;
+    depths.push_back(e.depth_m);  // ε·ln(exp(δ_j/ε)) = δ_j
+    m = std::max(m, e.depth_m);
+  }
+  double sum = 0.0;
+  for (const double d : depths) sum += std::exp((d - m) / f.smooth_max_m);
+  EXPECT_NEAR(whole.depth_m, m + f.smooth_max_m * std::log(sum), 1e-10) << eps;
+  EXPECT_NEAR(whole.max_node_depth_m, m, 1e-12) << eps;
+  if (eps == kDepthFieldSmoothMaxM) {
+    EXPECT_LT(whole.nodes_evaluated, static_cast<int>(depths.size()));  // the bound pruned some
+  }
+  }
+}
+
+TEST(DepthField, IsValidWithinItsTravelMarginOnly) {
+  const RigidTransform X_WF = TurnedFrame();
+  const RigidTransform X_WT0 = ToolAboveFace(X_WF);
+  const DepthField f = MakeField(kN, kH, X_WF, X_WT0, Flat, FaceInto, 1e-3);
+  RigidTransform X_WT = X_WT0;
+  X_WT.translation.x += 0.9e-3;
+  EXPECT_TRUE(DepthFieldDepthAt(f, X_WT).valid);
+  X_WT.translation.x += 0.2e-3;
+  EXPECT_FALSE(DepthFieldDepthAt(f, X_WT).valid);
+  // A turn moves the face's far corners by θ times their distance (about 9 mm).
+  EXPECT_TRUE(DepthFieldDepthAt(f, Displace(X_WT0, Twist{{}, {0.0, 0.0, 5e-4}})).valid);
+  EXPECT_FALSE(DepthFieldDepthAt(f, Displace(X_WT0, Twist{{}, {0.0, 0.0, 0.2}})).valid);
+  DepthField unprepared;
+  EXPECT_FALSE(DepthFieldDepthAt(unprepared, X_WT0).valid);
+}
+
+TEST(DepthField, PrepareRefusesABadField) {
+  const RigidTransform X_WF = TurnedFrame();
+  const RigidTransform X_WT0 = ToolAboveFace(X_WF);
+  DepthField f = MakeField(kN, kH, X_WF, X_WT0, Flat, FaceInto);
+  DepthField bad = f;
+  bad.id = 0;
+  EXPECT_FALSE(bad.Prepare());
+  bad = f;
+  bad.tool_height_m.pop_back();
+  EXPECT_FALSE(bad.Prepare());
+  bad = f;
+  bad.travel_margin_m = std::nan("");
+  EXPECT_FALSE(bad.Prepare());
+  bad = f;
+  bad.cell_m = 0.0;
+  EXPECT_FALSE(bad.Prepare());
+  bad = f;
+  bad.nx = bad.ny = kMaxDepthFieldSide + 1;
+  EXPECT_FALSE(bad.Prepare());
+  EXPECT_FALSE(bad.prepared);
+}
+
+TEST(DepthField, CacheFindsByIdEvictsTheOldestUnkeptAndNeverAllocates) {
+  const RigidTransform X_WF = TurnedFrame();
+  const RigidTransform X_WT0 = ToolAboveFace(X_WF);
+  const DepthField base = MakeField(kN, kH, X_WF, X_WT0, Flat, FaceInto);
+  DepthFieldCache cache(2);
+  std::vector<DepthField> incoming(4, base);
+  for (std::uint32_t k = 0; k < 4; ++k) {
+    incoming[k].id = 10 + k;
+    incoming[k].Reserve();
+  }
+  const std::uint32_t keep[] = {10};
+  const long before = Allocations();
+  EXPECT_TRUE(cache.Take(incoming[0], keep));
+  EXPECT_TRUE(cache.Take(incoming[1], keep));
+  EXPECT_TRUE(cache.Take(incoming[2], keep));  // evicts 11, the oldest not kept
+  const DepthField* f10 = cache.Find(10);
+  const DepthFieldEvaluation e = f10 != nullptr ? DepthFieldDepthAt(*f10, X_WT0)
+                                                : DepthFieldEvaluation{};
+  EXPECT_EQ(Allocations() - before, 0);
+  ASSERT_NE(f10, nullptr);
+  EXPECT_TRUE(e.valid);
+  EXPECT_EQ(cache.Find(11), nullptr);
+  EXPECT_NE(cache.Find(12), nullptr);
+  const std::uint32_t keep_both[] = {10, 12};
+  EXPECT_FALSE(cache.Take(incoming[3], keep_both));  // every slot kept
+  DepthField unprepared;
+  unprepared.id = 99;
+  EXPECT_FALSE(cache.Take(unprepared, {}));
+  EXPECT_EQ(cache.refused(), 2);
+  EXPECT_EQ(cache.Find(0), nullptr);
+}
+
+// The remote node's render against the texture stage's own depth at displaced poses: a textured
+// block pressed onto a textured plate (test_scenes.h).
+double PlateTexture(double x, double y) {
+  return 60e-6 * std::sin(2.0 * kPi * x / 3e-3) + 25e-6 * std::cos(2.0 * kPi * y / 2.2e-3);
+}
+double BlockTexture(double x, double y) { return 20e-6 * std::sin(2.0 * kPi * (x + y) / 5e-3); }
+
+TEST(DepthField, RenderedFieldReadsTheTextureStagesDepthAtDisplacedPoses) {
+  // A 16 mm block: inside the 20 mm window, so that its whole face is in the field and stays in
+  // it within the margin, and the texture stage's grown window sees all of it too.
+  const HapticModel tool =
+      MakeTexturedBox({0.008, 0.008, testing::kHalfHeight}, BlockTexture, 512, 0.1, "tool");
+  const HapticModel env = testing::EnvironmentBox(PlateTexture);
+  ContactQuery q;
+  q.environment = &env;
+  q.X_WO = testing::EnvironmentPose();
+  q.window = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.02, 50);
+  q.stiffness_n_per_m = 1e4;
+  const RigidTransform X_WT0 = testing::ToolPose(0.001, -0.0005, -40e-6);
+  DepthFieldRenderer renderer;
+  DepthField f;
+  ASSERT_TRUE(renderer.Render(tool, X_WT0, q, 10, 1, kDepthFieldSmoothMaxM, f));
+  EXPECT_EQ(f.nx, 70);
+  EXPECT_NEAR(f.travel_margin_m, 10 * 0.4e-3, 1e-12);
+  TexturePenetrationSolver solver(128, 4096);
+  const double h = q.window.cell_size_m();
+  // The texture stage on the field's grid: the window grown by the margin (same centre, cell).
+  const ContactWindow grown = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.028, 70);
+  // Whole cells: the tool's nodes land on the environment's, the same cells the texture stage
+  // renders (within the smooth maximum's lift, and the tool's render at the moved pose).
+  for (const glm::dvec3 d : {glm::dvec3(0.0), glm::dvec3(h, 0.0, 0.0), glm::dvec3(-2 * h, 3 * h, 0.0),
+                             glm::dvec3(5 * h, -4 * h, -10e-6)}) {
+    RigidTransform X_WT = X_WT0;
+    X_WT.translation += d;
+    const DepthSample truth = solver.Depth(tool, X_WT, env, q.X_WO, grown);
+    const DepthFieldEvaluation e = DepthFieldDepthAt(f, X_WT);
+    ASSERT_TRUE(e.valid);
+    EXPECT_NEAR(e.max_node_depth_m, truth.depth_m, 1e-6) << d.x << " " << d.y;
+    EXPECT_GE(e.depth_m, e.max_node_depth_m);
+    EXPECT_LE(e.depth_m, e.max_node_depth_m + f.smooth_max_m * std::log(e.nodes_evaluated));
+  }
+  // Between cells and tilted: the interpolated field against a fresh render, which samples the
+  // plate's peaks at other points: each misses a peak's top by up to A(1 − cos(π h / λ)), 5 µm
+  // for the 60 µm, 3 mm ridges at h = 0.4 mm.
+  for (const Twist dq : {Twist{{0.5e-3 + 0.13e-3, 0.21e-3, 0.0}, {}},
+                         Twist{{1.5e-3, -0.77e-3, 0.0}, {}}, Twist{{}, {1e-3, 0.0, 0.0}},
+                         Twist{{}, {0.0, 0.0, 10e-3}}, Twist{{0.3e-3, 0.0, 0.0}, {0.0, 2e-3, 0.0}}}) {
+    const RigidTransform X_WT = Displace(X_WT0, dq);
+    const DepthSample truth = solver.Depth(tool, X_WT, env, q.X_WO, grown);
+    const DepthFieldEvaluation e = DepthFieldDepthAt(f, X_WT);
+    ASSERT_TRUE(e.valid);
+    EXPECT_NEAR(e.max_node_depth_m, truth.depth_m, 6e-6) << dq.linear.x << " " << dq.angular.z;
+  }
+}
+
+}  // namespace
+}  // namespace ht
