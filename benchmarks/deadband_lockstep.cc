@@ -147,10 +147,11 @@ int main(int argc, char** argv) {
       "--speculative-speed-mm-s: the floor by the round trip) or a fixed\n"
       "speculative_floor_mm; setting=NAME, the remote step's setting by its frontier\n"
       "name (speed_error_frontier --list-settings; default --reference-setting)");
-  bool reference_fields = false;
-  app.add_flag("--reference-depth-fields", reference_fields,
-               "the reference arm's contact model as depth fields (arm key depth_fields=1), to\n"
-               "judge the fields under delay against the fields undelayed");
+  std::string reference_keys;
+  app.add_option("--reference-keys", reference_keys,
+                 "the reference arm's own keys, as --arm's KEY=V,... (its deadbands stay off):\n"
+                 "e.g. depth_fields=1 to judge the depth fields under delay against the fields\n"
+                 "undelayed");
   app.add_flag("--translation-patch", setup.translation_patch,
                "every contact model carries its translation patch (slave_sim --translation-patch;\n"
                "by default the remote node sends patches from a 10 ms round trip)");
@@ -165,9 +166,10 @@ int main(int argc, char** argv) {
   }
   const double seed_step_m = seed_step_um * 1e-6;
   std::vector<Arm> arms;
-  Arm reference = ParseArm("reference:deadband=0");
-  if (reference_fields) reference.depth_fields = true;
+  Arm reference;
   try {
+    reference = ParseArm("reference:deadband=0" +
+                         (reference_keys.empty() ? std::string() : "," + reference_keys));
     ht::FrontierSettingNamed(setup.setting);
     setup.seed_axis = seed_axis == "x" ? 0 : seed_axis == "y" ? 1 : 2;
     setup.experiment = !experiment.empty()              ? experiment
@@ -253,6 +255,7 @@ int main(int argc, char** argv) {
             {"tick_p50_us", Quantile(r.tick_us, 0.5)},
             {"tick_p99_us", Quantile(r.tick_us, 0.99)},
             {"field_fallback_ticks_pct", FieldTickShare(r.field_fallbacks)},
+            {"field_beyond_margin_ticks_pct", FieldTickShare(r.field_beyond_margin)},
             {"tool_state_decisions", ht::ToJson(r.tool_decisions)},
             {"model_decisions", ht::ToJson(r.model_decisions)}};
         for (const auto& [key, value] : j.items()) {
@@ -299,9 +302,12 @@ int main(int argc, char** argv) {
           cell("contact_force_step_p99_n", "%.3f").c_str(),
           cell("device_force_ripple_mn", "%.1f").c_str());
       if (v["field_ticks_pct"].size() > 0 && v["field_ticks_pct"][0] > 0.0) {
-        std::printf("|   %s: ticks from depth fields %s %%, with a fallback %s %% |\n", name.c_str(),
-                    cell("field_ticks_pct", "%.1f").c_str(),
-                    cell("field_fallback_ticks_pct", "%.1f").c_str());
+        std::printf(
+            "|   %s: ticks from depth fields %s %%, beyond a field's margin %s %%, with a fallback "
+            "%s %% |\n",
+            name.c_str(), cell("field_ticks_pct", "%.1f").c_str(),
+            cell("field_beyond_margin_ticks_pct", "%.1f").c_str(),
+            cell("field_fallback_ticks_pct", "%.1f").c_str());
       }
       std::printf("|   %s: operator tick p50 %s us, p99 %s us |\n", name.c_str(),
                   cell("tick_p50_us", "%.1f").c_str(), cell("tick_p99_us", "%.1f").c_str());

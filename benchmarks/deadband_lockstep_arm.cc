@@ -67,6 +67,10 @@ double NonNegative(const std::string& key, double v) {
 /// the remote step's options), depth_fields, field_min_margin_mm, field_smooth_max_um,
 /// field_offset_to_q0 (the contact model as depth fields). Defaults: master_station's and slave_sim's, deadband 10 %.
 
+/// The tool's reach (m) by which a turn moves its surface, for the fields' resend rule (the
+/// fig75 block's half diagonal, about 3 cm).
+constexpr double kFieldToolRadiusM = 0.03;
+
 /// A message in flight: it arrives at `arrive_ns`.
 template <typename T>
 struct InFlight {
@@ -147,6 +151,10 @@ Arm ParseArm(const std::string& text) {
       arm.depth_fields = v != 0.0;
     } else if (key == "field_min_margin_mm") {
       arm.depth_field_min_margin_m = NonNegative(key, v) * 1e-3;
+    } else if (key == "field_subdivision") {
+      arm.depth_field_subdivision = static_cast<int>(v);
+    } else if (key == "field_speed_mm_s") {
+      arm.depth_field_speed_m_per_s = NonNegative(key, v) * 1e-3;
     } else if (key == "field_smooth_max_um") {
       if (!(v > 0.0)) throw std::invalid_argument("--arm: field_smooth_max_um must be > 0");
       arm.depth_field_smooth_max_m = v * 1e-6;
@@ -221,11 +229,13 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
   if (arm.depth_fields) {
     options.depth_fields = true;
     options.depth_field_margin_m =
-        std::max(arm.depth_field_min_margin_m, arm.speculative_speed_m_per_s * rtt_ms * 1e-3);
+        std::max(arm.depth_field_min_margin_m, arm.depth_field_speed_m_per_s * rtt_ms * 1e-3);
     if (arm.depth_field_smooth_max_m > 0.0) {
       options.depth_field_smooth_max_m = arm.depth_field_smooth_max_m;
     }
     options.depth_field_offset_to_q0 = arm.depth_field_offset_to_q0;
+    options.depth_field_subdivision = arm.depth_field_subdivision;
+    options.Validate();
   } else if (setup.translation_patch ||
              rtt_ms >= RemoteNodeConfig{}.translation_patch_rtt_ms) {
     options.depth_refinement.translation_patch = true;
@@ -302,6 +312,7 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     run.contacts.push_back(out.step.active_contacts);
     run.field_contacts.push_back(out.step.field_contacts);
     run.field_fallbacks.push_back(out.step.field_fallbacks);
+    run.field_beyond_margin.push_back(out.step.field_beyond_margin);
     run.depth_offset_m.push_back(out.depth_offset_m);
     run.model_arrived.push_back(have_arrived ? 1 : 0);
     run.p_WT.push_back(tick.tool().X_WT.translation);
@@ -348,6 +359,16 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     wire::ContactModelMessage message;
     message.model = pipeline.Step(X_WT, remote.seq, timings, remote.message.V_WT_W);
     const std::int64_t sent_ns = t_r + step_ns;
+    // With depth fields, a model whose tool pose has travelled half its fields' margin from the
+    // one the operator holds is sent whatever its force (the held fields would soon no longer
+    // hold the tool): the deadband forgets its held model, so that it sends this one.
+    if (options.depth_fields && model_deadband.held().num_contacts > 0) {
+      const Twist travel = PoseDifference(message.model.X_WT0, model_deadband.held().X_WT0);
+      if (glm::length(travel.linear) + glm::length(travel.angular) * kFieldToolRadiusM >
+          0.5 * options.depth_field_margin_m) {
+        model_deadband.ForgetHeld();
+      }
+    }
     const DeadbandReason model_why = model_deadband.Decide(message.model, sent_ns);
     ++run.model_decisions[static_cast<std::size_t>(model_why)];
     if (model_why == DeadbandReason::kNotSent) continue;

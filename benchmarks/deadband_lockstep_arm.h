@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "haptic_core/haptic_scene.h"
+#include "haptic_core/remote_step.h"
 #include "master_station/operator_station.h"
 #include "slave_sim/remote_node_config.h"
 #include "transport/deadband.h"
@@ -39,10 +40,12 @@ struct Arm {
   /// the run's round trip (2 × delay + step time).
   double speculative_speed_m_per_s = ht::RemoteNodeConfig{}.speculative_speed_m_per_s;
   /// The contact model as depth fields (PipelineOptions::depth_fields), evaluated by the
-  /// operator's tick at its tool pose; their travel margin is speculative_speed_m_per_s times the
+  /// operator's tick at its tool pose; their travel margin is depth_field_speed_m_per_s times the
   /// run's round trip, at least depth_field_min_margin_m.
   bool depth_fields = false;
-  double depth_field_min_margin_m = 1e-3;
+  double depth_field_min_margin_m = 2e-3;
+  double depth_field_speed_m_per_s = 0.05;
+  int depth_field_subdivision = ht::PipelineOptions{}.depth_field_subdivision;
   /// The fields' smooth-maximum width (m; < 0: PipelineOptions' default) and whether they are
   /// offset to the contact's refined δ0 at q0 (PipelineOptions::depth_field_offset_to_q0).
   double depth_field_smooth_max_m = -1.0;
@@ -55,7 +58,7 @@ struct ArmRun {
   std::vector<double> passivity_removed_n, model_age_ms;
   std::vector<int> contacts, model_arrived;
   /// Per tick: contacts the tool step rendered from a depth field, and those that fell back.
-  std::vector<int> field_contacts, field_fallbacks;
+  std::vector<int> field_contacts, field_fallbacks, field_beyond_margin;
   /// Per tick: the operator tick's own time (µs, this machine's clock; the tick only).
   std::vector<double> tick_us;
   std::vector<double> depth_offset_m;

@@ -37,7 +37,8 @@ void WriteTrace(const std::string& path, const ArmRun& r) {
   if (!f) throw std::runtime_error("cannot write " + path);
   f << "t_s,device_fx,device_fy,device_fz,device_tx,device_ty,device_tz,contact_fx,contact_fy,"
        "contact_fz,passivity_removed_n,model_age_ms,contacts,model_arrived,tool_x,tool_y,tool_z,"
-       "hand_x,hand_y,hand_z,depth_offset_um,tool_rx,tool_ry,tool_rz\n";
+       "hand_x,hand_y,hand_z,depth_offset_um,tool_rx,tool_ry,tool_rz,field_contacts,"
+       "field_fallbacks,field_beyond_margin,tick_us\n";
   for (std::size_t i = 0; i < r.device_force_W.size(); ++i) {
     const auto v = [&](const glm::dvec3& a) { f << ',' << a.x << ',' << a.y << ',' << a.z; };
     f << static_cast<double>(i) * 1e-3;
@@ -50,6 +51,10 @@ void WriteTrace(const std::string& path, const ArmRun& r) {
     v(r.p_WH[i]);
     f << ',' << r.depth_offset_m[i] * 1e6;
     v(r.theta_WT[i]);
+    f << ',' << (i < r.field_contacts.size() ? r.field_contacts[i] : 0) << ','
+      << (i < r.field_fallbacks.size() ? r.field_fallbacks[i] : 0) << ','
+      << (i < r.field_beyond_margin.size() ? r.field_beyond_margin[i] : 0) << ','
+      << (i < r.tick_us.size() ? r.tick_us[i] : 0.0);
     f << '\n';
   }
 }

@@ -239,18 +239,28 @@ TEST(DepthField, PrunedSmoothMaximumEqualsTheSumOverEveryNodeAlone) {
   }
 }
 
-TEST(DepthField, IsValidWithinItsTravelMarginOnly) {
+TEST(DepthField, SaysWhetherTheToolIsWithinItsTravelMargin) {
   const RigidTransform X_WF = TurnedFrame();
   const RigidTransform X_WT0 = ToolAboveFace(X_WF);
   const DepthField f = MakeField(kN, kH, X_WF, X_WT0, Flat, FaceInto, 1e-3);
+  const glm::dvec3 in_plane_W = X_WF.rotation * glm::dvec3(0.6, 0.8, 0.0);
+  const glm::dvec3 n_W = X_WF.rotation * glm::dvec3(0.0, 0.0, 1.0);
   RigidTransform X_WT = X_WT0;
-  X_WT.translation.x += 0.9e-3;
-  EXPECT_TRUE(DepthFieldDepthAt(f, X_WT).valid);
-  X_WT.translation.x += 0.2e-3;
-  EXPECT_FALSE(DepthFieldDepthAt(f, X_WT).valid);
+  X_WT.translation += 0.9e-3 * in_plane_W;
+  EXPECT_TRUE(DepthFieldDepthAt(f, X_WT).within_margin);
+  X_WT.translation += 0.2e-3 * in_plane_W;
+  EXPECT_FALSE(DepthFieldDepthAt(f, X_WT).within_margin);
+  // Along the normal the field holds however far the tool goes.
+  X_WT = X_WT0;
+  X_WT.translation -= 5e-3 * n_W;
+  EXPECT_TRUE(DepthFieldDepthAt(f, X_WT).within_margin);
   // A turn moves the face's far corners by θ times their distance (about 9 mm).
-  EXPECT_TRUE(DepthFieldDepthAt(f, Displace(X_WT0, Twist{{}, {0.0, 0.0, 5e-4}})).valid);
-  EXPECT_FALSE(DepthFieldDepthAt(f, Displace(X_WT0, Twist{{}, {0.0, 0.0, 0.2}})).valid);
+  EXPECT_TRUE(DepthFieldDepthAt(f, Displace(X_WT0, Twist{{}, {0.0, 0.0, 5e-4}})).within_margin);
+  // Turned about the normal through the face's centre by 0.2 rad: its corners move 1.3 mm.
+  const DepthFieldEvaluation turned = DepthFieldDepthAt(f, Displace(X_WT0, Twist{{}, 0.2 * n_W}));
+  EXPECT_FALSE(turned.within_margin);
+  EXPECT_TRUE(turned.valid);  // still evaluated: the face's nodes still over the plate
+  EXPECT_NEAR(turned.max_node_depth_m, kD, 1e-9);
   DepthField unprepared;
   EXPECT_FALSE(DepthFieldDepthAt(unprepared, X_WT0).valid);
 }
@@ -295,7 +305,12 @@ TEST(DepthField, CacheFindsByIdEvictsTheOldestUnkeptAndNeverAllocates) {
   const DepthField* f10 = cache.Find(10);
   const DepthFieldEvaluation e = f10 != nullptr ? DepthFieldDepthAt(*f10, X_WT0)
                                                 : DepthFieldEvaluation{};
+  const DepthFieldEvaluation memo1 = cache.Evaluate(10, X_WT0);
+  const DepthFieldEvaluation memo2 = cache.Evaluate(10, X_WT0);  // remembered
   EXPECT_EQ(Allocations() - before, 0);
+  EXPECT_EQ(memo1.depth_m, e.depth_m);
+  EXPECT_EQ(memo2.depth_m, e.depth_m);
+  EXPECT_FALSE(cache.Evaluate(11, X_WT0).valid);  // evicted
   ASSERT_NE(f10, nullptr);
   EXPECT_TRUE(e.valid);
   EXPECT_EQ(cache.Find(11), nullptr);

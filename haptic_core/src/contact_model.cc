@@ -282,12 +282,11 @@ ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const Rig
     PenetrationGradient J_active;
     bool curved = c.num_kink_planes > 0 || PatchGivesCurvature(c.patch);
     double depth;
-    const DepthField* field =
-        fields != nullptr && c.depth_field_id != 0 ? fields->Find(c.depth_field_id) : nullptr;
     DepthFieldEvaluation fe;
-    if (field != nullptr) fe = DepthFieldDepthAt(*field, X_WT);
+    if (fields != nullptr && c.depth_field_id != 0) fe = fields->Evaluate(c.depth_field_id, X_WT);
     if (fe.valid) {
       ++out.field_contacts;
+      if (!fe.within_margin) ++out.field_beyond_margin;
       depth = fe.depth_m + c.depth_field_shift_m;
       J_active = fe.gradient;
       curvature = fe.curvature;

@@ -4,6 +4,7 @@
 #include "haptic_core/depth_field.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <glm/geometric.hpp>
 #include <glm/gtc/quaternion.hpp>
@@ -25,11 +26,6 @@ inline void CatmullRom(double t, double w[4], double d[4]) noexcept {
   d[3] = 0.5 * (3.0 * t2 - 2.0 * t);
 }
 
-/// Over a 4×4 stencil the Catmull–Rom weights' positive part sums to at most
-/// (1 + 1/8)² + (1/8)² (each 1D weight set has negative lobes of at most 1/8 in all), so the
-/// interpolant is at most lo + kOvershoot·(hi − lo), lo and hi the stencil's extremes.
-constexpr double kOvershoot = 1.125 * 1.125 + 0.125 * 0.125;
-
 /// Depths more than this many ε below the maximum weigh less than e^−30 ≈ 1e−13: skipped.
 constexpr double kCutoffWidths = 30.0;
 
@@ -38,11 +34,17 @@ using Mat6 = Eigen::Matrix<double, 6, 6>;
 
 }  // namespace
 
+constexpr int kMaxBlocksPerSide = (kMaxDepthFieldSide + kDepthFieldBlock - 1) / kDepthFieldBlock;
+
 void DepthField::Reserve() {
   const std::size_t n = static_cast<std::size_t>(kMaxDepthFieldSide) * kMaxDepthFieldSide;
   env_height_m.reserve(n);
   tool_height_m.reserve(n);
   env_bound_m.reserve(n);
+  const std::size_t blocks = static_cast<std::size_t>(kMaxBlocksPerSide) * kMaxBlocksPerSide;
+  env_block_bound_m.reserve(blocks);
+  tool_block_min_m.reserve(blocks);
+  tool_block_max_m.reserve(blocks);
 }
 
 bool DepthField::Prepare() {
@@ -56,27 +58,64 @@ bool DepthField::Prepare() {
     return false;
   }
   env_bound_m.assign(n, -std::numeric_limits<float>::infinity());
+  // The Catmull–Rom segment between nodes 1 and 2 of four is the cubic Bézier with control
+  // points P1, P1 + (P2 − P0)/6, P2 − (P3 − P1)/6, P2; over a cell the bicubic is the tensor
+  // Bézier patch with coefficients M·Y·Mᵀ, which lies within their convex hull: its largest
+  // coefficient bounds it.
+  constexpr double M[4][4] = {{0.0, 1.0, 0.0, 0.0},
+                              {-1.0 / 6.0, 1.0, 1.0 / 6.0, 0.0},
+                              {0.0, 1.0 / 6.0, 1.0, -1.0 / 6.0},
+                              {0.0, 0.0, 1.0, 0.0}};
   for (int j = 1; j + 2 < ny; ++j) {
     for (int i = 1; i + 2 < nx; ++i) {
-      float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+      double Y[4][4];
       bool complete = true;
-      for (int b = -1; b <= 2 && complete; ++b) {
-        const float* row = env_height_m.data() + static_cast<std::size_t>(j + b) * nx;
-        for (int a = -1; a <= 2; ++a) {
-          const float v = row[i + a];
+      for (int b = 0; b < 4 && complete; ++b) {
+        const float* row = env_height_m.data() + static_cast<std::size_t>(j - 1 + b) * nx;
+        for (int a = 0; a < 4; ++a) {
+          const float v = row[i - 1 + a];
           if (!std::isfinite(v)) {
             complete = false;
             break;
           }
-          lo = std::min(lo, v);
-          hi = std::max(hi, v);
+          Y[b][a] = v;
         }
       }
-      if (complete) {
-        // Rounded up by a relative 1e−6 (the float store) so that the bound holds.
-        const double bound = lo + kOvershoot * (static_cast<double>(hi) - lo);
-        env_bound_m[static_cast<std::size_t>(j) * nx + i] =
-            static_cast<float>(bound + 1e-6 * std::abs(bound) + 1e-12);
+      if (!complete) continue;
+      double MY[4][4];  // rows of M applied along v (b), then along u (a)
+      for (int r = 0; r < 4; ++r) {
+        for (int a = 0; a < 4; ++a) {
+          MY[r][a] = M[r][0] * Y[0][a] + M[r][1] * Y[1][a] + M[r][2] * Y[2][a] + M[r][3] * Y[3][a];
+        }
+      }
+      double bound = -std::numeric_limits<double>::infinity();
+      for (int r = 0; r < 4; ++r) {
+        for (int c = 0; c < 4; ++c) {
+          bound = std::max(bound, M[c][0] * MY[r][0] + M[c][1] * MY[r][1] + M[c][2] * MY[r][2] +
+                                      M[c][3] * MY[r][3]);
+        }
+      }
+      // Rounded up (the float store, and the interpolant's own rounding) so that it holds.
+      env_bound_m[static_cast<std::size_t>(j) * nx + i] =
+          static_cast<float>(bound + 1e-6 * std::abs(bound) + 1e-9);
+    }
+  }
+  const int bx = (nx + kDepthFieldBlock - 1) / kDepthFieldBlock;
+  const int by = (ny + kDepthFieldBlock - 1) / kDepthFieldBlock;
+  const float inf = std::numeric_limits<float>::infinity();
+  env_block_bound_m.assign(static_cast<std::size_t>(bx) * by, -inf);
+  tool_block_min_m.assign(static_cast<std::size_t>(bx) * by, inf);
+  tool_block_max_m.assign(static_cast<std::size_t>(bx) * by, -inf);
+  for (int j = 0; j < ny; ++j) {
+    for (int i = 0; i < nx; ++i) {
+      const std::size_t k = static_cast<std::size_t>(j) * nx + i;
+      const std::size_t b =
+          static_cast<std::size_t>(j / kDepthFieldBlock) * bx + i / kDepthFieldBlock;
+      env_block_bound_m[b] = std::max(env_block_bound_m[b], env_bound_m[k]);
+      const float a = tool_height_m[k];
+      if (std::isfinite(a)) {
+        tool_block_min_m[b] = std::min(tool_block_min_m[b], a);
+        tool_block_max_m[b] = std::max(tool_block_max_m[b], a);
       }
     }
   }
@@ -119,6 +158,9 @@ void DepthField::CopyFrom(const DepthField& other) noexcept {
   depth_offset_m = other.depth_offset_m;
   smooth_max_m = other.smooth_max_m;
   env_bound_m.assign(other.env_bound_m.begin(), other.env_bound_m.end());
+  env_block_bound_m.assign(other.env_block_bound_m.begin(), other.env_block_bound_m.end());
+  tool_block_min_m.assign(other.tool_block_min_m.begin(), other.tool_block_min_m.end());
+  tool_block_max_m.assign(other.tool_block_max_m.begin(), other.tool_block_max_m.end());
   tool_radius_m = other.tool_radius_m;
   prepared = other.prepared;
 }
@@ -126,10 +168,13 @@ void DepthField::CopyFrom(const DepthField& other) noexcept {
 DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform& X_WT) noexcept {
   DepthFieldEvaluation out;
   if (!f.prepared || !IsFiniteRigidTransform(X_WT)) return out;
+  // The nodes' travel in F's plane (along n the field is exact): the centre of mass's in-plane
+  // displacement plus the turn's reach.
   const Twist dq = PoseDifference(X_WT, f.X_WT0);
-  if (glm::length(dq.linear) + glm::length(dq.angular) * f.tool_radius_m > f.travel_margin_m) {
-    return out;
-  }
+  const glm::dvec3 n_W = f.X_WF.rotation * glm::dvec3(0.0, 0.0, 1.0);
+  const glm::dvec3 slide_W = dq.linear - glm::dot(dq.linear, n_W) * n_W;
+  out.within_margin =
+      glm::length(slide_W) + glm::length(dq.angular) * f.tool_radius_m <= f.travel_margin_m;
   out.valid = true;
   // The tool's motion since X_WT0 in F: s = D·p for a tool node p (F at X_WT0).
   const RigidTransform X_FW = f.X_WF.Inverse();
@@ -153,27 +198,6 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
     cell = j0 * nx + i0;
     return true;
   };
-  // Pass 1: the node with the highest bound.
-  double best_ub = -std::numeric_limits<double>::infinity();
-  int best_node = -1;
-  for (int j = 0; j < ny; ++j) {
-    const glm::dvec3 row = D.translation + static_cast<double>(j) * step_j;
-    for (int i = 0; i < nx; ++i) {
-      const float a = tool[j * nx + i];
-      if (!std::isfinite(a)) continue;
-      const glm::dvec3 s = row + static_cast<double>(i) * step_i + static_cast<double>(a) * along_a;
-      int cell;
-      double tu, tv;
-      if (!locate(s, cell, tu, tv)) continue;
-      const double ub = bound[cell] - s.z;
-      if (ub > best_ub) {
-        best_ub = ub;
-        best_node = j * nx + i;
-      }
-    }
-  }
-  if (best_node < 0) return out;  // no tool node over the environment: no overlap, valid
-
   // The exact depth of node (i, j): δ = b(s) − s.z and the node's gradient in F.
   const auto exact = [&](int i, int j, const glm::dvec3& s, int cell, double tu, double tv,
                          Vec6* J) noexcept {
@@ -199,49 +223,97 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
     }
     return b - s.z;
   };
-  double m_ref;
-  {
-    const int i = best_node % nx, j = best_node / nx;
-    const glm::dvec3 s = D.translation + static_cast<double>(j) * step_j +
-                         static_cast<double>(i) * step_i +
-                         static_cast<double>(tool[best_node]) * along_a;
-    int cell;
-    double tu, tv;
-    locate(s, cell, tu, tv);
-    m_ref = exact(i, j, s, cell, tu, tv, nullptr);
+  // Pass 1, per block of tool nodes: the moved box of its nodes (x, y over the block's nodes, z
+  // over its heights) and the largest bound of the environment blocks under that box's
+  // footprint, less its lowest point: no node of the block is deeper than that.
+  const int bx = (nx + kDepthFieldBlock - 1) / kDepthFieldBlock;
+  const int by = (ny + kDepthFieldBlock - 1) / kDepthFieldBlock;
+  std::array<float, kMaxBlocksPerSide * kMaxBlocksPerSide> block_ub;
+  const glm::dmat3 R_abs(glm::abs(R[0]), glm::abs(R[1]), glm::abs(R[2]));
+  int best_block = -1;
+  double best_ub = -std::numeric_limits<double>::infinity();
+  for (int tj = 0; tj < by; ++tj) {
+    for (int ti = 0; ti < bx; ++ti) {
+      const int b = tj * bx + ti;
+      block_ub[static_cast<std::size_t>(b)] = -std::numeric_limits<float>::infinity();
+      const float a_lo = f.tool_block_min_m[static_cast<std::size_t>(b)];
+      const float a_hi = f.tool_block_max_m[static_cast<std::size_t>(b)];
+      if (!(a_lo <= a_hi)) continue;  // no tool node
+      const int i0 = ti * kDepthFieldBlock, i1 = std::min(nx, i0 + kDepthFieldBlock) - 1;
+      const int j0 = tj * kDepthFieldBlock, j1 = std::min(ny, j0 + kDepthFieldBlock) - 1;
+      const glm::dvec3 centre(0.5 * (i0 + i1) * h, 0.5 * (j0 + j1) * h, 0.5 * (a_lo + a_hi));
+      const glm::dvec3 half(0.5 * (i1 - i0) * h, 0.5 * (j1 - j0) * h, 0.5 * (a_hi - a_lo));
+      const glm::dvec3 s = D * centre;
+      const glm::dvec3 e = R_abs * half;
+      const int cu0 = std::max(1, static_cast<int>(std::floor((s.x - e.x) * inv_h)));
+      const int cu1 = std::min(nx - 3, static_cast<int>(std::floor((s.x + e.x) * inv_h)));
+      const int cv0 = std::max(1, static_cast<int>(std::floor((s.y - e.y) * inv_h)));
+      const int cv1 = std::min(ny - 3, static_cast<int>(std::floor((s.y + e.y) * inv_h)));
+      if (cu0 > cu1 || cv0 > cv1) continue;  // beyond the environment's interpolant
+      float env_max = -std::numeric_limits<float>::infinity();
+      for (int ej = cv0 / kDepthFieldBlock; ej <= cv1 / kDepthFieldBlock; ++ej) {
+        for (int ei = cu0 / kDepthFieldBlock; ei <= cu1 / kDepthFieldBlock; ++ei) {
+          env_max = std::max(env_max, f.env_block_bound_m[static_cast<std::size_t>(ej * bx + ei)]);
+        }
+      }
+      const double ub = env_max - (s.z - e.z);
+      block_ub[static_cast<std::size_t>(b)] = static_cast<float>(ub);
+      if (ub > best_ub) {
+        best_ub = ub;
+        best_block = b;
+      }
+    }
   }
-  // Pass 2: the nodes whose bound reaches within the cutoff of the running maximum, summed as
-  // an online log-sum-exp (the sums rescaled whenever the maximum rises).
+  if (best_block < 0) return out;  // no tool node over the environment: no overlap, valid
+
+  // Pass 2: the blocks whose bound reaches within the cutoff of the running maximum, the best
+  // block first, their nodes by their cell's bound, summed as an online log-sum-exp (the sums
+  // rescaled whenever the maximum rises).
   const double cutoff = kCutoffWidths * eps;
+  double m_ref = -std::numeric_limits<double>::infinity();
   double S0 = 0.0;
   Vec6 S1 = Vec6::Zero();
   Mat6 S2 = Mat6::Zero();
   Vec6 J;
-  for (int j = 0; j < ny; ++j) {
-    const glm::dvec3 row = D.translation + static_cast<double>(j) * step_j;
-    for (int i = 0; i < nx; ++i) {
-      const float a = tool[j * nx + i];
-      if (!std::isfinite(a)) continue;
-      const glm::dvec3 s = row + static_cast<double>(i) * step_i + static_cast<double>(a) * along_a;
-      int cell;
-      double tu, tv;
-      if (!locate(s, cell, tu, tv)) continue;
-      if (bound[cell] - s.z < m_ref - cutoff) continue;
-      const double d = exact(i, j, s, cell, tu, tv, &J);
-      ++out.nodes_evaluated;
-      if (d > m_ref) {
-        const double scale = std::exp((m_ref - d) / eps);
-        S0 *= scale;
-        S1 *= scale;
-        S2 *= scale;
-        m_ref = d;
+  const auto visit_block = [&](int b) noexcept {
+    const int ti = b % bx, tj = b / bx;
+    const int i0 = ti * kDepthFieldBlock, i1 = std::min(nx, i0 + kDepthFieldBlock);
+    const int j0 = tj * kDepthFieldBlock, j1 = std::min(ny, j0 + kDepthFieldBlock);
+    for (int j = j0; j < j1; ++j) {
+      const glm::dvec3 row = D.translation + static_cast<double>(j) * step_j;
+      for (int i = i0; i < i1; ++i) {
+        const float a = tool[j * nx + i];
+        if (!std::isfinite(a)) continue;
+        const glm::dvec3 s =
+            row + static_cast<double>(i) * step_i + static_cast<double>(a) * along_a;
+        int cell;
+        double tu, tv;
+        if (!locate(s, cell, tu, tv)) continue;
+        const float cell_bound = bound[cell];
+        if (!std::isfinite(cell_bound) || !(cell_bound - s.z >= m_ref - cutoff)) continue;
+        const double d = exact(i, j, s, cell, tu, tv, &J);
+        if (!std::isfinite(d)) continue;
+        ++out.nodes_evaluated;
+        if (d > m_ref) {
+          const double scale = std::isfinite(m_ref) ? std::exp((m_ref - d) / eps) : 0.0;
+          S0 *= scale;
+          S1 *= scale;
+          S2 *= scale;
+          m_ref = d;
+        }
+        const double w = std::exp((d - m_ref) / eps);
+        if (w < 1e-13) continue;
+        S0 += w;
+        S1.noalias() += w * J;
+        S2.noalias() += w * (J * J.transpose());
       }
-      const double e = std::exp((d - m_ref) / eps);
-      if (e < 1e-13) continue;
-      S0 += e;
-      S1.noalias() += e * J;
-      S2.noalias() += e * (J * J.transpose());
     }
+  };
+  visit_block(best_block);
+  for (int b = 0; b < bx * by; ++b) {
+    if (b == best_block) continue;
+    if (!(block_ub[static_cast<std::size_t>(b)] >= m_ref - cutoff)) continue;
+    visit_block(b);
   }
   if (!(S0 > 0.0)) return out;
   out.depth_m = m_ref + eps * std::log(S0) + f.depth_offset_m;
@@ -273,6 +345,24 @@ DepthFieldCache::DepthFieldCache(int slots) {
   slots_.resize(static_cast<std::size_t>(slots));
   for (DepthField& f : slots_) f.Reserve();
   stamp_.assign(static_cast<std::size_t>(slots), 0);
+  memo_.assign(static_cast<std::size_t>(slots), Memo{});
+}
+
+DepthFieldEvaluation DepthFieldCache::Evaluate(std::uint32_t id,
+                                               const RigidTransform& X_WT) const noexcept {
+  if (id == 0) return {};
+  for (std::size_t k = 0; k < slots_.size(); ++k) {
+    if (stamp_[k] == 0 || slots_[k].id != id) continue;
+    Memo& m = memo_[k];
+    if (m.stamp != stamp_[k] || m.X_WT.translation != X_WT.translation ||
+        m.X_WT.rotation != X_WT.rotation) {
+      m.result = DepthFieldDepthAt(slots_[k], X_WT);
+      m.X_WT = X_WT;
+      m.stamp = stamp_[k];
+    }
+    return m.result;
+  }
+  return {};
 }
 
 const DepthField* DepthFieldCache::Find(std::uint32_t id) const noexcept {

@@ -122,6 +122,7 @@ ToolStepResult ToolSimulator::StepBlended(ToolState& s, const RigidTransform& X_
   a.max_depth_m = std::max(a.max_depth_m, b.max_depth_m);
   a.field_contacts = beta >= 0.5 ? a.field_contacts : b.field_contacts;
   a.field_fallbacks = beta >= 0.5 ? a.field_fallbacks : b.field_fallbacks;
+  a.field_beyond_margin = beta >= 0.5 ? a.field_beyond_margin : b.field_beyond_margin;
   return Integrate(s, X_WH, V_WH_W, a, h, result);
 }
 
@@ -133,6 +134,7 @@ ToolStepResult ToolSimulator::Integrate(ToolState& s, const RigidTransform& X_WH
   result.max_depth_m = contact.max_depth_m;
   result.field_contacts = contact.field_contacts;
   result.field_fallbacks = contact.field_fallbacks;
+  result.field_beyond_margin = contact.field_beyond_margin;
   result.saturated_contacts = contact.saturated_contacts;
 
   const VirtualCoupling& c = coupling_;

@@ -108,9 +108,11 @@ struct ContactModelEvaluation {
   /// gives each contact the force −k_i δ_i α (J_i·V) J_i, which vanishes with δ_i
   /// (ToolSimulator::set_contact_damping_hunt_crossley).
   Stiffness6 G = Stiffness6::Zero();
-  /// Contacts whose δ came from their depth field, and contacts with a field that fell back to
-  /// their linearization (the field missing from the cache, or the tool beyond its margin).
+  /// Contacts whose δ came from their depth field (of which, with the tool beyond the field's
+  /// travel margin: field_beyond_margin), and contacts with a field that fell back to their
+  /// linearization (the field missing from the cache).
   int field_contacts = 0;
+  int field_beyond_margin = 0;
   int field_fallbacks = 0;
 };
 
@@ -130,9 +132,11 @@ struct ContactModelEvaluation {
 /// loop.
 ///
 /// With `fields`, a contact with a depth field (ContactLinearization::depth_field_id) that the
-/// cache holds and whose travel margin holds the tool takes δ, ∇δ and the smooth maximum's
-/// curvature from the field at X_WT (DepthFieldDepthAt, plus depth_field_shift_m) instead of its
-/// planes; otherwise its planes, and the fallback is counted.
+/// cache holds takes δ, ∇δ and the smooth maximum's curvature from the field at X_WT
+/// (DepthFieldCache::Evaluate, plus depth_field_shift_m) instead of its planes, also beyond the
+/// field's travel margin (counted: a linearization made a round trip ago is worse there, its
+/// steps at the margin were the largest force steps on the gear at 25 ms); without the field,
+/// its planes, and the fallback is counted.
 ContactModelEvaluation EvaluateContactModel(
     const ContactModel& model, const RigidTransform& X_WT, double stiffness_scale = 1.0,
     double max_contact_force_n = std::numeric_limits<double>::infinity(),

@@ -24,9 +24,12 @@ namespace ht {
 /// maximum's curvature.
 inline constexpr double kDepthFieldSmoothMaxM = 2e-6;
 
+/// Side (nodes) of the blocks a depth field's evaluation prunes by (DepthField::env_block_bound_m).
+inline constexpr int kDepthFieldBlock = 8;
+
 /// Largest number of nodes per side of a depth field's grid (the window's N plus twice the travel
 /// margin, in cells): bounds the memory the operator's loop preallocates per field.
-inline constexpr int kMaxDepthFieldSide = 192;
+inline constexpr int kMaxDepthFieldSide = 256;
 
 /// One contact window's two surfaces (our construction [R] on the seed's directional penetration
 /// depth [S][L]). Frame F is the window's at the render: origin at grid node (0, 0), x along the
@@ -41,7 +44,8 @@ inline constexpr int kMaxDepthFieldSide = 192;
 /// At a tool pose X_WT each tool node j moves to s_j = X_FW·X_WT·X_WT0⁻¹·X_WF·p_F(j) and reads the
 /// environment there: δ_j = b(s_j.x, s_j.y) − s_j.z, b interpolated between nodes by a
 /// Catmull–Rom bicubic (its gradient continuous across cell edges). The field is valid while every
-/// tool node moved at most travel_margin_m from where it was at X_WT0 (DepthFieldDepthAt).
+/// tool node moved at most travel_margin_m in F's plane from where it was at X_WT0
+/// (DepthFieldDepthAt).
 struct DepthField {
   /// The remote node's id of this field within its session (0: no field).
   std::uint32_t id = 0;
@@ -66,13 +70,18 @@ struct DepthField {
   /// column unused): an upper bound on the bicubic b over that cell (m), −∞ where its 4×4 stencil
   /// is incomplete (no interpolant there).
   std::vector<float> env_bound_m;
+  /// Per block of kDepthFieldBlock² grid cells (#ceil(nx/B)·ceil(ny/B), row-major): the largest
+  /// env_bound_m in it (m). Per block of as many tool nodes: their smallest and largest a (m;
+  /// +∞ and −∞ where the block has none). The evaluation skips a tool block whose moved box
+  /// cannot reach within the cutoff of the deepest node found.
+  std::vector<float> env_block_bound_m, tool_block_min_m, tool_block_max_m;
   /// The largest distance (m) of a tool node from the tool's centre of mass at X_WT0.
   double tool_radius_m = 0.0;
   bool prepared = false;
 
   /// Checks the field (id ≠ 0, finite frames, h > 0 and finite, nx and ny in
   /// [4, kMaxDepthFieldSide], both maps #nx·ny, margin ≥ 0, ε > 0, offset finite) and derives
-  /// env_bound_m and tool_radius_m. Allocates only when the buffers' capacity is short. Returns
+  /// env_bound_m, the blocks' bounds and tool_radius_m. Allocates only when the buffers' capacity is short. Returns
   /// false, leaving prepared false, on a bad field.
   bool Prepare();
   /// Reserves every buffer for kMaxDepthFieldSide² nodes, so that assigning a field into this one
@@ -97,9 +106,12 @@ struct DepthFieldEvaluation {
   /// then rotation): the weights' covariance of the nodes' gradients over ε, positive
   /// semi-definite (the curvature of δ's kinks, which the implicit step needs in K).
   Eigen::Matrix<double, 6, 6> curvature = Eigen::Matrix<double, 6, 6>::Zero();
-  /// False when the tool moved farther than the field's travel margin (nothing is computed) or
-  /// the field is not prepared.
+  /// False when the field is not prepared or the pose is not finite (nothing is computed).
   bool valid = false;
+  /// Whether the tool is within the field's travel margin of X_WT0. Beyond it the field is still
+  /// evaluated, but tool surface that lay outside the grid at X_WT0 is missing from it, and the
+  /// tool's nodes that left the environment's grid drop out.
+  bool within_margin = false;
   /// Tool nodes whose exact depth was computed (the others were pruned by the bound).
   int nodes_evaluated = 0;
 };
@@ -110,8 +122,8 @@ struct DepthFieldEvaluation {
 /// softmax weights) and ∇δ_j = (g_j, r_j × g_j), g_j = R_WF·(∂b/∂x, ∂b/∂y, −1), r_j the node less
 /// the centre of mass (W). Nodes whose depth is more than 30 ε below the maximum (weight below
 /// 1e-13) are skipped by the per-cell bound without changing the result beyond that. The field
-/// is invalid (valid false) when |Δx| + |Δθ|·tool_radius_m exceeds travel_margin_m, Δq = X_WT ⊖
-/// X_WT0. noexcept, allocation-free: callable from the 1 kHz loop.
+/// is within its margin (within_margin) while |Δx_∥| + |Δθ|·tool_radius_m ≤ travel_margin_m,
+/// Δq = X_WT ⊖ X_WT0 and Δx_∥ the part of Δx in F's plane (along n the field holds however far). noexcept, allocation-free: callable from the 1 kHz loop.
 DepthFieldEvaluation DepthFieldDepthAt(const DepthField& field, const RigidTransform& X_WT) noexcept;
 
 /// Renders a contact's depth field on the remote node (the texture stage's CPU raster,
@@ -124,8 +136,11 @@ class DepthFieldRenderer {
   /// Writes the field into `out` (id `id`, X_WT0 = X_WT, margin margin_cells·h, offset 0, ε
   /// `smooth_max_m`) and prepares it; returns false when the grown grid would exceed
   /// kMaxDepthFieldSide nodes a side or the field does not prepare (out.prepared false then).
+  /// With `subdivision` s > 1 the grid is the window's refined s times (cell h/s, the window's
+  /// N·s cells plus s·margin_cells on each side).
   bool Render(const HapticModel& tool, const RigidTransform& X_WT, const ContactQuery& query,
-              int margin_cells, std::uint32_t id, double smooth_max_m, DepthField& out);
+              int margin_cells, std::uint32_t id, double smooth_max_m, DepthField& out,
+              int subdivision = 1);
 
  private:
   std::vector<int> env_triangles_, tool_triangles_;
@@ -140,6 +155,10 @@ class DepthFieldCache {
   explicit DepthFieldCache(int slots);
   /// The field with `id`, or null (id 0: null).
   const DepthField* Find(std::uint32_t id) const noexcept;
+  /// DepthFieldDepthAt of the field with `id` at X_WT (valid false where there is none),
+  /// remembered per slot: the same field at the same pose (bit for bit) is not evaluated again,
+  /// as a tick evaluates its models several times at one pose. Not thread-safe (the loop's).
+  DepthFieldEvaluation Evaluate(std::uint32_t id, const RigidTransform& X_WT) const noexcept;
   /// Takes the prepared `field` in (DepthField::Prepare, the sender's or the receiver's work off
   /// the loop), replacing a field of the same id, else a free slot, else the oldest slot not in
   /// `keep` (ids the models in use refer to). Swaps buffers with `field` (no copy, no
@@ -154,6 +173,12 @@ class DepthFieldCache {
  private:
   std::vector<DepthField> slots_;
   std::vector<std::uint64_t> stamp_;  // when each slot was filled (0: free)
+  struct Memo {
+    std::uint64_t stamp = 0;  // the slot's stamp it was computed for (0: none)
+    RigidTransform X_WT;
+    DepthFieldEvaluation result;
+  };
+  mutable std::vector<Memo> memo_;
   std::uint64_t clock_ = 0;
   std::int64_t taken_ = 0, refused_ = 0;
 };

@@ -264,6 +264,11 @@ struct PipelineOptions {
   /// The travel margin (m, ≥ 0): how far the tool may move from q0 before a field no longer
   /// holds. The remote node sets it from the operator's round trip (SetDepthFieldMargin).
   double depth_field_margin_m = 2e-3;
+  /// Nodes per window cell along each axis (1..4): the fields are rendered on the window's grid
+  /// refined this many times (and the textures sampled at that finer cell's mip level), so that
+  /// the operator's bicubic between nodes follows ridges a few cells wide. Lowered, down to 1,
+  /// where the refined grid with its margin would exceed kMaxDepthFieldSide.
+  int depth_field_subdivision = 1;
   /// The fields' smooth-maximum width ε (m, > 0; DepthField::smooth_max_m).
   double depth_field_smooth_max_m = kDepthFieldSmoothMaxM;
   /// True: each field is offset so that it reads the contact's δ0 at q0 (the texture stage's

@@ -47,9 +47,10 @@ struct ToolStepResult {
   double max_depth_m = 0.0;
   /// Active contacts whose force was held at the simulator's bound this step.
   int saturated_contacts = 0;
-  /// Contacts rendered from their depth field, and contacts whose field fell back to their
-  /// linearization (ContactModelEvaluation).
+  /// Contacts rendered from their depth field (of which beyond its travel margin), and contacts
+  /// whose field fell back to their linearization (ContactModelEvaluation).
   int field_contacts = 0;
+  int field_beyond_margin = 0;
   int field_fallbacks = 0;
   /// False when the step produced a non-finite state; the tool was then reset onto the handle.
   bool ok = true;

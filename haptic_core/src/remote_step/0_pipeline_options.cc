@@ -41,6 +41,10 @@ void PipelineOptions::Validate() const {
     throw std::invalid_argument("depth_field_margin_m must be >= 0 and finite, got " +
                                 std::to_string(depth_field_margin_m));
   }
+  if (depth_field_subdivision < 1 || depth_field_subdivision > 4) {
+    throw std::invalid_argument("depth_field_subdivision must be in [1, 4], got " +
+                                std::to_string(depth_field_subdivision));
+  }
   if (!(depth_field_smooth_max_m > 0.0) || !std::isfinite(depth_field_smooth_max_m)) {
     throw std::invalid_argument("depth_field_smooth_max_m must be > 0 and finite, got " +
                                 std::to_string(depth_field_smooth_max_m));

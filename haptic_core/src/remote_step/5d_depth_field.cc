@@ -14,10 +14,12 @@ namespace ht {
 
 bool DepthFieldRenderer::Render(const HapticModel& tool, const RigidTransform& X_WT,
                                 const ContactQuery& query, int margin_cells, std::uint32_t id,
-                                double smooth_max_m, DepthField& out) {
+                                double smooth_max_m, DepthField& out, int subdivision) {
   out.prepared = false;
-  const ContactWindow& w = query.window;
-  const int m = std::max(0, margin_cells);
+  ContactWindow w = query.window;
+  const int s = std::clamp(subdivision, 1, 4);
+  w.resolution *= s;
+  const int m = std::max(0, margin_cells) * s;
   const int side = w.resolution + 2 * m;
   if (side > kMaxDepthFieldSide || query.environment == nullptr) return false;
   const double h = w.cell_size_m();
@@ -62,15 +64,20 @@ int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT
     if (!std::isfinite(lin.depth_m)) continue;
     const ContactQuery& q = d.last_queries[static_cast<std::size_t>(i)];
     const double h = q.window.cell_size_m();
-    const int room = (kMaxDepthFieldSide - q.window.resolution) / 2;
-    if (room < 0 || !(h > 0.0)) continue;
-    const int margin =
-        std::min(room, static_cast<int>(std::ceil(options.depth_field_margin_m / h - 1e-9)));
+    if (!(h > 0.0)) continue;
+    const int want = static_cast<int>(std::ceil(options.depth_field_margin_m / h - 1e-9));
+    // The finest subdivision whose grid holds the window and the margin, else the coarsest with
+    // the margin cut to fit.
+    int sub = std::max(1, options.depth_field_subdivision);
+    while (sub > 1 && sub * (q.window.resolution + 2 * want) > kMaxDepthFieldSide) --sub;
+    const int room = (kMaxDepthFieldSide / sub - q.window.resolution) / 2;
+    if (room < 0) continue;
+    const int margin = std::min(room, want);
     DepthField& f = d.fields[static_cast<std::size_t>(d.num_fields)];
     bool ok = false;
     try {
       ok = d.field_renderer.Render(tool, X_WT, q, margin, d.last_field_id + 1,
-                                   options.depth_field_smooth_max_m, f);
+                                   options.depth_field_smooth_max_m, f, sub);
     } catch (...) {  // std::bad_alloc beyond the reserve
       ok = false;
     }

@@ -166,10 +166,11 @@ struct OperatorTickCounters {
   /// Ticks rendered with a depth offset (energy_bounded_switch), and the largest offset (m).
   std::int64_t switch_offset_ticks = 0;
   double switch_offset_max_m = 0.0;
-  /// Ticks whose tool step rendered a contact from its depth field, and ticks on which a contact
-  /// with a field fell back to its linearization (the field missing, or the tool past its
-  /// travel margin); fields the cache refused.
+  /// Ticks whose tool step rendered a contact from its depth field (of which with the tool past a
+  /// field's travel margin), and ticks on which a contact with a field fell back to its
+  /// linearization (the field missing); fields the cache refused.
   std::int64_t field_ticks = 0;
+  std::int64_t field_beyond_margin_ticks = 0;
   std::int64_t field_fallback_ticks = 0;
   std::int64_t fields_refused = 0;
 };

@@ -23,6 +23,7 @@ Wrench OperatorTick::StepTool(const RigidTransform& X_WH, const Twist& V_WH_W, b
   if (!out.step.ok) ++counters_.nonfinite;
   if (out.step.field_contacts > 0) ++counters_.field_ticks;
   if (out.step.field_fallbacks > 0) ++counters_.field_fallback_ticks;
+  if (out.step.field_beyond_margin > 0) ++counters_.field_beyond_margin_ticks;
   if (out.step.saturated_contacts > 0) ++counters_.saturated_contact_ticks;
   Wrench F_H_W = -out.step.F_coupling_T_W;
   if (!IsFinite(F_H_W)) {
