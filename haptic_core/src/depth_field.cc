@@ -26,8 +26,30 @@ inline void CatmullRom(double t, double w[4], double d[4]) noexcept {
   d[3] = 0.5 * (3.0 * t2 - 2.0 * t);
 }
 
-/// Depths more than this many ε below the maximum weigh less than e^−30 ≈ 1e−13: skipped.
-constexpr double kCutoffWidths = 30.0;
+/// One row of cells' column pass of DepthField::Prepare's bound: the Bézier coefficients along
+/// v of one row-coefficient map (rows j−1, j, j+1, j+2), into the cells' largest and sum.
+void AccumulateBezierColumn(const float* __restrict rm1, const float* __restrict rc0,
+                            const float* __restrict rp1, const float* __restrict rp2, int nx,
+                            float* __restrict hi_row, float* __restrict sum_row) noexcept {
+  const float sixth = 1.0f / 6.0f;
+  for (int i = 1; i < nx - 2; ++i) {
+    const float q0 = rc0[i];
+    const float q1 = rc0[i] + sixth * (rp1[i] - rm1[i]);
+    const float q2 = rp1[i] - sixth * (rp2[i] - rc0[i]);
+    const float q3 = rp1[i];
+    const float m01 = q0 > q1 ? q0 : q1, m23 = q2 > q3 ? q2 : q3;
+    const float m = m01 > m23 ? m01 : m23;
+    hi_row[i] = hi_row[i] > m ? hi_row[i] : m;
+    sum_row[i] += (q0 + q1) + (q2 + q3);
+  }
+}
+
+/// Depths more than this many ε below the maximum weigh less than e^−20 ≈ 2e−9: skipped (their
+/// sum moves δ by less than ε·2e−9 per node).
+constexpr double kCutoffWidths = 20.0;
+/// Nodes lighter than this (relative to the deepest) add nothing to the curvature's sums: the
+/// curvature only conditions the implicit step.
+constexpr double kCurvatureWeight = 1e-6;
 
 using Vec6 = Eigen::Matrix<double, 6, 1>;
 using Mat6 = Eigen::Matrix<double, 6, 6>;
@@ -41,6 +63,7 @@ void DepthField::Reserve() {
   env_height_m.reserve(n);
   tool_height_m.reserve(n);
   env_bound_m.reserve(n);
+  row_coefficients_m.reserve(4 * n);
   const std::size_t blocks = static_cast<std::size_t>(kMaxBlocksPerSide) * kMaxBlocksPerSide;
   env_block_bound_m.reserve(blocks);
   tool_block_min_m.reserve(blocks);
@@ -60,44 +83,43 @@ bool DepthField::Prepare() {
   env_bound_m.assign(n, -std::numeric_limits<float>::infinity());
   // The Catmull–Rom segment between nodes 1 and 2 of four is the cubic Bézier with control
   // points P1, P1 + (P2 − P0)/6, P2 − (P3 − P1)/6, P2; over a cell the bicubic is the tensor
-  // Bézier patch with coefficients M·Y·Mᵀ, which lies within their convex hull: its largest
-  // coefficient bounds it.
-  constexpr double M[4][4] = {{0.0, 1.0, 0.0, 0.0},
-                              {-1.0 / 6.0, 1.0, 1.0 / 6.0, 0.0},
-                              {0.0, 1.0 / 6.0, 1.0, -1.0 / 6.0},
-                              {0.0, 0.0, 1.0, 0.0}};
-  for (int j = 1; j + 2 < ny; ++j) {
+  // Bézier patch whose 16 coefficients are those of the rows' Bézier coefficients taken along
+  // the columns, and it lies within their convex hull: their largest bounds it. Rows first
+  // (four coefficient maps), then columns, each a loop over i that the compiler vectorizes; a
+  // missing node makes its cells' sums NaN, and those cells get no bound.
+  row_coefficients_m.resize(4 * n);
+  float* R0 = row_coefficients_m.data();
+  float* R1 = R0 + n;
+  float* R2 = R1 + n;
+  float* R3 = R2 + n;
+  const float sixth = 1.0f / 6.0f;
+  for (int j = 0; j < ny; ++j) {
+    const float* y = env_height_m.data() + static_cast<std::size_t>(j) * nx;
+    const std::size_t row = static_cast<std::size_t>(j) * nx;
     for (int i = 1; i + 2 < nx; ++i) {
-      double Y[4][4];
-      bool complete = true;
-      for (int b = 0; b < 4 && complete; ++b) {
-        const float* row = env_height_m.data() + static_cast<std::size_t>(j - 1 + b) * nx;
-        for (int a = 0; a < 4; ++a) {
-          const float v = row[i - 1 + a];
-          if (!std::isfinite(v)) {
-            complete = false;
-            break;
-          }
-          Y[b][a] = v;
-        }
-      }
-      if (!complete) continue;
-      double MY[4][4];  // rows of M applied along v (b), then along u (a)
-      for (int r = 0; r < 4; ++r) {
-        for (int a = 0; a < 4; ++a) {
-          MY[r][a] = M[r][0] * Y[0][a] + M[r][1] * Y[1][a] + M[r][2] * Y[2][a] + M[r][3] * Y[3][a];
-        }
-      }
-      double bound = -std::numeric_limits<double>::infinity();
-      for (int r = 0; r < 4; ++r) {
-        for (int c = 0; c < 4; ++c) {
-          bound = std::max(bound, M[c][0] * MY[r][0] + M[c][1] * MY[r][1] + M[c][2] * MY[r][2] +
-                                      M[c][3] * MY[r][3]);
-        }
-      }
-      // Rounded up (the float store, and the interpolant's own rounding) so that it holds.
-      env_bound_m[static_cast<std::size_t>(j) * nx + i] =
-          static_cast<float>(bound + 1e-6 * std::abs(bound) + 1e-9);
+      R0[row + i] = y[i];
+      R1[row + i] = y[i] + sixth * (y[i + 1] - y[i - 1]);
+      R2[row + i] = y[i + 1] - sixth * (y[i + 2] - y[i]);
+      R3[row + i] = y[i + 1];
+    }
+  }
+  float hi_row[kMaxDepthFieldSide], sum_row[kMaxDepthFieldSide];
+  for (int j = 1; j + 2 < ny; ++j) {
+    const std::size_t m1 = static_cast<std::size_t>(j - 1) * nx, c0 = m1 + nx, p1 = c0 + nx,
+                      p2 = p1 + nx;
+    for (int i = 0; i < nx; ++i) {
+      hi_row[i] = -std::numeric_limits<float>::infinity();
+      sum_row[i] = 0.0f;
+    }
+    for (const float* R : {R0, R1, R2, R3}) {
+      AccumulateBezierColumn(R + m1, R + c0, R + p1, R + p2, nx, hi_row, sum_row);
+    }
+    float* out_row = env_bound_m.data() + c0;
+    for (int i = 1; i + 2 < nx; ++i) {
+      // Rounded up (float arithmetic, and the interpolant's own rounding) so that it holds.
+      const float hi = hi_row[i];
+      out_row[i] = std::isnan(sum_row[i]) ? -std::numeric_limits<float>::infinity()
+                                          : hi + 1e-6f * std::abs(hi) + 1e-9f;
     }
   }
   const int bx = (nx + kDepthFieldBlock - 1) / kDepthFieldBlock;
@@ -107,26 +129,40 @@ bool DepthField::Prepare() {
   tool_block_min_m.assign(static_cast<std::size_t>(bx) * by, inf);
   tool_block_max_m.assign(static_cast<std::size_t>(bx) * by, -inf);
   for (int j = 0; j < ny; ++j) {
-    for (int i = 0; i < nx; ++i) {
-      const std::size_t k = static_cast<std::size_t>(j) * nx + i;
-      const std::size_t b =
-          static_cast<std::size_t>(j / kDepthFieldBlock) * bx + i / kDepthFieldBlock;
-      env_block_bound_m[b] = std::max(env_block_bound_m[b], env_bound_m[k]);
-      const float a = tool_height_m[k];
-      if (std::isfinite(a)) {
-        tool_block_min_m[b] = std::min(tool_block_min_m[b], a);
-        tool_block_max_m[b] = std::max(tool_block_max_m[b], a);
+    const std::size_t row = static_cast<std::size_t>(j) * nx;
+    const std::size_t brow = static_cast<std::size_t>(j / kDepthFieldBlock) * bx;
+    for (int ti = 0; ti < bx; ++ti) {
+      const int i0 = ti * kDepthFieldBlock, i1 = std::min(nx, i0 + kDepthFieldBlock);
+      float eb = env_block_bound_m[brow + ti], lo = tool_block_min_m[brow + ti],
+            hi = tool_block_max_m[brow + ti];
+      for (int i = i0; i < i1; ++i) {
+        eb = std::max(eb, env_bound_m[row + i]);
+        const float a = tool_height_m[row + i];
+        if (a == a) {  // not NaN
+          lo = std::min(lo, a);
+          hi = std::max(hi, a);
+        }
       }
+      env_block_bound_m[brow + ti] = eb;
+      tool_block_min_m[brow + ti] = lo;
+      tool_block_max_m[brow + ti] = hi;
     }
   }
+  // The tool's reach: the farthest corner of each block's box of nodes from the centre of mass
+  // (an upper bound on the farthest node's distance).
+  const glm::dvec3 c_F = X_WF.Inverse() * X_WT0.translation;
   double r2 = 0.0;
-  for (int j = 0; j < ny; ++j) {
-    for (int i = 0; i < nx; ++i) {
-      const float a = tool_height_m[static_cast<std::size_t>(j) * nx + i];
-      if (!std::isfinite(a)) continue;
-      const glm::dvec3 p_W = X_WF * glm::dvec3(i * cell_m, j * cell_m, a);
-      const glm::dvec3 r = p_W - X_WT0.translation;
-      r2 = std::max(r2, glm::dot(r, r));
+  for (int tj = 0; tj < by; ++tj) {
+    for (int ti = 0; ti < bx; ++ti) {
+      const std::size_t b = static_cast<std::size_t>(tj) * bx + ti;
+      if (!(tool_block_min_m[b] <= tool_block_max_m[b])) continue;
+      const int i0 = ti * kDepthFieldBlock, i1 = std::min(nx, i0 + kDepthFieldBlock) - 1;
+      const int j0 = tj * kDepthFieldBlock, j1 = std::min(ny, j0 + kDepthFieldBlock) - 1;
+      const double dx = std::max(std::abs(i0 * cell_m - c_F.x), std::abs(i1 * cell_m - c_F.x));
+      const double dy = std::max(std::abs(j0 * cell_m - c_F.y), std::abs(j1 * cell_m - c_F.y));
+      const double dz = std::max(std::abs(tool_block_min_m[b] - c_F.z),
+                                 std::abs(tool_block_max_m[b] - c_F.z));
+      r2 = std::max(r2, dx * dx + dy * dy + dz * dz);
     }
   }
   tool_radius_m = std::sqrt(r2);
@@ -288,6 +324,7 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
             row + static_cast<double>(i) * step_i + static_cast<double>(a) * along_a;
         int cell;
         double tu, tv;
+        ++out.nodes_tested;
         if (!locate(s, cell, tu, tv)) continue;
         const float cell_bound = bound[cell];
         if (!std::isfinite(cell_bound) || !(cell_bound - s.z >= m_ref - cutoff)) continue;
@@ -302,10 +339,9 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
           m_ref = d;
         }
         const double w = std::exp((d - m_ref) / eps);
-        if (w < 1e-13) continue;
         S0 += w;
         S1.noalias() += w * J;
-        S2.noalias() += w * (J * J.transpose());
+        if (w >= kCurvatureWeight) S2.noalias() += w * (J * J.transpose());
       }
     }
   };

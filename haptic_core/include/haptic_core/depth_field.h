@@ -75,7 +75,10 @@ struct DepthField {
   /// +∞ and −∞ where the block has none). The evaluation skips a tool block whose moved box
   /// cannot reach within the cutoff of the deepest node found.
   std::vector<float> env_block_bound_m, tool_block_min_m, tool_block_max_m;
-  /// The largest distance (m) of a tool node from the tool's centre of mass at X_WT0.
+  /// Prepare's scratch: the rows' Bézier coefficients (#4·nx·ny).
+  std::vector<float> row_coefficients_m;
+  /// An upper bound (m) on the distance of a tool node from the tool's centre of mass at X_WT0
+  /// (the farthest corner of the blocks' boxes of nodes).
   double tool_radius_m = 0.0;
   bool prepared = false;
 
@@ -112,16 +115,18 @@ struct DepthFieldEvaluation {
   /// evaluated, but tool surface that lay outside the grid at X_WT0 is missing from it, and the
   /// tool's nodes that left the environment's grid drop out.
   bool within_margin = false;
-  /// Tool nodes whose exact depth was computed (the others were pruned by the bound).
+  /// Tool nodes whose exact depth was computed (the others were pruned by the bound), and those
+  /// whose cell's bound was tested (the rest were pruned with their block).
   int nodes_evaluated = 0;
+  int nodes_tested = 0;
 };
 
 /// Evaluates `field` at tool pose X_WT (T at the tool's centre of mass, W): each tool node's
 /// depth δ_j = b(s_j) − s_j.z (DepthField), δ = smooth_max_m·ln Σ_j exp(δ_j / smooth_max_m) +
 /// depth_offset_m over the nodes whose bicubic stencil is complete, with ∇δ = Σ w_j ∇δ_j (w the
 /// softmax weights) and ∇δ_j = (g_j, r_j × g_j), g_j = R_WF·(∂b/∂x, ∂b/∂y, −1), r_j the node less
-/// the centre of mass (W). Nodes whose depth is more than 30 ε below the maximum (weight below
-/// 1e-13) are skipped by the per-cell bound without changing the result beyond that. The field
+/// the centre of mass (W). Nodes whose depth is more than 20 ε below the maximum (weight below
+/// 2e-9) are skipped by bounds per block and per cell without changing the result beyond that. The field
 /// is within its margin (within_margin) while |Δx_∥| + |Δθ|·tool_radius_m ≤ travel_margin_m,
 /// Δq = X_WT ⊖ X_WT0 and Δx_∥ the part of Δx in F's plane (along n the field holds however far). noexcept, allocation-free: callable from the 1 kHz loop.
 DepthFieldEvaluation DepthFieldDepthAt(const DepthField& field, const RigidTransform& X_WT) noexcept;
