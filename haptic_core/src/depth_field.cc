@@ -63,7 +63,6 @@ void DepthField::Reserve() {
   env_height_m.reserve(n);
   tool_height_m.reserve(n);
   env_bound_m.reserve(n);
-  row_coefficients_m.reserve(4 * n);
   const std::size_t blocks = static_cast<std::size_t>(kMaxBlocksPerSide) * kMaxBlocksPerSide;
   env_block_bound_m.reserve(blocks);
   tool_block_min_m.reserve(blocks);
@@ -168,37 +167,6 @@ bool DepthField::Prepare() {
   tool_radius_m = std::sqrt(r2);
   prepared = true;
   return true;
-}
-
-void DepthField::CopyFrom(const DepthField& other) noexcept {
-  const std::size_t cap = static_cast<std::size_t>(kMaxDepthFieldSide) * kMaxDepthFieldSide;
-  if (other.env_height_m.size() > std::min(cap, env_height_m.capacity()) ||
-      other.tool_height_m.size() > std::min(cap, tool_height_m.capacity()) ||
-      other.env_bound_m.size() > std::min(cap, env_bound_m.capacity())) {
-    id = 0;
-    prepared = false;
-    env_height_m.clear();
-    tool_height_m.clear();
-    env_bound_m.clear();
-    return;
-  }
-  id = other.id;
-  X_WF = other.X_WF;
-  cell_m = other.cell_m;
-  nx = other.nx;
-  ny = other.ny;
-  env_height_m.assign(other.env_height_m.begin(), other.env_height_m.end());
-  tool_height_m.assign(other.tool_height_m.begin(), other.tool_height_m.end());
-  X_WT0 = other.X_WT0;
-  travel_margin_m = other.travel_margin_m;
-  depth_offset_m = other.depth_offset_m;
-  smooth_max_m = other.smooth_max_m;
-  env_bound_m.assign(other.env_bound_m.begin(), other.env_bound_m.end());
-  env_block_bound_m.assign(other.env_block_bound_m.begin(), other.env_block_bound_m.end());
-  tool_block_min_m.assign(other.tool_block_min_m.begin(), other.tool_block_min_m.end());
-  tool_block_max_m.assign(other.tool_block_max_m.begin(), other.tool_block_max_m.end());
-  tool_radius_m = other.tool_radius_m;
-  prepared = other.prepared;
 }
 
 DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform& X_WT) noexcept {

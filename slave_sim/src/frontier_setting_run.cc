@@ -2,10 +2,12 @@
 // and the poses of its model-prediction measure.
 
 #include <algorithm>
+#include <limits>
 #include <sstream>
 
 #include "frontier_records.h"
 #include "haptic_core/accuracy/mesh_contact_baseline.h"
+#include "haptic_core/depth_field.h"
 #include "haptic_core/gpu_penetration_depth.h"
 #include "haptic_core/remote_step.h"
 #include "slave_sim/benchmark_scenes.h"
@@ -115,6 +117,14 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   }
   std::vector<ContactModel> models;
   models.reserve(poses_WFt.size());
+  // Depth fields: each model's fields in a cache as the operator keeps them, and the fields of the
+  // poses the prediction measure samples, kept for it.
+  const std::size_t stride = PredictionStride(poses_WFt.size());
+  DepthFieldCache field_cache(options.depth_fields ? kMaxContacts : 1);
+  std::vector<std::vector<DepthField>> kept_fields(options.depth_fields ? poses_WFt.size() : 0);
+  const auto take_fields = [&field_cache](std::vector<DepthField> fields) {
+    for (DepthField& f : fields) field_cache.Take(f, {});
+  };
   for (std::size_t k = 0; k < poses_WFt.size(); ++k) {
     // A spread pose does not follow the last: its contacts start from their own grid alone.
     if (k == 0 || !consecutive) pipeline.ForgetLastStep();
@@ -123,6 +133,14 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
     PoseRecord p;
     p.timings = timings;
     p.F = model.F_T_W_at_q0;
+    if (options.depth_fields) {
+      const auto fields = pipeline.last_depth_fields();
+      take_fields({fields.begin(), fields.end()});
+      p.F = EvaluateContactModel(model, poses_WFt[k] * X_FtT, 1.0,
+                                 std::numeric_limits<double>::infinity(), &field_cache)
+                .F_T_W;
+      if (k % stride == 0) kept_fields[k].assign(fields.begin(), fields.end());
+    }
     for (int c = 0; c < model.num_contacts; ++c) p.contacts += model.contacts[c].depth_m > 0.0;
     run.poses.push_back(p);
     const auto queries = pipeline.last_contact_queries();
@@ -143,11 +161,14 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
   }
   // The model's prediction, after the timed steps: each sampled pose's model at its displaced
   // poses (PredictionPoses' order), compared with the pipeline truth there in ComputeMetrics.
-  const std::size_t stride = PredictionStride(poses_WFt.size());
   for (std::size_t k = 0; k < poses_WFt.size(); k += stride) {
     const RigidTransform X_WT = poses_WFt[k] * X_FtT;
+    if (options.depth_fields) take_fields(kept_fields[k]);
     for (const Twist& d : PredictionDisplacements(frontier_options)) {
-      run.predicted.push_back(EvaluateContactModel(models[k], Displace(X_WT, d)).F_T_W);
+      run.predicted.push_back(EvaluateContactModel(models[k], Displace(X_WT, d), 1.0,
+                                                   std::numeric_limits<double>::infinity(),
+                                                   options.depth_fields ? &field_cache : nullptr)
+                                  .F_T_W);
     }
   }
   // Model switches along consecutive poses: the model of switch_lag poses earlier at this pose

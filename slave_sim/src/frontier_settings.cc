@@ -76,6 +76,9 @@ PipelineOptions PipelineOptionsFor(const FrontierSetting& st) {
       st.translation_patch_follows_rotation;
   if (st.gradient_step_texels > 0.0)
     options.depth_refinement.gradient_step_texels = st.gradient_step_texels;
+  options.depth_fields = st.depth_fields;
+  options.depth_field_subdivision = st.depth_field_subdivision;
+  options.depth_field_offset_to_q0 = false;
   // The texture stage's threads are the coarse query's too, as in the product.
   options.texture_threads = st.texture_threads;
   return options;
@@ -329,6 +332,16 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     patch_rotation.name = "translation_patch_follows_rotation";
     patch_rotation.translation_patch_follows_rotation = true;
     s.push_back(patch_rotation);
+    // Issue 75: the contact model as depth fields, on the window's grid refined twice (the
+    // lockstep's) and on the window's own.
+    FrontierSetting fields = base;
+    fields.name = "depth_fields";
+    fields.depth_fields = true;
+    s.push_back(fields);
+    FrontierSetting fields_s1 = fields;
+    fields_s1.name = "depth_fields_s1";
+    fields_s1.depth_field_subdivision = 1;
+    s.push_back(fields_s1);
     FrontierSetting patch_climbs = patch;
     patch_climbs.name = "translation_patch_neighbour_climbs";
     patch_climbs.translation_patch_neighbour_climbs = true;

@@ -87,12 +87,9 @@ struct DepthField {
   /// env_bound_m, the blocks' bounds and tool_radius_m. Allocates only when the buffers' capacity is short. Returns
   /// false, leaving prepared false, on a bad field.
   bool Prepare();
-  /// Reserves every buffer for kMaxDepthFieldSide² nodes, so that assigning a field into this one
-  /// (CopyFrom) never allocates.
+  /// Reserves the maps, the bounds and the blocks for kMaxDepthFieldSide² nodes (not Prepare's
+  /// scratch), so that a field swapped into a cache slot keeps buffers of that size. Allocates.
   void Reserve();
-  /// Copies `other` into this field's buffers (no allocation within the reserve; noexcept:
-  /// beyond the reserve it leaves this field empty, id 0).
-  void CopyFrom(const DepthField& other) noexcept;
 };
 
 /// What DepthFieldDepthAt found.

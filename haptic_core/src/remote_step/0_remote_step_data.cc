@@ -72,7 +72,12 @@ RemoteStepData::RemoteStepData(const HapticScene& scene, const PipelineOptions& 
     queries.back().SetThreads(options.texture_threads);
   }
   if (options.depth_fields) {
-    for (DepthField& f : fields) f.Reserve();
+    for (DepthField& f : fields) {
+      f.Reserve();
+      // Prepare's scratch, which the operator's copies never need.
+      f.row_coefficients_m.reserve(4 * static_cast<std::size_t>(kMaxDepthFieldSide) *
+                                   kMaxDepthFieldSide);
+    }
   }
   // Stage 5a's copies of the kept contacts' fields, whatever the backend (a GPU backend that
   // falls back to the CPU keeps fields from then on).

@@ -161,6 +161,11 @@ struct FrontierSetting {
   /// PipelineOptions::depth_refinement.translation_patch_follows_rotation
   /// ("translation_patch_follows_rotation" turns it on).
   bool translation_patch_follows_rotation = false;
+  /// PipelineOptions::depth_fields, at this subdivision, unshifted ("depth_fields",
+  /// "depth_fields_s1"): each pose's force at q0 and the model's prediction are its depth fields'
+  /// (evaluated as the operator's loop does); the per-contact columns stay the linearization's.
+  bool depth_fields = false;
+  int depth_field_subdivision = 2;
 };
 
 /// The sweep: the default setting (grid 50, 1024² textures, the seed's coarse counts, CPU) first,
