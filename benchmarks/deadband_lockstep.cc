@@ -146,7 +146,11 @@ int main(int argc, char** argv) {
       "--speculative-lead-ms), speculative_margin_mm, speculative_speed_mm_s (slave_sim\n"
       "--speculative-speed-mm-s: the floor by the round trip) or a fixed\n"
       "speculative_floor_mm; setting=NAME, the remote step's setting by its frontier\n"
-      "name (speed_error_frontier --list-settings; default --reference-setting)");
+      "name (speed_error_frontier --list-settings; default --reference-setting);\n"
+      "depth_fields (0/1: the contact model as depth fields, evaluated by the tick at its\n"
+      "tool pose), field_subdivision (nodes per window cell, default 2), field_speed_mm_s\n"
+      "(the fields' travel margin is this times the round trip, default 50) with\n"
+      "field_min_margin_mm (default 2), field_smooth_max_um (the smooth maximum's width)");
   std::string reference_keys;
   app.add_option("--reference-keys", reference_keys,
                  "the reference arm's own keys, as --arm's KEY=V,... (its deadbands stay off):\n"

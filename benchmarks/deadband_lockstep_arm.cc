@@ -65,7 +65,7 @@ double NonNegative(const std::string& key, double v) {
 /// --model-deadband-*-floor), release_ticks, energy_bounded_switch, switch_spend,
 /// offset_release_ms (the operator tick's passivity options), setting (a frontier setting's name:
 /// the remote step's options), depth_fields, field_min_margin_mm, field_smooth_max_um,
-/// field_offset_to_q0 (the contact model as depth fields). Defaults: master_station's and slave_sim's, deadband 10 %.
+/// field_subdivision, field_speed_mm_s (the contact model as depth fields). Defaults: master_station's and slave_sim's, deadband 10 %.
 
 /// The tool's reach (m) by which a turn moves its surface, for the fields' resend rule (the
 /// fig75 block's half diagonal, about 3 cm).
@@ -158,8 +158,6 @@ Arm ParseArm(const std::string& text) {
     } else if (key == "field_smooth_max_um") {
       if (!(v > 0.0)) throw std::invalid_argument("--arm: field_smooth_max_um must be > 0");
       arm.depth_field_smooth_max_m = v * 1e-6;
-    } else if (key == "field_offset_to_q0") {
-      arm.depth_field_offset_to_q0 = v != 0.0;
     } else if (key == "force_floor") {
       arm.model.force_floor_scale_n = v;
     } else if (key == "torque_floor") {
@@ -233,7 +231,6 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     if (arm.depth_field_smooth_max_m > 0.0) {
       options.depth_field_smooth_max_m = arm.depth_field_smooth_max_m;
     }
-    options.depth_field_offset_to_q0 = arm.depth_field_offset_to_q0;
     options.depth_field_subdivision = arm.depth_field_subdivision;
     options.Validate();
   } else if (setup.translation_patch ||

@@ -46,10 +46,8 @@ struct Arm {
   double depth_field_min_margin_m = 2e-3;
   double depth_field_speed_m_per_s = 0.05;
   int depth_field_subdivision = ht::PipelineOptions{}.depth_field_subdivision;
-  /// The fields' smooth-maximum width (m; < 0: PipelineOptions' default) and whether they are
-  /// offset to the contact's refined δ0 at q0 (PipelineOptions::depth_field_offset_to_q0).
+  /// The fields' smooth-maximum width (m; < 0: PipelineOptions' default).
   double depth_field_smooth_max_m = -1.0;
-  bool depth_field_offset_to_q0 = true;
 };
 
 /// What one arm's run gives, tick by tick and in all.

@@ -49,7 +49,6 @@ int main(int argc, char** argv) {
   options.depth_fields = true;
   options.depth_field_subdivision = subdivision;
   options.depth_field_margin_m = margin_mm * 1e-3;
-  options.depth_field_offset_to_q0 = false;
   options.Validate();
   HapticTexturePipeline pipeline(scene, options,
                                  std::make_unique<CpuPenetrationDepthBackend>(

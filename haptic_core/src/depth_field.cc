@@ -76,7 +76,7 @@ bool DepthField::Prepare() {
       !(cell_m > 0.0) || !std::isfinite(cell_m) || nx < 4 || ny < 4 || nx > kMaxDepthFieldSide ||
       ny > kMaxDepthFieldSide || env_height_m.size() != n || tool_height_m.size() != n ||
       !(travel_margin_m >= 0.0) || !std::isfinite(travel_margin_m) || !(smooth_max_m > 0.0) ||
-      !std::isfinite(smooth_max_m) || !std::isfinite(depth_offset_m)) {
+      !std::isfinite(smooth_max_m)) {
     return false;
   }
   env_bound_m.assign(n, -std::numeric_limits<float>::infinity());
@@ -320,8 +320,8 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
     visit_block(b);
   }
   if (!(S0 > 0.0)) return out;
-  out.depth_m = m_ref + eps * std::log(S0) + f.depth_offset_m;
-  out.max_node_depth_m = m_ref + f.depth_offset_m;
+  out.depth_m = m_ref + eps * std::log(S0);
+  out.max_node_depth_m = m_ref;
   const Vec6 mean = S1 / S0;
   const Mat6 cov = S2 / S0 - mean * mean.transpose();
   // To world axes: both halves turn with R_WF.

@@ -78,7 +78,6 @@ PipelineOptions PipelineOptionsFor(const FrontierSetting& st) {
     options.depth_refinement.gradient_step_texels = st.gradient_step_texels;
   options.depth_fields = st.depth_fields;
   options.depth_field_subdivision = st.depth_field_subdivision;
-  options.depth_field_offset_to_q0 = false;
   // The texture stage's threads are the coarse query's too, as in the product.
   options.texture_threads = st.texture_threads;
   return options;

@@ -58,10 +58,6 @@ struct DepthField {
   /// How far (m) the tool's surface may move from where it was at X_WT0 before the field is no
   /// longer valid: the margin by which the grid exceeds the window on each side.
   double travel_margin_m = 0.0;
-  /// Added to the smooth maximum (m): the remote node's refined δ at q0 less the field's own
-  /// there, so that the field reads at q0 what the texture stage's refinement found
-  /// (DepthRefinementOptions); 0 for the field alone.
-  double depth_offset_m = 0.0;
   /// Smooth-maximum width ε (m, > 0).
   double smooth_max_m = kDepthFieldSmoothMaxM;
 
@@ -83,7 +79,7 @@ struct DepthField {
   bool prepared = false;
 
   /// Checks the field (id ≠ 0, finite frames, h > 0 and finite, nx and ny in
-  /// [4, kMaxDepthFieldSide], both maps #nx·ny, margin ≥ 0, ε > 0, offset finite) and derives
+  /// [4, kMaxDepthFieldSide], both maps #nx·ny, margin ≥ 0, ε > 0) and derives
   /// env_bound_m, the blocks' bounds and tool_radius_m. Allocates only when the buffers' capacity is short. Returns
   /// false, leaving prepared false, on a bad field.
   bool Prepare();
@@ -94,10 +90,9 @@ struct DepthField {
 
 /// What DepthFieldDepthAt found.
 struct DepthFieldEvaluation {
-  /// δ (m): the smooth maximum over the tool nodes that read an environment, plus the offset;
-  /// −∞ when none does.
+  /// δ (m): the smooth maximum over the tool nodes that read an environment; −∞ when none does.
   double depth_m = -std::numeric_limits<double>::infinity();
-  /// The deepest node's own δ_j plus the offset (m; the plain maximum, which depth_m exceeds by
+  /// The deepest node's own δ_j (m; the plain maximum, which depth_m exceeds by
   /// the smooth maximum's lift, at most ε·ln(nodes_evaluated)); −∞ when none.
   double max_node_depth_m = -std::numeric_limits<double>::infinity();
   /// ∇δ with respect to the tool's pose (x of its centre of mass, θ about it; world axes).
@@ -119,8 +114,8 @@ struct DepthFieldEvaluation {
 };
 
 /// Evaluates `field` at tool pose X_WT (T at the tool's centre of mass, W): each tool node's
-/// depth δ_j = b(s_j) − s_j.z (DepthField), δ = smooth_max_m·ln Σ_j exp(δ_j / smooth_max_m) +
-/// depth_offset_m over the nodes whose bicubic stencil is complete, with ∇δ = Σ w_j ∇δ_j (w the
+/// depth δ_j = b(s_j) − s_j.z (DepthField), δ = smooth_max_m·ln Σ_j exp(δ_j / smooth_max_m)
+/// over the nodes whose bicubic stencil is complete, with ∇δ = Σ w_j ∇δ_j (w the
 /// softmax weights) and ∇δ_j = (g_j, r_j × g_j), g_j = R_WF·(∂b/∂x, ∂b/∂y, −1), r_j the node less
 /// the centre of mass (W). Nodes whose depth is more than 20 ε below the maximum (weight below
 /// 2e-9) are skipped by bounds per block and per cell without changing the result beyond that. The field
@@ -135,7 +130,7 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& field, const RigidTrans
 /// triangle lists between calls (allocates only while they grow).
 class DepthFieldRenderer {
  public:
-  /// Writes the field into `out` (id `id`, X_WT0 = X_WT, margin margin_cells·h, offset 0, ε
+  /// Writes the field into `out` (id `id`, X_WT0 = X_WT, margin margin_cells·h, ε
   /// `smooth_max_m`) and prepares it; returns false when the grown grid would exceed
   /// kMaxDepthFieldSide nodes a side or the field does not prepare (out.prepared false then).
   /// With `subdivision` s > 1 the grid is the window's refined s times (cell h/s, the window's

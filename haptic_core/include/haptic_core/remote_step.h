@@ -268,12 +268,9 @@ struct PipelineOptions {
   /// refined this many times (and the textures sampled at that finer cell's mip level), so that
   /// the operator's bicubic between nodes follows ridges a few cells wide. Lowered, down to 1,
   /// where the refined grid with its margin would exceed kMaxDepthFieldSide.
-  int depth_field_subdivision = 1;
+  int depth_field_subdivision = 2;
   /// The fields' smooth-maximum width ε (m, > 0; DepthField::smooth_max_m).
   double depth_field_smooth_max_m = kDepthFieldSmoothMaxM;
-  /// True: each field is offset so that it reads the contact's δ0 at q0 (the texture stage's
-  /// refined depth, stage 5b) there (DepthField::depth_offset_m); false: the field's own maximum.
-  bool depth_field_offset_to_q0 = true;
 
   /// Throws std::invalid_argument naming a value out of range.
   void Validate() const;

@@ -149,8 +149,7 @@ struct RemoteStepData {
 
 /// Stage 5d (PipelineOptions::depth_fields): renders the depth field of each of the data's
 /// last_queries[0, last_num_queries) whose linearization is finite into d.fields (ids counting on
-/// from d.last_field_id), sets the linearization's depth_field_id, and with
-/// depth_field_offset_to_q0 offsets the field to read its δ0 at X_WT. A contact whose field
+/// from d.last_field_id) and sets the linearization's depth_field_id. A contact whose field
 /// cannot be made keeps id 0 (its linearization alone). Returns d.num_fields. Never allocates
 /// within the data's reserve.
 int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT,

@@ -49,7 +49,6 @@ bool DepthFieldRenderer::Render(const HapticModel& tool, const RigidTransform& X
   out.nx = out.ny = side;
   out.X_WT0 = X_WT;
   out.travel_margin_m = m * h;
-  out.depth_offset_m = 0.0;
   out.smooth_max_m = smooth_max_m;
   return out.Prepare();
 }
@@ -84,10 +83,6 @@ int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT
     if (!ok) continue;
     ++d.last_field_id;
     if (d.last_field_id == 0) d.last_field_id = 1;  // 0 means none
-    if (options.depth_field_offset_to_q0) {
-      const DepthFieldEvaluation at_q0 = DepthFieldDepthAt(f, X_WT);
-      if (std::isfinite(at_q0.depth_m)) f.depth_offset_m = lin.depth_m - at_q0.depth_m;
-    }
     lin.depth_field_id = f.id;
     ++d.num_fields;
   }
