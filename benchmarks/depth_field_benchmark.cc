@@ -30,11 +30,13 @@ double Quantile(std::vector<double> v, double q) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"The depth field's render (remote node) and evaluation (operator) on the seed's\n"
-               "Fig. 75 scene, the block resting on the gear."};
+  CLI::App app{
+      "The depth field's render (remote node) and evaluation (operator) on the seed's\n"
+      "Fig. 75 scene, the block resting on the gear."};
   int subdivision = 2, poses = 2000;
   double margin_mm = 2.5, travel_mm = 1.5, tilt_mrad = 10.0;
-  app.add_option("--subdivision", subdivision, "nodes per window cell (1..4)")->capture_default_str();
+  app.add_option("--subdivision", subdivision, "nodes per window cell (1..4)")
+      ->capture_default_str();
   app.add_option("--margin-mm", margin_mm, "the fields' travel margin (mm)")->capture_default_str();
   app.add_option("--poses", poses, "poses evaluated")->capture_default_str();
   app.add_option("--travel-mm", travel_mm, "largest in-plane travel from q0 (mm)")
@@ -60,7 +62,8 @@ int main(int argc, char** argv) {
   for (int k = 0; k < 2000; ++k) {
     model = pipeline.Step(X_WT, 1, timings);
     double deepest = -1.0;
-    for (int c = 0; c < model.num_contacts; ++c) deepest = std::max(deepest, model.contacts[c].depth_m);
+    for (int c = 0; c < model.num_contacts; ++c)
+      deepest = std::max(deepest, model.contacts[c].depth_m);
     if (deepest >= 30e-6) break;
     X_WT.translation.z -= 2e-6;
   }
@@ -112,9 +115,10 @@ int main(int argc, char** argv) {
     nodes.push_back(n);
     if (sum == 12345.0) std::printf(" ");  // keeps the evaluation
   }
-  std::printf("operator: all fields at one pose p50 %.1f us, p99 %.1f us; nodes computed p50 %.0f, "
-              "p99 %.0f; tested p50 %.0f, p99 %.0f\n",
-              Quantile(eval_us, 0.5), Quantile(eval_us, 0.99), Quantile(nodes, 0.5),
-              Quantile(nodes, 0.99), Quantile(tested, 0.5), Quantile(tested, 0.99));
+  std::printf(
+      "operator: all fields at one pose p50 %.1f us, p99 %.1f us; nodes computed p50 %.0f, "
+      "p99 %.0f; tested p50 %.0f, p99 %.0f\n",
+      Quantile(eval_us, 0.5), Quantile(eval_us, 0.99), Quantile(nodes, 0.5), Quantile(nodes, 0.99),
+      Quantile(tested, 0.5), Quantile(tested, 0.99));
   return 0;
 }

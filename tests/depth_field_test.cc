@@ -107,7 +107,8 @@ TEST(DepthField, TiltedFaceSumsItsMovedNodesAsTheirSmoothMaximumAndLevers) {
     const glm::dvec3 c_F = X_WF.Inverse() * X_WT.translation;
     double deepest = -1.0;
     for (int j = 10; j <= 29; ++j) {
-      for (int i = 10; i <= 29; ++i) deepest = std::max(deepest, -(D * glm::dvec3(i * kH, j * kH, -kD)).z);
+      for (int i = 10; i <= 29; ++i)
+        deepest = std::max(deepest, -(D * glm::dvec3(i * kH, j * kH, -kD)).z);
     }
     double sum = 0.0;
     glm::dvec3 torque_F{0.0};
@@ -188,13 +189,19 @@ TEST(DepthField, GradientIsTheDerivativeOfTheDepthAlongEachOfTheSixAxes) {
     ASSERT_TRUE(e.valid);
     const double g[6] = {e.gradient.d_translation_W.x, e.gradient.d_translation_W.y,
                          e.gradient.d_translation_W.z, e.gradient.d_rotation_W.x,
-                         e.gradient.d_rotation_W.y, e.gradient.d_rotation_W.z};
+                         e.gradient.d_rotation_W.y,    e.gradient.d_rotation_W.z};
     for (int k = 0; k < 6; ++k) {
       const double step = k < 3 ? 1e-8 : 1e-7;
       Twist d{};
-      if (k < 3) d.linear[k] = step; else d.angular[k - 3] = step;
+      if (k < 3)
+        d.linear[k] = step;
+      else
+        d.angular[k - 3] = step;
       Twist dm{};
-      if (k < 3) dm.linear[k] = -step; else dm.angular[k - 3] = -step;
+      if (k < 3)
+        dm.linear[k] = -step;
+      else
+        dm.angular[k - 3] = -step;
       const double fd = (DepthFieldDepthAt(f, Displace(X_WT, d)).depth_m -
                          DepthFieldDepthAt(f, Displace(X_WT, dm)).depth_m) /
                         (2.0 * step);
@@ -210,32 +217,32 @@ TEST(DepthField, PrunedSmoothMaximumEqualsTheSumOverEveryNodeAlone) {
   DepthField f = MakeField(kN, kH, X_WF, X_WT0, Rough, RoughFace, 3e-3);
   // A wide ε (many nodes weigh, none is pruned) and the default (the bound prunes).
   for (const double eps : {8e-6, kDepthFieldSmoothMaxM}) {
-  f.smooth_max_m = eps;
-  ASSERT_TRUE(f.Prepare());
-  const RigidTransform X_WT =
-      Displace(X_WT0, Twist{glm::dvec3(0.3e-3, -0.2e-3, 0.0), glm::dvec3(2e-3, 1e-3, 4e-3)});
-  const DepthFieldEvaluation whole = DepthFieldDepthAt(f, X_WT);
-  // The second route: a field per tool node (the same environment), each its node's δ_j.
-  DepthField one = f;
-  double m = -1.0;
-  std::vector<double> depths;
-  for (std::size_t k = 0; k < f.tool_height_m.size(); ++k) {
-    if (!std::isfinite(f.tool_height_m[k])) continue;
-    std::fill(one.tool_height_m.begin(), one.tool_height_m.end(), std::nanf(""));
-    one.tool_height_m[k] = f.tool_height_m[k];
-    ASSERT_TRUE(one.Prepare());
-    const DepthFieldEvaluation e = DepthFieldDepthAt(one, X_WT);
-    if (!std::isfinite(e.depth_m)) continue;
-    depths.push_back(e.depth_m);  // ε·ln(exp(δ_j/ε)) = δ_j
-    m = std::max(m, e.depth_m);
-  }
-  double sum = 0.0;
-  for (const double d : depths) sum += std::exp((d - m) / f.smooth_max_m);
-  EXPECT_NEAR(whole.depth_m, m + f.smooth_max_m * std::log(sum), 1e-10) << eps;
-  EXPECT_NEAR(whole.max_node_depth_m, m, 1e-12) << eps;
-  if (eps == kDepthFieldSmoothMaxM) {
-    EXPECT_LT(whole.nodes_evaluated, static_cast<int>(depths.size()));  // the bound pruned some
-  }
+    f.smooth_max_m = eps;
+    ASSERT_TRUE(f.Prepare());
+    const RigidTransform X_WT =
+        Displace(X_WT0, Twist{glm::dvec3(0.3e-3, -0.2e-3, 0.0), glm::dvec3(2e-3, 1e-3, 4e-3)});
+    const DepthFieldEvaluation whole = DepthFieldDepthAt(f, X_WT);
+    // The second route: a field per tool node (the same environment), each its node's δ_j.
+    DepthField one = f;
+    double m = -1.0;
+    std::vector<double> depths;
+    for (std::size_t k = 0; k < f.tool_height_m.size(); ++k) {
+      if (!std::isfinite(f.tool_height_m[k])) continue;
+      std::fill(one.tool_height_m.begin(), one.tool_height_m.end(), std::nanf(""));
+      one.tool_height_m[k] = f.tool_height_m[k];
+      ASSERT_TRUE(one.Prepare());
+      const DepthFieldEvaluation e = DepthFieldDepthAt(one, X_WT);
+      if (!std::isfinite(e.depth_m)) continue;
+      depths.push_back(e.depth_m);  // ε·ln(exp(δ_j/ε)) = δ_j
+      m = std::max(m, e.depth_m);
+    }
+    double sum = 0.0;
+    for (const double d : depths) sum += std::exp((d - m) / f.smooth_max_m);
+    EXPECT_NEAR(whole.depth_m, m + f.smooth_max_m * std::log(sum), 1e-10) << eps;
+    EXPECT_NEAR(whole.max_node_depth_m, m, 1e-12) << eps;
+    if (eps == kDepthFieldSmoothMaxM) {
+      EXPECT_LT(whole.nodes_evaluated, static_cast<int>(depths.size()));  // the bound pruned some
+    }
   }
 }
 
@@ -303,8 +310,8 @@ TEST(DepthField, CacheFindsByIdEvictsTheOldestUnkeptAndNeverAllocates) {
   EXPECT_TRUE(cache.Take(incoming[1], keep));
   EXPECT_TRUE(cache.Take(incoming[2], keep));  // evicts 11, the oldest not kept
   const DepthField* f10 = cache.Find(10);
-  const DepthFieldEvaluation e = f10 != nullptr ? DepthFieldDepthAt(*f10, X_WT0)
-                                                : DepthFieldEvaluation{};
+  const DepthFieldEvaluation e =
+      f10 != nullptr ? DepthFieldDepthAt(*f10, X_WT0) : DepthFieldEvaluation{};
   const DepthFieldEvaluation memo1 = cache.Evaluate(10, X_WT0);
   const DepthFieldEvaluation memo2 = cache.Evaluate(10, X_WT0);  // remembered
   EXPECT_EQ(Allocations() - before, 0);
@@ -354,8 +361,8 @@ TEST(DepthField, RenderedFieldReadsTheTextureStagesDepthAtDisplacedPoses) {
   const ContactWindow grown = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.028, 70);
   // Whole cells: the tool's nodes land on the environment's, the same cells the texture stage
   // renders (within the smooth maximum's lift, and the tool's render at the moved pose).
-  for (const glm::dvec3 d : {glm::dvec3(0.0), glm::dvec3(h, 0.0, 0.0), glm::dvec3(-2 * h, 3 * h, 0.0),
-                             glm::dvec3(5 * h, -4 * h, -10e-6)}) {
+  for (const glm::dvec3 d : {glm::dvec3(0.0), glm::dvec3(h, 0.0, 0.0),
+                             glm::dvec3(-2 * h, 3 * h, 0.0), glm::dvec3(5 * h, -4 * h, -10e-6)}) {
     RigidTransform X_WT = X_WT0;
     X_WT.translation += d;
     const DepthSample truth = solver.Depth(tool, X_WT, env, q.X_WO, grown);
@@ -368,9 +375,10 @@ TEST(DepthField, RenderedFieldReadsTheTextureStagesDepthAtDisplacedPoses) {
   // Between cells and tilted: the interpolated field against a fresh render, which samples the
   // plate's peaks at other points: each misses a peak's top by up to A(1 − cos(π h / λ)), 5 µm
   // for the 60 µm, 3 mm ridges at h = 0.4 mm.
-  for (const Twist dq : {Twist{{0.5e-3 + 0.13e-3, 0.21e-3, 0.0}, {}},
-                         Twist{{1.5e-3, -0.77e-3, 0.0}, {}}, Twist{{}, {1e-3, 0.0, 0.0}},
-                         Twist{{}, {0.0, 0.0, 10e-3}}, Twist{{0.3e-3, 0.0, 0.0}, {0.0, 2e-3, 0.0}}}) {
+  for (const Twist dq :
+       {Twist{{0.5e-3 + 0.13e-3, 0.21e-3, 0.0}, {}}, Twist{{1.5e-3, -0.77e-3, 0.0}, {}},
+        Twist{{}, {1e-3, 0.0, 0.0}}, Twist{{}, {0.0, 0.0, 10e-3}},
+        Twist{{0.3e-3, 0.0, 0.0}, {0.0, 2e-3, 0.0}}}) {
     const RigidTransform X_WT = Displace(X_WT0, dq);
     const DepthSample truth = solver.Depth(tool, X_WT, env, q.X_WO, grown);
     const DepthFieldEvaluation e = DepthFieldDepthAt(f, X_WT);

@@ -159,8 +159,8 @@ bool DepthField::Prepare() {
       const int j0 = tj * kDepthFieldBlock, j1 = std::min(ny, j0 + kDepthFieldBlock) - 1;
       const double dx = std::max(std::abs(i0 * cell_m - c_F.x), std::abs(i1 * cell_m - c_F.x));
       const double dy = std::max(std::abs(j0 * cell_m - c_F.y), std::abs(j1 * cell_m - c_F.y));
-      const double dz = std::max(std::abs(tool_block_min_m[b] - c_F.z),
-                                 std::abs(tool_block_max_m[b] - c_F.z));
+      const double dz =
+          std::max(std::abs(tool_block_min_m[b] - c_F.z), std::abs(tool_block_max_m[b] - c_F.z));
       r2 = std::max(r2, dx * dx + dy * dy + dz * dz);
     }
   }

@@ -43,20 +43,21 @@ inline constexpr int kMaxDepthFieldSide = 256;
 ///    p_F(i, j) = (i·h, j·h, a) at X_WT0, which move rigidly with the tool.
 /// At a tool pose X_WT each tool node j moves to s_j = X_FW·X_WT·X_WT0⁻¹·X_WF·p_F(j) and reads the
 /// environment there: δ_j = b(s_j.x, s_j.y) − s_j.z, b interpolated between nodes by a
-/// Catmull–Rom bicubic (its gradient continuous across cell edges). The field is valid while every
-/// tool node moved at most travel_margin_m in F's plane from where it was at X_WT0
-/// (DepthFieldDepthAt).
+/// Catmull–Rom bicubic (its gradient continuous across cell edges). The field holds the whole
+/// overlap while every tool node moved at most travel_margin_m in F's plane from where it was at
+/// X_WT0 (DepthFieldEvaluation::within_margin).
 struct DepthField {
   /// The remote node's id of this field within its session (0: no field).
   std::uint32_t id = 0;
-  RigidTransform X_WF;  ///< Frame F in W (m).
-  double cell_m = 0.0;  ///< Node spacing h (m), > 0.
-  int nx = 0, ny = 0;   ///< Nodes along x_F and y_F (2..kMaxDepthFieldSide).
+  RigidTransform X_WF;               ///< Frame F in W (m).
+  double cell_m = 0.0;               ///< Node spacing h (m), > 0.
+  int nx = 0, ny = 0;                ///< Nodes along x_F and y_F (4..kMaxDepthFieldSide).
   std::vector<float> env_height_m;   ///< b, #nx·ny, row-major j·nx + i (m).
   std::vector<float> tool_height_m;  ///< a at X_WT0, #nx·ny, row-major j·nx + i (m).
   RigidTransform X_WT0;              ///< The tool pose a was rendered at (T at the tool's CoM).
-  /// How far (m) the tool's surface may move from where it was at X_WT0 before the field is no
-  /// longer valid: the margin by which the grid exceeds the window on each side.
+  /// How far (m) the tool's surface may move in F's plane from where it was at X_WT0 before the
+  /// field may miss part of the overlap: the margin by which the grid exceeds the window on each
+  /// side.
   double travel_margin_m = 0.0;
   /// Smooth-maximum width ε (m, > 0).
   double smooth_max_m = kDepthFieldSmoothMaxM;
@@ -79,9 +80,9 @@ struct DepthField {
   bool prepared = false;
 
   /// Checks the field (id ≠ 0, finite frames, h > 0 and finite, nx and ny in
-  /// [4, kMaxDepthFieldSide], both maps #nx·ny, margin ≥ 0, ε > 0) and derives
-  /// env_bound_m, the blocks' bounds and tool_radius_m. Allocates only when the buffers' capacity is short. Returns
-  /// false, leaving prepared false, on a bad field.
+  /// [4, kMaxDepthFieldSide], both maps #nx·ny, margin ≥ 0, ε > 0) and derives env_bound_m, the
+  /// blocks' bounds and tool_radius_m. Allocates only when the buffers' capacity is short.
+  /// Returns false, leaving prepared false, on a bad field.
   bool Prepare();
   /// Reserves the maps, the bounds and the blocks for kMaxDepthFieldSide² nodes (not Prepare's
   /// scratch), so that a field swapped into a cache slot keeps buffers of that size. Allocates.
@@ -92,8 +93,8 @@ struct DepthField {
 struct DepthFieldEvaluation {
   /// δ (m): the smooth maximum over the tool nodes that read an environment; −∞ when none does.
   double depth_m = -std::numeric_limits<double>::infinity();
-  /// The deepest node's own δ_j (m; the plain maximum, which depth_m exceeds by
-  /// the smooth maximum's lift, at most ε·ln(nodes_evaluated)); −∞ when none.
+  /// The deepest node's own δ_j (m; the plain maximum, which depth_m exceeds by the smooth
+  /// maximum's lift, at most ε·ln(nodes_evaluated)); −∞ when none.
   double max_node_depth_m = -std::numeric_limits<double>::infinity();
   /// ∇δ with respect to the tool's pose (x of its centre of mass, θ about it; world axes).
   PenetrationGradient gradient;
@@ -123,10 +124,12 @@ struct DepthFieldEvaluation {
 /// over the nodes whose bicubic stencil is complete, with ∇δ = Σ w_j ∇δ_j (w the
 /// softmax weights) and ∇δ_j = (g_j, r_j × g_j), g_j = R_WF·(∂b/∂x, ∂b/∂y, −1), r_j the node less
 /// the centre of mass (W). Nodes whose depth is more than 20 ε below the maximum (weight below
-/// 2e-9) are skipped by bounds per block and per cell without changing the result beyond that. The field
-/// is within its margin (within_margin) while |Δx_∥| + |Δθ|·tool_radius_m ≤ travel_margin_m,
-/// Δq = X_WT ⊖ X_WT0 and Δx_∥ the part of Δx in F's plane (along n the field holds however far). noexcept, allocation-free: callable from the 1 kHz loop.
-DepthFieldEvaluation DepthFieldDepthAt(const DepthField& field, const RigidTransform& X_WT) noexcept;
+/// 2e-9) are skipped by bounds per block and per cell without changing the result beyond that.
+/// The tool is within the field's margin (within_margin) while |Δx_∥| + |Δθ|·tool_radius_m ≤
+/// travel_margin_m, Δq = X_WT ⊖ X_WT0 and Δx_∥ the part of Δx in F's plane (along n the field
+/// holds however far). noexcept, allocation-free: callable from the 1 kHz loop.
+DepthFieldEvaluation DepthFieldDepthAt(const DepthField& field,
+                                       const RigidTransform& X_WT) noexcept;
 
 /// Renders a contact's depth field on the remote node (the texture stage's CPU raster,
 /// RenderPatchHeightsFast): the query's window grown by `margin_cells` cells on each side, the

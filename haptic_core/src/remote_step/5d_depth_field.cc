@@ -6,9 +6,9 @@
 #include <glm/gtc/quaternion.hpp>
 #include <limits>
 
+#include "0_remote_step_data.h"
 #include "haptic_core/depth_field.h"
 #include "haptic_core/penetration_depth.h"
-#include "0_remote_step_data.h"
 
 namespace ht {
 
@@ -29,8 +29,8 @@ bool DepthFieldRenderer::Render(const HapticModel& tool, const RigidTransform& X
   SelectPatchTrianglesIn(query.environment_triangles, *query.environment, query.X_WO, w,
                          PatchSide::kEnvironment, (m + 1) * h, env_triangles_, 0.0, nullptr,
                          query.environment_triangles.tree);
-  RenderPatchHeightsFast(*query.environment, query.X_WO, env_triangles_, w,
-                         PatchSide::kEnvironment, m, out.env_height_m);
+  RenderPatchHeightsFast(*query.environment, query.X_WO, env_triangles_, w, PatchSide::kEnvironment,
+                         m, out.env_height_m);
   SelectPatchTrianglesIn(query.tool_triangles, tool, X_WT, w, PatchSide::kTool, (m + 1) * h,
                          tool_triangles_, 0.0, nullptr, query.tool_triangles.tree);
   RenderPatchHeightsFast(tool, X_WT, tool_triangles_, w, PatchSide::kTool, m, out.tool_height_m);
@@ -43,7 +43,8 @@ bool DepthFieldRenderer::Render(const HapticModel& tool, const RigidTransform& X
   // F: origin at the grown grid's node (0, 0), the centre of window cell (−m, −m).
   const double offset = (-m + 0.5) * h - 0.5 * w.extent_m;
   out.X_WF.translation = w.center_W + offset * w.axis_u_W + offset * w.axis_v_W;
-  out.X_WF.rotation = glm::normalize(glm::quat_cast(glm::dmat3(w.axis_u_W, w.axis_v_W, w.normal_W)));
+  out.X_WF.rotation =
+      glm::normalize(glm::quat_cast(glm::dmat3(w.axis_u_W, w.axis_v_W, w.normal_W)));
   out.id = id;
   out.cell_m = h;
   out.nx = out.ny = side;
