@@ -65,7 +65,8 @@ double NonNegative(const std::string& key, double v) {
 /// --model-deadband-*-floor), release_ticks, energy_bounded_switch, switch_spend,
 /// offset_release_ms (the operator tick's passivity options), setting (a frontier setting's name:
 /// the remote step's options), depth_fields, field_min_margin_mm, field_smooth_max_um,
-/// field_subdivision, field_speed_mm_s (the contact model as depth fields). Defaults: master_station's and slave_sim's, deadband 10 %.
+/// field_subdivision, field_speed_mm_s (the contact model as depth fields). Defaults:
+/// master_station's and slave_sim's, deadband 10 %.
 
 /// The tool's reach (m) by which a turn moves its surface, for the fields' resend rule (the
 /// fig75 block's half diagonal, about 3 cm).
@@ -233,8 +234,7 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     }
     options.depth_field_subdivision = arm.depth_field_subdivision;
     options.Validate();
-  } else if (setup.translation_patch ||
-             rtt_ms >= RemoteNodeConfig{}.translation_patch_rtt_ms) {
+  } else if (setup.translation_patch || rtt_ms >= RemoteNodeConfig{}.translation_patch_rtt_ms) {
     options.depth_refinement.translation_patch = true;
   }
   // The CPU backend with the setting's texture path and rotation gradient (as the frontier makes

@@ -78,8 +78,8 @@ void ToolSimulator::set_max_contact_force(double max_contact_force_n) {
 }
 
 ToolStepResult ToolSimulator::Step(ToolState& s, const RigidTransform& X_WH, const Twist& V_WH_W,
-                                   const ContactModel& model, double stiffness_scale,
-                                   double h, const DepthFieldCache* fields) const noexcept {
+                                   const ContactModel& model, double stiffness_scale, double h,
+                                   const DepthFieldCache* fields) const noexcept {
   ToolStepResult result;
   if (!IsFiniteRigidTransform(X_WH) || !IsFinite(V_WH_W) || !(h > 0.0) || !std::isfinite(h)) {
     result.ok = false;  // hold the tool where it is, at rest
@@ -90,15 +90,16 @@ ToolStepResult ToolSimulator::Step(ToolState& s, const RigidTransform& X_WH, con
     s = {X_WH, V_WH_W};
     result.ok = false;
   }
-  return Integrate(s, X_WH, V_WH_W,
-                   EvaluateContactModel(model, s.X_WT, stiffness_scale, max_contact_force_n_, fields), h,
-                   result);
+  return Integrate(
+      s, X_WH, V_WH_W,
+      EvaluateContactModel(model, s.X_WT, stiffness_scale, max_contact_force_n_, fields), h,
+      result);
 }
 
 ToolStepResult ToolSimulator::StepBlended(ToolState& s, const RigidTransform& X_WH,
                                           const Twist& V_WH_W, const ContactModel& current,
-                                          const ContactModel& previous, double blend,
-                                          double h, const DepthFieldCache* fields) const noexcept {
+                                          const ContactModel& previous, double blend, double h,
+                                          const DepthFieldCache* fields) const noexcept {
   ToolStepResult result;
   if (!IsFiniteRigidTransform(X_WH) || !IsFinite(V_WH_W) || !(h > 0.0) || !std::isfinite(h)) {
     result.ok = false;
@@ -110,7 +111,8 @@ ToolStepResult ToolSimulator::StepBlended(ToolState& s, const RigidTransform& X_
     result.ok = false;
   }
   const double beta = std::isfinite(blend) ? std::clamp(blend, 0.0, 1.0) : 1.0;
-  ContactModelEvaluation a = EvaluateContactModel(current, s.X_WT, beta, max_contact_force_n_, fields);
+  ContactModelEvaluation a =
+      EvaluateContactModel(current, s.X_WT, beta, max_contact_force_n_, fields);
   const ContactModelEvaluation b =
       EvaluateContactModel(previous, s.X_WT, 1.0 - beta, max_contact_force_n_, fields);
   a.F_T_W.force += b.F_T_W.force;

@@ -331,8 +331,8 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     patch_rotation.name = "translation_patch_follows_rotation";
     patch_rotation.translation_patch_follows_rotation = true;
     s.push_back(patch_rotation);
-    // Issue 75: the contact model as depth fields, on the window's grid refined twice (the
-    // lockstep's) and on the window's own.
+    // The contact model as depth fields, on the window's grid refined twice (the default) and
+    // on the window's own grid.
     FrontierSetting fields = base;
     fields.name = "depth_fields";
     fields.depth_fields = true;

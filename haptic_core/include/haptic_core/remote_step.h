@@ -10,8 +10,8 @@
 
 #include "haptic_core/contact_linearization.h"
 #include "haptic_core/contact_model.h"
-#include "haptic_core/depth_field.h"
 #include "haptic_core/contact_windows.h"
+#include "haptic_core/depth_field.h"
 #include "haptic_core/depth_refinement.h"
 #include "haptic_core/haptic_scene.h"
 #include "haptic_core/penetration_depth_backend.h"

@@ -16,11 +16,11 @@
 #include "haptic_core/contact_linearization.h"
 #include "haptic_core/contact_region.h"
 #include "haptic_core/contact_windows.h"
+#include "haptic_core/depth_field.h"
 #include "haptic_core/depth_refinement.h"
 #include "haptic_core/haptic_scene.h"
 #include "haptic_core/hull_proximity.h"
 #include "haptic_core/penetration_depth.h"
-#include "haptic_core/depth_field.h"
 #include "haptic_core/remote_step.h"
 
 namespace ht {

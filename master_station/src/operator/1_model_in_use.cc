@@ -42,8 +42,7 @@ void OperatorTick::TakeArrivedFields(const OperatorTickInput& in) noexcept {
   if (in.arrived_fields.empty()) return;
   std::array<std::uint32_t, 2 * kMaxContacts> keep{};
   std::size_t n = 0;
-  const ContactModel* in_use[2] = {&model_,
-                                   in.arrived != nullptr ? &in.arrived->model : nullptr};
+  const ContactModel* in_use[2] = {&model_, in.arrived != nullptr ? &in.arrived->model : nullptr};
   for (const ContactModel* m : in_use) {
     if (m == nullptr) continue;
     for (int i = 0; i < std::clamp(m->num_contacts, 0, kMaxContacts); ++i) {

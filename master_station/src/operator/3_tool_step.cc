@@ -13,10 +13,9 @@ Wrench OperatorTick::StepTool(const RigidTransform& X_WH, const Twist& V_WH_W, b
                               OperatorTickOutput& out) noexcept {
   const double h = config_.h_s;
   if (blending) {
-    out.step =
-        simulator_.StepBlended(tool_, X_WH, V_WH_W, model_, previous_model_,
-                               static_cast<double>(blend_tick_) / config_.model_blend_ticks, h,
-                               &fields_);
+    out.step = simulator_.StepBlended(tool_, X_WH, V_WH_W, model_, previous_model_,
+                                      static_cast<double>(blend_tick_) / config_.model_blend_ticks,
+                                      h, &fields_);
   } else {
     out.step = simulator_.Step(tool_, X_WH, V_WH_W, model_, 1.0, h, &fields_);
   }
