@@ -78,12 +78,13 @@ int main(int argc, char** argv) {
   DepthField scratch;
   scratch.Reserve();
   const ContactQuery query = pipeline.last_contact_queries()[0];
-  const int margin_cells =
-      static_cast<int>(std::ceil(options.depth_field_margin_m / query.window.cell_size_m()));
+  const DepthField& first = pipeline.last_depth_fields()[0];
+  const glm::dmat3 R_WF = glm::mat3_cast(first.X_WF.rotation);
+  const DepthFieldLattice lattice{R_WF[0], R_WF[1], R_WF[2], first.cell_m};
   for (int k = 0; k < 200; ++k) {
     const auto t0 = Clock::now();
-    renderer.Render(*scene.tool, X_WT, query, margin_cells, 1, kDepthFieldSmoothMaxM, scratch,
-                    subdivision);
+    renderer.Render(*scene.tool, X_WT, query, lattice, first.travel_margin_m, 1,
+                    kDepthFieldSmoothMaxM, scratch);
     field_us.push_back(std::chrono::duration<double, std::micro>(Clock::now() - t0).count());
   }
   const DepthField& field = pipeline.last_depth_fields()[0];

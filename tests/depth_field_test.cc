@@ -349,16 +349,24 @@ TEST(DepthField, RenderedFieldReadsTheTextureStagesDepthAtDisplacedPoses) {
   q.X_WO = testing::EnvironmentPose();
   q.window = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.02, 50);
   q.stiffness_n_per_m = 1e4;
-  const RigidTransform X_WT0 = testing::ToolPose(0.001, -0.0005, -40e-6);
+  // The tool's centre of mass on the environment's lattice (whole cells from its origin), so
+  // that the tool's nodes and the environment's coincide as the texture stage's do.
+  const RigidTransform X_WT0 = testing::ToolPose(0.0012, -0.0004, -40e-6);
+  const double h = q.window.cell_size_m();
+  const DepthFieldLattice lattice{q.window.axis_u_W, q.window.axis_v_W, q.window.normal_W, h};
   DepthFieldRenderer renderer;
   DepthField f;
-  ASSERT_TRUE(renderer.Render(tool, X_WT0, q, 10, 1, kDepthFieldSmoothMaxM, f));
+  ASSERT_TRUE(renderer.Render(tool, X_WT0, q, lattice, 10 * h, 1, kDepthFieldSmoothMaxM, f));
   EXPECT_EQ(f.nx, 70);
-  EXPECT_NEAR(f.travel_margin_m, 10 * 0.4e-3, 1e-12);
+  EXPECT_NEAR(f.travel_margin_m, 10 * h, 1e-12);
+  EXPECT_NEAR(f.tool_offset_u_m, 0.0, 1e-9);
+  EXPECT_NEAR(f.tool_offset_v_m, 0.0, 1e-9);
   TexturePenetrationSolver solver(128, 4096);
-  const double h = q.window.cell_size_m();
-  // The texture stage on the field's grid: the window grown by the margin (same centre, cell).
-  const ContactWindow grown = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.028, 70);
+  // The texture stage on the field's grid: its nodes are the grown window's cell centres.
+  const glm::dvec3 centre =
+      f.X_WF.translation + (0.5 * (f.nx - 1) * h) * (q.window.axis_u_W + q.window.axis_v_W);
+  const ContactWindow grown =
+      ContactWindow::Make({centre.x, centre.y, 0.0}, {0.0, 0.0, 1.0}, f.nx * h, f.nx);
   // Whole cells: the tool's nodes land on the environment's, the same cells the texture stage
   // renders (within the smooth maximum's lift, and the tool's render at the moved pose).
   for (const glm::dvec3 d : {glm::dvec3(0.0), glm::dvec3(h, 0.0, 0.0),
@@ -384,6 +392,45 @@ TEST(DepthField, RenderedFieldReadsTheTextureStagesDepthAtDisplacedPoses) {
     const DepthFieldEvaluation e = DepthFieldDepthAt(f, X_WT);
     ASSERT_TRUE(e.valid);
     EXPECT_NEAR(e.max_node_depth_m, truth.depth_m, 6e-6) << dq.linear.x << " " << dq.angular.z;
+  }
+}
+
+TEST(DepthField, FieldsOnOneLatticeFromOtherWindowsAndToolPosesAgreeWhereBothHoldTheTool) {
+  // Two renders of one contact as successive remote steps make them: the window's centre moved
+  // by a fraction of a cell and the tool slid between them. On one lattice both sample the same
+  // points of both surfaces, so they give one depth and one force at any pose both hold (what
+  // keeps a new field from stepping the force); on grids centred on each window they would not.
+  const HapticModel tool =
+      MakeTexturedBox({0.00607, 0.00607, testing::kHalfHeight}, BlockTexture, 512, 0.1, "tool");
+  const HapticModel env = testing::EnvironmentBox(PlateTexture);
+  ContactQuery q;
+  q.environment = &env;
+  q.X_WO = testing::EnvironmentPose();
+  q.window = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.02, 50);
+  q.stiffness_n_per_m = 1e4;
+  // (The face's edges off the lattice: a node on an edge is in or out of the face by rounding.)
+  const double h = 0.2e-3;
+  const DepthFieldLattice lattice{q.window.axis_u_W, q.window.axis_v_W, q.window.normal_W, h};
+  const RigidTransform X_WT0 = testing::ToolPose(0.00031, -0.00017, -30e-6);
+  const RigidTransform X_WT1 = Displace(X_WT0, Twist{{0.23e-3, 0.11e-3, 2e-6}, {0.0, 0.0, 0.0}});
+  ContactQuery q1 = q;
+  q1.window.center_W += glm::dvec3(0.37e-3, -0.13e-3, 0.0);
+  DepthFieldRenderer renderer;
+  DepthField f0, f1;
+  ASSERT_TRUE(renderer.Render(tool, X_WT0, q, lattice, 2e-3, 1, kDepthFieldSmoothMaxM, f0));
+  ASSERT_TRUE(renderer.Render(tool, X_WT1, q1, lattice, 2e-3, 2, kDepthFieldSmoothMaxM, f1));
+  // Offsets within ±h/2 that put the tool's nodes on its own lattice: different for the two.
+  EXPECT_GT(std::abs(f0.tool_offset_u_m - f1.tool_offset_u_m), 1e-6);
+  for (const Twist dq : {Twist{}, Twist{{0.1e-3, 0.05e-3, 0.0}, {}},
+                         Twist{{0.17e-3, 0.02e-3, -3e-6}, {0.5e-3, -0.3e-3, 0.0}}}) {
+    const RigidTransform X_WT = Displace(X_WT1, dq);
+    const DepthFieldEvaluation e0 = DepthFieldDepthAt(f0, X_WT);
+    const DepthFieldEvaluation e1 = DepthFieldDepthAt(f1, X_WT);
+    ASSERT_TRUE(e0.valid && e1.valid);
+    ASSERT_GT(e0.depth_m, 0.0);
+    EXPECT_NEAR(e0.depth_m, e1.depth_m, 1e-8) << dq.linear.x;
+    EXPECT_LT(glm::length(e0.gradient.d_translation_W - e1.gradient.d_translation_W), 1e-3);
+    EXPECT_LT(glm::length(e0.gradient.d_rotation_W - e1.gradient.d_rotation_W), 1e-5);
   }
 }
 

@@ -76,7 +76,8 @@ bool DepthField::Prepare() {
       !(cell_m > 0.0) || !std::isfinite(cell_m) || nx < 4 || ny < 4 || nx > kMaxDepthFieldSide ||
       ny > kMaxDepthFieldSide || env_height_m.size() != n || tool_height_m.size() != n ||
       !(travel_margin_m >= 0.0) || !std::isfinite(travel_margin_m) || !(smooth_max_m > 0.0) ||
-      !std::isfinite(smooth_max_m)) {
+      !std::isfinite(smooth_max_m) || !(std::abs(tool_offset_u_m) <= cell_m) ||
+      !(std::abs(tool_offset_v_m) <= cell_m)) {
     return false;
   }
   env_bound_m.assign(n, -std::numeric_limits<float>::infinity());
@@ -157,8 +158,10 @@ bool DepthField::Prepare() {
       if (!(tool_block_min_m[b] <= tool_block_max_m[b])) continue;
       const int i0 = ti * kDepthFieldBlock, i1 = std::min(nx, i0 + kDepthFieldBlock) - 1;
       const int j0 = tj * kDepthFieldBlock, j1 = std::min(ny, j0 + kDepthFieldBlock) - 1;
-      const double dx = std::max(std::abs(i0 * cell_m - c_F.x), std::abs(i1 * cell_m - c_F.x));
-      const double dy = std::max(std::abs(j0 * cell_m - c_F.y), std::abs(j1 * cell_m - c_F.y));
+      const double x0 = i0 * cell_m + tool_offset_u_m, x1 = i1 * cell_m + tool_offset_u_m;
+      const double y0 = j0 * cell_m + tool_offset_v_m, y1 = j1 * cell_m + tool_offset_v_m;
+      const double dx = std::max(std::abs(x0 - c_F.x), std::abs(x1 - c_F.x));
+      const double dy = std::max(std::abs(y0 - c_F.y), std::abs(y1 - c_F.y));
       const double dz =
           std::max(std::abs(tool_block_min_m[b] - c_F.z), std::abs(tool_block_max_m[b] - c_F.z));
       r2 = std::max(r2, dx * dx + dy * dy + dz * dz);
@@ -191,6 +194,8 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
   const float* tool = f.tool_height_m.data();
   const float* bound = f.env_bound_m.data();
   const glm::dvec3 step_i = h * R[0], step_j = h * R[1], along_a = R[2];
+  // Tool node (0, 0) at height 0, moved.
+  const glm::dvec3 origin = D * glm::dvec3(f.tool_offset_u_m, f.tool_offset_v_m, 0.0);
 
   // The node's moved position and its cell's bound (−∞: no interpolant under it).
   const auto locate = [&](const glm::dvec3& s, int& cell, double& tu, double& tv) noexcept {
@@ -245,7 +250,8 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
       if (!(a_lo <= a_hi)) continue;  // no tool node
       const int i0 = ti * kDepthFieldBlock, i1 = std::min(nx, i0 + kDepthFieldBlock) - 1;
       const int j0 = tj * kDepthFieldBlock, j1 = std::min(ny, j0 + kDepthFieldBlock) - 1;
-      const glm::dvec3 centre(0.5 * (i0 + i1) * h, 0.5 * (j0 + j1) * h, 0.5 * (a_lo + a_hi));
+      const glm::dvec3 centre(0.5 * (i0 + i1) * h + f.tool_offset_u_m,
+                              0.5 * (j0 + j1) * h + f.tool_offset_v_m, 0.5 * (a_lo + a_hi));
       const glm::dvec3 half(0.5 * (i1 - i0) * h, 0.5 * (j1 - j0) * h, 0.5 * (a_hi - a_lo));
       const glm::dvec3 s = D * centre;
       const glm::dvec3 e = R_abs * half;
@@ -284,7 +290,7 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
     const int i0 = ti * kDepthFieldBlock, i1 = std::min(nx, i0 + kDepthFieldBlock);
     const int j0 = tj * kDepthFieldBlock, j1 = std::min(ny, j0 + kDepthFieldBlock);
     for (int j = j0; j < j1; ++j) {
-      const glm::dvec3 row = D.translation + static_cast<double>(j) * step_j;
+      const glm::dvec3 row = origin + static_cast<double>(j) * step_j;
       for (int i = i0; i < i1; ++i) {
         const float a = tool[j * nx + i];
         if (!std::isfinite(a)) continue;

@@ -32,15 +32,17 @@ inline constexpr int kDepthFieldBlock = 8;
 inline constexpr int kMaxDepthFieldSide = 256;
 
 /// One contact window's two surfaces (our construction [R] on the seed's directional penetration
-/// depth [S][L]). Frame F is the window's at the render: origin at grid node (0, 0), x along the
-/// window's u, y along v, z along its normal n (from the environment towards the tool); node
-/// (i, j) lies at (i·h, j·h, 0) in F, h = cell_m.
+/// depth [S][L]). Frame F: origin at grid node (0, 0), x along the lattice's u, y along v, z
+/// along its normal n (from the environment towards the tool); environment node (i, j) lies at
+/// (i·h, j·h, 0) in F and tool node (i, j) at (i·h + tool_offset_u_m, j·h + tool_offset_v_m)
+/// at X_WT0, h = cell_m (DepthFieldRenderer puts both on lattices fixed in their objects' frames).
 ///  - env_height_m[j·nx + i] = b: the height along z_F of the environment's surface facing +n
 ///    under the node (m; its largest over the node's cell, as the texture stage renders it), NaN
 ///    where the environment has no surface there. b is fixed in the environment's frame.
-///  - tool_height_m[j·nx + i] = a: the height along z_F of the tool's surface facing −n at the
-///    pose X_WT0 (m; its smallest), NaN where none. The tool's nodes are points of the tool
-///    p_F(i, j) = (i·h, j·h, a) at X_WT0, which move rigidly with the tool.
+///  - tool_height_m[j·nx + i] = a: the height along z_F of the tool's surface facing −n under
+///    tool node (i, j) at the pose X_WT0 (m; its smallest), NaN where none. The tool's nodes are
+///    points of the tool p_F(i, j) = (i·h + tool_offset_u_m, j·h + tool_offset_v_m, a) at
+///    X_WT0, which move rigidly with the tool.
 /// At a tool pose X_WT each tool node j moves to s_j = X_FW·X_WT·X_WT0⁻¹·X_WF·p_F(j) and reads the
 /// environment there: δ_j = b(s_j.x, s_j.y) − s_j.z, b interpolated between nodes by a
 /// Catmull–Rom bicubic (its gradient continuous across cell edges). The field holds the whole
@@ -54,6 +56,8 @@ struct DepthField {
   int nx = 0, ny = 0;                ///< Nodes along x_F and y_F (4..kMaxDepthFieldSide).
   std::vector<float> env_height_m;   ///< b, #nx·ny, row-major j·nx + i (m).
   std::vector<float> tool_height_m;  ///< a at X_WT0, #nx·ny, row-major j·nx + i (m).
+  /// The tool nodes' offset from the environment's along x_F and y_F (m, |offset| ≤ h).
+  double tool_offset_u_m = 0.0, tool_offset_v_m = 0.0;
   RigidTransform X_WT0;              ///< The tool pose a was rendered at (T at the tool's CoM).
   /// How far (m) the tool's surface may move in F's plane from where it was at X_WT0 before the
   /// field may miss part of the overlap: the margin by which the grid exceeds the window on each
@@ -80,7 +84,7 @@ struct DepthField {
   bool prepared = false;
 
   /// Checks the field (id ≠ 0, finite frames, h > 0 and finite, nx and ny in
-  /// [4, kMaxDepthFieldSide], both maps #nx·ny, margin ≥ 0, ε > 0) and derives env_bound_m, the
+  /// [4, kMaxDepthFieldSide], both maps #nx·ny, the tool's offsets within ±h, margin ≥ 0, ε > 0) and derives env_bound_m, the
   /// blocks' bounds and tool_radius_m. Allocates only when the buffers' capacity is short.
   /// Returns false, leaving prepared false, on a bad field.
   bool Prepare();
@@ -131,21 +135,32 @@ struct DepthFieldEvaluation {
 DepthFieldEvaluation DepthFieldDepthAt(const DepthField& field,
                                        const RigidTransform& X_WT) noexcept;
 
+/// The lattice a depth field is sampled on (W; unit u, v, n with u × v = n, n from the
+/// environment towards the tool; cell h in m). The environment's nodes are its origin plus whole
+/// cells along u and v, the tool's its centre of mass plus whole cells: while the caller keeps
+/// the axes fixed in the environment's frame, successive fields sample the same points of both
+/// surfaces (for the tool, up to its turn about n between them), so that a new field changes
+/// the force only as far as the surfaces it adds.
+struct DepthFieldLattice {
+  glm::dvec3 axis_u_W{1.0, 0.0, 0.0}, axis_v_W{0.0, 1.0, 0.0}, normal_W{0.0, 0.0, 1.0};
+  double cell_m = 0.0;
+};
+
 /// Renders a contact's depth field on the remote node (the texture stage's CPU raster,
-/// RenderPatchHeightsFast): the query's window grown by `margin_cells` cells on each side, the
-/// environment at query.X_WO and the tool at X_WT (T at its centre of mass), each restricted to
-/// the query's triangle subsets, both with the textures' mip level at the window's cell. Keeps its
-/// triangle lists between calls (allocates only while they grow).
+/// RenderPatchHeightsFast): the query's window, on `lattice`, grown by the travel margin on each
+/// side, the environment at query.X_WO and the tool at X_WT (T at its centre of mass), each
+/// restricted to the query's triangle subsets, both with the textures' mip level at the cell.
+/// Keeps its triangle lists between calls (allocates only while they grow).
 class DepthFieldRenderer {
  public:
-  /// Writes the field into `out` (id `id`, X_WT0 = X_WT, margin margin_cells·h, ε
-  /// `smooth_max_m`) and prepares it; returns false when the grown grid would exceed
-  /// kMaxDepthFieldSide nodes a side or the field does not prepare (out.prepared false then).
-  /// With `subdivision` s > 1 the grid is the window's refined s times (cell h/s, the window's
-  /// N·s cells plus s·margin_cells on each side).
+  /// Writes the field into `out` (id `id`, X_WT0 = X_WT, ε `smooth_max_m`, travel margin
+  /// `margin_m` rounded up to whole cells) and prepares it: ceil(W/h) + 2·ceil(margin/h) nodes a
+  /// side, centred on the window to the nearest lattice node. Returns false (out.prepared false)
+  /// when that exceeds kMaxDepthFieldSide, the cell is not positive, a pose is not finite, or
+  /// the field does not prepare.
   bool Render(const HapticModel& tool, const RigidTransform& X_WT, const ContactQuery& query,
-              int margin_cells, std::uint32_t id, double smooth_max_m, DepthField& out,
-              int subdivision = 1);
+              const DepthFieldLattice& lattice, double margin_m, std::uint32_t id,
+              double smooth_max_m, DepthField& out);
 
  private:
   std::vector<int> env_triangles_, tool_triangles_;

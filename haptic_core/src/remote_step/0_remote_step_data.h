@@ -142,6 +142,18 @@ struct RemoteStepData {
   std::array<DepthField, kMaxContacts> fields{};
   int num_fields = 0;
   std::uint32_t last_field_id = 0;
+  /// The lattices the fields are sampled on, each fixed in its environment's frame (axes and
+  /// normal in O; the nodes at the environment's origin plus whole cells along u and v), reused
+  /// by every contact on that environment whose window normal is within 0.1 rad, the least
+  /// recently used replaced.
+  struct FieldLattice {
+    const HapticModel* environment = nullptr;
+    glm::dvec3 axis_u_O{1.0, 0.0, 0.0}, axis_v_O{0.0, 1.0, 0.0}, normal_O{0.0, 0.0, 1.0};
+    double cell_m = 0.0;
+    std::uint64_t last_used = 0;
+  };
+  std::array<FieldLattice, 2 * kMaxContacts> field_lattices{};
+  std::uint64_t field_lattice_clock = 0;
 
   /// What the stages counted (HapticTexturePipeline::step_faults()).
   HapticTexturePipeline::StepFaults step_faults;

@@ -12,17 +12,56 @@
 
 namespace ht {
 
+namespace {
+
+/// x less the nearest whole multiple of h, in [−h/2, h/2].
+double NearestRemainder(double x, double h) noexcept { return x - h * std::round(x / h); }
+
+/// How far (rad) a contact window's normal may turn from a lattice's before the contact gets a
+/// lattice of its own: within it the field's direction is the lattice's (its depth along the
+/// window's own normal differs by at most 1 − cos 0.1 = 0.5 %).
+constexpr double kLatticeTurnRad = 0.1;
+
+}  // namespace
+
 bool DepthFieldRenderer::Render(const HapticModel& tool, const RigidTransform& X_WT,
-                                const ContactQuery& query, int margin_cells, std::uint32_t id,
-                                double smooth_max_m, DepthField& out, int subdivision) {
+                                const ContactQuery& query, const DepthFieldLattice& lattice,
+                                double margin_m, std::uint32_t id, double smooth_max_m,
+                                DepthField& out) {
   out.prepared = false;
+  const double h = lattice.cell_m;
+  if (!(h > 0.0) || !std::isfinite(h) || query.environment == nullptr ||
+      !(query.window.extent_m > 0.0) || !IsFiniteRigidTransform(query.X_WO) ||
+      !IsFiniteRigidTransform(X_WT)) {
+    return false;
+  }
+  const glm::dvec3 u = lattice.axis_u_W, v = lattice.axis_v_W, n = lattice.normal_W;
+  const int m = std::max(0, static_cast<int>(std::ceil(std::max(margin_m, 0.0) / h - 1e-9)));
+  const int r = std::max(2, static_cast<int>(std::ceil(query.window.extent_m / h - 1e-9)));
+  const int side = r + 2 * m;
+  if (side > kMaxDepthFieldSide) return false;
+  // The environment's nodes: the lattice through the environment's origin, so that a node reads
+  // the same point of the environment in every field on this lattice. Node (0, 0) is the
+  // lattice point nearest where the window grown by the margin starts.
+  const glm::dvec3 p_O = query.X_WO.translation;
+  const glm::dvec3 c = query.window.center_W - p_O;
+  const double start = (-m + 0.5) - 0.5 * r;  // node (0, 0) from the centre (cells)
+  const double i_lo = std::floor(glm::dot(c, u) / h + start + 0.5);
+  const double j_lo = std::floor(glm::dot(c, v) / h + start + 0.5);
+  const glm::dvec3 F0 = p_O + i_lo * h * u + j_lo * h * v + glm::dot(c, n) * n;
   ContactWindow w = query.window;
-  const int s = std::clamp(subdivision, 1, 4);
-  w.resolution *= s;
-  const int m = std::max(0, margin_cells) * s;
-  const int side = w.resolution + 2 * m;
-  if (side > kMaxDepthFieldSide || query.environment == nullptr) return false;
-  const double h = w.cell_size_m();
+  w.axis_u_W = u;
+  w.axis_v_W = v;
+  w.normal_W = n;
+  w.resolution = r;
+  w.extent_m = r * h;
+  w.center_W = F0 - start * h * (u + v);
+  // The tool's nodes: the lattice through the tool's centre of mass, with the same axes.
+  const glm::dvec3 t = F0 - X_WT.translation;
+  const double du = NearestRemainder(-glm::dot(t, u), h);
+  const double dv = NearestRemainder(-glm::dot(t, v), h);
+  ContactWindow w_tool = w;
+  w_tool.center_W += du * u + dv * v;
   const std::size_t cells = static_cast<std::size_t>(side) * side;
   out.env_height_m.assign(cells, -std::numeric_limits<float>::infinity());
   out.tool_height_m.assign(cells, std::numeric_limits<float>::infinity());
@@ -31,23 +70,23 @@ bool DepthFieldRenderer::Render(const HapticModel& tool, const RigidTransform& X
                          query.environment_triangles.tree);
   RenderPatchHeightsFast(*query.environment, query.X_WO, env_triangles_, w, PatchSide::kEnvironment,
                          m, out.env_height_m);
-  SelectPatchTrianglesIn(query.tool_triangles, tool, X_WT, w, PatchSide::kTool, (m + 1) * h,
+  SelectPatchTrianglesIn(query.tool_triangles, tool, X_WT, w_tool, PatchSide::kTool, (m + 1) * h,
                          tool_triangles_, 0.0, nullptr, query.tool_triangles.tree);
-  RenderPatchHeightsFast(tool, X_WT, tool_triangles_, w, PatchSide::kTool, m, out.tool_height_m);
+  RenderPatchHeightsFast(tool, X_WT, tool_triangles_, w_tool, PatchSide::kTool, m,
+                         out.tool_height_m);
   for (float& b : out.env_height_m) {
     if (!std::isfinite(b)) b = std::numeric_limits<float>::quiet_NaN();
   }
   for (float& a : out.tool_height_m) {
     if (!std::isfinite(a)) a = std::numeric_limits<float>::quiet_NaN();
   }
-  // F: origin at the grown grid's node (0, 0), the centre of window cell (−m, −m).
-  const double offset = (-m + 0.5) * h - 0.5 * w.extent_m;
-  out.X_WF.translation = w.center_W + offset * w.axis_u_W + offset * w.axis_v_W;
-  out.X_WF.rotation =
-      glm::normalize(glm::quat_cast(glm::dmat3(w.axis_u_W, w.axis_v_W, w.normal_W)));
+  out.X_WF.translation = F0;
+  out.X_WF.rotation = glm::normalize(glm::quat_cast(glm::dmat3(u, v, n)));
   out.id = id;
   out.cell_m = h;
   out.nx = out.ny = side;
+  out.tool_offset_u_m = du;
+  out.tool_offset_v_m = dv;
   out.X_WT0 = X_WT;
   out.travel_margin_m = m * h;
   out.smooth_max_m = smooth_max_m;
@@ -57,27 +96,59 @@ bool DepthFieldRenderer::Render(const HapticModel& tool, const RigidTransform& X
 int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT,
                              const PipelineOptions& options, RemoteStepData& d) noexcept {
   d.num_fields = 0;
+  const double base_cell = options.window_extent_m / std::max(1, options.grid_resolution);
   for (int i = 0; i < d.last_num_queries; ++i) {
     ContactLinearization& lin = d.last_results[static_cast<std::size_t>(i)];
     lin.depth_field_id = 0;
     lin.depth_field_shift_m = 0.0;
     if (!std::isfinite(lin.depth_m)) continue;
     const ContactQuery& q = d.last_queries[static_cast<std::size_t>(i)];
-    const double h = q.window.cell_size_m();
-    if (!(h > 0.0)) continue;
-    const int want = static_cast<int>(std::ceil(options.depth_field_margin_m / h - 1e-9));
-    // The finest subdivision whose grid holds the window and the margin, else the coarsest with
-    // the margin cut to fit.
-    int sub = std::max(1, options.depth_field_subdivision);
-    while (sub > 1 && sub * (q.window.resolution + 2 * want) > kMaxDepthFieldSide) --sub;
-    const int room = (kMaxDepthFieldSide / sub - q.window.resolution) / 2;
-    if (room < 0) continue;
-    const int margin = std::min(room, want);
+    if (!(base_cell > 0.0) || q.environment == nullptr) continue;
+    // The finest cell (the window's divided by the subdivision) whose grid holds the window and
+    // the margin, else the window's own cell with the margin cut to fit.
+    int sub = std::clamp(options.depth_field_subdivision, 1, 4);
+    const auto side_at = [&](int s) {
+      const double h = base_cell / s;
+      return std::ceil(q.window.extent_m / h - 1e-9) +
+             2.0 * std::ceil(options.depth_field_margin_m / h - 1e-9);
+    };
+    while (sub > 1 && side_at(sub) > kMaxDepthFieldSide) --sub;
+    const double h = base_cell / sub;
+    const double room =
+        0.5 * (kMaxDepthFieldSide - std::max(2.0, std::ceil(q.window.extent_m / h - 1e-9))) * h;
+    if (room < 0.0) continue;
+    const double margin = std::min(room, options.depth_field_margin_m);
+    // The lattice: one the environment already has for this direction and cell, else the
+    // window's axes, kept in the environment's frame.
+    const glm::dmat3 R_WO = glm::mat3_cast(q.X_WO.rotation);
+    const glm::dmat3 R_OW = glm::transpose(R_WO);
+    const glm::dvec3 n_O = R_OW * q.window.normal_W;
+    RemoteStepData::FieldLattice* lattice = nullptr;
+    for (RemoteStepData::FieldLattice& e : d.field_lattices) {
+      if (e.environment == q.environment && e.cell_m == h &&
+          glm::dot(e.normal_O, n_O) >= std::cos(kLatticeTurnRad)) {
+        lattice = &e;
+        break;
+      }
+    }
+    if (lattice == nullptr) {
+      lattice = &*std::min_element(
+          d.field_lattices.begin(), d.field_lattices.end(),
+          [](const auto& a, const auto& b) noexcept { return a.last_used < b.last_used; });
+      lattice->environment = q.environment;
+      lattice->cell_m = h;
+      lattice->normal_O = n_O;
+      lattice->axis_u_O = R_OW * q.window.axis_u_W;
+      lattice->axis_v_O = R_OW * q.window.axis_v_W;
+    }
+    lattice->last_used = ++d.field_lattice_clock;
+    const DepthFieldLattice L{R_WO * lattice->axis_u_O, R_WO * lattice->axis_v_O,
+                              R_WO * lattice->normal_O, h};
     DepthField& f = d.fields[static_cast<std::size_t>(d.num_fields)];
     bool ok = false;
     try {
-      ok = d.field_renderer.Render(tool, X_WT, q, margin, d.last_field_id + 1,
-                                   options.depth_field_smooth_max_m, f, sub);
+      ok = d.field_renderer.Render(tool, X_WT, q, L, margin, d.last_field_id + 1,
+                                   options.depth_field_smooth_max_m, f);
     } catch (...) {  // std::bad_alloc beyond the reserve
       ok = false;
     }
