@@ -23,7 +23,8 @@ PACKAGES=(
   libqhull-dev libembree-dev
   # FCL: the reference the coarse contact query is checked and benchmarked against
   libfcl-dev
-  # meshoptimizer and zlib: what the scene stream's Draco is compared with
+  # zlib: the depth maps' deflate (codecs); meshoptimizer: what the scene stream's Draco is
+  # compared with
   libmeshoptimizer-dev zlib1g-dev
   # tests and benchmarks; clang's libFuzzer for the datagram fuzz target; iproute2 for the
   # network-namespace split test

@@ -1,7 +1,7 @@
 // Tests of codecs/draco_mesh_codec: round trip of a procedural mesh against the quantization bound
 // and the surface area, texture coordinates that stay attached to their vertices, rejection of bad
 // input on both sides, and decoding of Draco's own test files (../shared/data/draco, located
-// through HT_SHARED_DATA).
+// through HT_SHARED_DATA); and codecs/depth_map_codec: its bound, its holes, its refusals.
 
 #include <gtest/gtest.h>
 
@@ -31,6 +31,7 @@
 #include <vector>
 
 #include "codecs/draco_mesh_codec.h"
+#include "codecs/depth_map_codec.h"
 #include "haptic_core/demo/procedural_models.h"
 #include "haptic_core/haptic_model.h"
 
@@ -779,6 +780,132 @@ TEST_F(DracoFilesTest, CubeTextureCoordinatesMatchTheObjCorners) {
       }
       EXPECT_TRUE(found) << name << ": a decoded triangle matches no face of the OBJ";
     }
+  }
+}
+
+// ---- The depth-map stream (codecs/depth_map_codec.h).
+
+/// A rough map: ridges, a fine texture and a hole with a ragged edge (NaN), heights in m.
+std::vector<float> RoughDepthMap(int nx, int ny) {
+  std::vector<float> h(static_cast<std::size_t>(nx) * ny);
+  for (int j = 0; j < ny; ++j) {
+    for (int i = 0; i < nx; ++i) {
+      const double x = i * 0.2e-3, y = j * 0.2e-3;
+      const bool hole = std::hypot(x - 6e-3, y - 4e-3) < 2e-3 + 0.3e-3 * std::sin(9.0 * x);
+      h[static_cast<std::size_t>(j) * nx + i] =
+          hole ? std::nanf("")
+               : static_cast<float>(1.3e-3 * std::abs(std::sin(x / 1.5e-3)) +
+                                    40e-6 * std::sin(x / 0.31e-3) * std::cos(y / 0.47e-3) -
+                                    2e-3);
+    }
+  }
+  return h;
+}
+
+TEST(DepthMapCodec, RoundTripKeepsEveryHeightWithinHalfAStepAndEveryHoleWhereItWas) {
+  const int nx = 97, ny = 61;  // not multiples of 8: the bitmap's last byte is partial
+  const std::vector<float> h = RoughDepthMap(nx, ny);
+  for (const double step : {0.25e-6, 2e-6}) {
+    const std::vector<std::uint8_t> bytes = EncodeDepthMap(h, nx, ny, {step, 6});
+    DecodedDepthMap d;
+    std::string error;
+    ASSERT_TRUE(DecodeDepthMap(bytes, 256, d, error)) << error;
+    ASSERT_EQ(d.nx, nx);
+    ASSERT_EQ(d.ny, ny);
+    EXPECT_NEAR(d.step_m, step, 1e-6 * step);
+    double worst = 0.0;
+    for (std::size_t k = 0; k < h.size(); ++k) {
+      ASSERT_EQ(std::isnan(h[k]), std::isnan(d.heights_m[k])) << k;
+      if (!std::isnan(h[k])) worst = std::max(worst, std::abs(double(h[k]) - d.heights_m[k]));
+    }
+    EXPECT_LE(worst, 0.5 * step + 6e-8 * 3.3e-3) << step;
+    EXPECT_GE(worst, 0.25 * step) << "the quantization is as coarse as the step";
+  }
+}
+
+TEST(DepthMapCodec, ARangeBeyondSixtyFiveThousandStepsWidensTheStepToFit) {
+  const int n = 40;
+  std::vector<float> h(static_cast<std::size_t>(n) * n);
+  for (int k = 0; k < n * n; ++k) h[static_cast<std::size_t>(k)] = static_cast<float>(k * 1e-4);
+  const std::vector<std::uint8_t> bytes = EncodeDepthMap(h, n, n, {0.25e-6, 6});
+  DecodedDepthMap d;
+  std::string error;
+  ASSERT_TRUE(DecodeDepthMap(bytes, n, d, error)) << error;
+  const double q = (n * n - 1) * 1e-4 / 65534;
+  EXPECT_NEAR(d.step_m, q, 1e-6 * q);
+  for (std::size_t k = 0; k < h.size(); ++k) {
+    EXPECT_LE(std::abs(double(h[k]) - d.heights_m[k]), 0.5 * q + 6e-8 * 0.16) << k;
+  }
+}
+
+TEST(DepthMapCodec, APlaneCostsAlmostNothingAndAnEmptyMapDecodesEmpty) {
+  // A tilted plane: the prediction left + up − up-left is exact, so the residuals are rounding.
+  const int n = 128;
+  std::vector<float> plane(static_cast<std::size_t>(n) * n);
+  for (int j = 0; j < n; ++j) {
+    for (int i = 0; i < n; ++i) plane[static_cast<std::size_t>(j) * n + i] = float(i * 3e-6 + j * 7e-6);
+  }
+  const std::vector<std::uint8_t> bytes = EncodeDepthMap(plane, n, n);
+  EXPECT_LT(bytes.size(), plane.size() * 2 / 50) << "at most 2 % of 16 bits a node";
+  const std::vector<float> empty(25, std::nanf(""));
+  DecodedDepthMap d;
+  std::string error;
+  ASSERT_TRUE(DecodeDepthMap(EncodeDepthMap(empty, 5, 5), 8, d, error)) << error;
+  EXPECT_EQ(std::count_if(d.heights_m.begin(), d.heights_m.end(), [](float x) { return std::isnan(x); }), 25);
+}
+
+TEST(DepthMapCodec, EncoderRefusesWhatItCannotCarry) {
+  const std::vector<float> h(16, 0.0f);
+  EXPECT_THROW(EncodeDepthMap(h, 4, 5), std::invalid_argument);
+  EXPECT_THROW(EncodeDepthMap(h, 0, 16), std::invalid_argument);
+  std::vector<float> inf = h;
+  inf[3] = std::numeric_limits<float>::infinity();
+  EXPECT_THROW(EncodeDepthMap(inf, 4, 4), std::invalid_argument);
+  EXPECT_THROW(EncodeDepthMap(h, 4, 4, {0.0, 6}), std::invalid_argument);
+  EXPECT_THROW(EncodeDepthMap(h, 4, 4, {1e-6, 0}), std::invalid_argument);
+}
+
+TEST(DepthMapCodec, DecoderRejectsEveryDamagedStreamWithAReasonAndNeverCrashes) {
+  const int nx = 40, ny = 33;
+  const std::vector<std::uint8_t> good = EncodeDepthMap(RoughDepthMap(nx, ny), nx, ny);
+  DecodedDepthMap d;
+  std::string error;
+  ASSERT_TRUE(DecodeDepthMap(good, 64, d, error));
+  const auto rejects = [&](std::vector<std::uint8_t> bytes, int max_side, const char* what) {
+    error.clear();
+    EXPECT_FALSE(DecodeDepthMap(bytes, max_side, d, error)) << what;
+    EXPECT_FALSE(error.empty()) << what;
+  };
+  rejects({good.begin(), good.begin() + 10}, 64, "shorter than the header");
+  rejects({good.begin(), good.end() - 3}, 64, "the zlib stream cut");
+  std::vector<std::uint8_t> b = good;
+  b[0] = 2;
+  rejects(b, 64, "another format");
+  rejects(good, 39, "a side beyond the receiver's limit");
+  b = good;
+  b[13] = 0xFF;
+  b[14] = 0xFF;
+  rejects(b, 64, "more present nodes than nodes");
+  b = good;
+  b[13] ^= 1;
+  rejects(b, 64, "a count the bitmap disagrees with (or the stream's length)");
+  b = good;
+  b.push_back(0);
+  rejects(b, 64, "bytes after the stream");
+  b = good;
+  b[5] = b[6] = b[7] = 0;
+  b[8] = 0x80;  // −0.0: not a positive step
+  rejects(b, 64, "a step of zero");
+  // Every single-byte change and every cut: decoded or refused, never a crash (ASan/UBSan in
+  // the sanitizer build).
+  std::mt19937 rng(7);
+  for (std::size_t k = 0; k < good.size(); ++k) {
+    b = good;
+    b[k] = static_cast<std::uint8_t>(b[k] ^ (1u + rng() % 255u));
+    if (DecodeDepthMap(b, 64, d, error)) {
+      EXPECT_EQ(d.heights_m.size(), static_cast<std::size_t>(d.nx) * d.ny);
+    }
+    DecodeDepthMap({good.data(), k}, 64, d, error);
   }
 }
 
