@@ -242,6 +242,9 @@ int main(int argc, char** argv) {
                                 static_cast<double>(std::max<std::int64_t>(1, ref.tool_states)))},
             {"models_per_s", static_cast<double>(r.models) / d},
             {"model_kbit_s", static_cast<double>(r.model_bytes) * 8e-3 / d},
+            {"fields_per_s", static_cast<double>(r.fields_sent) / d},
+            {"field_kbit_s", static_cast<double>(r.field_bytes) * 8e-3 / d},
+            {"field_cached_kbit_s", static_cast<double>(r.field_cached_bytes) * 8e-3 / d},
             {"model_reduction_pct",
              100.0 * (1.0 - static_cast<double>(r.models) /
                                 static_cast<double>(std::max<std::int64_t>(1, ref.models)))},
@@ -312,6 +315,11 @@ int main(int argc, char** argv) {
             name.c_str(), cell("field_ticks_pct", "%.1f").c_str(),
             cell("field_beyond_margin_ticks_pct", "%.1f").c_str(),
             cell("field_fallback_ticks_pct", "%.1f").c_str());
+        std::printf(
+            "|   %s: depth fields %s /s, %s kbit/s whole; new surface (to a receiver that "
+            "caches it by lattice node) %s kbit/s |\n",
+            name.c_str(), cell("fields_per_s", "%.0f").c_str(),
+            cell("field_kbit_s", "%.0f").c_str(), cell("field_cached_kbit_s", "%.1f").c_str());
       }
       std::printf("|   %s: operator tick p50 %s us, p99 %s us |\n", name.c_str(),
                   cell("tick_p50_us", "%.1f").c_str(), cell("tick_p99_us", "%.1f").c_str());

@@ -17,8 +17,10 @@
 #include <random>
 #include <sstream>
 #include <string>
+#include <unordered_set>
 #include <vector>
 
+#include "codecs/depth_map_codec.h"
 #include "haptic_core/demo/demo_scenes.h"
 #include "haptic_core/penetration_depth_backend.h"
 #include "haptic_core/remote_step.h"
@@ -71,6 +73,9 @@ double NonNegative(const std::string& key, double v) {
 /// The tool's reach (m) by which a turn moves its surface, for the fields' resend rule (the
 /// fig75 block's half diagonal, about 3 cm).
 constexpr double kFieldToolRadiusM = 0.03;
+/// A depth field's bytes beside its maps: its ids, lattice coordinates, frames X_WF and X_WT0,
+/// cell, sides, offsets, margin and width (164), and a datagram's header and MAC (34).
+constexpr std::int64_t kFieldHeaderBytes = 198;
 
 /// A message in flight: it arrives at `arrive_ns`.
 template <typename T>
@@ -261,6 +266,8 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
   std::deque<std::vector<DepthField>> fields_to_operator;
   std::vector<DepthField> arrived_fields;
   std::vector<DepthField*> arrived_field_ptrs;
+  DecodedDepthMap decoded_map;
+  std::unordered_set<std::uint64_t> nodes_sent;  // (lattice, map, i, j) the operator has had
   SentToolState remote;              // the newest tool state the remote node holds
   std::int64_t remote_recv_ns = -1;  // when it arrived (< 0: none yet)
   ContactModel held_model{};         // the newest model the operator received (its deadband's)
@@ -394,9 +401,44 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     ArrivedModel a;
     a.model = decoded.model;
     // The depth fields travel beside the model here (not yet on the wire): the contacts keep
-    // their fields' ids through the encoding, in order.
+    // their fields' ids through the encoding, in order. Their maps go through the depth-map
+    // codec (the operator evaluates the decoded heights), and their bytes are counted twice:
+    // whole, and the surface a receiver that caches it by lattice node would still lack (the
+    // nodes of each lattice it has not had yet, at this field's bytes per node; no header).
     std::vector<DepthField> fields(pipeline.last_depth_fields().begin(),
                                    pipeline.last_depth_fields().end());
+    for (DepthField& f : fields) {
+      std::int64_t bytes = kFieldHeaderBytes, present = 0, fresh = 0;
+      for (const bool tool_map : {false, true}) {
+        std::vector<float>& map = tool_map ? f.tool_height_m : f.env_height_m;
+        const std::vector<std::uint8_t> encoded = EncodeDepthMap(map, f.nx, f.ny);
+        bytes += static_cast<std::int64_t>(encoded.size());
+        std::string error;
+        if (!DecodeDepthMap(encoded, kMaxDepthFieldSide, decoded_map, error)) {
+          throw std::runtime_error("a depth map did not decode: " + error);
+        }
+        map.swap(decoded_map.heights_m);
+        const std::int32_t i0 = tool_map ? f.tool_lattice_i0 : f.lattice_i0;
+        const std::int32_t j0 = tool_map ? f.tool_lattice_j0 : f.lattice_j0;
+        for (int j = 0; j < f.ny; ++j) {
+          for (int i = 0; i < f.nx; ++i) {
+            if (std::isnan(map[static_cast<std::size_t>(j) * f.nx + i])) continue;
+            ++present;
+            const std::uint64_t node =
+                (static_cast<std::uint64_t>(f.lattice_id) << 41) |
+                (static_cast<std::uint64_t>(tool_map) << 40) |
+                (static_cast<std::uint64_t>(static_cast<std::uint32_t>(i0 + i) & 0xFFFFFu) << 20) |
+                (static_cast<std::uint64_t>(static_cast<std::uint32_t>(j0 + j) & 0xFFFFFu));
+            if (nodes_sent.insert(node).second) ++fresh;
+          }
+        }
+      }
+      f.Prepare();
+      run.field_bytes += bytes;
+      run.field_cached_bytes +=
+          present > 0 ? (bytes - kFieldHeaderBytes) * fresh / present : std::int64_t{0};
+      ++run.fields_sent;
+    }
     if (a.model.num_contacts != message.model.num_contacts) {
       throw std::runtime_error("the compact encoding changed the contact count (tick " +
                                std::to_string(k) + ")");

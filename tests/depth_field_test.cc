@@ -421,6 +421,27 @@ TEST(DepthField, FieldsOnOneLatticeFromOtherWindowsAndToolPosesAgreeWhereBothHol
   ASSERT_TRUE(renderer.Render(tool, X_WT1, q1, lattice, 2e-3, 2, kDepthFieldSmoothMaxM, f1));
   // Offsets within ±h/2 that put the tool's nodes on its own lattice: different for the two.
   EXPECT_GT(std::abs(f0.tool_offset_u_m - f1.tool_offset_u_m), 1e-6);
+  // The maps' places on the lattices: the environment's grids start where their frames say, and
+  // a tool node of one field is the node with the same tool-lattice coordinates in the other
+  // (its height 2 µm higher, as the tool rose).
+  const glm::dvec3 shift = (f1.X_WF.translation - f0.X_WF.translation) / h;
+  EXPECT_NEAR(f1.lattice_i0 - f0.lattice_i0, shift.x, 1e-6);
+  EXPECT_NEAR(f1.lattice_j0 - f0.lattice_j0, shift.y, 1e-6);
+  int matched = 0;
+  for (int j = 0; j < f1.ny; ++j) {
+    for (int i = 0; i < f1.nx; ++i) {
+      const int i0 = i + f1.tool_lattice_i0 - f0.tool_lattice_i0;
+      const int j0 = j + f1.tool_lattice_j0 - f0.tool_lattice_j0;
+      if (i0 < 0 || j0 < 0 || i0 >= f0.nx || j0 >= f0.ny) continue;
+      const float a0 = f0.tool_height_m[static_cast<std::size_t>(j0 * f0.nx + i0)];
+      const float a1 = f1.tool_height_m[static_cast<std::size_t>(j * f1.nx + i)];
+      ASSERT_EQ(std::isnan(a0), std::isnan(a1)) << i << " " << j;
+      if (std::isnan(a0)) continue;
+      EXPECT_NEAR(a1 - a0, 2e-6, 1e-9);
+      ++matched;
+    }
+  }
+  EXPECT_GT(matched, 3000);
   for (const Twist dq : {Twist{}, Twist{{0.1e-3, 0.05e-3, 0.0}, {}},
                          Twist{{0.17e-3, 0.02e-3, -3e-6}, {0.5e-3, -0.3e-3, 0.0}}}) {
     const RigidTransform X_WT = Displace(X_WT1, dq);

@@ -58,6 +58,11 @@ struct DepthField {
   std::vector<float> tool_height_m;  ///< a at X_WT0, #nx·ny, row-major j·nx + i (m).
   /// The tool nodes' offset from the environment's along x_F and y_F (m, |offset| ≤ h).
   double tool_offset_u_m = 0.0, tool_offset_v_m = 0.0;
+  /// Where the maps lie on their lattices (DepthFieldLattice; what a receiver caches surface
+  /// by): the lattice's id (0: none), and node (0, 0)'s whole-cell coordinates along u and v on
+  /// the environment's lattice and on the tool's.
+  std::uint32_t lattice_id = 0;
+  std::int32_t lattice_i0 = 0, lattice_j0 = 0, tool_lattice_i0 = 0, tool_lattice_j0 = 0;
   RigidTransform X_WT0;              ///< The tool pose a was rendered at (T at the tool's CoM).
   /// How far (m) the tool's surface may move in F's plane from where it was at X_WT0 before the
   /// field may miss part of the overlap: the margin by which the grid exceeds the window on each
@@ -144,6 +149,7 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& field,
 struct DepthFieldLattice {
   glm::dvec3 axis_u_W{1.0, 0.0, 0.0}, axis_v_W{0.0, 1.0, 0.0}, normal_W{0.0, 0.0, 1.0};
   double cell_m = 0.0;
+  std::uint32_t id = 0;  ///< the caller's name for it (DepthField::lattice_id)
 };
 
 /// Renders a contact's depth field on the remote node (the texture stage's CPU raster,

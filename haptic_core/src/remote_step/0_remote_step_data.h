@@ -151,9 +151,11 @@ struct RemoteStepData {
     glm::dvec3 axis_u_O{1.0, 0.0, 0.0}, axis_v_O{0.0, 1.0, 0.0}, normal_O{0.0, 0.0, 1.0};
     double cell_m = 0.0;
     std::uint64_t last_used = 0;
+    std::uint32_t id = 0;
   };
   std::array<FieldLattice, 2 * kMaxContacts> field_lattices{};
   std::uint64_t field_lattice_clock = 0;
+  std::uint32_t last_lattice_id = 0;
 
   /// What the stages counted (HapticTexturePipeline::step_faults()).
   HapticTexturePipeline::StepFaults step_faults;

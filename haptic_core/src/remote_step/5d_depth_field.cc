@@ -87,6 +87,11 @@ bool DepthFieldRenderer::Render(const HapticModel& tool, const RigidTransform& X
   out.nx = out.ny = side;
   out.tool_offset_u_m = du;
   out.tool_offset_v_m = dv;
+  out.lattice_id = lattice.id;
+  out.lattice_i0 = static_cast<std::int32_t>(i_lo);
+  out.lattice_j0 = static_cast<std::int32_t>(j_lo);
+  out.tool_lattice_i0 = static_cast<std::int32_t>(-std::round(-glm::dot(t, u) / h));
+  out.tool_lattice_j0 = static_cast<std::int32_t>(-std::round(-glm::dot(t, v) / h));
   out.X_WT0 = X_WT;
   out.travel_margin_m = m * h;
   out.smooth_max_m = smooth_max_m;
@@ -140,10 +145,11 @@ int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT
       lattice->normal_O = n_O;
       lattice->axis_u_O = R_OW * q.window.axis_u_W;
       lattice->axis_v_O = R_OW * q.window.axis_v_W;
+      lattice->id = ++d.last_lattice_id;
     }
     lattice->last_used = ++d.field_lattice_clock;
     const DepthFieldLattice L{R_WO * lattice->axis_u_O, R_WO * lattice->axis_v_O,
-                              R_WO * lattice->normal_O, h};
+                              R_WO * lattice->normal_O, h, lattice->id};
     DepthField& f = d.fields[static_cast<std::size_t>(d.num_fields)];
     bool ok = false;
     try {
