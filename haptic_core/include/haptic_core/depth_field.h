@@ -37,10 +37,12 @@ inline constexpr int kMaxDepthFieldSide = 256;
 /// (i·h, j·h, 0) in F and tool node (i, j) at (i·h + tool_offset_u_m, j·h + tool_offset_v_m)
 /// at X_WT0, h = cell_m (DepthFieldRenderer puts both on lattices fixed in their objects' frames).
 ///  - env_height_m[j·nx + i] = b: the height along z_F of the environment's surface facing +n
-///    under the node (m; its largest over the node's cell, as the texture stage renders it), NaN
-///    where the environment has no surface there. b is fixed in the environment's frame.
+///    at the node (m; sampled at the node, the topmost where several surfaces lie over it, with
+///    the texture's mip level at the cell, as the texture stage renders it), NaN where the
+///    environment has no surface there. b is fixed in the environment's frame.
 ///  - tool_height_m[j·nx + i] = a: the height along z_F of the tool's surface facing −n under
-///    tool node (i, j) at the pose X_WT0 (m; its smallest), NaN where none. The tool's nodes are
+///    tool node (i, j) at the pose X_WT0 (m; the lowest where several lie over it), NaN where
+///    none. The tool's nodes are
 ///    points of the tool p_F(i, j) = (i·h + tool_offset_u_m, j·h + tool_offset_v_m, a) at
 ///    X_WT0, which move rigidly with the tool.
 /// At a tool pose X_WT each tool node j moves to s_j = X_FW·X_WT·X_WT0⁻¹·X_WF·p_F(j) and reads the
