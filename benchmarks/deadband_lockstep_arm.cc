@@ -70,9 +70,6 @@ double NonNegative(const std::string& key, double v) {
 /// field_subdivision, field_speed_mm_s (the contact model as depth fields). Defaults:
 /// master_station's and slave_sim's, deadband 10 %.
 
-/// The tool's reach (m) by which a turn moves its surface, for the fields' resend rule (the
-/// fig75 block's half diagonal, about 3 cm).
-constexpr double kFieldToolRadiusM = 0.03;
 /// A depth field's bytes beside its maps: its ids, lattice coordinates, frames X_WF and X_WT0,
 /// cell, sides, offsets, margin and width (164), and a datagram's header and MAC (34).
 constexpr std::int64_t kFieldHeaderBytes = 198;
@@ -268,6 +265,7 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
   std::vector<DepthField*> arrived_field_ptrs;
   DecodedDepthMap decoded_map;
   std::unordered_set<std::uint64_t> nodes_sent;  // (lattice, map, i, j) the operator has had
+  std::unordered_set<std::uint32_t> fields_delivered;  // ids sent with a model that arrives
   SentToolState remote;              // the newest tool state the remote node holds
   std::int64_t remote_recv_ns = -1;  // when it arrived (< 0: none yet)
   ContactModel held_model{};         // the newest model the operator received (its deadband's)
@@ -363,14 +361,22 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     wire::ContactModelMessage message;
     message.model = pipeline.Step(X_WT, remote.seq, timings, remote.message.V_WT_W);
     const std::int64_t sent_ns = t_r + step_ns;
-    // With depth fields, a model whose tool pose has travelled half its fields' margin from the
-    // one the operator holds is sent whatever its force (the held fields would soon no longer
-    // hold the tool): the deadband forgets its held model, so that it sends this one.
-    if (options.depth_fields && model_deadband.held().num_contacts > 0) {
-      const Twist travel = PoseDifference(message.model.X_WT0, model_deadband.held().X_WT0);
-      if (glm::length(travel.linear) + glm::length(travel.angular) * kFieldToolRadiusM >
-          0.5 * options.depth_field_margin_m) {
-        model_deadband.ForgetHeld();
+    // With depth fields, a model that refers to a field the held model does not (the remote
+    // step rendered it because the held ones no longer hold the tool: stage 5d keeps a field
+    // while the tool is within half its margin) is sent whatever its force: the deadband
+    // forgets its held model, so that it sends this one.
+    if (options.depth_fields) {
+      const ContactModel& held = model_deadband.held();
+      for (int c = 0; c < message.model.num_contacts; ++c) {
+        const std::uint32_t id = message.model.contacts[static_cast<std::size_t>(c)].depth_field_id;
+        bool held_has = id == 0;
+        for (int e = 0; e < held.num_contacts && !held_has; ++e) {
+          held_has = held.contacts[static_cast<std::size_t>(e)].depth_field_id == id;
+        }
+        if (!held_has) {
+          model_deadband.ForgetHeld();
+          break;
+        }
       }
     }
     const DeadbandReason model_why = model_deadband.Decide(message.model, sent_ns);
@@ -401,12 +407,17 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     ArrivedModel a;
     a.model = decoded.model;
     // The depth fields travel beside the model here (not yet on the wire): the contacts keep
-    // their fields' ids through the encoding, in order. Their maps go through the depth-map
-    // codec (the operator evaluates the decoded heights), and their bytes are counted twice:
-    // whole, and the surface a receiver that caches it by lattice node would still lack (the
-    // nodes of each lattice it has not had yet, at this field's bytes per node; no header).
-    std::vector<DepthField> fields(pipeline.last_depth_fields().begin(),
-                                   pipeline.last_depth_fields().end());
+    // their fields' ids through the encoding, in order. A field goes with the first model that
+    // refers to it and arrives (a repaired stream's delivery at the model's latency); a field
+    // kept from an earlier step is referred to by its id alone. Its maps go through the
+    // depth-map codec (the operator evaluates the decoded heights), and its bytes are counted
+    // twice: whole, and the surface a receiver that caches it by lattice node would still lack
+    // (the nodes of each lattice it has not had yet, at this field's bytes per node; no header).
+    const bool lost = uniform(loss_to_operator) < setup.loss;
+    std::vector<DepthField> fields;
+    for (const DepthField* f : pipeline.last_depth_fields()) {
+      if (!lost && fields_delivered.insert(f->id).second) fields.push_back(*f);
+    }
     for (DepthField& f : fields) {
       std::int64_t bytes = kFieldHeaderBytes, present = 0, fresh = 0;
       for (const bool tool_map : {false, true}) {
@@ -452,7 +463,7 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     a.collision_us = static_cast<float>(timings.collision_us);
     a.texture_us = static_cast<float>(timings.texture_us);
     a.step_us = static_cast<float>(timings.total_us);
-    if (uniform(loss_to_operator) >= setup.loss) {
+    if (!lost) {
       to_operator.push_back({arrive_ns, a});
       fields_to_operator.push_back(std::move(fields));
     }

@@ -78,7 +78,7 @@ int main(int argc, char** argv) {
   DepthField scratch;
   scratch.Reserve();
   const ContactQuery query = pipeline.last_contact_queries()[0];
-  const DepthField& first = pipeline.last_depth_fields()[0];
+  const DepthField& first = *pipeline.last_depth_fields()[0];
   const glm::dmat3 R_WF = glm::mat3_cast(first.X_WF.rotation);
   const DepthFieldLattice lattice{R_WF[0], R_WF[1], R_WF[2], first.cell_m};
   for (int k = 0; k < 200; ++k) {
@@ -87,7 +87,7 @@ int main(int argc, char** argv) {
                     kDepthFieldSmoothMaxM, scratch);
     field_us.push_back(std::chrono::duration<double, std::micro>(Clock::now() - t0).count());
   }
-  const DepthField& field = pipeline.last_depth_fields()[0];
+  const DepthField& field = *pipeline.last_depth_fields()[0];
   std::printf("fields %zu, first: %d x %d nodes, cell %.3f mm, margin %.2f mm\n",
               pipeline.last_depth_fields().size(), field.nx, field.ny, field.cell_m * 1e3,
               field.travel_margin_m * 1e3);
@@ -105,8 +105,8 @@ int main(int argc, char** argv) {
     const auto t0 = Clock::now();
     double sum = 0.0;
     int n = 0, t = 0;
-    for (const DepthField& f : pipeline.last_depth_fields()) {
-      const DepthFieldEvaluation e = DepthFieldDepthAt(f, X);
+    for (const DepthField* f : pipeline.last_depth_fields()) {
+      const DepthFieldEvaluation e = DepthFieldDepthAt(*f, X);
       sum += e.depth_m;
       n += e.nodes_evaluated;
       t += e.nodes_tested;

@@ -134,12 +134,13 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
     p.timings = timings;
     p.F = model.F_T_W_at_q0;
     if (options.depth_fields) {
-      const auto fields = pipeline.last_depth_fields();
-      take_fields({fields.begin(), fields.end()});
+      std::vector<DepthField> fields;
+      for (const DepthField* f : pipeline.last_depth_fields()) fields.push_back(*f);
+      take_fields(fields);
       p.F = EvaluateContactModel(model, poses_WFt[k] * X_FtT, 1.0,
                                  std::numeric_limits<double>::infinity(), &field_cache)
                 .F_T_W;
-      if (k % stride == 0) kept_fields[k].assign(fields.begin(), fields.end());
+      if (k % stride == 0) kept_fields[k] = std::move(fields);
     }
     for (int c = 0; c < model.num_contacts; ++c) p.contacts += model.contacts[c].depth_m > 0.0;
     run.poses.push_back(p);

@@ -425,9 +425,10 @@ class HapticTexturePipeline {
     options_.depth_field_margin_m = std::isfinite(margin_m) && margin_m > 0.0 ? margin_m : 0.0;
   }
   /// The depth fields of the last Step()'s model (PipelineOptions::depth_fields), the field of
-  /// each contact that refers to one (ContactLinearization::depth_field_id). Valid until the
-  /// next Step().
-  std::span<const DepthField> last_depth_fields() const noexcept;
+  /// each contact that refers to one (ContactLinearization::depth_field_id): rendered at this
+  /// step, or kept from an earlier one (the same id and bits) while it still holds the contact.
+  /// A sender sends only the ids its receiver lacks. Valid until the next Step().
+  std::span<const DepthField* const> last_depth_fields() const noexcept;
   /// The floor the next Step() uses (m).
   double speculative_floor_m() const noexcept { return options_.speculative_floor_m; }
   /// Stage 5b's seeds from the last step (DepthRefinementOptions::seed_from_last_step) forgotten:

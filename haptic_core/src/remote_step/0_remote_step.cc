@@ -504,7 +504,7 @@ std::span<const ContactLinearization> HapticTexturePipeline::last_linearizations
   return {data_->last_results.data(), static_cast<std::size_t>(data_->last_num_queries)};
 }
 
-std::span<const DepthField> HapticTexturePipeline::last_depth_fields() const noexcept {
+std::span<const DepthField* const> HapticTexturePipeline::last_depth_fields() const noexcept {
   return {data_->fields.data(), static_cast<std::size_t>(data_->num_fields)};
 }
 
@@ -521,7 +521,10 @@ void HapticTexturePipeline::SetTranslationPatch(bool on) noexcept {
   data_->refiner.SetTranslationPatch(on);
 }
 
-void HapticTexturePipeline::ForgetLastStep() noexcept { data_->refiner.ForgetLastStep(); }
+void HapticTexturePipeline::ForgetLastStep() noexcept {
+  data_->refiner.ForgetLastStep();
+  for (DepthField& f : data_->field_pool) f.prepared = false;  // none reused
+}
 
 bool HapticTexturePipeline::translation_patch() const noexcept {
   return options_.refine_depth && data_->refiner.options().translation_patch;

@@ -72,7 +72,7 @@ RemoteStepData::RemoteStepData(const HapticScene& scene, const PipelineOptions& 
     queries.back().SetThreads(options.texture_threads);
   }
   if (options.depth_fields) {
-    for (DepthField& f : fields) {
+    for (DepthField& f : field_pool) {
       f.Reserve();
       // Prepare's scratch, which the operator's copies never need.
       f.row_coefficients_m.reserve(4 * static_cast<std::size_t>(kMaxDepthFieldSide) *

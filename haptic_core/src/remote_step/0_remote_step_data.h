@@ -137,9 +137,15 @@ struct RemoteStepData {
   std::vector<std::uint8_t> sharing_occupancy;
 
   // ---- Stage 5d (depth_fields).
-  /// Its renderer, the fields of the last model (the first num_fields), and the last id given.
+  /// Its renderer; the fields it keeps (rendered at earlier steps, reused while they hold the
+  /// tool), the step each was last referred to at, and the step count; the fields of the last
+  /// model (the first num_fields, one per contact that has one); and the last id given.
   DepthFieldRenderer field_renderer;
-  std::array<DepthField, kMaxContacts> fields{};
+  static constexpr int kFieldPoolSize = 2 * kMaxContacts;
+  std::array<DepthField, kFieldPoolSize> field_pool{};
+  std::array<std::uint64_t, kFieldPoolSize> field_used_at{};
+  std::uint64_t field_step = 0;
+  std::array<const DepthField*, kMaxContacts> fields{};
   int num_fields = 0;
   std::uint32_t last_field_id = 0;
   /// The lattices the fields are sampled on, each fixed in its environment's frame (axes and
@@ -161,11 +167,14 @@ struct RemoteStepData {
   HapticTexturePipeline::StepFaults step_faults;
 };
 
-/// Stage 5d (PipelineOptions::depth_fields): renders the depth field of each of the data's
-/// last_queries[0, last_num_queries) whose linearization is finite into d.fields (ids counting on
-/// from d.last_field_id) and sets the linearization's depth_field_id. A contact whose field
-/// cannot be made keeps id 0 (its linearization alone). Returns d.num_fields. Never allocates
-/// within the data's reserve.
+/// Stage 5d (PipelineOptions::depth_fields): gives each of the data's last_queries[0,
+/// last_num_queries) whose linearization is finite a depth field and sets the linearization's
+/// depth_field_id: a kept field on the query's lattice that no other contact of this step took,
+/// whose grid holds the window grown by half the travel margin and whose tool pose the tool has
+/// moved at most half the travel margin from (DepthFieldEvaluation::within_margin's measure),
+/// else a new render into the least recently used slot (ids counting on from d.last_field_id).
+/// A contact whose field cannot be made keeps id 0 (its linearization alone). d.fields lists the
+/// step's fields. Returns d.num_fields. Never allocates within the data's reserve.
 int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT,
                              const PipelineOptions& options, RemoteStepData& d) noexcept;
 

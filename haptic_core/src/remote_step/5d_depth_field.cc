@@ -101,6 +101,7 @@ bool DepthFieldRenderer::Render(const HapticModel& tool, const RigidTransform& X
 int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT,
                              const PipelineOptions& options, RemoteStepData& d) noexcept {
   d.num_fields = 0;
+  const std::uint64_t step = ++d.field_step;
   const double base_cell = options.window_extent_m / std::max(1, options.grid_resolution);
   for (int i = 0; i < d.last_num_queries; ++i) {
     ContactLinearization& lin = d.last_results[static_cast<std::size_t>(i)];
@@ -148,21 +149,62 @@ int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT
       lattice->id = ++d.last_lattice_id;
     }
     lattice->last_used = ++d.field_lattice_clock;
-    const DepthFieldLattice L{R_WO * lattice->axis_u_O, R_WO * lattice->axis_v_O,
-                              R_WO * lattice->normal_O, h, lattice->id};
-    DepthField& f = d.fields[static_cast<std::size_t>(d.num_fields)];
-    bool ok = false;
-    try {
-      ok = d.field_renderer.Render(tool, X_WT, q, L, margin, d.last_field_id + 1,
-                                   options.depth_field_smooth_max_m, f);
-    } catch (...) {  // std::bad_alloc beyond the reserve
-      ok = false;
+    // A kept field that still holds this contact: on this lattice, not taken by another contact
+    // of this step, its grid around the window grown by half its margin, and the tool within
+    // half its margin of where the field was rendered.
+    int slot = -1;
+    for (int k = 0; k < RemoteStepData::kFieldPoolSize && slot < 0; ++k) {
+      const DepthField& f = d.field_pool[static_cast<std::size_t>(k)];
+      if (!f.prepared || f.lattice_id != lattice->id || f.cell_m != h ||
+          d.field_used_at[static_cast<std::size_t>(k)] == step) {
+        continue;
+      }
+      const double half = 0.5 * f.travel_margin_m;
+      const Twist dq = PoseDifference(X_WT, f.X_WT0);
+      const glm::dvec3 n_W = f.X_WF.rotation * glm::dvec3(0.0, 0.0, 1.0);
+      const glm::dvec3 slide_W = dq.linear - glm::dot(dq.linear, n_W) * n_W;
+      if (glm::length(slide_W) + glm::length(dq.angular) * f.tool_radius_m > half) continue;
+      const glm::dvec3 c_F = f.X_WF.Inverse() * q.window.center_W;
+      const double reach = 0.5 * q.window.extent_m + half;
+      const double hi_x = (f.nx - 1) * f.cell_m, hi_y = (f.ny - 1) * f.cell_m;
+      if (c_F.x - reach < 0.0 || c_F.y - reach < 0.0 || c_F.x + reach > hi_x ||
+          c_F.y + reach > hi_y) {
+        continue;
+      }
+      slot = k;
     }
-    if (!ok) continue;
-    ++d.last_field_id;
-    if (d.last_field_id == 0) d.last_field_id = 1;  // 0 means none
+    if (slot < 0) {
+      // A new render, into the least recently used slot this step has not taken.
+      std::uint64_t oldest = ~std::uint64_t{0};
+      for (int k = 0; k < RemoteStepData::kFieldPoolSize; ++k) {
+        const std::uint64_t used = d.field_used_at[static_cast<std::size_t>(k)];
+        if (used != step && used < oldest) {
+          oldest = used;
+          slot = k;
+        }
+      }
+      if (slot < 0) continue;
+      const DepthFieldLattice L{R_WO * lattice->axis_u_O, R_WO * lattice->axis_v_O,
+                                R_WO * lattice->normal_O, h, lattice->id};
+      DepthField& f = d.field_pool[static_cast<std::size_t>(slot)];
+      bool ok = false;
+      try {
+        ok = d.field_renderer.Render(tool, X_WT, q, L, margin, d.last_field_id + 1,
+                                     options.depth_field_smooth_max_m, f);
+      } catch (...) {  // std::bad_alloc beyond the reserve
+        ok = false;
+      }
+      if (!ok) {
+        f.prepared = false;
+        continue;
+      }
+      ++d.last_field_id;
+      if (d.last_field_id == 0) d.last_field_id = 1;  // 0 means none
+    }
+    d.field_used_at[static_cast<std::size_t>(slot)] = step;
+    const DepthField& f = d.field_pool[static_cast<std::size_t>(slot)];
     lin.depth_field_id = f.id;
-    ++d.num_fields;
+    d.fields[static_cast<std::size_t>(d.num_fields++)] = &f;
   }
   return d.num_fields;
 }
