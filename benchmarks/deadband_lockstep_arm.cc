@@ -20,7 +20,7 @@
 #include <unordered_set>
 #include <vector>
 
-#include "codecs/depth_map_codec.h"
+#include "codecs/depth_field_codec.h"
 #include "haptic_core/demo/demo_scenes.h"
 #include "haptic_core/penetration_depth_backend.h"
 #include "haptic_core/remote_step.h"
@@ -70,9 +70,10 @@ double NonNegative(const std::string& key, double v) {
 /// field_subdivision, field_speed_mm_s (the contact model as depth fields). Defaults:
 /// master_station's and slave_sim's, deadband 10 %.
 
-/// A depth field's bytes beside its maps: its ids, lattice coordinates, frames X_WF and X_WT0,
-/// cell, sides, offsets, margin and width (164), and a datagram's header and MAC (34).
-constexpr std::int64_t kFieldHeaderBytes = 198;
+/// A depth field's datagrams: each carries up to this many of its bytes (a 1,400-byte datagram
+/// less its header, MAC and a fragment's ids), and costs this many besides.
+constexpr std::int64_t kFieldFragmentPayload = 1350;
+constexpr std::int64_t kFieldDatagramOverhead = 50;
 
 /// A message in flight: it arrives at `arrive_ns`.
 template <typename T>
@@ -409,26 +410,21 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     // The depth fields travel beside the model here (not yet on the wire): the contacts keep
     // their fields' ids through the encoding, in order. A field goes with the first model that
     // refers to it and arrives (a repaired stream's delivery at the model's latency); a field
-    // kept from an earlier step is referred to by its id alone. Its maps go through the
-    // depth-map codec (the operator evaluates the decoded heights), and its bytes are counted
-    // twice: whole, and the surface a receiver that caches it by lattice node would still lack
-    // (the nodes of each lattice it has not had yet, at this field's bytes per node; no header).
+    // kept from an earlier step is referred to by its id alone. It goes through the depth-field
+    // codec (codecs/depth_field_codec.h: the operator evaluates the decoded field), and its
+    // bytes are counted twice: in datagrams, and the surface a receiver that caches it by
+    // lattice node would still lack (the nodes of each lattice it has not had yet, at this
+    // field's map bytes per node).
     const bool lost = uniform(loss_to_operator) < setup.loss;
     std::vector<DepthField> fields;
     for (const DepthField* f : pipeline.last_depth_fields()) {
       if (!lost && fields_delivered.insert(f->id).second) fields.push_back(*f);
     }
     for (DepthField& f : fields) {
-      std::int64_t bytes = kFieldHeaderBytes, present = 0, fresh = 0;
+      const std::vector<std::uint8_t> encoded = EncodeDepthField(f);
+      std::int64_t present = 0, fresh = 0;
       for (const bool tool_map : {false, true}) {
-        std::vector<float>& map = tool_map ? f.tool_height_m : f.env_height_m;
-        const std::vector<std::uint8_t> encoded = EncodeDepthMap(map, f.nx, f.ny);
-        bytes += static_cast<std::int64_t>(encoded.size());
-        std::string error;
-        if (!DecodeDepthMap(encoded, kMaxDepthFieldSide, decoded_map, error)) {
-          throw std::runtime_error("a depth map did not decode: " + error);
-        }
-        map.swap(decoded_map.heights_m);
+        const std::vector<float>& map = tool_map ? f.tool_height_m : f.env_height_m;
         const std::int32_t i0 = tool_map ? f.tool_lattice_i0 : f.lattice_i0;
         const std::int32_t j0 = tool_map ? f.tool_lattice_j0 : f.lattice_j0;
         for (int j = 0; j < f.ny; ++j) {
@@ -444,10 +440,15 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
           }
         }
       }
-      f.Prepare();
-      run.field_bytes += bytes;
-      run.field_cached_bytes +=
-          present > 0 ? (bytes - kFieldHeaderBytes) * fresh / present : std::int64_t{0};
+      std::string error;
+      if (!DecodeDepthField(encoded, f, decoded_map, error)) {
+        throw std::runtime_error("a depth field did not decode: " + error);
+      }
+      const auto size = static_cast<std::int64_t>(encoded.size());
+      const std::int64_t datagrams = (size + kFieldFragmentPayload - 1) / kFieldFragmentPayload;
+      run.field_bytes += size + datagrams * kFieldDatagramOverhead;
+      const auto maps = size - static_cast<std::int64_t>(kDepthFieldFixedBytes);
+      run.field_cached_bytes += present > 0 ? maps * fresh / present : std::int64_t{0};
       ++run.fields_sent;
     }
     if (a.model.num_contacts != message.model.num_contacts) {

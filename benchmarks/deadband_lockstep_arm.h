@@ -64,9 +64,8 @@ struct ArmRun {
   std::vector<glm::dvec3> theta_WT;  ///< R_WT as a rotation vector (rad, W)
   std::int64_t tool_states = 0, tool_state_bytes = 0;
   std::int64_t models = 0, model_bytes = 0;
-  /// Depth fields sent, their bytes whole (both maps through the depth-map codec plus
-  /// kFieldHeaderBytes), and the bytes of the surface a receiver caching it by lattice node
-  /// would lack (no headers).
+  /// Depth fields sent, their bytes (codecs/depth_field_codec.h, in datagrams), and the bytes of
+  /// the surface a receiver caching it by lattice node would lack (the maps' share only).
   std::int64_t fields_sent = 0, field_bytes = 0, field_cached_bytes = 0;
   ht::DeadbandCounts tool_decisions{}, model_decisions{};
   double duration_s = 0.0;

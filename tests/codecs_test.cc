@@ -1,7 +1,8 @@
 // Tests of codecs/draco_mesh_codec: round trip of a procedural mesh against the quantization bound
 // and the surface area, texture coordinates that stay attached to their vertices, rejection of bad
 // input on both sides, and decoding of Draco's own test files (../shared/data/draco, located
-// through HT_SHARED_DATA); and codecs/depth_map_codec: its bound, its holes, its refusals.
+// through HT_SHARED_DATA); and codecs/depth_map_codec and depth_field_codec: their bound, their
+// holes, their refusals.
 
 #include <gtest/gtest.h>
 
@@ -31,6 +32,7 @@
 #include <vector>
 
 #include "codecs/draco_mesh_codec.h"
+#include "codecs/depth_field_codec.h"
 #include "codecs/depth_map_codec.h"
 #include "haptic_core/demo/procedural_models.h"
 #include "haptic_core/haptic_model.h"
@@ -906,6 +908,120 @@ TEST(DepthMapCodec, DecoderRejectsEveryDamagedStreamWithAReasonAndNeverCrashes) 
       EXPECT_EQ(d.heights_m.size(), static_cast<std::size_t>(d.nx) * d.ny);
     }
     DecodeDepthMap({good.data(), k}, 64, d, error);
+  }
+}
+
+/// A prepared field whose environment is RoughDepthMap and whose tool is a tilted face.
+DepthField RoughDepthField() {
+  DepthField f;
+  f.id = 7;
+  f.lattice_id = 3;
+  f.lattice_i0 = -40;
+  f.lattice_j0 = 12;
+  f.tool_lattice_i0 = -30;
+  f.tool_lattice_j0 = -29;
+  f.cell_m = 0.2e-3;
+  f.nx = 70;
+  f.ny = 64;
+  f.tool_offset_u_m = 0.037e-3;
+  f.tool_offset_v_m = -0.081e-3;
+  f.X_WF.translation = {0.01, -0.02, 0.003};
+  f.X_WF.rotation = glm::normalize(glm::dquat(0.9, 0.1, -0.2, 0.3));
+  f.X_WT0.translation = {0.012, -0.015, 0.03};
+  f.X_WT0.rotation = glm::normalize(glm::dquat(0.8, 0.0, 0.1, -0.1));
+  f.travel_margin_m = 2e-3;
+  f.smooth_max_m = 2e-6;
+  f.env_height_m = RoughDepthMap(f.nx, f.ny);
+  f.tool_height_m.resize(f.env_height_m.size());
+  for (int j = 0; j < f.ny; ++j) {
+    for (int i = 0; i < f.nx; ++i) {
+      const bool on = i > 5 && i < 60 && j > 8 && j < 55;
+      f.tool_height_m[static_cast<std::size_t>(j) * f.nx + i] =
+          on ? static_cast<float>(-1.95e-3 + 1e-6 * i) : std::nanf("");
+    }
+  }
+  EXPECT_TRUE(f.Prepare());
+  return f;
+}
+
+TEST(DepthFieldCodec, RoundTripKeepsTheFieldAndItsDepthWithinTheMapsStep) {
+  const DepthField f = RoughDepthField();
+  const std::vector<std::uint8_t> bytes = EncodeDepthField(f);
+  EXPECT_EQ(bytes.size(), kDepthFieldFixedBytes + EncodeDepthMap(f.env_height_m, f.nx, f.ny).size() +
+                              EncodeDepthMap(f.tool_height_m, f.nx, f.ny).size());
+  DepthField g;
+  DecodedDepthMap scratch;
+  std::string error;
+  ASSERT_TRUE(DecodeDepthField(bytes, g, scratch, error)) << error;
+  EXPECT_TRUE(g.prepared);
+  EXPECT_EQ(g.id, f.id);
+  EXPECT_EQ(g.lattice_id, f.lattice_id);
+  EXPECT_EQ(g.lattice_i0, f.lattice_i0);
+  EXPECT_EQ(g.lattice_j0, f.lattice_j0);
+  EXPECT_EQ(g.tool_lattice_i0, f.tool_lattice_i0);
+  EXPECT_EQ(g.tool_lattice_j0, f.tool_lattice_j0);
+  EXPECT_EQ(g.cell_m, f.cell_m);
+  EXPECT_EQ(g.nx, f.nx);
+  EXPECT_EQ(g.ny, f.ny);
+  EXPECT_EQ(g.tool_offset_u_m, f.tool_offset_u_m);
+  EXPECT_EQ(g.tool_offset_v_m, f.tool_offset_v_m);
+  EXPECT_EQ(g.X_WF.translation, f.X_WF.translation);
+  EXPECT_EQ(g.X_WF.rotation, f.X_WF.rotation);
+  EXPECT_EQ(g.X_WT0.translation, f.X_WT0.translation);
+  EXPECT_EQ(g.X_WT0.rotation, f.X_WT0.rotation);
+  EXPECT_EQ(g.travel_margin_m, f.travel_margin_m);
+  EXPECT_EQ(g.smooth_max_m, f.smooth_max_m);
+  // The depth at displaced poses moves by at most the two maps' half steps (0.25 µm each).
+  for (const double dx : {0.0, 0.13e-3, -0.41e-3}) {
+    RigidTransform X = f.X_WT0;
+    X.translation += glm::dvec3(dx, 0.5 * dx, 0.0);
+    const DepthFieldEvaluation a = DepthFieldDepthAt(f, X), b = DepthFieldDepthAt(g, X);
+    ASSERT_TRUE(a.valid && b.valid);
+    EXPECT_NEAR(a.depth_m, b.depth_m, 0.25e-6 + 1e-9) << dx;
+  }
+}
+
+TEST(DepthFieldCodec, DecoderRefusesDamagedOrInvalidFieldsWithAReason) {
+  const DepthField f = RoughDepthField();
+  const std::vector<std::uint8_t> good = EncodeDepthField(f);
+  DepthField g;
+  DecodedDepthMap scratch;
+  std::string error;
+  const auto rejects = [&](const std::vector<std::uint8_t>& b, const char* what) {
+    error.clear();
+    EXPECT_FALSE(DecodeDepthField(b, g, scratch, error)) << what;
+    EXPECT_FALSE(error.empty()) << what;
+    EXPECT_FALSE(g.prepared) << what;
+  };
+  rejects({good.begin(), good.begin() + 100}, "cut in its header");
+  rejects({good.begin(), good.end() - 1}, "cut in its tool map");
+  std::vector<std::uint8_t> b = good;
+  b.push_back(0);
+  rejects(b, "a byte after it");
+  b = good;
+  b[0] = 9;
+  rejects(b, "another format");
+  DepthField bad = f;
+  bad.id = 0;
+  rejects(EncodeDepthField(bad), "id 0");
+  bad = f;
+  bad.X_WF.translation.x = std::numeric_limits<double>::quiet_NaN();
+  rejects(EncodeDepthField(bad), "a frame that is not finite");
+  bad = f;
+  bad.tool_offset_u_m = 3 * f.cell_m;
+  rejects(EncodeDepthField(bad), "a tool offset beyond a cell");
+  // Sides that disagree with a map's.
+  b = good;
+  b[33] = static_cast<std::uint8_t>(f.nx - 1);  // nx, after 33 bytes
+  rejects(b, "a map's sides not the field's");
+  // Every single-byte change: decoded and prepared, or refused; never a crash.
+  std::mt19937 rng(11);
+  for (std::size_t k = 0; k < good.size(); k += 3) {
+    b = good;
+    b[k] = static_cast<std::uint8_t>(b[k] ^ (1u + rng() % 255u));
+    if (DecodeDepthField(b, g, scratch, error)) {
+      EXPECT_TRUE(g.prepared);
+    }
   }
 }
 
