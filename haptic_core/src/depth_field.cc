@@ -57,6 +57,43 @@ using Mat6 = Eigen::Matrix<double, 6, 6>;
 }  // namespace
 
 constexpr int kMaxBlocksPerSide = (kMaxDepthFieldSide + kDepthFieldBlock - 1) / kDepthFieldBlock;
+constexpr int kMaxSubBlocksPerSide =
+    (kMaxDepthFieldSide + kDepthFieldSubBlock - 1) / kDepthFieldSubBlock;
+static_assert(kDepthFieldBlock % kDepthFieldSubBlock == 0);
+
+namespace {
+
+/// Per block of `side`² cells or nodes of an nx × ny grid (row-major blocks): the largest env
+/// bound, and the tool heights' smallest and largest (±∞ where none).
+void BlockBounds(const DepthField& f, int side, std::vector<float>& env, std::vector<float>& lo,
+                 std::vector<float>& hi) {
+  const int bx = (f.nx + side - 1) / side, by = (f.ny + side - 1) / side;
+  const float inf = std::numeric_limits<float>::infinity();
+  env.assign(static_cast<std::size_t>(bx) * by, -inf);
+  lo.assign(static_cast<std::size_t>(bx) * by, inf);
+  hi.assign(static_cast<std::size_t>(bx) * by, -inf);
+  for (int j = 0; j < f.ny; ++j) {
+    const std::size_t row = static_cast<std::size_t>(j) * f.nx;
+    const std::size_t brow = static_cast<std::size_t>(j / side) * bx;
+    for (int ti = 0; ti < bx; ++ti) {
+      const int i0 = ti * side, i1 = std::min(f.nx, i0 + side);
+      float eb = env[brow + ti], l = lo[brow + ti], h = hi[brow + ti];
+      for (int i = i0; i < i1; ++i) {
+        eb = std::max(eb, f.env_bound_m[row + i]);
+        const float a = f.tool_height_m[row + i];
+        if (a == a) {  // not NaN
+          l = std::min(l, a);
+          h = std::max(h, a);
+        }
+      }
+      env[brow + ti] = eb;
+      lo[brow + ti] = l;
+      hi[brow + ti] = h;
+    }
+  }
+}
+
+}  // namespace
 
 void DepthField::Reserve() {
   const std::size_t n = static_cast<std::size_t>(kMaxDepthFieldSide) * kMaxDepthFieldSide;
@@ -67,6 +104,10 @@ void DepthField::Reserve() {
   env_block_bound_m.reserve(blocks);
   tool_block_min_m.reserve(blocks);
   tool_block_max_m.reserve(blocks);
+  const std::size_t subs = static_cast<std::size_t>(kMaxSubBlocksPerSide) * kMaxSubBlocksPerSide;
+  env_sub_bound_m.reserve(subs);
+  tool_sub_min_m.reserve(subs);
+  tool_sub_max_m.reserve(subs);
 }
 
 bool DepthField::Prepare() {
@@ -122,32 +163,10 @@ bool DepthField::Prepare() {
                                           : hi + 1e-6f * std::abs(hi) + 1e-9f;
     }
   }
+  BlockBounds(*this, kDepthFieldBlock, env_block_bound_m, tool_block_min_m, tool_block_max_m);
+  BlockBounds(*this, kDepthFieldSubBlock, env_sub_bound_m, tool_sub_min_m, tool_sub_max_m);
   const int bx = (nx + kDepthFieldBlock - 1) / kDepthFieldBlock;
   const int by = (ny + kDepthFieldBlock - 1) / kDepthFieldBlock;
-  const float inf = std::numeric_limits<float>::infinity();
-  env_block_bound_m.assign(static_cast<std::size_t>(bx) * by, -inf);
-  tool_block_min_m.assign(static_cast<std::size_t>(bx) * by, inf);
-  tool_block_max_m.assign(static_cast<std::size_t>(bx) * by, -inf);
-  for (int j = 0; j < ny; ++j) {
-    const std::size_t row = static_cast<std::size_t>(j) * nx;
-    const std::size_t brow = static_cast<std::size_t>(j / kDepthFieldBlock) * bx;
-    for (int ti = 0; ti < bx; ++ti) {
-      const int i0 = ti * kDepthFieldBlock, i1 = std::min(nx, i0 + kDepthFieldBlock);
-      float eb = env_block_bound_m[brow + ti], lo = tool_block_min_m[brow + ti],
-            hi = tool_block_max_m[brow + ti];
-      for (int i = i0; i < i1; ++i) {
-        eb = std::max(eb, env_bound_m[row + i]);
-        const float a = tool_height_m[row + i];
-        if (a == a) {  // not NaN
-          lo = std::min(lo, a);
-          hi = std::max(hi, a);
-        }
-      }
-      env_block_bound_m[brow + ti] = eb;
-      tool_block_min_m[brow + ti] = lo;
-      tool_block_max_m[brow + ti] = hi;
-    }
-  }
   // The tool's reach: the farthest corner of each block's box of nodes from the centre of mass
   // (an upper bound on the farthest node's distance).
   const glm::dvec3 c_F = X_WF.Inverse() * X_WT0.translation;
@@ -232,13 +251,36 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
     }
     return b - s.z;
   };
-  // Pass 1, per block of tool nodes: the moved box of its nodes (x, y over the block's nodes, z
-  // over its heights) and the largest bound of the environment blocks under that box's
-  // footprint, less its lowest point: no node of the block is deeper than that.
+  // A bound on the depth of the tool nodes [i0, i1] × [j0, j1] whose heights lie in [a_lo,
+  // a_hi]: the largest environment bound (per `side`² cells, `env`, gbx a row) under the moved
+  // box's footprint, less the box's lowest point (−∞ when the footprint leaves the
+  // environment's interpolant).
+  const glm::dmat3 R_abs(glm::abs(R[0]), glm::abs(R[1]), glm::abs(R[2]));
+  const auto box_bound = [&](int i0, int i1, int j0, int j1, float a_lo, float a_hi,
+                             const float* env, int side, int gbx) noexcept {
+    const glm::dvec3 centre(0.5 * (i0 + i1) * h + f.tool_offset_u_m,
+                            0.5 * (j0 + j1) * h + f.tool_offset_v_m, 0.5 * (a_lo + a_hi));
+    const glm::dvec3 half(0.5 * (i1 - i0) * h, 0.5 * (j1 - j0) * h, 0.5 * (a_hi - a_lo));
+    const glm::dvec3 s = D * centre;
+    const glm::dvec3 e = R_abs * half;
+    const int cu0 = std::max(1, static_cast<int>(std::floor((s.x - e.x) * inv_h)));
+    const int cu1 = std::min(nx - 3, static_cast<int>(std::floor((s.x + e.x) * inv_h)));
+    const int cv0 = std::max(1, static_cast<int>(std::floor((s.y - e.y) * inv_h)));
+    const int cv1 = std::min(ny - 3, static_cast<int>(std::floor((s.y + e.y) * inv_h)));
+    if (cu0 > cu1 || cv0 > cv1) return -std::numeric_limits<double>::infinity();
+    float env_max = -std::numeric_limits<float>::infinity();
+    for (int ej = cv0 / side; ej <= cv1 / side; ++ej) {
+      for (int ei = cu0 / side; ei <= cu1 / side; ++ei) {
+        env_max = std::max(env_max, env[ej * gbx + ei]);
+      }
+    }
+    return static_cast<double>(env_max) - (s.z - e.z);
+  };
+  // Pass 1, per block of tool nodes: its bound.
   const int bx = (nx + kDepthFieldBlock - 1) / kDepthFieldBlock;
   const int by = (ny + kDepthFieldBlock - 1) / kDepthFieldBlock;
+  const int sbx = (nx + kDepthFieldSubBlock - 1) / kDepthFieldSubBlock;
   std::array<float, kMaxBlocksPerSide * kMaxBlocksPerSide> block_ub;
-  const glm::dmat3 R_abs(glm::abs(R[0]), glm::abs(R[1]), glm::abs(R[2]));
   int best_block = -1;
   double best_ub = -std::numeric_limits<double>::infinity();
   for (int tj = 0; tj < by; ++tj) {
@@ -250,23 +292,8 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
       if (!(a_lo <= a_hi)) continue;  // no tool node
       const int i0 = ti * kDepthFieldBlock, i1 = std::min(nx, i0 + kDepthFieldBlock) - 1;
       const int j0 = tj * kDepthFieldBlock, j1 = std::min(ny, j0 + kDepthFieldBlock) - 1;
-      const glm::dvec3 centre(0.5 * (i0 + i1) * h + f.tool_offset_u_m,
-                              0.5 * (j0 + j1) * h + f.tool_offset_v_m, 0.5 * (a_lo + a_hi));
-      const glm::dvec3 half(0.5 * (i1 - i0) * h, 0.5 * (j1 - j0) * h, 0.5 * (a_hi - a_lo));
-      const glm::dvec3 s = D * centre;
-      const glm::dvec3 e = R_abs * half;
-      const int cu0 = std::max(1, static_cast<int>(std::floor((s.x - e.x) * inv_h)));
-      const int cu1 = std::min(nx - 3, static_cast<int>(std::floor((s.x + e.x) * inv_h)));
-      const int cv0 = std::max(1, static_cast<int>(std::floor((s.y - e.y) * inv_h)));
-      const int cv1 = std::min(ny - 3, static_cast<int>(std::floor((s.y + e.y) * inv_h)));
-      if (cu0 > cu1 || cv0 > cv1) continue;  // beyond the environment's interpolant
-      float env_max = -std::numeric_limits<float>::infinity();
-      for (int ej = cv0 / kDepthFieldBlock; ej <= cv1 / kDepthFieldBlock; ++ej) {
-        for (int ei = cu0 / kDepthFieldBlock; ei <= cu1 / kDepthFieldBlock; ++ei) {
-          env_max = std::max(env_max, f.env_block_bound_m[static_cast<std::size_t>(ej * bx + ei)]);
-        }
-      }
-      const double ub = env_max - (s.z - e.z);
+      const double ub = box_bound(i0, i1, j0, j1, a_lo, a_hi, f.env_block_bound_m.data(),
+                                  kDepthFieldBlock, bx);
       block_ub[static_cast<std::size_t>(b)] = static_cast<float>(ub);
       if (ub > best_ub) {
         best_ub = ub;
@@ -285,10 +312,8 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
   Vec6 S1 = Vec6::Zero();
   Mat6 S2 = Mat6::Zero();
   Vec6 J;
-  const auto visit_block = [&](int b) noexcept {
-    const int ti = b % bx, tj = b / bx;
-    const int i0 = ti * kDepthFieldBlock, i1 = std::min(nx, i0 + kDepthFieldBlock);
-    const int j0 = tj * kDepthFieldBlock, j1 = std::min(ny, j0 + kDepthFieldBlock);
+  // The nodes [i0, i1) × [j0, j1), by their cell's bound.
+  const auto visit_nodes = [&](int i0, int i1, int j0, int j1) noexcept {
     for (int j = j0; j < j1; ++j) {
       const glm::dvec3 row = origin + static_cast<double>(j) * step_j;
       for (int i = i0; i < i1; ++i) {
@@ -316,6 +341,27 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
         S0 += w;
         S1.noalias() += w * J;
         if (w >= kCurvatureWeight) S2.noalias() += w * (J * J.transpose());
+      }
+    }
+  };
+  // A block: each of its sub-blocks whose own bound reaches within the cutoff.
+  const auto visit_block = [&](int b) noexcept {
+    const int ti = b % bx, tj = b / bx;
+    const int i_end = std::min(nx, (ti + 1) * kDepthFieldBlock);
+    const int j_end = std::min(ny, (tj + 1) * kDepthFieldBlock);
+    for (int j0 = tj * kDepthFieldBlock; j0 < j_end; j0 += kDepthFieldSubBlock) {
+      for (int i0 = ti * kDepthFieldBlock; i0 < i_end; i0 += kDepthFieldSubBlock) {
+        const int i1 = std::min(i_end, i0 + kDepthFieldSubBlock);
+        const int j1 = std::min(j_end, j0 + kDepthFieldSubBlock);
+        const std::size_t sb =
+            static_cast<std::size_t>(j0 / kDepthFieldSubBlock) * sbx + i0 / kDepthFieldSubBlock;
+        const float a_lo = f.tool_sub_min_m[sb], a_hi = f.tool_sub_max_m[sb];
+        if (!(a_lo <= a_hi)) continue;
+        if (!(box_bound(i0, i1 - 1, j0, j1 - 1, a_lo, a_hi, f.env_sub_bound_m.data(),
+                        kDepthFieldSubBlock, sbx) >= m_ref - cutoff)) {
+          continue;
+        }
+        visit_nodes(i0, i1, j0, j1);
       }
     }
   };

@@ -24,8 +24,10 @@ namespace ht {
 /// maximum's curvature.
 inline constexpr double kDepthFieldSmoothMaxM = 2e-6;
 
-/// Side (nodes) of the blocks a depth field's evaluation prunes by (DepthField::env_block_bound_m).
+/// Side (nodes) of the blocks a depth field's evaluation prunes by (DepthField::env_block_bound_m),
+/// and of the sub-blocks it prunes a block's nodes by in turn (env_sub_bound_m).
 inline constexpr int kDepthFieldBlock = 8;
+inline constexpr int kDepthFieldSubBlock = 4;
 
 /// Largest number of nodes per side of a depth field's grid (the window's N plus twice the travel
 /// margin, in cells): bounds the memory the operator's loop preallocates per field.
@@ -83,6 +85,8 @@ struct DepthField {
   /// +∞ and −∞ where the block has none). The evaluation skips a tool block whose moved box
   /// cannot reach within the cutoff of the deepest node found.
   std::vector<float> env_block_bound_m, tool_block_min_m, tool_block_max_m;
+  /// The same per sub-block of kDepthFieldSubBlock² cells or nodes.
+  std::vector<float> env_sub_bound_m, tool_sub_min_m, tool_sub_max_m;
   /// Prepare's scratch: the rows' Bézier coefficients (#4·nx·ny).
   std::vector<float> row_coefficients_m;
   /// An upper bound (m) on the distance of a tool node from the tool's centre of mass at X_WT0
