@@ -265,7 +265,7 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
   std::vector<DepthField> arrived_fields;
   std::vector<DepthField*> arrived_field_ptrs;
   DecodedDepthMap decoded_map;
-  std::unordered_set<std::uint64_t> nodes_sent;  // (lattice, map, i, j) the operator has had
+  std::unordered_set<std::uint64_t> nodes_sent;        // (lattice, map, i, j) the operator has had
   std::unordered_set<std::uint32_t> fields_delivered;  // ids sent with a model that arrives
   SentToolState remote;              // the newest tool state the remote node holds
   std::int64_t remote_recv_ns = -1;  // when it arrived (< 0: none yet)

@@ -31,9 +31,9 @@
 #include <utility>
 #include <vector>
 
-#include "codecs/draco_mesh_codec.h"
 #include "codecs/depth_field_codec.h"
 #include "codecs/depth_map_codec.h"
+#include "codecs/draco_mesh_codec.h"
 #include "haptic_core/demo/procedural_models.h"
 #include "haptic_core/haptic_model.h"
 
@@ -797,8 +797,7 @@ std::vector<float> RoughDepthMap(int nx, int ny) {
       h[static_cast<std::size_t>(j) * nx + i] =
           hole ? std::nanf("")
                : static_cast<float>(1.3e-3 * std::abs(std::sin(x / 1.5e-3)) +
-                                    40e-6 * std::sin(x / 0.31e-3) * std::cos(y / 0.47e-3) -
-                                    2e-3);
+                                    40e-6 * std::sin(x / 0.31e-3) * std::cos(y / 0.47e-3) - 2e-3);
     }
   }
   return h;
@@ -845,7 +844,8 @@ TEST(DepthMapCodec, APlaneCostsAlmostNothingAndAnEmptyMapDecodesEmpty) {
   const int n = 128;
   std::vector<float> plane(static_cast<std::size_t>(n) * n);
   for (int j = 0; j < n; ++j) {
-    for (int i = 0; i < n; ++i) plane[static_cast<std::size_t>(j) * n + i] = float(i * 3e-6 + j * 7e-6);
+    for (int i = 0; i < n; ++i)
+      plane[static_cast<std::size_t>(j) * n + i] = float(i * 3e-6 + j * 7e-6);
   }
   const std::vector<std::uint8_t> bytes = EncodeDepthMap(plane, n, n);
   EXPECT_LT(bytes.size(), plane.size() * 2 / 50) << "at most 2 % of 16 bits a node";
@@ -853,7 +853,9 @@ TEST(DepthMapCodec, APlaneCostsAlmostNothingAndAnEmptyMapDecodesEmpty) {
   DecodedDepthMap d;
   std::string error;
   ASSERT_TRUE(DecodeDepthMap(EncodeDepthMap(empty, 5, 5), 8, d, error)) << error;
-  EXPECT_EQ(std::count_if(d.heights_m.begin(), d.heights_m.end(), [](float x) { return std::isnan(x); }), 25);
+  EXPECT_EQ(
+      std::count_if(d.heights_m.begin(), d.heights_m.end(), [](float x) { return std::isnan(x); }),
+      25);
 }
 
 TEST(DepthMapCodec, EncoderRefusesWhatItCannotCarry) {
@@ -947,7 +949,8 @@ DepthField RoughDepthField() {
 TEST(DepthFieldCodec, RoundTripKeepsTheFieldAndItsDepthWithinTheMapsStep) {
   const DepthField f = RoughDepthField();
   const std::vector<std::uint8_t> bytes = EncodeDepthField(f);
-  EXPECT_EQ(bytes.size(), kDepthFieldFixedBytes + EncodeDepthMap(f.env_height_m, f.nx, f.ny).size() +
+  EXPECT_EQ(bytes.size(), kDepthFieldFixedBytes +
+                              EncodeDepthMap(f.env_height_m, f.nx, f.ny).size() +
                               EncodeDepthMap(f.tool_height_m, f.nx, f.ny).size());
   DepthField g;
   DecodedDepthMap scratch;

@@ -5,6 +5,7 @@
 #include <zlib.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -125,8 +126,8 @@ std::vector<std::uint8_t> EncodeDepthMap(std::span<const float> heights_m, int n
   out.resize(kHeaderBytes + packed);
   const int z = compress2(out.data() + kHeaderBytes, &packed, raw.data(),
                           static_cast<uLong>(raw.size()), options.level);
-  if (z != Z_OK) throw std::runtime_error("EncodeDepthMap: zlib compress2 failed (" +
-                                          std::to_string(z) + ")");
+  if (z != Z_OK)
+    throw std::runtime_error("EncodeDepthMap: zlib compress2 failed (" + std::to_string(z) + ")");
   out.resize(kHeaderBytes + packed);
   return out;
 }
@@ -140,8 +141,8 @@ bool DecodeDepthMap(std::span<const std::uint8_t> bytes, int max_side, DecodedDe
   }
   const std::uint8_t* p = bytes.data();
   if (p[0] != kDepthMapFormat) {
-    error = "depth-map format " + std::to_string(p[0]) + " is not " +
-            std::to_string(kDepthMapFormat);
+    error =
+        "depth-map format " + std::to_string(p[0]) + " is not " + std::to_string(kDepthMapFormat);
     return false;
   }
   const int nx = p[1] | (p[2] << 8), ny = p[3] | (p[4] << 8);
@@ -177,12 +178,14 @@ bool DecodeDepthMap(std::span<const std::uint8_t> bytes, int max_side, DecodedDe
   const bool whole = z == Z_STREAM_END && s.avail_out == 0 && s.avail_in == 0;
   inflateEnd(&s);
   if (!whole) {
-    error = z == Z_STREAM_END ? "a depth map's zlib stream is not the declared length, or bytes follow it"
-                              : "a depth map's zlib stream is corrupt or shorter than declared";
+    error = z == Z_STREAM_END
+                ? "a depth map's zlib stream is not the declared length, or bytes follow it"
+                : "a depth map's zlib stream is corrupt or shorter than declared";
     return false;
   }
   std::uint32_t counted = 0;
-  for (std::size_t b = 0; b < mask_bytes; ++b) counted += static_cast<std::uint32_t>(__builtin_popcount(raw[b]));
+  for (std::size_t b = 0; b < mask_bytes; ++b)
+    counted += static_cast<std::uint32_t>(std::popcount(raw[b]));
   // Bits past the last node must be clear.
   if (n % 8 != 0 && (raw[mask_bytes - 1] >> (n % 8)) != 0) ++counted;
   if (counted != present) {

@@ -292,8 +292,8 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
       if (!(a_lo <= a_hi)) continue;  // no tool node
       const int i0 = ti * kDepthFieldBlock, i1 = std::min(nx, i0 + kDepthFieldBlock) - 1;
       const int j0 = tj * kDepthFieldBlock, j1 = std::min(ny, j0 + kDepthFieldBlock) - 1;
-      const double ub = box_bound(i0, i1, j0, j1, a_lo, a_hi, f.env_block_bound_m.data(),
-                                  kDepthFieldBlock, bx);
+      const double ub =
+          box_bound(i0, i1, j0, j1, a_lo, a_hi, f.env_block_bound_m.data(), kDepthFieldBlock, bx);
       block_ub[static_cast<std::size_t>(b)] = static_cast<float>(ub);
       if (ub > best_ub) {
         best_ub = ub;

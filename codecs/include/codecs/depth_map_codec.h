@@ -48,8 +48,8 @@ std::vector<std::uint8_t> EncodeDepthMap(std::span<const float> heights_m, int n
 /// A decoded map.
 struct DecodedDepthMap {
   int nx = 0, ny = 0;
-  double step_m = 0.0;              ///< the stream's q (m): the bound on each height's error is q/2
-  std::vector<float> heights_m;     ///< nx·ny, row-major, NaN where absent
+  double step_m = 0.0;           ///< the stream's q (m): the bound on each height's error is q/2
+  std::vector<float> heights_m;  ///< nx·ny, row-major, NaN where absent
 };
 
 /// Decodes a stream written by EncodeDepthMap into `out` (its vector reused). Returns false with

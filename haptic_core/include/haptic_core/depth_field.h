@@ -95,9 +95,9 @@ struct DepthField {
   bool prepared = false;
 
   /// Checks the field (id ≠ 0, finite frames, h > 0 and finite, nx and ny in
-  /// [4, kMaxDepthFieldSide], both maps #nx·ny, the tool's offsets within ±h, margin ≥ 0, ε > 0) and derives env_bound_m, the
-  /// blocks' bounds and tool_radius_m. Allocates only when the buffers' capacity is short.
-  /// Returns false, leaving prepared false, on a bad field.
+  /// [4, kMaxDepthFieldSide], both maps #nx·ny, the tool's offsets within ±h, margin ≥ 0, ε > 0)
+  /// and derives env_bound_m, the blocks' bounds and tool_radius_m. Allocates only when the
+  /// buffers' capacity is short. Returns false, leaving prepared false, on a bad field.
   bool Prepare();
   /// Reserves the maps, the bounds and the blocks for kMaxDepthFieldSide² nodes (not Prepare's
   /// scratch), so that a field swapped into a cache slot keeps buffers of that size. Allocates.
