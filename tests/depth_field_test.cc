@@ -1,7 +1,7 @@
-// The contact model's depth field (depth_field.h): closed forms, the gradient against finite
-// differences, the pruned smooth maximum against every node's own depth, the field against the
-// texture stage's fresh render at displaced poses, the cache, and no allocation in the loop's
-// calls.
+// The contact model's depth field (depth_field.h): closed forms (a sphere slid across a rippled
+// plate among them), the gradient against finite differences, the pruned smooth maximum against
+// every node's own depth, the field against the texture stage's fresh render at displaced poses,
+// fields on one lattice against each other, the cache, and no allocation in the loop's calls.
 
 #include "haptic_core/depth_field.h"
 
@@ -453,6 +453,126 @@ TEST(DepthField, FieldsOnOneLatticeFromOtherWindowsAndToolPosesAgreeWhereBothHol
     EXPECT_LT(glm::length(e0.gradient.d_translation_W - e1.gradient.d_translation_W), 1e-3);
     EXPECT_LT(glm::length(e0.gradient.d_rotation_W - e1.gradient.d_rotation_W), 1e-5);
   }
+}
+
+namespace closed_form {
+
+// A sphere of radius R as the bottom of a box (the cap protrudes T(x, y) below the box's bottom
+// face, T = √(R² − r²) − √(R² − r_corner²) ≥ 0), slid across a plate rippled along x.
+constexpr double kR = 0.03, kBoxHalf = 0.006;
+constexpr double kRipple = 100e-6, kWavelength = 4e-3;
+double Cap(double x, double y) {
+  const double r_corner2 = 2.0 * kBoxHalf * kBoxHalf;
+  return std::sqrt(kR * kR - (x * x + y * y)) - std::sqrt(kR * kR - r_corner2);
+}
+double Plate(double x, double) { return kRipple * std::sin(2.0 * kPi * x / kWavelength); }
+double PlateSlope(double x) {
+  return kRipple * 2.0 * kPi / kWavelength * std::cos(2.0 * kPi * x / kWavelength);
+}
+
+/// The closed form at the tool's bottom face z_b and centre x = t (y = 0; the maximizer lies in
+/// the plane y = 0 by symmetry): g(x) = plate(x) − (z_b − Cap(x − t)), δ = max g, reached at
+/// x*; and the second-highest local maximum of g (another ripple's crest) and where, which
+/// ties with the first where the slide hands the contact from one crest to the next. A 1 µm
+/// scan refined by golden section.
+struct Crests {
+  double depth = -1.0, x = 0.0, second_depth = -1.0, second_x = 0.0;
+};
+Crests Depth(double t, double z_b) {
+  const auto g = [&](double x) { return Plate(x, 0.0) + Cap(x - t, 0.0) - z_b; };
+  const auto refine = [&](double x) {
+    double lo = x - 1e-6, hi = x + 1e-6;
+    for (int k = 0; k < 60; ++k) {
+      const double m1 = lo + 0.382 * (hi - lo), m2 = lo + 0.618 * (hi - lo);
+      if (g(m1) < g(m2)) {
+        lo = m1;
+      } else {
+        hi = m2;
+      }
+    }
+    return 0.5 * (lo + hi);
+  };
+  Crests c;
+  double previous = g(t - 5.5e-3), current = g(t - 5.5e-3 + 1e-6);
+  for (double x = t - 5.5e-3 + 1e-6; x <= t + 5.5e-3; x += 1e-6) {
+    const double next = g(x + 1e-6);
+    if (current >= previous && current > next) {  // a local maximum
+      const double xs = refine(x), v = g(xs);
+      if (v > c.depth) {
+        c.second_depth = c.depth;
+        c.second_x = c.x;
+        c.depth = v;
+        c.x = xs;
+      } else if (v > c.second_depth) {
+        c.second_depth = v;
+        c.second_x = xs;
+      }
+    }
+    previous = current;
+    current = next;
+  }
+  return c;
+}
+
+/// The angle (rad) of the plate's normal at x in the x–z plane, from +z towards +x.
+double NormalAngle(double x) { return std::atan2(-PlateSlope(x), 1.0); }
+
+}  // namespace closed_form
+
+TEST(DepthField, SphereSlidAcrossARippledPlateFollowsTheClosedFormInDepthAndDirection) {
+  // Rendered once at q0, evaluated along a 5 mm slide within its margin at poses held 60 µm deep
+  // by the closed form: the depth within 20 µm and the force within 3° of the plate's normal at
+  // the contact point (the envelope theorem: ∇δ = (plate'(x*), 0, −1)). What the operator's loop
+  // renders a round trip after the field was made, with the tool sliding over ripples.
+  using namespace closed_form;
+  const HapticModel tool =
+      MakeTexturedBox({kBoxHalf, kBoxHalf, testing::kHalfHeight}, Cap, 512, 0.1, "sphere");
+  const HapticModel env = testing::EnvironmentBox(Plate);
+  ContactQuery q;
+  q.environment = &env;
+  q.X_WO = testing::EnvironmentPose();
+  q.window = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.02, 50);
+  q.stiffness_n_per_m = 1e4;
+  const double h = 0.2e-3;
+  const DepthFieldLattice lattice{q.window.axis_u_W, q.window.axis_v_W, q.window.normal_W, h};
+  const auto pose_at = [&](double t, double* z_b) {
+    *z_b = Depth(t, 0.0).depth - 60e-6;  // δ is linear in z_b: this puts it at 60 µm
+    return testing::ToolPose(t, 0.0, *z_b);
+  };
+  double z0;
+  const RigidTransform X_WT0 = pose_at(0.0, &z0);
+  DepthFieldRenderer renderer;
+  DepthField f;
+  ASSERT_TRUE(renderer.Render(tool, X_WT0, q, lattice, 5.6e-3, 1, kDepthFieldSmoothMaxM, f));
+  double worst_depth = 0.0, worst_angle = 0.0;
+  int ties = 0;
+  for (double t = -2.5e-3; t <= 2.5e-3 + 1e-9; t += 0.125e-3) {
+    double z_b;
+    const RigidTransform X_WT = pose_at(t, &z_b);
+    const Crests truth = Depth(t, z_b);
+    const DepthFieldEvaluation e = DepthFieldDepthAt(f, X_WT);
+    ASSERT_TRUE(e.valid && e.within_margin) << t;
+    worst_depth = std::max(worst_depth, std::abs(e.depth_m - truth.depth));
+    EXPECT_NEAR(e.depth_m, truth.depth, 20e-6) << "slide " << t * 1e3 << " mm";
+    // The force's direction in the x–z plane against the normal at the deepest crest; where a
+    // second crest is within 5 ε, anywhere between the two crests' normals (δ has a kink there
+    // and the smooth maximum mixes the two).
+    const glm::dvec3 force = -e.gradient.d_translation_W;
+    EXPECT_LT(std::abs(force.y), 1e-3 * glm::length(force));
+    const double angle = std::atan2(force.x, force.z);
+    double lo = NormalAngle(truth.x), hi = lo;
+    if (truth.depth - truth.second_depth < 5.0 * kDepthFieldSmoothMaxM) {
+      ++ties;
+      lo = std::min(lo, NormalAngle(truth.second_x));
+      hi = std::max(hi, NormalAngle(truth.second_x));
+    }
+    const double off = std::max({0.0, lo - angle, angle - hi});
+    worst_angle = std::max(worst_angle, off);
+    EXPECT_LT(off, 3.0 * kPi / 180.0) << "slide " << t * 1e3 << " mm";
+  }
+  EXPECT_GE(ties, 1) << "the slide hands the contact from one crest to the next";
+  std::printf("sphere on ripples: depth within %.2f um, direction within %.2f deg, %d ties\n",
+              worst_depth * 1e6, worst_angle * 180.0 / kPi, ties);
 }
 
 }  // namespace
