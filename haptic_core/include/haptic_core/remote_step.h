@@ -257,17 +257,19 @@ struct PipelineOptions {
 
   /// Stage 5d: each contact of the model also carries its depth field (depth_field.h), the two
   /// surfaces over its window grown by depth_field_margin_m on each side (rounded up to cells,
-  /// and capped at kMaxDepthFieldSide nodes a side), which the operator's loop evaluates at the
-  /// tool's pose every tick. The contact's linearization stays, as the loop's fallback beyond the
-  /// margin. HapticTexturePipeline::last_depth_fields() holds them after the step.
+  /// and cut to what fits kMaxDepthFieldSide nodes a side), which the operator's loop evaluates
+  /// at the tool's pose every tick. The contact's linearization stays, as the loop's fallback
+  /// where it lacks the field. HapticTexturePipeline::last_depth_fields() holds them after the
+  /// step.
   bool depth_fields = false;
   /// The travel margin (m, ≥ 0): how far the tool may move from q0 before a field no longer
   /// holds. The remote node sets it from the operator's round trip (SetDepthFieldMargin).
   double depth_field_margin_m = 2e-3;
   /// Nodes per window cell along each axis (1..4): the fields are rendered on the window's grid
   /// refined this many times (and the textures sampled at that finer cell's mip level), so that
-  /// the operator's bicubic between nodes follows ridges a few cells wide. Lowered, down to 1,
-  /// where the refined grid with its margin would exceed kMaxDepthFieldSide.
+  /// the operator's bicubic between nodes follows ridges a few cells wide. The margin is cut
+  /// before the cell is made coarser: lowered, down to 1, only where the refined grid would
+  /// exceed kMaxDepthFieldSide with a margin of 2 mm (or depth_field_margin_m, if less).
   int depth_field_subdivision = 2;
   /// The fields' smooth-maximum width ε (m, > 0; DepthField::smooth_max_m).
   double depth_field_smooth_max_m = kDepthFieldSmoothMaxM;

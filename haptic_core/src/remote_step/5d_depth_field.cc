@@ -22,6 +22,9 @@ double NearestRemainder(double x, double h) noexcept { return x - h * std::round
 /// window's own normal differs by at most 1 − cos 0.1 = 0.5 %).
 constexpr double kLatticeTurnRad = 0.1;
 
+/// The least travel margin (m) a field keeps before its cell is made coarser to fit the grid.
+constexpr double kDepthFieldKeptMarginM = 2e-3;
+
 }  // namespace
 
 bool DepthFieldRenderer::Render(const HapticModel& tool, const RigidTransform& X_WT,
@@ -110,13 +113,16 @@ int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT
     if (!std::isfinite(lin.depth_m)) continue;
     const ContactQuery& q = d.last_queries[static_cast<std::size_t>(i)];
     if (!(base_cell > 0.0) || q.environment == nullptr) continue;
-    // The finest cell (the window's divided by the subdivision) whose grid holds the window and
-    // the margin, else the window's own cell with the margin cut to fit.
+    // The subdivision's cell while its grid holds the window and a margin of at least
+    // kDepthFieldKeptMarginM (or the margin asked, if less), the margin cut to what fits; else
+    // coarser cells. A fine cell beyond part of the margin beats a coarse one within all of it:
+    // the field is evaluated beyond its margin too, and the step renders a new one once the
+    // tool has moved half of it.
     int sub = std::clamp(options.depth_field_subdivision, 1, 4);
+    const double least = std::min(options.depth_field_margin_m, kDepthFieldKeptMarginM);
     const auto side_at = [&](int s) {
       const double h = base_cell / s;
-      return std::ceil(q.window.extent_m / h - 1e-9) +
-             2.0 * std::ceil(options.depth_field_margin_m / h - 1e-9);
+      return std::ceil(q.window.extent_m / h - 1e-9) + 2.0 * std::ceil(least / h - 1e-9);
     };
     while (sub > 1 && side_at(sub) > kMaxDepthFieldSide) --sub;
     const double h = base_cell / sub;
