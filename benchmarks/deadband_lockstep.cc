@@ -64,6 +64,12 @@ int main(int argc, char** argv) {
   std::vector<std::string> arm_texts;
   std::string out_dir, scene_name = "block-on-gear";
   int seeds = 3;
+  bool hand_from_reference = false;
+  app.add_flag("--hand-from-reference", hand_from_reference,
+               "replay the reference's hand (its positions, 1 ms apart) in the reference, run\n"
+               "again, and in every arm, instead of a simulated hand that reacts to what each\n"
+               "renders (the scripted hand waits for contact, so a delay shifts its script);\n"
+               "with --out, written to OUT/hand.csv for --replay");
   app.add_option("--replay", setup.replay_file,
                  "a handle trajectory CSV (master_station --device replay; e.g. from\n"
                  "deploy/kinesthetic-replay); default: the simulated hand of --experiment");
@@ -205,7 +211,37 @@ int main(int argc, char** argv) {
     Setup reference_setup = setup;
     reference_setup.loss = 0.0;
     if (setup.reference_delay_ms >= 0.0) reference_setup.delay_ms = setup.reference_delay_ms;
-    const ArmRun ref = RunArm(reference_setup, reference);
+    ArmRun ref = RunArm(reference_setup, reference);
+    if (hand_from_reference) {
+      // The reference's hand, replayed in the reference (run again) and in every arm: the arms
+      // then differ from it by what they render alone, not by a hand that reacts to it.
+      const ht::RigidTransform X_MW = ht::MakeSceneLayout(scene).X_WT_home.Inverse();
+      for (std::size_t k = 0; k < ref.p_WH.size(); ++k) {
+        ht::RigidTransform X_WH;
+        X_WH.translation = ref.p_WH[k];
+        X_WH.rotation = ref.R_WH[k];
+        ht::ReplaySample sample;
+        sample.t_s = static_cast<double>(k) * 1e-3;
+        sample.X_MH = X_MW * X_WH;  // the tick's X_WH = X_WM·X_MH
+        setup.replay_samples.push_back(sample);
+      }
+      reference_setup.replay_samples = setup.replay_samples;
+      if (!out_dir.empty()) {  // the same hand, for --replay (another build, another run)
+        std::filesystem::create_directories(out_dir);
+        std::ofstream hand(out_dir + "/hand.csv");
+        hand << "t_s,x,y,z,rx,ry,rz\n";
+        char line[256];
+        for (const ht::ReplaySample& h : setup.replay_samples) {
+          const glm::dvec3 p = h.X_MH.translation;
+          const glm::dvec3 r = ht::RotationVectorFromQuaternion(h.X_MH.rotation);
+          std::snprintf(line, sizeof line, "%.3f,%.9f,%.9f,%.9f,%.9f,%.9f,%.9f\n", h.t_s, p.x, p.y,
+                        p.z, r.x, r.y, r.z);
+          hand << line;
+        }
+      }
+      std::fprintf(stderr, "deadband_lockstep: reference again, with its hand replayed...\n");
+      ref = RunArm(reference_setup, reference);
+    }
     nlohmann::json summary;
     summary["input"] = setup.replay_file.empty() ? setup.experiment : setup.replay_file;
     summary["scene"] = scene_name;
@@ -245,6 +281,9 @@ int main(int argc, char** argv) {
             {"fields_per_s", static_cast<double>(r.fields_sent) / d},
             {"field_kbit_s", static_cast<double>(r.field_bytes) * 8e-3 / d},
             {"field_cached_kbit_s", static_cast<double>(r.field_cached_bytes) * 8e-3 / d},
+            {"contacts_without_field_pct",
+             100.0 * static_cast<double>(r.contacts_sent_without_field) /
+                 static_cast<double>(std::max<std::int64_t>(1, r.contacts_sent))},
             {"model_reduction_pct",
              100.0 * (1.0 - static_cast<double>(r.models) /
                                 static_cast<double>(std::max<std::int64_t>(1, ref.models)))},
@@ -317,9 +356,10 @@ int main(int argc, char** argv) {
             cell("field_fallback_ticks_pct", "%.1f").c_str());
         std::printf(
             "|   %s: depth fields %s /s, %s kbit/s whole; new surface (to a receiver that "
-            "caches it by lattice node) %s kbit/s |\n",
+            "caches it by lattice node) %s kbit/s; contacts sent without a field %s %% |\n",
             name.c_str(), cell("fields_per_s", "%.0f").c_str(),
-            cell("field_kbit_s", "%.0f").c_str(), cell("field_cached_kbit_s", "%.1f").c_str());
+            cell("field_kbit_s", "%.0f").c_str(), cell("field_cached_kbit_s", "%.1f").c_str(),
+            cell("contacts_without_field_pct", "%.2f").c_str());
       }
       std::printf("|   %s: operator tick p50 %s us, p99 %s us |\n", name.c_str(),
                   cell("tick_p50_us", "%.1f").c_str(), cell("tick_p99_us", "%.1f").c_str());

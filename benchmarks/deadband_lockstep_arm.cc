@@ -188,7 +188,11 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
   experiment->SetScene(ExperimentSceneInM(layout, X_WM));  // as RunOperatorStation does
   std::unique_ptr<HapticDevice> device;
   double duration_s = setup.duration_s;
-  if (!setup.replay_file.empty()) {
+  if (!setup.replay_samples.empty()) {
+    auto replay = std::make_unique<ReplayDevice>(setup.replay_samples, "the reference's hand");
+    duration_s = replay->duration_s();
+    device = std::move(replay);
+  } else if (!setup.replay_file.empty()) {
     auto replay = std::make_unique<ReplayDevice>(
         LoadReplayTrace(setup.replay_file, X_WM.translation), setup.replay_file);
     duration_s = replay->duration_s();
@@ -288,10 +292,12 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     in.device_ok = device->ReadState(now, in.device);
     bool have_arrived = false;
     arrived_field_ptrs.clear();
+    arrived_fields.clear();
     while (!to_operator.empty() && to_operator.front().arrive_ns <= now) {
       arrived = to_operator.front().value;
       to_operator.pop_front();
-      arrived_fields = std::move(fields_to_operator.front());
+      // Every field that came, also with a model the newer one in this tick replaces.
+      for (DepthField& f : fields_to_operator.front()) arrived_fields.push_back(std::move(f));
       fields_to_operator.pop_front();
       have_arrived = true;
     }
@@ -321,6 +327,7 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     run.p_WT.push_back(tick.tool().X_WT.translation);
     run.theta_WT.push_back(RotationVectorFromQuaternion(tick.tool().X_WT.rotation));
     run.p_WH.push_back(out.X_WH.translation);
+    run.R_WH.push_back(out.X_WH.rotation);
     // Its tool state, through the operator's deadband (on what the remote node will decode).
     ++tool_seq;
     const wire::ToolStateMessage state{tick.tool().X_WT, tick.tool().V_WT_W};
@@ -416,6 +423,14 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     // lattice node would still lack (the nodes of each lattice it has not had yet, at this
     // field's map bytes per node).
     const bool lost = uniform(loss_to_operator) < setup.loss;
+    if (options.depth_fields) {
+      for (int c = 0; c < message.model.num_contacts; ++c) {
+        const ContactLinearization& lin = message.model.contacts[static_cast<std::size_t>(c)];
+        ++run.contacts_sent;
+        if (std::isfinite(lin.depth_m) && lin.depth_field_id == 0)
+          ++run.contacts_sent_without_field;
+      }
+    }
     std::vector<DepthField> fields;
     for (const DepthField* f : pipeline.last_depth_fields()) {
       if (!lost && fields_delivered.insert(f->id).second) fields.push_back(*f);

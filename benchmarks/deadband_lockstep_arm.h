@@ -11,6 +11,7 @@
 #include "haptic_core/haptic_scene.h"
 #include "haptic_core/remote_step.h"
 #include "master_station/operator_station.h"
+#include "master_station/replay_device.h"
 #include "slave_sim/remote_node_config.h"
 #include "transport/deadband.h"
 
@@ -61,12 +62,16 @@ struct ArmRun {
   std::vector<double> tick_us;
   std::vector<double> depth_offset_m;
   std::vector<glm::dvec3> p_WT, p_WH;
+  std::vector<glm::dquat> R_WH;      ///< the hand's rotation, per tick
   std::vector<glm::dvec3> theta_WT;  ///< R_WT as a rotation vector (rad, W)
   std::int64_t tool_states = 0, tool_state_bytes = 0;
   std::int64_t models = 0, model_bytes = 0;
   /// Depth fields sent, their bytes (codecs/depth_field_codec.h, in datagrams), and the bytes of
   /// the surface a receiver caching it by lattice node would lack (the maps' share only).
   std::int64_t fields_sent = 0, field_bytes = 0, field_cached_bytes = 0;
+  /// Contacts in the models sent, and those with a finite depth but no field (their
+  /// linearization alone).
+  std::int64_t contacts_sent = 0, contacts_sent_without_field = 0;
   ht::DeadbandCounts tool_decisions{}, model_decisions{};
   double duration_s = 0.0;
 };
@@ -81,6 +86,9 @@ struct Setup {
   /// With --translation-patch: every model carries its patch, whatever the round trip.
   bool translation_patch = false;
   std::string replay_file;
+  /// A handle trajectory to replay (in M), taking the place of replay_file and the simulated
+  /// hand when not empty (--hand-from-reference).
+  std::vector<ht::ReplaySample> replay_samples;
   std::string experiment = "fig75";
   double duration_s = 5.0;
   double delay_ms = 0.1;

@@ -126,8 +126,10 @@ int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT
     };
     while (sub > 1 && side_at(sub) > kMaxDepthFieldSide) --sub;
     const double h = base_cell / sub;
-    const double room =
-        0.5 * (kMaxDepthFieldSide - std::max(2.0, std::ceil(q.window.extent_m / h - 1e-9))) * h;
+    // Whole cells on each side (Render rounds the margin up to cells).
+    const double room = std::floor(0.5 * (kMaxDepthFieldSide -
+                                          std::max(2.0, std::ceil(q.window.extent_m / h - 1e-9)))) *
+                        h;
     if (room < 0.0) continue;
     const double margin = std::min(room, options.depth_field_margin_m);
     // The lattice: one the environment already has for this direction and cell, else the
