@@ -216,7 +216,8 @@ class OperatorTick {
   ToolState tool_;
   RigidTransform X_WH_last_;
   ContactModel model_{}, previous_model_{};
-  /// The depth fields the models in use refer to (2·kMaxContacts + 4 slots).
+  /// The depth fields the models in use refer to, and those that came since (4·kMaxContacts + 4
+  /// slots: two models' worth kept, and room for as many arriving while fields churn).
   DepthFieldCache fields_;
   /// Stage 1: takes the fields that came with `in.arrived` into fields_, keeping those the model
   /// in use and the arriving one refer to.

@@ -20,7 +20,7 @@ OperatorTick::OperatorTick(const OperatorTickConfig& config, const RigidTransfor
       X_WM_(X_WM),
       tool_(tool_start),
       X_WH_last_(tool_start.X_WT),
-      fields_(2 * kMaxContacts + 4),
+      fields_(4 * kMaxContacts + 4),
       blend_tick_(config.model_blend_ticks) {
   if (config.model_blend_ticks < 1) {
     throw std::invalid_argument("model blend ticks must be >= 1, got " +
