@@ -315,12 +315,7 @@ ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const Rig
     J << J_active.d_translation_W.x, J_active.d_translation_W.y, J_active.d_translation_W.z,
         J_active.d_rotation_W.x, J_active.d_rotation_W.y, J_active.d_rotation_W.z;
     out.K.noalias() -= k * (J * J.transpose());
-    // From a field, each node's own direction (DepthFieldEvaluation::gradient_second_moment).
-    if (fe.valid) {
-      out.G.noalias() += (k * depth) * fe.gradient_second_moment;
-    } else {
-      out.G.noalias() += (k * depth) * (J * J.transpose());
-    }
+    out.G.noalias() += (k * depth) * (J * J.transpose());
     if (curved) out.K.noalias() -= (k * depth) * curvature;
   }
   return out;

@@ -390,9 +390,6 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
   }
   out.curvature.noalias() = B * (cov / eps) * B.transpose();
   out.curvature = 0.5 * (out.curvature + out.curvature.transpose()).eval();
-  out.gradient_second_moment.noalias() = B * (S2 / S0) * B.transpose();
-  out.gradient_second_moment =
-      0.5 * (out.gradient_second_moment + out.gradient_second_moment.transpose()).eval();
   return out;
 }
 

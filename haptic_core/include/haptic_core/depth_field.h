@@ -117,11 +117,6 @@ struct DepthFieldEvaluation {
   /// then rotation): the weights' covariance of the nodes' gradients over ε, positive
   /// semi-definite (the curvature of δ's kinks, which the implicit step needs in K).
   Eigen::Matrix<double, 6, 6> curvature = Eigen::Matrix<double, 6, 6>::Zero();
-  /// Σ w_j ∇δ_j ∇δ_jᵀ (6×6, world axes, positive semi-definite; the nodes whose weight is at
-  /// least 1e−6 of the deepest's): each node's own direction, of which ∇δ∇δᵀ is the mean's.
-  /// Damping along it damps a tool held between two flanks across them, where the weighted
-  /// mean ∇δ has no component (EvaluateContactModel's Hunt–Crossley term).
-  Eigen::Matrix<double, 6, 6> gradient_second_moment = Eigen::Matrix<double, 6, 6>::Zero();
   /// False when the field is not prepared or the pose is not finite (nothing is computed).
   bool valid = false;
   /// Whether the tool is within the field's travel margin of X_WT0. Beyond it the field is still
