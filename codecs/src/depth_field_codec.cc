@@ -15,23 +15,16 @@ static_assert(std::endian::native == std::endian::little);
 class Writer {
  public:
   std::vector<std::uint8_t> bytes;
-  void U8(std::uint8_t v) { bytes.push_back(v); }
-  void U16(std::uint16_t v) { Raw(&v, 2); }
-  void U32(std::uint32_t v) { Raw(&v, 4); }
-  void I32(std::int32_t v) { Raw(&v, 4); }
-  void F64(double v) { Raw(&v, 8); }
-  void Pose(const RigidTransform& X) {
-    for (int k = 0; k < 3; ++k) F64(X.translation[k]);
-    F64(X.rotation.w);
-    F64(X.rotation.x);
-    F64(X.rotation.y);
-    F64(X.rotation.z);
+  template <class T>
+  void Put(T v) {
+    const auto* b = reinterpret_cast<const std::uint8_t*>(&v);
+    bytes.insert(bytes.end(), b, b + sizeof v);
   }
-
- private:
-  void Raw(const void* p, std::size_t n) {
-    const auto* b = static_cast<const std::uint8_t*>(p);
-    bytes.insert(bytes.end(), b, b + n);
+  void Pose(const RigidTransform& X) {
+    for (const double v : {X.translation.x, X.translation.y, X.translation.z, X.rotation.w,
+                           X.rotation.x, X.rotation.y, X.rotation.z}) {
+      Put(v);
+    }
   }
 };
 
@@ -40,38 +33,21 @@ class Reader {
   explicit Reader(std::span<const std::uint8_t> b) : b_(b) {}
   bool ok() const { return ok_; }
   std::size_t left() const { return ok_ ? b_.size() - at_ : 0; }
-  std::uint8_t U8() {
-    std::uint8_t v = 0;
-    Raw(&v, 1);
-    return v;
-  }
-  std::uint16_t U16() {
-    std::uint16_t v = 0;
-    Raw(&v, 2);
-    return v;
-  }
-  std::uint32_t U32() {
-    std::uint32_t v = 0;
-    Raw(&v, 4);
-    return v;
-  }
-  std::int32_t I32() {
-    std::int32_t v = 0;
-    Raw(&v, 4);
-    return v;
-  }
-  double F64() {
-    double v = 0.0;
-    Raw(&v, 8);
+  /// The next sizeof(T) bytes as a T (0 once the bytes have run out; ok() says so).
+  template <class T>
+  T Get() {
+    T v{};
+    const std::span<const std::uint8_t> raw = Bytes(sizeof v);
+    if (ok_) std::memcpy(&v, raw.data(), sizeof v);
     return v;
   }
   RigidTransform Pose() {
     RigidTransform X;
-    for (int k = 0; k < 3; ++k) X.translation[k] = F64();
-    X.rotation.w = F64();
-    X.rotation.x = F64();
-    X.rotation.y = F64();
-    X.rotation.z = F64();
+    for (int k = 0; k < 3; ++k) X.translation[k] = Get<double>();
+    X.rotation.w = Get<double>();
+    X.rotation.x = Get<double>();
+    X.rotation.y = Get<double>();
+    X.rotation.z = Get<double>();
     return X;
   }
   std::span<const std::uint8_t> Bytes(std::size_t n) {
@@ -85,14 +61,6 @@ class Reader {
   }
 
  private:
-  void Raw(void* p, std::size_t n) {
-    if (!ok_ || n > b_.size() - at_) {
-      ok_ = false;
-      return;
-    }
-    std::memcpy(p, b_.data() + at_, n);
-    at_ += n;
-  }
   std::span<const std::uint8_t> b_;
   std::size_t at_ = 0;
   bool ok_ = true;
@@ -111,25 +79,25 @@ std::vector<std::uint8_t> EncodeDepthField(const DepthField& f,
   const std::vector<std::uint8_t> tool = EncodeDepthMap(f.tool_height_m, f.nx, f.ny, options);
   Writer w;
   w.bytes.reserve(200 + env.size() + tool.size());
-  w.U8(kDepthFieldFormat);
-  w.U32(f.id);
-  w.U32(f.lattice_id);
-  w.I32(f.lattice_i0);
-  w.I32(f.lattice_j0);
-  w.I32(f.tool_lattice_i0);
-  w.I32(f.tool_lattice_j0);
-  w.F64(f.cell_m);
-  w.U16(static_cast<std::uint16_t>(f.nx));
-  w.U16(static_cast<std::uint16_t>(f.ny));
-  w.F64(f.tool_offset_u_m);
-  w.F64(f.tool_offset_v_m);
+  w.Put<std::uint8_t>(kDepthFieldFormat);
+  w.Put<std::uint32_t>(f.id);
+  w.Put<std::uint32_t>(f.lattice_id);
+  w.Put<std::int32_t>(f.lattice_i0);
+  w.Put<std::int32_t>(f.lattice_j0);
+  w.Put<std::int32_t>(f.tool_lattice_i0);
+  w.Put<std::int32_t>(f.tool_lattice_j0);
+  w.Put<double>(f.cell_m);
+  w.Put<std::uint16_t>(static_cast<std::uint16_t>(f.nx));
+  w.Put<std::uint16_t>(static_cast<std::uint16_t>(f.ny));
+  w.Put<double>(f.tool_offset_u_m);
+  w.Put<double>(f.tool_offset_v_m);
   w.Pose(f.X_WF);
   w.Pose(f.X_WT0);
-  w.F64(f.travel_margin_m);
-  w.F64(f.smooth_max_m);
-  w.U32(static_cast<std::uint32_t>(env.size()));
+  w.Put<double>(f.travel_margin_m);
+  w.Put<double>(f.smooth_max_m);
+  w.Put<std::uint32_t>(static_cast<std::uint32_t>(env.size()));
   w.bytes.insert(w.bytes.end(), env.begin(), env.end());
-  w.U32(static_cast<std::uint32_t>(tool.size()));
+  w.Put<std::uint32_t>(static_cast<std::uint32_t>(tool.size()));
   w.bytes.insert(w.bytes.end(), tool.begin(), tool.end());
   return std::move(w.bytes);
 }
@@ -138,29 +106,29 @@ bool DecodeDepthField(std::span<const std::uint8_t> bytes, DepthField& out,
                       DecodedDepthMap& scratch, std::string& error) {
   out.prepared = false;
   Reader r(bytes);
-  const std::uint8_t format = r.U8();
+  const std::uint8_t format = r.Get<std::uint8_t>();
   if (r.ok() && format != kDepthFieldFormat) {
     error = "depth-field format " + std::to_string(format) + " is not " +
             std::to_string(kDepthFieldFormat);
     return false;
   }
-  out.id = r.U32();
-  out.lattice_id = r.U32();
-  out.lattice_i0 = r.I32();
-  out.lattice_j0 = r.I32();
-  out.tool_lattice_i0 = r.I32();
-  out.tool_lattice_j0 = r.I32();
-  out.cell_m = r.F64();
-  out.nx = r.U16();
-  out.ny = r.U16();
-  out.tool_offset_u_m = r.F64();
-  out.tool_offset_v_m = r.F64();
+  out.id = r.Get<std::uint32_t>();
+  out.lattice_id = r.Get<std::uint32_t>();
+  out.lattice_i0 = r.Get<std::int32_t>();
+  out.lattice_j0 = r.Get<std::int32_t>();
+  out.tool_lattice_i0 = r.Get<std::int32_t>();
+  out.tool_lattice_j0 = r.Get<std::int32_t>();
+  out.cell_m = r.Get<double>();
+  out.nx = r.Get<std::uint16_t>();
+  out.ny = r.Get<std::uint16_t>();
+  out.tool_offset_u_m = r.Get<double>();
+  out.tool_offset_v_m = r.Get<double>();
   out.X_WF = r.Pose();
   out.X_WT0 = r.Pose();
-  out.travel_margin_m = r.F64();
-  out.smooth_max_m = r.F64();
+  out.travel_margin_m = r.Get<double>();
+  out.smooth_max_m = r.Get<double>();
   for (const bool tool : {false, true}) {
-    const std::uint32_t n = r.U32();
+    const std::uint32_t n = r.Get<std::uint32_t>();
     const std::span<const std::uint8_t> map = r.Bytes(n);
     if (!r.ok()) {
       error = "a depth field of " + std::to_string(bytes.size()) + " bytes ends early";

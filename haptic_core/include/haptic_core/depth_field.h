@@ -67,7 +67,7 @@ struct DepthField {
   /// the environment's lattice and on the tool's.
   std::uint32_t lattice_id = 0;
   std::int32_t lattice_i0 = 0, lattice_j0 = 0, tool_lattice_i0 = 0, tool_lattice_j0 = 0;
-  RigidTransform X_WT0;              ///< The tool pose a was rendered at (T at the tool's CoM).
+  RigidTransform X_WT0;  ///< The tool pose a was rendered at (T at the tool's CoM).
   /// How far (m) the tool's surface may move in F's plane from where it was at X_WT0 before the
   /// field may miss part of the overlap: the margin by which the grid exceeds the window on each
   /// side.
