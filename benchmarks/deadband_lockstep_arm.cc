@@ -369,24 +369,6 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     wire::ContactModelMessage message;
     message.model = pipeline.Step(X_WT, remote.seq, timings, remote.message.V_WT_W);
     const std::int64_t sent_ns = t_r + step_ns;
-    // With depth fields, a model that refers to a field the held model does not (the remote
-    // step rendered it because the held ones no longer hold the tool: stage 5d keeps a field
-    // while the tool is within half its margin) is sent whatever its force: the deadband
-    // forgets its held model, so that it sends this one.
-    if (options.depth_fields) {
-      const ContactModel& held = model_deadband.held();
-      for (int c = 0; c < message.model.num_contacts; ++c) {
-        const std::uint32_t id = message.model.contacts[static_cast<std::size_t>(c)].depth_field_id;
-        bool held_has = id == 0;
-        for (int e = 0; e < held.num_contacts && !held_has; ++e) {
-          held_has = held.contacts[static_cast<std::size_t>(e)].depth_field_id == id;
-        }
-        if (!held_has) {
-          model_deadband.ForgetHeld();
-          break;
-        }
-      }
-    }
     const DeadbandReason model_why = model_deadband.Decide(message.model, sent_ns);
     ++run.model_decisions[static_cast<std::size_t>(model_why)];
     if (model_why == DeadbandReason::kNotSent) continue;
@@ -414,8 +396,8 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     }
     ArrivedModel a;
     a.model = decoded.model;
-    // The depth fields travel beside the model here (not yet on the wire): the contacts keep
-    // their fields' ids through the encoding, in order. A field goes with the first model that
+    // The depth fields travel beside the model here (the model names them by id; on the wire
+    // they are DepthFieldFragments, transport/depth_field_stream.h). A field goes with the first model that
     // refers to it and arrives (a repaired stream's delivery at the model's latency); a field
     // kept from an earlier step is referred to by its id alone. It goes through the depth-field
     // codec (codecs/depth_field_codec.h: the operator evaluates the decoded field), and its
@@ -465,14 +447,6 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
       const auto maps = size - static_cast<std::int64_t>(kDepthFieldFixedBytes);
       run.field_cached_bytes += present > 0 ? maps * fresh / present : std::int64_t{0};
       ++run.fields_sent;
-    }
-    if (a.model.num_contacts != message.model.num_contacts) {
-      throw std::runtime_error("the compact encoding changed the contact count (tick " +
-                               std::to_string(k) + ")");
-    }
-    for (int c = 0; c < a.model.num_contacts; ++c) {
-      a.model.contacts[static_cast<std::size_t>(c)].depth_field_id =
-          message.model.contacts[static_cast<std::size_t>(c)].depth_field_id;
     }
     a.tool_state_sent_ns = decoded.tool_state_send_time_ns;
     a.built_local_ns = sent_ns;

@@ -262,6 +262,7 @@ int main(int argc, char** argv) {
   std::optional<double> tool_state_deadband_pct, model_deadband_pct;
   double deadband_keepalive_ms = 100.0;
   bool deadband_velocity_adaptive = false, float_models = false, float_tool_states = false;
+  bool no_depth_fields = false;
   app.add_option("--deadband", deadband_pct,
                  "perceptual deadband on both streams, percent (a Weber fraction: a tool state or "
                  "contact model is sent only when it differs from what the other side predicts "
@@ -321,6 +322,10 @@ int main(int argc, char** argv) {
   app.add_flag("--float-models", float_models,
                "ask for contact models in the float encoding rather than the compact quantized "
                "one (transport/protocol.h states its error bounds)");
+  app.add_flag("--no-depth-fields", no_depth_fields,
+               "render every contact from the linearization the remote node made at the pose it "
+               "answered (δ0 + J·Δq) instead of evaluating the contact's depth field, the two "
+               "surfaces, at the tool's current pose every tick");
   ht::AddKeygenCommand(app, key);
   std::string merge_summary, merge_remote;
   CLI::App* merge = app.add_subcommand(
@@ -369,6 +374,7 @@ int main(int argc, char** argv) {
     config.model_deadband = model_deadband_pct.value_or(deadband_pct) / 100.0;
     config.model_keepalive_s = deadband_keepalive_ms * 1e-3;
     config.compact_models = !float_models;
+    config.depth_fields = !no_depth_fields;
     config.compact_tool_states = !float_tool_states;
     config.out_dir = out_dir;
     config.display.mode = display_mode == "headless" ? ht::DisplayConfig::Mode::kHeadless

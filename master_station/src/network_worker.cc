@@ -13,6 +13,7 @@
 #include <limits>
 #include <optional>
 
+#include "codecs/depth_field_codec.h"
 #include "codecs/draco_mesh_codec.h"
 #include "haptic_core/statistics.h"
 
@@ -20,7 +21,7 @@ namespace ht::station {
 
 NetworkWorker::NetworkWorker(const StationConfig& config, TripleBuffer<OutgoingToolState>& outgoing,
                              TripleBuffer<IncomingModel>& incoming, Counters& counters,
-                             ReceivedScene& scene)
+                             ReceivedScene& scene, FieldHandoff& fields)
     : config_(config),
       socket_(config.local_address),
       link_(socket_, config.key, LinkRole::kOperator),
@@ -28,7 +29,10 @@ NetworkWorker::NetworkWorker(const StationConfig& config, TripleBuffer<OutgoingT
       outgoing_(outgoing),
       incoming_(incoming),
       counters_(counters),
-      scene_(scene) {
+      scene_(scene),
+      fields_(fields),
+      field_reassembler_(config.mtu) {
+  field_decode_ms_.reserve(1 << 16);
   rtt_ms_.reserve(1 << 20);
   node_pose_latency_ms_.reserve(1 << 18);
   one_way_ms_.reserve(1 << 20);
@@ -143,6 +147,17 @@ void NetworkWorker::Run(const std::atomic<bool>& stop) {
     }
     SceneReassembler::RepairTiming repair;
     repair.rtt_ns = clock_.valid() ? clock_.rtt_ns() : handshake_rtt_ns_;
+    if (depth_fields_ && session_ != 0) {
+      DepthFieldReassembler::RepairTiming field_repair;
+      field_repair.rtt_ns = repair.rtt_ns;
+      field_reassembler_.CollectNacks(now, field_repair, [&](const wire::SceneNackMessage& nack) {
+        ++field_nacks_sent_;
+        link_.Send(wire::EncodeDepthFieldNack(
+                       link_.NextHeader(wire::MessageType::kDepthFieldNack, session_), nack,
+                       config_.key),
+                   config_.remote_address);
+      });
+    }
     reassembler_.CollectNacks(now, repair, [&](const wire::SceneNackMessage& nack) {
       for (int copy = 0; copy < kSceneNackCopies; ++copy) {
         link_.Send(wire::EncodeSceneNack(link_.NextHeader(wire::MessageType::kSceneNack, session_),
@@ -241,6 +256,19 @@ nlohmann::json NetworkWorker::Summary() const {
                 {"updates_received", update_transfer_ms_.size()},
                 {"update_transfer_ms_p50", Percentile(update_transfer_ms_, 0.5)},
                 {"update_transfer_ms_max", Percentile(update_transfer_ms_, 1.0)}};
+  const DepthFieldReassemblyStats& fr = field_reassembler_.stats();
+  t["depth_fields"] = {{"agreed", depth_fields_},
+                       {"fields_completed", fr.fields_completed},
+                       {"fields_handed_to_loop", fields_handed_},
+                       {"fields_undecodable", fields_undecodable_},
+                       {"fields_without_buffer", fields_without_buffer_},
+                       {"fields_abandoned", fr.fields_abandoned},
+                       {"fragments_accepted", fr.fragments_accepted},
+                       {"fragments_duplicate", fr.fragments_duplicate},
+                       {"fragments_inconsistent", fr.fragments_inconsistent},
+                       {"nacks_sent", fr.nacks_sent},
+                       {"decode_ms_p50", Percentile(field_decode_ms_, 0.5)},
+                       {"decode_ms_max", Percentile(field_decode_ms_, 1.0)}};
   const ReceivedPoseStats poses = scene_.pose_stats();
   t["node_poses"] = {{"messages", poses.messages},
                      {"messages_before_scene", poses.messages_before_scene},
@@ -283,7 +311,8 @@ void NetworkWorker::SendHello() {
   hello.peer_timeout_ms = static_cast<std::uint16_t>(config_.peer_timeout_ms);
   hello.codecs = wire::kCodecDracoMesh |
                  (config_.compact_models ? wire::kCodecCompactContactModel : 0u) |
-                 (config_.compact_tool_states ? wire::kCodecCompactToolState : 0u);
+                 (config_.compact_tool_states ? wire::kCodecCompactToolState : 0u) |
+                 (config_.depth_fields ? wire::kCodecDepthFields : 0u);
   hello.deadband.tool_state_deadband =
       static_cast<float>(config_.tool_state_deadband.weber_fraction);
   hello.deadband.model_deadband = static_cast<float>(config_.model_deadband);
@@ -294,6 +323,40 @@ void NetworkWorker::SendHello() {
   link_.Send(wire::EncodeHello(link_.NextHeader(wire::MessageType::kHello, 0), hello, config_.key),
              config_.remote_address);
   ++hellos_sent_;
+}
+
+void NetworkWorker::OnDepthFieldFragment(const wire::SceneFragmentMessage& fragment,
+                                         std::int64_t now) {
+  if (field_reassembler_.Add(fragment, now) != DepthFieldReassembler::Outcome::kCompleted) return;
+  if (spare_field_ == nullptr && !fields_.free.Pop(spare_field_)) {
+    // Every buffer is on its way to the loop: the field is asked for again when a model names it.
+    ++fields_without_buffer_;
+    return;
+  }
+  std::string error;
+  const std::int64_t t0 = SteadyNowNs();
+  if (!DecodeDepthField(field_reassembler_.completed(), *spare_field_, field_scratch_, error)) {
+    ++fields_undecodable_;
+    if (fields_undecodable_ == 1) {
+      std::printf("[master] a depth field from the remote node did not decode (%s); its contact "
+                  "is rendered from its linearization\n",
+                  error.c_str());
+      std::fflush(stdout);
+    }
+    field_reassembler_.Held(field_reassembler_.completed_id());  // asking again would not help
+    return;
+  }
+  if (field_decode_ms_.size() < field_decode_ms_.capacity()) {
+    field_decode_ms_.push_back(static_cast<double>(SteadyNowNs() - t0) * 1e-6);
+  }
+  // The ready ring holds at most the pool: a push cannot fail while every pointer is the pool's.
+  if (fields_.ready.Push(spare_field_)) {
+    spare_field_ = nullptr;
+    ++fields_handed_;
+    field_reassembler_.Held(field_reassembler_.completed_id());
+  } else {
+    ++fields_without_buffer_;
+  }
 }
 
 void NetworkWorker::EndSession() {
@@ -339,6 +402,8 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
       deadband_agreed_ = w.deadband;
       compact_models_ = (w.codecs & wire::kCodecCompactContactModel) != 0;
       compact_tool_states_ = (w.codecs & wire::kCodecCompactToolState) != 0;
+      depth_fields_ = (w.codecs & wire::kCodecDepthFields) != 0;
+      field_reassembler_.Reset(w.mtu);
       scene_name_ = std::string(w.name());
       {
         std::lock_guard<std::mutex> lock(layout_mutex_);
@@ -414,6 +479,13 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
       last_remote_ns_ = now;
       last_remote_steps_low_ = steps_low;
       held_model_ = model.message.model;
+      if (depth_fields_) {
+        // A field the model names that has not arrived is asked for again (CollectNacks).
+        for (int i = 0; i < std::clamp(model.message.model.num_contacts, 0, kMaxContacts); ++i) {
+          field_reassembler_.Wanted(
+              model.message.model.contacts[static_cast<std::size_t>(i)].depth_field_id, now);
+        }
+      }
       incoming_.Write(model);
       return;
     }
@@ -458,6 +530,15 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
         scene_dirty_ = true;
         CheckScene(now);
       }
+      return;
+    }
+    case wire::MessageType::kDepthFieldFragment: {
+      wire::SceneFragmentMessage f;
+      if (const auto st = wire::DecodeDepthFieldFragment(body, f); st != wire::DecodeStatus::kOk) {
+        link_.CountBodyRejected(header.type, st);
+        return;
+      }
+      if (depth_fields_) OnDepthFieldFragment(f, now);
       return;
     }
     case wire::MessageType::kNodePoses: {

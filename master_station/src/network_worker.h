@@ -8,17 +8,21 @@
 #include <cstddef>
 #include <cstdint>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <span>
 #include <string>
 #include <vector>
 
+#include "codecs/depth_map_codec.h"
+#include "haptic_core/depth_field.h"
 #include "haptic_core/steady_clock.h"
 #include "master_station/lock_free.h"
 #include "master_station/received_scene.h"
 #include "master_station/station_config.h"
 #include "transport/deadband.h"
+#include "transport/depth_field_stream.h"
 #include "transport/link.h"
 #include "transport/messages.h"
 #include "transport/scene_stream.h"
@@ -40,6 +44,24 @@ struct IncomingModel {
   std::int64_t built_local_ns = 0;  ///< when the remote node sent it, on the local clock
 };
 
+/// Depth fields from the network worker to the haptic loop, with no copy and no allocation on
+/// the loop: the worker decodes each field that arrived whole into a DepthField taken from
+/// `free` and hands its pointer on through `ready`; the loop gives every pointer it took back
+/// through `free` after its tick (OperatorTickInput::arrived_fields: the pointer then holds the
+/// buffers of the field its cache evicted).
+struct FieldHandoff {
+  static constexpr std::size_t kFields = 16;
+  FieldHandoff() : ready(kFields), free(kFields) {
+    pool.reserve(kFields);
+    for (std::size_t i = 0; i < kFields; ++i) {
+      pool.push_back(std::make_unique<DepthField>());
+      free.Push(pool.back().get());
+    }
+  }
+  std::vector<std::unique_ptr<DepthField>> pool;
+  SpscRing<DepthField*> ready, free;
+};
+
 struct Counters {
   std::atomic<std::uint64_t> model_accepted{0};
   std::atomic<bool> connected{false};
@@ -53,8 +75,10 @@ struct Counters {
 class NetworkWorker {
  public:
   /// `scene` receives the decoded scene and the moving nodes' poses (for the display).
+  /// `fields` receives the contacts' depth fields (when the session agreed them).
   NetworkWorker(const StationConfig& config, TripleBuffer<OutgoingToolState>& outgoing,
-                TripleBuffer<IncomingModel>& incoming, Counters& counters, ReceivedScene& scene);
+                TripleBuffer<IncomingModel>& incoming, Counters& counters, ReceivedScene& scene,
+                FieldHandoff& fields);
 
   void Run(const std::atomic<bool>& stop);
 
@@ -90,6 +114,10 @@ class NetworkWorker {
   /// new version completes), decode every object (the graph, Draco meshes, images) and publish
   /// them to the received scene.
   void CheckScene(std::int64_t now);
+
+  /// A DepthFieldFragment: reassembled; a field that arrived whole is decoded (prepared) into a
+  /// DepthField from the hand-off's free ring and handed to the loop.
+  void OnDepthFieldFragment(const wire::SceneFragmentMessage& fragment, std::int64_t now);
 
   /// Sends `s` as the session agreed: CompactToolState (quantized from s as it is) or ToolState.
   void Send(const OutgoingToolState& s);
@@ -154,6 +182,15 @@ class NetworkWorker {
   /// node's, counted from its 0), and the last model's low 32 bits.
   std::uint64_t remote_steps_ = 0;
   std::uint32_t last_remote_steps_low_ = 0;
+  // Depth fields (kCodecDepthFields, agreed in the Welcome): reassembly, decoding, hand-off.
+  FieldHandoff& fields_;
+  bool depth_fields_ = false;
+  DepthFieldReassembler field_reassembler_;
+  DepthField* spare_field_ = nullptr;  ///< taken from the free ring, not handed on yet
+  DecodedDepthMap field_scratch_;
+  std::uint64_t fields_handed_ = 0, fields_undecodable_ = 0, fields_without_buffer_ = 0;
+  std::uint64_t field_nacks_sent_ = 0;
+  std::vector<double> field_decode_ms_;
 };
 
 }  // namespace ht::station

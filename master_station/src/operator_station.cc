@@ -59,7 +59,7 @@ OperatorStationRun::OperatorStationRun(const StationConfig& config, HapticDevice
     WriteTraceHeader(trace_);
   }
   try {
-    network_.emplace(config, outgoing_, incoming_, counters_, received_scene_);
+    network_.emplace(config, outgoing_, incoming_, counters_, received_scene_, field_handoff_);
   } catch (...) {
     if (trace_) std::fclose(trace_);
     trace_ = nullptr;
@@ -246,6 +246,7 @@ void OperatorStationRun::LoopThread() {
   }
   IncomingModel received{};
   ArrivedModel arrived{};
+  std::array<DepthField*, FieldHandoff::kFields> arrived_fields{};
   DisplayToolState display_state{};
   std::int64_t experiment_t0 = -1;
   std::int64_t stop_ramp_start = -1;
@@ -284,6 +285,13 @@ void OperatorStationRun::LoopThread() {
         display_state.have_model = true;
       }
     }
+    // The depth fields that came (before or with the model just read: the worker hands a field
+    // on before the model that names it), given back to the worker after the tick.
+    std::size_t fields_in = 0;
+    while (fields_in < arrived_fields.size() && field_handoff_.ready.Pop(arrived_fields[fields_in])) {
+      ++fields_in;
+    }
+    in.arrived_fields = {arrived_fields.data(), fields_in};
     // Asked to stop (Ctrl-C, SIGTERM): ramp the device's wrench to zero (in the tick, before
     // the passivity observer records it), then end the run.
     if (stop_ramp_start < 0 && StopRequested()) stop_ramp_start = k;
@@ -292,6 +300,7 @@ void OperatorStationRun::LoopThread() {
           std::max(0.0, 1.0 - static_cast<double>(k - stop_ramp_start + 1) / stop_ramp_ticks);
     }
     OperatorTickOutput out = tick.Step(in);
+    for (std::size_t i = 0; i < fields_in; ++i) field_handoff_.free.Push(arrived_fields[i]);
     if (!device_.WriteWrench(out.F_H_M, now)) ++rec.device_write_faults;
     if (in.device_ok) {
       ++tool_seq_;

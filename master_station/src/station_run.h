@@ -95,6 +95,8 @@ class OperatorStationRun {
 
   TripleBuffer<OutgoingToolState> outgoing_;
   TripleBuffer<IncomingModel> incoming_;
+  /// Depth fields from the network worker to the loop (and their buffers back).
+  FieldHandoff field_handoff_;
   SpscRing<TraceRow> rows_{16384};
   Counters counters_;
   ReceivedScene received_scene_;

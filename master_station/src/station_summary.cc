@@ -50,6 +50,12 @@ nlohmann::json OperatorStationRun::Summary() const {
   s["contact_force_bound_n"] = config_.max_contact_force_n;
   s["contact_damping_hunt_crossley_s_per_m"] = config_.hunt_crossley_s_per_m;
   s["saturated_contact_ticks"] = tick_->counters().saturated_contact_ticks;
+  // Ticks that rendered a contact from its depth field (beyond its margin), that fell back to a
+  // contact's linearization for want of its field, and fields the loop's cache refused.
+  s["depth_fields"] = {{"field_ticks", tick_->counters().field_ticks},
+                       {"beyond_margin_ticks", tick_->counters().field_beyond_margin_ticks},
+                       {"fallback_ticks", tick_->counters().field_fallback_ticks},
+                       {"fields_refused", tick_->counters().fields_refused}};
   s["tool_mass_kg"] = tool_inertia_.mass_kg;
   s["device"] = caps_.name;
   s["duration_s"] =

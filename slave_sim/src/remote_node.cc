@@ -196,7 +196,8 @@ RemoteNodeRun::RemoteNodeRun(const RemoteNodeConfig& config, const HapticScene& 
   caps_.peer_timeout_ms = static_cast<std::uint16_t>(config.peer_timeout_ms);
   caps_.max_deadband = static_cast<float>(config.max_deadband);
   caps_.codecs =
-      wire::kCodecDracoMesh | wire::kCodecCompactContactModel | wire::kCodecCompactToolState;
+      wire::kCodecDracoMesh | wire::kCodecCompactContactModel | wire::kCodecCompactToolState |
+      (config.depth_fields ? wire::kCodecDepthFields : 0u);
   caps_.scene_objects = static_cast<std::uint16_t>(config.scene_objects.size());
   caps_.scene_name = scene.name;
   caps_.layout = MakeSceneLayout(scene);
@@ -352,7 +353,8 @@ void RemoteNodeRun::StepOrWait() {
   statistics_.Record(static_cast<double>(t_step - start_ns_) * 1e-9, t_step, step_end_ns, timings,
                      out.model.num_contacts, session_->latest_tool_state_seq(),
                      static_cast<int>(cause), pipeline_->last_contact_queries());
-  session_->MaybeSendContactModel(out, timings, statistics_.steps(), step_end_ns);
+  session_->MaybeSendContactModel(out, timings, statistics_.steps(), step_end_ns,
+                                  pipeline_->last_depth_fields());
   PrintProgress(timings, out.model.num_contacts);
   // The pace (config.max_rate_hz).
   if (min_period_ns_ > 0) {
@@ -373,6 +375,16 @@ void RemoteNodeRun::FollowRoundTrip() {
       ++patch_switches_;
     }
     if (patch) ++steps_with_patch_on_;
+  }
+  // Depth fields for a session whose operator takes them, their margin by its round trip.
+  if (session_->depth_fields() != pipeline_->depth_fields()) {
+    pipeline_->SetDepthFields(session_->depth_fields());
+  }
+  if (session_->depth_fields()) {
+    pipeline_->SetDepthFieldMargin(std::max(
+        config_.depth_field_min_margin_m,
+        config_.depth_field_speed_m_per_s * static_cast<double>(session_->operator_rtt_ns()) *
+            1e-9));
   }
   // The speculative floor by the operator's round trip (speculative_speed_m_per_s).
   if (config_.speculative_speed_m_per_s > 0.0) {

@@ -1,5 +1,8 @@
 #include "remote_session.h"
 
+#include "codecs/depth_field_codec.h"
+#include "haptic_core/steady_clock.h"
+
 #include <algorithm>
 #include <cstdio>
 #include <stdexcept>
@@ -93,6 +96,16 @@ bool RemoteSession::OnDatagram(std::span<const std::uint8_t> datagram, const Soc
       } else {
         ++nacks_ignored_;
       }
+      break;
+    }
+    case wire::MessageType::kDepthFieldNack: {
+      wire::SceneNackMessage nack;
+      if (const auto st = wire::DecodeDepthFieldNack(body, nack); st != wire::DecodeStatus::kOk) {
+        link_.CountBodyRejected(header.type, st);
+        break;
+      }
+      // Answered at once: the operator renders that contact from its linearization meanwhile.
+      if (depth_fields_ && field_sender_.OnNack(nack)) SendQueuedFieldFragments();
       break;
     }
     case wire::MessageType::kGoodbye: {
@@ -196,6 +209,8 @@ void RemoteSession::OnHello(const wire::Header& header, std::span<const std::uin
   tool_state_keepalive_ns_ = std::int64_t{welcome.deadband.tool_state_keepalive_ms} * 1000000;
   model_keepalive_ns_ = std::int64_t{welcome.deadband.model_keepalive_ms} * 1000000;
   compact_models_ = (welcome.codecs & wire::kCodecCompactContactModel) != 0;
+  depth_fields_ = (welcome.codecs & wire::kCodecDepthFields) != 0;
+  field_sender_.Reset(welcome.mtu);
   have_step_pose_ = have_sent_model_ = model_pending_ = have_held_echo_ = false;
   operator_rtt_ns_ = 0;
   link_.Send(wire::EncodeWelcome(link_.NextHeader(wire::MessageType::kWelcome, session_), welcome,
@@ -204,10 +219,11 @@ void RemoteSession::OnHello(const wire::Header& header, std::span<const std::uin
   SendManifest(now);
   std::printf(
       "[slave] session %08x opened for operator at %s (protocol v%u, mtu %u, grid %u, "
-      "peer timeout %u ms, deadband tool states %.0f %% / contact models %.0f %%, %s models)\n",
+      "peer timeout %u ms, deadband tool states %.0f %% / contact models %.0f %%, %s models%s)\n",
       session_, from.ToString().c_str(), welcome.version, welcome.mtu, welcome.grid,
       welcome.peer_timeout_ms, 100.0 * welcome.deadband.tool_state_deadband,
-      100.0 * welcome.deadband.model_deadband, compact_models_ ? "compact" : "float");
+      100.0 * welcome.deadband.model_deadband, compact_models_ ? "compact" : "float",
+      depth_fields_ ? " with depth fields" : "");
   std::fflush(stdout);
 }
 
@@ -319,7 +335,8 @@ StepCause RemoteSession::WhyStep(const RigidTransform& X_WT, bool scene_moves, d
 
 bool RemoteSession::MaybeSendContactModel(wire::ContactModelMessage& out,
                                           const StepTimings& timings, std::uint64_t step_count,
-                                          std::int64_t now) {
+                                          std::int64_t now,
+                                          std::span<const DepthField* const> fields) {
   if (session_ == 0) return false;
   if (model_period_ns_ != 0 && now - last_model_sent_ns_ < model_period_ns_) {
     // Too soon after the last model: this one is not sent, and the next pass must step again
@@ -348,6 +365,7 @@ bool RemoteSession::MaybeSendContactModel(wire::ContactModelMessage& out,
   out.texture_us = static_cast<float>(timings.texture_us);
   out.step_us = static_cast<float>(timings.total_us);
   last_sent_answer_recv_ns_ = latest_recv_ns_ + step_extrapolation_ns_;
+  SendDepthFields(out.model, fields);
   SendModel(out, now);
   return true;
 }
@@ -367,6 +385,51 @@ bool RemoteSession::MaybeSendKeepAlive(std::int64_t now) {
   return true;
 }
 
+void RemoteSession::SendQueuedFieldFragments() {
+  wire::SceneFragmentMessage fragment;
+  while (field_sender_.Next(fragment)) {
+    link_.Send(wire::EncodeDepthFieldFragment(
+                   link_.NextHeader(wire::MessageType::kDepthFieldFragment, session_), fragment,
+                   config_.key),
+               peer_);
+  }
+}
+
+void RemoteSession::SendDepthFields(ContactModel& model,
+                                    std::span<const DepthField* const> fields) {
+  const int n = std::clamp(model.num_contacts, 0, wire::kMaxWireContacts);
+  for (int i = 0; i < n; ++i) {
+    std::uint32_t& id = model.contacts[static_cast<std::size_t>(i)].depth_field_id;
+    if (id == 0) continue;
+    if (!depth_fields_) {  // the operator does not take fields: its linearization alone
+      id = 0;
+      continue;
+    }
+    if (field_sender_.Named(id)) continue;
+    const auto it = std::find_if(fields.begin(), fields.end(),
+                                 [id](const DepthField* f) { return f != nullptr && f->id == id; });
+    if (it == fields.end()) {
+      id = 0;
+      ++contacts_without_field_;
+      continue;
+    }
+    const std::int64_t t0 = SteadyNowNs();
+    std::vector<std::uint8_t> bytes;
+    try {
+      bytes = EncodeDepthField(**it);
+    } catch (const std::invalid_argument&) {  // a field the codec cannot carry: none for it
+      id = 0;
+      ++contacts_without_field_;
+      continue;
+    }
+    field_encode_ms_ += static_cast<double>(SteadyNowNs() - t0) * 1e-6;
+    ++fields_encoded_;
+    field_bytes_encoded_ += bytes.size();
+    field_sender_.Add(id, std::move(bytes));
+  }
+  SendQueuedFieldFragments();
+}
+
 void RemoteSession::SendModel(wire::ContactModelMessage& out, std::int64_t now) {
   const wire::MessageType type =
       compact_models_ ? wire::MessageType::kCompactContactModel : wire::MessageType::kContactModel;
@@ -374,6 +437,10 @@ void RemoteSession::SendModel(wire::ContactModelMessage& out, std::int64_t now) 
   out.hold_ns = header.send_time_ns - last_sent_answer_recv_ns_;
   // The kink planes that fit the datagram go (contact by contact); the rest are counted.
   const int contacts = std::clamp(out.model.num_contacts, 0, wire::kMaxWireContacts);
+  int field_ids = 0;
+  for (int i = 0; i < contacts; ++i) {
+    field_ids += out.model.contacts[static_cast<std::size_t>(i)].depth_field_id != 0 ? 1 : 0;
+  }
   std::uint64_t planes = 0;
   for (int i = 0; i < contacts; ++i) {
     planes += static_cast<std::uint64_t>(std::clamp(
@@ -382,8 +449,9 @@ void RemoteSession::SendModel(wire::ContactModelMessage& out, std::int64_t now) 
   const auto fit = static_cast<std::uint64_t>(
       compact_models_
           ? wire::KinkPlaneCapacity(wire::kCompactContactModelFixedBytes,
-                                    wire::kCompactContactBytes, contacts)
-          : wire::KinkPlaneCapacity(wire::kContactModelFixedBytes, wire::kContactBytes, contacts));
+                                    wire::kCompactContactBytes, contacts, field_ids)
+          : wire::KinkPlaneCapacity(wire::kContactModelFixedBytes, wire::kContactBytes, contacts,
+                                    field_ids));
   kink_planes_sent_ += std::min(planes, fit);
   kink_planes_left_out_ += planes - std::min(planes, fit);
   // The translation patches likewise, after the planes that went (protocol version 9).
@@ -395,9 +463,10 @@ void RemoteSession::SendModel(wire::ContactModelMessage& out, std::int64_t now) 
   const auto patch_fit = static_cast<std::uint64_t>(
       compact_models_
           ? wire::TranslationPatchCapacity(wire::kCompactContactModelFixedBytes,
-                                           wire::kCompactContactBytes, contacts, planes_sent)
+                                           wire::kCompactContactBytes, contacts, planes_sent,
+                                           field_ids)
           : wire::TranslationPatchCapacity(wire::kContactModelFixedBytes, wire::kContactBytes,
-                                           contacts, planes_sent));
+                                           contacts, planes_sent, field_ids));
   patches_sent_ += std::min(patches, patch_fit);
   patches_left_out_ += patches - std::min(patches, patch_fit);
   link_.Send(compact_models_ ? wire::EncodeCompactContactModel(header, out, config_.key)
@@ -479,6 +548,16 @@ nlohmann::json RemoteSession::StatsJson(std::size_t scene_objects, std::size_t s
                      {"model_decisions", ToJson(model_deadband_.counts())}});
   transport["kink_planes"] = {{"sent", kink_planes_sent_}, {"left_out", kink_planes_left_out_}};
   transport["translation_patches"] = {{"sent", patches_sent_}, {"left_out", patches_left_out_}};
+  transport["depth_fields"] = {{"agreed", depth_fields_},
+                               {"fields_sent", fields_encoded_},
+                               {"field_bytes", field_bytes_encoded_},
+                               {"encode_ms_mean", fields_encoded_ > 0
+                                                      ? field_encode_ms_ / fields_encoded_
+                                                      : 0.0},
+                               {"fragments_sent", field_sender_.fragments_sent()},
+                               {"nacks_answered", field_sender_.nacks_answered()},
+                               {"nacks_refused", field_sender_.nacks_refused()},
+                               {"contacts_without_field", contacts_without_field_}};
   transport["mtu"] = config_.mtu;
   transport["node_poses"] = {{"rate_hz", config_.display_rate_hz},
                              {"graph_version", graph_version_},

@@ -12,7 +12,9 @@
 #include <span>
 #include <vector>
 
+#include "haptic_core/depth_field.h"
 #include "slave_sim/remote_node_config.h"
+#include "transport/depth_field_stream.h"
 #include "transport/link.h"
 #include "transport/messages.h"
 #include "transport/scene_stream.h"
@@ -126,8 +128,13 @@ class RemoteSession {
   /// count, its echo of the tool state (send time plus the extrapolation, so that the operator's
   /// model age is the age of the pose answered) and its hold time. Sends in the compact encoding
   /// when both sides have it. Returns true when sent.
+  /// With depth fields agreed, the fields the model names that this session has not sent yet
+  /// (from `fields`, the step's HapticTexturePipeline::last_depth_fields()) are encoded and
+  /// their DepthFieldFragments sent first; a contact naming a field not in `fields` goes
+  /// without one.
   bool MaybeSendContactModel(wire::ContactModelMessage& out, const StepTimings& timings,
-                             std::uint64_t step_count, std::int64_t now_ns);
+                             std::uint64_t step_count, std::int64_t now_ns,
+                             std::span<const DepthField* const> fields = {});
   /// While steps wait (WhyStep gave kWait): sends the last model again (new header, same
   /// content) when the contact-model keep-alive has passed, echoing the newest tool state whose
   /// step gave a model the deadband held back (it answers that state too, to within the
@@ -138,6 +145,8 @@ class RemoteSession {
 
   /// A session is open.
   bool open() const noexcept { return session_ != 0; }
+  /// The open session's operator takes depth fields (both sides set kCodecDepthFields).
+  bool depth_fields() const noexcept { return session_ != 0 && depth_fields_; }
   /// A tool state has arrived in the open session (the node steps only then).
   bool have_tool_state() const noexcept { return have_state_; }
   /// The newest tool state of the session and its sequence number (the contact model's q0 tag).
@@ -161,6 +170,10 @@ class RemoteSession {
                const SocketAddress& from, std::int64_t now_ns);
   void RefuseForeignHello(std::span<const std::uint8_t> datagram, const SocketAddress& from);
   void SendModel(wire::ContactModelMessage& out, std::int64_t now_ns);
+  /// Encodes and queues the fields `model` names that the operator was not sent (from `fields`),
+  /// and sends every queued DepthFieldFragment.
+  void SendDepthFields(ContactModel& model, std::span<const DepthField* const> fields);
+  void SendQueuedFieldFragments();
   void SendManifest(std::int64_t now_ns);
   void Close(const char* why);
 
@@ -223,6 +236,11 @@ class RemoteSession {
   std::uint64_t sessions_renewed_ = 0;
   std::uint64_t hello_retransmits_ = 0, hello_deferred_ = 0, rejects_sent_ = 0;
   std::uint64_t nacks_accepted_ = 0, nacks_ignored_ = 0;
+  // Depth fields (kCodecDepthFields): agreed for this session, their sender, and counters.
+  bool depth_fields_ = false;
+  DepthFieldSender field_sender_{wire::kMaxDatagramBytes, 2 * kMaxContacts};
+  std::uint64_t fields_encoded_ = 0, field_bytes_encoded_ = 0, contacts_without_field_ = 0;
+  double field_encode_ms_ = 0.0;
 };
 
 }  // namespace ht

@@ -6,6 +6,8 @@
 //      that every body decoder sees arbitrary bytes behind a valid MAC;
 //   3. every decoded scene fragment / manifest / NACK is fed to a SceneReassembler / SceneSender,
 //      whose memory must stay within its limits, and every decoded NodePoses to a SceneNodePoses;
+//      every depth-field fragment / NACK to a DepthFieldReassembler / DepthFieldSender, and every
+//      field it completes to the depth-field decoder (codecs/depth_field_codec.h);
 //   4. as the bytes of a scene-graph object (transport/scene_graph.h): a graph it decodes to must
 //      encode back to the same bytes and compose (every object the reassembler completes is tried
 //      the same way).
@@ -18,6 +20,8 @@
 #include <string>
 #include <vector>
 
+#include "codecs/depth_field_codec.h"
+#include "transport/depth_field_stream.h"
 #include "transport/messages.h"
 #include "transport/scene_graph.h"
 #include "transport/scene_stream.h"
@@ -71,6 +75,14 @@ void DecodeBody(const ht::wire::Header& h, std::span<const std::uint8_t> body) {
     g.nodes.resize(40);
     return ht::SceneNodePoses(g, 1);
   }();
+  static ht::DepthFieldReassembler field_reassembler(kMinMtuBytes, 4);
+  static ht::DepthFieldSender field_sender = [] {
+    ht::DepthFieldSender s(kMinMtuBytes, 2);
+    s.Add(7, std::vector<std::uint8_t>(3000, 2));
+    return s;
+  }();
+  static ht::DepthField field;
+  static ht::DecodedDepthMap field_scratch;
   static std::int64_t now = 0;
   now += 1000000;
   switch (h.type) {
@@ -165,6 +177,38 @@ void DecodeBody(const ht::wire::Header& h, std::span<const std::uint8_t> body) {
           Check(std::abs(glm::length(q) - 1.0f) < 1e-5f);
         }
         Check(node_poses.Apply(m) <= m.count);
+      }
+      break;
+    }
+    case MessageType::kDepthFieldFragment: {
+      SceneFragmentMessage m;
+      if (DecodeDepthFieldFragment(body, m) == DecodeStatus::kOk) {
+        Check(m.object_id != 0 && m.object_bytes <= kMaxDepthFieldBytes);
+        field_reassembler.Wanted(m.object_id + 1, now);
+        if (field_reassembler.Add(m, now) == ht::DepthFieldReassembler::Outcome::kCompleted) {
+          Check(field_reassembler.completed().size() == m.object_bytes);
+          std::string error;
+          if (ht::DecodeDepthField(field_reassembler.completed(), field, field_scratch, error)) {
+            Check(field.prepared);
+            field_reassembler.Held(field_reassembler.completed_id());
+          } else {
+            Check(!error.empty());
+          }
+        }
+        field_reassembler.CollectNacks(now, {0, 0}, [](const SceneNackMessage& n) {
+          Check(n.object_id != 0 && n.count <= kMaxNackIndices);
+        });
+      }
+      break;
+    }
+    case MessageType::kDepthFieldNack: {
+      SceneNackMessage m;
+      if (DecodeDepthFieldNack(body, m) == DecodeStatus::kOk) {
+        field_sender.OnNack(m);
+        SceneFragmentMessage f;
+        for (int i = 0; i < 20 && field_sender.Next(f); ++i) {
+          Check(f.payload.size() <= f.object_bytes && f.object_id == 7);
+        }
       }
       break;
     }

@@ -217,10 +217,13 @@ CompactContactModelBody QuantizeContactModel(const ContactModelMessage& m) noexc
     }
     w.normal_oct = EncodeOctahedral(c.normal_W);
   }
+  b.num_field_ids =
+      static_cast<int>(FlattenFieldIds(model, static_cast<std::size_t>(n), b.field_ids));
   std::array<WireKinkPlane, kMaxWireKinkPlanes> planes{};
   b.num_kink_planes = static_cast<int>(FlattenKinkPlanes(
       model, static_cast<std::size_t>(n),
-      KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, n), planes));
+      KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, n, b.num_field_ids),
+      planes));
   for (int j = 0; j < b.num_kink_planes; ++j) {
     const WireKinkPlane& w = planes[static_cast<std::size_t>(j)];
     // A plane with its own translation slope says so; one that shares the contact's (every
@@ -234,7 +237,7 @@ CompactContactModelBody QuantizeContactModel(const ContactModelMessage& m) noexc
   b.num_patches = static_cast<int>(
       FlattenPatches(model, static_cast<std::size_t>(n),
                      TranslationPatchCapacity(kCompactContactModelFixedBytes, kCompactContactBytes,
-                                              n, b.num_kink_planes),
+                                              n, b.num_kink_planes, b.num_field_ids),
                      b.patches));
   return b;
 }
@@ -256,6 +259,14 @@ DecodeStatus Check(const CompactContactModelBody& m) {
       return DecodeStatus::kNonFinite;
     }
     if (c.stiffness_n_per_m < 0.0f) return DecodeStatus::kBadValue;
+  }
+  std::array<bool, kMaxWireContacts> has_field{};
+  for (int j = 0; j < m.num_field_ids; ++j) {
+    const WireFieldId& f = m.field_ids[static_cast<std::size_t>(j)];
+    if (f.contact >= m.num_contacts || f.id == 0 || has_field[f.contact]) {
+      return DecodeStatus::kBadValue;
+    }
+    has_field[f.contact] = true;
   }
   std::array<int, kMaxWireContacts> planes_of{};
   for (int j = 0; j < m.num_kink_planes; ++j) {
@@ -320,6 +331,9 @@ ContactModelMessage DequantizeContactModel(const CompactContactModelBody& b,
     }
     c.normal_W = DecodeOctahedral(w.normal_oct);
   }
+  // Check() found every field id's contact valid and once.
+  DistributeFieldIds({b.field_ids.data(), static_cast<std::size_t>(b.num_field_ids)},
+                     static_cast<std::size_t>(b.num_contacts), model);
   // Check() found every plane's contact and count valid.
   std::array<WireKinkPlane, kMaxWireKinkPlanes> planes{};
   for (int j = 0; j < b.num_kink_planes; ++j) {

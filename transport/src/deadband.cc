@@ -64,6 +64,8 @@ const char* ToString(DeadbandReason reason) noexcept {
       return "stiffness";
     case DeadbandReason::kDepth:
       return "depth";
+    case DeadbandReason::kDepthField:
+      return "depth_field";
   }
   return "unknown";
 }
@@ -205,6 +207,26 @@ DeadbandReason ToolStateDeadband::Decide(const RigidTransform& X_WT, const Twist
   return reason;
 }
 
+namespace {
+
+/// A contact of `model` names a depth field that no contact of `held` names.
+bool NamesNewDepthField(const ContactModel& model, const ContactModel& held) noexcept {
+  const int n = std::clamp(model.num_contacts, 0, kMaxContacts);
+  const int m = std::clamp(held.num_contacts, 0, kMaxContacts);
+  for (int i = 0; i < n; ++i) {
+    const std::uint32_t id = model.contacts[static_cast<std::size_t>(i)].depth_field_id;
+    if (id == 0) continue;
+    bool found = false;
+    for (int j = 0; j < m && !found; ++j) {
+      found = held.contacts[static_cast<std::size_t>(j)].depth_field_id == id;
+    }
+    if (!found) return true;
+  }
+  return false;
+}
+
+}  // namespace
+
 DeadbandReason ContactModelDeadband::Decide(const ContactModel& model, std::int64_t t_ns) noexcept {
   const ContactModelDeadbandConfig& c = config_;
   const double k = c.weber_fraction;
@@ -217,6 +239,8 @@ DeadbandReason ContactModelDeadband::Decide(const ContactModel& model, std::int6
     reason = DeadbandReason::kKeepAlive;
   } else if (model.num_contacts != held_.num_contacts) {
     reason = DeadbandReason::kContactCount;
+  } else if (NamesNewDepthField(model, held_)) {
+    reason = DeadbandReason::kDepthField;
   } else {
     const ContactModelEvaluation held = EvaluateContactModel(held_, model.X_WT0);
     const ContactModelEvaluation now = EvaluateContactModel(model, model.X_WT0);

@@ -39,11 +39,13 @@ bool Accepts(LinkRole role, wire::MessageType type) noexcept {
   using T = wire::MessageType;
   if (role == LinkRole::kRemote) {
     return type == T::kToolState || type == T::kCompactToolState || type == T::kHello ||
-           type == T::kPing || type == T::kSceneNack || type == T::kGoodbye;
+           type == T::kPing || type == T::kSceneNack || type == T::kDepthFieldNack ||
+           type == T::kGoodbye;
   }
   return type == T::kContactModel || type == T::kCompactContactModel || type == T::kWelcome ||
          type == T::kReject || type == T::kPong || type == T::kSceneFragment ||
-         type == T::kSceneManifest || type == T::kNodePoses || type == T::kGoodbye;
+         type == T::kSceneManifest || type == T::kNodePoses || type == T::kDepthFieldFragment ||
+         type == T::kGoodbye;
 }
 
 SecureLink::SecureLink(UdpSocket& socket, const MacKey& key, LinkRole role)

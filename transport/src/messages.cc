@@ -129,6 +129,10 @@ const char* ToString(MessageType t) noexcept {
       return "node_poses";
     case MessageType::kCompactToolState:
       return "compact_tool_state";
+    case MessageType::kDepthFieldFragment:
+      return "depth_field_fragment";
+    case MessageType::kDepthFieldNack:
+      return "depth_field_nack";
   }
   return "unknown";
 }
@@ -277,6 +281,16 @@ Datagram EncodeSceneNack(const Header& header, const SceneNackMessage& m,
   return Encode(header, MessageType::kSceneNack, m, key);
 }
 
+Datagram EncodeDepthFieldFragment(const Header& header, const SceneFragmentMessage& m,
+                                  const MacKey& key) noexcept {
+  return Encode(header, MessageType::kDepthFieldFragment, m, key);
+}
+
+Datagram EncodeDepthFieldNack(const Header& header, const SceneNackMessage& m,
+                              const MacKey& key) noexcept {
+  return Encode(header, MessageType::kDepthFieldNack, m, key);
+}
+
 Datagram EncodeNodePoses(const Header& header, const NodePosesMessage& m,
                          const MacKey& key) noexcept {
   return Encode(header, MessageType::kNodePoses, m, key);
@@ -379,6 +393,27 @@ DecodeStatus DecodeSceneManifest(std::span<const std::uint8_t> body,
 
 DecodeStatus DecodeSceneNack(std::span<const std::uint8_t> body, SceneNackMessage& m) noexcept {
   return Decode(body, m);
+}
+
+DecodeStatus DecodeDepthFieldFragment(std::span<const std::uint8_t> body,
+                                      SceneFragmentMessage& m) noexcept {
+  SceneFragmentMessage out;
+  if (const DecodeStatus s = Decode(body, out); s != DecodeStatus::kOk) return s;
+  if (out.object_id == 0 || out.version != kDepthFieldVersion ||
+      out.object_bytes > kMaxDepthFieldBytes) {
+    return DecodeStatus::kBadValue;
+  }
+  m = out;
+  return DecodeStatus::kOk;
+}
+
+DecodeStatus DecodeDepthFieldNack(std::span<const std::uint8_t> body,
+                                  SceneNackMessage& m) noexcept {
+  SceneNackMessage out;
+  if (const DecodeStatus s = Decode(body, out); s != DecodeStatus::kOk) return s;
+  if (out.object_id == 0 || out.version != kDepthFieldVersion) return DecodeStatus::kBadValue;
+  m = out;
+  return DecodeStatus::kOk;
 }
 
 DecodeStatus DecodeNodePoses(std::span<const std::uint8_t> body, NodePosesMessage& m) noexcept {

@@ -139,6 +139,61 @@ inline bool DistributeKinkPlanes(std::span<const WireKinkPlane> planes, std::siz
   return true;
 }
 
+/// One entry of the depth-field section (protocol.h, version 12): a contact and its field's id.
+struct WireFieldId {
+  std::uint8_t contact = 0;
+  std::uint32_t id = 0;
+};
+
+constexpr void Fields(auto& a, Of<WireFieldId> auto& f) {
+  a(f.contact);
+  a(f.id);
+}
+
+/// The field ids of contacts [0, n) of `model` in wire order (the contacts that have one).
+constexpr std::size_t FlattenFieldIds(const ContactModel& model, std::size_t n,
+                                      std::span<WireFieldId> out) noexcept {
+  std::size_t k = 0;
+  for (std::size_t i = 0; i < n && k < out.size(); ++i) {
+    const std::uint32_t id = model.contacts[i].depth_field_id;
+    if (id != 0) out[k++] = {static_cast<std::uint8_t>(i), id};
+  }
+  return k;
+}
+
+/// Gives each wire entry's id to its contact of `model` (whose first `n` contacts were read; the
+/// others' ids are 0); false when one names a contact ≥ n or twice, or an id 0.
+inline bool DistributeFieldIds(std::span<const WireFieldId> ids, std::size_t n,
+                               ContactModel& model) noexcept {
+  for (std::size_t i = 0; i < n; ++i) model.contacts[i].depth_field_id = 0;
+  for (const WireFieldId& w : ids) {
+    if (w.contact >= n || w.id == 0 || model.contacts[w.contact].depth_field_id != 0) return false;
+    model.contacts[w.contact].depth_field_id = w.id;
+  }
+  return true;
+}
+
+/// The depth-field section after the contacts (protocol.h, version 12): the Writer and the Sizer
+/// flatten the model's ids, the Reader reads them and gives them to their contacts. Returns the
+/// number of entries.
+constexpr std::size_t DepthFieldIds(auto& a, auto& model, std::size_t n) {
+  std::array<WireFieldId, kMaxWireContacts> ids{};
+  std::size_t k = 0;
+  if constexpr (!requires { a.Reject(DecodeStatus::kOk); }) {
+    k = FlattenFieldIds(model, n, ids);
+    const std::size_t sent = CountBefore<std::uint8_t>(
+        a, k, n, kDepthFieldIdBytes, kKinkPlaneCountBytes + kTranslationPatchCountBytes);
+    for (std::size_t j = 0; j < std::min(sent, k); ++j) Fields(a, ids[j]);
+    return std::min(sent, k);
+  } else {
+    k = CountBefore<std::uint8_t>(a, k, n, kDepthFieldIdBytes,
+                                  kKinkPlaneCountBytes + kTranslationPatchCountBytes);
+    for (std::size_t j = 0; j < k; ++j) Fields(a, ids[j]);
+    if (a.ok() && !DistributeFieldIds({ids.data(), k}, n, model)) a.Reject(DecodeStatus::kBadValue);
+    return k;
+  }
+}
+
 /// The kink-plane section after the contacts (protocol.h): the Writer and the Sizer flatten the
 /// model's planes, the Reader reads them and gives them to their contacts.
 constexpr std::size_t KinkPlanes(auto& a, auto& model, std::size_t n, int capacity) {
@@ -324,16 +379,17 @@ constexpr void Fields(auto& a, Of<ContactModelMessage> auto& m) {
   Pose(a, m.model.X_WT0);
   Vec(a, m.model.F_T_W_at_q0.force);
   Vec(a, m.model.F_T_W_at_q0.torque);
-  const std::size_t n =
-      CountBefore<std::uint8_t>(a, m.model.num_contacts, kMaxWireContacts, kContactBytes,
-                                kKinkPlaneCountBytes + kTranslationPatchCountBytes);
+  const std::size_t n = CountBefore<std::uint8_t>(
+      a, m.model.num_contacts, kMaxWireContacts, kContactBytes,
+      kDepthFieldIdCountBytes + kKinkPlaneCountBytes + kTranslationPatchCountBytes);
   for (std::size_t i = 0; i < n; ++i) Fields(a, m.model.contacts[i]);
-  const std::size_t planes =
-      KinkPlanes(a, m.model, n,
-                 KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, static_cast<int>(n)));
+  const int ids = static_cast<int>(DepthFieldIds(a, m.model, n));
+  const std::size_t planes = KinkPlanes(
+      a, m.model, n,
+      KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, static_cast<int>(n), ids));
   TranslationPatches(a, m.model, n,
                      TranslationPatchCapacity(kContactModelFixedBytes, kContactBytes,
-                                              static_cast<int>(n), static_cast<int>(planes)));
+                                              static_cast<int>(n), static_cast<int>(planes), ids));
 }
 
 /// One contact of a CompactContactModel as it is on the wire (protocol.h).
@@ -371,6 +427,8 @@ struct CompactContactModelBody {
   std::uint16_t q_WT0_high = 0;  ///< bits 64–79
   int num_contacts = 0;
   std::array<CompactContact, kMaxWireContacts> contacts{};
+  int num_field_ids = 0;
+  std::array<WireFieldId, kMaxWireContacts> field_ids{};
   int num_kink_planes = 0;
   std::array<CompactWireKinkPlane, kMaxWireKinkPlanes> kink_planes{};
   int num_patches = 0;
@@ -409,20 +467,25 @@ constexpr void Fields(auto& a, Of<CompactContactModelBody> auto& m) {
   Each(a, m.p_WT0);
   a(m.q_WT0_low);
   a(m.q_WT0_high);
-  const std::size_t n =
-      CountBefore<std::uint8_t>(a, m.num_contacts, kMaxWireContacts, kCompactContactBytes,
-                                kKinkPlaneCountBytes + kTranslationPatchCountBytes);
+  const std::size_t n = CountBefore<std::uint8_t>(
+      a, m.num_contacts, kMaxWireContacts, kCompactContactBytes,
+      kDepthFieldIdCountBytes + kKinkPlaneCountBytes + kTranslationPatchCountBytes);
   for (std::size_t i = 0; i < n; ++i) Fields(a, m.contacts[i]);
-  const int capacity =
-      KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, static_cast<int>(n));
+  const std::size_t nf =
+      CountBefore<std::uint8_t>(a, m.num_field_ids, n, kDepthFieldIdBytes,
+                                kKinkPlaneCountBytes + kTranslationPatchCountBytes);
+  for (std::size_t j = 0; j < nf; ++j) Fields(a, m.field_ids[j]);
+  const int capacity = KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes,
+                                         static_cast<int>(n), m.num_field_ids);
   // Counted as if each plane were kKinkPlaneBytes (as ContactModel's): the bound on the count is
   // the same whatever the planes carry; the bytes left are checked against the shortest plane.
   const std::size_t k =
       CountBefore<std::uint8_t>(a, m.num_kink_planes, static_cast<std::size_t>(capacity),
                                 kCompactKinkPlaneBytes, kTranslationPatchCountBytes);
   for (std::size_t j = 0; j < k; ++j) Fields(a, m.kink_planes[j]);
-  const int patch_capacity = TranslationPatchCapacity(
-      kCompactContactModelFixedBytes, kCompactContactBytes, static_cast<int>(n), m.num_kink_planes);
+  const int patch_capacity =
+      TranslationPatchCapacity(kCompactContactModelFixedBytes, kCompactContactBytes,
+                               static_cast<int>(n), m.num_kink_planes, m.num_field_ids);
   const std::size_t np = Count<std::uint8_t>(
       a, m.num_patches, static_cast<std::size_t>(patch_capacity), kTranslationPatchBytes);
   for (std::size_t j = 0; j < np; ++j) Fields(a, m.patches[j]);
@@ -574,16 +637,19 @@ constexpr Sizer SizeOf() {
 static_assert(SizeOf<WireHeader>().bytes == kHeaderBytes);
 static_assert(SizeOf<LegacyWireHeader>().bytes == kLegacyHeaderBytes);
 static_assert(SizeOf<ToolStateMessage>().bytes == kToolStateBodyBytes);
-static_assert(SizeOf<ContactModelMessage>().bytes == kContactModelFixedBytes + kContactBytes +
-                                                         kKinkPlaneCountBytes +
-                                                         kTranslationPatchCountBytes);
+static_assert(SizeOf<ContactModelMessage>().bytes ==
+              kContactModelFixedBytes + kContactBytes + kDepthFieldIdCountBytes +
+                  kKinkPlaneCountBytes + kTranslationPatchCountBytes);
 static_assert(SizeOf<ContactModelMessage>().counted_bytes ==
-              kContactBytes + kKinkPlaneBytes + kTranslationPatchBytes);
+              kContactBytes + kDepthFieldIdBytes + kKinkPlaneBytes + kTranslationPatchBytes);
 static_assert(SizeOf<CompactContactModelBody>().bytes ==
-              kCompactContactModelFixedBytes + kCompactContactBytes + kKinkPlaneCountBytes +
-                  kCompactKinkPlaneBytes + kTranslationPatchCountBytes + kTranslationPatchBytes);
+              kCompactContactModelFixedBytes + kCompactContactBytes + kDepthFieldIdCountBytes +
+                  kDepthFieldIdBytes + kKinkPlaneCountBytes + kCompactKinkPlaneBytes +
+                  kTranslationPatchCountBytes + kTranslationPatchBytes);
 static_assert(SizeOf<CompactContactModelBody>().counted_bytes ==
-              kCompactContactBytes + kCompactKinkPlaneBytes + kTranslationPatchBytes);
+              kCompactContactBytes + kDepthFieldIdBytes + kCompactKinkPlaneBytes +
+                  kTranslationPatchBytes);
+static_assert(SizeOf<WireFieldId>().bytes == kDepthFieldIdBytes);
 static_assert(SizeOf<CompactWireKinkPlane>().bytes == kCompactKinkPlaneBytes);
 static_assert(SizeOf<WirePatch>().bytes == kTranslationPatchBytes);
 static_assert(SizeOf<CompactToolStateBody>().bytes == kCompactToolStateBodyBytes);

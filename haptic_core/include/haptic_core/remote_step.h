@@ -426,6 +426,12 @@ class HapticTexturePipeline {
   void SetDepthFieldMargin(double margin_m) noexcept {
     options_.depth_field_margin_m = std::isfinite(margin_m) && margin_m > 0.0 ? margin_m : 0.0;
   }
+  /// PipelineOptions::depth_fields from the next Step() on (the remote node turns it on for a
+  /// session whose operator takes depth fields). Turning it on reserves the fields' buffers
+  /// (allocates) where the options at construction did not.
+  void SetDepthFields(bool on);
+  /// Whether the next Step() renders depth fields (PipelineOptions::depth_fields).
+  bool depth_fields() const noexcept { return options_.depth_fields; }
   /// The depth fields of the last Step()'s model (PipelineOptions::depth_fields), the field of
   /// each contact that refers to one (ContactLinearization::depth_field_id): rendered at this
   /// step, or kept from an earlier one (the same id and bits) while it still holds the contact.

@@ -521,6 +521,18 @@ void HapticTexturePipeline::SetTranslationPatch(bool on) noexcept {
   data_->refiner.SetTranslationPatch(on);
 }
 
+void HapticTexturePipeline::SetDepthFields(bool on) {
+  if (on && !options_.depth_fields) {
+    for (DepthField& f : data_->field_pool) {
+      f.Reserve();
+      f.row_coefficients_m.reserve(4 * static_cast<std::size_t>(kMaxDepthFieldSide) *
+                                   kMaxDepthFieldSide);
+      f.prepared = false;  // none reused from before
+    }
+  }
+  options_.depth_fields = on;
+}
+
 void HapticTexturePipeline::ForgetLastStep() noexcept {
   data_->refiner.ForgetLastStep();
   for (DepthField& f : data_->field_pool) f.prepared = false;  // none reused

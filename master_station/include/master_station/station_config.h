@@ -145,6 +145,10 @@ struct StationConfig {
   /// transport/protocol.h states its error bounds) rather than ToolState; used when the remote
   /// node agrees (Welcome's codecs).
   bool compact_tool_states = true;
+  /// Ask for each contact's depth field (transport/protocol.h kCodecDepthFields): the loop then
+  /// evaluates the two surfaces at its own tool pose every tick, and each contact's
+  /// linearization only where its field is missing or the tool has left the field's margin.
+  bool depth_fields = true;
 
   /// The display of the remote scene (none by default).
   DisplayConfig display;

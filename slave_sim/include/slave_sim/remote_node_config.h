@@ -85,6 +85,16 @@ struct RemoteNodeConfig {
   double speculative_speed_m_per_s = 0.025;
   /// The largest floor set by the round trip (m, ≥ 0).
   double max_speculative_floor_m = 6e-3;
+  /// Offer depth fields (protocol.h kCodecDepthFields): for a session whose operator takes them,
+  /// stage 5d renders each contact's depth field (PipelineOptions::depth_fields) and the node
+  /// sends each field's DepthFieldFragments before the first model that names it; the
+  /// operator's loop evaluates the fields at its own tool pose.
+  bool depth_fields = true;
+  /// A field's travel margin for a session: this hand speed (m/s) times the round trip the
+  /// operator's newest Ping reports, at least depth_field_min_margin_m (m); the margin is cut to
+  /// what fits kMaxDepthFieldSide nodes a side (PipelineOptions::depth_field_margin_m).
+  double depth_field_speed_m_per_s = 0.05;
+  double depth_field_min_margin_m = 2e-3;
   /// Floors and keep-alive of the contact-model deadband; its Weber fraction and keep-alive come
   /// from the session (the operator asks them in its Hello).
   ContactModelDeadbandConfig model_deadband;

@@ -49,8 +49,9 @@ enum class DeadbandReason : std::uint8_t {
   kTorque,           ///< the rendered torque changed
   kStiffness,        ///< the rendered stiffness (translational or rotational block) changed
   kDepth,            ///< a contact's depth at the tool left its depth at the prediction
+  kDepthField,       ///< a contact names a depth field the held model does not
 };
-inline constexpr int kDeadbandReasonCount = static_cast<int>(DeadbandReason::kDepth) + 1;
+inline constexpr int kDeadbandReasonCount = static_cast<int>(DeadbandReason::kDepthField) + 1;
 /// Decisions per reason, indexed by DeadbandReason.
 using DeadbandCounts = std::array<std::uint64_t, kDeadbandReasonCount>;
 /// {"reason": count} for the reasons with a non-zero count, for summaries.
@@ -179,6 +180,8 @@ struct ContactModelDeadbandConfig {
 /// is evaluated at the new model M's pose q0 (EvaluateContactModel), which is what the operator
 /// renders there; M is sent when
 ///   the number of contacts differs, or
+///   a contact of M names a depth field (ContactLinearization::depth_field_id) that no contact of
+///   H names (the operator evaluates a field only while a model it holds names it), or
 ///   |F_H − F_M| > max(k·|F_M|, k·floor_F) (force; likewise torque), or
 ///   ‖K_H − K_M‖_F > max(k·‖K_M‖_F, k·floor_K) for K's translational 3×3 block and, separately,
 ///   its rotational 3×3 block (Frobenius norms; the coupling blocks follow from these two),

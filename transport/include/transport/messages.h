@@ -281,6 +281,13 @@ Datagram EncodeSceneManifest(const Header& header, const SceneManifestMessage& m
                              const MacKey& key) noexcept;
 Datagram EncodeSceneNack(const Header& header, const SceneNackMessage& message,
                          const MacKey& key) noexcept;
+/// A fragment of an encoded depth field (protocol.h, DepthFieldFragment: SceneFragment's layout,
+/// object_id the field's id, version kDepthFieldVersion); the payload is cut to what fits.
+Datagram EncodeDepthFieldFragment(const Header& header, const SceneFragmentMessage& message,
+                                  const MacKey& key) noexcept;
+/// Fragments of a depth field that did not arrive (DepthFieldNack: SceneNack's layout).
+Datagram EncodeDepthFieldNack(const Header& header, const SceneNackMessage& message,
+                              const MacKey& key) noexcept;
 /// Entries beyond kMaxNodePosesPerDatagram are not sent. Fields are sent as given (f32); a
 /// non-finite field or a zero rotation makes the receiver reject the datagram.
 Datagram EncodeNodePoses(const Header& header, const NodePosesMessage& message,
@@ -368,6 +375,14 @@ DecodeStatus DecodeSceneManifest(std::span<const std::uint8_t> body,
                                  SceneManifestMessage& message) noexcept;
 DecodeStatus DecodeSceneNack(std::span<const std::uint8_t> body,
                              SceneNackMessage& message) noexcept;
+/// DepthFieldFragment: checked as SceneFragment, and kBadValue for a field id 0, a version other
+/// than kDepthFieldVersion or field bytes above kMaxDepthFieldBytes.
+DecodeStatus DecodeDepthFieldFragment(std::span<const std::uint8_t> body,
+                                      SceneFragmentMessage& message) noexcept;
+/// DepthFieldNack: checked as SceneNack, and kBadValue for a field id 0 or a version other than
+/// kDepthFieldVersion.
+DecodeStatus DecodeDepthFieldNack(std::span<const std::uint8_t> body,
+                                  SceneNackMessage& message) noexcept;
 /// NodePoses: kBadCount for more than kMaxNodePosesPerDatagram entries, kTooShort/kTooLong unless
 /// the length is exactly that of its entries, kNonFinite for a non-finite scene_time_s,
 /// translation, rotation or scale, kBadValue for a rotation of norm below

@@ -85,6 +85,12 @@
 //     num_contacts or a contact's second patch, or a step or scale out of range (kBadValue). A
 //     contact whose patch is not finite at the sender goes without one; the nodes' largest error
 //     is scale/2 (kTranslationPatch*). The compact model carries the same section, alike.
+//     Then (version 12) the depth-field section: u8 n (≤ num_contacts), per contact that has a
+//     depth field (kDepthFieldIdBytes, 5), in the contacts' order: u8 contact (< num_contacts),
+//     u32 field id (≠ 0: the DepthFieldFragment object that carries the field). A contact
+//     without an entry has no field. It takes its room before the kink planes do
+//     (KinkPlaneCapacity's num_field_ids). Rejected: a contact ≥ num_contacts or named twice, or
+//     an id 0 (kBadValue). The compact model carries the same section, alike.
 //   CompactContactModel R→O (kCompactContactModelFixedBytes + n·kCompactContactBytes): the same
 //     model quantized, sent instead of ContactModel when both sides set kCodecCompactContactModel
 //     and decoded into the same message (the float encoding stays available). Version 11 (issue
@@ -124,7 +130,7 @@
 //     for one with its own (the translation arms, DepthRefinementOptions::
 //     translation_kink_planes); the sender sets the bit when an offset component is not 0 in f32.
 //     Checked as in ContactModel (the contact is the byte less the bit). Then the translation
-//     patches as in ContactModel.
+//     patches and the depth-field section as in ContactModel.
 //   Goodbye O↔R (0): clean close of the session (the operator at the end of a run, the remote
 //     node when stopped); sent three times with new sequence numbers.
 //   Hello O→R (44): u16 min_version, u16 max_version, u64 client_nonce, f32 tool_state_rate_hz,
@@ -162,6 +168,16 @@
 //     SceneObjectKind, 16 bytes BLAKE2b-128 digest of the object's bytes.
 //   SceneNack O→R (10 + 2n): u32 object_id, u32 version, u16 n (≤ kMaxNackIndices; 0 = resend all),
 //     n × u16 missing fragment indices.
+//   DepthFieldFragment R→O (16 + payload; version 12, with kCodecDepthFields): one fragment of an
+//     encoded depth field (codecs/depth_field_codec.h), laid out as SceneFragment: u32 field id
+//     (≠ 0, the id the contact model's depth-field section names), u32 version (1: a field never
+//     changes), u32 field_bytes (≤ kMaxDepthFieldBytes), u16 fragment_index, u16 fragment_count,
+//     then bytes [index·P, min((index+1)·P, field_bytes)) of the encoded field, P =
+//     FragmentPayloadBytes(mtu). The remote node sends a field's fragments before the first
+//     contact model that names it, and keeps its last fields to answer DepthFieldNacks.
+//   DepthFieldNack O→R (10 + 2n; version 12): laid out as SceneNack, for a field id that a
+//     contact model named and that has not arrived whole a round trip later: u32 field id,
+//     u32 version (1), u16 n (≤ kMaxNackIndices; 0 = resend all), n × u16 missing indices.
 //   NodePoses R→O (kNodePosesFixedBytes + n·kNodePoseBytes): u32 graph_version (the version of
 //     the scene-graph object whose node indices these are), f64 scene_time_s (the remote scene's
 //     clock at this frame, s), u8 n (≤ kMaxNodePosesPerDatagram), per entry (42): u16 node (index
@@ -222,12 +238,15 @@ inline constexpr std::uint32_t kLegacyMagic = 0x504C5448u;  // bytes 'H' 'T' 'L'
 /// CompactContactModel above (a 45-byte fixed part instead of 103: u32 sequence, echo, hold and
 /// step count, f32 position, an 80-bit quaternion, no wrench at q0; a kink plane that shares its
 /// contact's translation slope in 17 bytes instead of 29); every other body is as in version 10.
-/// Only version 11 is accepted. A remote node answers a Hello of versions 2 to 10 whose MAC
+/// Version 12 (the contact model as depth fields) adds the depth-field section after the contacts
+/// of ContactModel and CompactContactModel (each contact's field id) and the DepthFieldFragment
+/// and DepthFieldNack messages; every other body is as in version 11.
+/// Only version 12 is accepted. A remote node answers a Hello of versions 2 to 11 whose MAC
 /// verifies with a Reject (kVersion) in that Hello's own layout and header version (the Hello's
-/// first 12 body bytes and the Reject body are laid out alike in versions 2 to 11), so that an
+/// first 12 body bytes and the Reject body are laid out alike in versions 2 to 12), so that an
 /// older operator is told why.
-inline constexpr std::uint16_t kProtocolVersion = 11;
-inline constexpr std::uint16_t kMinProtocolVersion = 11;
+inline constexpr std::uint16_t kProtocolVersion = 12;
+inline constexpr std::uint16_t kMinProtocolVersion = 12;
 
 /// Message types; values are part of the protocol and never reused.
 enum class MessageType : std::uint8_t {
@@ -245,8 +264,10 @@ enum class MessageType : std::uint8_t {
   kCompactContactModel = 12,
   kNodePoses = 13,
   kCompactToolState = 14,
+  kDepthFieldFragment = 15,
+  kDepthFieldNack = 16,
 };
-inline constexpr int kMaxMessageType = 14;
+inline constexpr int kMaxMessageType = 16;
 
 /// Why a remote node refused a Hello.
 enum class RejectReason : std::uint8_t {
@@ -263,6 +284,10 @@ inline constexpr std::uint32_t kCodecCompactContactModel = 1u << 1;
 /// Tool states go as CompactToolState (quantized, 66 bytes a datagram instead of 138) instead of
 /// ToolState when both sides set it.
 inline constexpr std::uint32_t kCodecCompactToolState = 1u << 2;
+/// Each contact of a contact model comes with its depth field (DepthFieldFragment, the codec of
+/// codecs/depth_field_codec.h), which the operator's loop evaluates at its own tool pose, when
+/// both sides set it.
+inline constexpr std::uint32_t kCodecDepthFields = 1u << 3;
 
 /// What a scene object's bytes are.
 enum class SceneObjectKind : std::uint8_t {
@@ -334,6 +359,23 @@ inline constexpr std::size_t kTranslationPatchBytes =
 inline constexpr std::size_t kTranslationPatchCountBytes = 1;
 /// Largest node spacing (m) a receiver accepts.
 inline constexpr double kMaxTranslationPatchStepM = 0.1;
+/// The depth-field section after the contacts (version 12): u8 count, then per contact with a
+/// field u8 contact and u32 field id.
+inline constexpr std::size_t kDepthFieldIdCountBytes = 1;
+inline constexpr std::size_t kDepthFieldIdBytes = 1 + 4;
+/// Bytes of the depth-field section that carries `num_field_ids` ids.
+constexpr std::size_t DepthFieldIdSectionBytes(int num_field_ids) noexcept {
+  return kDepthFieldIdCountBytes +
+         static_cast<std::size_t>(num_field_ids < 0 ? 0 : num_field_ids) * kDepthFieldIdBytes;
+}
+/// DepthFieldFragment and DepthFieldNack bodies: laid out as SceneFragment and SceneNack.
+inline constexpr std::size_t kDepthFieldFragmentFixedBytes = 16;
+inline constexpr std::size_t kDepthFieldNackFixedBytes = 10;
+/// Largest encoded depth field (bytes) a sender fragments or a receiver reassembles: two
+/// kMaxDepthFieldSide² maps at well under 8 bytes a node each.
+inline constexpr std::uint32_t kMaxDepthFieldBytes = 1u << 20;
+/// The version field of DepthFieldFragment and DepthFieldNack (a field never changes).
+inline constexpr std::uint32_t kDepthFieldVersion = 1;
 inline constexpr std::size_t kDeadbandTermsBytes = 12;
 inline constexpr std::size_t kHelloBodyBytes = 32 + kDeadbandTermsBytes;
 inline constexpr std::size_t kSceneNameBytes = 32;
@@ -372,11 +414,12 @@ inline constexpr int kMaxWireKinkPlanes = kMaxWireContacts * kMaxKinkPlanesPerCo
 /// fixed part of `fixed_bytes` (kContactModelFixedBytes and kContactBytes, or the compact ones):
 /// at most kMaxWireKinkPlanes. A receiver refuses a larger count (kBadCount).
 constexpr int KinkPlaneCapacity(std::size_t fixed_bytes, std::size_t contact_bytes,
-                                int num_contacts) noexcept {
+                                int num_contacts, int num_field_ids = 0) noexcept {
   const std::size_t used =
       kHeaderBytes + fixed_bytes +
       static_cast<std::size_t>(num_contacts < 0 ? 0 : num_contacts) * contact_bytes +
-      kKinkPlaneCountBytes + kTranslationPatchCountBytes + kMacBytes;
+      DepthFieldIdSectionBytes(num_field_ids) + kKinkPlaneCountBytes +
+      kTranslationPatchCountBytes + kMacBytes;
   if (used >= kMaxDatagramBytes) return 0;
   const std::size_t fit = (kMaxDatagramBytes - used) / kKinkPlaneBytes;
   return fit < static_cast<std::size_t>(kMaxWireKinkPlanes) ? static_cast<int>(fit)
@@ -386,11 +429,12 @@ constexpr int KinkPlaneCapacity(std::size_t fixed_bytes, std::size_t contact_byt
 /// (as KinkPlaneCapacity): at most kMaxWireContacts (one per contact). A receiver refuses a larger
 /// count (kBadCount).
 constexpr int TranslationPatchCapacity(std::size_t fixed_bytes, std::size_t contact_bytes,
-                                       int num_contacts, int num_kink_planes) noexcept {
+                                       int num_contacts, int num_kink_planes,
+                                       int num_field_ids = 0) noexcept {
   const std::size_t used =
       kHeaderBytes + fixed_bytes +
       static_cast<std::size_t>(num_contacts < 0 ? 0 : num_contacts) * contact_bytes +
-      kKinkPlaneCountBytes +
+      DepthFieldIdSectionBytes(num_field_ids) + kKinkPlaneCountBytes +
       static_cast<std::size_t>(num_kink_planes < 0 ? 0 : num_kink_planes) * kKinkPlaneBytes +
       kTranslationPatchCountBytes + kMacBytes;
   if (used >= kMaxDatagramBytes) return 0;
