@@ -443,8 +443,8 @@ TEST(CompactContactModel, BytesSitWhereProtocolHSaysAndAreFewerThanTheFloatEncod
     const Datagram compact = EncodeCompactContactModel(TestHeader(), m, key);
     const Datagram full = EncodeContactModel({MessageType::kContactModel, 7, 3, 11}, m, key);
     EXPECT_EQ(compact.size, kHeaderBytes + kCompactContactModelFixedBytes +
-                                n * kCompactContactBytes + kKinkPlaneCountBytes +
-                                kTranslationPatchCountBytes + kMacBytes);
+                                n * kCompactContactBytes + kDepthFieldIdCountBytes +
+                                kKinkPlaneCountBytes + kTranslationPatchCountBytes + kMacBytes);
     EXPECT_LE(compact.size, kMaxDatagramBytes);
     if (n >= 1) {
       EXPECT_LT(compact.size, full.size) << n;

@@ -267,6 +267,29 @@ TEST(Deadband, TheContactFloorsOutlastABounceOffTheSurface) {
   EXPECT_EQ(d.Decide(X, {}, 600 * kMs, false), DeadbandReason::kNotSent);
   EXPECT_EQ(d.Decide(X, {}, 601 * kMs, true), DeadbandReason::kPosition);
 }
+// The operator evaluates a depth field only while a model it holds names it: a model naming a
+// field the held one does not is sent whatever its force; one naming the held fields (or fewer)
+// is judged by what it renders.
+TEST(Deadband, AModelNamingANewDepthFieldIsSent) {
+  ContactModelDeadbandConfig c;
+  c.weber_fraction = 0.1;
+  ContactModelDeadband d(c);
+  ContactModel m0 = OneContact(1e-3, 2000.0, {0, 0, 0});
+  m0.contacts[0].depth_field_id = 4;
+  ASSERT_EQ(d.Decide(m0, 0), DeadbandReason::kFirst);
+  ContactModel same = m0;
+  EXPECT_EQ(d.Decide(same, kMs), DeadbandReason::kNotSent);
+  ContactModel none = m0;
+  none.contacts[0].depth_field_id = 0;  // the field left out: its linearization renders alike
+  EXPECT_EQ(d.Decide(none, 2 * kMs), DeadbandReason::kNotSent);
+  ContactModel next = m0;
+  next.contacts[0].depth_field_id = 5;
+  EXPECT_EQ(d.Decide(next, 3 * kMs), DeadbandReason::kDepthField);
+  EXPECT_EQ(d.held().contacts[0].depth_field_id, 5u);
+  EXPECT_EQ(d.counts()[static_cast<int>(DeadbandReason::kDepthField)], 1u);
+  EXPECT_EQ(ToJson(d.counts())["depth_field"].get<int>(), 1);
+}
+
 TEST(Deadband, ContactModelSentWhenTheHeldOneRendersDifferently) {
   ContactModelDeadbandConfig c;
   c.weber_fraction = 0.1;

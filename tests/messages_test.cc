@@ -120,6 +120,14 @@ DecodeStatus OpenAndDecode(std::span<const std::uint8_t> bytes, const MacKey& ke
       NodePosesMessage m;
       return DecodeNodePoses(body, m);
     }
+    case MessageType::kDepthFieldFragment: {
+      SceneFragmentMessage m;
+      return DecodeDepthFieldFragment(body, m);
+    }
+    case MessageType::kDepthFieldNack: {
+      SceneNackMessage m;
+      return DecodeDepthFieldNack(body, m);
+    }
   }
   return DecodeStatus::kUnknownType;
 }
@@ -213,6 +221,13 @@ std::vector<Datagram> OneOfEach(const MacKey& key) {
   tool.X_WT.translation = {0.1, -0.2, 0.3};
   tool.V_WT_W = {{0.01, 0.0, -0.02}, {0.5, 0.0, 0.0}};
   out.push_back(EncodeCompactToolState(h, tool, key));
+  SceneFragmentMessage ff{9, kDepthFieldVersion, 3000,
+                          2, 3, std::span<const std::uint8_t>(object).subspan(2 * 1396, 208)};
+  out.push_back(EncodeDepthFieldFragment(h, ff, key));
+  SceneNackMessage fn = n;
+  fn.object_id = 9;
+  fn.version = kDepthFieldVersion;
+  out.push_back(EncodeDepthFieldNack(h, fn, key));
   return out;
 }
 
@@ -251,7 +266,7 @@ TEST(Messages, FieldsSurviveTheRoundTrip) {
     const ContactModelMessage cm = SampleModel(n);
     const Datagram dc = EncodeContactModel({MessageType::kContactModel, 7, 3, 11}, cm, key);
     ASSERT_EQ(dc.size, kHeaderBytes + kContactModelFixedBytes + n * kContactBytes +
-                           kKinkPlaneCountBytes + kTranslationPatchCountBytes + kMacBytes);
+                           kDepthFieldIdCountBytes + kKinkPlaneCountBytes + kTranslationPatchCountBytes + kMacBytes);
     ASSERT_EQ(OpenDatagram(dc.view(), key, h, body), DecodeStatus::kOk);
     ContactModelMessage out;
     ASSERT_EQ(DecodeContactModel(body, out), DecodeStatus::kOk) << n;
@@ -324,9 +339,11 @@ TEST(Messages, TruncatedBodiesThatStillCarryAValidMacAreRejected) {
     const std::size_t body = d.size - kHeaderBytes - kMacBytes;
     const int type = DatagramType(d.view());
     for (std::size_t cut = 1; cut <= body; ++cut) {
-      if (type == int(MessageType::kReject) || type == int(MessageType::kSceneFragment)) {
-        if (cut < body && type == int(MessageType::kSceneFragment)) continue;  // shorter payload
-      }
+      // A fragment with a shorter payload is still a fragment (its reassembler checks the
+      // payload against its field's cut).
+      const bool fragment = type == int(MessageType::kSceneFragment) ||
+                            type == int(MessageType::kDepthFieldFragment);
+      if (fragment && cut < body) continue;
       Datagram t;
       std::copy(d.bytes.begin(), d.bytes.begin() + static_cast<long>(d.size - kMacBytes - cut),
                 t.bytes.begin());
@@ -377,7 +394,8 @@ TEST(Messages, HeaderFieldsAreCheckedBeforeTheMac) {
   EXPECT_EQ(mutate(kHeaderVersionOffset, 0x08), DecodeStatus::kBadVersion);  // nor 8
   EXPECT_EQ(mutate(kHeaderVersionOffset, 0x09), DecodeStatus::kBadVersion);  // nor 9
   EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0a), DecodeStatus::kBadVersion);  // nor 10
-  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0c), DecodeStatus::kBadVersion);
+  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0b), DecodeStatus::kBadVersion);  // nor 11
+  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0d), DecodeStatus::kBadVersion);
   EXPECT_EQ(mutate(kHeaderTypeOffset, 0x7f), DecodeStatus::kUnknownType);
   EXPECT_EQ(mutate(kHeaderTypeOffset, 0x00), DecodeStatus::kUnknownType);
   EXPECT_EQ(mutate(5, 0x01), DecodeStatus::kBadMac);   // session id changed
@@ -602,7 +620,7 @@ TEST(NodePoses, AFullDatagramRoundTripsAndFitsTheSmallestMtu) {
   EXPECT_EQ(none.size, kHeaderBytes + kNodePosesFixedBytes + kMacBytes);
   EXPECT_EQ(OpenAndDecode(none.view(), key), DecodeStatus::kOk);
   EXPECT_STREQ(ToString(MessageType::kNodePoses), "node_poses");
-  EXPECT_EQ(static_cast<int>(MessageType::kCompactToolState), kMaxMessageType);
+  EXPECT_EQ(static_cast<int>(MessageType::kDepthFieldNack), kMaxMessageType);
 }
 
 TEST(NodePoses, BadCountsSizesValuesAndMacsAreRejected) {
@@ -713,11 +731,11 @@ TEST(Messages, TheManifestCarriesEverySceneObjectKindAndNoOther) {
 }
 
 TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
-  // Versions 4 to 11 changed neither the Hello body nor the Reject body; version 3's Hello body is
+  // Versions 4 to 12 changed neither the Hello body nor the Reject body; version 3's Hello body is
   // the first 32 bytes (no deadband terms). Versions 2 to 7 had the 28-byte header and the whole
   // 32-byte MAC (test::LegacyDatagram writes them byte by byte).
-  EXPECT_EQ(kProtocolVersion, 11);
-  EXPECT_EQ(kMinProtocolVersion, 11);
+  EXPECT_EQ(kProtocolVersion, 12);
+  EXPECT_EQ(kMinProtocolVersion, 12);
   const MacKey key = TestKey();
   for (const std::uint16_t version : {std::uint16_t{7}, std::uint16_t{6}, std::uint16_t{5},
                                       std::uint16_t{4}, std::uint16_t{3}, std::uint16_t{2}}) {
@@ -970,7 +988,8 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
       EXPECT_EQ(d.size, kHeaderBytes +
                             (compact ? kCompactContactModelFixedBytes + n * kCompactContactBytes
                                      : kContactModelFixedBytes + n * kContactBytes) +
-                            kKinkPlaneCountBytes + plane_bytes + kTranslationPatchCountBytes +
+                            kDepthFieldIdCountBytes + kKinkPlaneCountBytes + plane_bytes +
+                            kTranslationPatchCountBytes +
                             kMacBytes);
       Header h;
       std::span<const std::uint8_t> body;
@@ -1084,8 +1103,8 @@ TEST(Messages, TranslationPatchesTravelWithTheirContactsAndWhatDoesNotFitIsLeftO
       EXPECT_EQ(d.size, kHeaderBytes +
                             (compact ? kCompactContactModelFixedBytes + n * kCompactContactBytes
                                      : kContactModelFixedBytes + n * kContactBytes) +
-                            kKinkPlaneCountBytes + kTranslationPatchCountBytes +
-                            sent * kTranslationPatchBytes + kMacBytes);
+                            kDepthFieldIdCountBytes + kKinkPlaneCountBytes +
+                            kTranslationPatchCountBytes + sent * kTranslationPatchBytes + kMacBytes);
       Header h;
       std::span<const std::uint8_t> body;
       ASSERT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kOk);
@@ -1171,6 +1190,135 @@ TEST(Messages, TranslationPatchesTravelWithTheirContactsAndWhatDoesNotFitIsLeftO
     EXPECT_EQ(patched([&](Datagram& d) { d.bytes[patches_at - 1] = 255; }),
               DecodeStatus::kBadCount);
   }
+}
+
+
+TEST(Messages, DepthFieldIdsTravelWithTheirContactsAndBadSectionsAreRejected) {
+  const MacKey key = TestKey();
+  for (const bool compact : {false, true}) {
+    for (const int n : {1, 3, 7, kMaxWireContacts}) {
+      ContactModelMessage m = SampleModel(n);
+      int with_field = 0;
+      for (int i = 0; i < n; ++i) {  // every other contact has a field
+        m.model.contacts[i].depth_field_id = i % 2 == 0 ? 1000u + 17u * i : 0u;
+        with_field += i % 2 == 0 ? 1 : 0;
+      }
+      const Datagram d =
+          compact ? EncodeCompactContactModel({}, m, key) : EncodeContactModel({}, m, key);
+      ASSERT_LE(d.size, kMaxDatagramBytes);
+      const std::size_t fixed = compact ? kCompactContactModelFixedBytes : kContactModelFixedBytes;
+      const std::size_t contact = compact ? kCompactContactBytes : kContactBytes;
+      EXPECT_EQ(d.size, kHeaderBytes + fixed + n * contact + DepthFieldIdSectionBytes(with_field) +
+                            kKinkPlaneCountBytes + kTranslationPatchCountBytes + kMacBytes);
+      const auto decode = [&](const Datagram& datagram, ContactModelMessage& out) {
+        Header h;
+        std::span<const std::uint8_t> body;
+        const DecodeStatus open = OpenDatagram(datagram.view(), key, h, body);
+        if (open != DecodeStatus::kOk) return open;
+        return compact ? DecodeCompactContactModel(body, out, /*receive_time_ns=*/0)
+                       : DecodeContactModel(body, out);
+      };
+      ContactModelMessage out;
+      // A message reused from an earlier model: its contacts' ids are overwritten, not kept.
+      for (auto& c : out.model.contacts) c.depth_field_id = 55;
+      ASSERT_EQ(decode(d, out), DecodeStatus::kOk) << compact << " " << n;
+      for (int i = 0; i < n; ++i) {
+        EXPECT_EQ(out.model.contacts[i].depth_field_id, m.model.contacts[i].depth_field_id)
+            << compact << " " << i;
+      }
+      // The section's entries, edited behind a valid MAC: a contact out of range, a contact
+      // named twice, an id 0.
+      const std::size_t at = fixed + n * contact;  // the count, in the body
+      const auto edited = [&](auto&& edit) {
+        return Resealed(d, key, [&](std::vector<std::uint8_t>& b) {
+          ASSERT_EQ(b[at], with_field);
+          edit(b);
+        });
+      };
+      ContactModelMessage bad;
+      EXPECT_EQ(decode(edited([&](std::vector<std::uint8_t>& b) { b[at + 1] = 0xE0; }), bad),
+                DecodeStatus::kBadValue);
+      EXPECT_EQ(decode(edited([&](std::vector<std::uint8_t>& b) {
+                         std::fill_n(b.begin() + static_cast<long>(at + 2), 4, 0);
+                       }),
+                       bad),
+                DecodeStatus::kBadValue);
+      if (with_field >= 2) {
+        EXPECT_EQ(decode(edited([&](std::vector<std::uint8_t>& b) {
+                           b[at + 1 + kDepthFieldIdBytes] = b[at + 1];
+                         }),
+                         bad),
+                  DecodeStatus::kBadValue);
+      }
+      // A count above the contacts.
+      EXPECT_NE(decode(edited([&](std::vector<std::uint8_t>& b) { b[at] = n + 1; }), bad),
+                DecodeStatus::kOk);
+    }
+  }
+  // The ids take their room before the kink planes: a full float model with every contact's
+  // field carries one plane fewer for every 29 bytes the ids take.
+  const int planes_without = KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, 7, 0);
+  const int planes_with = KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, 7, 7);
+  EXPECT_EQ(planes_without - planes_with,
+            static_cast<int>((kMaxDatagramBytes - kHeaderBytes - kContactModelFixedBytes -
+                              7 * kContactBytes - 3 - kMacBytes) /
+                                 kKinkPlaneBytes -
+                             (kMaxDatagramBytes - kHeaderBytes - kContactModelFixedBytes -
+                              7 * kContactBytes - 3 - 7 * kDepthFieldIdBytes - kMacBytes) /
+                                 kKinkPlaneBytes));
+}
+
+TEST(Messages, DepthFieldFragmentsAndNacksRefuseWhatNoFieldCanBe) {
+  const MacKey key = TestKey();
+  static const std::vector<std::uint8_t> bytes(3000, 0x33);
+  const SceneFragmentMessage good{4, kDepthFieldVersion, 3000, 0, 3,
+                                  std::span<const std::uint8_t>(bytes).first(1396)};
+  const auto open = [&](const Datagram& d, SceneFragmentMessage& out) {
+    Header h;
+    std::span<const std::uint8_t> body;
+    const DecodeStatus s = OpenDatagram(d.view(), key, h, body);
+    if (s != DecodeStatus::kOk) return s;
+    EXPECT_EQ(h.type, MessageType::kDepthFieldFragment);
+    return DecodeDepthFieldFragment(body, out);
+  };
+  SceneFragmentMessage out;
+  ASSERT_EQ(open(EncodeDepthFieldFragment({}, good, key), out), DecodeStatus::kOk);
+  EXPECT_EQ(out.object_id, 4u);
+  EXPECT_EQ(out.payload.size(), 1396u);
+  SceneFragmentMessage f = good;
+  f.object_id = 0;
+  EXPECT_EQ(open(EncodeDepthFieldFragment({}, f, key), out), DecodeStatus::kBadValue);
+  f = good;
+  f.version = 2;
+  EXPECT_EQ(open(EncodeDepthFieldFragment({}, f, key), out), DecodeStatus::kBadValue);
+  f = good;
+  f.object_bytes = kMaxDepthFieldBytes + 1;
+  EXPECT_EQ(open(EncodeDepthFieldFragment({}, f, key), out), DecodeStatus::kBadValue);
+  f = good;
+  f.fragment_index = 3;  // ≥ count: as a scene fragment
+  EXPECT_EQ(open(EncodeDepthFieldFragment({}, f, key), out), DecodeStatus::kBadValue);
+  SceneNackMessage nack;
+  nack.object_id = 4;
+  nack.version = kDepthFieldVersion;
+  nack.count = 1;
+  nack.missing[0] = 2;
+  const auto open_nack = [&](const SceneNackMessage& n) {
+    Header h;
+    std::span<const std::uint8_t> body;
+    SceneNackMessage got;
+    const Datagram d = EncodeDepthFieldNack({}, n, key);
+    EXPECT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kOk);
+    EXPECT_EQ(h.type, MessageType::kDepthFieldNack);
+    return DecodeDepthFieldNack(body, got);
+  };
+  EXPECT_EQ(open_nack(nack), DecodeStatus::kOk);
+  nack.object_id = 0;
+  EXPECT_EQ(open_nack(nack), DecodeStatus::kBadValue);
+  nack.object_id = 4;
+  nack.version = 7;
+  EXPECT_EQ(open_nack(nack), DecodeStatus::kBadValue);
+  EXPECT_STREQ(ToString(MessageType::kDepthFieldFragment), "depth_field_fragment");
+  EXPECT_STREQ(ToString(MessageType::kDepthFieldNack), "depth_field_nack");
 }
 
 }  // namespace

@@ -186,3 +186,44 @@ TEST_F(ImpairedRun, TheOperatorNeverGetsMoreEnergyThanItPutIn) {
 }
 
 }  // namespace
+
+namespace {
+
+// Protocol version 12: the contact models' depth fields. Every field fragment the remote node
+// sent went through the relay and the operator's count agrees with it; every field that arrived
+// whole decoded and reached the loop (none refused, none without a buffer), and the loop rendered
+// contacts from fields. A NACK the operator sent that reached the node was answered or refused:
+// the node's two counts add up to what its link received of that stream.
+TEST_F(ImpairedRun, DepthFieldsArriveWholeAndLostOnesAreAskedFor) {
+  const nlohmann::json& op = s_["transport"]["depth_fields"];
+  if (!op.value("agreed", false)) GTEST_SKIP() << "the session did not agree depth fields";
+  const nlohmann::json& node = s_["remote"]["transport"]["depth_fields"];
+  const nlohmann::json& relay = s_["relay"]["down"].value("depth_field_fragment",
+                                                          nlohmann::json::object());
+  const nlohmann::json& sent = s_["remote"]["transport"]["streams"]["depth_field_fragment"];
+  const nlohmann::json& rx = s_["transport"]["streams"]["depth_field_fragment"];
+  if (s_["remote"]["contacts_max"].get<int>() > 0) EXPECT_GT(Get(node, "fields_sent"), 0u);
+  EXPECT_EQ(Get(sent, "sent"), Get(relay, "received"));
+  EXPECT_EQ(Get(node, "fragments_sent"), Get(sent, "sent"));
+  ExpectMatches(rx, relay, 200.0, "depth_field_fragment down");
+  EXPECT_EQ(Get(op, "fields_undecodable"), 0u);
+  EXPECT_EQ(Get(op, "fragments_inconsistent"), 0u);
+  EXPECT_EQ(Get(op, "fields_without_buffer"), 0u);
+  EXPECT_EQ(Get(op, "fields_handed_to_loop"), Get(op, "fields_completed"));
+  EXPECT_EQ(Get(s_["depth_fields"], "fields_refused"), 0u);
+  if (Get(op, "fields_handed_to_loop") > 0) EXPECT_GT(Get(s_["depth_fields"], "field_ticks"), 0u);
+  const nlohmann::json& nacks_rx =
+      s_["remote"]["transport"]["streams"].value("depth_field_nack", nlohmann::json::object());
+  EXPECT_EQ(Get(node, "nacks_answered") + Get(node, "nacks_refused"),
+            Get(nacks_rx, "received"));
+  std::printf("depth fields: %llu sent, %llu whole at the operator, %llu NACKs sent, %llu "
+              "answered; %llu field ticks, %llu fallback ticks\n",
+              static_cast<unsigned long long>(Get(node, "fields_sent")),
+              static_cast<unsigned long long>(Get(op, "fields_completed")),
+              static_cast<unsigned long long>(Get(op, "nacks_sent")),
+              static_cast<unsigned long long>(Get(node, "nacks_answered")),
+              static_cast<unsigned long long>(Get(s_["depth_fields"], "field_ticks")),
+              static_cast<unsigned long long>(Get(s_["depth_fields"], "fallback_ticks")));
+}
+
+}  // namespace

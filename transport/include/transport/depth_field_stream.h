@@ -87,7 +87,7 @@ class DepthFieldReassembler {
   static constexpr std::size_t kHeldIds = 128;
   /// `mtu` as negotiated (fixes the payload per fragment); `slots` ≥ 1 fields in progress at
   /// once. Throws std::invalid_argument outside those ranges.
-  DepthFieldReassembler(std::size_t mtu, std::size_t slots = 8);
+  DepthFieldReassembler(std::size_t mtu, std::size_t slots = 16);
 
   enum class Outcome : std::uint8_t { kAccepted, kCompleted, kDuplicate, kInconsistent };
   /// Adds a fragment received at `now_ns` (operator clock). On kCompleted, completed() holds the
