@@ -397,11 +397,11 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     ArrivedModel a;
     a.model = decoded.model;
     // The depth fields travel beside the model here (the model names them by id; on the wire
-    // they are DepthFieldFragments, transport/depth_field_stream.h). A field goes with the first model that
-    // refers to it and arrives (a repaired stream's delivery at the model's latency); a field
-    // kept from an earlier step is referred to by its id alone. It goes through the depth-field
-    // codec (codecs/depth_field_codec.h: the operator evaluates the decoded field), and its
-    // bytes are counted twice: in datagrams, and the surface a receiver that caches it by
+    // they are DepthFieldFragments, transport/depth_field_stream.h). A field goes with the first
+    // model that refers to it and arrives (a repaired stream's delivery at the model's latency); a
+    // field kept from an earlier step is referred to by its id alone. It goes through the
+    // depth-field codec (codecs/depth_field_codec.h: the operator evaluates the decoded field), and
+    // its bytes are counted twice: in datagrams, and the surface a receiver that caches it by
     // lattice node would still lack (the nodes of each lattice it has not had yet, at this
     // field's map bytes per node).
     const bool lost = uniform(loss_to_operator) < setup.loss;

@@ -2,17 +2,17 @@
 // a simulated link with delay, jitter and loss each way: every field a model names arrives whole
 // and byte for byte; the sender keeps the fields named last; the reassembler refuses fragments
 // that contradict their field.
+#include "transport/depth_field_stream.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
-#include <cstdio>
 #include <cstdint>
+#include <cstdio>
 #include <deque>
 #include <map>
 #include <random>
 #include <vector>
-
-#include "transport/depth_field_stream.h"
 
 namespace ht {
 namespace {
@@ -31,9 +31,10 @@ struct InFlight {
 };
 
 // A remote node that makes a new field every `field_period` ms and a model every ms naming the
-// newest kNamed (a tool resting, then sliding on: a field stays in use for a few hundred ms), over a link of `one_way_ms` ± 5 ms with `loss` each way; the operator asks for
-// what a model names and it lacks. Returns, per field, when it was made and when it arrived whole
-// (−1: never), and counts what went over the link.
+// newest kNamed (a tool resting, then sliding on: a field stays in use for a few hundred ms), over
+// a link of `one_way_ms` ± 5 ms with `loss` each way; the operator asks for what a model names and
+// it lacks. Returns, per field, when it was made and when it arrived whole (−1: never), and counts
+// what went over the link.
 struct StreamRun {
   std::map<std::uint32_t, std::pair<double, double>> made_and_whole_s;
   std::size_t fragments_sent = 0, fragments_needed = 0;
@@ -144,11 +145,12 @@ TEST(DepthFieldStream, EveryFieldArrivesWholeThroughLossDelayAndJitter) {
       }
       ASSERT_FALSE(latency_s.empty());
       std::ranges::sort(latency_s);
-      std::printf("[ measured ] loss %.0f %%, one way %.0f ms: fields whole after %.0f / %.0f ms "
-                  "(median / slowest of %zu of %zu), %zu fragments sent for %zu, %llu NACKs\n",
-                  100 * loss, one_way_ms, 1e3 * latency_s[latency_s.size() / 2],
-                  1e3 * latency_s.back(), latency_s.size(), made, run.fragments_sent,
-                  run.fragments_needed, static_cast<unsigned long long>(run.rx.nacks_sent));
+      std::printf(
+          "[ measured ] loss %.0f %%, one way %.0f ms: fields whole after %.0f / %.0f ms "
+          "(median / slowest of %zu of %zu), %zu fragments sent for %zu, %llu NACKs\n",
+          100 * loss, one_way_ms, 1e3 * latency_s[latency_s.size() / 2], 1e3 * latency_s.back(),
+          latency_s.size(), made, run.fragments_sent, run.fragments_needed,
+          static_cast<unsigned long long>(run.rx.nacks_sent));
       if (loss == 0.0) {
         // Nothing lost: a one-way delay (and jitter), no repair asked for.
         EXPECT_LE(latency_s.back(), one_way_ms * 1e-3 + 0.0061);
@@ -261,7 +263,7 @@ TEST(DepthFieldStream, FragmentsThatContradictTheirFieldAreRefused) {
   EXPECT_EQ(nacks[0].missing[1], 2);
   EXPECT_EQ(nacks[1].object_id, 7u);
   EXPECT_EQ(nacks[1].count, 0);  // nothing of it came: all of it
-  collect(80'000'000);  // within a round trip and a gap of the last: not again
+  collect(80'000'000);           // within a round trip and a gap of the last: not again
   EXPECT_TRUE(nacks.empty());
   collect(2'000'000'000);  // no model has named them for over a second: forgotten
   EXPECT_TRUE(nacks.empty());

@@ -221,8 +221,9 @@ std::vector<Datagram> OneOfEach(const MacKey& key) {
   tool.X_WT.translation = {0.1, -0.2, 0.3};
   tool.V_WT_W = {{0.01, 0.0, -0.02}, {0.5, 0.0, 0.0}};
   out.push_back(EncodeCompactToolState(h, tool, key));
-  SceneFragmentMessage ff{9, kDepthFieldVersion, 3000,
-                          2, 3, std::span<const std::uint8_t>(object).subspan(2 * 1396, 208)};
+  SceneFragmentMessage ff{9,    kDepthFieldVersion,
+                          3000, 2,
+                          3,    std::span<const std::uint8_t>(object).subspan(2 * 1396, 208)};
   out.push_back(EncodeDepthFieldFragment(h, ff, key));
   SceneNackMessage fn = n;
   fn.object_id = 9;
@@ -266,7 +267,8 @@ TEST(Messages, FieldsSurviveTheRoundTrip) {
     const ContactModelMessage cm = SampleModel(n);
     const Datagram dc = EncodeContactModel({MessageType::kContactModel, 7, 3, 11}, cm, key);
     ASSERT_EQ(dc.size, kHeaderBytes + kContactModelFixedBytes + n * kContactBytes +
-                           kDepthFieldIdCountBytes + kKinkPlaneCountBytes + kTranslationPatchCountBytes + kMacBytes);
+                           kDepthFieldIdCountBytes + kKinkPlaneCountBytes +
+                           kTranslationPatchCountBytes + kMacBytes);
     ASSERT_EQ(OpenDatagram(dc.view(), key, h, body), DecodeStatus::kOk);
     ContactModelMessage out;
     ASSERT_EQ(DecodeContactModel(body, out), DecodeStatus::kOk) << n;
@@ -341,8 +343,8 @@ TEST(Messages, TruncatedBodiesThatStillCarryAValidMacAreRejected) {
     for (std::size_t cut = 1; cut <= body; ++cut) {
       // A fragment with a shorter payload is still a fragment (its reassembler checks the
       // payload against its field's cut).
-      const bool fragment = type == int(MessageType::kSceneFragment) ||
-                            type == int(MessageType::kDepthFieldFragment);
+      const bool fragment =
+          type == int(MessageType::kSceneFragment) || type == int(MessageType::kDepthFieldFragment);
       if (fragment && cut < body) continue;
       Datagram t;
       std::copy(d.bytes.begin(), d.bytes.begin() + static_cast<long>(d.size - kMacBytes - cut),
@@ -989,8 +991,7 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
                             (compact ? kCompactContactModelFixedBytes + n * kCompactContactBytes
                                      : kContactModelFixedBytes + n * kContactBytes) +
                             kDepthFieldIdCountBytes + kKinkPlaneCountBytes + plane_bytes +
-                            kTranslationPatchCountBytes +
-                            kMacBytes);
+                            kTranslationPatchCountBytes + kMacBytes);
       Header h;
       std::span<const std::uint8_t> body;
       ASSERT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kOk);
@@ -1104,7 +1105,8 @@ TEST(Messages, TranslationPatchesTravelWithTheirContactsAndWhatDoesNotFitIsLeftO
                             (compact ? kCompactContactModelFixedBytes + n * kCompactContactBytes
                                      : kContactModelFixedBytes + n * kContactBytes) +
                             kDepthFieldIdCountBytes + kKinkPlaneCountBytes +
-                            kTranslationPatchCountBytes + sent * kTranslationPatchBytes + kMacBytes);
+                            kTranslationPatchCountBytes + sent * kTranslationPatchBytes +
+                            kMacBytes);
       Header h;
       std::span<const std::uint8_t> body;
       ASSERT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kOk);
@@ -1192,7 +1194,6 @@ TEST(Messages, TranslationPatchesTravelWithTheirContactsAndWhatDoesNotFitIsLeftO
   }
 }
 
-
 TEST(Messages, DepthFieldIdsTravelWithTheirContactsAndBadSectionsAreRejected) {
   const MacKey key = TestKey();
   for (const bool compact : {false, true}) {
@@ -1271,8 +1272,8 @@ TEST(Messages, DepthFieldIdsTravelWithTheirContactsAndBadSectionsAreRejected) {
 TEST(Messages, DepthFieldFragmentsAndNacksRefuseWhatNoFieldCanBe) {
   const MacKey key = TestKey();
   static const std::vector<std::uint8_t> bytes(3000, 0x33);
-  const SceneFragmentMessage good{4, kDepthFieldVersion, 3000, 0, 3,
-                                  std::span<const std::uint8_t>(bytes).first(1396)};
+  const SceneFragmentMessage good{
+      4, kDepthFieldVersion, 3000, 0, 3, std::span<const std::uint8_t>(bytes).first(1396)};
   const auto open = [&](const Datagram& d, SceneFragmentMessage& out) {
     Header h;
     std::span<const std::uint8_t> body;

@@ -198,8 +198,8 @@ TEST_F(ImpairedRun, DepthFieldsArriveWholeAndLostOnesAreAskedFor) {
   const nlohmann::json& op = s_["transport"]["depth_fields"];
   if (!op.value("agreed", false)) GTEST_SKIP() << "the session did not agree depth fields";
   const nlohmann::json& node = s_["remote"]["transport"]["depth_fields"];
-  const nlohmann::json& relay = s_["relay"]["down"].value("depth_field_fragment",
-                                                          nlohmann::json::object());
+  const nlohmann::json& relay =
+      s_["relay"]["down"].value("depth_field_fragment", nlohmann::json::object());
   const nlohmann::json& sent = s_["remote"]["transport"]["streams"]["depth_field_fragment"];
   const nlohmann::json& rx = s_["transport"]["streams"]["depth_field_fragment"];
   if (s_["remote"]["contacts_max"].get<int>() > 0) EXPECT_GT(Get(node, "fields_sent"), 0u);
@@ -214,16 +214,16 @@ TEST_F(ImpairedRun, DepthFieldsArriveWholeAndLostOnesAreAskedFor) {
   if (Get(op, "fields_handed_to_loop") > 0) EXPECT_GT(Get(s_["depth_fields"], "field_ticks"), 0u);
   const nlohmann::json& nacks_rx =
       s_["remote"]["transport"]["streams"].value("depth_field_nack", nlohmann::json::object());
-  EXPECT_EQ(Get(node, "nacks_answered") + Get(node, "nacks_refused"),
-            Get(nacks_rx, "received"));
-  std::printf("depth fields: %llu sent, %llu whole at the operator, %llu NACKs sent, %llu "
-              "answered; %llu field ticks, %llu fallback ticks\n",
-              static_cast<unsigned long long>(Get(node, "fields_sent")),
-              static_cast<unsigned long long>(Get(op, "fields_completed")),
-              static_cast<unsigned long long>(Get(op, "nacks_sent")),
-              static_cast<unsigned long long>(Get(node, "nacks_answered")),
-              static_cast<unsigned long long>(Get(s_["depth_fields"], "field_ticks")),
-              static_cast<unsigned long long>(Get(s_["depth_fields"], "fallback_ticks")));
+  EXPECT_EQ(Get(node, "nacks_answered") + Get(node, "nacks_refused"), Get(nacks_rx, "received"));
+  std::printf(
+      "depth fields: %llu sent, %llu whole at the operator, %llu NACKs sent, %llu "
+      "answered; %llu field ticks, %llu fallback ticks\n",
+      static_cast<unsigned long long>(Get(node, "fields_sent")),
+      static_cast<unsigned long long>(Get(op, "fields_completed")),
+      static_cast<unsigned long long>(Get(op, "nacks_sent")),
+      static_cast<unsigned long long>(Get(node, "nacks_answered")),
+      static_cast<unsigned long long>(Get(s_["depth_fields"], "field_ticks")),
+      static_cast<unsigned long long>(Get(s_["depth_fields"], "fallback_ticks")));
 }
 
 }  // namespace

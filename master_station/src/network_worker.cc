@@ -152,10 +152,10 @@ void NetworkWorker::Run(const std::atomic<bool>& stop) {
       field_repair.rtt_ns = repair.rtt_ns;
       field_reassembler_.CollectNacks(now, field_repair, [&](const wire::SceneNackMessage& nack) {
         ++field_nacks_sent_;
-        link_.Send(wire::EncodeDepthFieldNack(
-                       link_.NextHeader(wire::MessageType::kDepthFieldNack, session_), nack,
-                       config_.key),
-                   config_.remote_address);
+        link_.Send(
+            wire::EncodeDepthFieldNack(
+                link_.NextHeader(wire::MessageType::kDepthFieldNack, session_), nack, config_.key),
+            config_.remote_address);
       });
     }
     reassembler_.CollectNacks(now, repair, [&](const wire::SceneNackMessage& nack) {
@@ -338,9 +338,10 @@ void NetworkWorker::OnDepthFieldFragment(const wire::SceneFragmentMessage& fragm
   if (!DecodeDepthField(field_reassembler_.completed(), *spare_field_, field_scratch_, error)) {
     ++fields_undecodable_;
     if (fields_undecodable_ == 1) {
-      std::printf("[master] a depth field from the remote node did not decode (%s); its contact "
-                  "is rendered from its linearization\n",
-                  error.c_str());
+      std::printf(
+          "[master] a depth field from the remote node did not decode (%s); its contact "
+          "is rendered from its linearization\n",
+          error.c_str());
       std::fflush(stdout);
     }
     field_reassembler_.Held(field_reassembler_.completed_id());  // asking again would not help

@@ -288,7 +288,8 @@ void OperatorStationRun::LoopThread() {
     // The depth fields that came (before or with the model just read: the worker hands a field
     // on before the model that names it), given back to the worker after the tick.
     std::size_t fields_in = 0;
-    while (fields_in < arrived_fields.size() && field_handoff_.ready.Pop(arrived_fields[fields_in])) {
+    while (fields_in < arrived_fields.size() &&
+           field_handoff_.ready.Pop(arrived_fields[fields_in])) {
       ++fields_in;
     }
     in.arrived_fields = {arrived_fields.data(), fields_in};

@@ -195,9 +195,9 @@ RemoteNodeRun::RemoteNodeRun(const RemoteNodeConfig& config, const HapticScene& 
   caps_.max_model_rate_hz = static_cast<float>(config.max_rate_hz);
   caps_.peer_timeout_ms = static_cast<std::uint16_t>(config.peer_timeout_ms);
   caps_.max_deadband = static_cast<float>(config.max_deadband);
-  caps_.codecs =
-      wire::kCodecDracoMesh | wire::kCodecCompactContactModel | wire::kCodecCompactToolState |
-      (config.depth_fields ? wire::kCodecDepthFields : 0u);
+  caps_.codecs = wire::kCodecDracoMesh | wire::kCodecCompactContactModel |
+                 wire::kCodecCompactToolState |
+                 (config.depth_fields ? wire::kCodecDepthFields : 0u);
   caps_.scene_objects = static_cast<std::uint16_t>(config.scene_objects.size());
   caps_.scene_name = scene.name;
   caps_.layout = MakeSceneLayout(scene);
@@ -381,10 +381,10 @@ void RemoteNodeRun::FollowRoundTrip() {
     pipeline_->SetDepthFields(session_->depth_fields());
   }
   if (session_->depth_fields()) {
-    pipeline_->SetDepthFieldMargin(std::max(
-        config_.depth_field_min_margin_m,
-        config_.depth_field_speed_m_per_s * static_cast<double>(session_->operator_rtt_ns()) *
-            1e-9));
+    pipeline_->SetDepthFieldMargin(std::max(config_.depth_field_min_margin_m,
+                                            config_.depth_field_speed_m_per_s *
+                                                static_cast<double>(session_->operator_rtt_ns()) *
+                                                1e-9));
   }
   // The speculative floor by the operator's round trip (speculative_speed_m_per_s).
   if (config_.speculative_speed_m_per_s > 0.0) {

@@ -1,11 +1,11 @@
 #include "remote_session.h"
 
-#include "codecs/depth_field_codec.h"
-#include "haptic_core/steady_clock.h"
-
 #include <algorithm>
 #include <cstdio>
 #include <stdexcept>
+
+#include "codecs/depth_field_codec.h"
+#include "haptic_core/steady_clock.h"
 
 namespace ht {
 
@@ -447,11 +447,10 @@ void RemoteSession::SendModel(wire::ContactModelMessage& out, std::int64_t now) 
         out.model.contacts[static_cast<std::size_t>(i)].num_kink_planes, 0, kMaxKinkPlanes));
   }
   const auto fit = static_cast<std::uint64_t>(
-      compact_models_
-          ? wire::KinkPlaneCapacity(wire::kCompactContactModelFixedBytes,
-                                    wire::kCompactContactBytes, contacts, field_ids)
-          : wire::KinkPlaneCapacity(wire::kContactModelFixedBytes, wire::kContactBytes, contacts,
-                                    field_ids));
+      compact_models_ ? wire::KinkPlaneCapacity(wire::kCompactContactModelFixedBytes,
+                                                wire::kCompactContactBytes, contacts, field_ids)
+                      : wire::KinkPlaneCapacity(wire::kContactModelFixedBytes, wire::kContactBytes,
+                                                contacts, field_ids));
   kink_planes_sent_ += std::min(planes, fit);
   kink_planes_left_out_ += planes - std::min(planes, fit);
   // The translation patches likewise, after the planes that went (protocol version 9).
@@ -548,16 +547,15 @@ nlohmann::json RemoteSession::StatsJson(std::size_t scene_objects, std::size_t s
                      {"model_decisions", ToJson(model_deadband_.counts())}});
   transport["kink_planes"] = {{"sent", kink_planes_sent_}, {"left_out", kink_planes_left_out_}};
   transport["translation_patches"] = {{"sent", patches_sent_}, {"left_out", patches_left_out_}};
-  transport["depth_fields"] = {{"agreed", depth_fields_},
-                               {"fields_sent", fields_encoded_},
-                               {"field_bytes", field_bytes_encoded_},
-                               {"encode_ms_mean", fields_encoded_ > 0
-                                                      ? field_encode_ms_ / fields_encoded_
-                                                      : 0.0},
-                               {"fragments_sent", field_sender_.fragments_sent()},
-                               {"nacks_answered", field_sender_.nacks_answered()},
-                               {"nacks_refused", field_sender_.nacks_refused()},
-                               {"contacts_without_field", contacts_without_field_}};
+  transport["depth_fields"] = {
+      {"agreed", depth_fields_},
+      {"fields_sent", fields_encoded_},
+      {"field_bytes", field_bytes_encoded_},
+      {"encode_ms_mean", fields_encoded_ > 0 ? field_encode_ms_ / fields_encoded_ : 0.0},
+      {"fragments_sent", field_sender_.fragments_sent()},
+      {"nacks_answered", field_sender_.nacks_answered()},
+      {"nacks_refused", field_sender_.nacks_refused()},
+      {"contacts_without_field", contacts_without_field_}};
   transport["mtu"] = config_.mtu;
   transport["node_poses"] = {{"rate_hz", config_.display_rate_hz},
                              {"graph_version", graph_version_},

@@ -9,8 +9,8 @@ namespace {
 
 std::size_t PayloadFor(std::size_t mtu) {
   if (mtu < wire::kMinMtuBytes || mtu > wire::kMaxDatagramBytes) {
-    throw std::invalid_argument("depth-field stream: MTU " + std::to_string(mtu) +
-                                " outside [" + std::to_string(wire::kMinMtuBytes) + ", " +
+    throw std::invalid_argument("depth-field stream: MTU " + std::to_string(mtu) + " outside [" +
+                                std::to_string(wire::kMinMtuBytes) + ", " +
                                 std::to_string(wire::kMaxDatagramBytes) + "]");
   }
   static_assert(wire::kDepthFieldFragmentFixedBytes == wire::kSceneFragmentFixedBytes);
@@ -48,8 +48,7 @@ bool DepthFieldSender::Named(std::uint32_t id) noexcept {
 void DepthFieldSender::Add(std::uint32_t id, std::vector<std::uint8_t> bytes) {
   if (id == 0) throw std::invalid_argument("depth-field stream: field id 0");
   if (Find(id) != nullptr) {
-    throw std::invalid_argument("depth-field stream: field " + std::to_string(id) +
-                                " added twice");
+    throw std::invalid_argument("depth-field stream: field " + std::to_string(id) + " added twice");
   }
   if (bytes.empty() || bytes.size() > wire::kMaxDepthFieldBytes) {
     throw std::invalid_argument("depth-field stream: field of " + std::to_string(bytes.size()) +
@@ -58,9 +57,9 @@ void DepthFieldSender::Add(std::uint32_t id, std::vector<std::uint8_t> bytes) {
   const std::size_t count = (bytes.size() + payload_ - 1) / payload_;  // ≤ 2¹⁰ at any MTU
   if (fields_.size() >= keep_) {
     // The least recently named goes; its queued fragments are skipped by Next.
-    const auto oldest = std::min_element(
-        fields_.begin(), fields_.end(),
-        [](const Field& a, const Field& b) { return a.named_at < b.named_at; });
+    const auto oldest =
+        std::min_element(fields_.begin(), fields_.end(),
+                         [](const Field& a, const Field& b) { return a.named_at < b.named_at; });
     fields_.erase(oldest);
   }
   Field f;

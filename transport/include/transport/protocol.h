@@ -418,8 +418,8 @@ constexpr int KinkPlaneCapacity(std::size_t fixed_bytes, std::size_t contact_byt
   const std::size_t used =
       kHeaderBytes + fixed_bytes +
       static_cast<std::size_t>(num_contacts < 0 ? 0 : num_contacts) * contact_bytes +
-      DepthFieldIdSectionBytes(num_field_ids) + kKinkPlaneCountBytes +
-      kTranslationPatchCountBytes + kMacBytes;
+      DepthFieldIdSectionBytes(num_field_ids) + kKinkPlaneCountBytes + kTranslationPatchCountBytes +
+      kMacBytes;
   if (used >= kMaxDatagramBytes) return 0;
   const std::size_t fit = (kMaxDatagramBytes - used) / kKinkPlaneBytes;
   return fit < static_cast<std::size_t>(kMaxWireKinkPlanes) ? static_cast<int>(fit)
