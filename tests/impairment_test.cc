@@ -525,7 +525,9 @@ TEST(MessageTypeName, NamesKnownTypesAndNumbersTheRest) {
   EXPECT_EQ(MessageTypeName(12), "compact_contact_model");
   EXPECT_EQ(MessageTypeName(13), "node_poses");
   EXPECT_EQ(MessageTypeName(14), "compact_tool_state");
-  EXPECT_EQ(MessageTypeName(15), "type_15");
+  EXPECT_EQ(MessageTypeName(15), "depth_field_fragment");
+  EXPECT_EQ(MessageTypeName(16), "depth_field_nack");
+  EXPECT_EQ(MessageTypeName(17), "type_17");
   EXPECT_EQ(MessageTypeName(255), "type_255");
 }
 

@@ -340,7 +340,7 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
         const double w = std::exp((d - m_ref) / eps);
         S0 += w;
         S1.noalias() += w * J;
-        if (w >= kCurvatureWeight) S2.noalias() += w * (J * J.transpose());
+        if (w >= kCurvatureWeight) S2.selfadjointView<Eigen::Lower>().rankUpdate(J, w);
       }
     }
   };
@@ -375,7 +375,8 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
   out.depth_m = m_ref + eps * std::log(S0);
   out.max_node_depth_m = m_ref;
   const Vec6 mean = S1 / S0;
-  const Mat6 cov = S2 / S0 - mean * mean.transpose();
+  const Mat6 second = S2.selfadjointView<Eigen::Lower>();  // the sums' lower triangle, mirrored
+  const Mat6 cov = second / S0 - mean * mean.transpose();
   // To world axes: both halves turn with R_WF.
   const glm::dmat3 R_WF = glm::mat3_cast(f.X_WF.rotation);
   const glm::dvec3 g_F(mean[0], mean[1], mean[2]), r_F(mean[3], mean[4], mean[5]);

@@ -12,6 +12,7 @@
 #include <exception>
 #include <limits>
 #include <optional>
+#include <thread>
 
 #include "codecs/depth_field_codec.h"
 #include "codecs/draco_mesh_codec.h"
@@ -33,6 +34,12 @@ NetworkWorker::NetworkWorker(const StationConfig& config, TripleBuffer<OutgoingT
       fields_(fields),
       field_reassembler_(config.mtu) {
   field_decode_ms_.reserve(1 << 16);
+  encoded_pool_.reserve(kEncodedFields);
+  decoding_ids_.reserve(kEncodedFields);
+  for (std::size_t i = 0; i < kEncodedFields; ++i) {
+    encoded_pool_.push_back(std::make_unique<EncodedField>());
+    encoded_free_.Push(encoded_pool_.back().get());
+  }
   rtt_ms_.reserve(1 << 20);
   node_pose_latency_ms_.reserve(1 << 18);
   one_way_ms_.reserve(1 << 20);
@@ -44,6 +51,21 @@ NetworkWorker::NetworkWorker(const StationConfig& config, TripleBuffer<OutgoingT
 }
 
 void NetworkWorker::Run(const std::atomic<bool>& stop) {
+  std::atomic<bool> stop_decoder{false};
+  std::thread decoder([this, &stop_decoder] { DecodeFields(stop_decoder); });
+  RunNetwork(stop);
+  stop_decoder.store(true, std::memory_order_release);
+  decoder.join();
+  TakeDecodedFields();
+  if (fields_undecodable_ > 0) {
+    std::printf("[master] %llu depth field(s) from the remote node did not decode (first: %s); "
+                "their contacts were rendered from their linearizations\n",
+                static_cast<unsigned long long>(fields_undecodable_), first_decode_error_.c_str());
+    std::fflush(stdout);
+  }
+}
+
+void NetworkWorker::RunNetwork(const std::atomic<bool>& stop) {
   std::array<std::uint8_t, wire::kMaxDatagramBytes + 1> buffer{};
   OutgoingToolState last{};
   bool have_last = false;
@@ -147,6 +169,7 @@ void NetworkWorker::Run(const std::atomic<bool>& stop) {
     }
     SceneReassembler::RepairTiming repair;
     repair.rtt_ns = clock_.valid() ? clock_.rtt_ns() : handshake_rtt_ns_;
+    TakeDecodedFields();
     if (depth_fields_ && session_ != 0) {
       DepthFieldReassembler::RepairTiming field_repair;
       field_repair.rtt_ns = repair.rtt_ns;
@@ -262,6 +285,8 @@ nlohmann::json NetworkWorker::Summary() const {
                        {"fields_handed_to_loop", fields_handed_},
                        {"fields_undecodable", fields_undecodable_},
                        {"fields_without_buffer", fields_without_buffer_},
+                       {"fields_decoder_busy", fields_decoder_busy_},
+                       {"models_waited_for_fields", models_waited_for_fields_},
                        {"fields_abandoned", fr.fields_abandoned},
                        {"fragments_accepted", fr.fragments_accepted},
                        {"fragments_duplicate", fr.fragments_duplicate},
@@ -328,35 +353,85 @@ void NetworkWorker::SendHello() {
 void NetworkWorker::OnDepthFieldFragment(const wire::SceneFragmentMessage& fragment,
                                          std::int64_t now) {
   if (field_reassembler_.Add(fragment, now) != DepthFieldReassembler::Outcome::kCompleted) return;
-  if (spare_field_ == nullptr && !fields_.free.Pop(spare_field_)) {
-    // Every buffer is on its way to the loop: the field is asked for again when a model names it.
-    ++fields_without_buffer_;
+  EncodedField* e = nullptr;
+  if (!encoded_free_.Pop(e)) {
+    // The decoder has kEncodedFields fields queued: this one is asked for again when a model
+    // names it.
+    ++fields_decoder_busy_;
     return;
   }
-  std::string error;
-  const std::int64_t t0 = SteadyNowNs();
-  if (!DecodeDepthField(field_reassembler_.completed(), *spare_field_, field_scratch_, error)) {
-    ++fields_undecodable_;
-    if (fields_undecodable_ == 1) {
-      std::printf(
-          "[master] a depth field from the remote node did not decode (%s); its contact "
-          "is rendered from its linearization\n",
-          error.c_str());
-      std::fflush(stdout);
+  e->id = field_reassembler_.completed_id();
+  e->bytes.assign(field_reassembler_.completed().begin(), field_reassembler_.completed().end());
+  decoding_ids_.push_back(e->id);
+  to_decode_.Push(e);  // cannot fail: the ring holds the whole pool
+}
+
+bool NetworkWorker::NamesFieldInDecoding(const ContactModel& model) const noexcept {
+  for (int i = 0; i < std::clamp(model.num_contacts, 0, kMaxContacts); ++i) {
+    const std::uint32_t id = model.contacts[static_cast<std::size_t>(i)].depth_field_id;
+    if (id != 0 && std::ranges::find(decoding_ids_, id) != decoding_ids_.end()) return true;
+  }
+  return false;
+}
+
+void NetworkWorker::TakeDecodedFields() {
+  DecodedField d;
+  bool any = false;
+  while (decoded_.Pop(d)) {
+    any = true;
+    std::erase(decoding_ids_, d.id);
+    switch (d.outcome) {
+      case DecodeOutcome::kHanded:
+        ++fields_handed_;
+        field_reassembler_.Held(d.id);
+        break;
+      case DecodeOutcome::kUndecodable:
+        ++fields_undecodable_;
+        field_reassembler_.Held(d.id);  // asking again would not help
+        break;
+      case DecodeOutcome::kNoBuffer:
+        ++fields_without_buffer_;  // asked for again when a model names it
+        break;
     }
-    field_reassembler_.Held(field_reassembler_.completed_id());  // asking again would not help
-    return;
   }
-  if (field_decode_ms_.size() < field_decode_ms_.capacity()) {
-    field_decode_ms_.push_back(static_cast<double>(SteadyNowNs() - t0) * 1e-6);
+  if (any && have_model_waiting_ && !NamesFieldInDecoding(model_waiting_.message.model)) {
+    incoming_.Write(model_waiting_);
+    have_model_waiting_ = false;
   }
-  // The ready ring holds at most the pool: a push cannot fail while every pointer is the pool's.
-  if (fields_.ready.Push(spare_field_)) {
-    spare_field_ = nullptr;
-    ++fields_handed_;
-    field_reassembler_.Held(field_reassembler_.completed_id());
-  } else {
-    ++fields_without_buffer_;
+}
+
+void NetworkWorker::DecodeFields(const std::atomic<bool>& stop) {
+  std::string error;
+  while (true) {
+    EncodedField* e = nullptr;
+    if (!to_decode_.Pop(e)) {
+      if (stop.load(std::memory_order_acquire)) return;
+      timespec pause{0, 500000};  // 0.5 ms: a field waits at most that long to start decoding
+      nanosleep(&pause, nullptr);
+      continue;
+    }
+    DecodedField result{e->id, DecodeOutcome::kHanded};
+    if (spare_field_ == nullptr && !fields_.free.Pop(spare_field_)) {
+      result.outcome = DecodeOutcome::kNoBuffer;  // every buffer is on its way to the loop
+    } else {
+      const std::int64_t t0 = SteadyNowNs();
+      if (!DecodeDepthField(e->bytes, *spare_field_, field_scratch_, error)) {
+        result.outcome = DecodeOutcome::kUndecodable;
+        if (first_decode_error_.empty()) first_decode_error_ = error;
+      } else {
+        if (field_decode_ms_.size() < field_decode_ms_.capacity()) {
+          field_decode_ms_.push_back(static_cast<double>(SteadyNowNs() - t0) * 1e-6);
+        }
+        // The ready ring holds the whole pool: a push cannot fail.
+        if (fields_.ready.Push(spare_field_)) {
+          spare_field_ = nullptr;
+        } else {
+          result.outcome = DecodeOutcome::kNoBuffer;
+        }
+      }
+    }
+    encoded_free_.Push(e);
+    decoded_.Push(result);  // room for every pool entry twice: cannot fail
   }
 }
 
@@ -405,6 +480,7 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
       compact_tool_states_ = (w.codecs & wire::kCodecCompactToolState) != 0;
       depth_fields_ = (w.codecs & wire::kCodecDepthFields) != 0;
       field_reassembler_.Reset(w.mtu);
+      have_model_waiting_ = false;
       scene_name_ = std::string(w.name());
       {
         std::lock_guard<std::mutex> lock(layout_mutex_);
@@ -487,6 +563,14 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
               model.message.model.contacts[static_cast<std::size_t>(i)].depth_field_id, now);
         }
       }
+      if (NamesFieldInDecoding(model.message.model)) {
+        // Its field is still being decoded (a few ms): it goes to the loop when the field does.
+        model_waiting_ = model;
+        have_model_waiting_ = true;
+        ++models_waited_for_fields_;
+        return;
+      }
+      have_model_waiting_ = false;  // newest wins
       incoming_.Write(model);
       return;
     }

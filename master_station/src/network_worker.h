@@ -80,6 +80,7 @@ class NetworkWorker {
                 TripleBuffer<IncomingModel>& incoming, Counters& counters, ReceivedScene& scene,
                 FieldHandoff& fields);
 
+  /// Runs the network side until `stop`, with the depth fields' decoder on a thread of its own.
   void Run(const std::atomic<bool>& stop);
 
   const std::vector<double>& rtt_ms() const { return rtt_ms_; }
@@ -103,6 +104,8 @@ class NetworkWorker {
   /// over retransmissions, so that a round trip longer than the reconnect period still completes:
   /// the remote node answers a repeated nonce with the same session.
   void SendHello();
+  /// The network loop of Run.
+  void RunNetwork(const std::atomic<bool>& stop);
 
   void EndSession();
   /// Goodbye three times (new sequence numbers each) when a session is open.
@@ -115,9 +118,15 @@ class NetworkWorker {
   /// them to the received scene.
   void CheckScene(std::int64_t now);
 
-  /// A DepthFieldFragment: reassembled; a field that arrived whole is decoded (prepared) into a
-  /// DepthField from the hand-off's free ring and handed to the loop.
+  /// A DepthFieldFragment: reassembled; a field that arrived whole goes to the decoder thread.
   void OnDepthFieldFragment(const wire::SceneFragmentMessage& fragment, std::int64_t now);
+  /// The decoder thread: decodes (and prepares) each encoded field into a DepthField from the
+  /// hand-off's free ring and hands it to the loop, so that the network thread never waits on a
+  /// field's milliseconds of decoding. Says each field's outcome back (DecodedField).
+  void DecodeFields(const std::atomic<bool>& stop);
+  /// The decoder's outcomes: a field handed to the loop is held; one that did not decode is held
+  /// too (asking again would not help); one that found no buffer is asked for again.
+  void TakeDecodedFields();
 
   /// Sends `s` as the session agreed: CompactToolState (quantized from s as it is) or ToolState.
   void Send(const OutgoingToolState& s);
@@ -182,15 +191,41 @@ class NetworkWorker {
   /// node's, counted from its 0), and the last model's low 32 bits.
   std::uint64_t remote_steps_ = 0;
   std::uint32_t last_remote_steps_low_ = 0;
-  // Depth fields (kCodecDepthFields, agreed in the Welcome): reassembly, decoding, hand-off.
+  // Depth fields (kCodecDepthFields, agreed in the Welcome): reassembly (network thread),
+  // decoding (decoder thread), hand-off to the loop.
   FieldHandoff& fields_;
   bool depth_fields_ = false;
   DepthFieldReassembler field_reassembler_;
+  /// An encoded field on its way to the decoder thread, and the decoder's outcome for it.
+  struct EncodedField {
+    std::uint32_t id = 0;
+    std::vector<std::uint8_t> bytes;
+  };
+  enum class DecodeOutcome : std::uint8_t { kHanded, kUndecodable, kNoBuffer };
+  struct DecodedField {
+    std::uint32_t id = 0;
+    DecodeOutcome outcome = DecodeOutcome::kHanded;
+  };
+  static constexpr std::size_t kEncodedFields = 8;
+  std::vector<std::unique_ptr<EncodedField>> encoded_pool_;
+  SpscRing<EncodedField*> to_decode_{kEncodedFields}, encoded_free_{kEncodedFields};
+  SpscRing<DecodedField> decoded_{2 * kEncodedFields};
+  // Written by the decoder thread only (read after it stopped).
   DepthField* spare_field_ = nullptr;  ///< taken from the free ring, not handed on yet
   DecodedDepthMap field_scratch_;
-  std::uint64_t fields_handed_ = 0, fields_undecodable_ = 0, fields_without_buffer_ = 0;
-  std::uint64_t field_nacks_sent_ = 0;
   std::vector<double> field_decode_ms_;
+  std::string first_decode_error_;
+  // Network thread: the ids with the decoder, and the newest model that names one of them (it
+  // goes to the loop once they are decoded, so that the loop has a model's fields when it takes
+  // the model).
+  std::vector<std::uint32_t> decoding_ids_;
+  IncomingModel model_waiting_;
+  bool have_model_waiting_ = false;
+  std::uint64_t models_waited_for_fields_ = 0;
+  /// Whether `model` names a field the decoder has not finished.
+  bool NamesFieldInDecoding(const ContactModel& model) const noexcept;
+  std::uint64_t fields_handed_ = 0, fields_undecodable_ = 0, fields_without_buffer_ = 0;
+  std::uint64_t fields_decoder_busy_ = 0, field_nacks_sent_ = 0;
 };
 
 }  // namespace ht::station
