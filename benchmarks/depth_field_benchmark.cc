@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cstdio>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "haptic_core/demo/demo_scenes.h"
@@ -42,8 +43,23 @@ int main(int argc, char** argv) {
   app.add_option("--travel-mm", travel_mm, "largest in-plane travel from q0 (mm)")
       ->capture_default_str();
   app.add_option("--tilt-mrad", tilt_mrad, "largest turn from q0 (mrad)")->capture_default_str();
+  std::string kernel_name = "auto";
+  app.add_option("--kernel", kernel_name,
+                 "how the operator evaluates the nodes: auto (avx2 where the CPU has it), scalar "
+                 "or avx2")
+      ->check(CLI::IsMember({"auto", "scalar", "avx2"}))
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   using namespace ht;
+  const DepthFieldKernel kernel =
+      kernel_name == "scalar" ? DepthFieldKernel::kScalar
+      : kernel_name == "avx2" || DepthFieldKernelAvailable(DepthFieldKernel::kAvx2)
+          ? DepthFieldKernel::kAvx2
+          : DepthFieldKernel::kScalar;
+  if (!DepthFieldKernelAvailable(kernel)) {
+    std::fprintf(stderr, "depth_field_benchmark: this CPU lacks AVX2 and FMA: --kernel scalar\n");
+    return 2;
+  }
   using Clock = std::chrono::steady_clock;
   const HapticScene scene = MakeBlockOnGearScene();
   PipelineOptions options;
@@ -106,7 +122,7 @@ int main(int argc, char** argv) {
     double sum = 0.0;
     int n = 0, t = 0;
     for (const DepthField* f : pipeline.last_depth_fields()) {
-      const DepthFieldEvaluation e = DepthFieldDepthAt(*f, X);
+      const DepthFieldEvaluation e = DepthFieldDepthAt(*f, X, kernel);
       sum += e.depth_m;
       n += e.nodes_evaluated;
       t += e.nodes_tested;
@@ -117,9 +133,9 @@ int main(int argc, char** argv) {
     if (sum == 12345.0) std::printf(" ");  // keeps the evaluation
   }
   std::printf(
-      "operator: all fields at one pose p50 %.1f us, p99 %.1f us; nodes computed p50 %.0f, "
+      "operator (%s): all fields at one pose p50 %.1f us, p99 %.1f us; nodes computed p50 %.0f, "
       "p99 %.0f; tested p50 %.0f, p99 %.0f\n",
-      Quantile(eval_us, 0.5), Quantile(eval_us, 0.99), Quantile(nodes, 0.5), Quantile(nodes, 0.99),
+      kernel == DepthFieldKernel::kAvx2 ? "avx2" : "scalar", Quantile(eval_us, 0.5), Quantile(eval_us, 0.99), Quantile(nodes, 0.5), Quantile(nodes, 0.99),
       Quantile(tested, 0.5), Quantile(tested, 0.99));
   return 0;
 }

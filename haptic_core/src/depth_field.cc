@@ -10,6 +10,11 @@
 #include <glm/gtc/quaternion.hpp>
 #include <stdexcept>
 
+#if defined(__x86_64__) || defined(__i386__)
+#include <immintrin.h>
+#define HT_DEPTH_FIELD_AVX2 1
+#endif
+
 namespace ht {
 namespace {
 
@@ -50,6 +55,15 @@ constexpr double kCutoffWidths = 20.0;
 /// Nodes lighter than this (relative to the deepest) add nothing to the curvature's sums: the
 /// curvature only conditions the implicit step.
 constexpr double kCurvatureWeight = 1e-6;
+
+/// ⌊x⌋ for a grid coordinate, clamped to ±2²⁰ (far outside any grid; NaN gives −2²⁰): a cast
+/// and a compare instead of std::floor, a library call on x86-64's baseline (no SSE4.1).
+inline int CellFloor(double x) noexcept {
+  constexpr double kReach = 1 << 20;
+  const double c = x > kReach ? kReach : x > -kReach ? x : -kReach;
+  const int i = static_cast<int>(c);
+  return i - (c < static_cast<double>(i) ? 1 : 0);
+}
 
 using Vec6 = Eigen::Matrix<double, 6, 1>;
 using Mat6 = Eigen::Matrix<double, 6, 6>;
@@ -191,7 +205,155 @@ bool DepthField::Prepare() {
   return true;
 }
 
+namespace {
+
+/// Up to kBatch candidate nodes of one evaluation (their cell's bound passed), evaluated together.
+constexpr int kBatch = 4;
+struct NodeBatch {
+  int n = 0;
+  std::array<int, kBatch> cell{};
+  std::array<double, kBatch> tu{}, tv{}, sx{}, sy{}, sz{};
+};
+
+/// The evaluation's sums in four lanes (AVX2): S0, S1 (6) and S2's lower triangle (21), each
+/// lane a share of the nodes, all relative to the running maximum m_ref.
+struct LaneSums {
+  alignas(32) std::array<double, 4 * 28> v{};
+};
+
+#ifdef HT_DEPTH_FIELD_AVX2
+bool HasAvx2() noexcept {
+  static const bool has = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+  return has;
+}
+
+/// Catmull–Rom weights (CatmullRom) in four double lanes.
+__attribute__((target("avx2,fma"))) inline void CatmullRomAvx2(__m256d t, __m256d w[4],
+                                                                __m256d dw[4]) noexcept {
+  const __m256d half = _mm256_set1_pd(0.5);
+  const __m256d t2 = _mm256_mul_pd(t, t), t3 = _mm256_mul_pd(t2, t);
+  const __m256d two = _mm256_set1_pd(2.0), three = _mm256_set1_pd(3.0);
+  const __m256d four = _mm256_set1_pd(4.0), five = _mm256_set1_pd(5.0);
+  const __m256d eight = _mm256_set1_pd(8.0), nine = _mm256_set1_pd(9.0);
+  const __m256d ten = _mm256_set1_pd(10.0), one = _mm256_set1_pd(1.0);
+  // w0 = ½(−t³ + 2t² − t), w1 = ½(3t³ − 5t² + 2), w2 = ½(−3t³ + 4t² + t), w3 = ½(t³ − t²).
+  w[0] = _mm256_mul_pd(half, _mm256_sub_pd(_mm256_fmsub_pd(two, t2, t3), t));
+  w[1] =
+      _mm256_mul_pd(half, _mm256_add_pd(_mm256_fnmadd_pd(five, t2, _mm256_mul_pd(three, t3)), two));
+  w[2] =
+      _mm256_mul_pd(half, _mm256_add_pd(_mm256_fnmadd_pd(three, t3, _mm256_mul_pd(four, t2)), t));
+  w[3] = _mm256_mul_pd(half, _mm256_sub_pd(t3, t2));
+  // d/dt: ½(−3t² + 4t − 1), ½(9t² − 10t), ½(−9t² + 8t + 1), ½(3t² − 2t).
+  dw[0] =
+      _mm256_mul_pd(half, _mm256_sub_pd(_mm256_fnmadd_pd(three, t2, _mm256_mul_pd(four, t)), one));
+  dw[1] = _mm256_mul_pd(half, _mm256_fmsub_pd(nine, t2, _mm256_mul_pd(ten, t)));
+  dw[2] =
+      _mm256_mul_pd(half, _mm256_add_pd(_mm256_fnmadd_pd(nine, t2, _mm256_mul_pd(eight, t)), one));
+  dw[3] = _mm256_mul_pd(half, _mm256_fmsub_pd(three, t2, _mm256_mul_pd(two, t)));
+}
+
+/// The batch's exact depths and gradients in four double lanes: the Catmull–Rom bicubic of the
+/// environment under each node (as `exact` in DepthFieldDepthAt), its depth b − s.z and its
+/// gradient J = (g, (s − c) × g), g = (∂b/∂x, ∂b/∂y, −1) in F. Lanes ≥ batch.n are copies of
+/// lane 0 (the caller ignores them).
+__attribute__((target("avx2,fma"))) void BatchDepthsAvx2(const NodeBatch& batch, const float* env,
+                                                          int nx, double inv_h,
+                                                          const glm::dvec3& c_F, double d[kBatch],
+                                                          double J[6][kBatch]) noexcept {
+  alignas(32) double tu[kBatch], tv[kBatch], sx[kBatch], sy[kBatch], sz[kBatch];
+  alignas(16) int base[kBatch];
+  for (int k = 0; k < kBatch; ++k) {
+    const int l = k < batch.n ? k : 0;
+    tu[k] = batch.tu[l];
+    tv[k] = batch.tv[l];
+    sx[k] = batch.sx[l];
+    sy[k] = batch.sy[l];
+    sz[k] = batch.sz[l];
+    base[k] = batch.cell[l] - nx - 1;  // stencil node (−1, −1)
+  }
+  __m256d wu[4], du[4], wv[4], dv[4];
+  CatmullRomAvx2(_mm256_load_pd(tu), wu, du);
+  CatmullRomAvx2(_mm256_load_pd(tv), wv, dv);
+  const __m128i b0 = _mm_load_si128(reinterpret_cast<const __m128i*>(base));
+  __m256d b = _mm256_setzero_pd(), bu = _mm256_setzero_pd(), bv = _mm256_setzero_pd();
+  for (int r = 0; r < 4; ++r) {
+    const __m128i row = _mm_add_epi32(b0, _mm_set1_epi32(r * nx));
+    __m256d x = _mm256_setzero_pd(), dx = _mm256_setzero_pd();
+    for (int c = 0; c < 4; ++c) {
+      const __m128i idx = _mm_add_epi32(row, _mm_set1_epi32(c));
+      const __m256d v = _mm256_cvtps_pd(_mm_i32gather_ps(env, idx, 4));
+      x = _mm256_fmadd_pd(wu[c], v, x);
+      dx = _mm256_fmadd_pd(du[c], v, dx);
+    }
+    b = _mm256_fmadd_pd(wv[r], x, b);
+    bu = _mm256_fmadd_pd(wv[r], dx, bu);
+    bv = _mm256_fmadd_pd(dv[r], x, bv);
+  }
+  _mm256_storeu_pd(d, _mm256_sub_pd(b, _mm256_load_pd(sz)));
+  const __m256d ih = _mm256_set1_pd(inv_h);
+  const __m256d gx = _mm256_mul_pd(bu, ih), gy = _mm256_mul_pd(bv, ih);
+  const __m256d rx = _mm256_sub_pd(_mm256_load_pd(sx), _mm256_set1_pd(c_F.x));
+  const __m256d ry = _mm256_sub_pd(_mm256_load_pd(sy), _mm256_set1_pd(c_F.y));
+  const __m256d rz = _mm256_sub_pd(_mm256_load_pd(sz), _mm256_set1_pd(c_F.z));
+  // (r × g) with g = (gx, gy, −1).
+  _mm256_storeu_pd(J[0], gx);
+  _mm256_storeu_pd(J[1], gy);
+  _mm256_storeu_pd(J[2], _mm256_set1_pd(-1.0));
+  _mm256_storeu_pd(J[3], _mm256_fnmadd_pd(rz, gy, _mm256_sub_pd(_mm256_setzero_pd(), ry)));
+  _mm256_storeu_pd(J[4], _mm256_fmadd_pd(rz, gx, rx));
+  _mm256_storeu_pd(J[5], _mm256_fnmadd_pd(ry, gx, _mm256_mul_pd(rx, gy)));
+}
+
+/// Adds the batch's weighted gradients to the lane sums: S0 += w, S1 += w·J, and S2's lower
+/// triangle += w2·J·Jᵀ (w2 = w where w ≥ kCurvatureWeight, else 0), lane by lane.
+__attribute__((target("avx2,fma"))) void AccumulateAvx2(const double w[kBatch],
+                                                         const double w2[kBatch],
+                                                         const double J[6][kBatch],
+                                                         LaneSums& sums) noexcept {
+  double* v = sums.v.data();
+  const __m256d W = _mm256_loadu_pd(w), W2 = _mm256_loadu_pd(w2);
+  _mm256_store_pd(v, _mm256_add_pd(_mm256_load_pd(v), W));
+  __m256d j[6], wj2[6];
+  for (int a = 0; a < 6; ++a) {
+    j[a] = _mm256_loadu_pd(J[a]);
+    _mm256_store_pd(v + 4 * (1 + a), _mm256_fmadd_pd(W, j[a], _mm256_load_pd(v + 4 * (1 + a))));
+    wj2[a] = _mm256_mul_pd(W2, j[a]);
+  }
+  int k = 7;
+  for (int a = 0; a < 6; ++a) {
+    for (int c = 0; c <= a; ++c, ++k) {
+      _mm256_store_pd(v + 4 * k, _mm256_fmadd_pd(wj2[a], j[c], _mm256_load_pd(v + 4 * k)));
+    }
+  }
+}
+#endif
+
+}  // namespace
+
 DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform& X_WT) noexcept {
+#ifdef HT_DEPTH_FIELD_AVX2
+  return DepthFieldDepthAt(f, X_WT, HasAvx2() ? DepthFieldKernel::kAvx2 : DepthFieldKernel::kScalar);
+#else
+  return DepthFieldDepthAt(f, X_WT, DepthFieldKernel::kScalar);
+#endif
+}
+
+bool DepthFieldKernelAvailable(DepthFieldKernel kernel) noexcept {
+#ifdef HT_DEPTH_FIELD_AVX2
+  return kernel == DepthFieldKernel::kScalar || HasAvx2();
+#else
+  return kernel == DepthFieldKernel::kScalar;
+#endif
+}
+
+DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform& X_WT,
+                                       DepthFieldKernel kernel) noexcept {
+#ifdef HT_DEPTH_FIELD_AVX2
+  const bool batched = kernel == DepthFieldKernel::kAvx2 && HasAvx2();
+#else
+  const bool batched = false;
+  (void)kernel;
+#endif
   DepthFieldEvaluation out;
   if (!f.prepared || !IsFiniteRigidTransform(X_WT)) return out;
   // The nodes' travel in F's plane (along n the field is exact): the centre of mass's in-plane
@@ -252,26 +414,26 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
     return b - s.z;
   };
   // A bound on the depth of the tool nodes [i0, i1] × [j0, j1] whose heights lie in [a_lo,
-  // a_hi]: the largest environment bound (per `side`² cells, `env`, gbx a row) under the moved
+  // a_hi]: the largest environment bound (per `side`² cells, `env_bounds`, gbx a row) under the moved
   // box's footprint, less the box's lowest point (−∞ when the footprint leaves the
   // environment's interpolant).
   const glm::dmat3 R_abs(glm::abs(R[0]), glm::abs(R[1]), glm::abs(R[2]));
   const auto box_bound = [&](int i0, int i1, int j0, int j1, float a_lo, float a_hi,
-                             const float* env, int side, int gbx) noexcept {
+                             const float* env_bounds, int side, int gbx) noexcept {
     const glm::dvec3 centre(0.5 * (i0 + i1) * h + f.tool_offset_u_m,
                             0.5 * (j0 + j1) * h + f.tool_offset_v_m, 0.5 * (a_lo + a_hi));
     const glm::dvec3 half(0.5 * (i1 - i0) * h, 0.5 * (j1 - j0) * h, 0.5 * (a_hi - a_lo));
     const glm::dvec3 s = D * centre;
     const glm::dvec3 e = R_abs * half;
-    const int cu0 = std::max(1, static_cast<int>(std::floor((s.x - e.x) * inv_h)));
-    const int cu1 = std::min(nx - 3, static_cast<int>(std::floor((s.x + e.x) * inv_h)));
-    const int cv0 = std::max(1, static_cast<int>(std::floor((s.y - e.y) * inv_h)));
-    const int cv1 = std::min(ny - 3, static_cast<int>(std::floor((s.y + e.y) * inv_h)));
+    const int cu0 = std::max(1, CellFloor((s.x - e.x) * inv_h));
+    const int cu1 = std::min(nx - 3, CellFloor((s.x + e.x) * inv_h));
+    const int cv0 = std::max(1, CellFloor((s.y - e.y) * inv_h));
+    const int cv1 = std::min(ny - 3, CellFloor((s.y + e.y) * inv_h));
     if (cu0 > cu1 || cv0 > cv1) return -std::numeric_limits<double>::infinity();
     float env_max = -std::numeric_limits<float>::infinity();
     for (int ej = cv0 / side; ej <= cv1 / side; ++ej) {
       for (int ei = cu0 / side; ei <= cu1 / side; ++ei) {
-        env_max = std::max(env_max, env[ej * gbx + ei]);
+        env_max = std::max(env_max, env_bounds[ej * gbx + ei]);
       }
     }
     return static_cast<double>(env_max) - (s.z - e.z);
@@ -312,6 +474,38 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
   Vec6 S1 = Vec6::Zero();
   Mat6 S2 = Mat6::Zero();
   Vec6 J;
+  // Batched (AVX2): candidates gathered kBatch at a time, their sums kept per lane.
+  NodeBatch batch;
+  LaneSums lanes;
+  const auto flush = [&]() noexcept {
+#ifdef HT_DEPTH_FIELD_AVX2
+    if (batch.n == 0) return;
+    double d[kBatch], Jb[6][kBatch], w[kBatch], w2[kBatch];
+    BatchDepthsAvx2(batch, env, nx, inv_h, c_F, d, Jb);
+    // The weights in the nodes' order, as the scalar kernel takes them: a node deeper than the
+    // running maximum rescales what came before it (the lanes' sums and this batch's earlier
+    // weights), and the curvature's cut applies to each weight as it is taken.
+    for (int k = 0; k < kBatch; ++k) {
+      const bool use = k < batch.n && std::isfinite(d[k]);
+      w[k] = w2[k] = 0.0;
+      if (!use) continue;
+      ++out.nodes_evaluated;
+      if (d[k] > m_ref) {
+        const double scale = std::isfinite(m_ref) ? std::exp((m_ref - d[k]) / eps) : 0.0;
+        for (double& v : lanes.v) v *= scale;
+        for (int e = 0; e < k; ++e) {
+          w[e] *= scale;
+          w2[e] *= scale;
+        }
+        m_ref = d[k];
+      }
+      w[k] = std::exp((d[k] - m_ref) / eps);
+      w2[k] = w[k] >= kCurvatureWeight ? w[k] : 0.0;
+    }
+    AccumulateAvx2(w, w2, Jb, lanes);
+    batch.n = 0;
+#endif
+  };
   // The nodes [i0, i1) × [j0, j1), by their cell's bound.
   const auto visit_nodes = [&](int i0, int i1, int j0, int j1) noexcept {
     for (int j = j0; j < j1; ++j) {
@@ -327,6 +521,17 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
         if (!locate(s, cell, tu, tv)) continue;
         const float cell_bound = bound[cell];
         if (!std::isfinite(cell_bound) || !(cell_bound - s.z >= m_ref - cutoff)) continue;
+        if (batched) {
+          const auto k = static_cast<std::size_t>(batch.n++);
+          batch.cell[k] = cell;
+          batch.tu[k] = tu;
+          batch.tv[k] = tv;
+          batch.sx[k] = s.x;
+          batch.sy[k] = s.y;
+          batch.sz[k] = s.z;
+          if (batch.n == kBatch) flush();
+          continue;
+        }
         const double d = exact(i, j, s, cell, tu, tv, &J);
         if (!std::isfinite(d)) continue;
         ++out.nodes_evaluated;
@@ -370,6 +575,18 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
     if (b == best_block) continue;
     if (!(block_ub[static_cast<std::size_t>(b)] >= m_ref - cutoff)) continue;
     visit_block(b);
+  }
+  if (batched) {
+    flush();
+    // The lanes' sums into the scalar ones (S2's lower triangle).
+    for (int l = 0; l < 4; ++l) {
+      S0 += lanes.v[static_cast<std::size_t>(l)];
+      for (int a = 0; a < 6; ++a) S1[a] += lanes.v[static_cast<std::size_t>(4 * (1 + a) + l)];
+      int k = 7;
+      for (int a = 0; a < 6; ++a) {
+        for (int c = 0; c <= a; ++c, ++k) S2(a, c) += lanes.v[static_cast<std::size_t>(4 * k + l)];
+      }
+    }
   }
   if (!(S0 > 0.0)) return out;
   out.depth_m = m_ref + eps * std::log(S0);

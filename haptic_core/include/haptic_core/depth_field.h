@@ -141,6 +141,16 @@ struct DepthFieldEvaluation {
 DepthFieldEvaluation DepthFieldDepthAt(const DepthField& field,
                                        const RigidTransform& X_WT) noexcept;
 
+/// How DepthFieldDepthAt evaluates the nodes whose cell's bound passed: one at a time in double
+/// (kScalar), or four at a time in double AVX2 lanes (kAvx2: the same sums, in another order).
+/// DepthFieldDepthAt(field, X_WT) takes kAvx2 where the CPU has AVX2 and FMA.
+enum class DepthFieldKernel : std::uint8_t { kScalar, kAvx2 };
+/// Whether `kernel` runs on this CPU (kAvx2 asked where it does not falls back to kScalar).
+bool DepthFieldKernelAvailable(DepthFieldKernel kernel) noexcept;
+/// DepthFieldDepthAt with the kernel chosen by the caller (tests, benchmarks).
+DepthFieldEvaluation DepthFieldDepthAt(const DepthField& field, const RigidTransform& X_WT,
+                                       DepthFieldKernel kernel) noexcept;
+
 /// The lattice a depth field is sampled on (W; unit u, v, n with u × v = n, n from the
 /// environment towards the tool; cell h in m). The environment's nodes are its origin plus whole
 /// cells along u and v, the tool's its centre of mass plus whole cells: while the caller keeps
