@@ -206,6 +206,12 @@ TEST(DepthFieldStream, TheSenderKeepsTheFieldsNamedLast) {
   EXPECT_EQ(f.fragment_index, 1);
   EXPECT_EQ(f.payload.size(), 1000u - wire::FragmentPayloadBytes(600));
   EXPECT_EQ(sender.nacks_refused(), 3u);
+  // A second copy of a kept field: every fragment once more; none of a dropped one.
+  EXPECT_TRUE(sender.QueueAgain(1));
+  EXPECT_FALSE(sender.QueueAgain(2));
+  EXPECT_EQ(sender.queued(), 2u);
+  EXPECT_TRUE(sender.QueueAgain(1));  // already queued: not twice
+  EXPECT_EQ(sender.queued(), 2u);
   EXPECT_THROW(sender.Add(0, RandomBytes(10, 4)), std::invalid_argument);
   EXPECT_THROW(sender.Add(1, RandomBytes(10, 4)), std::invalid_argument);
   EXPECT_THROW(sender.Add(9, {}), std::invalid_argument);

@@ -105,6 +105,7 @@ bool RemoteSession::OnDatagram(std::span<const std::uint8_t> datagram, const Soc
         break;
       }
       // Answered at once: the operator renders that contact from its linearization meanwhile.
+      last_field_nack_ns_ = now;
       if (depth_fields_ && field_sender_.OnNack(nack)) SendQueuedFieldFragments();
       break;
     }
@@ -365,7 +366,7 @@ bool RemoteSession::MaybeSendContactModel(wire::ContactModelMessage& out,
   out.texture_us = static_cast<float>(timings.texture_us);
   out.step_us = static_cast<float>(timings.total_us);
   last_sent_answer_recv_ns_ = latest_recv_ns_ + step_extrapolation_ns_;
-  SendDepthFields(out.model, fields);
+  SendDepthFields(out.model, fields, now);
   SendModel(out, now);
   return true;
 }
@@ -395,8 +396,14 @@ void RemoteSession::SendQueuedFieldFragments() {
   }
 }
 
-void RemoteSession::SendDepthFields(ContactModel& model,
-                                    std::span<const DepthField* const> fields) {
+void RemoteSession::SendDepthFields(ContactModel& model, std::span<const DepthField* const> fields,
+                                    std::int64_t now) {
+  // A field whose fragments all have to arrive before the loop can use it: on a link that lost
+  // some lately (the operator asked for a field again), each new field goes twice, so that one
+  // lost fragment does not cost a round trip. At 20 % loss a field of 10 fragments arrives whole
+  // with one copy 11 % of the time, with two 66 %.
+  constexpr std::int64_t kFieldCopiesAfterNackNs = 2'000'000'000;
+  const bool twice = now - last_field_nack_ns_ < kFieldCopiesAfterNackNs;
   const int n = std::clamp(model.num_contacts, 0, wire::kMaxWireContacts);
   for (int i = 0; i < n; ++i) {
     std::uint32_t& id = model.contacts[static_cast<std::size_t>(i)].depth_field_id;
@@ -426,6 +433,11 @@ void RemoteSession::SendDepthFields(ContactModel& model,
     ++fields_encoded_;
     field_bytes_encoded_ += bytes.size();
     field_sender_.Add(id, std::move(bytes));
+    if (twice) {
+      SendQueuedFieldFragments();
+      field_sender_.QueueAgain(id);
+      ++fields_sent_twice_;
+    }
   }
   SendQueuedFieldFragments();
 }
@@ -555,6 +567,7 @@ nlohmann::json RemoteSession::StatsJson(std::size_t scene_objects, std::size_t s
       {"fragments_sent", field_sender_.fragments_sent()},
       {"nacks_answered", field_sender_.nacks_answered()},
       {"nacks_refused", field_sender_.nacks_refused()},
+      {"fields_sent_twice", fields_sent_twice_},
       {"contacts_without_field", contacts_without_field_}};
   transport["mtu"] = config_.mtu;
   transport["node_poses"] = {{"rate_hz", config_.display_rate_hz},

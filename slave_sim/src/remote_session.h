@@ -8,6 +8,7 @@
 // Private to slave_sim: RunRemoteNode (remote_node.cc) drives it.
 
 #include <cstdint>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <span>
 #include <vector>
@@ -172,7 +173,8 @@ class RemoteSession {
   void SendModel(wire::ContactModelMessage& out, std::int64_t now_ns);
   /// Encodes and queues the fields `model` names that the operator was not sent (from `fields`),
   /// and sends every queued DepthFieldFragment.
-  void SendDepthFields(ContactModel& model, std::span<const DepthField* const> fields);
+  void SendDepthFields(ContactModel& model, std::span<const DepthField* const> fields,
+                       std::int64_t now_ns);
   void SendQueuedFieldFragments();
   void SendManifest(std::int64_t now_ns);
   void Close(const char* why);
@@ -240,6 +242,10 @@ class RemoteSession {
   bool depth_fields_ = false;
   DepthFieldSender field_sender_{wire::kMaxDatagramBytes, 2 * kMaxContacts};
   std::uint64_t fields_encoded_ = 0, field_bytes_encoded_ = 0, contacts_without_field_ = 0;
+  /// When the operator last asked for a field again (DepthFieldNack): the link loses datagrams,
+  /// and for kFieldCopiesAfterNackNs after it a new field goes twice (fields_sent_twice_).
+  std::int64_t last_field_nack_ns_ = std::numeric_limits<std::int64_t>::min() / 2;
+  std::uint64_t fields_sent_twice_ = 0;
   double field_encode_ms_ = 0.0;
 };
 

@@ -95,6 +95,17 @@ bool DepthFieldSender::OnNack(const wire::SceneNackMessage& nack) {
   return true;
 }
 
+bool DepthFieldSender::QueueAgain(std::uint32_t id) {
+  Field* f = id != 0 ? Find(id) : nullptr;
+  if (f == nullptr) return false;
+  for (std::uint16_t k = 0; k < f->fragment_count; ++k) {
+    if (f->queued[k]) continue;
+    f->queued[k] = true;
+    queue_.emplace_back(id, k);
+  }
+  return true;
+}
+
 bool DepthFieldSender::Next(wire::SceneFragmentMessage& out) {
   while (!queue_.empty()) {
     const auto [id, k] = queue_.front();

@@ -37,6 +37,9 @@ class DepthFieldSender {
   /// queued already. Returns false (nothing queued) for a field not kept or an index out of
   /// range.
   bool OnNack(const wire::SceneNackMessage& nack);
+  /// Queues every fragment of kept field `id` that is not queued already (a second copy of a
+  /// field just sent, for a link that loses datagrams). Returns false for a field not kept.
+  bool QueueAgain(std::uint32_t id);
   /// The next fragment to send, or false when the queue is empty. `payload` points into the
   /// field's bytes (valid until the next Add or Reset).
   bool Next(wire::SceneFragmentMessage& fragment);
