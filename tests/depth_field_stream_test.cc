@@ -273,6 +273,15 @@ TEST(DepthFieldStream, FragmentsThatContradictTheirFieldAreRefused) {
   EXPECT_TRUE(nacks.empty());
   collect(2'000'000'000);  // no model has named them for over a second: forgotten
   EXPECT_TRUE(nacks.empty());
+  // Field 5, held, is lost where it went (the loop's cache evicted it): asked for again, whole.
+  EXPECT_TRUE(rx.IsHeld(5));
+  rx.Lost(5, 2'000'000'000);
+  EXPECT_FALSE(rx.IsHeld(5));
+  collect(2'020'000'000);
+  ASSERT_EQ(nacks.size(), 1u);
+  EXPECT_EQ(nacks[0].object_id, 5u);
+  EXPECT_EQ(nacks[0].count, 0);
+  EXPECT_EQ(rx.Add(fragments[0], 2'030'000'000), DepthFieldReassembler::Outcome::kAccepted);
 }
 
 }  // namespace

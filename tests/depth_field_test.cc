@@ -372,6 +372,16 @@ TEST(DepthField, CacheFindsByIdEvictsTheOldestUnkeptAndNeverAllocates) {
   EXPECT_FALSE(cache.Take(unprepared, {}));
   EXPECT_EQ(cache.refused(), 2);
   EXPECT_EQ(cache.Find(0), nullptr);
+  // A new session: every field forgotten, and the remembered result with it.
+  const long before_clear = Allocations();
+  cache.Clear();
+  EXPECT_EQ(Allocations() - before_clear, 0);
+  EXPECT_EQ(cache.Find(10), nullptr);
+  EXPECT_EQ(cache.Find(12), nullptr);
+  EXPECT_FALSE(cache.Evaluate(10, X_WT0).valid);
+  incoming[3].id = 10;
+  EXPECT_TRUE(cache.Take(incoming[3], keep_both));  // every slot free again
+  EXPECT_NE(cache.Find(10), nullptr);
 }
 
 // The remote node's render against the texture stage's own depth at displaced poses: a textured

@@ -10,8 +10,8 @@
 #include <glm/gtc/quaternion.hpp>
 #include <stdexcept>
 
-#if defined(__x86_64__) || defined(__i386__)
-#include <immintrin.h>
+#include "x86_simd.h"
+#ifdef HT_X86_SIMD
 #define HT_DEPTH_FIELD_AVX2 1
 #endif
 
@@ -304,6 +304,99 @@ __attribute__((target("avx2,fma"))) void BatchDepthsAvx2(const NodeBatch& batch,
   _mm256_storeu_pd(J[5], _mm256_fnmadd_pd(ry, gx, _mm256_mul_pd(rx, gy)));
 }
 
+/// Up to four tool nodes of one row (`count` ≤ 4, heights `a` from node i0 on), moved: s = first
+/// + k·step_i + a_k·along_a for lane k. Which of them have a height (`tested` lanes), lie where the
+/// environment has an interpolant, and whose cell's bound reaches `threshold` (bound − s.z ≥
+/// threshold): their lanes' bits in the result, with their cell, cell fractions and s. As the
+/// scalar kernel's per-node test in DepthFieldDepthAt.
+__attribute__((target("avx2,fma"))) int RowCandidatesAvx2(
+    const float* a, int count, const glm::dvec3& first, const glm::dvec3& step_i,
+    const glm::dvec3& along_a, double inv_h, int nx, int ny, const float* bound, double threshold,
+    int& tested, int cell[4], double tu[4], double tv[4], double sx[4], double sy[4],
+    double sz[4]) noexcept {
+  const __m128i lane = _mm_setr_epi32(0, 1, 2, 3);
+  const __m128i in_row = _mm_cmpgt_epi32(_mm_set1_epi32(count), lane);
+  const __m128 heights = _mm_maskload_ps(a, in_row);
+  // A height: in the row and not NaN (a NaN compares unordered).
+  const __m128 has = _mm_and_ps(_mm_castsi128_ps(in_row), _mm_cmp_ps(heights, heights, _CMP_ORD_Q));
+  tested = __builtin_popcount(static_cast<unsigned>(_mm_movemask_ps(has)));
+  const __m256d av = _mm256_cvtps_pd(heights);
+  const __m256d k = _mm256_cvtepi32_pd(lane);
+  const __m256d x = _mm256_fmadd_pd(
+      av, _mm256_set1_pd(along_a.x), _mm256_fmadd_pd(k, _mm256_set1_pd(step_i.x), _mm256_set1_pd(first.x)));
+  const __m256d y = _mm256_fmadd_pd(
+      av, _mm256_set1_pd(along_a.y), _mm256_fmadd_pd(k, _mm256_set1_pd(step_i.y), _mm256_set1_pd(first.y)));
+  const __m256d z = _mm256_fmadd_pd(
+      av, _mm256_set1_pd(along_a.z), _mm256_fmadd_pd(k, _mm256_set1_pd(step_i.z), _mm256_set1_pd(first.z)));
+  const __m256d u = _mm256_mul_pd(x, _mm256_set1_pd(inv_h));
+  const __m256d v = _mm256_mul_pd(y, _mm256_set1_pd(inv_h));
+  const __m256d one = _mm256_set1_pd(1.0);
+  // 1 ≤ u < nx − 2 and 1 ≤ v < ny − 2 (false for NaN).
+  const __m256d inside = _mm256_and_pd(
+      _mm256_and_pd(_mm256_cmp_pd(u, one, _CMP_GE_OQ),
+                    _mm256_cmp_pd(u, _mm256_set1_pd(nx - 2), _CMP_LT_OQ)),
+      _mm256_and_pd(_mm256_cmp_pd(v, one, _CMP_GE_OQ),
+                    _mm256_cmp_pd(v, _mm256_set1_pd(ny - 2), _CMP_LT_OQ)));
+  // The lanes' masks as 32-bit lanes: a height and inside.
+  const __m128 inside32 = _mm256_cvtpd_ps(_mm256_and_pd(inside, _mm256_set1_pd(1.0)));
+  const __m128 ok = _mm_and_ps(has, _mm_cmp_ps(inside32, _mm_set1_ps(0.5f), _CMP_GT_OQ));
+  // Where not ok, u and v may be anything: the cell computed there is never read (masked gather).
+  const __m256d us = _mm256_blendv_pd(one, u, inside);
+  const __m256d vs = _mm256_blendv_pd(one, v, inside);
+  const __m128i iu = _mm256_cvttpd_epi32(us), iv = _mm256_cvttpd_epi32(vs);
+  const __m128i c = _mm_add_epi32(_mm_mullo_epi32(iv, _mm_set1_epi32(nx)), iu);
+  const __m128 b = _mm_mask_i32gather_ps(_mm_set1_ps(-std::numeric_limits<float>::infinity()),
+                                         bound, c, ok, 4);
+  // A finite bound reaching the threshold: (b − z ≥ threshold) and b < +∞ (b = −∞ fails the
+  // first, a NaN both).
+  const __m256d bd = _mm256_cvtps_pd(b);
+  const __m256d pass = _mm256_and_pd(
+      _mm256_cmp_pd(_mm256_sub_pd(bd, z), _mm256_set1_pd(threshold), _CMP_GE_OQ),
+      _mm256_cmp_pd(bd, _mm256_set1_pd(std::numeric_limits<double>::infinity()), _CMP_LT_OQ));
+  const int bits = _mm256_movemask_pd(pass) & _mm_movemask_ps(ok);
+  _mm_storeu_si128(reinterpret_cast<__m128i*>(cell), c);
+  _mm256_storeu_pd(tu, _mm256_sub_pd(us, _mm256_cvtepi32_pd(iu)));
+  _mm256_storeu_pd(tv, _mm256_sub_pd(vs, _mm256_cvtepi32_pd(iv)));
+  _mm256_storeu_pd(sx, x);
+  _mm256_storeu_pd(sy, y);
+  _mm256_storeu_pd(sz, z);
+  return bits;
+}
+
+/// e^x in four double lanes for x ≤ 0 (0 below −700): Cody–Waite reduction by ln 2 and the
+/// Taylor polynomial of degree 11 on |r| ≤ ln 2 / 2, relative error below 1e-14 (tested against
+/// std::exp through the kernels' agreement).
+__attribute__((target("avx2,fma"))) __m256d ExpAvx2(__m256d x) noexcept {
+  const __m256d lo = _mm256_set1_pd(-700.0);
+  const __m256d under = _mm256_cmp_pd(x, lo, _CMP_LT_OQ);
+  x = _mm256_max_pd(x, lo);
+  const __m256d n = _mm256_round_pd(_mm256_mul_pd(x, _mm256_set1_pd(1.4426950408889634)),
+                                    _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
+  __m256d r = _mm256_fnmadd_pd(n, _mm256_set1_pd(0.6931471803691238), x);
+  r = _mm256_fnmadd_pd(n, _mm256_set1_pd(1.9082149292705877e-10), r);
+  // Horner, 1/11! … 1.
+  constexpr double kC[12] = {1.0 / 39916800.0, 1.0 / 3628800.0, 1.0 / 362880.0, 1.0 / 40320.0,
+                             1.0 / 5040.0,     1.0 / 720.0,     1.0 / 120.0,    1.0 / 24.0,
+                             1.0 / 6.0,        0.5,             1.0,            1.0};
+  __m256d p = _mm256_set1_pd(kC[0]);
+  for (int k = 1; k < 12; ++k) p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(kC[k]));
+  // 2^n into the exponent (n ≥ −1010 here).
+  const __m128i ni = _mm256_cvtpd_epi32(n);
+  const __m256i bits = _mm256_slli_epi64(
+      _mm256_add_epi64(_mm256_cvtepi32_epi64(ni), _mm256_set1_epi64x(1023)), 52);
+  const __m256d scaled = _mm256_mul_pd(p, _mm256_castsi256_pd(bits));
+  return _mm256_andnot_pd(under, scaled);
+}
+
+/// The batch's weights relative to m_final, exp((d − m_final)/ε), into w (lanes with use 0: 0).
+__attribute__((target("avx2,fma"))) void BatchWeightsAvx2(const double d[kBatch],
+                                                           const bool use[kBatch], double m_final,
+                                                           double eps, double w[kBatch]) noexcept {
+  alignas(32) double x[kBatch];
+  for (int k = 0; k < kBatch; ++k) x[k] = use[k] ? (d[k] - m_final) / eps : -1000.0;
+  _mm256_storeu_pd(w, ExpAvx2(_mm256_load_pd(x)));
+}
+
 /// Adds the batch's weighted gradients to the lane sums: S0 += w, S1 += w·J, and S2's lower
 /// triangle += w2·J·Jᵀ (w2 = w where w ≥ kCurvatureWeight, else 0), lane by lane.
 __attribute__((target("avx2,fma"))) void AccumulateAvx2(const double w[kBatch],
@@ -417,14 +510,15 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
   // a_hi]: the largest environment bound (per `side`² cells, `env_bounds`, gbx a row) under the moved
   // box's footprint, less the box's lowest point (−∞ when the footprint leaves the
   // environment's interpolant).
-  const glm::dmat3 R_abs(glm::abs(R[0]), glm::abs(R[1]), glm::abs(R[2]));
+  // The moved box, from the nodes' affine map s = origin + i·step_i + j·step_j + a·along_a.
+  const glm::dvec3 abs_step_i = glm::abs(step_i), abs_step_j = glm::abs(step_j);
+  const glm::dvec3 abs_along_a = glm::abs(along_a);
   const auto box_bound = [&](int i0, int i1, int j0, int j1, float a_lo, float a_hi,
                              const float* env_bounds, int side, int gbx) noexcept {
-    const glm::dvec3 centre(0.5 * (i0 + i1) * h + f.tool_offset_u_m,
-                            0.5 * (j0 + j1) * h + f.tool_offset_v_m, 0.5 * (a_lo + a_hi));
-    const glm::dvec3 half(0.5 * (i1 - i0) * h, 0.5 * (j1 - j0) * h, 0.5 * (a_hi - a_lo));
-    const glm::dvec3 s = D * centre;
-    const glm::dvec3 e = R_abs * half;
+    const glm::dvec3 s = origin + (0.5 * (i0 + i1)) * step_i + (0.5 * (j0 + j1)) * step_j +
+                         (0.5 * (static_cast<double>(a_lo) + a_hi)) * along_a;
+    const glm::dvec3 e = (0.5 * (i1 - i0)) * abs_step_i + (0.5 * (j1 - j0)) * abs_step_j +
+                         (0.5 * (static_cast<double>(a_hi) - a_lo)) * abs_along_a;
     const int cu0 = std::max(1, CellFloor((s.x - e.x) * inv_h));
     const int cu1 = std::min(nx - 3, CellFloor((s.x + e.x) * inv_h));
     const int cv0 = std::max(1, CellFloor((s.y - e.y) * inv_h));
@@ -482,32 +576,60 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
     if (batch.n == 0) return;
     double d[kBatch], Jb[6][kBatch], w[kBatch], w2[kBatch];
     BatchDepthsAvx2(batch, env, nx, inv_h, c_F, d, Jb);
-    // The weights in the nodes' order, as the scalar kernel takes them: a node deeper than the
-    // running maximum rescales what came before it (the lanes' sums and this batch's earlier
-    // weights), and the curvature's cut applies to each weight as it is taken.
+    // The weights as the scalar kernel takes them, in the nodes' order: each relative to the
+    // running maximum when it is taken (whether it weighs in the curvature's sums), all relative
+    // to the batch's last maximum in the end, the lanes' sums rescaled to it once.
+    bool use[kBatch], curvature[kBatch];
+    const double m_before = m_ref;
+    const double curvature_cut = eps * std::log(kCurvatureWeight);
     for (int k = 0; k < kBatch; ++k) {
-      const bool use = k < batch.n && std::isfinite(d[k]);
-      w[k] = w2[k] = 0.0;
-      if (!use) continue;
+      use[k] = k < batch.n && std::isfinite(d[k]);
+      curvature[k] = false;
+      if (!use[k]) continue;
       ++out.nodes_evaluated;
-      if (d[k] > m_ref) {
-        const double scale = std::isfinite(m_ref) ? std::exp((m_ref - d[k]) / eps) : 0.0;
-        for (double& v : lanes.v) v *= scale;
-        for (int e = 0; e < k; ++e) {
-          w[e] *= scale;
-          w2[e] *= scale;
-        }
-        m_ref = d[k];
-      }
-      w[k] = std::exp((d[k] - m_ref) / eps);
-      w2[k] = w[k] >= kCurvatureWeight ? w[k] : 0.0;
+      m_ref = std::max(m_ref, d[k]);
+      curvature[k] = d[k] - m_ref >= curvature_cut;
     }
+    if (m_ref > m_before) {
+      const double scale = std::isfinite(m_before) ? std::exp((m_before - m_ref) / eps) : 0.0;
+      for (double& v : lanes.v) v *= scale;
+    }
+    BatchWeightsAvx2(d, use, m_ref, eps, w);
+    for (int k = 0; k < kBatch; ++k) w2[k] = curvature[k] ? w[k] : 0.0;
     AccumulateAvx2(w, w2, Jb, lanes);
     batch.n = 0;
 #endif
   };
   // The nodes [i0, i1) × [j0, j1), by their cell's bound.
   const auto visit_nodes = [&](int i0, int i1, int j0, int j1) noexcept {
+#ifdef HT_DEPTH_FIELD_AVX2
+    if (batched) {  // a row of (at most) four nodes at a time
+      for (int j = j0; j < j1; ++j) {
+        for (int i = i0; i < i1; i += 4) {
+          int cell[4], tested = 0;
+          double tu[4], tv[4], sx[4], sy[4], sz[4];
+          const glm::dvec3 first =
+              origin + static_cast<double>(j) * step_j + static_cast<double>(i) * step_i;
+          const int bits = RowCandidatesAvx2(tool + j * nx + i, std::min(4, i1 - i), first, step_i,
+                                             along_a, inv_h, nx, ny, bound, m_ref - cutoff,
+                                             tested, cell, tu, tv, sx, sy, sz);
+          out.nodes_tested += tested;
+          for (int k = 0; k < 4; ++k) {
+            if ((bits >> k & 1) == 0) continue;
+            const auto e = static_cast<std::size_t>(batch.n++);
+            batch.cell[e] = cell[k];
+            batch.tu[e] = tu[k];
+            batch.tv[e] = tv[k];
+            batch.sx[e] = sx[k];
+            batch.sy[e] = sy[k];
+            batch.sz[e] = sz[k];
+            if (batch.n == kBatch) flush();
+          }
+        }
+      }
+      return;
+    }
+#endif
     for (int j = j0; j < j1; ++j) {
       const glm::dvec3 row = origin + static_cast<double>(j) * step_j;
       for (int i = i0; i < i1; ++i) {
@@ -521,17 +643,6 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
         if (!locate(s, cell, tu, tv)) continue;
         const float cell_bound = bound[cell];
         if (!std::isfinite(cell_bound) || !(cell_bound - s.z >= m_ref - cutoff)) continue;
-        if (batched) {
-          const auto k = static_cast<std::size_t>(batch.n++);
-          batch.cell[k] = cell;
-          batch.tu[k] = tu;
-          batch.tv[k] = tv;
-          batch.sx[k] = s.x;
-          batch.sy[k] = s.y;
-          batch.sz[k] = s.z;
-          if (batch.n == kBatch) flush();
-          continue;
-        }
         const double d = exact(i, j, s, cell, tu, tv, &J);
         if (!std::isfinite(d)) continue;
         ++out.nodes_evaluated;
@@ -645,6 +756,11 @@ const DepthField* DepthFieldCache::Find(std::uint32_t id) const noexcept {
     if (stamp_[k] != 0 && slots_[k].id == id) return &slots_[k];
   }
   return nullptr;
+}
+
+void DepthFieldCache::Clear() noexcept {
+  std::fill(stamp_.begin(), stamp_.end(), std::uint64_t{0});
+  for (Memo& m : memo_) m.stamp = 0;
 }
 
 bool DepthFieldCache::Take(DepthField& field, std::span<const std::uint32_t> keep) noexcept {

@@ -287,6 +287,7 @@ nlohmann::json NetworkWorker::Summary() const {
                        {"fields_without_buffer", fields_without_buffer_},
                        {"fields_decoder_busy", fields_decoder_busy_},
                        {"models_waited_for_fields", models_waited_for_fields_},
+                       {"fields_missing_in_loop", fields_missing_in_loop_},
                        {"fields_abandoned", fr.fields_abandoned},
                        {"fragments_accepted", fr.fragments_accepted},
                        {"fragments_duplicate", fr.fragments_duplicate},
@@ -361,6 +362,7 @@ void NetworkWorker::OnDepthFieldFragment(const wire::SceneFragmentMessage& fragm
     return;
   }
   e->id = field_reassembler_.completed_id();
+  e->epoch = field_epoch_;
   e->bytes.assign(field_reassembler_.completed().begin(), field_reassembler_.completed().end());
   decoding_ids_.push_back(e->id);
   to_decode_.Push(e);  // cannot fail: the ring holds the whole pool
@@ -375,6 +377,13 @@ bool NetworkWorker::NamesFieldInDecoding(const ContactModel& model) const noexce
 }
 
 void NetworkWorker::TakeDecodedFields() {
+  // Fields the loop lacks though its model names them: asked for again (unless on their way).
+  std::uint32_t lacked = 0;
+  while (fields_.missing.Pop(lacked)) {
+    if (std::ranges::find(decoding_ids_, lacked) != decoding_ids_.end()) continue;
+    ++fields_missing_in_loop_;
+    field_reassembler_.Lost(lacked, SteadyNowNs());
+  }
   DecodedField d;
   bool any = false;
   while (decoded_.Pop(d)) {
@@ -423,7 +432,7 @@ void NetworkWorker::DecodeFields(const std::atomic<bool>& stop) {
           field_decode_ms_.push_back(static_cast<double>(SteadyNowNs() - t0) * 1e-6);
         }
         // The ready ring holds the whole pool: a push cannot fail.
-        if (fields_.ready.Push(spare_field_)) {
+        if (fields_.ready.Push({spare_field_, e->epoch})) {
           spare_field_ = nullptr;
         } else {
           result.outcome = DecodeOutcome::kNoBuffer;
@@ -481,6 +490,7 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
       depth_fields_ = (w.codecs & wire::kCodecDepthFields) != 0;
       field_reassembler_.Reset(w.mtu);
       have_model_waiting_ = false;
+      ++field_epoch_;
       scene_name_ = std::string(w.name());
       {
         std::lock_guard<std::mutex> lock(layout_mutex_);
@@ -529,6 +539,7 @@ void NetworkWorker::Handle(std::span<const std::uint8_t> datagram, const SocketA
       }
       if (late) return;  // newest wins: a newer model is already in use
       model.sequence = header.sequence;
+      model.field_epoch = field_epoch_;
       model.built_local_ns = clock_.valid() ? clock_.RemoteToLocal(header.send_time_ns) : now;
       counters_.model_accepted.fetch_add(1, std::memory_order_relaxed);
       // Samples for percentiles: the first 2^20 of each (reserved), then no more growth.

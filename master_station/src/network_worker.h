@@ -40,6 +40,7 @@ struct OutgoingToolState {
 
 struct IncomingModel {
   wire::ContactModelMessage message;
+  std::uint32_t field_epoch = 0;  ///< the session's epoch (FieldHandoff)
   std::uint64_t sequence = 0;
   std::int64_t built_local_ns = 0;  ///< when the remote node sent it, on the local clock
 };
@@ -49,9 +50,19 @@ struct IncomingModel {
 /// `free` and hands its pointer on through `ready`; the loop gives every pointer it took back
 /// through `free` after its tick (OperatorTickInput::arrived_fields: the pointer then holds the
 /// buffers of the field its cache evicted).
+///
+/// Each field and each model carries the session's epoch (the network worker counts sessions): a
+/// remote node restarted under the same station names its fields from 1 again, so the loop forgets
+/// the fields it holds when the first field or model of a newer epoch comes, and drops fields of
+/// an older one. `missing` carries back the ids of fields the loop's model names and it lacks (a
+/// field its cache evicted, or that never came), which the network worker asks for again.
 struct FieldHandoff {
   static constexpr std::size_t kFields = 16;
-  FieldHandoff() : ready(kFields), free(kFields) {
+  struct Handed {
+    DepthField* field = nullptr;
+    std::uint32_t epoch = 0;
+  };
+  FieldHandoff() : ready(kFields), free(kFields), missing(64) {
     pool.reserve(kFields);
     for (std::size_t i = 0; i < kFields; ++i) {
       pool.push_back(std::make_unique<DepthField>());
@@ -59,7 +70,9 @@ struct FieldHandoff {
     }
   }
   std::vector<std::unique_ptr<DepthField>> pool;
-  SpscRing<DepthField*> ready, free;
+  SpscRing<Handed> ready;
+  SpscRing<DepthField*> free;
+  SpscRing<std::uint32_t> missing;
 };
 
 struct Counters {
@@ -199,8 +212,12 @@ class NetworkWorker {
   /// An encoded field on its way to the decoder thread, and the decoder's outcome for it.
   struct EncodedField {
     std::uint32_t id = 0;
+    std::uint32_t epoch = 0;
     std::vector<std::uint8_t> bytes;
   };
+  /// Sessions opened so far: the epoch of their fields and models (FieldHandoff).
+  std::uint32_t field_epoch_ = 0;
+  std::uint64_t fields_missing_in_loop_ = 0;
   enum class DecodeOutcome : std::uint8_t { kHanded, kUndecodable, kNoBuffer };
   struct DecodedField {
     std::uint32_t id = 0;

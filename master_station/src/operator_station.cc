@@ -247,6 +247,10 @@ void OperatorStationRun::LoopThread() {
   IncomingModel received{};
   ArrivedModel arrived{};
   std::array<DepthField*, FieldHandoff::kFields> arrived_fields{};
+  std::uint32_t field_epoch = 0;
+  // Missing fields told to the network worker: id and tick (ticks of the loop, −∞: none).
+  std::array<std::pair<std::uint32_t, std::int64_t>, 8> missing_told{};
+  missing_told.fill({0, std::numeric_limits<std::int64_t>::min() / 2});
   DisplayToolState display_state{};
   std::int64_t experiment_t0 = -1;
   std::int64_t stop_ramp_start = -1;
@@ -287,10 +291,23 @@ void OperatorStationRun::LoopThread() {
     }
     // The depth fields that came (before or with the model just read: the worker hands a field
     // on before the model that names it), given back to the worker after the tick.
+    // A field or model of a newer session: the fields held name another session's surfaces.
+    if (in.arrived != nullptr && received.field_epoch > field_epoch) {
+      tick.ForgetDepthFields();
+      field_epoch = received.field_epoch;
+    }
     std::size_t fields_in = 0;
-    while (fields_in < arrived_fields.size() &&
-           field_handoff_.ready.Pop(arrived_fields[fields_in])) {
-      ++fields_in;
+    FieldHandoff::Handed handed;
+    while (fields_in < arrived_fields.size() && field_handoff_.ready.Pop(handed)) {
+      if (handed.epoch < field_epoch) {  // an older session's field, decoded late
+        field_handoff_.free.Push(handed.field);
+        continue;
+      }
+      if (handed.epoch > field_epoch) {
+        tick.ForgetDepthFields();
+        field_epoch = handed.epoch;
+      }
+      arrived_fields[fields_in++] = handed.field;
     }
     in.arrived_fields = {arrived_fields.data(), fields_in};
     // Asked to stop (Ctrl-C, SIGTERM): ramp the device's wrench to zero (in the tick, before
@@ -302,6 +319,20 @@ void OperatorStationRun::LoopThread() {
     }
     OperatorTickOutput out = tick.Step(in);
     for (std::size_t i = 0; i < fields_in; ++i) field_handoff_.free.Push(arrived_fields[i]);
+    // The fields the model in use names and the tick lacks, told to the network worker at most
+    // every 100 ms each (it asks the remote node for them again).
+    for (int c = 0; c < std::min(tick.model().num_contacts, kMaxContacts); ++c) {
+      const std::uint32_t id = tick.model().contacts[static_cast<std::size_t>(c)].depth_field_id;
+      if (id == 0 || tick.HasDepthField(id)) continue;
+      auto slot = std::ranges::find(missing_told, id, &std::pair<std::uint32_t, std::int64_t>::first);
+      if (slot == missing_told.end()) {
+        slot = std::ranges::min_element(missing_told, {},
+                                        &std::pair<std::uint32_t, std::int64_t>::second);
+      } else if (k - slot->second < 100) {
+        continue;
+      }
+      if (field_handoff_.missing.Push(id)) *slot = {id, k};
+    }
     if (!device_.WriteWrench(out.F_H_M, now)) ++rec.device_write_faults;
     if (in.device_ok) {
       ++tool_seq_;

@@ -212,6 +212,12 @@ DepthFieldReassembler::Outcome DepthFieldReassembler::Add(const wire::SceneFragm
   return Outcome::kCompleted;
 }
 
+void DepthFieldReassembler::Lost(std::uint32_t id, std::int64_t now_ns) {
+  if (id == 0) return;
+  std::replace(held_.begin(), held_.end(), id, 0u);
+  Wanted(id, now_ns);
+}
+
 void DepthFieldReassembler::Wanted(std::uint32_t id, std::int64_t now_ns) {
   if (id == 0 || IsHeld(id)) return;
   for (Want& w : wants_) {

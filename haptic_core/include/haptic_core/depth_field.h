@@ -202,6 +202,8 @@ class DepthFieldCache {
   /// allocation): `field` leaves holding the evicted field's buffers. Returns false, taking
   /// nothing, when the field is not prepared or every slot is kept.
   bool Take(DepthField& field, std::span<const std::uint32_t> keep) noexcept;
+  /// Forgets every field (a new session: its ids name other fields). noexcept, no allocation.
+  void Clear() noexcept;
   int size() const noexcept { return static_cast<int>(slots_.size()); }
   /// Fields taken in since construction, and those refused (bad, or no slot).
   std::int64_t taken() const noexcept { return taken_; }

@@ -206,6 +206,11 @@ class OperatorTick {
   const ModelStamp& model_stamp() const noexcept { return model_stamp_; }
   /// The contact model in use (the newest taken; empty before the first).
   const ContactModel& model() const noexcept { return model_; }
+  /// Whether the tick holds depth field `id` (DepthFieldCache::Find). noexcept.
+  bool HasDepthField(std::uint32_t id) const noexcept { return fields_.Find(id) != nullptr; }
+  /// Forgets every depth field held (the remote node's ids of a new session name other fields).
+  /// noexcept, no allocation.
+  void ForgetDepthFields() noexcept { fields_.Clear(); }
 
  private:
   OperatorTickConfig config_;

@@ -104,6 +104,9 @@ class DepthFieldReassembler {
   void Held(std::uint32_t id) noexcept;
   /// Whether field `id` was handed on (among the last kHeldIds).
   bool IsHeld(std::uint32_t id) const noexcept;
+  /// Field `id`, handed on, is not held where it went (evicted there): no longer held, and
+  /// wanted from `now_ns` on (Wanted).
+  void Lost(std::uint32_t id, std::int64_t now_ns);
   /// A contact model received at `now_ns` names field `id`: it will be asked for again if it is
   /// not held by the time CollectNacks finds the repair due.
   void Wanted(std::uint32_t id, std::int64_t now_ns);
