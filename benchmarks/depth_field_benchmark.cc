@@ -113,6 +113,7 @@ int main(int argc, char** argv) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   std::vector<double> eval_us, nodes, tested;
+  double largest_depth_difference_m = 0.0, largest_gradient_difference = 0.0;
   for (int k = 0; k < poses; ++k) {
     const Twist dq{glm::dvec3(u(rng), u(rng), 0.0) * (travel_mm * 1e-3 / std::sqrt(2.0)) +
                        glm::dvec3(0.0, 0.0, u(rng) * 20e-6),
@@ -129,6 +130,19 @@ int main(int argc, char** argv) {
     }
     tested.push_back(t);
     eval_us.push_back(std::chrono::duration<double, std::micro>(Clock::now() - t0).count());
+    // The other kernel at the same pose (not timed): the two must agree to rounding.
+    if (kernel == DepthFieldKernel::kAvx2) {
+      for (const DepthField* f : pipeline.last_depth_fields()) {
+        const DepthFieldEvaluation a = DepthFieldDepthAt(*f, X, DepthFieldKernel::kScalar);
+        const DepthFieldEvaluation b = DepthFieldDepthAt(*f, X, DepthFieldKernel::kAvx2);
+        if (!std::isfinite(a.depth_m) || !std::isfinite(b.depth_m)) continue;
+        largest_depth_difference_m =
+            std::max(largest_depth_difference_m, std::abs(a.depth_m - b.depth_m));
+        largest_gradient_difference =
+            std::max(largest_gradient_difference,
+                     glm::length(a.gradient.d_translation_W - b.gradient.d_translation_W));
+      }
+    }
     nodes.push_back(n);
     if (sum == 12345.0) std::printf(" ");  // keeps the evaluation
   }
@@ -137,5 +151,9 @@ int main(int argc, char** argv) {
       "p99 %.0f; tested p50 %.0f, p99 %.0f\n",
       kernel == DepthFieldKernel::kAvx2 ? "avx2" : "scalar", Quantile(eval_us, 0.5), Quantile(eval_us, 0.99), Quantile(nodes, 0.5), Quantile(nodes, 0.99),
       Quantile(tested, 0.5), Quantile(tested, 0.99));
+  if (kernel == DepthFieldKernel::kAvx2) {
+    std::printf("avx2 against scalar: largest depth difference %.3g m, gradient %.3g\n",
+                largest_depth_difference_m, largest_gradient_difference);
+  }
   return 0;
 }

@@ -322,21 +322,24 @@ __attribute__((target("avx2,fma"))) int RowCandidatesAvx2(
   tested = __builtin_popcount(static_cast<unsigned>(_mm_movemask_ps(has)));
   const __m256d av = _mm256_cvtps_pd(heights);
   const __m256d k = _mm256_cvtepi32_pd(lane);
-  const __m256d x = _mm256_fmadd_pd(
-      av, _mm256_set1_pd(along_a.x), _mm256_fmadd_pd(k, _mm256_set1_pd(step_i.x), _mm256_set1_pd(first.x)));
-  const __m256d y = _mm256_fmadd_pd(
-      av, _mm256_set1_pd(along_a.y), _mm256_fmadd_pd(k, _mm256_set1_pd(step_i.y), _mm256_set1_pd(first.y)));
-  const __m256d z = _mm256_fmadd_pd(
-      av, _mm256_set1_pd(along_a.z), _mm256_fmadd_pd(k, _mm256_set1_pd(step_i.z), _mm256_set1_pd(first.z)));
+  const __m256d x =
+      _mm256_fmadd_pd(av, _mm256_set1_pd(along_a.x),
+                      _mm256_fmadd_pd(k, _mm256_set1_pd(step_i.x), _mm256_set1_pd(first.x)));
+  const __m256d y =
+      _mm256_fmadd_pd(av, _mm256_set1_pd(along_a.y),
+                      _mm256_fmadd_pd(k, _mm256_set1_pd(step_i.y), _mm256_set1_pd(first.y)));
+  const __m256d z =
+      _mm256_fmadd_pd(av, _mm256_set1_pd(along_a.z),
+                      _mm256_fmadd_pd(k, _mm256_set1_pd(step_i.z), _mm256_set1_pd(first.z)));
   const __m256d u = _mm256_mul_pd(x, _mm256_set1_pd(inv_h));
   const __m256d v = _mm256_mul_pd(y, _mm256_set1_pd(inv_h));
   const __m256d one = _mm256_set1_pd(1.0);
   // 1 ≤ u < nx − 2 and 1 ≤ v < ny − 2 (false for NaN).
-  const __m256d inside = _mm256_and_pd(
-      _mm256_and_pd(_mm256_cmp_pd(u, one, _CMP_GE_OQ),
-                    _mm256_cmp_pd(u, _mm256_set1_pd(nx - 2), _CMP_LT_OQ)),
-      _mm256_and_pd(_mm256_cmp_pd(v, one, _CMP_GE_OQ),
-                    _mm256_cmp_pd(v, _mm256_set1_pd(ny - 2), _CMP_LT_OQ)));
+  const __m256d inside =
+      _mm256_and_pd(_mm256_and_pd(_mm256_cmp_pd(u, one, _CMP_GE_OQ),
+                                  _mm256_cmp_pd(u, _mm256_set1_pd(nx - 2), _CMP_LT_OQ)),
+                    _mm256_and_pd(_mm256_cmp_pd(v, one, _CMP_GE_OQ),
+                                  _mm256_cmp_pd(v, _mm256_set1_pd(ny - 2), _CMP_LT_OQ)));
   // The lanes' masks as 32-bit lanes: a height and inside.
   const __m128 inside32 = _mm256_cvtpd_ps(_mm256_and_pd(inside, _mm256_set1_pd(1.0)));
   const __m128 ok = _mm_and_ps(has, _mm_cmp_ps(inside32, _mm_set1_ps(0.5f), _CMP_GT_OQ));
@@ -345,8 +348,8 @@ __attribute__((target("avx2,fma"))) int RowCandidatesAvx2(
   const __m256d vs = _mm256_blendv_pd(one, v, inside);
   const __m128i iu = _mm256_cvttpd_epi32(us), iv = _mm256_cvttpd_epi32(vs);
   const __m128i c = _mm_add_epi32(_mm_mullo_epi32(iv, _mm_set1_epi32(nx)), iu);
-  const __m128 b = _mm_mask_i32gather_ps(_mm_set1_ps(-std::numeric_limits<float>::infinity()),
-                                         bound, c, ok, 4);
+  const __m128 b =
+      _mm_mask_i32gather_ps(_mm_set1_ps(-std::numeric_limits<float>::infinity()), bound, c, ok, 4);
   // A finite bound reaching the threshold: (b − z ≥ threshold) and b < +∞ (b = −∞ fails the
   // first, a NaN both).
   const __m256d bd = _mm256_cvtps_pd(b);
@@ -375,23 +378,23 @@ __attribute__((target("avx2,fma"))) __m256d ExpAvx2(__m256d x) noexcept {
   __m256d r = _mm256_fnmadd_pd(n, _mm256_set1_pd(0.6931471803691238), x);
   r = _mm256_fnmadd_pd(n, _mm256_set1_pd(1.9082149292705877e-10), r);
   // Horner, 1/11! … 1.
-  constexpr double kC[12] = {1.0 / 39916800.0, 1.0 / 3628800.0, 1.0 / 362880.0, 1.0 / 40320.0,
-                             1.0 / 5040.0,     1.0 / 720.0,     1.0 / 120.0,    1.0 / 24.0,
-                             1.0 / 6.0,        0.5,             1.0,            1.0};
+  constexpr double kC[12] = {
+      1.0 / 39916800.0, 1.0 / 3628800.0, 1.0 / 362880.0, 1.0 / 40320.0, 1.0 / 5040.0, 1.0 / 720.0,
+      1.0 / 120.0,      1.0 / 24.0,      1.0 / 6.0,      0.5,           1.0,          1.0};
   __m256d p = _mm256_set1_pd(kC[0]);
   for (int k = 1; k < 12; ++k) p = _mm256_fmadd_pd(p, r, _mm256_set1_pd(kC[k]));
   // 2^n into the exponent (n ≥ −1010 here).
   const __m128i ni = _mm256_cvtpd_epi32(n);
-  const __m256i bits = _mm256_slli_epi64(
-      _mm256_add_epi64(_mm256_cvtepi32_epi64(ni), _mm256_set1_epi64x(1023)), 52);
+  const __m256i bits =
+      _mm256_slli_epi64(_mm256_add_epi64(_mm256_cvtepi32_epi64(ni), _mm256_set1_epi64x(1023)), 52);
   const __m256d scaled = _mm256_mul_pd(p, _mm256_castsi256_pd(bits));
   return _mm256_andnot_pd(under, scaled);
 }
 
 /// The batch's weights relative to m_final, exp((d − m_final)/ε), into w (lanes with use 0: 0).
 __attribute__((target("avx2,fma"))) void BatchWeightsAvx2(const double d[kBatch],
-                                                           const bool use[kBatch], double m_final,
-                                                           double eps, double w[kBatch]) noexcept {
+                                                          const bool use[kBatch], double m_final,
+                                                          double eps, double w[kBatch]) noexcept {
   alignas(32) double x[kBatch];
   for (int k = 0; k < kBatch; ++k) x[k] = use[k] ? (d[k] - m_final) / eps : -1000.0;
   _mm256_storeu_pd(w, ExpAvx2(_mm256_load_pd(x)));
@@ -507,8 +510,8 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
     return b - s.z;
   };
   // A bound on the depth of the tool nodes [i0, i1] × [j0, j1] whose heights lie in [a_lo,
-  // a_hi]: the largest environment bound (per `side`² cells, `env_bounds`, gbx a row) under the moved
-  // box's footprint, less the box's lowest point (−∞ when the footprint leaves the
+  // a_hi]: the largest environment bound (per `side`² cells, `env_bounds`, gbx a row) under the
+  // moved box's footprint, less the box's lowest point (−∞ when the footprint leaves the
   // environment's interpolant).
   // The moved box, from the nodes' affine map s = origin + i·step_i + j·step_j + a·along_a.
   const glm::dvec3 abs_step_i = glm::abs(step_i), abs_step_j = glm::abs(step_j);
@@ -611,8 +614,8 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
           const glm::dvec3 first =
               origin + static_cast<double>(j) * step_j + static_cast<double>(i) * step_i;
           const int bits = RowCandidatesAvx2(tool + j * nx + i, std::min(4, i1 - i), first, step_i,
-                                             along_a, inv_h, nx, ny, bound, m_ref - cutoff,
-                                             tested, cell, tu, tv, sx, sy, sz);
+                                             along_a, inv_h, nx, ny, bound, m_ref - cutoff, tested,
+                                             cell, tu, tv, sx, sy, sz);
           out.nodes_tested += tested;
           for (int k = 0; k < 4; ++k) {
             if ((bits >> k & 1) == 0) continue;

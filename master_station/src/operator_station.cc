@@ -324,7 +324,8 @@ void OperatorStationRun::LoopThread() {
     for (int c = 0; c < std::min(tick.model().num_contacts, kMaxContacts); ++c) {
       const std::uint32_t id = tick.model().contacts[static_cast<std::size_t>(c)].depth_field_id;
       if (id == 0 || tick.HasDepthField(id)) continue;
-      auto slot = std::ranges::find(missing_told, id, &std::pair<std::uint32_t, std::int64_t>::first);
+      auto slot =
+          std::ranges::find(missing_told, id, &std::pair<std::uint32_t, std::int64_t>::first);
       if (slot == missing_told.end()) {
         slot = std::ranges::min_element(missing_told, {},
                                         &std::pair<std::uint32_t, std::int64_t>::second);
