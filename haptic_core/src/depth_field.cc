@@ -350,12 +350,14 @@ __attribute__((target("avx2,fma"))) int RowCandidatesAvx2(
   const __m128i c = _mm_add_epi32(_mm_mullo_epi32(iv, _mm_set1_epi32(nx)), iu);
   const __m128 b =
       _mm_mask_i32gather_ps(_mm_set1_ps(-std::numeric_limits<float>::infinity()), bound, c, ok, 4);
-  // A finite bound reaching the threshold: (b − z ≥ threshold) and b < +∞ (b = −∞ fails the
-  // first, a NaN both).
+  // A finite bound (−∞ < b < +∞, false for a NaN) reaching the threshold (b − z ≥ threshold).
   const __m256d bd = _mm256_cvtps_pd(b);
+  const __m256d inf = _mm256_set1_pd(std::numeric_limits<double>::infinity());
+  const __m256d finite = _mm256_and_pd(_mm256_cmp_pd(bd, inf, _CMP_LT_OQ),
+                                       _mm256_cmp_pd(bd, _mm256_sub_pd(_mm256_setzero_pd(), inf),
+                                                     _CMP_GT_OQ));
   const __m256d pass = _mm256_and_pd(
-      _mm256_cmp_pd(_mm256_sub_pd(bd, z), _mm256_set1_pd(threshold), _CMP_GE_OQ),
-      _mm256_cmp_pd(bd, _mm256_set1_pd(std::numeric_limits<double>::infinity()), _CMP_LT_OQ));
+      finite, _mm256_cmp_pd(_mm256_sub_pd(bd, z), _mm256_set1_pd(threshold), _CMP_GE_OQ));
   const int bits = _mm256_movemask_pd(pass) & _mm_movemask_ps(ok);
   _mm_storeu_si128(reinterpret_cast<__m128i*>(cell), c);
   _mm256_storeu_pd(tu, _mm256_sub_pd(us, _mm256_cvtepi32_pd(iu)));
@@ -598,7 +600,14 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
       for (double& v : lanes.v) v *= scale;
     }
     BatchWeightsAvx2(d, use, m_ref, eps, w);
-    for (int k = 0; k < kBatch; ++k) w2[k] = curvature[k] ? w[k] : 0.0;
+    for (int k = 0; k < kBatch; ++k) {
+      w2[k] = curvature[k] ? w[k] : 0.0;
+      // A node whose depth is not finite (its stencil reads a hole the cell's bound did not
+      // see) adds nothing: its gradient, NaN too, must not reach the sums as 0·NaN.
+      if (!use[k]) {
+        for (auto& component : Jb) component[k] = 0.0;
+      }
+    }
     AccumulateAvx2(w, w2, Jb, lanes);
     batch.n = 0;
 #endif
