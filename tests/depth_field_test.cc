@@ -307,6 +307,50 @@ TEST(DepthField, TheAvx2KernelSumsWhatTheScalarOneSums) {
   EXPECT_GT(compared, 600);
 }
 
+// A flat face on a flat plate puts every node of the face at the deepest depth: 110² nodes, more
+// than the loop's budget. The evaluation stops there (the plain call computes them all); the
+// cache then leaves that field alone until its slot takes another.
+double BigFlatFace(double x, double y) {
+  return x >= 5 * kH - 1e-9 && x <= 104 * kH + 1e-9 && y >= 5 * kH - 1e-9 && y <= 104 * kH + 1e-9
+             ? -kD
+             : std::nan("");
+}
+
+TEST(DepthField, AnEvaluationPastTheNodeBudgetStopsAndTheCacheLeavesTheFieldAlone) {
+  const RigidTransform X_WF = TurnedFrame();
+  RigidTransform X_WT0;
+  X_WT0.translation = X_WF * glm::dvec3(54.5 * kH, 54.5 * kH, 5e-3);
+  X_WT0.rotation = X_WF.rotation;
+  DepthField big = MakeField(110, kH, X_WF, X_WT0, Flat, BigFlatFace);
+  const DepthFieldEvaluation whole = DepthFieldDepthAt(big, X_WT0);
+  ASSERT_TRUE(whole.valid);
+  EXPECT_GT(whole.nodes_evaluated, kDepthFieldMaxNodes);
+  EXPECT_NEAR(whole.max_node_depth_m, kD, 1e-9);
+  for (const DepthFieldKernel kernel : {DepthFieldKernel::kScalar, DepthFieldKernel::kAvx2}) {
+    if (!DepthFieldKernelAvailable(kernel)) continue;
+    const DepthFieldEvaluation capped = DepthFieldDepthAt(big, X_WT0, kernel, 1000);
+    EXPECT_TRUE(capped.over_budget);
+    EXPECT_FALSE(capped.valid);
+    EXPECT_LT(capped.nodes_evaluated, 1000 + 64);  // stops within a sub-block of the budget
+  }
+  DepthFieldCache cache(1);
+  big.Reserve();
+  ASSERT_TRUE(cache.Take(big, {}));
+  const std::uint32_t id = 7;
+  EXPECT_TRUE(cache.Evaluate(id, X_WT0).over_budget);
+  EXPECT_EQ(cache.over_budget(), 1);
+  const DepthFieldEvaluation again = cache.Evaluate(id, Displace(X_WT0, Twist{{1e-4, 0, 0}, {}}));
+  EXPECT_TRUE(again.over_budget);
+  EXPECT_EQ(again.nodes_tested, 0);  // not evaluated again
+  EXPECT_EQ(cache.over_budget(), 1);
+  // Another field in the slot is evaluated.
+  DepthField small = MakeField(kN, kH, X_WF, ToolAboveFace(X_WF), Flat, FaceInto);
+  small.id = 8;
+  small.Reserve();
+  ASSERT_TRUE(cache.Take(small, {}));
+  EXPECT_TRUE(cache.Evaluate(8, ToolAboveFace(X_WF)).valid);
+}
+
 TEST(DepthField, SaysWhetherTheToolIsWithinItsTravelMargin) {
   const RigidTransform X_WF = TurnedFrame();
   const RigidTransform X_WT0 = ToolAboveFace(X_WF);

@@ -445,7 +445,7 @@ bool DepthFieldKernelAvailable(DepthFieldKernel kernel) noexcept {
 }
 
 DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform& X_WT,
-                                       DepthFieldKernel kernel) noexcept {
+                                       DepthFieldKernel kernel, int max_nodes) noexcept {
 #ifdef HT_DEPTH_FIELD_AVX2
   const bool batched = kernel == DepthFieldKernel::kAvx2 && HasAvx2();
 #else
@@ -689,15 +689,22 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
                         kDepthFieldSubBlock, sbx) >= m_ref - cutoff)) {
           continue;
         }
+        if (out.nodes_evaluated >= max_nodes) return;  // over budget: stopped
         visit_nodes(i0, i1, j0, j1);
       }
     }
   };
   visit_block(best_block);
-  for (int b = 0; b < bx * by; ++b) {
+  for (int b = 0; b < bx * by && out.nodes_evaluated < max_nodes; ++b) {
     if (b == best_block) continue;
     if (!(block_ub[static_cast<std::size_t>(b)] >= m_ref - cutoff)) continue;
     visit_block(b);
+  }
+  if (out.nodes_evaluated >= max_nodes) {
+    out.over_budget = true;
+    out.valid = false;
+    out.depth_m = out.max_node_depth_m = -std::numeric_limits<double>::infinity();
+    return out;
   }
   if (batched) {
     flush();
@@ -743,6 +750,7 @@ DepthFieldCache::DepthFieldCache(int slots) {
   for (DepthField& f : slots_) f.Reserve();
   stamp_.assign(static_cast<std::size_t>(slots), 0);
   memo_.assign(static_cast<std::size_t>(slots), Memo{});
+  dense_.assign(static_cast<std::size_t>(slots), 0);
 }
 
 DepthFieldEvaluation DepthFieldCache::Evaluate(std::uint32_t id,
@@ -750,12 +758,26 @@ DepthFieldEvaluation DepthFieldCache::Evaluate(std::uint32_t id,
   if (id == 0) return {};
   for (std::size_t k = 0; k < slots_.size(); ++k) {
     if (stamp_[k] == 0 || slots_[k].id != id) continue;
+    if (dense_[k] != 0) {
+      DepthFieldEvaluation dense;
+      dense.over_budget = true;
+      return dense;
+    }
     Memo& m = memo_[k];
     if (m.stamp != stamp_[k] || m.X_WT.translation != X_WT.translation ||
         m.X_WT.rotation != X_WT.rotation) {
-      m.result = DepthFieldDepthAt(slots_[k], X_WT);
+#ifdef HT_DEPTH_FIELD_AVX2
+      const DepthFieldKernel kernel = HasAvx2() ? DepthFieldKernel::kAvx2 : DepthFieldKernel::kScalar;
+#else
+      const DepthFieldKernel kernel = DepthFieldKernel::kScalar;
+#endif
+      m.result = DepthFieldDepthAt(slots_[k], X_WT, kernel, kDepthFieldMaxNodes);
       m.X_WT = X_WT;
       m.stamp = stamp_[k];
+      if (m.result.over_budget) {
+        dense_[k] = 1;
+        ++over_budget_;
+      }
     }
     return m.result;
   }
@@ -772,6 +794,7 @@ const DepthField* DepthFieldCache::Find(std::uint32_t id) const noexcept {
 
 void DepthFieldCache::Clear() noexcept {
   std::fill(stamp_.begin(), stamp_.end(), std::uint64_t{0});
+  std::fill(dense_.begin(), dense_.end(), std::uint8_t{0});
   for (Memo& m : memo_) m.stamp = 0;
 }
 
@@ -803,6 +826,7 @@ bool DepthFieldCache::Take(DepthField& field, std::span<const std::uint32_t> kee
   }
   std::swap(slots_[slot], field);
   stamp_[slot] = ++clock_;
+  dense_[slot] = 0;
   ++taken_;
   return true;
 }

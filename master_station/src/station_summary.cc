@@ -55,7 +55,8 @@ nlohmann::json OperatorStationRun::Summary() const {
   s["depth_fields"] = {{"field_ticks", tick_->counters().field_ticks},
                        {"beyond_margin_ticks", tick_->counters().field_beyond_margin_ticks},
                        {"fallback_ticks", tick_->counters().field_fallback_ticks},
-                       {"fields_refused", tick_->counters().fields_refused}};
+                       {"fields_refused", tick_->counters().fields_refused},
+                       {"fields_over_node_budget", tick_->depth_fields_over_budget()}};
   s["tool_mass_kg"] = tool_inertia_.mass_kg;
   s["device"] = caps_.name;
   s["duration_s"] =

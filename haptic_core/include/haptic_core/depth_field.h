@@ -29,6 +29,13 @@ inline constexpr double kDepthFieldSmoothMaxM = 2e-6;
 inline constexpr int kDepthFieldBlock = 8;
 inline constexpr int kDepthFieldSubBlock = 4;
 
+/// Most tool nodes one evaluation of a field computes in the operator's loop (DepthFieldCache):
+/// beyond, the evaluation stops (DepthFieldEvaluation::over_budget) and the cache renders that
+/// field's contact from its linearization for the field's lifetime, so that the 1 kHz tick
+/// stays bounded. A face resting on the gear's ridges computes up to ~4,600 nodes; two blocks'
+/// interlocked stripes (seed Fig. 76) up to ~38,000, which would take ~1 ms a field.
+inline constexpr int kDepthFieldMaxNodes = 8192;
+
 /// Largest number of nodes per side of a depth field's grid (the window's N plus twice the travel
 /// margin, in cells): bounds the memory the operator's loop preallocates per field.
 inline constexpr int kMaxDepthFieldSide = 256;
@@ -127,6 +134,8 @@ struct DepthFieldEvaluation {
   /// whose cell's bound was tested (the rest were pruned with their block).
   int nodes_evaluated = 0;
   int nodes_tested = 0;
+  /// The evaluation stopped at its node budget (DepthFieldDepthAt's max_nodes): valid is false.
+  bool over_budget = false;
 };
 
 /// Evaluates `field` at tool pose X_WT (T at the tool's centre of mass, W): each tool node's
@@ -147,9 +156,11 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& field,
 enum class DepthFieldKernel : std::uint8_t { kScalar, kAvx2 };
 /// Whether `kernel` runs on this CPU (kAvx2 asked where it does not falls back to kScalar).
 bool DepthFieldKernelAvailable(DepthFieldKernel kernel) noexcept;
-/// DepthFieldDepthAt with the kernel chosen by the caller (tests, benchmarks).
+/// DepthFieldDepthAt with the kernel chosen by the caller (tests, benchmarks), stopping once
+/// `max_nodes` nodes were computed (over_budget true, valid false).
 DepthFieldEvaluation DepthFieldDepthAt(const DepthField& field, const RigidTransform& X_WT,
-                                       DepthFieldKernel kernel) noexcept;
+                                       DepthFieldKernel kernel,
+                                       int max_nodes = std::numeric_limits<int>::max()) noexcept;
 
 /// The lattice a depth field is sampled on (W; unit u, v, n with u × v = n, n from the
 /// environment towards the tool; cell h in m). The environment's nodes are its origin plus whole
@@ -194,7 +205,9 @@ class DepthFieldCache {
   const DepthField* Find(std::uint32_t id) const noexcept;
   /// DepthFieldDepthAt of the field with `id` at X_WT (valid false where there is none),
   /// remembered per slot: the same field at the same pose (bit for bit) is not evaluated again,
-  /// as a tick evaluates its models several times at one pose. Not thread-safe (the loop's).
+  /// as a tick evaluates its models several times at one pose. A field whose evaluation passed
+  /// kDepthFieldMaxNodes is not evaluated again (valid false, over_budget true) until its slot
+  /// takes another field. Not thread-safe (the loop's).
   DepthFieldEvaluation Evaluate(std::uint32_t id, const RigidTransform& X_WT) const noexcept;
   /// Takes the prepared `field` in (DepthField::Prepare, the sender's or the receiver's work off
   /// the loop), replacing a field of the same id, else a free slot, else the oldest slot not in
@@ -208,6 +221,8 @@ class DepthFieldCache {
   /// Fields taken in since construction, and those refused (bad, or no slot).
   std::int64_t taken() const noexcept { return taken_; }
   std::int64_t refused() const noexcept { return refused_; }
+  /// Fields whose evaluation passed kDepthFieldMaxNodes (rendered from their linearization).
+  std::int64_t over_budget() const noexcept { return over_budget_; }
 
  private:
   std::vector<DepthField> slots_;
@@ -218,6 +233,8 @@ class DepthFieldCache {
     DepthFieldEvaluation result;
   };
   mutable std::vector<Memo> memo_;
+  mutable std::vector<std::uint8_t> dense_;  // per slot: its field passed the node budget
+  mutable std::int64_t over_budget_ = 0;
   std::uint64_t clock_ = 0;
   std::int64_t taken_ = 0, refused_ = 0;
 };

@@ -206,6 +206,9 @@ class OperatorTick {
   const ModelStamp& model_stamp() const noexcept { return model_stamp_; }
   /// The contact model in use (the newest taken; empty before the first).
   const ContactModel& model() const noexcept { return model_; }
+  /// Fields whose evaluation passed kDepthFieldMaxNodes: their contacts rendered from their
+  /// linearizations (DepthFieldCache::over_budget).
+  std::int64_t depth_fields_over_budget() const noexcept { return fields_.over_budget(); }
   /// Whether the tick holds depth field `id` (DepthFieldCache::Find). noexcept.
   bool HasDepthField(std::uint32_t id) const noexcept { return fields_.Find(id) != nullptr; }
   /// Forgets every depth field held (the remote node's ids of a new session name other fields).
