@@ -149,8 +149,9 @@ int main(int argc, char** argv) {
   std::printf(
       "operator (%s): all fields at one pose p50 %.1f us, p99 %.1f us; nodes computed p50 %.0f, "
       "p99 %.0f; tested p50 %.0f, p99 %.0f\n",
-      kernel == DepthFieldKernel::kAvx2 ? "avx2" : "scalar", Quantile(eval_us, 0.5), Quantile(eval_us, 0.99), Quantile(nodes, 0.5), Quantile(nodes, 0.99),
-      Quantile(tested, 0.5), Quantile(tested, 0.99));
+      kernel == DepthFieldKernel::kAvx2 ? "avx2" : "scalar", Quantile(eval_us, 0.5),
+      Quantile(eval_us, 0.99), Quantile(nodes, 0.5), Quantile(nodes, 0.99), Quantile(tested, 0.5),
+      Quantile(tested, 0.99));
   if (kernel == DepthFieldKernel::kAvx2) {
     std::printf("avx2 against scalar: largest depth difference %.3g m, gradient %.3g\n",
                 largest_depth_difference_m, largest_gradient_difference);

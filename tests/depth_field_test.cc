@@ -256,7 +256,8 @@ TEST(DepthField, PrunedSmoothMaximumEqualsTheSumOverEveryNodeAlone) {
 // Two routes to one evaluation: the nodes one at a time (kScalar) and four at a time in AVX2
 // lanes (kAvx2), which sum the same terms in another order and may test a few more nodes against
 // the bound (their running maximum lags by up to three nodes; such nodes weigh below e^−20):
-// depth, gradient and curvature agree to rounding, at poses that slide, press and tilt the rough face, with a wide and the default ε.
+// depth, gradient and curvature agree to rounding, at poses that slide, press and tilt the rough
+// face, with a wide and the default ε.
 TEST(DepthField, TheAvx2KernelSumsWhatTheScalarOneSums) {
   if (!DepthFieldKernelAvailable(DepthFieldKernel::kAvx2)) {
     GTEST_SKIP() << "this CPU lacks AVX2 and FMA: only the scalar kernel runs";
@@ -269,40 +270,41 @@ TEST(DepthField, TheAvx2KernelSumsWhatTheScalarOneSums) {
   // The rough plate whole, and with holes under the face (the environment has no surface at
   // some nodes: a node whose bicubic reads one has no depth, and must add nothing, not NaN).
   for (const bool holes : {false, true}) {
-  DepthField f = MakeField(kN, kH, X_WF, X_WT0, holes ? RoughWithHoles : Rough, RoughFace, 3e-3);
-  for (const double eps : {8e-6, kDepthFieldSmoothMaxM}) {
-    f.smooth_max_m = eps;
-    ASSERT_TRUE(f.Prepare());
-    for (int k = 0; k < 200; ++k) {
-      const RigidTransform X_WT = Displace(
-          X_WT0, Twist{glm::dvec3(u(rng) * 1e-3, u(rng) * 1e-3, u(rng) * 30e-6),
-                       glm::dvec3(u(rng), u(rng), u(rng)) * 5e-3});
-      const DepthFieldEvaluation a = DepthFieldDepthAt(f, X_WT, DepthFieldKernel::kScalar);
-      const DepthFieldEvaluation b = DepthFieldDepthAt(f, X_WT, DepthFieldKernel::kAvx2);
-      ASSERT_EQ(a.valid, b.valid);
-      EXPECT_EQ(a.within_margin, b.within_margin);
-      EXPECT_GE(b.nodes_tested, a.nodes_tested);
-      EXPECT_GE(b.nodes_evaluated, a.nodes_evaluated);
-      if (!std::isfinite(a.depth_m)) {
-        EXPECT_FALSE(std::isfinite(b.depth_m));
-        continue;
+    DepthField f = MakeField(kN, kH, X_WF, X_WT0, holes ? RoughWithHoles : Rough, RoughFace, 3e-3);
+    for (const double eps : {8e-6, kDepthFieldSmoothMaxM}) {
+      f.smooth_max_m = eps;
+      ASSERT_TRUE(f.Prepare());
+      for (int k = 0; k < 200; ++k) {
+        const RigidTransform X_WT =
+            Displace(X_WT0, Twist{glm::dvec3(u(rng) * 1e-3, u(rng) * 1e-3, u(rng) * 30e-6),
+                                  glm::dvec3(u(rng), u(rng), u(rng)) * 5e-3});
+        const DepthFieldEvaluation a = DepthFieldDepthAt(f, X_WT, DepthFieldKernel::kScalar);
+        const DepthFieldEvaluation b = DepthFieldDepthAt(f, X_WT, DepthFieldKernel::kAvx2);
+        ASSERT_EQ(a.valid, b.valid);
+        EXPECT_EQ(a.within_margin, b.within_margin);
+        EXPECT_GE(b.nodes_tested, a.nodes_tested);
+        EXPECT_GE(b.nodes_evaluated, a.nodes_evaluated);
+        if (!std::isfinite(a.depth_m)) {
+          EXPECT_FALSE(std::isfinite(b.depth_m));
+          continue;
+        }
+        ++compared;
+        EXPECT_NEAR(b.depth_m, a.depth_m, 1e-12) << k;
+        EXPECT_NEAR(b.max_node_depth_m, a.max_node_depth_m, 1e-15) << k;  // FMA rounding
+        EXPECT_LT(glm::length(b.gradient.d_translation_W - a.gradient.d_translation_W), 1e-9) << k;
+        EXPECT_LT(glm::length(b.gradient.d_rotation_W - a.gradient.d_rotation_W), 1e-11) << k;
+        // The curvature is a covariance over ε, (E[J·Jᵀ] − E[J]·E[J]ᵀ)/ε: where the nodes'
+        // gradients nearly agree it cancels, and the sums' rounding (relative to E[J·Jᵀ] ~ |∇δ|²)
+        // shows.
+        const double g2 = glm::dot(a.gradient.d_translation_W, a.gradient.d_translation_W);
+        EXPECT_LE((b.curvature - a.curvature).norm(),
+                  1e-6 * (1.0 + a.curvature.norm()) + 1e-9 * (1.0 + g2) / eps)
+            << k;
+        EXPECT_TRUE(std::isfinite(b.gradient.d_translation_W.x) &&
+                    std::isfinite(b.gradient.d_rotation_W.z) && std::isfinite(b.curvature.sum()))
+            << holes << " " << k;
       }
-      ++compared;
-      EXPECT_NEAR(b.depth_m, a.depth_m, 1e-12) << k;
-      EXPECT_NEAR(b.max_node_depth_m, a.max_node_depth_m, 1e-15) << k;  // FMA rounding
-      EXPECT_LT(glm::length(b.gradient.d_translation_W - a.gradient.d_translation_W), 1e-9) << k;
-      EXPECT_LT(glm::length(b.gradient.d_rotation_W - a.gradient.d_rotation_W), 1e-11) << k;
-      // The curvature is a covariance over ε, (E[J·Jᵀ] − E[J]·E[J]ᵀ)/ε: where the nodes' gradients
-      // nearly agree it cancels, and the sums' rounding (relative to E[J·Jᵀ] ~ |∇δ|²) shows.
-      const double g2 = glm::dot(a.gradient.d_translation_W, a.gradient.d_translation_W);
-      EXPECT_LE((b.curvature - a.curvature).norm(),
-                1e-6 * (1.0 + a.curvature.norm()) + 1e-9 * (1.0 + g2) / eps)
-          << k;
-      EXPECT_TRUE(std::isfinite(b.gradient.d_translation_W.x) &&
-                  std::isfinite(b.gradient.d_rotation_W.z) && std::isfinite(b.curvature.sum()))
-          << holes << " " << k;
     }
-  }
   }
   EXPECT_GT(compared, 600);
 }

@@ -229,7 +229,7 @@ bool HasAvx2() noexcept {
 
 /// Catmull–Rom weights (CatmullRom) in four double lanes.
 __attribute__((target("avx2,fma"))) inline void CatmullRomAvx2(__m256d t, __m256d w[4],
-                                                                __m256d dw[4]) noexcept {
+                                                               __m256d dw[4]) noexcept {
   const __m256d half = _mm256_set1_pd(0.5);
   const __m256d t2 = _mm256_mul_pd(t, t), t3 = _mm256_mul_pd(t2, t);
   const __m256d two = _mm256_set1_pd(2.0), three = _mm256_set1_pd(3.0);
@@ -257,9 +257,9 @@ __attribute__((target("avx2,fma"))) inline void CatmullRomAvx2(__m256d t, __m256
 /// gradient J = (g, (s − c) × g), g = (∂b/∂x, ∂b/∂y, −1) in F. Lanes ≥ batch.n are copies of
 /// lane 0 (the caller ignores them).
 __attribute__((target("avx2,fma"))) void BatchDepthsAvx2(const NodeBatch& batch, const float* env,
-                                                          int nx, double inv_h,
-                                                          const glm::dvec3& c_F, double d[kBatch],
-                                                          double J[6][kBatch]) noexcept {
+                                                         int nx, double inv_h,
+                                                         const glm::dvec3& c_F, double d[kBatch],
+                                                         double J[6][kBatch]) noexcept {
   alignas(32) double tu[kBatch], tv[kBatch], sx[kBatch], sy[kBatch], sz[kBatch];
   alignas(16) int base[kBatch];
   for (int k = 0; k < kBatch; ++k) {
@@ -353,9 +353,9 @@ __attribute__((target("avx2,fma"))) int RowCandidatesAvx2(
   // A finite bound (−∞ < b < +∞, false for a NaN) reaching the threshold (b − z ≥ threshold).
   const __m256d bd = _mm256_cvtps_pd(b);
   const __m256d inf = _mm256_set1_pd(std::numeric_limits<double>::infinity());
-  const __m256d finite = _mm256_and_pd(_mm256_cmp_pd(bd, inf, _CMP_LT_OQ),
-                                       _mm256_cmp_pd(bd, _mm256_sub_pd(_mm256_setzero_pd(), inf),
-                                                     _CMP_GT_OQ));
+  const __m256d finite =
+      _mm256_and_pd(_mm256_cmp_pd(bd, inf, _CMP_LT_OQ),
+                    _mm256_cmp_pd(bd, _mm256_sub_pd(_mm256_setzero_pd(), inf), _CMP_GT_OQ));
   const __m256d pass = _mm256_and_pd(
       finite, _mm256_cmp_pd(_mm256_sub_pd(bd, z), _mm256_set1_pd(threshold), _CMP_GE_OQ));
   const int bits = _mm256_movemask_pd(pass) & _mm_movemask_ps(ok);
@@ -405,9 +405,9 @@ __attribute__((target("avx2,fma"))) void BatchWeightsAvx2(const double d[kBatch]
 /// Adds the batch's weighted gradients to the lane sums: S0 += w, S1 += w·J, and S2's lower
 /// triangle += w2·J·Jᵀ (w2 = w where w ≥ kCurvatureWeight, else 0), lane by lane.
 __attribute__((target("avx2,fma"))) void AccumulateAvx2(const double w[kBatch],
-                                                         const double w2[kBatch],
-                                                         const double J[6][kBatch],
-                                                         LaneSums& sums) noexcept {
+                                                        const double w2[kBatch],
+                                                        const double J[6][kBatch],
+                                                        LaneSums& sums) noexcept {
   double* v = sums.v.data();
   const __m256d W = _mm256_loadu_pd(w), W2 = _mm256_loadu_pd(w2);
   _mm256_store_pd(v, _mm256_add_pd(_mm256_load_pd(v), W));
@@ -430,7 +430,8 @@ __attribute__((target("avx2,fma"))) void AccumulateAvx2(const double w[kBatch],
 
 DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform& X_WT) noexcept {
 #ifdef HT_DEPTH_FIELD_AVX2
-  return DepthFieldDepthAt(f, X_WT, HasAvx2() ? DepthFieldKernel::kAvx2 : DepthFieldKernel::kScalar);
+  return DepthFieldDepthAt(f, X_WT,
+                           HasAvx2() ? DepthFieldKernel::kAvx2 : DepthFieldKernel::kScalar);
 #else
   return DepthFieldDepthAt(f, X_WT, DepthFieldKernel::kScalar);
 #endif
@@ -767,7 +768,8 @@ DepthFieldEvaluation DepthFieldCache::Evaluate(std::uint32_t id,
     if (m.stamp != stamp_[k] || m.X_WT.translation != X_WT.translation ||
         m.X_WT.rotation != X_WT.rotation) {
 #ifdef HT_DEPTH_FIELD_AVX2
-      const DepthFieldKernel kernel = HasAvx2() ? DepthFieldKernel::kAvx2 : DepthFieldKernel::kScalar;
+      const DepthFieldKernel kernel =
+          HasAvx2() ? DepthFieldKernel::kAvx2 : DepthFieldKernel::kScalar;
 #else
       const DepthFieldKernel kernel = DepthFieldKernel::kScalar;
 #endif

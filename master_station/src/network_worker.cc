@@ -58,9 +58,10 @@ void NetworkWorker::Run(const std::atomic<bool>& stop) {
   decoder.join();
   TakeDecodedFields();
   if (fields_undecodable_ > 0) {
-    std::printf("[master] %llu depth field(s) from the remote node did not decode (first: %s); "
-                "their contacts were rendered from their linearizations\n",
-                static_cast<unsigned long long>(fields_undecodable_), first_decode_error_.c_str());
+    std::printf(
+        "[master] %llu depth field(s) from the remote node did not decode (first: %s); "
+        "their contacts were rendered from their linearizations\n",
+        static_cast<unsigned long long>(fields_undecodable_), first_decode_error_.c_str());
     std::fflush(stdout);
   }
 }
