@@ -49,6 +49,10 @@ struct Arm {
   int depth_field_subdivision = ht::PipelineOptions{}.depth_field_subdivision;
   /// The fields' smooth-maximum width (m; < 0: PipelineOptions' default).
   double depth_field_smooth_max_m = -1.0;
+  /// Translation patches (DepthRefinementOptions::translation_patch): < 0 as the remote node's
+  /// default (from RemoteNodeConfig::translation_patch_rtt_ms of round trip, also with fields),
+  /// 0 never, > 0 always.
+  int translation_patch = -1;
 };
 
 /// What one arm's run gives, tick by tick and in all.

@@ -13,7 +13,7 @@
 //
 // Usage: remote_step_benchmark [--scenes fig75,fig76,fig77,hammer_torus] [--poses N]
 //                              [--repeats R] [--grid N] [--threads T] [--path fast|reference]
-//                              [--no-refine-depth] [--texel-gradient] [--ab OPTION]
+//                              [--no-refine-depth] [--ab OPTION]
 //                              [--csv FILE] [--cache-dir D]
 
 #include <CLI/CLI.hpp>
@@ -71,20 +71,10 @@ int main(int argc, char** argv) {
                  "cell's r x dδ/dx); warp and lever are approximations")
       ->check(CLI::IsMember({"rendered", "warp", "lever"}))
       ->capture_default_str();
-  bool no_refinement = false, texel_gradient = false, translation_kinks = false,
-       secant_rotation = false;
+  bool no_refinement = false;
   app.add_flag("--no-refine-depth", no_refinement,
                "stage 5b off: the grid's cell samples alone (by default each contact's depth is "
                "refined to the texture's full resolution)");
-  app.add_flag("--texel-gradient", texel_gradient,
-               "stage 5b's gradient at texel-scale steps instead of the refined samples' one-cell\n"
-               "secants");
-  app.add_flag("--translation-kink-planes", translation_kinks,
-               "with --texel-gradient: the arms of each contact's V along the window's axes as\n"
-               "kink planes (DepthRefinementOptions::translation_kink_planes)");
-  app.add_flag("--secant-rotation-gradient", secant_rotation,
-               "with --texel-gradient: its translation part only, the rotation part the one-cell\n"
-               "secant");
   bool no_sharing = false;
   app.add_flag("--no-share-connected-contacts", no_sharing,
                "every contact its whole penalty (stage 5c off, as before issue 32's tenth stop)");
@@ -173,9 +163,6 @@ int main(int argc, char** argv) {
     options.depth_refinement.seed_from_last_step = !no_seed_from_last_step;
     options.depth_refinement.translation_patch = translation_patch;
     options.depth_refinement.translation_patch_spacing_cells = translation_patch_spacing_cells;
-    options.depth_refinement.texel_scale_gradient = texel_gradient;
-    options.depth_refinement.translation_kink_planes = translation_kinks;
-    options.depth_refinement.texel_scale_rotation = !secant_rotation;
     // Arm A is the options as given; arm B (with --ab) the same with one option flipped.
     ht::PipelineOptions options_b = options;
     std::string label_b;

@@ -42,10 +42,6 @@ PipelineOptions PipelineOptionsFor(const FrontierSetting& st) {
   options.kink_planes_own_slope = st.kink_planes_own_slope;
   options.kink_hang_other_arm = st.kink_hang_other_arm;
   options.refine_depth = st.refine_depth;
-  options.depth_refinement.texel_scale_gradient = st.texel_scale_gradient;
-  options.depth_refinement.secant_at_kinks_m = st.secant_at_kinks_m;
-  options.depth_refinement.translation_kink_planes = st.translation_kink_planes;
-  options.depth_refinement.texel_scale_rotation = st.texel_scale_rotation;
   options.split_windows_at_separated_overlap = st.split_windows_at_separated_overlap;
   options.share_connected_contacts = st.share_connected_contacts;
   if (st.share_link_m >= 0.0) options.share_link_m = st.share_link_m;
@@ -70,12 +66,9 @@ PipelineOptions PipelineOptionsFor(const FrontierSetting& st) {
       st.translation_patch_neighbour_climbs;
   options.depth_refinement.translation_patch_floor_texels = st.translation_patch_floor_texels;
   options.depth_refinement.translation_patch_spacing_cells = st.translation_patch_spacing_cells;
-  options.depth_refinement.translation_patch_step_texels = st.translation_patch_step_texels;
   options.depth_refinement.neighbour_peak_seeds = st.neighbour_peak_seeds;
   options.depth_refinement.translation_patch_follows_rotation =
       st.translation_patch_follows_rotation;
-  if (st.gradient_step_texels > 0.0)
-    options.depth_refinement.gradient_step_texels = st.gradient_step_texels;
   options.depth_fields = st.depth_fields;
   options.depth_field_subdivision = st.depth_field_subdivision;
   // The texture stage's threads are the coarse query's too, as in the product.
@@ -290,37 +283,6 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     s.push_back(hang);
     // Issue 32: stage 5b's variants (the default refines).
     const FrontierSetting& refined = base;
-    // The refined maximum's gradient at texel-scale steps instead of the refined samples'
-    // one-cell secants: 2 texels (the option's default), and 1, 4, 8 and 16; at 2 texels with
-    // the secant where a kink lies within a cell (1, 5 and 20 µm above the tangent).
-    FrontierSetting texel_gradient = refined;
-    texel_gradient.name = "refined_texel_gradient";
-    texel_gradient.texel_scale_gradient = true;
-    s.push_back(texel_gradient);
-    for (const double texels : {1.0, 4.0, 8.0, 16.0}) {
-      FrontierSetting step = texel_gradient;
-      step.name = "refined_texel_gradient_" + std::to_string(static_cast<int>(texels)) + "_texels";
-      step.gradient_step_texels = texels;
-      s.push_back(step);
-    }
-    FrontierSetting translation_kinks = texel_gradient;
-    translation_kinks.name = "refined_texel_gradient_translation_kinks";
-    translation_kinks.translation_kink_planes = true;
-    s.push_back(translation_kinks);
-    FrontierSetting translation_only = texel_gradient;
-    translation_only.name = "refined_texel_translation_gradient";
-    translation_only.texel_scale_rotation = false;
-    s.push_back(translation_only);
-    FrontierSetting translation_only_kinks = translation_only;
-    translation_only_kinks.name = "refined_texel_translation_gradient_translation_kinks";
-    translation_only_kinks.translation_kink_planes = true;
-    s.push_back(translation_only_kinks);
-    for (const int um : {1, 5, 20}) {
-      FrontierSetting kinks = texel_gradient;
-      kinks.name = "refined_texel_gradient_secant_at_kinks_" + std::to_string(um) + "um";
-      kinks.secant_at_kinks_m = um * 1e-6;
-      s.push_back(kinks);
-    }
     // Issue 32, nineteenth stop: each contact's depth over in-plane translations (a 5×5 patch at
     // the grid's step), for the model-prediction measure.
     FrontierSetting patch = refined;
@@ -357,31 +319,12 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
       patch_spacing.translation_patch_spacing_cells = cells;
       s.push_back(patch_spacing);
     }
-    FrontierSetting patch_texel = translation_only;
-    patch_texel.name = "translation_patch_texel_translation_gradient";
-    patch_texel.translation_patch = true;
-    s.push_back(patch_texel);
-    // The texel-scale translation slope with a patch whose nodes are that slope's own steps
-    // (2 texels): the V between two flanks and its curvature go to the loop.
-    FrontierSetting texel_patch = translation_only;
-    texel_patch.name = "texel_patch";
-    texel_patch.translation_patch = true;
-    texel_patch.translation_patch_step_texels = 2.0;
-    s.push_back(texel_patch);
     // Stage 5b without the neighbouring peaks as seeds (the default before issue 32's
-    // thirty-fourth stop), and the texel-scale translation slope without them.
+    // thirty-fourth stop).
     FrontierSetting no_neighbour_peaks = refined;
     no_neighbour_peaks.name = "no_neighbour_peak_seeds";
     no_neighbour_peaks.neighbour_peak_seeds = false;
     s.push_back(no_neighbour_peaks);
-    FrontierSetting texel_no_neighbour_peaks = translation_only;
-    texel_no_neighbour_peaks.name = "texel_translation_gradient_no_neighbour_peaks";
-    texel_no_neighbour_peaks.neighbour_peak_seeds = false;
-    s.push_back(texel_no_neighbour_peaks);
-    FrontierSetting texel_patch_rotation = texel_patch;
-    texel_patch_rotation.name = "texel_patch_follows_rotation";
-    texel_patch_rotation.translation_patch_follows_rotation = true;
-    s.push_back(texel_patch_rotation);
     // Stage 5b with the render's form h·(N·n) at the coarse point instead of parallax (the
     // default before issue 32's twenty-eighth stop), alone and with the hung other arm.
     FrontierSetting no_parallax = refined;
@@ -424,17 +367,11 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     split.name = "split_windows_at_separated_overlap";
     split.split_windows_at_separated_overlap = true;
     s.push_back(split);
-    FrontierSetting split_texel = split;
-    split_texel.name = "split_windows_texel_gradient";
-    split_texel.texel_scale_gradient = true;
-    s.push_back(split_texel);
     for (const int mm : {7, 10}) {
-      for (const bool texel : {false, true}) {
-        FrontierSetting linked = texel ? split_texel : split;
-        linked.name = linked.name + "_link" + std::to_string(mm) + "mm";
-        linked.split_link_m = mm * 1e-3;
-        s.push_back(linked);
-      }
+      FrontierSetting linked = split;
+      linked.name = linked.name + "_link" + std::to_string(mm) + "mm";
+      linked.split_link_m = mm * 1e-3;
+      s.push_back(linked);
     }
     // Stage 5a made continuous (issue 32's thirtieth stop), one piece at a time at a 10 mm link:
     // the birth ramp, then the parent's rotation step, then the bridge fade, then the parent's
@@ -453,18 +390,14 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     bridged.split_bridge_fade_m = 50e-6;
     s.push_back(bridged);
     for (const int um : {20, 50, 100, 200, 400}) {
-      for (const bool texel : {false, true}) {
-        if (texel && um != 50) continue;
-        FrontierSetting continuous = texel ? split_texel : split;
-        continuous.name = std::string(texel ? "split_continuous_texel_" : "split_continuous_") +
-                          std::to_string(um) + "um";
-        continuous.split_link_m = 10e-3;
-        continuous.split_birth_ramp_m = um * 1e-6;
-        continuous.split_keeps_parent_rotation_step = true;
-        continuous.split_bridge_fade_m = um * 1e-6;
-        continuous.split_keeps_parent_window = true;
-        s.push_back(continuous);
-      }
+      FrontierSetting continuous = split;
+      continuous.name = "split_continuous_" + std::to_string(um) + "um";
+      continuous.split_link_m = 10e-3;
+      continuous.split_birth_ramp_m = um * 1e-6;
+      continuous.split_keeps_parent_rotation_step = true;
+      continuous.split_bridge_fade_m = um * 1e-6;
+      continuous.split_keeps_parent_window = true;
+      s.push_back(continuous);
     }
     // The default's split with its bridge fade in proportion to each region's depth (issue 32's
     // thirty-first stop): "split_fade_per_depth<C>x", C = 1.5, 2, 3.

@@ -123,7 +123,7 @@ void AddDepthOptions(CLI::App& app, NodeCommandLine& cl) {
       "rougher (docs/frontier/issue32/twenty_sixth_stop)");
 }
 
-// Translation patches, and stage 5b's texel-scale gradient.
+// Translation patches.
 void AddTranslationPatchOptions(CLI::App& app, NodeCommandLine& cl) {
   CLI::Option* rtt_option =
       app.add_option(
@@ -156,42 +156,6 @@ void AddTranslationPatchOptions(CLI::App& app, NodeCommandLine& cl) {
                  "coarser on the ridges)")
       ->check(CLI::Range(1, kMaxTranslationPatchSpacing))
       ->capture_default_str();
-  auto* patch_texels_option = app.add_option(
-      "--translation-patch-step-texels", cl.translation_patch_step_texels,
-      "whenever translation patches go: their nodes' spacing in level-0 texels instead of\n"
-      "grid cells (with --texel-scale-gradient --secant-rotation-gradient and 2, the\n"
-      "slope's own steps): the loop then holds a V between two ridges' flanks and its\n"
-      "curvature (fig75's valleys no longer ring), over +/-2 spacings only, so pair it\n"
-      "with --translation-patch on a loopback or LAN (docs/frontier/issue32/\n"
-      "thirty_fourth_stop)");
-  patch_texels_option->check(CLI::Range(0.0, 64.0))->excludes("--translation-patch-spacing-cells");
-  app.add_flag("--texel-scale-gradient", cl.texel_scale_gradient,
-               "each refined contact's gradient as the refined maximum's derivative at\n"
-               "--gradient-step-texels instead of the secant over one grid cell: closer to the\n"
-               "full-resolution truth pose by pose, but where a face lies between two ridges'\n"
-               "flanks it gives one flank's slope and the tool chatters in the closed loop\n"
-               "(docs/frontier/issue32/seventh_stop)");
-  app.add_option("--gradient-step-texels", cl.gradient_step_texels,
-                 "with --texel-scale-gradient: its translation step, in level-0 texels of the\n"
-                 "finer surface at the contact point (the rotation step is this over half the\n"
-                 "window)")
-      ->check(CLI::Range(0.01, 1000.0))
-      ->capture_default_str();
-  app.add_option("--secant-at-kinks-um", cl.secant_at_kinks_um,
-                 "with --texel-scale-gradient, per axis: where the samples one grid cell\n"
-                 "away lie above the texel-scale tangent by more than this (a kink: another\n"
-                 "maximum takes over within the cell), the cell's secant instead; 0 = off")
-      ->check(CLI::Range(0.0, 1000.0))
-      ->capture_default_str();
-  app.add_flag("--secant-rotation-gradient", cl.secant_rotation_gradient,
-               "with --texel-scale-gradient: only its translation part at texel scale, the\n"
-               "rotation part the one-cell secant as by default (at texel scale a face resting on\n"
-               "ridges rocks between its tilt's arms; issue 32, ninth stop)");
-  app.add_flag("--translation-kink-planes", cl.translation_kink_planes,
-               "with --texel-scale-gradient: each contact also carries the arms of its\n"
-               "depth's V along the window's two in-plane axes (a face between two ridges'\n"
-               "flanks), so that the operator's loop finds the vertex between two models\n"
-               "instead of being pushed across it by one arm (issue 32, ninth stop)");
 }
 
 // Stages 5a (the split) and 5c (shared penalties).
@@ -382,7 +346,6 @@ void FinishDepthConfig(const CLI::App& app, const NodeCommandLine& cl, RemoteNod
   pipeline.grazing_guard = !cl.no_grazing_guard;
   pipeline.kink_planes = !cl.no_kink_planes;
   pipeline.refine_depth = !cl.no_refine_depth;
-  refinement.texel_scale_gradient = cl.texel_scale_gradient;
   refinement.parallax = cl.parallax;
   refinement.seed_from_last_step = !cl.no_seed_from_last_step;
   refinement.parallax_offset_seeds = !cl.no_parallax_offset_seeds;
@@ -392,12 +355,6 @@ void FinishDepthConfig(const CLI::App& app, const NodeCommandLine& cl, RemoteNod
   refinement.translation_patch = cl.translation_patch;
   refinement.translation_patch_follows_rotation = cl.translation_patch_follows_rotation;
   refinement.translation_patch_spacing_cells = cl.translation_patch_spacing_cells;
-  refinement.translation_patch_step_texels = cl.translation_patch_step_texels;
-  if (cl.translation_patch_step_texels > 0.0 && cl.no_translation_patch) {
-    throw std::invalid_argument(
-        "--translation-patch-step-texels sets the patches' spacing, and --no-translation-patch "
-        "sends none: drop one");
-  }
   config.translation_patch_rtt_ms = cl.no_translation_patch
                                         ? std::numeric_limits<double>::infinity()
                                         : cl.translation_patch_rtt_ms;
@@ -405,20 +362,6 @@ void FinishDepthConfig(const CLI::App& app, const NodeCommandLine& cl, RemoteNod
     throw std::invalid_argument(
         std::string(cl.translation_patch ? "--translation-patch" : "--translation-patch-rtt-ms") +
         " needs stage 5b (drop --no-refine-depth): the patch's nodes are refined maxima");
-  }
-  refinement.gradient_step_texels = cl.gradient_step_texels;
-  refinement.secant_at_kinks_m = cl.secant_at_kinks_um * 1e-6;
-  refinement.translation_kink_planes = cl.translation_kink_planes;
-  refinement.texel_scale_rotation = !cl.secant_rotation_gradient;
-  if (cl.secant_rotation_gradient && !cl.texel_scale_gradient) {
-    throw std::invalid_argument(
-        "--secant-rotation-gradient needs --texel-scale-gradient (without it the whole "
-        "gradient is the secant already)");
-  }
-  if (cl.translation_kink_planes && !cl.texel_scale_gradient) {
-    throw std::invalid_argument(
-        "--translation-kink-planes needs --texel-scale-gradient (the arms are the texel-scale "
-        "slopes on either side of the vertex)");
   }
 }
 

@@ -42,18 +42,12 @@ struct NodeCommandLine {
   bool no_seed_from_last_step = false;
   bool kink_hang_other_arm = false;
 
-  // Translation patches and the texel-scale gradient (AddTranslationPatchOptions).
+  // Translation patches (AddTranslationPatchOptions).
   double translation_patch_rtt_ms = RemoteNodeConfig{}.translation_patch_rtt_ms;
   bool translation_patch = false;
   bool no_translation_patch = false;
   bool translation_patch_follows_rotation = false;
   int translation_patch_spacing_cells = 1;
-  double translation_patch_step_texels = 0.0;
-  bool texel_scale_gradient = false;
-  double gradient_step_texels = DepthRefinementOptions{}.gradient_step_texels;
-  double secant_at_kinks_um = DepthRefinementOptions{}.secant_at_kinks_m * 1e6;
-  bool secant_rotation_gradient = false;
-  bool translation_kink_planes = false;
 
   // Stages 5a and 5c (AddSplitAndSharingOptions).
   double split_windows_link_mm = 10.0;

@@ -51,8 +51,7 @@ nlohmann::json RemoteNodeRun::Summary() const {
     // Stage 5b (issue 32), warm-up included: contacts refined, and per contact the seeds, the
     // evaluations of b − a and how far δ0 rose above the grid's; the conservative screen's
     // squares and leaves per contact, the contacts where it found a deeper point than the seeds
-    // (and Σ µm), and those it stopped at its leaf budget; the translation arms added as kink
-    // planes (DepthRefinementOptions::translation_kink_planes); the contacts given a translation
+    // (and Σ µm), and those it stopped at its leaf budget; the contacts given a translation
     // patch, and whether the option is on; the last step's seeds searched, the contacts where one
     // was deeper than the grid's seeds (and Σ µm), and whether they are on.
     const DepthRefinementCounters& r = pipeline_->depth_refinement_counters();
@@ -67,7 +66,6 @@ nlohmann::json RemoteNodeRun::Summary() const {
         {"screen_found_deeper", r.screen_found},
         {"screen_raised_um_sum", r.screen_raised_um},
         {"screen_truncated", r.screen_truncated},
-        {"translation_kink_planes", r.translation_kink_planes},
         {"translation_patches", r.translation_patches},
         {"translation_patch", config_.pipeline.depth_refinement.translation_patch},
         {"last_step_seeds", r.last_step_seeds},

@@ -29,8 +29,8 @@ struct PenetrationGradient {
 };
 
 /// Most kink planes one contact carries: the two arms of δ's V about each of the window's in-plane
-/// rotation axes u and v (issue 31, change 5), and along each of its in-plane translation axes
-/// (DepthRefinementOptions::translation_kink_planes).
+/// rotation axes u and v (issue 31, change 5), and room for arms along its in-plane translation
+/// axes (a plane with its own translation slope, which the wire carries).
 inline constexpr int kMaxKinkPlanes = 8;
 
 /// A further plane of a contact's depth (issue 31, change 5):
@@ -126,8 +126,7 @@ struct ContactLinearization {
 ///  - elsewhere, and without `hang_other_arm`, each arm whose cell is not the deepest one is a
 ///    plane through its sample, lowered to δ0 where it would exceed δ0 at q0.
 /// Elsewhere nothing changes. δ0 and ∂δ/∂x are never changed. Appends to the planes lin already
-/// holds (stage 5b's translation arms, which take the contact's new ∂δ/∂θ along a kinked axis
-/// too), up to kMaxKinkPlanes; adds none when δ0 is not finite or the base sample lacks a cell.
+/// holds, up to kMaxKinkPlanes; adds none when δ0 is not finite or the base sample lacks a cell.
 /// Returns lin's number of planes. noexcept, allocation-free.
 int AddKinkPlanes(const ContactWindow& window, std::span<const DepthSample> samples,
                   const glm::dvec3& p_WT, ContactLinearization& lin, bool own_slope = true,

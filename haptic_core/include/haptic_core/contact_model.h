@@ -41,11 +41,10 @@ struct ContactModel {
 inline constexpr double kKinkBlendM = 10e-6;
 
 /// Largest translation-patch spacing (m) whose curvature ContactDepthAt gives the implicit step:
-/// a patch at texel scale (DepthRefinementOptions::translation_patch_step_texels, 80 µm on the
-/// seed's 1024² textures) holds the vertex of a V between two flanks within its nodes, and without
-/// its curvature in K the loop meets that stiffness only one model later (fig75's valleys ring).
-/// Patches a grid cell apart (0.4–0.8 mm, the remote node's under delay) add no curvature to K:
-/// with it the loop is no better there (measured: docs/measurements.md).
+/// a patch this fine (a fine grid's cells) holds the vertex of a V between two flanks within its
+/// nodes, and without its curvature in K the loop meets that stiffness only one model later.
+/// Patches of the default grid's cells (0.4–0.8 mm) add no curvature to K: with it the loop is no
+/// better there (measured: docs/measurements.md).
 inline constexpr double kPatchCurvatureMaxStepM = 0.25e-3;
 
 /// δ of contact `c` at the pose change Δq = q ⊖ q0 (Δq.linear in m, Δq.angular in rad, world

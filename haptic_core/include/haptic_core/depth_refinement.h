@@ -27,19 +27,10 @@
 //  - The ten rendered displaced samples are refined the same way from their own deepest cells
 //    (from the cell's centre unless subgrid_translations / subgrid_rotations), so that δ0, the
 //    gradient and the kink planes' depths share one estimator.
-//  - Gradient (default): the grid's one-cell central differences of the refined samples
-//    (h_x = W/N, h_θ = h_x/(W/2)), a secant of the refined maximum. With texel_scale_gradient:
-//    central differences of the refined maximum at h_x = gradient_step_texels × the finer
-//    level-0 texel at the contact point (m), h_θ = h_x/(W/2) (rad), each displaced pose climbed
-//    from the base's seeds within reach of the deepest and from the point the displacement
-//    carries it to: the derivative itself (tests/depth_refinement_test.cc: a sinusoid under a
-//    paraboloid, where the cell secant at N = 16 even has the wrong sign). δ is a maximum, so
-//    where another maximum takes over within a cell (a face between two ridges' flanks: a V)
-//    the derivative is one arm's slope and the secant their mean. Posed against the pipeline
-//    truth the derivative is closer, but the operator's model is linear until the next one, and
-//    one arm's slope pushes the tool across the vertex, the next model's back: in the closed loop
-//    the tool chatters, so the secant stays the default (measured: docs/measurements.md).
-//    ∂δ/∂x_n = −1.
+//  - Gradient: the grid's one-cell central differences of the refined samples (h_x = W/N,
+//    h_θ = h_x/(W/2)), a secant of the refined maximum; ∂δ/∂x_n = −1. Where another maximum takes
+//    over within a cell (a face between two ridges' flanks: a V) the secant is the arms' mean,
+//    which the kink planes complete.
 // PipelineOptions::refine_depth turns stage 5b on (the default); off is the grid alone, the
 // reference path.
 
@@ -81,50 +72,11 @@ inline constexpr int kMaxTranslationPatchSpacing = 4;
 
 /// How the depth is refined (issue 32).
 struct DepthRefinementOptions {
-  /// Translation step of the gradient in level-0 texels of the finer surface at the contact
-  /// point; the rotation step is this over half the window. > 0.
-  double gradient_step_texels = 2.0;
   /// Most sub-samples per side of a seed's square (its spacing is about two texels, at least one
   /// sample). In [1, 16].
   int max_subsamples = 6;
   /// The pattern search stops when its step falls below this many texels. > 0.
   double search_floor_texels = 0.25;
-  /// With texel_scale_gradient: refine the ten rendered displaced samples as well (the kink
-  /// planes read them); off: only the base and the texel-scale gradient. Without
-  /// texel_scale_gradient they are always refined (the gradient is their secant).
-  bool refine_rendered_samples = true;
-  /// The gradient from the refined maximum at texel-scale steps (above); off: the grid's
-  /// one-cell secants (h_x = W/N, h_θ = h_x/(W/2)) of the refined rendered samples.
-  bool texel_scale_gradient = false;
-  /// With texel_scale_gradient: its rotation part at texel scale too (h_θ = h_x/(W/2)); off: the
-  /// translation part at texel scale and the rotation part the refined rendered samples' one-cell
-  /// secant, as without texel_scale_gradient (the rendered samples are then refined whatever
-  /// refine_rendered_samples says). A face resting on
-  /// ridges rocks between the arms of its tilt's V: at texel scale each model holds one arm's
-  /// slope (measured: docs/measurements.md).
-  bool texel_scale_rotation = true;
-  /// With texel_scale_gradient: per axis (translation along u and v, rotation about u, v and n),
-  /// where the refined rendered samples one cell away (±h_x, ±h_θ) lie above the texel-scale
-  /// tangent's prediction by more than this (m) on either side (a kink within the cell), that
-  /// axis's derivative becomes the samples' secant (δ(+h) − δ(−h))/2h. 0 turns it off. ≥ 0;
-  /// needs refine_rendered_samples. (On the seed's ridged scenes nearly every contact has a kink
-  /// within a cell, so this is the secant's error: docs/measurements.md.)
-  double secant_at_kinks_m = 0.0;
-  /// With texel_scale_gradient and refine_rendered_samples (issue 32): the arms of δ's V along the
-  /// window's in-plane translation axes as kink planes (KinkPlane, with their own translation
-  /// slope). Per axis a ∈ {u, v} and side ±, where the refined rendered sample one cell away
-  /// (δ± at ±h_x) lies above the texel-scale tangent (δ0 ± h_x·∂δ/∂a) by more than
-  /// translation_kink_tolerance_m, the depth is convex across the cell (a V: the tool's texture
-  /// passes from one peak of the other's to the next). That arm's slope s is the texel-scale
-  /// central difference of the refined maximum climbed from the sample's refined point at
-  /// ±h_x ± h_t (h_t = gradient_step_texels texels); the plane passes through (±h_x, δ±) with
-  /// slope s along a, the contact's along the other axes, lowered to δ0 where it would exceed it
-  /// at q0, and is kept only when s lies beyond the contact's slope on that side (convex). The
-  /// operator's loop then finds the vertex between two models (ContactDepthAt) instead of pushing
-  /// the tool across it with one arm's slope until the next (the texel gradient's chatter,
-  /// above). δ0 and the wrench at q0 are unchanged. Off: no translation arms (the default until the
-  /// frontier and the loop say otherwise).
-  bool translation_kink_planes = false;
   /// The contact's translation patch (TranslationPatch; off here, and the remote node turns it on
   /// by the operator's round trip, DepthRefiner::SetTranslationPatch and
   /// RemoteNodeConfig::translation_patch_rtt_ms): δ at the base pose
@@ -157,17 +109,6 @@ struct DepthRefinementOptions {
   /// trip, coarser on the ridges. At 1 the nodes one step away are the rendered samples; at more,
   /// every node is searched.
   int translation_patch_spacing_cells = 1;
-  /// With translation_patch: the nodes' spacing in level-0 texels of the finer surface at the
-  /// contact point instead of grid cells (0: translation_patch_spacing_cells), each node the
-  /// refined maximum climbed as texel_scale_gradient's translation samples are (from the base
-  /// seeds within reach of the deepest and from the point the displacement carries each to). At
-  /// gradient_step_texels with texel_scale_gradient, the nodes one step away are that gradient's
-  /// samples, so the patch's tangent at q0 is the contact's slope and the loop reads δ over
-  /// ±2 steps, the vertex of a V between two flanks included, and its curvature in the implicit
-  /// step's K (ContactDepthAt). ≥ 0.
-  double translation_patch_step_texels = 0.0;
-  /// How far above the tangent (m) a translation sample must lie to make an arm. ≥ 0.
-  double translation_kink_tolerance_m = 1e-6;
   /// The rendered rotation samples (±h_θ about u, v and n) searched from a sub-grid of their
   /// deepest cell's square as the base and the translations are; off (the default): a pattern
   /// search from the cell's centre alone, fewer evaluations at the same error (measured:
@@ -230,8 +171,8 @@ struct DepthRefinementOptions {
   /// deepest's, which is never a seed of its own (a cell next to a seed
   /// is skipped), so the refined δ0 read the wrong flank, with a lateral slope of the wrong sign:
   /// the curved tool 10 µm past the sinusoid's trough read 7.5 µm on the far flank where the
-  /// closed form is 10.0 on the near one (tests/depth_refinement_test.cc). The texel-scale patch
-  /// climbs its nodes from them too. Measured: docs/measurements.md.
+  /// closed form is 10.0 on the near one (tests/depth_refinement_test.cc). Measured:
+  /// docs/measurements.md.
   bool neighbour_peak_seeds = true;
   /// How far above the best a dropped square's bound may reach (m). ≥ 0.
   double screen_tolerance_m = 1e-6;
@@ -266,8 +207,6 @@ struct DepthRefinementCounters {
   std::uint64_t parallax_offset_seeds = 0;
   std::uint64_t parallax_offset_found = 0;
   std::uint64_t parallax_offset_raised_um = 0;
-  /// Translation arms added as kink planes (DepthRefinementOptions::translation_kink_planes).
-  std::uint64_t translation_kink_planes = 0;
   /// Contacts given a translation patch (DepthRefinementOptions::translation_patch).
   std::uint64_t translation_patches = 0;
   /// DepthRefinementOptions::seed_from_last_step: last-step seeds searched, and contacts where
@@ -355,22 +294,6 @@ class DepthRefiner {
   // The finer level-0 texel (m) of env_local_ and `tool_tris` (a quarter cell where neither is
   // textured: a smooth coarse surface is linear inside its triangles).
   double TexelOfGathered(std::span<const Projected> tool_tris) const noexcept;
-  // The base seeds `base` [0, num_seeds) within 4·reach (m) below `deepest`, deepest first, at
-  // most four (a small step cannot bring a far, lower peak above the deepest): their indices in
-  // order[0, returned count).
-  static int SeedsNear(std::span<const Seed> base, int num_seeds, const Seed& deepest, double reach,
-                       std::span<int> order) noexcept;
-  // DepthRefinementOptions::texel_scale_gradient: central differences of the refined maximum at
-  // texel-scale steps, climbed from the base seeds `base` [0, num_seeds) within reach of
-  // `deepest` (point_W its point on the window plane, m, W).
-  PenetrationGradient TexelScaleGradient(const RigidTransform& X_WT, std::span<const Seed> base,
-                                         int num_seeds, const Seed& deepest,
-                                         const glm::dvec3& point_W) noexcept;
-  // DepthRefinementOptions::translation_kink_planes: the arms of δ's V along u and v from the
-  // refined translation samples `found` (index k − 1 for rendered sample k = 1…4, at ±h_x, m),
-  // appended to lin's planes up to kMaxKinkPlanes. Returns the planes added.
-  int TranslationKinkPlanes(std::span<const Seed> found, const Seed& deepest, double h_x,
-                            ContactLinearization& lin) noexcept;
   // DepthRefinementOptions::translation_patch: lin.patch at step translation_patch_spacing_cells
   // × cell_step (m, cell_step the window's cell) for the tool at X_WT, from the deepest (q0's
   // maximum) and, at a spacing of one cell, the refined translation samples `found` (index k − 1
@@ -378,13 +301,6 @@ class DepthRefiner {
   void FillTranslationPatch(const RigidTransform& X_WT, const Seed& deepest,
                             std::span<const Seed> found, double cell_step,
                             ContactLinearization& lin) noexcept;
-  // DepthRefinementOptions::translation_patch_step_texels > 0: lin.patch at that many texels,
-  // its nodes climbed from the base seeds `base` [0, num_seeds) within reach of `deepest` as
-  // TexelScaleGradient's translation samples are, and from the refined rendered translation
-  // samples' maxima `found` (index k − 1 for rendered sample k = 1…4; −∞ where none).
-  void FillTexelTranslationPatch(std::span<const Seed> base, int num_seeds,
-                                 std::span<const Seed> found, const Seed& deepest,
-                                 ContactLinearization& lin) noexcept;
   // The triangles of `list` facing the side's way, projected on the window at pose X.
   void ProjectAll(const HapticModel& model, const RigidTransform& X, PatchSide side,
                   std::span<const int> list, std::vector<Projected>& out) noexcept;
@@ -404,13 +320,6 @@ class DepthRefiner {
   // from it with `step` halved down to `floor_m`, staying in `box`.
   Seed Search(std::span<const Projected> tool, const Box& box, double s, double t, double half_side,
               int subsamples, double step, double floor_m, double shift_s, double shift_t) noexcept;
-  // The larger depth (m; −∞ where neither reads one) of two pattern searches (Search's, from
-  // `step` down to `floor_m`, in `box`) with the tool shifted in-plane by (shift_s, shift_t) (m):
-  // from (s, t), where the maximum stays with the environment's feature, and from (moved_s,
-  // moved_t), the point the displacement carries it to, where it moves with the tool's.
-  double ClimbBoth(std::span<const Projected> tool, const Box& box, double s, double t,
-                   double moved_s, double moved_t, double step, double floor_m, double shift_s,
-                   double shift_t) noexcept;
 
   // The conservative screen (DepthRefinementOptions::conservative_screen): the bound of one
   // side's triangles `list` (indices into `all`) over a square (the environment's largest height,

@@ -1,7 +1,7 @@
 // Stage 5b: the penetration depth refined to the finest texture level (issue 32); see
 // depth_refinement.h for the method. The seeds' searches and the refinement of a contact; the
-// screen over the window in 5b_depth_screening.cc, the texel-scale gradient and patches in
-// 5b_texel_gradient.cc, the envelope's evaluation in 5b_patch_envelope.h.
+// screen over the window in 5b_depth_screening.cc, the translation patches in
+// 5b_translation_patch.cc, the envelope's evaluation in 5b_patch_envelope.h.
 
 #include <algorithm>
 #include <array>
@@ -35,10 +35,6 @@ double PatchHeightAt(const HapticModel& model, const RigidTransform& X_WO,
 }
 
 void DepthRefinementOptions::Validate() const {
-  if (!(gradient_step_texels > 0.0) || !std::isfinite(gradient_step_texels)) {
-    throw std::invalid_argument("depth refinement: gradient_step_texels must be > 0, got " +
-                                std::to_string(gradient_step_texels));
-  }
   if (max_subsamples < 1 || max_subsamples > 16) {
     throw std::invalid_argument("depth refinement: max_subsamples must be in [1, 16], got " +
                                 std::to_string(max_subsamples));
@@ -47,11 +43,6 @@ void DepthRefinementOptions::Validate() const {
     throw std::invalid_argument(
         "depth refinement: translation_patch_floor_texels must be >= 0, got " +
         std::to_string(translation_patch_floor_texels));
-  }
-  if (!(translation_patch_step_texels >= 0.0) || !std::isfinite(translation_patch_step_texels)) {
-    throw std::invalid_argument(
-        "depth refinement: translation_patch_step_texels must be >= 0, got " +
-        std::to_string(translation_patch_step_texels));
   }
   if (translation_patch_spacing_cells < 1 ||
       translation_patch_spacing_cells > kMaxTranslationPatchSpacing) {
@@ -63,15 +54,6 @@ void DepthRefinementOptions::Validate() const {
   if (!(search_floor_texels > 0.0) || !std::isfinite(search_floor_texels)) {
     throw std::invalid_argument("depth refinement: search_floor_texels must be > 0, got " +
                                 std::to_string(search_floor_texels));
-  }
-  if (!(secant_at_kinks_m >= 0.0) || !std::isfinite(secant_at_kinks_m)) {
-    throw std::invalid_argument("depth refinement: secant_at_kinks_m must be >= 0, got " +
-                                std::to_string(secant_at_kinks_m));
-  }
-  if (!(translation_kink_tolerance_m >= 0.0) || !std::isfinite(translation_kink_tolerance_m)) {
-    throw std::invalid_argument(
-        "depth refinement: translation_kink_tolerance_m must be >= 0, got " +
-        std::to_string(translation_kink_tolerance_m));
   }
   if (!(screen_tolerance_m >= 0.0) || !std::isfinite(screen_tolerance_m)) {
     throw std::invalid_argument("depth refinement: screen_tolerance_m must be >= 0, got " +
@@ -248,15 +230,6 @@ DepthRefiner::Seed DepthRefiner::Search(std::span<const Projected> tool, const B
   return best;
 }
 
-double DepthRefiner::ClimbBoth(std::span<const Projected> tool, const Box& box, double s, double t,
-                               double moved_s, double moved_t, double step, double floor_m,
-                               double shift_s, double shift_t) noexcept {
-  const Seed at_point = Search(tool, box, s, t, 0.0, 1, step, floor_m, shift_s, shift_t);
-  const Seed at_moved =
-      Search(tool, box, moved_s, moved_t, 0.0, 1, step, floor_m, shift_s, shift_t);
-  return std::max(at_point.depth_m, at_moved.depth_m);
-}
-
 double DepthRefiner::ScreenThreshold(double best_m) const noexcept {
   return std::max(best_m, options_.screen_floor_m) + options_.screen_tolerance_m;
 }
@@ -332,8 +305,7 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
   }
   Seed deepest = best >= 0 ? base[static_cast<std::size_t>(best)] : Seed{-kInf, 0.0, 0.0};
   // A deeper point found away from the grid's seeds (the screen, the last step) becomes deepest
-  // and one of the base seeds (TexelScaleGradient's), and the displaced samples are searched
-  // from it too. Returns how much deeper (µm, rounded; 0 when the seeds found nothing).
+  // and one of the base seeds, and the displaced samples are searched from it too. Returns how much deeper (µm, rounded; 0 when the seeds found nothing).
   bool deeper_away_from_seeds = false;
   const auto take_deeper = [&](const Seed& found) -> std::uint64_t {
     const std::uint64_t raised =
@@ -447,15 +419,11 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
   }
 
   const glm::dvec3 point_W = w.center_W + deepest.s * w.axis_u_W + deepest.t * w.axis_v_W;
-  if (options_.texel_scale_gradient) {
-    lin.gradient = TexelScaleGradient(X_WT, base, num_seeds, deepest, point_W);
-  }
 
   // The rendered displaced samples, each from its own deepest cell at its own pose.
   std::array<Seed, 4> translation_found{};
   translation_found.fill(Seed{-kInf, 0.0, 0.0});
-  if (options_.refine_rendered_samples || !options_.texel_scale_gradient ||
-      !options_.texel_scale_rotation) {
+  {
     const auto poses = GradientSamplePoses(X_WT, w);
     for (int k = 1; k < kGradientSamples; ++k) {
       DepthSample& sample = samples[static_cast<std::size_t>(k)];
@@ -500,45 +468,10 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
     next_[static_cast<std::size_t>(num_next_++)] = {
         env_, glm::conjugate(X_WT.rotation) * (point_W - X_WT.translation)};
   }
-  if (options_.texel_scale_gradient && options_.refine_rendered_samples &&
-      options_.secant_at_kinks_m > 0.0) {
-    // Per axis, the tangent against the refined samples one cell away: a kink within the cell
-    // takes the secant (DepthRefinementOptions::secant_at_kinks_m).
-    const glm::dvec3 axes[3] = {w.axis_u_W, w.axis_v_W, w.normal_W};
-    const auto across = [&](int first_sample, double step, const glm::dvec3& axis,
-                            glm::dvec3& derivative) {
-      const double plus = samples[static_cast<std::size_t>(first_sample)].depth_m;
-      const double minus = samples[static_cast<std::size_t>(first_sample + 1)].depth_m;
-      if (samples[static_cast<std::size_t>(first_sample)].cell < 0 ||
-          samples[static_cast<std::size_t>(first_sample + 1)].cell < 0 || !(plus > -kInf) ||
-          !(minus > -kInf)) {
-        return;
-      }
-      const double slope = glm::dot(derivative, axis);
-      const double above = std::max(plus - (deepest.depth_m + slope * step),
-                                    minus - (deepest.depth_m - slope * step));
-      if (above > options_.secant_at_kinks_m) {
-        derivative += ((plus - minus) / (2.0 * step) - slope) * axis;
-      }
-    };
-    across(1, big.h_x, axes[0], lin.gradient.d_translation_W);
-    across(3, big.h_x, axes[1], lin.gradient.d_translation_W);
-    for (int a = 0; a < 3; ++a) {
-      across(5 + 2 * a, big.h_theta, axes[a], lin.gradient.d_rotation_W);
-    }
-  }
-  const bool texel_rotation = options_.texel_scale_gradient && options_.texel_scale_rotation;
-  if (!texel_rotation) {
-    // The refined rendered samples' one-cell secants: the whole gradient, or (texel-scale
-    // translation only) its rotation part.
+  {
+    // The refined rendered samples' one-cell secants.
     LinearizationFaults faults;
-    const PenetrationGradient secant =
-        AssembleLinearization(w, samples, lin.stiffness_n_per_m, faults).gradient;
-    if (options_.texel_scale_gradient) {
-      lin.gradient.d_rotation_W = secant.d_rotation_W;
-    } else {
-      lin.gradient = secant;
-    }
+    lin.gradient = AssembleLinearization(w, samples, lin.stiffness_n_per_m, faults).gradient;
     // Without rotated samples (RotationGradient::kContactLever: only the base pose is drawn) the
     // rotation part stays the lever's, now at the refined deepest point: (r × ∂δ/∂x).
     bool rotations_drawn = true;
@@ -551,18 +484,10 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
     }
   }
   lin.num_kink_planes = 0;
-  if (options_.texel_scale_gradient && options_.refine_rendered_samples &&
-      options_.translation_kink_planes) {
-    TranslationKinkPlanes(translation_found, deepest, big.h_x, lin);
-  }
   lin.patch = TranslationPatch{};
   if (options_.translation_patch) {
     const std::uint64_t before = evaluations_;
-    if (options_.translation_patch_step_texels > 0.0) {
-      FillTexelTranslationPatch(base, num_seeds, translation_found, deepest, lin);
-    } else {
-      FillTranslationPatch(X_WT, deepest, translation_found, big.h_x, lin);
-    }
+    FillTranslationPatch(X_WT, deepest, translation_found, big.h_x, lin);
     counters_.translation_patches += 1;
     counters_.evaluations += evaluations_ - before;
   }

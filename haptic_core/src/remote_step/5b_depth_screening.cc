@@ -206,20 +206,4 @@ void DepthRefiner::Screen(Seed& best) noexcept {
   if (truncated_) counters_.screen_truncated += 1;
 }
 
-int DepthRefiner::SeedsNear(std::span<const Seed> base, int num_seeds, const Seed& deepest,
-                            double reach, std::span<int> order) noexcept {
-  const int n = std::min(num_seeds, static_cast<int>(order.size()));
-  for (int k = 0; k < n; ++k) order[static_cast<std::size_t>(k)] = k;
-  std::sort(order.begin(), order.begin() + n, [&](int a, int b) {
-    return base[static_cast<std::size_t>(a)].depth_m > base[static_cast<std::size_t>(b)].depth_m;
-  });
-  int num_near = 0;
-  while (num_near < std::min(n, 4) &&
-         base[static_cast<std::size_t>(order[static_cast<std::size_t>(num_near)])].depth_m >=
-             deepest.depth_m - 4.0 * reach) {
-    ++num_near;
-  }
-  return num_near;
-}
-
 }  // namespace ht

@@ -83,20 +83,6 @@ struct FrontierSetting {
   /// PipelineOptions::refine_depth (on; "grid_only" and the grid-size settings "gridN" turn it
   /// off, the "gridN_refined" settings keep it).
   bool refine_depth = true;
-  /// PipelineOptions::depth_refinement.gradient_step_texels (0: the default).
-  double gradient_step_texels = 0.0;
-  /// PipelineOptions::depth_refinement.texel_scale_gradient ("refined_texel_gradient" and
-  /// "refined_texel_gradient_*" turn it on).
-  bool texel_scale_gradient = false;
-  /// PipelineOptions::depth_refinement.secant_at_kinks_m
-  /// ("refined_texel_gradient_secant_at_kinks_Kum" sets it to K µm).
-  double secant_at_kinks_m = 0.0;
-  /// PipelineOptions::depth_refinement.translation_kink_planes
-  /// ("refined_texel_gradient_translation_kinks" turns it on).
-  bool translation_kink_planes = false;
-  /// PipelineOptions::depth_refinement.texel_scale_rotation ("refined_texel_translation_gradient*"
-  /// turn it off).
-  bool texel_scale_rotation = true;
   /// Stage 5a, PipelineOptions' split_* fields, at their defaults (the continuous split at a
   /// 10 mm link, ramp and fade 400 µm, since issue 32's thirty-first stop). "no_split" turns it
   /// off; the split settings ("split_windows_at_separated_overlap*", "split_link10mm_*",
@@ -154,8 +140,6 @@ struct FrontierSetting {
   /// PipelineOptions::depth_refinement.translation_patch_spacing_cells
   /// ("translation_patch_spacing2", "translation_patch_spacing3").
   int translation_patch_spacing_cells = 1;
-  /// PipelineOptions::depth_refinement.translation_patch_step_texels (0: cells).
-  double translation_patch_step_texels = 0.0;
   /// PipelineOptions::depth_refinement.neighbour_peak_seeds.
   bool neighbour_peak_seeds = true;
   /// PipelineOptions::depth_refinement.translation_patch_follows_rotation
