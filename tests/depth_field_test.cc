@@ -309,13 +309,55 @@ TEST(DepthField, TheAvx2KernelSumsWhatTheScalarOneSums) {
   EXPECT_GT(compared, 600);
 }
 
-// A flat face on a flat plate puts every node of the face at the deepest depth: 110² nodes, more
-// than the loop's budget. The evaluation stops there (the plain call computes them all); the
-// cache then leaves that field alone until its slot takes another.
+// A flat face on a flat plate puts every node of the face at the deepest depth: 100² nodes, more
+// than a field keeps (kDepthFieldDenseNodes). Prepare keeps every 4th node of the tool's lattice
+// along each axis (every 2nd would leave 2,500), and the evaluation is the closed form over
+// them: the smooth maximum of 625 tied nodes, kD + ε·ln 625, pushing along −n.
 double BigFlatFace(double x, double y) {
   return x >= 5 * kH - 1e-9 && x <= 104 * kH + 1e-9 && y >= 5 * kH - 1e-9 && y <= 104 * kH + 1e-9
              ? -kD
              : std::nan("");
+}
+
+TEST(DepthField, ADenseFieldKeepsEveryFewNodesOfItsLatticeAndReadsThemAsTheClosedForm) {
+  const RigidTransform X_WF = TurnedFrame();
+  RigidTransform X_WT0;
+  X_WT0.translation = X_WF * glm::dvec3(54.5 * kH, 54.5 * kH, 5e-3);
+  X_WT0.rotation = X_WF.rotation;
+  const DepthField big = MakeField(110, kH, X_WF, X_WT0, Flat, BigFlatFace);
+  EXPECT_EQ(big.node_stride, 4);
+  // The kept grid is the tool's map at every 4th node; the map itself is left whole.
+  ASSERT_EQ(big.tool_nx, 28);
+  ASSERT_EQ(big.tool_ny, 28);
+  int kept = 0;
+  for (int q = 0; q < big.tool_ny; ++q) {
+    for (int p = 0; p < big.tool_nx; ++p) {
+      const float a = big.tool_grid_m[static_cast<std::size_t>(q * big.tool_nx + p)];
+      EXPECT_EQ(std::isfinite(a), std::isfinite(BigFlatFace(4 * p * kH, 4 * q * kH)));
+      kept += std::isfinite(a) ? 1 : 0;
+    }
+  }
+  int whole = 0;
+  for (const float a : big.tool_height_m) whole += std::isfinite(a) ? 1 : 0;
+  EXPECT_EQ(whole, 100 * 100);
+  ASSERT_EQ(kept, 625);
+  const DepthFieldEvaluation e = DepthFieldDepthAt(big, X_WT0);
+  ASSERT_TRUE(e.valid);
+  EXPECT_EQ(e.nodes_evaluated, kept);
+  EXPECT_NEAR(e.depth_m, kD + big.smooth_max_m * std::log(static_cast<double>(kept)), 1e-9);
+  const glm::dvec3 n_W = X_WF.rotation * glm::dvec3(0, 0, 1);
+  EXPECT_NEAR(glm::length(e.gradient.d_translation_W + n_W), 0.0, 1e-6);
+  // A field that fits is kept whole.
+  const DepthField small = MakeField(kN, kH, X_WF, ToolAboveFace(X_WF), Flat, FaceInto);
+  EXPECT_EQ(small.node_stride, 1);
+}
+
+// The same face tilted by 0.1 over the plate: at X_WT0 only the nodes along its lowest edge lie
+// within the smooth maximum's cutoff, and the field is kept whole; turned level, all 100² nodes
+// tie, more than the loop's budget. The evaluation stops there (the plain call computes them
+// all); the cache then leaves that field alone until its slot takes another.
+double TiltedBigFace(double x, double y) {
+  return std::isfinite(BigFlatFace(x, y)) ? -kD - 0.1 * (x - 5 * kH) : std::nan("");
 }
 
 TEST(DepthField, AnEvaluationPastTheNodeBudgetStopsAndTheCacheLeavesTheFieldAlone) {
@@ -323,14 +365,17 @@ TEST(DepthField, AnEvaluationPastTheNodeBudgetStopsAndTheCacheLeavesTheFieldAlon
   RigidTransform X_WT0;
   X_WT0.translation = X_WF * glm::dvec3(54.5 * kH, 54.5 * kH, 5e-3);
   X_WT0.rotation = X_WF.rotation;
-  DepthField big = MakeField(110, kH, X_WF, X_WT0, Flat, BigFlatFace);
-  const DepthFieldEvaluation whole = DepthFieldDepthAt(big, X_WT0);
+  DepthField big = MakeField(110, kH, X_WF, X_WT0, Flat, TiltedBigFace);
+  EXPECT_EQ(big.node_stride, 1);
+  // Turned about y_F by −atan 0.1: the face level.
+  const glm::dvec3 y_W = X_WF.rotation * glm::dvec3(0, 1, 0);
+  const RigidTransform level = Displace(X_WT0, Twist{glm::dvec3(0.0), -std::atan(0.1) * y_W});
+  const DepthFieldEvaluation whole = DepthFieldDepthAt(big, level);
   ASSERT_TRUE(whole.valid);
   EXPECT_GT(whole.nodes_evaluated, kDepthFieldMaxNodes);
-  EXPECT_NEAR(whole.max_node_depth_m, kD, 1e-9);
   for (const DepthFieldKernel kernel : {DepthFieldKernel::kScalar, DepthFieldKernel::kAvx2}) {
     if (!DepthFieldKernelAvailable(kernel)) continue;
-    const DepthFieldEvaluation capped = DepthFieldDepthAt(big, X_WT0, kernel, 1000);
+    const DepthFieldEvaluation capped = DepthFieldDepthAt(big, level, kernel, 1000);
     EXPECT_TRUE(capped.over_budget);
     EXPECT_FALSE(capped.valid);
     EXPECT_LT(capped.nodes_evaluated, 1000 + 64);  // stops within a sub-block of the budget
@@ -339,9 +384,10 @@ TEST(DepthField, AnEvaluationPastTheNodeBudgetStopsAndTheCacheLeavesTheFieldAlon
   big.Reserve();
   ASSERT_TRUE(cache.Take(big, {}));
   const std::uint32_t id = 7;
-  EXPECT_TRUE(cache.Evaluate(id, X_WT0).over_budget);
+  EXPECT_TRUE(cache.Evaluate(id, X_WT0).valid);
+  EXPECT_TRUE(cache.Evaluate(id, level).over_budget);
   EXPECT_EQ(cache.over_budget(), 1);
-  const DepthFieldEvaluation again = cache.Evaluate(id, Displace(X_WT0, Twist{{1e-4, 0, 0}, {}}));
+  const DepthFieldEvaluation again = cache.Evaluate(id, X_WT0);
   EXPECT_TRUE(again.over_budget);
   EXPECT_EQ(again.nodes_tested, 0);  // not evaluated again
   EXPECT_EQ(cache.over_budget(), 1);

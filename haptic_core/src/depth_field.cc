@@ -73,34 +73,52 @@ using Mat6 = Eigen::Matrix<double, 6, 6>;
 constexpr int kMaxBlocksPerSide = (kMaxDepthFieldSide + kDepthFieldBlock - 1) / kDepthFieldBlock;
 constexpr int kMaxSubBlocksPerSide =
     (kMaxDepthFieldSide + kDepthFieldSubBlock - 1) / kDepthFieldSubBlock;
+constexpr int kMaxSuperBlocksPerSide =
+    (kMaxDepthFieldSide + kDepthFieldSuperBlock - 1) / kDepthFieldSuperBlock;
 static_assert(kDepthFieldBlock % kDepthFieldSubBlock == 0);
+static_assert(kDepthFieldSuperBlock % kDepthFieldBlock == 0);
 
 namespace {
 
-/// Per block of `side`² cells or nodes of an nx × ny grid (row-major blocks): the largest env
-/// bound, and the tool heights' smallest and largest (±∞ where none).
-void BlockBounds(const DepthField& f, int side, std::vector<float>& env, std::vector<float>& lo,
-                 std::vector<float>& hi) {
+/// Per block of `side`² cells of the environment's nx × ny grid (row-major blocks): the largest
+/// env bound (−∞ where none).
+void EnvBlockBounds(const DepthField& f, int side, std::vector<float>& env) {
   const int bx = (f.nx + side - 1) / side, by = (f.ny + side - 1) / side;
-  const float inf = std::numeric_limits<float>::infinity();
-  env.assign(static_cast<std::size_t>(bx) * by, -inf);
-  lo.assign(static_cast<std::size_t>(bx) * by, inf);
-  hi.assign(static_cast<std::size_t>(bx) * by, -inf);
+  env.assign(static_cast<std::size_t>(bx) * by, -std::numeric_limits<float>::infinity());
   for (int j = 0; j < f.ny; ++j) {
     const std::size_t row = static_cast<std::size_t>(j) * f.nx;
     const std::size_t brow = static_cast<std::size_t>(j / side) * bx;
     for (int ti = 0; ti < bx; ++ti) {
       const int i0 = ti * side, i1 = std::min(f.nx, i0 + side);
-      float eb = env[brow + ti], l = lo[brow + ti], h = hi[brow + ti];
+      float eb = env[brow + ti];
+      for (int i = i0; i < i1; ++i) eb = std::max(eb, f.env_bound_m[row + i]);
+      env[brow + ti] = eb;
+    }
+  }
+}
+
+/// Per block of `side`² nodes of the tool's kept grid (DepthField::tool_grid_m, row-major
+/// blocks): the heights' smallest and largest (+∞ and −∞ where none).
+void ToolBlockBounds(const DepthField& f, int side, std::vector<float>& lo,
+                     std::vector<float>& hi) {
+  const int nx = f.tool_nx, ny = f.tool_ny;
+  const int bx = (nx + side - 1) / side, by = (ny + side - 1) / side;
+  const float inf = std::numeric_limits<float>::infinity();
+  lo.assign(static_cast<std::size_t>(bx) * by, inf);
+  hi.assign(static_cast<std::size_t>(bx) * by, -inf);
+  for (int j = 0; j < ny; ++j) {
+    const std::size_t row = static_cast<std::size_t>(j) * nx;
+    const std::size_t brow = static_cast<std::size_t>(j / side) * bx;
+    for (int ti = 0; ti < bx; ++ti) {
+      const int i0 = ti * side, i1 = std::min(nx, i0 + side);
+      float l = lo[brow + ti], h = hi[brow + ti];
       for (int i = i0; i < i1; ++i) {
-        eb = std::max(eb, f.env_bound_m[row + i]);
-        const float a = f.tool_height_m[row + i];
+        const float a = f.tool_grid_m[row + i];
         if (a == a) {  // not NaN
           l = std::min(l, a);
           h = std::max(h, a);
         }
       }
-      env[brow + ti] = eb;
       lo[brow + ti] = l;
       hi[brow + ti] = h;
     }
@@ -113,6 +131,7 @@ void DepthField::Reserve() {
   const std::size_t n = static_cast<std::size_t>(kMaxDepthFieldSide) * kMaxDepthFieldSide;
   env_height_m.reserve(n);
   tool_height_m.reserve(n);
+  tool_grid_m.reserve(n);
   env_bound_m.reserve(n);
   const std::size_t blocks = static_cast<std::size_t>(kMaxBlocksPerSide) * kMaxBlocksPerSide;
   env_block_bound_m.reserve(blocks);
@@ -122,6 +141,11 @@ void DepthField::Reserve() {
   env_sub_bound_m.reserve(subs);
   tool_sub_min_m.reserve(subs);
   tool_sub_max_m.reserve(subs);
+  const std::size_t supers =
+      static_cast<std::size_t>(kMaxSuperBlocksPerSide) * kMaxSuperBlocksPerSide;
+  env_super_bound_m.reserve(supers);
+  tool_super_min_m.reserve(supers);
+  tool_super_max_m.reserve(supers);
 }
 
 bool DepthField::Prepare() {
@@ -177,22 +201,54 @@ bool DepthField::Prepare() {
                                           : hi + 1e-6f * std::abs(hi) + 1e-9f;
     }
   }
-  BlockBounds(*this, kDepthFieldBlock, env_block_bound_m, tool_block_min_m, tool_block_max_m);
-  BlockBounds(*this, kDepthFieldSubBlock, env_sub_bound_m, tool_sub_min_m, tool_sub_max_m);
-  const int bx = (nx + kDepthFieldBlock - 1) / kDepthFieldBlock;
-  const int by = (ny + kDepthFieldBlock - 1) / kDepthFieldBlock;
+  EnvBlockBounds(*this, kDepthFieldBlock, env_block_bound_m);
+  EnvBlockBounds(*this, kDepthFieldSubBlock, env_sub_bound_m);
+  EnvBlockBounds(*this, kDepthFieldSuperBlock, env_super_bound_m);
+  // Every tool node, then, for a dense field (kDepthFieldDenseNodes), every 2nd, 4th, … node of
+  // the tool's lattice along each axis, until the evaluation at X_WT0 fits.
+  KeepToolNodes(1);
+  prepared = true;
+  while (node_stride < kMaxDepthFieldNodeStride) {
+    const DepthFieldEvaluation at_q0 = DepthFieldDepthAt(*this, X_WT0, DepthFieldKernel::kAvx2,
+                                                         kDepthFieldDenseNodes + 1);
+    if (!at_q0.over_budget) break;
+    KeepToolNodes(2 * node_stride);
+  }
+  return true;
+}
+
+void DepthField::KeepToolNodes(int stride) {
+  node_stride = stride;
+  // The first kept node along each axis: lattice coordinate a multiple of the stride.
+  tool_i0 = ((-tool_lattice_i0) % stride + stride) % stride;
+  tool_j0 = ((-tool_lattice_j0) % stride + stride) % stride;
+  tool_nx = std::max(0, (nx - tool_i0 + stride - 1) / stride);
+  tool_ny = std::max(0, (ny - tool_j0 + stride - 1) / stride);
+  tool_grid_m.resize(static_cast<std::size_t>(tool_nx) * tool_ny);
+  for (int q = 0; q < tool_ny; ++q) {
+    const float* row = tool_height_m.data() + static_cast<std::size_t>(tool_j0 + q * stride) * nx;
+    float* out = tool_grid_m.data() + static_cast<std::size_t>(q) * tool_nx;
+    for (int p = 0; p < tool_nx; ++p) out[p] = row[tool_i0 + p * stride];
+  }
+  ToolBlockBounds(*this, kDepthFieldBlock, tool_block_min_m, tool_block_max_m);
+  ToolBlockBounds(*this, kDepthFieldSubBlock, tool_sub_min_m, tool_sub_max_m);
+  ToolBlockBounds(*this, kDepthFieldSuperBlock, tool_super_min_m, tool_super_max_m);
   // The tool's reach: the farthest corner of each block's box of nodes from the centre of mass
   // (an upper bound on the farthest node's distance).
+  const int bx = (tool_nx + kDepthFieldBlock - 1) / kDepthFieldBlock;
+  const int by = (tool_ny + kDepthFieldBlock - 1) / kDepthFieldBlock;
   const glm::dvec3 c_F = X_WF.Inverse() * X_WT0.translation;
+  const double step = stride * cell_m;
+  const double u0 = tool_i0 * cell_m + tool_offset_u_m, v0 = tool_j0 * cell_m + tool_offset_v_m;
   double r2 = 0.0;
   for (int tj = 0; tj < by; ++tj) {
     for (int ti = 0; ti < bx; ++ti) {
       const std::size_t b = static_cast<std::size_t>(tj) * bx + ti;
       if (!(tool_block_min_m[b] <= tool_block_max_m[b])) continue;
-      const int i0 = ti * kDepthFieldBlock, i1 = std::min(nx, i0 + kDepthFieldBlock) - 1;
-      const int j0 = tj * kDepthFieldBlock, j1 = std::min(ny, j0 + kDepthFieldBlock) - 1;
-      const double x0 = i0 * cell_m + tool_offset_u_m, x1 = i1 * cell_m + tool_offset_u_m;
-      const double y0 = j0 * cell_m + tool_offset_v_m, y1 = j1 * cell_m + tool_offset_v_m;
+      const int i0 = ti * kDepthFieldBlock, i1 = std::min(tool_nx, i0 + kDepthFieldBlock) - 1;
+      const int j0 = tj * kDepthFieldBlock, j1 = std::min(tool_ny, j0 + kDepthFieldBlock) - 1;
+      const double x0 = u0 + i0 * step, x1 = u0 + i1 * step;
+      const double y0 = v0 + j0 * step, y1 = v0 + j1 * step;
       const double dx = std::max(std::abs(x0 - c_F.x), std::abs(x1 - c_F.x));
       const double dy = std::max(std::abs(y0 - c_F.y), std::abs(y1 - c_F.y));
       const double dz =
@@ -201,8 +257,6 @@ bool DepthField::Prepare() {
     }
   }
   tool_radius_m = std::sqrt(r2);
-  prepared = true;
-  return true;
 }
 
 namespace {
@@ -469,13 +523,16 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
   const glm::dmat3 R = glm::mat3_cast(D.rotation);
   const glm::dvec3 c_F = X_FW * X_WT.translation;  // the centre of mass in F
   const double h = f.cell_m, inv_h = 1.0 / h, eps = f.smooth_max_m;
-  const int nx = f.nx, ny = f.ny;
+  const int nx = f.nx, ny = f.ny;  // the environment's grid
+  const int tnx = f.tool_nx, tny = f.tool_ny;  // the tool's kept nodes
   const float* env = f.env_height_m.data();
-  const float* tool = f.tool_height_m.data();
+  const float* tool = f.tool_grid_m.data();
   const float* bound = f.env_bound_m.data();
-  const glm::dvec3 step_i = h * R[0], step_j = h * R[1], along_a = R[2];
-  // Tool node (0, 0) at height 0, moved.
-  const glm::dvec3 origin = D * glm::dvec3(f.tool_offset_u_m, f.tool_offset_v_m, 0.0);
+  const double tool_step = f.node_stride * h;
+  const glm::dvec3 step_i = tool_step * R[0], step_j = tool_step * R[1], along_a = R[2];
+  // Kept tool node (0, 0) at height 0, moved.
+  const glm::dvec3 origin = D * glm::dvec3(f.tool_i0 * h + f.tool_offset_u_m,
+                                           f.tool_j0 * h + f.tool_offset_v_m, 0.0);
 
   // The node's moved position and its cell's bound (−∞: no interpolant under it).
   const auto locate = [&](const glm::dvec3& s, int& cell, double& tu, double& tv) noexcept {
@@ -538,32 +595,42 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
     }
     return static_cast<double>(env_max) - (s.z - e.z);
   };
-  // Pass 1, per block of tool nodes: its bound.
-  const int bx = (nx + kDepthFieldBlock - 1) / kDepthFieldBlock;
-  const int by = (ny + kDepthFieldBlock - 1) / kDepthFieldBlock;
-  const int sbx = (nx + kDepthFieldSubBlock - 1) / kDepthFieldSubBlock;
-  std::array<float, kMaxBlocksPerSide * kMaxBlocksPerSide> block_ub;
-  int best_block = -1;
-  double best_ub = -std::numeric_limits<double>::infinity();
-  for (int tj = 0; tj < by; ++tj) {
-    for (int ti = 0; ti < bx; ++ti) {
-      const int b = tj * bx + ti;
-      block_ub[static_cast<std::size_t>(b)] = -std::numeric_limits<float>::infinity();
-      const float a_lo = f.tool_block_min_m[static_cast<std::size_t>(b)];
-      const float a_hi = f.tool_block_max_m[static_cast<std::size_t>(b)];
+  // Pass 1, per super-block of tool nodes: its bound; the blocks' bounds are taken only in the
+  // super-blocks pass 2 visits.
+  // The tool's blocks on its kept grid; the environment's bounds on its own (box_bound's gbx).
+  const int bx = (tnx + kDepthFieldBlock - 1) / kDepthFieldBlock;
+  const int by = (tny + kDepthFieldBlock - 1) / kDepthFieldBlock;
+  const int sbx = (tnx + kDepthFieldSubBlock - 1) / kDepthFieldSubBlock;
+  const int gx = (tnx + kDepthFieldSuperBlock - 1) / kDepthFieldSuperBlock;
+  const int gy = (tny + kDepthFieldSuperBlock - 1) / kDepthFieldSuperBlock;
+  const int env_bx = (nx + kDepthFieldBlock - 1) / kDepthFieldBlock;
+  const int env_sbx = (nx + kDepthFieldSubBlock - 1) / kDepthFieldSubBlock;
+  const int env_gx = (nx + kDepthFieldSuperBlock - 1) / kDepthFieldSuperBlock;
+  constexpr int kBlocksPerSuper = kDepthFieldSuperBlock / kDepthFieldBlock;
+  std::array<float, kMaxSuperBlocksPerSide * kMaxSuperBlocksPerSide> super_ub;
+  std::array<int, kMaxSuperBlocksPerSide * kMaxSuperBlocksPerSide> super_order;
+  int num_supers = 0;
+  for (int tj = 0; tj < gy; ++tj) {
+    for (int ti = 0; ti < gx; ++ti) {
+      const int g = tj * gx + ti;
+      const float a_lo = f.tool_super_min_m[static_cast<std::size_t>(g)];
+      const float a_hi = f.tool_super_max_m[static_cast<std::size_t>(g)];
       if (!(a_lo <= a_hi)) continue;  // no tool node
-      const int i0 = ti * kDepthFieldBlock, i1 = std::min(nx, i0 + kDepthFieldBlock) - 1;
-      const int j0 = tj * kDepthFieldBlock, j1 = std::min(ny, j0 + kDepthFieldBlock) - 1;
-      const double ub =
-          box_bound(i0, i1, j0, j1, a_lo, a_hi, f.env_block_bound_m.data(), kDepthFieldBlock, bx);
-      block_ub[static_cast<std::size_t>(b)] = static_cast<float>(ub);
-      if (ub > best_ub) {
-        best_ub = ub;
-        best_block = b;
-      }
+      const int i0 = ti * kDepthFieldSuperBlock, i1 = std::min(tnx, i0 + kDepthFieldSuperBlock) - 1;
+      const int j0 = tj * kDepthFieldSuperBlock, j1 = std::min(tny, j0 + kDepthFieldSuperBlock) - 1;
+      const double ub = box_bound(i0, i1, j0, j1, a_lo, a_hi, f.env_super_bound_m.data(),
+                                  kDepthFieldSuperBlock, env_gx);
+      if (!(ub > -std::numeric_limits<double>::infinity())) continue;
+      super_ub[static_cast<std::size_t>(g)] = static_cast<float>(ub);
+      super_order[static_cast<std::size_t>(num_supers++)] = g;
     }
   }
-  if (best_block < 0) return out;  // no tool node over the environment: no overlap, valid
+  if (num_supers == 0) return out;  // no tool node over the environment: no overlap, valid
+  // The deepest bound first (its best block sets the running maximum the others are pruned by).
+  std::sort(super_order.begin(), super_order.begin() + num_supers, [&](int a, int b) noexcept {
+    return super_ub[static_cast<std::size_t>(a)] > super_ub[static_cast<std::size_t>(b)];
+  });
+  std::array<float, kMaxBlocksPerSide * kMaxBlocksPerSide> block_ub;
 
   // Pass 2: the blocks whose bound reaches within the cutoff of the running maximum, the best
   // block first, their nodes by their cell's bound, summed as an online log-sum-exp (the sums
@@ -623,7 +690,7 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
           double tu[4], tv[4], sx[4], sy[4], sz[4];
           const glm::dvec3 first =
               origin + static_cast<double>(j) * step_j + static_cast<double>(i) * step_i;
-          const int bits = RowCandidatesAvx2(tool + j * nx + i, std::min(4, i1 - i), first, step_i,
+          const int bits = RowCandidatesAvx2(tool + j * tnx + i, std::min(4, i1 - i), first, step_i,
                                              along_a, inv_h, nx, ny, bound, m_ref - cutoff, tested,
                                              cell, tu, tv, sx, sy, sz);
           out.nodes_tested += tested;
@@ -646,7 +713,7 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
     for (int j = j0; j < j1; ++j) {
       const glm::dvec3 row = origin + static_cast<double>(j) * step_j;
       for (int i = i0; i < i1; ++i) {
-        const float a = tool[j * nx + i];
+        const float a = tool[j * tnx + i];
         if (!std::isfinite(a)) continue;
         const glm::dvec3 s =
             row + static_cast<double>(i) * step_i + static_cast<double>(a) * along_a;
@@ -676,8 +743,8 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
   // A block: each of its sub-blocks whose own bound reaches within the cutoff.
   const auto visit_block = [&](int b) noexcept {
     const int ti = b % bx, tj = b / bx;
-    const int i_end = std::min(nx, (ti + 1) * kDepthFieldBlock);
-    const int j_end = std::min(ny, (tj + 1) * kDepthFieldBlock);
+    const int i_end = std::min(tnx, (ti + 1) * kDepthFieldBlock);
+    const int j_end = std::min(tny, (tj + 1) * kDepthFieldBlock);
     for (int j0 = tj * kDepthFieldBlock; j0 < j_end; j0 += kDepthFieldSubBlock) {
       for (int i0 = ti * kDepthFieldBlock; i0 < i_end; i0 += kDepthFieldSubBlock) {
         const int i1 = std::min(i_end, i0 + kDepthFieldSubBlock);
@@ -687,7 +754,7 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
         const float a_lo = f.tool_sub_min_m[sb], a_hi = f.tool_sub_max_m[sb];
         if (!(a_lo <= a_hi)) continue;
         if (!(box_bound(i0, i1 - 1, j0, j1 - 1, a_lo, a_hi, f.env_sub_bound_m.data(),
-                        kDepthFieldSubBlock, sbx) >= m_ref - cutoff)) {
+                        kDepthFieldSubBlock, env_sbx) >= m_ref - cutoff)) {
           continue;
         }
         if (out.nodes_evaluated >= max_nodes) return;  // over budget: stopped
@@ -695,11 +762,59 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
       }
     }
   };
+  // The blocks' bounds of super-block k of super_order (once).
+  int supers_bounded = 0;
+  int best_block = -1;
+  float best_ub = -std::numeric_limits<float>::infinity();
+  const auto bound_blocks = [&](int k) noexcept {
+    const int g = super_order[static_cast<std::size_t>(k)];
+    const int bi0 = (g % gx) * kBlocksPerSuper, bj0 = (g / gx) * kBlocksPerSuper;
+    const int bi1 = std::min(bx, bi0 + kBlocksPerSuper), bj1 = std::min(by, bj0 + kBlocksPerSuper);
+    for (int tj = bj0; tj < bj1; ++tj) {
+      for (int ti = bi0; ti < bi1; ++ti) {
+        const int b = tj * bx + ti;
+        float& ub = block_ub[static_cast<std::size_t>(b)];
+        ub = -std::numeric_limits<float>::infinity();
+        const float a_lo = f.tool_block_min_m[static_cast<std::size_t>(b)];
+        const float a_hi = f.tool_block_max_m[static_cast<std::size_t>(b)];
+        if (!(a_lo <= a_hi)) continue;  // no tool node
+        const int i0 = ti * kDepthFieldBlock, i1 = std::min(tnx, i0 + kDepthFieldBlock) - 1;
+        const int j0 = tj * kDepthFieldBlock, j1 = std::min(tny, j0 + kDepthFieldBlock) - 1;
+        ub = static_cast<float>(box_bound(i0, i1, j0, j1, a_lo, a_hi, f.env_block_bound_m.data(),
+                                          kDepthFieldBlock, env_bx));
+        if (ub > best_ub) {
+          best_ub = ub;
+          best_block = b;
+        }
+      }
+    }
+    supers_bounded = std::max(supers_bounded, k + 1);
+  };
+  // The best block over all: super-blocks in order of their bounds until the next one's cannot
+  // beat the best block's (a super-block's bound bounds its blocks').
+  for (int k = 0; k < num_supers; ++k) {
+    if (best_block >= 0 && !(super_ub[static_cast<std::size_t>(super_order[k])] > best_ub)) break;
+    bound_blocks(k);
+  }
+  if (best_block < 0) return out;  // no tool node over the environment's interpolant
   visit_block(best_block);
-  for (int b = 0; b < bx * by && out.nodes_evaluated < max_nodes; ++b) {
-    if (b == best_block) continue;
-    if (!(block_ub[static_cast<std::size_t>(b)] >= m_ref - cutoff)) continue;
-    visit_block(b);
+  // Then each super-block whose bound reaches within the cutoff of the running maximum, in order:
+  // its blocks that reach within it.
+  for (int k = 0; k < num_supers && out.nodes_evaluated < max_nodes; ++k) {
+    const int g = super_order[static_cast<std::size_t>(k)];
+    if (!(super_ub[static_cast<std::size_t>(g)] >= m_ref - cutoff)) break;  // nor any after it
+    if (k >= supers_bounded) bound_blocks(k);
+    const int bi0 = (g % gx) * kBlocksPerSuper, bj0 = (g / gx) * kBlocksPerSuper;
+    const int bi1 = std::min(bx, bi0 + kBlocksPerSuper), bj1 = std::min(by, bj0 + kBlocksPerSuper);
+    for (int tj = bj0; tj < bj1 && out.nodes_evaluated < max_nodes; ++tj) {
+      for (int ti = bi0; ti < bi1 && out.nodes_evaluated < max_nodes; ++ti) {
+        const int b = tj * bx + ti;
+        if (b == best_block || !(block_ub[static_cast<std::size_t>(b)] >= m_ref - cutoff)) {
+          continue;
+        }
+        visit_block(b);
+      }
+    }
   }
   if (out.nodes_evaluated >= max_nodes) {
     out.over_budget = true;

@@ -25,9 +25,11 @@ namespace ht {
 inline constexpr double kDepthFieldSmoothMaxM = 2e-6;
 
 /// Side (nodes) of the blocks a depth field's evaluation prunes by (DepthField::env_block_bound_m),
-/// and of the sub-blocks it prunes a block's nodes by in turn (env_sub_bound_m).
+/// of the sub-blocks it prunes a block's nodes by in turn (env_sub_bound_m), and of the
+/// super-blocks it prunes blocks by first (env_super_bound_m).
 inline constexpr int kDepthFieldBlock = 8;
 inline constexpr int kDepthFieldSubBlock = 4;
+inline constexpr int kDepthFieldSuperBlock = 32;
 
 /// Most tool nodes one evaluation of a field computes in the operator's loop (DepthFieldCache):
 /// beyond, the evaluation stops (DepthFieldEvaluation::over_budget) and the cache renders that
@@ -35,6 +37,17 @@ inline constexpr int kDepthFieldSubBlock = 4;
 /// stays bounded. A face resting on the gear's ridges computes up to ~4,600 nodes; two blocks'
 /// interlocked stripes (seed Fig. 76) up to ~38,000, which would take ~1 ms a field.
 inline constexpr int kDepthFieldMaxNodes = 8192;
+
+/// Most tool nodes a prepared field's evaluation at its own pose X_WT0 computes: where more of
+/// them lie within the smooth maximum's cutoff of the deepest (surfaces that bear over a wide
+/// area, as the striped blocks' interlocked stripes of seed Fig. 76), DepthField::Prepare keeps
+/// only every s-th tool node of the tool's lattice along each axis (s = 2, 4, …,
+/// kMaxDepthFieldNodeStride, the smallest that brings it within this), so that the loop
+/// evaluates such a field in bounded time instead of falling back to its linearization. The
+/// nodes kept are fixed on the tool's lattice, so that successive fields keep the same ones.
+inline constexpr int kDepthFieldDenseNodes = 2048;
+/// Largest DepthField::node_stride.
+inline constexpr int kMaxDepthFieldNodeStride = 8;
 
 /// Largest number of nodes per side of a depth field's grid (the window's N plus twice the travel
 /// margin, in cells): bounds the memory the operator's loop preallocates per field.
@@ -87,13 +100,22 @@ struct DepthField {
   /// column unused): an upper bound on the bicubic b over that cell (m), −∞ where its 4×4 stencil
   /// is incomplete (no interpolant there).
   std::vector<float> env_bound_m;
+  /// The tool nodes the evaluation takes (kDepthFieldDenseNodes): those whose lattice
+  /// coordinates (tool_lattice_i0 + i, tool_lattice_j0 + j) are both multiples of node_stride
+  /// (1: all), as a grid of tool_nx × tool_ny (row-major) whose node (p, q) is tool node
+  /// (tool_i0 + p·node_stride, tool_j0 + q·node_stride).
+  int node_stride = 1;
+  int tool_i0 = 0, tool_j0 = 0, tool_nx = 0, tool_ny = 0;
+  std::vector<float> tool_grid_m;
   /// Per block of kDepthFieldBlock² grid cells (#ceil(nx/B)·ceil(ny/B), row-major): the largest
-  /// env_bound_m in it (m). Per block of as many tool nodes: their smallest and largest a (m;
-  /// +∞ and −∞ where the block has none). The evaluation skips a tool block whose moved box
-  /// cannot reach within the cutoff of the deepest node found.
+  /// env_bound_m in it (m). Per block of as many kept tool nodes (on tool_grid_m): their smallest
+  /// and largest a (m; +∞ and −∞ where the block has none). The evaluation skips a tool block
+  /// whose moved box cannot reach within the cutoff of the deepest node found.
   std::vector<float> env_block_bound_m, tool_block_min_m, tool_block_max_m;
-  /// The same per sub-block of kDepthFieldSubBlock² cells or nodes.
+  /// The same per sub-block of kDepthFieldSubBlock² cells or nodes, and per super-block of
+  /// kDepthFieldSuperBlock².
   std::vector<float> env_sub_bound_m, tool_sub_min_m, tool_sub_max_m;
+  std::vector<float> env_super_bound_m, tool_super_min_m, tool_super_max_m;
   /// Prepare's scratch: the rows' Bézier coefficients (#4·nx·ny).
   std::vector<float> row_coefficients_m;
   /// An upper bound (m) on the distance of a tool node from the tool's centre of mass at X_WT0
@@ -103,9 +125,14 @@ struct DepthField {
 
   /// Checks the field (id ≠ 0, finite frames, h > 0 and finite, nx and ny in
   /// [4, kMaxDepthFieldSide], both maps #nx·ny, the tool's offsets within ±h, margin ≥ 0, ε > 0)
-  /// and derives env_bound_m, the blocks' bounds and tool_radius_m. Allocates only when the
-  /// buffers' capacity is short. Returns false, leaving prepared false, on a bad field.
+  /// and derives env_bound_m, the kept tool nodes, the blocks' bounds and tool_radius_m: all
+  /// tool nodes, or, where the evaluation at X_WT0 computes more than kDepthFieldDenseNodes of
+  /// them, every node_stride-th. Allocates only when the buffers' capacity is short. Returns
+  /// false, leaving prepared false, on a bad field.
   bool Prepare();
+  /// Keeps every `stride`-th tool node of the tool's lattice (node_stride, tool_grid_m and the
+  /// tool's bounds). Prepare's.
+  void KeepToolNodes(int stride);
   /// Reserves the maps, the bounds and the blocks for kMaxDepthFieldSide² nodes (not Prepare's
   /// scratch), so that a field swapped into a cache slot keeps buffers of that size. Allocates.
   void Reserve();
