@@ -156,17 +156,12 @@ int main(int argc, char** argv) {
       "depth_fields (0/1: the contact model as depth fields, evaluated by the tick at its\n"
       "tool pose), field_subdivision (nodes per window cell, default 2), field_speed_mm_s\n"
       "(the fields' travel margin is this times the round trip, default 50) with\n"
-      "field_min_margin_mm (default 2), field_smooth_max_um (the smooth maximum's width);\n"
-      "translation_patch (-1: from a 10 ms round trip as slave_sim, also with fields; 0 never;\n"
-      "1 always)");
+      "field_min_margin_mm (default 2), field_smooth_max_um (the smooth maximum's width)");
   std::string reference_keys;
   app.add_option("--reference-keys", reference_keys,
                  "the reference arm's own keys, as --arm's KEY=V,... (its deadbands stay off):\n"
                  "e.g. depth_fields=1 to judge the depth fields under delay against the fields\n"
                  "undelayed");
-  app.add_flag("--translation-patch", setup.translation_patch,
-               "every contact model carries its translation patch (slave_sim --translation-patch;\n"
-               "by default the remote node sends patches from a 10 ms round trip)");
   app.add_option("--out", out_dir,
                  "folder for summary.json and one trace per arm, ARM.csv (created); default:\n"
                  "the table on stdout only");

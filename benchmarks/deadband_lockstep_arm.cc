@@ -67,8 +67,7 @@ double NonNegative(const std::string& key, double v) {
 /// --model-deadband-*-floor), release_ticks, energy_bounded_switch, switch_spend,
 /// offset_release_ms (the operator tick's passivity options), setting (a frontier setting's name:
 /// the remote step's options), depth_fields, field_min_margin_mm, field_smooth_max_um,
-/// field_subdivision, field_speed_mm_s (the contact model as depth fields), translation_patch
-/// (-1 by the round trip as the remote node, 0 never, 1 always). Defaults:
+/// field_subdivision, field_speed_mm_s (the contact model as depth fields). Defaults:
 /// master_station's and slave_sim's, deadband 10 %.
 
 /// A depth field's datagrams: each carries up to this many of its bytes (a 1,400-byte datagram
@@ -163,8 +162,6 @@ Arm ParseArm(const std::string& text) {
     } else if (key == "field_smooth_max_um") {
       if (!(v > 0.0)) throw std::invalid_argument("--arm: field_smooth_max_um must be > 0");
       arm.depth_field_smooth_max_m = v * 1e-6;
-    } else if (key == "translation_patch") {  // -1 by the round trip, 0 never, 1 always
-      arm.translation_patch = v < 0.0 ? -1 : (v > 0.0 ? 1 : 0);
     } else if (key == "force_floor") {
       arm.model.force_floor_scale_n = v;
     } else if (key == "torque_floor") {
@@ -216,9 +213,6 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
   tool.X_WT.translation[setup.seed_axis] += setup.start_offset_m;
   OperatorTick tick(tc, X_WM, tool);
 
-  // The translation patches by the round trip, as the remote node's default
-  // (RemoteNodeConfig::translation_patch_rtt_ms, 10 ms), also with depth fields (the fallback
-  // reads them): here on from the first step.
   const FrontierSetting setting =
       FrontierSettingNamed(arm.setting.empty() ? setup.setting : arm.setting);
   PipelineOptions options = PipelineOptionsFor(setting);
@@ -246,10 +240,6 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     options.depth_field_subdivision = arm.depth_field_subdivision;
     options.Validate();
   }
-  options.depth_refinement.translation_patch =
-      arm.translation_patch > 0 ||
-      (arm.translation_patch < 0 &&
-       (setup.translation_patch || rtt_ms >= RemoteNodeConfig{}.translation_patch_rtt_ms));
   // The CPU backend with the setting's texture path and rotation gradient (as the frontier makes
   // it; with the default setting, what slave_sim --pd-backend cpu makes).
   HapticTexturePipeline pipeline(

@@ -49,10 +49,6 @@ struct Arm {
   int depth_field_subdivision = ht::PipelineOptions{}.depth_field_subdivision;
   /// The fields' smooth-maximum width (m; < 0: PipelineOptions' default).
   double depth_field_smooth_max_m = -1.0;
-  /// Translation patches (DepthRefinementOptions::translation_patch): < 0 as the remote node's
-  /// default (from RemoteNodeConfig::translation_patch_rtt_ms of round trip, also with fields),
-  /// 0 never, > 0 always.
-  int translation_patch = -1;
 };
 
 /// What one arm's run gives, tick by tick and in all.
@@ -87,8 +83,6 @@ struct Setup {
   const ht::HapticScene* scene = nullptr;
   /// The remote step's setting when an arm names none (a frontier setting's name).
   std::string setting = "default";
-  /// With --translation-patch: every model carries its patch, whatever the round trip.
-  bool translation_patch = false;
   std::string replay_file;
   /// A handle trajectory to replay (in M), taking the place of replay_file and the simulated
   /// hand when not empty (--hand-from-reference).

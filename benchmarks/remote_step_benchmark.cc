@@ -86,16 +86,6 @@ int main(int argc, char** argv) {
   app.add_flag("--no-seed-from-last-step", no_seed_from_last_step,
                "stage 5b without the last step's deepest points as seeds (by default a pose's "
                "repeats seed each other: DepthRefinementOptions::seed_from_last_step)");
-  bool translation_patch = false;
-  app.add_flag("--translation-patch", translation_patch,
-               "stage 5b: each contact's depth over in-plane translations of the tool "
-               "(DepthRefinementOptions::translation_patch)");
-  int translation_patch_spacing_cells = 1;
-  app.add_option("--translation-patch-spacing-cells", translation_patch_spacing_cells,
-                 "with --translation-patch: the nodes' spacing in grid cells "
-                 "(DepthRefinementOptions::translation_patch_spacing_cells)")
-      ->check(CLI::Range(1, ht::kMaxTranslationPatchSpacing))
-      ->capture_default_str();
   std::string ab;
   app.add_option("--ab", ab,
                  "also step a pipeline with this option of the remote step turned the other way, "
@@ -161,8 +151,6 @@ int main(int argc, char** argv) {
     options.share_connected_contacts = !no_sharing;
     options.depth_refinement.parallax = parallax;
     options.depth_refinement.seed_from_last_step = !no_seed_from_last_step;
-    options.depth_refinement.translation_patch = translation_patch;
-    options.depth_refinement.translation_patch_spacing_cells = translation_patch_spacing_cells;
     // Arm A is the options as given; arm B (with --ab) the same with one option flipped.
     ht::PipelineOptions options_b = options;
     std::string label_b;

@@ -26,9 +26,6 @@ expect slave_sim "--split-continuous-um" "$build/slave_sim/slave_sim" --split-co
 expect slave_sim "CPU texture stage" "$build/slave_sim/slave_sim" --key "$tmp/k.key" --split-continuous-um 50 --pd-backend gpu
 expect slave_sim "--no-split" "$build/slave_sim/slave_sim" --key "$tmp/k.key" --no-split --split-continuous-um 100
 expect slave_sim "--model-deadband-torque-floor" "$build/slave_sim/slave_sim" --model-deadband-torque-floor 0
-expect slave_sim "--translation-patch-rtt-ms" "$build/slave_sim/slave_sim" --translation-patch-rtt-ms -1
-expect slave_sim "excludes" "$build/slave_sim/slave_sim" --translation-patch --no-translation-patch
-expect slave_sim "excludes" "$build/slave_sim/slave_sim" --translation-patch --translation-patch-rtt-ms 5
 expect slave_sim "keygen" "$build/slave_sim/slave_sim" --key "$tmp/no_such.key"
 expect master_station "keygen" "$build/master_station/master_station" --key "$tmp/no_such.key"
 expect master_station "--rate" "$build/master_station/master_station" --rate 5

@@ -77,27 +77,15 @@ TEST_F(ImpairedRun, TheSessionHeldAndNothingWentNonFinite) {
   EXPECT_EQ(s_["remote"]["transport"]["rejected_by_reason"].value("bad_mac", 0), 0);
 }
 
-// Protocol version 10: the operator's Pings carry the round trip it measures, and the remote node
-// sends translation patches from its threshold (10 ms by default). Two routes to the round trip:
-// the last one the node heard is one the operator says it sent. The relay's delays are far from
-// the threshold (0.3, about 100 and 300 ms), so the patches are on at the end exactly when the
-// round trip reaches it, and then went out with the models in contact.
-TEST_F(ImpairedRun, TheRemoteNodeHearsTheRoundTripAndSendsPatchesFromIt) {
-  const nlohmann::json& by = s_["remote"]["translation_patch_by_rtt"];
-  ASSERT_FALSE(by["rtt_ms"].is_null()) << "the run turned the round-trip rule off";
-  const double threshold_ms = by["rtt_ms"].get<double>();
-  const double heard_ms = by["operator_rtt_ms_last"].get<double>();
+// Protocol version 10: the operator's Pings carry the round trip it measures, from which the
+// remote node sets its speculative floor and its depth fields' margin. Two routes to the round
+// trip: the last one the node heard is one the operator says it sent.
+TEST_F(ImpairedRun, TheRemoteNodeHearsTheRoundTripItsOperatorMeasures) {
+  const double heard_ms = s_["remote"]["operator_rtt_ms_last"].get<double>();
   const nlohmann::json& clock = s_["transport"]["clock"];
   EXPECT_GT(heard_ms, 0.0);
   EXPECT_GE(heard_ms, clock["rtt_reported_ms_min"].get<double>() - 1e-9) << clock.dump();
   EXPECT_LE(heard_ms, clock["rtt_reported_ms_max"].get<double>() + 1e-9) << clock.dump();
-  EXPECT_EQ(by["on_at_end"].get<bool>(), heard_ms >= threshold_ms) << by.dump();
-  if (heard_ms >= threshold_ms) {
-    EXPECT_GT(by["steps_with_patch_on"].get<int>(), 0);
-    if (s_["remote"]["contacts_max"].get<int>() > 0) {
-      EXPECT_GT(s_["remote"]["transport"]["translation_patches"]["sent"].get<int>(), 0);
-    }
-  }
 }
 
 TEST_F(ImpairedRun, TheSceneArrivedWholeAndDecodes) {

@@ -151,8 +151,8 @@ void NetworkWorker::RunNetwork(const std::atomic<bool>& stop) {
       last_send_ns = now;
     }
     if (now - last_ping_ns >= heartbeat_ns_) {
-      // The round trip measured so far goes with the probe (the remote node's
-      // translation_patch_rtt_ms decides from it); 0 until a Pong came back (the handshake's
+      // The round trip measured so far goes with the probe (the remote node sizes its depth
+      // fields' margin and speculative floor from it); 0 until a Pong came back (the handshake's
       // time counts from the first Hello of its nonce, retransmissions included).
       const std::int64_t rtt_ns = clock_.valid() ? clock_.rtt_ns() : 0;
       wire::PingMessage ping;

@@ -61,14 +61,7 @@ PipelineOptions PipelineOptionsFor(const FrontierSetting& st) {
   options.depth_refinement.seed_from_last_step = st.seed_from_last_step;
   options.depth_refinement.parallax_offset_seeds = st.parallax_offset_seeds;
   options.clustering_angle_deg = st.clustering_angle_deg;
-  options.depth_refinement.translation_patch = st.translation_patch;
-  options.depth_refinement.translation_patch_neighbour_climbs =
-      st.translation_patch_neighbour_climbs;
-  options.depth_refinement.translation_patch_floor_texels = st.translation_patch_floor_texels;
-  options.depth_refinement.translation_patch_spacing_cells = st.translation_patch_spacing_cells;
   options.depth_refinement.neighbour_peak_seeds = st.neighbour_peak_seeds;
-  options.depth_refinement.translation_patch_follows_rotation =
-      st.translation_patch_follows_rotation;
   options.depth_fields = st.depth_fields;
   options.depth_field_subdivision = st.depth_field_subdivision;
   // The texture stage's threads are the coarse query's too, as in the product.
@@ -283,16 +276,6 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     s.push_back(hang);
     // Issue 32: stage 5b's variants (the default refines).
     const FrontierSetting& refined = base;
-    // Issue 32, nineteenth stop: each contact's depth over in-plane translations (a 5×5 patch at
-    // the grid's step), for the model-prediction measure.
-    FrontierSetting patch = refined;
-    patch.name = "translation_patch";
-    patch.translation_patch = true;
-    s.push_back(patch);
-    FrontierSetting patch_rotation = patch;
-    patch_rotation.name = "translation_patch_follows_rotation";
-    patch_rotation.translation_patch_follows_rotation = true;
-    s.push_back(patch_rotation);
     // The contact model as depth fields, on the window's grid refined twice (the default) and
     // on the window's own grid.
     FrontierSetting fields = base;
@@ -303,22 +286,6 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     fields_s1.name = "depth_fields_s1";
     fields_s1.depth_field_subdivision = 1;
     s.push_back(fields_s1);
-    FrontierSetting patch_climbs = patch;
-    patch_climbs.name = "translation_patch_neighbour_climbs";
-    patch_climbs.translation_patch_neighbour_climbs = true;
-    s.push_back(patch_climbs);
-    for (const int texels : {1, 2}) {
-      FrontierSetting patch_floor = patch;
-      patch_floor.name = "translation_patch_floor" + std::to_string(texels);
-      patch_floor.translation_patch_floor_texels = texels;
-      s.push_back(patch_floor);
-    }
-    for (const int cells : {2, 3}) {
-      FrontierSetting patch_spacing = patch;
-      patch_spacing.name = "translation_patch_spacing" + std::to_string(cells);
-      patch_spacing.translation_patch_spacing_cells = cells;
-      s.push_back(patch_spacing);
-    }
     // Stage 5b without the neighbouring peaks as seeds (the default before issue 32's
     // thirty-fourth stop).
     FrontierSetting no_neighbour_peaks = refined;

@@ -123,41 +123,6 @@ void AddDepthOptions(CLI::App& app, NodeCommandLine& cl) {
       "rougher (docs/frontier/issue32/twenty_sixth_stop)");
 }
 
-// Translation patches.
-void AddTranslationPatchOptions(CLI::App& app, NodeCommandLine& cl) {
-  CLI::Option* rtt_option =
-      app.add_option(
-             "--translation-patch-rtt-ms", cl.translation_patch_rtt_ms,
-             "each contact model also carries its contacts' depth over in-plane\n"
-             "translations of the tool (a 5x5 patch one grid cell apart, 75 bytes a\n"
-             "contact) from when the round trip the operator measures (its pings carry\n"
-             "it) reaches this many ms until it falls below 0.8 of it: the operator's\n"
-             "loop then follows the texture's ridges a round trip away from where the\n"
-             "model was made instead of extending the tangent. The remote step costs\n"
-             "20-80 % more while they go, nothing below. 10 ms is half a grid cell of hand\n"
-             "motion at 20-50 mm/s with the default --window and --grid (0.4 mm cells);\n"
-             "0: from the first measured round trip (issue 33; docs/passivity)")
-          ->capture_default_str()
-          ->check(CLI::Range(0.0, 60000.0));
-  app.add_flag("--translation-patch", cl.translation_patch,
-               "always send the translation patches, whatever the round trip")
-      ->excludes(rtt_option);
-  app.add_flag("--no-translation-patch", cl.no_translation_patch,
-               "never send translation patches, whatever the round trip")
-      ->excludes("--translation-patch")
-      ->excludes(rtt_option);
-  app.add_flag("--translation-patch-follows-rotation", cl.translation_patch_follows_rotation,
-               "whenever translation patches go: the loop also reads the patch where a turn of\n"
-               "the tool slides the contact (its lever from the tool's centre of mass)")
-      ->excludes("--no-translation-patch");
-  app.add_option("--translation-patch-spacing-cells", cl.translation_patch_spacing_cells,
-                 "whenever translation patches go: their nodes' spacing in grid cells, so that\n"
-                 "a patch spans ±2 spacings (wider for a tool that moves further in a round trip,\n"
-                 "coarser on the ridges)")
-      ->check(CLI::Range(1, kMaxTranslationPatchSpacing))
-      ->capture_default_str();
-}
-
 // Stages 5a (the split) and 5c (shared penalties).
 void AddSplitAndSharingOptions(CLI::App& app, NodeCommandLine& cl) {
   app.add_option(
@@ -352,17 +317,6 @@ void FinishDepthConfig(const CLI::App& app, const NodeCommandLine& cl, RemoteNod
   refinement.neighbour_peak_seeds = !cl.no_neighbour_peak_seeds;
   pipeline.clustering_angle_deg = cl.clustering_angle_deg;
   pipeline.kink_hang_other_arm = cl.kink_hang_other_arm;
-  refinement.translation_patch = cl.translation_patch;
-  refinement.translation_patch_follows_rotation = cl.translation_patch_follows_rotation;
-  refinement.translation_patch_spacing_cells = cl.translation_patch_spacing_cells;
-  config.translation_patch_rtt_ms = cl.no_translation_patch
-                                        ? std::numeric_limits<double>::infinity()
-                                        : cl.translation_patch_rtt_ms;
-  if ((cl.translation_patch || app.count("--translation-patch-rtt-ms") > 0) && cl.no_refine_depth) {
-    throw std::invalid_argument(
-        std::string(cl.translation_patch ? "--translation-patch" : "--translation-patch-rtt-ms") +
-        " needs stage 5b (drop --no-refine-depth): the patch's nodes are refined maxima");
-  }
 }
 
 // Stages 5a and 5c, and speculative contacts. Returns whether a split option was given.
@@ -429,7 +383,6 @@ void AddNodeOptions(CLI::App& app, NodeCommandLine& cl) {
   AddSceneOptions(app, cl);
   AddWindowOptions(app, cl);
   AddDepthOptions(app, cl);
-  AddTranslationPatchOptions(app, cl);
   AddSplitAndSharingOptions(app, cl);
   AddSpeculativeOptions(app, cl);
   AddBackendOptions(app, cl);

@@ -42,12 +42,6 @@ struct NodeCommandLine {
   bool no_seed_from_last_step = false;
   bool kink_hang_other_arm = false;
 
-  // Translation patches (AddTranslationPatchOptions).
-  double translation_patch_rtt_ms = RemoteNodeConfig{}.translation_patch_rtt_ms;
-  bool translation_patch = false;
-  bool no_translation_patch = false;
-  bool translation_patch_follows_rotation = false;
-  int translation_patch_spacing_cells = 1;
 
   // Stages 5a and 5c (AddSplitAndSharingOptions).
   double split_windows_link_mm = 10.0;

@@ -93,18 +93,6 @@ std::int64_t WarmUpPenetrationDepth(PenetrationDepthBackend& backend, const Hapt
   return backend.faults().missing_overlap;
 }
 
-// Whether the next step fills translation patches (RemoteNodeConfig::translation_patch_rtt_ms):
-// always with the option, else from the threshold on and, once on (`on_now`), until the round
-// trip the operator reported (ns; 0: none yet) falls below kTranslationPatchOffFraction of it.
-bool TranslationPatchWanted(const RemoteNodeConfig& config, std::int64_t operator_rtt_ns,
-                            bool on_now) noexcept {
-  if (config.pipeline.depth_refinement.translation_patch) return true;
-  const double threshold_ms = config.translation_patch_rtt_ms;
-  if (!std::isfinite(threshold_ms) || operator_rtt_ns <= 0) return false;
-  const double rtt_ms = static_cast<double>(operator_rtt_ns) * 1e-6;
-  return rtt_ms >= (on_now ? kTranslationPatchOffFraction * threshold_ms : threshold_ms);
-}
-
 // Throws std::invalid_argument naming the first option of `config` out of range.
 void CheckConfig(const RemoteNodeConfig& config) {
   config.pipeline.Validate();
@@ -113,11 +101,6 @@ void CheckConfig(const RemoteNodeConfig& config) {
                                 std::to_string(config.max_deadband));
   }
   config.model_deadband.Validate();
-  if (!(config.translation_patch_rtt_ms >= 0.0)) {
-    throw std::invalid_argument(
-        "translation patch round trip must be >= 0 ms (infinite: never by the round trip), got " +
-        std::to_string(config.translation_patch_rtt_ms));
-  }
   if (!(config.speculative_speed_m_per_s >= 0.0) ||
       !std::isfinite(config.speculative_speed_m_per_s)) {
     throw std::invalid_argument("speculative speed must be a finite value >= 0 m/s, got " +
@@ -260,9 +243,7 @@ void RemoteNodeRun::SwitchToReloadedScene() {
   try {
     // The new pipeline moves the backend to the new scene (UseScene: the GPU uploads the new
     // models before the first step and frees the old ones').
-    const bool patch_was_on = pipeline_->translation_patch();
     pipeline_ = std::make_unique<HapticTexturePipeline>(*next, config_.pipeline, std::move(kept));
-    pipeline_->SetTranslationPatch(patch_was_on);  // the round trip's choice goes on
   } catch (const std::exception& e) {
     // The GPU refused the new models: the CPU backend, as after a failed batch.
     std::printf("[slave] the %s backend failed on the rebuilt scene (%s); CPU backend\n",
@@ -364,18 +345,6 @@ void RemoteNodeRun::StepOrWait() {
 }
 
 void RemoteNodeRun::FollowRoundTrip() {
-  // The translation patches by the operator's round trip. A switch sends the next model whatever
-  // the deadband (it compares forces, not patches).
-  if (config_.pipeline.refine_depth) {
-    const bool was_on = pipeline_->translation_patch();
-    const bool patch = TranslationPatchWanted(config_, session_->operator_rtt_ns(), was_on);
-    if (patch != was_on) {
-      pipeline_->SetTranslationPatch(patch);
-      session_->ResendNextModel();
-      ++patch_switches_;
-    }
-    if (patch) ++steps_with_patch_on_;
-  }
   // Depth fields for a session whose operator takes them, their margin by its round trip.
   if (session_->depth_fields() != pipeline_->depth_fields()) {
     pipeline_->SetDepthFields(session_->depth_fields());

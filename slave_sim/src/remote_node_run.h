@@ -78,7 +78,6 @@ class RemoteNodeRun {
   std::uint64_t bad_mac_said_ = 0;  // bad-MAC datagrams already said
   std::int64_t bad_mac_said_ns_ = 0;
   bool reported_fallback_ = false;
-  std::uint64_t steps_with_patch_on_ = 0, patch_switches_ = 0;
   double largest_speculative_floor_m_ = 0.0;
   std::vector<StreamObject> reload_objects_;
   const HapticScene* current_scene_;  // the scene the pipeline steps (a reload moves it)

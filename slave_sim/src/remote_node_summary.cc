@@ -51,8 +51,8 @@ nlohmann::json RemoteNodeRun::Summary() const {
     // Stage 5b (issue 32), warm-up included: contacts refined, and per contact the seeds, the
     // evaluations of b − a and how far δ0 rose above the grid's; the conservative screen's
     // squares and leaves per contact, the contacts where it found a deeper point than the seeds
-    // (and Σ µm), and those it stopped at its leaf budget; the contacts given a translation
-    // patch, and whether the option is on; the last step's seeds searched, the contacts where one
+    // (and Σ µm), and those it stopped at its leaf budget; the last step's seeds searched, the
+    // contacts where one
     // was deeper than the grid's seeds (and Σ µm), and whether they are on.
     const DepthRefinementCounters& r = pipeline_->depth_refinement_counters();
     const double n = r.contacts > 0 ? static_cast<double>(r.contacts) : 1.0;
@@ -66,8 +66,6 @@ nlohmann::json RemoteNodeRun::Summary() const {
         {"screen_found_deeper", r.screen_found},
         {"screen_raised_um_sum", r.screen_raised_um},
         {"screen_truncated", r.screen_truncated},
-        {"translation_patches", r.translation_patches},
-        {"translation_patch", config_.pipeline.depth_refinement.translation_patch},
         {"last_step_seeds", r.last_step_seeds},
         {"last_step_found_deeper", r.last_step_found},
         {"last_step_raised_um_sum", r.last_step_raised_um},
@@ -78,16 +76,9 @@ nlohmann::json RemoteNodeRun::Summary() const {
         {"neighbour_peak_seeds", r.neighbour_peak_seeds},
         {"neighbour_peak_found_deeper", r.neighbour_peak_found},
         {"neighbour_peak_raised_um_sum", r.neighbour_peak_raised_um}};
-    // Whether the patches went by the operator's round trip (translation_patch_rtt_ms).
-    s["translation_patch_by_rtt"] = {
-        {"rtt_ms", std::isfinite(config_.translation_patch_rtt_ms)
-                       ? nlohmann::json(config_.translation_patch_rtt_ms)
-                       : nlohmann::json(nullptr)},
-        {"operator_rtt_ms_last", static_cast<double>(session_->operator_rtt_ns()) * 1e-6},
-        {"steps_with_patch_on", steps_with_patch_on_},
-        {"on_at_end", pipeline_->translation_patch()},
-        {"switches", patch_switches_}};
   }
+  // The round trip the operator's newest Ping reported (ms; 0: none yet).
+  s["operator_rtt_ms_last"] = static_cast<double>(session_->operator_rtt_ns()) * 1e-6;
   s["grazing_dropped_contacts"] = pipeline_->step_faults().grazing_dropped;
   s["unreachable_pairs_dropped"] = pipeline_->step_faults().unreachable_pairs;
   s["speculative_pairs"] = pipeline_->step_faults().speculative_pairs;

@@ -52,8 +52,9 @@ inline constexpr int kTranslationPatchSide = 2 * kTranslationPatchRadius + 1;
 
 /// A contact's depth over in-plane translations of the tool (our construction [R]): δ at the tool
 /// poses q0 displaced by (i·h, j·h) along the window's u and v (i, j ∈ [−R, R],
-/// R = kTranslationPatchRadius), each the refined maximum of b − a at that pose
-/// (DepthRefinementOptions::translation_patch). A linear model holds a ridge's slope only until
+/// R = kTranslationPatchRadius), each the refined maximum of b − a at that pose, as protocol
+/// version 9 carries it (no sender fills it now: the depth fields hold the surface where the tool
+/// is). A linear model holds a ridge's slope only until
 /// the tool has moved a fraction of the ridge's period; the patch holds δ over ±R·h, so that a
 /// model read a round trip after its q0 (issue 33) or a linearization point a deadband away from
 /// the tool still gives the surface's depth there. ContactDepthAt adds its residual to the
@@ -70,8 +71,7 @@ struct TranslationPatch {
   std::array<float, kTranslationPatchSide * kTranslationPatchSide> depth_m{};
   /// The contact point less the tool's centre of mass at q0 (m, W), or zero. Non-zero: a rotation
   /// Δθ of the tool also slides its surface at the contact by Δθ × lever, and the patch is read at
-  /// the in-plane part of Δx + Δθ × lever (DepthRefinementOptions::
-  /// translation_patch_follows_rotation).
+  /// the in-plane part of Δx + Δθ × lever.
   glm::dvec3 lever_W{0.0};
 };
 

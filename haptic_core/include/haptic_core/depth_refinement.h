@@ -67,9 +67,6 @@ double PatchHeightAt(const HapticModel& model, const RigidTransform& X_WO,
                      std::span<const int> triangles, const ContactWindow& window, PatchSide side,
                      double s_m, double t_m, int level = 0, bool parallax = false) noexcept;
 
-/// Largest DepthRefinementOptions::translation_patch_spacing_cells.
-inline constexpr int kMaxTranslationPatchSpacing = 4;
-
 /// How the depth is refined (issue 32).
 struct DepthRefinementOptions {
   /// Most sub-samples per side of a seed's square (its spacing is about two texels, at least one
@@ -77,38 +74,6 @@ struct DepthRefinementOptions {
   int max_subsamples = 6;
   /// The pattern search stops when its step falls below this many texels. > 0.
   double search_floor_texels = 0.25;
-  /// The contact's translation patch (TranslationPatch; off here, and the remote node turns it on
-  /// by the operator's round trip, DepthRefiner::SetTranslationPatch and
-  /// RemoteNodeConfig::translation_patch_rtt_ms): δ at the base pose
-  /// translated by (i·h, j·h) along u and v, i, j ∈ [−R, R], h = W/N (the grid's translation step,
-  /// so that the nodes one step away are the refined rendered samples ±h_x and the patch's tangent
-  /// at q0 is the default's secant; translation_patch_spacing_cells × W/N with that option). The
-  /// window's grid is rendered once more at the base pose with the tool grown by R spacings
-  /// (RenderPatchHeightsFast), each other node's deepest cell found over
-  /// the whole window by reading the tool's render shifted (DirectionalPenetrationDepthShifted),
-  /// and refined at level 0 as the rendered translation samples are (and, with
-  /// translation_patch_neighbour_climbs, from the neighbouring node's maximum). A node without
-  /// overlap holds the contact's linear prediction. Two renders, 20 scans and 20 pattern searches
-  /// more per contact than the default.
-  bool translation_patch = false;
-  /// With translation_patch: also climb each node from its neighbour's maximum (one step nearer
-  /// q0), where it stays and carried by the step; off (the default): from the grid's deepest cell
-  /// alone, the same model prediction at less patch time (measured: docs/measurements.md).
-  bool translation_patch_neighbour_climbs = false;
-  /// With translation_patch: the patch's lever is set (TranslationPatch::lever_W, the refined
-  /// deepest point less the tool's centre of mass), so that the loop reads the patch at the
-  /// contact's slide under a rotation too (a turn about n slides a contact 10 mm off the axis by
-  /// 10 µm a milliradian). Off: translations only.
-  bool translation_patch_follows_rotation = false;
-  /// With translation_patch: the pattern search's floor for the patch's nodes (texels, as
-  /// search_floor_texels); 0: search_floor_texels. A coarser floor takes fewer evaluations of
-  /// b − a per node. ≥ 0.
-  double translation_patch_floor_texels = 0.0;
-  /// With translation_patch: the nodes' spacing in grid cells (1 … kMaxTranslationPatchSpacing),
-  /// so that the patch spans ±2·spacing cells: wider for a tool that moves further in a round
-  /// trip, coarser on the ridges. At 1 the nodes one step away are the rendered samples; at more,
-  /// every node is searched.
-  int translation_patch_spacing_cells = 1;
   /// The rendered rotation samples (±h_θ about u, v and n) searched from a sub-grid of their
   /// deepest cell's square as the base and the translations are; off (the default): a pattern
   /// search from the cell's centre alone, fewer evaluations at the same error (measured:
@@ -207,8 +172,6 @@ struct DepthRefinementCounters {
   std::uint64_t parallax_offset_seeds = 0;
   std::uint64_t parallax_offset_found = 0;
   std::uint64_t parallax_offset_raised_um = 0;
-  /// Contacts given a translation patch (DepthRefinementOptions::translation_patch).
-  std::uint64_t translation_patches = 0;
   /// DepthRefinementOptions::seed_from_last_step: last-step seeds searched, and contacts where
   /// one gave a deeper point than the grid's seeds (and Σ of how much deeper, µm).
   std::uint64_t last_step_seeds = 0;
@@ -226,13 +189,10 @@ struct DepthRefinementCounters {
 /// (unless a window holds more coarse triangles, or more cells a side, than reserved).
 class DepthRefiner {
  public:
-  /// Reserves for windows of up to `max_triangles` coarse triangles per side and, when
-  /// max_triangles > 0, translation patches (DepthRefinementOptions::translation_patch, on now or
-  /// by SetTranslationPatch later) on windows of up to `max_resolution` cells a side
-  /// (PipelineOptions::max_window_resolution). Throws std::invalid_argument for bad options or a
-  /// max_resolution below 1.
+  /// Reserves for windows of up to `max_triangles` coarse triangles per side. Throws
+  /// std::invalid_argument for bad options.
   explicit DepthRefiner(const DepthRefinementOptions& options = {},
-                        std::size_t max_triangles = 8192, int max_resolution = 160);
+                        std::size_t max_triangles = 8192);
 
   /// Refines one contact that a backend linearized: `query` as the backend got it (the
   /// environment, its pose, the window, the triangle subsets), the tool posed at X_WT (frame T at
@@ -246,11 +206,6 @@ class DepthRefiner {
 
   const DepthRefinementCounters& counters() const noexcept { return counters_; }
   const DepthRefinementOptions& options() const noexcept { return options_; }
-  /// Turns DepthRefinementOptions::translation_patch on or off for the contacts refined from now
-  /// on (the remote node's choice by the operator's round trip, RemoteNodeConfig::
-  /// translation_patch_rtt_ms). noexcept; the patch's buffers are reserved at construction (for
-  /// windows up to its max_resolution), so that Refine allocates no more with it on than off.
-  void SetTranslationPatch(bool on) noexcept { options_.translation_patch = on; }
   /// DepthRefinementOptions::seed_from_last_step: the deepest points of the contacts refined
   /// since the last call become the seeds of the contacts refined from now on (at most
   /// kMaxLastStepSeeds, the first ones kept), and the buffer for this step's starts empty. Call
@@ -294,13 +249,6 @@ class DepthRefiner {
   // The finer level-0 texel (m) of env_local_ and `tool_tris` (a quarter cell where neither is
   // textured: a smooth coarse surface is linear inside its triangles).
   double TexelOfGathered(std::span<const Projected> tool_tris) const noexcept;
-  // DepthRefinementOptions::translation_patch: lin.patch at step translation_patch_spacing_cells
-  // × cell_step (m, cell_step the window's cell) for the tool at X_WT, from the deepest (q0's
-  // maximum) and, at a spacing of one cell, the refined translation samples `found` (index k − 1
-  // for rendered sample k = 1…4, at ±cell_step along u and along v).
-  void FillTranslationPatch(const RigidTransform& X_WT, const Seed& deepest,
-                            std::span<const Seed> found, double cell_step,
-                            ContactLinearization& lin) noexcept;
   // The triangles of `list` facing the side's way, projected on the window at pose X.
   void ProjectAll(const HapticModel& model, const RigidTransform& X, PatchSide side,
                   std::span<const int> list, std::vector<Projected>& out) noexcept;
@@ -345,9 +293,6 @@ class DepthRefiner {
   // rendered rotation at a time), and those near the point being searched.
   std::vector<Projected> env_all_, tool_all_, tool_pose_all_;
   std::vector<Projected> env_local_, tool_local_, tool_moved_;
-  // The translation patch's grid: the environment's render and the tool's, grown by
-  // kTranslationPatchRadius cells.
-  std::vector<float> patch_env_heights_, patch_tool_heights_;
   // Set per contact.
   const HapticModel* env_ = nullptr;
   const HapticModel* tool_ = nullptr;

@@ -411,11 +411,6 @@ class HapticTexturePipeline {
   std::span<const DepthSample> last_depth_samples() const noexcept;
   /// What stage 5b did since construction.
   const DepthRefinementCounters& depth_refinement_counters() const noexcept;
-  /// Turns stage 5b's translation patch (DepthRefinementOptions::translation_patch, which sets
-  /// it at construction) on or off from the next Step() on; nothing without
-  /// PipelineOptions::refine_depth. The remote node turns it on while the operator's round trip
-  /// is long (RemoteNodeConfig::translation_patch_rtt_ms). noexcept, allocation-free.
-  void SetTranslationPatch(bool on) noexcept;
   /// PipelineOptions::speculative_floor_m (m) from the next Step() on; a negative or non-finite
   /// value is taken as 0. The remote node sets it from the operator's round trip. noexcept.
   void SetSpeculativeFloor(double floor_m) noexcept {
@@ -443,10 +438,6 @@ class HapticTexturePipeline {
   /// the next step's contacts start from their grid alone, as after construction (for a pose that
   /// does not follow the last one, e.g. the frontier's spread poses). noexcept.
   void ForgetLastStep() noexcept;
-  /// Whether stage 5b fills translation patches in the next Step(): the last SetTranslationPatch,
-  /// else DepthRefinementOptions::translation_patch; always false without
-  /// PipelineOptions::refine_depth (stage 5b does not run).
-  bool translation_patch() const noexcept;
 
  private:
   /// Stages 1–3 for every touchable: appends to the data's candidates (up to kMaxContacts) and

@@ -517,10 +517,6 @@ const DepthRefinementCounters& HapticTexturePipeline::depth_refinement_counters(
   return data_->refiner.counters();
 }
 
-void HapticTexturePipeline::SetTranslationPatch(bool on) noexcept {
-  data_->refiner.SetTranslationPatch(on);
-}
-
 void HapticTexturePipeline::SetDepthFields(bool on) {
   if (on && !options_.depth_fields) {
     for (DepthField& f : data_->field_pool) {
@@ -536,10 +532,6 @@ void HapticTexturePipeline::SetDepthFields(bool on) {
 void HapticTexturePipeline::ForgetLastStep() noexcept {
   data_->refiner.ForgetLastStep();
   for (DepthField& f : data_->field_pool) f.prepared = false;  // none reused
-}
-
-bool HapticTexturePipeline::translation_patch() const noexcept {
-  return options_.refine_depth && data_->refiner.options().translation_patch;
 }
 
 }  // namespace ht

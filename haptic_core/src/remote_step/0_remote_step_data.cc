@@ -48,8 +48,7 @@ RemoteStepModel::RemoteStepModel(const HapticScene& scene, const PipelineOptions
 RemoteStepData::RemoteStepData(const HapticScene& scene, const PipelineOptions& options,
                                int kept_field_resolution)
     :  // Stage 5b's buffers (about 10 MB at 8192 triangles) only where it runs.
-      refiner(options.depth_refinement, options.refine_depth ? 8192 : 0,
-              options.max_window_resolution()) {
+      refiner(options.depth_refinement, options.refine_depth ? 8192 : 0) {
   if (options.split_windows_at_separated_overlap || options.share_connected_contacts) {
     // Stage 5c renders whole windows, up to the largest.
     region_solver = std::make_unique<TexturePenetrationSolver>(

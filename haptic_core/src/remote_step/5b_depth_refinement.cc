@@ -1,7 +1,7 @@
 // Stage 5b: the penetration depth refined to the finest texture level (issue 32); see
 // depth_refinement.h for the method. The seeds' searches and the refinement of a contact; the
-// screen over the window in 5b_depth_screening.cc, the translation patches in
-// 5b_translation_patch.cc, the envelope's evaluation in 5b_patch_envelope.h.
+// screen over the window in 5b_depth_screening.cc, the envelope's evaluation in
+// 5b_patch_envelope.h.
 
 #include <algorithm>
 #include <array>
@@ -39,18 +39,6 @@ void DepthRefinementOptions::Validate() const {
     throw std::invalid_argument("depth refinement: max_subsamples must be in [1, 16], got " +
                                 std::to_string(max_subsamples));
   }
-  if (!(translation_patch_floor_texels >= 0.0) || !std::isfinite(translation_patch_floor_texels)) {
-    throw std::invalid_argument(
-        "depth refinement: translation_patch_floor_texels must be >= 0, got " +
-        std::to_string(translation_patch_floor_texels));
-  }
-  if (translation_patch_spacing_cells < 1 ||
-      translation_patch_spacing_cells > kMaxTranslationPatchSpacing) {
-    throw std::invalid_argument(
-        "depth refinement: translation_patch_spacing_cells must be in [1, " +
-        std::to_string(kMaxTranslationPatchSpacing) + "], got " +
-        std::to_string(translation_patch_spacing_cells));
-  }
   if (!(search_floor_texels > 0.0) || !std::isfinite(search_floor_texels)) {
     throw std::invalid_argument("depth refinement: search_floor_texels must be > 0, got " +
                                 std::to_string(search_floor_texels));
@@ -78,14 +66,9 @@ void DepthRefinementOptions::Validate() const {
   }
 }
 
-DepthRefiner::DepthRefiner(const DepthRefinementOptions& options, std::size_t max_triangles,
-                           int max_resolution)
+DepthRefiner::DepthRefiner(const DepthRefinementOptions& options, std::size_t max_triangles)
     : options_(options) {
   options_.Validate();
-  if (max_resolution < 1) {
-    throw std::invalid_argument("depth refinement: max_resolution must be >= 1, got " +
-                                std::to_string(max_resolution));
-  }
   env_list_.reserve(max_triangles);
   tool_list_.reserve(max_triangles);
   vertex_scratch_.reserve(max_triangles);
@@ -95,12 +78,6 @@ DepthRefiner::DepthRefiner(const DepthRefinementOptions& options, std::size_t ma
   env_all_.reserve(max_triangles);
   tool_all_.reserve(max_triangles);
   tool_pose_all_.reserve(max_triangles);
-  if (max_triangles > 0) {  // also with the patch off: SetTranslationPatch may turn it on
-    const auto n = static_cast<std::size_t>(max_resolution);
-    const std::size_t side = n + 2 * kTranslationPatchRadius * kMaxTranslationPatchSpacing;
-    patch_env_heights_.reserve(n * n);
-    patch_tool_heights_.reserve(side * side);
-  }
   if (options_.conservative_screen) {
     for (auto& v : env_screen_) v.reserve(max_triangles);
     for (auto& v : tool_screen_) v.reserve(max_triangles);
@@ -228,6 +205,17 @@ DepthRefiner::Seed DepthRefiner::Search(std::span<const Projected> tool, const B
     }
   }
   return best;
+}
+
+double DepthRefiner::TexelOfGathered(std::span<const Projected> tool_tris) const noexcept {
+  double texel = kInf;
+  for (const Projected& P : env_local_) {
+    if (P.textured && P.texel_m > 0.0) texel = std::min(texel, P.texel_m);
+  }
+  for (const Projected& P : tool_tris) {
+    if (P.textured && P.texel_m > 0.0) texel = std::min(texel, P.texel_m);
+  }
+  return std::isfinite(texel) ? texel : 0.25 * window_.cell_size_m();
 }
 
 double DepthRefiner::ScreenThreshold(double best_m) const noexcept {
@@ -421,8 +409,6 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
   const glm::dvec3 point_W = w.center_W + deepest.s * w.axis_u_W + deepest.t * w.axis_v_W;
 
   // The rendered displaced samples, each from its own deepest cell at its own pose.
-  std::array<Seed, 4> translation_found{};
-  translation_found.fill(Seed{-kInf, 0.0, 0.0});
   {
     const auto poses = GradientSamplePoses(X_WT, w);
     for (int k = 1; k < kGradientSamples; ++k) {
@@ -451,7 +437,6 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
         if (also.depth_m > found.depth_m) found = also;
       }
       if (found.depth_m > -kInf) sample.depth_m = found.depth_m;
-      if (k <= 4) translation_found[static_cast<std::size_t>(k - 1)] = found;
     }
   }
 
@@ -485,12 +470,6 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
   }
   lin.num_kink_planes = 0;
   lin.patch = TranslationPatch{};
-  if (options_.translation_patch) {
-    const std::uint64_t before = evaluations_;
-    FillTranslationPatch(X_WT, deepest, translation_found, big.h_x, lin);
-    counters_.translation_patches += 1;
-    counters_.evaluations += evaluations_ - before;
-  }
   return true;
 }
 

@@ -129,22 +129,8 @@ struct FrontierSetting {
   /// PipelineOptions::clustering_angle_deg ("clustering_angle_N" sets N°; the pipeline truth's
   /// patches keep ContactPatchTruthOptions' 30° whatever the method's angle).
   double clustering_angle_deg = PipelineOptions{}.clustering_angle_deg;
-  /// PipelineOptions::depth_refinement.translation_patch ("translation_patch" turns it on).
-  bool translation_patch = false;
-  /// PipelineOptions::depth_refinement.translation_patch_neighbour_climbs
-  /// ("translation_patch_neighbour_climbs" turns it on).
-  bool translation_patch_neighbour_climbs = false;
-  /// PipelineOptions::depth_refinement.translation_patch_floor_texels
-  /// ("translation_patch_floor1", "translation_patch_floor2").
-  double translation_patch_floor_texels = 0.0;
-  /// PipelineOptions::depth_refinement.translation_patch_spacing_cells
-  /// ("translation_patch_spacing2", "translation_patch_spacing3").
-  int translation_patch_spacing_cells = 1;
   /// PipelineOptions::depth_refinement.neighbour_peak_seeds.
   bool neighbour_peak_seeds = true;
-  /// PipelineOptions::depth_refinement.translation_patch_follows_rotation
-  /// ("translation_patch_follows_rotation" turns it on).
-  bool translation_patch_follows_rotation = false;
   /// PipelineOptions::depth_fields, at this subdivision, unshifted ("depth_fields",
   /// "depth_fields_s1"): each pose's force at q0 and the model's prediction are its depth fields'
   /// (evaluated as the operator's loop does); the per-contact columns stay the linearization's.

@@ -19,10 +19,6 @@
 
 namespace ht {
 
-/// Once on, translation patches stay on until the operator's round trip falls below this fraction
-/// of RemoteNodeConfig::translation_patch_rtt_ms.
-inline constexpr double kTranslationPatchOffFraction = 0.8;
-
 /// Configuration of the remote node.
 struct RemoteNodeConfig {
   SocketAddress listen_address = SocketAddress::Parse("127.0.0.1:47000");
@@ -57,19 +53,6 @@ struct RemoteNodeConfig {
   /// Largest perceptual deadband (Weber fraction, [0, 1)) accepted from an operator on either
   /// stream; a Hello asking more is refused with a Reject that says so.
   double max_deadband = 0.5;
-  /// Round trip (ms) from which each contact's translation patch goes with the contact models
-  /// (TranslationPatch, DepthRefinementOptions::translation_patch): from when the round trip that
-  /// the operator's newest Ping reports (PingMessage::operator_rtt_us) reaches this, stage 5b
-  /// fills the patches, so that a model used a round trip after its pose still holds the
-  /// texture's ridges where the tool has moved meanwhile, until it falls below
-  /// kTranslationPatchOffFraction of this (so that one near it does not switch them at every
-  /// Ping); below it the step pays nothing for them. Infinite: only
-  /// pipeline.depth_refinement.translation_patch decides (true: always); 0: from the first Ping
-  /// that reports a measured round trip. RunRemoteNode throws std::invalid_argument for NaN or a
-  /// negative value; nothing happens without pipeline.refine_depth. The default, 10 ms, is the
-  /// round trip in which a hand at 20–50 mm/s moves half a grid cell of the seed's windows
-  /// (0.4 mm); its measurements are in docs/passivity/README.md ("The patch by the round trip").
-  double translation_patch_rtt_ms = 10.0;
   /// The speculative floor by the round trip (PipelineOptions::speculative_floor_m, issue 33's
   /// thirty-fifth stop): before each step the node sets the floor to this hand speed (m/s) times
   /// the round trip the operator's newest Ping reports, at most max_speculative_floor_m. A model

@@ -156,8 +156,8 @@
 //   Reject R→O (10 + n): u64 client_nonce, u8 RejectReason, u8 n, n bytes of UTF-8 text (n ≤ 200)
 //   Ping O→R (4): u32 operator_rtt_us, the operator's round trip (µs): the smallest of its clock
 //     sync's last 8 samples (ClockSync::rtt_ns), 0 before its first Pong, saturated at 2³² − 1;
-//     so that the remote node can send what a model needs a round trip old
-//     (RemoteNodeConfig::translation_patch_rtt_ms). Its header's send_time_ns is t1.
+//     so that the remote node can send what a model needs a round trip old (its depth fields'
+//     travel margin, its speculative floor). Its header's send_time_ns is t1.
 //   Pong R→O (24): u64 ping_sequence, i64 t1 (echoed), i64 t2 (remote receive time); the header's
 //     send_time_ns is t3 (NTP's four timestamps with the operator's receive time t4).
 //   SceneFragment R→O (16 + payload, payload ≥ 1): u32 object_id, u32 version, u32 object_bytes,
