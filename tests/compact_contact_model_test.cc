@@ -444,7 +444,7 @@ TEST(CompactContactModel, BytesSitWhereProtocolHSaysAndAreFewerThanTheFloatEncod
     const Datagram full = EncodeContactModel({MessageType::kContactModel, 7, 3, 11}, m, key);
     EXPECT_EQ(compact.size, kHeaderBytes + kCompactContactModelFixedBytes +
                                 n * kCompactContactBytes + kDepthFieldIdCountBytes +
-                                kKinkPlaneCountBytes + kTranslationPatchCountBytes + kMacBytes);
+                                kKinkPlaneCountBytes + kMacBytes);
     EXPECT_LE(compact.size, kMaxDatagramBytes);
     if (n >= 1) {
       EXPECT_LT(compact.size, full.size) << n;

@@ -267,8 +267,7 @@ TEST(Messages, FieldsSurviveTheRoundTrip) {
     const ContactModelMessage cm = SampleModel(n);
     const Datagram dc = EncodeContactModel({MessageType::kContactModel, 7, 3, 11}, cm, key);
     ASSERT_EQ(dc.size, kHeaderBytes + kContactModelFixedBytes + n * kContactBytes +
-                           kDepthFieldIdCountBytes + kKinkPlaneCountBytes +
-                           kTranslationPatchCountBytes + kMacBytes);
+                           kDepthFieldIdCountBytes + kKinkPlaneCountBytes + kMacBytes);
     ASSERT_EQ(OpenDatagram(dc.view(), key, h, body), DecodeStatus::kOk);
     ContactModelMessage out;
     ASSERT_EQ(DecodeContactModel(body, out), DecodeStatus::kOk) << n;
@@ -397,7 +396,8 @@ TEST(Messages, HeaderFieldsAreCheckedBeforeTheMac) {
   EXPECT_EQ(mutate(kHeaderVersionOffset, 0x09), DecodeStatus::kBadVersion);  // nor 9
   EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0a), DecodeStatus::kBadVersion);  // nor 10
   EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0b), DecodeStatus::kBadVersion);  // nor 11
-  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0d), DecodeStatus::kBadVersion);
+  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0c), DecodeStatus::kBadVersion);  // nor 12
+  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0e), DecodeStatus::kBadVersion);
   EXPECT_EQ(mutate(kHeaderTypeOffset, 0x7f), DecodeStatus::kUnknownType);
   EXPECT_EQ(mutate(kHeaderTypeOffset, 0x00), DecodeStatus::kUnknownType);
   EXPECT_EQ(mutate(5, 0x01), DecodeStatus::kBadMac);   // session id changed
@@ -733,11 +733,11 @@ TEST(Messages, TheManifestCarriesEverySceneObjectKindAndNoOther) {
 }
 
 TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
-  // Versions 4 to 12 changed neither the Hello body nor the Reject body; version 3's Hello body is
+  // Versions 4 to 13 changed neither the Hello body nor the Reject body; version 3's Hello body is
   // the first 32 bytes (no deadband terms). Versions 2 to 7 had the 28-byte header and the whole
   // 32-byte MAC (test::LegacyDatagram writes them byte by byte).
-  EXPECT_EQ(kProtocolVersion, 12);
-  EXPECT_EQ(kMinProtocolVersion, 12);
+  EXPECT_EQ(kProtocolVersion, 13);
+  EXPECT_EQ(kMinProtocolVersion, 13);
   const MacKey key = TestKey();
   for (const std::uint16_t version : {std::uint16_t{7}, std::uint16_t{6}, std::uint16_t{5},
                                       std::uint16_t{4}, std::uint16_t{3}, std::uint16_t{2}}) {
@@ -991,7 +991,7 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
                             (compact ? kCompactContactModelFixedBytes + n * kCompactContactBytes
                                      : kContactModelFixedBytes + n * kContactBytes) +
                             kDepthFieldIdCountBytes + kKinkPlaneCountBytes + plane_bytes +
-                            kTranslationPatchCountBytes + kMacBytes);
+                            kMacBytes);
       Header h;
       std::span<const std::uint8_t> body;
       ASSERT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kOk);
@@ -1031,8 +1031,7 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
     for (KinkPlane& kp : m.model.contacts[1].kink_planes) kp.d_translation_offset_W = {0, 0.1, 0};
     const Datagram good =
         compact ? EncodeCompactContactModel({}, m, key) : EncodeContactModel({}, m, key);
-    const std::size_t planes_at =
-        good.size - kMacBytes - kTranslationPatchCountBytes - kMaxKinkPlanes * kKinkPlaneBytes;
+    const std::size_t planes_at = good.size - kMacBytes - kMaxKinkPlanes * kKinkPlaneBytes;
     const auto patched = [&](auto&& edit) {
       return OpenAndDecode(EditedAndSealed(good, key, edit).view(), key);
     };
@@ -1048,11 +1047,8 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
     // kMaxKinkPlanes + 1 planes of contact 1: append one more, counted.
     EXPECT_EQ(patched([&](Datagram& d) {
                 d.bytes[planes_at - 1] = kMaxKinkPlanes + 1;
-                // Over the patch count (0), which then follows it again.
-                std::copy_n(d.bytes.begin() + planes_at, kKinkPlaneBytes,
-                            d.bytes.begin() + d.size - 1);
+                std::copy_n(d.bytes.begin() + planes_at, kKinkPlaneBytes, d.bytes.begin() + d.size);
                 d.size += kKinkPlaneBytes;
-                d.bytes[d.size - 1] = 0;
               }),
               DecodeStatus::kBadValue);
     const float nan = std::nanf("");
@@ -1063,134 +1059,6 @@ TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
               DecodeStatus::kNonFinite);
     // A count above what fits: refused before any plane is read.
     EXPECT_EQ(patched([&](Datagram& d) { d.bytes[planes_at - 1] = 255; }), DecodeStatus::kBadCount);
-  }
-}
-
-// Translation patches (protocol version 9): each contact's patch travels with it in both
-// encodings, its nodes within half a quantization step (scale/2) and its axes within one i16 step,
-// so that the depth the operator's loop reads at a displaced pose is the sender's within a
-// fraction of a micrometre; a model with more patches than fit sends the first ones; a patch that
-// is not finite at the sender is not sent; a receiver refuses an index out of range, a second
-// patch of one contact, a marked node, a zero step and a count above what fits.
-TEST(Messages, TranslationPatchesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
-  const MacKey key = TestKey();
-  std::mt19937 rng(909);
-  std::uniform_real_distribution<double> node(-300e-6, 300e-6);
-  const auto with_patches = [&](int n) {
-    ContactModelMessage m = SampleModel(n);
-    for (int i = 0; i < n; ++i) {
-      TranslationPatch& p = m.model.contacts[i].patch;
-      p.step_m = 0.4e-3 + 1e-5 * i;
-      const double a = 0.3 * i;
-      p.axis_u_W = {std::cos(a), std::sin(a), 0.0};
-      p.axis_v_W = {-std::sin(a), std::cos(a), 0.0};
-      p.lever_W = {0.01 - 1e-3 * i, -0.004, -0.012};
-      for (float& v : p.depth_m) v = static_cast<float>(node(rng));
-      p.depth_m[kTranslationPatchSide * kTranslationPatchSide / 2] = 0.0f;
-    }
-    return m;
-  };
-  for (const bool compact : {false, true}) {
-    for (const int n : {1, 3, 7, kMaxWireContacts}) {
-      const ContactModelMessage m = with_patches(n);
-      const Datagram d =
-          compact ? EncodeCompactContactModel({}, m, key) : EncodeContactModel({}, m, key);
-      ASSERT_LE(d.size, kMaxDatagramBytes);
-      const int fit =
-          compact
-              ? TranslationPatchCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, n, 0)
-              : TranslationPatchCapacity(kContactModelFixedBytes, kContactBytes, n, 0);
-      const int sent = std::min(n, fit);
-      EXPECT_EQ(d.size, kHeaderBytes +
-                            (compact ? kCompactContactModelFixedBytes + n * kCompactContactBytes
-                                     : kContactModelFixedBytes + n * kContactBytes) +
-                            kDepthFieldIdCountBytes + kKinkPlaneCountBytes +
-                            kTranslationPatchCountBytes + sent * kTranslationPatchBytes +
-                            kMacBytes);
-      Header h;
-      std::span<const std::uint8_t> body;
-      ASSERT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kOk);
-      ContactModelMessage out;
-      ASSERT_EQ(compact ? DecodeCompactContactModel(body, out, /*receive_time_ns=*/0)
-                        : DecodeContactModel(body, out),
-                DecodeStatus::kOk)
-          << compact << " " << n;
-      for (int i = 0; i < n; ++i) {
-        const TranslationPatch& a = m.model.contacts[i].patch;
-        const TranslationPatch& b = out.model.contacts[i].patch;
-        if (i >= sent) {
-          EXPECT_EQ(b.step_m, 0.0) << "left out: the planes alone";
-          continue;
-        }
-        EXPECT_EQ(b.step_m, static_cast<double>(static_cast<float>(a.step_m)));
-        EXPECT_LT(glm::length(b.axis_u_W - a.axis_u_W), 2.0 / kCompactI16Max);
-        EXPECT_LT(glm::length(b.axis_v_W - a.axis_v_W), 2.0 / kCompactI16Max);
-        EXPECT_LT(glm::length(b.lever_W - a.lever_W), kCompactPointStepM);
-        double largest = 0.0;
-        for (const float v : a.depth_m) largest = std::max(largest, std::abs(double{v}));
-        for (std::size_t k = 0; k < a.depth_m.size(); ++k) {
-          EXPECT_NEAR(b.depth_m[k], a.depth_m[k], 0.5 * largest / kCompactI16Max + 1e-9) << k;
-        }
-        // What the loop reads 0.5 mm and 0.3 mm away, turned 20 mrad about z (the lever slides
-        // the contact 0.2 mm more).
-        Twist dq;
-        dq.linear = {0.5e-3, -0.3e-3, 0.0};
-        dq.angular = {0.0, 0.0, 0.02};
-        ContactLinearization ca = m.model.contacts[i];
-        ContactLinearization cb = out.model.contacts[i];
-        cb.depth_m = ca.depth_m;  // the compact contact's own f32 rounding left aside
-        cb.gradient = ca.gradient;
-        EXPECT_NEAR(ContactDepthAt(cb, dq), ContactDepthAt(ca, dq), 0.05e-6) << compact << i;
-      }
-    }
-  }
-  // A patch with a NaN node is not sent; its contact goes with its planes alone.
-  {
-    ContactModelMessage m = with_patches(2);
-    m.model.contacts[0].patch.depth_m[3] = std::numeric_limits<float>::quiet_NaN();
-    for (const bool compact : {false, true}) {
-      const Datagram d =
-          compact ? EncodeCompactContactModel({}, m, key) : EncodeContactModel({}, m, key);
-      Header h;
-      std::span<const std::uint8_t> body;
-      ASSERT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kOk);
-      ContactModelMessage out;
-      ASSERT_EQ(compact ? DecodeCompactContactModel(body, out, /*receive_time_ns=*/0)
-                        : DecodeContactModel(body, out),
-                DecodeStatus::kOk);
-      EXPECT_EQ(out.model.contacts[0].patch.step_m, 0.0);
-      EXPECT_GT(out.model.contacts[1].patch.step_m, 0.0);
-    }
-  }
-  // Refused.
-  for (const bool compact : {false, true}) {
-    const ContactModelMessage m = with_patches(2);
-    const Datagram good =
-        compact ? EncodeCompactContactModel({}, m, key) : EncodeContactModel({}, m, key);
-    const std::size_t patches_at = good.size - kMacBytes - 2 * kTranslationPatchBytes;
-    const auto patched = [&](auto&& edit) {
-      return OpenAndDecode(EditedAndSealed(good, key, edit).view(), key);
-    };
-    EXPECT_EQ(patched([](Datagram&) {}), DecodeStatus::kOk);
-    EXPECT_EQ(patched([&](Datagram& d) { d.bytes[patches_at] = 2; }), DecodeStatus::kBadValue);
-    EXPECT_EQ(patched([&](Datagram& d) { d.bytes[patches_at + kTranslationPatchBytes] = 0; }),
-              DecodeStatus::kBadValue)
-        << "a second patch of contact 0";
-    // The first node (after u8 contact, f32 step, 6×i16 axes, f32 scale) marked not finite.
-    const std::size_t node0 = patches_at + 1 + 4 + 12 + 4;
-    EXPECT_EQ(patched([&](Datagram& d) {
-                d.bytes[node0] = 0x00;
-                d.bytes[node0 + 1] = 0x80;
-              }),
-              DecodeStatus::kNonFinite);
-    EXPECT_EQ(patched([&](Datagram& d) { std::fill_n(&d.bytes[patches_at + 1], 4, 0); }),
-              DecodeStatus::kBadValue)
-        << "a zero step";
-    EXPECT_EQ(patched([&](Datagram& d) { std::fill_n(&d.bytes[patches_at + 5], 6, 0); }),
-              DecodeStatus::kBadValue)
-        << "a zero axis";
-    EXPECT_EQ(patched([&](Datagram& d) { d.bytes[patches_at - 1] = 255; }),
-              DecodeStatus::kBadCount);
   }
 }
 
@@ -1210,7 +1078,7 @@ TEST(Messages, DepthFieldIdsTravelWithTheirContactsAndBadSectionsAreRejected) {
       const std::size_t fixed = compact ? kCompactContactModelFixedBytes : kContactModelFixedBytes;
       const std::size_t contact = compact ? kCompactContactBytes : kContactBytes;
       EXPECT_EQ(d.size, kHeaderBytes + fixed + n * contact + DepthFieldIdSectionBytes(with_field) +
-                            kKinkPlaneCountBytes + kTranslationPatchCountBytes + kMacBytes);
+                            kKinkPlaneCountBytes + kMacBytes);
       const auto decode = [&](const Datagram& datagram, ContactModelMessage& out) {
         Header h;
         std::span<const std::uint8_t> body;

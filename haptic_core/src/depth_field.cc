@@ -209,8 +209,8 @@ bool DepthField::Prepare() {
   KeepToolNodes(1);
   prepared = true;
   while (node_stride < kMaxDepthFieldNodeStride) {
-    const DepthFieldEvaluation at_q0 = DepthFieldDepthAt(*this, X_WT0, DepthFieldKernel::kAvx2,
-                                                         kDepthFieldDenseNodes + 1);
+    const DepthFieldEvaluation at_q0 =
+        DepthFieldDepthAt(*this, X_WT0, DepthFieldKernel::kAvx2, kDepthFieldDenseNodes + 1);
     if (!at_q0.over_budget) break;
     KeepToolNodes(2 * node_stride);
   }
@@ -523,7 +523,7 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
   const glm::dmat3 R = glm::mat3_cast(D.rotation);
   const glm::dvec3 c_F = X_FW * X_WT.translation;  // the centre of mass in F
   const double h = f.cell_m, inv_h = 1.0 / h, eps = f.smooth_max_m;
-  const int nx = f.nx, ny = f.ny;  // the environment's grid
+  const int nx = f.nx, ny = f.ny;              // the environment's grid
   const int tnx = f.tool_nx, tny = f.tool_ny;  // the tool's kept nodes
   const float* env = f.env_height_m.data();
   const float* tool = f.tool_grid_m.data();
@@ -531,8 +531,8 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
   const double tool_step = f.node_stride * h;
   const glm::dvec3 step_i = tool_step * R[0], step_j = tool_step * R[1], along_a = R[2];
   // Kept tool node (0, 0) at height 0, moved.
-  const glm::dvec3 origin = D * glm::dvec3(f.tool_i0 * h + f.tool_offset_u_m,
-                                           f.tool_j0 * h + f.tool_offset_v_m, 0.0);
+  const glm::dvec3 origin =
+      D * glm::dvec3(f.tool_i0 * h + f.tool_offset_u_m, f.tool_j0 * h + f.tool_offset_v_m, 0.0);
 
   // The node's moved position and its cell's bound (−∞: no interpolant under it).
   const auto locate = [&](const glm::dvec3& s, int& cell, double& tu, double& tv) noexcept {

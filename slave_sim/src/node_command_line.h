@@ -42,7 +42,6 @@ struct NodeCommandLine {
   bool no_seed_from_last_step = false;
   bool kink_hang_other_arm = false;
 
-
   // Stages 5a and 5c (AddSplitAndSharingOptions).
   double split_windows_link_mm = 10.0;
   double split_continuous_um = 400.0;

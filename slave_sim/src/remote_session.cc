@@ -465,21 +465,6 @@ void RemoteSession::SendModel(wire::ContactModelMessage& out, std::int64_t now) 
                                                 contacts, field_ids));
   kink_planes_sent_ += std::min(planes, fit);
   kink_planes_left_out_ += planes - std::min(planes, fit);
-  // The translation patches likewise, after the planes that went (protocol version 9).
-  std::uint64_t patches = 0;
-  for (int i = 0; i < contacts; ++i) {
-    patches += out.model.contacts[static_cast<std::size_t>(i)].patch.step_m > 0.0 ? 1 : 0;
-  }
-  const int planes_sent = static_cast<int>(std::min(planes, fit));
-  const auto patch_fit = static_cast<std::uint64_t>(
-      compact_models_
-          ? wire::TranslationPatchCapacity(wire::kCompactContactModelFixedBytes,
-                                           wire::kCompactContactBytes, contacts, planes_sent,
-                                           field_ids)
-          : wire::TranslationPatchCapacity(wire::kContactModelFixedBytes, wire::kContactBytes,
-                                           contacts, planes_sent, field_ids));
-  patches_sent_ += std::min(patches, patch_fit);
-  patches_left_out_ += patches - std::min(patches, patch_fit);
   link_.Send(compact_models_ ? wire::EncodeCompactContactModel(header, out, config_.key)
                              : wire::EncodeContactModel(header, out, config_.key),
              peer_);
@@ -558,7 +543,6 @@ nlohmann::json RemoteSession::StatsJson(std::size_t scene_objects, std::size_t s
                      {"keepalives_sent", keepalives_sent_},
                      {"model_decisions", ToJson(model_deadband_.counts())}});
   transport["kink_planes"] = {{"sent", kink_planes_sent_}, {"left_out", kink_planes_left_out_}};
-  transport["translation_patches"] = {{"sent", patches_sent_}, {"left_out", patches_left_out_}};
   transport["depth_fields"] = {
       {"agreed", depth_fields_},
       {"fields_sent", fields_encoded_},

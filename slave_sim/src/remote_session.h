@@ -158,9 +158,6 @@ class RemoteSession {
   /// The round trip the operator's newest Ping reported (ns, PingMessage::operator_rtt_us; 0:
   /// none yet in this session, or the operator has not measured one yet).
   std::int64_t operator_rtt_ns() const noexcept { return operator_rtt_ns_; }
-  /// The next model goes out whatever the contact-model deadband says (counted as its "first"):
-  /// for a change the deadband does not compare, such as translation patches turned on or off.
-  void ResendNextModel() noexcept { model_deadband_.ForgetHeld(); }
 
   /// The link's statistics with the session counters (sessions, goodbyes, peers lost, Hello
   /// replays, retransmits, deferrals, rejects) and the scene stream's, for the run summary.
@@ -219,8 +216,6 @@ class RemoteSession {
   /// Kink planes of models sent that did not fit their datagram (protocol.h KinkPlaneCapacity),
   /// and those sent.
   std::uint64_t kink_planes_left_out_ = 0, kink_planes_sent_ = 0;
-  // Translation patches sent, and those that did not fit the datagram after the planes.
-  std::uint64_t patches_left_out_ = 0, patches_sent_ = 0;
   // Display poses (NodePoses) of the moving scene nodes.
   std::int64_t start_ns_ = 0;  ///< the node's start: the scene's clock (animate) counts from it
   std::uint32_t graph_version_ = 0;  ///< version of the kSceneGraph object (0 = none streamed)

@@ -234,11 +234,6 @@ CompactContactModelBody QuantizeContactModel(const ContactModelMessage& m) noexc
         static_cast<std::uint8_t>(w.contact | (own ? kCompactKinkPlaneOwnSlope : 0u)), w.depth_m,
         w.d_rotation, w.d_translation_offset};
   }
-  b.num_patches = static_cast<int>(
-      FlattenPatches(model, static_cast<std::size_t>(n),
-                     TranslationPatchCapacity(kCompactContactModelFixedBytes, kCompactContactBytes,
-                                              n, b.num_kink_planes, b.num_field_ids),
-                     b.patches));
   return b;
 }
 
@@ -280,13 +275,6 @@ DecodeStatus Check(const CompactContactModelBody& m) {
         ++planes_of[static_cast<std::size_t>(contact)] > kMaxKinkPlanes) {
       return DecodeStatus::kBadValue;
     }
-  }
-  std::array<bool, kMaxWireContacts> patched{};
-  for (int j = 0; j < m.num_patches; ++j) {
-    const WirePatch& p = m.patches[static_cast<std::size_t>(j)];
-    if (const DecodeStatus s = CheckPatch(p); s != DecodeStatus::kOk) return s;
-    if (p.contact >= m.num_contacts || patched[p.contact]) return DecodeStatus::kBadValue;
-    patched[p.contact] = true;
   }
   if (!AllFinite(m.p_WT0)) return DecodeStatus::kNonFinite;
   glm::dquat q;
@@ -344,9 +332,6 @@ ContactModelMessage DequantizeContactModel(const CompactContactModelBody& b,
   }
   DistributeKinkPlanes({planes.data(), static_cast<std::size_t>(b.num_kink_planes)},
                        static_cast<std::size_t>(b.num_contacts), model);
-  // Check() found every patch's values, contact and count valid.
-  DistributePatches({b.patches.data(), static_cast<std::size_t>(b.num_patches)},
-                    static_cast<std::size_t>(b.num_contacts), model);
   // Not on the wire (version 11): the sender summed it the same way (AssembleContactModel).
   model.F_T_W_at_q0 = ContactModelWrenchAtQ0(model);
   return m;

@@ -181,13 +181,12 @@ constexpr std::size_t DepthFieldIds(auto& a, auto& model, std::size_t n) {
   std::size_t k = 0;
   if constexpr (!requires { a.Reject(DecodeStatus::kOk); }) {
     k = FlattenFieldIds(model, n, ids);
-    const std::size_t sent = CountBefore<std::uint8_t>(
-        a, k, n, kDepthFieldIdBytes, kKinkPlaneCountBytes + kTranslationPatchCountBytes);
+    const std::size_t sent =
+        CountBefore<std::uint8_t>(a, k, n, kDepthFieldIdBytes, kKinkPlaneCountBytes);
     for (std::size_t j = 0; j < std::min(sent, k); ++j) Fields(a, ids[j]);
     return std::min(sent, k);
   } else {
-    k = CountBefore<std::uint8_t>(a, k, n, kDepthFieldIdBytes,
-                                  kKinkPlaneCountBytes + kTranslationPatchCountBytes);
+    k = CountBefore<std::uint8_t>(a, k, n, kDepthFieldIdBytes, kKinkPlaneCountBytes);
     for (std::size_t j = 0; j < k; ++j) Fields(a, ids[j]);
     if (a.ok() && !DistributeFieldIds({ids.data(), k}, n, model)) a.Reject(DecodeStatus::kBadValue);
     return k;
@@ -201,170 +200,17 @@ constexpr std::size_t KinkPlanes(auto& a, auto& model, std::size_t n, int capaci
   std::size_t k = 0;
   if constexpr (!requires { a.Reject(DecodeStatus::kOk); }) {
     k = FlattenKinkPlanes(model, n, capacity, planes);
-    const std::size_t sent = CountBefore<std::uint8_t>(
-        a, k, static_cast<std::size_t>(capacity), kKinkPlaneBytes, kTranslationPatchCountBytes);
+    const std::size_t sent =
+        Count<std::uint8_t>(a, k, static_cast<std::size_t>(capacity), kKinkPlaneBytes);
     for (std::size_t j = 0; j < std::min(sent, k); ++j) Fields(a, planes[j]);
     return std::min(sent, k);
   } else {
-    k = CountBefore<std::uint8_t>(a, k, static_cast<std::size_t>(std::max(capacity, 0)),
-                                  kKinkPlaneBytes, kTranslationPatchCountBytes);
+    k = Count<std::uint8_t>(a, k, static_cast<std::size_t>(std::max(capacity, 0)), kKinkPlaneBytes);
     for (std::size_t j = 0; j < k; ++j) Fields(a, planes[j]);
     if (a.ok() && !DistributeKinkPlanes({planes.data(), k}, n, model)) {
       a.Reject(DecodeStatus::kBadValue);
     }
     return k;
-  }
-}
-
-/// One translation patch as it is on the wire (protocol.h, version 9).
-struct WirePatch {
-  std::uint8_t contact = 0;
-  float step_m = 0.0f;
-  std::array<std::int16_t, 3> axis_u{};  ///< unit vector · kCompactI16Max
-  std::array<std::int16_t, 3> axis_v{};
-  float scale_m = 0.0f;  ///< m per node unit
-  std::array<std::int16_t, kTranslationPatchNodes> nodes{};
-  std::array<std::int16_t, 3> lever{};  ///< units of kCompactPointStepM; zero: translations only
-};
-
-constexpr void Fields(auto& a, Of<WirePatch> auto& p) {
-  a(p.contact);
-  a(p.step_m);
-  for (auto& v : p.axis_u) a(v);
-  for (auto& v : p.axis_v) a(v);
-  a(p.scale_m);
-  for (auto& v : p.nodes) a(v);
-  for (auto& v : p.lever) a(v);
-}
-
-static_assert(kTranslationPatchNodes + 1 == kTranslationPatchSide * kTranslationPatchSide);
-
-/// The patch's index of wire node k (the centre left out).
-constexpr std::size_t PatchIndexOfWireNode(int k) noexcept {
-  constexpr int centre = (kTranslationPatchSide * kTranslationPatchSide) / 2;
-  return static_cast<std::size_t>(k < centre ? k : k + 1);
-}
-
-/// round(v) within ±kCompactI16Max; constexpr-friendly (no std::round).
-constexpr std::int16_t PatchI16(double v) noexcept {
-  const double limit = kCompactI16Max;
-  const double c = v < -limit ? -limit : (v > limit ? limit : v);
-  return static_cast<std::int16_t>(c < 0.0 ? c - 0.5 : c + 0.5);
-}
-
-/// `p` as it goes on the wire for contact `contact`; false (nothing to send) for no patch or a
-/// non-finite one.
-constexpr bool QuantizePatch(const TranslationPatch& p, std::uint8_t contact,
-                             WirePatch& out) noexcept {
-  const auto finite = [](double v) { return v == v && v - v == 0.0; };
-  if (!(p.step_m > 0.0) || !finite(p.step_m)) return false;
-  double largest = 0.0;
-  for (const float v : p.depth_m) {
-    if (!finite(v)) return false;
-    largest = std::max(largest, v < 0.0f ? -static_cast<double>(v) : static_cast<double>(v));
-  }
-  for (int k = 0; k < 3; ++k) {
-    if (!finite(p.axis_u_W[k]) || !finite(p.axis_v_W[k]) || !finite(p.lever_W[k])) return false;
-  }
-  out = {};
-  out.contact = contact;
-  out.step_m = static_cast<float>(p.step_m);
-  for (int k = 0; k < 3; ++k) {
-    out.axis_u[static_cast<std::size_t>(k)] = PatchI16(p.axis_u_W[k] * kCompactI16Max);
-    out.axis_v[static_cast<std::size_t>(k)] = PatchI16(p.axis_v_W[k] * kCompactI16Max);
-    out.lever[static_cast<std::size_t>(k)] = PatchI16(p.lever_W[k] / kCompactPointStepM);
-  }
-  out.scale_m = static_cast<float>(largest / kCompactI16Max);
-  const double scale = static_cast<double>(out.scale_m);
-  for (int k = 0; k < kTranslationPatchNodes; ++k) {
-    const double v = p.depth_m[PatchIndexOfWireNode(k)];
-    out.nodes[static_cast<std::size_t>(k)] = scale > 0.0 ? PatchI16(v / scale) : 0;
-  }
-  return true;
-}
-
-/// The patches of contacts [0, n) of `model` in wire order (contact by contact, those that have
-/// one), at most `capacity`, into `out`; returns how many.
-constexpr std::size_t FlattenPatches(const ContactModel& model, std::size_t n, int capacity,
-                                     std::span<WirePatch> out) noexcept {
-  std::size_t k = 0;
-  const std::size_t cap = std::min(out.size(), static_cast<std::size_t>(std::max(capacity, 0)));
-  for (std::size_t i = 0; i < n && k < cap; ++i) {
-    if (QuantizePatch(model.contacts[i].patch, static_cast<std::uint8_t>(i), out[k])) ++k;
-  }
-  return k;
-}
-
-/// A wire patch's values: kOk, kNonFinite (a marked node or axis, a non-finite step or scale) or
-/// kBadValue (a step or scale out of range, an axis shorter than 0.5).
-inline DecodeStatus CheckPatch(const WirePatch& p) noexcept {
-  const auto marked = [](const auto& values) {
-    for (const std::int16_t v : values) {
-      if (v == kCompactNotFinite) return true;
-    }
-    return false;
-  };
-  if (!std::isfinite(p.step_m) || !std::isfinite(p.scale_m) || marked(p.axis_u) ||
-      marked(p.axis_v) || marked(p.nodes) || marked(p.lever)) {
-    return DecodeStatus::kNonFinite;
-  }
-  if (!(p.step_m > 0.0f) || p.step_m > kMaxTranslationPatchStepM || p.scale_m < 0.0f) {
-    return DecodeStatus::kBadValue;
-  }
-  for (const auto* axis : {&p.axis_u, &p.axis_v}) {
-    double norm2 = 0.0;
-    for (const std::int16_t v : *axis) norm2 += static_cast<double>(v) * v;
-    if (!(std::sqrt(norm2) >= 0.5 * kCompactI16Max)) return DecodeStatus::kBadValue;
-  }
-  return DecodeStatus::kOk;
-}
-
-/// Gives each wire patch (values checked by CheckPatch) to its contact of `model` (whose first `n`
-/// contacts were read); false when one names a contact ≥ n or a contact's second patch.
-inline bool DistributePatches(std::span<const WirePatch> patches, std::size_t n,
-                              ContactModel& model) noexcept {
-  for (std::size_t i = 0; i < n; ++i) model.contacts[i].patch = TranslationPatch{};
-  for (const WirePatch& w : patches) {
-    if (w.contact >= n) return false;
-    TranslationPatch& p = model.contacts[w.contact].patch;
-    if (p.step_m > 0.0) return false;
-    const auto axis = [](const std::array<std::int16_t, 3>& a) {
-      return glm::normalize(glm::dvec3(a[0], a[1], a[2]));
-    };
-    p.step_m = w.step_m;
-    p.axis_u_W = axis(w.axis_u);
-    p.axis_v_W = axis(w.axis_v);
-    p.lever_W = kCompactPointStepM * glm::dvec3(w.lever[0], w.lever[1], w.lever[2]);
-    p.depth_m.fill(0.0f);
-    for (int k = 0; k < kTranslationPatchNodes; ++k) {
-      p.depth_m[PatchIndexOfWireNode(k)] =
-          static_cast<float>(static_cast<double>(w.nodes[static_cast<std::size_t>(k)]) * w.scale_m);
-    }
-  }
-  return true;
-}
-
-/// The translation-patch section after the kink planes (protocol.h, version 9), as KinkPlanes.
-constexpr void TranslationPatches(auto& a, auto& model, std::size_t n, int capacity) {
-  std::array<WirePatch, kMaxWireContacts> patches{};
-  std::size_t k = 0;
-  if constexpr (!requires { a.Reject(DecodeStatus::kOk); }) {
-    k = FlattenPatches(model, n, capacity, patches);
-    const std::size_t sent =
-        Count<std::uint8_t>(a, k, static_cast<std::size_t>(capacity), kTranslationPatchBytes);
-    for (std::size_t j = 0; j < std::min(sent, k); ++j) Fields(a, patches[j]);
-  } else {
-    k = Count<std::uint8_t>(a, k, static_cast<std::size_t>(std::max(capacity, 0)),
-                            kTranslationPatchBytes);
-    for (std::size_t j = 0; j < k; ++j) Fields(a, patches[j]);
-    if (!a.ok()) return;
-    for (std::size_t j = 0; j < k; ++j) {
-      if (const DecodeStatus s = CheckPatch(patches[j]); s != DecodeStatus::kOk) {
-        a.Reject(s);
-        return;
-      }
-    }
-    if (!DistributePatches({patches.data(), k}, n, model)) a.Reject(DecodeStatus::kBadValue);
   }
 }
 
@@ -379,17 +225,13 @@ constexpr void Fields(auto& a, Of<ContactModelMessage> auto& m) {
   Pose(a, m.model.X_WT0);
   Vec(a, m.model.F_T_W_at_q0.force);
   Vec(a, m.model.F_T_W_at_q0.torque);
-  const std::size_t n = CountBefore<std::uint8_t>(
-      a, m.model.num_contacts, kMaxWireContacts, kContactBytes,
-      kDepthFieldIdCountBytes + kKinkPlaneCountBytes + kTranslationPatchCountBytes);
+  const std::size_t n =
+      CountBefore<std::uint8_t>(a, m.model.num_contacts, kMaxWireContacts, kContactBytes,
+                                kDepthFieldIdCountBytes + kKinkPlaneCountBytes);
   for (std::size_t i = 0; i < n; ++i) Fields(a, m.model.contacts[i]);
   const int ids = static_cast<int>(DepthFieldIds(a, m.model, n));
-  const std::size_t planes = KinkPlanes(
-      a, m.model, n,
-      KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, static_cast<int>(n), ids));
-  TranslationPatches(a, m.model, n,
-                     TranslationPatchCapacity(kContactModelFixedBytes, kContactBytes,
-                                              static_cast<int>(n), static_cast<int>(planes), ids));
+  KinkPlanes(a, m.model, n,
+             KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, static_cast<int>(n), ids));
 }
 
 /// One contact of a CompactContactModel as it is on the wire (protocol.h).
@@ -431,8 +273,6 @@ struct CompactContactModelBody {
   std::array<WireFieldId, kMaxWireContacts> field_ids{};
   int num_kink_planes = 0;
   std::array<CompactWireKinkPlane, kMaxWireKinkPlanes> kink_planes{};
-  int num_patches = 0;
-  std::array<WirePatch, kMaxWireContacts> patches{};
 };
 
 // Every element of an array of scalars, in order.
@@ -467,28 +307,22 @@ constexpr void Fields(auto& a, Of<CompactContactModelBody> auto& m) {
   Each(a, m.p_WT0);
   a(m.q_WT0_low);
   a(m.q_WT0_high);
-  const std::size_t n = CountBefore<std::uint8_t>(
-      a, m.num_contacts, kMaxWireContacts, kCompactContactBytes,
-      kDepthFieldIdCountBytes + kKinkPlaneCountBytes + kTranslationPatchCountBytes);
+  const std::size_t n =
+      CountBefore<std::uint8_t>(a, m.num_contacts, kMaxWireContacts, kCompactContactBytes,
+                                kDepthFieldIdCountBytes + kKinkPlaneCountBytes);
   for (std::size_t i = 0; i < n; ++i) Fields(a, m.contacts[i]);
   const std::size_t nf =
-      CountBefore<std::uint8_t>(a, m.num_field_ids, n, kDepthFieldIdBytes,
-                                kKinkPlaneCountBytes + kTranslationPatchCountBytes);
+      CountBefore<std::uint8_t>(a, m.num_field_ids, n, kDepthFieldIdBytes, kKinkPlaneCountBytes);
   for (std::size_t j = 0; j < nf; ++j) Fields(a, m.field_ids[j]);
   const int capacity = KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes,
                                          static_cast<int>(n), m.num_field_ids);
   // Counted as if each plane were kKinkPlaneBytes (as ContactModel's): the bound on the count is
   // the same whatever the planes carry; the bytes left are checked against the shortest plane.
-  const std::size_t k =
-      CountBefore<std::uint8_t>(a, m.num_kink_planes, static_cast<std::size_t>(capacity),
-                                kCompactKinkPlaneBytes, kTranslationPatchCountBytes);
+  // The planes' sizes vary (kCompactKinkPlaneSlopeBytes): the shortest bounds the count, and the
+  // body's end (Reader::Finish) checks that nothing follows the last.
+  const std::size_t k = CountBefore<std::uint8_t>(
+      a, m.num_kink_planes, static_cast<std::size_t>(capacity), kCompactKinkPlaneBytes, 0);
   for (std::size_t j = 0; j < k; ++j) Fields(a, m.kink_planes[j]);
-  const int patch_capacity =
-      TranslationPatchCapacity(kCompactContactModelFixedBytes, kCompactContactBytes,
-                               static_cast<int>(n), m.num_kink_planes, m.num_field_ids);
-  const std::size_t np = Count<std::uint8_t>(
-      a, m.num_patches, static_cast<std::size_t>(patch_capacity), kTranslationPatchBytes);
-  for (std::size_t j = 0; j < np; ++j) Fields(a, m.patches[j]);
 }
 
 /// A CompactToolState body as it is on the wire (protocol.h).
@@ -637,21 +471,18 @@ constexpr Sizer SizeOf() {
 static_assert(SizeOf<WireHeader>().bytes == kHeaderBytes);
 static_assert(SizeOf<LegacyWireHeader>().bytes == kLegacyHeaderBytes);
 static_assert(SizeOf<ToolStateMessage>().bytes == kToolStateBodyBytes);
-static_assert(SizeOf<ContactModelMessage>().bytes ==
-              kContactModelFixedBytes + kContactBytes + kDepthFieldIdCountBytes +
-                  kKinkPlaneCountBytes + kTranslationPatchCountBytes);
+static_assert(SizeOf<ContactModelMessage>().bytes == kContactModelFixedBytes + kContactBytes +
+                                                         kDepthFieldIdCountBytes +
+                                                         kKinkPlaneCountBytes);
 static_assert(SizeOf<ContactModelMessage>().counted_bytes ==
-              kContactBytes + kDepthFieldIdBytes + kKinkPlaneBytes + kTranslationPatchBytes);
+              kContactBytes + kDepthFieldIdBytes + kKinkPlaneBytes);
 static_assert(SizeOf<CompactContactModelBody>().bytes ==
               kCompactContactModelFixedBytes + kCompactContactBytes + kDepthFieldIdCountBytes +
-                  kDepthFieldIdBytes + kKinkPlaneCountBytes + kCompactKinkPlaneBytes +
-                  kTranslationPatchCountBytes + kTranslationPatchBytes);
+                  kDepthFieldIdBytes + kKinkPlaneCountBytes + kCompactKinkPlaneBytes);
 static_assert(SizeOf<CompactContactModelBody>().counted_bytes ==
-              kCompactContactBytes + kDepthFieldIdBytes + kCompactKinkPlaneBytes +
-                  kTranslationPatchBytes);
+              kCompactContactBytes + kDepthFieldIdBytes + kCompactKinkPlaneBytes);
 static_assert(SizeOf<WireFieldId>().bytes == kDepthFieldIdBytes);
 static_assert(SizeOf<CompactWireKinkPlane>().bytes == kCompactKinkPlaneBytes);
-static_assert(SizeOf<WirePatch>().bytes == kTranslationPatchBytes);
 static_assert(SizeOf<CompactToolStateBody>().bytes == kCompactToolStateBodyBytes);
 static_assert(SizeOf<HelloMessage>().bytes == kHelloBodyBytes);
 static_assert(SizeOf<WelcomeMessage>().bytes == kWelcomeFixedBytes + kWelcomeTargetBytes);

@@ -44,37 +44,6 @@ struct KinkPlane {
   glm::dvec3 d_translation_offset_W{0.0};
 };
 
-/// Half-width, in steps, of a contact's translation patch (TranslationPatch): the patch holds
-/// (2R + 1)² depths.
-inline constexpr int kTranslationPatchRadius = 2;
-/// Nodes per side of a translation patch.
-inline constexpr int kTranslationPatchSide = 2 * kTranslationPatchRadius + 1;
-
-/// A contact's depth over in-plane translations of the tool (our construction [R]): δ at the tool
-/// poses q0 displaced by (i·h, j·h) along the window's u and v (i, j ∈ [−R, R],
-/// R = kTranslationPatchRadius), each the refined maximum of b − a at that pose, as protocol
-/// version 9 carries it (no sender fills it now: the depth fields hold the surface where the tool
-/// is). A linear model holds a ridge's slope only until
-/// the tool has moved a fraction of the ridge's period; the patch holds δ over ±R·h, so that a
-/// model read a round trip after its q0 (issue 33) or a linearization point a deadband away from
-/// the tool still gives the surface's depth there. ContactDepthAt adds its residual to the
-/// planes: the patch's bicubic (Catmull–Rom) interpolant less a linear part, so that δ and ∇δ at
-/// q0 are the contact's own and δ passes the nodes; past the patch's edge δ holds
-/// (contact_model.h).
-struct TranslationPatch {
-  /// Node spacing h (m); 0: no patch.
-  double step_m = 0.0;
-  /// The window's in-plane axes u and v (unit, W) the nodes are displaced along.
-  glm::dvec3 axis_u_W{1.0, 0.0, 0.0};
-  glm::dvec3 axis_v_W{0.0, 1.0, 0.0};
-  /// δ(i·h, j·h) − δ0 (m) at index (j + R)·kTranslationPatchSide + (i + R); the centre is 0.
-  std::array<float, kTranslationPatchSide * kTranslationPatchSide> depth_m{};
-  /// The contact point less the tool's centre of mass at q0 (m, W), or zero. Non-zero: a rotation
-  /// Δθ of the tool also slides its surface at the contact by Δθ × lever, and the patch is read at
-  /// the in-plane part of Δx + Δθ × lever.
-  glm::dvec3 lever_W{0.0};
-};
-
 /// The linearized contact that the remote node sends and the operator loop evaluates:
 /// δ_i(q) ≈ depth_m + J·(q ⊖ q0) with stiffness k (DESIGN.md §5), or, with kink planes, the
 /// largest of that plane and theirs, blended over a few micrometres (ContactDepthAt,
@@ -90,9 +59,6 @@ struct ContactLinearization {
   /// Valid entries of kink_planes (0..kMaxKinkPlanes; values outside count as clamped).
   int num_kink_planes = 0;
   std::array<KinkPlane, kMaxKinkPlanes> kink_planes{};
-  /// δ over in-plane translations (step_m = 0: none, the planes alone). The remote node's
-  /// option; not carried on the wire (protocol version 8 sends the planes).
-  TranslationPatch patch;
   /// The contact's depth field (depth_field.h; 0: none). Where the evaluator holds that field and
   /// the tool is within its travel margin, δ and ∇δ are the field's at the tool's pose
   /// (EvaluateContactModel); elsewhere the planes above are the fallback.

@@ -40,13 +40,6 @@ struct ContactModel {
 /// vertex.
 inline constexpr double kKinkBlendM = 10e-6;
 
-/// Largest translation-patch spacing (m) whose curvature ContactDepthAt gives the implicit step:
-/// a patch this fine (a fine grid's cells) holds the vertex of a V between two flanks within its
-/// nodes, and without its curvature in K the loop meets that stiffness only one model later.
-/// Patches of the default grid's cells (0.4–0.8 mm) add no curvature to K: with it the loop is no
-/// better there (measured: docs/measurements.md).
-inline constexpr double kPatchCurvatureMaxStepM = 0.25e-3;
-
 /// δ of contact `c` at the pose change Δq = q ⊖ q0 (Δq.linear in m, Δq.angular in rad, world
 /// axes): the largest of its planes, δ0 + J·Δq and each kink plane's δ_m + J_m·Δq (J_m =
 /// (∂δ/∂x + the plane's offset, ∂δ_m/∂θ)), with a quadratic blend where another plane comes within
@@ -60,22 +53,7 @@ inline constexpr double kPatchCurvatureMaxStepM = 0.25e-3;
 /// `gradient` (optional) receives ∇δ; `curvature` (optional) receives ∇²δ (6×6, world axes,
 /// rows/cols as Stiffness6; only its rotation block is non-zero where the planes share ∂δ/∂x),
 /// the blend's Σ (J_max − J_i)(J_max − J_i)ᵀ/(2ε), which the implicit tool step needs in K to stay
-/// stable there, plus, for a translation patch no wider than kPatchCurvatureMaxStepM between
-/// nodes, the convex part of the patch's Hessian in the window's plane (its eigenvalues below
-/// zero dropped, so K stays negative semi-definite; through the lever where it has one; zero past
-/// the patch's edge). Non-finite planes are skipped.
-/// With a translation patch (c.patch.step_m > 0; TranslationPatch) the patch's residual is added:
-/// its Catmull–Rom bicubic interpolant at the in-plane part of Δq.linear (clamped to ±R·h; linear
-/// ghosts one node past each edge) less a linear part: the interpolant's tangent at q0 there,
-/// the contact's own in-plane ∂δ/∂x from one node on, joined by a smoothstep (the two are one
-/// where the nodes are one cell apart and ∂δ/∂x is the default secant, or at texel scale and ∂δ/∂x
-/// the texel-scale slope). So δ(q0) and ∇δ(q0) are unchanged and δ passes the nodes. Past an edge
-/// the in-plane slope fades from the interpolant's there to zero over a quarter node spacing and δ
-/// then holds in the plane (nothing is known of the surface there: the tangent at q0 carried on
-/// past a ridge read the tool deep into the next flank), with ∇δ continuous. Its gradient is added
-/// to ∂δ/∂x. A patch with a non-finite node is ignored. With a
-/// lever (TranslationPatch::lever_W non-zero) the patch is read at Δx + Δθ × lever instead of Δx,
-/// and its gradient r × g is added to ∂δ/∂θ.
+/// stable there. Non-finite planes are skipped.
 /// noexcept, allocation-free (1 kHz loop).
 double ContactDepthAt(const ContactLinearization& c, const Twist& dq,
                       PenetrationGradient* gradient = nullptr,
@@ -87,7 +65,7 @@ struct ContactModelEvaluation {
   /// J_i = ∇δ_i from ContactDepthAt).
   Wrench F_T_W;
   /// K = Σ_{δ_i>0} −k_i (J_i J_iᵀ + δ_i ∇²δ_i) (negative semi-definite; ∇²δ_i is zero but where
-  /// a contact's planes blend or a texel-scale translation patch curves: ContactDepthAt).
+  /// a contact's planes blend: ContactDepthAt; a depth field's, its smooth maximum's).
   Stiffness6 K = Stiffness6::Zero();
   /// Contacts with δ_i(q) > 0.
   int active_contacts = 0;

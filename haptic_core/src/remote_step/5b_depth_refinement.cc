@@ -293,7 +293,8 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
   }
   Seed deepest = best >= 0 ? base[static_cast<std::size_t>(best)] : Seed{-kInf, 0.0, 0.0};
   // A deeper point found away from the grid's seeds (the screen, the last step) becomes deepest
-  // and one of the base seeds, and the displaced samples are searched from it too. Returns how much deeper (µm, rounded; 0 when the seeds found nothing).
+  // and one of the base seeds, and the displaced samples are searched from it too. Returns how much
+  // deeper (µm, rounded; 0 when the seeds found nothing).
   bool deeper_away_from_seeds = false;
   const auto take_deeper = [&](const Seed& found) -> std::uint64_t {
     const std::uint64_t raised =
@@ -469,7 +470,6 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
     }
   }
   lin.num_kink_planes = 0;
-  lin.patch = TranslationPatch{};
   return true;
 }
 

@@ -202,7 +202,7 @@ class ContactModelDeadband {
     ForgetHeld();
   }
   /// Forgets the held model: the next Decide sends (kFirst), for a change of the model that
-  /// Decide does not compare (e.g. translation patches turned on or off).
+  /// Decide does not compare (a new configuration).
   void ForgetHeld() noexcept { have_sent_ = false; }
   const ContactModelDeadbandConfig& config() const noexcept { return config_; }
   /// The last model sent (valid after the first Decide that sent).

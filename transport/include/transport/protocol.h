@@ -71,20 +71,6 @@
 //     contact ≥ num_contacts or a contact's (kMaxKinkPlanesPerContact + 1)-th plane (kBadValue),
 //     a non-finite field (kNonFinite). The compact model carries the same section with 17-byte
 //     planes where the offset is zero (version 11, below).
-//     Then the translation patches (version 9, issue 32's nineteenth stop: δ over in-plane
-//     translations of the tool, haptic_core's TranslationPatch): u8 num_patches (at most
-//     TranslationPatchCapacity(): as many as fit after the planes), per patch
-//     (kTranslationPatchBytes, 75): u8 contact (< num_contacts, one patch per contact), f32
-//     step_m (node spacing h, m, finite, in (0, kMaxTranslationPatchStepM]), 3×i16 axis u and
-//     3×i16 axis v (unit vectors ·32767; normalized on receipt), f32 scale (m per node unit,
-//     finite, ≥ 0), 24×i16 nodes (δ(i·h, j·h) − δ0 = node·scale, row by row, j then i from −2 to
-//     2, the centre left out: it is 0), 3×i16 lever (the contact point less the tool's centre of
-//     mass at q0, units of kCompactPointStepM; zero: the patch follows translations only). A
-//     node, axis or lever of −32768 (kCompactNotFinite) or an axis
-//     shorter than 0.5 is rejected (kNonFinite, kBadValue); a patch naming a contact ≥
-//     num_contacts or a contact's second patch, or a step or scale out of range (kBadValue). A
-//     contact whose patch is not finite at the sender goes without one; the nodes' largest error
-//     is scale/2 (kTranslationPatch*). The compact model carries the same section, alike.
 //     Then (version 12) the depth-field section: u8 n (≤ num_contacts), per contact that has a
 //     depth field (kDepthFieldIdBytes, 5), in the contacts' order: u8 contact (< num_contacts),
 //     u32 field id (≠ 0: the DepthFieldFragment object that carries the field). A contact
@@ -130,7 +116,7 @@
 //     for one with its own (the translation arms, DepthRefinementOptions::
 //     translation_kink_planes); the sender sets the bit when an offset component is not 0 in f32.
 //     Checked as in ContactModel (the contact is the byte less the bit). Then the translation
-//     patches and the depth-field section as in ContactModel.
+//     the depth-field section as in ContactModel.
 //   Goodbye O↔R (0): clean close of the session (the operator at the end of a run, the remote
 //     node when stopped); sent three times with new sequence numbers.
 //   Hello O→R (44): u16 min_version, u16 max_version, u64 client_nonce, f32 tool_state_rate_hz,
@@ -240,13 +226,15 @@ inline constexpr std::uint32_t kLegacyMagic = 0x504C5448u;  // bytes 'H' 'T' 'L'
 /// contact's translation slope in 17 bytes instead of 29); every other body is as in version 10.
 /// Version 12 (the contact model as depth fields) adds the depth-field section after the contacts
 /// of ContactModel and CompactContactModel (each contact's field id) and the DepthFieldFragment
-/// and DepthFieldNack messages; every other body is as in version 11.
-/// Only version 12 is accepted. A remote node answers a Hello of versions 2 to 11 whose MAC
+/// and DepthFieldNack messages; every other body is as in version 11. Version 13 drops the
+/// translation patches' section after the kink planes (the depth fields hold the surface where
+/// the tool is); every other body is as in version 12.
+/// Only version 13 is accepted. A remote node answers a Hello of versions 2 to 12 whose MAC
 /// verifies with a Reject (kVersion) in that Hello's own layout and header version (the Hello's
-/// first 12 body bytes and the Reject body are laid out alike in versions 2 to 12), so that an
+/// first 12 body bytes and the Reject body are laid out alike in versions 2 to 13), so that an
 /// older operator is told why.
-inline constexpr std::uint16_t kProtocolVersion = 12;
-inline constexpr std::uint16_t kMinProtocolVersion = 12;
+inline constexpr std::uint16_t kProtocolVersion = 13;
+inline constexpr std::uint16_t kMinProtocolVersion = 13;
 
 /// Message types; values are part of the protocol and never reused.
 enum class MessageType : std::uint8_t {
@@ -351,14 +339,6 @@ inline constexpr std::uint8_t kCompactKinkPlaneOwnSlope = 0x80;
 inline constexpr std::size_t kKinkPlaneCountBytes = 1;
 /// Most kink planes per contact (haptic_core's kMaxKinkPlanes) and per model.
 inline constexpr int kMaxKinkPlanesPerContact = 8;
-/// One translation patch on the wire: u8 contact, f32 step, 2×3×i16 axes, f32 scale, 24×i16
-/// nodes, 3×i16 lever; and the u8 count before them (version 9).
-inline constexpr int kTranslationPatchNodes = 24;
-inline constexpr std::size_t kTranslationPatchBytes =
-    1 + 4 + 6 * 2 + 4 + kTranslationPatchNodes * 2 + 3 * 2;
-inline constexpr std::size_t kTranslationPatchCountBytes = 1;
-/// Largest node spacing (m) a receiver accepts.
-inline constexpr double kMaxTranslationPatchStepM = 0.1;
 /// The depth-field section after the contacts (version 12): u8 count, then per contact with a
 /// field u8 contact and u32 field id.
 inline constexpr std::size_t kDepthFieldIdCountBytes = 1;
@@ -418,29 +398,11 @@ constexpr int KinkPlaneCapacity(std::size_t fixed_bytes, std::size_t contact_byt
   const std::size_t used =
       kHeaderBytes + fixed_bytes +
       static_cast<std::size_t>(num_contacts < 0 ? 0 : num_contacts) * contact_bytes +
-      DepthFieldIdSectionBytes(num_field_ids) + kKinkPlaneCountBytes + kTranslationPatchCountBytes +
-      kMacBytes;
+      DepthFieldIdSectionBytes(num_field_ids) + kKinkPlaneCountBytes + kMacBytes;
   if (used >= kMaxDatagramBytes) return 0;
   const std::size_t fit = (kMaxDatagramBytes - used) / kKinkPlaneBytes;
   return fit < static_cast<std::size_t>(kMaxWireKinkPlanes) ? static_cast<int>(fit)
                                                             : kMaxWireKinkPlanes;
-}
-/// Translation patches that fit one datagram after the contacts and `num_kink_planes` kink planes
-/// (as KinkPlaneCapacity): at most kMaxWireContacts (one per contact). A receiver refuses a larger
-/// count (kBadCount).
-constexpr int TranslationPatchCapacity(std::size_t fixed_bytes, std::size_t contact_bytes,
-                                       int num_contacts, int num_kink_planes,
-                                       int num_field_ids = 0) noexcept {
-  const std::size_t used =
-      kHeaderBytes + fixed_bytes +
-      static_cast<std::size_t>(num_contacts < 0 ? 0 : num_contacts) * contact_bytes +
-      DepthFieldIdSectionBytes(num_field_ids) + kKinkPlaneCountBytes +
-      static_cast<std::size_t>(num_kink_planes < 0 ? 0 : num_kink_planes) * kKinkPlaneBytes +
-      kTranslationPatchCountBytes + kMacBytes;
-  if (used >= kMaxDatagramBytes) return 0;
-  const std::size_t fit = (kMaxDatagramBytes - used) / kTranslationPatchBytes;
-  return fit < static_cast<std::size_t>(kMaxWireContacts) ? static_cast<int>(fit)
-                                                          : kMaxWireContacts;
 }
 /// Largest scene object (bytes) a sender fragments or a receiver reassembles.
 inline constexpr std::uint32_t kMaxSceneObjectBytes = 64u << 20;
