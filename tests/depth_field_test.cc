@@ -9,6 +9,7 @@
 
 #include <cmath>
 #include <glm/gtc/quaternion.hpp>
+#include <limits>
 #include <random>
 
 #include "allocation_counter.h"
@@ -347,6 +348,24 @@ TEST(DepthField, ADenseFieldKeepsEveryFewNodesOfItsLatticeAndReadsThemAsTheClose
   EXPECT_NEAR(e.depth_m, kD + big.smooth_max_m * std::log(static_cast<double>(kept)), 1e-9);
   const glm::dvec3 n_W = X_WF.rotation * glm::dvec3(0, 0, 1);
   EXPECT_NEAR(glm::length(e.gradient.d_translation_W + n_W), 0.0, 1e-6);
+  // The kept nodes follow the tool's lattice: at lattice coordinates (i − 3, j + 5), nodes
+  // 3, 7, 11, … along both axes, 25 of them on the face each way.
+  DepthField shifted = MakeField(110, kH, X_WF, X_WT0, Flat, BigFlatFace);
+  shifted.tool_lattice_i0 = -3;
+  shifted.tool_lattice_j0 = 5;
+  ASSERT_TRUE(shifted.Prepare());
+  EXPECT_EQ(shifted.node_stride, 4);
+  EXPECT_EQ(shifted.tool_i0, 3);
+  EXPECT_EQ(shifted.tool_j0, 3);
+  const DepthFieldEvaluation es = DepthFieldDepthAt(shifted, X_WT0);
+  EXPECT_EQ(es.nodes_evaluated, 625);
+  EXPECT_NEAR(es.depth_m, kD + shifted.smooth_max_m * std::log(625.0), 1e-9);
+  // Coordinates off the wire at the ends of their range align without overflow.
+  shifted.tool_lattice_i0 = std::numeric_limits<std::int32_t>::min();
+  shifted.tool_lattice_j0 = std::numeric_limits<std::int32_t>::max();
+  ASSERT_TRUE(shifted.Prepare());
+  EXPECT_EQ(shifted.tool_i0, 0);
+  EXPECT_EQ(shifted.tool_j0, 1);
   // A field that fits is kept whole.
   const DepthField small = MakeField(kN, kH, X_WF, ToolAboveFace(X_WF), Flat, FaceInto);
   EXPECT_EQ(small.node_stride, 1);

@@ -874,7 +874,7 @@ TEST(Messages, TheMacIsHmacSha256TruncatedTo128Bits) {
 }
 
 // Protocol version 10: a Ping carries the operator's round trip as a u32 of µs (the remote node
-// decides from it whether to send translation patches); its body is exactly that.
+// sizes its depth fields' margin and speculative floor from it); its body is exactly that.
 TEST(Messages, APingCarriesTheOperatorsRoundTrip) {
   const MacKey key = TestKey();
   for (const std::uint32_t rtt_us : {0u, 1u, 10'000u, 0xFFFF'FFFFu}) {

@@ -219,9 +219,14 @@ bool DepthField::Prepare() {
 
 void DepthField::KeepToolNodes(int stride) {
   node_stride = stride;
-  // The first kept node along each axis: lattice coordinate a multiple of the stride.
-  tool_i0 = ((-tool_lattice_i0) % stride + stride) % stride;
-  tool_j0 = ((-tool_lattice_j0) % stride + stride) % stride;
+  // The first kept node along each axis: lattice coordinate a multiple of the stride (64-bit:
+  // the coordinates come off the wire, and −INT32_MIN overflows).
+  const auto first_kept = [stride](std::int32_t lattice0) {
+    const std::int64_t s = stride, r = ((static_cast<std::int64_t>(lattice0) % s) + s) % s;
+    return static_cast<int>((s - r) % s);
+  };
+  tool_i0 = first_kept(tool_lattice_i0);
+  tool_j0 = first_kept(tool_lattice_j0);
   tool_nx = std::max(0, (nx - tool_i0 + stride - 1) / stride);
   tool_ny = std::max(0, (ny - tool_j0 + stride - 1) / stride);
   tool_grid_m.resize(static_cast<std::size_t>(tool_nx) * tool_ny);
@@ -797,7 +802,8 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
     bound_blocks(k);
   }
   if (best_block < 0) return out;  // no tool node over the environment's interpolant
-  visit_block(best_block);
+  const int first_block = best_block;
+  visit_block(first_block);
   // Then each super-block whose bound reaches within the cutoff of the running maximum, in order:
   // its blocks that reach within it.
   for (int k = 0; k < num_supers && out.nodes_evaluated < max_nodes; ++k) {
@@ -809,7 +815,7 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
     for (int tj = bj0; tj < bj1 && out.nodes_evaluated < max_nodes; ++tj) {
       for (int ti = bi0; ti < bi1 && out.nodes_evaluated < max_nodes; ++ti) {
         const int b = tj * bx + ti;
-        if (b == best_block || !(block_ub[static_cast<std::size_t>(b)] >= m_ref - cutoff)) {
+        if (b == first_block || !(block_ub[static_cast<std::size_t>(b)] >= m_ref - cutoff)) {
           continue;
         }
         visit_block(b);

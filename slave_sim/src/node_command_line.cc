@@ -303,7 +303,7 @@ void FinishStreamConfig(const CLI::App& app, const NodeCommandLine& cl, RemoteNo
   if (!cl.out_dir.empty()) config.step_trace_path = cl.out_dir + "/remote_steps.csv";
 }
 
-// The texture stage's gradient, stage 5b, clustering, and the translation patches.
+// The texture stage's gradient, stage 5b and clustering.
 void FinishDepthConfig(const CLI::App& app, const NodeCommandLine& cl, RemoteNodeConfig& config) {
   PipelineOptions& pipeline = config.pipeline;
   DepthRefinementOptions& refinement = pipeline.depth_refinement;

@@ -50,7 +50,7 @@ class RemoteNodeRun {
   // The remote step at the session's tool pose and its contact model to the operator; or, when
   // the step would see nothing new, a wait on the socket.
   void StepOrWait();
-  // The translation patches and the speculative floor by the operator's round trip.
+  // The speculative floor and the depth fields' margin by the operator's round trip.
   void FollowRoundTrip();
   void PrintProgress(const StepTimings& timings, int num_contacts);
 

@@ -52,8 +52,7 @@ nlohmann::json RemoteNodeRun::Summary() const {
     // evaluations of b − a and how far δ0 rose above the grid's; the conservative screen's
     // squares and leaves per contact, the contacts where it found a deeper point than the seeds
     // (and Σ µm), and those it stopped at its leaf budget; the last step's seeds searched, the
-    // contacts where one
-    // was deeper than the grid's seeds (and Σ µm), and whether they are on.
+    // contacts where one was deeper than the grid's seeds (and Σ µm), and whether they are on.
     const DepthRefinementCounters& r = pipeline_->depth_refinement_counters();
     const double n = r.contacts > 0 ? static_cast<double>(r.contacts) : 1.0;
     s["depth_refinement"] = {

@@ -317,9 +317,9 @@ constexpr void Fields(auto& a, Of<CompactContactModelBody> auto& m) {
   const int capacity = KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes,
                                          static_cast<int>(n), m.num_field_ids);
   // Counted as if each plane were kKinkPlaneBytes (as ContactModel's): the bound on the count is
-  // the same whatever the planes carry; the bytes left are checked against the shortest plane.
-  // The planes' sizes vary (kCompactKinkPlaneSlopeBytes): the shortest bounds the count, and the
-  // body's end (Reader::Finish) checks that nothing follows the last.
+  // the same whatever the planes carry. The planes' sizes vary (kCompactKinkPlaneSlopeBytes): the
+  // bytes left are checked against the shortest, and the body's end (Reader::Finish) checks that
+  // nothing follows the last.
   const std::size_t k = CountBefore<std::uint8_t>(
       a, m.num_kink_planes, static_cast<std::size_t>(capacity), kCompactKinkPlaneBytes, 0);
   for (std::size_t j = 0; j < k; ++j) Fields(a, m.kink_planes[j]);

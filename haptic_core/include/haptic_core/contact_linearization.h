@@ -130,7 +130,7 @@ struct GradientSteps {
 std::array<RigidTransform, kGradientSamples> GradientSamplePoses(
     const RigidTransform& X_WT, const ContactWindow& window) noexcept;
 /// The same table with the steps `steps` (h_x in m along u and v, h_θ in rad about u, v and n)
-/// instead of the window's (stage 5b's texel-scale steps, depth_refinement.h).
+/// instead of the window's (the pipeline truth's fine tilt steps, ground_truth_depth.h).
 std::array<RigidTransform, kGradientSamples> GradientSamplePoses(
     const RigidTransform& X_WT, const ContactWindow& window, const GradientSteps& steps) noexcept;
 

@@ -108,8 +108,9 @@ struct DepthField {
   int tool_i0 = 0, tool_j0 = 0, tool_nx = 0, tool_ny = 0;
   std::vector<float> tool_grid_m;
   /// Per block of kDepthFieldBlock² grid cells (#ceil(nx/B)·ceil(ny/B), row-major): the largest
-  /// env_bound_m in it (m). Per block of as many kept tool nodes (on tool_grid_m): their smallest
-  /// and largest a (m; +∞ and −∞ where the block has none). The evaluation skips a tool block
+  /// env_bound_m in it (m). Per block of as many kept tool nodes (on tool_grid_m,
+  /// #ceil(tool_nx/B)·ceil(tool_ny/B)): their smallest and largest a (m; +∞ and −∞ where the
+  /// block has none). The evaluation skips a tool block
   /// whose moved box cannot reach within the cutoff of the deepest node found.
   std::vector<float> env_block_bound_m, tool_block_min_m, tool_block_max_m;
   /// The same per sub-block of kDepthFieldSubBlock² cells or nodes, and per super-block of
@@ -118,7 +119,7 @@ struct DepthField {
   std::vector<float> env_super_bound_m, tool_super_min_m, tool_super_max_m;
   /// Prepare's scratch: the rows' Bézier coefficients (#4·nx·ny).
   std::vector<float> row_coefficients_m;
-  /// An upper bound (m) on the distance of a tool node from the tool's centre of mass at X_WT0
+  /// An upper bound (m) on the distance of a kept tool node from the tool's centre of mass at X_WT0
   /// (the farthest corner of the blocks' boxes of nodes).
   double tool_radius_m = 0.0;
   bool prepared = false;
@@ -130,12 +131,14 @@ struct DepthField {
   /// them, every node_stride-th. Allocates only when the buffers' capacity is short. Returns
   /// false, leaving prepared false, on a bad field.
   bool Prepare();
-  /// Keeps every `stride`-th tool node of the tool's lattice (node_stride, tool_grid_m and the
-  /// tool's bounds). Prepare's.
-  void KeepToolNodes(int stride);
   /// Reserves the maps, the bounds and the blocks for kMaxDepthFieldSide² nodes (not Prepare's
   /// scratch), so that a field swapped into a cache slot keeps buffers of that size. Allocates.
   void Reserve();
+
+ private:
+  /// Keeps every `stride`-th tool node of the tool's lattice (node_stride, tool_grid_m and the
+  /// tool's bounds). Prepare's.
+  void KeepToolNodes(int stride);  // stride ≥ 1
 };
 
 /// What DepthFieldDepthAt found.
@@ -165,7 +168,7 @@ struct DepthFieldEvaluation {
   bool over_budget = false;
 };
 
-/// Evaluates `field` at tool pose X_WT (T at the tool's centre of mass, W): each tool node's
+/// Evaluates `field` at tool pose X_WT (T at the tool's centre of mass, W): each kept tool node's
 /// depth δ_j = b(s_j) − s_j.z (DepthField), δ = smooth_max_m·ln Σ_j exp(δ_j / smooth_max_m)
 /// over the nodes whose bicubic stencil is complete, with ∇δ = Σ w_j ∇δ_j (w the
 /// softmax weights) and ∇δ_j = (g_j, r_j × g_j), g_j = R_WF·(∂b/∂x, ∂b/∂y, −1), r_j the node less

@@ -252,12 +252,11 @@ class DepthRefiner {
   // The triangles of `list` facing the side's way, projected on the window at pose X.
   void ProjectAll(const HapticModel& model, const RigidTransform& X, PatchSide side,
                   std::span<const int> list, std::vector<Projected>& out) noexcept;
-  // The environment's projected triangles over a box (env_local_, from env_all_), the tool's
-  // (tool_local_, from `from`), and tool_local_'s faces at another pose (tool_moved_).
+  // The environment's projected triangles over a box (env_local_, from env_all_), and the tool's
+  // (tool_local_, from `from`).
   void GatherEnvironment(double s0, double s1, double t0, double t1) noexcept;
   void GatherTool(std::span<const Projected> from, double s0, double s1, double t0,
                   double t1) noexcept;
-  void MoveTool(const RigidTransform& X_WT) noexcept;
   // b − a at (s, t) at level 0, the tool's heights read at (s − shift_s, t − shift_t); −∞ where
   // either side is missing.
   double Difference(std::span<const Projected> tool, double s, double t, double shift_s,
@@ -292,7 +291,7 @@ class DepthRefiner {
   // The window's triangles projected once per contact (the tool at the base pose, and at one
   // rendered rotation at a time), and those near the point being searched.
   std::vector<Projected> env_all_, tool_all_, tool_pose_all_;
-  std::vector<Projected> env_local_, tool_local_, tool_moved_;
+  std::vector<Projected> env_local_, tool_local_;
   // Set per contact.
   const HapticModel* env_ = nullptr;
   const HapticModel* tool_ = nullptr;

@@ -94,9 +94,9 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
     d.last_results[static_cast<std::size_t>(d.split_first + k)].stiffness_n_per_m *=
         d.split_weights[static_cast<std::size_t>(k)];
   }
-  // Kink planes are added below (stage 5b's translation arms, then the rotation arms).
+  // Kink planes are added below (the rotation arms).
   for (int i = 0; i < d.last_num_queries; ++i) d.last_results[i].num_kink_planes = 0;
-  // Stage 5b: δ refined to the finest texture level, its gradient at texel scale (issue 32).
+  // Stage 5b: δ refined to the finest texture level (issue 32).
   if (options_.refine_depth) {
     d.refiner.BeginStep();
     for (int i = 0; i < d.last_num_queries; ++i) {

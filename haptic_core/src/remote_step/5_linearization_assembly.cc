@@ -56,7 +56,7 @@ int AddKinkPlanes(const ContactWindow& w, std::span<const DepthSample> samples,
     bearing[a] = off_plus <= off_minus ? 0 : 1;
     d_rotation += (s0 - glm::dot(d_rotation, axes[a])) * axes[a];
   }
-  // The planes already held (translation arms) share the contact's rotation slope.
+  // The planes already held share the contact's rotation slope.
   for (int m = 0; m < lin.num_kink_planes; ++m) {
     lin.kink_planes[static_cast<std::size_t>(m)].d_rotation_W +=
         d_rotation - lin.gradient.d_rotation_W;

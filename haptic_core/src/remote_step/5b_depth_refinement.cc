@@ -74,7 +74,6 @@ DepthRefiner::DepthRefiner(const DepthRefinementOptions& options, std::size_t ma
   vertex_scratch_.reserve(max_triangles);
   env_local_.reserve(max_triangles);
   tool_local_.reserve(max_triangles);
-  tool_moved_.reserve(max_triangles);
   env_all_.reserve(max_triangles);
   tool_all_.reserve(max_triangles);
   tool_pose_all_.reserve(max_triangles);
@@ -115,18 +114,6 @@ void DepthRefiner::GatherTool(std::span<const Projected> from, double s0, double
   for (const Projected& P : from) {
     if (P.x1 < s0 || P.x0 > s1 || P.y1 < t0 || P.y0 > t1) continue;
     tool_local_.push_back(P);
-  }
-}
-
-void DepthRefiner::MoveTool(const RigidTransform& X_WT) noexcept {
-  tool_moved_.clear();
-  Projected P;
-  for (const Projected& L : tool_local_) {
-    if (!ProjectTriangle(*tool_, X_WT, window_, L.face, PatchSide::kTool, P, options_.parallax)) {
-      continue;
-    }
-    P.face = L.face;
-    tool_moved_.push_back(P);
   }
 }
 

@@ -109,14 +109,13 @@
 //     −32768 (kCompactNotFinite) marks a value, or normal, that was not finite (or a zero normal)
 //     at the sender, and the receiver rejects the datagram (kNonFinite) as it would ContactModel
 //     with a NaN. The largest error of each field is a kCompact*Error* constant below. Then the
-//     kink planes (u8 count, at most KinkPlaneCapacity() as in ContactModel, i.e. as if each were
-//     kKinkPlaneBytes), each (version 11) u8 contact | kCompactKinkPlaneOwnSlope (0x80), f32
-//     depth_m, 3×f32 ∂δ_m/∂θ, and only when that bit is set 3×f32 ∂δ_m/∂x less the contact's:
-//     17 bytes for a plane that shares the contact's translation slope (every rotation arm), 29
-//     for one with its own (the translation arms, DepthRefinementOptions::
-//     translation_kink_planes); the sender sets the bit when an offset component is not 0 in f32.
-//     Checked as in ContactModel (the contact is the byte less the bit). Then the translation
-//     the depth-field section as in ContactModel.
+//     depth-field section as in ContactModel, then the kink planes, which end the body (u8 count,
+//     at most KinkPlaneCapacity() as in ContactModel, i.e. as if each were kKinkPlaneBytes), each
+//     (version 11) u8 contact | kCompactKinkPlaneOwnSlope (0x80), f32 depth_m, 3×f32 ∂δ_m/∂θ, and
+//     only when that bit is set 3×f32 ∂δ_m/∂x less the contact's: 17 bytes for a plane that
+//     shares the contact's translation slope (every rotation arm), 29 for one with its own; the
+//     sender sets the bit when an offset component is not 0 in f32. Checked as in ContactModel
+//     (the contact is the byte less the bit); bytes after the last plane are refused (kTooLong).
 //   Goodbye O↔R (0): clean close of the session (the operator at the end of a run, the remote
 //     node when stopped); sent three times with new sequence numbers.
 //   Hello O→R (44): u16 min_version, u16 max_version, u64 client_nonce, f32 tool_state_rate_hz,
