@@ -6,9 +6,7 @@
 #include <limits>
 
 namespace ht {
-namespace {
-
-}  // namespace
+namespace {}  // namespace
 
 // Declared in contact_linearization.h; defined here, beside the loop's evaluation that uses it, so
 // that a receiver of contact models (transport's decoder, its fuzz target) links without the

@@ -286,8 +286,7 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     fields_s1.name = "depth_fields_s1";
     fields_s1.depth_field_subdivision = 1;
     s.push_back(fields_s1);
-    // Stage 5b without the neighbouring peaks as seeds (the default before issue 32's
-    // thirty-fourth stop).
+    // Stage 5b without the neighbouring peaks as seeds.
     FrontierSetting no_neighbour_peaks = refined;
     no_neighbour_peaks.name = "no_neighbour_peak_seeds";
     no_neighbour_peaks.neighbour_peak_seeds = false;

@@ -29,7 +29,7 @@ struct PenetrationGradient {
 };
 
 /// Most kink planes one contact carries: the two arms of δ's V about each of the window's in-plane
-/// rotation axes u and v (issue 31, change 5), and room for arms along its in-plane translation
+/// rotation axes u and v, and room for arms along its in-plane translation
 /// axes (a plane with its own translation slope, which the wire carries).
 inline constexpr int kMaxKinkPlanes = 8;
 

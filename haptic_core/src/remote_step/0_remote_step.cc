@@ -96,7 +96,7 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   }
   // Kink planes are added below (the rotation arms).
   for (int i = 0; i < d.last_num_queries; ++i) d.last_results[i].num_kink_planes = 0;
-  // Stage 5b: δ refined to the finest texture level (issue 32).
+  // Stage 5b: δ refined to the finest texture level.
   if (options_.refine_depth) {
     d.refiner.BeginStep();
     for (int i = 0; i < d.last_num_queries; ++i) {
