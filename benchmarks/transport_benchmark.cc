@@ -45,7 +45,7 @@ void BM_ComputeMac(benchmark::State& state) {
   MacLoop<wire::kMacBytes>(state, [](auto& m, auto& k, auto& mac) { ComputeMac(m, k, mac); });
 }
 // 50 B: a compact tool state's header + body; 122 B: the f64 one's; 1400 B: a contact model with 14
-// contacts (no kink planes).
+// contacts.
 BENCHMARK(BM_ComputeMac)->Arg(50)->Arg(122)->Arg(1400);
 
 /// The MAC of protocol versions 2 to 7 (crypto_auth, HMAC-SHA-512-256, all 32 bytes), for the

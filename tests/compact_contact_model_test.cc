@@ -443,8 +443,7 @@ TEST(CompactContactModel, BytesSitWhereProtocolHSaysAndAreFewerThanTheFloatEncod
     const Datagram compact = EncodeCompactContactModel(TestHeader(), m, key);
     const Datagram full = EncodeContactModel({MessageType::kContactModel, 7, 3, 11}, m, key);
     EXPECT_EQ(compact.size, kHeaderBytes + kCompactContactModelFixedBytes +
-                                n * kCompactContactBytes + kDepthFieldIdCountBytes +
-                                kKinkPlaneCountBytes + kMacBytes);
+                                n * kCompactContactBytes + kDepthFieldIdCountBytes + kMacBytes);
     EXPECT_LE(compact.size, kMaxDatagramBytes);
     if (n >= 1) {
       EXPECT_LT(compact.size, full.size) << n;
@@ -527,8 +526,8 @@ TEST(CompactContactModel, EveryTruncationAndWrongLengthOrCountIsRefused) {
       std::vector<std::uint8_t> wrong = body;
       wrong[kAtCount] = static_cast<std::uint8_t>(n + 1);
       EXPECT_EQ(DecodeCompactContactModel(wrong, out, kNowNs), DecodeStatus::kTooShort);
-      // One fewer: the kink-plane section (protocol version 6) then starts inside the last
-      // contact, and its count, length or values refuse it.
+      // One fewer: the depth-field section then starts inside the last contact, and its count,
+      // length or values refuse it.
       wrong[kAtCount] = static_cast<std::uint8_t>(n - 1);
       EXPECT_NE(DecodeCompactContactModel(wrong, out, kNowNs), DecodeStatus::kOk);
     }
@@ -814,9 +813,8 @@ TEST(CompactContactModel, TheEchoComesBackAcrossTheWrapOfItsLow32Bits) {
 }
 
 // Version 11 does not send the wrench at q0: the receiver sums it from the contacts as the
-// sender's AssembleContactModel did, kink planes included (a plane at the contact's own δ0 is the
-// V's vertex, where the loop blends the arms' slopes). Two routes: the assembly's incremental sum
-// over the linearizations at the sender, and the receiver's sum over what it decoded.
+// sender's AssembleContactModel did. Two routes: the assembly's incremental sum over the
+// linearizations at the sender, and the receiver's sum over what it decoded.
 TEST(CompactContactModel, TheWrenchAtQ0IsTheSendersAssemblyOfTheContactsItCarries) {
   const MacKey key = TestKey();
   std::mt19937 rng(41);
@@ -825,15 +823,6 @@ TEST(CompactContactModel, TheWrenchAtQ0IsTheSendersAssemblyOfTheContactsItCarrie
     const ContactModelMessage shape = RandomModel(rng, 1 + trial % kMaxWireContacts);
     std::vector<ContactLinearization> lins(shape.model.contacts.begin(),
                                            shape.model.contacts.begin() + shape.model.num_contacts);
-    for (ContactLinearization& c : lins) {
-      c.num_kink_planes = static_cast<int>(rng() % 3);
-      for (int j = 0; j < c.num_kink_planes; ++j) {
-        KinkPlane& kp = c.kink_planes[static_cast<std::size_t>(j)];
-        kp.depth_m = j == 0 ? c.depth_m : c.depth_m - Uniform(rng, 0.0, 1e-4);
-        kp.d_rotation_W = RandomUnit(rng) * Uniform(rng, 0.0, 0.05);
-        kp.d_translation_offset_W = RandomUnit(rng) * Uniform(rng, 0.0, 0.2);
-      }
-    }
     ContactModelMessage m = shape;
     m.model.num_contacts = 0;
     m.model.F_T_W_at_q0 = {};
@@ -841,22 +830,12 @@ TEST(CompactContactModel, TheWrenchAtQ0IsTheSendersAssemblyOfTheContactsItCarrie
     ContactModelMessage out;
     ASSERT_EQ(OpenCompact(EncodeCompactContactModel(TestHeader(), m, key), key, out),
               DecodeStatus::kOk);
-    // Each term is k·δ·J of f32 factors (≤ 2⁻²⁴ each; 8·2⁻²⁴ of the term with margin). Where a
-    // plane lies within the blend width kKinkBlendM of the deepest, the slope is a blend whose
-    // weight moves by (change of the gap)/(2·kKinkBlendM): each depth's f32 rounding moves the
-    // gap, and with it the term by k·δ·|J_plane − J_contact| times that.
+    // Each term is k·δ·J of f32 factors (≤ 2⁻²⁴ each; 8·2⁻²⁴ of the term with margin).
     double bound = 1e-12;
     for (const ContactLinearization& c : lins) {
       const double kd = c.stiffness_n_per_m * std::max(c.depth_m, 0.0);
       bound += 8.0 * kCompactF32RelativeError * kd *
                (glm::length(c.gradient.d_translation_W) + glm::length(c.gradient.d_rotation_W));
-      for (int j = 0; j < c.num_kink_planes; ++j) {
-        const KinkPlane& kp = c.kink_planes[static_cast<std::size_t>(j)];
-        const double gap_moves = 2.0 * (F32Bound(c.depth_m) + F32Bound(kp.depth_m));
-        bound += kd * gap_moves / (2.0 * kKinkBlendM) *
-                 (glm::length(kp.d_translation_offset_W) +
-                  glm::length(kp.d_rotation_W - c.gradient.d_rotation_W));
-      }
     }
     const Wrench& a = out.model.F_T_W_at_q0;
     const Wrench& b = m.model.F_T_W_at_q0;

@@ -138,148 +138,9 @@ TEST(ContactModel, NonFiniteInputsGiveZeroWrench) {
   EXPECT_TRUE(IsFinite(e.F_T_W));
 }
 
-// A flat face resting on two edges r = 2 cm either side of the tool's centre of mass, as the
-// remote step sends it (AddKinkPlanes): δ(θ) is a V in the tilt θ about y with its vertex at θ_v,
-// δ_v deep there; at q0 (θ = 0) the bearing arm is the contact's own plane (slope +r) and the
-// other arm a kink plane (slope −r).
-constexpr double kR = 0.02, kDepthV = 1e-4, kThetaV = -1e-3;
-ContactModel RestingFace() {
-  ContactModel m;
-  m.X_WT0.translation = {0.0, 0.0, 0.035};
-  m.num_contacts = 1;
-  ContactLinearization& c = m.contacts[0];
-  c.depth_m = kDepthV + kR * (0.0 - kThetaV);
-  c.gradient = {{0.0, 0.0, -1.0}, {0.0, kR, 0.0}};
-  c.stiffness_n_per_m = 8000;
-  c.num_kink_planes = 1;
-  c.kink_planes[0] = {kDepthV - kR * (0.0 - kThetaV), {0.0, -kR, 0.0}};
-  return m;
-}
-
-Twist Tilt(double theta) { return {{0, 0, 0}, {0, theta, 0}}; }
-
-TEST(ContactModel, KinkPlanesGiveTheVAndBlendOnlyAtItsVertex) {
-  const ContactModel m = RestingFace();
-  const ContactLinearization& c = m.contacts[0];
-  const double blend_half_width = kKinkBlendM / (2 * kR);  // rad: the arms' gap reaches ε
-  double largest_step = 0.0, previous = 0.0;
-  const int n = 4000;
-  for (int i = 0; i <= n; ++i) {
-    const double theta = kThetaV - 2e-3 + 4e-3 * i / n;
-    PenetrationGradient J;
-    const double depth = ContactDepthAt(c, Tilt(theta), &J);
-    const double v = kDepthV + kR * std::abs(theta - kThetaV);
-    if (std::abs(theta - kThetaV) > blend_half_width) {
-      // The V exactly, along the bearing arm's gradient.
-      EXPECT_NEAR(depth, v, 1e-15) << theta;
-      EXPECT_NEAR(J.d_rotation_W.y, theta > kThetaV ? kR : -kR, 1e-15) << theta;
-    } else {
-      EXPECT_GE(depth, v - 1e-15) << theta;
-      EXPECT_LE(depth, v + kKinkBlendM / 4 + 1e-15) << theta;
-    }
-    EXPECT_EQ(J.d_translation_W, c.gradient.d_translation_W);
-    if (i > 0) largest_step = std::max(largest_step, std::abs(J.d_rotation_W.y - previous));
-    previous = J.d_rotation_W.y;
-  }
-  // Continuous: the 4000 steps of 1 µrad cross the 0.5 mrad-wide blend in about 500 steps.
-  EXPECT_LT(largest_step, 0.01 * 2 * kR);
-  // At the vertex both edges bear half: no torque.
-  PenetrationGradient J;
-  EXPECT_NEAR(ContactDepthAt(c, Tilt(kThetaV), &J), kDepthV + kKinkBlendM / 4, 1e-15);
-  EXPECT_NEAR(J.d_rotation_W.y, 0.0, 1e-15);
-  // Without kink planes: the contact's own plane, δ0 + J·Δq.
-  ContactLinearization one = c;
-  one.num_kink_planes = 0;
-  const Twist dq{{1e-4, -2e-4, 3e-4}, {2e-3, -4e-3, 1e-3}};
-  EXPECT_EQ(ContactDepthAt(one, dq), one.depth_m + one.gradient.Dot(dq));
-}
-
-TEST(ContactModel, KinkCurvatureAndStiffnessMatchFiniteDifferences) {
-  // Inside the blend (a quarter of its half-width from the vertex), two routes to one number:
-  // the curvature against differences of the gradient, and K against differences of the wrench.
-  const ContactModel m = RestingFace();
-  const double theta0 = kThetaV + 0.25 * kKinkBlendM / (2 * kR);
-  PenetrationGradient J0;
-  Stiffness6 H;
-  ContactDepthAt(m.contacts[0], Tilt(theta0), &J0, &H);
-  const double h = 1e-9;
-  PenetrationGradient J1;
-  ContactDepthAt(m.contacts[0], Tilt(theta0 + h), &J1);
-  EXPECT_NEAR((J1.d_rotation_W.y - J0.d_rotation_W.y) / h, H(4, 4), 1e-4 * H(4, 4));
-  EXPECT_GT(H(4, 4), 0.0);
-  EXPECT_EQ((H.topLeftCorner<3, 3>().norm()), 0.0);
-
-  const RigidTransform X0 = Displace(m.X_WT0, Tilt(theta0));
-  const ContactModelEvaluation e0 = EvaluateContactModel(m, X0);
-  for (int j = 0; j < 6; ++j) {
-    Twist d;
-    (j < 3 ? d.linear[j] : d.angular[j - 3]) = h;
-    const ContactModelEvaluation e = EvaluateContactModel(m, Displace(X0, d));
-    const glm::dvec3 df = (e.F_T_W.force - e0.F_T_W.force) / h;
-    const glm::dvec3 dt = (e.F_T_W.torque - e0.F_T_W.torque) / h;
-    for (int i = 0; i < 3; ++i) {
-      EXPECT_NEAR(df[i], e0.K(i, j), 1e-3 * (1 + std::abs(e0.K(i, j)))) << i << " " << j;
-      EXPECT_NEAR(dt[i], e0.K(3 + i, j), 1e-3 * (1 + std::abs(e0.K(3 + i, j)))) << i << " " << j;
-    }
-  }
-}
-
-// Translation kink planes (issue 32, ninth stop): a tool whose texture lies between two ridges'
-// flanks has a depth shaped like a V in its position x, with its vertex at x_v; the contact's own
-// plane is one arm (slope +s along x) and a kink plane with its own translation slope the other
-// (−s: offset −2s). The V exactly outside the blend, the slope flipping continuously inside it,
-// and the curvature's translation block against differences of the gradient (two routes).
-TEST(ContactModel, TranslationKinkPlanesGiveTheVInPosition) {
-  constexpr double s = 0.6, x_v = -2e-5, d_v = 5e-5;
-  ContactLinearization c;
-  c.depth_m = d_v + s * (0.0 - x_v);
-  c.gradient = {{s, 0.0, -1.0}, {0.0, 0.01, 0.0}};
-  c.stiffness_n_per_m = 8000;
-  c.num_kink_planes = 1;
-  c.kink_planes[0].depth_m = d_v - s * (0.0 - x_v);
-  c.kink_planes[0].d_rotation_W = c.gradient.d_rotation_W;
-  c.kink_planes[0].d_translation_offset_W = {-2.0 * s, 0.0, 0.0};
-  const double blend_half_width = kKinkBlendM / (2 * s);
-  double largest_step = 0.0, previous = 0.0;
-  const int n = 4000;
-  for (int i = 0; i <= n; ++i) {
-    const double x = x_v - 1e-4 + 2e-4 * i / n;
-    PenetrationGradient J;
-    const double depth = ContactDepthAt(c, {{x, 0.0, 0.0}, {0.0, 0.0, 0.0}}, &J);
-    const double v = d_v + s * std::abs(x - x_v);
-    if (std::abs(x - x_v) > blend_half_width) {
-      EXPECT_NEAR(depth, v, 1e-15) << x;
-      EXPECT_NEAR(J.d_translation_W.x, x > x_v ? s : -s, 1e-15) << x;
-    } else {
-      EXPECT_GE(depth, v - 1e-15) << x;
-      EXPECT_LE(depth, v + kKinkBlendM / 4 + 1e-15) << x;
-    }
-    EXPECT_EQ(J.d_translation_W.z, -1.0);
-    EXPECT_EQ(J.d_rotation_W, c.gradient.d_rotation_W);  // the arms share ∂δ/∂θ
-    if (i > 0) largest_step = std::max(largest_step, std::abs(J.d_translation_W.x - previous));
-    previous = J.d_translation_W.x;
-  }
-  EXPECT_LT(largest_step, 0.01 * 2 * s);  // continuous across the ≈17 µm-wide blend
-  // Inside the blend: the curvature against differences of the gradient, translation block only.
-  const double x0 = x_v + 0.25 * blend_half_width, h = 1e-10;
-  PenetrationGradient J0, J1;
-  Stiffness6 H;
-  ContactDepthAt(c, {{x0, 0.0, 0.0}, {0.0, 0.0, 0.0}}, &J0, &H);
-  ContactDepthAt(c, {{x0 + h, 0.0, 0.0}, {0.0, 0.0, 0.0}}, &J1);
-  EXPECT_GT(H(0, 0), 0.0);
-  EXPECT_NEAR((J1.d_translation_W.x - J0.d_translation_W.x) / h, H(0, 0), 1e-4 * H(0, 0));
-  EXPECT_EQ((H.bottomRightCorner<3, 3>().norm()), 0.0);
-  // The plane's own slope on a contact without it: the contact's ∂δ/∂x plus the offset.
-  ContactLinearization alone = c;
-  alone.depth_m = -1.0;  // the plane alone bears
-  PenetrationGradient J;
-  ContactDepthAt(alone, {{1e-4, 0.0, 0.0}, {0.0, 0.0, 0.0}}, &J);
-  EXPECT_DOUBLE_EQ(J.d_translation_W.x, -s);
-}
-
 // Issue 33's attribution rests on the loop being conservative within one model: the wrench is
 // the negative gradient of the potential (two routes: the potential's central differences and the
-// wrench), unsaturated, with one contact held at the force bound, and inside a kink blend.
+// wrench), unsaturated and with one contact held at the force bound.
 TEST(ContactModel, TheWrenchIsTheNegativeGradientOfThePotential) {
   const auto check = [](const ContactModel& m, const RigidTransform& X0, double bound,
                         const char* what) {
@@ -303,17 +164,7 @@ TEST(ContactModel, TheWrenchIsTheNegativeGradientOfThePotential) {
   const ContactModelEvaluation held = EvaluateContactModel(two, two.X_WT0, 1.0, 0.6);
   EXPECT_EQ(held.saturated_contacts, 1);
   check(two, two.X_WT0, 0.6, "one contact saturated");
-  const ContactModel face = RestingFace();
-  check(face, Displace(face.X_WT0, Tilt(kThetaV + 0.25 * kKinkBlendM / (2 * kR))),
-        std::numeric_limits<double>::infinity(), "inside the kink blend");
-  // ... and inside the blend of a translation arm (its own ∂δ/∂x: offset −2·0.4 along x).
-  ContactModel slope = face;
-  slope.contacts[0].gradient.d_translation_W = {0.4, 0.0, -1.0};
-  slope.contacts[0].kink_planes[0] = {
-      slope.contacts[0].depth_m - 2e-6, {0.0, kR, 0.0}, {-0.8, 0.0, 0.0}};
-  check(slope, Displace(slope.X_WT0, {{-1e-6, 0.0, 0.0}, {0.0, 0.0, 0.0}}),
-        std::numeric_limits<double>::infinity(), "inside a translation arm's blend");
-  // Half the stiffness, half the potential (the blend's weights scale U linearly).
+  // Half the stiffness, half the potential.
   EXPECT_NEAR(EvaluateContactModel(two, two.X_WT0, 0.5).potential_energy_j,
               0.5 * EvaluateContactModel(two, two.X_WT0).potential_energy_j, 1e-18);
 }

@@ -492,11 +492,12 @@ TEST(ContactRegion, PairRegionBoundsGivesThePlainClippingsBitsOnRandomPoses) {
 // edges (x = ±2 cm from its centre), so the contact force acts at the bearing edge and the torque
 // about y is the force times that lever, flipping sign once at the vertex (closed form). A window
 // on the face's region sees both edges (a window on the hulls' witness point, a corner of the
-// face, saw one); the deepest cell's slope gives the torque at q0 (the secant of the ±h_θ samples
-// across the vertex gave a tenth of it); and the kink planes let the model taken at one tilt
-// predict the step's wrench at another across the vertex, which is what the operator's 1 kHz loop
-// renders between two models (docs/hard-cases.md: the fig75 block rocked at the model rate).
-TEST(ContactRegion, BlockRestingOnTheGearBearsOnItsEdgesAndItsModelCarriesTheKink) {
+// face, saw one); the deepest cell's slope gives the torque at q0 (UseBearingEdgeRotationSlope;
+// the secant of the ±h_θ samples across the vertex gave a tenth of it); and the depth fields let
+// the model taken at one tilt give the step's wrench at another across the vertex, which is what
+// the operator's 1 kHz loop renders between two models, where a linearization holds one arm
+// (docs/hard-cases.md: the fig75 block rocked at the model rate).
+TEST(ContactRegion, BlockRestingOnTheGearBearsOnItsEdgesAndItsFieldCarriesTheKink) {
   const HapticScene scene = MakeBlockOnGearScene();
   const double x0 = 0.0017, half = RidgedBlockParams{}.half_extents_m.x;
   const auto tilted = [&](double theta) {
@@ -519,9 +520,8 @@ TEST(ContactRegion, BlockRestingOnTheGearBearsOnItsEdgesAndItsModelCarriesTheKin
     const double tau = m.F_T_W_at_q0.torque.y;
     const double lever = std::abs(tau) / glm::length(m.F_T_W_at_q0.force);
     // The bearing edge's lever: half the face, within the tilt's and the cell's few per cent;
-    // the level face's V has its vertex at θ = 0, rounded over ±kKinkBlendM / half (both edges
-    // bear there, ContactDepthAt).
-    if (std::abs(theta) > kKinkBlendM / half && std::abs(lever - half) > 0.1 * half) ++off_lever;
+    // the level face's V has its vertex at θ = 0, where both edges bear.
+    if (theta != 0.0 && std::abs(lever - half) > 0.1 * half) ++off_lever;
     if (i > 0 && (tau < 0.0) != (previous_tau < 0.0)) ++flips;
     EXPECT_TRUE(i == 0 || tau <= previous_tau + 1e-6) << "the torque restores: θ = " << theta;
     previous_tau = tau;
@@ -531,16 +531,26 @@ TEST(ContactRegion, BlockRestingOnTheGearBearsOnItsEdgesAndItsModelCarriesTheKin
 
   // The model taken at one tilt, evaluated 1.5 mrad either way (across the vertex one way), against
   // the step taken there (whose lever the closed form above checked): force and torque, relative
-  // to the wrench's scale.
-  const auto prediction_error = [&](const PipelineOptions& options) {
+  // to the wrench's scale; from the model's depth fields, and from its linearization alone.
+  const auto prediction_error = [&](bool fields) {
+    PipelineOptions options;
+    options.depth_fields = fields;
     HapticTexturePipeline p(scene, options);
+    DepthFieldCache cache(kMaxContacts);
     double worst = 0.0;
     for (const double theta : {-2e-3, -1e-3, 0.0, 1e-3, 2e-3}) {
       StepTimings t;
       const ContactModel m = p.Step(tilted(theta), 1, t);
+      for (const DepthField* f : p.last_depth_fields()) {
+        DepthField copy = *f;
+        EXPECT_TRUE(cache.Take(copy, {}));
+      }
       for (const double d : {-1.5e-3, 1.5e-3}) {
         const ContactModel there = pipeline.Step(tilted(theta + d), 1, t);
-        const ContactModelEvaluation e = EvaluateContactModel(m, tilted(theta + d));
+        const ContactModelEvaluation e =
+            EvaluateContactModel(m, tilted(theta + d), 1.0,
+                                 std::numeric_limits<double>::infinity(), fields ? &cache : nullptr);
+        if (fields) EXPECT_EQ(e.field_contacts, 1) << theta << " " << d;
         const double f_scale = glm::length(there.F_T_W_at_q0.force);
         worst = std::max(worst, glm::length(e.F_T_W.force - there.F_T_W_at_q0.force) / f_scale);
         worst = std::max(
@@ -549,43 +559,37 @@ TEST(ContactRegion, BlockRestingOnTheGearBearsOnItsEdgesAndItsModelCarriesTheKin
     }
     return worst;
   };
-  const double with_kinks = prediction_error(PipelineOptions{});
-  PipelineOptions one_plane;
-  one_plane.kink_planes = false;
-  const double without = prediction_error(one_plane);
+  const double with_fields = prediction_error(true);
+  const double linearization = prediction_error(false);
   std::printf(
       "[block on gear] the model's wrench 1.5 mrad away against the step there: worst "
-      "%.3g (kink planes) / %.3g (one plane per contact) of F and F·half-width\n",
-      with_kinks, without);
-  EXPECT_LT(with_kinks, 0.05);
-  EXPECT_GT(without, 0.5) << "one plane holds one arm across the vertex: the measure tells them "
-                             "apart";
+      "%.3g (depth fields) / %.3g (linearization) of F and F·half-width\n",
+      with_fields, linearization);
+  // The field's smooth maximum (width ε = kDepthFieldSmoothMaxM) weighs the face's node rows
+  // within ε of the bearing edge: at a tilt θ they reach ε/θ in from it, so 0.5 mrad from level
+  // the lever reads 4 mm short of the edge's 20 mm (0.19 of F·half); 3.5 mrad out, 0.6 mm (0.02).
+  EXPECT_LT(with_fields, 0.25);
+  EXPECT_GT(linearization, 0.5) << "a linearization holds one arm across the vertex: the measure "
+                                   "tells them apart";
 }
 
 // Through level in fine steps (a hundredth of a milliradian, the loop's scale: the block rocks
-// by a few tenths), with the other arm hung below δ0 by the arms' gap at q0 (AddKinkPlanes'
-// hang_other_arm, PipelineOptions::kink_hang_other_arm), the torque at q0 restores monotonically
-// and turns over within the blend, as ContactDepthAt rounds the V's vertex: its slope there is at
-// most 2·F·r²/ε (the arms' gap 2rθ sweeping the blend width ε), and no step between neighbouring
-// tilts is larger than that allows. Put through its own sample (the default), the other arm's
-// lever error puts it level with δ0 a quarter of a milliradian past the vertex, and the torque
-// falls back to the secant's and rises again (a sawtooth of about 12 mN·m, issue 32's
-// twenty-sixth stop), which the same measure finds.
+// by a few tenths), the torque at q0 restores at every tilt, with parallax (the default) and with
+// the render's form h·(N·n).
 // With parallax the tilted face's displaced surface ends a few micrometres inside its coarse
 // edge, past the rendered edge cell's centre; stage 5b's search gave up on a start that read
 // nothing, kept the render's value or took the other edge's from the last step's point (δ 700 µm
 // low), and the torque flipped between the two edges' within a hundredth of a milliradian. On
 // this flat face parallax now reads what the render's form reads, either way.
-TEST(ContactRegion, WithTheOtherArmHungTheRestingBlocksTorqueTurnsOverSmoothlyThroughLevel) {
+TEST(ContactRegion, ThroughLevelTheRestingBlocksTorqueRestoresAndParallaxReadsItAsTheRenderDoes) {
   const HapticScene scene = MakeBlockOnGearScene();
   const double half = RidgedBlockParams{}.half_extents_m.x;
   struct Sweep {
     std::vector<double> tau, force;
-    int non_restoring = 0;  // ticks where the torque does not restore, or no single contact
-    double worst_ratio = 0.0;
+    int non_restoring = 0;  // tilts where the torque does not restore, or no single contact
   };
   const int steps = 120;
-  const double span = 1.2e-3, d_theta = span / steps;
+  const double span = 1.2e-3;
   const auto sweep = [&](const PipelineOptions& options) {
     HapticTexturePipeline pipeline(scene, options);
     Sweep out;
@@ -600,37 +604,25 @@ TEST(ContactRegion, WithTheOtherArmHungTheRestingBlocksTorqueTurnsOverSmoothlyTh
       const double tau = m.num_contacts == 1 ? m.F_T_W_at_q0.torque.y : NAN;
       const double force = glm::length(m.F_T_W_at_q0.force);
       if (!std::isfinite(tau)) ++out.non_restoring;
-      if (i > 0 && std::isfinite(tau) && std::isfinite(out.tau.back())) {
-        if (tau > out.tau.back() + 1e-6) ++out.non_restoring;
-        const double largest_step = 2.0 * force * half * half / kKinkBlendM * d_theta;
-        out.worst_ratio = std::max(out.worst_ratio, std::abs(tau - out.tau.back()) / largest_step);
+      if (i > 0 && std::isfinite(tau) && std::isfinite(out.tau.back()) &&
+          tau > out.tau.back() + 1e-6) {
+        ++out.non_restoring;
       }
       out.tau.push_back(tau);
       out.force.push_back(force);
     }
     return out;
   };
-  // The render's form h·(N·n) (parallax off) and parallax (the default), each with the other arm
-  // as it is and hung.
   PipelineOptions render;
   render.depth_refinement.parallax = false;
-  PipelineOptions hung = render;
-  hung.kink_hang_other_arm = true;
-  PipelineOptions hung_parallax = hung;
-  hung_parallax.depth_refinement.parallax = true;
   const PipelineOptions parallax;
-  const Sweep h = sweep(hung), hp = sweep(hung_parallax), d = sweep(render), dp = sweep(parallax);
+  const Sweep d = sweep(render), dp = sweep(parallax);
   std::printf(
-      "[block on gear through level] ticks where the torque does not restore: %d hung, %d hung "
-      "with parallax, %d other arm as it is; largest step over the blend's: %.3g, %.3g, %.3g\n",
-      h.non_restoring, hp.non_restoring, d.non_restoring, h.worst_ratio, hp.worst_ratio,
-      d.worst_ratio);
-  EXPECT_EQ(h.non_restoring, 0);
-  EXPECT_LT(h.worst_ratio, 1.5);
-  EXPECT_EQ(hp.non_restoring, 0);
-  EXPECT_LT(hp.worst_ratio, 1.5);
-  EXPECT_GT(d.non_restoring + (d.worst_ratio > 1.5 ? 1 : 0), 0)
-      << "the other arm through its own sample jumps: the measure tells the two apart";
+      "[block on gear through level] tilts where the torque does not restore: %d with the "
+      "render's form, %d with parallax\n",
+      d.non_restoring, dp.non_restoring);
+  EXPECT_EQ(d.non_restoring, 0);
+  EXPECT_EQ(dp.non_restoring, 0);
   // Parallax against the render's form on this flat face, the default way: within 5 % of the
   // bearing edge's torque F·half at every tilt.
   int parallax_apart = 0;

@@ -267,7 +267,7 @@ TEST(Messages, FieldsSurviveTheRoundTrip) {
     const ContactModelMessage cm = SampleModel(n);
     const Datagram dc = EncodeContactModel({MessageType::kContactModel, 7, 3, 11}, cm, key);
     ASSERT_EQ(dc.size, kHeaderBytes + kContactModelFixedBytes + n * kContactBytes +
-                           kDepthFieldIdCountBytes + kKinkPlaneCountBytes + kMacBytes);
+                           kDepthFieldIdCountBytes + kMacBytes);
     ASSERT_EQ(OpenDatagram(dc.view(), key, h, body), DecodeStatus::kOk);
     ContactModelMessage out;
     ASSERT_EQ(DecodeContactModel(body, out), DecodeStatus::kOk) << n;
@@ -397,7 +397,8 @@ TEST(Messages, HeaderFieldsAreCheckedBeforeTheMac) {
   EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0a), DecodeStatus::kBadVersion);  // nor 10
   EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0b), DecodeStatus::kBadVersion);  // nor 11
   EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0c), DecodeStatus::kBadVersion);  // nor 12
-  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0e), DecodeStatus::kBadVersion);
+  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0d), DecodeStatus::kBadVersion);  // nor 13
+  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0f), DecodeStatus::kBadVersion);
   EXPECT_EQ(mutate(kHeaderTypeOffset, 0x7f), DecodeStatus::kUnknownType);
   EXPECT_EQ(mutate(kHeaderTypeOffset, 0x00), DecodeStatus::kUnknownType);
   EXPECT_EQ(mutate(5, 0x01), DecodeStatus::kBadMac);   // session id changed
@@ -736,8 +737,8 @@ TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
   // Versions 4 to 13 changed neither the Hello body nor the Reject body; version 3's Hello body is
   // the first 32 bytes (no deadband terms). Versions 2 to 7 had the 28-byte header and the whole
   // 32-byte MAC (test::LegacyDatagram writes them byte by byte).
-  EXPECT_EQ(kProtocolVersion, 13);
-  EXPECT_EQ(kMinProtocolVersion, 13);
+  EXPECT_EQ(kProtocolVersion, 14);
+  EXPECT_EQ(kMinProtocolVersion, 14);
   const MacKey key = TestKey();
   for (const std::uint16_t version : {std::uint16_t{7}, std::uint16_t{6}, std::uint16_t{5},
                                       std::uint16_t{4}, std::uint16_t{3}, std::uint16_t{2}}) {
@@ -949,119 +950,9 @@ TEST(Messages, TheHeaderCarriesSequenceAndTimeInItsOwnWidths) {
   }
 }
 
-// Kink planes (protocol version 6; version 7 their own translation slopes): each contact's planes
-// come back with it, both encodings; a model with more than fit its datagram sends the first
-// ones, contact by contact; a plane naming a contact that is not there, a contact's
-// (kMaxKinkPlanes + 1)-th plane or a non-finite plane is refused. The compact encoding (version
-// 11) leaves a plane's translation-slope offset off the wire when it is zero (17 bytes, not 29).
-TEST(Messages, KinkPlanesTravelWithTheirContactsAndWhatDoesNotFitIsLeftOut) {
-  const MacKey key = TestKey();
-  for (const bool compact : {false, true}) {
-    for (const int n : {1, 7, kMaxWireContacts}) {
-      ContactModelMessage m = SampleModel(n);
-      int planes = 0;
-      for (int i = 0; i < n; ++i) {
-        ContactLinearization& c = m.model.contacts[i];
-        c.num_kink_planes = 1 + i % 4;
-        for (int p = 0; p < c.num_kink_planes; ++p) {
-          // Every other plane shares the contact's translation slope (a rotation arm).
-          c.kink_planes[p] = {
-              c.depth_m - 1e-5 * (p + 1),
-              {0.001 * p, -0.02 + 0.001 * i, 0.003},
-              (i + p) % 2 == 0 ? glm::dvec3(0.0) : glm::dvec3(0.05 * p, -0.1, 0.02 * (p + 1))};
-        }
-        planes += c.num_kink_planes;
-      }
-      const Datagram d =
-          compact ? EncodeCompactContactModel({}, m, key) : EncodeContactModel({}, m, key);
-      ASSERT_LE(d.size, kMaxDatagramBytes);
-      const int fit =
-          compact ? KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, n)
-                  : KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, n);
-      const int sent = std::min(planes, fit);
-      std::size_t plane_bytes = 0;  // the first `sent` planes, contact by contact
-      for (int i = 0, k = 0; i < n; ++i) {
-        for (int p = 0; p < m.model.contacts[i].num_kink_planes && k < sent; ++p, ++k) {
-          const bool shares =
-              m.model.contacts[i].kink_planes[p].d_translation_offset_W == glm::dvec3(0.0);
-          plane_bytes += compact && shares ? kCompactKinkPlaneBytes : kKinkPlaneBytes;
-        }
-      }
-      EXPECT_EQ(d.size, kHeaderBytes +
-                            (compact ? kCompactContactModelFixedBytes + n * kCompactContactBytes
-                                     : kContactModelFixedBytes + n * kContactBytes) +
-                            kDepthFieldIdCountBytes + kKinkPlaneCountBytes + plane_bytes +
-                            kMacBytes);
-      Header h;
-      std::span<const std::uint8_t> body;
-      ASSERT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kOk);
-      ContactModelMessage out;
-      ASSERT_EQ(compact ? DecodeCompactContactModel(body, out, /*receive_time_ns=*/0)
-                        : DecodeContactModel(body, out),
-                DecodeStatus::kOk)
-          << compact << " " << n;
-      int got = 0;
-      for (int i = 0; i < n; ++i) {
-        const ContactLinearization& a = m.model.contacts[i];
-        const ContactLinearization& b = out.model.contacts[i];
-        const int expected = std::clamp(sent - got, 0, a.num_kink_planes);
-        ASSERT_EQ(b.num_kink_planes, expected) << compact << " " << n << " " << i;
-        for (int p = 0; p < expected; ++p) {
-          EXPECT_EQ(b.kink_planes[p].depth_m, static_cast<float>(a.kink_planes[p].depth_m));
-          EXPECT_EQ(b.kink_planes[p].d_rotation_W.y,
-                    static_cast<float>(a.kink_planes[p].d_rotation_W.y));
-          EXPECT_EQ(b.kink_planes[p].d_translation_offset_W.x,
-                    static_cast<float>(a.kink_planes[p].d_translation_offset_W.x));
-          EXPECT_EQ(b.kink_planes[p].d_translation_offset_W.y,
-                    static_cast<float>(a.kink_planes[p].d_translation_offset_W.y));
-          EXPECT_EQ(b.kink_planes[p].d_translation_offset_W.z,
-                    static_cast<float>(a.kink_planes[p].d_translation_offset_W.z));
-        }
-        got += expected;
-      }
-      EXPECT_EQ(got, sent);
-      if (n == 7) EXPECT_EQ(sent, planes) << "the seed's 7 contacts carry all their planes";
-    }
-  }
-  // Refused: the first plane's contact index out of range, a (kMaxKinkPlanes + 1)-th plane of one
-  // contact, NaN. Planes with their own translation slope: 29 bytes in both encodings.
-  for (const bool compact : {false, true}) {
-    ContactModelMessage m = SampleModel(2);
-    m.model.contacts[1].num_kink_planes = kMaxKinkPlanes;
-    for (KinkPlane& kp : m.model.contacts[1].kink_planes) kp.d_translation_offset_W = {0, 0.1, 0};
-    const Datagram good =
-        compact ? EncodeCompactContactModel({}, m, key) : EncodeContactModel({}, m, key);
-    const std::size_t planes_at = good.size - kMacBytes - kMaxKinkPlanes * kKinkPlaneBytes;
-    const auto patched = [&](auto&& edit) {
-      return OpenAndDecode(EditedAndSealed(good, key, edit).view(), key);
-    };
-    EXPECT_EQ(patched([](Datagram&) {}), DecodeStatus::kOk);
-    // (The compact plane's byte keeps its "own slope" bit, so that the rest still reads.)
-    EXPECT_EQ(patched([&](Datagram& d) {
-                d.bytes[planes_at] = compact ? 2 | kCompactKinkPlaneOwnSlope : 2;
-              }),
-              DecodeStatus::kBadValue);
-    if (compact) {
-      EXPECT_EQ(good.bytes[planes_at], 1 | kCompactKinkPlaneOwnSlope);
-    }
-    // kMaxKinkPlanes + 1 planes of contact 1: append one more, counted.
-    EXPECT_EQ(patched([&](Datagram& d) {
-                d.bytes[planes_at - 1] = kMaxKinkPlanes + 1;
-                std::copy_n(d.bytes.begin() + planes_at, kKinkPlaneBytes, d.bytes.begin() + d.size);
-                d.size += kKinkPlaneBytes;
-              }),
-              DecodeStatus::kBadValue);
-    const float nan = std::nanf("");
-    EXPECT_EQ(patched([&](Datagram& d) { std::memcpy(&d.bytes[planes_at + 1], &nan, 4); }),
-              DecodeStatus::kNonFinite);
-    // ... and a NaN translation slope (after u8 contact, f32 depth, 3×f32 ∂δ/∂θ).
-    EXPECT_EQ(patched([&](Datagram& d) { std::memcpy(&d.bytes[planes_at + 1 + 16], &nan, 4); }),
-              DecodeStatus::kNonFinite);
-    // A count above what fits: refused before any plane is read.
-    EXPECT_EQ(patched([&](Datagram& d) { d.bytes[planes_at - 1] = 255; }), DecodeStatus::kBadCount);
-  }
-}
-
+// Each contact's depth-field id comes back with it, both encodings; the section ends the body. A
+// float model of more contacts with fields than fit its datagram sends the first ids that fit
+// (DepthFieldIdCapacity), and the datagram stays within kMaxDatagramBytes.
 TEST(Messages, DepthFieldIdsTravelWithTheirContactsAndBadSectionsAreRejected) {
   const MacKey key = TestKey();
   for (const bool compact : {false, true}) {
@@ -1077,8 +968,8 @@ TEST(Messages, DepthFieldIdsTravelWithTheirContactsAndBadSectionsAreRejected) {
       ASSERT_LE(d.size, kMaxDatagramBytes);
       const std::size_t fixed = compact ? kCompactContactModelFixedBytes : kContactModelFixedBytes;
       const std::size_t contact = compact ? kCompactContactBytes : kContactBytes;
-      EXPECT_EQ(d.size, kHeaderBytes + fixed + n * contact + DepthFieldIdSectionBytes(with_field) +
-                            kKinkPlaneCountBytes + kMacBytes);
+      EXPECT_EQ(d.size,
+                kHeaderBytes + fixed + n * contact + DepthFieldIdSectionBytes(with_field) + kMacBytes);
       const auto decode = [&](const Datagram& datagram, ContactModelMessage& out) {
         Header h;
         std::span<const std::uint8_t> body;
@@ -1124,17 +1015,39 @@ TEST(Messages, DepthFieldIdsTravelWithTheirContactsAndBadSectionsAreRejected) {
                 DecodeStatus::kOk);
     }
   }
-  // The ids take their room before the kink planes: a full float model with every contact's
-  // field carries one plane fewer for every 29 bytes the ids take.
-  const int planes_without = KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, 7, 0);
-  const int planes_with = KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, 7, 7);
-  EXPECT_EQ(planes_without - planes_with,
-            static_cast<int>((kMaxDatagramBytes - kHeaderBytes - kContactModelFixedBytes -
-                              7 * kContactBytes - 3 - kMacBytes) /
-                                 kKinkPlaneBytes -
-                             (kMaxDatagramBytes - kHeaderBytes - kContactModelFixedBytes -
-                              7 * kContactBytes - 3 - 7 * kDepthFieldIdBytes - kMacBytes) /
-                                 kKinkPlaneBytes));
+  // Every contact with a field: the compact model carries all 14 ids; the float model the 11
+  // that fit, those of its first contacts, and the others come without a field.
+  const int float_fit = DepthFieldIdCapacity(kContactModelFixedBytes, kContactBytes, kMaxWireContacts);
+  EXPECT_EQ(float_fit, static_cast<int>((kMaxDatagramBytes - kHeaderBytes - kContactModelFixedBytes -
+                                         kMaxWireContacts * kContactBytes - 1 - kMacBytes) /
+                                        kDepthFieldIdBytes));
+  EXPECT_EQ(float_fit, 11);
+  for (const bool compact : {false, true}) {
+    ContactModelMessage m = SampleModel(kMaxWireContacts);
+    for (int i = 0; i < kMaxWireContacts; ++i) m.model.contacts[i].depth_field_id = 500u + i;
+    const Datagram d =
+        compact ? EncodeCompactContactModel({}, m, key) : EncodeContactModel({}, m, key);
+    ASSERT_LE(d.size, kMaxDatagramBytes);
+    Header h;
+    std::span<const std::uint8_t> body;
+    ASSERT_EQ(OpenDatagram(d.view(), key, h, body), DecodeStatus::kOk);
+    ContactModelMessage out;
+    ASSERT_EQ(compact ? DecodeCompactContactModel(body, out, 0) : DecodeContactModel(body, out),
+              DecodeStatus::kOk);
+    const int sent = compact ? kMaxWireContacts : float_fit;
+    for (int i = 0; i < kMaxWireContacts; ++i) {
+      EXPECT_EQ(out.model.contacts[i].depth_field_id, i < sent ? 500u + i : 0u) << compact << i;
+    }
+    // A count above what fits is refused before any entry is read.
+    if (!compact) {
+      const Datagram over = Resealed(d, key, [&](std::vector<std::uint8_t>& b) {
+        b[kContactModelFixedBytes + kMaxWireContacts * kContactBytes] = float_fit + 1;
+      });
+      ContactModelMessage bad;
+      ASSERT_EQ(OpenDatagram(over.view(), key, h, body), DecodeStatus::kOk);
+      EXPECT_EQ(DecodeContactModel(body, bad), DecodeStatus::kBadCount);
+    }
+  }
 }
 
 TEST(Messages, DepthFieldFragmentsAndNacksRefuseWhatNoFieldCanBe) {

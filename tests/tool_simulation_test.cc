@@ -170,47 +170,5 @@ TEST(ToolSimulation, ANewModelBlendsInWithBoundedForceSteps) {
             sim.Step(p2, X_WH, {}, b, 1.0, 1e-3).F_contact_T_W.force);
 }
 
-// A face resting on two edges (a contact whose depth is a V in the tilt about y, as the remote step
-// sends it with kink planes), held by the handle level above it: the tool settles where the
-// contact's torque balances the coupling's, in the V's rounded vertex, and stays there. Each arm
-// alone flips the torque from one edge's to the other's: before ContactDepthAt blended them, the
-// fig75 run's block chattered between its edges at 250 to 500 Hz (docs/hard-cases.md).
-TEST(ToolSimulation, AFaceRestingOnTwoEdgesSettlesWithoutChattering) {
-  const ToolSimulator sim(BlockOnGearToolInertia(), VirtualCoupling{});
-  const double r = 0.02, depth_v = 1e-4, theta_v = -1e-3;
-  ContactModel face;
-  face.num_contacts = 1;
-  ContactLinearization& c = face.contacts[0];
-  c.depth_m = depth_v - r * theta_v;
-  c.gradient = {{0.0, 0.0, -1.0}, {0.0, r, 0.0}};
-  c.stiffness_n_per_m = 40000;  // the stiff wall's
-  c.num_kink_planes = 1;
-  c.kink_planes[0] = {depth_v + r * theta_v, {0.0, -r, 0.0}};
-  RigidTransform X_WH;  // level, and pressing the face down 0.1 mm through the coupling
-  X_WH.translation = {0.0, 0.0, -1e-4};
-  ToolState s;
-  ToolStepResult step;
-  std::vector<double> tilt, torque;
-  for (int i = 0; i < 4000; ++i) {
-    step = sim.Step(s, X_WH, {}, face, 1.0, 1e-3);
-    ASSERT_TRUE(step.ok);
-    tilt.push_back(RotationVectorFromQuaternion(s.X_WT.rotation).y);
-    torque.push_back(step.F_contact_T_W.torque.y);
-  }
-  // The last second: still (no limit cycle), and the torque does not flip tick by tick.
-  double lo = 1e9, hi = -1e9;
-  int flips = 0;
-  for (std::size_t i = 3000; i < tilt.size(); ++i) {
-    lo = std::min(lo, tilt[i]);
-    hi = std::max(hi, tilt[i]);
-    if (i > 3000 && (torque[i] > 0.0) != (torque[i - 1] > 0.0)) ++flips;
-  }
-  EXPECT_LT(hi - lo, 1e-7) << "rad of tilt left over the last 1000 ticks";
-  EXPECT_EQ(flips, 0);
-  // Where it rests: the contact's torque balances the coupling's, within the vertex's blend.
-  EXPECT_NEAR(step.F_contact_T_W.torque.y + step.F_coupling_T_W.torque.y, 0.0, 1e-6);
-  EXPECT_NEAR(tilt.back(), theta_v, kKinkBlendM / (2 * r));
-}
-
 }  // namespace
 }  // namespace ht

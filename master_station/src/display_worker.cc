@@ -204,8 +204,8 @@ void DisplayWorker::Run(const std::atomic<bool>& stop) {
       }
       if (tool.have_model) {
         // Each contact's force on the tool at the tool's pose now, as the loop renders it:
-        // −k·max(δ(q), 0)·J with δ(q) the largest of the contact's planes (ContactDepthAt,
-        // DESIGN.md §5), drawn at the contact point moved with the tool since q0.
+        // −k·max(δ(q), 0)·J with δ(q) the contact's linearization (ContactDepthAt, DESIGN.md §5),
+        // drawn at the contact point moved with the tool since q0.
         const Twist dq = PoseDifference(tool.X_WT, tool.model.X_WT0);
         // X_WT · X_WT0⁻¹: carries a point fixed to the tool from where it was at q0 to where it is
         // now, both in W.

@@ -112,7 +112,7 @@ void WriteContactRow(std::ostream& o, const SceneReport& rep, const SettingRun& 
     << ',' << w.axis_u_W.z << ',' << w.extent_m << ',' << w.resolution << ','
     << c.query.stiffness_n_per_m << ',' << c.lin.depth_m << ',' << job.result.linearization.depth_m
     << ',';
-  // As the model gives it at q0 (its kink planes may blend there: ContactDepthAt).
+  // As the model gives it at q0 (ContactDepthAt).
   PenetrationGradient J_q0;
   const double depth_q0 = ContactDepthAt(c.lin, Twist{}, &J_q0);
   WriteWrench(o, PenaltyWrench(depth_q0, J_q0, c.lin.stiffness_n_per_m));
@@ -262,8 +262,8 @@ void WriteSummary(const std::string& path, const FrontierOptions& options,
     << " mm either way along them (`--prediction-rotation-mrad`, `--prediction-translation-mm`), "
        "against the **pipeline "
        "truth** at those displaced poses; `model prediction F / τ err` is the relative RMS over "
-       "them. A face resting on ridges tilted past its V's vertex gets the other edge's torque "
-       "only from a model that carries the kink.\n\n"
+       "them. A linearization holds one arm of a face's V: past the vertex only a depth "
+       "field (evaluated where the tool is) has the other edge's torque.\n\n"
        "Pareto and the fastest setting within 5 % use the pipeline truth.\n\n";
   if (!plot_note.empty()) s << plot_note << "\n\n";
   for (const SceneReport& rep : reports) {

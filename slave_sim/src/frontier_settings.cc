@@ -38,9 +38,6 @@ PipelineOptions PipelineOptionsFor(const FrontierSetting& st) {
   options.share_leaves_between_disjoint_windows = st.share_leaves_between_disjoint_windows;
   options.tool_leaves_follow_object_leaves = st.tool_leaves_follow_object_leaves;
   options.whole_model_region_windows = st.whole_model_region_windows;
-  options.kink_planes = st.kink_planes;
-  options.kink_planes_own_slope = st.kink_planes_own_slope;
-  options.kink_hang_other_arm = st.kink_hang_other_arm;
   options.refine_depth = st.refine_depth;
   options.split_windows_at_separated_overlap = st.split_windows_at_separated_overlap;
   options.share_connected_contacts = st.share_connected_contacts;
@@ -262,18 +259,6 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     follow.name = "tool_leaves_follow";
     follow.tool_leaves_follow_object_leaves = true;
     s.push_back(follow);
-    FrontierSetting one_plane = base;
-    one_plane.name = "no_kink_planes";
-    one_plane.kink_planes = false;
-    s.push_back(one_plane);
-    FrontierSetting keep_secant = base;
-    keep_secant.name = "kink_planes_keep_secant";
-    keep_secant.kink_planes_own_slope = false;
-    s.push_back(keep_secant);
-    FrontierSetting hang = base;
-    hang.name = "kink_hang_other_arm";
-    hang.kink_hang_other_arm = true;
-    s.push_back(hang);
     // Issue 32: stage 5b's variants (the default refines).
     const FrontierSetting& refined = base;
     // The contact model as depth fields, on the window's grid refined twice (the default) and
@@ -292,15 +277,11 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     no_neighbour_peaks.neighbour_peak_seeds = false;
     s.push_back(no_neighbour_peaks);
     // Stage 5b with the render's form h·(N·n) at the coarse point instead of parallax (the
-    // default before issue 32's twenty-eighth stop), alone and with the hung other arm.
+    // default before issue 32's twenty-eighth stop).
     FrontierSetting no_parallax = refined;
     no_parallax.name = "no_parallax";
     no_parallax.parallax = false;
     s.push_back(no_parallax);
-    FrontierSetting no_parallax_hang = no_parallax;
-    no_parallax_hang.name = "no_parallax_kink_hang_other_arm";
-    no_parallax_hang.kink_hang_other_arm = true;
-    s.push_back(no_parallax_hang);
     // Without the seeds from the last step (they count on a trace's consecutive rows only),
     // with and without parallax: the default before issue 32's twenty-fifth stop.
     FrontierSetting alone = refined;
@@ -311,12 +292,6 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     no_parallax_alone.name = "no_parallax_no_last_step_seeds";
     no_parallax_alone.seed_from_last_step = false;
     s.push_back(no_parallax_alone);
-    // One plane per contact without parallax: the resting block's rocking in the closed loop
-    // (issue 32, twenty-fifth stop) against the kink planes' V.
-    FrontierSetting no_parallax_one_plane = no_parallax;
-    no_parallax_one_plane.name = "no_parallax_no_kink_planes";
-    no_parallax_one_plane.kink_planes = false;
-    s.push_back(no_parallax_one_plane);
     // Stage 5a: a window per separated region of its overlap, with either gradient.
     // Stage 5a off: the default before issue 32's thirty-first stop. The split settings below
     // start from it and set the pieces they name.
@@ -421,10 +396,9 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     at_witness.name = "windows_at_witness";
     at_witness.whole_model_region_windows = false;
     s.push_back(at_witness);
-    // Issue 31's second stop's default: both of the third stop's changes off.
+    // Witness windows on the grid alone (no stage 5b).
     FrontierSetting stop2 = at_witness;
-    stop2.name = "witness_windows_one_plane";
-    stop2.kink_planes = false;
+    stop2.name = "witness_windows_grid_only";
     stop2.refine_depth = false;
     s.push_back(stop2);
     FrontierSetting before = no_guard;
@@ -434,7 +408,6 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     before.region_normals = false;
     before.cluster_triangles = false;
     before.whole_model_region_windows = false;
-    before.kink_planes = false;
     before.refine_depth = false;
     s.push_back(before);
     // Every speed option at once: the warped rotations, local reach, at most 7 contacts, two

@@ -61,7 +61,7 @@ void AddWindowOptions(CLI::App& app, NodeCommandLine& cl) {
       ->capture_default_str();
 }
 
-// The texture stage's gradient, the grazing guard, kink planes, stage 5b's depth refinement
+// The texture stage's gradient, the grazing guard, stage 5b's depth refinement
 // and its seeds, and contact clustering's angle.
 void AddDepthOptions(CLI::App& app, NodeCommandLine& cl) {
   app.add_option("--rotation-gradient", cl.rotation_gradient,
@@ -76,11 +76,6 @@ void AddDepthOptions(CLI::App& app, NodeCommandLine& cl) {
                "cluster's hull penetration + both texture reaches + a cell); by default they are\n"
                "dropped and counted (remote_summary.json grazing_dropped_contacts): along a\n"
                "grazing direction the depth is a sideways overlap, not a penetration");
-  app.add_flag("--no-kink-planes", cl.no_kink_planes,
-               "send one plane per contact: by default a contact whose depth is a V in the tilt\n"
-               "(a face resting on ridges, its two edges bearing in turn) also carries the V's\n"
-               "arms, so that the operator's loop finds where the torque flips between two models\n"
-               "(docs/hard-cases.md)");
   app.add_flag("--no-refine-depth", cl.no_refine_depth,
                "the grid's cell samples alone: by default each contact's depth is refined to the\n"
                "texture's full resolution around the grid's deepest cells (stage 5b,\n"
@@ -114,13 +109,6 @@ void AddDepthOptions(CLI::App& app, NodeCommandLine& cl) {
                "tool's frame), so that a narrow peak the filtered grid finds on one step and\n"
                "misses on the next is not lost for that step (docs/frontier/issue32/\n"
                "twenty_fifth_stop)");
-  app.add_flag(
-      "--kink-hang-other-arm", cl.kink_hang_other_arm,
-      "where a contact's depth is a V in the tool's tilt (a face resting on ridges), hang\n"
-      "the arm it does not bear on below its depth by the two arms' gap instead of through\n"
-      "its own sample: the resting block's torque turns over smoothly through level, but\n"
-      "the torque error against the truth is a little higher and the striped blocks' loop\n"
-      "rougher (docs/frontier/issue32/twenty_sixth_stop)");
 }
 
 // Stages 5a (the split) and 5c (shared penalties).
@@ -304,19 +292,17 @@ void FinishStreamConfig(const CLI::App& app, const NodeCommandLine& cl, RemoteNo
 }
 
 // The texture stage's gradient, stage 5b and clustering.
-void FinishDepthConfig(const CLI::App& app, const NodeCommandLine& cl, RemoteNodeConfig& config) {
+void FinishDepthConfig(const NodeCommandLine& cl, RemoteNodeConfig& config) {
   PipelineOptions& pipeline = config.pipeline;
   DepthRefinementOptions& refinement = pipeline.depth_refinement;
   pipeline.rotation_gradient = ParseRotationGradient(cl.rotation_gradient);
   pipeline.grazing_guard = !cl.no_grazing_guard;
-  pipeline.kink_planes = !cl.no_kink_planes;
   pipeline.refine_depth = !cl.no_refine_depth;
   refinement.parallax = cl.parallax;
   refinement.seed_from_last_step = !cl.no_seed_from_last_step;
   refinement.parallax_offset_seeds = !cl.no_parallax_offset_seeds;
   refinement.neighbour_peak_seeds = !cl.no_neighbour_peak_seeds;
   pipeline.clustering_angle_deg = cl.clustering_angle_deg;
-  pipeline.kink_hang_other_arm = cl.kink_hang_other_arm;
 }
 
 // Stages 5a and 5c, and speculative contacts. Returns whether a split option was given.
@@ -396,7 +382,7 @@ void AddNodeOptions(CLI::App& app, NodeCommandLine& cl) {
 void FinishNodeConfig(const CLI::App& app, NodeCommandLine& cl) {
   RemoteNodeConfig& config = cl.config;
   FinishStreamConfig(app, cl, config);
-  FinishDepthConfig(app, cl, config);
+  FinishDepthConfig(cl, config);
   const bool split_asked = FinishSplitConfig(app, cl, config);
   FinishBackendChoice(cl, split_asked, config);
 }

@@ -33,14 +33,12 @@ struct NodeCommandLine {
   // The texture stage's gradient, stage 5b and clustering (AddDepthOptions).
   std::string rotation_gradient = "rendered";
   bool no_grazing_guard = false;
-  bool no_kink_planes = false;
   bool no_refine_depth = false;
   bool parallax = true;
   bool no_parallax_offset_seeds = false;
   bool no_neighbour_peak_seeds = false;
   double clustering_angle_deg = PipelineOptions{}.clustering_angle_deg;
   bool no_seed_from_last_step = false;
-  bool kink_hang_other_arm = false;
 
   // Stages 5a and 5c (AddSplitAndSharingOptions).
   double split_windows_link_mm = 10.0;

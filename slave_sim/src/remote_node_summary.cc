@@ -43,8 +43,6 @@ nlohmann::json RemoteNodeRun::Summary() const {
       pipeline_->faults().missing_overlap -
       (pipeline_->backend_failures() == 0 ? warm_up_missing_overlap_ : 0);
   s["grazing_guard"] = config_.pipeline.grazing_guard;
-  s["kink_planes"] = config_.pipeline.kink_planes;
-  s["kink_hang_other_arm"] = config_.pipeline.kink_hang_other_arm;
   s["parallax"] = config_.pipeline.depth_refinement.parallax;
   s["refine_depth"] = config_.pipeline.refine_depth;
   {

@@ -447,24 +447,19 @@ void RemoteSession::SendModel(wire::ContactModelMessage& out, std::int64_t now) 
       compact_models_ ? wire::MessageType::kCompactContactModel : wire::MessageType::kContactModel;
   wire::Header header = link_.NextHeader(type, session_);
   out.hold_ns = header.send_time_ns - last_sent_answer_recv_ns_;
-  // The kink planes that fit the datagram go (contact by contact); the rest are counted.
+  // The field ids that fit the datagram go (contact by contact); the rest are counted (a float
+  // model of more than 11 contacts).
   const int contacts = std::clamp(out.model.num_contacts, 0, wire::kMaxWireContacts);
   int field_ids = 0;
   for (int i = 0; i < contacts; ++i) {
     field_ids += out.model.contacts[static_cast<std::size_t>(i)].depth_field_id != 0 ? 1 : 0;
   }
-  std::uint64_t planes = 0;
-  for (int i = 0; i < contacts; ++i) {
-    planes += static_cast<std::uint64_t>(std::clamp(
-        out.model.contacts[static_cast<std::size_t>(i)].num_kink_planes, 0, kMaxKinkPlanes));
-  }
-  const auto fit = static_cast<std::uint64_t>(
-      compact_models_ ? wire::KinkPlaneCapacity(wire::kCompactContactModelFixedBytes,
-                                                wire::kCompactContactBytes, contacts, field_ids)
-                      : wire::KinkPlaneCapacity(wire::kContactModelFixedBytes, wire::kContactBytes,
-                                                contacts, field_ids));
-  kink_planes_sent_ += std::min(planes, fit);
-  kink_planes_left_out_ += planes - std::min(planes, fit);
+  const int fit =
+      compact_models_ ? wire::DepthFieldIdCapacity(wire::kCompactContactModelFixedBytes,
+                                                   wire::kCompactContactBytes, contacts)
+                      : wire::DepthFieldIdCapacity(wire::kContactModelFixedBytes,
+                                                   wire::kContactBytes, contacts);
+  field_ids_left_out_ += static_cast<std::uint64_t>(std::max(field_ids - fit, 0));
   link_.Send(compact_models_ ? wire::EncodeCompactContactModel(header, out, config_.key)
                              : wire::EncodeContactModel(header, out, config_.key),
              peer_);
@@ -542,10 +537,10 @@ nlohmann::json RemoteSession::StatsJson(std::size_t scene_objects, std::size_t s
                      {"steps_by_cause", steps_by_cause},
                      {"keepalives_sent", keepalives_sent_},
                      {"model_decisions", ToJson(model_deadband_.counts())}});
-  transport["kink_planes"] = {{"sent", kink_planes_sent_}, {"left_out", kink_planes_left_out_}};
   transport["depth_fields"] = {
       {"agreed", depth_fields_},
       {"fields_sent", fields_encoded_},
+      {"field_ids_left_out", field_ids_left_out_},
       {"field_bytes", field_bytes_encoded_},
       {"encode_ms_mean", fields_encoded_ > 0 ? field_encode_ms_ / fields_encoded_ : 0.0},
       {"fragments_sent", field_sender_.fragments_sent()},

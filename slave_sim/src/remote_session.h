@@ -213,9 +213,9 @@ class RemoteSession {
   std::uint64_t steps_skipped_ = 0, models_held_back_ = 0, keepalives_sent_ = 0;
   std::uint64_t steps_by_cause_[kStepCauses] = {};
   std::uint64_t foreign_hellos_ = 0;
-  /// Kink planes of models sent that did not fit their datagram (protocol.h KinkPlaneCapacity),
-  /// and those sent.
-  std::uint64_t kink_planes_left_out_ = 0, kink_planes_sent_ = 0;
+  /// Depth-field ids of models sent that did not fit their datagram (protocol.h
+  /// DepthFieldIdCapacity): those contacts reached the operator without their field.
+  std::uint64_t field_ids_left_out_ = 0;
   // Display poses (NodePoses) of the moving scene nodes.
   std::int64_t start_ns_ = 0;  ///< the node's start: the scene's clock (animate) counts from it
   std::uint32_t graph_version_ = 0;  ///< version of the kSceneGraph object (0 = none streamed)

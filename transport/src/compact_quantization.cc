@@ -217,23 +217,12 @@ CompactContactModelBody QuantizeContactModel(const ContactModelMessage& m) noexc
     }
     w.normal_oct = EncodeOctahedral(c.normal_W);
   }
-  b.num_field_ids =
-      static_cast<int>(FlattenFieldIds(model, static_cast<std::size_t>(n), b.field_ids));
-  std::array<WireKinkPlane, kMaxWireKinkPlanes> planes{};
-  b.num_kink_planes = static_cast<int>(FlattenKinkPlanes(
+  // The ids that fit the datagram (all of them for kMaxWireContacts compact contacts).
+  b.num_field_ids = static_cast<int>(FlattenFieldIds(
       model, static_cast<std::size_t>(n),
-      KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, n, b.num_field_ids),
-      planes));
-  for (int j = 0; j < b.num_kink_planes; ++j) {
-    const WireKinkPlane& w = planes[static_cast<std::size_t>(j)];
-    // A plane with its own translation slope says so; one that shares the contact's (every
-    // rotation arm) leaves the zero offset off the wire. A non-finite offset goes, for the
-    // receiver to refuse.
-    const bool own = std::ranges::any_of(w.d_translation_offset, [](float v) { return v != 0.0f; });
-    b.kink_planes[static_cast<std::size_t>(j)] = {
-        static_cast<std::uint8_t>(w.contact | (own ? kCompactKinkPlaneOwnSlope : 0u)), w.depth_m,
-        w.d_rotation, w.d_translation_offset};
-  }
+      std::span(b.field_ids)
+          .first(static_cast<std::size_t>(
+              DepthFieldIdCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, n)))));
   return b;
 }
 
@@ -262,19 +251,6 @@ DecodeStatus Check(const CompactContactModelBody& m) {
       return DecodeStatus::kBadValue;
     }
     has_field[f.contact] = true;
-  }
-  std::array<int, kMaxWireContacts> planes_of{};
-  for (int j = 0; j < m.num_kink_planes; ++j) {
-    const CompactWireKinkPlane& p = m.kink_planes[static_cast<std::size_t>(j)];
-    if (!std::isfinite(p.depth_m) || !AllFinite(p.d_rotation) ||
-        !AllFinite(p.d_translation_offset)) {
-      return DecodeStatus::kNonFinite;
-    }
-    const int contact = p.contact & ~kCompactKinkPlaneOwnSlope;
-    if (contact >= m.num_contacts ||
-        ++planes_of[static_cast<std::size_t>(contact)] > kMaxKinkPlanes) {
-      return DecodeStatus::kBadValue;
-    }
   }
   if (!AllFinite(m.p_WT0)) return DecodeStatus::kNonFinite;
   glm::dquat q;
@@ -322,16 +298,6 @@ ContactModelMessage DequantizeContactModel(const CompactContactModelBody& b,
   // Check() found every field id's contact valid and once.
   DistributeFieldIds({b.field_ids.data(), static_cast<std::size_t>(b.num_field_ids)},
                      static_cast<std::size_t>(b.num_contacts), model);
-  // Check() found every plane's contact and count valid.
-  std::array<WireKinkPlane, kMaxWireKinkPlanes> planes{};
-  for (int j = 0; j < b.num_kink_planes; ++j) {
-    const CompactWireKinkPlane& p = b.kink_planes[static_cast<std::size_t>(j)];
-    planes[static_cast<std::size_t>(j)] = {
-        static_cast<std::uint8_t>(p.contact & ~kCompactKinkPlaneOwnSlope), p.depth_m, p.d_rotation,
-        p.d_translation_offset};  // zero unless it was sent
-  }
-  DistributeKinkPlanes({planes.data(), static_cast<std::size_t>(b.num_kink_planes)},
-                       static_cast<std::size_t>(b.num_contacts), model);
   // Not on the wire (version 11): the sender summed it the same way (AssembleContactModel).
   model.F_T_W_at_q0 = ContactModelWrenchAtQ0(model);
   return m;

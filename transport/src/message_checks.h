@@ -40,13 +40,6 @@ inline DecodeStatus Check(const ContactModelMessage& m) {
       return DecodeStatus::kNonFinite;
     }
     if (c.stiffness_n_per_m < 0.0) return DecodeStatus::kBadValue;
-    for (int p = 0; p < std::clamp(c.num_kink_planes, 0, kMaxKinkPlanes); ++p) {
-      const KinkPlane& kp = c.kink_planes[static_cast<std::size_t>(p)];
-      if (!std::isfinite(kp.depth_m) || !Finite3(kp.d_rotation_W) ||
-          !Finite3(kp.d_translation_offset_W)) {
-        return DecodeStatus::kNonFinite;
-      }
-    }
   }
   if (const DecodeStatus s = CheckPose(m.model.X_WT0); s != DecodeStatus::kOk) return s;
   if (!IsFinite(m.model.F_T_W_at_q0) || !std::isfinite(m.collision_us) ||

@@ -82,63 +82,6 @@ constexpr void Fields(auto& a, Of<ContactLinearization> auto& c) {
   Vec32(a, c.normal_W);
 }
 
-static_assert(kMaxKinkPlanesPerContact == kMaxKinkPlanes);
-
-/// One kink plane as it is on the wire (protocol.h).
-struct WireKinkPlane {
-  std::uint8_t contact = 0;
-  float depth_m = 0.0f;
-  std::array<float, 3> d_rotation{};            ///< ∂δ_m/∂θ (m/rad)
-  std::array<float, 3> d_translation_offset{};  ///< ∂δ_m/∂x less the contact's ∂δ/∂x
-};
-
-constexpr void Fields(auto& a, Of<WireKinkPlane> auto& p) {
-  a(p.contact);
-  a(p.depth_m);
-  for (auto& v : p.d_rotation) a(v);
-  for (auto& v : p.d_translation_offset) a(v);
-}
-
-/// The kink planes of contacts [0, n) of `model` in wire order (contact by contact), at most
-/// `capacity` of them, into `out`; returns how many.
-constexpr std::size_t FlattenKinkPlanes(const ContactModel& model, std::size_t n, int capacity,
-                                        std::span<WireKinkPlane> out) noexcept {
-  std::size_t k = 0;
-  const std::size_t cap = std::min(out.size(), static_cast<std::size_t>(std::max(capacity, 0)));
-  for (std::size_t i = 0; i < n && k < cap; ++i) {
-    const ContactLinearization& c = model.contacts[i];
-    const int planes = std::clamp(c.num_kink_planes, 0, kMaxKinkPlanes);
-    for (int p = 0; p < planes && k < cap; ++p) {
-      const KinkPlane& kp = c.kink_planes[static_cast<std::size_t>(p)];
-      out[k++] = {static_cast<std::uint8_t>(i),
-                  static_cast<float>(kp.depth_m),
-                  {static_cast<float>(kp.d_rotation_W.x), static_cast<float>(kp.d_rotation_W.y),
-                   static_cast<float>(kp.d_rotation_W.z)},
-                  {static_cast<float>(kp.d_translation_offset_W.x),
-                   static_cast<float>(kp.d_translation_offset_W.y),
-                   static_cast<float>(kp.d_translation_offset_W.z)}};
-    }
-  }
-  return k;
-}
-
-/// Gives each wire plane to its contact of `model` (whose first `n` contacts were read); false
-/// when one names a contact ≥ n or a contact's (kMaxKinkPlanes + 1)-th plane.
-inline bool DistributeKinkPlanes(std::span<const WireKinkPlane> planes, std::size_t n,
-                                 ContactModel& model) noexcept {
-  for (std::size_t i = 0; i < n; ++i) model.contacts[i].num_kink_planes = 0;
-  for (const WireKinkPlane& w : planes) {
-    if (w.contact >= n) return false;
-    ContactLinearization& c = model.contacts[w.contact];
-    if (c.num_kink_planes >= kMaxKinkPlanes) return false;
-    c.kink_planes[static_cast<std::size_t>(c.num_kink_planes++)] = {
-        w.depth_m, glm::dvec3(w.d_rotation[0], w.d_rotation[1], w.d_rotation[2]),
-        glm::dvec3(w.d_translation_offset[0], w.d_translation_offset[1],
-                   w.d_translation_offset[2])};
-  }
-  return true;
-}
-
 /// One entry of the depth-field section (protocol.h, version 12): a contact and its field's id.
 struct WireFieldId {
   std::uint8_t contact = 0;
@@ -173,43 +116,21 @@ inline bool DistributeFieldIds(std::span<const WireFieldId> ids, std::size_t n,
   return true;
 }
 
-/// The depth-field section after the contacts (protocol.h, version 12): the Writer and the Sizer
-/// flatten the model's ids, the Reader reads them and gives them to their contacts. Returns the
-/// number of entries.
-constexpr std::size_t DepthFieldIds(auto& a, auto& model, std::size_t n) {
+/// The depth-field section after the contacts, which ends the body (protocol.h): the Writer and
+/// the Sizer flatten the model's ids (the first `capacity`), the Reader reads at most `capacity`
+/// and gives them to their contacts. Returns the number of entries.
+constexpr std::size_t DepthFieldIds(auto& a, auto& model, std::size_t n, std::size_t capacity) {
   std::array<WireFieldId, kMaxWireContacts> ids{};
   std::size_t k = 0;
   if constexpr (!requires { a.Reject(DecodeStatus::kOk); }) {
     k = FlattenFieldIds(model, n, ids);
-    const std::size_t sent =
-        CountBefore<std::uint8_t>(a, k, n, kDepthFieldIdBytes, kKinkPlaneCountBytes);
+    const std::size_t sent = Count<std::uint8_t>(a, k, capacity, kDepthFieldIdBytes);
     for (std::size_t j = 0; j < std::min(sent, k); ++j) Fields(a, ids[j]);
     return std::min(sent, k);
   } else {
-    k = CountBefore<std::uint8_t>(a, k, n, kDepthFieldIdBytes, kKinkPlaneCountBytes);
+    k = Count<std::uint8_t>(a, k, capacity, kDepthFieldIdBytes);
     for (std::size_t j = 0; j < k; ++j) Fields(a, ids[j]);
     if (a.ok() && !DistributeFieldIds({ids.data(), k}, n, model)) a.Reject(DecodeStatus::kBadValue);
-    return k;
-  }
-}
-
-/// The kink-plane section after the contacts (protocol.h): the Writer and the Sizer flatten the
-/// model's planes, the Reader reads them and gives them to their contacts.
-constexpr std::size_t KinkPlanes(auto& a, auto& model, std::size_t n, int capacity) {
-  std::array<WireKinkPlane, kMaxWireKinkPlanes> planes{};
-  std::size_t k = 0;
-  if constexpr (!requires { a.Reject(DecodeStatus::kOk); }) {
-    k = FlattenKinkPlanes(model, n, capacity, planes);
-    const std::size_t sent =
-        Count<std::uint8_t>(a, k, static_cast<std::size_t>(capacity), kKinkPlaneBytes);
-    for (std::size_t j = 0; j < std::min(sent, k); ++j) Fields(a, planes[j]);
-    return std::min(sent, k);
-  } else {
-    k = Count<std::uint8_t>(a, k, static_cast<std::size_t>(std::max(capacity, 0)), kKinkPlaneBytes);
-    for (std::size_t j = 0; j < k; ++j) Fields(a, planes[j]);
-    if (a.ok() && !DistributeKinkPlanes({planes.data(), k}, n, model)) {
-      a.Reject(DecodeStatus::kBadValue);
-    }
     return k;
   }
 }
@@ -227,11 +148,11 @@ constexpr void Fields(auto& a, Of<ContactModelMessage> auto& m) {
   Vec(a, m.model.F_T_W_at_q0.torque);
   const std::size_t n =
       CountBefore<std::uint8_t>(a, m.model.num_contacts, kMaxWireContacts, kContactBytes,
-                                kDepthFieldIdCountBytes + kKinkPlaneCountBytes);
+                                kDepthFieldIdCountBytes);
   for (std::size_t i = 0; i < n; ++i) Fields(a, m.model.contacts[i]);
-  const int ids = static_cast<int>(DepthFieldIds(a, m.model, n));
-  KinkPlanes(a, m.model, n,
-             KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, static_cast<int>(n), ids));
+  DepthFieldIds(a, m.model, n,
+                static_cast<std::size_t>(DepthFieldIdCapacity(kContactModelFixedBytes, kContactBytes,
+                                                              static_cast<int>(n))));
 }
 
 /// One contact of a CompactContactModel as it is on the wire (protocol.h).
@@ -242,16 +163,6 @@ struct CompactContact {
   float stiffness_n_per_m = 0.0f;
   std::array<std::int16_t, 3> point_offset{};  ///< point_W − p_WT0 in units of kCompactPointStepM
   std::array<std::int16_t, 2> normal_oct{};    ///< octahedral (u, v)·kCompactI16Max
-};
-
-/// A kink plane of CompactContactModel (protocol.h, version 11): WireKinkPlane's fields, the
-/// translation slope's offset on the wire only when bit kCompactKinkPlaneOwnSlope of `contact`
-/// says the plane has one (the rotation arms share the contact's: 17 bytes instead of 29).
-struct CompactWireKinkPlane {
-  std::uint8_t contact = 0;  ///< the contact's index | kCompactKinkPlaneOwnSlope
-  float depth_m = 0.0f;
-  std::array<float, 3> d_rotation{};            ///< ∂δ_m/∂θ (m/rad)
-  std::array<float, 3> d_translation_offset{};  ///< ∂δ_m/∂x less the contact's ∂δ/∂x
 };
 
 /// A CompactContactModel body as it is on the wire: what QuantizeContactModel() makes of a
@@ -271,8 +182,6 @@ struct CompactContactModelBody {
   std::array<CompactContact, kMaxWireContacts> contacts{};
   int num_field_ids = 0;
   std::array<WireFieldId, kMaxWireContacts> field_ids{};
-  int num_kink_planes = 0;
-  std::array<CompactWireKinkPlane, kMaxWireKinkPlanes> kink_planes{};
 };
 
 // Every element of an array of scalars, in order.
@@ -289,13 +198,6 @@ constexpr void Fields(auto& a, Of<CompactContact> auto& c) {
   Each(a, c.normal_oct);
 }
 
-constexpr void Fields(auto& a, Of<CompactWireKinkPlane> auto& p) {
-  a(p.contact);  // read first: the Reader knows from it whether the offset follows
-  a(p.depth_m);
-  Each(a, p.d_rotation);
-  if ((p.contact & kCompactKinkPlaneOwnSlope) != 0) Each(a, p.d_translation_offset);
-}
-
 constexpr void Fields(auto& a, Of<CompactContactModelBody> auto& m) {
   a(m.tool_state_seq);
   a(m.tool_state_send_time_us);
@@ -309,20 +211,14 @@ constexpr void Fields(auto& a, Of<CompactContactModelBody> auto& m) {
   a(m.q_WT0_high);
   const std::size_t n =
       CountBefore<std::uint8_t>(a, m.num_contacts, kMaxWireContacts, kCompactContactBytes,
-                                kDepthFieldIdCountBytes + kKinkPlaneCountBytes);
+                                kDepthFieldIdCountBytes);
   for (std::size_t i = 0; i < n; ++i) Fields(a, m.contacts[i]);
-  const std::size_t nf =
-      CountBefore<std::uint8_t>(a, m.num_field_ids, n, kDepthFieldIdBytes, kKinkPlaneCountBytes);
+  const std::size_t nf = Count<std::uint8_t>(
+      a, m.num_field_ids,
+      static_cast<std::size_t>(DepthFieldIdCapacity(kCompactContactModelFixedBytes,
+                                                    kCompactContactBytes, static_cast<int>(n))),
+      kDepthFieldIdBytes);
   for (std::size_t j = 0; j < nf; ++j) Fields(a, m.field_ids[j]);
-  const int capacity = KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes,
-                                         static_cast<int>(n), m.num_field_ids);
-  // Counted as if each plane were kKinkPlaneBytes (as ContactModel's): the bound on the count is
-  // the same whatever the planes carry. The planes' sizes vary (kCompactKinkPlaneSlopeBytes): the
-  // bytes left are checked against the shortest, and the body's end (Reader::Finish) checks that
-  // nothing follows the last.
-  const std::size_t k = CountBefore<std::uint8_t>(
-      a, m.num_kink_planes, static_cast<std::size_t>(capacity), kCompactKinkPlaneBytes, 0);
-  for (std::size_t j = 0; j < k; ++j) Fields(a, m.kink_planes[j]);
 }
 
 /// A CompactToolState body as it is on the wire (protocol.h).
@@ -471,18 +367,15 @@ constexpr Sizer SizeOf() {
 static_assert(SizeOf<WireHeader>().bytes == kHeaderBytes);
 static_assert(SizeOf<LegacyWireHeader>().bytes == kLegacyHeaderBytes);
 static_assert(SizeOf<ToolStateMessage>().bytes == kToolStateBodyBytes);
-static_assert(SizeOf<ContactModelMessage>().bytes == kContactModelFixedBytes + kContactBytes +
-                                                         kDepthFieldIdCountBytes +
-                                                         kKinkPlaneCountBytes);
-static_assert(SizeOf<ContactModelMessage>().counted_bytes ==
-              kContactBytes + kDepthFieldIdBytes + kKinkPlaneBytes);
+static_assert(SizeOf<ContactModelMessage>().bytes ==
+              kContactModelFixedBytes + kContactBytes + kDepthFieldIdCountBytes);
+static_assert(SizeOf<ContactModelMessage>().counted_bytes == kContactBytes + kDepthFieldIdBytes);
 static_assert(SizeOf<CompactContactModelBody>().bytes ==
               kCompactContactModelFixedBytes + kCompactContactBytes + kDepthFieldIdCountBytes +
-                  kDepthFieldIdBytes + kKinkPlaneCountBytes + kCompactKinkPlaneBytes);
+                  kDepthFieldIdBytes);
 static_assert(SizeOf<CompactContactModelBody>().counted_bytes ==
-              kCompactContactBytes + kDepthFieldIdBytes + kCompactKinkPlaneBytes);
+              kCompactContactBytes + kDepthFieldIdBytes);
 static_assert(SizeOf<WireFieldId>().bytes == kDepthFieldIdBytes);
-static_assert(SizeOf<CompactWireKinkPlane>().bytes == kCompactKinkPlaneBytes);
 static_assert(SizeOf<CompactToolStateBody>().bytes == kCompactToolStateBodyBytes);
 static_assert(SizeOf<HelloMessage>().bytes == kHelloBodyBytes);
 static_assert(SizeOf<WelcomeMessage>().bytes == kWelcomeFixedBytes + kWelcomeTargetBytes);

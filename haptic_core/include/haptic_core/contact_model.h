@@ -35,37 +35,19 @@ struct ContactModel {
   Wrench F_T_W_at_q0;
 };
 
-/// Depth width ε (m) over which a contact's planes blend (ContactDepthAt): a tilt of ε/(2r) (r the
-/// lever of the arms, 0.25 mrad for the fig75 block's 2 cm edges) is the width of the V's rounded
-/// vertex.
-inline constexpr double kKinkBlendM = 10e-6;
-
 /// δ of contact `c` at the pose change Δq = q ⊖ q0 (Δq.linear in m, Δq.angular in rad, world
-/// axes): the largest of its planes, δ0 + J·Δq and each kink plane's δ_m + J_m·Δq (J_m =
-/// (∂δ/∂x + the plane's offset, ∂δ_m/∂θ)), with a quadratic blend where another plane comes within
-/// kKinkBlendM of the largest one (gap g < ε: δ += (ε − g)²/(4ε), J += w·(J_i − J_max) with w = (ε
-/// − g)/(2ε); the weights are normalized when they add up to more than 1), less that lift at q0, so
-/// that δ(q0) = δ0 always (planes that tie at q0, a level face on a flat, add no depth there; a
-/// touching contact pushes with nothing). Without planes, δ0 + J·Δq exactly.
-/// The blend makes the gradient continuous through the V's vertex: at a tie the two arms bear
-/// half each, so a face resting on two edges finds its equilibrium instead of chattering between
-/// them tick by tick (each plane alone flips the torque from one edge's to the other's).
-/// `gradient` (optional) receives ∇δ; `curvature` (optional) receives ∇²δ (6×6, world axes,
-/// rows/cols as Stiffness6; only its rotation block is non-zero where the planes share ∂δ/∂x),
-/// the blend's Σ (J_max − J_i)(J_max − J_i)ᵀ/(2ε), which the implicit tool step needs in K to stay
-/// stable there. Non-finite planes are skipped.
+/// axes): its linearization δ0 + J·Δq. `gradient` (optional) receives J.
 /// noexcept, allocation-free (1 kHz loop).
 double ContactDepthAt(const ContactLinearization& c, const Twist& dq,
-                      PenetrationGradient* gradient = nullptr,
-                      Stiffness6* curvature = nullptr) noexcept;
+                      PenetrationGradient* gradient = nullptr) noexcept;
 
 /// Result of evaluating a contact model at a tool pose.
 struct ContactModelEvaluation {
   /// Φ = Σ −k_i max(δ_i(q), 0) J_i: wrench on the tool at its centre of mass, in W (δ_i and
   /// J_i = ∇δ_i from ContactDepthAt).
   Wrench F_T_W;
-  /// K = Σ_{δ_i>0} −k_i (J_i J_iᵀ + δ_i ∇²δ_i) (negative semi-definite; ∇²δ_i is zero but where
-  /// a contact's planes blend: ContactDepthAt; a depth field's, its smooth maximum's).
+  /// K = Σ_{δ_i>0} −k_i (J_i J_iᵀ + δ_i ∇²δ_i) (negative semi-definite; ∇²δ_i is a depth
+  /// field's smooth maximum's curvature, zero for a linearization).
   Stiffness6 K = Stiffness6::Zero();
   /// Contacts with δ_i(q) > 0.
   int active_contacts = 0;
@@ -93,9 +75,8 @@ struct ContactModelEvaluation {
   int field_fallbacks = 0;
 };
 
-/// Evaluates `model` at tool pose X_WT: δ_i(q) = δ0_i + J_i·(q ⊖ q0), or with kink planes the
-/// largest of the contact's planes (ContactDepthAt; force, torque and K along the gradient of the
-/// plane that gives it), per-contact switching by max(δ_i, 0) (DESIGN.md §5). Contacts whose δ0 or
+/// Evaluates `model` at tool pose X_WT: δ_i(q) = δ0_i + J_i·(q ⊖ q0) (ContactDepthAt), per-contact
+/// switching by max(δ_i, 0) (DESIGN.md §5). Contacts whose δ0 or
 /// stiffness is not finite are skipped. `stiffness_scale` ∈ [0, 1] multiplies every k_i (used to
 /// blend a new model in).
 ///
@@ -110,10 +91,10 @@ struct ContactModelEvaluation {
 ///
 /// With `fields`, a contact with a depth field (ContactLinearization::depth_field_id) that the
 /// cache holds takes δ, ∇δ and the smooth maximum's curvature from the field at X_WT
-/// (DepthFieldCache::Evaluate, plus depth_field_shift_m) instead of its planes, also beyond the
+/// (DepthFieldCache::Evaluate, plus depth_field_shift_m) instead of its linearization, also beyond the
 /// field's travel margin (counted: a linearization made a round trip ago is worse there, its
 /// steps at the margin were the largest force steps on the gear at 25 ms); without the field,
-/// its planes, and the fallback is counted.
+/// its linearization, and the fallback is counted.
 ContactModelEvaluation EvaluateContactModel(
     const ContactModel& model, const RigidTransform& X_WT, double stiffness_scale = 1.0,
     double max_contact_force_n = std::numeric_limits<double>::infinity(),

@@ -26,11 +26,11 @@
 //    local maximum. The deepest of the seeds is δ0 and its point the contact point.
 //  - The ten rendered displaced samples are refined the same way from their own deepest cells
 //    (from the cell's centre unless subgrid_translations / subgrid_rotations), so that δ0, the
-//    gradient and the kink planes' depths share one estimator.
+//    gradient and δ0 share one estimator.
 //  - Gradient: the grid's one-cell central differences of the refined samples (h_x = W/N,
 //    h_θ = h_x/(W/2)), a secant of the refined maximum; ∂δ/∂x_n = −1. Where another maximum takes
 //    over within a cell (a face between two ridges' flanks: a V) the secant is the arms' mean,
-//    which the kink planes complete.
+//    which a depth field evaluated at the tool's pose resolves.
 // PipelineOptions::refine_depth turns stage 5b on (the default); off is the grid alone, the
 // reference path.
 

@@ -124,23 +124,6 @@ struct PipelineOptions {
   /// hull widened by the pair's texture reach) and sized to it plus the texture margin, within
   /// [window_extent_m, max_window_extent_m]. Off: the witness point and the smallest window.
   bool whole_model_region_windows = true;
-  /// Kink planes (issue 31, change 5): each contact also carries the arms of its depth's V about
-  /// the window's in-plane rotation axes (AddKinkPlanes, contact_linearization.h, from the
-  /// rendered rotation samples), so that the operator's loop finds the tilt where the torque of a
-  /// face resting on ridges flips between two models (ContactDepthAt). δ and the wrench at q0 are
-  /// unchanged. Off: one plane per contact.
-  bool kink_planes = true;
-  /// With kink_planes: along a kinked axis the contact's own ∂δ/∂θ becomes its deepest cell's slope
-  /// (AddKinkPlanes). Off: the secant of the ±h_θ samples stays, and only the arm the deepest cell
-  /// is not on is added (placed on the frontier as "kink_planes_keep_secant").
-  bool kink_planes_own_slope = true;
-  /// With kink_planes_own_slope: where the deepest cell bears like one arm, the other arm's plane
-  /// hangs below δ0 by the arms' gap at q0 instead of going through its own sample
-  /// (AddKinkPlanes' hang_other_arm), so that a resting face's torque turns over monotonically
-  /// through level. Off by default: on the frontier its torque error is higher and the striped
-  /// blocks' loop rougher (measured: docs/measurements.md; `slave_sim --kink-hang-other-arm`, the
-  /// frontier's "kink_hang_other_arm").
-  bool kink_hang_other_arm = false;
   /// Stage 5b (issue 32): δ refined from the grid's cell samples to the finest texture level
   /// (DepthRefiner, depth_refinement.h), after either backend. On: δ to the finest level, and a
   /// lower force error (measured: docs/measurements.md). Off (`slave_sim --no-refine-depth`, the
@@ -212,7 +195,7 @@ struct PipelineOptions {
   /// Stage 5c (issue 32): contacts on one object whose normals agree within clustering_angle_deg
   /// and whose textured overlaps at the tool's pose come within share_link_m of each other are one
   /// region and share one penalty (ShareConnectedContacts, connected_contacts.h): each keeps its δ,
-  /// J and kink planes, and its stiffness becomes k·s_i, so that a region pushes with about its
+  /// J and field, and its stiffness becomes k·s_i, so that a region pushes with about its
   /// deepest contact's k·δ, as the pipeline truth's one patch does (contact_patch_truth.h). The
   /// coarse clustering leaves such contacts apart where their merged window would exceed
   /// max_window_extent_m (the hammer's face on the torus: two windows, each reading the whole δ).

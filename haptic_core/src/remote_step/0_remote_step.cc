@@ -94,8 +94,6 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
     d.last_results[static_cast<std::size_t>(d.split_first + k)].stiffness_n_per_m *=
         d.split_weights[static_cast<std::size_t>(k)];
   }
-  // Kink planes are added below (the rotation arms).
-  for (int i = 0; i < d.last_num_queries; ++i) d.last_results[i].num_kink_planes = 0;
   // Stage 5b: δ refined to the finest texture level.
   if (options_.refine_depth) {
     d.refiner.BeginStep();
@@ -106,14 +104,12 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
                        d.last_results[i]);
     }
   }
-  if (options_.kink_planes) {
-    for (int i = 0; i < d.last_num_queries; ++i) {
-      AddKinkPlanes(d.last_queries[i].window,
-                    {d.last_samples.data() + static_cast<std::size_t>(i) * kGradientSamples,
-                     static_cast<std::size_t>(kGradientSamples)},
-                    X_WT.translation, d.last_results[i], options_.kink_planes_own_slope,
-                    options_.kink_hang_other_arm);
-    }
+  // A face resting on ridges: the bearing edge's slope instead of the secant across the V.
+  for (int i = 0; i < d.last_num_queries; ++i) {
+    UseBearingEdgeRotationSlope(d.last_queries[i].window,
+                                {d.last_samples.data() + static_cast<std::size_t>(i) * kGradientSamples,
+                                 static_cast<std::size_t>(kGradientSamples)},
+                                X_WT.translation, d.last_results[i]);
   }
   // The grazing guard: a δ its coarse geometry cannot hold is the sideways overlap along a
   // grazing direction, not a penetration; the contact is left out of the model (its linearization

@@ -99,7 +99,7 @@ struct RemoteStepData {
   // ---- Stages 4–6: the batch (HapticTexturePipeline::last_contact_queries() and the rest).
   std::array<ContactQuery, kMaxContacts> last_queries{};
   std::array<ContactLinearization, kMaxContacts> last_results{};
-  /// The depth samples of last_queries (kGradientSamples each, query-major), for kink planes.
+  /// The depth samples of last_queries (kGradientSamples each, query-major), for stage 5b.
   std::array<DepthSample, kMaxContacts * kGradientSamples> last_samples{};
   int last_num_queries = 0;
   /// Stage 5: one window size's queries, results, samples and their indices in last_queries (the

@@ -1,5 +1,5 @@
 // Stage 5 of the remote step (contact_linearization.h): the CPU texture solver's renders and
-// its linearization of one contact. The finite differences and kink planes:
+// its linearization of one contact. The finite differences:
 // 5_linearization_assembly.cc; the overlap's regions: 5_overlap_regions.cc.
 #include <oneapi/tbb/parallel_for.h>
 #include <oneapi/tbb/task_arena.h>

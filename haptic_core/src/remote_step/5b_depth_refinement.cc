@@ -456,7 +456,6 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
           glm::cross(point_W - X_WT.translation, lin.gradient.d_translation_W);
     }
   }
-  lin.num_kink_planes = 0;
   return true;
 }
 

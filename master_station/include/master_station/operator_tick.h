@@ -266,7 +266,7 @@ class OperatorTick {
   /// record (Commit) of the wrench returned, which the device gets.
   Wrench GuardPassivity(const Wrench& F_H_W, const Twist& V_WH_W, bool device_ok,
                         double f_after_apply, OperatorTickOutput& out) noexcept;
-  /// Sets model_'s depth offset to `offset_m` (shifts every contact's and kink plane's depth).
+  /// Sets model_'s depth offset to `offset_m` (shifts every contact's depth and its depth field's).
   void SetDepthOffset(double offset_m) noexcept;
   /// The energy-bounded onset, after stage 1 and the blend step: at an onset (`took_model`
   /// with no offset in use, no contact potential before it, `U_before`, and a model at least

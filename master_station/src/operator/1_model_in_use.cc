@@ -62,8 +62,6 @@ void OperatorTick::SetDepthOffset(double offset_m) noexcept {
     ContactLinearization& c = model_.contacts[static_cast<std::size_t>(i)];
     c.depth_m -= d;
     c.depth_field_shift_m -= d;
-    for (int m = 0; m < c.num_kink_planes; ++m)
-      c.kink_planes[static_cast<std::size_t>(m)].depth_m -= d;
   }
   depth_offset_m_ = offset_m;
 }

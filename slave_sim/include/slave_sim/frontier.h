@@ -73,13 +73,6 @@ struct FrontierSetting {
   bool share_leaves_between_disjoint_windows = true;
   /// PipelineOptions::whole_model_region_windows ("windows_at_witness" turns it off).
   bool whole_model_region_windows = true;
-  /// PipelineOptions::kink_planes ("no_kink_planes" turns it off).
-  bool kink_planes = true;
-  /// PipelineOptions::kink_planes_own_slope ("kink_planes_keep_secant" turns it off).
-  bool kink_planes_own_slope = true;
-  /// PipelineOptions::kink_hang_other_arm ("kink_hang_other_arm" and
-  /// "parallax_kink_hang_other_arm" turn it on).
-  bool kink_hang_other_arm = false;
   /// PipelineOptions::refine_depth (on; "grid_only" and the grid-size settings "gridN" turn it
   /// off, the "gridN_refined" settings keep it).
   bool refine_depth = true;

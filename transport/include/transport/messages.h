@@ -235,7 +235,9 @@ struct Datagram {
 // Encoders: header (its type is set by the encoder) + body + MAC under `key`.
 Datagram EncodeToolState(const Header& header, const ToolStateMessage& message,
                          const MacKey& key) noexcept;
-/// Contacts beyond kMaxWireContacts are not sent (the caller keeps at most kMaxContacts).
+/// Contacts beyond kMaxWireContacts are not sent (the caller keeps at most kMaxContacts); depth-field
+/// ids beyond DepthFieldIdCapacity() (11 with 14 float contacts) are not sent: those contacts go
+/// without their field.
 Datagram EncodeContactModel(const Header& header, const ContactModelMessage& message,
                             const MacKey& key) noexcept;
 /// The same model quantized as CompactContactModel (protocol.h states the layout and each field's
@@ -344,8 +346,7 @@ DecodeStatus DecodeContactModel(std::span<const std::uint8_t> body,
 /// CompactContactModel (protocol version 11) into the message the float encoding decodes to:
 /// X_WT0's rotation unit, normals unit; F_T_W_at_q0, which the compact body does not carry, summed
 /// from the decoded contacts at q0 (ContactModelWrenchAtQ0, as the sender's AssembleContactModel
-/// made it; where kink planes were left out for room, from the planes that came: the wrench of
-/// the model the receiver holds); tool_state_send_time_ns, sent as the low 32 bits of its whole µs,
+/// made it); tool_state_send_time_ns, sent as the low 32 bits of its whole µs,
 /// taken as the time within ±2³¹ µs (±35.8 min) of `receive_time_ns`, the receiver's steady clock
 /// in ns (the clock whose times its tool states carry): so the echo is right for any model whose
 /// pose answered a tool state sent within 35 minutes; hold_ns and the echo come back as whole µs;

@@ -61,22 +61,12 @@
 //     X_WT0: 3×f64 + 4×f64   F_T_W at q0: 3×f64 force (N), 3×f64 torque (N·m)
 //     u8 num_contacts (0..kMaxWireContacts), then per contact (88): f64 depth_m, 3×f64 ∂δ/∂x,
 //     3×f64 ∂δ/∂θ (m/rad), f64 stiffness (N/m), 3×f32 point_W (m), 3×f32 normal_W (unit);
-//     then the kink planes (version 6; version 7 added each plane's translation slope): u8
-//     num_kink_planes (at most KinkPlaneCapacity(): as many as fit the datagram), per plane
-//     (kKinkPlaneBytes, 29): u8 contact (< num_contacts), f32 depth_m (δ_m at q0, m), 3×f32
-//     ∂δ_m/∂θ (m/rad), 3×f32 ∂δ_m/∂x less the contact's ∂δ/∂x (zero for a plane that shares it);
-//     the contact's depth is the largest of its planes (haptic_core/contact_linearization.h,
-//     ContactDepthAt). Planes go contact by contact, in order; a sender whose model has more than
-//     fit leaves the last ones out (the remote node counts them). Rejected: a plane naming a
-//     contact ≥ num_contacts or a contact's (kMaxKinkPlanesPerContact + 1)-th plane (kBadValue),
-//     a non-finite field (kNonFinite). The compact model carries the same section with 17-byte
-//     planes where the offset is zero (version 11, below).
-//     Then (version 12) the depth-field section: u8 n (≤ num_contacts), per contact that has a
-//     depth field (kDepthFieldIdBytes, 5), in the contacts' order: u8 contact (< num_contacts),
-//     u32 field id (≠ 0: the DepthFieldFragment object that carries the field). A contact
-//     without an entry has no field. It takes its room before the kink planes do
-//     (KinkPlaneCapacity's num_field_ids). Rejected: a contact ≥ num_contacts or named twice, or
-//     an id 0 (kBadValue). The compact model carries the same section, alike.
+//     then the depth-field section, which ends the body: u8 n (≤ num_contacts, at most
+//     DepthFieldIdCapacity(): as many as fit the datagram), per contact that has a depth field
+//     (kDepthFieldIdBytes, 5), in the contacts' order: u8 contact (< num_contacts), u32 field id
+//     (≠ 0: the DepthFieldFragment object that carries the field). A contact without an entry
+//     has no field (the operator evaluates its linearization). Rejected: a contact ≥
+//     num_contacts or named twice, or an id 0 (kBadValue); bytes after the last entry (kTooLong).
 //   CompactContactModel R→O (kCompactContactModelFixedBytes + n·kCompactContactBytes): the same
 //     model quantized, sent instead of ContactModel when both sides set kCodecCompactContactModel
 //     and decoded into the same message (the float encoding stays available). Version 11 (issue
@@ -109,13 +99,7 @@
 //     −32768 (kCompactNotFinite) marks a value, or normal, that was not finite (or a zero normal)
 //     at the sender, and the receiver rejects the datagram (kNonFinite) as it would ContactModel
 //     with a NaN. The largest error of each field is a kCompact*Error* constant below. Then the
-//     depth-field section as in ContactModel, then the kink planes, which end the body (u8 count,
-//     at most KinkPlaneCapacity() as in ContactModel, i.e. as if each were kKinkPlaneBytes), each
-//     (version 11) u8 contact | kCompactKinkPlaneOwnSlope (0x80), f32 depth_m, 3×f32 ∂δ_m/∂θ, and
-//     only when that bit is set 3×f32 ∂δ_m/∂x less the contact's: 17 bytes for a plane that
-//     shares the contact's translation slope (every rotation arm), 29 for one with its own; the
-//     sender sets the bit when an offset component is not 0 in f32. Checked as in ContactModel
-//     (the contact is the byte less the bit); bytes after the last plane are refused (kTooLong).
+//     depth-field section as in ContactModel, which ends the body.
 //   Goodbye O↔R (0): clean close of the session (the operator at the end of a run, the remote
 //     node when stopped); sent three times with new sequence numbers.
 //   Hello O→R (44): u16 min_version, u16 max_version, u64 client_nonce, f32 tool_state_rate_hz,
@@ -227,13 +211,15 @@ inline constexpr std::uint32_t kLegacyMagic = 0x504C5448u;  // bytes 'H' 'T' 'L'
 /// of ContactModel and CompactContactModel (each contact's field id) and the DepthFieldFragment
 /// and DepthFieldNack messages; every other body is as in version 11. Version 13 drops the
 /// translation patches' section after the kink planes (the depth fields hold the surface where
-/// the tool is); every other body is as in version 12.
-/// Only version 13 is accepted. A remote node answers a Hello of versions 2 to 12 whose MAC
+/// the tool is); every other body is as in version 12. Version 14 drops the kink planes: the
+/// depth-field section ends ContactModel and CompactContactModel; every other body is as in
+/// version 13.
+/// Only version 14 is accepted. A remote node answers a Hello of versions 2 to 13 whose MAC
 /// verifies with a Reject (kVersion) in that Hello's own layout and header version (the Hello's
-/// first 12 body bytes and the Reject body are laid out alike in versions 2 to 13), so that an
+/// first 12 body bytes and the Reject body are laid out alike in versions 2 to 14), so that an
 /// older operator is told why.
-inline constexpr std::uint16_t kProtocolVersion = 13;
-inline constexpr std::uint16_t kMinProtocolVersion = 13;
+inline constexpr std::uint16_t kProtocolVersion = 14;
+inline constexpr std::uint16_t kMinProtocolVersion = 14;
 
 /// Message types; values are part of the protocol and never reused.
 enum class MessageType : std::uint8_t {
@@ -326,20 +312,8 @@ inline constexpr std::size_t kContactBytes = 8 + 6 * 8 + 8 + 3 * 4 + 3 * 4;
 /// (u64 + u16); u8 contact count (version 11; 103 bytes in versions 4 to 10).
 inline constexpr std::size_t kCompactContactModelFixedBytes = 4 * 4 + 3 * 2 + 3 * 4 + 8 + 2 + 1;
 inline constexpr std::size_t kCompactContactBytes = 4 + 6 * 4 + 4 + 3 * 2 + 2 * 2;
-/// One kink plane on the wire: u8 contact, f32 depth_m, 3×f32 ∂δ_m/∂θ, 3×f32 ∂δ_m/∂x offset; and
-/// the u8 count before them.
-inline constexpr std::size_t kKinkPlaneBytes = 1 + 7 * 4;
-/// A CompactContactModel kink plane (version 11): u8 contact | kCompactKinkPlaneOwnSlope, f32
-/// depth_m, 3×f32 ∂δ_m/∂θ, and the 3×f32 ∂δ_m/∂x offset (kCompactKinkPlaneSlopeBytes) only when
-/// that bit is set.
-inline constexpr std::size_t kCompactKinkPlaneBytes = 1 + 4 * 4;
-inline constexpr std::size_t kCompactKinkPlaneSlopeBytes = 3 * 4;
-inline constexpr std::uint8_t kCompactKinkPlaneOwnSlope = 0x80;
-inline constexpr std::size_t kKinkPlaneCountBytes = 1;
-/// Most kink planes per contact (haptic_core's kMaxKinkPlanes) and per model.
-inline constexpr int kMaxKinkPlanesPerContact = 8;
-/// The depth-field section after the contacts (version 12): u8 count, then per contact with a
-/// field u8 contact and u32 field id.
+/// The depth-field section after the contacts: u8 count, then per contact with a field u8 contact
+/// and u32 field id.
 inline constexpr std::size_t kDepthFieldIdCountBytes = 1;
 inline constexpr std::size_t kDepthFieldIdBytes = 1 + 4;
 /// Bytes of the depth-field section that carries `num_field_ids` ids.
@@ -387,21 +361,19 @@ inline constexpr std::size_t kMaxDatagramBytes = 1472;
 inline constexpr std::size_t kMinMtuBytes = 548;
 /// Contacts that fit in one contact-model datagram.
 inline constexpr int kMaxWireContacts = 14;
-/// Most kink planes of one contact model on the wire.
-inline constexpr int kMaxWireKinkPlanes = kMaxWireContacts * kMaxKinkPlanesPerContact;
-/// Kink planes that fit one datagram after `num_contacts` contacts of `contact_bytes` each and a
-/// fixed part of `fixed_bytes` (kContactModelFixedBytes and kContactBytes, or the compact ones):
-/// at most kMaxWireKinkPlanes. A receiver refuses a larger count (kBadCount).
-constexpr int KinkPlaneCapacity(std::size_t fixed_bytes, std::size_t contact_bytes,
-                                int num_contacts, int num_field_ids = 0) noexcept {
-  const std::size_t used =
-      kHeaderBytes + fixed_bytes +
-      static_cast<std::size_t>(num_contacts < 0 ? 0 : num_contacts) * contact_bytes +
-      DepthFieldIdSectionBytes(num_field_ids) + kKinkPlaneCountBytes + kMacBytes;
+/// Depth-field ids that fit one datagram after `num_contacts` contacts of `contact_bytes` each and
+/// a fixed part of `fixed_bytes` (kContactModelFixedBytes and kContactBytes, or the compact ones):
+/// at most num_contacts. A sender leaves the rest out (those contacts go without a field); a
+/// receiver refuses a larger count (kBadCount).
+constexpr int DepthFieldIdCapacity(std::size_t fixed_bytes, std::size_t contact_bytes,
+                                   int num_contacts) noexcept {
+  const int n = num_contacts < 0 ? 0 : num_contacts;
+  const std::size_t used = kHeaderBytes + fixed_bytes +
+                           static_cast<std::size_t>(n) * contact_bytes + kDepthFieldIdCountBytes +
+                           kMacBytes;
   if (used >= kMaxDatagramBytes) return 0;
-  const std::size_t fit = (kMaxDatagramBytes - used) / kKinkPlaneBytes;
-  return fit < static_cast<std::size_t>(kMaxWireKinkPlanes) ? static_cast<int>(fit)
-                                                            : kMaxWireKinkPlanes;
+  const std::size_t fit = (kMaxDatagramBytes - used) / kDepthFieldIdBytes;
+  return fit < static_cast<std::size_t>(n) ? static_cast<int>(fit) : n;
 }
 /// Largest scene object (bytes) a sender fragments or a receiver reassembles.
 inline constexpr std::uint32_t kMaxSceneObjectBytes = 64u << 20;
@@ -486,18 +458,16 @@ constexpr std::size_t FragmentPayloadBytes(std::size_t mtu) noexcept {
 }
 
 static_assert(kHeaderBytes + kContactModelFixedBytes + kMaxWireContacts * kContactBytes +
-                      kKinkPlaneCountBytes + kMacBytes <=
+                      kDepthFieldIdCountBytes + kMacBytes <=
                   kMaxDatagramBytes,
               "a full contact model must fit in one datagram");
 static_assert(kHeaderBytes + kCompactContactModelFixedBytes +
-                      kMaxWireContacts * kCompactContactBytes + kKinkPlaneCountBytes + kMacBytes <=
+                      kMaxWireContacts * (kCompactContactBytes + kDepthFieldIdBytes) +
+                      kDepthFieldIdCountBytes + kMacBytes <=
                   kMaxDatagramBytes,
-              "a full compact contact model must fit in one datagram");
-static_assert(KinkPlaneCapacity(kContactModelFixedBytes, kContactBytes, kMaxWireContacts) >= 1,
-              "a full contact model carries at least one kink plane");
-static_assert(KinkPlaneCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, 7) >= 7 * 4,
-              "a compact model of the seed's 7 contacts carries four kink planes each (the "
-              "rotation arms, or two axes' translation arms)");
+              "a full compact contact model with a field for each contact must fit in one datagram");
+static_assert(DepthFieldIdCapacity(kCompactContactModelFixedBytes, kCompactContactBytes,
+                                   kMaxWireContacts) == kMaxWireContacts);
 static_assert(kHeaderBytes + kSceneManifestFixedBytes + kMaxManifestEntries * kManifestEntryBytes +
                       kMacBytes <=
                   kMinMtuBytes,
