@@ -206,7 +206,10 @@ TEST(RotateModelFrame, TheSurfaceAndTheForcesStayPutWhenThePoseTurnsBack) {
     const Wrench& F0 = m0.F_T_W_at_q0;
     const Wrench& F1 = m1.F_T_W_at_q0;
     EXPECT_LT(glm::length(F1.force - F0.force), 0.02 * glm::length(F0.force) + 1e-9);
-    EXPECT_LT(glm::length(F1.torque - F0.torque), 0.02 * glm::length(F0.torque) + 1e-6);
+    // The level face bears on its edges; the torque's lever is the deepest cell's centre
+    // (UseBearingEdgeRotationSlope), and rounding in the turned frame may pick the neighbouring
+    // cell: 0.4 mm of the 20 mm lever.
+    EXPECT_LT(glm::length(F1.torque - F0.torque), 0.03 * glm::length(F0.torque) + 1e-6);
   }
   // A quarter turn about x swaps the y and z principal moments.
   HapticModel quarter = *scene.tool;
