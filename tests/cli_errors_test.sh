@@ -35,4 +35,12 @@ expect speed_error_frontier "--poses" "$build/slave_sim/speed_error_frontier" --
 expect run-loopback "--duration" "$src/deploy/run-loopback" --build-dir "$build" --out "$tmp/lb" --duration abc
 [ ! -e "$tmp/lb/slave.log" ] || { echo "FAIL: run-loopback started slave_sim before checking --duration"; fail=1; }
 expect run-loopback "--experiment" "$src/deploy/run-loopback" --build-dir "$build" --out "$tmp/lb" --experiment nope
+# A bad --impair SPEC is refused before the remote node starts (ht_relay --check).
+expect run-loopback "--impair: impairment spec" "$src/deploy/run-loopback" --build-dir "$build" --out "$tmp/imp" --impair "delay=5,lossy=3%"
+[ ! -e "$tmp/imp/slave.log" ] || { echo "FAIL: run-loopback started slave_sim before checking --impair"; fail=1; }
+# An option run-loopback sets itself, given again in --master-args / --slave-args: which of its own
+# options to use instead, before anything starts.
+expect run-loopback "use run-loopback --duration" "$src/deploy/run-loopback" --build-dir "$build" --out "$tmp/dup" --master-args "--quiet --duration 3"
+expect run-loopback "use run-loopback --scene" "$src/deploy/run-loopback" --build-dir "$build" --out "$tmp/dup" --slave-args "--scene=stiff-wall"
+[ ! -e "$tmp/dup/slave.log" ] || { echo "FAIL: run-loopback started slave_sim before checking --master-args"; fail=1; }
 exit $fail
