@@ -451,17 +451,25 @@ ExperimentScene ExperimentSceneInM(const wire::SceneLayout& layout, const RigidT
 nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& device,
                                   Experiment& experiment) {
   config.Validate();
-  station::OperatorStationRun run(config, device, experiment);
-  run.WaitForSession();
-  run.WaitForFirstModel();
-  run.RunHapticLoop();
-  nlohmann::json s = run.Summary();
-  if (!config.out_dir.empty()) {
+  const auto write_summary = [&](const nlohmann::json& s) {
+    if (config.out_dir.empty()) return;
     const std::string path = config.out_dir + "/summary.json";
     std::ofstream out(path);
     out << s.dump(2) << "\n";
     if (!out) throw std::runtime_error("cannot write " + path);
+  };
+  station::OperatorStationRun run(config, device, experiment);
+  try {
+    run.WaitForSession();
+    run.WaitForFirstModel();
+  } catch (const std::runtime_error& e) {
+    // No session or no model: the summary says why (the trace has its header only).
+    write_summary(run.FailureSummary(e.what()));
+    throw;
   }
+  run.RunHapticLoop();
+  nlohmann::json s = run.Summary();
+  write_summary(s);
   return s;
 }
 

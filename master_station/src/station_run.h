@@ -71,6 +71,10 @@ class OperatorStationRun {
   void RunHapticLoop();
   /// The run's summary (summary.json): station_summary.cc. After RunHapticLoop.
   nlohmann::json Summary() const;
+  /// The summary of a run that ended before its loop ran (no session, no first model, a stop
+  /// while waiting): `error` (why, as thrown), the experiment, the device, the session's state
+  /// and the transport's counts. Stops the worker threads first.
+  nlohmann::json FailureSummary(const std::string& error);
 
  private:
   // The loop thread's body: one tick per period on the device's clock.

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <nlohmann/json.hpp>
+#include <string>
 #include <vector>
 
 #include "haptic_core/passivity.h"
@@ -163,6 +164,23 @@ nlohmann::json OperatorStationRun::Summary() const {
   s["clock_offset_ms"] = s["transport"]["clock"]["offset_ms"];
   s["model_one_way_ms_p50"] = Percentile(network_->one_way_ms(), 0.5);
   s["model_one_way_ms_p99"] = Percentile(network_->one_way_ms(), 0.99);
+  return s;
+}
+
+nlohmann::json OperatorStationRun::FailureSummary(const std::string& error) {
+  StopWorkers();
+  nlohmann::json s;
+  s["error"] = error;
+  s["experiment"] = experiment_.name();
+  s["device"] = caps_.name;
+  s["remote"] = config_.remote_address.ToString();
+  s["session_opened"] = counters_.connected.load();
+  s["session_refused"] = counters_.rejected.load();
+  s["models_received"] = counters_.model_accepted.load();
+  s["stopped_by_request"] = StopRequested();
+  s["duration_s"] = 0.0;
+  s["ticks"] = 0;
+  s["transport"] = network_->Summary();
   return s;
 }
 
