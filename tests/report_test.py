@@ -67,7 +67,7 @@ def main():
               f"index.html shows min(6, {n_frames}) of the display's frames (got {len(frames)})")
         for ref in refs:
             check(os.path.exists(os.path.join(out, ref)), f"index.html's {ref} exists")
-        check("operator_rate_hz" in page and "remote_step_p50_us" in page,
+        check("operator_rate_hz" in page and "remote_step_of_models_p50_us" in page,
               "index.html has the summary's key figures")
 
         # The same run as fig76 draws rotation.png; as an explore run over two objects (phases

@@ -77,10 +77,13 @@ nlohmann::json OperatorStationRun::Summary() const {
   s["operator_overruns"] = rec.overruns;
   s["realtime_priority"] = rec.realtime_note;
   s["remote_rate_hz"] = network_->RemoteRateHz();
-  s["remote_step_p50_us"] = Percentile(network_->remote_step_us(), 0.5);
-  s["remote_step_p99_us"] = Percentile(network_->remote_step_us(), 0.99);
-  s["remote_step_in_contact_p50_us"] = Percentile(network_->contact_step_us(), 0.5);
-  s["remote_step_in_contact_p99_us"] = Percentile(network_->contact_step_us(), 0.99);
+  // The remote node's compute time of the steps whose contact models arrived here (each model
+  // carries its step's time): not a round trip (rtt_ms_*), and not the node's own percentiles
+  // over every step it took (remote.step_p50_us: free-space steps of a few µs included).
+  s["remote_step_of_models_p50_us"] = Percentile(network_->remote_step_us(), 0.5);
+  s["remote_step_of_models_p99_us"] = Percentile(network_->remote_step_us(), 0.99);
+  s["remote_step_of_models_in_contact_p50_us"] = Percentile(network_->contact_step_us(), 0.5);
+  s["remote_step_of_models_in_contact_p99_us"] = Percentile(network_->contact_step_us(), 0.99);
   s["remote_collision_p50_us"] = Percentile(network_->collision_us(), 0.5);
   s["remote_texture_p50_us"] = Percentile(network_->texture_us(), 0.5);
   s["rtt_ms_p50"] = Percentile(network_->rtt_ms(), 0.5);
