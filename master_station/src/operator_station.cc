@@ -346,6 +346,7 @@ void OperatorStationRun::LoopThread() {
       row.depth_m = step.max_depth_m;
       row.p_WH = out.X_WH.translation;
       row.F_H_W = out.F_H_W;
+      row.f_H_M = out.F_H_M.force;
       row.passivity_removed_n = out.passivity_removed_n;
       row.model_age_ms = out.model_age_ms;
       row.remote_collision_us = tick.model_stamp().collision_us;
