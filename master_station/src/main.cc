@@ -472,6 +472,15 @@ int main(int argc, char** argv) {
             bad);
       }
     }
+    if (const double n = number(summary["wedged"], "count"); n > 0.0) {
+      const nlohmann::json& first = summary["wedged"]["phase_ends"][0];
+      std::printf(
+          "[master] note: %.0f phase(s) that should end with the tool free ended with it still "
+          "pushed by more than %.1f N (wedged), the first %s at %.2f s (%.2f N); summary.json "
+          "wedged lists them\n",
+          n, number(summary["wedged"], "above_n"), first["phase"].get<std::string>().c_str(),
+          first["t_s"].get<double>(), first["contact_force_n"].get<double>());
+    }
     if (summary.contains("safety")) {
       if (const double c = number(summary["safety"], "clamped_ticks"); c > 0.0) {
         std::printf("[master] note: the safety stage clamped the device's force on %.0f ticks\n",

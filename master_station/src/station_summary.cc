@@ -91,6 +91,25 @@ nlohmann::json OperatorStationRun::Summary() const {
   s["model_age_ms_p50"] = Percentile(ages, 0.5);
   s["model_age_ms_p99"] = Percentile(ages, 0.99);
   s["contacts_max"] = rec.contacts_max;
+  {
+    // Phases that should end with the tool free (explore's releases and transfers) but ended
+    // with it still loaded: the tool was wedged in the part it left.
+    nlohmann::json ends = nlohmann::json::array();
+    const auto kept = std::min<std::int64_t>(rec.wedged_count, LoopRecord::kWedgedKept);
+    for (std::int64_t i = 0; i < kept; ++i) {
+      const LoopRecord::WedgedPhaseEnd& w = rec.wedged[static_cast<std::size_t>(i)];
+      const auto& names = experiment_.phase_names();
+      ends.push_back({{"phase", w.phase >= 0 && w.phase < static_cast<int>(names.size())
+                                    ? names[static_cast<std::size_t>(w.phase)]
+                                    : std::to_string(w.phase)},
+                      {"t_s", w.t_s},
+                      {"contact_force_n", w.force_n}});
+    }
+    s["wedged"] = {{"count", rec.wedged_count},
+                   {"phase_ends_checked", rec.free_ends_seen},
+                   {"above_n", LoopRecord::kWedgedForceN},
+                   {"phase_ends", ends}};
+  }
   s["contact_force_max_n"] = rec.contact_force_max_n;
   s["device_max_force_n"] = caps_.max_force_n;
   s["device_max_torque_nm"] = caps_.max_torque_nm;
