@@ -565,7 +565,6 @@ TEST(SecureLink, AFloodOfBadDatagramsIsCountedAndNeverAccepted) {
   EXPECT_EQ(arrived_bad, rx.rejected_total());
 }
 
-
 // A host name is resolved (the machine's own name; skipped where the resolver has none for it): a
 // datagram sent to "NAME:PORT" arrives at the socket bound to "NAME:0".
 TEST(SocketAddress, AcceptsAHostName) {
@@ -601,8 +600,9 @@ TEST(SocketAddress, RefusesWhatIsNoAddress) {
     }
     return std::string("accepted");
   };
-  EXPECT_NE(message("no-such-host.invalid:47000").find("cannot resolve host 'no-such-host.invalid'"),
-            std::string::npos);
+  EXPECT_NE(
+      message("no-such-host.invalid:47000").find("cannot resolve host 'no-such-host.invalid'"),
+      std::string::npos);
   EXPECT_NE(message("1.2.3:47000").find("numeric IPv4"), std::string::npos);
   EXPECT_NE(message("localhost:70000").find("port must be 0..65535"), std::string::npos);
   EXPECT_NE(message("localhost").find("HOST:PORT"), std::string::npos);

@@ -450,8 +450,8 @@ int main(int argc, char** argv) {
         "whose models arrived p50 %.0f us), rtt p50 %.3f ms, contacts max %d, non-finite %lld\n",
         summary["operator_rate_hz"].get<double>(), summary["operator_tick_p99_us"].get<double>(),
         summary["remote_rate_hz"].get<double>(),
-        summary["remote_step_of_models_p50_us"].get<double>(),
-        summary["rtt_ms_p50"].get<double>(), summary["contacts_max"].get<int>(),
+        summary["remote_step_of_models_p50_us"].get<double>(), summary["rtt_ms_p50"].get<double>(),
+        summary["contacts_max"].get<int>(),
         static_cast<long long>(summary["nonfinite_count"].get<std::int64_t>()));
     // What a person must see, said once at the end (issue 35): deploy/report lists the same.
     const auto number = [&](const nlohmann::json& j, const char* name) {

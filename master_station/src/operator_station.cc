@@ -367,7 +367,7 @@ void OperatorStationRun::LoopThread() {
         if (last_force_n > LoopRecord::kWedgedForceN) {
           if (rec.wedged_count < static_cast<std::int64_t>(LoopRecord::kWedgedKept)) {
             rec.wedged[static_cast<std::size_t>(rec.wedged_count)] = {last_phase, last_t_s,
-                                                                       last_force_n};
+                                                                      last_force_n};
           }
           ++rec.wedged_count;
         }

@@ -60,8 +60,8 @@ SocketAddress SocketAddress::Parse(const std::string& text) {
   hints.ai_socktype = SOCK_DGRAM;
   addrinfo* found = nullptr;
   if (const int rc = getaddrinfo(host.c_str(), nullptr, &hints, &found); rc != 0) {
-    throw std::invalid_argument("address '" + text + "': cannot resolve host '" + host +
-                                "' (" + gai_strerror(rc) +
+    throw std::invalid_argument("address '" + text + "': cannot resolve host '" + host + "' (" +
+                                gai_strerror(rc) +
                                 "): give a name this machine resolves, a numeric IPv4 address "
                                 "or [IPv6]");
   }
