@@ -35,4 +35,25 @@ expect speed_error_frontier "--poses" "$build/slave_sim/speed_error_frontier" --
 expect run-loopback "--duration" "$src/deploy/run-loopback" --build-dir "$build" --out "$tmp/lb" --duration abc
 [ ! -e "$tmp/lb/slave.log" ] || { echo "FAIL: run-loopback started slave_sim before checking --duration"; fail=1; }
 expect run-loopback "--experiment" "$src/deploy/run-loopback" --build-dir "$build" --out "$tmp/lb" --experiment nope
+# A bad --impair SPEC is refused before the remote node starts (ht_relay --check).
+expect run-loopback "--impair: impairment spec" "$src/deploy/run-loopback" --build-dir "$build" --out "$tmp/imp" --impair "delay=5,lossy=3%"
+[ ! -e "$tmp/imp/slave.log" ] || { echo "FAIL: run-loopback started slave_sim before checking --impair"; fail=1; }
+# An option run-loopback sets itself, given again in --master-args / --slave-args: which of its own
+# options to use instead, before anything starts.
+expect run-loopback "use run-loopback --duration" "$src/deploy/run-loopback" --build-dir "$build" --out "$tmp/dup" --master-args "--quiet --duration 3"
+expect run-loopback "use run-loopback --scene" "$src/deploy/run-loopback" --build-dir "$build" --out "$tmp/dup" --slave-args "--scene=stiff-wall"
+[ ! -e "$tmp/dup/slave.log" ] || { echo "FAIL: run-loopback started slave_sim before checking --master-args"; fail=1; }
+# A --config file's misspelt key is refused, the known keys listed (a scene description does so).
+printf 'grdi = 50\n' > "$tmp/typo.toml"
+expect slave_sim "unknown key 'grdi' (known: " "$build/slave_sim/slave_sim" --config "$tmp/typo.toml"
+grep -q "known: .*, grid, " "$tmp/err" || { echo "FAIL: the known keys do not list grid"; fail=1; }
+printf 'duration = 3\nexperimnet = "fig75"\n' > "$tmp/typo.toml"
+expect master_station "unknown key 'experimnet'" "$build/master_station/master_station" --config "$tmp/typo.toml"
+# The shipped configurations name only known keys (their key file is absent here: that error).
+for config in operator:master_station remote:slave_sim; do
+  "$build/${config#*:}/${config#*:}" --config "$src/deploy/config/${config%%:*}.toml" > /dev/null 2> "$tmp/err"
+  if grep -q "unknown key" "$tmp/err"; then
+    echo "FAIL: deploy/config/${config%%:*}.toml:"; cat "$tmp/err"; fail=1
+  fi
+done
 exit $fail

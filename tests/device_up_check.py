@@ -3,7 +3,9 @@
 top at Y = 0, the probe a 1 cm cube): the device's up is the scene's up (issue 33). Every tick in
 contact has the contact force pointing up the scene's +Y (|F_Y| ≥ 0.9 |F|), the probe's centre
 stays above the plate's top (Y ≥ 4 mm: the probe's half size less its press), and there are such
-ticks. Usage: device_up_check.py RUN_DIR LABEL"""
+ticks. The force the operator feels, in the device's frame (device_f*_M), is the device's force in
+the scene's frame turned into M: its up (z) is the scene's +Y (device_fy), two routes to one number.
+Usage: device_up_check.py RUN_DIR LABEL"""
 import csv
 import math
 import sys
@@ -26,6 +28,20 @@ for r in rows:
     lowest = min(lowest, y)
     if y < 0.004:
         below += 1
+felt_M = ("device_fx_M", "device_fy_M", "device_fz_M")
+if rows and not all(c in rows[0] for c in felt_M):
+    errors.append("trace.csv has no device-frame columns " + ", ".join(felt_M))
+elif rows:
+    # M's x, y, z are the scene's X, -Z, Y here (the Welcome's home pose turns z up to +Y).
+    worst = max(max(abs(float(r["device_fx_M"]) - float(r["device_fx"])),
+                    abs(float(r["device_fy_M"]) + float(r["device_fz"])),
+                    abs(float(r["device_fz_M"]) - float(r["device_fy"]))) for r in rows)
+    if worst > 1e-4:
+        errors.append(f"device_f*_M differs from the device's force turned into M by {worst:.3g} N")
+    felt_up = sum(1 for r in rows if float(r["device_fz_M"]) > 0.05)
+    if felt_up < len(rows) // 2:
+        errors.append(f"the operator feels the plate push up (device_fz_M > 0.05 N) on only "
+                      f"{felt_up} of {len(rows)} contact ticks")
 if sideways:
     errors.append(f"{sideways} contact ticks push sideways or down (worst |F_XZ|/|F| {worst_side:.2f})")
 if below:

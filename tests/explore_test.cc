@@ -173,6 +173,41 @@ TEST(SimulatedOperator, PressFindsASurfaceOfUnknownHeightAndHoldsTheForce) {
   EXPECT_LT(s.X_MH.translation.z, wall_z + 0.006);
 }
 
+// A tool wedged against a side pushes the hand sideways as well as up: lifting off, the hand also
+// moves along that push (the contact's normal), and keeps that offset once the push is gone,
+// until the script moves it sideways again.
+TEST(SimulatedOperator, ALiftLeavesAlongTheFeltForceAndKeepsThatOffset) {
+  HandTarget lift;
+  lift.z_control = HandZControl::kLift;
+  lift.lift_m = 0.005;
+  FixedTarget script(lift);
+  SimulatedOperatorDevice device(script);
+  device.Open();
+  std::int64_t now = 1000000000;
+  DeviceState s;
+  const auto run = [&](double seconds, const glm::dvec3& felt) {
+    for (int i = 0; i < static_cast<int>(seconds * 1000); ++i) {
+      now += 1000000;
+      ASSERT_TRUE(device.ReadState(now, s));
+      Wrench w;
+      w.force = felt;
+      ASSERT_TRUE(device.WriteWrench(w, now));
+    }
+  };
+  run(0.1, {3.0, 0.0, 1.0});  // wedged: pushed along +x (and up)
+  run(1.0, {0.0, 0.0, 0.0});  // free
+  // 0.1 s at the slow speed times the push's sideways share (3/√10): about 4.7 mm.
+  const double expected =
+      0.1 * OperatorHandParams{}.press_slow_speed_m_per_s * 3.0 / std::sqrt(10.0);
+  EXPECT_NEAR(s.X_MH.translation.x, expected, 0.2 * expected);
+  EXPECT_NEAR(s.X_MH.translation.y, 0.0, 1e-5);
+  // The script moves the hand sideways again: the offset is taken back.
+  script.target_.z_control = HandZControl::kPosition;
+  script.target_.V_MH_M.linear.y = 1e-6;
+  run(1.0, {0.0, 0.0, 0.0});
+  EXPECT_NEAR(s.X_MH.translation.x, 0.0, 1e-4);
+}
+
 TEST(SimulatedOperator, PressWithNothingBelowStopsAtTheFloor) {
   FixedTarget script(Press(1.5, -0.05, -0.01));
   SimulatedOperatorDevice device(script);

@@ -89,4 +89,33 @@ TEST(Explore, TheOperatorFoundTheObjectsAndPressedOnThem) {
       Median(device_force), s["workspace"]["jumps"].get<int>());
 }
 
+// The summary's wedged phase ends (a release or a transfer that ended with the tool still loaded)
+// are the trace's: counted again from the rows, at each end of such a phase the contact force on
+// the tool is above the summary's threshold exactly where the summary lists it.
+TEST(Explore, TheSummaryListsThePhaseEndsWhereTheToolWasWedged) {
+  const nlohmann::json s = Summary();
+  ASSERT_TRUE(s.contains("wedged")) << "summary.json says nothing of wedged phase ends";
+  const Trace t = LoadTrace(OutDir());
+  const double above = s["wedged"]["above_n"].get<double>();
+  std::vector<std::string> wedged;
+  int checked = 0;
+  const auto& fx = t.values.at("fx");
+  const auto& fy = t.values.at("fy");
+  const auto& fz = t.values.at("fz");
+  for (std::size_t i = 0; i + 1 < t.phase.size(); ++i) {
+    const std::string& p = t.phase[i];
+    if (p == t.phase[i + 1] || !(p.starts_with("release@") || p.starts_with("transfer@"))) {
+      continue;
+    }
+    ++checked;
+    if (std::sqrt(fx[i] * fx[i] + fy[i] * fy[i] + fz[i] * fz[i]) > above) wedged.push_back(p);
+  }
+  std::vector<std::string> listed;
+  for (const auto& e : s["wedged"]["phase_ends"]) listed.push_back(e["phase"].get<std::string>());
+  EXPECT_EQ(s["wedged"]["phase_ends_checked"].get<int>(), checked);
+  EXPECT_EQ(listed, wedged);
+  EXPECT_EQ(s["wedged"]["count"].get<int>(), static_cast<int>(wedged.size()));
+  std::printf("explore: %d phase ends that should be free, %zu wedged\n", checked, wedged.size());
+}
+
 }  // namespace

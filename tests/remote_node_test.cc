@@ -367,6 +367,43 @@ TEST(RemoteNode, ModelsASurfaceARoundTripAwayFromTheRoundTripItsOperatorReports)
 // The header's sequence is a u32 (protocol version 8): a node whose streams near its end says
 // Goodbye and closes the session (the operator then opens a new one), instead of sending numbers
 // the operator would refuse as replays.
+// The operator says Goodbye three times (a lost one would leave the node waiting for the peer
+// timeout): the copies after the first belong to the session it closed and are counted as its
+// copies, not as rejections (deploy/report draws rejections as faults). A Goodbye of a session
+// that never was is still refused.
+TEST(RemoteNode, TheCopiesOfTheOperatorsGoodbyeAreNoRejections) {
+  const HapticScene scene = MakeBlockOnGearScene();
+  RemoteNodeConfig config = LocalNodeConfig(TestKey(31), "remote_node_goodbye_test.port");
+  RunningNode node(config, scene);
+  ASSERT_NE(node.port, 0);
+  UdpSocket socket(SocketAddress::Parse("127.0.0.1:0"));
+  wire::HelloMessage hello;
+  hello.client_nonce = 31;
+  wire::WelcomeMessage welcome;
+  const std::uint32_t session = OpenSession(socket, node.remote, config.key, hello, welcome);
+  ASSERT_NE(session, 0u);
+  for (std::uint32_t seq = 1; seq <= 3; ++seq) {
+    socket.SendTo(
+        wire::EncodeGoodbye({wire::MessageType::kGoodbye, session, seq, 0}, config.key).view(),
+        node.remote);
+  }
+  socket.SendTo(
+      wire::EncodeGoodbye({wire::MessageType::kGoodbye, session ^ 0x5a5a5a5au, 1, 0}, config.key)
+          .view(),
+      node.remote);
+  // A new session: the node has handled every datagram sent before its Hello.
+  hello.client_nonce = 32;
+  ASSERT_NE(OpenSession(socket, node.remote, config.key, hello, welcome), 0u);
+  const nlohmann::json summary = node.Stop();
+  const nlohmann::json& t = summary["transport"];
+  EXPECT_EQ(t["goodbyes"].get<int>(), 1);
+  EXPECT_EQ(t["goodbye_copies"].get<int>(), 2);
+  EXPECT_EQ(t["streams"]["goodbye"]["received"].get<int>(), 3);
+  EXPECT_EQ(t["streams"]["goodbye"]["rejected"].get<int>(), 1);
+  EXPECT_EQ(t["rejected_by_reason"].value("wrong_session", 0), 1);
+  EXPECT_EQ(t["rejected_total"].get<int>(), 1);
+}
+
 TEST(RemoteNode, EndsASessionWhoseSequenceNumbersRunLow) {
   const HapticScene scene = MakeBlockOnGearScene();
   RemoteNodeConfig config = LocalNodeConfig(TestKey(41), "remote_node_renew_test.port");

@@ -32,6 +32,45 @@ def run_report(source, run_dir, out, extra=()):
     return r.returncode, r.stdout, r.stderr
 
 
+def check_phase_names(source):
+    """Explore's short phases on a half-width panel (per-object rows, two columns): the phase
+    names drawn do not overlap each other."""
+    import importlib.machinery
+    import importlib.util
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    loader = importlib.machinery.SourceFileLoader("report", os.path.join(source, "deploy",
+                                                                         "report"))
+    spec = importlib.util.spec_from_loader("report", loader)
+    report = importlib.util.module_from_spec(spec)
+    loader.exec_module(report)
+    rows, t = [], 0.0
+    for k in range(1, 4):  # three visits: explore's phases and their lengths
+        for phase, length in (("transfer", 0.3), ("press", 0.6), ("slide_x", 0.8),
+                              ("slide_y", 0.8), ("release", 0.4), ("press", 0.5)):
+            for _ in range(int(length * 100)):
+                rows.append({"t_s": t, "phase": f"{phase}@{k}"})
+                t += 0.01
+    fig, axes = plt.subplots(3, 2, figsize=(9, 6), squeeze=False)
+    for ax in axes.flat:
+        ax.plot([r["t_s"] for r in rows], [0.0] * len(rows))
+        report.shade_phases(ax, rows)
+    fig.tight_layout()
+    report.thin_phase_names(fig)
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    overlaps = drawn = 0
+    for ax in fig.axes:
+        boxes = sorted((t.get_window_extent(renderer) for t in ax.texts if t.get_visible()),
+                       key=lambda b: b.x0)
+        drawn += len(boxes)
+        overlaps += sum(1 for a, b in zip(boxes, boxes[1:]) if b.x0 < a.x1)
+    plt.close(fig)
+    check(drawn > 0 and overlaps == 0,
+          f"phase names: {drawn} drawn on 6 panels, {overlaps} overlapping (want none)")
+
+
 def main():
     source = sys.argv[1]
     run = os.environ.get("HT_LOOPBACK_OUT")
@@ -67,8 +106,14 @@ def main():
               f"index.html shows min(6, {n_frames}) of the display's frames (got {len(frames)})")
         for ref in refs:
             check(os.path.exists(os.path.join(out, ref)), f"index.html's {ref} exists")
-        check("operator_rate_hz" in page and "remote_step_p50_us" in page,
+        check("operator_rate_hz" in page and "remote_step_of_models_p50_us" in page,
               "index.html has the summary's key figures")
+        scale = re.search(r"\(([^ ()]+) m per N\)", page)
+        if n_frames:
+            check(scale is not None and len(scale.group(1).lstrip("0.").replace(".", "")) <= 3,
+                  f"the arrow scale is given in 3 significant digits (got "
+                  f"{scale.group(1) if scale else None!r})")
+        check_phase_names(source)
 
         # The same run as fig76 draws rotation.png; as an explore run over two objects (phases
         # "...@1", "...@2") it draws one row per object and still exits 0.

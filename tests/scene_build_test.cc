@@ -428,6 +428,29 @@ TEST_F(SceneBuildTest, BadDescriptionsAreRefusedNamingTheFileAndTheKey) {
   }
 }
 
+// A scene with nothing to touch (a glTF without a node, or whose every node is the tool or
+// display) is refused by the remote node's scene, with what to do; `slave_sim inspect`'s
+// BuildScene still reports it (no objects).
+TEST_F(SceneBuildTest, AWatchedSceneWithNothingToTouchIsRefused) {
+  const std::string empty = Write("empty.gltf", R"({"asset": {"version": "2.0"}})");
+  EXPECT_TRUE(BuildScene(LoadSceneInput(empty), HapticModelCache("")).haptic.touchables.empty());
+  WriteGlb((dir_ / "decor.glb").string(),
+           {{"decor", RidgedSlab(0.03, 0.03, 0.005, 10), glm::dmat4(1.0), ""}});
+  const std::string decor = Write("decor.json", R"({"scene": "decor.glb",
+    "defaults": {"role": "display"}})");
+  for (const std::string& path : {empty, decor}) {
+    try {
+      WatchedScene w(path, "", HapticModelCache(""));
+      ADD_FAILURE() << "accepted " << path << " with " << w.haptic().touchables.size()
+                    << " touchable(s)";
+    } catch (const std::runtime_error& e) {
+      const std::string what = e.what();
+      EXPECT_EQ(what.rfind(path, 0), 0u) << what;
+      EXPECT_NE(what.find("nothing to touch"), std::string::npos) << what;
+    }
+  }
+}
+
 // Issue 35: a file authored in millimetres (a 60 mm slab written as 60 units, 150 units off the
 // origin) is a 60 m slab until its description says "units": "mm"; then the scene is the one
 // written in metres, node for node, and nothing warns. Unnamed nodes are called by their mesh's

@@ -1,7 +1,9 @@
 // Keys, the replay window, session negotiation, the clock filter, scene fragmentation with NACK
 // repair through a lossy in-process channel, and a SecureLink under a flood of bad datagrams.
 #include <gtest/gtest.h>
+#include <netdb.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cstdio>
@@ -561,6 +563,50 @@ TEST(SecureLink, AFloodOfBadDatagramsIsCountedAndNeverAccepted) {
   for (int r = 1; r < wire::kDecodeStatusCount; ++r)
     arrived_bad += rx.rejected(static_cast<wire::DecodeStatus>(r));
   EXPECT_EQ(arrived_bad, rx.rejected_total());
+}
+
+// A host name is resolved (the machine's own name; skipped where the resolver has none for it): a
+// datagram sent to "NAME:PORT" arrives at the socket bound to "NAME:0".
+TEST(SocketAddress, AcceptsAHostName) {
+  char name[256] = {};
+  ASSERT_EQ(gethostname(name, sizeof(name) - 1), 0);
+  addrinfo* found = nullptr;
+  if (getaddrinfo(name, nullptr, nullptr, &found) != 0) {
+    GTEST_SKIP() << "this machine's name '" << name << "' does not resolve here";
+  }
+  freeaddrinfo(found);
+  const SocketAddress bound = SocketAddress::Parse(std::string(name) + ":0");
+  UdpSocket rx(bound);
+  const SocketAddress to =
+      SocketAddress::Parse(std::string(name) + ":" + std::to_string(rx.local_address().port()));
+  EXPECT_EQ(to, rx.local_address());
+  UdpSocket tx(SocketAddress::Parse(bound.storage.ss_family == AF_INET6 ? "[::]:0" : "0.0.0.0:0"));
+  const std::array<std::uint8_t, 3> hello{1, 2, 3};
+  ASSERT_TRUE(tx.SendTo(hello, to));
+  ASSERT_TRUE(rx.WaitReadable(5000));
+  std::array<std::uint8_t, 16> got{};
+  SocketAddress from;
+  EXPECT_EQ(rx.ReceiveFrom(got, from), std::optional<std::size_t>(3));
+}
+
+// What is not an address says which part is wrong: a name that does not resolve, digits that are
+// no dotted quad, a port out of range, no port.
+TEST(SocketAddress, RefusesWhatIsNoAddress) {
+  const auto message = [](const std::string& text) {
+    try {
+      SocketAddress::Parse(text);
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  EXPECT_NE(
+      message("no-such-host.invalid:47000").find("cannot resolve host 'no-such-host.invalid'"),
+      std::string::npos);
+  EXPECT_NE(message("1.2.3:47000").find("numeric IPv4"), std::string::npos);
+  EXPECT_NE(message("localhost:70000").find("port must be 0..65535"), std::string::npos);
+  EXPECT_NE(message("localhost").find("HOST:PORT"), std::string::npos);
+  EXPECT_EQ(SocketAddress::Parse("localhost:9").ToString(), "127.0.0.1:9");
 }
 
 }  // namespace

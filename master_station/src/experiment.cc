@@ -110,6 +110,8 @@ class ExploreExperiment final : public Experiment {
   const std::string& name() const noexcept override { return name_; }
   double duration_s() const noexcept override { return p_.duration_s; }
   const std::vector<std::string>& phase_names() const noexcept override { return phases_; }
+  // Phases 5k + 0 (transfer@k) and 5k + 4 (release@k): the hand has left the object.
+  bool EndsFree(int phase) const noexcept override { return phase % 5 == 0 || phase % 5 == 4; }
 
   void SetScene(const ExperimentScene& scene) override {
     std::vector<ExperimentTarget> targets = scene.targets;

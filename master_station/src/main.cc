@@ -446,11 +446,12 @@ int main(int argc, char** argv) {
                   summary["duration_s"].get<double>());
     }
     std::printf(
-        "[master] done: loop %.1f Hz (tick p99 %.1f us), remote %.1f Hz (step p50 %.0f us), "
-        "rtt p50 %.3f ms, contacts max %d, non-finite %lld\n",
+        "[master] done: loop %.1f Hz (tick p99 %.1f us), remote %.1f Hz (compute of the steps "
+        "whose models arrived p50 %.0f us), rtt p50 %.3f ms, contacts max %d, non-finite %lld\n",
         summary["operator_rate_hz"].get<double>(), summary["operator_tick_p99_us"].get<double>(),
-        summary["remote_rate_hz"].get<double>(), summary["remote_step_p50_us"].get<double>(),
-        summary["rtt_ms_p50"].get<double>(), summary["contacts_max"].get<int>(),
+        summary["remote_rate_hz"].get<double>(),
+        summary["remote_step_of_models_p50_us"].get<double>(), summary["rtt_ms_p50"].get<double>(),
+        summary["contacts_max"].get<int>(),
         static_cast<long long>(summary["nonfinite_count"].get<std::int64_t>()));
     // What a person must see, said once at the end (issue 35): deploy/report lists the same.
     const auto number = [&](const nlohmann::json& j, const char* name) {
@@ -470,6 +471,15 @@ int main(int argc, char** argv) {
             "sides use different --key files\n",
             bad);
       }
+    }
+    if (const double n = number(summary["wedged"], "count"); n > 0.0) {
+      const nlohmann::json& first = summary["wedged"]["phase_ends"][0];
+      std::printf(
+          "[master] note: %.0f phase(s) that should end with the tool free ended with it still "
+          "pushed by more than %.1f N (wedged), the first %s at %.2f s (%.2f N); summary.json "
+          "wedged lists them\n",
+          n, number(summary["wedged"], "above_n"), first["phase"].get<std::string>().c_str(),
+          first["t_s"].get<double>(), first["contact_force_n"].get<double>());
     }
     if (summary.contains("safety")) {
       if (const double c = number(summary["safety"], "clamped_ticks"); c > 0.0) {

@@ -254,6 +254,9 @@ void OperatorStationRun::LoopThread() {
   DisplayToolState display_state{};
   std::int64_t experiment_t0 = -1;
   std::int64_t stop_ramp_start = -1;
+  // The last tick's phase, time and contact force, for the phases that should end free.
+  int last_phase = -1;
+  double last_t_s = 0.0, last_force_n = 0.0;
   const double stop_ramp_ticks = std::max(1.0, config_.stop_ramp_s * config_.loop_rate_hz);
   std::int64_t next = SteadyNowNs() + period_ns_;
   std::int64_t previous = next - period_ns_;
@@ -346,6 +349,7 @@ void OperatorStationRun::LoopThread() {
       row.depth_m = step.max_depth_m;
       row.p_WH = out.X_WH.translation;
       row.F_H_W = out.F_H_W;
+      row.f_H_M = out.F_H_M.force;
       row.passivity_removed_n = out.passivity_removed_n;
       row.model_age_ms = out.model_age_ms;
       row.remote_collision_us = tick.model_stamp().collision_us;
@@ -357,6 +361,21 @@ void OperatorStationRun::LoopThread() {
     }
     // The phase the simulated hand was following, when the device is scripted.
     row.phase = experiment_.Target(row.t_s).phase;
+    if (caps_.scripted && row.phase != last_phase) {
+      if (last_phase >= 0 && experiment_.EndsFree(last_phase)) {
+        ++rec.free_ends_seen;
+        if (last_force_n > LoopRecord::kWedgedForceN) {
+          if (rec.wedged_count < static_cast<std::int64_t>(LoopRecord::kWedgedKept)) {
+            rec.wedged[static_cast<std::size_t>(rec.wedged_count)] = {last_phase, last_t_s,
+                                                                      last_force_n};
+          }
+          ++rec.wedged_count;
+        }
+      }
+      last_phase = row.phase;
+    }
+    last_t_s = row.t_s;
+    last_force_n = glm::length(row.F_contact_T_W.force);
     if (display_on_ && k % kDisplayEveryTicks == 0) {
       display_state.t_s = row.t_s;
       display_state.X_WT = tick.tool().X_WT;
@@ -451,17 +470,25 @@ ExperimentScene ExperimentSceneInM(const wire::SceneLayout& layout, const RigidT
 nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& device,
                                   Experiment& experiment) {
   config.Validate();
-  station::OperatorStationRun run(config, device, experiment);
-  run.WaitForSession();
-  run.WaitForFirstModel();
-  run.RunHapticLoop();
-  nlohmann::json s = run.Summary();
-  if (!config.out_dir.empty()) {
+  const auto write_summary = [&](const nlohmann::json& s) {
+    if (config.out_dir.empty()) return;
     const std::string path = config.out_dir + "/summary.json";
     std::ofstream out(path);
     out << s.dump(2) << "\n";
     if (!out) throw std::runtime_error("cannot write " + path);
+  };
+  station::OperatorStationRun run(config, device, experiment);
+  try {
+    run.WaitForSession();
+    run.WaitForFirstModel();
+  } catch (const std::runtime_error& e) {
+    // No session or no model: the summary says why (the trace has its header only).
+    write_summary(run.FailureSummary(e.what()));
+    throw;
   }
+  run.RunHapticLoop();
+  nlohmann::json s = run.Summary();
+  write_summary(s);
   return s;
 }
 

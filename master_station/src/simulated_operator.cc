@@ -66,6 +66,17 @@ HandTarget SimulatedOperatorDevice::ControlZ(const HandTarget& script, double dt
       const double top = std::min(lift_start_z_ + script.lift_m, script_z);
       rate = z_hand_ < top ? hand_.press_slow_speed_m_per_s : 0.0;
       z_hand_ = std::min(z_hand_ + rate * dt, std::max(top, z_hand_));
+      // Out along the contact's normal: sideways as the felt force pushes, in proportion.
+      const double felt_n = glm::length(F_H_M_.force);
+      if (felt_n > 1e-3) {
+        const glm::dvec3 side(F_H_M_.force.x, F_H_M_.force.y, 0.0);
+        release_offset_M_ += (hand_.press_slow_speed_m_per_s * dt / felt_n) * side;
+        const double length = glm::length(release_offset_M_);
+        if (length > hand_.release_offset_max_m) {
+          release_offset_M_ *= hand_.release_offset_max_m / length;
+        }
+        release_shift_M_ = script.workspace_shift_M;
+      }
       break;
     }
     case HandZControl::kPosition:
@@ -85,6 +96,17 @@ HandTarget SimulatedOperatorDevice::ControlZ(const HandTarget& script, double dt
     target.X_MH.translation.z = z_hand_;
     target.V_MH_M.linear.z = rate;
   }
+  // A lift's sideways offset: kept while the script holds the hand's x and y, taken back at the
+  // fast speed as soon as it moves them (a transfer across, a slide), dropped at a jump.
+  if (script.workspace_shift_M != release_shift_M_) release_offset_M_ = glm::dvec3(0.0);
+  if (script.z_control != HandZControl::kLift &&
+      (script.V_MH_M.linear.x != 0.0 || script.V_MH_M.linear.y != 0.0)) {
+    const double length = glm::length(release_offset_M_);
+    const double step = hand_.press_fast_speed_m_per_s * dt;
+    release_offset_M_ *= length > step ? (length - step) / length : 0.0;
+  }
+  target.X_MH.translation.x += release_offset_M_.x;
+  target.X_MH.translation.y += release_offset_M_.y;
   return target;
 }
 
@@ -112,6 +134,8 @@ bool SimulatedOperatorDevice::ReadState(std::int64_t now_ns, DeviceState& out) n
     z_free_ = true;
     z_mode_ = HandZControl::kPosition;
     z_hand_ = state_.X_MH.translation.z;
+    release_offset_M_ = glm::dvec3(0.0);
+    release_shift_M_ = start.workspace_shift_M;
   }
   // Integrate the hand from the last reading to now (at most 50 ms at once after a stall).
   const double dt_total = std::clamp((now_ns - last_ns_) * 1e-9, 0.0, 0.05);

@@ -6,6 +6,7 @@
 // summary. Internal to master_station/src: operator_station.cc runs it, station_summary.cc writes
 // its summary.
 
+#include <array>
 #include <atomic>
 #include <cstdint>
 #include <cstdio>
@@ -46,6 +47,18 @@ struct LoopRecord {
   int contacts_max = 0;
   double contact_force_max_n = 0.0;
   std::string realtime_note = "SCHED_FIFO priority 80";
+  /// The ends of phases that should end free (Experiment::EndsFree) where the contact force on the
+  /// tool was still above kWedgedForceN: a wedged tool. The first kWedgedKept are kept.
+  static constexpr double kWedgedForceN = 1.0;
+  static constexpr std::size_t kWedgedKept = 32;
+  struct WedgedPhaseEnd {
+    int phase = 0;
+    double t_s = 0.0;      ///< the phase's last tick (s of the run)
+    double force_n = 0.0;  ///< |contact force on the tool| then (N)
+  };
+  std::array<WedgedPhaseEnd, kWedgedKept> wedged{};
+  std::int64_t wedged_count = 0;    ///< all of them (beyond kWedgedKept too)
+  std::int64_t free_ends_seen = 0;  ///< the ends of phases that should end free, wedged or not
 };
 
 /// One run. The constructor opens the trace, the device and starts the network and recorder
@@ -71,6 +84,10 @@ class OperatorStationRun {
   void RunHapticLoop();
   /// The run's summary (summary.json): station_summary.cc. After RunHapticLoop.
   nlohmann::json Summary() const;
+  /// The summary of a run that ended before its loop ran (no session, no first model, a stop
+  /// while waiting): `error` (why, as thrown), the experiment, the device, the session's state
+  /// and the transport's counts. Stops the worker threads first.
+  nlohmann::json FailureSummary(const std::string& error);
 
  private:
   // The loop thread's body: one tick per period on the device's clock.

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <nlohmann/json.hpp>
+#include <string>
 #include <vector>
 
 #include "haptic_core/passivity.h"
@@ -76,10 +77,13 @@ nlohmann::json OperatorStationRun::Summary() const {
   s["operator_overruns"] = rec.overruns;
   s["realtime_priority"] = rec.realtime_note;
   s["remote_rate_hz"] = network_->RemoteRateHz();
-  s["remote_step_p50_us"] = Percentile(network_->remote_step_us(), 0.5);
-  s["remote_step_p99_us"] = Percentile(network_->remote_step_us(), 0.99);
-  s["remote_step_in_contact_p50_us"] = Percentile(network_->contact_step_us(), 0.5);
-  s["remote_step_in_contact_p99_us"] = Percentile(network_->contact_step_us(), 0.99);
+  // The remote node's compute time of the steps whose contact models arrived here (each model
+  // carries its step's time): not a round trip (rtt_ms_*), and not the node's own percentiles
+  // over every step it took (remote.step_p50_us: free-space steps of a few µs included).
+  s["remote_step_of_models_p50_us"] = Percentile(network_->remote_step_us(), 0.5);
+  s["remote_step_of_models_p99_us"] = Percentile(network_->remote_step_us(), 0.99);
+  s["remote_step_of_models_in_contact_p50_us"] = Percentile(network_->contact_step_us(), 0.5);
+  s["remote_step_of_models_in_contact_p99_us"] = Percentile(network_->contact_step_us(), 0.99);
   s["remote_collision_p50_us"] = Percentile(network_->collision_us(), 0.5);
   s["remote_texture_p50_us"] = Percentile(network_->texture_us(), 0.5);
   s["rtt_ms_p50"] = Percentile(network_->rtt_ms(), 0.5);
@@ -87,6 +91,25 @@ nlohmann::json OperatorStationRun::Summary() const {
   s["model_age_ms_p50"] = Percentile(ages, 0.5);
   s["model_age_ms_p99"] = Percentile(ages, 0.99);
   s["contacts_max"] = rec.contacts_max;
+  {
+    // Phases that should end with the tool free (explore's releases and transfers) but ended
+    // with it still loaded: the tool was wedged in the part it left.
+    nlohmann::json ends = nlohmann::json::array();
+    const auto kept = std::min<std::int64_t>(rec.wedged_count, LoopRecord::kWedgedKept);
+    for (std::int64_t i = 0; i < kept; ++i) {
+      const LoopRecord::WedgedPhaseEnd& w = rec.wedged[static_cast<std::size_t>(i)];
+      const auto& names = experiment_.phase_names();
+      ends.push_back({{"phase", w.phase >= 0 && w.phase < static_cast<int>(names.size())
+                                    ? names[static_cast<std::size_t>(w.phase)]
+                                    : std::to_string(w.phase)},
+                      {"t_s", w.t_s},
+                      {"contact_force_n", w.force_n}});
+    }
+    s["wedged"] = {{"count", rec.wedged_count},
+                   {"phase_ends_checked", rec.free_ends_seen},
+                   {"above_n", LoopRecord::kWedgedForceN},
+                   {"phase_ends", ends}};
+  }
   s["contact_force_max_n"] = rec.contact_force_max_n;
   s["device_max_force_n"] = caps_.max_force_n;
   s["device_max_torque_nm"] = caps_.max_torque_nm;
@@ -163,6 +186,23 @@ nlohmann::json OperatorStationRun::Summary() const {
   s["clock_offset_ms"] = s["transport"]["clock"]["offset_ms"];
   s["model_one_way_ms_p50"] = Percentile(network_->one_way_ms(), 0.5);
   s["model_one_way_ms_p99"] = Percentile(network_->one_way_ms(), 0.99);
+  return s;
+}
+
+nlohmann::json OperatorStationRun::FailureSummary(const std::string& error) {
+  StopWorkers();
+  nlohmann::json s;
+  s["error"] = error;
+  s["experiment"] = experiment_.name();
+  s["device"] = caps_.name;
+  s["remote"] = config_.remote_address.ToString();
+  s["session_opened"] = counters_.connected.load();
+  s["session_refused"] = counters_.rejected.load();
+  s["models_received"] = counters_.model_accepted.load();
+  s["stopped_by_request"] = StopRequested();
+  s["duration_s"] = 0.0;
+  s["ticks"] = 0;
+  s["transport"] = network_->Summary();
   return s;
 }
 

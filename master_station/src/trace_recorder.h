@@ -26,6 +26,9 @@ struct TraceRow {
   float remote_texture_us = 0.0f;
   float remote_step_us = 0.0f;
   double passivity_removed_n = 0.0;  ///< OperatorTickOutput::passivity_removed_n (N)
+  /// The force commanded to the device in its own frame M (x, y in the device's plane, z the
+  /// scene's up): what the operator feels, whatever the scene's axes (N).
+  glm::dvec3 f_H_M{0.0};
 };
 
 /// Writes the header line of trace.csv.

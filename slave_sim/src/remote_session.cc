@@ -30,12 +30,18 @@ bool RemoteSession::OnDatagram(std::span<const std::uint8_t> datagram, const Soc
   wire::Header header;
   std::span<const std::uint8_t> body;
   bool late = false;
-  const wire::DecodeStatus status = link_.Open(datagram, session_, header, body, late);
+  const wire::DecodeStatus status =
+      link_.Open(datagram, session_ != 0 ? session_ : goodbye_session_, header, body, late);
   if (status == wire::DecodeStatus::kBadVersion) {
     RefuseForeignHello(datagram, from);
     return true;
   }
   if (status != wire::DecodeStatus::kOk) return true;
+  if (session_ == 0 && goodbye_session_ != 0 && header.type != wire::MessageType::kHello) {
+    // The session the operator closed: its Goodbye's copies, or what it sent just before.
+    if (header.type == wire::MessageType::kGoodbye) ++goodbye_copies_;
+    return true;
+  }
   // Any datagram of the open session other than a Hello shows that the operator holds our
   // Welcome: only then does the scene stream start (before that, its fragments would reach an
   // operator without the session id and be dropped as out of session: with the Welcome lost, the
@@ -115,6 +121,7 @@ bool RemoteSession::OnDatagram(std::span<const std::uint8_t> datagram, const Soc
         break;
       }
       ++goodbyes_;
+      goodbye_session_ = session_;
       Close("the operator said goodbye");
       if (config_.exit_on_goodbye) return false;
       break;
@@ -184,6 +191,7 @@ void RemoteSession::OnHello(const wire::Header& header, std::span<const std::uin
   link_.ResetSession();
   if (config_.start_sequences_at != 0) link_.StartSequencesAt(config_.start_sequences_at);
   session_ = id;
+  goodbye_session_ = 0;
   session_nonce_ = hello.client_nonce;
   peer_ = from;
   ++sessions_;
@@ -522,6 +530,7 @@ nlohmann::json RemoteSession::StatsJson(std::size_t scene_objects, std::size_t s
   }
   transport["sessions"] = sessions_;
   transport["goodbyes"] = goodbyes_;
+  transport["goodbye_copies"] = goodbye_copies_;
   transport["sessions_renewed"] = sessions_renewed_;
   transport["peers_lost"] = peers_lost_;
   transport["hello_replayed"] = hello_replayed_;

@@ -183,6 +183,10 @@ class RemoteSession {
   NonceHistory nonces_;
 
   std::uint32_t session_ = 0;
+  // The session the operator's Goodbye closed (0: none since the last Hello): the copies of that
+  // Goodbye (it is sent three times) and datagrams sent before it are its session's, not
+  // rejections.
+  std::uint32_t goodbye_session_ = 0;
   std::uint64_t session_nonce_ = 0, pending_nonce_ = 0;
   std::int64_t session_start_ns_ = 0;
   wire::WelcomeMessage session_welcome_;
@@ -229,6 +233,7 @@ class RemoteSession {
   std::int64_t latest_send_time_ns_ = 0, latest_recv_ns_ = 0, max_gap_ns_ = 0;
   std::int64_t operator_rtt_ns_ = 0;
 
+  std::uint64_t goodbye_copies_ = 0;  // Goodbyes of goodbye_session_ after the first
   std::uint64_t sessions_ = 0, goodbyes_ = 0, peers_lost_ = 0, hello_replayed_ = 0;
   std::uint64_t sessions_renewed_ = 0;
   std::uint64_t hello_retransmits_ = 0, hello_deferred_ = 0, rejects_sent_ = 0;

@@ -67,6 +67,18 @@ WatchedScene::~WatchedScene() {
 std::unique_ptr<WatchedScene::Version> WatchedScene::Build() const {
   auto v = std::make_unique<Version>();
   v->built = BuildScene(LoadSceneInput(path_, tool_), cache_, progress_);
+  if (v->built.haptic.touchables.empty()) {
+    int tools = 0, display = 0;
+    for (const SceneNode& obj : v->built.objects) {
+      tools += obj.spec.role == NodeRole::kTool;
+      display += obj.spec.role == NodeRole::kDisplay;
+    }
+    throw std::runtime_error(
+        path_ + ": nothing to touch: the scene has " + std::to_string(v->built.objects.size()) +
+        " mesh node(s) (" + std::to_string(tools) + " tool, " + std::to_string(display) +
+        " display); give a glTF with a mesh node, or a scene description that leaves one "
+        "touchable");
+  }
   v->stream = MakeDisplayStream(v->built);
   return v;
 }

@@ -2,6 +2,7 @@
 
 #include <arpa/inet.h>
 #include <fcntl.h>
+#include <netdb.h>
 #include <netinet/in.h>
 #include <poll.h>
 #include <unistd.h>
@@ -41,12 +42,50 @@ SocketAddress SocketAddress::Parse(const std::string& text) {
   sockaddr_in s4{};
   s4.sin_family = AF_INET;
   s4.sin_port = htons(static_cast<std::uint16_t>(port));
-  if (inet_pton(AF_INET, host.c_str(), &s4.sin_addr) != 1) {
-    throw std::invalid_argument("address '" + text +
-                                "': host must be a numeric IPv4 address, [IPv6] or localhost");
+  if (inet_pton(AF_INET, host.c_str(), &s4.sin_addr) == 1) {
+    std::memcpy(&a.storage, &s4, sizeof(s4));
+    a.length = sizeof(s4);
+    return a;
   }
-  std::memcpy(&a.storage, &s4, sizeof(s4));
-  a.length = sizeof(s4);
+  // Digits and dots that are no dotted quad ("1.2.3") are a mistyped address, not a name (the
+  // resolver would read them as inet_aton does: 1.2.0.3).
+  if (host.empty() || host.find_first_not_of("0123456789.") == std::string::npos) {
+    throw std::invalid_argument("address '" + text +
+                                "': host must be a numeric IPv4 address, [IPv6] or a host name");
+  }
+  // A host name, through the system's resolver (/etc/hosts, DNS): its first IPv4 address, else
+  // its first IPv6 one.
+  addrinfo hints{};
+  hints.ai_family = AF_UNSPEC;
+  hints.ai_socktype = SOCK_DGRAM;
+  addrinfo* found = nullptr;
+  if (const int rc = getaddrinfo(host.c_str(), nullptr, &hints, &found); rc != 0) {
+    throw std::invalid_argument("address '" + text + "': cannot resolve host '" + host + "' (" +
+                                gai_strerror(rc) +
+                                "): give a name this machine resolves, a numeric IPv4 address "
+                                "or [IPv6]");
+  }
+  const addrinfo* chosen = found;
+  for (const addrinfo* i = found; i != nullptr; i = i->ai_next) {
+    if (i->ai_family == AF_INET) {
+      chosen = i;
+      break;
+    }
+  }
+  if (chosen->ai_family != AF_INET && chosen->ai_family != AF_INET6) {
+    freeaddrinfo(found);
+    throw std::invalid_argument("address '" + text + "': host '" + host +
+                                "' has no IPv4 or IPv6 address");
+  }
+  std::memcpy(&a.storage, chosen->ai_addr, chosen->ai_addrlen);
+  a.length = static_cast<socklen_t>(chosen->ai_addrlen);
+  freeaddrinfo(found);
+  const auto port_n = htons(static_cast<std::uint16_t>(port));
+  if (a.storage.ss_family == AF_INET) {
+    reinterpret_cast<sockaddr_in*>(&a.storage)->sin_port = port_n;
+  } else {
+    reinterpret_cast<sockaddr_in6*>(&a.storage)->sin6_port = port_n;
+  }
   return a;
 }
 

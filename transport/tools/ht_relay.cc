@@ -86,6 +86,10 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   app.add_flag("--quiet", quiet, "no progress lines");
+  bool check_only = false;
+  app.add_flag("--check", check_only,
+               "check the addresses and SPECs, say what is wrong, and exit without relaying "
+               "(status 0 when all is well)");
   if (const auto rc = ht::ParseCommandLine(app, argc, argv, "ht_relay")) return *rc;
 
   std::signal(SIGINT, OnSignal);
@@ -106,6 +110,7 @@ int main(int argc, char** argv) {
     }
     if (impair_up_opt->count() > 0) config.up = ParseSpecOption("--impair-up", impair_up);
     if (impair_down_opt->count() > 0) config.down = ParseSpecOption("--impair-down", impair_down);
+    if (check_only) return 0;
     config.port_file = port_file;
     config.stats_file = stats_file;
     config.duration_s = duration_s;

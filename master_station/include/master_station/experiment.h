@@ -75,6 +75,13 @@ class Experiment {
   /// scene's touchable objects are. Scripts that move along fixed axes ignore it. Throws
   /// std::bad_alloc only.
   virtual void SetScene(const ExperimentScene& scene) { (void)scene; }
+  /// Whether the tool should touch nothing at the end of `phase` (explore: a release, a
+  /// transfer): the operator station reports a contact still loaded then as a wedged tool
+  /// (summary.json "wedged"). Default: no such phase.
+  virtual bool EndsFree(int phase) const noexcept {
+    (void)phase;
+    return false;
+  }
 };
 
 /// Seed Fig. 75 (roughness under translation): the block is brought down onto the gear, then

@@ -48,7 +48,8 @@ OperatorTickConfig OperatorTickConfigFor(const StationConfig& config,
 /// object written to summary.json), with per-stream statistics under "transport". Throws
 /// std::runtime_error when the remote node never answers within connect_timeout_s, refuses the
 /// session (with its reason), a stop is requested while waiting for it, or a socket cannot be
-/// opened; the message says what to check.
+/// opened; the message says what to check. Where the session or its first model failed, the
+/// summary.json written first has that message under "error".
 nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& device,
                                   Experiment& experiment);
 

@@ -52,6 +52,10 @@ class SimulatedOperatorDevice final : public HapticDevice {
   bool z_free_ = true;
   HandZControl z_mode_ = HandZControl::kPosition;
   double lift_start_z_ = 0.0;
+  // Where a lift left the part sideways (along the felt force; z unused), and the workspace
+  // shift it was made at (HandTarget::workspace_shift_M).
+  glm::dvec3 release_offset_M_{0.0};
+  glm::dvec3 release_shift_M_{0.0};
 };
 
 }  // namespace ht

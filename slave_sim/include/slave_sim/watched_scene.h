@@ -26,7 +26,8 @@ namespace ht {
 class WatchedScene {
  public:
   /// Builds the scene of `path` (LoadSceneInput(path, tool), BuildScene through `cache`,
-  /// MakeDisplayStream), calling `progress` per model. Throws what those throw.
+  /// MakeDisplayStream), calling `progress` per model. Throws what those throw, and
+  /// std::runtime_error naming `path` when the scene has no touchable object (nothing to touch).
   WatchedScene(std::string path, std::string tool, HapticModelCache cache,
                SceneBuildProgress progress = {});
   /// Stops the watcher (waits for a build in progress to finish).

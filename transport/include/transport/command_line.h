@@ -3,22 +3,42 @@
 // checked before anything starts.
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <cstdio>
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <string_view>
+#include <vector>
 
 #include "transport/auth.h"
 
 namespace ht {
 
+/// The keys a --config file of `app` may hold: its configurable long options without their
+/// dashes, sorted, comma-separated ("--help" and --config itself are not keys).
+inline std::string ConfigFileKeys(const CLI::App& app) {
+  std::vector<std::string> keys;
+  for (const CLI::Option* option : app.get_options()) {
+    if (!option->get_configurable() || option->get_lnames().empty()) continue;
+    if (option->get_lnames().front() == "help") continue;
+    keys.push_back(option->get_lnames().front());
+  }
+  std::sort(keys.begin(), keys.end());
+  std::string out;
+  for (const std::string& key : keys) out += (out.empty() ? "" : ", ") + key;
+  return out;
+}
+
 /// Parses argc/argv into `app` (CLI11). Returns std::nullopt when the program should go on, or
 /// the status it should exit with: 0 after --help (CLI11 prints it on stdout), 2 after a bad
 /// argument, which is printed on stderr as one line "`program`: error: <what CLI11 says>", with
-/// what to do where it helps (a --key file that does not exist: `slave_sim keygen FILE`).
+/// what to do where it helps (a --key file that does not exist: `slave_sim keygen FILE`). A
+/// --config file's key that names no option is refused the same way, with the known keys.
 /// Header-only: the programs link CLI11, the libraries do not.
 inline std::optional<int> ParseCommandLine(CLI::App& app, int argc, const char* const* argv,
                                            const char* program) {
+  app.allow_config_extras(CLI::config_extras_mode::error);
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -29,6 +49,15 @@ inline std::optional<int> ParseCommandLine(CLI::App& app, int argc, const char* 
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
     std::string what = e.what();
+    // CLI11 says "INI was not able to parse KEY" for a key no option has.
+    static constexpr std::string_view kExtra = "INI was not able to parse ";
+    if (dynamic_cast<const CLI::ConfigError*>(&e) != nullptr && what.starts_with(kExtra)) {
+      const CLI::Option* config = app.get_config_ptr();
+      const std::string file =
+          config != nullptr && config->count() > 0 ? config->as<std::string>() : "--config";
+      what = file + ": unknown key '" + what.substr(kExtra.size()) +
+             "' (known: " + ConfigFileKeys(app) + ")";
+    }
     if (what.find("--key") != std::string::npos &&
         what.find("does not exist") != std::string::npos) {
       what += " (make one with 'slave_sim keygen FILE' and copy it to the other side)";
