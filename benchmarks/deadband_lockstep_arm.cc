@@ -245,8 +245,7 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
   HapticTexturePipeline pipeline(
       *setup.scene, options,
       std::make_unique<CpuPenetrationDepthBackend>(std::max(2, options.max_window_resolution()),
-                                                   setting.texture_path, options.texture_threads,
-                                                   setting.rotation_gradient));
+                                                   setting.texture_path, options.texture_threads));
   ToolStateDeadband tool_deadband(arm.tool);
   ContactModelDeadband model_deadband(arm.model);
   const MacKey key{};  // the MAC is computed as on the wire; its key does not matter here

@@ -64,13 +64,6 @@ int main(int argc, char** argv) {
   app.add_option("--max-contacts", max_contacts, "most contacts per step")
       ->check(CLI::Range(1, ht::kMaxContacts))
       ->capture_default_str();
-  std::string rotation = "rendered";
-  app.add_option("--rotation-gradient", rotation,
-                 "rotation part of the gradient: rendered (six rotated tool renders, the\n"
-                 "product's), warp (rotation samples from the base render) or lever (the deepest\n"
-                 "cell's r x dδ/dx); warp and lever are approximations")
-      ->check(CLI::IsMember({"rendered", "warp", "lever"}))
-      ->capture_default_str();
   bool no_refinement = false;
   app.add_flag("--no-refine-depth", no_refinement,
                "stage 5b off: the grid's cell samples alone (by default each contact's depth is "
@@ -146,7 +139,6 @@ int main(int argc, char** argv) {
     options.texture_threads = threads;
     options.local_reach = local_reach;
     options.max_contacts = max_contacts;
-    options.rotation_gradient = ht::ParseRotationGradient(rotation);
     options.refine_depth = !no_refinement;
     options.share_connected_contacts = !no_sharing;
     options.depth_refinement.parallax = parallax;
@@ -191,7 +183,7 @@ int main(int argc, char** argv) {
           std::make_unique<ht::CpuPenetrationDepthBackend>(
               std::max(128, grid),
               path == "fast" ? ht::TextureStagePath::kFast : ht::TextureStagePath::kReference,
-              threads, o->rotation_gradient));
+              threads));
       arms.push_back(std::move(arm));
     }
     const ht::RigidTransform X_FtT = scene.X_TFt.Inverse();

@@ -85,11 +85,8 @@ RigidTransform At(glm::dvec3 p, glm::dquat R = glm::dquat(1, 0, 0, 0)) {
 }
 
 ContactModel StepAt(const HapticScene& scene, const RigidTransform& X_WT,
-                    StepTimings* timings = nullptr,
-                    RotationGradient rotation = RotationGradient::kRenderedSamples) {
-  PipelineOptions options;
-  options.rotation_gradient = rotation;
-  HapticTexturePipeline pipeline(scene, options);
+                    StepTimings* timings = nullptr) {
+  HapticTexturePipeline pipeline(scene, PipelineOptions{});
   StepTimings t;
   ContactModel m = pipeline.Step(X_WT, 1, t);
   if (timings) *timings = t;
@@ -506,35 +503,6 @@ TEST(HardCases, InterlockingRidges) {
                 m.F_T_W_at_q0.force.z);
   }
   Report("interlocking ridges", what + "torque opposes the rotation");
-}
-
-TEST(HardCases, InterlockingRidgesWithTheRotationGradientFromTheBaseRender) {
-  // The same turn with the rotation gradient from the base render alone (issue 15). The warped
-  // samples see the ridges' flanks that the turn presses (many cells tie on the crests), so the
-  // torque about n still opposes the turn; the lever of the one deepest cell is reported.
-  const HapticScene scene = InterlockedRidgedBlocks();
-  std::string what;
-  for (const RotationGradient r :
-       {RotationGradient::kWarpedBaseRender, RotationGradient::kContactLever}) {
-    what += std::string(ToString(r)) + ": ";
-    for (double deg : {-2.0, 2.0}) {
-      const double a = deg * std::numbers::pi / 180.0;
-      const RigidTransform X_WT =
-          At({0, 1.5e-3, 0.01 + 0.1e-3}, glm::angleAxis(a, glm::dvec3(0, 0, 1)));
-      const ContactModel m = StepAt(scene, X_WT, nullptr, r);
-      const ContactModel rendered = StepAt(scene, X_WT);
-      ASSERT_GE(m.num_contacts, 1);
-      ASSERT_TRUE(Finite(m.F_T_W_at_q0));
-      // The force is the rendered mode's: only the rotation part of the gradient differs.
-      EXPECT_EQ(m.F_T_W_at_q0.force, rendered.F_T_W_at_q0.force);
-      if (r == RotationGradient::kWarpedBaseRender) {
-        EXPECT_LT(m.F_T_W_at_q0.torque.z * a, 0.0) << deg << "°: the torque opposes the turn";
-      }
-      what += Fmt("%+.0f°: τz %+.2e N·m (rendered %+.2e); ", deg, m.F_T_W_at_q0.torque.z,
-                  rendered.F_T_W_at_q0.torque.z);
-    }
-  }
-  Report("interlocking ridges, rotation gradient from the base render", what);
 }
 
 // Largest tangential/normal force ratio over 8 shifts across a period of interlocked saw teeth

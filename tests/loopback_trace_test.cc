@@ -25,7 +25,7 @@ Trace LoadTrace() { return LoadTrace(OutDir()); }
 double Rms(const std::vector<double>& v) {
   double s = 0;
   for (double x : v) s += x * x;
-  return v.empty() ? 0.0 : std::sqrt(s / v.size());
+  return v.empty() ? 0.0 : std::sqrt(s / static_cast<double>(v.size()));
 }
 
 TEST(LoopbackFig75, TraceHasTheRequiredColumnsAndFiniteValues) {
@@ -148,7 +148,9 @@ TEST(LoopbackFig75, SummaryNamesThePenetrationDepthBackend) {
   ASSERT_TRUE(s.contains("pd_backend")) << "merge-summary did not add the remote backend";
   const std::string used = s["pd_backend"].get<std::string>();
   EXPECT_TRUE(used == "cpu" || used == "gpu") << used;
-  if (const char* expected = std::getenv("HT_EXPECT_PD_BACKEND")) EXPECT_EQ(used, expected);
+  if (const char* expected = std::getenv("HT_EXPECT_PD_BACKEND")) {
+    EXPECT_EQ(used, expected);
+  }
   // A GPU run records its renderer; a CPU run has none.
   EXPECT_EQ(used == "gpu", !s["gl_renderer"].get<std::string>().empty());
   EXPECT_EQ(s["remote"]["pd_backend"]["failures"].get<int>(), 0);

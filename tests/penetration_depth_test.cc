@@ -47,27 +47,22 @@ TEST(PenetrationDepth, ConstantTexturesAddToTheOverlap) {
 }
 
 TEST(PenetrationDepth, SeparatedPatchesGiveNegativeDepthAndNoForce) {
-  // With every rotation gradient (issue 15): separated patches give no wrench, and a window the
-  // tool does not cover gives −∞ and a zero gradient (nothing computed from a missing cell).
+  // Separated patches give no wrench, and a window the tool does not cover gives −∞ and a zero
+  // gradient (nothing computed from a missing cell).
   const HapticModel a = ToolBox(kFlat), b = EnvironmentBox(kFlat);
   const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 50);
-  for (const RotationGradient r :
-       {RotationGradient::kRenderedSamples, RotationGradient::kContactLever,
-        RotationGradient::kWarpedBaseRender}) {
-    TexturePenetrationSolver solver;
-    solver.set_rotation_gradient(r);
-    const ContactLinearization lin =
-        solver.Linearize(a, ToolPose(0, 0, 2e-3), b, EnvironmentPose(), w, 1000.0);
-    EXPECT_NEAR(lin.depth_m, -2e-3, 1e-7) << ToString(r);
-    const Wrench F = PenaltyWrench(lin.depth_m, lin.gradient, lin.stiffness_n_per_m);
-    EXPECT_EQ(glm::length(F.force), 0.0) << ToString(r);
-    EXPECT_EQ(glm::length(F.torque), 0.0) << ToString(r);
-    const ContactLinearization off =
-        solver.Linearize(a, ToolPose(0.2, 0, 0), b, EnvironmentPose(), w, 1000.0);
-    EXPECT_TRUE(std::isinf(off.depth_m) && off.depth_m < 0.0) << ToString(r);
-    EXPECT_EQ(off.gradient.d_translation_W, glm::dvec3(0.0)) << ToString(r);
-    EXPECT_EQ(off.gradient.d_rotation_W, glm::dvec3(0.0)) << ToString(r);
-  }
+  TexturePenetrationSolver solver;
+  const ContactLinearization lin =
+      solver.Linearize(a, ToolPose(0, 0, 2e-3), b, EnvironmentPose(), w, 1000.0);
+  EXPECT_NEAR(lin.depth_m, -2e-3, 1e-7);
+  const Wrench F = PenaltyWrench(lin.depth_m, lin.gradient, lin.stiffness_n_per_m);
+  EXPECT_EQ(glm::length(F.force), 0.0);
+  EXPECT_EQ(glm::length(F.torque), 0.0);
+  const ContactLinearization off =
+      solver.Linearize(a, ToolPose(0.2, 0, 0), b, EnvironmentPose(), w, 1000.0);
+  EXPECT_TRUE(std::isinf(off.depth_m) && off.depth_m < 0.0);
+  EXPECT_EQ(off.gradient.d_translation_W, glm::dvec3(0.0));
+  EXPECT_EQ(off.gradient.d_rotation_W, glm::dvec3(0.0));
 }
 
 TEST(PenetrationDepth, NoOverlapOnTheWindowIsReported) {
@@ -147,106 +142,6 @@ TEST(PenetrationDepth, FiniteDifferenceGradientMatchesAnalyticGradient) {
     EXPECT_NEAR(lin.gradient.d_translation_W[i], J_x[i], tol_x) << "translation axis " << i;
     EXPECT_NEAR(lin.gradient.d_rotation_W[i], J_theta[i], tol_theta) << "rotation axis " << i;
   }
-}
-
-// The smooth case linearized on its 200² window, with the rendered rotation samples and with
-// `mode` (RotationGradient), on `path`. Checks what both base-render modes (issue 15) promise
-// there: δ, the point and ∂δ/∂x of the rendered mode bit for bit (the same five samples), and
-// ∂δ/∂θ within 5 % of both the analytic gradient and the rendered one. Returns the samples.
-struct BaseRenderGradientRun {
-  std::array<DepthSample, kGradientSamples> rendered{}, approximate{};
-  ContactLinearization approximate_lin;
-};
-BaseRenderGradientRun CheckBaseRenderGradientOnTheSmoothCase(TextureStagePath path,
-                                                             RotationGradient mode) {
-  const SmoothCase s;
-  const HapticModel a = s.Tool(), b = s.Environment();
-  const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 200);
-  const RigidTransform X_WT = ToolPose(0, s.y_tool, s.z_bottom);
-  TexturePenetrationSolver rendered(200, 4096, path), approximate(200, 4096, path);
-  approximate.set_rotation_gradient(mode);
-  BaseRenderGradientRun run;
-  const ContactLinearization lr =
-      rendered.Linearize(a, X_WT, b, EnvironmentPose(), w, 1000.0, run.rendered);
-  const ContactLinearization la =
-      approximate.Linearize(a, X_WT, b, EnvironmentPose(), w, 1000.0, run.approximate);
-  run.approximate_lin = la;
-  EXPECT_GT(la.depth_m, 0.0);
-  EXPECT_EQ(la.depth_m, lr.depth_m);
-  EXPECT_EQ(la.point_W, lr.point_W);
-  EXPECT_EQ(la.gradient.d_translation_W, lr.gradient.d_translation_W);
-  const glm::dvec3 J_theta = s.AnalyticGradient(X_WT).d_rotation_W;
-  const double tol = 0.05 * glm::length(J_theta);
-  for (int i = 0; i < 3; ++i) {
-    EXPECT_NEAR(la.gradient.d_rotation_W[i], J_theta[i], tol) << "axis " << i;
-    EXPECT_NEAR(la.gradient.d_rotation_W[i], lr.gradient.d_rotation_W[i], tol) << "axis " << i;
-  }
-  return run;
-}
-
-// The lever rotation gradient (issue 15): r × ∂δ/∂x at the deepest cell, without the six rotated
-// renders: the smooth case's gradient, no rotated sample taken, and a lever: ⟂ to ∂δ/∂x.
-TEST(PenetrationDepth, LeverRotationGradientMatchesAnalyticAndRenderedGradients) {
-  for (const TextureStagePath path : {TextureStagePath::kFast, TextureStagePath::kReference}) {
-    const BaseRenderGradientRun run =
-        CheckBaseRenderGradientOnTheSmoothCase(path, RotationGradient::kContactLever);
-    for (int i = 5; i < kGradientSamples; ++i) {
-      EXPECT_EQ(run.approximate[i].cell, -1) << "not rendered";
-    }
-    const PenetrationGradient& J = run.approximate_lin.gradient;
-    EXPECT_NEAR(glm::dot(J.d_rotation_W, J.d_translation_W), 0.0,
-                1e-12 * glm::length(J.d_rotation_W));
-  }
-}
-
-// The rotation samples warped from the base render (issue 15): the smooth case's gradient, and
-// samples that are first order: they differ from the rendered ones by the curvature's O(h_θ²)
-// part, the same for +h_θ and −h_θ, which the central difference cancels.
-TEST(PenetrationDepth, WarpedRotationSamplesMatchAnalyticAndRenderedGradients) {
-  for (const TextureStagePath path : {TextureStagePath::kFast, TextureStagePath::kReference}) {
-    const BaseRenderGradientRun run =
-        CheckBaseRenderGradientOnTheSmoothCase(path, RotationGradient::kWarpedBaseRender);
-    const auto& sr = run.rendered;
-    const auto& sw = run.approximate;
-    for (int i = 5; i < kGradientSamples; i += 2) {
-      ASSERT_GE(sw[i].cell, 0) << i;
-      ASSERT_GE(sw[i + 1].cell, 0) << i + 1;
-      const double rendered_odd = sr[i].depth_m - sr[i + 1].depth_m;
-      const double warped_odd = sw[i].depth_m - sw[i + 1].depth_m;
-      EXPECT_NEAR(warped_odd, rendered_odd, 0.05 * std::abs(rendered_odd) + 2e-7) << "sample " << i;
-    }
-  }
-}
-
-TEST(PenetrationDepth, WarpedRotationSamplesSeeTiesThatTheLeverMisses) {
-  // A flat face pressed flat on a flat face, the centre of mass off the window's centre: every
-  // cell is equally deep. A rotation about u lowers the cells on one side, so δ(±h_θ) comes from
-  // the two far edges and the central difference is the midrange of their levers; the rendered
-  // samples and the warped ones both see that, while the lever of one (the first) tied cell does
-  // not.
-  const HapticModel a = ToolBox(kFlat), b = EnvironmentBox(kFlat);
-  const ContactWindow w = ContactWindow::Make({0, 0, 0}, {0, 0, 1}, 0.02, 50);
-  const RigidTransform X_WT = ToolPose(0.003, -0.002, -5e-4);
-  TexturePenetrationSolver rendered, warp, lever;
-  warp.set_rotation_gradient(RotationGradient::kWarpedBaseRender);
-  lever.set_rotation_gradient(RotationGradient::kContactLever);
-  const ContactLinearization lr = rendered.Linearize(a, X_WT, b, EnvironmentPose(), w, 1000.0);
-  const ContactLinearization lw = warp.Linearize(a, X_WT, b, EnvironmentPose(), w, 1000.0);
-  const ContactLinearization ll = lever.Linearize(a, X_WT, b, EnvironmentPose(), w, 1000.0);
-  ASSERT_NEAR(lr.depth_m, 5e-4, 1e-7);
-  const double scale = glm::length(lr.gradient.d_rotation_W);
-  ASSERT_GT(scale, 1e-4) << "the off-centre mass must give a rotation gradient";
-  EXPECT_LT(glm::length(lw.gradient.d_rotation_W - lr.gradient.d_rotation_W), 0.02 * scale);
-  EXPECT_GT(glm::length(ll.gradient.d_rotation_W - lr.gradient.d_rotation_W), 0.2 * scale);
-}
-
-TEST(PenetrationDepth, RotationGradientNamesRoundTrip) {
-  for (const RotationGradient r :
-       {RotationGradient::kRenderedSamples, RotationGradient::kContactLever,
-        RotationGradient::kWarpedBaseRender}) {
-    EXPECT_EQ(ParseRotationGradient(ToString(r)), r);
-  }
-  EXPECT_THROW(ParseRotationGradient("analytic"), std::invalid_argument);
 }
 
 TEST(PenetrationDepth, ActionEqualsMinusReaction) {

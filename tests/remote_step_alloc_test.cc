@@ -37,18 +37,13 @@ RigidTransform PoseAt(int k) {
 }
 
 // On one thread and on two (the contacts, the coarse query's subtrees and a contact's renders as
-// oneTBB tasks), with either rotation gradient.
-struct AllocCase {
-  int threads;
-  RotationGradient rotation;
-};
-class RemoteStepAlloc : public ::testing::TestWithParam<AllocCase> {};
+// oneTBB tasks).
+class RemoteStepAlloc : public ::testing::TestWithParam<int> {};
 
 TEST_P(RemoteStepAlloc, AllocatesNothingAfterWarmUp) {
   const HapticScene scene = MakeBlockOnGearScene();
   PipelineOptions options;
-  options.texture_threads = GetParam().threads;
-  options.rotation_gradient = GetParam().rotation;
+  options.texture_threads = GetParam();
   HapticTexturePipeline pipeline(scene, options);
   StepTimings t;
   int in_contact = 0;
@@ -60,18 +55,9 @@ TEST_P(RemoteStepAlloc, AllocatesNothingAfterWarmUp) {
   EXPECT_LT(in_contact, 1000);  // and out of contact too
 }
 
-INSTANTIATE_TEST_SUITE_P(ThreadsAndRotationGradients, RemoteStepAlloc,
-                         ::testing::Values(AllocCase{1, RotationGradient::kRenderedSamples},
-                                           AllocCase{2, RotationGradient::kRenderedSamples},
-                                           AllocCase{1, RotationGradient::kContactLever},
-                                           AllocCase{2, RotationGradient::kContactLever},
-                                           AllocCase{1, RotationGradient::kWarpedBaseRender},
-                                           AllocCase{2, RotationGradient::kWarpedBaseRender}),
-                         [](const ::testing::TestParamInfo<AllocCase>& param_info) {
-                           std::string name = ToString(param_info.param.rotation);
-                           name[0] =
-                               static_cast<char>(std::toupper(static_cast<unsigned char>(name[0])));
-                           return std::to_string(param_info.param.threads) + "Threads" + name;
+INSTANTIATE_TEST_SUITE_P(Threads, RemoteStepAlloc, ::testing::Values(1, 2),
+                         [](const ::testing::TestParamInfo<int>& param_info) {
+                           return std::to_string(param_info.param) + "Threads";
                          });
 
 // The seed's scenes whose models are hull hierarchies (the coarse query's traversal, several

@@ -1026,67 +1026,6 @@ TEST(TextureStageParity, ABatchOnTwoThreadsEqualsTheBatchOnOne) {
   EXPECT_EQ(one.faults().missing_overlap, two.faults().missing_overlap);
 }
 
-void CheckBaseRenderRotationGradient(RotationGradient mode, std::uint32_t seed) {
-  std::mt19937 rng(seed);
-  CpuPenetrationDepthBackend rendered(128, TextureStagePath::kFast, 1);
-  CpuPenetrationDepthBackend lever1(128, TextureStagePath::kFast, 1, mode);
-  CpuPenetrationDepthBackend lever2(128, TextureStagePath::kFast, 2, mode);
-  CpuPenetrationDepthBackend lever_ref(128, TextureStagePath::kReference, 1, mode);
-  int in_contact = 0, rotation_differs = 0;
-  for (const SeedModel which : kAll) {
-    const HapticModel& env = Seed(which);
-    for (const SeedModel tool_which : {SeedModel::kFile, which}) {
-      const HapticModel& tool = Seed(tool_which);
-      for (int trial = 0; trial < 3; ++trial) {
-        const Contact c = RandomContact(tool, env, rng, 50);
-        const ContactQuery q{&env, c.X_WO, c.window, 8000.0};
-        const std::span<const ContactQuery> one(&q, 1);
-        ContactLinearization r, l1, l2, lr;
-        const auto out = [](ContactLinearization& l) {
-          return std::span<ContactLinearization>(&l, 1);
-        };
-        ASSERT_TRUE(rendered.LinearizeBatch(tool, c.X_WT, one, out(r)));
-        ASSERT_TRUE(lever1.LinearizeBatch(tool, c.X_WT, one, out(l1)));
-        ASSERT_TRUE(lever2.LinearizeBatch(tool, c.X_WT, one, out(l2)));
-        ASSERT_TRUE(lever_ref.LinearizeBatch(tool, c.X_WT, one, out(lr)));
-        EXPECT_EQ(l1.depth_m, r.depth_m);
-        EXPECT_EQ(l1.point_W, r.point_W);
-        EXPECT_EQ(l1.gradient.d_translation_W, r.gradient.d_translation_W);
-        EXPECT_EQ(l2.depth_m, l1.depth_m);
-        EXPECT_EQ(l2.gradient.d_translation_W, l1.gradient.d_translation_W);
-        EXPECT_EQ(l2.gradient.d_rotation_W, l1.gradient.d_rotation_W);
-        ASSERT_EQ(std::isfinite(lr.depth_m), std::isfinite(l1.depth_m));
-        if (!std::isfinite(l1.depth_m)) continue;  // −∞: no overlap on this window
-        ++in_contact;
-        const glm::dvec3 jx = l1.gradient.d_translation_W, jt = l1.gradient.d_rotation_W;
-        if (mode == RotationGradient::kContactLever) {  // a lever: ⟂ to ∂δ/∂x
-          EXPECT_LE(std::abs(glm::dot(jx, jt)), 1e-12 * glm::length(jx) * glm::length(jt) + 1e-300);
-        }
-        rotation_differs += jt != r.gradient.d_rotation_W;
-        // As FastSolverGivesTheReferenceDepthsAndGradients; the lever multiplies ∂δ/∂x's
-        // rounding by |r| ≤ 0.2 m, the warp works from heights within float rounding.
-        EXPECT_NEAR(lr.depth_m, l1.depth_m, 1e-8);
-        EXPECT_LT(glm::length(lr.gradient.d_translation_W - jx), 5e-5);
-        EXPECT_LT(glm::length(lr.gradient.d_rotation_W - jt), 1e-5);
-      }
-    }
-  }
-  EXPECT_GT(in_contact, 12);
-  EXPECT_GT(rotation_differs, 0);  // the lever is an approximation, not the rendered samples
-}
-
-// The rotation gradient from the base render alone (RotationGradient::kContactLever and
-// kWarpedBaseRender) on random contacts of the seed models: the depth, point and translation
-// gradient of the rendered mode, bit for bit (the same five samples); the same on two threads as
-// on one; the fast path within float rounding of the reference path; the lever ⟂ to ∂δ/∂x; and a
-// rotation gradient that is not the rendered one (they are approximations).
-TEST(TextureStageParity, LeverRotationGradientKeepsDepthAndTranslationOnSeedModels) {
-  CheckBaseRenderRotationGradient(RotationGradient::kContactLever, 2026);
-}
-TEST(TextureStageParity, WarpedRotationSamplesKeepDepthAndTranslationOnSeedModels) {
-  CheckBaseRenderRotationGradient(RotationGradient::kWarpedBaseRender, 2027);
-}
-
 // The coarse query's local reach (issue 15): two routes to one set of pairs. With local reach on,
 // the query must report exactly those pairs of the global-tolerance query whose signed distance
 // is within the pair's own tolerance (the two leaves' reaches plus the margin).

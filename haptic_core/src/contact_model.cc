@@ -31,7 +31,7 @@ ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const Rig
   const double scale = std::clamp(std::isfinite(stiffness_scale) ? stiffness_scale : 0.0, 0.0, 1.0);
   const Twist dq = PoseDifference(X_WT, model.X_WT0);
   const int n = std::clamp(model.num_contacts, 0, kMaxContacts);
-  Stiffness6 curvature;
+  Stiffness6 curvature = Stiffness6::Zero();
   for (int i = 0; i < n; ++i) {
     const ContactLinearization& c = model.contacts[i];
     const double k = c.stiffness_n_per_m * scale;

@@ -106,7 +106,7 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
     }
   } else {
     backend = std::make_unique<CpuPenetrationDepthBackend>(
-        max_resolution, st.texture_path, st.texture_threads, st.rotation_gradient);
+        max_resolution, st.texture_path, st.texture_threads);
   }
   run.renderer = backend->description();
   const PipelineOptions options = PipelineOptionsFor(st);

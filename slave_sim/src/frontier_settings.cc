@@ -27,7 +27,6 @@ PipelineOptions PipelineOptionsFor(const FrontierSetting& st) {
   options.grid_resolution = st.grid;
   options.max_contacts = st.max_contacts;
   options.local_reach = st.local_reach;
-  options.rotation_gradient = st.rotation_gradient;
   options.grazing_guard = st.grazing_guard;
   options.grazing_guard_local_reach = st.grazing_guard_local_reach;
   if (st.max_window_extent_m > 0.0) options.max_window_extent_m = st.max_window_extent_m;
@@ -178,14 +177,6 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     local.name = "local_reach";
     local.local_reach = true;
     s.push_back(local);
-    FrontierSetting lever = base;
-    lever.name = "rotation_lever";
-    lever.rotation_gradient = RotationGradient::kContactLever;
-    s.push_back(lever);
-    FrontierSetting warp = base;
-    warp.name = "rotation_warp";
-    warp.rotation_gradient = RotationGradient::kWarpedBaseRender;
-    s.push_back(warp);
     // The seed's contact count on both cores (issue 15's fig77 target allows both), the product's
     // rendered rotations: without and with local reach.
     FrontierSetting seven_two = base;
@@ -410,14 +401,6 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     before.whole_model_region_windows = false;
     before.refine_depth = false;
     s.push_back(before);
-    // Every speed option at once: the warped rotations, local reach, at most 7 contacts, two
-    // threads.
-    FrontierSetting fast = warp;
-    fast.name = "warp_local_contacts7_threads2";
-    fast.local_reach = true;
-    fast.max_contacts = 7;
-    fast.texture_threads = 2;
-    s.push_back(fast);
   }
   if (with_gpu) {
     gpu(16);

@@ -64,13 +64,6 @@ void AddWindowOptions(CLI::App& app, NodeCommandLine& cl) {
 // The texture stage's gradient, the grazing guard, stage 5b's depth refinement
 // and its seeds, and contact clustering's angle.
 void AddDepthOptions(CLI::App& app, NodeCommandLine& cl) {
-  app.add_option("--rotation-gradient", cl.rotation_gradient,
-                 "rotation part of each contact's gradient (CPU texture stage): rendered (six\n"
-                 "rotated tool renders), warp (rotation samples from the base render) or lever\n"
-                 "(the deepest cell's r x dδ/dx); warp and lever render the tool once per contact\n"
-                 "instead of seven times and are approximations: see docs/frontier/issue15")
-      ->check(CLI::IsMember({"rendered", "warp", "lever"}))
-      ->capture_default_str();
   app.add_flag("--no-grazing-guard", cl.no_grazing_guard,
                "keep contacts whose depth exceeds what their coarse geometry allows (the\n"
                "cluster's hull penetration + both texture reaches + a cell); by default they are\n"
@@ -295,7 +288,6 @@ void FinishStreamConfig(const CLI::App& app, const NodeCommandLine& cl, RemoteNo
 void FinishDepthConfig(const NodeCommandLine& cl, RemoteNodeConfig& config) {
   PipelineOptions& pipeline = config.pipeline;
   DepthRefinementOptions& refinement = pipeline.depth_refinement;
-  pipeline.rotation_gradient = ParseRotationGradient(cl.rotation_gradient);
   pipeline.grazing_guard = !cl.no_grazing_guard;
   pipeline.refine_depth = !cl.no_refine_depth;
   refinement.parallax = cl.parallax;
@@ -332,19 +324,6 @@ bool FinishSplitConfig(const CLI::App& app, const NodeCommandLine& cl, RemoteNod
 // The CPU texture stage's own options against --pd-backend: an error with gpu, the CPU stage (or
 // the option off) with auto.
 void FinishBackendChoice(const NodeCommandLine& cl, bool split_asked, RemoteNodeConfig& config) {
-  if (config.pipeline.rotation_gradient != RotationGradient::kRenderedSamples) {
-    if (config.pd_backend == PdBackendChoice::kGpu) {
-      throw std::invalid_argument("--rotation-gradient " + cl.rotation_gradient +
-                                  " is an option of the CPU texture stage; the GPU backend "
-                                  "renders the rotated samples (use --pd-backend cpu, or drop "
-                                  "the option)");
-    }
-    if (config.pd_backend == PdBackendChoice::kAuto) {
-      std::fprintf(stderr, "slave_sim: --rotation-gradient %s: using the CPU texture stage\n",
-                   cl.rotation_gradient.c_str());
-      config.pd_backend = PdBackendChoice::kCpu;
-    }
-  }
   if (config.pipeline.split_windows_at_separated_overlap &&
       config.pd_backend == PdBackendChoice::kGpu) {
     if (split_asked) {

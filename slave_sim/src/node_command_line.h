@@ -31,7 +31,6 @@ struct NodeCommandLine {
   bool no_watch = false;
 
   // The texture stage's gradient, stage 5b and clustering (AddDepthOptions).
-  std::string rotation_gradient = "rendered";
   bool no_grazing_guard = false;
   bool no_refine_depth = false;
   bool parallax = true;

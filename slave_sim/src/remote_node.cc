@@ -134,7 +134,7 @@ RemoteNodeRun::RemoteNodeRun(const RemoteNodeConfig& config, const HapticScene& 
   CheckConfig(config);
   std::unique_ptr<PenetrationDepthBackend> backend = MakePenetrationDepthBackend(
       config.pd_backend, config.gpu, config.pipeline.max_window_resolution(), backend_message_,
-      config.pipeline.texture_threads, config.pipeline.rotation_gradient);
+      config.pipeline.texture_threads);
   if (auto* gpu = dynamic_cast<GpuPenetrationDepthBackend*>(backend.get())) {
     // Stage 5a (the split) runs with the CPU texture stage only (HapticTexturePipeline).
     if (config.pipeline.split_windows_at_separated_overlap) {

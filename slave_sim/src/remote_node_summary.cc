@@ -37,7 +37,6 @@ nlohmann::json RemoteNodeRun::Summary() const {
   s["window_extent_m"] = config_.pipeline.window_extent_m;
   s["max_window_extent_m"] = config_.pipeline.max_window_extent_m;
   s["texture_threads"] = config_.pipeline.texture_threads;
-  s["rotation_gradient"] = ToString(config_.pipeline.rotation_gradient);
   // The warm-up's count is the backend's it started with (not the CPU's it may have fallen to).
   s["linearization_missing_overlap"] =
       pipeline_->faults().missing_overlap -

@@ -112,56 +112,6 @@ ContactLinearization AssembleLinearization(const ContactWindow& window,
                                            double h_tilt, double h_yaw, double stiffness_n_per_m,
                                            LinearizationFaults& faults) noexcept;
 
-/// How the rotation part of ∇δ is found (issue 15).
-enum class RotationGradient {
-  /// Central differences of δ at the six rotated poses of GradientSamplePoses (±h_θ about u, v
-  /// and n): six tool renders per contact [L]. The product's default.
-  kRenderedSamples,
-  /// The lever of the deepest cell (an approximation, placed on the speed-vs-error frontier as
-  /// "rotation_lever"): ∂δ/∂θ = r × ∂δ/∂x, r the tool's surface point at the deepest cell less
-  /// the tool's centre of mass. A rigid motion moves that point by Δx + Δθ × r, and to first order
-  /// δ changes as the point's own translation would change it (the envelope of the max over cells
-  /// at its arg-max), so the rotation samples are not rendered: one tool render per contact
-  /// instead of seven. Exact to first order where the deepest cell is unique and the surface
-  /// smooth there; unlike the rendered samples, it does not see a rotation bring another cell
-  /// deeper.
-  kContactLever,
-  /// Rotation samples from the base render (an approximation, placed on the speed-vs-error
-  /// frontier as "rotation_warp"): each cell's depth δ_c = b_c − a_c moves, under a rotation θ
-  /// about axis e through the centre of mass, by −θ·e·(r_c × (n − ∇a_c)) to first order (r_c the
-  /// tool's point at the cell less the centre of mass, ∇a_c the tool's height slope there from
-  /// its neighbours), and δ(±h_θ) is the largest moved δ_c (WarpedRotationSamples). Central
-  /// differences of those, as the rendered samples: one tool render per contact instead of
-  /// seven, and, unlike the lever, every cell (a rotation may bring another cell deeper: ties
-  /// and flat contacts).
-  kWarpedBaseRender,
-};
-
-/// "rendered", "lever" or "warp" (the command-line and summary names).
-const char* ToString(RotationGradient r) noexcept;
-/// Parses ToString's names; throws std::invalid_argument naming the bad value and the choices.
-RotationGradient ParseRotationGradient(const std::string& text);
-
-/// The six rotated samples of GradientSamplePoses (5..10: ±h_θ about u, v, n) estimated from the
-/// base pose's heights (RotationGradient::kWarpedBaseRender): `env` the environment's N×N
-/// heights, `tool_ext` the tool's at the base pose on the window grown by one cell ((N+2)² cells,
-/// window cell (i, j) at (i+1, j+1)), `p_WTcm` the tool's centre of mass in W (m). Each sample is
-/// max_c (δ_c ∓ h_θ·e·(r_c × (n − ∇a_c))) over the cells where both heights are finite, with its
-/// first cell (−∞ and −1 where there is none). Writes out[0..6); never allocates.
-void WarpedRotationSamples(std::span<const float> env, std::span<const float> tool_ext,
-                           const ContactWindow& window, const glm::dvec3& p_WTcm,
-                           std::span<DepthSample> out) noexcept;
-
-/// Builds the linearization from the first five depths of GradientSamplePoses() (the base, ±h_x
-/// along u and v) with RotationGradient::kContactLever: ∂δ/∂x as AssembleLinearization, and
-/// ∂δ/∂θ = r_W × ∂δ/∂x with r_W the deepest cell's tool point less the tool's centre of mass
-/// (world axes, m). Returns depth_m = −∞ when the base sample has no overlap. `samples` must hold
-/// at least 5 entries.
-ContactLinearization AssembleLeverLinearization(const ContactWindow& window,
-                                                std::span<const DepthSample> samples,
-                                                const glm::dvec3& r_W, double stiffness_n_per_m,
-                                                LinearizationFaults& faults) noexcept;
-
 /// How the CPU texture stage renders (issue 15). Both give the same δ and gradient within float
 /// rounding (tests/texture_stage_parity_test.cc checks it on random contacts of all six seed
 /// models).
@@ -204,10 +154,6 @@ class TexturePenetrationSolver {
 
   TextureStagePath path() const noexcept { return path_; }
 
-  /// How Linearize finds ∂δ/∂θ (default: the rendered samples).
-  void set_rotation_gradient(RotationGradient r) noexcept { rotation_gradient_ = r; }
-  RotationGradient rotation_gradient() const noexcept { return rotation_gradient_; }
-
   /// kFast only: run a contact's tool renders (the grown base render and the six rotations) as
   /// parallel tasks of the oneTBB arena the caller is in (CpuPenetrationDepthBackend
   /// turns it on when it has more than one thread, so that a step with fewer contacts than threads
@@ -222,7 +168,7 @@ class TexturePenetrationSolver {
     }
   }
 
-  /// kFast with rendered rotations: when the six rotation samples are rendered culled
+  /// kFast: when the six rotation samples are rendered culled
   /// (RenderToolDepth: the same depths and cells, fewer cells drawn; issue 15).
   enum class CullRotations {
     kWhenItPays,  ///< the first rotation culled, the other five too when it drew few cells
@@ -238,9 +184,8 @@ class TexturePenetrationSolver {
   /// Linearizes the contact of `tool` posed at X_WT (frame T at the tool's centre of mass) against
   /// `environment` posed at X_WO over `window`, with penalty stiffness k (N/m).
   /// Returns depth_m = −∞ and a zero gradient when the patches do not overlap on the window.
-  /// When `samples_out` holds kGradientSamples entries, the raw depths are copied there (with
-  /// RotationGradient::kContactLever the six rotated ones are not taken: depth −∞, cell −1; with
-  /// kWarpedBaseRender they are the warped estimates). `environment_triangles` and
+  /// When `samples_out` holds kGradientSamples entries, the raw depths are copied there.
+  /// `environment_triangles` and
   /// `tool_triangles` restrict which coarse triangles of each side may be rendered (the contact's
   /// cluster's own, issue 31; default: all, picked by the window alone).
   ///
@@ -336,7 +281,6 @@ class TexturePenetrationSolver {
   static constexpr std::size_t kPyramidTriangles = 32;
 
   TextureStagePath path_;
-  RotationGradient rotation_gradient_ = RotationGradient::kRenderedSamples;
   CullRotations cull_rotations_ = CullRotations::kWhenItPays;
   std::uint64_t culled_contacts_ = 0;
   /// SelectPatchTriangles' per-vertex coordinates (reserved for max_triangles vertices).

@@ -180,12 +180,10 @@ const char* ToString(PdBackendChoice choice) noexcept;
 /// context that starts (a real GPU first, else llvmpipe). kAuto: the GPU backend on a hardware GPU
 /// only, since a software rasterizer is slower than the CPU backend for this stage. When the GPU
 /// cannot start or its shaders do not build: the CPU backend, with the reason in `message`
-/// (which always says what was chosen and why), on `cpu_threads` threads with `cpu_rotation`'s
-/// rotation gradient (the GPU backend always renders the rotated samples). Never throws for a GPU
+/// (which always says what was chosen and why), on `cpu_threads` threads. Never throws for a GPU
 /// failure.
 std::unique_ptr<PenetrationDepthBackend> MakePenetrationDepthBackend(
     PdBackendChoice choice, const GpuPenetrationDepthOptions& gpu_options, int grid_resolution,
-    std::string& message, int cpu_threads = 1,
-    RotationGradient cpu_rotation = RotationGradient::kRenderedSamples);
+    std::string& message, int cpu_threads = 1);
 
 }  // namespace ht

@@ -86,11 +86,10 @@ class CpuPenetrationDepthBackend final : public PenetrationDepthBackend {
   /// (the default) or the reference one (same results within float rounding; issue 15);
   /// `threads` ≥ 1 (values below 1 count as 1): with more than one, every batch runs in a oneTBB
   /// task arena of that many threads (the calling thread among them): its contacts, and each
-  /// contact's tool renders, are tasks. `rotation` picks how ∂δ/∂θ is found (the rendered
-  /// samples, the default, or from the base render alone, approximations; RotationGradient).
-  explicit CpuPenetrationDepthBackend(
-      int max_resolution = 128, TextureStagePath path = TextureStagePath::kFast, int threads = 1,
-      RotationGradient rotation = RotationGradient::kRenderedSamples);
+  /// contact's tool renders, are tasks.
+  explicit CpuPenetrationDepthBackend(int max_resolution = 128,
+                                      TextureStagePath path = TextureStagePath::kFast,
+                                      int threads = 1);
   ~CpuPenetrationDepthBackend() override;
 
   std::string_view name() const noexcept override { return "cpu"; }
@@ -108,12 +107,6 @@ class CpuPenetrationDepthBackend final : public PenetrationDepthBackend {
   int threads() const noexcept { return static_cast<int>(solvers_.size()); }
 
  private:
-  /// Whether a contact's tool renders run as tasks: with threads and the rendered rotation
-  /// samples.
-  bool ParallelRenders() const noexcept {
-    return threads() > 1 &&
-           solvers_.front().rotation_gradient() == RotationGradient::kRenderedSamples;
-  }
   struct Arena;  // the oneTBB task arena, kept out of this header
   std::vector<TexturePenetrationSolver> solvers_;
   std::unique_ptr<Arena> arena_;

@@ -69,12 +69,6 @@ struct PipelineOptions {
   /// The remote node's default leaves one core to the operator on a loopback machine
   /// (DefaultTextureThreads()).
   int texture_threads = 1;
-  /// How the CPU texture stage finds ∂δ/∂θ (RotationGradient): the six rendered rotation samples
-  /// (the default), or from the base render alone, the deepest cell's lever r × ∂δ/∂x or the
-  /// warped rotation samples (one tool render per contact instead of seven; δ and ∂δ/∂x
-  /// unchanged). Both are approximations, placed on the speed-vs-error frontier
-  /// ("rotation_lever", "rotation_warp"). GPU backends ignore it.
-  RotationGradient rotation_gradient = RotationGradient::kRenderedSamples;
   /// Grazing guard (issue 31): a contact whose δ0 exceeds what its coarse geometry allows (the
   /// largest over the cluster's hull pairs of the pair's penetration + its two leaves' outward
   /// texture reach + a cell; see grazing_guard_local_reach) is dropped and counted

@@ -30,11 +30,11 @@ const char* ToString(PdBackendChoice choice) noexcept {
 
 std::unique_ptr<PenetrationDepthBackend> MakePenetrationDepthBackend(
     PdBackendChoice choice, const GpuPenetrationDepthOptions& gpu_options, int grid_resolution,
-    std::string& message, int cpu_threads, RotationGradient cpu_rotation) {
+    std::string& message, int cpu_threads) {
   const int cpu_resolution = std::max(grid_resolution, 2);
   if (choice == PdBackendChoice::kCpu) {
     auto cpu = std::make_unique<CpuPenetrationDepthBackend>(cpu_resolution, TextureStagePath::kFast,
-                                                            cpu_threads, cpu_rotation);
+                                                            cpu_threads);
     message = "penetration depth on the CPU (requested): " + cpu->description();
     return cpu;
   }
@@ -56,7 +56,7 @@ std::unique_ptr<PenetrationDepthBackend> MakePenetrationDepthBackend(
                         "); penetration depth on the CPU backend (--pd-backend gpu forces a "
                         "software renderer such as llvmpipe)";
     return std::make_unique<CpuPenetrationDepthBackend>(cpu_resolution, TextureStagePath::kFast,
-                                                        cpu_threads, cpu_rotation);
+                                                        cpu_threads);
   }
 }
 

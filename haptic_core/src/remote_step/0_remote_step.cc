@@ -391,8 +391,7 @@ void HapticTexturePipeline::RegionWindow(const RigidTransform& X_WT, std::size_t
 
 std::unique_ptr<PenetrationDepthBackend> HapticTexturePipeline::MakeCpuBackend() const {
   return std::make_unique<CpuPenetrationDepthBackend>(
-      options_.max_window_resolution(), TextureStagePath::kFast, options_.texture_threads,
-      options_.rotation_gradient);
+      options_.max_window_resolution(), TextureStagePath::kFast, options_.texture_threads);
 }
 
 void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n) noexcept {

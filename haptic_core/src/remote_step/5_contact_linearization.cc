@@ -14,71 +14,6 @@
 
 namespace ht {
 
-void WarpedRotationSamples(std::span<const float> env, std::span<const float> tool_ext,
-                           const ContactWindow& w, const glm::dvec3& p_WTcm,
-                           std::span<DepthSample> out) noexcept {
-  for (DepthSample& s : out) s = {-std::numeric_limits<double>::infinity(), -1};
-  const int n = w.resolution, nt = n + 2;
-  if (n <= 0 || out.size() < 6 || env.size() < static_cast<size_t>(n) * n ||
-      tool_ext.size() < static_cast<size_t>(nt) * nt) {
-    return;
-  }
-  const double cell = w.cell_size_m(), h = GradientSteps::For(w).h_theta;
-  const double inv_2cell = 0.5 / cell, inv_cell = 1.0 / cell;
-  // The window centre less the centre of mass, in the window's frame (u, v, n).
-  const glm::dvec3 c = w.center_W - p_WTcm;
-  const double cu = glm::dot(c, w.axis_u_W), cv = glm::dot(c, w.axis_v_W),
-               cn = glm::dot(c, w.normal_W);
-  // The tool's slope along one axis at a cell from its two neighbours (one-sided where one is
-  // off the tool's patch, 0 where both are).
-  const auto slope = [&](float lo, float mid, float hi) {
-    const bool fl = std::isfinite(lo), fh = std::isfinite(hi);
-    if (fl && fh) return (static_cast<double>(hi) - lo) * inv_2cell;
-    if (fh) return (static_cast<double>(hi) - mid) * inv_cell;
-    if (fl) return (static_cast<double>(mid) - lo) * inv_cell;
-    return 0.0;
-  };
-  double best[6];
-  int best_cell[6];
-  for (int k = 0; k < 6; ++k) {
-    best[k] = -std::numeric_limits<double>::infinity();
-    best_cell[k] = -1;
-  }
-  for (int j = 0; j < n; ++j) {
-    const float* row = &tool_ext[static_cast<size_t>(j + 1) * nt + 1];
-    const float* below = row - nt;
-    const float* above = row + nt;
-    const float* env_row = &env[static_cast<size_t>(j) * n];
-    const double r_v = cv + ((j + 0.5) / n - 0.5) * w.extent_m;
-    for (int i = 0; i < n; ++i) {
-      const float t = row[i], e = env_row[i];
-      if (!(std::isfinite(t) && std::isfinite(e))) continue;
-      const double delta = static_cast<double>(e - t);
-      const double g_u = slope(row[i - 1], t, row[i + 1]);
-      const double g_v = slope(below[i], t, above[i]);
-      const double r_u = cu + ((i + 0.5) / n - 0.5) * w.extent_m;
-      const double r_n = cn + t;
-      // ∂t/∂θ about u, v, n: r × (n − ∇t) in the window's frame, ∇t = (g_u, g_v, 0).
-      const double b[3] = {r_v + r_n * g_v, -r_n * g_u - r_u, r_v * g_u - r_u * g_v};
-      const int cell_index = j * n + i;
-      for (int k = 0; k < 3; ++k) {
-        const double plus = delta - h * b[k], minus = delta + h * b[k];
-        if (plus > best[2 * k]) {
-          best[2 * k] = plus;
-          best_cell[2 * k] = cell_index;
-        }
-        if (minus > best[2 * k + 1]) {
-          best[2 * k + 1] = minus;
-          best_cell[2 * k + 1] = cell_index;
-        }
-      }
-    }
-  }
-  for (int k = 0; k < 6; ++k) {
-    if (best_cell[k] >= 0) out[static_cast<size_t>(k)] = {best[k], best_cell[k]};
-  }
-}
-
 TexturePenetrationSolver::TexturePenetrationSolver(int max_resolution, int max_triangles,
                                                    TextureStagePath path)
     : path_(path), links_(max_resolution) {
@@ -156,53 +91,14 @@ ContactLinearization TexturePenetrationSolver::Linearize(
     }
   };
 
-  const bool from_base = rotation_gradient_ != RotationGradient::kRenderedSamples;
   RenderEnvironment(environment, X_WO, w, environment_triangles);
   // Tool triangles are chosen once, with margins that cover every perturbed pose (the render
-  // re-checks facing at each pose); without rendered rotations only the base pose is drawn, on
-  // the window grown by a cell.
+  // re-checks facing at each pose).
   SelectPatchTrianglesIn(tool_triangles, tool, X_WT, w, PatchSide::kTool, 2.0 * h.h_x,
-                         tool_triangles_, from_base ? 1e-9 : h.h_theta + 1e-9, &vertex_scratch_,
-                         nullptr, from_base ? 0.0 : h.h_theta);
+                         tool_triangles_, h.h_theta + 1e-9, &vertex_scratch_, nullptr, h.h_theta);
   std::array<DepthSample, kGradientSamples> samples;
   for (DepthSample& s : samples) s = {-std::numeric_limits<double>::infinity(), -1};
-  glm::dvec3 lever_W(0.0);  // RotationGradient::kContactLever
-  if (from_base) {
-    // The base pose on the window grown by one cell; the rotations come from it.
-    const int n = w.resolution, nt = n + 2;
-    if (path_ == TextureStagePath::kFast) {
-      RenderGrownBase(tool, X_WT, w, samples);
-      if (samples[0].cell >= 0) keep_base_overlap(tool_ext_heights_, nt, 1);
-    } else {
-      // The reference: the grown window (the same centre, axes and cell centres, one more cell
-      // on each side, and the window's own box along n) and the translations at their poses.
-      tool_ext_heights_.assign(static_cast<size_t>(nt) * nt,
-                               std::numeric_limits<float>::infinity());
-      ContactWindow grown = w;
-      grown.resolution = nt;
-      grown.extent_m = w.extent_m * nt / n;
-      RenderPatchHeights(tool, X_WT, tool_triangles_, grown, PatchSide::kTool, tool_ext_heights_,
-                         w.depth_range_m());
-      samples[0] = EvaluateTool(tool, X_WT, w);
-      if (samples[0].cell >= 0) {
-        keep_base_overlap(tool_heights_, n, 0);
-        const auto poses = GradientSamplePoses(X_WT, w);
-        for (int i = 1; i < 5; ++i) samples[i] = EvaluateTool(tool, poses[i], w);
-      }
-    }
-    if (samples[0].cell >= 0) {
-      if (rotation_gradient_ == RotationGradient::kWarpedBaseRender) {
-        WarpedRotationSamples(env_heights_, tool_ext_heights_, w, X_WT.translation,
-                              std::span<DepthSample>(samples).subspan(5));
-      } else {
-        // The deepest cell's tool point (its height along n from the window plane) less the
-        // centre of mass.
-        const int i = samples[0].cell % n, j = samples[0].cell / n;
-        const double t = tool_ext_heights_[static_cast<size_t>(j + 1) * nt + (i + 1)];
-        lever_W = w.CellCenter(samples[0].cell) + t * w.normal_W - X_WT.translation;
-      }
-    }
-  } else if (path_ == TextureStagePath::kFast) {
+  if (path_ == TextureStagePath::kFast) {
     // The base pose on the window grown by one cell gives the four translations (RenderGrownBase);
     // the six rotations are rendered.
     const size_t cells = static_cast<size_t>(w.resolution) * w.resolution;
@@ -299,9 +195,6 @@ ContactLinearization TexturePenetrationSolver::Linearize(
   }
   if (samples_out.size() >= samples.size())
     std::copy(samples.begin(), samples.end(), samples_out.begin());
-  if (rotation_gradient_ == RotationGradient::kContactLever) {
-    return AssembleLeverLinearization(w, samples, lever_W, stiffness_n_per_m, faults_);
-  }
   return AssembleLinearization(w, samples, stiffness_n_per_m, faults_);
 }
 

@@ -1,6 +1,6 @@
 // Stage 5 of the remote step (contact_linearization.h): a contact's linearization from its
 // eleven depth samples (central differences, the lever form), the gradient sample poses, the
-// bearing edge's rotation slope and the rotation gradient's names.
+// bearing edge's rotation slope.
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -42,28 +42,6 @@ void UseBearingEdgeRotationSlope(const ContactWindow& w, std::span<const DepthSa
     d_rotation += (s0 - glm::dot(d_rotation, axes[a])) * axes[a];
   }
   lin.gradient.d_rotation_W = d_rotation;
-}
-
-const char* ToString(RotationGradient r) noexcept {
-  switch (r) {
-    case RotationGradient::kRenderedSamples:
-      return "rendered";
-    case RotationGradient::kContactLever:
-      return "lever";
-    case RotationGradient::kWarpedBaseRender:
-      return "warp";
-  }
-  return "?";
-}
-
-RotationGradient ParseRotationGradient(const std::string& text) {
-  for (const RotationGradient r :
-       {RotationGradient::kRenderedSamples, RotationGradient::kContactLever,
-        RotationGradient::kWarpedBaseRender}) {
-    if (text == ToString(r)) return r;
-  }
-  throw std::invalid_argument("rotation gradient must be rendered, lever or warp, got '" + text +
-                              "'");
 }
 
 std::array<RigidTransform, kGradientSamples> GradientSamplePoses(const RigidTransform& X_WT,
@@ -152,19 +130,6 @@ ContactLinearization AssembleLinearization(const ContactWindow& w,
   out.gradient.d_translation_W = d.Translation(h_x);
   out.gradient.d_rotation_W = d.Central(2, h_tilt) * w.axis_u_W +
                               d.Central(3, h_tilt) * w.axis_v_W + d.Central(4, h_yaw) * w.normal_W;
-  return out;
-}
-
-ContactLinearization AssembleLeverLinearization(const ContactWindow& w,
-                                                std::span<const DepthSample> samples,
-                                                const glm::dvec3& r_W, double stiffness_n_per_m,
-                                                LinearizationFaults& faults) noexcept {
-  ContactLinearization out;
-  if (!StartLinearization(w, samples, 5, stiffness_n_per_m, out)) return out;
-  const Differences d{w, samples, faults};
-  out.gradient.d_translation_W = d.Translation(GradientSteps::For(w).h_x);
-  // The tool point p moves by Δx + Δθ × r: δ changes by ∂δ/∂x·(Δθ × r) = (r × ∂δ/∂x)·Δθ.
-  out.gradient.d_rotation_W = glm::cross(r_W, out.gradient.d_translation_W);
   return out;
 }
 

@@ -16,20 +16,18 @@ struct CpuPenetrationDepthBackend::Arena {
 };
 
 CpuPenetrationDepthBackend::CpuPenetrationDepthBackend(int max_resolution, TextureStagePath path,
-                                                       int threads, RotationGradient rotation) {
+                                                       int threads) {
   const int n = std::max(threads, 1);
   solvers_.reserve(static_cast<std::size_t>(n));
   for (int i = 0; i < n; ++i) {
     solvers_.emplace_back(max_resolution, 4096, path);
-    solvers_.back().set_rotation_gradient(rotation);
   }
   if (n > 1) {
     arena_ = std::make_unique<Arena>(n);
     internal::WarmTaskPools(arena_->arena);  // so that a batch's tasks do not allocate
     // Renders of one contact as tasks too, so that a step with fewer contacts than threads uses
-    // them all (each render has its own buffer: the same results). Without rendered rotations a
-    // contact has one tool render, so only the contacts are spread.
-    for (TexturePenetrationSolver& s : solvers_) s.set_parallel_renders(ParallelRenders());
+    // them all (each render has its own buffer: the same results).
+    for (TexturePenetrationSolver& s : solvers_) s.set_parallel_renders(true);
   }
 }
 
@@ -39,16 +37,6 @@ std::string CpuPenetrationDepthBackend::description() const {
   std::string d = solvers_.front().path() == TextureStagePath::kFast ? "CPU rasterizer (fast path)"
                                                                      : "CPU reference rasterizer";
   if (threads() > 1) d += ", " + std::to_string(threads()) + " threads (oneTBB)";
-  switch (solvers_.front().rotation_gradient()) {
-    case RotationGradient::kRenderedSamples:
-      break;
-    case RotationGradient::kContactLever:
-      d += ", rotation gradient by the contact lever";
-      break;
-    case RotationGradient::kWarpedBaseRender:
-      d += ", rotation samples warped from the base render";
-      break;
-  }
   return d;
 }
 
@@ -114,7 +102,7 @@ bool CpuPenetrationDepthBackend::LinearizeBatch(const HapticModel& tool, const R
     TexturePenetrationSolver& solver = solvers_.front();
     solver.set_parallel_renders(false);
     for (std::size_t i = 0; i < queries.size(); ++i) one(solver, i);
-    solver.set_parallel_renders(ParallelRenders());
+    solver.set_parallel_renders(threads() > 1);
   }
   faults_ = {};
   for (const TexturePenetrationSolver& s : solvers_) {

@@ -445,8 +445,8 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
     // The refined rendered samples' one-cell secants.
     LinearizationFaults faults;
     lin.gradient = AssembleLinearization(w, samples, lin.stiffness_n_per_m, faults).gradient;
-    // Without rotated samples (RotationGradient::kContactLever: only the base pose is drawn) the
-    // rotation part stays the lever's, now at the refined deepest point: (r × ∂δ/∂x).
+    // Where a rotated sample has no cell (the rotated tool leaves the environment's patch), the
+    // rotation part is the lever's at the refined deepest point: (r × ∂δ/∂x).
     bool rotations_drawn = true;
     for (int k = 5; k < kGradientSamples; ++k) {
       rotations_drawn &= samples[static_cast<std::size_t>(k)].cell >= 0;

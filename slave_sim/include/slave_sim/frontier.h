@@ -48,8 +48,6 @@ struct FrontierSetting {
   int max_contacts = kMaxContacts;
   /// PipelineOptions::local_reach.
   bool local_reach = false;
-  /// PipelineOptions::rotation_gradient (CPU only).
-  RotationGradient rotation_gradient = RotationGradient::kRenderedSamples;
   /// PipelineOptions::grazing_guard ("no_grazing_guard" turns it off: issue 31's before).
   bool grazing_guard = true;
   /// PipelineOptions::grazing_guard_local_reach ("guard_model_reach" turns it off).
