@@ -31,11 +31,11 @@ struct State {
   double w[3] = {0.0, 0.0, 0.0};
   unsigned int buttons = 0;
 
-  double last[7] = {};         // newest fx fy fz tx ty tz fg commanded
-  double before_stop[7] = {};  // the wrench commanded last before dhdStop
-  long sets = 0;               // dhdSetForceAndTorque calls
-  long gripper_sets = 0;       // dhdSetForceAndTorqueAndGripperForce calls
-  long sets_since_mark = 0;    // either, since fake_dhd_mark
+  double last[7] = {};          // newest fx fy fz tx ty tz fg commanded
+  double before_stop[7] = {};   // the wrench commanded last before dhdStop
+  long sets = 0;                // dhdSetForceAndTorque calls
+  long gripper_sets = 0;        // dhdSetForceAndTorqueAndGripperForce calls
+  long sets_since_mark = 0;     // either, since fake_dhd_mark
   long nonzero_since_mark = 0;  // of those, commands that were not all zero
   long reads = 0;               // dhdGetPosition calls
   char log[512] = {};           // lifecycle calls in order, comma-separated
@@ -263,8 +263,8 @@ void fake_dhd_set_limits(double max_force, double max_torque) {
 
 /// The handle: position (m), orientation frame (row-major, matrix[i][j] = R[3 i + j]), linear
 /// (m/s) and angular (rad/s) velocity, all in DHD's base frame, and the button mask.
-void fake_dhd_set_handle(const double p[3], const double R[9], const double v[3],
-                         const double w[3], unsigned int buttons) {
+void fake_dhd_set_handle(const double p[3], const double R[9], const double v[3], const double w[3],
+                         unsigned int buttons) {
   State& s = S();
   std::lock_guard lock(s.mutex);
   for (int i = 0; i < 3; ++i) {

@@ -177,13 +177,27 @@ void hdGetDoublev(HDenum name, double* out) {
   State& s = S();
   std::lock_guard lock(s.mutex);
   switch (name) {
-    case HD_CURRENT_TRANSFORM: Copy(out, s.T, 16); break;
-    case HD_CURRENT_VELOCITY: Copy(out, s.v, 3); break;
-    case HD_CURRENT_ANGULAR_VELOCITY: Copy(out, s.w, 3); break;
-    case HD_NOMINAL_MAX_FORCE: out[0] = s.max_force_n; break;
-    case HD_NOMINAL_MAX_STIFFNESS: out[0] = s.stiffness_n_per_mm; break;
-    case HD_NOMINAL_MAX_DAMPING: out[0] = s.damping_ns_per_mm; break;
-    case HD_USABLE_WORKSPACE_DIMENSIONS: Copy(out, s.workspace_mm, 6); break;
+    case HD_CURRENT_TRANSFORM:
+      Copy(out, s.T, 16);
+      break;
+    case HD_CURRENT_VELOCITY:
+      Copy(out, s.v, 3);
+      break;
+    case HD_CURRENT_ANGULAR_VELOCITY:
+      Copy(out, s.w, 3);
+      break;
+    case HD_NOMINAL_MAX_FORCE:
+      out[0] = s.max_force_n;
+      break;
+    case HD_NOMINAL_MAX_STIFFNESS:
+      out[0] = s.stiffness_n_per_mm;
+      break;
+    case HD_NOMINAL_MAX_DAMPING:
+      out[0] = s.damping_ns_per_mm;
+      break;
+    case HD_USABLE_WORKSPACE_DIMENSIONS:
+      Copy(out, s.workspace_mm, 6);
+      break;
     case HD_NOMINAL_MAX_TORQUE_FORCE:
       if (s.output_dof < 6) {
         Push(s, HD_INVALID_ENUM, 0);
@@ -194,7 +208,9 @@ void hdGetDoublev(HDenum name, double* out) {
     case HD_NOMINAL_MAX_TORQUE_STIFFNESS:
       for (int i = 0; i < 3; ++i) out[i] = 300.0;  // mN·m/rad
       break;
-    default: Push(s, HD_INVALID_ENUM, 0); break;
+    default:
+      Push(s, HD_INVALID_ENUM, 0);
+      break;
   }
 }
 
@@ -202,10 +218,18 @@ void hdGetIntegerv(HDenum name, int* out) {
   State& s = S();
   std::lock_guard lock(s.mutex);
   switch (name) {
-    case HD_CURRENT_BUTTONS: out[0] = s.buttons; break;
-    case HD_INPUT_DOF: out[0] = s.input_dof; break;
-    case HD_OUTPUT_DOF: out[0] = s.output_dof; break;
-    default: Push(s, HD_INVALID_ENUM, 0); break;
+    case HD_CURRENT_BUTTONS:
+      out[0] = s.buttons;
+      break;
+    case HD_INPUT_DOF:
+      out[0] = s.input_dof;
+      break;
+    case HD_OUTPUT_DOF:
+      out[0] = s.output_dof;
+      break;
+    default:
+      Push(s, HD_INVALID_ENUM, 0);
+      break;
   }
 }
 
@@ -241,9 +265,12 @@ HDErrorInfo hdGetError() {
 
 const char* hdGetErrorString(HDerror code) {
   switch (code) {
-    case HD_COMM_ERROR: return "fake: communication error";
-    case HD_INVALID_ENUM: return "fake: invalid enum";
-    default: return "fake: device error";
+    case HD_COMM_ERROR:
+      return "fake: communication error";
+    case HD_INVALID_ENUM:
+      return "fake: invalid enum";
+    default:
+      return "fake: device error";
   }
 }
 

@@ -170,12 +170,12 @@ TEST_F(ForceDimensionTest, NoDeviceGivesTheLibrarysErrorText) {
 TEST_F(ForceDimensionTest, CapabilitiesComeFromTheDeviceAfterOpen) {
   ForceDimensionDevice d(FakeConfig());
   EXPECT_EQ(d.capabilities().max_force_n, 0.0);  // nothing is known before Open
-  fake.set_limits(8.0, -1.0);                     // a force limit set on the device, no torque one
+  fake.set_limits(8.0, -1.0);                    // a force limit set on the device, no torque one
   d.Open();
   const DeviceCapabilities c = d.capabilities();
   EXPECT_NE(c.name.find("fake.7"), std::string::npos) << c.name;
-  EXPECT_EQ(c.max_force_n, 8.0);     // the device's limit, below sigma.7's 12 N
-  EXPECT_EQ(c.max_torque_nm, 0.2);   // sigma.7
+  EXPECT_EQ(c.max_force_n, 8.0);    // the device's limit, below sigma.7's 12 N
+  EXPECT_EQ(c.max_torque_nm, 0.2);  // sigma.7
   EXPECT_EQ(c.max_stiffness_n_per_m, 4000.0);
   EXPECT_EQ(c.dof_in, 6);
   EXPECT_EQ(c.dof_out, 6);

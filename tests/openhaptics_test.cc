@@ -42,8 +42,7 @@ struct Fake {
       f.reset = reinterpret_cast<decltype(f.reset)>(dlsym(h, "fake_hd_reset"));
       f.set_stylus = reinterpret_cast<decltype(f.set_stylus)>(dlsym(h, "fake_hd_set_stylus"));
       f.tick = reinterpret_cast<decltype(f.tick)>(dlsym(h, "fake_hd_tick"));
-      f.inject_error =
-          reinterpret_cast<decltype(f.inject_error)>(dlsym(h, "fake_hd_inject_error"));
+      f.inject_error = reinterpret_cast<decltype(f.inject_error)>(dlsym(h, "fake_hd_inject_error"));
       f.outputs = reinterpret_cast<decltype(f.outputs)>(dlsym(h, "fake_hd_outputs"));
       f.log = reinterpret_cast<decltype(f.log)>(dlsym(h, "fake_hd_log"));
       return f;

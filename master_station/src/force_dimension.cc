@@ -45,17 +45,17 @@ const VendorLibrarySpec& LibrarySpec() {
 // The DHD functions, with dhdc.h's signatures (the trailing `char ID` is the device: dhdOpen's
 // answer).
 struct ForceDimensionDevice::Api {
-  int (*open)() = nullptr;                                   // dhdOpen
-  int (*close)(char) = nullptr;                              // dhdClose
-  int (*stop)(char) = nullptr;                               // dhdStop
-  int (*get_system_type)(char) = nullptr;                    // dhdGetSystemType
-  const char* (*get_system_name)(char) = nullptr;            // dhdGetSystemName (optional)
-  int (*enable_force)(unsigned char, char) = nullptr;        // dhdEnableForce
-  int (*get_position)(double*, double*, double*, char) = nullptr;         // dhdGetPosition
-  int (*get_orientation_frame)(double[3][3], char) = nullptr;             // (optional)
+  int (*open)() = nullptr;                                         // dhdOpen
+  int (*close)(char) = nullptr;                                    // dhdClose
+  int (*stop)(char) = nullptr;                                     // dhdStop
+  int (*get_system_type)(char) = nullptr;                          // dhdGetSystemType
+  const char* (*get_system_name)(char) = nullptr;                  // dhdGetSystemName (optional)
+  int (*enable_force)(unsigned char, char) = nullptr;              // dhdEnableForce
+  int (*get_position)(double*, double*, double*, char) = nullptr;  // dhdGetPosition
+  int (*get_orientation_frame)(double[3][3], char) = nullptr;      // (optional)
   int (*get_linear_velocity)(double*, double*, double*, char) = nullptr;  // dhdGetLinearVelocity
   int (*get_angular_velocity_rad)(double*, double*, double*, char) = nullptr;  // (optional)
-  unsigned int (*get_button_mask)(char) = nullptr;                        // dhdGetButtonMask
+  unsigned int (*get_button_mask)(char) = nullptr;                             // dhdGetButtonMask
   int (*set_force_and_torque)(double, double, double, double, double, double, char) = nullptr;
   int (*set_force_and_torque_and_gripper_force)(double, double, double, double, double, double,
                                                 double, char) = nullptr;  // (optional)
@@ -74,8 +74,8 @@ struct ForceDimensionDevice::Api {
 
 ModelFigures FiguresForSystemType(int system_type) noexcept {
   // CHAI3D's cDeltaDevice::open: its default, then one entry per model.
-  ModelFigures f{system_type, "Force Dimension device", 12.0, 0.0, 5000.0, 0.0, 30.0, 0.075,
-                 false, false};
+  ModelFigures f{system_type, "Force Dimension device", 12.0, 0.0, 5000.0, 0.0, 30.0, 0.075, false,
+                 false};
   switch (system_type) {
     case kDeviceDelta3:
       f = {system_type, "delta.3", 20.0, 0.0, 5000.0, 0.0, 30.0, 0.15, false, false};
@@ -145,8 +145,7 @@ void ForceDimensionDevice::Open() {
     a.get_system_name = l.Find<decltype(a.get_system_name)>("dhdGetSystemName");
     a.enable_force = l.Require<decltype(a.enable_force)>("dhdEnableForce");
     a.get_position = l.Require<decltype(a.get_position)>("dhdGetPosition");
-    a.get_orientation_frame =
-        l.Find<decltype(a.get_orientation_frame)>("dhdGetOrientationFrame");
+    a.get_orientation_frame = l.Find<decltype(a.get_orientation_frame)>("dhdGetOrientationFrame");
     a.get_linear_velocity = l.Require<decltype(a.get_linear_velocity)>("dhdGetLinearVelocity");
     a.get_angular_velocity_rad =
         l.Find<decltype(a.get_angular_velocity_rad)>("dhdGetAngularVelocityRad");
@@ -257,8 +256,8 @@ void ForceDimensionDevice::Close() noexcept {
 bool ForceDimensionDevice::Send(const Wrench& F_H_D) noexcept {
   const glm::dvec3& f = F_H_D.force;
   const glm::dvec3 t = actuated_rotation_ ? F_H_D.torque : glm::dvec3(0.0);
-  const int rc = active_gripper_ ? api_->set_force_and_torque_and_gripper_force(
-                                       f.x, f.y, f.z, t.x, t.y, t.z, 0.0, id_)
+  const int rc = active_gripper_ ? api_->set_force_and_torque_and_gripper_force(f.x, f.y, f.z, t.x,
+                                                                                t.y, t.z, 0.0, id_)
                                  : api_->set_force_and_torque(f.x, f.y, f.z, t.x, t.y, t.z, id_);
   if (rc < 0) {
     write_faults_.fetch_add(1, std::memory_order_relaxed);
@@ -314,8 +313,8 @@ void ForceDimensionDevice::Exchange(const Command& command, std::int64_t now_ns)
 }
 
 void ForceDimensionDevice::IoLoop() noexcept {
-  const auto period = std::chrono::nanoseconds(
-      static_cast<std::int64_t>(std::llround(config_.io_period_s * 1e9)));
+  const auto period =
+      std::chrono::nanoseconds(static_cast<std::int64_t>(std::llround(config_.io_period_s * 1e9)));
   Command command;
   auto next = std::chrono::steady_clock::now();
   while (!stop_.load(std::memory_order_relaxed)) {

@@ -207,9 +207,10 @@ int main(int argc, char** argv) {
   app.add_option("--falcon-firmware", falcon_firmware,
                  "Falcon firmware image (not shipped; e.g. from libnifalcon's or Novint's files)");
   std::string device_library;
-  app.add_option("--device-library", device_library,
-                 "the vendor library for --device forcedimension or openhaptics (default: libdhd.so\n"
-                 "or libHD.so through LD_LIBRARY_PATH and the loader's cache)");
+  app.add_option(
+      "--device-library", device_library,
+      "the vendor library for --device forcedimension or openhaptics (default: libdhd.so\n"
+      "or libHD.so through LD_LIBRARY_PATH and the loader's cache)");
   bool no_passivity = false;
   double model_timeout_s = defaults.safety.model_timeout_s;
   double hunt_crossley = defaults.hunt_crossley_s_per_m;

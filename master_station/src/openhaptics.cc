@@ -83,34 +83,34 @@ std::string Hex(unsigned int code) {
 
 // The HD functions, with hd.h's signatures.
 struct OpenHapticsDevice::Api {
-  HHD (*init_device)(const char*) = nullptr;                    // hdInitDevice
-  void (*disable_device)(HHD) = nullptr;                        // hdDisableDevice
-  void (*make_current_device)(HHD) = nullptr;                   // hdMakeCurrentDevice
-  void (*begin_frame)(HHD) = nullptr;                           // hdBeginFrame
-  void (*end_frame)(HHD) = nullptr;                             // hdEndFrame
-  void (*enable)(HDenum) = nullptr;                             // hdEnable
-  void (*get_doublev)(HDenum, double*) = nullptr;               // hdGetDoublev
-  void (*get_integerv)(HDenum, int*) = nullptr;                 // hdGetIntegerv
-  const char* (*get_string)(HDenum) = nullptr;                  // hdGetString
-  void (*set_doublev)(HDenum, const double*) = nullptr;         // hdSetDoublev
-  HDErrorInfo (*get_error)() = nullptr;                         // hdGetError
-  const char* (*get_error_string)(HDerror) = nullptr;           // hdGetErrorString
-  void (*start_scheduler)() = nullptr;                          // hdStartScheduler
-  void (*stop_scheduler)() = nullptr;                           // hdStopScheduler
+  HHD (*init_device)(const char*) = nullptr;             // hdInitDevice
+  void (*disable_device)(HHD) = nullptr;                 // hdDisableDevice
+  void (*make_current_device)(HHD) = nullptr;            // hdMakeCurrentDevice
+  void (*begin_frame)(HHD) = nullptr;                    // hdBeginFrame
+  void (*end_frame)(HHD) = nullptr;                      // hdEndFrame
+  void (*enable)(HDenum) = nullptr;                      // hdEnable
+  void (*get_doublev)(HDenum, double*) = nullptr;        // hdGetDoublev
+  void (*get_integerv)(HDenum, int*) = nullptr;          // hdGetIntegerv
+  const char* (*get_string)(HDenum) = nullptr;           // hdGetString
+  void (*set_doublev)(HDenum, const double*) = nullptr;  // hdSetDoublev
+  HDErrorInfo (*get_error)() = nullptr;                  // hdGetError
+  const char* (*get_error_string)(HDerror) = nullptr;    // hdGetErrorString
+  void (*start_scheduler)() = nullptr;                   // hdStartScheduler
+  void (*stop_scheduler)() = nullptr;                    // hdStopScheduler
   HDSchedulerHandle (*schedule_asynchronous)(HDSchedulerCallback, void*,
                                              unsigned short) = nullptr;  // hdScheduleAsynchronous
   void (*schedule_synchronous)(HDSchedulerCallback, void*,
                                unsigned short) = nullptr;  // hdScheduleSynchronous
-  void (*unschedule)(HDSchedulerHandle) = nullptr;        // hdUnschedule
+  void (*unschedule)(HDSchedulerHandle) = nullptr;         // hdUnschedule
 
   // Throws when hdGetError reports an error, naming `what` and the error.
   void Check(const std::string& what) const {
     const HDErrorInfo e = get_error();
     if (e.errorCode == kHdSuccess) return;
     const char* text = get_error_string(e.errorCode);
-    throw std::runtime_error("OpenHaptics: " + what + " failed: " +
-                             (text && *text ? text : "no error text") + " (HD error " +
-                             Hex(e.errorCode) + ", device code " +
+    throw std::runtime_error("OpenHaptics: " + what +
+                             " failed: " + (text && *text ? text : "no error text") +
+                             " (HD error " + Hex(e.errorCode) + ", device code " +
                              std::to_string(e.internalErrorCode) + ")");
   }
 };
@@ -165,10 +165,12 @@ void OpenHapticsDevice::Open() {
                                 ? std::string("hdInitDevice(HD_DEFAULT_DEVICE)")
                                 : "hdInitDevice(\"" + config_.device_name + "\")";
   try {
-    api->Check(which + " (is the device plugged in and set up with Touch_Setup?)");
-  } catch (...) {
+    api->Check(which);
+  } catch (const std::runtime_error& e) {
     if (hhd != kHdInvalidHandle) api->disable_device(hhd);
-    throw;
+    throw std::runtime_error(std::string(e.what()) +
+                             ". Is the device plugged in and powered, and set up with Touch_Setup "
+                             "(Touch_Diagnostic shows it)?");
   }
   if (hhd == kHdInvalidHandle) {
     throw std::runtime_error("OpenHaptics: " + which + " gave no device");
@@ -252,8 +254,8 @@ void OpenHapticsDevice::Open() {
   stale_ = 0;
   commands_.Write(Command{});
   closing_ = false;
-  servo_handle_ = api_->schedule_asynchronous(&OpenHapticsDevice::ServoCallback, this,
-                                              kHdMaxSchedulerPriority);
+  servo_handle_ =
+      api_->schedule_asynchronous(&OpenHapticsDevice::ServoCallback, this, kHdMaxSchedulerPriority);
   api_->start_scheduler();
   try {
     api_->Check("starting the servo loop (hdScheduleAsynchronous, hdStartScheduler)");
@@ -273,8 +275,7 @@ void OpenHapticsDevice::Close() noexcept {
   open_ = false;
   closing_ = true;  // the servo callback renders zero from its next frame on
   // One more frame, after the servo callback's (lowest priority), that renders zero.
-  api_->schedule_synchronous(&OpenHapticsDevice::ZeroFrameCallback, this,
-                             kHdMinSchedulerPriority);
+  api_->schedule_synchronous(&OpenHapticsDevice::ZeroFrameCallback, this, kHdMinSchedulerPriority);
   api_->stop_scheduler();
   api_->unschedule(servo_handle_);
   api_->disable_device(hhd_);
@@ -327,8 +328,8 @@ unsigned int OpenHapticsDevice::Servo() noexcept {
   }
   double T[kGetBuffer] = {}, v[kGetBuffer] = {}, w[kGetBuffer] = {};
   int buttons[kGetBuffer] = {};
-  a.get_doublev(kHdCurrentTransform, T);  // X_PS, column-major, mm
-  a.get_doublev(kHdCurrentVelocity, v);   // mm/s
+  a.get_doublev(kHdCurrentTransform, T);                              // X_PS, column-major, mm
+  a.get_doublev(kHdCurrentVelocity, v);                               // mm/s
   if (sensed_rotation_) a.get_doublev(kHdCurrentAngularVelocity, w);  // rad/s
   a.get_integerv(kHdCurrentButtons, buttons);
   const std::int64_t now_ns = NowNs();
@@ -347,8 +348,8 @@ unsigned int OpenHapticsDevice::Servo() noexcept {
     }
     const glm::dmat3 R_MH = kR_MP * R_PS * glm::transpose(kR_MP);
     sample.X_MH = RigidTransform{kR_MP * (p_PS - c_P_m_), glm::quat_cast(R_MH)};
-    sample.V_MH_M = Twist{kR_MP * (1e-3 * glm::dvec3(v[0], v[1], v[2])),
-                          kR_MP * glm::dvec3(w[0], w[1], w[2])};
+    sample.V_MH_M =
+        Twist{kR_MP * (1e-3 * glm::dvec3(v[0], v[1], v[2])), kR_MP * glm::dvec3(w[0], w[1], w[2])};
     sample.buttons = static_cast<std::uint32_t>(buttons[0]);
     sample.valid = IsFinite(sample.X_MH) && IsFinite(sample.V_MH_M);
   }

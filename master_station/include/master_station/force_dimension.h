@@ -46,9 +46,9 @@ inline const glm::dmat3 kR_MD{glm::dvec3(0.0, -1.0, 0.0), glm::dvec3(1.0, 0.0, 0
 struct ModelFigures {
   int system_type = 0;
   const char* name = "";
-  double max_force_n = 0.0;              ///< Largest force (N).
-  double max_torque_nm = 0.0;            ///< Largest torque (N·m); 0 = the wrist is passive.
-  double max_stiffness_n_per_m = 0.0;    ///< Largest stable stiffness (N/m).
+  double max_force_n = 0.0;            ///< Largest force (N).
+  double max_torque_nm = 0.0;          ///< Largest torque (N·m); 0 = the wrist is passive.
+  double max_stiffness_n_per_m = 0.0;  ///< Largest stable stiffness (N/m).
   double max_rotational_stiffness_nm_per_rad = 0.0;
   double max_damping_ns_per_m = 0.0;  ///< Largest stable damping (N·s/m).
   double workspace_radius_m = 0.0;    ///< Radius of a sphere about the origin the handle reaches.
@@ -79,9 +79,9 @@ struct ForceDimensionConfig {
 /// What the I/O thread has seen (counters since Open).
 struct ForceDimensionStatus {
   bool running = false;
-  std::uint64_t exchanges = 0;     ///< Periods whose reading and command both succeeded.
-  std::uint64_t read_faults = 0;   ///< Periods whose reading failed (zero was commanded).
-  std::uint64_t write_faults = 0;  ///< dhdSetForceAndTorque... calls that failed.
+  std::uint64_t exchanges = 0;           ///< Periods whose reading and command both succeeded.
+  std::uint64_t read_faults = 0;         ///< Periods whose reading failed (zero was commanded).
+  std::uint64_t write_faults = 0;        ///< dhdSetForceAndTorque... calls that failed.
   std::uint64_t saturated_commands = 0;  ///< Wrenches scaled down to the device's limits.
   std::uint64_t stale_wrenches = 0;      ///< Periods that rendered zero for want of a wrench.
 };
@@ -103,8 +103,9 @@ class ForceDimensionDevice final : public HapticDevice {
   /// Before Open: the name only (no force). After Open: the model's figures
   /// (FiguresForSystemType), with max force and torque lowered to the library's limits where
   /// dhdGetMaxForce / dhdGetMaxTorque report one (> 0), torque 0 and dof_out 3 when the wrist is
-  /// passive, dof_in 3 without a wrist; workspace: the cube inscribed in the model's workspace
-  /// sphere (half size r/sqrt(3)); rated at 1/io_period_s.
+  /// passive or the model has no torque figure (delta.6, sigma.3...), dof_in 3 without a wrist;
+  /// workspace: the cube inscribed in the model's workspace sphere (half size r/sqrt(3)); rated at
+  /// 1/io_period_s.
   DeviceCapabilities capabilities() const override;
   /// Loads the library, resolves its symbols, opens the device, enables forces with a zero
   /// wrench and starts the I/O thread. Throws std::runtime_error naming what is missing: the
@@ -158,10 +159,10 @@ class ForceDimensionDevice final : public HapticDevice {
   std::thread io_thread_;
   std::atomic<bool> stop_{false};
   std::atomic<bool> open_{false};
-  TripleBuffer<Sample> samples_;     // I/O thread -> loop
-  TripleBuffer<Command> commands_;   // loop -> I/O thread
-  Sample last_sample_;               // loop side
-  bool have_sample_ = false;         // loop side
+  TripleBuffer<Sample> samples_;    // I/O thread -> loop
+  TripleBuffer<Command> commands_;  // loop -> I/O thread
+  Sample last_sample_;              // loop side
+  bool have_sample_ = false;        // loop side
 
   std::atomic<std::uint64_t> exchanges_{0};
   std::atomic<std::uint64_t> read_faults_{0};
