@@ -50,6 +50,7 @@ foreach(unit haptic-master-station.service haptic-slave-sim.service)
 endforeach()
 install(FILES ${PROJECT_SOURCE_DIR}/deploy/udev/70-haptic-falcon.rules
               ${PROJECT_SOURCE_DIR}/deploy/udev/70-haptic-spacemouse.rules
+              ${PROJECT_SOURCE_DIR}/deploy/udev/70-haptic-forcedimension.rules
         DESTINATION ${CMAKE_INSTALL_LIBDIR}/udev/rules.d)
 install(FILES ${PROJECT_SOURCE_DIR}/deploy/config/operator.toml
               ${PROJECT_SOURCE_DIR}/deploy/config/remote.toml

@@ -16,6 +16,8 @@
 #include "haptic_core/demo/demo_scenes.h"
 #include "master_station/experiment.h"
 #include "master_station/falcon.h"
+#include "master_station/force_dimension.h"
+#include "master_station/openhaptics.h"
 #include "master_station/operator_station.h"
 #include "master_station/replay_device.h"
 #include "master_station/simulated_operator.h"
@@ -100,8 +102,8 @@ int main(int argc, char** argv) {
                  "slide, release, move on)")
       ->capture_default_str();
   app.add_option("--duration", duration_s,
-                 "experiment duration in seconds (default 5; with --device spacemouse or falcon\n"
-                 "the session lasts until Ctrl-C or SIGTERM unless this is given)")
+                 "experiment duration in seconds (default 5; with a real --device the session\n"
+                 "lasts until Ctrl-C or SIGTERM unless this is given)")
       ->check(CLI::Range(0.1, 1e6))
       ->capture_default_str();
   double trace_max_mb = 0.0;
@@ -187,9 +189,12 @@ int main(int argc, char** argv) {
          "--device", device_name,
          "operator device: simulated (a scripted hand following --experiment) or replay\n"
          "(a recorded handle trajectory, --replay FILE), spacemouse (3Dconnexion 6-DoF mouse\n"
-         "through hidapi, rate control, no force) or falcon (Novint Falcon through libusb, 3-DoF\n"
-         "position and force; needs --falcon-firmware)")
-      ->check(CLI::IsMember({"simulated", "replay", "spacemouse", "falcon"}))
+         "through hidapi, rate control, no force), falcon (Novint Falcon through libusb, 3-DoF\n"
+         "position and force; needs --falcon-firmware), forcedimension (omega, sigma, delta,\n"
+         "lambda through Force Dimension's libdhd, loaded at start) or openhaptics (3D Systems\n"
+         "Touch, Touch X, Phantom through OpenHaptics' libHD, loaded at start)")
+      ->check(CLI::IsMember(
+          {"simulated", "replay", "spacemouse", "falcon", "forcedimension", "openhaptics"}))
       ->capture_default_str();
   app.add_option(
          "--replay", replay_file,
@@ -201,6 +206,11 @@ int main(int argc, char** argv) {
                  "hidraw path of the SpaceMouse (default: the first 6-DoF 3Dconnexion device)");
   app.add_option("--falcon-firmware", falcon_firmware,
                  "Falcon firmware image (not shipped; e.g. from libnifalcon's or Novint's files)");
+  std::string device_library;
+  app.add_option(
+      "--device-library", device_library,
+      "the vendor library for --device forcedimension or openhaptics (default: libdhd.so\n"
+      "or libHD.so through LD_LIBRARY_PATH and the loader's cache)");
   bool no_passivity = false;
   double model_timeout_s = defaults.safety.model_timeout_s;
   double hunt_crossley = defaults.hunt_crossley_s_per_m;
@@ -413,7 +423,7 @@ int main(int argc, char** argv) {
       device = std::move(replay);
     } else {
       // A person at a real device: the session lasts until they stop it, unless --duration.
-      const bool real_device = device_name == "spacemouse" || device_name == "falcon";
+      const bool real_device = device_name != "simulated";
       config.run_until_stopped = real_device && app.count("--duration") == 0;
       experiment = ht::MakeExperiment(experiment_name, duration_s);
       if (device_name == "spacemouse") {
@@ -424,6 +434,14 @@ int main(int argc, char** argv) {
         ht::falcon::FalconConfig fc;
         fc.firmware_path = falcon_firmware;
         device = std::make_unique<ht::falcon::FalconDevice>(fc);
+      } else if (device_name == "forcedimension") {
+        ht::force_dimension::ForceDimensionConfig fd;
+        fd.library_path = device_library;
+        device = std::make_unique<ht::force_dimension::ForceDimensionDevice>(fd);
+      } else if (device_name == "openhaptics") {
+        ht::openhaptics::OpenHapticsConfig oh;
+        oh.library_path = device_library;
+        device = std::make_unique<ht::openhaptics::OpenHapticsDevice>(oh);
       } else {
         device = std::make_unique<ht::SimulatedOperatorDevice>(*experiment);
       }

@@ -73,6 +73,7 @@ OperatorStationRun::OperatorStationRun(const StationConfig& config, HapticDevice
   // from the experiment at its first reading, after the scene is known).
   try {
     device_.Open();
+    caps_ = device_.capabilities();
   } catch (...) {
     if (trace_) std::fclose(trace_);
     trace_ = nullptr;

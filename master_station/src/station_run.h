@@ -105,7 +105,7 @@ class OperatorStationRun {
   const StationConfig& config_;
   HapticDevice& device_;
   Experiment& experiment_;
-  const DeviceCapabilities caps_;
+  DeviceCapabilities caps_;       // read again after Open: some devices learn their limits there
   const std::int64_t ticks_;      // the loop's ticks (the maximum when run until stopped)
   const std::int64_t period_ns_;  // the loop's period
   std::FILE* trace_ = nullptr;

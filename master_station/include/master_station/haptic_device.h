@@ -43,7 +43,9 @@ struct DeviceState {
 class HapticDevice {
  public:
   virtual ~HapticDevice() = default;
-  /// What this device can do (valid before Open).
+  /// What this device can do. Valid before Open, except for devices that learn their figures
+  /// from the device at Open (Force Dimension, OpenHaptics): those give their name and no force
+  /// before Open and the device's own figures after it. The station reads them after Open.
   virtual DeviceCapabilities capabilities() const = 0;
   /// Opens the device. Throws std::runtime_error saying what is missing and what to do.
   virtual void Open() = 0;
