@@ -483,8 +483,14 @@ nlohmann::json RunOperatorStation(const StationConfig& config, HapticDevice& dev
     run.WaitForSession();
     run.WaitForFirstModel();
   } catch (const std::runtime_error& e) {
-    // No session or no model: the summary says why (the trace has its header only).
-    write_summary(run.FailureSummary(e.what()));
+    // No session or no model: the summary says why (the trace has its header only). What goes
+    // wrong while it is written is a warning: the error thrown is the one that says why.
+    try {
+      write_summary(run.FailureSummary(e.what()));
+    } catch (const std::exception& summary_error) {
+      std::fprintf(stderr, "[master] warning: no summary.json of this run: %s\n",
+                   summary_error.what());
+    }
     throw;
   }
   run.RunHapticLoop();

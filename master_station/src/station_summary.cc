@@ -195,7 +195,7 @@ nlohmann::json OperatorStationRun::FailureSummary(const std::string& error) {
   s["error"] = error;
   s["experiment"] = experiment_.name();
   s["device"] = caps_.name;
-  s["remote"] = config_.remote_address.ToString();
+  s["remote_address"] = config_.remote_address.ToString();
   s["session_opened"] = counters_.connected.load();
   s["session_refused"] = counters_.rejected.load();
   s["models_received"] = counters_.model_accepted.load();
