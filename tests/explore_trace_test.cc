@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -91,10 +92,15 @@ TEST(Explore, TheOperatorFoundTheObjectsAndPressedOnThem) {
 
 // The summary's wedged phase ends (a release or a transfer that ended with the tool still loaded)
 // are the trace's: counted again from the rows, at each end of such a phase the contact force on
-// the tool is above the summary's threshold exactly where the summary lists it.
+// the tool is above the summary's threshold exactly where the summary lists it. The summary counts
+// the loop's rows: where the trace writer dropped some, the two cannot be compared.
 TEST(Explore, TheSummaryListsThePhaseEndsWhereTheToolWasWedged) {
   const nlohmann::json s = Summary();
   ASSERT_TRUE(s.contains("wedged")) << "summary.json says nothing of wedged phase ends";
+  if (const auto dropped = s.value("trace_rows_dropped", std::uint64_t{0}); dropped > 0) {
+    GTEST_SKIP() << "the trace writer dropped " << dropped
+                 << " row(s): the trace's phase ends are not the loop's";
+  }
   const Trace t = LoadTrace(OutDir());
   const double above = s["wedged"]["above_n"].get<double>();
   std::vector<std::string> wedged;
@@ -112,6 +118,7 @@ TEST(Explore, TheSummaryListsThePhaseEndsWhereTheToolWasWedged) {
   }
   std::vector<std::string> listed;
   for (const auto& e : s["wedged"]["phase_ends"]) listed.push_back(e["phase"].get<std::string>());
+  EXPECT_GT(checked, 0) << "the trace has no end of a release or transfer phase";
   EXPECT_EQ(s["wedged"]["phase_ends_checked"].get<int>(), checked);
   EXPECT_EQ(listed, wedged);
   EXPECT_EQ(s["wedged"]["count"].get<int>(), static_cast<int>(wedged.size()));

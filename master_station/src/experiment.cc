@@ -1,6 +1,7 @@
 #include "master_station/experiment.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <glm/gtc/quaternion.hpp>
 #include <limits>
@@ -95,6 +96,12 @@ class Fig75Experiment final : public FixedScript {
 
 // The explore script: a list of segments, each a time interval with a hand behaviour.
 class ExploreExperiment final : public Experiment {
+  // Each object's phases in order: the k-th object's (from 0) are kStepsPerObject * k + step,
+  // named kStepNames[step] + "@" + (k + 1).
+  enum Step : int { kTransfer, kPress, kSlideX, kSlideY, kRelease, kStepsPerObject };
+  static constexpr std::array<const char*, kStepsPerObject> kStepNames = {
+      "transfer", "press", "slide_x", "slide_y", "release"};
+
  public:
   explicit ExploreExperiment(const ExploreParams& p) : p_(p) {
     const auto positive = [](double v) { return v > 0.0 && std::isfinite(v); };
@@ -110,8 +117,11 @@ class ExploreExperiment final : public Experiment {
   const std::string& name() const noexcept override { return name_; }
   double duration_s() const noexcept override { return p_.duration_s; }
   const std::vector<std::string>& phase_names() const noexcept override { return phases_; }
-  // Phases 5k + 0 (transfer@k) and 5k + 4 (release@k): the hand has left the object.
-  bool EndsFree(int phase) const noexcept override { return phase % 5 == 0 || phase % 5 == 4; }
+  // Each object's transfer and release end with the hand off the object.
+  bool EndsFree(int phase) const noexcept override {
+    const int step = phase % kStepsPerObject;
+    return step == kTransfer || step == kRelease;
+  }
 
   void SetScene(const ExperimentScene& scene) override {
     std::vector<ExperimentTarget> targets = scene.targets;
@@ -126,7 +136,7 @@ class ExploreExperiment final : public Experiment {
     }
     phases_.clear();
     for (std::size_t k = 0; k < targets.size(); ++k) {
-      for (const char* ph : {"transfer", "press", "slide_x", "slide_y", "release"}) {
+      for (const char* ph : kStepNames) {
         phases_.push_back(std::string(ph) + "@" + std::to_string(k + 1));
       }
     }
@@ -166,7 +176,7 @@ class ExploreExperiment final : public Experiment {
       // may go: the tool at the bottom of the object's bounds.
       const double hover_z = target.top_M.z + below;
       const double floor_z = target.box_min_M.z + below - 0.005;
-      const int base = 5 * k;
+      const int base = kStepsPerObject * k;
 
       // Just above the object's top where the tool touches nothing (the remote node checked).
       const double approach_z = std::min(travel_z, std::max(target.approach_z_M, hover_z));
@@ -174,7 +184,7 @@ class ExploreExperiment final : public Experiment {
       const bool jump = distance > p_.jump_beyond_m || travel_z - approach_z > 0.1;
       Segment lift;  // straight up: to where the last press started, or to the travel height
       lift.kind = Segment::kMove;
-      lift.phase = base + 0;
+      lift.phase = base + kTransfer;
       lift.from = here;
       lift.to = {here.x, here.y, jump ? ceiling : travel_z};
       lift.shift = shift;
@@ -197,7 +207,7 @@ class ExploreExperiment final : public Experiment {
 
       Segment press;  // down under force control, fast to near the top, then slowly
       press.kind = Segment::kPress;
-      press.phase = base + 1;
+      press.phase = base + kPress;
       press.from = press.to = move.to;
       press.shift = shift;
       press.floor_z = floor_z;
@@ -206,20 +216,20 @@ class ExploreExperiment final : public Experiment {
       const double stroke_x = std::min(p_.stroke_m, 0.4 * half.x);
       const double stroke_y = std::min(p_.stroke_m, 0.4 * half.y);
       Segment slide = press;
-      slide.phase = base + 2;
+      slide.phase = base + kSlideX;
       slide.axis = 0;
       slide.amplitude = stroke_x;
       add(slide, p_.slide_s);
-      slide.phase = base + 3;
+      slide.phase = base + kSlideY;
       slide.axis = 1;
       slide.amplitude = stroke_y;
       add(slide, p_.slide_s);
       Segment release = press;
       release.kind = Segment::kLift;
-      release.phase = base + 4;
+      release.phase = base + kRelease;
       release.amplitude = 0.0;
       add(release, p_.release_s);
-      press.phase = base + 1;
+      press.phase = base + kPress;
       add(press, p_.press_s);
       here = {spot.x, spot.y, hover_z};
     }
