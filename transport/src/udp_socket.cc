@@ -39,6 +39,11 @@ SocketAddress SocketAddress::Parse(const std::string& text) {
     a.length = sizeof(s6);
     return a;
   }
+  // An IPv6 address without its brackets: its last ':' was taken for the port's.
+  if (host.find(':') != std::string::npos) {
+    throw std::invalid_argument("address '" + text +
+                                "': write an IPv6 address as [ADDR]:PORT, e.g. [::1]:47000");
+  }
   sockaddr_in s4{};
   s4.sin_family = AF_INET;
   s4.sin_port = htons(static_cast<std::uint16_t>(port));

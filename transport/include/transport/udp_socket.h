@@ -18,7 +18,8 @@ struct SocketAddress {
   /// Parses "HOST:PORT" where HOST is a numeric IPv4 address, "[IPv6]", "localhost" (127.0.0.1)
   /// or a host name, resolved by the system (getaddrinfo: its first IPv4 address, else its first
   /// IPv6 one). Throws std::invalid_argument with the offending text when it cannot be parsed or
-  /// resolved, or the port is outside 0..65535.
+  /// resolved, or the port is outside 0..65535; a HOST with ':' outside brackets ("::1:47000")
+  /// is refused with how to write an IPv6 address.
   static SocketAddress Parse(const std::string& text);
   /// "a.b.c.d:port" or "[v6]:port".
   std::string ToString() const;
