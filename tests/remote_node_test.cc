@@ -364,9 +364,6 @@ TEST(RemoteNode, ModelsASurfaceARoundTripAwayFromTheRoundTripItsOperatorReports)
   }
 }
 
-// The header's sequence is a u32 (protocol version 8): a node whose streams near its end says
-// Goodbye and closes the session (the operator then opens a new one), instead of sending numbers
-// the operator would refuse as replays.
 // The operator says Goodbye three times (a lost one would leave the node waiting for the peer
 // timeout): the copies after the first belong to the session it closed and are counted as its
 // copies, not as rejections (deploy/report draws rejections as faults). A Goodbye of a session
@@ -404,6 +401,9 @@ TEST(RemoteNode, TheCopiesOfTheOperatorsGoodbyeAreNoRejections) {
   EXPECT_EQ(t["rejected_total"].get<int>(), 1);
 }
 
+// The header's sequence is a u32 (protocol version 8): a node whose streams near its end says
+// Goodbye and closes the session (the operator then opens a new one), instead of sending numbers
+// the operator would refuse as replays.
 TEST(RemoteNode, EndsASessionWhoseSequenceNumbersRunLow) {
   const HapticScene scene = MakeBlockOnGearScene();
   RemoteNodeConfig config = LocalNodeConfig(TestKey(41), "remote_node_renew_test.port");
