@@ -548,8 +548,8 @@ TEST(ContactRegion, BlockRestingOnTheGearBearsOnItsEdgesAndItsFieldCarriesTheKin
       for (const double d : {-1.5e-3, 1.5e-3}) {
         const ContactModel there = pipeline.Step(tilted(theta + d), 1, t);
         const ContactModelEvaluation e =
-            EvaluateContactModel(m, tilted(theta + d), 1.0,
-                                 std::numeric_limits<double>::infinity(), fields ? &cache : nullptr);
+            EvaluateContactModel(m, tilted(theta + d), 1.0, std::numeric_limits<double>::infinity(),
+                                 fields ? &cache : nullptr);
         if (fields) EXPECT_EQ(e.field_contacts, 1) << theta << " " << d;
         const double f_scale = glm::length(there.F_T_W_at_q0.force);
         worst = std::max(worst, glm::length(e.F_T_W.force - there.F_T_W_at_q0.force) / f_scale);

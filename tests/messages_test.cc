@@ -968,8 +968,8 @@ TEST(Messages, DepthFieldIdsTravelWithTheirContactsAndBadSectionsAreRejected) {
       ASSERT_LE(d.size, kMaxDatagramBytes);
       const std::size_t fixed = compact ? kCompactContactModelFixedBytes : kContactModelFixedBytes;
       const std::size_t contact = compact ? kCompactContactBytes : kContactBytes;
-      EXPECT_EQ(d.size,
-                kHeaderBytes + fixed + n * contact + DepthFieldIdSectionBytes(with_field) + kMacBytes);
+      EXPECT_EQ(d.size, kHeaderBytes + fixed + n * contact + DepthFieldIdSectionBytes(with_field) +
+                            kMacBytes);
       const auto decode = [&](const Datagram& datagram, ContactModelMessage& out) {
         Header h;
         std::span<const std::uint8_t> body;
@@ -1017,10 +1017,12 @@ TEST(Messages, DepthFieldIdsTravelWithTheirContactsAndBadSectionsAreRejected) {
   }
   // Every contact with a field: the compact model carries all 14 ids; the float model the 11
   // that fit, those of its first contacts, and the others come without a field.
-  const int float_fit = DepthFieldIdCapacity(kContactModelFixedBytes, kContactBytes, kMaxWireContacts);
-  EXPECT_EQ(float_fit, static_cast<int>((kMaxDatagramBytes - kHeaderBytes - kContactModelFixedBytes -
-                                         kMaxWireContacts * kContactBytes - 1 - kMacBytes) /
-                                        kDepthFieldIdBytes));
+  const int float_fit =
+      DepthFieldIdCapacity(kContactModelFixedBytes, kContactBytes, kMaxWireContacts);
+  EXPECT_EQ(float_fit,
+            static_cast<int>((kMaxDatagramBytes - kHeaderBytes - kContactModelFixedBytes -
+                              kMaxWireContacts * kContactBytes - 1 - kMacBytes) /
+                             kDepthFieldIdBytes));
   EXPECT_EQ(float_fit, 11);
   for (const bool compact : {false, true}) {
     ContactModelMessage m = SampleModel(kMaxWireContacts);

@@ -105,8 +105,8 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
       return;
     }
   } else {
-    backend = std::make_unique<CpuPenetrationDepthBackend>(
-        max_resolution, st.texture_path, st.texture_threads);
+    backend = std::make_unique<CpuPenetrationDepthBackend>(max_resolution, st.texture_path,
+                                                           st.texture_threads);
   }
   run.renderer = backend->description();
   const PipelineOptions options = PipelineOptionsFor(st);

@@ -268,7 +268,7 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     no_neighbour_peaks.neighbour_peak_seeds = false;
     s.push_back(no_neighbour_peaks);
     // Stage 5b with the render's form h·(N·n) at the coarse point instead of parallax (the
-    // default before issue 32's twenty-eighth stop).
+    // form the grid renders).
     FrontierSetting no_parallax = refined;
     no_parallax.name = "no_parallax";
     no_parallax.parallax = false;

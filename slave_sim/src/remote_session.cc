@@ -462,11 +462,10 @@ void RemoteSession::SendModel(wire::ContactModelMessage& out, std::int64_t now) 
   for (int i = 0; i < contacts; ++i) {
     field_ids += out.model.contacts[static_cast<std::size_t>(i)].depth_field_id != 0 ? 1 : 0;
   }
-  const int fit =
-      compact_models_ ? wire::DepthFieldIdCapacity(wire::kCompactContactModelFixedBytes,
-                                                   wire::kCompactContactBytes, contacts)
-                      : wire::DepthFieldIdCapacity(wire::kContactModelFixedBytes,
-                                                   wire::kContactBytes, contacts);
+  const int fit = compact_models_ ? wire::DepthFieldIdCapacity(wire::kCompactContactModelFixedBytes,
+                                                               wire::kCompactContactBytes, contacts)
+                                  : wire::DepthFieldIdCapacity(wire::kContactModelFixedBytes,
+                                                               wire::kContactBytes, contacts);
   field_ids_left_out_ += static_cast<std::uint64_t>(std::max(field_ids - fit, 0));
   link_.Send(compact_models_ ? wire::EncodeCompactContactModel(header, out, config_.key)
                              : wire::EncodeContactModel(header, out, config_.key),

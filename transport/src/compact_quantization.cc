@@ -218,11 +218,11 @@ CompactContactModelBody QuantizeContactModel(const ContactModelMessage& m) noexc
     w.normal_oct = EncodeOctahedral(c.normal_W);
   }
   // The ids that fit the datagram (all of them for kMaxWireContacts compact contacts).
-  b.num_field_ids = static_cast<int>(FlattenFieldIds(
-      model, static_cast<std::size_t>(n),
-      std::span(b.field_ids)
-          .first(static_cast<std::size_t>(
-              DepthFieldIdCapacity(kCompactContactModelFixedBytes, kCompactContactBytes, n)))));
+  b.num_field_ids = static_cast<int>(
+      FlattenFieldIds(model, static_cast<std::size_t>(n),
+                      std::span(b.field_ids)
+                          .first(static_cast<std::size_t>(DepthFieldIdCapacity(
+                              kCompactContactModelFixedBytes, kCompactContactBytes, n)))));
   return b;
 }
 

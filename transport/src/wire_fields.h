@@ -146,13 +146,12 @@ constexpr void Fields(auto& a, Of<ContactModelMessage> auto& m) {
   Pose(a, m.model.X_WT0);
   Vec(a, m.model.F_T_W_at_q0.force);
   Vec(a, m.model.F_T_W_at_q0.torque);
-  const std::size_t n =
-      CountBefore<std::uint8_t>(a, m.model.num_contacts, kMaxWireContacts, kContactBytes,
-                                kDepthFieldIdCountBytes);
+  const std::size_t n = CountBefore<std::uint8_t>(a, m.model.num_contacts, kMaxWireContacts,
+                                                  kContactBytes, kDepthFieldIdCountBytes);
   for (std::size_t i = 0; i < n; ++i) Fields(a, m.model.contacts[i]);
   DepthFieldIds(a, m.model, n,
-                static_cast<std::size_t>(DepthFieldIdCapacity(kContactModelFixedBytes, kContactBytes,
-                                                              static_cast<int>(n))));
+                static_cast<std::size_t>(DepthFieldIdCapacity(kContactModelFixedBytes,
+                                                              kContactBytes, static_cast<int>(n))));
 }
 
 /// One contact of a CompactContactModel as it is on the wire (protocol.h).
@@ -209,9 +208,8 @@ constexpr void Fields(auto& a, Of<CompactContactModelBody> auto& m) {
   Each(a, m.p_WT0);
   a(m.q_WT0_low);
   a(m.q_WT0_high);
-  const std::size_t n =
-      CountBefore<std::uint8_t>(a, m.num_contacts, kMaxWireContacts, kCompactContactBytes,
-                                kDepthFieldIdCountBytes);
+  const std::size_t n = CountBefore<std::uint8_t>(a, m.num_contacts, kMaxWireContacts,
+                                                  kCompactContactBytes, kDepthFieldIdCountBytes);
   for (std::size_t i = 0; i < n; ++i) Fields(a, m.contacts[i]);
   const std::size_t nf = Count<std::uint8_t>(
       a, m.num_field_ids,

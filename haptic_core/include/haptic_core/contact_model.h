@@ -91,8 +91,8 @@ struct ContactModelEvaluation {
 ///
 /// With `fields`, a contact with a depth field (ContactLinearization::depth_field_id) that the
 /// cache holds takes δ, ∇δ and the smooth maximum's curvature from the field at X_WT
-/// (DepthFieldCache::Evaluate, plus depth_field_shift_m) instead of its linearization, also beyond the
-/// field's travel margin (counted: a linearization made a round trip ago is worse there, its
+/// (DepthFieldCache::Evaluate, plus depth_field_shift_m) instead of its linearization, also beyond
+/// the field's travel margin (counted: a linearization made a round trip ago is worse there, its
 /// steps at the margin were the largest force steps on the gear at 25 ms); without the field,
 /// its linearization, and the fallback is counted.
 ContactModelEvaluation EvaluateContactModel(

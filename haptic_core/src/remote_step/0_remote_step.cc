@@ -106,10 +106,11 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   }
   // A face resting on ridges: the bearing edge's slope instead of the secant across the V.
   for (int i = 0; i < d.last_num_queries; ++i) {
-    UseBearingEdgeRotationSlope(d.last_queries[i].window,
-                                {d.last_samples.data() + static_cast<std::size_t>(i) * kGradientSamples,
-                                 static_cast<std::size_t>(kGradientSamples)},
-                                X_WT.translation, d.last_results[i]);
+    UseBearingEdgeRotationSlope(
+        d.last_queries[i].window,
+        {d.last_samples.data() + static_cast<std::size_t>(i) * kGradientSamples,
+         static_cast<std::size_t>(kGradientSamples)},
+        X_WT.translation, d.last_results[i]);
   }
   // The grazing guard: a δ its coarse geometry cannot hold is the sideways overlap along a
   // grazing direction, not a penetration; the contact is left out of the model (its linearization

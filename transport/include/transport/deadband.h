@@ -96,11 +96,12 @@ struct ToolStateDeadbandConfig {
   /// Depth criterion near contact (issue 32, eleventh stop), 0 = off: with the held contact
   /// model given to Decide, a tool state is also sent when, for a contact of that model, the
   /// depth it gives at the tool's pose and at the remote node's prediction differ by more than
-  /// max(k·δ, k·this) (m; δ the contact's depth at the tool, ContactDepthAt). The remote node linearizes each model at the pose it predicts, so this bounds the
-  /// depth error of that linearization point where the held model says the depth changes fast
-  /// (a ridge's flank, a rotation about a long lever), and nowhere else. Contacts whose depth is
-  /// below −this at both poses are not looked at. The velocity-adaptive factor does not widen
-  /// it (a depth error is felt as such at any speed).
+  /// max(k·δ, k·this) (m; δ the contact's depth at the tool, ContactDepthAt). The remote node
+  /// linearizes each model at the pose it predicts, so this bounds the depth error of that
+  /// linearization point where the held model says the depth changes fast (a ridge's flank, a
+  /// rotation about a long lever), and nowhere else. Contacts whose depth is below −this at both
+  /// poses are not looked at. The velocity-adaptive factor does not widen it (a depth error is felt
+  /// as such at any speed).
   double contact_depth_floor_scale_m = 0.0;
   double keepalive_s = 0.1;  ///< longest time between two tool states sent (s, > 0)
   /// Also send when the twist itself changed beyond the deadband (Weber fraction of the last

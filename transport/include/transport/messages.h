@@ -235,9 +235,9 @@ struct Datagram {
 // Encoders: header (its type is set by the encoder) + body + MAC under `key`.
 Datagram EncodeToolState(const Header& header, const ToolStateMessage& message,
                          const MacKey& key) noexcept;
-/// Contacts beyond kMaxWireContacts are not sent (the caller keeps at most kMaxContacts); depth-field
-/// ids beyond DepthFieldIdCapacity() (11 with 14 float contacts) are not sent: those contacts go
-/// without their field.
+/// Contacts beyond kMaxWireContacts are not sent (the caller keeps at most kMaxContacts);
+/// depth-field ids beyond DepthFieldIdCapacity() (11 with 14 float contacts) are not sent: those
+/// contacts go without their field.
 Datagram EncodeContactModel(const Header& header, const ContactModelMessage& message,
                             const MacKey& key) noexcept;
 /// The same model quantized as CompactContactModel (protocol.h states the layout and each field's

@@ -461,11 +461,12 @@ static_assert(kHeaderBytes + kContactModelFixedBytes + kMaxWireContacts * kConta
                       kDepthFieldIdCountBytes + kMacBytes <=
                   kMaxDatagramBytes,
               "a full contact model must fit in one datagram");
-static_assert(kHeaderBytes + kCompactContactModelFixedBytes +
-                      kMaxWireContacts * (kCompactContactBytes + kDepthFieldIdBytes) +
-                      kDepthFieldIdCountBytes + kMacBytes <=
-                  kMaxDatagramBytes,
-              "a full compact contact model with a field for each contact must fit in one datagram");
+static_assert(
+    kHeaderBytes + kCompactContactModelFixedBytes +
+            kMaxWireContacts * (kCompactContactBytes + kDepthFieldIdBytes) +
+            kDepthFieldIdCountBytes + kMacBytes <=
+        kMaxDatagramBytes,
+    "a full compact contact model with a field for each contact must fit in one datagram");
 static_assert(DepthFieldIdCapacity(kCompactContactModelFixedBytes, kCompactContactBytes,
                                    kMaxWireContacts) == kMaxWireContacts);
 static_assert(kHeaderBytes + kSceneManifestFixedBytes + kMaxManifestEntries * kManifestEntryBytes +
