@@ -67,7 +67,8 @@ double NonNegative(const std::string& key, double v) {
 /// --model-deadband-*-floor), release_ticks, energy_bounded_switch, switch_spend,
 /// offset_release_ms (the operator tick's passivity options), setting (a frontier setting's name:
 /// the remote step's options), depth_fields, field_min_margin_mm, field_smooth_max_um,
-/// field_subdivision, field_speed_mm_s (the contact model as depth fields). Defaults:
+/// field_subdivision, field_speed_mm_s (the contact model as depth fields), remote_period_ms
+/// (the remote node's extrapolated steps at most this often). Defaults:
 /// master_station's and slave_sim's, deadband 10 %.
 
 /// A depth field's datagrams: each carries up to this many of its bytes (a 1,400-byte datagram
@@ -159,6 +160,8 @@ Arm ParseArm(const std::string& text) {
       arm.depth_field_subdivision = static_cast<int>(v);
     } else if (key == "field_speed_mm_s") {
       arm.depth_field_speed_m_per_s = NonNegative(key, v) * 1e-3;
+    } else if (key == "remote_period_ms") {
+      arm.remote_step_period_s = NonNegative(key, v) * 1e-3;
     } else if (key == "field_smooth_max_um") {
       if (!(v > 0.0)) throw std::invalid_argument("--arm: field_smooth_max_um must be > 0");
       arm.depth_field_smooth_max_m = v * 1e-6;
@@ -268,6 +271,9 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
   std::unordered_set<std::uint32_t> fields_delivered;  // ids sent with a model that arrives
   SentToolState remote;              // the newest tool state the remote node holds
   std::int64_t remote_recv_ns = -1;  // when it arrived (< 0: none yet)
+  // The remote node's last step (remote clock, ns) and its period for extrapolated steps.
+  std::int64_t last_remote_step_ns = std::numeric_limits<std::int64_t>::min() / 2;
+  const auto remote_period_ns = static_cast<std::int64_t>(arm.remote_step_period_s * 1e9);
   ContactModel held_model{};         // the newest model the operator received (its deadband's)
   std::uint64_t tool_seq = 0, model_seq = 0;
   ArmRun run;
@@ -348,12 +354,16 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     // The remote node, right after this tick's tool state has arrived: one step at the newest
     // state, extrapolated under a tool-state deadband as RemoteSession::ToolPoseForStep does.
     const std::int64_t t_r = now + delay_ns;
+    bool fresh_state = false;
     while (!to_remote.empty() && to_remote.front().arrive_ns <= t_r) {
       remote = to_remote.front().value;
       remote_recv_ns = to_remote.front().arrive_ns;
       to_remote.pop_front();
+      fresh_state = true;
     }
     if (remote_recv_ns < 0) continue;
+    if (!fresh_state && t_r - last_remote_step_ns < remote_period_ns) continue;
+    last_remote_step_ns = t_r;
     const std::int64_t extrapolation_ns =
         arm.tool.weber_fraction > 0.0
             ? std::clamp<std::int64_t>(t_r - remote_recv_ns, 0, keepalive_ns)

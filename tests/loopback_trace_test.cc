@@ -185,4 +185,24 @@ TEST(LoopbackFig75, TheDefaultDeadbandHoldsBackMostToolStatesAndModels) {
   EXPECT_GT(stream_value("packets_per_s"), 0.0);
 }
 
+// With depth fields the operator evaluates the surfaces at its own pose: the remote node steps at
+// once on each tool state, and on the extrapolated pose at most every kFieldPoseStepPeriodNs
+// (10 ms), so its pose_moved steps are bounded by its run time over that period, however fast
+// its steps run.
+TEST(LoopbackFig75, WithDepthFieldsTheExtrapolatedStepsComeAtMostEveryTenMilliseconds) {
+  std::ifstream in(OutDir() + "/summary.json");
+  ASSERT_TRUE(in.good());
+  const nlohmann::json s = nlohmann::json::parse(in);
+  const nlohmann::json& r = s["remote"];
+  if (!r["transport"]["depth_fields"].value("agreed", false)) {
+    GTEST_SKIP() << "run without depth fields";
+  }
+  const auto& by_cause = r["transport"]["deadband"]["steps_by_cause"];
+  const auto pose_moved = by_cause["pose_moved"].get<std::int64_t>();
+  const double wall_s = r["wall_s_since_first_step"].get<double>();
+  EXPECT_GT(by_cause["tool_state"].get<std::int64_t>(), 0);
+  EXPECT_GT(pose_moved, 0) << "the slides extrapolate the pose between tool states";
+  EXPECT_LE(static_cast<double>(pose_moved), wall_s / 0.010 + 1.0) << wall_s << " s";
+}
+
 }  // namespace

@@ -322,7 +322,7 @@ void RemoteNodeRun::StepOrWait() {
   wire::ContactModelMessage out;
   out.model = pipeline_->Step(X_WT, session_->latest_tool_state_seq(), timings,
                               session_->latest_tool_state().V_WT_W);
-  session_->SteppedAt(X_WT, timings.free_space_clearance_m);
+  session_->SteppedAt(X_WT, timings.free_space_clearance_m, t_step);
   session_->CountStep(cause);
   if (pipeline_->backend_failures() == 1 && !reported_fallback_) {
     reported_fallback_ = true;

@@ -326,11 +326,11 @@ const char* StepCauseName(StepCause cause) noexcept {
 
 StepCause RemoteSession::WhyStep(const RigidTransform& X_WT, bool scene_moves, double tool_motion_m,
                                  std::int64_t now) const noexcept {
-  // Pacing extrapolated steps to the model period was measured and left out: it cut the steps
-  // from 22 kHz to 0.8 kHz on fig75 but raised the device-force error at 10 % from 3.7 % to
-  // 5.0 % (the model that answers a change waits up to a period longer). Steps in contact
-  // therefore follow the extrapolated pose as fast as they run; only free space, an unchanged
-  // pose and a model the period holds wait.
+  // Without depth fields, steps in contact follow the extrapolated pose as fast as they run (a
+  // linearization answers a change only from the pose it was taken at: pacing them to the model
+  // period raised fig75's device-force error from 3.7 to 5.0 %). With fields the operator
+  // evaluates the surfaces at its own pose, and extrapolated steps come at most every
+  // kFieldPoseStepPeriodNs.
   if (fresh_state_) return StepCause::kToolState;
   if (!have_step_pose_) return StepCause::kFirst;
   if (scene_moves) return StepCause::kSceneMoves;
@@ -339,6 +339,7 @@ StepCause RemoteSession::WhyStep(const RigidTransform& X_WT, bool scene_moves, d
   // pass of an extrapolated pose was a busy loop of 10 µs steps until the period's end).
   if (model_pending_) return ModelDueInNs(now) > 0 ? StepCause::kWait : StepCause::kModelPeriodEnd;
   if (AtLastStepPose(X_WT) || tool_motion_m < last_step_clearance_m_) return StepCause::kWait;
+  if (depth_fields_ && now - last_step_ns_ < kFieldPoseStepPeriodNs) return StepCause::kWait;
   return StepCause::kPoseMoved;
 }
 

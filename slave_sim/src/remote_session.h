@@ -35,6 +35,12 @@ enum class StepCause : int {
   kPoseMoved,       ///< the extrapolated pose moved out of the last step's free space
 };
 inline constexpr int kStepCauses = 6;
+/// With depth fields agreed, the shortest time (ns) between two steps on an extrapolated pose
+/// (StepCause::kPoseMoved); a tool state is always stepped at once. In the lockstep (gear and
+/// Fig. 76 at 25 ms, gear at 150 ms with 10 % loss) 10 ms left the device force within 0.1
+/// point of stepping every millisecond and cut the contact-model stream 2.3–3.1×; 50 ms doubled
+/// the gear's error at 25 ms.
+inline constexpr std::int64_t kFieldPoseStepPeriodNs = 10'000'000;
 /// The cause's name in remote_summary.json ("wait", "first", "tool_state", "scene_moves",
 /// "model_period_end", "pose_moved").
 const char* StepCauseName(StepCause cause) noexcept;
@@ -93,8 +99,10 @@ class RemoteSession {
   /// - kWait when X_WT is the last step's pose, or when the last step was in free space and no
   ///   tool point has moved as far since (`tool_motion_m`, the pipeline's ToolMotionBound from
   ///   the last step's pose to X_WT, below that step's StepTimings::free_space_clearance_m: the
-  ///   same empty model); kPoseMoved otherwise (an extrapolated pose in contact, or out of the
-  ///   last step's free space).
+  ///   same empty model), or, with depth fields agreed, when the last step came less than
+  ///   kFieldPoseStepPeriodNs ago (the operator evaluates the fields at its own pose; a new step
+  ///   on the extrapolated pose only moves their q0); kPoseMoved otherwise (an extrapolated pose
+  ///   in contact, or out of the last step's free space).
   StepCause WhyStep(const RigidTransform& X_WT, bool scene_moves, double tool_motion_m,
                     std::int64_t now_ns) const noexcept;
   /// Time (ns) until a model held by the model period may go out: 0 when none is held or the
@@ -115,10 +123,12 @@ class RemoteSession {
   void CountSkippedStep() noexcept { ++steps_skipped_; }
   /// Counts a step by its cause (WhyStep), reported in StatsJson's "steps_by_cause".
   void CountStep(StepCause cause) noexcept { ++steps_by_cause_[static_cast<int>(cause)]; }
-  /// Records that a step ran at X_WT (the newest tool state is then used) and found
+  /// Records that a step ran at X_WT at `now_ns` (the newest tool state is then used) and found
   /// `free_space_clearance_m` (StepTimings) of free space around the tool.
-  void SteppedAt(const RigidTransform& X_WT, double free_space_clearance_m) noexcept {
+  void SteppedAt(const RigidTransform& X_WT, double free_space_clearance_m,
+                 std::int64_t now_ns) noexcept {
     fresh_state_ = false;
+    last_step_ns_ = now_ns;
     last_step_pose_ = X_WT;
     last_step_clearance_m_ = free_space_clearance_m;
     have_step_pose_ = true;
@@ -208,6 +218,7 @@ class RemoteSession {
   std::int64_t step_extrapolation_ns_ = 0;  ///< of the pose the newest step used
   RigidTransform last_step_pose_;
   double last_step_clearance_m_ = 0.0;  ///< StepTimings::free_space_clearance_m of the last step
+  std::int64_t last_step_ns_ = 0;       ///< when the last step ran (local clock, ns)
   wire::ContactModelMessage last_sent_;
   std::int64_t last_sent_answer_recv_ns_ = 0;  ///< receive time + extrapolation of its pose
   /// The newest step whose model the deadband held back (the same model to within it): its tool
