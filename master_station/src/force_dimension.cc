@@ -12,6 +12,7 @@
 #include "device_limits.h"
 #include "haptic_core/steady_clock.h"
 #include "master_station/vendor_library.h"
+#include "master_station/vendor_exchange.h"
 
 namespace ht::force_dimension {
 namespace {
@@ -331,35 +332,12 @@ void ForceDimensionDevice::IoLoop() noexcept {
 
 bool ForceDimensionDevice::ReadState(std::int64_t now_ns, DeviceState& state) noexcept {
   if (!open_.load(std::memory_order_acquire)) return false;
-  Sample s;
-  if (samples_.Read(s)) {
-    last_sample_ = s;
-    have_sample_ = true;
-  }
-  if (!have_sample_ || !last_sample_.valid) return false;
-  if (now_ns - last_sample_.t_ns > static_cast<std::int64_t>(config_.stale_after_s * 1e9)) {
-    return false;
-  }
-  state.X_MH = last_sample_.X_MH;
-  state.V_MH_M = last_sample_.V_MH_M;
-  state.buttons = last_sample_.buttons;
-  state.timestamp_ns = last_sample_.t_ns;
-  return true;
+  return ReadFreshSample(samples_, last_sample_, have_sample_, now_ns, config_.stale_after_s, state);
 }
 
 bool ForceDimensionDevice::WriteWrench(const Wrench& F_H_M, std::int64_t now_ns) noexcept {
   if (!open_.load(std::memory_order_acquire)) return false;
-  Command command;
-  command.t_ns = now_ns;
-  command.valid = true;
-  if (!IsFinite(F_H_M)) {
-    commands_.Write(command);  // zero
-    return false;
-  }
-  const glm::dmat3 R_DM = glm::transpose(kR_MD);
-  command.F_H_D = Wrench{R_DM * F_H_M.force, R_DM * F_H_M.torque};
-  commands_.Write(command);
-  return true;
+  return WriteVendorWrench(commands_, &Command::F_H_D, glm::transpose(kR_MD), F_H_M, now_ns);
 }
 
 ForceDimensionStatus ForceDimensionDevice::status() const noexcept {
