@@ -11,8 +11,8 @@
 
 #include "device_limits.h"
 #include "haptic_core/steady_clock.h"
-#include "master_station/vendor_library.h"
 #include "master_station/vendor_exchange.h"
+#include "master_station/vendor_library.h"
 
 namespace ht::force_dimension {
 namespace {
@@ -332,7 +332,8 @@ void ForceDimensionDevice::IoLoop() noexcept {
 
 bool ForceDimensionDevice::ReadState(std::int64_t now_ns, DeviceState& state) noexcept {
   if (!open_.load(std::memory_order_acquire)) return false;
-  return ReadFreshSample(samples_, last_sample_, have_sample_, now_ns, config_.stale_after_s, state);
+  return ReadFreshSample(samples_, last_sample_, have_sample_, now_ns, config_.stale_after_s,
+                         state);
 }
 
 bool ForceDimensionDevice::WriteWrench(const Wrench& F_H_M, std::int64_t now_ns) noexcept {
