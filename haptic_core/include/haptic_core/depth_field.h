@@ -172,8 +172,8 @@ struct DepthFieldEvaluation {
 /// depth δ_j = b(s_j) − s_j.z (DepthField), δ = smooth_max_m·ln Σ_j exp(δ_j / smooth_max_m)
 /// over the nodes whose bicubic stencil is complete, with ∇δ = Σ w_j ∇δ_j (w the
 /// softmax weights) and ∇δ_j = (g_j, r_j × g_j), g_j = R_WF·(∂b/∂x, ∂b/∂y, −1), r_j the node less
-/// the centre of mass (W). Nodes whose depth is more than 20 ε below the maximum (weight below
-/// 2e-9) are skipped by bounds per block and per cell without changing the result beyond that.
+/// the centre of mass (W). Nodes whose depth is more than 10 ε below the running maximum
+/// (weight below 4.5e-5 of the deepest's) are skipped by bounds per block and per cell.
 /// The tool is within the field's margin (within_margin) while |Δx_∥| + |Δθ|·tool_radius_m ≤
 /// travel_margin_m, Δq = X_WT ⊖ X_WT0 and Δx_∥ the part of Δx in F's plane (along n the field
 /// holds however far). noexcept, allocation-free: callable from the 1 kHz loop.
