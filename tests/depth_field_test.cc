@@ -395,6 +395,34 @@ double TiltedBigFace(double x, double y) {
   return std::isfinite(BigFlatFace(x, y)) ? -kD - 0.1 * (x - 5 * kH) : std::nan("");
 }
 
+// A plate of pins, one node 100 µm high every 12 nodes each way, under a flat 90 mm face resting
+// on them: only the cells next to a pin reach the deepest node's cutoff, so the evaluation
+// computes a few nodes per pin (far fewer than kDepthFieldDenseNodes) but tests nearly every
+// node, since every block's footprint reaches a pin.
+double Pins(double x, double y) {
+  const long i = std::lround(x / kH), j = std::lround(y / kH);
+  return i % 12 == 0 && j % 12 == 0 ? 100e-6 : 0.0;
+}
+double BigFace(double x, double y) {
+  const double lo = 10 * kH - 1e-9, hi = 189 * kH + 1e-9;
+  return x >= lo && x <= hi && y >= lo && y <= hi ? 95e-6 : std::nan("");
+}
+TEST(DepthField, AFieldWhoseEvaluationTestsManyNodesKeepsEveryOtherNode) {
+  const RigidTransform X_WF = TurnedFrame();
+  RigidTransform X_WT0;
+  X_WT0.translation = X_WF * glm::dvec3(99.5 * kH, 99.5 * kH, 5e-3);
+  X_WT0.rotation = X_WF.rotation;
+  const DepthField f = MakeField(200, kH, X_WF, X_WT0, Pins, BigFace);
+  const DepthFieldEvaluation e = DepthFieldDepthAt(f, X_WT0);
+  ASSERT_TRUE(e.valid);
+  // The nodes computed are far below kDepthFieldDenseNodes at stride 1 too (with pins every 14
+  // nodes the field keeps every node, computing 699 and testing 6,320): the tested ones decide.
+  EXPECT_LT(e.nodes_evaluated, kDepthFieldDenseNodes / 4);
+  EXPECT_EQ(f.node_stride, 2);
+  EXPECT_LE(e.nodes_tested, kDepthFieldDenseTestedNodes);
+  EXPECT_NEAR(e.max_node_depth_m, 5e-6, 1e-9);  // a pin 5 µm into the face
+}
+
 TEST(DepthField, AnEvaluationPastTheNodeBudgetStopsAndTheCacheLeavesTheFieldAlone) {
   const RigidTransform X_WF = TurnedFrame();
   RigidTransform X_WT0;

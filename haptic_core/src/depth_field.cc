@@ -206,14 +206,15 @@ bool DepthField::Prepare() {
   EnvBlockBounds(*this, kDepthFieldBlock, env_block_bound_m);
   EnvBlockBounds(*this, kDepthFieldSubBlock, env_sub_bound_m);
   EnvBlockBounds(*this, kDepthFieldSuperBlock, env_super_bound_m);
-  // Every tool node, then, for a dense field (kDepthFieldDenseNodes), every 2nd, 4th, … node of
-  // the tool's lattice along each axis, until the evaluation at X_WT0 fits.
+  // Every tool node, then, for a dense field (kDepthFieldDenseNodes, kDepthFieldDenseTestedNodes),
+  // every 2nd, 4th, … node of the tool's lattice along each axis, until the evaluation at X_WT0
+  // fits.
   KeepToolNodes(1);
   prepared = true;
   while (node_stride < kMaxDepthFieldNodeStride) {
     const DepthFieldEvaluation at_q0 =
         DepthFieldDepthAt(*this, X_WT0, DepthFieldKernel::kAvx2, kDepthFieldDenseNodes + 1);
-    if (!at_q0.over_budget) break;
+    if (!at_q0.over_budget && at_q0.nodes_tested <= kDepthFieldDenseTestedNodes) break;
     KeepToolNodes(2 * node_stride);
   }
   return true;

@@ -46,6 +46,12 @@ inline constexpr int kDepthFieldMaxNodes = 8192;
 /// evaluates such a field in bounded time instead of falling back to its linearization. The
 /// nodes kept are fixed on the tool's lattice, so that successive fields keep the same ones.
 inline constexpr int kDepthFieldDenseNodes = 2048;
+/// The same for the tool nodes whose own cell's bound the evaluation at X_WT0 tests (most of them
+/// rejected): surfaces interlocked over a wide area (seed Fig. 76's stripes) pass the blocks'
+/// bounds with most of their nodes and cost the loop ~25 ns a node tested. On Fig. 76 at 25 ms
+/// (`deadband_lockstep --scene striped-blocks`) the operator tick's p99 is 444 µs with this bound
+/// and 685 µs without; the gear's fields (seed Fig. 75) stay whole.
+inline constexpr int kDepthFieldDenseTestedNodes = 8192;
 /// Largest DepthField::node_stride.
 inline constexpr int kMaxDepthFieldNodeStride = 8;
 
@@ -128,7 +134,7 @@ struct DepthField {
   /// [4, kMaxDepthFieldSide], both maps #nx·ny, the tool's offsets within ±h, margin ≥ 0, ε > 0)
   /// and derives env_bound_m, the kept tool nodes, the blocks' bounds and tool_radius_m: all
   /// tool nodes, or, where the evaluation at X_WT0 computes more than kDepthFieldDenseNodes of
-  /// them, every node_stride-th. Allocates only when the buffers' capacity is short. Returns
+  /// them or tests more than kDepthFieldDenseTestedNodes, every node_stride-th. Allocates only when the buffers' capacity is short. Returns
   /// false, leaving prepared false, on a bad field.
   bool Prepare();
   /// Reserves the maps, the bounds and the blocks for kMaxDepthFieldSide² nodes (not Prepare's
