@@ -335,7 +335,7 @@ TEST(DepthRefinement, AContactWithoutOverlapIsLeftUnchanged) {
   EXPECT_EQ(refiner.counters().contacts, 0u);
 }
 
-// Parallax (DepthRefinementOptions::parallax, docs/frontier/issue32/twelfth_stop): the
+// Parallax (DepthRefinementOptions::parallax, docs/DESIGN.md §4): the
 // environment box's textured face tilted by θ about y from the window's n = z. Its displaced
 // surface in the face's own frame is (x, y, h(x)), in world R_y(θ)·(x, y, h(x)) = (x cosθ +
 // h sinθ, y, −x sinθ + h cosθ); its height along z at world s solves x cosθ + h(x) sinθ = s
