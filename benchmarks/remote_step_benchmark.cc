@@ -1,4 +1,4 @@
-// The full remote step (haptic_core/remote_step.h) on the seed's benchmark scenes (issue 15):
+// The full remote step (haptic_core/remote_step.h) on the seed's benchmark scenes:
 // per scene, the step's p50 time and its split (coarse stages, texture stage, per contact), leaf
 // pairs and contacts, over in-contact poses of the scene's scripted motion. A program, not a
 // Google Benchmark: each pose is stepped --repeats times and the percentiles are over all steps.
@@ -70,7 +70,7 @@ int main(int argc, char** argv) {
                "refined to the texture's full resolution)");
   bool no_sharing = false;
   app.add_flag("--no-share-connected-contacts", no_sharing,
-               "every contact its whole penalty (stage 5c off, as before issue 32's tenth stop)");
+               "every contact its whole penalty (stage 5c off)");
   bool parallax = true;
   app.add_flag("--parallax,!--no-parallax", parallax,
                "stage 5b reads heights through the displaced surface (DepthRefinementOptions::"
@@ -85,9 +85,8 @@ int main(int argc, char** argv) {
                  "interleaved step by step with the first on the same poses, and print its row "
                  "(B) beside: parallax (DepthRefinementOptions::parallax), seed-from-last-step, "
                  "tool-leaves-follow (PipelineOptions::tool_leaves_follow_object_leaves), "
-                 "split-continuous (stage 5a's split in its continuous form, on by default since "
-                 "issue 32's thirty-first stop: B without it; until then B was the split with "
-                 "100 um fades, the frontier's split_continuous_100um), reuse-base-render "
+                 "split-continuous (stage 5a's split in its continuous form, on by default: B "
+                 "without it), reuse-base-render "
                  "(stage 5a's regions from stage 5's base render; B renders the base again), "
                  "parallax-offset-seeds (DepthRefinementOptions::parallax_offset_seeds), "
                  "clustering-angle (PipelineOptions::clustering_angle_deg: B at 30 deg where A "

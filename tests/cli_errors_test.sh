@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Command-line errors (issue 35): every program answers a bad argument with one line
+# Command-line errors: every program answers a bad argument with one line
 # "program: error: ..." on stderr and exit status 2, before it starts anything; a missing key file
 # says how to make one. Usage: tests/cli_errors_test.sh SOURCE_DIR BUILD_DIR
 set -uo pipefail
@@ -49,6 +49,16 @@ expect slave_sim "unknown key 'grdi' (known: " "$build/slave_sim/slave_sim" --co
 grep -q "known: .*, grid, " "$tmp/err" || { echo "FAIL: the known keys do not list grid"; fail=1; }
 printf 'duration = 3\nexperimnet = "fig75"\n' > "$tmp/typo.toml"
 expect master_station "unknown key 'experimnet'" "$build/master_station/master_station" --config "$tmp/typo.toml"
+grep -q "known: .*, passivity-refill-pct, " "$tmp/err" ||
+  { echo "FAIL: the known keys do not list the Advanced group's passivity-refill-pct"; fail=1; }
+# The Advanced group's options are --config keys as the main group's: their values reach the
+# program (its range checks and its checks across options refuse them).
+printf 'key = "%s"\nno-split = true\nsplit-continuous-um = 100\n' "$tmp/k.key" > "$tmp/adv.toml"
+expect slave_sim "--no-split" "$build/slave_sim/slave_sim" --config "$tmp/adv.toml"
+printf 'clustering-angle-deg = 0\n' > "$tmp/adv.toml"
+expect slave_sim "--clustering-angle-deg" "$build/slave_sim/slave_sim" --config "$tmp/adv.toml"
+printf 'passivity-refill-pct = 100\n' > "$tmp/adv.toml"
+expect master_station "--passivity-refill-pct" "$build/master_station/master_station" --config "$tmp/adv.toml"
 # The shipped configurations name only known keys. They cannot be run here (CLI11 checks each key's
 # value as it reads it, so their absent key file would hide the keys after it; with the key the
 # remote node would start), so each key, and each commented-out "# key = value", is looked up in

@@ -4,8 +4,9 @@
 Reads the README's ```sh blocks, splits them into commands (at &&, ||, ;, |, &), and for each
 command whose program is one of --program NAME=PATH (matched by the basename of the command's
 first word: ./deploy/run-loopback and build/slave_sim/slave_sim alike) runs `PATH --help`
-(`PATH SUBCOMMAND --help` for a subcommand its help lists, e.g. `slave_sim inspect`) and checks
-that every --option the command uses appears in that help text. The options inside
+(`PATH SUBCOMMAND --help` for a subcommand its help lists, e.g. `slave_sim inspect`), or
+`--help-all` where --help offers it (the advanced options too), and checks that every --option
+the command uses appears in that help text. The options inside
 run-loopback's and deadband-table's --master-args "..." and --slave-args "..." are checked
 against master_station's and slave_sim's help. Commands of other programs (cmake, sudo, ...) are
 listed as not checked. Exit status 0 when every checked option exists, 1 otherwise (or when no
@@ -82,17 +83,22 @@ class Helps:
         self.programs = programs
         self.cache = {}
 
+    def run(self, argv):
+        try:
+            return subprocess.run(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                  text=True, timeout=120).stdout
+        except (OSError, subprocess.TimeoutExpired) as error:
+            print(f"  cannot run {' '.join(argv)}: {error}")
+            return ""
+
     def text(self, name, subcommand=None):
         key = (name, subcommand)
         if key not in self.cache:
-            argv = [self.programs[name]] + ([subcommand] if subcommand else []) + ["--help"]
-            try:
-                run = subprocess.run(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                     text=True, timeout=120)
-                self.cache[key] = run.stdout
-            except (OSError, subprocess.TimeoutExpired) as error:
-                self.cache[key] = ""
-                print(f"  cannot run {' '.join(argv)}: {error}")
+            argv = [self.programs[name]] + ([subcommand] if subcommand else [])
+            text = self.run(argv + ["--help"])
+            if re.search(r"^\s+--help-all\b", text, flags=re.M):
+                text = self.run(argv + ["--help-all"])
+            self.cache[key] = text
         return self.cache[key]
 
     def subcommands(self, name):
@@ -123,7 +129,7 @@ def check_options(helps, name, subcommand, words, where, failures):
             option, _, value = word.partition("=")
             checked += 1
             if not has_option(help_text, option):
-                failures.append(f"{where}: {label} has no option {option} (not in its --help)")
+                failures.append(f"{where}: {label} has no option {option} (not in its help)")
             if option in NESTED:
                 nested = value if value else (words[i + 1] if i + 1 < len(words) else "")
                 if not value:

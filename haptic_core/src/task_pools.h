@@ -2,7 +2,7 @@
 // oneTBB's task objects come from per-thread small-object pools that keep every object they ever
 // held: a pool allocates (through the scalable allocator) only when more of its tasks are in
 // flight at once than ever before, which on two threads can first happen many steps into a run
-// (issue 34: one allocation in the first 72 steps on hammer-on-torus after a one-pass warm-up).
+// (one allocation in the first 72 steps on hammer-on-torus after a one-pass warm-up).
 // WarmTaskPools fills the pools of the arena's threads past what the remote step's nesting needs
 // (a parallel_for over contacts or traversal tasks, each with an isolated parallel_for of seven
 // renders), so that the step's own tasks find objects waiting.

@@ -1,5 +1,5 @@
 #pragma once
-// The operator's display (issue 17): renders the scene as the operator station received it, off
+// The operator's display: renders the scene as the operator station received it, off
 // the haptic loop, on its own thread: the decoded meshes with their materials' base colours at
 // their received poses, the tool at its simulated pose, the device's handle as a ghost of the
 // tool, and the contact points of the contact model in use with force arrows (m per N in the

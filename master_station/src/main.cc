@@ -82,9 +82,18 @@ int main(int argc, char** argv) {
       "simulated operator hand that follows an experiment script, exchanging tool states and\n"
       "contact models with slave_sim over UDP. Every datagram is authenticated with the\n"
       "pre-shared key (--key) that slave_sim uses."};
+  ht::UseTwoLevelHelp(app);
   app.set_config("--config", "",
-                 "read options from a TOML file (key = value, long option names without dashes);\n"
-                 "command-line options override it");
+                 "read options from a TOML file (key = value, long option names without dashes,\n"
+                 "the advanced ones too); command-line options override it");
+  // What a user needs is the app's own (--help); research comparisons and tuning are Advanced
+  // (--help-all), with the same names, defaults and --config keys.
+  CLI::App& adv = *app.add_option_group(
+      "Advanced",
+      "the loop rate, the display's camera, the network's and the stream's settings, the\n"
+      "passivity stage and the energy-bounded switch, the deadband's per-stream settings and\n"
+      "floors, the encodings, and the depth fields switched off for comparison; each default's\n"
+      "reason and figure: docs/DESIGN.md, docs/deadband.md, docs/measurements.md");
   std::string remote = "127.0.0.1:47000", bind = "127.0.0.1:0", experiment_name = "fig75";
   std::string out_dir, origin_text;
   double duration_s = 5.0, rate_hz = 1000.0, connect_timeout_s = 10.0;
@@ -111,7 +120,7 @@ int main(int argc, char** argv) {
                  "largest trace.csv in MiB (0 = no cap); rows past it are counted, not written")
       ->check(CLI::Range(0.0, 1e6))
       ->capture_default_str();
-  app.add_option("--rate", rate_hz, "haptic loop rate in Hz (100..4000)")
+  adv.add_option("--rate", rate_hz, "haptic loop rate in Hz (100..4000)")
       ->check(CLI::Range(100.0, 4000.0))
       ->capture_default_str();
   app.add_option("--out", out_dir, "directory for trace.csv and summary.json");
@@ -135,28 +144,28 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   double camera_distance_m = 0.0;
   std::string display_camera = "follow";
-  app.add_option("--display-camera", display_camera,
+  adv.add_option("--display-camera", display_camera,
                  "the display's camera: follow (behind and above the tool, which stays in view) "
                  "or file (the scene file's own camera, where it has one)")
       ->check(CLI::IsMember({"follow", "file"}))
       ->capture_default_str();
   bool no_frame_overlay = false;
-  app.add_flag("--no-frame-overlay", no_frame_overlay,
+  adv.add_flag("--no-frame-overlay", no_frame_overlay,
                "do not print the run time, the phase and the contact force |F| in the display's "
                "frames");
-  app.add_option("--camera-distance", camera_distance_m,
+  adv.add_option("--camera-distance", camera_distance_m,
                  "distance of the display's camera behind and above the tool, m (0 = five times "
                  "the tool's radius)")
       ->check(CLI::Range(0.0, 1e4))
       ->capture_default_str();
-  app.add_option("--max-frames", max_frames, "stop the display after this many frames (0 = none)")
+  adv.add_option("--max-frames", max_frames, "stop the display after this many frames (0 = none)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   app.add_option(
       "--workspace-origin", origin_text,
       "X,Y,Z (m): where the device workspace centre lands in the remote world\n"
       "(default: the tool's home position the remote node gives when the session opens)");
-  app.add_option("--connect-timeout", connect_timeout_s,
+  adv.add_option("--connect-timeout", connect_timeout_s,
                  "seconds to wait for the first contact model")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
@@ -167,20 +176,20 @@ int main(int argc, char** argv) {
   ht::StationConfig defaults;
   int mtu = defaults.mtu, peer_timeout_ms = defaults.peer_timeout_ms, max_grid = 0;
   ht::AddKeyOption(app, key);
-  app.add_option("--mtu", mtu, "largest UDP datagram for scene-update fragments, bytes")
+  adv.add_option("--mtu", mtu, "largest UDP datagram for scene-update fragments, bytes")
       ->check(CLI::Range(548, 1472))
       ->capture_default_str();
-  app.add_option("--peer-timeout", peer_timeout_ms,
+  adv.add_option("--peer-timeout", peer_timeout_ms,
                  "declare the remote node lost after this long without an authenticated datagram, "
                  "ms (it is then asked for a new session every 250 ms)")
       ->check(CLI::Range(150, 60000))
       ->capture_default_str();
   double max_model_rate = 0.0;
-  app.add_option("--max-model-rate", max_model_rate,
+  adv.add_option("--max-model-rate", max_model_rate,
                  "most contact models per second asked of the remote node (0 = the loop rate)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
-  app.add_option("--max-grid", max_grid,
+  adv.add_option("--max-grid", max_grid,
                  "refuse a remote node whose penetration-depth grid is larger (0 = any)")
       ->check(CLI::Range(0, 65535))
       ->capture_default_str();
@@ -219,7 +228,7 @@ int main(int argc, char** argv) {
          "Hunt-Crossley contact damping of the simulated tool, alpha in s/m: each\n"
          "contact's force -k depth (1 + alpha d(depth)/dt); it grows with the depth and\n"
          "vanishes at first touch (at a 0.1 mm press, 20 s/m damps as a 2 ms linear damper\n"
-         "would; docs/frontier/issue32/ninth_stop); 0 = none")
+         "would; docs/measurements.md); 0 = none")
       ->check(CLI::Range(0.0, 10000.0))
       ->capture_default_str();
   double max_contact_force_n = defaults.max_contact_force_n;
@@ -229,10 +238,10 @@ int main(int argc, char** argv) {
                  "contacts, docs/hard-cases.md)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
-  app.add_flag("--no-passivity", no_passivity,
+  adv.add_flag("--no-passivity", no_passivity,
                "turn off the time-domain passivity controller (for comparison only)");
   double passivity_reserve_mj = ht::StationConfig{}.passivity_reserve_j * 1e3;
-  app.add_option("--passivity-reserve-mj", passivity_reserve_mj,
+  adv.add_option("--passivity-reserve-mj", passivity_reserve_mj,
                  "energy the passivity controller keeps in store, mJ (0 = none): while the "
                  "observed energy is below it, a damping of at most --passivity-refill-pct of "
                  "the wrench refills it, so that a hand too slow for the damping to act draws on "
@@ -240,30 +249,29 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0.0, 1000.0))
       ->capture_default_str();
   double passivity_refill_pct = ht::StationConfig{}.passivity_refill_fraction * 100.0;
-  app.add_option("--passivity-refill-pct", passivity_refill_pct,
+  adv.add_option("--passivity-refill-pct", passivity_refill_pct,
                  "the most the reserve's refill may change the wrench, percent of it")
       ->check(CLI::Range(0.0, 99.0))
       ->capture_default_str();
   double passivity_release_ms = ht::StationConfig{}.passivity_release_ms;
-  app.add_option("--passivity-release-ms", passivity_release_ms,
+  adv.add_option("--passivity-release-ms", passivity_release_ms,
                  "a force the passivity stage cut comes back over this long instead of on the "
-                 "next tick, ms (0 = at once; docs/passivity/README.md, \"The pulse train under "
-                 "delay\")")
+                 "next tick, ms (0 = at once; docs/measurements.md)")
       ->check(CLI::Range(0.0, 10000.0))
       ->capture_default_str();
   bool no_energy_bounded_switch = false;
-  app.add_flag("--no-energy-bounded-switch", no_energy_bounded_switch,
+  adv.add_flag("--no-energy-bounded-switch", no_energy_bounded_switch,
                "let a new contact model put its whole stored energy into the loop at once (by "
                "default it may raise the contact potential at the tool by no more than the "
                "passivity observer holds spare; beyond that its surface is moved out of the "
                "tool and given back as that energy allows, within --switch-offset-release-ms)");
   double switch_offset_release_ms = ht::StationConfig{}.switch_offset_release_ms;
-  app.add_option("--switch-offset-release-ms", switch_offset_release_ms,
+  adv.add_option("--switch-offset-release-ms", switch_offset_release_ms,
                  "the longest the energy-bounded switch holds its surface offset, ms (0 = as "
                  "long as the energy budget says)")
       ->check(CLI::Range(0.0, 1e9))
       ->capture_default_str();
-  app.add_option("--model-timeout", model_timeout_s,
+  adv.add_option("--model-timeout", model_timeout_s,
                  "fade the force to zero when the contact model is older than this, s")
       ->check(CLI::Range(0.01, 60.0))
       ->capture_default_str();
@@ -279,39 +287,39 @@ int main(int argc, char** argv) {
                  "by more than this; 0 = off, every sample sent)")
       ->check(CLI::Range(0.0, 99.0))
       ->capture_default_str();
-  app.add_option("--tool-state-deadband", tool_state_deadband_pct,
+  adv.add_option("--tool-state-deadband", tool_state_deadband_pct,
                  "deadband on the tool states this station sends, percent (default: --deadband)")
       ->check(CLI::Range(0.0, 99.0));
-  app.add_option("--model-deadband", model_deadband_pct,
+  adv.add_option("--model-deadband", model_deadband_pct,
                  "deadband asked of the remote node for its contact models, percent (default: "
                  "--deadband)")
       ->check(CLI::Range(0.0, 99.0));
-  app.add_option("--deadband-keepalive", deadband_keepalive_ms,
+  adv.add_option("--deadband-keepalive", deadband_keepalive_ms,
                  "longest gap either stream leaves while its deadband holds samples back, ms "
                  "(below --model-timeout)")
       ->check(CLI::Range(1.0, 60000.0))
       ->capture_default_str();
   bool deadband_velocity = false;
-  app.add_flag("--deadband-velocity", deadband_velocity,
+  adv.add_flag("--deadband-velocity", deadband_velocity,
                "also send a tool state when its twist changed beyond the deadband (by default "
                "only the pose's departure from the remote node's extrapolation counts)");
-  app.add_flag("--deadband-velocity-adaptive", deadband_velocity_adaptive,
+  adv.add_flag("--deadband-velocity-adaptive", deadband_velocity_adaptive,
                "widen the tool-state position and rotation floors while the tool moves fast "
                "(1 + speed / 0.05 m/s)");
   double contact_floor_mm = 0.2, contact_floor_mrad = 20.0;
-  app.add_option("--deadband-contact-floor-mm", contact_floor_mm,
+  adv.add_option("--deadband-contact-floor-mm", contact_floor_mm,
                  "near contact, the tool-state deadband's position floor scale, mm: a tool state "
                  "is sent once the pose leaves the remote node's prediction by the deadband times "
                  "this (free space: 2 mm)")
       ->check(CLI::Range(1e-3, 100.0))
       ->capture_default_str();
-  app.add_option("--deadband-contact-floor-mrad", contact_floor_mrad,
+  adv.add_option("--deadband-contact-floor-mrad", contact_floor_mrad,
                  "near contact, the tool-state deadband's rotation floor scale, mrad (the same as "
                  "in free space by default)")
       ->check(CLI::Range(1e-3, 1000.0))
       ->capture_default_str();
   double contact_depth_floor_um = ht::ToolStateDeadbandConfig{}.contact_depth_floor_scale_m * 1e6;
-  app.add_option("--deadband-contact-depth-floor-um", contact_depth_floor_um,
+  adv.add_option("--deadband-contact-depth-floor-um", contact_depth_floor_um,
                  "near contact, also send a tool state when a contact's depth in the held model "
                  "differs between the tool's pose and the remote node's prediction by more than "
                  "the deadband times max(depth, this), um (0 = off): the remote node linearizes "
@@ -320,19 +328,19 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0.0, 10000.0))
       ->capture_default_str();
   double contact_hold_ms = 500.0;
-  app.add_option("--deadband-contact-hold-ms", contact_hold_ms,
+  adv.add_option("--deadband-contact-hold-ms", contact_hold_ms,
                  "the contact floors stay this long after the held model last had contacts, ms "
                  "(covers a bounce off the surface; 0 = drop them at once)")
       ->check(CLI::Range(0.0, 60000.0))
       ->capture_default_str();
-  app.add_flag(
+  adv.add_flag(
       "--float-tool-states", float_tool_states,
       "send tool states in the f64 encoding (138 bytes a datagram) rather than the compact "
       "quantized one (66 bytes; transport/protocol.h states its error bounds)");
-  app.add_flag("--float-models", float_models,
+  adv.add_flag("--float-models", float_models,
                "ask for contact models in the float encoding rather than the compact quantized "
                "one (transport/protocol.h states its error bounds)");
-  app.add_flag("--no-depth-fields", no_depth_fields,
+  adv.add_flag("--no-depth-fields", no_depth_fields,
                "render every contact from the linearization the remote node made at the pose it "
                "answered (δ0 + J·Δq) instead of evaluating the contact's depth field, the two "
                "surfaces, at the tool's current pose every tick");
@@ -471,7 +479,7 @@ int main(int argc, char** argv) {
         summary["remote_step_of_models_p50_us"].get<double>(), summary["rtt_ms_p50"].get<double>(),
         summary["contacts_max"].get<int>(),
         static_cast<long long>(summary["nonfinite_count"].get<std::int64_t>()));
-    // What a person must see, said once at the end (issue 35): deploy/report lists the same.
+    // What a person must see, said once at the end: deploy/report lists the same.
     const auto number = [&](const nlohmann::json& j, const char* name) {
       return j.is_object() && j.contains(name) && j[name].is_number() ? j[name].get<double>() : 0.0;
     };

@@ -1,5 +1,5 @@
 #pragma once
-// The operator station's network side (one concern of RunOperatorStation, issue 16): the session
+// The operator station's network side (one concern of RunOperatorStation): the session
 // (Hello until Welcome, heartbeat, loss and reconnect), the tool-state and contact-model streams
 // through lock-free hand-offs with the haptic loop, and the scene stream's reassembly and repair.
 // Internal to master_station.

@@ -1,5 +1,5 @@
 #pragma once
-// trace.csv of the operator station (one concern of RunOperatorStation, issue 16): one row per
+// trace.csv of the operator station (one concern of RunOperatorStation): one row per
 // haptic tick, filled by the loop and written by the recorder thread. Internal to master_station.
 
 #include <cstdio>

@@ -71,11 +71,11 @@ struct Metrics {
   double dir_p50_deg = 0, dir_p95_deg = 0;
   double delta_p50_um = 0, delta_p95_um = 0;
   int windows = 0, missed = 0, invented = 0, poses_missed = 0, poses_invented = 0;
-  // Against the pipeline truth (contact_patch_truth.h, issue 31), which owns its contacts.
+  // Against the pipeline truth (contact_patch_truth.h), which owns its contacts.
   double pipeline_force_rel_rms = 0, pipeline_torque_rel_rms = 0;
   double volume_dir_p50_deg = 0, volume_dir_p95_deg = 0, volume_arm_rel_p50 = 0;
   int poses_truth_without_force = 0, poses_force_without_truth = 0;
-  // The contact model's prediction (issue 31, change 5): every PredictionStride()-th pose's model
+  // The contact model's prediction: every PredictionStride()-th pose's model
   // evaluated at its displaced poses (PredictionDisplacements) against the pipeline truth there
   // (what the operator's loop renders between two models); relative RMS over those poses and
   // displacements. NaN for the baselines, which send no model.

@@ -229,7 +229,7 @@ void WriteSummary(const std::string& path, const FrontierOptions& options,
        "stage and the coarse query); "
        "the ground truth afterwards on "
     << options.threads << ".\n\n";
-  s << "Two measures of error, each named where it is used (issue 31):\n\n"
+  s << "Two measures of error, each named where it is used:\n\n"
        "- **Pipeline truth (T1)**, the headline measure: from the **full-resolution** meshes "
        "alone, at each pose, the intersecting triangle pairs (FCL) grouped into contact patches "
        "(connected regions at the method's clustering distance and angle, then merged where two "
@@ -238,7 +238,7 @@ void WriteSummary(const std::string& path, const FrontierOptions& options,
        "5 mm (texture finer than that does not tilt it; else −∇V, the area-weighted normals of "
        "the surfaces inside the other solid, V the patch's intersection volume), its centre "
        "(their area centroid) and a window holding their projection; `--truth-no-merge` gives "
-       "the truth before issue 32's third stop (no merges, n = −∇V); δ_gt and ∇δ_gt on that window "
+       "the truth without them (single-linkage patches, n = −∇V); δ_gt and ∇δ_gt on that window "
        "by Embree ray casting (the method's facing and "
        "box rules), gradient steps at texel scale (0.1 mm); Φ_gt = Σ −k δ_gt ∇δ_gt. It owns its "
        "contacts: a method's window in the wrong place or along the wrong n, or a contact in no "
@@ -255,7 +255,7 @@ void WriteSummary(const std::string& path, const FrontierOptions& options,
        "baselines, which have no windows, against the default setting's. `texture-stage force "
        "err` (RMS; pose p50), torque, direction and δ errors and missed / invented windows use "
        "it; poses missed / invented are against FCL's intersection test.\n"
-       "- **Model prediction** (issue 31, change 5), what the operator's 1 kHz loop renders "
+       "- **Model prediction**, what the operator's 1 kHz loop renders "
        "between two models: the contact models of about 20 poses spread evenly, evaluated "
     << Fmt(options.prediction_rotation_rad * 1e3, 3) << " mrad either way about W's x and y and "
     << Fmt(options.prediction_translation_m * 1e3, 3)

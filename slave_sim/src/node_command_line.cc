@@ -1,5 +1,7 @@
 // slave_sim's command line (node_command_line.h): the options by group, in --help's order, and
-// what they make of the node's configuration.
+// what they make of the node's configuration. Each Add* function puts what a user needs in `app`
+// (listed by --help) and research comparisons and tuning in `adv`, the Advanced option group
+// (listed by --help-all; the same names and --config keys).
 
 #include "node_command_line.h"
 
@@ -37,7 +39,7 @@ void AddSceneOptions(CLI::App& app, NodeCommandLine& cl) {
 }
 
 // The contact windows' grid and sizes, and the texture stage's threads.
-void AddWindowOptions(CLI::App& app, NodeCommandLine& cl) {
+void AddWindowOptions(CLI::App& app, CLI::App& adv, NodeCommandLine& cl) {
   app.add_option("--grid", cl.config.pipeline.grid_resolution,
                  "penetration-depth grid N (N x N cells per contact)")
       ->check(CLI::Range(2, 1024))
@@ -46,7 +48,7 @@ void AddWindowOptions(CLI::App& app, NodeCommandLine& cl) {
                  "smallest contact window side W in metres (with the grid N: the cell W/N)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  app.add_option("--max-window", cl.config.pipeline.max_window_extent_m,
+  adv.add_option("--max-window", cl.config.pipeline.max_window_extent_m,
                  "largest contact window side in metres: a cluster spread wider than W gets a\n"
                  "window sized to it at the same cell (N grows with it); overlapping windows\n"
                  "with agreeing normals merge while they fit. Default 3 x --window; equal to\n"
@@ -63,81 +65,78 @@ void AddWindowOptions(CLI::App& app, NodeCommandLine& cl) {
 
 // The texture stage's gradient, the grazing guard, stage 5b's depth refinement
 // and its seeds, and contact clustering's angle.
-void AddDepthOptions(CLI::App& app, NodeCommandLine& cl) {
-  app.add_flag("--no-grazing-guard", cl.no_grazing_guard,
+void AddDepthOptions(CLI::App& adv, NodeCommandLine& cl) {
+  adv.add_flag("--no-grazing-guard", cl.no_grazing_guard,
                "keep contacts whose depth exceeds what their coarse geometry allows (the\n"
                "cluster's hull penetration + both texture reaches + a cell); by default they are\n"
                "dropped and counted (remote_summary.json grazing_dropped_contacts): along a\n"
                "grazing direction the depth is a sideways overlap, not a penetration");
-  app.add_flag("--no-refine-depth", cl.no_refine_depth,
+  adv.add_flag("--no-refine-depth", cl.no_refine_depth,
                "the grid's cell samples alone: by default each contact's depth is refined to the\n"
                "texture's full resolution around the grid's deepest cells (stage 5b,\n"
                "docs/DESIGN.md §4), which the grid's mip-filtered samples read tens of\n"
-               "micrometres low; faster by 7-26 % of the step (docs/frontier/issue32)");
-  app.add_flag("--parallax,!--no-parallax", cl.parallax,
+               "micrometres low; off is 7-26 % faster a step (docs/measurements.md)");
+  adv.add_flag("--parallax,!--no-parallax", cl.parallax,
                "stage 5b reads each height where the textured surface p + h*N crosses the line\n"
                "along the window's normal (parallax; on by default) instead of h*(N.n) at the\n"
                "coarse point under it, which on coarse facets tilted from the normal under large\n"
                "heights reads another part of the surface; --no-parallax: the render's form,\n"
-               "less accurate on such surfaces and 3-37 % faster there\n"
-               "(docs/frontier/issue32/twenty_eighth_stop)");
-  app.add_flag("--no-parallax-offset-seeds", cl.no_parallax_offset_seeds,
+               "less accurate on such surfaces and 3-37 % faster there (docs/measurements.md)");
+  adv.add_flag("--no-parallax-offset-seeds", cl.no_parallax_offset_seeds,
                "stage 5b searches only the grid's deepest cells: by default it also searches\n"
                "where parallax carries them (a facet tilted from the window's normal under a\n"
                "large height shows its peak up to several cells beside where the grid's\n"
-               "render puts it; docs/frontier/issue32/thirty_third_stop)");
-  app.add_flag("--no-neighbour-peak-seeds", cl.no_neighbour_peak_seeds,
+               "render puts it; docs/measurements.md)");
+  adv.add_flag("--no-neighbour-peak-seeds", cl.no_neighbour_peak_seeds,
                "stage 5b does not search half a cell and a cell beside its deepest point for a\n"
                "neighbouring peak: by default it does (beside a trough's vertex the other\n"
                "flank's maximum lies in the next cell, which is never a seed of its own; it costs\n"
-               "4-35 % of the texture stage; docs/frontier/issue32/thirty_fourth_stop)");
-  app.add_option("--clustering-angle-deg", cl.clustering_angle_deg,
+               "4-35 % of the texture stage; docs/measurements.md)");
+  adv.add_option("--clustering-angle-deg", cl.clustering_angle_deg,
                  "contact clustering: leaf pairs (and clusters) whose normals differ by less than\n"
-                 "this merge into one contact (degrees; 30 before issue 32's thirty-third stop)")
+                 "this merge into one contact (degrees; docs/measurements.md compares 60 and 30)")
       ->check(CLI::Range(1.0, 89.0))
       ->capture_default_str();
-  app.add_flag("--no-seed-from-last-step", cl.no_seed_from_last_step,
+  adv.add_flag("--no-seed-from-last-step", cl.no_seed_from_last_step,
                "each step's contacts from their own grid alone: by default stage 5b also\n"
                "searches each contact from the previous step's deepest point (kept in the\n"
                "tool's frame), so that a narrow peak the filtered grid finds on one step and\n"
-               "misses on the next is not lost for that step (docs/frontier/issue32/\n"
-               "twenty_fifth_stop)");
+               "misses on the next is not lost for that step (docs/measurements.md)");
 }
 
 // Stages 5a (the split) and 5c (shared penalties).
-void AddSplitAndSharingOptions(CLI::App& app, NodeCommandLine& cl) {
-  app.add_option(
+void AddSplitAndSharingOptions(CLI::App& adv, NodeCommandLine& cl) {
+  adv.add_option(
          "--split-windows-link-mm", cl.split_windows_link_mm,
          "stage 5a: a contact window whose overlap falls into regions farther apart than this\n"
          "(mm) also pushes with each other region's own depth, as contact clustering would\n"
-         "group the textured contact (CPU texture stage; docs/frontier/issue32/seventh_stop)")
+         "group the textured contact (CPU texture stage; docs/DESIGN.md §4)")
       ->check(CLI::Range(0.1, 1000.0))
       ->capture_default_str();
-  app.add_option(
+  adv.add_option(
          "--split-continuous-um", cl.split_continuous_um,
          "stage 5a's fades (um): the deepest region keeps the whole window, each other region\n"
          "fades in with its overlap and out as it joins a deeper one over this depth (birth\n"
          "ramp and bridge fade); narrower fades are closer to the truth on the frontier but\n"
          "rock the loop (100 um: fig76 25.5 % force error, 256 contact steps on one clock;\n"
-         "400 um: 28.6 %, 11; without the split 39.8 %, 6). 0: the seventh stop's plain\n"
-         "split (docs/frontier/issue32/thirty_first_stop)")
+         "400 um: 28.6 %, 11; without the split 39.8 %, 6; docs/measurements.md). 0: no fades,\n"
+         "each region its own box's window, born and joined at once")
       ->check(CLI::Range(0.0, 1000.0))
       ->capture_default_str();
-  app.add_flag("--no-split", cl.no_split,
-               "stage 5a off: one window per contact cluster whatever its overlap (the default\n"
-               "before issue 32's thirty-first stop; the GPU texture stage always runs without\n"
-               "the split)");
-  app.add_flag("--no-share-connected-contacts", cl.no_share_connected_contacts,
+  adv.add_flag("--no-split", cl.no_split,
+               "stage 5a off: one window per contact cluster whatever its overlap (as the GPU\n"
+               "texture stage always runs)");
+  adv.add_flag("--no-share-connected-contacts", cl.no_share_connected_contacts,
                "every contact pushes with its whole penalty: by default contacts on one object\n"
                "whose textured overlaps come within 10 mm of each other are one contact region\n"
                "and share one penalty (stage 5c), as the pipeline truth links its patches: a\n"
                "large flat contact that the coarse clustering left in two windows pushes once,\n"
-               "not twice (docs/frontier/issue32/tenth_stop)");
+               "not twice (docs/measurements.md)");
 }
 
 // Speculative contacts.
-void AddSpeculativeOptions(CLI::App& app, NodeCommandLine& cl) {
-  app.add_option("--speculative-speed-mm-s", cl.speculative_speed_mm_s,
+void AddSpeculativeOptions(CLI::App& adv, NodeCommandLine& cl) {
+  adv.add_option("--speculative-speed-mm-s", cl.speculative_speed_mm_s,
                  "speculative contacts by the round trip: the step also models every surface\n"
                  "within this speed times the operator's round trip of the tool (at most\n"
                  "--max-speculative-floor-mm; depth < 0, no force yet) while the tool touches\n"
@@ -146,11 +145,11 @@ void AddSpeculativeOptions(CLI::App& app, NodeCommandLine& cl) {
                  "or a LAN's round trip makes it a few micrometres)")
       ->check(CLI::Range(0.0, 10000.0))
       ->capture_default_str();
-  app.add_option("--max-speculative-floor-mm", cl.max_speculative_floor_mm,
+  adv.add_option("--max-speculative-floor-mm", cl.max_speculative_floor_mm,
                  "the largest distance --speculative-speed-mm-s models surfaces at (mm)")
       ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
-  app.add_option("--speculative-lead-ms", cl.speculative_lead_ms,
+  adv.add_option("--speculative-lead-ms", cl.speculative_lead_ms,
                  "speculative contacts: a separated pair beyond the textures' reach is modelled\n"
                  "(depth < 0, no force yet) when the tool closes it within this time at its\n"
                  "twist, so that the operator's local model has the surface before the tool\n"
@@ -160,7 +159,7 @@ void AddSpeculativeOptions(CLI::App& app, NodeCommandLine& cl) {
 }
 
 // Where the texture penetration depth runs.
-void AddBackendOptions(CLI::App& app, NodeCommandLine& cl) {
+void AddBackendOptions(CLI::App& app, CLI::App& adv, NodeCommandLine& cl) {
   app.add_option("--pd-backend", cl.pd_backend,
                  "where the texture penetration depth runs: cpu (software rasterizer), gpu\n"
                  "(headless EGL, OpenGL ES 3.1; Mesa llvmpipe when there is no GPU), or auto (a\n"
@@ -168,22 +167,22 @@ void AddBackendOptions(CLI::App& app, NodeCommandLine& cl) {
                  "mid-run falls back to cpu with a message")
       ->check(CLI::IsMember({"cpu", "gpu", "auto"}))
       ->capture_default_str();
-  app.add_option("--depth-bits", cl.config.gpu.depth_bits,
+  adv.add_option("--depth-bits", cl.config.gpu.depth_bits,
                  "GPU depth buffer precision: 16 (fixed point, as the seed) or 32 (float)")
       ->check(CLI::IsMember({16, 32}))
       ->capture_default_str();
-  app.add_flag("--gpu-per-render-draws", cl.per_render_draws,
+  adv.add_flag("--gpu-per-render-draws", cl.per_render_draws,
                "GPU backend: one draw per render (12 per contact), not one instanced draw per\n"
                "side per batch (the default where the driver has GL_EXT_clip_cull_distance); the\n"
                "same depths within a quantum, for a driver whose instancing misbehaves");
 }
 
 // Rates, deadbands, files, the key and the UDP stream.
-void AddStreamOptions(CLI::App& app, NodeCommandLine& cl) {
-  app.add_option("--max-rate", cl.config.max_rate_hz, "cap on the step rate in Hz (0 = none)")
+void AddStreamOptions(CLI::App& app, CLI::App& adv, NodeCommandLine& cl) {
+  adv.add_option("--max-rate", cl.config.max_rate_hz, "cap on the step rate in Hz (0 = none)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
-  app.add_option("--display-rate", cl.config.display_rate_hz,
+  adv.add_option("--display-rate", cl.config.display_rate_hz,
                  "rate of the moving scene nodes' poses streamed for the operator's display (Hz)")
       ->check(CLI::Range(1.0, 1000.0))
       ->capture_default_str();
@@ -194,21 +193,21 @@ void AddStreamOptions(CLI::App& app, NodeCommandLine& cl) {
       ->capture_default_str();
   // The contact-model deadband's floors (the Weber fraction k itself is the operator's, agreed
   // in the Hello): each threshold is max(k·|value|, k·floor), ContactModelDeadbandConfig.
-  app.add_option("--model-deadband-force-floor", cl.config.model_deadband.force_floor_scale_n,
+  adv.add_option("--model-deadband-force-floor", cl.config.model_deadband.force_floor_scale_n,
                  "contact-model deadband: force floor scale, N (the floor is k times it)")
       ->check(CLI::Range(1e-3, 1e3))
       ->capture_default_str();
-  app.add_option("--model-deadband-torque-floor", cl.config.model_deadband.torque_floor_scale_nm,
+  adv.add_option("--model-deadband-torque-floor", cl.config.model_deadband.torque_floor_scale_nm,
                  "contact-model deadband: torque floor scale, N*m (the floor is k times it)")
       ->check(CLI::Range(1e-5, 1e2))
       ->capture_default_str();
-  app.add_option("--model-deadband-stiffness-floor",
+  adv.add_option("--model-deadband-stiffness-floor",
                  cl.config.model_deadband.stiffness_floor_scale_n_per_m,
                  "contact-model deadband: floor scale of the stiffness's translational block,\n"
                  "N/m (the floor is k times it)")
       ->check(CLI::Range(1e-3, 1e9))
       ->capture_default_str();
-  app.add_option("--model-deadband-rotational-stiffness-floor",
+  adv.add_option("--model-deadband-rotational-stiffness-floor",
                  cl.config.model_deadband.rotational_stiffness_floor_scale_nm_per_rad,
                  "contact-model deadband: floor scale of the stiffness's rotational block,\n"
                  "N*m/rad (the floor is k times it)")
@@ -218,14 +217,14 @@ void AddStreamOptions(CLI::App& app, NodeCommandLine& cl) {
                  "directory for remote_summary.json and remote_steps.csv (one row per step)");
   app.add_option("--port-file", cl.port_file, "write the bound UDP port to this file");
   AddKeyOption(app, cl.key);
-  app.add_option("--mtu", cl.mtu, "largest UDP datagram for scene-update fragments, bytes")
+  adv.add_option("--mtu", cl.mtu, "largest UDP datagram for scene-update fragments, bytes")
       ->check(CLI::Range(548, 1472))
       ->capture_default_str();
-  app.add_option("--peer-timeout", cl.config.peer_timeout_ms,
+  adv.add_option("--peer-timeout", cl.config.peer_timeout_ms,
                  "declare the operator lost after this long without an authenticated datagram, ms")
       ->check(CLI::Range(50, 60000))
       ->capture_default_str();
-  app.add_option("--scene-rate", cl.config.scene_rate_bytes_per_s,
+  adv.add_option("--scene-rate", cl.config.scene_rate_bytes_per_s,
                  "pace of scene-update fragments, bytes per second")
       ->check(CLI::Range(1e4, 1e9))
       ->capture_default_str();
@@ -342,16 +341,22 @@ void FinishBackendChoice(const NodeCommandLine& cl, bool split_asked, RemoteNode
 }  // namespace
 
 void AddNodeOptions(CLI::App& app, NodeCommandLine& cl) {
+  UseTwoLevelHelp(app);
   app.set_config("--config", "",
-                 "read options from a TOML file (key = value, long option names without dashes);\n"
-                 "command-line options override it");
+                 "read options from a TOML file (key = value, long option names without dashes,\n"
+                 "the advanced ones too); command-line options override it");
+  CLI::App& adv = *app.add_option_group(
+      "Advanced",
+      "the remote step's stages switched off for comparison and their tuning, the contact-model\n"
+      "deadband's floors, the GPU backend, the stream and the network; each default's reason\n"
+      "and figure: docs/DESIGN.md, docs/measurements.md");
   AddSceneOptions(app, cl);
-  AddWindowOptions(app, cl);
-  AddDepthOptions(app, cl);
-  AddSplitAndSharingOptions(app, cl);
-  AddSpeculativeOptions(app, cl);
-  AddBackendOptions(app, cl);
-  AddStreamOptions(app, cl);
+  AddWindowOptions(app, adv, cl);
+  AddDepthOptions(adv, cl);
+  AddSplitAndSharingOptions(adv, cl);
+  AddSpeculativeOptions(adv, cl);
+  AddBackendOptions(app, adv, cl);
+  AddStreamOptions(app, adv, cl);
   AddSubcommands(app, cl);
   app.add_flag("--quiet", cl.quiet,
                "no progress or start-up lines (errors, warnings, session events and the last "

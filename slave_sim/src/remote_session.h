@@ -88,7 +88,7 @@ class RemoteSession {
   /// at most the tool-state keep-alive ahead, then held); without it, the newest state as is.
   RigidTransform ToolPoseForStep(std::int64_t now_ns) noexcept;
   /// Why the remote node steps on a loop pass (StepCause), or kWait when a step at X_WT (from
-  /// ToolPoseForStep) would see nothing new, so the node waits on its socket instead (issue 33).
+  /// ToolPoseForStep) would see nothing new, so the node waits on its socket instead.
   /// In order:
   /// - kToolState: a tool state arrived since the last step (always stepped, so that its answer
   ///   and its echo go out); kFirst: no step yet; kSceneMoves: the scene is animated.

@@ -1,5 +1,5 @@
 // speed_error_frontier: the remote step's speed against its error, measured against the
-// full-resolution ground truth on the seed's benchmark scenes (issue 14). See --help and the
+// full-resolution ground truth on the seed's benchmark scenes. See --help and the
 // README section "Speed against error".
 
 #include <CLI/CLI.hpp>
@@ -79,14 +79,14 @@ int main(int argc, char** argv) {
       ->transform([](std::string v) { return std::to_string(std::stod(v) * 1e-6); });
   bool truth_no_merge = false;
   app.add_flag("--truth-no-merge", truth_no_merge,
-               "pipeline truth as before issue 32's third stop: the single-linkage patches as they "
+               "pipeline truth without its merges: the single-linkage patches as they "
                "are (no merges of patches that measure one interpenetration twice) and each "
                "patch's depth along -grad V rather than the surface's 5 mm normal");
   double truth_share_fade_mm = ht::ContactPatchTruthOptions{}.share_fade_m * 1e3;
   app.add_option("--truth-share-fade-mm", truth_share_fade_mm,
                  "pipeline truth: neighbouring patches share one penalty, fading out over this "
                  "distance (mm) past the clustering distance (contact_patch_truth.h, step 4a); "
-                 "0: separate patches always sum (the truth before issue 32's fourteenth stop)")
+                 "0: separate patches always sum")
       ->check(CLI::Range(0.0, 1000.0))
       ->capture_default_str();
   double truth_tilt_lift_um = ht::ContactPatchTruthOptions{}.tilt_lift_m * 1e6;
@@ -117,7 +117,7 @@ int main(int argc, char** argv) {
   double prediction_yaw_mrad = 0.0;
   app.add_option("--prediction-yaw-mrad", prediction_yaw_mrad,
                  "model-prediction measure: also turn the tool by ± this about W's z (mrad; 0: "
-                 "no turn, as before)")
+                 "no turn)")
       ->check(CLI::Range(0.0, 1000.0))
       ->capture_default_str();
   app.add_flag("--quiet", quiet, "no progress lines");

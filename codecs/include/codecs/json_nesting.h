@@ -1,5 +1,5 @@
 #pragma once
-// A guard for JSON read from files (issue 16, hostile input): the parsers the project uses
+// A guard for JSON read from files (hostile input): the parsers the project uses
 // (nlohmann::json, tinygltf's) recurse once per nesting level when they build, copy, print or
 // destroy a document, so a few hundred kilobytes of "[[[[…" overflow the stack. Files are
 // scanned for their nesting depth before any parser sees them.

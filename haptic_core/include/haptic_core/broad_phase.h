@@ -25,7 +25,7 @@ double BoundingSphereGap(const glm::dvec4& sphere_A, const RigidTransform& X_WA,
 /// them (touching, overlapping, or separated only across an edge pair). Returns −∞ when a hull
 /// has no vertices or no planes, or when |planes_A|·|vertices_B| + |planes_B|·|vertices_A|
 /// exceeds `max_work` (a bound too costly to take). Allocation-free; NaN poses give NaN.
-/// Used by the remote step to tell how much free space surrounds the tool (issue 33).
+/// Used by the remote step to tell how much free space surrounds the tool.
 double HullSeparationBound(const ConvexHull& A, const RigidTransform& X_WA, const ConvexHull& B,
                            const RigidTransform& X_WB, std::size_t max_work = 65536) noexcept;
 

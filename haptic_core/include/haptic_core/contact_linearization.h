@@ -112,7 +112,7 @@ ContactLinearization AssembleLinearization(const ContactWindow& window,
                                            double h_tilt, double h_yaw, double stiffness_n_per_m,
                                            LinearizationFaults& faults) noexcept;
 
-/// How the CPU texture stage renders (issue 15). Both give the same δ and gradient within float
+/// How the CPU texture stage renders. Both give the same δ and gradient within float
 /// rounding (tests/texture_stage_parity_test.cc checks it on random contacts of all six seed
 /// models).
 enum class TextureStagePath {
@@ -169,7 +169,7 @@ class TexturePenetrationSolver {
   }
 
   /// kFast: when the six rotation samples are rendered culled
-  /// (RenderToolDepth: the same depths and cells, fewer cells drawn; issue 15).
+  /// (RenderToolDepth: the same depths and cells, fewer cells drawn).
   enum class CullRotations {
     kWhenItPays,  ///< the first rotation culled, the other five too when it drew few cells
                   ///< (kCullPaysFraction); with parallel renders, none (the rotations start
@@ -187,7 +187,7 @@ class TexturePenetrationSolver {
   /// When `samples_out` holds kGradientSamples entries, the raw depths are copied there.
   /// `environment_triangles` and
   /// `tool_triangles` restrict which coarse triangles of each side may be rendered (the contact's
-  /// cluster's own, issue 31; default: all, picked by the window alone).
+  /// cluster's own; default: all, picked by the window alone).
   ///
   /// When `base_overlap_out` holds N² entries and both sides have surface on the window at the
   /// base pose (depth_m > −∞; negative where they are apart), the base pose's overlap field is
@@ -274,7 +274,7 @@ class TexturePenetrationSolver {
   /// kWhenItPays: the remaining five rotations are rendered whole when the first culled one drew
   /// more than this fraction of the window's cells. A culled render costs more per cell drawn
   /// (two passes, the bound's test, flushes that raise the lower bound), so where most cells stay
-  /// it is the slower one (issue 15).
+  /// it is the slower one.
   static constexpr double kCullPaysFraction = 0.3;
   /// Culled rotations use the environment's max pyramid when the tool brings more triangles than
   /// this.

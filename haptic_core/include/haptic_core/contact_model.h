@@ -57,7 +57,7 @@ struct ContactModelEvaluation {
   /// Σ ½ k_i δ_i² (k_i times the stiffness scale), and for a saturated contact (held at δ_s)
   /// k_i (δ_s δ_i − ½ δ_s²), which grows linearly with δ as its bounded force does. Within one
   /// model the local loop is conservative in U; a new model (or a blend step) at the same pose
-  /// changes U, which is the energy a model switch puts into the loop (issue 33's attribution).
+  /// changes U, which is the energy a model switch puts into the loop (its attribution).
   double potential_energy_j = 0.0;
   /// Active contacts whose force was saturated at the bound (see EvaluateContactModel).
   int saturated_contacts = 0;

@@ -1,5 +1,5 @@
 #pragma once
-// The direction of a contact from its region (issue 31, change 2): for a leaf hull pair of the
+// The direction of a contact from its region: for a leaf hull pair of the
 // coarse query, the area-weighted normals of the coarse triangles that lie in contact, instead of
 // the smallest support overlap of the two hulls (which on a thin hull is a side face). After Kim,
 // Otaduy, Lin & Manocha, "Six-degree-of-freedom haptic display using localized contact
@@ -53,8 +53,8 @@ struct RegionBounds {
 /// call at set-up (the remote step builds one per such model at construction).
 std::optional<ConvexHull> ConvexMeshHull(const HapticModel& model, double tolerance_m = 1e-9);
 
-/// The extent of one hull pair's contact region on a window's axes (issue 31, change 1: the window
-/// centred on the region, not on a witness corner, and sized from it): the coarse triangles
+/// The extent of one hull pair's contact region on a window's axes (the window is centred on the
+/// region, not on a witness corner, and sized from it): the coarse triangles
 /// `triangles_B` of `object` (posed at X_WO) clipped to the tool's hull `hull_A` widened by
 /// `margin_m` (each face plane moved out; the pair's texture reach), and the tool's `triangles_A`
 /// (posed at X_WT) clipped to `hull_B` widened alike, each part's box on the unit axes u_W, v_W

@@ -63,11 +63,11 @@ struct ContactWindow {
   glm::dvec3 CellCenter(int index) const noexcept;
 };
 
-/// Which of a model's coarse triangles a contact may render (issue 31, change 4: each texture
-/// once): all of them (`all`, the default: SelectPatchTriangles picks by the window alone), or
-/// only `indices` (into HapticModel::triangles; the leaves contact clustering gave the contact's
-/// cluster, so that no triangle is rendered in two windows of one step). A view: the indices must
-/// outlive the call that reads them.
+/// Which of a model's coarse triangles a contact may render (each texture once): all of them
+/// (`all`, the default: SelectPatchTriangles picks by the window alone), or only `indices` (into
+/// HapticModel::triangles; the leaves contact clustering gave the contact's cluster, so that no
+/// triangle is rendered in two windows of one step). A view: the indices must outlive the call that
+/// reads them.
 struct TriangleSubset {
   std::span<const int> indices;
   bool all = true;
@@ -92,11 +92,11 @@ struct ContactQuery {
   ContactWindow window;
   double stiffness_n_per_m = 0.0;
   /// The largest δ the coarse geometry allows this contact (m): the cluster's coarse penetration
-  /// plus the texture reach plus a cell (issue 31's grazing guard, PipelineOptions); +∞ for none.
+  /// plus the texture reach plus a cell (the grazing guard, PipelineOptions); +∞ for none.
   /// The backends ignore it; the remote step drops a contact whose δ0 exceeds it.
   double depth_bound_m = std::numeric_limits<double>::infinity();
-  /// The coarse triangles of the environment and of the tool this contact may render (issue 31,
-  /// change 4: the contact's cluster's own leaves, so that no triangle is rendered in two windows
+  /// The coarse triangles of the environment and of the tool this contact may render (the
+  /// contact's cluster's own leaves, so that no triangle is rendered in two windows
   /// of one step); All(): picked by the window alone. Views: the lists must outlive the batch.
   TriangleSubset environment_triangles = TriangleSubset::All();
   TriangleSubset tool_triangles = TriangleSubset::All();
@@ -128,15 +128,15 @@ int WindowResolution(double side_m, double window_extent_m, int grid_resolution)
 /// candidate's triangle subsets: the window's side
 /// is the candidate's extent_m clamped to [window_extent_m, max_window_extent_m] (m), and its grid
 /// N = ceil(grid_resolution · side / window_extent_m), so that every window keeps the cell
-/// window_extent_m / grid_resolution (issue 31: a window sized from its contact region, at the
-/// texture's cell). Candidates with a non-finite point, a zero or non-finite normal
+/// window_extent_m / grid_resolution (a window sized from its contact region, at the texture's
+/// cell). Candidates with a non-finite point, a zero or non-finite normal
 /// or a null object are skipped and counted in `bad_windows`. Stops when `out` is full. Returns
 /// the number of queries written. noexcept, allocation-free.
 int MakeContactQueries(std::span<const ContactCandidate> candidates, double window_extent_m,
                        double max_window_extent_m, int grid_resolution, std::span<ContactQuery> out,
                        std::int64_t& bad_windows) noexcept;
 
-/// The grazing guard (issue 31): a contact whose δ0 exceeds its query's depth_bound_m (what its
+/// The grazing guard: a contact whose δ0 exceeds its query's depth_bound_m (what its
 /// coarse geometry allows) gets depth_m = −∞, so that the contact model leaves it out. Returns how
 /// many were dropped. noexcept, allocation-free; `queries` and `results` are parallel.
 int DropGrazingContacts(std::span<const ContactQuery> queries,

@@ -1,5 +1,5 @@
 #pragma once
-// Stage 5b of the remote step (issue 32): the directional penetration depth refined from the
+// Stage 5b of the remote step: the directional penetration depth refined from the
 // N×N grid's cell samples to the finest texture level.
 //
 // Why. The grid samples each cell centre at the mip level whose texel matches the cell
@@ -67,7 +67,7 @@ double PatchHeightAt(const HapticModel& model, const RigidTransform& X_WO,
                      std::span<const int> triangles, const ContactWindow& window, PatchSide side,
                      double s_m, double t_m, int level = 0, bool parallax = false) noexcept;
 
-/// How the depth is refined (issue 32).
+/// How the depth is refined.
 struct DepthRefinementOptions {
   /// Most sub-samples per side of a seed's square (its spacing is about two texels, at least one
   /// sample). In [1, 16].

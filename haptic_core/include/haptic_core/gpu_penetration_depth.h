@@ -41,7 +41,7 @@ struct GpuPenetrationDepthOptions {
   /// tile by four clip planes and drawing the union of the batch's patch triangles, where the
   /// context has GL_EXT_clip_cull_distance, a 16 KiB uniform block and a viewport that can span
   /// the atlases (instanced_draws() says whether it is used); else, or when false, one draw per
-  /// render, 12 per contact (issue 15). The same cells either way, depths within a quantum
+  /// render, 12 per contact. The same cells either way, depths within a quantum
   /// plus the float geometry's error (tested).
   bool instanced_draws = true;
   /// Testing hook: break the fragment shader's source so that compiling it fails.

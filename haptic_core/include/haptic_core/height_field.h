@@ -47,8 +47,8 @@ class HeightField {
   /// Returns 0 for an empty field. Never allocates; non-finite u or v gives 0.
   inline float Sample(int level, float u, float v) const noexcept;
   /// The same value as Sample(level, u, v), bit for bit, with the address arithmetic (wrap or
-  /// clamp) skipped when the 2×2 footprint lies inside the level: the texture stage's fast path
-  /// (issue 15). `L` must be level(level) of this field, 0 <= level < num_levels().
+  /// clamp) skipped when the 2×2 footprint lies inside the level: the texture stage's fast
+  /// path. `L` must be level(level) of this field, 0 <= level < num_levels().
   inline float SampleAt(int level, const HeightFieldLevel& L, float u, float v) const noexcept;
 
   /// An upper bound (m) of |Sample(level, u, v)| over the box u ∈ [u0, u1], v ∈ [v0, v1]: the
@@ -57,8 +57,8 @@ class HeightField {
   /// at the first level where the taps
   /// span at most two texels each way, enlarged by 1e-6 relative for the mip averages' and the
   /// bilinear sample's float rounding. Local where the whole texture's largest |h| is not: on the
-  /// seed's hammer 16 mm for the whole texture, 1.6 mm at its 99th percentile (issue 15: the
-  /// texture stage's culled renders). Falls back to the whole texture's bound (max(|min|, |max|)
+  /// seed's hammer 16 mm for the whole texture, 1.6 mm at its 99th percentile (what the texture
+  /// stage's culled renders use). Falls back to the whole texture's bound (max(|min|, |max|)
   /// of level 0, enlarged the same) when a periodic axis's taps cross its edge, a size is not a
   /// power of two, or the box is not finite. 0 for an empty field. Never allocates.
   float MaxAbsOver(int level, float u0, float v0, float u1, float v1) const noexcept;
@@ -68,16 +68,16 @@ class HeightField {
   /// the pyramids of the level-0 minima and maxima under each texel at the
   /// first level where the taps span at most four texels each way, the box widened by 1e-3 texel
   /// and the bounds by 1e-6 relative for the float arithmetic: the conservative screen of the
-  /// depth refinement (issue 32: a maximum is bounded by maxima, not by the mip's means). Falls
+  /// depth refinement (a maximum is bounded by maxima, not by the mip's means). Falls
   /// back to the whole level 0's [min_height, max_height] (widened the same) where MaxAbsOver
   /// falls back to its whole bound. {0, 0} for an empty field. Never allocates.
   void RangeOver(float u0, float v0, float u1, float v1, float& lo, float& hi) const noexcept;
 
-  /// What a texture of level `level`'s size would lose (issue 32: "model only what a scene
-  /// needs"): over every level-0 texel centre, |level-0 height − Sample(level, ·)| (m), its
-  /// largest value and its RMS. A surface with nothing finer than level k's texels loses little
-  /// at k. Level 0 gives zeros; an empty field or a level outside the chain gives zeros too.
-  /// O(texels); never allocates.
+  /// What a texture of level `level`'s size would lose (to model only what a scene needs): over
+  /// every level-0 texel centre, |level-0 height − Sample(level, ·)| (m), its largest value and its
+  /// RMS. A surface with nothing finer than level k's texels loses little at k. Level 0 gives
+  /// zeros; an empty field or a level outside the chain gives zeros too. O(texels); never
+  /// allocates.
   struct LevelLoss {
     double max_m = 0.0;
     double rms_m = 0.0;

@@ -1,5 +1,5 @@
 #pragma once
-// Many bilinear samples of one mip level at once (issue 15): the texture stage's fast path
+// Many bilinear samples of one mip level at once: the texture stage's fast path
 // gathers a triangle's covered cells and samples them together, with SIMD where the CPU has it.
 
 #include <span>

@@ -148,7 +148,7 @@ void RenderPatchHeights(const HapticModel& model, const RigidTransform& X_WO,
                         std::span<const int> triangles, const ContactWindow& window, PatchSide side,
                         std::span<float> heights, double depth_range_m = 0.0) noexcept;
 
-/// The fast path of RenderPatchHeights (issue 15), on the window's grid extended by
+/// The fast path of RenderPatchHeights, on the window's grid extended by
 /// `margin_cells` (m ≥ 0) cells on every side: `heights` holds (N+2m)² cells, window cell (i, j)
 /// (i, j ∈ [−m, N+m)) at index (j+m)·(N+2m) + (i+m), so that m = 0 is the window itself. Within
 /// float rounding it writes what RenderPatchHeights writes on a window of (N+2m)² cells of the
@@ -318,8 +318,8 @@ struct ToolDepthCull {
 
 /// DirectionalPenetrationDepth(env_heights, tool render) for the tool render that
 /// RenderPatchHeightsFast(tool, X_WT, triangles, window, kTool, 0, ·, kernel) would make, the
-/// same cell and bits, drawing only the cells that can matter (issue 15: the texture stage's
-/// rendered rotation samples). A first pass draws the cells around hints.first_cell (with
+/// same cell and bits, drawing only the cells that can matter (the texture stage's rendered
+/// rotation samples). A first pass draws the cells around hints.first_cell (with
 /// hints.first_triangles); from its cells on, the largest b − a drawn so far is a lower bound L
 /// of the depth (a cell's tool height only falls as triangles are drawn), and a covered cell
 /// whose bound env − (b·d) + max|h| (its coarse height b·d; max|h| the largest |height| under

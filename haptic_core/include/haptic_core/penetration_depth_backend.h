@@ -83,7 +83,7 @@ class PenetrationDepthBackend {
 class CpuPenetrationDepthBackend final : public PenetrationDepthBackend {
  public:
   /// Preallocates for grids of up to `max_resolution`² cells; `path` picks the fast texture stage
-  /// (the default) or the reference one (same results within float rounding; issue 15);
+  /// (the default) or the reference one (same results within float rounding);
   /// `threads` ≥ 1 (values below 1 count as 1): with more than one, every batch runs in a oneTBB
   /// task arena of that many threads (the calling thread among them): its contacts, and each
   /// contact's tool renders, are tasks.

@@ -1,10 +1,10 @@
 #pragma once
-// Stability of the operator's tool integration against a stiff contact (issue 14, DESIGN.md §5
-// and §8): the linearized backward-Euler step of ToolSimulator beside an explicit
-// (semi-implicit, symplectic) Euler step of the same forces, over contact stiffness × tool mass
-// × loop rate. Theory [L: OL05]: the explicit step of an undamped spring of stiffness k_total on
-// mass m is stable only while h·ω < 2, ω = √(k_total/m); the backward-Euler step is stable for
-// every h on a passive linear system.
+// Stability of the operator's tool integration against a stiff contact (DESIGN.md §5 and §8): the
+// linearized backward-Euler step of ToolSimulator beside an explicit (semi-implicit, symplectic)
+// Euler step of the same forces, over contact stiffness × tool mass × loop rate. Theory [L: OL05]:
+// the explicit step of an undamped spring of stiffness k_total on mass m is stable only while
+// h·ω < 2, ω = √(k_total/m); the backward-Euler step is stable for every h on a passive linear
+// system.
 
 #include <string>
 #include <vector>

@@ -1,6 +1,6 @@
 #pragma once
 // Text drawn onto a display frame: the run's time, the experiment's phase and the contact force
-// the operator feels, in the frame's top-left corner (issue 35). The glyphs are stb_easy_font's
+// the operator feels, in the frame's top-left corner. The glyphs are stb_easy_font's
 // (Sean Barrett, public domain; Debian's libstb-dev): each character is a few axis-aligned quads,
 // filled here into the RGBA8 image after it was read back, so the renderer draws no text.
 

@@ -1,7 +1,7 @@
 #pragma once
 
 #include <span>
-// The operator's haptic tick as one unit (issue 16): the device state in, the device wrench out,
+// The operator's haptic tick as one unit: the device state in, the device wrench out,
 // with no thread, socket or clock of its own, so that tests run it tick by tick. Stages, in
 // order (DESIGN.md §5), one file each in master_station/src/operator/, whose listing is this order:
 //   1. the contact model in use: a newly arrived one is taken, the one before kept for the blend;
@@ -150,7 +150,7 @@ struct OperatorTickCounters {
   std::int64_t models_from_before_jump = 0;
   std::int64_t models_used = 0;
   std::int64_t saturated_contact_ticks = 0;  ///< ticks with a contact force held at the bound
-  /// Where the local loop's energy comes from (issue 33's attribution). Within one contact model
+  /// Where the local loop's energy comes from (its attribution). Within one contact model
   /// the loop is conservative (ContactModelEvaluation::potential_energy_j); a new model, each
   /// blend step towards it, and a model dropped mid-blend change the contact potential U at the
   /// tool's pose q without moving it: ΔU = U_after(q) − U_before(q) on each such tick (the

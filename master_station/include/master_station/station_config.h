@@ -38,7 +38,7 @@ struct DisplayConfig {
   double camera_distance_m = 0.0;
   /// Use the scene file's own camera (its first perspective camera) instead of following the
   /// tool. Off by default: a file's camera frames the whole scene, and the tool, its ghost and
-  /// its force arrows were a few pixels in it (the Duck, 2CylinderEngine; issue 35). Without a
+  /// its force arrows were a few pixels in it (the Duck, 2CylinderEngine). Without a
   /// camera in the file the camera follows the tool either way.
   bool file_camera = false;
   /// Print the run time, the experiment's phase and the contact force |F| in each frame's
@@ -118,10 +118,9 @@ struct StationConfig {
   /// The passivity stage's release (ms, ≥ 0; 0 = off): a force the stage cut comes back over
   /// this long instead of on the next tick (OperatorTickConfig::passivity_release_ticks).
   /// Energy-bounded onsets (OperatorTickConfig::energy_bounded_switch) and the longest their
-  /// depth offset is held (ms, > 0; +∞ = as the energy budget allows). On by default together
-  /// (issue 33, docs/passivity/README.md, "The pulse train under delay"): without them a late
-  /// model's stored energy is cut by the guard in one-tick pulses of the whole force. Measured:
-  /// docs/measurements.md.
+  /// depth offset is held (ms, > 0; +∞ = as the energy budget allows). On by default together:
+  /// without them a late model's stored energy is cut by the guard in one-tick pulses of the
+  /// whole force, a pulse train under delay. Measured: docs/measurements.md.
   double passivity_release_ms = 20.0;
   bool energy_bounded_switch = true;
   double switch_offset_release_ms = 200.0;

@@ -1,5 +1,5 @@
 #pragma once
-// The seed's benchmark scenes (DESIGN.md §7) as the speed-vs-error study needs them (issue 14):
+// The seed's benchmark scenes (DESIGN.md §7) as the speed-vs-error study needs them:
 // each with its haptic models built at a chosen texture size and coarse triangle count, the
 // full-resolution meshes the ground truth is computed on, and in-contact tool poses.
 //

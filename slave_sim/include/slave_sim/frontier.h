@@ -1,5 +1,5 @@
 #pragma once
-// The speed-vs-error frontier (issue 14): every setting of the remote step (grid N, texture size,
+// The speed-vs-error frontier: every setting of the remote step (grid N, texture size,
 // coarse triangle count, CPU or GPU backend, GPU depth bits) and two baselines a user might pick
 // instead (coarse meshes without textures; full-resolution meshes through FCL), run on in-contact
 // poses of the seed's benchmark scenes and measured, in one run on one machine, for time per step
@@ -39,7 +39,7 @@ struct FrontierSetting {
   bool product_models = false;
   std::string backend = "cpu";  ///< "cpu" or "gpu".
   int depth_bits = 32;          ///< GPU depth precision (16 or 32); the CPU works in float.
-  /// CPU texture stage: the fast path (the product's) or the reference it replaced (issue 15),
+  /// CPU texture stage: the fast path (the product's) or the reference it replaced,
   /// and its threads, which the coarse query's traversal uses too (timings are single-thread
   /// unless a setting says otherwise).
   TextureStagePath texture_path = TextureStagePath::kFast;
@@ -48,7 +48,7 @@ struct FrontierSetting {
   int max_contacts = kMaxContacts;
   /// PipelineOptions::local_reach.
   bool local_reach = false;
-  /// PipelineOptions::grazing_guard ("no_grazing_guard" turns it off: issue 31's before).
+  /// PipelineOptions::grazing_guard ("no_grazing_guard" turns it off).
   bool grazing_guard = true;
   /// PipelineOptions::grazing_guard_local_reach ("guard_model_reach" turns it off).
   bool grazing_guard_local_reach = true;
@@ -75,7 +75,7 @@ struct FrontierSetting {
   /// off, the "gridN_refined" settings keep it).
   bool refine_depth = true;
   /// Stage 5a, PipelineOptions' split_* fields, at their defaults (the continuous split at a
-  /// 10 mm link, ramp and fade 400 µm, since issue 32's thirty-first stop). "no_split" turns it
+  /// 10 mm link, ramp and fade 400 µm). "no_split" turns it
   /// off; the split settings ("split_windows_at_separated_overlap*", "split_link10mm_*",
   /// "split_continuous_*") start from "no_split" and set the pieces they name.
   bool split_windows_at_separated_overlap = true;
@@ -188,10 +188,10 @@ struct FrontierOptions {
   GroundTruthOptions ground_truth;
   /// The pipeline truth merges patches that measure one interpenetration twice and slivers at a
   /// patch's edge (ContactPatchTruthOptions::overlap_merge_angle_deg, minor_patch_fraction);
-  /// false: the single-linkage patches as they are (the measure before issue 32's third stop).
+  /// false: the single-linkage patches as they are.
   bool truth_merge_patches = true;
   /// The pipeline truth's share fade (ContactPatchTruthOptions::share_fade_m, m; 0: separate
-  /// patches always sum, the measure before issue 32's fourteenth stop).
+  /// patches always sum).
   double truth_share_fade_m = ContactPatchTruthOptions{}.share_fade_m;
   /// The pipeline truth's tilt step as a lift at half the window (ContactPatchTruthOptions::
   /// tilt_lift_m, m; 0: a texel step's lift, the default measure).
@@ -204,8 +204,7 @@ struct FrontierOptions {
   double prediction_translation_m = 1e-4;
   /// … and ±this about them (rad, > 0), each about the tool's centre of mass.
   double prediction_rotation_rad = 1e-3;
-  /// … and, when > 0, ±this about W's z too (rad; 0: none, the measure before issue 32's
-  /// nineteenth stop).
+  /// … and, when > 0, ±this about W's z too (rad; 0: none).
   double prediction_yaw_rad = 0.0;
   /// The plotting script (python3 + matplotlib), "" = no plot.
   std::string plot_script;

@@ -53,8 +53,8 @@ struct RemoteNodeConfig {
   /// Largest perceptual deadband (Weber fraction, [0, 1)) accepted from an operator on either
   /// stream; a Hello asking more is refused with a Reject that says so.
   double max_deadband = 0.5;
-  /// The speculative floor by the round trip (PipelineOptions::speculative_floor_m, issue 33's
-  /// thirty-fifth stop): before each step the node sets the floor to this hand speed (m/s) times
+  /// The speculative floor by the round trip (PipelineOptions::speculative_floor_m): before each
+  /// step the node sets the floor to this hand speed (m/s) times
   /// the round trip the operator's newest Ping reports, at most max_speculative_floor_m. A model
   /// answers a tool pose a round trip old; a hand at this speed can meanwhile have covered that
   /// much towards a surface the pose was clear of (lifted and pressed again, turned towards it),
@@ -64,7 +64,7 @@ struct RemoteNodeConfig {
   /// it off (the pipeline's own floor stays). RunRemoteNode throws std::invalid_argument for a
   /// negative or non-finite value. The default, 25 mm/s, covers the seed's scripted press (about
   /// 22 mm/s at its fastest) and the recorded human motion (14 mm/s); its measurements are in
-  /// docs/passivity/README.md ("Surfaces a round trip away").
+  /// docs/measurements.md (PipelineOptions::speculative_floor_m).
   double speculative_speed_m_per_s = 0.025;
   /// The largest floor set by the round trip (m, ≥ 0).
   double max_speculative_floor_m = 6e-3;

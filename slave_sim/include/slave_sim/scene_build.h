@@ -1,5 +1,5 @@
 #pragma once
-// Scenes from files (issue 3): a glTF 2.0 scene plus an optional scene description say which
+// Scenes from files: a glTF 2.0 scene plus an optional scene description say which
 // nodes are the tool, which are touchable and which only shown; the touchable ones (and a tool
 // node) are built into haptic models (DESIGN.md §2) through the on-disk cache.
 

@@ -1,5 +1,5 @@
 #pragma once
-// A scene from a file that the remote node watches (issue 17): when the file (or the glTF a
+// A scene from a file that the remote node watches: when the file (or the glTF a
 // description names, or a buffer or image that glTF reads) changes on disk, a background thread
 // rebuilds the haptic models through the model cache and the display stream; the node's loop
 // adopts the new version between two steps (TakeReload), switches its pipeline to it and streams

@@ -1,10 +1,12 @@
 #pragma once
-// Command-line errors of every program (issue 35): one line "program: error: what", exit 2,
-// checked before anything starts.
+// What every program's command line shares: errors as one line "program: error: what", exit 2,
+// checked before anything starts; help in two levels (--help, --help-all); the pre-shared key's
+// options.
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cstdio>
+#include <memory>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -15,19 +17,75 @@
 
 namespace ht {
 
-/// The keys a --config file of `app` may hold: its configurable long options without their
-/// dashes, sorted, comma-separated ("--help" and --config itself are not keys).
-inline std::string ConfigFileKeys(const CLI::App& app) {
-  std::vector<std::string> keys;
+namespace detail {
+inline void AddConfigFileKeys(const CLI::App& app, std::vector<std::string>& keys) {
   for (const CLI::Option* option : app.get_options()) {
     if (!option->get_configurable() || option->get_lnames().empty()) continue;
-    if (option->get_lnames().front() == "help") continue;
-    keys.push_back(option->get_lnames().front());
+    const std::string& name = option->get_lnames().front();
+    if (name == "help" || name == "help-all") continue;
+    keys.push_back(name);
   }
+  // Option groups (add_option_group) are nameless subcommands whose options are the app's own.
+  for (const CLI::App* group : app.get_subcommands({})) {
+    if (group->get_name().empty()) AddConfigFileKeys(*group, keys);
+  }
+}
+}  // namespace detail
+
+/// The keys a --config file of `app` may hold: its configurable long options without their
+/// dashes, those of its option groups included, sorted, comma-separated ("--help", "--help-all"
+/// and --config itself are not keys).
+inline std::string ConfigFileKeys(const CLI::App& app) {
+  std::vector<std::string> keys;
+  detail::AddConfigFileKeys(app, keys);
   std::sort(keys.begin(), keys.end());
+  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
   std::string out;
   for (const std::string& key : keys) out += (out.empty() ? "" : ", ") + key;
   return out;
+}
+
+/// Help in two levels. --help lists the app's own options and names each option group with the
+/// number of its options; --help-all lists the groups' options too. The options of a group parse
+/// and load from a --config file exactly as the app's own (CLI11 looks options up through
+/// nameless subcommands, which option groups are).
+class TwoLevelHelpFormatter : public CLI::Formatter {
+ public:
+  std::string make_help(const CLI::App* app, std::string name,
+                        CLI::AppFormatMode mode) const override {
+    // Subcommands listed under --help-all are formatted with mode Sub: keep the caller's level.
+    if (mode != CLI::AppFormatMode::Sub) all_ = mode == CLI::AppFormatMode::All;
+    return CLI::Formatter::make_help(app, std::move(name), mode);
+  }
+  std::string make_expanded(const CLI::App* sub) const override {
+    if (!sub->get_name().empty()) return CLI::Formatter::make_expanded(sub);
+    if (all_) {  // "[Option Group: NAME]" and the group indented: "NAME:" as the app's own groups
+      const std::string text = CLI::Formatter::make_expanded(sub);
+      return "\n" + sub->get_group() + ":" + text.substr(text.find('\n'));
+    }
+    const std::size_t n =
+        sub->get_options([sub](const CLI::Option* option) {
+             return option != sub->get_help_ptr() && option != sub->get_help_all_ptr();
+           })
+            .size();
+    std::string description = sub->get_description();
+    for (std::size_t at = description.find('\n'); at != std::string::npos;
+         at = description.find('\n', at + 1)) {
+      description.insert(at + 1, "  ");
+    }
+    return "\n" + sub->get_group() + " (" + std::to_string(n) +
+           " options, listed by --help-all):\n  " + description + "\n";
+  }
+
+ private:
+  mutable bool all_ = false;
+};
+
+/// Gives `app` the two-level help (TwoLevelHelpFormatter) and its --help-all flag. Call it before
+/// adding option groups or subcommands: they inherit the formatter when they are added.
+inline void UseTwoLevelHelp(CLI::App& app) {
+  app.formatter(std::make_shared<TwoLevelHelpFormatter>());
+  app.set_help_all_flag("--help-all", "Print the help of every option, the advanced ones too");
 }
 
 /// Parses argc/argv into `app` (CLI11). Returns std::nullopt when the program should go on, or
@@ -62,14 +120,16 @@ inline std::optional<int> ParseCommandLine(CLI::App& app, int argc, const char* 
         what.find("does not exist") != std::string::npos) {
       what += " (make one with 'slave_sim keygen FILE' and copy it to the other side)";
     }
-    std::fprintf(stderr, "%s: error: %s (see %s --help)\n", program, what.c_str(), program);
+    // An option of an Advanced group is listed by --help-all only (UseTwoLevelHelp).
+    const char* help = app.get_help_all_ptr() != nullptr ? "--help-all" : "--help";
+    std::fprintf(stderr, "%s: error: %s (see %s %s)\n", program, what.c_str(), program, help);
     return 2;
   }
   return std::nullopt;
 }
 
-/// The pre-shared key's command line, the same on both sides (issue 34: written once): `--key
-/// FILE` and the `keygen PATH [--force]` subcommand.
+/// The pre-shared key's command line, the same on both sides: `--key FILE` and the
+/// `keygen PATH [--force]` subcommand.
 struct KeyFileOptions {
   std::string key_file;     ///< --key
   std::string keygen_path;  ///< keygen's PATH

@@ -1,5 +1,5 @@
 #pragma once
-// Perceptual deadband on both streams of a session (issue 18; docs/DESIGN.md §6).
+// Perceptual deadband on both streams of a session (docs/DESIGN.md §6, docs/deadband.md).
 //
 // The idea is the kinesthetic codecs' (Hinterseer, Hirche, Chaudhuri, Steinbach, Buss,
 // "Perception-based data reduction and transmission of haptic data in telepresence and
@@ -82,7 +82,7 @@ struct ToolStateDeadbandConfig {
   /// appears and vanishes within the penetration depth (about 0.1 mm on the fig75 block): with
   /// the free-space position floor (0.2 mm at k = 0.1) a tool bobbing by less than that was
   /// modelled where it was not, and the models so made kept a resting block bouncing at 45–50 Hz
-  /// (issue 32's note; docs/deadband.md). At k = 0.1 the position floor is 20 µm in contact.
+  /// (docs/deadband.md). At k = 0.1 the position floor is 20 µm in contact.
   /// The rotation floor stays the free-space one by default: shrinking it to 0.2 mrad also kept
   /// the block calm, at twice the tool states of the position floor alone (docs/deadband.md).
   double contact_position_floor_scale_m = 2e-4;
@@ -91,9 +91,9 @@ struct ToolStateDeadbandConfig {
   /// ≥ 0). A block that bounces off the surface gets a model with no contacts at the top of its
   /// bounce; with the free-space floor at once, it then fell 0.2 mm into the gear before the next
   /// tool state went out, and the next model pushed 1.7 N (1 in 17 fig75 loopback runs landed in
-  /// 3–4 such bounces; issue 32's third note). Half a second covers a bounce and a lift-off.
+  /// 3–4 such bounces). Half a second covers a bounce and a lift-off.
   double contact_floor_hold_s = 0.5;
-  /// Depth criterion near contact (issue 32, eleventh stop), 0 = off: with the held contact
+  /// Depth criterion near contact, 0 = off: with the held contact
   /// model given to Decide, a tool state is also sent when, for a contact of that model, the
   /// depth it gives at the tool's pose and at the remote node's prediction differ by more than
   /// max(k·δ, k·this) (m; δ the contact's depth at the tool, ContactDepthAt). The remote node

@@ -196,14 +196,13 @@ inline constexpr std::uint32_t kLegacyMagic = 0x504C5448u;  // bytes 'H' 'T' 'L'
 /// perceptual deadband terms in Hello and Welcome and the compact contact model; version 5 the
 /// scene as a scene: meshes in their own frames, the scene-graph and image objects
 /// (SceneObjectKind kSceneGraph, kImage) and NodePoses. Version 6 added the kink planes after the
-/// contacts of ContactModel and CompactContactModel (issue 31); version 7 each plane's own
-/// translation slope (issue 32: the arms of δ's V along the window's axes). Version 8 (issue 33:
-/// tool states within 50 kbit/s) has the 18-byte header above instead of 28 bytes and a 16-byte
-/// MAC (HMAC-SHA-256-128) instead of 32 (HMAC-SHA-512-256); every body is as in version 7.
-/// Version 9 (issue 32's nineteenth stop) adds the translation patches after the kink planes of
-/// ContactModel and CompactContactModel; header, MAC and every other body are as in version 8.
-/// Version 10 (issue 33) gives Ping a body, the operator's measured round trip; every other body
-/// is as in version 9. Version 11 (issue 33: contact models toward 100 kbit/s) has the leaner
+/// contacts of ContactModel and CompactContactModel; version 7 each plane's own translation
+/// slope (the arms of δ's V along the window's axes). Version 8 (tool states within 50 kbit/s) has
+/// the 18-byte header above instead of 28 bytes and a 16-byte MAC (HMAC-SHA-256-128) instead of 32
+/// (HMAC-SHA-512-256); every body is as in version 7. Version 9 adds the translation patches after
+/// the kink planes of ContactModel and CompactContactModel; header, MAC and every other body are as
+/// in version 8. Version 10 gives Ping a body, the operator's measured round trip; every other body
+/// is as in version 9. Version 11 (contact models toward 100 kbit/s) has the leaner
 /// CompactContactModel above (a 45-byte fixed part instead of 103: u32 sequence, echo, hold and
 /// step count, f32 position, an 80-bit quaternion, no wrench at q0; a kink plane that shares its
 /// contact's translation slope in 17 bytes instead of 29); every other body is as in version 10.

@@ -1,5 +1,5 @@
 #pragma once
-// The pipeline truth (issue 31): what the two FULL-RESOLUTION objects would exert at one pose,
+// The pipeline truth: what the two FULL-RESOLUTION objects would exert at one pose,
 // computed from their meshes alone, so that it owns its contacts instead of borrowing the
 // method's windows (ground_truth_depth.h measures the texture stage on the method's windows).
 //
@@ -31,7 +31,7 @@
 //  4. T1, the pipeline truth: δ and ∇δ on that window by ray casting (GroundTruthDepthSolver,
 //     gradient steps at texel scale; tilt_lift_m below sharpens the tilts), Φ_gt = Σ_patches
 //     s_p · (−k δ_p ∇δ_p).
-//  4a. The shares s_p (issue 32's fourteenth stop): patches merge in step 2 when their
+//  4a. The shares s_p: patches merge in step 2 when their
 //     intersection curves come within merge_distance_m, and a merged patch pushes its deepest
 //     point's k δ where the two pushed k δ_1 + k δ_2 a moment before; along a trajectory that is
 //     a step in force, the measure's own (fig76's trace: |ΔF| > 0.5 N on 166 of 399 consecutive
@@ -79,7 +79,7 @@ struct ContactPatchTruthOptions {
   /// direction runs into the neighbouring ridges: 0.9 mm where the overlap along the face's normal
   /// was 11 µm (fig76, 72 N against the method's 0.09 N). The method's own direction is its coarse
   /// surface's normal; detail finer than the radius is its texture. −∇_x V stays the volume
-  /// truth's direction (T2) either way. False: −∇_x V, as before issue 32's third stop.
+  /// truth's direction (T2) either way. False: −∇_x V.
   bool depth_along_macro_normal = true;
   /// Patches that measure one interpenetration twice become one (step 3b above), then their
   /// geometry is computed afresh: q joins p (the one with the larger |∇_x V|)
@@ -87,8 +87,8 @@ struct ContactPatchTruthOptions {
   ///    p's n) and their directions are within overlap_merge_angle_deg: on two textured faces
   ///    whose ridges interlock, the single-linkage regions split by the ridge flanks' normals
   ///    (facing ±y, 55° apart) had overlapping 35 mm windows, and the truth summed the same
-  ///    penetration two or three times (fig76: 9.8 N against one 1.6 N contact; issue 32's
-  ///    third note); 0 turns this rule off;
+  ///    penetration two or three times (fig76: 9.8 N against one 1.6 N contact); 0 turns this
+  ///    rule off;
   ///  - when |∇_x V_q| ≤ minor_patch_fraction · |∇_x V_p| and q's centre lies in p's window
   ///    grown by merge_distance_m: a sliver at p's edge (a block's side face grazing the other
   ///    block) too small to turn p's direction, whose own direction is ill-defined (fig76: a
@@ -112,7 +112,7 @@ struct ContactPatchTruthOptions {
   /// n, so δ(θ) has a kink wherever the bearing point changes (a face resting on two supports: a
   /// V whose arms are their levers), and a secant over ±h reads |θ|/h of an arm within h of the
   /// kink. A small lift (1 µm) reads the arms, and also each crest's own lever where an edge lies
-  /// across many crests; docs/frontier/issue32/twenty_seventh_stop compares the two measures.
+  /// across many crests (speed_error_frontier --truth-tilt-lift-um 0 and 1 compare the two).
   double tilt_lift_m = 0.0;
   /// Crossing triangles' inside part: split in four until no edge exceeds inside_cell_m (m), then
   /// only where a sub-triangle's corners and centroid disagree, down to boundary_cell_m (m).
@@ -120,8 +120,8 @@ struct ContactPatchTruthOptions {
   double boundary_cell_m = 5e-5;
   /// Step 4a: neighbouring patches' shared penalty fades out over this distance (m) past
   /// merge_distance_m, measured between their intersection curves (the pairs' points) where their
-  /// directions agree within max_normal_angle_deg; 0 turns the sharing off (the truth before
-  /// issue 32's fourteenth stop: separate patches always sum).
+  /// directions agree within max_normal_angle_deg; 0 turns the sharing off (separate patches
+  /// always sum).
   double share_fade_m = 5e-3;
   /// τ of the shares' soft maximum (m, > 0): patches deeper by several τ take the whole penalty.
   double share_temperature_m = 5e-6;

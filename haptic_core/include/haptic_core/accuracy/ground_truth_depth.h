@@ -1,5 +1,5 @@
 #pragma once
-// Ground truth for the speed-vs-error study (issue 14): the directional penetration depth of one
+// Ground truth for the speed-vs-error study: the directional penetration depth of one
 // contact window computed on the FULL-RESOLUTION meshes of both objects by dense ray casting
 // (Embree 3), with the same facing and box rules as the method (penetration_depth.h), its
 // gradient by central differences at the method's sample poses (GradientSamplePoses, step table

@@ -1,5 +1,5 @@
 #pragma once
-// A baseline a user might pick instead of haptic textures (issue 14): contact between the
+// A baseline a user might pick instead of haptic textures: contact between the
 // FULL-RESOLUTION triangle meshes through FCL (BVH of OBBRSS, all contacts with penetration depth
 // and normal), rendered as a penalty force Σ k·d·n over the contacts. Used by the speed-vs-error
 // frontier; also the full-resolution proximity check that counts contacts a method misses.

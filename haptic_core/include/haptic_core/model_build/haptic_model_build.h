@@ -18,7 +18,7 @@
 
 namespace ht {
 
-/// The texture size from the surface's detail (issue 32: "model only what a scene needs"): the
+/// The texture size from the surface's detail (model only what a scene needs): the
 /// atlas side chosen per object from the error each size leaves between the full-resolution
 /// surface and the textured coarse model (MeasureSurfaceError's p99 distance, surface_error.h),
 /// instead of one size for every object. Our rule [R]: bake at min_size, then double while

@@ -1,5 +1,5 @@
 #pragma once
-// How well a built haptic model holds the full-resolution surface it stands for (issue 32): the
+// How well a built haptic model holds the full-resolution surface it stands for: the
 // bake's own validation (TextureBakeReport::max_bake_error_m) samples the COARSE surface and asks
 // whether the stored height matches a ray cast there, so it cannot see full-resolution surface
 // that no ray of the coarse surface reaches (a fold, a part the coarse mesh cuts across, a ray
