@@ -69,7 +69,7 @@ struct PipelineOptions {
   /// The remote node's default leaves one core to the operator on a loopback machine
   /// (DefaultTextureThreads()).
   int texture_threads = 1;
-  /// Grazing guard (issue 31): a contact whose δ0 exceeds what its coarse geometry allows (the
+  /// Grazing guard: a contact whose δ0 exceeds what its coarse geometry allows (the
   /// largest over the cluster's hull pairs of the pair's penetration + its two leaves' outward
   /// texture reach + a cell; see grazing_guard_local_reach) is dropped and counted
   /// (StepFaults::grazing_dropped). Along a direction nearly parallel to the surfaces the patches
@@ -82,10 +82,10 @@ struct PipelineOptions {
   /// pressed contacts are a fraction of a millimetre), so the local one is the tighter bound.
   bool grazing_guard_local_reach = true;
   /// Separated leaf pairs farther apart than their two leaves' own outward texture reach
-  /// (HullBounds::reach_m) start no cluster (issue 31): they cannot touch through the
+  /// (HullBounds::reach_m) start no cluster: they cannot touch through the
   /// textures, and would only add windows without overlap. Off: every pair the query found.
   bool drop_unreachable_pairs = true;
-  /// The contact direction from the contact region (issue 31, change 2, after Kim, Otaduy, Lin &
+  /// The contact direction from the contact region (after Kim, Otaduy, Lin &
   /// Manocha 2003's per-cluster penetration direction): each leaf pair's normal, before
   /// clustering, is its region vector (LeafPairRegionVector, contact_region.h: the area-weighted
   /// normals of each leaf's coarse triangles within the other leaf's hull widened by the pair's
@@ -93,7 +93,7 @@ struct PipelineOptions {
   /// face; the pairs of one region then agree and cluster together. A pair without a region (a
   /// model without hierarchy, or no triangle within reach) keeps its hull normal.
   bool region_normals = false;
-  /// Each texture once (issue 31, change 4): a contact renders only its cluster's own coarse
+  /// Each texture once: a contact renders only its cluster's own coarse
   /// triangles (ContactCluster::tool_triangles, object_triangles: each leaf goes to the cluster of
   /// its deepest pair), so that no triangle is rendered in two windows of one step and two
   /// windows on one contact region do not both count its penetration. A side without hierarchy
@@ -109,7 +109,7 @@ struct PipelineOptions {
   /// pair's object leaf (ClusteringOptions::tool_leaves_follow_object_leaves), so that no pair's
   /// overlap falls between two windows.
   bool tool_leaves_follow_object_leaves = false;
-  /// Windows on the contact region of two models without hierarchy (issue 31, change 1): where
+  /// Windows on the contact region of two models without hierarchy: where
   /// a cluster is the single pair of two whole convex models (the procedural scenes: a block
   /// resting on a gear), its point is the hulls' witness point, which on parallel faces is
   /// a corner, and its spread is zero, so a 2 cm window sat on one edge of a 4 cm face and saw one
@@ -118,14 +118,14 @@ struct PipelineOptions {
   /// hull widened by the pair's texture reach) and sized to it plus the texture margin, within
   /// [window_extent_m, max_window_extent_m]. Off: the witness point and the smallest window.
   bool whole_model_region_windows = true;
-  /// Stage 5b (issue 32): δ refined from the grid's cell samples to the finest texture level
+  /// Stage 5b: δ refined from the grid's cell samples to the finest texture level
   /// (DepthRefiner, depth_refinement.h), after either backend. On: δ to the finest level, and a
   /// lower force error (measured: docs/measurements.md). Off (`slave_sim --no-refine-depth`, the
   /// frontier's "grid_only"): the grid's cell samples, the reference for parity.
   bool refine_depth = true;
   /// How stage 5b refines (steps, sub-samples, search floor).
   DepthRefinementOptions depth_refinement;
-  /// Stage 5a (issue 32; on by default, with the weights below): a window whose overlap at the
+  /// Stage 5a (on by default, with the weights below): a window whose overlap at the
   /// tool's pose falls into regions farther apart than split_link_m
   /// (TexturePenetrationSolver::OverlapRegions: the base pose rendered again on the CPU) becomes
   /// one window per region, each the region's box plus split_window_margin_m a side at the parent's
@@ -186,7 +186,7 @@ struct PipelineOptions {
   /// deepest region's δ and gradient do not change with its box. Off: every region gets its box's
   /// window.
   bool split_keeps_parent_window = true;
-  /// Stage 5c (issue 32): contacts on one object whose normals agree within clustering_angle_deg
+  /// Stage 5c: contacts on one object whose normals agree within clustering_angle_deg
   /// and whose textured overlaps at the tool's pose come within share_link_m of each other are one
   /// region and share one penalty (ShareConnectedContacts, connected_contacts.h): each keeps its δ,
   /// J and field, and its stiffness becomes k·s_i, so that a region pushes with about its
@@ -281,7 +281,7 @@ struct StepTimings {
   /// bounding-sphere gap less the coarse query's largest tolerance (reaches, proximity margin and
   /// the speculative margin at its cap, whatever the speed). 0 when any object passed the broad
   /// phase; +∞ without touchables. A step at a pose that moved less than this gives the same
-  /// empty model (the remote node waits instead, issue 33), while the objects stay still.
+  /// empty model (the remote node waits instead), while the objects stay still.
   double free_space_clearance_m = 0.0;
 };
 

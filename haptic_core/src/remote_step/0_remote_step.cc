@@ -233,7 +233,7 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
     ++timings.convex_pairs;
     timings.leaf_pairs += static_cast<int>(pairs.size());
     timings.collision_budget_exhausted |= stats.budget_exhausted;
-    // Each pair's two leaves' own texture reach, once, for two uses (issue 31): a separated pair
+    // Each pair's two leaves' own texture reach, once, for two uses: a separated pair
     // beyond it cannot touch through the textures and starts no cluster (it would only add a
     // window with no overlap); and the grazing guard's bound of a pair is its hull penetration
     // plus that reach plus a cell (a cluster takes its members' largest).

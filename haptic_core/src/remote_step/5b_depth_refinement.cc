@@ -1,4 +1,4 @@
-// Stage 5b: the penetration depth refined to the finest texture level (issue 32); see
+// Stage 5b: the penetration depth refined to the finest texture level; see
 // depth_refinement.h for the method. The seeds' searches and the refinement of a contact; the
 // screen over the window in 5b_depth_screening.cc, the envelope's evaluation in
 // 5b_patch_envelope.h.
