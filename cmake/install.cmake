@@ -3,7 +3,7 @@
 #   lib/, include/haptic_core the haptic core (static library) and its public headers, with an
 #                             exported CMake package: find_package(haptic_teleop CONFIG) gives
 #                             haptic_teleop::haptic_core, and the demo models and scenes as
-#                             haptic_teleop::haptic_demo_models (examples/find_package_consumer)
+#                             haptic_teleop::haptic_demo_models (examples/contact_force)
 #   lib/systemd/system/       the two services;  lib/udev/rules.d/  the device rules
 #   share/haptic_teleop/      example configs, the plot scripts, the docs
 # and `cpack -G DEB` (in the build folder) makes a Debian package of the same.

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installed as users expect (issue 16): `cmake --install` into a fresh prefix, then a project
-# outside the tree finds the haptic core with find_package and runs a remote step with it; and
-# `cpack -G DEB` makes a Debian package holding the binaries, units and rules.
+# outside the tree (examples/contact_force) finds the haptic core with find_package and runs a
+# remote step with it; and `cpack -G DEB` makes a Debian package holding the binaries, units and
+# rules.
 # Usage: tests/install_consumer_test.sh SOURCE_DIR BUILD_DIR OUT_DIR
 set -euo pipefail
 src="${1:?source dir}"; build="${2:?build dir}"; out="${3:?out dir}"
@@ -29,10 +30,13 @@ for unit in haptic-slave-sim haptic-master-station; do
     echo "install_consumer_test: systemd-analyze not found; unit files not verified"
   fi
 done
-cmake -S "$src/examples/find_package_consumer" -B "$out/consumer" \
+# examples/contact_force: built against the prefix, run at the default pose and at a given one
+# (it exits 1 when the block is not pushed up).
+cmake -S "$src/examples/contact_force" -B "$out/consumer" \
   -DCMAKE_PREFIX_PATH="$out/prefix" > "$out/consumer.log"
 cmake --build "$out/consumer" -j2 >> "$out/consumer.log"
-"$out/consumer/haptic_core_consumer"
+"$out/consumer/contact_force"
+"$out/consumer/contact_force" 0.3 1.5 10
 ( cd "$build" && cpack -G DEB -B "$out/deb" > "$out/cpack.log" 2>&1 ) || { tail "$out/cpack.log"; exit 1; }
 deb="$(ls "$out"/deb/haptic-teleop_*.deb)"
 contents="$(dpkg-deb -c "$deb")"
