@@ -81,11 +81,14 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   using namespace ht;
-  const std::vector<Displacement> displacements = {
-      {"slide 0.5 mm x", {{0.5e-3, 0, 0}, {0, 0, 0}}}, {"slide 1.5 mm y", {{0, 1.5e-3, 0}, {}}},
-      {"slide 5 mm x", {{5e-3, 0, 0}, {}}},            {"slide 5 mm y", {{0, 5e-3, 0}, {}}},
-      {"tilt 1 mrad x", {{}, {1e-3, 0, 0}}},           {"tilt 10 mrad y", {{}, {0, 10e-3, 0}}},
-      {"twist 1 mrad z", {{}, {0, 0, 1e-3}}},          {"twist 10 mrad z", {{}, {0, 0, 10e-3}}}};
+  const std::vector<Displacement> displacements = {{"slide 0.5 mm x", {{0.5e-3, 0, 0}, {0, 0, 0}}},
+                                                   {"slide 1.5 mm y", {{0, 1.5e-3, 0}, {}}},
+                                                   {"slide 5 mm x", {{5e-3, 0, 0}, {}}},
+                                                   {"slide 5 mm y", {{0, 5e-3, 0}, {}}},
+                                                   {"tilt 1 mrad x", {{}, {1e-3, 0, 0}}},
+                                                   {"tilt 10 mrad y", {{}, {0, 10e-3, 0}}},
+                                                   {"twist 1 mrad z", {{}, {0, 0, 1e-3}}},
+                                                   {"twist 10 mrad z", {{}, {0, 0, 10e-3}}}};
   for (const std::string& scene_name : scenes) {
     HapticScene scene;
     try {
@@ -154,7 +157,8 @@ int main(int argc, char** argv) {
       }
       std::printf("  %-16s %9.2f%% %9.2f%% %12.3f %10.3f %4d/%-4d\n", d.name.c_str(),
                   fr > 0 ? 100 * std::sqrt(fe / fr) : 0.0, tr > 0 ? 100 * std::sqrt(te / tr) : 0.0,
-                  largest, std::sqrt(fr / static_cast<double>(std::max<std::size_t>(1, poses.size()))),
+                  largest,
+                  std::sqrt(fr / static_cast<double>(std::max<std::size_t>(1, poses.size()))),
                   contacts_q0, contacts_fresh);
     }
   }

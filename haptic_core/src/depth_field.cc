@@ -374,8 +374,8 @@ __attribute__((target("avx2,fma"))) void BatchDepthsAvx2(const NodeBatch& batch,
 __attribute__((target("avx2,fma"))) int RowCandidatesAvx2(
     const float* a, int count, const glm::dvec3& first, const glm::dvec3& step_i,
     const glm::dvec3& along_a, double inv_h, int nx, int ny, const float* bound, double threshold,
-    int& tested, int cell[4], double tu[4], double tv[4], double sx[4], double sy[4],
-    double sz[4], double cell_bound[4]) noexcept {
+    int& tested, int cell[4], double tu[4], double tv[4], double sx[4], double sy[4], double sz[4],
+    double cell_bound[4]) noexcept {
   const __m128i lane = _mm_setr_epi32(0, 1, 2, 3);
   const __m128i in_row = _mm_cmpgt_epi32(_mm_set1_epi32(count), lane);
   const __m128 heights = _mm_maskload_ps(a, in_row);

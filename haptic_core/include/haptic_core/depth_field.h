@@ -134,8 +134,8 @@ struct DepthField {
   /// [4, kMaxDepthFieldSide], both maps #nx·ny, the tool's offsets within ±h, margin ≥ 0, ε > 0)
   /// and derives env_bound_m, the kept tool nodes, the blocks' bounds and tool_radius_m: all
   /// tool nodes, or, where the evaluation at X_WT0 computes more than kDepthFieldDenseNodes of
-  /// them or tests more than kDepthFieldDenseTestedNodes, every node_stride-th. Allocates only when the buffers' capacity is short. Returns
-  /// false, leaving prepared false, on a bad field.
+  /// them or tests more than kDepthFieldDenseTestedNodes, every node_stride-th. Allocates only when
+  /// the buffers' capacity is short. Returns false, leaving prepared false, on a bad field.
   bool Prepare();
   /// Reserves the maps, the bounds and the blocks for kMaxDepthFieldSide² nodes (not Prepare's
   /// scratch), so that a field swapped into a cache slot keeps buffers of that size. Allocates.
