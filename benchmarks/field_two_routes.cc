@@ -6,7 +6,7 @@
 // displacement the relative RMS difference of force and torque over the poses (the fresh step's
 // wrench the reference), and the largest force difference (N).
 //
-// Usage: field_two_routes [--scene NAME]... [--starts K] [--margin-mm M]
+// Usage: field_two_routes [--scene NAME]... [--starts K] [--margin-mm M] [--subdivision S]
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -59,7 +59,7 @@ int main(int argc, char** argv) {
       "evaluated at q0 + dq, against a fresh remote step at q0 + dq. CPU penetration depth."};
   std::vector<std::string> scenes{"block-on-gear", "striped-blocks", "file-on-cad-part",
                                   "hammer-on-torus"};
-  int starts = 9;
+  int starts = 9, subdivision = 2;
   double margin_mm = 7.5, spread_mm = 4.0, force_n = 1.0;
   std::string cache_dir = ht::HapticModelCache::DefaultDir();
   app.add_option("--scene", scenes,
@@ -76,6 +76,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--margin-mm", margin_mm,
                  "the fields' travel margin (mm; 7.5 = 50 mm/s over a 150 ms round trip)")
+      ->capture_default_str();
+  app.add_option("--subdivision", subdivision, "depth-field nodes per window cell (1..4)")
+      ->check(CLI::Range(1, 4))
       ->capture_default_str();
   app.add_option("--cache-dir", cache_dir, "model cache folder (the benchmark scenes)")
       ->capture_default_str();
@@ -107,6 +110,7 @@ int main(int argc, char** argv) {
     options.texture_threads = 1;
     options.depth_fields = true;
     options.depth_field_margin_m = margin_mm * 1e-3;
+    options.depth_field_subdivision = subdivision;
     options.Validate();
     HapticTexturePipeline pipeline(
         scene, options,
@@ -135,8 +139,8 @@ int main(int argc, char** argv) {
         if (k < 400) poses.push_back(X);
       }
     }
-    std::printf("%s: %zu resting poses, fields' margin %.1f mm\n", scene_name.c_str(), poses.size(),
-                margin_mm);
+    std::printf("%s: %zu resting poses, fields' margin %.1f mm, %d nodes a window cell\n",
+                scene_name.c_str(), poses.size(), margin_mm, subdivision);
     std::printf("  %-16s %10s %10s %12s %10s %9s\n", "displacement", "force rms", "torque rms",
                 "largest dF N", "|F| rms N", "contacts");
     for (const Displacement& d : displacements) {
