@@ -274,7 +274,7 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
   // The remote node's last step (remote clock, ns) and its period for extrapolated steps.
   std::int64_t last_remote_step_ns = std::numeric_limits<std::int64_t>::min() / 2;
   const auto remote_period_ns = static_cast<std::int64_t>(arm.remote_step_period_s * 1e9);
-  ContactModel held_model{};         // the newest model the operator received (its deadband's)
+  ContactModel held_model{};  // the newest model the operator received (its deadband's)
   std::uint64_t tool_seq = 0, model_seq = 0;
   ArmRun run;
   run.duration_s = static_cast<double>(ticks) * 1e-3;
