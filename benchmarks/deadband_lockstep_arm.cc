@@ -374,7 +374,8 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
     wire::ContactModelMessage message;
     message.model = pipeline.Step(X_WT, remote.seq, timings, remote.message.V_WT_W);
     const std::int64_t sent_ns = t_r + step_ns;
-    const DeadbandReason model_why = model_deadband.Decide(message.model, sent_ns);
+    const DeadbandReason model_why =
+        model_deadband.Decide(message.model, sent_ns, pipeline.kept_depth_fields());
     ++run.model_decisions[static_cast<std::size_t>(model_why)];
     if (model_why == DeadbandReason::kNotSent) continue;
     message.tool_state_send_time_ns = remote.sent_ns + extrapolation_ns;

@@ -497,6 +497,59 @@ TEST(ContactRegion, PairRegionBoundsGivesThePlainClippingsBitsOnRandomPoses) {
 // the model taken at one tilt give the step's wrench at another across the vertex, which is what
 // the operator's 1 kHz loop renders between two models, where a linearization holds one arm
 // (docs/hard-cases.md: the fig75 block rocked at the model rate).
+// A step whose kept depth fields still hold its contacts renders nothing: its contacts are the
+// last full step's, each linearized from its field at the new pose (the field's δ and ∇δ, as every
+// step with fields is), and its wrench at q0 is what a fresh pipeline's step there gives (a slide
+// across the gear's ridges, where a field is exact in translation). Past half the travel margin
+// the step renders again.
+TEST(ContactRegion, AStepWhoseKeptFieldsHoldItsContactsLinearizesFromThemWithoutARender) {
+  const HapticScene scene = MakeBlockOnGearScene();
+  PipelineOptions options;
+  options.depth_fields = true;
+  options.depth_field_margin_m = 2e-3;
+  HapticTexturePipeline pipeline(scene, options);
+  const RigidTransform X0 = LevelBlockOnGear(0.0017, 0.1e-3);
+  StepTimings t;
+  const ContactModel m0 = pipeline.Step(X0, 1, t);
+  ASSERT_EQ(m0.num_contacts, 1);
+  const std::uint32_t id0 = m0.contacts[0].depth_field_id;
+  ASSERT_NE(id0, 0u);
+  EXPECT_EQ(pipeline.step_faults().steps_from_kept_fields, 0);
+  ASSERT_EQ(pipeline.last_depth_fields().size(), 1u);
+  const DepthFieldEvaluation e0 = DepthFieldDepthAt(*pipeline.last_depth_fields()[0], X0);
+  EXPECT_EQ(m0.contacts[0].depth_m, e0.depth_m) << "a full step's linearization is its field's";
+
+  const auto slid = [&](double dy) {  // across the ridges
+    RigidTransform X = X0;
+    X.translation.y += dy;
+    return X;
+  };
+  const ContactModel m1 = pipeline.Step(slid(0.4e-3), 2, t);
+  EXPECT_EQ(pipeline.step_faults().steps_from_kept_fields, 1);
+  ASSERT_EQ(m1.num_contacts, 1);
+  EXPECT_EQ(m1.contacts[0].depth_field_id, id0);
+  ASSERT_EQ(pipeline.last_depth_fields().size(), 1u);
+  const DepthFieldEvaluation e1 = DepthFieldDepthAt(*pipeline.last_depth_fields()[0], slid(0.4e-3));
+  EXPECT_EQ(m1.contacts[0].depth_m, e1.depth_m);
+  EXPECT_EQ(m1.contacts[0].gradient.d_translation_W, e1.gradient.d_translation_W);
+  EXPECT_EQ(m1.contacts[0].gradient.d_rotation_W, e1.gradient.d_rotation_W);
+  EXPECT_NE(m1.contacts[0].depth_m, m0.contacts[0].depth_m) << "the slide moves over the ridges";
+
+  HapticTexturePipeline fresh(scene, options);
+  const ContactModel there = fresh.Step(slid(0.4e-3), 1, t);
+  ASSERT_EQ(there.num_contacts, 1);
+  EXPECT_NE(there.contacts[0].depth_field_id, 0u);
+  const double scale = glm::length(there.F_T_W_at_q0.force);
+  ASSERT_GT(scale, 0.1);
+  EXPECT_LT(glm::length(m1.F_T_W_at_q0.force - there.F_T_W_at_q0.force), 0.01 * scale);
+
+  // 1.5 mm on: past half the 2 mm margin, a new render.
+  const ContactModel m2 = pipeline.Step(slid(1.9e-3), 3, t);
+  EXPECT_EQ(pipeline.step_faults().steps_from_kept_fields, 1);
+  ASSERT_EQ(m2.num_contacts, 1);
+  EXPECT_NE(m2.contacts[0].depth_field_id, id0);
+}
+
 TEST(ContactRegion, BlockRestingOnTheGearBearsOnItsEdgesAndItsFieldCarriesTheKink) {
   const HapticScene scene = MakeBlockOnGearScene();
   const double x0 = 0.0017, half = RidgedBlockParams{}.half_extents_m.x;

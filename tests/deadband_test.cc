@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <numbers>
 #include <random>
@@ -288,6 +289,65 @@ TEST(Deadband, AModelNamingANewDepthFieldIsSent) {
   EXPECT_EQ(d.held().contacts[0].depth_field_id, 5u);
   EXPECT_EQ(d.counts()[static_cast<int>(DeadbandReason::kDepthField)], 1u);
   EXPECT_EQ(ToJson(d.counts())["depth_field"].get<int>(), 1);
+}
+
+// The remote node's deadband with its kept fields: two models whose contact names one field and
+// whose linearizations are that field's tangents at their poses render alike wherever the
+// operator holds the field, however much the tangents differ; judged by the linearizations
+// alone, the second is sent.
+TEST(Deadband, AModelWhoseFieldTheHeldOneNamesIsJudgedByTheField) {
+  // A plate rippled along x (100 µm, 2 mm period) under a tool whose only node sits 30 µm into it
+  // at a zero of the ripple.
+  constexpr int n = 48;
+  constexpr double h = 0.25e-3;
+  DepthField f;
+  f.id = 9;
+  f.cell_m = h;
+  f.nx = f.ny = n;
+  f.travel_margin_m = 2e-3;
+  f.X_WT0.translation = {24 * h, 24 * h, 5e-3};
+  for (int j = 0; j < n; ++j) {
+    for (int i = 0; i < n; ++i) {
+      f.env_height_m.push_back(
+          static_cast<float>(100e-6 * std::sin(2.0 * std::numbers::pi * i * h / 2e-3)));
+      f.tool_height_m.push_back(i == 24 && j == 24 ? -30e-6f : std::nanf(""));
+    }
+  }
+  ASSERT_TRUE(f.Prepare());
+  const std::array<const DepthField*, 1> kept{&f};
+  // The field's model at the tool displaced by dx along x: its linearization the field's tangent.
+  const auto model_at = [&](double dx) {
+    ContactModel m;
+    m.X_WT0 = f.X_WT0;
+    m.X_WT0.translation.x += dx;
+    const DepthFieldEvaluation e = DepthFieldDepthAt(f, m.X_WT0);
+    EXPECT_TRUE(e.valid);
+    m.num_contacts = 1;
+    ContactLinearization& c = m.contacts[0];
+    c.depth_m = e.depth_m;
+    c.gradient = e.gradient;
+    c.stiffness_n_per_m = 20000.0;
+    c.depth_field_id = f.id;
+    m.F_T_W_at_q0 = PenaltyWrench(c.depth_m, c.gradient, c.stiffness_n_per_m);
+    return m;
+  };
+  ContactModelDeadbandConfig c;
+  c.weber_fraction = 0.1;
+  c.keepalive_s = 10.0;
+  ContactModelDeadband with_fields(c), alone(c);
+  // A quarter period along the ripple: the depth's slope along x falls from 0.28 (the bicubic's
+  // between 8 nodes a period) to 0, and the depth is 130 µm where m0's tangent says 170 µm.
+  const ContactModel m0 = model_at(0.0), m1 = model_at(0.5e-3);
+  ASSERT_GT(m0.contacts[0].gradient.d_translation_W.x, 0.25);
+  ASSERT_NEAR(m1.contacts[0].gradient.d_translation_W.x, 0.0, 0.01);
+  ASSERT_EQ(with_fields.Decide(m0, 0, kept), DeadbandReason::kFirst);
+  ASSERT_EQ(alone.Decide(m0, 0), DeadbandReason::kFirst);
+  EXPECT_EQ(with_fields.Decide(m1, kMs, kept), DeadbandReason::kNotSent);
+  EXPECT_NE(alone.Decide(m1, kMs), DeadbandReason::kNotSent);
+  // The field gone from the sender's pool (replaced): the held model is judged by its
+  // linearization again.
+  const std::array<const DepthField*, 1> none{nullptr};
+  EXPECT_NE(with_fields.Decide(model_at(1e-3), 2 * kMs, none), DeadbandReason::kNotSent);
 }
 
 TEST(Deadband, ContactModelSentWhenTheHeldOneRendersDifferently) {

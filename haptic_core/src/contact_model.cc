@@ -23,9 +23,14 @@ double ContactDepthAt(const ContactLinearization& c, const Twist& dq,
   return c.depth_m + c.gradient.Dot(dq);
 }
 
-ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const RigidTransform& X_WT,
-                                            double stiffness_scale, double max_contact_force_n,
-                                            const DepthFieldCache* fields) noexcept {
+namespace {
+
+/// EvaluateContactModel with `field_at(id, X_WT)` giving a contact's field evaluation (valid
+/// false where there is none) when `has_fields`.
+template <typename FieldAt>
+ContactModelEvaluation EvaluateWithFields(const ContactModel& model, const RigidTransform& X_WT,
+                                          double stiffness_scale, double max_contact_force_n,
+                                          bool has_fields, const FieldAt& field_at) noexcept {
   ContactModelEvaluation out;
   if (!IsFiniteRigidTransform(X_WT) || !IsFiniteRigidTransform(model.X_WT0)) return out;
   const double scale = std::clamp(std::isfinite(stiffness_scale) ? stiffness_scale : 0.0, 0.0, 1.0);
@@ -40,7 +45,7 @@ ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const Rig
     bool curved = false;
     double depth;
     DepthFieldEvaluation fe;
-    if (fields != nullptr && c.depth_field_id != 0) fe = fields->Evaluate(c.depth_field_id, X_WT);
+    if (has_fields && c.depth_field_id != 0) fe = field_at(c.depth_field_id, X_WT);
     if (fe.valid) {
       ++out.field_contacts;
       if (!fe.within_margin) ++out.field_beyond_margin;
@@ -49,7 +54,7 @@ ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const Rig
       curvature = fe.curvature;
       curved = true;
     } else {
-      if (fields != nullptr && c.depth_field_id != 0) ++out.field_fallbacks;
+      if (has_fields && c.depth_field_id != 0) ++out.field_fallbacks;
       depth = ContactDepthAt(c, dq, &J_active);
     }
     if (!(depth > 0.0)) continue;
@@ -76,6 +81,29 @@ ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const Rig
     if (curved) out.K.noalias() -= (k * depth) * curvature;
   }
   return out;
+}
+
+}  // namespace
+
+ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const RigidTransform& X_WT,
+                                            double stiffness_scale, double max_contact_force_n,
+                                            const DepthFieldCache* fields) noexcept {
+  return EvaluateWithFields(model, X_WT, stiffness_scale, max_contact_force_n, fields != nullptr,
+                            [fields](std::uint32_t id, const RigidTransform& X) noexcept {
+                              return fields->Evaluate(id, X);
+                            });
+}
+
+ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const RigidTransform& X_WT,
+                                            std::span<const DepthField* const> fields) noexcept {
+  return EvaluateWithFields(model, X_WT, 1.0, std::numeric_limits<double>::infinity(), true,
+                            [fields](std::uint32_t id, const RigidTransform& X) noexcept {
+                              for (const DepthField* f : fields) {
+                                if (f != nullptr && f->prepared && f->id == id)
+                                  return DepthFieldDepthAt(*f, X);
+                              }
+                              return DepthFieldEvaluation{};
+                            });
 }
 
 }  // namespace ht

@@ -335,7 +335,7 @@ void RemoteNodeRun::StepOrWait() {
                      out.model.num_contacts, session_->latest_tool_state_seq(),
                      static_cast<int>(cause), pipeline_->last_contact_queries());
   session_->MaybeSendContactModel(out, timings, statistics_.steps(), step_end_ns,
-                                  pipeline_->last_depth_fields());
+                                  pipeline_->last_depth_fields(), pipeline_->kept_depth_fields());
   PrintProgress(timings, out.model.num_contacts);
   // The pace (config.max_rate_hz).
   if (min_period_ns_ > 0) {

@@ -95,6 +95,7 @@ nlohmann::json RemoteNodeRun::Summary() const {
                 {"bridge_fade_um", std::round(config_.pipeline.split_bridge_fade_m * 1e9) / 1e3}};
   s["share_connected_contacts"] = config_.pipeline.share_connected_contacts;
   s["shared_contacts"] = pipeline_->step_faults().shared_contacts;
+  s["steps_from_kept_fields"] = pipeline_->step_faults().steps_from_kept_fields;
   s["pd_backend"] = {{"requested", ToString(config_.pd_backend)},
                      {"used", backend_at_start_},
                      {"used_at_end", std::string(pipeline_->backend().name())},

@@ -346,7 +346,8 @@ StepCause RemoteSession::WhyStep(const RigidTransform& X_WT, bool scene_moves, d
 bool RemoteSession::MaybeSendContactModel(wire::ContactModelMessage& out,
                                           const StepTimings& timings, std::uint64_t step_count,
                                           std::int64_t now,
-                                          std::span<const DepthField* const> fields) {
+                                          std::span<const DepthField* const> fields,
+                                          std::span<const DepthField* const> kept_fields) {
   if (session_ == 0) return false;
   if (model_period_ns_ != 0 && now - last_model_sent_ns_ < model_period_ns_) {
     // Too soon after the last model: this one is not sent, and the next pass must step again
@@ -355,7 +356,7 @@ bool RemoteSession::MaybeSendContactModel(wire::ContactModelMessage& out,
     return false;
   }
   model_pending_ = false;
-  if (model_deadband_.Decide(out.model, now) == DeadbandReason::kNotSent) {
+  if (model_deadband_.Decide(out.model, now, kept_fields) == DeadbandReason::kNotSent) {
     ++models_held_back_;
     // The model the operator holds answers this pose too, to within the deadband: its next
     // keep-alive echoes this tool state, so that the operator's model age stays the age of the

@@ -142,10 +142,12 @@ class RemoteSession {
   /// With depth fields agreed, the fields the model names that this session has not sent yet
   /// (from `fields`, the step's HapticTexturePipeline::last_depth_fields()) are encoded and
   /// their DepthFieldFragments sent first; a contact naming a field not in `fields` goes
-  /// without one.
+  /// without one. `kept_fields` (HapticTexturePipeline::kept_depth_fields()) are the fields the
+  /// deadband evaluates both models with (ContactModelDeadband::Decide).
   bool MaybeSendContactModel(wire::ContactModelMessage& out, const StepTimings& timings,
                              std::uint64_t step_count, std::int64_t now_ns,
-                             std::span<const DepthField* const> fields = {});
+                             std::span<const DepthField* const> fields = {},
+                             std::span<const DepthField* const> kept_fields = {});
   /// While steps wait (WhyStep gave kWait): sends the last model again (new header, same
   /// content) when the contact-model keep-alive has passed, echoing the newest tool state whose
   /// step gave a model the deadband held back (it answers that state too, to within the

@@ -227,7 +227,8 @@ bool NamesNewDepthField(const ContactModel& model, const ContactModel& held) noe
 
 }  // namespace
 
-DeadbandReason ContactModelDeadband::Decide(const ContactModel& model, std::int64_t t_ns) noexcept {
+DeadbandReason ContactModelDeadband::Decide(const ContactModel& model, std::int64_t t_ns,
+                                            std::span<const DepthField* const> fields) noexcept {
   const ContactModelDeadbandConfig& c = config_;
   const double k = c.weber_fraction;
   DeadbandReason reason = DeadbandReason::kNotSent;
@@ -242,8 +243,12 @@ DeadbandReason ContactModelDeadband::Decide(const ContactModel& model, std::int6
   } else if (NamesNewDepthField(model, held_)) {
     reason = DeadbandReason::kDepthField;
   } else {
-    const ContactModelEvaluation held = EvaluateContactModel(held_, model.X_WT0);
-    const ContactModelEvaluation now = EvaluateContactModel(model, model.X_WT0);
+    const ContactModelEvaluation held = fields.empty()
+                                            ? EvaluateContactModel(held_, model.X_WT0)
+                                            : EvaluateContactModel(held_, model.X_WT0, fields);
+    const ContactModelEvaluation now = fields.empty()
+                                           ? EvaluateContactModel(model, model.X_WT0)
+                                           : EvaluateContactModel(model, model.X_WT0, fields);
     const double stiffness_t = Frobenius3(now.K, 0, 0);
     const double stiffness_r = Frobenius3(now.K, 3, 3);
     if (glm::length(held.F_T_W.force - now.F_T_W.force) >

@@ -6,6 +6,7 @@
 #include <array>
 #include <cstdint>
 #include <limits>
+#include <span>
 
 #include "haptic_core/contact_linearization.h"
 #include "haptic_core/depth_field.h"
@@ -99,5 +100,12 @@ ContactModelEvaluation EvaluateContactModel(
     const ContactModel& model, const RigidTransform& X_WT, double stiffness_scale = 1.0,
     double max_contact_force_n = std::numeric_limits<double>::infinity(),
     const DepthFieldCache* fields = nullptr) noexcept;
+
+/// The same with unit stiffness scale and no force bound, the fields looked up by id among
+/// `fields` (prepared ones; null entries skipped) and evaluated afresh (DepthFieldDepthAt): the
+/// remote node's view of what the operator renders, from the fields it keeps. noexcept,
+/// allocation-free.
+ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const RigidTransform& X_WT,
+                                            std::span<const DepthField* const> fields) noexcept;
 
 }  // namespace ht

@@ -297,6 +297,12 @@ struct StepTimings {
 ///     all contacts; the GPU backend falls back to the CPU backend if it fails), then the grazing
 ///     guard (contact_windows.h: DropGrazingContacts);
 ///  6. assembly (contact_assembly.h): the contact model and its wrench at q0.
+/// With depth fields (PipelineOptions::depth_fields), stage 5d also linearizes each contact that
+/// has a field from it (δ0 and J the field's δ and ∇δ at q0, the tangent of what the operator
+/// evaluates), and a step whose stage-4 contacts are the last full step's, each still held by the
+/// kept field stage 5d would give it, skips stages 5–5d: its contacts are that step's (stage 5a's
+/// split windows and 5c's shares included, held while the fields hold), linearized from their
+/// fields at the new pose (StepFaults::steps_from_kept_fields).
 /// Nothing in it throws after construction (faults are counted), and after warm-up it does not
 /// allocate. Holds preallocated scratch; not thread-safe, and must be stepped on the thread that
 /// created its penetration-depth backend (a GL context is current there).
@@ -361,6 +367,10 @@ class HapticTexturePipeline {
     /// Contacts whose penalty stage 5c shared with a linked contact
     /// (PipelineOptions::share_connected_contacts); not a fault, a count.
     std::int64_t shared_contacts = 0;
+    /// Steps whose contacts were the last full step's, linearized from their kept depth fields
+    /// at the step's pose, with stages 5–5d skipped (PipelineOptions::depth_fields); not a
+    /// fault, a count.
+    std::int64_t steps_from_kept_fields = 0;
   };
   const StepFaults& step_faults() const noexcept;
   /// The backend in use: the one given, or the CPU backend after that one failed.
@@ -375,8 +385,9 @@ class HapticTexturePipeline {
   const std::string& fallback_reason() const noexcept { return fallback_reason_; }
 
   /// The contacts of the last Step() before the texture stage dropped any: one query per cluster
-  /// (object, its pose X_WO, window, stiffness), in the order they were linearized. Valid until
-  /// the next Step(). For accuracy studies (the speed-vs-error frontier recomputes each window's
+  /// (object, its pose X_WO, window, stiffness), in the order they were linearized; after a step
+  /// from kept fields, the last full step's (their triangle subsets All()). Valid until the next
+  /// Step(). For accuracy studies (the speed-vs-error frontier recomputes each window's
   /// ground truth); the step itself does not need them.
   std::span<const ContactQuery> last_contact_queries() const noexcept;
   /// The linearization of each of last_contact_queries() (depth_m = −∞ where the patches did not
@@ -384,7 +395,8 @@ class HapticTexturePipeline {
   std::span<const ContactLinearization> last_linearizations() const noexcept;
   /// The kGradientSamples depth samples of each of last_contact_queries() (query-major,
   /// GradientSamplePoses() order), as stage 5b left them (refined where PipelineOptions::
-  /// refine_depth is on). Valid until the next Step().
+  /// refine_depth is on); a step from kept fields takes none (the last full step's stay). Valid
+  /// until the next Step().
   std::span<const DepthSample> last_depth_samples() const noexcept;
   /// What stage 5b did since construction.
   const DepthRefinementCounters& depth_refinement_counters() const noexcept;
@@ -409,6 +421,10 @@ class HapticTexturePipeline {
   /// step, or kept from an earlier one (the same id and bits) while it still holds the contact.
   /// A sender sends only the ids its receiver lacks. Valid until the next Step().
   std::span<const DepthField* const> last_depth_fields() const noexcept;
+  /// Every depth field the pipeline keeps (rendered at this or an earlier step and not yet
+  /// replaced; entries not prepared hold none), for evaluating a model sent earlier whose fields
+  /// the receiver holds (ContactModelDeadband::Decide). Valid until the next Step().
+  std::span<const DepthField* const> kept_depth_fields() const noexcept;
   /// The floor the next Step() uses (m).
   double speculative_floor_m() const noexcept { return options_.speculative_floor_m; }
   /// Stage 5b's seeds from the last step (DepthRefinementOptions::seed_from_last_step) forgotten:

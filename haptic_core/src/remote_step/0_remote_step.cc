@@ -77,6 +77,19 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
       MakeContactQueries({d.candidates.data(), static_cast<std::size_t>(d.num_candidates)},
                          options_.window_extent_m, options_.max_window_extent_m,
                          options_.grid_resolution, d.last_queries, d.step_faults.bad_windows);
+  // The step from kept fields: the last full step's contacts, each linearized from its field at
+  // this pose, while their fields hold them (no render).
+  if (options_.depth_fields && TakeStepFromKeptFields(X_WT, options_, d)) {
+    ++d.step_faults.steps_from_kept_fields;
+    AssembleContactModel(last_linearizations(), model);
+    const auto t2 = Clock::now();
+    timings.collision_us = us(t1 - t0);
+    timings.texture_us = us(t2 - t1);
+    timings.total_us = us(t2 - t0);
+    return model;
+  }
+  std::copy_n(d.last_queries.begin(), d.last_num_queries, d.full_stage4_queries.begin());
+  d.full_stage4_count = d.last_num_queries;
   // Stage 5: texture penetration depth and its gradient, linearized, for the whole batch.
   LinearizeContacts(X_WT, d.last_num_queries);
   for (int i = 0; i < d.last_num_queries; ++i) {
@@ -121,10 +134,15 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
   // Stage 5c: contacts whose overlaps are one region share one penalty.
   ShareConnectedContacts(X_WT, d.last_num_queries);
   // Stage 5d: each contact's depth field, the two surfaces over its window and travel margin.
+  // Each contact that has a field is linearized from it: the tangent of the depth the operator's
+  // loop evaluates.
   if (options_.depth_fields) {
     RenderContactDepthFields(*scene_.tool, X_WT, options_, d);
+    LinearizeFromDepthFields(X_WT, d);
+    RecordFullStep(d);
   } else {
     d.num_fields = 0;
+    d.full_valid = false;
   }
   // Stage 6: the contact model.
   AssembleContactModel(last_linearizations(), model);
@@ -504,6 +522,10 @@ std::span<const DepthField* const> HapticTexturePipeline::last_depth_fields() co
   return {data_->fields.data(), static_cast<std::size_t>(data_->num_fields)};
 }
 
+std::span<const DepthField* const> HapticTexturePipeline::kept_depth_fields() const noexcept {
+  return {data_->field_pool_fields.data(), data_->field_pool_fields.size()};
+}
+
 std::span<const DepthSample> HapticTexturePipeline::last_depth_samples() const noexcept {
   return {data_->last_samples.data(), static_cast<std::size_t>(data_->last_num_queries) *
                                           static_cast<std::size_t>(kGradientSamples)};
@@ -528,6 +550,7 @@ void HapticTexturePipeline::SetDepthFields(bool on) {
 void HapticTexturePipeline::ForgetLastStep() noexcept {
   data_->refiner.ForgetLastStep();
   for (DepthField& f : data_->field_pool) f.prepared = false;  // none reused
+  data_->full_valid = false;
 }
 
 }  // namespace ht

@@ -49,6 +49,7 @@ RemoteStepData::RemoteStepData(const HapticScene& scene, const PipelineOptions& 
                                int kept_field_resolution)
     :  // Stage 5b's buffers (about 10 MB at 8192 triangles) only where it runs.
       refiner(options.depth_refinement, options.refine_depth ? 8192 : 0) {
+  for (std::size_t k = 0; k < field_pool.size(); ++k) field_pool_fields[k] = &field_pool[k];
   if (options.split_windows_at_separated_overlap || options.share_connected_contacts) {
     // Stage 5c renders whole windows, up to the largest.
     region_solver = std::make_unique<TexturePenetrationSolver>(

@@ -144,6 +144,8 @@ struct RemoteStepData {
   static constexpr int kFieldPoolSize = 2 * kMaxContacts;
   std::array<DepthField, kFieldPoolSize> field_pool{};
   std::array<std::uint64_t, kFieldPoolSize> field_used_at{};
+  /// The pool's fields (HapticTexturePipeline::kept_depth_fields()).
+  std::array<const DepthField*, kFieldPoolSize> field_pool_fields{};
   std::uint64_t field_step = 0;
   std::array<const DepthField*, kMaxContacts> fields{};
   int num_fields = 0;
@@ -162,6 +164,23 @@ struct RemoteStepData {
   std::array<FieldLattice, 2 * kMaxContacts> field_lattices{};
   std::uint64_t field_lattice_clock = 0;
   std::uint32_t last_lattice_id = 0;
+  /// Each contact's slot in field_pool at the last step (−1: no field), in last_queries' order.
+  std::array<int, kMaxContacts> contact_field_slot{};
+
+  // ---- The step from kept fields (TakeStepFromKeptFields).
+  /// The last step that ran stages 5–5d: its stage-4 queries (before stage 5a) and their count,
+  /// its contacts (queries with their triangle subsets cleared, and linearizations, after stage
+  /// 5d) and their count, and whether a later step may take its contacts (every contact has a
+  /// field).
+  std::array<ContactQuery, kMaxContacts> full_stage4_queries{};
+  int full_stage4_count = 0;
+  std::array<ContactQuery, kMaxContacts> full_queries{};
+  std::array<ContactLinearization, kMaxContacts> full_results{};
+  std::array<int, kMaxContacts> full_slots{};
+  int full_count = 0;
+  bool full_valid = false;
+  /// The fast step's evaluations before they are taken.
+  std::array<DepthFieldEvaluation, kMaxContacts> field_evaluations{};
 
   /// What the stages counted (HapticTexturePipeline::step_faults()).
   HapticTexturePipeline::StepFaults step_faults;
@@ -177,5 +196,26 @@ struct RemoteStepData {
 /// step's fields. Returns d.num_fields. Never allocates within the data's reserve.
 int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT,
                              const PipelineOptions& options, RemoteStepData& d) noexcept;
+
+/// Sets each of the data's last_results[0, last_num_queries) that has a field (contact_field_slot
+/// ≥ 0) to that field's evaluation at X_WT: δ0 and J are the field's δ and ∇δ there, so that the
+/// contact's linearization is the tangent of the depth the operator's loop evaluates. A contact
+/// whose evaluation has no finite δ keeps its stage-5 linearization.
+void LinearizeFromDepthFields(const RigidTransform& X_WT, RemoteStepData& d) noexcept;
+
+/// Records the step that just ran stages 5–5d (its stage-4 queries were copied to
+/// d.full_stage4_queries before stage 5) for TakeStepFromKeptFields.
+void RecordFullStep(RemoteStepData& d) noexcept;
+
+/// The step from kept fields: when this step's stage-4 queries (d.last_queries[0,
+/// last_num_queries)) are the last full step's, one for one (same environment at the same pose,
+/// each window held by the field its contact had: on its lattice, within its grid grown by half
+/// the travel margin), and the tool has moved at most half the travel margin of every field from
+/// where it was rendered, the contacts are the last full step's with each δ0 and J the field's at
+/// X_WT (stages 5–5c skipped, no render); returns true, with d.last_queries, last_results,
+/// last_num_queries, fields and num_fields set. Returns false, changing nothing but the data's
+/// evaluations scratch, otherwise. noexcept, allocation-free.
+bool TakeStepFromKeptFields(const RigidTransform& X_WT, const PipelineOptions& options,
+                            RemoteStepData& d) noexcept;
 
 }  // namespace ht

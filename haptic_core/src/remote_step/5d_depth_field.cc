@@ -25,6 +25,87 @@ constexpr double kLatticeTurnRad = 0.1;
 /// The least travel margin (m) a field keeps before its cell is made coarser to fit the grid.
 constexpr double kDepthFieldKeptMarginM = 2e-3;
 
+/// Whether the kept field `f` still holds a contact whose window is `window` with the tool at
+/// X_WT: the tool within half the field's travel margin of where it was rendered
+/// (DepthFieldEvaluation::within_margin's measure), and the window grown by half the margin
+/// within the field's grid.
+bool KeptFieldHolds(const DepthField& f, const RigidTransform& X_WT,
+                    const ContactWindow& window) noexcept {
+  const double half = 0.5 * f.travel_margin_m;
+  const Twist dq = PoseDifference(X_WT, f.X_WT0);
+  const glm::dvec3 n_W = f.X_WF.rotation * glm::dvec3(0.0, 0.0, 1.0);
+  const glm::dvec3 slide_W = dq.linear - glm::dot(dq.linear, n_W) * n_W;
+  if (!(glm::length(slide_W) + glm::length(dq.angular) * f.tool_radius_m <= half)) return false;
+  const glm::dvec3 c_F = f.X_WF.Inverse() * window.center_W;
+  const double reach = 0.5 * window.extent_m + half;
+  const double hi_x = (f.nx - 1) * f.cell_m, hi_y = (f.ny - 1) * f.cell_m;
+  return c_F.x - reach >= 0.0 && c_F.y - reach >= 0.0 && c_F.x + reach <= hi_x &&
+         c_F.y + reach <= hi_y;
+}
+
+/// A contact's field cell and travel margin (m); ok false when the window leaves no room.
+struct FieldPlan {
+  double cell_m = 0.0;
+  double margin_m = 0.0;
+  bool ok = false;
+};
+
+FieldPlan PlanField(const ContactQuery& q, const PipelineOptions& options) noexcept {
+  FieldPlan plan;
+  const double base_cell = options.window_extent_m / std::max(1, options.grid_resolution);
+  if (!(base_cell > 0.0) || q.environment == nullptr) return plan;
+  // The subdivision's cell while its grid holds the window and a margin of at least
+  // kDepthFieldKeptMarginM (or the margin asked, if less), the margin cut to what fits; else
+  // coarser cells. A fine cell beyond part of the margin beats a coarse one within all of it:
+  // the field is evaluated beyond its margin too, and the step renders a new one once the
+  // tool has moved half of it.
+  int sub = std::clamp(options.depth_field_subdivision, 1, 4);
+  const double least = std::min(options.depth_field_margin_m, kDepthFieldKeptMarginM);
+  const auto side_at = [&](int s) {
+    const double h = base_cell / s;
+    return std::ceil(q.window.extent_m / h - 1e-9) + 2.0 * std::ceil(least / h - 1e-9);
+  };
+  while (sub > 1 && side_at(sub) > kMaxDepthFieldSide) --sub;
+  const double h = base_cell / sub;
+  // Whole cells on each side (Render rounds the margin up to cells).
+  const double room = std::floor(0.5 * (kMaxDepthFieldSide -
+                                        std::max(2.0, std::ceil(q.window.extent_m / h - 1e-9)))) *
+                      h;
+  if (room < 0.0) return plan;
+  plan.cell_m = h;
+  plan.margin_m = std::min(room, options.depth_field_margin_m);
+  plan.ok = true;
+  return plan;
+}
+
+/// The lattice the environment already has for the query's direction (within kLatticeTurnRad)
+/// and cell `h`, or null.
+RemoteStepData::FieldLattice* FindLattice(RemoteStepData& d, const ContactQuery& q,
+                                          double h) noexcept {
+  const glm::dvec3 n_O = glm::transpose(glm::mat3_cast(q.X_WO.rotation)) * q.window.normal_W;
+  for (RemoteStepData::FieldLattice& e : d.field_lattices) {
+    if (e.environment == q.environment && e.cell_m == h &&
+        glm::dot(e.normal_O, n_O) >= std::cos(kLatticeTurnRad)) {
+      return &e;
+    }
+  }
+  return nullptr;
+}
+
+/// The first kept field in the pool that still holds a contact with `window` at X_WT: on the
+/// lattice `lattice_id` with cell `h`, not `taken` by another contact of the step
+/// (KeptFieldHolds); −1 when none.
+template <typename Taken>
+int FindKeptField(const RemoteStepData& d, std::uint32_t lattice_id, double h,
+                  const RigidTransform& X_WT, const ContactWindow& window,
+                  const Taken& taken) noexcept {
+  for (int k = 0; k < RemoteStepData::kFieldPoolSize; ++k) {
+    const DepthField& f = d.field_pool[static_cast<std::size_t>(k)];
+    if (!f.prepared || f.lattice_id != lattice_id || f.cell_m != h || taken(k)) continue;
+    if (KeptFieldHolds(f, X_WT, window)) return k;
+  }
+  return -1;
+}
 }  // namespace
 
 bool DepthFieldRenderer::Render(const HapticModel& tool, const RigidTransform& X_WT,
@@ -105,53 +186,28 @@ int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT
                              const PipelineOptions& options, RemoteStepData& d) noexcept {
   d.num_fields = 0;
   const std::uint64_t step = ++d.field_step;
-  const double base_cell = options.window_extent_m / std::max(1, options.grid_resolution);
   for (int i = 0; i < d.last_num_queries; ++i) {
     ContactLinearization& lin = d.last_results[static_cast<std::size_t>(i)];
     lin.depth_field_id = 0;
     lin.depth_field_shift_m = 0.0;
+    d.contact_field_slot[static_cast<std::size_t>(i)] = -1;
     if (!std::isfinite(lin.depth_m)) continue;
     const ContactQuery& q = d.last_queries[static_cast<std::size_t>(i)];
-    if (!(base_cell > 0.0) || q.environment == nullptr) continue;
-    // The subdivision's cell while its grid holds the window and a margin of at least
-    // kDepthFieldKeptMarginM (or the margin asked, if less), the margin cut to what fits; else
-    // coarser cells. A fine cell beyond part of the margin beats a coarse one within all of it:
-    // the field is evaluated beyond its margin too, and the step renders a new one once the
-    // tool has moved half of it.
-    int sub = std::clamp(options.depth_field_subdivision, 1, 4);
-    const double least = std::min(options.depth_field_margin_m, kDepthFieldKeptMarginM);
-    const auto side_at = [&](int s) {
-      const double h = base_cell / s;
-      return std::ceil(q.window.extent_m / h - 1e-9) + 2.0 * std::ceil(least / h - 1e-9);
-    };
-    while (sub > 1 && side_at(sub) > kMaxDepthFieldSide) --sub;
-    const double h = base_cell / sub;
-    // Whole cells on each side (Render rounds the margin up to cells).
-    const double room = std::floor(0.5 * (kMaxDepthFieldSide -
-                                          std::max(2.0, std::ceil(q.window.extent_m / h - 1e-9)))) *
-                        h;
-    if (room < 0.0) continue;
-    const double margin = std::min(room, options.depth_field_margin_m);
-    // The lattice: one the environment already has for this direction and cell, else the
-    // window's axes, kept in the environment's frame.
+    const FieldPlan plan = PlanField(q, options);
+    if (!plan.ok) continue;
+    const double h = plan.cell_m;
+    const double margin = plan.margin_m;
     const glm::dmat3 R_WO = glm::mat3_cast(q.X_WO.rotation);
     const glm::dmat3 R_OW = glm::transpose(R_WO);
-    const glm::dvec3 n_O = R_OW * q.window.normal_W;
-    RemoteStepData::FieldLattice* lattice = nullptr;
-    for (RemoteStepData::FieldLattice& e : d.field_lattices) {
-      if (e.environment == q.environment && e.cell_m == h &&
-          glm::dot(e.normal_O, n_O) >= std::cos(kLatticeTurnRad)) {
-        lattice = &e;
-        break;
-      }
-    }
+    RemoteStepData::FieldLattice* lattice = FindLattice(d, q, h);
     if (lattice == nullptr) {
+      // The window's axes, kept in the environment's frame.
       lattice = &*std::min_element(
           d.field_lattices.begin(), d.field_lattices.end(),
           [](const auto& a, const auto& b) noexcept { return a.last_used < b.last_used; });
       lattice->environment = q.environment;
       lattice->cell_m = h;
-      lattice->normal_O = n_O;
+      lattice->normal_O = R_OW * q.window.normal_W;
       lattice->axis_u_O = R_OW * q.window.axis_u_W;
       lattice->axis_v_O = R_OW * q.window.axis_v_W;
       lattice->id = ++d.last_lattice_id;
@@ -160,27 +216,9 @@ int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT
     // A kept field that still holds this contact: on this lattice, not taken by another contact
     // of this step, its grid around the window grown by half its margin, and the tool within
     // half its margin of where the field was rendered.
-    int slot = -1;
-    for (int k = 0; k < RemoteStepData::kFieldPoolSize && slot < 0; ++k) {
-      const DepthField& f = d.field_pool[static_cast<std::size_t>(k)];
-      if (!f.prepared || f.lattice_id != lattice->id || f.cell_m != h ||
-          d.field_used_at[static_cast<std::size_t>(k)] == step) {
-        continue;
-      }
-      const double half = 0.5 * f.travel_margin_m;
-      const Twist dq = PoseDifference(X_WT, f.X_WT0);
-      const glm::dvec3 n_W = f.X_WF.rotation * glm::dvec3(0.0, 0.0, 1.0);
-      const glm::dvec3 slide_W = dq.linear - glm::dot(dq.linear, n_W) * n_W;
-      if (glm::length(slide_W) + glm::length(dq.angular) * f.tool_radius_m > half) continue;
-      const glm::dvec3 c_F = f.X_WF.Inverse() * q.window.center_W;
-      const double reach = 0.5 * q.window.extent_m + half;
-      const double hi_x = (f.nx - 1) * f.cell_m, hi_y = (f.ny - 1) * f.cell_m;
-      if (c_F.x - reach < 0.0 || c_F.y - reach < 0.0 || c_F.x + reach > hi_x ||
-          c_F.y + reach > hi_y) {
-        continue;
-      }
-      slot = k;
-    }
+    int slot = FindKeptField(d, lattice->id, h, X_WT, q.window, [&](int k) {
+      return d.field_used_at[static_cast<std::size_t>(k)] == step;
+    });
     if (slot < 0) {
       // A new render, into the least recently used slot this step has not taken.
       std::uint64_t oldest = ~std::uint64_t{0};
@@ -210,11 +248,104 @@ int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT
       if (d.last_field_id == 0) d.last_field_id = 1;  // 0 means none
     }
     d.field_used_at[static_cast<std::size_t>(slot)] = step;
+    d.contact_field_slot[static_cast<std::size_t>(i)] = slot;
     const DepthField& f = d.field_pool[static_cast<std::size_t>(slot)];
     lin.depth_field_id = f.id;
     d.fields[static_cast<std::size_t>(d.num_fields++)] = &f;
   }
   return d.num_fields;
+}
+
+void LinearizeFromDepthFields(const RigidTransform& X_WT, RemoteStepData& d) noexcept {
+  for (int i = 0; i < d.last_num_queries; ++i) {
+    const int slot = d.contact_field_slot[static_cast<std::size_t>(i)];
+    if (slot < 0) continue;
+    const DepthFieldEvaluation e =
+        DepthFieldDepthAt(d.field_pool[static_cast<std::size_t>(slot)], X_WT);
+    if (!e.valid || !std::isfinite(e.depth_m)) continue;
+    ContactLinearization& lin = d.last_results[static_cast<std::size_t>(i)];
+    lin.depth_m = e.depth_m;
+    lin.gradient = e.gradient;
+  }
+}
+
+void RecordFullStep(RemoteStepData& d) noexcept {
+  const int n = d.last_num_queries;
+  d.full_count = n;
+  bool valid = true;
+  for (int i = 0; i < n; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    ContactQuery q = d.last_queries[k];
+    // The lists live in the coarse stages' storage, which the next step overwrites.
+    q.environment_triangles = TriangleSubset::All();
+    q.tool_triangles = TriangleSubset::All();
+    d.full_queries[k] = q;
+    d.full_results[k] = d.last_results[k];
+    d.full_slots[k] = d.contact_field_slot[k];
+    // A contact without a field (no overlap on its window, dropped by the grazing guard, or no
+    // field made) could change with the pose in a way no field tells: the next step is a full one.
+    valid = valid && d.full_slots[k] >= 0;
+  }
+  d.full_valid = valid;
+}
+
+bool TakeStepFromKeptFields(const RigidTransform& X_WT, const PipelineOptions& options,
+                            RemoteStepData& d) noexcept {
+  const int n4 = d.last_num_queries;
+  if (!d.full_valid || n4 != d.full_stage4_count) return false;
+  // Stage 5a keeps a split window's parent at its index only with split_keeps_parent_window.
+  if (options.split_windows_at_separated_overlap && !options.split_keeps_parent_window) {
+    return false;
+  }
+  // Each contact takes the field stage 5d would give it (its window: this step's for the
+  // stage-4 contacts, the last full step's for stage 5a's), and every contact must have one.
+  std::array<bool, RemoteStepData::kFieldPoolSize> taken{};
+  std::array<RemoteStepData::FieldLattice*, kMaxContacts> lattices{};
+  std::array<int, kMaxContacts> slots{};
+  for (int i = 0; i < d.full_count; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    const ContactQuery& q = i < n4 ? d.last_queries[k] : d.full_queries[k];
+    if (i < n4) {
+      const ContactQuery& p = d.full_stage4_queries[k];
+      if (q.environment != p.environment || q.X_WO.translation != p.X_WO.translation ||
+          q.X_WO.rotation != p.X_WO.rotation) {
+        return false;
+      }
+    }
+    const FieldPlan plan = PlanField(q, options);
+    if (!plan.ok) return false;
+    RemoteStepData::FieldLattice* lattice = FindLattice(d, q, plan.cell_m);
+    if (lattice == nullptr) return false;
+    const int slot = FindKeptField(d, lattice->id, plan.cell_m, X_WT, q.window,
+                                   [&](int s) { return taken[static_cast<std::size_t>(s)]; });
+    if (slot < 0) return false;
+    taken[static_cast<std::size_t>(slot)] = true;
+    lattices[k] = lattice;
+    slots[k] = slot;
+    d.field_evaluations[k] = DepthFieldDepthAt(d.field_pool[static_cast<std::size_t>(slot)], X_WT);
+    if (!d.field_evaluations[k].valid || !std::isfinite(d.field_evaluations[k].depth_m)) {
+      return false;
+    }
+  }
+  const std::uint64_t step = ++d.field_step;
+  d.last_num_queries = d.full_count;
+  d.num_fields = 0;
+  for (int i = 0; i < d.full_count; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    const int slot = slots[k];
+    const DepthField& f = d.field_pool[static_cast<std::size_t>(slot)];
+    lattices[k]->last_used = ++d.field_lattice_clock;
+    d.last_queries[k] = d.full_queries[k];
+    ContactLinearization& lin = d.last_results[k];
+    lin = d.full_results[k];
+    lin.depth_m = d.field_evaluations[k].depth_m;
+    lin.gradient = d.field_evaluations[k].gradient;
+    lin.depth_field_id = f.id;
+    d.contact_field_slot[k] = slot;
+    d.field_used_at[static_cast<std::size_t>(slot)] = step;
+    d.fields[static_cast<std::size_t>(d.num_fields++)] = &f;
+  }
+  return true;
 }
 
 }  // namespace ht

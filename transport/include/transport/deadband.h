@@ -22,6 +22,7 @@
 #include <array>
 #include <cstdint>
 #include <nlohmann/json.hpp>
+#include <span>
 
 #include "haptic_core/contact_model.h"
 #include "haptic_core/spatial.h"
@@ -191,7 +192,12 @@ class ContactModelDeadband {
   explicit ContactModelDeadband(const ContactModelDeadbandConfig& config) : config_(config) {}
   /// The decision for `model` at time t_ns (ns, the remote node's steady clock). When it returns
   /// anything but kNotSent, `model` becomes the held model (the caller sends it).
-  DeadbandReason Decide(const ContactModel& model, std::int64_t t_ns) noexcept;
+  /// With `fields` (the sender's kept depth fields, looked up by id), both models are evaluated
+  /// with the fields their contacts name (EvaluateContactModel's field overload), as the
+  /// operator renders them, so that a model whose contacts name the held model's fields and
+  /// whose linearizations are those fields' tangents is not sent again.
+  DeadbandReason Decide(const ContactModel& model, std::int64_t t_ns,
+                        std::span<const DepthField* const> fields = {}) noexcept;
   /// Records that the held model was sent again at t_ns (a keep-alive): the keep-alive period
   /// starts over.
   void NoteResent(std::int64_t t_ns) noexcept { t_sent_ns_ = t_ns; }
