@@ -11,6 +11,7 @@
 #include <glm/gtc/quaternion.hpp>
 #include <limits>
 #include <random>
+#include <vector>
 
 #include "allocation_counter.h"
 #include "haptic_core/penetration_depth.h"
@@ -744,6 +745,138 @@ Crests Depth(double t, double z_b) {
 double NormalAngle(double x) { return std::atan2(-PlateSlope(x), 1.0); }
 
 }  // namespace closed_form
+
+// A flat face resting on the crest of a steep flank whose surface, in the contact's window, ends at
+// the crest: the remote step renders each contact's own coarse triangles, so that where the
+// surface goes on in another contact's (the rim of a thin fin beyond its flank) the field's
+// environment stops. Slid across the crest, the face's nodes come over the flank from beyond its
+// edge, one after another: the depth the loop renders must change as its gradient says, or the
+// contact's force (−k δ ∇δ) does work the potential ½ k δ² does not account for.
+TEST(DepthField, AFaceSlidOverTheCrestWhereTheSurfaceEndsFeelsADepthWhoseGradientItFollows) {
+  const double theta = 67.0 * kPi / 180.0;  // the flank's slope from the normal: tan θ = 2.36
+  const HapticModel env = MakeTexturedBox({0.02, 0.02, 0.01}, Flat, 64, 1.0, "flank");
+  // Turned by θ about y, the box's +z face descends towards +x; its upper edge (the crest, at
+  // the −x face, which this contact does not render) lies along y through the origin.
+  RigidTransform X_WO;
+  X_WO.rotation = glm::angleAxis(theta, glm::dvec3(0.0, 1.0, 0.0));
+  X_WO.translation = -(X_WO.rotation * glm::dvec3(-0.02, 0.0, 0.01));
+  std::vector<int> flank;
+  for (int t = 0; t < static_cast<int>(env.triangles.size()); ++t) {
+    const glm::ivec3 tri = env.triangles[static_cast<std::size_t>(t)];
+    const glm::dvec3 a = env.vertices_O[static_cast<std::size_t>(tri.x)];
+    const glm::dvec3 b = env.vertices_O[static_cast<std::size_t>(tri.y)];
+    const glm::dvec3 d = env.vertices_O[static_cast<std::size_t>(tri.z)];
+    if (glm::normalize(glm::cross(b - a, d - a)).z > 0.99) flank.push_back(t);
+  }
+  ASSERT_FALSE(flank.empty());
+  ContactQuery q;
+  q.environment = &env;
+  q.X_WO = X_WO;
+  q.environment_triangles = TriangleSubset::Of(flank);
+  q.window = ContactWindow::Make({0.0, 0.0, 0.0}, {0.0, 0.0, 1.0}, 0.02, 50);
+  q.stiffness_n_per_m = 1e4;
+  const HapticModel tool = testing::ToolBox(Flat, 64);
+  const double h = 0.2e-3;
+  const DepthFieldLattice lattice{q.window.axis_u_W, q.window.axis_v_W, q.window.normal_W, h};
+  // The tool's flat bottom 0.3 mm below the crest, its centre over the crest.
+  const RigidTransform X_WT0 = testing::ToolPose(0.0, 0.0, -0.3e-3);
+  DepthFieldRenderer renderer;
+  DepthField f;
+  ASSERT_TRUE(renderer.Render(tool, X_WT0, q, lattice, 2e-3, 1, kDepthFieldSmoothMaxM, f));
+  // The field holds the flank and no surface above the crest beyond it (none at all, or one
+  // that falls away).
+  const glm::dvec3 beyond_F = f.X_WF.Inverse() * glm::dvec3(-1.5e-3, 0.0, 0.0);
+  const int i_beyond = static_cast<int>(std::lround(beyond_F.x / h));
+  const int j_mid = static_cast<int>(std::lround(beyond_F.y / h));
+  const float b_beyond = f.env_height_m[static_cast<std::size_t>(j_mid * f.nx + i_beyond)];
+  EXPECT_TRUE(std::isnan(b_beyond) || b_beyond < beyond_F.z - 1e-3) << b_beyond;
+  // Slid 1 mm across the crest towards +x (down the flank) in 20 µm steps: the depth's change
+  // against its gradient summed along the path (the trapezoid rule), and the work the contact's
+  // force does per unit stiffness against what the potential gives back.
+  double path = 0.0, work = 0.0, largest_in_plane = 0.0;
+  DepthFieldEvaluation before = DepthFieldDepthAt(f, X_WT0);
+  ASSERT_TRUE(before.valid);
+  const double first = before.depth_m;
+  EXPECT_NEAR(first, 0.3e-3, 0.1e-3);
+  const double step = 20e-6;
+  for (int k = 1; k <= 50; ++k) {
+    RigidTransform X_WT = X_WT0;
+    X_WT.translation.x += k * step;
+    const DepthFieldEvaluation e = DepthFieldDepthAt(f, X_WT);
+    ASSERT_TRUE(e.valid) << k;
+    path += 0.5 * step * (before.gradient.d_translation_W.x + e.gradient.d_translation_W.x);
+    work += 0.5 * step *
+            (-before.depth_m * before.gradient.d_translation_W.x -
+             e.depth_m * e.gradient.d_translation_W.x);
+    largest_in_plane = std::max(largest_in_plane, std::abs(e.gradient.d_translation_W.x));
+    before = e;
+  }
+  const double last = before.depth_m;
+  // The face still rests on the crest: the depth stays (it slid along the crest's top, not
+  // down the flank, which falls away below it).
+  EXPECT_NEAR(last, first, 0.05e-3);
+  // The gradient's sum along the path is the depth's change: 2.36 mm lower, the force pushing
+  // the face down the flank all the way, where the nodes at the end of the surface carry the
+  // flank's slope while the next node over the edge keeps the depth.
+  EXPECT_NEAR(path, last - first, 0.05e-3) << "largest |dδ/dx| " << largest_in_plane;
+  // Work per unit stiffness (J per N/m): what the contact's force did, against −Δ(½ δ²).
+  EXPECT_NEAR(work, -0.5 * (last * last - first * first), 0.02e-6);
+  std::printf(
+      "face over the crest: depth %.1f -> %.1f um, gradient's sum %.1f um, largest "
+      "|d(depth)/dx| %.2f\n",
+      first * 1e6, last * 1e6, path * 1e6, largest_in_plane);
+}
+
+// Two surfaces one behind the other along n (a thin fin's face, and beyond its rim the next
+// fin's face 10 mm further back): b steps between two nodes.
+double FinFaceThenStep(double x, double) { return x <= 20 * kH + 1e-9 ? 0.0 : -10e-3; }
+double FaceOverTheRim(double x, double y) {
+  const double lo = 10 * kH - 1e-9, hi = 29 * kH + 1e-9;
+  return x >= lo && x <= hi && y >= lo && y <= hi ? -0.3e-3 : std::nan("");
+}
+
+TEST(DepthField, AStepBetweenTwoSurfacesBecomesAChamferAndAFaceOverItIsPushedSidewaysFarLess) {
+  // A flat face pressed 0.3 mm into the upper surface, half of it beyond the rim, slid across
+  // the rim by two cells: the bicubic across the raw step overshoots the upper surface (by 7 %
+  // of the step) with slopes of tens, and the face's deepest nodes ride that bump; limited to
+  // kDepthFieldMaxDescentSlope the step is a chamfer below the rim, and the face rests on the
+  // upper surface: its depth is its press (plus at most the bicubic's overshoot at the chamfer's
+  // edge), its force within about 45° of the normal.
+  const RigidTransform X_WF = TurnedFrame();
+  const RigidTransform X_WT0 = ToolAboveFace(X_WF);
+  DepthField raw = MakeField(kN, kH, X_WF, X_WT0, FinFaceThenStep, FaceOverTheRim);
+  DepthField limited = raw;
+  LimitDepthMapDescent(limited.nx, limited.ny, limited.cell_m, kDepthFieldMaxDescentSlope,
+                       limited.env_height_m);
+  ASSERT_TRUE(limited.Prepare());
+  // Only the lower surface moved, and no neighbour falls more than the limit below another.
+  for (int j = 0; j < kN; ++j) {
+    for (int i = 0; i + 1 < kN; ++i) {
+      const float b0 = limited.env_height_m[static_cast<std::size_t>(j * kN + i)];
+      const float b1 = limited.env_height_m[static_cast<std::size_t>(j * kN + i + 1)];
+      EXPECT_LE(b0 - b1, kDepthFieldMaxDescentSlope * kH * (1.0 + 1e-5)) << i << " " << j;
+      if (i <= 20) EXPECT_EQ(b0, 0.0f);
+    }
+  }
+  const glm::dvec3 u_W = X_WF.rotation * glm::dvec3(1.0, 0.0, 0.0);
+  double raw_worst = 0.0, worst = 0.0;
+  for (double t = -1.0; t <= 1.0 + 1e-9; t += 0.125) {
+    RigidTransform X_WT = X_WT0;
+    X_WT.translation += t * kH * u_W;
+    const DepthFieldEvaluation e = DepthFieldDepthAt(limited, X_WT);
+    ASSERT_TRUE(e.valid);
+    // At most the bicubic's overshoot at the chamfer's upper edge (7 % of a cell's fall).
+    EXPECT_GE(e.max_node_depth_m, 0.3e-3 - 1e-6) << t;
+    EXPECT_LE(e.max_node_depth_m, 0.3e-3 + 0.08 * kDepthFieldMaxDescentSlope * kH) << t;
+    worst = std::max(worst, std::abs(glm::dot(e.gradient.d_translation_W, u_W)));
+    raw_worst = std::max(
+        raw_worst, std::abs(glm::dot(DepthFieldDepthAt(raw, X_WT).gradient.d_translation_W, u_W)));
+  }
+  std::printf("face over a 10 mm step: largest |d(depth)/du| %.2f raw, %.2f chamfered\n", raw_worst,
+              worst);
+  EXPECT_LT(worst, 1.5);
+  EXPECT_GT(raw_worst, 5.0 * worst) << "the raw step's bump pushes sideways";
+}
 
 TEST(DepthField, SphereSlidAcrossARippledPlateFollowsTheClosedFormInDepthAndDirection) {
   // Rendered once at q0, evaluated along a 5 mm slide within its margin at poses held 60 µm deep
