@@ -862,23 +862,19 @@ TEST(HardCases, GrazingGuardDropsDepthsTheCoarseGeometryCannotHold) {
   EXPECT_EQ(results[1].depth_m, 1.1e-3);
   EXPECT_EQ(results[2].depth_m, 30e-3);
   // The remote step sets the bound from the cluster: a deep press keeps its contact and counts
-  // no drop; with the guard off the same force.
+  // no drop.
   const HapticScene scene = MakeBlockOnGearScene();
   RigidTransform X = BlockOnGearHomePose();
   X.translation.z -= 0.5e-3 + 5e-3;
-  PipelineOptions on, off;
-  off.grazing_guard = false;
-  HapticTexturePipeline a(scene, on), b(scene, off);
+  HapticTexturePipeline a(scene, PipelineOptions{});
   StepTimings t;
-  const ContactModel ma = a.Step(X, 1, t), mb = b.Step(X, 1, t);
+  const ContactModel ma = a.Step(X, 1, t);
   ASSERT_GE(ma.num_contacts, 1);
   EXPECT_EQ(a.step_faults().grazing_dropped, 0);
-  EXPECT_EQ(ma.F_T_W_at_q0.force.z, mb.F_T_W_at_q0.force.z);
   ASSERT_EQ(a.last_contact_queries().size(), 1u);
   const double bound = a.last_contact_queries()[0].depth_bound_m;
   EXPECT_TRUE(std::isfinite(bound));
   EXPECT_GT(bound, ma.contacts[0].depth_m);
-  EXPECT_TRUE(std::isinf(b.last_contact_queries()[0].depth_bound_m));
 }
 
 // Issue 31: separated leaf pairs beyond their leaves' own texture reach start no contact (the
@@ -888,18 +884,12 @@ TEST(HardCases, SeparatedPairsBeyondTheirTextureReachStartNoContact) {
   const double reach = scene.tool->OutwardReach() + scene.touchables[0].model->OutwardReach();
   RigidTransform X = BlockOnGearHomePose();  // 0.5 mm above the gear's mean top line
   X.translation.z += reach + 0.25e-3 - 0.5e-3;
-  PipelineOptions drop, keep;
-  keep.drop_unreachable_pairs = false;
-  HapticTexturePipeline a(scene, drop), b(scene, keep);
-  StepTimings ta, tb;
+  HapticTexturePipeline a(scene, PipelineOptions{});
+  StepTimings ta;
   a.Step(X, 1, ta);
-  b.Step(X, 1, tb);
   EXPECT_EQ(ta.leaf_pairs, 1);
-  EXPECT_EQ(tb.leaf_pairs, 1);
   EXPECT_EQ(a.last_contact_queries().size(), 0u);
   EXPECT_EQ(a.step_faults().unreachable_pairs, 1);
-  ASSERT_EQ(b.last_contact_queries().size(), 1u);
-  EXPECT_LT(b.last_linearizations()[0].depth_m, 0.0);  // it had no overlap anyway
   // Within the reach the pair is kept.
   X.translation.z -= 0.5e-3;
   a.Step(X, 1, ta);

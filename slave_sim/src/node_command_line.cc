@@ -66,11 +66,6 @@ void AddWindowOptions(CLI::App& app, CLI::App& adv, NodeCommandLine& cl) {
 // The texture stage's gradient, the grazing guard, stage 5b's depth refinement
 // and its seeds, and contact clustering's angle.
 void AddDepthOptions(CLI::App& adv, NodeCommandLine& cl) {
-  adv.add_flag("--no-grazing-guard", cl.no_grazing_guard,
-               "keep contacts whose depth exceeds what their coarse geometry allows (the\n"
-               "cluster's hull penetration + both texture reaches + a cell); by default they are\n"
-               "dropped and counted (remote_summary.json grazing_dropped_contacts): along a\n"
-               "grazing direction the depth is a sideways overlap, not a penetration");
   adv.add_flag("--no-refine-depth", cl.no_refine_depth,
                "the grid's cell samples alone: by default each contact's depth is refined to the\n"
                "texture's full resolution around the grid's deepest cells (stage 5b,\n"
@@ -92,11 +87,6 @@ void AddDepthOptions(CLI::App& adv, NodeCommandLine& cl) {
                "neighbouring peak: by default it does (beside a trough's vertex the other\n"
                "flank's maximum lies in the next cell, which is never a seed of its own; it costs\n"
                "4-35 % of the texture stage; docs/measurements.md)");
-  adv.add_option("--clustering-angle-deg", cl.clustering_angle_deg,
-                 "contact clustering: leaf pairs (and clusters) whose normals differ by less than\n"
-                 "this merge into one contact (degrees; docs/measurements.md compares 60 and 30)")
-      ->check(CLI::Range(1.0, 89.0))
-      ->capture_default_str();
   adv.add_flag("--no-seed-from-last-step", cl.no_seed_from_last_step,
                "each step's contacts from their own grid alone: by default stage 5b also\n"
                "searches each contact from the previous step's deepest point (kept in the\n"
@@ -287,13 +277,11 @@ void FinishStreamConfig(const CLI::App& app, const NodeCommandLine& cl, RemoteNo
 void FinishDepthConfig(const NodeCommandLine& cl, RemoteNodeConfig& config) {
   PipelineOptions& pipeline = config.pipeline;
   DepthRefinementOptions& refinement = pipeline.depth_refinement;
-  pipeline.grazing_guard = !cl.no_grazing_guard;
   pipeline.refine_depth = !cl.no_refine_depth;
   refinement.parallax = cl.parallax;
   refinement.seed_from_last_step = !cl.no_seed_from_last_step;
   refinement.parallax_offset_seeds = !cl.no_parallax_offset_seeds;
   refinement.neighbour_peak_seeds = !cl.no_neighbour_peak_seeds;
-  pipeline.clustering_angle_deg = cl.clustering_angle_deg;
 }
 
 // Stages 5a and 5c, and speculative contacts. Returns whether a split option was given.

@@ -31,12 +31,10 @@ struct NodeCommandLine {
   bool no_watch = false;
 
   // The texture stage's gradient, stage 5b and clustering (AddDepthOptions).
-  bool no_grazing_guard = false;
   bool no_refine_depth = false;
   bool parallax = true;
   bool no_parallax_offset_seeds = false;
   bool no_neighbour_peak_seeds = false;
-  double clustering_angle_deg = PipelineOptions{}.clustering_angle_deg;
   bool no_seed_from_last_step = false;
 
   // Stages 5a and 5c (AddSplitAndSharingOptions).

@@ -49,8 +49,8 @@ bool TriangleFrame(const HapticModel& m, int f, glm::dvec3& centroid_O, glm::dve
 // which at the first contact of a session stalled the remote node past the operator's 500 ms
 // peer timeout (a CI run of loopback_fig75_gpu). One contact made for it, the tool's first
 // triangle laid face to face on the first touchable's first triangle, in two batches: with
-// windows that pick by box (the instanced draws) and with triangle lists (the per-contact draws,
-// PipelineOptions::cluster_triangles). The results are discarded; a failure is left to the
+// windows that pick by box (the instanced draws) and with triangle lists (the per-contact draws
+// of each cluster's own triangles). The results are discarded; a failure is left to the
 // first real step, which falls back to the CPU. Returns the backend's missing-overlap count
 // after it, so that the run's summary counts only the session's.
 std::int64_t WarmUpPenetrationDepth(PenetrationDepthBackend& backend, const HapticScene& scene,

@@ -41,7 +41,6 @@ nlohmann::json RemoteNodeRun::Summary() const {
   s["linearization_missing_overlap"] =
       pipeline_->faults().missing_overlap -
       (pipeline_->backend_failures() == 0 ? warm_up_missing_overlap_ : 0);
-  s["grazing_guard"] = config_.pipeline.grazing_guard;
   s["parallax"] = config_.pipeline.depth_refinement.parallax;
   s["refine_depth"] = config_.pipeline.refine_depth;
   {

@@ -8,11 +8,11 @@
 
 namespace ht {
 
-RemoteStepModel::RemoteStepModel(const HapticScene& scene, const PipelineOptions& options) {
+RemoteStepModel::RemoteStepModel(const HapticScene& scene) {
   const std::size_t models = scene.touchables.size() + 1;
   // The hull of each model without hierarchy whose coarse mesh is convex (within a micrometre:
   // the procedural models' caps are fans of coplanar triangles), computed once: windows on its
-  // contact region use it (whole_model_region_windows, with its triangle list), and the free
+  // contact region use it (with its triangle list), and the free
   // space around the tool takes it, or a hierarchy's root, as the whole model's hull.
   whole_hulls.resize(models);
   whole_triangles.resize(models);
@@ -27,7 +27,6 @@ RemoteStepModel::RemoteStepModel(const HapticScene& scene, const PipelineOptions
     if (!hull) continue;
     whole_hulls[i] = std::move(*hull);
     root_hulls[i] = &whole_hulls[i];
-    if (!options.whole_model_region_windows) continue;
     whole_triangles[i].resize(model.triangles.size());
     for (std::size_t t = 0; t < model.triangles.size(); ++t)
       whole_triangles[i][t] = static_cast<int>(t);

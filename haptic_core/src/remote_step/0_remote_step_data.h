@@ -30,9 +30,8 @@ namespace ht {
 /// holds its models as shared_ptr<const HapticModel>, so none changes under it.
 struct RemoteStepModel {
   /// Builds every field from `scene` (which has a tool and no empty touchable; checked by the
-  /// pipeline first). `options.whole_model_region_windows` decides whether whole_triangles is
-  /// filled. Allocates; throws only std::bad_alloc.
-  RemoteStepModel(const HapticScene& scene, const PipelineOptions& options);
+  /// pipeline first). Allocates; throws only std::bad_alloc.
+  explicit RemoteStepModel(const HapticScene& scene);
 
   /// The coarse query's bounds (HullBounds::Of) of the tool and of every touchable. Their root
   /// spheres (spheres_O[0]) are the broad phase's, so that objects far from the tool cost one
@@ -50,8 +49,7 @@ struct RemoteStepModel {
   /// (HullSeparationBound): its hierarchy's root, or its whole_hulls entry; null when neither
   /// exists.
   std::vector<const ConvexHull*> root_hulls;
-  /// Per model with a whole hull, with PipelineOptions::whole_model_region_windows: the indices of
-  /// all its coarse triangles (empty otherwise).
+  /// Per model with a whole hull: the indices of all its coarse triangles (empty otherwise).
   std::vector<std::vector<int>> whole_triangles;
 };
 
@@ -79,12 +77,11 @@ struct RemoteStepData {
   std::unique_ptr<TexturePenetrationSolver> region_solver;
 
   // ---- Stages 1–3 (FindContactCandidates).
-  /// The leaf pairs within their local texture reach (PipelineOptions::drop_unreachable_pairs),
-  /// as many as the clusterer takes, and the grazing guard's bound of each
-  /// (PipelineOptions::grazing_guard_local_reach).
+  /// The leaf pairs within their local texture reach, as many as the clusterer takes, and the
+  /// grazing guard's bound of each (from the pair's two leaves' own reach).
   std::vector<HullPairContact> reachable_pairs;
   std::vector<double> pair_bounds;
-  /// The candidates' triangle lists (PipelineOptions::cluster_triangles), copied from the
+  /// The candidates' triangle lists (each texture once), copied from the
   /// clusterer, whose lists last only until its next call (one per touchable).
   std::vector<int> candidate_triangles;
   /// Per touchable: its bounding-sphere gap (m) when the coarse query found no pair for it, NaN
