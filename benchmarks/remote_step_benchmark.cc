@@ -66,9 +66,6 @@ int main(int argc, char** argv) {
   app.add_flag("--no-refine-depth", no_refinement,
                "stage 5b off: the grid's cell samples alone (by default each contact's depth is "
                "refined to the texture's full resolution)");
-  bool no_sharing = false;
-  app.add_flag("--no-share-connected-contacts", no_sharing,
-               "every contact its whole penalty (stage 5c off)");
   bool parallax = true;
   app.add_flag("--parallax,!--no-parallax", parallax,
                "stage 5b reads heights through the displaced surface (DepthRefinementOptions::"
@@ -82,14 +79,10 @@ int main(int argc, char** argv) {
                  "also step a pipeline with this option of the remote step turned the other way, "
                  "interleaved step by step with the first on the same poses, and print its row "
                  "(B) beside: parallax (DepthRefinementOptions::parallax), seed-from-last-step, "
-                 "split-continuous (stage 5a's split in its continuous form, on by default: B "
-                 "without it), reuse-base-render "
-                 "(stage 5a's regions from stage 5's base render; B renders the base again), "
                  "parallax-offset-seeds (DepthRefinementOptions::parallax_offset_seeds), "
                  "neighbour-peak-seeds "
                  "(DepthRefinementOptions::neighbour_peak_seeds)")
-      ->check(CLI::IsMember({"parallax", "seed-from-last-step", "split-continuous",
-                             "reuse-base-render", "parallax-offset-seeds",
+      ->check(CLI::IsMember({"parallax", "seed-from-last-step", "parallax-offset-seeds",
                              "neighbour-peak-seeds"}));
   bool product_models = false;
   app.add_flag("--product-models", product_models,
@@ -134,7 +127,6 @@ int main(int argc, char** argv) {
     options.texture_threads = threads;
     options.max_contacts = max_contacts;
     options.refine_depth = !no_refinement;
-    options.share_connected_contacts = !no_sharing;
     options.depth_refinement.parallax = parallax;
     options.depth_refinement.seed_from_last_step = !no_seed_from_last_step;
     // Arm A is the options as given; arm B (with --ab) the same with one option flipped.
@@ -144,8 +136,6 @@ int main(int argc, char** argv) {
     const auto ab_flag = [&](ht::PipelineOptions& o) -> bool* {
       if (ab == "parallax") return &o.depth_refinement.parallax;
       if (ab == "seed-from-last-step") return &o.depth_refinement.seed_from_last_step;
-      if (ab == "split-continuous") return &o.split_windows_at_separated_overlap;
-      if (ab == "reuse-base-render") return &o.reuse_base_render;
       if (ab == "parallax-offset-seeds") return &o.depth_refinement.parallax_offset_seeds;
       if (ab == "neighbour-peak-seeds") return &o.depth_refinement.neighbour_peak_seeds;
       return nullptr;

@@ -20,11 +20,8 @@ expect() {
   fi
 }
 expect slave_sim "--grid" "$build/slave_sim/slave_sim" --grid 0
-expect slave_sim "--split-windows-link-mm" "$build/slave_sim/slave_sim" --split-windows-link-mm -1
-expect slave_sim "--split-continuous-um" "$build/slave_sim/slave_sim" --split-continuous-um -5
+expect slave_sim "--speculative-lead-ms" "$build/slave_sim/slave_sim" --speculative-lead-ms -1
 "$build/slave_sim/slave_sim" keygen "$tmp/k.key" > /dev/null 2>&1
-expect slave_sim "CPU texture stage" "$build/slave_sim/slave_sim" --key "$tmp/k.key" --split-continuous-um 50 --pd-backend gpu
-expect slave_sim "--no-split" "$build/slave_sim/slave_sim" --key "$tmp/k.key" --no-split --split-continuous-um 100
 expect slave_sim "--model-deadband-torque-floor" "$build/slave_sim/slave_sim" --model-deadband-torque-floor 0
 expect slave_sim "keygen" "$build/slave_sim/slave_sim" --key "$tmp/no_such.key"
 expect master_station "keygen" "$build/master_station/master_station" --key "$tmp/no_such.key"

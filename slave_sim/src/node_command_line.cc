@@ -94,36 +94,6 @@ void AddDepthOptions(CLI::App& adv, NodeCommandLine& cl) {
                "misses on the next is not lost for that step (docs/measurements.md)");
 }
 
-// Stages 5a (the split) and 5c (shared penalties).
-void AddSplitAndSharingOptions(CLI::App& adv, NodeCommandLine& cl) {
-  adv.add_option(
-         "--split-windows-link-mm", cl.split_windows_link_mm,
-         "stage 5a: a contact window whose overlap falls into regions farther apart than this\n"
-         "(mm) also pushes with each other region's own depth, as contact clustering would\n"
-         "group the textured contact (CPU texture stage; docs/DESIGN.md §4)")
-      ->check(CLI::Range(0.1, 1000.0))
-      ->capture_default_str();
-  adv.add_option(
-         "--split-continuous-um", cl.split_continuous_um,
-         "stage 5a's fades (um): the deepest region keeps the whole window, each other region\n"
-         "fades in with its overlap and out as it joins a deeper one over this depth (birth\n"
-         "ramp and bridge fade); narrower fades are closer to the truth on the frontier but\n"
-         "rock the loop (100 um: fig76 25.5 % force error, 256 contact steps on one clock;\n"
-         "400 um: 28.6 %, 11; without the split 39.8 %, 6; docs/measurements.md). 0: no fades,\n"
-         "each region its own box's window, born and joined at once")
-      ->check(CLI::Range(0.0, 1000.0))
-      ->capture_default_str();
-  adv.add_flag("--no-split", cl.no_split,
-               "stage 5a off: one window per contact cluster whatever its overlap (as the GPU\n"
-               "texture stage always runs)");
-  adv.add_flag("--no-share-connected-contacts", cl.no_share_connected_contacts,
-               "every contact pushes with its whole penalty: by default contacts on one object\n"
-               "whose textured overlaps come within 10 mm of each other are one contact region\n"
-               "and share one penalty (stage 5c), as the pipeline truth links its patches: a\n"
-               "large flat contact that the coarse clustering left in two windows pushes once,\n"
-               "not twice (docs/measurements.md)");
-}
-
 // Speculative contacts.
 void AddSpeculativeOptions(CLI::App& adv, NodeCommandLine& cl) {
   adv.add_option("--speculative-speed-mm-s", cl.speculative_speed_mm_s,
@@ -284,46 +254,11 @@ void FinishDepthConfig(const NodeCommandLine& cl, RemoteNodeConfig& config) {
   refinement.neighbour_peak_seeds = !cl.no_neighbour_peak_seeds;
 }
 
-// Stages 5a and 5c, and speculative contacts. Returns whether a split option was given.
-bool FinishSplitConfig(const CLI::App& app, const NodeCommandLine& cl, RemoteNodeConfig& config) {
-  PipelineOptions& pipeline = config.pipeline;
-  pipeline.share_connected_contacts = !cl.no_share_connected_contacts;
-  pipeline.split_windows_at_separated_overlap = !cl.no_split;
-  pipeline.split_link_m = cl.split_windows_link_mm * 1e-3;
-  const bool continuous = cl.split_continuous_um > 0.0;
-  pipeline.split_birth_ramp_m = cl.split_continuous_um * 1e-6;
-  pipeline.split_bridge_fade_m = cl.split_continuous_um * 1e-6;
-  pipeline.split_keeps_parent_rotation_step = continuous;
-  pipeline.split_keeps_parent_window = continuous;
-  const bool split_asked =
-      app.count("--split-windows-link-mm") > 0 || app.count("--split-continuous-um") > 0;
-  if (cl.no_split && split_asked) {
-    throw std::invalid_argument(
-        "--no-split turns stage 5a off; drop it or --split-windows-link-mm / "
-        "--split-continuous-um");
-  }
-  pipeline.speculative_lead_s = cl.speculative_lead_ms * 1e-3;
+// Speculative contacts.
+void FinishSpeculativeConfig(const NodeCommandLine& cl, RemoteNodeConfig& config) {
+  config.pipeline.speculative_lead_s = cl.speculative_lead_ms * 1e-3;
   config.speculative_speed_m_per_s = cl.speculative_speed_mm_s * 1e-3;
   config.max_speculative_floor_m = cl.max_speculative_floor_mm * 1e-3;
-  return split_asked;
-}
-
-// The CPU texture stage's own options against --pd-backend: an error with gpu, the CPU stage (or
-// the option off) with auto.
-void FinishBackendChoice(const NodeCommandLine& cl, bool split_asked, RemoteNodeConfig& config) {
-  if (config.pipeline.split_windows_at_separated_overlap &&
-      config.pd_backend == PdBackendChoice::kGpu) {
-    if (split_asked) {
-      throw std::invalid_argument(
-          "--split-windows-link-mm and --split-continuous-um are options of the CPU texture "
-          "stage; the GPU backend takes one window size per batch (use --pd-backend cpu, or "
-          "drop the option)");
-    }
-    std::fprintf(stderr,
-                 "slave_sim: stage 5a's split is a CPU texture stage option: off with "
-                 "--pd-backend gpu\n");
-    config.pipeline.split_windows_at_separated_overlap = false;
-  }
 }
 
 }  // namespace
@@ -341,7 +276,6 @@ void AddNodeOptions(CLI::App& app, NodeCommandLine& cl) {
   AddSceneOptions(app, cl);
   AddWindowOptions(app, adv, cl);
   AddDepthOptions(adv, cl);
-  AddSplitAndSharingOptions(adv, cl);
   AddSpeculativeOptions(adv, cl);
   AddBackendOptions(app, adv, cl);
   AddStreamOptions(app, adv, cl);
@@ -355,8 +289,7 @@ void FinishNodeConfig(const CLI::App& app, NodeCommandLine& cl) {
   RemoteNodeConfig& config = cl.config;
   FinishStreamConfig(app, cl, config);
   FinishDepthConfig(cl, config);
-  const bool split_asked = FinishSplitConfig(app, cl, config);
-  FinishBackendChoice(cl, split_asked, config);
+  FinishSpeculativeConfig(cl, config);
 }
 
 }  // namespace ht

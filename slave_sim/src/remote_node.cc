@@ -137,9 +137,7 @@ RemoteNodeRun::RemoteNodeRun(const RemoteNodeConfig& config, const HapticScene& 
       config.pipeline.texture_threads);
   if (auto* gpu = dynamic_cast<GpuPenetrationDepthBackend*>(backend.get())) {
     // Stage 5a (the split) runs with the CPU texture stage only (HapticTexturePipeline).
-    if (config.pipeline.split_windows_at_separated_overlap) {
-      backend_message_ += "; stage 5a's split is off on the GPU backend (--pd-backend cpu has it)";
-    }
+    backend_message_ += "; stage 5a's split is off on the GPU backend (--pd-backend cpu has it)";
     gpu_instanced_draws_ = gpu->instanced_draws();
     gl_renderer_ = gpu->info().renderer;
     gl_version_ = gpu->info().version;

@@ -84,15 +84,9 @@ nlohmann::json RemoteNodeRun::Summary() const {
                             {"largest_mm", largest_speculative_floor_m_ * 1e3}};
   s["triangle_lists_overflowed"] = pipeline_->step_faults().triangle_lists_overflowed;
   s["region_windows"] = pipeline_->step_faults().region_windows;
-  // Stage 5a (issue 32, thirty-first stop): asked for, and whether the backend at the end runs it
-  // (the CPU texture stage does, the GPU backend does not).
-  s["split"] = {{"on", config_.pipeline.split_windows_at_separated_overlap},
-                {"runs", config_.pipeline.split_windows_at_separated_overlap &&
-                             pipeline_->backend().name() != "gpu"},
-                {"link_mm", std::round(config_.pipeline.split_link_m * 1e6) / 1e3},
-                {"birth_ramp_um", std::round(config_.pipeline.split_birth_ramp_m * 1e9) / 1e3},
-                {"bridge_fade_um", std::round(config_.pipeline.split_bridge_fade_m * 1e9) / 1e3}};
-  s["share_connected_contacts"] = config_.pipeline.share_connected_contacts;
+  // Stage 5a: whether the backend at the end runs it (the CPU texture stage does, the GPU
+  // backend does not).
+  s["split"] = {{"runs", pipeline_->backend().name() != "gpu"}};
   s["shared_contacts"] = pipeline_->step_faults().shared_contacts;
   s["pd_backend"] = {{"requested", ToString(config_.pd_backend)},
                      {"used", backend_at_start_},

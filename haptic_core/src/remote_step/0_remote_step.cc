@@ -45,7 +45,7 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
   // What a failing GPU backend falls back on, ready before the first step (LinearizeContacts).
   if (backend_->name() != "cpu") {
     cpu_fallback_ = MakeCpuBackend();
-    if (WantsBaseRender()) cpu_fallback_->set_keep_base_overlap(KeptFieldResolution());
+    cpu_fallback_->set_keep_base_overlap(KeptFieldResolution());
   }
   fallback_reason_.reserve(kMaxFallbackReason);
 }
@@ -85,11 +85,9 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
                            : std::span<const float>{};
   }
   // Stage 5a: a window whose overlap is in separated regions becomes one window per region.
-  if (d.region_solver && options_.split_windows_at_separated_overlap) {
-    d.last_num_queries = SplitSeparatedOverlap(X_WT, d.last_num_queries);
-  }
-  // Stage 5a's weights (split_birth_ramp_m, split_bridge_fade_m): a region other than its
-  // window's deepest fades in with its overlap and out as it joins a deeper one.
+  d.last_num_queries = SplitSeparatedOverlap(X_WT, d.last_num_queries);
+  // Stage 5a's weights (its birth ramp and bridge fade): a region other than its window's
+  // deepest fades in with its overlap and out as it joins a deeper one.
   for (int k = 0; k < d.split_count; ++k) {
     d.last_results[static_cast<std::size_t>(d.split_first + k)].stiffness_n_per_m *=
         d.split_weights[static_cast<std::size_t>(k)];
@@ -441,19 +439,13 @@ void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n)
 
 void HapticTexturePipeline::ShareConnectedContacts(const RigidTransform& X_WT, int n) noexcept {
   RemoteStepData& d = *data_;
-  if (!options_.share_connected_contacts || !d.region_solver || n < 2) return;
-  ContactSharingOptions sharing;
-  sharing.link_m = options_.share_link_m;
-  sharing.fade_m = options_.share_fade_m;
+  if (n < 2) return;
+  ContactSharingOptions sharing;  // its link, fade and temperature at their defaults
   sharing.max_normal_angle_deg = kClusteringAngleDeg;
-  sharing.temperature_m = options_.share_temperature_m;
   d.step_faults.shared_contacts += ht::ShareConnectedContacts(
       *scene_.tool, X_WT, {d.last_queries.data(), static_cast<std::size_t>(n)},
       {d.last_results.data(), static_cast<std::size_t>(n)}, sharing, *d.region_solver,
-      d.sharing_occupancy,
-      options_.split_windows_at_separated_overlap && options_.split_keeps_parent_window
-          ? std::span<const int>(d.split_family.data(), static_cast<std::size_t>(n))
-          : std::span<const int>(),
+      d.sharing_occupancy, std::span<const int>(d.split_family.data(), static_cast<std::size_t>(n)),
       std::span<const std::span<const float>>(d.base_fields.data(), static_cast<std::size_t>(n)));
 }
 
@@ -461,13 +453,8 @@ int HapticTexturePipeline::KeptFieldResolution() const noexcept {
   return std::min(options_.max_window_resolution(), kMaxKeptFieldResolution);
 }
 
-bool HapticTexturePipeline::WantsBaseRender() const noexcept {
-  return options_.reuse_base_render &&
-         (options_.split_windows_at_separated_overlap || options_.share_connected_contacts);
-}
-
 bool HapticTexturePipeline::ReusesBaseRender() const noexcept {
-  return WantsBaseRender() && backend_->name() == "cpu";
+  return backend_->name() == "cpu";
 }
 
 const HapticTexturePipeline::StepFaults& HapticTexturePipeline::step_faults() const noexcept {

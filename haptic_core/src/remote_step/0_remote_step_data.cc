@@ -48,17 +48,12 @@ RemoteStepData::RemoteStepData(const HapticScene& scene, const PipelineOptions& 
                                int kept_field_resolution)
     :  // Stage 5b's buffers (about 10 MB at 8192 triangles) only where it runs.
       refiner(options.depth_refinement, options.refine_depth ? 8192 : 0) {
-  if (options.split_windows_at_separated_overlap || options.share_connected_contacts) {
-    // Stage 5c renders whole windows, up to the largest.
-    region_solver = std::make_unique<TexturePenetrationSolver>(
-        std::max({128, options.grid_resolution,
-                  options.share_connected_contacts ? options.max_window_resolution() : 0}),
-        4096, TextureStagePath::kFast);
-  }
-  if (options.share_connected_contacts) {
-    sharing_occupancy.assign(
-        static_cast<std::size_t>(kMaxContacts) * kMaxSharingBlocks * kMaxSharingBlocks, 0);
-  }
+  // Stage 5c renders whole windows, up to the largest.
+  region_solver = std::make_unique<TexturePenetrationSolver>(
+      std::max({128, options.grid_resolution, options.max_window_resolution()}), 4096,
+      TextureStagePath::kFast);
+  sharing_occupancy.assign(
+      static_cast<std::size_t>(kMaxContacts) * kMaxSharingBlocks * kMaxSharingBlocks, 0);
   reachable_pairs.resize(static_cast<std::size_t>(clusterer.max_pairs()));
   pair_bounds.resize(static_cast<std::size_t>(clusterer.max_pairs()));
   candidate_triangles.resize(static_cast<std::size_t>(2 * clusterer.max_triangles()));
@@ -79,7 +74,7 @@ RemoteStepData::RemoteStepData(const HapticScene& scene, const PipelineOptions& 
   }
   // Stage 5a's copies of the kept contacts' fields, whatever the backend (a GPU backend that
   // falls back to the CPU keeps fields from then on).
-  if (options.reuse_base_render && options.split_windows_at_separated_overlap) {
+  {
     const auto r = static_cast<std::size_t>(kept_field_resolution);
     base_field_store.resize(kMaxContacts * r * r);
   }

@@ -72,8 +72,7 @@ struct RemoteStepData {
   ContactClusterer clusterer;
   /// Stage 5b (PipelineOptions::refine_depth): its buffers, and its seeds from the last step.
   DepthRefiner refiner;
-  /// Stages 5a and 5c (split_windows_at_separated_overlap, share_connected_contacts): the solver
-  /// that renders a window's overlap regions; null when both are off.
+  /// Stages 5a and 5c: the solver that renders a window's overlap regions.
   std::unique_ptr<TexturePenetrationSolver> region_solver;
 
   // ---- Stages 1–3 (FindContactCandidates).
@@ -105,31 +104,30 @@ struct RemoteStepData {
   std::array<ContactLinearization, kMaxContacts> size_results{};
   std::array<DepthSample, kMaxContacts * kGradientSamples> size_samples{};
   std::array<int, kMaxContacts> size_index{};
-  /// reuse_base_render: each contact's overlap field at the base pose from stage 5's render
+  /// Each contact's overlap field at the base pose from stage 5's render
   /// (PenetrationDepthBackend::base_overlap; empty: none), in last_queries' order, for stages 5a
   /// and 5c; and where the kept contacts' fields are copied before stage 5a's own batch
-  /// overwrites the backend's (kMaxContacts fields of kept_field_resolution² floats, reserved
-  /// with reuse_base_render and the split on).
+  /// overwrites the backend's (kMaxContacts fields of kept_field_resolution² floats).
   std::array<std::span<const float>, kMaxContacts> base_fields{};
   std::vector<float> base_field_store;
 
-  // ---- Stage 5a (split_windows_at_separated_overlap).
+  // ---- Stage 5a.
   /// A window's overlap regions, and the windows replacing a split one.
   std::array<OverlapRegion, 8> regions{};
   std::array<ContactQuery, kMaxContacts> split_queries{};
-  /// Each split window's birth-ramp weight (split_birth_ramp_m), in split_queries' order,
+  /// Each split window's weight (birth ramp and bridge fade), in split_queries' order,
   /// applied to its stiffness after stage 5b.
   std::array<double, kMaxContacts> split_weights{};
   /// The first split window in last_queries and how many follow (0: none this step).
   int split_first = 0;
   int split_count = 0;
-  /// With split_keeps_parent_window: each split window's parent (its index in last_queries), and
+  /// Each split window's parent (its index in last_queries), and
   /// each contact's family for stage 5c (−1: none; a parent and its split windows share one, and
   /// never share a penalty).
   std::array<int, kMaxContacts> split_parent{};
   std::array<int, kMaxContacts> split_family{};
 
-  // ---- Stage 5c (share_connected_contacts).
+  // ---- Stage 5c.
   /// The block occupancy of each contact (kMaxSharingBlocks² a contact).
   std::vector<std::uint8_t> sharing_occupancy;
 
