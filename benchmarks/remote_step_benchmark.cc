@@ -70,20 +70,12 @@ int main(int argc, char** argv) {
   app.add_flag("--parallax,!--no-parallax", parallax,
                "stage 5b reads heights through the displaced surface (DepthRefinementOptions::"
                "parallax, on by default); --no-parallax: the render's form h*(N.n)");
-  bool no_seed_from_last_step = false;
-  app.add_flag("--no-seed-from-last-step", no_seed_from_last_step,
-               "stage 5b without the last step's deepest points as seeds (by default a pose's "
-               "repeats seed each other: DepthRefinementOptions::seed_from_last_step)");
   std::string ab;
   app.add_option("--ab", ab,
                  "also step a pipeline with this option of the remote step turned the other way, "
                  "interleaved step by step with the first on the same poses, and print its row "
-                 "(B) beside: parallax (DepthRefinementOptions::parallax), seed-from-last-step, "
-                 "parallax-offset-seeds (DepthRefinementOptions::parallax_offset_seeds), "
-                 "neighbour-peak-seeds "
-                 "(DepthRefinementOptions::neighbour_peak_seeds)")
-      ->check(CLI::IsMember({"parallax", "seed-from-last-step", "parallax-offset-seeds",
-                             "neighbour-peak-seeds"}));
+                 "(B) beside: parallax (DepthRefinementOptions::parallax)")
+      ->check(CLI::IsMember({"parallax"}));
   bool product_models = false;
   app.add_flag("--product-models", product_models,
                "step the models slave_sim --scene builds (ProductModelSettings: fig77 and the "
@@ -128,16 +120,12 @@ int main(int argc, char** argv) {
     options.max_contacts = max_contacts;
     options.refine_depth = !no_refinement;
     options.depth_refinement.parallax = parallax;
-    options.depth_refinement.seed_from_last_step = !no_seed_from_last_step;
     // Arm A is the options as given; arm B (with --ab) the same with one option flipped.
     ht::PipelineOptions options_b = options;
     std::string label_b;
     // The flag --ab names, in a pipeline's options (null without --ab).
     const auto ab_flag = [&](ht::PipelineOptions& o) -> bool* {
       if (ab == "parallax") return &o.depth_refinement.parallax;
-      if (ab == "seed-from-last-step") return &o.depth_refinement.seed_from_last_step;
-      if (ab == "parallax-offset-seeds") return &o.depth_refinement.parallax_offset_seeds;
-      if (ab == "neighbour-peak-seeds") return &o.depth_refinement.neighbour_peak_seeds;
       return nullptr;
     };
     if (bool* flag = ab_flag(options_b)) {

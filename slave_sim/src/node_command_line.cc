@@ -63,35 +63,13 @@ void AddWindowOptions(CLI::App& app, CLI::App& adv, NodeCommandLine& cl) {
       ->capture_default_str();
 }
 
-// The texture stage's gradient, the grazing guard, stage 5b's depth refinement
-// and its seeds, and contact clustering's angle.
+// Stage 5b's depth refinement.
 void AddDepthOptions(CLI::App& adv, NodeCommandLine& cl) {
   adv.add_flag("--no-refine-depth", cl.no_refine_depth,
                "the grid's cell samples alone: by default each contact's depth is refined to the\n"
                "texture's full resolution around the grid's deepest cells (stage 5b,\n"
                "docs/DESIGN.md §4), which the grid's mip-filtered samples read tens of\n"
                "micrometres low; off is 7-26 % faster a step (docs/measurements.md)");
-  adv.add_flag("--parallax,!--no-parallax", cl.parallax,
-               "stage 5b reads each height where the textured surface p + h*N crosses the line\n"
-               "along the window's normal (parallax; on by default) instead of h*(N.n) at the\n"
-               "coarse point under it, which on coarse facets tilted from the normal under large\n"
-               "heights reads another part of the surface; --no-parallax: the render's form,\n"
-               "less accurate on such surfaces and 3-37 % faster there (docs/measurements.md)");
-  adv.add_flag("--no-parallax-offset-seeds", cl.no_parallax_offset_seeds,
-               "stage 5b searches only the grid's deepest cells: by default it also searches\n"
-               "where parallax carries them (a facet tilted from the window's normal under a\n"
-               "large height shows its peak up to several cells beside where the grid's\n"
-               "render puts it; docs/measurements.md)");
-  adv.add_flag("--no-neighbour-peak-seeds", cl.no_neighbour_peak_seeds,
-               "stage 5b does not search half a cell and a cell beside its deepest point for a\n"
-               "neighbouring peak: by default it does (beside a trough's vertex the other\n"
-               "flank's maximum lies in the next cell, which is never a seed of its own; it costs\n"
-               "4-35 % of the texture stage; docs/measurements.md)");
-  adv.add_flag("--no-seed-from-last-step", cl.no_seed_from_last_step,
-               "each step's contacts from their own grid alone: by default stage 5b also\n"
-               "searches each contact from the previous step's deepest point (kept in the\n"
-               "tool's frame), so that a narrow peak the filtered grid finds on one step and\n"
-               "misses on the next is not lost for that step (docs/measurements.md)");
 }
 
 // Speculative contacts.
@@ -243,15 +221,10 @@ void FinishStreamConfig(const CLI::App& app, const NodeCommandLine& cl, RemoteNo
   if (!cl.out_dir.empty()) config.step_trace_path = cl.out_dir + "/remote_steps.csv";
 }
 
-// The texture stage's gradient, stage 5b and clustering.
+// Stage 5b.
 void FinishDepthConfig(const NodeCommandLine& cl, RemoteNodeConfig& config) {
   PipelineOptions& pipeline = config.pipeline;
-  DepthRefinementOptions& refinement = pipeline.depth_refinement;
   pipeline.refine_depth = !cl.no_refine_depth;
-  refinement.parallax = cl.parallax;
-  refinement.seed_from_last_step = !cl.no_seed_from_last_step;
-  refinement.parallax_offset_seeds = !cl.no_parallax_offset_seeds;
-  refinement.neighbour_peak_seeds = !cl.no_neighbour_peak_seeds;
 }
 
 // Speculative contacts.

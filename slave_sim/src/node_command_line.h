@@ -30,12 +30,8 @@ struct NodeCommandLine {
   std::string scene_cache_dir = HapticModelCache::DefaultDir();
   bool no_watch = false;
 
-  // The texture stage's gradient, stage 5b and clustering (AddDepthOptions).
+  // Stage 5b (AddDepthOptions).
   bool no_refine_depth = false;
-  bool parallax = true;
-  bool no_parallax_offset_seeds = false;
-  bool no_neighbour_peak_seeds = false;
-  bool no_seed_from_last_step = false;
 
   // Speculative contacts (AddSpeculativeOptions).
   double speculative_speed_mm_s = RemoteNodeConfig{}.speculative_speed_m_per_s * 1e3;

@@ -41,14 +41,13 @@ nlohmann::json RemoteNodeRun::Summary() const {
   s["linearization_missing_overlap"] =
       pipeline_->faults().missing_overlap -
       (pipeline_->backend_failures() == 0 ? warm_up_missing_overlap_ : 0);
-  s["parallax"] = config_.pipeline.depth_refinement.parallax;
   s["refine_depth"] = config_.pipeline.refine_depth;
   {
     // Stage 5b (issue 32), warm-up included: contacts refined, and per contact the seeds, the
     // evaluations of b − a and how far δ0 rose above the grid's; the conservative screen's
     // squares and leaves per contact, the contacts where it found a deeper point than the seeds
     // (and Σ µm), and those it stopped at its leaf budget; the last step's seeds searched, the
-    // contacts where one was deeper than the grid's seeds (and Σ µm), and whether they are on.
+    // contacts where one was deeper than the grid's seeds (and Σ µm).
     const DepthRefinementCounters& r = pipeline_->depth_refinement_counters();
     const double n = r.contacts > 0 ? static_cast<double>(r.contacts) : 1.0;
     s["depth_refinement"] = {
@@ -64,7 +63,6 @@ nlohmann::json RemoteNodeRun::Summary() const {
         {"last_step_seeds", r.last_step_seeds},
         {"last_step_found_deeper", r.last_step_found},
         {"last_step_raised_um_sum", r.last_step_raised_um},
-        {"seed_from_last_step", config_.pipeline.depth_refinement.seed_from_last_step},
         {"parallax_offset_seeds", r.parallax_offset_seeds},
         {"parallax_offset_found_deeper", r.parallax_offset_found},
         {"parallax_offset_raised_um_sum", r.parallax_offset_raised_um},

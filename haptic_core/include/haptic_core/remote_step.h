@@ -318,7 +318,7 @@ class HapticTexturePipeline {
   std::span<const DepthField* const> last_depth_fields() const noexcept;
   /// The floor the next Step() uses (m).
   double speculative_floor_m() const noexcept { return options_.speculative_floor_m; }
-  /// Stage 5b's seeds from the last step (DepthRefinementOptions::seed_from_last_step) forgotten:
+  /// Stage 5b's seeds from the last step (depth_refinement.h) forgotten:
   /// the next step's contacts start from their grid alone, as after construction (for a pose that
   /// does not follow the last one, e.g. the frontier's spread poses). noexcept.
   void ForgetLastStep() noexcept;
