@@ -18,8 +18,8 @@
 
 int main(int argc, char** argv) {
   CLI::App app{
-      "Speed against error of the remote step: every setting (grid N, texture size, coarse\n"
-      "triangle count, CPU or GPU, GPU depth bits) and two baselines (coarse meshes without\n"
+      "Speed against error of the remote step: each named setting (grid N, texture size, coarse\n"
+      "triangle count, threads, depth fields, CPU or GPU) and two baselines (coarse meshes without\n"
       "textures; full-resolution meshes through FCL) on in-contact poses of the seed's scenes,\n"
       "timed, and compared with the ground truth computed on the full-resolution meshes.\n"
       "Errors against two truths: the pipeline truth (the full-resolution meshes' own contact\n"
