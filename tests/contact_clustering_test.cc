@@ -210,7 +210,7 @@ TEST(ContactClustering, CornerSpotsWithinMergeDistanceButNormals90DegApartStaySe
   EXPECT_EQ(clusterer.stats().clusters_pass2, 2);
 }
 
-// Issue 32's thirty-third stop: the pipeline clusters at 60° (kClusteringAngleDeg). One contact
+// The pipeline clusters at 60° (kClusteringAngleDeg). One contact
 // region whose hull pairs carry normals 45° apart (a curved or
 // thin coarse hull) was two contacts at 30°, and object leaf 0, whose deepest pair is on the
 // tilted side, went there while tool leaf 1, which overlaps it, stayed with the other: pair

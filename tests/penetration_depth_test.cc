@@ -474,8 +474,8 @@ TEST(OverlapRegions, BridgeLevelsAreTheSaddlesOfTheOverlapsMergeTree) {
   EXPECT_NEAR(at15[2] - at20[2], 5e-6, 0.05e-6);
 }
 
-// Stage 5a reads its regions from stage 5's base render (PenetrationDepthBackend::base_overlap;
-// issue 32's thirty-second stop) where the backend keeps it, and renders the base pose again
+// Stage 5a reads its regions from stage 5's base render (PenetrationDepthBackend::base_overlap)
+// where the backend keeps it, and renders the base pose again
 // elsewhere. Two routes to one set of regions: the field the backend kept and a fresh
 // render give the same regions, boxes, cell counts and peak cells, with depths and bridge levels
 // within float rounding of the window's heights, and stage 5c's block occupancy the same bytes,
