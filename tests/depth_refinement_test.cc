@@ -530,8 +530,8 @@ TEST(DepthRefinement, RefinedWithParallaxATiltedFacetsDepthIsTheDisplacedSurface
   }
 }
 
-// Seeds carried by parallax: a Gaussian bump of 0.8 mm on a facet tilted 50°, under the tool's flat face
-// tilted alike, 60 µm into the bump along the facet's normal. Along the window's n = z the two
+// Seeds carried by parallax: a Gaussian bump of 0.8 mm on a facet tilted 50°, under the tool's flat
+// face tilted alike, 60 µm into the bump along the facet's normal. Along the window's n = z the two
 // parallel planes stand (A − g)/cosθ apart at the bump's top, the closed form. The render's form
 // reads the bump at its coarse point, A·sinθ = 0.61 mm (three cells at N = 100) beside where its
 // displaced top lies, and there it reads no overlap at all; the carried seed is searched where

@@ -143,9 +143,8 @@ TEST(HardCases, AContinuousSplitJoinsTwoSupportsWithoutAStep) {
     previous = fz;
   }
   EXPECT_LT(largest_step, 4.0 * kK * 1e-6);  // no step where the supports join
-  Report("a continuous split",
-         Fmt("largest step while two supports join: %.4f N (k dz = %.4f N)", largest_step,
-             kK * 1e-6));
+  Report("a continuous split", Fmt("largest step while two supports join: %.4f N (k dz = %.4f N)",
+                                   largest_step, kK * 1e-6));
 }
 
 // Stage 5c (PipelineOptions): a flat box face pressed on the end cap

@@ -384,11 +384,11 @@ TEST(PenetrationDepth, LaneScanDepthIsTheOnePassDefinitionWithTiesInfinitiesAndS
 namespace ht {
 namespace {
 
-// TexturePenetrationSolver::OverlapRegions (stage 5a, PipelineOptions): three 40 µm Gaussian bumps (σ 1 mm) under a flat tool at
-// 20 µm, so each overlaps within about 1.2 mm of its top. Two lie 5 mm apart (2.6 mm of gap)
-// and one 16 mm from them: linked at 5 mm the overlap is two regions, the lone bump's box around
-// its own top; at 20 mm one region; at 1 mm three. Each region's depth is its bump's b − a at the
-// cells (≤ 20 µm, within the filtered grid's loss of a few µm).
+// TexturePenetrationSolver::OverlapRegions (stage 5a, PipelineOptions): three 40 µm Gaussian bumps
+// (σ 1 mm) under a flat tool at 20 µm, so each overlaps within about 1.2 mm of its top. Two lie 5
+// mm apart (2.6 mm of gap) and one 16 mm from them: linked at 5 mm the overlap is two regions, the
+// lone bump's box around its own top; at 20 mm one region; at 1 mm three. Each region's depth is
+// its bump's b − a at the cells (≤ 20 µm, within the filtered grid's loss of a few µm).
 TEST(OverlapRegions, SeparatedBumpsAreSeparateRegionsAtTheClusteringDistance) {
   const ThreeBumps scene = MakeThreeBumps();
   const HapticModel& env = scene.env;

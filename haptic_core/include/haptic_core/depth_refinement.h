@@ -138,8 +138,8 @@ struct DepthRefinementCounters {
   std::uint64_t screen_found = 0;
   std::uint64_t screen_raised_um = 0;
   std::uint64_t screen_truncated = 0;
-  /// The seeds carried by parallax: points searched, and contacts where one gave the deepest point (and
-  /// Σ of how much deeper, µm).
+  /// The seeds carried by parallax: points searched, and contacts where one gave the deepest point
+  /// (and Σ of how much deeper, µm).
   std::uint64_t parallax_offset_seeds = 0;
   std::uint64_t parallax_offset_found = 0;
   std::uint64_t parallax_offset_raised_um = 0;

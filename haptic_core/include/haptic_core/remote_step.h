@@ -338,8 +338,9 @@ class HapticTexturePipeline {
   /// of the batch), and linearizes those; returns the new count. CPU backend only.
   int SplitSeparatedOverlap(const RigidTransform& X_WT, int n) noexcept;
   /// Moves `point_W` to the centre of the contact region of the tool and touchable `k`, both
-  /// whole convex models, on the window axes of `normal_W`, and sets `extent_m` to the region's larger side plus 2·texture_margin_m; leaves
-  /// both unchanged when a model has no hull or the region is empty.
+  /// whole convex models, on the window axes of `normal_W`, and sets `extent_m` to the region's
+  /// larger side plus 2·texture_margin_m; leaves both unchanged when a model has no hull or the
+  /// region is empty.
   void RegionWindow(const RigidTransform& X_WT, std::size_t k, const glm::dvec3& normal_W,
                     double texture_margin_m, glm::dvec3& point_W, double& extent_m) noexcept;
   /// Stage 5c: shares the penalty of contacts [0, n) whose overlaps are one region

@@ -453,9 +453,7 @@ int HapticTexturePipeline::KeptFieldResolution() const noexcept {
   return std::min(options_.max_window_resolution(), kMaxKeptFieldResolution);
 }
 
-bool HapticTexturePipeline::ReusesBaseRender() const noexcept {
-  return backend_->name() == "cpu";
-}
+bool HapticTexturePipeline::ReusesBaseRender() const noexcept { return backend_->name() == "cpu"; }
 
 const HapticTexturePipeline::StepFaults& HapticTexturePipeline::step_faults() const noexcept {
   return data_->step_faults;

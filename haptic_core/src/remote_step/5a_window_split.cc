@@ -64,7 +64,8 @@ int HapticTexturePipeline::SplitSeparatedOverlap(const RigidTransform& X_WT, int
     const bool split = regions >= 2 && regions <= static_cast<int>(d.regions.size()) &&
                        kept_after + num_new + regions <= options_.max_contacts;
     {
-      // Kept (the deepest region's window when split): moved down over the split ones, with its results and samples.
+      // Kept (the deepest region's window when split): moved down over the split ones, with its
+      // results and samples.
       if (kept != i) {
         d.base_fields[static_cast<std::size_t>(kept)] = d.base_fields[static_cast<std::size_t>(i)];
         d.last_queries[static_cast<std::size_t>(kept)] = q;

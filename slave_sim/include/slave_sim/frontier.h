@@ -1,9 +1,9 @@
 #pragma once
 // The speed-vs-error frontier: every setting of the remote step (grid N, texture size,
-// coarse triangle count, threads, depth fields, CPU or GPU backend) and two baselines a user might pick
-// instead (coarse meshes without textures; full-resolution meshes through FCL), run on in-contact
-// poses of the seed's benchmark scenes and measured, in one run on one machine, for time per step
-// and for error against the full-resolution ground truth (haptic_core/accuracy).
+// coarse triangle count, threads, depth fields, CPU or GPU backend) and two baselines a user might
+// pick instead (coarse meshes without textures; full-resolution meshes through FCL), run on
+// in-contact poses of the seed's benchmark scenes and measured, in one run on one machine, for time
+// per step and for error against the full-resolution ground truth (haptic_core/accuracy).
 
 #include <map>
 #include <string>
