@@ -58,9 +58,7 @@ int main(int argc, char** argv) {
                  "same results within float rounding)")
       ->check(CLI::IsMember({"fast", "reference"}))
       ->capture_default_str();
-  bool local_reach = false;
   int max_contacts = ht::kMaxContacts;
-  app.add_flag("--local-reach", local_reach, "coarse query with each node pair's own reach");
   app.add_option("--max-contacts", max_contacts, "most contacts per step")
       ->check(CLI::Range(1, ht::kMaxContacts))
       ->capture_default_str();
@@ -68,33 +66,16 @@ int main(int argc, char** argv) {
   app.add_flag("--no-refine-depth", no_refinement,
                "stage 5b off: the grid's cell samples alone (by default each contact's depth is "
                "refined to the texture's full resolution)");
-  bool no_sharing = false;
-  app.add_flag("--no-share-connected-contacts", no_sharing,
-               "every contact its whole penalty (stage 5c off)");
   bool parallax = true;
   app.add_flag("--parallax,!--no-parallax", parallax,
                "stage 5b reads heights through the displaced surface (DepthRefinementOptions::"
                "parallax, on by default); --no-parallax: the render's form h*(N.n)");
-  bool no_seed_from_last_step = false;
-  app.add_flag("--no-seed-from-last-step", no_seed_from_last_step,
-               "stage 5b without the last step's deepest points as seeds (by default a pose's "
-               "repeats seed each other: DepthRefinementOptions::seed_from_last_step)");
   std::string ab;
   app.add_option("--ab", ab,
                  "also step a pipeline with this option of the remote step turned the other way, "
                  "interleaved step by step with the first on the same poses, and print its row "
-                 "(B) beside: parallax (DepthRefinementOptions::parallax), seed-from-last-step, "
-                 "tool-leaves-follow (PipelineOptions::tool_leaves_follow_object_leaves), "
-                 "split-continuous (stage 5a's split in its continuous form, on by default: B "
-                 "without it), reuse-base-render "
-                 "(stage 5a's regions from stage 5's base render; B renders the base again), "
-                 "parallax-offset-seeds (DepthRefinementOptions::parallax_offset_seeds), "
-                 "clustering-angle (PipelineOptions::clustering_angle_deg: B at 30 deg where A "
-                 "is not, else at 60), neighbour-peak-seeds "
-                 "(DepthRefinementOptions::neighbour_peak_seeds)")
-      ->check(CLI::IsMember({"parallax", "seed-from-last-step", "tool-leaves-follow",
-                             "split-continuous", "reuse-base-render", "parallax-offset-seeds",
-                             "clustering-angle", "neighbour-peak-seeds"}));
+                 "(B) beside: parallax (DepthRefinementOptions::parallax)")
+      ->check(CLI::IsMember({"parallax"}));
   bool product_models = false;
   app.add_flag("--product-models", product_models,
                "step the models slave_sim --scene builds (ProductModelSettings: fig77 and the "
@@ -136,33 +117,20 @@ int main(int argc, char** argv) {
     ht::PipelineOptions options;
     options.grid_resolution = grid;
     options.texture_threads = threads;
-    options.local_reach = local_reach;
     options.max_contacts = max_contacts;
     options.refine_depth = !no_refinement;
-    options.share_connected_contacts = !no_sharing;
     options.depth_refinement.parallax = parallax;
-    options.depth_refinement.seed_from_last_step = !no_seed_from_last_step;
     // Arm A is the options as given; arm B (with --ab) the same with one option flipped.
     ht::PipelineOptions options_b = options;
     std::string label_b;
     // The flag --ab names, in a pipeline's options (null without --ab).
     const auto ab_flag = [&](ht::PipelineOptions& o) -> bool* {
       if (ab == "parallax") return &o.depth_refinement.parallax;
-      if (ab == "seed-from-last-step") return &o.depth_refinement.seed_from_last_step;
-      if (ab == "tool-leaves-follow") return &o.tool_leaves_follow_object_leaves;
-      if (ab == "split-continuous") return &o.split_windows_at_separated_overlap;
-      if (ab == "reuse-base-render") return &o.reuse_base_render;
-      if (ab == "parallax-offset-seeds") return &o.depth_refinement.parallax_offset_seeds;
-      if (ab == "neighbour-peak-seeds") return &o.depth_refinement.neighbour_peak_seeds;
       return nullptr;
     };
     if (bool* flag = ab_flag(options_b)) {
       *flag = !*flag;
       label_b = (*flag ? "" : "no-") + ab;
-    } else if (ab == "clustering-angle") {
-      options_b.clustering_angle_deg = options.clustering_angle_deg != 30.0 ? 30.0 : 60.0;
-      label_b =
-          "clustering-angle-" + std::to_string(static_cast<int>(options_b.clustering_angle_deg));
     }
     struct Arm {
       std::string label;

@@ -20,11 +20,8 @@ expect() {
   fi
 }
 expect slave_sim "--grid" "$build/slave_sim/slave_sim" --grid 0
-expect slave_sim "--split-windows-link-mm" "$build/slave_sim/slave_sim" --split-windows-link-mm -1
-expect slave_sim "--split-continuous-um" "$build/slave_sim/slave_sim" --split-continuous-um -5
+expect slave_sim "--speculative-lead-ms" "$build/slave_sim/slave_sim" --speculative-lead-ms -1
 "$build/slave_sim/slave_sim" keygen "$tmp/k.key" > /dev/null 2>&1
-expect slave_sim "CPU texture stage" "$build/slave_sim/slave_sim" --key "$tmp/k.key" --split-continuous-um 50 --pd-backend gpu
-expect slave_sim "--no-split" "$build/slave_sim/slave_sim" --key "$tmp/k.key" --no-split --split-continuous-um 100
 expect slave_sim "--model-deadband-torque-floor" "$build/slave_sim/slave_sim" --model-deadband-torque-floor 0
 expect slave_sim "keygen" "$build/slave_sim/slave_sim" --key "$tmp/no_such.key"
 expect master_station "keygen" "$build/master_station/master_station" --key "$tmp/no_such.key"
@@ -52,11 +49,9 @@ expect master_station "unknown key 'experimnet'" "$build/master_station/master_s
 grep -q "known: .*, passivity-refill-pct, " "$tmp/err" ||
   { echo "FAIL: the known keys do not list the Advanced group's passivity-refill-pct"; fail=1; }
 # The Advanced group's options are --config keys as the main group's: their values reach the
-# program (its range checks and its checks across options refuse them).
-printf 'key = "%s"\nno-split = true\nsplit-continuous-um = 100\n' "$tmp/k.key" > "$tmp/adv.toml"
-expect slave_sim "--no-split" "$build/slave_sim/slave_sim" --config "$tmp/adv.toml"
-printf 'clustering-angle-deg = 0\n' > "$tmp/adv.toml"
-expect slave_sim "--clustering-angle-deg" "$build/slave_sim/slave_sim" --config "$tmp/adv.toml"
+# program (its range checks refuse them).
+printf 'max-speculative-floor-mm = 1000\n' > "$tmp/adv.toml"
+expect slave_sim "--max-speculative-floor-mm" "$build/slave_sim/slave_sim" --config "$tmp/adv.toml"
 printf 'passivity-refill-pct = 100\n' > "$tmp/adv.toml"
 expect master_station "--passivity-refill-pct" "$build/master_station/master_station" --config "$tmp/adv.toml"
 # The shipped configurations name only known keys. They cannot be run here (CLI11 checks each key's

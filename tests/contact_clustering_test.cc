@@ -210,8 +210,8 @@ TEST(ContactClustering, CornerSpotsWithinMergeDistanceButNormals90DegApartStaySe
   EXPECT_EQ(clusterer.stats().clusters_pass2, 2);
 }
 
-// Issue 32's thirty-third stop: the pipeline clusters at 60° (PipelineOptions::
-// clustering_angle_deg). One contact region whose hull pairs carry normals 45° apart (a curved or
+// The pipeline clusters at 60° (kClusteringAngleDeg). One contact
+// region whose hull pairs carry normals 45° apart (a curved or
 // thin coarse hull) was two contacts at 30°, and object leaf 0, whose deepest pair is on the
 // tilted side, went there while tool leaf 1, which overlaps it, stayed with the other: pair
 // (1, 0) was rendered in no window. At the pipeline's angle it is one contact holding every
@@ -241,7 +241,7 @@ TEST(ContactClustering, OneRegionsPairs45DegApartAreOneContactAtThePipelinesAngl
   ASSERT_EQ(clusters.size(), 2u);
   EXPECT_FALSE(rendered(clusters, 1, 0)) << "at 30° the pair (1, 0) lies in no window";
   ClusteringOptions now;
-  now.max_normal_angle_deg = PipelineOptions{}.clustering_angle_deg;
+  now.max_normal_angle_deg = kClusteringAngleDeg;
   EXPECT_EQ(now.max_normal_angle_deg, 60.0);
   clusters = clusterer.Cluster(pairs, MakeLeaves(3), MakeLeaves(2), now);
   ASSERT_EQ(clusters.size(), 1u);

@@ -1,6 +1,6 @@
 // Contact windows built from the contact regions (issue 31, changes 1, 2 and 4): a leaf pair's
 // direction from the coarse triangles in contact (contact_region.h), each coarse triangle rendered
-// in one window of a step (PipelineOptions::cluster_triangles), the smooth single-region case
+// in one window of a step, the smooth single-region case
 // with a closed form (a smooth sphere slid across a gently rippled plate), and the window of two
 // whole convex models on their contact region (a flat block resting on the gear's ridges).
 
@@ -252,7 +252,7 @@ SlideFigures Slide(const PipelineOptions& options, double y) {
     f.worst_force_m = std::max(f.worst_force_m, force_error);
     if (direction > 3.0 || depth_error > 20e-6 || force_error > 20e-6) ++f.off_ticks;
     // Each texture once: the step's contacts render disjoint triangle lists on each side.
-    if (options.cluster_triangles) {
+    {
       const auto queries = pipeline.last_contact_queries();
       std::set<int> tool_seen, object_seen;
       for (const ContactQuery& q : queries) {
@@ -279,15 +279,11 @@ TEST(ContactRegion, SmoothSphereSlidingOnGentleRipplesIsOneContactAtTheClosedFor
     EXPECT_LT(on.worst_direction_deg, 3.0);
     EXPECT_LT(on.worst_depth_m, 20e-6);
     EXPECT_LT(on.worst_force_m, 20e-6);
-    PipelineOptions by_box;
-    by_box.cluster_triangles = false;
-    const SlideFigures off = Slide(by_box, y);
     std::printf(
         "[smooth sphere] y = %.1f mm: %d ticks; worst direction %.2f°, depth %.1f µm, "
-        "|F|/k %.1f µm from the closed form, %d ticks with >1 contact; windows picking by "
-        "box: %d ticks with >1 contact, %d off, worst |F|/k %.0f µm\n",
+        "|F|/k %.1f µm from the closed form, %d ticks with >1 contact\n",
         y * 1e3, on.ticks, on.worst_direction_deg, on.worst_depth_m * 1e6, on.worst_force_m * 1e6,
-        on.multi_contact_ticks, off.multi_contact_ticks, off.off_ticks, off.worst_force_m * 1e6);
+        on.multi_contact_ticks);
   }
 }
 

@@ -247,10 +247,9 @@ TEST(DepthRefinement, ScreenFindsTheNarrowPeakTheFilteredGridHides) {
   }
 }
 
-// DepthRefinementOptions::seed_from_last_step: the narrow peak of the test above, hidden from the
-// whole window's filtered grid, found on a step whose window holds it alone, is kept on the next
-// step over the whole window; forgotten, the whole window's seeds stay on the hump as without the
-// option, bit for bit.
+// The last step's seeds: the narrow peak of the test above, hidden from the whole window's
+// filtered grid, found on a step whose window holds it alone, is kept on the next step over the
+// whole window; a refiner without a last step stays on the hump.
 TEST(DepthRefinement, ASeedFromTheLastStepKeepsTheNarrowPeakTheFilteredGridHides) {
   const auto surface = HumpAndSpike;
   const glm::dvec2 spike_at = kSpikeAt;
@@ -274,9 +273,7 @@ TEST(DepthRefinement, ASeedFromTheLastStepKeepsTheNarrowPeakTheFilteredGridHides
     EXPECT_TRUE(refiner.Refine(tool, X_WT, q, samples, out[0]));
     return out[0];
   };
-  DepthRefinementOptions with;
-  with.seed_from_last_step = true;
-  DepthRefiner seeded(with), alone{DepthRefinementOptions{}};
+  DepthRefiner seeded{DepthRefinementOptions{}}, alone{DepthRefinementOptions{}};
   const glm::dvec3 spike_W{spike_at.x, spike_at.y, 0.0}, origin{0.0, 0.0, 0.0};
   // Step 1: a 4 mm window around the spike; its own grid finds it.
   const ContactLinearization first = refine(seeded, spike_W, 4e-3, 16);
@@ -533,9 +530,8 @@ TEST(DepthRefinement, RefinedWithParallaxATiltedFacetsDepthIsTheDisplacedSurface
   }
 }
 
-// Seeds carried by parallax (DepthRefinementOptions::parallax_offset_seeds, issue 32's
-// thirty-third stop): a Gaussian bump of 0.8 mm on a facet tilted 50°, under the tool's flat face
-// tilted alike, 60 µm into the bump along the facet's normal. Along the window's n = z the two
+// Seeds carried by parallax: a Gaussian bump of 0.8 mm on a facet tilted 50°, under the tool's flat
+// face tilted alike, 60 µm into the bump along the facet's normal. Along the window's n = z the two
 // parallel planes stand (A − g)/cosθ apart at the bump's top, the closed form. The render's form
 // reads the bump at its coarse point, A·sinθ = 0.61 mm (three cells at N = 100) beside where its
 // displaced top lies, and there it reads no overlap at all; the carried seed is searched where
@@ -557,40 +553,23 @@ TEST(DepthRefinement, ParallaxOffsetSeedsFindTheBumpTheRendersFormPutsBeside) {
   ASSERT_TRUE(c.ok);
   const ContactQuery& q = c.query;
   EXPECT_LT(c.grid.depth_m, 0.0) << "the render's form reads no overlap";
-  double with = 0.0, without = 0.0;
-  for (const bool offset : {false, true}) {
-    DepthRefinementOptions o;
-    o.parallax_offset_seeds = offset;
-    DepthRefiner refiner(o);
-    ContactLinearization lin = c.grid;
-    std::vector<DepthSample> s = c.samples;
-    refiner.Refine(tool, X_WT, q, s, lin);
-    std::printf(
-        "bump on a 50 deg facet: offset seeds %d, delta %.1f um (closed form %.1f um), "
-        "%llu carried seeds\n",
-        int(offset), lin.depth_m * 1e6, expected * 1e6,
-        static_cast<unsigned long long>(refiner.counters().parallax_offset_seeds));
-    (offset ? with : without) = lin.depth_m;
-    if (offset) {
-      EXPECT_GT(refiner.counters().parallax_offset_seeds, 0u);
-      EXPECT_GT(refiner.counters().parallax_offset_found, 0u);
-    } else {
-      EXPECT_EQ(refiner.counters().parallax_offset_seeds, 0u);
-    }
-  }
-  EXPECT_NEAR(with, expected, 3e-6);
-  EXPECT_GE(with, without) << "a carried seed only adds a candidate";
-  // Without parallax the option does nothing: the render's form alone.
+  DepthRefiner refiner{DepthRefinementOptions{}};
+  ContactLinearization lin = c.grid;
+  std::vector<DepthSample> s = c.samples;
+  refiner.Refine(tool, X_WT, q, s, lin);
+  std::printf("bump on a 50 deg facet: delta %.1f um (closed form %.1f um), %llu carried seeds\n",
+              lin.depth_m * 1e6, expected * 1e6,
+              static_cast<unsigned long long>(refiner.counters().parallax_offset_seeds));
+  EXPECT_GT(refiner.counters().parallax_offset_seeds, 0u);
+  EXPECT_GT(refiner.counters().parallax_offset_found, 0u);
+  EXPECT_NEAR(lin.depth_m, expected, 3e-6);
+  // Without parallax no seed is carried: the render's form alone.
   DepthRefinementOptions plain;
   plain.parallax = false;
-  DepthRefinementOptions plain_offset = plain;
-  plain_offset.parallax_offset_seeds = true;
-  DepthRefiner a(plain), b(plain_offset);
-  ContactLinearization la = c.grid, lb = c.grid;
-  std::vector<DepthSample> sa = c.samples, sb = c.samples;
-  a.Refine(tool, X_WT, q, sa, la);
+  DepthRefiner b(plain);
+  ContactLinearization lb = c.grid;
+  std::vector<DepthSample> sb = c.samples;
   b.Refine(tool, X_WT, q, sb, lb);
-  EXPECT_EQ(la.depth_m, lb.depth_m);
   EXPECT_EQ(b.counters().parallax_offset_seeds, 0u);
 }
 

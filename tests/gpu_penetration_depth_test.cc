@@ -376,7 +376,7 @@ TEST_F(GpuTest, GlErrorInABatchSwitchesThePipelineToTheCpu) {
   EXPECT_EQ(pipeline.backend().name(), "gpu");
   raw->BreakProgramForTesting();  // the next batch meets GL_INVALID_VALUE
   // The reference steps once: the GPU step's deepest points are no seeds of the next
-  // (DepthRefinementOptions::seed_from_last_step), so that the two start alike.
+  // (DepthRefiner::BeginStep), so that the two start alike.
   pipeline.ForgetLastStep();
   const ContactModel after = pipeline.Step(X, 2, t);
   EXPECT_EQ(pipeline.backend().name(), "cpu");

@@ -122,153 +122,36 @@ std::string Fmt(const char* fmt, double a, double b = 0, double c = 0, double d 
   return buf;
 }
 
-// Stage 5a (PipelineOptions::split_windows_at_separated_overlap): a box whose bottom carries two
-// 40 µm bumps 20 mm apart, resting 20 µm above a flat slab, touches it at two places. One
-// window holds both (the coarse models' contact is one face), so one contact pushes with their
-// common δ; split, each bump is a contact of its own with that δ, at its own place: twice the
-// force, the same depth, and no torque about the box's centre (the bumps are symmetric).
-TEST(HardCases, SeparatedContactsOnOneFaceSplitIntoOneWindowEach) {
-  const HapticScene scene = TwoBumpsOnSlab({0.02, 0.02, 0.01}, 1.5e-3, "two_bumps");
-  const RigidTransform X_WT = At({0.0, 0.0, 0.01 + 20e-6});
-  const auto step = [&](bool split) {
-    PipelineOptions options;  // the seventh stop's plain split, at the clustering distance
-    options.split_windows_at_separated_overlap = split;
-    options.split_link_m = 0.0;
-    options.split_birth_ramp_m = 0.0;
-    options.split_bridge_fade_m = 0.0;
-    options.split_keeps_parent_rotation_step = false;
-    options.split_keeps_parent_window = false;
-    HapticTexturePipeline pipeline(scene, options);
-    StepTimings t;
-    return pipeline.Step(X_WT, 1, t);
-  };
-  const ContactModel whole = step(false);
-  const ContactModel split = step(true);
-  ASSERT_EQ(whole.num_contacts, 1);
-  ASSERT_EQ(split.num_contacts, 2);
-  const double delta = whole.contacts[0].depth_m;
-  EXPECT_NEAR(delta, 20e-6, 1.5e-6);
-  double x_sum = 0.0;
-  for (int i = 0; i < split.num_contacts; ++i) {
-    const ContactLinearization& c = split.contacts[static_cast<std::size_t>(i)];
-    EXPECT_NEAR(c.depth_m, delta, 1e-6);
-    EXPECT_NEAR(std::abs(c.point_W.x), 10e-3, 1e-3);
-    x_sum += c.point_W.x;
-  }
-  EXPECT_NEAR(x_sum, 0.0, 1e-3);  // one on each bump
-  const Wrench& F_whole = whole.F_T_W_at_q0;
-  const Wrench& F_split = split.F_T_W_at_q0;
-  EXPECT_NEAR(F_split.force.z, 2.0 * F_whole.force.z, 0.1 * F_whole.force.z);
-  EXPECT_NEAR(F_split.torque.y, 0.0, 0.05 * F_split.force.z * 10e-3);
-  PipelineOptions bad;
-  bad.split_windows_at_separated_overlap = true;
-  bad.split_link_m = -1e-3;
-  EXPECT_THROW(HapticTexturePipeline(scene, bad), std::invalid_argument);
-  Report("separated contacts on one face",
-         Fmt("one window: %.3f N; split: %.3f N in two contacts (delta %.1f um)", F_whole.force.z,
-             F_split.force.z, delta * 1e6));
-}
-
-// Stage 5a in its continuous form (split_keeps_parent_window, split_bridge_fade_m,
-// split_birth_ramp_m, split_keeps_parent_rotation_step; issue 32's thirtieth stop): a box whose
-// bottom carries two 40 µm bumps (σ 3 mm) 20 mm apart is lowered onto a flat slab in 1 µm steps.
-// High up, the two overlaps are far apart and each bump pushes with its own δ: about twice the
-// one window's force, as the seventh stop's split. As the box sinks the overlaps widen, and at a
-// gap of 10 mm (the link: r = σ·sqrt(2 ln(40 µm / h)) = 5 mm at h ≈ 10 µm) they become one
-// region, pushing k·δ once. The bridge level goes to 0 as they touch, so the force falls to the
-// one window's without a step: between consecutive heights it changes by no more than a few k·Δz
-// (two contacts' k·Δz plus the weight's own slope); and where the other bump's weight is
-// negligible the model is the unsplit window's, wrench for wrench.
+// Stage 5a (its birth ramp and bridge fade, PipelineOptions): a box whose bottom carries two
+// 40 µm bumps (σ 3 mm) 20 mm apart is lowered onto a flat slab in 1 µm steps. High up, the two
+// overlaps are far apart, two regions; as the box sinks the overlaps widen, and at a gap of 10 mm
+// (the link: r = σ·sqrt(2 ln(40 µm / h)) = 5 mm at h ≈ 10 µm) they become one region. The second
+// region's weight fades in with its depth and out as its bridge level goes to 0, so the force
+// changes between consecutive heights by no more than a few k·Δz: no step where the supports
+// join.
 TEST(HardCases, AContinuousSplitJoinsTwoSupportsWithoutAStep) {
   const HapticScene scene = TwoBumpsOnSlab({0.03, 0.02, 0.01}, 3e-3, "two_wide_bumps");
-  PipelineOptions whole_options;
-  whole_options.split_windows_at_separated_overlap = false;
-  PipelineOptions continuous = whole_options;
-  continuous.split_windows_at_separated_overlap = true;
-  continuous.split_link_m = 10e-3;
-  continuous.split_birth_ramp_m = 10e-6;  // a quarter of the bumps' height
-  continuous.split_bridge_fade_m = 10e-6;
-  continuous.split_keeps_parent_rotation_step = true;
-  continuous.split_keeps_parent_window = true;
-  HapticTexturePipeline whole(scene, whole_options);
-  HapticTexturePipeline split(scene, continuous);
+  HapticTexturePipeline split(scene, PipelineOptions{});
   StepTimings t;
-  double largest_step = 0.0, previous = -1.0, far_ratio = 0.0;
-  int equal_models = 0, compared = 0;
+  double largest_step = 0.0, previous = -1.0;
   for (int h_um = 30; h_um >= 2; --h_um) {
     const RigidTransform X_WT = At({0.0, 0.0, 0.01 + h_um * 1e-6});
-    const ContactModel a = whole.Step(X_WT, 1, t);
     const ContactModel b = split.Step(X_WT, 1, t);
-    ASSERT_EQ(a.num_contacts, 1) << h_um;
+    ASSERT_GE(b.num_contacts, 1) << h_um;
     const double fz = b.F_T_W_at_q0.force.z;
-    if (h_um == 30) far_ratio = fz / a.F_T_W_at_q0.force.z;
     if (previous >= 0.0) largest_step = std::max(largest_step, std::abs(fz - previous));
     previous = fz;
-    if (b.num_contacts == 1) {
-      ++compared;
-      equal_models += b.F_T_W_at_q0.force == a.F_T_W_at_q0.force &&
-                      b.F_T_W_at_q0.torque == a.F_T_W_at_q0.torque;
-    }
   }
-  EXPECT_NEAR(far_ratio, 2.0, 0.15);         // two supports, each its k·δ
   EXPECT_LT(largest_step, 4.0 * kK * 1e-6);  // no step where the supports join
-  EXPECT_GT(compared, 3);                    // the joined heights: one region, one window
-  EXPECT_EQ(equal_models, compared);
-  PipelineOptions bad = continuous;
-  bad.split_bridge_fade_m = -1e-6;
-  EXPECT_THROW(HapticTexturePipeline(scene, bad), std::invalid_argument);
-  bad.split_bridge_fade_m = 0.0;
-  bad.split_birth_ramp_m = std::numeric_limits<double>::quiet_NaN();
-  EXPECT_THROW(HapticTexturePipeline(scene, bad), std::invalid_argument);
-  Report("a continuous split",
-         Fmt("two supports: %.2f x the one window's force; largest step while they join: %.4f N "
-             "(k dz = %.4f N)",
-             far_ratio, largest_step, kK * 1e-6));
+  Report("a continuous split", Fmt("largest step while two supports join: %.4f N (k dz = %.4f N)",
+                                   largest_step, kK * 1e-6));
 }
 
-// Stage 5a's bridge fade in micrometres against one in proportion to the region's depth
-// (PipelineOptions::split_bridge_fade_per_depth; issue 32's thirty-first stop). The box with two
-// 40 µm bumps 20 mm apart rests 20 µm above the slab: each bump overlaps by d_r ≈ 20 µm, and the
-// flat between them is 20 µm above the slab, so the second support's bridge level is t ≈ −20 µm.
-// The default's 400 µm fade weighs it by smoothstep(20/400) ≈ 0.007: the pair pushes about what
-// one window does. A fade of c·d_r weighs it by smoothstep(1/c): 0.5 at c = 2, about 1.5 × the
-// one window's force, and more as c falls.
-TEST(HardCases, AFadePerDepthKeepsAShallowSecondSupport) {
-  const HapticScene scene = TwoBumpsOnSlab({0.02, 0.02, 0.01}, 1.5e-3, "two_bumps");
-  const RigidTransform X_WT = At({0.0, 0.0, 0.01 + 20e-6});
-  const auto force = [&](bool split, double per_depth) {
-    PipelineOptions options;
-    options.split_windows_at_separated_overlap = split;
-    options.split_bridge_fade_per_depth = per_depth;
-    HapticTexturePipeline pipeline(scene, options);
-    StepTimings t;
-    return pipeline.Step(X_WT, 1, t).F_T_W_at_q0.force.z;
-  };
-  const double whole = force(false, 0.0);
-  ASSERT_GT(whole, 0.0);
-  const double microns = force(true, 0.0) / whole;
-  const double c1 = force(true, 1.0) / whole;
-  const double c2 = force(true, 2.0) / whole;
-  const double c4 = force(true, 4.0) / whole;
-  EXPECT_LT(microns, 1.05);
-  EXPECT_NEAR(c2, 1.5, 0.2);
-  EXPECT_GT(c1, c2);
-  EXPECT_GT(c2, c4);
-  EXPECT_GT(c4, microns);
-  PipelineOptions bad;
-  bad.split_bridge_fade_per_depth = -1.0;
-  EXPECT_THROW(HapticTexturePipeline(scene, bad), std::invalid_argument);
-  Report("a fade per depth",
-         Fmt("second support 20 um deep, 20 um from joining: force / one window's %.3f (400 um "
-             "fade), %.3f (c = 1), %.3f (c = 2), %.3f (c = 4)",
-             microns, c1, c2, c4));
-}
-
-// Stage 5c (PipelineOptions::share_connected_contacts): a flat box face pressed on the end cap
+// Stage 5c (PipelineOptions): a flat box face pressed on the end cap
 // of a smooth cylinder (the gear model without ridges) overlaps it over the whole 50 mm disc. The
 // cylinder's hull hierarchy has small leaves, and windows may not exceed 20 mm, so the coarse
-// clustering leaves the disc in several windows, each reading the whole δ: the default pushes k·δ
-// once per window. Shared, the windows over one connected overlap push k·δ once, as the pipeline
+// clustering leaves the disc in several windows, each reading the whole δ. Shared, the windows
+// over one connected overlap push k·δ once, as the pipeline
 // truth's one patch does. A 30 mm groove across the box's face leaves two overlaps 30 mm apart
 // (the link is 5 mm): the windows over each share its penalty, and the two push 2·k·δ.
 TEST(HardCases, OneOverlapInSeveralWindowsPushesOnce) {
@@ -297,31 +180,24 @@ TEST(HardCases, OneOverlapInSeveralWindowsPushesOnce) {
   const double press = 50e-6;
   const RigidTransform X_WT = At({0.5 * gp.length_m + 0.005 - press, 0.0, 0.0},
                                  glm::angleAxis(0.5 * std::numbers::pi, glm::dvec3(0, 1, 0)));
-  const auto step = [&](const HapticScene& scene, bool share, bool reuse = true) {
+  const auto step = [&](const HapticScene& scene) {
     PipelineOptions options;
     options.max_window_extent_m = options.window_extent_m;
-    options.share_connected_contacts = share;
-    options.reuse_base_render = reuse;
     HapticTexturePipeline pipeline(scene, options);
     StepTimings t;
     ContactModel m = pipeline.Step(X_WT, 1, t);
     return std::make_pair(m, pipeline.step_faults().shared_contacts);
   };
   const HapticScene flat = scene_with([](double, double) { return 0.0; });
-  const auto [apart, none_shared] = step(flat, false);
-  const auto [shared, num_shared] = step(flat, true);
-  ASSERT_GE(apart.num_contacts, 2);
-  ASSERT_EQ(shared.num_contacts, apart.num_contacts);  // the same contacts, sharing one penalty
-  EXPECT_EQ(none_shared, 0);
-  EXPECT_EQ(num_shared, shared.num_contacts);
+  const auto [shared, num_shared] = step(flat);
+  ASSERT_GE(shared.num_contacts, 2);
+  EXPECT_EQ(num_shared, shared.num_contacts);  // every contact shares one penalty
   double delta = 0.0;
-  for (int i = 0; i < apart.num_contacts; ++i) {
-    delta = std::max(delta, apart.contacts[static_cast<std::size_t>(i)].depth_m);
-    EXPECT_NEAR(apart.contacts[static_cast<std::size_t>(i)].depth_m, press, 5e-6) << i;
+  for (int i = 0; i < shared.num_contacts; ++i) {
+    delta = std::max(delta, shared.contacts[static_cast<std::size_t>(i)].depth_m);
+    EXPECT_NEAR(shared.contacts[static_cast<std::size_t>(i)].depth_m, press, 5e-6) << i;
   }
-  const double F_apart = apart.F_T_W_at_q0.force.x;
   const double F_shared = shared.F_T_W_at_q0.force.x;
-  EXPECT_NEAR(F_apart, apart.num_contacts * kK * press, 0.1 * apart.num_contacts * kK * press);
   EXPECT_NEAR(F_shared, kK * delta, 0.02 * kK * delta);
   // Grooved: two overlaps 30 mm apart, each a region of its own. Each window renders only its
   // cluster's triangles (sectors of the cap) clipped to its 20 mm square, so the overlap between
@@ -330,43 +206,19 @@ TEST(HardCases, OneOverlapInSeveralWindowsPushesOnce) {
   // overlaps (λ = 0 past 15 mm).
   const HapticScene grooved =
       scene_with([](double x, double) { return std::abs(x) < 15e-3 ? -1e-3 : 0.0; });
-  const auto [g_apart, g_none] = step(grooved, false);
-  const auto [g_shared, g_num] = step(grooved, true);
-  ASSERT_GE(g_apart.num_contacts, 3);
+  const auto [g_shared, g_num] = step(grooved);
+  ASSERT_GE(g_shared.num_contacts, 3);
   double g_delta = 0.0;
-  for (int i = 0; i < g_apart.num_contacts; ++i) {
-    g_delta = std::max(g_delta, g_apart.contacts[static_cast<std::size_t>(i)].depth_m);
+  for (int i = 0; i < g_shared.num_contacts; ++i) {
+    g_delta = std::max(g_delta, g_shared.contacts[static_cast<std::size_t>(i)].depth_m);
   }
   EXPECT_NEAR(g_delta, press, 5e-6);
-  EXPECT_GT(g_apart.F_T_W_at_q0.force.x, 2.5 * kK * g_delta);
   EXPECT_NEAR(g_shared.F_T_W_at_q0.force.x, 2.0 * kK * g_delta, 0.04 * kK * g_delta);
-  // Two routes to the footprints (PipelineOptions::reuse_base_render): read from stage 5's render
-  // (the default) or rendered again, the same shares and wrench.
-  for (const HapticScene* s : {&flat, &grooved}) {
-    const auto [reused, reused_count] = step(*s, true, true);
-    const auto [again, again_count] = step(*s, true, false);
-    EXPECT_EQ(reused_count, again_count);
-    ASSERT_EQ(reused.num_contacts, again.num_contacts);
-    EXPECT_EQ(reused.F_T_W_at_q0.force, again.F_T_W_at_q0.force);
-    EXPECT_EQ(reused.F_T_W_at_q0.torque, again.F_T_W_at_q0.torque);
-    for (int i = 0; i < reused.num_contacts; ++i) {
-      EXPECT_EQ(reused.contacts[static_cast<std::size_t>(i)].stiffness_n_per_m,
-                again.contacts[static_cast<std::size_t>(i)].stiffness_n_per_m);
-    }
-  }
-  PipelineOptions bad;
-  bad.share_connected_contacts = true;
-  bad.share_temperature_m = 0.0;
-  EXPECT_THROW(HapticTexturePipeline(flat, bad), std::invalid_argument);
-  bad.share_temperature_m = 5e-6;
-  bad.share_link_m = 0.0;
-  EXPECT_THROW(HapticTexturePipeline(flat, bad), std::invalid_argument);
   Report("one overlap in several windows",
-         Fmt("%.0f windows over one disc: %.3f N apart, %.3f N shared (k delta = %.3f N); two "
-             "overlaps: ",
-             static_cast<double>(apart.num_contacts), F_apart, F_shared, kK * delta) +
-             Fmt("%.3f N (%.0f windows; %.3f N apart)", g_shared.F_T_W_at_q0.force.x,
-                 static_cast<double>(g_shared.num_contacts), g_apart.F_T_W_at_q0.force.x));
+         Fmt("%.0f windows over one disc: %.3f N shared (k delta = %.3f N); two overlaps: %.3f N",
+             static_cast<double>(shared.num_contacts), F_shared, kK * delta,
+             g_shared.F_T_W_at_q0.force.x) +
+             Fmt(" (%.0f windows)", static_cast<double>(g_shared.num_contacts)));
 }
 
 TEST(HardCases, CoplanarRestingContact) {
@@ -862,23 +714,19 @@ TEST(HardCases, GrazingGuardDropsDepthsTheCoarseGeometryCannotHold) {
   EXPECT_EQ(results[1].depth_m, 1.1e-3);
   EXPECT_EQ(results[2].depth_m, 30e-3);
   // The remote step sets the bound from the cluster: a deep press keeps its contact and counts
-  // no drop; with the guard off the same force.
+  // no drop.
   const HapticScene scene = MakeBlockOnGearScene();
   RigidTransform X = BlockOnGearHomePose();
   X.translation.z -= 0.5e-3 + 5e-3;
-  PipelineOptions on, off;
-  off.grazing_guard = false;
-  HapticTexturePipeline a(scene, on), b(scene, off);
+  HapticTexturePipeline a(scene, PipelineOptions{});
   StepTimings t;
-  const ContactModel ma = a.Step(X, 1, t), mb = b.Step(X, 1, t);
+  const ContactModel ma = a.Step(X, 1, t);
   ASSERT_GE(ma.num_contacts, 1);
   EXPECT_EQ(a.step_faults().grazing_dropped, 0);
-  EXPECT_EQ(ma.F_T_W_at_q0.force.z, mb.F_T_W_at_q0.force.z);
   ASSERT_EQ(a.last_contact_queries().size(), 1u);
   const double bound = a.last_contact_queries()[0].depth_bound_m;
   EXPECT_TRUE(std::isfinite(bound));
   EXPECT_GT(bound, ma.contacts[0].depth_m);
-  EXPECT_TRUE(std::isinf(b.last_contact_queries()[0].depth_bound_m));
 }
 
 // Issue 31: separated leaf pairs beyond their leaves' own texture reach start no contact (the
@@ -888,18 +736,12 @@ TEST(HardCases, SeparatedPairsBeyondTheirTextureReachStartNoContact) {
   const double reach = scene.tool->OutwardReach() + scene.touchables[0].model->OutwardReach();
   RigidTransform X = BlockOnGearHomePose();  // 0.5 mm above the gear's mean top line
   X.translation.z += reach + 0.25e-3 - 0.5e-3;
-  PipelineOptions drop, keep;
-  keep.drop_unreachable_pairs = false;
-  HapticTexturePipeline a(scene, drop), b(scene, keep);
-  StepTimings ta, tb;
+  HapticTexturePipeline a(scene, PipelineOptions{});
+  StepTimings ta;
   a.Step(X, 1, ta);
-  b.Step(X, 1, tb);
   EXPECT_EQ(ta.leaf_pairs, 1);
-  EXPECT_EQ(tb.leaf_pairs, 1);
   EXPECT_EQ(a.last_contact_queries().size(), 0u);
   EXPECT_EQ(a.step_faults().unreachable_pairs, 1);
-  ASSERT_EQ(b.last_contact_queries().size(), 1u);
-  EXPECT_LT(b.last_linearizations()[0].depth_m, 0.0);  // it had no overlap anyway
   // Within the reach the pair is kept.
   X.translation.z -= 0.5e-3;
   a.Step(X, 1, ta);

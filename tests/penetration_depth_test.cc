@@ -384,12 +384,11 @@ TEST(PenetrationDepth, LaneScanDepthIsTheOnePassDefinitionWithTiesInfinitiesAndS
 namespace ht {
 namespace {
 
-// TexturePenetrationSolver::OverlapRegions (stage 5a, PipelineOptions::
-// split_windows_at_separated_overlap): three 40 µm Gaussian bumps (σ 1 mm) under a flat tool at
-// 20 µm, so each overlaps within about 1.2 mm of its top. Two lie 5 mm apart (2.6 mm of gap)
-// and one 16 mm from them: linked at 5 mm the overlap is two regions, the lone bump's box around
-// its own top; at 20 mm one region; at 1 mm three. Each region's depth is its bump's b − a at the
-// cells (≤ 20 µm, within the filtered grid's loss of a few µm).
+// TexturePenetrationSolver::OverlapRegions (stage 5a, PipelineOptions): three 40 µm Gaussian bumps
+// (σ 1 mm) under a flat tool at 20 µm, so each overlaps within about 1.2 mm of its top. Two lie 5
+// mm apart (2.6 mm of gap) and one 16 mm from them: linked at 5 mm the overlap is two regions, the
+// lone bump's box around its own top; at 20 mm one region; at 1 mm three. Each region's depth is
+// its bump's b − a at the cells (≤ 20 µm, within the filtered grid's loss of a few µm).
 TEST(OverlapRegions, SeparatedBumpsAreSeparateRegionsAtTheClusteringDistance) {
   const ThreeBumps scene = MakeThreeBumps();
   const HapticModel& env = scene.env;
@@ -425,7 +424,7 @@ TEST(OverlapRegions, SeparatedBumpsAreSeparateRegionsAtTheClusteringDistance) {
             0);
 }
 
-// OverlapRegions' bridge levels (stage 5a's bridge fade, PipelineOptions::split_bridge_fade_m):
+// OverlapRegions' bridge levels (stage 5a's bridge fade, PipelineOptions):
 // the three bumps linked at 1 mm are three regions. The pair 5 mm apart joins at the level where
 // its superlevel sets come within the link: by symmetry on the segment between the tops, t* =
 // f(2.5 mm − L/2) − 20 µm with f the two bumps' sum, −14.1 µm (±0.2 mm of cells: −15.7 to
@@ -475,9 +474,9 @@ TEST(OverlapRegions, BridgeLevelsAreTheSaddlesOfTheOverlapsMergeTree) {
   EXPECT_NEAR(at15[2] - at20[2], 5e-6, 0.05e-6);
 }
 
-// Stage 5a reads its regions from stage 5's base render (PenetrationDepthBackend::base_overlap,
-// PipelineOptions::reuse_base_render; issue 32's thirty-second stop) instead of rendering
-// the base pose again. Two routes to one set of regions: the field the backend kept and a fresh
+// Stage 5a reads its regions from stage 5's base render (PenetrationDepthBackend::base_overlap)
+// where the backend keeps it, and renders the base pose again
+// elsewhere. Two routes to one set of regions: the field the backend kept and a fresh
 // render give the same regions, boxes, cell counts and peak cells, with depths and bridge levels
 // within float rounding of the window's heights, and stage 5c's block occupancy the same bytes,
 // on every texture-stage path (the fast path

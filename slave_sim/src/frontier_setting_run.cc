@@ -88,10 +88,9 @@ void RunSetting(const BenchmarkScene& scene, const std::vector<RigidTransform>& 
     return;
   }
   // Sized for the largest window of the setting (windows sized from their clusters keep the cell).
-  const int max_resolution = std::max(
-      128, WindowResolution(st.max_window_extent_m > 0.0 ? st.max_window_extent_m
-                                                         : PipelineOptions{}.max_window_extent_m,
-                            PipelineOptions{}.window_extent_m, st.grid));
+  const int max_resolution =
+      std::max(128, WindowResolution(PipelineOptions{}.max_window_extent_m,
+                                     PipelineOptions{}.window_extent_m, st.grid));
   std::unique_ptr<PenetrationDepthBackend> backend;
   if (st.backend == "gpu") {
     GpuPenetrationDepthOptions gpu;

@@ -63,75 +63,13 @@ void AddWindowOptions(CLI::App& app, CLI::App& adv, NodeCommandLine& cl) {
       ->capture_default_str();
 }
 
-// The texture stage's gradient, the grazing guard, stage 5b's depth refinement
-// and its seeds, and contact clustering's angle.
+// Stage 5b's depth refinement.
 void AddDepthOptions(CLI::App& adv, NodeCommandLine& cl) {
-  adv.add_flag("--no-grazing-guard", cl.no_grazing_guard,
-               "keep contacts whose depth exceeds what their coarse geometry allows (the\n"
-               "cluster's hull penetration + both texture reaches + a cell); by default they are\n"
-               "dropped and counted (remote_summary.json grazing_dropped_contacts): along a\n"
-               "grazing direction the depth is a sideways overlap, not a penetration");
   adv.add_flag("--no-refine-depth", cl.no_refine_depth,
                "the grid's cell samples alone: by default each contact's depth is refined to the\n"
                "texture's full resolution around the grid's deepest cells (stage 5b,\n"
                "docs/DESIGN.md §4), which the grid's mip-filtered samples read tens of\n"
                "micrometres low; off is 7-26 % faster a step (docs/measurements.md)");
-  adv.add_flag("--parallax,!--no-parallax", cl.parallax,
-               "stage 5b reads each height where the textured surface p + h*N crosses the line\n"
-               "along the window's normal (parallax; on by default) instead of h*(N.n) at the\n"
-               "coarse point under it, which on coarse facets tilted from the normal under large\n"
-               "heights reads another part of the surface; --no-parallax: the render's form,\n"
-               "less accurate on such surfaces and 3-37 % faster there (docs/measurements.md)");
-  adv.add_flag("--no-parallax-offset-seeds", cl.no_parallax_offset_seeds,
-               "stage 5b searches only the grid's deepest cells: by default it also searches\n"
-               "where parallax carries them (a facet tilted from the window's normal under a\n"
-               "large height shows its peak up to several cells beside where the grid's\n"
-               "render puts it; docs/measurements.md)");
-  adv.add_flag("--no-neighbour-peak-seeds", cl.no_neighbour_peak_seeds,
-               "stage 5b does not search half a cell and a cell beside its deepest point for a\n"
-               "neighbouring peak: by default it does (beside a trough's vertex the other\n"
-               "flank's maximum lies in the next cell, which is never a seed of its own; it costs\n"
-               "4-35 % of the texture stage; docs/measurements.md)");
-  adv.add_option("--clustering-angle-deg", cl.clustering_angle_deg,
-                 "contact clustering: leaf pairs (and clusters) whose normals differ by less than\n"
-                 "this merge into one contact (degrees; docs/measurements.md compares 60 and 30)")
-      ->check(CLI::Range(1.0, 89.0))
-      ->capture_default_str();
-  adv.add_flag("--no-seed-from-last-step", cl.no_seed_from_last_step,
-               "each step's contacts from their own grid alone: by default stage 5b also\n"
-               "searches each contact from the previous step's deepest point (kept in the\n"
-               "tool's frame), so that a narrow peak the filtered grid finds on one step and\n"
-               "misses on the next is not lost for that step (docs/measurements.md)");
-}
-
-// Stages 5a (the split) and 5c (shared penalties).
-void AddSplitAndSharingOptions(CLI::App& adv, NodeCommandLine& cl) {
-  adv.add_option(
-         "--split-windows-link-mm", cl.split_windows_link_mm,
-         "stage 5a: a contact window whose overlap falls into regions farther apart than this\n"
-         "(mm) also pushes with each other region's own depth, as contact clustering would\n"
-         "group the textured contact (CPU texture stage; docs/DESIGN.md §4)")
-      ->check(CLI::Range(0.1, 1000.0))
-      ->capture_default_str();
-  adv.add_option(
-         "--split-continuous-um", cl.split_continuous_um,
-         "stage 5a's fades (um): the deepest region keeps the whole window, each other region\n"
-         "fades in with its overlap and out as it joins a deeper one over this depth (birth\n"
-         "ramp and bridge fade); narrower fades are closer to the truth on the frontier but\n"
-         "rock the loop (100 um: fig76 25.5 % force error, 256 contact steps on one clock;\n"
-         "400 um: 28.6 %, 11; without the split 39.8 %, 6; docs/measurements.md). 0: no fades,\n"
-         "each region its own box's window, born and joined at once")
-      ->check(CLI::Range(0.0, 1000.0))
-      ->capture_default_str();
-  adv.add_flag("--no-split", cl.no_split,
-               "stage 5a off: one window per contact cluster whatever its overlap (as the GPU\n"
-               "texture stage always runs)");
-  adv.add_flag("--no-share-connected-contacts", cl.no_share_connected_contacts,
-               "every contact pushes with its whole penalty: by default contacts on one object\n"
-               "whose textured overlaps come within 10 mm of each other are one contact region\n"
-               "and share one penalty (stage 5c), as the pipeline truth links its patches: a\n"
-               "large flat contact that the coarse clustering left in two windows pushes once,\n"
-               "not twice (docs/measurements.md)");
 }
 
 // Speculative contacts.
@@ -283,59 +221,17 @@ void FinishStreamConfig(const CLI::App& app, const NodeCommandLine& cl, RemoteNo
   if (!cl.out_dir.empty()) config.step_trace_path = cl.out_dir + "/remote_steps.csv";
 }
 
-// The texture stage's gradient, stage 5b and clustering.
+// Stage 5b.
 void FinishDepthConfig(const NodeCommandLine& cl, RemoteNodeConfig& config) {
   PipelineOptions& pipeline = config.pipeline;
-  DepthRefinementOptions& refinement = pipeline.depth_refinement;
-  pipeline.grazing_guard = !cl.no_grazing_guard;
   pipeline.refine_depth = !cl.no_refine_depth;
-  refinement.parallax = cl.parallax;
-  refinement.seed_from_last_step = !cl.no_seed_from_last_step;
-  refinement.parallax_offset_seeds = !cl.no_parallax_offset_seeds;
-  refinement.neighbour_peak_seeds = !cl.no_neighbour_peak_seeds;
-  pipeline.clustering_angle_deg = cl.clustering_angle_deg;
 }
 
-// Stages 5a and 5c, and speculative contacts. Returns whether a split option was given.
-bool FinishSplitConfig(const CLI::App& app, const NodeCommandLine& cl, RemoteNodeConfig& config) {
-  PipelineOptions& pipeline = config.pipeline;
-  pipeline.share_connected_contacts = !cl.no_share_connected_contacts;
-  pipeline.split_windows_at_separated_overlap = !cl.no_split;
-  pipeline.split_link_m = cl.split_windows_link_mm * 1e-3;
-  const bool continuous = cl.split_continuous_um > 0.0;
-  pipeline.split_birth_ramp_m = cl.split_continuous_um * 1e-6;
-  pipeline.split_bridge_fade_m = cl.split_continuous_um * 1e-6;
-  pipeline.split_keeps_parent_rotation_step = continuous;
-  pipeline.split_keeps_parent_window = continuous;
-  const bool split_asked =
-      app.count("--split-windows-link-mm") > 0 || app.count("--split-continuous-um") > 0;
-  if (cl.no_split && split_asked) {
-    throw std::invalid_argument(
-        "--no-split turns stage 5a off; drop it or --split-windows-link-mm / "
-        "--split-continuous-um");
-  }
-  pipeline.speculative_lead_s = cl.speculative_lead_ms * 1e-3;
+// Speculative contacts.
+void FinishSpeculativeConfig(const NodeCommandLine& cl, RemoteNodeConfig& config) {
+  config.pipeline.speculative_lead_s = cl.speculative_lead_ms * 1e-3;
   config.speculative_speed_m_per_s = cl.speculative_speed_mm_s * 1e-3;
   config.max_speculative_floor_m = cl.max_speculative_floor_mm * 1e-3;
-  return split_asked;
-}
-
-// The CPU texture stage's own options against --pd-backend: an error with gpu, the CPU stage (or
-// the option off) with auto.
-void FinishBackendChoice(const NodeCommandLine& cl, bool split_asked, RemoteNodeConfig& config) {
-  if (config.pipeline.split_windows_at_separated_overlap &&
-      config.pd_backend == PdBackendChoice::kGpu) {
-    if (split_asked) {
-      throw std::invalid_argument(
-          "--split-windows-link-mm and --split-continuous-um are options of the CPU texture "
-          "stage; the GPU backend takes one window size per batch (use --pd-backend cpu, or "
-          "drop the option)");
-    }
-    std::fprintf(stderr,
-                 "slave_sim: stage 5a's split is a CPU texture stage option: off with "
-                 "--pd-backend gpu\n");
-    config.pipeline.split_windows_at_separated_overlap = false;
-  }
 }
 
 }  // namespace
@@ -353,7 +249,6 @@ void AddNodeOptions(CLI::App& app, NodeCommandLine& cl) {
   AddSceneOptions(app, cl);
   AddWindowOptions(app, adv, cl);
   AddDepthOptions(adv, cl);
-  AddSplitAndSharingOptions(adv, cl);
   AddSpeculativeOptions(adv, cl);
   AddBackendOptions(app, adv, cl);
   AddStreamOptions(app, adv, cl);
@@ -367,8 +262,7 @@ void FinishNodeConfig(const CLI::App& app, NodeCommandLine& cl) {
   RemoteNodeConfig& config = cl.config;
   FinishStreamConfig(app, cl, config);
   FinishDepthConfig(cl, config);
-  const bool split_asked = FinishSplitConfig(app, cl, config);
-  FinishBackendChoice(cl, split_asked, config);
+  FinishSpeculativeConfig(cl, config);
 }
 
 }  // namespace ht

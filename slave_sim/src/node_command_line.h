@@ -30,20 +30,8 @@ struct NodeCommandLine {
   std::string scene_cache_dir = HapticModelCache::DefaultDir();
   bool no_watch = false;
 
-  // The texture stage's gradient, stage 5b and clustering (AddDepthOptions).
-  bool no_grazing_guard = false;
+  // Stage 5b (AddDepthOptions).
   bool no_refine_depth = false;
-  bool parallax = true;
-  bool no_parallax_offset_seeds = false;
-  bool no_neighbour_peak_seeds = false;
-  double clustering_angle_deg = PipelineOptions{}.clustering_angle_deg;
-  bool no_seed_from_last_step = false;
-
-  // Stages 5a and 5c (AddSplitAndSharingOptions).
-  double split_windows_link_mm = 10.0;
-  double split_continuous_um = 400.0;
-  bool no_split = false;
-  bool no_share_connected_contacts = false;
 
   // Speculative contacts (AddSpeculativeOptions).
   double speculative_speed_mm_s = RemoteNodeConfig{}.speculative_speed_m_per_s * 1e3;
@@ -81,10 +69,7 @@ struct NodeCommandLine {
 void AddNodeOptions(CLI::App& app, NodeCommandLine& cl);
 
 /// After parsing: fills cl.config from the values kept in `cl` (units, defaults that depend on
-/// other options, the key file). Throws std::invalid_argument, with the options named, for
-/// options that contradict each other (e.g. --no-split with --split-continuous-um, a CPU-only
-/// option with --pd-backend gpu) and what LoadKeyOption and SocketAddress::Parse throw; prints to
-/// stderr where it turns an option off or picks the CPU texture stage for another option.
+/// other options, the key file). Throws what LoadKeyOption and SocketAddress::Parse throw.
 void FinishNodeConfig(const CLI::App& app, NodeCommandLine& cl);
 
 /// 'slave_sim seed-models': writes the seed's six benchmark models (or cl.seed_names) as

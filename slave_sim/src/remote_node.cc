@@ -49,8 +49,8 @@ bool TriangleFrame(const HapticModel& m, int f, glm::dvec3& centroid_O, glm::dve
 // which at the first contact of a session stalled the remote node past the operator's 500 ms
 // peer timeout (a CI run of loopback_fig75_gpu). One contact made for it, the tool's first
 // triangle laid face to face on the first touchable's first triangle, in two batches: with
-// windows that pick by box (the instanced draws) and with triangle lists (the per-contact draws,
-// PipelineOptions::cluster_triangles). The results are discarded; a failure is left to the
+// windows that pick by box (the instanced draws) and with triangle lists (the per-contact draws
+// of each cluster's own triangles). The results are discarded; a failure is left to the
 // first real step, which falls back to the CPU. Returns the backend's missing-overlap count
 // after it, so that the run's summary counts only the session's.
 std::int64_t WarmUpPenetrationDepth(PenetrationDepthBackend& backend, const HapticScene& scene,
@@ -137,9 +137,7 @@ RemoteNodeRun::RemoteNodeRun(const RemoteNodeConfig& config, const HapticScene& 
       config.pipeline.texture_threads);
   if (auto* gpu = dynamic_cast<GpuPenetrationDepthBackend*>(backend.get())) {
     // Stage 5a (the split) runs with the CPU texture stage only (HapticTexturePipeline).
-    if (config.pipeline.split_windows_at_separated_overlap) {
-      backend_message_ += "; stage 5a's split is off on the GPU backend (--pd-backend cpu has it)";
-    }
+    backend_message_ += "; stage 5a's split is off on the GPU backend (--pd-backend cpu has it)";
     gpu_instanced_draws_ = gpu->instanced_draws();
     gl_renderer_ = gpu->info().renderer;
     gl_version_ = gpu->info().version;

@@ -41,15 +41,13 @@ nlohmann::json RemoteNodeRun::Summary() const {
   s["linearization_missing_overlap"] =
       pipeline_->faults().missing_overlap -
       (pipeline_->backend_failures() == 0 ? warm_up_missing_overlap_ : 0);
-  s["grazing_guard"] = config_.pipeline.grazing_guard;
-  s["parallax"] = config_.pipeline.depth_refinement.parallax;
   s["refine_depth"] = config_.pipeline.refine_depth;
   {
     // Stage 5b (issue 32), warm-up included: contacts refined, and per contact the seeds, the
     // evaluations of b − a and how far δ0 rose above the grid's; the conservative screen's
     // squares and leaves per contact, the contacts where it found a deeper point than the seeds
     // (and Σ µm), and those it stopped at its leaf budget; the last step's seeds searched, the
-    // contacts where one was deeper than the grid's seeds (and Σ µm), and whether they are on.
+    // contacts where one was deeper than the grid's seeds (and Σ µm).
     const DepthRefinementCounters& r = pipeline_->depth_refinement_counters();
     const double n = r.contacts > 0 ? static_cast<double>(r.contacts) : 1.0;
     s["depth_refinement"] = {
@@ -65,7 +63,6 @@ nlohmann::json RemoteNodeRun::Summary() const {
         {"last_step_seeds", r.last_step_seeds},
         {"last_step_found_deeper", r.last_step_found},
         {"last_step_raised_um_sum", r.last_step_raised_um},
-        {"seed_from_last_step", config_.pipeline.depth_refinement.seed_from_last_step},
         {"parallax_offset_seeds", r.parallax_offset_seeds},
         {"parallax_offset_found_deeper", r.parallax_offset_found},
         {"parallax_offset_raised_um_sum", r.parallax_offset_raised_um},
@@ -85,15 +82,9 @@ nlohmann::json RemoteNodeRun::Summary() const {
                             {"largest_mm", largest_speculative_floor_m_ * 1e3}};
   s["triangle_lists_overflowed"] = pipeline_->step_faults().triangle_lists_overflowed;
   s["region_windows"] = pipeline_->step_faults().region_windows;
-  // Stage 5a (issue 32, thirty-first stop): asked for, and whether the backend at the end runs it
-  // (the CPU texture stage does, the GPU backend does not).
-  s["split"] = {{"on", config_.pipeline.split_windows_at_separated_overlap},
-                {"runs", config_.pipeline.split_windows_at_separated_overlap &&
-                             pipeline_->backend().name() != "gpu"},
-                {"link_mm", std::round(config_.pipeline.split_link_m * 1e6) / 1e3},
-                {"birth_ramp_um", std::round(config_.pipeline.split_birth_ramp_m * 1e9) / 1e3},
-                {"bridge_fade_um", std::round(config_.pipeline.split_bridge_fade_m * 1e9) / 1e3}};
-  s["share_connected_contacts"] = config_.pipeline.share_connected_contacts;
+  // Stage 5a: whether the backend at the end runs it (the CPU texture stage does, the GPU
+  // backend does not).
+  s["split"] = {{"runs", pipeline_->backend().name() != "gpu"}};
   s["shared_contacts"] = pipeline_->step_faults().shared_contacts;
   s["steps_from_kept_fields"] = pipeline_->step_faults().steps_from_kept_fields;
   s["pd_backend"] = {{"requested", ToString(config_.pd_backend)},

@@ -18,10 +18,10 @@
 
 int main(int argc, char** argv) {
   CLI::App app{
-      "Speed against error of the remote step: every setting (grid N, texture size, coarse\n"
-      "triangle count, CPU or GPU, GPU depth bits) and two baselines (coarse meshes without\n"
-      "textures; full-resolution meshes through FCL) on in-contact poses of the seed's scenes,\n"
-      "timed, and compared with the ground truth computed on the full-resolution meshes.\n"
+      "Speed against error of the remote step: each named setting (grid N, texture size, coarse\n"
+      "triangle count, threads, depth fields, CPU or GPU) and two baselines (coarse meshes\n"
+      "without textures; full-resolution meshes through FCL) on in-contact poses of the seed's\n"
+      "scenes, timed, and compared with the ground truth computed on the full-resolution meshes.\n"
       "Errors against two truths: the pipeline truth (the full-resolution meshes' own contact\n"
       "patches; OUT/patches.csv) and the texture stage's (the truth on each setting's windows).\n"
       "Writes OUT/frontier.csv, OUT/contacts.csv, OUT/patches.csv, OUT/meshes/*.glb,\n"

@@ -92,7 +92,7 @@ inline constexpr int kMaxSharingBlocks = 64;
 /// link_m ≤ 0, or scratch is short: nothing changes). `family`, where it is as long as
 /// `queries`, names each contact's family (≥ 0; −1: none): contacts of one family never link
 /// (stage 5a's split regions and the parent window they lie in, which its bridge fade weighs
-/// instead, PipelineOptions::split_keeps_parent_window). `base_overlaps`, where it is as long
+/// instead). `base_overlaps`, where it is as long
 /// as `queries`, gives each contact's overlap field at the base pose (stage 5's own render,
 /// PenetrationDepthBackend::base_overlap; empty: none): a contact with one is not rendered again
 /// (the same footprint from the same field). noexcept; allocation-free within the solver's

@@ -16,16 +16,29 @@
 //    among them is not searched (tests/texture_stage_parity_test.cc: on random contacts of the
 //    six seed models the refined δ0 is never below the grid's and is closer to the truth).
 //    DepthRefinementOptions::conservative_screen (off by default) adds one after the seeds.
-//    With parallax, each seed's cell carried by either side's h·N⊥ there is one more seed
-//    (parallax_offset_seeds, on): the grid is the render's form, which shows a tilted facet's
-//    peak that far beside where it lies.
+//    With parallax, each seed's cell carried by either side's h·N⊥ there is one more seed where
+//    that moves it by more than half a cell: the grid is the render's form, which shows a tilted
+//    facet's peak that far beside where it lies (fig77's product models: 1.2 mm, three cells).
+//  - The refined deepest point of every contact of the previous step (BeginStep), kept in the
+//    tool's frame T, is one more seed of each contact on the same environment model whose window
+//    it falls in (a pattern search from the point, no sub-grid): a narrow peak whose filtered cell
+//    is not among the grid's seeds is missed on some steps and found on the next (δ dips for
+//    single steps; measured: docs/measurements.md). A seed only adds a candidate: δ0 is never
+//    below the seeds-only value, and the result depends on the pose alone once the last step's
+//    points are forgotten (ForgetLastStep). When it gives the deepest point, the ten displaced
+//    samples are searched from there too.
+//  - Neighbouring peaks: pattern searches from half a cell and a cell from the deepest point
+//    along ±u and ±v (steps of two texels), each a seed. Beside a trough's vertex the other
+//    flank's maximum lies in the cell next to the deepest's, which is never a seed of its own, so
+//    δ0 would read the wrong flank, with a lateral slope of the wrong sign
+//    (tests/depth_refinement_test.cc; measured: docs/measurements.md).
 //  - At each seed, b − a is evaluated at level 0 (PatchHeightAt: the same coarse surface, normal
 //    factor and box rule as the render, the texture sampled bilinearly at its full resolution) on
 //    a sub-grid of about four texels' spacing over the seed's 1.5-cell square, then a pattern
 //    search (u and v, first improvement, step halved down to search_floor_texels) climbs to the
 //    local maximum. The deepest of the seeds is δ0 and its point the contact point.
 //  - The ten rendered displaced samples are refined the same way from their own deepest cells
-//    (from the cell's centre unless subgrid_translations / subgrid_rotations), so that δ0, the
+//    (a pattern search from the cell's centre), so that δ0, the
 //    gradient and δ0 share one estimator.
 //  - Gradient: the grid's one-cell central differences of the refined samples (h_x = W/N,
 //    h_θ = h_x/(W/2)), a secant of the refined maximum; ∂δ/∂x_n = −1. Where another maximum takes
@@ -74,14 +87,6 @@ struct DepthRefinementOptions {
   int max_subsamples = 6;
   /// The pattern search stops when its step falls below this many texels. > 0.
   double search_floor_texels = 0.25;
-  /// The rendered rotation samples (±h_θ about u, v and n) searched from a sub-grid of their
-  /// deepest cell's square as the base and the translations are; off (the default): a pattern
-  /// search from the cell's centre alone, fewer evaluations at the same error (measured:
-  /// docs/measurements.md; the frontier's "rotations_from_subgrid").
-  bool subgrid_rotations = false;
-  /// The same for the rendered translation samples (±h_x along u and v), off by default for the
-  /// same reason (measured: docs/measurements.md; the frontier's "translations_from_subgrid").
-  bool subgrid_translations = false;
   /// The conservative screen of the base sample (off by default: it raises δ0 little at several
   /// times the texture stage's time; measured: docs/measurements.md): after the seeds, a branch and
   /// bound over the window finds every place where b − a can exceed the best found by more than
@@ -100,45 +105,11 @@ struct DepthRefinementOptions {
   /// Where N ∥ n (flat coarse faces under the window: fig75, fig76) nothing changes. The grid
   /// (stage 5, the backend's render) still seeds the search with the render's form. Not with
   /// conservative_screen (its bounds are the render's form; Validate throws). On by default
-  /// (measured: docs/measurements.md); off (`slave_sim --no-parallax`): the render's form, which
-  /// takes fewer evaluations where facets are tilted from n.
+  /// (measured: docs/measurements.md); off: the render's form (what the grid renders, and what the
+  /// conservative screen bounds), which takes fewer evaluations where facets are tilted from n.
   bool parallax = true;
   /// Most fixed-point steps of the parallax per triangle and point; in [1, 64].
   int parallax_iterations = 12;
-  /// With parallax: seeds where parallax carries the grid's deepest cells. The grid is the render's
-  /// form, which reads at (s, t) the surface point of the coarse point under it, h·N⊥ to the side
-  /// of where that point lies (N⊥ the normal's part in the window plane). Where a coarse facet is
-  /// tilted from n under a large height that is more than the seed's square (fig77's product
-  /// models: 1.2 mm, three cells), so the parallax maximum was searched nowhere and a window whose
-  /// models overlap read no contact. Each base seed's cell centre is carried by each side's h·N⊥
-  /// there (the envelope's triangle at level 0), and where that moves it by more than half a cell,
-  /// the carried point is searched as a seed is (sub-grid and pattern search). A seed only adds
-  /// a candidate: δ0 is never below the value without it. On by default (`slave_sim
-  /// --no-parallax-offset-seeds`, the frontier's "no_parallax_offset_seeds": off).
-  bool parallax_offset_seeds = true;
-  /// Seeds from the last step: the refined deepest point of every contact of the previous step
-  /// (DepthRefiner::BeginStep), kept in the tool's frame T, is one more seed of each contact on the
-  /// same environment model whose window it falls in: a pattern search from the point (no sub-grid)
-  /// within the 1.75-cell square a base seed's search keeps to. The grid's seeds are the deepest
-  /// cells of a box-filtered render; a narrow
-  /// peak whose filtered cell is not among them is missed on some steps and found on the next
-  /// (δ dips for single steps; measured: docs/measurements.md). A maximum found once is kept while
-  /// it stays the maximum. A seed only adds a candidate: δ0 is never below the seeds-only value,
-  /// and the result still depends on the pose alone once the last step's points are forgotten
-  /// (DepthRefiner::ForgetLastStep). When it gives the deepest point, the ten displaced samples
-  /// are searched from there too (as the screen's). On by default (measured:
-  /// docs/measurements.md). Off (`slave_sim --no-seed-from-last-step`, the frontier's
-  /// "no_last_step_seeds"): each step from its own grid alone.
-  bool seed_from_last_step = true;
-  /// Neighbouring peaks as seeds (on): pattern searches from half a cell and a cell from the
-  /// deepest point along ±u and ±v (steps of two texels), each a seed, and the deepest where it is
-  /// deeper. Beside a trough's vertex the other flank's maximum lies in the cell next to the
-  /// deepest's, which is never a seed of its own (a cell next to a seed
-  /// is skipped), so the refined δ0 read the wrong flank, with a lateral slope of the wrong sign:
-  /// the curved tool 10 µm past the sinusoid's trough read 7.5 µm on the far flank where the
-  /// closed form is 10.0 on the near one (tests/depth_refinement_test.cc). Measured:
-  /// docs/measurements.md.
-  bool neighbour_peak_seeds = true;
   /// How far above the best a dropped square's bound may reach (m). ≥ 0.
   double screen_tolerance_m = 1e-6;
   /// The screen looks for b − a above the larger of the best found and this (m): 0 looks for
@@ -167,17 +138,17 @@ struct DepthRefinementCounters {
   std::uint64_t screen_found = 0;
   std::uint64_t screen_raised_um = 0;
   std::uint64_t screen_truncated = 0;
-  /// parallax_offset_seeds: points searched, and contacts where one gave the deepest point (and
-  /// Σ of how much deeper, µm).
+  /// The seeds carried by parallax: points searched, and contacts where one gave the deepest point
+  /// (and Σ of how much deeper, µm).
   std::uint64_t parallax_offset_seeds = 0;
   std::uint64_t parallax_offset_found = 0;
   std::uint64_t parallax_offset_raised_um = 0;
-  /// DepthRefinementOptions::seed_from_last_step: last-step seeds searched, and contacts where
+  /// The last step's seeds: searched, and contacts where
   /// one gave a deeper point than the grid's seeds (and Σ of how much deeper, µm).
   std::uint64_t last_step_seeds = 0;
   std::uint64_t last_step_found = 0;
   std::uint64_t last_step_raised_um = 0;
-  /// DepthRefinementOptions::neighbour_peak_seeds: searches, and contacts where a neighbouring
+  /// The neighbouring peaks: searches, and contacts where a neighbouring
   /// peak was deeper than the seeds' best (and Σ of how much deeper, µm).
   std::uint64_t neighbour_peak_seeds = 0;
   std::uint64_t neighbour_peak_found = 0;
@@ -206,7 +177,7 @@ class DepthRefiner {
 
   const DepthRefinementCounters& counters() const noexcept { return counters_; }
   const DepthRefinementOptions& options() const noexcept { return options_; }
-  /// DepthRefinementOptions::seed_from_last_step: the deepest points of the contacts refined
+  /// The last step's seeds: the deepest points of the contacts refined
   /// since the last call become the seeds of the contacts refined from now on (at most
   /// kMaxLastStepSeeds, the first ones kept), and the buffer for this step's starts empty. Call
   /// once per step before its contacts. noexcept, allocation-free.
@@ -298,7 +269,7 @@ class DepthRefiner {
   RigidTransform X_WO_;
   ContactWindow window_;
   std::uint64_t evaluations_ = 0;
-  // DepthRefinementOptions::seed_from_last_step: the last step's deepest points (p_T in the tool's
+  // The last step's seeds: its deepest points (p_T in the tool's
   // frame, with their environment model) and this step's so far.
   struct LastStepPoint {
     const HapticModel* environment;
@@ -306,7 +277,7 @@ class DepthRefiner {
   };
   std::array<LastStepPoint, kMaxLastStepSeeds> last_{}, next_{};
   int num_last_ = 0, num_next_ = 0;
-  // This contact's neighbouring peaks (DepthRefinementOptions::neighbour_peak_seeds).
+  // This contact's neighbouring peaks.
   static constexpr int kMaxNeighbourPeaks = 8;
   std::array<Seed, kMaxNeighbourPeaks> neighbour_peaks_{};
   int num_neighbour_peaks_ = 0;

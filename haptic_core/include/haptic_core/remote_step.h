@@ -25,7 +25,59 @@ inline constexpr double kDefaultMaxWindowPerWindow = 3.0;
 struct RemoteStepModel;  // src/remote_step/0_remote_step_data.h: what the step derives
 struct RemoteStepData;   // and what it writes
 
-/// Options of the per-step pipeline.
+/// Contact clustering's normal angle (degrees): leaf pairs (and clusters) whose normals differ by
+/// less than this merge into one contact, and stage 5c links contacts within it. On curved and
+/// thin coarse hulls (the file on the CAD part) the hull pairs of one contact region carry normals
+/// 30–60° apart, so at 30° one region makes several windows, and a tool leaf and the object leaf
+/// it overlaps could land in different windows and be rendered in none (measured:
+/// docs/measurements.md). Faces 90° apart (an L corner) stay apart.
+inline constexpr double kClusteringAngleDeg = 60.0;
+
+/// Options of the per-step pipeline. The coarse stages always:
+///  - drop separated leaf pairs farther apart than their two leaves' own outward texture reach
+///    (HullBounds::reach_m): they cannot touch through the textures and would only add windows
+///    without overlap (unless speculative, below);
+///  - size each window to its cluster's extent (between window_extent_m and max_window_extent_m,
+///    N scaled to keep the cell), and centre a window whose cluster is the single pair of two
+///    whole convex models (the procedural scenes: a block resting on a gear) on the pair's contact
+///    region (PairRegionBounds, contact_region.h), sized to it plus the texture margin, not at the
+///    hulls' witness point, which on parallel faces is a corner (docs/hard-cases.md);
+///  - render in each contact only its cluster's own coarse triangles (ContactCluster::
+///    tool_triangles, object_triangles: each leaf goes to its deepest pair's cluster, and to each
+///    further cluster whose window is disjoint from those holding it), so that two windows on one
+///    contact region do not both count its penetration; a side without hierarchy, or a step whose
+///    lists overflow the pipeline's storage, picks by window;
+///  - drop and count (StepFaults::grazing_dropped) a contact whose δ0 exceeds what its coarse
+///    geometry allows: the largest over the cluster's hull pairs of the pair's penetration + its
+///    two leaves' own outward texture reach + a cell (the grazing guard). Along a direction nearly
+///    parallel to the surfaces the patches are no height fields and δ measures the sideways
+///    overlap, bounded only by the window's box (DESIGN.md §4, docs/hard-cases.md).
+/// The texture stages always, with the CPU backend:
+///  - stage 5a: a window whose overlap at the tool's pose falls into regions farther apart than
+///    10 mm (TexturePenetrationSolver::OverlapRegions, on stage 5's base render) keeps its whole
+///    window for its deepest region, and each other region gets a window of its own (the
+///    region's box plus 1 mm a side at the parent's cell size and rotation step, linearized
+///    afresh), pushing with k·w, w = smoothstep(d_r / min(400 µm, d_max)) ·
+///    smoothstep(−t / 400 µm): d_r the region's deepest cell sample of b − a, d_max the window's,
+///    t its bridge level (OverlapRegion::bridge_m, ≤ 0: where it joins a deeper region). A region
+///    fades in as it first overlaps and out as it joins a deeper one, so the force does not step
+///    when the count of regions flips (an edge resting on stripes along its length); a region
+///    whose weight is below 10⁻³ gets no window, and a window whose regions would take the step
+///    past max_contacts stays whole (measured: docs/measurements.md). The GPU backend takes one
+///    window size per batch: there the step runs without it;
+///  - stage 5c: contacts on one object whose normals agree within kClusteringAngleDeg and whose
+///    textured overlaps at the tool's pose come within 10 mm of each other (fading out over 5 mm
+///    more) are one region and share one penalty (ShareConnectedContacts, connected_contacts.h,
+///    at ContactSharingOptions' defaults): each keeps its δ, J and field, and its stiffness
+///    becomes k·s_i, so that a region pushes with about its deepest contact's k·δ, as the
+///    pipeline truth's one patch does (contact_patch_truth.h). The coarse clustering leaves such
+///    contacts apart where their merged window would exceed max_window_extent_m (the hammer's
+///    face on the torus: two windows, each reading the whole δ). Only contacts with δ0 > 0 that
+///    have such a neighbour within reach of their windows are rendered again, so a step with one
+///    contact per object pays nothing (measured: docs/measurements.md);
+///  - stages 5a and 5c read the base pose's overlap (b − a per cell) from stage 5's own render
+///    where the backend keeps it (PenetrationDepthBackend::base_overlap: the CPU backend), and
+///    render it again elsewhere.
 struct PipelineOptions {
   int grid_resolution = 50;  ///< N of the penetration-depth grid (seed: 50).
   /// W of each contact window (m): the smallest side, with the grid's N. A cluster whose members
@@ -34,90 +86,26 @@ struct PipelineOptions {
   /// Largest window side (m), ≥ window_extent_m; windows whose normals agree and overlap merge
   /// while the merged window fits it (contact clustering's pass 2), so that one contact region
   /// (a hammer's face along a torus) gets one window instead of several overlapping ones of which
-  /// only one holds the region's leaves (cluster_triangles). The default is
-  /// kDefaultMaxWindowPerWindow × the default window_extent_m (6 cm; measured:
-  /// docs/measurements.md). Equal to window_extent_m: every window W×W.
+  /// only one holds the region's leaves. The default is kDefaultMaxWindowPerWindow × the default
+  /// window_extent_m (6 cm; measured: docs/measurements.md). Equal to window_extent_m: every
+  /// window W×W.
   double max_window_extent_m = 0.06;
-  /// True: a window's side is its cluster's extent (between window_extent_m and
-  /// max_window_extent_m, N scaled to keep the cell). False: every window is window_extent_m wide
-  /// around its cluster's point, however far its (merged) members spread.
-  bool size_windows_from_clusters = true;
   double proximity_margin_m = 0.5e-3;  ///< Extra coarse tolerance beyond both texture reaches (m).
   /// Time budget of the coarse query per tool–object pair (µs; 0 = none): most important node
   /// pairs first, the step reports when it stopped early.
   double collision_budget_us = 0.0;
   /// Contact clustering (DESIGN.md §3): leaf pairs whose points are closer than this (m) and whose
-  /// normals differ by less than clustering_angle_deg merge into one contact. The angle is 60°: on
-  /// curved and thin coarse hulls (the file on the CAD part) the hull pairs of one contact region
-  /// carry normals 30–60° apart, so at 30° one region makes several windows, and a leaf goes to
-  /// its deepest pair's window only, so a tool leaf and the object leaf it overlaps could land in
-  /// different windows and be rendered in none (measured: docs/measurements.md). Faces 90° apart
-  /// (an L corner) stay apart. Stage 5c links contacts within the same angle.
+  /// normals differ by less than kClusteringAngleDeg merge into one contact.
   double clustering_distance_m = 5e-3;
-  double clustering_angle_deg = 60.0;
-  /// Local reach in the coarse query (ProximityQueryOptions::local_reach_margin_m, with
-  /// proximity_margin_m as the margin): each hull-node pair's tolerance from the two nodes' own
-  /// texture heights instead of both models' largest. An approximation, placed on the
-  /// speed-vs-error frontier ("local_reach").
-  bool local_reach = false;
   /// Most contacts per step (1..kMaxContacts): clustering merges the shallowest clusters beyond
   /// it into the nearest kept ones (ClusteringOptions::max_contacts). The seed reports up to 7 on
-  /// its Fig. 77 scene; fewer contacts is an approximation, placed on the speed-vs-error frontier.
+  /// its Fig. 77 scene.
   int max_contacts = kMaxContacts;
   /// Threads of the CPU texture stage (the contacts of a step spread over them, oneTBB), and of
   /// the coarse query's traversal (HullProximityQuery::SetThreads: the same pairs); ≥ 1.
   /// The remote node's default leaves one core to the operator on a loopback machine
   /// (DefaultTextureThreads()).
   int texture_threads = 1;
-  /// Grazing guard: a contact whose δ0 exceeds what its coarse geometry allows (the
-  /// largest over the cluster's hull pairs of the pair's penetration + its two leaves' outward
-  /// texture reach + a cell; see grazing_guard_local_reach) is dropped and counted
-  /// (StepFaults::grazing_dropped). Along a direction nearly parallel to the surfaces the patches
-  /// are no height fields and δ measures the sideways overlap, bounded only by the window's box
-  /// (DESIGN.md §4, docs/hard-cases.md). Off: every contact is kept.
-  bool grazing_guard = true;
-  /// The guard's texture reach: each pair's two leaves' own (HullBounds::reach_m; a
-  /// cluster takes its members' largest bound), or both whole models' OutwardReach() (false). The
-  /// models' reach is their largest texture height anywhere (5.4 mm on the seed's CAD part, whose
-  /// pressed contacts are a fraction of a millimetre), so the local one is the tighter bound.
-  bool grazing_guard_local_reach = true;
-  /// Separated leaf pairs farther apart than their two leaves' own outward texture reach
-  /// (HullBounds::reach_m) start no cluster: they cannot touch through the
-  /// textures, and would only add windows without overlap. Off: every pair the query found.
-  bool drop_unreachable_pairs = true;
-  /// The contact direction from the contact region (after Kim, Otaduy, Lin &
-  /// Manocha 2003's per-cluster penetration direction): each leaf pair's normal, before
-  /// clustering, is its region vector (LeafPairRegionVector, contact_region.h: the area-weighted
-  /// normals of each leaf's coarse triangles within the other leaf's hull widened by the pair's
-  /// texture reach), instead of the hulls' smallest support overlap, which on thin hulls is a side
-  /// face; the pairs of one region then agree and cluster together. A pair without a region (a
-  /// model without hierarchy, or no triangle within reach) keeps its hull normal.
-  bool region_normals = false;
-  /// Each texture once: a contact renders only its cluster's own coarse
-  /// triangles (ContactCluster::tool_triangles, object_triangles: each leaf goes to the cluster of
-  /// its deepest pair), so that no triangle is rendered in two windows of one step and two
-  /// windows on one contact region do not both count its penetration. A side without hierarchy
-  /// (node −1), or a step whose lists overflow the pipeline's storage, picks by window as before.
-  /// Off: every window renders whatever triangles of both models it covers.
-  bool cluster_triangles = true;
-  /// With cluster_triangles: a leaf met by several clusters also serves each further cluster
-  /// whose window is disjoint from those holding it
-  /// (ClusteringOptions::share_leaves_between_disjoint_windows), instead of only the cluster of
-  /// its deepest pair, which leaves the other contact regions of one large leaf unrendered.
-  bool share_leaves_between_disjoint_windows = true;
-  /// With cluster_triangles: each tool leaf of a kept pair also goes to the cluster holding the
-  /// pair's object leaf (ClusteringOptions::tool_leaves_follow_object_leaves), so that no pair's
-  /// overlap falls between two windows.
-  bool tool_leaves_follow_object_leaves = false;
-  /// Windows on the contact region of two models without hierarchy: where
-  /// a cluster is the single pair of two whole convex models (the procedural scenes: a block
-  /// resting on a gear), its point is the hulls' witness point, which on parallel faces is
-  /// a corner, and its spread is zero, so a 2 cm window sat on one edge of a 4 cm face and saw one
-  /// arm of the face's rocking V (docs/hard-cases.md). On: the window is centred on the pair's
-  /// region (PairRegionBounds, contact_region.h: each model's coarse triangles within the other's
-  /// hull widened by the pair's texture reach) and sized to it plus the texture margin, within
-  /// [window_extent_m, max_window_extent_m]. Off: the witness point and the smallest window.
-  bool whole_model_region_windows = true;
   /// Stage 5b: δ refined from the grid's cell samples to the finest texture level
   /// (DepthRefiner, depth_refinement.h), after either backend. On: δ to the finest level, and a
   /// lower force error (measured: docs/measurements.md). Off (`slave_sim --no-refine-depth`, the
@@ -125,89 +113,8 @@ struct PipelineOptions {
   bool refine_depth = true;
   /// How stage 5b refines (steps, sub-samples, search floor).
   DepthRefinementOptions depth_refinement;
-  /// Stage 5a (on by default, with the weights below): a window whose overlap at the
-  /// tool's pose falls into regions farther apart than split_link_m
-  /// (TexturePenetrationSolver::OverlapRegions: the base pose rendered again on the CPU) becomes
-  /// one window per region, each the region's box plus split_window_margin_m a side at the parent's
-  /// cell size, linearized afresh: the contact clustering of the textured contact rather than of
-  /// the coarse models', so that two separated patches of one face each push with their own δ.
-  /// Regions whose centre lies in another's window are one (as the pipeline truth merges patches,
-  /// contact_patch_truth.h). A window whose regions would take the step past max_contacts stays
-  /// whole. CPU backend only (the GPU backend takes one window size per batch: there the step runs
-  /// without it).
-  bool split_windows_at_separated_overlap = true;
-  double split_window_margin_m = 1e-3;
-  /// The regions' linking distance (m); 0: clustering_distance_m.
-  double split_link_m = 10e-3;
-  /// Stage 5a's birth ramp (m; 0: none): a region other than the window's deepest pushes with
-  /// k·w, w = smoothstep(d_r / min(ramp, d_max)), where d_r is the region's deepest cell sample of
-  /// b − a on the parent's grid (OverlapRegion::depth_m) and d_max the window's. A region appears
-  /// when a cell centre first overlaps, with its refined δ already tens of micrometres (a ridge
-  /// between cell centres), and goes as suddenly (the count of regions flips from tick to tick;
-  /// measured: docs/measurements.md). d_r crosses zero continuously, so the region's force fades
-  /// in and out with it; the deepest region keeps w = 1, so a split with one region newborn is the
-  /// whole window's force. The weight is taken at q0 and held over the model (its gradient is not
-  /// in ∇δ).
-  double split_birth_ramp_m = 400e-6;
-  /// Stage 5a: each split window takes its rotation steps from its parent's extent
-  /// (ContactWindow::gradient_extent_m) instead of its own, so h_θ is the parent's whatever the
-  /// region's box. Off: h_θ = h_x / (W_region / 2).
-  bool split_keeps_parent_rotation_step = true;
-  /// Stage 5a's bridge fade (m; 0: none): a region other than the window's deepest pushes with
-  /// k·w·smoothstep(−t / fade), t its bridge level (OverlapRegion::bridge_m: the level ≤ 0 at
-  /// which the window's b − a, linked as the regions are, joins it to a deeper region). Two
-  /// regions that are about to touch (t → 0⁻) push as the one region they become, so the force
-  /// does not step by k·δ when the overlap between them crosses zero (an edge resting on stripes
-  /// along its length: one region or two from tick to tick); regions whose gap stays below −fade
-  /// push with their own δ. The force of the pair falls from k·(δ_1 + δ_2) to k·δ_1 over the
-  /// fade as the tool presses in: along the normal the pair's stiffness is k·(1 + w + δ_2·∂w/∂δ),
-  /// whose least value over the fade falls to zero and below as the fade shortens towards the
-  /// supports' depth (a negative stiffness the loop rocks on; measured: docs/measurements.md).
-  double split_bridge_fade_m = 400e-6;
-  /// Stage 5a's bridge fade in proportion to the region's depth (0: off, the default): with
-  /// c > 0 a region's fade is c·d_r (d_r its deepest cell sample, OverlapRegion::depth_m) in
-  /// place of split_bridge_fade_m, so a shallow support whose gap is shallow too still pushes (a
-  /// 400 µm fade weighs a 20 µm support 20 µm from joining out to 0.7 %, c = 2 to 50 %). As the
-  /// tool presses in d_r grows with the bridge level, so the pair's least stiffness along the
-  /// normal is about k·(1 + w − S'(x)·(1 + c·x)/c), x = −t/(c·d_r): 0 at c = 2, where the loop
-  /// rocks (measured: docs/measurements.md).
-  double split_bridge_fade_per_depth = 0.0;
-  /// Stages 5a and 5c read the base pose's overlap (b − a per cell) from stage 5's own render
-  /// where the backend keeps it (PenetrationDepthBackend::base_overlap: the CPU backend), instead
-  /// of rendering the base pose again on each window: 5a for its regions, 5c for its footprints
-  /// (false: rendered again). The two fields can differ only where the renders' triangles or
-  /// rounding do (stage 5 picks the tool's triangles with the gradient's margins and, on the fast
-  /// path, renders the base on the window grown by a cell); measured: docs/measurements.md.
-  bool reuse_base_render = true;
-  /// Stage 5a: the window's deepest region stays the parent's whole window as stage 5 linearized
-  /// it, and only the other regions get windows of their own (weighted as above; one whose
-  /// weight is below 10⁻³ gets none), without merging regions whose centre lies in another's
-  /// window. So the split of a window whose other regions fade out is the unsplit window, and the
-  /// deepest region's δ and gradient do not change with its box. Off: every region gets its box's
-  /// window.
-  bool split_keeps_parent_window = true;
-  /// Stage 5c: contacts on one object whose normals agree within clustering_angle_deg
-  /// and whose textured overlaps at the tool's pose come within share_link_m of each other are one
-  /// region and share one penalty (ShareConnectedContacts, connected_contacts.h): each keeps its δ,
-  /// J and field, and its stiffness becomes k·s_i, so that a region pushes with about its
-  /// deepest contact's k·δ, as the pipeline truth's one patch does (contact_patch_truth.h). The
-  /// coarse clustering leaves such contacts apart where their merged window would exceed
-  /// max_window_extent_m (the hammer's face on the torus: two windows, each reading the whole δ).
-  /// The link is share_link_m, twice the clustering distance, because each window renders only its
-  /// cluster's triangles clipped to its square, so the overlap between two neighbouring windows
-  /// can go unrendered (measured: docs/measurements.md); it fades out over share_fade_m more gap.
-  /// The overlaps are rendered again on the CPU (TexturePenetrationSolver::OverlapOccupancy), only
-  /// for contacts with δ0 > 0 that have such a neighbour within reach of their windows, so a step
-  /// with one contact per object pays nothing. On by default (measured: docs/measurements.md). Off
-  /// (`slave_sim --no-share-connected-contacts`, the frontier's "no_shared_contacts"): every
-  /// contact pushes with its whole k.
-  bool share_connected_contacts = true;
-  double share_link_m = 10e-3;
-  double share_fade_m = 5e-3;
-  /// τ of the shares (LinkedPenaltyShares, m).
-  double share_temperature_m = 5e-6;
   /// Speculative contacts (a lead time, s; 0 = off): a separated leaf pair farther apart than
-  /// its local texture reach is kept (not dropped by drop_unreachable_pairs) when the tool's
+  /// its local texture reach is kept (not dropped as unreachable) when the tool's
   /// twist given to Step closes it within this time, i.e. when
   ///   signed distance ≤ reach + min(max_speculative_margin_m, lead · closing speed),
   /// closing speed = −(v + ω × (p_A − p_WT))·n at the pair's tool witness point p_A (m/s, W).
@@ -350,22 +257,22 @@ class HapticTexturePipeline {
     /// Clusters whose window could not be set up (non-finite point, zero normal), and stage 5a
     /// regions whose window could not: skipped.
     std::int64_t bad_windows = 0;
-    /// Contacts dropped by the grazing guard (PipelineOptions::grazing_guard).
+    /// Contacts dropped by the grazing guard (PipelineOptions).
     std::int64_t grazing_dropped = 0;
     /// Separated leaf pairs beyond their local texture reach, left out of clustering
-    /// (PipelineOptions::drop_unreachable_pairs).
+    /// (PipelineOptions).
     std::int64_t unreachable_pairs = 0;
     /// Separated leaf pairs beyond their local texture reach kept because the tool closes them
     /// within the lead time (PipelineOptions::speculative_lead_s); not a fault, a count.
     std::int64_t speculative_pairs = 0;
     /// Contact sides whose cluster's triangle list did not fit the pipeline's storage and were
-    /// picked by window instead (PipelineOptions::cluster_triangles).
+    /// picked by window instead (PipelineOptions).
     std::int64_t triangle_lists_overflowed = 0;
     /// Windows centred on and sized from the contact region of two whole models
-    /// (PipelineOptions::whole_model_region_windows); not a fault, a count.
+    /// (PipelineOptions); not a fault, a count.
     std::int64_t region_windows = 0;
     /// Contacts whose penalty stage 5c shared with a linked contact
-    /// (PipelineOptions::share_connected_contacts); not a fault, a count.
+    /// (stage 5c, PipelineOptions); not a fault, a count.
     std::int64_t shared_contacts = 0;
     /// Steps whose contacts were the last full step's, linearized from their kept depth fields
     /// at the step's pose, with stages 5–5d skipped (PipelineOptions::depth_fields); not a
@@ -427,7 +334,7 @@ class HapticTexturePipeline {
   std::span<const DepthField* const> kept_depth_fields() const noexcept;
   /// The floor the next Step() uses (m).
   double speculative_floor_m() const noexcept { return options_.speculative_floor_m; }
-  /// Stage 5b's seeds from the last step (DepthRefinementOptions::seed_from_last_step) forgotten:
+  /// Stage 5b's seeds from the last step (depth_refinement.h) forgotten:
   /// the next step's contacts start from their grid alone, as after construction (for a pose that
   /// does not follow the last one, e.g. the frontier's spread poses). noexcept.
   void ForgetLastStep() noexcept;
@@ -442,30 +349,22 @@ class HapticTexturePipeline {
   /// in one batch per size); when that backend fails, switches to the CPU backend for good and
   /// recomputes the batch.
   void LinearizeContacts(const RigidTransform& X_WT, int n) noexcept;
-  /// Stage 5a (PipelineOptions::split_windows_at_separated_overlap): replaces each linearized
-  /// window of last_queries[0, n) whose overlap is in separated regions by one window per region
-  /// (at the end of the batch) and linearizes those; returns the new count.
+  /// Stage 5a (PipelineOptions): adds, for each linearized window of last_queries[0, n) whose
+  /// overlap is in separated regions, one window per region other than its deepest (at the end
+  /// of the batch), and linearizes those; returns the new count. CPU backend only.
   int SplitSeparatedOverlap(const RigidTransform& X_WT, int n) noexcept;
-  /// Stage 5a: merges the data's regions[0, count) where one's centre lies inside another's
-  /// window (the square of its box's larger side plus the margins; the pipeline truth's rule for
-  /// patches that measure one interpenetration twice, contact_patch_truth.h step 3b), until none
-  /// does; returns how many are left (count itself when it exceeds the regions kept).
-  int MergeRegionsInOneWindow(int count, double cell_m) noexcept;
-  /// PipelineOptions::whole_model_region_windows: moves `point_W` to the centre of the contact
-  /// region of the tool and touchable `k`, both whole convex models, on the window axes of
-  /// `normal_W`, and sets `extent_m` to the region's larger side plus 2·texture_margin_m; leaves
-  /// both unchanged when a model has no hull or the region is empty.
+  /// Moves `point_W` to the centre of the contact region of the tool and touchable `k`, both
+  /// whole convex models, on the window axes of `normal_W`, and sets `extent_m` to the region's
+  /// larger side plus 2·texture_margin_m; leaves both unchanged when a model has no hull or the
+  /// region is empty.
   void RegionWindow(const RigidTransform& X_WT, std::size_t k, const glm::dvec3& normal_W,
                     double texture_margin_m, glm::dvec3& point_W, double& extent_m) noexcept;
   /// Stage 5c: shares the penalty of contacts [0, n) whose overlaps are one region
-  /// (PipelineOptions::share_connected_contacts). Allocation-free.
+  /// (PipelineOptions). Allocation-free.
   void ShareConnectedContacts(const RigidTransform& X_WT, int n) noexcept;
   /// The CPU backend of these options (fast path, texture_threads threads).
   std::unique_ptr<PenetrationDepthBackend> MakeCpuBackend() const;
-  /// Whether the options ask stages 5a and 5c to read stage 5's render (reuse_base_render and a
-  /// stage that needs it on), whatever the backend.
-  bool WantsBaseRender() const noexcept;
-  /// WantsBaseRender() with a backend that keeps the render (the CPU's).
+  /// Whether stages 5a and 5c read stage 5's render: the backend keeps it (the CPU's).
   bool ReusesBaseRender() const noexcept;
   /// The largest window whose field is kept: max_window_resolution() (150 at the defaults), at
   /// most kMaxKeptFieldResolution (3.7 MB of fields in the backend and as much in the data;

@@ -53,28 +53,6 @@ void PipelineOptions::Validate() const {
     throw std::invalid_argument("max speculative margin must be >= 0, got " +
                                 std::to_string(max_speculative_margin_m));
   }
-  if (!(split_window_margin_m >= 0.0) || !std::isfinite(split_window_margin_m) ||
-      !(split_link_m >= 0.0) || !std::isfinite(split_link_m) || !(split_birth_ramp_m >= 0.0) ||
-      !std::isfinite(split_birth_ramp_m) || !(split_bridge_fade_m >= 0.0) ||
-      !std::isfinite(split_bridge_fade_m) || !(split_bridge_fade_per_depth >= 0.0) ||
-      !std::isfinite(split_bridge_fade_per_depth)) {
-    throw std::invalid_argument(
-        "split window margin, link, birth ramp, bridge fade and fade per depth must be finite "
-        "and >= 0, got " +
-        std::to_string(split_window_margin_m) + ", " + std::to_string(split_link_m) + ", " +
-        std::to_string(split_birth_ramp_m) + ", " + std::to_string(split_bridge_fade_m) + " and " +
-        std::to_string(split_bridge_fade_per_depth));
-  }
-  if (!(share_link_m > 0.0) || !std::isfinite(share_link_m) || !(share_fade_m >= 0.0) ||
-      !std::isfinite(share_fade_m)) {
-    throw std::invalid_argument("share link must be finite and > 0 and its fade >= 0, got " +
-                                std::to_string(share_link_m) + " and " +
-                                std::to_string(share_fade_m));
-  }
-  if (!(share_temperature_m > 0.0) || !std::isfinite(share_temperature_m)) {
-    throw std::invalid_argument("share temperature must be positive and finite, got " +
-                                std::to_string(share_temperature_m));
-  }
   if (max_contacts < 1 || max_contacts > kMaxContacts) {
     throw std::invalid_argument("max contacts must be in [1, " + std::to_string(kMaxContacts) +
                                 "], got " + std::to_string(max_contacts));

@@ -35,7 +35,7 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
   for (const auto& t : scene.touchables) {
     if (!t.model) throw std::invalid_argument("scene '" + scene.name + "' has an empty touchable");
   }
-  model_ = std::make_unique<const RemoteStepModel>(scene, options_);
+  model_ = std::make_unique<const RemoteStepModel>(scene);
   data_ = std::make_unique<RemoteStepData>(scene, options_, KeptFieldResolution());
   if (!backend_) backend_ = MakeCpuBackend();
   // What the backend keeps per model (the GPU's uploads) for this scene's models, now.
@@ -45,7 +45,7 @@ HapticTexturePipeline::HapticTexturePipeline(const HapticScene& scene,
   // What a failing GPU backend falls back on, ready before the first step (LinearizeContacts).
   if (backend_->name() != "cpu") {
     cpu_fallback_ = MakeCpuBackend();
-    if (WantsBaseRender()) cpu_fallback_->set_keep_base_overlap(KeptFieldResolution());
+    cpu_fallback_->set_keep_base_overlap(KeptFieldResolution());
   }
   fallback_reason_.reserve(kMaxFallbackReason);
 }
@@ -98,11 +98,9 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
                            : std::span<const float>{};
   }
   // Stage 5a: a window whose overlap is in separated regions becomes one window per region.
-  if (d.region_solver && options_.split_windows_at_separated_overlap) {
-    d.last_num_queries = SplitSeparatedOverlap(X_WT, d.last_num_queries);
-  }
-  // Stage 5a's weights (split_birth_ramp_m, split_bridge_fade_m): a region other than its
-  // window's deepest fades in with its overlap and out as it joins a deeper one.
+  d.last_num_queries = SplitSeparatedOverlap(X_WT, d.last_num_queries);
+  // Stage 5a's weights (its birth ramp and bridge fade): a region other than its window's
+  // deepest fades in with its overlap and out as it joins a deeper one.
   for (int k = 0; k < d.split_count; ++k) {
     d.last_results[static_cast<std::size_t>(d.split_first + k)].stiffness_n_per_m *=
         d.split_weights[static_cast<std::size_t>(k)];
@@ -165,7 +163,7 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
   const auto keep_list = [&](std::span<const int> list, bool whole_model,
                              const TriangleBoxTree* tree) {
     TriangleSubset subset = TriangleSubset::All();
-    if (options_.cluster_triangles && !whole_model) {
+    if (!whole_model) {
       if (list.size() > d.candidate_triangles.size() - triangles_used) {
         ++d.step_faults.triangle_lists_overflowed;
       } else {
@@ -227,7 +225,6 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
     const double reach = tool.OutwardReach() + object.model->OutwardReach();
     ProximityQueryOptions query;
     query.tolerance_m = reach + options_.proximity_margin_m + speculative_bound;
-    if (options_.local_reach) query.local_reach_margin_m = options_.proximity_margin_m;
     // 1. Broad phase: bounding spheres in W (the objects may move between steps).
     const double gap =
         BoundingSphereGap(tool_sphere_O, X_WT, m.object_bounds[k].spheres_O[0], object.X_WO);
@@ -256,13 +253,11 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
     // window with no overlap); and the grazing guard's bound of a pair is its hull penetration
     // plus that reach plus a cell (a cluster takes its members' largest).
     const double cell = options_.window_extent_m / options_.grid_resolution;
-    const bool local_bounds = options_.grazing_guard && options_.grazing_guard_local_reach;
     std::span<const double> pair_bounds;
     // The floor for this object's separated pairs: PipelineOptions::speculative_floor_m where the
     // tool touches it nowhere (no pair within its textures' reach), else 0.
     double object_floor_m = 0.0;
-    if (options_.drop_unreachable_pairs || options_.region_normals ||
-        (local_bounds && pairs.size() <= d.reachable_pairs.size())) {
+    {
       const bool touching =
           floor_m > 0.0 && std::any_of(pairs.begin(), pairs.end(), [&](const HullPairContact& p) {
             return p.signed_distance_m <=
@@ -274,7 +269,7 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
         if (kept == d.reachable_pairs.size()) break;
         const double pair_reach =
             m.tool_bounds.Reach(p.node_A) + m.object_bounds[k].Reach(p.node_B);
-        if (options_.drop_unreachable_pairs && p.signed_distance_m > pair_reach) {
+        if (p.signed_distance_m > pair_reach) {
           if (p.signed_distance_m > pair_reach + speculative_margin(p, object_floor_m)) {
             ++d.step_faults.unreachable_pairs;
             continue;
@@ -282,19 +277,10 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
           ++d.step_faults.speculative_pairs;
         }
         d.pair_bounds[kept] = std::max(0.0, -p.signed_distance_m) + pair_reach + cell;
-        HullPairContact& kept_pair = d.reachable_pairs[kept++];
-        kept_pair = p;
-        if (options_.region_normals) {
-          // The pair's direction from its contact region: the coarse triangles of each leaf
-          // within the other leaf's hull widened by the pair's texture reach (contact_region.h).
-          const glm::dvec3 region = LeafPairRegionVector(tool, X_WT, p.node_A, *object.model,
-                                                         object.X_WO, p.node_B, pair_reach);
-          const double len = glm::length(region);
-          if (len > 0.0) kept_pair.normal_W = region / len;
-        }
+        d.reachable_pairs[kept++] = p;
       }
       pairs = {d.reachable_pairs.data(), kept};
-      if (local_bounds) pair_bounds = {d.pair_bounds.data(), kept};
+      pair_bounds = {d.pair_bounds.data(), kept};
     }
     if (pairs.empty()) continue;
     // 3. Contact clustering: one window per cluster, sized from its members' spread between the
@@ -302,15 +288,12 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
     // the merged window fits, so that a texture region is rarely rendered in two windows.
     ClusteringOptions clustering;
     clustering.merge_distance_m = options_.clustering_distance_m;
-    clustering.max_normal_angle_deg = options_.clustering_angle_deg;
+    clustering.max_normal_angle_deg = kClusteringAngleDeg;
     clustering.texture_margin_m = reach;
     clustering.min_extent_m = options_.window_extent_m;
     clustering.max_extent_m = options_.max_window_extent_m;
     clustering.max_contacts = options_.max_contacts;
-    clustering.share_leaves_between_disjoint_windows =
-        options_.cluster_triangles && options_.share_leaves_between_disjoint_windows;
-    clustering.tool_leaves_follow_object_leaves =
-        options_.cluster_triangles && options_.tool_leaves_follow_object_leaves;
+    clustering.share_leaves_between_disjoint_windows = true;
     const std::span<const ContactCluster> clusters = d.clusterer.Cluster(
         pairs, tool.hull_hierarchy, object.model->hull_hierarchy, clustering, pair_bounds);
     timings.clusters += static_cast<int>(clusters.size());
@@ -320,14 +303,12 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
       if (floor_only ? num_floor_candidates < options_.max_contacts
                      : d.num_candidates < options_.max_contacts) {
         const glm::dvec3 normal_W = c.normal_W;
-        const double bound = !options_.grazing_guard ? std::numeric_limits<double>::infinity()
-                             : std::isfinite(c.depth_bound_m)
+        const double bound = std::isfinite(c.depth_bound_m)
                                  ? c.depth_bound_m
                                  : std::max(0.0, -c.min_signed_distance_m) + reach + cell;
-        double extent = options_.size_windows_from_clusters ? c.extent_m : 0.0;
+        double extent = c.extent_m;
         glm::dvec3 point_W = c.point_W;
-        if (c.tool_whole_model && c.object_whole_model && c.num_pairs == 1 &&
-            options_.size_windows_from_clusters) {
+        if (c.tool_whole_model && c.object_whole_model && c.num_pairs == 1) {
           RegionWindow(X_WT, k, normal_W, reach, point_W, extent);
         }
         const ContactCandidate candidate{
@@ -387,7 +368,6 @@ void HapticTexturePipeline::RegionWindow(const RigidTransform& X_WT, std::size_t
                                          glm::dvec3& point_W, double& extent_m) noexcept {
   RemoteStepData& d = *data_;
   const RemoteStepModel& m = *model_;
-  if (!options_.whole_model_region_windows) return;
   const ConvexHull& hull_A = m.whole_hulls[0];
   const ConvexHull& hull_B = m.whole_hulls[k + 1];
   if (hull_A.planes_O.empty() || hull_B.planes_O.empty()) return;
@@ -477,19 +457,13 @@ void HapticTexturePipeline::LinearizeContacts(const RigidTransform& X_WT, int n)
 
 void HapticTexturePipeline::ShareConnectedContacts(const RigidTransform& X_WT, int n) noexcept {
   RemoteStepData& d = *data_;
-  if (!options_.share_connected_contacts || !d.region_solver || n < 2) return;
-  ContactSharingOptions sharing;
-  sharing.link_m = options_.share_link_m;
-  sharing.fade_m = options_.share_fade_m;
-  sharing.max_normal_angle_deg = options_.clustering_angle_deg;
-  sharing.temperature_m = options_.share_temperature_m;
+  if (n < 2) return;
+  ContactSharingOptions sharing;  // its link, fade and temperature at their defaults
+  sharing.max_normal_angle_deg = kClusteringAngleDeg;
   d.step_faults.shared_contacts += ht::ShareConnectedContacts(
       *scene_.tool, X_WT, {d.last_queries.data(), static_cast<std::size_t>(n)},
       {d.last_results.data(), static_cast<std::size_t>(n)}, sharing, *d.region_solver,
-      d.sharing_occupancy,
-      options_.split_windows_at_separated_overlap && options_.split_keeps_parent_window
-          ? std::span<const int>(d.split_family.data(), static_cast<std::size_t>(n))
-          : std::span<const int>(),
+      d.sharing_occupancy, std::span<const int>(d.split_family.data(), static_cast<std::size_t>(n)),
       std::span<const std::span<const float>>(d.base_fields.data(), static_cast<std::size_t>(n)));
 }
 
@@ -497,14 +471,7 @@ int HapticTexturePipeline::KeptFieldResolution() const noexcept {
   return std::min(options_.max_window_resolution(), kMaxKeptFieldResolution);
 }
 
-bool HapticTexturePipeline::WantsBaseRender() const noexcept {
-  return options_.reuse_base_render &&
-         (options_.split_windows_at_separated_overlap || options_.share_connected_contacts);
-}
-
-bool HapticTexturePipeline::ReusesBaseRender() const noexcept {
-  return WantsBaseRender() && backend_->name() == "cpu";
-}
+bool HapticTexturePipeline::ReusesBaseRender() const noexcept { return backend_->name() == "cpu"; }
 
 const HapticTexturePipeline::StepFaults& HapticTexturePipeline::step_faults() const noexcept {
   return data_->step_faults;

@@ -8,11 +8,11 @@
 
 namespace ht {
 
-RemoteStepModel::RemoteStepModel(const HapticScene& scene, const PipelineOptions& options) {
+RemoteStepModel::RemoteStepModel(const HapticScene& scene) {
   const std::size_t models = scene.touchables.size() + 1;
   // The hull of each model without hierarchy whose coarse mesh is convex (within a micrometre:
   // the procedural models' caps are fans of coplanar triangles), computed once: windows on its
-  // contact region use it (whole_model_region_windows, with its triangle list), and the free
+  // contact region use it (with its triangle list), and the free
   // space around the tool takes it, or a hierarchy's root, as the whole model's hull.
   whole_hulls.resize(models);
   whole_triangles.resize(models);
@@ -27,7 +27,6 @@ RemoteStepModel::RemoteStepModel(const HapticScene& scene, const PipelineOptions
     if (!hull) continue;
     whole_hulls[i] = std::move(*hull);
     root_hulls[i] = &whole_hulls[i];
-    if (!options.whole_model_region_windows) continue;
     whole_triangles[i].resize(model.triangles.size());
     for (std::size_t t = 0; t < model.triangles.size(); ++t)
       whole_triangles[i][t] = static_cast<int>(t);
@@ -50,17 +49,12 @@ RemoteStepData::RemoteStepData(const HapticScene& scene, const PipelineOptions& 
     :  // Stage 5b's buffers (about 10 MB at 8192 triangles) only where it runs.
       refiner(options.depth_refinement, options.refine_depth ? 8192 : 0) {
   for (std::size_t k = 0; k < field_pool.size(); ++k) field_pool_fields[k] = &field_pool[k];
-  if (options.split_windows_at_separated_overlap || options.share_connected_contacts) {
-    // Stage 5c renders whole windows, up to the largest.
-    region_solver = std::make_unique<TexturePenetrationSolver>(
-        std::max({128, options.grid_resolution,
-                  options.share_connected_contacts ? options.max_window_resolution() : 0}),
-        4096, TextureStagePath::kFast);
-  }
-  if (options.share_connected_contacts) {
-    sharing_occupancy.assign(
-        static_cast<std::size_t>(kMaxContacts) * kMaxSharingBlocks * kMaxSharingBlocks, 0);
-  }
+  // Stage 5c renders whole windows, up to the largest.
+  region_solver = std::make_unique<TexturePenetrationSolver>(
+      std::max({128, options.grid_resolution, options.max_window_resolution()}), 4096,
+      TextureStagePath::kFast);
+  sharing_occupancy.assign(
+      static_cast<std::size_t>(kMaxContacts) * kMaxSharingBlocks * kMaxSharingBlocks, 0);
   reachable_pairs.resize(static_cast<std::size_t>(clusterer.max_pairs()));
   pair_bounds.resize(static_cast<std::size_t>(clusterer.max_pairs()));
   candidate_triangles.resize(static_cast<std::size_t>(2 * clusterer.max_triangles()));
@@ -81,7 +75,7 @@ RemoteStepData::RemoteStepData(const HapticScene& scene, const PipelineOptions& 
   }
   // Stage 5a's copies of the kept contacts' fields, whatever the backend (a GPU backend that
   // falls back to the CPU keeps fields from then on).
-  if (options.reuse_base_render && options.split_windows_at_separated_overlap) {
+  {
     const auto r = static_cast<std::size_t>(kept_field_resolution);
     base_field_store.resize(kMaxContacts * r * r);
   }

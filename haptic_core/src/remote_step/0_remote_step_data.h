@@ -30,9 +30,8 @@ namespace ht {
 /// holds its models as shared_ptr<const HapticModel>, so none changes under it.
 struct RemoteStepModel {
   /// Builds every field from `scene` (which has a tool and no empty touchable; checked by the
-  /// pipeline first). `options.whole_model_region_windows` decides whether whole_triangles is
-  /// filled. Allocates; throws only std::bad_alloc.
-  RemoteStepModel(const HapticScene& scene, const PipelineOptions& options);
+  /// pipeline first). Allocates; throws only std::bad_alloc.
+  explicit RemoteStepModel(const HapticScene& scene);
 
   /// The coarse query's bounds (HullBounds::Of) of the tool and of every touchable. Their root
   /// spheres (spheres_O[0]) are the broad phase's, so that objects far from the tool cost one
@@ -50,8 +49,7 @@ struct RemoteStepModel {
   /// (HullSeparationBound): its hierarchy's root, or its whole_hulls entry; null when neither
   /// exists.
   std::vector<const ConvexHull*> root_hulls;
-  /// Per model with a whole hull, with PipelineOptions::whole_model_region_windows: the indices of
-  /// all its coarse triangles (empty otherwise).
+  /// Per model with a whole hull: the indices of all its coarse triangles (empty otherwise).
   std::vector<std::vector<int>> whole_triangles;
 };
 
@@ -74,17 +72,15 @@ struct RemoteStepData {
   ContactClusterer clusterer;
   /// Stage 5b (PipelineOptions::refine_depth): its buffers, and its seeds from the last step.
   DepthRefiner refiner;
-  /// Stages 5a and 5c (split_windows_at_separated_overlap, share_connected_contacts): the solver
-  /// that renders a window's overlap regions; null when both are off.
+  /// Stages 5a and 5c: the solver that renders a window's overlap regions.
   std::unique_ptr<TexturePenetrationSolver> region_solver;
 
   // ---- Stages 1–3 (FindContactCandidates).
-  /// The leaf pairs within their local texture reach (PipelineOptions::drop_unreachable_pairs),
-  /// as many as the clusterer takes, and the grazing guard's bound of each
-  /// (PipelineOptions::grazing_guard_local_reach).
+  /// The leaf pairs within their local texture reach, as many as the clusterer takes, and the
+  /// grazing guard's bound of each (from the pair's two leaves' own reach).
   std::vector<HullPairContact> reachable_pairs;
   std::vector<double> pair_bounds;
-  /// The candidates' triangle lists (PipelineOptions::cluster_triangles), copied from the
+  /// The candidates' triangle lists (each texture once), copied from the
   /// clusterer, whose lists last only until its next call (one per touchable).
   std::vector<int> candidate_triangles;
   /// Per touchable: its bounding-sphere gap (m) when the coarse query found no pair for it, NaN
@@ -108,31 +104,30 @@ struct RemoteStepData {
   std::array<ContactLinearization, kMaxContacts> size_results{};
   std::array<DepthSample, kMaxContacts * kGradientSamples> size_samples{};
   std::array<int, kMaxContacts> size_index{};
-  /// reuse_base_render: each contact's overlap field at the base pose from stage 5's render
+  /// Each contact's overlap field at the base pose from stage 5's render
   /// (PenetrationDepthBackend::base_overlap; empty: none), in last_queries' order, for stages 5a
   /// and 5c; and where the kept contacts' fields are copied before stage 5a's own batch
-  /// overwrites the backend's (kMaxContacts fields of kept_field_resolution² floats, reserved
-  /// with reuse_base_render and the split on).
+  /// overwrites the backend's (kMaxContacts fields of kept_field_resolution² floats).
   std::array<std::span<const float>, kMaxContacts> base_fields{};
   std::vector<float> base_field_store;
 
-  // ---- Stage 5a (split_windows_at_separated_overlap).
+  // ---- Stage 5a.
   /// A window's overlap regions, and the windows replacing a split one.
   std::array<OverlapRegion, 8> regions{};
   std::array<ContactQuery, kMaxContacts> split_queries{};
-  /// Each split window's birth-ramp weight (split_birth_ramp_m), in split_queries' order,
+  /// Each split window's weight (birth ramp and bridge fade), in split_queries' order,
   /// applied to its stiffness after stage 5b.
   std::array<double, kMaxContacts> split_weights{};
   /// The first split window in last_queries and how many follow (0: none this step).
   int split_first = 0;
   int split_count = 0;
-  /// With split_keeps_parent_window: each split window's parent (its index in last_queries), and
+  /// Each split window's parent (its index in last_queries), and
   /// each contact's family for stage 5c (−1: none; a parent and its split windows share one, and
   /// never share a penalty).
   std::array<int, kMaxContacts> split_parent{};
   std::array<int, kMaxContacts> split_family{};
 
-  // ---- Stage 5c (share_connected_contacts).
+  // ---- Stage 5c.
   /// The block occupancy of each contact (kMaxSharingBlocks² a contact).
   std::vector<std::uint8_t> sharing_occupancy;
 

@@ -297,9 +297,9 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
     }
     return raised;
   };
-  // The grid's seeds carried by parallax (parallax_offset_seeds): where each side's envelope
-  // reads its surface point, more than half a cell away.
-  if (options_.parallax && options_.parallax_offset_seeds) {
+  // The grid's seeds carried by parallax: where each side's envelope reads its surface point,
+  // more than half a cell away.
+  if (options_.parallax) {
     const double half_extent = 0.5 * w.extent_m, range = w.depth_range_m();
     const int grid_seeds = num_seeds;
     for (int k = 0; k < grid_seeds; ++k) {
@@ -333,9 +333,9 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
       counters_.screen_raised_um += take_deeper(screened);
     }
   }
-  // The last step's deepest points within this window (seed_from_last_step), each searched by a
-  // pattern search from the point (it was a refined maximum one step ago: no sub-grid).
-  if (options_.seed_from_last_step) {
+  // The last step's deepest points within this window, each searched by a pattern search from
+  // the point (it was a refined maximum one step ago: no sub-grid).
+  {
     const double half_extent = 0.5 * w.extent_m;
     for (int k = 0; k < num_last_; ++k) {
       const LastStepPoint& last = last_[static_cast<std::size_t>(k)];
@@ -350,11 +350,11 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
       counters_.last_step_raised_um += take_deeper(found);
     }
   }
-  // The neighbouring peaks (neighbour_peak_seeds): climbs from half a cell and a cell from the
+  // The neighbouring peaks: climbs from half a cell and a cell from the
   // deepest along ±u and ±v, where the other flank across a trough lies (its cell is next to
   // the deepest's, and so never a seed of its own).
   num_neighbour_peaks_ = 0;
-  if (options_.neighbour_peak_seeds && deepest.depth_m > -kInf) {
+  if (deepest.depth_m > -kInf) {
     const double half_extent = 0.5 * w.extent_m;
     const Seed from = deepest;
     static constexpr std::array<std::array<int, 2>, 4> kAxes{{{1, 0}, {-1, 0}, {0, 1}, {0, -1}}};
@@ -410,11 +410,11 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
       // shifted, the rotations (5…10) the tool at their pose.
       const auto refine_from = [&](int cell_index) {
         if (k > 4) {
-          return refine_cell(cell_index, tool_pose_all_, 0.0, 0.0, options_.subgrid_rotations);
+          return refine_cell(cell_index, tool_pose_all_, 0.0, 0.0, false);
         }
         const double sign = (k % 2 == 1) ? 1.0 : -1.0;
         return refine_cell(cell_index, tool_all_, k <= 2 ? sign * big.h_x : 0.0,
-                           k <= 2 ? 0.0 : sign * big.h_x, options_.subgrid_translations);
+                           k <= 2 ? 0.0 : sign * big.h_x, false);
       };
       Seed found = refine_from(sample.cell);
       if (deeper_away_from_seeds) {
@@ -436,7 +436,7 @@ bool DepthRefiner::Refine(const HapticModel& tool, const RigidTransform& X_WT,
   samples[0] = {deepest.depth_m, CellAt(w, deepest.s, deepest.t)};
   lin.depth_m = deepest.depth_m;
   lin.point_W = point_W;
-  if (options_.seed_from_last_step && num_next_ < kMaxLastStepSeeds) {
+  if (num_next_ < kMaxLastStepSeeds) {
     // p_T = R_WTᵀ (p_W − p_WT): the point in the tool's frame.
     next_[static_cast<std::size_t>(num_next_++)] = {
         env_, glm::conjugate(X_WT.rotation) * (point_W - X_WT.translation)};

@@ -346,8 +346,8 @@ inline double HeightOver(std::span<const Projected> list, const HeightField& tex
   return envelope.Finish();
 }
 
-// Where parallax carries the render's value at (s, t) (DepthRefinementOptions::
-// parallax_offset_seeds): the envelope's triangle at (s, t) in the render's form at level 0 (the
+// Where parallax carries the render's value at (s, t) (stage 5b's seeds carried by parallax):
+// the envelope's triangle at (s, t) in the render's form at level 0 (the
 // largest value for the environment, the smallest for the tool, within the box ±range) reads the
 // surface point h·N of its coarse point under (s, t), which lies at (s, t) + h·N⊥ on the window
 // plane. Writes that offset (m along u and v); false where no triangle covers (s, t) or the

@@ -293,10 +293,6 @@ bool TakeStepFromKeptFields(const RigidTransform& X_WT, const PipelineOptions& o
                             RemoteStepData& d) noexcept {
   const int n4 = d.last_num_queries;
   if (!d.full_valid || n4 != d.full_stage4_count) return false;
-  // Stage 5a keeps a split window's parent at its index only with split_keeps_parent_window.
-  if (options.split_windows_at_separated_overlap && !options.split_keeps_parent_window) {
-    return false;
-  }
   // Each contact takes the field stage 5d would give it (its window: this step's for the
   // stage-4 contacts, the last full step's for stage 5a's), and every contact must have one.
   std::array<bool, RemoteStepData::kFieldPoolSize> taken{};

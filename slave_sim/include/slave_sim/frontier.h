@@ -1,9 +1,9 @@
 #pragma once
 // The speed-vs-error frontier: every setting of the remote step (grid N, texture size,
-// coarse triangle count, CPU or GPU backend, GPU depth bits) and two baselines a user might pick
-// instead (coarse meshes without textures; full-resolution meshes through FCL), run on in-contact
-// poses of the seed's benchmark scenes and measured, in one run on one machine, for time per step
-// and for error against the full-resolution ground truth (haptic_core/accuracy).
+// coarse triangle count, threads, depth fields, CPU or GPU backend) and two baselines a user might
+// pick instead (coarse meshes without textures; full-resolution meshes through FCL), run on
+// in-contact poses of the seed's benchmark scenes and measured, in one run on one machine, for time
+// per step and for error against the full-resolution ground truth (haptic_core/accuracy).
 
 #include <map>
 #include <string>
@@ -44,101 +44,22 @@ struct FrontierSetting {
   /// unless a setting says otherwise).
   TextureStagePath texture_path = TextureStagePath::kFast;
   int texture_threads = 1;
-  /// Most contacts per step (PipelineOptions::max_contacts).
-  int max_contacts = kMaxContacts;
-  /// PipelineOptions::local_reach.
-  bool local_reach = false;
-  /// PipelineOptions::grazing_guard ("no_grazing_guard" turns it off).
-  bool grazing_guard = true;
-  /// PipelineOptions::grazing_guard_local_reach ("guard_model_reach" turns it off).
-  bool grazing_guard_local_reach = true;
-  /// PipelineOptions::max_window_extent_m (0: the default, 3W). "windows_fixed": W (every window
-  /// W×W); "windows_from_clusters": up to 2W; "windows_from_clusters_4w": up to 4W.
-  double max_window_extent_m = 0.0;
-  /// PipelineOptions::drop_unreachable_pairs ("keep_unreachable_pairs" turns it off).
-  bool drop_unreachable_pairs = true;
-  /// PipelineOptions::region_normals ("region_normals" turns it on).
-  bool region_normals = false;
-  /// PipelineOptions::size_windows_from_clusters.
-  bool size_windows_from_clusters = true;
-  /// PipelineOptions::cluster_triangles ("windows_pick_by_box" turns it off).
-  bool cluster_triangles = true;
-  /// PipelineOptions::tool_leaves_follow_object_leaves ("tool_leaves_follow",
-  /// "product_tool_leaves_follow").
-  bool tool_leaves_follow_object_leaves = false;
-  /// PipelineOptions::share_leaves_between_disjoint_windows ("leaves_to_deepest_pair" turns it
-  /// off).
-  bool share_leaves_between_disjoint_windows = true;
-  /// PipelineOptions::whole_model_region_windows ("windows_at_witness" turns it off).
-  bool whole_model_region_windows = true;
-  /// PipelineOptions::refine_depth (on; "grid_only" and the grid-size settings "gridN" turn it
-  /// off, the "gridN_refined" settings keep it).
+  /// PipelineOptions::refine_depth (on; "grid_only" and the grid-alone settings "gridN" turn it
+  /// off, "grid16_refined" keeps it).
   bool refine_depth = true;
-  /// Stage 5a, PipelineOptions' split_* fields, at their defaults (the continuous split at a
-  /// 10 mm link, ramp and fade 400 µm). "no_split" turns it
-  /// off; the split settings ("split_windows_at_separated_overlap*", "split_link10mm_*",
-  /// "split_continuous_*") start from "no_split" and set the pieces they name.
-  bool split_windows_at_separated_overlap = true;
-  /// PipelineOptions::split_link_m (0: clustering_distance_m).
-  double split_link_m = 10e-3;
-  /// PipelineOptions::split_birth_ramp_m (0: none).
-  double split_birth_ramp_m = 400e-6;
-  /// PipelineOptions::split_keeps_parent_rotation_step.
-  bool split_keeps_parent_rotation_step = true;
-  /// PipelineOptions::split_bridge_fade_m (0: none).
-  double split_bridge_fade_m = 400e-6;
-  /// PipelineOptions::split_keeps_parent_window.
-  bool split_keeps_parent_window = true;
-  /// PipelineOptions::split_bridge_fade_per_depth (0: off; "split_fade_per_depth<C>x" set it).
-  double split_bridge_fade_per_depth = 0.0;
-  /// PipelineOptions::reuse_base_render ("render_base_again" turns it off).
-  bool reuse_base_render = true;
-  /// PipelineOptions::share_connected_contacts ("no_shared_contacts" turns it off), and
-  /// share_link_m, share_fade_m (< 0: the defaults) and share_temperature_m (0: the default).
-  bool share_connected_contacts = true;
-  double share_link_m = -1.0;
-  double share_fade_m = -1.0;
-  double share_temperature_m = 0.0;
-  /// PipelineOptions::depth_refinement.subgrid_rotations ("rotations_from_subgrid" turns it on).
-  bool subgrid_rotations = false;
-  /// PipelineOptions::depth_refinement.subgrid_translations ("translations_from_subgrid" turns
-  /// it on).
-  bool subgrid_translations = false;
-  /// PipelineOptions::depth_refinement.conservative_screen ("screen" turns it on).
-  bool conservative_screen = false;
-  /// PipelineOptions::depth_refinement.parallax (on; "no_parallax*", "product_no_parallax" and
-  /// "screen" turn it off).
-  bool parallax = true;
-  /// PipelineOptions::depth_refinement.seed_from_last_step ("*no_last_step_seeds" turn it off).
-  /// The frontier forgets the last step before each pose unless the poses are a trace's
-  /// consecutive rows (FrontierOptions::trace_from_s), where each pose follows the last as in the
-  /// loop: on spread poses it changes nothing.
-  bool seed_from_last_step = true;
-  /// PipelineOptions::depth_refinement.parallax_offset_seeds ("no_parallax_offset_seeds" and
-  /// "before_thirty_third_stop" turn it off).
-  bool parallax_offset_seeds = true;
-  /// PipelineOptions::clustering_angle_deg ("clustering_angle_N" sets N°; the pipeline truth's
-  /// patches keep ContactPatchTruthOptions' 30° whatever the method's angle).
-  double clustering_angle_deg = PipelineOptions{}.clustering_angle_deg;
-  /// PipelineOptions::depth_refinement.neighbour_peak_seeds.
-  bool neighbour_peak_seeds = true;
-  /// PipelineOptions::depth_fields, at this subdivision, unshifted ("depth_fields",
-  /// "depth_fields_s1"): each pose's force at q0 and the model's prediction are its depth fields'
-  /// (evaluated as the operator's loop does); the per-contact columns stay the linearization's.
+  /// PipelineOptions::depth_fields ("depth_fields"): each pose's force at q0 and the model's
+  /// prediction are its depth fields' (evaluated as the operator's loop does); the per-contact
+  /// columns stay the linearization's.
   bool depth_fields = false;
-  int depth_field_subdivision = 2;
 };
 
 /// The sweep: the default setting (grid 50, 1024² textures, the seed's coarse counts, CPU) first,
-/// then grid N ∈ {16, 25, 100}, texture size ∈ {256, 512, 2048}, coarse ×½ and ×2, the GPU at
-/// 16 and 32 depth bits (when `with_gpu`), the reference texture path ("reference", the path the
-/// fast one replaced: the same error, its time), the fast path on two threads ("threads2"), at
-/// most 7 contacts per step ("contacts7", the seed's count on Fig. 77), the coarse query's local
-/// reach ("local_reach"), the rotation gradient from the base render alone (the deepest cell's
-/// lever, "rotation_lever", and the warped rotation samples, "rotation_warp"), every speed option
-/// at once ("warp_local_contacts7_threads2"), and the two baselines.
-/// `quick` keeps grids 16, 25 and 100, texture 256, coarse ×2, reference, the GPU at 16 bits and
-/// both baselines.
+/// then the grid alone at N ∈ {50, 16, 100} ("grid_only", "grid16", "grid100"), stage 5b on the
+/// 16 grid ("grid16_refined"), texture size 256 and 2048, coarse ×2, the product's models
+/// ("product"), the reference texture path ("reference", the path the fast one replaced: the same
+/// error, its time), the fast path on two threads ("threads2"), the contact model as depth fields
+/// ("depth_fields"), the GPU at 16 depth bits (when `with_gpu`), and the two baselines.
+/// `quick` leaves out texture 2048, "product", "threads2" and "depth_fields".
 std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu);
 
 /// The remote step's options of a texture-method setting (`st.method` kTexture): every
