@@ -8,6 +8,8 @@
 #include <gtest/gtest.h>
 
 #include <cctype>
+#include <cmath>
+#include <cstdint>
 #include <glm/gtc/quaternion.hpp>
 #include <ostream>
 #include <string>
@@ -53,6 +55,34 @@ TEST_P(RemoteStepAlloc, AllocatesNothingAfterWarmUp) {
   EXPECT_EQ(Allocations() - before, 0) << "of which oneTBB's: " << TbbAllocations() - before_tbb;
   EXPECT_GT(in_contact, 100);
   EXPECT_LT(in_contact, 1000);  // and out of contact too
+}
+
+// With depth fields, at a hand's pace (a tenth of the slide above a step): the steps that render
+// fields and the steps that take their contacts from the kept fields allocate nothing either.
+TEST(RemoteStepAllocFields, AllocatesNothingAfterWarmUpRenderingOrKeepingFields) {
+  const HapticScene scene = MakeBlockOnGearScene();
+  PipelineOptions options;
+  options.depth_fields = true;
+  HapticTexturePipeline pipeline(scene, options);
+  const auto pose = [](int k) {
+    RigidTransform X = BlockOnGearHomePose();
+    const double s = 0.1 * k;
+    X.translation.x += 0.006 * std::sin(0.05 * s);
+    X.translation.y += 0.004 * std::sin(0.031 * s);
+    X.translation.z += 1e-3 + 3e-3 * std::sin(0.07 * s);
+    X.rotation = glm::angleAxis(0.03 * std::sin(0.02 * s), glm::dvec3(0, 1, 0));
+    return X;
+  };
+  StepTimings t;
+  for (int k = 0; k < 2000; ++k) pipeline.Step(pose(k), k, t);  // warm-up: a whole period
+  const std::int64_t kept_before = pipeline.step_faults().steps_from_kept_fields;
+  int in_contact = 0;
+  const long before = Allocations(), before_tbb = TbbAllocations();
+  for (int k = 2000; k < 4000; ++k) in_contact += pipeline.Step(pose(k), k, t).num_contacts > 0;
+  EXPECT_EQ(Allocations() - before, 0) << "of which oneTBB's: " << TbbAllocations() - before_tbb;
+  const std::int64_t kept = pipeline.step_faults().steps_from_kept_fields - kept_before;
+  EXPECT_GT(kept, 100) << "steps from kept fields";
+  EXPECT_LT(kept, in_contact) << "and steps that render";
 }
 
 INSTANTIATE_TEST_SUITE_P(Threads, RemoteStepAlloc, ::testing::Values(1, 2),

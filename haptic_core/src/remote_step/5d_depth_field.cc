@@ -292,7 +292,8 @@ void RecordFullStep(RemoteStepData& d) noexcept {
 bool TakeStepFromKeptFields(const RigidTransform& X_WT, const PipelineOptions& options,
                             RemoteStepData& d) noexcept {
   const int n4 = d.last_num_queries;
-  if (!d.full_valid || n4 != d.full_stage4_count) return false;
+  // Without contacts there is nothing to take (and stages 5–5d have nothing to do).
+  if (!d.full_valid || d.full_count == 0 || n4 != d.full_stage4_count) return false;
   // Each contact takes the field stage 5d would give it (its window: this step's for the
   // stage-4 contacts, the last full step's for stage 5a's), and every contact must have one.
   std::array<bool, RemoteStepData::kFieldPoolSize> taken{};
