@@ -243,12 +243,9 @@ DeadbandReason ContactModelDeadband::Decide(const ContactModel& model, std::int6
   } else if (NamesNewDepthField(model, held_)) {
     reason = DeadbandReason::kDepthField;
   } else {
-    const ContactModelEvaluation held = fields.empty()
-                                            ? EvaluateContactModel(held_, model.X_WT0)
-                                            : EvaluateContactModel(held_, model.X_WT0, fields);
-    const ContactModelEvaluation now = fields.empty()
-                                           ? EvaluateContactModel(model, model.X_WT0)
-                                           : EvaluateContactModel(model, model.X_WT0, fields);
+    // A contact whose field is not among `fields` (none given) is evaluated by its linearization.
+    const ContactModelEvaluation held = EvaluateContactModel(held_, model.X_WT0, fields);
+    const ContactModelEvaluation now = EvaluateContactModel(model, model.X_WT0, fields);
     const double stiffness_t = Frobenius3(now.K, 0, 0);
     const double stiffness_r = Frobenius3(now.K, 3, 3);
     if (glm::length(held.F_T_W.force - now.F_T_W.force) >

@@ -101,9 +101,11 @@ ContactModelEvaluation EvaluateContactModel(
     double max_contact_force_n = std::numeric_limits<double>::infinity(),
     const DepthFieldCache* fields = nullptr) noexcept;
 
-/// The same with unit stiffness scale and no force bound, the fields looked up by id among
-/// `fields` (prepared ones; null entries skipped) and evaluated afresh (DepthFieldDepthAt): the
-/// remote node's view of what the operator renders, from the fields it keeps. noexcept,
+/// The same at tool pose X_WT (W, T at the tool's centre of mass) with unit stiffness scale and
+/// no force bound, the fields looked up by id among `fields` (prepared ones; null entries
+/// skipped; empty: every contact by its linearization) and evaluated afresh (DepthFieldDepthAt):
+/// the remote node's view of what the operator renders, from the fields it keeps. A contact
+/// whose field is not found takes its linearization (counted in field_fallbacks). noexcept,
 /// allocation-free.
 ContactModelEvaluation EvaluateContactModel(const ContactModel& model, const RigidTransform& X_WT,
                                             std::span<const DepthField* const> fields) noexcept;

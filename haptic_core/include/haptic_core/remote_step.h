@@ -344,6 +344,11 @@ class HapticTexturePipeline {
   /// fills the coarse counts and flags of `timings`.
   void FindContactCandidates(const RigidTransform& X_WT, const Twist& V_WT_W,
                              StepTimings& timings) noexcept;
+  /// Stages 5–5d on the data's last_queries[0, last_num_queries) (stage 4's) at tool pose X_WT (W,
+  /// T at the tool's centre of mass): linearization, 5a's split, 5b's refinement, the bearing
+  /// edge's slope, the grazing guard, 5c's shares and 5d's depth fields (recording the step for
+  /// TakeStepFromKeptFields); leaves last_queries, last_results and last_num_queries for stage 6.
+  void RunTextureStages(const RigidTransform& X_WT) noexcept;
   /// Stage 5: linearizes the data's last_queries[0, n) into last_results with the backend in use
   /// (the GPU backend takes one window size per batch: windows sized from their clusters go to it
   /// in one batch per size); when that backend fails, switches to the CPU backend for good and

@@ -78,16 +78,23 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
                          options_.window_extent_m, options_.max_window_extent_m,
                          options_.grid_resolution, d.last_queries, d.step_faults.bad_windows);
   // The step from kept fields: the last full step's contacts, each linearized from its field at
-  // this pose, while their fields hold them (no render).
+  // this pose, while their fields hold them (no render); else stages 5–5d.
   if (options_.depth_fields && TakeStepFromKeptFields(X_WT, options_, d)) {
     ++d.step_faults.steps_from_kept_fields;
-    AssembleContactModel(last_linearizations(), model);
-    const auto t2 = Clock::now();
-    timings.collision_us = us(t1 - t0);
-    timings.texture_us = us(t2 - t1);
-    timings.total_us = us(t2 - t0);
-    return model;
+  } else {
+    RunTextureStages(X_WT);
   }
+  // Stage 6: the contact model.
+  AssembleContactModel(last_linearizations(), model);
+  const auto t2 = Clock::now();
+  timings.collision_us = us(t1 - t0);
+  timings.texture_us = us(t2 - t1);
+  timings.total_us = us(t2 - t0);
+  return model;
+}
+
+void HapticTexturePipeline::RunTextureStages(const RigidTransform& X_WT) noexcept {
+  RemoteStepData& d = *data_;
   std::copy_n(d.last_queries.begin(), d.last_num_queries, d.full_stage4_queries.begin());
   d.full_stage4_count = d.last_num_queries;
   // Stage 5: texture penetration depth and its gradient, linearized, for the whole batch.
@@ -142,13 +149,6 @@ ContactModel HapticTexturePipeline::Step(const RigidTransform& X_WT, std::uint64
     d.num_fields = 0;
     d.full_valid = false;
   }
-  // Stage 6: the contact model.
-  AssembleContactModel(last_linearizations(), model);
-  const auto t2 = Clock::now();
-  timings.collision_us = us(t1 - t0);
-  timings.texture_us = us(t2 - t1);
-  timings.total_us = us(t2 - t0);
-  return model;
 }
 
 void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, const Twist& V_WT_W,
@@ -253,35 +253,30 @@ void HapticTexturePipeline::FindContactCandidates(const RigidTransform& X_WT, co
     // window with no overlap); and the grazing guard's bound of a pair is its hull penetration
     // plus that reach plus a cell (a cluster takes its members' largest).
     const double cell = options_.window_extent_m / options_.grid_resolution;
-    std::span<const double> pair_bounds;
     // The floor for this object's separated pairs: PipelineOptions::speculative_floor_m where the
     // tool touches it nowhere (no pair within its textures' reach), else 0.
-    double object_floor_m = 0.0;
-    {
-      const bool touching =
-          floor_m > 0.0 && std::any_of(pairs.begin(), pairs.end(), [&](const HullPairContact& p) {
-            return p.signed_distance_m <=
-                   m.tool_bounds.Reach(p.node_A) + m.object_bounds[k].Reach(p.node_B);
-          });
-      object_floor_m = touching ? 0.0 : floor_m;
-      std::size_t kept = 0;
-      for (const HullPairContact& p : pairs) {
-        if (kept == d.reachable_pairs.size()) break;
-        const double pair_reach =
-            m.tool_bounds.Reach(p.node_A) + m.object_bounds[k].Reach(p.node_B);
-        if (p.signed_distance_m > pair_reach) {
-          if (p.signed_distance_m > pair_reach + speculative_margin(p, object_floor_m)) {
-            ++d.step_faults.unreachable_pairs;
-            continue;
-          }
-          ++d.step_faults.speculative_pairs;
+    const bool touching =
+        floor_m > 0.0 && std::any_of(pairs.begin(), pairs.end(), [&](const HullPairContact& p) {
+          return p.signed_distance_m <=
+                 m.tool_bounds.Reach(p.node_A) + m.object_bounds[k].Reach(p.node_B);
+        });
+    const double object_floor_m = touching ? 0.0 : floor_m;
+    std::size_t kept = 0;
+    for (const HullPairContact& p : pairs) {
+      if (kept == d.reachable_pairs.size()) break;
+      const double pair_reach = m.tool_bounds.Reach(p.node_A) + m.object_bounds[k].Reach(p.node_B);
+      if (p.signed_distance_m > pair_reach) {
+        if (p.signed_distance_m > pair_reach + speculative_margin(p, object_floor_m)) {
+          ++d.step_faults.unreachable_pairs;
+          continue;
         }
-        d.pair_bounds[kept] = std::max(0.0, -p.signed_distance_m) + pair_reach + cell;
-        d.reachable_pairs[kept++] = p;
+        ++d.step_faults.speculative_pairs;
       }
-      pairs = {d.reachable_pairs.data(), kept};
-      pair_bounds = {d.pair_bounds.data(), kept};
+      d.pair_bounds[kept] = std::max(0.0, -p.signed_distance_m) + pair_reach + cell;
+      d.reachable_pairs[kept++] = p;
     }
+    pairs = {d.reachable_pairs.data(), kept};
+    const std::span<const double> pair_bounds(d.pair_bounds.data(), kept);
     if (pairs.empty()) continue;
     // 3. Contact clustering: one window per cluster, sized from its members' spread between the
     // pipeline's smallest and largest window; clusters whose windows would overlap merge while

@@ -171,7 +171,6 @@ struct RemoteStepData {
   int full_stage4_count = 0;
   std::array<ContactQuery, kMaxContacts> full_queries{};
   std::array<ContactLinearization, kMaxContacts> full_results{};
-  std::array<int, kMaxContacts> full_slots{};
   int full_count = 0;
   bool full_valid = false;
   /// The fast step's evaluations before they are taken.

@@ -281,10 +281,9 @@ void RecordFullStep(RemoteStepData& d) noexcept {
     q.tool_triangles = TriangleSubset::All();
     d.full_queries[k] = q;
     d.full_results[k] = d.last_results[k];
-    d.full_slots[k] = d.contact_field_slot[k];
     // A contact without a field (no overlap on its window, dropped by the grazing guard, or no
     // field made) could change with the pose in a way no field tells: the next step is a full one.
-    valid = valid && d.full_slots[k] >= 0;
+    valid = valid && d.contact_field_slot[k] >= 0;
   }
   d.full_valid = valid;
 }
