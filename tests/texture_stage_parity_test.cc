@@ -239,6 +239,28 @@ int ExpectSameHeights(const std::vector<float>& ref, const std::vector<float>& f
   return covered;
 }
 
+// The six seed models these tests use, built at the seed's coarse counts (ctest runs this first,
+// alone, so that the other tests of this program and remote_step_alloc_test read them from the
+// build's model cache): each decimated to about its seed count, textured, its bake error small
+// against its size.
+TEST(TextureStageParity, SixSeedModelsAreBuiltAtTheSeedsCoarseCounts) {
+  for (const SeedModel which : kAll) {
+    double bake_error_m = -1.0;
+    const HapticModel& m = Seed(which, &bake_error_m);
+    const auto seed = static_cast<double>(SeedModelSpecOf(which).seed_coarse_triangles);
+    const auto n = static_cast<double>(m.triangles.size());
+    EXPECT_GE(n, 0.5 * seed) << SeedModelName(which);
+    EXPECT_LE(n, 1.5 * seed) << SeedModelName(which);
+    EXPECT_TRUE(std::isfinite(bake_error_m) && bake_error_m >= 0.0) << SeedModelName(which);
+    glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi = -lo;
+    for (const glm::dvec3& p : m.vertices_O) {
+      lo = glm::min(lo, p);
+      hi = glm::max(hi, p);
+    }
+    EXPECT_LT(bake_error_m, 0.1 * glm::length(hi - lo)) << SeedModelName(which);
+  }
+}
+
 TEST(TextureStageParity, FastRenderDrawsTheReferenceHeightsOnAllSixSeedModels) {
   std::mt19937 rng(15);
   int covered = 0;
