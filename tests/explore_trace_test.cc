@@ -94,6 +94,28 @@ TEST(Explore, TheOperatorFoundTheObjectsAndPressedOnThem) {
 // are the trace's: counted again from the rows, at each end of such a phase the contact force on
 // the tool is above the summary's threshold exactly where the summary lists it. The summary counts
 // the loop's rows: where the trace writer dropped some, the two cannot be compared.
+// Each depth field the remote node sent is decoded once by the operator: a field still decoding
+// is not asked for again, and a copy that arrives meanwhile is a duplicate, not a second decode
+// (on a loopback nothing is lost; a field is completed again only when the loop lost it or the
+// decoder found no buffer for it, and then asked for).
+TEST(Explore, EachDepthFieldIsDecodedOnce) {
+  const nlohmann::json s = Summary();
+  std::ifstream in(OutDir() + "/remote_summary.json");
+  ASSERT_TRUE(in.good()) << "no remote_summary.json at " << OutDir();
+  const nlohmann::json r = nlohmann::json::parse(in);
+  const nlohmann::json& op = s["transport"]["depth_fields"];
+  if (!op.value("agreed", false)) GTEST_SKIP() << "no depth fields in this run";
+  const auto sent = r["transport"]["depth_fields"]["fields_sent"].get<std::int64_t>();
+  const auto again = op["fields_missing_in_loop"].get<std::int64_t>() +
+                     op["fields_without_buffer"].get<std::int64_t>();
+  EXPECT_GT(sent, 0);
+  EXPECT_LE(op["fields_completed"].get<std::int64_t>(), sent + again)
+      << "fields completed more often than sent: copies decoded twice ("
+      << op["nacks_sent"].get<std::int64_t>() << " repairs asked, "
+      << r["transport"]["depth_fields"]["fields_sent_twice"].get<std::int64_t>()
+      << " fields sent twice)";
+}
+
 TEST(Explore, TheSummaryListsThePhaseEndsWhereTheToolWasWedged) {
   const nlohmann::json s = Summary();
   ASSERT_TRUE(s.contains("wedged")) << "summary.json says nothing of wedged phase ends";

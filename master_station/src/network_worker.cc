@@ -367,6 +367,10 @@ void NetworkWorker::OnDepthFieldFragment(const wire::SceneFragmentMessage& fragm
   e->bytes.assign(field_reassembler_.completed().begin(), field_reassembler_.completed().end());
   decoding_ids_.push_back(e->id);
   to_decode_.Push(e);  // cannot fail: the ring holds the whole pool
+  // Held from now on: a model naming it asks for no repair while it decodes (which can take
+  // longer than the repair gap on a loaded machine), and a resent copy is a duplicate rather
+  // than a second decode. A field that finds no buffer is asked for again (TakeDecodedFields).
+  field_reassembler_.Held(e->id);
 }
 
 bool NetworkWorker::NamesFieldInDecoding(const ContactModel& model) const noexcept {
@@ -400,7 +404,8 @@ void NetworkWorker::TakeDecodedFields() {
         field_reassembler_.Held(d.id);  // asking again would not help
         break;
       case DecodeOutcome::kNoBuffer:
-        ++fields_without_buffer_;  // asked for again when a model names it
+        ++fields_without_buffer_;
+        field_reassembler_.Lost(d.id, SteadyNowNs());  // asked for again
         break;
     }
   }
