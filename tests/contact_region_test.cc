@@ -544,6 +544,14 @@ TEST(ContactRegion, AStepWhoseKeptFieldsHoldItsContactsLinearizesFromThemWithout
   EXPECT_EQ(pipeline.step_faults().steps_from_kept_fields, 1);
   ASSERT_EQ(m2.num_contacts, 1);
   EXPECT_NE(m2.contacts[0].depth_field_id, id0);
+  // Stage 5b never ran (each contact's δ is its field's); without fields it refines each
+  // contact.
+  EXPECT_EQ(pipeline.depth_refinement_counters().contacts, 0u);
+  PipelineOptions linearized = options;
+  linearized.depth_fields = false;
+  HapticTexturePipeline without(scene, linearized);
+  ASSERT_EQ(without.Step(X0, 1, t).num_contacts, 1);
+  EXPECT_EQ(without.depth_refinement_counters().contacts, 1u);
 }
 
 TEST(ContactRegion, BlockRestingOnTheGearBearsOnItsEdgesAndItsFieldCarriesTheKink) {

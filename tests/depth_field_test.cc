@@ -745,6 +745,57 @@ double NormalAngle(double x) { return std::atan2(-PlateSlope(x), 1.0); }
 
 }  // namespace closed_form
 
+// Two surfaces one behind the other along n (a thin fin's face, and beyond its rim the next
+// fin's face 10 mm further back): b steps between two nodes.
+double FinFaceThenStep(double x, double) { return x <= 20 * kH + 1e-9 ? 0.0 : -10e-3; }
+double FaceOverTheRim(double x, double y) {
+  const double lo = 10 * kH - 1e-9, hi = 29 * kH + 1e-9;
+  return x >= lo && x <= hi && y >= lo && y <= hi ? -0.3e-3 : std::nan("");
+}
+
+TEST(DepthField, AStepBetweenTwoSurfacesBecomesAChamferAndAFaceOverItIsPushedSidewaysFarLess) {
+  // A flat face pressed 0.3 mm into the upper surface, half of it beyond the rim, slid across
+  // the rim by two cells: the bicubic across the raw step overshoots the upper surface (by 7 %
+  // of the step) with slopes of tens, and the face's deepest nodes ride that bump; limited to
+  // kDepthFieldMaxDescentSlope the step is a chamfer below the rim, and the face rests on the
+  // upper surface: its depth is its press (plus at most the bicubic's overshoot at the chamfer's
+  // edge), its force within about 45° of the normal.
+  const RigidTransform X_WF = TurnedFrame();
+  const RigidTransform X_WT0 = ToolAboveFace(X_WF);
+  DepthField raw = MakeField(kN, kH, X_WF, X_WT0, FinFaceThenStep, FaceOverTheRim);
+  DepthField limited = raw;
+  LimitDepthMapDescent(limited.nx, limited.ny, limited.cell_m, kDepthFieldMaxDescentSlope,
+                       limited.env_height_m);
+  ASSERT_TRUE(limited.Prepare());
+  // Only the lower surface moved, and no neighbour falls more than the limit below another.
+  for (int j = 0; j < kN; ++j) {
+    for (int i = 0; i + 1 < kN; ++i) {
+      const float b0 = limited.env_height_m[static_cast<std::size_t>(j * kN + i)];
+      const float b1 = limited.env_height_m[static_cast<std::size_t>(j * kN + i + 1)];
+      EXPECT_LE(b0 - b1, kDepthFieldMaxDescentSlope * kH * (1.0 + 1e-5)) << i << " " << j;
+      if (i <= 20) EXPECT_EQ(b0, 0.0f);
+    }
+  }
+  const glm::dvec3 u_W = X_WF.rotation * glm::dvec3(1.0, 0.0, 0.0);
+  double raw_worst = 0.0, worst = 0.0;
+  for (double t = -1.0; t <= 1.0 + 1e-9; t += 0.125) {
+    RigidTransform X_WT = X_WT0;
+    X_WT.translation += t * kH * u_W;
+    const DepthFieldEvaluation e = DepthFieldDepthAt(limited, X_WT);
+    ASSERT_TRUE(e.valid);
+    // At most the bicubic's overshoot at the chamfer's upper edge (7 % of a cell's fall).
+    EXPECT_GE(e.max_node_depth_m, 0.3e-3 - 1e-6) << t;
+    EXPECT_LE(e.max_node_depth_m, 0.3e-3 + 0.08 * kDepthFieldMaxDescentSlope * kH) << t;
+    worst = std::max(worst, std::abs(glm::dot(e.gradient.d_translation_W, u_W)));
+    raw_worst = std::max(
+        raw_worst, std::abs(glm::dot(DepthFieldDepthAt(raw, X_WT).gradient.d_translation_W, u_W)));
+  }
+  std::printf("face over a 10 mm step: largest |d(depth)/du| %.2f raw, %.2f chamfered\n", raw_worst,
+              worst);
+  EXPECT_LT(worst, 1.5);
+  EXPECT_GT(raw_worst, 5.0 * worst) << "the raw step's bump pushes sideways";
+}
+
 TEST(DepthField, SphereSlidAcrossARippledPlateFollowsTheClosedFormInDepthAndDirection) {
   // Rendered once at q0, evaluated along a 5 mm slide within its margin at poses held 60 µm deep
   // by the closed form: the depth within 20 µm and the force within 3° of the plate's normal at

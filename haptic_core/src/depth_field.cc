@@ -872,6 +872,53 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
   return out;
 }
 
+void LimitDepthMapDescent(int nx, int ny, double cell_m, double max_slope,
+                          std::vector<float>& heights_m) noexcept {
+  if (nx < 1 || ny < 1 || !(cell_m > 0.0) || !(max_slope > 0.0) || !std::isfinite(max_slope) ||
+      heights_m.size() != static_cast<std::size_t>(nx) * static_cast<std::size_t>(ny)) {
+    return;
+  }
+  // Two raster passes of the cone's chamfer (a node's neighbours along the axes at one cell, on
+  // the diagonals at √2 cells): b_i ← max(b_i, b_j − S·h·|i − j|) over the neighbours a pass has
+  // already visited. NaN counts as no surface (−∞) and stays NaN where no cone reaches.
+  const float drop = static_cast<float>(max_slope * cell_m);
+  const float drop_diagonal = static_cast<float>(max_slope * cell_m * std::sqrt(2.0));
+  constexpr float kNone = -std::numeric_limits<float>::infinity();
+  float* b = heights_m.data();
+  const auto at = [&](int i, int j) noexcept {
+    const float v = b[static_cast<std::size_t>(j) * nx + i];
+    return std::isnan(v) ? kNone : v;
+  };
+  const auto raise = [&](int i, int j, float v) noexcept {
+    float& x = b[static_cast<std::size_t>(j) * nx + i];
+    if (v > kNone && (std::isnan(x) || v > x)) x = v;
+  };
+  for (int j = 0; j < ny; ++j) {
+    for (int i = 0; i < nx; ++i) {
+      float v = kNone;
+      if (i > 0) v = std::max(v, at(i - 1, j) - drop);
+      if (j > 0) {
+        v = std::max(v, at(i, j - 1) - drop);
+        if (i > 0) v = std::max(v, at(i - 1, j - 1) - drop_diagonal);
+        if (i + 1 < nx) v = std::max(v, at(i + 1, j - 1) - drop_diagonal);
+      }
+      raise(i, j, v);
+    }
+  }
+  for (int j = ny - 1; j >= 0; --j) {
+    for (int i = nx - 1; i >= 0; --i) {
+      float v = kNone;
+      if (i + 1 < nx) v = std::max(v, at(i + 1, j) - drop);
+      if (j + 1 < ny) {
+        v = std::max(v, at(i, j + 1) - drop);
+        if (i + 1 < nx) v = std::max(v, at(i + 1, j + 1) - drop_diagonal);
+        if (i > 0) v = std::max(v, at(i - 1, j + 1) - drop_diagonal);
+      }
+      raise(i, j, v);
+    }
+  }
+}
+
 DepthFieldCache::DepthFieldCache(int slots) {
   if (slots < 1) {
     throw std::invalid_argument("a depth-field cache needs at least 1 slot, got " +

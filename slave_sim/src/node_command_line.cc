@@ -69,7 +69,9 @@ void AddDepthOptions(CLI::App& adv, NodeCommandLine& cl) {
                "the grid's cell samples alone: by default each contact's depth is refined to the\n"
                "texture's full resolution around the grid's deepest cells (stage 5b,\n"
                "docs/DESIGN.md §4), which the grid's mip-filtered samples read tens of\n"
-               "micrometres low; off is 7-26 % faster a step (docs/measurements.md)");
+               "micrometres low; off is 7-26 % faster a step (docs/measurements.md). Only for an\n"
+               "operator without depth fields (master_station --no-depth-fields): with them each\n"
+               "contact's depth is its field's");
 }
 
 // Speculative contacts.

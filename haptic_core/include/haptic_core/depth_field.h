@@ -59,6 +59,33 @@ inline constexpr int kMaxDepthFieldNodeStride = 8;
 /// margin, in cells): bounds the memory the operator's loop preallocates per field.
 inline constexpr int kMaxDepthFieldSide = 256;
 
+/// The least cosine between an environment triangle's face normal and a field's normal n for
+/// the triangle to be rendered into the field (cos 75°; the texture stage's own renders take
+/// every triangle above kPatchFacingThreshold, 87°). Nearly edge-on, a triangle's heights along n
+/// span millimetres within a cell: the rim of a thin fin seen along the fin's normal reads
+/// millimetres above the fin's face at single nodes, spikes whose bicubic slopes turn the
+/// contact's force sideways, one way or the other as the tool moves by a cell.
+inline constexpr double kDepthFieldFacingThreshold = 0.26;
+
+/// The steepest an environment's surface falls away in a rendered field (tan 75°, the slope at
+/// kDepthFieldFacingThreshold; LimitDepthMapDescent). Where two surfaces that both face n lie
+/// one behind the other (beyond a thin fin's rim, seen along the fin's normal, the next fin's
+/// face millimetres further back), b steps between two nodes: the bicubic across the step
+/// overshoots the upper surface by up to 7 % of the step with slopes of the step over a cell
+/// (tens), so that the deepest node sits on a bump whose sides push the tool sideways, one way
+/// and the other from tick to tick, at the contact force's bound. Textures no steeper than this
+/// are left as they are.
+inline constexpr double kDepthFieldMaxDescentSlope = 3.73;
+
+/// Limits how steeply `heights_m` (#nx·ny, row-major, m, NaN: no surface) falls away from any
+/// node: each node is raised to the highest of b_j − max_slope·d_ij over the other nodes j (d_ij
+/// their distance, m, on the grid of spacing `cell_m`, along the axes and diagonals), so that a
+/// step becomes a chamfer of slope max_slope below its upper edge and a node without a surface
+/// takes that chamfer's height (it stays NaN only in a map without any surface). Surfaces no
+/// steeper than max_slope are unchanged. noexcept; allocation-free; does nothing for bad sizes.
+void LimitDepthMapDescent(int nx, int ny, double cell_m, double max_slope,
+                          std::vector<float>& heights_m) noexcept;
+
 /// One contact window's two surfaces (our construction [R] on the seed's directional penetration
 /// depth [S][L]). Frame F: origin at grid node (0, 0), x along the lattice's u, y along v, z
 /// along its normal n (from the environment towards the tool); environment node (i, j) lies at
@@ -67,7 +94,11 @@ inline constexpr int kMaxDepthFieldSide = 256;
 ///  - env_height_m[j·nx + i] = b: the height along z_F of the environment's surface facing +n
 ///    at the node (m; sampled at the node, the topmost where several surfaces lie over it, with
 ///    the texture's mip level at the cell, as the texture stage renders it), NaN where the
-///    environment has no surface there. b is fixed in the environment's frame.
+///    environment has no surface there. b is fixed in the environment's frame. Triangles
+///    nearly edge-on to n are not rendered (kDepthFieldFacingThreshold), and b nowhere falls
+///    away more steeply than kDepthFieldMaxDescentSlope (LimitDepthMapDescent): beyond the
+///    surface's edges it falls away at that slope, and NaN remains only in a field without
+///    surface.
 ///  - tool_height_m[j·nx + i] = a: the height along z_F of the tool's surface facing −n under
 ///    tool node (i, j) at the pose X_WT0 (m; the lowest where several lie over it), NaN where
 ///    none. The tool's nodes are
@@ -213,7 +244,9 @@ struct DepthFieldLattice {
 /// Renders a contact's depth field on the remote node (the texture stage's CPU raster,
 /// RenderPatchHeightsFast): the query's window, on `lattice`, grown by the travel margin on each
 /// side, the environment at query.X_WO and the tool at X_WT (T at its centre of mass), each
-/// restricted to the query's triangle subsets, both with the textures' mip level at the cell.
+/// restricted to the query's triangle subsets, both with the textures' mip level at the cell;
+/// the environment without its triangles nearly edge-on to n (kDepthFieldFacingThreshold) and
+/// falling away nowhere more steeply than kDepthFieldMaxDescentSlope (DepthField::env_height_m).
 /// Keeps its triangle lists between calls (allocates only while they grow).
 class DepthFieldRenderer {
  public:

@@ -109,7 +109,8 @@ struct PipelineOptions {
   /// Stage 5b: δ refined from the grid's cell samples to the finest texture level
   /// (DepthRefiner, depth_refinement.h), after either backend. On: δ to the finest level, and a
   /// lower force error (measured: docs/measurements.md). Off (`slave_sim --no-refine-depth`, the
-  /// frontier's "grid_only"): the grid's cell samples, the reference for parity.
+  /// frontier's "grid_only"): the grid's cell samples, the reference for parity. With
+  /// depth_fields the stage does not run: each contact's δ and gradient are its field's (5d).
   bool refine_depth = true;
   /// How stage 5b refines (steps, sub-samples, search floor).
   DepthRefinementOptions depth_refinement;
@@ -302,7 +303,8 @@ class HapticTexturePipeline {
   std::span<const ContactLinearization> last_linearizations() const noexcept;
   /// The kGradientSamples depth samples of each of last_contact_queries() (query-major,
   /// GradientSamplePoses() order), as stage 5b left them (refined where PipelineOptions::
-  /// refine_depth is on); a step from kept fields takes none (the last full step's stay). Valid
+  /// refine_depth is on and depth_fields off); a step from kept fields takes none (the last full
+  /// step's stay). Valid
   /// until the next Step().
   std::span<const DepthSample> last_depth_samples() const noexcept;
   /// What stage 5b did since construction.

@@ -112,8 +112,9 @@ void HapticTexturePipeline::RunTextureStages(const RigidTransform& X_WT) noexcep
     d.last_results[static_cast<std::size_t>(d.split_first + k)].stiffness_n_per_m *=
         d.split_weights[static_cast<std::size_t>(k)];
   }
-  // Stage 5b: δ refined to the finest texture level.
-  if (options_.refine_depth) {
+  // Stage 5b: δ refined to the finest texture level. Not with depth fields: stage 5d gives each
+  // contact its field's δ and ∇δ.
+  if (options_.refine_depth && !options_.depth_fields) {
     d.refiner.BeginStep();
     for (int i = 0; i < d.last_num_queries; ++i) {
       d.refiner.Refine(*scene_.tool, X_WT, d.last_queries[i],

@@ -150,7 +150,8 @@ bool DepthFieldRenderer::Render(const HapticModel& tool, const RigidTransform& X
   out.env_height_m.assign(cells, -std::numeric_limits<float>::infinity());
   out.tool_height_m.assign(cells, std::numeric_limits<float>::infinity());
   SelectPatchTrianglesIn(query.environment_triangles, *query.environment, query.X_WO, w,
-                         PatchSide::kEnvironment, (m + 1) * h, env_triangles_, 0.0, nullptr,
+                         PatchSide::kEnvironment, (m + 1) * h, env_triangles_,
+                         kPatchFacingThreshold - kDepthFieldFacingThreshold, nullptr,
                          query.environment_triangles.tree);
   RenderPatchHeightsFast(*query.environment, query.X_WO, env_triangles_, w, PatchSide::kEnvironment,
                          m, out.env_height_m);
@@ -161,6 +162,7 @@ bool DepthFieldRenderer::Render(const HapticModel& tool, const RigidTransform& X
   for (float& b : out.env_height_m) {
     if (!std::isfinite(b)) b = std::numeric_limits<float>::quiet_NaN();
   }
+  LimitDepthMapDescent(side, side, h, kDepthFieldMaxDescentSlope, out.env_height_m);
   for (float& a : out.tool_height_m) {
     if (!std::isfinite(a)) a = std::numeric_limits<float>::quiet_NaN();
   }
