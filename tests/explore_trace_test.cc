@@ -90,10 +90,6 @@ TEST(Explore, TheOperatorFoundTheObjectsAndPressedOnThem) {
       Median(device_force), s["workspace"]["jumps"].get<int>());
 }
 
-// The summary's wedged phase ends (a release or a transfer that ended with the tool still loaded)
-// are the trace's: counted again from the rows, at each end of such a phase the contact force on
-// the tool is above the summary's threshold exactly where the summary lists it. The summary counts
-// the loop's rows: where the trace writer dropped some, the two cannot be compared.
 // Each depth field the remote node sent is decoded once by the operator: a field still decoding
 // is not asked for again, and a copy that arrives meanwhile is a duplicate, not a second decode
 // (on a loopback nothing is lost; a field is completed again only when the loop lost it or the
@@ -116,6 +112,10 @@ TEST(Explore, EachDepthFieldIsDecodedOnce) {
       << " fields sent twice)";
 }
 
+// The summary's wedged phase ends (a release or a transfer that ended with the tool still loaded)
+// are the trace's: counted again from the rows, at each end of such a phase the contact force on
+// the tool is above the summary's threshold exactly where the summary lists it. The summary counts
+// the loop's rows: where the trace writer dropped some, the two cannot be compared.
 TEST(Explore, TheSummaryListsThePhaseEndsWhereTheToolWasWedged) {
   const nlohmann::json s = Summary();
   ASSERT_TRUE(s.contains("wedged")) << "summary.json says nothing of wedged phase ends";

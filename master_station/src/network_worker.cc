@@ -395,13 +395,11 @@ void NetworkWorker::TakeDecodedFields() {
     any = true;
     std::erase(decoding_ids_, d.id);
     switch (d.outcome) {
-      case DecodeOutcome::kHanded:
+      case DecodeOutcome::kHanded:  // held since it was queued (OnDepthFieldFragment)
         ++fields_handed_;
-        field_reassembler_.Held(d.id);
         break;
-      case DecodeOutcome::kUndecodable:
+      case DecodeOutcome::kUndecodable:  // stays held: asking again would not help
         ++fields_undecodable_;
-        field_reassembler_.Held(d.id);  // asking again would not help
         break;
       case DecodeOutcome::kNoBuffer:
         ++fields_without_buffer_;

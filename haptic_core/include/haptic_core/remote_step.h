@@ -304,8 +304,7 @@ class HapticTexturePipeline {
   /// The kGradientSamples depth samples of each of last_contact_queries() (query-major,
   /// GradientSamplePoses() order), as stage 5b left them (refined where PipelineOptions::
   /// refine_depth is on and depth_fields off); a step from kept fields takes none (the last full
-  /// step's stay). Valid
-  /// until the next Step().
+  /// step's stay). Valid until the next Step().
   std::span<const DepthSample> last_depth_samples() const noexcept;
   /// What stage 5b did since construction.
   const DepthRefinementCounters& depth_refinement_counters() const noexcept;
@@ -347,9 +346,10 @@ class HapticTexturePipeline {
   void FindContactCandidates(const RigidTransform& X_WT, const Twist& V_WT_W,
                              StepTimings& timings) noexcept;
   /// Stages 5–5d on the data's last_queries[0, last_num_queries) (stage 4's) at tool pose X_WT (W,
-  /// T at the tool's centre of mass): linearization, 5a's split, 5b's refinement, the bearing
-  /// edge's slope, the grazing guard, 5c's shares and 5d's depth fields (recording the step for
-  /// TakeStepFromKeptFields); leaves last_queries, last_results and last_num_queries for stage 6.
+  /// T at the tool's centre of mass): linearization, 5a's split, 5b's refinement (without depth
+  /// fields), the bearing edge's slope, the grazing guard, 5c's shares and 5d's depth fields
+  /// (recording the step for TakeStepFromKeptFields); leaves last_queries, last_results and
+  /// last_num_queries for stage 6.
   void RunTextureStages(const RigidTransform& X_WT) noexcept;
   /// Stage 5: linearizes the data's last_queries[0, n) into last_results with the backend in use
   /// (the GPU backend takes one window size per batch: windows sized from their clusters go to it
