@@ -156,7 +156,8 @@ int main(int argc, char** argv) {
       "depth_fields (0/1: the contact model as depth fields, evaluated by the tick at its\n"
       "tool pose), field_subdivision (nodes per window cell, default 2), field_speed_mm_s\n"
       "(the fields' travel margin is this times the round trip, default 50) with\n"
-      "field_min_margin_mm (default 2), field_smooth_max_um (the smooth maximum's width);\n"
+      "field_min_margin_mm (default 2), field_smooth_max_um (the smooth maximum's width),\n"
+      "pressure (0/1: the fields' force law, slave_sim --force-law seed / pressure);\n"
       "remote_period_ms (the remote node steps when a tool state arrives, and on the\n"
       "extrapolated pose at most this often; default 0: every tick)");
   std::string reference_keys;

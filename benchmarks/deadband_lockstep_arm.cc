@@ -165,6 +165,8 @@ Arm ParseArm(const std::string& text) {
     } else if (key == "field_smooth_max_um") {
       if (!(v > 0.0)) throw std::invalid_argument("--arm: field_smooth_max_um must be > 0");
       arm.depth_field_smooth_max_m = v * 1e-6;
+    } else if (key == "pressure") {  // 0 / 1: slave_sim --force-law seed / pressure
+      arm.force_law = v != 0.0 ? ht::ForceLaw::kPressure : ht::ForceLaw::kSeed;
     } else if (key == "force_floor") {
       arm.model.force_floor_scale_n = v;
     } else if (key == "torque_floor") {
@@ -241,6 +243,7 @@ ArmRun RunArm(const Setup& setup, const Arm& arm) {
       options.depth_field_smooth_max_m = arm.depth_field_smooth_max_m;
     }
     options.depth_field_subdivision = arm.depth_field_subdivision;
+    options.force_law = arm.force_law;
     options.Validate();
   }
   // The CPU backend with the setting's texture path and rotation gradient (as the frontier makes

@@ -49,6 +49,8 @@ struct Arm {
   int depth_field_subdivision = ht::PipelineOptions{}.depth_field_subdivision;
   /// The fields' smooth-maximum width (m; < 0: PipelineOptions' default).
   double depth_field_smooth_max_m = -1.0;
+  /// The fields' force law (PipelineOptions::force_law, slave_sim --force-law).
+  ht::ForceLaw force_law = ht::ForceLaw::kSeed;
   /// The remote node steps when a tool state has arrived, and otherwise (on the pose extrapolated
   /// under the tool-state deadband) at most this often (s; 0: every tick).
   double remote_step_period_s = 0.0;

@@ -933,6 +933,8 @@ DepthField RoughDepthField() {
   f.X_WT0.rotation = glm::normalize(glm::dquat(0.8, 0.0, 0.1, -0.1));
   f.travel_margin_m = 2e-3;
   f.smooth_max_m = 2e-6;
+  f.force_law = ForceLaw::kPressure;
+  f.pressure_area_m2 = 3.7e-4;
   f.env_height_m = RoughDepthMap(f.nx, f.ny);
   f.tool_height_m.resize(f.env_height_m.size());
   for (int j = 0; j < f.ny; ++j) {
@@ -974,6 +976,8 @@ TEST(DepthFieldCodec, RoundTripKeepsTheFieldAndItsDepthWithinTheMapsStep) {
   EXPECT_EQ(g.X_WT0.rotation, f.X_WT0.rotation);
   EXPECT_EQ(g.travel_margin_m, f.travel_margin_m);
   EXPECT_EQ(g.smooth_max_m, f.smooth_max_m);
+  EXPECT_EQ(g.force_law, f.force_law);
+  EXPECT_EQ(g.pressure_area_m2, f.pressure_area_m2);
   // The depth at displaced poses moves by at most the two maps' half steps (0.25 µm each).
   for (const double dx : {0.0, 0.13e-3, -0.41e-3}) {
     RigidTransform X = f.X_WT0;
@@ -1013,6 +1017,12 @@ TEST(DepthFieldCodec, DecoderRefusesDamagedOrInvalidFieldsWithAReason) {
   bad = f;
   bad.tool_offset_u_m = 3 * f.cell_m;
   rejects(EncodeDepthField(bad), "a tool offset beyond a cell");
+  bad = f;
+  bad.force_law = static_cast<ForceLaw>(7);
+  rejects(EncodeDepthField(bad), "an unknown force law");
+  bad = f;
+  bad.pressure_area_m2 = -1.0;
+  rejects(EncodeDepthField(bad), "the pressure law with a negative reference area");
   // Sides that disagree with a map's.
   b = good;
   b[33] = static_cast<std::uint8_t>(f.nx - 1);  // nx, after 33 bytes

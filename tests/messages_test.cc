@@ -398,7 +398,8 @@ TEST(Messages, HeaderFieldsAreCheckedBeforeTheMac) {
   EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0b), DecodeStatus::kBadVersion);  // nor 11
   EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0c), DecodeStatus::kBadVersion);  // nor 12
   EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0d), DecodeStatus::kBadVersion);  // nor 13
-  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0f), DecodeStatus::kBadVersion);
+  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x0e), DecodeStatus::kBadVersion);  // nor 14
+  EXPECT_EQ(mutate(kHeaderVersionOffset, 0x10), DecodeStatus::kBadVersion);
   EXPECT_EQ(mutate(kHeaderTypeOffset, 0x7f), DecodeStatus::kUnknownType);
   EXPECT_EQ(mutate(kHeaderTypeOffset, 0x00), DecodeStatus::kUnknownType);
   EXPECT_EQ(mutate(5, 0x01), DecodeStatus::kBadMac);   // session id changed
@@ -734,11 +735,11 @@ TEST(Messages, TheManifestCarriesEverySceneObjectKindAndNoOther) {
 }
 
 TEST(Messages, AnOlderOperatorsHelloIsOpenedForARejectInItsOwnVersion) {
-  // Versions 4 to 13 changed neither the Hello body nor the Reject body; version 3's Hello body is
+  // Versions 4 to 15 changed neither the Hello body nor the Reject body; version 3's Hello body is
   // the first 32 bytes (no deadband terms). Versions 2 to 7 had the 28-byte header and the whole
   // 32-byte MAC (test::LegacyDatagram writes them byte by byte).
-  EXPECT_EQ(kProtocolVersion, 14);
-  EXPECT_EQ(kMinProtocolVersion, 14);
+  EXPECT_EQ(kProtocolVersion, 15);
+  EXPECT_EQ(kMinProtocolVersion, 15);
   const MacKey key = TestKey();
   for (const std::uint16_t version : {std::uint16_t{7}, std::uint16_t{6}, std::uint16_t{5},
                                       std::uint16_t{4}, std::uint16_t{3}, std::uint16_t{2}}) {

@@ -95,6 +95,8 @@ std::vector<std::uint8_t> EncodeDepthField(const DepthField& f,
   w.Pose(f.X_WT0);
   w.Put<double>(f.travel_margin_m);
   w.Put<double>(f.smooth_max_m);
+  w.Put<std::uint8_t>(static_cast<std::uint8_t>(f.force_law));
+  w.Put<double>(f.pressure_area_m2);
   w.Put<std::uint32_t>(static_cast<std::uint32_t>(env.size()));
   w.bytes.insert(w.bytes.end(), env.begin(), env.end());
   w.Put<std::uint32_t>(static_cast<std::uint32_t>(tool.size()));
@@ -127,6 +129,8 @@ bool DecodeDepthField(std::span<const std::uint8_t> bytes, DepthField& out,
   out.X_WT0 = r.Pose();
   out.travel_margin_m = r.Get<double>();
   out.smooth_max_m = r.Get<double>();
+  out.force_law = static_cast<ForceLaw>(r.Get<std::uint8_t>());
+  out.pressure_area_m2 = r.Get<double>();
   for (const bool tool : {false, true}) {
     const std::uint32_t n = r.Get<std::uint32_t>();
     const std::span<const std::uint8_t> map = r.Bytes(n);
@@ -150,7 +154,8 @@ bool DecodeDepthField(std::span<const std::uint8_t> bytes, DepthField& out,
     return false;
   }
   if (!out.Prepare()) {
-    error = "the depth field is not valid (DepthField::Prepare: id, frames, sides, margin, width)";
+    error =
+        "the depth field is not valid (DepthField::Prepare: id, frames, sides, margin, width, law)";
     return false;
   }
   return true;

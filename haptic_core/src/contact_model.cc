@@ -42,7 +42,7 @@ ContactModelEvaluation EvaluateWithFields(const ContactModel& model, const Rigid
     const double k = c.stiffness_n_per_m * scale;
     if (!std::isfinite(c.depth_m) || !std::isfinite(k) || !(k > 0.0)) continue;
     PenetrationGradient J_active;
-    bool curved = false;
+    bool curved = false, pressure = false;
     double depth;
     DepthFieldEvaluation fe;
     if (has_fields && c.depth_field_id != 0) fe = field_at(c.depth_field_id, X_WT);
@@ -53,6 +53,7 @@ ContactModelEvaluation EvaluateWithFields(const ContactModel& model, const Rigid
       J_active = fe.gradient;
       curvature = fe.curvature;
       curved = true;
+      pressure = fe.force_law == ForceLaw::kPressure;
     } else {
       if (has_fields && c.depth_field_id != 0) ++out.field_fallbacks;
       depth = ContactDepthAt(c, dq, &J_active);
@@ -77,7 +78,11 @@ ContactModelEvaluation EvaluateWithFields(const ContactModel& model, const Rigid
     J << J_active.d_translation_W.x, J_active.d_translation_W.y, J_active.d_translation_W.z,
         J_active.d_rotation_W.x, J_active.d_rotation_W.y, J_active.d_rotation_W.z;
     out.K.noalias() -= k * (J * J.transpose());
-    out.G.noalias() += (k * depth) * (J * J.transpose());
+    if (pressure) {
+      out.G.noalias() += k * fe.pressure_damping;
+    } else {
+      out.G.noalias() += (k * depth) * (J * J.transpose());
+    }
     if (curved) out.K.noalias() -= (k * depth) * curvature;
   }
   return out;

@@ -158,7 +158,10 @@ bool DepthField::Prepare() {
       ny > kMaxDepthFieldSide || env_height_m.size() != n || tool_height_m.size() != n ||
       !(travel_margin_m >= 0.0) || !std::isfinite(travel_margin_m) || !(smooth_max_m > 0.0) ||
       !std::isfinite(smooth_max_m) || !(std::abs(tool_offset_u_m) <= cell_m) ||
-      !(std::abs(tool_offset_v_m) <= cell_m)) {
+      !(std::abs(tool_offset_v_m) <= cell_m) ||
+      (force_law != ForceLaw::kSeed && force_law != ForceLaw::kPressure) ||
+      (force_law == ForceLaw::kPressure &&
+       (!(pressure_area_m2 > 0.0) || !std::isfinite(pressure_area_m2)))) {
     return false;
   }
   env_bound_m.assign(n, -std::numeric_limits<float>::infinity());
@@ -206,14 +209,16 @@ bool DepthField::Prepare() {
   EnvBlockBounds(*this, kDepthFieldBlock, env_block_bound_m);
   EnvBlockBounds(*this, kDepthFieldSubBlock, env_sub_bound_m);
   EnvBlockBounds(*this, kDepthFieldSuperBlock, env_super_bound_m);
-  // Every tool node, then, for a dense field (kDepthFieldDenseNodes, kDepthFieldDenseTestedNodes),
-  // every 2nd, 4th, … node of the tool's lattice along each axis, until the evaluation at X_WT0
-  // fits.
+  // Every tool node, then, for a dense field (kDepthFieldDenseNodes, kDepthFieldDenseTestedNodes;
+  // kDepthFieldDensePressureNodes under the pressure law), every 2nd, 4th, … node of the tool's
+  // lattice along each axis, until the evaluation at X_WT0 fits.
   KeepToolNodes(1);
   prepared = true;
+  const int dense =
+      force_law == ForceLaw::kPressure ? kDepthFieldDensePressureNodes : kDepthFieldDenseNodes;
   while (node_stride < kMaxDepthFieldNodeStride) {
     const DepthFieldEvaluation at_q0 =
-        DepthFieldDepthAt(*this, X_WT0, DepthFieldKernel::kAvx2, kDepthFieldDenseNodes + 1);
+        DepthFieldDepthAt(*this, X_WT0, DepthFieldKernel::kAvx2, dense + 1);
     if (!at_q0.over_budget && at_q0.nodes_tested <= kDepthFieldDenseTestedNodes) break;
     KeepToolNodes(2 * node_stride);
   }
@@ -281,6 +286,13 @@ struct NodeBatch {
 /// lane a share of the nodes, all relative to the running maximum m_ref.
 struct LaneSums {
   alignas(32) std::array<double, 4 * 28> v{};
+};
+
+/// The pressure law's sums in four lanes (AVX2), each lane a share of the overlapping nodes:
+/// Σ A d, Σ A d², Σ A d J (6), and the lower triangles of Σ A J Jᵀ and Σ A d J Jᵀ (21 each).
+constexpr int kPressureSums = 1 + 1 + 6 + 21 + 21;
+struct PressureLaneSums {
+  alignas(32) std::array<double, 4 * kPressureSums> v{};
 };
 
 #ifdef HT_DEPTH_FIELD_AVX2
@@ -488,36 +500,54 @@ __attribute__((target("avx2,fma"))) void AccumulateAvx2(const double w[kBatch],
     }
   }
 }
-#endif
 
-}  // namespace
-
-DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform& X_WT) noexcept {
-#ifdef HT_DEPTH_FIELD_AVX2
-  return DepthFieldDepthAt(f, X_WT,
-                           HasAvx2() ? DepthFieldKernel::kAvx2 : DepthFieldKernel::kScalar);
-#else
-  return DepthFieldDepthAt(f, X_WT, DepthFieldKernel::kScalar);
-#endif
+/// Adds the batch's overlapping nodes to the pressure law's lane sums (PressureLaneSums): w1 =
+/// A·d and w0 = A on lanes that overlap, 0 on the others.
+__attribute__((target("avx2,fma"))) void AccumulatePressureAvx2(const double w0[kBatch],
+                                                                const double w1[kBatch],
+                                                                const double d[kBatch],
+                                                                const double J[6][kBatch],
+                                                                PressureLaneSums& sums) noexcept {
+  double* v = sums.v.data();
+  const __m256d W0 = _mm256_loadu_pd(w0), W1 = _mm256_loadu_pd(w1);
+  _mm256_store_pd(v, _mm256_add_pd(_mm256_load_pd(v), W1));
+  _mm256_store_pd(v + 4, _mm256_fmadd_pd(W1, _mm256_loadu_pd(d), _mm256_load_pd(v + 4)));
+  __m256d j[6], w0j[6], w1j[6];
+  for (int a = 0; a < 6; ++a) {
+    j[a] = _mm256_loadu_pd(J[a]);
+    w0j[a] = _mm256_mul_pd(W0, j[a]);
+    w1j[a] = _mm256_mul_pd(W1, j[a]);
+    _mm256_store_pd(v + 4 * (2 + a), _mm256_add_pd(w1j[a], _mm256_load_pd(v + 4 * (2 + a))));
+  }
+  int k = 8;
+  for (int a = 0; a < 6; ++a) {
+    for (int c = 0; c <= a; ++c, ++k) {
+      _mm256_store_pd(v + 4 * k, _mm256_fmadd_pd(w0j[a], j[c], _mm256_load_pd(v + 4 * k)));
+      _mm256_store_pd(v + 4 * (k + 21),
+                      _mm256_fmadd_pd(w1j[a], j[c], _mm256_load_pd(v + 4 * (k + 21))));
+    }
+  }
 }
-
-bool DepthFieldKernelAvailable(DepthFieldKernel kernel) noexcept {
-#ifdef HT_DEPTH_FIELD_AVX2
-  return kernel == DepthFieldKernel::kScalar || HasAvx2();
-#else
-  return kernel == DepthFieldKernel::kScalar;
 #endif
-}
 
-DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform& X_WT,
-                                       DepthFieldKernel kernel, int max_nodes) noexcept {
-#ifdef HT_DEPTH_FIELD_AVX2
-  const bool batched = kernel == DepthFieldKernel::kAvx2 && HasAvx2();
-#else
-  const bool batched = false;
-  (void)kernel;
+/// The pressure law's sums (PressureLaneSums' order), in F's axes.
+struct PressureSums {
+  double volume = 0.0, squared = 0.0;
+  Vec6 first = Vec6::Zero();
+  Mat6 second = Mat6::Zero(), weighted = Mat6::Zero();
+};
+
+/// DepthFieldDepthAt's traversal under one law: kPressure false, the seed's smooth maximum over
+/// the nodes within the cutoff of the running maximum; true, the pressure law's sums over the
+/// nodes that overlap (DepthFieldEvaluation).
+template <bool kPressure>
+DepthFieldEvaluation EvaluateField(const DepthField& f, const RigidTransform& X_WT, bool batched,
+                                   int max_nodes) noexcept {
+#ifndef HT_DEPTH_FIELD_AVX2
+  batched = false;
 #endif
   DepthFieldEvaluation out;
+  if constexpr (kPressure) out.force_law = ForceLaw::kPressure;
   if (!f.prepared || !IsFiniteRigidTransform(X_WT)) return out;
   // The nodes' travel in F's plane (along n the field is exact): the centre of mass's in-plane
   // displacement plus the turn's reach.
@@ -647,10 +677,17 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
   // rescaled whenever the maximum rises).
   const double cutoff = kCutoffWidths * eps;
   double m_ref = -std::numeric_limits<double>::infinity();
+  // The least depth a node must be able to reach to count: within the cutoff of the running
+  // maximum (seed), or above 0 (pressure).
+  const auto floor = [&]() noexcept { return kPressure ? 0.0 : m_ref - cutoff; };
   double S0 = 0.0;
   Vec6 S1 = Vec6::Zero();
   Mat6 S2 = Mat6::Zero();
   Vec6 J;
+  // The pressure law's sums, each node standing for the tool area A.
+  const double area = (f.node_stride * h) * (f.node_stride * h);
+  PressureSums P;
+  PressureLaneSums pressure_lanes;
   // Batched (AVX2): candidates gathered kBatch at a time, their sums kept per lane.
   NodeBatch batch;
   LaneSums lanes;
@@ -662,6 +699,27 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
     // The weights as the scalar kernel takes them, in the nodes' order: each relative to the
     // running maximum when it is taken (whether it weighs in the curvature's sums), all relative
     // to the batch's last maximum in the end, the lanes' sums rescaled to it once.
+    if constexpr (kPressure) {
+      double w0[kBatch], w1[kBatch];
+      for (int k = 0; k < kBatch; ++k) {
+        const bool use = k < batch.n && std::isfinite(d[k]) && d[k] > 0.0;
+        w0[k] = use ? area : 0.0;
+        w1[k] = use ? area * d[k] : 0.0;
+        if (k < batch.n && std::isfinite(d[k])) {
+          ++out.nodes_evaluated;
+          m_ref = std::max(m_ref, d[k]);
+        }
+        if (use) {
+          ++out.overlapping_nodes;
+        } else {
+          d[k] = 0.0;  // a NaN must not reach the sums as 0·NaN
+          for (auto& component : Jb) component[k] = 0.0;
+        }
+      }
+      AccumulatePressureAvx2(w0, w1, d, Jb, pressure_lanes);
+      batch.n = 0;
+      return;
+    }
     bool use[kBatch], curvature[kBatch];
     const double m_before = m_ref;
     const double curvature_cut = eps * std::log(kCurvatureWeight);
@@ -669,7 +727,7 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
       // The scalar kernel's test against the running maximum as it stands at this node (the
       // candidates were tested against the maximum before the batch), so that both kernels
       // take the same nodes.
-      use[k] = k < batch.n && std::isfinite(d[k]) && batch.bound[k] - batch.sz[k] >= m_ref - cutoff;
+      use[k] = k < batch.n && std::isfinite(d[k]) && batch.bound[k] - batch.sz[k] >= floor();
       curvature[k] = false;
       if (!use[k]) continue;
       ++out.nodes_evaluated;
@@ -704,8 +762,8 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
           const glm::dvec3 first =
               origin + static_cast<double>(j) * step_j + static_cast<double>(i) * step_i;
           const int bits = RowCandidatesAvx2(tool + j * tnx + i, std::min(4, i1 - i), first, step_i,
-                                             along_a, inv_h, nx, ny, bound, m_ref - cutoff, tested,
-                                             cell, tu, tv, sx, sy, sz, cb);
+                                             along_a, inv_h, nx, ny, bound, floor(), tested, cell,
+                                             tu, tv, sx, sy, sz, cb);
           out.nodes_tested += tested;
           for (int k = 0; k < 4; ++k) {
             if ((bits >> k & 1) == 0) continue;
@@ -736,10 +794,21 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
         ++out.nodes_tested;
         if (!locate(s, cell, tu, tv)) continue;
         const float cell_bound = bound[cell];
-        if (!std::isfinite(cell_bound) || !(cell_bound - s.z >= m_ref - cutoff)) continue;
+        if (!std::isfinite(cell_bound) || !(cell_bound - s.z >= floor())) continue;
         const double d = exact(i, j, s, cell, tu, tv, &J);
         if (!std::isfinite(d)) continue;
         ++out.nodes_evaluated;
+        if constexpr (kPressure) {
+          m_ref = std::max(m_ref, d);
+          if (!(d > 0.0)) continue;
+          ++out.overlapping_nodes;
+          P.volume += area * d;
+          P.squared += area * d * d;
+          P.first.noalias() += (area * d) * J;
+          P.second.selfadjointView<Eigen::Lower>().rankUpdate(J, area);
+          P.weighted.selfadjointView<Eigen::Lower>().rankUpdate(J, area * d);
+          continue;
+        }
         if (d > m_ref) {
           const double scale = std::isfinite(m_ref) ? std::exp((m_ref - d) / eps) : 0.0;
           S0 *= scale;
@@ -768,7 +837,7 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
         const float a_lo = f.tool_sub_min_m[sb], a_hi = f.tool_sub_max_m[sb];
         if (!(a_lo <= a_hi)) continue;
         if (!(box_bound(i0, i1 - 1, j0, j1 - 1, a_lo, a_hi, f.env_sub_bound_m.data(),
-                        kDepthFieldSubBlock, env_sbx) >= m_ref - cutoff)) {
+                        kDepthFieldSubBlock, env_sbx) >= floor())) {
           continue;
         }
         if (out.nodes_evaluated >= max_nodes) return;  // over budget: stopped
@@ -817,14 +886,14 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
   // its blocks that reach within it.
   for (int k = 0; k < num_supers && out.nodes_evaluated < max_nodes; ++k) {
     const int g = super_order[static_cast<std::size_t>(k)];
-    if (!(super_ub[static_cast<std::size_t>(g)] >= m_ref - cutoff)) break;  // nor any after it
+    if (!(super_ub[static_cast<std::size_t>(g)] >= floor())) break;  // nor any after it
     if (k >= supers_bounded) bound_blocks(k);
     const int bi0 = (g % gx) * kBlocksPerSuper, bj0 = (g / gx) * kBlocksPerSuper;
     const int bi1 = std::min(bx, bi0 + kBlocksPerSuper), bj1 = std::min(by, bj0 + kBlocksPerSuper);
     for (int tj = bj0; tj < bj1 && out.nodes_evaluated < max_nodes; ++tj) {
       for (int ti = bi0; ti < bi1 && out.nodes_evaluated < max_nodes; ++ti) {
         const int b = tj * bx + ti;
-        if (b == first_block || !(block_ub[static_cast<std::size_t>(b)] >= m_ref - cutoff)) {
+        if (b == first_block || !(block_ub[static_cast<std::size_t>(b)] >= floor())) {
           continue;
         }
         visit_block(b);
@@ -835,6 +904,48 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
     out.over_budget = true;
     out.valid = false;
     out.depth_m = out.max_node_depth_m = -std::numeric_limits<double>::infinity();
+    return out;
+  }
+  // To world axes: both halves turn with R_WF.
+  const glm::dmat3 R_WF = glm::mat3_cast(f.X_WF.rotation);
+  Mat6 B = Mat6::Zero();
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) {
+      B(r, c) = R_WF[c][r];
+      B(r + 3, c + 3) = R_WF[c][r];
+    }
+  }
+  if constexpr (kPressure) {
+    if (batched) {
+      flush();
+      const double* v = pressure_lanes.v.data();
+      for (int l = 0; l < 4; ++l) {
+        P.volume += v[l];
+        P.squared += v[4 + l];
+        for (int a = 0; a < 6; ++a) P.first[a] += v[4 * (2 + a) + l];
+        int k = 8;
+        for (int a = 0; a < 6; ++a) {
+          for (int c = 0; c <= a; ++c, ++k) {
+            P.second(a, c) += v[4 * k + l];
+            P.weighted(a, c) += v[4 * (k + 21) + l];
+          }
+        }
+      }
+    }
+    out.max_node_depth_m = m_ref;
+    if (out.overlapping_nodes == 0 || !(P.squared > 0.0)) return out;  // depth_m −∞: no overlap
+    const double a_ref = f.pressure_area_m2;
+    const double depth = std::sqrt(P.squared / a_ref);
+    const Vec6 grad = (B * P.first) / (a_ref * depth);
+    const Mat6 second = B * Mat6(P.second.selfadjointView<Eigen::Lower>()) * B.transpose();
+    out.depth_m = depth;
+    out.gradient.d_translation_W = {grad[0], grad[1], grad[2]};
+    out.gradient.d_rotation_W = {grad[3], grad[4], grad[5]};
+    out.curvature = (second / a_ref - grad * grad.transpose()) / depth;
+    out.curvature = 0.5 * (out.curvature + out.curvature.transpose()).eval();
+    out.pressure_volume_m3 = P.volume;
+    out.pressure_damping =
+        B * Mat6(P.weighted.selfadjointView<Eigen::Lower>()) * B.transpose() / a_ref;
     return out;
   }
   if (batched) {
@@ -855,20 +966,55 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
   const Vec6 mean = S1 / S0;
   const Mat6 second = S2.selfadjointView<Eigen::Lower>();  // the sums' lower triangle, mirrored
   const Mat6 cov = second / S0 - mean * mean.transpose();
-  // To world axes: both halves turn with R_WF.
-  const glm::dmat3 R_WF = glm::mat3_cast(f.X_WF.rotation);
   const glm::dvec3 g_F(mean[0], mean[1], mean[2]), r_F(mean[3], mean[4], mean[5]);
   out.gradient.d_translation_W = R_WF * g_F;
   out.gradient.d_rotation_W = R_WF * r_F;
-  Mat6 B = Mat6::Zero();
-  for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < 3; ++c) {
-      B(r, c) = R_WF[c][r];
-      B(r + 3, c + 3) = R_WF[c][r];
-    }
-  }
   out.curvature.noalias() = B * (cov / eps) * B.transpose();
   out.curvature = 0.5 * (out.curvature + out.curvature.transpose()).eval();
+  return out;
+}
+
+}  // namespace
+
+DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform& X_WT) noexcept {
+#ifdef HT_DEPTH_FIELD_AVX2
+  return DepthFieldDepthAt(f, X_WT,
+                           HasAvx2() ? DepthFieldKernel::kAvx2 : DepthFieldKernel::kScalar);
+#else
+  return DepthFieldDepthAt(f, X_WT, DepthFieldKernel::kScalar);
+#endif
+}
+
+bool DepthFieldKernelAvailable(DepthFieldKernel kernel) noexcept {
+#ifdef HT_DEPTH_FIELD_AVX2
+  return kernel == DepthFieldKernel::kScalar || HasAvx2();
+#else
+  return kernel == DepthFieldKernel::kScalar;
+#endif
+}
+
+DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform& X_WT,
+                                       DepthFieldKernel kernel, int max_nodes) noexcept {
+#ifdef HT_DEPTH_FIELD_AVX2
+  const bool batched = kernel == DepthFieldKernel::kAvx2 && HasAvx2();
+#else
+  const bool batched = false;
+  (void)kernel;
+#endif
+  if (f.force_law != ForceLaw::kPressure) return EvaluateField<false>(f, X_WT, batched, max_nodes);
+  DepthFieldEvaluation out = EvaluateField<true>(f, X_WT, batched, max_nodes);
+  if (!out.valid || out.over_budget || out.overlapping_nodes > 0) return out;
+  // No node overlaps: the seed's δ (at most 0) and ∇δ, which say how far apart the surfaces are.
+  const DepthFieldEvaluation apart =
+      EvaluateField<false>(f, X_WT, batched, std::max(0, max_nodes - out.nodes_evaluated));
+  out.over_budget = apart.over_budget;
+  out.valid = apart.valid;
+  out.nodes_evaluated += apart.nodes_evaluated;
+  out.nodes_tested += apart.nodes_tested;
+  out.max_node_depth_m = apart.max_node_depth_m;
+  out.depth_m = std::min(apart.depth_m, 0.0);
+  if (!(apart.depth_m > -std::numeric_limits<double>::infinity())) out.depth_m = apart.depth_m;
+  out.gradient = apart.gradient;
   return out;
 }
 

@@ -63,8 +63,23 @@ void AddWindowOptions(CLI::App& app, CLI::App& adv, NodeCommandLine& cl) {
       ->capture_default_str();
 }
 
-// Stage 5b's depth refinement.
-void AddDepthOptions(CLI::App& adv, NodeCommandLine& cl) {
+// Stage 5b's depth refinement and the force law.
+void AddDepthOptions(CLI::App& app, CLI::App& adv, NodeCommandLine& cl) {
+  app.add_option("--force-law", cl.force_law,
+                 "the law the depth fields render: seed (the directional penetration depth's\n"
+                 "penalty, F = -k d grad d: the deepest point bears; the seed's experiments) or\n"
+                 "pressure (a pressure k_p d on every overlapping cell, the wrench of\n"
+                 "U = 1/2 k_p sum d^2 A: every cell in contact bears, so that a face resting on\n"
+                 "many ridges gets their moment). Sent with every field; contacts without a\n"
+                 "field keep the seed's law")
+      ->check(CLI::IsMember({"seed", "pressure"}))
+      ->capture_default_str();
+  adv.add_option("--pressure-stiffness", cl.pressure_stiffness,
+                 "the pressure law's k_p in N/m^3 (0: each object's stiffness k over the tool's\n"
+                 "contact area, the largest face of its bounding box, so that a flat face of\n"
+                 "that area pressed into a flat plate feels k under either law)")
+      ->check(CLI::Range(0.0, 1e15))
+      ->capture_default_str();
   adv.add_flag("--no-refine-depth", cl.no_refine_depth,
                "the grid's cell samples alone: by default each contact's depth is refined to the\n"
                "texture's full resolution around the grid's deepest cells (stage 5b,\n"
@@ -227,6 +242,8 @@ void FinishStreamConfig(const CLI::App& app, const NodeCommandLine& cl, RemoteNo
 void FinishDepthConfig(const NodeCommandLine& cl, RemoteNodeConfig& config) {
   PipelineOptions& pipeline = config.pipeline;
   pipeline.refine_depth = !cl.no_refine_depth;
+  pipeline.force_law = cl.force_law == "pressure" ? ForceLaw::kPressure : ForceLaw::kSeed;
+  pipeline.pressure_stiffness_n_per_m3 = cl.pressure_stiffness;
 }
 
 // Speculative contacts.
@@ -250,7 +267,7 @@ void AddNodeOptions(CLI::App& app, NodeCommandLine& cl) {
       "and figure: docs/DESIGN.md, docs/measurements.md");
   AddSceneOptions(app, cl);
   AddWindowOptions(app, adv, cl);
-  AddDepthOptions(adv, cl);
+  AddDepthOptions(app, adv, cl);
   AddSpeculativeOptions(adv, cl);
   AddBackendOptions(app, adv, cl);
   AddStreamOptions(app, adv, cl);

@@ -30,8 +30,10 @@ struct NodeCommandLine {
   std::string scene_cache_dir = HapticModelCache::DefaultDir();
   bool no_watch = false;
 
-  // Stage 5b (AddDepthOptions).
+  // Stage 5b and the force law (AddDepthOptions).
   bool no_refine_depth = false;
+  std::string force_law = "seed";
+  double pressure_stiffness = 0.0;
 
   // Speculative contacts (AddSpeculativeOptions).
   double speculative_speed_mm_s = RemoteNodeConfig{}.speculative_speed_m_per_s * 1e3;

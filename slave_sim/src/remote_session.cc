@@ -232,7 +232,14 @@ void RemoteSession::OnHello(const wire::Header& header, std::span<const std::uin
       session_, from.ToString().c_str(), welcome.version, welcome.mtu, welcome.grid,
       welcome.peer_timeout_ms, 100.0 * welcome.deadband.tool_state_deadband,
       100.0 * welcome.deadband.model_deadband, compact_models_ ? "compact" : "float",
-      depth_fields_ ? " with depth fields" : "");
+      !depth_fields_                                      ? ""
+      : config_.pipeline.force_law == ForceLaw::kPressure ? " with depth fields, pressure law"
+                                                          : " with depth fields");
+  if (!depth_fields_ && config_.pipeline.force_law == ForceLaw::kPressure) {
+    std::printf(
+        "[slave] warning: the operator takes no depth fields (master_station "
+        "--no-depth-fields), so this session renders the seed's law, not --force-law pressure\n");
+  }
   std::fflush(stdout);
 }
 
@@ -549,6 +556,7 @@ nlohmann::json RemoteSession::StatsJson(std::size_t scene_objects, std::size_t s
                      {"model_decisions", ToJson(model_deadband_.counts())}});
   transport["depth_fields"] = {
       {"agreed", depth_fields_},
+      {"force_law", config_.pipeline.force_law == ForceLaw::kPressure ? "pressure" : "seed"},
       {"fields_sent", fields_encoded_},
       {"field_ids_left_out", field_ids_left_out_},
       {"field_bytes", field_bytes_encoded_},

@@ -62,7 +62,8 @@ struct ContactModelEvaluation {
   double potential_energy_j = 0.0;
   /// Active contacts whose force was saturated at the bound (see EvaluateContactModel).
   int saturated_contacts = 0;
-  /// G = Σ_{δ_i>0, unsaturated} k_i δ_i J_i J_iᵀ (positive semi-definite, 6×6, rows/cols as K;
+  /// G = Σ_{δ_i>0, unsaturated} k_i δ_i J_i J_iᵀ (a field under ForceLaw::kPressure: k_i times
+  /// its DepthFieldEvaluation::pressure_damping) (positive semi-definite, 6×6, rows/cols as K;
   /// N in its translation block, N·m/rad and N·m²/rad² where rotation enters): the
   /// depth-weighted stiffness, from which a Hunt–Crossley contact damping D = −α·G (α in s/m)
   /// gives each contact the force −k_i δ_i α (J_i·V) J_i, which vanishes with δ_i
@@ -91,7 +92,8 @@ struct ContactModelEvaluation {
 /// loop.
 ///
 /// With `fields`, a contact with a depth field (ContactLinearization::depth_field_id) that the
-/// cache holds takes δ, ∇δ and the smooth maximum's curvature from the field at X_WT
+/// cache holds takes δ, ∇δ and the smooth maximum's curvature (under the pressure law, its
+/// equivalents: DepthFieldEvaluation) from the field at X_WT
 /// (DepthFieldCache::Evaluate, plus depth_field_shift_m) instead of its linearization, also beyond
 /// the field's travel margin (counted: a linearization made a round trip ago is worse there, its
 /// steps at the margin were the largest force steps on the gear at 25 ms); without the field,

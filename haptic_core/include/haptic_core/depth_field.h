@@ -24,6 +24,17 @@ namespace ht {
 /// maximum's curvature.
 inline constexpr double kDepthFieldSmoothMaxM = 2e-6;
 
+/// The force law a depth field is evaluated with (DepthFieldDepthAt; the remote node's choice for
+/// its session, stamped on every field it renders):
+///  - kSeed: the seed's directional penetration depth δ, the smooth maximum of the tool nodes'
+///    overlaps, and its penalty F = −k δ ∇δ [S][L]: one point, the deepest, bears.
+///  - kPressure: a pressure p_j = k_p d_j on every tool node's overlap d_j = max(0, b − a_q), the
+///    potential U = ½ k_p Σ_j A d_j² (A the tool's area a node stands for, m²) and the wrench
+///    −∇U (the discrete form of a hydroelastic pressure field, Elandt et al. 2019 [R]): every
+///    overlapping node bears, so that the torque of a face resting on many ridges is the
+///    pressures' moment. k_p = k / A_ref (N/m³; DepthField::pressure_area_m2).
+enum class ForceLaw : std::uint8_t { kSeed = 0, kPressure = 1 };
+
 /// Side (nodes) of the blocks a depth field's evaluation prunes by (DepthField::env_block_bound_m),
 /// of the sub-blocks it prunes a block's nodes by in turn (env_sub_bound_m), and of the
 /// super-blocks it prunes blocks by first (env_super_bound_m).
@@ -46,6 +57,13 @@ inline constexpr int kDepthFieldMaxNodes = 8192;
 /// evaluates such a field in bounded time instead of falling back to its linearization. The
 /// nodes kept are fixed on the tool's lattice, so that successive fields keep the same ones.
 inline constexpr int kDepthFieldDenseNodes = 2048;
+/// kDepthFieldDenseNodes under ForceLaw::kPressure, whose evaluation computes every node that
+/// overlaps, and more of them as the tool presses deeper than the pose the field was rendered
+/// at: the node spacing is the law's quadrature step. On the gear (seed Fig. 75) at 25 ms one
+/// way (`deadband_lockstep --scene block-on-gear --arm …,pressure=1`), 2,048 left fields that
+/// passed kDepthFieldMaxNodes at the operator's pose in 19 % of ticks (their contacts rendered
+/// from the linearization) and an operator tick p99 of 413 µs; 512, none and 149 µs.
+inline constexpr int kDepthFieldDensePressureNodes = 512;
 /// The same for the tool nodes whose own cell's bound the evaluation at X_WT0 tests (most of them
 /// rejected): surfaces interlocked over a wide area (seed Fig. 76's stripes) pass the blocks'
 /// bounds with most of their nodes and cost the loop ~25 ns a node tested. On Fig. 76 at 25 ms
@@ -129,8 +147,13 @@ struct DepthField {
   /// field may miss part of the overlap: the margin by which the grid exceeds the window on each
   /// side.
   double travel_margin_m = 0.0;
-  /// Smooth-maximum width ε (m, > 0).
+  /// Smooth-maximum width ε (m, > 0; the seed law's).
   double smooth_max_m = kDepthFieldSmoothMaxM;
+  /// The law the field is evaluated with, and for kPressure the reference area A_ref (m², > 0)
+  /// that sets the pressure stiffness k_p = k / A_ref from the contact's k: a flat face of area
+  /// A_ref pressed d into a flat plate is pushed back with k·d under either law.
+  ForceLaw force_law = ForceLaw::kSeed;
+  double pressure_area_m2 = 0.0;
 
   // Derived by Prepare (the receiver's work, off the loop).
   /// Per grid cell (i, j) (between nodes i, i+1 and j, j+1; #nx·ny, row-major, the last row and
@@ -162,7 +185,8 @@ struct DepthField {
   bool prepared = false;
 
   /// Checks the field (id ≠ 0, finite frames, h > 0 and finite, nx and ny in
-  /// [4, kMaxDepthFieldSide], both maps #nx·ny, the tool's offsets within ±h, margin ≥ 0, ε > 0)
+  /// [4, kMaxDepthFieldSide], both maps #nx·ny, the tool's offsets within ±h, margin ≥ 0, ε > 0,
+  /// a known law, A_ref > 0 and finite under kPressure)
   /// and derives env_bound_m, the kept tool nodes, the blocks' bounds and tool_radius_m: all
   /// tool nodes, or, where the evaluation at X_WT0 computes more than kDepthFieldDenseNodes of
   /// them or tests more than kDepthFieldDenseTestedNodes, every node_stride-th. Allocates only when
@@ -178,9 +202,18 @@ struct DepthField {
   void KeepToolNodes(int stride);  // stride ≥ 1
 };
 
-/// What DepthFieldDepthAt found.
+/// What DepthFieldDepthAt found. Under ForceLaw::kPressure the law is given as the seed's penalty
+/// on an equivalent depth, so that a contact's k turns either into its wrench, energy and
+/// stiffness through the same formulas (F = −k δ ∇δ, U = ½ k δ², K = −k(∇δ∇δᵀ + δ·curvature)):
+/// with the overlapping nodes' d_j > 0, their ∇d_j and A (DepthField), depth_m is
+/// δ_eq = √(Σ A d_j² / A_ref), gradient Σ A d_j ∇d_j / (A_ref δ_eq) and curvature
+/// (Σ A ∇d_j∇d_jᵀ / A_ref − ∇δ_eq∇δ_eqᵀ) / δ_eq, so that k δ_eq ∇δ_eq = k_p Σ A d_j ∇d_j (−∇U),
+/// ½ k δ_eq² = U and the stiffness is k_p Σ A ∇d_j∇d_jᵀ (its Gauss–Newton part: the d_j ∇²d_j
+/// terms are left out). Where no node overlaps, depth_m and gradient are the seed's δ (at most 0)
+/// and ∇δ, so that a linearization taken there still says how far apart the surfaces are.
 struct DepthFieldEvaluation {
-  /// δ (m): the smooth maximum over the tool nodes that read an environment; −∞ when none does.
+  /// δ (m): the smooth maximum over the tool nodes that read an environment; −∞ when none does
+  /// (kPressure: δ_eq, above).
   double depth_m = -std::numeric_limits<double>::infinity();
   /// The deepest node's own δ_j (m; the plain maximum, which depth_m exceeds by the smooth
   /// maximum's lift, at most ε·ln(nodes_evaluated)); −∞ when none.
@@ -189,8 +222,17 @@ struct DepthFieldEvaluation {
   PenetrationGradient gradient;
   /// ∇²δ's part from the smooth maximum (6×6, world axes, rows/cols as Stiffness6: translation
   /// then rotation): the weights' covariance of the nodes' gradients over ε, positive
-  /// semi-definite (the curvature of δ's kinks, which the implicit step needs in K).
+  /// semi-definite (the curvature of δ's kinks, which the implicit step needs in K; kPressure:
+  /// above, positive semi-definite by Cauchy–Schwarz).
   Eigen::Matrix<double, 6, 6> curvature = Eigen::Matrix<double, 6, 6>::Zero();
+  /// The field's law (DepthField::force_law).
+  ForceLaw force_law = ForceLaw::kSeed;
+  /// kPressure only (zero otherwise): the overlapping nodes (count), their volume Σ A d_j along
+  /// n (m³), and Σ A d_j ∇d_j∇d_jᵀ / A_ref (6×6, world axes, m): the depth-weighted stiffness per
+  /// unit k that a Hunt–Crossley damping scales (ContactModelEvaluation::G).
+  int overlapping_nodes = 0;
+  double pressure_volume_m3 = 0.0;
+  Eigen::Matrix<double, 6, 6> pressure_damping = Eigen::Matrix<double, 6, 6>::Zero();
   /// False when the field is not prepared or the pose is not finite (nothing is computed).
   bool valid = false;
   /// Whether the tool is within the field's travel margin of X_WT0. Beyond it the field is still
@@ -210,7 +252,10 @@ struct DepthFieldEvaluation {
 /// over the nodes whose bicubic stencil is complete, with ∇δ = Σ w_j ∇δ_j (w the
 /// softmax weights) and ∇δ_j = (g_j, r_j × g_j), g_j = R_WF·(∂b/∂x, ∂b/∂y, −1), r_j the node less
 /// the centre of mass (W). Nodes whose depth is more than 10 ε below the running maximum
-/// (weight below 4.5e-5 of the deepest's) are skipped by bounds per block and per cell.
+/// (weight below 4.5e-5 of the deepest's) are skipped by bounds per block and per cell. Under
+/// ForceLaw::kPressure: the sums over the nodes with δ_j > 0 (the others skipped by the same
+/// bounds), each of area A = (node_stride·h)² (carried rigidly with the tool: its projection's
+/// change with tilt, 1 − cos θ, is left out), as DepthFieldEvaluation says.
 /// The tool is within the field's margin (within_margin) while |Δx_∥| + |Δθ|·tool_radius_m ≤
 /// travel_margin_m, Δq = X_WT ⊖ X_WT0 and Δx_∥ the part of Δx in F's plane (along n the field
 /// holds however far). noexcept, allocation-free: callable from the 1 kHz loop.
@@ -255,13 +300,21 @@ class DepthFieldRenderer {
   /// side, centred on the window to the nearest lattice node. Returns false (out.prepared false)
   /// when that exceeds kMaxDepthFieldSide, the cell is not positive, a pose is not finite, or
   /// the field does not prepare.
+  /// The field is evaluated with `law` (DepthField::force_law; kPressure with A_ref
+  /// `pressure_area_m2`).
   bool Render(const HapticModel& tool, const RigidTransform& X_WT, const ContactQuery& query,
               const DepthFieldLattice& lattice, double margin_m, std::uint32_t id,
-              double smooth_max_m, DepthField& out);
+              double smooth_max_m, DepthField& out, ForceLaw law = ForceLaw::kSeed,
+              double pressure_area_m2 = 0.0);
 
  private:
   std::vector<int> env_triangles_, tool_triangles_;
 };
+
+/// The tool's contact area for the pressure law's default stiffness (PipelineOptions): the
+/// largest face of the axis-aligned box around `tool`'s vertices in its own frame (m²; 0 for a
+/// tool without vertices). For the seed's block, its broad face.
+double ToolContactArea(const HapticModel& tool) noexcept;
 
 /// A fixed set of prepared fields, by id, for the operator's loop: preallocated at construction,
 /// so that taking a field in and looking one up never allocate.

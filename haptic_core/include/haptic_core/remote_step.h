@@ -158,6 +158,13 @@ struct PipelineOptions {
   int depth_field_subdivision = 2;
   /// The fields' smooth-maximum width ε (m, > 0; DepthField::smooth_max_m).
   double depth_field_smooth_max_m = kDepthFieldSmoothMaxM;
+  /// The force law the fields are evaluated with (ForceLaw; a contact without a field, and every
+  /// contact without depth_fields, keeps the seed's law on its linearization), and the pressure
+  /// law's k_p (N/m³, ≥ 0): 0 gives each contact k / A_tool, A_tool the largest face of the tool's
+  /// bounding box in its own frame (ToolContactArea), so that a flat face of the tool pressed
+  /// into a flat plate feels the seed law's k.
+  ForceLaw force_law = ForceLaw::kSeed;
+  double pressure_stiffness_n_per_m3 = 0.0;
 
   /// Throws std::invalid_argument naming a value out of range.
   void Validate() const;

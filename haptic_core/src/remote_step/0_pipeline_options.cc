@@ -45,6 +45,13 @@ void PipelineOptions::Validate() const {
     throw std::invalid_argument("depth_field_subdivision must be in [1, 4], got " +
                                 std::to_string(depth_field_subdivision));
   }
+  if (force_law != ForceLaw::kSeed && force_law != ForceLaw::kPressure) {
+    throw std::invalid_argument("force_law must be seed or pressure");
+  }
+  if (!(pressure_stiffness_n_per_m3 >= 0.0) || !std::isfinite(pressure_stiffness_n_per_m3)) {
+    throw std::invalid_argument("pressure_stiffness_n_per_m3 must be >= 0 and finite, got " +
+                                std::to_string(pressure_stiffness_n_per_m3));
+  }
   if (!(depth_field_smooth_max_m > 0.0) || !std::isfinite(depth_field_smooth_max_m)) {
     throw std::invalid_argument("depth_field_smooth_max_m must be > 0 and finite, got " +
                                 std::to_string(depth_field_smooth_max_m));

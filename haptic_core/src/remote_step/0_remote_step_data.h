@@ -145,6 +145,9 @@ struct RemoteStepData {
   std::array<const DepthField*, kMaxContacts> fields{};
   int num_fields = 0;
   std::uint32_t last_field_id = 0;
+  /// The tool whose ToolContactArea (m²) the pressure law's fields take.
+  const HapticModel* pressure_area_tool = nullptr;
+  double tool_contact_area_m2 = 0.0;
   /// The lattices the fields are sampled on, each fixed in its environment's frame (axes and
   /// normal in O; the nodes at the environment's origin plus whole cells along u and v), reused
   /// by every contact on that environment whose window normal is within 0.1 rad, the least

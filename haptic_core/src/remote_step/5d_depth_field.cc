@@ -111,7 +111,7 @@ int FindKeptField(const RemoteStepData& d, std::uint32_t lattice_id, double h,
 bool DepthFieldRenderer::Render(const HapticModel& tool, const RigidTransform& X_WT,
                                 const ContactQuery& query, const DepthFieldLattice& lattice,
                                 double margin_m, std::uint32_t id, double smooth_max_m,
-                                DepthField& out) {
+                                DepthField& out, ForceLaw law, double pressure_area_m2) {
   out.prepared = false;
   const double h = lattice.cell_m;
   if (!(h > 0.0) || !std::isfinite(h) || query.environment == nullptr ||
@@ -181,7 +181,20 @@ bool DepthFieldRenderer::Render(const HapticModel& tool, const RigidTransform& X
   out.X_WT0 = X_WT;
   out.travel_margin_m = m * h;
   out.smooth_max_m = smooth_max_m;
+  out.force_law = law;
+  out.pressure_area_m2 = pressure_area_m2;
   return out.Prepare();
+}
+
+double ToolContactArea(const HapticModel& tool) noexcept {
+  if (tool.vertices_O.empty()) return 0.0;
+  glm::dvec3 lo = tool.vertices_O.front(), hi = lo;
+  for (const glm::dvec3& p : tool.vertices_O) {
+    lo = glm::min(lo, p);
+    hi = glm::max(hi, p);
+  }
+  const glm::dvec3 e = hi - lo;
+  return std::max({e.x * e.y, e.y * e.z, e.z * e.x});
 }
 
 int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT,
@@ -237,8 +250,18 @@ int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT
       DepthField& f = d.field_pool[static_cast<std::size_t>(slot)];
       bool ok = false;
       try {
+        double area = 0.0;
+        if (options.force_law == ForceLaw::kPressure) {
+          if (d.pressure_area_tool != &tool) {
+            d.pressure_area_tool = &tool;
+            d.tool_contact_area_m2 = ToolContactArea(tool);
+          }
+          area = options.pressure_stiffness_n_per_m3 > 0.0
+                     ? lin.stiffness_n_per_m / options.pressure_stiffness_n_per_m3
+                     : d.tool_contact_area_m2;
+        }
         ok = d.field_renderer.Render(tool, X_WT, q, L, margin, d.last_field_id + 1,
-                                     options.depth_field_smooth_max_m, f);
+                                     options.depth_field_smooth_max_m, f, options.force_law, area);
       } catch (...) {  // std::bad_alloc beyond the reserve
         ok = false;
       }

@@ -212,13 +212,14 @@ inline constexpr std::uint32_t kLegacyMagic = 0x504C5448u;  // bytes 'H' 'T' 'L'
 /// translation patches' section after the kink planes (the depth fields hold the surface where
 /// the tool is); every other body is as in version 12. Version 14 drops the kink planes: the
 /// depth-field section ends ContactModel and CompactContactModel; every other body is as in
-/// version 13.
-/// Only version 14 is accepted. A remote node answers a Hello of versions 2 to 13 whose MAC
+/// version 13. Version 15 adds the force law to each depth field (kDepthFieldFormat 2: its law
+/// and the pressure law's reference area); every message body is as in version 14.
+/// Only version 15 is accepted. A remote node answers a Hello of versions 2 to 14 whose MAC
 /// verifies with a Reject (kVersion) in that Hello's own layout and header version (the Hello's
-/// first 12 body bytes and the Reject body are laid out alike in versions 2 to 14), so that an
+/// first 12 body bytes and the Reject body are laid out alike in versions 2 to 15), so that an
 /// older operator is told why.
-inline constexpr std::uint16_t kProtocolVersion = 14;
-inline constexpr std::uint16_t kMinProtocolVersion = 14;
+inline constexpr std::uint16_t kProtocolVersion = 15;
+inline constexpr std::uint16_t kMinProtocolVersion = 15;
 
 /// Message types; values are part of the protocol and never reused.
 enum class MessageType : std::uint8_t {
