@@ -206,6 +206,39 @@ TEST(ContactPatchTruth, TiltedBoxOnItsEdgeAgreesWithTheVolumeComputedAnotherWay)
   }
 }
 
+// The pressure law's truth (step 4b) on a box tilted 10° about y, its lowest edge δ into a slab:
+// the overlap's cross-section is a triangle with legs δ cot α along the bottom face and δ tan α
+// along the side, V = b δ² / sin 2α, pushed along +z through the triangle's centroid,
+// (δ cot α − δ tan α) / 3 from the edge towards the bottom face. Refined to 0.5 %.
+TEST(ContactPatchTruth, ThePressureTruthOfATiltedBoxIsItsWedgesVolumeThroughItsCentroid) {
+  const glm::dvec3 half(0.01, 0.01, 0.005);
+  const double alpha = 10.0 * std::numbers::pi / 180.0, delta = 0.5e-3;
+  ContactPatchTruthOptions o;
+  o.pressure_tolerance = 0.005;
+  Rig rig(Box(-half, half), kSlab, o);
+  const glm::dquat R = AboutY(alpha);
+  const glm::dvec3 edge_a = R * glm::dvec3(-half.x, 0, -half.z);
+  const glm::dvec3 edge_b = R * glm::dvec3(half.x, 0, -half.z);
+  const glm::dvec3 low = edge_a.z < edge_b.z ? edge_a : edge_b;
+  const glm::dvec3 other = edge_a.z < edge_b.z ? edge_b : edge_a;  // along the bottom face
+  const RigidTransform X_WT = At({0, 0, -delta - low.z}, R);
+  const PoseTruth t = rig.truth.At(X_WT, RigidTransform{}, RigidTransform{}, kK);
+  ASSERT_EQ(t.patches.size(), 1u);
+  const GroundTruthPressure& p = t.patches[0].pressure;
+  EXPECT_TRUE(p.converged) << p.samples_per_side << " " << p.change;
+  const double volume = 2.0 * half.y * delta * delta / std::sin(2.0 * alpha);
+  EXPECT_NEAR(p.volume_m3, volume, 0.01 * volume);
+  EXPECT_NEAR(t.pressure_per_kp.force.z, volume, 0.01 * volume);
+  EXPECT_LT(glm::length(glm::dvec2(t.pressure_per_kp.force)), 0.01 * volume);
+  // The line of action: x where τ_y = (x − c_x)·(−F_z)... as r × F with F along +z.
+  const double x_line = -t.pressure_per_kp.torque.y / t.pressure_per_kp.force.z;
+  const double toward_face = other.x > low.x ? 1.0 : -1.0;
+  const double expected =
+      low.x + toward_face * (delta / std::tan(alpha) - delta * std::tan(alpha)) / 3.0;
+  EXPECT_NEAR(x_line, expected, 0.01 * std::abs(expected - low.x));
+  EXPECT_NEAR(t.pressure_volume_m3, p.volume_m3, 1e-15);
+}
+
 // A box on a slab tilted by 1 mrad about y bears on its lower edge: δ(θ) is a V whose arm is the
 // edge's lever, so τ_y = (edge × k δ ẑ)_y, the 10° case's closed form. A tilt step of a 1 µm lift
 // at the window's edge (about 0.09 mrad here) reads the arm; the default, a texel's lift (0.1 mm

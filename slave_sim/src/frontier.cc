@@ -60,10 +60,16 @@ void RunGroundTruth(const BenchmarkScene& scene, const RayCastSurface& tool,
   for (std::thread& t : pool) t.join();
 }
 
+// The relative change of the pressure law's truth at which its grid stops doubling
+// (ContactPatchTruthOptions::pressure_tolerance).
+constexpr double kPressureTruthTolerance = 0.01;
+
 // The pipeline truth of every pose (ContactPatchTruth, one per thread), with progress.
+// With `pressure`, each patch's pressure-law truth too (step 4b, refined to
+// kPressureTruthTolerance).
 void RunPipelineTruth(const BenchmarkScene& scene, const RayCastSurface& tool,
                       const RayCastSurface& object, const std::vector<RigidTransform>& poses_WFt,
-                      const FrontierOptions& options, std::vector<PoseTruth>& out) {
+                      const FrontierOptions& options, bool pressure, std::vector<PoseTruth>& out) {
   out.assign(poses_WFt.size(), PoseTruth{});
   const TouchableObject& target = scene.haptic.touchables.at(0);
   const RigidTransform X_FtT = scene.X_TFt.Inverse();
@@ -75,6 +81,7 @@ void RunPipelineTruth(const BenchmarkScene& scene, const RayCastSurface& tool,
   // until issue 32's thirty-third stop, 60° since): the measure does not move with the method.
   truth_options.share_fade_m = options.truth_share_fade_m;
   truth_options.tilt_lift_m = options.truth_tilt_lift_m;
+  if (pressure) truth_options.pressure_tolerance = kPressureTruthTolerance;
   if (!options.truth_merge_patches) {
     truth_options.macro_normal_radius_m = 0.0;
     truth_options.depth_along_macro_normal = false;
@@ -435,19 +442,25 @@ SceneReport RunScene(const FrontierOptions& options, const std::string& name,
       options.threads);
   const auto t_truth = Clock::now();
   std::vector<PoseTruth> pipeline;
-  RunPipelineTruth(ref, tool_rays, object_rays, poses, options, pipeline);
+  const bool pressure =
+      std::any_of(settings.begin(), settings.end(),
+                  [](const FrontierSetting& st) { return st.force_law == ForceLaw::kPressure; });
+  RunPipelineTruth(ref, tool_rays, object_rays, poses, options, pressure, pipeline);
   // The truth at the prediction measure's displaced poses.
   std::vector<PoseTruth> displaced_truth;
   if (options.model_prediction) {
     const std::vector<RigidTransform> displaced = PredictionPoses(poses, ref.X_TFt, options);
     Say(options, "%s: pipeline truth of %zu displaced poses (model prediction)", name.c_str(),
         displaced.size());
-    RunPipelineTruth(ref, tool_rays, object_rays, displaced, options, displaced_truth);
+    RunPipelineTruth(ref, tool_rays, object_rays, displaced, options, false, displaced_truth);
   }
   rep.truth_seconds = Seconds(t_truth);
   RecordPipelineTruth(ref, poses, pipeline, rep, pc);
   RecordGroundTruth(jobs, rep);
 
+  // The pressure law's k_p as the method's fields take it by default (PipelineOptions).
+  const double pressure_stiffness = ref.haptic.touchables.at(0).stiffness_n_per_m /
+                                    std::max(ToolContactArea(*ref.haptic.tool), 1e-12);
   // The default setting's ground truth per pose: the truth for the baselines.
   std::vector<Wrench> reference_gt(poses.size());
   for (const ContactRecord& c : rep.runs.front().contacts) {
@@ -463,6 +476,7 @@ SceneReport RunScene(const FrontierOptions& options, const std::string& name,
       }
     }
     ScorePrediction(displaced_truth, run);
+    ScorePressure(pipeline, pressure_stiffness, run);
     for (const ContactRecord& c : run.contacts) {
       WriteContactRow(cc, rep, run, c, jobs[c.gt], poses[c.pose]);
     }

@@ -134,6 +134,23 @@ void MarkPareto(std::vector<SettingRun>& runs) {
 
 // The model-prediction measure of `run`: its contact models' wrenches at the displaced poses
 // against the pipeline truth there (relative RMS), where both exist.
+void ScorePressure(const std::vector<PoseTruth>& pipeline, double k_p, SettingRun& run) {
+  if (run.setting.force_law != ForceLaw::kPressure) return;
+  double fe = 0, fg = 0, te = 0, tg = 0;
+  for (std::size_t k = 0; k < run.poses.size() && k < pipeline.size(); ++k) {
+    const Wrench& F = run.poses[k].F;
+    const glm::dvec3 g = k_p * pipeline[k].pressure_per_kp.force;
+    const glm::dvec3 t = k_p * pipeline[k].pressure_per_kp.torque;
+    fe += glm::dot(F.force - g, F.force - g);
+    fg += glm::dot(g, g);
+    te += glm::dot(F.torque - t, F.torque - t);
+    tg += glm::dot(t, t);
+  }
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  run.m.pressure_force_rel_rms = fg > 0 ? std::sqrt(fe / fg) : nan;
+  run.m.pressure_torque_rel_rms = tg > 0 ? std::sqrt(te / tg) : nan;
+}
+
 void ScorePrediction(const std::vector<PoseTruth>& displaced_truth, SettingRun& run) {
   if (run.predicted.size() != displaced_truth.size() || run.predicted.empty()) return;
   double fe = 0, fr = 0, te = 0, tr = 0;

@@ -89,6 +89,10 @@ struct Metrics {
   double switch_jump_p99_n = std::numeric_limits<double>::quiet_NaN();
   double switch_jump_max_n = std::numeric_limits<double>::quiet_NaN();
   int switch_jumps_over_0_2_n = 0;
+  // A pressure-law setting's force and torque against that law's own truth (PoseTruth's
+  // pressure_per_kp times k_p); NaN for the other settings.
+  double pressure_force_rel_rms = std::numeric_limits<double>::quiet_NaN();
+  double pressure_torque_rel_rms = std::numeric_limits<double>::quiet_NaN();
   bool pareto = false;
 };
 
@@ -198,6 +202,9 @@ void ComputeMetrics(SettingRun& run, const std::vector<GtJob>& jobs,
 // The model-prediction measure of `run`: its contact models' wrenches at the displaced poses
 // against the pipeline truth there (relative RMS), where both exist.
 void ScorePrediction(const std::vector<PoseTruth>& displaced_truth, SettingRun& run);
+// A pressure-law setting's Metrics::pressure_* against the pressure law's truth of each pose
+// (`pipeline`'s pressure_per_kp) at k_p (N/m³); nothing for the other settings.
+void ScorePressure(const std::vector<PoseTruth>& pipeline, double k_p, SettingRun& run);
 // Marks the runs no other run beats in both step time (p50) and pipeline force error.
 void MarkPareto(std::vector<SettingRun>& runs);
 

@@ -73,7 +73,9 @@ void WritePatchesHeader(std::ostream& o) {
        "fx_gt,fy_gt,fz_gt,tx_gt,ty_gt,tz_gt,tool_com_x,tool_com_y,tool_com_z,stiffness_n_per_m,"
        "gradient_step_m,pairs,tool_inside_area_m2,object_inside_area_m2,dV_dx,dV_dy,dV_dz,"
        "dV_dthx,dV_dthy,dV_dthz,gt_samples_per_side,gt_converged,share,gap_to_neighbour_m,"
-       "tilt_step_rad\n";
+       "tilt_step_rad,pressure_volume_m3,pressure_fx_per_kp,pressure_fy_per_kp,pressure_fz_per_kp,"
+       "pressure_tx_per_kp,pressure_ty_per_kp,pressure_tz_per_kp,pressure_samples_per_side,"
+       "pressure_converged\n";
 }
 
 void WritePatchRow(std::ostream& o, const SceneReport& rep, std::size_t k, std::size_t q,
@@ -96,7 +98,10 @@ void WritePatchRow(std::ostream& o, const SceneReport& rep, std::size_t k, std::
     << patch.environment_inside_area_m2 << ',' << gx.x << ',' << gx.y << ',' << gx.z << ',' << gt.x
     << ',' << gt.y << ',' << gt.z << ',' << patch.contact.base.samples_per_side << ','
     << (patch.contact.base.converged ? 1 : 0) << ',' << patch.share << ','
-    << patch.gap_to_neighbour_m << ',' << patch.tilt_step_rad << '\n';
+    << patch.gap_to_neighbour_m << ',' << patch.tilt_step_rad << ',' << patch.pressure.volume_m3
+    << ',';
+  WriteWrench(o, patch.pressure.per_kp);
+  o << ',' << patch.pressure.samples_per_side << ',' << (patch.pressure.converged ? 1 : 0) << '\n';
 }
 
 void WriteContactRow(std::ostream& o, const SceneReport& rep, const SettingRun& run,
@@ -138,7 +143,7 @@ void WriteFrontierCsv(const std::string& path, const std::vector<SceneReport>& r
        "tool_surface_p99_um,object_surface_p99_um,tool_surface_outside_p99_um,"
        "object_surface_outside_p99_um,tool_surface_share_outside,"
        "object_surface_share_outside,switch_jump_p50_n,switch_jump_p99_n,switch_jump_max_n,"
-       "switch_jumps_over_0_2_n,pareto,"
+       "switch_jumps_over_0_2_n,pressure_force_rel_rms,pressure_torque_rel_rms,pareto,"
        "skipped\n";
   for (const SceneReport& rep : reports) {
     for (const SettingRun& r : rep.runs) {
@@ -202,12 +207,14 @@ void WriteFrontierCsv(const std::string& path, const std::vector<SceneReport>& r
                                      Fmt(m.switch_jump_p99_n),
                                      Fmt(m.switch_jump_max_n),
                                      std::to_string(m.switch_jumps_over_0_2_n),
+                                     Fmt(m.pressure_force_rel_rms),
+                                     Fmt(m.pressure_torque_rel_rms),
                                      std::string(m.pareto ? "1" : "0"),
                                      std::string()}) {
           cells.push_back(c);
         }
       } else {
-        cells.resize(cells.size() + 41);
+        cells.resize(cells.size() + 43);
         cells.push_back(clean(r.skipped));
       }
       for (std::size_t i = 0; i < cells.size(); ++i) o << (i ? "," : "") << cells[i];
@@ -263,7 +270,16 @@ void WriteSummary(const std::string& path, const FrontierOptions& options,
        "against the **pipeline "
        "truth** at those displaced poses; `model prediction F / τ err` is the relative RMS over "
        "them. A linearization holds one arm of a face's V: past the vertex only a depth "
-       "field (evaluated where the tool is) has the other edge's torque.\n\n"
+       "field (evaluated where the tool is) has the other edge's torque.\n"
+       "- **Pressure truth**, for the `pressure` setting (the depth fields under the pressure "
+       "law, `slave_sim --force-law pressure`): on each pipeline-truth patch's window, the "
+       "overlap along its n at the centres of an M×M grid of rays over the full-resolution "
+       "meshes, the law's wrench k_p Σ A d (−∇d) with k_p = k / A_tool (the tool's bounding "
+       "box's largest face), M doubled from "
+    << options.ground_truth.initial_samples
+    << " until the wrench changes by less than 1 % (patches.csv's pressure_* columns, per unit "
+       "k_p); `pressure_force_rel_rms` and `pressure_torque_rel_rms` in frontier.csv are that "
+       "setting's relative RMS against it.\n\n"
        "Pareto and the fastest setting within 5 % use the pipeline truth.\n\n";
   if (!plot_note.empty()) s << plot_note << "\n\n";
   for (const SceneReport& rep : reports) {

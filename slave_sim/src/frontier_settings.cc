@@ -27,6 +27,7 @@ PipelineOptions PipelineOptionsFor(const FrontierSetting& st) {
   options.grid_resolution = st.grid;
   options.refine_depth = st.refine_depth;
   options.depth_fields = st.depth_fields;
+  options.force_law = st.force_law;
   // The texture stage's threads are the coarse query's too, as in the product.
   options.texture_threads = st.texture_threads;
   return options;
@@ -95,6 +96,11 @@ std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu) {
     fields.name = "depth_fields";
     fields.depth_fields = true;
     s.push_back(fields);
+    // The same fields under the pressure law, against that law's own truth.
+    FrontierSetting pressure = fields;
+    pressure.name = "pressure";
+    pressure.force_law = ForceLaw::kPressure;
+    s.push_back(pressure);
   }
   if (with_gpu) gpu(16);
   FrontierSetting c = base;

@@ -37,6 +37,9 @@ void ContactPatchTruthOptions::Validate() const {
   if (!(boundary_cell_m > 0.0) || !(boundary_cell_m <= inside_cell_m))
     fail("boundary_cell_m must be in (0, inside_cell_m]", boundary_cell_m);
   if (max_pairs < 1) fail("max_pairs must be >= 1", max_pairs);
+  if (!(pressure_tolerance >= 0.0 && pressure_tolerance < 1.0))
+    fail("pressure_tolerance must be in [0, 1)", pressure_tolerance);
+  if (pressure_max_samples < 2) fail("pressure_max_samples must be >= 2", pressure_max_samples);
   if (!(share_fade_m >= 0.0) || !std::isfinite(share_fade_m))
     fail("share_fade_m must be >= 0", share_fade_m);
   if (!(share_temperature_m > 0.0) || !std::isfinite(share_temperature_m))
@@ -541,6 +544,13 @@ void ContactPatchTruth::Impl::LinearizePatches(PoseState& s) {
     patch.contact = m.solver.Linearize(X_WT, X_TFt, X_WFe, patch.window, k, step_resolution,
                                        patch.tilt_step_rad);
     out.rays += patch.contact.rays;
+    if (o.pressure_tolerance > 0.0) {  // 4b.
+      patch.pressure = m.solver.ConvergedPressure(X_WT, X_TFt, X_WFe, patch.window,
+                                                  o.pressure_tolerance, o.pressure_max_samples);
+      out.rays += patch.pressure.rays;
+      out.pressure_per_kp += patch.pressure.per_kp;
+      out.pressure_volume_m3 += patch.pressure.volume_m3;
+    }
     out.patches.push_back(std::move(patch));
   }
 }

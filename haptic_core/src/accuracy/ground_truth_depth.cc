@@ -71,6 +71,74 @@ bool GroundTruthDepthSolver::ProbeTool(double s, double t, double& a) noexcept {
   return true;
 }
 
+GroundTruthPressure GroundTruthDepthSolver::PressureAt(const RigidTransform& X_WT,
+                                                       const RigidTransform& X_TFt,
+                                                       const RigidTransform& X_WFe,
+                                                       const ContactWindow& w, int m) {
+  m = std::clamp(m, 2, 8192);
+  const long long rays_before = rays_;
+  SetPoses(X_WT * X_TFt, X_WFe, w);
+  const double cell = w.extent_m / m, area = cell * cell, half_cell = 0.5 * cell;
+  const auto coord = [&](int i) { return ((i + 0.5) / m - 0.5) * w.extent_m; };
+  // The environment's slope along one axis at (s, t): central over ±half a cell where both
+  // sides have a surface, else one-sided, else 0.
+  const auto slope = [&](double s, double t, double b, bool along_u) {
+    double lo = 0.0, hi = 0.0;
+    const double ds = along_u ? half_cell : 0.0, dt = along_u ? 0.0 : half_cell;
+    const bool has_lo = ProbeEnvironment(s - ds, t - dt, lo);
+    const bool has_hi = ProbeEnvironment(s + ds, t + dt, hi);
+    if (has_lo && has_hi) return (hi - lo) / cell;
+    if (has_hi) return (hi - b) / half_cell;
+    if (has_lo) return (b - lo) / half_cell;
+    return 0.0;
+  };
+  GroundTruthPressure out;
+  out.samples_per_side = m;
+  glm::dvec3 force{0.0}, torque{0.0};
+  for (int j = 0; j < m; ++j) {
+    for (int i = 0; i < m; ++i) {
+      const double s = coord(i), t = coord(j);
+      const Sample x = Probe(s, t);
+      if (!x.hit_b || !x.hit_a) continue;
+      const double d = x.b - x.a;
+      if (!(d > 0.0)) continue;
+      const glm::dvec3 g =
+          slope(s, t, x.b, true) * w.axis_u_W + slope(s, t, x.b, false) * w.axis_v_W - w.normal_W;
+      const glm::dvec3 r =
+          w.center_W + s * w.axis_u_W + t * w.axis_v_W + x.a * w.normal_W - X_WT.translation;
+      out.volume_m3 += area * d;
+      force -= (area * d) * g;
+      torque -= (area * d) * glm::cross(r, g);
+    }
+  }
+  out.per_kp = {force, torque};
+  out.rays = rays_ - rays_before;
+  return out;
+}
+
+GroundTruthPressure GroundTruthDepthSolver::ConvergedPressure(const RigidTransform& X_WT,
+                                                              const RigidTransform& X_TFt,
+                                                              const RigidTransform& X_WFe,
+                                                              const ContactWindow& w,
+                                                              double tolerance, int max_samples) {
+  GroundTruthPressure out = PressureAt(X_WT, X_TFt, X_WFe, w, options_.initial_samples);
+  long long rays = out.rays;
+  for (int m = 2 * options_.initial_samples; m <= max_samples; m *= 2) {
+    GroundTruthPressure next = PressureAt(X_WT, X_TFt, X_WFe, w, m);
+    rays += next.rays;
+    const double f = glm::length(next.per_kp.force);
+    const double df = glm::length(next.per_kp.force - out.per_kp.force);
+    const double dt = glm::length(next.per_kp.torque - out.per_kp.torque);
+    const double t_scale = glm::length(next.per_kp.torque) + f * 0.5 * w.extent_m;
+    next.change = f > 0.0 ? std::max(df / f, dt / t_scale) : (df > 0.0 ? 1.0 : 0.0);
+    next.converged = next.change < tolerance;
+    out = next;
+    if (out.converged) break;
+  }
+  out.rays = rays;
+  return out;
+}
+
 GroundTruthDepthSolver::Sample GroundTruthDepthSolver::Probe(double s, double t) noexcept {
   Sample out;
   out.hit_b = ProbeEnvironment(s, t, out.b);

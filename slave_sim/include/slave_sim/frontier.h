@@ -51,6 +51,9 @@ struct FrontierSetting {
   /// prediction are its depth fields' (evaluated as the operator's loop does); the per-contact
   /// columns stay the linearization's.
   bool depth_fields = false;
+  /// PipelineOptions::force_law ("pressure": the depth fields under the pressure law, scored
+  /// against that law's own truth, Metrics' pressure_*).
+  ForceLaw force_law = ForceLaw::kSeed;
 };
 
 /// The sweep: the default setting (grid 50, 1024² textures, the seed's coarse counts, CPU) first,
@@ -58,8 +61,9 @@ struct FrontierSetting {
 /// 16 grid ("grid16_refined"), texture size 256 and 2048, coarse ×2, the product's models
 /// ("product"), the reference texture path ("reference", the path the fast one replaced: the same
 /// error, its time), the fast path on two threads ("threads2"), the contact model as depth fields
-/// ("depth_fields"), the GPU at 16 depth bits (when `with_gpu`), and the two baselines.
-/// `quick` leaves out texture 2048, "product", "threads2" and "depth_fields".
+/// ("depth_fields") and the same under the pressure law ("pressure"), the GPU at 16 depth bits
+/// (when `with_gpu`), and the two baselines. `quick` leaves out texture 2048, "product",
+/// "threads2", "depth_fields" and "pressure".
 std::vector<FrontierSetting> FrontierSettings(bool quick, bool with_gpu);
 
 /// The remote step's options of a texture-method setting (`st.method` kTexture): every

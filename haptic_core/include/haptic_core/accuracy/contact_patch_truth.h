@@ -41,6 +41,9 @@
 //     (connected_contacts.h's StrongestPathLinks and LinkedPenaltyShares, the law the method's
 //     stage 5c uses on its own windows). At the merge distance s ≈ 1 on the deeper patch, as the
 //     merged patch has it; share_fade_m = 0 gives the truth before (every s = 1).
+//  4b. The pressure law's truth (depth_field.h, ForceLaw::kPressure), when asked: the overlap
+//     along each patch's n integrated over its window by a grid of rays, refined until the wrench
+//     converges (GroundTruthDepthSolver::ConvergedPressure); the patches' wrenches add.
 //  5. T2, the volume truth, independent of the force law: −∇_x V's direction and the lever arm
 //     |∇_θ V| / |∇_x V| (what a volume penalty k_V·V would give as |τ|/|F|), so that distributed
 //     and grazing contact are judged by direction and arm, not by stiffness.
@@ -127,6 +130,11 @@ struct ContactPatchTruthOptions {
   double share_temperature_m = 5e-6;
   /// Most intersecting pairs gathered per pose (FCL's num_max_contacts).
   int max_pairs = 1 << 20;
+  /// Step 4b, the pressure law's truth (depth_field.h, ForceLaw::kPressure): on each patch's
+  /// window, GroundTruthDepthSolver::ConvergedPressure to this relative tolerance (0: not
+  /// computed), M doubled from depth.initial_samples up to pressure_max_samples.
+  double pressure_tolerance = 0.0;
+  int pressure_max_samples = 1024;
   /// δ's ray casting on each window.
   GroundTruthOptions depth;
 
@@ -159,6 +167,8 @@ struct TruthPatch {
   /// T1 on the window: δ_gt, ∇δ_gt (steps at texel scale), Φ_gt on the tool at its centre of mass
   /// (the patch's own, before its share).
   GroundTruthContact contact;
+  /// The pressure law's sums on its window (step 4b; zero when not computed).
+  GroundTruthPressure pressure;
   /// Its share s ∈ [0, 1] of that penalty (step 4a; 1 when no other patch is within
   /// merge_distance_m + share_fade_m): PoseTruth::F_T_W sums s · contact.F_T_W.
   double share = 1.0;
@@ -182,6 +192,10 @@ struct PoseTruth {
   Wrench F_T_W;
   /// T2: Σ over patches of the mean of both routes' ∇V (m², m³/rad), in W.
   glm::dvec3 dV_dx_W{0.0}, dV_dtheta_W{0.0};
+  /// The pressure law's truth (step 4b): Σ over patches of their wrench per unit k_p (m³, m⁴; the
+  /// law sums every overlapping cell, so patches add without shares) and of their volume (m³).
+  Wrench pressure_per_kp;
+  double pressure_volume_m3 = 0.0;
   /// Rays cast (inside tests and δ).
   long long rays = 0;
 };

@@ -73,6 +73,25 @@ struct GroundTruthContact {
   long long rays = 0;
 };
 
+/// The pressure law's truth on one window (depth_field.h, ForceLaw::kPressure, on the
+/// full-resolution meshes): the overlap d = b − a along the window's normal n at the centres of
+/// an M×M grid of cells of area A (b the environment's highest surface facing +n, a the tool's
+/// lowest facing −n, as the depth's samples), and over the cells where d > 0 the sums the law
+/// integrates: V = Σ A d and −∇U/k_p = −Σ A d ∇d, ∇d = (g, r × g) with g = b_u u + b_v v − n (the
+/// environment's slope from its heights half a cell either side) and r the tool's surface point
+/// less its centre of mass.
+struct GroundTruthPressure {
+  double volume_m3 = 0.0;
+  /// −∇U / k_p on the tool at its centre of mass, in W (m³ and m⁴): the law's wrench per unit k_p.
+  Wrench per_kp;
+  /// M of the grid that gave it, the last doubling's relative change of the wrench (force against
+  /// |F|, torque against |τ| + |F|·W/2), and whether that is within the tolerance.
+  int samples_per_side = 0;
+  double change = 0.0;
+  bool converged = false;
+  long long rays = 0;
+};
+
 /// Computes ground-truth penetration depths between one tool mesh and one environment mesh.
 /// Holds no per-call state beyond scratch buffers: one solver per thread.
 class GroundTruthDepthSolver {
@@ -108,6 +127,18 @@ class GroundTruthDepthSolver {
                                const RigidTransform& X_WFe, const ContactWindow& window,
                                double stiffness_n_per_m, int step_resolution = 0,
                                double tilt_step_rad = 0.0);
+
+  /// The pressure law's sums on `window` (GroundTruthPressure) on an M×M grid (M =
+  /// `samples_per_side`, ≥ 2), the tool's centre of mass frame T at X_WT, its mesh at X_TFt in T,
+  /// the environment's mesh at X_WFe.
+  GroundTruthPressure PressureAt(const RigidTransform& X_WT, const RigidTransform& X_TFt,
+                                 const RigidTransform& X_WFe, const ContactWindow& window,
+                                 int samples_per_side);
+  /// The same with M doubled from options.initial_samples until the wrench changes by less than
+  /// `tolerance` (relative, GroundTruthPressure::change) or M reaches `max_samples`.
+  GroundTruthPressure ConvergedPressure(const RigidTransform& X_WT, const RigidTransform& X_TFt,
+                                        const RigidTransform& X_WFe, const ContactWindow& window,
+                                        double tolerance, int max_samples);
 
  private:
   struct Sample {
