@@ -935,6 +935,7 @@ DepthField RoughDepthField() {
   f.smooth_max_m = 2e-6;
   f.force_law = ForceLaw::kPressure;
   f.pressure_area_m2 = 3.7e-4;
+  f.stride_hint = 2;
   f.env_height_m = RoughDepthMap(f.nx, f.ny);
   f.tool_height_m.resize(f.env_height_m.size());
   for (int j = 0; j < f.ny; ++j) {
@@ -978,6 +979,8 @@ TEST(DepthFieldCodec, RoundTripKeepsTheFieldAndItsDepthWithinTheMapsStep) {
   EXPECT_EQ(g.smooth_max_m, f.smooth_max_m);
   EXPECT_EQ(g.force_law, f.force_law);
   EXPECT_EQ(g.pressure_area_m2, f.pressure_area_m2);
+  EXPECT_EQ(g.stride_hint, f.stride_hint);
+  EXPECT_EQ(g.node_stride, f.node_stride);
   // The depth at displaced poses moves by at most the two maps' half steps (0.25 µm each).
   for (const double dx : {0.0, 0.13e-3, -0.41e-3}) {
     RigidTransform X = f.X_WT0;

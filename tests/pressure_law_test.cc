@@ -451,6 +451,37 @@ TEST(PressureLaw, TheContactModelPushesWithKOverTheReferenceAreaTimesTheNodesSum
   EXPECT_GT(m.G.norm(), 0.0);
 }
 
+TEST(PressureLaw, AStrideHintIsKeptWhileTheFieldsNodeCountAllowsIt) {
+  // The sphere of ASpherePressedIntoAHalfSpace at 200 µm: 1,259 overlapping nodes, so that
+  // without a hint Prepare keeps every 2nd node (315). A hint of 4 (~80 nodes, within
+  // [512/8, 512]) is kept; a hint of 8 (~20 nodes, below the band) is refined to 4; a hint of 1
+  // (1,259, above it) is coarsened to 2.
+  const double R = 5e-3, h = 70e-6, d = 200e-6;
+  const RigidTransform X_WF = TurnedFrame();
+  const glm::dvec3 c_F(25 * h, 25 * h, 0.0);
+  const auto sphere = [&](double x, double y) {
+    const double r2 = (x - c_F.x) * (x - c_F.x) + (y - c_F.y) * (y - c_F.y);
+    return r2 > 0.25 * R * R ? std::nan("") : -d + R - std::sqrt(R * R - r2);
+  };
+  RigidTransform X_WT0;
+  X_WT0.translation = X_WF * glm::dvec3(c_F.x, c_F.y, R - d);
+  X_WT0.rotation = X_WF.rotation;
+  DepthField f = MakeField(50, 50, h, X_WF, X_WT0, Flat, sphere);
+  EXPECT_EQ(f.node_stride, 2);
+  const double volume = kPi * d * d * (3.0 * R - d) / 3.0;
+  for (const auto& [hint, kept] : {std::pair{4, 4}, std::pair{8, 4}, std::pair{1, 2}}) {
+    f.stride_hint = static_cast<std::uint8_t>(hint);
+    ASSERT_TRUE(f.Prepare());
+    EXPECT_EQ(f.node_stride, kept) << hint;
+    // Every stride is a quadrature of the same integral.
+    EXPECT_NEAR(DepthFieldDepthAt(f, X_WT0).pressure_volume_m3 / volume, 1.0, 0.02) << hint;
+  }
+  for (const int bad : {3, 16}) {
+    f.stride_hint = static_cast<std::uint8_t>(bad);
+    EXPECT_FALSE(f.Prepare()) << bad;
+  }
+}
+
 TEST(PressureLaw, PrepareRefusesAnUnknownLawOrAReferenceAreaThatIsNotPositive) {
   const RigidTransform X_WF = TurnedFrame();
   DepthField f = MakeField(40, 40, kH, X_WF, ToolAboveRoughFace(X_WF), Rough, RoughFace);

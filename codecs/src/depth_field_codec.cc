@@ -97,6 +97,7 @@ std::vector<std::uint8_t> EncodeDepthField(const DepthField& f,
   w.Put<double>(f.smooth_max_m);
   w.Put<std::uint8_t>(static_cast<std::uint8_t>(f.force_law));
   w.Put<double>(f.pressure_area_m2);
+  w.Put<std::uint8_t>(f.stride_hint);
   w.Put<std::uint32_t>(static_cast<std::uint32_t>(env.size()));
   w.bytes.insert(w.bytes.end(), env.begin(), env.end());
   w.Put<std::uint32_t>(static_cast<std::uint32_t>(tool.size()));
@@ -131,6 +132,7 @@ bool DecodeDepthField(std::span<const std::uint8_t> bytes, DepthField& out,
   out.smooth_max_m = r.Get<double>();
   out.force_law = static_cast<ForceLaw>(r.Get<std::uint8_t>());
   out.pressure_area_m2 = r.Get<double>();
+  out.stride_hint = r.Get<std::uint8_t>();
   for (const bool tool : {false, true}) {
     const std::uint32_t n = r.Get<std::uint32_t>();
     const std::span<const std::uint8_t> map = r.Bytes(n);

@@ -161,7 +161,8 @@ bool DepthField::Prepare() {
       !(std::abs(tool_offset_v_m) <= cell_m) ||
       (force_law != ForceLaw::kSeed && force_law != ForceLaw::kPressure) ||
       (force_law == ForceLaw::kPressure &&
-       (!(pressure_area_m2 > 0.0) || !std::isfinite(pressure_area_m2)))) {
+       (!(pressure_area_m2 > 0.0) || !std::isfinite(pressure_area_m2))) ||
+      (stride_hint & (stride_hint - 1)) != 0 || stride_hint > kMaxDepthFieldNodeStride) {
     return false;
   }
   env_bound_m.assign(n, -std::numeric_limits<float>::infinity());
@@ -212,15 +213,34 @@ bool DepthField::Prepare() {
   // Every tool node, then, for a dense field (kDepthFieldDenseNodes, kDepthFieldDenseTestedNodes;
   // kDepthFieldDensePressureNodes under the pressure law), every 2nd, 4th, … node of the tool's
   // lattice along each axis, until the evaluation at X_WT0 fits.
-  KeepToolNodes(1);
-  prepared = true;
-  const int dense =
-      force_law == ForceLaw::kPressure ? kDepthFieldDensePressureNodes : kDepthFieldDenseNodes;
-  while (node_stride < kMaxDepthFieldNodeStride) {
+  const bool pressure = force_law == ForceLaw::kPressure;
+  const int dense = pressure ? kDepthFieldDensePressureNodes : kDepthFieldDenseNodes;
+  const auto fits = [&](int* computed) {
     const DepthFieldEvaluation at_q0 =
         DepthFieldDepthAt(*this, X_WT0, DepthFieldKernel::kAvx2, dense + 1);
-    if (!at_q0.over_budget && at_q0.nodes_tested <= kDepthFieldDenseTestedNodes) break;
+    if (computed != nullptr) *computed = at_q0.nodes_evaluated;
+    return !at_q0.over_budget && at_q0.nodes_tested <= kDepthFieldDenseTestedNodes;
+  };
+  prepared = true;
+  // The pressure law's hinted stride, kept while it computes [dense/8, dense] nodes; one step
+  // finer below that band (four times the nodes, still within it).
+  if (pressure && stride_hint > 0) {
+    KeepToolNodes(stride_hint);
+    int computed = 0;
+    if (fits(&computed)) {
+      if (node_stride == 1 || 8 * computed > dense) return true;
+      KeepToolNodes(node_stride / 2);
+      if (fits(nullptr)) return true;
+      KeepToolNodes(2 * node_stride);
+      return true;
+    }
+  } else {
+    KeepToolNodes(1);
+    if (fits(nullptr)) return true;
+  }
+  while (node_stride < kMaxDepthFieldNodeStride) {
     KeepToolNodes(2 * node_stride);
+    if (fits(nullptr)) break;
   }
   return true;
 }

@@ -9,7 +9,7 @@
 //   f64 cell_m     u16 nx, u16 ny   f64 tool_offset_u_m, tool_offset_v_m
 //   X_WF: 3×f64 translation (m), 4×f64 rotation w, x, y, z   X_WT0: the same
 //   f64 travel_margin_m   f64 smooth_max_m   u8 force_law (ForceLaw: 0 seed, 1 pressure)
-//   f64 pressure_area_m2
+//   f64 pressure_area_m2   u8 stride_hint
 //   u32 n, n bytes: the environment's map (nx × ny)   u32 n, n bytes: the tool's map (nx × ny)
 // and nothing after. The decoded field is the encoded one but for its maps, each height within
 // half its stream's step (DepthMapEncodeOptions::step_m, 0.25 µm by default).
@@ -26,7 +26,7 @@ namespace ht {
 
 inline constexpr std::uint8_t kDepthFieldFormat = 2;
 /// Bytes of the layout besides the two maps' streams.
-inline constexpr std::size_t kDepthFieldFixedBytes = 198;
+inline constexpr std::size_t kDepthFieldFixedBytes = 199;
 
 /// Encodes `field` (prepared or not: only what Prepare derives is left out). Throws
 /// std::invalid_argument when its sides are outside [1, kMaxDepthFieldSide] or its maps are not

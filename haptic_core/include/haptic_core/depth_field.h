@@ -62,7 +62,9 @@ inline constexpr int kDepthFieldDenseNodes = 2048;
 /// at: the node spacing is the law's quadrature step. On the gear (seed Fig. 75) at 25 ms one
 /// way (`deadband_lockstep --scene block-on-gear --arm …,pressure=1`), 2,048 left fields that
 /// passed kDepthFieldMaxNodes at the operator's pose in 19 % of ticks (their contacts rendered
-/// from the linearization) and an operator tick p99 of 413 µs; 512, none and 149 µs.
+/// from the linearization) and an operator tick p99 of 413 µs; 512, none and 149 µs. A field
+/// with a stride hint (DepthField::stride_hint) keeps the hinted stride while its evaluation at
+/// X_WT0 computes between an eighth of this and this many nodes.
 inline constexpr int kDepthFieldDensePressureNodes = 512;
 /// The same for the tool nodes whose own cell's bound the evaluation at X_WT0 tests (most of them
 /// rejected): surfaces interlocked over a wide area (seed Fig. 76's stripes) pass the blocks'
@@ -154,6 +156,11 @@ struct DepthField {
   /// A_ref pressed d into a flat plate is pushed back with k·d under either law.
   ForceLaw force_law = ForceLaw::kSeed;
   double pressure_area_m2 = 0.0;
+  /// Under kPressure, the node stride the sender's last field on this lattice kept (1, 2, 4 or
+  /// kMaxDepthFieldNodeStride; 0: none), which Prepare keeps while the field's own node count
+  /// allows (kDepthFieldDensePressureNodes): successive fields then take the same quadrature,
+  /// and the force does not step where one would keep every 2nd node and the next every 4th.
+  std::uint8_t stride_hint = 0;
 
   // Derived by Prepare (the receiver's work, off the loop).
   /// Per grid cell (i, j) (between nodes i, i+1 and j, j+1; #nx·ny, row-major, the last row and
@@ -186,7 +193,8 @@ struct DepthField {
 
   /// Checks the field (id ≠ 0, finite frames, h > 0 and finite, nx and ny in
   /// [4, kMaxDepthFieldSide], both maps #nx·ny, the tool's offsets within ±h, margin ≥ 0, ε > 0,
-  /// a known law, A_ref > 0 and finite under kPressure)
+  /// a known law, A_ref > 0 and finite under kPressure, a stride hint of 0 or a power of two up
+  /// to kMaxDepthFieldNodeStride)
   /// and derives env_bound_m, the kept tool nodes, the blocks' bounds and tool_radius_m: all
   /// tool nodes, or, where the evaluation at X_WT0 computes more than kDepthFieldDenseNodes of
   /// them or tests more than kDepthFieldDenseTestedNodes, every node_stride-th. Allocates only when
@@ -301,11 +309,11 @@ class DepthFieldRenderer {
   /// when that exceeds kMaxDepthFieldSide, the cell is not positive, a pose is not finite, or
   /// the field does not prepare.
   /// The field is evaluated with `law` (DepthField::force_law; kPressure with A_ref
-  /// `pressure_area_m2`).
+  /// `pressure_area_m2` and `stride_hint`).
   bool Render(const HapticModel& tool, const RigidTransform& X_WT, const ContactQuery& query,
               const DepthFieldLattice& lattice, double margin_m, std::uint32_t id,
               double smooth_max_m, DepthField& out, ForceLaw law = ForceLaw::kSeed,
-              double pressure_area_m2 = 0.0);
+              double pressure_area_m2 = 0.0, std::uint8_t stride_hint = 0);
 
  private:
   std::vector<int> env_triangles_, tool_triangles_;

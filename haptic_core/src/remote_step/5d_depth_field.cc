@@ -111,7 +111,8 @@ int FindKeptField(const RemoteStepData& d, std::uint32_t lattice_id, double h,
 bool DepthFieldRenderer::Render(const HapticModel& tool, const RigidTransform& X_WT,
                                 const ContactQuery& query, const DepthFieldLattice& lattice,
                                 double margin_m, std::uint32_t id, double smooth_max_m,
-                                DepthField& out, ForceLaw law, double pressure_area_m2) {
+                                DepthField& out, ForceLaw law, double pressure_area_m2,
+                                std::uint8_t stride_hint) {
   out.prepared = false;
   const double h = lattice.cell_m;
   if (!(h > 0.0) || !std::isfinite(h) || query.environment == nullptr ||
@@ -183,6 +184,7 @@ bool DepthFieldRenderer::Render(const HapticModel& tool, const RigidTransform& X
   out.smooth_max_m = smooth_max_m;
   out.force_law = law;
   out.pressure_area_m2 = pressure_area_m2;
+  out.stride_hint = law == ForceLaw::kPressure ? stride_hint : 0;
   return out.Prepare();
 }
 
@@ -226,6 +228,7 @@ int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT
       lattice->axis_u_O = R_OW * q.window.axis_u_W;
       lattice->axis_v_O = R_OW * q.window.axis_v_W;
       lattice->id = ++d.last_lattice_id;
+      lattice->pressure_stride = 0;
     }
     lattice->last_used = ++d.field_lattice_clock;
     // A kept field that still holds this contact: on this lattice, not taken by another contact
@@ -261,7 +264,8 @@ int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT
                      : d.tool_contact_area_m2;
         }
         ok = d.field_renderer.Render(tool, X_WT, q, L, margin, d.last_field_id + 1,
-                                     options.depth_field_smooth_max_m, f, options.force_law, area);
+                                     options.depth_field_smooth_max_m, f, options.force_law, area,
+                                     lattice->pressure_stride);
       } catch (...) {  // std::bad_alloc beyond the reserve
         ok = false;
       }
@@ -271,6 +275,9 @@ int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT
       }
       ++d.last_field_id;
       if (d.last_field_id == 0) d.last_field_id = 1;  // 0 means none
+      if (options.force_law == ForceLaw::kPressure) {
+        lattice->pressure_stride = static_cast<std::uint8_t>(f.node_stride);
+      }
     }
     d.field_used_at[static_cast<std::size_t>(slot)] = step;
     d.contact_field_slot[static_cast<std::size_t>(i)] = slot;
