@@ -278,6 +278,13 @@ TEST(PenaltyShares, SoftMaximumOverLinkedContacts) {
   EXPECT_GE(group, (d[0] + d[1] + d[2]) / 3.0);
   LinkedPenaltyShares(std::array<double, 3>{150e-6, 100e-6, 50e-6}, all, 5e-6, s);
   EXPECT_GT(s[0], 1.0 - 1e-4);
+  // Two linked contacts 5 mm below an unlinked deepest one: their weights relative to it
+  // underflow, and they still share as a pair (a half each), not 0/0.
+  const std::array<double, 9> pair{0, 0, 0, 0, 0, 1, 0, 1, 0};
+  LinkedPenaltyShares(std::array<double, 3>{5e-3, 0.0, 0.0}, pair, 5e-6, s);
+  EXPECT_EQ(s[0], 1.0);
+  EXPECT_NEAR(s[1], 0.5, 1e-12);
+  EXPECT_NEAR(s[2], 0.5, 1e-12);
   // Continuous where the deepest contact changes, and as a link fades in.
   std::array<double, 3> s2{};
   LinkedPenaltyShares(std::array<double, 3>{100e-6 + 1e-12, 100e-6, 0.0}, all, 5e-6, s);

@@ -105,7 +105,20 @@ void LinkedPenaltyShares(std::span<const double> depths_m, std::span<const doubl
       const double l = std::clamp(links[i * n + j], 0.0, 1.0);
       rivals += l * e(j);
     }
-    shares[i] = e(i) / (e(i) + rivals);
+    const double sum = e(i) + rivals;
+    if (sum > 0.0) {
+      shares[i] = e(i) / sum;
+      continue;
+    }
+    // Every weight underflowed (contacts far below the deepest, whose exp((δ − δ_max)/τ) is 0):
+    // the same share relative to this contact's own depth, 1 / (1 + Σ_j l_ij e^((δ_j − δ_i)/τ)).
+    double relative = 0.0;
+    for (std::size_t j = 0; j < n; ++j) {
+      const double l = std::clamp(links[i * n + j], 0.0, 1.0);
+      if (j == i || !std::isfinite(depths_m[j]) || !(l > 0.0)) continue;  // 0 · e^(+large): none
+      relative += l * std::exp((depths_m[j] - depths_m[i]) / tau);
+    }
+    shares[i] = 1.0 / (1.0 + relative);
   }
 }
 
