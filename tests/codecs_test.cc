@@ -1026,6 +1026,14 @@ TEST(DepthFieldCodec, DecoderRefusesDamagedOrInvalidFieldsWithAReason) {
   bad = f;
   bad.pressure_area_m2 = -1.0;
   rejects(EncodeDepthField(bad), "the pressure law with a negative reference area");
+  bad = f;
+  bad.pressure_area_m2 = 1e-300;  // Σ A d² / A_ref would overflow
+  rejects(EncodeDepthField(bad), "the pressure law with a vanishing reference area");
+  for (const int hint : {3, 16}) {
+    bad = f;
+    bad.stride_hint = static_cast<std::uint8_t>(hint);
+    rejects(EncodeDepthField(bad), "a stride hint that is not 0 or a power of two up to 8");
+  }
   // Sides that disagree with a map's.
   b = good;
   b[33] = static_cast<std::uint8_t>(f.nx - 1);  // nx, after 33 bytes

@@ -485,7 +485,7 @@ TEST(PressureLaw, AStrideHintIsKeptWhileTheFieldsNodeCountAllowsIt) {
 TEST(PressureLaw, PrepareRefusesAnUnknownLawOrAReferenceAreaThatIsNotPositive) {
   const RigidTransform X_WF = TurnedFrame();
   DepthField f = MakeField(40, 40, kH, X_WF, ToolAboveRoughFace(X_WF), Rough, RoughFace);
-  for (const double area : {0.0, -1e-4, std::nan(""), HUGE_VAL}) {
+  for (const double area : {0.0, -1e-4, std::nan(""), HUGE_VAL, 1e-300, 1e3}) {
     f.pressure_area_m2 = area;
     EXPECT_FALSE(f.Prepare()) << area;
   }

@@ -57,9 +57,17 @@ const char* DirOrSkip(const char* var) { return std::getenv(var); }
 
 // Seed Fig. 76: the top block rises along n as soon as it rotates, and the torque about n
 // opposes the rotation.
+// HT_FIG76_FORCE_LAW (seed or pressure): the law the node's summary must say it rendered.
 TEST(Fig76Trace, TheBlockRisesWhenRotatedAndTheTorqueOpposesTheRotation) {
   const char* dir = DirOrSkip("HT_FIG76_OUT");
   if (dir == nullptr) GTEST_SKIP() << "HT_FIG76_OUT not set";
+  if (const char* law = std::getenv("HT_FIG76_FORCE_LAW")) {
+    std::ifstream in(std::string(dir) + "/remote_summary.json");
+    std::stringstream summary;
+    summary << in.rdbuf();
+    EXPECT_NE(summary.str().find(std::string("\"force_law\": \"") + law + "\""), std::string::npos)
+        << "remote_summary.json does not say the node rendered the " << law << " law";
+  }
   const Trace t = LoadTrace(dir);
   const std::vector<double> z = t.Select("tool_z", "rotate");
   const std::vector<double> rz = t.Select("tool_rz", "rotate");

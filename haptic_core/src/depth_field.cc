@@ -161,7 +161,7 @@ bool DepthField::Prepare() {
       !(std::abs(tool_offset_v_m) <= cell_m) ||
       (force_law != ForceLaw::kSeed && force_law != ForceLaw::kPressure) ||
       (force_law == ForceLaw::kPressure &&
-       (!(pressure_area_m2 > 0.0) || !std::isfinite(pressure_area_m2))) ||
+       !(pressure_area_m2 >= kMinPressureAreaM2 && pressure_area_m2 <= kMaxPressureAreaM2)) ||
       (stride_hint & (stride_hint - 1)) != 0 || stride_hint > kMaxDepthFieldNodeStride) {
     return false;
   }
@@ -215,32 +215,34 @@ bool DepthField::Prepare() {
   // lattice along each axis, until the evaluation at X_WT0 fits.
   const bool pressure = force_law == ForceLaw::kPressure;
   const int dense = pressure ? kDepthFieldDensePressureNodes : kDepthFieldDenseNodes;
-  const auto fits = [&](int* computed) {
+  const auto fits = [&](int* computed, int* overlapping) {
     const DepthFieldEvaluation at_q0 =
         DepthFieldDepthAt(*this, X_WT0, DepthFieldKernel::kAvx2, dense + 1);
     if (computed != nullptr) *computed = at_q0.nodes_evaluated;
+    if (overlapping != nullptr) *overlapping = at_q0.overlapping_nodes;
     return !at_q0.over_budget && at_q0.nodes_tested <= kDepthFieldDenseTestedNodes;
   };
   prepared = true;
-  // The pressure law's hinted stride, kept while it computes [dense/8, dense] nodes; one step
-  // finer below that band (four times the nodes, still within it).
+  // The pressure law's hinted stride, kept while it computes more than dense/8 and at most
+  // dense nodes, or while nothing overlaps (no count to go by); one step finer below that band
+  // (four times the nodes, still within it).
   if (pressure && stride_hint > 0) {
     KeepToolNodes(stride_hint);
-    int computed = 0;
-    if (fits(&computed)) {
-      if (node_stride == 1 || 8 * computed > dense) return true;
+    int computed = 0, overlapping = 0;
+    if (fits(&computed, &overlapping)) {
+      if (node_stride == 1 || overlapping == 0 || 8 * computed > dense) return true;
       KeepToolNodes(node_stride / 2);
-      if (fits(nullptr)) return true;
+      if (fits(nullptr, nullptr)) return true;
       KeepToolNodes(2 * node_stride);
       return true;
     }
   } else {
     KeepToolNodes(1);
-    if (fits(nullptr)) return true;
+    if (fits(nullptr, nullptr)) return true;
   }
   while (node_stride < kMaxDepthFieldNodeStride) {
     KeepToolNodes(2 * node_stride);
-    if (fits(nullptr)) break;
+    if (fits(nullptr, nullptr)) break;
   }
   return true;
 }
@@ -966,6 +968,11 @@ DepthFieldEvaluation EvaluateField(const DepthField& f, const RigidTransform& X_
     out.pressure_volume_m3 = P.volume;
     out.pressure_damping =
         B * Mat6(P.weighted.selfadjointView<Eigen::Lower>()) * B.transpose() / a_ref;
+    if (!std::isfinite(depth) || !grad.allFinite() || !out.curvature.allFinite() ||
+        !out.pressure_damping.allFinite()) {
+      out.valid = false;  // the contact renders its linearization (counted as a fallback)
+      out.depth_m = -std::numeric_limits<double>::infinity();
+    }
     return out;
   }
   if (batched) {
@@ -1024,9 +1031,9 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
   if (f.force_law != ForceLaw::kPressure) return EvaluateField<false>(f, X_WT, batched, max_nodes);
   DepthFieldEvaluation out = EvaluateField<true>(f, X_WT, batched, max_nodes);
   if (!out.valid || out.over_budget || out.overlapping_nodes > 0) return out;
-  // No node overlaps: the seed's δ (at most 0) and ∇δ, which say how far apart the surfaces are.
-  const DepthFieldEvaluation apart =
-      EvaluateField<false>(f, X_WT, batched, std::max(0, max_nodes - out.nodes_evaluated));
+  // No node overlaps: the seed's δ (at most 0) and ∇δ, which say how far apart the surfaces are
+  // (a budget of its own: the pass above found nothing to sum).
+  const DepthFieldEvaluation apart = EvaluateField<false>(f, X_WT, batched, max_nodes);
   out.over_budget = apart.over_budget;
   out.valid = apart.valid;
   out.nodes_evaluated += apart.nodes_evaluated;

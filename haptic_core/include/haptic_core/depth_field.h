@@ -75,6 +75,11 @@ inline constexpr int kDepthFieldDenseTestedNodes = 8192;
 /// Largest DepthField::node_stride.
 inline constexpr int kMaxDepthFieldNodeStride = 8;
 
+/// The range of the pressure law's reference area A_ref (m², DepthField::pressure_area_m2) a
+/// field may carry: from a 10 µm square to a 10 m one, so that Σ A d² / A_ref stays finite.
+inline constexpr double kMinPressureAreaM2 = 1e-10;
+inline constexpr double kMaxPressureAreaM2 = 1e2;
+
 /// Largest number of nodes per side of a depth field's grid (the window's N plus twice the travel
 /// margin, in cells): bounds the memory the operator's loop preallocates per field.
 inline constexpr int kMaxDepthFieldSide = 256;
@@ -193,11 +198,13 @@ struct DepthField {
 
   /// Checks the field (id ≠ 0, finite frames, h > 0 and finite, nx and ny in
   /// [4, kMaxDepthFieldSide], both maps #nx·ny, the tool's offsets within ±h, margin ≥ 0, ε > 0,
-  /// a known law, A_ref > 0 and finite under kPressure, a stride hint of 0 or a power of two up
-  /// to kMaxDepthFieldNodeStride)
+  /// a known law, A_ref in [kMinPressureAreaM2, kMaxPressureAreaM2] under kPressure, a stride
+  /// hint of 0 or a power of two up to kMaxDepthFieldNodeStride)
   /// and derives env_bound_m, the kept tool nodes, the blocks' bounds and tool_radius_m: all
   /// tool nodes, or, where the evaluation at X_WT0 computes more than kDepthFieldDenseNodes of
-  /// them or tests more than kDepthFieldDenseTestedNodes, every node_stride-th. Allocates only when
+  /// them (kDepthFieldDensePressureNodes under kPressure, whose stride_hint is kept while that
+  /// evaluation computes more than an eighth of them and at most them, or no overlap at all)
+  /// or tests more than kDepthFieldDenseTestedNodes, every node_stride-th. Allocates only when
   /// the buffers' capacity is short. Returns false, leaving prepared false, on a bad field.
   bool Prepare();
   /// Reserves the maps, the bounds and the blocks for kMaxDepthFieldSide² nodes (not Prepare's

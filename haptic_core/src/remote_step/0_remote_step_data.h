@@ -158,9 +158,6 @@ struct RemoteStepData {
     double cell_m = 0.0;
     std::uint64_t last_used = 0;
     std::uint32_t id = 0;
-    /// The node stride of the lattice's last field under the pressure law (0: none yet), the
-    /// next one's DepthField::stride_hint.
-    std::uint8_t pressure_stride = 0;
   };
   std::array<FieldLattice, 2 * kMaxContacts> field_lattices{};
   std::uint64_t field_lattice_clock = 0;

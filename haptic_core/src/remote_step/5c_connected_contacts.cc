@@ -105,13 +105,12 @@ void LinkedPenaltyShares(std::span<const double> depths_m, std::span<const doubl
       const double l = std::clamp(links[i * n + j], 0.0, 1.0);
       rivals += l * e(j);
     }
-    const double sum = e(i) + rivals;
-    if (sum > 0.0) {
-      shares[i] = e(i) / sum;
+    if (e(i) > 0.0) {
+      shares[i] = e(i) / (e(i) + rivals);
       continue;
     }
-    // Every weight underflowed (contacts far below the deepest, whose exp((δ − δ_max)/τ) is 0):
-    // the same share relative to this contact's own depth, 1 / (1 + Σ_j l_ij e^((δ_j − δ_i)/τ)).
+    // Its own weight underflowed (a contact far below the deepest, exp((δ − δ_max)/τ) = 0): the
+    // same share relative to its own depth, 1 / (1 + Σ_j l_ij e^((δ_j − δ_i)/τ)), not 0/0.
     double relative = 0.0;
     for (std::size_t j = 0; j < n; ++j) {
       const double l = std::clamp(links[i * n + j], 0.0, 1.0);

@@ -106,6 +106,27 @@ int FindKeptField(const RemoteStepData& d, std::uint32_t lattice_id, double h,
   }
   return -1;
 }
+
+/// The pressure law's stride hint for a new field on lattice `lattice_id` around `center_W`: the
+/// node stride of the kept field on that lattice whose grid centre is nearest, if it lies within
+/// half that grid's side (the field this contact had); 0 when there is none.
+std::uint8_t PressureStrideHint(const RemoteStepData& d, std::uint32_t lattice_id,
+                                const glm::dvec3& center_W) noexcept {
+  std::uint8_t hint = 0;
+  double nearest = std::numeric_limits<double>::infinity();
+  for (const DepthField& f : d.field_pool) {
+    if (!f.prepared || f.lattice_id != lattice_id || f.force_law != ForceLaw::kPressure) continue;
+    const glm::dvec3 c =
+        f.X_WF * glm::dvec3(0.5 * (f.nx - 1) * f.cell_m, 0.5 * (f.ny - 1) * f.cell_m, 0.0);
+    const double gap = glm::length(c - center_W);
+    if (gap < nearest && gap <= 0.5 * std::min(f.nx, f.ny) * f.cell_m) {
+      nearest = gap;
+      hint = static_cast<std::uint8_t>(f.node_stride);
+    }
+  }
+  return hint;
+}
+
 }  // namespace
 
 bool DepthFieldRenderer::Render(const HapticModel& tool, const RigidTransform& X_WT,
@@ -228,7 +249,6 @@ int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT
       lattice->axis_u_O = R_OW * q.window.axis_u_W;
       lattice->axis_v_O = R_OW * q.window.axis_v_W;
       lattice->id = ++d.last_lattice_id;
-      lattice->pressure_stride = 0;
     }
     lattice->last_used = ++d.field_lattice_clock;
     // A kept field that still holds this contact: on this lattice, not taken by another contact
@@ -250,6 +270,9 @@ int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT
       if (slot < 0) continue;
       const DepthFieldLattice L{R_WO * lattice->axis_u_O, R_WO * lattice->axis_v_O,
                                 R_WO * lattice->normal_O, h, lattice->id};
+      const std::uint8_t hint = options.force_law == ForceLaw::kPressure
+                                    ? PressureStrideHint(d, lattice->id, q.window.center_W)
+                                    : std::uint8_t{0};
       DepthField& f = d.field_pool[static_cast<std::size_t>(slot)];
       bool ok = false;
       try {
@@ -259,13 +282,15 @@ int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT
             d.pressure_area_tool = &tool;
             d.tool_contact_area_m2 = ToolContactArea(tool);
           }
+          // From the object's own k (before stage 5c's share), so that k_p = s·k / A_ref takes
+          // the share s in both cases.
           area = options.pressure_stiffness_n_per_m3 > 0.0
-                     ? lin.stiffness_n_per_m / options.pressure_stiffness_n_per_m3
+                     ? q.stiffness_n_per_m / options.pressure_stiffness_n_per_m3
                      : d.tool_contact_area_m2;
         }
         ok = d.field_renderer.Render(tool, X_WT, q, L, margin, d.last_field_id + 1,
                                      options.depth_field_smooth_max_m, f, options.force_law, area,
-                                     lattice->pressure_stride);
+                                     hint);
       } catch (...) {  // std::bad_alloc beyond the reserve
         ok = false;
       }
@@ -275,9 +300,6 @@ int RenderContactDepthFields(const HapticModel& tool, const RigidTransform& X_WT
       }
       ++d.last_field_id;
       if (d.last_field_id == 0) d.last_field_id = 1;  // 0 means none
-      if (options.force_law == ForceLaw::kPressure) {
-        lattice->pressure_stride = static_cast<std::uint8_t>(f.node_stride);
-      }
     }
     d.field_used_at[static_cast<std::size_t>(slot)] = step;
     d.contact_field_slot[static_cast<std::size_t>(i)] = slot;

@@ -212,8 +212,9 @@ inline constexpr std::uint32_t kLegacyMagic = 0x504C5448u;  // bytes 'H' 'T' 'L'
 /// translation patches' section after the kink planes (the depth fields hold the surface where
 /// the tool is); every other body is as in version 12. Version 14 drops the kink planes: the
 /// depth-field section ends ContactModel and CompactContactModel; every other body is as in
-/// version 13. Version 15 adds the force law to each depth field (kDepthFieldFormat 2: its law
-/// and the pressure law's reference area); every message body is as in version 14.
+/// version 13. Version 15 adds the force law to each depth field (kDepthFieldFormat 2: its law,
+/// the pressure law's reference area and its node-stride hint); every message body is as in
+/// version 14.
 /// Only version 15 is accepted. A remote node answers a Hello of versions 2 to 14 whose MAC
 /// verifies with a Reject (kVersion) in that Hello's own layout and header version (the Hello's
 /// first 12 body bytes and the Reject body are laid out alike in versions 2 to 15), so that an
