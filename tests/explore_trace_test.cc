@@ -92,8 +92,9 @@ TEST(Explore, TheOperatorFoundTheObjectsAndPressedOnThem) {
 
 // Each depth field the remote node sent is decoded once by the operator: a field still decoding
 // is not asked for again, and a copy that arrives meanwhile is a duplicate, not a second decode
-// (on a loopback nothing is lost; a field is completed again only when the loop lost it or the
-// decoder found no buffer for it, and then asked for).
+// (on a loopback nothing is lost; a field is completed again only when the loop lost it, the
+// decoder found no buffer for it or its queue was full, as on a loaded machine, and then asked
+// for).
 TEST(Explore, EachDepthFieldIsDecodedOnce) {
   const nlohmann::json s = Summary();
   std::ifstream in(OutDir() + "/remote_summary.json");
@@ -103,7 +104,8 @@ TEST(Explore, EachDepthFieldIsDecodedOnce) {
   if (!op.value("agreed", false)) GTEST_SKIP() << "no depth fields in this run";
   const auto sent = r["transport"]["depth_fields"]["fields_sent"].get<std::int64_t>();
   const auto again = op["fields_missing_in_loop"].get<std::int64_t>() +
-                     op["fields_without_buffer"].get<std::int64_t>();
+                     op["fields_without_buffer"].get<std::int64_t>() +
+                     op["fields_decoder_busy"].get<std::int64_t>();
   EXPECT_GT(sent, 0);
   EXPECT_LE(op["fields_completed"].get<std::int64_t>(), sent + again)
       << "fields completed more often than sent: copies decoded twice ("
