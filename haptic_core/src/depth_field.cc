@@ -1040,7 +1040,6 @@ DepthFieldEvaluation DepthFieldDepthAt(const DepthField& f, const RigidTransform
   out.nodes_tested += apart.nodes_tested;
   out.max_node_depth_m = apart.max_node_depth_m;
   out.depth_m = std::min(apart.depth_m, 0.0);
-  if (!(apart.depth_m > -std::numeric_limits<double>::infinity())) out.depth_m = apart.depth_m;
   out.gradient = apart.gradient;
   return out;
 }
